@@ -1,0 +1,357 @@
+"""Impact detection, the impact law, saltation, chattering and sticking.
+
+The trajectory between impacts is the exact flow of :mod:`grazing_control.flow`. An
+impact is the first h > 0 with gap g(h) = x(h) - d = 0 and v >= 0. Finding it must
+never miss a low-velocity (near-grazing) impact and never report a spurious one.
+
+Certified search (docs/theory.md, "Impact detection")
+-----------------------------------------------------
+On an interval [a, b] the acceleration g'' = x'' has a fixed sign whenever
+
+    |g''(a)| + |g''(b)| > J (b - a),   signs equal,   J >= max |g'''|,
+
+because g'' is J-Lipschitz. With J = a(omega) omega^3 + |C| e^{-zeta a}
+(:func:`grazing_control.flow.amplitude_bound`) the bound is rigorous. On such an
+interval g is convex or concave, so it has at most one maximum, located by a
+safeguarded Newton iteration on v = g'; whether g reaches 0 is then decided by the
+sign of g at that maximum, computed without cancellation in deviation coordinates.
+Intervals that cannot be certified are bisected. A window is first excluded as a
+whole when sup g <= -Delta d + |C| < 0.
+
+Chattering and sticking
+-----------------------
+After an impact at phase tau_i with the wall force cos tau_i - d > 0 (mass pushed
+into the wall), the impacts form a geometric sequence v_{k+1} = r v_k that ends at
+t_inf ~ 2 r v- / ((1 - r)(cos tau_i - d)). When that time is below ``chatter_time``
+the sequence is summed in closed form and the mass sticks (x = d, v = 0) until the
+contact force cos tau - d changes sign; it is then released with zero velocity.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from .flow import amplitude_bound, transition_matrix
+from .params import OscillatorParams
+
+__all__ = [
+    "Impact",
+    "Segment",
+    "ImpactCapError",
+    "InitialStateError",
+    "next_impact",
+    "saltation_matrix",
+    "advance",
+]
+
+TWO_PI = 2.0 * math.pi
+_MAX_DEPTH = 64
+
+
+class Impact(NamedTuple):
+    """One impact: time since the start of the segment, phase, velocities.
+
+    ``sticking`` marks the end of a chattering sequence (the mass then sticks).
+    """
+
+    dt: float
+    phase: float
+    v_minus: float
+    v_plus: float
+    sticking: bool = False
+
+
+class Segment(NamedTuple):
+    """Result of :func:`advance`: final deviation, impacts, and monodromy if asked."""
+
+    dx: float
+    dv: float
+    impacts: list
+    monodromy: tuple | None
+
+
+class ImpactCapError(RuntimeError):
+    """More impacts than ``max_impacts`` in one call: the motion is not resolvable."""
+
+
+class InitialStateError(ValueError):
+    """The state lies beyond the wall (x > d)."""
+
+
+class _Eval:
+    """Gap, velocity and acceleration along the flow from one start state."""
+
+    __slots__ = ("zeta", "wd", "omega", "lag", "amp", "dd", "tau0", "dx0", "c2", "aw2", "aw3")
+
+    def __init__(self, p: OscillatorParams, tau0: float, dx0: float, dv0: float):
+        self.zeta = p.zeta
+        self.wd = p.omega_d
+        self.omega = p.omega
+        self.lag = p.lag
+        self.amp = p.amplitude
+        self.dd = p.delta_d
+        self.tau0 = tau0
+        self.dx0 = dx0
+        self.c2 = (dv0 + p.zeta * dx0) / self.wd
+        self.aw2 = self.amp * p.omega * p.omega
+        self.aw3 = self.aw2 * p.omega
+
+    def __call__(self, h: float):
+        """(g, v, acc, dx, dv) at time h: exact closed form."""
+        e = math.exp(-self.zeta * h)
+        c = math.cos(self.wd * h)
+        s = math.sin(self.wd * h)
+        c1 = self.dx0
+        c2 = self.c2
+        dx = e * (c1 * c + c2 * s)
+        dv = e * ((self.wd * c2 - self.zeta * c1) * c - (self.wd * c1 + self.zeta * c2) * s)
+        psi = self.tau0 + self.omega * h - self.lag
+        sh = math.sin(0.5 * psi)
+        g = dx - self.dd - 2.0 * self.amp * sh * sh
+        v = -self.amp * self.omega * math.sin(psi) + dv
+        acc = -self.aw2 * math.cos(psi) - 2.0 * self.zeta * dv - dx
+        return g, v, acc, dx, dv
+
+    def jerk_bound(self, h: float) -> float:
+        """J >= max |g'''| on [h, inf)."""
+        return self.aw3 + math.hypot(self.dx0, self.c2) * math.exp(-self.zeta * h)
+
+
+def _bracket(f, lo, hi, which):
+    """Root of component ``which`` of f (0: gap g, 1: velocity v) in [lo, hi].
+
+    Safeguarded Newton (the derivative of g is v, of v is the acceleration) that keeps
+    the bracket: g(lo) < 0 <= g(hi) for the gap, v(lo) > 0 >= v(hi) for the velocity.
+    Returns the bracket's right end once it is a few ulps wide: for the gap, the
+    first time at which g >= 0 in floating point.
+    """
+    sign = 1.0 if which == 0 else -1.0  # sign * component increases across the root
+    x = 0.5 * (lo + hi)
+    while hi - lo > 4.0 * math.ulp(hi):
+        vals = f(x)
+        fx = sign * vals[which]
+        if fx >= 0.0:
+            hi = x
+        else:
+            lo = x
+        dfx = sign * vals[which + 1]
+        xn = x - fx / dfx if dfx > 0.0 else lo
+        if not lo < xn < hi:
+            xn = 0.5 * (lo + hi)
+        if xn == x:
+            xn = 0.5 * (lo + hi)
+            if xn == x:
+                break
+        x = xn
+    return hi
+
+
+def _search(f, a, b, fa, fb, depth):
+    """First impact time in (a, b], or None.
+
+    Precondition g(a) <= 0. If g(a) = 0 (on the wall) the mass is leaving or at rest:
+    an impact is the next return to g >= 0, or an immediate one when the mass is at
+    rest on the wall with the acceleration pointing into it (sticking).
+    """
+    ga, va, acca = fa[0], fa[1], fa[2]
+    gb, vb, accb = fb[0], fb[1], fb[2]
+    jw = f.jerk_bound(a) * (b - a)
+    concave = acca < 0.0 and accb < 0.0 and -(acca + accb) > jw
+    convex = acca > 0.0 and accb > 0.0 and (acca + accb) > jw
+    if concave:  # v decreasing: at most one maximum
+        if va <= 0.0:
+            return None
+        if vb >= 0.0:
+            return _bracket(f, a, b, 0) if gb >= 0.0 else None
+        tm = _bracket(f, a, b, 1)
+        return _bracket(f, a, tm, 0) if f(tm)[0] >= 0.0 else None
+    if convex:  # v increasing: g below the chord unless it ends above 0
+        if gb < 0.0:
+            return None
+        if ga < 0.0:
+            return _bracket(f, a, b, 0)
+        if va >= 0.0:  # at rest on the wall and pushed into it
+            return a
+        tmin = _bracket(f, a, b, 1) if vb > 0.0 else b
+        fmin = f(tmin)
+        return _bracket(f, tmin, b, 0) if fmin[0] < 0.0 <= gb else None
+    if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
+        return _bracket(f, a, b, 0) if ga < 0.0 <= gb else None
+    mid = 0.5 * (a + b)
+    fm = f(mid)
+    found = _search(f, a, mid, fa, fm, depth + 1)
+    if found is not None:
+        return found
+    return _search(f, mid, b, fm, fb, depth + 1)
+
+
+def next_impact(p: OscillatorParams, tau0: float, dx0: float, dv0: float, horizon: float,
+                max_step: float | None = None):
+    """Time of the first impact in (0, horizon], or None.
+
+    Parameters
+    ----------
+    p : OscillatorParams
+    tau0 : float
+        Forcing phase at the start.
+    dx0, dv0 : float
+        Deviation from x_p at the start (see :mod:`grazing_control.flow`). The start
+        may be on the wall (g = 0); then a root at h = 0 is reported only if v > 0.
+    horizon : float
+        Length of the window, > 0.
+    max_step : float, optional
+        Initial subdivision of the window (default T / 8).
+
+    Returns
+    -------
+    float or None
+        Time since the start of the first impact.
+    """
+    if horizon <= 0.0:
+        return None
+    # whole-window exclusion: g <= |z_x| - Delta d <= |C| - Delta d
+    if amplitude_bound(p.zeta, dx0, dv0) < p.delta_d:
+        return None
+    f = _Eval(p, tau0, dx0, dv0)
+    step = max_step or p.period / 8.0
+    n = max(1, int(math.ceil(horizon / step)))
+    a = 0.0
+    fa = f(0.0)
+    scale = abs(dx0) + abs(p.delta_d) + 2.0 * p.amplitude * math.sin(0.5 * (tau0 - p.lag)) ** 2
+    if 0.0 < fa[0] <= 8.0 * math.ulp(scale):
+        fa = (0.0,) + fa[1:]  # on the wall up to rounding
+    if fa[0] > 0.0:
+        raise InitialStateError(
+            f"state beyond the wall: x - d = {fa[0]:.3e} > 0 (valid: x <= d)"
+        )
+    if fa[0] == 0.0 and fa[1] > 0.0:
+        return 0.0  # on the wall, moving into it
+    for k in range(1, n + 1):
+        b = horizon if k == n else k * (horizon / n)
+        fb = f(b)
+        r = _search(f, a, b, fa, fb, 0)
+        if r is not None:
+            return r
+        a, fa = b, fb
+    return None
+
+
+def saltation_matrix(p: OscillatorParams, phase: float, v_minus: float):
+    """Saltation matrix of the impact x = d, v+ = -r v- (spec section 5).
+
+    S = [[-r, 0], [(1 + r)(cos tau_i - d) / v-, -r]]: the Jacobian of the impact
+    law corrected for the jump of the vector field, so that perturbations map as
+    dz+ = S dz- across the impact. Returns (S11, S12, S21, S22).
+    """
+    r = p.r
+    return (-r, 0.0, (1.0 + r) * (math.cos(phase) - p.d) / v_minus, -r)
+
+
+def _matmul(a, b):
+    return (
+        a[0] * b[0] + a[1] * b[2],
+        a[0] * b[1] + a[1] * b[3],
+        a[2] * b[0] + a[3] * b[2],
+        a[2] * b[1] + a[3] * b[3],
+    )
+
+
+def _release_time(p: OscillatorParams, tau: float, horizon: float):
+    """Time after phase tau until cos(tau) - d falls below 0 (end of sticking)."""
+    d = p.d
+    if d >= 1.0:
+        return 0.0
+    if d <= -1.0:
+        return math.inf
+    alpha = math.acos(d)  # contact force cos tau - d > 0 for tau in (-alpha, alpha)
+    t = tau % TWO_PI
+    rel = alpha - t if t < alpha else alpha + TWO_PI - t
+    if math.cos(tau) - d <= 0.0 and rel > 1e-14:
+        return 0.0
+    return rel / p.omega
+
+
+def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: float, *,
+            monodromy: bool = False, max_impacts: int = 10000,
+            chatter_time: float | None = None) -> Segment:
+    """Flow with impacts for a fixed time: the exact event-driven trajectory segment.
+
+    Parameters
+    ----------
+    p : OscillatorParams
+    tau0 : float
+        Forcing phase at the start.
+    dx, dv : float
+        Deviation from x_p at the start (x <= d required).
+    duration : float
+        Time to advance, >= 0.
+    monodromy : bool
+        Also return the Jacobian of the end state with respect to the start state:
+        the product of Phi over each smooth segment and S at each impact in time
+        order (spec section 5). Through a sticking phase it is 0 (perturbations die).
+    max_impacts : int
+        Cap on impacts in this call; exceeding it raises :class:`ImpactCapError`.
+    chatter_time : float, optional
+        Accumulation-time threshold below which a chattering sequence is summed and
+        the mass sticks (default 1e-9 T).
+
+    Returns
+    -------
+    Segment
+        (dx, dv) at the end, the list of :class:`Impact`, and the monodromy
+        (M11, M12, M21, M22) or None.
+    """
+    zeta, r, omega = p.zeta, p.r, p.omega
+    chatter = chatter_time if chatter_time is not None else 1e-9 * p.period
+    impacts = []
+    mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
+    t = 0.0
+    tau = tau0
+    while True:
+        remaining = duration - t
+        h = next_impact(p, tau, dx, dv, remaining) if remaining > 0.0 else None
+        if h is None:
+            if remaining > 0.0:
+                f11, f12, f21, f22 = transition_matrix(zeta, remaining)
+                dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
+                if monodromy:
+                    mono = _matmul((f11, f12, f21, f22), mono)
+            return Segment(dx, dv, impacts, mono)
+        if len(impacts) >= max_impacts:
+            raise ImpactCapError(
+                f"more than max_impacts={max_impacts} impacts in {duration:.6g} time units "
+                f"at phase {tau % TWO_PI:.6f}: the motion is not resolvable at this cap"
+            )
+        f11, f12, f21, f22 = transition_matrix(zeta, h)
+        dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
+        if monodromy:
+            mono = _matmul((f11, f12, f21, f22), mono)
+        t += h
+        tau = (tau + omega * h) % TWO_PI
+        xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d
+        vp = -p.amplitude * omega * math.sin(tau - p.lag)
+        v_minus = vp + dv
+        v_plus = -r * v_minus
+        # on the wall exactly: dx = d - x_p
+        dx = -xp_minus_d
+        dv = v_plus - vp
+        force = math.cos(tau) - p.d
+        t_inf = 2.0 * r * v_minus / ((1.0 - r) * force) if force > 0.0 else math.inf
+        if t_inf < chatter:
+            # chattering: sum the geometric sequence and stick (velocity -> 0)
+            impacts.append(Impact(t, tau, v_minus, v_plus, True))
+            t += t_inf
+            tau = (tau + omega * t_inf) % TWO_PI
+            stick = _release_time(p, tau, duration - t)
+            t = min(duration, t + stick)
+            tau = (tau0 + omega * t) % TWO_PI
+            xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d
+            vp = -p.amplitude * omega * math.sin(tau - p.lag)
+            dx, dv = -xp_minus_d, -vp
+            if monodromy:
+                mono = (0.0, 0.0, 0.0, 0.0)
+            continue
+        impacts.append(Impact(t, tau, v_minus, v_plus, False))
+        if monodromy:
+            mono = _matmul(saltation_matrix(p, tau, v_minus), mono)

@@ -1,0 +1,73 @@
+"""Poincare maps on the sections Pi1 and Pi2, with the discrete controller optional.
+
+* Pi1 = {tau = tau*} (the grazing phase), Pi2 = {tau = tau* + pi2_offset} (Eqs. 4, 27).
+* The Pi2 map takes the state *sampled* on Pi2 (before the controller acts), applies
+  the correction of Eq. 28 if gains are given, and flows one forcing period with
+  impacts, to the next sample.
+* The Pi1 map flows s = pi2_offset / omega to Pi2, applies the correction, and flows
+  T - s back to Pi1.
+* :func:`smooth_return_matrix` is the linear map of the non-impacting deviation over
+  one period, N_g = Phi(T - s) G Phi(s) (Eqs. 29-32); uncontrolled N_g = Phi(T).
+
+States are deviations (dx, dv) from the non-impacting motion x_p (see
+:mod:`grazing_control.flow`); on Pi2 that motion passes through X**, so (dx, dv) is
+exactly (x - x**, v - v**).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .control import Gains, gain_matrix
+from .flow import transition_matrix
+from .impact import Segment, _matmul, advance
+from .params import OscillatorParams
+
+__all__ = ["pi2_map", "pi1_map", "smooth_return_matrix", "section_phase"]
+
+
+def section_phase(p: OscillatorParams, section: str) -> float:
+    """Forcing phase of section 'pi1' (tau*) or 'pi2' (tau2)."""
+    if section == "pi1":
+        return p.tau_star
+    if section == "pi2":
+        return p.tau2
+    raise ValueError(f"section={section!r} is invalid: valid values are 'pi1', 'pi2'")
+
+
+def pi2_map(p: OscillatorParams, dx: float, dv: float, gains: Gains | None = None, *,
+            monodromy: bool = False) -> Segment:
+    """One iteration of the Pi2 return map (with the controller of Eq. 28 if gains).
+
+    The monodromy, if asked, is d(next sample)/d(sample) = M_flow G.
+    """
+    if gains is not None:
+        dv = dv + gains.c1 * dx + gains.c2 * dv
+    seg = advance(p, p.tau2, dx, dv, p.period, monodromy=monodromy)
+    if monodromy and gains is not None:
+        seg = seg._replace(monodromy=_matmul(seg.monodromy, gain_matrix(gains)))
+    return seg
+
+
+def pi1_map(p: OscillatorParams, dx: float, dv: float, gains: Gains | None = None, *,
+            monodromy: bool = False) -> Segment:
+    """One iteration of the Pi1 return map: flow to Pi2, control, flow back to Pi1."""
+    s = p.pi2_offset / p.omega
+    first = advance(p, p.tau_star, dx, dv, s, monodromy=monodromy)
+    dx2, dv2 = first.dx, first.dv
+    if gains is not None:
+        dv2 = dv2 + gains.c1 * dx2 + gains.c2 * dv2
+    second = advance(p, p.tau2, dx2, dv2, p.period - s, monodromy=monodromy)
+    mono = None
+    if monodromy:
+        mono = _matmul(second.monodromy, _matmul(gain_matrix(gains), first.monodromy))
+    impacts = first.impacts + [i._replace(dt=i.dt + s) for i in second.impacts]
+    return Segment(second.dx, second.dv, impacts, mono)
+
+
+def smooth_return_matrix(p: OscillatorParams, gains: Gains | None = None) -> np.ndarray:
+    """N_g = Phi(T - s) G Phi(s), s = pi2_offset / omega (Eqs. 29-32), as a 2x2 array."""
+    s = p.pi2_offset / p.omega
+    m = _matmul(transition_matrix(p.zeta, p.period - s),
+                _matmul(gain_matrix(gains), transition_matrix(p.zeta, s)))
+    return np.array(m).reshape(2, 2)

@@ -1,0 +1,325 @@
+"""Periodic orbits and their Floquet multipliers.
+
+Two routes, each exact (no truncation) and cross-checked against each other:
+
+1. Impact-phase shooting for the 1/1 orbit (docs/theory.md, "The 1/1 branch").
+   Take the impact surface x = d as the section. Just before an impact at phase
+   theta = tau* + psi with velocity v, the deviation is z- = (q, v - v_p), just after
+   it z+ = (q, -r v - v_p), with q = Delta d + 2 a sin^2(psi/2), -v_p = a omega sin psi.
+   Over one period the deviation evolves linearly, z- = M(theta) z+, where
+   M(theta) = Phi(T - s) G Phi(s) and s = (tau2 - theta mod 2 pi)/omega places the
+   controller's action (M = Phi(T) uncontrolled). With B = M - I,
+   w = (r M12, 1 + r M22) and u0 = (2 a sin^2(psi/2), a omega sin psi), periodicity
+   is the *linear* system
+
+       [B e1, -w] (Delta d, v)^T = -B u0,
+
+   so the whole branch is explicit in the impact phase: psi -> (Delta d, v-).
+   The monodromy over one period, from just before the impact, is J = M S with S the
+   saltation matrix (spec section 5); its eigenvalues are the Floquet multipliers.
+
+2. Newton shooting on the Pi2 map for any p/n orbit (1/1, 2/2, 1/2, ...): the
+   residual is P^n(z) - z, the Jacobian the monodromy (Phi, S, G in time order)
+   minus I.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import brentq
+
+from .control import Gains, gain_matrix
+from .flow import to_physical, transition_matrix
+from .impact import Impact, _matmul, advance, saltation_matrix
+from .maps import pi2_map
+from .params import OscillatorParams
+
+__all__ = [
+    "PeriodicOrbit",
+    "OrbitNotFound",
+    "impact_period_matrix",
+    "branch_point",
+    "orbit_11",
+    "shoot",
+    "multipliers",
+    "monodromy_det",
+    "find_branch_phase",
+]
+
+TWO_PI = 2.0 * math.pi
+
+
+class OrbitNotFound(RuntimeError):
+    """No periodic orbit of the requested kind near the given data."""
+
+
+@dataclass(frozen=True)
+class PeriodicOrbit:
+    """A periodic orbit with p impacts in n forcing periods.
+
+    Attributes
+    ----------
+    params, gains : the system it belongs to.
+    periods : n.
+    pi2 : (x, v) sampled on Pi2 (before the controller acts).
+    pi2_deviation : (x - x**, v - v**) at full relative precision.
+    impacts : the impacts of one period of the orbit (time since the Pi2 sample).
+    monodromy : 2x2 array, Jacobian of P^n at the orbit (Phi, S, G in time order).
+    """
+
+    params: OscillatorParams
+    gains: Gains | None
+    periods: int
+    pi2: tuple
+    pi2_deviation: tuple
+    impacts: tuple
+    monodromy: np.ndarray = field(repr=False)
+
+    @property
+    def label(self) -> str:
+        """Orbit notation p/n (spec section 1)."""
+        return f"{len(self.impacts)}/{self.periods}"
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        """Floquet multipliers, eigenvalues of the monodromy, largest modulus first."""
+        sticking = any(i.sticking for i in self.impacts)
+        det = None if sticking else monodromy_det(
+            self.params, self.gains, self.periods, len(self.impacts))
+        return multipliers(self.monodromy, det)
+
+    @property
+    def stable(self) -> bool:
+        """All multipliers strictly inside the unit circle."""
+        return bool(np.max(np.abs(self.multipliers)) < 1.0)
+
+    @property
+    def v_minus(self) -> float:
+        """Impact velocity of the first impact (the only one of a 1/1 orbit)."""
+        return self.impacts[0].v_minus
+
+    @property
+    def impact_phase(self) -> float:
+        """Phase in [0, 2 pi) of the first impact."""
+        return self.impacts[0].phase
+
+
+def multipliers(monodromy, det: float | None = None) -> np.ndarray:
+    """Eigenvalues of a 2x2 monodromy matrix, sorted by decreasing modulus.
+
+    Computed from trace and determinant with the cancellation-free quadratic formula
+    (lambda1 = (tr + sign(tr) sqrt(tr^2 - 4 det)) / 2, lambda2 = det / lambda1), so the
+    small multiplier stays accurate when the large one grows like 1/v- near grazing.
+    ``det`` may be given exactly: det J = e^{-2 zeta n T} r^(2 impacts) (1 + c2)^n,
+    products of det Phi, det S and det G.
+    """
+    m = np.asarray(monodromy, dtype=float).reshape(2, 2)
+    tr = m[0, 0] + m[1, 1]
+    if det is None:
+        det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    disc = complex(tr * tr - 4.0 * det)
+    root = np.sqrt(disc)
+    if disc.real >= 0.0:
+        l1 = 0.5 * (tr + math.copysign(1.0, tr) * root.real)
+        l2 = det / l1 if l1 != 0.0 else 0.0
+        lam = np.array([l1, l2], dtype=complex)
+    else:
+        lam = np.array([0.5 * (tr + root), 0.5 * (tr - root)])
+    return lam[np.argsort(-np.abs(lam), kind="stable")]
+
+
+def monodromy_det(p: OscillatorParams, gains: Gains | None, periods: int, impacts: int) -> float:
+    """Exact det of the monodromy: e^{-2 zeta n T} r^(2 m) (1 + c2)^n (spec section 5)."""
+    g = 1.0 if gains is None else 1.0 + gains.c2
+    return math.exp(-2.0 * p.zeta * periods * p.period) * p.r ** (2 * impacts) * g ** periods
+
+
+def impact_period_matrix(p: OscillatorParams, theta: float, gains: Gains | None = None):
+    """M(theta): deviation map over one period from just after an impact at phase theta.
+
+    M = Phi(T - s) G Phi(s), s = ((tau2 - theta) mod 2 pi) / omega (Eqs. 29-32 with the
+    section moved to the impact phase); Phi(T) without control. Returns a 4-tuple.
+    """
+    if gains is None:
+        return transition_matrix(p.zeta, p.period)
+    s = ((p.tau2 - theta) % TWO_PI) / p.omega
+    return _matmul(transition_matrix(p.zeta, p.period - s),
+                   _matmul(gain_matrix(gains), transition_matrix(p.zeta, s)))
+
+
+def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
+    """The 1/1 branch at impact phase tau* + psi: (Delta d, v-, M).
+
+    Solves the linear periodicity system of the module docstring; ``p.delta_d`` is
+    ignored (it is the unknown). v- <= 0 means the point is not a physical impact.
+    """
+    theta = (p.tau_star + psi) % TWO_PI
+    m11, m12, m21, m22 = impact_period_matrix(p, theta, gains)
+    a, w, r = p.amplitude, p.omega, p.r
+    sh = math.sin(0.5 * psi)
+    u1 = 2.0 * a * sh * sh
+    u2 = a * w * math.sin(psi)
+    b11, b12, b21, b22 = m11 - 1.0, m12, m21, m22 - 1.0
+    w1, w2 = r * m12, 1.0 + r * m22
+    rhs1 = -(b11 * u1 + b12 * u2)
+    rhs2 = -(b21 * u1 + b22 * u2)
+    # columns: (b11, b21) for Delta d, (-w1, -w2) for v
+    det = -b11 * w2 + w1 * b21
+    delta_d = (-rhs1 * w2 + w1 * rhs2) / det
+    v = (b11 * rhs2 - b21 * rhs1) / det
+    return delta_d, v, (m11, m12, m21, m22)
+
+
+def _psi_grid(lo_exp=-15.0, n=241):
+    mags = np.logspace(lo_exp, math.log10(math.pi * 0.999), n)
+    return mags
+
+
+def _branch_values(p, gains, sign, mags):
+    out = []
+    for m in mags:
+        dd, v, _ = branch_point(p, sign * m, gains)
+        out.append((sign * m, dd, v))
+    return out
+
+
+def find_branch_phase(p: OscillatorParams, delta_d: float, gains: Gains | None = None) -> float:
+    """Impact phase offset psi of the 1/1 orbit born at grazing, for a given Delta d.
+
+    Scans |psi| on a logarithmic grid on both sides of tau*, keeps the brackets of
+    Delta d(psi) = delta_d where v- > 0, takes the one nearest to grazing and
+    refines it with Brent's method to a few ulps.
+
+    Raises
+    ------
+    OrbitNotFound
+        If no physical (v- > 0) 1/1 orbit on the branch has this Delta d.
+    """
+    best = None
+    mags = _psi_grid()
+    for sign in (-1.0, 1.0):
+        prev = (0.0, 0.0, 0.0)
+        for cur in _branch_values(p, gains, sign, mags):
+            f0, f1 = prev[1] - delta_d, cur[1] - delta_d
+            if cur[2] > 0.0 and f0 * f1 <= 0.0 and f0 != f1:
+                lo, hi = sorted((prev[0], cur[0]))
+                if best is None or min(abs(lo), abs(hi)) < min(abs(best[0]), abs(best[1])):
+                    best = (lo, hi)
+                break
+            if cur[2] <= 0.0 and abs(cur[0]) > 1e-3:
+                break  # the physical side of the branch is the other one
+            prev = cur
+    if best is None:
+        raise OrbitNotFound(f"no 1/1 orbit born at grazing with delta_d={delta_d!r}")
+    g = lambda psi: branch_point(p, psi, gains)[0] - delta_d  # noqa: E731
+    if g(best[0]) == 0.0:
+        return best[0]
+    if g(best[1]) == 0.0:
+        return best[1]
+    return brentq(g, best[0], best[1], xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
+
+
+def orbit_11(p: OscillatorParams, gains: Gains | None = None, *, check: bool = True) -> PeriodicOrbit:
+    """The 1/1 orbit at ``p.delta_d`` on the branch born at grazing (impact-phase shooting).
+
+    Parameters
+    ----------
+    p : OscillatorParams
+        Delta d < 0 for the branch born at grazing.
+    gains : Gains, optional
+        Controller in the loop (Eq. 28).
+    check : bool
+        Verify by the exact flow that one period from the Pi2 point has exactly one
+        impact and returns to the same point (to 1e-9 relative); else OrbitNotFound.
+    """
+    psi = find_branch_phase(p, p.delta_d, gains)
+    return _orbit_from_phase(p, psi, gains, check=check)
+
+
+def _orbit_from_phase(p, psi, gains, *, check=True):
+    dd, v, m = branch_point(p, psi, gains)
+    pp = p.with_(delta_d=dd) if dd != p.delta_d else p
+    theta = (pp.tau_star + psi) % TWO_PI
+    a, w = pp.amplitude, pp.omega
+    q = dd + 2.0 * a * math.sin(0.5 * psi) ** 2
+    vp = -a * w * math.sin(psi)
+    zplus = (q, -pp.r * v - vp)
+    s = ((pp.tau2 - theta) % TWO_PI) / w
+    f = transition_matrix(pp.zeta, s)
+    dx2 = f[0] * zplus[0] + f[1] * zplus[1]
+    dv2 = f[2] * zplus[0] + f[3] * zplus[1]
+    # monodromy of the Pi2 map: flow T - s (with impact at time T - s) ... conjugate of J
+    jac = _matmul(m, saltation_matrix(pp, theta, v))
+    # J starts just before the impact; the Pi2-sampled monodromy is similar to it:
+    # P = Phi(s) S M_rest ... we report J's eigenvalues through a similar matrix.
+    impact = Impact(((theta - pp.tau2) % TWO_PI) / w, theta, v, -pp.r * v)
+    orbit = PeriodicOrbit(pp, gains, 1, to_physical(pp, pp.tau2, dx2, dv2), (dx2, dv2),
+                          (impact,), np.array(jac).reshape(2, 2))
+    if check:
+        seg = pi2_map(pp, dx2, dv2, gains)
+        scale = max(abs(dx2), abs(dv2), 1e-300)
+        err = max(abs(seg.dx - dx2), abs(seg.dv - dv2))
+        gain = 1.0 + float(np.max(np.abs(orbit.multipliers)))  # rounding is amplified
+        if len(seg.impacts) != 1 or err > 1e-8 * gain * (scale + 1e-300) + 1e-15 * gain:
+            raise OrbitNotFound(
+                f"the branch point at delta_d={dd!r} is not a physical 1/1 orbit: "
+                f"{len(seg.impacts)} impacts in one period, return error {err:.2e}"
+            )
+    return orbit
+
+
+def _iterate(p, z, periods, gains):
+    """P^n from Pi2 deviation z with its monodromy and the impacts on the way."""
+    mono = (1.0, 0.0, 0.0, 1.0)
+    impacts = []
+    dx, dv = z
+    for k in range(periods):
+        seg = pi2_map(p, dx, dv, gains, monodromy=True)
+        impacts += [i._replace(dt=i.dt + k * p.period) for i in seg.impacts]
+        mono = _matmul(seg.monodromy, mono)
+        dx, dv = seg.dx, seg.dv
+    return np.array([dx, dv]), np.array(mono).reshape(2, 2), impacts
+
+
+def shoot(p: OscillatorParams, x: float | None = None, v: float | None = None,
+          periods: int = 1, gains: Gains | None = None, *, deviation=None,
+          tol: float = 1e-14, max_iter: int = 60) -> PeriodicOrbit:
+    """Periodic orbit of period n by Newton's method on the Pi2 map.
+
+    Parameters
+    ----------
+    x, v : float
+        Initial guess on Pi2 (physical coordinates), or
+    deviation : (float, float)
+        the guess as (x - x**, v - v**), which keeps full precision near grazing.
+    periods : int
+        n, the period in forcing periods (>= 1).
+    tol : float
+        Relative size of the last Newton step at convergence.
+
+    Returns
+    -------
+    PeriodicOrbit
+        Its monodromy is the product of Phi, S and G along the orbit (spec section 5).
+    """
+    if int(periods) != periods or periods < 1:
+        raise ValueError(f"periods={periods!r} is invalid: valid range is an integer >= 1")
+    if deviation is None:
+        if x is None or v is None:
+            raise ValueError("give the guess as x and v, or as deviation=(dx, dv)")
+        deviation = (x - p.x_ref, v - p.v_ref)
+    z = np.array(deviation, dtype=float)
+    for _ in range(max_iter):
+        zn, mono, _ = _iterate(p, z, periods, gains)
+        step = np.linalg.solve(mono - np.eye(2), -(zn - z))
+        z = z + step
+        if np.max(np.abs(step)) <= tol * max(np.max(np.abs(z)), 1e-300):
+            break
+    else:
+        raise OrbitNotFound(f"Newton shooting did not converge in {max_iter} iterations")
+    _, mono, impacts = _iterate(p, z, periods, gains)
+    return PeriodicOrbit(p, gains, periods, to_physical(p, p.tau2, z[0], z[1]),
+                         (float(z[0]), float(z[1])), tuple(impacts), mono)

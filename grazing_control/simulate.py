@@ -1,0 +1,188 @@
+"""Event-driven simulation on section Pi2, single trajectory and batch.
+
+A run is a sequence of forcing periods, each from one Pi2 sample to the next: the
+state is sampled on Pi2 (before the controller acts), the correction of Eq. 28 is
+applied if the controller is on, and the exact flow with impacts
+(:func:`grazing_control.impact.advance`) carries it over one period T. One call of
+:func:`period_step` per period is the whole integration, so the ROS simulator node,
+which calls the same function, reproduces this module sample for sample.
+
+Time origin: t = 0 is the first Pi2 sample; the phase there is tau2.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .control import Gains
+from .flow import propagate, to_deviation, to_physical
+from .impact import Impact, Segment, advance
+from .params import OscillatorParams
+
+__all__ = ["SimulationResult", "period_step", "states_between", "simulate", "simulate_batch"]
+
+TWO_PI = 2.0 * math.pi
+
+
+def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float = 0.0) -> Segment:
+    """One forcing period from a Pi2 sample (deviation dx, dv) after a correction dv_correction.
+
+    The correction enters as an instantaneous velocity change (Eq. 28); the rest is the
+    exact flow with impacts from phase tau2 over one period.
+    """
+    return advance(p, p.tau2, dx, dv + dv_correction, p.period)
+
+
+def states_between(p: OscillatorParams, tau0: float, dx: float, dv: float,
+                   impacts, times) -> np.ndarray:
+    """Dense output: physical (x, v) at ``times`` (since the segment start, sorted).
+
+    ``(dx, dv)`` is the deviation at the start, just after any correction, and
+    ``impacts`` the segment's impact list from :func:`advance`; between events the
+    closed-form flow is evaluated, so dense output never changes the trajectory.
+    """
+    times = np.asarray(times, dtype=float)
+    out = np.empty((times.size, 2))
+    t0, z = 0.0, (dx, dv)
+    events = list(impacts)
+    k = 0
+    for j, t in enumerate(times):
+        while k < len(events) and events[k].dt <= t:
+            imp = events[k]
+            tau = imp.phase
+            x_wall = p.d
+            z = to_deviation(p, tau, x_wall, imp.v_plus if not imp.sticking else 0.0)
+            t0 = imp.dt
+            k += 1
+        dzx, dzv = propagate(p.zeta, z[0], z[1], t - t0)
+        out[j] = to_physical(p, tau0 + p.omega * t, dzx, dzv)
+    return out
+
+
+@dataclass
+class SimulationResult:
+    """A simulated run, one entry per forcing period k = 0 .. N-1.
+
+    Attributes
+    ----------
+    pi2 : (N, 2) array of the physical Pi2 samples (x, v), before control.
+    pi2_deviation : (N, 2) array of (x - x**, v - v**) at full precision.
+    corrections : (N,) array of the velocity corrections applied at each sample.
+    impacts_per_period : (N,) int array.
+    impacts : (M, 5) array of [period k, time t, phase, v-, v+].
+    final_deviation : deviation at the sample after the last period.
+    """
+
+    params: OscillatorParams
+    gains: Gains | None
+    control_after: int | None
+    pi2: np.ndarray
+    pi2_deviation: np.ndarray
+    corrections: np.ndarray
+    impacts_per_period: np.ndarray
+    impacts: np.ndarray
+    final_deviation: tuple = field(default=(0.0, 0.0))
+
+
+def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
+             v0: float | None = None, deviation=None, gains: Gains | None = None,
+             control_after: int | None = 0) -> SimulationResult:
+    """Simulate ``periods`` forcing periods from a state on Pi2.
+
+    Parameters
+    ----------
+    p : OscillatorParams
+    periods : int
+        Number of forcing periods N >= 0.
+    x0, v0 : float, optional
+        Initial state on Pi2; default X** (the grazing orbit's point), or
+    deviation : (float, float), optional
+        the initial state as (x - x**, v - v**).
+    gains : Gains, optional
+        Controller gains; None runs the uncontrolled system.
+    control_after : int or None
+        The controller acts at samples k >= control_after (the study switches it on
+        after 1000 samples); None never.
+
+    Returns
+    -------
+    SimulationResult
+    """
+    if int(periods) != periods or periods < 0:
+        raise ValueError(f"periods={periods!r} is invalid: valid range is an integer >= 0")
+    if control_after is not None and (int(control_after) != control_after or control_after < 0):
+        raise ValueError(
+            f"control_after={control_after!r} is invalid: valid range is an integer >= 0 or None")
+    periods = int(periods)
+    if deviation is not None:
+        dx, dv = (float(deviation[0]), float(deviation[1]))
+    else:
+        x = p.x_ref if x0 is None else float(x0)
+        v = p.v_ref if v0 is None else float(v0)
+        dx, dv = x - p.x_ref, v - p.v_ref
+    dev = np.empty((periods, 2))
+    corr = np.zeros(periods)
+    counts = np.zeros(periods, dtype=int)
+    imps = []
+    active = gains is not None and control_after is not None
+    for k in range(periods):
+        dev[k] = dx, dv
+        dvc = 0.0
+        if active and k >= control_after:
+            dvc = gains.c1 * dx + gains.c2 * dv
+        corr[k] = dvc
+        seg = period_step(p, dx, dv, dvc)
+        counts[k] = len(seg.impacts)
+        for i in seg.impacts:
+            imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
+        dx, dv = seg.dx, seg.dv
+    pi2 = dev + np.array([p.x_ref, p.v_ref])
+    return SimulationResult(p, gains, control_after if active else None, pi2, dev, corr, counts,
+                            np.array(imps, dtype=float).reshape(-1, 5), (dx, dv))
+
+
+def _batch_one(args):
+    p, periods, keep, kwargs = args
+    res = simulate(p, periods, **kwargs)
+    return res.pi2[-keep:], res.impacts_per_period[-keep:]
+
+
+def simulate_batch(p: OscillatorParams, delta_d, periods: int, *, keep: int | None = None,
+                   workers: int = 1, **kwargs):
+    """Simulate the same scene for many values of Delta d (bifurcation diagrams).
+
+    Parameters
+    ----------
+    p : OscillatorParams
+        The other parameters; its delta_d is replaced by each value.
+    delta_d : array_like
+        Values of Delta d.
+    periods : int
+        Periods per value.
+    keep : int, optional
+        Keep only the last ``keep`` samples (after transients); default all.
+    workers : int
+        Processes to use (1: in this process).
+    **kwargs
+        Passed to :func:`simulate` (initial state, gains, control_after).
+
+    Returns
+    -------
+    pi2 : (len(delta_d), keep, 2) array
+    impacts_per_period : (len(delta_d), keep) array
+    """
+    values = np.atleast_1d(np.asarray(delta_d, dtype=float))
+    keep = periods if keep is None else int(keep)
+    jobs = [(p.with_(delta_d=float(d)), periods, keep, kwargs) for d in values]
+    if workers > 1:
+        with ProcessPoolExecutor(max_workers=workers) as ex:
+            out = list(ex.map(_batch_one, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+    else:
+        out = [_batch_one(j) for j in jobs]
+    pi2 = np.stack([o[0] for o in out]) if out else np.empty((0, keep, 2))
+    counts = np.stack([o[1] for o in out]) if out else np.empty((0, keep), dtype=int)
+    return pi2, counts
