@@ -236,12 +236,14 @@ def orbit_11(p: OscillatorParams, gains: Gains | None = None, *, check: bool = T
         impact and returns to the same point (to 1e-9 relative); else OrbitNotFound.
     """
     psi = find_branch_phase(p, p.delta_d, gains)
-    return _orbit_from_phase(p, psi, gains, check=check)
+    return _orbit_from_phase(p, psi, gains, check=check, keep_delta_d=True)
 
 
-def _orbit_from_phase(p, psi, gains, *, check=True):
+def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
+    """The 1/1 orbit at impact phase offset psi; Delta d is the branch's unless kept
+    (when psi was solved for p.delta_d, the two agree to a few ulps)."""
     dd, v, m = branch_point(p, psi, gains)
-    pp = p.with_(delta_d=dd) if dd != p.delta_d else p
+    pp = p if keep_delta_d or dd == p.delta_d else p.with_(delta_d=dd)
     theta = (pp.tau_star + psi) % TWO_PI
     a, w = pp.amplitude, pp.omega
     q = dd + 2.0 * a * math.sin(0.5 * psi) ** 2

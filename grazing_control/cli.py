@@ -1,0 +1,323 @@
+"""The `grazing` command line: design, orbit, continue, simulate, run, demo.
+
+Every subcommand shares --zeta --r --omega --pi2-offset (defaults: the study's set).
+Output is human-readable by default; with --json exactly one JSON object goes to
+stdout and nothing else. User errors (bad parameters, no orbit) print one line
+``grazing: error: ...`` to stderr and exit with status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+
+import numpy as np
+
+from .control import Gains
+from .params import STUDY_R, STUDY_ZETA, OscillatorParams, ParameterError, study_omega
+
+__all__ = ["main", "build_parser"]
+
+
+def _complex_list(values):
+    return [[float(np.real(z)), float(np.imag(z))] for z in values]
+
+
+def _finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not finite")
+    return value
+
+
+def _count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return value
+
+
+def _common(parser):
+    g = parser.add_argument_group("model (defaults: the study's parameter set)")
+    g.add_argument("--zeta", type=_finite, default=STUDY_ZETA, help="damping ratio, 0 < zeta < 1")
+    g.add_argument("--r", type=_finite, default=STUDY_R, help="restitution, 0 < r < 1")
+    g.add_argument("--omega", type=_finite, default=study_omega(), help="forcing frequency > 0")
+    g.add_argument("--pi2-offset", type=_finite, default=math.pi / 2,
+                   help="phase of Pi2 after Pi1, in (0, 2 pi)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _gain_args(parser, required=False):
+    parser.add_argument("--c1", type=_finite, help="gain c1 (default: degenerate condition Eq. 38)")
+    parser.add_argument("--c2", type=_finite, required=required, help="gain c2")
+
+
+def _params(args, delta_d=0.0):
+    return OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, delta_d=delta_d,
+                            pi2_offset=args.pi2_offset)
+
+
+def _gains(args, p):
+    if args.c2 is None:
+        if args.c1 is not None:
+            raise ParameterError("c1 given without c2: give both, or c2 alone (c1 from Eq. 38)")
+        return None
+    from .design import degenerate_c1
+
+    c1 = degenerate_c1(p, args.c2) if args.c1 is None else args.c1
+    return Gains(c1, args.c2)
+
+
+# ---------------------------------------------------------------------------- design
+def cmd_design(args):
+    from .design import admissible_c2, evaluate_design, write_controller_yaml
+
+    p = _params(args)
+    point = evaluate_design(p, args.c2)
+    intervals = admissible_c2(p)
+    chosen = next((iv for iv in intervals if iv[0] <= args.c2 <= iv[1]), None)
+    shown = chosen or (max(intervals, key=lambda iv: iv[1] - iv[0]) if intervals else None)
+    out = {
+        "c1": point.c1,
+        "c2": point.c2,
+        "x_ref": p.x_ref,
+        "v_ref": p.v_ref,
+        "admissible_c2": list(shown) if shown else None,
+        "multipliers_limit": _complex_list(point.multipliers_limit),
+        "gamma1": point.gamma1,
+        "admissible": point.admissible,
+    }
+    if args.out:
+        if not point.admissible:
+            raise ParameterError(
+                f"c2={args.c2!r} is not admissible: valid range is {_fmt_intervals(intervals)}; "
+                f"nothing written to {args.out}")
+        write_controller_yaml(args.out, p, Gains(point.c1, point.c2))
+    if args.json:
+        return out
+    lam = ", ".join(f"{abs(z):.6g}" for z in point.multipliers_limit)
+    lines = [
+        f"degenerate grazing design (N_g,12 = 0, Eq. 38) for c2 = {point.c2:.12g}",
+        f"  c1                 = {point.c1:.15g}",
+        f"  X** on Pi2         = ({p.x_ref:.15g}, {p.v_ref:.15g})",
+        f"  |lambda0|          = {lam}  (limit Delta d -> 0-)",
+        f"  gamma1             = {point.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*)",
+        f"  admissible c2      = {_fmt_intervals(intervals)}",
+        f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
+    ]
+    if args.out:
+        lines.append(f"  controller parameters written to {args.out}")
+    return "\n".join(lines)
+
+
+def _fmt_intervals(intervals):
+    return " U ".join(f"({lo:.10g}, {hi:.10g})" for lo, hi in intervals) or "empty"
+
+
+# ---------------------------------------------------------------------------- orbit
+def cmd_orbit(args):
+    from .orbits import orbit_11
+
+    p = _params(args, args.delta_d)
+    gains = _gains(args, p)
+    o = orbit_11(p, gains)
+    out = {
+        "delta_d": o.params.delta_d,
+        "impact_phase": o.impact_phase,
+        "v_minus": o.v_minus,
+        "section_pi2": list(o.pi2),
+        "multipliers": _complex_list(o.multipliers),
+        "stable": o.stable,
+    }
+    if args.json:
+        return out
+    lam = ", ".join(f"{z:.6g}" for z in o.multipliers)
+    ctl = f" with c1={gains.c1:.6g}, c2={gains.c2:.6g}" if gains else " (uncontrolled)"
+    return "\n".join([
+        f"1/1 orbit at Delta d = {o.params.delta_d:.6g}{ctl}",
+        f"  impact phase  = {o.impact_phase:.15g}",
+        f"  v-            = {o.v_minus:.10g}",
+        f"  Pi2 point     = ({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
+        f"  multipliers   = {lam}",
+        f"  stable        = {o.stable}",
+    ])
+
+
+# ---------------------------------------------------------------------------- continue
+def cmd_continue(args):
+    from .continuation import continue_11
+
+    p = _params(args)
+    gains = _gains(args, p)
+    branch = continue_11(p, args.start, args.stop, gains, points=args.points, check=True)
+    out = {
+        "branch": [
+            {"delta_d": b.delta_d, "v_minus": b.v_minus,
+             "multipliers": _complex_list(b.multipliers), "stable": b.stable}
+            for b in branch.points
+        ],
+        "bifurcations": [
+            {"type": b.type, "delta_d": b.delta_d, "multipliers": _complex_list(b.multipliers)}
+            for b in branch.bifurcations
+        ],
+    }
+    if args.json:
+        return out
+    lines = [f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to {args.stop:g}",
+             f"{'Delta d':>14} {'v-':>14} {'max|lambda|':>14} stable"]
+    step = max(1, len(branch.points) // 20)
+    for b in branch.points[::step]:
+        lines.append(f"{b.delta_d:14.6e} {b.v_minus:14.6e} {np.max(np.abs(b.multipliers)):14.6e} {b.stable}")
+    lines.append("bifurcations:" if branch.bifurcations else "bifurcations: none in range")
+    for b in branch.bifurcations:
+        lines.append(f"  {b.type:16s} at Delta d = {b.delta_d:.15g}")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- simulate
+def cmd_simulate(args):
+    from .simulate import simulate
+
+    p = _params(args, args.delta_d)
+    gains = _gains(args, p)
+    if args.control_after is not None and gains is None:
+        raise ParameterError("--control-after needs the gains: give --c2 (and optionally --c1)")
+    control_after = args.control_after if args.control_after is not None else (0 if gains else None)
+    res = simulate(p, args.periods, x0=args.x0, v0=args.v0, gains=gains, control_after=control_after)
+    out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist()}
+    if args.json:
+        return out
+    n = args.periods
+    tail = res.impacts_per_period[-min(n, 20):].tolist()
+    last = res.pi2[-1] if n else (float("nan"), float("nan"))
+    return "\n".join([
+        f"simulated {n} periods at Delta d = {p.delta_d:.6g}"
+        + (f", control on from sample {control_after}" if gains is not None else ", uncontrolled"),
+        f"  impacts in all     = {int(res.impacts_per_period.sum())}",
+        f"  impacts per period, last {len(tail)}: {tail}",
+        f"  last Pi2 sample    = ({last[0]:.15g}, {last[1]:.15g})",
+    ])
+
+
+# ---------------------------------------------------------------------------- run / demo
+def cmd_run(args):
+    from .launcher import run
+
+    return run(**_run_kwargs(args))
+
+
+def _run_kwargs(args):
+    return {k: v for k, v in vars(args).items() if k not in ("func", "json")}
+
+
+def cmd_demo(args):
+    from .demo import main as demo_main
+
+    return demo_main(args)
+
+
+# ---------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="grazing",
+        description="Exact analysis and discrete control of grazing in an impact oscillator.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("design", help="gains (c1, c2) for degenerate grazing, admissible c2")
+    _common(s)
+    s.add_argument("--c2", type=_finite, required=True, help="chosen gain c2")
+    s.add_argument("--out", help="write the controller's YAML parameter file here")
+    s.set_defaults(func=cmd_design)
+
+    s = sub.add_parser("orbit", help="the 1/1 orbit and its Floquet multipliers")
+    _common(s)
+    s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d* (< 0)")
+    _gain_args(s)
+    s.set_defaults(func=cmd_orbit)
+
+    s = sub.add_parser("continue", help="continue the 1/1 branch in Delta d, find bifurcations")
+    _common(s)
+    s.add_argument("--from", dest="start", type=_finite, required=True, help="start Delta d <= 0")
+    s.add_argument("--to", dest="stop", type=_finite, required=True, help="end Delta d <= 0")
+    s.add_argument("--points", type=_count, default=200, help="grid points (default 200)")
+    _gain_args(s)
+    s.set_defaults(func=cmd_continue)
+
+    s = sub.add_parser("simulate", help="simulate on Pi2, optionally switching control on")
+    _common(s)
+    s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d*")
+    s.add_argument("--periods", type=_count, required=True, help="number of forcing periods")
+    s.add_argument("--control-after", type=_count, help="switch control on at this sample")
+    s.add_argument("--x0", type=_finite, help="initial x on Pi2 (default x**)")
+    s.add_argument("--v0", type=_finite, help="initial v on Pi2 (default v**)")
+    _gain_args(s)
+    s.set_defaults(func=cmd_simulate)
+
+    try:
+        from .launcher import add_run_arguments
+    except ImportError:  # pragma: no cover - the launcher lands with the ROS issue
+        add_run_arguments = None
+    if add_run_arguments is not None:
+        s = sub.add_parser("run", help="run a scene through the real ROS 2 nodes")
+        add_run_arguments(s)
+        s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
+    s.add_argument("--out", default="out/demo", help="report folder (default out/demo)")
+    s.add_argument("--offline", action="store_true", help="through the core only, no ROS nodes")
+    s.set_defaults(func=cmd_demo)
+    return parser
+
+
+_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
+
+
+def _join_negative_values(argv):
+    """['--delta-d', '-5e-6'] -> ['--delta-d=-5e-6']: argparse takes '-5e-6' for an option."""
+    out = []
+    for token in argv:
+        if out and _NEGATIVE.match(token) and out[-1].startswith("--") and "=" not in out[-1]:
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
+def main(argv=None) -> int:
+    """Entry point of the `grazing` console script."""
+    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parser.parse_args(_join_negative_values(argv))
+    try:
+        result = args.func(args)
+    except (ParameterError, ValueError, RuntimeError, OSError) as exc:
+        print(f"grazing: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("grazing: interrupted", file=sys.stderr)
+        return 130
+    if isinstance(result, int):
+        return result
+    try:
+        if isinstance(result, dict):
+            json.dump(result, sys.stdout)
+            sys.stdout.write("\n")
+        elif result is not None:
+            print(result)
+        sys.stdout.flush()
+    except BrokenPipeError:  # the reader went away (| head): not an error of ours
+        sys.stdout = None
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
