@@ -1,0 +1,64 @@
+# grazing_control: virtual environment, tests, demo, benchmarks.
+# Needs only python3.11 and make (plus access to the package index for `make venv`).
+
+VENV ?= .venv
+PY = $(VENV)/bin/python
+# The ros-jazzy-* wheels are cp311: the environment must be CPython 3.11.
+PYTHON ?= python3.11
+BENCHES = $(sort $(wildcard benchmarks/bench_*.py))
+
+.DEFAULT_GOAL := help
+.PHONY: help venv test demo bench constraints clean
+
+help:
+	@echo "make venv         create $(VENV) (pinned: requirements.txt + constraints.txt) and install the package editable"
+	@echo "make test         run the test suite: $(PY) -m pytest -q tests"
+	@echo "make demo         run the demo: $(VENV)/bin/grazing demo --out out/demo"
+	@echo "make bench        run every benchmarks/bench_*.py"
+	@echo "make constraints  re-pin constraints.txt from requirements.txt (full freeze of a fresh venv)"
+	@echo "make clean        remove $(VENV) and everything generated (out/, build/, install/, log/, caches)"
+
+# Two stamps, each written last so that an interrupted step is redone on the next run.
+# $(VENV)/.deps: the venv, recreated from scratch whenever a pin changes.
+$(VENV)/.deps: requirements.txt constraints.txt
+	rm -rf $(VENV)
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip -c constraints.txt
+	$(PY) -m pip install -r requirements.txt -c constraints.txt
+	touch $@
+
+# $(VENV)/.stamp: the package, installed editable. The editable install maps the
+# top-level packages found at install time (modules added inside them need no
+# reinstall), so the packages' __init__.py files are prerequisites too: a package that
+# appears later gets mapped. --no-build-isolation: the editable wheel is built by the
+# venv's pinned setuptools, not by whatever version the index serves that day.
+PKG_INITS = $(wildcard grazing_control/__init__.py sim_node/__init__.py)
+$(VENV)/.stamp: $(VENV)/.deps setup.py setup.cfg package.xml $(PKG_INITS)
+	$(PY) -m pip install --no-deps --no-build-isolation -e .
+	touch $@
+
+venv: $(VENV)/.stamp
+
+test: $(VENV)/.stamp
+	$(PY) -m pytest -q tests
+
+demo: $(VENV)/.stamp
+	$(VENV)/bin/grazing demo --out out/demo
+
+bench: $(VENV)/.stamp
+	@test -n "$(BENCHES)" || echo "no benchmarks/bench_*.py yet"
+	@set -e; for b in $(BENCHES); do echo "== $$b"; $(PY) $$b; done
+
+LOCKVENV = $(VENV)-lock
+constraints:
+	rm -rf $(LOCKVENV)
+	$(PYTHON) -m venv $(LOCKVENV)
+	$(LOCKVENV)/bin/python -m pip install --upgrade pip
+	$(LOCKVENV)/bin/python -m pip install -r requirements.txt
+	{ echo "# Full freeze of a venv built from requirements.txt (make constraints). Do not edit."; \
+	  $(LOCKVENV)/bin/python -m pip freeze --all; } > constraints.txt
+	rm -rf $(LOCKVENV)
+
+clean:
+	rm -rf $(VENV) $(LOCKVENV) out build install log .pytest_cache benchmarks/out *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +
