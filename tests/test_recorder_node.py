@@ -1,0 +1,224 @@
+"""Behavioural tests of recorder_node over real middleware (Fast DDS).
+
+The recorder runs as a separate process (``python -m
+grazing_control.nodes.recorder_node``), isolated from concurrent tests by its
+own ``ROS_DOMAIN_ID`` and namespace; this test process publishes on every
+recorded topic with reliable QoS, waits until the recorder has acknowledged
+every message, then stops it with a signal. The bag must then hold every
+message, in order and equal, for both bag readers.
+"""
+
+import itertools
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import TwistStamped, Vector3Stamped
+from rclpy.context import Context
+from rclpy.duration import Duration
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from grazing_control.nodes.recorder_node import DEFAULT_TOPICS, parse_topics
+from grazing_control.params import ParameterError
+from grazing_control.recording import (message_to_dict, read_messages,
+                                       read_messages_rosbags, read_metadata)
+
+REPO = Path(__file__).resolve().parents[1]
+N = 150                      # messages per topic
+STARTUP_TIMEOUT = 20.0
+
+_CLASSES = {
+    "sensor_msgs/msg/JointState": JointState,
+    "geometry_msgs/msg/Vector3Stamped": Vector3Stamped,
+    "geometry_msgs/msg/TwistStamped": TwistStamped,
+    "rosgraph_msgs/msg/Clock": Clock,
+}
+_ids = itertools.count()
+
+
+def make_message(msg_type, i):
+    stamp = Time(sec=i, nanosec=7 * i)
+    if msg_type == "rosgraph_msgs/msg/Clock":
+        return Clock(clock=stamp)
+    msg = _CLASSES[msg_type]()
+    msg.header.stamp = stamp
+    if msg_type == "sensor_msgs/msg/JointState":
+        msg.name, msg.position, msg.velocity, msg.effort = ["mass"], [i * 1e-3], [-i / 7], [0.5]
+    elif msg_type == "geometry_msgs/msg/Vector3Stamped":
+        msg.vector.x, msg.vector.y, msg.vector.z = -0.1 * i, 0.08 * i, 1.0
+    else:
+        msg.twist.linear.x = i * 1e-6
+    return msg
+
+
+@pytest.fixture
+def isolation():
+    """A domain id and a namespace that no concurrent test uses."""
+    uid = f"{os.getpid()}_{next(_ids)}"
+    domain = random.Random(uid).randrange(120, 230)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+               PYTHONUNBUFFERED="1")
+    return domain, f"/rec_test_{uid}", env
+
+
+def start_recorder(bag, namespace, env, *params):
+    args = [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args",
+            "-r", f"__ns:={namespace}", "-p", f"output:={bag}"]
+    for p in params:
+        args += ["-p", p]
+    return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+@pytest.fixture
+def ros(isolation):
+    """A node of this test process in the isolated domain and namespace."""
+    domain, namespace, _ = isolation
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node("test_publisher", namespace=namespace, context=context)
+    yield node
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+def publish_all(node, recorder, n, topics=tuple(DEFAULT_TOPICS)):
+    """Publish `n` messages on each of `topics` once the recorder matches.
+
+    Returns {fully qualified topic: [messages]}.
+    """
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=n,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    pubs = {}
+    for name in topics:
+        msg_type = DEFAULT_TOPICS[name]
+        pub = node.create_publisher(_CLASSES[msg_type], name, qos)
+        pubs[pub.topic_name] = (pub, msg_type)
+    deadline = time.monotonic() + STARTUP_TIMEOUT
+    while any(p.get_subscription_count() < 1 for p, _ in pubs.values()):
+        assert recorder.poll() is None, recorder.communicate()[0]
+        assert time.monotonic() < deadline, "recorder did not subscribe"
+        time.sleep(0.05)
+    sent = {topic: [] for topic in pubs}
+    for i in range(n):
+        for topic, (pub, msg_type) in pubs.items():
+            msg = make_message(msg_type, i)
+            pub.publish(msg)
+            sent[topic].append(msg)
+    for pub, _ in pubs.values():
+        assert pub.wait_for_all_acked(Duration(seconds=10))
+    return sent
+
+
+def stop(recorder, signum):
+    recorder.send_signal(signum)
+    try:
+        output, _ = recorder.communicate(timeout=15)
+    except subprocess.TimeoutExpired:
+        recorder.kill()
+        raise
+    return recorder.returncode, output
+
+
+def assert_bag_holds(bag, sent):
+    for read in (read_messages, read_messages_rosbags):
+        got = {topic: [] for topic in sent}
+        last_time = {}
+        for m in read(bag):
+            got[m.topic].append(message_to_dict(m.message))
+            assert m.log_time_ns >= last_time.get(m.topic, 0)
+            last_time[m.topic] = m.log_time_ns
+        for topic, msgs in sent.items():
+            assert got[topic] == [message_to_dict(x) for x in msgs], (read.__name__, topic)
+    info = read_metadata(bag)
+    assert info["message_count"] == sum(len(v) for v in sent.values())
+    for entry in info["topics_with_message_count"]:
+        meta = entry["topic_metadata"]
+        assert entry["message_count"] == len(sent[meta["name"]])
+        assert meta["offered_qos_profiles"][0]["reliability"] == "reliable"
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_records_every_message_and_closes_on_signal(tmp_path, isolation, ros, signum):
+    _, namespace, env = isolation
+    bag = tmp_path / "run"
+    recorder = start_recorder(bag, namespace, env)
+    try:
+        sent = publish_all(ros, recorder, N)
+    finally:
+        rc, output = stop(recorder, signum)
+    assert rc == 0, output
+    assert "Traceback" not in output
+    assert f"closed {bag}/run_0.mcap: {6 * N} messages" in output
+    assert set(sent) == {ros.resolve_topic_name(t) for t in DEFAULT_TOPICS}
+    assert_bag_holds(bag, sent)
+
+
+def test_selected_topics_and_lz4(tmp_path, isolation, ros):
+    _, namespace, env = isolation
+    bag = tmp_path / "sel"
+    recorder = start_recorder(bag, namespace, env, "compression:=lz4",
+                              "topics:=['oscillator/pi2', '/clock']")
+    try:
+        sent = publish_all(ros, recorder, 20, topics=["oscillator/pi2", "/clock"])
+    finally:
+        rc, output = stop(recorder, signal.SIGTERM)
+    assert rc == 0, output
+    assert set(sent) == {f"{namespace}/oscillator/pi2", "/clock"}
+    assert_bag_holds(bag, sent)
+
+
+@pytest.mark.parametrize("params, reason", [
+    ([], "output='' is invalid"),
+    (["compression:=gzip"], "compression='gzip' is invalid"),
+    (["topics:=['oscillator/nothing']"], "topics entry 'oscillator/nothing' is invalid"),
+])
+def test_bad_parameters_exit_nonzero_without_traceback(tmp_path, isolation, params, reason):
+    _, namespace, env = isolation
+    args = [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args"]
+    if params != []:
+        args += ["-p", f"output:={tmp_path / 'bag'}"]
+    for p in params:
+        args += ["-p", p]
+    done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=30)
+    output = done.stdout + done.stderr
+    assert done.returncode == 2, output
+    assert reason in output
+    assert "Traceback" not in output
+    assert not (tmp_path / "bag").exists()
+
+
+def test_existing_bag_is_not_overwritten(tmp_path, isolation):
+    _, namespace, env = isolation
+    (tmp_path / "bag").mkdir()
+    (tmp_path / "bag" / "metadata.yaml").write_text("keep me")
+    done = subprocess.run(
+        [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args",
+         "-p", f"output:={tmp_path / 'bag'}"],
+        env=env, capture_output=True, text=True, timeout=30)
+    assert done.returncode == 2
+    assert "not empty" in done.stdout + done.stderr
+    assert "Traceback" not in done.stdout + done.stderr
+    assert (tmp_path / "bag" / "metadata.yaml").read_text() == "keep me"
+
+
+def test_parse_topics():
+    assert parse_topics(["oscillator/state", "/clock"]) == {
+        "oscillator/state": "sensor_msgs/msg/JointState", "/clock": "rosgraph_msgs/msg/Clock"}
+    assert parse_topics(["/oscillator/pi1"]) == {"oscillator/pi1": "sensor_msgs/msg/JointState"}
+    assert parse_topics(["chatter std_msgs/msg/String"]) == {"chatter": "std_msgs/msg/String"}
+    with pytest.raises(ParameterError):
+        parse_topics([])
+    with pytest.raises(ParameterError):
+        parse_topics(["a b c"])
