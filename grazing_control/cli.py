@@ -22,6 +22,13 @@ from .params import STUDY_R, STUDY_ZETA, OscillatorParams, ParameterError, study
 __all__ = ["main", "build_parser"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``grazing <command>: error: ...``, exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def _complex_list(values):
     return [[float(np.real(z)), float(np.imag(z))] for z in values]
 
@@ -30,9 +37,9 @@ def _finite(text):
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite real number") from None
     if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not finite")
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite real number")
     return value
 
 
@@ -40,9 +47,9 @@ def _count(text):
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer >= 0") from None
     if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer >= 0")
     return value
 
 
@@ -227,7 +234,7 @@ def cmd_demo(args):
 
 # ---------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="grazing",
         description="Exact analysis and discrete control of grazing in an impact oscillator.")
     sub = parser.add_subparsers(dest="command", required=True)
