@@ -119,7 +119,14 @@ class RefModel:
         horizon = _f(horizon)
         n = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / n for k in range(n + 1)]
-        prev = (hs[0], arc(hs[0]))
+        g0, v0, a0 = arc(hs[0])
+        if abs(g0) <= ROOT_TOL * 1e-3:  # on the wall (up to 50-digit rounding)
+            if v0 > 0:
+                return mpf(0)
+            if v0 == 0:
+                raise RuntimeError("reference: at rest on the wall (sticking) is not modelled")
+            g0 = -ROOT_TOL  # leaving the wall: g < 0 just after the start
+        prev = (hs[0], (g0, v0, a0))
         for h in hs[1:]:
             cur = (h, arc(h))
             found = self._search_cell(arc, prev, cur)
