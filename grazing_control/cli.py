@@ -26,7 +26,9 @@ class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``grazing <command>: error: ...``, exit status 2."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        command = self.prog.split()[-1]
+        where = "" if command == "grazing" else f"{command}: "
+        self.exit(2, f"grazing: error: {where}{message}\n")
 
 
 def _complex_list(values):

@@ -123,8 +123,9 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
     nonzero = [s for s in psis if s != 0.0]
     sign = math.copysign(1.0, nonzero[0])
     mags = [abs(s) for s in psis]
-    lo_mag = min(m for m in mags if m > 0.0) if 0.0 in mags else min(mags)
     hi_mag = max(mags)
+    # an end at grazing (psi = 0) is approached to 1e-12 of the other end's phase
+    lo_mag = min(mags) if 0.0 not in mags else hi_mag * 1e-12
     grid = np.logspace(math.log10(lo_mag), math.log10(hi_mag), points)
     if mags[0] > mags[1]:
         grid = grid[::-1]

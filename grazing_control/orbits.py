@@ -33,7 +33,7 @@ from scipy.optimize import brentq
 
 from .control import Gains, gain_matrix
 from .flow import to_physical, transition_matrix
-from .impact import Impact, _matmul, advance, saltation_matrix
+from .impact import Impact, InitialStateError, _matmul, advance, saltation_matrix
 from .maps import pi2_map
 from .params import OscillatorParams
 
@@ -261,7 +261,10 @@ def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     orbit = PeriodicOrbit(pp, gains, 1, to_physical(pp, pp.tau2, dx2, dv2), (dx2, dv2),
                           (impact,), np.array(jac).reshape(2, 2))
     if check:
-        seg = pi2_map(pp, dx2, dv2, gains)
+        try:
+            seg = pi2_map(pp, dx2, dv2, gains)
+        except InitialStateError as exc:  # the Pi2 point lies beyond the wall
+            raise OrbitNotFound(f"the branch point at delta_d={dd!r} is not physical: {exc}") from None
         scale = max(abs(dx2), abs(dv2), 1e-300)
         err = max(abs(seg.dx - dx2), abs(seg.dv - dv2))
         gain = 1.0 + float(np.max(np.abs(orbit.multipliers)))  # rounding is amplified
@@ -314,12 +317,17 @@ def shoot(p: OscillatorParams, x: float | None = None, v: float | None = None,
             raise ValueError("give the guess as x and v, or as deviation=(dx, dv)")
         deviation = (x - p.x_ref, v - p.v_ref)
     z = np.array(deviation, dtype=float)
+    previous = math.inf
     for _ in range(max_iter):
         zn, mono, _ = _iterate(p, z, periods, gains)
         step = np.linalg.solve(mono - np.eye(2), -(zn - z))
         z = z + step
-        if np.max(np.abs(step)) <= tol * max(np.max(np.abs(z)), 1e-300):
+        size = float(np.max(np.abs(step)))
+        scale = max(float(np.max(np.abs(z))), 1e-300)
+        # converged, or stagnating at the map's rounding floor (no quadratic decrease)
+        if size <= tol * scale or (size > 0.5 * previous and size <= 1e-8 * scale):
             break
+        previous = size
     else:
         raise OrbitNotFound(f"Newton shooting did not converge in {max_iter} iterations")
     _, mono, impacts = _iterate(p, z, periods, gains)
