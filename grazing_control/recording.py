@@ -24,8 +24,9 @@ rosbag2's ``mcap`` storage plugin writes it:
   description hash);
 * Message records with ``log_time`` = receive time and ``publish_time`` =
   source (send) time, in nanoseconds;
-* chunk and message indexes, a Statistics record and a ``rosbag2`` Metadata
-  record in the summary, written by :meth:`BagWriter.close`.
+* chunks with message indexes; at :meth:`BagWriter.close`, a ``rosbag2``
+  Metadata record (``serialized_metadata``, ``ROS_DISTRO``) and the summary
+  (schemas, channels, Statistics, chunk and metadata indexes).
 
 Chunks are written to the operating system as soon as they are complete, so
 a recorder that dies before :meth:`BagWriter.close` leaves a file that
@@ -33,10 +34,9 @@ a recorder that dies before :meth:`BagWriter.close` leaves a file that
 
 Examples
 --------
->>> from rclpy.serialization import serialize_message   # doctest: +SKIP
 >>> with BagWriter("/tmp/run1") as bag:                  # doctest: +SKIP
 ...     bag.add_topic("/oscillator/state", "sensor_msgs/msg/JointState")
-...     bag.write("/oscillator/state", serialize_message(msg), t_ns)
+...     bag.write("/oscillator/state", cdr_bytes, receive_time_ns)
 >>> for m in read_messages("/tmp/run1"):                 # doctest: +SKIP
 ...     print(m.topic, m.log_time_ns, m.message.position)
 """

@@ -1,19 +1,17 @@
 """recorder_node: records the oscillator's topics to a rosbag2-style MCAP bag.
 
-What it records (by default; names relative to the node's namespace):
+What it records by default (names relative to the node's namespace):
 
-==================================  =================================  =============================
-topic                               type                               content
-==================================  =================================  =============================
-``oscillator/state``                sensor_msgs/msg/JointState         x (position), v (velocity),
-                                                                       cos(tau) (effort); stamp =
-                                                                       simulation time
-``oscillator/impact``               geometry_msgs/msg/Vector3Stamped   v-, v+, phase tau at impact
-``oscillator/pi1``                  sensor_msgs/msg/JointState         state at each crossing of Pi1
-``oscillator/pi2``                  sensor_msgs/msg/JointState         state at each crossing of Pi2
-``controller/velocity_correction``  geometry_msgs/msg/TwistStamped     twist.linear.x = Delta v
-``/clock``                          rosgraph_msgs/msg/Clock            simulation time
-==================================  =================================  =============================
+``oscillator/state`` (sensor_msgs/msg/JointState)
+    position x, velocity v, effort cos(tau); stamp = simulation time.
+``oscillator/impact`` (geometry_msgs/msg/Vector3Stamped)
+    vector = (v-, v+, phase tau) at each impact; stamp = impact time.
+``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
+    state at each crossing of Pi1 and Pi2; stamp = crossing time.
+``controller/velocity_correction`` (geometry_msgs/msg/TwistStamped)
+    twist.linear.x = Delta v; stamp = stamp of the Pi2 sample it answers.
+``/clock`` (rosgraph_msgs/msg/Clock)
+    simulation time.
 
 Each message is stored as the serialized CDR bytes the middleware delivered
 (a ``raw=True`` subscription): nothing is deserialized on the way. The bag
