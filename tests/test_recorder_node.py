@@ -222,3 +222,19 @@ def test_parse_topics():
         parse_topics([])
     with pytest.raises(ParameterError):
         parse_topics(["a b c"])
+
+
+def test_use_sim_time_stamps_log_time_with_clock(tmp_path, isolation, ros):
+    _, namespace, env = isolation
+    bag = tmp_path / "sim"
+    recorder = start_recorder(bag, namespace, env, "use_sim_time:=true",
+                              "topics:=['oscillator/state', '/clock']")
+    try:
+        sent = publish_all(ros, recorder, 30, topics=["/clock", "oscillator/state"])
+    finally:
+        rc, output = stop(recorder, signal.SIGTERM)
+    assert rc == 0, output
+    assert_bag_holds(bag, sent)
+    assert read_metadata(bag)["custom_data"] == {"log_time": "ros_clock"}
+    clock_ns = {0} | {m.clock.sec * 10**9 + m.clock.nanosec for m in sent["/clock"]}
+    assert {m.log_time_ns for m in read_messages(bag)} <= clock_ns
