@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from .flow import amplitude_bound, transition_matrix
+from .flow import amplitude_bound, propagate, transition_matrix
 from .params import OscillatorParams
 
 __all__ = [
@@ -118,15 +118,14 @@ class _Eval:
         return self.aw3 + math.hypot(self.dx0, self.c2) * math.exp(-self.zeta * h)
 
 
-def _bracket(f, lo, hi, which):
+def _bracket(f, lo, hi, which, sign=1.0):
     """Root of component ``which`` of f (0: gap g, 1: velocity v) in [lo, hi].
 
     Safeguarded Newton (the derivative of g is v, of v is the acceleration) that keeps
-    the bracket: g(lo) < 0 <= g(hi) for the gap, v(lo) > 0 >= v(hi) for the velocity.
-    Returns the bracket's right end once it is a few ulps wide: for the gap, the
-    first time at which g >= 0 in floating point.
+    the bracket: sign * f(lo) < 0 <= sign * f(hi), sign = +1 for an increasing and
+    -1 for a decreasing component. Returns the bracket's right end once it is a few
+    ulps wide: for the gap, the first time at which g >= 0 in floating point.
     """
-    sign = 1.0 if which == 0 else -1.0  # sign * component increases across the root
     x = 0.5 * (lo + hi)
     while hi - lo > 4.0 * math.ulp(hi):
         vals = f(x)
@@ -164,7 +163,7 @@ def _search(f, a, b, fa, fb, depth):
             return None
         if vb >= 0.0:
             return _bracket(f, a, b, 0) if gb >= 0.0 else None
-        tm = _bracket(f, a, b, 1)
+        tm = _bracket(f, a, b, 1, -1.0)
         return _bracket(f, a, tm, 0) if f(tm)[0] >= 0.0 else None
     if convex:  # v increasing: g below the chord unless it ends above 0
         if gb < 0.0:
@@ -173,7 +172,7 @@ def _search(f, a, b, fa, fb, depth):
             return _bracket(f, a, b, 0)
         if va >= 0.0:  # at rest on the wall and pushed into it
             return a
-        tmin = _bracket(f, a, b, 1) if vb > 0.0 else b
+        tmin = _bracket(f, a, b, 1, 1.0) if vb > 0.0 else b
         fmin = f(tmin)
         return _bracket(f, tmin, b, 0) if fmin[0] < 0.0 <= gb else None
     if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
@@ -272,6 +271,30 @@ def _release_time(p: OscillatorParams, tau: float, horizon: float):
     return rel / p.omega
 
 
+def _resting_on_wall(p: OscillatorParams, tau: float, dx: float, dv: float) -> bool:
+    """x = d and v = 0 up to the rounding of the deviation coordinates."""
+    s = math.sin(0.5 * (tau - p.lag))
+    vp = -p.amplitude * p.omega * math.sin(tau - p.lag)
+    g_scale = abs(dx) + abs(p.delta_d) + 2.0 * p.amplitude * s * s
+    g = dx - p.delta_d - 2.0 * p.amplitude * s * s
+    return abs(g) <= 8.0 * math.ulp(g_scale) and abs(vp + dv) <= 8.0 * math.ulp(abs(vp) + abs(dv))
+
+
+def _release_skip(p: OscillatorParams, tau: float, dx: float) -> float:
+    """Time after leaving the wall at rest during which the gap is below its rounding.
+
+    From x = d, v = 0 the gap is g ~ F h^2 / 2 + F' h^3 / 6 with F = cos tau - d <= 0
+    and F' = -omega sin tau; no impact is possible while |g| < eps, the gap's rounding.
+    """
+    eps = 8.0 * math.ulp(abs(dx) + abs(p.delta_d) + 2.0 * p.amplitude)
+    force = abs(math.cos(tau) - p.d)
+    jerk = abs(p.omega * math.sin(tau))
+    times = [math.sqrt(2.0 * eps / force)] if force > 0.0 else []
+    if jerk > 0.0:
+        times.append((6.0 * eps / jerk) ** (1.0 / 3.0))
+    return min(times) if times else 0.0
+
+
 def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: float, *,
             monodromy: bool = False, max_impacts: int = 10000,
             chatter_time: float | None = None) -> Segment:
@@ -294,7 +317,9 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         Cap on impacts in this call; exceeding it raises :class:`ImpactCapError`.
     chatter_time : float, optional
         Accumulation-time threshold below which a chattering sequence is summed and
-        the mass sticks (default 1e-9 T).
+        the mass sticks (default 1e-6 T; the error of the summation is O(t_inf^2)).
+        The sequence is also summed once the next bounce height v+^2 / (2 F) is within
+        1e4 ulps of the gap's rounding, where single bounces cannot be resolved.
 
     Returns
     -------
@@ -303,15 +328,26 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         (M11, M12, M21, M22) or None.
     """
     zeta, r, omega = p.zeta, p.r, p.omega
-    chatter = chatter_time if chatter_time is not None else 1e-9 * p.period
+    chatter = chatter_time if chatter_time is not None else 1e-6 * p.period
     impacts = []
     mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
     t = 0.0
     tau = tau0
+    h = None
+    if _resting_on_wall(p, tau, dx, dv):
+        if math.cos(tau) - p.d > 0.0:
+            h = 0.0  # at rest on the wall (to rounding) and pushed into it: sticks at once
+        else:  # leaving from rest: no impact while the gap is below its rounding
+            t = min(duration, _release_skip(p, tau, dx))
+            dx, dv = propagate(zeta, dx, dv, t)
+            tau = (tau0 + omega * t) % TWO_PI
+            if monodromy:
+                mono = transition_matrix(zeta, t)
+    if h is None and t < duration:
+        h = next_impact(p, tau, dx, dv, duration - t)
     while True:
         remaining = duration - t
-        h = next_impact(p, tau, dx, dv, remaining) if remaining > 0.0 else None
-        if h is None:
+        if h is None or remaining <= 0.0:
             if remaining > 0.0:
                 f11, f12, f21, f22 = transition_matrix(zeta, remaining)
                 dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
@@ -337,8 +373,10 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         dx = -xp_minus_d
         dv = v_plus - vp
         force = math.cos(tau) - p.d
-        t_inf = 2.0 * r * v_minus / ((1.0 - r) * force) if force > 0.0 else math.inf
-        if t_inf < chatter:
+        t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
+        # the next bounce rises v+^2 / (2 F): below ~1e4 ulps of the gap it is not resolvable
+        height = v_plus * v_plus / (2.0 * force) if force > 0.0 else math.inf
+        if t_inf < chatter or height < 1e4 * math.ulp(abs(dx) + abs(p.delta_d) + p.amplitude):
             # chattering: sum the geometric sequence and stick (velocity -> 0)
             impacts.append(Impact(t, tau, v_minus, v_plus, True))
             t += t_inf
@@ -351,7 +389,16 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
             dx, dv = -xp_minus_d, -vp
             if monodromy:
                 mono = (0.0, 0.0, 0.0, 0.0)
+            if t < duration:
+                # released from (d, 0) with g ~ -|F'| h^3 / 6: below the gap's rounding for
+                # h < skip, where no impact is possible; flow there without searching
+                skip = min(duration - t, _release_skip(p, tau, dx))
+                dx, dv = propagate(zeta, dx, dv, skip)
+                t += skip
+                tau = (tau0 + omega * t) % TWO_PI
+            h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
             continue
         impacts.append(Impact(t, tau, v_minus, v_plus, False))
         if monodromy:
             mono = _matmul(saltation_matrix(p, tau, v_minus), mono)
+        h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None

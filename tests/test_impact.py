@@ -377,11 +377,6 @@ def test_chattering_terminates_quickly():
     assert len(seg.impacts) < 200
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: after an impact that leaves the mass on the "
-                   "wall with the acceleration pointing into it (cos tau - d > 0), impact._search "
-                   "brackets the velocity zero with the sign convention of a decreasing v "
-                   "(_bracket(f, a, b, 1)) although v increases: the return to the wall is "
-                   "missed and a spurious impact is reported later, beyond the wall")
 def test_chattering_sequence_matches_reference_then_sticks():
     """From the wall at tau = 0 (force cos 0 - d = 0.5 into the wall) with v = 0.01:
     the impacts form the geometric sequence v_k ~ r^k v0 of the 50-digit reference,
@@ -408,20 +403,18 @@ def test_chattering_sequence_matches_reference_then_sticks():
     sticking = [k for k, i in enumerate(imps) if i.sticking]
     assert len(sticking) == 1
     k = sticking[0]
-    assert imps[k].dt < 0.0401 and imps[k].v_minus < 1e-6
+    # summed once t_inf = 2 r v- / ((1 - r) F) < chatter_time (default 1e-6 T)
+    force = math.cos(imps[k].phase) - WALL.d
+    t_inf = 2 * WALL.r * imps[k].v_minus / ((1 - WALL.r) * force)
+    assert imps[k].dt < 0.0401 and t_inf < 1e-6 * WALL.period
+    assert 2 * WALL.r * imps[k - 1].v_minus / ((1 - WALL.r) * force) >= 1e-6 * WALL.period
     assert all(i.dt < 0.0401 and i.v_minus > 0 for i in imps[:k])
     assert k == len(imps) - 1  # nothing until the release at t = 1.5697
     x_end, v_end = to_physical(WALL, tau + WALL.omega * 1.5, seg.dx, seg.dv)
     assert abs(x_end - WALL.d) < 1e-12 and abs(v_end) < 1e-12
 
 
-ROUNDED_AWAY = pytest.mark.xfail(
-    strict=True, reason="core bug: at tau = 0, x = d, v = 0 the gap rounds to -9e-17 and the "
-    "mass bounces (v- = 5.7e-9, bounce height ~1e-17 below the rounding of the gap, "
-    "|dx| ~ 1.3): the next bounce is missed and the mass never sticks")
-
-
-@pytest.mark.parametrize("tau", [5.5, 5.9, pytest.param(0.0, marks=ROUNDED_AWAY)])
+@pytest.mark.parametrize("tau", [5.5, 5.9, 0.0])
 def test_at_rest_on_the_wall_sticks_and_releases_when_the_force_changes_sign(tau):
     """At rest on the wall with cos(tau) - d > 0 the mass stays at x = d, v = 0 until
     cos(tau) - d falls below 0, then leaves on the free flow from (d, 0) (mpmath)."""
@@ -442,10 +435,6 @@ def test_at_rest_on_the_wall_sticks_and_releases_when_the_force_changes_sign(tau
     assert abs(mpf(xa) - x_ref) < 1e-12 and abs(mpf(va) - v_ref) < 1e-12
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: starting at rest on the wall pushed into it "
-                   "gives more than one impact (at tau = 0 a first 'impact' at 1e-8 with "
-                   "v- = 5.7e-9 and a sticking one with v- < 0), and the release itself is "
-                   "reported as impacts with v- ~ 2e-16 at tau = acos(d)")
 @pytest.mark.parametrize("tau", [5.5, 0.0])
 def test_at_rest_on_the_wall_gives_one_sticking_impact_and_release_is_not_an_impact(tau):
     dx, dv = _wall_state(tau, 0.0)
@@ -455,9 +444,6 @@ def test_at_rest_on_the_wall_gives_one_sticking_impact_and_release_is_not_an_imp
     assert imp.sticking and imp.dt < 1e-6 and 0 <= imp.v_minus < 1e-6
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: advance(monodromy=True) through a release "
-                   "from sticking raises ZeroDivisionError: the release is taken for an impact "
-                   "with v- = 0 and saltation_matrix divides by it")
 @pytest.mark.parametrize("tau,duration", [(5.5, 3.5), (5.5, 4.0), (5.9, 3.0)])
 def test_monodromy_through_sticking_is_zero(tau, duration):
     """Through a sticking phase perturbations die: the monodromy is 0 after it."""
