@@ -167,8 +167,8 @@ def run(points: int, repeat: int, use_mp: bool):
 
 def table(grid, results) -> str:
     picks = [int(np.argmin(np.abs(np.log10(-grid) - e))) for e in (-4, -6, -9)]
-    head = ("| branch | method | cost per evaluation (median) | rel. error Δd=%s | Δd=%s | Δd=%s |"
-            % tuple(f"{grid[k]:.0e}" for k in picks))
+    head = ("| branch | method | cost per evaluation (median) "
+            "| rel. error Δd=%s | Δd=%s | Δd=%s |" % tuple(f"{grid[k]:.0e}" for k in picks))
     lines = [head, "|" + "---|" * 6]
     for (bname, mname), (costs, errs) in results.items():
         lines.append(f"| {bname} | {mname} | {np.median(costs):.2e} s | "

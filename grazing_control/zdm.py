@@ -181,6 +181,11 @@ def crossing(p: OscillatorParams, dx: float, dv: float):
     tau*, its value, and, when H_max > 0, the time and velocity of the crossing
     before it (t1 = v- = None otherwise). Local time 0 is Pi1; t1 < 0 means the
     real trajectory has already hit the wall when it reaches Pi1.
+
+    Raises
+    ------
+    ValueError
+        If Newton's method finds no maximum of the gap within a quarter period of Pi1.
     """
     f = _LocalGap(p, dx, dv)
     alpha = local_grazing(p).alpha
@@ -191,6 +196,11 @@ def crossing(p: OscillatorParams, dx: float, dv: float):
         t += step
         if abs(step) <= 4.0 * math.ulp(max(abs(t), 1e-300)):
             break
+    else:
+        t = math.nan
+    if not (abs(t) < 0.25 * p.period and f(t)[2] < 0.0):
+        raise ValueError(f"no local maximum of the gap near Pi1 for z=({dx!r}, {dv!r}): "
+                         "not a near-grazing state")
     t_max = t
     hm = f(t_max)[0]
     if not hm > 0.0:

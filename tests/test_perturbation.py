@@ -62,7 +62,8 @@ def exact_fixed_point(p, psi, gains):
     """(delta2 = v-, Delta d, z on Pi1, t1) of the exact branch at impact phase tau* + psi."""
     dd, v, _m = branch_point(p, psi, gains)
     t1 = psi / p.omega
-    zc = (dd + 2.0 * p.amplitude * math.sin(0.5 * psi) ** 2, v + p.amplitude * p.omega * math.sin(psi))
+    a, w = p.amplitude, p.omega
+    zc = (dd + 2.0 * a * math.sin(0.5 * psi) ** 2, v + a * w * math.sin(psi))
     f = transition_matrix(p.zeta, -t1)
     return v, dd, (f[0] * zc[0] + f[1] * zc[1], f[2] * zc[0] + f[3] * zc[1]), t1
 
@@ -96,7 +97,8 @@ def test_degenerate_limit_and_existence_agree_with_exact_design(c2):
     assert c.degenerate and c.chi_m1 == pytest.approx(0.0, abs=1e-15)
     ex, pe = limit_multipliers(P, g), limit_multipliers_perturbation(P, g)
     assert np.max(np.abs(np.sort_complex(ex) - np.sort_complex(pe))) < 1e-8
-    assert existence_coefficient_perturbation(P, g) == pytest.approx(existence_coefficient(P, g), rel=3e-6)
+    gamma1 = existence_coefficient(P, g)
+    assert existence_coefficient_perturbation(P, g) == pytest.approx(gamma1, rel=3e-6)
 
 
 def test_uncontrolled_eigenvalues_converge_to_shooting():

@@ -218,3 +218,5 @@ def test_local_coefficients():
     assert g.alpha == pytest.approx(P0.amplitude * P0.omega ** 2, rel=1e-13)
     with pytest.raises(ValueError):
         zdm(P0, 0.0, 0.0, order=3)
+    with pytest.raises(ValueError):  # far from grazing: no local event at Pi1
+        crossing(P0, 0.0, 5.0)
