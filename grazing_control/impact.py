@@ -22,8 +22,9 @@ Chattering and sticking
 -----------------------
 After an impact at phase tau_i with the wall force cos tau_i - d > 0 (mass pushed
 into the wall), the impacts form a geometric sequence v_{k+1} = r v_k that ends at
-t_inf ~ 2 r v- / ((1 - r)(cos tau_i - d)). When that time is below ``chatter_time``
-the sequence is summed in closed form and the mass sticks (x = d, v = 0) until the
+t_inf ~ 2 r v- / ((1 - r)(cos tau_i - d)). When that time is below ``chatter_time``,
+or the next bounce is lower than ~1e3 ulps of the gap (not resolvable), the sequence
+is summed in closed form and the mass sticks (x = d, v = 0) until the
 contact force cos tau - d changes sign; it is then released with zero velocity.
 """
 
@@ -319,7 +320,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         Accumulation-time threshold below which a chattering sequence is summed and
         the mass sticks (default 1e-6 T; the error of the summation is O(t_inf^2)).
         The sequence is also summed once the next bounce height v+^2 / (2 F) is within
-        1e4 ulps of the gap's rounding, where single bounces cannot be resolved.
+        1e3 ulps of the gap's rounding, where single bounces cannot be resolved.
 
     Returns
     -------
@@ -374,9 +375,9 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         dv = v_plus - vp
         force = math.cos(tau) - p.d
         t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
-        # the next bounce rises v+^2 / (2 F): below ~1e4 ulps of the gap it is not resolvable
+        # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap it is not resolvable
         height = v_plus * v_plus / (2.0 * force) if force > 0.0 else math.inf
-        if t_inf < chatter or height < 1e4 * math.ulp(abs(dx) + abs(p.delta_d) + p.amplitude):
+        if t_inf < chatter or height < 1e3 * math.ulp(abs(dx) + abs(p.delta_d) + p.amplitude):
             # chattering: sum the geometric sequence and stick (velocity -> 0)
             impacts.append(Impact(t, tau, v_minus, v_plus, True))
             t += t_inf
