@@ -1,0 +1,290 @@
+"""The `grazing` command line, run as a real subprocess (``python -m grazing_control.cli``).
+
+Contract (grazing_control/cli.py module docstring and the issue):
+
+* with --json, stdout is exactly one JSON object with the keys of the spec, and the
+  values are those of the library calls;
+* a user error exits 2 with exactly one line ``grazing: error: ...`` on stderr that
+  names the parameter, never a traceback, and nothing on stdout;
+* without --json every subcommand prints a human-readable report (design: the
+  ``--out`` run below).
+
+All commands run once, concurrently, in a module fixture (each process pays the
+numpy/scipy import); the tests then read their results.
+
+Observed extra keys of ``design --json`` (allowed by the spec): "gamma1", "admissible".
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from grazing_control.continuation import continue_11
+from grazing_control.control import Gains
+from grazing_control.design import admissible_c2, degenerate_c1, evaluate_design, write_controller_yaml
+from grazing_control.orbits import orbit_11
+from grazing_control.params import OscillatorParams
+from grazing_control.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+P = OscillatorParams()
+
+JSON_CASES = {
+    "design": ["design", "--c2", "-1", "--json"],
+    "design_outside": ["design", "--c2", "1.5", "--json"],
+    "orbit": ["orbit", "--delta-d", "-1e-6", "--json"],
+    "orbit_ctrl": ["orbit", "--delta-d", "-1e-6", "--c2", "-1", "--json"],
+    "orbit_gains": ["orbit", "--delta-d=-2e-5", "--c1", "0.1", "--c2", "-0.5", "--json"],
+    "continue": ["continue", "--from", "-1e-2", "--to", "-1e-8", "--points", "30", "--json"],
+    "continue_ctrl": ["continue", "--from", "-1e-4", "--to", "-1e-10", "--points", "20",
+                      "--c2", "-1", "--json"],
+    "simulate": ["simulate", "--delta-d", "-5e-6", "--periods", "25", "--json"],
+    "scene5": ["simulate", "--delta-d", "-5e-6", "--periods", "1100", "--control-after", "1000",
+               "--c2", "-1", "--json"],
+    "scene9": ["simulate", "--delta-d", "-9e-6", "--periods", "1100", "--control-after", "1000",
+               "--c2", "-1", "--json"],
+}
+
+HUMAN_CASES = {
+    "orbit": (["orbit", "--delta-d", "-1e-6"], ["1/1 orbit", "multipliers"]),
+    "continue": (["continue", "--from", "-1e-2", "--to", "-1e-8", "--points", "30"],
+                 ["period-doubling", "bifurcations"]),
+    "simulate": (["simulate", "--delta-d", "-5e-6", "--periods", "20", "--c2", "-1"],
+                 ["impacts per period"]),
+}
+
+# (argv, regex naming the parameter)
+BAD_CASES = {
+    "zeta": (["design", "--c2", "-1", "--zeta", "2"], r"\bzeta\b"),
+    "r": (["orbit", "--delta-d", "-1e-6", "--r", "0"], r"(--r\b|\br=)"),
+    "omega_negative": (["design", "--c2", "-1", "--omega", "-1"], r"\bomega\b"),
+    "omega_nan": (["design", "--c2", "-1", "--omega", "nan"], r"\bomega\b"),
+    "delta_d_abc": (["orbit", "--delta-d", "abc"], r"delta[-_]d"),
+    "periods_negative": (["simulate", "--delta-d", "-5e-6", "--periods", "-3"], r"\bperiods\b"),
+    "pi2_offset": (["design", "--c2", "-1", "--pi2-offset", "7"], r"pi2[-_]offset"),
+    "c1_without_c2": (["orbit", "--delta-d", "-1e-6", "--c1", "0.3"], r"\bc1\b"),
+    "orbit_positive_delta_d": (["orbit", "--delta-d", "1e-5"], r"delta[-_]d"),
+    "continue_positive_start": (["continue", "--from", "1e-3", "--to", "-1e-6"], r"\bstart\b|--from"),
+    "continue_points": (["continue", "--from", "-1e-3", "--to", "-1e-6", "--points", "1"],
+                        r"\bpoints\b"),
+}
+
+
+def _run(argv, cwd):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    return subprocess.run([sys.executable, "-m", "grazing_control.cli", *argv], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Run every command of this module once, a few at a time."""
+    tmp = tmp_path_factory.mktemp("cli")
+    out_ok = tmp / "ok" / "controller.yaml"
+    out_ok.parent.mkdir()
+    out_bad = tmp / "bad" / "controller.yaml"
+    out_bad.parent.mkdir()
+    jobs = {("json", k): v for k, v in JSON_CASES.items()}
+    jobs.update({("human", k): v[0] for k, v in HUMAN_CASES.items()})
+    jobs.update({("bad", k): v[0] for k, v in BAD_CASES.items()})
+    jobs[("out", "ok")] = ["design", "--c2", "-1", "--out", str(out_ok)]
+    jobs[("out", "bad")] = ["design", "--c2", "1.5", "--out", str(out_bad)]
+    with ThreadPoolExecutor(max_workers=max(2, min(6, os.cpu_count() or 2))) as ex:
+        futures = {k: ex.submit(_run, argv, tmp) for k, argv in jobs.items()}
+        results = {k: f.result() for k, f in futures.items()}
+    results["paths"] = (out_ok, out_bad)
+    return results
+
+
+def _json(runs, name):
+    r = runs[("json", name)]
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == ""
+    obj = json.loads(r.stdout)  # exactly one JSON value, nothing else
+    assert isinstance(obj, dict)
+    assert r.stdout.count("\n") == 1 and r.stdout.endswith("\n")
+    return obj
+
+
+def _pairs(values):
+    return [[float(np.real(z)), float(np.imag(z))] for z in values]
+
+
+def _close(a, b, rel=1e-12, abs_=0.0):
+    np.testing.assert_allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
+                               rtol=rel, atol=abs_)
+
+
+# ------------------------------------------------------------------ --json, design
+def test_design_json_keys_and_values(runs):
+    d = _json(runs, "design")
+    required = {"c1", "c2", "x_ref", "v_ref", "admissible_c2", "multipliers_limit"}
+    assert required <= set(d)
+    g = Gains(degenerate_c1(P, -1.0), -1.0)
+    assert d["c2"] == -1.0
+    assert d["c1"] == pytest.approx(g.c1, rel=1e-14)
+    assert (d["x_ref"], d["v_ref"]) == pytest.approx((P.x_ref, P.v_ref), rel=1e-14, abs=1e-300)
+    (lo, hi), = admissible_c2(P)
+    assert d["admissible_c2"] == pytest.approx([lo, hi], rel=1e-12)
+    point = evaluate_design(P, -1.0)
+    _close(d["multipliers_limit"], _pairs(point.multipliers_limit), abs_=1e-15)
+    assert d["multipliers_limit"][1] == [0.0, 0.0]  # det G = 0 for c2 = -1
+    if "gamma1" in d:
+        assert d["gamma1"] == pytest.approx(point.gamma1, rel=1e-12)
+    if "admissible" in d:
+        assert d["admissible"] is True
+
+
+def test_design_json_for_a_non_admissible_gain(runs):
+    d = _json(runs, "design_outside")
+    assert d["c2"] == 1.5
+    assert d["c1"] == pytest.approx(degenerate_c1(P, 1.5), rel=1e-14)
+    assert max(np.hypot(*np.array(d["multipliers_limit"]).T)) > 1.0
+    if "admissible" in d:
+        assert d["admissible"] is False
+
+
+# ------------------------------------------------------------------ --json, orbit
+@pytest.mark.parametrize("name, dd, gains", [
+    ("orbit", -1e-6, None),
+    ("orbit_ctrl", -1e-6, Gains(degenerate_c1(P, -1.0), -1.0)),
+    ("orbit_gains", -2e-5, Gains(0.1, -0.5)),
+])
+def test_orbit_json_keys_and_values(runs, name, dd, gains):
+    d = _json(runs, name)
+    assert set(d) == {"delta_d", "impact_phase", "v_minus", "section_pi2", "multipliers", "stable"}
+    o = orbit_11(P.with_(delta_d=dd), gains)
+    assert d["delta_d"] == dd
+    assert d["impact_phase"] == pytest.approx(o.impact_phase, rel=1e-13)
+    assert d["v_minus"] == pytest.approx(o.v_minus, rel=1e-12)
+    _close(d["section_pi2"], list(o.pi2))
+    _close(d["multipliers"], _pairs(o.multipliers), abs_=1e-14)
+    assert d["stable"] is o.stable
+    assert len(d["section_pi2"]) == 2 and all(len(z) == 2 for z in d["multipliers"])
+
+
+# ------------------------------------------------------------------ --json, continue
+@pytest.mark.parametrize("name, args, gains", [
+    ("continue", (-1e-2, -1e-8, 30), None),
+    ("continue_ctrl", (-1e-4, -1e-10, 20), Gains(degenerate_c1(P, -1.0), -1.0)),
+])
+def test_continue_json_keys_and_values(runs, name, args, gains):
+    d = _json(runs, name)
+    assert set(d) == {"branch", "bifurcations"}
+    start, stop, n = args
+    b = continue_11(P, start, stop, gains, points=n, check=True)
+    assert len(d["branch"]) == len(b.points) == n
+    for row, pt in zip(d["branch"], b.points):
+        assert set(row) == {"delta_d", "v_minus", "multipliers", "stable"}
+        assert row["delta_d"] == pytest.approx(pt.delta_d, rel=1e-12)
+        assert row["v_minus"] == pytest.approx(pt.v_minus, rel=1e-12)
+        _close(row["multipliers"], _pairs(pt.multipliers), abs_=1e-14)
+        assert row["stable"] is pt.stable
+    assert len(d["bifurcations"]) == len(b.bifurcations)
+    for row, bf in zip(d["bifurcations"], b.bifurcations):
+        assert set(row) == {"type", "delta_d", "multipliers"}
+        assert row["type"] == bf.type
+        assert row["delta_d"] == pytest.approx(bf.delta_d, rel=1e-12)
+        _close(row["multipliers"], _pairs(bf.multipliers), abs_=1e-12)
+    if gains is None:
+        assert [row["type"] for row in d["bifurcations"]] == ["period-doubling"]
+        assert d["bifurcations"][0]["delta_d"] == pytest.approx(-1.005268252976113e-05, rel=1e-10)
+
+
+# ------------------------------------------------------------------ --json, simulate
+def test_simulate_json_keys_and_values(runs):
+    d = _json(runs, "simulate")
+    assert set(d) == {"pi2", "impacts_per_period"}
+    res = simulate(P.with_(delta_d=-5e-6), 25, gains=None, control_after=None)
+    assert len(d["pi2"]) == len(d["impacts_per_period"]) == 25  # one entry per period
+    assert all(len(s) == 2 for s in d["pi2"])
+    _close(d["pi2"], res.pi2, abs_=1e-15)
+    assert d["impacts_per_period"] == res.impacts_per_period.tolist()
+    assert d["pi2"][0] == pytest.approx([P.x_ref, P.v_ref], rel=1e-15, abs=1e-300)
+
+
+@pytest.mark.parametrize("name, dd", [("scene5", -5e-6), ("scene9", -9e-6)])
+def test_scene_converges_to_the_controlled_orbit(runs, name, dd):
+    d = _json(runs, name)
+    counts = d["impacts_per_period"]
+    pi2 = np.array(d["pi2"])
+    assert len(counts) == len(pi2) == 1100
+    assert counts[-50:] == [1] * 50
+    g = Gains(degenerate_c1(P, -1.0), -1.0)
+    o = orbit_11(P.with_(delta_d=dd), g)
+    _close(pi2[-1], o.pi2, rel=0.0, abs_=1e-12)
+    # before the switch the uncontrolled motion is not the 1/1 orbit (it is unstable there:
+    # the PD is at -1.005e-5), after it the samples settle
+    assert np.max(np.abs(pi2[900:1000] - o.pi2)) > 1e-4
+    assert np.max(np.abs(pi2[-50:] - o.pi2)) < 1e-12
+
+
+# ------------------------------------------------------------------ design --out
+def test_design_out_writes_the_controller_yaml(runs, tmp_path):
+    r = runs[("out", "ok")]
+    out_ok, _ = runs["paths"]
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == ""
+    # human-readable report of `design` (no --json) names the file
+    assert "c1" in r.stdout and "admissible" in r.stdout and str(out_ok) in r.stdout
+    doc = yaml.safe_load(out_ok.read_text())
+    params = doc["/controller_node"]["ros__parameters"]
+    assert set(params) == {"c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset"}
+    assert params["c1"] == pytest.approx(degenerate_c1(P, -1.0), rel=1e-14)
+    assert params["c2"] == -1.0
+    ref = tmp_path / "ref.yaml"
+    write_controller_yaml(ref, P, Gains(degenerate_c1(P, -1.0), -1.0))
+    assert yaml.safe_load(ref.read_text()) == doc
+    assert sorted(p.name for p in out_ok.parent.iterdir()) == ["controller.yaml"]
+
+
+def test_design_out_refuses_a_non_admissible_gain(runs):
+    r = runs[("out", "bad")]
+    _, out_bad = runs["paths"]
+    assert r.returncode == 2
+    assert r.stdout == ""
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("grazing: error:")
+    assert re.search(r"\bc2\b", lines[0])
+    assert "Traceback" not in r.stderr
+    assert list(out_bad.parent.iterdir()) == []
+
+
+# ------------------------------------------------------------------ bad input
+@pytest.mark.parametrize("name", list(BAD_CASES))
+def test_bad_input_exits_2_with_one_line_naming_the_parameter(runs, name):
+    """Regression (a83d817, fixed in 5d7f72f/39e12ff) for omega_nan, delta_d_abc,
+    periods_negative: a value rejected by argparse's type function printed argparse's
+    usage block and 'grazing <cmd>: error: ...' (3-5 lines), not one 'grazing: error:'."""
+    r = runs[("bad", name)]
+    pattern = BAD_CASES[name][1]
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert r.stdout == ""
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("grazing: error: ")
+    assert re.search(pattern, lines[0]), lines[0]
+
+
+# ------------------------------------------------------------------ human-readable
+@pytest.mark.parametrize("name", list(HUMAN_CASES))
+def test_human_readable_output(runs, name):
+    r = runs[("human", name)]
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == ""
+    words = HUMAN_CASES[name][1]
+    for w in words:
+        assert w in r.stdout
+    with pytest.raises(json.JSONDecodeError):
+        json.loads(r.stdout)
+    assert len(r.stdout.splitlines()) >= 3
