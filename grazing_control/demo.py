@@ -41,7 +41,18 @@ def _run_nodes(p, controller_yaml, bag_dir, periods):
     return run_scene(p, controller_yaml, bag_dir, periods=periods, enable_after=CONTROL_AFTER)
 
 
+def _nodes_available() -> bool:
+    import importlib.util
+
+    return all(importlib.util.find_spec(m) is not None for m in (
+        "grazing_control.launcher", "sim_node.sim_node", "grazing_control.nodes.controller_node",
+        "grazing_control.nodes.recorder_node"))
+
+
 def main(args) -> int:
+    if not args.offline and not _nodes_available():
+        print("demo: the ROS 2 nodes or the launcher are not available; running offline (core)")
+        args.offline = True
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     base = OscillatorParams()
