@@ -53,7 +53,8 @@ _MAX_DEPTH = 64
 class Impact(NamedTuple):
     """One impact: time since the start of the segment, phase, velocities.
 
-    ``sticking`` marks the end of a chattering sequence (the mass then sticks).
+    ``sticking`` marks the end of a chattering sequence: the mass then rests on the
+    wall until ``release`` (time since the segment start; inf if not in the segment).
     """
 
     dt: float
@@ -61,6 +62,7 @@ class Impact(NamedTuple):
     v_minus: float
     v_plus: float
     sticking: bool = False
+    release: float = math.nan
 
 
 class Segment(NamedTuple):
@@ -383,6 +385,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
             t += t_inf
             tau = (tau + omega * t_inf) % TWO_PI
             stick = _release_time(p, tau, duration - t)
+            impacts[-1] = impacts[-1]._replace(release=t + stick if t + stick <= duration else math.inf)
             t = min(duration, t + stick)
             tau = (tau0 + omega * t) % TWO_PI
             xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d

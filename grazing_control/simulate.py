@@ -20,7 +20,7 @@ import numpy as np
 
 from .control import Gains
 from .flow import propagate, to_deviation, to_physical
-from .impact import Impact, Segment, advance
+from .impact import Segment, advance
 from .params import OscillatorParams
 
 __all__ = ["SimulationResult", "period_step", "states_between", "simulate", "simulate_batch"]
@@ -47,17 +47,23 @@ def states_between(p: OscillatorParams, tau0: float, dx: float, dv: float,
     """
     times = np.asarray(times, dtype=float)
     out = np.empty((times.size, 2))
-    t0, z = 0.0, (dx, dv)
+    t0, z, stuck_until = 0.0, (dx, dv), -math.inf
     events = list(impacts)
     k = 0
     for j, t in enumerate(times):
         while k < len(events) and events[k].dt <= t:
             imp = events[k]
-            tau = imp.phase
-            x_wall = p.d
-            z = to_deviation(p, tau, x_wall, imp.v_plus if not imp.sticking else 0.0)
-            t0 = imp.dt
+            if imp.sticking:  # on the wall at rest until the release, then free from (d, 0)
+                stuck_until = imp.release
+                t0 = min(imp.release, 1e300)
+                z = to_deviation(p, tau0 + p.omega * t0, p.d, 0.0)
+            else:
+                t0 = imp.dt
+                z = to_deviation(p, imp.phase, p.d, imp.v_plus)
             k += 1
+        if t < stuck_until:
+            out[j] = (p.d, 0.0)
+            continue
         dzx, dzv = propagate(p.zeta, z[0], z[1], t - t0)
         out[j] = to_physical(p, tau0 + p.omega * t, dzx, dzv)
     return out

@@ -188,9 +188,6 @@ def test_states_between_agrees_with_advance(p, z):
         assert x <= p.d + 1e-12
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: states_between ignores sticking: after a "
-                   "sticking impact it flows freely from (d, 0), through the wall (x = 0.53 > d "
-                   "= 0.5 at t = 0.5), instead of staying at x = d until the release")
 def test_states_between_holds_the_mass_on_the_wall_while_it_sticks():
     p = OscillatorParams.from_d(0.5, r=0.5)
     tau = 5.5  # at rest on the wall with cos(tau) - d > 0: sticks until tau = pi/3
