@@ -13,6 +13,7 @@ import json
 import math
 import re
 import sys
+import time
 
 import numpy as np
 
@@ -65,6 +66,12 @@ def _common(parser):
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
+def _method_arg(parser):
+    parser.add_argument("--method", choices=("exact", "perturbation"), default="exact",
+                        help="exact (shooting, the accurate route) or perturbation (series in "
+                             "delta2, the fast estimate); the cost is reported")
+
+
 def _gain_args(parser, required=False):
     parser.add_argument("--c1", type=_finite, help="gain c1 (default: degenerate condition Eq. 38)")
     parser.add_argument("--c2", type=_finite, required=required, help="gain c2")
@@ -91,8 +98,26 @@ def cmd_design(args):
     from .design import admissible_c2, evaluate_design, write_controller_yaml
 
     p = _params(args)
+    t0 = time.perf_counter()
     point = evaluate_design(p, args.c2)
     intervals = admissible_c2(p)
+    cost = time.perf_counter() - t0
+    other = None
+    if args.method == "perturbation":
+        from .perturbation import (admissible_c2_perturbation, existence_coefficient_perturbation,
+                                   limit_multipliers_perturbation)
+
+        t0 = time.perf_counter()
+        g = Gains(point.c1, point.c2)
+        lam_p = limit_multipliers_perturbation(p, g)
+        gamma_p = existence_coefficient_perturbation(p, g)
+        intervals_p = admissible_c2_perturbation(p)
+        cost_p = time.perf_counter() - t0
+        other = {"exact": {"admissible_c2": [list(iv) for iv in intervals],
+                           "multipliers_limit": _complex_list(point.multipliers_limit),
+                           "gamma1": point.gamma1, "seconds": cost}}
+        point = type(point)(point.c1, point.c2, lam_p, gamma_p)
+        intervals, cost = intervals_p, cost_p
     chosen = next((iv for iv in intervals if iv[0] <= args.c2 <= iv[1]), None)
     shown = chosen or (max(intervals, key=lambda iv: iv[1] - iv[0]) if intervals else None)
     out = {
@@ -104,7 +129,13 @@ def cmd_design(args):
         "multipliers_limit": _complex_list(point.multipliers_limit),
         "gamma1": point.gamma1,
         "admissible": point.admissible,
+        "method": args.method,
+        "seconds": cost,
     }
+    if other is not None:
+        ends = [(a - b) for iv, jv in zip(intervals, other["exact"]["admissible_c2"]) for a, b in zip(iv, jv)]
+        other["difference_admissible_ends"] = ends
+        out["comparison"] = other
     if args.out:
         if not point.admissible:
             raise ParameterError(
@@ -122,7 +153,12 @@ def cmd_design(args):
         f"  gamma1             = {point.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*)",
         f"  admissible c2      = {_fmt_intervals(intervals)}",
         f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
+        f"  method             : {args.method} ({cost:.3g} s)",
     ]
+    if other is not None:
+        lines.append(f"  exact route        : admissible c2 = "
+                     f"{_fmt_intervals(other['exact']['admissible_c2'])} ({other['exact']['seconds']:.3g} s); "
+                     f"end differences {other['difference_admissible_ends']}")
     if args.out:
         lines.append(f"  controller parameters written to {args.out}")
     return "\n".join(lines)
@@ -138,26 +174,37 @@ def cmd_orbit(args):
 
     p = _params(args, args.delta_d)
     gains = _gains(args, p)
+    t0 = time.perf_counter()
     o = orbit_11(p, gains)
+    lam = o.multipliers
+    cost = time.perf_counter() - t0
+    if args.method == "perturbation":
+        from .perturbation import perturbation_multipliers
+
+        t0 = time.perf_counter()
+        lam = perturbation_multipliers(p, gains)
+        cost = time.perf_counter() - t0
     out = {
         "delta_d": o.params.delta_d,
         "impact_phase": o.impact_phase,
         "v_minus": o.v_minus,
         "section_pi2": list(o.pi2),
-        "multipliers": _complex_list(o.multipliers),
-        "stable": o.stable,
+        "multipliers": _complex_list(lam),
+        "stable": bool(np.max(np.abs(lam)) < 1.0),
+        "method": args.method,
+        "seconds": cost,
     }
     if args.json:
         return out
-    lam = ", ".join(f"{z:.6g}" for z in o.multipliers)
+    lam = ", ".join(f"{z:.6g}" for z in lam)
     ctl = f" with c1={gains.c1:.6g}, c2={gains.c2:.6g}" if gains else " (uncontrolled)"
     return "\n".join([
         f"1/1 orbit at Delta d = {o.params.delta_d:.6g}{ctl}",
         f"  impact phase  = {o.impact_phase:.15g}",
         f"  v-            = {o.v_minus:.10g}",
         f"  Pi2 point     = ({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
-        f"  multipliers   = {lam}",
-        f"  stable        = {o.stable}",
+        f"  multipliers   = {lam}  ({args.method}, {cost:.3g} s)",
+        f"  stable        = {out['stable']}",
     ])
 
 
@@ -245,12 +292,14 @@ def build_parser() -> argparse.ArgumentParser:
     _common(s)
     s.add_argument("--c2", type=_finite, required=True, help="chosen gain c2")
     s.add_argument("--out", help="write the controller's YAML parameter file here")
+    _method_arg(s)
     s.set_defaults(func=cmd_design)
 
     s = sub.add_parser("orbit", help="the 1/1 orbit and its Floquet multipliers")
     _common(s)
     s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d* (< 0)")
     _gain_args(s)
+    _method_arg(s)
     s.set_defaults(func=cmd_orbit)
 
     s = sub.add_parser("continue", help="continue the 1/1 branch in Delta d, find bifurcations")

@@ -161,7 +161,10 @@ def test_design_json_for_a_non_admissible_gain(runs):
 ])
 def test_orbit_json_keys_and_values(runs, name, dd, gains):
     d = _json(runs, name)
-    assert set(d) == {"delta_d", "impact_phase", "v_minus", "section_pi2", "multipliers", "stable"}
+    # the spec's keys, plus the method and its cost in seconds (issue 4: --method)
+    assert set(d) == {"delta_d", "impact_phase", "v_minus", "section_pi2", "multipliers", "stable",
+                      "method", "seconds"}
+    assert d["method"] == "exact" and d["seconds"] > 0
     o = orbit_11(P.with_(delta_d=dd), gains)
     assert d["delta_d"] == dd
     assert d["impact_phase"] == pytest.approx(o.impact_phase, rel=1e-13)
@@ -288,3 +291,13 @@ def test_human_readable_output(runs, name):
     with pytest.raises(json.JSONDecodeError):
         json.loads(r.stdout)
     assert len(r.stdout.splitlines()) >= 3
+
+
+def test_orbit_perturbation_method_agrees_with_exact_near_grazing(tmp_path):
+    """--method perturbation answers with the series estimate and reports its cost."""
+    exact, fast = (json.loads(_run(["orbit", "--delta-d", "-1e-7", "--json", *extra], tmp_path).stdout)
+                   for extra in ([], ["--method", "perturbation"]))
+    assert fast["method"] == "perturbation" and fast["seconds"] > 0
+    lam_e = complex(*exact["multipliers"][0])
+    lam_p = complex(*fast["multipliers"][0])
+    assert abs(lam_p / lam_e - 1) < 1e-6
