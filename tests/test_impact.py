@@ -414,6 +414,37 @@ def test_chattering_sequence_matches_reference_then_sticks():
     assert abs(x_end - WALL.d) < 1e-12 and abs(v_end) < 1e-12
 
 
+def test_chattering_then_release_and_independent_of_the_duration():
+    """The chattering run of the previous test, continued past the release at
+    tau = acos(d): the sticking impact carries the release time, the impacts up to any
+    time do not depend on how long the segment is, and after the release the mass
+    follows the free flow from (d, 0) (50-digit reference)."""
+    tau = 0.0
+    z = _wall_state(tau, 0.01)
+    t_rel = _release_time(tau)
+    runs = {dur: advance(WALL, tau, *z, dur) for dur in (1.0, 1.5, t_rel + 0.3, 3.0)}
+    short = runs[1.0].impacts
+    for seg in runs.values():
+        # The window subdivision depends on the duration, so the runs agree up to
+        # rounding, which the chattering sequence amplifies as ~eps |dx| / v- in time:
+        # compare the resolved bounces (v- > 1e-4) closely and the sticking point.
+        big = [(a, b) for a, b in zip(seg.impacts, short) if b.v_minus > 1e-4]
+        assert len(big) >= 6
+        for a, b in big:
+            assert abs(a.dt - b.dt) < 1e-10 and a.v_minus == pytest.approx(b.v_minus, rel=1e-6)
+        sa = [i for i in seg.impacts if i.sticking]
+        sb = [i for i in short if i.sticking]
+        assert len(sa) == len(sb) == 1 and abs(sa[0].dt - sb[0].dt) < 1e-9
+    stick = [i for i in runs[3.0].impacts if i.sticking]
+    assert len(stick) == 1 and stick[0].release == pytest.approx(t_rel, abs=1e-12)
+    assert all(i.dt > t_rel for i in runs[3.0].impacts if i.dt > stick[0].dt)
+    seg = runs[t_rel + 0.3]
+    x, v = to_physical(WALL, tau + WALL.omega * (t_rel + 0.3), seg.dx, seg.dv)
+    ref = RefModel.from_params(WALL)
+    x_ref, v_ref = ref.flow(mp.acos(ref.d), ref.d, 0, 0.3)
+    assert abs(mpf(x) - x_ref) < 1e-12 and abs(mpf(v) - v_ref) < 1e-12
+
+
 @pytest.mark.parametrize("tau", [5.5, 5.9, 0.0])
 def test_at_rest_on_the_wall_sticks_and_releases_when_the_force_changes_sign(tau):
     """At rest on the wall with cos(tau) - d > 0 the mass stays at x = d, v = 0 until
