@@ -309,9 +309,3 @@ def _refine(arc, lo, hi, which, increasing):
                 return xh
         x = xn
     return hi
-
-
-def mpf_max_abs(values) -> float:
-    """max |v| over an iterable of mpf, as a float (for error reports)."""
-    return float(max((abs(v) for v in values), default=mpf(0)))
-
