@@ -99,7 +99,7 @@ class OscillatorParams:
     --------
     >>> p = OscillatorParams(delta_d=-5e-6)
     >>> round(p.d_star, 6), p.non_sticking
-    (1.797542, True)
+    (1.801498, True)
     """
 
     zeta: float = STUDY_ZETA
@@ -120,7 +120,8 @@ class OscillatorParams:
             0.0 < values["pi2_offset"] < TWO_PI,
             "0 < pi2_offset < 2*pi",
         )
-        values["tau0"] = math.fmod(values["tau0"], TWO_PI) % TWO_PI
+        tau0 = math.fmod(values["tau0"], TWO_PI) % TWO_PI
+        values["tau0"] = 0.0 if tau0 >= TWO_PI else tau0  # % may round 2 pi - tiny up to 2 pi
         for name, value in values.items():
             object.__setattr__(self, name, value)
 

@@ -72,8 +72,6 @@ def test_numbers_are_normalised():
     assert OscillatorParams(tau0=4 * math.pi + 0.5).tau0 == pytest.approx(0.5, abs=1e-14)
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: tau0=-1e-300 is 'reduced' to exactly 2*pi "
-                   "(float % rounds 2*pi - 1e-300 up), outside [0, 2*pi)")
 def test_tau0_reduction_stays_below_two_pi():
     assert 0.0 <= OscillatorParams(tau0=-1e-300).tau0 < 2 * math.pi
 
@@ -193,8 +191,6 @@ def test_grazing_acceleration_closed_form(zeta, omega):
     assert p.non_sticking
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: the docstring example of OscillatorParams "
-                   "gives d_star 1.797542, the value is 1.801498")
 def test_docstring_examples():
     result = doctest.testmod(params_module, verbose=False)
     assert result.failed == 0
