@@ -1,0 +1,276 @@
+"""The project's own launcher: the three nodes as separate processes, for machines without ``ros2``.
+
+:func:`run` starts ``sim_node``, ``controller_node`` and (with a bag directory)
+``recorder_node`` as ``sys.executable -m <module> --ros-args --params-file ... -p key:=value``,
+waits for the simulator to finish the scene (it runs ``max_periods`` forcing periods with
+``exit_when_done:=true`` and exits with status 0), then stops the controller and the
+recorder with SIGINT (the recorder closes its bag) and returns every exit status.
+It only spawns processes: it does not import rclpy.
+
+Start order and readiness: the recorder and the controller start first; the simulator
+waits until the controller is matched (``wait_for_controller``) and, with a recorder,
+until every data topic has a subscriber (``wait_for_subscribers:=1``), so no message of
+the scene is published before someone records it.
+
+Ctrl-C (or SIGTERM to the launcher): SIGINT is forwarded to every node still running
+(a node also getting the terminal's SIGINT ignores the second one), the launcher waits
+for them and returns with ``interrupted=True``.
+
+``ros2 launch grazing_control grazing_control.launch.py`` is the equivalent on a ROS install.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+__all__ = ["RunResult", "run", "node_command", "start_node", "stop_nodes", "format_value",
+           "SIM_MODULE", "CONTROLLER_MODULE", "RECORDER_MODULE", "CONFIG_DIR"]
+
+SIM_MODULE = "sim_node.sim_node"
+CONTROLLER_MODULE = "grazing_control.nodes.controller_node"
+RECORDER_MODULE = "grazing_control.nodes.recorder_node"
+#: The source tree's root (so that ``-m sim_node.sim_node`` works from a checkout).
+SOURCE_ROOT = Path(__file__).resolve().parents[1]
+#: Parameter files of the study (config/ of the checkout).
+CONFIG_DIR = SOURCE_ROOT / "config"
+
+
+@dataclass
+class RunResult:
+    """Exit statuses of one scene's processes (None: not started)."""
+
+    sim: int | None
+    controller: int | None
+    recorder: int | None
+    bag_dir: str | None
+    wall: float
+    timed_out: bool = False
+    interrupted: bool = False
+    logs: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """The simulator finished and every node exited with status 0."""
+        codes = [self.sim, self.controller] + ([self.recorder] if self.recorder is not None
+                                               else [])
+        return not (self.timed_out or self.interrupted) and all(c == 0 for c in codes)
+
+
+def format_value(value) -> str:
+    """A parameter value as ``-p key:=value`` text that rcl parses back to the same type."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return ".nan"
+        if math.isinf(value):
+            return ".inf" if value > 0 else "-.inf"
+        text = repr(value)
+        return text if ("." in text or "e" in text) else text + ".0"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(format_value(v) for v in value) + "]"
+    return str(value)
+
+
+def node_command(module: str, params_files=(), overrides=None, python: str | None = None) -> list:
+    """``python -m module --ros-args --params-file F ... -p key:=value ...``."""
+    cmd = [python or sys.executable, "-m", module, "--ros-args"]
+    for f in params_files:
+        cmd += ["--params-file", os.fspath(f)]
+    for key, value in (overrides or {}).items():
+        cmd += ["-p", f"{key}:={format_value(value)}"]
+    return cmd
+
+
+def node_env(domain_id: int | None = None) -> dict:
+    """Environment of a node: ours, the source root on PYTHONPATH, the domain if given."""
+    env = dict(os.environ)
+    paths = [str(SOURCE_ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
+    env["PYTHONUNBUFFERED"] = "1"
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(int(domain_id))
+    return env
+
+
+def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, log=None,
+               python=None) -> subprocess.Popen:
+    """Start one node process; its output goes to ``log`` (a path) or is inherited."""
+    out = open(log, "wb") if log is not None else None
+    try:
+        return subprocess.Popen(node_command(module, params_files, overrides, python),
+                                env=node_env(domain_id), stdin=subprocess.DEVNULL,
+                                stdout=out, stderr=subprocess.STDOUT if out else None)
+    finally:
+        if out is not None:
+            out.close()
+
+
+def stop_nodes(procs, grace: float = 15.0) -> None:
+    """SIGINT every running process, wait ``grace`` s, then SIGTERM, then SIGKILL."""
+    procs = [p for p in procs if p is not None]
+    for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        alive = [p for p in procs if p.poll() is None]
+        if not alive:
+            return
+        for p in alive:
+            try:
+                p.send_signal(sig)
+            except ProcessLookupError:
+                pass
+        end = time.monotonic() + wait
+        for p in alive:
+            try:
+                p.wait(max(0.0, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+
+
+def _params_file(params, node: str, tmp: Path) -> Path:
+    """A parameter file: a path as is, a dict written as ``/node: ros__parameters: {...}``."""
+    if isinstance(params, (str, os.PathLike)):
+        return Path(params)
+    path = tmp / f"{node}.yaml"
+    values = {k: (float(v) if isinstance(v, float) else v) for k, v in dict(params).items()}
+    with open(path, "w") as fh:
+        yaml.safe_dump({f"/{node}": {"ros__parameters": values}}, fh, sort_keys=False)
+    return path
+
+
+def run(sim_params, controller_params, bag_dir=None, periods: int | None = None, *,
+        domain_id: int | None = None, timeout: float | None = None,
+        sim_overrides: dict | None = None, controller_overrides: dict | None = None,
+        recorder_overrides: dict | None = None, log_dir=None,
+        python: str | None = None) -> RunResult:
+    """Run one scene through the three node processes and wait for it to finish.
+
+    Parameters
+    ----------
+    sim_params : dict or path
+        The simulator's parameters: a ROS parameter file (``/sim_node: ros__parameters``,
+        e.g. config/study.yaml) or a dict of values (floats must be floats).
+    controller_params : dict or path
+        The controller's parameter file (``grazing design --out``, config/controller.yaml)
+        or a dict.
+    bag_dir : path, optional
+        Record the scene to this rosbag2-style directory (must not exist or be empty);
+        None: no recorder. Skipped with a warning if the recorder node is not available.
+    periods : int, optional
+        Forcing periods to simulate (``max_periods``); None: the parameter file's value
+        (which must be > 0 for the scene to end).
+    domain_id : int, optional
+        ROS_DOMAIN_ID of the processes (isolation); default: the environment's.
+    timeout : float, optional
+        Wall seconds to wait for the simulator; then every node is stopped and the
+        result has ``timed_out=True``.
+    sim_overrides, controller_overrides, recorder_overrides : dict, optional
+        Extra ``-p key:=value`` for each node (e.g. ``{"enable_after": 200}``).
+    log_dir : path, optional
+        Write each node's output to ``<log_dir>/<node>.log`` instead of the terminal.
+    python : str, optional
+        Interpreter for the nodes (default: this one).
+
+    Returns
+    -------
+    RunResult
+        Exit statuses (sim, controller, recorder), wall time, flags.
+    """
+    t0 = time.monotonic()
+    record = bag_dir is not None
+    if record and importlib.util.find_spec(RECORDER_MODULE) is None:
+        print(f"warning: {RECORDER_MODULE} is not available: running without recording",
+              file=sys.stderr)
+        record = False
+    logs = {}
+    if log_dir is not None:
+        Path(log_dir).mkdir(parents=True, exist_ok=True)
+        logs = {n: str(Path(log_dir) / f"{n}.log") for n in ("sim_node", "controller_node",
+                                                             "recorder_node")}
+    sim_over = {"exit_when_done": True, "wait_for_controller": True,
+                "wait_for_subscribers": 1 if record else 0}
+    if periods is not None:
+        sim_over["max_periods"] = int(periods)
+    sim_over.update(sim_overrides or {})
+    procs = {"sim_node": None, "controller_node": None, "recorder_node": None}
+    timed_out = interrupted = False
+
+    def on_term(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = None
+    if threading_is_main():
+        previous = signal.signal(signal.SIGTERM, on_term)
+    with tempfile.TemporaryDirectory(prefix="grazing_run_") as tmp:
+        tmp = Path(tmp)
+        try:
+            if record:
+                rec_over = {"output": os.fspath(bag_dir)}
+                rec_over.update(recorder_overrides or {})
+                procs["recorder_node"] = start_node(
+                    RECORDER_MODULE, (), rec_over, domain_id=domain_id,
+                    log=logs.get("recorder_node"), python=python)
+            procs["controller_node"] = start_node(
+                CONTROLLER_MODULE, [_params_file(controller_params, "controller_node", tmp)],
+                controller_overrides, domain_id=domain_id, log=logs.get("controller_node"),
+                python=python)
+            procs["sim_node"] = start_node(
+                SIM_MODULE, [_params_file(sim_params, "sim_node", tmp)], sim_over,
+                domain_id=domain_id, log=logs.get("sim_node"), python=python)
+            sim = procs["sim_node"]
+            end = None if timeout is None else t0 + timeout
+            while sim.poll() is None:
+                if end is not None and time.monotonic() > end:
+                    timed_out = True
+                    break
+                early = [n for n in ("controller_node", "recorder_node")
+                         if procs[n] is not None and procs[n].poll() is not None]
+                if early:
+                    for name in early:
+                        print(f"warning: {name} exited early with status "
+                              f"{procs[name].returncode}: stopping the scene", file=sys.stderr)
+                    break
+                try:
+                    sim.wait(0.1)
+                except subprocess.TimeoutExpired:
+                    pass
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            try:
+                stop_nodes([procs["sim_node"]])
+                stop_nodes([procs["controller_node"], procs["recorder_node"]])
+            except KeyboardInterrupt:
+                interrupted = True
+                stop_nodes(list(procs.values()), grace=2.0)
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
+
+    def code(name):
+        p = procs[name]
+        return None if p is None else p.returncode
+
+    return RunResult(sim=code("sim_node"), controller=code("controller_node"),
+                     recorder=code("recorder_node"),
+                     bag_dir=os.fspath(bag_dir) if record else None,
+                     wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
+                     logs=logs)
+
+
+def threading_is_main() -> bool:
+    """Signal handlers can only be installed from the main thread."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()

@@ -1,0 +1,248 @@
+"""controller_node: the discrete grazing controller on section Pi2 (spec section 4, Eq. 28).
+
+Each Pi2 sample (x, v) is answered with the velocity correction
+
+    Delta v = c1 (x - x**) + c2 (v - v**)
+
+computed by :func:`grazing_control.control.correction`, limited to |Delta v| <=
+``saturation``, and published stamped with the sample's own stamp, so that the
+simulator can tell which sample it answers.
+
+Topics (reliable, volatile, keep last 1000)
+-------------------------------------------
+subscribes ``oscillator/pi2`` (sensor_msgs/JointState): position [x], velocity [v] at Pi2.
+publishes ``controller/velocity_correction`` (geometry_msgs/TwistStamped):
+twist.linear.x = Delta v (nondimensional velocity), header.stamp = the sample's stamp.
+
+Switching on
+------------
+The controller acts from the ``enable_after``-th sample on (counted from 0: with
+enable_after = 1000 samples 0..999 are uncontrolled, as the study and
+``simulate(..., control_after=1000)``); -1 means only through ``~/enable``
+(std_srvs/SetBool), which switches it on or off at any time. While off it still answers
+every sample, with Delta v = 0, so that a lockstep simulator never waits for an answer
+that will not come.
+
+Stale and malformed samples
+---------------------------
+* A sample whose stamp equals or precedes the newest one already answered is a duplicate
+  or out of order: not answered (counted as stale). The one exception is a sample at
+  t = 0 (stamp 0): the simulator was reset (``~/reset``), the sample count restarts and
+  ``enable_after`` counts again from there.
+* With ``use_sim_time`` true the node's clock follows ``/clock``; a sample older than
+  ``stale_after`` seconds of simulation time on arrival (clock now - stamp) is stale and
+  not answered. Without simulation time the check is skipped (stamps are simulation
+  time, the node's clock would be wall time).
+* NaN/inf or missing position/velocity: ignored, counted, logged (throttled).
+
+Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_ref
+(NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
+stale_after. Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+config/controller.yaml`` or ``python -m grazing_control.nodes.controller_node ...``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from geometry_msgs.msg import TwistStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool
+
+from grazing_control.control import Gains, correction
+from grazing_control.nodes.common import (DATA_QOS, StartupError, Throttled, float_descriptor,
+                                          int_descriptor, run_node, seconds_from_stamp,
+                                          stamp_key)
+from grazing_control.params import OscillatorParams, ParameterError, study_omega
+
+__all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
+
+_KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
+         "enable_after", "saturation", "stale_after")
+
+
+class ControlLaw:
+    """Eq. 28 with a switch, a saturation and the sample bookkeeping (no ROS).
+
+    Parameters
+    ----------
+    gains : Gains
+    x_ref, v_ref : float
+        X** on Pi2.
+    enable_after : int
+        First sample index (from 0) that is controlled; -1: only by :meth:`enable`.
+    saturation : float
+        Limit on |Delta v|, > 0 (inf: none).
+    """
+
+    def __init__(self, gains: Gains, x_ref: float, v_ref: float, enable_after: int,
+                 saturation: float):
+        self.configure(gains, x_ref, v_ref, enable_after, saturation)
+        self.count = 0          # samples answered since the start or the last reset
+        self.newest = None      # stamp key of the newest sample answered
+        self.forced = None      # None: follow enable_after; True/False: set by ~/enable
+
+    def configure(self, gains, x_ref, v_ref, enable_after, saturation) -> None:
+        self.gains, self.x_ref, self.v_ref = gains, x_ref, v_ref
+        self.enable_after, self.saturation = enable_after, saturation
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the next sample is controlled."""
+        if self.forced is not None:
+            return self.forced
+        return 0 <= self.enable_after <= self.count
+
+    def answer(self, key: tuple, x: float, v: float):
+        """Delta v for the sample with stamp ``key``; None when it must not be answered."""
+        if self.newest is not None and key <= self.newest:
+            if key != (0, 0):
+                return None
+            self.count = 0          # back to t = 0: the simulator was reset
+        dv = 0.0
+        if self.enabled:
+            dv = correction(self.gains, x, v, self.x_ref, self.v_ref)
+            if abs(dv) > self.saturation:
+                dv = math.copysign(self.saturation, dv)
+        self.newest = key
+        self.count += 1
+        return dv
+
+
+def law_from_values(values: dict) -> ControlLaw:
+    """Validate the controller's parameters into a :class:`ControlLaw` (ParameterError)."""
+    gains = Gains(values["c1"], values["c2"])
+    x_ref, v_ref = float(values["x_ref"]), float(values["v_ref"])
+    if math.isnan(x_ref) or math.isnan(v_ref):
+        p = OscillatorParams(zeta=values["zeta"], r=values["r"], omega=values["omega"],
+                             pi2_offset=values["pi2_offset"])
+        x_ref = p.x_ref if math.isnan(x_ref) else x_ref
+        v_ref = p.v_ref if math.isnan(v_ref) else v_ref
+    for name, value in (("x_ref", x_ref), ("v_ref", v_ref)):
+        if not math.isfinite(value):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite real "
+                                 "number, or NaN to compute X** from the model parameters")
+    enable_after = int(values["enable_after"])
+    if enable_after < -1:
+        raise ParameterError(f"enable_after={enable_after} is invalid: valid range is >= 0, "
+                             "or -1 for only through ~/enable")
+    saturation = float(values["saturation"])
+    if not saturation > 0.0:
+        raise ParameterError(f"saturation={saturation!r} is invalid: valid range is "
+                             "saturation > 0 (inf: no limit)")
+    stale_after = float(values["stale_after"])
+    if not stale_after > 0.0:
+        raise ParameterError(f"stale_after={stale_after!r} is invalid: valid range is "
+                             "stale_after > 0 (inf: no age limit)")
+    return ControlLaw(gains, x_ref, v_ref, enable_after, saturation)
+
+
+class ControllerNode(Node):
+    """The controller node (module docstring: topics, switching, stale samples)."""
+
+    def __init__(self, **kwargs):
+        super().__init__("controller_node", **kwargs)
+        ref = OscillatorParams()
+        d = self.declare_parameter
+        d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)"))
+        d("c2", 0.0, float_descriptor("gain c2 on v - v** (Eq. 28)"))
+        d("x_ref", math.nan, float_descriptor("x** on Pi2; NaN: from the model parameters"))
+        d("v_ref", math.nan, float_descriptor("v** on Pi2; NaN: from the model parameters"))
+        d("zeta", ref.zeta, float_descriptor("damping ratio (for X**)", 0.0, 1.0))
+        d("r", ref.r, float_descriptor("coefficient of restitution (recorded with the gains)",
+                                       0.0, 1.0))
+        d("omega", study_omega(), float_descriptor("forcing frequency (for X**)", 0.0))
+        d("pi2_offset", ref.pi2_offset, float_descriptor("phase of Pi2 after Pi1 (for X**)",
+                                                         0.0, 2.0 * math.pi))
+        d("enable_after", 1000, int_descriptor(
+            "first controlled sample (from 0); -1: only through ~/enable", -1))
+        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0", 0.0))
+        d("stale_after", math.inf, float_descriptor(
+            "max age of a sample in simulation seconds (with use_sim_time)", 0.0))
+        try:
+            self.law = law_from_values(self._values())
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
+        self.stale_after = float(self.get_parameter("stale_after").value)
+        self.pub = self.create_publisher(TwistStamped, "controller/velocity_correction",
+                                         DATA_QOS)
+        self.create_subscription(JointState, "oscillator/pi2", self._on_sample, DATA_QOS)
+        self.create_service(SetBool, "~/enable", self._on_enable)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        log = self.get_logger()
+        self.malformed = Throttled(log, "malformed sample ignored")
+        self.stale = Throttled(log, "stale sample not answered")
+        self.answered = 0
+        self._out = TwistStamped()
+        if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
+            log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
+                        "time)")
+        log.info(f"c1={self.law.gains.c1!r} c2={self.law.gains.c2!r} x_ref={self.law.x_ref!r} "
+                 f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after}")
+
+    def _values(self) -> dict:
+        return {k: self.get_parameter(k).value for k in _KEYS}
+
+    def _on_sample(self, msg: JointState) -> None:
+        if len(msg.position) < 1 or len(msg.velocity) < 1:
+            self.malformed(f"stamp {stamp_key(msg.header.stamp)}: missing position/velocity")
+            return
+        x, v = msg.position[0], msg.velocity[0]
+        if not (math.isfinite(x) and math.isfinite(v)):
+            self.malformed(f"stamp {stamp_key(msg.header.stamp)}: x={x!r} v={v!r}")
+            return
+        if math.isfinite(self.stale_after) and self._use_sim_time():
+            age = self.get_clock().now().nanoseconds * 1e-9 - seconds_from_stamp(msg.header.stamp)
+            if age > self.stale_after:
+                self.stale(f"stamp {stamp_key(msg.header.stamp)} is {age:.6g} s old")
+                return
+        dv = self.law.answer(stamp_key(msg.header.stamp), x, v)
+        if dv is None:
+            self.stale(f"stamp {stamp_key(msg.header.stamp)} is not newer than "
+                       f"{self.law.newest}")
+            return
+        out = self._out
+        out.header.stamp = msg.header.stamp
+        out.twist.linear.x = dv
+        self.pub.publish(out)
+        self.answered += 1
+
+    def _use_sim_time(self) -> bool:
+        return self.get_clock().ros_time_is_active
+
+    def _on_enable(self, request, response):
+        self.law.forced = bool(request.data)
+        response.success = True
+        response.message = f"controller {'on' if request.data else 'off'} at sample " \
+                           f"{self.law.count}"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        values = self._values()
+        values.update({p.name: p.value for p in params if p.name in values})
+        try:
+            new = law_from_values(values)
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.law.configure(new.gains, new.x_ref, new.v_ref, new.enable_after, new.saturation)
+        self.stale_after = float(values["stale_after"])
+        return SetParametersResult(successful=True)
+
+    def on_exit(self) -> None:
+        """Log what was answered and ignored."""
+        self.get_logger().info(
+            f"summary: answered={self.answered} controlled_from_sample="
+            f"{self.law.enable_after} malformed={self.malformed.count} "
+            f"stale={self.stale.count}")
+
+
+def main(args=None) -> int:
+    """Entry point of the ``controller_node`` executable; returns the exit status."""
+    return run_node(ControllerNode, args, "controller_node")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,684 @@
+"""sim_node: the impact oscillator integrated with the exact flow, as a ROS 2 node.
+
+The integration is :func:`grazing_control.simulate.period_step`, one call per forcing
+period from one Pi2 sample to the next, exactly as :func:`grazing_control.simulate.simulate`
+does; everything published between two samples (state, Pi1 crossing, impacts) is
+evaluated from the closed form by :func:`grazing_control.simulate.states_between`
+without altering the trajectory. A lockstep run therefore reproduces ``simulate`` of
+the same scene sample for sample (docs/nodes.md).
+
+Simulation time: t = 0 at the first Pi2 sample, sample k at t = k T (T = 2 pi / omega);
+the forcing phase at a Pi2 sample is tau2 = tau* + pi2_offset (spec section 3), so
+``tau0`` does not change the sampled dynamics (it is accepted and validated with the
+model parameters).
+
+Topics (all reliable, volatile, keep last 1000, except ``oscillator/done``)
+---------------------------------------------------------------------------
+``oscillator/state`` (sensor_msgs/JointState)
+    name ["mass"], position [x], velocity [v], effort [cos tau], every
+    ``state_period`` of simulation time (nondimensional units; t in seconds of stamp).
+``oscillator/impact`` (geometry_msgs/Vector3Stamped)
+    vector.x = v-, vector.y = v+ (= -r v-), vector.z = phase in [0, 2 pi); stamp = impact time.
+``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/JointState)
+    state at each crossing of Pi1 (phase tau*) and Pi2 (phase tau2), stamped with the
+    crossing time; a Pi2 sample is the state before the correction.
+``oscillator/latency`` (std_msgs/Float64)
+    realtime mode: wall seconds from publishing a sample to applying its correction.
+``oscillator/done`` (std_msgs/Bool, transient local)
+    true once ``max_periods`` periods have run.
+``/clock`` (rosgraph_msgs/Clock)
+    simulation time: at every Pi2 sample and state message (lockstep), every tick (realtime).
+
+Subscribed: ``controller/velocity_correction`` (geometry_msgs/TwistStamped), twist.linear.x
+= Delta v, header.stamp = the stamp of the Pi2 sample it answers. Service: ``~/reset``
+(std_srvs/Trigger): back to the initial state at t = 0.
+
+Modes
+-----
+``lockstep``: after publishing sample k the node waits for the correction stamped with
+sample k's stamp (others are ignored and counted), applies it and integrates the period;
+after ``answer_timeout`` wall seconds without it, no correction is applied (counted, logged).
+Deterministic, as fast as the round trip allows. The loop is driven by the correction's
+subscription callback (no thread, no polling): the callback integrates the period,
+publishes it and the next sample.
+
+``realtime``: simulation time runs at ``time_scale`` times the wall clock (a 1 ms tick
+publishes what is due); samples are published on time and the period continues without
+waiting. A correction for the latest sample is applied when it arrives, as an
+instantaneous velocity change at the state of that instant: the period is then split
+there (the exact flow is evaluated up to the arrival, Delta v is added, and the flow
+continues to the next sample), so the correction acts a latency after Pi2, not on it.
+The latency (wall time from publishing the sample to applying its correction) is
+published on ``oscillator/latency`` and summarised at exit.
+
+Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
+``python -m sim_node.sim_node --ros-args ...``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import TwistStamped, Vector3Stamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+from std_srvs.srv import Trigger
+
+from grazing_control.impact import advance
+from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, StartupError, Throttled,
+                                          bool_descriptor, float_descriptor, int_descriptor,
+                                          run_node, spin, stamp_from_seconds, stamp_key,
+                                          string_descriptor)
+from grazing_control.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.simulate import period_step, states_between
+
+__all__ = ["SimSettings", "settings_from_values", "Event", "Engine", "SimNode", "main"]
+
+TWO_PI = 2.0 * math.pi
+MODES = ("lockstep", "realtime")
+FIDELITIES = ("exact",)
+MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
+#: Wall seconds between two ticks of the realtime loop.
+REALTIME_TICK = 1e-3
+
+
+# ============================================================== settings (no ROS)
+@dataclass(frozen=True)
+class SimSettings:
+    """The sim node's validated parameters (see :func:`settings_from_values`)."""
+
+    params: OscillatorParams
+    x0: float
+    v0: float
+    mode: str
+    time_scale: float
+    state_period: float
+    answer_timeout: float
+    max_periods: int
+    fidelity: str
+    noise: float
+    seed: int
+
+
+def _finite(name, value, ok, valid):
+    value = float(value)
+    if not (math.isfinite(value) and ok(value)):
+        raise ParameterError(f"{name}={value!r} is invalid: valid range is {valid}")
+    return value
+
+
+def settings_from_values(values: dict) -> SimSettings:
+    """Validate the sim node's parameter values; raise ParameterError naming the bad one.
+
+    The model parameters go through :class:`OscillatorParams` (its message names the
+    parameter and its range); the initial state must be finite or NaN (= X**) and not
+    beyond the wall (x0 <= d).
+    """
+    p = OscillatorParams(**{k: values[k] for k in MODEL_KEYS})
+    mode = str(values["mode"])
+    if mode not in MODES:
+        raise ParameterError(f"mode={mode!r} is invalid: valid values are {', '.join(MODES)}")
+    fidelity = str(values["fidelity"])
+    if fidelity not in FIDELITIES:
+        raise ParameterError(
+            f"fidelity={fidelity!r} is not available: only 'exact' (the closed-form flow) "
+            "is implemented in this version")
+    x0, v0 = float(values["x0"]), float(values["v0"])
+    for name, value in (("x0", x0), ("v0", v0)):
+        if math.isinf(value):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite real "
+                                 "number, or NaN for the grazing point X**")
+    if not math.isnan(x0) and x0 > p.d:
+        raise ParameterError(f"x0={x0!r} is invalid: valid range is x0 <= d = {p.d!r} "
+                             "(the state must not be beyond the wall)")
+    max_periods = int(values["max_periods"])
+    if max_periods < 0:
+        raise ParameterError(f"max_periods={max_periods} is invalid: valid range is >= 0 "
+                             "(0 = unbounded)")
+    return SimSettings(
+        params=p, x0=x0, v0=v0, mode=mode,
+        time_scale=_finite("time_scale", values["time_scale"], lambda v: v > 0.0,
+                           "a finite time_scale > 0"),
+        state_period=_finite("state_period", values["state_period"], lambda v: v >= 0.0,
+                             "a finite state_period >= 0 (0 disables oscillator/state)"),
+        answer_timeout=_finite("answer_timeout", values["answer_timeout"],
+                               lambda v: v > 0.0, "a finite answer_timeout > 0"),
+        max_periods=max_periods, fidelity=fidelity,
+        noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
+        seed=int(values["seed"]))
+
+
+def initial_deviation(p: OscillatorParams, x0: float, v0: float) -> tuple:
+    """(x0 - x**, v0 - v**) with NaN meaning the grazing point's coordinate: as simulate()."""
+    x = p.x_ref if math.isnan(x0) else x0
+    v = p.v_ref if math.isnan(v0) else v0
+    return x - p.x_ref, v - p.v_ref
+
+
+# ================================================================= engine (no ROS)
+class Event(NamedTuple):
+    """Something to publish at simulation time t.
+
+    kind 'state' or 'pi1': (x, v) physical; kind 'impact': x = v-, v = v+;
+    kind 'pi2': the sample (x, v) before correction. ``phase`` is the forcing phase.
+    """
+
+    t: float
+    kind: str
+    x: float
+    v: float
+    phase: float
+
+
+class _Segment(NamedTuple):
+    ts: float      # start time
+    tau: float     # forcing phase at the start
+    dx: float      # deviation at the start, after any correction
+    dv: float
+    te: float      # end time (the next Pi2 sample)
+    dx_end: float
+    dv_end: float
+
+
+class Engine:
+    """The simulated oscillator between ROS and the core: samples, periods, splits.
+
+    The state is carried as the deviation (dx, dv) from the non-impacting motion at the
+    current Pi2 sample k (time t_k). :meth:`begin_period` integrates the period with a
+    correction by one :func:`period_step` call; :meth:`split` (realtime) re-evaluates the
+    current period from its start to a time inside it and applies a correction there;
+    :meth:`end_period` moves to the next sample, where pending model parameters take
+    effect and the velocity noise is added.
+    """
+
+    def __init__(self, settings: SimSettings):
+        self.settings = settings
+        self.p = settings.params
+        self.pending = None
+        self.rng = np.random.default_rng(settings.seed)
+        self.impacts = 0
+        self.reset()
+
+    # ---------------------------------------------------------------- samples
+    def reset(self) -> Event:
+        """Back to the initial state, sample 0 at t = 0 (pending parameters apply now)."""
+        if self.pending is not None:
+            self.p, self.pending = self.pending, None
+        s = self.settings
+        self.rng = np.random.default_rng(s.seed)
+        self.k = 0
+        self.k_base, self.t_base = 0, 0.0
+        self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
+        self.impacts = 0
+        self.seg = None
+        return self._sample()
+
+    @property
+    def t(self) -> float:
+        """Time of the current sample, t_k = k T (re-based when T changes)."""
+        return self.t_base + (self.k - self.k_base) * self.p.period
+
+    def _sample(self) -> Event:
+        if self.settings.noise > 0.0:
+            self.dv += float(self.rng.normal(0.0, self.settings.noise))
+        p = self.p
+        return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
+
+    def sample(self) -> Event:
+        """The current sample (without drawing noise again)."""
+        p = self.p
+        return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
+
+    # ---------------------------------------------------------------- periods
+    def begin_period(self, dv_correction: float) -> list:
+        """Integrate the period from the current sample after ``dv_correction``.
+
+        One :func:`period_step` call, as :func:`simulate` makes. Returns the events of
+        (t_k, t_k+1) in time order (state, Pi1, impacts), the next sample excluded.
+        """
+        p = self.p
+        seg = period_step(p, self.dx, self.dv, dv_correction)
+        t0 = self.t
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        self.seg = _Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
+        return self._events(self.seg, seg.impacts)
+
+    def split(self, tc: float, dv_correction: float) -> list:
+        """Apply ``dv_correction`` at time tc inside the current period (realtime).
+
+        The exact flow is re-evaluated from the period's start to tc (same closed form as
+        the events already published), the velocity jumps there, and the flow continues
+        to the next sample. Returns the events of (tc, t_k+1).
+        """
+        s, p = self.seg, self.p
+        tc = min(max(tc, s.ts), s.te)
+        head = advance(p, s.tau, s.dx, s.dv, tc - s.ts)
+        tau_c = (s.tau + p.omega * (tc - s.ts)) % TWO_PI
+        dv_c = head.dv + dv_correction
+        tail = advance(p, tau_c, head.dx, dv_c, s.te - tc)
+        self.seg = _Segment(tc, tau_c, head.dx, dv_c, s.te, tail.dx, tail.dv)
+        return self._events(self.seg, tail.impacts)
+
+    def end_period(self) -> tuple:
+        """Move to the next sample: returns (sample event, warning or None).
+
+        Pending model parameters take effect here, never within a period: the physical
+        state (x, v) at the sample is kept and re-expressed as a deviation of the new
+        model on its own Pi2 (if it lies beyond the new wall it is put on the wall).
+        """
+        s = self.seg
+        self.dx, self.dv = s.dx_end, s.dv_end
+        self.k += 1
+        self.seg = None
+        warning = None
+        if self.pending is not None:
+            warning = self._apply_pending()
+        return self._sample(), warning
+
+    def _apply_pending(self):
+        old, new = self.p, self.pending
+        t = self.t
+        self.p, self.pending = new, None
+        self.k_base, self.t_base = self.k, t
+        if (old.x_ref, old.v_ref) == (new.x_ref, new.v_ref):
+            x = None
+        else:
+            x, v = old.x_ref + self.dx, old.v_ref + self.dv
+            self.dx, self.dv = x - new.x_ref, v - new.v_ref
+        if new.x_ref + self.dx > new.d:
+            self.dx = new.d - new.x_ref
+            self.dv = min(self.dv + new.v_ref, 0.0) - new.v_ref
+            return (f"the state at t={t:.6g} lies beyond the new wall d={new.d!r}: "
+                    "placed on the wall")
+        return None
+
+    def _events(self, s: _Segment, impacts) -> list:
+        p = self.p
+        events = []
+        for i in impacts:
+            events.append(Event(s.ts + i.dt, "impact", i.v_minus, i.v_plus, i.phase % TWO_PI))
+        rel, kinds = [], []
+        sp = self.settings.state_period
+        if sp > 0.0:
+            j = math.floor(s.ts / sp) + 1
+            while j * sp < s.te:
+                rel.append(j * sp - s.ts)
+                kinds.append("state")
+                j += 1
+        d1 = ((p.tau_star - s.tau) % TWO_PI) / p.omega
+        if 0.0 < d1 < s.te - s.ts:
+            rel.append(d1)
+            kinds.append("pi1")
+        if rel:
+            order = np.argsort(rel, kind="stable")
+            rel = [rel[i] for i in order]
+            kinds = [kinds[i] for i in order]
+            xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
+            for h, kind, (x, v) in zip(rel, kinds, xv):
+                phase = p.tau_star if kind == "pi1" else (s.tau + p.omega * h) % TWO_PI
+                events.append(Event(s.ts + h, kind, float(x), float(v), phase))
+        events.sort(key=lambda e: e.t)
+        return events
+
+
+# ======================================================================= the node
+def _declare(node: Node) -> None:
+    d = node.declare_parameter
+    ref = OscillatorParams()
+    d("zeta", ref.zeta, float_descriptor("damping ratio zeta, 0 < zeta < 1", 0.0, 1.0))
+    d("r", ref.r, float_descriptor("coefficient of restitution r, 0 < r < 1", 0.0, 1.0))
+    d("omega", study_omega(), float_descriptor("forcing frequency omega > 0 (nondimensional)",
+                                               0.0))
+    d("delta_d", 0.0, float_descriptor("wall clearance Delta d = d - d* (< 0: impacting side)"))
+    d("tau0", 0.0, float_descriptor("forcing phase tau0 (reduced mod 2 pi; the sampled "
+                                    "dynamics start on Pi2 and do not depend on it)"))
+    d("pi2_offset", ref.pi2_offset, float_descriptor(
+        "phase of Pi2 after Pi1, 0 < pi2_offset < 2 pi (study: pi/2)", 0.0, TWO_PI))
+    d("x0", math.nan, float_descriptor("initial position on Pi2; NaN = x** (grazing point)"))
+    d("v0", math.nan, float_descriptor("initial velocity on Pi2; NaN = v** (grazing point)"))
+    d("mode", "lockstep", string_descriptor("lockstep (wait for each correction) or realtime "
+                                            "(paced to the wall clock)", True, MODES))
+    d("time_scale", 1.0, float_descriptor("realtime: simulation seconds per wall second, > 0",
+                                          0.0))
+    d("state_period", 1.0, float_descriptor("simulation time between oscillator/state "
+                                            "messages; 0 disables them", 0.0))
+    d("answer_timeout", 1.0, float_descriptor("lockstep: wall seconds to wait for the "
+                                              "correction of a sample, then apply none", 0.0))
+    d("max_periods", 0, int_descriptor("forcing periods to simulate; 0 = unbounded", 0))
+    d("fidelity", "exact", string_descriptor("model fidelity: only 'exact' (closed-form flow)",
+                                             False, FIDELITIES))
+    d("noise", 0.0, float_descriptor("std of Gaussian velocity noise added at each Pi2 sample",
+                                     0.0))
+    d("seed", 0, int_descriptor("seed of the noise generator (applied at start and reset)"))
+    d("exit_when_done", False, bool_descriptor("exit (status 0) once max_periods have run",
+                                               True))
+    d("wait_for_controller", True, bool_descriptor(
+        "lockstep: start only when a controller is matched on oscillator/pi2 and "
+        "controller/velocity_correction", True))
+    d("wait_for_subscribers", 0, int_descriptor(
+        "start only when every data topic has this many other subscribers (a recorder: 1)",
+        0, 100, True))
+    d("start_timeout", 30.0, float_descriptor(
+        "wall seconds to wait for the above, then start anyway (with a warning)", 0.0,
+        read_only=True))
+
+
+_SETTING_KEYS = MODEL_KEYS + ("x0", "v0", "mode", "time_scale", "state_period",
+                              "answer_timeout", "max_periods", "fidelity", "noise", "seed")
+
+
+class SimNode(Node):
+    """The simulator node (module docstring: topics, modes, parameters)."""
+
+    def __init__(self, **kwargs):
+        super().__init__("sim_node", **kwargs)
+        _declare(self)
+        values = {k: self.get_parameter(k).value for k in _SETTING_KEYS}
+        try:
+            self.settings = settings_from_values(values)
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
+        self.engine = Engine(self.settings)
+        self.exit_when_done = self.get_parameter("exit_when_done").value
+        self.exit_code = 0
+        self.exit_now = False
+
+        self.pub_state = self.create_publisher(JointState, "oscillator/state", DATA_QOS)
+        self.pub_impact = self.create_publisher(Vector3Stamped, "oscillator/impact", DATA_QOS)
+        self.pub_pi1 = self.create_publisher(JointState, "oscillator/pi1", DATA_QOS)
+        self.pub_pi2 = self.create_publisher(JointState, "oscillator/pi2", DATA_QOS)
+        self.pub_clock = self.create_publisher(Clock, "/clock", DATA_QOS)
+        self.pub_latency = self.create_publisher(Float64, "oscillator/latency", DATA_QOS)
+        self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
+        self.sub_correction = self.create_subscription(
+            TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._start_timer = self.create_timer(0.02, self._try_start)
+        self._tick_timer = None
+        self._watchdog = None
+
+        log = self.get_logger()
+        self.ignored = Throttled(log, "correction ignored")
+        self.malformed = Throttled(log, "malformed correction ignored")
+        self.timeouts = Throttled(log, "no correction within answer_timeout, none applied")
+        self.stats = {"applied": 0, "late": 0}
+        self.latencies = []
+        self._started = False
+        self._finished = False
+        self._created = time.monotonic()
+        self._wall_start = None
+        self._waiting = None
+        self._msg_js = JointState(name=["mass"])
+        log.info(
+            f"mode={self.settings.mode} delta_d={self.settings.params.delta_d!r} "
+            f"max_periods={self.settings.max_periods} state_period={self.settings.state_period}")
+
+    # ------------------------------------------------------------------ start
+    def _ready(self) -> bool:
+        n = self.get_parameter("wait_for_subscribers").value
+        controller = (self.settings.mode == "lockstep"
+                      and self.get_parameter("wait_for_controller").value)
+        if controller and (self.pub_pi2.get_subscription_count() < n + 1
+                           or self.sub_correction.get_publisher_count() < 1):
+            return False
+        if n > 0:
+            pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]
+            if self.settings.state_period > 0.0:
+                pubs.append(self.pub_state)
+            if any(pub.get_subscription_count() < n for pub in pubs):
+                return False
+            if self.count_subscribers("controller/velocity_correction") < n + 1:
+                return False
+        return True
+
+    def _try_start(self) -> None:
+        waited = time.monotonic() - self._created
+        if not self._ready():
+            if waited < self.get_parameter("start_timeout").value:
+                return
+            self.get_logger().warning(
+                f"starting after start_timeout={waited:.1f} s without the expected "
+                "controller/subscribers")
+        elif self._ready_since is None:
+            self._ready_since = time.monotonic()   # let both ends of every match settle
+            return
+        elif time.monotonic() - self._ready_since < 0.2:
+            return
+        self._start_timer.cancel()
+        self._started = True
+        self._wall_start = time.monotonic()
+        if self.settings.mode == "lockstep":
+            self._watchdog = self.create_timer(
+                min(0.25, self.settings.answer_timeout / 4.0), self._on_watchdog)
+            self._publish_sample(self.engine.sample())
+        else:
+            self._rt_start()
+
+    _ready_since = None
+
+    # ----------------------------------------------------------------- lockstep
+    def _publish_sample(self, ev: Event) -> None:
+        """Publish sample k (state before correction) and wait for its answer."""
+        self._waiting = stamp_key(self._publish(ev))
+        self._sent = time.monotonic()
+
+    def _on_correction(self, msg: TwistStamped) -> None:
+        dv = msg.twist.linear.x
+        if not math.isfinite(dv):
+            self.malformed(f"dv={dv!r} for stamp {stamp_key(msg.header.stamp)}")
+            return
+        if self.settings.mode == "lockstep":
+            if not self._started or self._finished or stamp_key(msg.header.stamp) != self._waiting:
+                self.ignored(f"stamp {stamp_key(msg.header.stamp)} does not answer the "
+                             f"waiting sample {self._waiting}")
+                return
+            self.stats["applied"] += 1
+            self._lockstep_period(dv)
+        else:
+            self._rt_correction(msg.header.stamp, dv)
+
+    def _on_watchdog(self) -> None:
+        if (self._started and not self._finished and self._waiting is not None
+                and time.monotonic() - self._sent > self.settings.answer_timeout):
+            self.timeouts(f"sample {self._waiting}")
+            self._lockstep_period(0.0)
+
+    def _lockstep_period(self, dv: float) -> None:
+        self._waiting = None
+        try:
+            events = self.engine.begin_period(dv)
+        except Exception as exc:  # the core refused (impact cap, state beyond the wall)
+            self._fail(exc)
+            return
+        for ev in events:
+            self._publish(ev)
+        ev, warning = self.engine.end_period()
+        if warning:
+            self.get_logger().warning(warning)
+        if 0 < self.settings.max_periods <= self.engine.k:
+            self._finish()
+            return
+        self._publish_sample(ev)
+
+    # ----------------------------------------------------------------- realtime
+    def _now(self) -> float:
+        return self._rt_t0 + (time.monotonic() - self._rt_wall0) * self.settings.time_scale
+
+    def _rt_start(self) -> None:
+        self._rt_t0, self._rt_wall0 = 0.0, time.monotonic()
+        self._rt_sample = None
+        self._rt_queue = []
+        self._rt_publish_sample(self.engine.sample())
+        self._tick_timer = self.create_timer(REALTIME_TICK, self._rt_tick)
+
+    def _rt_publish_sample(self, ev: Event) -> None:
+        self._rt_sent = time.monotonic()
+        self._rt_sample = stamp_key(self._publish(ev))
+        self._rt_queue = self.engine.begin_period(0.0)
+
+    def _rt_tick(self) -> None:
+        if self._finished:
+            return
+        now = self._now()
+        try:
+            self._rt_advance(now)
+        except Exception as exc:
+            self._fail(exc)
+            return
+        if not self._finished:
+            self.pub_clock.publish(Clock(clock=stamp_from_seconds(now)))
+
+    def _rt_advance(self, now: float) -> None:
+        """Publish everything due up to simulation time ``now``."""
+        while True:
+            q = self._rt_queue
+            i = 0
+            while i < len(q) and q[i].t <= now:
+                self._publish(q[i], clock=False)
+                i += 1
+            del q[:i]
+            if now < self.engine.seg.te:
+                return
+            for ev in q:
+                self._publish(ev, clock=False)
+            ev, warning = self.engine.end_period()
+            if warning:
+                self.get_logger().warning(warning)
+            if 0 < self.settings.max_periods <= self.engine.k:
+                self._finish()
+                return
+            self._rt_publish_sample(ev)
+
+    def _rt_correction(self, stamp, dv: float) -> None:
+        key = stamp_key(stamp)
+        if not self._started or self._finished or key != self._rt_sample:
+            self.stats["late"] += 1
+            self.ignored(f"stamp {key} does not answer the latest sample {self._rt_sample}"
+                         " (late or foreign)")
+            return
+        now = self._now()
+        self._rt_advance(now)
+        if self._finished or key != self._rt_sample:
+            self.stats["late"] += 1
+            return
+        self._rt_queue = self.engine.split(now, dv)
+        latency = time.monotonic() - self._rt_sent
+        self._rt_sample = None          # answered: a second answer is ignored
+        self.stats["applied"] += 1
+        self.latencies.append(latency)
+        self.pub_latency.publish(Float64(data=latency))
+
+    # ---------------------------------------------------------------- publishing
+    def _publish(self, ev: Event, clock: bool = True):
+        stamp = stamp_from_seconds(ev.t)
+        if ev.kind == "impact":
+            self.engine.impacts += 1
+            m = Vector3Stamped()
+            m.header.stamp = stamp
+            m.vector.x, m.vector.y, m.vector.z = ev.x, ev.v, ev.phase
+            self.pub_impact.publish(m)
+            return stamp
+        m = self._msg_js
+        m.header.stamp = stamp
+        m.position = [ev.x]
+        m.velocity = [ev.v]
+        m.effort = [math.cos(ev.phase)]
+        if ev.kind == "pi1":
+            self.pub_pi1.publish(m)
+            return stamp
+        if clock and self.settings.mode == "lockstep":
+            self.pub_clock.publish(Clock(clock=stamp))
+        (self.pub_pi2 if ev.kind == "pi2" else self.pub_state).publish(m)
+        return stamp
+
+    # ------------------------------------------------------------ end, failure
+    def _finish(self) -> None:
+        self._finished = True
+        self.pub_done.publish(Bool(data=True))
+        self.get_logger().info(self.summary())
+        if self.exit_when_done:
+            self.exit_now = True
+
+    def _fail(self, exc: Exception) -> None:
+        self.get_logger().error(f"simulation stopped at t={self.engine.t:.9g}: {exc}")
+        self.exit_code = 1
+        self._finished = True
+        self.exit_now = True
+
+    def summary(self) -> str:
+        """One line: periods, impacts, corrections, ignored input, rate, latency."""
+        wall = time.monotonic() - self._wall_start if self._wall_start else 0.0
+        k = self.engine.k
+        text = (f"summary: periods={k} t={self.engine.t:.9g} impacts={self.engine.impacts} "
+                f"applied={self.stats['applied']} timeouts={self.timeouts.count} "
+                f"ignored={self.ignored.count} malformed={self.malformed.count} "
+                f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")
+        if self.latencies:
+            lat = np.asarray(self.latencies) * 1e3
+            text += (f" latency_ms p50={np.percentile(lat, 50):.3f} "
+                     f"p99={np.percentile(lat, 99):.3f} max={lat.max():.3f} n={lat.size}")
+        return text
+
+    def spin_until(self, executor) -> None:
+        """Spin until shutdown, or until done when exit_when_done."""
+        spin(executor, lambda: self.exit_now)
+        if self.exit_now:
+            for pub in (self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2,
+                        self.pub_clock, self.pub_latency, self.pub_done):
+                pub.wait_for_all_acked(Duration(seconds=5.0))
+
+    def on_exit(self) -> None:
+        """Log the summary when stopped before the end (Ctrl-C)."""
+        if not self._finished:
+            self.get_logger().info(self.summary() + " (interrupted)")
+
+    # ----------------------------------------------------------- services, params
+    def _on_reset(self, request, response):
+        ev = self.engine.reset()
+        response.success = True
+        response.message = "reset to the initial state, sample 0 at t=0"
+        self.get_logger().info(response.message)
+        if not self._started:
+            return response
+        self._finished = False
+        if self.settings.mode == "lockstep":
+            self._publish_sample(ev)
+        else:
+            self._rt_t0, self._rt_wall0 = 0.0, time.monotonic()
+            self._rt_publish_sample(ev)
+        return response
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        values = {k: self.get_parameter(k).value for k in _SETTING_KEYS}
+        values.update({p.name: p.value for p in params if p.name in values})
+        try:
+            new = settings_from_values(values)
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        old = self.settings
+        if new.params != old.params:
+            self.engine.pending = new.params     # whole, at the next Pi2 sample
+        if self.settings.mode == "realtime" and self._started and new.time_scale != old.time_scale:
+            self._rt_t0, self._rt_wall0 = self._now(), time.monotonic()
+        self.settings = new
+        self.engine.settings = new
+        return SetParametersResult(successful=True)
+
+
+def main(args=None) -> int:
+    """Entry point of the ``sim_node`` executable; returns the exit status."""
+    return run_node(SimNode, args, "sim_node")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,191 @@
+"""Closed loop over real middleware: sim_node + controller_node as separate processes.
+
+Each test runs its nodes with :func:`grazing_control.launcher.run` (or
+:func:`~grazing_control.launcher.start_node`) under its own ROS_DOMAIN_ID, and a
+:class:`Collector` node in the test process (its own rclpy context on the same domain)
+subscribes to every topic the recorder would, so the simulator (``wait_for_subscribers:=1``)
+starts only when it listens. The other node test modules import the helpers from here.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import TwistStamped, Vector3Stamped
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+
+from grazing_control import launcher
+from grazing_control.control import Gains
+from grazing_control.design import degenerate_c1
+from grazing_control.nodes.common import DATA_QOS, LATCHED_QOS, seconds_from_stamp
+from grazing_control.params import OscillatorParams
+from grazing_control.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDY = ROOT / "config" / "study.yaml"
+CONTROLLER = ROOT / "config" / "controller.yaml"
+
+TOPICS = {
+    "oscillator/state": JointState,
+    "oscillator/pi1": JointState,
+    "oscillator/pi2": JointState,
+    "oscillator/impact": Vector3Stamped,
+    "oscillator/latency": Float64,
+    "controller/velocity_correction": TwistStamped,
+    "/clock": Clock,
+}
+
+
+def new_domain() -> int:
+    """A ROS_DOMAIN_ID unlikely to be used by anything else running now (1..232)."""
+    return random.SystemRandom().randrange(101, 232)
+
+
+class Collector:
+    """A node in the test process that keeps every message of the scene's topics."""
+
+    def __init__(self, domain: int, topics=TOPICS):
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("collector", context=self.context)
+        self.msgs = defaultdict(list)
+        self.lock = threading.Lock()
+        for topic, kind in topics.items():
+            self.node.create_subscription(kind, topic, self._keeper(topic), DATA_QOS)
+        self.node.create_subscription(Bool, "oscillator/done", self._keeper("done"),
+                                      LATCHED_QOS)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _keeper(self, topic):
+        def keep(msg):
+            with self.lock:
+                self.msgs[topic].append((time.monotonic(), msg))
+        return keep
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # context shut down while waiting
+                break
+
+    def get(self, topic):
+        with self.lock:
+            return [m for _, m in self.msgs[topic]]
+
+    def timed(self, topic):
+        with self.lock:
+            return list(self.msgs[topic])
+
+    def wait_for(self, predicate, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            time.sleep(0.02)
+        return predicate()
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=2.0)
+
+
+@pytest.fixture
+def domain():
+    return new_domain()
+
+
+@pytest.fixture
+def collector(domain):
+    c = Collector(domain)
+    yield c
+    c.close()
+
+
+def xv(msgs):
+    return np.array([(m.position[0], m.velocity[0]) for m in msgs])
+
+
+def stamps(msgs):
+    return np.array([seconds_from_stamp(m.header.stamp) for m in msgs])
+
+
+# ---------------------------------------------------------------------------- tests
+N, ON = 300, 200      # periods, first controlled sample
+
+
+@pytest.mark.parametrize("delta_d", [-5e-6])
+def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
+    """Sample for sample equal to simulate(): bitwise before control, 1e-9 after."""
+    p = OscillatorParams(delta_d=delta_d)
+    gains = Gains(degenerate_c1(p, -1.0), -1.0)
+    ref = simulate(p, N, gains=gains, control_after=ON)
+
+    res = launcher.run(STUDY, CONTROLLER, None, N, domain_id=domain, timeout=60,
+                       sim_overrides={"delta_d": delta_d, "wait_for_subscribers": 1},
+                       controller_overrides={"enable_after": ON}, log_dir=tmp_path)
+    assert res.ok, (res, Path(res.logs["sim_node"]).read_text())
+    assert collector.wait_for(lambda: len(collector.get("done")) == 1, 5.0)
+    pi2 = collector.get("oscillator/pi2")
+    assert len(pi2) == N
+    T = p.period
+    np.testing.assert_array_equal(stamps(pi2), [round(k * T, 9) for k in range(N)])
+    got = xv(pi2)
+    # uncontrolled (chaotic) part: the same period_step calls, so the same numbers
+    np.testing.assert_array_equal(got[:ON], ref.pi2[:ON])
+    # controlled part: the controller computes c1 (x - x**) + c2 (v - v**) from the
+    # published physical state, simulate() from the deviation: rounding-level difference
+    scale = np.linalg.norm(ref.pi2[ON:], axis=1)
+    rel = np.linalg.norm(got[ON:] - ref.pi2[ON:], axis=1) / scale
+    assert rel.max() < 1e-9, rel.max()
+    print(f"controlled part: max relative difference {rel.max():.2e}")
+    # the controlled response converged to a 1/1 motion, as simulate's
+    assert np.all(ref.impacts_per_period[-20:] == 1)
+
+    corr = collector.get("controller/velocity_correction")
+    assert len(corr) == N
+    dv = np.array([m.twist.linear.x for m in corr])
+    np.testing.assert_array_equal(dv[:ON], 0.0)
+    np.testing.assert_allclose(dv[ON:], ref.corrections[ON:], rtol=1e-6, atol=1e-14)
+
+    impacts = collector.get("oscillator/impact")
+    t_imp = stamps(impacts)
+    counts = np.bincount(np.floor((t_imp + 1e-9) / T).astype(int), minlength=N)[:N]
+    np.testing.assert_array_equal(counts, ref.impacts_per_period)
+    vec = np.array([(m.vector.x, m.vector.y, m.vector.z) for m in impacts])
+    np.testing.assert_allclose(t_imp, ref.impacts[:, 1], rtol=0, atol=2e-9)
+    np.testing.assert_allclose(vec[:, :2], ref.impacts[:, 3:5], rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(vec[:, 2], ref.impacts[:, 2] % (2 * math.pi), atol=1e-9)
+
+    # Pi1: one crossing per period, at phase tau*, a quarter period before Pi2
+    pi1 = collector.get("oscillator/pi1")
+    assert len(pi1) == N
+    np.testing.assert_allclose(stamps(pi1) % T, (2 * math.pi - p.pi2_offset) / p.omega,
+                               atol=1e-6)
+    np.testing.assert_allclose([m.effort[0] for m in pi1], math.cos(p.tau_star), atol=1e-12)
+
+    # state every state_period (1.0), stamps on the grid, /clock monotone
+    state = collector.get("oscillator/state")
+    st = stamps(state)
+    assert len(state) == math.floor(N * T) or len(state) == math.floor(N * T) - 1
+    np.testing.assert_allclose(st, np.arange(1, len(st) + 1) * 1.0, atol=1e-9)
+    clock = [seconds_from_stamp(m.clock) for m in collector.get("/clock")]
+    assert np.all(np.diff(clock) >= 0)
+    assert (N - 1) * T <= clock[-1] <= N * T
