@@ -511,8 +511,9 @@ class SimNode(Node):
         self._publish_sample(ev)
 
     # ----------------------------------------------------------------- realtime
-    def _now(self) -> float:
-        return self._rt_t0 + (time.monotonic() - self._rt_wall0) * self.settings.time_scale
+    def _now(self, wall: float | None = None) -> float:
+        wall = time.monotonic() if wall is None else wall
+        return self._rt_t0 + (wall - self._rt_wall0) * self.settings.time_scale
 
     def _rt_start(self) -> None:
         self._rt_t0, self._rt_wall0 = 0.0, time.monotonic()
@@ -522,9 +523,11 @@ class SimNode(Node):
         self._tick_timer = self.create_timer(REALTIME_TICK, self._rt_tick)
 
     def _rt_publish_sample(self, ev: Event) -> None:
+        # the uncorrected period is integrated first, so that the round trip of the
+        # correction does not include it
+        self._rt_queue = self.engine.begin_period(0.0)
         self._rt_sent = time.monotonic()
         self._rt_sample = stamp_key(self._publish(ev))
-        self._rt_queue = self.engine.begin_period(0.0)
 
     def _rt_tick(self) -> None:
         if self._finished:
@@ -566,13 +569,14 @@ class SimNode(Node):
             self.ignored(f"stamp {key} does not answer the latest sample {self._rt_sample}"
                          " (late or foreign)")
             return
-        now = self._now()
+        wall = time.monotonic()          # the correction acts at this instant's sim time
+        now = self._now(wall)
         self._rt_advance(now)
         if self._finished or key != self._rt_sample:
             self.stats["late"] += 1
             return
         self._rt_queue = self.engine.split(now, dv)
-        latency = time.monotonic() - self._rt_sent
+        latency = wall - self._rt_sent
         self._rt_sample = None          # answered: a second answer is ignored
         self.stats["applied"] += 1
         self.latencies.append(latency)

@@ -1,0 +1,69 @@
+"""Launch one control scene on a ROS 2 install: sim_node, controller_node, recorder_node.
+
+    ros2 launch grazing_control grazing_control.launch.py                       # study scene
+    ros2 launch grazing_control grazing_control.launch.py delta_d:=-9.0e-06 bag:=bags/scene2
+
+Parameters come from the package's config/ (study.yaml, controller.yaml) unless other
+files are given; ``delta_d`` and ``max_periods`` override the simulator's (write floats
+with a decimal point, e.g. -9.0e-06). With ``bag`` set, the recorder records the scene
+there and the simulator waits for it before starting. The launch shuts everything
+down when the simulator exits after ``max_periods`` (the recorder closes its bag on the
+SIGINT that follows). Machines without ``ros2 launch`` use ``grazing run``
+(grazing_control.launcher), which does the same with plain processes.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.conditions import IfCondition
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
+from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    share = get_package_share_directory("grazing_control")
+    config = os.path.join(share, "config")
+    bag = LaunchConfiguration("bag")
+    recording = PythonExpression(["'", bag, "' != ''"])
+
+    args = [
+        DeclareLaunchArgument("sim_params", default_value=os.path.join(config, "study.yaml"),
+                              description="sim_node parameter file"),
+        DeclareLaunchArgument("controller_params",
+                              default_value=os.path.join(config, "controller.yaml"),
+                              description="controller_node parameter file (grazing design --out)"),
+        DeclareLaunchArgument("delta_d", default_value="-5.0e-06",
+                              description="wall clearance Delta d = d - d*"),
+        DeclareLaunchArgument("max_periods", default_value="1200",
+                              description="forcing periods of the scene"),
+        DeclareLaunchArgument("enable_after", default_value="1000",
+                              description="first controlled Pi2 sample"),
+        DeclareLaunchArgument("bag", default_value="",
+                              description="record to this bag directory ('' = no recording)"),
+    ]
+
+    sim = Node(
+        package="grazing_control", executable="sim_node", name="sim_node", output="screen",
+        parameters=[LaunchConfiguration("sim_params"), {
+            "delta_d": LaunchConfiguration("delta_d"),
+            "max_periods": LaunchConfiguration("max_periods"),
+            "exit_when_done": True,
+            "wait_for_subscribers": PythonExpression(["1 if ", recording, " else 0"]),
+        }])
+    controller = Node(
+        package="grazing_control", executable="controller_node", name="controller_node",
+        output="screen", parameters=[LaunchConfiguration("controller_params"), {
+            "enable_after": LaunchConfiguration("enable_after")}])
+    recorder = Node(
+        package="grazing_control", executable="recorder_node", name="recorder_node",
+        output="screen", condition=IfCondition(recording),
+        parameters=[{"output": bag}])
+    end_with_sim = RegisterEventHandler(OnProcessExit(
+        target_action=sim,
+        on_exit=[EmitEvent(event=Shutdown(reason="sim_node finished the scene"))]))
+
+    return LaunchDescription(args + [recorder, controller, sim, end_with_sim])

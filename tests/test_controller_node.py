@@ -1,0 +1,179 @@
+"""controller_node: its control law without ROS, then the node over Fast DDS.
+
+The node tests play the simulator: they publish Pi2 samples on oscillator/pi2 from the
+test process and read the answers on controller/velocity_correction.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+
+import pytest
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+
+from grazing_control import launcher
+from grazing_control.control import Gains, correction
+from grazing_control.design import degenerate_c1, write_controller_yaml
+from grazing_control.nodes.common import DATA_QOS, stamp_from_seconds
+from grazing_control.nodes.controller_node import ControlLaw, law_from_values
+from grazing_control.params import OscillatorParams, ParameterError
+from test_closed_loop import CONTROLLER, Collector, new_domain
+
+P = OscillatorParams()
+GAINS = Gains(degenerate_c1(P, -1.0), -1.0)
+
+
+def test_controller_yaml_is_what_the_design_core_writes_now(tmp_path):
+    fresh = tmp_path / "controller.yaml"
+    write_controller_yaml(fresh, P, GAINS)
+    assert CONTROLLER.read_text() == fresh.read_text()
+
+
+# ================================================================== law, no ROS
+def law(**kw):
+    values = dict(c1=GAINS.c1, c2=GAINS.c2, x_ref=math.nan, v_ref=math.nan, zeta=P.zeta,
+                  r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, enable_after=2,
+                  saturation=math.inf, stale_after=math.inf)
+    values.update(kw)
+    return law_from_values(values)
+
+
+def test_law_switches_on_after_n_samples_and_restarts_on_reset():
+    c = law()
+    x, v = 0.01, P.v_ref + 0.02
+    want = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    assert [c.answer((k, 0), x, v) for k in range(4)] == [0.0, 0.0, want, want]
+    assert c.answer((3, 0), x, v) is None and c.answer((1, 0), x, v) is None  # stale
+    assert c.answer((0, 0), x, v) == 0.0            # t = 0 again: a reset, count restarts
+    assert c.answer((1, 0), x, v) == 0.0 and c.answer((2, 0), x, v) == want
+
+
+def test_law_saturates_and_validates():
+    c = law(enable_after=0, saturation=1e-3)
+    assert c.answer((0, 1), 0.5, P.v_ref) == pytest.approx(-1e-3)
+    for kw, text in [({"c1": math.nan}, "c1"), ({"saturation": 0.0}, "saturation"),
+                     ({"enable_after": -2}, "enable_after"), ({"zeta": 1.5}, "zeta")]:
+        with pytest.raises(ParameterError, match=text):
+            law(**kw)
+
+
+def test_law_disabled_by_minus_one_until_forced():
+    c = law(enable_after=-1)
+    assert not c.enabled
+    c.forced = True
+    assert c.enabled
+    assert isinstance(c, ControlLaw)
+
+
+# ========================================================= the node, over DDS
+@pytest.fixture
+def controller(tmp_path):
+    """(collector, start): start(**overrides) runs controller_node in a fresh domain."""
+    domain = new_domain()
+    col = Collector(domain)
+    procs = []
+
+    def start(**over):
+        log = tmp_path / f"controller{len(procs)}.log"
+        procs.append(launcher.start_node(launcher.CONTROLLER_MODULE, [CONTROLLER], over,
+                                         domain_id=domain, log=log))
+        pub = col.node.create_publisher(JointState, "oscillator/pi2", DATA_QOS)
+        assert col.wait_for(lambda: pub.get_subscription_count() > 0
+                            and col.node.count_publishers("controller/velocity_correction"),
+                            20.0), log.read_text()
+        return procs[-1], log, pub
+
+    yield col, start
+    launcher.stop_nodes(procs)
+    col.close()
+
+
+def sample(t, x, v):
+    m = JointState(name=["mass"], position=[x], velocity=[v], effort=[0.0])
+    m.header.stamp = stamp_from_seconds(t)
+    return m
+
+
+def answers(col, n, timeout=10.0):
+    assert col.wait_for(lambda: len(col.get("controller/velocity_correction")) >= n, timeout), \
+        col.get("controller/velocity_correction")
+    return [(m.header.stamp.sec, m.header.stamp.nanosec, m.twist.linear.x)
+            for m in col.get("controller/velocity_correction")]
+
+
+def test_node_answers_saturates_and_ignores_bad_samples(controller):
+    col, start = controller
+    proc, log, pub = start(enable_after=1, saturation=1e-3)
+    x, v = 1e-4, P.v_ref - 2e-4
+    exact = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    assert abs(exact) < 1e-3
+    bad = sample(0.5, math.nan, v)
+    empty = JointState()
+    empty.header.stamp = stamp_from_seconds(0.7)
+    for msg in [sample(1.0, x, v), bad, empty, sample(2.0, x, v), sample(3.0, 0.5, v),
+                sample(3.0, x, v), sample(2.5, x, v)]:   # the last two: stale
+        pub.publish(msg)
+    got = answers(col, 3)
+    assert got == [(1, 0, 0.0), (2, 0, exact), (3, 0, -1e-3)]
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    text = log.read_text()
+    assert "answered=3" in text and "malformed=2" in text and "stale=2" in text, text
+    assert "Traceback" not in text
+
+
+def test_enable_service_and_runtime_parameters(controller):
+    col, start = controller
+    proc, log, pub = start(enable_after=-1)
+    x, v = 1e-4, P.v_ref - 2e-4
+    exact = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    pub.publish(sample(1.0, x, v))
+    assert answers(col, 1)[-1][2] == 0.0
+    enable = col.node.create_client(SetBool, "controller_node/enable")
+    assert enable.wait_for_service(10.0)
+    fut = enable.call_async(SetBool.Request(data=True))
+    assert col.wait_for(fut.done, 10.0) and fut.result().success
+    pub.publish(sample(2.0, x, v))
+    assert answers(col, 2)[-1][2] == exact
+    params = AsyncParameterClient(col.node, "controller_node")
+    assert params.wait_for_services(10.0)
+    fut = params.set_parameters([Parameter("c1", value=math.nan)])
+    assert col.wait_for(fut.done, 10.0)
+    assert not fut.result().results[0].successful and "c1" in fut.result().results[0].reason
+    fut = params.set_parameters([Parameter("c2", value=0.0)])
+    assert col.wait_for(fut.done, 10.0) and fut.result().results[0].successful
+    pub.publish(sample(3.0, x, v))
+    assert answers(col, 3)[-1][2] == GAINS.c1 * (x - P.x_ref)
+    fut = enable.call_async(SetBool.Request(data=False))
+    assert col.wait_for(fut.done, 10.0) and fut.result().success
+    pub.publish(sample(4.0, x, v))
+    assert answers(col, 4)[-1][2] == 0.0
+
+
+def test_stale_after_uses_simulation_time(controller):
+    col, start = controller
+    proc, log, pub = start(enable_after=0, stale_after=5.0, use_sim_time=True)
+    clock = col.node.create_publisher(Clock, "/clock", DATA_QOS)
+    assert col.wait_for(lambda: clock.get_subscription_count() > 0, 10.0)
+    for _ in range(10):        # /clock is taken best effort: repeat until surely matched
+        clock.publish(Clock(clock=stamp_from_seconds(100.0)))
+        col.wait_for(lambda: False, 0.05)
+    pub.publish(sample(10.0, 1e-4, P.v_ref))          # 90 s old: stale
+    pub.publish(sample(98.0, 1e-4, P.v_ref))          # 2 s old: answered
+    answers(col, 1)
+    col.wait_for(lambda: False, 0.3)
+    assert [g[:2] for g in answers(col, 1)] == [(98, 0)]
+
+
+def test_invalid_gain_at_start_exits_nonzero_with_one_line():
+    cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER],
+                                {"saturation": -1.0})
+    res = subprocess.run(cmd, env=launcher.node_env(new_domain()), capture_output=True,
+                         text=True, timeout=30)
+    lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
+    assert res.returncode == 2 and len(lines) == 1 and "saturation=-1.0 is invalid" in lines[0]

@@ -1,0 +1,271 @@
+"""sim_node: its engine without ROS, then the node over Fast DDS in its own process.
+
+The node tests act as the controller themselves (a subscription on oscillator/pi2 in
+the test process answers on controller/velocity_correction), so they control exactly
+what the simulator receives: late, malformed or foreign answers, held answers while a
+parameter is set or a reset is requested.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import TwistStamped
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from grazing_control import launcher
+from grazing_control.nodes.common import DATA_QOS, stamp_key
+from grazing_control.params import OscillatorParams, ParameterError
+from grazing_control.simulate import simulate
+from sim_node.sim_node import Engine, settings_from_values
+from test_closed_loop import STUDY, Collector, new_domain, stamps, xv
+
+BASE = dict(zeta=0.01, r=0.68, omega=OscillatorParams().omega, delta_d=-5e-6, tau0=0.0,
+            pi2_offset=math.pi / 2, x0=math.nan, v0=math.nan, mode="lockstep",
+            time_scale=1.0, state_period=1.0, answer_timeout=1.0, max_periods=0,
+            fidelity="exact", noise=0.0, seed=0)
+
+
+def settings(**kw):
+    return settings_from_values({**BASE, **kw})
+
+
+# ============================================================ engine, no middleware
+def test_settings_refuse_invalid_values_with_a_reason():
+    for kw, text in [({"zeta": 2.0}, "zeta=2.0 is invalid"), ({"r": 1.0}, "r=1.0"),
+                     ({"mode": "fast"}, "mode='fast'"), ({"fidelity": "rk45"}, "rk45"),
+                     ({"x0": 5.0}, "x0=5.0"), ({"time_scale": 0.0}, "time_scale"),
+                     ({"noise": -1.0}, "noise"), ({"v0": math.inf}, "v0")]:
+        with pytest.raises(ParameterError, match=re.escape(text)):
+            settings(**kw)
+
+
+def test_engine_reproduces_simulate_and_events_are_ordered():
+    s = settings()
+    eng = Engine(s)
+    ref = simulate(s.params, 50)
+    got, pi1 = [eng.sample()], 0
+    for _ in range(50):
+        events = eng.begin_period(0.0)
+        assert [e.t for e in events] == sorted(e.t for e in events)
+        pi1 += sum(e.kind == "pi1" for e in events)
+        got.append(eng.end_period()[0])
+    assert pi1 == 50
+    np.testing.assert_array_equal([(e.x, e.v) for e in got[:50]], ref.pi2)
+    assert got[50].t == 50 * s.params.period
+
+
+def test_split_without_correction_keeps_the_trajectory():
+    s = settings(delta_d=-1e-3)
+    a, b = Engine(s), Engine(s)
+    for _ in range(5):
+        a.begin_period(0.0)
+        b.begin_period(0.0)
+        b.split(b.seg.ts + 0.3, 0.0)
+        ea, eb = a.end_period()[0], b.end_period()[0]
+        assert ea.x == pytest.approx(eb.x, abs=1e-12) and ea.v == pytest.approx(eb.v, abs=1e-12)
+
+
+def test_noise_is_reproducible_from_the_seed():
+    runs = []
+    for _ in range(2):
+        eng = Engine(settings(noise=1e-4, seed=7))
+        runs.append([eng.sample().v] + [(eng.begin_period(0.0), eng.end_period()[0].v)[1]
+                                        for _ in range(5)])
+    assert runs[0] == runs[1]
+    assert runs[0][1] != simulate(settings().params, 2).pi2[1, 1]
+
+
+def test_pending_parameters_apply_at_the_next_sample_only():
+    eng = Engine(settings())
+    eng.begin_period(0.0)
+    eng.pending = settings(delta_d=-9e-6).params
+    assert eng.p.delta_d == -5e-6           # the running period keeps the old model
+    eng.end_period()
+    assert eng.p.delta_d == -9e-6 and eng.pending is None
+
+
+# =========================================================== the node, over DDS
+def sim_cmd(domain, **over):
+    return (launcher.node_command(launcher.SIM_MODULE, [STUDY], over),
+            launcher.node_env(domain))
+
+
+def test_invalid_parameter_at_start_exits_nonzero_with_one_line():
+    domain = new_domain()
+    cases = {"zeta": ("2.0", "zeta=2.0 is invalid"), "r": ("1.0", "r=1.0 is invalid"),
+             "fidelity": ("rk45", "fidelity='rk45' is not available"),
+             "x0": ("5.0", "x0=5.0 is invalid"), "mode": ("fast", "mode='fast' is invalid"),
+             "omega": ("1", "expected type DOUBLE")}
+    procs = {}
+    for name, (value, _) in cases.items():
+        cmd, env = sim_cmd(domain)
+        procs[name] = subprocess.Popen(cmd + ["-p", f"{name}:={value}"], env=env,
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                       text=True)
+    for name, proc in procs.items():
+        out, err = proc.communicate(timeout=30)
+        lines = [ln for ln in (out + err).splitlines() if ln.strip()]
+        assert proc.returncode == 2, (name, out, err)
+        assert len(lines) == 1 and "Traceback" not in err, (name, lines)
+        assert cases[name][1] in lines[0] and "[ERROR]" in lines[0], lines[0]
+
+
+class Answerer:
+    """The test as the controller: answers every Pi2 sample with dv = 0 unless held."""
+
+    def __init__(self, collector: Collector, extra=None):
+        self.c = collector
+        self.pub = collector.node.create_publisher(
+            TwistStamped, "controller/velocity_correction", DATA_QOS)
+        self.samples = []
+        self.hold_at = None          # sample index (counted in arrival order) to hold
+        self.held = None
+        self.extra = extra           # called with (msg) before the real answer
+        self.lock = threading.Lock()
+        collector.node.create_subscription(JointState, "oscillator/pi2", self.on_sample,
+                                           DATA_QOS)
+
+    def on_sample(self, msg):
+        with self.lock:
+            self.samples.append(msg)
+            if self.hold_at is not None and len(self.samples) - 1 == self.hold_at:
+                self.held = msg
+                return
+        if self.extra:
+            self.extra(self.pub, msg)
+        self.answer(msg)
+
+    def answer(self, msg, dv=0.0):
+        out = TwistStamped()
+        out.header.stamp = msg.header.stamp
+        out.twist.linear.x = dv
+        self.pub.publish(out)
+
+    def wait_held(self, timeout=20.0):
+        assert self.c.wait_for(lambda: self.held is not None, timeout), len(self.samples)
+        return self.held
+
+
+def call(collector, future, timeout=10.0):
+    assert collector.wait_for(future.done, timeout)
+    return future.result()
+
+
+def summary(log_text):
+    m = re.search(r"summary: (.*)", log_text)
+    assert m, log_text
+    return dict(re.findall(r"(\w+)=([^\s]+)", m.group(1)))
+
+
+@pytest.fixture
+def node_env(tmp_path):
+    """(domain, collector, start) where start(**overrides) runs sim_node in the domain."""
+    domain = new_domain()
+    collector = Collector(domain)
+    procs = []
+
+    def start(**over):
+        log = tmp_path / f"sim{len(procs)}.log"
+        over = {"wait_for_controller": False, "wait_for_subscribers": 1, **over}
+        proc = launcher.start_node(launcher.SIM_MODULE, [STUDY], over, domain_id=domain,
+                                   log=log)
+        procs.append(proc)
+        return proc, log
+
+    yield domain, collector, start
+    launcher.stop_nodes(procs)
+    collector.close()
+
+
+def test_malformed_and_foreign_corrections_are_ignored(node_env):
+    domain, collector, start = node_env
+
+    def junk(pub, msg):
+        bad = TwistStamped()
+        bad.header.stamp = msg.header.stamp
+        bad.twist.linear.x = math.nan
+        pub.publish(bad)                          # NaN: malformed
+        foreign = TwistStamped()
+        foreign.header.stamp.sec = msg.header.stamp.sec + 1
+        foreign.twist.linear.x = 0.5
+        pub.publish(foreign)                      # another stamp: foreign
+
+    Answerer(collector, junk)
+    n = 20
+    proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0)
+    assert proc.wait(30) == 0, log.read_text()
+    s = summary(log.read_text())
+    assert (s["applied"], s["malformed"], s["ignored"], s["timeouts"]) == \
+        (str(n), str(n), str(n), "0")
+    ref = simulate(OscillatorParams(delta_d=-5e-6), n)
+    np.testing.assert_array_equal(xv(collector.get("oscillator/pi2")), ref.pi2)
+
+
+def test_no_answer_times_out_and_applies_none(node_env):
+    domain, collector, start = node_env
+    proc, log = start(max_periods=5, exit_when_done=True, answer_timeout=0.05)
+    assert proc.wait(30) == 0, log.read_text()
+    assert summary(log.read_text())["timeouts"] == "5"
+    ref = simulate(OscillatorParams(delta_d=-5e-6), 5)
+    np.testing.assert_array_equal(xv(collector.get("oscillator/pi2")), ref.pi2)
+    assert collector.wait_for(lambda: len(collector.get("done")) == 1, 5.0)
+
+
+def test_runtime_parameters_validated_and_applied_at_the_next_sample(node_env):
+    domain, collector, start = node_env
+    ans = Answerer(collector)
+    ans.hold_at = 5
+    proc, log = start(max_periods=12, exit_when_done=True, answer_timeout=30.0)
+    held = ans.wait_held()
+    client = AsyncParameterClient(collector.node, "sim_node")
+    assert client.wait_for_services(10.0)
+    # invalid values: rejected with the reason, old values kept
+    for name, value, text in [("zeta", 2.0, "zeta"), ("r", 1.0, "r=1.0 is invalid"),
+                              ("fidelity", "rk45", "rk45"), ("mode", "realtime", "read-only"),
+                              ("x0", 9.0, "x0=9.0")]:
+        res = call(collector, client.set_parameters([Parameter(name, value=value)]))
+        assert not res.results[0].successful and text in res.results[0].reason, res
+    got = call(collector, client.get_parameters(["zeta", "r", "fidelity", "mode"]))
+    assert [v.double_value for v in got.values[:2]] == [0.01, 0.68]
+    assert [v.string_value for v in got.values[2:]] == ["exact", "lockstep"]
+    # a valid change of the model during period 5: period 5 runs with the old model,
+    # the new one from sample 6 on
+    res = call(collector, client.set_parameters([Parameter("delta_d", value=-9e-6)]))
+    assert res.results[0].successful
+    ans.answer(held)
+    assert proc.wait(30) == 0, log.read_text()
+    got = xv(ans.samples)
+    old = simulate(OscillatorParams(delta_d=-5e-6), 7)
+    np.testing.assert_array_equal(got[:7], old.pi2)
+    new = simulate(OscillatorParams(delta_d=-9e-6), 6, deviation=old.pi2_deviation[6])
+    np.testing.assert_array_equal(got[6:], new.pi2)
+
+
+def test_reset_restarts_from_the_initial_state(node_env):
+    domain, collector, start = node_env
+    ans = Answerer(collector)
+    ans.hold_at = 8
+    proc, log = start(max_periods=12, exit_when_done=True, answer_timeout=30.0,
+                      x0=-0.5, v0=-1.0)
+    ans.wait_held()
+    client = collector.node.create_client(Trigger, "sim_node/reset")
+    assert client.wait_for_service(10.0)
+    res = call(collector, client.call_async(Trigger.Request()))
+    assert res.success, res
+    assert proc.wait(30) == 0, log.read_text()
+    keys = [stamp_key(m.header.stamp) for m in ans.samples]
+    assert len(keys) == 9 + 12 and keys[9] == (0, 0)
+    got = xv(ans.samples)
+    np.testing.assert_array_equal(got[9:18], got[:9])
+    ref = simulate(OscillatorParams(delta_d=-5e-6), 12, x0=-0.5, v0=-1.0)
+    np.testing.assert_array_equal(got[9:], ref.pi2)
+    assert stamps(ans.samples)[-1] == pytest.approx(11 * OscillatorParams().period, abs=1e-9)
