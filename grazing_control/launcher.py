@@ -1,4 +1,4 @@
-"""The project's own launcher: the three nodes as separate processes, for machines without ``ros2``.
+"""The project's own launcher: the nodes as separate processes, for machines without ``ros2``.
 
 :func:`run` starts ``sim_node``, ``controller_node`` and (with a bag directory)
 ``recorder_node`` as ``sys.executable -m <module> --ros-args --params-file ... -p key:=value``,
@@ -21,6 +21,7 @@ for them and returns with ``interrupted=True``.
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 import math
 import os
@@ -34,16 +35,32 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["RunResult", "run", "node_command", "start_node", "stop_nodes", "format_value",
-           "SIM_MODULE", "CONTROLLER_MODULE", "RECORDER_MODULE", "CONFIG_DIR"]
+__all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "node_command", "node_env",
+           "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",
+           "RECORDER_MODULE", "CONFIG_DIR"]
 
 SIM_MODULE = "sim_node.sim_node"
 CONTROLLER_MODULE = "grazing_control.nodes.controller_node"
 RECORDER_MODULE = "grazing_control.nodes.recorder_node"
 #: The source tree's root (so that ``-m sim_node.sim_node`` works from a checkout).
 SOURCE_ROOT = Path(__file__).resolve().parents[1]
-#: Parameter files of the study (config/ of the checkout).
-CONFIG_DIR = SOURCE_ROOT / "config"
+
+
+def _config_dir() -> Path:
+    """config/ of the checkout, else the installed package's share/grazing_control/config."""
+    local = SOURCE_ROOT / "config"
+    if (local / "study.yaml").is_file():
+        return local
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory("grazing_control")) / "config"
+    except Exception:  # not installed with colcon: keep the checkout's path for the message
+        return local
+
+
+#: Parameter files of the study: study.yaml (sim_node) and controller.yaml (c2 = -1).
+CONFIG_DIR = _config_dir()
 
 
 @dataclass
@@ -58,6 +75,22 @@ class RunResult:
     timed_out: bool = False
     interrupted: bool = False
     logs: dict = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
+                 else "finished" if self.ok else "failed")
+        text = (f"scene {state} in {self.wall:.1f} s: exit status sim_node={self.sim} "
+                f"controller_node={self.controller}")
+        if self.recorder is not None:
+            text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
+        if self.logs:
+            text += f"; logs in {Path(next(iter(self.logs.values()))).parent}"
+        return text
+
+    @property
+    def exit_code(self) -> int:
+        """0 if ok, 130 if interrupted, else 1: what a command returns."""
+        return 0 if self.ok else 130 if self.interrupted else 1
 
     @property
     def ok(self) -> bool:
@@ -150,8 +183,9 @@ def _params_file(params, node: str, tmp: Path) -> Path:
     return path
 
 
-def run(sim_params, controller_params, bag_dir=None, periods: int | None = None, *,
-        domain_id: int | None = None, timeout: float | None = None,
+def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | None = None, *,
+        delta_d: float | None = None, enable_after: int | None = None,
+        mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
         sim_overrides: dict | None = None, controller_overrides: dict | None = None,
         recorder_overrides: dict | None = None, log_dir=None,
         python: str | None = None) -> RunResult:
@@ -159,25 +193,29 @@ def run(sim_params, controller_params, bag_dir=None, periods: int | None = None,
 
     Parameters
     ----------
-    sim_params : dict or path
-        The simulator's parameters: a ROS parameter file (``/sim_node: ros__parameters``,
-        e.g. config/study.yaml) or a dict of values (floats must be floats).
-    controller_params : dict or path
-        The controller's parameter file (``grazing design --out``, config/controller.yaml)
-        or a dict.
+    sim_params : dict or path, optional
+        The simulator's parameters: a ROS parameter file (``/sim_node: ros__parameters``)
+        or a dict of values (floats must be floats); default config/study.yaml.
+    controller_params : dict or path, optional
+        The controller's parameter file (``grazing design --out``) or a dict; default
+        config/controller.yaml (c2 = -1, c1 from the degenerate condition).
     bag_dir : path, optional
         Record the scene to this rosbag2-style directory (must not exist or be empty);
         None: no recorder. Skipped with a warning if the recorder node is not available.
     periods : int, optional
         Forcing periods to simulate (``max_periods``); None: the parameter file's value
         (which must be > 0 for the scene to end).
+    delta_d, enable_after, mode : optional
+        Shortcuts for the simulator's ``delta_d`` and ``mode`` and the controller's
+        ``enable_after`` (first controlled sample).
     domain_id : int, optional
         ROS_DOMAIN_ID of the processes (isolation); default: the environment's.
     timeout : float, optional
         Wall seconds to wait for the simulator; then every node is stopped and the
         result has ``timed_out=True``.
     sim_overrides, controller_overrides, recorder_overrides : dict, optional
-        Extra ``-p key:=value`` for each node (e.g. ``{"enable_after": 200}``).
+        Extra ``-p key:=value`` for each node (e.g. ``{"state_period": 0.0}``); a value
+        given as text is passed as is (``"-5.0e-06"``), see :func:`format_value`.
     log_dir : path, optional
         Write each node's output to ``<log_dir>/<node>.log`` instead of the terminal.
     python : str, optional
@@ -189,6 +227,9 @@ def run(sim_params, controller_params, bag_dir=None, periods: int | None = None,
         Exit statuses (sim, controller, recorder), wall time, flags.
     """
     t0 = time.monotonic()
+    sim_params = CONFIG_DIR / "study.yaml" if sim_params is None else sim_params
+    controller_params = (CONFIG_DIR / "controller.yaml" if controller_params is None
+                         else controller_params)
     record = bag_dir is not None
     if record and importlib.util.find_spec(RECORDER_MODULE) is None:
         print(f"warning: {RECORDER_MODULE} is not available: running without recording",
@@ -197,13 +238,20 @@ def run(sim_params, controller_params, bag_dir=None, periods: int | None = None,
     logs = {}
     if log_dir is not None:
         Path(log_dir).mkdir(parents=True, exist_ok=True)
-        logs = {n: str(Path(log_dir) / f"{n}.log") for n in ("sim_node", "controller_node",
-                                                             "recorder_node")}
+        names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
+        logs = {n: str(Path(log_dir) / f"{n}.log") for n in names}
     sim_over = {"exit_when_done": True, "wait_for_controller": True,
                 "wait_for_subscribers": 1 if record else 0}
     if periods is not None:
         sim_over["max_periods"] = int(periods)
+    if delta_d is not None:
+        sim_over["delta_d"] = float(delta_d)
+    if mode is not None:
+        sim_over["mode"] = str(mode)
     sim_over.update(sim_overrides or {})
+    controller_overrides = dict(controller_overrides or {})
+    if enable_after is not None:
+        controller_overrides["enable_after"] = int(enable_after)
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None}
     timed_out = interrupted = False
 
@@ -274,3 +322,72 @@ def threading_is_main() -> bool:
     import threading
 
     return threading.current_thread() is threading.main_thread()
+
+
+def run_scene(p, controller_params=None, bag_dir=None, periods: int = 1300,
+              enable_after: int = 1000, **kwargs) -> RunResult:
+    """Run the scene of a model ``p`` (OscillatorParams) in lockstep; raise if it fails.
+
+    The study's parameter file with ``p``'s model parameters over it; ``kwargs`` go to
+    :func:`run`. Raises RuntimeError (with the simulator's last log lines when logs were
+    kept) unless every node finished with status 0.
+    """
+    over = {k: float(getattr(p, k)) for k in ("zeta", "r", "omega", "delta_d", "tau0",
+                                               "pi2_offset")}
+    over.update(kwargs.pop("sim_overrides", None) or {})
+    res = run(None, controller_params, bag_dir, periods, enable_after=enable_after,
+              mode="lockstep", sim_overrides=over, **kwargs)
+    if not res.ok:
+        detail = ""
+        if res.logs.get("sim_node") and Path(res.logs["sim_node"]).is_file():
+            lines = Path(res.logs["sim_node"]).read_text(errors="replace").splitlines()
+            detail = "\n" + "\n".join(lines[-5:])
+        raise RuntimeError(f"{res}{detail}")
+    return res
+
+
+def _key_value(text: str):
+    key, sep, value = text.partition(":=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY:=VALUE")
+    return key, value
+
+
+class _Pairs(argparse.Action):
+    """Collect KEY:=VALUE options into a dict."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        pairs = dict(getattr(namespace, self.dest) or {})
+        key, value = values
+        pairs[key] = value
+        setattr(namespace, self.dest, pairs)
+
+
+def add_run_arguments(parser) -> None:
+    """The options of ``grazing run``; their names are :func:`run`'s keyword arguments."""
+    parser.add_argument("--sim-params", dest="sim_params", default=None,
+                        help="sim_node parameter file (default: config/study.yaml)")
+    parser.add_argument("--controller-params", dest="controller_params", default=None,
+                        help="controller parameter file from `grazing design --out` "
+                             "(default: config/controller.yaml)")
+    parser.add_argument("--bag", dest="bag_dir", default=None,
+                        help="record the scene to this bag directory (default: no recording)")
+    parser.add_argument("--periods", type=int, default=None,
+                        help="forcing periods to simulate (default: the parameter file's)")
+    parser.add_argument("--delta-d", dest="delta_d", type=float, default=None,
+                        help="Delta d = d - d* (default: the parameter file's)")
+    parser.add_argument("--enable-after", dest="enable_after", type=int, default=None,
+                        help="first controlled Pi2 sample (default 1000; -1: never)")
+    parser.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
+                        help="simulator mode (default: the parameter file's, lockstep)")
+    parser.add_argument("--domain-id", dest="domain_id", type=int, default=None,
+                        help="ROS_DOMAIN_ID of the nodes (default: the environment's)")
+    parser.add_argument("--timeout", type=float, default=None,
+                        help="wall seconds before the scene is stopped (default: none)")
+    parser.add_argument("--log-dir", dest="log_dir", default=None,
+                        help="write each node's output to LOG_DIR/<node>.log")
+    parser.add_argument("--sim-param", dest="sim_overrides", type=_key_value, action=_Pairs,
+                        metavar="KEY:=VALUE", help="any sim_node parameter (repeatable)")
+    parser.add_argument("--controller-param", dest="controller_overrides", type=_key_value,
+                        action=_Pairs, metavar="KEY:=VALUE",
+                        help="any controller_node parameter (repeatable)")

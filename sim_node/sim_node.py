@@ -63,7 +63,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
@@ -74,10 +73,10 @@ from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
 
 from grazing_control.impact import advance
-from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, StartupError, Throttled,
-                                          bool_descriptor, float_descriptor, int_descriptor,
-                                          run_node, spin, stamp_from_seconds, stamp_key,
-                                          string_descriptor)
+from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, PUBLISHER_QOS, StartupError,
+                                          Throttled, bool_descriptor, float_descriptor,
+                                          int_descriptor, run_node, spin, stamp_from_seconds,
+                                          stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.simulate import period_step, states_between
 
@@ -89,6 +88,8 @@ FIDELITIES = ("exact",)
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 #: Wall seconds between two ticks of the realtime loop.
 REALTIME_TICK = 1e-3
+#: Wall seconds to wait at exit for every reader to acknowledge every message.
+ACK_TIMEOUT = 10.0
 
 
 # ============================================================== settings (no ROS)
@@ -392,12 +393,12 @@ class SimNode(Node):
         self.exit_code = 0
         self.exit_now = False
 
-        self.pub_state = self.create_publisher(JointState, "oscillator/state", DATA_QOS)
-        self.pub_impact = self.create_publisher(Vector3Stamped, "oscillator/impact", DATA_QOS)
-        self.pub_pi1 = self.create_publisher(JointState, "oscillator/pi1", DATA_QOS)
-        self.pub_pi2 = self.create_publisher(JointState, "oscillator/pi2", DATA_QOS)
-        self.pub_clock = self.create_publisher(Clock, "/clock", DATA_QOS)
-        self.pub_latency = self.create_publisher(Float64, "oscillator/latency", DATA_QOS)
+        self.pub_state = self.create_publisher(JointState, "oscillator/state", PUBLISHER_QOS)
+        self.pub_impact = self.create_publisher(Vector3Stamped, "oscillator/impact", PUBLISHER_QOS)
+        self.pub_pi1 = self.create_publisher(JointState, "oscillator/pi1", PUBLISHER_QOS)
+        self.pub_pi2 = self.create_publisher(JointState, "oscillator/pi2", PUBLISHER_QOS)
+        self.pub_clock = self.create_publisher(Clock, "/clock", PUBLISHER_QOS)
+        self.pub_latency = self.create_publisher(Float64, "oscillator/latency", PUBLISHER_QOS)
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
         self.sub_correction = self.create_subscription(
             TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS)
@@ -634,12 +635,21 @@ class SimNode(Node):
         return text
 
     def spin_until(self, executor) -> None:
-        """Spin until shutdown, or until done when exit_when_done."""
+        """Spin until shutdown, or until done when exit_when_done.
+
+        Before returning after the scene, wait (ACK_TIMEOUT s at most in all) until every
+        reliable reader has acknowledged every message: a reader that lagged behind
+        (a recorder) gets the rest from the publishers' history, not from a dead process.
+        """
         spin(executor, lambda: self.exit_now)
         if self.exit_now:
-            for pub in (self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2,
+            end = time.monotonic() + ACK_TIMEOUT
+            for pub in (self.pub_pi2, self.pub_state, self.pub_impact, self.pub_pi1,
                         self.pub_clock, self.pub_latency, self.pub_done):
-                pub.wait_for_all_acked(Duration(seconds=5.0))
+                left = max(0.0, end - time.monotonic())
+                if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                    self.get_logger().warning(
+                        f"{pub.topic_name}: not every message acknowledged at exit")
 
     def on_exit(self) -> None:
         """Log the summary when stopped before the end (Ctrl-C)."""

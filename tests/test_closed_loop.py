@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import math
 import random
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections import defaultdict
@@ -22,6 +25,7 @@ import rclpy
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
@@ -29,7 +33,7 @@ from std_msgs.msg import Bool, Float64
 from grazing_control import launcher
 from grazing_control.control import Gains
 from grazing_control.design import degenerate_c1
-from grazing_control.nodes.common import DATA_QOS, LATCHED_QOS, seconds_from_stamp
+from grazing_control.nodes.common import LATCHED_QOS, seconds_from_stamp
 from grazing_control.params import OscillatorParams
 from grazing_control.simulate import simulate
 
@@ -48,6 +52,11 @@ TOPICS = {
 }
 
 
+#: The collector's subscriptions: reliable keep-all, as the recorder's, so that nothing
+#: is dropped on the reader's side while the test's executor lags behind a burst.
+KEEP_ALL = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+
+
 def new_domain() -> int:
     """A ROS_DOMAIN_ID unlikely to be used by anything else running now (1..232)."""
     return random.SystemRandom().randrange(101, 232)
@@ -62,8 +71,9 @@ class Collector:
         self.node = rclpy.create_node("collector", context=self.context)
         self.msgs = defaultdict(list)
         self.lock = threading.Lock()
-        for topic, kind in topics.items():
-            self.node.create_subscription(kind, topic, self._keeper(topic), DATA_QOS)
+        self.subs = {topic: self.node.create_subscription(kind, topic, self._keeper(topic),
+                                                          KEEP_ALL)
+                     for topic, kind in topics.items()}
         self.node.create_subscription(Bool, "oscillator/done", self._keeper("done"),
                                       LATCHED_QOS)
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -189,3 +199,75 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
     clock = [seconds_from_stamp(m.clock) for m in collector.get("/clock")]
     assert np.all(np.diff(clock) >= 0)
     assert (N - 1) * T <= clock[-1] <= N * T
+
+
+def test_realtime_keeps_pace_and_measures_latency(tmp_path, domain, collector):
+    """time_scale 200: a Pi2 sample every T/200 = 47 ms of wall time; corrections on arrival."""
+    scale, n = 200.0, 40
+    res = launcher.run(STUDY, CONTROLLER, None, n, domain_id=domain, timeout=60,
+                       sim_overrides={"mode": "realtime", "time_scale": scale,
+                                      "wait_for_subscribers": 1},
+                       controller_overrides={"enable_after": 10}, log_dir=tmp_path)
+    log = Path(res.logs["sim_node"]).read_text()
+    assert res.ok, (res, log)
+    timed = collector.timed("oscillator/pi2")
+    assert len(timed) == n
+    wall = np.array([w for w, _ in timed])
+    sim = stamps([m for _, m in timed])
+    slope = np.polyfit(wall, sim, 1)[0]
+    assert slope == pytest.approx(scale, rel=0.03), slope      # keeps pace within 3 %
+    # every sample answered and applied on arrival; the latency is published per sample
+    assert collector.wait_for(lambda: len(collector.get("oscillator/latency")) == n, 5.0), log
+    lat = np.array([m.data for m in collector.get("oscillator/latency")])
+    assert np.all(lat > 0) and np.median(lat) < 0.02, lat
+    assert "latency_ms p50=" in log and f"applied={n}" in log
+
+
+def test_launcher_records_the_scene_with_the_recorder(tmp_path, domain):
+    pytest.importorskip("grazing_control.nodes.recorder_node")
+    from grazing_control.recording import read_messages
+
+    n, on = 60, 40
+    bag = tmp_path / "bag"
+    res = launcher.run(STUDY, CONTROLLER, bag, n, domain_id=domain, timeout=60,
+                       controller_overrides={"enable_after": on}, log_dir=tmp_path / "logs")
+    assert res.ok, (res, [Path(f).read_text() for f in res.logs.values()])
+    counts = defaultdict(int)
+    pi2 = []
+    for m in read_messages(bag):
+        counts[m.topic] += 1
+        if m.topic == "/oscillator/pi2":
+            pi2.append((m.message.position[0], m.message.velocity[0]))
+    assert counts["/oscillator/pi2"] == n and counts["/controller/velocity_correction"] == n
+    assert counts["/oscillator/pi1"] == n and counts["/oscillator/state"] > 0
+    p = OscillatorParams(delta_d=-5e-6)
+    ref = simulate(p, n, gains=Gains(degenerate_c1(p, -1.0), -1.0), control_after=on)
+    np.testing.assert_allclose(pi2, ref.pi2, rtol=1e-9, atol=1e-12)
+    assert counts["/oscillator/impact"] == ref.impacts.shape[0]
+
+
+def test_launcher_forwards_ctrl_c_and_nodes_exit_cleanly(tmp_path, domain):
+    code = ("import sys; from grazing_control.launcher import run; "
+            f"r = run({str(STUDY)!r}, {str(CONTROLLER)!r}, None, 0, domain_id={domain}, "
+            f"log_dir={str(tmp_path)!r}, sim_overrides={{'answer_timeout': 1.0}}); "
+            "print(r.sim, r.controller, r.interrupted); sys.exit(130 if r.interrupted else 0)")
+    proc = subprocess.Popen([sys.executable, "-c", code], env=launcher.node_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim_log = tmp_path / "sim_node.log"
+    end = time.monotonic() + 20
+    while time.monotonic() < end and "mode=lockstep" not in (
+            sim_log.read_text() if sim_log.exists() else ""):
+        time.sleep(0.1)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and out.split() == ["0", "0", "True"], (out, err)
+    assert "(interrupted)" in sim_log.read_text()
+    for name in ("sim_node", "controller_node"):
+        assert "Traceback" not in (tmp_path / f"{name}.log").read_text()
+
+
+def test_launch_file_is_valid_python():
+    source = (ROOT / "launch" / "grazing_control.launch.py").read_text()
+    compile(source, "grazing_control.launch.py", "exec")
+    assert "def generate_launch_description" in source

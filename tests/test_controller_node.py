@@ -83,9 +83,10 @@ def controller(tmp_path):
         procs.append(launcher.start_node(launcher.CONTROLLER_MODULE, [CONTROLLER], over,
                                          domain_id=domain, log=log))
         pub = col.node.create_publisher(JointState, "oscillator/pi2", DATA_QOS)
+        answers_sub = col.subs["controller/velocity_correction"]
         assert col.wait_for(lambda: pub.get_subscription_count() > 0
-                            and col.node.count_publishers("controller/velocity_correction"),
-                            20.0), log.read_text()
+                            and answers_sub.get_publisher_count() > 0, 20.0), log.read_text()
+        col.wait_for(lambda: False, 0.2)      # both ends of each match
         return procs[-1], log, pub
 
     yield col, start

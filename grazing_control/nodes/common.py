@@ -5,10 +5,15 @@ Nothing here knows the model; the nodes (:mod:`sim_node.sim_node`,
 
 QoS (docs/nodes.md, "QoS")
 --------------------------
-:data:`DATA_QOS` (reliable, volatile, keep last 1000) is used for every data topic:
-Pi2 samples, corrections, impacts, section crossings, state and /clock. Reliable
-everywhere so that a reliable keep-all subscriber (the recorder) gets every message,
-and a depth of 1000 so that a lockstep burst never overruns a slow reader.
+Every data topic (Pi2 samples, corrections, impacts, section crossings, state, /clock,
+latency) is reliable and volatile. Publishers use :data:`PUBLISHER_QOS`, keep last
+100000: a reliable writer keeps each message until every reader has acknowledged it or
+it falls out of this history, so the depth is the backlog a reader may accumulate without
+loss. In lockstep the simulator is paced only by the controller and publishes the
+state, crossings and impacts of a 1200-period scene (about 25,000 messages) in about a
+second, faster than a recorder takes them; the history holds them until it does (the
+memory is used only while a reader lags). The nodes' own subscriptions use
+:data:`DATA_QOS` (reliable, keep last 1000): they need only the newest samples.
 :data:`LATCHED_QOS` (reliable, transient local, depth 1) is for ``oscillator/done``, so
 that a late subscriber still learns that the scene has finished.
 """
@@ -32,6 +37,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 __all__ = [
     "DATA_QOS",
+    "PUBLISHER_QOS",
     "LATCHED_QOS",
     "StartupError",
     "Throttled",
@@ -46,10 +52,15 @@ __all__ = [
     "string_descriptor",
 ]
 
-#: Reliable, volatile, keep last 1000: every data topic (see the module docstring).
+#: Reliable, volatile, keep last 1000: the nodes' subscriptions (see the module docstring).
 DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+#: Reliable, volatile, keep last 100000: every data publisher (a lagging reader loses nothing).
+PUBLISHER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
 
 #: Reliable, transient local, depth 1: ``oscillator/done``.
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,

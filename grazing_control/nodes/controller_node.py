@@ -52,9 +52,9 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from grazing_control.control import Gains, correction
-from grazing_control.nodes.common import (DATA_QOS, StartupError, Throttled, float_descriptor,
-                                          int_descriptor, run_node, seconds_from_stamp,
-                                          stamp_key)
+from grazing_control.nodes.common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled,
+                                          float_descriptor, int_descriptor, run_node,
+                                          seconds_from_stamp, stamp_key)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 
 __all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
@@ -167,7 +167,7 @@ class ControllerNode(Node):
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
         self.pub = self.create_publisher(TwistStamped, "controller/velocity_correction",
-                                         DATA_QOS)
+                                         PUBLISHER_QOS)
         self.create_subscription(JointState, "oscillator/pi2", self._on_sample, DATA_QOS)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
