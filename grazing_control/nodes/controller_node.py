@@ -47,6 +47,7 @@ import math
 
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
@@ -166,9 +167,13 @@ class ControllerNode(Node):
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
-        self.pub = self.create_publisher(TwistStamped, "controller/velocity_correction",
-                                         PUBLISHER_QOS)
-        self.create_subscription(JointState, "oscillator/pi2", self._on_sample, DATA_QOS)
+        # no default QoS-event handlers: each is one more entity in every executor wait
+        self.pub = self.create_publisher(
+            TwistStamped, "controller/velocity_correction", PUBLISHER_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+        self.create_subscription(
+            JointState, "oscillator/pi2", self._on_sample, DATA_QOS,
+            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         log = self.get_logger()
