@@ -12,8 +12,10 @@ controller answering every sample; the latency of a sample is the wall time from
 publishing it to applying its correction in the simulator (see sim_node's docstring),
 over ``--samples`` samples; p50/p99/max from the sim node's summary.
 
-QoS everywhere: reliable, volatile, keep last 1000 (grazing_control.nodes.common.DATA_QOS),
-RMW rmw_fastrtps_cpp (default), one SingleThreadedExecutor per node.
+QoS: every topic reliable and volatile; publishers keep last 100000, subscriptions keep
+last 1000 (grazing_control.nodes.common.PUBLISHER_QOS, DATA_QOS); RMW rmw_fastrtps_cpp
+(default, shared-memory transport between processes on one host); one
+SingleThreadedExecutor per node.
 
 Run: ``python benchmarks/bench_closed_loop.py`` (about 2 minutes; ``--quick`` for a
 short check). Each run uses its own ROS_DOMAIN_ID.
@@ -122,7 +124,8 @@ def main(argv=None):
         args.periods, args.repeat, args.samples = 1000, 1, 1000
     print(f"closed-loop benchmark: python {platform.python_version()}, "
           f"RMW {os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)')}, "
-          f"{os.cpu_count()} CPUs, QoS reliable/volatile/keep last 1000")
+          f"{os.cpu_count()} CPUs; QoS reliable, volatile, publishers keep last 100000, "
+          "subscriptions keep last 1000")
     lockstep(args.periods, args.repeat)
     realtime(args.samples, args.scale)
 

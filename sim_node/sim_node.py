@@ -369,7 +369,7 @@ def _declare(node: Node) -> None:
     d("exit_when_done", False, bool_descriptor("exit (status 0) once max_periods have run",
                                                True))
     d("wait_for_controller", True, bool_descriptor(
-        "lockstep: start only when a controller is matched on oscillator/pi2 and "
+        "start only when a controller is matched on oscillator/pi2 and "
         "controller/velocity_correction", True))
     d("wait_for_subscribers", 0, int_descriptor(
         "start only when every data topic has this many other subscribers (a recorder: 1)",
@@ -437,8 +437,7 @@ class SimNode(Node):
     # ------------------------------------------------------------------ start
     def _ready(self) -> bool:
         n = self.get_parameter("wait_for_subscribers").value
-        controller = (self.settings.mode == "lockstep"
-                      and self.get_parameter("wait_for_controller").value)
+        controller = self.get_parameter("wait_for_controller").value
         if controller and (self.pub_pi2.get_subscription_count() < n + 1
                            or self.sub_correction.get_publisher_count() < 1):
             return False
