@@ -44,12 +44,14 @@ publishes it and the next sample.
 
 ``realtime``: simulation time runs at ``time_scale`` times the wall clock (a 1 ms tick
 publishes what is due); samples are published on time and the period continues without
-waiting. A correction for the latest sample is applied when it arrives, as an
-instantaneous velocity change at the state of that instant: the period is then split
-there (the exact flow is evaluated up to the arrival, Delta v is added, and the flow
-continues to the next sample), so the correction acts a latency after Pi2, not on it.
-The latency (wall time from publishing the sample to applying its correction) is
-published on ``oscillator/latency`` and summarised at exit.
+waiting. A correction is applied when it arrives, as an instantaneous velocity change
+at the state of that instant: the period is then split there (the exact flow is
+evaluated up to the arrival, Delta v is added, and the flow continues to the next
+sample), so the correction acts a latency after Pi2, not on it. It must answer one of
+the last two samples, once; an answer that comes after the next sample went out is
+still applied (counted as late). The latency (wall time from publishing the sample to
+applying its correction) is published on ``oscillator/latency`` and summarised at exit
+with how late the samples went out against their simulation time (``sample_lag_ms``).
 
 Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
 ``python -m sim_node.sim_node --ros-args ...``.
@@ -424,6 +426,7 @@ class SimNode(Node):
         self.timeouts = Throttled(log, "no correction within answer_timeout, none applied")
         self.stats = {"applied": 0, "late": 0}
         self.latencies = []
+        self.lags = []
         self._started = False
         self._finished = False
         self._created = time.monotonic()
@@ -528,6 +531,7 @@ class SimNode(Node):
     def _rt_start(self) -> None:
         self._rt_t0, self._rt_wall0 = 0.0, time.monotonic()
         self._rt_sample = None
+        self._rt_pending = {}
         self._rt_queue = []
         self._rt_publish_sample(self.engine.sample())
         self._tick_timer = self.create_timer(REALTIME_TICK, self._rt_tick)
@@ -536,8 +540,14 @@ class SimNode(Node):
         # the uncorrected period is integrated first, so that the round trip of the
         # correction does not include it
         self._rt_queue = self.engine.begin_period(0.0)
-        self._rt_sent = time.monotonic()
+        sent = time.monotonic()
         self._rt_sample = stamp_key(self._publish(ev))
+        self._rt_pending[self._rt_sample] = sent
+        if len(self._rt_pending) > 2:                    # keep the last two samples
+            del self._rt_pending[next(iter(self._rt_pending))]
+        # pace: how late the sample went out against its simulation time
+        self.lags.append(sent - self._rt_wall0
+                         - (ev.t - self._rt_t0) / self.settings.time_scale)
 
     def _rt_tick(self) -> None:
         if self._finished:
@@ -573,21 +583,27 @@ class SimNode(Node):
             self._rt_publish_sample(ev)
 
     def _rt_correction(self, stamp, dv: float) -> None:
+        """Apply a correction at the simulation time of its arrival.
+
+        It must answer one of the last two samples, once: the latest (normal) or the
+        one before, when the answer comes after the next sample went out (counted as
+        late, applied all the same: the next opportunity). Anything else is ignored.
+        """
         key = stamp_key(stamp)
-        if not self._started or self._finished or key != self._rt_sample:
-            self.stats["late"] += 1
-            self.ignored(f"stamp {key} does not answer the latest sample {self._rt_sample}"
-                         " (late or foreign)")
+        sent = self._rt_pending.pop(key, None) if self._started else None
+        if sent is None or self._finished:
+            self.ignored(f"stamp {key} answers none of the last two unanswered samples "
+                         "(stale, duplicate or foreign)")
             return
         wall = time.monotonic()          # the correction acts at this instant's sim time
         now = self._now(wall)
         self._rt_advance(now)
-        if self._finished or key != self._rt_sample:
-            self.stats["late"] += 1
+        if self._finished:
             return
+        if key != self._rt_sample:
+            self.stats["late"] += 1
         self._rt_queue = self.engine.split(now, dv)
-        latency = wall - self._rt_sent
-        self._rt_sample = None          # answered: a second answer is ignored
+        latency = wall - sent
         self.stats["applied"] += 1
         self.latencies.append(latency)
         self.pub_latency.publish(Float64(data=latency))
@@ -634,13 +650,18 @@ class SimNode(Node):
         wall = time.monotonic() - self._wall_start if self._wall_start else 0.0
         k = self.engine.k
         text = (f"summary: periods={k} t={self.engine.t:.9g} impacts={self.engine.impacts} "
-                f"applied={self.stats['applied']} timeouts={self.timeouts.count} "
+                f"applied={self.stats['applied']} late={self.stats['late']} "
+                f"timeouts={self.timeouts.count} "
                 f"ignored={self.ignored.count} malformed={self.malformed.count} "
                 f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")
         if self.latencies:
             lat = np.asarray(self.latencies) * 1e3
             text += (f" latency_ms p50={np.percentile(lat, 50):.3f} "
                      f"p99={np.percentile(lat, 99):.3f} max={lat.max():.3f} n={lat.size}")
+        if self.lags:
+            lag = np.asarray(self.lags) * 1e3
+            text += (f" sample_lag_ms p50={np.percentile(lag, 50):.3f} "
+                     f"p99={np.percentile(lag, 99):.3f} max={lag.max():.3f}")
         return text
 
     def spin_until(self, executor) -> None:
@@ -678,6 +699,7 @@ class SimNode(Node):
             self._publish_sample(ev)
         else:
             self._rt_t0, self._rt_wall0 = 0.0, time.monotonic()
+            self._rt_pending.clear()
             self._rt_publish_sample(ev)
         return response
 
