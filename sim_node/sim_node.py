@@ -27,7 +27,8 @@ Topics (all reliable, volatile, keep last 1000, except ``oscillator/done``)
 ``oscillator/done`` (std_msgs/Bool, transient local)
     true once ``max_periods`` periods have run.
 ``/clock`` (rosgraph_msgs/Clock)
-    simulation time: at every Pi2 sample and state message (lockstep), every tick (realtime).
+    simulation time: at every Pi2 sample and state message (lockstep), at every wake-up
+    of the realtime loop (at least every 5 ms of wall time).
 
 Subscribed: ``controller/velocity_correction`` (geometry_msgs/TwistStamped), twist.linear.x
 = Delta v, header.stamp = the stamp of the Pi2 sample it answers. Service: ``~/reset``
@@ -42,8 +43,8 @@ Deterministic, as fast as the round trip allows. The loop is driven by the corre
 subscription callback (no thread, no polling): the callback integrates the period,
 publishes it and the next sample.
 
-``realtime``: simulation time runs at ``time_scale`` times the wall clock (a 1 ms tick
-publishes what is due); samples are published on time and the period continues without
+``realtime``: simulation time runs at ``time_scale`` times the wall clock (a timer wakes
+up when the next event is due, and at least every 5 ms for /clock); samples are published on time and the period continues without
 waiting. A correction is applied when it arrives, as an instantaneous velocity change
 at the state of that instant: the period is then split there (the exact flow is
 evaluated up to the arrival, Delta v is added, and the flow continues to the next
@@ -89,8 +90,10 @@ TWO_PI = 2.0 * math.pi
 MODES = ("lockstep", "realtime")
 FIDELITIES = ("exact",)
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
-#: Wall seconds between two ticks of the realtime loop.
-REALTIME_TICK = 1e-3
+#: Realtime: longest wall time between two wake-ups (each publishes /clock), seconds.
+CLOCK_TICK = 5e-3
+#: Realtime: shortest timer period (an event already due is published at once), seconds.
+MIN_TICK = 5e-5
 #: Wall seconds to wait at exit for every reader to acknowledge every message.
 ACK_TIMEOUT = 10.0
 
@@ -534,7 +537,7 @@ class SimNode(Node):
         self._rt_pending = {}
         self._rt_queue = []
         self._rt_publish_sample(self.engine.sample())
-        self._tick_timer = self.create_timer(REALTIME_TICK, self._rt_tick)
+        self._tick_timer = self.create_timer(MIN_TICK, self._rt_tick)
 
     def _rt_publish_sample(self, ev: Event) -> None:
         # the uncorrected period is integrated first, so that the round trip of the
@@ -560,6 +563,14 @@ class SimNode(Node):
             return
         if not self._finished:
             self.pub_clock.publish(Clock(clock=stamp_from_seconds(now)))
+            self._rt_schedule(now)
+
+    def _rt_schedule(self, now: float) -> None:
+        """Wake up when the next event is due, and at least every CLOCK_TICK for /clock."""
+        due = self._rt_queue[0].t if self._rt_queue else self.engine.seg.te
+        delay = min(max((due - now) / self.settings.time_scale, MIN_TICK), CLOCK_TICK)
+        self._tick_timer.timer_period_ns = int(delay * 1e9)
+        self._tick_timer.reset()
 
     def _rt_advance(self, now: float) -> None:
         """Publish everything due up to simulation time ``now``."""
@@ -607,6 +618,7 @@ class SimNode(Node):
         self.stats["applied"] += 1
         self.latencies.append(latency)
         self.pub_latency.publish(Float64(data=latency))
+        self._rt_schedule(now)           # the split may have brought an event forward
 
     # ---------------------------------------------------------------- publishing
     def _publish(self, ev: Event, clock: bool = True):
