@@ -151,6 +151,9 @@ def settings_from_values(values: dict) -> SimSettings:
     if max_periods < 0:
         raise ParameterError(f"max_periods={max_periods} is invalid: valid range is >= 0 "
                              "(0 = unbounded)")
+    seed = int(values["seed"])
+    if seed < 0:
+        raise ParameterError(f"seed={seed} is invalid: valid range is seed >= 0")
     return SimSettings(
         params=p, x0=x0, v0=v0, mode=mode,
         time_scale=_finite("time_scale", values["time_scale"], lambda v: v > 0.0,
@@ -161,7 +164,7 @@ def settings_from_values(values: dict) -> SimSettings:
                                lambda v: v > 0.0, "a finite answer_timeout > 0"),
         max_periods=max_periods, fidelity=fidelity,
         noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
-        seed=int(values["seed"]))
+        seed=seed)
 
 
 def initial_deviation(p: OscillatorParams, x0: float, v0: float) -> tuple:
@@ -370,7 +373,8 @@ def _declare(node: Node) -> None:
                                              False, FIDELITIES))
     d("noise", 0.0, float_descriptor("std of Gaussian velocity noise added at each Pi2 sample",
                                      0.0))
-    d("seed", 0, int_descriptor("seed of the noise generator (applied at start and reset)"))
+    d("seed", 0, int_descriptor("seed of the noise generator, >= 0 (applied at start and "
+                                "reset)", 0))
     d("exit_when_done", False, bool_descriptor("exit (status 0) once max_periods have run",
                                                True))
     d("wait_for_controller", True, bool_descriptor(

@@ -43,7 +43,8 @@ def test_settings_refuse_invalid_values_with_a_reason():
     for kw, text in [({"zeta": 2.0}, "zeta=2.0 is invalid"), ({"r": 1.0}, "r=1.0"),
                      ({"mode": "fast"}, "mode='fast'"), ({"fidelity": "rk45"}, "rk45"),
                      ({"x0": 5.0}, "x0=5.0"), ({"time_scale": 0.0}, "time_scale"),
-                     ({"noise": -1.0}, "noise"), ({"v0": math.inf}, "v0")]:
+                     ({"noise": -1.0}, "noise"), ({"v0": math.inf}, "v0"),
+                     ({"seed": -1}, "seed=-1")]:
         with pytest.raises(ParameterError, match=re.escape(text)):
             settings(**kw)
 
