@@ -268,11 +268,9 @@ def cmd_simulate(args):
 def cmd_run(args):
     from .launcher import run
 
-    return run(**_run_kwargs(args))
-
-
-def _run_kwargs(args):
-    return {k: v for k, v in vars(args).items() if k not in ("func", "json")}
+    result = run(**{k: v for k, v in vars(args).items() if k not in ("func", "command")})
+    print(result)
+    return result.exit_code
 
 
 def cmd_demo(args):

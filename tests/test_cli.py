@@ -301,3 +301,25 @@ def test_orbit_perturbation_method_agrees_with_exact_near_grazing(tmp_path):
     lam_e = complex(*exact["multipliers"][0])
     lam_p = complex(*fast["multipliers"][0])
     assert abs(lam_p / lam_e - 1) < 1e-6
+
+
+def test_grazing_run_drives_the_three_nodes_and_records(tmp_path):
+    """`grazing run` starts sim, controller and recorder as processes, waits, stops them."""
+    import random
+
+    from grazing_control.recording import read_messages
+
+    bag = tmp_path / "bag"
+    r = _run(["run", "--periods", "40", "--delta-d", "-5e-6", "--enable-after", "20",
+              "--bag", str(bag), "--timeout", "120",
+              "--domain-id", str(random.SystemRandom().randrange(101, 232))], tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "sim_node=0 controller_node=0 recorder_node=0" in r.stdout
+    pi2 = [m for m in read_messages(bag, ["/oscillator/pi2"])]
+    assert len(pi2) == 40
+
+
+def test_grazing_run_reports_a_failed_scene_with_nonzero_status(tmp_path):
+    r = _run(["run", "--periods", "5", "--sim-param", "zeta:=2.0", "--timeout", "60"], tmp_path)
+    assert r.returncode != 0
+    assert "Traceback" not in r.stdout + r.stderr
