@@ -10,6 +10,7 @@ describes the build and its quirks.
 import importlib.metadata
 import importlib.util
 import os
+import random
 import shutil
 import subprocess
 import sys
@@ -181,8 +182,16 @@ def test_colcon_build(tmp_path, symlink):
               f'"{sys.executable}" -c "{probe}"')
     if module_exists(CONSOLE_SCRIPTS['grazing']):
         script += f' && "{prefix}/lib/{PACKAGE}/grazing" --help >/dev/null'
+        if not symlink and module_exists(CONSOLE_SCRIPTS['sim_node']):
+            # a short closed-loop scene through the installed nodes, on a domain of its own
+            domain = random.SystemRandom().randrange(101, 232)
+            script += (f' && "{prefix}/lib/{PACKAGE}/grazing" run --periods 10 --delta-d -5e-6'
+                       f' --enable-after 5 --timeout 90 --domain-id {domain}')
     run = subprocess.run(['bash', '-c', script], env=env, capture_output=True, text=True,
-                         timeout=120)
+                         timeout=180)
     assert run.returncode == 0, run.stdout + run.stderr
-    for line in run.stdout.split():
+    lines = run.stdout.split('\n')
+    for line in lines[:2]:
         assert Path(line).resolve().is_relative_to(tmp_path.resolve()), line
+    if not symlink and module_exists(CONSOLE_SCRIPTS['sim_node']):
+        assert 'sim_node=0 controller_node=0' in run.stdout, run.stdout + run.stderr
