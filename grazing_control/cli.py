@@ -248,8 +248,11 @@ def cmd_simulate(args):
     if args.control_after is not None and gains is None:
         raise ParameterError("--control-after needs the gains: give --c2 (and optionally --c1)")
     control_after = args.control_after if args.control_after is not None else (0 if gains else None)
-    res = simulate(p, args.periods, x0=args.x0, v0=args.v0, gains=gains, control_after=control_after)
+    res = simulate(p, args.periods, x0=args.x0, v0=args.v0, gains=gains, control_after=control_after,
+                   fidelity=args.fidelity, tol=args.tol)
     out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist()}
+    if args.fidelity != "exact":
+        out.update(fidelity=res.fidelity, fidelity_reason=res.fidelity_reason)
     if args.json:
         return out
     n = args.periods
@@ -261,6 +264,7 @@ def cmd_simulate(args):
         f"  impacts in all     = {int(res.impacts_per_period.sum())}",
         f"  impacts per period, last {len(tail)}: {tail}",
         f"  last Pi2 sample    = ({last[0]:.15g}, {last[1]:.15g})",
+        f"  model              = {res.fidelity_reason}",
     ])
 
 
@@ -315,6 +319,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--control-after", type=_count, help="switch control on at this sample")
     s.add_argument("--x0", type=_finite, help="initial x on Pi2 (default x**)")
     s.add_argument("--v0", type=_finite, help="initial v on Pi2 (default v**)")
+    s.add_argument("--fidelity", choices=("exact", "zdm2", "zdm1", "ode", "auto"), default="exact",
+                   help="model: exact flow (default), normal-form maps zdm2/zdm1, solve_ivp "
+                        "(ode, comparison), or auto: the cheapest meeting --tol over the horizon")
+    s.add_argument("--tol", type=_finite, default=1e-9,
+                   help="Pi2 error tolerance for --fidelity auto (default 1e-9)")
     _gain_args(s)
     s.set_defaults(func=cmd_simulate)
 

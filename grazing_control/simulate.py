@@ -20,6 +20,8 @@ import numpy as np
 
 from .control import Gains
 from .flow import propagate, to_deviation, to_physical
+from .fidelity import FIDELITIES, choose_fidelity
+from .fidelity import period_step as fidelity_step
 from .impact import Segment, advance
 from .params import OscillatorParams
 
@@ -81,6 +83,7 @@ class SimulationResult:
     impacts_per_period : (N,) int array.
     impacts : (M, 5) array of [period k, time t, phase, v-, v+].
     final_deviation : deviation at the sample after the last period.
+    fidelity, fidelity_reason : the model used and why (see :mod:`grazing_control.fidelity`).
     """
 
     params: OscillatorParams
@@ -92,11 +95,14 @@ class SimulationResult:
     impacts_per_period: np.ndarray
     impacts: np.ndarray
     final_deviation: tuple = field(default=(0.0, 0.0))
+    fidelity: str = "exact"
+    fidelity_reason: str = ""
 
 
 def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
              v0: float | None = None, deviation=None, gains: Gains | None = None,
-             control_after: int | None = 0) -> SimulationResult:
+             control_after: int | None = 0, fidelity: str = "exact",
+             tol: float = 1e-9) -> SimulationResult:
     """Simulate ``periods`` forcing periods from a state on Pi2.
 
     Parameters
@@ -113,6 +119,12 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     control_after : int or None
         The controller acts at samples k >= control_after (the study switches it on
         after 1000 samples); None never.
+    fidelity : str
+        'exact' (default), 'zdm2', 'zdm1', 'ode' (:mod:`grazing_control.fidelity`), or
+        'auto': the cheapest of exact/zdm2/zdm1 whose estimated error over this scene's
+        horizon is <= ``tol`` (the choice and its reason are in the result).
+    tol : float
+        Tolerance for 'auto'.
 
     Returns
     -------
@@ -135,20 +147,33 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     counts = np.zeros(periods, dtype=int)
     imps = []
     active = gains is not None and control_after is not None
+    reason = "exact: the closed-form flow (requested)" if fidelity == "exact" else \
+        f"{fidelity}: requested"
+    if fidelity == "auto":
+        choice = choose_fidelity(p, max(periods, 1), tol, deviation=(dx, dv),
+                                 gains=gains if active else None,
+                                 control_after=control_after if active else None)
+        fidelity, reason = choice.fidelity, choice.reason
+    elif fidelity not in FIDELITIES:
+        raise ValueError(f"fidelity={fidelity!r} is invalid: valid values are "
+                         f"{', '.join(FIDELITIES)}, auto")
+    step = period_step if fidelity == "exact" else \
+        (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
     for k in range(periods):
         dev[k] = dx, dv
         dvc = 0.0
         if active and k >= control_after:
             dvc = gains.c1 * dx + gains.c2 * dv
         corr[k] = dvc
-        seg = period_step(p, dx, dv, dvc)
+        seg = step(p, dx, dv, dvc)
         counts[k] = len(seg.impacts)
         for i in seg.impacts:
             imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
         dx, dv = seg.dx, seg.dv
     pi2 = dev + np.array([p.x_ref, p.v_ref])
     return SimulationResult(p, gains, control_after if active else None, pi2, dev, corr, counts,
-                            np.array(imps, dtype=float).reshape(-1, 5), (dx, dv))
+                            np.array(imps, dtype=float).reshape(-1, 5), (dx, dv),
+                            fidelity, reason)
 
 
 def _batch_one(args):

@@ -1,6 +1,7 @@
 """sim_node: the impact oscillator integrated with the exact flow, as a ROS 2 node.
 
-The integration is :func:`grazing_control.simulate.period_step`, one call per forcing
+The integration is :func:`grazing_control.fidelity.period_step` (by default the exact
+:func:`grazing_control.simulate.period_step`), one call per forcing
 period from one Pi2 sample to the next, exactly as :func:`grazing_control.simulate.simulate`
 does; everything published between two samples (state, Pi1 crossing, impacts) is
 evaluated from the closed form by :func:`grazing_control.simulate.states_between`
@@ -82,13 +83,13 @@ from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, PUBLISHER_QOS, 
                                           int_descriptor, run_node, spin, stamp_from_seconds,
                                           stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
-from grazing_control.simulate import period_step, states_between
+from grazing_control.fidelity import FIDELITIES, period_step
+from grazing_control.simulate import states_between
 
 __all__ = ["SimSettings", "settings_from_values", "Event", "Engine", "SimNode", "main"]
 
 TWO_PI = 2.0 * math.pi
 MODES = ("lockstep", "realtime")
-FIDELITIES = ("exact",)
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 #: Realtime: longest wall time between two wake-ups (each publishes /clock), seconds.
 CLOCK_TICK = 5e-3
@@ -137,8 +138,11 @@ def settings_from_values(values: dict) -> SimSettings:
     fidelity = str(values["fidelity"])
     if fidelity not in FIDELITIES:
         raise ParameterError(
-            f"fidelity={fidelity!r} is not available: only 'exact' (the closed-form flow) "
-            "is implemented in this version")
+            f"fidelity={fidelity!r} is invalid: valid values are {', '.join(FIDELITIES)}")
+    if fidelity != "exact" and mode == "realtime":
+        raise ParameterError(
+            f"fidelity={fidelity!r} is invalid in realtime mode: valid there is 'exact' only "
+            "(corrections land inside a period, which only the exact flow can split)")
     x0, v0 = float(values["x0"]), float(values["v0"])
     for name, value in (("x0", x0), ("v0", v0)):
         if math.isinf(value):
@@ -256,7 +260,7 @@ class Engine:
         (t_k, t_k+1) in time order (state, Pi1, impacts), the next sample excluded.
         """
         p = self.p
-        seg = period_step(p, self.dx, self.dv, dv_correction)
+        seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
         t0 = self.t
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         self.seg = _Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
@@ -369,7 +373,9 @@ def _declare(node: Node) -> None:
     d("answer_timeout", 1.0, float_descriptor("lockstep: wall seconds to wait for the "
                                               "correction of a sample, then apply none", 0.0))
     d("max_periods", 0, int_descriptor("forcing periods to simulate; 0 = unbounded", 0))
-    d("fidelity", "exact", string_descriptor("model fidelity: only 'exact' (closed-form flow)",
+    d("fidelity", "exact", string_descriptor("model fidelity: exact (closed-form flow), zdm2 / "
+                                             "zdm1 (normal-form maps), ode (solve_ivp, "
+                                             "comparison); lockstep only for all but exact",
                                              False, FIDELITIES))
     d("noise", 0.0, float_descriptor("std of Gaussian velocity noise added at each Pi2 sample",
                                      0.0))

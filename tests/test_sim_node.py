@@ -103,7 +103,7 @@ def sim_cmd(domain, **over):
 def test_invalid_parameter_at_start_exits_nonzero_with_one_line():
     domain = new_domain()
     cases = {"zeta": ("2.0", "zeta=2.0 is invalid"), "r": ("1.0", "r=1.0 is invalid"),
-             "fidelity": ("rk45", "fidelity='rk45' is not available"),
+             "fidelity": ("rk45", "fidelity='rk45' is invalid"),
              "x0": ("5.0", "x0=5.0 is invalid"), "mode": ("fast", "mode='fast' is invalid"),
              "omega": ("1", "expected type DOUBLE")}
     procs = {}
