@@ -148,17 +148,19 @@ def admissible_c2(p: OscillatorParams, lo: float = -4.0, hi: float = 2.0, n: int
     start = None
     for k, flag in enumerate(ok):
         if flag and start is None:
-            start = grid[0] if k == 0 else _edge(grid[k - 1], grid[k], pts[k - 1], pts[k], stab, exist)
+            start = grid[0] if k == 0 else _edge(grid[k - 1], grid[k], stab, exist)
         if not flag and start is not None:
-            intervals.append((start, _edge(grid[k - 1], grid[k], pts[k - 1], pts[k], stab, exist)))
+            intervals.append((start, _edge(grid[k - 1], grid[k], stab, exist)))
             start = None
     if start is not None:
         intervals.append((start, grid[-1]))
     return intervals
 
 
-def _edge(a, b, da, db, stab, exist):
-    for f, fa, fb in ((stab, None, None), (exist, None, None)):
+def _edge(a, b, stab, exist):
+    """The end point of an admissible interval between grid points a and b: Brent's
+    method on whichever condition changes sign there (stability first)."""
+    for f in (stab, exist):
         fa, fb = f(a), f(b)
         if fa * fb < 0.0:
             return brentq(f, a, b, xtol=1e-13)

@@ -33,7 +33,7 @@ import numpy as np
 from .flow import to_deviation, to_physical, transition_matrix
 from .impact import Impact, Segment, advance
 from .params import OscillatorParams
-from .zdm import local_grazing
+from .zdm import zdm_event
 
 __all__ = ["FIDELITIES", "period_step", "FidelityChoice", "choose_fidelity"]
 
@@ -54,24 +54,9 @@ def _zdm_period(p: OscillatorParams, dx: float, dv: float, order: int) -> Segmen
     """Normal-form period on Pi2: Phi(s) D(Phi(T - s) z), with the grazing impact it implies."""
     s = p.pi2_offset / p.omega
     f11, f12, f21, f22 = transition_matrix(p.zeta, p.period - s)
-    zx, zv = f11 * dx + f12 * dv, f21 * dx + f22 * dv  # virtual state on Pi1
-    g = local_grazing(p)
-    e1, e2 = zx - p.delta_d, zv
-    h = e1 + e2 * e2 / (2.0 * g.alpha)
-    if order == 2:
-        h += g.c3 * e2 ** 3
+    zx, zv, t1, v_minus = zdm_event(p, f11 * dx + f12 * dv, f21 * dx + f22 * dv, order)
     impacts = []
-    if h > 0.0:
-        rr = 1.0 + p.r
-        if order == 2:
-            big_v = math.sqrt(2.0 * (g.alpha + g.k * e2) * h)
-            v_minus = big_v + g.beta * big_v * big_v / (3.0 * g.alpha ** 2)
-            t1 = (e2 - big_v) / g.alpha
-            zx, zv = zx + rr * big_v * t1, zv - rr * (v_minus + 2.0 * p.zeta * big_v * t1)
-        else:
-            v_minus = math.sqrt(2.0 * g.alpha * h)
-            t1 = (e2 - v_minus) / g.alpha
-            zv = zv - rr * v_minus
+    if t1 is not None:
         t_imp = p.period - s + t1
         impacts.append(Impact(t_imp, (p.tau2 + p.omega * t_imp) % TWO_PI, v_minus, -p.r * v_minus))
     f11, f12, f21, f22 = transition_matrix(p.zeta, s)

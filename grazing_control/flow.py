@@ -35,6 +35,7 @@ __all__ = [
     "to_physical",
     "gap",
     "amplitude_bound",
+    "matmul2",
 ]
 
 
@@ -105,3 +106,13 @@ def amplitude_bound(zeta: float, dx: float, dv: float) -> float:
     """
     wd = math.sqrt(1.0 - zeta * zeta)
     return math.hypot(dx, (dv + zeta * dx) / wd)
+
+
+def matmul2(a, b):
+    """Product of two 2x2 matrices given as 4-tuples (row-major): the hot-path form."""
+    return (
+        a[0] * b[0] + a[1] * b[2],
+        a[0] * b[1] + a[1] * b[3],
+        a[2] * b[0] + a[3] * b[2],
+        a[2] * b[1] + a[3] * b[3],
+    )

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from .flow import amplitude_bound, propagate, transition_matrix
+from .flow import amplitude_bound, matmul2, propagate, transition_matrix
 from .params import OscillatorParams
 
 __all__ = [
@@ -255,15 +255,6 @@ def saltation_matrix(p: OscillatorParams, phase: float, v_minus: float):
     return (-r, 0.0, (1.0 + r) * (math.cos(phase) - p.d) / v_minus, -r)
 
 
-def _matmul(a, b):
-    return (
-        a[0] * b[0] + a[1] * b[2],
-        a[0] * b[1] + a[1] * b[3],
-        a[2] * b[0] + a[3] * b[2],
-        a[2] * b[1] + a[3] * b[3],
-    )
-
-
 def _release_time(p: OscillatorParams, tau: float, horizon: float):
     """Time after phase tau until cos(tau) - d falls below 0 (end of sticking)."""
     d = p.d
@@ -360,7 +351,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
                 f11, f12, f21, f22 = transition_matrix(zeta, remaining)
                 dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
                 if monodromy:
-                    mono = _matmul((f11, f12, f21, f22), mono)
+                    mono = matmul2((f11, f12, f21, f22), mono)
             return Segment(dx, dv, impacts, mono)
         if len(impacts) >= max_impacts:
             raise ImpactCapError(
@@ -370,7 +361,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         f11, f12, f21, f22 = transition_matrix(zeta, h)
         dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
         if monodromy:
-            mono = _matmul((f11, f12, f21, f22), mono)
+            mono = matmul2((f11, f12, f21, f22), mono)
         t += h
         tau = (tau + omega * h) % TWO_PI
         xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d
@@ -409,5 +400,5 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
             continue
         impacts.append(Impact(t, tau, v_minus, v_plus, False))
         if monodromy:
-            mono = _matmul(saltation_matrix(p, tau, v_minus), mono)
+            mono = matmul2(saltation_matrix(p, tau, v_minus), mono)
         h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None

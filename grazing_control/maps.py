@@ -19,11 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from .control import Gains, gain_matrix
-from .flow import transition_matrix
-from .impact import Segment, _matmul, advance
+from .flow import matmul2, transition_matrix
+from .impact import Segment, advance
 from .params import OscillatorParams
 
-__all__ = ["pi2_map", "pi1_map", "smooth_return_matrix", "section_phase"]
+__all__ = ["pi2_map", "pi1_map", "flow_through_pi2", "period_matrix", "smooth_return_matrix",
+           "section_phase"]
 
 
 def section_phase(p: OscillatorParams, section: str) -> float:
@@ -45,29 +46,53 @@ def pi2_map(p: OscillatorParams, dx: float, dv: float, gains: Gains | None = Non
         dv = dv + gains.c1 * dx + gains.c2 * dv
     seg = advance(p, p.tau2, dx, dv, p.period, monodromy=monodromy)
     if monodromy and gains is not None:
-        seg = seg._replace(monodromy=_matmul(seg.monodromy, gain_matrix(gains)))
+        seg = seg._replace(monodromy=matmul2(seg.monodromy, gain_matrix(gains)))
     return seg
 
 
-def pi1_map(p: OscillatorParams, dx: float, dv: float, gains: Gains | None = None, *,
-            monodromy: bool = False) -> Segment:
-    """One iteration of the Pi1 return map: flow to Pi2, control, flow back to Pi1."""
+def flow_through_pi2(p: OscillatorParams, tau0: float, dx: float, dv: float, to_pi2: float,
+                     gains: Gains | None = None, *, monodromy: bool = False) -> Segment:
+    """Flow from phase tau0 for ``to_pi2`` (arriving on Pi2), control, flow T - s further.
+
+    The composition behind the Pi1 map (s = pi2_offset / omega): it ends at phase
+    tau* + T. Impact times are measured from the start; the monodromy is
+    M_second G M_first.
+    """
     s = p.pi2_offset / p.omega
-    first = advance(p, p.tau_star, dx, dv, s, monodromy=monodromy)
+    first = advance(p, tau0, dx, dv, to_pi2, monodromy=monodromy)
     dx2, dv2 = first.dx, first.dv
     if gains is not None:
         dv2 = dv2 + gains.c1 * dx2 + gains.c2 * dv2
     second = advance(p, p.tau2, dx2, dv2, p.period - s, monodromy=monodromy)
     mono = None
     if monodromy:
-        mono = _matmul(second.monodromy, _matmul(gain_matrix(gains), first.monodromy))
-    impacts = first.impacts + [i._replace(dt=i.dt + s) for i in second.impacts]
+        mono = matmul2(second.monodromy, matmul2(gain_matrix(gains), first.monodromy))
+    impacts = first.impacts + [i._replace(dt=i.dt + to_pi2) for i in second.impacts]
     return Segment(second.dx, second.dv, impacts, mono)
+
+
+def pi1_map(p: OscillatorParams, dx: float, dv: float, gains: Gains | None = None, *,
+            monodromy: bool = False) -> Segment:
+    """One iteration of the Pi1 return map: flow to Pi2, control, flow back to Pi1."""
+    return flow_through_pi2(p, p.tau_star, dx, dv, p.pi2_offset / p.omega, gains,
+                            monodromy=monodromy)
+
+
+def period_matrix(p: OscillatorParams, gains: Gains | None = None, s: float | None = None):
+    """Deviation map over one period with the controller acting after time s, as a 4-tuple.
+
+    Phi(T - s) G Phi(s) (Eqs. 29-32); s defaults to pi2_offset / omega (then this is N_g on
+    Pi1). Uncontrolled it is Phi(T), evaluated directly: near the degenerate frequency
+    N12 = Phi12(T) is small and the product Phi(T - s) Phi(s) would lose ~1e-13 of it.
+    """
+    if gains is None:
+        return transition_matrix(p.zeta, p.period)
+    if s is None:
+        s = p.pi2_offset / p.omega
+    return matmul2(transition_matrix(p.zeta, p.period - s),
+                   matmul2(gain_matrix(gains), transition_matrix(p.zeta, s)))
 
 
 def smooth_return_matrix(p: OscillatorParams, gains: Gains | None = None) -> np.ndarray:
     """N_g = Phi(T - s) G Phi(s), s = pi2_offset / omega (Eqs. 29-32), as a 2x2 array."""
-    s = p.pi2_offset / p.omega
-    m = _matmul(transition_matrix(p.zeta, p.period - s),
-                _matmul(gain_matrix(gains), transition_matrix(p.zeta, s)))
-    return np.array(m).reshape(2, 2)
+    return np.array(period_matrix(p, gains)).reshape(2, 2)

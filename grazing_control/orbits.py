@@ -31,10 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from .control import Gains, gain_matrix
-from .flow import to_physical, transition_matrix
-from .impact import Impact, InitialStateError, _matmul, advance, saltation_matrix
-from .maps import pi2_map
+from .control import Gains
+from .flow import matmul2, to_physical, transition_matrix
+from .impact import Impact, InitialStateError, saltation_matrix
+from .maps import period_matrix, pi2_map
 from .params import OscillatorParams
 
 __all__ = [
@@ -143,11 +143,7 @@ def impact_period_matrix(p: OscillatorParams, theta: float, gains: Gains | None 
     M = Phi(T - s) G Phi(s), s = ((tau2 - theta) mod 2 pi) / omega (Eqs. 29-32 with the
     section moved to the impact phase); Phi(T) without control. Returns a 4-tuple.
     """
-    if gains is None:
-        return transition_matrix(p.zeta, p.period)
-    s = ((p.tau2 - theta) % TWO_PI) / p.omega
-    return _matmul(transition_matrix(p.zeta, p.period - s),
-                   _matmul(gain_matrix(gains), transition_matrix(p.zeta, s)))
+    return period_matrix(p, gains, ((p.tau2 - theta) % TWO_PI) / p.omega)
 
 
 def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
@@ -253,10 +249,9 @@ def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     f = transition_matrix(pp.zeta, s)
     dx2 = f[0] * zplus[0] + f[1] * zplus[1]
     dv2 = f[2] * zplus[0] + f[3] * zplus[1]
-    # monodromy of the Pi2 map: flow T - s (with impact at time T - s) ... conjugate of J
-    jac = _matmul(m, saltation_matrix(pp, theta, v))
-    # J starts just before the impact; the Pi2-sampled monodromy is similar to it:
-    # P = Phi(s) S M_rest ... we report J's eigenvalues through a similar matrix.
+    # J = M S from just before the impact: similar to the Pi2 map's monodromy, so it has
+    # the same multipliers (spec section 5)
+    jac = matmul2(m, saltation_matrix(pp, theta, v))
     impact = Impact(((theta - pp.tau2) % TWO_PI) / w, theta, v, -pp.r * v)
     orbit = PeriodicOrbit(pp, gains, 1, to_physical(pp, pp.tau2, dx2, dv2), (dx2, dv2),
                           (impact,), np.array(jac).reshape(2, 2))
@@ -284,7 +279,7 @@ def _iterate(p, z, periods, gains):
     for k in range(periods):
         seg = pi2_map(p, dx, dv, gains, monodromy=True)
         impacts += [i._replace(dt=i.dt + k * p.period) for i in seg.impacts]
-        mono = _matmul(seg.monodromy, mono)
+        mono = matmul2(seg.monodromy, mono)
         dx, dv = seg.dx, seg.dv
     return np.array([dx, dv]), np.array(mono).reshape(2, 2), impacts
 

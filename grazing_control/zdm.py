@@ -40,10 +40,10 @@ from typing import NamedTuple
 
 from scipy.optimize import brentq
 
-from .control import Gains, gain_matrix
-from .flow import propagate, transition_matrix
-from .impact import Segment, _matmul, advance
-from .maps import pi1_map
+from .control import Gains
+from .flow import matmul2, propagate, transition_matrix
+from .impact import Segment
+from .maps import flow_through_pi2, period_matrix, pi1_map
 from .params import OscillatorParams
 
 __all__ = [
@@ -51,6 +51,7 @@ __all__ = [
     "local_grazing",
     "gap_on_pi1",
     "h_max",
+    "zdm_event",
     "zdm_leading",
     "zdm_second",
     "zdm_exact",
@@ -116,44 +117,53 @@ def h_max(p: OscillatorParams, dx: float, dv: float, order: int = 2) -> float:
     return h
 
 
-def zdm_leading(p: OscillatorParams, dx: float, dv: float):
-    """Leading-order ZDM at Pi1 (theory_zdm.md, Eq. (Z7)): a sqrt(H0) velocity jump.
+def zdm_event(p: OscillatorParams, dx: float, dv: float, order: int = 2):
+    """Truncated ZDM at Pi1 with the grazing impact it implies: (dx', dv', t1, v-).
 
-    z -> z                                        if H0 <= 0,
-    z -> (z_x, z_v - (1 + r) sqrt(2 alpha H0))    otherwise.
+    t1 is the local time of the crossing (0 = Pi1) and v- the impact velocity, both to
+    the map's order; (dx, dv, None, None) when the smooth flow does not reach the wall.
 
-    Error O(delta^2) against the exact ZDM, delta = sqrt(H_max).
+    order 1 (theory_zdm.md, Eq. (Z7)): with H0 = e1 + e2^2 / (2 alpha),
+        v- = sqrt(2 alpha H0),  z -> (z_x, z_v - (1 + r) v-);  error O(delta^2).
+    order 2 (Eq. (Z8)): with H = H0 + c3 e2^3, V = sqrt(2 (alpha + k e2) H),
+        v- = V + beta V^2 / (3 alpha^2),
+        z_x -> z_x + (1 + r) V t1,  z_v -> z_v - (1 + r)(v- + 2 zeta V t1);  error O(delta^3).
+    In both, t1 = (e2 - V)/alpha (V = v- at order 1); delta = sqrt(H_max).
     """
+    if order not in (1, 2):
+        raise ValueError(f"order={order!r} is invalid: valid values are 1, 2")
     g = local_grazing(p)
     e1, e2 = gap_on_pi1(p, dx, dv)
-    h0 = e1 + e2 * e2 / (2.0 * g.alpha)
-    if not h0 > 0.0:
-        return dx, dv
-    return dx, dv - (1.0 + p.r) * math.sqrt(2.0 * g.alpha * h0)
-
-
-def zdm_second(p: OscillatorParams, dx: float, dv: float):
-    """Second-order ZDM at Pi1 (theory_zdm.md, Eq. (Z8)).
-
-    With H = e1 + e2^2/(2 alpha) + c3 e2^3, V = sqrt(2 (alpha + k e2) H),
-    v- = V + beta V^2 / (3 alpha^2) (impact velocity) and t1 = (e2 - V)/alpha
-    (crossing time), for H > 0:
-
-        z_x -> z_x + (1 + r) V t1,
-        z_v -> z_v - (1 + r) (v- + 2 zeta V t1).
-
-    Error O(delta^3) against the exact ZDM.
-    """
-    g = local_grazing(p)
-    e1, e2 = gap_on_pi1(p, dx, dv)
-    h = e1 + e2 * e2 / (2.0 * g.alpha) + g.c3 * e2 ** 3
+    h = e1 + e2 * e2 / (2.0 * g.alpha)
+    if order == 2:
+        h += g.c3 * e2 ** 3
     if not h > 0.0:
-        return dx, dv
+        return dx, dv, None, None
+    rr = 1.0 + p.r
+    if order == 1:
+        v_minus = math.sqrt(2.0 * g.alpha * h)
+        return dx, dv - rr * v_minus, (e2 - v_minus) / g.alpha, v_minus
     big_v = math.sqrt(2.0 * (g.alpha + g.k * e2) * h)
     v_minus = big_v + g.beta * big_v * big_v / (3.0 * g.alpha ** 2)
     t1 = (e2 - big_v) / g.alpha
-    rr = 1.0 + p.r
-    return dx + rr * big_v * t1, dv - rr * (v_minus + 2.0 * p.zeta * big_v * t1)
+    return (dx + rr * big_v * t1, dv - rr * (v_minus + 2.0 * p.zeta * big_v * t1), t1, v_minus)
+
+
+def zdm_leading(p: OscillatorParams, dx: float, dv: float):
+    """Leading-order ZDM at Pi1 (theory_zdm.md, Eq. (Z7)): a sqrt(H0) velocity jump.
+
+    z -> z if H0 <= 0, else (z_x, z_v - (1 + r) sqrt(2 alpha H0)); see :func:`zdm_event`.
+    Error O(delta^2) against the exact ZDM, delta = sqrt(H_max).
+    """
+    return zdm_event(p, dx, dv, 1)[:2]
+
+
+def zdm_second(p: OscillatorParams, dx: float, dv: float):
+    """Second-order ZDM at Pi1 (theory_zdm.md, Eq. (Z8)); see :func:`zdm_event`.
+
+    Error O(delta^3) against the exact ZDM.
+    """
+    return zdm_event(p, dx, dv, 2)[:2]
 
 
 class _LocalGap:
@@ -253,8 +263,8 @@ def zdm_jacobian(p: OscillatorParams, dx: float, dv: float, order=2):
         r = p.r
         k = (1.0 + r) * (math.cos(p.tau_star + p.omega * t1) - p.d) / v
         sal = (-r, 0.0, k, -r)
-        return _matmul(transition_matrix(p.zeta, -t1),
-                       _matmul(sal, transition_matrix(p.zeta, t1)))
+        return matmul2(transition_matrix(p.zeta, -t1),
+                       matmul2(sal, transition_matrix(p.zeta, t1)))
     g = local_grazing(p)
     e1, e2 = gap_on_pi1(p, dx, dv)
     rr = 1.0 + p.r
@@ -285,14 +295,9 @@ def zdm_jacobian(p: OscillatorParams, dx: float, dv: float, order=2):
 def smooth_map(p: OscillatorParams, gains: Gains | None = None):
     """N_g = Phi(T - s) G Phi(s) as a 4-tuple (N11, N12, N21, N22) (Eqs. 29-32).
 
-    Uncontrolled, Phi(T) is evaluated directly: near the degenerate frequency
-    N12 = Phi12(T) is small and the product would lose ~1e-13 of it.
+    :func:`grazing_control.maps.period_matrix` (Phi(T) evaluated directly uncontrolled).
     """
-    if gains is None:
-        return transition_matrix(p.zeta, p.period)
-    s = p.pi2_offset / p.omega
-    return _matmul(transition_matrix(p.zeta, p.period - s),
-                   _matmul(gain_matrix(gains), transition_matrix(p.zeta, s)))
+    return period_matrix(p, gains)
 
 
 def normal_form_map(p: OscillatorParams, z, gains: Gains | None = None, order=2):
@@ -329,7 +334,7 @@ def normal_form_map(p: OscillatorParams, z, gains: Gains | None = None, order=2)
 
 def normal_form_jacobian(p: OscillatorParams, z, gains: Gains | None = None, order=2):
     """Jacobian of :func:`normal_form_map`: N_g dD/dz, as (J11, J12, J21, J22)."""
-    return _matmul(smooth_map(p, gains), zdm_jacobian(p, z[0], z[1], order))
+    return matmul2(smooth_map(p, gains), zdm_jacobian(p, z[0], z[1], order))
 
 
 def exact_return(p: OscillatorParams, dx: float, dv: float, gains: Gains | None = None,
@@ -347,17 +352,8 @@ def exact_return(p: OscillatorParams, dx: float, dv: float, gains: Gains | None 
         return pi1_map(p, dx, dv, gains, monodromy=monodromy)
     ts = 2.0 * t1
     zs = propagate(p.zeta, dx, dv, ts)
-    s = p.pi2_offset / p.omega
-    first = advance(p, (p.tau_star + p.omega * ts) % (2.0 * math.pi), zs[0], zs[1], s - ts,
-                    monodromy=monodromy)
-    dx2, dv2 = first.dx, first.dv
-    if gains is not None:
-        dv2 = dv2 + gains.c1 * dx2 + gains.c2 * dv2
-    second = advance(p, p.tau2, dx2, dv2, p.period - s, monodromy=monodromy)
-    mono = None
-    if monodromy:
-        mono = _matmul(second.monodromy, _matmul(gain_matrix(gains), first.monodromy))
-        mono = _matmul(mono, transition_matrix(p.zeta, ts))
-    impacts = [i._replace(dt=i.dt + ts) for i in first.impacts]
-    impacts += [i._replace(dt=i.dt + s) for i in second.impacts]
-    return Segment(second.dx, second.dv, impacts, mono)
+    seg = flow_through_pi2(p, (p.tau_star + p.omega * ts) % (2.0 * math.pi), zs[0], zs[1],
+                           p.pi2_offset / p.omega - ts, gains, monodromy=monodromy)
+    mono = matmul2(seg.monodromy, transition_matrix(p.zeta, ts)) if monodromy else None
+    impacts = [i._replace(dt=i.dt + ts) for i in seg.impacts]
+    return Segment(seg.dx, seg.dv, impacts, mono)

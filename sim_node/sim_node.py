@@ -528,13 +528,19 @@ class SimNode(Node):
             return
         for ev in events:
             self._publish(ev)
+        ev = self._next_sample()
+        if ev is not None:
+            self._publish_sample(ev)
+
+    def _next_sample(self):
+        """End the period (pending parameters apply); the next sample, or None when done."""
         ev, warning = self.engine.end_period()
         if warning:
             self.get_logger().warning(warning)
         if 0 < self.settings.max_periods <= self.engine.k:
             self._finish()
-            return
-        self._publish_sample(ev)
+            return None
+        return ev
 
     # ----------------------------------------------------------------- realtime
     def _now(self, wall: float | None = None) -> float:
@@ -595,11 +601,8 @@ class SimNode(Node):
                 return
             for ev in q:
                 self._publish(ev, clock=False)
-            ev, warning = self.engine.end_period()
-            if warning:
-                self.get_logger().warning(warning)
-            if 0 < self.settings.max_periods <= self.engine.k:
-                self._finish()
+            ev = self._next_sample()
+            if ev is None:
                 return
             self._rt_publish_sample(ev)
 
