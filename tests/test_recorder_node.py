@@ -93,30 +93,33 @@ def ros(isolation):
     rclpy.try_shutdown(context=context)
 
 
-def publish_all(node, recorder, n, topics=tuple(DEFAULT_TOPICS)):
+def publish_all(node, recorder, n, topics=tuple(DEFAULT_TOPICS), matches=None):
     """Publish `n` messages on each of `topics` once the recorder matches.
 
+    ``matches`` gives, per topic name, how many subscriptions to wait for (default 1;
+    with use_sim_time the recorder's time source subscribes to /clock as well).
     Returns {fully qualified topic: [messages]}.
     """
+    matches = matches or {}
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=n,
                      reliability=ReliabilityPolicy.RELIABLE)
     pubs = {}
     for name in topics:
         msg_type = DEFAULT_TOPICS[name]
         pub = node.create_publisher(_CLASSES[msg_type], name, qos)
-        pubs[pub.topic_name] = (pub, msg_type)
+        pubs[pub.topic_name] = (pub, msg_type, matches.get(name, 1))
     deadline = time.monotonic() + STARTUP_TIMEOUT
-    while any(p.get_subscription_count() < 1 for p, _ in pubs.values()):
+    while any(p.get_subscription_count() < k for p, _, k in pubs.values()):
         assert recorder.poll() is None, recorder.communicate()[0]
         assert time.monotonic() < deadline, "recorder did not subscribe"
         time.sleep(0.05)
     sent = {topic: [] for topic in pubs}
     for i in range(n):
-        for topic, (pub, msg_type) in pubs.items():
+        for topic, (pub, msg_type, _k) in pubs.items():
             msg = make_message(msg_type, i)
             pub.publish(msg)
             sent[topic].append(msg)
-    for pub, _ in pubs.values():
+    for pub, _, _k in pubs.values():
         assert pub.wait_for_all_acked(Duration(seconds=10))
     return sent
 
@@ -230,7 +233,9 @@ def test_use_sim_time_stamps_log_time_with_clock(tmp_path, isolation, ros):
     recorder = start_recorder(bag, namespace, env, "use_sim_time:=true",
                               "topics:=['oscillator/state', '/clock']")
     try:
-        sent = publish_all(ros, recorder, 30, topics=["/clock", "oscillator/state"])
+        # the recorder and its use_sim_time time source both subscribe to /clock
+        sent = publish_all(ros, recorder, 30, topics=["/clock", "oscillator/state"],
+                           matches={"/clock": 2})
     finally:
         rc, output = stop(recorder, signal.SIGTERM)
     assert rc == 0, output
