@@ -178,9 +178,10 @@ def _search(f, a, b, fa, fb, depth):
         tmin = _bracket(f, a, b, 1, 1.0) if vb > 0.0 else b
         fmin = f(tmin)
         return _bracket(f, tmin, b, 0) if fmin[0] < 0.0 <= gb else None
-    # below the chord plus the curvature allowance: g <= max(g(a), g(b)) + h^2/8 max(g''),
-    # max g'' <= max(g''(a), g''(b)) + J h / 2; certifies intervals around inflections
-    curvature = max(0.0, max(acca, accb) + 0.5 * jw)
+    # below the chord plus the curvature allowance (docs/theory.md, "Impact detection"):
+    # g <= chord + K h^2 / 8 with K = max(0, -min g''), and since g'' is J-Lipschitz,
+    # min g'' >= (g''(a) + g''(b) - J h) / 2; certifies intervals around inflections
+    curvature = max(0.0, 0.5 * (jw - acca - accb))
     if max(ga, gb) + 0.125 * (b - a) ** 2 * curvature < 0.0:
         return None
     if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
