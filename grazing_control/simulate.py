@@ -30,13 +30,24 @@ __all__ = ["SimulationResult", "period_step", "states_between", "simulate", "sim
 TWO_PI = 2.0 * math.pi
 
 
-def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float = 0.0) -> Segment:
-    """One forcing period from a Pi2 sample (deviation dx, dv) after a correction dv_correction.
+def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float = 0.0, *,
+                delay: float = 0.0) -> Segment:
+    """One forcing period from a Pi2 sample (deviation dx, dv) with a correction dv_correction.
 
-    The correction enters as an instantaneous velocity change (Eq. 28); the rest is the
-    exact flow with impacts from phase tau2 over one period.
+    The correction enters as an instantaneous velocity change (Eq. 28) applied ``delay``
+    after the sample (0 <= delay < T; 0: on Pi2 itself, the study's controller); the rest
+    is the exact flow with impacts from phase tau2 over one period. Impact times in the
+    returned segment count from the sample.
     """
-    return advance(p, p.tau2, dx, dv + dv_correction, p.period)
+    if delay == 0.0:
+        return advance(p, p.tau2, dx, dv + dv_correction, p.period)
+    if not 0.0 < delay < p.period:
+        raise ValueError(f"delay={delay!r} is invalid: valid range is 0 <= delay < T = {p.period!r}")
+    first = advance(p, p.tau2, dx, dv, delay)
+    tau = (p.tau2 + p.omega * delay) % TWO_PI
+    second = advance(p, tau, first.dx, first.dv + dv_correction, p.period - delay)
+    later = [i._replace(dt=i.dt + delay, release=i.release + delay) for i in second.impacts]
+    return Segment(second.dx, second.dv, first.impacts + later, None)
 
 
 def states_between(p: OscillatorParams, tau0: float, dx: float, dv: float,
