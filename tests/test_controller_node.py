@@ -53,6 +53,16 @@ def test_law_switches_on_after_n_samples_and_restarts_on_reset():
     assert c.answer((1, 0), x, v) == 0.0 and c.answer((2, 0), x, v) == want
 
 
+def test_law_a_stray_future_sample_does_not_switch_control_off():
+    c = law(enable_after=0)
+    x, v = 0.01, P.v_ref + 0.02
+    want = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    assert c.answer((1, 0), x, v) == want
+    assert c.answer((10**9, 0), x, v) == want       # a stray stamp far in the future
+    assert [c.answer((k, 0), x, v) for k in range(2, 6)] == [want] * 4
+    assert c.out_of_order == 4 and c.answer((3, 0), x, v) is None   # duplicate
+
+
 def test_law_saturates_and_validates():
     c = law(enable_after=0, saturation=1e-3)
     assert c.answer((0, 1), 0.5, P.v_ref) == pytest.approx(-1e-3)
@@ -117,14 +127,15 @@ def test_node_answers_saturates_and_ignores_bad_samples(controller):
     empty = JointState()
     empty.header.stamp = stamp_from_seconds(0.7)
     for msg in [sample(1.0, x, v), bad, empty, sample(2.0, x, v), sample(3.0, 0.5, v),
-                sample(3.0, x, v), sample(2.5, x, v)]:   # the last two: stale
+                sample(3.0, x, v), sample(2.5, x, v)]:   # a duplicate, then out of order
         pub.publish(msg)
-    got = answers(col, 3)
-    assert got == [(1, 0, 0.0), (2, 0, exact), (3, 0, -1e-3)]
+    got = answers(col, 4)
+    assert got == [(1, 0, 0.0), (2, 0, exact), (3, 0, -1e-3), (2, 500_000_000, exact)]
     proc.send_signal(2)
     assert proc.wait(10) == 0
     text = log.read_text()
-    assert "answered=3" in text and "malformed=2" in text and "stale=2" in text, text
+    assert "answered=4" in text and "malformed=2" in text and "stale=1" in text, text
+    assert "out_of_order=1" in text, text
     assert "Traceback" not in text
 
 
@@ -178,3 +189,25 @@ def test_invalid_gain_at_start_exits_nonzero_with_one_line():
                          text=True, timeout=30)
     lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
     assert res.returncode == 2 and len(lines) == 1 and "saturation=-1.0 is invalid" in lines[0]
+
+
+def test_stray_future_sample_and_overflow_over_dds(controller):
+    """A future stamp does not stop the answers; an overflowing Delta v is not published."""
+    col, start = controller
+    proc, log, pub = start(enable_after=0)
+    x, v = 1e-4, P.v_ref - 2e-4
+    exact = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    pub.publish(sample(1.0, x, v))
+    pub.publish(sample(1e6, x, v))                     # stray: a million seconds ahead
+    pub.publish(sample(2.0, 1e308, 1e308))   # c1 x + c2 v overflows to -inf
+    for t in (3.0, 4.0, 5.0):
+        pub.publish(sample(t, x, v))
+    got = answers(col, 5)
+    col.wait_for(lambda: False, 0.3)
+    got = answers(col, 5)
+    assert [g[:2] for g in got] == [(1, 0), (1_000_000, 0), (3, 0), (4, 0), (5, 0)]
+    assert all(g[2] == exact for g in got)
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    text = log.read_text()
+    assert "nonfinite=1" in text and "answered=5" in text and "out_of_order=4" in text, text

@@ -23,17 +23,25 @@ enable_after = 1000 samples 0..999 are uncontrolled, as the study and
 every sample, with Delta v = 0, so that a lockstep simulator never waits for an answer
 that will not come.
 
-Stale and malformed samples
----------------------------
-* A sample whose stamp equals or precedes the newest one already answered is a duplicate
-  or out of order: not answered (counted as stale). The one exception is a sample at
-  t = 0 (stamp 0): the simulator was reset (``~/reset``), the sample count restarts and
-  ``enable_after`` counts again from there.
+Stale, duplicate and malformed samples
+--------------------------------------
+* Every sample is answered once: a sample whose stamp equals one of the last
+  ``RECENT`` answered stamps is a duplicate and not answered (counted as stale). A
+  sample older than the newest one is still answered (counted as out of order): the
+  controller cannot tell a stray message from the simulator's stream, so it does not
+  let one decide; the simulator applies only the answer to the sample it is waiting for
+  (lockstep) or to one of its last two samples (realtime), so a stray sample with a
+  future stamp neither switches control off nor starves the simulator. A sample at
+  t = 0 (stamp 0) after others means the simulator was reset (``~/reset``): the sample
+  count restarts and ``enable_after`` counts again from there.
 * With ``use_sim_time`` true the node's clock follows ``/clock``; a sample older than
   ``stale_after`` seconds of simulation time on arrival (clock now - stamp) is stale and
   not answered. Without simulation time the check is skipped (stamps are simulation
   time, the node's clock would be wall time).
 * NaN/inf or missing position/velocity: ignored, counted, logged (throttled).
+* A correction that is not finite (overflow, e.g. x = v = 1e308 with saturation = inf)
+  is never published: counted (``nonfinite``) and logged; the simulator then applies no
+  correction to that sample.
 
 Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_ref
 (NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
@@ -44,6 +52,7 @@ config/controller.yaml`` or ``python -m grazing_control.nodes.controller_node ..
 from __future__ import annotations
 
 import math
+from collections import deque
 
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -78,11 +87,16 @@ class ControlLaw:
         Limit on |Delta v|, > 0 (inf: none).
     """
 
+    #: Answered stamps remembered to recognise duplicates.
+    RECENT = 64
+
     def __init__(self, gains: Gains, x_ref: float, v_ref: float, enable_after: int,
                  saturation: float):
         self.configure(gains, x_ref, v_ref, enable_after, saturation)
         self.count = 0          # samples answered since the start or the last reset
         self.newest = None      # stamp key of the newest sample answered
+        self.recent = deque(maxlen=self.RECENT)   # stamp keys of the last answers
+        self.out_of_order = 0   # samples answered though older than the newest
         self.forced = None      # None: follow enable_after; True/False: set by ~/enable
 
     def configure(self, gains, x_ref, v_ref, enable_after, saturation) -> None:
@@ -97,17 +111,26 @@ class ControlLaw:
         return 0 <= self.enable_after <= self.count
 
     def answer(self, key: tuple, x: float, v: float):
-        """Delta v for the sample with stamp ``key``; None when it must not be answered."""
-        if self.newest is not None and key <= self.newest:
-            if key != (0, 0):
-                return None
+        """Delta v for the sample with stamp ``key``; None when it must not be answered.
+
+        None for a duplicate (a stamp among the last :attr:`RECENT` answered). The
+        result may be non-finite (overflow): the caller must not publish it.
+        """
+        if key == (0, 0) and self.newest is not None:
             self.count = 0          # back to t = 0: the simulator was reset
+            self.newest = None
+            self.recent.clear()
+        if key in self.recent:
+            return None
+        if self.newest is not None and key < self.newest:
+            self.out_of_order += 1
         dv = 0.0
         if self.enabled:
             dv = correction(self.gains, x, v, self.x_ref, self.v_ref)
             if abs(dv) > self.saturation:
                 dv = math.copysign(self.saturation, dv)
-        self.newest = key
+        self.newest = key if self.newest is None else max(self.newest, key)
+        self.recent.append(key)
         self.count += 1
         return dv
 
@@ -179,6 +202,7 @@ class ControllerNode(Node):
         log = self.get_logger()
         self.malformed = Throttled(log, "malformed sample ignored")
         self.stale = Throttled(log, "stale sample not answered")
+        self.nonfinite = Throttled(log, "non-finite correction not published")
         self.answered = 0
         self._out = TwistStamped()
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
@@ -205,8 +229,11 @@ class ControllerNode(Node):
                 return
         dv = self.law.answer(stamp_key(msg.header.stamp), x, v)
         if dv is None:
-            self.stale(f"stamp {stamp_key(msg.header.stamp)} is not newer than "
-                       f"{self.law.newest}")
+            self.stale(f"stamp {stamp_key(msg.header.stamp)} was already answered")
+            return
+        if not math.isfinite(dv):
+            self.nonfinite(f"stamp {stamp_key(msg.header.stamp)}: x={x!r} v={v!r} "
+                           f"gives Delta v={dv!r}: not published")
             return
         out = self._out
         out.header.stamp = msg.header.stamp
@@ -241,7 +268,8 @@ class ControllerNode(Node):
         self.get_logger().info(
             f"summary: answered={self.answered} controlled_from_sample="
             f"{self.law.enable_after} malformed={self.malformed.count} "
-            f"stale={self.stale.count}")
+            f"stale={self.stale.count} out_of_order={self.law.out_of_order} "
+            f"nonfinite={self.nonfinite.count}")
 
 
 def main(args=None) -> int:
