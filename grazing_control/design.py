@@ -182,11 +182,12 @@ def controller_parameters(p: OscillatorParams, gains: Gains) -> dict:
 
 
 def write_controller_yaml(path, p: OscillatorParams, gains: Gains,
-                          node_name: str = "controller_node") -> None:
+                          node_name: str = "**") -> None:
     """Write the ROS 2 parameter file the controller node loads.
 
-    Shape: ``/controller_node: ros__parameters: {c1, c2, x_ref, v_ref, zeta, r, omega,
-    pi2_offset}``. Written to a temporary file and renamed, so a failure leaves no
+    Shape: ``/**: ros__parameters: {c1, c2, x_ref, v_ref, zeta, r, omega,
+    pi2_offset}``: keyed ``/**`` so that it applies under a namespace or a renamed node
+    too (a ``/controller_node:`` key would be silently ignored there). Written to a temporary file and renamed, so a failure leaves no
     half-written file.
     """
     import os

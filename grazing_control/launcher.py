@@ -9,12 +9,26 @@ It only spawns processes: it does not import rclpy.
 
 Start order and readiness: the recorder and the controller start first; the simulator
 waits until the controller is matched (``wait_for_controller``) and, with a recorder,
-until every data topic has a subscriber (``wait_for_subscribers:=1``), so no message of
-the scene is published before someone records it.
+until every data topic has a subscriber (``wait_for_subscribers:=1``) and the recorder
+says it has matched a publisher on every topic it records (``wait_for_recorder``), so no
+message of the scene is published before someone records it; the recorder checks the
+publishers' sequence numbers at the end and fails (``require_complete``) if it missed any.
 
-Ctrl-C (or SIGTERM to the launcher): SIGINT is forwarded to every node still running
-(a node also getting the terminal's SIGINT ignores the second one), the launcher waits
-for them and returns with ``interrupted=True``.
+Isolation: each scene runs on a ROS_DOMAIN_ID of its own unless one is given
+(:func:`claim_domain`): a domain id in 1..232 that no other scene of this machine has
+claimed (a lock file held for the run) and on which no DDS participant of this host
+is running (its first participant's discovery port is free). A domain isolates
+everything, ``/clock``, ``/rosout``, ``/parameter_events`` and services included,
+without renaming a topic; a namespace would leave the absolute ones shared. The
+simulator also refuses to run when another simulator or controller shares its topics.
+
+Failing fast: a node that exits early (a refused parameter) stops the scene at once.
+Ctrl-C (or SIGTERM to the launcher): the nodes run in process groups of their own, so
+only the launcher gets the terminal's SIGINT; it sends SIGTERM to every node still
+running (handled as SIGINT: summaries, the bag closed; a node still starting ends
+quietly), waits for them and returns with ``interrupted=True``. A node sent SIGINT
+while it is still importing its modules exits quietly with status 130
+(:data:`BOOTSTRAP`); every node gets SIGTERM if the launcher is killed.
 
 ``ros2 launch grazing_control grazing_control.launch.py`` is the equivalent on a ROS install.
 """
@@ -22,10 +36,14 @@ for them and returns with ``interrupted=True``.
 from __future__ import annotations
 
 import argparse
+import errno
+import fcntl
 import importlib.util
 import math
 import os
+import random
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -35,7 +53,8 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "node_command", "node_env",
+__all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
+           "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
            "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",
            "RECORDER_MODULE", "CONFIG_DIR"]
 
@@ -75,12 +94,15 @@ class RunResult:
     timed_out: bool = False
     interrupted: bool = False
     logs: dict = field(default_factory=dict)
+    domain_id: int | None = None
 
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
                  else "finished" if self.ok else "failed")
         text = (f"scene {state} in {self.wall:.1f} s: exit status sim_node={self.sim} "
                 f"controller_node={self.controller}")
+        if self.domain_id is not None:
+            text = f"{text} (ROS_DOMAIN_ID={self.domain_id})"
         if self.recorder is not None:
             text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
         if self.logs:
@@ -118,9 +140,73 @@ def format_value(value) -> str:
     return str(value)
 
 
+#: Runs a node module as ``python -m`` does, with a SIGINT that ends the process quietly
+#: (status 130) until the node installs its own handlers: a Ctrl-C while Python is still
+#: importing would otherwise print a KeyboardInterrupt traceback.
+BOOTSTRAP = ("import os, runpy, signal, sys; "
+             "signal.signal(signal.SIGINT, lambda s, f: os._exit(130)); "
+             "runpy.run_module(sys.argv.pop(1), run_name='__main__', alter_sys=True)")
+
+#: Largest ROS_DOMAIN_ID: Fast DDS's ports (7400 + 250 d + 11 + 2 i) must stay below 65536.
+MAX_DOMAIN_ID = 232
+
+
+def check_domain_id(domain_id) -> int:
+    """A valid ROS_DOMAIN_ID (0..232) as int, else ValueError naming the range."""
+    if isinstance(domain_id, bool) or not isinstance(domain_id, int) or not (
+            0 <= domain_id <= MAX_DOMAIN_ID):
+        raise ValueError(f"domain_id={domain_id!r} is invalid: valid range is 0..{MAX_DOMAIN_ID} "
+                         "(Fast DDS on Linux)")
+    return domain_id
+
+
+def _discovery_port_free(domain_id: int) -> bool:
+    """Whether no DDS participant of this host uses ``domain_id`` (participant 0's port)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.bind(("0.0.0.0", 7410 + 250 * domain_id))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return False
+            raise
+    return True
+
+
+def claim_domain(exclude=()):
+    """A ROS_DOMAIN_ID free on this host, and the lock that keeps it ours.
+
+    Tries the ids 1..232 (without ``exclude`` and the environment's ROS_DOMAIN_ID) in a
+    random order; an id is free when no other scene of this machine holds its lock file
+    (``<tmp>/grazing_control_domains/<id>.lock``, flock) and no DDS participant of this
+    host uses it. Returns ``(domain_id, lock file)``; close the file to release it.
+    Raises RuntimeError if every id is taken.
+    """
+    folder = Path(tempfile.gettempdir()) / "grazing_control_domains"
+    folder.mkdir(exist_ok=True)
+    skip = set(exclude)
+    env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    skip.add(int(env) if env.isdigit() else 0)
+    ids = [d for d in range(1, MAX_DOMAIN_ID + 1) if d not in skip]
+    random.SystemRandom().shuffle(ids)
+    for d in ids:
+        lock = open(folder / f"{d}.lock", "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        if _discovery_port_free(d):
+            return d, lock
+        lock.close()
+    raise RuntimeError("no free ROS_DOMAIN_ID on this host: give one with --domain-id")
+
+
 def node_command(module: str, params_files=(), overrides=None, python: str | None = None) -> list:
-    """``python -m module --ros-args --params-file F ... -p key:=value ...``."""
-    cmd = [python or sys.executable, "-m", module, "--ros-args"]
+    """``python -c BOOTSTRAP module --ros-args --params-file F ... -p key:=value ...``.
+
+    The same as ``python -m module ...`` (:data:`BOOTSTRAP`), quiet on an early Ctrl-C.
+    """
+    cmd = [python or sys.executable, "-c", BOOTSTRAP, module, "--ros-args"]
     for f in params_files:
         cmd += ["--params-file", os.fspath(f)]
     for key, value in (overrides or {}).items():
@@ -139,23 +225,44 @@ def node_env(domain_id: int | None = None) -> dict:
     return env
 
 
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM it when the launcher dies (Linux prctl)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
+    except Exception:  # not Linux: the node outlives a killed launcher
+        pass
+
+
 def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, log=None,
                python=None) -> subprocess.Popen:
-    """Start one node process; its output goes to ``log`` (a path) or is inherited."""
+    """Start one node process; its output goes to ``log`` (a path) or is inherited.
+
+    The node gets a process group of its own, so that the terminal's Ctrl-C reaches only
+    the launcher, which stops the nodes with SIGTERM (:func:`stop_nodes`): a SIGINT
+    while a node's Python is still starting would print a traceback, a SIGTERM ends it
+    quietly. The node is sent SIGTERM if the launcher dies (killed with SIGKILL).
+    """
     out = open(log, "wb") if log is not None else None
     try:
         return subprocess.Popen(node_command(module, params_files, overrides, python),
                                 env=node_env(domain_id), stdin=subprocess.DEVNULL,
-                                stdout=out, stderr=subprocess.STDOUT if out else None)
+                                stdout=out, stderr=subprocess.STDOUT if out else None,
+                                process_group=0, preexec_fn=_die_with_parent)
     finally:
         if out is not None:
             out.close()
 
 
 def stop_nodes(procs, grace: float = 15.0) -> None:
-    """SIGINT every running process, wait ``grace`` s, then SIGTERM, then SIGKILL."""
+    """SIGTERM every running process, wait ``grace`` s, then SIGKILL.
+
+    The nodes handle SIGTERM as SIGINT (the summary is logged, the recorder closes its
+    bag); before a node has installed its handlers, SIGTERM ends it without a traceback.
+    """
     procs = [p for p in procs if p is not None]
-    for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
         alive = [p for p in procs if p.poll() is None]
         if not alive:
             return
@@ -173,13 +280,13 @@ def stop_nodes(procs, grace: float = 15.0) -> None:
 
 
 def _params_file(params, node: str, tmp: Path) -> Path:
-    """A parameter file: a path as is, a dict written as ``/node: ros__parameters: {...}``."""
+    """A parameter file: a path as is, a dict written as ``/**: ros__parameters: {...}``."""
     if isinstance(params, (str, os.PathLike)):
         return Path(params)
     path = tmp / f"{node}.yaml"
     values = {k: (float(v) if isinstance(v, float) else v) for k, v in dict(params).items()}
     with open(path, "w") as fh:
-        yaml.safe_dump({f"/{node}": {"ros__parameters": values}}, fh, sort_keys=False)
+        yaml.safe_dump({"/**": {"ros__parameters": values}}, fh, sort_keys=False)
     return path
 
 
@@ -209,10 +316,11 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         Shortcuts for the simulator's ``delta_d`` and ``mode`` and the controller's
         ``enable_after`` (first controlled sample).
     domain_id : int, optional
-        ROS_DOMAIN_ID of the processes (isolation); default: the environment's.
+        ROS_DOMAIN_ID of the processes, 0..232; default: a free one claimed for the run
+        (:func:`claim_domain`), so that two scenes never share their topics.
     timeout : float, optional
-        Wall seconds to wait for the simulator; then every node is stopped and the
-        result has ``timed_out=True``.
+        Wall seconds (finite, > 0) to wait for the simulator; then every node is stopped
+        and the result has ``timed_out=True``.
     sim_overrides, controller_overrides, recorder_overrides : dict, optional
         Extra ``-p key:=value`` for each node (e.g. ``{"state_period": 0.0}``); a value
         given as text is passed as is (``"-5.0e-06"``), see :func:`format_value`.
@@ -227,6 +335,12 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         Exit statuses (sim, controller, recorder), wall time, flags.
     """
     t0 = time.monotonic()
+    if domain_id is not None:
+        check_domain_id(domain_id)
+    if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0
+                                    and math.isfinite(timeout)):
+        raise ValueError(f"timeout={timeout!r} is invalid: valid range is a finite "
+                         "number of seconds > 0 (None: no timeout)")
     sim_params = CONFIG_DIR / "study.yaml" if sim_params is None else sim_params
     controller_params = (CONFIG_DIR / "controller.yaml" if controller_params is None
                          else controller_params)
@@ -241,7 +355,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
         logs = {n: str(Path(log_dir) / f"{n}.log") for n in names}
     sim_over = {"exit_when_done": True, "wait_for_controller": True,
-                "wait_for_subscribers": 1 if record else 0}
+                "wait_for_subscribers": 1 if record else 0, "wait_for_recorder": record}
     if periods is not None:
         sim_over["max_periods"] = int(periods)
     if delta_d is not None:
@@ -261,11 +375,14 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     previous = None
     if threading_is_main():
         previous = signal.signal(signal.SIGTERM, on_term)
+    lock = None
+    if domain_id is None:
+        domain_id, lock = claim_domain()
     with tempfile.TemporaryDirectory(prefix="grazing_run_") as tmp:
         tmp = Path(tmp)
         try:
             if record:
-                rec_over = {"output": os.fspath(bag_dir)}
+                rec_over = {"output": os.fspath(bag_dir), "require_complete": True}
                 rec_over.update(recorder_overrides or {})
                 procs["recorder_node"] = start_node(
                     RECORDER_MODULE, (), rec_over, domain_id=domain_id,
@@ -305,6 +422,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 stop_nodes(list(procs.values()), grace=2.0)
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
+            if lock is not None:
+                lock.close()
 
     def code(name):
         p = procs[name]
@@ -314,7 +433,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                      recorder=code("recorder_node"),
                      bag_dir=os.fspath(bag_dir) if record else None,
                      wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
-                     logs=logs)
+                     logs=logs, domain_id=domain_id)
 
 
 def threading_is_main() -> bool:
@@ -344,6 +463,25 @@ def run_scene(p, controller_params=None, bag_dir=None, periods: int = 1300,
             detail = "\n" + "\n".join(lines[-5:])
         raise RuntimeError(f"{res}{detail}")
     return res
+
+
+def _domain_id(text: str) -> int:
+    try:
+        return check_domain_id(int(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: valid range is an integer 0..{MAX_DOMAIN_ID}") from None
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: valid range is a finite number of seconds > 0")
+    return value
 
 
 def _key_value(text: str):
@@ -380,9 +518,10 @@ def add_run_arguments(parser) -> None:
                         help="first controlled Pi2 sample (default 1000; -1: never)")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
                         help="simulator mode (default: the parameter file's, lockstep)")
-    parser.add_argument("--domain-id", dest="domain_id", type=int, default=None,
-                        help="ROS_DOMAIN_ID of the nodes (default: the environment's)")
-    parser.add_argument("--timeout", type=float, default=None,
+    parser.add_argument("--domain-id", dest="domain_id", type=_domain_id, default=None,
+                        help=f"ROS_DOMAIN_ID of the nodes, 0..{MAX_DOMAIN_ID} (default: a free "
+                             "one claimed for this run, so that scenes never mix; printed)")
+    parser.add_argument("--timeout", type=_seconds, default=None,
                         help="wall seconds before the scene is stopped (default: none)")
     parser.add_argument("--log-dir", dest="log_dir", default=None,
                         help="write each node's output to LOG_DIR/<node>.log")

@@ -580,6 +580,21 @@ class BagWriter:
                            sort_keys=False, default_flow_style=False))
         return info
 
+    def abandon(self) -> None:
+        """Close the file without finishing it (after a failed write: disk full).
+
+        The file keeps every chunk written so far (readable by :func:`read_messages`;
+        :func:`reindex` makes it a complete bag); no ``metadata.yaml`` is written.
+        """
+        if self._stream is not None:
+            try:
+                self._stream.close()
+            except OSError:
+                pass    # the unflushed rest of a chunk: lost either way
+        self._writer = None
+        self._stream = None
+        self._closed = True
+
     def __enter__(self) -> "BagWriter":
         return self.open()
 

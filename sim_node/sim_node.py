@@ -78,7 +78,8 @@ from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
 
 from grazing_control.impact import advance
-from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, PUBLISHER_QOS, StartupError,
+from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, PUBLISHER_QOS, READY_TOPIC,
+                                          StartupError,
                                           Throttled, bool_descriptor, float_descriptor,
                                           int_descriptor, run_node, spin, stamp_from_seconds,
                                           stamp_key, string_descriptor)
@@ -95,6 +96,8 @@ MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 CLOCK_TICK = 5e-3
 #: Realtime: shortest timer period (an event already due is published at once), seconds.
 MIN_TICK = 5e-5
+#: Wall seconds between two checks for another simulator or controller on the topics.
+ISOLATION_CHECK = 0.25
 #: Wall seconds to wait at exit for every reader to acknowledge every message.
 ACK_TIMEOUT = 10.0
 
@@ -389,6 +392,9 @@ def _declare(node: Node) -> None:
     d("wait_for_subscribers", 0, int_descriptor(
         "start only when every data topic has this many other subscribers (a recorder: 1)",
         0, 100, True))
+    d("wait_for_recorder", False, bool_descriptor(
+        "start only when recorder_node says it has matched every topic "
+        f"({READY_TOPIC}); grazing run sets it when it records", True))
     d("start_timeout", 30.0, float_descriptor(
         "wall seconds to wait for the above, then start anyway (with a warning)", 0.0,
         read_only=True))
@@ -429,7 +435,11 @@ class SimNode(Node):
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._recorder_ready = False
+        if self.get_parameter("wait_for_recorder").value:
+            self.create_subscription(Bool, READY_TOPIC, self._on_recorder_ready, LATCHED_QOS)
         self._start_timer = self.create_timer(0.02, self._try_start)
+        self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
         self._tick_timer = None
         self._watchdog = None
 
@@ -451,7 +461,50 @@ class SimNode(Node):
             f"max_periods={self.settings.max_periods} state_period={self.settings.state_period}")
 
     # ------------------------------------------------------------------ start
+    def _on_recorder_ready(self, msg: Bool) -> None:
+        self._recorder_ready = bool(msg.data)
+
+    def _intruders(self) -> list:
+        """Other simulators or controllers on this scene's topics (publisher counts)."""
+        found = []
+        n = self.count_publishers(self.pub_pi2.topic_name)
+        if n > 1:
+            found.append(f"{n - 1} other publisher(s) on {self.pub_pi2.topic_name} "
+                         "(another simulator)")
+        n = self.count_publishers(self.sub_correction.topic_name)
+        if n > 1:
+            found.append(f"{n} publishers on {self.sub_correction.topic_name} "
+                         "(more than one controller)")
+        return found
+
+    def _check_isolation(self) -> None:
+        """Refuse to start, or stop, when another scene shares this one's topics.
+
+        Two simulators (or two controllers) on the same topics corrupt each other's
+        samples, answers and recordings: the scene is stopped with an error (exit status
+        1) instead of reporting success. Checked every ISOLATION_CHECK wall seconds.
+        """
+        if self._finished:
+            return
+        found = self._intruders()
+        if found:
+            what = "; ".join(found)
+            if not self._started:
+                self.get_logger().error(f"not starting: {what}: the scene is not isolated "
+                                        "(another scene on this ROS_DOMAIN_ID and namespace?)")
+                self.exit_code = 1
+                self._finished = True
+                self.exit_now = True
+                self.destroy_timer(self._start_timer)
+            else:
+                self._fail(RuntimeError(f"{what}: the scene is not isolated (another scene "
+                                        "on this ROS_DOMAIN_ID and namespace?)"))
+
     def _ready(self) -> bool:
+        if self.get_parameter("wait_for_recorder").value and not self._recorder_ready:
+            return False
+        if self._intruders():
+            return False                   # _check_isolation refuses
         n = self.get_parameter("wait_for_subscribers").value
         controller = self.get_parameter("wait_for_controller").value
         if controller and (self.pub_pi2.get_subscription_count() < n + 1

@@ -10,7 +10,6 @@ starts only when it listens. The other node test modules import the helpers from
 from __future__ import annotations
 
 import math
-import random
 import signal
 import subprocess
 import sys
@@ -57,9 +56,18 @@ TOPICS = {
 KEEP_ALL = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 
 
+_CLAIMED = []
+
+
 def new_domain() -> int:
-    """A ROS_DOMAIN_ID unlikely to be used by anything else running now (1..232)."""
-    return random.SystemRandom().randrange(101, 232)
+    """A ROS_DOMAIN_ID that no DDS participant of this host uses now, and no other scene
+    claimed (:func:`grazing_control.launcher.claim_domain`); the claim is held while the
+    next few tests run (the tests run one after another)."""
+    domain, lock = launcher.claim_domain()
+    _CLAIMED.append(lock)
+    while len(_CLAIMED) > 4:
+        _CLAIMED.pop(0).close()
+    return domain
 
 
 class Collector:

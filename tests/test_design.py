@@ -241,9 +241,9 @@ def test_write_controller_yaml_shape_and_round_trip(tmp_path):
     path = tmp_path / "controller.yaml"
     write_controller_yaml(path, P, g)
     doc = yaml.safe_load(path.read_text())
-    assert list(doc) == ["/controller_node"]
-    assert list(doc["/controller_node"]) == ["ros__parameters"]
-    params = doc["/controller_node"]["ros__parameters"]
+    assert list(doc) == ["/**"]
+    assert list(doc["/**"]) == ["ros__parameters"]
+    params = doc["/**"]["ros__parameters"]
     assert set(params) == {"c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset"}
     assert all(isinstance(v, float) for v in params.values())
     assert params == controller_parameters(P, g)  # exact: floats round-trip

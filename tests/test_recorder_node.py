@@ -10,7 +10,6 @@ message, in order and equal, for both bag readers.
 
 import itertools
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -28,6 +27,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from grazing_control.nodes.recorder_node import DEFAULT_TOPICS, parse_topics
+from test_closed_loop import new_domain
 from grazing_control.params import ParameterError
 from grazing_control.recording import (message_to_dict, read_messages,
                                        read_messages_rosbags, read_metadata)
@@ -64,7 +64,7 @@ def make_message(msg_type, i):
 def isolation():
     """A domain id and a namespace that no concurrent test uses."""
     uid = f"{os.getpid()}_{next(_ids)}"
-    domain = random.Random(uid).randrange(120, 230)
+    domain = new_domain()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),

@@ -23,7 +23,9 @@ from __future__ import annotations
 import math
 import re
 import signal
+import sys
 import time
+from typing import NamedTuple
 
 import rclpy
 import rclpy.logging
@@ -38,10 +40,16 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 __all__ = [
     "DATA_QOS",
     "PUBLISHER_QOS",
+    "READY_TOPIC",
     "LATCHED_QOS",
+    "NodeArguments",
     "StartupError",
     "Throttled",
     "bool_descriptor",
+    "check_overrides",
+    "init_ros",
+    "node_key_matches",
+    "parse_node_arguments",
     "float_descriptor",
     "int_descriptor",
     "run_node",
@@ -68,6 +76,10 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 _NS = 1_000_000_000
+
+#: Latched topic (std_msgs/Bool) on which recorder_node says it has matched a publisher
+#: on every topic it records; sim_node waits for it with ``wait_for_recorder``.
+READY_TOPIC = "recorder/ready"
 
 
 class StartupError(RuntimeError):
@@ -166,7 +178,11 @@ def _startup_message(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     m = _TYPE_RE.search(text)
     if m:
-        hint = " (write a double with a decimal point, e.g. 1.0)" if m["want"] == "DOUBLE" else ""
+        hint = {"DOUBLE": " (write a double with a decimal point, e.g. 1.0)",
+                "STRING": " (quote a value that YAML reads as another type: "
+                          "-p \"name:='123'\")",
+                "STRING_ARRAY": " (write a list of strings: -p \"name:=['a', 'b']\")",
+                "INTEGER": " (write an integer, e.g. 262144)"}.get(m["want"], "")
         return (f"{m['name']}={m['value']} is invalid: expected type {m['want']}, "
                 f"got {m['got']}{hint}")
     m = _VALUE_RE.search(text)
@@ -189,32 +205,221 @@ def spin(executor, done=None) -> None:
         executor.spin_once(timeout_sec=SIGNAL_POLL)
 
 
+# ----------------------------------------------------------- command-line arguments
+#: ROS arguments (rcl) that take a value, and those that do not.
+_ROS_VALUE_ARGS = {"-p", "--param", "-r", "--remap", "-e", "--enclave", "--params-file",
+                   "--log-level", "--log-config-file", "--log-file-name"}
+_ROS_FLAGS = {"--disable-rosout-logs", "--enable-rosout-logs", "--disable-stdout-logs",
+              "--enable-stdout-logs", "--disable-external-lib-logs",
+              "--enable-external-lib-logs"}
+
+
+class NodeArguments(NamedTuple):
+    """What :func:`parse_node_arguments` found on a node's command line."""
+
+    help: bool
+    params: dict           # name -> value text of every -p name:=value
+    params_files: tuple    # (path, {key: {name: value}}) of every --params-file
+
+
+def parse_node_arguments(args) -> NodeArguments:
+    """Check a node's command line before rcl sees it; StartupError names what is wrong.
+
+    ``-h``/``--help`` outside ``--ros-args`` asks for the usage; any other argument outside
+    ``--ros-args`` is refused (node parameters go after ``--ros-args``). Inside, every
+    ``-p`` must read ``name:=value``, every ``--params-file`` must be a readable YAML
+    parameter file (``<node key>: ros__parameters: {...}``), and an unknown ROS
+    argument is refused (rcl would only say ``UnknownROSArgsError``).
+    """
+    tokens = list(args[1:])
+    helped, params, files = False, {}, []
+    ros = False
+    i = 0
+    while i < len(tokens):
+        tok = tokens[i]
+        i += 1
+        if tok == "--ros-args":
+            ros = True
+            continue
+        if not ros:
+            if tok in ("-h", "--help"):
+                helped = True
+                continue
+            raise StartupError(f"unexpected argument {tok!r}: node parameters go after "
+                               "--ros-args, e.g. --ros-args -p name:=value (see --help)")
+        if tok == "--":
+            ros = False
+            continue
+        if tok in _ROS_FLAGS:
+            continue
+        if tok not in _ROS_VALUE_ARGS:
+            raise StartupError(f"unknown ROS argument {tok!r}: valid are "
+                               f"{', '.join(sorted(_ROS_VALUE_ARGS | _ROS_FLAGS))}")
+        if i >= len(tokens):
+            raise StartupError(f"ROS argument {tok} needs a value")
+        value = tokens[i]
+        i += 1
+        if tok in ("-p", "--param"):
+            name, sep, text = value.partition(":=")
+            if not sep or not name:
+                raise StartupError(f"-p {value!r} is invalid: write -p name:=value")
+            params[name] = text
+        elif tok == "--params-file":
+            files.append((value, _load_params_file(value)))
+    return NodeArguments(helped, params, tuple(files))
+
+
+def _load_params_file(path: str) -> dict:
+    """{node key: {name: value}} of a ROS parameter file; StartupError if unusable."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except OSError as exc:
+        raise StartupError(f"--params-file {path!r} cannot be read: "
+                           f"{exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" (line {where.line + 1})" if where is not None else ""
+        raise StartupError(f"--params-file {path!r} is not valid YAML{at}: "
+                           f"{getattr(exc, 'problem', None) or exc}") from None
+    shape = ("expected '<node name or /**>: ros__parameters: {name: value, ...}' "
+             "at the top level")
+    if not isinstance(data, dict) or not data:
+        raise StartupError(f"--params-file {path!r} is not a ROS parameter file: {shape}")
+    out = {}
+    for key, body in data.items():
+        if (not isinstance(body, dict) or "ros__parameters" not in body
+                or not isinstance(body["ros__parameters"], (dict, type(None)))):
+            raise StartupError(f"--params-file {path!r}, key {key!r}: {shape}")
+        out[str(key)] = dict(_flatten(body["ros__parameters"] or {}))
+    return out
+
+
+def _flatten(tree: dict, prefix: str = ""):
+    """Nested parameter maps as rcl reads them: {'a': {'b': 1}} -> ('a.b', 1)."""
+    for name, value in tree.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", value
+
+
+def node_key_matches(key: str, full_name: str) -> bool:
+    """Whether a parameter-file key (``/**``, ``/*``, ``/ns/node``, ``node``) applies.
+
+    rcl's rule: ``**`` matches any number of name tokens, ``*`` exactly one; a key
+    without a leading ``/`` is absolute all the same.
+    """
+    pattern = ""
+    for token in key.strip("/").split("/"):
+        if token == "**":
+            pattern += "(/[^/]+)*"
+        elif token == "*":
+            pattern += "/[^/]+"
+        else:
+            pattern += "/" + re.escape(token)
+    return re.fullmatch(pattern, full_name) is not None
+
+
+def check_overrides(node, arguments: NodeArguments) -> None:
+    """Refuse ``-p`` names the node does not declare; warn about unused file entries.
+
+    A ``-p name:=value`` for a parameter the node does not have is a typo or a wrong
+    node: StartupError. A parameter file keyed for another node name (``/sim_node:``
+    read by ``/ns/sim_node``) is silently ignored by rcl: a file none of whose keys
+    applies to the node is warned about, naming its keys and the node's full name (the
+    other sections of a combined file are normal); so are names under a matching key
+    that the node does not declare (a shared ``/**:`` file may hold other nodes'
+    parameters: a warning, not an error).
+    """
+    log = node.get_logger()
+    unknown = sorted(n for n in arguments.params if not node.has_parameter(n))
+    if unknown:
+        declared = sorted(node._parameters) if hasattr(node, "_parameters") else []
+        raise StartupError(
+            f"unknown parameter {', '.join(unknown)} for {node.get_name()}: valid names "
+            f"are {', '.join(declared)}")
+    full = node.get_fully_qualified_name()
+    for path, keys in arguments.params_files:
+        matching = [key for key in keys if node_key_matches(key, full)]
+        if not matching:         # a combined file's other sections are normal
+            log.warning(f"--params-file {path}: no key applies to this node ({full}): "
+                        f"{', '.join(repr(k) for k in keys)} ignored (key the file '/**:' "
+                        "to apply to any node name)")
+        for key in matching:
+            extra = sorted(n for n in keys[key] if not node.has_parameter(n))
+            if extra:
+                log.warning(f"--params-file {path}: {', '.join(extra)} under {key!r} are "
+                            f"not parameters of {full}: ignored")
+
+
+def init_ros(args, name: str):
+    """Check the arguments, then ``rclpy.init`` them; StartupError with one line if bad.
+
+    Returns the :class:`NodeArguments`, or None when ``--help`` was asked (the caller
+    prints its usage and exits 0).
+    """
+    arguments = parse_node_arguments(args)
+    if arguments.help:
+        return None
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:   # rcl: RCLError, UnknownROSArgsError (not exported)
+        text = re.sub(r", at \S+:\d+", "", " ".join(str(exc).split()))
+        raise StartupError(f"invalid ROS arguments: {text}") from None
+    return arguments
+
+
+def usage(factory, name: str) -> str:
+    """The usage text of a node: a synopsis and its module's docstring."""
+    doc = (sys.modules.get(getattr(factory, "__module__", ""), None).__doc__
+           if getattr(factory, "__module__", "") in sys.modules else None) or ""
+    return (f"usage: {name} [-h] [--ros-args [--params-file FILE] [-p name:=value] ...]\n\n"
+            + doc.strip() + "\n")
+
+
 def run_node(factory, args=None, name: str = "node") -> int:
     """The main of every node: init, build, spin, and a clean exit.
 
+    The command line is checked first (:func:`init_ros`): ``--help`` prints the usage and
+    returns 0; a malformed argument or parameter file is one line and exit status 2.
     ``factory()`` builds the node; its optional ``spin_until(executor)`` method spins
     (a node that finishes by itself returns from it), otherwise :func:`spin` spins until
-    shutdown. A :class:`StartupError` or a parameter exception while building is logged
-    in one line and gives exit status 2. SIGINT (Ctrl-C) and SIGTERM end the spin
-    without a traceback: rclpy's own signal handlers are not installed, so the context
-    stays valid while the node's ``on_exit()`` logs its summary (to /rosout too); a
-    second signal during that cleanup is ignored. Returns the exit status, which is the
-    value of ``node.exit_code`` if the node has one.
+    shutdown. A :class:`StartupError`, a ParameterError or a parameter exception while
+    building, or an unknown ``-p`` name (:func:`check_overrides`), is logged in one line
+    and gives exit status 2. SIGINT (Ctrl-C) and SIGTERM end the spin
+    without a traceback, also while starting: rclpy's own signal handlers are not
+    installed, so the context stays valid while the node's ``on_exit()`` logs its summary
+    (to /rosout too); a second signal during that cleanup is ignored. Returns the exit
+    status, which is the value of ``node.exit_code`` if the node has one.
     """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    from grazing_control.params import ParameterError
+
+    args = list(sys.argv if args is None else args)
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
     node = None
     code = 0
     try:
+        arguments = init_ros(args, name)
+        if arguments is None:
+            sys.stdout.write(usage(factory, name))
+            return 0
         node = factory()
+        try:
+            check_overrides(node, arguments)
+        except StartupError:
+            node.on_exit = lambda: None      # it never ran: no summary
+            raise
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if hasattr(node, "spin_until"):
             node.spin_until(executor)
         else:
             spin(executor)
-    except (StartupError, ParameterException) as exc:
+    except (StartupError, ParameterException, ParameterError) as exc:
         rclpy.logging.get_logger(name).error(_startup_message(exc))
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -208,8 +208,24 @@ class ControllerNode(Node):
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
+        self._warn_gains()
         log.info(f"c1={self.law.gains.c1!r} c2={self.law.gains.c2!r} x_ref={self.law.x_ref!r} "
                  f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after}")
+
+    def _warn_gains(self) -> None:
+        """Warn when the gains were not given or are both zero (the controller then
+        answers every sample with Delta v = 0): typically a parameter file keyed for
+        another node name, which rcl ignores silently."""
+        given = getattr(self, "_parameter_overrides", {})
+        missing = [k for k in ("c1", "c2") if k not in given]
+        if missing:
+            self.get_logger().warning(
+                f"{' and '.join(missing)} not given to {self.get_fully_qualified_name()} "
+                "(no -p and no parameter-file entry that applies to this node name): "
+                "default 0.0 used")
+        if self.law.gains.c1 == 0.0 and self.law.gains.c2 == 0.0:
+            self.get_logger().warning("c1 = c2 = 0: every correction is 0, the controller "
+                                      "does not control")
 
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in _KEYS}

@@ -27,10 +27,21 @@ Times of a recorded message:
   is taken, which is 0 before the first ``/clock`` message.
 * ``publish_time``: the publisher's source timestamp (wall clock).
 
-QoS: every topic is subscribed reliable, keep-all, volatile, so that nothing
-published by a reliable publisher is dropped. A best-effort publisher is not
-matched (a warning names the topic). The publishers' offered QoS profiles
-(read at the first message of a topic) are stored in ``offered_qos_profiles``.
+QoS: like ``ros2 bag record``, the recorder subscribes to a topic once it has a
+publisher, with a QoS adapted to the publishers' offers (:func:`adapted_qos`, rosbag2's
+rule): reliable only if every publisher is reliable (else best effort, which matches
+them all), transient local only if every publisher is (then it also gets what they
+sent before it started), keep-all history. The offered profiles are stored in the
+channel metadata ``offered_qos_profiles``. A publisher that appears later with an
+incompatible QoS is reported (a warning names the topic and the policy).
+
+Readiness and completeness: once every topic has a subscription matched to at least
+one publisher, the recorder publishes ``True`` on ``recorder/ready`` (std_msgs/Bool,
+reliable, transient local); the simulator waits for it (``wait_for_recorder``) before
+the scene starts. At close, each topic with one publisher is checked with the
+publisher's sequence numbers (``publication_sequence_number``, 1 for its first message):
+messages published before the match or lost on the way are reported as ``missed`` in a
+warning, and with ``require_complete:=true`` the exit status is 1.
 
 Parameters (all read-only):
 
@@ -42,11 +53,16 @@ Parameters (all read-only):
     Chunk compression: ``zstd``, ``lz4`` or ``none``.
 ``chunk_size`` (integer, bytes, 262144)
     Uncompressed chunk size; a crash loses at most the chunk being filled.
+``require_complete`` (bool, false)
+    Exit with status 1 when messages were missed (see above).
 
 On SIGINT or SIGTERM the node stops spinning, takes every message already
 received by the middleware, finishes the MCAP file, writes ``metadata.yaml``
 and logs the message count per topic; it exits with status 0. A bad parameter
-is logged in one line and the process exits with status 2.
+or argument is logged in one line and the process exits with status 2. A write
+that fails (disk full, file too large) stops the recording with one error line and
+exit status 2; the file keeps every chunk written before, and
+``grazing bag reindex`` makes it a complete bag again.
 
 Run: ``ros2 run grazing_control recorder_node --ros-args -p output:=bags/run1``
 (or ``python -m grazing_control.nodes.recorder_node --ros-args ...``).
@@ -57,23 +73,31 @@ import signal
 import sys
 import threading
 import time
+from collections import defaultdict
 
 import rclpy
 import rclpy.logging
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
                        ReliabilityPolicy)
-from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Bool
 
+from grazing_control.nodes.common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
+                                          check_overrides, init_ros, usage)
 from grazing_control.params import ParameterError
 from grazing_control.recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE,
                                        BagWriter, message_definition,
                                        qos_profile_dict)
 
-__all__ = ["DEFAULT_TOPICS", "RECORDER_QOS", "RecorderNode", "main", "parse_topics"]
+__all__ = ["DEFAULT_TOPICS", "READY_TOPIC", "RECORDER_QOS", "RecorderNode", "adapted_qos",
+           "main", "parse_topics"]
+
+
 
 #: Topics recorded by default (relative names) and their types.
 DEFAULT_TOPICS = {
@@ -85,7 +109,8 @@ DEFAULT_TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock",
 }
 
-#: Subscription QoS: reliable and keep-all, so a lockstep run loses nothing.
+#: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
+#: nothing (used for a topic's metadata when it never had a publisher).
 RECORDER_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     depth=0,
@@ -135,6 +160,37 @@ def parse_topics(entries):
     return topics
 
 
+def adapted_qos(offered):
+    """The subscription QoS for publishers offering ``offered`` (rosbag2's rule).
+
+    rosbag2_transport ``Rosbag2QoS::adapt_request_to_offers``: reliable only if every
+    publisher is reliable, else best effort (which matches both kinds); transient local
+    only if every publisher is, else volatile. History (keep all here) does not affect
+    compatibility; deadline and liveliness stay at their defaults, compatible with any
+    offer. Returns ``(qos, warnings)``: a warning for each mixed policy.
+    """
+    offered = list(offered)
+    qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=0,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    warnings = []
+    if not offered:
+        return qos, warnings
+    reliable = sum(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    latched = sum(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+    if reliable < len(offered):
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+        if reliable:
+            warnings.append("some, but not all, publishers are reliable: subscribed best "
+                            "effort (messages of the reliable ones may be dropped)")
+    if latched == len(offered):
+        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    elif latched:
+        warnings.append("some, but not all, publishers are transient local: subscribed "
+                        "volatile (their earlier messages are not retrieved)")
+    return qos, warnings
+
+
 def qos_to_dict(qos):
     """rosbag2 mapping (:func:`~grazing_control.recording.qos_profile_dict`) of a QoSProfile."""
     return qos_profile_dict(
@@ -162,6 +218,9 @@ class RecorderNode(Node):
 
     Parameters
     ----------
+    arguments : NodeArguments, optional
+        The parsed command line (:func:`~grazing_control.nodes.common.init_ros`): an
+        unknown ``-p`` name is refused before the bag is created.
     **kwargs
         Passed to :class:`rclpy.node.Node` (e.g. ``parameter_overrides``).
 
@@ -171,23 +230,57 @@ class RecorderNode(Node):
         If a parameter is invalid; nothing is created then.
     """
 
-    def __init__(self, **kwargs):
+    def __init__(self, arguments=None, **kwargs):
         super().__init__("recorder_node", **kwargs)
         self._declare_parameters()
+        if arguments is not None:      # refuse unknown -p names before creating anything
+            check_overrides(self, arguments)
         output, topics, compression, chunk_size = self._read_parameters()
         self._sim_time = self.get_parameter("use_sim_time").value
+        self.require_complete = self.get_parameter("require_complete").value
         self.bag = BagWriter(
             output, compression=compression, chunk_size=chunk_size,
             custom_data={"log_time": "ros_clock" if self._sim_time else "received_timestamp"})
         self.bag.open()
         self.received = 0
+        self.failed = None          # the OSError that stopped the recording
         self._types = {}            # fully qualified topic -> message type
         self._subs = {}             # fully qualified topic -> Subscription
+        self._offered = {}          # fully qualified topic -> offered QoS dicts
+        self._names = {}            # fully qualified topic -> name as given
+        self._first_seq = {}        # topic -> first publication sequence number
+        self._last_seq = {}         # topic -> last publication sequence number
+        self._gaps = defaultdict(int)   # topic -> messages skipped inside the sequence
+        self._publisher_counts = defaultdict(int)   # topic -> most publishers seen
         for name, kind in topics.items():
-            self._subscribe(name, kind)
+            topic = self.resolve_topic_name(name)            # fully qualified
+            self._types[topic] = kind
+            self._names[topic] = name
+        self._ready = False
+        self._pub_ready = self.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
+        self._pub_ready.publish(Bool(data=False))
+        self._watch()
+        # a steady clock: with use_sim_time a ROS-time timer would wait for /clock
+        self._watch_timer = self.create_timer(0.05, self._watch,
+                                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f"recording {', '.join(self._types)} to {self.bag.bag_dir} "
             f"({compression}, log_time = {'ROS clock' if self._sim_time else 'receive time'})")
+
+    def _watch(self):
+        """Subscribe to each topic once it has publishers; say when all are matched."""
+        for topic, kind in self._types.items():
+            if topic not in self._subs:
+                publishers = self.get_publishers_info_by_topic(topic)
+                if publishers:
+                    self._subscribe(topic, kind, publishers)
+        if self._ready:
+            return
+        if len(self._subs) == len(self._types) and all(
+                sub.get_publisher_count() > 0 for sub in self._subs.values()):
+            self._ready = True
+            self._pub_ready.publish(Bool(data=True))
+            self.get_logger().info("every topic is matched: ready")
 
     def _declare_parameters(self):
         def read_only(description, kind):
@@ -203,6 +296,8 @@ class RecorderNode(Node):
             f"chunk compression: {', '.join(COMPRESSIONS)}", ParameterType.PARAMETER_STRING))
         self.declare_parameter("chunk_size", DEFAULT_CHUNK_SIZE, read_only(
             "uncompressed chunk size, bytes", ParameterType.PARAMETER_INTEGER))
+        self.declare_parameter("require_complete", False, read_only(
+            "exit with status 1 when messages were missed", ParameterType.PARAMETER_BOOL))
 
     def _read_parameters(self):
         output = self.get_parameter("output").value
@@ -216,7 +311,11 @@ class RecorderNode(Node):
         chunk_size = self.get_parameter("chunk_size").value
         if chunk_size <= 0:
             raise ParameterError(f"chunk_size={chunk_size} is invalid: valid range is > 0")
-        topics = parse_topics(self.get_parameter("topics").value)
+        try:
+            entries = self.get_parameter("topics").value
+        except ParameterUninitializedException:      # -p topics:=[] has no type
+            entries = []
+        topics = parse_topics(entries)
         for kind in topics.values():
             try:
                 _message_class(kind)
@@ -226,15 +325,18 @@ class RecorderNode(Node):
                                      "(no Python module or no .msg file)") from None
         return output, topics, compression, chunk_size
 
-    def _subscribe(self, name, kind):
-        topic = self.resolve_topic_name(name)            # fully qualified
+    def _subscribe(self, topic, kind, publishers):
+        """Subscribe to ``topic`` with the QoS adapted to its ``publishers``."""
+        qos, warnings = adapted_qos([p.qos_profile for p in publishers])
+        for text in warnings:
+            self.get_logger().warning(f"{topic}: {text}")
+        self._offered[topic] = [qos_to_dict(p.qos_profile) for p in publishers]
         events = SubscriptionEventCallbacks(
             incompatible_qos=lambda event: self._on_incompatible_qos(topic, event))
-        self._types[topic] = kind
         self._subs[topic] = self.create_subscription(
-            _message_class(kind), name,
+            _message_class(kind), self._names[topic],
             lambda data, info: self._on_message(topic, data, info),
-            RECORDER_QOS, raw=True, event_callbacks=events)
+            qos, raw=True, event_callbacks=events)
 
     def _on_message(self, topic, data, info):
         """Record a message, then the ones already queued behind it."""
@@ -259,28 +361,66 @@ class RecorderNode(Node):
         return limit
 
     def _record(self, topic, data, info):
-        """Write one serialized message as received."""
-        if not self.bag.has_topic(topic):
-            self.bag.add_topic(topic, self._types[topic], self._offered_qos(topic))
+        """Write one serialized message as received (nothing after a failed write)."""
+        if self.failed is not None:
+            return
         if self._sim_time:
             log_time = self.get_clock().now().nanoseconds
         else:
             log_time = info.get("received_timestamp") or time.time_ns()
         sequence = info.get("publication_sequence_number") or 0
-        self.bag.write(topic, data, log_time, info.get("source_timestamp") or log_time,
-                       sequence if sequence < 2**63 else 0)
+        sequence = sequence if sequence < 2**63 else 0
+        try:
+            if not self.bag.has_topic(topic):
+                self.bag.add_topic(topic, self._types[topic],
+                                   self._offered.get(topic) or [qos_to_dict(RECORDER_QOS)])
+            self.bag.write(topic, data, log_time, info.get("source_timestamp") or log_time,
+                           sequence)
+        except OSError as exc:
+            self.failed = exc
+            self.get_logger().error(
+                f"writing {self.bag.path} failed: {exc.strerror or exc}: recording stopped; "
+                "the file keeps every chunk written before (grazing bag reindex "
+                f"{self.bag.bag_dir} makes it a complete bag)")
+            return
         self.received += 1
+        self._track_sequence(topic, sequence)
 
-    def _offered_qos(self, topic):
-        """QoS profiles offered by the topic's publishers (ours if none is known)."""
-        publishers = self.get_publishers_info_by_topic(topic)
-        return [qos_to_dict(p.qos_profile) for p in publishers] or [qos_to_dict(RECORDER_QOS)]
+    def _track_sequence(self, topic, sequence):
+        if not sequence:
+            return
+        publishers = self._subs[topic].get_publisher_count()
+        self._publisher_counts[topic] = max(self._publisher_counts[topic], publishers)
+        if topic not in self._first_seq:
+            self._first_seq[topic] = sequence
+        else:
+            last = self._last_seq[topic]
+            if sequence > last + 1:
+                self._gaps[topic] += sequence - last - 1
+        self._last_seq[topic] = sequence
+
+    def missed(self):
+        """{topic: messages missed} from the sequence numbers of single-publisher topics.
+
+        Messages published before the recorder matched the publisher (the first one
+        recorded has sequence number n > 1: n - 1 missed) or lost in between (gaps).
+        Topics that had more than one publisher are not checked (their sequences
+        interleave).
+        """
+        out = {}
+        for topic, first in self._first_seq.items():
+            if self._publisher_counts[topic] != 1:
+                continue
+            n = first - 1 + self._gaps[topic]
+            if n:
+                out[topic] = n
+        return out
 
     def _on_incompatible_qos(self, topic, event):
         self.get_logger().warning(
-            f"{topic}: a publisher's QoS is incompatible with the recorder's "
-            f"(reliable, keep-all; policy {event.last_policy_kind}): its messages are "
-            "not recorded")
+            f"{topic}: a publisher's QoS is incompatible with the recorder's subscription "
+            f"(policy {event.last_policy_kind}; the recorder adapted to the publishers it "
+            "found first): its messages are not recorded")
 
     def drain(self):
         """Record every message the middleware has already received.
@@ -291,22 +431,44 @@ class RecorderNode(Node):
             Number of messages taken.
         """
         total = 0
-        while True:
+        while self.failed is None:
             taken = sum(self._take_queued(topic, _BATCH) for topic in self._subs)
             if taken == 0:
                 return total
             total += taken
+        return total
 
     def close(self):
-        """Finish the bag (summary, metadata.yaml) and log the counts per topic."""
+        """Finish the bag (summary, metadata.yaml) and log the counts per topic.
+
+        Returns the exit status: 0, 1 if messages were missed and ``require_complete``,
+        2 if a write failed (then the file is only closed, not finished).
+        """
+        log = self.get_logger()
+        if self.failed is not None:
+            self.bag.abandon()
+            return 2
         for topic, kind in self._types.items():
             if not self.bag.has_topic(topic):          # listed, with no message
-                self.bag.add_topic(topic, kind, [qos_to_dict(RECORDER_QOS)])
-        info = self.bag.close()
+                self.bag.add_topic(topic, kind, self._offered.get(topic)
+                                   or [qos_to_dict(RECORDER_QOS)])
+        try:
+            info = self.bag.close()
+        except OSError as exc:
+            self.bag.abandon()
+            log.error(f"finishing {self.bag.path} failed: {exc.strerror or exc} (grazing bag "
+                      f"reindex {self.bag.bag_dir} recovers the chunks written)")
+            return 2
         if info:
             counts = ", ".join(f"{name} {n}" for name, n in self.bag.message_counts.items())
-            self.get_logger().info(
-                f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
+            log.info(f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
+        missed = self.missed()
+        if missed:
+            text = ", ".join(f"{t} {n}" for t, n in missed.items())
+            log.warning(f"missed: {text} (published before the recorder matched the "
+                        "publisher, or lost)")
+            return 1 if self.require_complete else 0
+        return 0
 
 
 def _stop_on_signals(stop):
@@ -319,29 +481,37 @@ def _stop_on_signals(stop):
 
 def main(args=None):
     """Run the recorder until SIGINT/SIGTERM; return the exit status."""
-    # Our own handlers: rclpy's would shut the context down before the drain.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    args = list(sys.argv if args is None else args)
+    # Our own handlers, from the start: rclpy's would shut the context down before the
+    # drain, and a signal while starting must end the process quietly.
     stop = threading.Event()
+    _stop_on_signals(stop)
     status = 0
     node = None
     try:
-        _stop_on_signals(stop)
-        node = RecorderNode()
+        arguments = init_ros(args, "recorder_node")
+        if arguments is None:
+            sys.stdout.write(usage(RecorderNode, "recorder_node"))
+            return 0
+        if stop.is_set():
+            return 0
+        node = RecorderNode(arguments)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
+        while not stop.is_set() and rclpy.ok() and node.failed is None:
             executor.spin_once(timeout_sec=0.1)
         node.drain()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ParameterError, OSError) as exc:       # bad parameter, bag not creatable
-        rclpy.logging.get_logger("recorder_node").error(str(exc))
+    except (StartupError, ParameterError, ParameterException, OSError) as exc:
+        # bad parameter or argument, bag not creatable
+        rclpy.logging.get_logger("recorder_node").error(_startup_message(exc))
         status = 2
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not cut the close
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
-            node.close()
+            status = node.close() or status
             node.destroy_node()
         rclpy.try_shutdown()
     return status
