@@ -10,6 +10,8 @@ message, in order and equal, for both bag readers.
 
 import itertools
 import os
+import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -22,11 +24,14 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rclpy.context import Context
 from rclpy.duration import Duration
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from grazing_control.nodes.recorder_node import DEFAULT_TOPICS, parse_topics
+from grazing_control.nodes.common import LATCHED_QOS, READY_TOPIC
+from grazing_control.nodes.recorder_node import DEFAULT_TOPICS, adapted_qos, parse_topics
 from test_closed_loop import new_domain
 from grazing_control.params import ParameterError
 from grazing_control.recording import (message_to_dict, read_messages,
@@ -186,6 +191,11 @@ def test_selected_topics_and_lz4(tmp_path, isolation, ros):
     ([], "output='' is invalid"),
     (["compression:=gzip"], "compression='gzip' is invalid"),
     (["topics:=['oscillator/nothing']"], "topics entry 'oscillator/nothing' is invalid"),
+    (["topics:=[]"], "topics=[] is invalid"),
+    (["topics:=a_string"], "topics=a_string is invalid: expected type STRING_ARRAY"),
+    (["chunk_size:=abc"], "chunk_size=abc is invalid: expected type INTEGER"),
+    (["output:=123"], "output=123 is invalid: expected type STRING"),
+    (["outptu:=x"], "unknown parameter outptu"),
 ])
 def test_bad_parameters_exit_nonzero_without_traceback(tmp_path, isolation, params, reason):
     _, namespace, env = isolation
@@ -197,7 +207,7 @@ def test_bad_parameters_exit_nonzero_without_traceback(tmp_path, isolation, para
     done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=30)
     output = done.stdout + done.stderr
     assert done.returncode == 2, output
-    assert reason in output
+    assert reason in output and len(output.strip().splitlines()) == 1, output
     assert "Traceback" not in output
     assert not (tmp_path / "bag").exists()
 
@@ -243,3 +253,161 @@ def test_use_sim_time_stamps_log_time_with_clock(tmp_path, isolation, ros):
     assert read_metadata(bag)["custom_data"] == {"log_time": "ros_clock"}
     clock_ns = {0} | {m.clock.sec * 10**9 + m.clock.nanosec for m in sent["/clock"]}
     assert {m.log_time_ns for m in read_messages(bag)} <= clock_ns
+
+
+# ------------------------------------------------------------------ QoS, completeness
+BEST_EFFORT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                         reliability=ReliabilityPolicy.BEST_EFFORT)
+LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def wait_ready(node, recorder):
+    """Wait until the recorder says (on recorder/ready) that it matched every topic."""
+    ready = []
+    sub = node.create_subscription(Bool, READY_TOPIC, lambda m: ready.append(m.data),
+                                   LATCHED_QOS)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    deadline = time.monotonic() + STARTUP_TIMEOUT
+    while not (ready and ready[-1]):
+        assert recorder.poll() is None, recorder.communicate()[0]
+        assert time.monotonic() < deadline, "recorder not ready"
+        executor.spin_once(timeout_sec=0.05)
+    executor.remove_node(node)
+    node.destroy_subscription(sub)
+
+
+def test_adapts_to_best_effort_and_transient_local_publishers(tmp_path, isolation, ros):
+    """As ros2 bag record: a best-effort publisher is recorded, and a transient-local
+    one's messages from before the recorder started are too."""
+    _, namespace, env = isolation
+    be = ros.create_publisher(JointState, "oscillator/pi2", BEST_EFFORT)
+    latched = ros.create_publisher(JointState, "oscillator/pi1", LATCHED)
+    early = [make_message("sensor_msgs/msg/JointState", i) for i in range(5)]
+    for m in early:
+        latched.publish(m)                       # nobody listens yet
+    bag = tmp_path / "qos"
+    recorder = start_recorder(bag, namespace, env,
+                              "topics:=['oscillator/pi2', 'oscillator/pi1']")
+    try:
+        wait_ready(ros, recorder)
+        time.sleep(0.3)                          # both ends of the best-effort match
+        late = [make_message("sensor_msgs/msg/JointState", i) for i in range(5, 25)]
+        for m in late:
+            be.publish(m)
+            latched.publish(m)
+            time.sleep(0.002)                    # best effort: no flood
+        assert latched.wait_for_all_acked(Duration(seconds=10))
+        time.sleep(0.5)
+    finally:
+        rc, output = stop(recorder, signal.SIGTERM)
+    assert rc == 0, output
+    got = {}
+    for m in read_messages(bag):
+        got.setdefault(m.topic, []).append(message_to_dict(m.message))
+    assert got[f"{namespace}/oscillator/pi2"] == [message_to_dict(m) for m in late]
+    assert got[f"{namespace}/oscillator/pi1"] == [message_to_dict(m) for m in early + late]
+    qos = {e["topic_metadata"]["name"]: e["topic_metadata"]["offered_qos_profiles"][0]
+           for e in read_metadata(bag)["topics_with_message_count"]}
+    assert qos[f"{namespace}/oscillator/pi2"]["reliability"] == "best_effort"
+    assert qos[f"{namespace}/oscillator/pi1"]["durability"] == "transient_local"
+
+
+def test_adapted_qos_follows_rosbag2():
+    reliable = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+    qos, warnings = adapted_qos([BEST_EFFORT, reliable])
+    assert qos.reliability == ReliabilityPolicy.BEST_EFFORT and len(warnings) == 1
+    assert qos.durability == DurabilityPolicy.VOLATILE
+    qos, warnings = adapted_qos([LATCHED, LATCHED])
+    assert qos.reliability == ReliabilityPolicy.RELIABLE and not warnings
+    assert qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    qos, warnings = adapted_qos([LATCHED, reliable])
+    assert qos.durability == DurabilityPolicy.VOLATILE and len(warnings) == 1
+
+
+def test_reports_what_it_missed(tmp_path, isolation, ros):
+    """Messages published before the recorder matched are counted from the publisher's
+    sequence numbers; with require_complete the exit status says so."""
+    _, namespace, env = isolation
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    pub = ros.create_publisher(JointState, "oscillator/pi2", qos)
+    for i in range(7):
+        pub.publish(make_message("sensor_msgs/msg/JointState", i))     # lost: no reader
+    bag = tmp_path / "missed"
+    recorder = start_recorder(bag, namespace, env, "topics:=['oscillator/pi2']",
+                              "require_complete:=true")
+    try:
+        wait_ready(ros, recorder)
+        time.sleep(0.3)
+        for i in range(7, 12):
+            pub.publish(make_message("sensor_msgs/msg/JointState", i))
+        assert pub.wait_for_all_acked(Duration(seconds=10))
+    finally:
+        rc, output = stop(recorder, signal.SIGTERM)
+    assert rc == 1, output
+    assert f"missed: {namespace}/oscillator/pi2 7 " in output, output
+    assert [m.message.position[0] for m in read_messages(bag)] == \
+        [i * 1e-3 for i in range(7, 12)]
+
+
+def _fsize_limit(limit):
+    def apply():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # write() fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return apply
+
+
+def _tmpfs_available():
+    return shutil.which("unshare") is not None and subprocess.run(
+        ["unshare", "-rm", "sh", "-c", "mount -t tmpfs -o size=64k tmpfs /mnt"],
+        capture_output=True).returncode == 0
+
+
+@pytest.mark.parametrize("how", ["file_size_limit", "full_tmpfs"])
+def test_disk_full_is_one_error_line_and_keeps_the_chunks(tmp_path, isolation, ros, how):
+    """A write that fails stops the recording with one [ERROR] line and status 2.
+
+    file_size_limit: RLIMIT_FSIZE makes write() fail with EFBIG (the file stays, and is
+    still read up to its last complete chunk); full_tmpfs: a 64 kB tmpfs in a private
+    mount namespace (unshare) makes it fail with ENOSPC, as a full disk does.
+    """
+    _, namespace, env = isolation
+    args = [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args",
+            "-r", f"__ns:={namespace}", "-p", "topics:=['oscillator/state']",
+            "-p", "compression:=none", "-p", "chunk_size:=4096"]
+    if how == "file_size_limit":
+        bag, kw = tmp_path / "full", {"preexec_fn": _fsize_limit(40_000)}
+    else:
+        if not _tmpfs_available():
+            pytest.skip("no user namespaces: cannot mount a small tmpfs")
+        mnt = tmp_path / "mnt"
+        mnt.mkdir()
+        bag, kw = mnt / "full", {}
+        args = ["unshare", "-rm", "sh", "-c",
+                f'mount -t tmpfs -o size=64k tmpfs {mnt} && exec "$0" "$@"'] + args
+    args += ["-p", f"output:={bag}"]
+    recorder = subprocess.Popen(args, env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, **kw)
+    try:
+        pub = ros.create_publisher(JointState, "oscillator/state", QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=5000,
+            reliability=ReliabilityPolicy.RELIABLE))
+        wait_ready(ros, recorder)
+        for i in range(3000):                    # about 300 kB of CDR
+            pub.publish(make_message("sensor_msgs/msg/JointState", i))
+        output, _ = recorder.communicate(timeout=30)   # it stops by itself
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+    assert recorder.returncode == 2, output
+    errors = [ln for ln in output.splitlines() if "[ERROR]" in ln]
+    assert len(errors) == 1 and "Traceback" not in output, output
+    reason = "File too large" if how == "file_size_limit" else "No space left on device"
+    assert reason in errors[0], errors
+    if how == "file_size_limit":
+        kept = list(read_messages(bag))
+        assert 0 < len(kept) < 3000
+        assert [m.message.position[0] for m in kept] == [i * 1e-3 for i in range(len(kept))]
