@@ -86,6 +86,7 @@ def controller(tmp_path):
     """(collector, start): start(**overrides) runs controller_node in a fresh domain."""
     domain = new_domain()
     col = Collector(domain)
+    col.domain = domain
     procs = []
 
     def start(**over):
@@ -211,3 +212,31 @@ def test_stray_future_sample_and_overflow_over_dds(controller):
     assert proc.wait(10) == 0
     text = log.read_text()
     assert "nonfinite=1" in text and "answered=5" in text and "out_of_order=4" in text, text
+
+
+def test_a_recorder_started_late_still_gets_every_answer(controller, tmp_path):
+    """The corrections are transient local: a recorder that matches the controller after
+    it answered (the start race of nodes started one after another) records them all."""
+    from grazing_control.recording import read_messages
+
+    col, start = controller
+    proc, log, pub = start(enable_after=0)
+    x, v = 1e-4, P.v_ref - 2e-4
+    for t in range(1, 6):
+        pub.publish(sample(float(t), x, v))
+    answers(col, 5)                              # answered before any recorder exists
+    bag = tmp_path / "late"
+    rec_log = tmp_path / "recorder.log"
+    recorder = launcher.start_node(
+        launcher.RECORDER_MODULE, (), {"output": str(bag), "require_complete": True,
+                                       "topics": ["controller/velocity_correction"]},
+        domain_id=col.domain, log=rec_log)
+    try:
+        assert col.wait_for(lambda: "ready" in rec_log.read_text(), 20.0), rec_log.read_text()
+        col.wait_for(lambda: False, 0.5)
+    finally:
+        launcher.stop_nodes([recorder])
+    assert recorder.returncode == 0, rec_log.read_text()
+    got = [(m.message.header.stamp.sec, m.message.twist.linear.x) for m in read_messages(bag)]
+    assert got == [(t, correction(GAINS, x, v, P.x_ref, P.v_ref)) for t in range(1, 6)]
+    assert "missed" not in rec_log.read_text()

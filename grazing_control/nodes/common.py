@@ -41,6 +41,7 @@ __all__ = [
     "DATA_QOS",
     "PUBLISHER_QOS",
     "READY_TOPIC",
+    "REPLAY_QOS",
     "LATCHED_QOS",
     "NodeArguments",
     "StartupError",
@@ -69,6 +70,15 @@ DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
 PUBLISHER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
                            reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.VOLATILE)
+
+#: Reliable, transient local, keep last 100000: the controller's corrections. A reader
+#: that matches the writer late (the recorder: the simulator can check its own writers'
+#: matches before the scene starts, not the controller's) still gets every answer
+#: published before, from the writer's history; volatile readers (the simulator) are
+#: compatible and get no replay.
+REPLAY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: Reliable, transient local, depth 1: ``oscillator/done``.
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,

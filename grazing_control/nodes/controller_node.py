@@ -8,11 +8,13 @@ computed by :func:`grazing_control.control.correction`, limited to |Delta v| <=
 ``saturation``, and published stamped with the sample's own stamp, so that the
 simulator can tell which sample it answers.
 
-Topics (reliable, volatile, keep last 1000)
--------------------------------------------
+Topics
+------
 subscribes ``oscillator/pi2`` (sensor_msgs/JointState): position [x], velocity [v] at Pi2.
 publishes ``controller/velocity_correction`` (geometry_msgs/TwistStamped):
-twist.linear.x = Delta v (nondimensional velocity), header.stamp = the sample's stamp.
+twist.linear.x = Delta v (nondimensional velocity), header.stamp = the sample's stamp;
+reliable, transient local, keep last 100000 (``REPLAY_QOS``): a recorder that matches
+late still gets every answer (the subscription is reliable, volatile, keep last 1000).
 
 Switching on
 ------------
@@ -56,13 +58,14 @@ from collections import deque
 
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from grazing_control.control import Gains, correction
-from grazing_control.nodes.common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled,
+from grazing_control.nodes.common import (DATA_QOS, REPLAY_QOS, StartupError, Throttled,
                                           float_descriptor, int_descriptor, run_node,
                                           seconds_from_stamp, stamp_key)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
@@ -192,7 +195,7 @@ class ControllerNode(Node):
         self.stale_after = float(self.get_parameter("stale_after").value)
         # no default QoS-event handlers: each is one more entity in every executor wait
         self.pub = self.create_publisher(
-            TwistStamped, "controller/velocity_correction", PUBLISHER_QOS,
+            TwistStamped, "controller/velocity_correction", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         self.create_subscription(
             JointState, "oscillator/pi2", self._on_sample, DATA_QOS,
@@ -280,7 +283,8 @@ class ControllerNode(Node):
         return SetParametersResult(successful=True)
 
     def on_exit(self) -> None:
-        """Log what was answered and ignored."""
+        """Log what was answered and ignored (after the readers acknowledged, 1 s at most)."""
+        self.pub.wait_for_all_acked(Duration(seconds=1))
         self.get_logger().info(
             f"summary: answered={self.answered} controlled_from_sample="
             f"{self.law.enable_after} malformed={self.malformed.count} "
