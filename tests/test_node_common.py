@@ -1,0 +1,131 @@
+"""nodes.common: the command line of every node, checked before rcl sees it.
+
+Pure parsing first (no ROS), then the node processes over Fast DDS: a bad command line
+is one [ERROR] line and exit status 2, ``--help`` prints the usage, an unknown ``-p``
+name is refused, and a parameter file keyed for another node name is warned about.
+"""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+from grazing_control import launcher
+from grazing_control.nodes.common import (NodeArguments, StartupError, node_key_matches,
+                                          parse_node_arguments)
+from test_closed_loop import CONTROLLER, STUDY, new_domain
+
+
+# ====================================================================== no ROS
+def test_arguments_are_parsed_like_rcl(tmp_path):
+    got = parse_node_arguments(["node", "--ros-args", "-p", "zeta:=0.1", "--params-file",
+                                str(STUDY), "-r", "__ns:=/a", "--log-level", "warn",
+                                "--disable-rosout-logs", "--", "--ros-args", "-p", "r:=0.5"])
+    assert isinstance(got, NodeArguments) and not got.help
+    assert got.params == {"zeta": "0.1", "r": "0.5"}
+    assert [p for p, _ in got.params_files] == [str(STUDY)]
+    assert got.params_files[0][1]["/**"]["zeta"] == 0.01
+    assert parse_node_arguments(["node", "--help"]).help
+
+
+@pytest.mark.parametrize("args, text", [
+    (["stray"], "unexpected argument 'stray'"),
+    (["--ros-args", "-p", "zeta"], "-p 'zeta' is invalid: write -p name:=value"),
+    (["--ros-args", "-p", ":=1"], "write -p name:=value"),
+    (["--ros-args", "--foo"], "unknown ROS argument '--foo'"),
+    (["--ros-args", "-p"], "needs a value"),
+    (["--ros-args", "--params-file", "/nonexistent.yaml"], "cannot be read"),
+])
+def test_bad_arguments_are_refused_with_a_reason(args, text):
+    with pytest.raises(StartupError, match=text.replace("(", r"\(")):
+        parse_node_arguments(["node"] + args)
+
+
+@pytest.mark.parametrize("content, text", [
+    ("a: [1, 2\n", "is not valid YAML"),
+    ("- 1\n- 2\n", "is not a ROS parameter file"),
+    ("/sim_node:\n  zeta: 0.1\n", "key '/sim_node'"),
+    ("", "is not a ROS parameter file"),
+])
+def test_malformed_parameter_files_are_refused(tmp_path, content, text):
+    path = tmp_path / "p.yaml"
+    path.write_text(content)
+    with pytest.raises(StartupError, match=text):
+        parse_node_arguments(["node", "--ros-args", "--params-file", str(path)])
+
+
+@pytest.mark.parametrize("key, name, applies", [
+    ("/**", "/sim_node", True), ("/**", "/a/b/sim_node", True),
+    ("/sim_node", "/sim_node", True), ("sim_node", "/sim_node", True),
+    ("/sim_node", "/ns/sim_node", False), ("/sim_node", "/other", False),
+    ("/*", "/sim_node", True), ("/*", "/ns/sim_node", False),
+    ("/ns/*", "/ns/sim_node", True), ("/**/sim_node", "/x/y/sim_node", True),
+    ("/**/sim_node", "/x/controller_node", False),
+])
+def test_parameter_file_keys_match_as_rcl_does(key, name, applies):
+    assert node_key_matches(key, name) is applies
+
+
+# ================================================================ the processes
+def run_node(module, *args, timeout=30):
+    cmd = launcher.node_command(module)[:-1] + list(args)      # without --ros-args
+    return subprocess.run(cmd, env=launcher.node_env(new_domain()), capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def test_help_prints_usage_and_exits_0():
+    for module, name in ((launcher.SIM_MODULE, "sim_node"),
+                         (launcher.CONTROLLER_MODULE, "controller_node"),
+                         (launcher.RECORDER_MODULE, "recorder_node")):
+        done = run_node(module, "--help")
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.startswith(f"usage: {name}") and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--ros-args", "--params-file", "/nonexistent.yaml"], "cannot be read"),
+    (["--ros-args", "--params-file", __file__], "is not valid YAML"),
+    (["--ros-args", "-p", "zeta"], "-p 'zeta' is invalid"),
+    (["--ros-args", "--foo"], "unknown ROS argument '--foo'"),
+    (["extra"], "unexpected argument 'extra'"),
+])
+def test_bad_command_line_is_one_error_line_and_status_2(args, text):
+    done = run_node(launcher.SIM_MODULE, *args)
+    lines = [ln for ln in (done.stdout + done.stderr).splitlines() if ln.strip()]
+    assert done.returncode == 2 and len(lines) == 1, lines
+    assert "[ERROR]" in lines[0] and text in lines[0], lines
+
+
+def test_unknown_parameter_name_is_refused():
+    done = run_node(launcher.CONTROLLER_MODULE, "--ros-args", "--params-file",
+                    str(CONTROLLER), "-p", "c3:=1.0")
+    out = done.stdout + done.stderr
+    assert done.returncode == 2 and "unknown parameter c3 for controller_node" in out, out
+    assert "Traceback" not in out and "summary" not in out
+
+
+def test_parameter_file_for_another_node_name_is_warned(tmp_path):
+    """Under a namespace a '/controller_node:' file is ignored by rcl: said, twice (the
+    file, and the gains left at 0); the shipped '/**' file applies."""
+    old = tmp_path / "old.yaml"
+    old.write_text(CONTROLLER.read_text().replace("/**:", "/controller_node:"))
+    outputs = {}
+    for name, path in (("old", old), ("shipped", CONTROLLER)):
+        cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [path],
+                                    {"enable_after": -1}) + ["-r", "__ns:=/scene2"]
+        proc = subprocess.Popen(cmd, env=launcher.node_env(new_domain()), text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        try:
+            out = ""
+            for line in proc.stdout:
+                out += line
+                if "enable_after=" in line:       # the last line of its start
+                    break
+        finally:
+            launcher.stop_nodes([proc])
+        outputs[name] = out + proc.stdout.read()
+    assert "no key applies to this node (/scene2/controller_node): '/controller_node'" \
+        in outputs["old"], outputs["old"]
+    assert "c1 and c2 not given" in outputs["old"] and "c1 = c2 = 0" in outputs["old"]
+    assert "WARN" not in outputs["shipped"] and "c1=-1.02060145554" in outputs["shipped"]
