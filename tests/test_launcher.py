@@ -1,0 +1,143 @@
+"""launcher: scene isolation, failing fast, Ctrl-C, and its arguments (real processes).
+
+Every scene here is cheap (a few hundred lockstep periods). Two scenes started at once
+must give two clean bags; two scenes forced onto one domain must both fail loudly.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grazing_control import launcher
+from grazing_control.control import Gains
+from grazing_control.design import degenerate_c1
+from grazing_control.params import OscillatorParams
+from grazing_control.recording import read_messages
+from grazing_control.simulate import simulate
+from test_closed_loop import CONTROLLER, STUDY, new_domain
+
+GRAZING = [sys.executable, "-c", "import sys; from grazing_control.cli import main; "
+           "sys.exit(main())"]
+
+
+def grazing(*args, **kw):
+    return subprocess.Popen(GRAZING + list(args), env=launcher.node_env(), text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+
+
+# ------------------------------------------------------------------------ domains
+def test_claimed_domains_are_distinct_and_not_in_use():
+    import rclpy
+    from rclpy.context import Context
+
+    held = [launcher.claim_domain() for _ in range(3)]
+    ids = [d for d, _ in held]
+    assert len(set(ids)) == 3 and all(1 <= d <= launcher.MAX_DOMAIN_ID for d in ids)
+    # a domain with a DDS participant on this host is not free
+    context = Context()
+    rclpy.init(context=context, domain_id=ids[0])
+    node = rclpy.create_node("occupant", context=context)
+    try:
+        held[0][1].close()                    # released, but a participant uses it
+        assert ids[0] not in {launcher.claim_domain(exclude=ids[1:])[0] for _ in range(1)}
+        assert not launcher._discovery_port_free(ids[0])
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        for _, lock in held[1:]:
+            lock.close()
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--domain-id", "-1"], "--domain-id: '-1' is invalid: valid range is an integer 0..232"),
+    (["--domain-id", "233"], "valid range is an integer 0..232"),
+    (["--timeout", "nan"], "--timeout: 'nan' is invalid"),
+    (["--timeout", "0"], "--timeout: '0' is invalid"),
+])
+def test_run_refuses_bad_domain_and_timeout(args, text):
+    proc = grazing("run", "--periods", "5", *args)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 2 and text in err and len(err.strip().splitlines()) == 1, err
+
+
+# ---------------------------------------------------------------------- isolation
+def scene_is_clean(bag, n, on):
+    """Every sample once, on its grid, equal to the core's; every answer once."""
+    counts = Counter()
+    pi2, stamps = [], []
+    for m in read_messages(bag):
+        counts[m.topic] += 1
+        if m.topic == "/oscillator/pi2":
+            pi2.append((m.message.position[0], m.message.velocity[0]))
+            stamps.append(m.message.header.stamp.sec * 10**9 + m.message.header.stamp.nanosec)
+    p = OscillatorParams(delta_d=-5e-6)
+    ref = simulate(p, n, gains=Gains(degenerate_c1(p, -1.0), -1.0), control_after=on)
+    assert counts["/oscillator/pi2"] == n and counts["/controller/velocity_correction"] == n
+    np.testing.assert_array_equal(stamps, [round(k * p.period * 1e9) for k in range(n)])
+    np.testing.assert_allclose(pi2, ref.pi2, rtol=1e-9, atol=1e-12)
+
+
+def test_two_scenes_at_once_give_two_clean_bags(tmp_path):
+    n, on = 200, 100
+    procs = [grazing("run", "--periods", str(n), "--enable-after", str(on), "--bag",
+                     str(tmp_path / f"bag{i}"), "--timeout", "120") for i in range(2)]
+    outs = [p.communicate(timeout=180) for p in procs]
+    for p, (out, err) in zip(procs, outs):
+        assert p.returncode == 0, out + err
+    domains = {out.split("ROS_DOMAIN_ID=")[1].split(")")[0] for out, _ in outs}
+    assert len(domains) == 2, outs
+    for i in range(2):
+        scene_is_clean(tmp_path / f"bag{i}", n, on)
+
+
+def test_two_scenes_on_one_domain_never_both_succeed(tmp_path):
+    """Forced onto one domain, the simulators see each other's simulator or controller:
+    the one that sees the other refuses (or stops) with an error and a nonzero status;
+    a scene that finishes had no foreign answer (ignored=0)."""
+    domain = str(new_domain())
+    procs = [grazing("run", "--periods", "3000", "--domain-id", domain, "--sim-param",
+                     "state_period:=0.0", "--timeout", "120", "--log-dir",
+                     str(tmp_path / f"logs{i}")) for i in range(2)]
+    for p in procs:
+        p.communicate(timeout=180)
+    logs = [(tmp_path / f"logs{i}" / "sim_node.log").read_text() for i in range(2)]
+    failed = [i for i, p in enumerate(procs) if p.returncode != 0]
+    assert failed, logs
+    for i in failed:
+        assert "[ERROR]" in logs[i] and "the scene is not isolated" in logs[i], logs[i]
+    for i in set(range(2)) - set(failed):
+        assert "ignored=0 " in logs[i] and "applied=3000 " in logs[i], logs[i]
+
+
+# ----------------------------------------------------------------- failing, Ctrl-C
+def test_a_node_refusing_to_start_stops_the_scene_at_once(tmp_path):
+    res = launcher.run(STUDY, CONTROLLER, tmp_path / "bag", 50, domain_id=new_domain(),
+                       controller_overrides={"saturation": -1.0}, log_dir=tmp_path)
+    assert res.controller == 2 and res.sim not in (0, None) and not res.ok
+    # the simulator was stopped, not left to its start_timeout
+    assert "start_timeout" not in (tmp_path / "sim_node.log").read_text()
+    print(f"scene stopped after {res.wall:.1f} s")
+
+
+@pytest.mark.parametrize("delay", [0.5, 1.2])
+def test_ctrl_c_early_in_grazing_run_is_quiet(tmp_path, delay):
+    """The terminal's Ctrl-C (SIGINT to the whole foreground group) while the nodes are
+    still starting: status 130 and no traceback, on the terminal or in a node's log."""
+    logs = tmp_path / "logs"
+    proc = grazing("run", "--periods", "100", "--bag", str(tmp_path / "bag"), "--log-dir",
+                   str(logs), start_new_session=True)
+    time.sleep(delay)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out + err
+    texts = [out, err] + [f.read_text() for f in logs.glob("*.log")]
+    assert not any("Traceback" in t or "Fatal Python error" in t for t in texts), texts
