@@ -394,3 +394,28 @@ def test_empty_bag_is_valid(tmp_path):
 
 def test_default_chunk_size_is_moderate():
     assert 16 * 1024 <= DEFAULT_CHUNK_SIZE <= 1024 * 1024
+
+
+def test_reindex_recovers_a_truncated_bag_for_every_reader(tmp_path):
+    """The complete chunks of a cut file, as the partial reader sees them, become a bag
+    with a summary and metadata.yaml (reindex); a complete bag is left as it was."""
+    import shutil
+
+    from grazing_control.recording import reindex
+
+    src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
+    bag = tmp_path / "scene_9e-6"
+    shutil.copytree(src, bag)
+    (bag / "metadata.yaml").unlink()
+    f = bag / "scene_9e-6_0.mcap"
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 3])
+    partial = [(m.topic, m.log_time_ns, message_to_dict(m.message)) for m in read_messages(bag)]
+    res = reindex(bag)
+    assert not res.had_summary and res.dropped_bytes > 0 and res.message_count == len(partial)
+    for read in (read_messages, read_messages_rosbags):
+        assert [(m.topic, m.log_time_ns, message_to_dict(m.message)) for m in read(bag)] \
+            == partial
+    whole = tmp_path / "whole"
+    shutil.copytree(src, whole)
+    res = reindex(whole)
+    assert res.had_summary and res.message_count == read_metadata(src)["message_count"]
