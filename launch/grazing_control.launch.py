@@ -6,7 +6,9 @@
 Parameters come from the package's config/ (study.yaml, controller.yaml) unless other
 files are given; ``delta_d`` and ``max_periods`` override the simulator's (write floats
 with a decimal point, e.g. -9.0e-06). With ``bag`` set, the recorder records the scene
-there and the simulator waits for it before starting. The launch shuts everything
+there and the simulator waits until it has matched every topic (``recorder/ready``)
+before starting; the bag path is compared as text (NotEqualsSubstitution, launch >= 3.1,
+Jazzy), never evaluated, so any path works. The launch shuts everything
 down when the simulator exits after ``max_periods`` (the recorder closes its bag on the
 SIGINT that follows). Machines without ``ros2 launch`` use ``grazing run``
 (grazing_control.launcher), which does the same with plain processes.
@@ -20,15 +22,17 @@ from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandle
 from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
-from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch.substitutions import IfElseSubstitution, LaunchConfiguration, NotEqualsSubstitution
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 
 
 def generate_launch_description():
     share = get_package_share_directory("grazing_control")
     config = os.path.join(share, "config")
     bag = LaunchConfiguration("bag")
-    recording = PythonExpression(["'", bag, "' != ''"])
+    # compared as text, never evaluated: any bag path works (quotes included)
+    recording = NotEqualsSubstitution(bag, "")
 
     args = [
         DeclareLaunchArgument("sim_params", default_value=os.path.join(config, "study.yaml"),
@@ -52,7 +56,8 @@ def generate_launch_description():
             "delta_d": LaunchConfiguration("delta_d"),
             "max_periods": LaunchConfiguration("max_periods"),
             "exit_when_done": True,
-            "wait_for_subscribers": PythonExpression(["1 if ", recording, " else 0"]),
+            "wait_for_subscribers": IfElseSubstitution(recording, "1", "0"),
+            "wait_for_recorder": IfElseSubstitution(recording, "true", "false"),
         }])
     controller = Node(
         package="grazing_control", executable="controller_node", name="controller_node",
@@ -61,7 +66,8 @@ def generate_launch_description():
     recorder = Node(
         package="grazing_control", executable="recorder_node", name="recorder_node",
         output="screen", condition=IfCondition(recording),
-        parameters=[{"output": bag}])
+        parameters=[{"output": ParameterValue(bag, value_type=str),
+                     "require_complete": True}])
     end_with_sim = RegisterEventHandler(OnProcessExit(
         target_action=sim,
         on_exit=[EmitEvent(event=Shutdown(reason="sim_node finished the scene"))]))
