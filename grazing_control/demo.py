@@ -14,6 +14,7 @@ same scene) are printed next to the recorded numbers as a cross-check, labelled 
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -36,9 +37,30 @@ PERIODS = 1300
 
 
 def _run_nodes(p, controller_yaml, bag_dir, periods):
+    """Record the scene into a fresh folder, then put it in place of ``bag_dir``.
+
+    The demo owns its output folder: a second run replaces the bag of the first (the
+    recorder itself never writes into an existing bag), and only once the new one is
+    complete, so a failed or interrupted run leaves the previous bag as it was.
+    """
+    import shutil
+    import tempfile
+
     from .launcher import run_scene
 
-    return run_scene(p, controller_yaml, bag_dir, periods=periods, enable_after=CONTROL_AFTER)
+    bag_dir = Path(bag_dir)
+    bag_dir.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{bag_dir.name}.", dir=bag_dir.parent))
+    try:
+        fresh = work / bag_dir.name          # the .mcap is named after its folder
+        result = run_scene(p, controller_yaml, fresh, periods=periods,
+                           enable_after=CONTROL_AFTER)
+        if bag_dir.exists():
+            os.replace(bag_dir, work / "previous")
+        os.replace(fresh, bag_dir)
+        return result
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def _nodes_available() -> bool:
