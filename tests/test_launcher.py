@@ -141,3 +141,18 @@ def test_ctrl_c_early_in_grazing_run_is_quiet(tmp_path, delay):
     assert proc.returncode == 130, out + err
     texts = [out, err] + [f.read_text() for f in logs.glob("*.log")]
     assert not any("Traceback" in t or "Fatal Python error" in t for t in texts), texts
+
+
+def test_repeated_recorded_scenes_lose_no_correction(tmp_path):
+    """The start race: the simulator starts only once the recorder matched every topic
+    (recorder/ready), the corrections are transient local, and the recorder checks the
+    sequence numbers (require_complete): every run records every sample and answer."""
+    n = 40
+    for i in range(3):
+        bag = tmp_path / f"bag{i}"
+        res = launcher.run(STUDY, CONTROLLER, bag, n, controller_overrides={"enable_after": 20},
+                           log_dir=tmp_path / f"logs{i}", timeout=120)
+        assert res.ok, (res, (tmp_path / f"logs{i}" / "recorder_node.log").read_text())
+        counts = Counter(m.topic for m in read_messages(bag))
+        assert counts["/oscillator/pi2"] == n and counts["/controller/velocity_correction"] == n
+        assert "missed" not in (tmp_path / f"logs{i}" / "recorder_node.log").read_text()
