@@ -101,10 +101,10 @@ class RunResult:
                  else "finished" if self.ok else "failed")
         text = (f"scene {state} in {self.wall:.1f} s: exit status sim_node={self.sim} "
                 f"controller_node={self.controller}")
-        if self.domain_id is not None:
-            text = f"{text} (ROS_DOMAIN_ID={self.domain_id})"
         if self.recorder is not None:
             text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
+        if self.domain_id is not None:
+            text += f"; ROS_DOMAIN_ID={self.domain_id}"
         if self.logs:
             text += f"; logs in {Path(next(iter(self.logs.values()))).parent}"
         return text

@@ -93,7 +93,7 @@ def test_two_scenes_at_once_give_two_clean_bags(tmp_path):
     outs = [p.communicate(timeout=180) for p in procs]
     for p, (out, err) in zip(procs, outs):
         assert p.returncode == 0, out + err
-    domains = {out.split("ROS_DOMAIN_ID=")[1].split(")")[0] for out, _ in outs}
+    domains = {out.split("ROS_DOMAIN_ID=")[1].split(";")[0].split()[0] for out, _ in outs}
     assert len(domains) == 2, outs
     for i in range(2):
         scene_is_clean(tmp_path / f"bag{i}", n, on)
