@@ -8,6 +8,8 @@ name is refused, and a parameter file keyed for another node name is warned abou
 from __future__ import annotations
 
 import subprocess
+import threading
+import time
 
 import pytest
 
@@ -116,14 +118,20 @@ def test_parameter_file_for_another_node_name_is_warned(tmp_path):
                                     {"enable_after": -1}) + ["-r", "__ns:=/scene2"]
         proc = subprocess.Popen(cmd, env=launcher.node_env(new_domain()), text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        guard = threading.Timer(30.0, proc.kill)      # never hang on a missing line
+        guard.start()
         try:
             out = ""
             for line in proc.stdout:
                 out += line
-                if "enable_after=" in line:       # the last line of its start
+                if "summary" in line or ("enable_after=" in line and name == "shipped"):
                     break
+                if "no key applies" in line:      # checked right after the node is built
+                    break
+            time.sleep(0.5)                       # anything logged after its start
         finally:
             launcher.stop_nodes([proc])
+            guard.cancel()
         outputs[name] = out + proc.stdout.read()
     assert "no key applies to this node (/scene2/controller_node): '/controller_node'" \
         in outputs["old"], outputs["old"]
