@@ -63,6 +63,17 @@ def test_law_a_stray_future_sample_does_not_switch_control_off():
     assert c.out_of_order == 4 and c.answer((3, 0), x, v) is None   # duplicate
 
 
+def test_law_a_stray_sample_at_t0_is_not_a_reset():
+    c = law(enable_after=2)
+    x, v = 0.01, P.v_ref + 0.02
+    want = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    assert [c.answer((k, 0), x, v) for k in range(1, 5)] == [0.0, 0.0, want, want]
+    c.answer((0, 0), x, v)                           # a stray t = 0 sample...
+    assert c.answer((5, 0), x, v) == want            # ...the stream goes on: still on
+    assert c.count == 6 and c.answer((0, 0), x, v) == 0.0   # a real reset:
+    assert c.answer((1, 0), x, v) == 0.0 and c.answer((2, 0), x, v) == want   # counts again
+
+
 def test_law_saturates_and_validates():
     c = law(enable_after=0, saturation=1e-3)
     assert c.answer((0, 1), 0.5, P.v_ref) == pytest.approx(-1e-3)

@@ -35,7 +35,9 @@ Stale, duplicate and malformed samples
   (lockstep) or to one of its last two samples (realtime), so a stray sample with a
   future stamp neither switches control off nor starves the simulator. A sample at
   t = 0 (stamp 0) after others means the simulator was reset (``~/reset``): the sample
-  count restarts and ``enable_after`` counts again from there.
+  count restarts and ``enable_after`` counts again from there, unless the next sample
+  continues the old stream (a stamp newer than the newest before it): then that t = 0
+  sample was a stray and the count goes on.
 * With ``use_sim_time`` true the node's clock follows ``/clock``; a sample older than
   ``stale_after`` seconds of simulation time on arrival (clock now - stamp) is stale and
   not answered. Without simulation time the check is skipped (stamps are simulation
@@ -100,6 +102,7 @@ class ControlLaw:
         self.newest = None      # stamp key of the newest sample answered
         self.recent = deque(maxlen=self.RECENT)   # stamp keys of the last answers
         self.out_of_order = 0   # samples answered though older than the newest
+        self._before_reset = None   # (count, newest, recent) before a t = 0 sample
         self.forced = None      # None: follow enable_after; True/False: set by ~/enable
 
     def configure(self, gains, x_ref, v_ref, enable_after, saturation) -> None:
@@ -119,10 +122,19 @@ class ControlLaw:
         None for a duplicate (a stamp among the last :attr:`RECENT` answered). The
         result may be non-finite (overflow): the caller must not publish it.
         """
+        if self._before_reset is not None:
+            count, newest, recent = self._before_reset
+            self._before_reset = None
+            if key > newest:        # the stream went on: that t = 0 sample was a stray
+                self.count, self.newest = count + self.count, newest
+                self.recent = recent
+                self.recent.append((0, 0))
         if key == (0, 0) and self.newest is not None:
-            self.count = 0          # back to t = 0: the simulator was reset
+            # back to t = 0: the simulator was reset (confirmed by the next sample)
+            self._before_reset = (self.count, self.newest, self.recent)
+            self.count = 0
             self.newest = None
-            self.recent.clear()
+            self.recent = deque(maxlen=self.RECENT)
         if key in self.recent:
             return None
         if self.newest is not None and key < self.newest:
