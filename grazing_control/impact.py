@@ -15,8 +15,21 @@ because g'' is J-Lipschitz. With J = a(omega) omega^3 + |C| e^{-zeta a}
 interval g is convex or concave, so it has at most one maximum, located by a
 safeguarded Newton iteration on v = g'; whether g reaches 0 is then decided by the
 sign of g at that maximum, computed without cancellation in deviation coordinates.
-Intervals that cannot be certified are bisected. A window is first excluded as a
-whole when sup g <= -Delta d + |C| < 0.
+An interval whose upper bound from the chord, max(g(a), g(b)) + K h^2 / 8 with
+K = max(0, -min g'') >= 0 and min g'' >= (g''(a) + g''(b) - J h) / 2, is below 0 has no
+impact. Intervals that cannot be certified are bisected. A window is first excluded as
+a whole when sup g <= -Delta d + |C| < 0. Every exclusion carries a margin for the
+rounding of the computed g and g'' (docs/theory.md, "Rounding"), so it holds for the
+exact trajectory of the rounded start state.
+
+Contacts below rounding
+-----------------------
+A contact whose approach velocity is within the velocity's rounding of 0 is a contact
+at rest: not an impact when the wall force cos tau - d <= 0 (a tangency), a sticking
+event with v- = v+ = 0 when it pushes into the wall. Every other reported impact has
+v- > 0 (docs/theory.md, "Tangency below rounding"). A mass at rest on the wall at the
+start of a call (stuck across a Pi2 sample) is recognised to the rounding of the phase
+and stays stuck.
 
 Chattering and sticking
 -----------------------
