@@ -321,6 +321,10 @@ def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     """The 1/1 orbit at impact phase offset psi; Delta d is the branch's unless kept
     (when psi was solved for p.delta_d, the two agree to a few ulps)."""
     dd, v, m = branch_point(p, psi, gains)
+    if not v > 0.0 or not math.isfinite(dd):
+        raise OrbitNotFound(
+            f"the 1/1 solution at delta_d={dd!r} has v- = {v!r}: not an impacting orbit (at "
+            "grazing, Delta d = 0, v- = 0 and the multipliers are not defined)")
     pp = p if keep_delta_d or dd == p.delta_d else p.with_(delta_d=dd)
     theta = (pp.tau_star + psi) % TWO_PI
     a, w = pp.amplitude, pp.omega

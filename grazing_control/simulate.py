@@ -200,7 +200,8 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
             dvc = gains.c1 * dx + gains.c2 * dv
             if not abs(dvc) <= 1e150:
                 raise NonFiniteStateError(
-                    f"the correction c1*dx + c2*dv = {dvc!r} at period {k} overflowed "
+                    f"the correction c1*dx + c2*dv = {dvc!r} at period {k} is not finite or exceeds 1e150: "
+                    f"an input overflowed "
                     f"(c1={gains.c1!r}, c2={gains.c2!r}, dx={dx!r}, dv={dv!r})")
         corr[k] = dvc
         try:
