@@ -502,7 +502,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
             t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
             # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap, not resolvable
             height = (r * v_minus) ** 2 / (2.0 * force) if force > 0.0 else math.inf
-        v_plus = -r * v_minus
+        v_plus = -r * v_minus if v_minus > 0.0 else 0.0  # at rest: +0.0, not -0.0
         dv = v_plus - vp
         if t_inf < chatter or height < 1e3 * math.ulp(abs(dx) + abs(p.delta_d) + p.amplitude):
             # chattering: sum the geometric sequence and stick (velocity -> 0)

@@ -606,6 +606,7 @@ def test_sticking_carries_over_a_period_boundary_issue_7():
         seg = period_step(p, dx, dv)
         assert seg.impacts[0].sticking and seg.impacts[0].dt == 0.0
         assert seg.impacts[0].v_minus == 0.0 == seg.impacts[0].v_plus
+        assert math.copysign(1.0, seg.impacts[0].v_plus) == 1.0  # +0.0, not -0.0
         x = states_between(p, p.tau2, dx, dv, seg.impacts, times)[:, 0]
         assert np.max(x - p.d) <= 1e-12
         dx, dv = seg.dx, seg.dv
@@ -673,6 +674,7 @@ def test_every_reported_impact_has_positive_velocity():
                 n_imp += 1
                 if i.sticking:
                     assert i.v_minus >= 0.0 and i.v_plus == -p.r * i.v_minus
+                    assert math.copysign(1.0, i.v_minus) == 1.0
                     n_zero_stick += i.v_minus == 0.0
                 else:
                     assert i.v_minus > 0.0 and i.v_plus == -p.r * i.v_minus
