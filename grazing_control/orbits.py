@@ -34,7 +34,7 @@ from scipy.optimize import brentq
 
 from .control import Gains
 from .flow import matmul2, to_physical, transition_matrix
-from .impact import Impact, InitialStateError, saltation_matrix
+from .impact import Impact, InitialStateError, NonFiniteStateError, saltation_matrix
 from .maps import period_matrix, pi2_map
 from .params import OscillatorParams
 
@@ -344,7 +344,7 @@ def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     if check:
         try:
             seg = pi2_map(pp, dx2, dv2, gains)
-        except InitialStateError as exc:  # the Pi2 point lies beyond the wall
+        except (InitialStateError, NonFiniteStateError) as exc:  # beyond the wall, or absurd
             raise OrbitNotFound(f"the branch point at delta_d={dd!r} is not physical: {exc}") from None
         scale = max(abs(dx2), abs(dv2), 1e-300)
         err = max(abs(seg.dx - dx2), abs(seg.dv - dv2))
