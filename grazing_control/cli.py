@@ -129,8 +129,8 @@ def _params(args, delta_d=0.0):
                          pi2_offset=args.pi2_offset)
     if not 1e-100 < p.amplitude < 1e100:
         raise ParameterError(
-            f"omega={p.omega!r} is invalid: the non-impacting amplitude a(omega) = "
-            f"{p.amplitude:.3g} is outside the computable range (1e-100, 1e100)")
+            f"omega={p.omega!r} is invalid with zeta={p.zeta!r}: the non-impacting amplitude "
+            f"a(omega) = {p.amplitude:.3g} is outside the computable range (1e-100, 1e100)")
     if not p.zeta * p.period <= _MAX_DECAY:
         raise ParameterError(
             f"omega={p.omega!r} is invalid with zeta={p.zeta!r}: valid range is "
