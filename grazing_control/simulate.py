@@ -170,13 +170,18 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
                          f"{', '.join(FIDELITIES)}, auto")
     step = period_step if fidelity == "exact" else \
         (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
+    delay = gains.delay if active else 0.0  # actuation delay (docs/theory_delay.md)
+    if delay != 0.0 and fidelity != "exact":
+        raise ValueError(f"fidelity={fidelity!r} does not model an actuation delay "
+                         f"(delay={delay!r}): use fidelity='exact'")
     for k in range(periods):
         dev[k] = dx, dv
         dvc = 0.0
         if active and k >= control_after:
             dvc = gains.c1 * dx + gains.c2 * dv
         corr[k] = dvc
-        seg = step(p, dx, dv, dvc)
+        seg = step(p, dx, dv, dvc) if delay == 0.0 or k < control_after else \
+            period_step(p, dx, dv, dvc, delay=delay)
         counts[k] = len(seg.impacts)
         for i in seg.impacts:
             imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))

@@ -8,7 +8,9 @@ Every number is checked against a route that does not share the code under test:
 * the admissible set's end points by what fails there: exact multipliers crossing the
   unit circle, and the 1/1 branch born at grazing leaving the impacting side.
 
-Measured (study parameters): admissible c2 = (-2.0190440881, 0.2820918413);
+Measured (study parameters): the study's (impacting-side) admissible set
+c2 = (-2.0190440882, 0.2820918413); with the non-impacting side too (rho(N_g) < 1)
+the combined default set is (-2.0190440882, 0.1065759767);
 at the lower end lambda0 = -1 (flip) with gamma1 ~ 187 > 0, so only stability fails;
 at the upper end lambda0 = +1 *and* gamma1 = 0 at the same c2 (a +1 limit multiplier
 is a fold of Delta d(psi) at grazing, i.e. kappa = 0), so both conditions fail there.
@@ -71,7 +73,8 @@ def _shoot_at(p, gains, guess):
 
 @pytest.fixture(scope="module")
 def interval():
-    intervals = admissible_c2(P)
+    """The study's set: the impacting-side conditions only."""
+    intervals = admissible_c2(P, conditions="impacting")
     assert len(intervals) == 1, intervals
     return intervals[0]
 
@@ -167,7 +170,7 @@ def test_admissible_c2_is_one_interval_containing_the_study_gain(interval):
     assert hi == pytest.approx(0.2820918413, abs=1e-8)
     assert lo < -1.0 < hi
     # a wider scan finds the same set
-    wide = admissible_c2(P, -10.0, 10.0, 801)
+    wide = admissible_c2(P, -10.0, 10.0, 801, conditions="impacting")
     assert len(wide) == 1
     assert wide[0] == pytest.approx(interval, abs=1e-9)
 
@@ -177,8 +180,8 @@ def test_just_inside_each_end_admissible_just_outside_not(interval, end):
     x = interval[end]
     inward = 1.0 if end == 0 else -1.0
     for eps in (1e-6, 1e-3):
-        assert evaluate_design(P, x + inward * eps).admissible
-        assert not evaluate_design(P, x - inward * eps).admissible
+        assert evaluate_design(P, x + inward * eps).admissible_impacting
+        assert not evaluate_design(P, x - inward * eps).admissible_impacting
 
 
 def test_lower_end_is_a_flip_of_the_exact_multipliers(interval):
@@ -244,7 +247,8 @@ def test_write_controller_yaml_shape_and_round_trip(tmp_path):
     assert list(doc) == ["/controller_node"]
     assert list(doc["/controller_node"]) == ["ros__parameters"]
     params = doc["/controller_node"]["ros__parameters"]
-    assert set(params) == {"c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset"}
+    assert set(params) == {"c1", "c2", "actuation_delay", "x_ref", "v_ref", "zeta", "r", "omega",
+                           "pi2_offset"}
     assert all(isinstance(v, float) for v in params.values())
     assert params == controller_parameters(P, g)  # exact: floats round-trip
     assert params["c1"] == g.c1 and params["c2"] == -1.0

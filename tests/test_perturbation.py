@@ -202,15 +202,21 @@ def test_second_order_normal_form_map_eigenvalues_converge():
     assert abs(slope([1e-5, 1e-7, 1e-9], errs) - 0.5) < 0.1 and errs[-1] < 1e-5
 
 
-def test_admissible_c2_both_routes():
-    """Exact (design.admissible_c2) (-2.0190440881, 0.2820918413); perturbation the same
-    to 8.4e-11 and 5.3e-11."""
-    ex = admissible_c2(P)
-    pe = admissible_c2_perturbation(P)
+@pytest.mark.parametrize("conditions, expected", (
+    ("impacting", (-2.019044088, 0.2820918413)),
+    ("non-impacting", (-2.1065759767, 0.1065759767)),
+    ("combined", (-2.019044088, 0.1065759767))))
+def test_admissible_c2_both_routes(conditions, expected):
+    """Exact (design.admissible_c2, closed forms) and perturbation agree to 1e-12 on every
+    end point, for each set of conditions (the combined set is the default)."""
+    ex = admissible_c2(P, conditions=conditions)
+    pe = admissible_c2_perturbation(P, conditions=conditions)
     assert len(ex) == len(pe) == 1
     diff = np.abs(np.subtract(ex[0], pe[0]))
-    assert np.all(diff < 1e-9), diff
-    assert pe[0] == pytest.approx((-2.019044088, 0.2820918413), abs=1e-9)
+    assert np.all(diff < 1e-12), diff
+    assert pe[0] == pytest.approx(expected, abs=1e-9)
+    if conditions == "combined":
+        assert admissible_c2(P) == ex and admissible_c2_perturbation(P) == pe
 
 
 def test_delta2_from_delta_d():
