@@ -1,4 +1,4 @@
-"""The `grazing` command line: design, orbit, continue, simulate, run, demo.
+"""The `grazing` command line: design, orbit, continue, simulate, run, demo, robustness.
 
 Every subcommand shares --zeta --r --omega --pi2-offset (defaults: the study's set).
 Output is human-readable by default; with --json exactly one JSON object goes to

@@ -160,6 +160,9 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     active = gains is not None and control_after is not None
     reason = "exact: the closed-form flow (requested)" if fidelity == "exact" else \
         f"{fidelity}: requested"
+    delay = gains.delay if active else 0.0  # actuation delay (docs/theory_delay.md)
+    if fidelity == "auto" and delay != 0.0:
+        fidelity, reason = "exact", "exact: the maps do not model an actuation delay"
     if fidelity == "auto":
         choice = choose_fidelity(p, max(periods, 1), tol, deviation=(dx, dv),
                                  gains=gains if active else None,
@@ -170,7 +173,6 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
                          f"{', '.join(FIDELITIES)}, auto")
     step = period_step if fidelity == "exact" else \
         (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
-    delay = gains.delay if active else 0.0  # actuation delay (docs/theory_delay.md)
     if delay != 0.0 and fidelity != "exact":
         raise ValueError(f"fidelity={fidelity!r} does not model an actuation delay "
                          f"(delay={delay!r}): use fidelity='exact'")

@@ -378,3 +378,17 @@ def test_cli_delay_errors_are_one_line(capsys):
         err = capsys.readouterr().err
         assert status == 2, argv
         assert err.startswith("grazing: error:") and err.count("\n") == 1 and "delay" in err
+
+
+def test_simulate_models_the_delay_only_with_the_exact_flow():
+    q = P.with_(delta_d=-5e-6)
+    g = evaluate_design(P, 0.5, 2.0).gains()
+    auto = simulate(q, 20, gains=g, control_after=5, fidelity="auto")
+    exact = simulate(q, 20, gains=g, control_after=5)
+    assert auto.fidelity == "exact" and "delay" in auto.fidelity_reason
+    assert np.array_equal(auto.pi2_deviation, exact.pi2_deviation)
+    # before control_after the samples are the uncontrolled run's, bit for bit
+    assert np.array_equal(exact.pi2_deviation[:6], simulate(q, 6).pi2_deviation)
+    for fidelity in ("zdm2", "zdm1", "ode"):
+        with pytest.raises(ValueError, match="actuation delay"):
+            simulate(q, 3, gains=g, fidelity=fidelity)
