@@ -87,6 +87,10 @@ class PeriodicOrbit:
     def multipliers(self) -> np.ndarray:
         """Floquet multipliers, eigenvalues of the monodromy, largest modulus first."""
         sticking = any(i.sticking for i in self.impacts)
+        # an impact between a sample and its delayed kick: det is not the product formula
+        # (docs/theory_delay.md, (D3))
+        delay = 0.0 if self.gains is None else self.gains.delay
+        sticking = sticking or any(i.dt % self.params.period < delay for i in self.impacts)
         det = None if sticking else monodromy_det(
             self.params, self.gains, self.periods, len(self.impacts))
         return multipliers(self.monodromy, det)

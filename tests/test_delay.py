@@ -392,3 +392,20 @@ def test_simulate_models_the_delay_only_with_the_exact_flow():
     for fidelity in ("zdm2", "zdm1", "ode"):
         with pytest.raises(ValueError, match="actuation delay"):
             simulate(q, 3, gains=g, fidelity=fidelity)
+
+
+def test_orbit_with_its_impact_inside_the_delay_window_by_newton_shooting():
+    """delta = 8 > T - s: the kick acts after the impact. Newton shooting on the exact
+    delayed Pi2 map still finds the 1/1 orbit; its multipliers (det from the matrix, not
+    the product formula, which no longer holds) match finite differences of period_step."""
+    q = P.with_(delta_d=-1e-1)
+    g = Gains(0.05, -0.1, 8.0)
+    guess = simulate(q, 300, gains=g).final_deviation  # the run settles on it
+    o = shoot(q, gains=g, deviation=guess)
+    assert o.label == "1/1" and o.impacts[0].dt < g.delay
+    z = np.array(o.pi2_deviation)
+    jac = _fd(_step_map(q, g, g.delay), z, 1e-6)
+    np.testing.assert_allclose(np.sort_complex(o.multipliers), np.sort_complex(np.linalg.eigvals(jac)),
+                               atol=1e-6)
+    det_formula = math.exp(-2 * q.zeta * q.period) * q.r ** 2 * gain_determinant(g, q.zeta)
+    assert abs(np.linalg.det(jac) - det_formula) > 1e-3
