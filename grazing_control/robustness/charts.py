@@ -105,10 +105,14 @@ def plot_fault_sweep(results, path, dpi=80):
             lo = np.array([np.nan if r["spread_p10"] is None else r["spread_p10"] for r in rows])
             hi = np.array([np.nan if r["spread_p90"] is None else r["spread_p90"] for r in rows])
             axes[1, j].loglog(xs, med, "o-", ms=3, color=line.get_color())
+            pred = [r.get("spread_predicted") for r in rows]
+            if any(v is not None for v in pred):
+                axes[1, j].loglog(xs, [np.nan if v is None else v for v in pred], "--", lw=1,
+                                  color=line.get_color())
             axes[1, j].fill_between(xs, np.maximum(lo, 1e-16), hi, color=line.get_color(), alpha=0.15)
         axes[0, j].set_ylim(-0.05, 1.05)
         axes[0, j].set_ylabel(f"P(capture within {results[0]['horizon']} samples)")
-        axes[1, j].set_ylabel("stationary spread (RMS)")
+        axes[1, j].set_ylabel("stationary spread (RMS; dashed: linear prediction)")
         axes[1, j].set_xlabel(xlabel[kind])
     axes[0, 0].legend(fontsize=6)
     fig.tight_layout()

@@ -13,10 +13,16 @@ sample for sample):
 
 **Capture** (:func:`capture_statistics`): the loop has captured the controlled 1/1 orbit
 z* (the exact orbit of :func:`grazing_control.orbits.orbit_11` for the designed gains and
-delay) at sample n if max(|dx_k - dx*|, |dv_k - dv*|) <= ``threshold`` for the
-``hold`` consecutive samples k = n, ..., n + hold - 1, all inside the first N controlled
-samples. The **stationary spread** is the RMS of that distance over the last ``tail``
-samples of the run.
+delay) at sample n if the distance |z_k - z*| (Euclidean, on the Pi2 deviation) is
+<= ``threshold`` for the ``hold`` consecutive samples k = n, ..., n + hold - 1, all inside
+the first N = ``horizon`` controlled samples. The **stationary spread** is the RMS of that
+distance over the last ``tail`` samples of the run.
+
+**Prediction** (:func:`predicted_spread`, docs/robustness.md): for small faults the
+deviation from z* obeys the linearised loop e_{k+1} = J e_k + u_k, J the orbit's
+monodromy M2 (M1 + e2 k^T) (docs/theory_delay.md (D3)), u_k the fault's effect at the
+end of the period; its stationary RMS is sqrt(tr Sigma + |m|^2) with Sigma the solution
+of the discrete Lyapunov equation Sigma = J Sigma J^T + Cov u and m = (I - J)^{-1} E u.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from ..params import OscillatorParams
 from ..simulate import period_step, simulate
 
 __all__ = ["simulate_with_faults", "attractor_states", "CaptureResult", "capture_time",
-           "capture_statistics", "LEVELS", "fault_sweep"]
+           "capture_statistics", "LEVELS", "fault_sweep", "predicted_spread"]
 
 
 def simulate_with_faults(p: OscillatorParams, gains: Gains, faults: FaultModel, periods: int, *,
@@ -73,6 +79,59 @@ def simulate_with_faults(p: OscillatorParams, gains: Gains, faults: FaultModel, 
         dx, dv = seg.dx, seg.dv
         out[j + 1] = dx, dv
     return out
+
+
+def _loop_linearisation(p: OscillatorParams, gains: Gains, target):
+    """(J, M2, dv*) at the orbit: J = M2 (M1 + e2 k^T) (docs/theory_delay.md (D3)), M2 the
+    monodromy of the flow from the kick to the next sample, dv* = k^T z* the correction."""
+    from ..impact import advance
+
+    dx, dv = target
+    dvc = gains.c1 * dx + gains.c2 * dv
+    if gains.delay == 0.0:
+        m1 = (1.0, 0.0, 0.0, 1.0)
+        second = advance(p, p.tau2, dx, dv + dvc, p.period, monodromy=True)
+    else:
+        first = advance(p, p.tau2, dx, dv, gains.delay, monodromy=True)
+        m1 = first.monodromy
+        tau = (p.tau2 + p.omega * gains.delay) % (2.0 * math.pi)
+        second = advance(p, tau, first.dx, first.dv + dvc, p.period - gains.delay, monodromy=True)
+    m2 = np.array(second.monodromy).reshape(2, 2)
+    j = m2 @ (np.array(m1).reshape(2, 2) + np.outer([0.0, 1.0], [gains.c1, gains.c2]))
+    return j, m2, dvc
+
+
+def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float, target=None) -> float:
+    """Stationary RMS distance to z* of the linearised loop for one fault kind and level.
+
+    noise: u = M2 e2 k^T n, n ~ N(0, sigma^2 I); jitter: the kick dv* acts eps later, so
+    the state after it differs by (I - Phi(eps)) e2 dv* = -eps A e2 dv* + O(eps^2),
+    u = -M2 A e2 dv* eps, eps ~ N(0, jitter^2) (needs a designed delay > 0: at 0 the clip
+    makes eps one-sided); loss: u = -M2 e2 dv* with probability p (mean and covariance).
+    Valid while the faults keep the motion in the orbit's linear regime (docs/robustness.md).
+    """
+    from scipy.linalg import solve_discrete_lyapunov
+
+    from ..orbits import orbit_11
+
+    if target is None:
+        target = orbit_11(p, gains).pi2_deviation
+    j, m2, dvc = _loop_linearisation(p, gains, target)
+    mean = np.zeros(2)
+    if kind == "noise":
+        b = m2[:, 1]
+        q = level ** 2 * (gains.c1 ** 2 + gains.c2 ** 2) * np.outer(b, b)
+    elif kind == "jitter":
+        u = -(m2 @ np.array([1.0, -2.0 * p.zeta])) * dvc  # A e2 = (1, -2 zeta)
+        q = level ** 2 * np.outer(u, u)
+    elif kind == "loss":
+        u = -m2[:, 1] * dvc
+        mean = np.linalg.solve(np.eye(2) - j, level * u)
+        q = level * (1.0 - level) * np.outer(u, u)
+    else:
+        raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(LEVELS)}")
+    sigma = solve_discrete_lyapunov(j, q)
+    return float(math.sqrt(max(np.trace(sigma), 0.0) + mean @ mean))
 
 
 def attractor_states(p: OscillatorParams, count: int, *, transient: int = 1000, stride: int = 7,
@@ -120,7 +179,7 @@ def _one_run(args):
                                     first_sample=first_sample)
     except (ImpactCapError, InitialStateError, ValueError):
         return math.nan, math.nan
-    dist = np.max(np.abs(traj - np.asarray(target)), axis=1)
+    dist = np.hypot(traj[:, 0] - target[0], traj[:, 1] - target[1])
     n = capture_time(dist[: horizon + hold], threshold, hold)
     t = math.nan if n is None or n + hold > horizon else float(n)
     spread = float(np.sqrt(np.mean(dist[-tail:] ** 2)))
@@ -187,6 +246,8 @@ def fault_sweep(p: OscillatorParams, gains: Gains, delta_d: float, kind: str, le
             "spread_p10": float(np.quantile(sp, 0.1)) if sp.size else None,
             "spread_p90": float(np.quantile(sp, 0.9)) if sp.size else None,
             "failed_runs": int(np.sum(np.isnan(res.spread))),
+            "spread_predicted": (predicted_spread(q, gains, kind, float(level), target)
+                                 if not (kind == "jitter" and gains.delay == 0.0) else None),
         })
     return {"delta_d": delta_d, "kind": kind, "c1": gains.c1, "c2": gains.c2,
             "actuation_delay": gains.delay, "target": list(target), "seeds": seeds,
