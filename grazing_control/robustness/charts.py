@@ -69,9 +69,10 @@ def plot_stability_maps(maps, path, boundaries=None, dpi=80):
                 ax.contour(m.c2s, m.delays, np.nan_to_num(vals, nan=3.0), levels=[0.0],
                            colors="k", linewidths=0.8)
             if design == "delayed" and boundaries:
-                for delay, ivs in boundaries.items():
-                    for lo, hi in ivs:
-                        ax.plot([lo, hi], [delay, delay], color="m", lw=0.6, alpha=0.6)
+                ends = [(x, delay) for delay, ivs in boundaries.items() for iv in ivs for x in iv]
+                if ends:
+                    ex, ey = zip(*ends)
+                    ax.plot(ex, ey, "m.", ms=2.5, label="admissible-set ends (design)")
             if i == 0:
                 ax.set_title(f"Δd = {dd:.0e}", fontsize=9)
             if j == 0:
@@ -79,6 +80,8 @@ def plot_stability_maps(maps, path, boundaries=None, dpi=80):
             if i == 1:
                 ax.set_xlabel("c2")
     fig.colorbar(mesh, ax=axes, shrink=0.8, label="log10 max|λ| (black: |λ| = 1; gray: no 1/1 orbit)")
+    if boundaries:
+        axes[0, 0].legend(fontsize=6, loc="lower left")
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
 
