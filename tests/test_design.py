@@ -300,3 +300,35 @@ def test_failed_write_keeps_an_existing_file(tmp_path, monkeypatch):
         write_controller_yaml(path, P, _gains(-1.0))
     assert path.read_text() == "old\n"
     assert sorted(os.listdir(tmp_path)) == ["controller.yaml"]
+
+
+# ------------------------------------------------------------------ non-impacting side
+def test_combined_set_adds_the_non_impacting_condition():
+    """Default set = impacting conditions and rho(N_g) < 1 (issue 7): (-2.0190, 0.10658)."""
+    (lo, hi), = admissible_c2(P)
+    (ilo, ihi), = admissible_c2(P, conditions="impacting")
+    (nlo, nhi), = admissible_c2(P, conditions="non-impacting")
+    assert (lo, hi) == (max(ilo, nlo), min(ihi, nhi))
+    assert hi == pytest.approx(0.1065759767, abs=1e-9) and nlo == pytest.approx(-2.1065759767, abs=1e-9)
+    with pytest.raises(ValueError, match="conditions"):
+        admissible_c2(P, conditions="both")
+
+
+@pytest.mark.parametrize("c2, grows", [(0.1065759767 - 1e-2, False), (0.1065759767 + 1e-2, True)])
+def test_non_impacting_controlled_motion_flips_at_the_upper_end(c2, grows):
+    """On the non-impacting side (Delta d = +1e-3, wall out of reach of a 1e-9 deviation)
+    the exact controlled Pi2 map contracts below the end and grows above it, at the rate
+    rho(N_g) per period (a flip: the eigenvalue N11 of the degenerate N_g passes -1)."""
+    from grazing_control.simulate import simulate
+
+    q = P.with_(delta_d=1e-3)
+    g = _gains(c2)
+    n = 200
+    res = simulate(q, n + 1, deviation=(1e-9, 0.0), gains=g)
+    assert res.impacts_per_period.sum() == 0
+    size = np.linalg.norm(res.pi2_deviation, axis=1)
+    assert bool(size[n] > size[0]) is grows
+    rate = (size[n] / size[n - 40]) ** (1 / 40)
+    rho = float(np.max(np.abs(evaluate_design(P, c2).multipliers_free)))
+    assert rate == pytest.approx(rho, rel=1e-2)
+    assert evaluate_design(P, c2).free_stable is (not grows)
