@@ -114,9 +114,12 @@ def plot_fault_sweep(results, path, dpi=80):
                                   color=line.get_color())
             axes[1, j].fill_between(xs, np.maximum(lo, 1e-16), hi, color=line.get_color(), alpha=0.15)
         axes[0, j].set_ylim(-0.05, 1.05)
-        axes[0, j].set_ylabel(f"P(capture within {results[0]['horizon']} samples)")
-        axes[1, j].set_ylabel("stationary spread (RMS; dashed: linear prediction)")
+        axes[0, j].set_ylabel(f"P(capture, N = {results[0]['horizon']})")
+        axes[1, j].set_ylabel("spread (RMS)")
         axes[1, j].set_xlabel(xlabel[kind])
+    axes[1, 0].set_ylim(1e-5, 1e-1)  # runs without a loss in their tail sit at ~1e-15
+    fig.suptitle("capture probability (top) and stationary spread, median and 10-90 % "
+                 "(bottom; dashed: linear prediction)", fontsize=9)
     axes[0, 0].legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=dpi)
