@@ -90,20 +90,23 @@ def test_no_faults_capture_all_and_spread_at_rounding_loss_one_captures_none(sta
     assert np.all(lost.spread > 1e-4)
 
 
-@pytest.mark.parametrize("kind, level", [("jitter", 1e-4), ("noise", 1e-9)])
-def test_small_faults_give_the_spread_of_the_linearised_loop(kind, level, starts):
+@pytest.mark.parametrize("gains, kind, level", [(DELAYED, "jitter", 1e-4), (DELAYED, "noise", 1e-9),
+                                                 (STUDY, "jitter", 1e-4)],
+                         ids=["delayed-jitter", "delayed-noise", "study-one-sided-jitter"])
+def test_small_faults_give_the_spread_of_the_linearised_loop(gains, kind, level, starts):
     """Linear response around the orbit: the measured stationary RMS matches the discrete
     Lyapunov prediction (+-15 % with 3 seeds x 300 samples), and twice the level gives
-    twice the spread."""
-    target = orbit_11(Q, DELAYED).pi2_deviation
+    twice the spread. With no designed delay the jitter is clipped at the sample (one-
+    sided, with a mean): the prediction uses the clipped normal's moments."""
+    target = orbit_11(Q, gains).pi2_deviation
     spreads = []
     for lv in (level, 2 * level):
-        res = capture_statistics(Q, DELAYED, target, starts[:3],
+        res = capture_statistics(Q, gains, target, starts[:3],
                                  [FaultModel(**{kind: lv}, seed=i) for i in range(3)],
                                  horizon=100, tail=300, threshold=1e-4, hold=10)
         assert res.captured == 1.0
         rms = math.sqrt(np.mean(res.spread ** 2))
-        assert rms == pytest.approx(predicted_spread(Q, DELAYED, kind, lv, target), rel=0.15)
+        assert rms == pytest.approx(predicted_spread(Q, gains, kind, lv, target), rel=0.15)
         spreads.append(rms)
     assert spreads[1] / spreads[0] == pytest.approx(2.0, rel=0.15)
 
@@ -195,3 +198,18 @@ def test_grazing_robustness_bad_input_is_one_line(argv, capsys):
         status = exc.code
     err = capsys.readouterr().err
     assert status == 2 and err.startswith("grazing: error:") and err.count("\n") == 1
+
+
+def test_clipped_normal_moments():
+    from math import pi, sqrt
+
+    from grazing_control.robustness.faults import _clipped_normal_moments
+
+    assert _clipped_normal_moments(0.0, 2.0) == pytest.approx((2.0 / sqrt(2 * pi), 4.0 * (0.5 - 1 / (2 * pi))))
+    assert _clipped_normal_moments(-50.0, 1.0) == pytest.approx((0.0, 1.0), abs=1e-12)
+    assert _clipped_normal_moments(-1.0, 0.0) == (0.0, 0.0)
+    z = np.random.default_rng(5).standard_normal(400_000)
+    x = np.maximum(-0.4, 0.5 * z)
+    mean, var = _clipped_normal_moments(-0.4, 0.5)
+    assert mean == pytest.approx(x.mean(), abs=4 * x.std() / sqrt(z.size))
+    assert var == pytest.approx(x.var(), rel=0.01)

@@ -106,8 +106,9 @@ def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float,
 
     noise: u = M2 e2 k^T n, n ~ N(0, sigma^2 I); jitter: the kick dv* acts eps later, so
     the state after it differs by (I - Phi(eps)) e2 dv* = -eps A e2 dv* + O(eps^2),
-    u = -M2 A e2 dv* eps, eps ~ N(0, jitter^2) (needs a designed delay > 0: at 0 the clip
-    makes eps one-sided); loss: u = -M2 e2 dv* with probability p (mean and covariance).
+    u = -M2 A e2 dv* eps, eps = max(-delay, jitter e), e ~ N(0, 1) (the clip at the
+    sample; its mean and variance are those of the clipped normal); loss: u = -M2 e2 dv*
+    with probability p (mean and covariance).
     Valid while the faults keep the motion in the orbit's linear regime (docs/robustness.md).
     """
     from scipy.linalg import solve_discrete_lyapunov
@@ -123,7 +124,9 @@ def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float,
         q = level ** 2 * (gains.c1 ** 2 + gains.c2 ** 2) * np.outer(b, b)
     elif kind == "jitter":
         u = -(m2 @ np.array([1.0, -2.0 * p.zeta])) * dvc  # A e2 = (1, -2 zeta)
-        q = level ** 2 * np.outer(u, u)
+        e_mean, e_var = _clipped_normal_moments(-gains.delay, level)
+        mean = np.linalg.solve(np.eye(2) - j, e_mean * u)
+        q = e_var * np.outer(u, u)
     elif kind == "loss":
         u = -m2[:, 1] * dvc
         mean = np.linalg.solve(np.eye(2) - j, level * u)
@@ -132,6 +135,18 @@ def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float,
         raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(LEVELS)}")
     sigma = solve_discrete_lyapunov(j, q)
     return float(math.sqrt(max(np.trace(sigma), 0.0) + mean @ mean))
+
+
+def _clipped_normal_moments(a: float, sigma: float):
+    """Mean and variance of max(a, sigma Z), Z ~ N(0, 1), a <= 0."""
+    if sigma == 0.0:
+        return 0.0, 0.0
+    al = a / sigma
+    cdf = 0.5 * math.erfc(-al / math.sqrt(2.0))
+    pdf = math.exp(-0.5 * al * al) / math.sqrt(2.0 * math.pi)
+    mean = a * cdf + sigma * pdf
+    second = a * a * cdf + sigma * sigma * (1.0 - cdf + al * pdf)
+    return mean, max(second - mean * mean, 0.0)
 
 
 def attractor_states(p: OscillatorParams, count: int, *, transient: int = 1000, stride: int = 7,
@@ -246,8 +261,7 @@ def fault_sweep(p: OscillatorParams, gains: Gains, delta_d: float, kind: str, le
             "spread_p10": float(np.quantile(sp, 0.1)) if sp.size else None,
             "spread_p90": float(np.quantile(sp, 0.9)) if sp.size else None,
             "failed_runs": int(np.sum(np.isnan(res.spread))),
-            "spread_predicted": (predicted_spread(q, gains, kind, float(level), target)
-                                 if not (kind == "jitter" and gains.delay == 0.0) else None),
+            "spread_predicted": predicted_spread(q, gains, kind, float(level), target),
         })
     return {"delta_d": delta_d, "kind": kind, "c1": gains.c1, "c2": gains.c2,
             "actuation_delay": gains.delay, "target": list(target), "seeds": seeds,
