@@ -305,7 +305,7 @@ def test_delayed_design_bounds_the_multipliers_and_the_undelayed_one_does_not(de
         errs.append(np.max(np.abs(np.sort_complex(o.multipliers) - lam0)))
         large.append(abs(orbit_11(q, g0).multipliers[0]))
     assert errs[-1] < 1e-4 and errs[-1] <= errs[0]
-    assert all(np.max(np.abs(lam0)) < 1.0 for _ in (0,))
+    assert np.max(np.abs(lam0)) < 1.0
     # 1/|Delta d|: two decades of Delta d, two decades of multiplier (ratios ~100)
     for a, b in zip(large[:-1], large[1:]):
         assert 50.0 < b / a < 200.0, large
