@@ -1,4 +1,4 @@
-"""The `grazing` command line: design, orbit, continue, simulate, run, demo.
+"""The `grazing` command line: design, orbit, continue, simulate, run, demo, robustness.
 
 Every subcommand shares --zeta --r --omega --pi2-offset (defaults: the study's set).
 Output is human-readable by default; with --json exactly one JSON object goes to
@@ -117,6 +117,14 @@ def _method_arg(parser):
 def _gain_args(parser, required=False):
     parser.add_argument("--c1", type=_finite, help="gain c1 (default: degenerate condition Eq. 38)")
     parser.add_argument("--c2", type=_finite, required=required, help="gain c2")
+    _delay_arg(parser)
+
+
+def _delay_arg(parser):
+    parser.add_argument("--delay", type=_finite, default=0.0,
+                        help="actuation delay: the correction acts this long (simulation time) "
+                             "after the Pi2 sample, 0 <= delay < T - pi2_offset/omega "
+                             "(docs/theory_delay.md); default 0")
 
 
 #: Largest zeta T (forcing periods' decay exponent) the commands accept: e^{-2 zeta T}
@@ -140,14 +148,17 @@ def _params(args, delta_d=0.0):
 
 
 def _gains(args, p):
+    delay = getattr(args, "delay", 0.0)
     if args.c2 is None:
         if args.c1 is not None:
             raise ParameterError("c1 given without c2: give both, or c2 alone (c1 from Eq. 38)")
+        if delay != 0.0:
+            raise ParameterError("--delay needs the gains: give --c2 (and optionally --c1)")
         return None
     from .design import degenerate_c1
 
-    c1 = degenerate_c1(p, args.c2) if args.c1 is None else args.c1
-    return Gains(c1, args.c2)
+    c1 = degenerate_c1(p, args.c2, delay) if args.c1 is None else args.c1
+    return Gains(c1, args.c2, delay)
 
 
 # ---------------------------------------------------------------------------- design
@@ -156,8 +167,9 @@ def cmd_design(args):
 
     p = _params(args)
     t0 = time.perf_counter()
-    point = evaluate_design(p, args.c2)
-    intervals = admissible_c2(p)
+    point = evaluate_design(p, args.c2, args.delay)
+    sets = {c: admissible_c2(p, delay=args.delay, conditions=c)
+            for c in ("combined", "impacting", "non-impacting")}
     cost = time.perf_counter() - t0
     other = None
     if args.method == "perturbation":
@@ -165,33 +177,43 @@ def cmd_design(args):
                                    limit_multipliers_perturbation)
 
         t0 = time.perf_counter()
-        g = Gains(point.c1, point.c2)
+        g = point.gains()
         lam_p = limit_multipliers_perturbation(p, g)
         gamma_p = existence_coefficient_perturbation(p, g)
-        intervals_p = admissible_c2_perturbation(p)
+        sets_p = {c: admissible_c2_perturbation(p, delay=args.delay, conditions=c) for c in sets}
         cost_p = time.perf_counter() - t0
-        other = {"exact": {"admissible_c2": [list(iv) for iv in intervals],
+        other = {"exact": {"admissible_c2": [list(iv) for iv in sets["combined"]],
                            "multipliers_limit": _complex_list(point.multipliers_limit),
                            "gamma1": point.gamma1, "seconds": cost}}
-        point = type(point)(point.c1, point.c2, lam_p, gamma_p)
-        intervals, cost = intervals_p, cost_p
+        exact_combined = sets["combined"]
+        point = type(point)(point.c1, point.c2, lam_p, gamma_p, point.multipliers_free, point.delay)
+        sets, cost = sets_p, cost_p
+        ends = [(a - b) for iv, jv in zip(sets["combined"], exact_combined) for a, b in zip(iv, jv)]
+        other["difference_admissible_ends"] = ends
+    intervals = sets["combined"]
     chosen = next((iv for iv in intervals if iv[0] <= args.c2 <= iv[1]), None)
     shown = chosen or (max(intervals, key=lambda iv: iv[1] - iv[0]) if intervals else None)
+    rho_free = float(np.max(np.abs(point.multipliers_free)))
     out = {
         "c1": point.c1,
         "c2": point.c2,
+        "actuation_delay": point.delay,
         "x_ref": p.x_ref,
         "v_ref": p.v_ref,
         "admissible_c2": list(shown) if shown else None,
+        "admissible_c2_sets": {c: [list(iv) for iv in ivs] for c, ivs in sets.items()},
         "multipliers_limit": _complex_list(point.multipliers_limit),
         "gamma1": point.gamma1,
+        "multipliers_free": _complex_list(point.multipliers_free),
+        "spectral_radius_free": rho_free,
+        "conditions": {"limit_stable": point.stable, "exists_impacting": point.gamma1 > 0.0,
+                       "free_stable": point.free_stable},
         "admissible": point.admissible,
+        "admissible_impacting": point.admissible_impacting,
         "method": args.method,
         "seconds": cost,
     }
     if other is not None:
-        ends = [(a - b) for iv, jv in zip(intervals, other["exact"]["admissible_c2"]) for a, b in zip(iv, jv)]
-        other["difference_admissible_ends"] = ends
         out["comparison"] = other
     _require_finite(out, "design")
     if args.out:
@@ -199,17 +221,24 @@ def cmd_design(args):
             raise ParameterError(
                 f"c2={args.c2!r} is not admissible: valid range is {_fmt_intervals(intervals)}; "
                 f"nothing written to {args.out}")
-        write_controller_yaml(args.out, p, Gains(point.c1, point.c2))
+        write_controller_yaml(args.out, p, point.gains())
     if args.json:
         return out
     lam = ", ".join(f"{abs(z):.6g}" for z in point.multipliers_limit)
+    ok = {True: "yes", False: "NO"}
+    delay = f", actuation delay {point.delay:.12g}" if point.delay else ""
     lines = [
-        f"degenerate grazing design (N_g,12 = 0, Eq. 38) for c2 = {point.c2:.12g}",
+        f"degenerate grazing design (N_g,12 = 0, Eq. 38) for c2 = {point.c2:.12g}{delay}",
         f"  c1                 = {point.c1:.15g}",
         f"  X** on Pi2         = ({p.x_ref:.15g}, {p.v_ref:.15g})",
-        f"  |lambda0|          = {lam}  (limit Delta d -> 0-)",
-        f"  gamma1             = {point.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*)",
-        f"  admissible c2      = {_fmt_intervals(intervals)}",
+        f"  |lambda0|          = {lam}  (limit Delta d -> 0-: {ok[point.stable]} < 1)",
+        f"  gamma1             = {point.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*: "
+        f"{ok[point.gamma1 > 0.0]})",
+        f"  rho(N_g)           = {rho_free:.6g}  (non-impacting motion, d > d*: "
+        f"{ok[point.free_stable]} < 1)",
+        f"  admissible c2      = {_fmt_intervals(intervals)}  (all three conditions)",
+        f"    impacting side   = {_fmt_intervals(sets['impacting'])}  (|lambda0| < 1, gamma1 > 0)",
+        f"    non-impacting    = {_fmt_intervals(sets['non-impacting'])}  (rho(N_g) < 1)",
         f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
         f"  method             : {args.method} ({cost:.3g} s)",
     ]
@@ -259,11 +288,16 @@ def cmd_orbit(args):
         "method": args.method,
         "seconds": cost,
     }
+    if gains is not None and gains.delay:
+        out.update(c1=gains.c1, c2=gains.c2, actuation_delay=gains.delay,
+                   section_pi2_deviation=list(o.pi2_deviation))
     _require_finite(out, "orbit")
     if args.json:
         return out
     lam = ", ".join(f"{z:.6g}" for z in lam)
     ctl = f" with c1={gains.c1:.6g}, c2={gains.c2:.6g}" if gains else " (uncontrolled)"
+    if gains is not None and gains.delay:
+        ctl += f", actuation delay {gains.delay:.6g}"
     return "\n".join([
         f"1/1 orbit at Delta d = {o.params.delta_d:.6g}{ctl}",
         f"  impact phase  = {o.impact_phase:.15g}",
@@ -429,7 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("design", help="gains (c1, c2) for degenerate grazing, admissible c2")
     _common(s)
     s.add_argument("--c2", type=_finite, required=True, help="chosen gain c2")
-    s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here")
+    _delay_arg(s)
+    s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here "
+                                             "(c1, c2, actuation_delay, X**, the model)")
     _method_arg(s)
     s.set_defaults(func=cmd_design)
 
@@ -479,6 +515,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .bag_command import add_bag_parser
     add_bag_parser(sub)
+    from .robustness.cli import add_robustness_parser
+
+    add_robustness_parser(sub, _common, _finite)
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
     s.add_argument("--out", type=_path, default="out/demo", help="report folder (default out/demo)")

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from .control import Gains
+from .control import Gains, gain_determinant
 from .flow import matmul2
 from .impact import saltation_matrix
 from .orbits import OrbitNotFound, _orbit_from_phase, branch_point, find_branch_phase, multipliers
@@ -75,7 +75,7 @@ def branch_monodromy(p: OscillatorParams, psi: float, gains: Gains | None = None
     q = p.with_(delta_d=dd)
     theta = (p.tau_star + psi) % TWO_PI
     j = matmul2(m, saltation_matrix(q, theta, v))
-    g = 1.0 if gains is None else 1.0 + gains.c2
+    g = gain_determinant(gains, p.zeta)
     det = math.exp(-2.0 * p.zeta * p.period) * p.r ** 2 * g
     return dd, v, j[0] + j[3], det
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from .control import Gains
+from .control import Gains, gain_determinant
 from .flow import matmul2, to_physical, transition_matrix
 from .impact import Impact, InitialStateError, NonFiniteStateError, saltation_matrix
 from .maps import period_matrix, pi2_map
@@ -98,6 +98,10 @@ class PeriodicOrbit:
     def multipliers(self) -> np.ndarray:
         """Floquet multipliers, eigenvalues of the monodromy, largest modulus first."""
         sticking = any(i.sticking for i in self.impacts)
+        # an impact between a sample and its delayed kick: det is not the product formula
+        # (docs/theory_delay.md, (D3))
+        delay = 0.0 if self.gains is None else self.gains.delay
+        sticking = sticking or any(i.dt % self.params.period < delay for i in self.impacts)
         det = None if sticking else monodromy_det(
             self.params, self.gains, self.periods, len(self.impacts))
         return multipliers(self.monodromy, det)
@@ -143,8 +147,11 @@ def multipliers(monodromy, det: float | None = None) -> np.ndarray:
 
 
 def monodromy_det(p: OscillatorParams, gains: Gains | None, periods: int, impacts: int) -> float:
-    """Exact det of the monodromy: e^{-2 zeta n T} r^(2 m) (1 + c2)^n (spec section 5)."""
-    g = 1.0 if gains is None else 1.0 + gains.c2
+    """Exact det of the monodromy: e^{-2 zeta n T} r^(2 m) (det G)^n (spec section 5).
+
+    det G = 1 + c2, or 1 + k^T b_delta with an actuation delay (docs/theory_delay.md).
+    """
+    g = gain_determinant(gains, p.zeta)
     return math.exp(-2.0 * p.zeta * periods * p.period) * p.r ** (2 * impacts) * g ** periods
 
 
@@ -162,8 +169,13 @@ def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
 
     Solves the linear periodicity system of the module docstring; ``p.delta_d`` is
     ignored (it is the unknown). v- <= 0 means the point is not a physical impact.
+    With an actuation delay the kick must act before the next impact
+    (delay < T - sigma, docs/theory_delay.md section 2); beyond, all values are nan.
     """
     theta = (p.tau_star + psi) % TWO_PI
+    if gains is not None and gains.delay != 0.0 and \
+            not gains.delay < p.period - ((p.tau2 - theta) % TWO_PI) / p.omega:
+        return math.nan, math.nan, (math.nan,) * 4
     m11, m12, m21, m22 = impact_period_matrix(p, theta, gains)
     a, w, r = p.amplitude, p.omega, p.r
     sh = math.sin(0.5 * psi)

@@ -277,41 +277,51 @@ def existence_coefficient_perturbation(p: OscillatorParams, gains: Gains,
 
 
 def admissible_c2_perturbation(p: OscillatorParams, lo: float = -4.0, hi: float = 2.0,
-                               n: int = 601, zdm_order: int = 2):
+                               n: int = 601, zdm_order: int = 2, *, delay: float = 0.0,
+                               conditions: str = "combined"):
     """Admissible c2 set from the perturbation formulas (spec section 6).
 
-    For each c2, c1 from the degenerate condition (Eq. 38); admissible where
-    max|lambda0| < 1 (lambda0 from chi0, psi0; Eq. 23) and kappa2 < 0 (the 1/1 motion
-    exists for d < d*, Eq. 36). Scan of [lo, hi] on n points, end points refined by
-    Brent's method. Compare :func:`grazing_control.design.admissible_c2`.
+    For each c2, c1 from the degenerate condition (Eq. 38, for the actuation ``delay``);
+    'impacting': max|lambda0| < 1 (lambda0 from chi0, psi0; Eq. 23) and kappa2 < 0 (the
+    1/1 motion exists for d < d*, Eq. 36); 'non-impacting': the spectral radius of N_g
+    below 1 (the 0/1 motion for d > d*); 'combined' (default): all three. Scan of
+    [lo, hi] on n points, end points refined by Brent's method. Compare
+    :func:`grazing_control.design.admissible_c2`.
 
     Returns
     -------
     list of (float, float)
     """
-    from .design import degenerate_c1
+    from .design import CONDITIONS, degenerate_c1
 
     def coeffs(c2):
-        return series_coefficients(p, Gains(degenerate_c1(p, c2), c2), zdm_order)
+        return series_coefficients(p, Gains(degenerate_c1(p, c2, delay), c2, delay), zdm_order)
 
     def stab(c2):
         return float(np.max(np.abs(characteristic_roots(coeffs(c2), 0.0)))) - 1.0
 
     def exist(c2):
-        return -coeffs(c2).kappa2
+        return coeffs(c2).kappa2
+
+    def free(c2):
+        return float(np.max(np.abs(multipliers(np.array(coeffs(c2).n).reshape(2, 2))))) - 1.0
+
+    funcs = {"impacting": (stab, exist), "non-impacting": (free,),
+             "combined": (stab, exist, free)}.get(conditions)
+    if funcs is None:
+        raise ValueError(f"conditions={conditions!r} is invalid: valid values are {', '.join(CONDITIONS)}")
 
     def ok(c2):
-        return stab(c2) < 0.0 and exist(c2) > 0.0
+        return all(f(c2) < 0.0 for f in funcs)
 
     grid = np.linspace(lo, hi, n)
     flags = [ok(c2) for c2 in grid]
 
     def edge(a, b):
-        for f in (stab, exist):
-            fa, fb = f(a), f(b)
-            if fa * fb < 0.0:
-                return brentq(f, a, b, xtol=1e-13)
-        return 0.5 * (a + b)
+        edges = [brentq(f, a, b, xtol=1e-13) for f in funcs if f(a) * f(b) < 0.0]
+        if not edges:
+            return 0.5 * (a + b)
+        return min(edges) if ok(a) else max(edges)
 
     out, start = [], None
     for k, flag in enumerate(flags):

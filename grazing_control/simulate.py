@@ -177,6 +177,9 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     reason = "exact: the closed-form flow (requested)" if fidelity == "exact" else \
         f"{fidelity}: requested"
     auto = fidelity == "auto"
+    delay = gains.delay if active else 0.0  # actuation delay (docs/theory_delay.md)
+    if auto and delay != 0.0:
+        fidelity, reason, auto = "exact", "exact: the maps do not model an actuation delay", False
     if auto:
         choice = choose_fidelity(p, max(periods, 1), tol, deviation=(dx, dv),
                                  gains=gains if active else None,
@@ -187,6 +190,9 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
                          f"{', '.join(FIDELITIES)}, auto")
     step = period_step if fidelity == "exact" else \
         (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
+    if delay != 0.0 and fidelity != "exact":
+        raise ValueError(f"fidelity={fidelity!r} does not model an actuation delay "
+                         f"(delay={delay!r}): use fidelity='exact'")
     fallbacks = 0
     ks = range(periods)
     if progress:
@@ -206,7 +212,10 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
         corr[k] = dvc
         try:
             try:
-                seg = step(p, dx, dv, dvc)
+                if delay != 0.0 and k >= control_after:
+                    seg = period_step(p, dx, dv, dvc, delay=delay)
+                else:
+                    seg = step(p, dx, dv, dvc)
             except ModelValidityError:
                 if not auto:
                     raise

@@ -242,7 +242,8 @@ def test_design_out_writes_the_controller_yaml(runs, tmp_path):
     assert "c1" in r.stdout and "admissible" in r.stdout and str(out_ok) in r.stdout
     doc = yaml.safe_load(out_ok.read_text())
     params = doc["/**"]["ros__parameters"]
-    assert set(params) == {"c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset"}
+    assert set(params) == {"c1", "c2", "actuation_delay", "x_ref", "v_ref", "zeta", "r", "omega",
+                           "pi2_offset"}
     assert params["c1"] == pytest.approx(degenerate_c1(P, -1.0), rel=1e-14)
     assert params["c2"] == -1.0
     ref = tmp_path / "ref.yaml"

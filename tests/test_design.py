@@ -8,7 +8,9 @@ Every number is checked against a route that does not share the code under test:
 * the admissible set's end points by what fails there: exact multipliers crossing the
   unit circle, and the 1/1 branch born at grazing leaving the impacting side.
 
-Measured (study parameters): admissible c2 = (-2.0190440881, 0.2820918413);
+Measured (study parameters): the study's (impacting-side) admissible set
+c2 = (-2.0190440882, 0.2820918413); with the non-impacting side too (rho(N_g) < 1)
+the combined default set is (-2.0190440882, 0.1065759767);
 at the lower end lambda0 = -1 (flip) with gamma1 ~ 187 > 0, so only stability fails;
 at the upper end lambda0 = +1 *and* gamma1 = 0 at the same c2 (a +1 limit multiplier
 is a fold of Delta d(psi) at grazing, i.e. kappa = 0), so both conditions fail there.
@@ -71,7 +73,8 @@ def _shoot_at(p, gains, guess):
 
 @pytest.fixture(scope="module")
 def interval():
-    intervals = admissible_c2(P)
+    """The study's set: the impacting-side conditions only."""
+    intervals = admissible_c2(P, conditions="impacting")
     assert len(intervals) == 1, intervals
     return intervals[0]
 
@@ -167,7 +170,7 @@ def test_admissible_c2_is_one_interval_containing_the_study_gain(interval):
     assert hi == pytest.approx(0.2820918413, abs=1e-8)
     assert lo < -1.0 < hi
     # a wider scan finds the same set
-    wide = admissible_c2(P, -10.0, 10.0, 801)
+    wide = admissible_c2(P, -10.0, 10.0, 801, conditions="impacting")
     assert len(wide) == 1
     assert wide[0] == pytest.approx(interval, abs=1e-9)
 
@@ -177,8 +180,8 @@ def test_just_inside_each_end_admissible_just_outside_not(interval, end):
     x = interval[end]
     inward = 1.0 if end == 0 else -1.0
     for eps in (1e-6, 1e-3):
-        assert evaluate_design(P, x + inward * eps).admissible
-        assert not evaluate_design(P, x - inward * eps).admissible
+        assert evaluate_design(P, x + inward * eps).admissible_impacting
+        assert not evaluate_design(P, x - inward * eps).admissible_impacting
 
 
 def test_lower_end_is_a_flip_of_the_exact_multipliers(interval):
@@ -244,7 +247,8 @@ def test_write_controller_yaml_shape_and_round_trip(tmp_path):
     assert list(doc) == ["/**"]
     assert list(doc["/**"]) == ["ros__parameters"]
     params = doc["/**"]["ros__parameters"]
-    assert set(params) == {"c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset"}
+    assert set(params) == {"c1", "c2", "actuation_delay", "x_ref", "v_ref", "zeta", "r", "omega",
+                           "pi2_offset"}
     assert all(isinstance(v, float) for v in params.values())
     assert params == controller_parameters(P, g)  # exact: floats round-trip
     assert params["c1"] == g.c1 and params["c2"] == -1.0
@@ -296,3 +300,35 @@ def test_failed_write_keeps_an_existing_file(tmp_path, monkeypatch):
         write_controller_yaml(path, P, _gains(-1.0))
     assert path.read_text() == "old\n"
     assert sorted(os.listdir(tmp_path)) == ["controller.yaml"]
+
+
+# ------------------------------------------------------------------ non-impacting side
+def test_combined_set_adds_the_non_impacting_condition():
+    """Default set = impacting conditions and rho(N_g) < 1 (issue 7): (-2.0190, 0.10658)."""
+    (lo, hi), = admissible_c2(P)
+    (ilo, ihi), = admissible_c2(P, conditions="impacting")
+    (nlo, nhi), = admissible_c2(P, conditions="non-impacting")
+    assert (lo, hi) == (max(ilo, nlo), min(ihi, nhi))
+    assert hi == pytest.approx(0.1065759767, abs=1e-9) and nlo == pytest.approx(-2.1065759767, abs=1e-9)
+    with pytest.raises(ValueError, match="conditions"):
+        admissible_c2(P, conditions="both")
+
+
+@pytest.mark.parametrize("c2, grows", [(0.1065759767 - 1e-2, False), (0.1065759767 + 1e-2, True)])
+def test_non_impacting_controlled_motion_flips_at_the_upper_end(c2, grows):
+    """On the non-impacting side (Delta d = +1e-3, wall out of reach of a 1e-9 deviation)
+    the exact controlled Pi2 map contracts below the end and grows above it, at the rate
+    rho(N_g) per period (a flip: the eigenvalue N11 of the degenerate N_g passes -1)."""
+    from grazing_control.simulate import simulate
+
+    q = P.with_(delta_d=1e-3)
+    g = _gains(c2)
+    n = 200
+    res = simulate(q, n + 1, deviation=(1e-9, 0.0), gains=g)
+    assert res.impacts_per_period.sum() == 0
+    size = np.linalg.norm(res.pi2_deviation, axis=1)
+    assert bool(size[n] > size[0]) is grows
+    rate = (size[n] / size[n - 40]) ** (1 / 40)
+    rho = float(np.max(np.abs(evaluate_design(P, c2).multipliers_free)))
+    assert rate == pytest.approx(rho, rel=1e-2)
+    assert evaluate_design(P, c2).free_stable is (not grows)

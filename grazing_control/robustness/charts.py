@@ -1,0 +1,126 @@
+"""Charts of the robustness studies (docs/theory_delay.md section 6, docs/robustness.md).
+
+matplotlib with the Agg backend; each function takes computed results (plain data) and
+writes one PNG.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["plot_delay_curves", "plot_stability_maps", "plot_fault_sweep"]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_delay_curves(curves, path, dpi=80):
+    """max|lambda| vs the actual delay, one panel per design.
+
+    curves: list of dicts {design_delay, c2, c1, delays, by_delta_d: {dd: values},
+    perturbation: {dd: values}, intervals: {dd: (lo, hi) or None}}.
+    """
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(curves), figsize=(5.2 * len(curves), 3.8), squeeze=False)
+    for ax, c in zip(axes[0], curves):
+        for k, (dd, vals) in enumerate(sorted(c["by_delta_d"].items())):
+            line, = ax.semilogy(c["delays"], vals, lw=1.3, label=f"exact, Δd = {dd:.0e}")
+            pert = c.get("perturbation", {}).get(dd)
+            if pert is not None:
+                ax.semilogy(c["delays"], pert, ls=":", lw=1.6, color=line.get_color())
+        ax.axhline(1.0, color="k", lw=0.8)
+        ax.axvline(c["design_delay"], color="gray", ls="--", lw=0.8)
+        ax.set_title(f"designed for δ_a = {c['design_delay']:g} (c2 = {c['c2']:g})", fontsize=9)
+        ax.set_xlabel("actual actuation delay δ")
+        ax.set_ylabel("max |λ| of the 1/1 orbit")
+        ax.set_ylim(0.1, 1e3)
+        ax.legend(fontsize=7, title="dotted: perturbation", title_fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def plot_stability_maps(maps, path, boundaries=None, dpi=80):
+    """log10 max|lambda| over (c2, delay), rows = design rule, columns = Delta d.
+
+    maps: dict {(design, delta_d): StabilityMap}; boundaries: optional dict
+    {delay: [(lo, hi), ...]} of the design's admissible c2 (drawn on the 'delayed' row).
+    """
+    plt = _plt()
+    designs = ["delayed", "undelayed"]
+    dds = sorted({dd for _d, dd in maps}, reverse=True)
+    fig, axes = plt.subplots(2, len(dds), figsize=(3.6 * len(dds), 6.2), squeeze=False,
+                             sharex=True, sharey=True)
+    for i, design in enumerate(designs):
+        for j, dd in enumerate(dds):
+            ax = axes[i, j]
+            m = maps[(design, dd)]
+            vals = np.log10(m.values)
+            ax.set_facecolor("0.75")  # no 1/1 orbit
+            mesh = ax.pcolormesh(m.c2s, m.delays, np.ma.masked_invalid(vals), vmin=-1, vmax=2,
+                                 cmap="RdYlBu_r", shading="nearest")
+            if np.any(np.isfinite(vals)):
+                ax.contour(m.c2s, m.delays, np.nan_to_num(vals, nan=3.0), levels=[0.0],
+                           colors="k", linewidths=0.8)
+            if design == "delayed" and boundaries:
+                ends = [(x, delay) for delay, ivs in boundaries.items() for iv in ivs for x in iv]
+                if ends:
+                    ex, ey = zip(*ends)
+                    ax.plot(ex, ey, "m.", ms=2.5, label="admissible-set ends (design)")
+            if i == 0:
+                ax.set_title(f"Δd = {dd:.0e}", fontsize=9)
+            if j == 0:
+                ax.set_ylabel(f"{design} design\nactual delay δ")
+            if i == 1:
+                ax.set_xlabel("c2")
+    fig.colorbar(mesh, ax=axes, shrink=0.8, label="log10 max|λ| (black: |λ| = 1; gray: no 1/1 orbit)")
+    if boundaries:
+        axes[0, 0].legend(fontsize=6, loc="lower left")
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def plot_fault_sweep(results, path, dpi=80):
+    """Capture probability (top) and stationary spread (bottom) vs loss, noise, jitter.
+
+    results: list of fault_sweep dicts (any Delta d / configurations), grouped by kind.
+    """
+    plt = _plt()
+    kinds = ["loss", "noise", "jitter"]
+    xlabel = {"loss": "loss probability p", "noise": "measurement noise σ",
+              "jitter": "delay jitter (std, time units)"}
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6), sharex="col")
+    for j, kind in enumerate(kinds):
+        for res in (r for r in results if r["kind"] == kind):
+            rows = res["rows"]
+            x = np.array([r["level"] for r in rows])
+            xs = np.where(x > 0, x, np.nan)
+            lab = f"Δd = {res['delta_d']:.0e}, c2 = {res['c2']:g}, δ = {res['actuation_delay']:g}"
+            line, = axes[0, j].semilogx(xs, [r["capture_probability"] for r in rows], "o-", ms=3,
+                                        label=lab)
+            med = np.array([np.nan if r["spread_median"] is None else r["spread_median"] for r in rows])
+            lo = np.array([np.nan if r["spread_p10"] is None else r["spread_p10"] for r in rows])
+            hi = np.array([np.nan if r["spread_p90"] is None else r["spread_p90"] for r in rows])
+            axes[1, j].loglog(xs, med, "o-", ms=3, color=line.get_color())
+            pred = [r.get("spread_predicted") for r in rows]
+            if any(v is not None for v in pred):
+                axes[1, j].loglog(xs, [np.nan if v is None else v for v in pred], "--", lw=1,
+                                  color=line.get_color())
+            axes[1, j].fill_between(xs, np.maximum(lo, 1e-16), hi, color=line.get_color(), alpha=0.15)
+        axes[0, j].set_ylim(-0.05, 1.05)
+        axes[0, j].set_ylabel(f"P(capture, N = {results[0]['horizon']})")
+        axes[1, j].set_ylabel("spread (RMS)")
+        axes[1, j].set_xlabel(xlabel[kind])
+    axes[1, 0].set_ylim(1e-5, 1e-1)  # runs without a loss in their tail sit at ~1e-15
+    fig.suptitle("capture probability (top) and stationary spread, median and 10-90 % "
+                 "(bottom; dashed: linear prediction)", fontsize=9)
+    axes[0, 0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
