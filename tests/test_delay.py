@@ -360,7 +360,7 @@ def test_admissible_sets_for_a_delay_and_the_yaml(tmp_path, capsys):
     assert main(["design", "--c2", "0.5", "--delay", "2", "--out", str(out), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     import yaml
-    params = yaml.safe_load(out.read_text())["/controller_node"]["ros__parameters"]
+    params = yaml.safe_load(out.read_text())["/**"]["ros__parameters"]
     assert params["actuation_delay"] == 2.0 == d["actuation_delay"]
     assert params["c1"] == degenerate_c1(P, 0.5, 2.0) == d["c1"]
     assert d["admissible"] is True and d["admissible_c2"] == pytest.approx([lo, hi], abs=1e-12)

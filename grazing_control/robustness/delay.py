@@ -34,14 +34,16 @@ def design_gains(p: OscillatorParams, c2: float, design_delay: float) -> Gains:
 def largest_multiplier(p: OscillatorParams, gains: Gains, delay: float) -> float:
     """max |lambda| of the 1/1 orbit at ``p.delta_d`` with ``gains`` acting ``delay`` after Pi2.
 
-    nan where no 1/1 orbit born at grazing exists at this Delta d (the branch left the
-    impacting side, or the kick falls after the impact: delay >= T - sigma).
+    nan where no 1/1 orbit born at grazing exists at this Delta d (the
+    branch left the impacting side, or the kick falls after the impact: delay >= T - sigma);
+    orbits of other 1/1 branches are not the near-grazing motion of the design.
     """
     g = Gains(gains.c1, gains.c2, delay)
     try:
-        return float(np.max(np.abs(orbit_11(p, g).multipliers)))
+        orbit = orbit_11(p, g, branch="grazing")
     except (OrbitNotFound, ValueError):
         return math.nan
+    return float(np.max(np.abs(orbit.multipliers)))
 
 
 def multiplier_curve(p: OscillatorParams, gains: Gains, delays) -> np.ndarray:
