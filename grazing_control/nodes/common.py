@@ -37,6 +37,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 __all__ = [
     "DATA_QOS",
+    "EXECUTORS",
+    "make_executor",
     "PUBLISHER_QOS",
     "LATCHED_QOS",
     "StartupError",
@@ -175,6 +177,24 @@ def _startup_message(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
+#: The executors a node can spin in (its read-only parameter ``executor``):
+#: ``single_threaded`` (rclpy.executors.SingleThreadedExecutor, the default) and ``events``
+#: (rclpy.experimental.EventsExecutor: the wait and dispatch in C++; docs/benchmarks.md).
+EXECUTORS = ("single_threaded", "events")
+
+
+def make_executor(kind: str = "single_threaded"):
+    """A new executor of the given kind (:data:`EXECUTORS`)."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    if kind != "single_threaded":
+        raise StartupError(f"executor={kind!r} is invalid: valid values are "
+                           f"{', '.join(EXECUTORS)}")
+    return SingleThreadedExecutor()
+
+
 #: Longest wall time an idle executor waits before noticing a signal (seconds).
 SIGNAL_POLL = 0.2
 
@@ -208,7 +228,7 @@ def run_node(factory, args=None, name: str = "node") -> int:
     code = 0
     try:
         node = factory()
-        executor = SingleThreadedExecutor()
+        executor = make_executor(getattr(node, "executor_kind", "single_threaded"))
         executor.add_node(node)
         if hasattr(node, "spin_until"):
             node.spin_until(executor)
