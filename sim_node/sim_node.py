@@ -522,7 +522,7 @@ def _declare(node: Node) -> None:
     d("jitter", 0.0, float_descriptor(
         "injected fault: std of the actuation time around actuation_delay, simulation time "
         "(FaultModel, seed)", 0.0, read_only=True))
-    d("executor", "single_threaded", string_descriptor(
+    d("executor", "events", string_descriptor(
         "rclpy executor: single_threaded (SingleThreadedExecutor) or events "
         "(rclpy.experimental EventsExecutor)", True, EXECUTORS))
     d("exit_when_done", False, bool_descriptor("exit (status 0) once max_periods have run",
@@ -690,11 +690,18 @@ class SimNode(Node):
         except Exception as exc:  # the core refused (impact cap, state beyond the wall)
             self._fail(exc)
             return
-        for ev in events:
-            self._publish(ev)
-        ev = self._next_sample()
-        if ev is not None:
+        # the next sample goes out first, so that the controller computes its answer
+        # while this period's state, crossings and impacts are published
+        ev, warning = self.engine.end_period()
+        if warning:
+            self.get_logger().warning(warning)
+        done = 0 < self.settings.max_periods <= self.engine.k
+        if not done:
             self._publish_sample(ev)
+        for e in events:
+            self._publish(e)
+        if done:
+            self._finish()
 
     def _next_sample(self):
         """End the period (pending parameters apply); the next sample, or None when done."""
@@ -881,9 +888,12 @@ class SimNode(Node):
         if ev.kind == "pi1":
             self.pub_pi1.publish(m)
             return stamp
-        if clock and self.settings.mode == "lockstep":
-            self.pub_clock.publish(Clock(clock=stamp))
-        (self.pub_pi2 if ev.kind == "pi2" else self.pub_state).publish(m)
+        if ev.kind == "pi2":
+            if clock and self.settings.mode == "lockstep":
+                self.pub_clock.publish(Clock(clock=stamp))
+            self.pub_pi2.publish(m)
+        else:
+            self.pub_state.publish(m)
         return stamp
 
     # ------------------------------------------------------------ end, failure

@@ -178,7 +178,7 @@ class ControllerNode(Node):
         d("actuation_delay", 0.0, float_descriptor(
             "simulation time from a sample to its correction that the gains were designed "
             "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True))
-        d("executor", "single_threaded", string_descriptor(
+        d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
         self.executor_kind = self.get_parameter("executor").value
