@@ -24,12 +24,17 @@ Topics (all reliable, volatile, keep last 1000, except ``oscillator/done``)
     state at each crossing of Pi1 (phase tau*) and Pi2 (phase tau2), stamped with the
     crossing time; a Pi2 sample is the state before the correction.
 ``oscillator/latency`` (std_msgs/Float64)
-    realtime mode: wall seconds from publishing a sample to applying its correction.
+    realtime mode: wall seconds from publishing a sample to receiving its correction
+    (on arrival: the instant it is applied).
+``oscillator/deadline_miss`` (geometry_msgs/Vector3Stamped)
+    realtime, scheduled actuation: one per sample whose correction had not arrived at its
+    actuation time; stamp = the sample's stamp, vector.x = k, vector.y = the actuation
+    time t_k + delay missed, vector.z = wall seconds from publishing the sample to the miss.
 ``oscillator/done`` (std_msgs/Bool, transient local)
     true once ``max_periods`` periods have run.
 ``/clock`` (rosgraph_msgs/Clock)
-    simulation time: at every Pi2 sample and state message (lockstep), at every wake-up
-    of the realtime loop (at least every 5 ms of wall time).
+    simulation time: at every Pi2 sample (lockstep), at every wake-up of the realtime
+    loop (at least every 5 ms of wall time).
 
 Subscribed: ``controller/velocity_correction`` (geometry_msgs/TwistStamped), twist.linear.x
 = Delta v, header.stamp = the stamp of the Pi2 sample it answers. Service: ``~/reset``
@@ -38,15 +43,23 @@ Subscribed: ``controller/velocity_correction`` (geometry_msgs/TwistStamped), twi
 Modes
 -----
 ``lockstep``: after publishing sample k the node waits for the correction stamped with
-sample k's stamp (others are ignored and counted), applies it and integrates the period;
-after ``answer_timeout`` wall seconds without it, no correction is applied (counted, logged).
-Deterministic, as fast as the round trip allows. The loop is driven by the correction's
-subscription callback (no thread, no polling): the callback integrates the period,
-publishes it and the next sample.
+sample k's stamp (others are ignored and counted), applies it ``actuation_delay`` (+ the
+injected jitter) after the sample, as ``simulate.period_step(..., delay=)``, and
+integrates the period; after ``answer_timeout`` wall seconds without it, no correction is
+applied (counted, logged). Deterministic, as fast as the round trip allows. The loop is
+driven by the correction's subscription callback (no thread, no polling): the callback
+integrates the period, publishes the next sample, then the period's state, crossings and
+impacts (so the controller computes while they go out).
 
 ``realtime``: simulation time runs at ``time_scale`` times the wall clock (a timer wakes
-up when the next event is due, and at least every 5 ms for /clock); samples are published on time and the period continues without
-waiting. A correction is applied when it arrives, as an instantaneous velocity change
+up when the next event is due, and at least every 5 ms for /clock); samples are published
+on time and the period continues without waiting. With scheduled actuation
+(``actuation_delay`` > 0, docs/nodes.md "Scheduled actuation") the correction of sample k
+acts exactly at t_k + actuation_delay (+ jitter) if it has arrived by then, as in lockstep
+(:meth:`Engine.actuate`); an answer that has not arrived is a deadline miss: no correction
+(counted, logged, published on ``oscillator/deadline_miss``), and the answer, when it
+comes, is dropped. With ``actuation:=on_arrival`` (the default when actuation_delay = 0)
+a correction is applied when it arrives, as an instantaneous velocity change
 at the state of that instant: the period is then split there (the exact flow is
 evaluated up to the arrival, Delta v is added, and the flow continues to the next
 sample), so the correction acts a latency after Pi2, not on it. It must answer one of
@@ -54,6 +67,11 @@ the last two samples, once; an answer that comes after the next sample went out 
 still applied (counted as late). The latency (wall time from publishing the sample to
 applying its correction) is published on ``oscillator/latency`` and summarised at exit
 with how late the samples went out against their simulation time (``sample_lag_ms``).
+
+Injected faults (``loss``, ``measurement_noise``, ``jitter`` with ``seed``): the
+:class:`grazing_control.faults.FaultModel` of sample k, a pure function of (seed, k), as
+in the core's fault simulation: the published sample carries the measurement noise, the
+correction is dropped (counted as ``lost``) or acts at the jittered delay.
 
 Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
 ``python -m sim_node.sim_node --ros-args ...``.
