@@ -27,7 +27,7 @@ from grazing_control.params import OscillatorParams, ParameterError
 from grazing_control.simulate import period_step
 from sim_node.sim_node import Engine, settings_from_values
 from test_closed_loop import TOPICS as CLOSED_LOOP_TOPICS
-from test_closed_loop import STUDY, Collector, new_domain, stamps, xv
+from test_closed_loop import STUDY, Collector, new_domain, xv
 
 BASE = dict(zeta=0.01, r=0.68, omega=OscillatorParams().omega, delta_d=-5e-6, tau0=0.0,
             pi2_offset=math.pi / 2, x0=math.nan, v0=math.nan, mode="lockstep",
@@ -105,6 +105,24 @@ def test_new_parameters_refused_with_a_reason():
             settings(**kw)
     assert not settings().scheduled and settings(actuation_delay=1.0).scheduled
     assert not settings(actuation_delay=1.0, actuation="on_arrival").scheduled
+
+
+def test_controller_validates_the_design_delay_and_the_launcher_passes_it_on(tmp_path):
+    from grazing_control.launcher import _design_delay
+    from grazing_control.nodes.controller_node import actuation_delay_from_values
+
+    omega = OscillatorParams().omega
+    assert actuation_delay_from_values({"actuation_delay": 6.0, "omega": omega}) == 6.0
+    for bad in (-1.0, 2 * math.pi / omega, math.inf):
+        with pytest.raises(ParameterError, match="actuation_delay=.* is invalid: valid range"):
+            actuation_delay_from_values({"actuation_delay": bad, "omega": omega})
+    yaml_file = tmp_path / "c.yaml"
+    yaml_file.write_text("/controller_node:\n  ros__parameters:\n    c1: -1.0\n"
+                         "    c2: -1.0\n    actuation_delay: 6.0\n")
+    assert _design_delay(yaml_file) == 6.0
+    assert _design_delay({"c1": -1.0, "actuation_delay": 2.5}) == 2.5
+    assert _design_delay(launcher.CONFIG_DIR / "controller.yaml") is None   # undelayed
+    assert _design_delay(tmp_path / "missing.yaml") is None   # the node reports it
 
 
 def test_delayed_period_equals_period_step_bitwise_on_both_paths():

@@ -178,8 +178,10 @@ def _startup_message(exc: BaseException) -> str:
 
 
 #: The executors a node can spin in (its read-only parameter ``executor``):
-#: ``single_threaded`` (rclpy.executors.SingleThreadedExecutor, the default) and ``events``
-#: (rclpy.experimental.EventsExecutor: the wait and dispatch in C++; docs/benchmarks.md).
+#: ``single_threaded`` (rclpy.executors.SingleThreadedExecutor) and ``events``
+#: (rclpy.experimental.EventsExecutor: the wait and dispatch in C++; the default of
+#: sim_node and controller_node, measured faster in docs/benchmarks.md). A node without
+#: an ``executor_kind`` attribute gets the SingleThreadedExecutor.
 EXECUTORS = ("single_threaded", "events")
 
 
