@@ -18,7 +18,7 @@ scene on its own ROS_DOMAIN_ID, and side by side in one run of this script:
    from the simulator's summary, with no extra load and with both cores busy (two
    ``yes > /dev/null``), for both executors.
 3. **Pace**: realtime with the recorder on and state every 1.0, default executor, time
-   scales doubling from 1000; the simulator keeps pace while the sample lag (how late a
+   scales doubling from 250; the simulator keeps pace while the sample lag (how late a
    sample goes out against its simulation time) has p99 < 10 % of a period of wall time.
 
 Run: ``.venv/bin/python benchmarks/bench_closed_loop.py`` (about 4 minutes; ``--quick``
@@ -218,7 +218,7 @@ def pace(samples_wall, executor, scales):
     T = OscillatorParams().period
     rows = []
     for scale in scales:
-        n = max(200, int(samples_wall * scale / T))
+        n = max(50, int(samples_wall * scale / T))
         sim, ctl = executors(executor)
         s, cpu = scene(n, {"mode": "realtime", "time_scale": scale, "state_period": 1.0,
                            "delta_d": -5e-6, "actuation": "on_arrival", **sim},
@@ -249,7 +249,7 @@ def main(argv=None):
     ap.add_argument("--scale", type=float, default=1000.0, help="latency: time_scale")
     ap.add_argument("--pace-seconds", type=float, default=4.0,
                     help="pace: wall seconds per time scale")
-    ap.add_argument("--scales", default="1000,2000,4000,8000,16000",
+    ap.add_argument("--scales", default="250,500,1000,2000,4000,8000",
                     help="pace: time scales to try")
     ap.add_argument("--executor", choices=EXECUTORS, default="events",
                     help="pace: the executor of both nodes")
