@@ -206,6 +206,7 @@ def _fault_scene(tmp_path, name, n, on, delay, seed):
                          delayed_c1(p, -1.0, delay), delay, mode,
                          sim={"seed": seed, "time_scale": 1000.0, **FAULTS[name]})
         assert col.wait_for(lambda: len(col.get("oscillator/pi2")) == n, 5.0)
+        assert col.wait_for(lambda: len(col.get("controller/velocity_correction")) == n, 5.0)
         assert col.wait_for(lambda: len(col.get("oscillator/deadline_miss"))
                             == int(summary["missed"]), 5.0), summary
         pi2 = col.get("oscillator/pi2")
@@ -290,6 +291,8 @@ def test_realtime_scheduled_matches_lockstep_and_suppresses_the_chaos(tmp_path, 
             summary = _scene(tmp_path / mode, domain, n, on, c1, delay, mode,
                              sim={"delta_d": delta_d, "time_scale": scale})
             assert col.wait_for(lambda: len(col.get("oscillator/pi2")) == n, 5.0)
+            assert col.wait_for(
+                lambda: len(col.get("controller/velocity_correction")) == n, 5.0)
             assert col.wait_for(lambda: len(col.get("oscillator/deadline_miss"))
                                 == int(summary["missed"]), 5.0), summary
             dv = {stamp_key(m.header.stamp): m.twist.linear.x
