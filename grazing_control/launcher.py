@@ -290,6 +290,25 @@ def _params_file(params, node: str, tmp: Path) -> Path:
     return path
 
 
+def _design_delay(controller_params):
+    """``actuation_delay`` of the controller's parameters (``grazing design --delay``), or None."""
+    if isinstance(controller_params, (str, os.PathLike)):
+        try:
+            with open(controller_params) as fh:
+                doc = yaml.safe_load(fh) or {}
+        except (OSError, yaml.YAMLError):
+            return None             # the node reports an unreadable file itself
+        values = {}
+        for section in doc.values() if isinstance(doc, dict) else ():
+            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+                values.update(section["ros__parameters"])
+    else:
+        values = dict(controller_params or {})
+    delay = values.get("actuation_delay")
+    return float(delay) if isinstance(delay, (int, float)) and not isinstance(delay, bool) \
+        else None
+
+
 def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | None = None, *,
         delta_d: float | None = None, enable_after: int | None = None,
         mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
@@ -305,7 +324,9 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         or a dict of values (floats must be floats); default config/study.yaml.
     controller_params : dict or path, optional
         The controller's parameter file (``grazing design --out``) or a dict; default
-        config/controller.yaml (c2 = -1, c1 from the degenerate condition).
+        config/controller.yaml (c2 = -1, c1 from the degenerate condition). Its
+        ``actuation_delay`` (``grazing design --delay``) is passed to the simulator as
+        its ``actuation_delay`` unless ``sim_overrides`` sets one.
     bag_dir : path, optional
         Record the scene to this rosbag2-style directory (must not exist or be empty);
         None: no recorder. Skipped with a warning if the recorder node is not available.
@@ -362,6 +383,10 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         sim_over["delta_d"] = float(delta_d)
     if mode is not None:
         sim_over["mode"] = str(mode)
+    delay = dict(controller_overrides or {}).get("actuation_delay",
+                                                 _design_delay(controller_params))
+    if delay is not None:               # the gains' design delay is the simulator's too
+        sim_over["actuation_delay"] = delay
     sim_over.update(sim_overrides or {})
     controller_overrides = dict(controller_overrides or {})
     if enable_after is not None:

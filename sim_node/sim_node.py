@@ -24,12 +24,17 @@ Topics (all reliable, volatile, keep last 1000, except ``oscillator/done``)
     state at each crossing of Pi1 (phase tau*) and Pi2 (phase tau2), stamped with the
     crossing time; a Pi2 sample is the state before the correction.
 ``oscillator/latency`` (std_msgs/Float64)
-    realtime mode: wall seconds from publishing a sample to applying its correction.
+    realtime mode: wall seconds from publishing a sample to receiving its correction
+    (on arrival: the instant it is applied).
+``oscillator/deadline_miss`` (geometry_msgs/Vector3Stamped)
+    realtime, scheduled actuation: one per sample whose correction had not arrived at its
+    actuation time; stamp = the sample's stamp, vector.x = k, vector.y = the actuation
+    time t_k + delay missed, vector.z = wall seconds from publishing the sample to the miss.
 ``oscillator/done`` (std_msgs/Bool, transient local)
     true once ``max_periods`` periods have run.
 ``/clock`` (rosgraph_msgs/Clock)
-    simulation time: at every Pi2 sample and state message (lockstep), at every wake-up
-    of the realtime loop (at least every 5 ms of wall time).
+    simulation time: at every Pi2 sample (lockstep), at every wake-up of the realtime
+    loop (at least every 5 ms of wall time).
 
 Subscribed: ``controller/velocity_correction`` (geometry_msgs/TwistStamped), twist.linear.x
 = Delta v, header.stamp = the stamp of the Pi2 sample it answers. Service: ``~/reset``
@@ -38,15 +43,23 @@ Subscribed: ``controller/velocity_correction`` (geometry_msgs/TwistStamped), twi
 Modes
 -----
 ``lockstep``: after publishing sample k the node waits for the correction stamped with
-sample k's stamp (others are ignored and counted), applies it and integrates the period;
-after ``answer_timeout`` wall seconds without it, no correction is applied (counted, logged).
-Deterministic, as fast as the round trip allows. The loop is driven by the correction's
-subscription callback (no thread, no polling): the callback integrates the period,
-publishes it and the next sample.
+sample k's stamp (others are ignored and counted), applies it ``actuation_delay`` (+ the
+injected jitter) after the sample, as ``simulate.period_step(..., delay=)``, and
+integrates the period; after ``answer_timeout`` wall seconds without it, no correction is
+applied (counted, logged). Deterministic, as fast as the round trip allows. The loop is
+driven by the correction's subscription callback (no thread, no polling): the callback
+integrates the period, publishes the next sample, then the period's state, crossings and
+impacts (so the controller computes while they go out).
 
 ``realtime``: simulation time runs at ``time_scale`` times the wall clock (a timer wakes
-up when the next event is due, and at least every 5 ms for /clock); samples are published on time and the period continues without
-waiting. A correction is applied when it arrives, as an instantaneous velocity change
+up when the next event is due, and at least every 5 ms for /clock); samples are published
+on time and the period continues without waiting. With scheduled actuation
+(``actuation_delay`` > 0, docs/nodes.md "Scheduled actuation") the correction of sample k
+acts exactly at t_k + actuation_delay (+ jitter) if it has arrived by then, as in lockstep
+(:meth:`Engine.actuate`); an answer that has not arrived is a deadline miss: no correction
+(counted, logged, published on ``oscillator/deadline_miss``), and the answer, when it
+comes, is dropped. With ``actuation:=on_arrival`` (the default when actuation_delay = 0)
+a correction is applied when it arrives, as an instantaneous velocity change
 at the state of that instant: the period is then split there (the exact flow is
 evaluated up to the arrival, Delta v is added, and the flow continues to the next
 sample), so the correction acts a latency after Pi2, not on it. It must answer one of
@@ -54,6 +67,11 @@ the last two samples, once; an answer that comes after the next sample went out 
 still applied (counted as late). The latency (wall time from publishing the sample to
 applying its correction) is published on ``oscillator/latency`` and summarised at exit
 with how late the samples went out against their simulation time (``sample_lag_ms``).
+
+Injected faults (``loss``, ``measurement_noise``, ``jitter`` with ``seed``): the
+:class:`grazing_control.faults.FaultModel` of sample k, a pure function of (seed, k), as
+in the core's fault simulation: the published sample carries the measurement noise, the
+correction is dropped (counted as ``lost``) or acts at the jittered delay.
 
 Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
 ``python -m sim_node.sim_node --ros-args ...``.
@@ -64,6 +82,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -77,8 +96,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
 
+from grazing_control.faults import FaultModel
 from grazing_control.impact import advance
-from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, PUBLISHER_QOS, READY_TOPIC,
+from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
+                                          READY_TOPIC,
                                           StartupError,
                                           Throttled, bool_descriptor, float_descriptor,
                                           int_descriptor, run_node, spin, stamp_from_seconds,
@@ -91,6 +112,10 @@ __all__ = ["SimSettings", "settings_from_values", "Event", "Engine", "SimNode", 
 
 TWO_PI = 2.0 * math.pi
 MODES = ("lockstep", "realtime")
+#: When a realtime correction acts: at t_k + actuation_delay (scheduled), when it arrives
+#: (on_arrival, the original behaviour), or auto: scheduled if actuation_delay > 0 or
+#: jitter > 0, else on_arrival. Lockstep always acts at t_k + actuation_delay.
+ACTUATIONS = ("auto", "scheduled", "on_arrival")
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 #: Realtime: longest wall time between two wake-ups (each publishes /clock), seconds.
 CLOCK_TICK = 5e-3
@@ -118,6 +143,23 @@ class SimSettings:
     fidelity: str
     noise: float
     seed: int
+    actuation_delay: float = 0.0
+    actuation: str = "auto"
+    loss: float = 0.0
+    measurement_noise: float = 0.0
+    jitter: float = 0.0
+
+    @property
+    def scheduled(self) -> bool:
+        """Realtime corrections act at t_k + actuation_delay (else on arrival)."""
+        if self.actuation == "auto":
+            return self.actuation_delay > 0.0 or self.jitter > 0.0
+        return self.actuation == "scheduled"
+
+    @cached_property
+    def faults(self) -> FaultModel:
+        """The injected faults (loss, measurement noise, jitter) with the node's seed."""
+        return FaultModel(self.loss, self.measurement_noise, self.jitter, self.seed)
 
 
 def _finite(name, value, ok, valid):
@@ -161,6 +203,7 @@ def settings_from_values(values: dict) -> SimSettings:
     seed = int(values["seed"])
     if seed < 0:
         raise ParameterError(f"seed={seed} is invalid: valid range is seed >= 0")
+    actuation = _actuation_values(values, p, mode, fidelity)
     return SimSettings(
         params=p, x0=x0, v0=v0, mode=mode,
         time_scale=_finite("time_scale", values["time_scale"], lambda v: v > 0.0,
@@ -171,7 +214,42 @@ def settings_from_values(values: dict) -> SimSettings:
                                lambda v: v > 0.0, "a finite answer_timeout > 0"),
         max_periods=max_periods, fidelity=fidelity,
         noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
-        seed=seed)
+        seed=seed, **actuation)
+
+
+def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: str) -> dict:
+    """Validate actuation_delay, actuation and the injected faults (docs/nodes.md)."""
+    out = {
+        "actuation_delay": _finite(
+            "actuation_delay", values.get("actuation_delay", 0.0),
+            lambda v: 0.0 <= v < p.period,
+            f"0 <= actuation_delay < T = {p.period!r} (simulation time)"),
+        "loss": _finite("loss", values.get("loss", 0.0), lambda v: 0.0 <= v <= 1.0,
+                        "0 <= loss <= 1"),
+        "measurement_noise": _finite("measurement_noise", values.get("measurement_noise", 0.0),
+                                     lambda v: v >= 0.0, "a finite measurement_noise >= 0"),
+        "jitter": _finite("jitter", values.get("jitter", 0.0), lambda v: v >= 0.0,
+                          "a finite jitter >= 0 (simulation time)"),
+    }
+    actuation = str(values.get("actuation", "auto"))
+    if actuation not in ACTUATIONS:
+        raise ParameterError(f"actuation={actuation!r} is invalid: valid values are "
+                             f"{', '.join(ACTUATIONS)}")
+    out["actuation"] = actuation
+    split = out["actuation_delay"] > 0.0 or out["jitter"] > 0.0
+    if split and fidelity != "exact":
+        raise ParameterError(
+            f"fidelity={fidelity!r} is invalid with actuation_delay or jitter > 0: valid "
+            "there is 'exact' only (the correction splits the period)")
+    if mode == "realtime" and actuation == "on_arrival" and out["jitter"] > 0.0:
+        raise ParameterError(f"jitter={out['jitter']!r} is invalid with actuation=on_arrival: "
+                             "valid there is 0 (the actuation time is the arrival)")
+    if mode == "realtime" and actuation == "scheduled" and not split:
+        raise ParameterError(
+            "actuation_delay=0.0 is invalid with actuation=scheduled in realtime mode: valid "
+            f"range is 0 < actuation_delay < T = {p.period!r} (no answer can arrive at its "
+            "own sample's instant); use actuation:=on_arrival to apply on arrival")
+    return out
 
 
 def initial_deviation(p: OscillatorParams, x0: float, v0: float) -> tuple:
@@ -194,6 +272,17 @@ class Event(NamedTuple):
     x: float
     v: float
     phase: float
+
+
+class _Deadline(NamedTuple):
+    """Realtime, scheduled: sample k's actuation instant and its answer once it arrives."""
+
+    t: float          # actuation time t_k + delay (simulation time)
+    delay: float      # delay after the sample (actuation_delay + jitter)
+    key: tuple        # the sample's stamp key
+    k: int            # sample index
+    sent: float       # wall time the sample was published
+    dv: float | None  # the answer, None until it arrives
 
 
 class _Segment(NamedTuple):
@@ -223,6 +312,7 @@ class Engine:
         self.pending = None
         self.rng = np.random.default_rng(settings.seed)
         self.impacts = 0
+        self._drawn = None
         self.reset()
 
     # ---------------------------------------------------------------- samples
@@ -255,19 +345,73 @@ class Engine:
         p = self.p
         return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
 
-    # ---------------------------------------------------------------- periods
-    def begin_period(self, dv_correction: float) -> list:
-        """Integrate the period from the current sample after ``dv_correction``.
+    # ------------------------------------------------------------- faults (per sample k)
+    def _draw(self):
+        """The faults of sample k (FaultModel.draw, a pure function of (seed, k))."""
+        faults = self.settings.faults
+        if self._drawn is None or self._drawn[0] != (faults, self.k):
+            self._drawn = ((faults, self.k), faults.draw(self.k))
+        return self._drawn[1]
 
-        One :func:`period_step` call, as :func:`simulate` makes. Returns the events of
-        (t_k, t_k+1) in time order (state, Pi1, impacts), the next sample excluded.
+    def measured(self, ev: Event) -> Event:
+        """Sample k as the controller sees it: (x, v) + the measurement noise of draw(k)."""
+        if self.settings.measurement_noise == 0.0:
+            return ev
+        f = self._draw()
+        return ev._replace(x=ev.x + f.noise_x, v=ev.v + f.noise_v)
+
+    def correction_lost(self) -> bool:
+        """Whether sample k's correction is dropped by the injected loss."""
+        return self.settings.loss > 0.0 and self._draw().dropped
+
+    def actuation_delay(self) -> float:
+        """Delay of sample k's correction after the sample: actuation_delay + jitter e_k,
+        clipped to [0, T) (FaultModel.actuation_delay)."""
+        s = self.settings
+        if s.jitter == 0.0:
+            return s.actuation_delay
+        return s.faults.actuation_delay(s.actuation_delay, self.k, self.p.period)
+
+    # ---------------------------------------------------------------- periods
+    def begin_period(self, dv_correction: float, delay: float = 0.0) -> list:
+        """Integrate the period from the current sample with ``dv_correction`` at ``delay``.
+
+        delay = 0: one :func:`period_step` call, as :func:`simulate` makes. delay > 0:
+        the flow to t_k + delay, the correction there, the flow to t_k+1 (:meth:`actuate`),
+        the same two calls as ``simulate.period_step(..., delay=delay)``. Returns the events
+        of (t_k, t_k+1) in time order (state, Pi1, impacts), the next sample excluded.
         """
         p = self.p
-        seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
         t0 = self.t
+        if delay > 0.0:
+            head = advance(p, p.tau2, self.dx, self.dv, delay)
+            events = self._events(_Segment(t0, p.tau2, self.dx, self.dv, t0 + delay,
+                                           head.dx, head.dv), head.impacts)
+            return events + self._actuate(head, dv_correction, delay)
+        seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         self.seg = _Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
         return self._events(self.seg, seg.impacts)
+
+    def actuate(self, dv_correction: float, delay: float) -> list:
+        """Apply ``dv_correction`` exactly ``delay`` after the current sample (scheduled).
+
+        The period is re-integrated as ``simulate.period_step(p, dx, dv, dv_correction,
+        delay=delay)`` does it (the free flow with impacts to t_k + delay, the velocity
+        jump, the flow on to t_k+1), so a realtime period equals the lockstep one bit for
+        bit. Returns the events of (t_k + delay, t_k+1).
+        """
+        head = advance(self.p, self.p.tau2, self.dx, self.dv, delay)
+        return self._actuate(head, dv_correction, delay)
+
+    def _actuate(self, head, dv_correction: float, delay: float) -> list:
+        p = self.p
+        tau = (p.tau2 + p.omega * delay) % TWO_PI
+        dv = head.dv + dv_correction
+        tail = advance(p, tau, head.dx, dv, p.period - delay)
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        self.seg = _Segment(self.t + delay, tau, head.dx, dv, t1, tail.dx, tail.dv)
+        return self._events(self.seg, tail.impacts)
 
     def split(self, tc: float, dv_correction: float) -> list:
         """Apply ``dv_correction`` at time tc inside the current period (realtime).
@@ -384,6 +528,24 @@ def _declare(node: Node) -> None:
                                      0.0))
     d("seed", 0, int_descriptor("seed of the noise generator, >= 0 (applied at start and "
                                 "reset)", 0))
+    d("actuation_delay", 0.0, float_descriptor(
+        "simulation time from a Pi2 sample to its correction, 0 <= actuation_delay < T "
+        "(the controller YAML's actuation_delay)", 0.0, read_only=True))
+    d("actuation", "auto", string_descriptor(
+        "realtime: scheduled (act at t_k + actuation_delay; a later answer is a deadline "
+        "miss), on_arrival (act when the answer arrives), auto (scheduled if "
+        "actuation_delay or jitter > 0)", True, ACTUATIONS))
+    d("loss", 0.0, float_descriptor("injected fault: probability that a correction is "
+                                    "dropped, 0..1 (FaultModel, seed)", 0.0, 1.0, True))
+    d("measurement_noise", 0.0, float_descriptor(
+        "injected fault: std of Gaussian noise on the x and v of the published Pi2 sample "
+        "(FaultModel, seed)", 0.0, read_only=True))
+    d("jitter", 0.0, float_descriptor(
+        "injected fault: std of the actuation time around actuation_delay, simulation time "
+        "(FaultModel, seed)", 0.0, read_only=True))
+    d("executor", "events", string_descriptor(
+        "rclpy executor: single_threaded (SingleThreadedExecutor) or events "
+        "(rclpy.experimental EventsExecutor)", True, EXECUTORS))
     d("exit_when_done", False, bool_descriptor("exit (status 0) once max_periods have run",
                                                True))
     d("wait_for_controller", True, bool_descriptor(
@@ -401,7 +563,9 @@ def _declare(node: Node) -> None:
 
 
 _SETTING_KEYS = MODEL_KEYS + ("x0", "v0", "mode", "time_scale", "state_period",
-                              "answer_timeout", "max_periods", "fidelity", "noise", "seed")
+                              "answer_timeout", "max_periods", "fidelity", "noise", "seed",
+                              "actuation_delay", "actuation", "loss", "measurement_noise",
+                              "jitter")
 
 
 class SimNode(Node):
@@ -429,6 +593,7 @@ class SimNode(Node):
         self.pub_pi2 = publisher(JointState, "oscillator/pi2")
         self.pub_clock = publisher(Clock, "/clock")
         self.pub_latency = publisher(Float64, "oscillator/latency")
+        self.pub_miss = publisher(Vector3Stamped, "oscillator/deadline_miss")
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
         self.sub_correction = self.create_subscription(
             TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS,
@@ -447,7 +612,11 @@ class SimNode(Node):
         self.ignored = Throttled(log, "correction ignored")
         self.malformed = Throttled(log, "malformed correction ignored")
         self.timeouts = Throttled(log, "no correction within answer_timeout, none applied")
-        self.stats = {"applied": 0, "late": 0}
+        self.misses = Throttled(log, "deadline missed: no correction at the actuation time, "
+                                     "none applied")
+        self.late_answers = Throttled(log, "answer after its deadline dropped")
+        self.executor_kind = self.get_parameter("executor").value
+        self.stats = {"applied": 0, "late": 0, "lost": 0}
         self.latencies = []
         self.lags = []
         self._started = False
@@ -456,9 +625,14 @@ class SimNode(Node):
         self._wall_start = None
         self._waiting = None
         self._msg_js = JointState(name=["mass"])
+        s = self.settings
         log.info(
-            f"mode={self.settings.mode} delta_d={self.settings.params.delta_d!r} "
-            f"max_periods={self.settings.max_periods} state_period={self.settings.state_period}")
+            f"mode={s.mode} delta_d={s.params.delta_d!r} "
+            f"max_periods={s.max_periods} state_period={s.state_period} "
+            f"actuation={'scheduled' if s.scheduled else 'on_arrival'} "
+            f"actuation_delay={s.actuation_delay!r} executor={self.executor_kind}"
+            + (f" faults loss={s.loss!r} measurement_noise={s.measurement_noise!r} "
+               f"jitter={s.jitter!r} seed={s.seed}" if s.faults.active else ""))
 
     # ------------------------------------------------------------------ start
     def _on_recorder_ready(self, msg: Bool) -> None:
@@ -547,8 +721,8 @@ class SimNode(Node):
 
     # ----------------------------------------------------------------- lockstep
     def _publish_sample(self, ev: Event) -> None:
-        """Publish sample k (state before correction) and wait for its answer."""
-        self._waiting = stamp_key(self._publish(ev))
+        """Publish sample k (state before correction, as measured) and wait for its answer."""
+        self._waiting = stamp_key(self._publish(self.engine.measured(ev)))
         self._sent = time.monotonic()
 
     def _on_correction(self, msg: TwistStamped) -> None:
@@ -561,8 +735,9 @@ class SimNode(Node):
                 self.ignored(f"stamp {stamp_key(msg.header.stamp)} does not answer the "
                              f"waiting sample {self._waiting}")
                 return
-            self.stats["applied"] += 1
-            self._lockstep_period(dv)
+            self._lockstep_period(dv, answered=True)
+        elif self.settings.scheduled:
+            self._rt_answer(msg.header.stamp, dv)
         else:
             self._rt_correction(msg.header.stamp, dv)
 
@@ -572,18 +747,32 @@ class SimNode(Node):
             self.timeouts(f"sample {self._waiting}")
             self._lockstep_period(0.0)
 
-    def _lockstep_period(self, dv: float) -> None:
+    def _lockstep_period(self, dv: float, answered: bool = False) -> None:
+        """Sample k's period with its correction acting at t_k + actuation_delay (+ jitter)."""
         self._waiting = None
+        if answered:
+            if self.engine.correction_lost():
+                self.stats["lost"] += 1
+                dv = 0.0
+            else:
+                self.stats["applied"] += 1
         try:
-            events = self.engine.begin_period(dv)
+            events = self.engine.begin_period(dv, self.engine.actuation_delay())
         except Exception as exc:  # the core refused (impact cap, state beyond the wall)
             self._fail(exc)
             return
-        for ev in events:
-            self._publish(ev)
-        ev = self._next_sample()
-        if ev is not None:
+        # the next sample goes out first, so that the controller computes its answer
+        # while this period's state, crossings and impacts are published
+        ev, warning = self.engine.end_period()
+        if warning:
+            self.get_logger().warning(warning)
+        done = 0 < self.settings.max_periods <= self.engine.k
+        if not done:
             self._publish_sample(ev)
+        for e in events:
+            self._publish(e)
+        if done:
+            self._finish()
 
     def _next_sample(self):
         """End the period (pending parameters apply); the next sample, or None when done."""
@@ -605,6 +794,7 @@ class SimNode(Node):
         self._rt_sample = None
         self._rt_pending = {}
         self._rt_queue = []
+        self._rt_deadline = None
         self._rt_publish_sample(self.engine.sample())
         self._tick_timer = self.create_timer(MIN_TICK, self._rt_tick)
 
@@ -613,10 +803,14 @@ class SimNode(Node):
         # correction does not include it
         self._rt_queue = self.engine.begin_period(0.0)
         sent = time.monotonic()
-        self._rt_sample = stamp_key(self._publish(ev))
+        self._rt_sample = stamp_key(self._publish(self.engine.measured(ev)))
         self._rt_pending[self._rt_sample] = sent
         if len(self._rt_pending) > 2:                    # keep the last two samples
             del self._rt_pending[next(iter(self._rt_pending))]
+        if self.settings.scheduled:                      # sample k's actuation instant
+            delay = self.engine.actuation_delay()
+            self._rt_deadline = _Deadline(ev.t + delay, delay, self._rt_sample,
+                                          self.engine.k, sent, None)
         # pace: how late the sample went out against its simulation time
         self.lags.append(sent - self._rt_wall0
                          - (ev.t - self._rt_t0) / self.settings.time_scale)
@@ -637,19 +831,26 @@ class SimNode(Node):
     def _rt_schedule(self, now: float) -> None:
         """Wake up when the next event is due, and at least every CLOCK_TICK for /clock."""
         due = self._rt_queue[0].t if self._rt_queue else self.engine.seg.te
+        if self._rt_deadline is not None:
+            due = min(due, self._rt_deadline.t)
         delay = min(max((due - now) / self.settings.time_scale, MIN_TICK), CLOCK_TICK)
         self._tick_timer.timer_period_ns = int(delay * 1e9)
         self._tick_timer.reset()
 
     def _rt_advance(self, now: float) -> None:
-        """Publish everything due up to simulation time ``now``."""
+        """Publish everything due up to simulation time ``now``, actuating on schedule."""
         while True:
             q = self._rt_queue
+            dl = self._rt_deadline
+            due = dl is not None and dl.t <= now
             i = 0
-            while i < len(q) and q[i].t <= now:
+            while i < len(q) and (q[i].t < dl.t if due else q[i].t <= now):
                 self._publish(q[i], clock=False)
                 i += 1
             del q[:i]
+            if due:
+                self._rt_actuate(dl)
+                continue
             if now < self.engine.seg.te:
                 return
             for ev in q:
@@ -658,6 +859,57 @@ class SimNode(Node):
             if ev is None:
                 return
             self._rt_publish_sample(ev)
+
+    def _rt_answer(self, stamp, dv: float) -> None:
+        """Scheduled actuation: keep the answer of the current sample for its deadline.
+
+        The answer must arrive (this callback runs) before the sample's actuation instant
+        t_k + delay in simulation time; one that comes later is dropped and counted (its
+        deadline was already reported as missed).
+        """
+        key = stamp_key(stamp)
+        if not self._started or self._finished:
+            self.ignored(f"stamp {key}: the scene is not running")
+            return
+        wall = time.monotonic()
+        self._rt_advance(self._now(wall))     # a deadline already due is handled first
+        if self._finished:
+            return
+        dl = self._rt_deadline
+        sent = self._rt_pending.pop(key, None)
+        if sent is None:
+            self.ignored(f"stamp {key} answers none of the last two unanswered samples "
+                         "(stale, duplicate or foreign)")
+            return
+        latency = wall - sent
+        self.latencies.append(latency)
+        self.pub_latency.publish(Float64(data=latency))
+        if dl is None or dl.key != key:
+            self.stats["late"] += 1
+            self.late_answers(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
+                              "after its actuation time")
+            return
+        self._rt_deadline = dl._replace(dv=dv)
+
+    def _rt_actuate(self, dl) -> None:
+        """Sample k's actuation instant: its answer, or 0 (a deadline miss), at t_k + delay."""
+        self._rt_deadline = None
+        dv = dl.dv
+        if dv is None:
+            dv = 0.0
+            waited = time.monotonic() - dl.sent
+            self.misses(f"sample {dl.k} (stamp {dl.key}), actuation at t={dl.t:.9g}, "
+                        f"{waited * 1e3:.3f} ms after the sample went out")
+            m = Vector3Stamped()
+            m.header.stamp.sec, m.header.stamp.nanosec = dl.key
+            m.vector.x, m.vector.y, m.vector.z = float(dl.k), dl.t, waited
+            self.pub_miss.publish(m)
+        elif self.engine.correction_lost():
+            self.stats["lost"] += 1
+            dv = 0.0
+        else:
+            self.stats["applied"] += 1
+        self._rt_queue = self.engine.actuate(dv, dl.delay)
 
     def _rt_correction(self, stamp, dv: float) -> None:
         """Apply a correction at the simulation time of its arrival.
@@ -679,11 +931,14 @@ class SimNode(Node):
             return
         if key != self._rt_sample:
             self.stats["late"] += 1
-        self._rt_queue = self.engine.split(now, dv)
         latency = wall - sent
-        self.stats["applied"] += 1
         self.latencies.append(latency)
         self.pub_latency.publish(Float64(data=latency))
+        if self.engine.correction_lost():
+            self.stats["lost"] += 1
+            return
+        self._rt_queue = self.engine.split(now, dv)
+        self.stats["applied"] += 1
         self._rt_schedule(now)           # the split may have brought an event forward
 
     # ---------------------------------------------------------------- publishing
@@ -704,9 +959,12 @@ class SimNode(Node):
         if ev.kind == "pi1":
             self.pub_pi1.publish(m)
             return stamp
-        if clock and self.settings.mode == "lockstep":
-            self.pub_clock.publish(Clock(clock=stamp))
-        (self.pub_pi2 if ev.kind == "pi2" else self.pub_state).publish(m)
+        if ev.kind == "pi2":
+            if clock and self.settings.mode == "lockstep":
+                self.pub_clock.publish(Clock(clock=stamp))
+            self.pub_pi2.publish(m)
+        else:
+            self.pub_state.publish(m)
         return stamp
 
     # ------------------------------------------------------------ end, failure
@@ -729,6 +987,7 @@ class SimNode(Node):
         k = self.engine.k
         text = (f"summary: periods={k} t={self.engine.t:.9g} impacts={self.engine.impacts} "
                 f"applied={self.stats['applied']} late={self.stats['late']} "
+                f"missed={self.misses.count} lost={self.stats['lost']} "
                 f"timeouts={self.timeouts.count} "
                 f"ignored={self.ignored.count} malformed={self.malformed.count} "
                 f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")
@@ -753,7 +1012,7 @@ class SimNode(Node):
         if self.exit_now:
             end = time.monotonic() + ACK_TIMEOUT
             for pub in (self.pub_pi2, self.pub_state, self.pub_impact, self.pub_pi1,
-                        self.pub_clock, self.pub_latency, self.pub_done):
+                        self.pub_clock, self.pub_latency, self.pub_miss, self.pub_done):
                 left = max(0.0, end - time.monotonic())
                 if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
                     self.get_logger().warning(
@@ -778,6 +1037,7 @@ class SimNode(Node):
         else:
             self._rt_t0, self._rt_wall0 = 0.0, time.monotonic()
             self._rt_pending.clear()
+            self._rt_deadline = None
             self._rt_publish_sample(ev)
         return response
 

@@ -39,6 +39,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 __all__ = [
     "DATA_QOS",
+    "EXECUTORS",
+    "make_executor",
     "PUBLISHER_QOS",
     "READY_TOPIC",
     "REPLAY_QOS",
@@ -199,6 +201,26 @@ def _startup_message(exc: BaseException) -> str:
     if m:
         return f"{m['name']}={m['value']} is invalid: {m['reason']}"
     return text or type(exc).__name__
+
+
+#: The executors a node can spin in (its read-only parameter ``executor``):
+#: ``single_threaded`` (rclpy.executors.SingleThreadedExecutor) and ``events``
+#: (rclpy.experimental.EventsExecutor: the wait and dispatch in C++; the default of
+#: sim_node and controller_node, measured faster in docs/benchmarks.md). A node without
+#: an ``executor_kind`` attribute gets the SingleThreadedExecutor.
+EXECUTORS = ("single_threaded", "events")
+
+
+def make_executor(kind: str = "single_threaded"):
+    """A new executor of the given kind (:data:`EXECUTORS`)."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    if kind != "single_threaded":
+        raise StartupError(f"executor={kind!r} is invalid: valid values are "
+                           f"{', '.join(EXECUTORS)}")
+    return SingleThreadedExecutor()
 
 
 #: Longest wall time an idle executor waits before noticing a signal (seconds).
@@ -423,7 +445,7 @@ def run_node(factory, args=None, name: str = "node") -> int:
         except StartupError:
             node.on_exit = lambda: None      # it never ran: no summary
             raise
-        executor = SingleThreadedExecutor()
+        executor = make_executor(getattr(node, "executor_kind", "single_threaded"))
         executor.add_node(node)
         if hasattr(node, "spin_until"):
             node.spin_until(executor)

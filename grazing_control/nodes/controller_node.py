@@ -49,7 +49,9 @@ Stale, duplicate and malformed samples
 
 Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_ref
 (NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
-stale_after. Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+stale_after, actuation_delay (the delay the gains were designed for, 0 <= delay < T; the
+simulator applies it, the controller validates and reports it: docs/nodes.md,
+"Scheduled actuation"), executor (single_threaded or events). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.nodes.controller_node ...``.
 """
 
@@ -67,15 +69,16 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from grazing_control.control import Gains, correction
-from grazing_control.nodes.common import (DATA_QOS, REPLAY_QOS, StartupError, Throttled,
-                                          float_descriptor, int_descriptor, run_node,
-                                          seconds_from_stamp, stamp_key)
+from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, PUBLISHER_QOS, REPLAY_QOS,
+                                          StartupError, Throttled, float_descriptor,
+                                          int_descriptor, run_node, seconds_from_stamp,
+                                          stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 
 __all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
 
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
-         "enable_after", "saturation", "stale_after")
+         "enable_after", "saturation", "stale_after", "actuation_delay")
 
 
 class ControlLaw:
@@ -178,6 +181,16 @@ def law_from_values(values: dict) -> ControlLaw:
     return ControlLaw(gains, x_ref, v_ref, enable_after, saturation)
 
 
+def actuation_delay_from_values(values: dict) -> float:
+    """The design's actuation delay, 0 <= delay < T = 2 pi / omega (ParameterError)."""
+    delay = float(values.get("actuation_delay", 0.0))
+    period = 2.0 * math.pi / float(values["omega"])
+    if not (math.isfinite(delay) and 0.0 <= delay < period):
+        raise ParameterError(f"actuation_delay={delay!r} is invalid: valid range is "
+                             f"0 <= actuation_delay < T = {period!r} (simulation time)")
+    return delay
+
+
 class ControllerNode(Node):
     """The controller node (module docstring: topics, switching, stale samples)."""
 
@@ -200,8 +213,16 @@ class ControllerNode(Node):
         d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0", 0.0))
         d("stale_after", math.inf, float_descriptor(
             "max age of a sample in simulation seconds (with use_sim_time)", 0.0))
+        d("actuation_delay", 0.0, float_descriptor(
+            "simulation time from a sample to its correction that the gains were designed "
+            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True))
+        d("executor", "events", string_descriptor(
+            "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
+            True, EXECUTORS))
+        self.executor_kind = self.get_parameter("executor").value
         try:
             self.law = law_from_values(self._values())
+            self.actuation_delay = actuation_delay_from_values(self._values())
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -225,7 +246,8 @@ class ControllerNode(Node):
                         "time)")
         self._warn_gains()
         log.info(f"c1={self.law.gains.c1!r} c2={self.law.gains.c2!r} x_ref={self.law.x_ref!r} "
-                 f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after}")
+                 f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after} "
+                 f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind}")
 
     def _warn_gains(self) -> None:
         """Warn when the gains were not given or are both zero (the controller then

@@ -12,6 +12,9 @@ What it records by default (names relative to the node's namespace):
     twist.linear.x = Delta v; stamp = stamp of the Pi2 sample it answers.
 ``/clock`` (rosgraph_msgs/msg/Clock)
     simulation time.
+``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
+    realtime, scheduled actuation: a sample whose correction missed its actuation
+    time (docs/nodes.md, "Scheduled actuation").
 
 Each message is stored as the serialized CDR bytes the middleware delivered
 (a ``raw=True`` subscription): nothing is deserialized on the way. The bag
@@ -107,6 +110,7 @@ DEFAULT_TOPICS = {
     "oscillator/pi2": "sensor_msgs/msg/JointState",
     "controller/velocity_correction": "geometry_msgs/msg/TwistStamped",
     "/clock": "rosgraph_msgs/msg/Clock",
+    "oscillator/deadline_miss": "geometry_msgs/msg/Vector3Stamped",
 }
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
