@@ -122,7 +122,7 @@ def test_controller_validates_the_design_delay_and_the_launcher_passes_it_on(tmp
                          "    c2: -1.0\n    actuation_delay: 6.0\n")
     assert _design_delay(yaml_file) == 6.0
     assert _design_delay({"c1": -1.0, "actuation_delay": 2.5}) == 2.5
-    assert _design_delay(launcher.CONFIG_DIR / "controller.yaml") is None   # undelayed
+    assert _design_delay(launcher.CONFIG_DIR / "controller.yaml") == 0.0   # undelayed design
     assert _design_delay(tmp_path / "missing.yaml") is None   # the node reports it
 
 
