@@ -80,7 +80,8 @@ from std_srvs.srv import Trigger
 from grazing_control.impact import advance
 from grazing_control.nodes.common import (DATA_QOS, LATCHED_QOS, PUBLISHER_QOS, StartupError,
                                           Throttled, bool_descriptor, float_descriptor,
-                                          int_descriptor, run_node, spin, stamp_from_seconds,
+                                          int_descriptor, publish_parameter_record, run_node,
+                                          spin, stamp_from_seconds,
                                           stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.fidelity import FIDELITIES, period_step
@@ -429,6 +430,7 @@ class SimNode(Node):
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
         self._start_timer = self.create_timer(0.02, self._try_start)
         self._tick_timer = None
         self._watchdog = None

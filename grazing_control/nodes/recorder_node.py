@@ -73,7 +73,8 @@ from grazing_control.recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE,
                                        BagWriter, message_definition,
                                        qos_profile_dict)
 
-__all__ = ["DEFAULT_TOPICS", "RECORDER_QOS", "RecorderNode", "main", "parse_topics"]
+__all__ = ["DEFAULT_TOPICS", "PARAMETER_TOPIC", "RECORDER_QOS", "RecorderNode", "main",
+           "parse_topics"]
 
 #: Topics recorded by default (relative names) and their types.
 DEFAULT_TOPICS = {
@@ -85,12 +86,25 @@ DEFAULT_TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock",
 }
 
+#: The nodes' parameter record (grazing_control.bagtools.record), recorded by default too,
+#: subscribed transient local so that a record published before the match is received.
+PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
+
 #: Subscription QoS: reliable and keep-all, so a lockstep run loses nothing.
 RECORDER_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     depth=0,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
+)
+
+#: Subscription QoS of PARAMETER_TOPIC: reliable, transient local (matches the latched
+#: publishers of the nodes, and volatile ones).
+PARAMETER_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL,
+    depth=0,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 
 # Most messages of one topic taken in one callback (keeps topics interleaved
@@ -117,7 +131,8 @@ def parse_topics(entries):
     ParameterError
         For an empty list, a malformed entry or an unknown topic without type.
     """
-    known = {name.lstrip("/"): (name, kind) for name, kind in DEFAULT_TOPICS.items()}
+    known = {name.lstrip("/"): (name, kind)
+             for name, kind in (*DEFAULT_TOPICS.items(), PARAMETER_TOPIC)}
     topics = {}
     for entry in entries:
         words = entry.split()
@@ -196,7 +211,8 @@ class RecorderNode(Node):
         self.declare_parameter("output", "", read_only(
             "bag directory (created; must not exist or be empty)",
             ParameterType.PARAMETER_STRING))
-        self.declare_parameter("topics", [f"{n} {t}" for n, t in DEFAULT_TOPICS.items()],
+        self.declare_parameter("topics", [f"{n} {t}" for n, t in (*DEFAULT_TOPICS.items(),
+                                                                  PARAMETER_TOPIC)],
                                read_only("'name' or 'name pkg/msg/Type' per topic",
                                          ParameterType.PARAMETER_STRING_ARRAY))
         self.declare_parameter("compression", "zstd", read_only(
@@ -234,7 +250,8 @@ class RecorderNode(Node):
         self._subs[topic] = self.create_subscription(
             _message_class(kind), name,
             lambda data, info: self._on_message(topic, data, info),
-            RECORDER_QOS, raw=True, event_callbacks=events)
+            PARAMETER_QOS if name.lstrip("/") == PARAMETER_TOPIC[0] else RECORDER_QOS,
+            raw=True, event_callbacks=events)
 
     def _on_message(self, topic, data, info):
         """Record a message, then the ones already queued behind it."""
