@@ -340,6 +340,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="out/demo", help="report folder (default out/demo)")
     s.add_argument("--offline", action="store_true", help="through the core only, no ROS nodes")
     s.set_defaults(func=cmd_demo)
+
+    from .bagtools import add_commands   # analyze, replay (docs/analysis.md)
+    add_commands(sub)
     return parser
 
 
