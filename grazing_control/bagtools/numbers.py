@@ -363,6 +363,9 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
     pred = _predicted(setup)
     out["predicted"] = pred
     meas = measured_contraction(scene.pi2, on)
+    if meas is not None and base["samples_to_converge"] is None:
+        meas = {"rho": None, "samples": 0, "reason": f"the scene did not converge to {tol:g} "
+                "by its end, so there is no fixed point to measure the contraction against"}
     out["measured_contraction"] = meas
     if meas and meas.get("rho") and pred.get("rho") is not None:
         out["contraction_relative_error"] = abs(meas["rho"] - pred["rho"]) / max(pred["rho"], 1e-300)

@@ -73,8 +73,8 @@ from grazing_control.recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE,
                                        BagWriter, message_definition,
                                        qos_profile_dict)
 
-__all__ = ["DEFAULT_TOPICS", "PARAMETER_TOPIC", "RECORDER_QOS", "RecorderNode", "main",
-           "parse_topics"]
+__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "RECORDER_QOS", "RecorderNode",
+           "main", "parse_topics"]
 
 #: Topics recorded by default (relative names) and their types.
 DEFAULT_TOPICS = {
@@ -89,6 +89,9 @@ DEFAULT_TOPICS = {
 #: The nodes' parameter record (grazing_control.bagtools.record), recorded by default too,
 #: subscribed transient local so that a record published before the match is received.
 PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
+#: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
+EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
+                "oscillator/latency": "std_msgs/msg/Float64"}
 
 #: Subscription QoS: reliable and keep-all, so a lockstep run loses nothing.
 RECORDER_QOS = QoSProfile(
@@ -132,7 +135,7 @@ def parse_topics(entries):
         For an empty list, a malformed entry or an unknown topic without type.
     """
     known = {name.lstrip("/"): (name, kind)
-             for name, kind in (*DEFAULT_TOPICS.items(), PARAMETER_TOPIC)}
+             for name, kind in (*DEFAULT_TOPICS.items(), *EXTRA_TOPICS.items())}
     topics = {}
     for entry in entries:
         words = entry.split()
@@ -212,7 +215,7 @@ class RecorderNode(Node):
             "bag directory (created; must not exist or be empty)",
             ParameterType.PARAMETER_STRING))
         self.declare_parameter("topics", [f"{n} {t}" for n, t in (*DEFAULT_TOPICS.items(),
-                                                                  PARAMETER_TOPIC)],
+                                                                  *EXTRA_TOPICS.items())],
                                read_only("'name' or 'name pkg/msg/Type' per topic",
                                          ParameterType.PARAMETER_STRING_ARRAY))
         self.declare_parameter("compression", "zstd", read_only(
