@@ -8,7 +8,9 @@ the recording itself (docs/analysis.md, "Where the parameters come from"):
   so with the deviation z(h) = Phi(h) (z_k + (0, dv_k)) carried by the free flow from the
   preceding sample over the recorded time h to the first impact,
   Delta d = z_x(h) - 2 a sin^2((tau - phi)/2). Stamps are rounded to 1 ns, so this is
-  exact to |v-| * 0.5 ns.
+  exact to |v-| * 0.5 ns; secant steps on one recorded period then refine it, and the
+  shortest decimal within 1e-12 relative is taken (a value typed by a person, -5e-06, is
+  recovered exactly; the model check below shows whether it reproduces every period).
 * the gains (c1, c2) by least squares on Eq. 28, Delta v = c1 (x - x**) + c2 (v - v**),
   over the corrected, unsaturated samples.
 
@@ -41,7 +43,7 @@ from ..control import Gains
 from ..flow import propagate
 from ..params import OscillatorParams, ParameterError
 
-__all__ = ["Setup", "resolve_setup", "infer_delta_d", "infer_gains", "scene_numbers",
+__all__ = ["Setup", "resolve_setup", "infer_delta_d", "shortest_decimal", "infer_gains", "scene_numbers",
            "model_check", "measured_contraction"]
 
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
@@ -117,9 +119,23 @@ def _refine_delta_d(base, scene, dd):
                 break
             a, b, fa = b, b - fb * (b - a) / (fb - fa), fb
             fb = f(b)
-        return b if abs(fb) <= abs(f(dd)) else dd
+        best = b if abs(fb) <= abs(f(dd)) else dd
     except Exception:
         return dd
+    return shortest_decimal(best, 1e-12)
+
+
+def shortest_decimal(value: float, rel: float) -> float:
+    """The float with the fewest significant decimal digits within ``rel`` of ``value``.
+
+    A parameter typed by a person (-5e-06) is recovered exactly from an estimate good to
+    ``rel``; the model check then shows whether it reproduces every recorded period.
+    """
+    for digits in range(1, 18):
+        cand = float(f"{value:.{digits}g}")
+        if abs(cand - value) <= rel * abs(value):
+            return cand
+    return value
 
 
 def infer_gains(scene, x_ref, v_ref, saturation=math.inf):
