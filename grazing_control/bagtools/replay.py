@@ -62,7 +62,16 @@ def _controller_values(data, setup, controller_params, notes):
         path = Path(controller_params)
         if not path.is_file():
             raise ValueError(f"--controller-params {path}: no such file")
-        return path, f"{path}"
+        try:
+            doc = yaml.safe_load(path.read_text())
+            values = dict(next(iter(doc.values()))["ros__parameters"])
+        except (yaml.YAMLError, AttributeError, KeyError, StopIteration, TypeError):
+            raise ValueError(f"--controller-params {path}: not a ROS parameter file "
+                             "('/controller_node: ros__parameters: ...')") from None
+        if "enable_after" not in values:
+            values["enable_after"] = _bag_enable_after(data)
+            notes.append(f"{path} has no enable_after: the bag's, {values['enable_after']}")
+        return values, f"{path}"
     rec = (data.parameters.get("nodes", {}).get("controller_node") or [None])[0]
     if rec is not None:
         values = {k: v for k, v in rec.items() if k not in _NOT_SETTINGS}
@@ -71,8 +80,7 @@ def _controller_values(data, setup, controller_params, notes):
     default = CONFIG_DIR / "controller.yaml"
     doc = yaml.safe_load(default.read_text())
     values = dict(next(iter(doc.values()))["ros__parameters"])
-    on = data.scenes[0].scene.correction.nonzero()[0]
-    values["enable_after"] = int(on[0]) if on.size else -1
+    values["enable_after"] = _bag_enable_after(data)
     notes.append(f"no parameter record: enable_after = {values['enable_after']} from the first "
                  "non-zero correction")
     g = setup.gains
@@ -88,6 +96,15 @@ def _controller_values(data, setup, controller_params, notes):
     notes.append("gains inferred from the recording (not those of config/controller.yaml): "
                  "bit-identical answers are not expected")
     return values, "inferred from the recording"
+
+
+def _bag_enable_after(data) -> int:
+    """The controller's enable_after in the bag: its record, else the first non-zero answer."""
+    rec = (data.parameters.get("nodes", {}).get("controller_node") or [{}])[0]
+    if "enable_after" in rec:
+        return int(rec["enable_after"])
+    on = data.scenes[0].scene.correction.nonzero()[0]
+    return int(on[0]) if on.size else -1
 
 
 def _params_file(values, node, tmp: Path) -> Path:
@@ -452,12 +469,20 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                                sorted({k0, min(k0 + 10, m - 1), min(k0 + 50, m - 1), m - 1})}
         if setup.mode == "realtime":
             lat = sd.latency_s
+            nz = np.flatnonzero(sd.scene.correction != 0)
+            first_on = int(nz[0]) if nz.size else None
             why = ("in realtime the corrections acted at their arrival (latency "
                    + (f"p50 {np.median(lat) * 1e3:.3g} ms wall = {np.median(lat) * (setup.time_scale or 1):.3g}"
                       " simulation time after Π2" if lat.size else "not recorded")
-                   + "), the lockstep replay applies them on Π2 itself; from the first "
-                   "differing period on, the open-loop replay follows its own trajectory "
-                   "(chaotic before control: the difference grows)")
+                   + "), the lockstep replay applies them on Π2 itself")
+            if first_on is None or k0 < first_on:
+                why += (f"; the departure starts at sample {k0}, before any non-zero correction "
+                        f"(first at {first_on}): the realtime simulator splits each period at the "
+                        "arrival of even a zero correction (the flow evaluated in two pieces), "
+                        "which rounds differently, and the chaotic motion before control "
+                        "amplifies that rounding")
+            why += ("; once apart, the open-loop replay follows its own trajectory with "
+                    "corrections computed for the recorded one")
         else:
             why = ("a lockstep bag should be reproduced: check the model parameters (the bag's "
                    "record or --delta-d ...) and the simulator's fidelity")
