@@ -161,7 +161,8 @@ def load(bag, topics: dict | None = None) -> BagData:
         available = ", ".join(f"{t} [{c.type}]" for t, c in sorted(raw.channels.items())) or "none"
         raise reader.BagReadError(
             f"{path}: no usable Pi2 sample topic {topics['pi2']} (sensor_msgs/msg/JointState); "
-            f"topics in the bag: {available}. Remap with --topic pi2=/your/topic")
+            f"topics in the bag: {available}. Remap with --topic pi2=/your/topic"
+            + "".join(f"; {msg}" for msg in problems if "(pi2)" in msg))
 
     pi2 = reader.decode_joint_state(raw, present["pi2"])
     bad = int(np.count_nonzero(~pi2["ok"]))
