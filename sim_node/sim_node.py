@@ -463,6 +463,8 @@ class SimNode(Node):
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]
             if self.settings.state_period > 0.0:
                 pubs.append(self.pub_state)
+            if self.settings.mode == "realtime":     # the latency of every sample is recorded
+                pubs.append(self.pub_latency)
             if any(pub.get_subscription_count() < n for pub in pubs):
                 return False
             if self.count_subscribers("controller/velocity_correction") < n + 1:

@@ -67,7 +67,7 @@ def test_replay_with_other_gains_gives_what_eq28_commands(tmp_path, capsys):
 
 def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     bag = tmp_path / "rt"
-    n, on, scale = 60, 30, 200.0
+    n, on, scale = 60, 30, 100.0
     res = launcher.run(None, None, bag, n, domain_id=new_domain(), timeout=90,
                        sim_overrides={"mode": "realtime", "time_scale": scale,
                                       "delta_d": -5e-6},
@@ -78,7 +78,9 @@ def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     assert rep["setup"]["sources"]["delta_d"] == "parameter record"
     assert rep["setup"]["time_scale"] == scale
     rt = rep["scenes"][0]["realtime"]
-    assert rt["latency_ms"]["n"] == n and rt["latency_ms"]["p50"] > 0
+    # one latency message per applied correction: all of them unless the loaded machine
+    # delayed an answer past the next two samples (the simulator then ignores it)
+    assert n - 5 <= rt["latency_ms"]["n"] <= n and rt["latency_ms"]["p50"] > 0
     assert rt["answer_time_ms"]["n"] == n and rt["missing_answers"] == 0
     assert rt["sample_lag_ms"]["n"] == n
     assert (tmp_path / "report" / "rt.png").is_file()
