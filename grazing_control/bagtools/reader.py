@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -207,17 +208,21 @@ class _Scan:
 
     def chunk(self, buf, p, end):
         try:
-            _t0, _t1, size, _crc = struct.unpack_from("<QQQI", buf, p)
+            _t0, _t1, size, crc = struct.unpack_from("<QQQI", buf, p)
             kind, r = _string(buf, p + 28)
             (n,) = _U64.unpack_from(buf, r)
             data = bytes(buf[r + 8:r + 8 + n]) if kind else buf[r + 8:r + 8 + n]
-            raw = _decompress(kind, data, size)
+            raw = bytes(_decompress(kind, data, size))
+            if len(raw) != size:
+                raise ValueError(f"{len(raw)} bytes, the chunk header says {size}")
+            if crc and zlib.crc32(raw) != crc:
+                raise ValueError("CRC mismatch")
         except BagReadError:
             raise
         except Exception as exc:      # a corrupt chunk: skip it, say so
-            self.problems.append(f"chunk at byte {p - 9} skipped: {type(exc).__name__}: {exc}")
+            self.problems.append(f"chunk at byte {p - 9} skipped (corrupt): "
+                                 f"{type(exc).__name__}: {exc}")
             return
-        raw = bytes(raw)
         self.pieces.append(raw)
         reason, _ = self.records(raw, 0, len(raw), False)
         if reason == "torn":
@@ -267,6 +272,8 @@ def read_raw(bag, topics=None) -> RawBag:
 
 # ----------------------------------------------------------------- vectorised CDR
 _R = {n: np.arange(n, dtype=np.int64) for n in (4, 8)}
+#: A sequence<string> longer than this is walked per message (see _Body.skip_strings).
+_MANY = 64
 
 
 def _gather(pool, off, n, dtype, ok, end):
@@ -324,17 +331,40 @@ class _Body:
         return sec * 1_000_000_000 + nsec, 12 + np.where(self.ok, flen, 0)
 
     def skip_strings(self, pos):
-        """Position after a sequence<string> at ``pos``."""
+        """Position after a sequence<string> at ``pos``.
+
+        Vectorised over the messages, one step per string; a message with more than
+        ``_MANY`` strings is walked on its own (bounded by its length).
+        """
         pos = _align(pos, 4)
         n = self.u32(pos)
+        self.ok &= n <= (self.end - self.body) // 4
         n = np.where(self.ok, n, 0)
-        self.ok &= n <= self.end - self.body
         pos = pos + 4
+        many = np.flatnonzero(n > _MANY)
+        for i in many.tolist():
+            pos[i] = self._walk_strings(i, int(pos[i]), int(n[i]))
+        n[many] = 0
         for j in range(int(n.max()) if n.size else 0):
             on = self.ok & (n > j)
             pj = _align(pos, 4)
             ln = self.u32(np.where(on, pj, 0))
-            pos = np.where(on, pj + 4 + np.where(self.ok, ln, 0), pos)
+            pos = np.where(on & self.ok, pj + 4 + ln, pos)
+        return pos
+
+    def _walk_strings(self, i, pos, n):
+        end = int(self.end[i] - self.body[i])
+        base = int(self.body[i])
+        for _ in range(n):
+            pos = (pos + 3) & ~3
+            if pos + 4 > end:
+                self.ok[i] = False
+                return 0
+            ln = int(self.pool[base + pos:base + pos + 4].view("<u4")[0])
+            pos += 4 + ln
+            if pos > end:
+                self.ok[i] = False
+                return 0
         return pos
 
     def first_double(self, pos):
