@@ -123,3 +123,34 @@ def test_sigkilled_recorder_leaves_a_bag_the_analysis_reads(tmp_path):
     core = simulate(p, len(got), gains=Gains(degenerate_c1(p, -1.0), -1.0), control_after=on)
     assert np.array_equal(got[:on], core.pi2[:on])
     assert np.max(np.abs(got - core.pi2)) < 1e-12
+
+
+def test_replay_at_the_recorded_rate(tmp_path):
+    res = replay_controller(BAGS / "scene_9e-6", tmp_path / "ctl", rate=2.0,
+                            domain_id=new_domain())
+    assert res["answers"] == 1300 and res["comparison"]["all_bit_identical"]
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--rate", "0"], "--rate"),
+    (["--rate", "nan"], "--rate"),
+    (["--domain-id", "999"], "--domain-id"),
+    (["--controller-params", "/nonexistent.yaml"], "no such file"),
+])
+def test_replay_bad_input_one_line_error(tmp_path, capsys, argv, message):
+    code = cli.main(["replay", str(BAGS / "scene_5e-6"), "--bag", str(tmp_path / "o")] + argv)
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("grazing: error:") and message in err
+    assert err.count("\n") == 1
+
+
+def test_replay_refuses_a_non_empty_output_and_a_missing_bag(tmp_path, capsys):
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "x").write_text("keep me")
+    code = cli.main(["replay", str(BAGS / "scene_5e-6"), "--bag", str(tmp_path / "o"),
+                     "--no-sim"])
+    err = capsys.readouterr().err
+    assert code == 2 and "not empty" in err and (tmp_path / "o" / "x").read_text() == "keep me"
+    code = cli.main(["replay", str(tmp_path / "missing"), "--bag", str(tmp_path / "p")])
+    err = capsys.readouterr().err
+    assert code == 2 and "no such bag" in err and not (tmp_path / "p").exists()

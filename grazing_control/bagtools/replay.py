@@ -529,8 +529,12 @@ def main(args):
         raise ValueError(f"--domain-id={args.domain_id} is invalid: valid range is 0..232")
     topics = parse_topic_option(args.topic)
     options = options_from_args(args)
-    load(args.bag, topics)      # refuse a bad bag before starting anything
+    load(args.bag, topics)      # refuse a bad bag or output before starting anything
     out = Path(args.out)
+    for path, used in ((out, not args.no_controller),
+                       (out.with_name(out.name + "_sim"), not args.no_sim)):
+        if used and path.exists() and (not path.is_dir() or any(path.iterdir())):
+            raise ValueError(f"--bag: {path} exists and is not an empty directory")
     result = {"bag": args.bag}
     if not args.no_controller:
         result["controller"] = replay_controller(
