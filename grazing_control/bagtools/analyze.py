@@ -45,6 +45,11 @@ def _fmt(v, spec=".4g"):
     return str(v)
 
 
+def _complex(z) -> str:
+    z = complex(*z) if isinstance(z, (list, tuple)) else complex(z)
+    return f"{z.real:.6g}" if z.imag == 0 else f"{z.real:.6g}{z.imag:+.6g}i"
+
+
 def _setup_value(setup, key):
     if key == "gains":
         g = setup.gains
@@ -169,7 +174,7 @@ def _scene_lines(label, numbers, fig_name):
         lines.append(f"* contraction per sample: measured ρ = {meas['rho']:.6f} (median ratio "
                      f"{meas['median_ratio']:.6f}, samples {meas['first']}–{meas['last']}); "
                      f"predicted |λ|max = {_fmt(pred.get('rho'), '.6f')} "
-                     f"(multipliers {', '.join(_fmt(complex(z), '.4g') for z in pred.get('multipliers', []))}); "
+                     f"(multipliers {', '.join(_complex(z) for z in pred.get('multipliers', []))}); "
                      f"relative difference {_fmt(n.get('contraction_relative_error'), '.1e')}")
     elif meas:
         lines.append(f"* contraction: not measured ({meas.get('reason')})")
