@@ -83,6 +83,11 @@ def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     assert n - 5 <= rt["latency_ms"]["n"] <= n and rt["latency_ms"]["p50"] > 0
     assert rt["answer_time_ms"]["n"] == n and rt["missing_answers"] == 0
     assert rt["sample_lag_ms"]["n"] == n
+    dc = rt["delay_check"]
+    if rt["latency_ms"]["n"] == n:    # every correction applied: the delays explain the run
+        assert dc["median_departure"] < 1e-2 * dc["median_departure_kicks_on_pi2"], dc
+    else:
+        assert dc is None
     assert (tmp_path / "report" / "rt.png").is_file()
     assert "realtime latency" in (tmp_path / "report" / "report.md").read_text()
     ctl = replay_controller(bag, tmp_path / "ctl", domain_id=new_domain())

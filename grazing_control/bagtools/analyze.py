@@ -213,6 +213,19 @@ def _scene_lines(label, numbers, fig_name):
                   f"* sample lag (published vs due, time scale {_fmt(rt.get('time_scale'))}"
                   f"{', ' + rt['time_scale_source'] if 'time_scale_source' in rt else ''}): "
                   f"{d(rt.get('sample_lag_ms'))}"]
+        dc = rt.get("delay_check")
+        if dc:
+            lines.append(
+                f"* why a realtime run departs from the model with kicks on Π2: applying each "
+                f"non-zero correction at its measured arrival ((sample lag + latency) × time "
+                f"scale after Π2, median {dc['median_delay']:.3g}; the first sample's own lag, "
+                f"not recorded, fitted: {dc['fitted_first_sample_lag_ms']:.3g} ms) leaves a "
+                f"departure of median {dc['median_departure']:.2e}, max "
+                f"{dc['max_departure']:.2e} over {dc['periods']} periods, against median "
+                f"{_fmt(dc.get('median_departure_kicks_on_pi2'), '.2e')}, max "
+                f"{_fmt((n.get('model_check') or {}).get('max_departure'), '.2e')} with the "
+                "kicks on Π2; the rest is the microsecond resolution of the recorded wall-clock "
+                "timestamps, times the time scale")
     lines.append("")
     return lines
 
