@@ -22,7 +22,6 @@ Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[
 
 from __future__ import annotations
 
-import os
 import struct
 import zlib
 from dataclasses import dataclass, field

@@ -28,7 +28,6 @@ random) so that no other scene can cross-talk.
 from __future__ import annotations
 
 import math
-import os
 import random
 import struct
 import tempfile
@@ -279,10 +278,15 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
                 last = samples[-1][0] if samples else None
                 session.wait_for(lambda: last in answers, answer_timeout)
             session.wait_for(lambda: False, 0.2)
-            if recs:
-                writer.add_topic("/grazing/parameters", "std_msgs/msg/String", [])
-                for data_, t in recs:
-                    writer.write("/grazing/parameters", data_, t)
+            writer.add_topic("/grazing/parameters", "std_msgs/msg/String", [])
+            for data_, t in recs:
+                writer.write("/grazing/parameters", data_, t)
+            # the replay's own record: what was replayed, how
+            own = String(data=encode("/grazing_replay", {
+                "source_bag": str(bag), "rate": "as fast as possible" if rate is None else rate,
+                "gains_source": source, "domain_id": domain_id}))
+            from rclpy.serialization import serialize_message
+            writer.write("/grazing/parameters", bytes(serialize_message(own)), time.time_ns())
         finally:
             if proc is not None:
                 stop_nodes([proc], grace=5.0)
