@@ -181,3 +181,16 @@ def test_corrupted_bytes_anywhere_give_a_result_or_a_one_line_error(tmp_path):
         outcomes["read"] += 1
         outcomes["chunk skipped"] += any("corrupt" in p for p in data.problems)
     assert outcomes["read"] > 50 and outcomes["chunk skipped"] > 25, outcomes
+
+
+def test_a_file_compressed_as_a_whole_is_read(tmp_path):
+    """rosbag2's "file" compression mode writes <bag>_0.mcap.zstd."""
+    import zstandard
+
+    data = (BAGS / "scene_5e-6" / "scene_5e-6_0.mcap").read_bytes()
+    (tmp_path / "whole").mkdir()
+    (tmp_path / "whole" / "whole_0.mcap.zstd").write_bytes(
+        zstandard.ZstdCompressor().compress(data))
+    js = reader.decode_joint_state(reader.read_raw(tmp_path / "whole"), "/oscillator/pi2")
+    ref = reader.decode_joint_state(reader.read_raw(BAGS / "scene_5e-6"), "/oscillator/pi2")
+    assert js["x"].tolist() == ref["x"].tolist() and len(ref["x"]) == 1300

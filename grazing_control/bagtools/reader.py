@@ -34,6 +34,7 @@ __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_
            "decode_float64", "decode_strings"]
 
 MAGIC = b"\x89MCAP0\r\n"
+_ZSTD_FRAME = b"\x28\xb5\x2f\xfd"
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
 _REC = struct.Struct("<BQ")
@@ -101,7 +102,8 @@ def bag_path(bag) -> Path:
         import yaml
         try:
             info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
-            files = [f for f in info.get("relative_file_paths", []) if str(f).endswith(".mcap")]
+            files = [f for f in info.get("relative_file_paths", [])
+                 if str(f).endswith((".mcap", ".mcap.zstd"))]
         except (KeyError, TypeError, yaml.YAMLError):
             files = []
         if len(files) == 1 and (bag / files[0]).is_file():
@@ -109,7 +111,7 @@ def bag_path(bag) -> Path:
         if len(files) > 1:
             raise BagReadError(f"{bag}: split bags ({len(files)} files) are not supported: "
                                "give one .mcap file")
-    found = sorted(bag.glob("*.mcap"))
+    found = sorted(bag.glob("*.mcap")) or sorted(bag.glob("*.mcap.zstd"))
     if len(found) != 1:
         what = "no .mcap file" if not found else f"{len(found)} .mcap files"
         raise BagReadError(f"{bag}: {what} in the directory (need exactly one; "
@@ -246,6 +248,13 @@ def read_raw(bag, topics=None) -> RawBag:
     path = bag_path(bag)
     with open(path, "rb") as fh:
         data = fh.read()
+    if data.startswith(_ZSTD_FRAME):     # rosbag2 "file" compression mode: a .mcap.zstd
+        import zstandard
+        try:
+            data = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        except zstandard.ZstdError as exc:
+            raise BagReadError(f"{path}: a zstd-compressed file that does not decompress "
+                               f"({exc})") from None
     if not data.startswith(MAGIC):
         raise BagReadError(f"{path}: not an MCAP file (bad magic bytes)")
     scan = _Scan(None if topics is None else set(topics))
