@@ -525,6 +525,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true",
                    help="print one JSON summary object (progress goes to stderr)")
     s.set_defaults(func=cmd_demo)
+
+    from .bagtools import add_commands   # analyze, replay (docs/analysis.md)
+    add_commands(sub)
     return parser
 
 

@@ -140,6 +140,12 @@ def main(args) -> int:
         print(f"{name}: Δd = {dd:g}: control on at {numbers['control_on']}, converged after "
               f"{numbers['samples_to_converge']} samples, 1/1 at the end: {bool(ok)}, "
               f"|final - exact orbit| = {cross['final_pi2_error_vs_exact']:.1e} ({wall:.1f} s)")
+    if not args.offline:     # the bag analysis of the recordings (docs/analysis.md)
+        from .bagtools.analyze import analyze
+
+        analyze([out / "bags" / name for name, _ in SCENES], out / "analysis")
+        lines += [f"Bag analysis of the recordings (measured vs predicted contraction, "
+                  f"parameter record): [analysis/report.md](analysis/report.md)", ""]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     print(f"report: {out / 'report.md'} (numbers: {out / 'report.json'})")

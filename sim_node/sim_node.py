@@ -102,7 +102,8 @@ from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBL
                                           READY_TOPIC,
                                           StartupError,
                                           Throttled, bool_descriptor, float_descriptor,
-                                          int_descriptor, run_node, spin, stamp_from_seconds,
+                                          int_descriptor, publish_parameter_record, run_node,
+                                          spin, stamp_from_seconds,
                                           stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.fidelity import FIDELITIES, period_step
@@ -603,6 +604,7 @@ class SimNode(Node):
         self._recorder_ready = False
         if self.get_parameter("wait_for_recorder").value:
             self.create_subscription(Bool, READY_TOPIC, self._on_recorder_ready, LATCHED_QOS)
+        self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
         self._start_timer = self.create_timer(0.02, self._try_start)
         self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
         self._tick_timer = None
@@ -688,6 +690,8 @@ class SimNode(Node):
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]
             if self.settings.state_period > 0.0:
                 pubs.append(self.pub_state)
+            if self.settings.mode == "realtime":     # the latency of every sample is recorded
+                pubs.append(self.pub_latency)
             if any(pub.get_subscription_count() < n for pub in pubs):
                 return False
             if self.count_subscribers("controller/velocity_correction") < n + 1:

@@ -197,6 +197,9 @@ def test_colcon_build(tmp_path, symlink):
             domain = random.SystemRandom().randrange(101, 232)
             script += (f' && "{prefix}/lib/{PACKAGE}/grazing" run --periods 10 --delta-d -5e-6'
                        f' --enable-after 5 --timeout 90 --domain-id {domain}')
+            # a reference bag replayed through the installed controller and simulator
+            script += (f' && "{prefix}/lib/{PACKAGE}/grazing" replay "{src}/bags/scene_9e-6"'
+                       f' --bag "{tmp_path}/replay" --domain-id {domain}')
     run = subprocess.run(['bash', '-c', script], env=env, capture_output=True, text=True,
                          timeout=180)
     assert run.returncode == 0, run.stdout + run.stderr
@@ -205,3 +208,5 @@ def test_colcon_build(tmp_path, symlink):
         assert Path(line).resolve().is_relative_to(tmp_path.resolve()), line
     if not symlink and module_exists(CONSOLE_SCRIPTS['sim_node']):
         assert 'sim_node=0 controller_node=0' in run.stdout, run.stdout + run.stderr
+        assert 'BIT-IDENTICAL to the recorded corrections' in run.stdout, run.stdout + run.stderr
+        assert '1300 bit-identical' in run.stdout, run.stdout + run.stderr

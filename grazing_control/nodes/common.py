@@ -46,6 +46,7 @@ __all__ = [
     "REPLAY_QOS",
     "LATCHED_QOS",
     "NodeArguments",
+    "publish_parameter_record",
     "StartupError",
     "Throttled",
     "bool_descriptor",
@@ -467,3 +468,26 @@ def run_node(factory, args=None, name: str = "node") -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+# ------------------------------------------------------------------ parameter record
+def publish_parameter_record(node):
+    """Publish the node's parameters on ``grazing/parameters``, now and after each change.
+
+    One std_msgs/String (JSON of :func:`grazing_control.bagtools.record.encode`) on a
+    reliable, transient-local, depth-1 publisher, so that a recording describes itself
+    (docs/analysis.md, "Parameter record"). Returns the publisher.
+    """
+    from std_msgs.msg import String
+
+    from grazing_control.bagtools.record import TOPIC, encode
+
+    pub = node.create_publisher(String, TOPIC, LATCHED_QOS)
+
+    def publish(_changed=None):
+        values = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
+        pub.publish(String(data=encode(node.get_fully_qualified_name(), values)))
+
+    node.add_post_set_parameters_callback(publish)
+    publish()
+    return pub

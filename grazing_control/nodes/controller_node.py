@@ -71,8 +71,8 @@ from std_srvs.srv import SetBool
 from grazing_control.control import Gains, correction
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, PUBLISHER_QOS, REPLAY_QOS,
                                           StartupError, Throttled, float_descriptor,
-                                          int_descriptor, run_node, seconds_from_stamp,
-                                          stamp_key, string_descriptor)
+                                          int_descriptor, publish_parameter_record, run_node,
+                                          seconds_from_stamp, stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 
 __all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
@@ -235,6 +235,7 @@ class ControllerNode(Node):
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
         log = self.get_logger()
         self.malformed = Throttled(log, "malformed sample ignored")
         self.stale = Throttled(log, "stale sample not answered")

@@ -97,8 +97,8 @@ from grazing_control.recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE,
                                        BagWriter, message_definition,
                                        qos_profile_dict)
 
-__all__ = ["DEFAULT_TOPICS", "READY_TOPIC", "RECORDER_QOS", "RecorderNode", "adapted_qos",
-           "main", "parse_topics"]
+__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "READY_TOPIC", "RECORDER_QOS",
+           "RecorderNode", "adapted_qos", "main", "parse_topics"]
 
 
 
@@ -112,6 +112,14 @@ DEFAULT_TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock",
     "oscillator/deadline_miss": "geometry_msgs/msg/Vector3Stamped",
 }
+
+#: The nodes' parameter record (grazing_control.bagtools.record), recorded by default too;
+#: its publishers are transient local, so the adapted subscription is too and a record
+#: published before the match is received.
+PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
+#: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
+EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
+                "oscillator/latency": "std_msgs/msg/Float64"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
 #: nothing (used for a topic's metadata when it never had a publisher).
@@ -146,7 +154,8 @@ def parse_topics(entries):
     ParameterError
         For an empty list, a malformed entry or an unknown topic without type.
     """
-    known = {name.lstrip("/"): (name, kind) for name, kind in DEFAULT_TOPICS.items()}
+    known = {name.lstrip("/"): (name, kind)
+             for name, kind in (*DEFAULT_TOPICS.items(), *EXTRA_TOPICS.items())}
     topics = {}
     for entry in entries:
         words = entry.split()
@@ -293,7 +302,8 @@ class RecorderNode(Node):
         self.declare_parameter("output", "", read_only(
             "bag directory (created; must not exist or be empty)",
             ParameterType.PARAMETER_STRING))
-        self.declare_parameter("topics", [f"{n} {t}" for n, t in DEFAULT_TOPICS.items()],
+        self.declare_parameter("topics", [f"{n} {t}" for n, t in (*DEFAULT_TOPICS.items(),
+                                                                  *EXTRA_TOPICS.items())],
                                read_only("'name' or 'name pkg/msg/Type' per topic",
                                          ParameterType.PARAMETER_STRING_ARRAY))
         self.declare_parameter("compression", "zstd", read_only(

@@ -1,0 +1,443 @@
+"""Columnar reading of a rosbag2 MCAP file: stream the records, decode only what is needed.
+
+The analysis needs a few numbers of each message (a stamp, a position, a velocity), not
+message objects. This reader streams the file record by record from its start (MCAP
+specification, "Records"): it never needs the summary, so a file whose recorder was
+killed (no summary, no ``metadata.yaml``, a torn last record) is read up to its last
+complete record, and a file written by any other writer (rosbag2, rosbags, the
+``mcap`` library) is read the same way. Chunks are decompressed (zstd, lz4 or none) and
+concatenated into one byte pool; each message is kept as its offset into the pool.
+
+CDR decoding is vectorised: for all messages of a channel at once, the offsets of the
+fields follow the plain little-endian CDR layout of the ROS 2 type (strings and
+sequences carry a uint32 length; primitives are aligned to their size relative to the
+start of the body, after the 4-byte encapsulation header), computed with numpy from the
+lengths read out of the pool. A message too short for its layout is marked invalid (it
+is counted, never decoded from beyond its end).
+
+Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]),
+``geometry_msgs/msg/TwistStamped`` (stamp, linear.x), ``geometry_msgs/msg/Vector3Stamped``
+(stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
+           "decode_joint_state", "decode_twist_stamped", "decode_vector3_stamped",
+           "decode_float64", "decode_strings"]
+
+MAGIC = b"\x89MCAP0\r\n"
+_ZSTD_FRAME = b"\x28\xb5\x2f\xfd"
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
+_OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
+_REC = struct.Struct("<BQ")
+_MSG = struct.Struct("<BQH")
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+
+
+class BagReadError(ValueError):
+    """The file is not an MCAP bag this reader can use (message says why)."""
+
+
+@dataclass
+class Channel:
+    """One MCAP channel (a topic) and the pool offsets of its message records."""
+
+    id: int
+    topic: str
+    type: str
+    encoding: str
+    metadata: dict
+    records: list = field(default_factory=list, repr=False)
+
+
+@dataclass
+class RawBag:
+    """What :func:`read_raw` found: channels with message offsets into one byte pool.
+
+    Attributes
+    ----------
+    path : the MCAP file.
+    pool : np.ndarray of uint8, the decompressed records of every chunk (and the
+        top-level messages), concatenated.
+    channels : dict topic -> Channel.
+    metadata : list of (name, dict) MCAP Metadata records.
+    complete : True if the data section ended with DataEnd/Footer (a clean close).
+    problems : list of str, what was cut or skipped (torn tail, bad chunk).
+    """
+
+    path: Path
+    pool: np.ndarray
+    channels: dict
+    metadata: list
+    complete: bool
+    problems: list
+
+    def offsets(self, topic: str) -> np.ndarray:
+        """Pool offsets (int64) of the message records of ``topic``, in file order."""
+        ch = self.channels.get(topic)
+        return np.array(ch.records if ch else [], dtype=np.int64)
+
+    def count(self, topic: str) -> int:
+        ch = self.channels.get(topic)
+        return len(ch.records) if ch else 0
+
+
+def bag_path(bag) -> Path:
+    """The MCAP file of a bag directory (metadata.yaml's file, else its single .mcap)."""
+    bag = Path(bag)
+    if bag.is_file():
+        return bag
+    if not bag.is_dir():
+        raise BagReadError(f"{bag}: no such bag directory or .mcap file")
+    meta = bag / "metadata.yaml"
+    if meta.is_file():
+        import yaml
+        try:
+            info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+            files = [f for f in info.get("relative_file_paths", [])
+                 if str(f).endswith((".mcap", ".mcap.zstd"))]
+        except (KeyError, TypeError, yaml.YAMLError):
+            files = []
+        if len(files) == 1 and (bag / files[0]).is_file():
+            return bag / files[0]
+        if len(files) > 1:
+            raise BagReadError(f"{bag}: split bags ({len(files)} files) are not supported: "
+                               "give one .mcap file")
+    found = sorted(bag.glob("*.mcap")) or sorted(bag.glob("*.mcap.zstd"))
+    if len(found) != 1:
+        what = "no .mcap file" if not found else f"{len(found)} .mcap files"
+        raise BagReadError(f"{bag}: {what} in the directory (need exactly one; "
+                           "a .db3 bag must be converted to MCAP)")
+    return found[0]
+
+
+def _string(buf, p):
+    (n,) = _U32.unpack_from(buf, p)
+    return bytes(buf[p + 4:p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
+
+
+def _map(buf, p):
+    (n,) = _U32.unpack_from(buf, p)
+    p += 4
+    end = p + n
+    out = {}
+    while p < end:
+        k, p = _string(buf, p)
+        v, p = _string(buf, p)
+        out[k] = v
+    return out, end
+
+
+def _decompress(kind: str, data: bytes, size: int) -> bytes:
+    if kind == "":
+        return data
+    if kind == "zstd":
+        import zstandard
+        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+    if kind == "lz4":
+        try:
+            import lz4.frame
+        except ImportError:
+            raise BagReadError("an lz4-compressed chunk needs the lz4 package") from None
+        return lz4.frame.decompress(data)
+    raise BagReadError(f"unknown chunk compression {kind!r}")
+
+
+class _Scan:
+    def __init__(self, wanted):
+        self.wanted = wanted
+        self.schemas = {}            # id -> (name, encoding)
+        self.channels = {}           # id -> Channel
+        self.by_id_records = {}      # id -> list (only wanted channels)
+        self.metadata = []
+        self.pieces = []
+        self.base = 0
+        self.problems = []
+
+    def records(self, buf, start, end, top):
+        """Walk records in buf[start:end]; return (stop_reason, position reached)."""
+        p = start
+        by_id = self.by_id_records
+        unpack_msg = _MSG.unpack_from
+        base = self.base
+        while p + 9 <= end:
+            op, ln, cid = unpack_msg(buf, p) if p + 11 <= end else (*_REC.unpack_from(buf, p), 0)
+            q = p + 9 + ln
+            if q > end:
+                return "torn", p
+            if op == _OP_MESSAGE:
+                lst = by_id.get(cid)
+                if lst is not None:
+                    lst.append(base + p)
+                elif cid not in self.channels and not top:
+                    self.problems.append(f"message on unknown channel {cid} skipped")
+            elif op == _OP_CHUNK and top:
+                self.chunk(buf, p + 9, q)
+                base = self.base
+            elif op == _OP_SCHEMA:
+                (sid,) = _U16.unpack_from(buf, p + 9)
+                name, r = _string(buf, p + 11)
+                enc, _ = _string(buf, r)
+                self.schemas[sid] = (name, enc)
+            elif op == _OP_CHANNEL:
+                cid, sid = struct.unpack_from("<HH", buf, p + 9)
+                if cid not in self.channels:
+                    topic, r = _string(buf, p + 13)
+                    enc, r = _string(buf, r)
+                    meta, _ = _map(buf, r)
+                    name = self.schemas.get(sid, ("", ""))[0]
+                    ch = Channel(cid, topic, name, enc, meta)
+                    self.channels[cid] = ch
+                    if self.wanted is None or topic in self.wanted:
+                        by_id[cid] = ch.records
+            elif op == _OP_METADATA:
+                name, r = _string(buf, p + 9)
+                meta, _ = _map(buf, r)
+                self.metadata.append((name, meta))
+            elif op in (_OP_DATA_END, _OP_FOOTER) and top:
+                return "end", q
+            p = q
+        return ("torn" if p < end else "eof"), p
+
+    def chunk(self, buf, p, end):
+        try:
+            _t0, _t1, size, crc = struct.unpack_from("<QQQI", buf, p)
+            kind, r = _string(buf, p + 28)
+            (n,) = _U64.unpack_from(buf, r)
+            data = bytes(buf[r + 8:r + 8 + n]) if kind else buf[r + 8:r + 8 + n]
+            raw = bytes(_decompress(kind, data, size))
+            if len(raw) != size:
+                raise ValueError(f"{len(raw)} bytes, the chunk header says {size}")
+            if crc and zlib.crc32(raw) != crc:
+                raise ValueError("CRC mismatch")
+        except BagReadError:
+            raise
+        except Exception as exc:      # a corrupt chunk: skip it, say so
+            self.problems.append(f"chunk at byte {p - 9} skipped (corrupt): "
+                                 f"{type(exc).__name__}: {exc}")
+            return
+        self.pieces.append(raw)
+        reason, _ = self.records(raw, 0, len(raw), False)
+        if reason == "torn":
+            self.problems.append(f"chunk at byte {p - 9} ends inside a record")
+        self.base += len(raw)
+
+
+def read_raw(bag, topics=None) -> RawBag:
+    """Stream an MCAP file (or a bag directory's file) into a :class:`RawBag`.
+
+    Parameters
+    ----------
+    bag : path of a bag directory or of an .mcap file.
+    topics : iterable of str, optional
+        Keep message offsets only for these topics (all channels are listed anyway).
+
+    Raises
+    ------
+    BagReadError
+        Not an MCAP file, or an unsupported chunk compression.
+    """
+    path = bag_path(bag)
+    with open(path, "rb") as fh:
+        data = fh.read()
+    if data.startswith(_ZSTD_FRAME):     # rosbag2 "file" compression mode: a .mcap.zstd
+        import zstandard
+        try:
+            data = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        except zstandard.ZstdError as exc:
+            raise BagReadError(f"{path}: a zstd-compressed file that does not decompress "
+                               f"({exc})") from None
+    if not data.startswith(MAGIC):
+        raise BagReadError(f"{path}: not an MCAP file (bad magic bytes)")
+    scan = _Scan(None if topics is None else set(topics))
+    # top-level messages (unchunked files) point into the file itself: it goes first
+    scan.pieces.append(data)
+    scan.base = len(data)
+    reason, stop = scan.records(memoryview(data), len(MAGIC), len(data), True)
+    problems = scan.problems
+    if reason != "end":
+        problems.insert(0, f"the file has no summary (recorder killed?): read up to byte "
+                           f"{stop} of {len(data)}" + (", the rest is a torn record"
+                                                     if stop < len(data) else ""))
+    pool = np.frombuffer(b"".join(scan.pieces), dtype=np.uint8)
+    channels = {}
+    for ch in scan.channels.values():
+        if ch.topic in channels:           # two channels on one topic (two types): merge
+            channels[ch.topic].records.extend(ch.records)
+            channels[ch.topic].records.sort()
+        else:
+            channels[ch.topic] = ch
+    return RawBag(path, pool, channels, scan.metadata, reason == "end", problems)
+
+
+# ----------------------------------------------------------------- vectorised CDR
+_R = {n: np.arange(n, dtype=np.int64) for n in (4, 8)}
+#: A sequence<string> longer than this is walked per message (see _Body.skip_strings).
+_MANY = 64
+
+
+def _gather(pool, off, n, dtype, ok, end):
+    """Values of ``dtype`` (n bytes) at pool offsets ``off``; ``ok`` narrowed in place."""
+    ok &= off + n <= end
+    safe = np.where(ok, off, 0)
+    return pool[safe[:, None] + _R[n]].view(dtype)[:, 0]
+
+
+def _align(pos, n):
+    return (pos + (n - 1)) & ~np.int64(n - 1)
+
+
+class _Body:
+    """Message records at pool offsets: times, CDR body start and end, validity."""
+
+    def __init__(self, pool, rec):
+        self.pool = pool
+        rec = np.asarray(rec, dtype=np.int64)
+        if rec.size == 0:
+            z = np.zeros(0, np.int64)
+            self.log_time = self.publish_time = self.sequence = z
+            self.body = self.end = z
+            self.ok = np.zeros(0, bool)
+            return
+        ok = np.ones(rec.size, bool)
+        big = np.full(rec.size, np.iinfo(np.int64).max)
+        length = _gather(pool, rec + 1, 8, "<u8", ok, big).astype(np.int64)
+        self.end = rec + 9 + length
+        self.sequence = _gather(pool, rec + 11, 4, "<u4", ok, self.end).astype(np.int64)
+        self.log_time = _gather(pool, rec + 15, 8, "<u8", ok, self.end).astype(np.int64)
+        self.publish_time = _gather(pool, rec + 23, 8, "<u8", ok, self.end).astype(np.int64)
+        data = rec + 31
+        enc = _gather(pool, data, 4, "<u4", ok, self.end)
+        # encapsulation: 00 01 (CDR_LE) or 00 03 (PL_CDR_LE); big endian is refused
+        ok &= ((enc & 0xFFFF) == 0x0100) | ((enc & 0xFFFF) == 0x0300)
+        self.body = data + 4
+        self.ok = ok
+
+    def u32(self, pos):
+        return _gather(self.pool, self.body + pos, 4, "<u4", self.ok, self.end).astype(np.int64)
+
+    def i32(self, pos):
+        return _gather(self.pool, self.body + pos, 4, "<i4", self.ok, self.end).astype(np.int64)
+
+    def f64(self, pos):
+        return _gather(self.pool, self.body + pos, 8, "<f8", self.ok, self.end)
+
+    def header(self):
+        """(stamp ns as int64, position after header) of std_msgs/Header at the body start."""
+        sec = self.i32(np.zeros_like(self.body))
+        nsec = self.u32(np.full_like(self.body, 4))
+        flen = self.u32(np.full_like(self.body, 8))
+        self.ok &= flen <= self.end - self.body
+        return sec * 1_000_000_000 + nsec, 12 + np.where(self.ok, flen, 0)
+
+    def skip_strings(self, pos):
+        """Position after a sequence<string> at ``pos``.
+
+        Vectorised over the messages, one step per string; a message with more than
+        ``_MANY`` strings is walked on its own (bounded by its length).
+        """
+        pos = _align(pos, 4)
+        n = self.u32(pos)
+        self.ok &= n <= (self.end - self.body) // 4
+        n = np.where(self.ok, n, 0)
+        pos = pos + 4
+        many = np.flatnonzero(n > _MANY)
+        for i in many.tolist():
+            pos[i] = self._walk_strings(i, int(pos[i]), int(n[i]))
+        n[many] = 0
+        for j in range(int(n.max()) if n.size else 0):
+            on = self.ok & (n > j)
+            pj = _align(pos, 4)
+            ln = self.u32(np.where(on, pj, 0))
+            pos = np.where(on & self.ok, pj + 4 + ln, pos)
+        return pos
+
+    def _walk_strings(self, i, pos, n):
+        end = int(self.end[i] - self.body[i])
+        base = int(self.body[i])
+        for _ in range(n):
+            pos = (pos + 3) & ~3
+            if pos + 4 > end:
+                self.ok[i] = False
+                return 0
+            ln = int(self.pool[base + pos:base + pos + 4].view("<u4")[0])
+            pos += 4 + ln
+            if pos > end:
+                self.ok[i] = False
+                return 0
+        return pos
+
+    def first_double(self, pos):
+        """(seq[0] or NaN, count, position after) of a sequence<double> at ``pos``."""
+        pos = _align(pos, 4)
+        n = np.where(self.ok, self.u32(pos), 0)
+        self.ok &= n <= self.end - self.body
+        pos = pos + 4
+        p8 = _align(pos, 8)
+        has = n > 0
+        val = np.where(has, self.f64(np.where(has, p8, 0)), np.nan)
+        return val, n, np.where(has, p8 + 8 * n, pos)
+
+
+def decode_stamped(bag: RawBag, topic: str):
+    """(_Body, stamp ns, position after header) for a message type starting with a Header."""
+    b = _Body(bag.pool, bag.offsets(topic))
+    stamp, pos = b.header()
+    return b, stamp, pos
+
+
+def decode_joint_state(bag: RawBag, topic: str) -> dict:
+    """JointState columns: stamp_ns, x = position[0], v = velocity[0], times, ok."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = b.skip_strings(pos)
+    x, nx, pos = b.first_double(pos)
+    v, nv, pos = b.first_double(pos)
+    b.ok &= (nx > 0) & (nv > 0)
+    return _columns(b, stamp=stamp, x=x, v=v)
+
+
+def decode_twist_stamped(bag: RawBag, topic: str) -> dict:
+    """TwistStamped columns: stamp_ns, dv = twist.linear.x, times, ok."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    dv = b.f64(_align(pos, 8))
+    return _columns(b, stamp=stamp, dv=dv)
+
+
+def decode_vector3_stamped(bag: RawBag, topic: str) -> dict:
+    """Vector3Stamped columns: stamp_ns, vx, vy, vz, times, ok."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    p = _align(pos, 8)
+    return _columns(b, stamp=stamp, vx=b.f64(p), vy=b.f64(p + 8), vz=b.f64(p + 16))
+
+
+def decode_float64(bag: RawBag, topic: str) -> dict:
+    """std_msgs/Float64 columns: data, times, ok."""
+    b = _Body(bag.pool, bag.offsets(topic))
+    return _columns(b, data=b.f64(np.zeros_like(b.body)))
+
+
+def decode_strings(bag: RawBag, topic: str) -> list:
+    """std_msgs/String messages as (log_time_ns, text), in file order (few messages)."""
+    b = _Body(bag.pool, bag.offsets(topic))
+    n = b.u32(np.zeros_like(b.body))
+    out = []
+    for i in np.flatnonzero(b.ok & (n <= b.end - b.body - 4)):
+        s = int(b.body[i]) + 4
+        raw = bag.pool[s:s + int(n[i])].tobytes().rstrip(b"\0")
+        out.append((int(b.log_time[i]), raw.decode("utf-8", "replace")))
+    return out
+
+
+def _columns(b: _Body, **cols) -> dict:
+    out = {"log_time": b.log_time, "publish_time": b.publish_time, "sequence": b.sequence,
+           "ok": b.ok.copy()}
+    out.update(cols)
+    return out

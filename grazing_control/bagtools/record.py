@@ -1,0 +1,85 @@
+"""The parameter record: a node's parameters as JSON, so that a recording describes itself.
+
+Each node publishes its parameters on ``grazing/parameters`` (std_msgs/String, reliable,
+transient local, depth 1) at start and again after every accepted change; the recorder
+records that topic by default (docs/analysis.md, "Parameter record"). The text is one JSON
+object::
+
+    {"record": "grazing_control/parameters", "version": 1, "node": "/sim_node",
+     "parameters": {"delta_d": -5e-06, "mode": "lockstep", ...}}
+
+Non-finite numbers are written as the strings "nan", "inf", "-inf" (strict JSON).
+This module has no ROS dependency: the nodes call :func:`encode`, the analysis
+:func:`decode` and :func:`run_parameters`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+__all__ = ["TOPIC", "KIND", "encode", "decode", "run_parameters"]
+
+#: Relative topic name of the record (``/grazing/parameters`` in the root namespace).
+TOPIC = "grazing/parameters"
+#: Value of the "record" key, so that a foreign String on the topic is recognised.
+KIND = "grazing_control/parameters"
+VERSION = 1
+
+
+def _plain(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (bytes, bytearray)):
+        return list(value)
+    return value
+
+
+def _number(value):
+    if isinstance(value, str) and value in ("nan", "inf", "-inf"):
+        return float(value)
+    return value
+
+
+def encode(node: str, parameters: dict) -> str:
+    """The JSON text of one record (``node``: its fully qualified name)."""
+    body = {k: _plain(v) for k, v in sorted(parameters.items())}
+    return json.dumps({"record": KIND, "version": VERSION, "node": node, "parameters": body},
+                      allow_nan=False, separators=(",", ":"))
+
+
+def decode(text: str):
+    """(node, parameters) of a record's text; ValueError if it is not one."""
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"not JSON ({exc.msg})") from None
+    if not isinstance(obj, dict) or obj.get("record") != KIND:
+        raise ValueError("not a grazing_control parameter record")
+    params = obj.get("parameters")
+    if not isinstance(params, dict):
+        raise ValueError("parameter record without a 'parameters' object")
+    return str(obj.get("node", "")), {k: _number(v) for k, v in params.items()}
+
+
+def run_parameters(records) -> dict:
+    """Per node short name ("sim_node", "controller_node"): the records in time order.
+
+    ``records``: (log_time_ns, text) pairs. Returns ``{"nodes": {name: [params, ...]},
+    "rejected": n}`` where the first entry of each list is the parameters at start and the
+    others are later changes.
+    """
+    nodes, rejected = {}, 0
+    for _t, text in sorted(records, key=lambda r: r[0]):
+        try:
+            node, params = decode(text)
+        except ValueError:
+            rejected += 1
+            continue
+        name = node.rsplit("/", 1)[-1] or node
+        seq = nodes.setdefault(name, [])
+        if not seq or seq[-1] != params:
+            seq.append(params)
+    return {"nodes": nodes, "rejected": rejected}

@@ -1,0 +1,209 @@
+"""`grazing analyze`: the report from recordings alone (no ROS needed).
+
+The numbers are checked against the core: the contraction measured from the recorded
+samples against the multipliers of the exact controlled orbit, the final sample against
+that orbit, and every recorded period against the core's own step. Bags of another writer,
+with remapped and extra topics, missing optional topics, resets, duplicate stamps (two
+simulators on one topic) and a parameter record are fed to it as a user would.
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from grazing_control import cli
+from grazing_control.bagtools import record
+from grazing_control.bagtools.scenes import DuplicateStampsError, load
+from grazing_control.control import Gains
+from grazing_control.design import degenerate_c1
+from grazing_control.orbits import orbit_11
+from grazing_control.params import OscillatorParams
+
+from bagtools_helpers import BAGS, joint_state, scene_messages, string, write_rosbags
+
+SCENES = (("scene_5e-6", -5e-6), ("scene_9e-6", -9e-6))
+
+
+def run_cli(argv, capsys):
+    code = cli.main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def reference_report(tmp_path_factory):
+    from grazing_control.bagtools.analyze import analyze
+
+    out = tmp_path_factory.mktemp("analyze")
+    return analyze([BAGS / n for n, _ in SCENES], out), out
+
+
+@pytest.mark.parametrize("i", [0, 1])
+def test_reference_bags_measured_contraction_matches_the_predicted_multiplier(reference_report, i):
+    report, out = reference_report
+    name, dd = SCENES[i]
+    bag = report["bags"][i]
+    setup = bag["setup"]
+    # no parameter record in these bags: Delta d and the gains are inferred from the data
+    assert not bag["parameter_record"]
+    assert setup["params"]["delta_d"] == dd and "inferred" in setup["sources"]["delta_d"]
+    p = OscillatorParams(delta_d=dd)
+    c1 = degenerate_c1(p, -1.0)
+    # least squares on Eq. 28 over 300 corrections that converge to one point: ~1e-12
+    assert setup["gains"]["c1"] == pytest.approx(c1, rel=1e-10)
+    assert setup["gains"]["c2"] == pytest.approx(-1.0, rel=1e-10)
+    s = bag["scenes"][0]
+    exact = orbit_11(p, Gains(c1, -1.0))
+    rho = float(np.max(np.abs(exact.multipliers)))
+    assert s["predicted"]["rho"] == pytest.approx(rho, rel=1e-9)
+    assert s["measured_contraction"]["rho"] == pytest.approx(rho, rel=1e-3)
+    assert s["measured_contraction"]["median_ratio"] == pytest.approx(rho, rel=2e-4)
+    assert s["final_vs_exact_orbit"] < 1e-12
+    assert s["model_check"]["max_departure"] < 1e-12
+    assert s["control_on_sample"] == 1000 and s["one_impact_per_period_after_convergence"]
+    assert s["corrections"]["missing"] == 0 and s["corrections"]["saturation_hits"] == 0
+    assert (out / f"{name}.png").stat().st_size > 10_000
+
+
+def test_reference_report_files_and_comparison(reference_report):
+    report, out = reference_report
+    md = (out / "report.md").read_text()
+    assert "## Comparison" in md and md.count("| scene_") == 2
+    assert "measured ρ" in md and "predicted |λ|max" in md
+    assert "none in this bag" in md           # says that the record is missing
+    assert json.loads((out / "report.json").read_text())["bags"][1]["label"] == "scene_9e-6"
+
+
+def test_cli_json_and_summary(tmp_path, capsys):
+    code, out, err = run_cli(["analyze", str(BAGS / "scene_9e-6"), "--out", str(tmp_path),
+                              "--json", "--no-figures"], capsys)
+    assert code == 0 and err == ""
+    rep = json.loads(out)
+    assert rep["bags"][0]["scenes"][0]["samples_to_converge"] == 10
+    code, out, err = run_cli(["analyze", str(BAGS / "scene_9e-6"), "--out", str(tmp_path),
+                              "--no-figures", "--delta-d", "-9e-6", "--c2", "-1"], capsys)
+    assert code == 0 and "contraction measured 0.3191" in out
+
+
+def test_another_writers_bag_with_remapped_and_extra_topics(tmp_path, capsys):
+    topics = {"pi2": "/rig/pi2", "correction": "/rig/dv", "impact": "/rig/impact"}
+    msgs, scene = scene_messages(BAGS / "scene_5e-6", topics)
+    msgs.insert(5, ("/chatter", "std_msgs/msg/String", 5, string("hello")))
+    bag = write_rosbags(tmp_path / "rig", msgs)
+    code, out, err = run_cli(["analyze", str(bag), "--out", str(tmp_path / "a")], capsys)
+    assert code == 2 and err.startswith("grazing: error:") and "--topic pi2=" in err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    code, out, err = run_cli(["analyze", str(bag), "--out", str(tmp_path / "a"), "--json",
+                              "--no-figures", "--topic", "pi2=/rig/pi2", "--topic",
+                              "correction=/rig/dv", "--topic", "impact=/rig/impact"], capsys)
+    assert code == 0, err
+    rep = json.loads(out)["bags"][0]
+    assert any("/chatter" in n for n in rep["notes"])
+    assert any("absent" in n and "/oscillator/pi1" in n for n in rep["notes"])
+    s = rep["scenes"][0]
+    assert s["samples"] == 1300 and s["control_on_sample"] == 1000
+    assert s["final_pi2"] == scene.pi2[-1].tolist()
+    assert s["model_check"]["max_departure"] < 1e-12
+
+
+def test_pi2_only_bag_is_analysed_and_says_what_it_lacks(tmp_path):
+    msgs, _ = scene_messages(BAGS / "scene_9e-6", with_impacts=False)
+    msgs = [m for m in msgs if m[0] == "/oscillator/pi2"][:400]
+    bag = write_rosbags(tmp_path / "pi2only", msgs)
+    from grazing_control.bagtools.analyze import analyze
+
+    rep = analyze([bag], tmp_path / "out", figures=False)["bags"][0]
+    assert any("no corrections recorded" in n for n in rep["notes"])
+    assert any("Delta d unknown" in n for n in rep["notes"])
+    s = rep["scenes"][0]
+    assert s["control_on_sample"] is None and s["uncontrolled"]["period"] is None
+    rep = analyze([bag], tmp_path / "out", figures=False,
+                  options={"delta_d": -9e-6})["bags"][0]
+    assert rep["setup"]["sources"]["delta_d"] == "option"
+    assert rep["scenes"][0]["model_check"]["max_departure"] < 1e-12
+
+
+def test_two_simulators_on_one_topic_are_refused(tmp_path, capsys):
+    msgs, scene = scene_messages(BAGS / "scene_5e-6", with_impacts=False)
+    pi2 = [m for m in msgs if m[0] == "/oscillator/pi2"][:200]
+    twin = []
+    for topic, kind, t, msg in pi2:      # a second simulator, same stamps, other states
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        twin += [(topic, kind, t, msg),
+                 (topic, kind, t + 3, joint_state(stamp, msg.position[0] + 1e-3, msg.velocity[0]))]
+    bag = write_rosbags(tmp_path / "two", twin)
+    with pytest.raises(DuplicateStampsError, match="more than one simulator"):
+        load(bag)
+    code, out, err = run_cli(["analyze", str(bag), "--out", str(tmp_path / "a")], capsys)
+    assert code == 2 and err.startswith("grazing: error:") and "duplicate stamps" in err
+    assert "Traceback" not in err and err.count("\n") == 1
+
+
+def test_a_reset_starts_a_new_scene(tmp_path):
+    msgs, _ = scene_messages(BAGS / "scene_5e-6", with_impacts=False)
+    pi2 = [m for m in msgs if m[0] != "/oscillator/impact"]
+    again = [(topic, kind, t + 10**9, msg) for topic, kind, t, msg in pi2[:120]]
+    bag = write_rosbags(tmp_path / "reset", pi2[:300] + again)
+    data = load(bag)
+    assert [len(s.stamp_ns) for s in data.scenes] == [150, 60]
+    assert any("reset 1 times" in n for n in data.notes)
+    assert np.array_equal(data.scenes[1].scene.pi2, data.scenes[0].scene.pi2[:60])
+
+
+def test_wrong_type_on_the_pi2_topic_is_named(tmp_path, capsys):
+    bag = write_rosbags(tmp_path / "wrong", [("/oscillator/pi2", "std_msgs/msg/String", 1,
+                                             string("x"))])
+    code, out, err = run_cli(["analyze", str(bag)], capsys)
+    assert code == 2 and "no usable Pi2 sample topic" in err and err.count("\n") == 1
+    assert "has type std_msgs/msg/String, expected sensor_msgs/msg/JointState" in err
+
+
+def test_parameter_record_round_trip_and_use(tmp_path):
+    text = record.encode("/sim_node", {"delta_d": -9e-6, "x0": math.nan, "mode": "lockstep",
+                                       "saturation": math.inf})
+    node, params = record.decode(text)
+    assert node == "/sim_node" and params["delta_d"] == -9e-6 and math.isnan(params["x0"])
+    assert params["saturation"] == math.inf and json.loads(text)["parameters"]["x0"] == "nan"
+    for bad in ("{}", "not json", '{"record": "other"}', "[1]"):
+        with pytest.raises(ValueError):
+            record.decode(bad)
+    msgs, _ = scene_messages(BAGS / "scene_9e-6")
+    p = OscillatorParams(delta_d=-9e-6)
+    ctl = {"c1": degenerate_c1(p, -1.0), "c2": -1.0, "enable_after": 1000,
+           "saturation": math.inf}
+    msgs = [("/grazing/parameters", "std_msgs/msg/String", 0,
+             string(record.encode("/sim_node", {"delta_d": -9e-6, "mode": "lockstep"}))),
+            ("/grazing/parameters", "std_msgs/msg/String", 0,
+             string(record.encode("/controller_node", ctl))),
+            ("/grazing/parameters", "std_msgs/msg/String", 0, string("foreign text"))] + msgs
+    bag = write_rosbags(tmp_path / "rec", msgs)
+    from grazing_control.bagtools.analyze import analyze
+
+    rep = analyze([bag], tmp_path / "out", figures=False)["bags"][0]
+    src = rep["setup"]["sources"]
+    assert rep["parameter_record"] and src["delta_d"] == "parameter record"
+    assert src["gains"] == "parameter record" and rep["setup"]["gains"]["c1"] == ctl["c1"]
+    assert any("not parameter records" in s for s in rep["problems"])
+    rep = analyze([bag], tmp_path / "out", figures=False, options={"delta_d": -8e-6})["bags"][0]
+    assert rep["setup"]["sources"]["delta_d"] == "option (overrides the record)"
+    assert rep["scenes"][0]["model_check"]["max_departure"] > 1e-9   # the wrong model shows
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--tol", "-1"], "--tol"),
+    (["--topic", "nonsense"], "ROLE=/topic/name"),
+    (["--topic", "foo=/x"], "ROLE must be one of"),
+    (["--c1", "1.0"], "--c1 given without --c2"),
+])
+def test_bad_options_one_line_error(capsys, argv, message):
+    code, out, err = run_cli(["analyze", str(BAGS / "scene_5e-6"), "--no-figures"] + argv,
+                             capsys)
+    assert code == 2 and err.startswith("grazing: error:") and message in err
+    assert err.count("\n") == 1
+
+
+def test_missing_bag_one_line_error(tmp_path, capsys):
+    code, out, err = run_cli(["analyze", str(tmp_path / "nope")], capsys)
+    assert code == 2 and "no such bag" in err and err.count("\n") == 1

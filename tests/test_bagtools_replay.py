@@ -1,0 +1,162 @@
+"""`grazing replay` and the analysis of bags recorded here through the real nodes.
+
+Replay through a real controller_node (over Fast DDS, a domain of its own): the
+reference bag's own gains give bit-identical corrections; other gains give exactly what
+Eq. 28 computes with them on the recorded samples. Replay through sim_node in lockstep
+reproduces a lockstep bag bit for bit, and a realtime one departs (reported with why).
+A realtime bag and a bag whose recorder was SIGKILLed are recorded in the tests.
+"""
+
+import os
+import random
+import signal
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+
+from grazing_control import cli, launcher                       # noqa: E402
+from grazing_control.bagtools.analyze import analyze            # noqa: E402
+from grazing_control.bagtools.replay import replay_controller, replay_simulator  # noqa: E402
+from grazing_control.bagtools.scenes import load                # noqa: E402
+from grazing_control.control import Gains, correction          # noqa: E402
+from grazing_control.design import degenerate_c1, write_controller_yaml  # noqa: E402
+from grazing_control.params import OscillatorParams             # noqa: E402
+from grazing_control.simulate import simulate                   # noqa: E402
+
+from bagtools_helpers import BAGS                               # noqa: E402
+
+
+def new_domain():
+    return random.SystemRandom().randrange(101, 232)
+
+
+def test_replay_with_the_recorded_gains_is_bit_identical_through_both_nodes(tmp_path):
+    res = replay_controller(BAGS / "scene_9e-6", tmp_path / "ctl", domain_id=new_domain())
+    cmp_ = res["comparison"]
+    assert res["answers"] == 1300 and cmp_["answered_in_both"] == 1300
+    assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == 1300
+    assert "config/controller.yaml (matches the recording)" in res["gains_source"]
+    # the replay bag is itself analysable: the controller's record is in it
+    data = load(tmp_path / "ctl")
+    assert data.parameters["nodes"]["controller_node"][0]["enable_after"] == 1000
+    sim = replay_simulator(BAGS / "scene_9e-6", tmp_path / "sim", domain_id=new_domain())
+    assert sim["samples_replayed"] == 1300 and sim["stamps_equal"]
+    assert sim["bit_identical_samples"] == 1300 and sim["max_departure"] == 0.0
+
+
+def test_replay_with_other_gains_gives_what_eq28_commands(tmp_path, capsys):
+    p = OscillatorParams(delta_d=-5e-6)
+    gains = Gains(degenerate_c1(p, -0.5), -0.5)
+    yaml_path = tmp_path / "c05.yaml"
+    write_controller_yaml(yaml_path, p, gains)
+    code = cli.main(["replay", str(BAGS / "scene_5e-6"), "--bag", str(tmp_path / "out"),
+                     "--controller-params", str(yaml_path), "--no-sim",
+                     "--domain-id", str(new_domain())])
+    text = capsys.readouterr().out
+    assert code == 0
+    assert "300 of 1300 answers differ" in text and "| after the original switch-on | 300 |" in text
+    assert "|λ|max = 0.4376" in text and "(stable)" in text
+    new = load(tmp_path / "out").scenes[0]
+    orig = load(BAGS / "scene_5e-6").scenes[0].scene
+    want = [0.0] * 1000 + [correction(gains, x, v, p.x_ref, p.v_ref) for x, v in orig.pi2[1000:]]
+    assert new.answered.all() and new.scene.correction.tolist() == want
+
+
+def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
+    bag = tmp_path / "rt"
+    n, on, scale = 60, 30, 100.0
+    res = launcher.run(None, None, bag, n, domain_id=new_domain(), timeout=90,
+                       sim_overrides={"mode": "realtime", "time_scale": scale,
+                                      "delta_d": -5e-6},
+                       controller_overrides={"enable_after": on}, log_dir=tmp_path / "logs")
+    assert res.ok, res
+    rep = analyze([bag], tmp_path / "report")["bags"][0]
+    assert rep["parameter_record"] and rep["setup"]["mode"] == "realtime"
+    assert rep["setup"]["sources"]["delta_d"] == "parameter record"
+    assert rep["setup"]["time_scale"] == scale
+    rt = rep["scenes"][0]["realtime"]
+    # one latency message per applied correction: all of them unless the loaded machine
+    # delayed an answer past the next two samples (the simulator then ignores it)
+    assert n - 5 <= rt["latency_ms"]["n"] <= n and rt["latency_ms"]["p50"] > 0
+    assert rt["answer_time_ms"]["n"] == n and rt["missing_answers"] == 0
+    assert rt["sample_lag_ms"]["n"] == n
+    dc = rt["delay_check"]
+    if rt["latency_ms"]["n"] == n:    # every correction applied: the delays explain the run
+        assert dc["median_departure"] < 1e-2 * dc["median_departure_kicks_on_pi2"], dc
+    else:
+        assert dc is None
+    assert (tmp_path / "report" / "rt.png").is_file()
+    assert "realtime latency" in (tmp_path / "report" / "report.md").read_text()
+    ctl = replay_controller(bag, tmp_path / "ctl", domain_id=new_domain())
+    assert ctl["gains_source"].startswith("the bag's parameter record")
+    assert ctl["comparison"]["all_bit_identical"]
+    sim = replay_simulator(bag, tmp_path / "sim", domain_id=new_domain())
+    assert sim["samples_replayed"] == n and sim["stamps_equal"]
+    # corrections acted at their arrival in realtime: the lockstep replay departs
+    assert sim["first_sample_above_1e-12"] is not None and "arrival" in sim["why"]
+
+
+def test_sigkilled_recorder_leaves_a_bag_the_analysis_reads(tmp_path):
+    """kill -9 of the recorder: no summary, no metadata.yaml; the analysis reads every
+    complete chunk, says so, and the samples equal the core's simulation bit for bit."""
+    domain, n, on = new_domain(), 150, 100
+    bag = tmp_path / "killed"
+    rec = launcher.start_node(launcher.RECORDER_MODULE, (),
+                              {"output": str(bag), "chunk_size": 2048}, domain_id=domain,
+                              log=tmp_path / "recorder.log")
+    try:
+        res = launcher.run(None, None, None, n, domain_id=domain, timeout=90,
+                           sim_overrides={"wait_for_subscribers": 1, "delta_d": -5e-6},
+                           enable_after=on)
+        assert res.ok, res
+        time.sleep(1.0)
+    finally:
+        os.kill(rec.pid, signal.SIGKILL)
+        rec.wait(10)
+    assert not (bag / "metadata.yaml").exists()
+    rep = analyze([bag], tmp_path / "report", figures=False)["bags"][0]
+    assert not rep["closed_cleanly"]
+    assert any("no summary" in s for s in rep["problems"])
+    s = rep["scenes"][0]
+    assert n // 2 <= s["samples"] <= n
+    data = load(bag)
+    got = data.scenes[0].scene.pi2
+    p = OscillatorParams(delta_d=-5e-6)
+    core = simulate(p, len(got), gains=Gains(degenerate_c1(p, -1.0), -1.0), control_after=on)
+    assert np.array_equal(got[:on], core.pi2[:on])
+    assert np.max(np.abs(got - core.pi2)) < 1e-12
+
+
+def test_replay_at_the_recorded_rate(tmp_path):
+    res = replay_controller(BAGS / "scene_9e-6", tmp_path / "ctl", rate=2.0,
+                            domain_id=new_domain())
+    assert res["answers"] == 1300 and res["comparison"]["all_bit_identical"]
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--rate", "0"], "--rate"),
+    (["--rate", "nan"], "--rate"),
+    (["--domain-id", "999"], "--domain-id"),
+    (["--controller-params", "/nonexistent.yaml"], "no such file"),
+])
+def test_replay_bad_input_one_line_error(tmp_path, capsys, argv, message):
+    code = cli.main(["replay", str(BAGS / "scene_5e-6"), "--bag", str(tmp_path / "o")] + argv)
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("grazing: error:") and message in err
+    assert err.count("\n") == 1
+
+
+def test_replay_refuses_a_non_empty_output_and_a_missing_bag(tmp_path, capsys):
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "x").write_text("keep me")
+    code = cli.main(["replay", str(BAGS / "scene_5e-6"), "--bag", str(tmp_path / "o"),
+                     "--no-sim"])
+    err = capsys.readouterr().err
+    assert code == 2 and "not an empty directory" in err
+    assert (tmp_path / "o" / "x").read_text() == "keep me"
+    code = cli.main(["replay", str(tmp_path / "missing"), "--bag", str(tmp_path / "p")])
+    err = capsys.readouterr().err
+    assert code == 2 and "no such bag" in err and not (tmp_path / "p").exists()
