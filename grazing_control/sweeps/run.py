@@ -120,10 +120,15 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
     counts = np.zeros((len(chunk), m), dtype=np.int32)
     period = np.zeros(len(chunk), dtype=np.int64)
     errors = [""] * len(chunk)
+    run_point = _run_point_python
+    if engine == "kernel":
+        from ..kernel import run_point as kernel_point
+
+        def run_point(p, start, c1, c2, periods, transient, control_after):
+            return kernel_point(p, periods, transient, start[0], start[1], c1, c2, control_after)
     for j, (_i, p, start, c1, c2) in enumerate(chunk):
         try:
-            dev[j], counts[j] = _run_point_python(p, start, c1, c2, periods, transient,
-                                                  control_after)
+            dev[j], counts[j] = run_point(p, start, c1, c2, periods, transient, control_after)
         except (ImpactCapError, InitialStateError, ValueError, ArithmeticError) as exc:
             errors[j] = f"{type(exc).__name__}: {exc}"
             period[j] = -1
@@ -248,13 +253,23 @@ def _point_value(pt, name):
 
 
 def _resolve_engine(engine):
+    from .. import kernel
+
     if engine == "python":
         return "python"
-    return "python"  # the compiled kernel lands next
+    if engine == "kernel":
+        if not kernel.available():
+            raise ParameterError("engine='kernel' is invalid here: numba is not installed")
+        return "kernel"
+    return "kernel" if kernel.use_kernel() else "python"
 
 
 def _prepare(engine):
     """Compile (or load from cache) before forking, so workers inherit the machine code."""
+    if engine == "kernel":
+        from ..kernel import warm_up
+
+        warm_up()
 
 
 def _run_dask(scheduler, indexed, args, store):
