@@ -44,7 +44,10 @@ _CHOICES = ("auto", "python", "numba")
 
 def available() -> bool:
     """numba is installed (the kernel can be compiled or loaded)."""
-    return importlib.util.find_spec("numba") is not None
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):  # ValueError: sys.modules["numba"] is None
+        return False
 
 
 def use_kernel() -> bool:

@@ -53,15 +53,28 @@ STATUS_NONFINITE = 4  # a non-finite start state or time (the core's search woul
 IMPACT_FIELDS = ("dt", "phase", "v_minus", "v_plus", "sticking", "release")
 
 # P: the model parameters, see params_tuple
-_ZETA, _R, _OMEGA, _WD, _LAG, _AMP, _DD, _D, _PERIOD, _TAU2 = range(10)
+_ZETA, _R, _OMEGA, _WD, _LAG, _AMP, _DD, _D, _PERIOD, _TAU2, _TWO, _THIRD = range(12)
 
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 def params_tuple(p):
-    """(zeta, r, omega, omega_d, lag, amplitude, delta_d, d, period, tau2) of an OscillatorParams."""
+    """(zeta, r, omega, omega_d, lag, amplitude, delta_d, d, period, tau2, 2, 1/3) of an
+    OscillatorParams.
+
+    The last two are the exponents of the core's ``x ** 2`` and ``x ** (1 / 3)``: CPython
+    computes those with libm's pow, which is not always x * x to the last bit, while
+    LLVM turns a constant exponent 2 into a multiplication. Passed at run time, they
+    keep the kernel on pow, the same function, and so on the same floats (:func:`power`).
+    """
     return (p.zeta, p.r, p.omega, p.omega_d, p.lag, p.amplitude, p.delta_d, p.d, p.period,
-            p.tau2)
+            p.tau2, 2.0, 1.0 / 3.0)
+
+
+@jit
+def power(x, y):
+    """x ** y as CPython computes it for floats (libm pow); y must come from P."""
+    return math.pow(x, y)
 
 
 @jit
@@ -98,14 +111,14 @@ def propagate(zeta, dx, dv, h):
 # ------------------------------------------------------------------ _Eval
 @jit
 def make_eval(P, tau0, dx0, dv0):
-    """impact._Eval.__init__: (zeta, wd, omega, lag, amp, dd, tau0, dx0, c2, aw2, aw3, |C|)."""
+    """impact._Eval.__init__: (zeta, wd, omega, lag, amp, dd, tau0, dx0, c2, aw2, aw3, |C|, 2)."""
     wd = P[_WD]
     amp = P[_AMP]
     omega = P[_OMEGA]
     aw2 = amp * omega * omega
     c2 = (dv0 + P[_ZETA] * dx0) / wd
     return (P[_ZETA], wd, omega, P[_LAG], amp, P[_DD], tau0, dx0, c2, aw2, aw2 * omega,
-            math.hypot(dx0, c2))
+            math.hypot(dx0, c2), P[_TWO])
 
 
 @jit
@@ -114,7 +127,7 @@ def evaluate(ev, h):
 
     Also returns e^{-zeta h} (6th), which :func:`jerk_bound` reuses at the same h.
     """
-    zeta, wd, omega, lag, amp, dd, tau0, c1, c2, aw2, _aw3, _cabs = ev
+    zeta, wd, omega, lag, amp, dd, tau0, c1, c2, aw2, _aw3, _cabs, _two = ev
     e = math.exp(-zeta * h)
     c = math.cos(wd * h)
     s = math.sin(wd * h)
@@ -190,7 +203,7 @@ def _certified(ev, a, b, ea, ga, va, acca, gb, vb, accb):
         return 1, (bracket(ev, tmin, b, 0, 1.0) if gmin < 0.0 <= gb else NONE)
     # below the chord plus the curvature allowance (docs/theory.md, "Impact detection")
     curvature = max(0.0, 0.5 * (jw - acca - accb))
-    if max(ga, gb) + 0.125 * (b - a) ** 2 * curvature < 0.0:
+    if max(ga, gb) + 0.125 * power(b - a, ev[12]) * curvature < 0.0:
         return 1, NONE
     return 0, NONE
 
@@ -260,7 +273,8 @@ def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack):
     a = 0.0
     fa = evaluate(ev, 0.0)
     ga = fa[0]
-    scale = abs(dx0) + abs(P[_DD]) + 2.0 * P[_AMP] * math.sin(0.5 * (tau0 - P[_LAG])) ** 2
+    scale = abs(dx0) + abs(P[_DD]) + 2.0 * P[_AMP] * power(math.sin(0.5 * (tau0 - P[_LAG])),
+                                                          P[_TWO])
     if 0.0 < ga <= 8.0 * ulp(scale):
         ga = 0.0  # on the wall up to rounding
     if ga > 0.0:
@@ -315,7 +329,7 @@ def release_skip(P, tau, dx):
     if force > 0.0:
         out = math.sqrt(2.0 * eps / force)
     if jerk > 0.0:
-        out = min(out, (6.0 * eps / jerk) ** (1.0 / 3.0))
+        out = min(out, power(6.0 * eps / jerk, P[_THIRD]))
     return out if out < math.inf else 0.0
 
 
@@ -323,7 +337,7 @@ def release_skip(P, tau, dx):
 @jit
 def _wall_state(P, tau):
     """(x_p - d, v_p) at phase tau, as advance computes them at an impact."""
-    xp_minus_d = -2.0 * P[_AMP] * math.sin(0.5 * (tau - P[_LAG])) ** 2 - P[_DD]
+    xp_minus_d = -2.0 * P[_AMP] * power(math.sin(0.5 * (tau - P[_LAG])), P[_TWO]) - P[_DD]
     vp = -P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
     return xp_minus_d, vp
 
