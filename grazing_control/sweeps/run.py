@@ -22,7 +22,10 @@ from ..params import OscillatorParams, ParameterError
 from .period import detect_period
 from .result import SweepResult
 
-__all__ = ["GRID_NAMES", "sweep", "run_chunk"]
+__all__ = ["GRID_NAMES", "CONNECT_TIMEOUT", "sweep", "run_chunk"]
+
+#: Seconds to wait for a Dask scheduler given by address before giving up.
+CONNECT_TIMEOUT = 10.0
 
 _PARAM_NAMES = tuple(f.name for f in fields(OscillatorParams))
 #: Names a sweep grid may use: the model's parameters and the controller's gains.
@@ -277,10 +280,15 @@ def _run_dask(scheduler, indexed, args, store):
     from distributed import Client, as_completed as dask_completed
 
     own = not isinstance(scheduler, Client)
+    if own and not (isinstance(scheduler, str) and scheduler.strip()):
+        raise ParameterError(f"scheduler={scheduler!r} is invalid: expected an address "
+                             "tcp://HOST:PORT or a distributed.Client")
     try:
-        client = Client(scheduler, set_as_default=False) if own else scheduler
+        client = Client(scheduler, set_as_default=False, timeout=CONNECT_TIMEOUT) if own \
+            else scheduler
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ParameterError(f"scheduler={scheduler!r} is invalid: cannot connect ({exc})") from None
+        raise ParameterError(f"scheduler={scheduler!r} is invalid: cannot connect within "
+                             f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__})") from None
     try:
         nw = max(1, sum(client.nthreads().values()))
         chunks = _chunks(indexed, 8 * nw)
