@@ -76,6 +76,17 @@ def _params(p):
     return _compiled()[0].params_tuple(p)
 
 
+@functools.lru_cache(maxsize=64)
+def _grid(p):
+    """The window grid of a period from Pi2 (tau2, T), shared by every period_step call."""
+    ki = _compiled()[0]
+    grid = ki.window_grid(_params(p), p.tau2, p.period)
+    return grid
+
+
+_NO_GRID = np.zeros((0, 9))
+
+
 _local = threading.local()
 
 
@@ -127,7 +138,8 @@ def next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     """:func:`grazing_control.impact.next_impact`, compiled."""
     ki = _compiled()[0]
     h, status, info = ki.next_impact(_params(p), float(tau0), float(dx0), float(dv0),
-                                     float(horizon), float(max_step or 0.0), _scratch()[1])
+                                     float(horizon), float(max_step or 0.0), _scratch()[1],
+                                     _NO_GRID)
     if status != ki.STATUS_OK:
         _raise(status, info, max_impacts=0, duration=horizon)
     return None if h == ki.NONE else h
@@ -143,7 +155,7 @@ def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) 
     out = np.empty((max(int(max_impacts), 1), 6))
     dx, dv, n, status, info = ki.advance(
         _params(p), float(tau0), float(dx), float(dv), float(duration), int(max_impacts),
-        -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1])
+        -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1], _NO_GRID)
     if status != ki.STATUS_OK:
         _raise(status, info, max_impacts=max_impacts, duration=duration)
     return Segment(dx, dv, _impacts(out[:n]), None)
@@ -154,7 +166,8 @@ def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
     ki, ks = _compiled()
     scratch, stack = _scratch()
     dx, dv, n, status, info = ks.period_step(_params(p), float(dx), float(dv),
-                                             float(dv_correction), float(delay), scratch, 0, stack)
+                                             float(dv_correction), float(delay), scratch, 0, stack,
+                                             _grid(p))
     if status != ki.STATUS_OK:
         _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
     return Segment(dx, dv, _impacts(scratch[:n]), None)

@@ -36,7 +36,7 @@ import numba
 import numpy as np
 
 __all__ = ["params_tuple", "make_eval", "evaluate", "jerk_bound", "bracket", "search",
-           "search_stack", "next_impact", "release_time", "resting_on_wall", "release_skip",
+           "search_stack", "evaluate_row", "window_grid", "next_impact", "release_time", "resting_on_wall", "release_skip",
            "advance", "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
            "IMPACT_FIELDS"]
 
@@ -147,6 +147,51 @@ def jerk_bound(ev, e):
     return ev[10] + ev[11] * e
 
 
+@jit
+def evaluate_row(ev, grid, k):
+    """:func:`evaluate` at h = grid[k, 0] from the transcendental values stored in row k.
+
+    The same operations on the same floats as :func:`evaluate` (the stored values are
+    libm's results for the same arguments), hence bit-identical results.
+    """
+    zeta, wd, omega, lag, amp, dd, tau0, c1, c2, aw2, _aw3, _cabs, _two = ev
+    e, c, s = grid[k, 1], grid[k, 2], grid[k, 3]
+    dx = e * (c1 * c + c2 * s)
+    dv = e * ((wd * c2 - zeta * c1) * c - (wd * c1 + zeta * c2) * s)
+    sh = grid[k, 4]
+    g = dx - dd - 2.0 * amp * sh * sh
+    v = -amp * omega * grid[k, 5] + dv
+    acc = -aw2 * grid[k, 6] - 2.0 * zeta * dv - dx
+    return g, v, acc, dx, dv, e
+
+
+@jit
+def window_grid(P, tau0, horizon):
+    """The window ends of next_impact(P, tau0, ., ., horizon) and what evaluate needs there.
+
+    Row k (k = 0..n) holds h_k and e^{-zeta h}, cos(wd h), sin(wd h), sin(psi / 2),
+    sin(psi), cos(psi) at h_k; row 0 also holds (tau0, horizon) in columns 7, 8. These
+    depend on the start phase and the horizon only, not on the state: every period of a
+    run starts at (tau2, T), so its first search reuses them (:func:`next_impact`).
+    """
+    step = P[_PERIOD] / 8.0
+    n = max(1, int(math.ceil(horizon / step)))
+    grid = np.zeros((n + 1, 9))
+    for k in range(n + 1):
+        h = 0.0 if k == 0 else (horizon if k == n else k * (horizon / n))
+        psi = tau0 + P[_OMEGA] * h - P[_LAG]
+        grid[k, 0] = h
+        grid[k, 1] = math.exp(-P[_ZETA] * h)
+        grid[k, 2] = math.cos(P[_WD] * h)
+        grid[k, 3] = math.sin(P[_WD] * h)
+        grid[k, 4] = math.sin(0.5 * psi)
+        grid[k, 5] = math.sin(psi)
+        grid[k, 6] = math.cos(psi)
+    grid[0, 7] = tau0
+    grid[0, 8] = horizon
+    return grid
+
+
 # ------------------------------------------------------------------ _bracket
 @jit
 def bracket(ev, lo, hi, which, sign):
@@ -232,16 +277,17 @@ def search(ev, a, b, fa, fb, stack):
             if top == 0:
                 return NONE
             top -= 1  # the pending right half of the nearest ancestor
-            row = stack[top]
-            a, b, ea, ga, va, acca, gb, vb, accb = (row[0], row[1], row[2], row[3], row[4],
-                                                    row[5], row[6], row[7], row[8])
-            depth = int(row[9])
+            a, b, ea = stack[top, 0], stack[top, 1], stack[top, 2]
+            ga, va, acca = stack[top, 3], stack[top, 4], stack[top, 5]
+            gb, vb, accb = stack[top, 6], stack[top, 7], stack[top, 8]
+            depth = int(stack[top, 9])
             continue
         mid = 0.5 * (a + b)
         gm, vm, accm, _dx, _dv, em = evaluate(ev, mid)
-        row = stack[top]
-        row[0], row[1], row[2], row[3], row[4], row[5] = mid, b, em, gm, vm, accm
-        row[6], row[7], row[8], row[9] = gb, vb, accb, depth + 1
+        stack[top, 0], stack[top, 1], stack[top, 2] = mid, b, em
+        stack[top, 3], stack[top, 4], stack[top, 5] = gm, vm, accm
+        stack[top, 6], stack[top, 7], stack[top, 8] = gb, vb, accb
+        stack[top, 9] = depth + 1
         top += 1
         b, gb, vb, accb = mid, gm, vm, accm
         depth += 1
@@ -254,11 +300,13 @@ def search_stack():
 
 # ------------------------------------------------------------------ next_impact
 @jit
-def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack):
+def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
     """impact.next_impact: (time of the first impact in (0, horizon] or NONE, status, gap).
 
     ``max_step`` <= 0 means the default T / 8. status is STATUS_BEYOND_WALL (and gap the
-    offending x - d) where the core raises InitialStateError.
+    offending x - d) where the core raises InitialStateError. ``stack``: the work array
+    of :func:`search`; ``grid``: a :func:`window_grid`, used when it was made for this
+    (tau0, horizon) with the default step (else ignored; it may have no rows).
     """
     if not (math.isfinite(dx0) and math.isfinite(dv0) and math.isfinite(tau0)
             and math.isfinite(horizon)):
@@ -271,7 +319,9 @@ def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack):
     step = max_step if max_step > 0.0 else P[_PERIOD] / 8.0
     n = max(1, int(math.ceil(horizon / step)))
     a = 0.0
-    fa = evaluate(ev, 0.0)
+    cached = (max_step <= 0.0 and grid.shape[0] > 0 and grid[0, 7] == tau0
+              and grid[0, 8] == horizon)
+    fa = evaluate_row(ev, grid, 0) if cached else evaluate(ev, 0.0)
     ga = fa[0]
     scale = abs(dx0) + abs(P[_DD]) + 2.0 * P[_AMP] * power(math.sin(0.5 * (tau0 - P[_LAG])),
                                                           P[_TWO])
@@ -284,7 +334,7 @@ def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack):
     fa = (ga, fa[1], fa[2], fa[3], fa[4], fa[5])
     for k in range(1, n + 1):
         b = horizon if k == n else k * (horizon / n)
-        fb = evaluate(ev, b)
+        fb = evaluate_row(ev, grid, k) if cached else evaluate(ev, b)
         r = search(ev, a, b, fa, fb, stack)
         if r != NONE:
             return r, STATUS_OK, 0.0
@@ -343,12 +393,13 @@ def _wall_state(P, tau):
 
 
 @jit
-def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack):
+def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack, grid):
     """impact.advance without the monodromy: the exact event-driven segment.
 
     Impacts are written to rows n0, n0 + 1, ... of ``out`` (at least n0 + max_impacts
     rows, columns IMPACT_FIELDS). ``chatter_time`` < 0 means the default 1e-6 T.
-    ``stack`` is :func:`search`'s work array (:func:`search_stack`).
+    ``stack`` is :func:`search`'s work array (:func:`search_stack`), ``grid`` a
+    :func:`window_grid` for (tau0, duration) or an empty (0, 9) array.
 
     Returns
     -------
@@ -373,7 +424,7 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
             dx, dv = propagate(zeta, dx, dv, t)
             tau = (tau0 + omega * t) % TWO_PI
     if not searched and t < duration:
-        h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack)
+        h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
         if status != STATUS_OK:
             return dx, dv, n, status, info
     while True:
@@ -417,7 +468,7 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
                 tau = (tau0 + omega * t) % TWO_PI
             h = NONE
             if t < duration:
-                h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack)
+                h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
                 if status != STATUS_OK:
                     return dx, dv, n, status, info
             continue
@@ -426,6 +477,6 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
         n += 1
         h = NONE
         if t < duration:
-            h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack)
+            h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
             if status != STATUS_OK:
                 return dx, dv, n, status, info

@@ -160,8 +160,10 @@ def _progress(total, enabled):
 
 
 def _chunks(points, n_chunks):
-    size = max(1, math.ceil(len(points) / n_chunks))
-    return [points[i:i + size] for i in range(0, len(points), size)]
+    """Split into n_chunks strided chunks (point i to chunk i mod n_chunks): neighbouring
+    grid values cost alike (chaos costs more than a 1/1 orbit), so striding balances."""
+    n_chunks = max(1, min(n_chunks, len(points)))
+    return [points[i::n_chunks] for i in range(n_chunks)]
 
 
 def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
