@@ -90,8 +90,12 @@ def _points(params, grid, starts, gains, control_after):
 
 
 def _run_point_python(p, start, c1, c2, periods, transient, control_after):
-    """One point by the pure-Python reference core: (deviation (m, 2), counts (m,))."""
-    from ..simulate import period_step
+    """One point by the pure-Python reference core: (deviation (m, 2), counts (m,)).
+
+    Each period is simulate.period_step's exact flow with impacts (delay 0) on
+    impact.advance itself, whichever path period_step would take.
+    """
+    from ..impact import advance
 
     m = periods - transient
     dev = np.full((m, 2), np.nan)
@@ -100,7 +104,7 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
     controlled = not math.isnan(c1)
     for k in range(periods):
         dvc = c1 * dx + c2 * dv if controlled and k >= control_after else 0.0
-        seg = period_step(p, dx, dv, dvc)
+        seg = advance(p, p.tau2, dx, dv + dvc, p.period)
         if k >= transient:
             dev[k - transient] = dx, dv
             counts[k - transient] = len(seg.impacts)
