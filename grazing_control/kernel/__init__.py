@@ -32,7 +32,8 @@ import time
 
 import numpy as np
 
-from ..impact import Impact, ImpactCapError, InitialStateError, Segment
+from ..impact import (Impact, ImpactCapError, InitialStateError, NonFiniteStateError, Segment,
+                      check_state)
 
 __all__ = ["ENV", "available", "use_kernel", "warm_up", "next_impact", "advance",
            "period_step", "simulate_exact", "run_point"]
@@ -99,8 +100,12 @@ def _scratch():
     return bufs
 
 
-def _raise(status, info, *, max_impacts, duration):
-    """The core's exception for a kernel status."""
+def _raise(status, info, *, max_impacts, duration, p=None, state=None, times=None):
+    """The core's exception (and message) for a kernel status.
+
+    ``state``: the (dx, dv) the kernel returned with STATUS_NONFINITE, ``times``: the
+    (tau0, horizon) of the call, for the same messages as impact.check_state's.
+    """
     ki = _compiled()[0]
     if status == ki.STATUS_IMPACT_CAP:
         raise ImpactCapError(
@@ -109,7 +114,9 @@ def _raise(status, info, *, max_impacts, duration):
     if status == ki.STATUS_BEYOND_WALL:
         raise InitialStateError(f"state beyond the wall: x - d = {info:.3e} > 0 (valid: x <= d)")
     if status == ki.STATUS_NONFINITE:
-        raise ValueError(f"the state is not finite ({info!r}): valid range is finite dx, dv")
+        check_state(state[0], state[1], p.zeta, "the start state")
+        tau0, horizon = times
+        raise NonFiniteStateError(f"tau0={tau0!r} and duration={horizon!r} must be finite")
     raise RuntimeError(f"kernel status {status}")  # pragma: no cover - no other status
 
 
@@ -141,7 +148,11 @@ def next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
                                      float(horizon), float(max_step or 0.0), _scratch()[1],
                                      _NO_GRID)
     if status != ki.STATUS_OK:
-        _raise(status, info, max_impacts=0, duration=horizon)
+        if status == ki.STATUS_NONFINITE and math.isfinite(dx0) and math.isfinite(dv0) and \
+                not (math.isfinite(tau0) and math.isfinite(horizon)):
+            raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+        _raise(status, info, max_impacts=0, duration=horizon, p=p, state=(dx0, dv0),
+               times=(tau0, horizon))
     return None if h == ki.NONE else h
 
 
@@ -153,11 +164,13 @@ def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) 
     """:func:`grazing_control.impact.advance` without the monodromy, compiled."""
     ki = _compiled()[0]
     out = np.empty((max(int(max_impacts), 1), 6))
-    dx, dv, n, status, info = ki.advance(
+    ndx, ndv, n, status, info = ki.advance(
         _params(p), float(tau0), float(dx), float(dv), float(duration), int(max_impacts),
         -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1], _NO_GRID)
     if status != ki.STATUS_OK:
-        _raise(status, info, max_impacts=max_impacts, duration=duration)
+        _raise(status, info, max_impacts=max_impacts, duration=duration, p=p, state=(ndx, ndv),
+               times=(tau0, duration))
+    dx, dv = ndx, ndv
     return Segment(dx, dv, _impacts(out[:n]), None)
 
 
@@ -169,7 +182,8 @@ def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
                                              float(dv_correction), float(delay), scratch, 0, stack,
                                              _grid(p))
     if status != ki.STATUS_OK:
-        _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
+        _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
+               state=(dx, dv), times=(p.tau2, p.period))
     return Segment(dx, dv, _impacts(scratch[:n]), None)
 
 
@@ -191,7 +205,8 @@ def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_imp
             impacts = np.concatenate([impacts, np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))])
             continue
         if status != ki.STATUS_OK:
-            _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
+            _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
+                   state=(dx, dv), times=(p.tau2, p.period))
         return dev, corr, counts, impacts[:n], (dx, dv)
 
 

@@ -62,7 +62,8 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
     (k, dx, dv, n_impacts, status, info)
         k = periods and STATUS_OK when done. STATUS_BUFFER_FULL: period k did not fit in
         ``impacts``; (dx, dv) is still sample k's, so the call can be resumed from k with
-        a larger array. Any other status is the core's error at period k.
+        a larger array. Any other status is the core's error at period k, with (dx, dv)
+        the state it is about (see impact.advance).
     """
     period = P[_PERIOD]
     keep = impacts.shape[0] > 0
@@ -72,8 +73,8 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
         if controlled and k >= control_after:
             dvc = c1 * dx + c2 * dv
         ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, delay, scratch, 0, stack, grid)
-        if status != STATUS_OK:
-            return k, dx, dv, n_impacts, status, info
+        if status != STATUS_OK:  # (ndx, ndv): the state the error is about
+            return k, ndx, ndv, n_impacts, status, info
         if keep:
             if n_impacts + n > impacts.shape[0]:
                 return k, dx, dv, n_impacts, STATUS_BUFFER_FULL, 0.0
