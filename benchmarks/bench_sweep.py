@@ -12,7 +12,11 @@ Side by side in one process:
   (process pool start included; the kernel is loaded from numba's cache first, timed
   apart);
 * ``python``  the same sweep through the pure-Python core, on every ``--python-every``-th
-  point only (default 100), extrapolated to the whole grid by periods/s.
+  point only (default 100), extrapolated to the whole grid by periods per CPU-second.
+
+On a shared machine wall-clock times depend on the other jobs: the CPU seconds of the
+process and its workers are reported too, and CPU / workers estimates the wall time on
+that many idle cores.
 
 Checks that the 1- and 2-worker results are bit-identical and writes the diagram to
 benchmarks/out/sweep_fig1a.png.
@@ -75,9 +79,9 @@ def main(argv=None):
                                             transient=args.transient, workers=workers))
         cpu[workers] = cpu_seconds
     sub = {"delta_d": grid["delta_d"][::args.python_every]}
-    t_py, _ = timed(lambda: sweep(p, sub, periods=args.periods, transient=args.transient,
-                                  workers=1, engine="python"))
-    py_rate = sub["delta_d"].size * args.periods / t_py
+    timed(lambda: sweep(p, sub, periods=args.periods, transient=args.transient, workers=1,
+                        engine="python"))
+    py_rate = sub["delta_d"].size * args.periods / cpu_seconds  # per CPU-second
     (t_n, res_n), (t_1, res_1) = runs[args.workers], runs[1]
     out = REPO / "benchmarks" / "out"
     out.mkdir(parents=True, exist_ok=True)
@@ -91,12 +95,13 @@ def main(argv=None):
           f"{total / cpu[args.workers]:.3g} periods per CPU-second)")
     print(f"kernel, 1 worker                 : {t_1:.2f} s, {total / t_1:.3g} periods/s "
           f"(CPU {cpu[1]:.2f} s: {total / cpu[1]:.3g} periods per CPU-second)")
-    print(f"on {args.workers} idle cores (CPU / workers)  : {cpu[args.workers] / args.workers:.2f} s "
+    print(f"on {args.workers} idle cores (CPU / workers)  : "
+          f"{cpu[args.workers] / args.workers:.2f} s "
           "(an estimate where the machine is shared)")
     print(f"scaling 1 -> {args.workers} workers            : {t_1 / t_n:.2f}x")
-    print(f"python core ({sub['delta_d'].size} points)         : {py_rate:.3g} periods/s -> "
-          f"{total / py_rate:.0f} s for the diagram on 1 core "
-          f"({(total / py_rate) / t_1:.0f}x the kernel on 1 worker)")
+    print(f"python core ({sub['delta_d'].size} points)         : {py_rate:.3g} periods per "
+          f"CPU-second -> {total / py_rate:.0f} CPU-s for the diagram "
+          f"({(total / py_rate) / cpu[1]:.0f}x the kernel's {cpu[1]:.1f} CPU-s)")
     print(f"1 and {args.workers} workers bit-identical    : {res_1.same_as(res_n)}")
     print("detected periods                 : " + ", ".join(
         f"{int(k)}: {int(c)}" for k, c in zip(periods, counts)))

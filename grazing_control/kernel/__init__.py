@@ -202,7 +202,8 @@ def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_imp
             _params(p), k, periods, float(dx), float(dv), controlled, float(c1), float(c2),
             after, float(delay), record_from, dev, corr, counts, impacts, n, *_scratch())
         if status == ks.STATUS_BUFFER_FULL:
-            impacts = np.concatenate([impacts, np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))])
+            more = np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))
+            impacts = np.concatenate([impacts, more])
             continue
         if status != ki.STATUS_OK:
             _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,

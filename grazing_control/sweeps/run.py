@@ -63,7 +63,8 @@ def _points(params, grid, starts, gains, control_after):
     axes = tuple(_values(n, grid[n]) for n in names)
     for n in names:
         if n not in GRID_NAMES:
-            raise ParameterError(f"grid name {n!r} is invalid: valid names are {', '.join(GRID_NAMES)}")
+            raise ParameterError(
+                f"grid name {n!r} is invalid: valid names are {', '.join(GRID_NAMES)}")
     gridded_gains = "c1" in names or "c2" in names
     if "c1" in names and "c2" not in names and gains is None:
         raise ParameterError("grid has c1 without c2 and no gains: give c2 (grid or gains)")
@@ -189,7 +190,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
     transient = _count("transient", transient, 0)
     if transient >= periods:
         raise ParameterError(
-            f"transient={transient!r} is invalid: valid range is 0 <= transient < periods={periods}")
+            f"transient={transient!r} is invalid: valid range is 0 <= transient < "
+            f"periods={periods}")
     if control_after is not None:
         control_after = _count("control_after", control_after, 0)
     has_gains = gains is not None or "c1" in grid or "c2" in grid
@@ -200,7 +202,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
     if engine not in ("auto", "kernel", "python"):
         raise ParameterError(f"engine={engine!r} is invalid: valid values are auto, kernel, python")
     if not (isinstance(period_tol, (int, float)) and math.isfinite(period_tol) and period_tol > 0):
-        raise ParameterError(f"period_tol={period_tol!r} is invalid: valid range is a finite value > 0")
+        raise ParameterError(
+            f"period_tol={period_tol!r} is invalid: valid range is a finite value > 0")
     if max_period is not None:
         max_period = _count("max_period", max_period, 1)
     starts = _starts(deviation)
@@ -249,7 +252,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
         names=names, axes=axes, shape=tuple(a.size for a in axes) + (starts.shape[0],),
         points={nm: np.array([_point_value(pt, nm) for pt in pts]) for nm in names},
         starts=np.array([pt[1] for pt in pts]).reshape(n, 2),
-        pi2_deviation=dev, reference=np.array([(pt[0].x_ref, pt[0].v_ref) for pt in pts]).reshape(n, 2),
+        pi2_deviation=dev,
+        reference=np.array([(pt[0].x_ref, pt[0].v_ref) for pt in pts]).reshape(n, 2),
         impacts_per_period=counts, period=period, errors=errors.astype(str),
         c1=np.array([pt[2] for pt in pts]), c2=np.array([pt[3] for pt in pts]),
         periods=periods, transient=transient,
