@@ -187,7 +187,13 @@ def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
     return Segment(dx, dv, _impacts(scratch[:n]), None)
 
 
-def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_impacts):
+def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_impacts,
+         progress=False):
+    """simulate's loop on the kernel, in blocks of _BLOCK periods (progress bar, resizing).
+
+    Errors as simulate raises them: NonFiniteStateError "at period k: ..." for a state,
+    and its message for a correction that overflowed.
+    """
     ki, ks = _compiled()
     m = periods - record_from
     dev = np.empty((m, 2))
@@ -196,29 +202,57 @@ def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_imp
     impacts = np.empty((max(16, 2 * periods) if keep_impacts else 0, 5))
     controlled = not (math.isnan(c1) or control_after is None)
     after = 0 if control_after is None else int(control_after)
+    bar = None
+    if progress:
+        import sys
+
+        from tqdm import tqdm
+
+        bar = tqdm(total=periods, unit="period", file=sys.stderr, leave=False)
     k, n = 0, 0
-    while True:
-        k, dx, dv, n, status, info = ks.run(
-            _params(p), k, periods, float(dx), float(dv), controlled, float(c1), float(c2),
-            after, float(delay), record_from, dev, corr, counts, impacts, n, *_scratch())
-        if status == ks.STATUS_BUFFER_FULL:
-            more = np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))
-            impacts = np.concatenate([impacts, more])
-            continue
-        if status != ki.STATUS_OK:
-            _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
-                   state=(dx, dv), times=(p.tau2, p.period))
-        return dev, corr, counts, impacts[:n], (dx, dv)
+    try:
+        while k < periods:
+            end = min(periods, k + _BLOCK)
+            k1, dx, dv, n, status, info = ks.run(
+                _params(p), k, end, float(dx), float(dv), controlled, float(c1), float(c2),
+                after, float(delay), record_from, dev, corr, counts, impacts, n, *_scratch())
+            if bar is not None:
+                bar.update(k1 - k)
+            k = k1
+            if status == ks.STATUS_BUFFER_FULL:
+                more = np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))
+                impacts = np.concatenate([impacts, more])
+                continue
+            if status == ks.STATUS_CORRECTION:
+                raise NonFiniteStateError(
+                    f"the correction c1*dx + c2*dv = {info!r} at period {k} is not finite or "
+                    f"exceeds 1e150: an input overflowed (c1={c1!r}, c2={c2!r}, dx={dx!r}, "
+                    f"dv={dv!r})")
+            if status != ki.STATUS_OK:
+                try:
+                    _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
+                           state=(dx, dv), times=(p.tau2, p.period))
+                except NonFiniteStateError as exc:
+                    raise NonFiniteStateError(f"at period {k}: {exc}") from None
+    finally:
+        if bar is not None:
+            bar.close()
+    return dev, corr, counts, impacts[:n], (dx, dv)
 
 
-def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=0.0):
-    """The exact loop of :func:`grazing_control.simulate.simulate`, compiled.
+_BLOCK = 50_000  # periods per kernel call (a progress bar moves once per block)
+
+
+def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=0.0,
+                   progress=False):
+    """The exact loop of :func:`grazing_control.simulate.simulate`, compiled (with its
+    checks and messages; ``progress``: a tqdm bar on stderr).
 
     Returns (deviation (N, 2), corrections (N,), impacts per period (N,),
     impacts (M, 5) rows [k, t, phase, v-, v+], final deviation).
     """
     c1, c2 = (math.nan, math.nan) if gains is None else (gains.c1, gains.c2)
-    return _run(p, int(periods), dx, dv, c1, c2, control_after, delay, 0, True)
+    return _run(p, int(periods), dx, dv, c1, c2, control_after, delay, 0, True, progress)
 
 
 def run_point(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_after=0):

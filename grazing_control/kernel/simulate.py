@@ -13,10 +13,12 @@ import numpy as np
 
 from .impact import STATUS_OK, TWO_PI, _OMEGA, _PERIOD, _TAU2, advance, jit, window_grid
 
-__all__ = ["period_step", "run", "STATUS_BUFFER_FULL", "MAX_IMPACTS"]
+__all__ = ["period_step", "run", "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS"]
 
 #: The impact buffer of :func:`run` is full: resume at the returned period with more room.
 STATUS_BUFFER_FULL = 3
+#: simulate's check: the correction c1 dx + c2 dv is not finite or exceeds 1e150 (info).
+STATUS_CORRECTION = 5
 #: The core's default cap of impacts per advance call.
 MAX_IMPACTS = 10000
 
@@ -62,8 +64,9 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
     (k, dx, dv, n_impacts, status, info)
         k = periods and STATUS_OK when done. STATUS_BUFFER_FULL: period k did not fit in
         ``impacts``; (dx, dv) is still sample k's, so the call can be resumed from k with
-        a larger array. Any other status is the core's error at period k, with (dx, dv)
-        the state it is about (see impact.advance).
+        a larger array. STATUS_CORRECTION: simulate's overflow check of the correction
+        (info) failed at sample k, whose (dx, dv) are returned. Any other status is the
+        core's error at period k, with (dx, dv) the state it is about (impact.advance).
     """
     period = P[_PERIOD]
     keep = impacts.shape[0] > 0
@@ -72,6 +75,8 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
         dvc = 0.0
         if controlled and k >= control_after:
             dvc = c1 * dx + c2 * dv
+            if not abs(dvc) <= 1e150:  # simulate's check: an input overflowed
+                return k, dx, dv, n_impacts, STATUS_CORRECTION, dvc
         ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, delay, scratch, 0, stack, grid)
         if status != STATUS_OK:  # (ndx, ndv): the state the error is about
             return k, ndx, ndv, n_impacts, status, info

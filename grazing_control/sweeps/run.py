@@ -96,7 +96,7 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
     Each period is simulate.period_step's exact flow with impacts (delay 0) on
     impact.advance itself, whichever path period_step would take.
     """
-    from ..impact import advance
+    from ..impact import NonFiniteStateError, advance
 
     m = periods - transient
     dev = np.full((m, 2), np.nan)
@@ -104,8 +104,18 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
     dx, dv = start
     controlled = not math.isnan(c1)
     for k in range(periods):
-        dvc = c1 * dx + c2 * dv if controlled and k >= control_after else 0.0
-        seg = advance(p, p.tau2, dx, dv + dvc, p.period)
+        dvc = 0.0
+        if controlled and k >= control_after:  # as simulate: Eq. 28 and its overflow check
+            dvc = c1 * dx + c2 * dv
+            if not abs(dvc) <= 1e150:
+                raise NonFiniteStateError(
+                    f"the correction c1*dx + c2*dv = {dvc!r} at period {k} is not finite or "
+                    f"exceeds 1e150: an input overflowed (c1={c1!r}, c2={c2!r}, dx={dx!r}, "
+                    f"dv={dv!r})")
+        try:
+            seg = advance(p, p.tau2, dx, dv + dvc, p.period)
+        except NonFiniteStateError as exc:
+            raise NonFiniteStateError(f"at period {k}: {exc}") from None
         if k >= transient:
             dev[k - transient] = dx, dv
             counts[k - transient] = len(seg.impacts)
