@@ -179,7 +179,8 @@ def test_errors_are_the_cores():
 
 @pytest.mark.parametrize("gains,deviation", [(Gains(1e300, 0.0), (1.0, 0.0)),
                                              (Gains(0.0, 1e12), (0.0, 1e-3)),
-                                             (Gains(-3e5, 2e5), (1e-6, 0.0))])
+                                             (Gains(-3e5, 2e5), (1e-6, 0.0)),
+                                             (Gains(0.0, 1.0), (0.0, 9e149))])
 def test_simulate_errors_are_the_same_on_both_paths(gains, deviation, monkeypatch):
     """A controller that blows the state up: simulate stops with the same
     NonFiniteStateError message (the correction's or the state's, and the period) on the
@@ -192,6 +193,8 @@ def test_simulate_errors_are_the_same_on_both_paths(gains, deviation, monkeypatc
             simulate(p, 200, deviation=deviation, gains=gains, control_after=0)
         messages.append(str(err.value))
     assert messages[0] == messages[1] and "period" in messages[0], messages
+    if deviation[1] == 9e149:  # the kicked state, not the kick, is too large
+        assert messages[0].startswith("at period 0: the start state is absurdly large")
 
 
 def test_progress_bar_on_the_kernel_path(capsys):
