@@ -239,6 +239,12 @@ def cmd_orbit(args):
     if args.method == "perturbation":
         from .perturbation import perturbation_multipliers
 
+        if o.branch != "grazing":
+            raise ParameterError(
+                f"--method perturbation is a series about grazing on the branch born there; "
+                f"the 1/1 orbit at delta_d={p.delta_d!r} is not near grazing (branch: "
+                f"{_BRANCH_TEXT.get(o.branch, o.branch)}; v- = {o.v_minus:.3g}): use --method exact")
+
         t0 = time.perf_counter()
         lam = perturbation_multipliers(p, gains)
         cost = time.perf_counter() - t0

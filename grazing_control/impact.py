@@ -142,7 +142,7 @@ class _Eval:
     """Gap, velocity and acceleration along the flow from one start state."""
 
     __slots__ = ("zeta", "wd", "omega", "lag", "amp", "dd", "tau0", "dx0", "c2", "aw2", "aw3",
-                 "cabs", "acc_err")
+                 "cabs", "acc_err", "m0", "m1")
 
     def __init__(self, p: OscillatorParams, tau0: float, dx0: float, dv0: float):
         self.zeta = p.zeta
@@ -161,6 +161,10 @@ class _Eval:
         # few correctly rounded factors; the phases carry ~eps (|tau0| + |phi| + omega h)
         self.acc_err = 8.0 * _EPS * (self.aw2 * (4.0 + abs(tau0) + abs(self.lag))
                                      + 4.0 * self.cabs)
+        # gap_rounding(h) <= m0 + m1 h for every h (s2 <= 2 a): a cheap first test
+        phase0 = abs(tau0) + abs(self.lag) + 1.0
+        self.m0 = 8.0 * _EPS * (2.0 * self.cabs + abs(self.dd) + 2.0 * self.amp * (1.0 + phase0))
+        self.m1 = 8.0 * _EPS * (self.cabs * self.wd + 2.0 * self.amp * self.omega)
 
     def __call__(self, h: float):
         """(g, v, acc, dx, dv) at time h: exact closed form."""
@@ -262,8 +266,9 @@ def _search(f, a, b, fa, fb, depth):
     # min g'' >= (g''(a) + g''(b) - J h) / 2; certifies intervals around inflections
     # the computed ends are within their rounding of the exact ones, hence the margin
     curvature = max(0.0, 0.5 * (jw - acca - accb))
-    margin = max(f.gap_rounding(a, fa), f.gap_rounding(b, fb))
-    if max(ga, gb) + margin + 0.125 * (b - a) ** 2 * curvature < 0.0:
+    upper = max(ga, gb) + 0.125 * (b - a) ** 2 * curvature
+    if upper < 0.0 and (upper + f.m0 + f.m1 * b < 0.0 or
+                        upper + max(f.gap_rounding(a, fa), f.gap_rounding(b, fb)) < 0.0):
         return None
     if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
         return _bracket(f, a, b, 0) if ga < 0.0 <= gb else None
@@ -300,6 +305,11 @@ def next_impact(p: OscillatorParams, tau0: float, dx0: float, dv0: float, horizo
     check_state(dx0, dv0, p.zeta, "the start state")
     if not (math.isfinite(tau0) and math.isfinite(horizon)):
         raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+    return _next_impact(p, tau0, dx0, dv0, horizon, max_step)
+
+
+def _next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
+    """:func:`next_impact` without the checks of its inputs (advance has made them)."""
     if horizon <= 0.0:
         return None
     # whole-window exclusion: g <= |z_x| - Delta d <= |C| - Delta d (|C| rounded up)
@@ -310,7 +320,7 @@ def next_impact(p: OscillatorParams, tau0: float, dx0: float, dv0: float, horizo
     n = max(1, int(math.ceil(horizon / step)))
     a = 0.0
     fa = f(0.0)
-    if 0.0 < fa[0] <= _wall_rounding(p, tau0, dx0, dv0)[0]:
+    if fa[0] > 0.0 and fa[0] <= _wall_rounding(p, tau0, dx0, dv0)[0]:
         fa = (0.0,) + fa[1:]  # on the wall up to rounding
     if fa[0] > 0.0:
         raise InitialStateError(
@@ -441,6 +451,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
     if not (math.isfinite(tau0) and math.isfinite(duration)):
         raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
     zeta, r, omega = p.zeta, p.r, p.omega
+    aw, lag_abs, wd = p.amplitude * omega, abs(p.lag), p.omega_d
     chatter = chatter_time if chatter_time is not None else 1e-6 * p.period
     impacts = []
     mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
@@ -449,7 +460,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
     contacts = 0
     # at rest on the wall (to rounding): a contact at rest now, handled in the loop
     h = 0.0 if _resting_on_wall(p, tau, dx, dv) else \
-        (next_impact(p, tau, dx, dv, duration) if duration > 0.0 else None)
+        (_next_impact(p, tau, dx, dv, duration) if duration > 0.0 else None)
     while True:
         remaining = duration - t
         if h is None or remaining <= 0.0:
@@ -465,8 +476,8 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
                 f"at phase {tau % TWO_PI:.6f}: the motion is not resolvable at this cap"
             )
         contacts += 1
-        # velocity rounding after the flow: terms of size |C| with phases omega_d h
-        flow_err = 8.0 * _EPS * amplitude_bound(zeta, dx, dv) * (2.0 + h)
+        # velocity rounding after the flow: terms of size |C| <= |dx| + |dv + zeta dx| / omega_d
+        flow_err = 8.0 * _EPS * (abs(dx) + abs(dv + zeta * dx) / wd) * (2.0 + h)
         f11, f12, f21, f22 = transition_matrix(zeta, h)
         dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
         if monodromy:
@@ -477,20 +488,21 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         vp = -wall_dv
         v_minus = vp + dv
         force = math.cos(tau) - p.d
-        v_tol = _wall_rounding(p, tau, dx, dv)[1] + flow_err
+        # the velocity's rounding (_wall_rounding) plus that of the flow
+        v_tol = 8.0 * _EPS * (abs(vp) + abs(dv) + aw * (tau + lag_abs + TWO_PI + 1.0)) + flow_err
         dx = wall_dx  # on the wall exactly
         if v_minus <= v_tol:  # contact at rest, below the velocity's rounding
             dv = wall_dv
             if force <= 0.0:  # tangency: v- = 0 changes nothing; leave the wall
                 t, tau, dx, dv, mono = _leave_wall(p, tau0, t, duration, dx, dv, mono)
-                h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
+                h = _next_impact(p, tau, dx, dv, duration - t) if t < duration else None
                 continue
             v_minus, t_inf, height = 0.0, 0.0, 0.0  # pushed into the wall: sticks
         else:
             t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
             # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap, not resolvable
             height = (r * v_minus) ** 2 / (2.0 * force) if force > 0.0 else math.inf
-        v_plus = -r * v_minus
+        v_plus = -r * v_minus if v_minus > 0.0 else 0.0  # at rest: +0.0, not -0.0
         dv = v_plus - vp
         if t_inf < chatter or height < 1e3 * math.ulp(abs(dx) + abs(p.delta_d) + p.amplitude):
             # chattering: sum the geometric sequence and stick (velocity -> 0)
@@ -507,12 +519,12 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
                 mono = (0.0, 0.0, 0.0, 0.0)
             if t < duration:
                 t, tau, dx, dv, mono = _leave_wall(p, tau0, t, duration, dx, dv, mono)
-            h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
+            h = _next_impact(p, tau, dx, dv, duration - t) if t < duration else None
             continue
         impacts.append(Impact(t, tau, v_minus, v_plus, False))
         if monodromy:
             mono = matmul2(saltation_matrix(p, tau, v_minus), mono)
-        h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
+        h = _next_impact(p, tau, dx, dv, duration - t) if t < duration else None
 
 
 def _leave_wall(p: OscillatorParams, tau0: float, t: float, duration: float, dx: float,

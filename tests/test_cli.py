@@ -366,6 +366,7 @@ ISSUE_7_ERRORS = [
     (["continue", "--from", "0", "--to", "-1e-4", "--omega", "1e308"], "omega="),
     (["simulate", "--delta-d", "-5e-6", "--periods", "1000000000000"], "periods="),
     (["design", "--c2", "1e308"], "not finite"),
+    (["orbit", "--delta-d", "-1e-9", "--method", "perturbation", "--omega", "1"], "not near grazing"),
     (["design", "--c2", "-1", "--out", ""], "--out"),
     (["demo", "--out", ""], "--out"),
     (["simulate", "--delta-d", "-5e-6", "--periods", "200", "--c2", "1e308"], "period 1"),
