@@ -3,8 +3,8 @@
 The same algorithm as :mod:`grazing_control.impact` and
 :func:`grazing_control.simulate.period_step` (closed-form flow in deviation coordinates,
 certified impact detection, chattering summation and sticking, the controller's kick with
-an optional delay), mirrored function by function in :mod:`.impact` and :mod:`.simulate`
-so that a fix in the core ports line by line. The pure-Python core stays the readable
+an optional delay), mirrored function by function in :mod:`.compiled` so that a fix in
+the core ports line by line. The pure-Python core stays the readable
 reference and the fallback; the equivalence of the two is tested scene by scene and by a
 differential fuzz test (tests/test_kernel.py).
 
@@ -65,11 +65,11 @@ def use_kernel() -> bool:
 
 @functools.lru_cache(maxsize=1)
 def _compiled():
-    """Import the numba modules (compiling, or loading the cache, on first use)."""
-    from . import impact as kimpact
-    from . import simulate as ksimulate
+    """Import the numba module (compiling, or loading the cache, on first use), twice:
+    as the mirror of impact (ki) and of simulate (ks), which it both is."""
+    from . import compiled
 
-    return kimpact, ksimulate
+    return compiled, compiled
 
 
 @functools.lru_cache(maxsize=1024)

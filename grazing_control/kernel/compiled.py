@@ -1,7 +1,12 @@
-"""Compiled mirror of :mod:`grazing_control.impact` (numba, nopython, cached).
+"""Compiled mirror of :mod:`grazing_control.impact` and of :func:`simulate.period_step`.
 
 Function by function the same algorithm as the pure-Python core, in the same floating
-point operations and the same order, so that a fix there ports here line by line:
+point operations and the same order, so that a fix there ports here line by line.
+
+All compiled functions live in this one module on purpose: numba's on-disk cache
+(``cache=True``) keys each function on its own source file only, so a function that
+calls into another file would keep loading stale machine code after that file changed.
+In one file, any edit recompiles everything.
 
 =========================  =======================================================
 grazing_control.impact     here
@@ -14,8 +19,8 @@ grazing_control.impact     here
 ``check_state``            :func:`check_state` (NonFiniteStateError ->
                            status STATUS_NONFINITE)
 ``_wall_rounding``         :func:`wall_rounding`
-``next_impact``            :func:`next_impact` (None -> -1.0; InitialStateError ->
-                           status STATUS_BEYOND_WALL)
+``next_impact``,           :func:`next_impact` (None -> -1.0; InitialStateError ->
+``_next_impact``           status STATUS_BEYOND_WALL), :func:`next_impact_unchecked`
 ``_release_time``,         :func:`release_time`, :func:`resting_on_wall`,
 ``_resting_on_wall``,      :func:`release_skip`, :func:`on_wall_at_rest`,
 ``_release_skip``,         :func:`leave_wall`
@@ -24,6 +29,8 @@ grazing_control.impact     here
 ``advance``                :func:`advance` (no monodromy: that stays in the core);
                            impacts go to a caller's array, one row
                            (dt, phase, v-, v+, sticking, release) each
+simulate.period_step       :func:`period_step`
+simulate.simulate's loop   :func:`run` (also the loop of a sweep point)
 =========================  =======================================================
 
 Model parameters travel as the tuple ``P`` of :func:`params_tuple` (derived quantities
@@ -47,9 +54,11 @@ import numpy as np
 
 __all__ = ["params_tuple", "check_state", "wall_rounding", "make_eval", "evaluate",
            "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "bracket", "search",
-           "search_stack", "next_impact", "release_time", "resting_on_wall", "release_skip",
-           "on_wall_at_rest", "leave_wall", "advance", "STATUS_OK", "STATUS_IMPACT_CAP",
-           "STATUS_BEYOND_WALL", "STATUS_NONFINITE", "IMPACT_FIELDS", "MAX_AMPLITUDE"]
+           "search_stack", "next_impact", "next_impact_unchecked", "release_time",
+           "resting_on_wall", "release_skip", "on_wall_at_rest", "leave_wall", "advance",
+           "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
+           "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run", "scratch_buffer",
+           "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS"]
 
 TWO_PI = 2.0 * math.pi
 _MAX_DEPTH = 64
@@ -144,7 +153,7 @@ def wall_rounding(P, tau, dx, dv):
 
 
 # ------------------------------------------------------------------ _Eval
-# ev = (zeta, wd, omega, lag, amp, dd, tau0, dx0, c2, aw2, aw3, cabs, 2, acc_err)
+# ev = (zeta, wd, omega, lag, amp, dd, tau0, dx0, c2, aw2, aw3, cabs, 2, acc_err, m0, m1)
 @jit
 def make_eval(P, tau0, dx0, dv0):
     """impact._Eval.__init__ as a tuple ``ev`` (see the comment above)."""
@@ -157,8 +166,12 @@ def make_eval(P, tau0, dx0, dv0):
     aw3 = aw2 * omega
     cabs = math.hypot(dx0, c2)
     acc_err = 8.0 * _EPS * (aw2 * (4.0 + abs(tau0) + abs(lag)) + 4.0 * cabs)
+    # gap_rounding(h) <= m0 + m1 h for every h (s2 <= 2 a): a cheap first test
+    phase0 = abs(tau0) + abs(lag) + 1.0
+    m0 = 8.0 * _EPS * (2.0 * cabs + abs(P[_DD]) + 2.0 * amp * (1.0 + phase0))
+    m1 = 8.0 * _EPS * (cabs * wd + 2.0 * amp * omega)
     return (P[_ZETA], wd, omega, lag, amp, P[_DD], tau0, dx0, c2, aw2, aw3, cabs, P[_TWO],
-            acc_err)
+            acc_err, m0, m1)
 
 
 @jit
@@ -301,9 +314,12 @@ def _certified(ev, a, b, ea, ga, va, acca, dxa, gb, vb, accb, dxb):
             return 1, tmin
         return 1, (bracket(ev, tmin, b, 0, 1.0) if gmin < 0.0 <= gb else NONE)
     # below the chord plus the curvature allowance, with the rounding margin of the ends
+    # (a uniform bound m0 + m1 b first, the precise one only when needed)
     curvature = max(0.0, 0.5 * (jw - acca - accb))
-    margin = max(gap_rounding(ev, a, ga, dxa), gap_rounding(ev, b, gb, dxb))
-    if max(ga, gb) + margin + 0.125 * power(b - a, ev[12]) * curvature < 0.0:
+    upper = max(ga, gb) + 0.125 * power(b - a, ev[12]) * curvature
+    if upper < 0.0 and (upper + ev[14] + ev[15] * b < 0.0 or
+                        upper + max(gap_rounding(ev, a, ga, dxa), gap_rounding(ev, b, gb, dxb))
+                        < 0.0):
         return 1, NONE
     return 0, NONE
 
@@ -364,13 +380,19 @@ def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
     :func:`window_grid`, used when it was made for this (tau0, horizon) with the default
     step (else ignored; it may have no rows).
     """
-    ok, size = check_state(P[_ZETA], dx0, dv0)
+    ok, _size = check_state(P[_ZETA], dx0, dv0)
     if not ok or not (math.isfinite(tau0) and math.isfinite(horizon)):
         return NONE, STATUS_NONFINITE, 0.0
+    return next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid)
+
+
+@jit
+def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
+    """impact._next_impact: :func:`next_impact` without the checks (advance made them)."""
     if horizon <= 0.0:
         return NONE, STATUS_OK, 0.0
     # whole-window exclusion: g <= |z_x| - Delta d <= |C| - Delta d (|C| rounded up)
-    if size * (1.0 + 4.0 * _EPS) < P[_DD]:
+    if amplitude_bound(P[_ZETA], dx0, dv0) * (1.0 + 4.0 * _EPS) < P[_DD]:
         return NONE, STATUS_OK, 0.0
     ev = make_eval(P, tau0, dx0, dv0)
     step = max_step if max_step > 0.0 else P[_PERIOD] / 8.0
@@ -477,6 +499,7 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
     if not ok or not (math.isfinite(tau0) and math.isfinite(duration)):
         return dx, dv, n0, STATUS_NONFINITE, 0.0
     zeta, r, omega = P[_ZETA], P[_R], P[_OMEGA]
+    aw, lag_abs, wd = P[_AMP] * omega, abs(P[_LAG]), P[_WD]
     chatter = chatter_time if chatter_time >= 0.0 else 1e-6 * P[_PERIOD]
     n = n0
     t = 0.0
@@ -486,7 +509,7 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
     if resting_on_wall(P, tau, dx, dv):
         h = 0.0
     elif duration > 0.0:
-        h, status, info = next_impact(P, tau, dx, dv, duration, 0.0, stack, grid)
+        h, status, info = next_impact_unchecked(P, tau, dx, dv, duration, 0.0, stack, grid)
         if status != STATUS_OK:
             return dx, dv, n, status, info
     else:
@@ -501,8 +524,8 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
         if contacts >= max_impacts:
             return dx, dv, n, STATUS_IMPACT_CAP, tau % TWO_PI
         contacts += 1
-        # velocity rounding after the flow: terms of size |C| with phases omega_d h
-        flow_err = 8.0 * _EPS * amplitude_bound(zeta, dx, dv) * (2.0 + h)
+        # velocity rounding after the flow: terms of size |C| <= |dx| + |dv + zeta dx| / omega_d
+        flow_err = 8.0 * _EPS * (abs(dx) + abs(dv + zeta * dx) / wd) * (2.0 + h)
         f11, f12, f21, f22 = transition_matrix(zeta, h)
         dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
         t += h
@@ -511,7 +534,8 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
         vp = -wall_dv
         v_minus = vp + dv
         force = math.cos(tau) - P[_D]
-        v_tol = wall_rounding(P, tau, dx, dv)[1] + flow_err
+        # the velocity's rounding (wall_rounding) plus that of the flow
+        v_tol = 8.0 * _EPS * (abs(vp) + abs(dv) + aw * (tau + lag_abs + TWO_PI + 1.0)) + flow_err
         dx = wall_dx  # on the wall exactly
         if v_minus <= v_tol:  # contact at rest, below the velocity's rounding
             dv = wall_dv
@@ -519,8 +543,8 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
                 t, tau, dx, dv = leave_wall(P, tau0, t, duration, dx, dv)
                 h = NONE
                 if t < duration:
-                    h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack,
-                                                  grid)
+                    h, status, info = next_impact_unchecked(P, tau, dx, dv, duration - t, 0.0,
+                                                            stack, grid)
                     if status != STATUS_OK:
                         return dx, dv, n, status, info
                 continue
@@ -530,7 +554,7 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
                 else math.inf
             # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap, not resolvable
             height = power(r * v_minus, P[_TWO]) / (2.0 * force) if force > 0.0 else math.inf
-        v_plus = -r * v_minus
+        v_plus = -r * v_minus if v_minus > 0.0 else 0.0  # at rest: +0.0, not -0.0
         dv = v_plus - vp
         if t_inf < chatter or height < 1e3 * ulp(abs(dx) + abs(P[_DD]) + P[_AMP]):
             # chattering: sum the geometric sequence and stick (velocity -> 0)
@@ -549,7 +573,8 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
                 t, tau, dx, dv = leave_wall(P, tau0, t, duration, dx, dv)
             h = NONE
             if t < duration:
-                h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
+                h, status, info = next_impact_unchecked(P, tau, dx, dv, duration - t, 0.0, stack,
+                                                        grid)
                 if status != STATUS_OK:
                     return dx, dv, n, status, info
             continue
@@ -558,6 +583,103 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
         n += 1
         h = NONE
         if t < duration:
-            h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
+            h, status, info = next_impact_unchecked(P, tau, dx, dv, duration - t, 0.0, stack, grid)
             if status != STATUS_OK:
                 return dx, dv, n, status, info
+
+# ======================================================= simulate.period_step, the loop
+# :func:`period_step` is one forcing period from a Pi2 sample with the correction applied
+# ``delay`` after it, exactly as the core's; :func:`run` chains periods with the
+# controller of Eq. 28 (dv_correction = c1 dx + c2 dv at samples k >= control_after), as
+# :func:`grazing_control.simulate.simulate` does: the whole inner loop of a sweep point
+# or of an exact simulation.
+
+#: The impact buffer of :func:`run` is full: resume at the returned period with more room.
+STATUS_BUFFER_FULL = 3
+#: simulate's check: the correction c1 dx + c2 dv is not finite or exceeds 1e150 (info).
+STATUS_CORRECTION = 5
+#: The core's default cap of impacts per advance call.
+MAX_IMPACTS = 10000
+
+
+@jit
+def period_step(P, dx, dv, dv_correction, delay, out, n0, stack, grid):
+    """simulate.period_step: (dx, dv, n, status, info); impact rows n0..n-1 of ``out``.
+
+    ``out`` needs n0 + 2 MAX_IMPACTS rows when delay > 0 (two advance calls), n0 +
+    MAX_IMPACTS otherwise. Impact times count from the sample. The caller validates
+    0 <= delay < T. ``grid``: window_grid(P, tau2, T) (or empty), reused when delay = 0.
+    """
+    if delay == 0.0:
+        return advance(P, P[_TAU2], dx, dv + dv_correction, P[_PERIOD], MAX_IMPACTS, -1.0,
+                       out, n0, stack, grid)
+    dx1, dv1, n1, status, info = advance(P, P[_TAU2], dx, dv, delay, MAX_IMPACTS, -1.0, out, n0,
+                                          stack, grid)
+    if status != STATUS_OK:
+        return dx1, dv1, n1, status, info
+    tau = (P[_TAU2] + P[_OMEGA] * delay) % TWO_PI
+    dx2, dv2, n2, status, info = advance(P, tau, dx1, dv1 + dv_correction, P[_PERIOD] - delay,
+                                         MAX_IMPACTS, -1.0, out, n1, stack, grid)
+    for i in range(n1, n2):
+        out[i, 0] += delay
+        out[i, 5] += delay
+    return dx2, dv2, n2, status, info
+
+
+@jit
+def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record_from,
+        dev, corr, counts, impacts, n_impacts, scratch, stack):
+    """Periods k0 .. periods-1 from the Pi2 deviation (dx, dv) at sample k0.
+
+    Sample k (>= record_from) is stored at row k - record_from of ``dev`` (deviation
+    before the correction), ``corr`` (the correction) and ``counts`` (impacts in the
+    period). Impact rows (k, time since sample 0, phase, v-, v+) are appended to
+    ``impacts`` from row ``n_impacts`` when it has any rows (an exact simulation) and
+    skipped when it has none (a sweep); ``scratch`` holds one period's impacts
+    (2 MAX_IMPACTS rows).
+
+    Returns
+    -------
+    (k, dx, dv, n_impacts, status, info)
+        k = periods and STATUS_OK when done. STATUS_BUFFER_FULL: period k did not fit in
+        ``impacts``; (dx, dv) is still sample k's, so the call can be resumed from k with
+        a larger array. STATUS_CORRECTION: simulate's overflow check of the correction
+        (info) failed at sample k, whose (dx, dv) are returned. Any other status is the
+        core's error at period k, with (dx, dv) the state it is about (impact.advance).
+    """
+    period = P[_PERIOD]
+    keep = impacts.shape[0] > 0
+    grid = window_grid(P, P[_TAU2], period)
+    for k in range(k0, periods):
+        dvc = 0.0
+        if controlled and k >= control_after:
+            dvc = c1 * dx + c2 * dv
+            if not abs(dvc) <= 1e150:  # simulate's check: an input overflowed
+                return k, dx, dv, n_impacts, STATUS_CORRECTION, dvc
+        ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, delay, scratch, 0, stack, grid)
+        if status != STATUS_OK:  # (ndx, ndv): the state the error is about
+            return k, ndx, ndv, n_impacts, status, info
+        if keep:
+            if n_impacts + n > impacts.shape[0]:
+                return k, dx, dv, n_impacts, STATUS_BUFFER_FULL, 0.0
+            for i in range(n):
+                impacts[n_impacts, 0] = k
+                impacts[n_impacts, 1] = k * period + scratch[i, 0]
+                impacts[n_impacts, 2] = scratch[i, 1]
+                impacts[n_impacts, 3] = scratch[i, 2]
+                impacts[n_impacts, 4] = scratch[i, 3]
+                n_impacts += 1
+        if k >= record_from:
+            j = k - record_from
+            dev[j, 0] = dx
+            dev[j, 1] = dv
+            corr[j] = dvc
+            counts[j] = n
+        dx, dv = ndx, ndv
+    return periods, dx, dv, n_impacts, STATUS_OK, 0.0
+
+
+def scratch_buffer():
+    """The per-period impact buffer :func:`run` and :func:`period_step` need."""
+    return np.empty((2 * MAX_IMPACTS, 6))
+
