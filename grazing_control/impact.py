@@ -395,8 +395,8 @@ def _release_skip(p: OscillatorParams, tau: float, dx: float) -> float:
 
 def _on_wall_at_rest(p: OscillatorParams, tau: float):
     """Deviation of (x, v) = (d, 0) at phase tau."""
-    s = math.sin(0.5 * (tau - p.lag))
-    return p.delta_d + 2.0 * p.amplitude * s * s, p.amplitude * p.omega * math.sin(tau - p.lag)
+    xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d
+    return -xp_minus_d, p.amplitude * p.omega * math.sin(tau - p.lag)
 
 
 def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: float, *,
