@@ -463,8 +463,8 @@ def release_skip(P, tau, dx):
 @jit
 def on_wall_at_rest(P, tau):
     """impact._on_wall_at_rest: deviation of (x, v) = (d, 0) at phase tau."""
-    s = math.sin(0.5 * (tau - P[_LAG]))
-    return P[_DD] + 2.0 * P[_AMP] * s * s, P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
+    xp_minus_d = -2.0 * P[_AMP] * power(math.sin(0.5 * (tau - P[_LAG])), P[_TWO]) - P[_DD]
+    return -xp_minus_d, P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
 
 
 @jit
