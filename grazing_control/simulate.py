@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import kernel as _kernel
 from .control import Gains
 from .flow import propagate, to_deviation, to_physical
 from .fidelity import FIDELITIES, ModelValidityError, choose_fidelity
@@ -42,8 +43,11 @@ def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float 
     The correction enters as an instantaneous velocity change (Eq. 28) applied ``delay``
     after the sample (0 <= delay < T; 0: on Pi2 itself, the study's controller); the rest
     is the exact flow with impacts from phase tau2 over one period. Impact times in the
-    returned segment count from the sample.
+    returned segment count from the sample. Runs on the compiled kernel when it is in use
+    (:func:`grazing_control.kernel.use_kernel`), which gives the same result.
     """
+    if _kernel.use_kernel() and (delay == 0.0 or 0.0 < delay < p.period):
+        return _kernel.period_step(p, dx, dv, dv_correction, delay=delay)
     if delay == 0.0:
         return advance(p, p.tau2, dx, dv + dv_correction, p.period)
     if not 0.0 < delay < p.period:
@@ -195,7 +199,12 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
                          f"(delay={delay!r}): use fidelity='exact'")
     fallbacks = 0
     ks = range(periods)
-    if progress:
+    if fidelity == "exact" and _kernel.use_kernel():  # this loop, compiled: done here
+        dev, corr, counts, imps, (dx, dv) = _kernel.simulate_exact(
+            p, periods, dx, dv, gains if active else None, control_after if active else None,
+            delay=delay, progress=progress)
+        ks = ()
+    elif progress:
         from tqdm import tqdm
 
         ks = tqdm(ks, total=periods, unit="period", file=sys.stderr, leave=False)
