@@ -336,6 +336,10 @@ def build_parser() -> argparse.ArgumentParser:
         add_run_arguments(s)
         s.set_defaults(func=cmd_run)
 
+    from .figures.command import add_parser as add_figures_parser
+
+    add_figures_parser(sub)
+
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
     s.add_argument("--out", default="out/demo", help="report folder (default out/demo)")
     s.add_argument("--offline", action="store_true", help="through the core only, no ROS nodes")

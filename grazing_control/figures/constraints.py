@@ -1,0 +1,156 @@
+"""The control constraints against c2 and the admissible set: Figs. 2(a) and 2(b).
+
+For each c2, c1 follows from the degenerate condition N_g,12 = 0 (Eq. 38); then
+(spec section 6, docs/theory.md §6)
+
+* (a) the limit multipliers lambda0 (Eq. 23): the near-grazing 1/1 motion is stable
+  iff max|lambda0| < 1 (Eqs. 34, 35);
+* (b) the existence coefficient gamma1 (Eq. 36): the controlled 1/1 motion lives on
+  the impacting side d < d* iff gamma1 > 0.
+
+Lines are the exact route (:func:`grazing_control.design.evaluate_design`), circles the
+perturbation formulas (:mod:`grazing_control.perturbation`); the shaded set is
+:func:`grazing_control.design.admissible_c2`, the design tool's own answer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control import Gains
+from ..design import admissible_c2, degenerate_c1, evaluate_design
+from ..params import OscillatorParams
+from ..perturbation import (admissible_c2_perturbation, existence_coefficient_perturbation,
+                            limit_multipliers_perturbation)
+from ._plot import COLORS, PANEL_SIZE, pyplot, save
+from .report import Number, Panel
+
+__all__ = ["ConstraintData", "constraint_data", "panel_2a", "panel_2b"]
+
+
+@dataclass(frozen=True)
+class ConstraintData:
+    """lambda0 and gamma1 against c2, exact (lines) and perturbation (circles).
+
+    c2, lambda0 (n, 2) complex, gamma1 (n,): exact on a fine grid; c2_p, lambda0_p,
+    gamma1_p: perturbation on a coarse grid; admissible, admissible_p: the intervals.
+    """
+
+    c2: np.ndarray
+    lambda0: np.ndarray
+    gamma1: np.ndarray
+    c2_p: np.ndarray
+    lambda0_p: np.ndarray
+    gamma1_p: np.ndarray
+    admissible: tuple
+    admissible_p: tuple
+
+
+def constraint_data(p: OscillatorParams, c2_range=(-3.0, 1.0), points: int = 401,
+                    circles: int = 21) -> ConstraintData:
+    """Evaluate the design on ``points`` values of c2 (and the perturbation on ``circles``)."""
+    c2 = np.linspace(*c2_range, points)
+    designs = [evaluate_design(p, float(c)) for c in c2]
+    c2_p = np.linspace(*c2_range, circles)
+    gains = [Gains(degenerate_c1(p, float(c)), float(c)) for c in c2_p]
+    return ConstraintData(
+        c2=c2,
+        lambda0=np.array([d.multipliers_limit for d in designs]).reshape(-1, 2),
+        gamma1=np.array([d.gamma1 for d in designs]),
+        c2_p=c2_p,
+        lambda0_p=np.array([limit_multipliers_perturbation(p, g) for g in gains]).reshape(-1, 2),
+        gamma1_p=np.array([existence_coefficient_perturbation(p, g) for g in gains]),
+        admissible=tuple(tuple(float(x) for x in iv) for iv in admissible_c2(p)),
+        admissible_p=tuple(tuple(float(x) for x in iv) for iv in admissible_c2_perturbation(p)),
+    )
+
+
+def _shade(ax, data: ConstraintData, chosen: float):
+    for k, (lo, hi) in enumerate(data.admissible):
+        ax.axvspan(lo, hi, color=COLORS["admissible"], alpha=0.12, lw=0,
+                   label="admissible c2 (design.admissible_c2)" if k == 0 else None)
+    ax.axvline(chosen, color="k", lw=0.8, ls=":", label=f"chosen c2 = {chosen:g}")
+
+
+def _interval_numbers(data: ConstraintData, chosen: float, p: OscillatorParams):
+    exact = data.admissible
+    pert = data.admissible_p
+    d = evaluate_design(p, chosen)
+    out = [Number("admissible_c2", "admissible c2 (exact)", exact[0] if len(exact) == 1 else exact,
+                  fmt=".10g", note="design.admissible_c2: Brent on both conditions"),
+           Number("admissible_c2_perturbation", "admissible c2 (perturbation)",
+                  pert[0] if len(pert) == 1 else pert, fmt=".10g",
+                  note="perturbation.admissible_c2_perturbation"),
+           Number("c1_at_chosen", f"c1 at c2 = {chosen:g}", float(d.c1), -1.02060, fmt=".8f",
+                  note="Eq. 38")]
+    return out, d
+
+
+def panel_2a(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> Panel:
+    """Fig. 2(a): |lambda0| against c2 with the stability bound |lambda0| < 1."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
+    _shade(ax, data, chosen)
+    mods = np.abs(data.lambda0)
+    ax.plot(data.c2, mods[:, 0], "-", color="k", lw=1.4, label="|λ0,1| (exact)")
+    ax.plot(data.c2, mods[:, 1], "-", color="0.55", lw=1.4, label="|λ0,2| (exact)")
+    pm = np.abs(data.lambda0_p)
+    ax.plot(data.c2_p, pm[:, 0], "o", mfc="none", color=COLORS["perturbation"], ms=6,
+            label="perturbation (Eq. 23)")
+    ax.plot(data.c2_p, pm[:, 1], "o", mfc="none", color=COLORS["perturbation"], ms=6)
+    ax.axhline(1.0, color=COLORS["unstable"], lw=0.9, ls="--", label="|λ0| = 1")
+    ax.set(xlim=(data.c2[0], data.c2[-1]), ylim=(0.0, min(2.5, 1.05 * mods.max())),
+           xlabel="c2  (c1 from N_g,12 = 0, Eq. 38)", ylabel="|λ0|",
+           title="Fig. 2(a): stability of the controlled 1/1 motion at grazing")
+    ax.legend(fontsize=8, loc="upper center")
+    files = save(fig, out, "fig2a")
+    nums, d = _interval_numbers(data, chosen, p)
+    stable = mods[:, 0] < 1.0
+    nums += [Number("lambda0_at_chosen", f"|λ0| at c2 = {chosen:g}",
+                    tuple(float(a) for a in np.abs(d.multipliers_limit)), fmt=".8f"),
+             Number("stable_c2", "c2 grid range with max|λ0| < 1",
+                    (float(data.c2[stable].min()), float(data.c2[stable].max())) if stable.any() else None,
+                    fmt=".4g", note=f"{data.c2.size}-point grid"),
+             Number("min_abs_lambda0", "min over c2 of max|λ0|", float(mods[:, 0].min()), fmt=".6f",
+                    note=f"at c2 = {data.c2[np.argmin(mods[:, 0])]:.4g}")]
+    return Panel("fig2a", "control constraint |λ0| < 1",
+                 "Moduli of the limit multipliers λ0 of the controlled 1/1 motion at grazing "
+                 "(Eq. 23) against c2, c1 from the degenerate condition (Eq. 38): exact "
+                 "(lines) and perturbation (circles). Stability needs both inside the unit "
+                 "circle (below the dashed line). Shaded: the admissible set (both "
+                 "constraints, as computed by design.admissible_c2); dotted: the study's "
+                 "c2 = −1.", tuple(files), tuple(nums))
+
+
+def panel_2b(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> Panel:
+    """Fig. 2(b): gamma1 against c2 with the existence bound gamma1 > 0 (symlog axis)."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
+    _shade(ax, data, chosen)
+    ax.plot(data.c2, data.gamma1, "-", color="k", lw=1.4, label="γ1 (exact)")
+    ax.plot(data.c2_p, data.gamma1_p, "o", mfc="none", color=COLORS["perturbation"], ms=6,
+            label="γ1 (perturbation)")
+    ax.axhline(0.0, color=COLORS["unstable"], lw=0.9, ls="--", label="γ1 = 0")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set(xlim=(data.c2[0], data.c2[-1]), xlabel="c2  (c1 from N_g,12 = 0, Eq. 38)",
+           ylabel="γ1  (symmetric log scale)",
+           title="Fig. 2(b): existence of the controlled 1/1 motion for d < d*")
+    ax.legend(fontsize=8, loc="lower left")
+    files = save(fig, out, "fig2b")
+    nums, d = _interval_numbers(data, chosen, p)
+    pos = data.gamma1 > 0.0
+    flips = np.flatnonzero(np.diff(np.sign(data.gamma1)) != 0)
+    nums += [Number("gamma1_at_chosen", f"γ1 at c2 = {chosen:g}", float(d.gamma1), fmt=".6g"),
+             Number("gamma1_sign_changes", "c2 grid cells where γ1 changes sign",
+                    tuple(float(0.5 * (data.c2[k] + data.c2[k + 1])) for k in flips), fmt=".4g",
+                    note="a zero or a pole of γ1"),
+             Number("gamma1_positive_fraction", "fraction of the c2 grid with γ1 > 0",
+                    float(np.mean(pos)), fmt=".3f")]
+    return Panel("fig2b", "control constraint γ1 > 0",
+                 "The existence coefficient γ1 (Eq. 36; Δd = −γ1 ψ² + … along the controlled "
+                 "branch) against c2: exact (line) and perturbation (circles), on a symmetric "
+                 "log axis. The controlled 1/1 motion exists on the impacting side d < d* "
+                 "where γ1 > 0. Shaded: the admissible set, where this and the stability "
+                 "constraint of Fig. 2(a) both hold.", tuple(files), tuple(nums))
