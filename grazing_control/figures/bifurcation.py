@@ -120,9 +120,9 @@ def panel_1a(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
                     f"{data.seconds:.1f} s"),
         Number("period1_fraction_negative", "Δd < 0 from X**: fraction of period-1 points",
                float(np.mean(per[neg] == 1)) if neg.any() else None, fmt=".3f"),
-        Number("chaos_from", "Δd < 0 from X**: first Δd with no period ≤ 64",
-               _first(data.delta_d, neg & (per == 0)), fmt=".4g",
-               note="chaotic, or a transient slower than the run"),
+        Number("chaos_from", "Δd < 0 from X**: the range next to grazing with no period ≤ 64 "
+               "starts at", _chaos_from(data.delta_d[neg], per[neg]), fmt=".4g",
+               note="chaos (or a transient slower than the run)"),
         Number("other_attractor_ranges", "Δd ranges before the doubling where X** reaches "
                "an attractor other than the 1/1 motion",
                _runs(data.delta_d, _off_branch(data, branch)) or None, fmt=".3g",
@@ -203,12 +203,12 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
     after = first2 if first2 is not None else -np.inf
     bracket = last1 is not None and first2 is not None and last1 <= pd.delta_d <= first2
     numbers = (
-        Number("pd_delta_d", "period doubling Δd_PD (continuation)", pd.delta_d, -1.00527e-5,
+        Number("pd_delta_d", "period doubling Δd_PD (continuation)", pd.delta_d, "−1.00527e-5",
                fmt=".12g", note="exact: Brent on 1 + tr J + det J"),
         Number("brute_last_period1", "brute force from X**: last period-1 Δd", last1, fmt=".6g",
                note=f"grid step {dd[1] - dd[0]:.2g}"),
         Number("brute_first_period2", "brute force: first period-2 Δd after it", first2, fmt=".6g"),
-        Number("pd_in_bracket", "Δd_PD (continuation) lies between the two", bool(bracket), True,
+        Number("pd_in_bracket", "Δd_PD (continuation) lies between the two", bool(bracket), "—",
                note="critical slowing down blurs the grid points next to Δd_PD"),
         Number("brute_first_period4", "brute force: first period-4 Δd after that",
                _first(dd, (per == 4) & (dd > after)), fmt=".6g"),

@@ -20,7 +20,7 @@ import numpy as np
 from ..continuation import continue_11
 from ..control import Gains
 from ..maps import smooth_return_matrix
-from ..orbits import _orbit_from_phase, multipliers
+from ..orbits import _orbit_from_phase, multipliers, orbit_11
 from ..params import OscillatorParams
 from ._plot import COLORS, PANEL_SIZE, pyplot, save, stability_segments
 from .report import Number, Panel
@@ -53,20 +53,40 @@ class BranchData:
 
 
 def branch_data(p: OscillatorParams, gains: Gains | None = None, start: float = -1e-3,
-                stop: float = -1e-12, points: int = 400) -> BranchData:
-    """Continue the 1/1 branch from ``start`` to ``stop`` (both < 0) and sample it on Pi2."""
+                stop: float = -1e-12, points: int = 400, uniform: int = 0) -> BranchData:
+    """Continue the 1/1 branch from ``start`` to ``stop`` (both < 0) and sample it on Pi2.
+
+    The continuation's grid is logarithmic in the impact phase (dense near grazing);
+    ``uniform`` > 0 adds that many orbits equally spaced in Delta d over the range
+    (:func:`grazing_control.orbits.orbit_11`), for panels with a linear Delta d axis.
+    The located bifurcation points are part of the curve, so that stability changes
+    exactly there.
+    """
     br = continue_11(p, start, stop, gains, points=points, check=True)
-    pts = sorted(br.points, key=lambda b: b.delta_d)
-    x = [_orbit_from_phase(p, b.psi, gains, check=False).pi2[0] for b in pts]
+    rows = []
+    for b in br.points:
+        o = _orbit_from_phase(p, b.psi, gains, check=False)
+        rows.append((b.delta_d, b.psi, o.pi2[0], b.v_minus, b.multipliers))
+    for b in br.bifurcations:
+        if b.type != "grazing":
+            o = _orbit_from_phase(p, b.psi, gains, check=False)
+            rows.append((b.delta_d, b.psi, o.pi2[0], o.v_minus, b.multipliers))
+    for dd in np.linspace(start, stop, uniform) if uniform else ():
+        o = orbit_11(p.with_(delta_d=float(dd)), gains, check=True)
+        psi = (o.impact_phase - p.tau_star + np.pi) % (2.0 * np.pi) - np.pi
+        rows.append((float(dd), psi, o.pi2[0], o.v_minus, o.multipliers))
+    rows.sort(key=lambda row: row[0])
+    lam = np.array([row[4] for row in rows]).reshape(-1, 2)
     n_g = smooth_return_matrix(p, gains)
     return BranchData(
         gains=gains,
-        delta_d=np.array([b.delta_d for b in pts]),
-        psi=np.array([b.psi for b in pts]),
-        x_pi2=np.array(x),
-        v_minus=np.array([b.v_minus for b in pts]),
-        multipliers=np.array([b.multipliers for b in pts]).reshape(-1, 2),
-        stable=np.array([b.stable for b in pts], dtype=bool),
+        delta_d=np.array([row[0] for row in rows]),
+        psi=np.array([row[1] for row in rows]),
+        x_pi2=np.array([row[2] for row in rows]),
+        v_minus=np.array([row[3] for row in rows]),
+        multipliers=lam,
+        # |lambda| = 1 at a bifurcation point counts as unstable: the curve changes there
+        stable=np.max(np.abs(lam), axis=1) < 1.0 - 1e-12,
         bifurcations=tuple(br.bifurcations),
         non_impacting=multipliers(n_g),
     )
@@ -124,10 +144,10 @@ def panel_1c(p: OscillatorParams, data: BranchData, window, out) -> Panel:
     in_win = data.delta_d >= window[0]
     unstable = data.delta_d[~data.stable]
     numbers = (
-        Number("points", "branch points (verified by the exact flow)", int(data.delta_d.size),
-               note="continue_11(check=True), Δd from "
+        Number("points", "branch points drawn (each a verified 1/1 orbit)", int(data.delta_d.size),
+               note="continue_11(check=True) and orbit_11 on a uniform grid, Δd from "
                     f"{data.delta_d[0]:.3g} to {data.delta_d[-1]:.3g}"),
-        Number("pd_delta_d", "period doubling Δd_PD", pd.delta_d if pd else None, -1.00527e-5,
+        Number("pd_delta_d", "period doubling Δd_PD", pd.delta_d if pd else None, "−1.00527e-5",
                fmt=".12g", note="test function 1 + tr J + det J, Brent in ψ"),
         Number("unstable_from", "unstable 1/1 from Δd", float(unstable.min()) if unstable.size else None,
                fmt=".6g", note="first unstable grid point"),
@@ -172,12 +192,12 @@ def panel_2c(p: OscillatorParams, uncontrolled: BranchData, controlled: BranchDa
         Number("controlled_points", "controlled branch points", int(controlled.delta_d.size),
                note=f"Δd from {controlled.delta_d[0]:.3g} to {controlled.delta_d[-1]:.3g}"),
         Number("controlled_all_stable", "controlled 1/1 stable at every point",
-               bool(np.all(controlled.stable)), True),
+               bool(np.all(controlled.stable)), "yes"),
         Number("controlled_max_abs_multiplier", "max |λ| on the controlled branch", c_max, fmt=".6f"),
         Number("controlled_bifurcations", "bifurcations on the controlled branch",
-               ", ".join(b.type for b in controlled.bifurcations) or "none", "none"),
+               ", ".join(b.type for b in controlled.bifurcations) or "none", "none (bounded)"),
         Number("uncontrolled_pd_delta_d", "uncontrolled period doubling Δd_PD",
-               uncontrolled.bifurcation("period-doubling").delta_d, -1.00527e-5, fmt=".12g"),
+               uncontrolled.bifurcation("period-doubling").delta_d, "−1.00527e-5", fmt=".12g"),
         Number("controlled_v_minus_slope", "controlled v⁻ ∝ |Δd|^s: s on [1e-12, 1e-8]",
                loglog_slope(controlled.delta_d, controlled.v_minus, 1e-12, 1e-8), fmt=".5f",
                note="degenerate grazing: 1/2 (docs/theory.md §5)"),

@@ -40,7 +40,8 @@ class Settings:
     diagram_points, zoom_points : grid sizes of the brute-force diagrams;
     periods, transient : per point of 1(a); zoom_periods, zoom_transient : of 1(b)
     (longer: critical slowing down at the period doubling);
-    branch_points : continuation grid; log_range : |Delta d| range of the log panels;
+    branch_points : continuation grid; uniform_points : orbits added on a uniform grid
+    in Delta d over ``window`` (linear axes); log_range : |Delta d| range of the log panels;
     circles : perturbation samples; c2_range, c2_points, c2_circles : Figs. 2(a, b).
     """
 
@@ -53,6 +54,7 @@ class Settings:
     zoom_periods: int = 3200
     zoom_transient: int = 3000
     branch_points: int = 400
+    uniform_points: int = 300
     log_range: tuple = (1e-12, 1e-3)
     circles: int = 19
     c2_range: tuple = (-3.0, 1.0)
@@ -62,7 +64,7 @@ class Settings:
 
 FULL = Settings()
 QUICK = Settings(diagram_points=48, zoom_points=32, periods=260, transient=200,
-                 zoom_periods=460, zoom_transient=400, branch_points=80, circles=10,
+                 zoom_periods=460, zoom_transient=400, branch_points=80, uniform_points=40, circles=10,
                  c2_points=81, c2_circles=9)
 
 
@@ -90,6 +92,11 @@ def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
     -------
     list of Panel
     """
+    if bags is not None:  # refuse before anything runs or is written
+        missing = [name for name, _dd in SCENES if not (Path(bags) / name).exists()]
+        if missing:
+            raise ValueError(f"bags={str(bags)!r} is invalid: no recording {missing[0]} in it "
+                             "(expected the folder `grazing demo` writes: out/demo/bags)")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     log = log or (lambda *_: None)
@@ -107,9 +114,11 @@ def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
         log(f"figures: {panel.name} ({panel.seconds:.1f} s): {panel.title}")
 
     lo, hi = s.log_range
-    uncontrolled_win = branch_data(p, None, start=s.window[0], points=s.branch_points)
+    uncontrolled_win = branch_data(p, None, start=s.window[0], points=s.branch_points,
+                                   uniform=s.uniform_points)
     uncontrolled_log = branch_data(p, None, start=-hi, stop=-lo, points=s.branch_points)
-    controlled_win = branch_data(p, gains, start=s.window[0], points=s.branch_points)
+    controlled_win = branch_data(p, gains, start=s.window[0], points=s.branch_points,
+                                 uniform=s.uniform_points)
     controlled_log = branch_data(p, gains, start=-hi, stop=-lo, points=s.branch_points)
 
     def fig_1a():
@@ -158,7 +167,7 @@ def _header(mode, s: Settings, total: float) -> str:
         f"Made by `{cmd}` ({mode} resolution, {total:.0f} s). Study parameters: ζ = 0.01, "
         "r = 0.68, ω = 2ω_d/3 + 5·10⁻⁴; Δd = d − d*. Every number below is computed from "
         "the data its panel was drawn from; the study's value is given where the study "
-        "(spec §8, issue 10) states one.",
+        "(spec §8, issue 10) states one (\"yes\": a qualitative claim of the study).",
         "",
         f"Brute-force diagrams: {s.diagram_points} values of Δd in [{s.window[0]:g}, "
         f"{s.window[1]:g}] × {s.periods} periods ({s.transient} transient) for 1(a); "

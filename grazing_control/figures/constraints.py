@@ -83,7 +83,7 @@ def _interval_numbers(data: ConstraintData, chosen: float, p: OscillatorParams):
            Number("admissible_c2_perturbation", "admissible c2 (perturbation)",
                   pert[0] if len(pert) == 1 else pert, fmt=".10g",
                   note="perturbation.admissible_c2_perturbation"),
-           Number("c1_at_chosen", f"c1 at c2 = {chosen:g}", float(d.c1), -1.02060, fmt=".8f",
+           Number("c1_at_chosen", f"c1 at c2 = {chosen:g}", float(d.c1), "−1.02060", fmt=".8f",
                   note="Eq. 38")]
     return out, d
 
@@ -124,12 +124,25 @@ def panel_2a(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> P
                  "c2 = −1.", tuple(files), tuple(nums))
 
 
+def _poles(data: ConstraintData) -> np.ndarray:
+    """Grid cells where gamma1 changes sign through a pole: large on both sides (a zero
+    is small on one side at least)."""
+    g = data.gamma1
+    flips = np.flatnonzero(np.diff(np.sign(g)) != 0)
+    return flips[np.minimum(np.abs(g[flips]), np.abs(g[flips + 1])) > 10.0]
+
+
 def panel_2b(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> Panel:
     """Fig. 2(b): gamma1 against c2 with the existence bound gamma1 > 0 (symlog axis)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
     _shade(ax, data, chosen)
-    ax.plot(data.c2, data.gamma1, "-", color="k", lw=1.4, label="γ1 (exact)")
+    poles = _poles(data)
+    ax.plot(np.insert(data.c2, poles + 1, np.nan), np.insert(data.gamma1, poles + 1, np.nan),
+            "-", color="k", lw=1.4, label="γ1 (exact)")
+    for k, i in enumerate(poles):
+        ax.axvline(0.5 * (data.c2[i] + data.c2[i + 1]), color="0.5", lw=0.7, ls="-.",
+                   label="pole of γ1" if k == 0 else None)
     ax.plot(data.c2_p, data.gamma1_p, "o", mfc="none", color=COLORS["perturbation"], ms=6,
             label="γ1 (perturbation)")
     ax.axhline(0.0, color=COLORS["unstable"], lw=0.9, ls="--", label="γ1 = 0")
@@ -137,17 +150,24 @@ def panel_2b(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> P
     ax.set(xlim=(data.c2[0], data.c2[-1]), xlabel="c2  (c1 from N_g,12 = 0, Eq. 38)",
            ylabel="γ1  (symmetric log scale)",
            title="Fig. 2(b): existence of the controlled 1/1 motion for d < d*")
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper right")
     files = save(fig, out, "fig2b")
-    nums, d = _interval_numbers(data, chosen, p)
+    d = evaluate_design(p, chosen)
     pos = data.gamma1 > 0.0
     flips = np.flatnonzero(np.diff(np.sign(data.gamma1)) != 0)
-    nums += [Number("gamma1_at_chosen", f"γ1 at c2 = {chosen:g}", float(d.gamma1), fmt=".6g"),
-             Number("gamma1_sign_changes", "c2 grid cells where γ1 changes sign",
-                    tuple(float(0.5 * (data.c2[k] + data.c2[k + 1])) for k in flips), fmt=".4g",
-                    note="a zero or a pole of γ1"),
-             Number("gamma1_positive_fraction", "fraction of the c2 grid with γ1 > 0",
-                    float(np.mean(pos)), fmt=".3f")]
+    big = np.isin(flips, poles)
+    cell = [float(0.5 * (data.c2[k] + data.c2[k + 1])) for k in flips]
+    nums = [Number("gamma1_at_chosen", f"γ1 at c2 = {chosen:g}", float(d.gamma1), fmt=".6g"),
+            Number("gamma1_zeros", "c2 grid cells where γ1 crosses 0",
+                   tuple(c for c, b in zip(cell, big) if not b), fmt=".4g",
+                   note=f"{data.c2.size}-point grid; the admissible set's end is Brent's"),
+            Number("gamma1_poles", "c2 grid cells where γ1 jumps through ±∞",
+                   tuple(c for c, b in zip(cell, big) if b), fmt=".4g"),
+            Number("admissible_upper_gamma1", "γ1 at the admissible set's upper end",
+                   float(evaluate_design(p, data.admissible[-1][1]).gamma1) if data.admissible
+                   else None, fmt=".2e", note="both constraints fail together there"),
+            Number("gamma1_positive_fraction", "fraction of the c2 grid with γ1 > 0",
+                   float(np.mean(pos)), fmt=".3f")]
     return Panel("fig2b", "control constraint γ1 > 0",
                  "The existence coefficient γ1 (Eq. 36; Δd = −γ1 ψ² + … along the controlled "
                  "branch) against c2: exact (line) and perturbation (circles), on a symmetric "

@@ -89,11 +89,11 @@ def panel_1d(p: OscillatorParams, data: BranchData, s: Samples, out) -> Panel:
     small = np.argmin(ad)
     numbers = (
         Number("pd_delta_d", "period doubling Δd_PD (shooting, continuation)", pd.delta_d,
-               -1.00527e-5, fmt=".12g", note="multiplier −1: 1 + tr J + det J = 0"),
+               "−1.00527e-5", fmt=".12g", note="multiplier −1: 1 + tr J + det J = 0"),
         Number("pd_multipliers", "multipliers at Δd_PD", tuple(float(x.real) for x in pd.multipliers),
                fmt=".6f"),
         Number("pd_delta_d_perturbation_limit", "Δd_PD, perturbation (Eq. 26)", pd_lim,
-               -1.00527e-5, fmt=".9g",
+               "−1.00527e-5", fmt=".9g",
                note="1 + tr + ψ0 = 0 with the truncated trace"),
         Number("pd_delta_d_perturbation_practical", "Δd_PD, perturbation (with χ1 δ2)", pd_pra,
                fmt=".9g"),
@@ -111,7 +111,7 @@ def panel_1d(p: OscillatorParams, data: BranchData, s: Samples, out) -> Panel:
     )
     return Panel("fig1d", "moduli of the multipliers, shooting and perturbation",
                  "Moduli of the two Floquet multipliers of the uncontrolled 1/1 motion against "
-                 "|Δd| (grazing to the left): shooting (lines, the exact monodromy along the "
+                 "|Δd| (log axis, grazing to the right): shooting (lines, the exact monodromy along the "
                  "continued branch) and the perturbation series (circles). Far from grazing "
                  "they are a complex pair of modulus r e^{−ζT}; closer in they split, one "
                  "crosses −1 at the period doubling (dotted line; the 1/1 motion is stable in "
@@ -152,14 +152,14 @@ def panel_2d(p: OscillatorParams, data: BranchData, s: Samples, out,
         k = int(np.argmin(np.abs(s.delta_d - dd)))
         at[dd] = (s.delta_d[k], float(np.abs(s.exact[k, 0])), float(np.abs(s.perturbation[k, 0])))
     numbers = (
-        Number("c1", "c1 (degenerate condition, Eq. 38)", float(data.gains.c1), -1.02060, fmt=".8f"),
+        Number("c1", "c1 (degenerate condition, Eq. 38)", float(data.gains.c1), "−1.02060", fmt=".8f"),
         Number("lambda0", "λ0 (exact limit, design.limit_multipliers)",
                tuple(float(x.real) for x in lam0), fmt=".8f"),
         Number("lambda0_perturbation", "λ0 (perturbation, Eq. 23)",
                tuple(float(x.real) for x in lam0_p), fmt=".8f"),
         Number("max_abs_multiplier", "max |λ| along the branch", float(mods.max()), fmt=".6f",
                note=f"|Δd| in [{ad.min():.2g}, {ad.max():.2g}]"),
-        Number("all_stable", "stable along the whole branch", bool(np.all(data.stable)), True),
+        Number("all_stable", "stable along the whole branch", bool(np.all(data.stable)), "yes (bounded)"),
         *(Number(f"abs_lambda1_{abs(dd):.0e}", f"|λ1| at Δd = {d:.3g}: shooting / perturbation",
                  (a, b), fmt=".6f") for dd, (d, a, b) in at.items()),
         Number("second_multiplier_max", "max |λ2| (c2 = −1: det G = 0)", float(mods[:, 1].max()),
@@ -199,8 +199,8 @@ def panel_2e(p: OscillatorParams, data: BranchData, s: Samples, out) -> Panel:
     ratio = err / data.v_minus
     k = int(np.argmin(ad))
     numbers = (
-        Number("slope", "|λ1 − λ0| ∝ |Δd|^s: s on [1e-12, 1e-8]", slope, 0.5, fmt=".5f",
-               note="least squares; λ = λ0 + O(δ2), δ2 ∝ |Δd|^(1/2) (Eqs. 18, 23)"),
+        Number("slope", "|λ1 − λ0| ∝ |Δd|^s: s on [1e-12, 1e-8]", slope, fmt=".5f",
+               note="least squares; theory 1/2: λ = λ0 + O(δ2), δ2 ∝ |Δd|^(1/2) (Eqs. 18, 23)"),
         Number("error_per_v_minus", f"|λ1 − λ0| / v⁻ at Δd = {data.delta_d[k]:.3g}",
                float(ratio[k]), fmt=".5g"),
         Number("perturbation_vs_shooting", "max |λ1 perturbation − λ1 shooting| at the circles",

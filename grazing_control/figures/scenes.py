@@ -57,15 +57,15 @@ def panel_scene(p: OscillatorParams, gains: Gains, which: str, out, bags=None) -
                label=f"controlled 1/1 orbit, x = {exact.pi2[0]:.6g}")
     ax.set(xlabel="Π2 sample k (forcing periods)", ylabel="x on Π2",
            title=f"Fig. 2({which}): Δd = {dd:g}, control switched on after {CONTROL_AFTER} samples")
-    ax.legend(fontsize=8, loc="lower left")
+    fig.legend(fontsize=8, loc="outside lower center", ncol=2)
     files = save(fig, out, f"fig2{which}")
     per = numbers["uncontrolled_period"]
     hist = numbers["uncontrolled_impacts_per_period"]
     err = float(np.max(np.abs(scene.pi2[-1] - np.array(exact.pi2))))
     nums = (
         Number("source", "source", source),
-        Number("delta_d", "Δd", dd, dd, fmt="g"),
-        Number("control_on", "control switched on at sample", on, CONTROL_AFTER),
+        Number("delta_d", "Δd", dd, f"{dd:g}", fmt="g"),
+        Number("control_on", "control switched on at sample", on, str(CONTROL_AFTER)),
         Number("uncontrolled_period", "uncontrolled motion before control: period",
                per if per else "none ≤ 64 (chaotic)", note="last 200 samples, analysis.summarize"),
         Number("uncontrolled_impacts_histogram", "impacts per period before control (0, 1, 2, …)",
@@ -73,7 +73,7 @@ def panel_scene(p: OscillatorParams, gains: Gains, which: str, out, bags=None) -
         Number("samples_to_converge", "samples after switching on until within 1e-8",
                numbers["samples_to_converge"]),
         Number("one_impact_per_period", "1/1 motion after convergence",
-               numbers.get("one_impact_per_period_after_convergence"), True),
+               numbers.get("one_impact_per_period_after_convergence"), "yes"),
         Number("final_error", "|final sample − exact controlled 1/1 orbit|", err, fmt=".2e"),
         Number("final_v_minus", "final impact velocity v⁻", numbers["final_v_minus"], fmt=".6g",
                note=f"exact orbit: {exact.v_minus:.6g}"),
