@@ -327,6 +327,10 @@ def build_parser() -> argparse.ArgumentParser:
     _gain_args(s)
     s.set_defaults(func=cmd_simulate)
 
+    from .sweeps.cli import add_sweep_command
+
+    add_sweep_command(sub, _common, _finite, _count)
+
     try:
         from .launcher import add_run_arguments
     except ImportError:  # pragma: no cover - the launcher lands with the ROS issue

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import kernel as _kernel
 from .control import Gains
 from .flow import propagate, to_deviation, to_physical
 from .fidelity import FIDELITIES, choose_fidelity
@@ -37,8 +38,11 @@ def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float 
     The correction enters as an instantaneous velocity change (Eq. 28) applied ``delay``
     after the sample (0 <= delay < T; 0: on Pi2 itself, the study's controller); the rest
     is the exact flow with impacts from phase tau2 over one period. Impact times in the
-    returned segment count from the sample.
+    returned segment count from the sample. Runs on the compiled kernel when it is in use
+    (:func:`grazing_control.kernel.use_kernel`), which gives the same result.
     """
+    if _kernel.use_kernel() and (delay == 0.0 or 0.0 < delay < p.period):
+        return _kernel.period_step(p, dx, dv, dv_correction, delay=delay)
     if delay == 0.0:
         return advance(p, p.tau2, dx, dv + dv_correction, p.period)
     if not 0.0 < delay < p.period:
@@ -170,17 +174,21 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
                          f"{', '.join(FIDELITIES)}, auto")
     step = period_step if fidelity == "exact" else \
         (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
-    for k in range(periods):
-        dev[k] = dx, dv
-        dvc = 0.0
-        if active and k >= control_after:
-            dvc = gains.c1 * dx + gains.c2 * dv
-        corr[k] = dvc
-        seg = step(p, dx, dv, dvc)
-        counts[k] = len(seg.impacts)
-        for i in seg.impacts:
-            imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
-        dx, dv = seg.dx, seg.dv
+    if fidelity == "exact" and _kernel.use_kernel():  # the same loop, compiled
+        dev, corr, counts, imps, (dx, dv) = _kernel.simulate_exact(
+            p, periods, dx, dv, gains if active else None, control_after if active else None)
+    else:
+        for k in range(periods):
+            dev[k] = dx, dv
+            dvc = 0.0
+            if active and k >= control_after:
+                dvc = gains.c1 * dx + gains.c2 * dv
+            corr[k] = dvc
+            seg = step(p, dx, dv, dvc)
+            counts[k] = len(seg.impacts)
+            for i in seg.impacts:
+                imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
+            dx, dv = seg.dx, seg.dv
     pi2 = dev + np.array([p.x_ref, p.v_ref])
     return SimulationResult(p, gains, control_after if active else None, pi2, dev, corr, counts,
                             np.array(imps, dtype=float).reshape(-1, 5), (dx, dv),

@@ -22,7 +22,10 @@ from ..params import OscillatorParams, ParameterError
 from .period import detect_period
 from .result import SweepResult
 
-__all__ = ["GRID_NAMES", "sweep", "run_chunk"]
+__all__ = ["GRID_NAMES", "CONNECT_TIMEOUT", "sweep", "run_chunk"]
+
+#: Seconds to wait for a Dask scheduler given by address before giving up.
+CONNECT_TIMEOUT = 10.0
 
 _PARAM_NAMES = tuple(f.name for f in fields(OscillatorParams))
 #: Names a sweep grid may use: the model's parameters and the controller's gains.
@@ -120,10 +123,15 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
     counts = np.zeros((len(chunk), m), dtype=np.int32)
     period = np.zeros(len(chunk), dtype=np.int64)
     errors = [""] * len(chunk)
+    run_point = _run_point_python
+    if engine == "kernel":
+        from ..kernel import run_point as kernel_point
+
+        def run_point(p, start, c1, c2, periods, transient, control_after):
+            return kernel_point(p, periods, transient, start[0], start[1], c1, c2, control_after)
     for j, (_i, p, start, c1, c2) in enumerate(chunk):
         try:
-            dev[j], counts[j] = _run_point_python(p, start, c1, c2, periods, transient,
-                                                  control_after)
+            dev[j], counts[j] = run_point(p, start, c1, c2, periods, transient, control_after)
         except (ImpactCapError, InitialStateError, ValueError, ArithmeticError) as exc:
             errors[j] = f"{type(exc).__name__}: {exc}"
             period[j] = -1
@@ -248,13 +256,23 @@ def _point_value(pt, name):
 
 
 def _resolve_engine(engine):
+    from .. import kernel
+
     if engine == "python":
         return "python"
-    return "python"  # the compiled kernel lands next
+    if engine == "kernel":
+        if not kernel.available():
+            raise ParameterError("engine='kernel' is invalid here: numba is not installed")
+        return "kernel"
+    return "kernel" if kernel.use_kernel() else "python"
 
 
 def _prepare(engine):
     """Compile (or load from cache) before forking, so workers inherit the machine code."""
+    if engine == "kernel":
+        from ..kernel import warm_up
+
+        warm_up()
 
 
 def _run_dask(scheduler, indexed, args, store):
@@ -262,10 +280,15 @@ def _run_dask(scheduler, indexed, args, store):
     from distributed import Client, as_completed as dask_completed
 
     own = not isinstance(scheduler, Client)
+    if own and not (isinstance(scheduler, str) and scheduler.strip()):
+        raise ParameterError(f"scheduler={scheduler!r} is invalid: expected an address "
+                             "tcp://HOST:PORT or a distributed.Client")
     try:
-        client = Client(scheduler, set_as_default=False) if own else scheduler
+        client = Client(scheduler, set_as_default=False, timeout=CONNECT_TIMEOUT) if own \
+            else scheduler
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ParameterError(f"scheduler={scheduler!r} is invalid: cannot connect ({exc})") from None
+        raise ParameterError(f"scheduler={scheduler!r} is invalid: cannot connect within "
+                             f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__})") from None
     try:
         nw = max(1, sum(client.nthreads().values()))
         chunks = _chunks(indexed, 8 * nw)

@@ -1,0 +1,200 @@
+"""The compiled exact kernel: the core's flow with impacts, compiled by numba.
+
+The same algorithm as :mod:`grazing_control.impact` and
+:func:`grazing_control.simulate.period_step` (closed-form flow in deviation coordinates,
+certified impact detection, chattering summation and sticking, the controller's kick with
+an optional delay), mirrored function by function in :mod:`.impact` and :mod:`.simulate`
+so that a fix in the core ports line by line. The pure-Python core stays the readable
+reference and the fallback; the equivalence of the two is tested scene by scene and by a
+differential fuzz test (tests/test_kernel.py).
+
+Which path runs
+---------------
+:func:`use_kernel` decides, from the environment variable ``GRAZING_KERNEL``:
+
+* unset, ``auto``: the kernel if numba can be imported, else the pure-Python core;
+* ``python``: always the pure-Python core (the reference);
+* ``numba``: always the kernel (an error if numba is missing).
+
+Compilation happens on the first call in a process and is cached on disk by numba
+(``cache=True``: ``__pycache__`` next to the source, or ``NUMBA_CACHE_DIR``), so later
+processes only load the machine code (:func:`warm_up` does either explicitly).
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+import math
+import os
+import threading
+import time
+
+import numpy as np
+
+from ..impact import Impact, ImpactCapError, InitialStateError, Segment
+
+__all__ = ["ENV", "available", "use_kernel", "warm_up", "next_impact", "advance",
+           "period_step", "simulate_exact", "run_point"]
+
+#: Environment variable that chooses the path: auto (default), python, numba.
+ENV = "GRAZING_KERNEL"
+_CHOICES = ("auto", "python", "numba")
+
+
+def available() -> bool:
+    """numba is installed (the kernel can be compiled or loaded)."""
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):  # ValueError: sys.modules["numba"] is None
+        return False
+
+
+def use_kernel() -> bool:
+    """True if the compiled kernel runs the exact simulation (see ``GRAZING_KERNEL``)."""
+    choice = os.environ.get(ENV, "auto").strip().lower() or "auto"
+    if choice not in _CHOICES:
+        raise ValueError(f"{ENV}={choice!r} is invalid: valid values are {', '.join(_CHOICES)}")
+    if choice == "python":
+        return False
+    if choice == "numba" and not available():
+        raise RuntimeError(f"{ENV}=numba but numba is not installed (pip install numba)")
+    return available()
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled():
+    """Import the numba modules (compiling, or loading the cache, on first use)."""
+    from . import impact as kimpact
+    from . import simulate as ksimulate
+
+    return kimpact, ksimulate
+
+
+@functools.lru_cache(maxsize=1024)
+def _params(p):
+    return _compiled()[0].params_tuple(p)
+
+
+_local = threading.local()
+
+
+def _scratch():
+    """Per-thread work arrays: one period's impacts, and the search's stack."""
+    bufs = getattr(_local, "bufs", None)
+    if bufs is None:
+        ki, ks = _compiled()
+        bufs = _local.bufs = (ks.scratch_buffer(), ki.search_stack())
+    return bufs
+
+
+def _raise(status, info, *, max_impacts, duration):
+    """The core's exception for a kernel status."""
+    ki = _compiled()[0]
+    if status == ki.STATUS_IMPACT_CAP:
+        raise ImpactCapError(
+            f"more than max_impacts={max_impacts} impacts in {duration:.6g} time units "
+            f"at phase {info:.6f}: the motion is not resolvable at this cap")
+    if status == ki.STATUS_BEYOND_WALL:
+        raise InitialStateError(f"state beyond the wall: x - d = {info:.3e} > 0 (valid: x <= d)")
+    if status == ki.STATUS_NONFINITE:
+        raise ValueError(f"the state is not finite ({info!r}): valid range is finite dx, dv")
+    raise RuntimeError(f"kernel status {status}")  # pragma: no cover - no other status
+
+
+def warm_up() -> dict:
+    """Compile (or load from the cache) every kernel function; returns the seconds taken.
+
+    ``{"import": s, "first_call": s}``: importing numba and the modules, then the first
+    call, which compiles all specialisations or loads them from the on-disk cache.
+    """
+    t0 = time.perf_counter()
+    _compiled()
+    t1 = time.perf_counter()
+    from ..params import OscillatorParams
+
+    p = OscillatorParams(delta_d=-1e-3)
+    period_step(p, 0.0, 0.0, 0.0)
+    period_step(p, 0.0, 0.0, 0.0, delay=1.0)
+    next_impact(p, p.tau2, 0.0, 0.0, p.period)
+    advance(p, p.tau2, 0.0, 0.0, p.period)
+    simulate_exact(p, 2, 0.0, 0.0)
+    run_point(p, 2, 1, 0.0, 0.0)
+    return {"import": t1 - t0, "first_call": time.perf_counter() - t1}
+
+
+def next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
+    """:func:`grazing_control.impact.next_impact`, compiled."""
+    ki = _compiled()[0]
+    h, status, info = ki.next_impact(_params(p), float(tau0), float(dx0), float(dv0),
+                                     float(horizon), float(max_step or 0.0), _scratch()[1])
+    if status != ki.STATUS_OK:
+        _raise(status, info, max_impacts=0, duration=horizon)
+    return None if h == ki.NONE else h
+
+
+def _impacts(rows):
+    return [Impact(r[0], r[1], r[2], r[3], bool(r[4]), r[5]) for r in rows.tolist()]
+
+
+def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) -> Segment:
+    """:func:`grazing_control.impact.advance` without the monodromy, compiled."""
+    ki = _compiled()[0]
+    out = np.empty((max(int(max_impacts), 1), 6))
+    dx, dv, n, status, info = ki.advance(
+        _params(p), float(tau0), float(dx), float(dv), float(duration), int(max_impacts),
+        -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1])
+    if status != ki.STATUS_OK:
+        _raise(status, info, max_impacts=max_impacts, duration=duration)
+    return Segment(dx, dv, _impacts(out[:n]), None)
+
+
+def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
+    """:func:`grazing_control.simulate.period_step`, compiled (0 <= delay < T checked there)."""
+    ki, ks = _compiled()
+    scratch, stack = _scratch()
+    dx, dv, n, status, info = ks.period_step(_params(p), float(dx), float(dv),
+                                             float(dv_correction), float(delay), scratch, 0, stack)
+    if status != ki.STATUS_OK:
+        _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
+    return Segment(dx, dv, _impacts(scratch[:n]), None)
+
+
+def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_impacts):
+    ki, ks = _compiled()
+    m = periods - record_from
+    dev = np.empty((m, 2))
+    corr = np.zeros(m)
+    counts = np.zeros(m, dtype=np.int64)
+    impacts = np.empty((max(16, 2 * periods) if keep_impacts else 0, 5))
+    controlled = not (math.isnan(c1) or control_after is None)
+    after = 0 if control_after is None else int(control_after)
+    k, n = 0, 0
+    while True:
+        k, dx, dv, n, status, info = ks.run(
+            _params(p), k, periods, float(dx), float(dv), controlled, float(c1), float(c2),
+            after, float(delay), record_from, dev, corr, counts, impacts, n, *_scratch())
+        if status == ks.STATUS_BUFFER_FULL:
+            impacts = np.concatenate([impacts, np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))])
+            continue
+        if status != ki.STATUS_OK:
+            _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
+        return dev, corr, counts, impacts[:n], (dx, dv)
+
+
+def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=0.0):
+    """The exact loop of :func:`grazing_control.simulate.simulate`, compiled.
+
+    Returns (deviation (N, 2), corrections (N,), impacts per period (N,),
+    impacts (M, 5) rows [k, t, phase, v-, v+], final deviation).
+    """
+    c1, c2 = (math.nan, math.nan) if gains is None else (gains.c1, gains.c2)
+    return _run(p, int(periods), dx, dv, c1, c2, control_after, delay, 0, True)
+
+
+def run_point(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_after=0):
+    """One sweep point: the deviation (m, 2) and impact counts (m,) of the last m =
+    periods - transient samples (c1 = nan: uncontrolled)."""
+    dev, _corr, counts, _imps, _end = _run(p, int(periods), dx, dv, c1, c2, control_after, 0.0,
+                                           int(transient), False)
+    return dev, counts

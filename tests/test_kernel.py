@@ -1,0 +1,310 @@
+"""Tests of grazing_control.kernel: the compiled exact kernel against the pure-Python core.
+
+The kernel mirrors grazing_control.impact and simulate.period_step operation by
+operation, so on every scene it must give the same impact counts and Pi2 sequences as
+the reference path (here: within 1e-13, and in practice bit for bit), up to where
+chaos separates any two correct simulators; the 50-digit mpmath tests of
+tests/test_impact.py are run again through the kernel; and a differential fuzz test
+compares single periods over thousands of random seeded cases.
+"""
+
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import test_impact
+from grazing_control import impact, kernel, simulate as simulate_module
+from grazing_control.control import Gains
+from grazing_control.design import degenerate_c1
+from grazing_control.flow import to_deviation
+from grazing_control.params import OscillatorParams
+from grazing_control.simulate import simulate
+
+STUDY = OscillatorParams()
+WALL = OscillatorParams.from_d(0.5, r=0.5)  # d < 1: chattering and sticking
+TOL = 1e-13
+
+
+def _reference_step(p, dx, dv, dvc=0.0, delay=0.0):
+    """simulate.period_step on the pure-Python core (the reference path)."""
+    if delay == 0.0:
+        return impact.advance(p, p.tau2, dx, dv + dvc, p.period)
+    first = impact.advance(p, p.tau2, dx, dv, delay)
+    tau = (p.tau2 + p.omega * delay) % (2 * math.pi)
+    second = impact.advance(p, tau, first.dx, first.dv + dvc, p.period - delay)
+    return impact.Segment(second.dx, second.dv, first.impacts + [
+        i._replace(dt=i.dt + delay, release=i.release + delay) for i in second.impacts], None)
+
+
+def _same_segment(a, b, scale=1.0):
+    """Same impact count, end state and impacts within TOL (relative to ``scale``)."""
+    assert len(a.impacts) == len(b.impacts)
+    tol = TOL * scale
+    assert abs(a.dx - b.dx) <= tol and abs(a.dv - b.dv) <= tol, (a.dx - b.dx, a.dv - b.dv)
+    for i, j in zip(a.impacts, b.impacts):
+        assert i.sticking == j.sticking
+        assert abs(i.dt - j.dt) <= tol and abs(i.v_minus - j.v_minus) <= tol
+        assert abs(i.v_plus - j.v_plus) <= tol
+        assert abs((i.phase - j.phase + math.pi) % (2 * math.pi) - math.pi) <= tol
+        assert (math.isnan(i.release) and math.isnan(j.release)) or i.release == j.release \
+            or abs(i.release - j.release) <= tol
+
+
+# ---------------------------------------------------------- the study's scenes
+def _design(p):
+    return Gains(degenerate_c1(p, -1.0), -1.0)
+
+
+def _reference_run(p, periods, gains=None, control_after=None, delay=0.0):
+    dx = dv = 0.0
+    dev, counts = [], []
+    for k in range(periods):
+        dev.append((dx, dv))
+        dvc = gains.c1 * dx + gains.c2 * dv if gains and k >= control_after else 0.0
+        seg = _reference_step(p, dx, dv, dvc, delay)
+        counts.append(len(seg.impacts))
+        dx, dv = seg.dx, seg.dv
+    return np.array(dev), np.array(counts)
+
+
+# compared: every period where the motion converges; the first 15 where it is chaotic
+# (test_impact: the reference agrees with mpmath to 1e-12 there, and rounding errors
+# grow ~x4 per period afterwards, so two correct simulators part after ~25 periods)
+SCENES = [
+    # delta_d, periods, controlled from, compared periods
+    (-1e-3, 300, None, 300),
+    (-9e-6, 300, None, 15),
+    (-5e-6, 300, None, 15),
+    (-9e-6, 300, 0, 300),
+    (-5e-6, 300, 0, 300),
+    (-5e-6, 1200, 1000, 15),
+]
+
+
+@pytest.mark.parametrize("delta_d,periods,control_after,compared", SCENES)
+def test_study_scenes_match_the_reference_path(delta_d, periods, control_after, compared):
+    """The kernel's simulate loop against the Python core period by period: equal impact
+    counts and Pi2 deviations within 1e-13 over the compared periods."""
+    p = STUDY.with_(delta_d=delta_d)
+    gains = _design(p) if control_after is not None else None
+    ref_dev, ref_counts = _reference_run(p, periods, gains, control_after)
+    dev, corr, counts, imps, end = kernel.simulate_exact(p, periods, 0.0, 0.0, gains, control_after)
+    assert np.array_equal(counts[:compared], ref_counts[:compared])
+    assert np.max(np.abs(dev[:compared] - ref_dev[:compared])) <= TOL
+    assert imps.shape == (counts.sum(), 5) and np.all(imps[:, 3] > 0)
+    if control_after is not None:
+        on = np.arange(periods) >= control_after
+        assert np.array_equal(corr[on], gains.c1 * dev[on, 0] + gains.c2 * dev[on, 1])
+        assert np.all(corr[~on] == 0.0)
+
+
+def test_same_floating_point_operations_bit_for_bit():
+    """Stronger than the 1e-13 above: the kernel performs the core's operations in the
+    core's order (libm's exp, sin, cos, pow included), so even the chaotic scene, which
+    amplifies a one-ulp difference to O(1) within ~30 periods, is bit-identical over
+    300 periods. A port that reorders an expression shows up here first."""
+    p = STUDY.with_(delta_d=-5e-6)
+    ref_dev, ref_counts = _reference_run(p, 300)
+    dev, _corr, counts, _imps, _end = kernel.simulate_exact(p, 300, 0.0, 0.0)
+    assert np.array_equal(counts, ref_counts) and np.array_equal(dev, ref_dev)
+
+
+@pytest.mark.parametrize("delay", [0.3, 2.0])
+def test_delayed_correction_matches_the_reference_path(delay):
+    """The kick applied ``delay`` after the sample (simulate.period_step(delay=...))."""
+    p = STUDY.with_(delta_d=-5e-6)
+    gains = _design(p)
+    ref_dev, ref_counts = _reference_run(p, 40, gains, 0, delay)
+    dev, _corr, counts, _imps, _end = kernel.simulate_exact(p, 40, 0.0, 0.0, gains, 0, delay=delay)
+    assert np.array_equal(counts[:15], ref_counts[:15])
+    assert np.max(np.abs(dev[:15] - ref_dev[:15])) <= TOL
+
+
+@pytest.mark.parametrize("tau,v,duration", [(0.0, 0.01, 1.5), (0.0, 0.01, 3.0), (5.5, 0.0, 4.0),
+                                            (5.9, 0.0, 3.0), (0.0, 0.0, 2.0)])
+def test_chattering_and_sticking_match_the_reference_path(tau, v, duration):
+    """The chattering sequence, its summation, sticking and release (test_impact's cases)."""
+    z = to_deviation(WALL, tau, WALL.d, v)
+    _same_segment(kernel.advance(WALL, tau, *z, duration), impact.advance(WALL, tau, *z, duration))
+
+
+def test_simulate_uses_the_kernel_and_equals_the_reference(monkeypatch):
+    """simulate() on the kernel (default) and on the core (GRAZING_KERNEL=python) agree."""
+    p = STUDY.with_(delta_d=-9e-6)
+    gains = _design(p)
+    fast = simulate(p, 200, gains=gains, control_after=100)
+    monkeypatch.setenv(kernel.ENV, "python")
+    calls = []
+    monkeypatch.setattr(kernel, "simulate_exact", lambda *a, **k: calls.append(a))
+    slow = simulate(p, 200, gains=gains, control_after=100)
+    assert calls == []  # the reference path did not touch the kernel
+    assert np.array_equal(fast.impacts_per_period[:15], slow.impacts_per_period[:15])
+    assert np.max(np.abs(fast.pi2_deviation[:15] - slow.pi2_deviation[:15])) <= TOL
+    # controlled from 100 on, both converge onto the same 1/1 orbit
+    assert np.max(np.abs(fast.pi2_deviation[-20:] - slow.pi2_deviation[-20:])) < 1e-12
+    assert fast.impacts.shape == slow.impacts.shape and fast.final_deviation[0] == \
+        pytest.approx(slow.final_deviation[0], abs=1e-12)
+
+
+def test_period_step_runs_on_the_kernel(monkeypatch):
+    calls = []
+    real = kernel.period_step
+    monkeypatch.setattr(kernel, "period_step", lambda *a, **k: calls.append(1) or real(*a, **k))
+    seg = simulate_module.period_step(STUDY.with_(delta_d=-1e-3), 0.0, 0.0, 0.01, delay=0.5)
+    assert calls == [1]
+    _same_segment(seg, _reference_step(STUDY.with_(delta_d=-1e-3), 0.0, 0.0, 0.01, 0.5))
+    with pytest.raises(ValueError, match="delay=.*valid range is 0 <= delay < T"):
+        simulate_module.period_step(STUDY, 0.0, 0.0, 0.0, delay=-1.0)
+
+
+# ------------------------------------------------- errors, as the core reports them
+def test_errors_are_the_cores():
+    tau = WALL.lag + 0.3
+    dx, dv = to_deviation(WALL, tau, WALL.d, -0.1)
+    with pytest.raises(impact.InitialStateError, match=r"beyond the wall: x - d = .*valid: x <= d"):
+        kernel.advance(WALL, tau, dx + 1e-6, dv, 1.0)
+    with pytest.raises(impact.InitialStateError):
+        kernel.next_impact(WALL, tau, dx + 0.3, dv, 1.0)
+    with pytest.raises(impact.ImpactCapError, match=r"more than max_impacts=5 impacts"):
+        kernel.advance(WALL, WALL.tau2, 0.0, 0.0, 50 * WALL.period, max_impacts=5)
+    with pytest.raises(ValueError, match="not finite"):
+        kernel.period_step(STUDY, math.nan, 0.0)
+    with pytest.raises(ValueError, match="not finite"):
+        kernel.simulate_exact(STUDY, 3, 0.0, math.inf)
+
+
+def test_environment_variable_chooses_the_path(monkeypatch):
+    monkeypatch.setenv(kernel.ENV, "python")
+    assert kernel.use_kernel() is False
+    monkeypatch.setenv(kernel.ENV, "numba")
+    assert kernel.use_kernel() is True
+    monkeypatch.delenv(kernel.ENV)
+    assert kernel.use_kernel() is kernel.available() is True
+    monkeypatch.setenv(kernel.ENV, "fortran")
+    with pytest.raises(ValueError, match=r"GRAZING_KERNEL='fortran' is invalid: valid values are"):
+        kernel.use_kernel()
+
+
+def test_fallback_without_numba_runs_the_core(tmp_path):
+    """With numba hidden from the import system the package falls back to the core."""
+    code = (
+        "import sys\n"
+        "sys.modules['numba'] = None  # import numba now fails, as if not installed\n"
+        "from grazing_control import kernel\n"
+        "from grazing_control.params import OscillatorParams\n"
+        "from grazing_control.simulate import simulate\n"
+        "assert not kernel.available() and not kernel.use_kernel()\n"
+        "r = simulate(OscillatorParams(delta_d=-1e-3), 5)\n"
+        "print(int(r.impacts_per_period.sum()))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "PYTHONPATH": os.getcwd()})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["5"]
+
+
+# ------------------------------------------------ the mpmath tests, through the kernel
+@pytest.fixture(autouse=True)
+def _core_is_the_kernel(monkeypatch, request):
+    """The test_impact tests re-exported below run with advance and next_impact of the
+    kernel in place of the core's (their module globals are patched)."""
+    if request.function.__module__ == "test_impact":
+        monkeypatch.setattr(test_impact, "advance", _kernel_advance)
+        monkeypatch.setattr(test_impact, "next_impact", kernel.next_impact)
+
+
+def _kernel_advance(p, tau0, dx, dv, duration, *, monodromy=False, **kwargs):
+    assert not monodromy, "the kernel has no monodromy: such tests stay with the core"
+    return kernel.advance(p, tau0, dx, dv, duration, **kwargs)
+
+
+# 50-digit reference: 100 periods with impacts, the chaotic scene's first 15 periods,
+# low-velocity impacts (v- down to 1e-10), near misses at 1e-20, starts on the wall,
+# chattering against the reference's chain of impacts, sticking and release.
+test_mpmath_hundred_periods = test_impact.test_hundred_periods_with_impacts_match_mpmath
+test_mpmath_chaotic_scene = \
+    test_impact.test_chaotic_near_grazing_scene_matches_mpmath_while_trajectories_are_close
+test_mpmath_low_velocity_impact = \
+    test_impact.test_low_velocity_impact_found_with_right_time_and_velocity
+test_mpmath_near_miss = test_impact.test_near_miss_is_not_an_impact
+test_mpmath_start_on_wall_into_it = \
+    test_impact.test_start_on_wall_moving_into_it_is_an_immediate_impact
+test_mpmath_start_on_wall_leaving = test_impact.test_start_on_wall_moving_away_leaves
+test_mpmath_no_redetection = test_impact.test_no_redetection_after_impacts
+test_mpmath_chattering = test_impact.test_chattering_sequence_matches_reference_then_sticks
+test_mpmath_release = \
+    test_impact.test_chattering_then_release_and_independent_of_the_duration
+test_mpmath_sticking = \
+    test_impact.test_at_rest_on_the_wall_sticks_and_releases_when_the_force_changes_sign
+
+
+# ------------------------------------------------------------- differential fuzz
+def _random_case(rng):
+    """A random model, start state and correction; a quarter near grazing of the study."""
+    kind = rng.integers(4)
+    if kind == 0:  # the study's model near grazing
+        p = STUDY.with_(delta_d=-10.0 ** rng.uniform(-10, -2))
+    elif kind == 1:  # the study's model, either side
+        p = STUDY.with_(delta_d=rng.uniform(-0.5, 0.1))
+    elif kind == 2:  # another model, wall possibly at d < 1 (sticking)
+        p = OscillatorParams.from_d(rng.uniform(-0.5, 2.0), zeta=rng.uniform(0.005, 0.3),
+                                    r=rng.uniform(0.1, 0.95), omega=rng.uniform(0.3, 3.0))
+    else:
+        p = OscillatorParams(zeta=rng.uniform(0.005, 0.3), r=rng.uniform(0.1, 0.95),
+                             omega=rng.uniform(0.3, 3.0), delta_d=rng.uniform(-1.0, 0.2))
+    scale = 10.0 ** rng.uniform(-9, 0)
+    dx, dv = rng.normal(size=2) * scale
+    dvc = rng.normal() * scale if rng.random() < 0.3 else 0.0
+    delay = rng.uniform(0, p.period) if dvc and rng.random() < 0.5 else 0.0
+    return p, float(dx), float(dv), float(dvc), float(delay)
+
+
+def _random_wall_case(rng):
+    """At the wall (x = d) at a random phase, moving in, out, or at rest: advance's start."""
+    p = OscillatorParams.from_d(rng.uniform(-0.5, 1.5), zeta=rng.uniform(0.005, 0.3),
+                                r=rng.uniform(0.1, 0.95), omega=rng.uniform(0.3, 3.0))
+    tau = rng.uniform(0, 2 * math.pi)
+    v = [0.0, 1e-9, -1e-9, 0.1, -0.1][rng.integers(5)]
+    return p, tau, *to_deviation(p, tau, p.d, v), rng.uniform(0.1, 3.0) * p.period
+
+
+def _outcome(step, *args):
+    try:
+        return step(*args)
+    except (impact.ImpactCapError, impact.InitialStateError) as exc:
+        return type(exc)
+
+
+def test_differential_fuzz_single_periods():
+    """3000 seeded random periods and 1000 segments from the wall: the same exception, or
+    the same impact count and end state and impacts within 1e-13 (relative to the
+    state's size)."""
+    rng = np.random.default_rng(20261122)
+    kinds = {"impacts": 0, "errors": 0, "sticking": 0}
+    for _ in range(3000):
+        p, dx, dv, dvc, delay = _random_case(rng)
+        ref = _outcome(_reference_step, p, dx, dv, dvc, delay)
+        got = _outcome(lambda *a: kernel.period_step(*a[:4], delay=a[4]), p, dx, dv, dvc, delay)
+        if isinstance(ref, type):
+            assert got is ref, (p, dx, dv, dvc, delay)
+            kinds["errors"] += 1
+            continue
+        _same_segment(got, ref, 1.0 + abs(dx) + abs(dv))
+        kinds["impacts"] += bool(ref.impacts)
+        kinds["sticking"] += any(i.sticking for i in ref.impacts)
+    for _ in range(1000):
+        p, tau, dx, dv, duration = _random_wall_case(rng)
+        ref = _outcome(impact.advance, p, tau, dx, dv, duration)
+        got = _outcome(kernel.advance, p, tau, dx, dv, duration)
+        if isinstance(ref, type):
+            assert got is ref, (p, tau, dx, dv, duration)
+            kinds["errors"] += 1
+            continue
+        _same_segment(got, ref, 1.0 + abs(dx) + abs(dv))
+        kinds["sticking"] += any(i.sticking for i in ref.impacts)
+    # the cases cover what they should
+    assert kinds["impacts"] > 1000 and kinds["errors"] > 50 and kinds["sticking"] > 20, kinds
