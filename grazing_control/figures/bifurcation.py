@@ -30,6 +30,9 @@ from .report import Number, Panel
 
 __all__ = ["STARTS", "DiagramData", "diagram_data", "panel_1a", "panel_1b"]
 
+#: A detected period 2 counts as a 2-cycle when its two x differ by more than this.
+TWO_CYCLE_SPREAD = 1e-6
+
 #: Starts on Pi2 as deviations from X** (x - x**, v - v**).
 STARTS = ((0.0, 0.0), (1e-3, 0.0))
 
@@ -198,7 +201,11 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
     per, dd = data.period[:, 0], data.delta_d
     k1 = np.flatnonzero(per == 1)
     last1 = float(dd[k1[-1]]) if k1.size else None
-    k2 = np.flatnonzero((per == 2) & (dd > (last1 if last1 is not None else -np.inf)))
+    # a 2-cycle, not the alternating transient of a multiplier near -1 (critical slowing
+    # down next to the doubling), which the period test alone can take for period 2
+    spread = np.ptp(data.x[:, 0, :], axis=1)
+    k2 = np.flatnonzero((per == 2) & (spread > TWO_CYCLE_SPREAD)
+                        & (dd > (last1 if last1 is not None else -np.inf)))
     first2 = float(dd[k2[0]]) if k2.size else None
     after = first2 if first2 is not None else -np.inf
     bracket = last1 is not None and first2 is not None and last1 <= pd.delta_d <= first2
@@ -207,7 +214,10 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
                fmt=".12g", note="exact: Brent on 1 + tr J + det J"),
         Number("brute_last_period1", "brute force from X**: last period-1 Δd", last1, fmt=".6g",
                note=f"grid step {dd[1] - dd[0]:.2g}"),
-        Number("brute_first_period2", "brute force: first period-2 Δd after it", first2, fmt=".6g"),
+        Number("brute_first_period2", "brute force: first period-2 Δd after it", first2, fmt=".6g",
+               note=f"its two points more than {TWO_CYCLE_SPREAD:g} apart"),
+        Number("slow_points", "grid points between the two (slow transients)",
+               int(np.count_nonzero((dd > last1) & (dd < first2))) if bracket else None),
         Number("pd_in_bracket", "Δd_PD (continuation) lies between the two", bool(bracket), "—",
                note="critical slowing down blurs the grid points next to Δd_PD"),
         Number("brute_first_period4", "brute force: first period-4 Δd after that",

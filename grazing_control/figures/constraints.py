@@ -150,7 +150,7 @@ def panel_2b(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> P
     ax.set(xlim=(data.c2[0], data.c2[-1]), xlabel="c2  (c1 from N_g,12 = 0, Eq. 38)",
            ylabel="γ1  (symmetric log scale)",
            title="Fig. 2(b): existence of the controlled 1/1 motion for d < d*")
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="lower center")
     files = save(fig, out, "fig2b")
     d = evaluate_design(p, chosen)
     pos = data.gamma1 > 0.0
