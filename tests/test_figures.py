@@ -34,7 +34,8 @@ PANELS = ("fig1a", "fig1b", "fig1c", "fig1d", "fig2a", "fig2b", "fig2c", "fig2d"
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("figures")
-    code = main(["figures", "--quick", "--out", str(out), "--workers", "1", "--json"])
+    code = main(["figures", "--quick", "--out", str(out), "--workers", "1", "--json",
+                 "--docs", str(out / "docs")])
     assert code == 0
     doc = json.loads((out / "figures.json").read_text(encoding="utf-8"))
     md = (out / "figures.md").read_text(encoding="utf-8")
@@ -51,6 +52,19 @@ def test_every_panel_is_written_as_png_and_svg_and_shown_in_figures_md(quick):
         assert svg.read_text(encoding="utf-8").lstrip().startswith("<?xml")
         assert f"]({name}.png)" in md
     assert doc["mode"] == "quick"
+
+
+def test_docs_get_small_thumbnails_and_the_same_numbers(quick):
+    out, doc, md = quick
+    docs_md = (out / "docs" / "figures.md").read_text(encoding="utf-8")
+    for name in PANELS:
+        thumb = out / "docs" / "img" / "figures" / f"{name}.png"
+        assert 5_000 < thumb.stat().st_size < 200_000
+        assert f"](img/figures/{name}.png)" in docs_md
+    assert "grazing figures --quick --docs" in docs_md
+    # the same tables as figures.md
+    assert [ln for ln in docs_md.splitlines() if ln.startswith("| ")] == \
+        [ln for ln in md.splitlines() if ln.startswith("| ")]
 
 
 def test_the_period_doubling_is_the_continuation_s(quick):

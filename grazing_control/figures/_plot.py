@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["pyplot", "save", "stability_segments", "COLORS", "PANEL_SIZE"]
+__all__ = ["pyplot", "save", "thumbnail", "stability_segments", "COLORS", "PANEL_SIZE"]
 
 #: One size for every panel (inches), so the panels line up in figures.md.
 PANEL_SIZE = (6.4, 4.4)
@@ -49,6 +49,19 @@ def save(fig, out: Path, name: str, dpi: int = 150) -> list:
         files.append(path.name)
     plt.close(fig)
     return files
+
+
+def thumbnail(src, dst, width: int = 640) -> int:
+    """Write a downscaled copy of the PNG ``src`` to ``dst`` (``width`` pixels wide, 256
+    colours) for docs/; returns its size in bytes."""
+    from PIL import Image
+
+    with Image.open(src) as im:
+        rgb = im.convert("RGB")
+    w, h = rgb.size
+    small = rgb.resize((width, round(h * width / w)), Image.LANCZOS)
+    small.quantize(colors=256, method=Image.Quantize.FASTOCTREE).save(dst, optimize=True)
+    return Path(dst).stat().st_size
 
 
 def stability_segments(x, y, stable):

@@ -150,7 +150,7 @@ def panel_1c(p: OscillatorParams, data: BranchData, window, out) -> Panel:
         Number("pd_delta_d", "period doubling Δd_PD", pd.delta_d if pd else None, "−1.00527e-5",
                fmt=".12g", note="test function 1 + tr J + det J, Brent in ψ"),
         Number("unstable_from", "unstable 1/1 from Δd", float(unstable.min()) if unstable.size else None,
-               fmt=".6g", note="first unstable grid point"),
+               fmt=".6g", note="the period-doubling point"),
         Number("unstable_to", "unstable up to Δd", float(unstable.max()) if unstable.size else None,
                fmt=".3g", note="last grid point (grazing at 0)"),
         Number("x_pi2_at_window", f"x on Π2 at Δd = {data.delta_d[in_win][0]:.3g}",

@@ -69,7 +69,7 @@ QUICK = Settings(diagram_points=48, zoom_points=32, periods=260, transient=200,
 
 
 def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
-                 progress: bool = False, log=print) -> list:
+                 progress: bool = False, log=print, docs=None) -> list:
     """Write every panel (PNG + SVG), figures.md and figures.json to ``out``.
 
     Parameters
@@ -87,6 +87,8 @@ def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
         Progress bars for the sweeps.
     log : callable
         Called with one line per panel (None: silent).
+    docs : path-like, optional
+        Also write ``docs``/figures.md with thumbnails in ``docs``/img/figures/.
 
     Returns
     -------
@@ -150,17 +152,39 @@ def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
     add(lambda: panel_scene(p, gains, "g", out, bags))
     total = time.perf_counter() - t_all
     mode = "quick" if s == QUICK else ("full" if s == FULL else "custom")
-    header = _header(mode, s, total)
+    cmd = "grazing figures" + (" --quick" if mode == "quick" else "") + \
+        (f" --docs {docs}" if docs is not None else "")
+    header = _header(cmd, mode, s, total)
     (out / "figures.md").write_text(render_markdown(panels, header), encoding="utf-8")
     doc = {"mode": mode, "seconds": total, "settings": asdict(s), "panels": numbers_dict(panels),
            "files": {pn.name: list(pn.files) for pn in panels}}
     (out / "figures.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     log(f"figures: {len(panels)} panels, figures.md and figures.json in {out} ({total:.1f} s)")
+    if docs is not None:
+        _write_docs(Path(docs), out, panels, header)
+        log(f"figures: {Path(docs) / 'figures.md'} and thumbnails in {Path(docs) / 'img/figures'}")
     return panels
 
 
-def _header(mode, s: Settings, total: float) -> str:
-    cmd = "grazing figures" + (" --quick" if mode == "quick" else "")
+def _write_docs(docs: Path, out: Path, panels, header: str):
+    """docs/figures.md (numbers as in out/figures.md) and small PNGs in docs/img/figures."""
+    from ._plot import thumbnail
+
+    img = docs / "img" / "figures"
+    img.mkdir(parents=True, exist_ok=True)
+    for p in panels:
+        png = next(f for f in p.files if f.endswith(".png"))
+        thumbnail(out / png, img / png)
+    note = ("The panels below are thumbnails (640 px) of the PNGs the command writes; it "
+            "also writes each panel as SVG, this text as figures.md and the numbers as "
+            "figures.json to its output folder. Timings were taken on a shared 2-core "
+            "machine and are noisy.")
+    text = render_markdown(panels, header + "\n\n" + note, image_prefix="img/figures/",
+                           files=False)
+    (docs / "figures.md").write_text(text, encoding="utf-8")
+
+
+def _header(cmd: str, mode: str, s: Settings, total: float) -> str:
     return "\n".join([
         "# The study's Figs. 1 and 2",
         "",

@@ -15,6 +15,8 @@ def add_parser(sub):
                                   "for Figs. 2(f, g); default: simulate the scenes")
     s.add_argument("--workers", type=int, help="processes for the brute-force sweeps "
                                                "(default: all cores), >= 1")
+    s.add_argument("--docs", help="also write DOCS/figures.md with thumbnails in "
+                                  "DOCS/img/figures (the repository's docs/)")
     s.add_argument("--json", action="store_true", help="print the numbers as one JSON object")
     s.set_defaults(func=run)
     return s
@@ -35,7 +37,7 @@ def run(args):
         raise ParameterError(f"--out={args.out!r} is invalid: it exists and is not a folder")
     log = None if args.json else (lambda line: print(line, file=sys.stderr))
     make_figures(out, QUICK if args.quick else FULL, bags=args.bags, workers=args.workers,
-                 progress=not args.json and sys.stderr.isatty(), log=log)
+                 progress=not args.json and sys.stderr.isatty(), log=log, docs=args.docs)
     doc = json.loads((out / "figures.json").read_text(encoding="utf-8"))
     if args.json:
         return doc

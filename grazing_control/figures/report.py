@@ -72,19 +72,26 @@ def numbers_dict(panels) -> dict:
     return {p.name: {n.key: _json_value(n.value) for n in p.numbers} for p in panels}
 
 
-def render_markdown(panels, header: str, footer: str = "") -> str:
-    """figures.md: per panel its image, its caption and a table of its numbers."""
+def render_markdown(panels, header: str, footer: str = "", image_prefix: str = "",
+                    files: bool = True) -> str:
+    """figures.md: per panel its image, its caption and a table of its numbers.
+
+    ``image_prefix`` is put before each image's file name (docs/figures.md links the
+    thumbnails in img/figures/); ``files`` lists the files written for each panel.
+    """
     lines = [header.rstrip(), ""]
     for p in panels:
         png = next(f for f in p.files if f.endswith(".png"))
-        lines += [f"## {p.name[3:]}: {p.title}", "", f"![{p.name}]({png})", "", p.caption, ""]
+        lines += [f"## {p.name[3:]}: {p.title}", "", f"![{p.name}]({image_prefix}{png})", "",
+                  p.caption, ""]
         if p.numbers:
             lines += ["| quantity | this run | study | how |", "|---|---|---|---|"]
             for n in p.numbers:
                 lines.append(f"| {n.label} | {n.text()} | {n.text('study')} | {n.note} |")
             lines.append("")
         others = [f for f in p.files if f != png]
-        lines += [f"Files: {', '.join([png] + others)} ({p.seconds:.1f} s).", ""]
+        if files:
+            lines += [f"Files: {', '.join([png] + others)} ({p.seconds:.1f} s).", ""]
     if footer:
         lines += [footer.rstrip(), ""]
     return "\n".join(lines)
