@@ -130,6 +130,9 @@ def test_control_scenes_converge_to_the_exact_controlled_orbit(quick, panel, del
 
 def test_numbers_in_figures_md_are_those_of_figures_json(quick):
     _out, doc, md = quick
+    rows = [ln for ln in md.splitlines() if ln.startswith("| ")]
+    # four cells per row: a '|' inside a cell (|λ|) is escaped
+    assert rows and all(len(ln.replace("\\|", "").split("|")) == 6 for ln in rows)
     nums = doc["panels"]
     assert f"{nums['fig2a']['admissible_c2'][0]:.10g}" in md
     assert f"{nums['fig2f']['final_error']:.2e}" in md

@@ -175,10 +175,13 @@ def _write_docs(docs: Path, out: Path, panels, header: str):
     for p in panels:
         png = next(f for f in p.files if f.endswith(".png"))
         thumbnail(out / png, img / png)
+    brute = sum(p.seconds for p in panels if p.name in ("fig1a", "fig1b"))
+    total = sum(p.seconds for p in panels)
     note = ("The panels below are thumbnails (640 px) of the PNGs the command writes; it "
             "also writes each panel as SVG, this text as figures.md and the numbers as "
-            "figures.json to its output folder. Timings were taken on a shared 2-core "
-            "machine and are noisy.")
+            "figures.json to its output folder (`make figures`: out/figures). Of the "
+            f"{total:.0f} s spent on the panels, the brute-force diagrams 1(a) and 1(b) took "
+            f"{brute:.0f} s; timings were taken on a shared 2-core machine and are noisy.")
     text = render_markdown(panels, header + "\n\n" + note, image_prefix="img/figures/",
                            files=False)
     (docs / "figures.md").write_text(text, encoding="utf-8")

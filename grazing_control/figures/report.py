@@ -87,7 +87,8 @@ def render_markdown(panels, header: str, footer: str = "", image_prefix: str = "
         if p.numbers:
             lines += ["| quantity | this run | study | how |", "|---|---|---|---|"]
             for n in p.numbers:
-                lines.append(f"| {n.label} | {n.text()} | {n.text('study')} | {n.note} |")
+                cells = (n.label, n.text(), n.text("study"), n.note)
+                lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
             lines.append("")
         others = [f for f in p.files if f != png]
         if files:
