@@ -245,3 +245,17 @@ def test_a_scene_panel_reads_a_recording_when_given_one(tmp_path):
     assert {k: v for k, v in got.items() if k != "final_error"} == \
         {k: v for k, v in want.items() if k != "final_error"}
     assert (tmp_path / "fig2g.png").exists()
+
+
+def test_the_controlled_non_impacting_motion_is_marginal_at_the_ends_read_off_fig2a(quick):
+    """At the ends of the c2 range where the controlled 0/1 motion is stable, N_g (built
+    here from scipy's expm, not the closed-form Phi) has a multiplier on the unit circle."""
+    from scipy.linalg import expm
+
+    p = OscillatorParams()
+    a = np.array([[0.0, 1.0], [-1.0, -2.0 * p.zeta]])
+    s = p.pi2_offset / p.omega
+    for c2 in quick[1]["panels"]["fig2a"]["free_stable_c2"]:
+        g = np.array([[1.0, 0.0], [degenerate_c1(p, c2), 1.0 + c2]])
+        n_g = expm(a * (p.period - s)) @ g @ expm(a * s)
+        assert np.max(np.abs(np.linalg.eigvals(n_g))) == pytest.approx(1.0, abs=1e-9)

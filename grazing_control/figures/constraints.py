@@ -6,7 +6,10 @@ For each c2, c1 follows from the degenerate condition N_g,12 = 0 (Eq. 38); then
 * (a) the limit multipliers lambda0 (Eq. 23): the near-grazing 1/1 motion is stable
   iff max|lambda0| < 1 (Eqs. 34, 35);
 * (b) the existence coefficient gamma1 (Eq. 36): the controlled 1/1 motion lives on
-  the impacting side d < d* iff gamma1 > 0.
+  the impacting side d < d* iff gamma1 > 0;
+* and, drawn in (a), the multipliers of the controlled non-impacting 0/1 motion
+  (Delta d > 0), the eigenvalues of N_g (Eqs. 29-32): the controller acts on that
+  motion too, and it stays stable only where max|eig N_g| < 1.
 
 Lines are the exact route (:func:`grazing_control.design.evaluate_design`), circles the
 perturbation formulas (:mod:`grazing_control.perturbation`); the shaded set is
@@ -20,7 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..control import Gains
+from scipy.optimize import brentq
+
 from ..design import admissible_c2, degenerate_c1, evaluate_design
+from ..maps import smooth_return_matrix
+from ..orbits import multipliers
 from ..params import OscillatorParams
 from ..perturbation import (admissible_c2_perturbation, existence_coefficient_perturbation,
                             limit_multipliers_perturbation)
@@ -34,13 +41,15 @@ __all__ = ["ConstraintData", "constraint_data", "panel_2a", "panel_2b"]
 class ConstraintData:
     """lambda0 and gamma1 against c2, exact (lines) and perturbation (circles).
 
-    c2, lambda0 (n, 2) complex, gamma1 (n,): exact on a fine grid; c2_p, lambda0_p,
-    gamma1_p: perturbation on a coarse grid; admissible, admissible_p: the intervals.
+    c2, lambda0 (n, 2) complex, gamma1 (n,), free (n,) = max|eig N_g|: exact on a fine
+    grid; c2_p, lambda0_p, gamma1_p: perturbation on a coarse grid; admissible,
+    admissible_p: the intervals.
     """
 
     c2: np.ndarray
     lambda0: np.ndarray
     gamma1: np.ndarray
+    free: np.ndarray
     c2_p: np.ndarray
     lambda0_p: np.ndarray
     gamma1_p: np.ndarray
@@ -59,12 +68,34 @@ def constraint_data(p: OscillatorParams, c2_range=(-3.0, 1.0), points: int = 401
         c2=c2,
         lambda0=np.array([d.multipliers_limit for d in designs]).reshape(-1, 2),
         gamma1=np.array([d.gamma1 for d in designs]),
+        free=np.array([_free(p, float(c)) for c in c2]),
         c2_p=c2_p,
         lambda0_p=np.array([limit_multipliers_perturbation(p, g) for g in gains]).reshape(-1, 2),
         gamma1_p=np.array([existence_coefficient_perturbation(p, g) for g in gains]),
         admissible=tuple(tuple(float(x) for x in iv) for iv in admissible_c2(p)),
         admissible_p=tuple(tuple(float(x) for x in iv) for iv in admissible_c2_perturbation(p)),
     )
+
+
+def _free(p: OscillatorParams, c2: float) -> float:
+    """max|eig N_g| with c1 from Eq. 38: the controlled 0/1 motion's largest multiplier."""
+    g = Gains(degenerate_c1(p, c2), c2)
+    return float(np.max(np.abs(multipliers(smooth_return_matrix(p, g)))))
+
+
+def _free_range(p: OscillatorParams, data: ConstraintData):
+    """The c2 interval around the chosen grid's stable part of the 0/1 motion, its ends
+    refined by Brent's method on max|eig N_g| - 1."""
+    ok = data.free < 1.0
+    if not ok.any():
+        return None
+    k = np.flatnonzero(ok)
+    lo, hi = k[0], k[-1]
+    f = lambda c: _free(p, c) - 1.0  # noqa: E731
+    a = brentq(f, data.c2[lo - 1], data.c2[lo], xtol=1e-13) if lo > 0 else float(data.c2[0])
+    b = brentq(f, data.c2[hi], data.c2[hi + 1], xtol=1e-13) if hi + 1 < data.c2.size \
+        else float(data.c2[-1])
+    return float(a), float(b)
 
 
 def _shade(ax, data: ConstraintData, chosen: float):
@@ -100,11 +131,13 @@ def panel_2a(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> P
     ax.plot(data.c2_p, pm[:, 0], "o", mfc="none", color=COLORS["perturbation"], ms=6,
             label="perturbation (Eq. 23)")
     ax.plot(data.c2_p, pm[:, 1], "o", mfc="none", color=COLORS["perturbation"], ms=6)
-    ax.axhline(1.0, color=COLORS["unstable"], lw=0.9, ls="--", label="|λ0| = 1")
+    ax.plot(data.c2, data.free, "-.", color=COLORS["stable"], lw=1.2,
+            label="max|eig N_g|: 0/1 motion, Δd > 0")
+    ax.axhline(1.0, color=COLORS["unstable"], lw=0.9, ls="--", label="|λ| = 1")
     ax.set(xlim=(data.c2[0], data.c2[-1]), ylim=(0.0, min(2.5, 1.05 * mods.max())),
-           xlabel="c2  (c1 from N_g,12 = 0, Eq. 38)", ylabel="|λ0|",
+           xlabel="c2  (c1 from N_g,12 = 0, Eq. 38)", ylabel="|λ|",
            title="Fig. 2(a): stability of the controlled 1/1 motion at grazing")
-    ax.legend(fontsize=8, loc="upper center")
+    fig.legend(fontsize=7.5, loc="outside lower center", ncol=3)
     files = save(fig, out, "fig2a")
     nums, d = _interval_numbers(data, chosen, p)
     stable = mods[:, 0] < 1.0
@@ -114,14 +147,21 @@ def panel_2a(p: OscillatorParams, data: ConstraintData, chosen: float, out) -> P
                     (float(data.c2[stable].min()), float(data.c2[stable].max())) if stable.any() else None,
                     fmt=".4g", note=f"{data.c2.size}-point grid"),
              Number("min_abs_lambda0", "min over c2 of max|λ0|", float(mods[:, 0].min()), fmt=".6f",
-                    note=f"at c2 = {data.c2[np.argmin(mods[:, 0])]:.4g}")]
+                    note=f"at c2 = {data.c2[np.argmin(mods[:, 0])]:.4g}"),
+             Number("free_stable_c2", "c2 where the controlled 0/1 motion is stable",
+                    _free_range(p, data), fmt=".10g",
+                    note="max|eig N_g| < 1 (Eqs. 29-32), ends by Brent"),
+             Number("free_abs_at_chosen", f"|eig N_g| at c2 = {chosen:g}",
+                    float(data.free[np.argmin(np.abs(data.c2 - chosen))]), fmt=".6f")]
     return Panel("fig2a", "control constraint |λ0| < 1",
                  "Moduli of the limit multipliers λ0 of the controlled 1/1 motion at grazing "
                  "(Eq. 23) against c2, c1 from the degenerate condition (Eq. 38): exact "
                  "(lines) and perturbation (circles). Stability needs both inside the unit "
-                 "circle (below the dashed line). Shaded: the admissible set (both "
-                 "constraints, as computed by design.admissible_c2); dotted: the study's "
-                 "c2 = −1.", tuple(files), tuple(nums))
+                 "circle (below the dashed line). Dash-dotted: the largest multiplier of the "
+                 "controlled non-impacting 0/1 motion (Δd > 0, eig N_g), which the controller "
+                 "also acts on. Shaded: the admissible set as computed by "
+                 "design.admissible_c2; dotted: the study's c2 = −1.",
+                 tuple(files), tuple(nums))
 
 
 def _poles(data: ConstraintData) -> np.ndarray:
