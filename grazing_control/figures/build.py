@@ -64,8 +64,8 @@ class Settings:
 
 FULL = Settings()
 QUICK = Settings(diagram_points=48, zoom_points=32, periods=260, transient=200,
-                 zoom_periods=460, zoom_transient=400, branch_points=80, uniform_points=40, circles=10,
-                 c2_points=81, c2_circles=9)
+                 zoom_periods=460, zoom_transient=400, branch_points=80, uniform_points=40,
+                 circles=10, c2_points=81, c2_circles=9)
 
 
 def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
