@@ -9,11 +9,14 @@ stdout and nothing else. User errors (bad parameters, no orbit) print one line
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import re
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -21,6 +24,8 @@ from .control import Gains
 from .params import STUDY_R, STUDY_ZETA, OscillatorParams, ParameterError, study_omega
 
 __all__ = ["main", "build_parser"]
+
+TWO_PI = 2.0 * math.pi
 
 
 class _Parser(argparse.ArgumentParser):
@@ -56,6 +61,43 @@ def _count(text):
     return value
 
 
+def _path(text):
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a non-empty path")
+    return text
+
+
+def _non_finite(obj, where=""):
+    """Key paths of the non-finite floats in a result (nested dicts and lists)."""
+    if isinstance(obj, float):
+        return [] if math.isfinite(obj) else [f"{where}={obj!r}"]
+    if isinstance(obj, dict):
+        return [w for k, v in obj.items() for w in _non_finite(v, f"{where}.{k}" if where else k)]
+    if isinstance(obj, (list, tuple)):
+        return [w for i, v in enumerate(obj) for w in _non_finite(v, f"{where}[{i}]")]
+    return []
+
+
+def _require_finite(out, command):
+    """A result with nan/inf is an input outside the computable range: say so (status 2)."""
+    bad = _non_finite(out)
+    if bad:
+        raise ParameterError(
+            f"{command}: the result is not finite ({', '.join(bad[:3])}"
+            f"{', ...' if len(bad) > 3 else ''}): an input is outside the computable range")
+
+
+def _nulls(obj):
+    """nan/inf -> None (JSON null), recursively."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _nulls(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_nulls(v) for v in obj]
+    return obj
+
+
 def _common(parser):
     g = parser.add_argument_group("model (defaults: the study's parameter set)")
     g.add_argument("--zeta", type=_finite, default=STUDY_ZETA, help="damping ratio, 0 < zeta < 1")
@@ -77,9 +119,24 @@ def _gain_args(parser, required=False):
     parser.add_argument("--c2", type=_finite, required=required, help="gain c2")
 
 
+#: Largest zeta T (forcing periods' decay exponent) the commands accept: e^{-2 zeta T}
+#: underflows near 700 and the period maps become 0.
+_MAX_DECAY = 300.0
+
+
 def _params(args, delta_d=0.0):
-    return OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, delta_d=delta_d,
-                            pi2_offset=args.pi2_offset)
+    p = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, delta_d=delta_d,
+                         pi2_offset=args.pi2_offset)
+    if not 1e-100 < p.amplitude < 1e100:
+        raise ParameterError(
+            f"omega={p.omega!r} is invalid: the non-impacting amplitude a(omega) = "
+            f"{p.amplitude:.3g} is outside the computable range (1e-100, 1e100)")
+    if not p.zeta * p.period <= _MAX_DECAY:
+        raise ParameterError(
+            f"omega={p.omega!r} is invalid with zeta={p.zeta!r}: valid range is "
+            f"omega >= 2 pi zeta / {_MAX_DECAY:g} = {TWO_PI * p.zeta / _MAX_DECAY:.3g} "
+            f"(the decay e^(-zeta T) over a forcing period underflows)")
+    return p
 
 
 def _gains(args, p):
@@ -136,6 +193,7 @@ def cmd_design(args):
         ends = [(a - b) for iv, jv in zip(intervals, other["exact"]["admissible_c2"]) for a, b in zip(iv, jv)]
         other["difference_admissible_ends"] = ends
         out["comparison"] = other
+    _require_finite(out, "design")
     if args.out:
         if not point.admissible:
             raise ParameterError(
@@ -191,9 +249,11 @@ def cmd_orbit(args):
         "section_pi2": list(o.pi2),
         "multipliers": _complex_list(lam),
         "stable": bool(np.max(np.abs(lam)) < 1.0),
+        "branch": o.branch,
         "method": args.method,
         "seconds": cost,
     }
+    _require_finite(out, "orbit")
     if args.json:
         return out
     lam = ", ".join(f"{z:.6g}" for z in lam)
@@ -205,7 +265,15 @@ def cmd_orbit(args):
         f"  Pi2 point     = ({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
         f"  multipliers   = {lam}  ({args.method}, {cost:.3g} s)",
         f"  stable        = {out['stable']}",
+        f"  branch        = {_BRANCH_TEXT.get(o.branch, o.branch)}",
     ])
+
+
+_BRANCH_TEXT = {
+    "grazing": "born at grazing (v- -> 0 as Delta d -> 0)",
+    "grazing past a fold": "born at grazing, past a fold (saddle-node): far from grazing",
+    "other": "another 1/1 branch, not connected to grazing",
+}
 
 
 # ---------------------------------------------------------------------------- continue
@@ -227,7 +295,7 @@ def cmd_continue(args):
         ],
     }
     if args.json:
-        return out
+        return _nulls(out)  # inf multipliers at the grazing point itself -> null
     lines = [f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to {args.stop:g}",
              f"{'Delta d':>14} {'v-':>14} {'max|lambda|':>14} stable"]
     step = max(1, len(branch.points) // 20)
@@ -248,52 +316,114 @@ def cmd_simulate(args):
     if args.control_after is not None and gains is None:
         raise ParameterError("--control-after needs the gains: give --c2 (and optionally --c1)")
     control_after = args.control_after if args.control_after is not None else (0 if gains else None)
-    res = simulate(p, args.periods, x0=args.x0, v0=args.v0, gains=gains, control_after=control_after,
-                   fidelity=args.fidelity, tol=args.tol)
+    physical = args.x0 is not None or args.v0 is not None
+    deviation = None
+    if args.dx0 is not None or args.dv0 is not None:
+        if physical:
+            raise ParameterError("--x0/--v0 and --dx0/--dv0 both given: give the initial state "
+                                 "in one form (physical, or deviation from X**)")
+        deviation = (args.dx0 or 0.0, args.dv0 or 0.0)
+    progress = (not args.json and args.periods >= 2000 and sys.stderr.isatty())
+    res = simulate(p, args.periods, x0=args.x0, v0=args.v0, deviation=deviation, gains=gains,
+                   control_after=control_after, fidelity=args.fidelity, tol=args.tol,
+                   progress=progress)
     out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist()}
     if args.fidelity != "exact":
         out.update(fidelity=res.fidelity, fidelity_reason=res.fidelity_reason)
+    _require_finite(out, "simulate")
     if args.json:
         return out
     n = args.periods
     tail = res.impacts_per_period[-min(n, 20):].tolist()
-    last = res.pi2[-1] if n else (float("nan"), float("nan"))
+    last = (f"({res.pi2[-1][0]:.15g}, {res.pi2[-1][1]:.15g})" if n else "none (0 periods)")
     return "\n".join([
         f"simulated {n} periods at Delta d = {p.delta_d:.6g}"
         + (f", control on from sample {control_after}" if gains is not None else ", uncontrolled"),
         f"  impacts in all     = {int(res.impacts_per_period.sum())}",
         f"  impacts per period, last {len(tail)}: {tail}",
-        f"  last Pi2 sample    = ({last[0]:.15g}, {last[1]:.15g})",
+        f"  last Pi2 sample    = {last}",
         f"  model              = {res.fidelity_reason}",
     ])
 
 
 # ---------------------------------------------------------------------------- run / demo
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """Send this process's stdout, and that of the processes it starts, to stderr."""
+    sys.stdout.flush()
+    try:
+        fd = sys.stdout.fileno()
+        saved = os.dup(fd)
+    except (AttributeError, OSError, ValueError):  # no real file descriptor (captured)
+        fd = saved = None
+    try:
+        if fd is not None:
+            os.dup2(sys.stderr.fileno(), fd)
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    finally:
+        if fd is not None:
+            sys.stderr.flush()
+            os.dup2(saved, fd)
+            os.close(saved)
+
+
 def cmd_run(args):
+    import dataclasses
+
     from .launcher import run
 
-    result = run(**{k: v for k, v in vars(args).items() if k not in ("func", "command")})
-    print(result)
+    kwargs = {k: v for k, v in vars(args).items() if k not in ("func", "command", "json")}
+    if not args.json:
+        result = run(**kwargs)
+        print(result)
+        return result.exit_code
+    with _stdout_to_stderr():  # stdout: the one JSON object only
+        result = run(**kwargs)
+    summary = _nulls(dataclasses.asdict(result)) if dataclasses.is_dataclass(result) else {}
+    summary.update(ok=bool(result.ok), exit_code=result.exit_code, summary=str(result))
+    _print_json(summary)
     return result.exit_code
 
 
 def cmd_demo(args):
+    from pathlib import Path
+
     from .demo import main as demo_main
 
-    return demo_main(args)
+    if not args.json:
+        return demo_main(args)
+    with _stdout_to_stderr():  # the progress lines go to stderr
+        status = demo_main(args)
+    report = Path(args.out) / "report.json"
+    summary = {"exit_code": status, "report": str(Path(args.out) / "report.md"),
+               "numbers": str(report)}
+    if report.is_file():
+        summary.update(json.loads(report.read_text(encoding="utf-8")))
+    _print_json(_nulls(summary))
+    return status
+
+
+def _print_json(obj):
+    json.dump(obj, sys.stdout, allow_nan=False)
+    sys.stdout.write("\n")
+    sys.stdout.flush()
 
 
 # ---------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     parser = _Parser(
         prog="grazing",
         description="Exact analysis and discrete control of grazing in an impact oscillator.")
+    parser.add_argument("--version", action="version", version=f"grazing {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("design", help="gains (c1, c2) for degenerate grazing, admissible c2")
     _common(s)
     s.add_argument("--c2", type=_finite, required=True, help="chosen gain c2")
-    s.add_argument("--out", help="write the controller's YAML parameter file here")
+    s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here")
     _method_arg(s)
     s.set_defaults(func=cmd_design)
 
@@ -319,6 +449,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--control-after", type=_count, help="switch control on at this sample")
     s.add_argument("--x0", type=_finite, help="initial x on Pi2 (default x**)")
     s.add_argument("--v0", type=_finite, help="initial v on Pi2 (default v**)")
+    s.add_argument("--dx0", type=_finite,
+                   help="initial x - x** on Pi2 (deviation; full precision near grazing)")
+    s.add_argument("--dv0", type=_finite, help="initial v - v** on Pi2 (deviation)")
     s.add_argument("--fidelity", choices=("exact", "zdm2", "zdm1", "ode", "auto"), default="exact",
                    help="model: exact flow (default), normal-form maps zdm2/zdm1, solve_ivp "
                         "(ode, comparison), or auto: the cheapest meeting --tol over the horizon")
@@ -338,6 +471,8 @@ def build_parser() -> argparse.ArgumentParser:
     if add_run_arguments is not None:
         s = sub.add_parser("run", help="run a scene through the real ROS 2 nodes")
         add_run_arguments(s)
+        s.add_argument("--json", action="store_true",
+                       help="print one JSON summary object (node output goes to stderr)")
         s.set_defaults(func=cmd_run)
 
     from .figures.command import add_parser as add_figures_parser
@@ -345,8 +480,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_figures_parser(sub)
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
-    s.add_argument("--out", default="out/demo", help="report folder (default out/demo)")
+    s.add_argument("--out", type=_path, default="out/demo", help="report folder (default out/demo)")
     s.add_argument("--offline", action="store_true", help="through the core only, no ROS nodes")
+    s.add_argument("--json", action="store_true",
+                   help="print one JSON summary object (progress goes to stderr)")
     s.set_defaults(func=cmd_demo)
     return parser
 
@@ -365,24 +502,44 @@ def _join_negative_values(argv):
     return out
 
 
+def _one_line(exc) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 def main(argv=None) -> int:
     """Entry point of the `grazing` console script."""
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(_join_negative_values(argv))
     try:
-        result = args.func(args)
+        # overflow in a computation shows up as nan/inf in the result, which is refused
+        # below with one line; numpy's warnings would add lines of their own
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            result = args.func(args)
     except (ParameterError, ValueError, RuntimeError, OSError) as exc:
-        print(f"grazing: error: {exc}", file=sys.stderr)
+        print(f"grazing: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except ArithmeticError as exc:  # ZeroDivisionError, OverflowError, FloatingPointError
+        print(f"grazing: error: numerical failure ({type(exc).__name__}: {_one_line(exc)}): "
+              "an input is outside the computable range", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("grazing: error: out of memory: reduce the size of the request", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("grazing: interrupted", file=sys.stderr)
         return 130
     if isinstance(result, int):
         return result
+    bad = _non_finite(result) if isinstance(result, dict) else []
+    if bad:
+        print(f"grazing: error: {args.command}: the result is not finite ({', '.join(bad[:3])}): "
+              "an input is outside the computable range", file=sys.stderr)
+        return 2
     try:
         if isinstance(result, dict):
-            json.dump(result, sys.stdout)
+            json.dump(result, sys.stdout, allow_nan=False)
             sys.stdout.write("\n")
         elif result is not None:
             print(result)

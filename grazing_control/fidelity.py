@@ -30,12 +30,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .flow import to_deviation, to_physical, transition_matrix
-from .impact import Impact, Segment, advance
+from .flow import amplitude_bound, to_deviation, to_physical, transition_matrix
+from .impact import Impact, Segment, advance, check_state
 from .params import OscillatorParams
-from .zdm import zdm_event
+from .zdm import local_grazing, zdm_event
 
-__all__ = ["FIDELITIES", "period_step", "FidelityChoice", "choose_fidelity"]
+__all__ = ["FIDELITIES", "period_step", "FidelityChoice", "choose_fidelity",
+           "ModelValidityError", "zdm_window", "ZDM_WINDOW"]
+
+#: Largest half-width |psi| (rad) of the phase window around tau* in which a ZDM period
+#: may have contacts (docs/theory_zdm.md, "Validity of the maps").
+ZDM_WINDOW = 0.5
+
+
+class ModelValidityError(ValueError):
+    """A map fidelity (zdm1, zdm2) does not apply to this state or these parameters."""
 
 #: Fidelities, cheapest model first among the maps; 'ode' is a comparison path.
 FIDELITIES = ("exact", "zdm2", "zdm1", "ode")
@@ -50,11 +59,50 @@ def _check(fidelity):
                          f"{', '.join(FIDELITIES)} (or 'auto' where a scene is given)")
 
 
+def zdm_window(p: OscillatorParams, amplitude: float) -> float:
+    """Half-width psi_c of the phases where a deviation of amplitude |C| can touch the wall.
+
+    The gap is g = z_x - Delta d - 2 a sin^2(psi / 2) with |z_x| <= |C|, so a contact
+    needs 2 a sin^2(psi / 2) <= |C| - Delta d: |psi| <= psi_c = 2 asin(sqrt((|C| -
+    Delta d) / (2 a))), and -1 (no contact anywhere) when |C| <= Delta d.
+    """
+    excess = amplitude - p.delta_d
+    if excess < 0.0:
+        return -1.0
+    return 2.0 * math.asin(min(1.0, math.sqrt(excess / (2.0 * p.amplitude))))
+
+
+def _zdm_check(p: OscillatorParams, amplitude: float, where: str, order: int) -> None:
+    """Refuse a ZDM period whose contacts are not confined near tau*, away from Pi2."""
+    psi_c = zdm_window(p, amplitude)
+    if psi_c < 0.0:
+        return
+    if psi_c > ZDM_WINDOW or not psi_c < p.pi2_offset < TWO_PI - psi_c:
+        raise ModelValidityError(
+            f"zdm{order} does not apply: the deviation {where} (amplitude {amplitude:.3g}, "
+            f"Delta d = {p.delta_d:.3g}) can touch the wall within {psi_c:.3g} rad of tau*; "
+            f"the map needs contacts within {ZDM_WINDOW} rad of tau* and clear of Pi2 "
+            f"(pi2_offset = {p.pi2_offset:.3g}); use fidelity exact")
+
+
 def _zdm_period(p: OscillatorParams, dx: float, dv: float, order: int) -> Segment:
-    """Normal-form period on Pi2: Phi(s) D(Phi(T - s) z), with the grazing impact it implies."""
+    """Normal-form period on Pi2: Phi(s) D(Phi(T - s) z), with the grazing impact it implies.
+
+    Refused (:class:`ModelValidityError`) where the map does not apply: grazing not
+    regular (alpha <= 0, Eq. 3), or a deviation before or after the impact large enough
+    to touch the wall outside a window of ZDM_WINDOW rad around tau* or at Pi2 (a sample
+    beyond the wall), see :func:`zdm_window`.
+    """
+    try:
+        local_grazing(p)
+    except ValueError as exc:
+        raise ModelValidityError(f"zdm{order} does not apply: {exc}") from None
+    _zdm_check(p, amplitude_bound(p.zeta, dx, dv), "on Pi2", order)
     s = p.pi2_offset / p.omega
     f11, f12, f21, f22 = transition_matrix(p.zeta, p.period - s)
     zx, zv, t1, v_minus = zdm_event(p, f11 * dx + f12 * dv, f21 * dx + f22 * dv, order)
+    if t1 is not None:
+        _zdm_check(p, amplitude_bound(p.zeta, zx, zv), "after the impact", order)
     impacts = []
     if t1 is not None:
         t_imp = p.period - s + t1
@@ -105,6 +153,7 @@ def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float 
     """
     _check(fidelity)
     dv = dv + dv_correction
+    check_state(dx, dv, p.zeta, "the Pi2 state after the correction")
     if fidelity == "exact":
         return advance(p, p.tau2, dx, dv, p.period)
     if fidelity == "zdm2":
@@ -174,18 +223,27 @@ def choose_fidelity(p: OscillatorParams, periods: int, tol: float, *, deviation=
     exact_cost = t_exact / probe
     estimates = {"exact": (exact_cost, 4.0 * np.finfo(float).eps * (1.0 + abs(p.v_ref)),
                            None)}
+    refused = {}
     for fid in ("zdm2", "zdm1"):
         err, cost = 0.0, 0.0
-        for sx, sv, dvc in samples:
-            t0 = time.perf_counter()
-            approx = period_step(p, sx, sv, dvc, fid)
-            cost += time.perf_counter() - t0
-            ref = advance(p, p.tau2, sx, sv + dvc, p.period)
-            err = max(err, abs(approx.dx - ref.dx), abs(approx.dv - ref.dv))
+        try:
+            for sx, sv, dvc in samples:
+                t0 = time.perf_counter()
+                approx = period_step(p, sx, sv, dvc, fid)
+                cost += time.perf_counter() - t0
+                ref = advance(p, p.tau2, sx, sv + dvc, p.period)
+                err = max(err, abs(approx.dx - ref.dx), abs(approx.dv - ref.dv))
+        except ModelValidityError as exc:
+            refused[fid] = str(exc)
+            err = math.inf
         estimates[fid] = (cost / len(samples), err, None)
     estimates = {k: (c, e, e * amplification) for k, (c, e, _b) in estimates.items()}
     for fid in _AUTO_CANDIDATES:
         cost, local, bound = estimates[fid]
+        if fid == "exact" and refused:
+            why = (f"exact: the maps do not apply to this scene ({'; '.join(refused.values())}); "
+                   f"{cost * 1e6:.0f} us per period")
+            return FidelityChoice("exact", why, growth, estimates)
         if bound <= tol:
             why = (f"{fid}: local error {local:.2g} per period, growth factor {growth:.3g} over "
                    f"{periods} periods -> estimated error {bound:.2g} <= tol {tol:g}; "

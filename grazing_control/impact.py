@@ -15,8 +15,21 @@ because g'' is J-Lipschitz. With J = a(omega) omega^3 + |C| e^{-zeta a}
 interval g is convex or concave, so it has at most one maximum, located by a
 safeguarded Newton iteration on v = g'; whether g reaches 0 is then decided by the
 sign of g at that maximum, computed without cancellation in deviation coordinates.
-Intervals that cannot be certified are bisected. A window is first excluded as a
-whole when sup g <= -Delta d + |C| < 0.
+An interval whose upper bound from the chord, max(g(a), g(b)) + K h^2 / 8 with
+K = max(0, -min g'') >= 0 and min g'' >= (g''(a) + g''(b) - J h) / 2, is below 0 has no
+impact. Intervals that cannot be certified are bisected. A window is first excluded as
+a whole when sup g <= -Delta d + |C| < 0. Every exclusion carries a margin for the
+rounding of the computed g and g'' (docs/theory.md, "Rounding"), so it holds for the
+exact trajectory of the rounded start state.
+
+Contacts below rounding
+-----------------------
+A contact whose approach velocity is within the velocity's rounding of 0 is a contact
+at rest: not an impact when the wall force cos tau - d <= 0 (a tangency), a sticking
+event with v- = v+ = 0 when it pushes into the wall. Every other reported impact has
+v- > 0 (docs/theory.md, "Tangency below rounding"). A mass at rest on the wall at the
+start of a call (stuck across a Pi2 sample) is recognised to the rounding of the phase
+and stays stuck.
 
 Chattering and sticking
 -----------------------
@@ -41,6 +54,9 @@ __all__ = [
     "Segment",
     "ImpactCapError",
     "InitialStateError",
+    "NonFiniteStateError",
+    "check_state",
+    "MAX_AMPLITUDE",
     "next_impact",
     "saltation_matrix",
     "advance",
@@ -48,6 +64,10 @@ __all__ = [
 
 TWO_PI = 2.0 * math.pi
 _MAX_DEPTH = 64
+_EPS = 2.0 ** -52
+#: Largest deviation amplitude |C| (flow.amplitude_bound) accepted: beyond it the gap's
+#: rounding exceeds any physical scale and squared velocities overflow.
+MAX_AMPLITUDE = 1e150
 
 
 class Impact(NamedTuple):
@@ -82,10 +102,47 @@ class InitialStateError(ValueError):
     """The state lies beyond the wall (x > d)."""
 
 
+class NonFiniteStateError(ValueError):
+    """A state (or a time) is not finite, or absurdly large (deviation |C| > MAX_AMPLITUDE).
+
+    Raised before any search starts, so that an overflow (a gain of 1e308, noise of
+    1e308) stops with a message naming the value instead of hanging the search.
+    """
+
+
+def check_state(dx: float, dv: float, zeta: float, where: str = "the state") -> None:
+    """Raise :class:`NonFiniteStateError` unless (dx, dv) is finite with |C| <= MAX_AMPLITUDE."""
+    if not (math.isfinite(dx) and math.isfinite(dv)):
+        raise NonFiniteStateError(
+            f"{where} is not finite: deviation (dx, dv) = ({dx!r}, {dv!r})")
+    size = amplitude_bound(zeta, dx, dv)
+    if not size <= MAX_AMPLITUDE:
+        raise NonFiniteStateError(
+            f"{where} is absurdly large: deviation amplitude |C| = {size:.3e} > "
+            f"{MAX_AMPLITUDE:.0e} (dx, dv) = ({dx!r}, {dv!r}); an input overflowed")
+
+
+def _wall_rounding(p: OscillatorParams, tau: float, dx: float, dv: float):
+    """Rounding (gap, velocity) of a state at phase tau in deviation coordinates.
+
+    The gap g = dx - Delta d - 2 a sin^2(psi / 2) and the velocity v = v_p + dv carry
+    the rounding of their terms and of the phase psi = tau - phi, which is known to
+    ~eps (|tau| + |phi| + 2 pi) (phases are reduced modulo 2 pi after each step).
+    """
+    psi = tau - p.lag
+    s2 = 2.0 * p.amplitude * math.sin(0.5 * psi) ** 2
+    vp = -p.amplitude * p.omega * math.sin(psi)
+    phase = abs(tau) + abs(p.lag) + TWO_PI + 1.0
+    eg = 8.0 * _EPS * (abs(dx) + abs(p.delta_d) + s2 + math.sqrt(2.0 * p.amplitude * s2) * phase)
+    ev = 8.0 * _EPS * (abs(vp) + abs(dv) + p.amplitude * p.omega * phase)
+    return eg, ev
+
+
 class _Eval:
     """Gap, velocity and acceleration along the flow from one start state."""
 
-    __slots__ = ("zeta", "wd", "omega", "lag", "amp", "dd", "tau0", "dx0", "c2", "aw2", "aw3")
+    __slots__ = ("zeta", "wd", "omega", "lag", "amp", "dd", "tau0", "dx0", "c2", "aw2", "aw3",
+                 "cabs", "acc_err")
 
     def __init__(self, p: OscillatorParams, tau0: float, dx0: float, dv0: float):
         self.zeta = p.zeta
@@ -99,6 +156,11 @@ class _Eval:
         self.c2 = (dv0 + p.zeta * dx0) / self.wd
         self.aw2 = self.amp * p.omega * p.omega
         self.aw3 = self.aw2 * p.omega
+        self.cabs = math.hypot(dx0, self.c2)
+        # rounding of the computed acceleration (docs/theory.md, "Rounding"): products of a
+        # few correctly rounded factors; the phases carry ~eps (|tau0| + |phi| + omega h)
+        self.acc_err = 8.0 * _EPS * (self.aw2 * (4.0 + abs(tau0) + abs(self.lag))
+                                     + 4.0 * self.cabs)
 
     def __call__(self, h: float):
         """(g, v, acc, dx, dv) at time h: exact closed form."""
@@ -118,7 +180,21 @@ class _Eval:
 
     def jerk_bound(self, h: float) -> float:
         """J >= max |g'''| on [h, inf)."""
-        return self.aw3 + math.hypot(self.dx0, self.c2) * math.exp(-self.zeta * h)
+        return self.aw3 + self.cabs * math.exp(-self.zeta * h)
+
+    def gap_rounding(self, h: float, vals) -> float:
+        """Bound on |computed g(h) - exact g(h)| (docs/theory.md, "Rounding").
+
+        z_x is a sum of terms of size |C| whose phase omega_d h carries ~eps h, and
+        x_p - d* = -2 a sin^2(psi / 2) has a phase psi = tau0 + omega h - phi rounded to
+        ~eps (|tau0| + omega h + |phi|), which moves it by a |sin psi| <= sqrt(2 a s2)
+        times that (s2 = 2 a sin^2(psi / 2)).
+        """
+        g, dx = vals[0], vals[3]
+        s2 = abs(dx - self.dd - g)
+        phase = abs(self.tau0) + self.omega * h + abs(self.lag) + 1.0
+        return 8.0 * _EPS * (self.cabs * (2.0 + self.wd * h) + abs(self.dd) + s2
+                             + math.sqrt(2.0 * self.amp * s2) * phase)
 
 
 def _bracket(f, lo, hi, which, sign=1.0):
@@ -158,7 +234,8 @@ def _search(f, a, b, fa, fb, depth):
     """
     ga, va, acca = fa[0], fa[1], fa[2]
     gb, vb, accb = fb[0], fb[1], fb[2]
-    jw = f.jerk_bound(a) * (b - a)
+    # J (b - a), rounded up, plus the rounding of the two accelerations (docs/theory.md)
+    jw = f.jerk_bound(a) * (b - a) * (1.0 + 1e-12) + 2.0 * f.acc_err
     concave = acca < 0.0 and accb < 0.0 and -(acca + accb) > jw
     convex = acca > 0.0 and accb > 0.0 and (acca + accb) > jw
     if concave:  # v decreasing: at most one maximum
@@ -177,12 +254,16 @@ def _search(f, a, b, fa, fb, depth):
             return a
         tmin = _bracket(f, a, b, 1, 1.0) if vb > 0.0 else b
         fmin = f(tmin)
+        if fmin[0] >= 0.0:  # the dip below the wall is below rounding: at rest, pushed in
+            return tmin
         return _bracket(f, tmin, b, 0) if fmin[0] < 0.0 <= gb else None
     # below the chord plus the curvature allowance (docs/theory.md, "Impact detection"):
     # g <= chord + K h^2 / 8 with K = max(0, -min g''), and since g'' is J-Lipschitz,
     # min g'' >= (g''(a) + g''(b) - J h) / 2; certifies intervals around inflections
+    # the computed ends are within their rounding of the exact ones, hence the margin
     curvature = max(0.0, 0.5 * (jw - acca - accb))
-    if max(ga, gb) + 0.125 * (b - a) ** 2 * curvature < 0.0:
+    margin = max(f.gap_rounding(a, fa), f.gap_rounding(b, fb))
+    if max(ga, gb) + margin + 0.125 * (b - a) ** 2 * curvature < 0.0:
         return None
     if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
         return _bracket(f, a, b, 0) if ga < 0.0 <= gb else None
@@ -216,18 +297,20 @@ def next_impact(p: OscillatorParams, tau0: float, dx0: float, dv0: float, horizo
     float or None
         Time since the start of the first impact.
     """
+    check_state(dx0, dv0, p.zeta, "the start state")
+    if not (math.isfinite(tau0) and math.isfinite(horizon)):
+        raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
     if horizon <= 0.0:
         return None
-    # whole-window exclusion: g <= |z_x| - Delta d <= |C| - Delta d
-    if amplitude_bound(p.zeta, dx0, dv0) < p.delta_d:
+    # whole-window exclusion: g <= |z_x| - Delta d <= |C| - Delta d (|C| rounded up)
+    if amplitude_bound(p.zeta, dx0, dv0) * (1.0 + 4.0 * _EPS) < p.delta_d:
         return None
     f = _Eval(p, tau0, dx0, dv0)
     step = max_step or p.period / 8.0
     n = max(1, int(math.ceil(horizon / step)))
     a = 0.0
     fa = f(0.0)
-    scale = abs(dx0) + abs(p.delta_d) + 2.0 * p.amplitude * math.sin(0.5 * (tau0 - p.lag)) ** 2
-    if 0.0 < fa[0] <= 8.0 * math.ulp(scale):
+    if 0.0 < fa[0] <= _wall_rounding(p, tau0, dx0, dv0)[0]:
         fa = (0.0,) + fa[1:]  # on the wall up to rounding
     if fa[0] > 0.0:
         raise InitialStateError(
@@ -272,12 +355,17 @@ def _release_time(p: OscillatorParams, tau: float, horizon: float):
 
 
 def _resting_on_wall(p: OscillatorParams, tau: float, dx: float, dv: float) -> bool:
-    """x = d and v = 0 up to the rounding of the deviation coordinates."""
+    """x = d and v = 0 up to the rounding of the deviation coordinates and of the phase.
+
+    A mass stuck on the wall across a Pi2 sample comes back at phase tau2 with the
+    state of the wall at phase (tau2 + omega T) mod 2 pi, a few ulps of 2 pi away: the
+    tolerances include that phase rounding, so the sticking carries over the sample.
+    """
+    eg, ev = _wall_rounding(p, tau, dx, dv)
     s = math.sin(0.5 * (tau - p.lag))
-    vp = -p.amplitude * p.omega * math.sin(tau - p.lag)
-    g_scale = abs(dx) + abs(p.delta_d) + 2.0 * p.amplitude * s * s
     g = dx - p.delta_d - 2.0 * p.amplitude * s * s
-    return abs(g) <= 8.0 * math.ulp(g_scale) and abs(vp + dv) <= 8.0 * math.ulp(abs(vp) + abs(dv))
+    vp = -p.amplitude * p.omega * math.sin(tau - p.lag)
+    return abs(g) <= eg and abs(vp + dv) <= ev
 
 
 def _release_skip(p: OscillatorParams, tau: float, dx: float) -> float:
@@ -293,6 +381,12 @@ def _release_skip(p: OscillatorParams, tau: float, dx: float) -> float:
     if jerk > 0.0:
         times.append((6.0 * eps / jerk) ** (1.0 / 3.0))
     return min(times) if times else 0.0
+
+
+def _on_wall_at_rest(p: OscillatorParams, tau: float):
+    """Deviation of (x, v) = (d, 0) at phase tau."""
+    s = math.sin(0.5 * (tau - p.lag))
+    return p.delta_d + 2.0 * p.amplitude * s * s, p.amplitude * p.omega * math.sin(tau - p.lag)
 
 
 def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: float, *,
@@ -314,7 +408,8 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         the product of Phi over each smooth segment and S at each impact in time
         order (spec section 5). Through a sticking phase it is 0 (perturbations die).
     max_impacts : int
-        Cap on impacts in this call; exceeding it raises :class:`ImpactCapError`.
+        Cap on contacts (impacts and tangencies) in this call; exceeding it raises
+        :class:`ImpactCapError`.
     chatter_time : float, optional
         Accumulation-time threshold below which a chattering sequence is summed and
         the mass sticks (default 1e-6 T; the error of the summation is O(t_inf^2)).
@@ -326,25 +421,35 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
     Segment
         (dx, dv) at the end, the list of :class:`Impact`, and the monodromy
         (M11, M12, M21, M22) or None.
+
+    Notes
+    -----
+    Contacts below rounding (docs/theory.md, "Tangency below rounding"): a contact
+    whose approach velocity is within the velocity's rounding of 0 is a contact at
+    rest. With the wall force F = cos tau - d <= 0 it is a tangency, not an impact:
+    v- = 0 leaves the state unchanged, nothing is reported and the flow goes on. With
+    F > 0 the mass sticks, reported as a sticking :class:`Impact` with v- = v+ = 0.
+    Every other reported impact has v- > 0.
+
+    Raises
+    ------
+    NonFiniteStateError
+        The start state, tau0 or duration is not finite, or the state is absurdly
+        large (see :func:`check_state`).
     """
+    check_state(dx, dv, p.zeta, "the start state")
+    if not (math.isfinite(tau0) and math.isfinite(duration)):
+        raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
     zeta, r, omega = p.zeta, p.r, p.omega
     chatter = chatter_time if chatter_time is not None else 1e-6 * p.period
     impacts = []
     mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
     t = 0.0
     tau = tau0
-    h = None
-    if _resting_on_wall(p, tau, dx, dv):
-        if math.cos(tau) - p.d > 0.0:
-            h = 0.0  # at rest on the wall (to rounding) and pushed into it: sticks at once
-        else:  # leaving from rest: no impact while the gap is below its rounding
-            t = min(duration, _release_skip(p, tau, dx))
-            dx, dv = propagate(zeta, dx, dv, t)
-            tau = (tau0 + omega * t) % TWO_PI
-            if monodromy:
-                mono = transition_matrix(zeta, t)
-    if h is None and t < duration:
-        h = next_impact(p, tau, dx, dv, duration - t)
+    contacts = 0
+    # at rest on the wall (to rounding): a contact at rest now, handled in the loop
+    h = 0.0 if _resting_on_wall(p, tau, dx, dv) else \
+        (next_impact(p, tau, dx, dv, duration) if duration > 0.0 else None)
     while True:
         remaining = duration - t
         if h is None or remaining <= 0.0:
@@ -354,52 +459,70 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
                 if monodromy:
                     mono = matmul2((f11, f12, f21, f22), mono)
             return Segment(dx, dv, impacts, mono)
-        if len(impacts) >= max_impacts:
+        if contacts >= max_impacts:
             raise ImpactCapError(
                 f"more than max_impacts={max_impacts} impacts in {duration:.6g} time units "
                 f"at phase {tau % TWO_PI:.6f}: the motion is not resolvable at this cap"
             )
+        contacts += 1
+        # velocity rounding after the flow: terms of size |C| with phases omega_d h
+        flow_err = 8.0 * _EPS * amplitude_bound(zeta, dx, dv) * (2.0 + h)
         f11, f12, f21, f22 = transition_matrix(zeta, h)
         dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
         if monodromy:
             mono = matmul2((f11, f12, f21, f22), mono)
         t += h
         tau = (tau + omega * h) % TWO_PI
-        xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d
-        vp = -p.amplitude * omega * math.sin(tau - p.lag)
+        wall_dx, wall_dv = _on_wall_at_rest(p, tau)  # (d, 0) at this phase
+        vp = -wall_dv
         v_minus = vp + dv
-        v_plus = -r * v_minus
-        # on the wall exactly: dx = d - x_p
-        dx = -xp_minus_d
-        dv = v_plus - vp
         force = math.cos(tau) - p.d
-        t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
-        # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap it is not resolvable
-        height = v_plus * v_plus / (2.0 * force) if force > 0.0 else math.inf
+        v_tol = _wall_rounding(p, tau, dx, dv)[1] + flow_err
+        dx = wall_dx  # on the wall exactly
+        if v_minus <= v_tol:  # contact at rest, below the velocity's rounding
+            dv = wall_dv
+            if force <= 0.0:  # tangency: v- = 0 changes nothing; leave the wall
+                t, tau, dx, dv, mono = _leave_wall(p, tau0, t, duration, dx, dv, mono)
+                h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
+                continue
+            v_minus, t_inf, height = 0.0, 0.0, 0.0  # pushed into the wall: sticks
+        else:
+            t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
+            # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap, not resolvable
+            height = (r * v_minus) ** 2 / (2.0 * force) if force > 0.0 else math.inf
+        v_plus = -r * v_minus
+        dv = v_plus - vp
         if t_inf < chatter or height < 1e3 * math.ulp(abs(dx) + abs(p.delta_d) + p.amplitude):
             # chattering: sum the geometric sequence and stick (velocity -> 0)
-            impacts.append(Impact(t, tau, v_minus, v_plus, True))
+            t_hit, tau_hit = t, tau
             t += t_inf
             tau = (tau + omega * t_inf) % TWO_PI
             stick = _release_time(p, tau, duration - t)
-            impacts[-1] = impacts[-1]._replace(release=t + stick if t + stick <= duration else math.inf)
+            release = t + stick if t + stick <= duration else math.inf
+            impacts.append(Impact(t_hit, tau_hit, v_minus, v_plus, True, release))
             t = min(duration, t + stick)
             tau = (tau0 + omega * t) % TWO_PI
-            xp_minus_d = -2.0 * p.amplitude * math.sin(0.5 * (tau - p.lag)) ** 2 - p.delta_d
-            vp = -p.amplitude * omega * math.sin(tau - p.lag)
-            dx, dv = -xp_minus_d, -vp
+            dx, dv = _on_wall_at_rest(p, tau)
             if monodromy:
                 mono = (0.0, 0.0, 0.0, 0.0)
             if t < duration:
-                # released from (d, 0) with g ~ -|F'| h^3 / 6: below the gap's rounding for
-                # h < skip, where no impact is possible; flow there without searching
-                skip = min(duration - t, _release_skip(p, tau, dx))
-                dx, dv = propagate(zeta, dx, dv, skip)
-                t += skip
-                tau = (tau0 + omega * t) % TWO_PI
+                t, tau, dx, dv, mono = _leave_wall(p, tau0, t, duration, dx, dv, mono)
             h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
             continue
         impacts.append(Impact(t, tau, v_minus, v_plus, False))
         if monodromy:
             mono = matmul2(saltation_matrix(p, tau, v_minus), mono)
         h = next_impact(p, tau, dx, dv, duration - t) if t < duration else None
+
+
+def _leave_wall(p: OscillatorParams, tau0: float, t: float, duration: float, dx: float,
+                dv: float, mono):
+    """Leave the wall from rest at time t: flow, without searching, while the gap is
+    below its rounding (g ~ F h^2 / 2 + F' h^3 / 6, no impact is possible there)."""
+    skip = min(duration - t, _release_skip(p, (tau0 + p.omega * t) % TWO_PI, dx))
+    f = transition_matrix(p.zeta, skip)
+    dx, dv = f[0] * dx + f[1] * dv, f[2] * dx + f[3] * dv
+    if mono is not None:
+        mono = matmul2(f, mono)
+    t += skip
+    return t, (tau0 + p.omega * t) % TWO_PI, dx, dv, mono

@@ -25,6 +25,7 @@ Two routes, each exact (no truncation) and cross-checked against each other:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -47,7 +48,14 @@ __all__ = [
     "multipliers",
     "monodromy_det",
     "find_branch_phase",
+    "branch_brackets",
+    "BRANCHES",
 ]
+
+#: Labels of the part of the 1/1 solution curve psi -> (Delta d, v-) an orbit lies on:
+#: the arc born at grazing (psi = 0) before its first fold, the same arc past a fold,
+#: or an arc with v- > 0 separated from grazing by v- <= 0 (docs/theory.md, section 5).
+BRANCHES = ("grazing", "grazing past a fold", "other")
 
 TWO_PI = 2.0 * math.pi
 
@@ -68,6 +76,8 @@ class PeriodicOrbit:
     pi2_deviation : (x - x**, v - v**) at full relative precision.
     impacts : the impacts of one period of the orbit (time since the Pi2 sample).
     monodromy : 2x2 array, Jacobian of P^n at the orbit (Phi, S, G in time order).
+    branch : for a 1/1 orbit from :func:`orbit_11`, which part of the 1/1 solution
+        curve it lies on (one of :data:`BRANCHES`); '' when not classified (shoot).
     """
 
     params: OscillatorParams
@@ -77,6 +87,7 @@ class PeriodicOrbit:
     pi2_deviation: tuple
     impacts: tuple
     monodromy: np.ndarray = field(repr=False)
+    branch: str = ""
 
     @property
     def label(self) -> str:
@@ -218,8 +229,64 @@ def find_branch_phase(p: OscillatorParams, delta_d: float, gains: Gains | None =
     return brentq(g, best[0], best[1], xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
 
 
-def orbit_11(p: OscillatorParams, gains: Gains | None = None, *, check: bool = True) -> PeriodicOrbit:
-    """The 1/1 orbit at ``p.delta_d`` on the branch born at grazing (impact-phase shooting).
+def branch_brackets(p: OscillatorParams, delta_d: float, gains: Gains | None = None):
+    """Every bracket (lo, hi, branch, fold) of Delta d(psi) = delta_d with v- > 0.
+
+    Every 1/1 orbit has an impact phase tau* + psi, psi in (-pi, pi), and at each psi
+    the periodicity system gives one (Delta d, v-): the curve psi -> (Delta d, v-) holds
+    all 1/1 orbits. Walking |psi| outwards from grazing (psi = 0) on each side on a
+    logarithmic grid, the arc with v- > 0 that starts at psi = 0 is the branch born at
+    grazing; the brackets on it are labelled 'grazing' before the first fold (turn of
+    Delta d(psi)) and 'grazing past a fold' after it (``fold``: the Delta d of the
+    first turn, to the grid's resolution); brackets on arcs with v- > 0 reached after a
+    stretch of v- <= 0 are 'other'. Sorted in that order, nearest to grazing first.
+    """
+    found = []
+    mags = _psi_grid()
+    for sign in (-1.0, 1.0):
+        prev = (0.0, 0.0, 0.0)
+        on_grazing_arc, fold, direction, steps = True, None, 0.0, 0
+        for cur in _branch_values(p, gains, sign, mags):
+            steps += 1
+            if cur[2] <= 0.0:
+                if abs(cur[0]) > 1e-3:  # rounding may flip tiny v- near psi = 0
+                    on_grazing_arc = False
+                prev = cur
+                continue
+            step = cur[1] - prev[1]
+            if on_grazing_arc and fold is None and step != 0.0:
+                if direction != 0.0 and math.copysign(1.0, step) != direction:
+                    fold = prev[1]
+                direction = math.copysign(1.0, step)
+            f0, f1 = prev[1] - delta_d, cur[1] - delta_d
+            if prev[2] >= 0.0 and f0 * f1 <= 0.0 and f0 != f1:
+                lo, hi = sorted((prev[0], cur[0]))
+                kind = ("grazing" if fold is None else "grazing past a fold") \
+                    if on_grazing_arc else "other"
+                found.append((lo, hi, kind, fold, steps))
+            prev = cur
+    order = {k: i for i, k in enumerate(BRANCHES)}
+    found.sort(key=lambda b: (order[b[2]], b[4] if b[2] != "grazing" else min(abs(b[0]), abs(b[1]))))
+    return [b[:4] for b in found]
+
+
+def _solve_bracket(p, delta_d, gains, lo, hi):
+    g = lambda psi: branch_point(p, psi, gains)[0] - delta_d  # noqa: E731
+    if g(lo) == 0.0:
+        return lo
+    if g(hi) == 0.0:
+        return hi
+    return brentq(g, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
+
+
+def orbit_11(p: OscillatorParams, gains: Gains | None = None, *, check: bool = True,
+             branch: str = "any") -> PeriodicOrbit:
+    """The 1/1 orbit at ``p.delta_d`` by impact-phase shooting, labelled with its branch.
+
+    The orbit on the branch born at grazing is preferred (before a fold, then past
+    one); if there is none, or it fails the physical check, another 1/1 orbit at this
+    Delta d is returned, labelled ``branch='other'`` (:func:`branch_brackets`).
+    ``branch='grazing'`` accepts only the branch born at grazing (either label).
 
     Parameters
     ----------
@@ -231,14 +298,33 @@ def orbit_11(p: OscillatorParams, gains: Gains | None = None, *, check: bool = T
         Verify by the exact flow that one period from the Pi2 point has exactly one
         impact and returns to the same point (to 1e-9 relative); else OrbitNotFound.
     """
-    psi = find_branch_phase(p, p.delta_d, gains)
-    return _orbit_from_phase(p, psi, gains, check=check, keep_delta_d=True)
+    if branch not in ("any", "grazing"):
+        raise ValueError(f"branch={branch!r} is invalid: valid values are 'any', 'grazing'")
+    candidates = [b for b in branch_brackets(p, p.delta_d, gains)
+                  if branch == "any" or b[2] != "other"]
+    failure = None
+    for lo, hi, kind, _fold in candidates:
+        psi = _solve_bracket(p, p.delta_d, gains, lo, hi)
+        try:
+            orbit = _orbit_from_phase(p, psi, gains, check=check, keep_delta_d=True)
+        except OrbitNotFound as exc:
+            failure = failure or exc
+            continue
+        return dataclasses.replace(orbit, branch=kind)
+    if failure is not None:
+        raise failure
+    where = "born at grazing" if branch == "grazing" else "(on any branch)"
+    raise OrbitNotFound(f"no 1/1 orbit {where} with delta_d={p.delta_d!r}")
 
 
 def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     """The 1/1 orbit at impact phase offset psi; Delta d is the branch's unless kept
     (when psi was solved for p.delta_d, the two agree to a few ulps)."""
     dd, v, m = branch_point(p, psi, gains)
+    if not v > 0.0 or not math.isfinite(dd):
+        raise OrbitNotFound(
+            f"the 1/1 solution at delta_d={dd!r} has v- = {v!r}: not an impacting orbit (at "
+            "grazing, Delta d = 0, v- = 0 and the multipliers are not defined)")
     pp = p if keep_delta_d or dd == p.delta_d else p.with_(delta_d=dd)
     theta = (pp.tau_star + psi) % TWO_PI
     a, w = pp.amplitude, pp.omega

@@ -13,6 +13,7 @@ Time origin: t = 0 is the first Pi2 sample; the phase there is tau2.
 from __future__ import annotations
 
 import math
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
@@ -21,14 +22,18 @@ import numpy as np
 from . import kernel as _kernel
 from .control import Gains
 from .flow import propagate, to_deviation, to_physical
-from .fidelity import FIDELITIES, choose_fidelity
+from .fidelity import FIDELITIES, ModelValidityError, choose_fidelity
 from .fidelity import period_step as fidelity_step
-from .impact import Segment, advance
+from .impact import NonFiniteStateError, Segment, advance, check_state
 from .params import OscillatorParams
 
-__all__ = ["SimulationResult", "period_step", "states_between", "simulate", "simulate_batch"]
+__all__ = ["SimulationResult", "period_step", "states_between", "simulate", "simulate_batch",
+           "MAX_PERIODS"]
 
 TWO_PI = 2.0 * math.pi
+#: Largest number of periods of one :func:`simulate` call: it keeps 4 floats and an
+#: integer per period (~40 bytes), so 1e7 periods need ~400 MB; split longer runs.
+MAX_PERIODS = 10_000_000
 
 
 def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float = 0.0, *,
@@ -117,7 +122,7 @@ class SimulationResult:
 def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
              v0: float | None = None, deviation=None, gains: Gains | None = None,
              control_after: int | None = 0, fidelity: str = "exact",
-             tol: float = 1e-9) -> SimulationResult:
+             tol: float = 1e-9, progress: bool = False) -> SimulationResult:
     """Simulate ``periods`` forcing periods from a state on Pi2.
 
     Parameters
@@ -140,13 +145,23 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
         horizon is <= ``tol`` (the choice and its reason are in the result).
     tol : float
         Tolerance for 'auto'.
+    progress : bool
+        Show a progress bar (tqdm, on stderr); for interactive use.
 
     Returns
     -------
     SimulationResult
+
+    Raises
+    ------
+    NonFiniteStateError
+        A state or a correction became non-finite or absurdly large (an input
+        overflowed); the message names it and the period.
     """
-    if int(periods) != periods or periods < 0:
-        raise ValueError(f"periods={periods!r} is invalid: valid range is an integer >= 0")
+    if int(periods) != periods or not 0 <= periods <= MAX_PERIODS:
+        raise ValueError(f"periods={periods!r} is invalid: valid range is an integer in "
+                         f"[0, {MAX_PERIODS}] (memory: one Pi2 sample is kept per period; "
+                         f"split longer runs)")
     if control_after is not None and (int(control_after) != control_after or control_after < 0):
         raise ValueError(
             f"control_after={control_after!r} is invalid: valid range is an integer >= 0 or None")
@@ -157,6 +172,7 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
         x = p.x_ref if x0 is None else float(x0)
         v = p.v_ref if v0 is None else float(v0)
         dx, dv = x - p.x_ref, v - p.v_ref
+    check_state(dx, dv, p.zeta, "the initial state")
     dev = np.empty((periods, 2))
     corr = np.zeros(periods)
     counts = np.zeros(periods, dtype=int)
@@ -164,7 +180,8 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     active = gains is not None and control_after is not None
     reason = "exact: the closed-form flow (requested)" if fidelity == "exact" else \
         f"{fidelity}: requested"
-    if fidelity == "auto":
+    auto = fidelity == "auto"
+    if auto:
         choice = choose_fidelity(p, max(periods, 1), tol, deviation=(dx, dv),
                                  gains=gains if active else None,
                                  control_after=control_after if active else None)
@@ -174,21 +191,45 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
                          f"{', '.join(FIDELITIES)}, auto")
     step = period_step if fidelity == "exact" else \
         (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
-    if fidelity == "exact" and _kernel.use_kernel():  # the same loop, compiled
+    fallbacks = 0
+    ks = range(periods)
+    if fidelity == "exact" and _kernel.use_kernel():  # this loop, compiled: done here
         dev, corr, counts, imps, (dx, dv) = _kernel.simulate_exact(
-            p, periods, dx, dv, gains if active else None, control_after if active else None)
-    else:
-        for k in range(periods):
-            dev[k] = dx, dv
-            dvc = 0.0
-            if active and k >= control_after:
-                dvc = gains.c1 * dx + gains.c2 * dv
-            corr[k] = dvc
-            seg = step(p, dx, dv, dvc)
-            counts[k] = len(seg.impacts)
-            for i in seg.impacts:
-                imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
-            dx, dv = seg.dx, seg.dv
+            p, periods, dx, dv, gains if active else None, control_after if active else None,
+            progress=progress)
+        ks = ()
+    elif progress:
+        from tqdm import tqdm
+
+        ks = tqdm(ks, total=periods, unit="period", file=sys.stderr, leave=False)
+    for k in ks:
+        dev[k] = dx, dv
+        dvc = 0.0
+        if active and k >= control_after:
+            dvc = gains.c1 * dx + gains.c2 * dv
+            if not abs(dvc) <= 1e150:
+                raise NonFiniteStateError(
+                    f"the correction c1*dx + c2*dv = {dvc!r} at period {k} is not finite or exceeds 1e150: "
+                    f"an input overflowed "
+                    f"(c1={gains.c1!r}, c2={gains.c2!r}, dx={dx!r}, dv={dv!r})")
+        corr[k] = dvc
+        try:
+            try:
+                seg = step(p, dx, dv, dvc)
+            except ModelValidityError:
+                if not auto:
+                    raise
+                seg = period_step(p, dx, dv, dvc)  # auto: exact where the map does not apply
+                fallbacks += 1
+        except NonFiniteStateError as exc:
+            raise NonFiniteStateError(f"at period {k}: {exc}") from None
+        counts[k] = len(seg.impacts)
+        for i in seg.impacts:
+            imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
+        dx, dv = seg.dx, seg.dv
+    if fallbacks:
+        reason += (f"; exact in {fallbacks} of {periods} periods where {fidelity} "
+                   "does not apply")
     pi2 = dev + np.array([p.x_ref, p.v_ref])
     return SimulationResult(p, gains, control_after if active else None, pi2, dev, corr, counts,
                             np.array(imps, dtype=float).reshape(-1, 5), (dx, dv),

@@ -163,7 +163,8 @@ def test_orbit_json_keys_and_values(runs, name, dd, gains):
     d = _json(runs, name)
     # the spec's keys, plus the method and its cost in seconds (issue 4: --method)
     assert set(d) == {"delta_d", "impact_phase", "v_minus", "section_pi2", "multipliers", "stable",
-                      "method", "seconds"}
+                      "method", "seconds", "branch"}  # branch: issue 7
+    assert d["branch"] == "grazing"
     assert d["method"] == "exact" and d["seconds"] > 0
     o = orbit_11(P.with_(delta_d=dd), gains)
     assert d["delta_d"] == dd
@@ -323,3 +324,226 @@ def test_grazing_run_reports_a_failed_scene_with_nonzero_status(tmp_path):
     r = _run(["run", "--periods", "5", "--sim-param", "zeta:=2.0", "--timeout", "60"], tmp_path)
     assert r.returncode != 0
     assert "Traceback" not in r.stdout + r.stderr
+
+
+# ------------------------------------------------------- hardening (issue 7), in-process
+def _main(argv, capsys):
+    """Run cli.main in this process: (status, stdout, stderr)."""
+    from grazing_control import cli
+
+    try:
+        status = cli.main(argv)
+    except SystemExit as exc:  # argparse errors, --version, --help
+        status = exc.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def _strict_json(text):
+    """Exactly one JSON object, with no NaN / Infinity (not JSON, though Python writes them)."""
+    def refuse(name):
+        raise AssertionError(f"non-standard JSON constant {name} in {text[:200]!r}")
+
+    assert text.endswith("\n") and text.count("\n") == 1, text[:300]
+    obj = json.loads(text, parse_constant=refuse)
+    assert isinstance(obj, dict)
+    return obj
+
+
+def _one_error_line(err):
+    assert "Traceback" not in err
+    assert err.count("\n") == 1 and err.startswith("grazing: error: "), err
+    return err
+
+
+ISSUE_7_ERRORS = [
+    (["orbit", "--delta-d", "0"], "v- = "),
+    (["orbit", "--delta-d", "-0"], "v- = "),
+    (["orbit", "--delta-d", "-1e-320"], "v- = "),
+    (["design", "--c2", "-1", "--omega", "1e308"], "omega="),
+    (["design", "--c2", "-1", "--omega", "1e-6"], "omega="),
+    (["orbit", "--delta-d", "-1e-3", "--omega", "1e308"], "omega="),
+    (["continue", "--from", "0", "--to", "-1e-4", "--omega", "1e308"], "omega="),
+    (["simulate", "--delta-d", "-5e-6", "--periods", "1000000000000"], "periods="),
+    (["design", "--c2", "1e308"], "not finite"),
+    (["design", "--c2", "-1", "--out", ""], "--out"),
+    (["demo", "--out", ""], "--out"),
+    (["simulate", "--delta-d", "-5e-6", "--periods", "200", "--c2", "1e308"], "period 1"),
+    (["simulate", "--delta-d", "-5e-6", "--periods", "200", "--c2", "-1", "--c1", "1e308"],
+     "overflowed"),
+    (["simulate", "--delta-d", "-5e-6", "--periods", "200", "--c2", "-1", "--c1", "-1e308"],
+     "overflowed"),
+    (["simulate", "--delta-d", "-1e-3", "--periods", "3", "--dx0", "0", "--x0", "1"], "--dx0"),
+]
+
+
+@pytest.mark.parametrize("argv,what", ISSUE_7_ERRORS, ids=lambda a: " ".join(a) if isinstance(a, list) else "")
+def test_issue_7_inputs_give_one_error_line_and_status_2(argv, what, capsys):
+    """Issue 7's tracebacks, hangs and silent NaN: one line naming the problem, status 2,
+    nothing on stdout."""
+    status, out, err = _main(argv, capsys)
+    assert status == 2 and out == ""
+    assert what in _one_error_line(err)
+
+
+def test_issue_7_json_is_valid_and_finite(capsys):
+    """`continue --from 0 --to -1e-4 --points 40 --json` printed Infinity (the grazing
+    point's multipliers): now null there, valid JSON; `simulate --periods 0` printed
+    (nan, nan): now 'none'."""
+    status, out, err = _main(["continue", "--from", "0", "--to", "-1e-4", "--points", "40",
+                              "--json"], capsys)
+    assert status == 0, err
+    obj = _strict_json(out)
+    grazing = [b for b in obj["bifurcations"] if b["type"] == "grazing"]
+    assert grazing and grazing[0]["multipliers"] == [[None, 0.0], [None, 0.0]]
+    status, out, err = _main(["simulate", "--delta-d", "-1e-3", "--periods", "0"], capsys)
+    assert status == 0 and "nan" not in out and "none (0 periods)" in out
+    status, out, err = _main(["simulate", "--delta-d", "-1e-3", "--periods", "0", "--json"], capsys)
+    assert status == 0 and _strict_json(out)["pi2"] == []
+
+
+def test_orbit_says_which_branch_it_is_on(capsys):
+    """Issue 7: the far orbit (v- = 1.31 at zeta 0.2, r 0.3, omega 1.5) is labelled."""
+    argv = ["orbit", "--zeta", "0.2", "--r", "0.3", "--omega", "1.5", "--delta-d", "-1e-3"]
+    status, out, _ = _main(argv + ["--json"], capsys)
+    assert status == 0 and _strict_json(out)["branch"] == "grazing past a fold"
+    status, out, _ = _main(argv, capsys)
+    assert "past a fold" in out and "far from grazing" in out
+    status, out, _ = _main(["orbit", "--delta-d", "-1e-6", "--json"], capsys)
+    assert _strict_json(out)["branch"] == "grazing"
+
+
+def test_deviation_coordinates_on_the_command_line(capsys):
+    """--dx0/--dv0 give the start as a deviation from X**, exactly: near a tangency the
+    physical --x0/--v0 lose ~1e-16 * |x**| on conversion (issue 7)."""
+    p = P.with_(delta_d=-1e-9)
+    dev = (3e-12, -2e-13)
+    status, out, err = _main(["simulate", "--delta-d", "-1e-9", "--periods", "5", "--dx0",
+                              repr(dev[0]), "--dv0", repr(dev[1]), "--json"], capsys)
+    assert status == 0, err
+    core = simulate(p, 5, deviation=dev)
+    assert _strict_json(out)["pi2"] == core.pi2.tolist()
+    assert (core.pi2_deviation[0] == dev).all()
+    # the physical form of the same start is not the same state after rounding
+    x0, v0 = p.x_ref + dev[0], p.v_ref + dev[1]
+    assert (x0 - p.x_ref, v0 - p.v_ref) != dev
+
+
+def test_version(capsys):
+    from grazing_control import __version__
+
+    status, out, _ = _main(["--version"], capsys)
+    assert status == 0 and out.strip() == f"grazing {__version__}"
+
+
+def test_controller_yaml_is_written_with_the_usual_permissions(tmp_path, capsys):
+    """The YAML was written 0600 (mkstemp); now 0666 & ~umask, atomically (rename)."""
+    path = tmp_path / "c.yaml"
+    old = os.umask(0o022)
+    try:
+        status, _, err = _main(["design", "--c2", "-1", "--out", str(path)], capsys)
+    finally:
+        os.umask(old)
+    assert status == 0, err
+    assert (path.stat().st_mode & 0o777) == 0o644
+    assert list(tmp_path.iterdir()) == [path]  # no temporary file left
+    old = os.umask(0o077)
+    try:
+        _main(["design", "--c2", "-1", "--out", str(path)], capsys)
+    finally:
+        os.umask(old)
+    assert (path.stat().st_mode & 0o777) == 0o600
+
+
+def test_progress_bar_only_on_a_terminal(capsys, monkeypatch):
+    """A long simulate shows a tqdm bar on stderr when stderr is a terminal, never with
+    --json or when not a terminal (issue 7: 100000 periods printed nothing for 23 s)."""
+    argv = ["simulate", "--delta-d", "-1e-3", "--periods", "2500"]
+    status, out, err = _main(argv, capsys)
+    assert status == 0 and err == ""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    status, out, err = _main(argv, capsys)
+    assert status == 0 and "/2500 [" in err and "period/s" in err
+    status, out, err = _main(argv + ["--json"], capsys)
+    assert status == 0 and err == ""
+    _strict_json(out)
+
+
+def test_demo_json_prints_one_summary_object(tmp_path, capsys):
+    status, out, err = _main(["demo", "--offline", "--json", "--out", str(tmp_path / "d")], capsys)
+    assert status == 0, err
+    obj = _strict_json(out)
+    assert obj["exit_code"] == 0 and set(obj["scenes"]) and obj["report"].endswith("report.md")
+    assert "report:" in err  # the progress lines went to stderr
+
+
+_POOL = ["nan", "inf", "-inf", "1e308", "-1e308", "-0", "0", "1e-320", "", "abc", "-1", "1",
+         "0.5", "-5e-6", "1e-6", "2", "-1e-3", "0.3", "3", "6.3"]
+_COUNTS = ["nan", "inf", "1e308", "-0", "0", "1e-320", "", "-1", "1", "2", "3", "2.5", "1000000000000"]
+_GOOD = {"--zeta": ["0.01", "0.2"], "--r": ["0.68", "0.3"], "--omega": ["0.667", "1.5"],
+         "--pi2-offset": ["1.57", "3"], "--c1": ["0.1", "-0.3"], "--c2": ["-1", "-0.5", "0.2"],
+         "--delta-d": ["-5e-6", "-1e-3", "0.01"], "--from": ["-1e-3", "0"], "--to": ["-1e-6"],
+         "--x0": ["0.1"], "--v0": ["-1"], "--dx0": ["1e-9"], "--dv0": ["-1e-9"], "--tol": ["1e-6"],
+         "--points": ["5", "8"], "--periods": ["3", "20"], "--control-after": ["1", "0"]}
+_COMMANDS = {
+    "design": (["--c2"], ["--zeta", "--r", "--omega", "--pi2-offset"], []),
+    "orbit": (["--delta-d"], ["--zeta", "--r", "--omega", "--pi2-offset", "--c1", "--c2"], []),
+    "continue": (["--from", "--to"], ["--zeta", "--r", "--omega", "--c2"], ["--points"]),
+    "simulate": (["--delta-d"], ["--zeta", "--r", "--omega", "--pi2-offset", "--c1", "--c2",
+                                 "--x0", "--v0", "--dx0", "--dv0", "--tol"],
+                 ["--periods", "--control-after"]),
+}
+
+
+def test_cli_fuzz_never_a_traceback(capsys):
+    """Fuzz (seeded, 400 argument sets): each numeric option (30 % of the time) of design, orbit, continue
+    and simulate set to nan, inf, 1e308, -0, 1e-320, '', garbage or ordinary values,
+    with and without --json: status 0 with valid, finite JSON (with --json), or status 2
+    with exactly one `grazing: error:` line; never a traceback, never NaN."""
+    import random
+
+    rng = random.Random(7)
+    seen = {0: 0, 2: 0}
+    for _ in range(400):
+        command = rng.choice(sorted(_COMMANDS))
+        required, optional, counts = _COMMANDS[command]
+        argv = [command]
+        for opt in required + rng.sample(optional, rng.randint(0, 3)):
+            argv.append(f"{opt}={rng.choice(_POOL if rng.random() < 0.3 else _GOOD[opt])}")
+        for opt in counts:
+            if rng.random() < 0.7 or opt == "--periods":
+                value = rng.choice(_COUNTS[:12] if rng.random() < 0.3 else _GOOD[opt])
+                argv.append(f"{opt}={value}")
+        if command == "simulate" and rng.random() < 0.3:
+            argv.append(f"--fidelity={rng.choice(['exact', 'zdm1', 'zdm2', 'auto'])}")
+        if command in ("orbit", "design") and rng.random() < 0.3:
+            argv.append("--method=perturbation")
+        as_json = rng.random() < 0.5
+        if as_json:
+            argv.append("--json")
+        status, out, err = _main(argv, capsys)
+        assert status in (0, 2), (argv, status, err)
+        seen[status] += 1
+        if status == 2:
+            _one_error_line(err)
+            assert out == "", argv
+        else:
+            assert "Traceback" not in err, argv
+            if as_json:
+                _strict_json(out)
+            else:
+                assert not re.search(r"\bnan\b|\binf\b", out.lower()), (argv, out)
+    assert seen[0] > 40 and seen[2] > 40
+
+
+def test_grazing_run_json_prints_one_summary_object(tmp_path):
+    """`grazing run --json`: the README says every command takes --json; stdout is one
+    JSON object (node output goes to stderr)."""
+    import random
+
+    r = _run(["run", "--periods", "20", "--delta-d", "-5e-6", "--timeout", "120", "--json",
+              "--domain-id", str(random.SystemRandom().randrange(101, 232))], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    obj = _strict_json(r.stdout)
+    assert obj["ok"] is True and obj["exit_code"] == 0 and obj["sim"] == 0
+    assert "finished" in obj["summary"]

@@ -11,7 +11,8 @@ from grazing_control import simulate as simulate_module
 from grazing_control.analysis import scene_from_bag
 from grazing_control.control import Gains
 from grazing_control.design import degenerate_c1
-from grazing_control.fidelity import FIDELITIES, choose_fidelity, period_step
+from grazing_control.fidelity import (FIDELITIES, ZDM_WINDOW, ModelValidityError,
+                                      choose_fidelity, period_step)
 from grazing_control.orbits import orbit_11
 from grazing_control.params import OscillatorParams
 from grazing_control.simulate import simulate
@@ -78,6 +79,63 @@ def test_auto_keeps_the_exact_flow_for_a_chaotic_scene():
     choice = choose_fidelity(p, 1000, 1e-6)
     assert choice.fidelity == "exact" and choice.growth > 1.0
     assert "no model meets" in choice.reason or "exact:" in choice.reason
+
+
+def test_auto_falls_back_to_exact_where_the_maps_do_not_apply_issue_7():
+    """Issue 7: `grazing simulate --delta-d -1 --periods 30 --fidelity auto` failed with
+    'the ZDM does not apply' (alpha < 0) where exact works; auto now chooses exact and
+    says why, and gives exact's samples."""
+    p = P.with_(delta_d=-1.0)
+    res = simulate(p, 30, fidelity="auto")
+    assert res.fidelity == "exact" and "do not apply" in res.fidelity_reason
+    np.testing.assert_array_equal(res.pi2, simulate(p, 30).pi2)
+    for fid in ("zdm1", "zdm2"):
+        with pytest.raises(ModelValidityError, match=f"{fid} does not apply"):
+            simulate(p, 30, fidelity=fid)
+
+
+def test_auto_uses_exact_for_the_periods_a_chosen_map_does_not_cover():
+    """A scene whose transient starts far from grazing: auto chooses a map on the probe
+    near the orbit... or exact; periods outside the map's validity are computed exactly
+    and counted in the reason."""
+    p = P.with_(delta_d=-1e-7)
+    res = simulate(p, 60, fidelity="auto", tol=1e-6, deviation=(0.0, 0.0))
+    assert res.fidelity in ("zdm1", "zdm2", "exact")
+    far = simulate(p, 3, fidelity="zdm1", deviation=(1e-6, 0.0))  # applies: small deviation
+    assert far.fidelity == "zdm1"
+    with pytest.raises(ModelValidityError, match="within .* rad of tau"):
+        simulate(p, 3, fidelity="zdm1", deviation=(-0.5, 0.3))
+
+
+def test_maps_refuse_states_outside_their_validity_fuzz():
+    """Fuzz (seeded, 1500 cases): random parameters, Delta d from -1 to 0.1 and Pi2
+    deviations from 1e-9 to 1: every zdm1/zdm2 period either refuses with
+    ModelValidityError or returns a Pi2 sample on the physical side (x <= d) with at
+    most one impact, at a phase within ZDM_WINDOW of tau*. (Before, hundreds of such
+    sets returned samples beyond the wall with no error.)"""
+    from grazing_control.flow import gap
+
+    rng = np.random.default_rng(5)
+    refused = accepted = 0
+    for _ in range(1500):
+        p = OscillatorParams(zeta=10 ** rng.uniform(-3, -0.5), r=rng.uniform(0.1, 0.9),
+                             omega=rng.uniform(0.3, 2.5), pi2_offset=rng.uniform(0.1, 6.2),
+                             delta_d=rng.choice([-1, 1]) * 10 ** rng.uniform(-9, 0) * 0.5)
+        size = 10 ** rng.uniform(-9, 0)
+        dx, dv = size * rng.normal(), size * rng.normal()
+        for fid in ("zdm1", "zdm2"):
+            try:
+                seg = period_step(p, dx, dv, 0.0, fid)
+            except ModelValidityError:
+                refused += 1
+                continue
+            accepted += 1
+            assert gap(p, p.tau2, seg.dx) <= 1e-12
+            assert len(seg.impacts) <= 1
+            for i in seg.impacts:
+                psi = (i.phase - p.tau_star + math.pi) % (2 * math.pi) - math.pi
+                assert abs(psi) <= ZDM_WINDOW
+    assert refused > 300 and accepted > 300
 
 
 def test_bad_fidelity_arguments_are_refused():

@@ -209,12 +209,12 @@ def test_fallback_without_numba_runs_the_core(tmp_path):
 
 # ------------------------------------------------ the mpmath tests, through the kernel
 @pytest.fixture(autouse=True)
-def _core_is_the_kernel(monkeypatch, request):
+def _core_is_the_kernel(monkeypatch):
     """The test_impact tests re-exported below run with advance and next_impact of the
-    kernel in place of the core's (their module globals are patched)."""
-    if request.function.__module__ == "test_impact":
-        monkeypatch.setattr(test_impact, "advance", _kernel_advance)
-        monkeypatch.setattr(test_impact, "next_impact", kernel.next_impact)
+    kernel in place of the core's (their module globals are patched; the tests of this
+    module call the core as ``impact.advance``, unaffected)."""
+    monkeypatch.setattr(test_impact, "advance", _kernel_advance)
+    monkeypatch.setattr(test_impact, "next_impact", kernel.next_impact)
 
 
 def _kernel_advance(p, tau0, dx, dv, duration, *, monodromy=False, **kwargs):
@@ -240,6 +240,24 @@ test_mpmath_release = \
     test_impact.test_chattering_then_release_and_independent_of_the_duration
 test_mpmath_sticking = \
     test_impact.test_at_rest_on_the_wall_sticks_and_releases_when_the_force_changes_sign
+test_mpmath_concave_hump = test_impact.test_concave_hump_above_the_wall_is_found_issue_7
+test_tangency_below_rounding = test_impact.test_tangency_below_rounding_is_not_an_impact_issue_7
+test_non_finite_state = test_impact.test_non_finite_or_absurd_state_raises_a_clear_error
+
+
+def test_certified_search_agrees_with_dense_grid_brute_force():
+    """test_impact's differential test against tests/brute_impacts.py (3000 random
+    cases, T/4096 cells), through the kernel's next_impact: 0 missed, 0 spurious."""
+    test_impact.test_certified_search_agrees_with_dense_grid_brute_force(7)
+
+
+# simulate.period_step runs on the kernel by default, so test_impact's scene tests
+# through period_step (no passage through the wall, sticking carried over Pi2 samples,
+# v- > 0 for every impact) test the kernel already; here they run on both paths.
+@pytest.mark.parametrize("path", ["numba", "python"])
+def test_sticking_carries_over_a_period_boundary_on_both_paths(path, monkeypatch):
+    monkeypatch.setenv(kernel.ENV, path)
+    test_impact.test_sticking_carries_over_a_period_boundary_issue_7()
 
 
 # ------------------------------------------------------------- differential fuzz
@@ -280,9 +298,9 @@ def _outcome(step, *args):
 
 
 def test_differential_fuzz_single_periods():
-    """3000 seeded random periods and 1000 segments from the wall: the same exception, or
-    the same impact count and end state and impacts within 1e-13 (relative to the
-    state's size)."""
+    """3000 seeded random periods, 1000 segments from the wall, 1500 near-grazing humps,
+    transients and starts at grazing: the same exception, or the same impact count and
+    end state and impacts within 1e-13 (relative to the state's size)."""
     rng = np.random.default_rng(20261122)
     kinds = {"impacts": 0, "errors": 0, "sticking": 0}
     for _ in range(3000):
@@ -305,6 +323,24 @@ def test_differential_fuzz_single_periods():
             kinds["errors"] += 1
             continue
         _same_segment(got, ref, 1.0 + abs(dx) + abs(dv))
+        kinds["sticking"] += any(i.sticking for i in ref.impacts)
+    # test_impact's random cases (transients, near X**, constructed humps at d +- 1e-10..)
+    # and starts at grazing down to 1e-32 (tangencies below rounding)
+    wall = [(p.with_(r=rng.uniform(0.05, 0.95)), tau0, dx, dv)
+            for p, tau0, dx, dv in test_impact._random_cases(5, 1000)]
+    for _ in range(500):
+        size = 10 ** rng.uniform(-32, -6)
+        p = STUDY.with_(delta_d=rng.choice([0.0, -size, size * 1e-3]))
+        wall.append((p, p.tau2, size * rng.normal(), size * rng.normal()))
+    for p, tau0, dx, dv in wall:
+        ref = _outcome(impact.advance, p, tau0, dx, dv, 2 * p.period)
+        got = _outcome(kernel.advance, p, tau0, dx, dv, 2 * p.period)
+        if isinstance(ref, type):
+            assert got is ref, (p, tau0, dx, dv)
+            kinds["errors"] += 1
+            continue
+        _same_segment(got, ref, 1.0 + abs(dx) + abs(dv))
+        kinds["impacts"] += bool(ref.impacts)
         kinds["sticking"] += any(i.sticking for i in ref.impacts)
     # the cases cover what they should
     assert kinds["impacts"] > 1000 and kinds["errors"] > 50 and kinds["sticking"] > 20, kinds

@@ -26,7 +26,9 @@ from grazing_control.design import degenerate_c1
 from grazing_control.maps import pi2_map
 from grazing_control.orbits import (
     OrbitNotFound,
+    branch_brackets,
     branch_point,
+    find_branch_phase,
     monodromy_det,
     multipliers,
     orbit_11,
@@ -271,3 +273,56 @@ def test_shoot_validates_its_arguments():
         shoot(STUDY.with_(delta_d=-0.05), 0.0, 0.0, periods=0)
     with pytest.raises(ValueError, match="give the guess"):
         shoot(STUDY.with_(delta_d=-0.05))
+
+
+# ------------------------------------------------------- branch labels (issue 7)
+def test_orbit_near_grazing_is_on_the_branch_born_at_grazing():
+    o = orbit_11(OscillatorParams(delta_d=-5e-6))
+    assert o.branch == "grazing" and 0 < o.v_minus < 1e-2
+
+
+def test_far_orbit_past_a_fold_is_labelled_issue_7():
+    """Issue 7: at zeta 0.2, r 0.3, omega 1.5, Delta d = -1e-3 `grazing orbit` returned
+    a 1/1 orbit with v- = 1.31 without saying that it is far from grazing. The branch
+    born at grazing goes to Delta d > 0 (v- -> 0 as Delta d -> 0+), turns at a fold near
+    Delta d = 0.114 and comes back: the orbit is on it, past the fold."""
+    p = OscillatorParams(zeta=0.2, r=0.3, omega=1.5, delta_d=-1e-3)
+    o = orbit_11(p)
+    assert o.branch == "grazing past a fold" and o.v_minus == pytest.approx(1.3095, abs=1e-4)
+    # the fold, independently: Delta d(psi) on a fine grid from grazing to the orbit
+    psi_orbit = (o.impact_phase - p.tau_star + math.pi) % (2 * math.pi) - math.pi
+    psis = np.linspace(0.0, psi_orbit, 4001)[1:]
+    dds = np.array([branch_point(p, s)[0] for s in psis])
+    vs = np.array([branch_point(p, s)[1] for s in psis])
+    assert np.all(vs > 0)  # one arc with v- > 0 from grazing to the orbit
+    assert 0.1 < dds.max() < 0.13 and dds[0] > 0  # born towards Delta d > 0, turns
+    (lo, hi, kind, fold), = branch_brackets(p, p.delta_d)
+    assert kind == "grazing past a fold" and fold == pytest.approx(dds.max(), rel=0.05)
+    # on the near side of the fold at Delta d = 0.01 both orbits exist; the near one first
+    near = orbit_11(p.with_(delta_d=0.01))
+    assert near.branch == "grazing" and near.v_minus < 0.05
+    assert [b[2] for b in branch_brackets(p, 0.01)] == ["grazing", "grazing past a fold"]
+
+
+def test_orbit_on_another_branch_is_found_and_labelled_issue_7():
+    """A controlled case where no 1/1 orbit of the branch born at grazing has this
+    Delta d (the old search said "no 1/1 orbit born at grazing") but a physical one
+    exists on an arc separated from grazing by v- <= 0: returned, labelled 'other',
+    and checked by the exact flow (one impact, back to the same Pi2 point)."""
+    from grazing_control.maps import pi2_map
+
+    p = OscillatorParams(zeta=0.006638694214357835, r=0.6869943793584391,
+                         omega=1.069458758465759, delta_d=-0.0009979230443342096,
+                         pi2_offset=6.178984565892156)
+    g = Gains(-9.152301501092964, -0.4013223587735988)
+    with pytest.raises(OrbitNotFound):
+        find_branch_phase(p, p.delta_d, g)
+    with pytest.raises(OrbitNotFound, match="born at grazing"):
+        orbit_11(p, g, branch="grazing")
+    o = orbit_11(p, g)
+    assert o.branch == "other" and o.v_minus > 1.0
+    seg = pi2_map(p, *o.pi2_deviation, g)
+    assert len(seg.impacts) == 1
+    assert abs(seg.dx - o.pi2_deviation[0]) < 1e-9 and abs(seg.dv - o.pi2_deviation[1]) < 1e-9
+    with pytest.raises(ValueError, match="branch="):
+        orbit_11(p, g, branch="far")

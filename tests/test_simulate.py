@@ -10,10 +10,11 @@ import pytest
 from grazing_control.control import Gains
 from grazing_control.design import degenerate_c1
 from grazing_control.flow import to_deviation, to_physical
-from grazing_control.impact import advance
+from grazing_control.impact import NonFiniteStateError, advance
 from grazing_control.orbits import orbit_11
 from grazing_control.params import OscillatorParams
 from grazing_control.simulate import (
+    MAX_PERIODS,
     SimulationResult,
     period_step,
     simulate,
@@ -199,3 +200,32 @@ def test_states_between_holds_the_mass_on_the_wall_while_it_sticks():
         a = advance(p, tau, *z, t)
         xa, va = to_physical(p, tau + p.omega * t, a.dx, a.dv)
         assert abs(x - xa) < 1e-12 and abs(v - va) < 1e-12
+
+
+# ------------------------------------------------------------- overflow (issue 7)
+@pytest.mark.parametrize("gains", [Gains(0.0, 1e308), Gains(1e308, 0.0), Gains(-1e308, 0.0),
+                                   Gains(0.0, 1e200)])
+def test_an_overflowing_controller_stops_with_a_clear_error(gains):
+    """Issue 7: `grazing simulate --delta-d -5e-6 --periods 200 --c2 1e308` (and c1 =
+    +-1e308) hung the impact search on inf/nan; now it stops at once naming what
+    overflowed and the period."""
+    import time
+
+    p = OscillatorParams(delta_d=-5e-6)
+    start = time.perf_counter()
+    with pytest.raises(NonFiniteStateError, match=r"period \d+") as info:
+        simulate(p, 200, gains=gains, deviation=(1e-3, 1e-3))
+    assert time.perf_counter() - start < 5.0
+    assert "overflowed" in str(info.value) or "absurdly large" in str(info.value)
+
+
+@pytest.mark.parametrize("deviation", [(math.nan, 0.0), (0.0, math.inf), (1e200, 0.0)])
+def test_non_finite_initial_state_is_refused(deviation):
+    with pytest.raises(NonFiniteStateError, match="initial state"):
+        simulate(OscillatorParams(delta_d=-1e-3), 3, deviation=deviation)
+
+
+def test_period_count_is_bounded():
+    """simulate(periods=1e12) raised MemoryError; the limit is stated up front."""
+    with pytest.raises(ValueError, match=f"periods=1000000000000 is invalid.*{MAX_PERIODS}"):
+        simulate(OscillatorParams(), 10 ** 12)

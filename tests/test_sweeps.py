@@ -6,7 +6,6 @@ against simulate() itself; local and Dask runs must give bit-identical files.
 """
 
 import json
-import math
 import subprocess
 import sys
 from pathlib import Path
@@ -64,10 +63,16 @@ def test_each_point_is_simulate_after_the_transient(engine):
             assert np.all(res.c1 == gains.c1) and res.control_after == 30
 
 
-def test_kernel_and_python_engines_agree_bit_for_bit():
+def test_kernel_and_python_engines_agree_bit_for_bit(monkeypatch):
+    from grazing_control import kernel
+
     g = {"delta_d": np.linspace(-2e-5, -1e-6, 6)}
-    a = sweep(STUDY, g, periods=80, transient=40, workers=1, engine="kernel")
+    monkeypatch.setattr(kernel, "run_point", None)  # the python engine must not use them
+    monkeypatch.setattr(kernel, "period_step", None)
     b = sweep(STUDY, g, periods=80, transient=40, workers=1, engine="python")
+    monkeypatch.undo()
+    a = sweep(STUDY, g, periods=80, transient=40, workers=1, engine="kernel")
+    assert a.engine == "kernel" and b.engine == "python"
     assert np.array_equal(a.pi2_deviation, b.pi2_deviation)
     assert np.array_equal(a.impacts_per_period, b.impacts_per_period)
     assert np.array_equal(a.period, b.period)
@@ -152,6 +157,8 @@ def test_npz_round_trip(tmp_path):
     res.to_npz(tmp_path / "s.npz")
     back = SweepResult.from_npz(tmp_path / "s.npz")
     assert back.same_as(res) and back.engine == res.engine
+    back.to_npz(tmp_path / "again.npz")  # equal results, byte-identical files
+    assert (tmp_path / "again.npz").read_bytes() == (tmp_path / "s.npz").read_bytes()
     with np.load(tmp_path / "s.npz") as f:  # readable without this package
         assert np.array_equal(f["pi2"], res.pi2) and f["period"].shape == (6,)
     np.savez(tmp_path / "other.npz", a=np.zeros(2), meta=np.array('{"format": "x"}'))
@@ -160,7 +167,7 @@ def test_npz_round_trip(tmp_path):
 
 
 # ------------------------------------------------------------------------ Dask
-def test_dask_local_cluster_gives_the_local_result():
+def test_dask_local_cluster_gives_the_local_result(tmp_path):
     """Two worker processes on 127.0.0.1, reached by address as `--scheduler` would."""
     distributed = pytest.importorskip("distributed")
     g = {"delta_d": np.linspace(-2e-5, 0.0, 12)}
@@ -171,6 +178,9 @@ def test_dask_local_cluster_gives_the_local_result():
             with_client = sweep(STUDY, g, periods=300, transient=100, scheduler=client)
     local = sweep(STUDY, g, periods=300, transient=100, workers=1)
     assert on_dask.same_as(local) and with_client.same_as(local)
+    on_dask.to_npz(tmp_path / "dask.npz")
+    local.to_npz(tmp_path / "local.npz")
+    assert (tmp_path / "dask.npz").read_bytes() == (tmp_path / "local.npz").read_bytes()
 
 
 def test_unreachable_scheduler_is_a_clear_error(monkeypatch):

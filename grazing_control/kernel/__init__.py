@@ -32,7 +32,8 @@ import time
 
 import numpy as np
 
-from ..impact import Impact, ImpactCapError, InitialStateError, Segment
+from ..impact import (Impact, ImpactCapError, InitialStateError, NonFiniteStateError, Segment,
+                      check_state)
 
 __all__ = ["ENV", "available", "use_kernel", "warm_up", "next_impact", "advance",
            "period_step", "simulate_exact", "run_point"]
@@ -76,6 +77,17 @@ def _params(p):
     return _compiled()[0].params_tuple(p)
 
 
+@functools.lru_cache(maxsize=64)
+def _grid(p):
+    """The window grid of a period from Pi2 (tau2, T), shared by every period_step call."""
+    ki = _compiled()[0]
+    grid = ki.window_grid(_params(p), p.tau2, p.period)
+    return grid
+
+
+_NO_GRID = np.zeros((0, 9))
+
+
 _local = threading.local()
 
 
@@ -88,8 +100,12 @@ def _scratch():
     return bufs
 
 
-def _raise(status, info, *, max_impacts, duration):
-    """The core's exception for a kernel status."""
+def _raise(status, info, *, max_impacts, duration, p=None, state=None, times=None):
+    """The core's exception (and message) for a kernel status.
+
+    ``state``: the (dx, dv) the kernel returned with STATUS_NONFINITE, ``times``: the
+    (tau0, horizon) of the call, for the same messages as impact.check_state's.
+    """
     ki = _compiled()[0]
     if status == ki.STATUS_IMPACT_CAP:
         raise ImpactCapError(
@@ -98,7 +114,9 @@ def _raise(status, info, *, max_impacts, duration):
     if status == ki.STATUS_BEYOND_WALL:
         raise InitialStateError(f"state beyond the wall: x - d = {info:.3e} > 0 (valid: x <= d)")
     if status == ki.STATUS_NONFINITE:
-        raise ValueError(f"the state is not finite ({info!r}): valid range is finite dx, dv")
+        check_state(state[0], state[1], p.zeta, "the start state")
+        tau0, horizon = times
+        raise NonFiniteStateError(f"tau0={tau0!r} and duration={horizon!r} must be finite")
     raise RuntimeError(f"kernel status {status}")  # pragma: no cover - no other status
 
 
@@ -127,9 +145,14 @@ def next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     """:func:`grazing_control.impact.next_impact`, compiled."""
     ki = _compiled()[0]
     h, status, info = ki.next_impact(_params(p), float(tau0), float(dx0), float(dv0),
-                                     float(horizon), float(max_step or 0.0), _scratch()[1])
+                                     float(horizon), float(max_step or 0.0), _scratch()[1],
+                                     _NO_GRID)
     if status != ki.STATUS_OK:
-        _raise(status, info, max_impacts=0, duration=horizon)
+        if status == ki.STATUS_NONFINITE and math.isfinite(dx0) and math.isfinite(dv0) and \
+                not (math.isfinite(tau0) and math.isfinite(horizon)):
+            raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+        _raise(status, info, max_impacts=0, duration=horizon, p=p, state=(dx0, dv0),
+               times=(tau0, horizon))
     return None if h == ki.NONE else h
 
 
@@ -141,11 +164,13 @@ def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) 
     """:func:`grazing_control.impact.advance` without the monodromy, compiled."""
     ki = _compiled()[0]
     out = np.empty((max(int(max_impacts), 1), 6))
-    dx, dv, n, status, info = ki.advance(
+    ndx, ndv, n, status, info = ki.advance(
         _params(p), float(tau0), float(dx), float(dv), float(duration), int(max_impacts),
-        -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1])
+        -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1], _NO_GRID)
     if status != ki.STATUS_OK:
-        _raise(status, info, max_impacts=max_impacts, duration=duration)
+        _raise(status, info, max_impacts=max_impacts, duration=duration, p=p, state=(ndx, ndv),
+               times=(tau0, duration))
+    dx, dv = ndx, ndv
     return Segment(dx, dv, _impacts(out[:n]), None)
 
 
@@ -154,13 +179,21 @@ def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
     ki, ks = _compiled()
     scratch, stack = _scratch()
     dx, dv, n, status, info = ks.period_step(_params(p), float(dx), float(dv),
-                                             float(dv_correction), float(delay), scratch, 0, stack)
+                                             float(dv_correction), float(delay), scratch, 0, stack,
+                                             _grid(p))
     if status != ki.STATUS_OK:
-        _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
+        _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
+               state=(dx, dv), times=(p.tau2, p.period))
     return Segment(dx, dv, _impacts(scratch[:n]), None)
 
 
-def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_impacts):
+def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_impacts,
+         progress=False):
+    """simulate's loop on the kernel, in blocks of _BLOCK periods (progress bar, resizing).
+
+    Errors as simulate raises them: NonFiniteStateError "at period k: ..." for a state,
+    and its message for a correction that overflowed.
+    """
     ki, ks = _compiled()
     m = periods - record_from
     dev = np.empty((m, 2))
@@ -169,27 +202,57 @@ def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_imp
     impacts = np.empty((max(16, 2 * periods) if keep_impacts else 0, 5))
     controlled = not (math.isnan(c1) or control_after is None)
     after = 0 if control_after is None else int(control_after)
+    bar = None
+    if progress:
+        import sys
+
+        from tqdm import tqdm
+
+        bar = tqdm(total=periods, unit="period", file=sys.stderr, leave=False)
     k, n = 0, 0
-    while True:
-        k, dx, dv, n, status, info = ks.run(
-            _params(p), k, periods, float(dx), float(dv), controlled, float(c1), float(c2),
-            after, float(delay), record_from, dev, corr, counts, impacts, n, *_scratch())
-        if status == ks.STATUS_BUFFER_FULL:
-            impacts = np.concatenate([impacts, np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))])
-            continue
-        if status != ki.STATUS_OK:
-            _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period)
-        return dev, corr, counts, impacts[:n], (dx, dv)
+    try:
+        while k < periods:
+            end = min(periods, k + _BLOCK)
+            k1, dx, dv, n, status, info = ks.run(
+                _params(p), k, end, float(dx), float(dv), controlled, float(c1), float(c2),
+                after, float(delay), record_from, dev, corr, counts, impacts, n, *_scratch())
+            if bar is not None:
+                bar.update(k1 - k)
+            k = k1
+            if status == ks.STATUS_BUFFER_FULL:
+                more = np.empty((impacts.shape[0] + 2 * ks.MAX_IMPACTS, 5))
+                impacts = np.concatenate([impacts, more])
+                continue
+            if status == ks.STATUS_CORRECTION:
+                raise NonFiniteStateError(
+                    f"the correction c1*dx + c2*dv = {info!r} at period {k} is not finite or "
+                    f"exceeds 1e150: an input overflowed (c1={c1!r}, c2={c2!r}, dx={dx!r}, "
+                    f"dv={dv!r})")
+            if status != ki.STATUS_OK:
+                try:
+                    _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
+                           state=(dx, dv), times=(p.tau2, p.period))
+                except NonFiniteStateError as exc:
+                    raise NonFiniteStateError(f"at period {k}: {exc}") from None
+    finally:
+        if bar is not None:
+            bar.close()
+    return dev, corr, counts, impacts[:n], (dx, dv)
 
 
-def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=0.0):
-    """The exact loop of :func:`grazing_control.simulate.simulate`, compiled.
+_BLOCK = 50_000  # periods per kernel call (a progress bar moves once per block)
+
+
+def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=0.0,
+                   progress=False):
+    """The exact loop of :func:`grazing_control.simulate.simulate`, compiled (with its
+    checks and messages; ``progress``: a tqdm bar on stderr).
 
     Returns (deviation (N, 2), corrections (N,), impacts per period (N,),
     impacts (M, 5) rows [k, t, phase, v-, v+], final deviation).
     """
     c1, c2 = (math.nan, math.nan) if gains is None else (gains.c1, gains.c2)
-    return _run(p, int(periods), dx, dv, c1, c2, control_after, delay, 0, True)
+    return _run(p, int(periods), dx, dv, c1, c2, control_after, delay, 0, True, progress)
 
 
 def run_point(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_after=0):

@@ -11,11 +11,16 @@ grazing_control.impact     here
 ``_bracket``               :func:`bracket`
 ``_search`` (recursive)    :func:`search`: the same depth-first, left-first order
                            with an explicit stack
+``check_state``            :func:`check_state` (NonFiniteStateError ->
+                           status STATUS_NONFINITE)
+``_wall_rounding``         :func:`wall_rounding`
 ``next_impact``            :func:`next_impact` (None -> -1.0; InitialStateError ->
                            status STATUS_BEYOND_WALL)
 ``_release_time``,         :func:`release_time`, :func:`resting_on_wall`,
-``_resting_on_wall``,      :func:`release_skip`
-``_release_skip``
+``_resting_on_wall``,      :func:`release_skip`, :func:`on_wall_at_rest`,
+``_release_skip``,         :func:`leave_wall`
+``_on_wall_at_rest``,
+``_leave_wall``
 ``advance``                :func:`advance` (no monodromy: that stays in the core);
                            impacts go to a caller's array, one row
                            (dt, phase, v-, v+, sticking, release) each
@@ -26,6 +31,11 @@ computed once, by :class:`~grazing_control.params.OscillatorParams` itself, so t
 both paths use the very same floats). Errors cannot be raised from compiled code with
 the core's messages, so they come back as a status code and one number, and the
 Python wrapper (:mod:`grazing_control.kernel`) raises the core's exception.
+
+Two things are computed once instead of again, with bit-identical results: the window
+ends of a search from Pi2 over one period (:func:`window_grid`: every period starts at
+the same phase with the same horizon, so exp, sin and cos there are the same numbers),
+and e^{-zeta a} of the jerk bound, which :func:`evaluate` already computed at a.
 """
 
 from __future__ import annotations
@@ -35,19 +45,23 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["params_tuple", "make_eval", "evaluate", "jerk_bound", "bracket", "search",
+__all__ = ["params_tuple", "check_state", "wall_rounding", "make_eval", "evaluate",
+           "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "bracket", "search",
            "search_stack", "next_impact", "release_time", "resting_on_wall", "release_skip",
-           "advance", "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
-           "IMPACT_FIELDS"]
+           "on_wall_at_rest", "leave_wall", "advance", "STATUS_OK", "STATUS_IMPACT_CAP",
+           "STATUS_BEYOND_WALL", "STATUS_NONFINITE", "IMPACT_FIELDS", "MAX_AMPLITUDE"]
 
 TWO_PI = 2.0 * math.pi
 _MAX_DEPTH = 64
+_EPS = 2.0 ** -52
+#: impact.MAX_AMPLITUDE: the largest deviation amplitude |C| accepted.
+MAX_AMPLITUDE = 1e150
 NONE = -1.0  # "no impact" (times are >= 0)
 
 STATUS_OK = 0
 STATUS_IMPACT_CAP = 1  # ImpactCapError
 STATUS_BEYOND_WALL = 2  # InitialStateError
-STATUS_NONFINITE = 4  # a non-finite start state or time (the core's search would not end)
+STATUS_NONFINITE = 4  # NonFiniteStateError: (dx, dv) returned are the offending state
 
 #: Columns of an impact row.
 IMPACT_FIELDS = ("dt", "phase", "v_minus", "v_plus", "sticking", "release")
@@ -108,17 +122,43 @@ def propagate(zeta, dx, dv, h):
     return f11 * dx + f12 * dv, f21 * dx + f22 * dv
 
 
+@jit
+def check_state(zeta, dx, dv):
+    """impact.check_state: (dx, dv) finite with |C| <= MAX_AMPLITUDE; also returns |C|."""
+    if not (math.isfinite(dx) and math.isfinite(dv)):
+        return False, math.nan
+    size = amplitude_bound(zeta, dx, dv)
+    return size <= MAX_AMPLITUDE, size
+
+
+@jit
+def wall_rounding(P, tau, dx, dv):
+    """impact._wall_rounding: rounding (gap, velocity) of a state at phase tau."""
+    psi = tau - P[_LAG]
+    s2 = 2.0 * P[_AMP] * power(math.sin(0.5 * psi), P[_TWO])
+    vp = -P[_AMP] * P[_OMEGA] * math.sin(psi)
+    phase = abs(tau) + abs(P[_LAG]) + TWO_PI + 1.0
+    eg = 8.0 * _EPS * (abs(dx) + abs(P[_DD]) + s2 + math.sqrt(2.0 * P[_AMP] * s2) * phase)
+    ev = 8.0 * _EPS * (abs(vp) + abs(dv) + P[_AMP] * P[_OMEGA] * phase)
+    return eg, ev
+
+
 # ------------------------------------------------------------------ _Eval
+# ev = (zeta, wd, omega, lag, amp, dd, tau0, dx0, c2, aw2, aw3, cabs, 2, acc_err)
 @jit
 def make_eval(P, tau0, dx0, dv0):
-    """impact._Eval.__init__: (zeta, wd, omega, lag, amp, dd, tau0, dx0, c2, aw2, aw3, |C|, 2)."""
+    """impact._Eval.__init__ as a tuple ``ev`` (see the comment above)."""
     wd = P[_WD]
     amp = P[_AMP]
     omega = P[_OMEGA]
-    aw2 = amp * omega * omega
+    lag = P[_LAG]
     c2 = (dv0 + P[_ZETA] * dx0) / wd
-    return (P[_ZETA], wd, omega, P[_LAG], amp, P[_DD], tau0, dx0, c2, aw2, aw2 * omega,
-            math.hypot(dx0, c2), P[_TWO])
+    aw2 = amp * omega * omega
+    aw3 = aw2 * omega
+    cabs = math.hypot(dx0, c2)
+    acc_err = 8.0 * _EPS * (aw2 * (4.0 + abs(tau0) + abs(lag)) + 4.0 * cabs)
+    return (P[_ZETA], wd, omega, lag, amp, P[_DD], tau0, dx0, c2, aw2, aw3, cabs, P[_TWO],
+            acc_err)
 
 
 @jit
@@ -127,7 +167,8 @@ def evaluate(ev, h):
 
     Also returns e^{-zeta h} (6th), which :func:`jerk_bound` reuses at the same h.
     """
-    zeta, wd, omega, lag, amp, dd, tau0, c1, c2, aw2, _aw3, _cabs, _two = ev
+    zeta, wd, omega, lag, amp, dd, tau0, c1, c2, aw2 = (ev[0], ev[1], ev[2], ev[3], ev[4],
+                                                        ev[5], ev[6], ev[7], ev[8], ev[9])
     e = math.exp(-zeta * h)
     c = math.cos(wd * h)
     s = math.sin(wd * h)
@@ -142,9 +183,64 @@ def evaluate(ev, h):
 
 
 @jit
+def evaluate_row(ev, grid, k):
+    """:func:`evaluate` at h = grid[k, 0] from the transcendental values stored in row k.
+
+    The same operations on the same floats as :func:`evaluate` (the stored values are
+    libm's results for the same arguments), hence bit-identical results.
+    """
+    zeta, wd, omega, amp, dd, c1, c2, aw2 = (ev[0], ev[1], ev[2], ev[4], ev[5], ev[7], ev[8],
+                                            ev[9])
+    e, c, s = grid[k, 1], grid[k, 2], grid[k, 3]
+    dx = e * (c1 * c + c2 * s)
+    dv = e * ((wd * c2 - zeta * c1) * c - (wd * c1 + zeta * c2) * s)
+    sh = grid[k, 4]
+    g = dx - dd - 2.0 * amp * sh * sh
+    v = -amp * omega * grid[k, 5] + dv
+    acc = -aw2 * grid[k, 6] - 2.0 * zeta * dv - dx
+    return g, v, acc, dx, dv, e
+
+
+@jit
+def window_grid(P, tau0, horizon):
+    """The window ends of next_impact(P, tau0, ., ., horizon) and what evaluate needs there.
+
+    Row k (k = 0..n) holds h_k and e^{-zeta h}, cos(wd h), sin(wd h), sin(psi / 2),
+    sin(psi), cos(psi) at h_k; row 0 also holds (tau0, horizon) in columns 7, 8. These
+    depend on the start phase and the horizon only, not on the state: every period of a
+    run starts at (tau2, T), so its first search reuses them (:func:`next_impact`).
+    """
+    step = P[_PERIOD] / 8.0
+    n = max(1, int(math.ceil(horizon / step)))
+    grid = np.zeros((n + 1, 9))
+    for k in range(n + 1):
+        h = 0.0 if k == 0 else (horizon if k == n else k * (horizon / n))
+        psi = tau0 + P[_OMEGA] * h - P[_LAG]
+        grid[k, 0] = h
+        grid[k, 1] = math.exp(-P[_ZETA] * h)
+        grid[k, 2] = math.cos(P[_WD] * h)
+        grid[k, 3] = math.sin(P[_WD] * h)
+        grid[k, 4] = math.sin(0.5 * psi)
+        grid[k, 5] = math.sin(psi)
+        grid[k, 6] = math.cos(psi)
+    grid[0, 7] = tau0
+    grid[0, 8] = horizon
+    return grid
+
+
+@jit
 def jerk_bound(ev, e):
-    """impact._Eval.jerk_bound at h, given e = e^{-zeta h}: J >= max |g'''| on [h, inf)."""
+    """impact._Eval.jerk_bound at h, given e = e^{-zeta h}: J >= max |g^(3)| on [h, inf)."""
     return ev[10] + ev[11] * e
+
+
+@jit
+def gap_rounding(ev, h, g, dx):
+    """impact._Eval.gap_rounding: bound on |computed g(h) - exact g(h)|."""
+    s2 = abs(dx - ev[5] - g)
+    phase = abs(ev[6]) + ev[2] * h + abs(ev[3]) + 1.0
+    return 8.0 * _EPS * (ev[11] * (2.0 + ev[1] * h) + abs(ev[5]) + s2
+                         + math.sqrt(2.0 * ev[4] * s2) * phase)
 
 
 # ------------------------------------------------------------------ _bracket
@@ -175,13 +271,14 @@ def bracket(ev, lo, hi, which, sign):
 
 # ------------------------------------------------------------------ _search
 @jit
-def _certified(ev, a, b, ea, ga, va, acca, gb, vb, accb):
-    """The certified cases of impact._search on [a, b].
+def _certified(ev, a, b, ea, ga, va, acca, dxa, gb, vb, accb, dxb):
+    """The certified cases of impact._search on [a, b] (fa = (ga, va, acca, dxa) etc.).
 
     Returns (decided, time): decided = 1 with time >= 0 (impact) or NONE (none), or
     decided = 0 when the interval must be split.
     """
-    jw = jerk_bound(ev, ea) * (b - a)
+    # J (b - a), rounded up, plus the rounding of the two accelerations (docs/theory.md)
+    jw = jerk_bound(ev, ea) * (b - a) * (1.0 + 1e-12) + 2.0 * ev[13]
     concave = acca < 0.0 and accb < 0.0 and -(acca + accb) > jw
     convex = acca > 0.0 and accb > 0.0 and (acca + accb) > jw
     if concave:  # v decreasing: at most one maximum
@@ -200,10 +297,13 @@ def _certified(ev, a, b, ea, ga, va, acca, gb, vb, accb):
             return 1, a
         tmin = bracket(ev, a, b, 1, 1.0) if vb > 0.0 else b
         gmin = evaluate(ev, tmin)[0]
+        if gmin >= 0.0:  # the dip below the wall is below rounding: at rest, pushed in
+            return 1, tmin
         return 1, (bracket(ev, tmin, b, 0, 1.0) if gmin < 0.0 <= gb else NONE)
-    # below the chord plus the curvature allowance (docs/theory.md, "Impact detection")
+    # below the chord plus the curvature allowance, with the rounding margin of the ends
     curvature = max(0.0, 0.5 * (jw - acca - accb))
-    if max(ga, gb) + 0.125 * power(b - a, ev[12]) * curvature < 0.0:
+    margin = max(gap_rounding(ev, a, ga, dxa), gap_rounding(ev, b, gb, dxb))
+    if max(ga, gb) + margin + 0.125 * power(b - a, ev[12]) * curvature < 0.0:
         return 1, NONE
     return 0, NONE
 
@@ -217,11 +317,11 @@ def search(ev, a, b, fa, fb, stack):
     intervals in the same order.
     """
     top = 0
-    ea, ga, va, acca = fa[5], fa[0], fa[1], fa[2]
-    gb, vb, accb = fb[0], fb[1], fb[2]
+    ga, va, acca, dxa, ea = fa[0], fa[1], fa[2], fa[3], fa[5]
+    gb, vb, accb, dxb = fb[0], fb[1], fb[2], fb[3]
     depth = 0
     while True:
-        decided, t = _certified(ev, a, b, ea, ga, va, acca, gb, vb, accb)
+        decided, t = _certified(ev, a, b, ea, ga, va, acca, dxa, gb, vb, accb, dxb)
         if not decided:
             if depth >= _MAX_DEPTH or b - a <= 4.0 * ulp(b):
                 decided = 1
@@ -232,50 +332,55 @@ def search(ev, a, b, fa, fb, stack):
             if top == 0:
                 return NONE
             top -= 1  # the pending right half of the nearest ancestor
-            row = stack[top]
-            a, b, ea, ga, va, acca, gb, vb, accb = (row[0], row[1], row[2], row[3], row[4],
-                                                    row[5], row[6], row[7], row[8])
-            depth = int(row[9])
+            a, b, ea = stack[top, 0], stack[top, 1], stack[top, 2]
+            ga, va, acca, dxa = stack[top, 3], stack[top, 4], stack[top, 5], stack[top, 6]
+            gb, vb, accb, dxb = stack[top, 7], stack[top, 8], stack[top, 9], stack[top, 10]
+            depth = int(stack[top, 11])
             continue
         mid = 0.5 * (a + b)
-        gm, vm, accm, _dx, _dv, em = evaluate(ev, mid)
-        row = stack[top]
-        row[0], row[1], row[2], row[3], row[4], row[5] = mid, b, em, gm, vm, accm
-        row[6], row[7], row[8], row[9] = gb, vb, accb, depth + 1
+        gm, vm, accm, dxm, _dv, em = evaluate(ev, mid)
+        stack[top, 0], stack[top, 1], stack[top, 2] = mid, b, em
+        stack[top, 3], stack[top, 4], stack[top, 5], stack[top, 6] = gm, vm, accm, dxm
+        stack[top, 7], stack[top, 8], stack[top, 9], stack[top, 10] = gb, vb, accb, dxb
+        stack[top, 11] = depth + 1
         top += 1
-        b, gb, vb, accb = mid, gm, vm, accm
+        b, gb, vb, accb, dxb = mid, gm, vm, accm, dxm
         depth += 1
 
 
 def search_stack():
     """The work array of :func:`search`: one row per pending interval."""
-    return np.empty((_MAX_DEPTH + 2, 10))
+    return np.empty((_MAX_DEPTH + 2, 12))
 
 
 # ------------------------------------------------------------------ next_impact
 @jit
-def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack):
-    """impact.next_impact: (time of the first impact in (0, horizon] or NONE, status, gap).
+def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
+    """impact.next_impact: (time of the first impact in (0, horizon] or NONE, status, info).
 
-    ``max_step`` <= 0 means the default T / 8. status is STATUS_BEYOND_WALL (and gap the
-    offending x - d) where the core raises InitialStateError.
+    ``max_step`` <= 0 means the default T / 8. status: STATUS_NONFINITE where the core
+    raises NonFiniteStateError, STATUS_BEYOND_WALL (info = x - d) where it raises
+    InitialStateError. ``stack``: the work array of :func:`search`; ``grid``: a
+    :func:`window_grid`, used when it was made for this (tau0, horizon) with the default
+    step (else ignored; it may have no rows).
     """
-    if not (math.isfinite(dx0) and math.isfinite(dv0) and math.isfinite(tau0)
-            and math.isfinite(horizon)):
-        return NONE, STATUS_NONFINITE, dx0 if not math.isfinite(dx0) else dv0
+    ok, size = check_state(P[_ZETA], dx0, dv0)
+    if not ok or not (math.isfinite(tau0) and math.isfinite(horizon)):
+        return NONE, STATUS_NONFINITE, 0.0
     if horizon <= 0.0:
         return NONE, STATUS_OK, 0.0
-    if amplitude_bound(P[_ZETA], dx0, dv0) < P[_DD]:
+    # whole-window exclusion: g <= |z_x| - Delta d <= |C| - Delta d (|C| rounded up)
+    if size * (1.0 + 4.0 * _EPS) < P[_DD]:
         return NONE, STATUS_OK, 0.0
     ev = make_eval(P, tau0, dx0, dv0)
     step = max_step if max_step > 0.0 else P[_PERIOD] / 8.0
     n = max(1, int(math.ceil(horizon / step)))
     a = 0.0
-    fa = evaluate(ev, 0.0)
+    cached = (max_step <= 0.0 and grid.shape[0] > 0 and grid[0, 7] == tau0
+              and grid[0, 8] == horizon)
+    fa = evaluate_row(ev, grid, 0) if cached else evaluate(ev, 0.0)
     ga = fa[0]
-    scale = abs(dx0) + abs(P[_DD]) + 2.0 * P[_AMP] * power(math.sin(0.5 * (tau0 - P[_LAG])),
-                                                          P[_TWO])
-    if 0.0 < ga <= 8.0 * ulp(scale):
+    if 0.0 < ga <= wall_rounding(P, tau0, dx0, dv0)[0]:
         ga = 0.0  # on the wall up to rounding
     if ga > 0.0:
         return NONE, STATUS_BEYOND_WALL, ga
@@ -284,7 +389,7 @@ def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack):
     fa = (ga, fa[1], fa[2], fa[3], fa[4], fa[5])
     for k in range(1, n + 1):
         b = horizon if k == n else k * (horizon / n)
-        fb = evaluate(ev, b)
+        fb = evaluate_row(ev, grid, k) if cached else evaluate(ev, b)
         r = search(ev, a, b, fa, fb, stack)
         if r != NONE:
             return r, STATUS_OK, 0.0
@@ -311,12 +416,12 @@ def release_time(P, tau, horizon):
 
 @jit
 def resting_on_wall(P, tau, dx, dv):
-    """impact._resting_on_wall: x = d and v = 0 up to rounding."""
+    """impact._resting_on_wall: x = d and v = 0 up to rounding (phase included)."""
+    eg, ev = wall_rounding(P, tau, dx, dv)
     s = math.sin(0.5 * (tau - P[_LAG]))
-    vp = -P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
-    g_scale = abs(dx) + abs(P[_DD]) + 2.0 * P[_AMP] * s * s
     g = dx - P[_DD] - 2.0 * P[_AMP] * s * s
-    return abs(g) <= 8.0 * ulp(g_scale) and abs(vp + dv) <= 8.0 * ulp(abs(vp) + abs(dv))
+    vp = -P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
+    return abs(g) <= eg and abs(vp + dv) <= ev
 
 
 @jit
@@ -333,49 +438,59 @@ def release_skip(P, tau, dx):
     return out if out < math.inf else 0.0
 
 
+@jit
+def on_wall_at_rest(P, tau):
+    """impact._on_wall_at_rest: deviation of (x, v) = (d, 0) at phase tau."""
+    s = math.sin(0.5 * (tau - P[_LAG]))
+    return P[_DD] + 2.0 * P[_AMP] * s * s, P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
+
+
+@jit
+def leave_wall(P, tau0, t, duration, dx, dv):
+    """impact._leave_wall (without the monodromy): (t, tau, dx, dv) after the skip."""
+    skip = min(duration - t, release_skip(P, (tau0 + P[_OMEGA] * t) % TWO_PI, dx))
+    f11, f12, f21, f22 = transition_matrix(P[_ZETA], skip)
+    dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
+    t += skip
+    return t, (tau0 + P[_OMEGA] * t) % TWO_PI, dx, dv
+
+
 # ------------------------------------------------------------------ advance
 @jit
-def _wall_state(P, tau):
-    """(x_p - d, v_p) at phase tau, as advance computes them at an impact."""
-    xp_minus_d = -2.0 * P[_AMP] * power(math.sin(0.5 * (tau - P[_LAG])), P[_TWO]) - P[_DD]
-    vp = -P[_AMP] * P[_OMEGA] * math.sin(tau - P[_LAG])
-    return xp_minus_d, vp
-
-
-@jit
-def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack):
+def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack, grid):
     """impact.advance without the monodromy: the exact event-driven segment.
 
     Impacts are written to rows n0, n0 + 1, ... of ``out`` (at least n0 + max_impacts
     rows, columns IMPACT_FIELDS). ``chatter_time`` < 0 means the default 1e-6 T.
-    ``stack`` is :func:`search`'s work array (:func:`search_stack`).
+    ``stack`` is :func:`search`'s work array (:func:`search_stack`), ``grid`` a
+    :func:`window_grid` for (tau0, duration) or an empty (0, 9) array.
 
     Returns
     -------
     (dx, dv, n, status, info)
         The deviation at the end, the number of rows used (n0 + impacts), and the
         status: STATUS_OK; STATUS_IMPACT_CAP (info = the phase, as in the core's message);
-        STATUS_BEYOND_WALL (info = x - d).
+        STATUS_BEYOND_WALL (info = x - d); STATUS_NONFINITE ((dx, dv) = the state that
+        failed impact.check_state, or the start state when tau0 or duration is not finite).
     """
+    ok, _size = check_state(P[_ZETA], dx, dv)
+    if not ok or not (math.isfinite(tau0) and math.isfinite(duration)):
+        return dx, dv, n0, STATUS_NONFINITE, 0.0
     zeta, r, omega = P[_ZETA], P[_R], P[_OMEGA]
     chatter = chatter_time if chatter_time >= 0.0 else 1e-6 * P[_PERIOD]
     n = n0
     t = 0.0
     tau = tau0
-    h = NONE
-    searched = False
+    contacts = 0
+    # at rest on the wall (to rounding): a contact at rest now, handled in the loop
     if resting_on_wall(P, tau, dx, dv):
-        if math.cos(tau) - P[_D] > 0.0:
-            h = 0.0  # at rest on the wall (to rounding) and pushed into it: sticks at once
-            searched = True
-        else:  # leaving from rest: no impact while the gap is below its rounding
-            t = min(duration, release_skip(P, tau, dx))
-            dx, dv = propagate(zeta, dx, dv, t)
-            tau = (tau0 + omega * t) % TWO_PI
-    if not searched and t < duration:
-        h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack)
+        h = 0.0
+    elif duration > 0.0:
+        h, status, info = next_impact(P, tau, dx, dv, duration, 0.0, stack, grid)
         if status != STATUS_OK:
             return dx, dv, n, status, info
+    else:
+        h = NONE
     while True:
         remaining = duration - t
         if h == NONE or remaining <= 0.0:
@@ -383,49 +498,66 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
                 f11, f12, f21, f22 = transition_matrix(zeta, remaining)
                 dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
             return dx, dv, n, STATUS_OK, 0.0
-        if n - n0 >= max_impacts:
+        if contacts >= max_impacts:
             return dx, dv, n, STATUS_IMPACT_CAP, tau % TWO_PI
+        contacts += 1
+        # velocity rounding after the flow: terms of size |C| with phases omega_d h
+        flow_err = 8.0 * _EPS * amplitude_bound(zeta, dx, dv) * (2.0 + h)
         f11, f12, f21, f22 = transition_matrix(zeta, h)
         dx, dv = f11 * dx + f12 * dv, f21 * dx + f22 * dv
         t += h
         tau = (tau + omega * h) % TWO_PI
-        xp_minus_d, vp = _wall_state(P, tau)
+        wall_dx, wall_dv = on_wall_at_rest(P, tau)  # (d, 0) at this phase
+        vp = -wall_dv
         v_minus = vp + dv
-        v_plus = -r * v_minus
-        # on the wall exactly: dx = d - x_p
-        dx = -xp_minus_d
-        dv = v_plus - vp
         force = math.cos(tau) - P[_D]
-        t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 else math.inf
-        height = v_plus * v_plus / (2.0 * force) if force > 0.0 else math.inf
+        v_tol = wall_rounding(P, tau, dx, dv)[1] + flow_err
+        dx = wall_dx  # on the wall exactly
+        if v_minus <= v_tol:  # contact at rest, below the velocity's rounding
+            dv = wall_dv
+            if force <= 0.0:  # tangency: v- = 0 changes nothing; leave the wall
+                t, tau, dx, dv = leave_wall(P, tau0, t, duration, dx, dv)
+                h = NONE
+                if t < duration:
+                    h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack,
+                                                  grid)
+                    if status != STATUS_OK:
+                        return dx, dv, n, status, info
+                continue
+            v_minus, t_inf, height = 0.0, 0.0, 0.0  # pushed into the wall: sticks
+        else:
+            t_inf = max(0.0, 2.0 * r * v_minus / ((1.0 - r) * force)) if force > 0.0 \
+                else math.inf
+            # the next bounce rises v+^2 / (2 F): below ~1e3 ulps of the gap, not resolvable
+            height = power(r * v_minus, P[_TWO]) / (2.0 * force) if force > 0.0 else math.inf
+        v_plus = -r * v_minus
+        dv = v_plus - vp
         if t_inf < chatter or height < 1e3 * ulp(abs(dx) + abs(P[_DD]) + P[_AMP]):
             # chattering: sum the geometric sequence and stick (velocity -> 0)
-            out[n, 0], out[n, 1], out[n, 2], out[n, 3], out[n, 4] = t, tau, v_minus, v_plus, 1.0
+            t_hit, tau_hit = t, tau
             t += t_inf
             tau = (tau + omega * t_inf) % TWO_PI
             stick = release_time(P, tau, duration - t)
-            out[n, 5] = t + stick if t + stick <= duration else math.inf
+            release = t + stick if t + stick <= duration else math.inf
+            out[n, 0], out[n, 1], out[n, 2], out[n, 3] = t_hit, tau_hit, v_minus, v_plus
+            out[n, 4], out[n, 5] = 1.0, release
             n += 1
             t = min(duration, t + stick)
             tau = (tau0 + omega * t) % TWO_PI
-            xp_minus_d, vp = _wall_state(P, tau)
-            dx, dv = -xp_minus_d, -vp
+            dx, dv = on_wall_at_rest(P, tau)
             if t < duration:
-                skip = min(duration - t, release_skip(P, tau, dx))
-                dx, dv = propagate(zeta, dx, dv, skip)
-                t += skip
-                tau = (tau0 + omega * t) % TWO_PI
+                t, tau, dx, dv = leave_wall(P, tau0, t, duration, dx, dv)
             h = NONE
             if t < duration:
-                h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack)
+                h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
                 if status != STATUS_OK:
                     return dx, dv, n, status, info
             continue
-        out[n, 0], out[n, 1], out[n, 2], out[n, 3], out[n, 4] = t, tau, v_minus, v_plus, 0.0
-        out[n, 5] = math.nan
+        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = t, tau, v_minus, v_plus
+        out[n, 4], out[n, 5] = 0.0, math.nan
         n += 1
         h = NONE
         if t < duration:
-            h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack)
+            h, status, info = next_impact(P, tau, dx, dv, duration - t, 0.0, stack, grid)
             if status != STATUS_OK:
                 return dx, dv, n, status, info

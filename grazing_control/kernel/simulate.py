@@ -11,34 +11,36 @@ from __future__ import annotations
 
 import numpy as np
 
-from .impact import STATUS_OK, TWO_PI, _OMEGA, _PERIOD, _TAU2, advance, jit
+from .impact import STATUS_OK, TWO_PI, _OMEGA, _PERIOD, _TAU2, advance, jit, window_grid
 
-__all__ = ["period_step", "run", "STATUS_BUFFER_FULL", "MAX_IMPACTS"]
+__all__ = ["period_step", "run", "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS"]
 
 #: The impact buffer of :func:`run` is full: resume at the returned period with more room.
 STATUS_BUFFER_FULL = 3
+#: simulate's check: the correction c1 dx + c2 dv is not finite or exceeds 1e150 (info).
+STATUS_CORRECTION = 5
 #: The core's default cap of impacts per advance call.
 MAX_IMPACTS = 10000
 
 
 @jit
-def period_step(P, dx, dv, dv_correction, delay, out, n0, stack):
+def period_step(P, dx, dv, dv_correction, delay, out, n0, stack, grid):
     """simulate.period_step: (dx, dv, n, status, info); impact rows n0..n-1 of ``out``.
 
     ``out`` needs n0 + 2 MAX_IMPACTS rows when delay > 0 (two advance calls), n0 +
     MAX_IMPACTS otherwise. Impact times count from the sample. The caller validates
-    0 <= delay < T.
+    0 <= delay < T. ``grid``: window_grid(P, tau2, T) (or empty), reused when delay = 0.
     """
     if delay == 0.0:
         return advance(P, P[_TAU2], dx, dv + dv_correction, P[_PERIOD], MAX_IMPACTS, -1.0,
-                       out, n0, stack)
+                       out, n0, stack, grid)
     dx1, dv1, n1, status, info = advance(P, P[_TAU2], dx, dv, delay, MAX_IMPACTS, -1.0, out, n0,
-                                          stack)
+                                          stack, grid)
     if status != STATUS_OK:
         return dx1, dv1, n1, status, info
     tau = (P[_TAU2] + P[_OMEGA] * delay) % TWO_PI
     dx2, dv2, n2, status, info = advance(P, tau, dx1, dv1 + dv_correction, P[_PERIOD] - delay,
-                                         MAX_IMPACTS, -1.0, out, n1, stack)
+                                         MAX_IMPACTS, -1.0, out, n1, stack, grid)
     for i in range(n1, n2):
         out[i, 0] += delay
         out[i, 5] += delay
@@ -62,17 +64,22 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
     (k, dx, dv, n_impacts, status, info)
         k = periods and STATUS_OK when done. STATUS_BUFFER_FULL: period k did not fit in
         ``impacts``; (dx, dv) is still sample k's, so the call can be resumed from k with
-        a larger array. Any other status is the core's error at period k.
+        a larger array. STATUS_CORRECTION: simulate's overflow check of the correction
+        (info) failed at sample k, whose (dx, dv) are returned. Any other status is the
+        core's error at period k, with (dx, dv) the state it is about (impact.advance).
     """
     period = P[_PERIOD]
     keep = impacts.shape[0] > 0
+    grid = window_grid(P, P[_TAU2], period)
     for k in range(k0, periods):
         dvc = 0.0
         if controlled and k >= control_after:
             dvc = c1 * dx + c2 * dv
-        ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, delay, scratch, 0, stack)
-        if status != STATUS_OK:
-            return k, dx, dv, n_impacts, status, info
+            if not abs(dvc) <= 1e150:  # simulate's check: an input overflowed
+                return k, dx, dv, n_impacts, STATUS_CORRECTION, dvc
+        ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, delay, scratch, 0, stack, grid)
+        if status != STATUS_OK:  # (ndx, ndv): the state the error is about
+            return k, ndx, ndv, n_impacts, status, info
         if keep:
             if n_impacts + n > impacts.shape[0]:
                 return k, dx, dv, n_impacts, STATUS_BUFFER_FULL, 0.0

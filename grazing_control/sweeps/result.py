@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,16 +49,26 @@ class SweepResult:
         return int(self.period.shape[0])
 
     def to_npz(self, path) -> None:
-        """Write every field to an uncompressed npz (readable without this package)."""
+        """Write every field to an uncompressed npz (readable without this package).
+
+        The file is a function of the result alone (fixed member order and zip
+        timestamps), so equal results give byte-identical files.
+        """
         meta = {"format": _FORMAT, "names": list(self.names), "shape": list(self.shape),
                 "periods": self.periods, "transient": self.transient,
                 "control_after": self.control_after, "base": self.base, "engine": self.engine}
         arrays = {f"axis_{n}": np.asarray(a) for n, a in zip(self.names, self.axes)}
         arrays.update({f"point_{n}": np.asarray(v) for n, v in self.points.items()})
-        np.savez(path, meta=np.array(json.dumps(meta)), starts=self.starts,
-                 pi2=self.pi2, pi2_deviation=self.pi2_deviation, reference=self.reference,
-                 impacts_per_period=self.impacts_per_period, period=self.period,
-                 errors=self.errors, c1=self.c1, c2=self.c2, **arrays)
+        arrays.update(meta=np.array(json.dumps(meta, sort_keys=True)), starts=self.starts,
+                      pi2=self.pi2, pi2_deviation=self.pi2_deviation, reference=self.reference,
+                      impacts_per_period=self.impacts_per_period, period=self.period,
+                      errors=self.errors, c1=self.c1, c2=self.c2)
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for name in sorted(arrays):
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                with zf.open(info, "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(arrays[name]),
+                                              allow_pickle=False)
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":

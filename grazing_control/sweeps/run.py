@@ -63,7 +63,8 @@ def _points(params, grid, starts, gains, control_after):
     axes = tuple(_values(n, grid[n]) for n in names)
     for n in names:
         if n not in GRID_NAMES:
-            raise ParameterError(f"grid name {n!r} is invalid: valid names are {', '.join(GRID_NAMES)}")
+            raise ParameterError(
+                f"grid name {n!r} is invalid: valid names are {', '.join(GRID_NAMES)}")
     gridded_gains = "c1" in names or "c2" in names
     if "c1" in names and "c2" not in names and gains is None:
         raise ParameterError("grid has c1 without c2 and no gains: give c2 (grid or gains)")
@@ -90,8 +91,12 @@ def _points(params, grid, starts, gains, control_after):
 
 
 def _run_point_python(p, start, c1, c2, periods, transient, control_after):
-    """One point by the pure-Python reference core: (deviation (m, 2), counts (m,))."""
-    from ..simulate import period_step
+    """One point by the pure-Python reference core: (deviation (m, 2), counts (m,)).
+
+    Each period is simulate.period_step's exact flow with impacts (delay 0) on
+    impact.advance itself, whichever path period_step would take.
+    """
+    from ..impact import NonFiniteStateError, advance
 
     m = periods - transient
     dev = np.full((m, 2), np.nan)
@@ -99,8 +104,18 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
     dx, dv = start
     controlled = not math.isnan(c1)
     for k in range(periods):
-        dvc = c1 * dx + c2 * dv if controlled and k >= control_after else 0.0
-        seg = period_step(p, dx, dv, dvc)
+        dvc = 0.0
+        if controlled and k >= control_after:  # as simulate: Eq. 28 and its overflow check
+            dvc = c1 * dx + c2 * dv
+            if not abs(dvc) <= 1e150:
+                raise NonFiniteStateError(
+                    f"the correction c1*dx + c2*dv = {dvc!r} at period {k} is not finite or "
+                    f"exceeds 1e150: an input overflowed (c1={c1!r}, c2={c2!r}, dx={dx!r}, "
+                    f"dv={dv!r})")
+        try:
+            seg = advance(p, p.tau2, dx, dv + dvc, p.period)
+        except NonFiniteStateError as exc:
+            raise NonFiniteStateError(f"at period {k}: {exc}") from None
         if k >= transient:
             dev[k - transient] = dx, dv
             counts[k - transient] = len(seg.impacts)
@@ -160,8 +175,10 @@ def _progress(total, enabled):
 
 
 def _chunks(points, n_chunks):
-    size = max(1, math.ceil(len(points) / n_chunks))
-    return [points[i:i + size] for i in range(0, len(points), size)]
+    """Split into n_chunks strided chunks (point i to chunk i mod n_chunks): neighbouring
+    grid values cost alike (chaos costs more than a 1/1 orbit), so striding balances."""
+    n_chunks = max(1, min(n_chunks, len(points)))
+    return [points[i::n_chunks] for i in range(n_chunks)]
 
 
 def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
@@ -183,7 +200,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
     transient = _count("transient", transient, 0)
     if transient >= periods:
         raise ParameterError(
-            f"transient={transient!r} is invalid: valid range is 0 <= transient < periods={periods}")
+            f"transient={transient!r} is invalid: valid range is 0 <= transient < "
+            f"periods={periods}")
     if control_after is not None:
         control_after = _count("control_after", control_after, 0)
     has_gains = gains is not None or "c1" in grid or "c2" in grid
@@ -194,7 +212,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
     if engine not in ("auto", "kernel", "python"):
         raise ParameterError(f"engine={engine!r} is invalid: valid values are auto, kernel, python")
     if not (isinstance(period_tol, (int, float)) and math.isfinite(period_tol) and period_tol > 0):
-        raise ParameterError(f"period_tol={period_tol!r} is invalid: valid range is a finite value > 0")
+        raise ParameterError(
+            f"period_tol={period_tol!r} is invalid: valid range is a finite value > 0")
     if max_period is not None:
         max_period = _count("max_period", max_period, 1)
     starts = _starts(deviation)
@@ -243,7 +262,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
         names=names, axes=axes, shape=tuple(a.size for a in axes) + (starts.shape[0],),
         points={nm: np.array([_point_value(pt, nm) for pt in pts]) for nm in names},
         starts=np.array([pt[1] for pt in pts]).reshape(n, 2),
-        pi2_deviation=dev, reference=np.array([(pt[0].x_ref, pt[0].v_ref) for pt in pts]).reshape(n, 2),
+        pi2_deviation=dev,
+        reference=np.array([(pt[0].x_ref, pt[0].v_ref) for pt in pts]).reshape(n, 2),
         impacts_per_period=counts, period=period, errors=errors.astype(str),
         c1=np.array([pt[2] for pt in pts]), c2=np.array([pt[3] for pt in pts]),
         periods=periods, transient=transient,
