@@ -150,11 +150,16 @@ def _status(argv):
     (["--workers", "0"], "--workers"),
     (["--workers", "x"], "--workers"),
     (["--bags", "/nonexistent/bags"], "bags"),
+    (["--out", ""], "--out"),
+    (["--out", "  "], "--out"),
+    (["--docs", ""], "--docs"),
 ])
-def test_bad_input_is_one_line_and_status_2(tmp_path, capsys, argv, needle):
+def test_bad_input_is_one_line_and_status_2(tmp_path, capsys, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)
     assert _status(["figures", "--quick", "--out", str(tmp_path / "o")] + argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("grazing: error:") and needle in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []  # nothing written, not even into the cwd
 
 
 def test_out_that_is_a_file_is_refused(tmp_path, capsys):
