@@ -85,8 +85,11 @@ def test_brute_force_diagram_doubles_where_the_branch_loses_stability(quick):
     assert nums["brute_last_period1"] <= nums["pd_delta_d"] <= nums["brute_first_period2"]
     assert nums["pd_in_bracket"] is True
     assert nums["brute_first_period2"] < nums["brute_first_period4"] < nums["brute_chaos_from"]
-    # the period-1 points of the diagram are the exact 1/1 orbit
+    # the period-1 points of the diagram are the exact 1/1 orbit, the period-2 points the
+    # 2/2 orbit found by Newton shooting; period 4 appears only past the 2/2 orbit's doubling
     assert quick[1]["panels"]["fig1a"]["branch_agreement"] < 1e-10
+    assert nums["two_cycle_agreement"] < 1e-10
+    assert nums["brute_first_period2"] < nums["two_cycle_pd"] <= nums["brute_first_period4"]
 
 
 def test_admissible_set_and_gains_are_design_s(quick):

@@ -24,8 +24,9 @@ import numpy as np
 from ..orbits import orbit_11
 from ..params import OscillatorParams
 from ..sweeps import sweep
-from ._plot import COLORS, PANEL_SIZE, pyplot, save
+from ._plot import COLORS, PANEL_SIZE, pyplot, save, stability_segments
 from .branches import BranchData, draw_branch
+from .two_cycle import two_cycle
 from .report import Number, Panel
 
 __all__ = ["STARTS", "DiagramData", "diagram_data", "panel_1a", "panel_1b"]
@@ -40,11 +41,13 @@ STARTS = ((0.0, 0.0), (1e-3, 0.0))
 @dataclass(frozen=True)
 class DiagramData:
     """A brute-force diagram: delta_d (n,), starts (s, 2), x (n, s, m) physical Pi2
-    samples after the transient, period (n, s), impacts (n, s, m), and how it was run."""
+    samples after the transient, last (n, s, 2) the last sample as a deviation from X**,
+    period (n, s), impacts (n, s, m), and how it was run."""
 
     delta_d: np.ndarray
     starts: np.ndarray
     x: np.ndarray
+    last: np.ndarray
     period: np.ndarray
     impacts: np.ndarray
     periods: int
@@ -63,7 +66,8 @@ def diagram_data(p: OscillatorParams, delta_d, *, periods: int, transient: int,
                 workers=workers, progress=progress)
     seconds = time.perf_counter() - t0
     n, s, m = dd.size, st.shape[0], periods - transient
-    return DiagramData(dd, st, res.pi2[:, :, 0].reshape(n, s, m), res.period.reshape(n, s),
+    return DiagramData(dd, st, res.pi2[:, :, 0].reshape(n, s, m),
+                       res.pi2_deviation[:, -1, :].reshape(n, s, 2), res.period.reshape(n, s),
                        res.impacts_per_period.reshape(n, s, m), periods, transient,
                        str(res.engine), seconds)
 
@@ -161,6 +165,20 @@ def _runs(dd, mask):
                  for r in np.split(k, np.flatnonzero(np.diff(k) != 1) + 1))
 
 
+def _two_cycle_agreement(data: DiagramData, tc) -> float | None:
+    """max over the grid points with a brute-force 2-cycle (from X**) and a shot 2/2
+    orbit of the distance between their two Pi2 x values (sorted)."""
+    if tc is None or not tc.delta_d.size:
+        return None
+    errs = []
+    for d, xs in zip(tc.delta_d, tc.x):
+        i = int(np.searchsorted(data.delta_d, d))
+        if i < data.delta_d.size and data.delta_d[i] == d and data.period[i, 0] == 2:
+            brute = np.sort(data.x[i, 0, -2:])
+            errs.append(float(np.max(np.abs(brute - np.sort(xs)))))
+    return max(errs) if errs else None
+
+
 def _chaos_from(dd, per):
     """The left end of the last run of period-0 points reaching the right end of the grid."""
     if not per.size or per[-1] != 0:
@@ -188,16 +206,6 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
     pd = branch.bifurcation("period-doubling")
     ax.axvline(pd.delta_d, color=COLORS["bifurcation"], lw=0.8, ls=":",
                label=f"period doubling (continuation), Δd = {pd.delta_d:.6g}")
-    regular = data.x[(data.period[:, 0] > 0) & (data.period[:, 0] <= 16), 0, :]
-    if regular.size:  # frame the cascade; chaotic points beyond it are clipped
-        lo, hi = float(regular.min()), float(regular.max())
-        pad = 0.25 * (hi - lo) + 1e-6
-        ax.set_ylim(lo - pad, hi + pad)
-    ax.set(xlim=window, xlabel="Δd = d − d*", ylabel="x on Π2",
-           title="Fig. 1(b): magnified near the period doubling")
-    ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 3))
-    ax.legend(fontsize=7.5, loc="lower left", markerscale=6)
-    files = save(fig, out, "fig1b")
     per, dd = data.period[:, 0], data.delta_d
     k1 = np.flatnonzero(per == 1)
     last1 = float(dd[k1[-1]]) if k1.size else None
@@ -207,6 +215,29 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
     k2 = np.flatnonzero((per == 2) & (spread > TWO_CYCLE_SPREAD)
                         & (dd > (last1 if last1 is not None else -np.inf)))
     first2 = float(dd[k2[0]]) if k2.size else None
+    tc = two_cycle(p, dd[k2[0]:], data.last[k2[0], 0]) if k2.size else None
+    if tc is not None and tc.delta_d.size:
+        labelled = set()
+        for col in (0, 1):
+            for xs, ys, st in stability_segments(tc.delta_d, tc.x[:, col], tc.stable):
+                tag = f"2/2 orbit (Newton shooting), {'stable' if st else 'unstable'}"
+                ax.plot(xs, ys, "-" if st else "--", lw=1.0, zorder=0.6,
+                        color=COLORS["perturbation"] if st else "tab:brown",
+                        label=None if st in labelled else tag)
+                labelled.add(st)
+        if tc.period_doubling is not None:
+            ax.axvline(tc.period_doubling, color="tab:brown", lw=0.8, ls=":",
+                       label=f"2/2 period doubling, Δd = {tc.period_doubling:.6g}")
+    regular = data.x[(data.period[:, 0] > 0) & (data.period[:, 0] <= 16), 0, :]
+    if regular.size:  # frame the cascade; chaotic points beyond it are clipped
+        lo, hi = float(regular.min()), float(regular.max())
+        pad = 0.25 * (hi - lo) + 1e-6
+        ax.set_ylim(lo - pad, hi + pad)
+    ax.set(xlim=window, xlabel="Δd = d − d*", ylabel="x on Π2",
+           title="Fig. 1(b): magnified near the period doubling")
+    ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 3))
+    fig.legend(fontsize=7, loc="outside lower center", ncol=2, markerscale=6)
+    files = save(fig, out, "fig1b")
     after = first2 if first2 is not None else -np.inf
     bracket = last1 is not None and first2 is not None and last1 <= pd.delta_d <= first2
     numbers = (
@@ -220,8 +251,14 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
                int(np.count_nonzero((dd > last1) & (dd < first2))) if bracket else None),
         Number("pd_in_bracket", "Δd_PD (continuation) lies between the two", bool(bracket), "—",
                note="critical slowing down blurs the grid points next to Δd_PD"),
+        Number("two_cycle_pd", "2/2 orbit: period doubling Δd (shooting + Brent)",
+               tc.period_doubling if tc is not None else None, fmt=".9g",
+               note="1 + tr J + det J of the 2/2 monodromy"),
         Number("brute_first_period4", "brute force: first period-4 Δd after that",
                _first(dd, (per == 4) & (dd > after)), fmt=".6g"),
+        Number("two_cycle_agreement", "max |x − x(2/2 orbit)| at the brute-force period-2 points",
+               _two_cycle_agreement(data, tc), fmt=".2e",
+               note=f"{tc.delta_d.size if tc is not None else 0} orbits shot along the grid"),
         Number("brute_first_period8", "brute force: first period-8 Δd after that",
                _first(dd, (per == 8) & (dd > after)), fmt=".6g"),
         Number("brute_chaos_from", "brute force: Δd from which no point has a period ≤ 64",
@@ -234,5 +271,7 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
                  "The brute-force diagram of Fig. 1(a) on a finer grid around the period "
                  "doubling, with the exactly located bifurcation (dotted, continuation) and "
                  "the 1/1 branch. The period-1 dots split into two where the branch turns "
-                 "unstable, and the doubling cascade (2, 4, 8, …) ends in chaos.",
+                 "unstable; the two points of the 2-cycle lie on the 2/2 orbit found by "
+                 "Newton shooting (orange), which doubles in turn (brown dotted), and the "
+                 "cascade (2, 4, 8, …) ends in chaos.",
                  tuple(files), numbers)
