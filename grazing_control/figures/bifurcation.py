@@ -202,7 +202,8 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
     fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
     _scatter(ax, data, size=1.5 if data.delta_d.size > 300 else 5.0)
     window = (float(data.delta_d[0]), float(data.delta_d[-1]))
-    draw_branch(ax, branch, p.x_ref, window, COLORS["stable"], COLORS["unstable"], "1/1 branch")
+    draw_branch(ax, branch, p.x_ref, window, COLORS["stable"], COLORS["unstable"], "1/1 branch",
+                zorder=3)
     pd = branch.bifurcation("period-doubling")
     ax.axvline(pd.delta_d, color=COLORS["bifurcation"], lw=0.8, ls=":",
                label=f"period doubling (continuation), Δd = {pd.delta_d:.6g}")
@@ -221,7 +222,7 @@ def panel_1b(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
         for col in (0, 1):
             for xs, ys, st in stability_segments(tc.delta_d, tc.x[:, col], tc.stable):
                 tag = f"2/2 orbit (Newton shooting), {'stable' if st else 'unstable'}"
-                ax.plot(xs, ys, "-" if st else "--", lw=1.0, zorder=0.6,
+                ax.plot(xs, ys, "-" if st else "--", lw=1.0, zorder=3,
                         color=COLORS["perturbation"] if st else "tab:brown",
                         label=None if st in labelled else tag)
                 labelled.add(st)

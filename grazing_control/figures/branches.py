@@ -102,7 +102,7 @@ def loglog_slope(x, y, lo: float, hi: float) -> float:
 
 
 def draw_branch(ax, data: BranchData, x_ref: float, window, color_stable, color_unstable,
-                label: str):
+                label: str, zorder: float = 0.5):
     """The 1/1 branch on Pi2 in ``window`` = (lo, hi) of Delta d, and the 0/1 motion
     (x = x_ref) on (0, hi]: solid where stable, dashed where unstable."""
     lo, hi = window
@@ -110,12 +110,12 @@ def draw_branch(ax, data: BranchData, x_ref: float, window, color_stable, color_
     first = {True: True, False: True}
     for xs, ys, st in stability_segments(data.delta_d[keep], data.x_pi2[keep], data.stable[keep]):
         tag = f"{label}, {'stable' if st else 'unstable'}"
-        ax.plot(xs, ys, "-" if st else "--", lw=1.6, zorder=0.5,
+        ax.plot(xs, ys, "-" if st else "--", lw=1.6, zorder=zorder,
                 color=color_stable if st else color_unstable, label=tag if first[st] else None)
         first[st] = False
     if hi > 0.0:
         st = bool(np.max(np.abs(data.non_impacting)) < 1.0)
-        ax.plot([0.0, hi], [x_ref, x_ref], "-" if st else "--", lw=1.6, zorder=0.5,
+        ax.plot([0.0, hi], [x_ref, x_ref], "-" if st else "--", lw=1.6, zorder=zorder,
                 color=color_stable if st else color_unstable)
 
 
