@@ -22,7 +22,7 @@ import pytest
 
 from grazing_control.cli import main
 from grazing_control.continuation import continue_11
-from grazing_control.design import admissible_c2, degenerate_c1
+from grazing_control.design import admissible_c2, degenerate_c1, evaluate_design
 from grazing_control.figures._plot import stability_segments
 from grazing_control.figures.branches import loglog_slope
 from grazing_control.params import OscillatorParams
@@ -100,7 +100,12 @@ def test_admissible_set_and_gains_are_design_s(quick):
     assert nums["c1_at_chosen"] == degenerate_c1(p, -1.0)
     assert round(nums["c1_at_chosen"], 5) == -1.02060
     assert nums["admissible_c2_perturbation"] == pytest.approx([lo, hi], abs=1e-8)
-    assert quick[1]["panels"]["fig2b"]["admissible_upper_gamma1"] == pytest.approx(0.0, abs=1e-6)
+    # each end of the set is where a drawn constraint is marginal
+    assert "none" not in nums["admissible_ends_binding"]
+    assert nums["admissible_ends_binding"].startswith("|λ0| = 1")  # the lower end: a flip
+    zero = quick[1]["panels"]["fig2b"]["gamma1_zero"]
+    assert evaluate_design(p, zero).gamma1 == pytest.approx(0.0, abs=1e-9)
+    assert hi <= zero + 1e-9  # gamma1 > 0 inside the set
 
 
 def test_power_laws_read_off_the_panels_match_theory(quick):
