@@ -177,6 +177,31 @@ def test_errors_are_the_cores():
         kernel.simulate_exact(STUDY, 3, 0.0, math.inf)
 
 
+@pytest.mark.parametrize("gains,deviation", [(Gains(1e300, 0.0), (1.0, 0.0)),
+                                             (Gains(0.0, 1e12), (0.0, 1e-3)),
+                                             (Gains(-3e5, 2e5), (1e-6, 0.0)),
+                                             (Gains(0.0, 1.0), (0.0, 9e149))])
+def test_simulate_errors_are_the_same_on_both_paths(gains, deviation, monkeypatch):
+    """A controller that blows the state up: simulate stops with the same
+    NonFiniteStateError message (the correction's or the state's, and the period) on the
+    kernel and on the core."""
+    p = STUDY.with_(delta_d=-1e-3)
+    messages = []
+    for path in ("numba", "python"):
+        monkeypatch.setenv(kernel.ENV, path)
+        with pytest.raises(impact.NonFiniteStateError) as err:
+            simulate(p, 200, deviation=deviation, gains=gains, control_after=0)
+        messages.append(str(err.value))
+    assert messages[0] == messages[1] and "period" in messages[0], messages
+    if deviation[1] == 9e149:  # the kicked state, not the kick, is too large
+        assert messages[0].startswith("at period 0: the start state is absurdly large")
+
+
+def test_progress_bar_on_the_kernel_path(capsys):
+    res = simulate(STUDY.with_(delta_d=-1e-3), 120_000, progress=True)
+    assert res.impacts_per_period.shape == (120_000,) and "period" in capsys.readouterr().err
+
+
 def test_environment_variable_chooses_the_path(monkeypatch):
     monkeypatch.setenv(kernel.ENV, "python")
     assert kernel.use_kernel() is False
