@@ -8,12 +8,13 @@ PYTHON ?= python3.11
 BENCHES = $(sort $(wildcard benchmarks/bench_*.py))
 
 .DEFAULT_GOAL := help
-.PHONY: help venv test demo bench constraints clean
+.PHONY: help venv test demo figures bench constraints clean
 
 help:
 	@echo "make venv         create $(VENV) (pinned: requirements.txt + constraints.txt) and install the package editable"
 	@echo "make test         run the test suite: $(PY) -m pytest -q tests"
 	@echo "make demo         run the demo: $(VENV)/bin/grazing demo --out out/demo"
+	@echo "make figures      the study's Figs. 1 and 2: $(VENV)/bin/grazing figures --out out/figures"
 	@echo "make bench        run every benchmarks/bench_*.py"
 	@echo "make constraints  re-pin constraints.txt from requirements.txt (full freeze of a fresh venv)"
 	@echo "make clean        remove $(VENV) and everything generated (out/, build/, install/, log/, caches)"
@@ -44,6 +45,9 @@ test: $(VENV)/.stamp
 
 demo: $(VENV)/.stamp
 	$(VENV)/bin/grazing demo --out out/demo
+
+figures: $(VENV)/.stamp
+	$(VENV)/bin/grazing figures --out out/figures
 
 bench: $(VENV)/.stamp
 	@test -n "$(BENCHES)" || echo "no benchmarks/bench_*.py yet"

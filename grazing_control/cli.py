@@ -522,6 +522,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .robustness.cli import add_robustness_parser
 
     add_robustness_parser(sub, _common, _finite)
+    from .figures.command import add_parser as add_figures_parser
+
+    add_figures_parser(sub)
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
     s.add_argument("--out", type=_path, default="out/demo", help="report folder (default out/demo)")
