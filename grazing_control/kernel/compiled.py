@@ -652,11 +652,14 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
     grid = window_grid(P, P[_TAU2], period)
     for k in range(k0, periods):
         dvc = 0.0
+        kick_delay = 0.0  # as simulate: the period is split at the delay only under control
         if controlled and k >= control_after:
             dvc = c1 * dx + c2 * dv
+            kick_delay = delay
             if not abs(dvc) <= 1e150:  # simulate's check: an input overflowed
                 return k, dx, dv, n_impacts, STATUS_CORRECTION, dvc
-        ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, delay, scratch, 0, stack, grid)
+        ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, kick_delay, scratch, 0, stack,
+                                                grid)
         if status != STATUS_OK:  # (ndx, ndv): the state the error is about
             return k, ndx, ndv, n_impacts, status, info
         if keep:
