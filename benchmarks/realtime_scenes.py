@@ -15,16 +15,15 @@ the realtime run differs from lockstep, the deadline misses (oscillator/deadline
 and the largest difference to lockstep before the first miss of a non-zero correction;
 "on orbit": the share of the last 200 samples within 1e-9 of the lockstep 1/1 orbit.
 
-Until ``grazing design --delay`` is on this branch the delay-aware c1 is written from the
-formula of issue 8 §1 (c1 solving N_g,12(delay) = 0 with c2 = -1; tests/test_actuation.py
-has the same helper). Run: ``.venv/bin/python benchmarks/realtime_scenes.py [--delay 6]``;
+The delay-aware gains are those of ``grazing design --c2 -1 --delay D`` (c1 from
+N_g,12(delay) = 0, docs/theory_delay.md). Each ``grazing run`` gets its own ROS domain.
+Run: ``.venv/bin/python benchmarks/realtime_scenes.py [--delay 6]``;
 the bags and YAMLs go to benchmarks/out/realtime_scenes/.
 """
 
 from __future__ import annotations
 
 import argparse
-import random
 import re
 import shutil
 import subprocess
@@ -36,22 +35,19 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
+from grazing_control.control import Gains  # noqa: E402
+from grazing_control.design import degenerate_c1, write_controller_yaml  # noqa: E402
 from grazing_control.nodes.common import stamp_key  # noqa: E402
 from grazing_control.params import OscillatorParams  # noqa: E402
 from grazing_control.recording import read_messages  # noqa: E402
-from test_actuation import delayed_c1  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "out" / "realtime_scenes"
 
 
 def controller_yaml(path: Path, p: OscillatorParams, delay: float) -> Path:
-    c1 = delayed_c1(p, -1.0, delay)
-    doc = {"/controller_node": {"ros__parameters": {
-        "c1": float(c1), "c2": -1.0, "actuation_delay": float(delay), "zeta": p.zeta,
-        "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset}}}
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    """The controller YAML of ``grazing design --c2 -1 --delay D --out path``."""
+    write_controller_yaml(path, p, Gains(degenerate_c1(p, -1.0, delay), -1.0, delay))
     return path
 
 
@@ -60,8 +56,7 @@ def grazing_run(name, delta_d, mode, controller, extra=()):
     shutil.rmtree(bag, ignore_errors=True)
     cmd = [sys.executable, "-m", "grazing_control.cli", "run", "--mode", mode,
            "--periods", "1300", "--delta-d", repr(delta_d), "--controller-params",
-           str(controller), "--bag", str(bag), "--log-dir", str(logs), "--domain-id",
-           str(random.SystemRandom().randrange(101, 232)), "--timeout", "300", *extra]
+           str(controller), "--bag", str(bag), "--log-dir", str(logs), "--timeout", "300", *extra]
     print("$ grazing " + " ".join(cmd[3:]), flush=True)
     subprocess.run(cmd, check=True, cwd=ROOT)
     text = (logs / "sim_node.log").read_text()

@@ -47,7 +47,8 @@ def settings(**kw):
 def delayed_c1(p: OscillatorParams, c2: float, delay: float) -> float:
     """c1 making the grazing bifurcation degenerate with the kick delayed by ``delay``.
 
-    Test-only restatement of issue 8 section 1 (the library's is delay8's design):
+    Test-only restatement of issue 8 section 1, independent of the library's
+    design.degenerate_c1(p, c2, delay):
     N_g(delay) = Phi(T - s) (I + b k^T) Phi(s), b = Phi(-delay) (0, 1)^T, k = (c1, c2),
     s = pi2_offset / omega; N_g[0, 1] = 0 is linear in c1.
     """
@@ -83,6 +84,16 @@ def core_fault_run(p, n, c1, c2, on, delay, faults: FaultModel):
 
 
 # ============================================================ engine, no middleware
+def test_library_delayed_design_equals_the_restatement():
+    """design.degenerate_c1(p, c2, delay) (docs/theory_delay.md, Eq. D5) equals the
+    matrix restatement above at the delays the node tests use."""
+    p = OscillatorParams(delta_d=-5e-6)
+    for c2 in (-1.0, -0.5, 0.5):
+        for delay in (0.3, 2.0, 6.0):
+            assert degenerate_c1(p, c2, delay) == pytest.approx(delayed_c1(p, c2, delay),
+                                                                rel=1e-12)
+
+
 def test_delayed_c1_at_zero_delay_is_the_study_design():
     p = OscillatorParams(delta_d=-5e-6)
     for c2 in (-1.0, -0.5, 0.3):
