@@ -53,6 +53,8 @@ from pathlib import Path
 
 import yaml
 
+from grazing_control import kernel
+
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
            "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
            "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",
@@ -358,6 +360,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     t0 = time.monotonic()
     if domain_id is not None:
         check_domain_id(domain_id)
+    if kernel.use_kernel():  # a fresh checkout compiles numba's cache once, here, not in a node
+        kernel.warm_up()
     if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0
                                     and math.isfinite(timeout)):
         raise ValueError(f"timeout={timeout!r} is invalid: valid range is a finite "

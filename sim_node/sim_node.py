@@ -96,6 +96,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
 
+from grazing_control import kernel
 from grazing_control.faults import FaultModel
 from grazing_control.impact import advance
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
@@ -581,6 +582,8 @@ class SimNode(Node):
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.engine = Engine(self.settings)
+        if kernel.use_kernel():   # compile, or load numba's cache, now: not in the first period
+            kernel.warm_up()
         self.exit_when_done = self.get_parameter("exit_when_done").value
         self.exit_code = 0
         self.exit_now = False
