@@ -143,10 +143,18 @@ def format_value(value) -> str:
 
 
 #: Runs a node module as ``python -m`` does, with a SIGINT that ends the process quietly
-#: (status 130) until the node installs its own handlers: a Ctrl-C while Python is still
-#: importing would otherwise print a KeyboardInterrupt traceback.
+#: (status 130) until the node installs its own handlers (a Ctrl-C while Python is still
+#: importing would otherwise print a KeyboardInterrupt traceback), and a SIGTERM when the
+#: launcher dies (Linux PR_SET_PDEATHSIG; exits at once if the launcher is already gone).
+#: Set here, after exec, rather than in a ``preexec_fn``: Python code between fork and
+#: exec would run in the launcher's process group and could print the traceback of a
+#: Ctrl-C that reaches it there.
 BOOTSTRAP = ("import os, runpy, signal, sys; "
              "signal.signal(signal.SIGINT, lambda s, f: os._exit(130)); "
+             "parent = int(os.environ.pop('GRAZING_LAUNCHER_PID', '0')); "
+             "exec('try:\\n import ctypes; ctypes.CDLL(None).prctl(1, 15)\\n"
+             "except Exception: pass') if parent else None; "
+             "os._exit(143) if parent and os.getppid() != parent else None; "
              "runpy.run_module(sys.argv.pop(1), run_name='__main__', alter_sys=True)")
 
 #: Largest ROS_DOMAIN_ID: Fast DDS's ports (7400 + 250 d + 11 + 2 i) must stay below 65536.
@@ -227,16 +235,6 @@ def node_env(domain_id: int | None = None) -> dict:
     return env
 
 
-def _die_with_parent() -> None:
-    """In the child before exec: SIGTERM it when the launcher dies (Linux prctl)."""
-    try:
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
-    except Exception:  # not Linux: the node outlives a killed launcher
-        pass
-
-
 def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, log=None,
                python=None) -> subprocess.Popen:
     """Start one node process; its output goes to ``log`` (a path) or is inherited.
@@ -249,9 +247,11 @@ def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, 
     out = open(log, "wb") if log is not None else None
     try:
         return subprocess.Popen(node_command(module, params_files, overrides, python),
-                                env=node_env(domain_id), stdin=subprocess.DEVNULL,
+                                env=dict(node_env(domain_id),
+                                         GRAZING_LAUNCHER_PID=str(os.getpid())),
+                                stdin=subprocess.DEVNULL,
                                 stdout=out, stderr=subprocess.STDOUT if out else None,
-                                process_group=0, preexec_fn=_die_with_parent)
+                                process_group=0)
     finally:
         if out is not None:
             out.close()

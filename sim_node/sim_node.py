@@ -582,8 +582,6 @@ class SimNode(Node):
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.engine = Engine(self.settings)
-        if kernel.use_kernel():   # compile, or load numba's cache, now: not in the first period
-            kernel.warm_up()
         self.exit_when_done = self.get_parameter("exit_when_done").value
         self.exit_code = 0
         self.exit_now = False
@@ -715,6 +713,8 @@ class SimNode(Node):
         elif time.monotonic() - self._ready_since < 0.2:
             return
         self.destroy_timer(self._start_timer)
+        if kernel.use_kernel():   # compile, or load numba's cache, now: not in the first period
+            kernel.warm_up()
         self._started = True
         self._wall_start = time.monotonic()
         if self.settings.mode == "lockstep":

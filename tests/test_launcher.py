@@ -160,3 +160,38 @@ def test_repeated_recorded_scenes_lose_no_correction(tmp_path):
         counts = Counter(m.topic for m in read_messages(bag))
         assert counts["/oscillator/pi2"] == n and counts["/controller/velocity_correction"] == n
         assert "missed" not in (tmp_path / f"logs{i}" / "recorder_node.log").read_text()
+
+
+def _processes_mentioning(text: str) -> list:
+    """PIDs of live processes whose command line contains ``text``."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/cmdline", "rb") as f:
+                    if text.encode() in f.read():
+                        found.append(int(entry))
+            except OSError:
+                pass
+    return found
+
+
+def test_nodes_stop_and_the_bag_closes_when_the_launcher_is_killed(tmp_path):
+    """SIGKILL to `grazing run` (no chance to stop its nodes): every node gets SIGTERM from
+    the kernel (PR_SET_PDEATHSIG, set by the bootstrap after exec), ends, and the recorder
+    closes its bag (metadata.yaml written)."""
+    bag = tmp_path / "bag"
+    proc = grazing("run", "--periods", "1000000", "--bag", str(bag), "--log-dir",
+                   str(tmp_path / "logs"), start_new_session=True)
+    end = time.monotonic() + 60
+    while not list(bag.glob("*.mcap")) and time.monotonic() < end:
+        time.sleep(0.05)
+    time.sleep(1.0)
+    assert _processes_mentioning(str(bag)), "the recorder is not running"
+    proc.kill()
+    proc.communicate(timeout=30)
+    end = time.monotonic() + 20
+    while _processes_mentioning(str(bag)) and time.monotonic() < end:
+        time.sleep(0.1)
+    assert not _processes_mentioning(str(bag))
+    assert (bag / "metadata.yaml").is_file()
