@@ -549,3 +549,21 @@ def test_grazing_run_json_prints_one_summary_object(tmp_path):
     obj = _strict_json(r.stdout)
     assert obj["ok"] is True and obj["exit_code"] == 0 and obj["sim"] == 0
     assert "finished" in obj["summary"]
+
+
+@pytest.mark.parametrize("delay", [0.05, 0.15, 0.3, 0.6])
+def test_ctrl_c_at_any_moment_of_the_console_script_is_quiet(delay):
+    """The `grazing` console script (grazing_control.console) under SIGINT while it
+    imports numpy/scipy or while it simulates: status 130, one line, no traceback."""
+    import signal
+    import time
+
+    script = Path(sys.executable).parent / "grazing"
+    proc = subprocess.Popen([str(script), "simulate", "--delta-d", "-5e-6", "--periods",
+                             "5000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err and err.strip() == "grazing: interrupted", err

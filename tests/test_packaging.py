@@ -25,7 +25,7 @@ BIN_DIR = Path(sys.executable).parent
 
 # Executable name -> module holding its ``main`` (the contract of setup.py).
 CONSOLE_SCRIPTS = {
-    'grazing': 'grazing_control.cli',
+    'grazing': 'grazing_control.console',
     'sim_node': 'sim_node.sim_node',
     'controller_node': 'grazing_control.nodes.controller_node',
     'recorder_node': 'grazing_control.nodes.recorder_node',
