@@ -32,7 +32,6 @@ gives (uncontrolled attractor, switch-on, convergence, final point) and:
 
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import dataclass, field
 
@@ -336,15 +335,10 @@ def _predicted(setup: Setup):
         out["uncontrolled_orbit_error"] = f"{type(exc).__name__}: {exc}"
     if g is None:
         return out
-    kwargs = {}
-    if setup.actuation_delay:
-        if "delay" in inspect.signature(orbit_11).parameters:
-            kwargs["delay"] = setup.actuation_delay
-        else:
-            out["note"] = ("the run had an actuation delay but this core's orbit_11 takes "
-                           "none: prediction for a kick on Pi2")
+    if setup.actuation_delay:  # the kick acts the delay after Pi2 (docs/theory_delay.md)
+        g = Gains(g.c1, g.c2, setup.actuation_delay)
     try:
-        orb = orbit_11(p, g, **kwargs)
+        orb = orbit_11(p, g, branch="grazing")
     except Exception as exc:
         out["controlled_orbit_error"] = f"{type(exc).__name__}: {exc}"
         return out

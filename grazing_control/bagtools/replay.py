@@ -368,7 +368,9 @@ def compare_corrections(orig, new, setup) -> dict:
         from ..control import Gains
         from ..orbits import orbit_11
         try:
-            orb = orbit_11(setup.params, Gains(float(g[0]), float(g[1])))
+            delay = float(rec.get("actuation_delay") or setup.actuation_delay or 0.0)
+            orb = orbit_11(setup.params, Gains(float(g[0]), float(g[1]), delay),
+                           branch="grazing")
             out["new_gains_controlled_orbit"] = {
                 "multipliers": [complex(z) for z in orb.multipliers],
                 "rho": float(np.max(np.abs(orb.multipliers))),
