@@ -20,6 +20,7 @@ import warnings
 
 import numpy as np
 
+from .arguments import finite, integer_at_least, non_empty_path
 from .control import Gains
 from .params import STUDY_R, STUDY_ZETA, OscillatorParams, ParameterError, study_omega
 
@@ -41,30 +42,9 @@ def _complex_list(values):
     return [[float(np.real(z)), float(np.imag(z))] for z in values]
 
 
-def _finite(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite real number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite real number")
-    return value
-
-
-def _count(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer >= 0") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer >= 0")
-    return value
-
-
-def _path(text):
-    if not text.strip():
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a non-empty path")
-    return text
+_finite = finite
+_count = integer_at_least(0)
+_path = non_empty_path
 
 
 def _non_finite(obj, where=""):

@@ -122,7 +122,7 @@ def main(args) -> int:
             f"## Δd = {dd:g}", "", f"![{name}]({fig.name})", "",
             f"* source: {source} ({wall:.1f} s wall)",
             f"* samples: {numbers['samples']}, impacts: {numbers['impacts']}",
-            f"* uncontrolled attractor: "
+            "* uncontrolled attractor: "
             + (f"period {per}" if per else "not periodic over the last 200 samples (chaotic)")
             + f"; impacts per period histogram before control: {numbers['uncontrolled_impacts_per_period']}",
             f"* control on at sample {numbers['control_on']}; converged (to 1e-8) after "
@@ -144,8 +144,8 @@ def main(args) -> int:
         from .bagtools.analyze import analyze
 
         analyze([out / "bags" / name for name, _ in SCENES], out / "analysis")
-        lines += [f"Bag analysis of the recordings (measured vs predicted contraction, "
-                  f"parameter record): [analysis/report.md](analysis/report.md)", ""]
+        lines += ["Bag analysis of the recordings (measured vs predicted contraction, "
+                  "parameter record): [analysis/report.md](analysis/report.md)", ""]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     print(f"report: {out / 'report.md'} (numbers: {out / 'report.json'})")

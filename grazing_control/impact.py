@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from .flow import amplitude_bound, matmul2, propagate, transition_matrix
+from .flow import amplitude_bound, matmul2, transition_matrix
 from .params import OscillatorParams
 
 __all__ = [

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..arguments import finite
 from .numbers import resolve_setup, scene_numbers
 from .scenes import load, parse_topic_option
 
@@ -325,16 +326,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     return report
 
 
-def _finite(text):
-    try:
-        v = float(text)
-    except ValueError:
-        raise __import__("argparse").ArgumentTypeError(
-            f"{text!r} is invalid: expected a finite real number") from None
-    if not math.isfinite(v):
-        raise __import__("argparse").ArgumentTypeError(
-            f"{text!r} is invalid: expected a finite real number")
-    return v
+_finite = finite
 
 
 def add_model_options(parser) -> None:

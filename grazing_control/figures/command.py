@@ -2,25 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
+from ..arguments import integer_at_least, non_empty_path
 
 __all__ = ["add_parser", "run"]
 
 
-def _path(text):
-    if not text.strip():
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a non-empty path")
-    return text
-
-
-def _workers(text):
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: valid range is an integer >= 1")
-    return value
+_path = non_empty_path
+_workers = integer_at_least(1)
 
 
 def add_parser(sub):

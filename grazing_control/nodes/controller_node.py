@@ -69,7 +69,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from grazing_control.control import Gains, correction
-from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, PUBLISHER_QOS, REPLAY_QOS,
+from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, REPLAY_QOS,
                                           StartupError, Throttled, float_descriptor,
                                           int_descriptor, publish_parameter_record, run_node,
                                           seconds_from_stamp, stamp_key, string_descriptor)

@@ -16,6 +16,8 @@ import time
 
 import numpy as np
 
+from ..arguments import integer_at_least
+
 __all__ = ["add_robustness_parser"]
 
 
@@ -144,14 +146,7 @@ def cmd_faults(args):
     return "\n".join(lines)
 
 
-def _count(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer >= 1") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer >= 1")
-    return value
+_count = integer_at_least(1)
 
 
 def add_robustness_parser(sub, common, finite):
