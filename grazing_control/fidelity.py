@@ -32,6 +32,7 @@ import numpy as np
 
 from .flow import amplitude_bound, to_deviation, to_physical, transition_matrix
 from .impact import Impact, Segment, advance, check_state
+from .kernel import exact_advance
 from .params import OscillatorParams
 from .zdm import local_grazing, zdm_event
 
@@ -155,7 +156,7 @@ def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float 
     dv = dv + dv_correction
     check_state(dx, dv, p.zeta, "the Pi2 state after the correction")
     if fidelity == "exact":
-        return advance(p, p.tau2, dx, dv, p.period)
+        return exact_advance()(p, p.tau2, dx, dv, p.period)
     if fidelity == "zdm2":
         return _zdm_period(p, dx, dv, 2)
     if fidelity == "zdm1":

@@ -98,7 +98,6 @@ from std_srvs.srv import Trigger
 
 from grazing_control import kernel
 from grazing_control.faults import FaultModel
-from grazing_control.impact import advance
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
                                           READY_TOPIC,
                                           StartupError,
@@ -311,6 +310,7 @@ class Engine:
     def __init__(self, settings: SimSettings):
         self.settings = settings
         self.p = settings.params
+        self.advance = kernel.exact_advance()   # the exact flow, compiled when available
         self.pending = None
         self.rng = np.random.default_rng(settings.seed)
         self.impacts = 0
@@ -386,7 +386,7 @@ class Engine:
         p = self.p
         t0 = self.t
         if delay > 0.0:
-            head = advance(p, p.tau2, self.dx, self.dv, delay)
+            head = self.advance(p, p.tau2, self.dx, self.dv, delay)
             events = self._events(_Segment(t0, p.tau2, self.dx, self.dv, t0 + delay,
                                            head.dx, head.dv), head.impacts)
             return events + self._actuate(head, dv_correction, delay)
@@ -403,14 +403,14 @@ class Engine:
         jump, the flow on to t_k+1), so a realtime period equals the lockstep one bit for
         bit. Returns the events of (t_k + delay, t_k+1).
         """
-        head = advance(self.p, self.p.tau2, self.dx, self.dv, delay)
+        head = self.advance(self.p, self.p.tau2, self.dx, self.dv, delay)
         return self._actuate(head, dv_correction, delay)
 
     def _actuate(self, head, dv_correction: float, delay: float) -> list:
         p = self.p
         tau = (p.tau2 + p.omega * delay) % TWO_PI
         dv = head.dv + dv_correction
-        tail = advance(p, tau, head.dx, dv, p.period - delay)
+        tail = self.advance(p, tau, head.dx, dv, p.period - delay)
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         self.seg = _Segment(self.t + delay, tau, head.dx, dv, t1, tail.dx, tail.dv)
         return self._events(self.seg, tail.impacts)
@@ -424,10 +424,10 @@ class Engine:
         """
         s, p = self.seg, self.p
         tc = min(max(tc, s.ts), s.te)
-        head = advance(p, s.tau, s.dx, s.dv, tc - s.ts)
+        head = self.advance(p, s.tau, s.dx, s.dv, tc - s.ts)
         tau_c = (s.tau + p.omega * (tc - s.ts)) % TWO_PI
         dv_c = head.dv + dv_correction
-        tail = advance(p, tau_c, head.dx, dv_c, s.te - tc)
+        tail = self.advance(p, tau_c, head.dx, dv_c, s.te - tc)
         self.seg = _Segment(tc, tau_c, head.dx, dv_c, s.te, tail.dx, tail.dv)
         return self._events(self.seg, tail.impacts)
 

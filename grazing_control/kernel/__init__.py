@@ -141,6 +141,18 @@ def warm_up() -> dict:
     return {"import": t1 - t0, "first_call": time.perf_counter() - t1}
 
 
+def exact_advance():
+    """The exact flow with impacts to call: :func:`advance` (compiled) while the kernel is
+    in use (:func:`use_kernel`), else :func:`grazing_control.impact.advance`. Both give
+    the same segment bit for bit; callers that split periods themselves (sim_node, the
+    exact fidelity) resolve it once and call it per segment."""
+    if use_kernel():
+        return advance
+    from ..impact import advance as reference
+
+    return reference
+
+
 def next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     """:func:`grazing_control.impact.next_impact`, compiled."""
     ki = _compiled()[0]
