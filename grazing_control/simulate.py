@@ -173,10 +173,6 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
         v = p.v_ref if v0 is None else float(v0)
         dx, dv = x - p.x_ref, v - p.v_ref
     check_state(dx, dv, p.zeta, "the initial state")
-    dev = np.empty((periods, 2))
-    corr = np.zeros(periods)
-    counts = np.zeros(periods, dtype=int)
-    imps = []
     active = gains is not None and control_after is not None
     reason = "exact: the closed-form flow (requested)" if fidelity == "exact" else \
         f"{fidelity}: requested"
@@ -192,50 +188,17 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     elif fidelity not in FIDELITIES:
         raise ValueError(f"fidelity={fidelity!r} is invalid: valid values are "
                          f"{', '.join(FIDELITIES)}, auto")
-    step = period_step if fidelity == "exact" else \
-        (lambda p_, x_, v_, c_: fidelity_step(p_, x_, v_, c_, fidelity))
     if delay != 0.0 and fidelity != "exact":
         raise ValueError(f"fidelity={fidelity!r} does not model an actuation delay "
                          f"(delay={delay!r}): use fidelity='exact'")
-    fallbacks = 0
-    ks = range(periods)
-    if fidelity == "exact" and _kernel.use_kernel():  # this loop, compiled: done here
-        dev, corr, counts, imps, (dx, dv) = _kernel.simulate_exact(
-            p, periods, dx, dv, gains if active else None, control_after if active else None,
-            delay=delay, progress=progress)
-        ks = ()
-    elif progress:
-        from tqdm import tqdm
-
-        ks = tqdm(ks, total=periods, unit="period", file=sys.stderr, leave=False)
-    for k in ks:
-        dev[k] = dx, dv
-        dvc = 0.0
-        if active and k >= control_after:
-            dvc = gains.c1 * dx + gains.c2 * dv
-            if not abs(dvc) <= 1e150:
-                raise NonFiniteStateError(
-                    f"the correction c1*dx + c2*dv = {dvc!r} at period {k} is not finite or exceeds 1e150: "
-                    f"an input overflowed "
-                    f"(c1={gains.c1!r}, c2={gains.c2!r}, dx={dx!r}, dv={dv!r})")
-        corr[k] = dvc
-        try:
-            try:
-                if delay != 0.0 and k >= control_after:
-                    seg = period_step(p, dx, dv, dvc, delay=delay)
-                else:
-                    seg = step(p, dx, dv, dvc)
-            except ModelValidityError:
-                if not auto:
-                    raise
-                seg = period_step(p, dx, dv, dvc)  # auto: exact where the map does not apply
-                fallbacks += 1
-        except NonFiniteStateError as exc:
-            raise NonFiniteStateError(f"at period {k}: {exc}") from None
-        counts[k] = len(seg.impacts)
-        for i in seg.impacts:
-            imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
-        dx, dv = seg.dx, seg.dv
+    args = (p, periods, dx, dv, gains if active else None, control_after if active else None)
+    if fidelity == "exact" and _kernel.use_kernel():  # the same loop, compiled
+        dev, corr, counts, imps, (dx, dv) = _kernel.simulate_exact(*args, delay=delay,
+                                                                   progress=progress)
+        fallbacks = 0
+    else:
+        dev, corr, counts, imps, (dx, dv), fallbacks = _simulate_loop(
+            *args, delay=delay, progress=progress, fidelity=fidelity, fall_back=auto)
     if fallbacks:
         reason += (f"; exact in {fallbacks} of {periods} periods where {fidelity} "
                    "does not apply")
@@ -243,6 +206,54 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
     return SimulationResult(p, gains, control_after if active else None, pi2, dev, corr, counts,
                             np.array(imps, dtype=float).reshape(-1, 5), (dx, dv),
                             fidelity, reason)
+
+
+def _simulate_loop(p, periods, dx, dv, gains, control_after, *, delay=0.0, progress=False,
+                   fidelity="exact", fall_back=False):
+    """The period loop of :func:`simulate` in Python (any fidelity); the compiled kernel's
+    :func:`grazing_control.kernel.simulate_exact` is the same loop for the exact flow.
+
+    Returns (deviation (N, 2), corrections (N,), impacts per period (N,), impact rows
+    [k, t, phase, v-, v+], final deviation, periods where a map fell back to exact).
+    """
+    dev = np.empty((periods, 2))
+    corr = np.zeros(periods)
+    counts = np.zeros(periods, dtype=int)
+    imps = []
+    fallbacks = 0
+    ks = range(periods)
+    if progress:
+        from tqdm import tqdm
+
+        ks = tqdm(ks, total=periods, unit="period", file=sys.stderr, leave=False)
+    for k in ks:
+        dev[k] = dx, dv
+        controlled = gains is not None and k >= control_after
+        dvc = gains.c1 * dx + gains.c2 * dv if controlled else 0.0
+        if not abs(dvc) <= 1e150:
+            raise NonFiniteStateError(
+                f"the correction c1*dx + c2*dv = {dvc!r} at period {k} is not finite or exceeds 1e150: "
+                f"an input overflowed "
+                f"(c1={gains.c1!r}, c2={gains.c2!r}, dx={dx!r}, dv={dv!r})")
+        corr[k] = dvc
+        try:
+            if fidelity == "exact" or (delay != 0.0 and controlled):
+                seg = period_step(p, dx, dv, dvc, delay=delay if controlled else 0.0)
+            else:
+                try:
+                    seg = fidelity_step(p, dx, dv, dvc, fidelity)
+                except ModelValidityError:
+                    if not fall_back:
+                        raise
+                    seg = period_step(p, dx, dv, dvc)  # auto: exact where the map does not apply
+                    fallbacks += 1
+        except NonFiniteStateError as exc:
+            raise NonFiniteStateError(f"at period {k}: {exc}") from None
+        counts[k] = len(seg.impacts)
+        for i in seg.impacts:
+            imps.append((k, k * p.period + i.dt, i.phase, i.v_minus, i.v_plus))
+        dx, dv = seg.dx, seg.dv
+    return dev, corr, counts, imps, (dx, dv), fallbacks
 
 
 def _batch_one(args):
