@@ -28,7 +28,6 @@ random) so that no other scene can cross-talk.
 from __future__ import annotations
 
 import math
-import random
 import struct
 import tempfile
 import time
@@ -112,7 +111,8 @@ def _params_file(values, node, tmp: Path) -> Path:
     path = tmp / f"{node}.yaml"
     clean = {k: (float(v) if isinstance(v, float) else v) for k, v in values.items()
              if isinstance(v, (bool, int, float, str, list))}
-    path.write_text(yaml.safe_dump({f"/{node}": {"ros__parameters": clean}}, sort_keys=False))
+    # keyed /** like every parameter file of the package (applies under any node name)
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": clean}}, sort_keys=False))
     return path
 
 
@@ -180,6 +180,31 @@ def _start(module, params_file, overrides, domain_id, log):
                       domain_id=domain_id, log=log)
 
 
+def _claim(domain_id):
+    """The replay's ROS domain and the lock that keeps it: ``domain_id`` if given, else a
+    free one claimed as ``grazing run`` does (:func:`grazing_control.launcher.claim_domain`)."""
+    if domain_id is not None:
+        return int(domain_id), None
+    from ..launcher import claim_domain
+
+    return claim_domain()
+
+
+def _close(proc, session, writer, lock) -> None:
+    """Stop the replayed node, close the in-process session, the bag and the domain lock."""
+    from ..launcher import stop_nodes
+
+    try:
+        if proc is not None:
+            stop_nodes([proc], grace=5.0)
+        if session is not None:
+            session.close()
+        writer.close()
+    finally:
+        if lock is not None:
+            lock.close()
+
+
 def _bag_writer(out: Path):
     from ..recording import BagWriter
 
@@ -203,7 +228,7 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
 
     from builtin_interfaces.msg import Time
 
-    from ..launcher import CONTROLLER_MODULE, stop_nodes
+    from ..launcher import CONTROLLER_MODULE
 
     data = load(bag, topics)
     setup = resolve_setup(data, options or {})
@@ -213,7 +238,7 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
     raw = read_raw(data.path, [data.present["pi2"]])
     out = Path(out)
     writer = _bag_writer(out)
-    domain_id = random.randint(110, 230) if domain_id is None else int(domain_id)
+    domain_id, lock = _claim(domain_id)
     log_dir = Path(log_dir) if log_dir else out
     proc = None
     session = None
@@ -288,11 +313,7 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
             from rclpy.serialization import serialize_message
             writer.write("/grazing/parameters", bytes(serialize_message(own)), time.time_ns())
         finally:
-            if proc is not None:
-                stop_nodes([proc], grace=5.0)
-            if session is not None:
-                session.close()
-            writer.close()
+            _close(proc, session, writer, lock)
     return {"gains_source": source, "notes": notes, "domain_id": domain_id,
             "samples_published": len(samples), "answers": len(answers),
             "comparison": compare_corrections(data, load(out), setup)}
@@ -386,7 +407,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
     from geometry_msgs.msg import TwistStamped
     from sensor_msgs.msg import JointState
 
-    from ..launcher import SIM_MODULE, stop_nodes
+    from ..launcher import SIM_MODULE
 
     data = load(bag, topics)
     setup = resolve_setup(data, options or {})
@@ -411,7 +432,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
     dv_of = dict(zip(sd.stamp_ns.tolist(), sd.scene.correction.tolist()))
     out = Path(out)
     writer = _bag_writer(out)
-    domain_id = random.randint(110, 230) if domain_id is None else int(domain_id)
+    domain_id, lock = _claim(domain_id)
     log_dir = Path(log_dir) if log_dir else out
     proc = session = None
     unknown = [0]
@@ -452,11 +473,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                 raise RuntimeError(f"sim_node exited with status {proc.returncode}; see "
                                    f"{log_dir.parent / (out.name + '_sim.log')}")
         finally:
-            if proc is not None:
-                stop_nodes([proc], grace=5.0)
-            if session is not None:
-                session.close()
-            writer.close()
+            _close(proc, session, writer, lock)
     new = load(out).scenes[0]
     m = min(len(new.stamp_ns), n)
     dep = np.max(np.abs(new.scene.pi2[:m] - sd.scene.pi2[:m]), axis=1) if m else np.zeros(0)
