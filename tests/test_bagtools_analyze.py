@@ -40,20 +40,30 @@ def reference_report(tmp_path_factory):
     return analyze([BAGS / n for n, _ in SCENES], out), out
 
 
+@pytest.fixture(scope="module")
+def unrecorded_report(tmp_path_factory):
+    """The reference bags rewritten without the parameter record (as bags recorded before
+    it existed, or by another recorder): samples, corrections and impacts only."""
+    from grazing_control.bagtools.analyze import analyze
+
+    out = tmp_path_factory.mktemp("unrecorded")
+    bags = [write_rosbags(out / name, scene_messages(BAGS / name)[0]) for name, _ in SCENES]
+    return analyze(bags, out / "report"), out / "report"
+
+
 @pytest.mark.parametrize("i", [0, 1])
 def test_reference_bags_measured_contraction_matches_the_predicted_multiplier(reference_report, i):
     report, out = reference_report
     name, dd = SCENES[i]
     bag = report["bags"][i]
     setup = bag["setup"]
-    # no parameter record in these bags: Delta d and the gains are inferred from the data
-    assert not bag["parameter_record"]
-    assert setup["params"]["delta_d"] == dd and "inferred" in setup["sources"]["delta_d"]
+    # the nodes' parameter record (grazing/parameters) says what ran
+    assert bag["parameter_record"]
+    assert setup["params"]["delta_d"] == dd
+    assert setup["sources"]["delta_d"] == setup["sources"]["gains"] == "parameter record"
     p = OscillatorParams(delta_d=dd)
     c1 = degenerate_c1(p, -1.0)
-    # least squares on Eq. 28 over 300 corrections that converge to one point: ~1e-12
-    assert setup["gains"]["c1"] == pytest.approx(c1, rel=1e-10)
-    assert setup["gains"]["c2"] == pytest.approx(-1.0, rel=1e-10)
+    assert setup["gains"] == {"c1": c1, "c2": -1.0}
     s = bag["scenes"][0]
     exact = orbit_11(p, Gains(c1, -1.0))
     rho = float(np.max(np.abs(exact.multipliers)))
@@ -67,13 +77,35 @@ def test_reference_bags_measured_contraction_matches_the_predicted_multiplier(re
     assert (out / f"{name}.png").stat().st_size > 10_000
 
 
+@pytest.mark.parametrize("i", [0, 1])
+def test_without_a_parameter_record_delta_d_and_the_gains_are_inferred(unrecorded_report, i):
+    name, dd = SCENES[i]
+    bag = unrecorded_report[0]["bags"][i]
+    setup = bag["setup"]
+    assert not bag["parameter_record"]
+    # Delta d from the impacts, exactly; the gains by least squares on Eq. 28 over 300
+    # corrections that converge to one point: ~1e-12
+    assert setup["params"]["delta_d"] == dd and "inferred" in setup["sources"]["delta_d"]
+    p = OscillatorParams(delta_d=dd)
+    assert setup["gains"]["c1"] == pytest.approx(degenerate_c1(p, -1.0), rel=1e-10)
+    assert setup["gains"]["c2"] == pytest.approx(-1.0, rel=1e-10)
+    s = bag["scenes"][0]
+    rho = float(np.max(np.abs(orbit_11(p, Gains(degenerate_c1(p, -1.0), -1.0)).multipliers)))
+    assert s["predicted"]["rho"] == pytest.approx(rho, rel=1e-9)
+    assert s["final_vs_exact_orbit"] < 1e-12
+
+
 def test_reference_report_files_and_comparison(reference_report):
     report, out = reference_report
     md = (out / "report.md").read_text()
     assert "## Comparison" in md and md.count("| scene_") == 2
     assert "measured ρ" in md and "predicted |λ|max" in md
-    assert "none in this bag" in md           # says that the record is missing
+    assert "none in this bag" not in md
     assert json.loads((out / "report.json").read_text())["bags"][1]["label"] == "scene_9e-6"
+
+
+def test_report_says_when_the_parameter_record_is_missing(unrecorded_report):
+    assert "none in this bag" in (unrecorded_report[1] / "report.md").read_text()
 
 
 def test_cli_json_and_summary(tmp_path, capsys):
@@ -118,7 +150,7 @@ def test_pi2_only_bag_is_analysed_and_says_what_it_lacks(tmp_path):
     assert any("no corrections recorded" in n for n in rep["notes"])
     assert any("Delta d unknown" in n for n in rep["notes"])
     s = rep["scenes"][0]
-    assert s["control_on_sample"] is None and s["uncontrolled"]["period"] is None
+    assert s["control_on_sample"] is None
     rep = analyze([bag], tmp_path / "out", figures=False,
                   options={"delta_d": -9e-6})["bags"][0]
     assert rep["setup"]["sources"]["delta_d"] == "option"

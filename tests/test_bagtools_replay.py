@@ -38,13 +38,25 @@ def test_replay_with_the_recorded_gains_is_bit_identical_through_both_nodes(tmp_
     cmp_ = res["comparison"]
     assert res["answers"] == 1300 and cmp_["answered_in_both"] == 1300
     assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == 1300
-    assert "config/controller.yaml (matches the recording)" in res["gains_source"]
+    assert res["gains_source"] == "the bag's parameter record (controller_node)"
     # the replay bag is itself analysable: the controller's record is in it
     data = load(tmp_path / "ctl")
     assert data.parameters["nodes"]["controller_node"][0]["enable_after"] == 1000
     sim = replay_simulator(BAGS / "scene_9e-6", tmp_path / "sim", domain_id=new_domain())
     assert sim["samples_replayed"] == 1300 and sim["stamps_equal"]
     assert sim["bit_identical_samples"] == 1300 and sim["max_departure"] == 0.0
+
+
+def test_replay_of_a_bag_without_parameter_record_uses_the_default_gains_it_shows(tmp_path):
+    """A bag without the nodes' parameter record (rewritten from the reference bag with
+    its samples, corrections and impacts only): the gains inferred from its corrections
+    match config/controller.yaml's, which then answer bit for bit."""
+    from bagtools_helpers import scene_messages, write_rosbags
+
+    bag = write_rosbags(tmp_path / "plain", scene_messages(BAGS / "scene_5e-6")[0])
+    res = replay_controller(bag, tmp_path / "ctl", domain_id=new_domain())
+    assert "config/controller.yaml (matches the recording)" in res["gains_source"]
+    assert res["comparison"]["all_bit_identical"] and res["comparison"]["bit_identical"] == 1300
 
 
 def test_replay_with_other_gains_gives_what_eq28_commands(tmp_path, capsys):

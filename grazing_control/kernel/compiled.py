@@ -14,6 +14,8 @@ grazing_control.impact     here
 ``_Eval(p, tau0, z)``      :func:`make_eval` -> a tuple ``ev``; ``ev(h)`` is
                            :func:`evaluate`, ``ev.jerk_bound`` :func:`jerk_bound`
 ``_bracket``               :func:`bracket`
+``_danger_halfwidth``,     :func:`danger_halfwidth` (None -> -1.0),
+``_far_from_wall``         :func:`far_from_wall`
 ``_search`` (recursive)    :func:`search`: the same depth-first, left-first order
                            with an explicit stack
 ``check_state``            :func:`check_state` (NonFiniteStateError ->
@@ -54,7 +56,7 @@ import numpy as np
 
 __all__ = ["params_tuple", "check_state", "wall_rounding", "make_eval", "evaluate",
            "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "bracket", "search",
-           "search_stack", "next_impact", "next_impact_unchecked", "release_time",
+           "search_stack", "danger_halfwidth", "far_from_wall", "next_impact", "next_impact_unchecked", "release_time",
            "resting_on_wall", "release_skip", "on_wall_at_rest", "leave_wall", "advance",
            "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
            "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run", "scratch_buffer",
@@ -258,9 +260,13 @@ def gap_rounding(ev, h, g, dx):
 
 # ------------------------------------------------------------------ _bracket
 @jit
-def bracket(ev, lo, hi, which, sign):
+def bracket(ev, lo, hi, which, sign, flo, fhi):
     """impact._bracket: root of g (which = 0) or v (which = 1) in [lo, hi]."""
-    x = 0.5 * (lo + hi)
+    d = flo - fhi
+    x = lo + (hi - lo) * (flo / d) if d != 0.0 else 0.5 * (lo + hi)
+    if not lo < x < hi:
+        x = 0.5 * (lo + hi)
+    probed = False
     while hi - lo > 4.0 * ulp(hi):
         g, v, acc, _dx, _dv, _e = evaluate(ev, x)
         if which == 0:
@@ -272,6 +278,12 @@ def bracket(ev, lo, hi, which, sign):
         else:
             lo = x
         xn = x - fx / dfx if dfx > 0.0 else lo
+        probe = 2.0 * ulp(x)
+        if abs(xn - x) < probe:  # 2 ulps past the root; bisect if the last probe failed
+            xn = 0.5 * (lo + hi) if probed else (x - probe if fx >= 0.0 else x + probe)
+            probed = not probed
+        else:
+            probed = False
         if not lo < xn < hi:
             xn = 0.5 * (lo + hi)
         if xn == x:
@@ -298,21 +310,22 @@ def _certified(ev, a, b, ea, ga, va, acca, dxa, gb, vb, accb, dxb):
         if va <= 0.0:
             return 1, NONE
         if vb >= 0.0:
-            return 1, (bracket(ev, a, b, 0, 1.0) if gb >= 0.0 else NONE)
-        tm = bracket(ev, a, b, 1, -1.0)
-        return 1, (bracket(ev, a, tm, 0, 1.0) if evaluate(ev, tm)[0] >= 0.0 else NONE)
+            return 1, (bracket(ev, a, b, 0, 1.0, ga, gb) if gb >= 0.0 else NONE)
+        tm = bracket(ev, a, b, 1, -1.0, va, vb)
+        gm = evaluate(ev, tm)[0]
+        return 1, (bracket(ev, a, tm, 0, 1.0, ga, gm) if gm >= 0.0 else NONE)
     if convex:  # v increasing: g below the chord unless it ends above 0
         if gb < 0.0:
             return 1, NONE
         if ga < 0.0:
-            return 1, bracket(ev, a, b, 0, 1.0)
+            return 1, bracket(ev, a, b, 0, 1.0, ga, gb)
         if va >= 0.0:  # at rest on the wall and pushed into it
             return 1, a
-        tmin = bracket(ev, a, b, 1, 1.0) if vb > 0.0 else b
+        tmin = bracket(ev, a, b, 1, 1.0, va, vb) if vb > 0.0 else b
         gmin = evaluate(ev, tmin)[0]
         if gmin >= 0.0:  # the dip below the wall is below rounding: at rest, pushed in
             return 1, tmin
-        return 1, (bracket(ev, tmin, b, 0, 1.0) if gmin < 0.0 <= gb else NONE)
+        return 1, (bracket(ev, tmin, b, 0, 1.0, gmin, gb) if gmin < 0.0 <= gb else NONE)
     # below the chord plus the curvature allowance, with the rounding margin of the ends
     # (a uniform bound m0 + m1 b first, the precise one only when needed)
     curvature = max(0.0, 0.5 * (jw - acca - accb))
@@ -341,7 +354,7 @@ def search(ev, a, b, fa, fb, stack):
         if not decided:
             if depth >= _MAX_DEPTH or b - a <= 4.0 * ulp(b):
                 decided = 1
-                t = bracket(ev, a, b, 0, 1.0) if ga < 0.0 <= gb else NONE
+                t = bracket(ev, a, b, 0, 1.0, ga, gb) if ga < 0.0 <= gb else NONE
         if decided:
             if t != NONE:
                 return t
@@ -409,14 +422,39 @@ def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
     if ga == 0.0 and fa[1] > 0.0:
         return 0.0, STATUS_OK, 0.0  # on the wall, moving into it
     fa = (ga, fa[1], fa[2], fa[3], fa[4], fa[5])
+    w = danger_halfwidth(ev, horizon)
+    valid = True  # fa holds the values at a
     for k in range(1, n + 1):
         b = horizon if k == n else k * (horizon / n)
+        if k > 1 and w >= 0.0 and far_from_wall(ev[6] + ev[2] * a - ev[3],
+                                                ev[6] + ev[2] * b - ev[3], w):
+            a, valid = b, False  # g < 0 on all of [a, b]: the search would find nothing
+            continue
+        if not valid:
+            fa = evaluate_row(ev, grid, k - 1) if cached else evaluate(ev, a)
+            valid = True
         fb = evaluate_row(ev, grid, k) if cached else evaluate(ev, b)
         r = search(ev, a, b, fa, fb, stack)
         if r != NONE:
             return r, STATUS_OK, 0.0
         a, fa = b, fb
     return NONE, STATUS_OK, 0.0
+
+
+@jit
+def danger_halfwidth(ev, horizon):
+    """impact._danger_halfwidth; -1.0 for None."""
+    s = (ev[11] * (1.0 + 4.0 * _EPS) - ev[5] + ev[14] + ev[15] * horizon) / (2.0 * ev[4])
+    if s >= 1.0:
+        return -1.0
+    return 2.0 * math.asin(math.sqrt(max(s, 0.0))) + 1e-9
+
+
+@jit
+def far_from_wall(psi_a, psi_b, w):
+    """impact._far_from_wall."""
+    k = math.ceil((psi_a - w) / TWO_PI)
+    return TWO_PI * k - w > psi_b
 
 
 # ------------------------------------------------------------------ sticking
