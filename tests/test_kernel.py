@@ -232,6 +232,29 @@ def test_fallback_without_numba_runs_the_core(tmp_path):
     assert out.stdout.split() == ["5"]
 
 
+def test_ctrl_c_while_the_kernel_compiles_is_delivered_once_it_is_loaded(tmp_path):
+    """A SIGINT during numba's first compilation (an empty cache: several seconds) is held
+    back and delivered as a KeyboardInterrupt once the kernel is loaded: neither lost in
+    llvmlite's callbacks nor a crash at exit."""
+    import signal
+    import time
+
+    code = ("from grazing_control import kernel\n"
+            "kernel.warm_up()\n"
+            "print('not interrupted', flush=True)\n")
+    env = {**os.environ, "PYTHONPATH": os.getcwd(), "NUMBA_CACHE_DIR": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    time.sleep(1.5)  # numba imported, compiling
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode in (1, -signal.SIGINT), err
+    assert "not interrupted" not in out
+    assert err.rstrip().endswith("KeyboardInterrupt") and "Exception ignored" not in err, err
+    assert "_sigint_held" in err  # delivered when the load ended, not inside numba
+    assert any(tmp_path.rglob("*.nbi"))  # the compilation finished and was cached
+
+
 # ------------------------------------------------ the mpmath tests, through the kernel
 @pytest.fixture(autouse=True)
 def _core_is_the_kernel(monkeypatch):

@@ -23,10 +23,12 @@ processes only load the machine code (:func:`warm_up` does either explicitly).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib.util
 import math
 import os
+import signal
 import threading
 import time
 
@@ -63,13 +65,61 @@ def use_kernel() -> bool:
     return available()
 
 
-@functools.lru_cache(maxsize=1)
-def _compiled():
-    """Import the numba module (compiling, or loading the cache, on first use), twice:
-    as the mirror of impact (ki) and of simulate (ks), which it both is."""
-    from . import compiled
+_module = None
+_load_seconds = {}
 
-    return compiled, compiled
+
+def _compiled():
+    """The numba module, twice: as the mirror of impact (ki) and of simulate (ks), which
+    it both is. The first call imports it and compiles, or loads from numba's cache,
+    every specialisation (the calls of :func:`warm_up`), with SIGINT held back until
+    that is done (:func:`_sigint_held`)."""
+    global _module
+    if _module is None:
+        with _sigint_held():
+            t0 = time.perf_counter()
+            from . import compiled
+
+            t1 = time.perf_counter()
+            _module = compiled  # set first: the calls below go through the wrappers
+            try:
+                _first_calls()
+            except BaseException:
+                _module = None
+                raise
+            _load_seconds.update({"import": t1 - t0, "first_call": time.perf_counter() - t1})
+    return _module, _module
+
+
+@contextlib.contextmanager
+def _sigint_held():
+    """Hold a SIGINT back while numba compiles or loads machine code, then deliver it.
+
+    A KeyboardInterrupt raised inside numba's compiler or llvmlite's ctypes callbacks is
+    either lost there (printed as ignored; the command then runs on) or leaves llvmlite
+    half set up, and the process crashes at exit (SIGSEGV): 2 of 60 Ctrl-C at random
+    moments of the first second of ``grazing simulate`` did one or the other. Only in
+    the main thread and over a handler set from Python (not one set from C, as rclpy's);
+    a first compile holds the signal for its few seconds, a cache load for ~0.3 s.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is None:  # installed from C: not ours to swap
+        yield
+        return
+    caught = []
+    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(frame))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        if callable(previous):
+            previous(signal.SIGINT, caught[-1])
+        elif previous == signal.SIG_DFL:
+            signal.raise_signal(signal.SIGINT)
 
 
 @functools.lru_cache(maxsize=1024)
@@ -124,11 +174,16 @@ def warm_up() -> dict:
     """Compile (or load from the cache) every kernel function; returns the seconds taken.
 
     ``{"import": s, "first_call": s}``: importing numba and the modules, then the first
-    call, which compiles all specialisations or loads them from the on-disk cache.
+    calls, which compile all specialisations or load them from the on-disk cache (both
+    0.0 when an earlier call in this process did it).
     """
-    t0 = time.perf_counter()
+    loaded = _module is not None
     _compiled()
-    t1 = time.perf_counter()
+    return {"import": 0.0, "first_call": 0.0} if loaded else dict(_load_seconds)
+
+
+def _first_calls():
+    """One call of each entry point: numba compiles, or loads, each specialisation."""
     from ..params import OscillatorParams
 
     p = OscillatorParams(delta_d=-1e-3)
@@ -138,7 +193,6 @@ def warm_up() -> dict:
     advance(p, p.tau2, 0.0, 0.0, p.period)
     simulate_exact(p, 2, 0.0, 0.0)
     run_point(p, 2, 1, 0.0, 0.0)
-    return {"import": t1 - t0, "first_call": time.perf_counter() - t1}
 
 
 def exact_advance():
