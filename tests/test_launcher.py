@@ -121,9 +121,13 @@ def test_two_scenes_on_one_domain_never_both_succeed(tmp_path):
 def test_a_node_refusing_to_start_stops_the_scene_at_once(tmp_path):
     res = launcher.run(STUDY, CONTROLLER, tmp_path / "bag", 50, domain_id=new_domain(),
                        controller_overrides={"saturation": -1.0}, log_dir=tmp_path)
-    assert res.controller == 2 and res.sim not in (0, None) and not res.ok
-    # the simulator was stopped, not left to its start_timeout
-    assert "start_timeout" not in (tmp_path / "sim_node.log").read_text()
+    assert res.controller == 2 and res.sim is not None and not res.ok
+    # the simulator was stopped by the launcher's SIGTERM, not left to its start_timeout:
+    # -15 while Python still imports, 0 once run_node's handlers are in (quietly while
+    # it initialises, with an "(interrupted)" summary once the node exists)
+    log = (tmp_path / "sim_node.log").read_text()
+    assert res.sim in (-15, 0), (res.sim, log)
+    assert "start_timeout" not in log and "periods=1" not in log and res.wall < 10.0
     print(f"scene stopped after {res.wall:.1f} s")
 
 
