@@ -91,6 +91,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
@@ -98,13 +99,13 @@ from std_srvs.srv import Trigger
 
 from grazing_control import kernel
 from grazing_control.faults import FaultModel
+from grazing_control.nodes import cdr
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
                                           READY_TOPIC,
                                           StartupError,
                                           Throttled, bool_descriptor, float_descriptor,
                                           int_descriptor, publish_parameter_record, run_node,
-                                          spin, stamp_from_seconds,
-                                          stamp_key, string_descriptor)
+                                          spin, stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.fidelity import FIDELITIES, period_step
 from grazing_control.simulate import states_between
@@ -599,7 +600,7 @@ class SimNode(Node):
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
         self.sub_correction = self.create_subscription(
             TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS,
-            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+            raw=True, event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._recorder_ready = False
@@ -627,7 +628,6 @@ class SimNode(Node):
         self._created = time.monotonic()
         self._wall_start = None
         self._waiting = None
-        self._msg_js = JointState(name=["mass"])
         s = self.settings
         log.info(
             f"mode={s.mode} delta_d={s.params.delta_d!r} "
@@ -729,24 +729,33 @@ class SimNode(Node):
     # ----------------------------------------------------------------- lockstep
     def _publish_sample(self, ev: Event) -> None:
         """Publish sample k (state before correction, as measured) and wait for its answer."""
-        self._waiting = stamp_key(self._publish(self.engine.measured(ev)))
+        self._waiting = self._publish(self.engine.measured(ev))
         self._sent = time.monotonic()
 
-    def _on_correction(self, msg: TwistStamped) -> None:
-        dv = msg.twist.linear.x
+    def _on_correction(self, data: bytes) -> None:
+        """A correction as received (serialized): the controller's layout is read directly
+        (:func:`cdr.read_twist_stamped`), any other TwistStamped through rclpy."""
+        answer = cdr.read_twist_stamped(data)
+        if answer is None:
+            try:
+                msg = deserialize_message(data, TwistStamped)
+            except Exception as exc:  # noqa: BLE001 - bytes no TwistStamped decodes from
+                self.malformed(f"{len(data)} bytes that are no TwistStamped ({exc})")
+                return
+            answer = stamp_key(msg.header.stamp) + (msg.twist.linear.x,)
+        key, dv = answer[:2], answer[2]
         if not math.isfinite(dv):
-            self.malformed(f"dv={dv!r} for stamp {stamp_key(msg.header.stamp)}")
+            self.malformed(f"dv={dv!r} for stamp {key}")
             return
         if self.settings.mode == "lockstep":
-            if not self._started or self._finished or stamp_key(msg.header.stamp) != self._waiting:
-                self.ignored(f"stamp {stamp_key(msg.header.stamp)} does not answer the "
-                             f"waiting sample {self._waiting}")
+            if not self._started or self._finished or key != self._waiting:
+                self.ignored(f"stamp {key} does not answer the waiting sample {self._waiting}")
                 return
             self._lockstep_period(dv, answered=True)
         elif self.settings.scheduled:
-            self._rt_answer(msg.header.stamp, dv)
+            self._rt_answer(key, dv)
         else:
-            self._rt_correction(msg.header.stamp, dv)
+            self._rt_correction(key, dv)
 
     def _on_watchdog(self) -> None:
         if (self._started and not self._finished and self._waiting is not None
@@ -810,7 +819,7 @@ class SimNode(Node):
         # correction does not include it
         self._rt_queue = self.engine.begin_period(0.0)
         sent = time.monotonic()
-        self._rt_sample = stamp_key(self._publish(self.engine.measured(ev)))
+        self._rt_sample = self._publish(self.engine.measured(ev))
         self._rt_pending[self._rt_sample] = sent
         if len(self._rt_pending) > 2:                    # keep the last two samples
             del self._rt_pending[next(iter(self._rt_pending))]
@@ -832,7 +841,7 @@ class SimNode(Node):
             self._fail(exc)
             return
         if not self._finished:
-            self.pub_clock.publish(Clock(clock=stamp_from_seconds(now)))
+            self.pub_clock.publish(cdr.clock(*cdr.stamp_parts(now)))
             self._rt_schedule(now)
 
     def _rt_schedule(self, now: float) -> None:
@@ -867,14 +876,13 @@ class SimNode(Node):
                 return
             self._rt_publish_sample(ev)
 
-    def _rt_answer(self, stamp, dv: float) -> None:
+    def _rt_answer(self, key: tuple, dv: float) -> None:
         """Scheduled actuation: keep the answer of the current sample for its deadline.
 
         The answer must arrive (this callback runs) before the sample's actuation instant
         t_k + delay in simulation time; one that comes later is dropped and counted (its
         deadline was already reported as missed).
         """
-        key = stamp_key(stamp)
         if not self._started or self._finished:
             self.ignored(f"stamp {key}: the scene is not running")
             return
@@ -890,7 +898,7 @@ class SimNode(Node):
             return
         latency = wall - sent
         self.latencies.append(latency)
-        self.pub_latency.publish(Float64(data=latency))
+        self.pub_latency.publish(cdr.float64(latency))
         if dl is None or dl.key != key:
             self.stats["late"] += 1
             self.late_answers(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
@@ -907,10 +915,7 @@ class SimNode(Node):
             waited = time.monotonic() - dl.sent
             self.misses(f"sample {dl.k} (stamp {dl.key}), actuation at t={dl.t:.9g}, "
                         f"{waited * 1e3:.3f} ms after the sample went out")
-            m = Vector3Stamped()
-            m.header.stamp.sec, m.header.stamp.nanosec = dl.key
-            m.vector.x, m.vector.y, m.vector.z = float(dl.k), dl.t, waited
-            self.pub_miss.publish(m)
+            self.pub_miss.publish(cdr.vector3_stamped(*dl.key, float(dl.k), dl.t, waited))
         elif self.engine.correction_lost():
             self.stats["lost"] += 1
             dv = 0.0
@@ -918,14 +923,13 @@ class SimNode(Node):
             self.stats["applied"] += 1
         self._rt_queue = self.engine.actuate(dv, dl.delay)
 
-    def _rt_correction(self, stamp, dv: float) -> None:
+    def _rt_correction(self, key: tuple, dv: float) -> None:
         """Apply a correction at the simulation time of its arrival.
 
         It must answer one of the last two samples, once: the latest (normal) or the
         one before, when the answer comes after the next sample went out (counted as
         late, applied all the same: the next opportunity). Anything else is ignored.
         """
-        key = stamp_key(stamp)
         sent = self._rt_pending.pop(key, None) if self._started else None
         if sent is None or self._finished:
             self.ignored(f"stamp {key} answers none of the last two unanswered samples "
@@ -940,7 +944,7 @@ class SimNode(Node):
             self.stats["late"] += 1
         latency = wall - sent
         self.latencies.append(latency)
-        self.pub_latency.publish(Float64(data=latency))
+        self.pub_latency.publish(cdr.float64(latency))
         if self.engine.correction_lost():
             self.stats["lost"] += 1
             return
@@ -949,29 +953,23 @@ class SimNode(Node):
         self._rt_schedule(now)           # the split may have brought an event forward
 
     # ---------------------------------------------------------------- publishing
-    def _publish(self, ev: Event, clock: bool = True):
-        stamp = stamp_from_seconds(ev.t)
+    def _publish(self, ev: Event, clock: bool = True) -> tuple:
+        """Publish an event (as packed CDR, :mod:`grazing_control.nodes.cdr`); returns
+        its stamp as (sec, nanosec)."""
+        sec, ns = stamp = cdr.stamp_parts(ev.t)
         if ev.kind == "impact":
             self.engine.impacts += 1
-            m = Vector3Stamped()
-            m.header.stamp = stamp
-            m.vector.x, m.vector.y, m.vector.z = ev.x, ev.v, ev.phase
-            self.pub_impact.publish(m)
+            self.pub_impact.publish(cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase))
             return stamp
-        m = self._msg_js
-        m.header.stamp = stamp
-        m.position = [ev.x]
-        m.velocity = [ev.v]
-        m.effort = [math.cos(ev.phase)]
+        data = cdr.joint_state(sec, ns, ev.x, ev.v, math.cos(ev.phase))
         if ev.kind == "pi1":
-            self.pub_pi1.publish(m)
-            return stamp
-        if ev.kind == "pi2":
+            self.pub_pi1.publish(data)
+        elif ev.kind == "pi2":
             if clock and self.settings.mode == "lockstep":
-                self.pub_clock.publish(Clock(clock=stamp))
-            self.pub_pi2.publish(m)
+                self.pub_clock.publish(cdr.clock(sec, ns))
+            self.pub_pi2.publish(data)
         else:
-            self.pub_state.publish(m)
+            self.pub_state.publish(data)
         return stamp
 
     # ------------------------------------------------------------ end, failure

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import subprocess
 
+import numpy as np
 import pytest
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -19,6 +20,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from grazing_control import launcher
 from grazing_control.control import Gains, correction
 from grazing_control.design import degenerate_c1, write_controller_yaml
+from grazing_control.nodes import cdr
 from grazing_control.nodes.common import DATA_QOS, stamp_from_seconds
 from grazing_control.nodes.controller_node import ControlLaw, law_from_values
 from grazing_control.params import OscillatorParams, ParameterError
@@ -149,6 +151,33 @@ def test_node_answers_saturates_and_ignores_bad_samples(controller):
     assert "answered=4" in text and "malformed=2" in text and "stale=1" in text, text
     assert "out_of_order=1" in text, text
     assert "Traceback" not in text
+
+
+def test_samples_of_another_layout_are_read_and_undecodable_bytes_are_malformed(controller):
+    """The controller reads the simulator's layout directly (grazing_control.nodes.cdr)
+    and any other JointState through rclpy: another publisher's sample (two joints, a
+    frame_id; the first joint is the mass) is answered, bytes that decode to no
+    JointState (truncated samples, 40 of them) are counted as malformed, and the node
+    goes on."""
+    col, start = controller
+    proc, log, pub = start(enable_after=1)
+    x, v = 1e-4, P.v_ref - 2e-4
+    exact = correction(GAINS, x, v, P.x_ref, P.v_ref)
+    other = JointState(name=["mass", "base"], position=[x, 9.0], velocity=[v, 9.0])
+    other.header.stamp = stamp_from_seconds(2.0)
+    other.header.frame_id = "rig"
+    rng = np.random.default_rng(4)
+    pub.publish(sample(1.0, x, v))
+    for _ in range(40):
+        good = cdr.joint_state(1, int(rng.integers(0, 10**9)), x, v, 0.0)
+        pub.publish(good[:int(rng.integers(1, 60))])   # DDS pads to 4 bytes: cut early
+    pub.publish(other)
+    got = answers(col, 2)
+    assert got == [(1, 0, 0.0), (2, 0, exact)]
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    text = log.read_text()
+    assert "answered=2" in text and "malformed=40" in text and "Traceback" not in text, text
 
 
 def test_enable_service_and_runtime_parameters(controller):

@@ -22,6 +22,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from grazing_control import launcher
+from grazing_control.nodes import cdr
 from grazing_control.nodes.common import DATA_QOS, stamp_key
 from grazing_control.params import OscillatorParams, ParameterError
 from grazing_control.simulate import simulate
@@ -145,9 +146,12 @@ class Answerer:
             self.extra(self.pub, msg)
         self.answer(msg)
 
+    frame_id = ""                    # "": the controller's layout; else rclpy decodes it
+
     def answer(self, msg, dv=0.0):
         out = TwistStamped()
         out.header.stamp = msg.header.stamp
+        out.header.frame_id = self.frame_id
         out.twist.linear.x = dv
         self.pub.publish(out)
 
@@ -199,14 +203,20 @@ def test_malformed_and_foreign_corrections_are_ignored(node_env):
         foreign.header.stamp.sec = msg.header.stamp.sec + 1
         foreign.twist.linear.x = 0.5
         pub.publish(foreign)                      # another stamp: foreign
+        # bytes no TwistStamped decodes from (a truncated answer for this very sample)
+        pub.publish(cdr.twist_stamped(msg.header.stamp.sec, msg.header.stamp.nanosec,
+                                      0.5)[:int(rng.integers(1, 60))])
 
-    Answerer(collector, junk)
+    rng = np.random.default_rng(8)
+    answerer = Answerer(collector, junk)
+    answerer.frame_id = "rig"     # the real answers in another layout: decoded by rclpy
     n = 20
     proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0)
     assert proc.wait(30) == 0, log.read_text()
     s = summary(log.read_text())
     assert (s["applied"], s["malformed"], s["ignored"], s["timeouts"]) == \
-        (str(n), str(n), str(n), "0")
+        (str(n), str(2 * n), str(n), "0")
+    assert "Traceback" not in log.read_text()
     ref = simulate(OscillatorParams(delta_d=-5e-6), n)
     np.testing.assert_array_equal(xv(collector.get("oscillator/pi2")), ref.pi2)
 

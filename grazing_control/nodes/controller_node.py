@@ -15,6 +15,9 @@ publishes ``controller/velocity_correction`` (geometry_msgs/TwistStamped):
 twist.linear.x = Delta v (nondimensional velocity), header.stamp = the sample's stamp;
 reliable, transient local, keep last 100000 (``REPLAY_QOS``): a recorder that matches
 late still gets every answer (the subscription is reliable, volatile, keep last 1000).
+Both as packed bytes (:mod:`grazing_control.nodes.cdr`, docs/nodes.md "Wire format"):
+the simulator's sample layout is read directly, any other JointState through rclpy;
+bytes that decode to no JointState are counted as malformed.
 
 Switching on
 ------------
@@ -65,14 +68,16 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from grazing_control.control import Gains, correction
+from grazing_control.nodes import cdr
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, REPLAY_QOS,
                                           StartupError, Throttled, float_descriptor,
                                           int_descriptor, publish_parameter_record, run_node,
-                                          seconds_from_stamp, stamp_key, string_descriptor)
+                                          stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
 
 __all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
@@ -231,7 +236,7 @@ class ControllerNode(Node):
             TwistStamped, "controller/velocity_correction", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         self.create_subscription(
-            JointState, "oscillator/pi2", self._on_sample, DATA_QOS,
+            JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -241,7 +246,6 @@ class ControllerNode(Node):
         self.stale = Throttled(log, "stale sample not answered")
         self.nonfinite = Throttled(log, "non-finite correction not published")
         self.answered = 0
-        self._out = TwistStamped()
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
@@ -268,31 +272,39 @@ class ControllerNode(Node):
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in _KEYS}
 
-    def _on_sample(self, msg: JointState) -> None:
-        if len(msg.position) < 1 or len(msg.velocity) < 1:
-            self.malformed(f"stamp {stamp_key(msg.header.stamp)}: missing position/velocity")
-            return
-        x, v = msg.position[0], msg.velocity[0]
+    def _on_sample(self, data: bytes) -> None:
+        """A Pi2 sample as received (serialized): the simulator's layout is read directly
+        (:func:`cdr.read_sample`), any other JointState through rclpy's deserializer."""
+        sample = cdr.read_sample(data)
+        if sample is None:
+            try:
+                msg = deserialize_message(data, JointState)
+            except Exception as exc:  # noqa: BLE001 - bytes no JointState decodes from
+                self.malformed(f"{len(data)} bytes that are no JointState ({exc})")
+                return
+            key = stamp_key(msg.header.stamp)
+            if len(msg.position) < 1 or len(msg.velocity) < 1:
+                self.malformed(f"stamp {key}: missing position/velocity")
+                return
+            sample = key + (msg.position[0], msg.velocity[0])
+        sec, ns, x, v = sample
+        key = (sec, ns)
         if not (math.isfinite(x) and math.isfinite(v)):
-            self.malformed(f"stamp {stamp_key(msg.header.stamp)}: x={x!r} v={v!r}")
+            self.malformed(f"stamp {key}: x={x!r} v={v!r}")
             return
         if math.isfinite(self.stale_after) and self._use_sim_time():
-            age = self.get_clock().now().nanoseconds * 1e-9 - seconds_from_stamp(msg.header.stamp)
+            age = self.get_clock().now().nanoseconds * 1e-9 - (sec + ns * 1e-9)
             if age > self.stale_after:
-                self.stale(f"stamp {stamp_key(msg.header.stamp)} is {age:.6g} s old")
+                self.stale(f"stamp {key} is {age:.6g} s old")
                 return
-        dv = self.law.answer(stamp_key(msg.header.stamp), x, v)
+        dv = self.law.answer(key, x, v)
         if dv is None:
-            self.stale(f"stamp {stamp_key(msg.header.stamp)} was already answered")
+            self.stale(f"stamp {key} was already answered")
             return
         if not math.isfinite(dv):
-            self.nonfinite(f"stamp {stamp_key(msg.header.stamp)}: x={x!r} v={v!r} "
-                           f"gives Delta v={dv!r}: not published")
+            self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
             return
-        out = self._out
-        out.header.stamp = msg.header.stamp
-        out.twist.linear.x = dv
-        self.pub.publish(out)
+        self.pub.publish(cdr.twist_stamped(sec, ns, dv))
         self.answered += 1
 
     def _use_sim_time(self) -> bool:

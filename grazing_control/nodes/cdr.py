@@ -1,0 +1,110 @@
+"""The nodes' hot messages in their wire format (XCDR1, little endian), without rclpy.
+
+``Publisher.publish(msg)`` converts the Python message to its C struct field by field
+before the middleware serializes it; for the simulator's small messages that conversion
+is most of the publisher's CPU (measured: 16-21 us per JointState with one remote
+reader, 6.4-6.8 us for the same message published as bytes, ``publish(bytes)``;
+docs/benchmarks.md, "Pre-serialized messages"). The simulator and the controller
+publish the messages of every period as bytes packed here, and the controller reads
+its samples from the bytes it receives.
+
+The layouts are those of ``rclpy.serialization.serialize_message`` for the messages as
+the nodes fill them (one joint named ``mass``, empty ``frame_id``), padding zeroed:
+tests/test_cdr.py checks every encoder against rclpy's serializer and every decoder
+against its deserializer on thousands of seeded random values. A message of another
+shape (another publisher's JointState with two joints, say) is not this layout:
+:func:`read_sample` returns None and the caller uses rclpy's deserializer.
+
+CDR in brief: a 4-byte encapsulation header (00 01 00 00: CDR, little endian), then the
+fields in order, each aligned to its own size counted from the end of the header; a
+string is a uint32 length (with the terminating NUL) and its bytes; a sequence a uint32
+count and its elements.
+"""
+
+from __future__ import annotations
+
+import struct
+
+__all__ = ["NAME", "joint_state", "vector3_stamped", "twist_stamped", "clock", "float64",
+           "read_sample", "read_twist_stamped", "stamp_parts"]
+
+_HEADER = b"\x00\x01\x00\x00"
+_NS = 1_000_000_000
+#: The joint name of the oscillator's JointState messages.
+NAME = "mass"
+
+# sensor_msgs/JointState: stamp, frame_id "", name ["mass"], position [x], velocity [v],
+# effort [e]. Offsets after the header: 0 sec, 4 nanosec, 8 len 1, 12 NUL + 3 pad,
+# 16 count 1, 20 len 5, 24 "mass" NUL + 3 pad, 32 count 1, 36 pad, 40 x, 48 count 1,
+# 52 pad, 56 v, 64 count 1, 68 pad, 72 e.
+_JOINT_STATE = struct.Struct("<4siII4sII8sI4xdI4xdI4xd")
+_FRAME = b"\x00\x00\x00\x00"
+_MASS = b"mass\x00\x00\x00\x00"
+# geometry_msgs/Vector3Stamped: stamp, frame_id "", then x, y, z at 16, 24, 32.
+_VECTOR3_STAMPED = struct.Struct("<4siII4sddd")
+# geometry_msgs/TwistStamped: stamp, frame_id "", linear x y z, angular x y z.
+_TWIST_STAMPED = struct.Struct("<4siII4sdddddd")
+# rosgraph_msgs/Clock: one builtin_interfaces/Time.
+_CLOCK = struct.Struct("<4siI")
+# std_msgs/Float64.
+_FLOAT64 = struct.Struct("<4sd")
+
+
+def stamp_parts(t: float) -> tuple:
+    """(sec, nanosec) of a simulation time t >= 0 in seconds, rounded to 1 ns (the
+    same numbers as ``nodes.common.stamp_from_seconds``)."""
+    ns = int(round(t * 1e9))
+    return ns // _NS, ns % _NS
+
+
+def joint_state(sec: int, nanosec: int, x: float, v: float, effort: float) -> bytes:
+    """sensor_msgs/JointState: joint ``mass`` at (x, v), effort ``effort``."""
+    return _JOINT_STATE.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 1, v, 1,
+                             effort)
+
+
+def vector3_stamped(sec: int, nanosec: int, x: float, y: float, z: float) -> bytes:
+    """geometry_msgs/Vector3Stamped with an empty frame_id."""
+    return _VECTOR3_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, x, y, z)
+
+
+def twist_stamped(sec: int, nanosec: int, linear_x: float) -> bytes:
+    """geometry_msgs/TwistStamped: twist.linear.x = ``linear_x``, every other component 0."""
+    return _TWIST_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, linear_x, 0.0, 0.0, 0.0,
+                               0.0, 0.0)
+
+
+def clock(sec: int, nanosec: int) -> bytes:
+    """rosgraph_msgs/Clock."""
+    return _CLOCK.pack(_HEADER, sec, nanosec)
+
+
+def float64(value: float) -> bytes:
+    """std_msgs/Float64."""
+    return _FLOAT64.pack(_HEADER, value)
+
+
+def read_sample(data: bytes):
+    """(sec, nanosec, x, v) of a JointState in the simulator's layout, else None.
+
+    None for anything else (other lengths, joint names, counts or byte order): the
+    caller then deserializes it with rclpy and applies its own checks.
+    """
+    if len(data) != _JOINT_STATE.size:
+        return None
+    (head, sec, nanosec, flen, frame, names, nlen, name, npos, x, nvel, v, neff,
+     _effort) = _JOINT_STATE.unpack(data)
+    if (head != _HEADER or flen != 1 or frame[0] != 0 or names != 1 or nlen != 5
+            or name[:5] != _MASS[:5] or npos != 1 or nvel != 1 or neff != 1):
+        return None
+    return sec, nanosec, x, v
+
+
+def read_twist_stamped(data: bytes):
+    """(sec, nanosec, linear.x) of a TwistStamped with an empty frame_id, else None."""
+    if len(data) != _TWIST_STAMPED.size:
+        return None
+    head, sec, nanosec, flen, frame, lx, *_rest = _TWIST_STAMPED.unpack(data)
+    if head != _HEADER or flen != 1 or frame[0] != 0:
+        return None
+    return sec, nanosec, lx

@@ -1,0 +1,149 @@
+"""grazing_control.nodes.cdr against rclpy's own serializer and deserializer.
+
+Differential: thousands of seeded random values (finite, huge, tiny, signed zeros,
+inf, nan; stamps up to 2^31 - 1 s) give the bytes rclpy's serializer gives, except in
+the alignment padding (which rclpy leaves uninitialised and cdr zeroes), and rclpy
+deserializes them to the same fields; the decoders read rclpy's bytes back and refuse
+every other layout.
+"""
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+from builtin_interfaces.msg import Time  # noqa: E402
+from geometry_msgs.msg import TwistStamped, Vector3Stamped  # noqa: E402
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
+
+from grazing_control.nodes import cdr  # noqa: E402
+from grazing_control.nodes.common import stamp_from_seconds  # noqa: E402
+
+N = 3000
+
+
+def _padding(*ranges):
+    """Absolute byte positions of alignment padding (payload offsets + the 4-byte header)."""
+    return {4 + i for a, b in ranges for i in range(a, b)}
+
+
+PAD = {
+    "joint_state": _padding((13, 16), (29, 32), (36, 40), (52, 56), (68, 72)),
+    "vector3_stamped": _padding((13, 16)),
+    "twist_stamped": _padding((13, 16)),
+    "clock": set(),
+    "float64": set(),
+}
+
+
+def _values(rng, n):
+    """Random doubles of every kind the simulator can produce, and the edge cases."""
+    special = [0.0, -0.0, math.inf, -math.inf, math.nan, 5e-324, -5e-324, 1.7976931348623157e308,
+               2.2250738585072014e-308, 1e-300, -1e300]
+    out = list(rng.normal(size=n // 2) * 10.0 ** rng.integers(-20, 20, size=n // 2))
+    out += list(rng.uniform(-1e3, 1e3, size=n - n // 2 - len(special))) + special
+    return out
+
+
+def _stamps(rng, n):
+    secs = list(rng.integers(0, 2**31 - 1, size=n - 3)) + [0, 2**31 - 1, 1]
+    nsecs = list(rng.integers(0, 10**9, size=n - 3)) + [0, 10**9 - 1, 999_999_999]
+    return [(int(s), int(ns)) for s, ns in zip(secs, nsecs)]
+
+
+def _same_bytes_but_padding(ours, theirs, pad):
+    assert len(ours) == len(theirs)
+    diff = {i for i, (a, b) in enumerate(zip(ours, theirs)) if a != b}
+    assert diff <= pad, sorted(diff - pad)
+    assert all(ours[i] == 0 for i in pad)
+
+
+def _equal(a, b):
+    return a == b or (math.isnan(a) and math.isnan(b))
+
+
+def test_joint_state_bytes_are_rclpys():
+    rng = np.random.default_rng(1)
+    xs, vs, es = _values(rng, N), _values(rng, N), _values(rng, N)
+    rng.shuffle(vs)
+    for (sec, ns), x, v, e in zip(_stamps(rng, N), xs, vs, es):
+        ours = cdr.joint_state(sec, ns, x, v, e)
+        msg = JointState(name=["mass"], position=[x], velocity=[v], effort=[e])
+        msg.header.stamp = Time(sec=sec, nanosec=ns)
+        _same_bytes_but_padding(ours, serialize_message(msg), PAD["joint_state"])
+        back = deserialize_message(ours, JointState)
+        assert back.name == ["mass"] and back.header.frame_id == ""
+        assert (back.header.stamp.sec, back.header.stamp.nanosec) == (sec, ns)
+        assert all(_equal(a, b) for a, b in
+                   ((back.position[0], x), (back.velocity[0], v), (back.effort[0], e)))
+        # and the decoder reads rclpy's bytes (garbage in the padding included)
+        got = cdr.read_sample(serialize_message(msg))
+        assert got[:2] == (sec, ns) and _equal(got[2], x) and _equal(got[3], v)
+
+
+def test_vector3_twist_clock_and_float64_bytes_are_rclpys():
+    rng = np.random.default_rng(2)
+    vals = _values(rng, N)
+    for (sec, ns), a, b, c in zip(_stamps(rng, N), vals, vals[1:] + vals[:1], vals[::-1]):
+        stamp = Time(sec=sec, nanosec=ns)
+        m = Vector3Stamped()
+        m.header.stamp = stamp
+        m.vector.x, m.vector.y, m.vector.z = a, b, c
+        _same_bytes_but_padding(cdr.vector3_stamped(sec, ns, a, b, c), serialize_message(m),
+                                PAD["vector3_stamped"])
+        t = TwistStamped()
+        t.header.stamp = stamp
+        t.twist.linear.x = a
+        _same_bytes_but_padding(cdr.twist_stamped(sec, ns, a), serialize_message(t),
+                                PAD["twist_stamped"])
+        got = cdr.read_twist_stamped(serialize_message(t))
+        assert got[:2] == (sec, ns) and _equal(got[2], a)
+        assert cdr.clock(sec, ns) == serialize_message(Clock(clock=stamp))
+        assert cdr.float64(a) == serialize_message(Float64(data=a)) or math.isnan(a)
+
+
+@pytest.mark.parametrize("t", [0.0, 1e-9, 0.4999999999, 9.418185242872688, 12243.640812,
+                               188363.705, 2**31 - 1.5])
+def test_stamp_parts_are_stamp_from_seconds(t):
+    stamp = stamp_from_seconds(t)
+    assert cdr.stamp_parts(t) == (stamp.sec, stamp.nanosec)
+
+
+def test_decoders_refuse_every_other_layout():
+    """Another publisher's JointState (two joints, no name, a frame_id, no velocity), a
+    truncated or padded buffer, big endian, random bytes: None (the caller then uses
+    rclpy's deserializer and its own checks), never an exception or a wrong sample."""
+    def js(**kw):
+        m = JointState(**kw)
+        m.header.stamp = Time(sec=3, nanosec=4)
+        return serialize_message(m)
+
+    others = [js(name=["a", "b"], position=[1.0, 2.0], velocity=[1.0, 2.0], effort=[0.0, 0.0]),
+              js(position=[1.0], velocity=[2.0], effort=[3.0]),
+              js(name=["mass"], position=[1.0], velocity=[], effort=[3.0]),
+              js(name=["mass"], position=[1.0], velocity=[2.0]),
+              js(name=["mast"], position=[1.0], velocity=[2.0], effort=[3.0])]
+    m = JointState(name=["mass"], position=[1.0], velocity=[2.0], effort=[3.0])
+    m.header.frame_id = "x"
+    others.append(serialize_message(m))
+    good = cdr.joint_state(3, 4, 1.0, 2.0, 3.0)
+    others += [good[:-1], good + b"\x00", b"\x00\x00" + good[2:], b""]
+    assert cdr.read_sample(good) == (3, 4, 1.0, 2.0)
+    for data in others:
+        assert cdr.read_sample(data) is None
+    rng = np.random.default_rng(3)
+    for _ in range(N):
+        data = bytes(rng.integers(0, 256, size=len(good), dtype=np.uint8))
+        got = cdr.read_sample(data)
+        assert got is None or data[:4] == b"\x00\x01\x00\x00"
+        data = bytes(rng.integers(0, 256, size=int(rng.integers(0, 100)), dtype=np.uint8))
+        cdr.read_twist_stamped(data)   # never raises
+    t = TwistStamped()
+    t.header.frame_id = "map"
+    assert cdr.read_twist_stamped(serialize_message(t)) is None
+    assert cdr.read_twist_stamped(struct.pack("<4s", b"\x00\x01\x00\x00")) is None
