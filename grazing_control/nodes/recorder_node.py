@@ -58,6 +58,14 @@ Parameters (all read-only):
     Uncompressed chunk size; a crash loses at most the chunk being filled.
 ``require_complete`` (bool, false)
     Exit with status 1 when messages were missed (see above).
+``batch_window`` (double, seconds, 0.001; range [0, 0.1])
+    After each wake-up the recorder waits this long and then takes every message
+    queued on every topic: one wake-up records a batch instead of one message, which
+    is most of the recorder's CPU and of its contention with the simulator on a small
+    machine (docs/benchmarks.md, "Recorder batching"). Messages wait in the
+    middleware's keep-all queues meanwhile; ``log_time`` is the reception time and is
+    not moved, except with ``use_sim_time`` (the clock when taken: up to the window
+    later; 0 takes each message as it arrives).
 
 On SIGINT or SIGTERM the node stops spinning, takes every message already
 received by the middleware, finishes the MCAP file, writes ``metadata.yaml``
@@ -133,6 +141,11 @@ RECORDER_QOS = QoSProfile(
 # Most messages of one topic taken in one callback (keeps topics interleaved
 # and the reaction to a signal prompt).
 _BATCH = 256
+
+#: Default ``batch_window``: after a wake-up the recorder waits this long, then takes
+#: every message queued on every topic (docs/nodes.md, "Recorder"; docs/benchmarks.md).
+DEFAULT_BATCH_WINDOW = 0.001
+MAX_BATCH_WINDOW = 0.1
 
 
 def parse_topics(entries):
@@ -312,6 +325,10 @@ class RecorderNode(Node):
             "uncompressed chunk size, bytes", ParameterType.PARAMETER_INTEGER))
         self.declare_parameter("require_complete", False, read_only(
             "exit with status 1 when messages were missed", ParameterType.PARAMETER_BOOL))
+        self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, read_only(
+            f"seconds the recorder lets messages gather after each wake-up before taking "
+            f"all of them, in [0, {MAX_BATCH_WINDOW:g}] (0: take each one as it arrives)",
+            ParameterType.PARAMETER_DOUBLE))
 
     def _read_parameters(self):
         output = self.get_parameter("output").value
@@ -325,6 +342,10 @@ class RecorderNode(Node):
         chunk_size = self.get_parameter("chunk_size").value
         if chunk_size <= 0:
             raise ParameterError(f"chunk_size={chunk_size} is invalid: valid range is > 0")
+        window = self.get_parameter("batch_window").value
+        if not 0.0 <= window <= MAX_BATCH_WINDOW:
+            raise ParameterError(f"batch_window={window!r} is invalid: valid range is "
+                                 f"[0, {MAX_BATCH_WINDOW:g}] seconds")
         try:
             entries = self.get_parameter("topics").value
         except ParameterUninitializedException:      # -p topics:=[] has no type
@@ -512,8 +533,12 @@ def main(args=None):
         node = RecorderNode(arguments)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        window = node.get_parameter("batch_window").value
         while not stop.is_set() and rclpy.ok() and node.failed is None:
             executor.spin_once(timeout_sec=0.1)
+            if window > 0.0:    # let a batch gather, then take all of it in one go
+                stop.wait(window)
+                node.drain()
         node.drain()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
