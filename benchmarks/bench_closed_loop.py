@@ -6,7 +6,8 @@ scene on its own ROS_DOMAIN_ID, and side by side in one run of this script:
 
 1. **Lockstep throughput**: every period controlled (enable_after 0, Delta d = -5e-6);
    rows without state messages, with a state message every 1.0 of simulation time, and
-   the same with the recorder, for both executors (rclpy's SingleThreadedExecutor and
+   the same with the recorder (its default batch_window of 1 ms, and 0: a take per
+   wake-up), for both executors (rclpy's SingleThreadedExecutor and
    rclpy.experimental.EventsExecutor, in both nodes). The rate is the simulator's own
    count (periods / wall seconds from its first sample to its last period); the baseline
    is the in-process core ``simulate(p, N, gains, control_after=0)``, timed in this
@@ -118,20 +119,25 @@ class CpuMeter:
         self._thread.join()
 
 
-def scene(periods, sim_overrides, controller_overrides, bag=False):
-    """One launcher run; returns (the sim node's summary, CPU seconds per node)."""
-    with tempfile.TemporaryDirectory(prefix="bench_closed_loop_") as tmp, CpuMeter() as meter:
+def scene(periods, sim_overrides, controller_overrides, bag=False, recorder_overrides=None,
+          meter=True):
+    """One launcher run; returns (the sim node's summary, CPU seconds per node, or {}
+    without ``meter``: the meter's thread wakes every 20 ms to read /proc, and on two
+    cores that shows in a realtime run's latency tail, so the realtime rows run without)."""
+    with tempfile.TemporaryDirectory(prefix="bench_closed_loop_") as tmp, \
+            (CpuMeter() if meter else contextlib.nullcontext()) as cpu:
         res = launcher.run(STUDY, CONTROLLER, Path(tmp) / "bag" if bag else None,
                            periods, domain_id=random.SystemRandom().randrange(101, 232),
                            timeout=600, sim_overrides=sim_overrides,
-                           controller_overrides=controller_overrides, log_dir=tmp)
+                           controller_overrides=controller_overrides,
+                           recorder_overrides=recorder_overrides, log_dir=tmp)
         if not res.ok:
             raise RuntimeError(f"run failed: {res}\n{Path(res.logs['sim_node']).read_text()}")
         log = Path(res.logs["sim_node"]).read_text()
         s = summary(Path(res.logs["sim_node"]))
     # the scene: from the first sample to the summary line (its log stamp, Unix time)
     end = float(re.search(r"\[(\d+\.\d+)\] \[sim_node\]: summary", log).group(1))
-    return s, meter.during(end - float(s["wall"].rstrip("s")), end)
+    return s, (cpu.during(end - float(s["wall"].rstrip("s")), end) if cpu else {})
 
 
 @contextlib.contextmanager
@@ -159,18 +165,19 @@ def executors(ex):
 
 
 def lockstep(periods, repeat):
-    configs = [("no state", {"state_period": 0.0}, False),
-               ("state every 1.0", {"state_period": 1.0}, False),
-               ("state 1.0 + recorder", {"state_period": 1.0}, True)]
+    configs = [("no state", {"state_period": 0.0}, False, None),
+               ("state every 1.0", {"state_period": 1.0}, False, None),
+               ("state 1.0 + recorder", {"state_period": 1.0}, True, None),
+               ("  recorder window 0", {"state_period": 1.0}, True, {"batch_window": 0.0})]
     rows = []
-    for name, over, bag in configs:
+    for name, over, bag, rec in configs:
         for ex in EXECUTORS:
             rates, base, cpus = [], [], []
             for _ in range(repeat):
                 base.append(core_rate(min(periods, 2000)))
                 sim, ctl = executors(ex)
                 s, cpu = scene(periods, {"delta_d": -5e-6, **over, **sim},
-                               {"enable_after": 0, **ctl}, bag)
+                               {"enable_after": 0, **ctl}, bag, rec)
                 assert int(s["periods"]) == periods and s["timeouts"] == "0", s
                 rates.append(float(s["rate"]))
                 cpus.append(cpu)
@@ -199,7 +206,7 @@ def latency(samples, scale):
                 s, _ = scene(samples, {"mode": "realtime", "time_scale": scale,
                                        "state_period": 0.0, "delta_d": -5e-6,
                                        "actuation": "on_arrival", **sim},
-                             {"enable_after": 0, **ctl})
+                             {"enable_after": 0, **ctl}, meter=False)
             rows.append((load, ex, s))
     print(f"\nrealtime latency, time_scale {scale:g} (a sample every {T / scale * 1e3:.2f} ms "
           f"wall), {samples} samples, state off, apply on arrival")
@@ -220,9 +227,9 @@ def pace(samples_wall, executor, scales):
     for scale in scales:
         n = max(50, int(samples_wall * scale / T))
         sim, ctl = executors(executor)
-        s, cpu = scene(n, {"mode": "realtime", "time_scale": scale, "state_period": 1.0,
-                           "delta_d": -5e-6, "actuation": "on_arrival", **sim},
-                       {"enable_after": 0, **ctl}, bag=True)
+        s, _ = scene(n, {"mode": "realtime", "time_scale": scale, "state_period": 1.0,
+                         "delta_d": -5e-6, "actuation": "on_arrival", **sim},
+                     {"enable_after": 0, **ctl}, bag=True, meter=False)
         budget = 0.1 * T / scale * 1e3
         rows.append((scale, n, s, budget))
     print(f"\nrealtime pace with the recorder on, state every 1.0, executor {executor}: keeps "
