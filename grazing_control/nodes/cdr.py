@@ -2,11 +2,11 @@
 
 ``Publisher.publish(msg)`` converts the Python message to its C struct field by field
 before the middleware serializes it; for the simulator's small messages that conversion
-is most of the publisher's CPU (measured: 16-21 us per JointState with one remote
-reader, 6.4-6.8 us for the same message published as bytes, ``publish(bytes)``;
-docs/benchmarks.md, "Pre-serialized messages"). The simulator and the controller
-publish the messages of every period as bytes packed here, and the controller reads
-its samples from the bytes it receives.
+is 40-60 % of the publisher's CPU (benchmarks/bench_publish.py: 10-16 us per JointState
+with one remote reader, 6.3-6.7 us for the same message published as bytes with
+``publish(bytes)``; docs/benchmarks.md, "Batching and packed messages"). The simulator
+and the controller publish the messages of every period as bytes packed here, and each
+reads the other's messages from the bytes it receives.
 
 The layouts are those of ``rclpy.serialization.serialize_message`` for the messages as
 the nodes fill them (one joint named ``mass``, empty ``frame_id``), padding zeroed:
