@@ -91,7 +91,6 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
@@ -101,6 +100,7 @@ from grazing_control import kernel
 from grazing_control.faults import FaultModel
 from grazing_control.nodes import cdr
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
+                                          deserialize,
                                           READY_TOPIC,
                                           StartupError,
                                           Throttled, bool_descriptor, float_descriptor,
@@ -737,10 +737,8 @@ class SimNode(Node):
         (:func:`cdr.read_twist_stamped`), any other TwistStamped through rclpy."""
         answer = cdr.read_twist_stamped(data)
         if answer is None:
-            try:
-                msg = deserialize_message(data, TwistStamped)
-            except Exception as exc:  # noqa: BLE001 - bytes no TwistStamped decodes from
-                self.malformed(f"{len(data)} bytes that are no TwistStamped ({exc})")
+            msg = deserialize(data, TwistStamped, self.malformed)
+            if msg is None:
                 return
             answer = stamp_key(msg.header.stamp) + (msg.twist.linear.x,)
         key, dv = answer[:2], answer[2]

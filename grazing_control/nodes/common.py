@@ -41,6 +41,7 @@ __all__ = [
     "DATA_QOS",
     "EXECUTORS",
     "make_executor",
+    "deserialize",
     "PUBLISHER_QOS",
     "READY_TOPIC",
     "REPLAY_QOS",
@@ -177,6 +178,19 @@ class Throttled:
         if now - self._last >= self.interval:
             self._last = now
             self.logger.warning(f"{self.what} ({self.count} so far): {detail}")
+
+
+def deserialize(data: bytes, kind, malformed: Throttled):
+    """A message of type ``kind`` from serialized ``data`` with rclpy's deserializer, or
+    None (counted and logged by ``malformed``) when the bytes decode to no such message:
+    a node must not fail on what arrives (the fast path of :mod:`.cdr` comes first)."""
+    from rclpy.serialization import deserialize_message
+
+    try:
+        return deserialize_message(data, kind)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises several types for bad bytes
+        malformed(f"{len(data)} bytes that are no {kind.__name__} ({exc})")
+        return None
 
 
 # ------------------------------------------------------------------------------ main

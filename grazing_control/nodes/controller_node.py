@@ -68,13 +68,12 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from grazing_control.control import Gains, correction
 from grazing_control.nodes import cdr
-from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, REPLAY_QOS,
+from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize,
                                           StartupError, Throttled, float_descriptor,
                                           int_descriptor, publish_parameter_record, run_node,
                                           stamp_key, string_descriptor)
@@ -277,10 +276,8 @@ class ControllerNode(Node):
         (:func:`cdr.read_sample`), any other JointState through rclpy's deserializer."""
         sample = cdr.read_sample(data)
         if sample is None:
-            try:
-                msg = deserialize_message(data, JointState)
-            except Exception as exc:  # noqa: BLE001 - bytes no JointState decodes from
-                self.malformed(f"{len(data)} bytes that are no JointState ({exc})")
+            msg = deserialize(data, JointState, self.malformed)
+            if msg is None:
                 return
             key = stamp_key(msg.header.stamp)
             if len(msg.position) < 1 or len(msg.velocity) < 1:
