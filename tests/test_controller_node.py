@@ -180,6 +180,23 @@ def test_samples_of_another_layout_are_read_and_undecodable_bytes_are_malformed(
     assert "answered=2" in text and "malformed=40" in text and "Traceback" not in text, text
 
 
+def test_a_second_simulator_on_the_samples_stops_the_controller_with_an_error(controller):
+    """Two publishers of oscillator/pi2 (two scenes on one domain): the controller logs
+    that the scene is not isolated and exits with status 1 (the launcher then stops the
+    scene) instead of answering both and refusing one's colliding stamps."""
+    col, start = controller
+    proc, log, pub = start(enable_after=0)
+    x, v = 1e-4, P.v_ref - 2e-4
+    pub.publish(sample(1.0, x, v))
+    answers(col, 1)
+    assert proc.poll() is None
+    col.node.create_publisher(JointState, "oscillator/pi2", DATA_QOS)   # a second simulator
+    assert proc.wait(10) == 1
+    text = log.read_text()
+    assert "[ERROR]" in text and "2 publishers on /oscillator/pi2" in text, text
+    assert "the scene is not isolated" in text and "Traceback" not in text, text
+
+
 def test_enable_service_and_runtime_parameters(controller):
     col, start = controller
     proc, log, pub = start(enable_after=-1)

@@ -49,6 +49,12 @@ Stale, duplicate and malformed samples
 * A correction that is not finite (overflow, e.g. x = v = 1e308 with saturation = inf)
   is never published: counted (``nonfinite``) and logged; the simulator then applies no
   correction to that sample.
+* More than one publisher of ``oscillator/pi2`` (two simulators: two scenes on one
+  domain and namespace) is an error: the node logs it and exits with status 1, so the
+  scene fails instead of losing answers to the other scene's colliding stamps. Checked
+  every ``ISOLATION_CHECK`` s of wall time and whenever a sample is refused as a
+  duplicate. (Each simulator checks for another simulator or controller too, but sees
+  only what its own participant has discovered; the controller hears both.)
 
 Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_ref
 (NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
@@ -61,6 +67,7 @@ config/controller.yaml`` or ``python -m grazing_control.nodes.controller_node ..
 from __future__ import annotations
 
 import math
+import time
 from collections import deque
 
 from geometry_msgs.msg import TwistStamped
@@ -76,8 +83,11 @@ from grazing_control.nodes import cdr
 from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize,
                                           StartupError, Throttled, float_descriptor,
                                           int_descriptor, publish_parameter_record, run_node,
-                                          stamp_key, string_descriptor)
+                                          spin, stamp_key, string_descriptor)
 from grazing_control.params import OscillatorParams, ParameterError, study_omega
+
+#: Wall seconds between two checks that only one simulator publishes the samples.
+ISOLATION_CHECK = 0.25
 
 __all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
 
@@ -234,9 +244,12 @@ class ControllerNode(Node):
         self.pub = self.create_publisher(
             TwistStamped, "controller/velocity_correction", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
-        self.create_subscription(
+        self.sub_samples = self.create_subscription(
             JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        self.exit_code = 0
+        self.exit_now = False
+        self._next_check = 0.0
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
@@ -297,12 +310,40 @@ class ControllerNode(Node):
         dv = self.law.answer(key, x, v)
         if dv is None:
             self.stale(f"stamp {key} was already answered")
+            self._check_isolation()
             return
         if not math.isfinite(dv):
             self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
             return
         self.pub.publish(cdr.twist_stamped(sec, ns, dv))
         self.answered += 1
+
+    def _check_isolation(self) -> None:
+        """Stop with status 1 when more than one simulator publishes the samples."""
+        n = self.sub_samples.get_publisher_count()
+        if n > 1 and not self.exit_now:
+            self.get_logger().error(
+                f"{n} publishers on {self.sub_samples.topic_name} (more than one simulator):"
+                " the scene is not isolated (another scene on this ROS_DOMAIN_ID and "
+                "namespace?)")
+            self.exit_code = 1
+            self.exit_now = True
+
+    def spin_until(self, executor) -> None:
+        """Spin until shutdown, or until the isolation check stops the node.
+
+        The check runs here, between the executor's waits, rather than in a timer: a
+        SIGTERM is delivered in whatever Python callback runs next, and in a timer's
+        the EventsExecutor logs it as a fatal exception.
+        """
+        def stopped() -> bool:
+            now = time.monotonic()
+            if now >= self._next_check:
+                self._next_check = now + ISOLATION_CHECK
+                self._check_isolation()
+            return self.exit_now
+
+        spin(executor, stopped)
 
     def _use_sim_time(self) -> bool:
         return self.get_clock().ros_time_is_active
