@@ -110,8 +110,14 @@ def test_vector3_twist_clock_and_float64_bytes_are_rclpys():
 @pytest.mark.parametrize("t", [0.0, 1e-9, 0.4999999999, 9.418185242872688, 12243.640812,
                                188363.705, 2**31 - 1.5])
 def test_stamp_parts_are_stamp_from_seconds(t):
+    """Both round t * 1e9 (the float product, as the stamps always did) to the nearest
+    nanosecond, half to even: checked against exact rational arithmetic."""
+    from fractions import Fraction
+
     stamp = stamp_from_seconds(t)
     assert cdr.stamp_parts(t) == (stamp.sec, stamp.nanosec)
+    ns = round(Fraction(t * 1e9))
+    assert cdr.stamp_parts(t) == divmod(ns, 10**9)
 
 
 def test_decoders_refuse_every_other_layout():

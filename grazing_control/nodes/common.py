@@ -37,6 +37,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from grazing_control.nodes.cdr import stamp_parts
+
 __all__ = [
     "DATA_QOS",
     "EXECUTORS",
@@ -89,8 +91,6 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-_NS = 1_000_000_000
-
 #: Latched topic (std_msgs/Bool) on which recorder_node says it has matched a publisher
 #: on every topic it records; sim_node waits for it with ``wait_for_recorder``.
 READY_TOPIC = "recorder/ready"
@@ -102,9 +102,10 @@ class StartupError(RuntimeError):
 
 # --------------------------------------------------------------------------- stamps
 def stamp_from_seconds(t: float) -> Time:
-    """builtin_interfaces/Time for a simulation time t >= 0 in seconds (rounded to 1 ns)."""
-    ns = int(round(t * 1e9))
-    return Time(sec=ns // _NS, nanosec=ns % _NS)
+    """builtin_interfaces/Time for a simulation time t >= 0 in seconds (rounded to 1 ns,
+    :func:`grazing_control.nodes.cdr.stamp_parts`)."""
+    sec, nanosec = stamp_parts(t)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def stamp_key(stamp) -> tuple:
