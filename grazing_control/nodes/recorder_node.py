@@ -62,7 +62,7 @@ Parameters (all read-only):
     After each wake-up the recorder waits this long and then takes every message
     queued on every topic: one wake-up records a batch instead of one message, which
     is most of the recorder's CPU and of its contention with the simulator on a small
-    machine (docs/benchmarks.md, "Recorder batching"). Messages wait in the
+    machine (docs/benchmarks.md, "Batching and packed messages"). Messages wait in the
     middleware's keep-all queues meanwhile; ``log_time`` is the reception time and is
     not moved, except with ``use_sim_time`` (the clock when taken: up to the window
     later; 0 takes each message as it arrives).
@@ -143,7 +143,7 @@ RECORDER_QOS = QoSProfile(
 _BATCH = 256
 
 #: Default ``batch_window``: after a wake-up the recorder waits this long, then takes
-#: every message queued on every topic (docs/nodes.md, "Recorder"; docs/benchmarks.md).
+#: every message queued on every topic (docs/nodes.md, "Wire format and batching").
 DEFAULT_BATCH_WINDOW = 0.001
 MAX_BATCH_WINDOW = 0.1
 
