@@ -31,10 +31,10 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'grazing = grazing_control.console:main',
+            'grazing = grazing_control.cli.console:main',
             'sim_node = sim_node.sim_node:main',
-            'controller_node = grazing_control.nodes.controller_node:main',
-            'recorder_node = grazing_control.nodes.recorder_node:main',
+            'controller_node = grazing_control.ros.controller_node:main',
+            'recorder_node = grazing_control.ros.recorder_node:main',
         ],
     },
 )

@@ -42,11 +42,11 @@ sys.path.insert(0, str(REPO))
 
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
-from grazing_control.control import Gains  # noqa: E402
-from grazing_control.design import degenerate_c1  # noqa: E402
-from grazing_control.params import OscillatorParams  # noqa: E402
-from grazing_control.recording import BagWriter  # noqa: E402
-from grazing_control.simulate import simulate  # noqa: E402
+from grazing_control.oscillator.control import Gains  # noqa: E402
+from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
+from grazing_control.ros.recording import BagWriter  # noqa: E402
+from grazing_control.dynamics.simulate import simulate  # noqa: E402
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 T = TS.types
@@ -136,7 +136,7 @@ def make_bag(path: Path, messages: int) -> int:
 
 
 def bench_mcap_ros2(bag):
-    from grazing_control.recording import read_messages
+    from grazing_control.ros.recording import read_messages
 
     n, acc = 0, 0.0
     for m in read_messages(bag, topics=TOPICS):
@@ -174,7 +174,7 @@ def bench_anyreader(bag):
 def bench_mcap_raw(bag):
     from mcap.reader import make_reader
 
-    from grazing_control.bagtools.reader import bag_path
+    from grazing_control.recordings.reader import bag_path
 
     n = 0
     with open(bag_path(bag), "rb") as fh:
@@ -184,14 +184,14 @@ def bench_mcap_raw(bag):
 
 
 def bench_load(bag):
-    from grazing_control.bagtools.scenes import load
+    from grazing_control.recordings.scenes import load
 
     d = load(bag)
     return sum(len(s.stamp_ns) for s in d.scenes)
 
 
 def bench_analyze(bag):
-    from grazing_control.bagtools.analyze import analyze
+    from grazing_control.recordings.analyze import analyze
 
     rep = analyze([bag], None, figures=False)
     return rep["bags"][0]["scenes"][0]["samples"]

@@ -1,6 +1,6 @@
 """Closed loop across processes: lockstep throughput, realtime latency and pace (issue 8 §4).
 
-Everything runs through :func:`grazing_control.launcher.run` (sim_node, controller_node and,
+Everything runs through :func:`grazing_control.ros.launcher.run` (sim_node, controller_node and,
 where stated, recorder_node as separate processes; Fast DDS, reliable volatile QoS), each
 scene on its own ROS_DOMAIN_ID, and side by side in one run of this script:
 
@@ -45,11 +45,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from grazing_control import launcher  # noqa: E402
-from grazing_control.control import Gains  # noqa: E402
-from grazing_control.design import degenerate_c1  # noqa: E402
-from grazing_control.params import OscillatorParams  # noqa: E402
-from grazing_control.simulate import simulate  # noqa: E402
+from grazing_control.ros import launcher  # noqa: E402
+from grazing_control.oscillator.control import Gains  # noqa: E402
+from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
+from grazing_control.dynamics.simulate import simulate  # noqa: E402
 
 STUDY = ROOT / "config" / "study.yaml"
 CONTROLLER = ROOT / "config" / "controller.yaml"

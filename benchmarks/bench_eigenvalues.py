@@ -36,17 +36,14 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from grazing_control.control import Gains  # noqa: E402
-from grazing_control.design import degenerate_c1  # noqa: E402
-from grazing_control.orbits import find_branch_phase, multipliers, orbit_11  # noqa: E402
-from grazing_control.params import OscillatorParams  # noqa: E402
-from grazing_control.perturbation import (  # noqa: E402
-    characteristic_roots,
-    delta2_from_delta_d,
-    normal_form_fixed_point,
-    perturbation_multipliers,
-    series_coefficients,
-)
+from grazing_control.oscillator.control import Gains  # noqa: E402
+from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.orbits import find_branch_phase, multipliers, orbit_11  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
+from grazing_control.dynamics.perturbation import (characteristic_roots, delta2_from_delta_d,
+                                                   normal_form_fixed_point,
+                                                   perturbation_multipliers,
+                                                   series_coefficients)
 
 FLOOR = 1e-17  # errors of exactly 0 are drawn here
 

@@ -3,11 +3,11 @@
 Side by side in one process, on the study's scenes (parameters of the study, start at
 X** on Pi2):
 
-* ``reference``  grazing_control.simulate.simulate with GRAZING_KERNEL=python: the
+* ``reference``  grazing_control.dynamics.simulate.simulate with GRAZING_KERNEL=python: the
                  pure-Python core (impact.advance period by period);
-* ``kernel``     grazing_control.kernel.simulate_exact: the same loop compiled by numba
+* ``kernel``     grazing_control.oscillator.kernel.simulate_exact: the same loop compiled by numba
                  (the default path of simulate);
-* ``sweep``      grazing_control.kernel.run_point: the kernel's loop as a sweep runs it
+* ``sweep``      grazing_control.oscillator.kernel.run_point: the kernel's loop as a sweep runs it
                  (no per-impact records, only counts).
 
 Scenes: Delta d = -1e-3 (settles on the stable 1/1 orbit), -9e-6 and -5e-6 uncontrolled
@@ -49,11 +49,11 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-from grazing_control import kernel  # noqa: E402
-from grazing_control.control import Gains  # noqa: E402
-from grazing_control.design import degenerate_c1  # noqa: E402
-from grazing_control.params import OscillatorParams  # noqa: E402
-from grazing_control.simulate import simulate  # noqa: E402
+from grazing_control.oscillator import kernel  # noqa: E402
+from grazing_control.oscillator.control import Gains  # noqa: E402
+from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
+from grazing_control.dynamics.simulate import simulate  # noqa: E402
 
 STUDY = OscillatorParams()
 SCENES = [  # name, delta_d, controlled, chaotic (compare fewer periods with mpmath)

@@ -10,7 +10,7 @@ and Fast DDS's synchronous write to the reader):
   arrays set on a reused message (what sim_node did before issue 8 §4's change);
 * ``serialize``: ``rclpy.serialization.serialize_message`` of that message, published
   as bytes;
-* ``cdr``: :func:`grazing_control.nodes.cdr.joint_state` (struct.pack), published as
+* ``cdr``: :func:`grazing_control.ros.cdr.joint_state` (struct.pack), published as
   bytes (what sim_node does now);
 * ``pack only``: the cdr packing alone.
 
@@ -67,7 +67,7 @@ def main(argv=None):
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
 
-    from grazing_control.nodes import cdr
+    from grazing_control.ros import cdr
 
     kinds = ("message", "serialize", "cdr", "pack only")
     total = args.messages * args.repeat * (len(kinds) - 1)

@@ -39,9 +39,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from grazing_control.nodes.recorder_node import DEFAULT_TOPICS  # noqa: E402
-from grazing_control.recording import (BagWriter, message_definition,  # noqa: E402
-                                       read_messages)
+from grazing_control.ros.recorder_node import DEFAULT_TOPICS  # noqa: E402
+from grazing_control.ros.recording import BagWriter, message_definition, read_messages
 
 CLASSES = {
     "sensor_msgs/msg/JointState": JointState,
@@ -93,9 +92,9 @@ def bench_bagwriter(n, compression, workdir):
 
 # recorder_node with BagWriter.write made a no-op: what the node costs without
 # recording (subscription, executor, take), to show where the time goes.
-_NO_WRITE = ("import sys, grazing_control.recording as r; "
+_NO_WRITE = ("import sys, grazing_control.ros.recording as r; "
              "r.BagWriter.write = lambda *a, **k: None; "
-             "from grazing_control.nodes.recorder_node import main; sys.exit(main())")
+             "from grazing_control.ros.recorder_node import main; sys.exit(main())")
 
 
 def bench_node(n, compression, workdir, domain, write=True):
@@ -107,7 +106,7 @@ def bench_node(n, compression, workdir, domain, write=True):
     bag_dir = Path(workdir) / f"node_{compression}_{domain}"
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
-    program = ["-m", "grazing_control.nodes.recorder_node"] if write else ["-c", _NO_WRITE]
+    program = ["-m", "grazing_control.ros.recorder_node"] if write else ["-c", _NO_WRITE]
     recorder = subprocess.Popen(
         [sys.executable, *program, "--ros-args",
          "-p", f"output:={bag_dir}", "-p", f"compression:={compression}"],

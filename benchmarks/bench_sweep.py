@@ -7,7 +7,7 @@ the first ``--transient`` (1000) dropped, from X** on Pi2, uncontrolled.
 
 Side by side in one process:
 
-* ``kernel, N workers``  grazing_control.sweeps.sweep on N local processes (default 2,
+* ``kernel, N workers``  grazing_control.studies.sweeps.sweep on N local processes (default 2,
   this machine's cores) and on 1, for the scaling; wall-clock seconds of the call
   (process pool start included; the kernel is loaded from numba's cache first, timed
   apart);
@@ -37,10 +37,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from grazing_control import kernel  # noqa: E402
-from grazing_control.params import OscillatorParams  # noqa: E402
-from grazing_control.sweeps import sweep  # noqa: E402
-from grazing_control.sweeps.plot import diagram  # noqa: E402
+from grazing_control.oscillator import kernel  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
+from grazing_control.studies.sweeps import sweep  # noqa: E402
+from grazing_control.studies.sweeps.plot import diagram  # noqa: E402
 
 
 def timed(fn):

@@ -11,7 +11,7 @@ before starting; the bag path is compared as text (NotEqualsSubstitution, launch
 Jazzy), never evaluated, so any path works. The launch shuts everything
 down when the simulator exits after ``max_periods`` (the recorder closes its bag on the
 SIGINT that follows). Machines without ``ros2 launch`` use ``grazing run``
-(grazing_control.launcher), which does the same with plain processes.
+(grazing_control.ros.launcher), which does the same with plain processes.
 """
 
 import os

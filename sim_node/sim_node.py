@@ -1,10 +1,10 @@
 """sim_node: the impact oscillator integrated with the exact flow, as a ROS 2 node.
 
-The integration is :func:`grazing_control.fidelity.period_step` (by default the exact
-:func:`grazing_control.simulate.period_step`), one call per forcing
-period from one Pi2 sample to the next, exactly as :func:`grazing_control.simulate.simulate`
+The integration is :func:`grazing_control.dynamics.fidelity.period_step` (by default the exact
+:func:`grazing_control.dynamics.simulate.period_step`), one call per forcing
+period from one Pi2 sample to the next, exactly as :func:`grazing_control.dynamics.simulate.simulate`
 does; everything published between two samples (state, Pi1 crossing, impacts) is
-evaluated from the closed form by :func:`grazing_control.simulate.states_between`
+evaluated from the closed form by :func:`grazing_control.dynamics.simulate.states_between`
 without altering the trajectory. A lockstep run therefore reproduces ``simulate`` of
 the same scene sample for sample (docs/nodes.md).
 
@@ -69,7 +69,7 @@ applying its correction) is published on ``oscillator/latency`` and summarised a
 with how late the samples went out against their simulation time (``sample_lag_ms``).
 
 Injected faults (``loss``, ``measurement_noise``, ``jitter`` with ``seed``): the
-:class:`grazing_control.faults.FaultModel` of sample k, a pure function of (seed, k), as
+:class:`grazing_control.plant.faults.FaultModel` of sample k, a pure function of (seed, k), as
 in the core's fault simulation: the published sample carries the measurement noise, the
 correction is dropped (counted as ``lost``) or acts at the jittered delay.
 
@@ -96,19 +96,17 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
 
-from grazing_control import kernel
-from grazing_control.faults import FaultModel
-from grazing_control.nodes import cdr
-from grazing_control.nodes.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
-                                          deserialize,
-                                          READY_TOPIC,
-                                          StartupError,
-                                          Throttled, bool_descriptor, float_descriptor,
-                                          int_descriptor, publish_parameter_record, run_node,
-                                          spin, stamp_key, string_descriptor)
-from grazing_control.params import OscillatorParams, ParameterError, study_omega
-from grazing_control.fidelity import FIDELITIES, period_step
-from grazing_control.simulate import states_between
+from grazing_control.oscillator import kernel
+from grazing_control.plant.faults import FaultModel
+from grazing_control.ros import cdr
+from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
+                                        deserialize, READY_TOPIC, StartupError, Throttled,
+                                        bool_descriptor, float_descriptor, int_descriptor,
+                                        publish_parameter_record, run_node, spin, stamp_key,
+                                        string_descriptor)
+from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.dynamics.fidelity import FIDELITIES, period_step
+from grazing_control.dynamics.simulate import states_between
 
 __all__ = ["SimSettings", "settings_from_values", "Event", "Engine", "SimNode", "main"]
 
@@ -952,7 +950,7 @@ class SimNode(Node):
 
     # ---------------------------------------------------------------- publishing
     def _publish(self, ev: Event, clock: bool = True) -> tuple:
-        """Publish an event (as packed CDR, :mod:`grazing_control.nodes.cdr`); returns
+        """Publish an event (as packed CDR, :mod:`grazing_control.ros.cdr`); returns
         its stamp as (sec, nanosec)."""
         sec, ns = stamp = cdr.stamp_parts(ev.t)
         if ev.kind == "impact":

@@ -60,7 +60,7 @@ def write_rosbags(path, messages):
 
 def scene_messages(bag_dir, topics=None, *, with_impacts=True):
     """The Pi2 samples, corrections and impacts of a bag as rosbags messages (re-written)."""
-    from grazing_control.analysis import scene_from_bag
+    from grazing_control.recordings.analysis import scene_from_bag
 
     topics = topics or {"pi2": "/oscillator/pi2", "correction": "/controller/velocity_correction",
                         "impact": "/oscillator/impact"}

@@ -1,7 +1,7 @@
 """Brute-force first impacts on a dense grid, vectorised over many cases (numpy).
 
 The yardstick of the differential test of the certified search
-(:func:`grazing_control.impact.next_impact`). It shares no code with the core: the
+(:func:`grazing_control.oscillator.impact.next_impact`). It shares no code with the core: the
 closed-form flow is written again here (spec section 1) in deviation coordinates,
 
     z_x(t) = e^{-zeta t} (c1 cos(omega_d t) + c2 sin(omega_d t)),   c1 = dx0,

@@ -2,7 +2,7 @@
 
 import pytest
 
-from grazing_control import kernel
+from grazing_control.oscillator import kernel
 
 
 @pytest.fixture(scope="session", autouse=True)

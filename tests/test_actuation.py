@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Vector3Stamped
 
-from grazing_control import launcher
-from grazing_control.design import degenerate_c1
-from grazing_control.faults import FaultModel
-from grazing_control.flow import transition_matrix
-from grazing_control.nodes.common import seconds_from_stamp, stamp_key
-from grazing_control.params import OscillatorParams, ParameterError
-from grazing_control.simulate import period_step
+from grazing_control.ros import launcher
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.plant.faults import FaultModel
+from grazing_control.oscillator.flow import transition_matrix
+from grazing_control.ros.common import seconds_from_stamp, stamp_key
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.dynamics.simulate import period_step
 from sim_node.sim_node import Engine, settings_from_values
 from test_closed_loop import TOPICS as CLOSED_LOOP_TOPICS
 from test_closed_loop import STUDY, Collector, new_domain, xv
@@ -120,8 +120,8 @@ def test_new_parameters_refused_with_a_reason():
 
 
 def test_controller_validates_the_design_delay_and_the_launcher_passes_it_on(tmp_path):
-    from grazing_control.launcher import _design_delay
-    from grazing_control.nodes.controller_node import actuation_delay_from_values
+    from grazing_control.ros.launcher import _design_delay
+    from grazing_control.ros.controller_node import actuation_delay_from_values
 
     omega = OscillatorParams().omega
     assert actuation_delay_from_values({"actuation_delay": 6.0, "omega": omega}) == 6.0

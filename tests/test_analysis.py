@@ -5,13 +5,13 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from grazing_control.analysis import scene_from_simulation, summarize
-from grazing_control.control import Gains
-from grazing_control.demo import main as demo_main
-from grazing_control.design import degenerate_c1
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.recordings.analysis import scene_from_simulation, summarize
+from grazing_control.oscillator.control import Gains
+from grazing_control.studies.demo import main as demo_main
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 
 def test_summary_of_a_controlled_scene_matches_the_exact_orbit():

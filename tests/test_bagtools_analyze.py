@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from grazing_control import cli
-from grazing_control.bagtools import record
-from grazing_control.bagtools.scenes import DuplicateStampsError, load
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams
+from grazing_control.ros.recording import record
+from grazing_control.recordings.scenes import DuplicateStampsError, load
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams
 
 from bagtools_helpers import BAGS, joint_state, scene_messages, string, write_rosbags
 
@@ -34,7 +34,7 @@ def run_cli(argv, capsys):
 
 @pytest.fixture(scope="module")
 def reference_report(tmp_path_factory):
-    from grazing_control.bagtools.analyze import analyze
+    from grazing_control.recordings.analyze import analyze
 
     out = tmp_path_factory.mktemp("analyze")
     return analyze([BAGS / n for n, _ in SCENES], out), out
@@ -44,7 +44,7 @@ def reference_report(tmp_path_factory):
 def unrecorded_report(tmp_path_factory):
     """The reference bags rewritten without the parameter record (as bags recorded before
     it existed, or by another recorder): samples, corrections and impacts only."""
-    from grazing_control.bagtools.analyze import analyze
+    from grazing_control.recordings.analyze import analyze
 
     out = tmp_path_factory.mktemp("unrecorded")
     bags = [write_rosbags(out / name, scene_messages(BAGS / name)[0]) for name, _ in SCENES]
@@ -144,7 +144,7 @@ def test_pi2_only_bag_is_analysed_and_says_what_it_lacks(tmp_path):
     msgs, _ = scene_messages(BAGS / "scene_9e-6", with_impacts=False)
     msgs = [m for m in msgs if m[0] == "/oscillator/pi2"][:400]
     bag = write_rosbags(tmp_path / "pi2only", msgs)
-    from grazing_control.bagtools.analyze import analyze
+    from grazing_control.recordings.analyze import analyze
 
     rep = analyze([bag], tmp_path / "out", figures=False)["bags"][0]
     assert any("no corrections recorded" in n for n in rep["notes"])
@@ -211,7 +211,7 @@ def test_parameter_record_round_trip_and_use(tmp_path):
              string(record.encode("/controller_node", ctl))),
             ("/grazing/parameters", "std_msgs/msg/String", 0, string("foreign text"))] + msgs
     bag = write_rosbags(tmp_path / "rec", msgs)
-    from grazing_control.bagtools.analyze import analyze
+    from grazing_control.recordings.analyze import analyze
 
     rep = analyze([bag], tmp_path / "out", figures=False)["bags"][0]
     src = rep["setup"]["sources"]
@@ -245,9 +245,9 @@ def test_a_delayed_design_is_analysed_with_its_delay(tmp_path):
     """A lockstep scene with scheduled actuation (gains of `grazing design --delay 6`):
     the bag's parameter record carries the delay, and the prediction is the delayed
     1/1 orbit (the kick along b_delta): the final sample equals it to rounding."""
-    from grazing_control import launcher
-    from grazing_control.bagtools.analyze import analyze
-    from grazing_control.design import write_controller_yaml
+    from grazing_control.ros import launcher
+    from grazing_control.recordings.analyze import analyze
+    from grazing_control.dynamics.design import write_controller_yaml
 
     p = OscillatorParams(delta_d=-9e-6)
     delay = 6.0

@@ -7,8 +7,8 @@ import random
 import numpy as np
 import pytest
 
-from grazing_control.bagtools import reader
-from grazing_control.recording import BagWriter, read_messages
+from grazing_control.recordings import reader
+from grazing_control.ros.recording import BagWriter, read_messages
 
 from bagtools_helpers import BAGS, TYPESTORE, joint_state, twist_stamped, vector3_stamped, \
     write_rosbags
@@ -154,7 +154,7 @@ def test_corrupted_bytes_anywhere_give_a_result_or_a_one_line_error(tmp_path):
     or refuses it with a ValueError; never another exception, never a hang."""
     from mcap.reader import make_reader
 
-    from grazing_control.bagtools.scenes import load
+    from grazing_control.recordings.scenes import load
 
     clean = tmp_path / "clean"
     with open(BAGS / "scene_9e-6" / "scene_9e-6_0.mcap", "rb") as fh, \

@@ -17,14 +17,15 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from grazing_control import cli, launcher                       # noqa: E402
-from grazing_control.bagtools.analyze import analyze            # noqa: E402
-from grazing_control.bagtools.replay import replay_controller, replay_simulator  # noqa: E402
-from grazing_control.bagtools.scenes import load                # noqa: E402
-from grazing_control.control import Gains, correction          # noqa: E402
-from grazing_control.design import degenerate_c1, write_controller_yaml  # noqa: E402
-from grazing_control.params import OscillatorParams             # noqa: E402
-from grazing_control.simulate import simulate                   # noqa: E402
+from grazing_control import cli
+from grazing_control.ros import launcher                       # noqa: E402
+from grazing_control.recordings.analyze import analyze            # noqa: E402
+from grazing_control.recordings.replay import replay_controller, replay_simulator  # noqa: E402
+from grazing_control.recordings.scenes import load                # noqa: E402
+from grazing_control.oscillator.control import Gains, correction          # noqa: E402
+from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams             # noqa: E402
+from grazing_control.dynamics.simulate import simulate                   # noqa: E402
 
 from bagtools_helpers import BAGS                               # noqa: E402
 

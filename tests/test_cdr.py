@@ -1,4 +1,4 @@
-"""grazing_control.nodes.cdr against rclpy's own serializer and deserializer.
+"""grazing_control.ros.cdr against rclpy's own serializer and deserializer.
 
 Differential: thousands of seeded random values (finite, huge, tiny, signed zeros,
 inf, nan; stamps up to 2^31 - 1 s) give the bytes rclpy's serializer gives, except in
@@ -21,8 +21,8 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
-from grazing_control.nodes import cdr  # noqa: E402
-from grazing_control.nodes.common import stamp_from_seconds  # noqa: E402
+from grazing_control.ros import cdr  # noqa: E402
+from grazing_control.ros.common import stamp_from_seconds  # noqa: E402
 
 N = 3000
 

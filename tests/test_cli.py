@@ -1,6 +1,6 @@
 """The `grazing` command line, run as a real subprocess (``python -m grazing_control.cli``).
 
-Contract (grazing_control/cli.py module docstring and the issue):
+Contract (grazing_control/cli/commands.py module docstring and the issue):
 
 * with --json, stdout is exactly one JSON object with the keys of the spec, and the
   values are those of the library calls;
@@ -27,12 +27,13 @@ import numpy as np
 import pytest
 import yaml
 
-from grazing_control.continuation import continue_11
-from grazing_control.control import Gains
-from grazing_control.design import admissible_c2, degenerate_c1, evaluate_design, write_controller_yaml
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.dynamics.continuation import continue_11
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import (admissible_c2, degenerate_c1, evaluate_design,
+                                             write_controller_yaml)
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 P = OscillatorParams()
@@ -309,7 +310,7 @@ def test_grazing_run_drives_the_three_nodes_and_records(tmp_path):
     """`grazing run` starts sim, controller and recorder as processes, waits, stops them."""
     import random
 
-    from grazing_control.recording import read_messages
+    from grazing_control.ros.recording import read_messages
 
     bag = tmp_path / "bag"
     r = _run(["run", "--periods", "40", "--delta-d", "-5e-6", "--enable-after", "20",
@@ -553,7 +554,7 @@ def test_grazing_run_json_prints_one_summary_object(tmp_path):
 
 @pytest.mark.parametrize("delay", [0.05, 0.15, 0.3, 0.6])
 def test_ctrl_c_at_any_moment_of_the_console_script_is_quiet(delay):
-    """The `grazing` console script (grazing_control.console) under SIGINT while it
+    """The `grazing` console script (grazing_control.cli.console) under SIGINT while it
     imports numpy/scipy or while it simulates: status 130, one line, no traceback."""
     import signal
     import time

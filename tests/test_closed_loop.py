@@ -1,7 +1,7 @@
 """Closed loop over real middleware: sim_node + controller_node as separate processes.
 
-Each test runs its nodes with :func:`grazing_control.launcher.run` (or
-:func:`~grazing_control.launcher.start_node`) under its own ROS_DOMAIN_ID, and a
+Each test runs its nodes with :func:`grazing_control.ros.launcher.run` (or
+:func:`~grazing_control.ros.launcher.start_node`) under its own ROS_DOMAIN_ID, and a
 :class:`Collector` node in the test process (its own rclpy context on the same domain)
 subscribes to every topic the recorder would, so the simulator (``wait_for_subscribers:=1``)
 starts only when it listens. The other node test modules import the helpers from here.
@@ -29,12 +29,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 
-from grazing_control import launcher
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.nodes.common import LATCHED_QOS, seconds_from_stamp
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.ros import launcher
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.ros.common import LATCHED_QOS, seconds_from_stamp
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "config" / "study.yaml"
@@ -61,7 +61,7 @@ _CLAIMED = []
 
 def new_domain() -> int:
     """A ROS_DOMAIN_ID that no DDS participant of this host uses now, and no other scene
-    claimed (:func:`grazing_control.launcher.claim_domain`); the claim is held while the
+    claimed (:func:`grazing_control.ros.launcher.claim_domain`); the claim is held while the
     next few tests run (the tests run one after another)."""
     domain, lock = launcher.claim_domain()
     _CLAIMED.append(lock)
@@ -232,8 +232,8 @@ def test_realtime_keeps_pace_and_measures_latency(tmp_path, domain, collector):
 
 
 def test_launcher_records_the_scene_with_the_recorder(tmp_path, domain):
-    pytest.importorskip("grazing_control.nodes.recorder_node")
-    from grazing_control.recording import read_messages
+    pytest.importorskip("grazing_control.ros.recorder_node")
+    from grazing_control.ros.recording import read_messages
 
     n, on = 60, 40
     bag = tmp_path / "bag"
@@ -255,7 +255,7 @@ def test_launcher_records_the_scene_with_the_recorder(tmp_path, domain):
 
 
 def test_launcher_forwards_ctrl_c_and_nodes_exit_cleanly(tmp_path, domain):
-    code = ("import sys; from grazing_control.launcher import run; "
+    code = ("import sys; from grazing_control.ros.launcher import run; "
             f"r = run({str(STUDY)!r}, {str(CONTROLLER)!r}, None, 0, domain_id={domain}, "
             f"log_dir={str(tmp_path)!r}, sim_overrides={{'answer_timeout': 1.0}}); "
             "print(r.sim, r.controller, r.interrupted); sys.exit(130 if r.interrupted else 0)")

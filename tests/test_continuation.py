@@ -1,4 +1,4 @@
-"""Specification tests of grazing_control.continuation (spec sections 5-6, Fig. 1c-d, 2c-e).
+"""Specification tests of grazing_control.dynamics.continuation (spec sections 5-6, Fig. 1c-d, 2c-e).
 
 Independent routes used to earn the numbers:
 
@@ -40,13 +40,13 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.continuation import Branch, branch_monodromy, continue_11
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1, limit_multipliers
-from grazing_control.maps import pi2_map
-from grazing_control.orbits import _orbit_from_phase, orbit_11, shoot
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.dynamics.continuation import Branch, branch_monodromy, continue_11
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1, limit_multipliers
+from grazing_control.dynamics.maps import pi2_map
+from grazing_control.dynamics.orbits import _orbit_from_phase, orbit_11, shoot
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 P = OscillatorParams()
 PD_STUDY = -1.005268252976113e-05

@@ -17,13 +17,13 @@ from std_srvs.srv import SetBool
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
-from grazing_control import launcher
-from grazing_control.control import Gains, correction
-from grazing_control.design import degenerate_c1, write_controller_yaml
-from grazing_control.nodes import cdr
-from grazing_control.nodes.common import DATA_QOS, stamp_from_seconds
-from grazing_control.nodes.controller_node import ControlLaw, law_from_values
-from grazing_control.params import OscillatorParams, ParameterError
+from grazing_control.ros import launcher
+from grazing_control.oscillator.control import Gains, correction
+from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml
+from grazing_control.ros import cdr
+from grazing_control.ros.common import DATA_QOS, stamp_from_seconds
+from grazing_control.ros.controller_node import ControlLaw, law_from_values
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from test_closed_loop import CONTROLLER, Collector, new_domain
 
 P = OscillatorParams()
@@ -154,7 +154,7 @@ def test_node_answers_saturates_and_ignores_bad_samples(controller):
 
 
 def test_samples_of_another_layout_are_read_and_undecodable_bytes_are_malformed(controller):
-    """The controller reads the simulator's layout directly (grazing_control.nodes.cdr)
+    """The controller reads the simulator's layout directly (grazing_control.ros.cdr)
     and any other JointState through rclpy: another publisher's sample (two joints, a
     frame_id; the first joint is the mass) is answered, bytes that decode to no
     JointState (truncated samples, 40 of them) are counted as malformed, and the node
@@ -274,7 +274,7 @@ def test_stray_future_sample_and_overflow_over_dds(controller):
 def test_a_recorder_started_late_still_gets_every_answer(controller, tmp_path):
     """The corrections are transient local: a recorder that matches the controller after
     it answered (the start race of nodes started one after another) records them all."""
-    from grazing_control.recording import read_messages
+    from grazing_control.ros.recording import read_messages
 
     col, start = controller
     proc, log, pub = start(enable_after=0)

@@ -7,9 +7,9 @@ that fails leaves the previous bag as it was.
 
 from __future__ import annotations
 
-from grazing_control import demo
-from grazing_control.params import OscillatorParams
-from grazing_control.recording import read_metadata
+from grazing_control.studies import demo
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.ros.recording import read_metadata
 from test_closed_loop import CONTROLLER
 
 

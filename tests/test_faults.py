@@ -1,4 +1,4 @@
-"""Specification tests of grazing_control.faults.FaultModel (issue 8 section 3).
+"""Specification tests of grazing_control.plant.faults.FaultModel (issue 8 section 3).
 
 The faults of sample k are a pure function of (seed, k): the core and the nodes draw the
 same ones. Checked here: validation (one named parameter and its range per error),
@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.faults import NO_FAULTS, FaultModel, SampleFaults
-from grazing_control.params import ParameterError
+from grazing_control.plant.faults import NO_FAULTS, FaultModel, SampleFaults
+from grazing_control.oscillator.params import ParameterError
 
 N = 8000
 T = 9.42

@@ -7,15 +7,15 @@ import random
 import numpy as np
 import pytest
 
-from grazing_control import simulate as simulate_module
-from grazing_control.analysis import scene_from_bag
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.fidelity import (FIDELITIES, ZDM_WINDOW, ModelValidityError,
-                                      choose_fidelity, period_step)
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.dynamics import simulate as simulate_module
+from grazing_control.recordings.analysis import scene_from_bag
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.fidelity import (FIDELITIES, ZDM_WINDOW, ModelValidityError,
+                                               choose_fidelity, period_step)
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 P = OscillatorParams()
 G = Gains(degenerate_c1(P, -1.0), -1.0)
@@ -113,7 +113,7 @@ def test_maps_refuse_states_outside_their_validity_fuzz():
     ModelValidityError or returns a Pi2 sample on the physical side (x <= d) with at
     most one impact, at a phase within ZDM_WINDOW of tau*. (Before, hundreds of such
     sets returned samples beyond the wall with no error.)"""
-    from grazing_control.flow import gap
+    from grazing_control.oscillator.flow import gap
 
     rng = np.random.default_rng(5)
     refused = accepted = 0
@@ -150,11 +150,11 @@ def test_bad_fidelity_arguments_are_refused():
 
 def test_sim_node_runs_a_map_fidelity_in_lockstep(tmp_path):
     """sim_node with fidelity:=zdm2 reproduces simulate(fidelity='zdm2') sample for sample."""
-    from grazing_control.launcher import run_scene
+    from grazing_control.ros.launcher import run_scene
 
     p = P.with_(delta_d=-1e-6)
     yaml = tmp_path / "controller.yaml"
-    from grazing_control.design import write_controller_yaml
+    from grazing_control.dynamics.design import write_controller_yaml
 
     write_controller_yaml(yaml, p, G)
     bag = tmp_path / "bag"

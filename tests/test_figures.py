@@ -1,4 +1,4 @@
-"""Specification tests of grazing_control.figures and `grazing figures` (issue 10 §3).
+"""Specification tests of grazing_control.studies.figures and `grazing figures` (issue 10 §3).
 
 One quick run (``--quick``: every panel, coarse grids) through the command line is
 shared by the tests; its numbers (figures.json, rendered into figures.md) are checked
@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 
 from grazing_control.cli import main
-from grazing_control.continuation import continue_11
-from grazing_control.design import admissible_c2, degenerate_c1, evaluate_design
-from grazing_control.figures._plot import stability_segments
-from grazing_control.figures.branches import loglog_slope
-from grazing_control.params import OscillatorParams
+from grazing_control.dynamics.continuation import continue_11
+from grazing_control.dynamics.design import admissible_c2, degenerate_c1, evaluate_design
+from grazing_control.support.plotting import stability_segments
+from grazing_control.studies.figures.branches import loglog_slope
+from grazing_control.oscillator.params import OscillatorParams
 
 PANELS = ("fig1a", "fig1b", "fig1c", "fig1d", "fig2a", "fig2b", "fig2c", "fig2d", "fig2e",
           "fig2f", "fig2g")
@@ -194,7 +194,7 @@ def test_loglog_slope_of_exact_power_laws():
 
 
 def test_the_figures_never_import_rclpy():
-    code = ("import sys, grazing_control.figures, grazing_control.figures.command; "
+    code = ("import sys, grazing_control.studies.figures, grazing_control.studies.figures.command; "
             "sys.exit('rclpy' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
@@ -206,7 +206,7 @@ def _record_scene(bag_dir, res):
     from mcap_ros2._dynamic import serialize_dynamic
     from sensor_msgs.msg import JointState
 
-    from grazing_control.recording import BagWriter, message_definition, qos_profile_dict
+    from grazing_control.ros.recording import BagWriter, message_definition, qos_profile_dict
 
     def stamp(t):
         ns = round(t * 1e9)
@@ -240,10 +240,10 @@ def _record_scene(bag_dir, res):
 
 
 def test_a_scene_panel_reads_a_recording_when_given_one(tmp_path):
-    from grazing_control.control import Gains
-    from grazing_control.demo import CONTROL_AFTER, PERIODS
-    from grazing_control.figures.scenes import panel_scene
-    from grazing_control.simulate import simulate
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.studies.demo import CONTROL_AFTER, PERIODS
+    from grazing_control.studies.figures.scenes import panel_scene
+    from grazing_control.dynamics.simulate import simulate
 
     p = OscillatorParams()
     gains = Gains(degenerate_c1(p, -1.0), -1.0)

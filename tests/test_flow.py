@@ -1,4 +1,4 @@
-"""Tests of grazing_control.flow: the exact flow between impacts.
+"""Tests of grazing_control.oscillator.flow: the exact flow between impacts.
 
 References: scipy.linalg.expm, mpmath's 50-digit matrix exponential and the
 closed form written again in mpmath, scipy.integrate.solve_ivp on the ODE, and the
@@ -13,16 +13,9 @@ from mpmath import mp, mpf
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from grazing_control.flow import (
-    amplitude_bound,
-    gap,
-    particular,
-    propagate,
-    to_deviation,
-    to_physical,
-    transition_matrix,
-)
-from grazing_control.params import OscillatorParams
+from grazing_control.oscillator.flow import (amplitude_bound, gap, particular, propagate,
+                                             to_deviation, to_physical, transition_matrix)
+from grazing_control.oscillator.params import OscillatorParams
 
 from reference import RefModel
 

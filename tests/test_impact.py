@@ -1,4 +1,4 @@
-"""Tests of grazing_control.impact: impact detection, impact law, saltation, sticking.
+"""Tests of grazing_control.oscillator.impact: impact detection, impact law, saltation, sticking.
 
 The yardstick is the independent 50-digit reference of tests/reference.py, which
 works in physical coordinates and finds impacts by its own grid-and-maximum search.
@@ -13,17 +13,12 @@ import numpy as np
 import pytest
 from mpmath import mp, mpf
 
-from grazing_control.flow import gap, propagate, to_deviation, to_physical, transition_matrix
-from grazing_control.impact import (
-    MAX_AMPLITUDE,
-    ImpactCapError,
-    InitialStateError,
-    NonFiniteStateError,
-    advance,
-    next_impact,
-    saltation_matrix,
-)
-from grazing_control.params import OscillatorParams
+from grazing_control.oscillator.flow import (gap, propagate, to_deviation, to_physical,
+                                             transition_matrix)
+from grazing_control.oscillator.impact import (MAX_AMPLITUDE, ImpactCapError,
+                                               InitialStateError, NonFiniteStateError,
+                                               advance, next_impact, saltation_matrix)
+from grazing_control.oscillator.params import OscillatorParams
 
 from brute_impacts import Cases, first_impacts
 from reference import RefModel
@@ -569,7 +564,7 @@ def test_no_trajectory_passes_through_the_wall():
     """Brute force over 150 random scenes of 8 periods (random Pi2 starts, all
     parameters random, controller off): x <= d at 400 points per period of the
     simulated trajectory (dense output from the impact list), to 1e-12."""
-    from grazing_control.simulate import period_step, states_between
+    from grazing_control.dynamics.simulate import period_step, states_between
 
     rng = np.random.default_rng(77)
     worst = -math.inf
@@ -599,7 +594,7 @@ def test_sticking_carries_over_a_period_boundary_issue_7():
     dx, dv = -1.1435760702391229, -0.08635059486302293  # the Pi2 sample of the report
     assert 0 < gap(p, p.tau2, dx) < 1e-15 and -1e-15 < dv + p.v_ref < 0  # off by rounding
     assert math.cos(p.tau2) - p.d > 1.0  # pushed into the wall
-    from grazing_control.simulate import period_step, states_between
+    from grazing_control.dynamics.simulate import period_step, states_between
 
     times = np.linspace(0.0, p.period, 2001)
     for _ in range(5):
@@ -616,7 +611,7 @@ def test_sticking_spanning_samples_in_a_long_run():
     """Random scenes near the report's parameters: 12 periods each from random starts,
     many of them stuck across samples; no trajectory enters the wall (the pre-fix core
     failed 23 of 100 such scenes)."""
-    from grazing_control.simulate import period_step, states_between
+    from grazing_control.dynamics.simulate import period_step, states_between
 
     rng = np.random.default_rng(1)
     spans = 0
@@ -641,7 +636,7 @@ def test_tangency_below_rounding_is_not_an_impact_issue_7():
     below the rounding of the velocity; it was reported as two impacts with
     v- = -2.4e-16 and +1.6e-16. Now it is no impact (docs/theory.md, "Tangency below
     rounding") and every reported impact has v- > 0."""
-    from grazing_control.simulate import simulate
+    from grazing_control.dynamics.simulate import simulate
 
     p = STUDY.with_(delta_d=0.0)
     res = simulate(p, 20, deviation=(7.55e-31, 0.0))
@@ -655,7 +650,7 @@ def test_every_reported_impact_has_positive_velocity():
     with sticking, and 200 at grazing (issue 7's tangencies below rounding): every non-sticking impact has v- > 0 and v+ = -r v-; every sticking
     event has v- >= 0 (0: the mass came to rest on the wall without a bounce, or was
     at rest there at the start of the segment)."""
-    from grazing_control.simulate import period_step
+    from grazing_control.dynamics.simulate import period_step
 
     rng = np.random.default_rng(3)
     n_imp = n_zero_stick = 0
@@ -705,7 +700,7 @@ def test_humps_below_the_gaps_rounding_are_the_only_disagreements_with_mpmath():
     where either answer is consistent with the rounded state."""
     from mpmath import findroot
 
-    from grazing_control.impact import _Eval
+    from grazing_control.oscillator.impact import _Eval
 
     rng = np.random.default_rng(17)
     cases = []
@@ -756,8 +751,8 @@ def test_phase_exclusion_changes_no_result(monkeypatch):
     computed g is provably negative there, so the search would have found nothing. Over
     3000 random cases and the study's scenes every result is bit-identical with the
     exclusion switched off, and it saves evaluations."""
-    import grazing_control.impact as impact
-    from grazing_control.simulate import simulate
+    import grazing_control.oscillator.impact as impact
+    from grazing_control.dynamics.simulate import simulate
 
     calls = [0]
     evaluate = impact._Eval.__call__
@@ -792,7 +787,7 @@ def test_root_refinement_closes_the_bracket_in_a_few_evaluations(monkeypatch):
     evaluations on average (the bisections that closed the far end before took ~40), and
     each gap root returned is the right end of a bracket at most 4 ulps wide: computed
     g >= 0 there and < 0 at one of the 4 floats before it."""
-    import grazing_control.impact as impact
+    import grazing_control.oscillator.impact as impact
 
     calls, counts, roots = [0], [], []
     evaluate, bracket = impact._Eval.__call__, impact._bracket

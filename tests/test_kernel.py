@@ -1,6 +1,6 @@
-"""Tests of grazing_control.kernel: the compiled exact kernel against the pure-Python core.
+"""Tests of grazing_control.oscillator.kernel: the compiled exact kernel against the pure-Python core.
 
-The kernel mirrors grazing_control.impact and simulate.period_step operation by
+The kernel mirrors grazing_control.oscillator.impact and simulate.period_step operation by
 operation, so on every scene it must give the same impact counts and Pi2 sequences as
 the reference path (here: within 1e-13, and in practice bit for bit), up to where
 chaos separates any two correct simulators; the 50-digit mpmath tests of
@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 
 import test_impact
-from grazing_control import impact, kernel, simulate as simulate_module
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.flow import to_deviation
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.oscillator import impact, kernel
+from grazing_control.dynamics import simulate as simulate_module
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.oscillator.flow import to_deviation
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 STUDY = OscillatorParams()
 WALL = OscillatorParams.from_d(0.5, r=0.5)  # d < 1: chattering and sticking
@@ -220,8 +221,8 @@ def test_fallback_without_numba_runs_the_core(tmp_path):
         "import sys\n"
         "sys.modules['numba'] = None  # import numba now fails, as if not installed\n"
         "from grazing_control import kernel\n"
-        "from grazing_control.params import OscillatorParams\n"
-        "from grazing_control.simulate import simulate\n"
+        "from grazing_control.oscillator.params import OscillatorParams\n"
+        "from grazing_control.dynamics.simulate import simulate\n"
         "assert not kernel.available() and not kernel.use_kernel()\n"
         "r = simulate(OscillatorParams(delta_d=-1e-3), 5)\n"
         "print(int(r.impacts_per_period.sum()))\n"

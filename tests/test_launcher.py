@@ -16,12 +16,12 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from grazing_control import launcher
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.params import OscillatorParams
-from grazing_control.recording import read_messages
-from grazing_control.simulate import simulate
+from grazing_control.ros import launcher
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.ros.recording import read_messages
+from grazing_control.dynamics.simulate import simulate
 from test_closed_loop import CONTROLLER, STUDY, new_domain
 
 GRAZING = [sys.executable, "-c", "import sys; from grazing_control.cli import main; "

@@ -13,9 +13,9 @@ import time
 
 import pytest
 
-from grazing_control import launcher
-from grazing_control.nodes.common import (NodeArguments, StartupError, node_key_matches,
-                                          parse_node_arguments)
+from grazing_control.ros import launcher
+from grazing_control.ros.common import (NodeArguments, StartupError, node_key_matches,
+                                        parse_node_arguments)
 from test_closed_loop import CONTROLLER, STUDY, new_domain
 
 

@@ -1,4 +1,4 @@
-"""Tests of grazing_control.orbits: periodic orbits and their Floquet multipliers.
+"""Tests of grazing_control.dynamics.orbits: periodic orbits and their Floquet multipliers.
 
 Three independent routes must agree: the explicit impact-phase shooting of
 orbit_11, Newton shooting on the Pi2 map (shoot), and a 50-digit Newton iteration on
@@ -21,21 +21,14 @@ import numpy as np
 import pytest
 from mpmath import mp, mpf
 
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.maps import pi2_map
-from grazing_control.orbits import (
-    OrbitNotFound,
-    branch_brackets,
-    branch_point,
-    find_branch_phase,
-    monodromy_det,
-    multipliers,
-    orbit_11,
-    shoot,
-)
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import simulate
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.maps import pi2_map
+from grazing_control.dynamics.orbits import (OrbitNotFound, branch_brackets, branch_point,
+                                             find_branch_phase, monodromy_det, multipliers,
+                                             orbit_11, shoot)
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import simulate
 
 from reference import RefModel
 
@@ -309,7 +302,7 @@ def test_orbit_on_another_branch_is_found_and_labelled_issue_7():
     Delta d (the old search said "no 1/1 orbit born at grazing") but a physical one
     exists on an arc separated from grazing by v- <= 0: returned, labelled 'other',
     and checked by the exact flow (one impact, back to the same Pi2 point)."""
-    from grazing_control.maps import pi2_map
+    from grazing_control.dynamics.maps import pi2_map
 
     p = OscillatorParams(zeta=0.006638694214357835, r=0.6869943793584391,
                          omega=1.069458758465759, delta_d=-0.0009979230443342096,

@@ -25,10 +25,10 @@ BIN_DIR = Path(sys.executable).parent
 
 # Executable name -> module holding its ``main`` (the contract of setup.py).
 CONSOLE_SCRIPTS = {
-    'grazing': 'grazing_control.console',
+    'grazing': 'grazing_control.cli.console',
     'sim_node': 'sim_node.sim_node',
-    'controller_node': 'grazing_control.nodes.controller_node',
-    'recorder_node': 'grazing_control.nodes.recorder_node',
+    'controller_node': 'grazing_control.ros.controller_node',
+    'recorder_node': 'grazing_control.ros.recorder_node',
 }
 
 EXEC_DEPENDS = {

@@ -1,4 +1,4 @@
-"""Tests of grazing_control.params: defaults, validation, derived quantities.
+"""Tests of grazing_control.oscillator.params: defaults, validation, derived quantities.
 
 Derived values are compared with their closed forms (spec sections 1-3) evaluated
 independently in mpmath at 50 digits.
@@ -12,14 +12,9 @@ import numpy as np
 import pytest
 from mpmath import mp, mpf
 
-import grazing_control.params as params_module
-from grazing_control.params import (
-    STUDY_R,
-    STUDY_ZETA,
-    OscillatorParams,
-    ParameterError,
-    study_omega,
-)
+import grazing_control.oscillator.params as params_module
+from grazing_control.oscillator.params import (STUDY_R, STUDY_ZETA, OscillatorParams,
+                                               ParameterError, study_omega)
 
 mp.dps = 50
 FIELDS = [f.name for f in fields(OscillatorParams)]

@@ -1,7 +1,7 @@
 """Behavioural tests of recorder_node over real middleware (Fast DDS).
 
 The recorder runs as a separate process (``python -m
-grazing_control.nodes.recorder_node``), isolated from concurrent tests by its
+grazing_control.ros.recorder_node``), isolated from concurrent tests by its
 own ``ROS_DOMAIN_ID`` and namespace; this test process publishes on every
 recorded topic with reliable QoS, waits until the recorder has acknowledged
 every message, then stops it with a signal. The bag must then hold every
@@ -30,12 +30,12 @@ from std_msgs.msg import Bool
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from grazing_control.nodes.common import LATCHED_QOS, READY_TOPIC
-from grazing_control.nodes.recorder_node import DEFAULT_TOPICS, adapted_qos, parse_topics
+from grazing_control.ros.common import LATCHED_QOS, READY_TOPIC
+from grazing_control.ros.recorder_node import DEFAULT_TOPICS, adapted_qos, parse_topics
 from test_closed_loop import new_domain
-from grazing_control.params import ParameterError
-from grazing_control.recording import (message_to_dict, read_messages,
-                                       read_messages_rosbags, read_metadata)
+from grazing_control.oscillator.params import ParameterError
+from grazing_control.ros.recording import (message_to_dict, read_messages,
+                                           read_messages_rosbags, read_metadata)
 
 REPO = Path(__file__).resolve().parents[1]
 N = 150                      # messages per topic
@@ -78,7 +78,7 @@ def isolation():
 
 
 def start_recorder(bag, namespace, env, *params):
-    args = [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args",
+    args = [sys.executable, "-m", "grazing_control.ros.recorder_node", "--ros-args",
             "-r", f"__ns:={namespace}", "-p", f"output:={bag}"]
     for p in params:
         args += ["-p", p]
@@ -203,7 +203,7 @@ def test_selected_topics_and_lz4(tmp_path, isolation, ros):
 ])
 def test_bad_parameters_exit_nonzero_without_traceback(tmp_path, isolation, params, reason):
     _, namespace, env = isolation
-    args = [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args"]
+    args = [sys.executable, "-m", "grazing_control.ros.recorder_node", "--ros-args"]
     if params != []:
         args += ["-p", f"output:={tmp_path / 'bag'}"]
     for p in params:
@@ -221,7 +221,7 @@ def test_existing_bag_is_not_overwritten(tmp_path, isolation):
     (tmp_path / "bag").mkdir()
     (tmp_path / "bag" / "metadata.yaml").write_text("keep me")
     done = subprocess.run(
-        [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args",
+        [sys.executable, "-m", "grazing_control.ros.recorder_node", "--ros-args",
          "-p", f"output:={tmp_path / 'bag'}"],
         env=env, capture_output=True, text=True, timeout=30)
     assert done.returncode == 2
@@ -379,7 +379,7 @@ def test_disk_full_is_one_error_line_and_keeps_the_chunks(tmp_path, isolation, r
     mount namespace (unshare) makes it fail with ENOSPC, as a full disk does.
     """
     _, namespace, env = isolation
-    args = [sys.executable, "-m", "grazing_control.nodes.recorder_node", "--ros-args",
+    args = [sys.executable, "-m", "grazing_control.ros.recorder_node", "--ros-args",
             "-r", f"__ns:={namespace}", "-p", "topics:=['oscillator/state']",
             "-p", "compression:=none", "-p", "chunk_size:=4096"]
     if how == "file_size_limit":

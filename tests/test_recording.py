@@ -1,4 +1,4 @@
-"""Tests of grazing_control.recording: rosbag2-style MCAP bags without ROS.
+"""Tests of grazing_control.ros.recording: rosbag2-style MCAP bags without ROS.
 
 Bags are written with :class:`BagWriter` from messages serialized by
 ``mcap_ros2``'s CDR encoder, then read back with two independent readers
@@ -26,19 +26,11 @@ from rosbags.typesys import get_types_from_msg
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from grazing_control.recording import (
-    BagWriter,
-    DEFAULT_CHUNK_SIZE,
-    bag_file,
-    message_definition,
-    message_to_dict,
-    qos_profile_dict,
-    qos_profiles_yaml,
-    read_messages,
-    read_messages_rosbags,
-    read_metadata,
-    type_description_hash,
-)
+from grazing_control.ros.recording import (BagWriter, DEFAULT_CHUNK_SIZE, bag_file,
+                                           message_definition, message_to_dict,
+                                           qos_profile_dict, qos_profiles_yaml, read_messages,
+                                           read_messages_rosbags, read_metadata,
+                                           type_description_hash)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -192,7 +184,7 @@ def test_nested_types_in_every_form(fake_package):
 
 
 def test_recording_module_does_not_import_rclpy():
-    code = ("import sys, grazing_control.recording as r; "
+    code = ("import sys, grazing_control.ros.recording as r; "
             "r.message_definition('sensor_msgs/msg/JointState'); "
             "sys.exit('rclpy' in sys.modules)")
     env = dict(os.environ, PYTHONPATH=str(REPO))
@@ -401,7 +393,7 @@ def test_reindex_recovers_a_truncated_bag_for_every_reader(tmp_path):
     with a summary and metadata.yaml (reindex); a complete bag is left as it was."""
     import shutil
 
-    from grazing_control.recording import reindex
+    from grazing_control.ros.recording import reindex
 
     src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
     bag = tmp_path / "scene_9e-6"

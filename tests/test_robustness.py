@@ -1,4 +1,4 @@
-"""Specification tests of grazing_control.robustness (issue 8 sections 1 and 3).
+"""Specification tests of grazing_control.studies.robustness (issue 8 sections 1 and 3).
 
 * simulate_with_faults without faults is the core's closed loop sample for sample
   (simulate with control on), with loss 1 the uncontrolled run; capture and spread behave
@@ -16,26 +16,18 @@ import numpy as np
 import pytest
 
 from grazing_control.cli import main
-from grazing_control.control import Gains
-from grazing_control.design import evaluate_design
-from grazing_control.faults import NO_FAULTS, FaultModel
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams
-from grazing_control.perturbation import perturbation_multipliers
-from grazing_control.robustness.delay import (
-    design_gains,
-    largest_multiplier,
-    stability_interval,
-    stability_map,
-)
-from grazing_control.robustness.faults import (
-    attractor_states,
-    capture_statistics,
-    capture_time,
-    predicted_spread,
-    simulate_with_faults,
-)
-from grazing_control.simulate import simulate
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import evaluate_design
+from grazing_control.plant.faults import NO_FAULTS, FaultModel
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.perturbation import perturbation_multipliers
+from grazing_control.studies.robustness.delay import (design_gains, largest_multiplier,
+                                                      stability_interval, stability_map)
+from grazing_control.studies.robustness.faults import (attractor_states, capture_statistics,
+                                                       capture_time, predicted_spread,
+                                                       simulate_with_faults)
+from grazing_control.dynamics.simulate import simulate
 
 P = OscillatorParams()
 Q = P.with_(delta_d=-9e-6)
@@ -203,7 +195,7 @@ def test_grazing_robustness_bad_input_is_one_line(argv, capsys):
 def test_clipped_normal_moments():
     from math import pi, sqrt
 
-    from grazing_control.robustness.faults import _clipped_normal_moments
+    from grazing_control.studies.robustness.faults import _clipped_normal_moments
 
     assert _clipped_normal_moments(0.0, 2.0) == pytest.approx((2.0 / sqrt(2 * pi), 4.0 * (0.5 - 1 / (2 * pi))))
     assert _clipped_normal_moments(-50.0, 1.0) == pytest.approx((0.0, 1.0), abs=1e-12)

@@ -21,11 +21,11 @@ from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from grazing_control import launcher
-from grazing_control.nodes import cdr
-from grazing_control.nodes.common import DATA_QOS, stamp_key
-from grazing_control.params import OscillatorParams, ParameterError
-from grazing_control.simulate import simulate
+from grazing_control.ros import launcher
+from grazing_control.ros import cdr
+from grazing_control.ros.common import DATA_QOS, stamp_key
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.dynamics.simulate import simulate
 from sim_node.sim_node import Engine, settings_from_values
 from test_closed_loop import STUDY, Collector, new_domain, stamps, xv
 

@@ -1,4 +1,4 @@
-"""Tests of grazing_control.simulate: runs on Pi2, the controller switch, batches,
+"""Tests of grazing_control.dynamics.simulate: runs on Pi2, the controller switch, batches,
 dense output, and the two controlled scenes of the study (spec section 8, Fig. 2 f, g).
 """
 
@@ -7,20 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.flow import to_deviation, to_physical
-from grazing_control.impact import NonFiniteStateError, advance
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams
-from grazing_control.simulate import (
-    MAX_PERIODS,
-    SimulationResult,
-    period_step,
-    simulate,
-    simulate_batch,
-    states_between,
-)
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.oscillator.flow import to_deviation, to_physical
+from grazing_control.oscillator.impact import NonFiniteStateError, advance
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.simulate import (MAX_PERIODS, SimulationResult, period_step,
+                                               simulate, simulate_batch, states_between)
 
 STUDY = OscillatorParams()
 SCENE = STUDY.with_(delta_d=-1e-3)

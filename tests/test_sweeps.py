@@ -1,4 +1,4 @@
-"""Tests of grazing_control.sweeps: grids, the per-point runs, period detection, files,
+"""Tests of grazing_control.studies.sweeps: grids, the per-point runs, period detection, files,
 local processes and Dask (a LocalCluster of two worker processes), and `grazing sweep`.
 
 Every point of a sweep is an independent run of simulate's loop, so each is checked
@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.control import Gains
-from grazing_control.design import degenerate_c1
-from grazing_control.orbits import orbit_11
-from grazing_control.params import OscillatorParams, ParameterError
-from grazing_control.simulate import simulate
-from grazing_control.sweeps import SweepResult, detect_period, sweep
-from grazing_control.sweeps import run as sweep_run
+from grazing_control.oscillator.control import Gains
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.dynamics.simulate import simulate
+from grazing_control.studies.sweeps import SweepResult, detect_period, sweep
+from grazing_control.studies.sweeps import run as sweep_run
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = OscillatorParams()
@@ -64,7 +64,7 @@ def test_each_point_is_simulate_after_the_transient(engine):
 
 
 def test_kernel_and_python_engines_agree_bit_for_bit(monkeypatch):
-    from grazing_control import kernel
+    from grazing_control.oscillator import kernel
 
     g = {"delta_d": np.linspace(-2e-5, -1e-6, 6)}
     monkeypatch.setattr(kernel, "run_point", None)  # the python engine must not use them

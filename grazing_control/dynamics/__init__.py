@@ -1,0 +1,13 @@
+"""The dynamics over the oscillator: maps, orbits, continuation, design, simulation.
+
+Layer 2 of 7 (docs/architecture.md). :mod:`.model` is the small protocol (a period map
+from a section state with its Jacobian and impact events, the section geometry, the
+grazing point) over which :mod:`.shooting` and :mod:`.continuation` are written once;
+:mod:`.maps` (the Pi1/Pi2 return maps of the 1-DOF closed form), :mod:`.zdm` (Nordmark's
+discontinuity map), :mod:`.orbits` (the 1/1 branch explicit in the impact phase),
+:mod:`.perturbation`, :mod:`.design` (c1(c2; delay), lambda0, the admissible set),
+:mod:`.fidelity` (the model fidelities) and :mod:`.simulate` (event-driven simulation
+on Pi2).
+
+May import: :mod:`grazing_control.oscillator`, :mod:`grazing_control.support`. Never rclpy.
+"""

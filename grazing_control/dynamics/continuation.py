@@ -1,0 +1,167 @@
+"""Continuation of the 1/1 branch in Delta d and location of its bifurcations.
+
+The branch is explicit in the impact phase offset psi = theta - tau*
+(:func:`grazing_control.dynamics.orbits.branch_point`): psi -> (Delta d, v-, J). Continuation
+therefore steps in psi, which passes folds of Delta d(psi) without special care, on
+a logarithmic grid in |psi| so that points crowd towards grazing (|Delta d| down to
+1e-12 and below).
+
+Bifurcations are zeros of test functions of the exact monodromy J = M S, evaluated
+from its trace and (exact) determinant (docs/theory.md, "Continuation"):
+
+* period-doubling: det(J + I) = 1 + tr J + det J = 0 (a multiplier at -1);
+* fold: det(J - I) = 1 - tr J + det J = 0 (a multiplier at +1);
+* Neimark-Sacker: det J - 1 = 0 with tr^2 < 4 det (a complex pair on |lambda| = 1);
+* grazing: v- = 0, at psi = 0, where Delta d = 0 exactly (the branch's end).
+
+Each sign change between grid points is refined with Brent's method in psi to a few
+ulps, so Delta d at the bifurcation is located to ~1e-14 relative.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from grazing_control.oscillator.control import Gains, gain_determinant
+from grazing_control.oscillator.flow import matmul2
+from grazing_control.oscillator.impact import saltation_matrix
+from .orbits import (OrbitNotFound, _orbit_from_phase, branch_point, find_branch_phase,
+                     multipliers)
+from grazing_control.oscillator.params import OscillatorParams
+
+__all__ = ["BranchPoint", "Bifurcation", "Branch", "continue_11", "branch_monodromy"]
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class BranchPoint:
+    """One point of the 1/1 branch."""
+
+    delta_d: float
+    psi: float
+    v_minus: float
+    multipliers: np.ndarray
+
+    @property
+    def stable(self) -> bool:
+        return bool(np.max(np.abs(self.multipliers)) < 1.0)
+
+
+@dataclass(frozen=True)
+class Bifurcation:
+    """A located bifurcation: 'period-doubling', 'fold', 'neimark-sacker' or 'grazing'."""
+
+    type: str
+    delta_d: float
+    psi: float
+    multipliers: np.ndarray
+
+
+@dataclass(frozen=True)
+class Branch:
+    """Points ordered from ``start`` to ``stop``, and the bifurcations between them."""
+
+    points: list
+    bifurcations: list
+
+
+def branch_monodromy(p: OscillatorParams, psi: float, gains: Gains | None = None):
+    """(Delta d, v-, trace J, det J) on the 1/1 branch at impact phase tau* + psi."""
+    dd, v, m = branch_point(p, psi, gains)
+    q = p.with_(delta_d=dd)
+    theta = (p.tau_star + psi) % TWO_PI
+    j = matmul2(m, saltation_matrix(q, theta, v))
+    g = gain_determinant(gains, p.zeta)
+    det = math.exp(-2.0 * p.zeta * p.period) * p.r ** 2 * g
+    return dd, v, j[0] + j[3], det
+
+
+def _tests(tr, det):
+    return {
+        "period-doubling": 1.0 + tr + det,
+        "fold": 1.0 - tr + det,
+        "neimark-sacker": (det - 1.0) if tr * tr < 4.0 * det else math.nan,
+    }
+
+
+def _mults(tr, det):
+    return multipliers(np.array([[tr, -det], [1.0, 0.0]]), det)
+
+
+def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | None = None,
+                points: int = 200, check: bool = False) -> Branch:
+    """Continue the 1/1 orbit born at grazing from Delta d = start to stop.
+
+    Parameters
+    ----------
+    p : OscillatorParams
+        The other parameters (its delta_d is ignored).
+    start, stop : float
+        Ends of the range, <= 0; an end equal to 0 is the grazing point itself.
+    gains : Gains, optional
+        Controller in the loop.
+    points : int
+        Number of grid points (logarithmic in |psi|), >= 2.
+    check : bool
+        Verify every point with the exact flow (one impact per period, periodic).
+
+    Returns
+    -------
+    Branch
+    """
+    if not (math.isfinite(start) and math.isfinite(stop)) or start > 0.0 or stop > 0.0:
+        raise ValueError(f"start={start!r}, stop={stop!r} are invalid: valid range is "
+                         "finite Delta d <= 0 (the 1/1 branch lives on the impacting side)")
+    if points < 2:
+        raise ValueError(f"points={points!r} is invalid: valid range is points >= 2")
+    if start == stop:
+        raise ValueError("start and stop must differ")
+    psis = [find_branch_phase(p, dd, gains) if dd != 0.0 else 0.0 for dd in (start, stop)]
+    nonzero = [s for s in psis if s != 0.0]
+    sign = math.copysign(1.0, nonzero[0])
+    mags = [abs(s) for s in psis]
+    hi_mag = max(mags)
+    # an end at grazing (psi = 0) is approached to 1e-12 of the other end's phase
+    lo_mag = min(mags) if 0.0 not in mags else hi_mag * 1e-12
+    grid = np.logspace(math.log10(lo_mag), math.log10(hi_mag), points)
+    if mags[0] > mags[1]:
+        grid = grid[::-1]
+    pts = []
+    for m in grid:
+        psi = sign * float(m)
+        dd, v, tr, det = branch_monodromy(p, psi, gains)
+        if check:
+            try:
+                _orbit_from_phase(p, psi, gains, check=True)
+            except OrbitNotFound:
+                continue
+        pts.append(BranchPoint(dd, psi, v, _mults(tr, det)))
+    bifs = []
+    for a, b in zip(pts[:-1], pts[1:]):
+        ta = _tests(*branch_monodromy(p, a.psi, gains)[2:])
+        tb = _tests(*branch_monodromy(p, b.psi, gains)[2:])
+        for kind in ta:
+            fa, fb = ta[kind], tb[kind]
+            if not (math.isfinite(fa) and math.isfinite(fb)) or fa * fb > 0.0 or fa == fb:
+                continue
+
+            def f(psi, kind=kind):
+                return _tests(*branch_monodromy(p, psi, gains)[2:])[kind]
+
+            lo, hi = sorted((a.psi, b.psi))
+            psi = brentq(f, lo, hi, xtol=1e-300, rtol=4.0 * np.finfo(float).eps, maxiter=400)
+            dd, v, tr, det = branch_monodromy(p, psi, gains)
+            bifs.append(Bifurcation(kind, dd, psi, _mults(tr, det)))
+    if 0.0 in (start, stop):
+        lam = np.array([math.inf, math.inf], dtype=complex)
+        if gains is not None:
+            from .design import limit_multipliers
+
+            lam = limit_multipliers(p, gains)
+        bifs.append(Bifurcation("grazing", 0.0, 0.0, lam))
+    return Branch(pts, bifs)

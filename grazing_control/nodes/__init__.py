@@ -1,1 +1,0 @@
-"""ROS 2 node adapters; the only part of grazing_control that imports rclpy."""

@@ -1,0 +1,389 @@
+"""``grazing analyze BAG...``: a report (markdown, JSON, PNG panels) from recordings alone.
+
+For each bag (:func:`.scenes.load`) and each scene in it, the numbers of
+:func:`.numbers.scene_numbers`; with several scenes a comparison table. The report says
+where each parameter came from (the bag's parameter record, an option, the study's
+defaults, or inferred from the data) and what the bag lacked or held that could not be
+used. Documented in docs/analysis.md.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from grazing_control.support.arguments import finite
+from .numbers import resolve_setup, scene_numbers
+from .scenes import load, parse_topic_option
+
+__all__ = ["analyze", "add_arguments", "main"]
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items() if not str(k).startswith("_")}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, complex):
+        return [obj.real, obj.imag]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return str(obj)
+    return obj
+
+
+def _fmt(v, spec=".4g"):
+    if v is None:
+        return "—"
+    if isinstance(v, float):
+        return format(v, spec)
+    return str(v)
+
+
+def _complex(z) -> str:
+    z = complex(*z) if isinstance(z, (list, tuple)) else complex(z)
+    return f"{z.real:.6g}" if z.imag == 0 else f"{z.real:.6g}{z.imag:+.6g}i"
+
+
+def _setup_value(setup, key):
+    if key == "gains":
+        g = setup.gains
+        return "unknown" if g is None else f"c1 {g.c1!r}, c2 {g.c2!r}"
+    if setup.params is not None and hasattr(setup.params, key):
+        return repr(getattr(setup.params, key))
+    return _fmt(getattr(setup, key, None))
+
+
+def _label(path: Path, used: set) -> str:
+    name = path.name[:-5] if path.name.endswith(".mcap") else path.name
+    label, i = name, 2
+    while label in used:
+        label, i = f"{name}_{i}", i + 1
+    used.add(label)
+    return label
+
+
+def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
+    """Panels: Pi2 samples, x per sample, impact velocities, corrections, contraction,
+    and for realtime runs the latency, answer-time and sample-lag histograms."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scene = sd.scene
+    on = numbers["control_on_sample"]
+    on_ = on if on is not None else len(scene.t)
+    rt = numbers.get("realtime")
+    rows = 3 if rt else 2
+    fig, ax = plt.subplots(rows, 3, figsize=(15, 4 * rows), constrained_layout=True)
+    k = np.arange(len(scene.t))
+    a = ax[0, 0]
+    a.plot(scene.pi2[:on_, 0], scene.pi2[:on_, 1], ".", ms=2, color="tab:red", label="before control")
+    a.plot(scene.pi2[on_:, 0], scene.pi2[on_:, 1], ".", ms=3, color="tab:blue", label="after control")
+    pred = numbers.get("predicted", {})
+    if "orbit_pi2" in pred:
+        a.plot(*pred["orbit_pi2"], "k+", ms=14, label="exact controlled 1/1 orbit")
+    a.set(xlabel="x on Π2", ylabel="v on Π2", title="Π2 samples")
+    a.legend(fontsize=8)
+    a = ax[0, 1]
+    a.plot(k, scene.pi2[:, 0], ".", ms=2)
+    if on is not None:
+        a.axvline(on, color="k", lw=0.8, ls="--", label="control on")
+        a.legend(fontsize=8)
+    a.set(xlabel="sample k", ylabel="x on Π2", title="Π2 position per forcing period")
+    a = ax[0, 2]
+    if len(scene.impacts):
+        period = np.median(np.diff(scene.t)) if len(scene.t) > 1 else 1.0
+        a.semilogy((scene.impacts[:, 0] - scene.t[0]) / period, np.abs(scene.impacts[:, 1]),
+                   ".", ms=2)
+    else:
+        a.text(0.5, 0.5, "no impacts recorded", ha="center", transform=a.transAxes)
+    if on is not None:
+        a.axvline(on, color="k", lw=0.8, ls="--")
+    a.set(xlabel="time / T", ylabel="impact velocity v⁻", title="impact velocities")
+    a = ax[1, 0]
+    a.plot(k, scene.correction, ".-", ms=2, lw=0.5)
+    if numbers["corrections"]["saturation"] is not None:
+        for s in (-1, 1):
+            a.axhline(s * numbers["corrections"]["saturation"], color="tab:red", lw=0.8, ls=":")
+    a.set(xlabel="sample k", ylabel="Δv", title="velocity corrections")
+    a = ax[1, 1]
+    meas = numbers.get("measured_contraction")
+    if meas and meas.get("distances"):
+        e = np.array(meas["distances"])
+        kk = np.arange(len(e)) + on
+        a.semilogy(kk, np.maximum(e, 1e-18), "o-", ms=3, label="|X_k − X_final| (recorded)")
+        if meas.get("rho"):
+            for rho, style, lab in ((meas["rho"], "-", f"measured ρ = {meas['rho']:.5f}"),
+                                    (pred.get("rho"), "--", f"predicted |λ|max = "
+                                     f"{_fmt(pred.get('rho'), '.5f')}")):
+                if rho:
+                    ks = np.arange(meas["first"], meas["last"] + 1)
+                    a.semilogy(ks, np.exp(meas["intercept"]) * rho ** (ks - on), style, lw=1,
+                               label=lab)
+        a.axhline(meas["floor"], color="gray", lw=0.6, ls=":", label="rounding floor")
+        a.legend(fontsize=8)
+    else:
+        a.text(0.5, 0.5, "no convergence to measure", ha="center", transform=a.transAxes)
+    a.set(xlabel="sample k", ylabel="distance", title="contraction per sample after control")
+    a = ax[1, 2]
+    dep = numbers.get("_departures")
+    if dep is not None and len(dep):
+        a.semilogy(np.arange(len(dep)), np.maximum(dep, 1e-18), ".", ms=2)
+    a.set(xlabel="sample k", ylabel="|core step − recorded next sample|",
+          title="model check (recorded sample + correction → core)")
+    if rt:
+        for a, key, lab in ((ax[2, 0], None, "latency (sim: published → applied) [ms]"),
+                            (ax[2, 1], "_answer_ms", "answer time (controller) [ms]"),
+                            (ax[2, 2], "_lag_ms", "sample lag [ms]")):
+            data = sd.latency_s * 1e3 if key is None else rt.get(key)
+            if data is not None and len(data):
+                a.hist(data, bins=60)
+                a.set_yscale("log")
+            else:
+                a.text(0.5, 0.5, "not recorded", ha="center", transform=a.transAxes)
+            a.set(xlabel=lab, ylabel="count")
+    fig.suptitle(title)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _scene_lines(label, numbers, fig_name):
+    n = numbers
+    u = n["uncontrolled"]
+    pred, meas = n["predicted"], n["measured_contraction"]
+    c = n["corrections"]
+    lines = [f"### {label}", "", f"![{label}]({fig_name})", "",
+             f"* samples: {n['samples']} over {n['duration_s']:.6g} s of simulation time",
+             f"* uncontrolled attractor: {('period ' + str(u['period'])) if u['period'] else u['kind']}; "
+             f"impacts per period before control (histogram 0, 1, 2, …): "
+             f"{u['impacts_per_period_histogram']}"]
+    if n["control_on_sample"] is None:
+        lines.append("* control never switched on (no non-zero correction)")
+    else:
+        lines.append(f"* control on at sample {n['control_on_sample']} (t = "
+                     f"{n['control_on_time_s']:.6g} s); converged to 1e-8 after "
+                     f"{_fmt(n['samples_to_converge'])} samples")
+    if meas and meas.get("rho"):
+        lines.append(f"* contraction per sample: measured ρ = {meas['rho']:.6f} (median ratio "
+                     f"{meas['median_ratio']:.6f}, samples {meas['first']}–{meas['last']}); "
+                     f"predicted |λ|max = {_fmt(pred.get('rho'), '.6f')} "
+                     f"(multipliers {', '.join(_complex(z) for z in pred.get('multipliers', []))}); "
+                     f"relative difference {_fmt(n.get('contraction_relative_error'), '.1e')}")
+    elif meas:
+        lines.append(f"* contraction: not measured ({meas.get('reason')})")
+    for key in ("controlled_orbit_error", "uncontrolled_orbit_error", "note", "error"):
+        if key in pred:
+            lines.append(f"* prediction: {pred[key]}")
+    if "final_vs_exact_orbit" in n:
+        lines.append(f"* final Π2 sample ({n['final_pi2'][0]:.12g}, {n['final_pi2'][1]:.12g}) vs "
+                     f"the exact controlled 1/1 orbit ({pred['orbit_pi2'][0]:.12g}, "
+                     f"{pred['orbit_pi2'][1]:.12g}): {n['final_vs_exact_orbit']:.2e}; impacts "
+                     f"per period at the end: {_fmt(n['final_impacts_per_period'])}; v⁻ "
+                     f"{_fmt(n['final_v_minus'], '.8g')} (exact {pred['orbit_v_minus']:.8g})")
+    lines.append(f"* corrections: {c['answered']} answers, {c['missing']} samples without one, "
+                 f"{c['nonzero']} non-zero, max |Δv| = {c['max_abs']:.3g}, saturation "
+                 f"{_fmt(c['saturation'])} hit {c['saturation_hits']} times"
+                 + (f"; {c['duplicate_answers']} duplicate answers ({c['conflicting_answers']} "
+                    "with different values: two controllers?)" if c["duplicate_answers"] else "")
+                 + (f"; {c['answers_matching_no_sample']} answers match no sample"
+                    if c["answers_matching_no_sample"] else ""))
+    mc = n.get("model_check")
+    if mc:
+        lines.append(f"* model check: each recorded period re-integrated by the core from the "
+                     f"recorded sample and correction departs from the next recorded sample by "
+                     f"at most {_fmt(mc['max_departure'], '.2e')} ({mc['periods_above_1e-12']} "
+                     f"of {mc['periods']} periods above 1e-12)")
+    rt = n.get("realtime")
+    if rt:
+        def d(x):
+            return ("—" if not x else f"p50 {x['p50']:.3g}, p90 {x['p90']:.3g}, p99 {x['p99']:.3g},"
+                    f" max {x['max']:.3g} ms (n = {x['n']})")
+        lines += [f"* realtime latency (sim, published → applied): {d(rt.get('latency_ms'))}",
+                  f"* answer time (controller, source timestamps): {d(rt.get('answer_time_ms'))}",
+                  f"* late answers (sent after the next sample): {rt['late_answers']}; samples "
+                  f"without an answer: {rt['missing_answers']}; deadline misses: "
+                  f"{_fmt(rt['deadline_misses']) if rt['deadline_misses'] is not None else 'topic not recorded'}",
+                  f"* sample lag (published vs due, time scale {_fmt(rt.get('time_scale'))}"
+                  f"{', ' + rt['time_scale_source'] if 'time_scale_source' in rt else ''}): "
+                  f"{d(rt.get('sample_lag_ms'))}"]
+        dc = rt.get("delay_check")
+        if dc:
+            lines.append(
+                f"* why a realtime run departs from the model with kicks on Π2: applying each "
+                f"non-zero correction at its measured arrival ((sample lag + latency) × time "
+                f"scale after Π2, median {dc['median_delay']:.3g}; the first sample's own lag, "
+                f"not recorded, fitted: {dc['fitted_first_sample_lag_ms']:.3g} ms) leaves a "
+                f"departure of median {dc['median_departure']:.2e}, max "
+                f"{dc['max_departure']:.2e} over {dc['periods']} periods, against median "
+                f"{_fmt(dc.get('median_departure_kicks_on_pi2'), '.2e')}, max "
+                f"{_fmt((n.get('model_check') or {}).get('max_departure'), '.2e')} with the "
+                "kicks on Π2; the rest is the microsecond resolution of the recorded wall-clock "
+                "timestamps, times the time scale")
+    lines.append("")
+    return lines
+
+
+_COLUMNS = [("bag / scene", None), ("mode", None), ("Δd", ".3g"), ("c2", ".4g"),
+            ("on at", None), ("converged", None), ("ρ measured", ".5f"),
+            ("\\|λ\\|max predicted", ".5f"), ("\\|final − exact\\|", ".1e"),
+            ("max \\|Δv\\|", ".2e"),
+            ("sat. hits", None), ("missing", None), ("model check", ".1e"),
+            ("latency p50/p99 ms", None), ("late", None), ("deadline misses", None)]
+
+
+def _row(label, setup, n):
+    rt = n.get("realtime") or {}
+    lat = rt.get("latency_ms") or rt.get("answer_time_ms")
+    meas = n.get("measured_contraction") or {}
+    vals = [label, setup.mode, setup.params.delta_d if setup.params else None,
+            setup.gains.c2 if setup.gains else None, n["control_on_sample"],
+            n["samples_to_converge"], meas.get("rho"), n["predicted"].get("rho"),
+            n.get("final_vs_exact_orbit"), n["corrections"]["max_abs"],
+            n["corrections"]["saturation_hits"], n["corrections"]["missing"],
+            (n.get("model_check") or {}).get("max_departure"),
+            f"{lat['p50']:.3g}/{lat['p99']:.3g}" if lat else None,
+            rt.get("late_answers"), rt.get("deadline_misses")]
+    return "| " + " | ".join(_fmt(v, spec) if spec else _fmt(v)
+                             for v, (_, spec) in zip(vals, _COLUMNS)) + " |"
+
+
+def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True) -> dict:
+    """Analyse bags; write report.md, report.json and one PNG per scene under ``out``.
+
+    Returns the report as a JSON-serialisable dict. Raises ValueError (BagReadError,
+    DuplicateStampsError, ParameterError) for a bag that cannot be analysed.
+    """
+    options = dict(options or {})
+    out = Path(out) if out is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    report = {"bags": [], "comparison": []}
+    lines = ["# Bag analysis", ""]
+    rows = []
+    used = set()
+    for bag in bags:
+        data = load(bag, topics)
+        setup = resolve_setup(data, options)
+        label = _label(Path(bag), used)
+        entry = {"bag": str(bag), "file": str(data.file), "label": label,
+                 "closed_cleanly": data.complete, "messages": data.message_count,
+                 "topics_used": data.present, "notes": data.notes + setup.notes,
+                 "problems": data.problems,
+                 "parameter_record": bool(data.parameters.get("nodes")),
+                 "setup": {"params": ({k: getattr(setup.params, k) for k in
+                                       ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")}
+                                      if setup.params else None),
+                           "gains": ({"c1": setup.gains.c1, "c2": setup.gains.c2}
+                                     if setup.gains else None),
+                           "mode": setup.mode, "time_scale": setup.time_scale,
+                           "saturation": setup.saturation, "enable_after": setup.enable_after,
+                           "actuation_delay": setup.actuation_delay,
+                           "sources": setup.sources},
+                 "scenes": []}
+        lines += [f"## {label}", "", f"* file: `{data.file}` ({data.message_count} messages"
+                  f"{'' if data.complete else ', not closed cleanly'})",
+                  "* parameter record: " + ("yes" if entry["parameter_record"] else
+                                            "none in this bag (it predates the record, or the "
+                                            "nodes did not publish one): options, defaults and "
+                                            "inference are used"),
+                  "* parameters: " + "; ".join(
+                      f"{k} = {_setup_value(setup, k)} ({v})" for k, v in setup.sources.items()),
+                  "* topics used: " + ", ".join(f"{r} = {t}" for r, t in data.present.items())]
+        lines += [f"* note: {s}" for s in entry["notes"]]
+        lines += [f"* **cannot use**: {s}" for s in data.problems]
+        lines.append("")
+        for sd in data.scenes:
+            n = scene_numbers(sd, setup, tol)
+            slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
+            fig_name = f"{slabel.replace(' ', '_')}.png"
+            if out is not None and figures:
+                title = (f"{slabel}: {setup.mode}, Δd = {_fmt(setup.params.delta_d if setup.params else None, '.3g')}")
+                plot_scene(sd, n, setup, title, out / fig_name)
+                n["figure"] = fig_name
+            lines += _scene_lines(slabel, n, fig_name)
+            rows.append(_row(slabel, setup, n))
+            entry["scenes"].append(_jsonable(n))
+        report["bags"].append(_jsonable(entry))
+    if len(rows) > 1:
+        lines += ["## Comparison", "",
+                  "| " + " | ".join(c for c, _ in _COLUMNS) + " |",
+                  "|" + "---|" * len(_COLUMNS)] + rows + [""]
+    report["comparison"] = rows
+    report["markdown"] = "\n".join(lines) + "\n"
+    if out is not None:
+        (out / "report.md").write_text(report["markdown"], encoding="utf-8")
+        (out / "report.json").write_text(json.dumps({k: v for k, v in report.items()
+                                                     if k != "markdown"}, indent=1) + "\n",
+                                         encoding="utf-8")
+    return report
+
+
+_finite = finite
+
+
+def add_model_options(parser) -> None:
+    """Options that stand in for a missing parameter record (or override it)."""
+    g = parser.add_argument_group("run parameters (default: the bag's parameter record; "
+                                  "without one the study's set, Δd and gains inferred)")
+    for name, help_ in (("zeta", "damping ratio"), ("r", "restitution"),
+                        ("omega", "forcing frequency"), ("pi2-offset", "phase of Π2 after Π1"),
+                        ("delta-d", "Δd = d − d*"), ("c1", "gain c1 (default with --c2: Eq. 38)"),
+                        ("c2", "gain c2"), ("time-scale", "realtime time scale")):
+        g.add_argument(f"--{name}", type=_finite, default=None, help=help_)
+    g.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
+                   help="simulator mode of the run")
+    parser.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
+                        help="remap a topic (repeatable); roles: pi2, correction, impact, pi1, "
+                             "state, latency, deadline_miss, parameters")
+
+
+def options_from_args(args) -> dict:
+    return {"zeta": args.zeta, "r": args.r, "omega": args.omega, "pi2_offset": args.pi2_offset,
+            "delta_d": args.delta_d, "c1": args.c1, "c2": args.c2, "mode": args.mode,
+            "time_scale": args.time_scale}
+
+
+def add_arguments(parser) -> None:
+    """The options of ``grazing analyze``."""
+    parser.add_argument("bags", nargs="+", metavar="BAG",
+                        help="rosbag2 directory or .mcap file (several: a comparison table)")
+    parser.add_argument("--out", default="out/analyze", help="report folder (default out/analyze)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the report as one JSON object (files are written too)")
+    parser.add_argument("--tol", type=_finite, default=1e-8,
+                        help="convergence tolerance on Π2 (default 1e-8)")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG panels")
+    add_model_options(parser)
+
+
+def main(args):
+    """``grazing analyze``: returns the report dict (--json) or 0 after printing a summary."""
+    if not args.tol > 0:
+        raise ValueError(f"--tol={args.tol!r} is invalid: valid range is tol > 0")
+    if args.c1 is not None and args.c2 is None:
+        raise ValueError("--c1 given without --c2: give both, or --c2 alone (c1 from Eq. 38)")
+    topics = parse_topic_option(args.topic)
+    report = analyze(args.bags, args.out, topics=topics, options=options_from_args(args),
+                     tol=args.tol, figures=not args.no_figures)
+    if args.json:
+        return {k: v for k, v in report.items() if k != "markdown"}
+    for b in report["bags"]:
+        for i, s in enumerate(b["scenes"]):
+            m = s.get("measured_contraction") or {}
+            print(f"{b['label']}{'' if len(b['scenes']) == 1 else f' scene {i}'}: "
+                  f"{b['setup']['mode']}, control on at {s['control_on_sample']}, converged after "
+                  f"{s['samples_to_converge']}, contraction measured {_fmt(m.get('rho'), '.5f')} vs "
+                  f"predicted {_fmt(s['predicted'].get('rho'), '.5f')}, |final - exact| "
+                  f"{_fmt(s.get('final_vs_exact_orbit'), '.1e')}")
+        for p_ in b["problems"]:
+            print(f"  cannot use: {p_}")
+    print(f"report: {Path(args.out) / 'report.md'} (numbers: {Path(args.out) / 'report.json'})")
+    return 0

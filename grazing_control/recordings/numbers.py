@@ -1,0 +1,499 @@
+"""The numbers of a recorded scene, measured from the bag and predicted by the core.
+
+:func:`resolve_setup` finds the model, gains and mode of a run: from the bag's
+parameter record (:mod:`.record`) if it has one, else from options, else inferred from
+the recording itself (docs/analysis.md, "Where the parameters come from"):
+
+* Delta d from the impacts: at an impact the gap is zero (docs/theory.md, gap function),
+  so with the deviation z(h) = Phi(h) (z_k + (0, dv_k)) carried by the free flow from the
+  preceding sample over the recorded time h to the first impact,
+  Delta d = z_x(h) - 2 a sin^2((tau - phi)/2). Stamps are rounded to 1 ns, so this is
+  exact to |v-| * 0.5 ns; secant steps on one recorded period then refine it, and the
+  shortest decimal within 1e-12 relative is taken (a value typed by a person, -5e-06, is
+  recovered exactly; the model check below shows whether it reproduces every period).
+* the gains (c1, c2) by least squares on Eq. 28, Delta v = c1 (x - x**) + c2 (v - v**),
+  over the corrected, unsaturated samples.
+
+:func:`scene_numbers` then gives, per scene, what :func:`grazing_control.recordings.analysis.summarize`
+gives (uncontrolled attractor, switch-on, convergence, final point) and:
+
+* the measured contraction per sample after the switch-on, exp of the least-squares slope
+  of log |X_k - X_final| over the samples above the rounding floor, against the modulus of
+  the largest Floquet multiplier of the controlled 1/1 orbit that the core predicts
+  (:func:`grazing_control.dynamics.orbits.orbit_11`) for the same parameters and gains;
+* the final sample against the exact controlled orbit;
+* the model check: every recorded period re-integrated with the core
+  (:func:`grazing_control.dynamics.simulate.period_step`) from the recorded sample and correction,
+  the largest departure from the next recorded sample (rounding level for a lockstep run;
+  for a realtime run the corrections act at their arrival, not on Pi2, and it departs);
+* corrections: largest |Delta v|, saturation hits;
+* realtime: latency distribution, late and missing answers, deadline misses, sample lag.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .analysis import summarize
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.flow import propagate
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+__all__ = ["Setup", "resolve_setup", "infer_delta_d", "shortest_decimal", "infer_gains", "scene_numbers",
+           "model_check", "measured_contraction"]
+
+MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
+_NS = 1_000_000_000
+
+
+@dataclass
+class Setup:
+    """What a run was: model, gains, mode, and where each came from (``sources``)."""
+
+    params: OscillatorParams | None
+    gains: Gains | None
+    mode: str
+    time_scale: float | None
+    saturation: float
+    enable_after: int | None
+    actuation_delay: float
+    sources: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+
+def infer_delta_d(base: OscillatorParams, scene):
+    """Delta d from the first impact after each sample (module docstring); (value, n, spread).
+
+    Returns (None, 0, None) without impacts.
+    """
+    t, pi2, dv, imp = scene.t, scene.pi2, scene.correction, scene.impacts
+    if len(imp) == 0 or len(t) < 2:
+        return None, 0, None
+    k = np.searchsorted(t, imp[:, 0], side="right") - 1
+    first = np.ones(len(imp), bool)
+    first[1:] = k[1:] != k[:-1]
+    sel = np.flatnonzero(first & (k >= 0))[:50]
+    p = base
+    out = []
+    for j in sel:
+        kk = int(k[j])
+        h = imp[j, 0] - t[kk]
+        if not 0.0 < h <= p.period * 1.0000001:
+            continue
+        dx, dvv = pi2[kk, 0] - p.x_ref, pi2[kk, 1] - p.v_ref + dv[kk]
+        zx, _ = propagate(p.zeta, dx, dvv, h)
+        tau = p.tau2 + p.omega * h
+        s = math.sin(0.5 * (tau - p.lag))
+        out.append(zx - 2.0 * p.amplitude * s * s)
+    if not out:
+        return None, 0, None
+    out = np.array(out)
+    return _refine_delta_d(base, scene, float(np.median(out))), int(out.size), \
+        float(np.max(out) - np.min(out))
+
+
+def _refine_delta_d(base, scene, dd):
+    """Secant steps on the recorded one-period step with the first impact (stamp rounding
+    limits the impact estimate; the Pi2 map is ~1/v- sensitive to Delta d near grazing)."""
+    from grazing_control.dynamics.simulate import period_step
+
+    t, pi2, dv, imp = scene.t, scene.pi2, scene.correction, scene.impacts
+    k = int(np.searchsorted(t, imp[0, 0], side="right") - 1)
+    if k + 1 >= len(t):
+        return dd
+
+    def f(d):
+        p = base.with_(delta_d=d)
+        seg = period_step(p, pi2[k, 0] - p.x_ref, pi2[k, 1] - p.v_ref, float(dv[k]))
+        return p.x_ref + seg.dx - pi2[k + 1, 0]
+
+    try:
+        a, b = dd, dd * (1.0 + 1e-7)
+        fa, fb = f(a), f(b)
+        for _ in range(8):
+            if fb == fa or fb == 0.0:
+                break
+            a, b, fa = b, b - fb * (b - a) / (fb - fa), fb
+            fb = f(b)
+        best = b if abs(fb) <= abs(f(dd)) else dd
+    except Exception:
+        return dd
+    return shortest_decimal(best, 1e-12)
+
+
+def shortest_decimal(value: float, rel: float) -> float:
+    """The float with the fewest significant decimal digits within ``rel`` of ``value``.
+
+    A parameter typed by a person (-5e-06) is recovered exactly from an estimate good to
+    ``rel``; the model check then shows whether it reproduces every recorded period.
+    """
+    for digits in range(1, 18):
+        cand = float(f"{value:.{digits}g}")
+        if abs(cand - value) <= rel * abs(value):
+            return cand
+    return value
+
+
+def infer_gains(scene, x_ref, v_ref, saturation=math.inf):
+    """(c1, c2, rms residual, n) by least squares on Eq. 28; None if < 3 usable samples."""
+    dv = scene.correction
+    use = (dv != 0.0) & (np.abs(dv) < saturation)
+    if np.count_nonzero(use) < 3:
+        return None
+    a = np.column_stack([scene.pi2[use, 0] - x_ref, scene.pi2[use, 1] - v_ref])
+    (c1, c2), *_ = np.linalg.lstsq(a, dv[use], rcond=None)
+    res = a @ np.array([c1, c2]) - dv[use]
+    return float(c1), float(c2), float(np.sqrt(np.mean(res * res))), int(np.count_nonzero(use))
+
+
+def _num(value, default=None):
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return default
+    return value
+
+
+def resolve_setup(bag, options: dict) -> Setup:
+    """Model, gains and mode of a bag: record, else options, else inferred (module doc).
+
+    ``options``: zeta, r, omega, pi2_offset, delta_d, c1, c2, mode, time_scale (None when
+    not given). An option given explicitly overrides the record (said in the notes).
+    """
+    nodes = bag.parameters.get("nodes", {})
+    sim = (nodes.get("sim_node") or [{}])[0]
+    ctl = (nodes.get("controller_node") or [{}])[0]
+    sources, notes = {}, []
+    for name, seq in nodes.items():
+        if len(seq) > 1:
+            changed = sorted({k for a in seq[1:] for k in a if a.get(k) != seq[0].get(k)})
+            notes.append(f"{name} parameters changed during the run ({', '.join(changed)}); "
+                         "the analysis uses the values at start")
+    model = {}
+    for key in MODEL_KEYS:
+        opt = options.get(key)
+        rec = _num(sim.get(key), _num(ctl.get(key)) if key != "delta_d" else None)
+        if opt is not None:
+            model[key] = float(opt)
+            sources[key] = "option" + (" (overrides the record)" if rec is not None else "")
+        elif rec is not None:
+            model[key] = rec
+            sources[key] = "parameter record"
+    scene0 = bag.scenes[0].scene
+    base_keys = {k: v for k, v in model.items() if k != "delta_d"}
+    try:
+        base = OscillatorParams(**base_keys)
+    except ParameterError as exc:
+        raise ParameterError(f"{bag.path}: {exc}") from None
+    for key in MODEL_KEYS:
+        if key != "delta_d" and key not in sources:
+            sources[key] = "default (the study's set)"
+    if "delta_d" not in model:
+        dd, n, spread = infer_delta_d(base, scene0)
+        if dd is not None:
+            model["delta_d"] = dd
+            sources["delta_d"] = (f"inferred from {n} impacts (spread {spread:.1e}); give "
+                                  "--delta-d to set it")
+        else:
+            notes.append("Delta d unknown (no parameter record, no --delta-d, no impacts): "
+                         "no prediction")
+    params = None
+    if "delta_d" in model:
+        params = OscillatorParams(**model)
+    # the controller's reference point and gains
+    x_ref = _num(ctl.get("x_ref"), math.nan)
+    v_ref = _num(ctl.get("v_ref"), math.nan)
+    ref = params or base
+    x_ref = ref.x_ref if math.isnan(x_ref) else x_ref
+    v_ref = ref.v_ref if math.isnan(v_ref) else v_ref
+    saturation = _num(ctl.get("saturation"), math.inf)
+    gains = None
+    c1o, c2o = options.get("c1"), options.get("c2")
+    if c2o is not None:
+        from grazing_control.dynamics.design import degenerate_c1
+        c1 = c1o if c1o is not None else degenerate_c1(params or base, c2o)
+        gains = Gains(c1, c2o)
+        sources["gains"] = "option" + (" (c1 from the degenerate condition, Eq. 38)"
+                                       if c1o is None else "")
+    elif "c1" in ctl and "c2" in ctl:
+        gains = Gains(float(ctl["c1"]), float(ctl["c2"]))
+        sources["gains"] = "parameter record"
+    else:
+        fit = infer_gains(scene0, x_ref, v_ref, saturation)
+        if fit is not None:
+            c1, c2, rms, n = fit
+            gains = Gains(c1, c2)
+            sources["gains"] = (f"inferred by least squares on Eq. 28 from {n} corrections "
+                                f"(rms residual {rms:.1e}); give --c2 (and --c1) to set them")
+        else:
+            sources["gains"] = "unknown (no record, no option, fewer than 3 corrections)"
+    mode = options.get("mode") or sim.get("mode")
+    if options.get("mode"):
+        sources["mode"] = "option"
+    elif mode:
+        sources["mode"] = "parameter record"
+    elif "latency" in bag.present:
+        mode = "realtime"
+        sources["mode"] = f"inferred: the bag has {bag.present['latency']}"
+    else:
+        mode = "lockstep"
+        sources["mode"] = "assumed (no parameter record, no latency topic); give --mode"
+    ts = options.get("time_scale")
+    if ts is not None:
+        sources["time_scale"] = "option"
+    elif "time_scale" in sim:
+        ts = _num(sim["time_scale"])
+        sources["time_scale"] = "parameter record"
+    delay = _num(sim.get("actuation_delay"), _num(ctl.get("actuation_delay"), 0.0))
+    ea = ctl.get("enable_after")
+    return Setup(params, gains, str(mode), ts, saturation,
+                 int(ea) if ea is not None else None, delay, sources, notes)
+
+
+def measured_contraction(pi2: np.ndarray, on: int | None, floor_factor: float = 1e4):
+    """Contraction per sample after ``on``, measured: dict or None (see module docstring).
+
+    The distance to the final sample e_k = max |X_k - X_final| is fitted by
+    log e_k = a + k log rho over k = on+1 ... up to the first sample within
+    ``floor_factor`` ulps of the final point (below that, rounding decides).
+    """
+    if on is None or len(pi2) - on < 5:
+        return None
+    final = pi2[-1]
+    e = np.max(np.abs(pi2[on:] - final), axis=1)
+    floor = floor_factor * np.finfo(float).eps * max(1.0, float(np.max(np.abs(final))))
+    below = np.flatnonzero(e[1:] <= floor)
+    stop = int(below[0]) + 1 if below.size else len(e) - 1
+    k = np.arange(1, stop)
+    if k.size < 3:
+        return {"rho": None, "samples": int(k.size), "reason": "fewer than 3 samples between "
+                "the switch-on and the rounding floor"}
+    # the capture is nonlinear (impacts near grazing): fit where e_k has dropped two
+    # decades below its first value, the linear regime, if that leaves 3 samples
+    lin = k[e[k] <= 1e-2 * e[k[0]]]
+    if lin.size >= 3:
+        k = lin
+    slope, icpt = np.polyfit(k, np.log(e[k]), 1)
+    ratios = e[k[1:]] / e[k[:-1]]
+    return {"rho": float(math.exp(slope)), "samples": int(k.size), "first": on + 1,
+            "last": on + int(k[-1]), "median_ratio": float(np.median(ratios)),
+            "floor": float(floor), "distances": e[: stop + 3].tolist(),
+            "intercept": float(icpt)}
+
+
+def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000):
+    """Re-integrate each recorded period with the core; largest departure, per sample.
+
+    Returns (max departure, array of departures |P(X_k, dv_k) - X_{k+1}|) over at most
+    ``limit`` periods; the recorded correction of sample k is applied on Pi2 (``delay``
+    after it when the run had an actuation delay).
+    """
+    from grazing_control.dynamics.simulate import period_step
+
+    n = min(len(scene.t) - 1, limit)
+    dep = np.zeros(max(n, 0))
+    kw = {"delay": delay} if delay else {}
+    for k in range(n):
+        x, v = scene.pi2[k]
+        try:
+            seg = period_step(p, x - p.x_ref, v - p.v_ref, float(scene.correction[k]), **kw)
+        except Exception:            # the core refuses (impact cap): count as departed
+            dep[k] = np.inf
+            continue
+        dep[k] = max(abs(p.x_ref + seg.dx - scene.pi2[k + 1, 0]),
+                     abs(p.v_ref + seg.dv - scene.pi2[k + 1, 1]))
+    return (float(np.max(dep)) if n > 0 else None), dep
+
+
+def _pct(a, q):
+    return float(np.percentile(a, q)) if len(a) else None
+
+
+def _dist(a_ms):
+    a = np.asarray(a_ms, float)
+    if a.size == 0:
+        return None
+    return {"n": int(a.size), "p50": _pct(a, 50), "p90": _pct(a, 90), "p99": _pct(a, 99),
+            "max": float(a.max()), "mean": float(a.mean())}
+
+
+def _predicted(setup: Setup):
+    """Multipliers of the controlled 1/1 orbit (and the uncontrolled one) from the core."""
+    from grazing_control.dynamics.orbits import orbit_11
+
+    out = {}
+    p, g = setup.params, setup.gains
+    if p is None:
+        return {"error": "Delta d unknown"}
+    try:
+        unc = orbit_11(p, None)
+        out["uncontrolled_orbit_multipliers"] = [complex(z) for z in unc.multipliers]
+    except Exception as exc:
+        out["uncontrolled_orbit_error"] = f"{type(exc).__name__}: {exc}"
+    if g is None:
+        return out
+    if setup.actuation_delay:  # the kick acts the delay after Pi2 (docs/theory_delay.md)
+        g = Gains(g.c1, g.c2, setup.actuation_delay)
+    try:
+        orb = orbit_11(p, g, branch="grazing")
+    except Exception as exc:
+        out["controlled_orbit_error"] = f"{type(exc).__name__}: {exc}"
+        return out
+    mult = orb.multipliers
+    out.update({"multipliers": [complex(z) for z in mult],
+                "rho": float(np.max(np.abs(mult))),
+                "orbit_pi2": [float(orb.pi2[0]), float(orb.pi2[1])],
+                "orbit_v_minus": float(orb.v_minus)})
+    return out
+
+
+def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
+    """All numbers of one scene (JSON-serialisable except complex multipliers)."""
+    scene = sd.scene
+    base = summarize(scene, tol=tol)
+    on = base["control_on"]
+    out = {"samples": base["samples"], "duration_s": float(scene.t[-1] - scene.t[0]),
+           "summary": base}
+    per = base["uncontrolled_period"]
+    hist = base["uncontrolled_impacts_per_period"]
+    out["uncontrolled"] = {
+        "period": per,
+        "kind": ("periodic" if per else "not periodic over the last 200 samples (chaotic)")
+                if on is None or on >= 2 else "too short to tell",
+        "impacts_per_period_histogram": hist,
+        "mean_impacts_per_period": (float(np.dot(np.arange(len(hist)), hist) / max(sum(hist), 1))
+                                    if hist else None),
+    }
+    out["control_on_sample"] = on
+    out["control_on_time_s"] = float(scene.t[on]) if on is not None else None
+    out["samples_to_converge"] = base["samples_to_converge"]
+    pred = _predicted(setup)
+    out["predicted"] = pred
+    meas = measured_contraction(scene.pi2, on)
+    if meas is not None and base["samples_to_converge"] is None:
+        meas = {"rho": None, "samples": 0, "reason": f"the scene did not converge to {tol:g} "
+                "by its end, so there is no fixed point to measure the contraction against"}
+    out["measured_contraction"] = meas
+    if meas and meas.get("rho") and pred.get("rho") is not None:
+        out["contraction_relative_error"] = abs(meas["rho"] - pred["rho"]) / max(pred["rho"], 1e-300)
+    if "orbit_pi2" in pred:
+        out["final_vs_exact_orbit"] = float(np.max(np.abs(scene.pi2[-1] - np.array(pred["orbit_pi2"]))))
+        out["final_v_minus"] = base["final_v_minus"]
+        out["exact_v_minus"] = pred["orbit_v_minus"]
+    out["final_pi2"] = base["final_pi2"]
+    out["final_impacts_per_period"] = base["final_impacts_per_period"]
+    out["one_impact_per_period_after_convergence"] = base.get(
+        "one_impact_per_period_after_convergence")
+    dv = scene.correction
+    sat = setup.saturation
+    out["corrections"] = {
+        "answered": int(np.count_nonzero(sd.answered)),
+        "missing": int(np.count_nonzero(~sd.answered)),
+        "nonzero": int(np.count_nonzero(dv)),
+        "max_abs": float(np.max(np.abs(dv))) if dv.size else 0.0,
+        "saturation": None if math.isinf(sat) else sat,
+        "saturation_hits": int(np.count_nonzero(np.abs(dv) >= sat)) if math.isfinite(sat) else 0,
+        "duplicate_answers": sd.duplicate_answers,
+        "conflicting_answers": sd.conflicting_answers,
+        "answers_matching_no_sample": sd.unmatched_answers,
+    }
+    if setup.params is not None:
+        worst, dep = model_check(setup.params, scene, setup.actuation_delay)
+        out["model_check"] = {"max_departure": worst,
+                              "periods": int(dep.size),
+                              "periods_above_1e-12": int(np.count_nonzero(dep > 1e-12))}
+        out["_departures"] = dep
+    out["realtime"] = realtime_numbers(sd, setup) if setup.mode == "realtime" else None
+    dc = (out["realtime"] or {}).get("delay_check")
+    if dc and "_departures" in out:
+        active = np.flatnonzero(scene.correction[:-1] != 0.0)
+        dc["median_departure_kicks_on_pi2"] = float(np.median(out["_departures"][active]))
+    return out
+
+
+def realtime_numbers(sd, setup: Setup) -> dict:
+    """Latency, late and missing answers, deadline misses, sample lag (wall clock)."""
+    out = {}
+    if sd.latency_s.size:
+        out["latency_ms"] = _dist(sd.latency_s * 1e3)
+        out["latency_source"] = "the simulator's latency messages (sample published -> applied)"
+    ans = sd.answered & (sd.corr_pub_ns >= 0) & (sd.pi2_pub_ns > 0)
+    rt = (sd.corr_pub_ns[ans] - sd.pi2_pub_ns[ans]) / 1e6
+    out["answer_time_ms"] = _dist(rt)
+    out["answer_time_source"] = ("correction publish time - sample publish time (source "
+                                 "timestamps, wall clock)")
+    nxt = np.append(sd.pi2_pub_ns[1:], np.iinfo(np.int64).max)
+    late = ans & (sd.corr_pub_ns > nxt)
+    out["late_answers"] = int(np.count_nonzero(late))
+    out["missing_answers"] = int(np.count_nonzero(~sd.answered))
+    out["deadline_misses"] = sd.deadline_misses
+    ts = setup.time_scale
+    t = sd.scene.t
+    wall = (sd.pi2_pub_ns - sd.pi2_pub_ns[0]) / 1e9
+    if ts is None and len(t) > 2 and np.all(sd.pi2_pub_ns > 0):
+        slope = np.polyfit(t - t[0], wall, 1)[0]
+        ts = 1.0 / slope if slope > 0 else None
+        out["time_scale_source"] = "estimated from the publish times"
+    out["time_scale"] = ts
+    if ts:
+        lag = (wall - (t - t[0]) / ts) * 1e3
+        out["sample_lag_ms"] = _dist(lag)
+        out["_lag_ms"] = lag
+    out["_answer_ms"] = rt
+    out["delay_check"] = _delay_check(sd, setup, out)
+    return out
+
+
+def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
+    """Model check with each correction applied at its measured arrival, not on Pi2.
+
+    In realtime the simulator applies a correction when it arrives, (lag_k + latency_k)
+    x time_scale of simulation time after sample k (docs/nodes.md, realtime mode). The
+    latency is the simulator's own message (one per applied correction, in order); the lag
+    comes from the recorded publish times relative to sample 0, whose own lag (the time
+    the simulator took to integrate period 0 before publishing it) is not recorded: it is
+    fitted as one constant offset minimising the median departure. The departure left is
+    what the recorded wall-clock timestamps cannot resolve (microseconds x time_scale).
+    None when the data do not allow it (a sample without answer, latencies missing).
+    """
+    from scipy.optimize import minimize_scalar
+
+    from grazing_control.dynamics.simulate import period_step
+
+    p, ts = setup.params, rt.get("time_scale")
+    lat, lag = sd.latency_s, rt.get("_lag_ms")
+    n = len(sd.scene.t)
+    if p is None or not ts or lag is None or lat.size != n or not sd.answered.all() or n < 3:
+        return None
+    base = lat + np.maximum(lag, 0.0) / 1e3
+    x, v, dv = sd.scene.pi2[:, 0], sd.scene.pi2[:, 1], sd.scene.correction
+
+    def departures(offset, ks):
+        out = np.empty(len(ks))
+        for j, k in enumerate(ks):
+            d = float((base[k] + offset) * ts)
+            try:
+                seg = period_step(p, x[k] - p.x_ref, v[k] - p.v_ref, float(dv[k]),
+                                  **({"delay": d} if 0.0 < d < p.period else {}))
+            except Exception:
+                out[j] = np.inf
+                continue
+            out[j] = max(abs(p.x_ref + seg.dx - x[k + 1]), abs(p.v_ref + seg.dv - v[k + 1]))
+        return out
+
+    active = np.flatnonzero(dv[:-1] != 0.0)
+    if active.size == 0:
+        return None
+    fit = active[:: max(1, active.size // fit_samples)]
+    best = minimize_scalar(lambda c: float(np.median(departures(c, fit))),
+                           bounds=(0.0, 5e-3), method="bounded",
+                           options={"xatol": 1e-7})
+    offset = float(best.x)
+    dep = departures(offset, active)
+    return {"fitted_first_sample_lag_ms": offset * 1e3,
+            "max_departure": float(dep.max()), "median_departure": float(np.median(dep)),
+            "median_delay": float(np.median((base[active] + offset) * ts)),
+            "periods": int(active.size)}

@@ -1,0 +1,280 @@
+"""From a recording to scenes: the columns of the package's topics, split and matched.
+
+:func:`load` reads one bag (directory or bare .mcap, by :mod:`.reader`), decodes the
+topics the analysis uses (names remappable), splits the Pi2 samples into scenes (a
+simulator reset starts a new scene at t = 0), matches each correction to the sample it
+answers by the stamp (spec ros.md), and collects the parameter record
+(:mod:`.record`). What it cannot use is said in ``notes``/``problems``, never silently
+dropped. Two simulators on one topic leave duplicate sample stamps: refused
+(:class:`DuplicateStampsError`), since their samples cannot be told apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .analysis import Scene
+from . import reader
+from grazing_control.ros.recording.record import run_parameters
+
+__all__ = ["DEFAULT_TOPICS", "EXPECTED_TYPES", "DuplicateStampsError", "SceneData", "BagData",
+           "load", "parse_topic_option"]
+
+#: Role -> default topic name (the names the nodes publish in the root namespace).
+DEFAULT_TOPICS = {
+    "pi2": "/oscillator/pi2",
+    "correction": "/controller/velocity_correction",
+    "impact": "/oscillator/impact",
+    "pi1": "/oscillator/pi1",
+    "state": "/oscillator/state",
+    "latency": "/oscillator/latency",
+    "deadline_miss": "/oscillator/deadline_miss",
+    "parameters": "/grazing/parameters",
+}
+
+#: Role -> the message type the analysis can decode (None: any type, counted only).
+EXPECTED_TYPES = {
+    "pi2": "sensor_msgs/msg/JointState",
+    "correction": "geometry_msgs/msg/TwistStamped",
+    "impact": "geometry_msgs/msg/Vector3Stamped",
+    "pi1": "sensor_msgs/msg/JointState",
+    "state": "sensor_msgs/msg/JointState",
+    "latency": "std_msgs/msg/Float64",
+    "deadline_miss": None,
+    "parameters": "std_msgs/msg/String",
+}
+
+#: Roles not needed by the analysis: listed as present or absent, not decoded.
+_COUNTED_ONLY = ("pi1", "state")
+
+_NS = 1_000_000_000
+
+
+class DuplicateStampsError(ValueError):
+    """Pi2 samples with equal stamps in one scene: more than one simulator on the topic."""
+
+
+def parse_topic_option(values) -> dict:
+    """``["pi2=/rig/pi2", ...]`` -> role -> topic (ValueError naming a bad entry)."""
+    topics = dict(DEFAULT_TOPICS)
+    for text in values or ():
+        role, sep, name = text.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--topic {text!r} is invalid: expected ROLE=/topic/name")
+        if role not in DEFAULT_TOPICS:
+            raise ValueError(f"--topic {text!r} is invalid: ROLE must be one of "
+                             f"{', '.join(DEFAULT_TOPICS)}")
+        topics[role] = name if name.startswith("/") else "/" + name
+    return topics
+
+
+@dataclass
+class SceneData:
+    """One scene of a bag: the analysis Scene plus the wall-clock columns of its messages.
+
+    ``stamp_ns``: sample stamps (int64 ns); ``pi2_pub_ns`` / ``pi2_log_ns``: their
+    publish (source) and log (receive) times; ``answered``: whether a correction for the
+    sample was recorded; ``corr_pub_ns``: its publish time (-1 if none); ``latency_s``:
+    the simulator's own latency messages (realtime), ``deadline_misses``: messages on
+    the deadline-miss topic in this scene's time span.
+    """
+
+    index: int
+    scene: Scene
+    stamp_ns: np.ndarray
+    pi2_pub_ns: np.ndarray
+    pi2_log_ns: np.ndarray
+    answered: np.ndarray
+    corr_pub_ns: np.ndarray
+    duplicate_answers: int = 0
+    conflicting_answers: int = 0
+    unmatched_answers: int = 0
+    latency_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    deadline_misses: int | None = None
+
+
+@dataclass
+class BagData:
+    """A bag read for the analysis (see :func:`load`)."""
+
+    path: Path
+    file: Path
+    complete: bool
+    topics: dict
+    present: dict
+    scenes: list
+    parameters: dict
+    notes: list
+    problems: list
+    message_count: int
+
+
+def _scene_index(starts_log, log):
+    return np.clip(np.searchsorted(starts_log, log, side="right") - 1, 0, None)
+
+
+def load(bag, topics: dict | None = None) -> BagData:
+    """Read one bag for the analysis.
+
+    Parameters
+    ----------
+    bag : path of a rosbag2 directory or of a bare .mcap file.
+    topics : role -> topic name (default :data:`DEFAULT_TOPICS`).
+
+    Raises
+    ------
+    reader.BagReadError
+        Not an MCAP bag, or no usable Pi2 topic.
+    DuplicateStampsError
+        Equal Pi2 stamps within a scene (two simulators on one topic).
+    """
+    topics = dict(DEFAULT_TOPICS if topics is None else topics)
+    path = Path(bag)
+    raw = reader.read_raw(path, topics=[topics[r] for r in topics if r not in _COUNTED_ONLY])
+    notes, problems = [], list(raw.problems)
+    present = {}
+    for role, name in topics.items():
+        ch = raw.channels.get(name)
+        if ch is None:
+            continue
+        want = EXPECTED_TYPES[role]
+        if want is not None and ch.type != want:
+            problems.append(f"topic {name} ({role}) has type {ch.type or '?'}, expected {want}: "
+                            "not used")
+            continue
+        if ch.encoding != "cdr":
+            problems.append(f"topic {name} ({role}) has message encoding {ch.encoding!r}, "
+                            "expected 'cdr': not used")
+            continue
+        present[role] = name
+    known = set(topics.values())
+    extra = sorted(t for t in raw.channels if t not in known)
+    if extra:
+        notes.append(f"other topics not used by the analysis: {', '.join(extra)}")
+    missing = [f"{topics[r]} ({r})" for r in topics if r not in present and r != "deadline_miss"]
+    if missing:
+        notes.append(f"absent: {', '.join(missing)}")
+    if "pi2" not in present:
+        available = ", ".join(f"{t} [{c.type}]" for t, c in sorted(raw.channels.items())) or "none"
+        raise reader.BagReadError(
+            f"{path}: no usable Pi2 sample topic {topics['pi2']} (sensor_msgs/msg/JointState); "
+            f"topics in the bag: {available}. Remap with --topic pi2=/your/topic"
+            + "".join(f"; {msg}" for msg in problems if "(pi2)" in msg))
+
+    pi2 = reader.decode_joint_state(raw, present["pi2"])
+    bad = int(np.count_nonzero(~pi2["ok"]))
+    if bad:
+        problems.append(f"{bad} malformed Pi2 messages (too short, no position/velocity, "
+                        "or big-endian CDR): not used")
+    order = np.argsort(pi2["log_time"], kind="stable")
+    order = order[pi2["ok"][order]]
+    stamp = pi2["stamp"][order]
+    x, v = pi2["x"][order], pi2["v"][order]
+    pub, log = pi2["publish_time"][order], pi2["log_time"][order]
+    if stamp.size == 0:
+        raise reader.BagReadError(f"{path}: {present['pi2']} holds no usable Pi2 sample")
+
+    # scenes: a reset publishes sample 0 at t = 0 again
+    starts = np.flatnonzero(stamp == 0)
+    starts = np.concatenate([[0], starts[starts > 0]]).astype(np.int64)
+    bounds = list(starts) + [stamp.size]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        d = np.diff(stamp[a:b])
+        if d.size and np.any(d <= 0):
+            dup = int(np.count_nonzero(d == 0))
+            back = int(np.count_nonzero(d < 0))
+            seg = stamp[a:b]
+            uniq, counts = np.unique(seg, return_counts=True)
+            first = uniq[counts > 1][0] if np.any(counts > 1) else seg[1:][d < 0][0]
+            raise DuplicateStampsError(
+                f"{path}: {present['pi2']} has {int(np.sum(counts[counts > 1]))} samples with "
+                f"duplicate stamps ({dup} repeated, {back} going back; first at t = "
+                f"{first / _NS:.9g} s): more than one simulator publishes on this topic, and "
+                "their samples cannot be told apart. Record each scene on its own ROS domain "
+                "(`grazing run --domain-id`) or remap one simulator's topics")
+    starts_log = log[starts]
+
+    parameters = {"nodes": {}, "rejected": 0}
+    if "parameters" in present:
+        parameters = run_parameters(reader.decode_strings(raw, present["parameters"]))
+        if parameters["rejected"]:
+            problems.append(f"{parameters['rejected']} messages on {present['parameters']} are "
+                            "not parameter records: ignored")
+
+    corr = None
+    if "correction" in present:
+        corr = reader.decode_twist_stamped(raw, present["correction"])
+        badc = int(np.count_nonzero(~corr["ok"]))
+        if badc:
+            problems.append(f"{badc} malformed corrections: not used")
+        co = np.argsort(corr["log_time"], kind="stable")
+        co = co[corr["ok"][co] & np.isfinite(corr["dv"][co])]
+        corr = {k: (val[co] if isinstance(val, np.ndarray) else val) for k, val in corr.items()}
+        corr["scene"] = _scene_index(starts_log, corr["log_time"])
+    else:
+        notes.append("no corrections recorded: every sample is treated as uncorrected")
+    imp = None
+    if "impact" in present:
+        imp = reader.decode_vector3_stamped(raw, present["impact"])
+        ok = imp["ok"]
+        imp = {k: (val[ok] if isinstance(val, np.ndarray) else val) for k, val in imp.items()}
+        imp["scene"] = _scene_index(starts_log, imp["log_time"])
+    lat = None
+    if "latency" in present:
+        lat = reader.decode_float64(raw, present["latency"])
+        lat["scene"] = _scene_index(starts_log, lat["log_time"])
+    dl_scene = None
+    if "deadline_miss" in present:
+        dl = reader._Body(raw.pool, raw.offsets(present["deadline_miss"]))
+        dl_scene = _scene_index(starts_log, dl.log_time)
+
+    scenes = []
+    for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+        st = stamp[a:b]
+        t = st / _NS
+        dv = np.zeros(b - a)
+        answered = np.zeros(b - a, bool)
+        corr_pub = np.full(b - a, -1, np.int64)
+        dup = conflict = unmatched = 0
+        if corr is not None:
+            m = corr["scene"] == i
+            cst, cdv, cpub = corr["stamp"][m], corr["dv"][m], corr["publish_time"][m]
+            if cst.size:
+                uniq, first, counts = np.unique(cst, return_index=True, return_counts=True)
+                dup = int(np.sum(counts - 1))
+                if dup:
+                    # the same stamp answered twice with different values: two controllers
+                    for s_ in uniq[counts > 1]:
+                        if np.unique(cdv[cst == s_]).size > 1:
+                            conflict += 1
+                pos = np.searchsorted(st, uniq)
+                hit = (pos < st.size) & (st[np.minimum(pos, st.size - 1)] == uniq)
+                unmatched = int(np.count_nonzero(~hit))
+                k = pos[hit]
+                dv[k] = cdv[first[hit]]
+                answered[k] = True
+                corr_pub[k] = cpub[first[hit]]
+        impacts = np.zeros((0, 4))
+        if imp is not None:
+            m = imp["scene"] == i
+            it = imp["stamp"][m] / _NS
+            impacts = np.column_stack([it, imp["vx"][m], imp["vy"][m], imp["vz"][m]])
+            impacts = impacts[np.argsort(impacts[:, 0], kind="stable")]
+        sd = SceneData(i, Scene(t, np.column_stack([x[a:b], v[a:b]]), dv, impacts), st,
+                       pub[a:b], log[a:b], answered, corr_pub, dup, conflict, unmatched)
+        if lat is not None:
+            sd.latency_s = lat["data"][(lat["scene"] == i) & lat["ok"]]
+        if dl_scene is not None:
+            sd.deadline_misses = int(np.count_nonzero(dl_scene == i))
+        scenes.append(sd)
+    if len(scenes) > 1:
+        notes.append(f"{len(scenes)} scenes (the simulator was reset {len(scenes) - 1} times)")
+    if not raw.complete:
+        notes.append("the file was not closed cleanly (no summary): read by streaming up to "
+                     "its last complete record")
+    count = sum(len(c.records) for c in raw.channels.values())
+    return BagData(path, raw.path, raw.complete, topics, present, scenes, parameters, notes,
+                   problems, count)

@@ -1,0 +1,508 @@
+"""Small helpers shared by the node adapters: QoS, stamps, descriptors, throttled logs, main.
+
+Nothing here knows the model; the nodes (:mod:`sim_node.sim_node`,
+:mod:`grazing_control.ros.controller_node`) adapt the core to ROS with these.
+
+QoS (docs/nodes.md, "QoS")
+--------------------------
+Every data topic (Pi2 samples, corrections, impacts, section crossings, state, /clock,
+latency) is reliable and volatile. Publishers use :data:`PUBLISHER_QOS`, keep last
+100000: a reliable writer keeps each message until every reader has acknowledged it or
+it falls out of this history, so the depth is the backlog a reader may accumulate without
+loss. In lockstep the simulator is paced only by the controller and publishes the
+state, crossings and impacts of a 1200-period scene (about 25,000 messages) in about a
+second, faster than a recorder takes them; the history holds them until it does (the
+memory is used only while a reader lags). The nodes' own subscriptions use
+:data:`DATA_QOS` (reliable, keep last 1000): they need only the newest samples.
+:data:`LATCHED_QOS` (reliable, transient local, depth 1) is for ``oscillator/done``, so
+that a late subscriber still learns that the scene has finished.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import signal
+import sys
+import time
+from typing import NamedTuple
+
+import rclpy
+import rclpy.logging
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from .cdr import stamp_parts
+
+__all__ = [
+    "DATA_QOS",
+    "EXECUTORS",
+    "make_executor",
+    "deserialize",
+    "PUBLISHER_QOS",
+    "READY_TOPIC",
+    "REPLAY_QOS",
+    "LATCHED_QOS",
+    "NodeArguments",
+    "publish_parameter_record",
+    "StartupError",
+    "Throttled",
+    "bool_descriptor",
+    "check_overrides",
+    "init_ros",
+    "node_key_matches",
+    "parse_node_arguments",
+    "float_descriptor",
+    "int_descriptor",
+    "run_node",
+    "spin",
+    "seconds_from_stamp",
+    "stamp_from_seconds",
+    "stamp_key",
+    "string_descriptor",
+]
+
+#: Reliable, volatile, keep last 1000: the nodes' subscriptions (see the module docstring).
+DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+#: Reliable, volatile, keep last 100000: every data publisher (a lagging reader loses nothing).
+PUBLISHER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
+
+#: Reliable, transient local, keep last 100000: the controller's corrections. A reader
+#: that matches the writer late (the recorder: the simulator can check its own writers'
+#: matches before the scene starts, not the controller's) still gets every answer
+#: published before, from the writer's history; volatile readers (the simulator) are
+#: compatible and get no replay.
+REPLAY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: Reliable, transient local, depth 1: ``oscillator/done``.
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: Latched topic (std_msgs/Bool) on which recorder_node says it has matched a publisher
+#: on every topic it records; sim_node waits for it with ``wait_for_recorder``.
+READY_TOPIC = "recorder/ready"
+
+
+class StartupError(RuntimeError):
+    """A node cannot start (invalid parameter): logged in one line, exit status 2."""
+
+
+# --------------------------------------------------------------------------- stamps
+def stamp_from_seconds(t: float) -> Time:
+    """builtin_interfaces/Time for a simulation time t >= 0 in seconds (rounded to 1 ns,
+    :func:`grazing_control.ros.cdr.stamp_parts`)."""
+    sec, nanosec = stamp_parts(t)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_key(stamp) -> tuple:
+    """(sec, nanosec) of a stamp: the exact identity of a sample."""
+    return (stamp.sec, stamp.nanosec)
+
+
+def seconds_from_stamp(stamp) -> float:
+    """Seconds of a builtin_interfaces/Time."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+# ----------------------------------------------------------------------- descriptors
+def float_descriptor(description: str, lo: float | None = None, hi: float | None = None,
+                     read_only: bool = False) -> ParameterDescriptor:
+    """A double parameter; with ``lo``/``hi`` a FloatingPointRange (closed, ends included)."""
+    d = ParameterDescriptor(type=ParameterType.PARAMETER_DOUBLE, description=description,
+                            read_only=read_only)
+    if lo is not None or hi is not None:
+        d.floating_point_range = [FloatingPointRange(
+            from_value=-math.inf if lo is None else float(lo),
+            to_value=math.inf if hi is None else float(hi), step=0.0)]
+    return d
+
+
+def int_descriptor(description: str, lo: int | None = None, hi: int | None = None,
+                   read_only: bool = False) -> ParameterDescriptor:
+    """An integer parameter; with ``lo``/``hi`` an IntegerRange (ends included)."""
+    d = ParameterDescriptor(type=ParameterType.PARAMETER_INTEGER, description=description,
+                            read_only=read_only)
+    if lo is not None or hi is not None:
+        d.integer_range = [IntegerRange(from_value=-2**63 if lo is None else int(lo),
+                                        to_value=2**63 - 1 if hi is None else int(hi), step=1)]
+    return d
+
+
+def string_descriptor(description: str, read_only: bool = False,
+                      choices=None) -> ParameterDescriptor:
+    """A string parameter; ``choices`` is stated in additional_constraints."""
+    d = ParameterDescriptor(type=ParameterType.PARAMETER_STRING, description=description,
+                            read_only=read_only)
+    if choices:
+        d.additional_constraints = "one of: " + ", ".join(choices)
+    return d
+
+
+def bool_descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
+    """A boolean parameter."""
+    return ParameterDescriptor(type=ParameterType.PARAMETER_BOOL, description=description,
+                               read_only=read_only)
+
+
+# ------------------------------------------------------------------ throttled logging
+class Throttled:
+    """Count events of one kind and log at most one line per ``interval`` wall seconds.
+
+    >>> bad = Throttled(node.get_logger(), "malformed correction")   # doctest: +SKIP
+    >>> bad("NaN dv")   # counts, logs "malformed correction (1 so far): NaN dv"
+    """
+
+    def __init__(self, logger, what: str, interval: float = 2.0):
+        self.logger = logger
+        self.what = what
+        self.interval = interval
+        self.count = 0
+        self._last = -math.inf
+
+    def __call__(self, detail: str) -> None:
+        self.count += 1
+        now = time.monotonic()
+        if now - self._last >= self.interval:
+            self._last = now
+            self.logger.warning(f"{self.what} ({self.count} so far): {detail}")
+
+
+def deserialize(data: bytes, kind, malformed: Throttled):
+    """A message of type ``kind`` from serialized ``data`` with rclpy's deserializer, or
+    None (counted and logged by ``malformed``) when the bytes decode to no such message:
+    a node must not fail on what arrives (the fast path of :mod:`.cdr` comes first)."""
+    from rclpy.serialization import deserialize_message
+
+    try:
+        return deserialize_message(data, kind)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises several types for bad bytes
+        malformed(f"{len(data)} bytes that are no {kind.__name__} ({exc})")
+        return None
+
+
+# ------------------------------------------------------------------------------ main
+_TYPE_RE = re.compile(r"Trying to set parameter '(?P<name>[^']*)' to '(?P<value>.*)' of type "
+                      r"'(?P<got>\w+)', expecting type '(?P<want>\w+)'")
+_VALUE_RE = re.compile(r"Invalid parameter value \((?P<value>.*?)\) for parameter\. "
+                       r"Reason: (?P<reason>.*): (?P<name>[\w./]+)$")
+
+
+def _startup_message(exc: BaseException) -> str:
+    """One line for a refused parameter: ``name=value is invalid: reason``."""
+    text = " ".join(str(exc).split())
+    m = _TYPE_RE.search(text)
+    if m:
+        hint = {"DOUBLE": " (write a double with a decimal point, e.g. 1.0)",
+                "STRING": " (quote a value that YAML reads as another type: "
+                          "-p \"name:='123'\")",
+                "STRING_ARRAY": " (write a list of strings: -p \"name:=['a', 'b']\")",
+                "INTEGER": " (write an integer, e.g. 262144)"}.get(m["want"], "")
+        return (f"{m['name']}={m['value']} is invalid: expected type {m['want']}, "
+                f"got {m['got']}{hint}")
+    m = _VALUE_RE.search(text)
+    if m:
+        return f"{m['name']}={m['value']} is invalid: {m['reason']}"
+    return text or type(exc).__name__
+
+
+#: The executors a node can spin in (its read-only parameter ``executor``):
+#: ``single_threaded`` (rclpy.executors.SingleThreadedExecutor) and ``events``
+#: (rclpy.experimental.EventsExecutor: the wait and dispatch in C++; the default of
+#: sim_node and controller_node, measured faster in docs/benchmarks.md). A node without
+#: an ``executor_kind`` attribute gets the SingleThreadedExecutor.
+EXECUTORS = ("single_threaded", "events")
+
+
+def make_executor(kind: str = "single_threaded"):
+    """A new executor of the given kind (:data:`EXECUTORS`)."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    if kind != "single_threaded":
+        raise StartupError(f"executor={kind!r} is invalid: valid values are "
+                           f"{', '.join(EXECUTORS)}")
+    return SingleThreadedExecutor()
+
+
+#: Longest wall time an idle executor waits before noticing a signal (seconds).
+SIGNAL_POLL = 0.2
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def spin(executor, done=None) -> None:
+    """Spin until ``done()`` is true (or forever), waking at least every SIGNAL_POLL s."""
+    while rclpy.ok() and not (done is not None and done()):
+        executor.spin_once(timeout_sec=SIGNAL_POLL)
+
+
+# ----------------------------------------------------------- command-line arguments
+#: ROS arguments (rcl) that take a value, and those that do not.
+_ROS_VALUE_ARGS = {"-p", "--param", "-r", "--remap", "-e", "--enclave", "--params-file",
+                   "--log-level", "--log-config-file", "--log-file-name"}
+_ROS_FLAGS = {"--disable-rosout-logs", "--enable-rosout-logs", "--disable-stdout-logs",
+              "--enable-stdout-logs", "--disable-external-lib-logs",
+              "--enable-external-lib-logs"}
+
+
+class NodeArguments(NamedTuple):
+    """What :func:`parse_node_arguments` found on a node's command line."""
+
+    help: bool
+    params: dict           # name -> value text of every -p name:=value
+    params_files: tuple    # (path, {key: {name: value}}) of every --params-file
+
+
+def parse_node_arguments(args) -> NodeArguments:
+    """Check a node's command line before rcl sees it; StartupError names what is wrong.
+
+    ``-h``/``--help`` outside ``--ros-args`` asks for the usage; any other argument outside
+    ``--ros-args`` is refused (node parameters go after ``--ros-args``). Inside, every
+    ``-p`` must read ``name:=value``, every ``--params-file`` must be a readable YAML
+    parameter file (``<node key>: ros__parameters: {...}``), and an unknown ROS
+    argument is refused (rcl would only say ``UnknownROSArgsError``).
+    """
+    tokens = list(args[1:])
+    helped, params, files = False, {}, []
+    ros = False
+    i = 0
+    while i < len(tokens):
+        tok = tokens[i]
+        i += 1
+        if tok == "--ros-args":
+            ros = True
+            continue
+        if not ros:
+            if tok in ("-h", "--help"):
+                helped = True
+                continue
+            raise StartupError(f"unexpected argument {tok!r}: node parameters go after "
+                               "--ros-args, e.g. --ros-args -p name:=value (see --help)")
+        if tok == "--":
+            ros = False
+            continue
+        if tok in _ROS_FLAGS:
+            continue
+        if tok not in _ROS_VALUE_ARGS:
+            raise StartupError(f"unknown ROS argument {tok!r}: valid are "
+                               f"{', '.join(sorted(_ROS_VALUE_ARGS | _ROS_FLAGS))}")
+        if i >= len(tokens):
+            raise StartupError(f"ROS argument {tok} needs a value")
+        value = tokens[i]
+        i += 1
+        if tok in ("-p", "--param"):
+            name, sep, text = value.partition(":=")
+            if not sep or not name:
+                raise StartupError(f"-p {value!r} is invalid: write -p name:=value")
+            params[name] = text
+        elif tok == "--params-file":
+            files.append((value, _load_params_file(value)))
+    return NodeArguments(helped, params, tuple(files))
+
+
+def _load_params_file(path: str) -> dict:
+    """{node key: {name: value}} of a ROS parameter file; StartupError if unusable."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except OSError as exc:
+        raise StartupError(f"--params-file {path!r} cannot be read: "
+                           f"{exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" (line {where.line + 1})" if where is not None else ""
+        raise StartupError(f"--params-file {path!r} is not valid YAML{at}: "
+                           f"{getattr(exc, 'problem', None) or exc}") from None
+    shape = ("expected '<node name or /**>: ros__parameters: {name: value, ...}' "
+             "at the top level")
+    if not isinstance(data, dict) or not data:
+        raise StartupError(f"--params-file {path!r} is not a ROS parameter file: {shape}")
+    out = {}
+    for key, body in data.items():
+        if (not isinstance(body, dict) or "ros__parameters" not in body
+                or not isinstance(body["ros__parameters"], (dict, type(None)))):
+            raise StartupError(f"--params-file {path!r}, key {key!r}: {shape}")
+        out[str(key)] = dict(_flatten(body["ros__parameters"] or {}))
+    return out
+
+
+def _flatten(tree: dict, prefix: str = ""):
+    """Nested parameter maps as rcl reads them: {'a': {'b': 1}} -> ('a.b', 1)."""
+    for name, value in tree.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", value
+
+
+def node_key_matches(key: str, full_name: str) -> bool:
+    """Whether a parameter-file key (``/**``, ``/*``, ``/ns/node``, ``node``) applies.
+
+    rcl's rule: ``**`` matches any number of name tokens, ``*`` exactly one; a key
+    without a leading ``/`` is absolute all the same.
+    """
+    pattern = ""
+    for token in key.strip("/").split("/"):
+        if token == "**":
+            pattern += "(/[^/]+)*"
+        elif token == "*":
+            pattern += "/[^/]+"
+        else:
+            pattern += "/" + re.escape(token)
+    return re.fullmatch(pattern, full_name) is not None
+
+
+def check_overrides(node, arguments: NodeArguments) -> None:
+    """Refuse ``-p`` names the node does not declare; warn about unused file entries.
+
+    A ``-p name:=value`` for a parameter the node does not have is a typo or a wrong
+    node: StartupError. A parameter file keyed for another node name (``/sim_node:``
+    read by ``/ns/sim_node``) is silently ignored by rcl: a file none of whose keys
+    applies to the node is warned about, naming its keys and the node's full name (the
+    other sections of a combined file are normal); so are names under a matching key
+    that the node does not declare (a shared ``/**:`` file may hold other nodes'
+    parameters: a warning, not an error).
+    """
+    log = node.get_logger()
+    unknown = sorted(n for n in arguments.params if not node.has_parameter(n))
+    if unknown:
+        declared = sorted(node._parameters) if hasattr(node, "_parameters") else []
+        raise StartupError(
+            f"unknown parameter {', '.join(unknown)} for {node.get_name()}: valid names "
+            f"are {', '.join(declared)}")
+    full = node.get_fully_qualified_name()
+    for path, keys in arguments.params_files:
+        matching = [key for key in keys if node_key_matches(key, full)]
+        if not matching:         # a combined file's other sections are normal
+            log.warning(f"--params-file {path}: no key applies to this node ({full}): "
+                        f"{', '.join(repr(k) for k in keys)} ignored (key the file '/**:' "
+                        "to apply to any node name)")
+        for key in matching:
+            extra = sorted(n for n in keys[key] if not node.has_parameter(n))
+            if extra:
+                log.warning(f"--params-file {path}: {', '.join(extra)} under {key!r} are "
+                            f"not parameters of {full}: ignored")
+
+
+def init_ros(args, name: str):
+    """Check the arguments, then ``rclpy.init`` them; StartupError with one line if bad.
+
+    Returns the :class:`NodeArguments`, or None when ``--help`` was asked (the caller
+    prints its usage and exits 0).
+    """
+    arguments = parse_node_arguments(args)
+    if arguments.help:
+        return None
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:   # rcl: RCLError, UnknownROSArgsError (not exported)
+        text = re.sub(r", at \S+:\d+", "", " ".join(str(exc).split()))
+        raise StartupError(f"invalid ROS arguments: {text}") from None
+    return arguments
+
+
+def usage(factory, name: str) -> str:
+    """The usage text of a node: a synopsis and its module's docstring."""
+    doc = (sys.modules.get(getattr(factory, "__module__", ""), None).__doc__
+           if getattr(factory, "__module__", "") in sys.modules else None) or ""
+    return (f"usage: {name} [-h] [--ros-args [--params-file FILE] [-p name:=value] ...]\n\n"
+            + doc.strip() + "\n")
+
+
+def run_node(factory, args=None, name: str = "node") -> int:
+    """The main of every node: init, build, spin, and a clean exit.
+
+    The command line is checked first (:func:`init_ros`): ``--help`` prints the usage and
+    returns 0; a malformed argument or parameter file is one line and exit status 2.
+    ``factory()`` builds the node; its optional ``spin_until(executor)`` method spins
+    (a node that finishes by itself returns from it), otherwise :func:`spin` spins until
+    shutdown. A :class:`StartupError`, a ParameterError or a parameter exception while
+    building, or an unknown ``-p`` name (:func:`check_overrides`), is logged in one line
+    and gives exit status 2. SIGINT (Ctrl-C) and SIGTERM end the spin
+    without a traceback, also while starting: rclpy's own signal handlers are not
+    installed, so the context stays valid while the node's ``on_exit()`` logs its summary
+    (to /rosout too); a second signal during that cleanup is ignored. Returns the exit
+    status, which is the value of ``node.exit_code`` if the node has one.
+    """
+    from grazing_control.oscillator.params import ParameterError
+
+    args = list(sys.argv if args is None else args)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+    node = None
+    code = 0
+    try:
+        arguments = init_ros(args, name)
+        if arguments is None:
+            sys.stdout.write(usage(factory, name))
+            return 0
+        node = factory()
+        try:
+            check_overrides(node, arguments)
+        except StartupError:
+            node.on_exit = lambda: None      # it never ran: no summary
+            raise
+        executor = make_executor(getattr(node, "executor_kind", "single_threaded"))
+        executor.add_node(node)
+        if hasattr(node, "spin_until"):
+            node.spin_until(executor)
+        else:
+            spin(executor)
+    except (StartupError, ParameterException, ParameterError) as exc:
+        rclpy.logging.get_logger(name).error(_startup_message(exc))
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        # a second Ctrl-C (terminal and launcher both signal) must not break the cleanup
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if node is not None:
+            if hasattr(node, "on_exit"):
+                node.on_exit()
+            code = code or int(getattr(node, "exit_code", 0))
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+# ------------------------------------------------------------------ parameter record
+def publish_parameter_record(node):
+    """Publish the node's parameters on ``grazing/parameters``, now and after each change.
+
+    One std_msgs/String (JSON of :func:`grazing_control.ros.recording.record.encode`) on a
+    reliable, transient-local, depth-1 publisher, so that a recording describes itself
+    (docs/analysis.md, "Parameter record"). Returns the publisher.
+    """
+    from std_msgs.msg import String
+
+    from grazing_control.ros.recording.record import TOPIC, encode
+
+    pub = node.create_publisher(String, TOPIC, LATCHED_QOS)
+
+    def publish(_changed=None):
+        values = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
+        pub.publish(String(data=encode(node.get_fully_qualified_name(), values)))
+
+    node.add_post_set_parameters_callback(publish)
+    publish()
+    return pub

@@ -1,0 +1,385 @@
+"""controller_node: the discrete grazing controller on section Pi2 (spec section 4, Eq. 28).
+
+Each Pi2 sample (x, v) is answered with the velocity correction
+
+    Delta v = c1 (x - x**) + c2 (v - v**)
+
+computed by :func:`grazing_control.oscillator.control.correction`, limited to |Delta v| <=
+``saturation``, and published stamped with the sample's own stamp, so that the
+simulator can tell which sample it answers.
+
+Topics
+------
+subscribes ``oscillator/pi2`` (sensor_msgs/JointState): position [x], velocity [v] at Pi2.
+publishes ``controller/velocity_correction`` (geometry_msgs/TwistStamped):
+twist.linear.x = Delta v (nondimensional velocity), header.stamp = the sample's stamp;
+reliable, transient local, keep last 100000 (``REPLAY_QOS``): a recorder that matches
+late still gets every answer (the subscription is reliable, volatile, keep last 1000).
+Both as packed bytes (:mod:`grazing_control.ros.cdr`, docs/nodes.md "Wire format"):
+the simulator's sample layout is read directly, any other JointState through rclpy;
+bytes that decode to no JointState are counted as malformed.
+
+Switching on
+------------
+The controller acts from the ``enable_after``-th sample on (counted from 0: with
+enable_after = 1000 samples 0..999 are uncontrolled, as the study and
+``simulate(..., control_after=1000)``); -1 means only through ``~/enable``
+(std_srvs/SetBool), which switches it on or off at any time. While off it still answers
+every sample, with Delta v = 0, so that a lockstep simulator never waits for an answer
+that will not come.
+
+Stale, duplicate and malformed samples
+--------------------------------------
+* Every sample is answered once: a sample whose stamp equals one of the last
+  ``RECENT`` answered stamps is a duplicate and not answered (counted as stale). A
+  sample older than the newest one is still answered (counted as out of order): the
+  controller cannot tell a stray message from the simulator's stream, so it does not
+  let one decide; the simulator applies only the answer to the sample it is waiting for
+  (lockstep) or to one of its last two samples (realtime), so a stray sample with a
+  future stamp neither switches control off nor starves the simulator. A sample at
+  t = 0 (stamp 0) after others means the simulator was reset (``~/reset``): the sample
+  count restarts and ``enable_after`` counts again from there, unless the next sample
+  continues the old stream (a stamp newer than the newest before it): then that t = 0
+  sample was a stray and the count goes on.
+* With ``use_sim_time`` true the node's clock follows ``/clock``; a sample older than
+  ``stale_after`` seconds of simulation time on arrival (clock now - stamp) is stale and
+  not answered. Without simulation time the check is skipped (stamps are simulation
+  time, the node's clock would be wall time).
+* NaN/inf or missing position/velocity: ignored, counted, logged (throttled).
+* A correction that is not finite (overflow, e.g. x = v = 1e308 with saturation = inf)
+  is never published: counted (``nonfinite``) and logged; the simulator then applies no
+  correction to that sample.
+* More than one publisher of ``oscillator/pi2`` (two simulators: two scenes on one
+  domain and namespace) is an error: the node logs it and exits with status 1, so the
+  scene fails instead of losing answers to the other scene's colliding stamps. Checked
+  every ``ISOLATION_CHECK`` s of wall time and whenever a sample is refused as a
+  duplicate. (Each simulator checks for another simulator or controller too, but sees
+  only what its own participant has discovered; the controller hears both.)
+
+Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_ref
+(NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
+stale_after, actuation_delay (the delay the gains were designed for, 0 <= delay < T; the
+simulator applies it, the controller validates and reports it: docs/nodes.md,
+"Scheduled actuation"), executor (single_threaded or events). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+
+from geometry_msgs.msg import TwistStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool
+
+from grazing_control.oscillator.control import Gains, correction
+from . import cdr
+from .common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize, StartupError, Throttled,
+                     float_descriptor, int_descriptor, publish_parameter_record, run_node,
+                     spin, stamp_key, string_descriptor)
+from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+
+#: Wall seconds between two checks that only one simulator publishes the samples.
+ISOLATION_CHECK = 0.25
+
+__all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
+
+_KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
+         "enable_after", "saturation", "stale_after", "actuation_delay")
+
+
+class ControlLaw:
+    """Eq. 28 with a switch, a saturation and the sample bookkeeping (no ROS).
+
+    Parameters
+    ----------
+    gains : Gains
+    x_ref, v_ref : float
+        X** on Pi2.
+    enable_after : int
+        First sample index (from 0) that is controlled; -1: only by :meth:`enable`.
+    saturation : float
+        Limit on |Delta v|, > 0 (inf: none).
+    """
+
+    #: Answered stamps remembered to recognise duplicates.
+    RECENT = 64
+
+    def __init__(self, gains: Gains, x_ref: float, v_ref: float, enable_after: int,
+                 saturation: float):
+        self.configure(gains, x_ref, v_ref, enable_after, saturation)
+        self.count = 0          # samples answered since the start or the last reset
+        self.newest = None      # stamp key of the newest sample answered
+        self.recent = deque(maxlen=self.RECENT)   # stamp keys of the last answers
+        self.out_of_order = 0   # samples answered though older than the newest
+        self._before_reset = None   # (count, newest, recent) before a t = 0 sample
+        self.forced = None      # None: follow enable_after; True/False: set by ~/enable
+
+    def configure(self, gains, x_ref, v_ref, enable_after, saturation) -> None:
+        self.gains, self.x_ref, self.v_ref = gains, x_ref, v_ref
+        self.enable_after, self.saturation = enable_after, saturation
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the next sample is controlled."""
+        if self.forced is not None:
+            return self.forced
+        return 0 <= self.enable_after <= self.count
+
+    def answer(self, key: tuple, x: float, v: float):
+        """Delta v for the sample with stamp ``key``; None when it must not be answered.
+
+        None for a duplicate (a stamp among the last :attr:`RECENT` answered). The
+        result may be non-finite (overflow): the caller must not publish it.
+        """
+        if self._before_reset is not None:
+            count, newest, recent = self._before_reset
+            self._before_reset = None
+            if key > newest:        # the stream went on: that t = 0 sample was a stray
+                self.count, self.newest = count + self.count, newest
+                self.recent = recent
+                self.recent.append((0, 0))
+        if key == (0, 0) and self.newest is not None:
+            # back to t = 0: the simulator was reset (confirmed by the next sample)
+            self._before_reset = (self.count, self.newest, self.recent)
+            self.count = 0
+            self.newest = None
+            self.recent = deque(maxlen=self.RECENT)
+        if key in self.recent:
+            return None
+        if self.newest is not None and key < self.newest:
+            self.out_of_order += 1
+        dv = 0.0
+        if self.enabled:
+            dv = correction(self.gains, x, v, self.x_ref, self.v_ref)
+            if abs(dv) > self.saturation:
+                dv = math.copysign(self.saturation, dv)
+        self.newest = key if self.newest is None else max(self.newest, key)
+        self.recent.append(key)
+        self.count += 1
+        return dv
+
+
+def law_from_values(values: dict) -> ControlLaw:
+    """Validate the controller's parameters into a :class:`ControlLaw` (ParameterError)."""
+    gains = Gains(values["c1"], values["c2"])
+    x_ref, v_ref = float(values["x_ref"]), float(values["v_ref"])
+    if math.isnan(x_ref) or math.isnan(v_ref):
+        p = OscillatorParams(zeta=values["zeta"], r=values["r"], omega=values["omega"],
+                             pi2_offset=values["pi2_offset"])
+        x_ref = p.x_ref if math.isnan(x_ref) else x_ref
+        v_ref = p.v_ref if math.isnan(v_ref) else v_ref
+    for name, value in (("x_ref", x_ref), ("v_ref", v_ref)):
+        if not math.isfinite(value):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite real "
+                                 "number, or NaN to compute X** from the model parameters")
+    enable_after = int(values["enable_after"])
+    if enable_after < -1:
+        raise ParameterError(f"enable_after={enable_after} is invalid: valid range is >= 0, "
+                             "or -1 for only through ~/enable")
+    saturation = float(values["saturation"])
+    if not saturation > 0.0:
+        raise ParameterError(f"saturation={saturation!r} is invalid: valid range is "
+                             "saturation > 0 (inf: no limit)")
+    stale_after = float(values["stale_after"])
+    if not stale_after > 0.0:
+        raise ParameterError(f"stale_after={stale_after!r} is invalid: valid range is "
+                             "stale_after > 0 (inf: no age limit)")
+    return ControlLaw(gains, x_ref, v_ref, enable_after, saturation)
+
+
+def actuation_delay_from_values(values: dict) -> float:
+    """The design's actuation delay, 0 <= delay < T = 2 pi / omega (ParameterError)."""
+    delay = float(values.get("actuation_delay", 0.0))
+    period = 2.0 * math.pi / float(values["omega"])
+    if not (math.isfinite(delay) and 0.0 <= delay < period):
+        raise ParameterError(f"actuation_delay={delay!r} is invalid: valid range is "
+                             f"0 <= actuation_delay < T = {period!r} (simulation time)")
+    return delay
+
+
+class ControllerNode(Node):
+    """The controller node (module docstring: topics, switching, stale samples)."""
+
+    def __init__(self, **kwargs):
+        super().__init__("controller_node", **kwargs)
+        ref = OscillatorParams()
+        d = self.declare_parameter
+        d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)"))
+        d("c2", 0.0, float_descriptor("gain c2 on v - v** (Eq. 28)"))
+        d("x_ref", math.nan, float_descriptor("x** on Pi2; NaN: from the model parameters"))
+        d("v_ref", math.nan, float_descriptor("v** on Pi2; NaN: from the model parameters"))
+        d("zeta", ref.zeta, float_descriptor("damping ratio (for X**)", 0.0, 1.0))
+        d("r", ref.r, float_descriptor("coefficient of restitution (recorded with the gains)",
+                                       0.0, 1.0))
+        d("omega", study_omega(), float_descriptor("forcing frequency (for X**)", 0.0))
+        d("pi2_offset", ref.pi2_offset, float_descriptor("phase of Pi2 after Pi1 (for X**)",
+                                                         0.0, 2.0 * math.pi))
+        d("enable_after", 1000, int_descriptor(
+            "first controlled sample (from 0); -1: only through ~/enable", -1))
+        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0", 0.0))
+        d("stale_after", math.inf, float_descriptor(
+            "max age of a sample in simulation seconds (with use_sim_time)", 0.0))
+        d("actuation_delay", 0.0, float_descriptor(
+            "simulation time from a sample to its correction that the gains were designed "
+            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True))
+        d("executor", "events", string_descriptor(
+            "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
+            True, EXECUTORS))
+        self.executor_kind = self.get_parameter("executor").value
+        try:
+            self.law = law_from_values(self._values())
+            self.actuation_delay = actuation_delay_from_values(self._values())
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
+        self.stale_after = float(self.get_parameter("stale_after").value)
+        # no default QoS-event handlers: each is one more entity in every executor wait
+        self.pub = self.create_publisher(
+            TwistStamped, "controller/velocity_correction", REPLAY_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+        self.sub_samples = self.create_subscription(
+            JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        self.exit_code = 0
+        self.exit_now = False
+        self._next_check = 0.0
+        self.create_service(SetBool, "~/enable", self._on_enable)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
+        log = self.get_logger()
+        self.malformed = Throttled(log, "malformed sample ignored")
+        self.stale = Throttled(log, "stale sample not answered")
+        self.nonfinite = Throttled(log, "non-finite correction not published")
+        self.answered = 0
+        if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
+            log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
+                        "time)")
+        self._warn_gains()
+        log.info(f"c1={self.law.gains.c1!r} c2={self.law.gains.c2!r} x_ref={self.law.x_ref!r} "
+                 f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after} "
+                 f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind}")
+
+    def _warn_gains(self) -> None:
+        """Warn when the gains were not given or are both zero (the controller then
+        answers every sample with Delta v = 0): typically a parameter file keyed for
+        another node name, which rcl ignores silently."""
+        given = getattr(self, "_parameter_overrides", {})
+        missing = [k for k in ("c1", "c2") if k not in given]
+        if missing:
+            self.get_logger().warning(
+                f"{' and '.join(missing)} not given to {self.get_fully_qualified_name()} "
+                "(no -p and no parameter-file entry that applies to this node name): "
+                "default 0.0 used")
+        if self.law.gains.c1 == 0.0 and self.law.gains.c2 == 0.0:
+            self.get_logger().warning("c1 = c2 = 0: every correction is 0, the controller "
+                                      "does not control")
+
+    def _values(self) -> dict:
+        return {k: self.get_parameter(k).value for k in _KEYS}
+
+    def _on_sample(self, data: bytes) -> None:
+        """A Pi2 sample as received (serialized): the simulator's layout is read directly
+        (:func:`cdr.read_sample`), any other JointState through rclpy's deserializer."""
+        sample = cdr.read_sample(data)
+        if sample is None:
+            msg = deserialize(data, JointState, self.malformed)
+            if msg is None:
+                return
+            key = stamp_key(msg.header.stamp)
+            if len(msg.position) < 1 or len(msg.velocity) < 1:
+                self.malformed(f"stamp {key}: missing position/velocity")
+                return
+            sample = key + (msg.position[0], msg.velocity[0])
+        sec, ns, x, v = sample
+        key = (sec, ns)
+        if not (math.isfinite(x) and math.isfinite(v)):
+            self.malformed(f"stamp {key}: x={x!r} v={v!r}")
+            return
+        if math.isfinite(self.stale_after) and self._use_sim_time():
+            age = self.get_clock().now().nanoseconds * 1e-9 - (sec + ns * 1e-9)
+            if age > self.stale_after:
+                self.stale(f"stamp {key} is {age:.6g} s old")
+                return
+        dv = self.law.answer(key, x, v)
+        if dv is None:
+            self.stale(f"stamp {key} was already answered")
+            self._check_isolation()
+            return
+        if not math.isfinite(dv):
+            self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
+            return
+        self.pub.publish(cdr.twist_stamped(sec, ns, dv))
+        self.answered += 1
+
+    def _check_isolation(self) -> None:
+        """Stop with status 1 when more than one simulator publishes the samples."""
+        n = self.sub_samples.get_publisher_count()
+        if n > 1 and not self.exit_now:
+            self.get_logger().error(
+                f"{n} publishers on {self.sub_samples.topic_name} (more than one simulator):"
+                " the scene is not isolated (another scene on this ROS_DOMAIN_ID and "
+                "namespace?)")
+            self.exit_code = 1
+            self.exit_now = True
+
+    def spin_until(self, executor) -> None:
+        """Spin until shutdown, or until the isolation check stops the node.
+
+        The check runs here, between the executor's waits, rather than in a timer: a
+        SIGTERM is delivered in whatever Python callback runs next, and in a timer's
+        the EventsExecutor logs it as a fatal exception.
+        """
+        def stopped() -> bool:
+            now = time.monotonic()
+            if now >= self._next_check:
+                self._next_check = now + ISOLATION_CHECK
+                self._check_isolation()
+            return self.exit_now
+
+        spin(executor, stopped)
+
+    def _use_sim_time(self) -> bool:
+        return self.get_clock().ros_time_is_active
+
+    def _on_enable(self, request, response):
+        self.law.forced = bool(request.data)
+        response.success = True
+        response.message = f"controller {'on' if request.data else 'off'} at sample " \
+                           f"{self.law.count}"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        values = self._values()
+        values.update({p.name: p.value for p in params if p.name in values})
+        try:
+            new = law_from_values(values)
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.law.configure(new.gains, new.x_ref, new.v_ref, new.enable_after, new.saturation)
+        self.stale_after = float(values["stale_after"])
+        return SetParametersResult(successful=True)
+
+    def on_exit(self) -> None:
+        """Log what was answered and ignored (after the readers acknowledged, 1 s at most)."""
+        self.pub.wait_for_all_acked(Duration(seconds=1))
+        self.get_logger().info(
+            f"summary: answered={self.answered} controlled_from_sample="
+            f"{self.law.enable_after} malformed={self.malformed.count} "
+            f"stale={self.stale.count} out_of_order={self.law.out_of_order} "
+            f"nonfinite={self.nonfinite.count}")
+
+
+def main(args=None) -> int:
+    """Entry point of the ``controller_node`` executable; returns the exit status."""
+    return run_node(ControllerNode, args, "controller_node")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,561 @@
+"""The project's own launcher: the nodes as separate processes, for machines without ``ros2``.
+
+:func:`run` starts ``sim_node``, ``controller_node`` and (with a bag directory)
+``recorder_node`` as ``sys.executable -m <module> --ros-args --params-file ... -p key:=value``,
+waits for the simulator to finish the scene (it runs ``max_periods`` forcing periods with
+``exit_when_done:=true`` and exits with status 0), then stops the controller and the
+recorder with SIGINT (the recorder closes its bag) and returns every exit status.
+It only spawns processes: it does not import rclpy.
+
+Start order and readiness: the recorder and the controller start first; the simulator
+waits until the controller is matched (``wait_for_controller``) and, with a recorder,
+until every data topic has a subscriber (``wait_for_subscribers:=1``) and the recorder
+says it has matched a publisher on every topic it records (``wait_for_recorder``), so no
+message of the scene is published before someone records it; the recorder checks the
+publishers' sequence numbers at the end and fails (``require_complete``) if it missed any.
+
+Isolation: each scene runs on a ROS_DOMAIN_ID of its own unless one is given
+(:func:`claim_domain`): a domain id in 1..232 that no other scene of this machine has
+claimed (a lock file held for the run) and on which no DDS participant of this host
+is running (its first participant's discovery port is free). A domain isolates
+everything, ``/clock``, ``/rosout``, ``/parameter_events`` and services included,
+without renaming a topic; a namespace would leave the absolute ones shared. The
+simulator also refuses to run when another simulator or controller shares its topics.
+
+Failing fast: a node that exits early (a refused parameter) stops the scene at once.
+Ctrl-C (or SIGTERM to the launcher): the nodes run in process groups of their own, so
+only the launcher gets the terminal's SIGINT; it sends SIGTERM to every node still
+running (handled as SIGINT: summaries, the bag closed; a node still starting ends
+quietly), waits for them and returns with ``interrupted=True``. A node sent SIGINT
+while it is still importing its modules exits quietly with status 130
+(:data:`BOOTSTRAP`); every node gets SIGTERM if the launcher is killed.
+
+``ros2 launch grazing_control grazing_control.launch.py`` is the equivalent on a ROS install.
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import fcntl
+import importlib.util
+import math
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from grazing_control.oscillator import kernel
+
+__all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
+           "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
+           "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",
+           "RECORDER_MODULE", "CONFIG_DIR"]
+
+SIM_MODULE = "sim_node.sim_node"
+CONTROLLER_MODULE = "grazing_control.ros.controller_node"
+RECORDER_MODULE = "grazing_control.ros.recorder_node"
+#: The source tree's root (so that ``-m sim_node.sim_node`` works from a checkout).
+SOURCE_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _config_dir() -> Path:
+    """config/ of the checkout, else the installed package's share/grazing_control/config."""
+    local = SOURCE_ROOT / "config"
+    if (local / "study.yaml").is_file():
+        return local
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory("grazing_control")) / "config"
+    except Exception:  # not installed with colcon: keep the checkout's path for the message
+        return local
+
+
+#: Parameter files of the study: study.yaml (sim_node) and controller.yaml (c2 = -1).
+CONFIG_DIR = _config_dir()
+
+
+@dataclass
+class RunResult:
+    """Exit statuses of one scene's processes (None: not started)."""
+
+    sim: int | None
+    controller: int | None
+    recorder: int | None
+    bag_dir: str | None
+    wall: float
+    timed_out: bool = False
+    interrupted: bool = False
+    logs: dict = field(default_factory=dict)
+    domain_id: int | None = None
+
+    def __str__(self) -> str:
+        state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
+                 else "finished" if self.ok else "failed")
+        text = (f"scene {state} in {self.wall:.1f} s: exit status sim_node={self.sim} "
+                f"controller_node={self.controller}")
+        if self.recorder is not None:
+            text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
+        if self.domain_id is not None:
+            text += f"; ROS_DOMAIN_ID={self.domain_id}"
+        if self.logs:
+            text += f"; logs in {Path(next(iter(self.logs.values()))).parent}"
+        return text
+
+    @property
+    def exit_code(self) -> int:
+        """0 if ok, 130 if interrupted, else 1: what a command returns."""
+        return 0 if self.ok else 130 if self.interrupted else 1
+
+    @property
+    def ok(self) -> bool:
+        """The simulator finished and every node exited with status 0."""
+        codes = [self.sim, self.controller] + ([self.recorder] if self.recorder is not None
+                                               else [])
+        return not (self.timed_out or self.interrupted) and all(c == 0 for c in codes)
+
+
+def format_value(value) -> str:
+    """A parameter value as ``-p key:=value`` text that rcl parses back to the same type."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return ".nan"
+        if math.isinf(value):
+            return ".inf" if value > 0 else "-.inf"
+        text = repr(value)
+        return text if ("." in text or "e" in text) else text + ".0"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(format_value(v) for v in value) + "]"
+    return str(value)
+
+
+#: Runs a node module as ``python -m`` does, with a SIGINT that ends the process quietly
+#: (status 130) until the node installs its own handlers (a Ctrl-C while Python is still
+#: importing would otherwise print a KeyboardInterrupt traceback), and a SIGTERM when the
+#: launcher dies (Linux PR_SET_PDEATHSIG; exits at once if the launcher is already gone).
+#: Set here, after exec, rather than in a ``preexec_fn``: Python code between fork and
+#: exec would run in the launcher's process group and could print the traceback of a
+#: Ctrl-C that reaches it there.
+BOOTSTRAP = ("import os, runpy, signal, sys; "
+             "signal.signal(signal.SIGINT, lambda s, f: os._exit(130)); "
+             "parent = int(os.environ.pop('GRAZING_LAUNCHER_PID', '0')); "
+             "exec('try:\\n import ctypes; ctypes.CDLL(None).prctl(1, 15)\\n"
+             "except Exception: pass') if parent else None; "
+             "os._exit(143) if parent and os.getppid() != parent else None; "
+             "runpy.run_module(sys.argv.pop(1), run_name='__main__', alter_sys=True)")
+
+#: Largest ROS_DOMAIN_ID: Fast DDS's ports (7400 + 250 d + 11 + 2 i) must stay below 65536.
+MAX_DOMAIN_ID = 232
+
+
+def check_domain_id(domain_id) -> int:
+    """A valid ROS_DOMAIN_ID (0..232) as int, else ValueError naming the range."""
+    if isinstance(domain_id, bool) or not isinstance(domain_id, int) or not (
+            0 <= domain_id <= MAX_DOMAIN_ID):
+        raise ValueError(f"domain_id={domain_id!r} is invalid: valid range is 0..{MAX_DOMAIN_ID} "
+                         "(Fast DDS on Linux)")
+    return domain_id
+
+
+def _discovery_port_free(domain_id: int) -> bool:
+    """Whether no DDS participant of this host uses ``domain_id`` (participant 0's port)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.bind(("0.0.0.0", 7410 + 250 * domain_id))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return False
+            raise
+    return True
+
+
+def claim_domain(exclude=()):
+    """A ROS_DOMAIN_ID free on this host, and the lock that keeps it ours.
+
+    Tries the ids 1..232 (without ``exclude`` and the environment's ROS_DOMAIN_ID) in a
+    random order; an id is free when no other scene of this machine holds its lock file
+    (``<tmp>/grazing_control_domains/<id>.lock``, flock) and no DDS participant of this
+    host uses it. Returns ``(domain_id, lock file)``; close the file to release it.
+    Raises RuntimeError if every id is taken.
+    """
+    folder = Path(tempfile.gettempdir()) / "grazing_control_domains"
+    folder.mkdir(exist_ok=True)
+    skip = set(exclude)
+    env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    skip.add(int(env) if env.isdigit() else 0)
+    ids = [d for d in range(1, MAX_DOMAIN_ID + 1) if d not in skip]
+    random.SystemRandom().shuffle(ids)
+    for d in ids:
+        lock = open(folder / f"{d}.lock", "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        if _discovery_port_free(d):
+            return d, lock
+        lock.close()
+    raise RuntimeError("no free ROS_DOMAIN_ID on this host: give one with --domain-id")
+
+
+def node_command(module: str, params_files=(), overrides=None, python: str | None = None) -> list:
+    """``python -c BOOTSTRAP module --ros-args --params-file F ... -p key:=value ...``.
+
+    The same as ``python -m module ...`` (:data:`BOOTSTRAP`), quiet on an early Ctrl-C.
+    """
+    cmd = [python or sys.executable, "-c", BOOTSTRAP, module, "--ros-args"]
+    for f in params_files:
+        cmd += ["--params-file", os.fspath(f)]
+    for key, value in (overrides or {}).items():
+        cmd += ["-p", f"{key}:={format_value(value)}"]
+    return cmd
+
+
+def node_env(domain_id: int | None = None) -> dict:
+    """Environment of a node: ours, the source root on PYTHONPATH, the domain if given."""
+    env = dict(os.environ)
+    paths = [str(SOURCE_ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
+    env["PYTHONUNBUFFERED"] = "1"
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(int(domain_id))
+    return env
+
+
+def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, log=None,
+               python=None) -> subprocess.Popen:
+    """Start one node process; its output goes to ``log`` (a path) or is inherited.
+
+    The node gets a process group of its own, so that the terminal's Ctrl-C reaches only
+    the launcher, which stops the nodes with SIGTERM (:func:`stop_nodes`): a SIGINT
+    while a node's Python is still starting would print a traceback, a SIGTERM ends it
+    quietly. The node is sent SIGTERM if the launcher dies (killed with SIGKILL).
+    """
+    out = open(log, "wb") if log is not None else None
+    try:
+        return subprocess.Popen(node_command(module, params_files, overrides, python),
+                                env=dict(node_env(domain_id),
+                                         GRAZING_LAUNCHER_PID=str(os.getpid())),
+                                stdin=subprocess.DEVNULL,
+                                stdout=out, stderr=subprocess.STDOUT if out else None,
+                                process_group=0)
+    finally:
+        if out is not None:
+            out.close()
+
+
+def stop_nodes(procs, grace: float = 15.0) -> None:
+    """SIGTERM every running process, wait ``grace`` s, then SIGKILL.
+
+    The nodes handle SIGTERM as SIGINT (the summary is logged, the recorder closes its
+    bag); before a node has installed its handlers, SIGTERM ends it without a traceback.
+    """
+    procs = [p for p in procs if p is not None]
+    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
+        alive = [p for p in procs if p.poll() is None]
+        if not alive:
+            return
+        for p in alive:
+            try:
+                p.send_signal(sig)
+            except ProcessLookupError:
+                pass
+        end = time.monotonic() + wait
+        for p in alive:
+            try:
+                p.wait(max(0.0, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+
+
+def _params_file(params, node: str, tmp: Path) -> Path:
+    """A parameter file: a path as is, a dict written as ``/**: ros__parameters: {...}``."""
+    if isinstance(params, (str, os.PathLike)):
+        return Path(params)
+    path = tmp / f"{node}.yaml"
+    values = {k: (float(v) if isinstance(v, float) else v) for k, v in dict(params).items()}
+    with open(path, "w") as fh:
+        yaml.safe_dump({"/**": {"ros__parameters": values}}, fh, sort_keys=False)
+    return path
+
+
+def _design_delay(controller_params):
+    """``actuation_delay`` of the controller's parameters (``grazing design --delay``), or None."""
+    if isinstance(controller_params, (str, os.PathLike)):
+        try:
+            with open(controller_params) as fh:
+                doc = yaml.safe_load(fh) or {}
+        except (OSError, yaml.YAMLError):
+            return None             # the node reports an unreadable file itself
+        values = {}
+        for section in doc.values() if isinstance(doc, dict) else ():
+            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+                values.update(section["ros__parameters"])
+    else:
+        values = dict(controller_params or {})
+    delay = values.get("actuation_delay")
+    return float(delay) if isinstance(delay, (int, float)) and not isinstance(delay, bool) \
+        else None
+
+
+def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | None = None, *,
+        delta_d: float | None = None, enable_after: int | None = None,
+        mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
+        sim_overrides: dict | None = None, controller_overrides: dict | None = None,
+        recorder_overrides: dict | None = None, log_dir=None,
+        python: str | None = None) -> RunResult:
+    """Run one scene through the three node processes and wait for it to finish.
+
+    Parameters
+    ----------
+    sim_params : dict or path, optional
+        The simulator's parameters: a ROS parameter file (``/sim_node: ros__parameters``)
+        or a dict of values (floats must be floats); default config/study.yaml.
+    controller_params : dict or path, optional
+        The controller's parameter file (``grazing design --out``) or a dict; default
+        config/controller.yaml (c2 = -1, c1 from the degenerate condition). Its
+        ``actuation_delay`` (``grazing design --delay``) is passed to the simulator as
+        its ``actuation_delay`` unless ``sim_overrides`` sets one.
+    bag_dir : path, optional
+        Record the scene to this rosbag2-style directory (must not exist or be empty);
+        None: no recorder. Skipped with a warning if the recorder node is not available.
+    periods : int, optional
+        Forcing periods to simulate (``max_periods``); None: the parameter file's value
+        (which must be > 0 for the scene to end).
+    delta_d, enable_after, mode : optional
+        Shortcuts for the simulator's ``delta_d`` and ``mode`` and the controller's
+        ``enable_after`` (first controlled sample).
+    domain_id : int, optional
+        ROS_DOMAIN_ID of the processes, 0..232; default: a free one claimed for the run
+        (:func:`claim_domain`), so that two scenes never share their topics.
+    timeout : float, optional
+        Wall seconds (finite, > 0) to wait for the simulator; then every node is stopped
+        and the result has ``timed_out=True``.
+    sim_overrides, controller_overrides, recorder_overrides : dict, optional
+        Extra ``-p key:=value`` for each node (e.g. ``{"state_period": 0.0}``); a value
+        given as text is passed as is (``"-5.0e-06"``), see :func:`format_value`.
+    log_dir : path, optional
+        Write each node's output to ``<log_dir>/<node>.log`` instead of the terminal.
+    python : str, optional
+        Interpreter for the nodes (default: this one).
+
+    Returns
+    -------
+    RunResult
+        Exit statuses (sim, controller, recorder), wall time, flags.
+    """
+    t0 = time.monotonic()
+    if domain_id is not None:
+        check_domain_id(domain_id)
+    if kernel.use_kernel():  # a fresh checkout compiles numba's cache once, here, not in a node
+        kernel.warm_up()
+    if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0
+                                    and math.isfinite(timeout)):
+        raise ValueError(f"timeout={timeout!r} is invalid: valid range is a finite "
+                         "number of seconds > 0 (None: no timeout)")
+    sim_params = CONFIG_DIR / "study.yaml" if sim_params is None else sim_params
+    controller_params = (CONFIG_DIR / "controller.yaml" if controller_params is None
+                         else controller_params)
+    record = bag_dir is not None
+    if record and importlib.util.find_spec(RECORDER_MODULE) is None:
+        print(f"warning: {RECORDER_MODULE} is not available: running without recording",
+              file=sys.stderr)
+        record = False
+    logs = {}
+    if log_dir is not None:
+        Path(log_dir).mkdir(parents=True, exist_ok=True)
+        names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
+        logs = {n: str(Path(log_dir) / f"{n}.log") for n in names}
+    sim_over = {"exit_when_done": True, "wait_for_controller": True,
+                "wait_for_subscribers": 1 if record else 0, "wait_for_recorder": record}
+    if periods is not None:
+        sim_over["max_periods"] = int(periods)
+    if delta_d is not None:
+        sim_over["delta_d"] = float(delta_d)
+    if mode is not None:
+        sim_over["mode"] = str(mode)
+    delay = dict(controller_overrides or {}).get("actuation_delay",
+                                                 _design_delay(controller_params))
+    if delay is not None:               # the gains' design delay is the simulator's too
+        sim_over["actuation_delay"] = delay
+    sim_over.update(sim_overrides or {})
+    controller_overrides = dict(controller_overrides or {})
+    if enable_after is not None:
+        controller_overrides["enable_after"] = int(enable_after)
+    procs = {"sim_node": None, "controller_node": None, "recorder_node": None}
+    timed_out = interrupted = False
+
+    def on_term(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = None
+    if threading_is_main():
+        previous = signal.signal(signal.SIGTERM, on_term)
+    lock = None
+    if domain_id is None:
+        domain_id, lock = claim_domain()
+    with tempfile.TemporaryDirectory(prefix="grazing_run_") as tmp:
+        tmp = Path(tmp)
+        try:
+            if record:
+                rec_over = {"output": os.fspath(bag_dir), "require_complete": True}
+                rec_over.update(recorder_overrides or {})
+                procs["recorder_node"] = start_node(
+                    RECORDER_MODULE, (), rec_over, domain_id=domain_id,
+                    log=logs.get("recorder_node"), python=python)
+            procs["controller_node"] = start_node(
+                CONTROLLER_MODULE, [_params_file(controller_params, "controller_node", tmp)],
+                controller_overrides, domain_id=domain_id, log=logs.get("controller_node"),
+                python=python)
+            procs["sim_node"] = start_node(
+                SIM_MODULE, [_params_file(sim_params, "sim_node", tmp)], sim_over,
+                domain_id=domain_id, log=logs.get("sim_node"), python=python)
+            sim = procs["sim_node"]
+            end = None if timeout is None else t0 + timeout
+            while sim.poll() is None:
+                if end is not None and time.monotonic() > end:
+                    timed_out = True
+                    break
+                early = [n for n in ("controller_node", "recorder_node")
+                         if procs[n] is not None and procs[n].poll() is not None]
+                if early:
+                    for name in early:
+                        print(f"warning: {name} exited early with status "
+                              f"{procs[name].returncode}: stopping the scene", file=sys.stderr)
+                    break
+                try:
+                    sim.wait(0.1)
+                except subprocess.TimeoutExpired:
+                    pass
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            try:
+                stop_nodes([procs["sim_node"]])
+                stop_nodes([procs["controller_node"], procs["recorder_node"]])
+            except KeyboardInterrupt:
+                interrupted = True
+                stop_nodes(list(procs.values()), grace=2.0)
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
+            if lock is not None:
+                lock.close()
+
+    def code(name):
+        p = procs[name]
+        return None if p is None else p.returncode
+
+    return RunResult(sim=code("sim_node"), controller=code("controller_node"),
+                     recorder=code("recorder_node"),
+                     bag_dir=os.fspath(bag_dir) if record else None,
+                     wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
+                     logs=logs, domain_id=domain_id)
+
+
+def threading_is_main() -> bool:
+    """Signal handlers can only be installed from the main thread."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def run_scene(p, controller_params=None, bag_dir=None, periods: int = 1300,
+              enable_after: int = 1000, **kwargs) -> RunResult:
+    """Run the scene of a model ``p`` (OscillatorParams) in lockstep; raise if it fails.
+
+    The study's parameter file with ``p``'s model parameters over it; ``kwargs`` go to
+    :func:`run`. Raises RuntimeError (with the simulator's last log lines when logs were
+    kept) unless every node finished with status 0.
+    """
+    over = {k: float(getattr(p, k)) for k in ("zeta", "r", "omega", "delta_d", "tau0",
+                                               "pi2_offset")}
+    over.update(kwargs.pop("sim_overrides", None) or {})
+    res = run(None, controller_params, bag_dir, periods, enable_after=enable_after,
+              mode="lockstep", sim_overrides=over, **kwargs)
+    if not res.ok:
+        detail = ""
+        if res.logs.get("sim_node") and Path(res.logs["sim_node"]).is_file():
+            lines = Path(res.logs["sim_node"]).read_text(errors="replace").splitlines()
+            detail = "\n" + "\n".join(lines[-5:])
+        raise RuntimeError(f"{res}{detail}")
+    return res
+
+
+def _domain_id(text: str) -> int:
+    try:
+        return check_domain_id(int(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: valid range is an integer 0..{MAX_DOMAIN_ID}") from None
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: valid range is a finite number of seconds > 0")
+    return value
+
+
+def _key_value(text: str):
+    key, sep, value = text.partition(":=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY:=VALUE")
+    return key, value
+
+
+class _Pairs(argparse.Action):
+    """Collect KEY:=VALUE options into a dict."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        pairs = dict(getattr(namespace, self.dest) or {})
+        key, value = values
+        pairs[key] = value
+        setattr(namespace, self.dest, pairs)
+
+
+def add_run_arguments(parser) -> None:
+    """The options of ``grazing run``; their names are :func:`run`'s keyword arguments."""
+    parser.add_argument("--sim-params", dest="sim_params", default=None,
+                        help="sim_node parameter file (default: config/study.yaml)")
+    parser.add_argument("--controller-params", dest="controller_params", default=None,
+                        help="controller parameter file from `grazing design --out` "
+                             "(default: config/controller.yaml)")
+    parser.add_argument("--bag", dest="bag_dir", default=None,
+                        help="record the scene to this bag directory (default: no recording)")
+    parser.add_argument("--periods", type=int, default=None,
+                        help="forcing periods to simulate (default: the parameter file's)")
+    parser.add_argument("--delta-d", dest="delta_d", type=float, default=None,
+                        help="Delta d = d - d* (default: the parameter file's)")
+    parser.add_argument("--enable-after", dest="enable_after", type=int, default=None,
+                        help="first controlled Pi2 sample (default 1000; -1: never)")
+    parser.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
+                        help="simulator mode (default: the parameter file's, lockstep)")
+    parser.add_argument("--domain-id", dest="domain_id", type=_domain_id, default=None,
+                        help=f"ROS_DOMAIN_ID of the nodes, 0..{MAX_DOMAIN_ID} (default: a free "
+                             "one claimed for this run, so that scenes never mix; printed)")
+    parser.add_argument("--timeout", type=_seconds, default=None,
+                        help="wall seconds before the scene is stopped (default: none)")
+    parser.add_argument("--log-dir", dest="log_dir", default=None,
+                        help="write each node's output to LOG_DIR/<node>.log")
+    parser.add_argument("--sim-param", dest="sim_overrides", type=_key_value, action=_Pairs,
+                        metavar="KEY:=VALUE", help="any sim_node parameter (repeatable)")
+    parser.add_argument("--controller-param", dest="controller_overrides", type=_key_value,
+                        action=_Pairs, metavar="KEY:=VALUE",
+                        help="any controller_node parameter (repeatable)")

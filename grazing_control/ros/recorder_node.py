@@ -1,0 +1,559 @@
+"""recorder_node: records the oscillator's topics to a rosbag2-style MCAP bag.
+
+What it records by default (names relative to the node's namespace):
+
+``oscillator/state`` (sensor_msgs/msg/JointState)
+    position x, velocity v, effort cos(tau); stamp = simulation time.
+``oscillator/impact`` (geometry_msgs/msg/Vector3Stamped)
+    vector = (v-, v+, phase tau) at each impact; stamp = impact time.
+``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
+    state at each crossing of Pi1 and Pi2; stamp = crossing time.
+``controller/velocity_correction`` (geometry_msgs/msg/TwistStamped)
+    twist.linear.x = Delta v; stamp = stamp of the Pi2 sample it answers.
+``/clock`` (rosgraph_msgs/msg/Clock)
+    simulation time.
+``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
+    realtime, scheduled actuation: a sample whose correction missed its actuation
+    time (docs/nodes.md, "Scheduled actuation").
+
+Each message is stored as the serialized CDR bytes the middleware delivered
+(a ``raw=True`` subscription): nothing is deserialized on the way. The bag
+(:mod:`grazing_control.ros.recording`) is ``<output>/<output name>_0.mcap`` plus
+``<output>/metadata.yaml``; ``ros2 bag info``, ``ros2 bag play`` and Foxglove
+open it.
+
+Times of a recorded message:
+
+* ``log_time``: receive time. Without ``use_sim_time``, the middleware's
+  reception timestamp (wall clock, ns since the Unix epoch); with
+  ``use_sim_time:=true``, the node's ROS clock (``/clock``) when the message
+  is taken, which is 0 before the first ``/clock`` message.
+* ``publish_time``: the publisher's source timestamp (wall clock).
+
+QoS: like ``ros2 bag record``, the recorder subscribes to a topic once it has a
+publisher, with a QoS adapted to the publishers' offers (:func:`adapted_qos`, rosbag2's
+rule): reliable only if every publisher is reliable (else best effort, which matches
+them all), transient local only if every publisher is (then it also gets what they
+sent before it started), keep-all history. The offered profiles are stored in the
+channel metadata ``offered_qos_profiles``. A publisher that appears later with an
+incompatible QoS is reported (a warning names the topic and the policy).
+
+Readiness and completeness: once every topic has a subscription matched to at least
+one publisher, the recorder publishes ``True`` on ``recorder/ready`` (std_msgs/Bool,
+reliable, transient local); the simulator waits for it (``wait_for_recorder``) before
+the scene starts. At close, each topic with one publisher is checked with the
+publisher's sequence numbers (``publication_sequence_number``, 1 for its first message):
+messages published before the match or lost on the way are reported as ``missed`` in a
+warning, and with ``require_complete:=true`` the exit status is 1.
+
+Parameters (all read-only):
+
+``output`` (string, required)
+    Bag directory; created, and must not exist or be empty.
+``topics`` (string array)
+    Entries ``"name"`` for the topics above, or ``"name pkg/msg/Type"``.
+``compression`` (string, ``zstd``)
+    Chunk compression: ``zstd``, ``lz4`` or ``none``.
+``chunk_size`` (integer, bytes, 262144)
+    Uncompressed chunk size; a crash loses at most the chunk being filled.
+``require_complete`` (bool, false)
+    Exit with status 1 when messages were missed (see above).
+``batch_window`` (double, seconds, 0.001; range [0, 0.1])
+    After each wake-up the recorder waits this long and then takes every message
+    queued on every topic: one wake-up records a batch instead of one message, which
+    is most of the recorder's CPU and of its contention with the simulator on a small
+    machine (docs/benchmarks.md, "Batching and packed messages"). Messages wait in the
+    middleware's keep-all queues meanwhile; ``log_time`` is the reception time and is
+    not moved, except with ``use_sim_time`` (the clock when taken: up to the window
+    later; 0 takes each message as it arrives).
+
+On SIGINT or SIGTERM the node stops spinning, takes every message already
+received by the middleware, finishes the MCAP file, writes ``metadata.yaml``
+and logs the message count per topic; it exits with status 0. A bad parameter
+or argument is logged in one line and the process exits with status 2. A write
+that fails (disk full, file too large) stops the recording with one error line and
+exit status 2; the file keeps every chunk written before, and
+``grazing bag reindex`` makes it a complete bag again.
+
+Run: ``ros2 run grazing_control recorder_node --ros-args -p output:=bags/run1``
+(or ``python -m grazing_control.ros.recorder_node --ros-args ...``).
+"""
+
+import importlib
+import signal
+import sys
+import threading
+import time
+from collections import defaultdict
+
+import rclpy
+import rclpy.logging
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
+                       ReliabilityPolicy)
+from std_msgs.msg import Bool
+
+from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
+                     check_overrides, init_ros, usage)
+from grazing_control.oscillator.params import ParameterError
+from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
+                        qos_profile_dict)
+
+__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "READY_TOPIC", "RECORDER_QOS",
+           "RecorderNode", "adapted_qos", "main", "parse_topics"]
+
+
+
+#: Topics recorded by default (relative names) and their types.
+DEFAULT_TOPICS = {
+    "oscillator/state": "sensor_msgs/msg/JointState",
+    "oscillator/impact": "geometry_msgs/msg/Vector3Stamped",
+    "oscillator/pi1": "sensor_msgs/msg/JointState",
+    "oscillator/pi2": "sensor_msgs/msg/JointState",
+    "controller/velocity_correction": "geometry_msgs/msg/TwistStamped",
+    "/clock": "rosgraph_msgs/msg/Clock",
+    "oscillator/deadline_miss": "geometry_msgs/msg/Vector3Stamped",
+}
+
+#: The nodes' parameter record (grazing_control.ros.recording.record), recorded by default too;
+#: its publishers are transient local, so the adapted subscription is too and a record
+#: published before the match is received.
+PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
+#: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
+EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
+                "oscillator/latency": "std_msgs/msg/Float64"}
+
+#: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
+#: nothing (used for a topic's metadata when it never had a publisher).
+RECORDER_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL,
+    depth=0,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+# Most messages of one topic taken in one callback (keeps topics interleaved
+# and the reaction to a signal prompt).
+_BATCH = 256
+
+#: Default ``batch_window``: after a wake-up the recorder waits this long, then takes
+#: every message queued on every topic (docs/nodes.md, "Wire format and batching").
+DEFAULT_BATCH_WINDOW = 0.001
+MAX_BATCH_WINDOW = 0.1
+
+
+def parse_topics(entries):
+    """Topics to record from the ``topics`` parameter.
+
+    Parameters
+    ----------
+    entries : sequence of str
+        ``"name"`` (a topic of :data:`DEFAULT_TOPICS`, with or without its
+        leading ``/``) or ``"name pkg/msg/Type"``.
+
+    Returns
+    -------
+    dict
+        Topic name (as given) to message type.
+
+    Raises
+    ------
+    ParameterError
+        For an empty list, a malformed entry or an unknown topic without type.
+    """
+    known = {name.lstrip("/"): (name, kind)
+             for name, kind in (*DEFAULT_TOPICS.items(), *EXTRA_TOPICS.items())}
+    topics = {}
+    for entry in entries:
+        words = entry.split()
+        if len(words) == 2:
+            name, kind = words
+        elif len(words) == 1 and words[0].lstrip("/") in known:
+            name, kind = known[words[0].lstrip("/")]
+        else:
+            raise ParameterError(
+                f"topics entry {entry!r} is invalid: give 'name pkg/msg/Type' or one of "
+                f"{', '.join(DEFAULT_TOPICS)}")
+        topics[name] = kind
+    if not topics:
+        raise ParameterError("topics=[] is invalid: give at least one topic")
+    return topics
+
+
+def adapted_qos(offered):
+    """The subscription QoS for publishers offering ``offered`` (rosbag2's rule).
+
+    rosbag2_transport ``Rosbag2QoS::adapt_request_to_offers``: reliable only if every
+    publisher is reliable, else best effort (which matches both kinds); transient local
+    only if every publisher is, else volatile. History (keep all here) does not affect
+    compatibility; deadline and liveliness stay at their defaults, compatible with any
+    offer. Returns ``(qos, warnings)``: a warning for each mixed policy.
+    """
+    offered = list(offered)
+    qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=0,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    warnings = []
+    if not offered:
+        return qos, warnings
+    reliable = sum(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    latched = sum(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+    if reliable < len(offered):
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+        if reliable:
+            warnings.append("some, but not all, publishers are reliable: subscribed best "
+                            "effort (messages of the reliable ones may be dropped)")
+    if latched == len(offered):
+        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    elif latched:
+        warnings.append("some, but not all, publishers are transient local: subscribed "
+                        "volatile (their earlier messages are not retrieved)")
+    return qos, warnings
+
+
+def qos_to_dict(qos):
+    """rosbag2 mapping (:func:`~grazing_control.ros.recording.qos_profile_dict`) of a QoSProfile."""
+    return qos_profile_dict(
+        history=qos.history.name.lower(),
+        depth=qos.depth,
+        reliability=qos.reliability.name.lower(),
+        durability=qos.durability.name.lower(),
+        deadline_ns=qos.deadline.nanoseconds,
+        lifespan_ns=qos.lifespan.nanoseconds,
+        liveliness=qos.liveliness.name.lower(),
+        liveliness_lease_duration_ns=qos.liveliness_lease_duration.nanoseconds,
+        avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions,
+    )
+
+
+def _message_class(msg_type):
+    """Python class of ``pkg/msg/Type`` (or ``pkg/Type``)."""
+    parts = msg_type.split("/")
+    package, name = parts[0], parts[-1]
+    return getattr(importlib.import_module(f"{package}.msg"), name)
+
+
+class RecorderNode(Node):
+    """Subscribes to the topics and writes their serialized messages to a bag.
+
+    Parameters
+    ----------
+    arguments : NodeArguments, optional
+        The parsed command line (:func:`~grazing_control.ros.common.init_ros`): an
+        unknown ``-p`` name is refused before the bag is created.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (e.g. ``parameter_overrides``).
+
+    Raises
+    ------
+    ParameterError
+        If a parameter is invalid; nothing is created then.
+    """
+
+    def __init__(self, arguments=None, **kwargs):
+        super().__init__("recorder_node", **kwargs)
+        self._declare_parameters()
+        if arguments is not None:      # refuse unknown -p names before creating anything
+            check_overrides(self, arguments)
+        output, topics, compression, chunk_size = self._read_parameters()
+        self._sim_time = self.get_parameter("use_sim_time").value
+        self.require_complete = self.get_parameter("require_complete").value
+        self.bag = BagWriter(
+            output, compression=compression, chunk_size=chunk_size,
+            custom_data={"log_time": "ros_clock" if self._sim_time else "received_timestamp"})
+        self.bag.open()
+        self.received = 0
+        self.failed = None          # the OSError that stopped the recording
+        self._types = {}            # fully qualified topic -> message type
+        self._subs = {}             # fully qualified topic -> Subscription
+        self._offered = {}          # fully qualified topic -> offered QoS dicts
+        self._names = {}            # fully qualified topic -> name as given
+        self._first_seq = {}        # topic -> first publication sequence number
+        self._last_seq = {}         # topic -> last publication sequence number
+        self._gaps = defaultdict(int)   # topic -> messages skipped inside the sequence
+        self._publisher_counts = defaultdict(int)   # topic -> most publishers seen
+        for name, kind in topics.items():
+            topic = self.resolve_topic_name(name)            # fully qualified
+            self._types[topic] = kind
+            self._names[topic] = name
+        self._ready = False
+        self._pub_ready = self.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
+        self._pub_ready.publish(Bool(data=False))
+        self._watch()
+        # a steady clock: with use_sim_time a ROS-time timer would wait for /clock
+        self._watch_timer = self.create_timer(0.05, self._watch,
+                                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(
+            f"recording {', '.join(self._types)} to {self.bag.bag_dir} "
+            f"({compression}, log_time = {'ROS clock' if self._sim_time else 'receive time'})")
+
+    def _watch(self):
+        """Subscribe to each topic once it has publishers; say when all are matched."""
+        for topic, kind in self._types.items():
+            if topic not in self._subs:
+                publishers = self.get_publishers_info_by_topic(topic)
+                if publishers:
+                    self._subscribe(topic, kind, publishers)
+        if self._ready:
+            return
+        if len(self._subs) == len(self._types) and all(
+                sub.get_publisher_count() > 0 for sub in self._subs.values()):
+            self._ready = True
+            self._pub_ready.publish(Bool(data=True))
+            self.get_logger().info("every topic is matched: ready")
+
+    def _declare_parameters(self):
+        def read_only(description, kind):
+            return ParameterDescriptor(description=description, type=kind, read_only=True)
+
+        self.declare_parameter("output", "", read_only(
+            "bag directory (created; must not exist or be empty)",
+            ParameterType.PARAMETER_STRING))
+        self.declare_parameter("topics", [f"{n} {t}" for n, t in (*DEFAULT_TOPICS.items(),
+                                                                  *EXTRA_TOPICS.items())],
+                               read_only("'name' or 'name pkg/msg/Type' per topic",
+                                         ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter("compression", "zstd", read_only(
+            f"chunk compression: {', '.join(COMPRESSIONS)}", ParameterType.PARAMETER_STRING))
+        self.declare_parameter("chunk_size", DEFAULT_CHUNK_SIZE, read_only(
+            "uncompressed chunk size, bytes", ParameterType.PARAMETER_INTEGER))
+        self.declare_parameter("require_complete", False, read_only(
+            "exit with status 1 when messages were missed", ParameterType.PARAMETER_BOOL))
+        self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, read_only(
+            f"seconds the recorder lets messages gather after each wake-up before taking "
+            f"all of them, in [0, {MAX_BATCH_WINDOW:g}] (0: take each one as it arrives)",
+            ParameterType.PARAMETER_DOUBLE))
+
+    def _read_parameters(self):
+        output = self.get_parameter("output").value
+        if not output:
+            raise ParameterError("output='' is invalid: give the bag directory, "
+                                 "e.g. --ros-args -p output:=bags/run1")
+        compression = self.get_parameter("compression").value
+        if compression not in COMPRESSIONS:
+            raise ParameterError(f"compression={compression!r} is invalid: valid values "
+                                 f"are {', '.join(COMPRESSIONS)}")
+        chunk_size = self.get_parameter("chunk_size").value
+        if chunk_size <= 0:
+            raise ParameterError(f"chunk_size={chunk_size} is invalid: valid range is > 0")
+        window = self.get_parameter("batch_window").value
+        if not 0.0 <= window <= MAX_BATCH_WINDOW:
+            raise ParameterError(f"batch_window={window!r} is invalid: valid range is "
+                                 f"[0, {MAX_BATCH_WINDOW:g}] seconds")
+        try:
+            entries = self.get_parameter("topics").value
+        except ParameterUninitializedException:      # -p topics:=[] has no type
+            entries = []
+        topics = parse_topics(entries)
+        for kind in topics.values():
+            try:
+                _message_class(kind)
+                message_definition(kind)
+            except (ImportError, AttributeError, LookupError, ValueError):
+                raise ParameterError(f"topics: message type {kind!r} is not installed "
+                                     "(no Python module or no .msg file)") from None
+        return output, topics, compression, chunk_size
+
+    def _subscribe(self, topic, kind, publishers):
+        """Subscribe to ``topic`` with the QoS adapted to its ``publishers``."""
+        qos, warnings = adapted_qos([p.qos_profile for p in publishers])
+        for text in warnings:
+            self.get_logger().warning(f"{topic}: {text}")
+        self._offered[topic] = [qos_to_dict(p.qos_profile) for p in publishers]
+        events = SubscriptionEventCallbacks(
+            incompatible_qos=lambda event: self._on_incompatible_qos(topic, event))
+        self._subs[topic] = self.create_subscription(
+            _message_class(kind), self._names[topic],
+            lambda data, info: self._on_message(topic, data, info),
+            qos, raw=True, event_callbacks=events)
+
+    def _on_message(self, topic, data, info):
+        """Record a message, then the ones already queued behind it."""
+        self._record(topic, data, info)
+        self._take_queued(topic, _BATCH)
+
+    def _take_queued(self, topic, limit):
+        """Take and record up to `limit` messages queued on `topic`; return how many.
+
+        The executor hands over one message per wait, and building the wait
+        set costs several times more than recording; taking the queued
+        messages here, with the call the executor itself makes, lets the
+        recorder keep up with a lockstep simulation.
+        """
+        sub = self._subs[topic]
+        for n in range(limit):
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, True)
+            if taken is None:
+                return n
+            self._record(topic, *taken)
+        return limit
+
+    def _record(self, topic, data, info):
+        """Write one serialized message as received (nothing after a failed write)."""
+        if self.failed is not None:
+            return
+        if self._sim_time:
+            log_time = self.get_clock().now().nanoseconds
+        else:
+            log_time = info.get("received_timestamp") or time.time_ns()
+        sequence = info.get("publication_sequence_number") or 0
+        sequence = sequence if sequence < 2**63 else 0
+        try:
+            if not self.bag.has_topic(topic):
+                self.bag.add_topic(topic, self._types[topic],
+                                   self._offered.get(topic) or [qos_to_dict(RECORDER_QOS)])
+            self.bag.write(topic, data, log_time, info.get("source_timestamp") or log_time,
+                           sequence)
+        except OSError as exc:
+            self.failed = exc
+            self.get_logger().error(
+                f"writing {self.bag.path} failed: {exc.strerror or exc}: recording stopped; "
+                "the file keeps every chunk written before (grazing bag reindex "
+                f"{self.bag.bag_dir} makes it a complete bag)")
+            return
+        self.received += 1
+        self._track_sequence(topic, sequence)
+
+    def _track_sequence(self, topic, sequence):
+        if not sequence:
+            return
+        publishers = self._subs[topic].get_publisher_count()
+        self._publisher_counts[topic] = max(self._publisher_counts[topic], publishers)
+        if topic not in self._first_seq:
+            self._first_seq[topic] = sequence
+        else:
+            last = self._last_seq[topic]
+            if sequence > last + 1:
+                self._gaps[topic] += sequence - last - 1
+        self._last_seq[topic] = sequence
+
+    def missed(self):
+        """{topic: messages missed} from the sequence numbers of single-publisher topics.
+
+        Messages published before the recorder matched the publisher (the first one
+        recorded has sequence number n > 1: n - 1 missed) or lost in between (gaps).
+        Topics that had more than one publisher are not checked (their sequences
+        interleave).
+        """
+        out = {}
+        for topic, first in self._first_seq.items():
+            if self._publisher_counts[topic] != 1:
+                continue
+            n = first - 1 + self._gaps[topic]
+            if n:
+                out[topic] = n
+        return out
+
+    def _on_incompatible_qos(self, topic, event):
+        self.get_logger().warning(
+            f"{topic}: a publisher's QoS is incompatible with the recorder's subscription "
+            f"(policy {event.last_policy_kind}; the recorder adapted to the publishers it "
+            "found first): its messages are not recorded")
+
+    def drain(self):
+        """Record every message the middleware has already received.
+
+        Returns
+        -------
+        int
+            Number of messages taken.
+        """
+        total = 0
+        while self.failed is None:
+            taken = sum(self._take_queued(topic, _BATCH) for topic in self._subs)
+            if taken == 0:
+                return total
+            total += taken
+        return total
+
+    def close(self):
+        """Finish the bag (summary, metadata.yaml) and log the counts per topic.
+
+        Returns the exit status: 0, 1 if messages were missed and ``require_complete``,
+        2 if a write failed (then the file is only closed, not finished).
+        """
+        log = self.get_logger()
+        if self.failed is not None:
+            self.bag.abandon()
+            return 2
+        for topic, kind in self._types.items():
+            if not self.bag.has_topic(topic):          # listed, with no message
+                self.bag.add_topic(topic, kind, self._offered.get(topic)
+                                   or [qos_to_dict(RECORDER_QOS)])
+        try:
+            info = self.bag.close()
+        except OSError as exc:
+            self.bag.abandon()
+            log.error(f"finishing {self.bag.path} failed: {exc.strerror or exc} (grazing bag "
+                      f"reindex {self.bag.bag_dir} recovers the chunks written)")
+            return 2
+        if info:
+            counts = ", ".join(f"{name} {n}" for name, n in self.bag.message_counts.items())
+            log.info(f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
+        missed = self.missed()
+        if missed:
+            text = ", ".join(f"{t} {n}" for t, n in missed.items())
+            log.warning(f"missed: {text} (published before the recorder matched the "
+                        "publisher, or lost)")
+            return 1 if self.require_complete else 0
+        return 0
+
+
+def _stop_on_signals(stop):
+    """SIGINT and SIGTERM set `stop` (the spin loop then ends and the bag closes)."""
+    def handler(signum, frame):
+        stop.set()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, handler)
+
+
+def main(args=None):
+    """Run the recorder until SIGINT/SIGTERM; return the exit status."""
+    args = list(sys.argv if args is None else args)
+    # Our own handlers, from the start: rclpy's would shut the context down before the
+    # drain, and a signal while starting must end the process quietly.
+    stop = threading.Event()
+    _stop_on_signals(stop)
+    status = 0
+    node = None
+    try:
+        arguments = init_ros(args, "recorder_node")
+        if arguments is None:
+            sys.stdout.write(usage(RecorderNode, "recorder_node"))
+            return 0
+        if stop.is_set():
+            return 0
+        node = RecorderNode(arguments)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        window = node.get_parameter("batch_window").value
+        while not stop.is_set() and rclpy.ok() and node.failed is None:
+            executor.spin_once(timeout_sec=0.1)
+            if window > 0.0:    # let a batch gather, then take all of it in one go
+                stop.wait(window)
+                node.drain()
+        node.drain()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (StartupError, ParameterError, ParameterException, OSError) as exc:
+        # bad parameter or argument, bag not creatable
+        rclpy.logging.get_logger("recorder_node").error(_startup_message(exc))
+        status = 2
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not cut the close
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if node is not None:
+            status = node.close() or status
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""``grazing robustness delay|faults``: the robustness studies and their charts.
+
+Registered from :func:`grazing_control.cli.build_parser`. Both write their charts (PNG)
+and numbers (JSON) to ``--out`` (default out/robustness) and print a summary (or, with
+--json, one JSON object). docs/theory_delay.md section 6 and docs/robustness.md give the
+exact commands that made the committed charts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+
+import numpy as np
+
+from grazing_control.support.arguments import integer_at_least
+
+__all__ = ["add_robustness_parser"]
+
+
+def _pair(text):
+    try:
+        a, b = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected DELAY:C2, e.g. 2.0:0.5") from None
+    if not (math.isfinite(a) and math.isfinite(b) and a >= 0.0):
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected DELAY:C2 with a finite delay >= 0")
+    return a, b
+
+
+def _out_dir(path):
+    if not path:
+        raise ValueError("out='' is invalid: give a folder name")
+    os.makedirs(path, exist_ok=True)
+    return path
+
+
+def cmd_delay(args):
+    from grazing_control.dynamics.design import admissible_c2, max_design_delay
+    from grazing_control.oscillator.params import OscillatorParams
+    from grazing_control.dynamics.perturbation import perturbation_multipliers
+    from grazing_control.oscillator.control import Gains
+    from .charts import plot_delay_curves, plot_stability_maps
+    from .delay import design_gains, multiplier_curve, stability_interval, stability_map
+
+    base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    top = math.nextafter(max_design_delay(base), 0.0)
+    delays = np.linspace(0.0, top, args.points)
+    designs = args.design or [(0.0, -1.0), (2.0, 0.5)]
+    curves, summary = [], []
+    for da, c2 in designs:
+        g = design_gains(base, c2, da)
+        c = {"design_delay": da, "c2": c2, "c1": g.c1, "delays": delays.tolist(),
+             "by_delta_d": {}, "perturbation": {}, "intervals": {}}
+        for dd in args.delta_d:
+            q = base.with_(delta_d=dd)
+            vals = multiplier_curve(q, g, delays)
+            c["by_delta_d"][dd] = vals.tolist()
+            c["perturbation"][dd] = [float(np.max(np.abs(perturbation_multipliers(q, Gains(g.c1, g.c2, d)))))
+                                     for d in delays]
+            iv = stability_interval(q, g, da, hi=top, n=args.points)
+            c["intervals"][dd] = iv
+            summary.append({"design_delay": da, "c2": c2, "c1": g.c1, "delta_d": dd,
+                            "stable_delays": None if iv is None else [iv[0], iv[1]],
+                            "ends": None if iv is None else list(iv[2])})
+        curves.append(c)
+    plot_delay_curves(curves, os.path.join(out, "delay_curves.png"))
+    maps = {}
+    c2s = np.linspace(args.c2_range[0], args.c2_range[1], args.map_points)
+    mdelays = np.linspace(0.0, top, args.map_points)
+    for design in ("delayed", "undelayed"):
+        for dd in args.delta_d:
+            maps[(design, dd)] = stability_map(base.with_(delta_d=dd), design, c2s, mdelays,
+                                               workers=args.workers)
+    bounds = {float(d): admissible_c2(base, args.c2_range[0], args.c2_range[1], 201, delay=float(d))
+              for d in mdelays[::2]}
+    plot_stability_maps(maps, os.path.join(out, "delay_stability_map.png"), bounds)
+    cost = time.perf_counter() - t0
+    record = {"model": {"zeta": base.zeta, "r": base.r, "omega": base.omega,
+                        "pi2_offset": base.pi2_offset, "max_design_delay": max_design_delay(base)},
+              "stability_intervals": summary, "seconds": cost,
+              "maps": {f"{d}:{dd}": {"c2": m.c2s.tolist(), "delays": m.delays.tolist(),
+                                     "max_abs_multiplier": [[None if not math.isfinite(v) else v for v in row]
+                                                            for row in m.values.tolist()]}
+                       for (d, dd), m in maps.items()},
+              "files": [os.path.join(out, "delay_curves.png"), os.path.join(out, "delay_stability_map.png")]}
+    with open(os.path.join(out, "delay.json"), "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return {k: v for k, v in record.items() if k != "maps"}
+    lines = [f"actuation-delay robustness (design range 0 <= delta < T - s = {max_design_delay(base):.6g})",
+             f"{'delta_a':>8} {'c2':>6} {'Delta d':>9}  stable actual delays"]
+    for s in summary:
+        iv = "none" if s["stable_delays"] is None else \
+            f"[{s['stable_delays'][0]:.6g}, {s['stable_delays'][1]:.6g}] ({s['ends'][0]}, {s['ends'][1]})"
+        lines.append(f"{s['design_delay']:8.4g} {s['c2']:6.3g} {s['delta_d']:9.1e}  {iv}")
+    lines.append(f"charts and numbers in {out} ({cost:.1f} s)")
+    return "\n".join(lines)
+
+
+def cmd_faults(args):
+    from concurrent.futures import ProcessPoolExecutor
+
+    from grazing_control.oscillator.params import OscillatorParams
+    from .charts import plot_fault_sweep
+    from .delay import design_gains
+    from .faults import LEVELS, fault_sweep
+    from grazing_control.oscillator.control import Gains
+
+    base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    configs = args.design or [(0.0, -1.0), (2.0, 0.5)]
+    results = []
+    ex = ProcessPoolExecutor(max_workers=args.workers) if args.workers > 1 else None
+    try:
+        for da, c2 in configs:
+            g = design_gains(base, c2, da)
+            g = Gains(g.c1, g.c2, da)
+            for dd in args.delta_d:
+                for kind in args.kinds:
+                    results.append(fault_sweep(base, g, dd, kind, LEVELS[kind], args.seeds,
+                                               horizon=args.horizon, tail=args.tail,
+                                               threshold=args.threshold, hold=args.hold, executor=ex))
+    finally:
+        if ex is not None:
+            ex.shutdown()
+    cost = time.perf_counter() - t0
+    plot_fault_sweep(results, os.path.join(out, "faults.png"))
+    record = {"results": results, "seconds": cost, "files": [os.path.join(out, "faults.png")]}
+    with open(os.path.join(out, "faults.json"), "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return record
+    lines = [f"capture of the controlled 1/1 orbit within {args.horizon} samples "
+             f"(|z - z*| <= {args.threshold:g} for {args.hold} samples), {args.seeds} seeds"]
+    for r in results:
+        cells = " ".join(f"{row['level']:g}:{row['capture_probability']:.2f}" for row in r["rows"])
+        lines.append(f"  Δd={r['delta_d']:.0e} c2={r['c2']:g} δ={r['actuation_delay']:g} {r['kind']:6s} {cells}")
+    lines.append(f"charts and numbers in {out} ({cost:.1f} s)")
+    return "\n".join(lines)
+
+
+_count = integer_at_least(1)
+
+
+def add_robustness_parser(sub, common, finite):
+    """Register ``grazing robustness delay|faults`` on the subparsers ``sub``."""
+    s = sub.add_parser("robustness", help="robustness to the actuation delay and to loss/noise/jitter")
+    rsub = s.add_subparsers(dest="study", required=True)
+
+    d = rsub.add_parser("delay", help="max multiplier vs the actual delay; stability maps over (c2, delay)")
+    common(d)
+    d.add_argument("--design", type=_pair, action="append",
+                   help="DELAY:C2 of a design (repeatable; default 0:-1 and 2:0.5)")
+    d.add_argument("--delta-d", type=finite, nargs="+", default=[-1e-4, -1e-5, -1e-6],
+                   help="wall offsets Delta d < 0 (default -1e-4 -1e-5 -1e-6)")
+    d.add_argument("--points", type=_count, default=141, help="actual delays on the curves (141)")
+    d.add_argument("--map-points", type=_count, default=61, help="grid points per axis of the maps (61)")
+    d.add_argument("--c2-range", type=finite, nargs=2, default=[-3.0, 2.0], help="c2 axis of the maps")
+    d.add_argument("--workers", type=_count, default=2, help="processes (default 2)")
+    d.add_argument("--out", default="out/robustness", help="folder for charts and JSON")
+    d.set_defaults(func=cmd_delay)
+
+    f = rsub.add_parser("faults", help="capture probability and spread vs loss, noise, jitter (core)")
+    common(f)
+    f.add_argument("--design", type=_pair, action="append",
+                   help="DELAY:C2 of a design (repeatable; default 0:-1 and 2:0.5)")
+    f.add_argument("--delta-d", type=finite, nargs="+", default=[-5e-6, -9e-6],
+                   help="wall offsets (default the study's scenes -5e-6 -9e-6)")
+    f.add_argument("--kinds", nargs="+", choices=("loss", "noise", "jitter"),
+                   default=["loss", "noise", "jitter"])
+    f.add_argument("--seeds", type=_count, default=48, help="runs per level (default 48)")
+    f.add_argument("--horizon", type=_count, default=400, help="N: capture within N samples (400)")
+    f.add_argument("--tail", type=_count, default=200, help="samples of the stationary spread (200)")
+    f.add_argument("--threshold", type=finite, default=1e-4, help="capture distance (1e-4)")
+    f.add_argument("--hold", type=_count, default=20, help="M consecutive samples (20)")
+    f.add_argument("--workers", type=_count, default=2, help="processes (default 2)")
+    f.add_argument("--out", default="out/robustness", help="folder for charts and JSON")
+    f.set_defaults(func=cmd_faults)

@@ -1,0 +1,170 @@
+"""``grazing sweep``: a parameter grid simulated on all local cores or on a Dask cluster.
+
+    grazing sweep --grid delta_d=-2e-5:0:200 --periods 2000 --transient 1000
+    grazing sweep --grid delta_d=-1e-3:-1e-7:100:log --grid c2=-1.5:-0.5:3 --control-after 0
+    grazing sweep --grid delta_d=-2e-5:0:200 --scheduler tcp://127.0.0.1:8786
+
+Writes the npz of :meth:`SweepResult.to_npz` and a PNG of the diagram next to it; a
+progress bar on a terminal, nothing but one JSON object with --json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+from grazing_control.oscillator.params import ParameterError
+
+__all__ = ["add_sweep_command", "parse_grid", "cmd_sweep"]
+
+
+def parse_grid(text):
+    """``NAME=START:STOP:N[:log]`` (N values, linear or geometric) or ``NAME=V1,V2,...``."""
+    name, sep, spec = text.partition("=")
+    name = name.strip().replace("-", "_")
+    if not sep or not name or not spec:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: expected NAME=START:STOP:N[:log] or NAME=V1,V2,...")
+    try:
+        if ":" in spec:
+            parts = spec.split(":")
+            if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] != "log"):
+                raise ValueError
+            lo, hi, n = float(parts[0]), float(parts[1]), int(parts[2])
+            if n < 1 or not (math.isfinite(lo) and math.isfinite(hi)):
+                raise ValueError
+            if len(parts) == 4:
+                if lo == 0 or hi == 0 or (lo < 0) != (hi < 0):
+                    raise argparse.ArgumentTypeError(
+                        f"{text!r} is invalid: a :log range needs START and STOP of one sign, "
+                        "nonzero")
+                values = np.geomspace(lo, hi, n)
+            else:
+                values = np.linspace(lo, hi, n)
+        else:
+            values = np.array([float(v) for v in spec.split(",")])
+            if not np.all(np.isfinite(values)):
+                raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: expected NAME=START:STOP:N[:log] (N >= 1) or NAME=V1,V2,... "
+            "with finite numbers") from None
+    return name, values
+
+
+def _start(text):
+    try:
+        dx, dv = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is invalid: expected DX,DV (deviation from X** on Pi2)") from None
+    if not (math.isfinite(dx) and math.isfinite(dv)):
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected finite DX,DV")
+    return dx, dv
+
+
+def add_sweep_command(sub, common, finite, count):
+    """Register ``grazing sweep`` on the ``grazing`` subparsers (see grazing_control.cli)."""
+    s = sub.add_parser("sweep", help="bifurcation diagram: simulate a parameter grid on Pi2")
+    common(s)
+    s.add_argument("--grid", type=parse_grid, action="append", required=True,
+                   metavar="NAME=START:STOP:N[:log]",
+                   help="a grid axis (repeatable; first = x axis of the PNG): delta_d, zeta, r, "
+                        "omega, tau0, pi2_offset, c1 or c2; or NAME=V1,V2,...")
+    s.add_argument("--periods", type=count, default=2000, help="periods per point (default 2000)")
+    s.add_argument("--transient", type=count, help="periods dropped first (default periods / 2)")
+    s.add_argument("--start", type=_start, action="append", metavar="DX,DV",
+                   help="start on Pi2 as (x - x**, v - v**) (repeatable; default 0,0); "
+                        "write --start=-1e-4,0 for a negative DX")
+    s.add_argument("--c1", type=finite, help="gain c1 (default with --c2: Eq. 38)")
+    s.add_argument("--c2", type=finite, help="gain c2 (turns the controller on)")
+    s.add_argument("--control-after", type=count,
+                   help="controller on from this sample (default 0 when there are gains)")
+    s.add_argument("--workers", type=count, help="local processes (default: all cores)")
+    s.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="run on this Dask scheduler instead of local processes")
+    s.add_argument("--engine", choices=("auto", "kernel", "python"), default="auto",
+                   help="compiled kernel (auto: if numba imports) or the pure-Python core")
+    s.add_argument("--period-tol", type=finite, default=1e-10,
+                   help="tolerance of the period detection on Pi2 (default 1e-10)")
+    s.add_argument("--max-period", type=count, help="longest period detected (default 64)")
+    s.add_argument("--out", default="out/sweep/sweep.npz",
+                   help="npz file (default out/sweep/sweep.npz); the PNG goes next to it")
+    s.add_argument("--component", choices=("x", "v"), default="x",
+                   help="Pi2 coordinate drawn in the PNG (default x)")
+    s.add_argument("--no-png", action="store_true", help="write only the npz")
+    s.set_defaults(func=cmd_sweep)
+    return s
+
+
+def cmd_sweep(args):
+    """Run the sweep and write its files; returns the summary (dict with --json)."""
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.oscillator.params import OscillatorParams
+    from .plot import diagram
+    from .run import sweep
+
+    grid = {}
+    for name, values in args.grid:
+        if name in grid:
+            raise ParameterError(f"--grid {name} is given twice: give each name once")
+        grid[name] = values
+    p = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    gains = None
+    if args.c2 is not None:
+        gains = Gains(degenerate_c1(p, args.c2) if args.c1 is None else args.c1, args.c2)
+    elif args.c1 is not None and "c2" not in grid:
+        raise ParameterError("c1 given without c2: give both, or c2 alone (c1 from Eq. 38)")
+    if args.control_after is not None and gains is None and not ({"c1", "c2"} & set(grid)):
+        raise ParameterError("--control-after needs the gains: give --c2 (or a c2 grid)")
+    if gains is None and args.c1 is not None:  # c2 gridded, c1 fixed
+        grid.setdefault("c1", np.array([args.c1]))
+    transient = args.periods // 2 if args.transient is None else args.transient
+    out = os.path.abspath(args.out)
+    if not out.endswith(".npz"):
+        out += ".npz"
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    t0 = time.perf_counter()
+    res = sweep(p, grid, periods=args.periods, transient=transient,
+                deviation=np.array(args.start) if args.start else (0.0, 0.0), gains=gains,
+                control_after=args.control_after, workers=args.workers,
+                scheduler=args.scheduler, engine=args.engine, period_tol=args.period_tol,
+                max_period=args.max_period, progress=not args.json and sys.stderr.isatty())
+    seconds = time.perf_counter() - t0
+    res.to_npz(out)
+    png = None
+    if not args.no_png:
+        png = diagram(res, out[:-4] + ".png", component=args.component)
+    periods, n_of = np.unique(res.period, return_counts=True)
+    summary = {
+        "npz": out, "png": png, "points": res.n_points, "grid": list(res.names),
+        "shape": list(res.shape), "periods": res.periods, "transient": res.transient,
+        "engine": res.engine, "seconds": seconds,
+        "periods_per_second": res.n_points * res.periods / seconds if seconds > 0 else None,
+        "detected_periods": {str(int(k)): int(v) for k, v in zip(periods, n_of)},
+        "failed": int(np.sum(res.period == -1)),
+    }
+    if args.json:
+        return summary
+    hist = ", ".join(f"{'failed' if k == '-1' else 'none' if k == '0' else 'period ' + k}: {v}"
+                     for k, v in summary["detected_periods"].items())
+    where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
+    lines = [
+        f"sweep of {res.n_points} points ({' x '.join(res.names)}"
+        f"{' x starts' if res.shape[-1] > 1 else ''}), {res.periods} periods each, "
+        f"last {res.periods - res.transient} kept",
+        f"  engine            : {res.engine} on {where}",
+        f"  time              : {seconds:.3g} s ({summary['periods_per_second']:.3g} periods/s)",
+        f"  detected on Pi2   : {hist}",
+        f"  written           : {out}" + (f"\n                      {png}" if png else ""),
+    ]
+    if summary["failed"]:
+        first = next(e for e in res.errors if e)
+        lines.append(f"  failed points     : {summary['failed']} (first: {first})")
+    return "\n".join(lines)

@@ -1,0 +1,6 @@
+"""Helpers every layer may use: argument types and the shared look of the plots.
+
+Not a layer of the model: :mod:`.arguments` (argparse types with one-line errors naming
+the range) and :mod:`.plotting` (the Agg backend, one look, PNG + SVG output). Imports
+nothing else of grazing_control (docs/architecture.md).
+"""

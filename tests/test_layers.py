@@ -1,0 +1,74 @@
+"""The package's layers as a contract (.importlinter, docs/architecture.md).
+
+grazing_control is seven layers, one folder each, arrows pointing down: cli > studies >
+recordings > ros > plant > dynamics > oscillator (and support, which every layer may
+use and which imports nothing of the package). rclpy and the ROS message packages are
+imported only from the ros layer up. `lint-imports` checks both on the real import
+graph; these tests run it on the package as it is, and on copies of it with one upward
+import added, which it must refuse.
+"""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LINT = Path(sys.executable).with_name("lint-imports")
+LAYERS = ["cli", "studies", "recordings", "ros", "plant", "dynamics", "oscillator", "support"]
+
+
+def lint(root: Path) -> subprocess.CompletedProcess:
+    """lint-imports with the repository's contracts, on the package found first under root."""
+    return subprocess.run([str(LINT), "--config", str(ROOT / ".importlinter"), "--no-cache"],
+                          cwd=root, env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"},
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture
+def copy(tmp_path):
+    """A copy of grazing_control and sim_node to add an import to."""
+    for name in ("grazing_control", "sim_node"):
+        shutil.copytree(ROOT / name, tmp_path / name,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    return tmp_path
+
+
+def test_every_layer_is_a_folder_with_a_docstring_naming_what_it_may_import():
+    for layer in LAYERS:
+        init = ROOT / "grazing_control" / layer / "__init__.py"
+        assert init.is_file(), layer
+        doc = init.read_text().split('"""')[1]
+        assert "import" in doc.lower(), f"{layer}: the package docstring says what it may import"
+
+
+def test_no_module_left_beside_the_layers():
+    loose = sorted(p.name for p in (ROOT / "grazing_control").glob("*.py")
+                   if p.name != "__init__.py")
+    assert loose == []
+
+
+def test_the_package_keeps_its_contracts():
+    result = lint(ROOT)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "4 kept, 0 broken" in result.stdout
+
+
+@pytest.mark.parametrize("module, line, contract", [
+    ("oscillator/flow.py", "from grazing_control.dynamics import maps", "Layers point down"),
+    ("dynamics/design.py", "from grazing_control.ros import cdr", "Layers point down"),
+    ("ros/cdr.py", "from grazing_control.recordings import reader", "Layers point down"),
+    ("dynamics/orbits.py", "import rclpy", "No rclpy"),
+    ("plant/faults.py", "from sensor_msgs.msg import JointState", "No rclpy"),
+    ("support/arguments.py", "from grazing_control.oscillator import params", "support"),
+    ("recordings/scenes.py", "import sim_node.sim_node", "never imports the sim_node"),
+])
+def test_an_upward_import_breaks_a_contract(copy, module, line, contract):
+    path = copy / "grazing_control" / module
+    path.write_text(path.read_text() + f"\n{line}  # added by the test\n")
+    result = lint(copy)
+    assert result.returncode != 0
+    broken = result.stdout.split("Broken contracts")[-1]
+    assert contract in broken, result.stdout
