@@ -377,3 +377,60 @@ def test_return_type():
     b = continue_11(P, -1e-3, -1e-6, points=2)
     assert isinstance(b, Branch)
     assert len(b.points) == 2
+
+
+# ------------------------------------------- continue_orbit: any model, by shooting
+from affine_model import Affine  # noqa: E402
+from grazing_control.dynamics.continuation import continue_orbit  # noqa: E402
+from grazing_control.dynamics.model import OneDOF  # noqa: E402
+
+
+def test_generic_continuation_locates_period_doubling_and_neimark_sacker_exactly():
+    """The affine model's multiplier mu crosses -1 at mu = -1, its pair's modulus rho
+    crosses 1 at rho = 1: both located to the tolerance of Brent's method."""
+    m = Affine(mu=-0.5)
+    br = continue_orbit(m, "mu", np.linspace(-0.5, -1.5, 11), m.fixed_point())
+    assert [b.type for b in br.bifurcations] == ["period-doubling"]
+    assert abs(br.bifurcations[0].value + 1.0) < 1e-12
+    assert br.stopped == "end" and len(br.points) == 11
+    m = Affine(mu=0.2, rho=0.8)
+    br = continue_orbit(m, "rho", np.linspace(0.8, 1.3, 6), m.fixed_point())
+    assert [b.type for b in br.bifurcations] == ["neimark-sacker"]
+    assert abs(br.bifurcations[0].value - 1.0) < 1e-12
+
+
+def test_generic_continuation_of_the_1_1_branch_agrees_with_the_explicit_route():
+    """Uncontrolled, in Delta d: the period doubling where continue_11 puts it (to the
+    shooting tolerance), and the multipliers of every point as orbit_11's."""
+    exact = continue_11(P, -1e-4, -1e-7)
+    pd = [b.delta_d for b in exact.bifurcations if b.type == "period-doubling"]
+    values = -np.logspace(-4, -6, 30)
+    br = continue_orbit(OneDOF(P.with_(delta_d=-1e-4)), "delta_d", values,
+                        orbit_11(P.with_(delta_d=-1e-4)).pi2_deviation)
+    found = [b.value for b in br.bifurcations if b.type == "period-doubling"]
+    assert len(found) == 1 and len(pd) == 1
+    assert abs(found[0] - pd[0]) < 1e-10 * abs(pd[0])
+    for pt in br.points[::7]:
+        lam = orbit_11(P.with_(delta_d=pt.value)).multipliers
+        assert np.allclose(pt.multipliers, lam, rtol=1e-8, atol=1e-12)
+
+
+def test_generic_continuation_of_the_controlled_branch_ends_at_grazing():
+    """With the degenerate gains the 1/1 orbit stays stable down to grazing; continued
+    past Delta d = 0 the orbit stops impacting there, and the end is a grazing."""
+    p = P.with_(delta_d=-1e-3)
+    g = Gains(degenerate_c1(p, -1.0), -1.0)
+    br = continue_orbit(OneDOF(p, g), "delta_d", np.linspace(-1e-3, 1e-4, 23),
+                        orbit_11(p, g).pi2_deviation)
+    assert all(pt.stable for pt in br.points)
+    kinds = [b.type for b in br.bifurcations]
+    assert kinds == ["grazing"]
+    assert abs(br.bifurcations[0].value) < 1e-12
+    assert br.points[-1].value < 0.0 and "0 impacts" in br.stopped
+
+
+def test_generic_continuation_refuses_bad_values():
+    with pytest.raises(ValueError, match="at least two finite"):
+        continue_orbit(Affine(), "mu", [0.5], np.zeros(4))
+    with pytest.raises(ValueError, match="'nope' is invalid"):
+        continue_orbit(Affine(), "nope", [0.5, 0.6], np.zeros(4))

@@ -33,7 +33,8 @@ from .orbits import (OrbitNotFound, _orbit_from_phase, branch_point, find_branch
                      multipliers)
 from grazing_control.oscillator.params import OscillatorParams
 
-__all__ = ["BranchPoint", "Bifurcation", "Branch", "continue_11", "branch_monodromy"]
+__all__ = ["BranchPoint", "Bifurcation", "Branch", "continue_11", "branch_monodromy",
+           "OrbitPoint", "OrbitBifurcation", "OrbitBranch", "continue_orbit"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -165,3 +166,159 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
             lam = limit_multipliers(p, gains)
         bifs.append(Bifurcation("grazing", 0.0, 0.0, lam))
     return Branch(pts, bifs)
+
+
+# ----------------------------------------------------------- any model, by shooting
+#: The end of a branch continued by shooting is a grazing when its smallest impact
+#: velocity has fallen below this fraction of the branch's largest.
+GRAZED = 1e-3
+
+
+@dataclass(frozen=True)
+class OrbitPoint:
+    """One point of a branch continued by shooting: the parameter value, the orbit's
+    section state, its multipliers, and the smallest impact velocity of its impacts."""
+
+    value: float
+    state: np.ndarray
+    multipliers: np.ndarray
+    impacts: int
+    v_min: float
+
+    @property
+    def stable(self) -> bool:
+        return bool(np.max(np.abs(self.multipliers)) < 1.0)
+
+
+@dataclass(frozen=True)
+class OrbitBifurcation:
+    """A bifurcation located on a branch continued by shooting: 'period-doubling', 'fold',
+    'neimark-sacker' or 'grazing', at ``value`` of the continued parameter."""
+
+    type: str
+    value: float
+    multipliers: np.ndarray
+
+
+@dataclass(frozen=True)
+class OrbitBranch:
+    """Points in the order continued, the bifurcations located between them, and why the
+    continuation stopped ('end' of the values, or the reason shooting failed)."""
+
+    parameter: str
+    periods: int
+    points: list
+    bifurcations: list
+    stopped: str
+
+
+def continue_orbit(model, name: str, values, guess, periods: int = 1, *,
+                   tol: float = 1e-14) -> OrbitBranch:
+    """Continue a p/n orbit of any model in one parameter, by Newton shooting.
+
+    Written once over the model protocol (:class:`grazing_control.dynamics.model.PeriodMap`):
+    at each value of ``name`` (in the order given) the orbit is found by
+    :func:`~grazing_control.dynamics.shooting.find_periodic` from a secant predictor
+    through the last two points (the first from ``guess``). Between neighbours the test
+    functions of :func:`~grazing_control.dynamics.shooting.bifurcation_tests` are
+    compared; a sign change is refined by Brent's method in the parameter, each
+    evaluation a shooting from the nearer neighbour. The continuation stops where
+    shooting fails or the orbit's number of impacts changes: past its last point the
+    orbit has grazed (an impact velocity went to 0) or changed type; the end is found by
+    bisection between the last orbit and the failure (60 halvings at most, every
+    orbit found on the way is kept). A 'grazing' event is then located where v-_min,
+    extrapolated as v-_min^2 linear in the parameter through the last point and the
+    last with twice its v-_min (the
+    square-root law of grazing, docs/theory.md section 5), vanishes, when it falls
+    towards 0 and the end's v-_min is below :data:`GRAZED` times the branch's largest (a
+    fold, or a Newton failure in the singular regime next to grazing, ends the branch
+    without a grazing event: the 1-DOF 1/1 branch without control is found only down to
+    |Delta d| ~ 1e-6 by shooting, its multiplier growing like |Delta d|^(-1/2); the
+    explicit route reaches 1e-12).
+
+    For the 1-DOF 1/1 branch the explicit impact-phase route (:func:`continue_11`) is
+    exact to rounding; this one agrees with it to the shooting tolerance (tests).
+    """
+    from .shooting import (TEST_FUNCTIONS, ShootingFailed, bifurcation_tests, find_periodic,
+                           floquet_multipliers)
+
+    values = [float(v) for v in values]
+    if len(values) < 2 or not all(math.isfinite(v) for v in values):
+        raise ValueError("values are invalid: expected at least two finite parameter values")
+    model.parameter(name)    # a parameter of the model, else ValueError naming the valid ones
+
+    def solve(value, start):
+        m = model.with_parameter(name, value)
+        o = find_periodic(m, start, periods, tol=tol)
+        det = m.jacobian_det(periods, len(o.impacts))
+        if any(getattr(i, "sticking", False) for i in o.impacts):
+            det = None
+        lam = floquet_multipliers(o.monodromy, det)
+        v_min = min((i.v_minus for i in o.impacts), default=math.inf)
+        return OrbitPoint(value, o.state, lam, len(o.impacts), v_min)
+
+    points, stopped, failed_at = [], "end", None
+    for value in values:
+        if len(points) >= 2:
+            a, b = points[-2], points[-1]
+            t = (value - b.value) / (b.value - a.value)
+            start = b.state + t * (b.state - a.state)
+        else:
+            start = points[-1].state if points else guess
+        try:
+            pt = solve(value, start)
+        except (ShootingFailed, ValueError, ArithmeticError) as exc:
+            stopped, failed_at = f"shooting failed at {name}={value!r}: {exc}", value
+            break
+        if points and pt.impacts != points[-1].impacts:
+            stopped = (f"the orbit changed from {points[-1].impacts} to {pt.impacts} impacts "
+                       f"between {name}={points[-1].value!r} and {value!r}")
+            failed_at = value
+            break
+        points.append(pt)
+    if failed_at is not None and points:
+        # the end of the branch, by bisection between the last orbit and the failure
+        good = points[-1]
+        for _ in range(60):
+            mid = 0.5 * (good.value + failed_at)
+            if mid in (good.value, failed_at):
+                break
+            try:
+                pt = solve(mid, good.state)
+            except (ShootingFailed, ValueError, ArithmeticError):
+                pt = None
+            if pt is not None and pt.impacts == good.impacts:
+                points.append(pt)
+                good = pt
+            else:
+                failed_at = mid
+
+    bifs = []
+    for a, b in zip(points[:-1], points[1:]):
+        ta, tb = bifurcation_tests(a.multipliers), bifurcation_tests(b.multipliers)
+        for kind in TEST_FUNCTIONS:
+            fa, fb = ta[kind], tb[kind]
+            if not (math.isfinite(fa) and math.isfinite(fb)) or fa * fb > 0.0 or fa == fb:
+                continue
+
+            def f(value, kind=kind, a=a, b=b):
+                near = a if abs(value - a.value) <= abs(value - b.value) else b
+                return bifurcation_tests(solve(value, near.state).multipliers)[kind]
+
+            try:
+                at = brentq(f, a.value, b.value, xtol=1e-300, rtol=1e-13, maxiter=200)
+                pt = solve(at, a.state)
+            except (ShootingFailed, ValueError, ArithmeticError):
+                continue
+            bifs.append(OrbitBifurcation(kind, float(at), pt.multipliers))
+    if failed_at is not None and len(points) >= 2:
+        b = points[-1]   # a: the last point whose v-_min is resolved against b's
+        a = next((q for q in reversed(points[:-1]) if q.v_min >= 2.0 * b.v_min), points[-2])
+        at = math.nan
+        if 0.0 < b.v_min < a.v_min:
+            at = b.value - b.v_min ** 2 * (b.value - a.value) / (b.v_min ** 2 - a.v_min ** 2)
+        v_scale = max(q.v_min for q in points)
+        if b.v_min <= GRAZED * v_scale and math.isfinite(at):
+            bifs.append(OrbitBifurcation("grazing", float(at),
+                                         np.array([math.inf, math.inf], dtype=complex)))
+    return OrbitBranch(name, int(periods), points, bifs, stopped)

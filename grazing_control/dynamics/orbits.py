@@ -20,7 +20,8 @@ Two routes, each exact (no truncation) and cross-checked against each other:
 
 2. Newton shooting on the Pi2 map for any p/n orbit (1/1, 2/2, 1/2, ...): the
    residual is P^n(z) - z, the Jacobian the monodromy (Phi, S, G in time order)
-   minus I.
+   minus I. This is the generic algorithm of :mod:`.shooting` over the model protocol
+   (:mod:`.model`), applied to the 1-DOF model.
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ from grazing_control.oscillator.flow import matmul2, to_physical, transition_mat
 from grazing_control.oscillator.impact import (Impact, InitialStateError, NonFiniteStateError,
                                                saltation_matrix)
 from .maps import period_matrix, pi2_map
+from .model import OneDOF
+from .shooting import ShootingFailed, find_periodic, floquet_multipliers
 from grazing_control.oscillator.params import OscillatorParams
 
 __all__ = [
@@ -124,27 +127,11 @@ class PeriodicOrbit:
 
 
 def multipliers(monodromy, det: float | None = None) -> np.ndarray:
-    """Eigenvalues of a 2x2 monodromy matrix, sorted by decreasing modulus.
-
-    Computed from trace and determinant with the cancellation-free quadratic formula
-    (lambda1 = (tr + sign(tr) sqrt(tr^2 - 4 det)) / 2, lambda2 = det / lambda1), so the
-    small multiplier stays accurate when the large one grows like 1/v- near grazing.
-    ``det`` may be given exactly: det J = e^{-2 zeta n T} r^(2 impacts) (1 + c2)^n,
-    products of det Phi, det S and det G.
-    """
-    m = np.asarray(monodromy, dtype=float).reshape(2, 2)
-    tr = m[0, 0] + m[1, 1]
-    if det is None:
-        det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
-    disc = complex(tr * tr - 4.0 * det)
-    root = np.sqrt(disc)
-    if disc.real >= 0.0:
-        l1 = 0.5 * (tr + math.copysign(1.0, tr) * root.real)
-        l2 = det / l1 if l1 != 0.0 else 0.0
-        lam = np.array([l1, l2], dtype=complex)
-    else:
-        lam = np.array([0.5 * (tr + root), 0.5 * (tr - root)])
-    return lam[np.argsort(-np.abs(lam), kind="stable")]
+    """Eigenvalues of a 2x2 monodromy matrix, sorted by decreasing modulus
+    (:func:`grazing_control.dynamics.shooting.floquet_multipliers`: the cancellation-free
+    quadratic formula, ``det`` given exactly where known: det J = e^{-2 zeta n T}
+    r^(2 impacts) (1 + c2)^n, products of det Phi, det S and det G)."""
+    return floquet_multipliers(monodromy, det)
 
 
 def monodromy_det(p: OscillatorParams, gains: Gains | None, periods: int, impacts: int) -> float:
@@ -370,23 +357,13 @@ def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     return orbit
 
 
-def _iterate(p, z, periods, gains):
-    """P^n from Pi2 deviation z with its monodromy and the impacts on the way."""
-    mono = (1.0, 0.0, 0.0, 1.0)
-    impacts = []
-    dx, dv = z
-    for k in range(periods):
-        seg = pi2_map(p, dx, dv, gains, monodromy=True)
-        impacts += [i._replace(dt=i.dt + k * p.period) for i in seg.impacts]
-        mono = matmul2(seg.monodromy, mono)
-        dx, dv = seg.dx, seg.dv
-    return np.array([dx, dv]), np.array(mono).reshape(2, 2), impacts
-
-
 def shoot(p: OscillatorParams, x: float | None = None, v: float | None = None,
           periods: int = 1, gains: Gains | None = None, *, deviation=None,
           tol: float = 1e-14, max_iter: int = 60) -> PeriodicOrbit:
     """Periodic orbit of period n by Newton's method on the Pi2 map.
+
+    The 1-DOF case of :func:`grazing_control.dynamics.shooting.find_periodic` (the model
+    :class:`grazing_control.dynamics.model.OneDOF`); a failure raises OrbitNotFound.
 
     Parameters
     ----------
@@ -410,20 +387,10 @@ def shoot(p: OscillatorParams, x: float | None = None, v: float | None = None,
         if x is None or v is None:
             raise ValueError("give the guess as x and v, or as deviation=(dx, dv)")
         deviation = (x - p.x_ref, v - p.v_ref)
-    z = np.array(deviation, dtype=float)
-    previous = math.inf
-    for _ in range(max_iter):
-        zn, mono, _ = _iterate(p, z, periods, gains)
-        step = np.linalg.solve(mono - np.eye(2), -(zn - z))
-        z = z + step
-        size = float(np.max(np.abs(step)))
-        scale = max(float(np.max(np.abs(z))), 1e-300)
-        # converged, or stagnating at the map's rounding floor (no quadratic decrease)
-        if size <= tol * scale or (size > 0.5 * previous and size <= 1e-8 * scale):
-            break
-        previous = size
-    else:
-        raise OrbitNotFound(f"Newton shooting did not converge in {max_iter} iterations")
-    _, mono, impacts = _iterate(p, z, periods, gains)
+    try:
+        o = find_periodic(OneDOF(p, gains), deviation, periods, tol=tol, max_iter=max_iter)
+    except ShootingFailed as exc:
+        raise OrbitNotFound(str(exc)) from None
+    z = o.state
     return PeriodicOrbit(p, gains, periods, to_physical(p, p.tau2, z[0], z[1]),
-                         (float(z[0]), float(z[1])), tuple(impacts), mono)
+                         (float(z[0]), float(z[1])), o.impacts, o.monodromy)
