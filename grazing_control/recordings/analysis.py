@@ -137,10 +137,9 @@ def summarize(scene: Scene, tol: float = 1e-8, window: int = 200) -> dict:
 
 def plot_scene(scene: Scene, title: str, path) -> None:
     """Four panels: Pi2 before/after control, Pi2 x per sample, impact velocities, corrections."""
-    import matplotlib
+    from grazing_control.support.plotting import pyplot, save_png
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     summary = summarize(scene)
     on = summary["control_on"] if summary["control_on"] is not None else len(scene.t)
@@ -167,5 +166,4 @@ def plot_scene(scene: Scene, title: str, path) -> None:
     a.plot(k, scene.correction, ".-", ms=2, lw=0.5)
     a.set(xlabel="sample k", ylabel="Δv", title="velocity corrections")
     fig.suptitle(title)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)

@@ -72,10 +72,9 @@ def _label(path: Path, used: set) -> str:
 def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
     """Panels: Pi2 samples, x per sample, impact velocities, corrections, contraction,
     and for realtime runs the latency, answer-time and sample-lag histograms."""
-    import matplotlib
+    from grazing_control.support.plotting import pyplot, save_png
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     scene = sd.scene
     on = numbers["control_on_sample"]
@@ -151,8 +150,7 @@ def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
                 a.text(0.5, 0.5, "not recorded", ha="center", transform=a.transAxes)
             a.set(xlabel=lab, ylabel="count")
     fig.suptitle(title)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_png(fig, path, dpi=90)
 
 
 def _scene_lines(label, numbers, fig_name):

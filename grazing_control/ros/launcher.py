@@ -64,7 +64,7 @@ SIM_MODULE = "sim_node.sim_node"
 CONTROLLER_MODULE = "grazing_control.ros.controller_node"
 RECORDER_MODULE = "grazing_control.ros.recorder_node"
 #: The source tree's root (so that ``-m sim_node.sim_node`` works from a checkout).
-SOURCE_ROOT = Path(__file__).resolve().parents[1]
+SOURCE_ROOT = Path(__file__).resolve().parents[2]
 
 
 def _config_dir() -> Path:

@@ -1,4 +1,7 @@
-"""Shared plotting helpers of the figures: the Agg backend, one look, PNG + SVG output.
+"""Shared plotting: the Agg backend, one look, PNG + SVG output (figures) or one PNG.
+
+Used by the figures, the sweeps' diagram, the robustness charts and the analysis
+reports, so that every picture of the package is drawn and written the same way.
 
 Every panel is its own figure, saved twice: a PNG (raster, for reading and for
 docs/) and an SVG (vector; dense point clouds are rasterized inside it so the file
@@ -11,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["pyplot", "save", "thumbnail", "stability_segments", "COLORS", "PANEL_SIZE"]
+__all__ = ["pyplot", "save", "save_png", "thumbnail", "stability_segments", "COLORS",
+           "PANEL_SIZE"]
 
 #: One size for every panel (inches), so the panels line up in figures.md.
 PANEL_SIZE = (6.4, 4.4)
@@ -49,6 +53,12 @@ def save(fig, out: Path, name: str, dpi: int = 150) -> list:
         files.append(path.name)
     plt.close(fig)
     return files
+
+
+def save_png(fig, path, dpi: int = 150) -> None:
+    """Write ``fig`` as one PNG at ``path`` and close it (the reports and charts)."""
+    fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
 
 
 def thumbnail(src, dst, width: int = 640) -> int:

@@ -8,16 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from grazing_control.support.plotting import pyplot, save_png
+
 __all__ = ["plot_delay_curves", "plot_stability_maps", "plot_fault_sweep"]
 
 
 def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return pyplot()
 
 
 def plot_delay_curves(curves, path, dpi=80):
@@ -42,8 +39,7 @@ def plot_delay_curves(curves, path, dpi=80):
         ax.set_ylim(0.1, 1e3)
         ax.legend(fontsize=7, title="dotted: perturbation", title_fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    save_png(fig, path, dpi=dpi)
 
 
 def plot_stability_maps(maps, path, boundaries=None, dpi=80):
@@ -82,8 +78,7 @@ def plot_stability_maps(maps, path, boundaries=None, dpi=80):
     fig.colorbar(mesh, ax=axes, shrink=0.8, label="log10 max|λ| (black: |λ| = 1; gray: no 1/1 orbit)")
     if boundaries:
         axes[0, 0].legend(fontsize=6, loc="lower left")
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    save_png(fig, path, dpi=dpi)
 
 
 def plot_fault_sweep(results, path, dpi=80):
@@ -122,5 +117,4 @@ def plot_fault_sweep(results, path, dpi=80):
                  "(bottom; dashed: linear prediction)", fontsize=9)
     axes[0, 0].legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    save_png(fig, path, dpi=dpi)

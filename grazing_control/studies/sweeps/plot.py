@@ -16,10 +16,9 @@ def diagram(result, path, *, component: str = "x", title: str | None = None, dpi
     component : 'x' or 'v', the coordinate on Pi2 (physical). Points of other grid axes
     and of all starts are drawn over each other, as in a brute-force diagram.
     """
-    import matplotlib
+    from grazing_control.support.plotting import pyplot, save_png
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     if component not in ("x", "v"):
         raise ValueError(f"component={component!r} is invalid: valid values are x, v")
@@ -36,6 +35,5 @@ def diagram(result, path, *, component: str = "x", title: str | None = None, dpi
     ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 3), useOffset=False)
     ax.set_title(title or f"{result.n_points} points x {m} periods "
                           f"(after {result.transient} transient)", fontsize=9)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    save_png(fig, path, dpi=dpi)
     return path
