@@ -64,7 +64,7 @@ SCENES = [  # name, delta_d, controlled, chaotic (compare fewer periods with mpm
     ("-5e-6 controlled", -5e-6, True, False),
 ]
 
-_WARM = ("import time, json; t0 = time.perf_counter(); from grazing_control import kernel; "
+_WARM = ("import time, json; t0 = time.perf_counter(); from grazing_control.oscillator import kernel; "
          "w = kernel.warm_up(); w['total'] = time.perf_counter() - t0; print(json.dumps(w))")
 
 

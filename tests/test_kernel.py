@@ -220,7 +220,7 @@ def test_fallback_without_numba_runs_the_core(tmp_path):
     code = (
         "import sys\n"
         "sys.modules['numba'] = None  # import numba now fails, as if not installed\n"
-        "from grazing_control import kernel\n"
+        "from grazing_control.oscillator import kernel\n"
         "from grazing_control.oscillator.params import OscillatorParams\n"
         "from grazing_control.dynamics.simulate import simulate\n"
         "assert not kernel.available() and not kernel.use_kernel()\n"
@@ -240,7 +240,7 @@ def test_ctrl_c_while_the_kernel_compiles_is_delivered_once_it_is_loaded(tmp_pat
     import signal
     import time
 
-    code = ("from grazing_control import kernel\n"
+    code = ("from grazing_control.oscillator import kernel\n"
             "kernel.warm_up()\n"
             "print('not interrupted', flush=True)\n")
     env = {**os.environ, "PYTHONPATH": os.getcwd(), "NUMBA_CACHE_DIR": str(tmp_path)}
