@@ -36,6 +36,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.plant.faults import FaultModel
 from grazing_control.oscillator.impact import ImpactCapError, InitialStateError
 from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.dynamics.noise import loop_linearisation
 from grazing_control.dynamics.simulate import period_step, simulate
 
 __all__ = ["simulate_with_faults", "attractor_states", "CaptureResult", "capture_time",
@@ -81,26 +82,6 @@ def simulate_with_faults(p: OscillatorParams, gains: Gains, faults: FaultModel, 
     return out
 
 
-def _loop_linearisation(p: OscillatorParams, gains: Gains, target):
-    """(J, M2, dv*) at the orbit: J = M2 (M1 + e2 k^T) (docs/theory_delay.md (D3)), M2 the
-    monodromy of the flow from the kick to the next sample, dv* = k^T z* the correction."""
-    from grazing_control.oscillator.impact import advance
-
-    dx, dv = target
-    dvc = gains.c1 * dx + gains.c2 * dv
-    if gains.delay == 0.0:
-        m1 = (1.0, 0.0, 0.0, 1.0)
-        second = advance(p, p.tau2, dx, dv + dvc, p.period, monodromy=True)
-    else:
-        first = advance(p, p.tau2, dx, dv, gains.delay, monodromy=True)
-        m1 = first.monodromy
-        tau = (p.tau2 + p.omega * gains.delay) % (2.0 * math.pi)
-        second = advance(p, tau, first.dx, first.dv + dvc, p.period - gains.delay, monodromy=True)
-    m2 = np.array(second.monodromy).reshape(2, 2)
-    j = m2 @ (np.array(m1).reshape(2, 2) + np.outer([0.0, 1.0], [gains.c1, gains.c2]))
-    return j, m2, dvc
-
-
 def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float, target=None) -> float:
     """Stationary RMS distance to z* of the linearised loop for one fault kind and level.
 
@@ -117,7 +98,7 @@ def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float,
 
     if target is None:
         target = orbit_11(p, gains).pi2_deviation
-    j, m2, dvc = _loop_linearisation(p, gains, target)
+    j, m2, dvc = loop_linearisation(p, gains, target)
     mean = np.zeros(2)
     if kind == "noise":
         b = m2[:, 1]
