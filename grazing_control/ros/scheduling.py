@@ -1,0 +1,113 @@
+"""Real-time scheduling of a node's process: SCHED_FIFO priority, CPU affinity, locked memory.
+
+What ros2_control's controller manager offers (its ``thread_priority``, ``cpu_affinity``
+and ``lock_memory`` parameters), for the nodes of a realtime scene (docs/nodes.md,
+"Real-time scheduling"). Each option is opt-in; where the process lacks the privilege
+(no CAP_SYS_NICE / CAP_IPC_LOCK, an RLIMIT_RTPRIO of 0, a container that forbids it) the
+option is not applied and a clear warning says what was refused and how to grant it:
+the node runs on, never crashes. Linux only; elsewhere every option is refused with a
+warning.
+
+* priority p in 1..99: ``sched_setscheduler(0, SCHED_FIFO, p)`` for the whole process
+  (every thread the process creates afterwards inherits it; the middleware's threads
+  that already exist keep their policy). 0 leaves the scheduler alone.
+* cpus: ``sched_setaffinity(0, cpus)``.
+* lock memory: ``mlockall(MCL_CURRENT | MCL_FUTURE)``, so that no page of the process
+  is paged out (and faulted back in, a millisecond) during a scene.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+from typing import NamedTuple
+
+__all__ = ["Scheduling", "parse_cpus", "apply_scheduling"]
+
+_MCL_CURRENT, _MCL_FUTURE = 1, 2
+
+
+class Scheduling(NamedTuple):
+    """What was asked and what was applied, with the warnings for what was refused."""
+
+    applied: tuple
+    warnings: tuple
+
+
+def parse_cpus(text: str) -> tuple:
+    """'0,2-3' -> (0, 2, 3); '' -> () (no affinity). ValueError naming the parameter."""
+    cpus = set()
+    for part in (p.strip() for p in str(text).split(",")):
+        if not part:
+            continue
+        try:
+            if "-" in part:
+                lo, hi = (int(x) for x in part.split("-", 1))
+                if lo > hi:
+                    raise ValueError
+                cpus.update(range(lo, hi + 1))
+            else:
+                cpus.add(int(part))
+        except ValueError:
+            raise ValueError(f"cpu_affinity={text!r} is invalid: valid values are CPU numbers "
+                             "and ranges like '0,2-3' ('' for none)") from None
+    if any(c < 0 for c in cpus):
+        raise ValueError(f"cpu_affinity={text!r} is invalid: CPU numbers are >= 0")
+    return tuple(sorted(cpus))
+
+
+def _mlockall() -> int:
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE) != 0:
+        return ctypes.get_errno()
+    return 0
+
+
+def apply_scheduling(priority: int = 0, cpus=(), lock_memory: bool = False) -> Scheduling:
+    """Apply the options to this process; refused ones become warnings (module docstring).
+
+    ValueError for a priority outside 0..99 (the caller's parameter validation);
+    everything the operating system refuses is a warning, never an exception.
+    """
+    if isinstance(priority, bool) or int(priority) != priority or not 0 <= priority <= 99:
+        raise ValueError(f"thread_priority={priority!r} is invalid: valid range is 0 (off) "
+                         "or 1..99 (SCHED_FIFO)")
+    applied, warnings = [], []
+    if priority:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
+            applied.append(f"SCHED_FIFO priority {int(priority)}")
+        except (PermissionError, OSError, AttributeError) as exc:
+            warnings.append(f"thread_priority={int(priority)} not applied ({_reason(exc)}): "
+                            "grant CAP_SYS_NICE or an rtprio limit (ulimit -r, "
+                            "/etc/security/limits.conf) to run under SCHED_FIFO")
+    if cpus:
+        try:
+            os.sched_setaffinity(0, set(cpus))
+            applied.append(f"CPU affinity {sorted(cpus)}")
+        except (PermissionError, OSError, AttributeError) as exc:
+            warnings.append(f"cpu_affinity={sorted(cpus)} not applied ({_reason(exc)}): "
+                            f"this machine's CPUs are {_cpus()}")
+    if lock_memory:
+        try:
+            err = _mlockall()
+        except (OSError, AttributeError) as exc:
+            err = getattr(exc, "errno", None) or -1
+        if err == 0:
+            applied.append("memory locked (mlockall)")
+        else:
+            warnings.append(f"lock_memory not applied ({os.strerror(err) if err > 0 else err}): "
+                            "grant CAP_IPC_LOCK or raise the memlock limit (ulimit -l)")
+    return Scheduling(tuple(applied), tuple(warnings))
+
+
+def _reason(exc: BaseException) -> str:
+    return exc.strerror if isinstance(exc, OSError) and exc.strerror else type(exc).__name__
+
+
+def _cpus() -> str:
+    try:
+        return str(sorted(os.sched_getaffinity(0)))
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        return "unknown"

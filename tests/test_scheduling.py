@@ -1,0 +1,62 @@
+"""Real-time scheduling of a node's process (grazing_control.ros.scheduling): applied where
+the process may, a warning naming the option and the privilege where it may not, never
+an exception from the operating system's refusal."""
+
+import errno
+import os
+import subprocess
+import sys
+
+import pytest
+
+from grazing_control.ros import scheduling
+from grazing_control.ros.scheduling import apply_scheduling, parse_cpus
+
+
+def test_cpu_lists():
+    assert parse_cpus("") == ()
+    assert parse_cpus("0,2-3") == (0, 2, 3)
+    assert parse_cpus(" 1 , 1 ") == (1,)
+    for bad in ("a", "3-1", "-1", "1-"):
+        with pytest.raises(ValueError, match="cpu_affinity=.* is invalid"):
+            parse_cpus(bad)
+
+
+@pytest.mark.parametrize("priority", [-1, 100, 1.5, True])
+def test_priority_outside_its_range_is_refused(priority):
+    with pytest.raises(ValueError, match="thread_priority=.* is invalid"):
+        apply_scheduling(priority)
+
+
+def test_nothing_asked_nothing_done():
+    assert apply_scheduling() == ((), ())
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs the privilege to be granted")
+def test_applied_in_a_process_that_may():
+    """In a child process (this one must not become real-time): policy, affinity and
+    locked memory as the kernel reports them afterwards."""
+    code = ("import os; from grazing_control.ros.scheduling import apply_scheduling as a; "
+            "r = a(5, (0,), True); print(r.applied, r.warnings); "
+            "print(os.sched_getscheduler(0) == os.SCHED_FIFO, os.sched_getparam(0).sched_priority, "
+            "sorted(os.sched_getaffinity(0)), "
+            "[l for l in open('/proc/self/status') if l.startswith('VmLck')][0].split()[1] != '0')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, check=True).stdout.splitlines()
+    assert out[-1] == "True 5 [0] True", out
+
+
+def test_refusals_are_warnings(monkeypatch):
+    def refuse(*args):
+        raise PermissionError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    monkeypatch.setattr(os, "sched_setaffinity", refuse)
+    monkeypatch.setattr(scheduling, "_mlockall", lambda: errno.EPERM)
+    r = apply_scheduling(10, (0, 1), True)
+    assert r.applied == ()
+    assert len(r.warnings) == 3
+    assert "thread_priority=10 not applied (Operation not permitted)" in r.warnings[0]
+    assert "CAP_SYS_NICE" in r.warnings[0]
+    assert "cpu_affinity=[0, 1] not applied" in r.warnings[1]
+    assert "lock_memory not applied" in r.warnings[2] and "CAP_IPC_LOCK" in r.warnings[2]
