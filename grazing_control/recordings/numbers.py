@@ -218,10 +218,13 @@ def resolve_setup(bag, options: dict) -> Setup:
         gains = Gains(c1, c2o)
         sources["gains"] = "option" + (" (c1 from the degenerate condition, Eq. 38)"
                                        if c1o is None else "")
-    elif "c1" in ctl and "c2" in ctl:
-        gains = Gains(float(ctl["c1"]), float(ctl["c2"]))
+    elif "c1" in ctl and "c2" in ctl and None not in (_num(ctl["c1"]), _num(ctl["c2"])):
+        gains = Gains(_num(ctl["c1"]), _num(ctl["c2"]))
         sources["gains"] = "parameter record"
     else:
+        if "c1" in ctl or "c2" in ctl:
+            notes.append("the controller's c1 or c2 in the parameter record is not a number: "
+                         "ignored")
         fit = infer_gains(scene0, x_ref, v_ref, saturation)
         if fit is not None:
             c1, c2, rms, n = fit
@@ -230,7 +233,8 @@ def resolve_setup(bag, options: dict) -> Setup:
                                 f"(rms residual {rms:.1e}); give --c2 (and --c1) to set them")
         else:
             sources["gains"] = "unknown (no record, no option, fewer than 3 corrections)"
-    mode = options.get("mode") or sim.get("mode")
+    mode = options.get("mode") or (sim.get("mode") if isinstance(sim.get("mode"), str)
+                                   else None)
     if options.get("mode"):
         sources["mode"] = "option"
     elif mode:
