@@ -80,9 +80,9 @@ Run: ``ros2 run grazing_control recorder_node --ros-args -p output:=bags/run1``
 """
 
 import importlib
+import os
 import signal
 import sys
-import threading
 import time
 from collections import defaultdict
 
@@ -101,13 +101,12 @@ from std_msgs.msg import Bool
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
                      check_overrides, init_ros, usage)
 from grazing_control.oscillator.params import ParameterError
+from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
                         qos_profile_dict)
 
 __all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "READY_TOPIC", "RECORDER_QOS",
            "RecorderNode", "adapted_qos", "main", "parse_topics"]
-
-
 
 #: Topics recorded by default (relative names) and their types.
 DEFAULT_TOPICS = {
@@ -146,7 +145,6 @@ _BATCH = 256
 DEFAULT_BATCH_WINDOW = 0.001
 MAX_BATCH_WINDOW = 0.1
 
-
 def parse_topics(entries):
     """Topics to record from the ``topics`` parameter.
 
@@ -184,7 +182,6 @@ def parse_topics(entries):
         raise ParameterError("topics=[] is invalid: give at least one topic")
     return topics
 
-
 def adapted_qos(offered):
     """The subscription QoS for publishers offering ``offered`` (rosbag2's rule).
 
@@ -215,7 +212,6 @@ def adapted_qos(offered):
                         "volatile (their earlier messages are not retrieved)")
     return qos, warnings
 
-
 def qos_to_dict(qos):
     """rosbag2 mapping (:func:`~grazing_control.ros.recording.qos_profile_dict`) of a QoSProfile."""
     return qos_profile_dict(
@@ -230,13 +226,11 @@ def qos_to_dict(qos):
         avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions,
     )
 
-
 def _message_class(msg_type):
     """Python class of ``pkg/msg/Type`` (or ``pkg/Type``)."""
     parts = msg_type.split("/")
     package, name = parts[0], parts[-1]
     return getattr(importlib.import_module(f"{package}.msg"), name)
-
 
 class RecorderNode(Node):
     """Subscribes to the topics and writes their serialized messages to a bag.
@@ -504,21 +498,17 @@ class RecorderNode(Node):
             return 1 if self.require_complete else 0
         return 0
 
-
 def _stop_on_signals(stop):
     """SIGINT and SIGTERM set `stop` (the spin loop then ends and the bag closes)."""
-    def handler(signum, frame):
-        stop.set()
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, handler)
-
+        signal.signal(signum, stop.set)
 
 def main(args=None):
     """Run the recorder until SIGINT/SIGTERM; return the exit status."""
     args = list(sys.argv if args is None else args)
     # Our own handlers, from the start: rclpy's would shut the context down before the
     # drain, and a signal while starting must end the process quietly.
-    stop = threading.Event()
+    stop = SignalStop()
     _stop_on_signals(stop)
     status = 0
     node = None
@@ -550,10 +540,12 @@ def main(args=None):
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
             status = node.close() or status
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
-
+    # The bag is closed and its summary logged: leave now. Tearing the node, the DDS
+    # participant and the interpreter down (GC of every history) took up to 30 s under
+    # CPU starvation, past the launcher's grace (issue 21: a complete bag, then SIGKILL).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 if __name__ == "__main__":
     sys.exit(main())
