@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.support.arguments import finite
+from grazing_control.support.arguments import finite, positive
 from .numbers import resolve_setup, scene_numbers
 from .scenes import load, parse_topic_option
 
@@ -335,7 +335,8 @@ def add_model_options(parser) -> None:
                         ("omega", "forcing frequency"), ("pi2-offset", "phase of Π2 after Π1"),
                         ("delta-d", "Δd = d − d*"), ("c1", "gain c1 (default with --c2: Eq. 38)"),
                         ("c2", "gain c2"), ("time-scale", "realtime time scale")):
-        g.add_argument(f"--{name}", type=_finite, default=None, help=help_)
+        g.add_argument(f"--{name}", type=positive if name == "time-scale" else _finite,
+                       default=None, help=help_)
     g.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
                    help="simulator mode of the run")
     parser.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
