@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from grazing_control.support.arguments import finite, positive
-from .numbers import resolve_setup, scene_numbers
+from .numbers import resolve_setup, scene_numbers, section_phase_problems
 from .scenes import load, parse_topic_option
 
 __all__ = ["analyze", "add_arguments", "main"]
@@ -270,6 +270,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     for bag in bags:
         data = load(bag, topics)
         setup = resolve_setup(data, options)
+        data.problems.extend(section_phase_problems(data, setup))
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
