@@ -343,8 +343,12 @@ def _next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     n = max(1, int(math.ceil(horizon / step)))
     a = 0.0
     fa = f(0.0)
-    if fa[0] > 0.0 and fa[0] <= _wall_rounding(p, tau0, dx0, dv0)[0]:
-        fa = (0.0,) + fa[1:]  # on the wall up to rounding
+    # on the wall up to rounding: a start above it, or below it while leaving (v < 0),
+    # whose flight must not find its own start as a root (docs/theory.md, "Impact
+    # detection": a start on the wall)
+    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and \
+            abs(fa[0]) <= _wall_rounding(p, tau0, dx0, dv0)[0]:
+        fa = (0.0,) + fa[1:]
     if fa[0] > 0.0:
         raise InitialStateError(
             f"state beyond the wall: x - d = {fa[0]:.3e} > 0 (valid: x <= d)"
