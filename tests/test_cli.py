@@ -581,3 +581,46 @@ def test_ctrl_c_at_any_moment_of_the_console_script_is_quiet(delay, startup):
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, (out, err)
     assert "Traceback" not in err and err.strip() == "grazing: interrupted", err
+
+
+# ------------------------------------------------------------------ issue 20, items 2-3
+@pytest.mark.parametrize("argv", [
+    ["--zeta", "0.03", "--r", "0.85", "--omega", "0.6655665991362745"],
+    ["--zeta", "0.015"],
+    ["--zeta", "0.02", "--method", "perturbation"],
+])
+def test_design_on_the_issue_20_inputs_gives_a_design(argv, capsys, tmp_path):
+    """These gave "numerical failure (ZeroDivisionError)" (gamma1's pole at N11 = 1)."""
+    out_file = tmp_path / "c.yaml"
+    status, out, err = _main(["design", "--c2", "-1", *argv, "--out", str(out_file)], capsys)
+    assert status == 0, err
+    assert "this c2            : admissible" in out and out_file.exists()
+
+
+def test_design_prints_the_true_ends_of_the_admissible_set(capsys):
+    """`--c2 -4.5 --delay 0.5` printed (-4, 0.2698), the scan window; the set goes on to
+    -5.1523011978 where |lambda0| = 1."""
+    status, out, err = _main(["design", "--c2", "-4.5", "--delay", "0.5"], capsys)
+    assert status == 0, err
+    assert "admissible c2      = (-5.152301198, 0.269775247)" in out
+    status, out, _ = _main(["design", "--c2", "1", "--delay", "1", "--json"], capsys)
+    d = _strict_json(out)
+    assert d["admissible_c2"][0] == pytest.approx(-0.3403039074, abs=1e-9)
+    assert d["admissible_c2"][1] > 6.0 and d["c2_search_limit"] == 1e6
+
+
+def test_design_says_beyond_the_search_limit_and_gives_null(capsys, monkeypatch):
+    import math
+
+    from grazing_control.dynamics import design
+
+    monkeypatch.setattr(design, "admissible_c2",
+                        lambda p, *a, **k: [(-math.inf, -0.5), (0.25, math.inf)])
+    status, out, err = _main(["design", "--c2", "1"], capsys)
+    assert status == 0, err
+    assert "(beyond -1e+06, -0.5) U (0.25, beyond +1e+06)" in out
+    status, out, err = _main(["design", "--c2", "1", "--json"], capsys)
+    d = _strict_json(out)
+    assert d["admissible_c2"] == [0.25, None]
+    assert d["admissible_c2_sets"]["combined"] == [[None, -0.5], [0.25, None]]
+    assert d["c2_search_limit"] == 1e6

@@ -144,7 +144,7 @@ def _gains(args, p):
 
 # ---------------------------------------------------------------------------- design
 def cmd_design(args):
-    from grazing_control.dynamics.design import (admissible_c2, evaluate_design,
+    from grazing_control.dynamics.design import (C2_LIMIT, admissible_c2, evaluate_design,
                                                  write_controller_yaml)
 
     p = _params(args)
@@ -165,13 +165,14 @@ def cmd_design(args):
         gamma_p = existence_coefficient_perturbation(p, g)
         sets_p = {c: admissible_c2_perturbation(p, delay=args.delay, conditions=c) for c in sets}
         cost_p = time.perf_counter() - t0
-        other = {"exact": {"admissible_c2": [list(iv) for iv in sets["combined"]],
+        other = {"exact": {"admissible_c2": [_json_interval(iv) for iv in sets["combined"]],
                            "multipliers_limit": _complex_list(point.multipliers_limit),
                            "gamma1": point.gamma1, "seconds": cost}}
         exact_combined = sets["combined"]
         point = type(point)(point.c1, point.c2, lam_p, gamma_p, point.multipliers_free, point.delay)
         sets, cost = sets_p, cost_p
-        ends = [(a - b) for iv, jv in zip(sets["combined"], exact_combined) for a, b in zip(iv, jv)]
+        ends = [(a - b) for iv, jv in zip(sets["combined"], exact_combined) for a, b in zip(iv, jv)
+                if math.isfinite(a) and math.isfinite(b)]
         other["difference_admissible_ends"] = ends
     intervals = sets["combined"]
     chosen = next((iv for iv in intervals if iv[0] <= args.c2 <= iv[1]), None)
@@ -183,8 +184,9 @@ def cmd_design(args):
         "actuation_delay": point.delay,
         "x_ref": p.x_ref,
         "v_ref": p.v_ref,
-        "admissible_c2": list(shown) if shown else None,
-        "admissible_c2_sets": {c: [list(iv) for iv in ivs] for c, ivs in sets.items()},
+        "admissible_c2": _json_interval(shown) if shown else None,
+        "admissible_c2_sets": {c: [_json_interval(iv) for iv in ivs] for c, ivs in sets.items()},
+        "c2_search_limit": C2_LIMIT,
         "multipliers_limit": _complex_list(point.multipliers_limit),
         "gamma1": point.gamma1,
         "multipliers_free": _complex_list(point.multipliers_free),
@@ -235,7 +237,20 @@ def cmd_design(args):
 
 
 def _fmt_intervals(intervals):
-    return " U ".join(f"({lo:.10g}, {hi:.10g})" for lo, hi in intervals) or "empty"
+    """'(lo, hi) U ...'; an end open at the search limit reads 'beyond -1e+06' (design.C2_LIMIT)."""
+    from grazing_control.dynamics.design import C2_LIMIT
+
+    def end(x, sign):
+        if x is None or not math.isfinite(x):
+            return f"beyond {sign}{C2_LIMIT:.0e}"
+        return f"{x:.10g}"
+
+    return " U ".join(f"({end(lo, '-')}, {end(hi, '+')})" for lo, hi in intervals) or "empty"
+
+
+def _json_interval(iv):
+    """[lo, hi] with an end open at the search limit as null (the key c2_search_limit)."""
+    return [x if math.isfinite(x) else None for x in iv]
 
 
 # ---------------------------------------------------------------------------- orbit
