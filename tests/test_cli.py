@@ -624,3 +624,49 @@ def test_design_says_beyond_the_search_limit_and_gives_null(capsys, monkeypatch)
     assert d["admissible_c2"] == [0.25, None]
     assert d["admissible_c2_sets"]["combined"] == [[None, -0.5], [0.25, None]]
     assert d["c2_search_limit"] == 1e6
+
+
+# ------------------------------------------------------------------ issue 15 section 3
+def test_design_reports_the_noise_gain_of_the_core(capsys):
+    """noise_gain in the JSON is dynamics.noise.noise_gain about the controlled orbit at
+    --delta-d (itself checked against seeded simulations of the exact closed loop in
+    tests/test_noise.py and tests/test_tuning.py)."""
+    from grazing_control.dynamics.noise import noise_gain
+
+    status, out, err = _main(["design", "--c2", "-0.3", "--delta-d", "-9e-6", "--json"], capsys)
+    assert status == 0, err
+    d = _strict_json(out)
+    q = P.with_(delta_d=-9e-6)
+    assert d["noise_gain"] == pytest.approx(noise_gain(q, Gains(degenerate_c1(P, -0.3), -0.3)),
+                                            rel=1e-12)
+    assert d["noise_gain_delta_d"] == -9e-6 and "optimize" not in d
+    status, out, _ = _main(["design", "--c2", "-1", "--delta-d", "-5e-6"], capsys)
+    assert re.search(r"noise gain\s+= 19\d\.\d", out)
+    # c2 = -2.5 is not admissible: no stable orbit, no stationary spread
+    status, out, _ = _main(["design", "--c2", "-2.5", "--delta-d", "-5e-6", "--json"], capsys)
+    assert status == 0 and _strict_json(out)["noise_gain"] is None
+
+
+def test_design_optimize_noise(capsys, tmp_path):
+    from grazing_control.dynamics.tuning import optimize_noise
+
+    path = tmp_path / "c.yaml"
+    status, out, err = _main(["design", "--optimize", "noise", "--delay", "0.5", "--delta-d",
+                              "-9e-6", "--json", "--out", str(path)], capsys)
+    assert status == 0, err
+    d = _strict_json(out)
+    ref = optimize_noise(P.with_(delta_d=-9e-6), 0.5)
+    assert d["c2"] == ref.c2 and d["c1"] == ref.c1 and d["actuation_delay"] == 0.5
+    assert d["optimize"]["noise_gain"] == d["noise_gain"] == ref.noise_gain
+    assert d["optimize"]["study_noise_gain"] == pytest.approx(ref.study_noise_gain)
+    assert d["admissible"] is True
+    params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+    assert (params["c1"], params["c2"]) == (ref.c1, ref.c2)
+    status, out, _ = _main(["design", "--optimize", "noise"], capsys)
+    assert "optimised" in out and "the study's c2 = -1: 19" in out   # at -5e-6 by default
+    status, _, err = _main(["design", "--optimize", "noise", "--c2", "1"], capsys)
+    assert status == 2 and "--optimize" in err
+    status, _, err = _main(["design"], capsys)
+    assert status == 2 and "c2" in err
+    status, _, err = _main(["design", "--c2", "-1", "--delta-d", "1e-6"], capsys)
+    assert status == 2 and "delta_d" in err
