@@ -39,6 +39,11 @@ class Outputs:
         if ev.kind == "impact":
             n.pub_impact.publish(cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase))
             return stamp
+        if ev.kind == "state":                 # the rig's sensor stream
+            v = ev.v if n.settings.sensor.velocity else None
+            n.pub_state.publish(cdr.stream_sample(sec, ns, ev.x, v, math.cos(ev.phase),
+                                                  math.sin(ev.phase)))
+            return stamp
         data = cdr.joint_state(sec, ns, ev.x, ev.v, math.cos(ev.phase))
         if ev.kind == "pi1":
             n.pub_pi1.publish(data)
@@ -46,8 +51,6 @@ class Outputs:
             if n.settings.mode == "lockstep":
                 n.pub_clock.publish(cdr.clock(sec, ns))
             n.pub_pi2.publish(data)
-        else:
-            n.pub_state.publish(data)
         return stamp
 
     def latency(self, seconds: float) -> None:

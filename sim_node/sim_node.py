@@ -199,8 +199,9 @@ class SimNode(Node):
             return False                   # _check_isolation refuses
         n = self.get_parameter("wait_for_subscribers").value
         controller = self.get_parameter("wait_for_controller").value
-        if controller and (self.pub_pi2.get_subscription_count() < n + 1
-                           or self.sub_correction.get_publisher_count() < 1):
+        samples = max(self.pub_pi2.get_subscription_count(),      # a controller reads
+                      self.pub_state.get_subscription_count())    # Pi2 or the stream
+        if controller and (samples < n + 1 or self.sub_correction.get_publisher_count() < 1):
             return False
         if n > 0:
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]

@@ -41,7 +41,7 @@ class Recorder:
 
     def publish(self, ev):
         self.events.append(ev)
-        return (int(round(ev.t * 1e9)),)
+        return key(ev)
 
     def samples(self):
         return [e for e in self.events if e.kind == "pi2"]
@@ -79,7 +79,9 @@ class Clock:
 
 
 def key(ev):
-    return (int(round(ev.t * 1e9)),)
+    """The stamp (sec, nanosec) of an event, as sim_node's (cdr.stamp_parts)."""
+    ns = int(round(ev.t * 1e9))
+    return divmod(ns, 1_000_000_000)
 
 
 def law(c1, c2, ev):
@@ -145,7 +147,7 @@ def test_lockstep_ignores_other_stamps_and_times_out():
     loop = Lockstep(Engine(settings(answer_timeout=0.5)), sink, clock)
     loop.start()
     first = loop.waiting
-    loop.answer((12345,), 0.1)                        # foreign
+    loop.answer((12345, 0), 0.1)                      # foreign
     assert sink.counts["ignored"] == 1 and loop.engine.k == 0
     clock.now += 0.4
     loop.check_timeout()
@@ -299,3 +301,41 @@ def test_rebase_keeps_the_simulation_time_continuous():
     clock.now += 0.1
     assert loop.now() == pytest.approx(t + 1.0, abs=1e-9)
     assert math.isfinite(loop.wake_in(loop.now()))
+
+
+# ============================================================ the stream controller
+@pytest.mark.parametrize("mode, make", [("lockstep", Lockstep), ("realtime", Realtime)])
+def test_the_stream_sample_at_t0_goes_out_before_sample_0s_answer_is_awaited(mode, make):
+    sink = Recorder()
+    loop = make(Engine(settings(state_period=P.period / 200, mode=mode)), sink, Clock())
+    loop.start()
+    assert [(e.kind, e.t) for e in sink.events] == [("pi2", 0.0), ("state", 0.0)]
+    loop.reset(loop.engine.reset())
+    assert [(e.kind, e.t) for e in sink.events[2:]] == [("pi2", 0.0), ("state", 0.0)]
+
+
+def test_realtime_answers_that_come_before_their_sample_are_kept():
+    """A stream controller may answer sample k before the simulator publishes it (it
+    estimates Pi2 from the stream's samples before t_k): the answer acts on schedule."""
+    n, delay = 30, 2.0
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=n,
+                 state_period=0.0)
+    dvs = [1e-4 * ((k % 5) - 2) for k in range(n + 2)]
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        k = round(ev.t / P.period)
+        if k == 0:
+            loop.answer(key(ev), dvs[0])
+        nxt = ev._replace(t=(k + 1) * P.period)       # the next sample, not yet out
+        loop.answer(key(nxt), dvs[k + 1])
+
+    loop = run_realtime(s, n, answer, clock, sink)
+    dx = dv = 0.0
+    ref = []
+    for k in range(n):
+        ref.append((P.x_ref + dx, P.v_ref + dv))
+        seg = period_step(P, dx, dv, dvs[k], delay=delay)
+        dx, dv = seg.dx, seg.dv
+    np.testing.assert_array_equal([(e.x, e.v) for e in sink.samples()], ref)
+    assert not sink.misses and loop.stats["applied"] == n and sink.counts["ignored"] <= 1

@@ -281,3 +281,80 @@ def test_reset_restarts_from_the_initial_state(node_env):
     ref = simulate(OscillatorParams(delta_d=-5e-6), 12, x0=-0.5, v0=-1.0)
     np.testing.assert_array_equal(got[9:], ref.pi2)
     assert stamps(ans.samples)[-1] == pytest.approx(11 * OscillatorParams().period, abs=1e-9)
+
+
+# ================================================== the rig: sensor stream and pulse
+def test_stream_controller_position_only_sensor_and_pulse_through_the_node(node_env):
+    """A controller that reads only oscillator/state (issue 15 §1): the simulator starts
+    for it (wait_for_controller), sends the stream's sample at t = 0 with sample 0, and
+    the stream is the sensor's (position only: velocity empty; effort [cos tau, sin tau]);
+    the run with a force pulse is the core's pulse_step loop bit for bit."""
+    from grazing_control.dynamics.actuation import pulse_step
+    from grazing_control.plant.sensor import SensorModel
+
+    domain, collector, start = node_env
+    p = OscillatorParams(delta_d=-5e-6)
+    T, n, delay, w, sigma = p.period, 12, 3.0, 0.5, 1e-4
+    pub = collector.node.create_publisher(TwistStamped, "controller/velocity_correction",
+                                          DATA_QOS)
+    dvs = [2e-3 * ((k % 3) - 1) for k in range(n)]
+
+    def on_state(msg):                 # answer sample k on the stream's sample at t_k
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        k = round(t / T)
+        if abs(t - k * T) < 1e-6 and k < n:
+            out = TwistStamped()
+            out.header.stamp.sec, out.header.stamp.nanosec = cdr.stamp_parts(k * T)
+            out.twist.linear.x = dvs[k]
+            pub.publish(out)
+
+    collector.node.create_subscription(JointState, "oscillator/state", on_state, DATA_QOS)
+    proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0,
+                      wait_for_controller=True, start_timeout=20.0, state_period=T / 200,
+                      sensor_noise=sigma, sensor_velocity=False, sensor_seed=3,
+                      actuation_delay=delay, pulse_width=w)
+    assert proc.wait(60) == 0, log.read_text()
+    text = log.read_text()
+    assert "start_timeout" not in text and summary(text)["timeouts"] == "0", text
+    # the ground truth on oscillator/pi2: the core's pulse loop with the answers
+    dx = dv = 0.0
+    ref = []
+    for k in range(n):
+        ref.append((p.x_ref + dx, p.v_ref + dv))
+        seg = pulse_step(p, dx, dv, dvs[k], start=delay - w / 2, width=w)
+        dx, dv = seg.dx, seg.dv
+    np.testing.assert_array_equal(xv(collector.get("oscillator/pi2")), ref)
+    # the stream: every grid sample from t = 0, position only, the phase reference
+    m = n * 200 + 1                                      # t = 0 .. t_n, both included
+    assert collector.wait_for(lambda: len(collector.get("oscillator/state")) == m, 5.0)
+    states = collector.get("oscillator/state")
+    t = stamps(states)
+    np.testing.assert_allclose(t, np.arange(m) * T / 200, rtol=0, atol=1e-9)
+    assert all(len(m.velocity) == 0 and len(m.position) == 1 for m in states)
+    tau = np.array([math.atan2(m.effort[1], m.effort[0]) for m in states]) % (2 * math.pi)
+    want = (p.tau2 + p.omega * t) % (2 * math.pi)
+    assert np.abs(np.angle(np.exp(1j * (tau - want)))).max() < 1e-9
+    # sample j is the true state (the engine with an exact sensor) + the sensor's draw j
+    eng = Engine(settings(delta_d=-5e-6, state_period=T / 200, actuation_delay=delay,
+                          pulse_width=w))
+    true = eng.initial_states()
+    for k in range(n):
+        true += [e for e in eng.begin_period(dvs[k], delay) if e.kind == "state"]
+        eng.end_period()
+    e = SensorModel(noise=sigma, seed=3).draws(0, m)[:, 0] * sigma
+    x = np.array([s.position[0] for s in states])
+    np.testing.assert_allclose(x, [s.x for s in true] + e, rtol=0, atol=1e-12)
+
+
+def test_stream_sample_writer_is_the_rclpy_layout():
+    """rclpy decodes cdr.stream_sample's bytes to the stream's JointState (with and
+    without velocity: the alignment of the effort differs)."""
+    from rclpy.serialization import deserialize_message
+
+    for v in (None, -1.25):
+        data = cdr.stream_sample(3, 500, 0.5, v, 0.6, 0.8)
+        msg = deserialize_message(data, JointState)
+        assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == \
+            (3, 500, "")
+        assert (list(msg.name), list(msg.position), list(msg.velocity), list(msg.effort)) \
+            == (["mass"], [0.5], [] if v is None else [v], [0.6, 0.8])

@@ -24,13 +24,16 @@ class Lockstep(Loop):
     sent = 0.0           # wall time it was published
 
     def start(self) -> None:
-        """Publish sample 0 and wait for its answer."""
-        self.publish_sample(self.engine.sample())
+        """Publish sample 0 (and the state stream's sample at t = 0) and wait for its
+        answer."""
+        self.reset(self.engine.sample())
 
     def reset(self, ev: Event) -> None:
         """After ``engine.reset()``: run again from its sample 0, ``ev``."""
         self.finished = False
         self.publish_sample(ev)
+        for e in self.engine.initial_states():
+            self.emit(e)
 
     def publish_sample(self, ev: Event) -> None:
         """Publish sample k (state before correction, as measured) and wait for its answer."""

@@ -56,6 +56,8 @@ class Realtime(Loop):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.pending = {}      # stamp key -> wall time sent, the last two unanswered samples
+        self.early = {}        # stamp key -> (dv, wall time received): answers of samples
+        #                        not yet published (a stream controller may answer first)
         self.queue = []        # the current period's events not yet published, in time order
 
     def now(self, wall: float | None = None) -> float:
@@ -72,8 +74,11 @@ class Realtime(Loop):
         self.t0, self.wall0 = 0.0, self.clock()
         self.finished = False
         self.pending.clear()
+        self.early.clear()
         self.deadline = None
         self.publish_sample(ev)
+        for e in self.engine.initial_states():
+            self.emit(e)
 
     def rebase(self) -> None:
         """Keep the simulation time continuous across a change of time_scale (call it
@@ -90,10 +95,23 @@ class Realtime(Loop):
             del self.pending[next(iter(self.pending))]
         if self.settings.scheduled:                      # sample k's actuation instant
             delay = self.engine.actuation_delay()
-            self.deadline = Deadline(ev.t + delay, delay, self.sample, self.engine.k,
-                                     sent, None)
+            self.deadline = Deadline(ev.t + self.engine.actuation_start(delay), delay,
+                                     self.sample, self.engine.k, sent, None)
         # pace: how late the sample went out against its simulation time
         self.lags.append(sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale)
+        early = self.early.pop(self.sample, None)
+        if early is not None:                            # answered before it went out
+            dv, wall = early
+            self.pending.pop(self.sample)
+            self.latencies.append(wall - sent)
+            self.sink.latency(wall - sent)
+            if self.deadline is not None:
+                self.deadline = self.deadline._replace(dv=dv)
+            elif self.engine.correction_lost():
+                self.stats["lost"] += 1
+            else:
+                self.queue = self.engine.split(ev.t, dv)
+                self.stats["applied"] += 1
 
     def tick(self):
         """A wake-up: publish what is due; the simulation time now, or None when over."""
@@ -158,6 +176,8 @@ class Realtime(Loop):
             return
         dl = self.deadline
         sent = self.pending.pop(key, None)
+        if sent is None and self._keep_early(key, dv, wall):
+            return
         if sent is None:
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
@@ -171,6 +191,21 @@ class Realtime(Loop):
                            "after its actuation time")
             return
         self.deadline = dl._replace(dv=dv)
+
+    def _keep_early(self, key: tuple, dv: float, wall: float) -> bool:
+        """Keep the answer of a sample not yet published (its stamp lies after the
+        latest sample's, within the next two periods): it acts when that sample goes
+        out, as if it had arrived then. A stream controller may estimate the Pi2 state
+        from the stream's samples before the sample instant and answer before it."""
+        if self.sample is None or key <= self.sample or key in self.early:
+            return False
+        period = self.engine.p.period
+        if key[0] + key[1] * 1e-9 > self.engine.t + 2.0 * period + 1e-6:
+            return False
+        self.early[key] = (dv, wall)
+        if len(self.early) > 2:
+            del self.early[next(iter(self.early))]
+        return True
 
     def _actuate(self, dl: Deadline) -> None:
         """Sample k's actuation instant: its answer, or 0 (a deadline miss), at t_k + delay."""
@@ -194,6 +229,8 @@ class Realtime(Loop):
         late, applied all the same: the next opportunity). Anything else is ignored.
         """
         sent = self.pending.pop(key, None)
+        if sent is None and not self.finished and self._keep_early(key, dv, self.clock()):
+            return False
         if sent is None or self.finished:
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
