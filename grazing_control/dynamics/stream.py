@@ -27,7 +27,7 @@ from .estimation import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit
                          deviation_samples, detect_impact, model_update, nearest_estimate,
                          trajectory, unkick)
 
-__all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream"]
+__all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section"]
 
 #: Where impacts come from: the rig's impact sensor, or detection in the stream.
 IMPACT_SOURCES = ("topic", "stream")
@@ -294,3 +294,11 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
         for ti in imp_times:
             est.add_impact(ti)
     return StreamRun(truth, zhat, cov, corr, counts, est.resets)
+
+
+def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0):
+    """The next section's state (deviation, before its correction) predicted from the
+    estimate ``z`` with ``correction`` applied ``delay`` after the section: one exact
+    period of the model (issue 16 section 3; :func:`trajectory`)."""
+    *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay)
+    return end
