@@ -26,7 +26,8 @@ from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.ros.common import seconds_from_stamp, stamp_key
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulate import period_step
-from sim_node.sim_node import Engine, settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 from test_closed_loop import TOPICS as CLOSED_LOOP_TOPICS
 from test_closed_loop import STUDY, Collector, new_domain, xv
 
@@ -190,7 +191,8 @@ def _scene(tmp_path, domain, n, on, c1, delay, mode="lockstep", sim=None, ex="ev
                          sim.get("delta_d", BASE["delta_d"]))
     ctl = {"c1": float(c1), "c2": -1.0, "actuation_delay": float(delay), "zeta": p.zeta,
            "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset, "executor": ex}
-    over = {"state_period": 0.0, "wait_for_subscribers": 1, "executor": ex}
+    over = {"state_period": 0.0, "wait_for_subscribers": 1, "wait_for_recorder": True,
+            "executor": ex}
     over.update(sim or {})
     res = launcher.run(STUDY, ctl, None, n, mode=mode, enable_after=on, domain_id=domain,
                        timeout=120, sim_overrides=over, log_dir=tmp_path)
@@ -209,7 +211,7 @@ FAULTS = {"loss": dict(loss=0.3, measurement_noise=0.0, jitter=0.0),
 def _fault_scene(tmp_path, name, n, on, delay, seed):
     """One scene with the faults FAULTS[name]: (published samples, answers, misses, summary)."""
     domain = new_domain()
-    col = Collector(domain, TOPICS)
+    col = Collector(domain, TOPICS, ready=True)
     try:
         p = OscillatorParams(delta_d=-5e-6)
         mode = "realtime" if name.startswith("realtime") else "lockstep"
@@ -217,7 +219,10 @@ def _fault_scene(tmp_path, name, n, on, delay, seed):
                          delayed_c1(p, -1.0, delay), delay, mode,
                          sim={"seed": seed, "time_scale": 1000.0, **FAULTS[name]})
         assert col.wait_for(lambda: len(col.get("oscillator/pi2")) == n, 5.0)
-        assert col.wait_for(lambda: len(col.get("controller/velocity_correction")) == n, 5.0)
+        answers = col.get("controller/velocity_correction")
+        assert col.wait_for(lambda: len(col.get("controller/velocity_correction")) == n,
+                            5.0), (name, len(answers), n, summary, [
+            stamp_key(m.header.stamp) for m in col.get("controller/velocity_correction")][:3])
         assert col.wait_for(lambda: len(col.get("oscillator/deadline_miss"))
                             == int(summary["missed"]), 5.0), summary
         pi2 = col.get("oscillator/pi2")
@@ -297,7 +302,7 @@ def test_realtime_scheduled_matches_lockstep_and_suppresses_the_chaos(tmp_path, 
     runs = {}
     for mode in ("lockstep", "realtime"):
         domain = new_domain()
-        col = Collector(domain, TOPICS)
+        col = Collector(domain, TOPICS, ready=True)
         try:
             summary = _scene(tmp_path / mode, domain, n, on, c1, delay, mode,
                              sim={"delta_d": delta_d, "time_scale": scale})

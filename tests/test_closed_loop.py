@@ -32,7 +32,7 @@ from std_msgs.msg import Bool, Float64
 from grazing_control.ros import launcher
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.ros.common import LATCHED_QOS, seconds_from_stamp
+from grazing_control.ros.common import LATCHED_QOS, READY_TOPIC, seconds_from_stamp
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.simulate import simulate
 
@@ -73,7 +73,12 @@ def new_domain() -> int:
 class Collector:
     """A node in the test process that keeps every message of the scene's topics."""
 
-    def __init__(self, domain: int, topics=TOPICS):
+    def __init__(self, domain: int, topics=TOPICS, ready: bool = False):
+        """``ready``: say on recorder/ready, as recorder_node does, once every topic's
+        subscription has matched a publisher; a simulator started with
+        ``wait_for_recorder:=true`` then waits for that, so that no answer goes out
+        before the controller's publisher can reach this node (without it, under load,
+        the first answers of a realtime scene were missed: 235 of 250 received)."""
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("collector", context=self.context)
@@ -84,10 +89,18 @@ class Collector:
                      for topic, kind in topics.items()}
         self.node.create_subscription(Bool, "oscillator/done", self._keeper("done"),
                                       LATCHED_QOS)
+        if ready:
+            self._ready = self.node.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
+            self._ready_timer = self.node.create_timer(0.02, self._say_ready)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
+
+    def _say_ready(self):
+        if all(sub.get_publisher_count() > 0 for sub in self.subs.values()):
+            self._ready.publish(Bool(data=True))
+            self._ready_timer.cancel()
 
     def _keeper(self, topic):
         def keep(msg):

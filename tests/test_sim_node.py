@@ -26,7 +26,8 @@ from grazing_control.ros import cdr
 from grazing_control.ros.common import DATA_QOS, stamp_key
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulate import simulate
-from sim_node.sim_node import Engine, settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 from test_closed_loop import STUDY, Collector, new_domain, stamps, xv
 
 BASE = dict(zeta=0.01, r=0.68, omega=OscillatorParams().omega, delta_d=-5e-6, tau0=0.0,

@@ -1,10 +1,13 @@
 """The plant emulator: what sim_node drives, without ROS.
 
-Layer 3 of 7 (docs/architecture.md). :mod:`.settings` (the simulator's validated
-parameters), :mod:`.engine` (samples and periods of the exact oscillator, corrections
-applied on schedule or on arrival), :mod:`.realtime` (pacing, deadlines and the
-bookkeeping of answers in realtime mode) and :mod:`.faults` (injected loss,
-measurement noise and jitter, a pure function of seed and sample).
+Layer 3 of 7 (docs/architecture.md). :mod:`.settings` (the simulator's parameter table
+and its validation), :mod:`.engine` (samples and periods of the exact oscillator,
+corrections on schedule, delayed or on arrival, the events to publish), :mod:`.loop`,
+:mod:`.lockstep` and :mod:`.realtime` (the two ways the node runs the engine: one period
+per answer, or paced to a wall clock with deadlines), :mod:`.faults` (injected loss,
+measurement noise and jitter, a pure function of seed and sample) and :mod:`.sensor`
+(the rig's motion sensor: noise, bias, quantisation, position only). The actuator's
+force pulse is :mod:`grazing_control.dynamics.actuation`.
 
 May import: :mod:`grazing_control.dynamics` and below. Never rclpy: the node adapter
 (sim_node) translates between this and ROS.

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.support.arguments import finite
+from grazing_control.support.arguments import finite, positive
 from . import reader
-from .numbers import resolve_setup, scene_numbers
+from .numbers import resolve_setup, scene_numbers, section_phase_problems
 from .scenes import load, parse_topic_option
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
@@ -378,6 +378,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     for bag in bags:
         data = load(bag, topics)
         setup = resolve_setup(data, options)
+        data.problems.extend(section_phase_problems(data, setup))
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
@@ -446,7 +447,8 @@ def add_model_options(parser) -> None:
                         ("omega", "forcing frequency"), ("pi2-offset", "phase of Π2 after Π1"),
                         ("delta-d", "Δd = d − d*"), ("c1", "gain c1 (default with --c2: Eq. 38)"),
                         ("c2", "gain c2"), ("time-scale", "realtime time scale")):
-        g.add_argument(f"--{name}", type=_finite, default=None, help=help_)
+        g.add_argument(f"--{name}", type=positive if name == "time-scale" else _finite,
+                       default=None, help=help_)
     g.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
                    help="simulator mode of the run")
     parser.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",

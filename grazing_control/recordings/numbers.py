@@ -252,9 +252,42 @@ def resolve_setup(bag, options: dict) -> Setup:
         ts = _num(sim["time_scale"])
         sources["time_scale"] = "parameter record"
     delay = _num(sim.get("actuation_delay"), _num(ctl.get("actuation_delay"), 0.0))
-    ea = ctl.get("enable_after")
-    return Setup(params, gains, str(mode), ts, saturation,
-                 int(ea) if ea is not None else None, delay, sources, notes)
+    ea = _num(ctl.get("enable_after"))
+    ea = int(ea) if ea is not None and math.isfinite(ea) else None
+    return Setup(params, gains, str(mode), ts, saturation, ea, delay, sources, notes)
+
+
+#: Largest |omega t mod 2 pi| of a Pi2 stamp accepted as "on the section" (rad): stamps are
+#: whole nanoseconds, so a genuine sample is within omega * 1e-9 of the section's phase.
+SECTION_PHASE_TOL = 1e-4
+
+
+def section_phase_problems(bag, setup: Setup) -> list:
+    """Problems if the Pi2 samples are not stamped at the section's phase.
+
+    The simulator's clock starts at the first Pi2 sample and sample k is stamped t_k = k T
+    (docs/nodes.md), so omega t_k = 0 mod 2 pi; a Pi1 sample is stamped at
+    omega t = -pi2_offset mod 2 pi. Samples away from the section's phase (swapped pi1/pi2
+    topics, another section, a foreign clock) would be analysed as Pi2 samples: say so.
+    """
+    p = setup.params
+    if p is None:
+        return []
+    out = []
+    for sd in bag.scenes:
+        t = sd.scene.t
+        if t.size < 2:
+            continue
+        phase = np.angle(np.exp(1j * p.omega * t))
+        worst = float(np.median(np.abs(phase)))
+        if worst > SECTION_PHASE_TOL:
+            pi1 = float(np.angle(np.exp(-1j * p.pi2_offset)))
+            swapped = abs(float(np.median(phase)) - pi1) < 1e-3
+            out.append(f"scene {sd.index}: the Pi2 samples are not at the section's phase "
+                       f"(median |omega t mod 2 pi| = {worst:.3g} rad, not 0"
+                       + ("; they are at Pi1's phase: are the pi1 and pi2 topics swapped?"
+                          if swapped else "") + "): the numbers below are not Pi2 numbers")
+    return out
 
 
 def measured_contraction(pi2: np.ndarray, on: int | None, floor_factor: float = 1e4):

@@ -335,6 +335,19 @@ class _Scan:
         self.base += len(raw)
 
 
+#: A file without summary that changed less than this many seconds ago may still be
+#: being written (a recorder that flushes a chunk at least every few seconds).
+WRITING_AGE = 30.0
+
+
+def _age(path: Path) -> float:
+    import time
+    try:
+        return max(0.0, time.time() - os.stat(path).st_mtime)
+    except OSError:
+        return float("inf")
+
+
 def read_raw(bag, topics=None) -> RawBag:
     """Stream an MCAP file (or a bag directory's file) into a :class:`RawBag`.
 
@@ -375,7 +388,10 @@ def read_raw(bag, topics=None) -> RawBag:
     reason, stop = scan.records(memoryview(data), len(MAGIC), len(data), True)
     problems = scan.problems
     if reason != "end":
-        problems.insert(0, f"the file has no summary (recorder killed?): read up to byte "
+        age = _age(path)
+        why = (f"still being written? it changed {age:.1f} s ago" if age < WRITING_AGE
+               else "recorder killed?")
+        problems.insert(0, f"the file has no summary ({why}): read up to byte "
                            f"{stop} of {len(data)}" + (", the rest is a torn record"
                                                      if stop < len(data) else ""))
     pool = np.frombuffer(b"".join(scan.pieces), dtype=np.uint8)

@@ -171,6 +171,12 @@ def load(bag, topics: dict | None = None) -> BagData:
                         "or big-endian CDR): not used")
     order = np.argsort(pi2["log_time"], kind="stable")
     order = order[pi2["ok"][order]]
+    finite = np.isfinite(pi2["x"][order]) & np.isfinite(pi2["v"][order])
+    if not finite.all():
+        bad_t = pi2["stamp"][order][~finite] / _NS
+        problems.append(f"{int(np.count_nonzero(~finite))} Pi2 samples with a non-finite state "
+                        f"(first at t = {bad_t[0]:.9g} s): not used")
+        order = order[finite]
     stamp = pi2["stamp"][order]
     x, v = pi2["x"][order], pi2["v"][order]
     pub, log = pi2["publish_time"][order], pi2["log_time"][order]
@@ -211,6 +217,10 @@ def load(bag, topics: dict | None = None) -> BagData:
         if badc:
             problems.append(f"{badc} malformed corrections: not used")
         co = np.argsort(corr["log_time"], kind="stable")
+        nonfinite = int(np.count_nonzero(corr["ok"][co] & ~np.isfinite(corr["dv"][co])))
+        if nonfinite:
+            problems.append(f"{nonfinite} of {co.size} corrections are not finite numbers: "
+                            "not used (the samples they answer count as unanswered)")
         co = co[corr["ok"][co] & np.isfinite(corr["dv"][co])]
         corr = {k: (val[co] if isinstance(val, np.ndarray) else val) for k, val in corr.items()}
         corr["scene"] = _scene_index(starts_log, corr["log_time"])

@@ -1,0 +1,258 @@
+"""The simulated oscillator, sample by sample: periods, corrections, splits, published events.
+
+:class:`Engine` carries the state as the deviation (dx, dv) from the non-impacting motion
+at the current Pi2 sample k (t_k = k T, spec section 3) and integrates each period with
+the core's exact flow: one :func:`grazing_control.dynamics.fidelity.period_step` call per
+period (as :func:`grazing_control.dynamics.simulate.simulate` makes them), or, with a
+correction delayed by s, the flow to t_k + s, the velocity jump, the flow to t_k+1 (as
+``simulate.period_step(..., delay=s)``, docs/theory_delay.md). Everything published
+between two samples (state, Pi1 crossing, impacts) is evaluated from the closed form by
+:func:`grazing_control.dynamics.simulate.states_between` without altering the trajectory,
+so a run of the engine reproduces ``simulate`` of the same scene sample for sample.
+
+No ROS: sim_node publishes the :class:`Event` values this returns.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from grazing_control.dynamics.fidelity import period_step
+from grazing_control.dynamics.simulate import states_between
+from grazing_control.oscillator import kernel
+from grazing_control.plant.settings import SimSettings, initial_deviation
+
+__all__ = ["Event", "Segment", "Engine"]
+
+TWO_PI = 2.0 * math.pi
+
+
+class Event(NamedTuple):
+    """Something to publish at simulation time t.
+
+    kind 'state' or 'pi1': (x, v) physical; kind 'impact': x = v-, v = v+;
+    kind 'pi2': the sample (x, v) before correction. ``phase`` is the forcing phase.
+    """
+
+    t: float
+    kind: str
+    x: float
+    v: float
+    phase: float
+
+
+class Segment(NamedTuple):
+    """One stretch of a period after its last correction: from (ts, tau, dx, dv) to te."""
+
+    ts: float      # start time
+    tau: float     # forcing phase at the start
+    dx: float      # deviation at the start, after any correction
+    dv: float
+    te: float      # end time (the next Pi2 sample)
+    dx_end: float
+    dv_end: float
+
+
+class Engine:
+    """The simulated oscillator between ROS and the core: samples, periods, splits.
+
+    The state is carried as the deviation (dx, dv) from the non-impacting motion at the
+    current Pi2 sample k (time t_k). :meth:`begin_period` integrates the period with a
+    correction by one :func:`period_step` call; :meth:`split` (realtime) re-evaluates the
+    current period from its start to a time inside it and applies a correction there;
+    :meth:`end_period` moves to the next sample, where pending model parameters take
+    effect and the velocity noise is added.
+    """
+
+    def __init__(self, settings: SimSettings):
+        self.settings = settings
+        self.p = settings.params
+        self.advance = kernel.exact_advance()   # the exact flow, compiled when available
+        self.pending = None
+        self.rng = np.random.default_rng(settings.seed)
+        self.impacts = 0
+        self._drawn = None
+        self.reset()
+
+    # ---------------------------------------------------------------- samples
+    def reset(self) -> Event:
+        """Back to the initial state, sample 0 at t = 0 (pending parameters apply now)."""
+        if self.pending is not None:
+            self.p, self.pending = self.pending, None
+        s = self.settings
+        self.rng = np.random.default_rng(s.seed)
+        self.k = 0
+        self.k_base, self.t_base = 0, 0.0
+        self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
+        self.impacts = 0
+        self.seg = None
+        return self._sample()
+
+    @property
+    def done(self) -> bool:
+        """Whether ``max_periods`` periods have run (never when max_periods = 0)."""
+        return 0 < self.settings.max_periods <= self.k
+
+    @property
+    def t(self) -> float:
+        """Time of the current sample, t_k = k T (re-based when T changes)."""
+        return self.t_base + (self.k - self.k_base) * self.p.period
+
+    def _sample(self) -> Event:
+        if self.settings.noise > 0.0:
+            self.dv += float(self.rng.normal(0.0, self.settings.noise))
+        p = self.p
+        return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
+
+    def sample(self) -> Event:
+        """The current sample (without drawing noise again)."""
+        p = self.p
+        return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
+
+    # ------------------------------------------------------------- faults (per sample k)
+    def _draw(self):
+        """The faults of sample k (FaultModel.draw, a pure function of (seed, k))."""
+        faults = self.settings.faults
+        if self._drawn is None or self._drawn[0] != (faults, self.k):
+            self._drawn = ((faults, self.k), faults.draw(self.k))
+        return self._drawn[1]
+
+    def measured(self, ev: Event) -> Event:
+        """Sample k as the controller sees it: (x, v) + the measurement noise of draw(k)."""
+        if self.settings.measurement_noise == 0.0:
+            return ev
+        f = self._draw()
+        return ev._replace(x=ev.x + f.noise_x, v=ev.v + f.noise_v)
+
+    def correction_lost(self) -> bool:
+        """Whether sample k's correction is dropped by the injected loss."""
+        return self.settings.loss > 0.0 and self._draw().dropped
+
+    def actuation_delay(self) -> float:
+        """Delay of sample k's correction after the sample: actuation_delay + jitter e_k,
+        clipped to [0, T) (FaultModel.actuation_delay)."""
+        s = self.settings
+        if s.jitter == 0.0:
+            return s.actuation_delay
+        return s.faults.actuation_delay(s.actuation_delay, self.k, self.p.period)
+
+    # ---------------------------------------------------------------- periods
+    def begin_period(self, dv_correction: float, delay: float = 0.0) -> list:
+        """Integrate the period from the current sample with ``dv_correction`` at ``delay``.
+
+        delay = 0: one :func:`period_step` call, as :func:`simulate` makes. delay > 0:
+        the flow to t_k + delay, the correction there, the flow to t_k+1 (:meth:`actuate`),
+        the same two calls as ``simulate.period_step(..., delay=delay)``. Returns the events
+        of (t_k, t_k+1) in time order (state, Pi1, impacts), the next sample excluded.
+        """
+        p = self.p
+        t0 = self.t
+        if delay > 0.0:
+            head = self.advance(p, p.tau2, self.dx, self.dv, delay)
+            events = self._events(Segment(t0, p.tau2, self.dx, self.dv, t0 + delay,
+                                           head.dx, head.dv), head.impacts)
+            return events + self._actuate(head, dv_correction, delay)
+        seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        self.seg = Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
+        return self._events(self.seg, seg.impacts)
+
+    def actuate(self, dv_correction: float, delay: float) -> list:
+        """Apply ``dv_correction`` exactly ``delay`` after the current sample (scheduled).
+
+        The period is re-integrated as ``simulate.period_step(p, dx, dv, dv_correction,
+        delay=delay)`` does it (the free flow with impacts to t_k + delay, the velocity
+        jump, the flow on to t_k+1), so a realtime period equals the lockstep one bit for
+        bit. Returns the events of (t_k + delay, t_k+1).
+        """
+        head = self.advance(self.p, self.p.tau2, self.dx, self.dv, delay)
+        return self._actuate(head, dv_correction, delay)
+
+    def _actuate(self, head, dv_correction: float, delay: float) -> list:
+        p = self.p
+        tau = (p.tau2 + p.omega * delay) % TWO_PI
+        dv = head.dv + dv_correction
+        tail = self.advance(p, tau, head.dx, dv, p.period - delay)
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        self.seg = Segment(self.t + delay, tau, head.dx, dv, t1, tail.dx, tail.dv)
+        return self._events(self.seg, tail.impacts)
+
+    def split(self, tc: float, dv_correction: float) -> list:
+        """Apply ``dv_correction`` at time tc inside the current period (realtime).
+
+        The exact flow is re-evaluated from the period's start to tc (same closed form as
+        the events already published), the velocity jumps there, and the flow continues
+        to the next sample. Returns the events of (tc, t_k+1).
+        """
+        s, p = self.seg, self.p
+        tc = min(max(tc, s.ts), s.te)
+        head = self.advance(p, s.tau, s.dx, s.dv, tc - s.ts)
+        tau_c = (s.tau + p.omega * (tc - s.ts)) % TWO_PI
+        dv_c = head.dv + dv_correction
+        tail = self.advance(p, tau_c, head.dx, dv_c, s.te - tc)
+        self.seg = Segment(tc, tau_c, head.dx, dv_c, s.te, tail.dx, tail.dv)
+        return self._events(self.seg, tail.impacts)
+
+    def end_period(self) -> tuple:
+        """Move to the next sample: returns (sample event, warning or None).
+
+        Pending model parameters take effect here, never within a period: the physical
+        state (x, v) at the sample is kept and re-expressed as a deviation of the new
+        model on its own Pi2 (if it lies beyond the new wall it is put on the wall).
+        """
+        s = self.seg
+        self.dx, self.dv = s.dx_end, s.dv_end
+        self.k += 1
+        self.seg = None
+        warning = None
+        if self.pending is not None:
+            warning = self._apply_pending()
+        return self._sample(), warning
+
+    def _apply_pending(self):
+        old, new = self.p, self.pending
+        t = self.t
+        self.p, self.pending = new, None
+        self.k_base, self.t_base = self.k, t
+        if (old.x_ref, old.v_ref) == (new.x_ref, new.v_ref):
+            x = None
+        else:
+            x, v = old.x_ref + self.dx, old.v_ref + self.dv
+            self.dx, self.dv = x - new.x_ref, v - new.v_ref
+        if new.x_ref + self.dx > new.d:
+            self.dx = new.d - new.x_ref
+            self.dv = min(self.dv + new.v_ref, 0.0) - new.v_ref
+            return (f"the state at t={t:.6g} lies beyond the new wall d={new.d!r}: "
+                    "placed on the wall")
+        return None
+
+    def _events(self, s: Segment, impacts) -> list:
+        p = self.p
+        events = []
+        for i in impacts:
+            events.append(Event(s.ts + i.dt, "impact", i.v_minus, i.v_plus, i.phase % TWO_PI))
+        rel, kinds = [], []
+        sp = self.settings.state_period
+        if sp > 0.0:
+            j = math.floor(s.ts / sp) + 1
+            while j * sp < s.te:
+                rel.append(j * sp - s.ts)
+                kinds.append("state")
+                j += 1
+        d1 = ((p.tau_star - s.tau) % TWO_PI) / p.omega
+        if 0.0 < d1 < s.te - s.ts:
+            rel.append(d1)
+            kinds.append("pi1")
+        if rel:
+            order = np.argsort(rel, kind="stable")
+            rel = [rel[i] for i in order]
+            kinds = [kinds[i] for i in order]
+            xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
+            for h, kind, (x, v) in zip(rel, kinds, xv):
+                phase = p.tau_star if kind == "pi1" else (s.tau + p.omega * h) % TWO_PI
+                events.append(Event(s.ts + h, kind, float(x), float(v), phase))
+        events.sort(key=lambda e: e.t)
+        return events

@@ -1,0 +1,112 @@
+"""What the lockstep and realtime loops share: the sink they publish to, their tallies.
+
+A loop (:class:`grazing_control.plant.lockstep.Lockstep`,
+:class:`grazing_control.plant.realtime.Realtime`) drives an
+:class:`grazing_control.plant.engine.Engine` from the controller's answers and the wall
+clock, and hands everything it produces to a :class:`Sink`: sim_node's sink publishes on
+the topics of docs/nodes.md, a test's sink records. The loops read the wall clock only
+through the ``clock`` they are given (``time.monotonic`` in the node, a fake in tests).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+import numpy as np
+
+from grazing_control.plant.engine import Engine, Event
+
+__all__ = ["Sink", "Loop"]
+
+
+class Sink(Protocol):
+    """Where a loop's output goes (sim_node: topics and throttled log lines)."""
+
+    def publish(self, ev: Event) -> tuple:
+        """Publish ``ev``; return its stamp key (sec, nanosec), which answers quote."""
+
+    def latency(self, seconds: float) -> None:
+        """Wall seconds from publishing a sample to receiving (applying) its answer."""
+
+    def miss(self, k: int, key: tuple, t: float, waited: float) -> None:
+        """Sample k's answer had not arrived at its actuation time t (scheduled)."""
+
+    def ignored(self, text: str) -> None:
+        """An answer that answers no waiting sample."""
+
+    def late(self, text: str) -> None:
+        """An answer after its deadline (dropped)."""
+
+    def timeout(self, text: str) -> None:
+        """Lockstep: no answer within answer_timeout."""
+
+    def warn(self, text: str) -> None:
+        """Anything else worth a warning (new model parameters at a sample)."""
+
+    def finish(self) -> None:
+        """``max_periods`` periods have run."""
+
+
+class Loop:
+    """The tallies and the end of a run, common to both loops.
+
+    ``stats``: corrections applied, answers late (after the next sample or their
+    deadline), corrections lost (injected loss); ``latencies`` (wall seconds per
+    answered sample) and ``lags`` (realtime: how late each sample went out against its
+    simulation time).
+    """
+
+    def __init__(self, engine: Engine, sink: Sink, clock=time.monotonic):
+        self.engine = engine
+        self.sink = sink
+        self.clock = clock
+        self.stats = {"applied": 0, "late": 0, "lost": 0}
+        self.latencies = []
+        self.lags = []
+        self.finished = False
+
+    @property
+    def settings(self):
+        """The engine's current settings (a runtime parameter change replaces them)."""
+        return self.engine.settings
+
+    def emit(self, ev: Event) -> tuple:
+        """Publish one event (counting impacts); its stamp key."""
+        if ev.kind == "impact":
+            self.engine.impacts += 1
+        return self.sink.publish(ev)
+
+    def next_sample(self):
+        """End the period (pending parameters apply); the next sample, or None when done."""
+        ev, warning = self.engine.end_period()
+        if warning:
+            self.sink.warn(warning)
+        if self.engine.done:
+            self.finish()
+            return None
+        return ev
+
+    def finish(self) -> None:
+        """The run is over (max_periods): no more samples."""
+        self.finished = True
+        self.sink.finish()
+
+    def summary(self, wall: float, counts: dict) -> str:
+        """The run in one line: periods, impacts, corrections, then ``counts`` (what the
+        node counted: missed, timeouts, ignored, malformed), the rate over ``wall``
+        seconds, and the latency and sample lag percentiles in milliseconds."""
+        k, stats = self.engine.k, self.stats
+        text = (f"summary: periods={k} t={self.engine.t:.9g} impacts={self.engine.impacts} "
+                f"applied={stats['applied']} late={stats['late']} "
+                f"missed={counts['missed']} lost={stats['lost']} "
+                + "".join(f"{name}={counts[name]} " for name in
+                          ("timeouts", "ignored", "malformed"))
+                + f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")
+        for name, values in (("latency_ms", self.latencies), ("sample_lag_ms", self.lags)):
+            if values:
+                ms = np.asarray(values) * 1e3
+                text += (f" {name} p50={np.percentile(ms, 50):.3f} "
+                         f"p99={np.percentile(ms, 99):.3f} max={ms.max():.3f}"
+                         + (f" n={ms.size}" if name == "latency_ms" else ""))
+        return text

@@ -1,0 +1,216 @@
+"""Realtime: simulation time paced to the wall clock, deadlines, corrections on schedule or on arrival.
+
+Simulation time runs at ``time_scale`` times the wall clock: t = t0 + (wall - wall0)
+time_scale. Samples go out when due and the period continues without waiting (its
+uncorrected events are integrated when the sample goes out, so that the round trip of
+the answer does not include that work). Two ways to act (docs/nodes.md, "Modes"):
+
+* scheduled (``settings.scheduled``): the answer of sample k acts exactly at
+  t_k + actuation_delay (+ jitter), the lockstep period bit for bit
+  (:meth:`grazing_control.plant.engine.Engine.actuate`, docs/theory_delay.md), if it
+  has arrived by then; otherwise the deadline is missed: no correction (counted and
+  handed to the sink), and the answer, when it comes, is dropped as late;
+* on arrival: the correction acts at the simulation time of its arrival, splitting
+  the period there (:meth:`~grazing_control.plant.engine.Engine.split`); it must answer
+  one of the last two samples, once; an answer after the next sample went out is still
+  applied (counted as late).
+
+The node calls :meth:`Realtime.tick` when woken up, arms its timer with
+:meth:`Realtime.wake_in`, and hands each answer to :meth:`Realtime.answer`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from grazing_control.plant.engine import Event
+from grazing_control.plant.loop import Loop
+
+__all__ = ["Deadline", "Realtime", "CLOCK_TICK", "MIN_TICK"]
+
+#: Longest wall time between two wake-ups (each publishes /clock), seconds.
+CLOCK_TICK = 5e-3
+#: Shortest timer period (an event already due is published at once), seconds.
+MIN_TICK = 5e-5
+
+
+class Deadline(NamedTuple):
+    """Scheduled actuation: sample k's actuation instant and its answer once it arrives."""
+
+    t: float          # actuation time t_k + delay (simulation time)
+    delay: float      # delay after the sample (actuation_delay + jitter)
+    key: tuple        # the sample's stamp key
+    k: int            # sample index
+    sent: float       # wall time the sample was published
+    dv: float | None  # the answer, None until it arrives
+
+
+class Realtime(Loop):
+    """The realtime loop over an engine (see the module docstring)."""
+
+    t0 = 0.0           # simulation time at wall time wall0
+    wall0 = 0.0
+    sample = None      # stamp key of the latest sample
+    deadline = None    # scheduled: the current sample's Deadline
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.pending = {}      # stamp key -> wall time sent, the last two unanswered samples
+        self.queue = []        # the current period's events not yet published, in time order
+
+    def now(self, wall: float | None = None) -> float:
+        """Simulation time at wall time ``wall`` (default: now)."""
+        wall = self.clock() if wall is None else wall
+        return self.t0 + (wall - self.wall0) * self.settings.time_scale
+
+    def start(self) -> None:
+        """Sample 0 at t = 0, now."""
+        self.reset(self.engine.sample())
+
+    def reset(self, ev: Event) -> None:
+        """After ``engine.reset()``: t = 0 now, and its sample 0 ``ev`` goes out."""
+        self.t0, self.wall0 = 0.0, self.clock()
+        self.finished = False
+        self.pending.clear()
+        self.deadline = None
+        self.publish_sample(ev)
+
+    def rebase(self) -> None:
+        """Keep the simulation time continuous across a change of time_scale (call it
+        before the new settings take effect)."""
+        self.t0, self.wall0 = self.now(), self.clock()
+
+    def publish_sample(self, ev: Event) -> None:
+        """Sample k goes out (as measured); its uncorrected period is integrated first."""
+        self.queue = self.engine.begin_period(0.0)
+        sent = self.clock()
+        self.sample = self.emit(self.engine.measured(ev))
+        self.pending[self.sample] = sent
+        if len(self.pending) > 2:                        # keep the last two samples
+            del self.pending[next(iter(self.pending))]
+        if self.settings.scheduled:                      # sample k's actuation instant
+            delay = self.engine.actuation_delay()
+            self.deadline = Deadline(ev.t + delay, delay, self.sample, self.engine.k,
+                                     sent, None)
+        # pace: how late the sample went out against its simulation time
+        self.lags.append(sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale)
+
+    def tick(self):
+        """A wake-up: publish what is due; the simulation time now, or None when over."""
+        if self.finished:
+            return None
+        now = self.now()
+        self.advance(now)
+        return None if self.finished else now
+
+    def wake_in(self, now: float) -> float:
+        """Wall seconds to the next event due after simulation time ``now``, within
+        [MIN_TICK, CLOCK_TICK] (at least every CLOCK_TICK for /clock)."""
+        due = self.queue[0].t if self.queue else self.engine.seg.te
+        if self.deadline is not None:
+            due = min(due, self.deadline.t)
+        return min(max((due - now) / self.settings.time_scale, MIN_TICK), CLOCK_TICK)
+
+    def advance(self, now: float) -> None:
+        """Publish everything due up to simulation time ``now``, actuating on schedule."""
+        while True:
+            q = self.queue
+            dl = self.deadline
+            due = dl is not None and dl.t <= now
+            i = 0
+            while i < len(q) and (q[i].t < dl.t if due else q[i].t <= now):
+                self.emit(q[i])
+                i += 1
+            del q[:i]
+            if due:
+                self._actuate(dl)
+                continue
+            if now < self.engine.seg.te:
+                return
+            for ev in q:
+                self.emit(ev)
+            ev = self.next_sample()
+            if ev is None:
+                return
+            self.publish_sample(ev)
+
+    def answer(self, key: tuple, dv: float) -> bool:
+        """The correction ``dv`` answering the sample stamped ``key``; True when the
+        wake-up must be re-armed (an on-arrival split may bring an event forward)."""
+        if self.settings.scheduled:
+            self._answer_scheduled(key, dv)
+            return False
+        return self._on_arrival(key, dv)
+
+    def _answer_scheduled(self, key: tuple, dv: float) -> None:
+        """Scheduled actuation: keep the answer of the current sample for its deadline.
+
+        The answer must arrive (this runs) before the sample's actuation instant
+        t_k + delay in simulation time; one that comes later is dropped and counted (its
+        deadline was already reported as missed).
+        """
+        if self.finished:
+            self.sink.ignored(f"stamp {key}: the scene is not running")
+            return
+        wall = self.clock()
+        self.advance(self.now(wall))     # a deadline already due is handled first
+        if self.finished:
+            return
+        dl = self.deadline
+        sent = self.pending.pop(key, None)
+        if sent is None:
+            self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
+                              "(stale, duplicate or foreign)")
+            return
+        latency = wall - sent
+        self.latencies.append(latency)
+        self.sink.latency(latency)
+        if dl is None or dl.key != key:
+            self.stats["late"] += 1
+            self.sink.late(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
+                           "after its actuation time")
+            return
+        self.deadline = dl._replace(dv=dv)
+
+    def _actuate(self, dl: Deadline) -> None:
+        """Sample k's actuation instant: its answer, or 0 (a deadline miss), at t_k + delay."""
+        self.deadline = None
+        dv = dl.dv
+        if dv is None:
+            dv = 0.0
+            self.sink.miss(dl.k, dl.key, dl.t, self.clock() - dl.sent)
+        elif self.engine.correction_lost():
+            self.stats["lost"] += 1
+            dv = 0.0
+        else:
+            self.stats["applied"] += 1
+        self.queue = self.engine.actuate(dv, dl.delay)
+
+    def _on_arrival(self, key: tuple, dv: float) -> bool:
+        """Apply a correction at the simulation time of its arrival.
+
+        It must answer one of the last two samples, once: the latest (normal) or the
+        one before, when the answer comes after the next sample went out (counted as
+        late, applied all the same: the next opportunity). Anything else is ignored.
+        """
+        sent = self.pending.pop(key, None)
+        if sent is None or self.finished:
+            self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
+                              "(stale, duplicate or foreign)")
+            return False
+        wall = self.clock()              # the correction acts at this instant's sim time
+        now = self.now(wall)
+        self.advance(now)
+        if self.finished:
+            return False
+        if key != self.sample:
+            self.stats["late"] += 1
+        latency = wall - sent
+        self.latencies.append(latency)
+        self.sink.latency(latency)
+        if self.engine.correction_lost():
+            self.stats["lost"] += 1
+            return False
+        self.queue = self.engine.split(now, dv)
+        self.stats["applied"] += 1
+        return True

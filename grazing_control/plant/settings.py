@@ -1,0 +1,251 @@
+"""The simulator's parameters: one table (name, type, default, range, doc) and their validation.
+
+:data:`PARAMETERS` is the single source of the sim node's simulation parameters: the
+node declares each of them from it (type, default, description, range, read-only) and
+validates a set of values with :func:`settings_from_values`, which returns the frozen
+:class:`SimSettings` the engine runs on, or raises :class:`ParameterError` naming the bad
+parameter and its valid range (nothing half-applied: the caller keeps its old settings).
+
+The model parameters (zeta, r, omega, delta_d, tau0, pi2_offset) are validated by
+:class:`grazing_control.oscillator.params.OscillatorParams` (spec section 1); the
+actuation delay is the one of docs/theory_delay.md (0 <= delay < T); the injected faults
+are :class:`grazing_control.plant.faults.FaultModel`'s (issue 8 section 3).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
+
+from grazing_control.dynamics.fidelity import FIDELITIES
+from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.plant.faults import FaultModel
+
+__all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "MODEL_KEYS",
+           "SimSettings", "settings_from_values", "default_values", "initial_deviation"]
+
+TWO_PI = 2.0 * math.pi
+MODES = ("lockstep", "realtime")
+#: When a realtime correction acts: at t_k + actuation_delay (scheduled), when it arrives
+#: (on_arrival, the original behaviour), or auto: scheduled if actuation_delay > 0 or
+#: jitter > 0, else on_arrival. Lockstep always acts at t_k + actuation_delay.
+ACTUATIONS = ("auto", "scheduled", "on_arrival")
+MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
+
+
+class Parameter(NamedTuple):
+    """One node parameter: ``kind`` is double, integer, string or bool; ``lo``/``hi`` the
+    closed range a ROS descriptor states (None: unbounded; the validation is
+    :func:`settings_from_values`'), ``choices`` the valid strings, ``read_only`` whether it
+    may change while the node runs."""
+
+    name: str
+    kind: str
+    default: object
+    doc: str
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple = ()
+    read_only: bool = False
+
+
+_REF = OscillatorParams()
+
+#: The simulation parameters of sim_node, in declaration order (docs/nodes.md).
+PARAMETERS = (
+    Parameter("zeta", "double", _REF.zeta, "damping ratio zeta, 0 < zeta < 1", 0.0, 1.0),
+    Parameter("r", "double", _REF.r, "coefficient of restitution r, 0 < r < 1", 0.0, 1.0),
+    Parameter("omega", "double", study_omega(), "forcing frequency omega > 0 (nondimensional)",
+              0.0),
+    Parameter("delta_d", "double", 0.0,
+              "wall clearance Delta d = d - d* (< 0: impacting side)"),
+    Parameter("tau0", "double", 0.0, "forcing phase tau0 (reduced mod 2 pi; the sampled "
+              "dynamics start on Pi2 and do not depend on it)"),
+    Parameter("pi2_offset", "double", _REF.pi2_offset,
+              "phase of Pi2 after Pi1, 0 < pi2_offset < 2 pi (study: pi/2)", 0.0, TWO_PI),
+    Parameter("x0", "double", math.nan, "initial position on Pi2; NaN = x** (grazing point)"),
+    Parameter("v0", "double", math.nan, "initial velocity on Pi2; NaN = v** (grazing point)"),
+    Parameter("mode", "string", "lockstep", "lockstep (wait for each correction) or realtime "
+              "(paced to the wall clock)", choices=MODES, read_only=True),
+    Parameter("time_scale", "double", 1.0,
+              "realtime: simulation seconds per wall second, > 0", 0.0),
+    Parameter("state_period", "double", 1.0, "simulation time between oscillator/state "
+              "messages; 0 disables them", 0.0),
+    Parameter("answer_timeout", "double", 1.0, "lockstep: wall seconds to wait for the "
+              "correction of a sample, then apply none", 0.0),
+    Parameter("max_periods", "integer", 0, "forcing periods to simulate; 0 = unbounded", 0),
+    Parameter("fidelity", "string", "exact", "model fidelity: exact (closed-form flow), zdm2 / "
+              "zdm1 (normal-form maps), ode (solve_ivp, comparison); lockstep only for all "
+              "but exact", choices=FIDELITIES),
+    Parameter("noise", "double", 0.0,
+              "std of Gaussian velocity noise added at each Pi2 sample", 0.0),
+    Parameter("seed", "integer", 0, "seed of the noise generator, >= 0 (applied at start and "
+              "reset)", 0),
+    Parameter("actuation_delay", "double", 0.0,
+              "simulation time from a Pi2 sample to its correction, 0 <= actuation_delay < T "
+              "(the controller YAML's actuation_delay)", 0.0, read_only=True),
+    Parameter("actuation", "string", "auto",
+              "realtime: scheduled (act at t_k + actuation_delay; a later answer is a "
+              "deadline miss), on_arrival (act when the answer arrives), auto (scheduled if "
+              "actuation_delay or jitter > 0)", choices=ACTUATIONS, read_only=True),
+    Parameter("loss", "double", 0.0, "injected fault: probability that a correction is "
+              "dropped, 0..1 (FaultModel, seed)", 0.0, 1.0, read_only=True),
+    Parameter("measurement_noise", "double", 0.0,
+              "injected fault: std of Gaussian noise on the x and v of the published Pi2 "
+              "sample (FaultModel, seed)", 0.0, read_only=True),
+    Parameter("jitter", "double", 0.0,
+              "injected fault: std of the actuation time around actuation_delay, simulation "
+              "time (FaultModel, seed)", 0.0, read_only=True),
+)
+
+SETTING_KEYS = tuple(p.name for p in PARAMETERS)
+
+
+def default_values() -> dict:
+    """{name: default} of :data:`PARAMETERS` (what a node without overrides starts with)."""
+    return {p.name: p.default for p in PARAMETERS}
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """The sim node's validated parameters (see :func:`settings_from_values`)."""
+
+    params: OscillatorParams
+    x0: float
+    v0: float
+    mode: str
+    time_scale: float
+    state_period: float
+    answer_timeout: float
+    max_periods: int
+    fidelity: str
+    noise: float
+    seed: int
+    actuation_delay: float = 0.0
+    actuation: str = "auto"
+    loss: float = 0.0
+    measurement_noise: float = 0.0
+    jitter: float = 0.0
+
+    @property
+    def scheduled(self) -> bool:
+        """Realtime corrections act at t_k + actuation_delay (else on arrival)."""
+        if self.actuation == "auto":
+            return self.actuation_delay > 0.0 or self.jitter > 0.0
+        return self.actuation == "scheduled"
+
+    def describe(self) -> str:
+        """One line for the node's start-up log: mode, scene, actuation, faults."""
+        text = (f"mode={self.mode} delta_d={self.params.delta_d!r} "
+                f"max_periods={self.max_periods} state_period={self.state_period} "
+                f"actuation={'scheduled' if self.scheduled else 'on_arrival'} "
+                f"actuation_delay={self.actuation_delay!r}")
+        if self.faults.active:
+            text += (f" faults loss={self.loss!r} measurement_noise="
+                     f"{self.measurement_noise!r} jitter={self.jitter!r} seed={self.seed}")
+        return text
+
+    @cached_property
+    def faults(self) -> FaultModel:
+        """The injected faults (loss, measurement noise, jitter) with the node's seed."""
+        return FaultModel(self.loss, self.measurement_noise, self.jitter, self.seed)
+
+
+def _finite(name, value, ok, valid):
+    value = float(value)
+    if not (math.isfinite(value) and ok(value)):
+        raise ParameterError(f"{name}={value!r} is invalid: valid range is {valid}")
+    return value
+
+
+def settings_from_values(values: dict) -> SimSettings:
+    """Validate the sim node's parameter values; raise ParameterError naming the bad one.
+
+    ``values`` maps names of :data:`PARAMETERS` to values; a name left out takes its
+    default. The model parameters go through :class:`OscillatorParams` (its message names
+    the parameter and its range, spec section 1); the initial state must be finite or NaN
+    (= X**) and not beyond the wall (x0 <= d).
+    """
+    values = {**default_values(), **values}
+    p = OscillatorParams(**{k: values[k] for k in MODEL_KEYS})
+    mode = str(values["mode"])
+    if mode not in MODES:
+        raise ParameterError(f"mode={mode!r} is invalid: valid values are {', '.join(MODES)}")
+    fidelity = str(values["fidelity"])
+    if fidelity not in FIDELITIES:
+        raise ParameterError(
+            f"fidelity={fidelity!r} is invalid: valid values are {', '.join(FIDELITIES)}")
+    if fidelity != "exact" and mode == "realtime":
+        raise ParameterError(
+            f"fidelity={fidelity!r} is invalid in realtime mode: valid there is 'exact' only "
+            "(corrections land inside a period, which only the exact flow can split)")
+    x0, v0 = float(values["x0"]), float(values["v0"])
+    for name, value in (("x0", x0), ("v0", v0)):
+        if math.isinf(value):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite real "
+                                 "number, or NaN for the grazing point X**")
+    if not math.isnan(x0) and x0 > p.d:
+        raise ParameterError(f"x0={x0!r} is invalid: valid range is x0 <= d = {p.d!r} "
+                             "(the state must not be beyond the wall)")
+    max_periods = int(values["max_periods"])
+    if max_periods < 0:
+        raise ParameterError(f"max_periods={max_periods} is invalid: valid range is >= 0 "
+                             "(0 = unbounded)")
+    seed = int(values["seed"])
+    if seed < 0:
+        raise ParameterError(f"seed={seed} is invalid: valid range is seed >= 0")
+    actuation = _actuation_values(values, p, mode, fidelity)
+    return SimSettings(
+        params=p, x0=x0, v0=v0, mode=mode,
+        time_scale=_finite("time_scale", values["time_scale"], lambda v: v > 0.0,
+                           "a finite time_scale > 0"),
+        state_period=_finite("state_period", values["state_period"], lambda v: v >= 0.0,
+                             "a finite state_period >= 0 (0 disables oscillator/state)"),
+        answer_timeout=_finite("answer_timeout", values["answer_timeout"],
+                               lambda v: v > 0.0, "a finite answer_timeout > 0"),
+        max_periods=max_periods, fidelity=fidelity,
+        noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
+        seed=seed, **actuation)
+
+
+def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: str) -> dict:
+    """Validate actuation_delay, actuation and the injected faults (docs/nodes.md)."""
+    out = {
+        "actuation_delay": _finite(
+            "actuation_delay", values["actuation_delay"],
+            lambda v: 0.0 <= v < p.period,
+            f"0 <= actuation_delay < T = {p.period!r} (simulation time)"),
+        "loss": _finite("loss", values["loss"], lambda v: 0.0 <= v <= 1.0, "0 <= loss <= 1"),
+        "measurement_noise": _finite("measurement_noise", values["measurement_noise"],
+                                     lambda v: v >= 0.0, "a finite measurement_noise >= 0"),
+        "jitter": _finite("jitter", values["jitter"], lambda v: v >= 0.0,
+                          "a finite jitter >= 0 (simulation time)"),
+    }
+    actuation = str(values["actuation"])
+    if actuation not in ACTUATIONS:
+        raise ParameterError(f"actuation={actuation!r} is invalid: valid values are "
+                             f"{', '.join(ACTUATIONS)}")
+    out["actuation"] = actuation
+    split = out["actuation_delay"] > 0.0 or out["jitter"] > 0.0
+    if split and fidelity != "exact":
+        raise ParameterError(
+            f"fidelity={fidelity!r} is invalid with actuation_delay or jitter > 0: valid "
+            "there is 'exact' only (the correction splits the period)")
+    if mode == "realtime" and actuation == "on_arrival" and out["jitter"] > 0.0:
+        raise ParameterError(f"jitter={out['jitter']!r} is invalid with actuation=on_arrival: "
+                             "valid there is 0 (the actuation time is the arrival)")
+    if mode == "realtime" and actuation == "scheduled" and not split:
+        raise ParameterError(
+            "actuation_delay=0.0 is invalid with actuation=scheduled in realtime mode: valid "
+            f"range is 0 < actuation_delay < T = {p.period!r} (no answer can arrive at its "
+            "own sample's instant); use actuation:=on_arrival to apply on arrival")
+    return out
+
+
+def initial_deviation(p: OscillatorParams, x0: float, v0: float) -> tuple:
+    """(x0 - x**, v0 - v**) with NaN meaning the grazing point's coordinate: as simulate()."""
+    x = p.x_ref if math.isnan(x0) else x0
+    v = p.v_ref if math.isnan(v0) else v0
+    return x - p.x_ref, v - p.v_ref

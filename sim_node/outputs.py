@@ -1,0 +1,62 @@
+"""sim_node's outputs: the plant loops' sink, as messages on the topics and log lines.
+
+:class:`Outputs` is the :class:`grazing_control.plant.loop.Sink` of the node: each
+:class:`grazing_control.plant.engine.Event` goes out as packed CDR
+(:mod:`grazing_control.ros.cdr`) on its topic (docs/nodes.md, "Topics"); what the loops
+count (ignored, malformed, late answers, timeouts, deadline misses) is logged at most
+once per two seconds per kind (:class:`grazing_control.ros.common.Throttled`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from grazing_control.plant.engine import Event
+from grazing_control.ros import cdr
+from grazing_control.ros.common import Throttled
+
+__all__ = ["Outputs"]
+
+
+class Outputs:
+    """The loops' sink (:class:`grazing_control.plant.loop.Sink`): topics and log lines."""
+
+    def __init__(self, node):
+        self.node = node
+        log = node.get_logger()
+        self.ignored = Throttled(log, "correction ignored")
+        self.malformed = Throttled(log, "malformed correction ignored")
+        self.timeout = Throttled(log, "no correction within answer_timeout, none applied")
+        self.misses = Throttled(log, "deadline missed: no correction at the actuation time, "
+                                     "none applied")
+        self.late = Throttled(log, "answer after its deadline dropped")
+        self.warn = log.warning
+
+    def publish(self, ev: Event) -> tuple:
+        """Publish an event as packed CDR; its stamp as (sec, nanosec)."""
+        n = self.node
+        sec, ns = stamp = cdr.stamp_parts(ev.t)
+        if ev.kind == "impact":
+            n.pub_impact.publish(cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase))
+            return stamp
+        data = cdr.joint_state(sec, ns, ev.x, ev.v, math.cos(ev.phase))
+        if ev.kind == "pi1":
+            n.pub_pi1.publish(data)
+        elif ev.kind == "pi2":
+            if n.settings.mode == "lockstep":
+                n.pub_clock.publish(cdr.clock(sec, ns))
+            n.pub_pi2.publish(data)
+        else:
+            n.pub_state.publish(data)
+        return stamp
+
+    def latency(self, seconds: float) -> None:
+        self.node.pub_latency.publish(cdr.float64(seconds))
+
+    def miss(self, k: int, key: tuple, t: float, waited: float) -> None:
+        self.misses(f"sample {k} (stamp {key}), actuation at t={t:.9g}, "
+                    f"{waited * 1e3:.3f} ms after the sample went out")
+        self.node.pub_miss.publish(cdr.vector3_stamped(*key, float(k), t, waited))
+
+    def finish(self) -> None:
+        self.node.finish()

@@ -1,0 +1,301 @@
+"""The plant's two loops without ROS: lockstep and realtime over a recording sink and a
+fake wall clock (grazing_control.plant.lockstep, .realtime, .loop).
+
+The references are the core's: :func:`grazing_control.dynamics.simulate.simulate` and a
+loop of :func:`grazing_control.dynamics.simulate.period_step` written here, one call per
+sample with the delay of docs/theory_delay.md. The realtime loop is driven by a clock the
+test advances, so deadlines, misses, late answers and splits happen exactly where the
+test puts them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.simulate import period_step, simulate
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.lockstep import Lockstep
+from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, Realtime
+from grazing_control.plant.settings import settings_from_values
+
+P = OscillatorParams(delta_d=-5e-6)
+
+
+def settings(**kw):
+    return settings_from_values({"delta_d": P.delta_d, **kw})
+
+
+class Recorder:
+    """A sink that keeps what a loop publishes, keyed like the node (stamp in ns)."""
+
+    def __init__(self):
+        self.events, self.misses, self.latencies = [], [], []
+        self.counts = {"ignored": 0, "late": 0, "timeout": 0, "warn": 0}
+        self.finished = 0
+
+    def publish(self, ev):
+        self.events.append(ev)
+        return (int(round(ev.t * 1e9)),)
+
+    def samples(self):
+        return [e for e in self.events if e.kind == "pi2"]
+
+    def latency(self, seconds):
+        self.latencies.append(seconds)
+
+    def miss(self, k, key, t, waited):
+        self.misses.append((k, key, t, waited))
+
+    def ignored(self, text):
+        self.counts["ignored"] += 1
+
+    def late(self, text):
+        self.counts["late"] += 1
+
+    def timeout(self, text):
+        self.counts["timeout"] += 1
+
+    def warn(self, text):
+        self.counts["warn"] += 1
+
+    def finish(self):
+        self.finished += 1
+
+
+class Clock:
+    """A wall clock the test moves."""
+
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def key(ev):
+    return (int(round(ev.t * 1e9)),)
+
+
+def law(c1, c2, ev):
+    """Eq. 28 on the published (physical) sample, as controller_node computes it."""
+    return c1 * (ev.x - P.x_ref) + c2 * (ev.v - P.v_ref)
+
+
+def reference(n, c1, c2, on, delay, skip=()):
+    """The core, one period_step per sample: the Pi2 samples (physical) and corrections.
+    Samples in ``skip`` get no correction (a miss)."""
+    dx = dv = 0.0
+    out = []
+    for k in range(n):
+        ev_x, ev_v = P.x_ref + dx, P.v_ref + dv
+        out.append((ev_x, ev_v))
+        dvc = c1 * (ev_x - P.x_ref) + c2 * (ev_v - P.v_ref) if k >= on and k not in skip \
+            else 0.0
+        seg = period_step(P, dx, dv, dvc, delay=delay)
+        dx, dv = seg.dx, seg.dv
+    return np.array(out)
+
+
+# ==================================================================== lockstep
+def test_lockstep_without_corrections_is_simulate_sample_for_sample():
+    n = 40
+    sink = Recorder()
+    loop = Lockstep(Engine(settings(max_periods=n, state_period=0.5)), sink, Clock())
+    loop.start()
+    while not loop.finished:
+        loop.answer(loop.waiting, 0.0)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    np.testing.assert_array_equal(got, simulate(P, n).pi2)
+    assert sink.finished == 1 and loop.stats["applied"] == n
+    assert sum(e.kind == "pi1" for e in sink.events) == n
+    assert sum(e.kind == "impact" for e in sink.events) == loop.engine.impacts == \
+        simulate(P, n).impacts_per_period.sum()
+
+
+@pytest.mark.parametrize("delay", [0.0, 5.0])
+def test_lockstep_controlled_is_the_cores_period_loop_bit_for_bit(delay):
+    n, on, c2 = 300, 100, -1.0
+    c1 = degenerate_c1(P, c2, delay)
+    sink = Recorder()
+    loop = Lockstep(Engine(settings(max_periods=n, state_period=0.0,
+                                    actuation_delay=delay)), sink, Clock())
+    loop.start()
+    while not loop.finished:
+        ev = sink.samples()[-1]
+        loop.answer(loop.waiting, law(c1, c2, ev) if loop.engine.k >= on else 0.0)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    np.testing.assert_array_equal(got, reference(n, c1, c2, on, delay))
+    if delay == 0.0:
+        # and simulate's own loop (its law on the deviation: rounding apart; with a delay
+        # simulate does not split its uncontrolled periods, so chaos parts the rounding)
+        ref = simulate(P, n, gains=Gains(c1, c2, delay), control_after=on).pi2
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    assert np.ptp(got[-50:, 0]) < 1e-12             # captured on the 1/1 orbit
+
+
+def test_lockstep_ignores_other_stamps_and_times_out():
+    clock = Clock()
+    sink = Recorder()
+    loop = Lockstep(Engine(settings(answer_timeout=0.5)), sink, clock)
+    loop.start()
+    first = loop.waiting
+    loop.answer((12345,), 0.1)                        # foreign
+    assert sink.counts["ignored"] == 1 and loop.engine.k == 0
+    clock.now += 0.4
+    loop.check_timeout()
+    assert loop.engine.k == 0                         # not yet
+    clock.now += 0.2
+    loop.check_timeout()
+    assert sink.counts["timeout"] == 1 and loop.engine.k == 1 and loop.stats["applied"] == 0
+    loop.answer(first, 0.1)                           # its sample has gone: ignored
+    assert sink.counts["ignored"] == 2 and loop.engine.k == 1
+
+
+def test_lockstep_loss_drops_the_corrections_the_fault_model_draws():
+    sink = Recorder()
+    s = settings(loss=0.4, seed=5, max_periods=60)
+    loop = Lockstep(Engine(s), sink, Clock())
+    loop.start()
+    while not loop.finished:
+        loop.answer(loop.waiting, 1e-3)
+    lost = sum(s.faults.draw(k).dropped for k in range(60))
+    assert loop.stats["lost"] == lost and loop.stats["applied"] == 60 - lost and 0 < lost < 60
+
+
+def test_lockstep_reset_starts_again_from_sample_zero():
+    sink = Recorder()
+    loop = Lockstep(Engine(settings(x0=-0.5, v0=-1.0)), sink, Clock())
+    loop.start()
+    for _ in range(5):
+        loop.answer(loop.waiting, 0.0)
+    loop.reset(loop.engine.reset())
+    for _ in range(5):
+        loop.answer(loop.waiting, 0.0)
+    s = sink.samples()
+    assert [e.t for e in s[6:]] == [e.t for e in s[:6]]
+    assert [(e.x, e.v) for e in s[6:]] == [(e.x, e.v) for e in s[:6]]
+
+
+# ==================================================================== realtime
+def run_realtime(s, n, answer, clock, sink, step=None):
+    """Drive a realtime loop for n samples: at each wake-up the clock jumps to the next
+    due instant (wake_in), and ``answer(loop, sample)`` is called right after each sample
+    goes out (it may move the clock and answer or not)."""
+    loop = Realtime(Engine(s), sink, clock)
+    loop.start()
+    seen = 0
+    while not loop.finished:
+        samples = sink.samples()
+        while seen < len(samples):
+            answer(loop, samples[seen])
+            seen += 1
+        now = loop.now()
+        clock.now += loop.wake_in(now) if step is None else step
+        loop.tick()
+    return loop
+
+
+def test_realtime_wake_ups_stay_within_the_tick_bounds():
+    clock, sink = Clock(), Recorder()
+    loop = Realtime(Engine(settings(mode="realtime", time_scale=1000.0)), sink, clock)
+    loop.start()
+    for _ in range(200):
+        w = loop.wake_in(loop.now())
+        assert MIN_TICK <= w <= CLOCK_TICK
+        clock.now += w
+        loop.tick()
+    # published in time order, each when due, never early
+    ts = [e.t for e in sink.events]
+    assert ts == sorted(ts) and ts[-1] <= loop.now()
+
+
+def test_realtime_scheduled_equals_lockstep_bit_for_bit_and_misses_cost_one_correction():
+    n, on, delay, c2 = 200, 60, 5.0, -1.0
+    c1 = degenerate_c1(P, c2, delay)
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay,
+                 max_periods=n, state_period=0.0)
+    skip = {80, 81, 150}
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        k = round(ev.t / P.period)
+        if k in skip:
+            return                                    # this answer never comes in time
+        clock.now += 1e-3                             # 1 ms round trip < 5 ms of delay
+        loop.answer(key(ev), law(c1, c2, ev) if k >= on else 0.0)
+
+    loop = run_realtime(s, n, answer, clock, sink)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    np.testing.assert_array_equal(got, reference(n, c1, c2, on, delay, skip))
+    assert [m[0] for m in sink.misses] == sorted(skip)
+    assert all(m[2] == pytest.approx(m[0] * P.period + delay, abs=1e-9) for m in sink.misses)
+    assert loop.stats["applied"] == n - len(skip)
+    assert sink.latencies == pytest.approx([1e-3] * (n - len(skip)))
+
+
+def test_realtime_scheduled_answer_after_its_deadline_is_dropped_as_late():
+    delay = 5.0
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=20)
+    clock, sink = Clock(), Recorder()
+    late = []
+
+    def answer(loop, ev):
+        if late:                                     # the late answer of sample 3
+            loop.answer(late.pop(), 0.5)
+        if round(ev.t / P.period) == 3:
+            late.append(key(ev))                      # answered after the next sample
+            return
+        loop.answer(key(ev), 0.0)
+
+    loop = run_realtime(s, 20, answer, clock, sink)
+    assert [m[0] for m in sink.misses] == [3]
+    assert sink.counts["late"] == 1 and loop.stats["late"] == 1
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    np.testing.assert_array_equal(got, reference(20, 0.0, 0.0, 0, delay))  # 0.5 never acted
+
+
+def test_realtime_on_arrival_splits_the_period_where_the_answer_arrives():
+    s = settings(mode="realtime", time_scale=1000.0, max_periods=3, state_period=0.0)
+    clock, sink = Clock(), Recorder()
+    dv = 1e-3
+
+    def answer(loop, ev):
+        if round(ev.t / P.period) == 0:
+            clock.now += 2e-3                         # arrives 2 ms = 2.0 time units later
+            loop.answer(key(ev), dv)
+
+    run_realtime(s, 3, answer, clock, sink)
+    # the core: the flow to t = 2, the jump there, the flow on (period_step's delay)
+    seg = period_step(P, 0.0, 0.0, dv, delay=2.0)
+    got = sink.samples()[1]
+    assert got.x == pytest.approx(P.x_ref + seg.dx, abs=1e-12)
+    assert got.v == pytest.approx(P.v_ref + seg.dv, abs=1e-12)
+
+
+def test_realtime_lags_are_how_late_each_sample_went_out():
+    s = settings(mode="realtime", time_scale=1000.0, max_periods=10)
+    clock, sink = Clock(), Recorder()
+    loop = run_realtime(s, 10, lambda loop, ev: None, clock, sink, step=1e-3)
+    lags = np.array(loop.lags)
+    assert lags[0] == 0.0 and np.all(lags >= 0) and np.all(lags < 1e-3 + 1e-12)
+
+
+def test_rebase_keeps_the_simulation_time_continuous():
+    clock, sink = Clock(), Recorder()
+    engine = Engine(settings(mode="realtime", time_scale=1000.0))
+    loop = Realtime(engine, sink, clock)
+    loop.start()
+    clock.now += 2e-3
+    t = loop.now()
+    loop.rebase()
+    engine.settings = settings(mode="realtime", time_scale=10.0)
+    assert loop.now() == pytest.approx(t, abs=1e-12)
+    clock.now += 0.1
+    assert loop.now() == pytest.approx(t + 1.0, abs=1e-9)
+    assert math.isfinite(loop.wake_in(loop.now()))

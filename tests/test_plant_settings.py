@@ -1,0 +1,68 @@
+"""The simulator's parameter table and its validation (grazing_control.plant.settings).
+
+sim_node declares its simulation parameters from PARAMETERS and validates them with
+settings_from_values: the table must be complete (every field of SimSettings, every key
+the validation reads), its defaults valid, and every bad value refused with the
+parameter's name and its valid range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+
+import pytest
+
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, PARAMETERS,
+                                            SETTING_KEYS, SimSettings, default_values,
+                                            initial_deviation, settings_from_values)
+
+
+def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
+    names = [p.name for p in PARAMETERS]
+    assert len(set(names)) == len(names) and tuple(names) == SETTING_KEYS
+    fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params"}
+    assert fields | set(MODEL_KEYS) == set(names)
+    kinds = {"double": float, "integer": int, "string": str, "bool": bool}
+    for p in PARAMETERS:
+        assert isinstance(p.default, kinds[p.kind]), p
+        assert p.doc and (p.kind == "string") == bool(p.choices), p
+
+
+def test_the_defaults_are_valid_and_are_the_study_scene():
+    s = settings_from_values({})
+    assert s.params == OscillatorParams(delta_d=0.0)
+    assert (s.mode, s.fidelity, s.actuation) == ("lockstep", "exact", "auto")
+    assert settings_from_values(default_values()) == s
+    assert not s.scheduled and not s.faults.active
+
+
+@pytest.mark.parametrize("p", [p for p in PARAMETERS if p.kind == "double" and p.lo is not None],
+                         ids=lambda p: p.name)
+def test_doubles_below_their_range_or_not_finite_are_refused_by_name(p):
+    for bad in (p.lo - 1.0, math.inf):
+        with pytest.raises(ParameterError, match=rf"^{p.name}=.*invalid.*valid"):
+            settings_from_values({p.name: bad})
+
+
+@pytest.mark.parametrize("name, choices", [("mode", MODES), ("actuation", ACTUATIONS)])
+def test_strings_outside_their_choices_are_refused_with_the_choices(name, choices):
+    with pytest.raises(ParameterError, match=re.escape(", ".join(choices))):
+        settings_from_values({name: "nonsense"})
+    for c in choices:
+        extra = {"actuation_delay": 1.0} if c == "scheduled" else {}
+        assert getattr(settings_from_values({name: c, **extra}), name) == c
+
+
+def test_describe_is_one_line_with_the_faults_only_when_injected():
+    assert "faults" not in settings_from_values({}).describe()
+    text = settings_from_values({"loss": 0.1, "seed": 4}).describe()
+    assert "\n" not in text and "loss=0.1" in text and "seed=4" in text
+
+
+def test_initial_deviation_nan_is_the_grazing_point():
+    p = OscillatorParams(delta_d=-5e-6)
+    assert initial_deviation(p, math.nan, math.nan) == (0.0, 0.0)
+    assert initial_deviation(p, -0.5, math.nan) == (-0.5 - p.x_ref, 0.0)
