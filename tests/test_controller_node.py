@@ -458,3 +458,38 @@ def test_the_predicted_correction_is_the_next_one_on_exact_samples(stream_scene)
     assert abs(dv[-1]) > 1e-4          # control acts: the orbit's correction
     proc.send_signal(2)
     assert proc.wait(10) == 0
+
+
+def test_a_malformed_stream_never_stops_the_answers(stream_scene):
+    """Stream mode: samples with NaN positions, no position, undecodable bytes, a
+    duplicate and an older stamp between good samples; every section is still answered
+    once, in order, and the node exits cleanly with the malformed ones counted."""
+    col, start = stream_scene
+    p = OscillatorParams(delta_d=0.1)               # far from the wall: a free motion
+    proc, log, pub = start("oscillator/state", pi2_source="stream", estimator="arc",
+                           delta_d=p.delta_d, sensor_noise=1e-6, enable_after=0,
+                           c1=GAINS.c1, c2=GAINS.c2)
+    h = p.period / 10
+    for j in range(31):
+        t = j * h
+        psi = p.tau2 + p.omega * t - p.lag
+        good = JointState(name=["mass"], position=[p.amplitude * math.cos(psi)],
+                          velocity=[], effort=[math.cos(t), math.sin(t)])
+        good.header.stamp = stamp_from_seconds(t)
+        pub.publish(good)
+        if j % 5 == 2:
+            bad = JointState(name=["mass"], position=[math.nan], velocity=[], effort=[])
+            bad.header.stamp = stamp_from_seconds(t + 0.5 * h)
+            pub.publish(bad)
+            pub.publish(JointState(name=["mass"]))
+            pub.publish(b"\x00\x01\x00\x00garbage")
+            pub.publish(good)                       # a duplicate
+    got = [(m.header.stamp.sec, m.header.stamp.nanosec)
+           for m in (_answer_of(col, 4) and col.get("controller/velocity_correction"))]
+    assert got == [cdr.stamp_parts(k * p.period) for k in range(4)]
+    est = col.get("controller/estimate")
+    assert all(abs(m.position[0] - p.x_ref) < 1e-9 for m in est[1:])   # a free motion
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    text = log.read_text()
+    assert "answered=4" in text and "malformed=" in text and "Traceback" not in text, text

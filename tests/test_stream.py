@@ -137,3 +137,24 @@ def test_the_model_covariance_is_that_of_its_errors(c2, velocity):
     design = estimate_covariance(p, g, 200, velocity=velocity) * 1e-8
     reported = np.concatenate(covs).mean(axis=0)
     assert np.allclose(np.diag(design), np.diag(reported), rtol=0.1)
+
+
+def test_duplicates_older_samples_and_strays_are_not_used():
+    """A repeated or older stamp is ignored (it must not make a section due early); a
+    stamp far ahead is a stray unless the next sample follows it (a jump: restart
+    there); a non-finite stamp is ignored."""
+    p = OscillatorParams(delta_d=0.1)
+    est = StreamEstimator(p, "arc", 1e-6, "stream", 0.0)
+    t = np.arange(0, 25) * p.period / 10
+    x, _v = _xv(p, t)
+    ks = [d[0] for ti, xi in zip(t[:15], x[:15]) for d in est.add_sample(ti, xi)]
+    assert ks == [0, 1]
+    assert est.add_sample(t[14], x[14]) == [] and est.add_sample(t[12], x[12]) == []
+    assert est.add_sample(math.nan, 0.0) == []
+    assert est.add_sample(1e6, 0.0) == []              # a stray a million seconds ahead
+    ks = [d[0] for ti, xi in zip(t[15:], x[15:]) for d in est.add_sample(ti, xi)]
+    assert ks == [2] and est.ignored == 4
+    far = 1000 * p.period + np.arange(0, 12) * p.period / 10
+    xf, _ = _xv(p, far)
+    ks = [d[0] for ti, xi in zip(far, xf) for d in est.add_sample(ti, xi)]
+    assert ks == [1000, 1001]                          # confirmed by the next sample

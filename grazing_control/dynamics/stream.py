@@ -33,6 +33,9 @@ __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", 
 IMPACT_SOURCES = ("topic", "stream")
 #: Tolerance on times, relative to T: a sample within it of t_k is at t_k.
 _TOL = 1e-9
+#: A sample more than this many periods after the newest is a stray unless the next
+#: sample follows it (then the stream jumped: a restart from there).
+MAX_GAP = 4
 
 
 class StreamEstimator:
@@ -88,6 +91,8 @@ class StreamEstimator:
         self.filter_k = None
         self.resets = 0                 # model fits that fell back to the arc fit
         self.last_t = None
+        self.ignored = 0                # samples not used: duplicates, older, strays
+        self._jump = None               # a sample far ahead, kept until confirmed
 
     # ----------------------------------------------------------------- input
     def add_impact(self, t: float) -> None:
@@ -107,8 +112,26 @@ class StreamEstimator:
         [(k, t_k, Estimate)] now due (normally none or one)."""
         T = self.p.period
         tol = _TOL * T
+        if not math.isfinite(t):
+            self.ignored += 1
+            return []
         if self.last_t is not None and t < self.last_t - T:
+            ignored, resets = self.ignored, self.resets
             self.reset()                # back to the start: the simulator was reset
+            self.ignored, self.resets = ignored, resets
+        elif self.last_t is not None and t <= self.last_t:
+            self.ignored += 1           # a duplicate or an older sample: not used
+            return []
+        elif self.last_t is not None and t > self.last_t + MAX_GAP * T:
+            jump, self._jump = self._jump, (t, x, v)
+            if jump is None or not 0.0 < t - jump[0] <= 2.0 * T:
+                self.ignored += 1       # a stray far ahead, unless the next one follows
+                return []
+            ignored, resets = self.ignored, self.resets
+            self.reset()                # the stream jumped ahead: start again there
+            self.ignored, self.resets = ignored - 1, resets
+            return self.add_sample(*jump) + self.add_sample(t, x, v)
+        self._jump = None
         due = []
         if self.next_k is None:
             self.next_k = max(0, math.ceil((t - tol) / T))
