@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
-           "decode_joint_state", "decode_twist_stamped", "decode_vector3_stamped",
+           "decode_joint_state", "decode_estimate", "decode_twist_stamped", "decode_vector3_stamped",
            "decode_float64", "decode_strings"]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -531,11 +531,29 @@ def decode_joint_state(bag: RawBag, topic: str) -> dict:
     return _columns(b, stamp=stamp, x=x, v=v)
 
 
+def decode_estimate(bag: RawBag, topic: str) -> dict:
+    """The controller's estimate (JointState, effort [var x, cov xv, var v]): columns
+    stamp_ns, x, v, var_x, cov_xv, var_v, times, ok (ok needs the three efforts)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = b.skip_strings(pos)
+    x, nx, pos = b.first_double(pos)
+    v, nv, pos = b.first_double(pos)
+    var_x, ne, pos8 = b.first_double(pos)
+    b.ok &= (nx > 0) & (nv > 0) & (ne >= 3)
+    start = np.where(b.ok, pos8 - 8 * ne, 0)
+    cov_xv = np.where(b.ok, b.f64(start + 8), np.nan)
+    var_v = np.where(b.ok, b.f64(start + 16), np.nan)
+    return _columns(b, stamp=stamp, x=x, v=v, var_x=var_x, cov_xv=cov_xv, var_v=var_v)
+
+
 def decode_twist_stamped(bag: RawBag, topic: str) -> dict:
-    """TwistStamped columns: stamp_ns, dv = twist.linear.x, times, ok."""
+    """TwistStamped columns: stamp_ns, dv = twist.linear.x, dv_next = twist.linear.y (the
+    predicted next correction; NaN: none, 0.0 in bags from before the prediction), times,
+    ok."""
     b, stamp, pos = decode_stamped(bag, topic)
     dv = b.f64(_align(pos, 8))
-    return _columns(b, stamp=stamp, dv=dv)
+    dv_next = b.f64(_align(pos, 8) + 8)
+    return _columns(b, stamp=stamp, dv=dv, dv_next=dv_next)
 
 
 def decode_vector3_stamped(bag: RawBag, topic: str) -> dict:

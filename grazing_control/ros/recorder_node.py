@@ -9,7 +9,11 @@ What it records by default (names relative to the node's namespace):
 ``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
     state at each crossing of Pi1 and Pi2; stamp = crossing time.
 ``controller/velocity_correction`` (geometry_msgs/msg/TwistStamped)
-    twist.linear.x = Delta v; stamp = stamp of the Pi2 sample it answers.
+    twist.linear.x = Delta v, twist.linear.y = the predicted next Delta v (NaN: none);
+    stamp = stamp of the Pi2 sample it answers.
+``controller/estimate`` (sensor_msgs/msg/JointState)
+    stream mode: the controller's Pi2 estimate, position [x^], velocity [v^], effort
+    [var x, cov xv, var v]; stamp = the section time.
 ``/clock`` (rosgraph_msgs/msg/Clock)
     simulation time.
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
@@ -136,7 +140,8 @@ DEFAULT_TOPICS = {
 PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
 #: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
 EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
-                "oscillator/latency": "std_msgs/msg/Float64"}
+                "oscillator/latency": "std_msgs/msg/Float64",
+                "controller/estimate": "sensor_msgs/msg/JointState"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
 #: nothing (used for a topic's metadata when it never had a publisher).
