@@ -15,7 +15,10 @@ Residuals, all in the recording's units:
   W (x_{b-1}(t_b) - X_b).
 
 The constraints are exact in the model, so at the solution of noise-free data every
-residual vanishes; with noise they hold to O(sigma / W^2) (docs: "Constraints").
+residual vanishes; with noise they hold to O(sigma / W^2) (docs: "Constraints"). The
+weight is raised in steps (:data:`CONTINUATION`), each solve starting from the last:
+the initial guess violates the constraints, and a solve at the full weight from there
+would chase them far from the data.
 
 Jacobian: by complex step, J e_p = Im r(p + i h e_p) / h with h = 1e-30, exact to
 rounding because every residual is analytic in the parameters; the arcs' parameters
@@ -47,6 +50,8 @@ __all__ = ["CONSTRAINT_WEIGHT", "IdentificationError", "Problem", "Identificatio
 
 #: Weight of the impact and continuity constraints against the data residuals.
 CONSTRAINT_WEIGHT = 1e4
+#: The weights of the penalty continuation, the last being CONSTRAINT_WEIGHT.
+CONTINUATION = (1.0, 1e2, CONSTRAINT_WEIGHT)
 _H = 1e-30
 
 
@@ -60,6 +65,7 @@ class Problem:
     def __init__(self, rec: Recording, arcs: Arcs, phase: PhaseReference, *,
                  impact_velocities: bool = True):
         self.rec, self.arcs, self.phase = rec, arcs, phase
+        self.weight = CONSTRAINT_WEIGHT
         self.omega, self.tau0 = phase.omega, phase.tau0
         K = arcs.count
         n = 6
@@ -159,7 +165,7 @@ class Problem:
                              V[bi - 1])
         xc, _vc = free_flight(zeta, Om, A, om, psi0[bc - 1], S[bc] - S[bc - 1], X[bc - 1],
                               V[bc - 1])
-        W = CONSTRAINT_WEIGHT
+        W = self.weight
         ar = self.arcs
         pos = {int(b): i for i, b in enumerate(bi)}
         vm_rows = vi[[pos[int(b)] for b in self.b_vm]] - ar.v_minus[self.b_vm] \
@@ -262,8 +268,10 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     Parameters
     ----------
     rec : Recording
-    impacts : "recorded" (the recording's impact times, exact) or "motion" (found from
-        the state stream, their times fitted).
+    impacts : "recorded" (the recording's impact events cut the arcs, their times start
+        the fit) or "motion" (found from the state stream). Either way the impact times
+        are fitted: held fixed, a recorded time that is off (a soft contact's entry, a
+        detector's delay) would make the impact constraints inconsistent.
     impact_velocities : use the recorded v-, v+ as data (weighted like a sample).
     max_arcs : fit the recording up to its max_arcs-th event (None: all of it).
     max_nfev : most evaluations of the least-squares solver.
@@ -288,7 +296,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
             vm = vp = None
         else:
             rec_events = rec.impact_t
-            free = False
+            free = True      # recorded times start the fit; the state stream decides
             vm, vp = rec.impact_v_minus, rec.impact_v_plus
         if max_arcs is not None:
             ev = np.sort(np.concatenate([rec_events[(rec_events > rec.t[0])],
@@ -318,9 +326,15 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
-    sol = least_squares(prob.residual, p0, jac=prob.jacobian, bounds=(lo, hi), method="trf",
-                        x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_nfev)
-    p = sol.x
+    # penalty continuation: the initial guess violates the constraints; raising their
+    # weight in steps keeps each solve near the last one (docs: "Constraints")
+    p = p0
+    for weight in CONTINUATION:
+        prob.weight = weight
+        sol = least_squares(prob.residual, p, jac=prob.jacobian, bounds=(lo, hi),
+                            method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                            max_nfev=max_nfev)
+        p = sol.x
     res = prob.residual(p)
     J = prob.jacobian(p)
     data = res[:prob.m_data]
@@ -345,7 +359,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     se_nd[inf_nd] = np.inf
     xres = data[:rec.t.size]
     vres = data[rec.t.size:prob.offsets[2]]
-    cons = res[prob.m_data:] / CONSTRAINT_WEIGHT
+    cons = res[prob.m_data:] / prob.weight
     return Identification(
         model=model,
         stderr={n: float(s) for n, s in zip(GLOBAL_NAMES, se)},
