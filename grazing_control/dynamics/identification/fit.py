@@ -262,7 +262,7 @@ def _covariance(J, sigma2, k=6):
 
 
 def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
-             max_arcs: int | None = 400, max_nfev: int = 200) -> Identification:
+             max_arcs: int | None = 100, max_nfev: int = 200) -> Identification:
     """Fit the model to a recording (module docstring).
 
     Parameters
