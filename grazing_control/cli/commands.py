@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 
 from grazing_control.support.arguments import finite, integer_at_least, non_empty_path
+from .parameter_file import add_params_option, apply_to_args
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import (STUDY_R, STUDY_ZETA, OscillatorParams,
                                                ParameterError, study_omega)
@@ -87,6 +88,7 @@ def _common(parser):
     g.add_argument("--pi2-offset", type=_finite, default=math.pi / 2,
                    help="phase of Pi2 after Pi1, in (0, 2 pi)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_params_option(g)
 
 
 def _method_arg(parser):
@@ -573,10 +575,13 @@ def build_parser() -> argparse.ArgumentParser:
         add_run_arguments(s)
         s.add_argument("--json", action="store_true",
                        help="print one JSON summary object (node output goes to stderr)")
+        add_params_option(s)
         s.set_defaults(func=cmd_run)
 
     from .bag import add_bag_parser
     add_bag_parser(sub)
+    from .identify import add_identify_parser
+    add_identify_parser(sub)
     from grazing_control.studies.robustness.cli import add_robustness_parser
 
     add_robustness_parser(sub, _common, _finite)
@@ -624,6 +629,7 @@ def main(argv=None) -> int:
         # below with one line; numpy's warnings would add lines of their own
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
+            apply_to_args(args, argv)     # --params FILE (cli/parameter_file.py)
             result = args.func(args)
     except (ParameterError, ValueError, RuntimeError, OSError) as exc:
         print(f"grazing: error: {_one_line(exc)}", file=sys.stderr)

@@ -144,10 +144,10 @@ def existence_coefficient(p: OscillatorParams, gains: Gains) -> float:
     """
     n11, _n12, _n21, n22 = period_matrix(p, gains)
     a, r = p.amplitude, p.r
-    den = (n11 - 1.0) * (1.0 + r * n22)
-    if den == 0.0:
-        return math.nan
-    return 0.5 * a + a * (1.0 + r) * (n22 - n11) / den
+    num, den = a * (1.0 + r) * (n22 - n11), (n11 - 1.0) * (1.0 + r * n22)
+    if den == 0.0:      # on the pole of (D9), which a root search over c2 can hit exactly
+        return 0.5 * a if num == 0.0 else math.copysign(math.inf, num)
+    return 0.5 * a + num / den
 
 
 def free_multipliers(p: OscillatorParams, gains: Gains | None) -> np.ndarray:
