@@ -371,6 +371,48 @@ def node_key_matches(key: str, full_name: str) -> bool:
     return re.fullmatch(pattern, full_name) is not None
 
 
+_YAML_FLOATS = {".nan": math.nan, ".NaN": math.nan, ".NAN": math.nan, ".inf": math.inf,
+                ".Inf": math.inf, ".INF": math.inf, "-.inf": -math.inf, "-.Inf": -math.inf,
+                "-.INF": -math.inf, "+.inf": math.inf}
+
+
+def _override_problem(param, text: str):
+    """Why ``-p name:=text`` did not set ``param`` to that value, or None.
+
+    rcl types a ``-p`` value from its text (integer, double, bool, string, array); a value
+    of another type than the declared one, or an integer beyond 64 bits (rcl reads it as
+    a double), is not always refused by rclpy: with a parameter file giving the same name,
+    the file's value silently stayed (``zeta:=abc``, ``max_periods:=1e23``; issue 21).
+    Compared here with what the node holds after declaring its parameters.
+    """
+    from rclpy.parameter import Parameter
+
+    kind, value = param.type_, param.value
+    t = text.strip()
+    if kind == Parameter.Type.DOUBLE:
+        try:
+            want = _YAML_FLOATS[t] if t in _YAML_FLOATS else float(t)
+        except ValueError:
+            return "expected a double (a number with a decimal point, e.g. 0.01)"
+        if not (want == value or (math.isnan(want) and math.isnan(value))):
+            return f"not applied (the node holds {value!r})"
+    elif kind == Parameter.Type.INTEGER:
+        try:
+            want = int(t)
+        except ValueError:
+            return "expected an integer"
+        if not -2**63 <= want < 2**63:
+            return "beyond the 64-bit integer range"
+        if want != value:
+            return f"not applied (the node holds {value!r})"
+    elif kind == Parameter.Type.BOOL:
+        if t.lower() not in ("true", "false"):
+            return "expected true or false"
+        if (t.lower() == "true") != value:
+            return f"not applied (the node holds {value!r})"
+    return None
+
+
 def check_overrides(node, arguments: NodeArguments) -> None:
     """Refuse ``-p`` names the node does not declare; warn about unused file entries.
 
@@ -389,6 +431,10 @@ def check_overrides(node, arguments: NodeArguments) -> None:
         raise StartupError(
             f"unknown parameter {', '.join(unknown)} for {node.get_name()}: valid names "
             f"are {', '.join(declared)}")
+    for name, text in arguments.params.items():
+        problem = _override_problem(node.get_parameter(name), text)
+        if problem:
+            raise StartupError(f"{name}:={text} is invalid: {problem}")
     full = node.get_fully_qualified_name()
     for path, keys in arguments.params_files:
         matching = [key for key in keys if node_key_matches(key, full)]

@@ -54,6 +54,7 @@ from pathlib import Path
 import yaml
 
 from grazing_control.oscillator import kernel
+from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
            "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
@@ -516,6 +517,17 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _periods(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer in "
+                                         "1 .. 2^63 - 1 (sim_node's max_periods)")
+    return value
+
+
 def _key_value(text: str):
     key, sep, value = text.partition(":=")
     if not sep or not key:
@@ -542,9 +554,10 @@ def add_run_arguments(parser) -> None:
                              "(default: config/controller.yaml)")
     parser.add_argument("--bag", dest="bag_dir", default=None,
                         help="record the scene to this bag directory (default: no recording)")
-    parser.add_argument("--periods", type=int, default=None,
-                        help="forcing periods to simulate (default: the parameter file's)")
-    parser.add_argument("--delta-d", dest="delta_d", type=float, default=None,
+    parser.add_argument("--periods", type=_periods, default=None,
+                        help="forcing periods to simulate, 1 .. 2^63 - 1 (default: the "
+                             "parameter file's)")
+    parser.add_argument("--delta-d", dest="delta_d", type=finite, default=None,
                         help="Delta d = d - d* (default: the parameter file's)")
     parser.add_argument("--enable-after", dest="enable_after", type=int, default=None,
                         help="first controlled Pi2 sample (default 1000; -1: never)")
