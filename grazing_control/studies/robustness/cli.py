@@ -1,4 +1,4 @@
-"""``grazing robustness delay|faults``: the robustness studies and their charts.
+"""``grazing robustness delay|faults|noise``: the robustness studies and their charts.
 
 Registered from :func:`grazing_control.cli.build_parser`. Both write their charts (PNG)
 and numbers (JSON) to ``--out`` (default out/robustness) and print a summary (or, with
@@ -146,11 +146,38 @@ def cmd_faults(args):
     return "\n".join(lines)
 
 
+def cmd_noise(args):
+    from grazing_control.oscillator.params import OscillatorParams
+    from .charts import plot_noise_gain
+    from .noise import noise_gain_curves
+
+    base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    record = noise_gain_curves(base, args.delta_d, args.delay, args.points)
+    png = os.path.join(out, "noise_gain.png" if not args.delay else f"noise_gain_delay{args.delay:g}.png")
+    plot_noise_gain(record, png)
+    record.update(seconds=time.perf_counter() - t0, files=[png])
+    with open(os.path.splitext(png)[0] + ".json", "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return record
+    lines = [f"noise gain (std of the Pi2 position per unit measurement noise) over the admissible c2"
+             f"{f', delay {args.delay:g}' if args.delay else ''}",
+             f"{'Delta d':>9} {'least gain':>11} {'at c2':>10} {'c1':>10} {'study c2=-1':>12}"]
+    for c in record["curves"]:
+        b = c["best"]
+        study = "-" if c["study"] is None else f"{c['study']:.4g}"
+        lines.append(f"{c['delta_d']:9.1e} {b['gain']:11.4g} {b['c2']:10.5f} {b['c1']:10.5f} {study:>12}")
+    lines.append(f"chart and numbers in {out} ({record['seconds']:.1f} s)")
+    return "\n".join(lines)
+
+
 _count = integer_at_least(1)
 
 
 def add_robustness_parser(sub, common, finite):
-    """Register ``grazing robustness delay|faults`` on the subparsers ``sub``."""
+    """Register ``grazing robustness delay|faults|noise`` on the subparsers ``sub``."""
     s = sub.add_parser("robustness", help="robustness to the actuation delay and to loss/noise/jitter")
     rsub = s.add_subparsers(dest="study", required=True)
 
@@ -183,3 +210,12 @@ def add_robustness_parser(sub, common, finite):
     f.add_argument("--workers", type=_count, default=2, help="processes (default 2)")
     f.add_argument("--out", default="out/robustness", help="folder for charts and JSON")
     f.set_defaults(func=cmd_faults)
+
+    n = rsub.add_parser("noise", help="noise gain over the admissible c2 at several Delta d (chart)")
+    common(n)
+    n.add_argument("--delta-d", type=finite, nargs="+", default=[-1e-4, -1e-5, -5e-6, -1e-6, -1e-7],
+                   help="wall offsets Delta d < 0 (default -1e-4 -1e-5 -5e-6 -1e-6 -1e-7)")
+    n.add_argument("--delay", type=finite, default=0.0, help="actuation delay of the design (0)")
+    n.add_argument("--points", type=_count, default=201, help="c2 per admissible interval (201)")
+    n.add_argument("--out", default="out/robustness", help="folder for the chart and JSON")
+    n.set_defaults(func=cmd_noise)
