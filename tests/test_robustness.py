@@ -250,3 +250,24 @@ def test_grazing_robustness_noise_chart_and_numbers(tmp_path, capsys):
     assert [c["delta_d"] for c in d["curves"]] == [-1e-4, -1e-5, -5e-6, -1e-6, -1e-7]
     ratio = d["curves"][4]["best"]["gain"] / d["curves"][3]["best"]["gain"]
     assert ratio == pytest.approx(math.sqrt(10.0), rel=0.02)
+
+
+def test_grazing_robustness_model_chart_and_numbers(tmp_path, capsys, monkeypatch):
+    """`grazing robustness model`: the band per design and error, equal to the core's
+    (dynamics.mismatch.instability_band); here on a reduced error list."""
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.mismatch import instability_band
+    from grazing_control.studies.robustness import model
+
+    monkeypatch.setattr(model, "ERRORS", {"zeta": (0.05,), "r": (0.1,)})
+    out = tmp_path / "m"
+    assert main(["robustness", "model", "--c2", "-1", "--out", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert (out / "model_error_bands.png").stat().st_size > 0
+    (design,) = d["designs"]
+    rows = {(r["parameter"], r["error"]): r for r in design["bands"]}
+    assert set(rows) == {("zeta", 0.05), ("zeta", -0.05), ("r", 0.1), ("r", -0.1)}
+    g = Gains(degenerate_c1(OscillatorParams(), -1.0), -1.0)
+    assert rows[("zeta", 0.05)]["end"] == instability_band(OscillatorParams(), g, "zeta", 0.05).end
+    assert rows[("zeta", 0.05)]["end"] < 0.0 and rows[("r", 0.1)]["end"] == 0.0
+    assert rows[("zeta", 0.05)]["k"] == pytest.approx(rows[("zeta", 0.05)]["end"] / 0.0025)

@@ -1,4 +1,4 @@
-"""``grazing robustness delay|faults|noise``: the robustness studies and their charts.
+"""``grazing robustness delay|faults|noise|model``: the robustness studies and their charts.
 
 Registered from :func:`grazing_control.cli.build_parser`. Both write their charts (PNG)
 and numbers (JSON) to ``--out`` (default out/robustness) and print a summary (or, with
@@ -173,11 +173,45 @@ def cmd_noise(args):
     return "\n".join(lines)
 
 
+def cmd_model(args):
+    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.oscillator.params import OscillatorParams
+    from .charts import plot_model_bands
+    from .model import model_error_bands
+
+    base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    if args.c2:
+        designs = [(f"c2 = {c:g}", c) for c in args.c2]
+    else:
+        best = optimize_noise(base.with_(delta_d=-5e-6))
+        designs = [("study", -1.0), ("least noise at -5e-6", best.c2)]
+    record = model_error_bands(base, designs)
+    png = os.path.join(out, "model_error_bands.png")
+    plot_model_bands(record, png)
+    record.update(seconds=time.perf_counter() - t0, files=[png])
+    with open(os.path.join(out, "model_error_bands.json"), "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return record
+    lines = ["band of Delta d next to grazing where the controlled orbit fails (gains designed on "
+             "the nominal model, plant off by a relative error e)",
+             f"{'design':>22} {'param':>6} {'error':>9} {'band end':>11} {'series':>11} {'end/e^2':>10}"]
+    for d in record["designs"]:
+        for r in d["bands"]:
+            end = "none" if r["end"] == 0.0 else f"{r['end']:.4g}"
+            lines.append(f"{d['label']:>22} {r['parameter']:>6} {r['error']:+9.2g} {end:>11} "
+                         f"{r['predicted']:11.4g} {r['k']:10.4g}")
+    lines.append(f"chart and numbers in {out} ({record['seconds']:.1f} s)")
+    return "\n".join(lines)
+
+
 _count = integer_at_least(1)
 
 
 def add_robustness_parser(sub, common, finite):
-    """Register ``grazing robustness delay|faults|noise`` on the subparsers ``sub``."""
+    """Register ``grazing robustness delay|faults|noise|model`` on the subparsers ``sub``."""
     s = sub.add_parser("robustness", help="robustness to the actuation delay and to loss/noise/jitter")
     rsub = s.add_subparsers(dest="study", required=True)
 
@@ -219,3 +253,11 @@ def add_robustness_parser(sub, common, finite):
     n.add_argument("--points", type=_count, default=201, help="c2 per admissible interval (201)")
     n.add_argument("--out", default="out/robustness", help="folder for the chart and JSON")
     n.set_defaults(func=cmd_noise)
+
+    m = rsub.add_parser("model", help="band of Delta d where control fails vs model error (chart)")
+    common(m)
+    m.add_argument("--c2", type=finite, action="append",
+                   help="c2 of a design on the nominal model (repeatable; default the study's -1 "
+                        "and the least-noise c2 at Delta d = -5e-6)")
+    m.add_argument("--out", default="out/robustness", help="folder for the chart and JSON")
+    m.set_defaults(func=cmd_model)
