@@ -75,3 +75,12 @@ def test_a_node_override_of_the_wrong_type_is_refused_not_replaced_by_the_file(t
                              env=dict(os.environ, ROS_DOMAIN_ID=str(new_domain())))
         assert out.returncode == 2, (override, out.stdout, out.stderr)
         assert message in out.stdout + out.stderr, (override, out.stdout, out.stderr)
+
+
+def test_a_list_of_negative_numbers_in_exponent_form_is_values_not_options():
+    from grazing_control.cli.commands import build_parser
+    args = build_parser().parse_args(["robustness", "delay", "--delta-d", "-5e-6", "-1E-6",
+                                      "-2.5e-7"])
+    assert args.delta_d == [-5e-6, -1e-6, -2.5e-7]
+    args = build_parser().parse_args(["orbit", "--delta-d", "-1e-10", "--c2", "-.5"])
+    assert (args.delta_d, args.c2) == (-1e-10, -0.5)
