@@ -1,21 +1,40 @@
-"""sim_node's outputs: the plant loops' sink, as messages on the topics and log lines.
+"""sim_node's messages: the plant loops' output as messages and log lines, answers read.
 
 :class:`Outputs` is the :class:`grazing_control.plant.loop.Sink` of the node: each
 :class:`grazing_control.plant.engine.Event` goes out as packed CDR
 (:mod:`grazing_control.ros.cdr`) on its topic (docs/nodes.md, "Topics"); what the loops
 count (ignored, malformed, late answers, timeouts, deadline misses) is logged at most
 once per two seconds per kind (:class:`grazing_control.ros.common.Throttled`).
+:func:`read_answer` reads a controller's answer (Delta v and its prediction for the next
+sample, issue 16 §3).
 """
 
 from __future__ import annotations
 
 import math
+import struct
 
 from grazing_control.plant.engine import Event
 from grazing_control.ros import cdr
 from grazing_control.ros.common import Throttled
 
-__all__ = ["Outputs"]
+__all__ = ["Outputs", "read_answer"]
+
+#: twist.linear.y of a TwistStamped with an empty frame_id, at byte 28 of the message.
+_LINEAR_Y = struct.Struct("<d")
+
+
+def read_answer(data: bytes):
+    """(stamp key, Delta v = twist.linear.x, the prediction for the next sample =
+    twist.linear.y, NaN for none) of a TwistStamped in the controller's layout, else None
+    (issue 16 §3). Reads linear.y itself where :func:`cdr.read_twist_stamped` returns
+    linear.x only."""
+    answer = cdr.read_twist_stamped(data)
+    if answer is None:
+        return None
+    if len(answer) >= 4:
+        return tuple(answer[:2]), answer[2], answer[3]
+    return tuple(answer[:2]), answer[2], _LINEAR_Y.unpack_from(data, 28)[0]
 
 
 class Outputs:
