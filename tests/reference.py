@@ -27,8 +27,10 @@ point. Roots are refined by a bracketed Newton iteration (bisection fallback) to
 grid cell of length T/64 ~ 0.15 contains two zeros of the acceleration.
 
 The controller of Eq. 28 is included, v <- v + c1 (x - x**) + c2 (v - v**) on Pi2,
-so that controlled orbits can be checked too. Chattering and sticking are *not*
-modelled: more than ``MAX_IMPACTS_PER_PERIOD`` impacts in a period raise RuntimeError.
+so that controlled orbits can be checked too. Sticking is *not* modelled: more than
+``MAX_IMPACTS_PER_PERIOD`` impacts in a period of :meth:`RefModel.simulate` raise
+RuntimeError. Chattering sequences are, bounce by bounce, by :meth:`RefModel.bounces`
+(continued from the exact post-impact state until a caller's stopping rule).
 """
 
 from __future__ import annotations
@@ -151,6 +153,37 @@ class RefModel:
                 if arc(tm)[0] >= 0:
                     return _refine(arc, a, tm, 0, True)
         return None
+
+    def bounces(self, tau, v, duration, stop=None, max_impacts=2000):
+        """The exact impacts of the motion that leaves the wall x = d with velocity v.
+
+        From (d, v) at phase tau (v <= 0: the state just after an impact), the free flow
+        is continued at 50 digits, each impact located to ``ROOT_TOL`` (:meth:`next_impact`)
+        and the impact law v+ = -r v- applied exactly, until ``duration`` has passed or
+        ``stop(phase, v_minus)`` is true at an impact (that impact is the last returned).
+        Bounces are thus resolved ~35 digits below the rounding of a double, which makes
+        this the yardstick of chattering sequences.
+
+        Returns
+        -------
+        (impacts, stopped)
+            impacts: list of (t, phase, v-, v+) with t since the start, phase not reduced;
+            stopped: whether ``stop`` ended the sequence.
+        """
+        x, v, tau, t = self.d, _f(v), _f(tau), mpf(0)
+        duration = _f(duration)
+        out = []
+        while len(out) < max_impacts:
+            h = self.next_impact(tau, x, v, duration - t)
+            if h is None:
+                return out, False
+            vm = self.flow(tau, x, v, h)[1]
+            t, tau = t + h, tau + self.omega * h
+            x, v = self.d, -self.r * vm
+            out.append((t, tau, vm, v))
+            if stop is not None and stop(tau, vm):
+                return out, True
+        raise RuntimeError(f"reference: more than {max_impacts} bounces")
 
     # -------------------------------------------------------------- simulate
     def simulate(self, periods, x0=None, v0=None, gains=None, control_after=0,

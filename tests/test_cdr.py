@@ -99,10 +99,11 @@ def test_vector3_twist_clock_and_float64_bytes_are_rclpys():
         t = TwistStamped()
         t.header.stamp = stamp
         t.twist.linear.x = a
-        _same_bytes_but_padding(cdr.twist_stamped(sec, ns, a), serialize_message(t),
+        t.twist.linear.y = b
+        _same_bytes_but_padding(cdr.twist_stamped(sec, ns, a, b), serialize_message(t),
                                 PAD["twist_stamped"])
         got = cdr.read_twist_stamped(serialize_message(t))
-        assert got[:2] == (sec, ns) and _equal(got[2], a)
+        assert got[:2] == (sec, ns) and _equal(got[2], a) and _equal(got[3], b)
         assert cdr.clock(sec, ns) == serialize_message(Clock(clock=stamp))
         assert cdr.float64(a) == serialize_message(Float64(data=a)) or math.isnan(a)
 
@@ -153,3 +154,63 @@ def test_decoders_refuse_every_other_layout():
     t.header.frame_id = "map"
     assert cdr.read_twist_stamped(serialize_message(t)) is None
     assert cdr.read_twist_stamped(struct.pack("<4s", b"\x00\x01\x00\x00")) is None
+
+
+def test_a_correction_without_prediction_carries_nan_and_old_answers_still_decode():
+    """linear.y defaults to NaN (no prediction); an answer from before the prediction
+    (linear.y = 0, what every old bag holds) decodes with its 0.0."""
+    got = cdr.read_twist_stamped(cdr.twist_stamped(1, 2, 0.5))
+    assert got[:3] == (1, 2, 0.5) and math.isnan(got[3])
+    t = TwistStamped()
+    t.twist.linear.x = 0.25
+    assert cdr.read_twist_stamped(serialize_message(t)) == (0, 0, 0.25, 0.0)
+
+
+def test_the_estimate_deserializes_to_its_fields():
+    rng = np.random.default_rng(5)
+    vals = _values(rng, 500)
+    for (sec, ns), a, b, c, d, e in zip(_stamps(rng, 500), vals, vals[1:], vals[2:],
+                                        vals[3:], vals[4:]):
+        m = deserialize_message(cdr.estimate_state(sec, ns, a, b, c, d, e), JointState)
+        assert (m.header.stamp.sec, m.header.stamp.nanosec) == (sec, ns)
+        assert list(m.name) == ["mass"] and m.header.frame_id == ""
+        got = [m.position[0], m.velocity[0], *m.effort]
+        assert len(got) == 5 and all(_equal(x, y) for x, y in zip(got, (a, b, c, d, e)))
+
+
+def test_stream_samples_of_every_sensor_layout_read_as_rclpy_wrote_them():
+    """read_state on rclpy's bytes: velocity carried or not (position-only sensor), effort
+    [cos tau, sin tau], today's [cos tau], none, or more; random values and stamps."""
+    rng = np.random.default_rng(6)
+    vals = _values(rng, N)
+    for i, ((sec, ns), x) in enumerate(zip(_stamps(rng, N), vals)):
+        v = [vals[-i]] if i % 2 else []
+        eff = [float(e) for e in rng.normal(size=i % 4)]
+        m = JointState(name=["mass"], position=[x], velocity=v, effort=eff)
+        m.header.stamp = Time(sec=sec, nanosec=ns)
+        got = cdr.read_state(serialize_message(m))
+        assert got[:2] == (sec, ns) and _equal(got[2], x)
+        assert _equal(got[3], v[0]) if v else math.isnan(got[3])
+        assert got[4] == tuple(eff)
+    assert cdr.read_state(cdr.joint_state(3, 4, 1.0, 2.0, 0.5)) == (3, 4, 1.0, 2.0, (0.5,))
+
+
+def test_the_stream_reader_refuses_other_layouts_and_never_raises():
+    def js(**kw):
+        return serialize_message(JointState(**kw))
+
+    for data in (js(name=["a", "b"], position=[1.0, 2.0]), js(position=[1.0]),
+                 js(name=["mass"], position=[]), js(name=["mass"], position=[1.0, 2.0]),
+                 js(name=["mass"], position=[1.0], velocity=[1.0, 2.0]),
+                 js(name=["mast"], position=[1.0]), b"", b"\x00\x01\x00\x00"):
+        assert cdr.read_state(data) is None
+    good = cdr.joint_state(3, 4, 1.0, 2.0, 0.5)
+    assert cdr.read_state(good[:-1]) is None and cdr.read_state(good + bytes(9)) is None
+    rng = np.random.default_rng(8)
+    for _ in range(N):
+        data = bytearray(good)
+        for j in rng.integers(0, len(good), size=3):
+            data[j] = int(rng.integers(0, 256))
+        cdr.read_state(bytes(data))                   # never raises
+        cdr.read_state(bytes(rng.integers(0, 256, size=int(rng.integers(0, 120)),
+                                          dtype=np.uint8)))

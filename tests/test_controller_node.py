@@ -145,6 +145,8 @@ def test_node_answers_saturates_and_ignores_bad_samples(controller):
         pub.publish(msg)
     got = answers(col, 4)
     assert got == [(1, 0, 0.0), (2, 0, exact), (3, 0, -1e-3), (2, 500_000_000, exact)]
+    # no delta_d, no model: no predicted next correction
+    assert all(math.isnan(m.twist.linear.y) for m in col.get("controller/velocity_correction"))
     proc.send_signal(2)
     assert proc.wait(10) == 0
     text = log.read_text()
@@ -297,3 +299,197 @@ def test_a_recorder_started_late_still_gets_every_answer(controller, tmp_path):
     got = [(m.message.header.stamp.sec, m.message.twist.linear.x) for m in read_messages(bag)]
     assert got == [(t, correction(GAINS, x, v, P.x_ref, P.v_ref)) for t in range(1, 6)]
     assert "missed" not in rec_log.read_text()
+
+
+# ================================================= stream mode and the prediction
+def test_stream_settings_are_validated_naming_the_parameter():
+    from grazing_control.ros.controller_node import model_from_values, stream_from_values
+    base = dict(zeta=P.zeta, r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, delta_d=-5e-6,
+                pi2_source="stream", estimator="model", impact_source="stream",
+                sensor_noise=1e-4, state_period=0.0, model_noise=1e-2)
+    assert stream_from_values(base, model_from_values(base)).estimator == "model"
+    assert stream_from_values(dict(base, pi2_source="sample"), None) is None
+    for kw, text in [({"pi2_source": "bag"}, "pi2_source='bag' is invalid"),
+                     ({"estimator": "kalman"}, "estimator='kalman' is invalid"),
+                     ({"impact_source": "radar"}, "impact_source='radar' is invalid"),
+                     ({"sensor_noise": 0.0}, "sensor_noise=0.0 is invalid"),
+                     ({"state_period": 20.0}, "state_period=20.0 is invalid"),
+                     ({"model_noise": -1.0}, "model_noise=-1.0 is invalid"),
+                     ({"delta_d": math.nan}, "delta_d=nan is invalid with pi2_source=stream"),
+                     ({"delta_d": math.inf}, "delta_d=inf is invalid")]:
+        values = dict(base, **kw)
+        with pytest.raises(ParameterError, match=text.replace("(", r"\(")):
+            stream_from_values(values, model_from_values(values))
+
+
+def test_stream_mode_without_delta_d_exits_with_one_line():
+    cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER],
+                                {"pi2_source": "stream"})
+    res = subprocess.run(cmd, env=launcher.node_env(new_domain()), capture_output=True,
+                         text=True, timeout=30)
+    lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
+    assert res.returncode == 2 and len(lines) == 1, lines
+    assert "delta_d=nan is invalid with pi2_source=stream" in lines[0]
+
+
+STREAM_TOPICS = {"controller/velocity_correction": __import__(
+    "geometry_msgs.msg", fromlist=["TwistStamped"]).TwistStamped,
+    "controller/estimate": JointState}
+
+
+def _answer_of(col, n, timeout=10.0):
+    assert col.wait_for(lambda: len(col.get("controller/velocity_correction")) >= n,
+                        timeout), len(col.get("controller/velocity_correction"))
+    return col.get("controller/velocity_correction")[n - 1]
+
+
+@pytest.fixture
+def stream_scene(tmp_path):
+    """(collector, start): controller_node in a fresh domain with the test as the plant."""
+    domain = new_domain()
+    col = Collector(domain, STREAM_TOPICS)
+    procs = []
+
+    def start(topic, **over):
+        log = tmp_path / f"controller{len(procs)}.log"
+        procs.append(launcher.start_node(launcher.CONTROLLER_MODULE, [CONTROLLER], over,
+                                         domain_id=domain, log=log))
+        pub = col.node.create_publisher(JointState, topic, DATA_QOS)
+        assert col.wait_for(lambda: pub.get_subscription_count() > 0 and
+                            col.subs["controller/velocity_correction"].get_publisher_count()
+                            > 0 and col.subs["controller/estimate"].get_publisher_count()
+                            > (0 if topic == "oscillator/state" else -1), 20.0), \
+            log.read_text()
+        col.wait_for(lambda: False, 0.2)
+        return procs[-1], log, pub
+
+    yield col, start
+    launcher.stop_nodes(procs)
+    col.close()
+
+
+def test_stream_mode_estimates_each_section_as_the_core_does(stream_scene):
+    """The test plays a position-only rig at 50 samples per period (sigma = 1e-4, the
+    exact flow, the node's corrections applied at Pi2): the node answers every section
+    t_k = k T, publishes an estimate with its covariance that is the core's
+    (dynamics.stream.simulate_stream with the same sensor draws) to 1e-7, never listens
+    to oscillator/pi2, and its predicted next correction is within 5 sigma of its
+    covariance of the next one."""
+    from grazing_control.dynamics.estimation import trajectory
+    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.plant.sensor import SensorModel
+
+    col, start = stream_scene
+    p = OscillatorParams(delta_d=-5e-6)
+    g = Gains(degenerate_c1(p, -0.3), -0.3)
+    proc, log, pub = start("oscillator/state", pi2_source="stream", estimator="model",
+                           delta_d=p.delta_d, sensor_noise=1e-4, enable_after=0,
+                           c1=g.c1, c2=g.c2)
+    assert col.node.count_subscribers("oscillator/pi2") == 0
+    assert col.node.count_subscribers("oscillator/state") == 1
+    rate, periods, T = 50, 30, p.period
+    h = T / rate
+    sensor = SensorModel(noise=1e-4, velocity=False, seed=4)
+    z = orbit_11(p, g).pi2_deviation
+
+    def send(j0, x):
+        xm, _vm = sensor.measure(j0, x, x)
+        for j, xj in enumerate(xm):
+            t = (j0 + j) * h
+            tau = p.tau2 + p.omega * t
+            m = JointState(name=["mass"], position=[float(xj)], velocity=[],
+                           effort=[math.cos(tau), math.sin(tau)])
+            m.header.stamp = stamp_from_seconds(t)
+            pub.publish(m)
+
+    send(0, np.array([p.x_ref + z[0]]))
+    node_dv, node_pred = [], []
+    for k in range(periods):
+        a = _answer_of(col, k + 1)
+        assert (a.header.stamp.sec, a.header.stamp.nanosec) == cdr.stamp_parts(k * T)
+        node_dv.append(a.twist.linear.x)
+        node_pred.append(a.twist.linear.y)
+        s = np.arange(k * rate + 1, (k + 1) * rate + 1) * h - k * T
+        dev, _j, z, _m, _i = trajectory(p, z, s, node_dv[-1])
+        psi = p.tau2 + p.omega * s - p.lag
+        send(k * rate + 1, p.amplitude * np.cos(psi) + dev[:, 0])
+    col.wait_for(lambda: len(col.get("controller/estimate")) >= periods, 5.0)
+    est = col.get("controller/estimate")[:periods]
+    core = simulate_stream(p, g, sensor.measure, periods, rate, estimator="model",
+                           sigma=1e-4, deviation=orbit_11(p, g).pi2_deviation)
+    xh = np.array([[m.position[0] - p.x_ref, m.velocity[0] - p.v_ref] for m in est])
+    cov = np.array([m.effort for m in est])
+    assert np.allclose(xh[1:], core.estimate[1:periods], rtol=0, atol=1e-7)
+    assert np.allclose(cov[1:, 0], core.cov[1:periods, 0, 0], rtol=1e-4)
+    assert np.allclose(node_dv[1:], core.corrections[1:periods], rtol=0, atol=1e-7)
+    k = np.array([g.c1, g.c2])
+    sd = np.sqrt([k @ np.array([[c[0], c[1]], [c[1], c[2]]]) @ k for c in cov])
+    miss = np.abs(np.array(node_pred[5:-1]) - np.array(node_dv[6:]))
+    assert np.all(miss < 5 * sd[6:] + 1e-12), (miss, sd[6:])
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    assert "Traceback" not in log.read_text()
+
+
+def test_the_predicted_correction_is_the_next_one_on_exact_samples(stream_scene):
+    """Sample mode with delta_d: the test plays the exact plant on Pi2 (period_step with
+    the node's corrections, Delta d = -9e-6, c2 = -1, a delay of 1.0); every answer's
+    twist.linear.y equals the next answer's twist.linear.x to 1e-9 once control is on,
+    and 0 is predicted for a sample before enable_after; without delta_d it is NaN."""
+    from grazing_control.dynamics.simulate import period_step
+
+    col, start = stream_scene
+    p = OscillatorParams(delta_d=-9e-6)
+    g = Gains(degenerate_c1(p, -1.0, 1.0), -1.0, 1.0)
+    proc, log, pub = start("oscillator/pi2", delta_d=p.delta_d, enable_after=3,
+                           c1=g.c1, c2=g.c2, actuation_delay=1.0)
+    z = (1e-3, -2e-3)
+    got = []
+    for k in range(40):
+        pub.publish(sample(k * p.period, p.x_ref + z[0], p.v_ref + z[1]))
+        a = _answer_of(col, k + 1)
+        got.append((a.twist.linear.x, a.twist.linear.y))
+        seg = period_step(p, z[0], z[1], a.twist.linear.x, delay=1.0)
+        z = (seg.dx, seg.dv)
+    dv, pred = np.array(got).T
+    assert np.all(dv[:3] == 0.0) and np.all(pred[:2] == 0.0)
+    assert np.allclose(pred[:-1], dv[1:], rtol=0, atol=1e-9)
+    assert abs(dv[-1]) > 1e-4          # control acts: the orbit's correction
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+
+
+def test_a_malformed_stream_never_stops_the_answers(stream_scene):
+    """Stream mode: samples with NaN positions, no position, undecodable bytes, a
+    duplicate and an older stamp between good samples; every section is still answered
+    once, in order, and the node exits cleanly with the malformed ones counted."""
+    col, start = stream_scene
+    p = OscillatorParams(delta_d=0.1)               # far from the wall: a free motion
+    proc, log, pub = start("oscillator/state", pi2_source="stream", estimator="arc",
+                           delta_d=p.delta_d, sensor_noise=1e-6, enable_after=0,
+                           c1=GAINS.c1, c2=GAINS.c2)
+    h = p.period / 10
+    for j in range(31):
+        t = j * h
+        psi = p.tau2 + p.omega * t - p.lag
+        good = JointState(name=["mass"], position=[p.amplitude * math.cos(psi)],
+                          velocity=[], effort=[math.cos(t), math.sin(t)])
+        good.header.stamp = stamp_from_seconds(t)
+        pub.publish(good)
+        if j % 5 == 2:
+            bad = JointState(name=["mass"], position=[math.nan], velocity=[], effort=[])
+            bad.header.stamp = stamp_from_seconds(t + 0.5 * h)
+            pub.publish(bad)
+            pub.publish(JointState(name=["mass"]))
+            pub.publish(b"\x00\x01\x00\x00garbage")
+            pub.publish(good)                       # a duplicate
+    got = [(m.header.stamp.sec, m.header.stamp.nanosec)
+           for m in (_answer_of(col, 4) and col.get("controller/velocity_correction"))]
+    assert got == [cdr.stamp_parts(k * p.period) for k in range(4)]
+    est = col.get("controller/estimate")
+    assert all(abs(m.position[0] - p.x_ref) < 1e-9 for m in est[1:])   # a free motion
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    text = log.read_text()
+    assert "answered=4" in text and "malformed=" in text and "Traceback" not in text, text

@@ -273,7 +273,8 @@ def _kernel_advance(p, tau0, dx, dv, duration, *, monodromy=False, **kwargs):
 
 # 50-digit reference: 100 periods with impacts, the chaotic scene's first 15 periods,
 # low-velocity impacts (v- down to 1e-10), near misses at 1e-20, starts on the wall,
-# chattering against the reference's chain of impacts, sticking and release.
+# chattering against the reference's chain of impacts, sticking and release, 600 random
+# chattering sequences against the exact continuation and issue 20's reproduction.
 test_mpmath_hundred_periods = test_impact.test_hundred_periods_with_impacts_match_mpmath
 test_mpmath_chaotic_scene = \
     test_impact.test_chaotic_near_grazing_scene_matches_mpmath_while_trajectories_are_close
@@ -291,7 +292,27 @@ test_mpmath_sticking = \
     test_impact.test_at_rest_on_the_wall_sticks_and_releases_when_the_force_changes_sign
 test_mpmath_concave_hump = test_impact.test_concave_hump_above_the_wall_is_found_issue_7
 test_tangency_below_rounding = test_impact.test_tangency_below_rounding_is_not_an_impact_issue_7
+test_mpmath_chattering_sequences = \
+    test_impact.test_chattering_sequences_match_the_exact_continuation
+test_mpmath_bounce_leaving_the_wall = \
+    test_impact.test_bounce_leaving_the_wall_is_not_a_contact_at_rest_issue_20
 test_non_finite_state = test_impact.test_non_finite_or_absurd_state_raises_a_clear_error
+
+
+def test_chattering_sequences_bit_for_bit():
+    """test_impact's 600 random chattering sequences (plus issue 20's): the kernel's
+    impacts and end state are the core's, bit for bit (a flight leaving the wall within
+    the gap's rounding starts on it in both)."""
+    p, tau, v = test_impact.ISSUE_20
+    cases = test_impact._chatter_cases(20, 600) + [(p, tau, v, 1.0)]
+    for p, tau, v, duration in cases:
+        z = to_deviation(p, tau, p.d, v)
+        ref = impact.advance(p, tau, *z, duration)
+        got = kernel.advance(p, tau, *z, duration)
+        assert (got.dx, got.dv) == (ref.dx, ref.dv)
+        assert [i._replace(release=0.0) for i in got.impacts] == \
+            [i._replace(release=0.0) for i in ref.impacts]
+        assert [str(i.release) for i in got.impacts] == [str(i.release) for i in ref.impacts]
 
 
 def test_certified_search_agrees_with_dense_grid_brute_force():

@@ -284,17 +284,19 @@ def wait_ready(node, recorder):
 
 
 def test_adapts_to_best_effort_and_transient_local_publishers(tmp_path, isolation, ros):
-    """As ros2 bag record: a best-effort publisher is recorded, and a transient-local
-    one's messages from before the recorder started are too."""
+    """As ros2 bag record, on topics that are not the package's: a best-effort publisher
+    is recorded, and a transient-local one's messages from before the recorder started
+    are too."""
     _, namespace, env = isolation
-    be = ros.create_publisher(JointState, "oscillator/pi2", BEST_EFFORT)
-    latched = ros.create_publisher(JointState, "oscillator/pi1", LATCHED)
+    be = ros.create_publisher(JointState, "rig/pi2", BEST_EFFORT)
+    latched = ros.create_publisher(JointState, "rig/pi1", LATCHED)
     early = [make_message("sensor_msgs/msg/JointState", i) for i in range(5)]
     for m in early:
         latched.publish(m)                       # nobody listens yet
     bag = tmp_path / "qos"
     recorder = start_recorder(bag, namespace, env,
-                              "topics:=['oscillator/pi2', 'oscillator/pi1']")
+                              "topics:=['rig/pi2 sensor_msgs/msg/JointState', "
+                              "'rig/pi1 sensor_msgs/msg/JointState']")
     try:
         wait_ready(ros, recorder)
         time.sleep(0.3)                          # both ends of the best-effort match
@@ -311,18 +313,87 @@ def test_adapts_to_best_effort_and_transient_local_publishers(tmp_path, isolatio
     got = {}
     for m in read_messages(bag):
         got.setdefault(m.topic, []).append(message_to_dict(m.message))
-    assert got[f"{namespace}/oscillator/pi2"] == [message_to_dict(m) for m in late]
-    assert got[f"{namespace}/oscillator/pi1"] == [message_to_dict(m) for m in early + late]
+    assert got[f"{namespace}/rig/pi2"] == [message_to_dict(m) for m in late]
+    assert got[f"{namespace}/rig/pi1"] == [message_to_dict(m) for m in early + late]
     qos = {e["topic_metadata"]["name"]: e["topic_metadata"]["offered_qos_profiles"][0]
            for e in read_metadata(bag)["topics_with_message_count"]}
-    assert qos[f"{namespace}/oscillator/pi2"]["reliability"] == "best_effort"
-    assert qos[f"{namespace}/oscillator/pi1"]["durability"] == "transient_local"
+    assert qos[f"{namespace}/rig/pi2"]["reliability"] == "best_effort"
+    assert qos[f"{namespace}/rig/pi1"]["durability"] == "transient_local"
+
+
+@pytest.mark.parametrize("bystander_first", [True, False], ids=["bystander first",
+                                                                "package first"])
+def test_a_best_effort_bystander_does_not_make_the_package_topics_lossy(
+        tmp_path, isolation, ros, bystander_first):
+    """A passive best-effort publisher on the package's own topics (before or after the
+    package's reliable one): the recording stays reliable, every message of a fast burst
+    is recorded, the bystander is named in a warning, and losses are still counted."""
+    _, namespace, env = isolation
+    reliable = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=3000,
+                          reliability=ReliabilityPolicy.RELIABLE)
+    topics = ("oscillator/state", "/clock")
+
+    def bystanders():
+        return [ros.create_publisher(_CLASSES[DEFAULT_TOPICS[t]], t, BEST_EFFORT)
+                for t in topics]
+
+    def package():
+        return {t: ros.create_publisher(_CLASSES[DEFAULT_TOPICS[t]], t, reliable)
+                for t in topics}
+
+    bag = tmp_path / "bystander"
+    args = ("require_complete:=true", "topics:=['oscillator/state', '/clock']")
+    if bystander_first:
+        others = bystanders()
+        recorder = start_recorder(bag, namespace, env, *args)
+    else:
+        pubs = package()
+        # published before the recorder exists: missed, and counted as missed although a
+        # (silent) second publisher joins the topic
+        pubs["oscillator/state"].publish(make_message("sensor_msgs/msg/JointState", 0))
+        recorder = start_recorder(bag, namespace, env, *args)
+        others = bystanders()
+    try:
+        if bystander_first:
+            time.sleep(1.0)                     # the recorder sees only the bystanders
+            pubs = package()
+        time.sleep(0.5)
+        wait_ready(ros, recorder)
+        sent = []
+        for i in range(1, 2001):                 # a burst: best effort would drop some
+            m = make_message("sensor_msgs/msg/JointState", i)
+            pubs["oscillator/state"].publish(m)
+            sent.append(m)
+            clock = Clock()
+            clock.clock.sec = i
+            pubs["/clock"].publish(clock)
+        for pub in pubs.values():
+            assert pub.wait_for_all_acked(Duration(seconds=20))
+    finally:
+        rc, output = stop(recorder, signal.SIGTERM)
+    assert len(others) == 2
+    if bystander_first:
+        assert rc == 0 and "missed" not in output, output
+    else:
+        assert rc == 1 and f"missed: {namespace}/oscillator/state 1" in output, output
+    assert "best-effort publisher(s) not recorded" in output
+    got = [message_to_dict(m.message) for m in read_messages(bag)
+           if m.topic == f"{namespace}/oscillator/state"]
+    assert got == [message_to_dict(m) for m in sent]
+    assert sum(1 for m in read_messages(bag) if m.topic == "/clock") == 2000
+    qos = {e["topic_metadata"]["name"]: e["topic_metadata"]["offered_qos_profiles"]
+           for e in read_metadata(bag)["topics_with_message_count"]}
+    assert [q["reliability"] for q in qos[f"{namespace}/oscillator/state"]] == ["reliable"]
 
 
 def test_adapted_qos_follows_rosbag2():
     reliable = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
     qos, warnings = adapted_qos([BEST_EFFORT, reliable])
     assert qos.reliability == ReliabilityPolicy.BEST_EFFORT and len(warnings) == 1
+    qos, warnings = adapted_qos([BEST_EFFORT, reliable], own=True)
+    assert qos.reliability == ReliabilityPolicy.RELIABLE and "not recorded" in warnings[0]
+    qos, warnings = adapted_qos([BEST_EFFORT], own=True)       # only a bystander so far
+    assert qos.reliability == ReliabilityPolicy.RELIABLE and len(warnings) == 1
     assert qos.durability == DurabilityPolicy.VOLATILE
     qos, warnings = adapted_qos([LATCHED, LATCHED])
     assert qos.reliability == ReliabilityPolicy.RELIABLE and not warnings

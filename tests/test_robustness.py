@@ -205,3 +205,24 @@ def test_clipped_normal_moments():
     mean, var = _clipped_normal_moments(-0.4, 0.5)
     assert mean == pytest.approx(x.mean(), abs=4 * x.std() / sqrt(z.size))
     assert var == pytest.approx(x.var(), rel=0.01)
+
+
+def test_stability_chart_keeps_to_its_c2_grid(tmp_path, monkeypatch):
+    """Issue 20: the design's true admissible ends (not clipped at a scan window any more)
+    can lie outside the plotted c2 range, or at infinity: the axes stay on the grid and
+    only the ends on it are marked."""
+    from types import SimpleNamespace
+
+    from grazing_control.studies.robustness import charts
+
+    figs = []
+    monkeypatch.setattr(charts, "save_png", lambda fig, path, dpi=80: figs.append(fig))
+    c2s, delays = np.linspace(-2.0, 1.0, 7), np.linspace(0.0, 1.0, 3)
+    m = SimpleNamespace(c2s=c2s, delays=delays, values=np.full((3, 7), 0.5))
+    maps = {(d, -1e-6): m for d in ("delayed", "undelayed")}
+    charts.plot_stability_maps(maps, tmp_path / "x.png",
+                               boundaries={0.0: [(-5.15, 0.27)], 1.0: [(-0.34, math.inf)]})
+    ax = figs[0].axes[0]
+    assert ax.get_xlim() == (-2.0, 1.0)
+    marked = [x for line in ax.get_lines() for x in line.get_xdata()]
+    assert sorted(marked) == [-0.34, 0.27]

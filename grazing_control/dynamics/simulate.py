@@ -26,7 +26,7 @@ from .fidelity import FIDELITIES, ModelValidityError, choose_fidelity
 from .fidelity import period_step as fidelity_step
 from grazing_control.oscillator.impact import (NonFiniteStateError, Segment, advance,
                                                check_state)
-from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
 __all__ = ["SimulationResult", "period_step", "states_between", "simulate", "simulate_batch",
            "MAX_PERIODS"]
@@ -179,6 +179,9 @@ def simulate(p: OscillatorParams, periods: int, *, x0: float | None = None,
         f"{fidelity}: requested"
     auto = fidelity == "auto"
     delay = gains.delay if active else 0.0  # actuation delay (docs/theory_delay.md)
+    if delay != 0.0 and not 0.0 < delay < p.period:
+        raise ParameterError(f"delay={delay!r} is invalid: valid range is 0 <= delay < T = "
+                             f"{p.period!r} (the correction acts within the period it answers)")
     if auto and delay != 0.0:
         fidelity, reason, auto = "exact", "exact: the maps do not model an actuation delay", False
     if auto:

@@ -29,7 +29,9 @@ at rest: not an impact when the wall force cos tau - d <= 0 (a tangency), a stic
 event with v- = v+ = 0 when it pushes into the wall. Every other reported impact has
 v- > 0 (docs/theory.md, "Tangency below rounding"). A mass at rest on the wall at the
 start of a call (stuck across a Pi2 sample) is recognised to the rounding of the phase
-and stays stuck.
+and stays stuck. A flight that starts within the gap's rounding below the wall while
+leaving it (v < 0, after every bounce) starts on the wall: its search never takes its
+own start for a root (docs/theory.md, "A start on the wall").
 
 Chattering and sticking
 -----------------------
@@ -343,8 +345,12 @@ def _next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     n = max(1, int(math.ceil(horizon / step)))
     a = 0.0
     fa = f(0.0)
-    if fa[0] > 0.0 and fa[0] <= _wall_rounding(p, tau0, dx0, dv0)[0]:
-        fa = (0.0,) + fa[1:]  # on the wall up to rounding
+    # on the wall up to rounding: a start above it, or below it while leaving (v < 0),
+    # whose flight must not find its own start as a root (docs/theory.md, "A start on
+    # the wall")
+    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and \
+            abs(fa[0]) <= _wall_rounding(p, tau0, dx0, dv0)[0]:
+        fa = (0.0,) + fa[1:]
     if fa[0] > 0.0:
         raise InitialStateError(
             f"state beyond the wall: x - d = {fa[0]:.3e} > 0 (valid: x <= d)"

@@ -67,15 +67,24 @@ def scene_from_bag(bag_dir) -> Scene:
     from grazing_control.ros.recording import read_messages
 
     samples, corrections, impacts = [], {}, []
-    for m in read_messages(bag_dir, topics=[TOPIC_PI2, TOPIC_CORRECTION, TOPIC_IMPACT]):
-        msg = m.message
-        if m.topic == TOPIC_PI2:
-            samples.append((_key(msg.header), msg.position[0], msg.velocity[0]))
-        elif m.topic == TOPIC_CORRECTION:
-            corrections[_key(msg.header)] = msg.twist.linear.x
-        else:
-            sec, nsec = _key(msg.header)
-            impacts.append((sec + 1e-9 * nsec, msg.vector.x, msg.vector.y, msg.vector.z))
+    try:
+        for m in read_messages(bag_dir, topics=[TOPIC_PI2, TOPIC_CORRECTION, TOPIC_IMPACT]):
+            msg = m.message
+            if m.topic == TOPIC_PI2:
+                if len(msg.position) and len(msg.velocity):     # else: not a sample, skipped
+                    samples.append((_key(msg.header), msg.position[0], msg.velocity[0]))
+            elif m.topic == TOPIC_CORRECTION:
+                corrections[_key(msg.header)] = msg.twist.linear.x
+            else:
+                sec, nsec = _key(msg.header)
+                impacts.append((sec + 1e-9 * nsec, msg.vector.x, msg.vector.y, msg.vector.z))
+    except (OSError, ValueError):
+        raise
+    except Exception as exc:        # mcap's own errors, a schema that does not decode, ...
+        raise ValueError(f"{bag_dir}: not a readable recording ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    if not samples:
+        raise ValueError(f"{bag_dir}: no Pi2 samples on {TOPIC_PI2}: not a scene recording")
     samples.sort()
     impacts.sort()
     t = np.array([sec + 1e-9 * nsec for (sec, nsec), _x, _v in samples])

@@ -15,9 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.support.arguments import finite
-from .numbers import resolve_setup, scene_numbers
+from grazing_control.support.arguments import finite, positive
+from . import reader
+from .numbers import resolve_setup, scene_numbers, section_phase_problems
 from .scenes import load, parse_topic_option
+
+#: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
+ESTIMATE_TOPIC = "/controller/estimate"
+#: Samples at the end of a scene over which the spreads are measured.
+SPREAD_WINDOW = 500
 
 __all__ = ["analyze", "add_arguments", "main"]
 
@@ -153,6 +159,107 @@ def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
     save_png(fig, path, dpi=90)
 
 
+def read_estimates(path, topic: str = ESTIMATE_TOPIC):
+    """The estimate topic's columns (:func:`reader.decode_estimate`), or None when the bag
+    has no such topic."""
+    raw = reader.read_raw(Path(path), topics=[topic])
+    if topic not in raw.channels:
+        return None
+    est = reader.decode_estimate(raw, topic)
+    order = np.argsort(est["log_time"], kind="stable")
+    order = order[est["ok"][order]]
+    return {k: (v[order] if isinstance(v, np.ndarray) else v) for k, v in est.items()}
+
+
+def estimate_numbers(est, sd, setup) -> dict | None:
+    """The controller's estimates against the ground truth of one scene.
+
+    Each estimate (stamped with its section) is matched to the recorded Pi2 sample of the
+    same stamp in the scene's log-time span. Error e = estimate - truth; normalised
+    errors e_x / sqrt(var x), e_v / sqrt(var v) (unit std if the covariance is right) and
+    chi^2 = e^T P^-1 e (mean 2); coverage of the 95 % ellipse. Over the last
+    :data:`SPREAD_WINDOW` samples: the measured Pi2 spread (std of x about the exact
+    controlled orbit) and the spread predicted from the reported covariance by the loop
+    linearised about that orbit (:func:`grazing_control.dynamics.noise.noise_covariance`
+    with the mean reported covariance as the measurement covariance; errors correlated
+    from period to period, as the model filter's are, break its white-noise premise).
+    """
+    if est is None:
+        return None
+    lo = sd.pi2_log_ns[0]
+    span = (est["log_time"] >= lo)
+    st = sd.stamp_ns
+    pos = np.searchsorted(st, est["stamp"])
+    hit = span & (pos < st.size) & (st[np.minimum(pos, st.size - 1)] == est["stamp"])
+    if not np.any(hit):
+        return {"estimates": 0, "note": "no estimate matches a Pi2 sample of this scene"}
+    k = pos[hit]
+    _, first = np.unique(k, return_index=True)
+    k = k[first]
+    sel = np.flatnonzero(hit)[first]
+    e = np.column_stack([est["x"][sel], est["v"][sel]]) - sd.scene.pi2[k]
+    cov = np.empty((sel.size, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = est["var_x"][sel], est["var_v"][sel]
+    cov[:, 0, 1] = cov[:, 1, 0] = est["cov_xv"][sel]
+    good = np.all(np.isfinite(cov.reshape(-1, 4)), axis=1) & (np.linalg.det(
+        np.where(np.isfinite(cov), cov, 1.0)) > 0) & np.all(np.isfinite(e), axis=1)
+    out = {"estimates": int(sel.size), "with_covariance": int(good.sum())}
+    last = k >= sd.scene.pi2.shape[0] - SPREAD_WINDOW
+    use = good & last
+    if not np.any(use):
+        return out
+    eu, cu = e[use], cov[use]
+    chi2 = np.einsum("ni,nij,nj->n", eu, np.linalg.inv(cu), eu)
+    out.update({
+        "window": int(use.sum()),
+        "error_std": eu.std(axis=0).tolist(),
+        "error_mean": eu.mean(axis=0).tolist(),
+        "reported_std": np.sqrt(np.mean(cu[:, [0, 1], [0, 1]], axis=0)).tolist(),
+        "normalised_std": [float(np.std(eu[:, 0] / np.sqrt(cu[:, 0, 0]))),
+                           float(np.std(eu[:, 1] / np.sqrt(cu[:, 1, 1])))],
+        "chi2_mean": float(chi2.mean()),
+        "coverage_95": float(np.mean(chi2 < -2.0 * math.log(0.05)))})
+    p, g = setup.params, setup.gains
+    if p is None or g is None:
+        return out
+    from grazing_control.dynamics.noise import noise_covariance
+    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.oscillator.control import Gains
+
+    try:
+        gains = Gains(g.c1, g.c2, setup.actuation_delay)
+        z = orbit_11(p, gains).pi2_deviation
+        x = sd.scene.pi2[-SPREAD_WINDOW:, 0]
+        out["measured_spread"] = float(np.sqrt(np.mean((x - p.x_ref - z[0]) ** 2)))
+        pred = noise_covariance(p, gains, cu.mean(axis=0), z)
+        out["predicted_spread"] = float(math.sqrt(max(pred[0, 0], 0.0)))
+    except (ValueError, RuntimeError, ArithmeticError) as exc:
+        out["spread_note"] = f"no predicted spread: {exc}"
+    return out
+
+
+def _estimate_lines(n) -> list:
+    """The report's lines on the estimates (:func:`estimate_numbers`)."""
+    if not n:
+        return []
+    if "chi2_mean" not in n:
+        return [f"* estimates: {n.get('estimates', 0)} matched"
+                + (f" ({n['note']})" if "note" in n else "")]
+    lines = [f"* estimate vs ground truth (last {n['window']} sections): error std x "
+             f"{n['error_std'][0]:.3g}, v {n['error_std'][1]:.3g} (reported "
+             f"{n['reported_std'][0]:.3g}, {n['reported_std'][1]:.3g}); normalised error std "
+             f"{n['normalised_std'][0]:.3f}, {n['normalised_std'][1]:.3f} (1 if the covariance "
+             f"is right); χ² mean {n['chi2_mean']:.3f} (2), 95 % ellipse covers "
+             f"{100 * n['coverage_95']:.1f} %"]
+    if "measured_spread" in n:
+        lines.append(f"* Π2 spread about the exact controlled orbit: measured "
+                     f"{n['measured_spread']:.3g}, predicted from the reported covariance "
+                     f"{n['predicted_spread']:.3g}")
+    if "spread_note" in n:
+        lines.append(f"* {n['spread_note']}")
+    return lines
+
+
 def _scene_lines(label, numbers, fig_name):
     n = numbers
     u = n["uncontrolled"]
@@ -194,11 +301,18 @@ def _scene_lines(label, numbers, fig_name):
                  + (f"; {c['answers_matching_no_sample']} answers match no sample"
                     if c["answers_matching_no_sample"] else ""))
     mc = n.get("model_check")
+    lines += _estimate_lines(n.get("estimate"))
     if mc:
         lines.append(f"* model check: each recorded period re-integrated by the core from the "
                      f"recorded sample and correction departs from the next recorded sample by "
                      f"at most {_fmt(mc['max_departure'], '.2e')} ({mc['periods_above_1e-12']} "
-                     f"of {mc['periods']} periods above 1e-12)")
+                     f"of {mc['periods']} periods above 1e-12"
+                     + (f"; the {mc['dropped_at_deadline_misses']} corrections dropped at "
+                        "deadline misses re-integrated as 0" if mc.get("dropped_at_deadline_misses")
+                        else "")
+                     + (f"; checked only the first {mc['periods']} of "
+                        f"{mc['periods_in_scene']} periods" if mc.get("periods_in_scene", 0)
+                        > mc["periods"] else "") + ")")
     rt = n.get("realtime")
     if rt:
         def d(x):
@@ -270,6 +384,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     for bag in bags:
         data = load(bag, topics)
         setup = resolve_setup(data, options)
+        data.problems.extend(section_phase_problems(data, setup))
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
@@ -298,8 +413,11 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
         lines.append("")
+        estimates = read_estimates(bag)
         for sd in data.scenes:
             n = scene_numbers(sd, setup, tol)
+            if estimates is not None:
+                n["estimate"] = estimate_numbers(estimates, sd, setup)
             slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
             fig_name = f"{slabel.replace(' ', '_')}.png"
             if out is not None and figures:
@@ -335,7 +453,8 @@ def add_model_options(parser) -> None:
                         ("omega", "forcing frequency"), ("pi2-offset", "phase of Π2 after Π1"),
                         ("delta-d", "Δd = d − d*"), ("c1", "gain c1 (default with --c2: Eq. 38)"),
                         ("c2", "gain c2"), ("time-scale", "realtime time scale")):
-        g.add_argument(f"--{name}", type=_finite, default=None, help=help_)
+        g.add_argument(f"--{name}", type=positive if name == "time-scale" else _finite,
+                       default=None, help=help_)
     g.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
                    help="simulator mode of the run")
     parser.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",

@@ -15,13 +15,17 @@ start of the body, after the 4-byte encapsulation header), computed with numpy f
 lengths read out of the pool. A message too short for its layout is marked invalid (it
 is counted, never decoded from beyond its end).
 
-Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]),
+Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]; as a
+state stream also effort[0], effort[1], velocity possibly empty),
 ``geometry_msgs/msg/TwistStamped`` (stamp, linear.x), ``geometry_msgs/msg/Vector3Stamped``
 (stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``.
 """
 
 from __future__ import annotations
 
+import io
+import os
+import stat
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -30,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
-           "decode_joint_state", "decode_twist_stamped", "decode_vector3_stamped",
+           "decode_joint_state", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
+           "decode_vector3_stamped",
            "decode_float64", "decode_strings"]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -44,6 +49,47 @@ _U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
 
 class BagReadError(ValueError):
     """The file is not an MCAP bag this reader can use (message says why)."""
+
+
+#: The most bytes a bag may decompress to (chunks and whole-file compression together),
+#: unless the environment variable ``GRAZING_BAG_MAX_BYTES`` says otherwise. The package's
+#: bags decompress 3-10x (a 1e6-message bag: about 0.2 GB); a decompression bomb (a 33 kB
+#: chunk that inflates to 1 GiB) is refused before its output is allocated.
+MAX_BYTES = 2 ** 30
+
+
+def max_bytes() -> int:
+    """The decompression budget: ``GRAZING_BAG_MAX_BYTES`` (a positive integer) or MAX_BYTES."""
+    text = os.environ.get("GRAZING_BAG_MAX_BYTES", "")
+    if not text:
+        return MAX_BYTES
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value <= 0:
+        raise BagReadError(f"GRAZING_BAG_MAX_BYTES={text!r}: must be a positive integer "
+                           "(bytes a bag may decompress to)")
+    return value
+
+
+def _regular_file(path: Path) -> Path:
+    """``path`` if it is a regular file (after links); a FIFO, device or folder is refused.
+
+    Opening a FIFO blocks until a writer appears, so the type is checked before opening.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        raise BagReadError(f"{path}: cannot be read ({exc.strerror})") from None
+    if not stat.S_ISREG(mode):
+        raise BagReadError(f"{path}: not a regular file (a FIFO, device or folder); "
+                           "a bag's .mcap must be a plain file")
+    return path
+
+
+class _Malformed(ValueError):
+    """A length field points beyond the end of its record."""
 
 
 @dataclass
@@ -119,35 +165,73 @@ def bag_path(bag) -> Path:
     return found[0]
 
 
-def _string(buf, p):
-    (n,) = _U32.unpack_from(buf, p)
+def _u32(buf, p, end):
+    if p + 4 > end:
+        raise _Malformed(f"a length field at byte {p} runs past its record's end {end}")
+    return _U32.unpack_from(buf, p)[0]
+
+
+def _string(buf, p, end):
+    """An MCAP string (uint32 length + UTF-8) at ``p`` inside a record ending at ``end``."""
+    n = _u32(buf, p, end)
+    if p + 4 + n > end:
+        raise _Malformed(f"a string of {n} bytes at byte {p} runs past its record's end {end}")
     return bytes(buf[p + 4:p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
 
 
-def _map(buf, p):
-    (n,) = _U32.unpack_from(buf, p)
+def _map(buf, p, end):
+    """An MCAP map<string, string> (uint32 byte length + pairs) inside a record."""
+    n = _u32(buf, p, end)
     p += 4
-    end = p + n
+    stop = p + n
+    if stop > end:
+        raise _Malformed(f"a map of {n} bytes at byte {p - 4} runs past its record's end {end}")
     out = {}
-    while p < end:
-        k, p = _string(buf, p)
-        v, p = _string(buf, p)
+    while p < stop:
+        k, p = _string(buf, p, stop)
+        v, p = _string(buf, p, stop)
         out[k] = v
-    return out, end
+    return out, stop
 
 
-def _decompress(kind: str, data: bytes, size: int) -> bytes:
+def _read_zstd(data: bytes, limit: int) -> bytes:
+    """Decompress every zstd frame of ``data``, never producing more than ``limit + 1`` bytes."""
+    import zstandard
+    parts, n = [], 0
+    with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data),
+                                                    read_across_frames=True) as r:
+        while n <= limit:
+            piece = r.read(min(limit + 1 - n, 1 << 24))
+            if not piece:
+                break
+            parts.append(piece)
+            n += len(piece)
+    return b"".join(parts)
+
+
+def _decompress(kind: str, data: bytes, size: int, budget: int) -> bytes:
+    """A chunk's records: at most ``min(size, budget)`` bytes are ever produced."""
     if kind == "":
         return data
+    if size > budget:
+        raise BagReadError(f"a chunk declares {size} uncompressed bytes, beyond what is left "
+                           f"of the {max_bytes()}-byte budget (a decompression bomb?); "
+                           "GRAZING_BAG_MAX_BYTES raises the limit")
     if kind == "zstd":
-        import zstandard
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+        out = _read_zstd(bytes(data), size)
+        if len(out) > size:
+            raise ValueError(f"more than the {size} bytes the chunk header says")
+        return out
     if kind == "lz4":
         try:
             import lz4.frame
         except ImportError:
             raise BagReadError("an lz4-compressed chunk needs the lz4 package") from None
-        return lz4.frame.decompress(data)
+        d = lz4.frame.LZ4FrameDecompressor()
+        out = d.decompress(bytes(data), max_length=size + 1)
+        if len(out) > size:
+            raise ValueError(f"more than the {size} bytes the chunk header says")
+        return out
     raise BagReadError(f"unknown chunk compression {kind!r}")
 
 
@@ -161,6 +245,7 @@ class _Scan:
         self.pieces = []
         self.base = 0
         self.problems = []
+        self.budget = max_bytes()
 
     def records(self, buf, start, end, top):
         """Walk records in buf[start:end]; return (stop_reason, position reached)."""
@@ -182,38 +267,58 @@ class _Scan:
             elif op == _OP_CHUNK and top:
                 self.chunk(buf, p + 9, q)
                 base = self.base
-            elif op == _OP_SCHEMA:
-                (sid,) = _U16.unpack_from(buf, p + 9)
-                name, r = _string(buf, p + 11)
-                enc, _ = _string(buf, r)
-                self.schemas[sid] = (name, enc)
-            elif op == _OP_CHANNEL:
-                cid, sid = struct.unpack_from("<HH", buf, p + 9)
-                if cid not in self.channels:
-                    topic, r = _string(buf, p + 13)
-                    enc, r = _string(buf, r)
-                    meta, _ = _map(buf, r)
-                    name = self.schemas.get(sid, ("", ""))[0]
-                    ch = Channel(cid, topic, name, enc, meta)
-                    self.channels[cid] = ch
-                    if self.wanted is None or topic in self.wanted:
-                        by_id[cid] = ch.records
-            elif op == _OP_METADATA:
-                name, r = _string(buf, p + 9)
-                meta, _ = _map(buf, r)
-                self.metadata.append((name, meta))
+            elif op in (_OP_SCHEMA, _OP_CHANNEL, _OP_METADATA):
+                try:
+                    self.definition(buf, op, p + 9, q)
+                except (_Malformed, struct.error) as exc:
+                    kind = {_OP_SCHEMA: "Schema", _OP_CHANNEL: "Channel",
+                            _OP_METADATA: "Metadata"}[op]
+                    where = "" if top else " of a chunk"
+                    raise BagReadError(f"a {kind} record at byte {p}{where} is malformed "
+                                       f"({exc})") from None
             elif op in (_OP_DATA_END, _OP_FOOTER) and top:
                 return "end", q
             p = q
         return ("torn" if p < end else "eof"), p
 
+    def definition(self, buf, op, p, end):
+        """Read a Schema, Channel or Metadata record's body ``buf[p:end]`` (bounded)."""
+        if op == _OP_SCHEMA:
+            if p + 2 > end:
+                raise _Malformed("no schema id")
+            (sid,) = _U16.unpack_from(buf, p)
+            name, r = _string(buf, p + 2, end)
+            enc, r = _string(buf, r, end)
+            if r + 4 + _u32(buf, r, end) > end:
+                raise _Malformed(f"the schema data at byte {r} runs past its record's end {end}")
+            self.schemas[sid] = (name, enc)
+        elif op == _OP_CHANNEL:
+            if p + 4 > end:
+                raise _Malformed("no channel and schema ids")
+            cid, sid = struct.unpack_from("<HH", buf, p)
+            if cid not in self.channels:
+                topic, r = _string(buf, p + 4, end)
+                enc, r = _string(buf, r, end)
+                meta, _ = _map(buf, r, end)
+                name = self.schemas.get(sid, ("", ""))[0]
+                ch = Channel(cid, topic, name, enc, meta)
+                self.channels[cid] = ch
+                if self.wanted is None or topic in self.wanted:
+                    self.by_id_records[cid] = ch.records
+        else:
+            name, r = _string(buf, p, end)
+            meta, _ = _map(buf, r, end)
+            self.metadata.append((name, meta))
+
     def chunk(self, buf, p, end):
         try:
             _t0, _t1, size, crc = struct.unpack_from("<QQQI", buf, p)
-            kind, r = _string(buf, p + 28)
+            kind, r = _string(buf, p + 28, end)
             (n,) = _U64.unpack_from(buf, r)
+            if r + 8 + n > end:
+                raise _Malformed(f"records of {n} bytes run past the chunk's end")
             data = bytes(buf[r + 8:r + 8 + n]) if kind else buf[r + 8:r + 8 + n]
-            raw = bytes(_decompress(kind, data, size))
+            raw = bytes(_decompress(kind, data, size, self.budget))
             if len(raw) != size:
                 raise ValueError(f"{len(raw)} bytes, the chunk header says {size}")
             if crc and zlib.crc32(raw) != crc:
@@ -224,11 +329,25 @@ class _Scan:
             self.problems.append(f"chunk at byte {p - 9} skipped (corrupt): "
                                  f"{type(exc).__name__}: {exc}")
             return
+        self.budget -= len(raw)
         self.pieces.append(raw)
         reason, _ = self.records(raw, 0, len(raw), False)
         if reason == "torn":
             self.problems.append(f"chunk at byte {p - 9} ends inside a record")
         self.base += len(raw)
+
+
+#: A file without summary that changed less than this many seconds ago may still be
+#: being written (a recorder that flushes a chunk at least every few seconds).
+WRITING_AGE = 30.0
+
+
+def _age(path: Path) -> float:
+    import time
+    try:
+        return max(0.0, time.time() - os.stat(path).st_mtime)
+    except OSError:
+        return float("inf")
 
 
 def read_raw(bag, topics=None) -> RawBag:
@@ -243,28 +362,38 @@ def read_raw(bag, topics=None) -> RawBag:
     Raises
     ------
     BagReadError
-        Not an MCAP file, or an unsupported chunk compression.
+        Not a regular file, not an MCAP file, an unsupported chunk compression, a Schema,
+        Channel or Metadata record whose length fields run past its end, or more
+        decompressed bytes than :func:`max_bytes` allows (the memory bound).
     """
-    path = bag_path(bag)
+    path = _regular_file(bag_path(bag))
     with open(path, "rb") as fh:
         data = fh.read()
+    scan = _Scan(None if topics is None else set(topics))
     if data.startswith(_ZSTD_FRAME):     # rosbag2 "file" compression mode: a .mcap.zstd
         import zstandard
         try:
-            data = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+            data = _read_zstd(data, scan.budget)
         except zstandard.ZstdError as exc:
             raise BagReadError(f"{path}: a zstd-compressed file that does not decompress "
                                f"({exc})") from None
+        if len(data) > scan.budget:
+            raise BagReadError(f"{path}: the zstd-compressed file decompresses to more than "
+                               f"{scan.budget} bytes (a decompression bomb?); "
+                               "GRAZING_BAG_MAX_BYTES raises the limit")
+        scan.budget -= len(data)
     if not data.startswith(MAGIC):
         raise BagReadError(f"{path}: not an MCAP file (bad magic bytes)")
-    scan = _Scan(None if topics is None else set(topics))
     # top-level messages (unchunked files) point into the file itself: it goes first
     scan.pieces.append(data)
     scan.base = len(data)
     reason, stop = scan.records(memoryview(data), len(MAGIC), len(data), True)
     problems = scan.problems
     if reason != "end":
-        problems.insert(0, f"the file has no summary (recorder killed?): read up to byte "
+        age = _age(path)
+        why = (f"still being written? it changed {age:.1f} s ago" if age < WRITING_AGE
+               else "recorder killed?")
+        problems.insert(0, f"the file has no summary ({why}): read up to byte "
                            f"{stop} of {len(data)}" + (", the rest is a torn record"
                                                      if stop < len(data) else ""))
     pool = np.frombuffer(b"".join(scan.pieces), dtype=np.uint8)
@@ -404,11 +533,49 @@ def decode_joint_state(bag: RawBag, topic: str) -> dict:
     return _columns(b, stamp=stamp, x=x, v=v)
 
 
+def decode_estimate(bag: RawBag, topic: str) -> dict:
+    """The controller's estimate (JointState, effort [var x, cov xv, var v]): columns
+    stamp_ns, x, v, var_x, cov_xv, var_v, times, ok (ok needs the three efforts)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = b.skip_strings(pos)
+    x, nx, pos = b.first_double(pos)
+    v, nv, pos = b.first_double(pos)
+    var_x, ne, pos8 = b.first_double(pos)
+    b.ok &= (nx > 0) & (nv > 0) & (ne >= 3)
+    start = np.where(b.ok, pos8 - 8 * ne, 0)
+    cov_xv = np.where(b.ok, b.f64(start + 8), np.nan)
+    var_v = np.where(b.ok, b.f64(start + 16), np.nan)
+    return _columns(b, stamp=stamp, x=x, v=v, var_x=var_x, cov_xv=cov_xv, var_v=var_v)
+
+
+def decode_joint_stream(bag: RawBag, topic: str) -> dict:
+    """A sensor's state stream (docs/nodes.md, "The sensor stream"): stamp_ns,
+    x = position[0], v = velocity[0] (NaN where the velocity is empty: a position-only
+    sensor), e0, e1 = effort[0], effort[1] (the phase reference cos tau, sin tau; NaN
+    where absent), times, ok (a message without a position is not ok)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = b.skip_strings(pos)
+    x, nx, pos = b.first_double(pos)
+    v, nv, pos = b.first_double(pos)
+    pe = _align(pos, 4)
+    ne = np.where(b.ok, b.u32(pe), 0)
+    b.ok &= ne <= b.end - b.body
+    p8 = _align(pe + 4, 8)
+    has1, has2 = ne > 0, ne > 1
+    e0 = np.where(has1, b.f64(np.where(has1, p8, 0)), np.nan)
+    e1 = np.where(has2, b.f64(np.where(has2, p8 + 8, 0)), np.nan)
+    b.ok &= nx > 0
+    return _columns(b, stamp=stamp, x=x, v=np.where(nv > 0, v, np.nan), e0=e0, e1=e1)
+
+
 def decode_twist_stamped(bag: RawBag, topic: str) -> dict:
-    """TwistStamped columns: stamp_ns, dv = twist.linear.x, times, ok."""
+    """TwistStamped columns: stamp_ns, dv = twist.linear.x, dv_next = twist.linear.y (the
+    predicted next correction; NaN: none, 0.0 in bags from before the prediction), times,
+    ok."""
     b, stamp, pos = decode_stamped(bag, topic)
     dv = b.f64(_align(pos, 8))
-    return _columns(b, stamp=stamp, dv=dv)
+    dv_next = b.f64(_align(pos, 8) + 8)
+    return _columns(b, stamp=stamp, dv=dv, dv_next=dv_next)
 
 
 def decode_vector3_stamped(bag: RawBag, topic: str) -> dict:

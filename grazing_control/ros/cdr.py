@@ -23,10 +23,11 @@ count and its elements.
 
 from __future__ import annotations
 
+import math
 import struct
 
 __all__ = ["NAME", "joint_state", "vector3_stamped", "twist_stamped", "clock", "float64",
-           "read_sample", "read_twist_stamped", "stamp_parts"]
+           "estimate_state", "read_sample", "read_state", "read_twist_stamped", "stamp_parts"]
 
 _HEADER = b"\x00\x01\x00\x00"
 _NS = 1_000_000_000
@@ -40,6 +41,10 @@ NAME = "mass"
 _JOINT_STATE = struct.Struct("<4siII4sII8sI4xdI4xdI4xd")
 _FRAME = b"\x00\x00\x00\x00"
 _MASS = b"mass\x00\x00\x00\x00"
+# name = ["mass"]: count 1, length 5, "mass" NUL (the padding after it is not compared)
+_ONE_MASS = b"\x01\x00\x00\x00\x05\x00\x00\x00mass\x00"
+# the controller's estimate: the same with effort [var x, cov xv, var v] (3 doubles).
+_ESTIMATE = struct.Struct("<4siII4sII8sI4xdI4xdI4xddd")
 # geometry_msgs/Vector3Stamped: stamp, frame_id "", then x, y, z at 16, 24, 32.
 _VECTOR3_STAMPED = struct.Struct("<4siII4sddd")
 # geometry_msgs/TwistStamped: stamp, frame_id "", linear x y z, angular x y z.
@@ -84,10 +89,21 @@ def vector3_stamped(sec: int, nanosec: int, x: float, y: float, z: float) -> byt
     return _VECTOR3_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, x, y, z)
 
 
-def twist_stamped(sec: int, nanosec: int, linear_x: float) -> bytes:
-    """geometry_msgs/TwistStamped: twist.linear.x = ``linear_x``, every other component 0."""
-    return _TWIST_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, linear_x, 0.0, 0.0, 0.0,
-                               0.0, 0.0)
+def estimate_state(sec: int, nanosec: int, x: float, v: float, var_x: float, cov_xv: float,
+                   var_v: float) -> bytes:
+    """sensor_msgs/JointState of the controller's Pi2 estimate: joint ``mass`` at (x, v),
+    effort [var x, cov xv, var v] (its covariance)."""
+    return _ESTIMATE.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 1, v, 3,
+                          var_x, cov_xv, var_v)
+
+
+def twist_stamped(sec: int, nanosec: int, linear_x: float,
+                  linear_y: float = math.nan) -> bytes:
+    """geometry_msgs/TwistStamped: twist.linear.x = ``linear_x`` (the correction),
+    twist.linear.y = ``linear_y`` (the correction predicted for the next sample, NaN:
+    none), every other component 0."""
+    return _TWIST_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, linear_x, linear_y, 0.0,
+                               0.0, 0.0, 0.0)
 
 
 def clock(sec: int, nanosec: int) -> bytes:
@@ -116,11 +132,47 @@ def read_sample(data: bytes):
     return sec, nanosec, x, v
 
 
+def read_state(data: bytes):
+    """(sec, nanosec, x, v, effort) of a stream sample: a JointState with an empty
+    frame_id and the one joint ``mass``, one position, one velocity or none (v is then
+    NaN: a position-only sensor), any number of efforts (a tuple: [cos tau, sin tau],
+    or today's [cos tau]); None for anything else (the caller then uses rclpy's
+    deserializer). Never raises."""
+    n = len(data)
+    if n < 40 or data[:4] != _HEADER:
+        return None
+    sec, nanosec, flen = struct.unpack_from("<iII", data, 4)
+    if flen != 1 or data[16] != 0 or data[20:33] != _ONE_MASS:
+        return None
+    pos = 36                                   # body offset 32: the position count
+    values = []
+    for _ in range(3):                          # position, velocity, effort
+        if pos + 4 > n:
+            return None
+        (count,) = struct.unpack_from("<I", data, pos)
+        pos += 4
+        if count:
+            pos = 4 + ((pos - 4 + 7) & ~7)     # doubles align to 8 from the body start
+            if count > (n - pos) // 8:
+                return None
+            values.append(struct.unpack_from(f"<{count}d", data, pos))
+            pos += 8 * count
+        else:
+            values.append(())
+    # rclpy's serializer may leave up to 8 bytes of padding after the last field
+    if not pos <= n <= pos + 8 or len(values[0]) != 1 or len(values[1]) > 1:
+        return None
+    v = values[1][0] if values[1] else math.nan
+    return sec, nanosec, values[0][0], v, values[2]
+
+
 def read_twist_stamped(data: bytes):
-    """(sec, nanosec, linear.x) of a TwistStamped with an empty frame_id, else None."""
+    """(sec, nanosec, linear.x, linear.y) of a TwistStamped with an empty frame_id,
+    else None. linear.y is the predicted next correction (NaN: none; bags from before
+    the prediction carry 0.0 there)."""
     if len(data) != _TWIST_STAMPED.size:
         return None
-    head, sec, nanosec, flen, frame, lx, *_rest = _TWIST_STAMPED.unpack(data)
+    head, sec, nanosec, flen, frame, lx, ly, *_rest = _TWIST_STAMPED.unpack(data)
     if head != _HEADER or flen != 1 or frame[0] != 0:
         return None
-    return sec, nanosec, lx
+    return sec, nanosec, lx, ly

@@ -12,12 +12,33 @@ Topics
 ------
 subscribes ``oscillator/pi2`` (sensor_msgs/JointState): position [x], velocity [v] at Pi2.
 publishes ``controller/velocity_correction`` (geometry_msgs/TwistStamped):
-twist.linear.x = Delta v (nondimensional velocity), header.stamp = the sample's stamp;
+twist.linear.x = Delta v (nondimensional velocity), twist.linear.y = the correction
+predicted for the NEXT sample (one exact period of the model from this sample with this
+correction applied after ``actuation_delay``, then Eq. 28; 0 when the next sample is not
+controlled; NaN without a model, i.e. ``delta_d`` NaN: issue 16 section 3),
+header.stamp = the sample's stamp;
 reliable, transient local, keep last 100000 (``REPLAY_QOS``): a recorder that matches
 late still gets every answer (the subscription is reliable, volatile, keep last 1000).
 Both as packed bytes (:mod:`grazing_control.ros.cdr`, docs/nodes.md "Wire format"):
 the simulator's sample layout is read directly, any other JointState through rclpy;
 bytes that decode to no JointState are counted as malformed.
+
+Stream mode (``pi2_source`` stream)
+-----------------------------------
+The controller does not subscribe ``oscillator/pi2``: it estimates each section's state
+from ``oscillator/state`` (JointState, stamp = sample time, position [x~], velocity [v~]
+or empty for a position-only sensor, effort [cos tau, sin tau] or [cos tau]; the section
+times are t_k = k T, the simulator's origin) with ``estimator`` nearest, arc or model
+(:mod:`grazing_control.dynamics.estimation`, docs/theory_estimation.md), the impacts
+taken from ``oscillator/impact`` (``impact_source`` topic) or detected in the stream.
+Section k is estimated and answered (stamped t_k) as soon as its last sample arrived:
+the newest sample's t + ``state_period`` > t_k (0: the gap between the last two stamps),
+or late, with the first sample after t_k when that one was lost. Each estimate is
+published on ``controller/estimate`` (JointState: position [x^], velocity [v^], effort
+[var x, cov xv, var v] per the noise model; stamp t_k; transient local like the
+answers). The model needs the plant's ``delta_d`` and the sensor's ``sensor_noise``
+(the launcher passes the simulator's); ``model_noise`` is the model filter's process
+noise per period in units of ``sensor_noise``.
 
 Switching on
 ------------
@@ -60,7 +81,9 @@ Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_
 (NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
 stale_after, actuation_delay (the delay the gains were designed for, 0 <= delay < T; the
 simulator applies it, the controller validates and reports it: docs/nodes.md,
-"Scheduled actuation"), executor (single_threaded or events). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+"Scheduled actuation"), executor (single_threaded or events); delta_d (the plant's
+model, NaN: none), pi2_source, estimator, impact_source, sensor_noise, state_period,
+model_noise (stream mode, above). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
 """
 
@@ -70,7 +93,7 @@ import math
 import time
 from collections import deque
 
-from geometry_msgs.msg import TwistStamped
+from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
@@ -78,6 +101,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
+from grazing_control.dynamics.estimation import ESTIMATORS
+from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr
 from .common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize, StartupError, Throttled,
@@ -88,10 +113,15 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError, 
 #: Wall seconds between two checks that only one simulator publishes the samples.
 ISOLATION_CHECK = 0.25
 
-__all__ = ["ControlLaw", "law_from_values", "ControllerNode", "main"]
+__all__ = ["ControlLaw", "law_from_values", "model_from_values", "stream_from_values",
+           "ControllerNode", "main", "PI2_SOURCES"]
 
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
-         "enable_after", "saturation", "stale_after", "actuation_delay")
+         "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
+         "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
+         "model_noise")
+#: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
+PI2_SOURCES = ("sample", "stream")
 
 
 class ControlLaw:
@@ -165,6 +195,16 @@ class ControlLaw:
         self.count += 1
         return dv
 
+    def preview(self, x: float, v: float) -> float:
+        """The correction the next sample would get if it were (x, v): Eq. 28 with the
+        saturation when the next sample is controlled, else 0 (issue 16 section 3)."""
+        if not self.enabled:
+            return 0.0
+        dv = correction(self.gains, x, v, self.x_ref, self.v_ref)
+        if abs(dv) > self.saturation:
+            dv = math.copysign(self.saturation, dv)
+        return dv
+
 
 def law_from_values(values: dict) -> ControlLaw:
     """Validate the controller's parameters into a :class:`ControlLaw` (ParameterError)."""
@@ -192,6 +232,45 @@ def law_from_values(values: dict) -> ControlLaw:
         raise ParameterError(f"stale_after={stale_after!r} is invalid: valid range is "
                              "stale_after > 0 (inf: no age limit)")
     return ControlLaw(gains, x_ref, v_ref, enable_after, saturation)
+
+
+def model_from_values(values: dict):
+    """The plant model (with Delta d) for the estimator and the prediction, or None when
+    ``delta_d`` is NaN (no model: no prediction, and no stream mode)."""
+    delta_d = float(values["delta_d"])
+    if math.isnan(delta_d):
+        return None
+    if not math.isfinite(delta_d):
+        raise ParameterError(f"delta_d={delta_d!r} is invalid: valid range is a finite real "
+                             "number (the plant's Delta d), or NaN for no model")
+    return OscillatorParams(zeta=values["zeta"], r=values["r"], omega=values["omega"],
+                            delta_d=delta_d, pi2_offset=values["pi2_offset"])
+
+
+def stream_from_values(values: dict, model):
+    """The :class:`StreamEstimator` of ``pi2_source`` stream, None for ``sample``
+    (ParameterError naming the parameter and its valid values)."""
+    source = values["pi2_source"]
+    if source not in PI2_SOURCES:
+        raise ParameterError(f"pi2_source={source!r} is invalid: valid values are "
+                             f"{', '.join(PI2_SOURCES)}")
+    if values["estimator"] not in ESTIMATORS:
+        raise ParameterError(f"estimator={values['estimator']!r} is invalid: valid values "
+                             f"are {', '.join(ESTIMATORS)}")
+    if values["impact_source"] not in IMPACT_SOURCES:
+        raise ParameterError(f"impact_source={values['impact_source']!r} is invalid: valid "
+                             f"values are {', '.join(IMPACT_SOURCES)}")
+    floor = float(values["model_noise"])
+    if not (math.isfinite(floor) and floor >= 0.0):
+        raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "
+                             "model_noise >= 0 (process noise per period, in sensor_noise)")
+    if source == "sample":
+        return None
+    if model is None:
+        raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
+                             "the plant's finite Delta d (the estimator's model needs the wall)")
+    return StreamEstimator(model, values["estimator"], values["sensor_noise"],
+                           values["impact_source"], values["state_period"], floor)
 
 
 def actuation_delay_from_values(values: dict) -> float:
@@ -229,6 +308,26 @@ class ControllerNode(Node):
         d("actuation_delay", 0.0, float_descriptor(
             "simulation time from a sample to its correction that the gains were designed "
             "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True))
+        d("delta_d", math.nan, float_descriptor(
+            "the plant's Delta d (the model of the estimator and of the predicted next "
+            "correction); NaN: no model", read_only=True))
+        d("pi2_source", "sample", string_descriptor(
+            "sample: the simulator's Pi2 samples (oscillator/pi2); stream: estimated from "
+            "the sensor stream (oscillator/state)", True, PI2_SOURCES))
+        d("estimator", "model", string_descriptor(
+            "stream mode: nearest (last sample), arc (free-flow fit since the last impact),"
+            " model (exact-map filter across periods)", True, ESTIMATORS))
+        d("impact_source", "stream", string_descriptor(
+            "stream mode: impacts from oscillator/impact (topic) or detected in the stream",
+            True, IMPACT_SOURCES))
+        d("sensor_noise", 1e-4, float_descriptor(
+            "std of the stream's noise (> 0 for arc and model)", 0.0, read_only=True))
+        d("state_period", 0.0, float_descriptor(
+            "simulation time between stream samples; 0: from the stamps", 0.0,
+            read_only=True))
+        d("model_noise", 1e-2, float_descriptor(
+            "model filter's process noise per period, in units of sensor_noise", 0.0,
+            read_only=True))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
@@ -236,6 +335,8 @@ class ControllerNode(Node):
         try:
             self.law = law_from_values(self._values())
             self.actuation_delay = actuation_delay_from_values(self._values())
+            self.model = model_from_values(self._values())
+            self.stream = stream_from_values(self._values(), self.model)
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -243,9 +344,22 @@ class ControllerNode(Node):
         self.pub = self.create_publisher(
             TwistStamped, "controller/velocity_correction", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
-        self.sub_samples = self.create_subscription(
-            JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
-            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        quiet = SubscriptionEventCallbacks(use_default_callbacks=False)
+        if self.stream is None:
+            self.sub_samples = self.create_subscription(
+                JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
+                event_callbacks=quiet)
+        else:       # stream mode never listens to the simulator's exact samples
+            self.sub_samples = self.create_subscription(
+                JointState, "oscillator/state", self._on_state, DATA_QOS, raw=True,
+                event_callbacks=quiet)
+            self.pub_estimate = self.create_publisher(
+                JointState, "controller/estimate", REPLAY_QOS,
+                event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+            if self.stream.impact_source == "topic":
+                self.sub_impacts = self.create_subscription(
+                    Vector3Stamped, "oscillator/impact", self._on_impact, DATA_QOS,
+                    event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0
@@ -261,9 +375,13 @@ class ControllerNode(Node):
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
         self._warn_gains()
+        source = "sample" if self.stream is None else (
+            f"stream estimator={self.stream.estimator} impact_source="
+            f"{self.stream.impact_source} sensor_noise={self.stream.sigma!r}")
         log.info(f"c1={self.law.gains.c1!r} c2={self.law.gains.c2!r} x_ref={self.law.x_ref!r} "
                  f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after} "
-                 f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind}")
+                 f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind} "
+                 f"pi2_source={source}")
 
     def _warn_gains(self) -> None:
         """Warn when the gains were not given or are both zero (the controller then
@@ -306,16 +424,75 @@ class ControllerNode(Node):
             if age > self.stale_after:
                 self.stale(f"stamp {key} is {age:.6g} s old")
                 return
+        self._answer(key, x, v)
+
+    def _answer(self, key: tuple, x: float, v: float):
+        """Answer the Pi2 state (x, v) stamped ``key``: the correction and, with a model,
+        the one predicted for the next sample (twist.linear.y, NaN: none). Returns the
+        correction published, or None."""
         dv = self.law.answer(key, x, v)
         if dv is None:
             self.stale(f"stamp {key} was already answered")
             self._check_isolation()
-            return
+            return None
         if not math.isfinite(dv):
             self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
-            return
-        self.pub.publish(cdr.twist_stamped(sec, ns, dv))
+            return None
+        self.pub.publish(cdr.twist_stamped(*key, dv, self._predict(x, v, dv)))
         self.answered += 1
+        return dv
+
+    def _predict(self, x: float, v: float, dv: float) -> float:
+        """The correction of the next sample predicted by one exact period of the model
+        from (x, v) with ``dv`` applied (NaN without a model or where it fails)."""
+        if self.model is None:
+            return math.nan
+        p = self.model
+        try:
+            zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay)
+        except (ValueError, ArithmeticError, RuntimeError):
+            return math.nan
+        return self.law.preview(p.x_ref + zx, p.v_ref + zv)
+
+    def _on_state(self, data: bytes) -> None:
+        """A stream sample as received: read directly (:func:`cdr.read_state`), else
+        through rclpy; the sections it completes are estimated, published on
+        controller/estimate and answered."""
+        sample = cdr.read_state(data)
+        if sample is None:
+            msg = deserialize(data, JointState, self.malformed)
+            if msg is None:
+                return
+            if len(msg.position) < 1:
+                self.malformed(f"stamp {stamp_key(msg.header.stamp)}: no position")
+                return
+            v = msg.velocity[0] if len(msg.velocity) else math.nan
+            sample = stamp_key(msg.header.stamp) + (msg.position[0], v, tuple(msg.effort))
+        sec, ns, x, v, _effort = sample
+        if not math.isfinite(x) or math.isinf(v):
+            self.malformed(f"stamp {(sec, ns)}: x={x!r} v={v!r}")
+            return
+        try:
+            due = self.stream.add_sample(sec + ns * 1e-9, x, v)
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            self.malformed(f"stamp {(sec, ns)}: the estimator failed: {exc}")
+            return
+        p = self.model
+        for k, tk, est in due:
+            key = cdr.stamp_parts(tk)
+            xh, vh = p.x_ref + est.z[0], p.v_ref + est.z[1]
+            c = est.cov
+            self.pub_estimate.publish(cdr.estimate_state(*key, xh, vh, float(c[0, 0]),
+                                                         float(c[0, 1]), float(c[1, 1])))
+            if not (math.isfinite(xh) and math.isfinite(vh)):
+                self.malformed(f"section {k}: no estimate (no sample before it)")
+                continue
+            dv = self._answer(key, xh, vh)
+            self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
+
+    def _on_impact(self, msg) -> None:
+        """An impact from the rig's impact sensor (impact_source topic): its time."""
+        self.stream.add_impact(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
 
     def _check_isolation(self) -> None:
         """Stop with status 1 when more than one simulator publishes the samples."""

@@ -393,6 +393,9 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         sim_over["actuation_delay"] = delay
     sim_over.update(sim_overrides or {})
     controller_overrides = dict(controller_overrides or {})
+    for key in ("delta_d", "sensor_noise", "state_period"):  # the controller's model of
+        if key in sim_over:                                   # the plant and its sensor
+            controller_overrides.setdefault(key, sim_over[key])
     if enable_after is not None:
         controller_overrides["enable_after"] = int(enable_after)
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None}

@@ -9,7 +9,11 @@ What it records by default (names relative to the node's namespace):
 ``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
     state at each crossing of Pi1 and Pi2; stamp = crossing time.
 ``controller/velocity_correction`` (geometry_msgs/msg/TwistStamped)
-    twist.linear.x = Delta v; stamp = stamp of the Pi2 sample it answers.
+    twist.linear.x = Delta v, twist.linear.y = the predicted next Delta v (NaN: none);
+    stamp = stamp of the Pi2 sample it answers.
+``controller/estimate`` (sensor_msgs/msg/JointState)
+    stream mode: the controller's Pi2 estimate, position [x^], velocity [v^], effort
+    [var x, cov xv, var v]; stamp = the section time.
 ``/clock`` (rosgraph_msgs/msg/Clock)
     simulation time.
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
@@ -41,10 +45,19 @@ incompatible QoS is reported (a warning names the topic and the policy).
 Readiness and completeness: once every topic has a subscription matched to at least
 one publisher, the recorder publishes ``True`` on ``recorder/ready`` (std_msgs/Bool,
 reliable, transient local); the simulator waits for it (``wait_for_recorder``) before
-the scene starts. At close, each topic with one publisher is checked with the
-publisher's sequence numbers (``publication_sequence_number``, 1 for its first message):
-messages published before the match or lost on the way are reported as ``missed`` in a
-warning, and with ``require_complete:=true`` the exit status is 1.
+the scene starts. At close, each topic is checked with the publisher's sequence numbers
+(``publication_sequence_number``, 1 for its first message): messages published before
+the match or lost on the way are reported as ``missed`` in a warning, and with
+``require_complete:=true`` the exit status is 1. A topic on which two publishers both
+sent cannot be checked (their sequences interleave) and is named in a warning; a silent
+second publisher does not stop the check.
+
+QoS: the package's own topics (those above and ``grazing/parameters``,
+``oscillator/latency``) are subscribed reliably whatever else is offered: a best-effort
+publisher on them (a bystander) is not matched and is named in a warning, so it cannot
+make the scene's record lossy. Other topics follow ros2 bag's rule (reliable only if every
+publisher is, transient local only if every publisher is); ``adapt_qos:=true`` applies
+that rule to every topic (a rig whose driver publishes best effort).
 
 Parameters (all read-only):
 
@@ -58,6 +71,8 @@ Parameters (all read-only):
     Uncompressed chunk size; a crash loses at most the chunk being filled.
 ``require_complete`` (bool, false)
     Exit with status 1 when messages were missed (see above).
+``adapt_qos`` (bool, false)
+    ros2 bag's QoS rule for the package's own topics too (see QoS above).
 ``batch_window`` (double, seconds, 0.001; range [0, 0.1])
     After each wake-up the recorder waits this long and then takes every message
     queued on every topic: one wake-up records a batch instead of one message, which
@@ -80,9 +95,9 @@ Run: ``ros2 run grazing_control recorder_node --ros-args -p output:=bags/run1``
 """
 
 import importlib
+import os
 import signal
 import sys
-import threading
 import time
 from collections import defaultdict
 
@@ -101,13 +116,12 @@ from std_msgs.msg import Bool
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
                      check_overrides, init_ros, usage)
 from grazing_control.oscillator.params import ParameterError
+from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
                         qos_profile_dict)
 
 __all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "READY_TOPIC", "RECORDER_QOS",
            "RecorderNode", "adapted_qos", "main", "parse_topics"]
-
-
 
 #: Topics recorded by default (relative names) and their types.
 DEFAULT_TOPICS = {
@@ -126,7 +140,8 @@ DEFAULT_TOPICS = {
 PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
 #: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
 EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
-                "oscillator/latency": "std_msgs/msg/Float64"}
+                "oscillator/latency": "std_msgs/msg/Float64",
+                "controller/estimate": "sensor_msgs/msg/JointState"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
 #: nothing (used for a topic's metadata when it never had a publisher).
@@ -145,7 +160,6 @@ _BATCH = 256
 #: every message queued on every topic (docs/nodes.md, "Wire format and batching").
 DEFAULT_BATCH_WINDOW = 0.001
 MAX_BATCH_WINDOW = 0.1
-
 
 def parse_topics(entries):
     """Topics to record from the ``topics`` parameter.
@@ -184,8 +198,7 @@ def parse_topics(entries):
         raise ParameterError("topics=[] is invalid: give at least one topic")
     return topics
 
-
-def adapted_qos(offered):
+def adapted_qos(offered, own: bool = False):
     """The subscription QoS for publishers offering ``offered`` (rosbag2's rule).
 
     rosbag2_transport ``Rosbag2QoS::adapt_request_to_offers``: reliable only if every
@@ -193,6 +206,11 @@ def adapted_qos(offered):
     only if every publisher is, else volatile. History (keep all here) does not affect
     compatibility; deadline and liveliness stay at their defaults, compatible with any
     offer. Returns ``(qos, warnings)``: a warning for each mixed policy.
+
+    ``own``: the topic is one of the package's (its nodes publish it reliably). Then the
+    subscription is reliable whatever is offered: a best-effort publisher (a bystander,
+    or a rig's driver: record it with ``adapt_qos:=true``) is left out with a warning, so
+    a passive bystander cannot turn the scene's record lossy (issue 21).
     """
     offered = list(offered)
     qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=0,
@@ -202,6 +220,15 @@ def adapted_qos(offered):
     if not offered:
         return qos, warnings
     reliable = sum(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    if own:
+        if reliable < len(offered):
+            warnings.append(f"{len(offered) - reliable} best-effort publisher(s) not recorded "
+                            "(the package's own topics are recorded reliably; "
+                            "adapt_qos:=true records them best effort, as ros2 bag does)")
+        offered = [q for q in offered if q.reliability == ReliabilityPolicy.RELIABLE]
+        if not offered:
+            return qos, warnings
+        reliable = len(offered)
     latched = sum(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
     if reliable < len(offered):
         qos.reliability = ReliabilityPolicy.BEST_EFFORT
@@ -214,6 +241,13 @@ def adapted_qos(offered):
         warnings.append("some, but not all, publishers are transient local: subscribed "
                         "volatile (their earlier messages are not retrieved)")
     return qos, warnings
+
+def _is_own(topic: str) -> bool:
+    """Whether ``topic`` (as configured, relative or absolute) is one of the package's."""
+    return topic.lstrip("/") in _OWN
+
+
+_OWN = {name.lstrip("/") for name in (*DEFAULT_TOPICS, *EXTRA_TOPICS)}
 
 
 def qos_to_dict(qos):
@@ -230,13 +264,11 @@ def qos_to_dict(qos):
         avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions,
     )
 
-
 def _message_class(msg_type):
     """Python class of ``pkg/msg/Type`` (or ``pkg/Type``)."""
     parts = msg_type.split("/")
     package, name = parts[0], parts[-1]
     return getattr(importlib.import_module(f"{package}.msg"), name)
-
 
 class RecorderNode(Node):
     """Subscribes to the topics and writes their serialized messages to a bag.
@@ -276,7 +308,9 @@ class RecorderNode(Node):
         self._first_seq = {}        # topic -> first publication sequence number
         self._last_seq = {}         # topic -> last publication sequence number
         self._gaps = defaultdict(int)   # topic -> messages skipped inside the sequence
-        self._publisher_counts = defaultdict(int)   # topic -> most publishers seen
+        self._interleaved = set()   # topics on which several publishers send
+        self._reliable = {}         # topic -> its subscription is reliable
+        self._adapt_all = bool(self.get_parameter("adapt_qos").value)
         for name, kind in topics.items():
             topic = self.resolve_topic_name(name)            # fully qualified
             self._types[topic] = kind
@@ -293,12 +327,17 @@ class RecorderNode(Node):
             f"({compression}, log_time = {'ROS clock' if self._sim_time else 'receive time'})")
 
     def _watch(self):
-        """Subscribe to each topic once it has publishers; say when all are matched."""
+        """Subscribe to each topic once it has publishers; say when all are matched.
+
+        "Matched" counts the publishers the subscription matched: a best-effort bystander
+        on one of the package's (reliably recorded) topics does not make it ready.
+        """
         for topic, kind in self._types.items():
             if topic not in self._subs:
                 publishers = self.get_publishers_info_by_topic(topic)
                 if publishers:
                     self._subscribe(topic, kind, publishers)
+
         if self._ready:
             return
         if len(self._subs) == len(self._types) and all(
@@ -324,6 +363,9 @@ class RecorderNode(Node):
             "uncompressed chunk size, bytes", ParameterType.PARAMETER_INTEGER))
         self.declare_parameter("require_complete", False, read_only(
             "exit with status 1 when messages were missed", ParameterType.PARAMETER_BOOL))
+        self.declare_parameter("adapt_qos", False, read_only(
+            "subscribe to the package's own topics with ros2 bag's adapted QoS too (default: "
+            "reliable, a best-effort publisher is left out)", ParameterType.PARAMETER_BOOL))
         self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, read_only(
             f"seconds the recorder lets messages gather after each wake-up before taking "
             f"all of them, in [0, {MAX_BATCH_WINDOW:g}] (0: take each one as it arrives)",
@@ -361,10 +403,14 @@ class RecorderNode(Node):
 
     def _subscribe(self, topic, kind, publishers):
         """Subscribe to ``topic`` with the QoS adapted to its ``publishers``."""
-        qos, warnings = adapted_qos([p.qos_profile for p in publishers])
+        own = _is_own(self._names[topic]) and not self._adapt_all
+        qos, warnings = adapted_qos([p.qos_profile for p in publishers], own=own)
         for text in warnings:
             self.get_logger().warning(f"{topic}: {text}")
-        self._offered[topic] = [qos_to_dict(p.qos_profile) for p in publishers]
+        self._reliable[topic] = qos.reliability == ReliabilityPolicy.RELIABLE
+        self._offered[topic] = [qos_to_dict(p.qos_profile) for p in publishers
+                                if not own or not self._reliable[topic]
+                                or p.qos_profile.reliability == ReliabilityPolicy.RELIABLE]
         events = SubscriptionEventCallbacks(
             incompatible_qos=lambda event: self._on_incompatible_qos(topic, event))
         self._subs[topic] = self.create_subscription(
@@ -423,27 +469,28 @@ class RecorderNode(Node):
     def _track_sequence(self, topic, sequence):
         if not sequence:
             return
-        publishers = self._subs[topic].get_publisher_count()
-        self._publisher_counts[topic] = max(self._publisher_counts[topic], publishers)
         if topic not in self._first_seq:
             self._first_seq[topic] = sequence
         else:
             last = self._last_seq[topic]
-            if sequence > last + 1:
+            if sequence <= last:            # a second publisher that sends: interleaved
+                self._interleaved.add(topic)
+            elif sequence > last + 1:
                 self._gaps[topic] += sequence - last - 1
         self._last_seq[topic] = sequence
 
     def missed(self):
-        """{topic: messages missed} from the sequence numbers of single-publisher topics.
+        """{topic: messages missed} from the publisher's sequence numbers.
 
         Messages published before the recorder matched the publisher (the first one
         recorded has sequence number n > 1: n - 1 missed) or lost in between (gaps).
-        Topics that had more than one publisher are not checked (their sequences
-        interleave).
+        A topic on which two publishers both send interleaves their sequences and cannot
+        be checked: :meth:`unchecked` lists it (a silent second publisher, e.g. a passive
+        bystander, does not prevent the check).
         """
         out = {}
         for topic, first in self._first_seq.items():
-            if self._publisher_counts[topic] != 1:
+            if topic in self._interleaved:
                 continue
             n = first - 1 + self._gaps[topic]
             if n:
@@ -453,8 +500,7 @@ class RecorderNode(Node):
     def _on_incompatible_qos(self, topic, event):
         self.get_logger().warning(
             f"{topic}: a publisher's QoS is incompatible with the recorder's subscription "
-            f"(policy {event.last_policy_kind}; the recorder adapted to the publishers it "
-            "found first): its messages are not recorded")
+            f"(policy {event.last_policy_kind}): its messages are not recorded")
 
     def drain(self):
         """Record every message the middleware has already received.
@@ -496,6 +542,10 @@ class RecorderNode(Node):
         if info:
             counts = ", ".join(f"{name} {n}" for name, n in self.bag.message_counts.items())
             log.info(f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
+        if self._interleaved:
+            self.get_logger().warning(
+                f"not checked for losses: {', '.join(sorted(self._interleaved))} (several "
+                "publishers sent on it: their sequence numbers interleave)")
         missed = self.missed()
         if missed:
             text = ", ".join(f"{t} {n}" for t, n in missed.items())
@@ -504,21 +554,17 @@ class RecorderNode(Node):
             return 1 if self.require_complete else 0
         return 0
 
-
 def _stop_on_signals(stop):
     """SIGINT and SIGTERM set `stop` (the spin loop then ends and the bag closes)."""
-    def handler(signum, frame):
-        stop.set()
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, handler)
-
+        signal.signal(signum, stop.set)
 
 def main(args=None):
     """Run the recorder until SIGINT/SIGTERM; return the exit status."""
     args = list(sys.argv if args is None else args)
     # Our own handlers, from the start: rclpy's would shut the context down before the
     # drain, and a signal while starting must end the process quietly.
-    stop = threading.Event()
+    stop = SignalStop()
     _stop_on_signals(stop)
     status = 0
     node = None
@@ -550,10 +596,12 @@ def main(args=None):
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
             status = node.close() or status
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
-
+    # The bag is closed and its summary logged: leave now. Tearing the node, the DDS
+    # participant and the interpreter down (GC of every history) took up to 30 s under
+    # CPU starvation, past the launcher's grace (issue 21: a complete bag, then SIGKILL).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 if __name__ == "__main__":
     sys.exit(main())

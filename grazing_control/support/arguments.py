@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["finite", "integer_at_least", "non_empty_path"]
+__all__ = ["finite", "positive", "negative", "integer_at_least", "non_empty_path"]
 
 
 def finite(text: str) -> float:
@@ -20,6 +20,22 @@ def finite(text: str) -> float:
         value = math.nan
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite real number")
+    return value
+
+
+def positive(text: str) -> float:
+    """A finite real number > 0."""
+    value = finite(text)
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite number > 0")
+    return value
+
+
+def negative(text: str) -> float:
+    """A finite real number < 0 (a wall offset Delta d on the impacting side)."""
+    value = finite(text)
+    if not value < 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite number < 0")
     return value
 
 

@@ -415,8 +415,9 @@ def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
               and grid[0, 8] == horizon)
     fa = evaluate_row(ev, grid, 0) if cached else evaluate(ev, 0.0)
     ga = fa[0]
-    if 0.0 < ga <= wall_rounding(P, tau0, dx0, dv0)[0]:
-        ga = 0.0  # on the wall up to rounding
+    # on the wall up to rounding: above it, or below it while leaving (v < 0)
+    if (ga > 0.0 or ga < 0.0 and fa[1] < 0.0) and abs(ga) <= wall_rounding(P, tau0, dx0, dv0)[0]:
+        ga = 0.0
     if ga > 0.0:
         return NONE, STATUS_BEYOND_WALL, ga
     if ga == 0.0 and fa[1] > 0.0:

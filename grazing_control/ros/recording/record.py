@@ -56,6 +56,8 @@ def decode(text: str):
         obj = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"not JSON ({exc.msg})") from None
+    except RecursionError:              # a hostile, deeply nested text
+        raise ValueError("JSON nested too deeply") from None
     if not isinstance(obj, dict) or obj.get("record") != KIND:
         raise ValueError("not a grazing_control parameter record")
     params = obj.get("parameters")

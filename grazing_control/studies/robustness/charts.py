@@ -65,10 +65,14 @@ def plot_stability_maps(maps, path, boundaries=None, dpi=80):
                 ax.contour(m.c2s, m.delays, np.nan_to_num(vals, nan=3.0), levels=[0.0],
                            colors="k", linewidths=0.8)
             if design == "delayed" and boundaries:
-                ends = [(x, delay) for delay, ivs in boundaries.items() for iv in ivs for x in iv]
+                # the design's true ends may lie outside the plotted c2 grid (or at
+                # infinity, beyond its search limit): only those on the chart are marked
+                ends = [(x, delay) for delay, ivs in boundaries.items() for iv in ivs for x in iv
+                        if m.c2s[0] <= x <= m.c2s[-1]]
                 if ends:
                     ex, ey = zip(*ends)
                     ax.plot(ex, ey, "m.", ms=2.5, label="admissible-set ends (design)")
+            ax.set_xlim(m.c2s[0], m.c2s[-1])
             if i == 0:
                 ax.set_title(f"Δd = {dd:.0e}", fontsize=9)
             if j == 0:

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from grazing_control.support.arguments import integer_at_least
+from grazing_control.support.arguments import integer_at_least, negative, positive
 
 __all__ = ["add_robustness_parser"]
 
@@ -46,6 +46,10 @@ def cmd_delay(args):
     from .charts import plot_delay_curves, plot_stability_maps
     from .delay import design_gains, multiplier_curve, stability_interval, stability_map
 
+    lo, hi = args.c2_range
+    if not lo < hi:
+        from grazing_control.oscillator.params import ParameterError
+        raise ParameterError(f"c2_range=({lo!r}, {hi!r}) is invalid: expected LOW < HIGH")
     base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
     out = _out_dir(args.out)
     t0 = time.perf_counter()
@@ -158,7 +162,7 @@ def add_robustness_parser(sub, common, finite):
     common(d)
     d.add_argument("--design", type=_pair, action="append",
                    help="DELAY:C2 of a design (repeatable; default 0:-1 and 2:0.5)")
-    d.add_argument("--delta-d", type=finite, nargs="+", default=[-1e-4, -1e-5, -1e-6],
+    d.add_argument("--delta-d", type=negative, nargs="+", default=[-1e-4, -1e-5, -1e-6],
                    help="wall offsets Delta d < 0 (default -1e-4 -1e-5 -1e-6)")
     d.add_argument("--points", type=_count, default=141, help="actual delays on the curves (141)")
     d.add_argument("--map-points", type=_count, default=61, help="grid points per axis of the maps (61)")
@@ -171,14 +175,14 @@ def add_robustness_parser(sub, common, finite):
     common(f)
     f.add_argument("--design", type=_pair, action="append",
                    help="DELAY:C2 of a design (repeatable; default 0:-1 and 2:0.5)")
-    f.add_argument("--delta-d", type=finite, nargs="+", default=[-5e-6, -9e-6],
+    f.add_argument("--delta-d", type=negative, nargs="+", default=[-5e-6, -9e-6],
                    help="wall offsets (default the study's scenes -5e-6 -9e-6)")
     f.add_argument("--kinds", nargs="+", choices=("loss", "noise", "jitter"),
                    default=["loss", "noise", "jitter"])
     f.add_argument("--seeds", type=_count, default=48, help="runs per level (default 48)")
     f.add_argument("--horizon", type=_count, default=400, help="N: capture within N samples (400)")
     f.add_argument("--tail", type=_count, default=200, help="samples of the stationary spread (200)")
-    f.add_argument("--threshold", type=finite, default=1e-4, help="capture distance (1e-4)")
+    f.add_argument("--threshold", type=positive, default=1e-4, help="capture distance (1e-4)")
     f.add_argument("--hold", type=_count, default=20, help="M consecutive samples (20)")
     f.add_argument("--workers", type=_count, default=2, help="processes (default 2)")
     f.add_argument("--out", default="out/robustness", help="folder for charts and JSON")

@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
+from grazing_control.support.arguments import non_empty_path
 
 __all__ = ["add_sweep_command", "parse_grid", "cmd_sweep"]
 
@@ -68,6 +69,14 @@ def _start(text):
     return dx, dv
 
 
+def _scheduler(text):
+    from .run import check_scheduler
+    try:
+        return check_scheduler(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace("scheduler=", "", 1)) from None
+
+
 def add_sweep_command(sub, common, finite, count):
     """Register ``grazing sweep`` on the ``grazing`` subparsers (see grazing_control.cli)."""
     s = sub.add_parser("sweep", help="bifurcation diagram: simulate a parameter grid on Pi2")
@@ -86,15 +95,16 @@ def add_sweep_command(sub, common, finite, count):
     s.add_argument("--control-after", type=count,
                    help="controller on from this sample (default 0 when there are gains)")
     s.add_argument("--workers", type=count, help="local processes (default: all cores)")
-    s.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+    s.add_argument("--scheduler", metavar="tcp://HOST:PORT", type=_scheduler,
                    help="run on this Dask scheduler instead of local processes")
     s.add_argument("--engine", choices=("auto", "kernel", "python"), default="auto",
                    help="compiled kernel (auto: if numba imports) or the pure-Python core")
     s.add_argument("--period-tol", type=finite, default=1e-10,
                    help="tolerance of the period detection on Pi2 (default 1e-10)")
     s.add_argument("--max-period", type=count, help="longest period detected (default 64)")
-    s.add_argument("--out", default="out/sweep/sweep.npz",
-                   help="npz file (default out/sweep/sweep.npz); the PNG goes next to it")
+    s.add_argument("--out", default="out/sweep/sweep.npz", type=non_empty_path,
+                   help="npz file (default out/sweep/sweep.npz), or an existing folder "
+                        "(then FOLDER/sweep.npz); the PNG goes next to it")
     s.add_argument("--component", choices=("x", "v"), default="x",
                    help="Pi2 coordinate drawn in the PNG (default x)")
     s.add_argument("--no-png", action="store_true", help="write only the npz")
@@ -127,6 +137,8 @@ def cmd_sweep(args):
         grid.setdefault("c1", np.array([args.c1]))
     transient = args.periods // 2 if args.transient is None else args.transient
     out = os.path.abspath(args.out)
+    if os.path.isdir(out) or args.out.endswith(os.sep):   # a folder: the file goes inside
+        out = os.path.join(out, "sweep.npz")
     if not out.endswith(".npz"):
         out += ".npz"
     os.makedirs(os.path.dirname(out), exist_ok=True)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
+import re
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import fields
 
@@ -295,14 +296,31 @@ def _prepare(engine):
         warm_up()
 
 
+#: A Dask scheduler address: protocol://host:port (the protocols distributed speaks).
+_ADDRESS = re.compile(r"^(tcp|tls|ucx|ws|wss)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
+
+
+def check_scheduler(scheduler) -> str:
+    """``scheduler`` if it is an address ``tcp://HOST:PORT``; else ParameterError.
+
+    Checked before a ``distributed.Client`` exists: a Client built from a malformed address
+    fails, and its finaliser then waits 20 s to close a connection that never was.
+    """
+    m = _ADDRESS.match(scheduler.strip()) if isinstance(scheduler, str) else None
+    if m is None or not 0 < int(m.group(3)) < 65536:
+        raise ParameterError(f"scheduler={scheduler!r} is invalid: expected an address "
+                             "PROTOCOL://HOST:PORT (tcp, tls, ucx, ws, wss; port 1..65535) "
+                             "or a distributed.Client")
+    return scheduler.strip()
+
+
 def _run_dask(scheduler, indexed, args, store):
     """Run the chunks on a Dask cluster: an address (tcp://host:port) or a Client."""
     from distributed import Client, as_completed as dask_completed
 
     own = not isinstance(scheduler, Client)
-    if own and not (isinstance(scheduler, str) and scheduler.strip()):
-        raise ParameterError(f"scheduler={scheduler!r} is invalid: expected an address "
-                             "tcp://HOST:PORT or a distributed.Client")
+    if own:
+        check_scheduler(scheduler)
     try:
         client = Client(scheduler, set_as_default=False, timeout=CONNECT_TIMEOUT) if own \
             else scheduler

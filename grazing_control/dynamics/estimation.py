@@ -1,0 +1,386 @@
+"""The Pi2 state from a sampled, noisy sensor stream: nearest sample, arc fit, model fit.
+
+A rig does not sample its motion on Pi2; it streams position (and maybe velocity)
+samples x~_j = x(t_j) + sigma e_j at a fixed rate. The controller needs the state
+z_k = (x, v)(t_k) - y_p(tau2) on Pi2 (deviation coordinates,
+:mod:`grazing_control.oscillator.flow`) at the section times t_k = k T, before the
+correction of period k. docs/theory_estimation.md derives the three estimators:
+
+``nearest``
+    The last sample at or before t_k; where velocity is not measured, the backward
+    difference of the last two samples (never across a known impact). Error
+    covariance sigma^2 diag(1, 2 / h^2) (position only), sigma^2 I with velocity,
+    plus the bias of the time offset (docs/theory_estimation.md, (E1)).
+``arc``
+    Linear least squares of the exact free flow over the samples since the last
+    impact: between impacts y_j = e1^T Phi(t_j - t_k) z_k + sigma e_j (E2), so
+    z^ = (H^T H)^-1 H^T y with covariance sigma^2 (H^T H)^-1.
+``model``
+    An iterated extended Kalman filter without process noise beyond a small floor,
+    over whole periods, with the exact flow, the impact law and the known correction
+    (E3-E5): the prior N(z^_{k-1}, P_{k-1}) and the samples of (t_{k-1}, t_k] give
+    the posterior of z_{k-1} by Gauss-Newton on the exact trajectory (Jacobians: Phi,
+    the saltation matrix S at each impact), which the exact map carries to t_k with
+    P_k = M P+ M^T + Q. The information of every earlier period is kept through the
+    map; a residual test (chi^2) falls back to the arc fit when the prior and the data
+    disagree (an unexpected or missed impact).
+
+Every estimate comes with its covariance per the noise model (tests/test_estimation.py
+checks it against seeded Monte Carlo). Impacts are detected from the stream where the
+rig has no impact sensor by a split test on the arc fit (:func:`detect_impact`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from grazing_control.oscillator.flow import transition_matrix
+from grazing_control.oscillator.impact import advance, saltation_matrix
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+__all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
+           "nearest_estimate", "arc_fit", "detect_impact", "trajectory", "model_update", "estimate_covariance",
+           "CHI2_SIGMAS"]
+
+TWO_PI = 2.0 * math.pi
+#: The estimators by name (``estimator`` parameter of the controller).
+ESTIMATORS = ("nearest", "arc", "model")
+#: The residual test of the model fit: reset when the sum of squared normalised
+#: residuals of a period exceeds n + CHI2_SIGMAS sqrt(2 n) (chi^2_n's mean + 8 std).
+CHI2_SIGMAS = 8.0
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The Pi2 deviation estimate ``z`` = (dx, dv) and its covariance ``cov`` (2x2) at
+    the section time; ``source`` names what produced it."""
+
+    z: tuple
+    cov: np.ndarray
+    source: str
+
+
+@dataclass(frozen=True)
+class FilterState:
+    """The model filter's state at a section time: the estimate ``z`` (before the
+    correction) and its covariance ``cov``; ``periods`` counts the periods fitted
+    since the last reset."""
+
+    z: tuple
+    cov: np.ndarray
+    periods: int = 0
+
+
+def _check_sigma(sigma: float) -> float:
+    sigma = float(sigma)
+    if not (math.isfinite(sigma) and sigma > 0.0):
+        raise ParameterError(f"sensor_noise={sigma!r} is invalid: valid range is a finite "
+                             "sensor_noise > 0 for the fitted estimators")
+    return sigma
+
+
+def deviation_samples(p: OscillatorParams, s, x, v=None, tau_start: float | None = None):
+    """Measured deviations y_j = x~_j - x_p(tau_j), w_j = v~_j - v_p(tau_j) at times s
+    after a section (phase tau2, or ``tau_start``): tau_j = tau + omega s_j (spec
+    section 1). ``w`` is NaN where v is not measured."""
+    tau = p.tau2 if tau_start is None else tau_start
+    s = np.asarray(s, dtype=float)
+    psi = tau + p.omega * s - p.lag
+    y = np.asarray(x, dtype=float) - p.amplitude * np.cos(psi)
+    if v is None:
+        w = np.full_like(y, math.nan)
+    else:
+        w = np.asarray(v, dtype=float) + p.amplitude * p.omega * np.sin(psi)
+    return y, w
+
+
+def phi_rows(zeta: float, h):
+    """Phi(h) = exp(A h) for an array of h: (n, 2, 2) (the closed form of
+    :func:`grazing_control.oscillator.flow.transition_matrix`, vectorised)."""
+    h = np.asarray(h, dtype=float)
+    wd = math.sqrt(1.0 - zeta * zeta)
+    e = np.exp(-zeta * h)
+    c = np.cos(wd * h)
+    s = np.sin(wd * h) / wd
+    out = np.empty(h.shape + (2, 2))
+    out[..., 0, 0] = e * (c + zeta * s)
+    out[..., 0, 1] = e * s
+    out[..., 1, 0] = -e * s
+    out[..., 1, 1] = e * (c - zeta * s)
+    return out
+
+
+def nearest_estimate(s, y, w, sigma: float) -> Estimate:
+    """The last sample (times ``s`` <= 0 relative to the section, sorted) as the Pi2
+    state; without velocity the backward difference (y_n - y_{n-1}) / h (E1).
+
+    The covariance is that of the noise alone: sigma^2 I with velocity, else
+    sigma^2 [[1, 1/h], [1/h, 2/h^2]] (the difference shares the last sample's noise).
+    The time offset of the sample is not corrected: it is a bias, not in the covariance.
+    """
+    s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
+    if s.size == 0:
+        raise ValueError("no sample before the section: the nearest estimator needs one")
+    var = sigma * sigma
+    if math.isfinite(w[-1]):
+        return Estimate((float(y[-1]), float(w[-1])), var * np.eye(2), "nearest")
+    if s.size < 2:
+        return Estimate((float(y[-1]), 0.0), np.diag([var, math.inf]), "nearest")
+    h = float(s[-1] - s[-2])
+    dv = (y[-1] - y[-2]) / h
+    cov = var * np.array([[1.0, 1.0 / h], [1.0 / h, 2.0 / (h * h)]])
+    return Estimate((float(y[-1]), float(dv)), cov, "nearest")
+
+
+def unkick(p: OscillatorParams, s, y, w, kicks=()):
+    """Samples with the known corrections taken out: a sample before a kick dv at time
+    s_c is moved to the free flow through the kick's end state,
+    y_j + dv Phi12(s_j - s_c), w_j + dv Phi22(s_j - s_c) (E2'), so that an arc through
+    corrections is one free flow."""
+    s = np.asarray(s, dtype=float)
+    y = np.array(y, dtype=float)
+    w = np.array(w, dtype=float)
+    for at, dv in kicks:
+        if dv == 0.0:
+            continue
+        before = s <= at
+        phi = phi_rows(p.zeta, s[before] - at)
+        y[before] += dv * phi[:, 0, 1]
+        w[before] += dv * phi[:, 1, 1]
+    return y, w
+
+
+def arc_fit(p: OscillatorParams, s, y, w, sigma: float, at: float = 0.0,
+            kicks=()) -> Estimate:
+    """Least squares of the free flow over one arc (no impact among the samples):
+    the deviation z at time ``at`` from y_j = e1^T Phi(s_j - at) z + noise and, where
+    measured, w_j = e2^T Phi(s_j - at) z + noise (E2), through the known corrections
+    ``kicks`` ((time, dv) pairs, :func:`unkick`). Covariance sigma^2 (H^T H)^-1.
+    Fewer than two measured components: ValueError."""
+    sigma = _check_sigma(sigma)
+    s = np.asarray(s, dtype=float)
+    y, w = unkick(p, s, y, w, kicks)
+    phi = phi_rows(p.zeta, s - at)
+    rows = [phi[:, 0, :]]
+    obs = [y]
+    has_v = np.isfinite(w)
+    if has_v.any():
+        rows.append(phi[has_v, 1, :])
+        obs.append(w[has_v])
+    h = np.vstack(rows)
+    b = np.concatenate(obs)
+    if b.size < 2:
+        raise ValueError(f"{b.size} measurement(s) since the last impact: the arc fit needs 2")
+    info = h.T @ h
+    z = np.linalg.solve(info, h.T @ b)
+    return Estimate((float(z[0]), float(z[1])), sigma * sigma * np.linalg.inv(info), "arc")
+
+
+def _rss_line(phi_x, y):
+    """Residual sum of squares of the LS fit y ~ phi_x z (2 unknowns)."""
+    z, *_ = np.linalg.lstsq(phi_x, y, rcond=None)
+    r = y - phi_x @ z
+    return float(r @ r)
+
+
+def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
+                  threshold: float = 25.0):
+    """The time of an impact among position samples (times ``s`` after a section), or None.
+
+    A split test on the free flow (E6): one arc through all samples against two arcs
+    split between samples m-1 and m; the split with the smallest residual sum wins if
+    it lowers the sum by more than ``threshold`` sigma^2 (a kink of the velocity that
+    noise alone explains with probability ~ e^{-threshold/2}). Impacts can only be where
+    the mass is at the wall, so only splits next to samples within 6 sigma + one sample
+    step of motion of the wall are tried. The impact time is where the arc before the
+    split reaches the wall (x = d), else the midpoint of the split.
+    """
+    s, y = np.asarray(s, dtype=float), np.asarray(y, dtype=float)
+    n = s.size
+    if n < 2 * min_side + 1:
+        return None
+    # the gap of each sample: g = x - d = y - Delta d - 2 a sin^2(psi / 2)
+    psi = p.tau2 + p.omega * s - p.lag
+    gap = y - p.delta_d - 2.0 * p.amplitude * np.sin(0.5 * psi) ** 2
+    hstep = float(np.max(np.diff(s))) if n > 1 else 0.0
+    near = gap > -(6.0 * sigma + 2.0 * hstep + hstep * hstep)
+    cands = [m for m in range(min_side, n - min_side + 1)
+             if near[max(m - 2, 0):m + 2].any()]
+    if not cands:
+        return None
+    phi_x = phi_rows(p.zeta, s)[:, 0, :]
+    whole = _rss_line(phi_x, y)
+    best, best_m = whole, None
+    for m in cands:
+        rss = _rss_line(phi_x[:m], y[:m]) + _rss_line(phi_x[m:], y[m:])
+        if rss < best:
+            best, best_m = rss, m
+    if best_m is None or whole - best <= threshold * sigma * sigma:
+        return None
+    # refine: the pre-impact arc meets the wall between s[m-1] and s[m + 1)
+    m = best_m
+    fit = arc_fit(p, s[:m], y[:m], np.full(m, math.nan), sigma, at=float(s[m - 1]))
+    lo, hi = float(s[m - 1]), float(s[m])
+    tt = np.linspace(lo, hi, 65)
+    ph = phi_rows(p.zeta, tt - lo)[:, 0, :] @ np.array(fit.z)
+    g = ph - p.delta_d - 2.0 * p.amplitude * np.sin(0.5 * (p.tau2 + p.omega * tt - p.lag)) ** 2
+    above = np.nonzero(g >= 0.0)[0]
+    return float(tt[above[0]]) if above.size else 0.5 * (lo + hi)
+
+
+def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
+               duration: float | None = None):
+    """The exact motion from the section state ``z0`` (before the correction): the
+    deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
+    (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
+
+    Between events z(s) = Phi(s - s_e) z_e; the Jacobian is Phi(s - s_e) M_e with M_e
+    the product of Phi and the saltation matrices S of the impacts before s (spec
+    section 5); the known kick shifts the state and leaves the Jacobian unchanged.
+
+    Returns
+    -------
+    z : (n, 2) deviations, jac : (n, 2, 2), end : (dx, dv) at ``duration`` (default T),
+    monodromy : (2, 2) d end / d z0, impacts : list of (time, phase, v-, v+).
+    """
+    duration = p.period if duration is None else float(duration)
+    s = np.asarray(s, dtype=float)
+    # events: (time, state after, jacobian after); start, kick, impacts
+    events = []
+    tau = p.tau2
+    z = (float(z0[0]), float(z0[1]))
+    m = np.eye(2)
+    t0 = 0.0
+    impacts = []
+    legs = [(0.0, delay, 0.0), (delay, duration, correction)] if delay > 0.0 else \
+        [(0.0, duration, correction)]
+    for start, end, kick in legs:
+        z = (z[0], z[1] + kick)
+        events.append((start, z, m))
+        seg = advance(p, (tau + p.omega * start) % TWO_PI, z[0], z[1], end - start)
+        for imp in seg.impacts:
+            if imp.sticking:
+                raise ValueError("the model's motion sticks to the wall: no fit")
+            ti = start + imp.dt
+            f = np.array(transition_matrix(p.zeta, ti - t0)).reshape(2, 2)
+            sal = np.array(saltation_matrix(p, imp.phase, imp.v_minus)).reshape(2, 2)
+            m = sal @ f @ m
+            psi = imp.phase - p.lag
+            z = (p.d - p.amplitude * math.cos(psi),
+                 imp.v_plus + p.amplitude * p.omega * math.sin(psi))
+            t0 = ti
+            events.append((ti, z, m))
+            impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
+        f = np.array(transition_matrix(p.zeta, end - t0)).reshape(2, 2)
+        m = f @ m
+        z = (seg.dx, seg.dv)
+        t0 = end
+    times = np.array([e[0] for e in events])
+    idx = np.searchsorted(times, s, side="left") - 1   # the last event strictly before s
+    idx = np.clip(idx, 0, len(events) - 1)
+    zs = np.array([e[1] for e in events])[idx]
+    ms = np.array([e[2] for e in events])[idx]
+    phi = phi_rows(p.zeta, s - times[idx])
+    out = np.einsum("nij,nj->ni", phi, zs)
+    jac = np.einsum("nij,njk->nik", phi, ms)
+    return out, jac, z, m, impacts
+
+
+def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
+                 correction: float, delay: float = 0.0, *, floor: float = 1e-2,
+                 iterations: int = 8):
+    """One period of the model filter: from the prior of z_{k-1} and the samples at times
+    ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
+
+    Gauss-Newton on the exact trajectory (:func:`trajectory`) minimises
+    (z - z^)^T P^-1 (z - z^) + |y - h(z)|^2 / sigma^2; the posterior covariance
+    P+ = (P^-1 + H^T H / sigma^2)^-1 is carried by the exact map's monodromy M:
+    P_k = M P+ M^T + (floor sigma)^2 I (the floor keeps the filter from trusting a
+    direction that the map contracts to zero; it stands for what the model omits).
+
+    Returns (FilterState at t_k, chi2 of the period's residuals, number of
+    measurements); raises ValueError when the fit fails (no convergence, a sticking
+    motion), for the caller to reset.
+    """
+    sigma = _check_sigma(sigma)
+    s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
+    has_v = np.isfinite(w)
+    z_prior = np.array(prior.z, dtype=float)
+    info_prior = np.linalg.inv(prior.cov)
+    z = z_prior.copy()
+    inv_var = 1.0 / (sigma * sigma)
+    for _ in range(iterations):
+        pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay)
+        h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
+        r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
+        info = info_prior + inv_var * (h.T @ h)
+        grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
+        step = np.linalg.solve(info, grad)
+        z = z + step
+        if np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(z)):
+            break
+    else:
+        raise ValueError("the model fit did not converge")
+    pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay)
+    h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
+    r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
+    info = info_prior + inv_var * (h.T @ h)
+    post = np.linalg.inv(info)
+    cov = mono @ post @ mono.T + (floor * sigma) ** 2 * np.eye(2)
+    chi2 = float(r @ r) * inv_var
+    return FilterState((float(end[0]), float(end[1])), 0.5 * (cov + cov.T),
+                       prior.periods + 1), chi2, r.size
+
+
+def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str = "model",
+                        velocity: bool = False, floor: float = 1e-2, target=None,
+                        periods: int = 400) -> np.ndarray:
+    """The Pi2 estimate's error covariance per unit sigma^2 on the controlled 1/1 orbit
+    (2x2), for a sensor at ``rate`` samples per period (position only unless
+    ``velocity``): the design's measurement covariance R for
+    :func:`grazing_control.dynamics.noise.noise_covariance` (E7).
+
+    ``nearest``: diag(1, 1) with velocity, [[1, 1/h], [1/h, 2/h^2]] without (E1).
+    ``arc``: (H^T H)^-1 over the orbit's samples after its impact (E2).
+    ``model``: the fixed point of P = M (P^-1 + H^T H)^-1 M^T + floor^2 I along the
+    orbit (E5), iterated from the arc fit's covariance for ``periods`` periods at most.
+    ``target``: the orbit's Pi2 deviation (default ``orbit_11``).
+    """
+    if estimator not in ESTIMATORS:
+        raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
+                             f"{', '.join(ESTIMATORS)}")
+    if int(rate) != rate or rate < 2:
+        raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
+                             "samples per period")
+    T = p.period
+    h = T / rate
+    if estimator == "nearest":
+        if velocity:
+            return np.eye(2)
+        return np.array([[1.0, 1.0 / h], [1.0 / h, 2.0 / (h * h)]])
+    if target is None:
+        from .orbits import orbit_11
+
+        target = orbit_11(p, gains).pi2_deviation
+    dv = gains.c1 * target[0] + gains.c2 * target[1]
+    s = np.arange(1, int(rate) + 1) * h
+    _pred, jac, _end, mono, imps = trajectory(p, target, s, dv, gains.delay)
+    if estimator == "arc":
+        after = s > (imps[-1][0] if imps else -math.inf)
+        phi = phi_rows(p.zeta, s[after] - T)
+        h_arc = phi[:, 0, :] if not velocity else np.vstack([phi[:, 0, :], phi[:, 1, :]])
+        return np.linalg.inv(h_arc.T @ h_arc)
+    hm = jac[:, 0, :] if not velocity else np.vstack([jac[:, 0, :], jac[:, 1, :]])
+    info_data = hm.T @ hm
+    cov = np.linalg.inv(info_data)
+    for _ in range(periods):
+        new = mono @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ mono.T \
+            + floor * floor * np.eye(2)
+        done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
+        cov = 0.5 * (new + new.T)
+        if done:
+            break
+    return cov

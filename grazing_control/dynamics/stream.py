@@ -1,0 +1,327 @@
+"""Sampling Pi2 from a sensor stream: which samples belong to which section, when a
+section's estimate is due, and the closed loop of plant, sensor, estimator and Eq. 28.
+
+The stream's samples arrive in time order (stamp t, simulation time; the section times
+are t_k = k T, the simulator's origin: docs/nodes.md, "The sensor stream"). The
+estimate of section k uses the samples with t_{k-1} < t <= t_k (a sample at t_k is
+before that section's correction) and is due as soon as no further sample at or before
+t_k can come: when t + h > t_k for the newest sample (h the sample period), or when a
+sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
+over the estimators of :mod:`grazing_control.dynamics.estimation`; the controller node
+feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
+through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
+the plant layer lies above this one, so the caller passes it in).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from .estimation import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
+                         deviation_samples, detect_impact, model_update, nearest_estimate,
+                         trajectory, unkick)
+
+__all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section"]
+
+#: Where impacts come from: the rig's impact sensor, or detection in the stream.
+IMPACT_SOURCES = ("topic", "stream")
+#: Tolerance on times, relative to T: a sample within it of t_k is at t_k.
+_TOL = 1e-9
+#: A sample more than this many periods after the newest is a stray unless the next
+#: sample follows it (then the stream jumped: a restart from there).
+MAX_GAP = 4
+
+
+class StreamEstimator:
+    """Estimates of the Pi2 states from a stream of samples (no ROS).
+
+    Parameters
+    ----------
+    p : OscillatorParams
+        The model (Delta d included: the impacts of the model need the wall).
+    estimator : str
+        ``nearest``, ``arc`` or ``model`` (:mod:`grazing_control.dynamics.estimation`).
+    sigma : float
+        The sensor's noise std (> 0 for ``arc`` and ``model``; the covariances scale
+        with it).
+    impact_source : str
+        ``topic`` (impacts given by :meth:`add_impact`) or ``stream`` (detected).
+    sample_period : float
+        The stream's sample period h; 0: the gap between the last two samples.
+    floor : float
+        The model filter's floor (:func:`grazing_control.dynamics.estimation.model_update`).
+    """
+
+    def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
+                 impact_source: str = "stream", sample_period: float = 0.0,
+                 floor: float = 1e-2):
+        if estimator not in ESTIMATORS:
+            raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
+                                 f"{', '.join(ESTIMATORS)}")
+        if impact_source not in IMPACT_SOURCES:
+            raise ParameterError(f"impact_source={impact_source!r} is invalid: valid values "
+                                 f"are {', '.join(IMPACT_SOURCES)}")
+        sigma = float(sigma)
+        if not (math.isfinite(sigma) and (sigma > 0.0 or estimator == "nearest"
+                                          and sigma >= 0.0)):
+            raise ParameterError(f"sensor_noise={sigma!r} is invalid: valid range is a finite "
+                                 "sensor_noise > 0 (>= 0 for the nearest estimator)")
+        sample_period = float(sample_period)
+        if not (math.isfinite(sample_period) and 0.0 <= sample_period < p.period):
+            raise ParameterError(f"state_period={sample_period!r} is invalid: valid range is "
+                                 f"0 <= state_period < T = {p.period!r} (0: from the stamps)")
+        self.p, self.estimator, self.sigma = p, estimator, sigma
+        self.impact_source, self.sample_period, self.floor = impact_source, sample_period, floor
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (the simulator was reset)."""
+        self.samples = deque()          # (t, x, v) of the last two periods
+        self.next_k = None              # the next section to estimate
+        self.kicks = {}                 # section k -> (time of the kick, dv)
+        self.delay = 0.0
+        self.impacts = deque(maxlen=64)  # impact times (topic or detected)
+        self.filter = None              # FilterState at section filter_k
+        self.filter_k = None
+        self.resets = 0                 # model fits that fell back to the arc fit
+        self.last_t = None
+        self.ignored = 0                # samples not used: duplicates, older, strays
+        self._jump = None               # a sample far ahead, kept until confirmed
+
+    # ----------------------------------------------------------------- input
+    def add_impact(self, t: float) -> None:
+        """An impact at time t from the rig's impact sensor (``impact_source`` topic)."""
+        if self.impact_source == "topic":
+            self.impacts.append(float(t))
+
+    def set_correction(self, k: int, dv: float, delay: float = 0.0) -> None:
+        """The correction answered to section k, applied ``delay`` after t_k."""
+        self.kicks[k] = (k * self.p.period + delay, float(dv))
+        self.delay = delay
+        for old in [j for j in self.kicks if j < k - 3]:
+            del self.kicks[old]
+
+    def add_sample(self, t: float, x: float, v: float = math.nan) -> list:
+        """A sample (x~, v~; v NaN if not measured) at time t; returns the sections
+        [(k, t_k, Estimate)] now due (normally none or one)."""
+        T = self.p.period
+        tol = _TOL * T
+        if not math.isfinite(t):
+            self.ignored += 1
+            return []
+        if self.last_t is not None and t < self.last_t - T:
+            ignored, resets = self.ignored, self.resets
+            self.reset()                # back to the start: the simulator was reset
+            self.ignored, self.resets = ignored, resets
+        elif self.last_t is not None and t <= self.last_t:
+            self.ignored += 1           # a duplicate or an older sample: not used
+            return []
+        elif self.last_t is not None and t > self.last_t + MAX_GAP * T:
+            jump, self._jump = self._jump, (t, x, v)
+            if jump is None or not 0.0 < t - jump[0] <= 2.0 * T:
+                self.ignored += 1       # a stray far ahead, unless the next one follows
+                return []
+            ignored, resets = self.ignored, self.resets
+            self.reset()                # the stream jumped ahead: start again there
+            self.ignored, self.resets = ignored - 1, resets
+            return self.add_sample(*jump) + self.add_sample(t, x, v)
+        self._jump = None
+        due = []
+        if self.next_k is None:
+            self.next_k = max(0, math.ceil((t - tol) / T))
+        while t > self.next_k * T + tol:
+            due.append(self._due(self.next_k))     # late: a sample was lost
+        h = self.sample_period
+        if h == 0.0 and self.samples:
+            h = t - self.samples[-1][0]
+        self.samples.append((float(t), float(x), float(v)))
+        while self.samples and self.samples[0][0] < t - 2.0 * T - tol:
+            self.samples.popleft()
+        self.last_t = t if self.last_t is None else max(self.last_t, t)
+        if h <= 0.0 or t + h > self.next_k * T + tol:
+            due.append(self._due(self.next_k))
+        return due
+
+    def flush(self, k: int) -> list:
+        """The sections up to k not yet estimated (the stream stopped short of t_k)."""
+        due = []
+        if self.next_k is None:
+            self.next_k = k
+        while self.next_k <= k:
+            due.append(self._due(self.next_k))
+        return due
+
+    # ----------------------------------------------------------------- estimates
+    def _due(self, k: int):
+        self.next_k = k + 1
+        return k, k * self.p.period, self.estimate(k)
+
+    def _window(self, k: int, since: float):
+        """Samples with since < t <= t_k + tol as arrays (s relative to t_k)."""
+        tk = k * self.p.period
+        tol = _TOL * self.p.period
+        rows = [r for r in self.samples if since < r[0] <= tk + tol]
+        if not rows:
+            return np.empty(0), np.empty(0), np.empty(0)
+        a = np.array(rows)
+        return a[:, 0] - tk, a[:, 1], a[:, 2]
+
+    def estimate(self, k: int) -> Estimate:
+        """The estimate of section k from the samples received (model, else arc, else
+        nearest, else the last position with an unknown velocity)."""
+        p, T = self.p, self.p.period
+        tk = k * T
+        if self.estimator == "model":
+            est = self._model(k)
+            if est is not None:
+                return est
+        if self.estimator in ("model", "arc"):
+            est = self._arc(k)
+            if est is not None:
+                if self.estimator == "model":
+                    self.filter, self.filter_k = FilterState(est.z, est.cov, 0), k
+                return est
+        s, x, v = self._window(k, tk - 2.0 * T)
+        if s.size == 0:
+            return Estimate((math.nan, math.nan), np.full((2, 2), math.inf), "none")
+        y, w = deviation_samples(p, s, x, v, tau_start=p.tau2)
+        last = self.impacts[-1] - tk if self.impacts else -math.inf
+        keep = s > last if (s > last).sum() >= 2 else np.ones(s.size, bool)
+        return nearest_estimate(s[keep], y[keep], w[keep], self.sigma)
+
+    def _kicks(self, k: int):
+        """The known corrections before t_k as (time relative to t_k, dv)."""
+        tk = k * self.p.period
+        return [(at - tk, dv) for j, (at, dv) in self.kicks.items() if j < k]
+
+    def _arc(self, k: int):
+        """The arc fit over the samples since the last impact (topic or detected)."""
+        p, T = self.p, self.p.period
+        tk = k * T
+        s, x, v = self._window(k, tk - 2.0 * T)
+        if s.size < 2:
+            return None
+        y, w = deviation_samples(p, s, x, v, tau_start=p.tau2)
+        kicks = self._kicks(k)
+        if self.impact_source == "stream":
+            ya, _wa = unkick(p, s, y, w, kicks)
+            recent = s > -T - _TOL * T
+            hit = detect_impact(p, s[recent] + T, ya[recent], self.sigma)
+            if hit is not None:
+                t_hit = hit - T + tk
+                if not self.impacts or abs(self.impacts[-1] - t_hit) > 0.25 * T:
+                    self.impacts.append(t_hit)
+        last = max((i for i in self.impacts if i <= tk), default=-math.inf) - tk
+        keep = s > last
+        measured = keep.sum() + np.isfinite(w[keep]).sum()
+        if measured < 2:
+            return None
+        return arc_fit(p, s[keep], y[keep], w[keep], self.sigma, 0.0, kicks)
+
+    def _model(self, k: int):
+        """One period of the model filter from section k - 1 (None: start or reset)."""
+        p, T = self.p, self.p.period
+        if self.filter is None or self.filter_k != k - 1:
+            return None
+        s, x, v = self._window(k, (k - 1) * T + _TOL * T)
+        if s.size == 0:
+            return None
+        s = s + T
+        y, w = deviation_samples(p, s, x, v, tau_start=p.tau2)
+        at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
+        try:
+            new, chi2, n = model_update(p, self.filter, s, y, w, self.sigma, dv,
+                                        at - (k - 1) * T, floor=self.floor)
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+            self.filter = None
+            self.resets += 1
+            return None
+        if chi2 > n + CHI2_SIGMAS * math.sqrt(2.0 * n):
+            self.filter = None
+            self.resets += 1
+            return None
+        self.filter, self.filter_k = new, k
+        return Estimate(new.z, new.cov, "model")
+
+
+@dataclass
+class StreamRun:
+    """A closed-loop run on the stream, one row per section k: the true deviation
+    ``truth`` (before the correction), the ``estimate`` and its ``cov`` (k, 2, 2), the
+    ``corrections``, the ``impacts_per_period`` and the estimator's ``resets``."""
+
+    truth: np.ndarray
+    estimate: np.ndarray
+    cov: np.ndarray
+    corrections: np.ndarray
+    impacts_per_period: np.ndarray
+    resets: int
+
+
+def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, rate: int, *,
+                    estimator: str = "model", sigma: float = 1e-4,
+                    impact_source: str = "stream", deviation=(0.0, 0.0),
+                    control_after: int = 0, floor: float = 1e-2) -> StreamRun:
+    """The closed loop on a sensor stream: exact plant (:func:`trajectory`), samples at
+    t_j = j T / ``rate`` measured by ``measure(j0, x, v) -> (x~, v~)`` (a
+    :class:`grazing_control.plant.sensor.SensorModel`'s ``measure``), the estimator of
+    :class:`StreamEstimator`, and Eq. 28 on the estimate from section ``control_after``
+    on, applied ``gains.delay`` after the section.
+    """
+    if int(rate) != rate or rate < 2:
+        raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
+                             "samples per period")
+    T = p.period
+    h = T / rate
+    est = StreamEstimator(p, estimator, sigma, impact_source, h, floor)
+    z = (float(deviation[0]), float(deviation[1]))
+    truth = np.empty((periods, 2))
+    zhat = np.empty((periods, 2))
+    cov = np.empty((periods, 2, 2))
+    corr = np.zeros(periods)
+    counts = np.zeros(periods, dtype=int)
+    xm, vm = measure(0, np.array([p.x_ref + z[0]]), np.array([p.v_ref + z[1]]))
+    pending = est.add_sample(0.0, float(xm[0]), float(vm[0]))
+    for k in range(periods):
+        truth[k] = z
+        pending += est.flush(k)
+        (_, _, e), = [d for d in pending if d[0] == k]
+        zhat[k], cov[k] = e.z, e.cov
+        dv = 0.0
+        if k >= control_after and np.all(np.isfinite(e.z)):
+            dv = gains.c1 * e.z[0] + gains.c2 * e.z[1]
+        corr[k] = dv
+        est.set_correction(k, dv, gains.delay)
+        j0 = math.floor((k * T + _TOL * T) / h) + 1
+        j1 = math.floor(((k + 1) * T + _TOL * T) / h)
+        js = np.arange(j0, j1 + 1)
+        s = js * h - k * T
+        dev, _jac, z, _m, imps = trajectory(p, z, s, dv, gains.delay)
+        counts[k] = len(imps)
+        psi = p.tau2 + p.omega * s - p.lag
+        x = p.amplitude * np.cos(psi) + dev[:, 0]
+        v = -p.amplitude * p.omega * np.sin(psi) + dev[:, 1]
+        xm, vm = measure(int(j0), x, v)
+        pending = []
+        imp_times = [k * T + i[0] for i in imps]
+        for j, t in enumerate(js * h):
+            while imp_times and imp_times[0] <= t:
+                est.add_impact(imp_times.pop(0))
+            pending += est.add_sample(float(t), float(xm[j]), float(vm[j]))
+        for ti in imp_times:
+            est.add_impact(ti)
+    return StreamRun(truth, zhat, cov, corr, counts, est.resets)
+
+
+def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0):
+    """The next section's state (deviation, before its correction) predicted from the
+    estimate ``z`` with ``correction`` applied ``delay`` after the section: one exact
+    period of the model (issue 16 section 3; :func:`trajectory`)."""
+    *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay)
+    return end
