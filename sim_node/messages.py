@@ -12,7 +12,6 @@ sample, issue 16 §3).
 from __future__ import annotations
 
 import math
-import struct
 
 from grazing_control.plant.engine import Event
 from grazing_control.ros import cdr
@@ -20,21 +19,15 @@ from grazing_control.ros.common import Throttled
 
 __all__ = ["Outputs", "read_answer"]
 
-#: twist.linear.y of a TwistStamped with an empty frame_id, at byte 28 of the message.
-_LINEAR_Y = struct.Struct("<d")
-
-
 def read_answer(data: bytes):
-    """(stamp key, Delta v = twist.linear.x, the prediction for the next sample =
-    twist.linear.y, NaN for none) of a TwistStamped in the controller's layout, else None
-    (issue 16 §3). Reads linear.y itself where :func:`cdr.read_twist_stamped` returns
-    linear.x only."""
+    """(stamp key, Delta v = twist.linear.x, the Delta v predicted for the next sample =
+    twist.linear.y, NaN for none) of a TwistStamped in the controller's layout
+    (:func:`cdr.read_twist_stamped`), else None (issue 16 §3)."""
     answer = cdr.read_twist_stamped(data)
     if answer is None:
         return None
-    if len(answer) >= 4:
-        return tuple(answer[:2]), answer[2], answer[3]
-    return tuple(answer[:2]), answer[2], _LINEAR_Y.unpack_from(data, 28)[0]
+    sec, nanosec, dv, predicted = answer
+    return (sec, nanosec), dv, predicted
 
 
 class Outputs:

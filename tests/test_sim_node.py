@@ -372,7 +372,7 @@ def test_read_answer_takes_the_prediction_from_linear_y():
     assert (key, dv) == ((7, 9), 1.5e-3) and math.isnan(pred)
     msg.twist.linear.y = -2.5e-3
     assert read_answer(bytes(serialize_message(msg))[:68]) == ((7, 9), 1.5e-3, -2.5e-3)
-    assert read_answer(cdr.twist_stamped(7, 9, 1.0)) == ((7, 9), 1.0, 0.0)
+    assert read_answer(cdr.twist_stamped(7, 9, 1.0, 0.5)) == ((7, 9), 1.0, 0.5)
     assert read_answer(b"\x00" * 10) is None
 
 
