@@ -15,7 +15,8 @@ import re
 import pytest
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, PARAMETERS,
+from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, ON_MISS,
+                                            PARAMETERS,
                                             SETTING_KEYS, SimSettings, default_values,
                                             initial_deviation, settings_from_values)
 
@@ -48,7 +49,8 @@ def test_doubles_below_their_range_or_not_finite_are_refused_by_name(p):
             settings_from_values({p.name: bad})
 
 
-@pytest.mark.parametrize("name, choices", [("mode", MODES), ("actuation", ACTUATIONS)])
+@pytest.mark.parametrize("name, choices", [("mode", MODES), ("actuation", ACTUATIONS),
+                                           ("on_miss", ON_MISS)])
 def test_strings_outside_their_choices_are_refused_with_the_choices(name, choices):
     with pytest.raises(ParameterError, match=re.escape(", ".join(choices))):
         settings_from_values({name: "nonsense"})

@@ -358,3 +358,78 @@ def test_stream_sample_writer_is_the_rclpy_layout():
             (3, 500, "")
         assert (list(msg.name), list(msg.position), list(msg.velocity), list(msg.effort)) \
             == (["mass"], [0.5], [] if v is None else [v], [0.6, 0.8])
+
+
+# ============================================================ miss-tolerant actuation
+def test_read_answer_takes_the_prediction_from_linear_y():
+    from rclpy.serialization import serialize_message
+    from sim_node.messages import read_answer
+
+    msg = TwistStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 7, 9
+    msg.twist.linear.x, msg.twist.linear.y = 1.5e-3, math.nan
+    key, dv, pred = read_answer(bytes(serialize_message(msg))[:68])
+    assert (key, dv) == ((7, 9), 1.5e-3) and math.isnan(pred)
+    msg.twist.linear.y = -2.5e-3
+    assert read_answer(bytes(serialize_message(msg))[:68]) == ((7, 9), 1.5e-3, -2.5e-3)
+    assert read_answer(cdr.twist_stamped(7, 9, 1.0, 0.5)) == ((7, 9), 1.0, 0.5)
+    assert read_answer(b"\x00" * 10) is None
+
+
+def test_lost_answers_are_replaced_by_their_predictions_through_the_node(node_env):
+    """Issue 16 §3 through the node: lockstep, loss 0.05 (seed 7), the test as a
+    controller that sends its prediction in twist.linear.y; the published Pi2 samples
+    are the engine's lockstep loop with the same answers bit for bit (its spread about
+    the orbit <= 1e-10, tests/test_plant_loops.py), every loss after the first
+    controlled answer is counted as predicted."""
+    from grazing_control.dynamics.design import degenerate_c1
+    from test_plant_loops import lossy_lockstep, predicting_controller
+
+    domain, collector, start = node_env
+    n, on, seed = 700, 100, 7
+    c1 = degenerate_c1(OscillatorParams(delta_d=-5e-6), -1.0)
+    ctl = predicting_controller(c1, -1.0, 0.0)
+    pub = collector.node.create_publisher(TwistStamped, "controller/velocity_correction",
+                                          DATA_QOS)
+    count = [0]
+
+    def on_sample(msg):
+        k, count[0] = count[0], count[0] + 1
+        out = TwistStamped()
+        out.header.stamp = msg.header.stamp
+        out.twist.linear.x, out.twist.linear.y = (
+            ctl(msg.position[0], msg.velocity[0]) if k >= on else (0.0, math.nan))
+        pub.publish(out)
+
+    collector.node.create_subscription(JointState, "oscillator/pi2", on_sample, DATA_QOS)
+    proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0,
+                      state_period=0.0, loss=0.05, seed=seed)
+    assert proc.wait(60) == 0, log.read_text()
+    got = xv(collector.get("oscillator/pi2"))
+    ref, loop = lossy_lockstep("predict", n, on, 0.05, seed)
+    np.testing.assert_array_equal(got, ref)
+    s = summary(log.read_text())
+    assert (s["lost"], s["predicted"]) == (str(loop.stats["lost"]),
+                                           str(loop.stats["predicted"]))
+    assert loop.stats["predicted"] > 20
+
+
+def test_scheduling_options_warn_where_refused_and_bad_ones_stop_the_start(node_env):
+    """thread_priority, cpu_affinity, lock_memory (ros.scheduling): applied or refused
+    with a warning, never a crash; an invalid cpu_affinity is one line, status 2."""
+    domain, collector, start = node_env
+    proc, log = start(max_periods=3, exit_when_done=True, answer_timeout=0.05,
+                      thread_priority=10, cpu_affinity="0,1", lock_memory=True)
+    assert proc.wait(30) == 0, log.read_text()
+    text = log.read_text()
+    for option, applied in (("thread_priority=10", "SCHED_FIFO priority 10"),
+                            ("cpu_affinity=[0, 1]", "CPU affinity [0, 1]"),
+                            ("lock_memory", "memory locked")):
+        assert applied in text or f"{option} not applied" in text, (option, text)
+    assert "Traceback" not in text
+    cmd, env = sim_cmd(domain)
+    bad = subprocess.run(cmd + ["-p", "cpu_affinity:=zero"], env=env, capture_output=True,
+                         text=True, timeout=30)
+    lines = [ln for ln in (bad.stdout + bad.stderr).splitlines() if ln.strip()]
+    assert bad.returncode == 2 and len(lines) == 1, lines
+    assert "cpu_affinity='zero' is invalid" in lines[0]

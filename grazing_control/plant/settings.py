@@ -26,7 +26,8 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError, 
 from grazing_control.plant.faults import FaultModel
 from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
 
-__all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "MODEL_KEYS",
+__all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "ON_MISS",
+           "MODEL_KEYS",
            "SimSettings", "settings_from_values", "default_values", "initial_deviation"]
 
 TWO_PI = 2.0 * math.pi
@@ -35,6 +36,8 @@ MODES = ("lockstep", "realtime")
 #: (on_arrival, the original behaviour), or auto: scheduled if actuation_delay > 0 or
 #: jitter > 0, else on_arrival. Lockstep always acts at t_k + actuation_delay.
 ACTUATIONS = ("auto", "scheduled", "on_arrival")
+#: At a deadline miss or a lost answer: the previous answer's prediction, or nothing.
+ON_MISS = ("predict", "drop")
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 
 
@@ -101,6 +104,10 @@ PARAMETERS = (
     Parameter("jitter", "double", 0.0,
               "injected fault: std of the actuation time around actuation_delay, simulation "
               "time (FaultModel, seed)", 0.0, read_only=True),
+    Parameter("on_miss", "string", "predict",
+              "when a scheduled correction misses its deadline or is lost: predict (apply "
+              "the prediction the previous answer carried for this sample, twist.linear.y) "
+              "or drop (apply none)", choices=ON_MISS, read_only=True),
     Parameter("sensor_noise", "double", 0.0,
               "std of the Gaussian noise on each oscillator/state sample's position, and "
               "velocity where carried (SensorModel, sensor_seed)", 0.0, read_only=True),
@@ -148,6 +155,7 @@ class SimSettings:
     loss: float = 0.0
     measurement_noise: float = 0.0
     jitter: float = 0.0
+    on_miss: str = "predict"
     sensor: SensorModel = EXACT_SENSOR
     pulse_width: float = 0.0
     force_limit: float = 0.0
@@ -278,6 +286,10 @@ def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: st
             "pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < "
             f"T = {p.period!r} (the pulse is centred at the actuation time, within the "
             "period)")
+    out["on_miss"] = str(values["on_miss"])
+    if out["on_miss"] not in ON_MISS:
+        raise ParameterError(f"on_miss={out['on_miss']!r} is invalid: valid values are "
+                             f"{', '.join(ON_MISS)}")
     actuation = str(values["actuation"])
     if actuation not in ACTUATIONS:
         raise ParameterError(f"actuation={actuation!r} is invalid: valid values are "
