@@ -57,41 +57,50 @@ def rig_recording(p=SCENE, periods=24, *, noise=0.0, seed=0, velocity=True, sin=
 def soft_wall_recording(p=SCENE, periods=24, *, stiffness=1e3, damping=None, noise=0.0, seed=0,
                         samples_per_period=16, deviation=(0.3, -0.2)):
     """The motion against a soft wall (contact force -k (x - d) - c v for x > d, c from
-    the restitution of a linear contact), by solve_ivp at tight tolerances; the 'impacts'
-    are the contacts' entries (v-) and exits (v+)."""
+    the restitution r of a linear contact), by solve_ivp (DOP853, rtol 1e-12) phase by
+    phase: free flight until x = d, contact until x = d again (events); the 'impacts' are
+    the contacts' entries (time, v-) and exits (v+)."""
     if damping is None:   # r = exp(-pi zeta_c / sqrt(1 - zeta_c^2)) for the contact
         lr = math.log(p.r)
         zc = -lr / math.hypot(math.pi, lr)
         damping = 2.0 * zc * math.sqrt(stiffness)
     d = p.d
 
-    def f(t, y):
-        x, v = y
-        force = math.cos(p.omega * t + p.tau2) - 2 * p.zeta * v - x
-        if x > d:
-            force -= stiffness * (x - d) + damping * v
-        return [v, force]
+    def free(t, y):
+        return [y[1], math.cos(p.omega * t + p.tau2) - 2 * p.zeta * y[1] - y[0]]
 
+    def contact(t, y):
+        f = free(t, y)
+        return [f[0], f[1] - stiffness * (y[0] - d) - damping * y[1]]
+
+    def wall(t, y):
+        return y[0] - d
+
+    wall.terminal = True
     T = p.period
     n = periods * samples_per_period
     t = np.arange(n) * (T / samples_per_period)
-    y0 = [p.x_ref + deviation[0], p.v_ref + deviation[1]]
-    sol = solve_ivp(f, (0, t[-1]), y0, t_eval=t, rtol=1e-12, atol=1e-13, max_step=0.01,
-                    method="DOP853")
-    x, v = sol.y
-    # contacts: entries and exits on a fine grid
-    fine = solve_ivp(f, (0, t[-1]), y0, rtol=1e-12, atol=1e-13, max_step=0.002,
-                     method="DOP853", dense_output=True)
-    tf = np.arange(0, t[-1], 0.002)
-    xf, vf = fine.sol(tf)
-    inside = xf > d
-    starts = np.flatnonzero(~inside[:-1] & inside[1:])
-    ends = np.flatnonzero(inside[:-1] & ~inside[1:])
-    imps = []
-    for s in starts:
-        e = ends[ends > s]
-        if e.size:
-            imps.append((tf[s], vf[s], vf[e[0] + 1]))
+    x, v = np.empty(n), np.empty(n)
+    y = [p.x_ref + deviation[0], p.v_ref + deviation[1]]
+    t0, inside, imps, entry = 0.0, False, [], None
+    while t0 < t[-1]:
+        wall.direction = -1.0 if inside else 1.0
+        sol = solve_ivp(contact if inside else free, (t0, t[-1]), y, rtol=1e-12, atol=1e-13,
+                        method="DOP853", events=wall, dense_output=True,
+                        first_step=1e-6 if t0 > 0 else None)
+        t1 = sol.t[-1]
+        sel = (t >= t0) & (t <= t1)
+        if np.any(sel):
+            x[sel], v[sel] = sol.sol(t[sel])
+        if sol.status != 1:
+            break
+        y = sol.y_events[0][0].copy()
+        y[0] = d
+        if inside:
+            imps.append((entry[0], entry[1], y[1]))
+        else:
+            entry = (sol.t_events[0][0], y[1])
+        t0, inside = sol.t_events[0][0], not inside
     imps = np.array(imps).reshape(-1, 3)
     sensor = SensorModel(noise=noise, seed=seed)
     xm, vm = sensor.measure(0, x, v)

@@ -320,8 +320,12 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
     p0 = prob.pack(g0, start0, X0, V0)
     lo, hi = prob.bounds()
-    p0 = np.clip(p0, np.where(np.isfinite(lo), lo + 1e-12 * np.maximum(1, np.abs(lo)), lo),
-                 np.where(np.isfinite(hi), hi - 1e-12 * np.maximum(1, np.abs(hi)), hi))
+    inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
+    f = np.isfinite(lo)
+    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
+    f = np.isfinite(hi)
+    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    p0 = np.clip(p0, inner_lo, inner_hi)
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
