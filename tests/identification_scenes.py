@@ -16,34 +16,41 @@ from grazing_control.plant.sensor import SensorModel
 SCENE = OscillatorParams(delta_d=-0.05)
 
 
-def exact_motion(p, periods, samples_per_period=16, deviation=(0.3, -0.2), ns=False):
-    """(t, x, v, tau, impacts [t, v-, v+, phase]) of the exact motion, nondimensional,
-    sampled on t_j = j T / samples_per_period (rounded to whole ns if ``ns``)."""
+def exact_motion(p, periods, samples_per_period=16, deviation=(0.3, -0.2), ns=False,
+                 gains=None, control_after=0):
+    """(t, x, v, tau, impacts [t, v-, v+, phase], corrections [t, dv]) of the exact
+    motion, nondimensional, sampled on t_j = j T / samples_per_period (rounded to whole ns
+    if ``ns``); with ``gains`` the controller of Eq. 28 acts at the Pi2 samples k >=
+    control_after (t = k T)."""
     T = p.period
     n = periods * samples_per_period
     t = np.arange(n) * (T / samples_per_period)
     if ns:
         t = np.round(t * 1e9) / 1e9
     dx, dv = deviation
-    xs, vs, imps = np.empty(n), np.empty(n), []
+    xs, vs, imps, corr = np.empty(n), np.empty(n), [], []
     for k in range(periods):
-        seg = period_step(p, dx, dv)
+        dvc = gains.c1 * dx + gains.c2 * dv if gains is not None and k >= control_after else 0.0
+        if dvc:
+            corr.append((k * T, dvc))
+        seg = period_step(p, dx, dv, dvc)
         sel = (t >= k * T) & (t < (k + 1) * T)
-        out = states_between(p, p.tau2, dx, dv, seg.impacts, t[sel] - k * T)
+        out = states_between(p, p.tau2, dx, dv + dvc, seg.impacts, t[sel] - k * T)
         xs[sel], vs[sel] = out[:, 0], out[:, 1]
         for i in seg.impacts:
             imps.append((k * T + i.dt, i.v_minus, i.v_plus, i.phase))
         dx, dv = seg.dx, seg.dv
     tau = p.tau2 + p.omega * t
-    return t, xs, vs, tau, np.array(imps).reshape(-1, 4)
+    return t, xs, vs, tau, np.array(imps).reshape(-1, 4), np.array(corr).reshape(-1, 2)
 
 
 def rig_recording(p=SCENE, periods=24, *, noise=0.0, seed=0, velocity=True, sin=True,
                   Omega=1.0, A=1.0, theta=0.0, impacts=True, samples_per_period=16,
-                  deviation=(0.3, -0.2)):
+                  deviation=(0.3, -0.2), gains=None, control_after=0):
     """A Recording of the exact motion in a rig's units (natural frequency Omega, forcing
     amplitude A, force theta behind the reference), measured by SensorModel(noise, seed)."""
-    t, x, v, tau, imp = exact_motion(p, periods, samples_per_period, deviation)
+    t, x, v, tau, imp, corr = exact_motion(p, periods, samples_per_period, deviation,
+                                           gains=gains, control_after=control_after)
     L = A / Omega ** 2
     sensor = SensorModel(noise=noise, velocity=velocity, seed=seed)
     xm, vm = sensor.measure(0, x * L, v * L * Omega)
@@ -51,7 +58,7 @@ def rig_recording(p=SCENE, periods=24, *, noise=0.0, seed=0, velocity=True, sin=
     it = imp[:, 0] / Omega if impacts else np.zeros(0)
     return Recording(t / Omega, xm, vm, np.cos(ref), np.sin(ref) if sin else np.full(t.size, np.nan),
                      it, imp[:, 1] * L * Omega if impacts else np.zeros(0),
-                     imp[:, 2] * L * Omega if impacts else np.zeros(0))
+                     imp[:, 2] * L * Omega if impacts else np.zeros(0), corr[:, 0] / Omega)
 
 
 def soft_wall_recording(p=SCENE, periods=24, *, stiffness=1e3, damping=None, noise=0.0, seed=0,

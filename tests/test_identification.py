@@ -22,10 +22,12 @@ from grazing_control.dynamics.identification.initial import arx, find_impacts, m
 from grazing_control.dynamics.identification.model import forced_response, free_flight
 from grazing_control.dynamics.identification.phase import PhaseError, fit_phase
 from grazing_control.oscillator.flow import particular, propagate, to_deviation, to_physical
+from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 
 from identification_scenes import SCENE, exact_motion, rig_recording, soft_wall_recording
 
+GAINS = Gains(-0.9, -0.5)
 TRUTH = {"zeta": SCENE.zeta, "r": SCENE.r, "omega": SCENE.omega, "d": SCENE.d,
          "delta_d": SCENE.delta_d}
 
@@ -116,7 +118,7 @@ def test_phase_reference_that_is_not_harmonic_is_refused():
 
 def test_arx_recursion_is_exact_on_free_flight():
     p = OscillatorParams(zeta=0.04, omega=0.7, delta_d=50.0)     # no impact
-    t, x, _v, tau, imp = exact_motion(p, 6, samples_per_period=12)
+    t, x, _v, tau, imp, _c = exact_motion(p, 6, samples_per_period=12)
     assert imp.size == 0
     coef, h, _j, e = arx(t, x, tau, np.zeros(t.size, int))
     assert np.max(np.abs(e)) < 1e-12
@@ -141,6 +143,7 @@ CASES = {
         dict(velocity=False, sin=False, Omega=1.3, A=0.7, theta=0.2), {}),
     "impacts found in the motion": (dict(velocity=False), dict(impacts="motion")),
     "no impact topic": (dict(impacts=False, Omega=0.8, A=2.0, theta=-1.0), {}),
+    "controlled from sample 8": (dict(gains=GAINS, control_after=8), {}),
 }
 
 

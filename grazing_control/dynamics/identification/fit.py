@@ -262,7 +262,8 @@ def _covariance(J, sigma2, k=6):
 
 
 def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
-             max_arcs: int | None = 100, max_nfev: int = 200) -> Identification:
+             max_arcs: int | None = 100, max_nfev: int = 200,
+             coincidence: float = 1.5e-9) -> Identification:
     """Fit the model to a recording (module docstring).
 
     Parameters
@@ -275,6 +276,9 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     impact_velocities : use the recorded v-, v+ as data (weighted like a sample).
     max_arcs : fit the recording up to its max_arcs-th event (None: all of it).
     max_nfev : most evaluations of the least-squares solver.
+    coincidence : samples within this time of a correction or a recorded impact are left
+        out: their velocity is either side of the jump (default: 1.5 ns, the resolution
+        of a bag's stamps).
 
     Raises
     ------
@@ -285,6 +289,10 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
         raise IdentificationError(f"impacts={impacts!r} is invalid: valid values are "
                                   "recorded, motion")
     try:
+        # a sample stamped at an event's instant is ambiguous (before or after the jump)
+        events = np.concatenate([rec.corrections, rec.impact_t if impacts == "recorded"
+                                 else np.zeros(0)])
+        rec = rec.without_samples(rec.near(events, coincidence))
         phase = fit_phase(rec.t, rec.cos_tau, rec.sin_tau)
         if impacts == "motion" or rec.impact_t.size == 0:
             # impacts from the motion (the corrections cut the arcs first)
