@@ -6,8 +6,8 @@ grazing point) over which :mod:`.shooting` and :mod:`.continuation` are written 
 :mod:`.maps` (the Pi1/Pi2 return maps of the 1-DOF closed form), :mod:`.zdm` (Nordmark's
 discontinuity map), :mod:`.orbits` (the 1/1 branch explicit in the impact phase),
 :mod:`.perturbation`, :mod:`.design` (c1(c2; delay), lambda0, the admissible set),
-:mod:`.fidelity` (the model fidelities) and :mod:`.simulate` (event-driven simulation
-on Pi2).
+:mod:`.fidelity` (the model fidelities), :mod:`.simulate` (event-driven simulation
+on Pi2) and :mod:`.identification` (the model's parameters from a recorded motion).
 
 May import: :mod:`grazing_control.oscillator`, :mod:`grazing_control.support`. Never rclpy.
 """

@@ -114,6 +114,7 @@ class Problem:
 
     # ------------------------------------------------------------------ vector
     def pack(self, g, start, X, V) -> np.ndarray:
+        """The parameter vector of (g, arcs' start times, X, V) (module docstring)."""
         p = np.zeros(self.n)
         p[:6] = g
         k = self.iX >= 0
@@ -139,6 +140,8 @@ class Problem:
         return g, S, X, V
 
     def bounds(self):
+        """Bounds: 0 < zeta < 1, Omega > 0, A > 0, 0 <= r <= 2 (a fitted r beyond 1 is a
+        poor fit, reported), impact times between their samples."""
         lo = np.full(self.n, -np.inf)
         hi = np.full(self.n, np.inf)
         lo[0], hi[0] = 1e-12, 1.0 - 1e-12       # zeta
