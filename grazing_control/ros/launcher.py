@@ -399,6 +399,11 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
             controller_overrides.setdefault(key, sim_over[key])
     if enable_after is not None:
         controller_overrides["enable_after"] = int(enable_after)
+    # one token for this scene's nodes (ros/scene.py): the simulator starts with its own
+    # controller only, and a node of another scene on the domain is an intruder
+    token = f"{os.getpid():x}-{random.getrandbits(48):012x}"
+    sim_over.setdefault("scene", token)
+    controller_overrides.setdefault("scene", sim_over["scene"])
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None}
     timed_out = interrupted = False
 
