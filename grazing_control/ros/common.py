@@ -25,10 +25,12 @@ import re
 import signal
 import sys
 import time
+import warnings
 from typing import NamedTuple
 
 import rclpy
 import rclpy.logging
+from rclpy._rclpy_pybind11 import RCLError
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -529,7 +531,13 @@ def run_node(factory, args=None, name: str = "node") -> int:
         if arguments is None:
             sys.stdout.write(usage(factory, name))
             return 0
-        node = factory()
+        try:
+            with warnings.catch_warnings():   # rclpy's own noise after a failed creation
+                warnings.filterwarnings("ignore", message="Failed to fini rosout publisher")
+                node = factory()
+        except RCLError as exc:       # e.g. SROS2 asked of a Fast DDS without security
+            text = re.sub(r",? at \S+:\d+", "", " ".join(str(exc).split()))
+            raise StartupError(f"the node cannot be created: {text}") from None
         try:
             check_overrides(node, arguments)
         except StartupError:
