@@ -125,8 +125,15 @@ class RunResult:
         return not (self.timed_out or self.interrupted) and all(c == 0 for c in codes)
 
 
+class ParamText(str):
+    """A ``-p`` value as typed on a command line (``--sim-param k:=v``): passed verbatim,
+    rcl types it (as ``ros2 run`` would)."""
+
+
 def format_value(value) -> str:
     """A parameter value as ``-p key:=value`` text that rcl parses back to the same type."""
+    if isinstance(value, ParamText):
+        return str(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -140,7 +147,20 @@ def format_value(value) -> str:
         return text if ("." in text or "e" in text) else text + ".0"
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(format_value(v) for v in value) + "]"
-    return str(value)
+    text = str(value)
+    if isinstance(value, str) and _typed_as_other(text):
+        return "'" + text.replace("'", "''") + "'"    # '0', 'true', '1e-3' stay strings
+    return text
+
+
+def _typed_as_other(text: str) -> bool:
+    """Whether rcl would read ``-p name:=text`` as something other than a string."""
+    try:
+        float(text)
+        return True           # rcl reads 1e-3 as a double (YAML 1.1 would not)
+    except ValueError:
+        pass
+    return text == "" or not isinstance(yaml.safe_load(text), str)
 
 
 #: Runs a node module as ``python -m`` does, with a SIGINT that ends the process quietly
@@ -537,7 +557,7 @@ def _key_value(text: str):
     key, sep, value = text.partition(":=")
     if not sep or not key:
         raise argparse.ArgumentTypeError(f"{text!r}: expected KEY:=VALUE")
-    return key, value
+    return key, ParamText(value)
 
 
 class _Pairs(argparse.Action):
