@@ -21,7 +21,7 @@ from grazing_control.plant.engine import Engine, Event
 __all__ = ["Sink", "Loop", "PREDICTION_HOLD"]
 
 #: Consecutive missing answers a prediction stands in for (Loop.substitute).
-PREDICTION_HOLD = 3
+PREDICTION_HOLD = 10
 
 
 class Sink(Protocol):
