@@ -429,3 +429,43 @@ def test_realtime_misses_apply_the_previous_answers_prediction():
             dvc = ctl(ev.x, ev.v)[0]
         seg = period_step(P, dx, dv, dvc, delay=delay)
         dx, dv = seg.dx, seg.dv
+
+
+def test_realtime_a_late_answers_prediction_serves_the_next_sample():
+    """Sample 240's answer comes after its deadline (dropped as late) and 241's never:
+    240 gets 239's prediction, 241 gets the late answer's own prediction (made for it)."""
+    n, on, delay, c2 = 260, 60, 5.0, -1.0
+    c1 = degenerate_c1(P, c2, delay)
+    ctl = predicting_controller(c1, c2, delay)
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=n,
+                 state_period=0.0)
+    clock, sink = Clock(), Recorder()
+    held = []
+
+    def answer(loop, ev):
+        k = round(ev.t / P.period)
+        if k == 241:
+            prev = held.pop()
+            loop.answer(key(prev), *ctl(prev.x, prev.v))        # 240's, late
+            return                                             # 241: never answered
+        if k == 240:
+            held.append(ev)
+            return
+        clock.now += 1e-3
+        loop.answer(key(ev), *(ctl(ev.x, ev.v) if k >= on else (0.0, math.nan)))
+
+    loop = run_realtime(s, n, answer, clock, sink)
+    assert [m[0] for m in sink.misses] == [240, 241] and loop.stats["late"] == 1
+    assert loop.stats["predicted"] == 2
+    samples = sink.samples()
+    dx = dv = 0.0
+    for k, ev in enumerate(samples):
+        assert (ev.x, ev.v) == (P.x_ref + dx, P.v_ref + dv), k
+        if k < on:
+            dvc = 0.0
+        elif k in (240, 241):
+            dvc = ctl(samples[k - 1].x, samples[k - 1].v)[1]
+        else:
+            dvc = ctl(ev.x, ev.v)[0]
+        seg = period_step(P, dx, dv, dvc, delay=delay)
+        dx, dv = seg.dx, seg.dv
