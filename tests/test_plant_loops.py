@@ -37,6 +37,7 @@ class Recorder:
 
     def __init__(self):
         self.events, self.misses, self.latencies = [], [], []
+        self.substitutions = []
         self.counts = {"ignored": 0, "late": 0, "timeout": 0, "warn": 0}
         self.finished = 0
 
@@ -52,6 +53,9 @@ class Recorder:
 
     def miss(self, k, key, t, waited):
         self.misses.append((k, key, t, waited))
+
+    def substituted(self, k, key, dv):
+        self.substitutions.append((k, key, dv))
 
     def ignored(self, text):
         self.counts["ignored"] += 1
@@ -415,6 +419,8 @@ def test_realtime_misses_apply_the_previous_answers_prediction():
     loop = run_realtime(s, n, answer, clock, sink)
     assert [m[0] for m in sink.misses] == sorted(skip)
     assert loop.stats["predicted"] == len(skip) - 1       # all but the last of the run
+    assert [k for k, _, _ in sink.substitutions] == sorted(skip)[:-1]
+    assert all(key_ == key(sink.samples()[k]) for k, key_, _ in sink.substitutions)
     # the core: each miss gets the prediction of the last answer before it
     dx = dv = 0.0
     samples = sink.samples()

@@ -224,10 +224,10 @@ class Realtime(Loop):
         dv = dl.dv
         if dv is None:
             self.sink.miss(dl.k, dl.key, dl.t, self.clock() - dl.sent)
-            dv = self.substitute(dl.k)
+            dv = self.substitute(dl.k, dl.key)
         elif self.engine.correction_lost():
             self.stats["lost"] += 1
-            dv = self.substitute(dl.k)
+            dv = self.substitute(dl.k, dl.key)
         else:
             self.stats["applied"] += 1
             self.remember(dl.k, dl.predicted)
