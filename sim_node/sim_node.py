@@ -58,6 +58,7 @@ from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLIS
                                         bool_descriptor, float_descriptor, int_descriptor,
                                         publish_parameter_record, run_node, spin, stamp_key,
                                         string_descriptor)
+from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
 from grazing_control.ros.scheduling import apply_scheduling, parse_cpus
 
 from sim_node.messages import Outputs, read_answer
@@ -86,6 +87,7 @@ NODE_PARAMETERS = (
     Parameter("wait_for_recorder", "bool", False, "start only when recorder_node says it has "
               f"matched every topic ({READY_TOPIC}); grazing run sets it when it records",
               read_only=True),
+    Parameter("scene", "string", "", SCENE_PARAMETER_DOC, read_only=True),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
     Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "
@@ -151,6 +153,7 @@ class SimNode(Node):
         if self.get_parameter("wait_for_recorder").value:
             self.create_subscription(Bool, READY_TOPIC, self._on_recorder_ready, LATCHED_QOS)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
+        self.scene = SceneGuard(self, self.get_parameter("scene").value)
         self._start_timer = self.create_timer(0.02, self._try_start)
         self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
         self._tick_timer = None
@@ -186,7 +189,7 @@ class SimNode(Node):
         if n > 1:
             found.append(f"{n} publishers on {self.sub_correction.topic_name} "
                          "(more than one controller)")
-        return found
+        return found + self.scene.intruders()
 
     def _check_isolation(self) -> None:
         """Refuse to start, or stop, when another scene shares this one's topics.
@@ -220,7 +223,8 @@ class SimNode(Node):
         controller = self.get_parameter("wait_for_controller").value
         samples = max(self.pub_pi2.get_subscription_count(),      # a controller reads
                       self.pub_state.get_subscription_count())    # Pi2 or the stream
-        if controller and (samples < n + 1 or self.sub_correction.get_publisher_count() < 1):
+        if controller and (samples < n + 1 or self.sub_correction.get_publisher_count() < 1
+                           or (self.scene.token and not self.scene.own_controller)):
             return False
         if n > 0:
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]

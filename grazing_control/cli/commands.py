@@ -32,12 +32,24 @@ TWO_PI = 2.0 * math.pi
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``grazing <command>: error: ...``, exit status 2."""
+    """argparse with one-line errors: ``grazing <command>: error: ...``, exit status 2.
+
+    A negative number in exponent form (``--delta-d -5e-6 -1e-6``) is a value, not an
+    option: argparse's own pattern only knows ``-1`` and ``-1.5``, so the second value of
+    a list was taken for an unknown option.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message):
         command = self.prog.split()[-1]
         where = "" if command == "grazing" else f"{command}: "
         self.exit(2, f"grazing: error: {where}{message}\n")
+
+
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
 
 
 def _complex_list(values):
@@ -601,19 +613,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
-
-
-def _join_negative_values(argv):
-    """['--delta-d', '-5e-6'] -> ['--delta-d=-5e-6']: argparse takes '-5e-6' for an option."""
-    out = []
-    for token in argv:
-        if out and _NEGATIVE.match(token) and out[-1].startswith("--") and "=" not in out[-1]:
-            out[-1] = f"{out[-1]}={token}"
-        else:
-            out.append(token)
-    return out
-
 
 def _one_line(exc) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
@@ -623,7 +622,7 @@ def main(argv=None) -> int:
     """Entry point of the `grazing` console script."""
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = parser.parse_args(_join_negative_values(argv))
+    args = parser.parse_args(argv)
     try:
         # overflow in a computation shows up as nan/inf in the result, which is refused
         # below with one line; numpy's warnings would add lines of their own

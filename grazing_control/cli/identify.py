@@ -25,6 +25,7 @@ __all__ = ["add_identify_parser", "cmd_identify"]
 
 
 def _plain(obj):
+    """Standard JSON: nan/inf -> null (a parameter not identified), numpy -> Python."""
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
     if isinstance(obj, dict):
@@ -37,6 +38,7 @@ def _plain(obj):
 
 
 def cmd_identify(args) -> int:
+    """Run ``grazing identify``; the exit status (module docstring)."""
     from grazing_control.recordings.identify import format_report, identify_bags
 
     result = identify_bags(args.bags, position_only=args.position_only,

@@ -92,12 +92,14 @@ def read_parameter_file(path) -> dict:
 
 
 def add_params_option(parser) -> None:
+    """Add ``--params FILE`` (module docstring) to a subcommand's parser or group."""
     parser.add_argument("--params", metavar="FILE", default=None,
                         help="read the model (zeta, r, omega, pi2_offset, delta_d) from this "
                              "parameter file (`grazing identify --out`); options given here win")
 
 
 def _given(argv, name) -> bool:
+    """Whether ``--name`` was given on the command line (then it wins over the file)."""
     flag = "--" + name.replace("_", "-")
     return any(a == flag or a.startswith(flag + "=") for a in argv)
 

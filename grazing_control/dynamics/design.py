@@ -28,8 +28,11 @@ docs/theory_delay.md, section 2:
 
 The admissible c2 set is, by default, where all three hold (the *combined* set):
 |lambda0| < 1, gamma1 > 0 (the impacting side, the study's set) and rho(N_g) < 1 (the
-non-impacting side). End points are located by Brent's method on the condition that
-changes sign.
+non-impacting side). The conditions are evaluated division-free
+(:func:`condition_values`, docs/theory_delay.md section 5: each is a polynomial of
+degree <= 2 in N_g,11, which is affine in c2), so the set's ends are the roots of those
+polynomials, bisected to adjacent floats on the admissibility itself; the search
+reaches |c2| = C2_LIMIT, beyond any scan window.
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@ section's estimate is due, and the closed loop of plant, sensor, estimator and E
 The stream's samples arrive in time order (stamp t, simulation time; the section times
 are t_k = k T, the simulator's origin: docs/nodes.md, "The sensor stream"). The
 estimate of section k uses the samples with t_{k-1} < t <= t_k (a sample at t_k is
-before that section's correction) and is due as soon as no further sample at or before
-t_k can come: when t + h > t_k for the newest sample (h the sample period), or when a
-sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
+before that section's correction) and is due as soon as no further sample before t_k can
+come: when t + h >= t_k for the newest sample (h the sample period; a sample at t_k
+itself is not waited for), or when a sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
 over the estimators of :mod:`grazing_control.dynamics.estimation`; the controller node
 feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
 through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
@@ -144,7 +144,10 @@ class StreamEstimator:
         while self.samples and self.samples[0][0] < t - 2.0 * T - tol:
             self.samples.popleft()
         self.last_t = t if self.last_t is None else max(self.last_t, t)
-        if h <= 0.0 or t + h > self.next_k * T + tol:
+        # due when the next sample would be at t_k or after it: a sample at t_k itself
+        # (up to rounding, 1e-3 h) is not waited for (a simulator publishes the samples
+        # before t_k, then waits for the answer)
+        if h <= 0.0 or t + h >= self.next_k * T - 1e-3 * h:
             due.append(self._due(self.next_k))
         return due
 

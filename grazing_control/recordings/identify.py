@@ -43,6 +43,8 @@ _NS = 1_000_000_000
 
 
 def _sim_parameters(raw, topic) -> dict:
+    """The simulator's parameters at start from the bag's parameter record (docs/analysis.md,
+    "Parameter record"); {} without one."""
     if raw.count(topic) == 0:
         return {}
     nodes = run_parameters(reader.decode_strings(raw, topic))["nodes"]
@@ -118,6 +120,7 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
 
 
 def _parameters(ident) -> dict:
+    """The reported parameters: name -> {value, stderr} (:data:`PARAMETER_ORDER`)."""
     m = ident.model
     nd = ident.nondimensional
     out = {name: {"value": nd[name][0], "stderr": nd[name][1]}
@@ -194,6 +197,7 @@ def identify_bags(bags, **kwargs) -> dict:
 
 
 def _fmt(name, entry):
+    """One line of the text report: value and standard error."""
     v, s = entry["value"], entry["stderr"]
     s_text = "not identified" if not math.isfinite(s) else f"+- {s:.2g}"
     return f"  {name:18s} = {v:.12g}  {s_text}"

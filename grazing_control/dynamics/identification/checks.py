@@ -55,6 +55,7 @@ def whiteness(ident) -> dict:
 
 
 def _arc_state(ident, k, tt):
+    """The fitted state of arc k at times tt (:func:`.model.free_flight`)."""
     prob = ident.problem
     g, S, X, V = prob.unpack(ident.solution)
     zeta, Om, A, th = g[:4]

@@ -76,6 +76,23 @@ class Recording:
     def has_velocity(self) -> bool:
         return bool(np.any(np.isfinite(self.v)))
 
+    def without_samples(self, drop) -> "Recording":
+        """The recording less the samples where ``drop`` (a boolean per sample) is true."""
+        k = ~np.asarray(drop, bool)
+        return Recording(self.t[k], self.x[k], self.v[k], self.cos_tau[k], self.sin_tau[k],
+                         self.impact_t, self.impact_v_minus, self.impact_v_plus,
+                         self.corrections)
+
+    def near(self, times, tolerance: float) -> np.ndarray:
+        """Boolean per sample: within ``tolerance`` of one of ``times``."""
+        times = np.sort(np.asarray(times, float))
+        if times.size == 0:
+            return np.zeros(self.t.size, bool)
+        j = np.clip(np.searchsorted(times, self.t), 1, times.size)
+        gap = np.minimum(np.abs(self.t - times[j - 1]),
+                         np.abs(self.t - times[np.minimum(j, times.size - 1)]))
+        return gap <= tolerance
+
     def window(self, t0: float, t1: float) -> "Recording":
         """The part with t0 <= t < t1 (events included likewise)."""
         s = (self.t >= t0) & (self.t < t1)

@@ -114,6 +114,7 @@ class Problem:
 
     # ------------------------------------------------------------------ vector
     def pack(self, g, start, X, V) -> np.ndarray:
+        """The parameter vector of (g, arcs' start times, X, V) (module docstring)."""
         p = np.zeros(self.n)
         p[:6] = g
         k = self.iX >= 0
@@ -139,6 +140,8 @@ class Problem:
         return g, S, X, V
 
     def bounds(self):
+        """Bounds: 0 < zeta < 1, Omega > 0, A > 0, 0 <= r <= 2 (a fitted r beyond 1 is a
+        poor fit, reported), impact times between their samples."""
         lo = np.full(self.n, -np.inf)
         hi = np.full(self.n, np.inf)
         lo[0], hi[0] = 1e-12, 1.0 - 1e-12       # zeta
@@ -262,7 +265,8 @@ def _covariance(J, sigma2, k=6):
 
 
 def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
-             max_arcs: int | None = 100, max_nfev: int = 200) -> Identification:
+             max_arcs: int | None = 100, max_nfev: int = 200,
+             coincidence: float = 1.5e-9) -> Identification:
     """Fit the model to a recording (module docstring).
 
     Parameters
@@ -275,6 +279,9 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     impact_velocities : use the recorded v-, v+ as data (weighted like a sample).
     max_arcs : fit the recording up to its max_arcs-th event (None: all of it).
     max_nfev : most evaluations of the least-squares solver.
+    coincidence : samples within this time of a correction or a recorded impact are left
+        out: their velocity is either side of the jump (default: 1.5 ns, the resolution
+        of a bag's stamps).
 
     Raises
     ------
@@ -285,6 +292,10 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
         raise IdentificationError(f"impacts={impacts!r} is invalid: valid values are "
                                   "recorded, motion")
     try:
+        # a sample stamped at an event's instant is ambiguous (before or after the jump)
+        events = np.concatenate([rec.corrections, rec.impact_t if impacts == "recorded"
+                                 else np.zeros(0)])
+        rec = rec.without_samples(rec.near(events, coincidence))
         phase = fit_phase(rec.t, rec.cos_tau, rec.sin_tau)
         if impacts == "motion" or rec.impact_t.size == 0:
             # impacts from the motion (the corrections cut the arcs first)
@@ -320,8 +331,12 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
     p0 = prob.pack(g0, start0, X0, V0)
     lo, hi = prob.bounds()
-    p0 = np.clip(p0, np.where(np.isfinite(lo), lo + 1e-12 * np.maximum(1, np.abs(lo)), lo),
-                 np.where(np.isfinite(hi), hi - 1e-12 * np.maximum(1, np.abs(hi)), hi))
+    inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
+    f = np.isfinite(lo)
+    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
+    f = np.isfinite(hi)
+    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    p0 = np.clip(p0, inner_lo, inner_hi)
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "

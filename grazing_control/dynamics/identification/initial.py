@@ -89,6 +89,8 @@ def _forcing_columns(zeta, Omega, omega, tau):
 
 
 def _basis(zeta, Omega, h):
+    """Homogeneous solutions e^{-zeta Omega h} (cos wh, sin wh) and their derivatives (the
+    free flight of :func:`.model.free_flight` without forcing)."""
     k = zeta * Omega
     w = Omega * math.sqrt(1.0 - zeta * zeta)
     e = np.exp(-k * h)
@@ -282,6 +284,7 @@ def initial_guess(rec, arcs, phase):
 
 
 def _end_state(g, phase, start, X, V, b):
+    """State of arc b - 1 at the start of arc b (:func:`.model.free_flight`)."""
     zeta, Om, A, th = g[:4]
     om = phase.omega
     return free_flight(zeta, Om, A, om, om * start[b - 1] + phase.tau0 + th,
@@ -289,6 +292,8 @@ def _end_state(g, phase, start, X, V, b):
 
 
 def _states(t, x, v, tau, start, arcs, zeta, Omega, phase):
+    """(A, theta) and the arcs' start states: :func:`linear_arcs` plus the forced
+    response (:func:`.model.forced_response`)."""
     A, theta, C1, C2v = linear_arcs(t, x, v, tau, start, arcs.sample_arc, zeta, Omega,
                                     phase.omega)
     # linear_arcs returns the homogeneous part at the start: add the forced response

@@ -97,9 +97,11 @@ class RigModel:
 
     @classmethod
     def from_vector(cls, g, omega, tau0) -> "RigModel":
+        """From the fit's vector g (:data:`GLOBAL_NAMES` order) and the reference."""
         return cls(*(float(np.real(v)) for v in g[:6]), float(omega), float(tau0))
 
     def vector(self) -> np.ndarray:
+        """The fit's vector g (:data:`GLOBAL_NAMES` order)."""
         return np.array([getattr(self, n) for n in GLOBAL_NAMES])
 
     def nondimensional(self, pi2_offset: float = math.pi / 2) -> OscillatorParams:

@@ -44,6 +44,7 @@ class PhaseReference:
 
 
 def _initial(t, c, s):
+    """(omega, tau0) by regressing the unwrapped sample phases on t (module docstring)."""
     if s is not None:
         tau = np.arctan2(s, c)
     else:
