@@ -12,15 +12,17 @@ turns answers into loop calls and the loops' output into messages (packed CDR,
 scene sample for sample (docs/nodes.md).
 
 Topics (reliable, volatile, keep last 1000; docs/nodes.md has every field and unit):
-``oscillator/state``, ``/pi1``, ``/pi2`` (sensor_msgs/JointState: position [x], velocity
-[v], effort [cos tau]; stamp = simulation time; a Pi2 sample is the state before its
-correction, as measured), ``oscillator/impact`` (geometry_msgs/Vector3Stamped: v-, v+,
-phase), ``oscillator/latency`` (std_msgs/Float64, realtime: wall seconds from a sample to
-its answer), ``oscillator/deadline_miss`` (geometry_msgs/Vector3Stamped: k, the missed
-actuation time, the wall seconds waited), ``/clock``, ``oscillator/done`` (std_msgs/Bool,
-transient local). Subscribed: ``controller/velocity_correction``
-(geometry_msgs/TwistStamped: twist.linear.x = Delta v, stamp = the Pi2 sample's it
-answers). Service ``~/reset`` (std_srvs/Trigger): back to the initial state at t = 0.
+``oscillator/state`` (sensor_msgs/JointState: the rig's sensor stream, position [x~],
+velocity [v~] or empty, effort [cos tau, sin tau]), ``oscillator/pi1``, ``/pi2``
+(JointState: position [x], velocity [v], effort [cos tau]; a Pi2 sample is the state
+before its correction, the ground truth), ``oscillator/impact`` (geometry_msgs/
+Vector3Stamped: v-, v+, phase), ``oscillator/latency`` (std_msgs/Float64, realtime: wall
+seconds from a sample to its answer), ``oscillator/deadline_miss`` (Vector3Stamped: k,
+the missed actuation time, the wall seconds waited), ``/clock``, ``oscillator/done``
+(std_msgs/Bool, transient local); stamps are simulation time. Subscribed:
+``controller/velocity_correction`` (geometry_msgs/TwistStamped: twist.linear.x = Delta v,
+twist.linear.y = the Delta v it predicts for the next sample or NaN, stamp = the Pi2
+sample's it answers). Service ``~/reset`` (std_srvs/Trigger): back to t = 0.
 
 Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
 ``python -m sim_node.sim_node --ros-args ...``.
@@ -55,8 +57,10 @@ from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLIS
                                         bool_descriptor, float_descriptor, int_descriptor,
                                         publish_parameter_record, run_node, spin, stamp_key,
                                         string_descriptor)
+from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
+from grazing_control.ros.scheduling import apply_scheduling, parse_cpus
 
-from sim_node.outputs import Outputs
+from sim_node.messages import Outputs, read_answer
 
 __all__ = ["SimNode", "main"]
 
@@ -82,8 +86,16 @@ NODE_PARAMETERS = (
     Parameter("wait_for_recorder", "bool", False, "start only when recorder_node says it has "
               f"matched every topic ({READY_TOPIC}); grazing run sets it when it records",
               read_only=True),
+    Parameter("scene", "string", "", SCENE_PARAMETER_DOC, read_only=True),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
+    Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "
+              "1..99 of the process, 0 = off (a warning where not permitted)", 0, 99,
+              read_only=True),
+    Parameter("cpu_affinity", "string", "", "real-time scheduling: CPUs to run on, e.g. "
+              "'2' or '0,2-3'; '' = any", read_only=True),
+    Parameter("lock_memory", "bool", False, "real-time scheduling: lock the process's memory "
+              "(mlockall; a warning where not permitted)", read_only=True),
 )
 
 
@@ -107,8 +119,15 @@ class SimNode(Node):
             self.declare_parameter(p.name, p.default, descriptor(p))
         try:
             self.settings = settings_from_values(self._values())
-        except ParameterError as exc:
+            sched = apply_scheduling(self.get_parameter("thread_priority").value,
+                                     parse_cpus(self.get_parameter("cpu_affinity").value),
+                                     self.get_parameter("lock_memory").value)
+        except (ParameterError, ValueError) as exc:
             raise StartupError(str(exc)) from None
+        for warning in sched.warnings:
+            self.get_logger().warning(warning)
+        if sched.applied:
+            self.get_logger().info("real-time scheduling: " + ", ".join(sched.applied))
         self.engine = Engine(self.settings)
         self.exit_when_done = self.get_parameter("exit_when_done").value
         self.exit_code = 0
@@ -132,6 +151,7 @@ class SimNode(Node):
         if self.get_parameter("wait_for_recorder").value:
             self.create_subscription(Bool, READY_TOPIC, self._on_recorder_ready, LATCHED_QOS)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
+        self.scene = SceneGuard(self, self.get_parameter("scene").value)
         self._start_timer = self.create_timer(0.02, self._try_start)
         self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
         self._tick_timer = None
@@ -167,7 +187,7 @@ class SimNode(Node):
         if n > 1:
             found.append(f"{n} publishers on {self.sub_correction.topic_name} "
                          "(more than one controller)")
-        return found
+        return found + self.scene.intruders()
 
     def _check_isolation(self) -> None:
         """Refuse to start, or stop, when another scene shares this one's topics.
@@ -199,8 +219,10 @@ class SimNode(Node):
             return False                   # _check_isolation refuses
         n = self.get_parameter("wait_for_subscribers").value
         controller = self.get_parameter("wait_for_controller").value
-        if controller and (self.pub_pi2.get_subscription_count() < n + 1
-                           or self.sub_correction.get_publisher_count() < 1):
+        samples = max(self.pub_pi2.get_subscription_count(),      # a controller reads
+                      self.pub_state.get_subscription_count())    # Pi2 or the stream
+        if controller and (samples < n + 1 or self.sub_correction.get_publisher_count() < 1
+                           or (self.scene.token and not self.scene.own_controller)):
             return False
         if n > 0:
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]
@@ -244,21 +266,21 @@ class SimNode(Node):
     # ---------------------------------------------------------------- answers, time
     def _on_correction(self, data: bytes) -> None:
         """A correction as received (serialized): the controller's layout is read directly
-        (:func:`cdr.read_twist_stamped`), any other TwistStamped through rclpy."""
-        answer = cdr.read_twist_stamped(data)
+        (:func:`read_answer`), any other TwistStamped through rclpy."""
+        answer = read_answer(data)
         if answer is None:
             msg = deserialize(data, TwistStamped, self.out.malformed)
             if msg is None:
                 return
-            answer = stamp_key(msg.header.stamp) + (msg.twist.linear.x,)
-        key, dv = answer[:2], answer[2]
+            answer = (stamp_key(msg.header.stamp), msg.twist.linear.x, msg.twist.linear.y)
+        key, dv, predicted = answer
         if not math.isfinite(dv):
             self.out.malformed(f"dv={dv!r} for stamp {key}")
             return
         if not self.running:
             self.out.ignored(f"stamp {key}: the scene is not running")
             return
-        if self._guard(self.loop.answer, key, dv) and self._tick_timer is not None:
+        if self._guard(self.loop.answer, key, dv, predicted) and self._tick_timer is not None:
             self._arm(self.loop.now())       # a split may have brought an event forward
 
     def _on_tick(self) -> None:

@@ -581,3 +581,92 @@ def test_ctrl_c_at_any_moment_of_the_console_script_is_quiet(delay, startup):
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, (out, err)
     assert "Traceback" not in err and err.strip() == "grazing: interrupted", err
+
+
+# ------------------------------------------------------------------ issue 20, items 2-3
+@pytest.mark.parametrize("argv", [
+    ["--zeta", "0.03", "--r", "0.85", "--omega", "0.6655665991362745"],
+    ["--zeta", "0.015"],
+    ["--zeta", "0.02", "--method", "perturbation"],
+])
+def test_design_on_the_issue_20_inputs_gives_a_design(argv, capsys, tmp_path):
+    """These gave "numerical failure (ZeroDivisionError)" (gamma1's pole at N11 = 1)."""
+    out_file = tmp_path / "c.yaml"
+    status, out, err = _main(["design", "--c2", "-1", *argv, "--out", str(out_file)], capsys)
+    assert status == 0, err
+    assert "this c2            : admissible" in out and out_file.exists()
+
+
+def test_design_prints_the_true_ends_of_the_admissible_set(capsys):
+    """`--c2 -4.5 --delay 0.5` printed (-4, 0.2698), the scan window; the set goes on to
+    -5.1523011978 where |lambda0| = 1."""
+    status, out, err = _main(["design", "--c2", "-4.5", "--delay", "0.5"], capsys)
+    assert status == 0, err
+    assert "admissible c2      = (-5.152301198, 0.269775247)" in out
+    status, out, _ = _main(["design", "--c2", "1", "--delay", "1", "--json"], capsys)
+    d = _strict_json(out)
+    assert d["admissible_c2"][0] == pytest.approx(-0.3403039074, abs=1e-9)
+    assert d["admissible_c2"][1] > 6.0 and d["c2_search_limit"] == 1e6
+
+
+def test_design_says_beyond_the_search_limit_and_gives_null(capsys, monkeypatch):
+    import math
+
+    from grazing_control.dynamics import design
+
+    monkeypatch.setattr(design, "admissible_c2",
+                        lambda p, *a, **k: [(-math.inf, -0.5), (0.25, math.inf)])
+    status, out, err = _main(["design", "--c2", "1"], capsys)
+    assert status == 0, err
+    assert "(beyond -1e+06, -0.5) U (0.25, beyond +1e+06)" in out
+    status, out, err = _main(["design", "--c2", "1", "--json"], capsys)
+    d = _strict_json(out)
+    assert d["admissible_c2"] == [0.25, None]
+    assert d["admissible_c2_sets"]["combined"] == [[None, -0.5], [0.25, None]]
+    assert d["c2_search_limit"] == 1e6
+
+
+# ------------------------------------------------------------------ issue 15 section 3
+def test_design_reports_the_noise_gain_of_the_core(capsys):
+    """noise_gain in the JSON is dynamics.noise.noise_gain about the controlled orbit at
+    --delta-d (itself checked against seeded simulations of the exact closed loop in
+    tests/test_noise.py and tests/test_tuning.py)."""
+    from grazing_control.dynamics.noise import noise_gain
+
+    status, out, err = _main(["design", "--c2", "-0.3", "--delta-d", "-9e-6", "--json"], capsys)
+    assert status == 0, err
+    d = _strict_json(out)
+    q = P.with_(delta_d=-9e-6)
+    assert d["noise_gain"] == pytest.approx(noise_gain(q, Gains(degenerate_c1(P, -0.3), -0.3)),
+                                            rel=1e-12)
+    assert d["noise_gain_delta_d"] == -9e-6 and "optimize" not in d
+    status, out, _ = _main(["design", "--c2", "-1", "--delta-d", "-5e-6"], capsys)
+    assert re.search(r"noise gain\s+= 19\d\.\d", out)
+    # c2 = -2.5 is not admissible: no stable orbit, no stationary spread
+    status, out, _ = _main(["design", "--c2", "-2.5", "--delta-d", "-5e-6", "--json"], capsys)
+    assert status == 0 and _strict_json(out)["noise_gain"] is None
+
+
+def test_design_optimize_noise(capsys, tmp_path):
+    from grazing_control.dynamics.tuning import optimize_noise
+
+    path = tmp_path / "c.yaml"
+    status, out, err = _main(["design", "--optimize", "noise", "--delay", "0.5", "--delta-d",
+                              "-9e-6", "--json", "--out", str(path)], capsys)
+    assert status == 0, err
+    d = _strict_json(out)
+    ref = optimize_noise(P.with_(delta_d=-9e-6), 0.5)
+    assert d["c2"] == ref.c2 and d["c1"] == ref.c1 and d["actuation_delay"] == 0.5
+    assert d["optimize"]["noise_gain"] == d["noise_gain"] == ref.noise_gain
+    assert d["optimize"]["study_noise_gain"] == pytest.approx(ref.study_noise_gain)
+    assert d["admissible"] is True
+    params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+    assert (params["c1"], params["c2"]) == (ref.c1, ref.c2)
+    status, out, _ = _main(["design", "--optimize", "noise"], capsys)
+    assert "optimised" in out and "the study's c2 = -1: 19" in out   # at -5e-6 by default
+    status, _, err = _main(["design", "--optimize", "noise", "--c2", "1"], capsys)
+    assert status == 2 and "--optimize" in err
+    status, _, err = _main(["design"], capsys)
+    assert status == 2 and "c2" in err
+    status, _, err = _main(["design", "--c2", "-1", "--delta-d", "1e-6"], capsys)
+    assert status == 2 and "delta_d" in err

@@ -1,10 +1,13 @@
 """The command line against hostile arguments (issue 21 §8): each is refused with one line
 naming the parameter and its valid range, status 2, nothing written, no traceback."""
 
+import os
 import subprocess
 import sys
 
 import pytest
+
+from test_closed_loop import new_domain
 
 CASES = [
     (["simulate", "--delta-d", "-5e-6", "--periods", "100", "--c2", "-1", "--c1", "-1",
@@ -44,3 +47,40 @@ def test_a_sweep_into_a_folder_writes_inside_it(tmp_path):
     assert out.returncode == 0, out.stderr
     assert sorted(p.name for p in (tmp_path / "here").iterdir()) == ["sweep.npz", "sweep.png"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["here"]
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["run", "--periods", "99999999999999999999999"], "--periods: '99999999999999999999999' is invalid"),
+    (["run", "--periods", "0"], "--periods: '0' is invalid"),
+    (["run", "--delta-d", "nan"], "--delta-d: 'nan' is invalid"),
+])
+def test_run_refuses_what_sim_node_cannot_hold(argv, message, tmp_path):
+    out = subprocess.run([sys.executable, "-m", "grazing_control.cli", *argv], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and message in out.stderr, out.stderr
+
+
+def test_a_node_override_of_the_wrong_type_is_refused_not_replaced_by_the_file(tmp_path):
+    """`-p zeta:=abc` with a parameter file that sets zeta: rclpy kept the file's value
+    silently; the node now refuses the override (status 2, one line naming it)."""
+    from grazing_control.ros.launcher import CONFIG_DIR
+    for override, message in (("zeta:=abc", "zeta:=abc is invalid: expected a double"),
+                              ("max_periods:=99999999999999999999999",
+                               "beyond the 64-bit integer range"),
+                              ("exit_when_done:=maybe", "expected true or false")):
+        out = subprocess.run([sys.executable, "-m", "sim_node.sim_node", "--ros-args",
+                              "--params-file", str(CONFIG_DIR / "study.yaml"), "-p", override,
+                              "-p", "wait_for_controller:=false"],
+                             capture_output=True, text=True, timeout=120,
+                             env=dict(os.environ, ROS_DOMAIN_ID=str(new_domain())))
+        assert out.returncode == 2, (override, out.stdout, out.stderr)
+        assert message in out.stdout + out.stderr, (override, out.stdout, out.stderr)
+
+
+def test_a_list_of_negative_numbers_in_exponent_form_is_values_not_options():
+    from grazing_control.cli.commands import build_parser
+    args = build_parser().parse_args(["robustness", "delay", "--delta-d", "-5e-6", "-1E-6",
+                                      "-2.5e-7"])
+    assert args.delta_d == [-5e-6, -1e-6, -2.5e-7]
+    args = build_parser().parse_args(["orbit", "--delta-d", "-1e-10", "--c2", "-.5"])
+    assert (args.delta_d, args.c2) == (-1e-10, -0.5)

@@ -212,11 +212,12 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
                                atol=1e-6)
     np.testing.assert_allclose([m.effort[0] for m in pi1], math.cos(p.tau_star), atol=1e-12)
 
-    # state every state_period (1.0), stamps on the grid, /clock monotone
+    # state every state_period (1.0) from t = 0 (sent with sample 0) to the last
+    # period's end, stamps on the grid, /clock monotone
     state = collector.get("oscillator/state")
     st = stamps(state)
-    assert len(state) == math.floor(N * T) or len(state) == math.floor(N * T) - 1
-    np.testing.assert_allclose(st, np.arange(1, len(st) + 1) * 1.0, atol=1e-9)
+    assert len(state) == math.floor(N * T) + 1
+    np.testing.assert_allclose(st, np.arange(len(st)) * 1.0, atol=1e-9)
     clock = [seconds_from_stamp(m.clock) for m in collector.get("/clock")]
     assert np.all(np.diff(clock) >= 0)
     assert (N - 1) * T <= clock[-1] <= N * T

@@ -319,3 +319,35 @@ def test_orbit_on_another_branch_is_found_and_labelled_issue_7():
     assert abs(seg.dx - o.pi2_deviation[0]) < 1e-9 and abs(seg.dv - o.pi2_deviation[1]) < 1e-9
     with pytest.raises(ValueError, match="branch="):
         orbit_11(p, g, branch="far")
+
+
+# ------------------------------------------------------- fold or rounding (issue 20, item 4)
+@pytest.mark.parametrize("c2, delay", [(-0.5, 0.0), (0.0, 0.0), (0.1, 0.0), (-1.0, 0.5)])
+def test_near_grazing_controlled_orbit_is_not_past_a_fold(c2, delay):
+    """Issue 20: at Delta d = -1e-10 these orbits (5e-6 rad from grazing, v- ~ 3e-5) were
+    labelled "grazing past a fold": the 'fold' was the rounding wobble of Delta d(psi)
+    at |psi| ~ 1e-15. They are on the branch born at grazing, before any fold."""
+    p = OscillatorParams(delta_d=-1e-10)
+    g = Gains(degenerate_c1(p, c2, delay), c2, delay)
+    o = orbit_11(p, g)
+    assert o.branch == "grazing"
+    assert abs(o.impact_phase - p.tau_star) < 2e-5 and 0.0 < o.v_minus < 1e-4
+
+
+@pytest.mark.parametrize("c2, delay", [(-0.5, 0.0), (0.1, 0.0), (-1.0, 0.5), (-1.0, 0.0)])
+def test_delta_d_rounding_bounds_the_wobble_and_is_not_vacuous(c2, delay):
+    """Against Delta d = -gamma1 psi^2 (D9; the psi^3 term is below 1e-33 here): the error
+    of branch_point's Delta d stays inside the bound for |psi| <= 6e-12 on both sides,
+    and reaches at least a tenth of it (measured 0.55 ... 0.72 of the bound at most)."""
+    from grazing_control.dynamics.design import existence_coefficient
+    from grazing_control.dynamics.orbits import _delta_d_rounding, _psi_grid
+
+    p = OscillatorParams()
+    g = Gains(degenerate_c1(p, c2, delay), c2, delay)
+    gamma1 = existence_coefficient(p, g)
+    ratios = []
+    for m in _psi_grid()[:60]:
+        for psi in (-m, m):
+            err = abs(branch_point(p, psi, g)[0] + gamma1 * psi * psi)
+            ratios.append(err / _delta_d_rounding(p, psi, g))
+    assert 0.1 < max(ratios) <= 1.0

@@ -15,7 +15,8 @@ import re
 import pytest
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, PARAMETERS,
+from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, ON_MISS,
+                                            PARAMETERS,
                                             SETTING_KEYS, SimSettings, default_values,
                                             initial_deviation, settings_from_values)
 
@@ -23,8 +24,9 @@ from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, PARAM
 def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     names = [p.name for p in PARAMETERS]
     assert len(set(names)) == len(names) and tuple(names) == SETTING_KEYS
-    fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params"}
-    assert fields | set(MODEL_KEYS) == set(names)
+    fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params", "sensor"}
+    sensor = {n for n in names if n.startswith("sensor_")}
+    assert fields | set(MODEL_KEYS) | sensor == set(names)
     kinds = {"double": float, "integer": int, "string": str, "bool": bool}
     for p in PARAMETERS:
         assert isinstance(p.default, kinds[p.kind]), p
@@ -47,7 +49,8 @@ def test_doubles_below_their_range_or_not_finite_are_refused_by_name(p):
             settings_from_values({p.name: bad})
 
 
-@pytest.mark.parametrize("name, choices", [("mode", MODES), ("actuation", ACTUATIONS)])
+@pytest.mark.parametrize("name, choices", [("mode", MODES), ("actuation", ACTUATIONS),
+                                           ("on_miss", ON_MISS)])
 def test_strings_outside_their_choices_are_refused_with_the_choices(name, choices):
     with pytest.raises(ParameterError, match=re.escape(", ".join(choices))):
         settings_from_values({name: "nonsense"})
@@ -66,3 +69,35 @@ def test_initial_deviation_nan_is_the_grazing_point():
     p = OscillatorParams(delta_d=-5e-6)
     assert initial_deviation(p, math.nan, math.nan) == (0.0, 0.0)
     assert initial_deviation(p, -0.5, math.nan) == (-0.5 - p.x_ref, 0.0)
+
+
+@pytest.mark.parametrize("kw, text", [
+    ({"sensor_noise": -1e-4}, "sensor_noise=-0.0001 is invalid: valid range"),
+    ({"sensor_noise": math.nan}, "sensor_noise=nan is invalid"),
+    ({"sensor_quantum": -1.0}, "sensor_quantum=-1.0 is invalid: valid range"),
+    ({"sensor_bias": math.inf}, "sensor_bias=inf is invalid: valid range"),
+    ({"sensor_seed": -2}, "sensor_seed=-2 is invalid: valid range is an integer >= 0"),
+    ({"sensor_velocity": "yes"}, "sensor_velocity='yes' is invalid: valid values"),
+    ({"pulse_width": -0.1}, "pulse_width=-0.1 is invalid: valid range"),
+    ({"pulse_width": 0.1}, "pulse_width=0.1 is invalid with actuation_delay=0.0: valid range"),
+    ({"pulse_width": 1.0, "actuation_delay": 0.4}, "pulse_width <= 2 actuation_delay"),
+    ({"pulse_width": 1.0, "actuation_delay": 9.0}, "actuation_delay + pulse_width / 2 < T"),
+    ({"force_limit": -1.0}, "force_limit=-1.0 is invalid: valid range"),
+    ({"pulse_width": 0.2, "actuation_delay": 1.0, "fidelity": "zdm2"}, "fidelity='zdm2'"),
+    ({"pulse_width": 0.2, "actuation_delay": 1.0, "mode": "realtime",
+      "actuation": "on_arrival"}, "pulse_width=0.2 is invalid with actuation=on_arrival"),
+])
+def test_sensor_and_pulse_values_are_refused_by_name_and_range(kw, text):
+    with pytest.raises(ParameterError, match=re.escape(text)):
+        settings_from_values(kw)
+
+
+def test_the_sensor_is_plant_sensors_model_and_the_pulse_is_carried():
+    s = settings_from_values({"sensor_noise": 1e-4, "sensor_velocity": False,
+                              "sensor_quantum": 1e-5, "sensor_bias": 2e-4, "sensor_seed": 9,
+                              "pulse_width": 0.1, "actuation_delay": 5.0, "force_limit": 3.0})
+    assert (s.sensor.noise, s.sensor.velocity, s.sensor.quantum, s.sensor.bias,
+            s.sensor.seed) == (1e-4, False, 1e-5, 2e-4, 9)
+    assert (s.pulse_width, s.force_limit) == (0.1, 3.0)
+    assert "sensor noise=0.0001 velocity=false" in s.describe()
+    assert settings_from_values({}).sensor.exact

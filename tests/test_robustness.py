@@ -205,3 +205,69 @@ def test_clipped_normal_moments():
     mean, var = _clipped_normal_moments(-0.4, 0.5)
     assert mean == pytest.approx(x.mean(), abs=4 * x.std() / sqrt(z.size))
     assert var == pytest.approx(x.var(), rel=0.01)
+
+
+def test_stability_chart_keeps_to_its_c2_grid(tmp_path, monkeypatch):
+    """Issue 20: the design's true admissible ends (not clipped at a scan window any more)
+    can lie outside the plotted c2 range, or at infinity: the axes stay on the grid and
+    only the ends on it are marked."""
+    from types import SimpleNamespace
+
+    from grazing_control.studies.robustness import charts
+
+    figs = []
+    monkeypatch.setattr(charts, "save_png", lambda fig, path, dpi=80: figs.append(fig))
+    c2s, delays = np.linspace(-2.0, 1.0, 7), np.linspace(0.0, 1.0, 3)
+    m = SimpleNamespace(c2s=c2s, delays=delays, values=np.full((3, 7), 0.5))
+    maps = {(d, -1e-6): m for d in ("delayed", "undelayed")}
+    charts.plot_stability_maps(maps, tmp_path / "x.png",
+                               boundaries={0.0: [(-5.15, 0.27)], 1.0: [(-0.34, math.inf)]})
+    ax = figs[0].axes[0]
+    assert ax.get_xlim() == (-2.0, 1.0)
+    marked = [x for line in ax.get_lines() for x in line.get_xdata()]
+    assert sorted(marked) == [-0.34, 0.27]
+
+
+def test_grazing_robustness_noise_chart_and_numbers(tmp_path, capsys):
+    """`grazing robustness noise`: the noise gain over the admissible c2 per Delta d, the
+    least gain and the study's, equal to the core's (dynamics.tuning)."""
+    from grazing_control.dynamics.tuning import design_noise_gain, optimize_noise
+
+    out = tmp_path / "n"
+    assert main(["robustness", "noise", "--points", "21", "--out", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert (out / "noise_gain.png").stat().st_size > 0
+    assert json.loads((out / "noise_gain.json").read_text())["curves"] == d["curves"]
+    for curve in d["curves"]:
+        p = OscillatorParams(delta_d=curve["delta_d"])
+        best = optimize_noise(p)
+        assert curve["best"]["gain"] == best.noise_gain and curve["study"] == best.study_noise_gain
+        finite = [g for g in curve["gain"] if g is not None]
+        assert min(finite) >= best.noise_gain
+        k = 7
+        assert curve["gain"][k] == design_noise_gain(p, curve["c2"][k])
+    # the gain grows like 1/sqrt|Delta d| (v- ~ sqrt|Delta d| on the controlled branch)
+    assert [c["delta_d"] for c in d["curves"]] == [-1e-4, -1e-5, -5e-6, -1e-6, -1e-7]
+    ratio = d["curves"][4]["best"]["gain"] / d["curves"][3]["best"]["gain"]
+    assert ratio == pytest.approx(math.sqrt(10.0), rel=0.02)
+
+
+def test_grazing_robustness_model_chart_and_numbers(tmp_path, capsys, monkeypatch):
+    """`grazing robustness model`: the band per design and error, equal to the core's
+    (dynamics.mismatch.instability_band); here on a reduced error list."""
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.mismatch import instability_band
+    from grazing_control.studies.robustness import model
+
+    monkeypatch.setattr(model, "ERRORS", {"zeta": (0.05,), "r": (0.1,)})
+    out = tmp_path / "m"
+    assert main(["robustness", "model", "--c2", "-1", "--out", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert (out / "model_error_bands.png").stat().st_size > 0
+    (design,) = d["designs"]
+    rows = {(r["parameter"], r["error"]): r for r in design["bands"]}
+    assert set(rows) == {("zeta", 0.05), ("zeta", -0.05), ("r", 0.1), ("r", -0.1)}
+    g = Gains(degenerate_c1(OscillatorParams(), -1.0), -1.0)
+    assert rows[("zeta", 0.05)]["end"] == instability_band(OscillatorParams(), g, "zeta", 0.05).end
+    assert rows[("zeta", 0.05)]["end"] < 0.0 and rows[("r", 0.1)]["end"] == 0.0
+    assert rows[("zeta", 0.05)]["k"] == pytest.approx(rows[("zeta", 0.05)]["end"] / 0.0025)

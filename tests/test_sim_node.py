@@ -281,3 +281,155 @@ def test_reset_restarts_from_the_initial_state(node_env):
     ref = simulate(OscillatorParams(delta_d=-5e-6), 12, x0=-0.5, v0=-1.0)
     np.testing.assert_array_equal(got[9:], ref.pi2)
     assert stamps(ans.samples)[-1] == pytest.approx(11 * OscillatorParams().period, abs=1e-9)
+
+
+# ================================================== the rig: sensor stream and pulse
+def test_stream_controller_position_only_sensor_and_pulse_through_the_node(node_env):
+    """A controller that reads only oscillator/state (issue 15 §1): the simulator starts
+    for it (wait_for_controller), sends the stream's sample at t = 0 with sample 0, and
+    the stream is the sensor's (position only: velocity empty; effort [cos tau, sin tau]);
+    the run with a force pulse is the core's pulse_step loop bit for bit."""
+    from grazing_control.dynamics.actuation import pulse_step
+    from grazing_control.plant.sensor import SensorModel
+
+    domain, collector, start = node_env
+    p = OscillatorParams(delta_d=-5e-6)
+    T, n, delay, w, sigma = p.period, 12, 3.0, 0.5, 1e-4
+    pub = collector.node.create_publisher(TwistStamped, "controller/velocity_correction",
+                                          DATA_QOS)
+    dvs = [2e-3 * ((k % 3) - 1) for k in range(n)]
+
+    def on_state(msg):                 # answer sample k on the stream's sample at t_k
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        k = round(t / T)
+        if abs(t - k * T) < 1e-6 and k < n:
+            out = TwistStamped()
+            out.header.stamp.sec, out.header.stamp.nanosec = cdr.stamp_parts(k * T)
+            out.twist.linear.x = dvs[k]
+            pub.publish(out)
+
+    collector.node.create_subscription(JointState, "oscillator/state", on_state, DATA_QOS)
+    proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0,
+                      wait_for_controller=True, start_timeout=20.0, state_period=T / 200,
+                      sensor_noise=sigma, sensor_velocity=False, sensor_seed=3,
+                      actuation_delay=delay, pulse_width=w)
+    assert proc.wait(60) == 0, log.read_text()
+    text = log.read_text()
+    assert "start_timeout" not in text and summary(text)["timeouts"] == "0", text
+    # the ground truth on oscillator/pi2: the core's pulse loop with the answers
+    dx = dv = 0.0
+    ref = []
+    for k in range(n):
+        ref.append((p.x_ref + dx, p.v_ref + dv))
+        seg = pulse_step(p, dx, dv, dvs[k], start=delay - w / 2, width=w)
+        dx, dv = seg.dx, seg.dv
+    np.testing.assert_array_equal(xv(collector.get("oscillator/pi2")), ref)
+    # the stream: every grid sample from t = 0, position only, the phase reference
+    m = n * 200 + 1                                      # t = 0 .. t_n, both included
+    assert collector.wait_for(lambda: len(collector.get("oscillator/state")) == m, 5.0)
+    states = collector.get("oscillator/state")
+    t = stamps(states)
+    np.testing.assert_allclose(t, np.arange(m) * T / 200, rtol=0, atol=1e-9)
+    assert all(len(m.velocity) == 0 and len(m.position) == 1 for m in states)
+    tau = np.array([math.atan2(m.effort[1], m.effort[0]) for m in states]) % (2 * math.pi)
+    want = (p.tau2 + p.omega * t) % (2 * math.pi)
+    assert np.abs(np.angle(np.exp(1j * (tau - want)))).max() < 1e-9
+    # sample j is the true state (the engine with an exact sensor) + the sensor's draw j
+    eng = Engine(settings(delta_d=-5e-6, state_period=T / 200, actuation_delay=delay,
+                          pulse_width=w))
+    true = eng.initial_states()
+    for k in range(n):
+        true += [e for e in eng.begin_period(dvs[k], delay) if e.kind == "state"]
+        eng.end_period()
+    e = SensorModel(noise=sigma, seed=3).draws(0, m)[:, 0] * sigma
+    x = np.array([s.position[0] for s in states])
+    np.testing.assert_allclose(x, [s.x for s in true] + e, rtol=0, atol=1e-12)
+
+
+def test_stream_sample_writer_is_the_rclpy_layout():
+    """rclpy decodes cdr.stream_sample's bytes to the stream's JointState (with and
+    without velocity: the alignment of the effort differs)."""
+    from rclpy.serialization import deserialize_message
+
+    for v in (None, -1.25):
+        data = cdr.stream_sample(3, 500, 0.5, v, 0.6, 0.8)
+        msg = deserialize_message(data, JointState)
+        assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == \
+            (3, 500, "")
+        assert (list(msg.name), list(msg.position), list(msg.velocity), list(msg.effort)) \
+            == (["mass"], [0.5], [] if v is None else [v], [0.6, 0.8])
+
+
+# ============================================================ miss-tolerant actuation
+def test_read_answer_takes_the_prediction_from_linear_y():
+    from rclpy.serialization import serialize_message
+    from sim_node.messages import read_answer
+
+    msg = TwistStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 7, 9
+    msg.twist.linear.x, msg.twist.linear.y = 1.5e-3, math.nan
+    key, dv, pred = read_answer(bytes(serialize_message(msg))[:68])
+    assert (key, dv) == ((7, 9), 1.5e-3) and math.isnan(pred)
+    msg.twist.linear.y = -2.5e-3
+    assert read_answer(bytes(serialize_message(msg))[:68]) == ((7, 9), 1.5e-3, -2.5e-3)
+    assert read_answer(cdr.twist_stamped(7, 9, 1.0, 0.5)) == ((7, 9), 1.0, 0.5)
+    assert read_answer(b"\x00" * 10) is None
+
+
+def test_lost_answers_are_replaced_by_their_predictions_through_the_node(node_env):
+    """Issue 16 §3 through the node: lockstep, loss 0.05 (seed 7), the test as a
+    controller that sends its prediction in twist.linear.y; the published Pi2 samples
+    are the engine's lockstep loop with the same answers bit for bit (its spread about
+    the orbit <= 1e-10, tests/test_plant_loops.py), every loss after the first
+    controlled answer is counted as predicted."""
+    from grazing_control.dynamics.design import degenerate_c1
+    from test_plant_loops import lossy_lockstep, predicting_controller
+
+    domain, collector, start = node_env
+    n, on, seed = 700, 100, 7
+    c1 = degenerate_c1(OscillatorParams(delta_d=-5e-6), -1.0)
+    ctl = predicting_controller(c1, -1.0, 0.0)
+    pub = collector.node.create_publisher(TwistStamped, "controller/velocity_correction",
+                                          DATA_QOS)
+    count = [0]
+
+    def on_sample(msg):
+        k, count[0] = count[0], count[0] + 1
+        out = TwistStamped()
+        out.header.stamp = msg.header.stamp
+        out.twist.linear.x, out.twist.linear.y = (
+            ctl(msg.position[0], msg.velocity[0]) if k >= on else (0.0, math.nan))
+        pub.publish(out)
+
+    collector.node.create_subscription(JointState, "oscillator/pi2", on_sample, DATA_QOS)
+    proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0,
+                      state_period=0.0, loss=0.05, seed=seed)
+    assert proc.wait(60) == 0, log.read_text()
+    got = xv(collector.get("oscillator/pi2"))
+    ref, loop = lossy_lockstep("predict", n, on, 0.05, seed)
+    np.testing.assert_array_equal(got, ref)
+    s = summary(log.read_text())
+    assert (s["lost"], s["predicted"]) == (str(loop.stats["lost"]),
+                                           str(loop.stats["predicted"]))
+    assert loop.stats["predicted"] > 20
+
+
+def test_scheduling_options_warn_where_refused_and_bad_ones_stop_the_start(node_env):
+    """thread_priority, cpu_affinity, lock_memory (ros.scheduling): applied or refused
+    with a warning, never a crash; an invalid cpu_affinity is one line, status 2."""
+    domain, collector, start = node_env
+    proc, log = start(max_periods=3, exit_when_done=True, answer_timeout=0.05,
+                      thread_priority=10, cpu_affinity="0,1", lock_memory=True)
+    assert proc.wait(30) == 0, log.read_text()
+    text = log.read_text()
+    for option, applied in (("thread_priority=10", "SCHED_FIFO priority 10"),
+                            ("cpu_affinity=[0, 1]", "CPU affinity [0, 1]"),
+                            ("lock_memory", "memory locked")):
+        assert applied in text or f"{option} not applied" in text, (option, text)
+    assert "Traceback" not in text
+    cmd, env = sim_cmd(domain)
+    bad = subprocess.run(cmd + ["-p", "cpu_affinity:=zero"], env=env, capture_output=True,
+                         text=True, timeout=30)
+    lines = [ln for ln in (bad.stdout + bad.stderr).splitlines() if ln.strip()]
+    assert bad.returncode == 2 and len(lines) == 1, lines
+    assert "cpu_affinity='zero' is invalid" in lines[0]

@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 
 from grazing_control.support.arguments import finite, integer_at_least, non_empty_path
+from .parameter_file import add_params_option, apply_to_args
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import (STUDY_R, STUDY_ZETA, OscillatorParams,
                                                ParameterError, study_omega)
@@ -31,12 +32,24 @@ TWO_PI = 2.0 * math.pi
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``grazing <command>: error: ...``, exit status 2."""
+    """argparse with one-line errors: ``grazing <command>: error: ...``, exit status 2.
+
+    A negative number in exponent form (``--delta-d -5e-6 -1e-6``) is a value, not an
+    option: argparse's own pattern only knows ``-1`` and ``-1.5``, so the second value of
+    a list was taken for an unknown option.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message):
         command = self.prog.split()[-1]
         where = "" if command == "grazing" else f"{command}: "
         self.exit(2, f"grazing: error: {where}{message}\n")
+
+
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
 
 
 def _complex_list(values):
@@ -87,6 +100,7 @@ def _common(parser):
     g.add_argument("--pi2-offset", type=_finite, default=math.pi / 2,
                    help="phase of Pi2 after Pi1, in (0, 2 pi)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_params_option(g)
 
 
 def _method_arg(parser):
@@ -144,11 +158,19 @@ def _gains(args, p):
 
 # ---------------------------------------------------------------------------- design
 def cmd_design(args):
-    from grazing_control.dynamics.design import (admissible_c2, evaluate_design,
+    from grazing_control.dynamics.design import (C2_LIMIT, admissible_c2, evaluate_design,
                                                  write_controller_yaml)
 
     p = _params(args)
     t0 = time.perf_counter()
+    tuned = None
+    if args.optimize is not None:
+        if args.c2 is not None:
+            raise ParameterError("c2 is given with --optimize: give one of --c2 and --optimize")
+        tuned = _optimize(args, p)
+        args.c2 = tuned["c2"]
+    elif args.c2 is None:
+        raise ParameterError("c2 is missing: give --c2 (the chosen gain) or --optimize noise")
     point = evaluate_design(p, args.c2, args.delay)
     sets = {c: admissible_c2(p, delay=args.delay, conditions=c)
             for c in ("combined", "impacting", "non-impacting")}
@@ -165,13 +187,14 @@ def cmd_design(args):
         gamma_p = existence_coefficient_perturbation(p, g)
         sets_p = {c: admissible_c2_perturbation(p, delay=args.delay, conditions=c) for c in sets}
         cost_p = time.perf_counter() - t0
-        other = {"exact": {"admissible_c2": [list(iv) for iv in sets["combined"]],
+        other = {"exact": {"admissible_c2": [_json_interval(iv) for iv in sets["combined"]],
                            "multipliers_limit": _complex_list(point.multipliers_limit),
                            "gamma1": point.gamma1, "seconds": cost}}
         exact_combined = sets["combined"]
         point = type(point)(point.c1, point.c2, lam_p, gamma_p, point.multipliers_free, point.delay)
         sets, cost = sets_p, cost_p
-        ends = [(a - b) for iv, jv in zip(sets["combined"], exact_combined) for a, b in zip(iv, jv)]
+        ends = [(a - b) for iv, jv in zip(sets["combined"], exact_combined) for a, b in zip(iv, jv)
+                if math.isfinite(a) and math.isfinite(b)]
         other["difference_admissible_ends"] = ends
     intervals = sets["combined"]
     chosen = next((iv for iv in intervals if iv[0] <= args.c2 <= iv[1]), None)
@@ -183,8 +206,9 @@ def cmd_design(args):
         "actuation_delay": point.delay,
         "x_ref": p.x_ref,
         "v_ref": p.v_ref,
-        "admissible_c2": list(shown) if shown else None,
-        "admissible_c2_sets": {c: [list(iv) for iv in ivs] for c, ivs in sets.items()},
+        "admissible_c2": _json_interval(shown) if shown else None,
+        "admissible_c2_sets": {c: [_json_interval(iv) for iv in ivs] for c, ivs in sets.items()},
+        "c2_search_limit": C2_LIMIT,
         "multipliers_limit": _complex_list(point.multipliers_limit),
         "gamma1": point.gamma1,
         "multipliers_free": _complex_list(point.multipliers_free),
@@ -198,6 +222,12 @@ def cmd_design(args):
     }
     if other is not None:
         out["comparison"] = other
+    noise = None
+    if args.delta_d is not None or tuned is not None:
+        noise = _noise_report(args, p, point)
+        out.update(noise)
+    if tuned is not None:
+        out["optimize"] = tuned
     _require_finite(out, "design")
     if args.out:
         if not point.admissible:
@@ -225,6 +255,17 @@ def cmd_design(args):
         f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
         f"  method             : {args.method} ({cost:.3g} s)",
     ]
+    if noise is not None:
+        gain = noise["noise_gain"]
+        lines.append(f"  noise gain         = {'none (no stable controlled orbit)' if gain is None else f'{gain:.4g}'}"
+                     f"  (std of the Pi2 position per unit measurement noise on x and v, "
+                     f"Delta d = {noise['noise_gain_delta_d']:.3g})")
+    if tuned is not None:
+        study = tuned["study_noise_gain"]
+        lines.append(f"  optimised          : least noise gain in {_fmt_intervals([tuned['interval']])}"
+                     f" ({tuned['evaluations']} evaluations); the study's c2 = {tuned['study_c2']:g}: "
+                     + ("no stable controlled orbit with this delay" if study is None
+                        else f"{study:.4g} ({study / tuned['noise_gain']:.3g}x)"))
     if other is not None:
         lines.append(f"  exact route        : admissible c2 = "
                      f"{_fmt_intervals(other['exact']['admissible_c2'])} ({other['exact']['seconds']:.3g} s); "
@@ -234,8 +275,50 @@ def cmd_design(args):
     return "\n".join(lines)
 
 
+def _noise_delta_d(args):
+    """Delta d of the noise gain: --delta-d, or the study's first scene for --optimize."""
+    dd = -5e-6 if args.delta_d is None else args.delta_d
+    if not dd < 0.0:
+        raise ParameterError(f"delta_d={dd!r} is invalid: the noise gain is that of the "
+                             f"controlled 1/1 orbit, valid range is delta_d < 0")
+    return dd
+
+
+def _optimize(args, p):
+    """--optimize noise: the c2 of least noise gain (dynamics.tuning.optimize_noise)."""
+    from grazing_control.dynamics.tuning import STUDY_C2, optimize_noise
+
+    r = optimize_noise(p.with_(delta_d=_noise_delta_d(args)), args.delay)
+    study = r.study_noise_gain if math.isfinite(r.study_noise_gain) else None
+    return {"objective": args.optimize, "delta_d": r.delta_d, "c2": r.c2, "c1": r.c1,
+            "noise_gain": r.noise_gain, "interval": _json_interval(r.interval),
+            "study_c2": STUDY_C2, "study_noise_gain": study, "evaluations": r.evaluations}
+
+
+def _noise_report(args, p, point):
+    """noise_gain (null where no stable controlled orbit) at --delta-d, issue 15 section 3."""
+    from grazing_control.dynamics.tuning import design_noise_gain
+
+    dd = _noise_delta_d(args)
+    gain = design_noise_gain(p.with_(delta_d=dd), point.c2, point.delay)
+    return {"noise_gain": gain if math.isfinite(gain) else None, "noise_gain_delta_d": dd}
+
+
 def _fmt_intervals(intervals):
-    return " U ".join(f"({lo:.10g}, {hi:.10g})" for lo, hi in intervals) or "empty"
+    """'(lo, hi) U ...'; an end open at the search limit reads 'beyond -1e+06' (design.C2_LIMIT)."""
+    from grazing_control.dynamics.design import C2_LIMIT
+
+    def end(x, sign):
+        if x is None or not math.isfinite(x):
+            return f"beyond {sign}{C2_LIMIT:.0e}"
+        return f"{x:.10g}"
+
+    return " U ".join(f"({end(lo, '-')}, {end(hi, '+')})" for lo, hi in intervals) or "empty"
+
+
+def _json_interval(iv):
+    """[lo, hi] with an end open at the search limit as null (the key c2_search_limit)."""
+    return [x if math.isfinite(x) else None for x in iv]
 
 
 # ---------------------------------------------------------------------------- orbit
@@ -445,8 +528,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("design", help="gains (c1, c2) for degenerate grazing, admissible c2")
     _common(s)
-    s.add_argument("--c2", type=_finite, required=True, help="chosen gain c2")
+    s.add_argument("--c2", type=_finite, help="chosen gain c2 (or --optimize)")
     _delay_arg(s)
+    s.add_argument("--delta-d", type=_finite,
+                   help="report the noise gain (std of the Pi2 position per unit measurement "
+                        "noise) of the controlled orbit at this Delta d < 0")
+    s.add_argument("--optimize", choices=("noise",),
+                   help="choose c2 in the admissible set: noise = least noise gain at --delta-d "
+                        "(default -5e-6, the study's first scene)")
     s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here "
                                              "(c1, c2, actuation_delay, X**, the model)")
     _method_arg(s)
@@ -498,10 +587,13 @@ def build_parser() -> argparse.ArgumentParser:
         add_run_arguments(s)
         s.add_argument("--json", action="store_true",
                        help="print one JSON summary object (node output goes to stderr)")
+        add_params_option(s)
         s.set_defaults(func=cmd_run)
 
     from .bag import add_bag_parser
     add_bag_parser(sub)
+    from .identify import add_identify_parser
+    add_identify_parser(sub)
     from grazing_control.studies.robustness.cli import add_robustness_parser
 
     add_robustness_parser(sub, _common, _finite)
@@ -521,19 +613,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
-
-
-def _join_negative_values(argv):
-    """['--delta-d', '-5e-6'] -> ['--delta-d=-5e-6']: argparse takes '-5e-6' for an option."""
-    out = []
-    for token in argv:
-        if out and _NEGATIVE.match(token) and out[-1].startswith("--") and "=" not in out[-1]:
-            out[-1] = f"{out[-1]}={token}"
-        else:
-            out.append(token)
-    return out
-
 
 def _one_line(exc) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
@@ -543,12 +622,13 @@ def main(argv=None) -> int:
     """Entry point of the `grazing` console script."""
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = parser.parse_args(_join_negative_values(argv))
+    args = parser.parse_args(argv)
     try:
         # overflow in a computation shows up as nan/inf in the result, which is refused
         # below with one line; numpy's warnings would add lines of their own
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
+            apply_to_args(args, argv)     # --params FILE (cli/parameter_file.py)
             result = args.func(args)
     except (ParameterError, ValueError, RuntimeError, OSError) as exc:
         print(f"grazing: error: {_one_line(exc)}", file=sys.stderr)

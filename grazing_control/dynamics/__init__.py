@@ -8,8 +8,11 @@ discontinuity map), :mod:`.orbits` (the 1/1 branch explicit in the impact phase)
 :mod:`.perturbation`, :mod:`.design` (c1(c2; delay), lambda0, the admissible set),
 :mod:`.fidelity` (the model fidelities), :mod:`.simulate` (event-driven simulation
 on Pi2), :mod:`.estimation` (the Pi2 state from a sampled sensor stream: nearest sample,
-arc fit, model filter) and :mod:`.stream` (which samples make which section; the closed
-loop on a stream).
+arc fit, model filter), :mod:`.stream` (which samples make which section; the closed
+loop on a stream), :mod:`.noise` (the loop's stationary covariance per unit measurement
+noise), :mod:`.tuning` (the least-noise design), :mod:`.mismatch` (model-error bands),
+:mod:`.actuation` (a correction as a force pulse) and :mod:`.identification` (the
+model's parameters from a recorded motion).
 
 May import: :mod:`grazing_control.oscillator`, :mod:`grazing_control.support`. Never rclpy.
 """

@@ -28,8 +28,11 @@ docs/theory_delay.md, section 2:
 
 The admissible c2 set is, by default, where all three hold (the *combined* set):
 |lambda0| < 1, gamma1 > 0 (the impacting side, the study's set) and rho(N_g) < 1 (the
-non-impacting side). End points are located by Brent's method on the condition that
-changes sign.
+non-impacting side). The conditions are evaluated division-free
+(:func:`condition_values`, docs/theory_delay.md section 5: each is a polynomial of
+degree <= 2 in N_g,11, which is affine in c2), so the set's ends are the roots of those
+polynomials, bisected to adjacent floats on the admissibility itself; the search
+reaches |c2| = C2_LIMIT, beyond any scan window.
 """
 
 from __future__ import annotations
@@ -38,7 +41,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from grazing_control.oscillator.control import Gains, gain_determinant
 from grazing_control.oscillator.flow import transition_matrix
@@ -56,7 +58,13 @@ __all__ = [
     "DesignPoint",
     "evaluate_design",
     "CONDITIONS",
+    "C2_LIMIT",
+    "ConditionValues",
+    "condition_values",
+    "degenerate_n22",
+    "breakpoints",
     "admissible_c2",
+    "admissible_intervals",
     "controller_parameters",
     "write_controller_yaml",
 ]
@@ -84,8 +92,14 @@ def degenerate_c1(p: OscillatorParams, c2: float, delay: float = 0.0) -> float:
     """
     s = p.pi2_offset / p.omega
     p11, p12, _p21, p22 = transition_matrix(p.zeta, s)
+    if p12 == 0.0:
+        raise ParameterError(f"pi2_offset={p.pi2_offset!r} is invalid: Phi12(s) = 0 there, a kick "
+                             f"on Pi2 cannot reach the grazing phase's position (no c1 exists)")
     if delay == 0.0:
         q11, q12, _q21, _q22 = transition_matrix(p.zeta, p.period - s)
+        if q12 == 0.0:
+            raise ParameterError(f"pi2_offset={p.pi2_offset!r} is invalid: Phi12(T - s) = 0 there, "
+                                 f"no gain c1 makes N_g,12 = 0")
         return -(q11 * p12 + q12 * (1.0 + c2) * p22) / (q12 * p12)
     top = max_design_delay(p)
     if not (math.isfinite(delay) and 0.0 < delay < top):
@@ -109,7 +123,10 @@ def limit_monodromy(p: OscillatorParams, gains: Gains) -> np.ndarray:
     """
     n11, _n12, _n21, n22 = period_matrix(p, gains)
     r = p.r
-    tr0 = -r * (n11 + n22) + (1.0 + r) * (n11 - n22) * (1.0 + r * n22) / (n22 - 1.0)
+    num = (1.0 + r) * (n11 - n22) * (1.0 + r * n22)
+    # N22 = 1: the trace has a pole (no bounded lambda0); inf keeps the multipliers unbounded
+    tail = num / (n22 - 1.0) if n22 != 1.0 else math.copysign(math.inf, num or 1.0)
+    tr0 = -r * (n11 + n22) + tail
     det0 = r ** 2 * math.exp(-2.0 * p.zeta * p.period) * gain_determinant(gains, p.zeta)
     return np.array([[tr0, -det0], [1.0, 0.0]])
 
@@ -125,10 +142,15 @@ def existence_coefficient(p: OscillatorParams, gains: Gains) -> float:
 
     Positive when the controlled 1/1 motion exists for d < d*. Closed form
     gamma1 = a/2 + a (1 + r)(N22 - N11) / ((N11 - 1)(1 + r N22)) (theory_delay.md, (D9)).
+    nan at its pole (N11 = 1 or 1 + r N22 = 0), where its sign is undefined; the
+    admissible set uses the division-free :func:`condition_values` instead.
     """
     n11, _n12, _n21, n22 = period_matrix(p, gains)
     a, r = p.amplitude, p.r
-    return 0.5 * a + a * (1.0 + r) * (n22 - n11) / ((n11 - 1.0) * (1.0 + r * n22))
+    num, den = a * (1.0 + r) * (n22 - n11), (n11 - 1.0) * (1.0 + r * n22)
+    if den == 0.0:      # on the pole of (D9), which a root search over c2 can hit exactly
+        return 0.5 * a if num == 0.0 else math.copysign(math.inf, num)
+    return 0.5 * a + num / den
 
 
 def free_multipliers(p: OscillatorParams, gains: Gains | None) -> np.ndarray:
@@ -185,24 +207,138 @@ def evaluate_design(p: OscillatorParams, c2: float, delay: float = 0.0) -> Desig
                        free_multipliers(p, g), g.delay)
 
 
-def _condition_functions(p, delay, conditions):
-    """Functions of c2 negative where each condition of ``conditions`` holds."""
-    def stab(c2):
-        return float(np.max(np.abs(evaluate_design(p, c2, delay).multipliers_limit))) - 1.0
+@dataclass(frozen=True)
+class ConditionValues:
+    """The design conditions at one c2 as division-free numbers, each > 0 where it holds.
 
-    def exist(c2):
-        return -evaluate_design(p, c2, delay).gamma1
+    Multiplying (D8) and (D9) of docs/theory_delay.md through by their denominators
+    with their signs (docs/theory_delay.md, section 5): with N = N_g, q = N22 - 1 and
+    P = tr J0 q = -r tr N q + (1 + r)(N11 - N22)(1 + r N22),
 
-    def free(c2):
-        return float(np.max(np.abs(evaluate_design(p, c2, delay).multipliers_free))) - 1.0
+    limit : Jury's conditions for lambda0 (Eq. 23), times q^2:
+        (1 - det J0, (1 + det J0) q^2 - P q, (1 + det J0) q^2 + P q);
+    existence : D (D / 2 + (1 + r)(N22 - N11)), D = (N11 - 1)(1 + r N22), which has the
+        sign of gamma1 (Eq. 36) = a (D / 2 + (1 + r)(N22 - N11)) / D;
+    free : Jury's conditions for N_g (1 - det N, 1 + det N - tr N, 1 + det N + tr N).
 
-    if conditions == "impacting":
-        return (stab, exist)
-    if conditions == "non-impacting":
-        return (free,)
-    if conditions == "combined":
-        return (stab, exist, free)
-    raise ValueError(f"conditions={conditions!r} is invalid: valid values are {', '.join(CONDITIONS)}")
+    A pole of (D8) or (D9) is a zero here, where the strict condition fails.
+    """
+
+    limit: tuple
+    existence: float
+    free: tuple
+
+    def holds(self, conditions: str = "combined") -> bool:
+        """All conditions of the set ``conditions`` (:data:`CONDITIONS`) hold."""
+        groups = _GROUPS.get(conditions)
+        if groups is None:
+            raise ValueError(f"conditions={conditions!r} is invalid: valid values are "
+                             f"{', '.join(CONDITIONS)}")
+        return all(v > 0.0 for g in groups for v in self._group(g))
+
+    def _group(self, name):
+        return (self.existence,) if name == "existence" else getattr(self, name)
+
+
+_GROUPS = {"combined": ("limit", "existence", "free"), "impacting": ("limit", "existence"),
+           "non-impacting": ("free",)}
+
+#: The outward search for the ends of the admissible c2 set stops at |c2| = C2_LIMIT;
+#: an interval still open there is reported with an infinite end ("beyond").
+C2_LIMIT = 1e6
+
+
+def degenerate_n22(p: OscillatorParams, delay: float = 0.0) -> float:
+    """N_g,22 of the degenerate design, the same for every c2 (docs/theory_delay.md, 5).
+
+    N_g = Phi(T) + h k^T Phi(s), h = Phi(T - s - delay) e2 (D4): N_g,12 = 0 fixes
+    k^T Phi(s) e2 = -Phi12(T) / h12, hence N22 = Phi22(T) - h22 Phi12(T) / h12.
+    """
+    free = transition_matrix(p.zeta, p.period)
+    h = transition_matrix(p.zeta, max_design_delay(p) - delay)
+    return free[3] - h[3] * free[1] / h[1]
+
+
+def _n22_family(p, delay):
+    """(q, beta) = (N22 - 1, 1 + r N22) of the degenerate design, constant in c2; each is
+    set to exactly 0 when it is 0 within the rounding of N22 (the degenerate family:
+    lambda0 unbounded, or gamma1 undefined, for every c2)."""
+    free = transition_matrix(p.zeta, p.period)
+    h = transition_matrix(p.zeta, max_design_delay(p) - delay)
+    n22 = free[3] - h[3] * free[1] / h[1]
+    err = 8.0 * np.finfo(float).eps * (abs(free[3]) + abs(h[3] * free[1] / h[1]) + 1.0)
+    q = n22 - 1.0
+    beta = 1.0 + p.r * n22
+    return (0.0 if abs(q) <= err else q), (0.0 if abs(beta) <= p.r * err else beta)
+
+
+def condition_values(p: OscillatorParams, c2: float, delay: float = 0.0) -> ConditionValues:
+    """The division-free design conditions at c2 (c1 from (D5)): :class:`ConditionValues`.
+
+    N22 and the factors q = N22 - 1, 1 + r N22 come from :func:`degenerate_n22` (the
+    same for every c2, so their signs cannot flip by rounding); N11, det and tr from
+    N_g = :func:`grazing_control.dynamics.maps.period_matrix`.
+    """
+    return _values(p, c2, delay, _n22_family(p, delay))
+
+
+def _values(p, c2, delay, family):
+    q, beta = family
+    g = Gains(degenerate_c1(p, c2, delay), c2, delay)
+    n11, n12, n21, n22 = period_matrix(p, g)
+    r = p.r
+    n22c = q + 1.0
+    det_n = math.exp(-2.0 * p.zeta * p.period) * gain_determinant(g, p.zeta)
+    tr_n = n11 + n22
+    det0 = r * r * det_n
+    big_p = -r * (n11 + n22c) * q + (1.0 + r) * (n11 - n22c) * beta
+    limit = (1.0 - det0, (1.0 + det0) * q * q - big_p * q, (1.0 + det0) * q * q + big_p * q)
+    d = (n11 - 1.0) * beta
+    existence = d * (0.5 * d + (1.0 + r) * (n22c - n11))
+    free = (1.0 - det_n, 1.0 + det_n - tr_n, 1.0 + det_n + tr_n)
+    return ConditionValues(limit, existence, free)
+
+
+def _c2_of_n11(p, delay):
+    """(u0, sigma): N_g,11 = u0 + sigma c2 along the degenerate design (from (D4), (D5):
+    N11 = Phi11(T) - P11 Phi12(T) / P12 - c2 h12 det Phi(s) / P12)."""
+    s = p.pi2_offset / p.omega
+    p11, p12, _p21, _p22 = transition_matrix(p.zeta, s)
+    free = transition_matrix(p.zeta, p.period)
+    h12 = transition_matrix(p.zeta, max_design_delay(p) - delay)[1]
+    return free[0] - p11 * free[1] / p12, -h12 * math.exp(-2.0 * p.zeta * s) / p12
+
+
+def breakpoints(p: OscillatorParams, delay: float = 0.0, conditions: str = "combined"):
+    """The c2 where a condition value of the set may change sign (sorted, |c2| < C2_LIMIT).
+
+    Every value of :class:`ConditionValues` is a polynomial of degree <= 2 in
+    u = N_g,11, which is affine in c2 (docs/theory_delay.md, section 5): each value is
+    sampled at three u, its roots mapped to c2. Between two consecutive breakpoints
+    the admissibility cannot change.
+    """
+    degenerate_c1(p, 0.0, delay)  # ParameterError where no degenerate design exists
+    family = _n22_family(p, delay)
+    u0, sigma = _c2_of_n11(p, delay)
+    nodes = np.array([-2.0, 0.0, 2.0])
+    cs = (nodes - u0) / sigma
+    vals = [_values(p, float(c), delay, family) for c in cs]
+    out = []
+    for group in _GROUPS[conditions]:
+        for k in range(len(vals[0]._group(group))):
+            y = [v._group(group)[k] for v in vals]
+            coef = np.polyfit(nodes, y, 2)
+            scale = max(abs(x) for x in y) or 1.0
+            coef[np.abs(coef) <= 1e-12 * scale] = 0.0
+            coef = np.trim_zeros(coef, "f")
+            if len(coef) < 2:
+                continue
+            for u in np.roots(coef):
+                if abs(u.imag) <= 1e-9 * max(1.0, abs(u.real)):
+                    c2 = (u.real - u0) / sigma
+                    if abs(c2) < C2_LIMIT:
+                        out.append(float(c2))
+    return sorted(set(out))
 
 
 def admissible_c2(p: OscillatorParams, lo: float = -4.0, hi: float = 2.0, n: int = 601, *,
@@ -210,43 +346,71 @@ def admissible_c2(p: OscillatorParams, lo: float = -4.0, hi: float = 2.0, n: int
     """Intervals of c2 where the degenerate design (for ``delay``) meets ``conditions``.
 
     'combined' (default): |lambda0| < 1, gamma1 > 0 and rho(N_g) < 1; 'impacting': the
-    first two (the study's set); 'non-impacting': rho(N_g) < 1 alone. Scans [lo, hi] on
-    n points, then refines each end point with Brent's method on the condition that
-    changes sign there to ~1e-13.
+    first two (the study's set); 'non-impacting': rho(N_g) < 1 alone. The conditions
+    are read from the division-free :func:`condition_values`. The candidate ends are
+    the roots of their polynomials (:func:`breakpoints`) and a scan of [lo, hi] on n
+    points; admissibility is constant between consecutive candidates, so each interval
+    is found whole, wherever it lies in |c2| < C2_LIMIT, and each end is bisected on
+    the admissibility itself to a few ulps (from both sides of the switch).
 
     Returns
     -------
     list of (float, float)
+        Sorted, disjoint. An end at -inf or +inf: the interval is still open at
+        c2 = -C2_LIMIT or +C2_LIMIT (the search stops there).
     """
-    funcs = _condition_functions(p, delay, conditions)
-    grid = np.linspace(lo, hi, n)
-    ok = [all(f(c2) < 0.0 for f in funcs) for c2 in grid]
-    intervals = []
-    start = None
-    for k, flag in enumerate(ok):
+    if conditions not in _GROUPS:
+        raise ValueError(f"conditions={conditions!r} is invalid: valid values are {', '.join(CONDITIONS)}")
+    degenerate_c1(p, 0.0, delay)  # ParameterError where no degenerate design exists
+    family = _n22_family(p, delay)
+
+    def ok(c2):
+        return _values(p, c2, delay, family).holds(conditions)
+
+    cands = breakpoints(p, delay, conditions)
+    grid = np.linspace(lo, hi, n) if n > 0 else np.array([])
+    return admissible_intervals(ok, cands + [float(x) for x in grid])
+
+
+def admissible_intervals(ok, candidates, limit: float = C2_LIMIT):
+    """Intervals of c2 in (-limit, limit) where ``ok(c2)`` holds, given every point where
+    it may switch (``candidates``): each gap between consecutive candidates is decided
+    at its midpoint, each switch bisected between the midpoints on either side until
+    they are adjacent floats (the admissible one is returned). An interval still open
+    at +-limit gets an infinite end. ``ok`` must not raise. An "interval" narrower
+    than 1e-12 relative is rounding at a pole of the conditions (seen in the series of
+    the perturbation route, 30 ulps wide), not a set, and is dropped."""
+    pts = sorted({-limit, limit, *(float(c) for c in candidates if -limit < c < limit)})
+    mids = [0.5 * (a + b) for a, b in zip(pts, pts[1:])]
+    flags = [bool(ok(m)) for m in mids]
+    out, start = [], None
+    for k, flag in enumerate(flags):
         if flag and start is None:
-            start = float(grid[0]) if k == 0 else _edge(grid[k - 1], grid[k], funcs)
+            start = -math.inf if k == 0 else _switch(ok, mids[k], mids[k - 1])
         if not flag and start is not None:
-            intervals.append((start, _edge(grid[k - 1], grid[k], funcs)))
+            end = _switch(ok, mids[k - 1], mids[k])
+            if end - start > _SLIVER * max(1.0, abs(end)):
+                out.append((start, end))
             start = None
     if start is not None:
-        intervals.append((start, float(grid[-1])))
-    return intervals
+        out.append((start, math.inf))
+    return out
 
 
-def _edge(a, b, funcs):
-    """The end point of an admissible interval between grid points a and b: Brent's
-    method on whichever condition changes sign there (the one nearest to a if several)."""
-    edges = []
-    for f in funcs:
-        fa, fb = f(a), f(b)
-        if fa * fb < 0.0:
-            edges.append(brentq(f, a, b, xtol=1e-13))
-    if not edges:
-        return float(0.5 * (a + b))
-    # the set changes where the first condition to switch does, seen from the inside
-    ok_a = all(f(a) < 0.0 for f in funcs)
-    return float(min(edges) if ok_a else max(edges))
+#: Relative width below which an admissible interval is a rounding artefact.
+_SLIVER = 1e-12
+
+
+def _switch(ok, inside, outside):
+    """Bisect between an admissible point and an inadmissible one to adjacent floats."""
+    while True:
+        mid = 0.5 * (inside + outside)
+        if mid in (inside, outside):
+            return float(inside)
+        if ok(mid):
+            inside = mid
+        else:
+            outside = mid
 
 
 def controller_parameters(p: OscillatorParams, gains: Gains) -> dict:

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from grazing_control.oscillator.control import Gains, gain_determinant
+from grazing_control.oscillator.control import Gains, gain_determinant, gain_matrix
 from grazing_control.oscillator.flow import matmul2, to_physical, transition_matrix
 from grazing_control.oscillator.impact import (Impact, InitialStateError, NonFiniteStateError,
                                                saltation_matrix)
@@ -180,16 +180,58 @@ def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
     return delta_d, v, (m11, m12, m21, m22)
 
 
+def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = None) -> float:
+    """A bound on the rounding error of Delta d(psi) from :func:`branch_point`.
+
+    Delta d = N / det with N = -rhs1 w2 + w1 rhs2, det = -b11 w2 + w1 b21 (the
+    periodicity system of docs/theory.md section 5). Each entry of M = Q G P carries an
+    absolute error e_M <= 8 eps max(|Q| |G| |P|) (products of O(1) entries summing to a
+    possibly tiny M12); to first order Delta d moves by
+    sum_ij |dN/dM_ij - Delta d d(det)/dM_ij| e_M / |det|, plus the rounding of the
+    products themselves. Near grazing (|psi| ~ 1e-15) M12 is itself at the rounding
+    level and Delta d(psi) ~ psi^2 wobbles by tens of percent: a change of direction
+    smaller than this bound is not a fold (issue 20, item 4).
+    """
+    theta = (p.tau_star + psi) % TWO_PI
+    s = ((p.tau2 - theta) % TWO_PI) / p.omega
+    dd, _v, (m11, m12, m21, m22) = branch_point(p, psi, gains)
+    if not math.isfinite(dd):
+        return math.inf
+    q = np.abs(np.array(transition_matrix(p.zeta, p.period - s)).reshape(2, 2))
+    g = np.abs(np.array(gain_matrix(gains, p.zeta)).reshape(2, 2))
+    pm = np.abs(np.array(transition_matrix(p.zeta, s)).reshape(2, 2))
+    eps = np.finfo(float).eps
+    e_m = 8.0 * eps * float(np.max(q @ g @ pm))
+    a, w, r = p.amplitude, p.omega, p.r
+    sh = math.sin(0.5 * psi)
+    u1, u2 = 2.0 * a * sh * sh, a * w * math.sin(psi)
+    b11, b12, b21, b22 = m11 - 1.0, m12, m21, m22 - 1.0
+    w1, w2 = r * m12, 1.0 + r * m22
+    rhs1, rhs2 = -(b11 * u1 + b12 * u2), -(b21 * u1 + b22 * u2)
+    det = -b11 * w2 + w1 * b21
+    # (dN/dM_ij, d det/dM_ij) for ij = 11, 12, 21, 22
+    partials = ((u1 * w2, -w2), (u2 * w2 + r * rhs2, r * b21), (-w1 * u1, w1),
+                (-r * rhs1 - w1 * u2, -r * b11))
+    first = e_m * sum(abs(dn - dd * ddet) for dn, ddet in partials)
+    products = 4.0 * eps * ((abs(b11 * u1) + abs(b12 * u2)) * abs(w2)
+                            + abs(w1) * (abs(b21 * u1) + abs(b22 * u2)))
+    return (first + products) / abs(det) + 4.0 * eps * abs(dd)
+
+
 def _psi_grid(lo_exp=-15.0, n=241):
     mags = np.logspace(lo_exp, math.log10(math.pi * 0.999), n)
     return mags
 
 
-def _branch_values(p, gains, sign, mags):
+def _branch_values(p, gains, sign, mags, rounding=False):
+    """(psi, Delta d, v-) along the grid, with Delta d's rounding bound if ``rounding``."""
     out = []
     for m in mags:
         dd, v, _ = branch_point(p, sign * m, gains)
-        out.append((sign * m, dd, v))
+        if rounding:
+            out.append((sign * m, dd, v, _delta_d_rounding(p, sign * m, gains)))
+        else:
+            out.append((sign * m, dd, v))
     return out
 
 
@@ -240,13 +282,16 @@ def branch_brackets(p: OscillatorParams, delta_d: float, gains: Gains | None = N
     Delta d(psi)) and 'grazing past a fold' after it (``fold``: the Delta d of the
     first turn, to the grid's resolution); brackets on arcs with v- > 0 reached after a
     stretch of v- <= 0 are 'other'. Sorted in that order, nearest to grazing first.
+    A step of Delta d(psi) counts for a turn only where it exceeds the rounding bounds
+    of its two ends (:func:`_delta_d_rounding`): near |psi| ~ 1e-15 the computed
+    Delta d wobbles by tens of percent, which is no fold.
     """
     found = []
     mags = _psi_grid()
     for sign in (-1.0, 1.0):
-        prev = (0.0, 0.0, 0.0)
+        prev = (0.0, 0.0, 0.0, 0.0)
         on_grazing_arc, fold, direction, steps = True, None, 0.0, 0
-        for cur in _branch_values(p, gains, sign, mags):
+        for cur in _branch_values(p, gains, sign, mags, rounding=True):
             steps += 1
             if cur[2] <= 0.0:
                 if abs(cur[0]) > 1e-3:  # rounding may flip tiny v- near psi = 0
@@ -254,7 +299,7 @@ def branch_brackets(p: OscillatorParams, delta_d: float, gains: Gains | None = N
                 prev = cur
                 continue
             step = cur[1] - prev[1]
-            if on_grazing_arc and fold is None and step != 0.0:
+            if on_grazing_arc and fold is None and abs(step) > cur[3] + prev[3]:
                 if direction != 0.0 and math.copysign(1.0, step) != direction:
                     fold = prev[1]
                 direction = math.copysign(1.0, step)

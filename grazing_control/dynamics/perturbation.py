@@ -29,7 +29,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from grazing_control.oscillator.control import Gains
 from .orbits import multipliers
@@ -285,14 +284,16 @@ def admissible_c2_perturbation(p: OscillatorParams, lo: float = -4.0, hi: float 
     'impacting': max|lambda0| < 1 (lambda0 from chi0, psi0; Eq. 23) and kappa2 < 0 (the
     1/1 motion exists for d < d*, Eq. 36); 'non-impacting': the spectral radius of N_g
     below 1 (the 0/1 motion for d > d*); 'combined' (default): all three. Scan of
-    [lo, hi] on n points, end points refined by Brent's method. Compare
-    :func:`grazing_control.dynamics.design.admissible_c2`.
+    [lo, hi] on n points and the exact route's breakpoints, each end bisected on the
+    series' own conditions (:func:`grazing_control.dynamics.design.admissible_intervals`).
+    Compare :func:`grazing_control.dynamics.design.admissible_c2`.
 
     Returns
     -------
     list of (float, float)
+        An end at -inf or +inf: still open at |c2| = C2_LIMIT.
     """
-    from .design import CONDITIONS, degenerate_c1
+    from .design import CONDITIONS, admissible_intervals, breakpoints, degenerate_c1
 
     def coeffs(c2):
         return series_coefficients(p, Gains(degenerate_c1(p, c2, delay), c2, delay), zdm_order)
@@ -312,27 +313,16 @@ def admissible_c2_perturbation(p: OscillatorParams, lo: float = -4.0, hi: float 
         raise ValueError(f"conditions={conditions!r} is invalid: valid values are {', '.join(CONDITIONS)}")
 
     def ok(c2):
-        return all(f(c2) < 0.0 for f in funcs)
+        # at a pole of the series (I - N_g singular: N11 = 1) the conditions are undefined
+        try:
+            return all(f(c2) < 0.0 for f in funcs)
+        except (ArithmeticError, np.linalg.LinAlgError):
+            return False
 
-    grid = np.linspace(lo, hi, n)
-    flags = [ok(c2) for c2 in grid]
-
-    def edge(a, b):
-        edges = [brentq(f, a, b, xtol=1e-13) for f in funcs if f(a) * f(b) < 0.0]
-        if not edges:
-            return 0.5 * (a + b)
-        return min(edges) if ok(a) else max(edges)
-
-    out, start = [], None
-    for k, flag in enumerate(flags):
-        if flag and start is None:
-            start = grid[0] if k == 0 else edge(grid[k - 1], grid[k])
-        if not flag and start is not None:
-            out.append((float(start), float(edge(grid[k - 1], grid[k]))))
-            start = None
-    if start is not None:
-        out.append((float(start), float(grid[-1])))
-    return out
+    # the series' conditions are the exact route's (theory_delay.md section 4), so they
+    # switch at the same breakpoints; the scan of [lo, hi] adds candidates of its own
+    cands = breakpoints(p, delay, conditions) + [float(x) for x in np.linspace(lo, hi, n)]
+    return admissible_intervals(ok, cands)
 
 
 def normal_form_fixed_point(p: OscillatorParams, gains: Gains | None = None, order=2,

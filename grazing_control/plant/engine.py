@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from grazing_control.dynamics.actuation import flow_with_force, pulse_force
 from grazing_control.dynamics.fidelity import period_step
 from grazing_control.dynamics.simulate import states_between
 from grazing_control.oscillator import kernel
@@ -54,6 +55,7 @@ class Segment(NamedTuple):
     te: float      # end time (the next Pi2 sample)
     dx_end: float
     dv_end: float
+    force: float = 0.0   # a pulse's constant force on the segment (0: free flight)
 
 
 class Engine:
@@ -145,40 +147,66 @@ class Engine:
 
         delay = 0: one :func:`period_step` call, as :func:`simulate` makes. delay > 0:
         the flow to t_k + delay, the correction there, the flow to t_k+1 (:meth:`actuate`),
-        the same two calls as ``simulate.period_step(..., delay=delay)``. Returns the events
-        of (t_k, t_k+1) in time order (state, Pi1, impacts), the next sample excluded.
+        the same two calls as ``simulate.period_step(..., delay=delay)``; with a pulse
+        width w > 0 the flow to its start, the pulse, the flow on, as
+        ``dynamics.actuation.pulse_step``. Returns the events of (t_k, t_k+1] in time
+        order (state, Pi1, impacts), the next sample excluded.
         """
         p = self.p
         t0 = self.t
         if delay > 0.0:
-            head = self.advance(p, p.tau2, self.dx, self.dv, delay)
-            events = self._events(Segment(t0, p.tau2, self.dx, self.dv, t0 + delay,
-                                           head.dx, head.dv), head.impacts)
-            return events + self._actuate(head, dv_correction, delay)
+            start = self.actuation_start(delay)
+            head = self.advance(p, p.tau2, self.dx, self.dv, start)
+            events = self._events(Segment(t0, p.tau2, self.dx, self.dv, t0 + start,
+                                          head.dx, head.dv), head.impacts)
+            return events + self._actuate(head, dv_correction, start)
         seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         self.seg = Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
         return self._events(self.seg, seg.impacts)
+
+    def actuation_start(self, delay: float) -> float:
+        """When the correction of a sample acting ``delay`` after it starts to act: at
+        ``delay`` (the velocity jump), or, for a force pulse of width w, at delay - w/2
+        (centred at the actuation time, docs/theory_pulse.md), kept within [0, T - w)."""
+        w = self.settings.pulse_width
+        if w == 0.0:
+            return delay
+        return min(max(delay - 0.5 * w, 0.0), math.nextafter(self.p.period - w, 0.0))
 
     def actuate(self, dv_correction: float, delay: float) -> list:
         """Apply ``dv_correction`` exactly ``delay`` after the current sample (scheduled).
 
         The period is re-integrated as ``simulate.period_step(p, dx, dv, dv_correction,
         delay=delay)`` does it (the free flow with impacts to t_k + delay, the velocity
-        jump, the flow on to t_k+1), so a realtime period equals the lockstep one bit for
-        bit. Returns the events of (t_k + delay, t_k+1).
+        jump, the flow on to t_k+1), or as ``pulse_step`` for a pulse, so a realtime period
+        equals the lockstep one bit for bit. Returns the events from the actuation's start
+        to t_k+1.
         """
-        head = self.advance(self.p, self.p.tau2, self.dx, self.dv, delay)
-        return self._actuate(head, dv_correction, delay)
+        start = self.actuation_start(delay)
+        head = self.advance(self.p, self.p.tau2, self.dx, self.dv, start)
+        return self._actuate(head, dv_correction, start)
 
-    def _actuate(self, head, dv_correction: float, delay: float) -> list:
+    def _actuate(self, head, dv_correction: float, start: float) -> list:
         p = self.p
-        tau = (p.tau2 + p.omega * delay) % TWO_PI
-        dv = head.dv + dv_correction
-        tail = self.advance(p, tau, head.dx, dv, p.period - delay)
+        t, w = self.t, self.settings.pulse_width
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
-        self.seg = Segment(self.t + delay, tau, head.dx, dv, t1, tail.dx, tail.dv)
-        return self._events(self.seg, tail.impacts)
+        tau = (p.tau2 + p.omega * start) % TWO_PI
+        if w == 0.0:                                    # the kick of Eq. 28
+            dv = head.dv + dv_correction
+            tail = self.advance(p, tau, head.dx, dv, p.period - start)
+            self.seg = Segment(t + start, tau, head.dx, dv, t1, tail.dx, tail.dv)
+            return self._events(self.seg, tail.impacts)
+        # a force pulse on [start, start + w]: the exact flow under a constant force
+        limit = self.settings.force_limit or math.inf
+        force = pulse_force(dv_correction, w, limit)
+        mid = flow_with_force(p, tau, head.dx, head.dv, w, force, self.advance)
+        events = self._events(Segment(t + start, tau, head.dx, head.dv, t + start + w,
+                                      mid.dx, mid.dv, force), mid.impacts)
+        tau = (p.tau2 + p.omega * (start + w)) % TWO_PI
+        tail = self.advance(p, tau, mid.dx, mid.dv, p.period - start - w)
+        self.seg = Segment(t + start + w, tau, mid.dx, mid.dv, t1, tail.dx, tail.dv)
+        return events + self._events(self.seg, tail.impacts)
 
     def split(self, tc: float, dv_correction: float) -> list:
         """Apply ``dv_correction`` at time tc inside the current period (realtime).
@@ -229,18 +257,36 @@ class Engine:
                     "placed on the wall")
         return None
 
+    def initial_states(self) -> list:
+        """The state stream's sample at t = 0 (grid index 0; none when state_period = 0):
+        published with sample 0, before its answer is awaited, so that a controller
+        estimating Pi2 from the stream has it."""
+        if self.settings.state_period <= 0.0 or self.t != 0.0:
+            return []
+        p = self.p
+        xm, vm = self.settings.sensor.measure(0, [p.x_ref + self.dx], [p.v_ref + self.dv])
+        return [Event(0.0, "state", float(xm[0]), float(vm[0]), p.tau2)]
+
     def _events(self, s: Segment, impacts) -> list:
+        """The events of segment ``s``: its impacts, the state stream's samples on the
+        grid j * state_period in (ts, te] as the sensor measures them (plant.sensor,
+        draws of sample j), and the Pi1 crossing; in time order. Under a pulse's force F
+        the states are the flow of the oscillator with clearance Delta d - F shifted by
+        F (dynamics.actuation.flow_with_force)."""
         p = self.p
         events = []
         for i in impacts:
             events.append(Event(s.ts + i.dt, "impact", i.v_minus, i.v_plus, i.phase % TWO_PI))
         rel, kinds = [], []
         sp = self.settings.state_period
+        j0 = None
         if sp > 0.0:
-            j = math.floor(s.ts / sp) + 1
-            while j * sp < s.te:
-                rel.append(j * sp - s.ts)
-                kinds.append("state")
+            j = math.floor(s.ts / sp)
+            while j * sp <= s.te:
+                if j * sp > s.ts:
+                    j0 = j if j0 is None else j0
+                    rel.append(j * sp - s.ts)
+                    kinds.append("state")
                 j += 1
         d1 = ((p.tau_star - s.tau) % TWO_PI) / p.omega
         if 0.0 < d1 < s.te - s.ts:
@@ -250,7 +296,16 @@ class Engine:
             order = np.argsort(rel, kind="stable")
             rel = [rel[i] for i in order]
             kinds = [kinds[i] for i in order]
-            xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
+            if s.force == 0.0:
+                xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
+            else:
+                shifted = p.with_(delta_d=p.delta_d - s.force)
+                xv = states_between(shifted, s.tau, s.dx - s.force, s.dv, impacts, rel)
+                xv[:, 0] += s.force
+            states = [i for i, kind in enumerate(kinds) if kind == "state"]
+            if states:
+                xm, vm = self.settings.sensor.measure(j0, xv[states, 0], xv[states, 1])
+                xv[states, 0], xv[states, 1] = xm, vm
             for h, kind, (x, v) in zip(rel, kinds, xv):
                 phase = p.tau_star if kind == "pi1" else (s.tau + p.omega * h) % TWO_PI
                 events.append(Event(s.ts + h, kind, float(x), float(v), phase))

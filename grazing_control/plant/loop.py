@@ -10,6 +10,7 @@ through the ``clock`` they are given (``time.monotonic`` in the node, a fake in 
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Protocol
 
@@ -17,7 +18,10 @@ import numpy as np
 
 from grazing_control.plant.engine import Engine, Event
 
-__all__ = ["Sink", "Loop"]
+__all__ = ["Sink", "Loop", "PREDICTION_HOLD"]
+
+#: Consecutive missing answers a prediction stands in for (Loop.substitute).
+PREDICTION_HOLD = 3
 
 
 class Sink(Protocol):
@@ -61,7 +65,8 @@ class Loop:
         self.engine = engine
         self.sink = sink
         self.clock = clock
-        self.stats = {"applied": 0, "late": 0, "lost": 0}
+        self.stats = {"applied": 0, "late": 0, "lost": 0, "predicted": 0}
+        self.prediction = None     # (k, dv): the last answer's prediction for sample k
         self.latencies = []
         self.lags = []
         self.finished = False
@@ -70,6 +75,28 @@ class Loop:
     def settings(self):
         """The engine's current settings (a runtime parameter change replaces them)."""
         return self.engine.settings
+
+    def remember(self, k: int, predicted: float) -> None:
+        """Sample k's answer was applied: keep its prediction for sample k + 1 (NaN:
+        none; issue 16 §3)."""
+        self.prediction = (k + 1, predicted) if math.isfinite(predicted) else None
+
+    def substitute(self, k: int) -> float:
+        """Sample k's answer missed its deadline or was lost: with on_miss = predict the
+        last applied answer's prediction (counted in ``predicted``), else 0.
+
+        The prediction was made for the sample after that answer's; it stands in for up
+        to PREDICTION_HOLD consecutive missing answers: near the controlled orbit (a
+        fixed point of the controlled map, the study's Eq. 28 on Pi2) the correction is
+        the same at every sample, so a second miss in a row costs nothing either. An
+        older prediction is not used (no correction).
+        """
+        pred = self.prediction
+        if (self.settings.on_miss == "predict" and pred is not None
+                and 0 <= k - pred[0] < PREDICTION_HOLD):
+            self.stats["predicted"] += 1
+            return pred[1]
+        return 0.0
 
     def emit(self, ev: Event) -> tuple:
         """Publish one event (counting impacts); its stamp key."""
@@ -100,6 +127,7 @@ class Loop:
         text = (f"summary: periods={k} t={self.engine.t:.9g} impacts={self.engine.impacts} "
                 f"applied={stats['applied']} late={stats['late']} "
                 f"missed={counts['missed']} lost={stats['lost']} "
+                f"predicted={stats['predicted']} "
                 + "".join(f"{name}={counts[name]} " for name in
                           ("timeouts", "ignored", "malformed"))
                 + f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")

@@ -8,8 +8,10 @@ the answer does not include that work). Two ways to act (docs/nodes.md, "Modes")
 * scheduled (``settings.scheduled``): the answer of sample k acts exactly at
   t_k + actuation_delay (+ jitter), the lockstep period bit for bit
   (:meth:`grazing_control.plant.engine.Engine.actuate`, docs/theory_delay.md), if it
-  has arrived by then; otherwise the deadline is missed: no correction (counted and
-  handed to the sink), and the answer, when it comes, is dropped as late;
+  has arrived by then; otherwise the deadline is missed (counted and handed to the
+  sink): the last answer's prediction acts in its place (``on_miss`` = predict,
+  :meth:`~grazing_control.plant.loop.Loop.substitute`) or nothing (drop), and the
+  answer, when it comes, is dropped as late;
 * on arrival: the correction acts at the simulation time of its arrival, splitting
   the period there (:meth:`~grazing_control.plant.engine.Engine.split`); it must answer
   one of the last two samples, once; an answer after the next sample went out is still
@@ -21,6 +23,7 @@ The node calls :meth:`Realtime.tick` when woken up, arms its timer with
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 from grazing_control.plant.engine import Event
@@ -43,6 +46,7 @@ class Deadline(NamedTuple):
     k: int            # sample index
     sent: float       # wall time the sample was published
     dv: float | None  # the answer, None until it arrives
+    predicted: float = math.nan   # the answer's prediction for sample k + 1
 
 
 class Realtime(Loop):
@@ -56,6 +60,8 @@ class Realtime(Loop):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.pending = {}      # stamp key -> wall time sent, the last two unanswered samples
+        self.early = {}        # stamp key -> (dv, wall, predicted): answers of samples
+        #                        not yet published (a stream controller may answer first)
         self.queue = []        # the current period's events not yet published, in time order
 
     def now(self, wall: float | None = None) -> float:
@@ -72,8 +78,11 @@ class Realtime(Loop):
         self.t0, self.wall0 = 0.0, self.clock()
         self.finished = False
         self.pending.clear()
+        self.early.clear()
         self.deadline = None
         self.publish_sample(ev)
+        for e in self.engine.initial_states():
+            self.emit(e)
 
     def rebase(self) -> None:
         """Keep the simulation time continuous across a change of time_scale (call it
@@ -90,10 +99,23 @@ class Realtime(Loop):
             del self.pending[next(iter(self.pending))]
         if self.settings.scheduled:                      # sample k's actuation instant
             delay = self.engine.actuation_delay()
-            self.deadline = Deadline(ev.t + delay, delay, self.sample, self.engine.k,
-                                     sent, None)
+            self.deadline = Deadline(ev.t + self.engine.actuation_start(delay), delay,
+                                     self.sample, self.engine.k, sent, None)
         # pace: how late the sample went out against its simulation time
         self.lags.append(sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale)
+        early = self.early.pop(self.sample, None)
+        if early is not None:                            # answered before it went out
+            dv, wall, predicted = early
+            self.pending.pop(self.sample)
+            self.latencies.append(wall - sent)
+            self.sink.latency(wall - sent)
+            if self.deadline is not None:
+                self.deadline = self.deadline._replace(dv=dv, predicted=predicted)
+            elif self.engine.correction_lost():
+                self.stats["lost"] += 1
+            else:
+                self.queue = self.engine.split(ev.t, dv)
+                self.stats["applied"] += 1
 
     def tick(self):
         """A wake-up: publish what is due; the simulation time now, or None when over."""
@@ -134,15 +156,16 @@ class Realtime(Loop):
                 return
             self.publish_sample(ev)
 
-    def answer(self, key: tuple, dv: float) -> bool:
-        """The correction ``dv`` answering the sample stamped ``key``; True when the
-        wake-up must be re-armed (an on-arrival split may bring an event forward)."""
+    def answer(self, key: tuple, dv: float, predicted: float = math.nan) -> bool:
+        """The correction ``dv`` answering the sample stamped ``key`` (with its
+        prediction for the next sample, NaN: none); True when the wake-up must be
+        re-armed (an on-arrival split may bring an event forward)."""
         if self.settings.scheduled:
-            self._answer_scheduled(key, dv)
+            self._answer_scheduled(key, dv, predicted)
             return False
         return self._on_arrival(key, dv)
 
-    def _answer_scheduled(self, key: tuple, dv: float) -> None:
+    def _answer_scheduled(self, key: tuple, dv: float, predicted: float) -> None:
         """Scheduled actuation: keep the answer of the current sample for its deadline.
 
         The answer must arrive (this runs) before the sample's actuation instant
@@ -158,6 +181,8 @@ class Realtime(Loop):
             return
         dl = self.deadline
         sent = self.pending.pop(key, None)
+        if sent is None and self._keep_early(key, (dv, wall, predicted)):
+            return
         if sent is None:
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
@@ -170,20 +195,37 @@ class Realtime(Loop):
             self.sink.late(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
                            "after its actuation time")
             return
-        self.deadline = dl._replace(dv=dv)
+        self.deadline = dl._replace(dv=dv, predicted=predicted)
+
+    def _keep_early(self, key: tuple, answer: tuple) -> bool:
+        """Keep the answer of a sample not yet published (its stamp lies after the
+        latest sample's, within the next two periods): it acts when that sample goes
+        out, as if it had arrived then. A stream controller may estimate the Pi2 state
+        from the stream's samples before the sample instant and answer before it."""
+        if self.sample is None or key <= self.sample or key in self.early:
+            return False
+        period = self.engine.p.period
+        if key[0] + key[1] * 1e-9 > self.engine.t + 2.0 * period + 1e-6:
+            return False
+        self.early[key] = answer
+        if len(self.early) > 2:
+            del self.early[next(iter(self.early))]
+        return True
 
     def _actuate(self, dl: Deadline) -> None:
-        """Sample k's actuation instant: its answer, or 0 (a deadline miss), at t_k + delay."""
+        """Sample k's actuation instant: its answer at t_k + delay; at a deadline miss or
+        a lost answer the previous answer's prediction (on_miss = predict) or none."""
         self.deadline = None
         dv = dl.dv
         if dv is None:
-            dv = 0.0
             self.sink.miss(dl.k, dl.key, dl.t, self.clock() - dl.sent)
+            dv = self.substitute(dl.k)
         elif self.engine.correction_lost():
             self.stats["lost"] += 1
-            dv = 0.0
+            dv = self.substitute(dl.k)
         else:
             self.stats["applied"] += 1
+            self.remember(dl.k, dl.predicted)
         self.queue = self.engine.actuate(dv, dl.delay)
 
     def _on_arrival(self, key: tuple, dv: float) -> bool:
@@ -194,6 +236,9 @@ class Realtime(Loop):
         late, applied all the same: the next opportunity). Anything else is ignored.
         """
         sent = self.pending.pop(key, None)
+        if sent is None and not self.finished and self._keep_early(
+                key, (dv, self.clock(), math.nan)):
+            return False
         if sent is None or self.finished:
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")

@@ -19,11 +19,15 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import NamedTuple
 
+import numpy as np
+
 from grazing_control.dynamics.fidelity import FIDELITIES
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.faults import FaultModel
+from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
 
-__all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "MODEL_KEYS",
+__all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "ON_MISS",
+           "MODEL_KEYS",
            "SimSettings", "settings_from_values", "default_values", "initial_deviation"]
 
 TWO_PI = 2.0 * math.pi
@@ -32,6 +36,8 @@ MODES = ("lockstep", "realtime")
 #: (on_arrival, the original behaviour), or auto: scheduled if actuation_delay > 0 or
 #: jitter > 0, else on_arrival. Lockstep always acts at t_k + actuation_delay.
 ACTUATIONS = ("auto", "scheduled", "on_arrival")
+#: At a deadline miss or a lost answer: the previous answer's prediction, or nothing.
+ON_MISS = ("predict", "drop")
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 
 
@@ -98,6 +104,27 @@ PARAMETERS = (
     Parameter("jitter", "double", 0.0,
               "injected fault: std of the actuation time around actuation_delay, simulation "
               "time (FaultModel, seed)", 0.0, read_only=True),
+    Parameter("on_miss", "string", "predict",
+              "when a scheduled correction misses its deadline or is lost: predict (apply "
+              "the prediction the previous answer carried for this sample, twist.linear.y) "
+              "or drop (apply none)", choices=ON_MISS, read_only=True),
+    Parameter("sensor_noise", "double", 0.0,
+              "std of the Gaussian noise on each oscillator/state sample's position, and "
+              "velocity where carried (SensorModel, sensor_seed)", 0.0, read_only=True),
+    Parameter("sensor_velocity", "bool", True, "oscillator/state carries the velocity (false: "
+              "position only, velocity empty)", read_only=True),
+    Parameter("sensor_quantum", "double", 0.0, "quantisation step of the measured position, "
+              ">= 0 (0: none)", 0.0, read_only=True),
+    Parameter("sensor_bias", "double", 0.0, "bias added to the measured position",
+              read_only=True),
+    Parameter("sensor_seed", "integer", 0, "seed of the sensor noise, >= 0 (draws a pure "
+              "function of (sensor_seed, sample index))", 0, read_only=True),
+    Parameter("pulse_width", "double", 0.0,
+              "actuation as a force pulse of this width (simulation time) centred at the "
+              "actuation time, impulse = the commanded Delta v; 0 = the velocity jump",
+              0.0, read_only=True),
+    Parameter("force_limit", "double", 0.0, "largest |force| of a pulse, > 0; 0 = no limit "
+              "(the impulse delivered is then smaller than commanded)", 0.0, read_only=True),
 )
 
 SETTING_KEYS = tuple(p.name for p in PARAMETERS)
@@ -128,6 +155,10 @@ class SimSettings:
     loss: float = 0.0
     measurement_noise: float = 0.0
     jitter: float = 0.0
+    on_miss: str = "predict"
+    sensor: SensorModel = EXACT_SENSOR
+    pulse_width: float = 0.0
+    force_limit: float = 0.0
 
     @property
     def scheduled(self) -> bool:
@@ -142,6 +173,12 @@ class SimSettings:
                 f"max_periods={self.max_periods} state_period={self.state_period} "
                 f"actuation={'scheduled' if self.scheduled else 'on_arrival'} "
                 f"actuation_delay={self.actuation_delay!r}")
+        if not self.sensor.exact or not self.sensor.velocity:
+            sn = self.sensor
+            text += (f" sensor noise={sn.noise!r} velocity={str(sn.velocity).lower()} "
+                     f"quantum={sn.quantum!r} bias={sn.bias!r} seed={sn.seed}")
+        if self.pulse_width > 0.0:
+            text += f" pulse_width={self.pulse_width!r} force_limit={self.force_limit!r}"
         if self.faults.active:
             text += (f" faults loss={self.loss!r} measurement_noise="
                      f"{self.measurement_noise!r} jitter={self.jitter!r} seed={self.seed}")
@@ -207,7 +244,21 @@ def settings_from_values(values: dict) -> SimSettings:
                                lambda v: v > 0.0, "a finite answer_timeout > 0"),
         max_periods=max_periods, fidelity=fidelity,
         noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
-        seed=seed, **actuation)
+        seed=seed, sensor=_sensor(values), **actuation)
+
+
+def _sensor(values: dict) -> SensorModel:
+    """The rig's motion sensor of the state stream (plant.sensor.SensorModel)."""
+    seed = values["sensor_seed"]
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError(f"sensor_seed={seed!r} is invalid: valid range is an integer >= 0")
+    velocity = values["sensor_velocity"]
+    if not isinstance(velocity, bool):
+        raise ParameterError(f"sensor_velocity={velocity!r} is invalid: valid values are "
+                             "true, false")
+    return SensorModel(noise=values["sensor_noise"], velocity=velocity,
+                       quantum=values["sensor_quantum"], bias=values["sensor_bias"],
+                       seed=int(seed))
 
 
 def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: str) -> dict:
@@ -223,16 +274,35 @@ def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: st
         "jitter": _finite("jitter", values["jitter"], lambda v: v >= 0.0,
                           "a finite jitter >= 0 (simulation time)"),
     }
+    out["pulse_width"] = w = _finite(
+        "pulse_width", values["pulse_width"], lambda v: v >= 0.0,
+        "a finite pulse_width >= 0 (simulation time; 0: the velocity jump)")
+    out["force_limit"] = _finite("force_limit", values["force_limit"], lambda v: v >= 0.0,
+                                 "a finite force_limit >= 0 (0: no limit)")
+    delay = out["actuation_delay"]
+    if w > 0.0 and not (w / 2.0 <= delay and delay + w / 2.0 < p.period):
+        raise ParameterError(
+            f"pulse_width={w!r} is invalid with actuation_delay={delay!r}: valid range is "
+            "pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < "
+            f"T = {p.period!r} (the pulse is centred at the actuation time, within the "
+            "period)")
+    out["on_miss"] = str(values["on_miss"])
+    if out["on_miss"] not in ON_MISS:
+        raise ParameterError(f"on_miss={out['on_miss']!r} is invalid: valid values are "
+                             f"{', '.join(ON_MISS)}")
     actuation = str(values["actuation"])
     if actuation not in ACTUATIONS:
         raise ParameterError(f"actuation={actuation!r} is invalid: valid values are "
                              f"{', '.join(ACTUATIONS)}")
     out["actuation"] = actuation
-    split = out["actuation_delay"] > 0.0 or out["jitter"] > 0.0
+    split = out["actuation_delay"] > 0.0 or out["jitter"] > 0.0 or w > 0.0
     if split and fidelity != "exact":
         raise ParameterError(
             f"fidelity={fidelity!r} is invalid with actuation_delay or jitter > 0: valid "
             "there is 'exact' only (the correction splits the period)")
+    if mode == "realtime" and actuation == "on_arrival" and w > 0.0:
+        raise ParameterError(f"pulse_width={w!r} is invalid with actuation=on_arrival: valid "
+                             "there is 0 (a pulse is centred at a scheduled actuation time)")
     if mode == "realtime" and actuation == "on_arrival" and out["jitter"] > 0.0:
         raise ParameterError(f"jitter={out['jitter']!r} is invalid with actuation=on_arrival: "
                              "valid there is 0 (the actuation time is the arrival)")

@@ -9,6 +9,8 @@ Layer 5 of 7 (docs/architecture.md).
 * :mod:`.numbers`: measured vs predicted numbers of a scene;
 * :mod:`.analysis`: a scene's summary and figure (the demo's report);
 * :mod:`.analyze`: the report and the ``analyze`` command;
+* :mod:`.identify`: the ``identify`` command (the model's parameters from bags; the
+  fit is :mod:`grazing_control.dynamics.identification`);
 * :mod:`.replay`: the ``replay`` command (recorded samples through a real controller_node,
   recorded corrections through sim_node).
 

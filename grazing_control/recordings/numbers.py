@@ -315,28 +315,69 @@ def measured_contraction(pi2: np.ndarray, on: int | None, floor_factor: float = 
         k = lin
     slope, icpt = np.polyfit(k, np.log(e[k]), 1)
     ratios = e[k[1:]] / e[k[:-1]]
-    return {"rho": float(math.exp(slope)), "samples": int(k.size), "first": on + 1,
-            "last": on + int(k[-1]), "median_ratio": float(np.median(ratios)),
-            "floor": float(floor), "distances": e[: stop + 3].tolist(),
-            "intercept": float(icpt)}
+    out = {"rho": float(math.exp(slope)), "samples": int(k.size), "first": on + 1,
+           "last": on + int(k[-1]), "median_ratio": float(np.median(ratios)),
+           "floor": float(floor), "distances": e[: stop + 3].tolist(),
+           "intercept": float(icpt), "method": "slope of log distance"}
+    fitted = _fitted_map(pi2[on:] - final, k)
+    if fitted is not None:
+        out["rho_distance_slope"] = out["rho"]
+        out.update(fitted)
+    return out
 
 
-def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000):
+def _fitted_map(dev: np.ndarray, k: np.ndarray):
+    """The linearised Pi2 map fitted to the deviations: D_{j+1} = A D_j (least squares).
+
+    The slope of log |D_k| measures the largest multiplier only when it is real and
+    dominates; with complex multipliers |D_k| oscillates about the decay and the slope is
+    biased by a few per cent. The 2x2 map fitted to the same samples has the multipliers
+    as its eigenvalues (linear regime, deviations from the final sample, which is on the
+    orbit to rounding). None with fewer than 3 pairs or an ill-conditioned fit.
+    """
+    j = k[:-1]
+    if j.size < 3:
+        return None
+    a, b = dev[j], dev[j + 1]
+    scale = np.max(np.abs(a), axis=1)
+    w = 1.0 / scale                                   # each pair counts alike
+    x, _res, rank, sv = np.linalg.lstsq(a * w[:, None], b * w[:, None], rcond=None)
+    if rank < 2 or sv[-1] < 1e-9 * sv[0]:
+        return None
+    mult = np.linalg.eigvals(x.T)
+    order = np.argsort(-np.abs(mult))
+    mult = mult[order]
+    return {"rho": float(np.abs(mult[0])), "method": "eigenvalues of the fitted 2x2 map",
+            "fitted_multipliers": [[float(m.real), float(m.imag)] for m in mult]}
+
+
+def applied_corrections(sd) -> np.ndarray:
+    """The corrections that acted: the recorded ones, 0 where the simulator reported a
+    deadline miss for the sample (the answer came too late and was dropped)."""
+    dv = np.array(sd.scene.correction, dtype=float)
+    if sd.missed_stamp_ns.size:
+        dv[np.isin(sd.stamp_ns, sd.missed_stamp_ns)] = 0.0
+    return dv
+
+
+def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000,
+                corrections=None):
     """Re-integrate each recorded period with the core; largest departure, per sample.
 
     Returns (max departure, array of departures |P(X_k, dv_k) - X_{k+1}|) over at most
-    ``limit`` periods; the recorded correction of sample k is applied on Pi2 (``delay``
-    after it when the run had an actuation delay).
+    ``limit`` periods; the correction of sample k (``corrections``, default the recorded
+    ones) is applied on Pi2 (``delay`` after it when the run had an actuation delay).
     """
     from grazing_control.dynamics.simulate import period_step
 
+    dvs = scene.correction if corrections is None else corrections
     n = min(len(scene.t) - 1, limit)
     dep = np.zeros(max(n, 0))
     kw = {"delay": delay} if delay else {}
     for k in range(n):
         x, v = scene.pi2[k]
         try:
-            seg = period_step(p, x - p.x_ref, v - p.v_ref, float(scene.correction[k]), **kw)
+            seg = period_step(p, x - p.x_ref, v - p.v_ref, float(dvs[k]), **kw)
         except Exception:            # the core refuses (impact cap): count as departed
             dep[k] = np.inf
             continue
@@ -438,10 +479,13 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
         "answers_matching_no_sample": sd.unmatched_answers,
     }
     if setup.params is not None:
-        worst, dep = model_check(setup.params, scene, setup.actuation_delay)
+        worst, dep = model_check(setup.params, scene, setup.actuation_delay,
+                                 corrections=applied_corrections(sd))
         out["model_check"] = {"max_departure": worst,
                               "periods": int(dep.size),
-                              "periods_above_1e-12": int(np.count_nonzero(dep > 1e-12))}
+                              "periods_in_scene": max(len(scene.t) - 1, 0),
+                              "periods_above_1e-12": int(np.count_nonzero(dep > 1e-12)),
+                              "dropped_at_deadline_misses": int(sd.missed_stamp_ns.size)}
         out["_departures"] = dep
     out["realtime"] = realtime_numbers(sd, setup) if setup.mode == "realtime" else None
     dc = (out["realtime"] or {}).get("delay_check")
@@ -500,6 +544,8 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
 
     from grazing_control.dynamics.simulate import period_step
 
+    if (setup.actuation_delay or 0.0) > 0.0:
+        return None       # scheduled actuation: a correction acts at t_k + delay, not on arrival
     p, ts = setup.params, rt.get("time_scale")
     lat, lag = sd.latency_s, rt.get("_lag_ms")
     n = len(sd.scene.t)

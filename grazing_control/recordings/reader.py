@@ -15,7 +15,8 @@ start of the body, after the 4-byte encapsulation header), computed with numpy f
 lengths read out of the pool. A message too short for its layout is marked invalid (it
 is counted, never decoded from beyond its end).
 
-Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]),
+Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]; as a
+state stream also effort[0], effort[1], velocity possibly empty),
 ``geometry_msgs/msg/TwistStamped`` (stamp, linear.x), ``geometry_msgs/msg/Vector3Stamped``
 (stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``.
 """
@@ -33,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
-           "decode_joint_state", "decode_estimate", "decode_twist_stamped", "decode_vector3_stamped",
+           "decode_joint_state", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
+           "decode_vector3_stamped",
            "decode_float64", "decode_strings"]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -544,6 +546,26 @@ def decode_estimate(bag: RawBag, topic: str) -> dict:
     cov_xv = np.where(b.ok, b.f64(start + 8), np.nan)
     var_v = np.where(b.ok, b.f64(start + 16), np.nan)
     return _columns(b, stamp=stamp, x=x, v=v, var_x=var_x, cov_xv=cov_xv, var_v=var_v)
+
+
+def decode_joint_stream(bag: RawBag, topic: str) -> dict:
+    """A sensor's state stream (docs/nodes.md, "The sensor stream"): stamp_ns,
+    x = position[0], v = velocity[0] (NaN where the velocity is empty: a position-only
+    sensor), e0, e1 = effort[0], effort[1] (the phase reference cos tau, sin tau; NaN
+    where absent), times, ok (a message without a position is not ok)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = b.skip_strings(pos)
+    x, nx, pos = b.first_double(pos)
+    v, nv, pos = b.first_double(pos)
+    pe = _align(pos, 4)
+    ne = np.where(b.ok, b.u32(pe), 0)
+    b.ok &= ne <= b.end - b.body
+    p8 = _align(pe + 4, 8)
+    has1, has2 = ne > 0, ne > 1
+    e0 = np.where(has1, b.f64(np.where(has1, p8, 0)), np.nan)
+    e1 = np.where(has2, b.f64(np.where(has2, p8 + 8, 0)), np.nan)
+    b.ok &= nx > 0
+    return _columns(b, stamp=stamp, x=x, v=np.where(nv > 0, v, np.nan), e0=e0, e1=e1)
 
 
 def decode_twist_stamped(bag: RawBag, topic: str) -> dict:

@@ -430,6 +430,14 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                   wait_for_controller=True, wait_for_subscribers=0,
                   answer_timeout=float(answer_timeout))
     dv_of = dict(zip(sd.stamp_ns.tolist(), sd.scene.correction.tolist()))
+    # a correction the simulator dropped at a deadline miss did not act: replay it as 0
+    dropped = set(sd.missed_stamp_ns.tolist())
+    replayed_as_zero = sum(1 for k in dropped if dv_of.get(k, 0.0) != 0.0)
+    for k in dropped:
+        dv_of[k] = 0.0
+    if dropped:
+        notes.append(f"{len(dropped)} samples had a deadline miss: their recorded corrections "
+                     f"({replayed_as_zero} non-zero) did not act and are replayed as 0")
     out = Path(out)
     writer = _bag_writer(out)
     domain_id, lock = _claim(domain_id)
@@ -490,7 +498,13 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
         k0 = int(above[0])
         res["departure_at"] = {str(k): float(dep[k]) for k in
                                sorted({k0, min(k0 + 10, m - 1), min(k0 + 50, m - 1), m - 1})}
-        if setup.mode == "realtime":
+        if setup.mode == "realtime" and (setup.actuation_delay or 0.0) > 0.0:
+            why = ("scheduled actuation: the simulator applied each correction "
+                   f"{setup.actuation_delay:g} after its sample, as this replay does, and the "
+                   f"{len(dropped)} dropped at deadline misses are replayed as 0; a departure "
+                   "here is not explained by the timing of the corrections: check the model "
+                   "parameters and the simulator's fidelity")
+        elif setup.mode == "realtime":
             lat = sd.latency_s
             nz = np.flatnonzero(sd.scene.correction != 0)
             first_on = int(nz[0]) if nz.size else None

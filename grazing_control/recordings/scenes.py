@@ -79,7 +79,8 @@ class SceneData:
     publish (source) and log (receive) times; ``answered``: whether a correction for the
     sample was recorded; ``corr_pub_ns``: its publish time (-1 if none); ``latency_s``:
     the simulator's own latency messages (realtime), ``deadline_misses``: messages on
-    the deadline-miss topic in this scene's time span.
+    the deadline-miss topic in this scene's time span, ``missed_stamp_ns``: the stamps of
+    the samples they name (their corrections were not applied).
     """
 
     index: int
@@ -94,6 +95,9 @@ class SceneData:
     unmatched_answers: int = 0
     latency_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     deadline_misses: int | None = None
+    #: stamps (int64 ns) of the samples whose correction the simulator did not apply
+    #: (its deadline-miss messages; the correction arrived too late or never)
+    missed_stamp_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 @dataclass
@@ -236,10 +240,11 @@ def load(bag, topics: dict | None = None) -> BagData:
     if "latency" in present:
         lat = reader.decode_float64(raw, present["latency"])
         lat["scene"] = _scene_index(starts_log, lat["log_time"])
-    dl_scene = None
+    dl_scene = dl_stamp = None
     if "deadline_miss" in present:
-        dl = reader._Body(raw.pool, raw.offsets(present["deadline_miss"]))
-        dl_scene = _scene_index(starts_log, dl.log_time)
+        dl = reader.decode_vector3_stamped(raw, present["deadline_miss"])
+        dl_scene = _scene_index(starts_log, dl["log_time"])
+        dl_stamp = np.where(dl["ok"], dl["stamp"], -1)
 
     scenes = []
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
@@ -279,6 +284,8 @@ def load(bag, topics: dict | None = None) -> BagData:
             sd.latency_s = lat["data"][(lat["scene"] == i) & lat["ok"]]
         if dl_scene is not None:
             sd.deadline_misses = int(np.count_nonzero(dl_scene == i))
+            missed = dl_stamp[(dl_scene == i) & (dl_stamp >= 0)]
+            sd.missed_stamp_ns = np.unique(missed[np.isin(missed, st)])
         scenes.append(sd)
     if len(scenes) > 1:
         notes.append(f"{len(scenes)} scenes (the simulator was reset {len(scenes) - 1} times)")

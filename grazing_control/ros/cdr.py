@@ -68,6 +68,22 @@ def joint_state(sec: int, nanosec: int, x: float, v: float, effort: float) -> by
                              effort)
 
 
+_STREAM_XV = struct.Struct("<4siII4sII8sI4xdI4xdI4xdd")
+_STREAM_X = struct.Struct("<4siII4sII8sI4xdIIdd")
+
+
+def stream_sample(sec: int, nanosec: int, x: float, v: float | None, cos_tau: float,
+                  sin_tau: float) -> bytes:
+    """sensor_msgs/JointState of the state stream (``oscillator/state``): joint ``mass``,
+    position [x], velocity [v] or empty (``v`` None: a position-only sensor), effort
+    [cos tau, sin tau] (the shaker's phase reference, tau recoverable)."""
+    if v is None:
+        return _STREAM_X.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 0, 2,
+                              cos_tau, sin_tau)
+    return _STREAM_XV.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 1, v, 2,
+                           cos_tau, sin_tau)
+
+
 def vector3_stamped(sec: int, nanosec: int, x: float, y: float, z: float) -> bytes:
     """geometry_msgs/Vector3Stamped with an empty frame_id."""
     return _VECTOR3_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, x, y, z)

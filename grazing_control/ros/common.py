@@ -243,14 +243,42 @@ def make_executor(kind: str = "single_threaded"):
 SIGNAL_POLL = 0.2
 
 
+class _Signals:
+    """What the signal handler knows: whether a stop was asked, whether we spin."""
+
+    stop = False
+    spinning = False
+
+
 def _interrupt(signum, frame):
-    raise KeyboardInterrupt
+    """SIGINT/SIGTERM: while the node spins, only ask :func:`spin` to stop.
+
+    Raising KeyboardInterrupt from the handler lands in whatever Python code runs next:
+    inside a timer's or a subscription's callback the EventsExecutor logs it as
+    ``[FATAL] Exception in 'timers' callback`` with a stack (every realtime scene stopped
+    by Ctrl-C or --timeout), and an executor that catches it can lose the signal (2 of 12
+    scripted SIGINTs, issue 19). Outside the spin (starting up) it still raises, which
+    ends the start at once.
+    """
+    _Signals.stop = True
+    if not _Signals.spinning:
+        raise KeyboardInterrupt
 
 
 def spin(executor, done=None) -> None:
-    """Spin until ``done()`` is true (or forever), waking at least every SIGNAL_POLL s."""
-    while rclpy.ok() and not (done is not None and done()):
-        executor.spin_once(timeout_sec=SIGNAL_POLL)
+    """Spin until ``done()`` is true (or forever), waking at least every SIGNAL_POLL s.
+
+    A SIGINT/SIGTERM (:func:`_interrupt`) ends it between two callbacks, as a
+    KeyboardInterrupt raised here, in our code, never inside a callback.
+    """
+    _Signals.spinning = True
+    try:
+        while rclpy.ok() and not _Signals.stop and not (done is not None and done()):
+            executor.spin_once(timeout_sec=SIGNAL_POLL)
+    finally:
+        _Signals.spinning = False
+    if _Signals.stop:
+        raise KeyboardInterrupt
 
 
 # ----------------------------------------------------------- command-line arguments
@@ -371,6 +399,48 @@ def node_key_matches(key: str, full_name: str) -> bool:
     return re.fullmatch(pattern, full_name) is not None
 
 
+_YAML_FLOATS = {".nan": math.nan, ".NaN": math.nan, ".NAN": math.nan, ".inf": math.inf,
+                ".Inf": math.inf, ".INF": math.inf, "-.inf": -math.inf, "-.Inf": -math.inf,
+                "-.INF": -math.inf, "+.inf": math.inf}
+
+
+def _override_problem(param, text: str):
+    """Why ``-p name:=text`` did not set ``param`` to that value, or None.
+
+    rcl types a ``-p`` value from its text (integer, double, bool, string, array); a value
+    of another type than the declared one, or an integer beyond 64 bits (rcl reads it as
+    a double), is not always refused by rclpy: with a parameter file giving the same name,
+    the file's value silently stayed (``zeta:=abc``, ``max_periods:=1e23``; issue 21).
+    Compared here with what the node holds after declaring its parameters.
+    """
+    from rclpy.parameter import Parameter
+
+    kind, value = param.type_, param.value
+    t = text.strip()
+    if kind == Parameter.Type.DOUBLE:
+        try:
+            want = _YAML_FLOATS[t] if t in _YAML_FLOATS else float(t)
+        except ValueError:
+            return "expected a double (a number with a decimal point, e.g. 0.01)"
+        if not (want == value or (math.isnan(want) and math.isnan(value))):
+            return f"not applied (the node holds {value!r})"
+    elif kind == Parameter.Type.INTEGER:
+        try:
+            want = int(t)
+        except ValueError:
+            return "expected an integer"
+        if not -2**63 <= want < 2**63:
+            return "beyond the 64-bit integer range"
+        if want != value:
+            return f"not applied (the node holds {value!r})"
+    elif kind == Parameter.Type.BOOL:
+        if t.lower() not in ("true", "false"):
+            return "expected true or false"
+        if (t.lower() == "true") != value:
+            return f"not applied (the node holds {value!r})"
+    return None
+
+
 def check_overrides(node, arguments: NodeArguments) -> None:
     """Refuse ``-p`` names the node does not declare; warn about unused file entries.
 
@@ -389,6 +459,10 @@ def check_overrides(node, arguments: NodeArguments) -> None:
         raise StartupError(
             f"unknown parameter {', '.join(unknown)} for {node.get_name()}: valid names "
             f"are {', '.join(declared)}")
+    for name, text in arguments.params.items():
+        problem = _override_problem(node.get_parameter(name), text)
+        if problem:
+            raise StartupError(f"{name}:={text} is invalid: {problem}")
     full = node.get_fully_qualified_name()
     for path, keys in arguments.params_files:
         matching = [key for key in keys if node_key_matches(key, full)]

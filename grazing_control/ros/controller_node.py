@@ -105,6 +105,7 @@ from grazing_control.dynamics.estimation import ESTIMATORS
 from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr
+from .scene import SCENE_PARAMETER_DOC
 from .common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize, StartupError, Throttled,
                      float_descriptor, int_descriptor, publish_parameter_record, run_node,
                      spin, stamp_key, string_descriptor)
@@ -328,6 +329,7 @@ class ControllerNode(Node):
         d("model_noise", 1e-2, float_descriptor(
             "model filter's process noise per period, in units of sensor_noise", 0.0,
             read_only=True))
+        d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))

@@ -54,6 +54,7 @@ from pathlib import Path
 import yaml
 
 from grazing_control.oscillator import kernel
+from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
            "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
@@ -398,6 +399,11 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
             controller_overrides.setdefault(key, sim_over[key])
     if enable_after is not None:
         controller_overrides["enable_after"] = int(enable_after)
+    # one token for this scene's nodes (ros/scene.py): the simulator starts with its own
+    # controller only, and a node of another scene on the domain is an intruder
+    token = f"{os.getpid():x}-{random.getrandbits(48):012x}"
+    sim_over.setdefault("scene", token)
+    controller_overrides.setdefault("scene", sim_over["scene"])
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None}
     timed_out = interrupted = False
 
@@ -516,6 +522,17 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _periods(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected an integer in "
+                                         "1 .. 2^63 - 1 (sim_node's max_periods)")
+    return value
+
+
 def _key_value(text: str):
     key, sep, value = text.partition(":=")
     if not sep or not key:
@@ -542,9 +559,10 @@ def add_run_arguments(parser) -> None:
                              "(default: config/controller.yaml)")
     parser.add_argument("--bag", dest="bag_dir", default=None,
                         help="record the scene to this bag directory (default: no recording)")
-    parser.add_argument("--periods", type=int, default=None,
-                        help="forcing periods to simulate (default: the parameter file's)")
-    parser.add_argument("--delta-d", dest="delta_d", type=float, default=None,
+    parser.add_argument("--periods", type=_periods, default=None,
+                        help="forcing periods to simulate, 1 .. 2^63 - 1 (default: the "
+                             "parameter file's)")
+    parser.add_argument("--delta-d", dest="delta_d", type=finite, default=None,
                         help="Delta d = d - d* (default: the parameter file's)")
     parser.add_argument("--enable-after", dest="enable_after", type=int, default=None,
                         help="first controlled Pi2 sample (default 1000; -1: never)")

@@ -10,7 +10,8 @@ import numpy as np
 
 from grazing_control.support.plotting import pyplot, save_png
 
-__all__ = ["plot_delay_curves", "plot_stability_maps", "plot_fault_sweep"]
+__all__ = ["plot_delay_curves", "plot_stability_maps", "plot_fault_sweep", "plot_noise_gain",
+           "plot_model_bands"]
 
 
 def _plt():
@@ -65,10 +66,14 @@ def plot_stability_maps(maps, path, boundaries=None, dpi=80):
                 ax.contour(m.c2s, m.delays, np.nan_to_num(vals, nan=3.0), levels=[0.0],
                            colors="k", linewidths=0.8)
             if design == "delayed" and boundaries:
-                ends = [(x, delay) for delay, ivs in boundaries.items() for iv in ivs for x in iv]
+                # the design's true ends may lie outside the plotted c2 grid (or at
+                # infinity, beyond its search limit): only those on the chart are marked
+                ends = [(x, delay) for delay, ivs in boundaries.items() for iv in ivs for x in iv
+                        if m.c2s[0] <= x <= m.c2s[-1]]
                 if ends:
                     ex, ey = zip(*ends)
                     ax.plot(ex, ey, "m.", ms=2.5, label="admissible-set ends (design)")
+            ax.set_xlim(m.c2s[0], m.c2s[-1])
             if i == 0:
                 ax.set_title(f"Δd = {dd:.0e}", fontsize=9)
             if j == 0:
@@ -117,4 +122,51 @@ def plot_fault_sweep(results, path, dpi=80):
                  "(bottom; dashed: linear prediction)", fontsize=9)
     axes[0, 0].legend(fontsize=6)
     fig.tight_layout()
+    save_png(fig, path, dpi=dpi)
+
+
+def plot_noise_gain(record, path, dpi=80):
+    """Noise gain (log) over the admissible c2, one curve per Delta d; the least gain
+    marked (o) and the study's c2 (dotted). ``record``: :func:`.noise.noise_gain_curves`."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for curve in record["curves"]:
+        c2 = np.array(curve["c2"])
+        g = np.array([np.nan if x is None else x for x in curve["gain"]], dtype=float)
+        (line,) = ax.semilogy(c2, g, lw=1.2, label=f"Δd = {curve['delta_d']:.0e}")
+        b = curve["best"]
+        ax.semilogy([b["c2"]], [b["gain"]], "o", color=line.get_color(), ms=4)
+    ax.axvline(record["study_c2"], color="0.4", ls=":", lw=1, label=f"study c2 = {record['study_c2']:g}")
+    ax.set_xlabel("c2 (c1 from the degenerate condition)")
+    ax.set_ylabel("noise gain: std of Π2 position per unit σ")
+    delay = record["delay"]
+    ax.set_title("measurement noise through the controlled loop" + (f", delay {delay:g}" if delay else ""),
+                 fontsize=9)
+    ax.grid(True, which="both", lw=0.3)
+    ax.legend(fontsize=7)
+    save_png(fig, path, dpi=dpi)
+
+
+def plot_model_bands(record, path, dpi=80):
+    """|band end| (log) against the relative error (log), one panel per parameter with a
+    band, one line per design (positive errors; negative ones have none on d < d*), the
+    series' prediction dashed. ``record``: :func:`.model.model_error_bands`."""
+    plt = _plt()
+    params = [n for n in ("zeta", "omega")
+              if any(r["parameter"] == n for d in record["designs"] for r in d["bands"])]
+    fig, axes = plt.subplots(1, len(params), figsize=(4.6 * len(params), 3.8), squeeze=False)
+    for ax, name in zip(axes[0], params):
+        for d in record["designs"]:
+            rows = [r for r in d["bands"] if r["parameter"] == name and r["error"] > 0 and r["end"] < 0]
+            if not rows:
+                continue
+            e = np.array([r["error"] for r in rows])
+            (line,) = ax.loglog(e, [-r["end"] for r in rows], "o-", ms=3,
+                                label=f"{d['label']} (c2 = {d['c2']:.4g})")
+            ax.loglog(e, [-r["predicted"] for r in rows], "--", color=line.get_color(), lw=0.8)
+        ax.set_xlabel(f"relative error in {'ζ' if name == 'zeta' else 'ω'} (> 0)")
+        if ax is axes[0][0]:
+            ax.set_ylabel("band |Δd| where control fails")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=7, title="dashed: series, ∝ e²", title_fontsize=7)
     save_png(fig, path, dpi=dpi)

@@ -1,4 +1,4 @@
-"""``grazing robustness delay|faults``: the robustness studies and their charts.
+"""``grazing robustness delay|faults|noise|model``: the robustness studies and their charts.
 
 Registered from :func:`grazing_control.cli.build_parser`. Both write their charts (PNG)
 and numbers (JSON) to ``--out`` (default out/robustness) and print a summary (or, with
@@ -150,11 +150,72 @@ def cmd_faults(args):
     return "\n".join(lines)
 
 
+def cmd_noise(args):
+    from grazing_control.oscillator.params import OscillatorParams
+    from .charts import plot_noise_gain
+    from .noise import noise_gain_curves
+
+    base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    record = noise_gain_curves(base, args.delta_d, args.delay, args.points)
+    png = os.path.join(out, "noise_gain.png" if not args.delay else f"noise_gain_delay{args.delay:g}.png")
+    plot_noise_gain(record, png)
+    record.update(seconds=time.perf_counter() - t0, files=[png])
+    with open(os.path.splitext(png)[0] + ".json", "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return record
+    lines = [f"noise gain (std of the Pi2 position per unit measurement noise) over the admissible c2"
+             f"{f', delay {args.delay:g}' if args.delay else ''}",
+             f"{'Delta d':>9} {'least gain':>11} {'at c2':>10} {'c1':>10} {'study c2=-1':>12}"]
+    for c in record["curves"]:
+        b = c["best"]
+        study = "-" if c["study"] is None else f"{c['study']:.4g}"
+        lines.append(f"{c['delta_d']:9.1e} {b['gain']:11.4g} {b['c2']:10.5f} {b['c1']:10.5f} {study:>12}")
+    lines.append(f"chart and numbers in {out} ({record['seconds']:.1f} s)")
+    return "\n".join(lines)
+
+
+def cmd_model(args):
+    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.oscillator.params import OscillatorParams
+    from .charts import plot_model_bands
+    from .model import model_error_bands
+
+    base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    if args.c2:
+        designs = [(f"c2 = {c:g}", c) for c in args.c2]
+    else:
+        best = optimize_noise(base.with_(delta_d=-5e-6))
+        designs = [("study", -1.0), ("least noise at -5e-6", best.c2)]
+    record = model_error_bands(base, designs)
+    png = os.path.join(out, "model_error_bands.png")
+    plot_model_bands(record, png)
+    record.update(seconds=time.perf_counter() - t0, files=[png])
+    with open(os.path.join(out, "model_error_bands.json"), "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return record
+    lines = ["band of Delta d next to grazing where the controlled orbit fails (gains designed on "
+             "the nominal model, plant off by a relative error e)",
+             f"{'design':>22} {'param':>6} {'error':>9} {'band end':>11} {'series':>11} {'end/e^2':>10}"]
+    for d in record["designs"]:
+        for r in d["bands"]:
+            end = "none" if r["end"] == 0.0 else f"{r['end']:.4g}"
+            lines.append(f"{d['label']:>22} {r['parameter']:>6} {r['error']:+9.2g} {end:>11} "
+                         f"{r['predicted']:11.4g} {r['k']:10.4g}")
+    lines.append(f"chart and numbers in {out} ({record['seconds']:.1f} s)")
+    return "\n".join(lines)
+
+
 _count = integer_at_least(1)
 
 
 def add_robustness_parser(sub, common, finite):
-    """Register ``grazing robustness delay|faults`` on the subparsers ``sub``."""
+    """Register ``grazing robustness delay|faults|noise|model`` on the subparsers ``sub``."""
     s = sub.add_parser("robustness", help="robustness to the actuation delay and to loss/noise/jitter")
     rsub = s.add_subparsers(dest="study", required=True)
 
@@ -187,3 +248,20 @@ def add_robustness_parser(sub, common, finite):
     f.add_argument("--workers", type=_count, default=2, help="processes (default 2)")
     f.add_argument("--out", default="out/robustness", help="folder for charts and JSON")
     f.set_defaults(func=cmd_faults)
+
+    n = rsub.add_parser("noise", help="noise gain over the admissible c2 at several Delta d (chart)")
+    common(n)
+    n.add_argument("--delta-d", type=finite, nargs="+", default=[-1e-4, -1e-5, -5e-6, -1e-6, -1e-7],
+                   help="wall offsets Delta d < 0 (default -1e-4 -1e-5 -5e-6 -1e-6 -1e-7)")
+    n.add_argument("--delay", type=finite, default=0.0, help="actuation delay of the design (0)")
+    n.add_argument("--points", type=_count, default=201, help="c2 per admissible interval (201)")
+    n.add_argument("--out", default="out/robustness", help="folder for the chart and JSON")
+    n.set_defaults(func=cmd_noise)
+
+    m = rsub.add_parser("model", help="band of Delta d where control fails vs model error (chart)")
+    common(m)
+    m.add_argument("--c2", type=finite, action="append",
+                   help="c2 of a design on the nominal model (repeatable; default the study's -1 "
+                        "and the least-noise c2 at Delta d = -5e-6)")
+    m.add_argument("--out", default="out/robustness", help="folder for the chart and JSON")
+    m.set_defaults(func=cmd_model)

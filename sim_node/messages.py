@@ -1,10 +1,12 @@
-"""sim_node's outputs: the plant loops' sink, as messages on the topics and log lines.
+"""sim_node's messages: the plant loops' output as messages and log lines, answers read.
 
 :class:`Outputs` is the :class:`grazing_control.plant.loop.Sink` of the node: each
 :class:`grazing_control.plant.engine.Event` goes out as packed CDR
 (:mod:`grazing_control.ros.cdr`) on its topic (docs/nodes.md, "Topics"); what the loops
 count (ignored, malformed, late answers, timeouts, deadline misses) is logged at most
 once per two seconds per kind (:class:`grazing_control.ros.common.Throttled`).
+:func:`read_answer` reads a controller's answer (Delta v and its prediction for the next
+sample, issue 16 §3).
 """
 
 from __future__ import annotations
@@ -15,7 +17,17 @@ from grazing_control.plant.engine import Event
 from grazing_control.ros import cdr
 from grazing_control.ros.common import Throttled
 
-__all__ = ["Outputs"]
+__all__ = ["Outputs", "read_answer"]
+
+def read_answer(data: bytes):
+    """(stamp key, Delta v = twist.linear.x, the Delta v predicted for the next sample =
+    twist.linear.y, NaN for none) of a TwistStamped in the controller's layout
+    (:func:`cdr.read_twist_stamped`), else None (issue 16 §3)."""
+    answer = cdr.read_twist_stamped(data)
+    if answer is None:
+        return None
+    sec, nanosec, dv, predicted = answer
+    return (sec, nanosec), dv, predicted
 
 
 class Outputs:
@@ -39,6 +51,11 @@ class Outputs:
         if ev.kind == "impact":
             n.pub_impact.publish(cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase))
             return stamp
+        if ev.kind == "state":                 # the rig's sensor stream
+            v = ev.v if n.settings.sensor.velocity else None
+            n.pub_state.publish(cdr.stream_sample(sec, ns, ev.x, v, math.cos(ev.phase),
+                                                  math.sin(ev.phase)))
+            return stamp
         data = cdr.joint_state(sec, ns, ev.x, ev.v, math.cos(ev.phase))
         if ev.kind == "pi1":
             n.pub_pi1.publish(data)
@@ -46,8 +63,6 @@ class Outputs:
             if n.settings.mode == "lockstep":
                 n.pub_clock.publish(cdr.clock(sec, ns))
             n.pub_pi2.publish(data)
-        else:
-            n.pub_state.publish(data)
         return stamp
 
     def latency(self, seconds: float) -> None:

@@ -1,0 +1,90 @@
+"""``grazing identify BAG... [--json] [--out FILE]``: the model's parameters from recordings.
+
+Fits the model (zeta, r, omega, delta_d, and the rig's natural frequency, forcing
+amplitude and phase) to each bag's state stream and impacts
+(:mod:`grazing_control.recordings.identify`; the method: docs/theory_identification.md),
+prints each parameter with its standard error, the residuals and a re-simulation check,
+and with ``--out`` writes the parameter file (:mod:`.parameter_file`) that ``grazing
+design --params``, ``grazing run --params`` / ``--sim-params`` and the nodes
+(``--params-file``) take.
+
+Exit status: 0 good fit; 1 poor fit (the motion is not this model's: the report says
+why; nothing is written); 2 bad input (unreadable bag, no state stream, too few samples,
+no impact), with one line ``grazing: error: ...``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+from grazing_control.support.arguments import integer_at_least, non_empty_path
+
+__all__ = ["add_identify_parser", "cmd_identify"]
+
+
+def _plain(obj):
+    """Standard JSON: nan/inf -> null (a parameter not identified), numpy -> Python."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if hasattr(obj, "item"):          # numpy scalars
+        return _plain(obj.item())
+    return obj
+
+
+def cmd_identify(args) -> int:
+    """Run ``grazing identify``; the exit status (module docstring)."""
+    from grazing_control.recordings.identify import format_report, identify_bags
+
+    result = identify_bags(args.bags, position_only=args.position_only,
+                           impacts=not args.no_impacts, max_arcs=args.max_arcs)
+    good = result["fit"] == "good"
+    if args.out:
+        if good:
+            from .parameter_file import write_parameter_file
+
+            par = result["parameters"]
+            write_parameter_file(
+                args.out, {k: par[k]["value"] for k in ("zeta", "r", "omega", "delta_d")},
+                [f"model parameters identified by `grazing identify` from "
+                 f"{', '.join(result['bags'])}"]
+                + [f"{k} = {par[k]['value']!r} +- {par[k]['stderr']:.3g}"
+                   for k in ("zeta", "r", "omega", "delta_d")])
+            result["out"] = args.out
+        else:
+            result["out"] = None
+    if args.json:
+        json.dump(_plain(result), sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(format_report(result))
+        if args.out:
+            print(f"  parameter file written to {args.out}" if good else
+                  f"  poor fit: nothing written to {args.out}")
+    sys.stdout.flush()
+    return 0 if good else 1
+
+
+def add_identify_parser(sub) -> None:
+    """Register ``grazing identify`` on the subcommands of the ``grazing`` parser."""
+    s = sub.add_parser("identify", help="the model's parameters (zeta, r, omega, delta_d, "
+                                        "...) with standard errors from recorded bags")
+    s.add_argument("bags", nargs="+", metavar="BAG", help="bag directories or .mcap files "
+                   "(several: each fitted, their estimates combined)")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.add_argument("--out", type=non_empty_path, metavar="FILE",
+                   help="write the identified model as a ROS 2 parameter file (only after a "
+                        "good fit)")
+    s.add_argument("--no-impacts", action="store_true",
+                   help="ignore the recorded impacts (oscillator/impact): find them in the "
+                        "motion")
+    s.add_argument("--position-only", action="store_true",
+                   help="ignore the recorded velocity: fit the positions only")
+    s.add_argument("--max-arcs", type=integer_at_least(2), default=100,
+                   help="fit each bag up to its N-th impact or correction (default 100)")
+    s.set_defaults(func=cmd_identify)

@@ -1,0 +1,19 @@
+"""Identification of the oscillator's parameters from a recorded motion (issue 16 §1).
+
+Pure numerics (docs/theory_identification.md): :mod:`.model` (the rig's model in its own
+units: free flight in closed form, the impact law, the map to the study's nondimensional
+parameters), :mod:`.phase` (the forcing's phase reference), :mod:`.data` (a recording as
+arrays, cut into free-flight arcs), :mod:`.initial` (the robust initial guess: the exact
+ARX(2) recursion of the sampled flow, per-arc linear fits, impacts found from the
+motion), :mod:`.fit` (multiple-shooting nonlinear least squares with complex-step
+Jacobians, standard errors) and :mod:`.checks` (residual whiteness, re-simulation, the
+verdict).
+
+May import: :mod:`grazing_control.dynamics` and below. Never rclpy.
+"""
+
+from .data import Recording
+from .fit import IdentificationError, Identification, identify
+from .model import RigModel
+
+__all__ = ["Recording", "RigModel", "Identification", "IdentificationError", "identify"]

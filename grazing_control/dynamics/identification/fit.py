@@ -1,0 +1,389 @@
+"""Multiple-shooting least squares for the model's parameters (docs/theory_identification.md).
+
+Unknowns: the model g = (zeta, Omega, A, theta, d, r) (:data:`.model.GLOBAL_NAMES`), the
+start of every free-flight arc (after an impact only its velocity V_b, the position being
+d; else (X_b, V_b)) and, for impacts found from the motion, their times t_b.
+
+Residuals, all in the recording's units:
+
+* data: x(t_j) - x~_j and v(t_j) - v~_j (where measured), x(t) by the closed-form flow
+  of the sample's arc (:func:`.model.free_flight`); recorded impact velocities
+  v-(t_b) - v-~_b and V_b - v+~_b;
+* constraints, weighted by W = :data:`CONSTRAINT_WEIGHT`: at an impact b the arc before
+  reaches the wall, W (x_{b-1}(t_b) - d), and the impact law links the arcs,
+  W (V_b + r v_{b-1}(t_b)) (Eq. 1); at a correction the position is continuous,
+  W (x_{b-1}(t_b) - X_b).
+
+The constraints are exact in the model, so at the solution of noise-free data every
+residual vanishes; with noise they hold to O(sigma / W^2) (docs: "Constraints"). The
+weight is raised in steps (:data:`CONTINUATION`), each solve starting from the last:
+the initial guess violates the constraints, and a solve at the full weight from there
+would chase them far from the data.
+
+Jacobian: by complex step, J e_p = Im r(p + i h e_p) / h with h = 1e-30, exact to
+rounding because every residual is analytic in the parameters; the arcs' parameters
+are perturbed together in two colours (even and odd arcs), whose rows never overlap
+(an arc's parameters reach only its samples and its two boundaries), so a Jacobian
+costs 6 + 2 x 3 evaluations of the residual.
+
+Standard errors: sigma^2 (J^T J)^{-1} from the SVD of J at the solution, sigma^2 the
+data residuals' sum of squares over m_data - (n - n_constraints) degrees of freedom;
+the study's nondimensional parameters by the delta method (their complex-step gradient).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .data import Arcs, Recording, RecordingError, cut_arcs
+from .initial import InitialGuessError, find_impacts, initial_guess
+from .model import (GLOBAL_NAMES, NONDIMENSIONAL_NAMES, RigModel, free_flight,
+                    nondimensional_vector)
+from .phase import PhaseError, PhaseReference, fit_phase
+
+__all__ = ["CONSTRAINT_WEIGHT", "IdentificationError", "Problem", "Identification",
+           "identify"]
+
+#: Weight of the impact and continuity constraints against the data residuals.
+CONSTRAINT_WEIGHT = 1e4
+#: The weights of the penalty continuation, the last being CONSTRAINT_WEIGHT.
+CONTINUATION = (1.0, 1e2, CONSTRAINT_WEIGHT)
+_H = 1e-30
+
+
+class IdentificationError(ValueError):
+    """The recording cannot be fitted (bad input: too short, no impacts, no reference)."""
+
+
+class Problem:
+    """The residual vector and its Jacobian for one recording cut into arcs."""
+
+    def __init__(self, rec: Recording, arcs: Arcs, phase: PhaseReference, *,
+                 impact_velocities: bool = True):
+        self.rec, self.arcs, self.phase = rec, arcs, phase
+        self.weight = CONSTRAINT_WEIGHT
+        self.omega, self.tau0 = phase.omega, phase.tau0
+        K = arcs.count
+        n = 6
+        self.iX = np.full(K, -1)
+        self.iV = np.zeros(K, int)
+        self.iT = np.full(K, -1)
+        for k in range(K):
+            if arcs.kind[k] != 1:
+                self.iX[k] = n
+                n += 1
+            self.iV[k] = n
+            n += 1
+        for k in np.flatnonzero(arcs.time_free):
+            self.iT[k] = n
+            n += 1
+        self.n = n
+        # rows: x data, v data, recorded v-, recorded v+, impact position, impact law,
+        # correction continuity
+        sa = arcs.sample_arc
+        self.vrows = np.flatnonzero(np.isfinite(rec.v))
+        b = np.arange(1, K)
+        self.b_imp = b[arcs.kind[1:] == 1]
+        self.b_cor = b[arcs.kind[1:] == 2]
+        use = bool(impact_velocities)
+        self.b_vm = self.b_imp[np.isfinite(arcs.v_minus[self.b_imp])] if use else b[:0]
+        self.b_vp = self.b_imp[np.isfinite(arcs.v_plus[self.b_imp])] if use else b[:0]
+        sizes = [rec.t.size, self.vrows.size, self.b_vm.size, self.b_vp.size,
+                 self.b_imp.size, self.b_imp.size, self.b_cor.size]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)])
+        self.m = int(self.offsets[-1])
+        self.m_data = int(self.offsets[4])
+        self.n_constraints = int(self.m - self.m_data)
+        # rows of each arc (its samples, its two boundaries): the Jacobian's colouring
+        owner = [[] for _ in range(K)]
+        o = self.offsets
+        for j, k in enumerate(sa):
+            owner[k].append(o[0] + j)
+        for i, j in enumerate(self.vrows):
+            owner[sa[j]].append(o[1] + i)
+        for block, bs in ((2, self.b_vm), (3, self.b_vp), (4, self.b_imp), (5, self.b_imp),
+                          (6, self.b_cor)):
+            for i, bb in enumerate(bs):
+                owner[bb].append(o[block] + i)
+                owner[bb - 1].append(o[block] + i)
+        self.rows_of_arc = [np.array(r, int) for r in owner]
+
+    # ------------------------------------------------------------------ vector
+    def pack(self, g, start, X, V) -> np.ndarray:
+        """The parameter vector of (g, arcs' start times, X, V) (module docstring)."""
+        p = np.zeros(self.n)
+        p[:6] = g
+        k = self.iX >= 0
+        p[self.iX[k]] = X[k]
+        p[self.iV] = V
+        f = self.iT >= 0
+        p[self.iT[f]] = start[f]
+        return p
+
+    def unpack(self, p):
+        """(g, start times, X, V) of a parameter vector (complex allowed)."""
+        g = p[:6]
+        d = g[4]
+        K = self.arcs.count
+        X = np.empty(K, dtype=p.dtype)
+        k = self.iX >= 0
+        X[k] = p[self.iX[k]]
+        X[~k] = d
+        V = p[self.iV]
+        S = self.arcs.start.astype(p.dtype)
+        f = self.iT >= 0
+        S[f] = p[self.iT[f]]
+        return g, S, X, V
+
+    def bounds(self):
+        """Bounds: 0 < zeta < 1, Omega > 0, A > 0, 0 <= r <= 2 (a fitted r beyond 1 is a
+        poor fit, reported), impact times between their samples."""
+        lo = np.full(self.n, -np.inf)
+        hi = np.full(self.n, np.inf)
+        lo[0], hi[0] = 1e-12, 1.0 - 1e-12       # zeta
+        lo[1] = 1e-12                           # Omega
+        lo[2] = 1e-300                          # A
+        lo[5], hi[5] = 0.0, 2.0                 # r (beyond 1: the fit says "wrong model")
+        f = self.iT >= 0
+        lo[self.iT[f]] = self.arcs.lower[f]
+        hi[self.iT[f]] = self.arcs.upper[f]
+        return lo, hi
+
+    # ------------------------------------------------------------------ residuals
+    def residual(self, p) -> np.ndarray:
+        """The residual vector (module docstring) at parameters p (real or complex)."""
+        g, S, X, V = self.unpack(p)
+        zeta, Om, A, th, d, r = g
+        om = self.omega
+        psi0 = om * S + self.tau0 + th
+        rec = self.rec
+        a = self.arcs.sample_arc
+        x, v = free_flight(zeta, Om, A, om, psi0[a], rec.t - S[a], X[a], V[a])
+        bi, bc = self.b_imp, self.b_cor
+        xi, vi = free_flight(zeta, Om, A, om, psi0[bi - 1], S[bi] - S[bi - 1], X[bi - 1],
+                             V[bi - 1])
+        xc, _vc = free_flight(zeta, Om, A, om, psi0[bc - 1], S[bc] - S[bc - 1], X[bc - 1],
+                              V[bc - 1])
+        W = self.weight
+        ar = self.arcs
+        pos = {int(b): i for i, b in enumerate(bi)}
+        vm_rows = vi[[pos[int(b)] for b in self.b_vm]] - ar.v_minus[self.b_vm] \
+            if self.b_vm.size else np.zeros(0, dtype=x.dtype)
+        vp_rows = V[self.b_vp] - ar.v_plus[self.b_vp]
+        return np.concatenate([
+            x - rec.x,
+            v[self.vrows] - rec.v[self.vrows],
+            vm_rows,
+            vp_rows,
+            W * (xi - d),
+            W * (V[bi] + r * vi),
+            W * (xc - X[bc]),
+        ])
+
+    def jacobian(self, p) -> np.ndarray:
+        """Complex-step Jacobian (module docstring), dense (m, n)."""
+        p = np.asarray(p, float)
+        J = np.zeros((self.m, self.n))
+        for j in range(6):
+            q = p.astype(complex)
+            q[j] += 1j * _H
+            J[:, j] = self.residual(q).imag / _H
+        K = self.arcs.count
+        for index in (self.iX, self.iV, self.iT):
+            for colour in (0, 1):
+                ks = [k for k in range(colour, K, 2) if index[k] >= 0]
+                if not ks:
+                    continue
+                q = p.astype(complex)
+                q[index[ks]] += 1j * _H
+                im = self.residual(q).imag / _H
+                for k in ks:
+                    rows = self.rows_of_arc[k]
+                    J[rows, index[k]] = im[rows]
+        return J
+
+
+@dataclass
+class Identification:
+    """The result of :func:`identify`.
+
+    Attributes
+    ----------
+    model : RigModel, the fitted model in the recording's units.
+    stderr : dict name -> standard error of the model's parameters (GLOBAL_NAMES).
+    nondimensional : dict name -> (value, stderr) of the study's zeta, r, omega, d, delta_d.
+    covariance : (6, 6) covariance of g.
+    sigma : estimated noise standard deviation (data residuals).
+    rms_x, rms_v : RMS of the position and velocity residuals.
+    constraint_rms : RMS of the (unweighted) constraint violations.
+    phase : PhaseReference.
+    problem, solution : the least-squares problem and its solution vector.
+    arcs_used, impacts_used, samples_used : counts.
+    converged : bool, message : the solver's status.
+    checks : dict filled by :mod:`.checks`.
+    """
+
+    model: RigModel
+    stderr: dict
+    nondimensional: dict
+    covariance: np.ndarray
+    sigma: float
+    rms_x: float
+    rms_v: float
+    constraint_rms: float
+    phase: PhaseReference
+    problem: Problem
+    solution: np.ndarray
+    arcs_used: int
+    impacts_used: int
+    samples_used: int
+    dof: int
+    converged: bool
+    message: str
+    checks: dict = field(default_factory=dict)
+
+
+def _covariance(J, sigma2, k=6):
+    """sigma^2 (J^T J)^{-1} restricted to the first k parameters, from the SVD of J;
+    directions with singular values below 1e-13 of the largest are not identified (inf)."""
+    _U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    inv = np.where(s > 1e-13 * s[0], 1.0 / np.where(s > 0, s, 1.0) ** 2, np.inf)
+    Vk = Vt[:, :k]
+    with np.errstate(invalid="ignore"):
+        cov = (Vk.T * inv) @ Vk
+    # a not-identified direction that touches a parameter makes its variance infinite
+    touched = (np.abs(Vk) > 1e-12)[~np.isfinite(inv)].any(axis=0) if np.any(~np.isfinite(inv)) \
+        else np.zeros(k, bool)
+    cov = np.where(np.isfinite(cov), cov, 0.0)
+    cov[touched, :] = np.inf
+    cov[:, touched] = np.inf
+    return sigma2 * cov
+
+
+def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
+             max_arcs: int | None = 100, max_nfev: int = 200,
+             coincidence: float = 1.5e-9) -> Identification:
+    """Fit the model to a recording (module docstring).
+
+    Parameters
+    ----------
+    rec : Recording
+    impacts : "recorded" (the recording's impact events cut the arcs, their times start
+        the fit) or "motion" (found from the state stream). Either way the impact times
+        are fitted: held fixed, a recorded time that is off (a soft contact's entry, a
+        detector's delay) would make the impact constraints inconsistent.
+    impact_velocities : use the recorded v-, v+ as data (weighted like a sample).
+    max_arcs : fit the recording up to its max_arcs-th event (None: all of it).
+    max_nfev : most evaluations of the least-squares solver.
+    coincidence : samples within this time of a correction or a recorded impact are left
+        out: their velocity is either side of the jump (default: 1.5 ns, the resolution
+        of a bag's stamps).
+
+    Raises
+    ------
+    IdentificationError
+        Bad input: no phase reference, too few samples, no impact, no initial guess.
+    """
+    if impacts not in ("recorded", "motion"):
+        raise IdentificationError(f"impacts={impacts!r} is invalid: valid values are "
+                                  "recorded, motion")
+    try:
+        # a sample stamped at an event's instant is ambiguous (before or after the jump)
+        events = np.concatenate([rec.corrections, rec.impact_t if impacts == "recorded"
+                                 else np.zeros(0)])
+        rec = rec.without_samples(rec.near(events, coincidence))
+        phase = fit_phase(rec.t, rec.cos_tau, rec.sin_tau)
+        if impacts == "motion" or rec.impact_t.size == 0:
+            # impacts from the motion (the corrections cut the arcs first)
+            pre = cut_arcs(rec.t, np.zeros(0), rec.corrections)
+            found = find_impacts(rec.t, rec.x, phase.phase(rec.t), pre.sample_arc)
+            mid = np.array([0.5 * (a + b) for a, b in found])
+            rec_events = mid
+            free = True
+            vm = vp = None
+        else:
+            rec_events = rec.impact_t
+            free = True      # recorded times start the fit; the state stream decides
+            vm, vp = rec.impact_v_minus, rec.impact_v_plus
+        if max_arcs is not None:
+            ev = np.sort(np.concatenate([rec_events[(rec_events > rec.t[0])],
+                                         rec.corrections[rec.corrections > rec.t[0]]]))
+            if ev.size >= max_arcs:
+                end = ev[max_arcs - 1]
+                rec = rec.window(rec.t[0], end)
+                keep = rec_events < end
+                rec_events = rec_events[keep]
+                if vm is not None:
+                    vm, vp = vm[keep], vp[keep]
+        arcs = cut_arcs(rec.t, rec_events, rec.corrections, impact_v_minus=vm,
+                        impact_v_plus=vp, free_times=free)
+        if np.count_nonzero(arcs.kind == 1) == 0:
+            raise IdentificationError(
+                "the recording has no impact: r and d (so delta_d) are not identifiable "
+                "from free flight alone (record a scene with impacts)")
+        g0, start0, X0, V0 = initial_guess(rec, arcs, phase)
+    except (PhaseError, RecordingError, InitialGuessError) as exc:
+        raise IdentificationError(str(exc)) from None
+    prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
+    p0 = prob.pack(g0, start0, X0, V0)
+    lo, hi = prob.bounds()
+    inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
+    f = np.isfinite(lo)
+    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
+    f = np.isfinite(hi)
+    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    p0 = np.clip(p0, inner_lo, inner_hi)
+    dof = prob.m_data - (prob.n - prob.n_constraints)
+    if dof <= 0:
+        raise IdentificationError(f"too few samples: {prob.m_data} data values for "
+                                  f"{prob.n - prob.n_constraints} free parameters")
+    # penalty continuation: the initial guess violates the constraints; raising their
+    # weight in steps keeps each solve near the last one (docs: "Constraints")
+    p = p0
+    for weight in CONTINUATION:
+        prob.weight = weight
+        sol = least_squares(prob.residual, p, jac=prob.jacobian, bounds=(lo, hi),
+                            method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                            max_nfev=max_nfev)
+        p = sol.x
+    res = prob.residual(p)
+    J = prob.jacobian(p)
+    data = res[:prob.m_data]
+    sigma2 = float(data @ data) / dof
+    cov = _covariance(J, sigma2)
+    se = np.sqrt(np.diag(cov))
+    model = RigModel.from_vector(p, phase.omega, phase.tau0)
+    # the study's parameters by the delta method (complex-step gradient)
+    g = p[:6]
+    nd = nondimensional_vector(g, phase.omega)
+    G = np.zeros((nd.size, 6))
+    for j in range(6):
+        q = g.astype(complex)
+        q[j] += 1j * _H
+        G[:, j] = nondimensional_vector(q, phase.omega).imag / _H
+    with np.errstate(invalid="ignore"):
+        cov_nd = G @ np.where(np.isfinite(cov), cov, 0.0) @ G.T
+    inf_nd = (np.abs(G) > 0) @ (~np.isfinite(np.diag(cov))).astype(float) > 0
+    # omega / Omega also carries the reference's uncertainty
+    cov_nd[2, 2] += (phase.omega_stderr / g[1]) ** 2
+    se_nd = np.sqrt(np.maximum(np.diag(cov_nd), 0.0))
+    se_nd[inf_nd] = np.inf
+    xres = data[:rec.t.size]
+    vres = data[rec.t.size:prob.offsets[2]]
+    cons = res[prob.m_data:] / prob.weight
+    return Identification(
+        model=model,
+        stderr={n: float(s) for n, s in zip(GLOBAL_NAMES, se)},
+        nondimensional={n: (float(v), float(s))
+                        for n, v, s in zip(NONDIMENSIONAL_NAMES, nd, se_nd)},
+        covariance=cov, sigma=math.sqrt(sigma2),
+        rms_x=float(np.sqrt(np.mean(xres ** 2))),
+        rms_v=float(np.sqrt(np.mean(vres ** 2))) if vres.size else math.nan,
+        constraint_rms=float(np.sqrt(np.mean(cons ** 2))) if cons.size else 0.0,
+        phase=phase, problem=prob, solution=p, arcs_used=arcs.count,
+        impacts_used=int(np.count_nonzero(arcs.kind == 1)), samples_used=int(rec.t.size),
+        dof=int(dof), converged=bool(sol.status > 0), message=str(sol.message))

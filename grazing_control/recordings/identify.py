@@ -1,0 +1,230 @@
+"""``grazing identify BAG...``: the model's parameters from recordings (issue 16 §1).
+
+bag -> data -> fit -> report. :func:`load_recording` reads a bag's state stream
+(``oscillator/state``: position [x], velocity [v] or empty, effort [cos tau] or
+[cos tau, sin tau]; stamp = time), its impacts (``oscillator/impact``: x = v-, y = v+,
+z = phase) where recorded, its corrections (``controller/velocity_correction``, acting
+at the sample's stamp + the simulator's ``actuation_delay`` from the parameter record)
+into a :class:`grazing_control.dynamics.identification.Recording`;
+:func:`identify_bags` fits each bag (:func:`grazing_control.dynamics.identification.identify`),
+checks the fit (:mod:`grazing_control.dynamics.identification.checks`) and combines the
+bags' estimates (inverse-variance weighted means). The method is in
+docs/theory_identification.md.
+"""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+
+from grazing_control.dynamics.identification import IdentificationError, identify
+from grazing_control.dynamics.identification.checks import verdict
+from grazing_control.dynamics.identification.data import Recording, RecordingError
+from grazing_control.ros.recording.record import run_parameters
+
+from . import reader
+
+__all__ = ["TOPICS", "load_recording", "identify_bag", "identify_bags", "combine",
+           "format_report", "PARAMETER_ORDER"]
+
+#: Role -> default topic (the simulator's names in the root namespace).
+TOPICS = {
+    "state": "/oscillator/state",
+    "impact": "/oscillator/impact",
+    "correction": "/controller/velocity_correction",
+    "parameters": "/grazing/parameters",
+}
+
+#: The reported parameters: the study's (nondimensional), then the rig's.
+PARAMETER_ORDER = ("zeta", "r", "omega", "delta_d", "d", "natural_frequency",
+                   "forcing_amplitude", "forcing_phase")
+
+_NS = 1_000_000_000
+
+
+def _sim_parameters(raw, topic) -> dict:
+    """The simulator's parameters at start from the bag's parameter record (docs/analysis.md,
+    "Parameter record"); {} without one."""
+    if raw.count(topic) == 0:
+        return {}
+    nodes = run_parameters(reader.decode_strings(raw, topic))["nodes"]
+    for name, seq in nodes.items():
+        if "sim" in name and seq:
+            return dict(seq[0])
+    return {}
+
+
+def load_recording(bag, *, topics: dict | None = None, position_only: bool = False,
+                   impacts: bool = True):
+    """(Recording, notes, the simulator's parameter record) of one bag (module docstring).
+
+    Raises RecordingError (or reader.BagReadError) when the bag has no usable state stream.
+    """
+    topics = dict(TOPICS, **(topics or {}))
+    raw = reader.read_raw(bag, topics=list(topics.values()))
+    notes = list(raw.problems)
+    if raw.count(topics["state"]) == 0:
+        raise RecordingError(f"{bag}: no messages on {topics['state']} (the state stream; "
+                             "sim_node publishes it every state_period > 0)")
+    s = reader.decode_joint_stream(raw, topics["state"])
+    ok = s["ok"]
+    if not np.any(ok):
+        raise RecordingError(f"{bag}: no decodable JointState with a position on "
+                             f"{topics['state']}")
+    if np.count_nonzero(~ok):
+        notes.append(f"{np.count_nonzero(~ok)} state messages not decodable: skipped")
+    stamp = s["stamp"][ok]
+    order = np.argsort(stamp, kind="stable")
+    stamp = stamp[order]
+    if stamp.size > 1 and np.any(np.diff(stamp) <= 0):
+        # a reset (time back to 0) or repeated stamps: keep the first increasing stretch
+        cut = int(np.flatnonzero(np.diff(s["stamp"][ok]) <= 0)[0]) + 1
+        notes.append(f"the state stream's stamps stop increasing after {cut} samples "
+                     "(a simulator reset?): the first stretch is fitted")
+        stamp = s["stamp"][ok][:cut]
+        order = np.arange(cut)
+    t0 = int(stamp[0])
+    t = (stamp - t0) / _NS
+    x = s["x"][ok][order]
+    v = np.full(t.size, np.nan) if position_only else s["v"][ok][order]
+    e0, e1 = s["e0"][ok][order], s["e1"][ok][order]
+    if not np.all(np.isfinite(e0)):
+        raise RecordingError(f"{bag}: the state stream carries no phase reference in "
+                             "effort ([cos tau] or [cos tau, sin tau]) on every sample")
+    sim = _sim_parameters(raw, topics["parameters"])
+    it = vm = vp = np.zeros(0)
+    if impacts and raw.count(topics["impact"]):
+        im = reader.decode_vector3_stamped(raw, topics["impact"])
+        k = im["ok"]
+        it = (im["stamp"][k] - t0) / _NS
+        vm, vp = im["vx"][k], im["vy"][k]
+        o = np.argsort(it, kind="stable")
+        it, vm, vp = it[o], vm[o], vp[o]
+        keep = np.concatenate([[True], np.diff(it) > 0]) if it.size else np.zeros(0, bool)
+        if np.count_nonzero(~keep):
+            notes.append(f"{np.count_nonzero(~keep)} impacts with repeated stamps dropped")
+        it, vm, vp = it[keep], vm[keep], vp[keep]
+    elif impacts:
+        notes.append(f"no impacts recorded on {topics['impact']}: found in the motion")
+    corr = np.zeros(0)
+    if raw.count(topics["correction"]):
+        c = reader.decode_twist_stamped(raw, topics["correction"])
+        k = c["ok"] & (c["dv"] != 0.0)
+        delay = float(sim.get("actuation_delay", 0.0) or 0.0)
+        corr = np.unique((c["stamp"][k] - t0) / _NS + delay)
+        if str(sim.get("actuation", "")) == "on_arrival" and corr.size:
+            notes.append("corrections applied on arrival (realtime): their instants are not "
+                         "recorded; the arcs are cut at the samples' stamps")
+    rec = Recording(t, x, v, e0, e1, it, vm, vp, corr)
+    return rec, notes, sim
+
+
+def _parameters(ident) -> dict:
+    """The reported parameters: name -> {value, stderr} (:data:`PARAMETER_ORDER`)."""
+    m = ident.model
+    nd = ident.nondimensional
+    out = {name: {"value": nd[name][0], "stderr": nd[name][1]}
+           for name in ("zeta", "r", "omega", "delta_d", "d")}
+    for name in ("natural_frequency", "forcing_amplitude", "forcing_phase"):
+        out[name] = {"value": getattr(m, name), "stderr": ident.stderr[name]}
+    out["forcing_phase"]["value"] = math.remainder(m.forcing_phase, 2.0 * math.pi)
+    return {k: out[k] for k in PARAMETER_ORDER}
+
+
+def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
+                 max_arcs: int | None = 100) -> dict:
+    """The report of one bag: parameters (value, stderr), fit verdict, residuals,
+    re-simulation, counts, the parameter record (when the bag has one).
+
+    Raises IdentificationError / RecordingError / reader.BagReadError (bad input).
+    """
+    rec, notes, sim = load_recording(bag, topics=topics, position_only=position_only,
+                                     impacts=impacts)
+    ident = identify(rec, impacts="recorded" if impacts and rec.impact_t.size else "motion",
+                     max_arcs=max_arcs)
+    check = verdict(ident)
+    report = {
+        "bag": str(bag),
+        "parameters": _parameters(ident),
+        "fit": check["fit"],
+        "reasons": check["reasons"],
+        "residuals": {"sigma": ident.sigma, "rms_x": ident.rms_x,
+                      "rms_v": ident.rms_v if math.isfinite(ident.rms_v) else None,
+                      "constraint_rms": ident.constraint_rms, "dof": ident.dof,
+                      **check["whiteness"]},
+        "resimulation": check["resimulation"],
+        "phase_reference": {"omega": ident.phase.omega, "omega_stderr": ident.phase.omega_stderr,
+                            "tau0": ident.phase.tau0, "rms": ident.phase.rms,
+                            "sin": bool(np.any(np.isfinite(rec.sin_tau)))},
+        "samples": ident.samples_used, "samples_in_bag": int(rec.t.size),
+        "arcs": ident.arcs_used, "impacts": ident.impacts_used,
+        "impacts_from": "recording" if impacts and rec.impact_t.size else "motion",
+        "velocity": bool(rec.has_velocity), "converged": ident.converged,
+        "notes": notes,
+    }
+    record = {k: sim[k] for k in ("zeta", "r", "omega", "delta_d") if k in sim}
+    if record:
+        report["parameter_record"] = record
+    return report
+
+
+def combine(reports) -> dict:
+    """Inverse-variance weighted means of the bags' parameters (each parameter on its
+    own; bags whose fit is poor are left out unless all are)."""
+    use = [r for r in reports if r["fit"] == "good"] or list(reports)
+    out = {}
+    for name in PARAMETER_ORDER:
+        vals = np.array([r["parameters"][name]["value"] for r in use])
+        se = np.array([r["parameters"][name]["stderr"] for r in use])
+        w = np.where((se > 0) & np.isfinite(se), 1.0 / np.where(se > 0, se, 1.0) ** 2, 0.0)
+        if len(use) == 1 or not np.any(w > 0):
+            out[name] = dict(use[0]["parameters"][name])
+        else:
+            out[name] = {"value": float(w @ vals / w.sum()), "stderr": float(w.sum() ** -0.5)}
+    return out
+
+
+def identify_bags(bags, **kwargs) -> dict:
+    """Every bag's report, their combination and the overall verdict (the JSON of
+    ``grazing identify``)."""
+    reports = [identify_bag(b, **kwargs) for b in bags]
+    fit = "good" if all(r["fit"] == "good" for r in reports) else "poor"
+    if len(reports) == 1:
+        return dict(reports[0], bags=[reports[0]["bag"]])
+    return {"parameters": combine(reports), "fit": fit,
+            "reasons": [f"{r['bag']}: {why}" for r in reports for why in r["reasons"]],
+            "bags": [r["bag"] for r in reports], "per_bag": reports}
+
+
+def _fmt(name, entry):
+    """One line of the text report: value and standard error."""
+    v, s = entry["value"], entry["stderr"]
+    s_text = "not identified" if not math.isfinite(s) else f"+- {s:.2g}"
+    return f"  {name:18s} = {v:.12g}  {s_text}"
+
+
+def format_report(result: dict) -> str:
+    """The human-readable report."""
+    lines = [f"identification of {', '.join(result['bags'])}: fit {result['fit'].upper()}"]
+    lines += [_fmt(n, result["parameters"][n]) for n in PARAMETER_ORDER]
+    lines.append("  (zeta, r, omega, delta_d, d: the study's nondimensional model; "
+                 "natural_frequency, forcing_amplitude, forcing_phase: the rig's units)")
+    for rep in result.get("per_bag", [result]):
+        res, sim = rep["residuals"], rep["resimulation"]
+        lines.append(f"  {rep['bag']}: {rep['samples']} samples, {rep['arcs']} arcs, "
+                     f"{rep['impacts']} impacts ({rep['impacts_from']}); noise sigma "
+                     f"{res['sigma']:.3g}, residual lag-1 autocorrelation "
+                     f"{res['lag1_autocorrelation']:.3f} ({res['z']:.1f} sigma); one-period "
+                     f"re-simulation RMS {sim['rms']:.3g} ({sim['ratio_to_noise']:.3g} x noise)")
+        if "parameter_record" in rep:
+            rec = rep["parameter_record"]
+            lines.append("    its parameter record: " + ", ".join(f"{k} = {v:.12g}"
+                                                             for k, v in rec.items()))
+        lines += [f"    note: {n}" for n in rep["notes"]]
+    lines += [f"  poor fit: {why}" for why in result["reasons"]]
+    return "\n".join(lines)
+
+
+def bad_input_types():
+    """The exceptions that mean bad input (exit status 2)."""
+    return (IdentificationError, RecordingError, reader.BagReadError, FileNotFoundError)

@@ -1,0 +1,57 @@
+"""Which scene a node belongs to: a token shared by the nodes of one scene.
+
+Two scenes forced onto one ROS domain and namespace (``grazing run --domain-id``) see each
+other's topics. The simulator's start condition "a controller is matched" was then met
+by the *other* scene's controller while its own was still starting: it started, and lost
+the answers to its first samples (measured 2 of 25 forced pairs, docs/nodes.md). With a
+token (parameter ``scene``, set by ``grazing run`` to the same random value on every node
+it starts), each node's parameter record (``grazing/parameters``, transient local)
+names its scene: the simulator starts only once the record of a controller of its own
+scene has arrived, and a record of another scene is an intruder (the scene is not
+isolated: refused, as for two simulators on one topic). An empty token (``ros2 run``)
+checks nothing.
+"""
+
+from __future__ import annotations
+
+from std_msgs.msg import String
+
+from grazing_control.ros.recording.record import TOPIC, decode
+
+from .common import LATCHED_QOS
+
+__all__ = ["SceneGuard", "SCENE_PARAMETER_DOC"]
+
+SCENE_PARAMETER_DOC = ("token naming this scene (grazing run sets one): the simulator "
+                       "starts with a controller of the same scene only, and a node of "
+                       "another scene on the domain stops the scene; '' = no check")
+
+
+class SceneGuard:
+    """Reads the parameter records of the domain and sorts them by scene token."""
+
+    def __init__(self, node, token: str):
+        self.token = token
+        self.own_controller = False
+        self.foreign = set()                # "node (scene token)" of other scenes
+        if token:
+            node.create_subscription(String, TOPIC, self._on_record, LATCHED_QOS)
+
+    def _on_record(self, msg) -> None:
+        try:
+            name, params = decode(msg.data)
+        except ValueError:
+            return
+        other = params.get("scene")
+        if not isinstance(other, str) or not other:
+            return
+        if other != self.token:
+            self.foreign.add(f"{name} (scene {other})")
+        elif name.rsplit("/", 1)[-1] == "controller_node":
+            self.own_controller = True
+
+    def intruders(self) -> list:
+        """One line per node of another scene seen on the domain."""
+        if not self.foreign:
+            return []
+        return [f"node(s) of another scene on this domain: {', '.join(sorted(self.foreign))}"]
