@@ -270,7 +270,7 @@ def test_a_delayed_design_is_analysed_with_its_delay(tmp_path):
     assert s["model_check"]["max_departure"] < 1e-12
 
 
-def _stream_bag(tmp_path, estimator, periods=700, sigma=1e-4, seed=2):
+def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2):
     """A bag of the core's closed loop on a position-only stream: the ground truth on
     oscillator/pi2, the corrections, the estimates with their covariance."""
     from bagtools_helpers import TYPESTORE, twist_stamped
@@ -281,7 +281,8 @@ def _stream_bag(tmp_path, estimator, periods=700, sigma=1e-4, seed=2):
     g = Gains(degenerate_c1(p, -0.3), -0.3)
     z = orbit_11(p, g).pi2_deviation
     run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=seed).measure,
-                          periods, 200, estimator=estimator, sigma=sigma, deviation=z)
+                          periods, 200, estimator=estimator, sigma=sigma, deviation=z,
+                          impact_source="topic")
     JointState = TYPESTORE.types["sensor_msgs/msg/JointState"]
     msgs = []
     for k in range(periods):

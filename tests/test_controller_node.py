@@ -429,7 +429,8 @@ def test_stream_mode_estimates_each_section_as_the_core_does(stream_scene):
     assert np.all(miss < 5 * sd[6:] + 1e-12), (miss, sd[6:])
     proc.send_signal(2)
     assert proc.wait(10) == 0
-    assert "Traceback" not in log.read_text()
+    text = log.read_text()
+    assert "Traceback" not in text and "phase_mismatch=0" in text, text
 
 
 def test_the_predicted_correction_is_the_next_one_on_exact_samples(stream_scene):
@@ -493,3 +494,5 @@ def test_a_malformed_stream_never_stops_the_answers(stream_scene):
     assert proc.wait(10) == 0
     text = log.read_text()
     assert "answered=4" in text and "malformed=" in text and "Traceback" not in text, text
+    # its effort [cos t, sin t] is not the phase tau2 + omega t: counted, not fatal
+    assert "phase_mismatch=37" in text and "stream_ignored=6" in text, text   # 31 + 6 dup.

@@ -176,7 +176,7 @@ def test_the_design_covariance_is_the_closed_form_and_the_least_squares_formula(
                           np.eye(2))
     # arc: brute force the information of the samples after the orbit's impact
     z = orbit_11(P, g).pi2_deviation
-    s = np.arange(1, 101) * h
+    s = np.arange(1, 100) * h          # the samples strictly between two sections
     imp = trajectory(P, z, s, g.c1 * z[0] + g.c2 * z[1])[4][0][0]
     rows = np.array([expm(np.array([[0, 1], [-1, -2 * P.zeta]]) * (t - P.period))[0]
                      for t in s if t > imp])

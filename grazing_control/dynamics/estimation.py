@@ -366,7 +366,7 @@ def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str
 
         target = orbit_11(p, gains).pi2_deviation
     dv = gains.c1 * target[0] + gains.c2 * target[1]
-    s = np.arange(1, int(rate) + 1) * h
+    s = np.arange(1, int(rate)) * h        # the samples strictly between the sections
     _pred, jac, _end, mono, imps = trajectory(p, target, s, dv, gains.delay)
     if estimator == "arc":
         after = s > (imps[-1][0] if imps else -math.inf)

@@ -270,19 +270,22 @@ class StreamRun:
 def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, rate: int, *,
                     estimator: str = "model", sigma: float = 1e-4,
                     impact_source: str = "stream", deviation=(0.0, 0.0),
-                    control_after: int = 0, floor: float = 1e-2) -> StreamRun:
+                    control_after: int = 0, floor: float = 1e-2,
+                    model: OscillatorParams | None = None) -> StreamRun:
     """The closed loop on a sensor stream: exact plant (:func:`trajectory`), samples at
     t_j = j T / ``rate`` measured by ``measure(j0, x, v) -> (x~, v~)`` (a
     :class:`grazing_control.plant.sensor.SensorModel`'s ``measure``), the estimator of
     :class:`StreamEstimator`, and Eq. 28 on the estimate from section ``control_after``
-    on, applied ``gains.delay`` after the section.
+    on, applied ``gains.delay`` after the section. ``model``: the estimator's model of
+    the plant when it is not ``p`` (a model error); default ``p``.
     """
     if int(rate) != rate or rate < 2:
         raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
                              "samples per period")
     T = p.period
     h = T / rate
-    est = StreamEstimator(p, estimator, sigma, impact_source, h, floor)
+    est = StreamEstimator(p if model is None else model, estimator, sigma, impact_source,
+                          h, floor)
     z = (float(deviation[0]), float(deviation[1]))
     truth = np.empty((periods, 2))
     zhat = np.empty((periods, 2))

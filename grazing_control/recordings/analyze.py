@@ -177,8 +177,9 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     Each estimate (stamped with its section) is matched to the recorded Pi2 sample of the
     same stamp in the scene's log-time span. Error e = estimate - truth; normalised
     errors e_x / sqrt(var x), e_v / sqrt(var v) (unit std if the covariance is right) and
-    chi^2 = e^T P^-1 e (mean 2); coverage of the 95 % ellipse. Over the last
-    :data:`SPREAD_WINDOW` samples: the measured Pi2 spread (std of x about the exact
+    chi^2 = e^T P^-1 e (mean 2); coverage of the 95 % ellipse; all over the last
+    :data:`SPREAD_WINDOW` samples (at most half of those since control is on): the
+    measured Pi2 spread (std of x about the exact
     controlled orbit) and the spread predicted from the reported covariance by the loop
     linearised about that orbit (:func:`grazing_control.dynamics.noise.noise_covariance`
     with the mean reported covariance as the measurement covariance; errors correlated
@@ -204,7 +205,11 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     good = np.all(np.isfinite(cov.reshape(-1, 4)), axis=1) & (np.linalg.det(
         np.where(np.isfinite(cov), cov, 1.0)) > 0) & np.all(np.isfinite(e), axis=1)
     out = {"estimates": int(sel.size), "with_covariance": int(good.sum())}
-    last = k >= sd.scene.pi2.shape[0] - SPREAD_WINDOW
+    n_all = sd.scene.pi2.shape[0]
+    on = np.flatnonzero(sd.scene.correction != 0.0)
+    window = SPREAD_WINDOW if on.size == 0 else min(SPREAD_WINDOW, (n_all - on[0]) // 2)
+    window = max(window, 1)
+    last = k >= n_all - window
     use = good & last
     if not np.any(use):
         return out
@@ -229,7 +234,7 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     try:
         gains = Gains(g.c1, g.c2, setup.actuation_delay)
         z = orbit_11(p, gains).pi2_deviation
-        x = sd.scene.pi2[-SPREAD_WINDOW:, 0]
+        x = sd.scene.pi2[-window:, 0]
         out["measured_spread"] = float(np.sqrt(np.mean((x - p.x_ref - z[0]) ** 2)))
         pred = noise_covariance(p, gains, cu.mean(axis=0), z)
         out["predicted_spread"] = float(math.sqrt(max(pred[0, 0], 0.0)))

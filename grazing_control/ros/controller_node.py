@@ -378,6 +378,7 @@ class ControllerNode(Node):
         self.malformed = Throttled(log, "malformed sample ignored")
         self.stale = Throttled(log, "stale sample not answered")
         self.nonfinite = Throttled(log, "non-finite correction not published")
+        self.phase_mismatch = Throttled(log, "stream phase reference off")
         self.answered = 0
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
@@ -476,12 +477,14 @@ class ControllerNode(Node):
                 return
             v = msg.velocity[0] if len(msg.velocity) else math.nan
             sample = stamp_key(msg.header.stamp) + (msg.position[0], v, tuple(msg.effort))
-        sec, ns, x, v, _effort = sample
+        sec, ns, x, v, effort = sample
         if not math.isfinite(x) or math.isinf(v):
             self.malformed(f"stamp {(sec, ns)}: x={x!r} v={v!r}")
             return
+        t = sec + ns * 1e-9
+        self._check_phase(t, effort)
         try:
-            due = self.stream.add_sample(sec + ns * 1e-9, x, v)
+            due = self.stream.add_sample(t, x, v)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.malformed(f"stamp {(sec, ns)}: the estimator failed: {exc}")
             return
@@ -497,6 +500,20 @@ class ControllerNode(Node):
                 continue
             dv = self._answer(key, xh, vh)
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
+
+    def _check_phase(self, t: float, effort) -> None:
+        """The shaker's phase reference (effort [cos tau, sin tau] or [cos tau]) against the
+        phase the sections assume, tau2 + omega t: a rig whose reference disagrees by more
+        than 1e-6 is counted and logged (``phase_mismatch``); the estimate goes on."""
+        if not effort:
+            return
+        tau = self.model.tau2 + self.model.omega * t
+        want = (math.cos(tau), math.sin(tau))
+        err = max(abs(e - w) for e, w in zip(effort[:2], want))
+        if not err <= 1e-6:
+            self.phase_mismatch(f"t={t!r}: the stream's phase reference {tuple(effort[:2])} "
+                                f"differs by {err:.3g} from tau2 + omega t (sections at "
+                                "t_k = k T)")
 
     def _on_impact(self, msg) -> None:
         """An impact from the rig's impact sensor (impact_source topic): its time."""
@@ -558,7 +575,10 @@ class ControllerNode(Node):
             f"summary: answered={self.answered} controlled_from_sample="
             f"{self.law.enable_after} malformed={self.malformed.count} "
             f"stale={self.stale.count} out_of_order={self.law.out_of_order} "
-            f"nonfinite={self.nonfinite.count}")
+            f"nonfinite={self.nonfinite.count}"
+            + ("" if self.stream is None else
+               f" phase_mismatch={self.phase_mismatch.count} stream_ignored="
+               f"{self.stream.ignored} model_resets={self.stream.resets}"))
 
 
 def main(args=None) -> int:
