@@ -205,6 +205,55 @@ def test_parse_message_data_reads_the_specified_layout():
         parse_message_data(bytes([2]) + frame[1:])
 
 
+def _paths(node):
+    """Every message path (``/topic.field...``) in a layout's panel configs."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            if key == "value" and isinstance(value, str) and value.startswith("/"):
+                yield value
+            else:
+                yield from _paths(value)
+    elif isinstance(node, list):
+        for value in node:
+            yield from _paths(value)
+
+
+def test_the_shipped_layout_plots_fields_that_exist_on_the_channels_the_node_serves():
+    """config/live_layout.json: every panel in the layout tree has a config, and every
+    message path names a forwarded topic and a numeric field of its message type."""
+    import json
+
+    from grazing_control.ros.recorder_node import _message_class
+
+    layout = json.loads((ROOT / "config" / "live_layout.json").read_text())
+    panels = set()
+    stack = [layout["layout"]]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, str):
+            panels.add(node)
+        else:
+            stack += [node["first"], node["second"]]
+    assert panels == set(layout["configById"])
+    poincare = layout["configById"]["Plot!poincare"]
+    assert poincare["xAxisVal"] == "custom"
+    assert poincare["xAxisPath"]["value"] == "/oscillator/pi2.position[0]"
+    assert [p["value"] for p in poincare["paths"]] == ["/oscillator/pi2.velocity[0]"]
+    paths = list(_paths(layout))
+    assert len(paths) >= 8
+    for path in paths:
+        topic, _, field = path.partition(".")
+        assert topic.lstrip("/") in LIVE_TOPICS, path
+        value = _message_class(LIVE_TOPICS[topic.lstrip("/")])()
+        for part in field.split("."):
+            name, _, index = part.partition("[")
+            value = getattr(value, name)
+            if index:                  # a float64[] field (array('d')): an element is a float
+                assert getattr(value, "typecode", None) == "d", path
+                value = 0.0
+        assert isinstance(value, float), path
+
+
 # --------------------------------------------------------------------- a real scene
 def _bag_messages(bag_dir):
     """{topic: {payload bytes}} of a recorded bag (the MCAP file's raw messages)."""

@@ -62,6 +62,7 @@ Run: ``ros2 run grazing_control live_node --ros-args -p port:=8765``, or
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 
@@ -95,6 +96,8 @@ DEFAULT_DEPTH = 10
 MAX_DEPTH = 10_000
 DEFAULT_BACKLOG = 1024
 MAX_BACKLOG = 1_000_000
+DEFAULT_NICENESS = 19
+MAX_NICENESS = 19
 
 # Most messages of one topic forwarded in one callback (keeps topics interleaved).
 _BATCH = 64
@@ -135,7 +138,9 @@ class LiveNode(Node):
     def __init__(self, **kwargs):
         super().__init__("live_node", **kwargs)
         self._declare_parameters()
-        port, host, topics, depth, backlog = self._read_parameters()
+        port, host, topics, depth, backlog, niceness = self._read_parameters()
+        if niceness:        # this process and the server's threads, started below
+            os.nice(niceness)
         import foxglove
 
         self._context = foxglove.Context()
@@ -184,11 +189,14 @@ class LiveNode(Node):
         self.declare_parameter("backlog", DEFAULT_BACKLOG, int_descriptor(
             f"messages queued per WebSocket client before the oldest is dropped, "
             f"1..{MAX_BACKLOG}", 1, MAX_BACKLOG, read_only=True))
+        self.declare_parameter("niceness", DEFAULT_NICENESS, int_descriptor(
+            f"added to the process's nice value, 0..{MAX_NICENESS}: the view yields the "
+            "CPU to the scene's nodes", 0, MAX_NICENESS, read_only=True))
 
     def _read_parameters(self):
         values = {}
         for name, lo, hi in (("port", 0, MAX_PORT), ("depth", 1, MAX_DEPTH),
-                             ("backlog", 1, MAX_BACKLOG)):
+                             ("backlog", 1, MAX_BACKLOG), ("niceness", 0, MAX_NICENESS)):
             value = self.get_parameter(name).value
             if not lo <= value <= hi:       # the descriptor's range, for a direct caller
                 raise ParameterError(f"{name}={value!r} is invalid: valid range is "
@@ -209,7 +217,8 @@ class LiveNode(Node):
             except (ImportError, AttributeError, LookupError, ValueError):
                 raise ParameterError(f"topics: message type {kind!r} is not installed "
                                      "(no Python module or no .msg file)") from None
-        return values["port"], host, topics, values["depth"], values["backlog"]
+        return (values["port"], host, topics, values["depth"], values["backlog"],
+                values["niceness"])
 
     def _on_message(self, topic, data, info):
         """Forward a message, then those already queued behind it (one wake-up, a batch)."""
