@@ -312,9 +312,10 @@ def _scene_lines(label, numbers, fig_name):
                      f"recorded sample and correction departs from the next recorded sample by "
                      f"at most {_fmt(mc['max_departure'], '.2e')} ({mc['periods_above_1e-12']} "
                      f"of {mc['periods']} periods above 1e-12"
-                     + (f"; the {mc['dropped_at_deadline_misses']} corrections dropped at "
-                        "deadline misses re-integrated as 0" if mc.get("dropped_at_deadline_misses")
-                        else "")
+                     + (f"; the {mc['dropped_at_deadline_misses']} answers missed at "
+                        "deadline misses re-integrated as what acted instead ("
+                        f"{mc.get('predictions_substituted', 0)} predictions, 0 otherwise)"
+                        if mc.get("dropped_at_deadline_misses") else "")
                      + (f"; checked only the first {mc['periods']} of "
                         f"{mc['periods_in_scene']} periods" if mc.get("periods_in_scene", 0)
                         > mc["periods"] else "") + ")")

@@ -352,11 +352,18 @@ def _fitted_map(dev: np.ndarray, k: np.ndarray):
 
 
 def applied_corrections(sd) -> np.ndarray:
-    """The corrections that acted: the recorded ones, 0 where the simulator reported a
-    deadline miss for the sample (the answer came too late and was dropped)."""
+    """The corrections that acted: the recorded answers, except where the simulator
+    reported a deadline miss for the sample (the answer came too late): there the
+    prediction it applied instead (``oscillator/substituted``, on_miss predict), else 0
+    (on_miss drop). A prediction recorded for a lost answer acts too."""
     dv = np.array(sd.scene.correction, dtype=float)
     if sd.missed_stamp_ns.size:
         dv[np.isin(sd.stamp_ns, sd.missed_stamp_ns)] = 0.0
+    if sd.substituted:
+        index = {s: k for k, s in enumerate(sd.stamp_ns.tolist())}
+        for stamp, value in sd.substituted.items():
+            if stamp in index:
+                dv[index[stamp]] = value
     return dv
 
 
@@ -485,7 +492,8 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
                               "periods": int(dep.size),
                               "periods_in_scene": max(len(scene.t) - 1, 0),
                               "periods_above_1e-12": int(np.count_nonzero(dep > 1e-12)),
-                              "dropped_at_deadline_misses": int(sd.missed_stamp_ns.size)}
+                              "dropped_at_deadline_misses": int(sd.missed_stamp_ns.size),
+                              "predictions_substituted": len(sd.substituted)}
         out["_departures"] = dep
     out["realtime"] = realtime_numbers(sd, setup) if setup.mode == "realtime" else None
     dc = (out["realtime"] or {}).get("delay_check")

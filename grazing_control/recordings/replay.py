@@ -430,14 +430,16 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                   wait_for_controller=True, wait_for_subscribers=0,
                   answer_timeout=float(answer_timeout))
     dv_of = dict(zip(sd.stamp_ns.tolist(), sd.scene.correction.tolist()))
-    # a correction the simulator dropped at a deadline miss did not act: replay it as 0
+    # a correction the simulator dropped at a deadline miss did not act: replay what did,
+    # the prediction it substituted (on_miss predict) or 0 (on_miss drop)
+    from .numbers import applied_corrections
     dropped = set(sd.missed_stamp_ns.tolist())
-    replayed_as_zero = sum(1 for k in dropped if dv_of.get(k, 0.0) != 0.0)
-    for k in dropped:
-        dv_of[k] = 0.0
-    if dropped:
-        notes.append(f"{len(dropped)} samples had a deadline miss: their recorded corrections "
-                     f"({replayed_as_zero} non-zero) did not act and are replayed as 0")
+    applied = applied_corrections(sd)
+    dv_of = dict(zip(sd.stamp_ns.tolist(), applied.tolist()))
+    if dropped or sd.substituted:
+        notes.append(f"{len(dropped)} samples had a deadline miss: their recorded answers did "
+                     f"not act; replayed are the {len(sd.substituted)} predictions the "
+                     "simulator substituted (oscillator/substituted) and 0 for the rest")
     out = Path(out)
     writer = _bag_writer(out)
     domain_id, lock = _claim(domain_id)
@@ -501,7 +503,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
         if setup.mode == "realtime" and (setup.actuation_delay or 0.0) > 0.0:
             why = ("scheduled actuation: the simulator applied each correction "
                    f"{setup.actuation_delay:g} after its sample, as this replay does, and the "
-                   f"{len(dropped)} dropped at deadline misses are replayed as 0; a departure "
+                   f"{len(dropped)} missed answers are replayed as what acted; a departure "
                    "here is not explained by the timing of the corrections: check the model "
                    "parameters and the simulator's fidelity")
         elif setup.mode == "realtime":

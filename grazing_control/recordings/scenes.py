@@ -32,6 +32,7 @@ DEFAULT_TOPICS = {
     "state": "/oscillator/state",
     "latency": "/oscillator/latency",
     "deadline_miss": "/oscillator/deadline_miss",
+    "substituted": "/oscillator/substituted",
     "parameters": "/grazing/parameters",
 }
 
@@ -44,6 +45,7 @@ EXPECTED_TYPES = {
     "state": "sensor_msgs/msg/JointState",
     "latency": "std_msgs/msg/Float64",
     "deadline_miss": None,
+    "substituted": "geometry_msgs/msg/TwistStamped",
     "parameters": "std_msgs/msg/String",
 }
 
@@ -98,6 +100,9 @@ class SceneData:
     #: stamps (int64 ns) of the samples whose correction the simulator did not apply
     #: (its deadline-miss messages; the correction arrived too late or never)
     missed_stamp_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: stamp (int64 ns) -> the predicted correction the simulator applied in place of a
+    #: missing answer (``oscillator/substituted``, on_miss predict)
+    substituted: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -158,7 +163,8 @@ def load(bag, topics: dict | None = None) -> BagData:
     extra = sorted(t for t in raw.channels if t not in known)
     if extra:
         notes.append(f"other topics not used by the analysis: {', '.join(extra)}")
-    missing = [f"{topics[r]} ({r})" for r in topics if r not in present and r != "deadline_miss"]
+    missing = [f"{topics[r]} ({r})" for r in topics if r not in present
+               and r not in ("deadline_miss", "substituted")]
     if missing:
         notes.append(f"absent: {', '.join(missing)}")
     if "pi2" not in present:
@@ -240,6 +246,12 @@ def load(bag, topics: dict | None = None) -> BagData:
     if "latency" in present:
         lat = reader.decode_float64(raw, present["latency"])
         lat["scene"] = _scene_index(starts_log, lat["log_time"])
+    sub = None
+    if "substituted" in present:        # the predictions that acted at misses (on_miss)
+        sub = reader.decode_twist_stamped(raw, present["substituted"])
+        ok = sub["ok"] & np.isfinite(sub["dv"])
+        sub = {"stamp": sub["stamp"][ok], "dv": sub["dv"][ok],
+               "scene": _scene_index(starts_log, sub["log_time"][ok])}
     dl_scene = dl_stamp = None
     if "deadline_miss" in present:
         dl = reader.decode_vector3_stamped(raw, present["deadline_miss"])
@@ -286,6 +298,9 @@ def load(bag, topics: dict | None = None) -> BagData:
             sd.deadline_misses = int(np.count_nonzero(dl_scene == i))
             missed = dl_stamp[(dl_scene == i) & (dl_stamp >= 0)]
             sd.missed_stamp_ns = np.unique(missed[np.isin(missed, st)])
+        if sub is not None:
+            m = sub["scene"] == i
+            sd.substituted = dict(zip(sub["stamp"][m].tolist(), sub["dv"][m].tolist()))
         scenes.append(sd)
     if len(scenes) > 1:
         notes.append(f"{len(scenes)} scenes (the simulator was reset {len(scenes) - 1} times)")

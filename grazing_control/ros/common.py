@@ -35,7 +35,7 @@ from rclpy._rclpy_pybind11 import RCLError
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -463,7 +463,11 @@ def check_overrides(node, arguments: NodeArguments) -> None:
             f"unknown parameter {', '.join(unknown)} for {node.get_name()}: valid names "
             f"are {', '.join(declared)}")
     for name, text in arguments.params.items():
-        problem = _override_problem(node.get_parameter(name), text)
+        try:
+            param = node.get_parameter(name)
+        except ParameterUninitializedException:     # -p name:=[] (no type): the node's own
+            continue                                # check says what is wrong
+        problem = _override_problem(param, text)
         if problem:
             raise StartupError(f"{name}:={text} is invalid: {problem}")
     full = node.get_fully_qualified_name()

@@ -132,6 +132,7 @@ DEFAULT_TOPICS = {
     "controller/velocity_correction": "geometry_msgs/msg/TwistStamped",
     "/clock": "rosgraph_msgs/msg/Clock",
     "oscillator/deadline_miss": "geometry_msgs/msg/Vector3Stamped",
+    "oscillator/substituted": "geometry_msgs/msg/TwistStamped",
 }
 
 #: The nodes' parameter record (grazing_control.ros.recording.record), recorded by default too;
