@@ -19,7 +19,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.py'))),
-        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -35,6 +35,7 @@ setup(
             'sim_node = sim_node.sim_node:main',
             'controller_node = grazing_control.ros.controller_node:main',
             'recorder_node = grazing_control.ros.recorder_node:main',
+            'live_node = grazing_control.ros.live_node:main',
         ],
     },
 )

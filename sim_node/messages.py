@@ -73,5 +73,8 @@ class Outputs:
                     f"{waited * 1e3:.3f} ms after the sample went out")
         self.node.pub_miss.publish(cdr.vector3_stamped(*key, float(k), t, waited))
 
+    def substituted(self, k: int, key: tuple, dv: float) -> None:
+        self.node.pub_substituted.publish(cdr.twist_stamped(*key, dv))
+
     def finish(self) -> None:
         self.node.finish()

@@ -19,7 +19,8 @@ before its correction, the ground truth), ``oscillator/impact`` (geometry_msgs/
 Vector3Stamped: v-, v+, phase), ``oscillator/latency`` (std_msgs/Float64, realtime: wall
 seconds from a sample to its answer), ``oscillator/deadline_miss`` (Vector3Stamped: k,
 the missed actuation time, the wall seconds waited), ``/clock``, ``oscillator/done``
-(std_msgs/Bool, transient local); stamps are simulation time. Subscribed:
+(std_msgs/Bool, transient local), ``oscillator/substituted`` (TwistStamped: the
+prediction that acted for a sample whose answer was missing); stamps are simulation time. Subscribed:
 ``controller/velocity_correction`` (geometry_msgs/TwistStamped: twist.linear.x = Delta v,
 twist.linear.y = the Delta v it predicts for the next sample or NaN, stamp = the Pi2
 sample's it answers). Service ``~/reset`` (std_srvs/Trigger): back to t = 0.
@@ -141,6 +142,7 @@ class SimNode(Node):
              (JointState, "oscillator/state"), (Vector3Stamped, "oscillator/impact"),
              (JointState, "oscillator/pi1"), (JointState, "oscillator/pi2"), (Clock, "/clock"),
              (Float64, "oscillator/latency"), (Vector3Stamped, "oscillator/deadline_miss")))
+        self.pub_substituted = publisher(TwistStamped, "oscillator/substituted")
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
         self.sub_correction = self.create_subscription(
             TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS,
@@ -340,7 +342,8 @@ class SimNode(Node):
         if self.exit_now:
             end = time.monotonic() + ACK_TIMEOUT
             for pub in (self.pub_pi2, self.pub_state, self.pub_impact, self.pub_pi1,
-                        self.pub_clock, self.pub_latency, self.pub_miss, self.pub_done):
+                        self.pub_clock, self.pub_latency, self.pub_miss,
+                        self.pub_substituted, self.pub_done):
                 left = max(0.0, end - time.monotonic())
                 if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
                     self.get_logger().warning(

@@ -230,3 +230,19 @@ def test_constraints_hold_at_the_solution():
     res = identify(rig_recording(noise=1e-4, seed=5))
     assert res.constraint_rms < 1e-9
     assert isinstance(res.problem, Problem)
+
+
+def test_correction_instants_are_fitted_and_moved_across_samples():
+    """Corrections given one sample interval late (an on-arrival instant guessed wrong):
+    the fitted instants stop at their bounds, move to the interval before, and the model
+    comes back to 1e-8."""
+    rec = rig_recording(gains=GAINS, control_after=8)
+    h = rec.t[1] - rec.t[0]
+    rec = rec.without_samples(rec.near(rec.corrections, 1e-9))   # Pi2 falls on a sample
+    late = Recording(rec.t, rec.x, rec.v, rec.cos_tau, rec.sin_tau, rec.impact_t,
+                     rec.impact_v_minus, rec.impact_v_plus, rec.corrections + 1.5 * h)
+    res = identify(late)
+    assert res.events_moved >= rec.corrections.size
+    assert max(_relative_errors(res).values()) <= 1e-8
+    starts = res.problem.unpack(res.solution)[1][res.problem.arcs.kind == 2]
+    assert np.max(np.abs(np.sort(starts) - rec.corrections)) < 1e-9

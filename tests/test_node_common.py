@@ -166,3 +166,23 @@ def test_a_signal_during_a_realtime_scene_ends_it_quietly(signum):
                 proc.kill()
         assert proc.returncode == 0, out
         assert "(interrupted)" in out and "FATAL" not in out and "Error occurred" not in out, out
+
+
+def test_security_enforced_without_the_plugins_is_refused(tmp_path):
+    """SROS2 (docs/nodes.md, 'Who may talk to a scene'): the wheels' Fast DDS has no
+    security plugins, so a node asked to enforce security refuses to start with one line
+    and status 2, instead of running unsecured or with a traceback. If a future wheel
+    carries the plugins, this fails: then test that an enclave-less participant cannot
+    reach a secured scene."""
+    import os
+
+    (tmp_path / "enclaves" / "grazing" / "controller_node").mkdir(parents=True)
+    env = dict(launcher.node_env(new_domain()), ROS_SECURITY_KEYSTORE=str(tmp_path),
+               ROS_SECURITY_ENABLE="true", ROS_SECURITY_STRATEGY="Enforce")
+    cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER], {}) + [
+        "--enclave", "/grazing/controller_node"]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=60)
+    out = done.stdout + done.stderr
+    assert done.returncode == 2, out
+    assert "doesn't have the security libraries" in out and "Traceback" not in out, out
+    assert os.path.isdir(tmp_path / "enclaves")

@@ -37,6 +37,7 @@ class Recorder:
 
     def __init__(self):
         self.events, self.misses, self.latencies = [], [], []
+        self.substitutions = []
         self.counts = {"ignored": 0, "late": 0, "timeout": 0, "warn": 0}
         self.finished = 0
 
@@ -52,6 +53,9 @@ class Recorder:
 
     def miss(self, k, key, t, waited):
         self.misses.append((k, key, t, waited))
+
+    def substituted(self, k, key, dv):
+        self.substitutions.append((k, key, dv))
 
     def ignored(self, text):
         self.counts["ignored"] += 1
@@ -415,6 +419,8 @@ def test_realtime_misses_apply_the_previous_answers_prediction():
     loop = run_realtime(s, n, answer, clock, sink)
     assert [m[0] for m in sink.misses] == sorted(skip)
     assert loop.stats["predicted"] == len(skip) - 1       # all but the last of the run
+    assert [k for k, _, _ in sink.substitutions] == sorted(skip)[:-1]
+    assert all(key_ == key(sink.samples()[k]) for k, key_, _ in sink.substitutions)
     # the core: each miss gets the prediction of the last answer before it
     dx = dv = 0.0
     samples = sink.samples()
@@ -425,6 +431,46 @@ def test_realtime_misses_apply_the_previous_answers_prediction():
         elif k in skip:
             last = max(j for j in range(k) if j not in skip)
             dvc = ctl(samples[last].x, samples[last].v)[1]
+        else:
+            dvc = ctl(ev.x, ev.v)[0]
+        seg = period_step(P, dx, dv, dvc, delay=delay)
+        dx, dv = seg.dx, seg.dv
+
+
+def test_realtime_a_late_answers_prediction_serves_the_next_sample():
+    """Sample 240's answer comes after its deadline (dropped as late) and 241's never:
+    240 gets 239's prediction, 241 gets the late answer's own prediction (made for it)."""
+    n, on, delay, c2 = 260, 60, 5.0, -1.0
+    c1 = degenerate_c1(P, c2, delay)
+    ctl = predicting_controller(c1, c2, delay)
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=n,
+                 state_period=0.0)
+    clock, sink = Clock(), Recorder()
+    held = []
+
+    def answer(loop, ev):
+        k = round(ev.t / P.period)
+        if k == 241:
+            prev = held.pop()
+            loop.answer(key(prev), *ctl(prev.x, prev.v))        # 240's, late
+            return                                             # 241: never answered
+        if k == 240:
+            held.append(ev)
+            return
+        clock.now += 1e-3
+        loop.answer(key(ev), *(ctl(ev.x, ev.v) if k >= on else (0.0, math.nan)))
+
+    loop = run_realtime(s, n, answer, clock, sink)
+    assert [m[0] for m in sink.misses] == [240, 241] and loop.stats["late"] == 1
+    assert loop.stats["predicted"] == 2
+    samples = sink.samples()
+    dx = dv = 0.0
+    for k, ev in enumerate(samples):
+        assert (ev.x, ev.v) == (P.x_ref + dx, P.v_ref + dv), k
+        if k < on:
+            dvc = 0.0
+        elif k in (240, 241):
+            dvc = ctl(samples[k - 1].x, samples[k - 1].v)[1]
         else:
             dvc = ctl(ev.x, ev.v)[0]
         seg = period_step(P, dx, dv, dvc, delay=delay)

@@ -60,3 +60,30 @@ def test_refusals_are_warnings(monkeypatch):
     assert "CAP_SYS_NICE" in r.warnings[0]
     assert "cpu_affinity=[0, 1] not applied" in r.warnings[1]
     assert "lock_memory not applied" in r.warnings[2] and "CAP_IPC_LOCK" in r.warnings[2]
+
+
+def test_the_controller_node_takes_the_scheduling_parameters():
+    """controller_node as sim_node: the three options applied (root here) or each refused
+    with a warning naming it; a malformed one is one line, status 2."""
+    import subprocess
+
+    from grazing_control.ros import launcher
+    from test_closed_loop import CONTROLLER, new_domain
+
+    cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER], {
+        "thread_priority": 20, "lock_memory": True, "cpu_affinity": "0"})
+    proc = subprocess.Popen(cmd, env=launcher.node_env(new_domain()), text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        first = proc.stdout.readline()
+    finally:
+        launcher.stop_nodes([proc])
+    out = first + proc.stdout.read()
+    assert ("real-time scheduling: SCHED_FIFO priority 20" in out
+            or "thread_priority=20 not applied" in out), out
+    assert "Traceback" not in out
+    bad = subprocess.run(launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER],
+                                               {"thread_priority": 120}),
+                         env=launcher.node_env(new_domain()), capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2 and "thread_priority" in bad.stdout + bad.stderr

@@ -23,7 +23,7 @@ from std_srvs.srv import Trigger
 
 from grazing_control.ros import launcher
 from grazing_control.ros import cdr
-from grazing_control.ros.common import DATA_QOS, stamp_key
+from grazing_control.ros.common import DATA_QOS, seconds_from_stamp, stamp_key
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulate import simulate
 from grazing_control.plant.engine import Engine
@@ -402,6 +402,9 @@ def test_lost_answers_are_replaced_by_their_predictions_through_the_node(node_en
         pub.publish(out)
 
     collector.node.create_subscription(JointState, "oscillator/pi2", on_sample, DATA_QOS)
+    substituted = []
+    collector.node.create_subscription(TwistStamped, "oscillator/substituted",
+                                       substituted.append, DATA_QOS)
     proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=10.0,
                       state_period=0.0, loss=0.05, seed=seed)
     assert proc.wait(60) == 0, log.read_text()
@@ -412,6 +415,13 @@ def test_lost_answers_are_replaced_by_their_predictions_through_the_node(node_en
     assert (s["lost"], s["predicted"]) == (str(loop.stats["lost"]),
                                            str(loop.stats["predicted"]))
     assert loop.stats["predicted"] > 20
+    # each substitution published with its sample's stamp and the prediction that acted
+    assert collector.wait_for(lambda: len(substituted) == loop.stats["predicted"], 5.0)
+    ks = [round(seconds_from_stamp(m.header.stamp) / OscillatorParams().period)
+          for m in substituted]
+    assert ks == [k for k, _, _ in loop.sink.substitutions]
+    assert [m.twist.linear.x for m in substituted] == [dv for _, _, dv in
+                                                       loop.sink.substitutions]
 
 
 def test_scheduling_options_warn_where_refused_and_bad_ones_stop_the_start(node_env):

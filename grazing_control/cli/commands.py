@@ -474,12 +474,43 @@ def _stdout_to_stderr():
             os.close(saved)
 
 
+def _live_port(text: str) -> int:
+    """``--live PORT``: an integer 0..65535 (0: any free port, which live_node logs)."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: valid range is an integer "
+                                         "0..65535 (0: any free port)")
+    return port
+
+
+def _port_in_use(port: int, host: str = "127.0.0.1") -> str | None:
+    """Why live_node could not listen on ``host:port``, before any node starts, or None."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            return (f"port {port} is in use on {host} ({exc.strerror}): stop the other "
+                    "server or choose another port")
+    return None
+
+
 def cmd_run(args):
     import dataclasses
 
     from grazing_control.ros.launcher import run
 
     kwargs = {k: v for k, v in vars(args).items() if k not in ("func", "command", "json")}
+    if getattr(args, "live", None):
+        busy = _port_in_use(args.live)
+        if busy:
+            print(f"grazing run: error: --live {args.live}: {busy}", file=sys.stderr)
+            return 2
     if not args.json:
         result = run(**kwargs)
         print(result)
@@ -585,6 +616,10 @@ def build_parser() -> argparse.ArgumentParser:
     if add_run_arguments is not None:
         s = sub.add_parser("run", help="run a scene through the real ROS 2 nodes")
         add_run_arguments(s)
+        s.add_argument("--live", type=_live_port, default=None, metavar="PORT",
+                       help="also start live_node: a Foxglove WebSocket server on PORT "
+                            "(e.g. 8765) streaming the scene to Foxglove/Lichtblick "
+                            "(docs/live.md)")
         s.add_argument("--json", action="store_true",
                        help="print one JSON summary object (node output goes to stderr)")
         add_params_option(s)

@@ -66,14 +66,14 @@ class Lockstep(Loop):
         controller computes its answer while this period's state, crossings and impacts
         are published.
         """
-        self.waiting = None
+        key, self.waiting = self.waiting, None
         engine = self.engine
         if answered and not engine.correction_lost():
             self.stats["applied"] += 1
             self.remember(engine.k, predicted)
         else:
             self.stats["lost"] += answered
-            dv = self.substitute(engine.k)
+            dv = self.substitute(engine.k, key)
         events = engine.begin_period(dv, engine.actuation_delay())
         ev, warning = engine.end_period()
         if warning:

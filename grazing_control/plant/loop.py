@@ -21,7 +21,7 @@ from grazing_control.plant.engine import Engine, Event
 __all__ = ["Sink", "Loop", "PREDICTION_HOLD"]
 
 #: Consecutive missing answers a prediction stands in for (Loop.substitute).
-PREDICTION_HOLD = 3
+PREDICTION_HOLD = 10
 
 
 class Sink(Protocol):
@@ -35,6 +35,10 @@ class Sink(Protocol):
 
     def miss(self, k: int, key: tuple, t: float, waited: float) -> None:
         """Sample k's answer had not arrived at its actuation time t (scheduled)."""
+
+    def substituted(self, k: int, key: tuple, dv: float) -> None:
+        """Sample k's answer was missing (miss, loss, timeout): ``dv``, a prediction,
+        acted in its place (on_miss = predict)."""
 
     def ignored(self, text: str) -> None:
         """An answer that answers no waiting sample."""
@@ -81,7 +85,7 @@ class Loop:
         none; issue 16 §3)."""
         self.prediction = (k + 1, predicted) if math.isfinite(predicted) else None
 
-    def substitute(self, k: int) -> float:
+    def substitute(self, k: int, key: tuple) -> float:
         """Sample k's answer missed its deadline or was lost: with on_miss = predict the
         last applied answer's prediction (counted in ``predicted``), else 0.
 
@@ -95,6 +99,7 @@ class Loop:
         if (self.settings.on_miss == "predict" and pred is not None
                 and 0 <= k - pred[0] < PREDICTION_HOLD):
             self.stats["predicted"] += 1
+            self.sink.substituted(k, key, pred[1])
             return pred[1]
         return 0.0
 

@@ -59,7 +59,7 @@ class Realtime(Loop):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.pending = {}      # stamp key -> wall time sent, the last two unanswered samples
+        self.pending = {}      # stamp key -> (wall time sent, k), the last two unanswered
         self.early = {}        # stamp key -> (dv, wall, predicted): answers of samples
         #                        not yet published (a stream controller may answer first)
         self.queue = []        # the current period's events not yet published, in time order
@@ -94,7 +94,7 @@ class Realtime(Loop):
         self.queue = self.engine.begin_period(0.0)
         sent = self.clock()
         self.sample = self.emit(self.engine.measured(ev))
-        self.pending[self.sample] = sent
+        self.pending[self.sample] = (sent, self.engine.k)
         if len(self.pending) > 2:                        # keep the last two samples
             del self.pending[next(iter(self.pending))]
         if self.settings.scheduled:                      # sample k's actuation instant
@@ -187,6 +187,7 @@ class Realtime(Loop):
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
             return
+        sent, k = sent
         latency = wall - sent
         self.latencies.append(latency)
         self.sink.latency(latency)
@@ -194,6 +195,10 @@ class Realtime(Loop):
             self.stats["late"] += 1
             self.sink.late(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
                            "after its actuation time")
+            # too late for its own sample, but its prediction is the newest for the next
+            if self.prediction is None or self.prediction[0] <= k:
+                if math.isfinite(predicted):
+                    self.remember(k, predicted)
             return
         self.deadline = dl._replace(dv=dv, predicted=predicted)
 
@@ -219,10 +224,10 @@ class Realtime(Loop):
         dv = dl.dv
         if dv is None:
             self.sink.miss(dl.k, dl.key, dl.t, self.clock() - dl.sent)
-            dv = self.substitute(dl.k)
+            dv = self.substitute(dl.k, dl.key)
         elif self.engine.correction_lost():
             self.stats["lost"] += 1
-            dv = self.substitute(dl.k)
+            dv = self.substitute(dl.k, dl.key)
         else:
             self.stats["applied"] += 1
             self.remember(dl.k, dl.predicted)
@@ -235,7 +240,7 @@ class Realtime(Loop):
         one before, when the answer comes after the next sample went out (counted as
         late, applied all the same: the next opportunity). Anything else is ignored.
         """
-        sent = self.pending.pop(key, None)
+        sent, _ = self.pending.pop(key, (None, None))
         if sent is None and not self.finished and self._keep_early(
                 key, (dv, self.clock(), math.nan)):
             return False

@@ -33,6 +33,7 @@ TOPICS = {
     "impact": "/oscillator/impact",
     "correction": "/controller/velocity_correction",
     "parameters": "/grazing/parameters",
+    "latency": "/oscillator/latency",
 }
 
 #: The reported parameters: the study's (nondimensional), then the rig's.
@@ -52,6 +53,31 @@ def _sim_parameters(raw, topic) -> dict:
         if "sim" in name and seq:
             return dict(seq[0])
     return {}
+
+
+def _on_arrival(sim) -> bool:
+    """Whether the simulator applied corrections on arrival (realtime, docs/nodes.md)."""
+    act = str(sim.get("actuation", ""))
+    return sim.get("mode") == "realtime" and (
+        act == "on_arrival" or (act == "auto" and not sim.get("actuation_delay", 0.0)))
+
+
+def _arrival_instants(raw, topics, corrections, when, time_scale, notes):
+    """On arrival a correction acts at its sample's stamp + the latency (wall seconds,
+    ``oscillator/latency``, one per applied correction in sample order) x time_scale: the
+    fit's start for each instant (the fit refines it between the samples around it)."""
+    topic = topics.get("latency", "/oscillator/latency")
+    lat = reader.decode_float64(raw, topic) if raw.count(topic) else None
+    if lat is None or np.count_nonzero(lat["ok"]) != when.size:
+        notes.append("corrections applied on arrival (realtime): their instants are fitted "
+                     "from the Pi2 stamps (no latency per correction recorded)")
+        return when
+    notes.append(f"corrections applied on arrival (realtime): their instants are fitted from "
+                 f"stamp + latency x time_scale ({time_scale:g})")
+    order = np.argsort(corrections["stamp"], kind="stable")
+    out = when.copy()
+    out[order] = when[order] + lat["data"][lat["ok"]] * time_scale
+    return out
 
 
 def load_recording(bag, *, topics: dict | None = None, position_only: bool = False,
@@ -109,12 +135,13 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
     corr = np.zeros(0)
     if raw.count(topics["correction"]):
         c = reader.decode_twist_stamped(raw, topics["correction"])
-        k = c["ok"] & (c["dv"] != 0.0)
         delay = float(sim.get("actuation_delay", 0.0) or 0.0)
-        corr = np.unique((c["stamp"][k] - t0) / _NS + delay)
-        if str(sim.get("actuation", "")) == "on_arrival" and corr.size:
-            notes.append("corrections applied on arrival (realtime): their instants are not "
-                         "recorded; the arcs are cut at the samples' stamps")
+        when = (c["stamp"] - t0) / _NS + delay
+        if _on_arrival(sim):
+            when = _arrival_instants(raw, topics, c, when, float(sim.get("time_scale", 1.0)),
+                                     notes)
+        k = c["ok"] & (c["dv"] != 0.0)
+        corr = np.unique(when[k])
     rec = Recording(t, x, v, e0, e1, it, vm, vp, corr)
     return rec, notes, sim
 

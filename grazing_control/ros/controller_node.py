@@ -106,6 +106,7 @@ from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, pre
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr
 from .scene import SCENE_PARAMETER_DOC
+from .scheduling import apply_node_scheduling, declare_scheduling
 from .common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize, StartupError, Throttled,
                      bool_descriptor, float_descriptor, int_descriptor,
                      publish_parameter_record, run_node, spin, stamp_key, string_descriptor)
@@ -338,7 +339,12 @@ class ControllerNode(Node):
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
+        declare_scheduling(self)
         self.executor_kind = self.get_parameter("executor").value
+        try:
+            apply_node_scheduling(self)
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
         try:
             self.law = law_from_values(self._values())
             self.actuation_delay = actuation_delay_from_values(self._values())

@@ -64,6 +64,7 @@ __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain",
 SIM_MODULE = "sim_node.sim_node"
 CONTROLLER_MODULE = "grazing_control.ros.controller_node"
 RECORDER_MODULE = "grazing_control.ros.recorder_node"
+LIVE_MODULE = "grazing_control.ros.live_node"
 #: The source tree's root (so that ``-m sim_node.sim_node`` works from a checkout).
 SOURCE_ROOT = Path(__file__).resolve().parents[2]
 
@@ -98,6 +99,7 @@ class RunResult:
     interrupted: bool = False
     logs: dict = field(default_factory=dict)
     domain_id: int | None = None
+    live: int | None = None            # live_node's exit status (None: no live view)
 
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
@@ -106,6 +108,8 @@ class RunResult:
                 f"controller_node={self.controller}")
         if self.recorder is not None:
             text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
+        if self.live is not None:
+            text += f"; live_node={self.live}"
         if self.domain_id is not None:
             text += f"; ROS_DOMAIN_ID={self.domain_id}"
         if self.logs:
@@ -122,11 +126,19 @@ class RunResult:
         """The simulator finished and every node exited with status 0."""
         codes = [self.sim, self.controller] + ([self.recorder] if self.recorder is not None
                                                else [])
+        codes += [self.live] if self.live is not None else []
         return not (self.timed_out or self.interrupted) and all(c == 0 for c in codes)
+
+
+class ParamText(str):
+    """A ``-p`` value as typed on a command line (``--sim-param k:=v``): passed verbatim,
+    rcl types it (as ``ros2 run`` would)."""
 
 
 def format_value(value) -> str:
     """A parameter value as ``-p key:=value`` text that rcl parses back to the same type."""
+    if isinstance(value, ParamText):
+        return str(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -140,7 +152,20 @@ def format_value(value) -> str:
         return text if ("." in text or "e" in text) else text + ".0"
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(format_value(v) for v in value) + "]"
-    return str(value)
+    text = str(value)
+    if isinstance(value, str) and _typed_as_other(text):
+        return "'" + text.replace("'", "''") + "'"    # '0', 'true', '1e-3' stay strings
+    return text
+
+
+def _typed_as_other(text: str) -> bool:
+    """Whether rcl would read ``-p name:=text`` as something other than a string."""
+    try:
+        float(text)
+        return True           # rcl reads 1e-3 as a double (YAML 1.1 would not)
+    except ValueError:
+        pass
+    return text == "" or not isinstance(yaml.safe_load(text), str)
 
 
 #: Runs a node module as ``python -m`` does, with a SIGINT that ends the process quietly
@@ -317,7 +342,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
         sim_overrides: dict | None = None, controller_overrides: dict | None = None,
         recorder_overrides: dict | None = None, log_dir=None,
-        python: str | None = None) -> RunResult:
+        python: str | None = None, live: int | None = None) -> RunResult:
     """Run one scene through the three node processes and wait for it to finish.
 
     Parameters
@@ -352,6 +377,10 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         Write each node's output to ``<log_dir>/<node>.log`` instead of the terminal.
     python : str, optional
         Interpreter for the nodes (default: this one).
+    live : int, optional
+        Start ``live_node`` (docs/live.md) with this WebSocket port (0..65535, 0: any
+        free port, logged): a live view for Foxglove/Lichtblick that the scene does not
+        wait for. None: no live view.
 
     Returns
     -------
@@ -379,6 +408,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     if log_dir is not None:
         Path(log_dir).mkdir(parents=True, exist_ok=True)
         names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
+        names += ("live_node",) if live is not None else ()
         logs = {n: str(Path(log_dir) / f"{n}.log") for n in names}
     sim_over = {"exit_when_done": True, "wait_for_controller": True,
                 "wait_for_subscribers": 1 if record else 0, "wait_for_recorder": record}
@@ -406,7 +436,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     token = f"{os.getpid():x}-{random.getrandbits(48):012x}"
     sim_over.setdefault("scene", token)
     controller_overrides.setdefault("scene", sim_over["scene"])
-    procs = {"sim_node": None, "controller_node": None, "recorder_node": None}
+    procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
+             "live_node": None}
     timed_out = interrupted = False
 
     def on_term(signum, frame):
@@ -427,6 +458,10 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 procs["recorder_node"] = start_node(
                     RECORDER_MODULE, (), rec_over, domain_id=domain_id,
                     log=logs.get("recorder_node"), python=python)
+            if live is not None:
+                procs["live_node"] = start_node(LIVE_MODULE, (), {"port": int(live)},
+                                                domain_id=domain_id, log=logs.get("live_node"),
+                                                python=python)
             procs["controller_node"] = start_node(
                 CONTROLLER_MODULE, [_params_file(controller_params, "controller_node", tmp)],
                 controller_overrides, domain_id=domain_id, log=logs.get("controller_node"),
@@ -440,7 +475,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 if end is not None and time.monotonic() > end:
                     timed_out = True
                     break
-                early = [n for n in ("controller_node", "recorder_node")
+                early = [n for n in ("controller_node", "recorder_node", "live_node")
                          if procs[n] is not None and procs[n].poll() is not None]
                 if early:
                     for name in early:
@@ -456,7 +491,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         finally:
             try:
                 stop_nodes([procs["sim_node"]])
-                stop_nodes([procs["controller_node"], procs["recorder_node"]])
+                stop_nodes([procs["controller_node"], procs["recorder_node"],
+                            procs["live_node"]])
             except KeyboardInterrupt:
                 interrupted = True
                 stop_nodes(list(procs.values()), grace=2.0)
@@ -473,7 +509,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                      recorder=code("recorder_node"),
                      bag_dir=os.fspath(bag_dir) if record else None,
                      wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
-                     logs=logs, domain_id=domain_id)
+                     logs=logs, domain_id=domain_id, live=code("live_node"))
 
 
 def threading_is_main() -> bool:
@@ -539,7 +575,7 @@ def _key_value(text: str):
     key, sep, value = text.partition(":=")
     if not sep or not key:
         raise argparse.ArgumentTypeError(f"{text!r}: expected KEY:=VALUE")
-    return key, value
+    return key, ParamText(value)
 
 
 class _Pairs(argparse.Action):

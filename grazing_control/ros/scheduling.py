@@ -23,7 +23,8 @@ import ctypes.util
 import os
 from typing import NamedTuple
 
-__all__ = ["Scheduling", "parse_cpus", "apply_scheduling"]
+__all__ = ["Scheduling", "parse_cpus", "apply_scheduling", "declare_scheduling",
+           "apply_node_scheduling"]
 
 _MCL_CURRENT, _MCL_FUTURE = 1, 2
 
@@ -111,3 +112,40 @@ def _cpus() -> str:
         return str(sorted(os.sched_getaffinity(0)))
     except (OSError, AttributeError):  # pragma: no cover - not Linux
         return "unknown"
+
+
+def declare_scheduling(node) -> None:
+    """Declare a node's three read-only scheduling parameters (docs/nodes.md).
+
+    ``thread_priority`` (0 = off, 1..99 SCHED_FIFO), ``cpu_affinity`` ('' = any, '0,2-3'),
+    ``lock_memory`` (mlockall), as ros2_control's controller manager offers them.
+    """
+    from rcl_interfaces.msg import (IntegerRange, ParameterDescriptor, ParameterType)
+
+    node.declare_parameter("thread_priority", 0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER, read_only=True,
+        description="real-time scheduling: SCHED_FIFO priority 1..99 of the process, "
+                    "0 = off (a warning where not permitted)",
+        integer_range=[IntegerRange(from_value=0, to_value=99, step=1)]))
+    node.declare_parameter("cpu_affinity", "", ParameterDescriptor(
+        type=ParameterType.PARAMETER_STRING, read_only=True,
+        description="real-time scheduling: CPUs to run on, e.g. '1' or '0,2-3'; '' = any"))
+    node.declare_parameter("lock_memory", False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, read_only=True,
+        description="real-time scheduling: lock the process's memory (mlockall; a warning "
+                    "where not permitted)"))
+
+
+def apply_node_scheduling(node) -> Scheduling:
+    """Apply a node's scheduling parameters; log what was applied and what was refused.
+
+    ValueError for a malformed value (the caller turns it into its startup error).
+    """
+    sched = apply_scheduling(node.get_parameter("thread_priority").value,
+                             parse_cpus(node.get_parameter("cpu_affinity").value),
+                             node.get_parameter("lock_memory").value)
+    for warning in sched.warnings:
+        node.get_logger().warning(warning)
+    if sched.applied:
+        node.get_logger().info("real-time scheduling: " + ", ".join(sched.applied))
+    return sched

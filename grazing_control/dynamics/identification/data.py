@@ -111,7 +111,7 @@ class Arcs:
     ----------
     start : (K,) start times (boundary times; arc 0: t[0]).
     kind : (K,) 0 first arc, 1 after an impact, 2 after a correction.
-    time_free : (K,) the boundary's time is a fit parameter (impact found from the motion).
+    time_free : (K,) the boundary's time is a fit parameter.
     lower, upper : (K,) bounds of a free time (the samples around it).
     v_minus, v_plus : (K,) recorded impact velocities (NaN: none).
     sample_arc : (n,) arc of each sample.
@@ -132,11 +132,11 @@ class Arcs:
 
 
 def cut_arcs(t, impact_t, corrections, *, impact_v_minus=None, impact_v_plus=None,
-             free_times=False) -> Arcs:
+             free_times=False, free_corrections=False) -> Arcs:
     """Arcs between the events after the first sample (before the last one).
 
-    ``free_times``: the impact times are estimates (found from the motion): each becomes
-    a fit parameter bounded by the samples around it.
+    ``free_times``, ``free_corrections``: the impact (correction) times are estimates:
+    each becomes a fit parameter bounded by the samples around it.
     """
     t = np.asarray(t, float)
     it = np.asarray(impact_t, float)
@@ -154,7 +154,7 @@ def cut_arcs(t, impact_t, corrections, *, impact_v_minus=None, impact_v_plus=Non
     kind = np.concatenate([[0], ev_k[order]])
     v_minus = np.concatenate([[np.nan], ev_vm[order]])
     v_plus = np.concatenate([[np.nan], ev_vp[order]])
-    time_free = (kind == 1) & bool(free_times)
+    time_free = ((kind == 1) & bool(free_times)) | ((kind == 2) & bool(free_corrections))
     j = np.searchsorted(t, start, side="right")          # first sample after the event
     lower = t[np.maximum(j - 1, 0)]
     upper = t[np.minimum(j, t.size - 1)]

@@ -2,7 +2,8 @@
 
 Unknowns: the model g = (zeta, Omega, A, theta, d, r) (:data:`.model.GLOBAL_NAMES`), the
 start of every free-flight arc (after an impact only its velocity V_b, the position being
-d; else (X_b, V_b)) and, for impacts found from the motion, their times t_b.
+d; else (X_b, V_b)) and the events' times t_b (impacts, corrections), each bounded by
+the samples around it.
 
 Residuals, all in the recording's units:
 
@@ -18,7 +19,9 @@ The constraints are exact in the model, so at the solution of noise-free data ev
 residual vanishes; with noise they hold to O(sigma / W^2) (docs: "Constraints"). The
 weight is raised in steps (:data:`CONTINUATION`), each solve starting from the last:
 the initial guess violates the constraints, and a solve at the full weight from there
-would chase them far from the data.
+would chase them far from the data. An event time that stops at a bound (a sample) was
+guessed in the wrong sample interval: it is moved to the next one and the fit repeated
+(:data:`MAX_SHIFTS` rounds; the solve of least cost is kept).
 
 Jacobian: by complex step, J e_p = Im r(p + i h e_p) / h with h = 1e-30, exact to
 rounding because every residual is analytic in the parameters; the arcs' parameters
@@ -52,6 +55,8 @@ __all__ = ["CONSTRAINT_WEIGHT", "IdentificationError", "Problem", "Identificatio
 CONSTRAINT_WEIGHT = 1e4
 #: The weights of the penalty continuation, the last being CONSTRAINT_WEIGHT.
 CONTINUATION = (1.0, 1e2, CONSTRAINT_WEIGHT)
+#: Rounds of moving event times that stopped at a bound to the next sample interval.
+MAX_SHIFTS = 4
 _H = 1e-30
 
 
@@ -224,6 +229,8 @@ class Identification:
     problem, solution : the least-squares problem and its solution vector.
     arcs_used, impacts_used, samples_used : counts.
     converged : bool, message : the solver's status.
+    events_moved : event times moved to another sample interval before the kept solve
+        (:data:`MAX_SHIFTS` rounds at most; the solve of least cost is kept).
     checks : dict filled by :mod:`.checks`.
     """
 
@@ -244,6 +251,7 @@ class Identification:
     dof: int
     converged: bool
     message: str
+    events_moved: int = 0
     checks: dict = field(default_factory=dict)
 
 
@@ -264,9 +272,62 @@ def _covariance(J, sigma2, k=6):
     return sigma2 * cov
 
 
+def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correction_times,
+           max_nfev):
+    """Arcs, initial guess and the penalty continuation: (Problem, last solution)."""
+    arcs = cut_arcs(rec.t, impact_t, corr_t, impact_v_minus=vm, impact_v_plus=vp,
+                    free_times=free, free_corrections=correction_times)
+    if np.count_nonzero(arcs.kind == 1) == 0:
+        raise IdentificationError(
+            "the recording has no impact: r and d (so delta_d) are not identifiable "
+            "from free flight alone (record a scene with impacts)")
+    g0, start0, X0, V0 = initial_guess(rec, arcs, phase)
+    prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
+    lo, hi = prob.bounds()
+    inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
+    f = np.isfinite(lo)
+    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
+    f = np.isfinite(hi)
+    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    p = np.clip(prob.pack(g0, start0, X0, V0), inner_lo, inner_hi)
+    if prob.m_data - (prob.n - prob.n_constraints) <= 0:
+        raise IdentificationError(f"too few samples: {prob.m_data} data values for "
+                                  f"{prob.n - prob.n_constraints} free parameters")
+    # penalty continuation: the initial guess violates the constraints; raising their
+    # weight in steps keeps each solve near the last one (docs: "Constraints")
+    for weight in CONTINUATION:
+        prob.weight = weight
+        sol = least_squares(prob.residual, p, jac=prob.jacobian, bounds=(lo, hi),
+                            method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                            max_nfev=max_nfev)
+        p = sol.x
+    return prob, sol
+
+
+def _shift_from_bounds(prob, p):
+    """Fitted event times with those stopped at a bound moved to the middle of the next
+    sample interval beyond it (the event was between other samples); None if none is."""
+    a = prob.arcs
+    S = np.real(prob.unpack(p)[1]).copy()
+    t = prob.rec.t
+    tol = 1e-9 * (a.upper - a.lower)
+    at_hi = np.flatnonzero(a.time_free & (S >= a.upper - tol))
+    at_lo = np.flatnonzero(a.time_free & (S <= a.lower + tol))
+    moved = S.copy()
+    for b in at_hi:
+        j = int(np.searchsorted(t, a.upper[b], side="right"))
+        if j < t.size:
+            moved[b] = 0.5 * (t[j - 1] + t[j])
+    for b in at_lo:
+        j = int(np.searchsorted(t, a.lower[b], side="left"))
+        if j >= 1:
+            moved[b] = 0.5 * (t[j - 1] + t[j])
+    return None if np.array_equal(moved, S) else moved
+
+
 def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
-             max_arcs: int | None = 100, max_nfev: int = 200,
-             coincidence: float = 1.5e-9) -> Identification:
+             max_arcs: int | None = 100, max_nfev: int = 400,
+             coincidence: float = 1.5e-9, correction_times: bool = True) -> Identification:
     """Fit the model to a recording (module docstring).
 
     Parameters
@@ -282,6 +343,9 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     coincidence : samples within this time of a correction or a recorded impact are left
         out: their velocity is either side of the jump (default: 1.5 ns, the resolution
         of a bag's stamps).
+    correction_times : fit the corrections' instants too (bounded by the samples around
+        the given ones): a correction applied on arrival, or with a jitter, acts at an
+        instant the recording does not carry exactly.
 
     Raises
     ------
@@ -319,37 +383,28 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
                 rec_events = rec_events[keep]
                 if vm is not None:
                     vm, vp = vm[keep], vp[keep]
-        arcs = cut_arcs(rec.t, rec_events, rec.corrections, impact_v_minus=vm,
-                        impact_v_plus=vp, free_times=free)
-        if np.count_nonzero(arcs.kind == 1) == 0:
-            raise IdentificationError(
-                "the recording has no impact: r and d (so delta_d) are not identifiable "
-                "from free flight alone (record a scene with impacts)")
-        g0, start0, X0, V0 = initial_guess(rec, arcs, phase)
+        corr_t = rec.corrections
+        shifts, best = 0, None
+        for _round in range(MAX_SHIFTS + 1):
+            prob, sol = _solve(rec, phase, rec_events, vm, vp, corr_t, free,
+                               impact_velocities, correction_times, max_nfev)
+            if best is None or sol.cost < best[2].cost:   # an event on a sample may cycle
+                best = (shifts, prob, sol)
+            moved = _shift_from_bounds(prob, sol.x)
+            if moved is None:
+                break
+            shifts += int(np.count_nonzero(moved != np.real(prob.unpack(sol.x)[1])))
+            a = prob.arcs
+            rec_events, corr_t = moved[a.kind == 1], moved[a.kind == 2]
+            vm, vp = a.v_minus[a.kind == 1], a.v_plus[a.kind == 1]
+        shifts, prob, sol = best
     except (PhaseError, RecordingError, InitialGuessError) as exc:
         raise IdentificationError(str(exc)) from None
-    prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
-    p0 = prob.pack(g0, start0, X0, V0)
-    lo, hi = prob.bounds()
-    inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
-    f = np.isfinite(lo)
-    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
-    f = np.isfinite(hi)
-    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
-    p0 = np.clip(p0, inner_lo, inner_hi)
+    p = sol.x
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
-    # penalty continuation: the initial guess violates the constraints; raising their
-    # weight in steps keeps each solve near the last one (docs: "Constraints")
-    p = p0
-    for weight in CONTINUATION:
-        prob.weight = weight
-        sol = least_squares(prob.residual, p, jac=prob.jacobian, bounds=(lo, hi),
-                            method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
-                            max_nfev=max_nfev)
-        p = sol.x
     res = prob.residual(p)
     J = prob.jacobian(p)
     data = res[:prob.m_data]
@@ -384,6 +439,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
         rms_x=float(np.sqrt(np.mean(xres ** 2))),
         rms_v=float(np.sqrt(np.mean(vres ** 2))) if vres.size else math.nan,
         constraint_rms=float(np.sqrt(np.mean(cons ** 2))) if cons.size else 0.0,
-        phase=phase, problem=prob, solution=p, arcs_used=arcs.count,
-        impacts_used=int(np.count_nonzero(arcs.kind == 1)), samples_used=int(rec.t.size),
-        dof=int(dof), converged=bool(sol.status > 0), message=str(sol.message))
+        phase=phase, problem=prob, solution=p, arcs_used=prob.arcs.count,
+        impacts_used=int(np.count_nonzero(prob.arcs.kind == 1)), samples_used=int(rec.t.size),
+        dof=int(dof), converged=bool(sol.status > 0), message=str(sol.message),
+        events_moved=shifts)

@@ -237,7 +237,7 @@ def initial_guess(rec, arcs, phase):
     start = arcs.start.copy()
     A, theta, X, V = _states(t, x, v, tau, start, arcs, zeta, Omega, phase)
     g = np.array([zeta, Omega, A, theta, 0.0, 0.5])
-    free = np.flatnonzero(arcs.time_free)
+    free = np.flatnonzero(arcs.time_free & (arcs.kind == 1))     # impacts: where arcs meet
     if free.size:
         # the arcs' states at their (provisional) starts -> where neighbours meet
         start = refine_impact_times(g, phase.omega, phase.tau0, start, X, V, arcs.lower,

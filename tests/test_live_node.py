@@ -1,0 +1,302 @@
+"""live_node: the scene's CDR messages over the Foxglove WebSocket protocol (issue 19 §1).
+
+Real processes over Fast DDS on a domain of their own (:func:`new_domain`), and a real
+WebSocket client speaking the Foxglove protocol (tests/foxglove_client.py): it reads the
+advertised channels, subscribes, receives messageData frames and decodes each payload
+against the schema the server advertised (mcap_ros2's ros2msg parser, independent of
+the node, which never decodes what it forwards).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2._dynamic import generate_dynamic
+
+from grazing_control.ros import launcher
+from grazing_control.ros.live_node import LIVE_TOPICS
+from grazing_control.ros.recording import message_definition
+from foxglove_client import FoxgloveClient, parse_message_data
+from test_closed_loop import new_domain
+
+ROOT = Path(__file__).resolve().parents[1]
+LIVE = "grazing_control.ros.live_node"
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on now (the system's choice)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def start_live(domain, port, ready=True, **params):
+    """live_node as a process; with ``ready``, return once it says it serves (its first
+    line), so that a signal cannot reach it while it is still being built."""
+    proc = subprocess.Popen(
+        launcher.node_command(LIVE, (), {"port": port, **params}),
+        env=launcher.node_env(domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        process_group=0)
+    proc.first = b""
+    if ready:
+        proc.first = proc.stdout.readline()      # the node exits or logs: never hangs
+        assert b"live view on ws://" in proc.first, proc.first
+    return proc
+
+
+def stop(proc, timeout=20):
+    """SIGTERM (handled as Ctrl-C), then the whole output; SIGKILL if it hangs."""
+    if proc.poll() is None:
+        proc.terminate()
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return (proc.first + out).decode(errors="replace")
+
+
+def decode(channel, payload):
+    """A messageData payload decoded with the channel's advertised ros2msg schema."""
+    assert channel["encoding"] == "cdr" and channel["schemaEncoding"] == "ros2msg"
+    return generate_dynamic(channel["schemaName"], channel["schema"])[
+        channel["schemaName"]](payload)
+
+
+# ------------------------------------------------------------------------ refusals
+@pytest.mark.parametrize("value, reason", [
+    ("70000", "out of range. Min: 0, Max: 65535"),
+    ("-1", "out of range. Min: 0, Max: 65535"),
+    ("abc", "expected type INTEGER"),
+    ("80.0", "expected type INTEGER"),
+])
+def test_a_bad_port_is_refused_in_one_line_naming_it_and_its_range(value, reason):
+    proc = subprocess.run(launcher.node_command(LIVE) + ["-p", f"port:={value}"],
+                          env=launcher.node_env(new_domain()), capture_output=True,
+                          text=True, timeout=60)
+    lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
+    assert proc.returncode == 2
+    assert len(lines) == 1 and f"port={value} is invalid" in lines[0] and reason in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_a_port_in_use_is_one_line_and_exit_status_2():
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        proc = start_live(new_domain(), port, ready=False)
+        proc.wait(60)
+        out = stop(proc)
+    lines = [line for line in out.splitlines() if line.strip()]
+    assert proc.returncode == 2, out
+    assert len(lines) == 1 and f"port={port} is in use on 127.0.0.1" in lines[0], out
+
+
+def test_grazing_run_refuses_a_bad_or_busy_live_port_before_starting_a_node():
+    grazing = [sys.executable, "-m", "grazing_control.cli"]
+    bad = subprocess.run(grazing + ["run", "--live", "65536", "--periods", "5"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2
+    assert "--live: '65536' is invalid: valid range is an integer 0..65535" in bad.stderr
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        t0 = time.monotonic()
+        used = subprocess.run(grazing + ["run", "--live", str(port), "--periods", "5"],
+                              capture_output=True, text=True, timeout=60)
+    lines = [line for line in used.stderr.splitlines() if line.strip()]
+    assert used.returncode == 2
+    assert lines == [f"grazing run: error: --live {port}: port {port} is in use on 127.0.0.1 "
+                     "(Address already in use): stop the other server or choose another port"]
+    assert time.monotonic() - t0 < 30          # refused up front, no scene started
+
+
+# ------------------------------------------------------------- protocol and values
+def test_channels_advertise_cdr_with_the_ros2msg_definitions_of_the_recorder():
+    port = free_port()
+    proc = start_live(new_domain(), port)
+    try:
+        client = FoxgloveClient(port)
+        client.close()
+    finally:
+        out = stop(proc)
+    assert client.subprotocol == "foxglove.sdk.v1"
+    assert client.server_info["op"] == "serverInfo"
+    assert set(client.channels) == {f"/{name}" for name in LIVE_TOPICS}, out
+    for name, kind in LIVE_TOPICS.items():
+        ch = client.channels[f"/{name}"]
+        assert ch["encoding"] == "cdr"
+        assert ch["schemaEncoding"] == "ros2msg"
+        assert ch["schemaName"] == kind
+        assert ch["schema"] == message_definition(kind)   # what the bags hold
+    assert proc.returncode == 0, out
+    assert "live view stopped: forwarded nothing" in out
+
+
+def test_what_a_node_publishes_arrives_byte_for_byte_and_decodes_to_the_same_values():
+    """The test process publishes JointStates (reliable, as the simulator) with values
+    of its own choosing; each frame the client receives decodes to one of them, and
+    its length is that of rclpy's serialization (the padding bytes may differ: rclpy
+    leaves them unset)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    from grazing_control.ros.common import PUBLISHER_QOS
+
+    domain = new_domain()
+    port = free_port()
+    proc = start_live(domain, port)
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node("publisher", context=context)
+    pub = node.create_publisher(JointState, "oscillator/pi2", PUBLISHER_QOS)
+    sent = {}
+    try:
+        client = FoxgloveClient(port, topics=["/oscillator/pi2"])
+        k = 0
+        end = time.monotonic() + 30
+        while len(client.messages) < 50 and time.monotonic() < end:
+            msg = JointState(name=["mass"], position=[0.125 * k - 3.0],
+                             velocity=[-1e-7 * k], effort=[0.5 ** k])
+            msg.header.stamp.sec, msg.header.stamp.nanosec = k, 7 * k
+            sent[(k, 7 * k)] = msg
+            pub.publish(msg)
+            k += 1
+            time.sleep(0.01)
+        client.close()
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        out = stop(proc)
+    assert len(client.messages) >= 50, out
+    channel = client.channels["/oscillator/pi2"]
+    for topic, stamp, payload in client.messages:
+        assert topic == "/oscillator/pi2"
+        got = decode(channel, payload)
+        want = sent[(got.header.stamp.sec, got.header.stamp.nanosec)]
+        assert len(payload) == len(serialize_message(want))
+        assert list(got.name) == ["mass"]
+        assert list(got.position) == list(want.position)
+        assert list(got.velocity) == list(want.velocity)
+        assert list(got.effort) == list(want.effort)
+        assert (got.header.stamp.sec, got.header.stamp.nanosec) == (
+            want.header.stamp.sec, want.header.stamp.nanosec)
+        assert abs(stamp - time.time_ns()) < 120e9      # reception time, ns since epoch
+    assert proc.returncode == 0
+    assert "live view stopped: forwarded /oscillator/pi2 " in out
+
+
+def test_parse_message_data_reads_the_specified_layout():
+    frame = bytes([1]) + (7).to_bytes(4, "little") + (2**40 + 3).to_bytes(8, "little") + b"xy"
+    assert parse_message_data(frame) == (7, 2**40 + 3, b"xy")
+    with pytest.raises(ValueError, match="opcode 0x2"):
+        parse_message_data(bytes([2]) + frame[1:])
+
+
+def _paths(node):
+    """Every message path (``/topic.field...``) in a layout's panel configs."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            if key == "value" and isinstance(value, str) and value.startswith("/"):
+                yield value
+            else:
+                yield from _paths(value)
+    elif isinstance(node, list):
+        for value in node:
+            yield from _paths(value)
+
+
+def test_the_shipped_layout_plots_fields_that_exist_on_the_channels_the_node_serves():
+    """config/live_layout.json: every panel in the layout tree has a config, and every
+    message path names a forwarded topic and a numeric field of its message type."""
+    import json
+
+    from grazing_control.ros.recorder_node import _message_class
+
+    layout = json.loads((ROOT / "config" / "live_layout.json").read_text())
+    panels = set()
+    stack = [layout["layout"]]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, str):
+            panels.add(node)
+        else:
+            stack += [node["first"], node["second"]]
+    assert panels == set(layout["configById"])
+    poincare = layout["configById"]["Plot!poincare"]
+    assert poincare["xAxisVal"] == "custom"
+    assert poincare["xAxisPath"]["value"] == "/oscillator/pi2.position[0]"
+    assert [p["value"] for p in poincare["paths"]] == ["/oscillator/pi2.velocity[0]"]
+    paths = list(_paths(layout))
+    assert len(paths) >= 8
+    for path in paths:
+        topic, _, field = path.partition(".")
+        assert topic.lstrip("/") in LIVE_TOPICS, path
+        value = _message_class(LIVE_TOPICS[topic.lstrip("/")])()
+        for part in field.split("."):
+            name, _, index = part.partition("[")
+            value = getattr(value, name)
+            if index:                  # a float64[] field (array('d')): an element is a float
+                assert getattr(value, "typecode", None) == "d", path
+                value = 0.0
+        assert isinstance(value, float), path
+
+
+# --------------------------------------------------------------------- a real scene
+def _bag_messages(bag_dir):
+    """{topic: {payload bytes}} of a recorded bag (the MCAP file's raw messages)."""
+    out = {}
+    (path,) = glob.glob(os.path.join(bag_dir, "*.mcap"))
+    with open(path, "rb") as fh:
+        for _schema, channel, message in make_reader(fh).iter_messages():
+            out.setdefault(channel.topic, set()).add(bytes(message.data))
+    return out
+
+
+def test_grazing_run_live_streams_the_scene_that_the_bag_records(tmp_path):
+    """``grazing run --live PORT --periods 200 --bag DIR`` (the launcher's API): the
+    client, connected while the scene starts, receives Π2 samples, corrections, impacts
+    and state; every payload is one the recorder stored (the same bytes) and decodes
+    against the advertised schema to the bag's values."""
+    port = free_port()
+    bag = tmp_path / "bag"
+    result = {}
+    scene = threading.Thread(target=lambda: result.update(res=launcher.run(
+        None, None, bag, 200, domain_id=new_domain(), live=port, timeout=240,
+        log_dir=tmp_path / "logs")))
+    scene.start()
+    try:
+        client = FoxgloveClient(port, timeout=60)
+    finally:
+        scene.join(300)
+    client.wait_for(lambda c: False, 1.0)        # the last frames in flight
+    client.close()
+    res = result["res"]
+    assert res.ok and res.live == 0, (res, Path(res.logs["live_node"]).read_text())
+    recorded = _bag_messages(bag)
+    got = {}
+    for topic, _stamp, payload in client.messages:
+        got.setdefault(topic, []).append(payload)
+    for topic in ("/oscillator/pi2", "/controller/velocity_correction",
+                  "/oscillator/impact", "/oscillator/state"):
+        assert got.get(topic), (topic, {t: len(v) for t, v in got.items()})
+        channel = client.channels[topic]
+        reader = generate_dynamic(channel["schemaName"], channel["schema"])
+        for payload in got[topic]:
+            assert payload in recorded[topic]          # the scene's own message
+            assert reader[channel["schemaName"]](payload) is not None
+    log = Path(res.logs["live_node"]).read_text()
+    assert "live view stopped: forwarded" in log
+    print({t: (len(v), len(recorded.get(t, ()))) for t, v in got.items()})
