@@ -9,6 +9,7 @@ controlled orbit with the kick at the delay, and the std), and `grazing analyze`
 estimate lines. Each scene with the model estimator and, for contrast, the nearest.
 
     .venv/bin/python benchmarks/estimation_rig.py [--periods 1500] [--delta-d=-5e-6 ...]
+    .venv/bin/python benchmarks/estimation_rig.py --mode realtime --delay 5.0
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ from grazing_control.ros import launcher
 GRAZING = str(Path(sys.executable).with_name("grazing"))
 
 
-def scene(dd, estimator, periods, sigma, rate, delay, width, out, control_after=1000):
+def scene(dd, estimator, periods, sigma, rate, delay, width, out, control_after=1000,
+          mode="lockstep", time_scale=1000.0):
     p = OscillatorParams(delta_d=dd)
     yaml = out / "controller.yaml"
     subprocess.run([GRAZING, "design", "--optimize", "noise", f"--delta-d={dd}",
@@ -43,8 +45,9 @@ def scene(dd, estimator, periods, sigma, rate, delay, width, out, control_after=
     g = Gains(values["c1"], values["c2"], delay)
     t0 = time.time()
     res = launcher.run(None, str(yaml), str(out / "bag"), periods, delta_d=dd,
-                       enable_after=control_after, mode="lockstep", timeout=590,
+                       enable_after=control_after, mode=mode, timeout=590,
                        sim_overrides={"state_period": p.period / rate, "sensor_noise": sigma,
+                                      "time_scale": time_scale,
                                       "sensor_velocity": False, "pulse_width": width,
                                       "sensor_seed": 7},
                        controller_overrides={"pi2_source": "stream", "estimator": estimator},
@@ -62,7 +65,9 @@ def scene(dd, estimator, periods, sigma, rate, delay, width, out, control_after=
     rms = float(np.sqrt(np.mean((x[last] - p.x_ref - z[0]) ** 2)))
     rep = analyze([out / "bag"], out / "report", figures=False)
     lines = [ln for ln in rep["markdown"].splitlines() if "estimate vs" in ln]
-    return (f"Delta d {dd:g}, {estimator}: c2 = {g.c2:.4g}, {res}; one impact in "
+    misses = sd.deadline_misses
+    return (f"Delta d {dd:g}, {estimator}, {mode}: c2 = {g.c2:.4g}, {res}; deadline misses "
+            f"{misses}; one impact in "
             f"{100 * np.mean(counts[last] == 1):.1f} % of the last {n} periods, spread RMS "
             f"{rms:.3g} (std {np.std(x[last]):.3g}); {wall:.0f} s\n  " + "\n  ".join(lines))
 
@@ -77,12 +82,14 @@ def main(argv=None):
     ap.add_argument("--delay", type=float, default=1.0)
     ap.add_argument("--pulse-width", type=float, default=0.1)
     ap.add_argument("--control-after", type=int, default=1000)
+    ap.add_argument("--mode", default="lockstep", choices=("lockstep", "realtime"))
+    ap.add_argument("--time-scale", type=float, default=1000.0)
     a = ap.parse_args(argv)
     for dd in a.delta_d or [-5e-6, -9e-6]:
         for est in a.estimator or ["model", "nearest"]:
             out = Path(tempfile.mkdtemp())
             print(scene(dd, est, a.periods, a.sigma, a.rate, a.delay, a.pulse_width, out,
-                        a.control_after), flush=True)
+                        a.control_after, a.mode, a.time_scale), flush=True)
 
 
 if __name__ == "__main__":

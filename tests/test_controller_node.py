@@ -306,7 +306,8 @@ def test_stream_settings_are_validated_naming_the_parameter():
     from grazing_control.ros.controller_node import model_from_values, stream_from_values
     base = dict(zeta=P.zeta, r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, delta_d=-5e-6,
                 pi2_source="stream", estimator="model", impact_source="stream",
-                sensor_noise=1e-4, state_period=0.0, model_noise=1e-2)
+                sensor_noise=1e-4, state_period=0.0, model_noise=1e-2,
+                answer_after_section=False)
     assert stream_from_values(base, model_from_values(base)).estimator == "model"
     assert stream_from_values(dict(base, pi2_source="sample"), None) is None
     for kw, text in [({"pi2_source": "bag"}, "pi2_source='bag' is invalid"),

@@ -175,3 +175,18 @@ def test_a_model_error_costs_the_model_filter_spread_but_not_the_orbit():
                               600, 200, estimator="model", sigma=1e-4, deviation=z, model=model)
         spread = np.sqrt(np.mean((run.truth[200:, 0] - z[0]) ** 2))
         assert spread < bound and np.all(run.impacts_per_period[200:] == 1)
+
+
+def test_after_section_makes_a_section_due_with_the_first_sample_after_it():
+    """Realtime: the estimate of section k waits for the first sample after t_k (the
+    simulator takes an answer only after its Pi2 sample); the estimate is the same."""
+    p = OscillatorParams(delta_d=0.1)
+    t = np.arange(0, 22) * p.period / 10
+    x, _v = _xv(p, t, (1e-3, -2e-3))
+    before = StreamEstimator(p, "arc", 1e-6, "stream", p.period / 10)
+    after = StreamEstimator(p, "arc", 1e-6, "stream", p.period / 10, after_section=True)
+    b = [(j, d[0], d[2].z) for j, (ti, xi) in enumerate(zip(t, x)) for d in before.add_sample(ti, xi)]
+    a = [(j, d[0], d[2].z) for j, (ti, xi) in enumerate(zip(t, x)) for d in after.add_sample(ti, xi)]
+    assert [r[:2] for r in b] == [(0, 0), (9, 1), (19, 2)]
+    assert [r[:2] for r in a] == [(1, 0), (11, 1), (21, 2)]
+    assert np.allclose([r[2] for r in a[1:]], [r[2] for r in b[1:]], rtol=0, atol=1e-12)

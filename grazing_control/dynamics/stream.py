@@ -56,11 +56,15 @@ class StreamEstimator:
         The stream's sample period h; 0: the gap between the last two samples.
     floor : float
         The model filter's floor (:func:`grazing_control.dynamics.estimation.model_update`).
+    after_section : bool
+        Make a section due only with the first sample after t_k (a realtime simulator
+        takes an answer only once it has published its Pi2 sample), not with the last
+        sample before it (lockstep: the simulator waits for the answer before it goes on).
     """
 
     def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
                  impact_source: str = "stream", sample_period: float = 0.0,
-                 floor: float = 1e-2):
+                 floor: float = 1e-2, after_section: bool = False):
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -78,6 +82,7 @@ class StreamEstimator:
                                  f"0 <= state_period < T = {p.period!r} (0: from the stamps)")
         self.p, self.estimator, self.sigma = p, estimator, sigma
         self.impact_source, self.sample_period, self.floor = impact_source, sample_period, floor
+        self.after_section = bool(after_section)
         self.reset()
 
     def reset(self) -> None:
@@ -147,7 +152,7 @@ class StreamEstimator:
         # due when the next sample would be at t_k or after it: a sample at t_k itself
         # (up to rounding, 1e-3 h) is not waited for (a simulator publishes the samples
         # before t_k, then waits for the answer)
-        if h <= 0.0 or t + h >= self.next_k * T - 1e-3 * h:
+        if not self.after_section and (h <= 0.0 or t + h >= self.next_k * T - 1e-3 * h):
             due.append(self._due(self.next_k))
         return due
 

@@ -108,8 +108,8 @@ from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize, StartupError, Throttled,
-                     float_descriptor, int_descriptor, publish_parameter_record, run_node,
-                     spin, stamp_key, string_descriptor)
+                     bool_descriptor, float_descriptor, int_descriptor,
+                     publish_parameter_record, run_node, spin, stamp_key, string_descriptor)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
@@ -121,7 +121,7 @@ __all__ = ["ControlLaw", "law_from_values", "model_from_values", "stream_from_va
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
-         "model_noise")
+         "model_noise", "answer_after_section")
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
@@ -272,7 +272,8 @@ def stream_from_values(values: dict, model):
         raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
                              "the plant's finite Delta d (the estimator's model needs the wall)")
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
-                           values["impact_source"], values["state_period"], floor)
+                           values["impact_source"], values["state_period"], floor,
+                           bool(values["answer_after_section"]))
 
 
 def actuation_delay_from_values(values: dict) -> float:
@@ -331,6 +332,10 @@ class ControllerNode(Node):
             "model filter's process noise per period, in units of sensor_noise", 0.0,
             read_only=True))
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
+        d("answer_after_section", False, bool_descriptor(
+            "stream mode: answer section k with the first sample after t_k (realtime: the "
+            "simulator takes an answer only after its Pi2 sample), not with the last "
+            "before it (lockstep)", read_only=True))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))

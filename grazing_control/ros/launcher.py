@@ -427,6 +427,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     for key in ("delta_d", "sensor_noise", "state_period"):  # the controller's model of
         if key in sim_over:                                   # the plant and its sensor
             controller_overrides.setdefault(key, sim_over[key])
+    if sim_over.get("mode") == "realtime":     # a stream controller answers after t_k
+        controller_overrides.setdefault("answer_after_section", True)
     if enable_after is not None:
         controller_overrides["enable_after"] = int(enable_after)
     # one token for this scene's nodes (ros/scene.py): the simulator starts with its own
