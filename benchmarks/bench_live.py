@@ -13,7 +13,7 @@ that a drift of the machine's load does not favour one side:
    simulator's summary.
 
 "With": live_node with its default parameters (as ``grazing run --live PORT`` starts
-it; niceness 19) on the scene's domain, and a Foxglove WebSocket client
+it; priority idle) on the scene's domain, and a Foxglove WebSocket client
 (tests/foxglove_client.py) in this process connected to it and subscribed to every
 channel before the scene starts; the frames it received are printed, so that the view
 was really attached. The ratio printed is with / without (medians).
@@ -99,6 +99,8 @@ def main(argv=None):
     ap.add_argument("--scale", type=float, default=1000.0, help="realtime time_scale")
     ap.add_argument("--repeat", type=int, default=3, help="pairs of runs per row")
     ap.add_argument("--quick", action="store_true", help="1000 periods, 500 samples, 1 pair")
+    ap.add_argument("--only", choices=("lockstep", "realtime"), default=None,
+                    help="run only one of the two parts")
     args = ap.parse_args(argv)
     if args.quick:
         args.periods, args.samples, args.repeat = 1000, 500, 1
@@ -108,6 +110,15 @@ def main(argv=None):
           f"load average {' '.join(load)} at the start; {args.repeat} pair(s) per row, "
           "order alternating")
 
+    if args.only != "realtime":
+        lockstep(args)
+    if args.only != "lockstep":
+        realtime(args)
+    with open("/proc/loadavg") as fh:
+        print(f"\nload average at the end: {' '.join(fh.read().split()[:3])}")
+
+
+def lockstep(args):
     lock = paired(args.repeat, args.periods, {"state_period": 1.0})
     rate = {k: [float(s["rate"]) for s, _ in v] for k, v in lock.items()}
     print(f"\nlockstep, {args.periods} controlled periods, state every 1.0")
@@ -119,6 +130,9 @@ def main(argv=None):
     print(f"ratio with / without (median rate): "
           f"{statistics.median(rate[True]) / statistics.median(rate[False]):.3f}")
 
+
+
+def realtime(args):
     rt = paired(args.repeat, args.samples, {"mode": "realtime", "time_scale": args.scale,
                                             "state_period": 1.0, "actuation": "on_arrival"})
     print(f"\nrealtime, time_scale {args.scale:g}, {args.samples} samples, state every 1.0, "
@@ -136,8 +150,6 @@ def main(argv=None):
               f"{lag:8.3f} {late:5.0f} {frames:7.0f}")
     print(f"ratio with / without: p50 {med[True][0] / med[False][0]:.3f}, "
           f"p99 {med[True][1] / med[False][1]:.3f}")
-    with open("/proc/loadavg") as fh:
-        print(f"\nload average at the end: {' '.join(fh.read().split()[:3])}")
 
 
 if __name__ == "__main__":

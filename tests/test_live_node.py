@@ -198,6 +198,48 @@ def test_what_a_node_publishes_arrives_byte_for_byte_and_decodes_to_the_same_val
     assert "live view stopped: forwarded /oscillator/pi2 " in out
 
 
+def test_a_malformed_message_is_forwarded_as_is_and_the_node_keeps_running():
+    """Bytes that decode to no JointState (a stray publisher's serialized garbage) reach
+    the viewer unchanged, and the node goes on forwarding the well-formed ones."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from grazing_control.ros.common import PUBLISHER_QOS
+
+    domain = new_domain()
+    port = free_port()
+    proc = start_live(domain, port)
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node("stray", context=context)
+    pub = node.create_publisher(JointState, "oscillator/pi2", PUBLISHER_QOS)
+    garbage = b"\x00\x01\x00\x00" + bytes(range(7, 43))   # 40 bytes: no DDS padding
+    good = JointState(name=["mass"], position=[1.5], velocity=[-2.0], effort=[0.0])
+    try:
+        client = FoxgloveClient(port, topics=["/oscillator/pi2"])
+        end = time.monotonic() + 30
+        while time.monotonic() < end and not (
+                {p for _, _, p in client.messages} >= {garbage}
+                and len(client.messages) > 20 and client.messages[-1][2] != garbage):
+            pub.publish(garbage)            # rclpy publishes bytes as serialized data
+            pub.publish(good)
+            time.sleep(0.01)
+        client.close()
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        out = stop(proc)
+    payloads = [p for _, _, p in client.messages]
+    assert garbage in payloads, out
+    assert len(serialize_message(good)) in {len(p) for p in payloads if p != garbage}
+    decoded = decode(client.channels["/oscillator/pi2"], payloads[-1])
+    assert list(decoded.position) == [1.5] and list(decoded.velocity) == [-2.0]
+    assert proc.returncode == 0, out
+    assert "Traceback" not in out
+
+
 def test_parse_message_data_reads_the_specified_layout():
     frame = bytes([1]) + (7).to_bytes(4, "little") + (2**40 + 3).to_bytes(8, "little") + b"xy"
     assert parse_message_data(frame) == (7, 2**40 + 3, b"xy")

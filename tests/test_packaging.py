@@ -29,6 +29,7 @@ CONSOLE_SCRIPTS = {
     'sim_node': 'sim_node.sim_node',
     'controller_node': 'grazing_control.ros.controller_node',
     'recorder_node': 'grazing_control.ros.recorder_node',
+    'live_node': 'grazing_control.ros.live_node',
 }
 
 EXEC_DEPENDS = {
@@ -174,7 +175,8 @@ def test_colcon_build(tmp_path, symlink):
     for name in CONSOLE_SCRIPTS:
         exe = prefix / 'lib' / PACKAGE / name
         assert exe.is_file() and os.access(exe, os.X_OK), f'{exe} missing'
-    for pattern, subdir in (('launch/*.py', 'launch'), ('config/*.yaml', 'config')):
+    for pattern, subdir in (('launch/*.py', 'launch'), ('config/*.yaml', 'config'),
+                          ('config/*.json', 'config')):
         for f in src.glob(pattern):
             assert (prefix / 'share' / PACKAGE / subdir / f.name).is_file(), f
 

@@ -35,9 +35,10 @@ The subscriptions are best effort, volatile, keep last ``depth``: a reliable pub
 does not wait for this reader's acknowledgements (a best-effort reader matches a
 reliable writer without joining its flow control), and when the node lags, the oldest
 queued messages are overwritten. Towards the browser the SDK keeps at most ``backlog``
-messages per client and drops the oldest. The simulator does not wait for this node
-(it is not a recorder: ``recorder/ready`` is not its business), so a scene started
-before the view loses only what the view would have shown. A message is forwarded as
+messages per client and drops the oldest. Every thread of the node runs at SCHED_IDLE
+(``priority``): the scene's nodes get the CPU first. The simulator does not wait for
+this node (it is not a recorder: ``recorder/ready`` is not its business), so a scene
+started before the view loses only what the view would have shown. A message is forwarded as
 bytes without being decoded, so a malformed message cannot make the node fail: the
 viewer reports what it cannot decode.
 
@@ -55,6 +56,9 @@ Parameters (all read-only)
     Keep-last depth of each subscription.
 ``backlog`` (integer, 1024; range 1..1000000)
     Messages queued per WebSocket client before the oldest is dropped.
+``priority`` (string, ``idle``)
+    CPU priority of the node's threads: ``idle`` (SCHED_IDLE), ``low`` (nice 19),
+    ``normal`` (:func:`lower_priority`).
 
 Run: ``ros2 run grazing_control live_node --ros-args -p port:=8765``, or
 ``grazing run --live 8765`` (the launcher starts it beside the scene).
@@ -96,8 +100,8 @@ DEFAULT_DEPTH = 10
 MAX_DEPTH = 10_000
 DEFAULT_BACKLOG = 1024
 MAX_BACKLOG = 1_000_000
-DEFAULT_NICENESS = 19
-MAX_NICENESS = 19
+#: CPU priorities of the view (parameter ``priority``), lowest first.
+PRIORITIES = ("idle", "low", "normal")
 
 # Most messages of one topic forwarded in one callback (keeps topics interleaved).
 _BATCH = 64
@@ -125,6 +129,33 @@ def channel_schema(msg_type: str):
     return f"{package}/msg/{name}", "ros2msg", message_definition(msg_type).encode()
 
 
+def lower_priority(priority: str) -> None:
+    """Lower the CPU priority of every thread of this process (and so of those they
+    start: the middleware's and the WebSocket server's).
+
+    ``idle``: Linux SCHED_IDLE, below every nice level: the view runs on what the
+    scene's nodes leave (nice 19 where SCHED_IDLE is refused); ``low``: nice 19;
+    ``normal``: unchanged.
+    """
+    if priority == "normal":
+        return
+    try:
+        threads = [int(tid) for tid in os.listdir("/proc/self/task")]
+    except OSError:
+        threads = [0]
+    for tid in threads:
+        try:
+            if priority == "idle" and hasattr(os, "SCHED_IDLE"):
+                os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+            else:
+                os.setpriority(os.PRIO_PROCESS, tid, 19)
+        except OSError:
+            try:
+                os.setpriority(os.PRIO_PROCESS, tid, 19)
+            except OSError:
+                pass        # a thread that ended meanwhile
+
+
 class LiveNode(Node):
     """Forwards the scene's serialized messages to a Foxglove WebSocket server.
 
@@ -138,9 +169,8 @@ class LiveNode(Node):
     def __init__(self, **kwargs):
         super().__init__("live_node", **kwargs)
         self._declare_parameters()
-        port, host, topics, depth, backlog, niceness = self._read_parameters()
-        if niceness:        # this process and the server's threads, started below
-            os.nice(niceness)
+        port, host, topics, depth, backlog, priority = self._read_parameters()
+        lower_priority(priority)     # the middleware's threads and the server's (below)
         import foxglove
 
         self._context = foxglove.Context()
@@ -189,19 +219,24 @@ class LiveNode(Node):
         self.declare_parameter("backlog", DEFAULT_BACKLOG, int_descriptor(
             f"messages queued per WebSocket client before the oldest is dropped, "
             f"1..{MAX_BACKLOG}", 1, MAX_BACKLOG, read_only=True))
-        self.declare_parameter("niceness", DEFAULT_NICENESS, int_descriptor(
-            f"added to the process's nice value, 0..{MAX_NICENESS}: the view yields the "
-            "CPU to the scene's nodes", 0, MAX_NICENESS, read_only=True))
+        self.declare_parameter("priority", "idle", string_descriptor(
+            "CPU priority of the view: idle (SCHED_IDLE: runs when the scene's nodes "
+            "leave a core free), low (nice 19) or normal", read_only=True,
+            choices=PRIORITIES))
 
     def _read_parameters(self):
         values = {}
         for name, lo, hi in (("port", 0, MAX_PORT), ("depth", 1, MAX_DEPTH),
-                             ("backlog", 1, MAX_BACKLOG), ("niceness", 0, MAX_NICENESS)):
+                             ("backlog", 1, MAX_BACKLOG)):
             value = self.get_parameter(name).value
             if not lo <= value <= hi:       # the descriptor's range, for a direct caller
                 raise ParameterError(f"{name}={value!r} is invalid: valid range is "
                                      f"{lo}..{hi}")
             values[name] = value
+        priority = self.get_parameter("priority").value
+        if priority not in PRIORITIES:
+            raise ParameterError(f"priority={priority!r} is invalid: valid values are "
+                                 f"{', '.join(PRIORITIES)}")
         host = self.get_parameter("host").value
         if not host:
             raise ParameterError("host='' is invalid: give an address, e.g. 127.0.0.1")
@@ -218,7 +253,7 @@ class LiveNode(Node):
                 raise ParameterError(f"topics: message type {kind!r} is not installed "
                                      "(no Python module or no .msg file)") from None
         return (values["port"], host, topics, values["depth"], values["backlog"],
-                values["niceness"])
+                priority)
 
     def _on_message(self, topic, data, info):
         """Forward a message, then those already queued behind it (one wake-up, a batch)."""
