@@ -69,6 +69,9 @@ __all__ = ["SimNode", "main"]
 ISOLATION_CHECK = 0.25
 #: Wall seconds to wait at exit for every reader to acknowledge every message.
 ACK_TIMEOUT = 10.0
+#: Realtime: /clock goes out at a wake-up at most every this many wall seconds (and at
+#: least every CLOCK_TICK of the loop); one per wake-up was one message per stream sample.
+CLOCK_EVERY = 1e-3
 #: No default QoS-event handlers on the data publishers: each one is one more entity in
 #: every executor wait (measured: about 10 % of the lockstep rate).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
@@ -164,6 +167,7 @@ class SimNode(Node):
         self._created = time.monotonic()
         self._wall_start = None
         self._ready_since = None
+        self._clock_wall = -math.inf   # wall time of the last /clock (realtime)
         self.get_logger().info(f"{self.settings.describe()} executor={self.executor_kind}")
 
     def _values(self) -> dict:
@@ -291,7 +295,10 @@ class SimNode(Node):
             return
         now = self._guard(self.loop.tick)
         if now is not None and self.running:
-            self.pub_clock.publish(cdr.clock(*cdr.stamp_parts(now)))
+            wall = time.monotonic()
+            if wall - self._clock_wall >= CLOCK_EVERY:     # /clock at most every 1 ms
+                self._clock_wall = wall
+                self.pub_clock.publish(cdr.clock(*cdr.stamp_parts(now)))
             self._arm(now)
 
     def _arm(self, now: float) -> None:

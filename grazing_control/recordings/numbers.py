@@ -62,6 +62,8 @@ class Setup:
     actuation_delay: float
     sources: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    pulse_width: float = 0.0      # the simulator's force pulse (0: the kick of Eq. 28)
+    force_limit: float = 0.0      # 0: none
 
 
 def infer_delta_d(base: OscillatorParams, scene):
@@ -254,7 +256,11 @@ def resolve_setup(bag, options: dict) -> Setup:
     delay = _num(sim.get("actuation_delay"), _num(ctl.get("actuation_delay"), 0.0))
     ea = _num(ctl.get("enable_after"))
     ea = int(ea) if ea is not None and math.isfinite(ea) else None
-    return Setup(params, gains, str(mode), ts, saturation, ea, delay, sources, notes)
+    width = _num(sim.get("pulse_width"), 0.0)
+    limit = _num(sim.get("force_limit"), 0.0)
+    return Setup(params, gains, str(mode), ts, saturation, ea, delay, sources, notes,
+                 width if width is not None and math.isfinite(width) and width > 0 else 0.0,
+                 limit if limit is not None and math.isfinite(limit) and limit > 0 else 0.0)
 
 
 #: Largest |omega t mod 2 pi| of a Pi2 stamp accepted as "on the section" (rad): stamps are
@@ -368,23 +374,37 @@ def applied_corrections(sd) -> np.ndarray:
 
 
 def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000,
-                corrections=None):
+                corrections=None, pulse_width: float = 0.0, force_limit: float = 0.0):
     """Re-integrate each recorded period with the core; largest departure, per sample.
 
     Returns (max departure, array of departures |P(X_k, dv_k) - X_{k+1}|) over at most
     ``limit`` periods; the correction of sample k (``corrections``, default the recorded
-    ones) is applied on Pi2 (``delay`` after it when the run had an actuation delay).
+    ones) is applied on Pi2 (``delay`` after it when the run had an actuation delay), as
+    a force pulse of ``pulse_width`` centred there when the simulator had one
+    (:func:`grazing_control.dynamics.actuation.pulse_step`, docs/theory_pulse.md).
     """
+    from grazing_control.dynamics.actuation import pulse_step
     from grazing_control.dynamics.simulate import period_step
 
     dvs = scene.correction if corrections is None else corrections
     n = min(len(scene.t) - 1, limit)
     dep = np.zeros(max(n, 0))
-    kw = {"delay": delay} if delay else {}
+    if pulse_width > 0.0:       # the engine's rule: centred at the delay, within [0, T - w)
+        start = min(max(delay - 0.5 * pulse_width, 0.0),
+                    math.nextafter(p.period - pulse_width, 0.0))
+
+        def step(dx, dv, dvc):
+            return pulse_step(p, dx, dv, dvc, start=start, width=pulse_width,
+                              force_limit=force_limit or math.inf)
+    else:
+        kw = {"delay": delay} if delay else {}
+
+        def step(dx, dv, dvc):
+            return period_step(p, dx, dv, dvc, **kw)
     for k in range(n):
         x, v = scene.pi2[k]
         try:
-            seg = period_step(p, x - p.x_ref, v - p.v_ref, float(dvs[k]), **kw)
+            seg = step(x - p.x_ref, v - p.v_ref, float(dvs[k]))
         except Exception:            # the core refuses (impact cap): count as departed
             dep[k] = np.inf
             continue
@@ -487,7 +507,8 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
     }
     if setup.params is not None:
         worst, dep = model_check(setup.params, scene, setup.actuation_delay,
-                                 corrections=applied_corrections(sd))
+                                 corrections=applied_corrections(sd),
+                                 pulse_width=setup.pulse_width, force_limit=setup.force_limit)
         out["model_check"] = {"max_departure": worst,
                               "periods": int(dep.size),
                               "periods_in_scene": max(len(scene.t) - 1, 0),
