@@ -190,3 +190,20 @@ def test_after_section_makes_a_section_due_with_the_first_sample_after_it():
     assert [r[:2] for r in b] == [(0, 0), (9, 1), (19, 2)]
     assert [r[:2] for r in a] == [(1, 0), (11, 1), (21, 2)]
     assert np.allclose([r[2] for r in a[1:]], [r[2] for r in b[1:]], rtol=0, atol=1e-12)
+
+
+def test_what_the_plant_reports_as_acted_replaces_the_answer():
+    """A deadline miss (0) or a substituted prediction reported by the plant is the kick
+    the filter integrates, before or after the controller's own late answer."""
+    from grazing_control.dynamics.stream import StreamEstimator
+    from grazing_control.oscillator.params import OscillatorParams
+
+    s = StreamEstimator(OscillatorParams(delta_d=-5e-6), "model", 1e-4)
+    s.set_correction(5, 1e-3, 2.0)
+    s.acted(5, 0.0, 2.0)                   # the answer came too late: nothing acted
+    assert s.kicks[5][1] == 0.0
+    s.acted(6, 2e-4, 2.0)                  # the prediction acted, reported first ...
+    s.set_correction(6, 3e-4, 2.0)         # ... then our late answer: ignored
+    assert s.kicks[6] == (6 * s.p.period + 2.0, 2e-4)
+    s.set_correction(7, 5e-4, 2.0)         # an answer in time stands
+    assert s.kicks[7][1] == 5e-4

@@ -90,6 +90,7 @@ class StreamEstimator:
         self.samples = deque()          # (t, x, v) of the last two periods
         self.next_k = None              # the next section to estimate
         self.kicks = {}                 # section k -> (time of the kick, dv)
+        self.final = set()              # sections whose kick the plant reported (acted)
         self.delay = 0.0
         self.impacts = deque(maxlen=64)  # impact times (topic or detected)
         self.filter = None              # FilterState at section filter_k
@@ -106,11 +107,23 @@ class StreamEstimator:
             self.impacts.append(float(t))
 
     def set_correction(self, k: int, dv: float, delay: float = 0.0) -> None:
-        """The correction answered to section k, applied ``delay`` after t_k."""
+        """The correction answered to section k, applied ``delay`` after t_k (unless the
+        plant already said what acted there: :meth:`acted`)."""
+        if k in self.final:
+            return
         self.kicks[k] = (k * self.p.period + delay, float(dv))
         self.delay = delay
         for old in [j for j in self.kicks if j < k - 3]:
             del self.kicks[old]
+        self.final = {j for j in self.final if j >= k - 3}
+
+    def acted(self, k: int, dv: float, delay: float = 0.0) -> None:
+        """What acted at section k according to the plant (a deadline miss: 0, or the
+        prediction substituted for a late answer): it replaces the answered correction,
+        also one answered after this call."""
+        self.final.discard(k)
+        self.set_correction(k, dv, delay)
+        self.final.add(k)
 
     def add_sample(self, t: float, x: float, v: float = math.nan) -> list:
         """A sample (x~, v~; v NaN if not measured) at time t; returns the sections

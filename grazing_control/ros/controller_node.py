@@ -373,6 +373,14 @@ class ControllerNode(Node):
                 self.sub_impacts = self.create_subscription(
                     Vector3Stamped, "oscillator/impact", self._on_impact, DATA_QOS,
                     event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+            # what acted where an answer came too late: nothing (oscillator/deadline_miss)
+            # or the prediction substituted for it (oscillator/substituted); the model
+            # filter must integrate the kick that acted, not the one it answered
+            self.create_subscription(Vector3Stamped, "oscillator/deadline_miss",
+                                     self._on_miss, DATA_QOS, event_callbacks=quiet)
+            self.create_subscription(TwistStamped, "oscillator/substituted",
+                                     self._on_substituted, DATA_QOS, raw=True,
+                                     event_callbacks=quiet)
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0
@@ -519,6 +527,27 @@ class ControllerNode(Node):
             self.phase_mismatch(f"t={t!r}: the stream's phase reference {tuple(effort[:2])} "
                                 f"differs by {err:.3g} from tau2 + omega t (sections at "
                                 "t_k = k T)")
+
+    def _section(self, sec: int, nanosec: int) -> int | None:
+        """The section index k of a sample stamp t_k = k T (None if it is not one)."""
+        t = sec + nanosec * 1e-9
+        k = round(t / self.model.period) if self.model is not None else -1
+        return k if k >= 0 and abs(t - k * self.model.period) < 1e-6 else None
+
+    def _on_miss(self, msg) -> None:
+        """The simulator missed section k's deadline: no answer of ours acted there."""
+        k = self._section(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if k is not None:
+            self.stream.acted(k, 0.0, self.actuation_delay)
+
+    def _on_substituted(self, data: bytes) -> None:
+        """The prediction that acted at section k in place of our late answer."""
+        answer = cdr.read_twist_stamped(data)
+        if answer is None or not math.isfinite(answer[2]):
+            return
+        k = self._section(answer[0], answer[1])
+        if k is not None:
+            self.stream.acted(k, answer[2], self.actuation_delay)
 
     def _on_impact(self, msg) -> None:
         """An impact from the rig's impact sensor (impact_source topic): its time."""
