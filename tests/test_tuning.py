@@ -99,3 +99,32 @@ def test_design_noise_gain_is_infinite_without_a_stable_orbit():
     g = Gains(degenerate_c1(p, -1.0), -1.0)
     only_x = design_noise_gain(p, -1.0, measurement=np.diag([1.0, 0.0]))
     assert only_x == pytest.approx(noise_gain(p, g) * abs(g.c1) / math.hypot(g.c1, g.c2), rel=1e-12)
+
+
+def test_design_reports_the_position_only_noise_gain_of_the_chosen_estimator(capsys):
+    """`grazing design --delta-d --json`: noise_gain_position_only is the loop's gain with
+    the estimator's covariance per unit sigma^2 (E7) as the measurement covariance; the
+    arc fit's agrees with its simulated spread (docs/theory_estimation.md), the nearest
+    sample's is two orders above it, the model filter's below."""
+    import json
+
+    from grazing_control import cli
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.estimation import estimate_covariance
+    from grazing_control.dynamics.tuning import design_noise_gain
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.oscillator.params import OscillatorParams
+
+    p = OscillatorParams(delta_d=-5e-6)
+    gains = {}
+    for estimator in ("model", "arc", "nearest"):
+        assert cli.main(["design", "--c2", "-0.3", "--delta-d", "-5e-6", "--estimator",
+                         estimator, "--sensor-rate", "200", "--json"]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        g = Gains(degenerate_c1(p, -0.3), -0.3)
+        r = estimate_covariance(p, g, 200, estimator=estimator)
+        assert doc["noise_gain_position_only"] == pytest.approx(
+            design_noise_gain(p, -0.3, 0.0, measurement=r), rel=1e-12)
+        assert doc["position_only_sensor"] == {"samples_per_period": 200, "estimator": estimator}
+        gains[estimator] = doc["noise_gain_position_only"]
+    assert gains["model"] < gains["arc"] < gains["nearest"] / 50

@@ -260,6 +260,11 @@ def cmd_design(args):
         lines.append(f"  noise gain         = {'none (no stable controlled orbit)' if gain is None else f'{gain:.4g}'}"
                      f"  (std of the Pi2 position per unit measurement noise on x and v, "
                      f"Delta d = {noise['noise_gain_delta_d']:.3g})")
+        pos = noise["noise_gain_position_only"]
+        sensor = noise["position_only_sensor"]
+        lines.append(f"  position only      = {'none' if pos is None else f'{pos:.4g}'}"
+                     f"  (a position sensor at {sensor['samples_per_period']} samples per "
+                     f"period, {sensor['estimator']} estimator, per unit sigma)")
     if tuned is not None:
         study = tuned["study_noise_gain"]
         lines.append(f"  optimised          : least noise gain in {_fmt_intervals([tuned['interval']])}"
@@ -299,9 +304,26 @@ def _noise_report(args, p, point):
     """noise_gain (null where no stable controlled orbit) at --delta-d, issue 15 section 3."""
     from grazing_control.dynamics.tuning import design_noise_gain
 
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.estimation import estimate_covariance
+    from grazing_control.dynamics.orbits import OrbitNotFound
+
     dd = _noise_delta_d(args)
-    gain = design_noise_gain(p.with_(delta_d=dd), point.c2, point.delay)
-    return {"noise_gain": gain if math.isfinite(gain) else None, "noise_gain_delta_d": dd}
+    q = p.with_(delta_d=dd)
+    gain = design_noise_gain(q, point.c2, point.delay)
+    out = {"noise_gain": gain if math.isfinite(gain) else None, "noise_gain_delta_d": dd}
+    # the position-only sensor (issue 15 section 3): the estimate's covariance per unit
+    # sigma^2 of the chosen estimator at --sensor-rate samples per period (E7)
+    try:
+        g = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
+        r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator)
+        pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
+    except (OrbitNotFound, ValueError, ArithmeticError):
+        pos = math.inf
+    out.update(noise_gain_position_only=pos if math.isfinite(pos) else None,
+               position_only_sensor={"samples_per_period": args.sensor_rate,
+                                     "estimator": args.estimator})
+    return out
 
 
 def _fmt_intervals(intervals):
@@ -564,6 +586,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--delta-d", type=_finite,
                    help="report the noise gain (std of the Pi2 position per unit measurement "
                         "noise) of the controlled orbit at this Delta d < 0")
+    s.add_argument("--sensor-rate", type=integer_at_least(2), default=200,
+                   help="position-only sensor for the noise gain: samples per period "
+                        "(default 200)")
+    s.add_argument("--estimator", choices=("model", "arc", "nearest"), default="model",
+                   help="its Pi2 estimator (default model, docs/theory_estimation.md)")
     s.add_argument("--optimize", choices=("noise",),
                    help="choose c2 in the admissible set: noise = least noise gain at --delta-d "
                         "(default -5e-6, the study's first scene)")
