@@ -358,6 +358,11 @@ class ControllerNode(Node):
             TwistStamped, "controller/velocity_correction", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         quiet = SubscriptionEventCallbacks(use_default_callbacks=False)
+        # created in both modes (published in stream mode only): the recorder records it by
+        # default and says it is ready once every recorded topic has its publisher
+        self.pub_estimate = self.create_publisher(
+            JointState, "controller/estimate", REPLAY_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         if self.stream is None:
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
@@ -366,9 +371,6 @@ class ControllerNode(Node):
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/state", self._on_state, DATA_QOS, raw=True,
                 event_callbacks=quiet)
-            self.pub_estimate = self.create_publisher(
-                JointState, "controller/estimate", REPLAY_QOS,
-                event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
             if self.stream.impact_source == "topic":
                 self.sub_impacts = self.create_subscription(
                     Vector3Stamped, "oscillator/impact", self._on_impact, DATA_QOS,
