@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml  # noqa: E402
 from grazing_control.dynamics.orbits import orbit_11  # noqa: E402
+from grazing_control.dynamics.tuning import optimize_noise  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.recordings import reader  # noqa: E402
@@ -90,7 +91,8 @@ def main():
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     p = OscillatorParams(delta_d=DD)
-    gains = Gains(degenerate_c1(p, -1.0, args.delay), -1.0, args.delay)
+    c2 = optimize_noise(p, args.delay).c2     # the study's c2 = -1 has no orbit at delay 3
+    gains = Gains(degenerate_c1(p, c2, args.delay), c2, args.delay)
     controller = write_controller_yaml(OUT / "controller.yaml", p, gains) or OUT / "controller.yaml"
     orbit = np.array(orbit_11(p, gains, branch="grazing").pi2)
     configs = [("idle", False, False), ("idle+rt", False, True), ("yes", True, False),

@@ -11,19 +11,12 @@ turns answers into loop calls and the loops' output into messages (packed CDR,
 :mod:`grazing_control.ros.cdr`). A lockstep run reproduces ``simulate`` of the same
 scene sample for sample (docs/nodes.md).
 
-Topics (reliable, volatile, keep last 1000; docs/nodes.md has every field and unit):
-``oscillator/state`` (sensor_msgs/JointState: the rig's sensor stream, position [x~],
-velocity [v~] or empty, effort [cos tau, sin tau]), ``oscillator/pi1``, ``/pi2``
-(JointState: position [x], velocity [v], effort [cos tau]; a Pi2 sample is the state
-before its correction, the ground truth), ``oscillator/impact`` (geometry_msgs/
-Vector3Stamped: v-, v+, phase), ``oscillator/latency`` (std_msgs/Float64, realtime: wall
-seconds from a sample to its answer), ``oscillator/deadline_miss`` (Vector3Stamped: k,
-the missed actuation time, the wall seconds waited), ``/clock``, ``oscillator/done``
-(std_msgs/Bool, transient local), ``oscillator/substituted`` (TwistStamped: the
-prediction that acted for a sample whose answer was missing); stamps are simulation time. Subscribed:
-``controller/velocity_correction`` (geometry_msgs/TwistStamped: twist.linear.x = Delta v,
-twist.linear.y = the Delta v it predicts for the next sample or NaN, stamp = the Pi2
-sample's it answers). Service ``~/reset`` (std_srvs/Trigger): back to t = 0.
+Topics (docs/nodes.md has every field, unit and QoS): publishes ``oscillator/state`` (the
+rig's sensor stream), ``oscillator/pi1``, ``/pi2`` (the ground truth), ``/impact``,
+``/latency``, ``/deadline_miss``, ``/substituted`` (the prediction that acted for a
+missing answer), ``/done``, ``/clock``; stamps are simulation time. Subscribes
+``controller/velocity_correction`` (linear.x = Delta v, linear.y = the predicted next
+one, stamp = the Pi2 sample answered). Service ``~/reset``: back to t = 0.
 
 Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
 ``python -m sim_node.sim_node --ros-args ...``.
@@ -53,11 +46,12 @@ from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             settings_from_values)
 from grazing_control.ros import cdr
-from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS, PUBLISHER_QOS,
-                                        deserialize, READY_TOPIC, StartupError,
-                                        bool_descriptor, float_descriptor, int_descriptor,
-                                        publish_parameter_record, run_node, spin, stamp_key,
-                                        string_descriptor)
+from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
+                                        LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
+                                        StartupError, bool_descriptor, deserialize,
+                                        float_descriptor, int_descriptor, log_parameter_changes,
+                                        publish_parameter_record, refuse_while_running,
+                                        run_node, spin, stamp_key, string_descriptor)
 from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
 from grazing_control.ros.scheduling import apply_scheduling, parse_cpus
 
@@ -91,6 +85,7 @@ NODE_PARAMETERS = (
               f"matched every topic ({READY_TOPIC}); grazing run sets it when it records",
               read_only=True),
     Parameter("scene", "string", "", SCENE_PARAMETER_DOC, read_only=True),
+    Parameter("live_changes", "bool", False, LIVE_CHANGES_DOC, read_only=True),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
     Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "
@@ -374,6 +369,9 @@ class SimNode(Node):
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
+        refused = refuse_while_running(self, params, self.loop is not None)
+        if refused is not None:
+            return refused
         values = self._values()
         values.update({p.name: p.value for p in params if p.name in values})
         try:
@@ -387,6 +385,7 @@ class SimNode(Node):
             self.loop.rebase()
         self.settings = new
         self.engine.settings = new
+        log_parameter_changes(self, params)
         return SetParametersResult(successful=True)
 
 

@@ -201,7 +201,7 @@ def test_a_second_simulator_on_the_samples_stops_the_controller_with_an_error(co
 
 def test_enable_service_and_runtime_parameters(controller):
     col, start = controller
-    proc, log, pub = start(enable_after=-1)
+    proc, log, pub = start(enable_after=-1, live_changes=True)
     x, v = 1e-4, P.v_ref - 2e-4
     exact = correction(GAINS, x, v, P.x_ref, P.v_ref)
     pub.publish(sample(1.0, x, v))
@@ -497,3 +497,53 @@ def test_a_malformed_stream_never_stops_the_answers(stream_scene):
     assert "answered=4" in text and "malformed=" in text and "Traceback" not in text, text
     # its effort [cos t, sin t] is not the phase tau2 + omega t: counted, not fatal
     assert "phase_mismatch=37" in text and "stream_ignored=6" in text, text   # 31 + 6 dup.
+
+
+def test_parameters_are_read_only_once_the_scene_runs_unless_allowed(controller):
+    """Anyone on the domain can call the parameter services (issue 21 §3): before the
+    first answer a change is accepted (and logged); once the controller answers, every
+    change is refused naming live_changes; an absurd gain is refused even when allowed;
+    ~/enable stays the explicit, logged path and is published on controller/enabled."""
+    from std_msgs.msg import Bool
+
+    from grazing_control.ros.common import LATCHED_QOS
+
+    col, start = controller
+    proc, log, pub = start(enable_after=-1)
+    params = AsyncParameterClient(col.node, "controller_node")
+    assert params.wait_for_services(10.0)
+
+    def set_(name, value):
+        fut = params.set_parameters([Parameter(name, value=value)])
+        assert col.wait_for(fut.done, 10.0)
+        return fut.result().results[0]
+
+    assert set_("c2", -0.5).successful                  # not running yet
+    x, v = 1e-4, P.v_ref - 2e-4
+    pub.publish(sample(1.0, x, v))
+    answers(col, 1)
+    refused = set_("c2", -0.25)
+    assert not refused.successful and "live_changes" in refused.reason
+    enabled = []
+    col.node.create_subscription(Bool, "controller/enabled", lambda m: enabled.append(m.data),
+                                 LATCHED_QOS)
+    enable = col.node.create_client(SetBool, "controller_node/enable")
+    assert enable.wait_for_service(10.0)
+    fut = enable.call_async(SetBool.Request(data=True))
+    assert col.wait_for(fut.done, 10.0) and fut.result().success
+    assert col.wait_for(lambda: enabled == [True], 10.0), enabled
+    text = log.read_text()
+    assert "parameter changed: c2 -1.0 -> -0.5" in text
+    assert "parameter change refused while the scene runs: c2" in text
+    assert "~/enable: controller on" in text
+
+
+def test_an_absurd_gain_is_refused_even_when_changes_are_allowed(controller):
+    col, start = controller
+    proc, log, pub = start(live_changes=True)
+    params = AsyncParameterClient(col.node, "controller_node")
+    assert params.wait_for_services(10.0)
+    fut = params.set_parameters([Parameter("c2", value=1e308)])
+    assert col.wait_for(fut.done, 10.0)
+    result = fut.result().results[0]
+    assert not result.successful and "|c2| <= 1e+06" in result.reason

@@ -231,3 +231,24 @@ def test_a_file_still_being_written_is_not_called_killed(tmp_path):
     st = path.stat()
     os.utime(path, (st.st_atime - old, st.st_mtime - old))
     assert "recorder killed?" in reader.read_raw(path).problems[0]
+
+
+def test_control_switched_off_by_enable_is_a_named_problem(tmp_path):
+    """A third party's `~/enable false` (recorded on /controller/enabled) ends the designed
+    control: the report says so (issue 21 §3: the analysis did not notice)."""
+    with open(SOURCE, "rb") as fh:
+        messages = list(make_reader(fh).iter_messages())
+    folder = tmp_path / "enabled"
+    with BagWriter(folder, compression="zstd") as w:
+        switched = False
+        for i, (schema, channel, msg) in enumerate(messages):
+            if not w.has_topic(channel.topic):
+                w.add_topic(channel.topic, schema.name)
+            w.write(channel.topic, msg.data, msg.log_time)
+            if not switched and i > len(messages) * 0.9:
+                w.add_topic("/controller/enabled", "std_msgs/msg/Bool")
+                w.write("/controller/enabled", b"\x00\x01\x00\x00\x00", msg.log_time)
+                switched = True
+    report, md = _report(folder, tmp_path)
+    assert any("~/enable switched the control off" in p for p in report["problems"])
+    assert "switched the control off" in md

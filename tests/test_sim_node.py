@@ -236,7 +236,8 @@ def test_runtime_parameters_validated_and_applied_at_the_next_sample(node_env):
     domain, collector, start = node_env
     ans = Answerer(collector)
     ans.hold_at = 5
-    proc, log = start(max_periods=12, exit_when_done=True, answer_timeout=30.0)
+    proc, log = start(max_periods=12, exit_when_done=True, answer_timeout=30.0,
+                      live_changes=True)
     held = ans.wait_held()
     client = AsyncParameterClient(collector.node, "sim_node")
     assert client.wait_for_services(10.0)
@@ -260,6 +261,26 @@ def test_runtime_parameters_validated_and_applied_at_the_next_sample(node_env):
     np.testing.assert_array_equal(got[:7], old.pi2)
     new = simulate(OscillatorParams(delta_d=-9e-6), 6, deviation=old.pi2_deviation[6])
     np.testing.assert_array_equal(got[6:], new.pi2)
+
+
+def test_parameters_are_read_only_while_the_scene_runs_by_default(node_env):
+    """Without live_changes a running scene refuses every change, naming the option, and
+    logs the attempt (anyone on the domain can call the parameter services)."""
+    domain, collector, start = node_env
+    ans = Answerer(collector)
+    ans.hold_at = 3
+    proc, log = start(max_periods=6, exit_when_done=True, answer_timeout=30.0)
+    held = ans.wait_held()
+    client = AsyncParameterClient(collector.node, "sim_node")
+    assert client.wait_for_services(10.0)
+    for name, value in (("delta_d", 1e300), ("max_periods", 0), ("zeta", 0.02)):
+        res = call(collector, client.set_parameters([Parameter(name, value=value)]))
+        assert not res.results[0].successful and "live_changes" in res.results[0].reason
+    ans.answer(held)
+    assert proc.wait(30) == 0, log.read_text()
+    np.testing.assert_array_equal(xv(ans.samples), simulate(OscillatorParams(delta_d=-5e-6),
+                                                            7).pi2)
+    assert "parameter change refused while the scene runs: delta_d" in log.read_text()
 
 
 def test_reset_restarts_from_the_initial_state(node_env):

@@ -33,6 +33,7 @@ DEFAULT_TOPICS = {
     "latency": "/oscillator/latency",
     "deadline_miss": "/oscillator/deadline_miss",
     "substituted": "/oscillator/substituted",
+    "enabled": "/controller/enabled",
     "parameters": "/grazing/parameters",
 }
 
@@ -46,6 +47,7 @@ EXPECTED_TYPES = {
     "latency": "std_msgs/msg/Float64",
     "deadline_miss": None,
     "substituted": "geometry_msgs/msg/TwistStamped",
+    "enabled": "std_msgs/msg/Bool",
     "parameters": "std_msgs/msg/String",
 }
 
@@ -164,7 +166,7 @@ def load(bag, topics: dict | None = None) -> BagData:
     if extra:
         notes.append(f"other topics not used by the analysis: {', '.join(extra)}")
     missing = [f"{topics[r]} ({r})" for r in topics if r not in present
-               and r not in ("deadline_miss", "substituted")]
+               and r not in ("deadline_miss", "substituted", "enabled")]
     if missing:
         notes.append(f"absent: {', '.join(missing)}")
     if "pi2" not in present:
@@ -246,6 +248,17 @@ def load(bag, topics: dict | None = None) -> BagData:
     if "latency" in present:
         lat = reader.decode_float64(raw, present["latency"])
         lat["scene"] = _scene_index(starts_log, lat["log_time"])
+    if "enabled" in present:            # ~/enable calls: the explicit switch, recorded
+        en = reader._Body(raw.pool, raw.offsets(present["enabled"]))
+        ok = en.ok & (en.end - en.body >= 1)
+        flags = raw.pool[np.where(ok, en.body, 0)] != 0
+        for t_log, on in zip(en.log_time[ok].tolist(), flags[ok].tolist()):
+            k = int(np.searchsorted(log, t_log, side="right")) - 1
+            what = (f"~/enable switched the control {'on' if on else 'off'} during the run "
+                    f"(after sample {max(k, 0)}, log time {t_log / _NS:.6f} s)")
+            (notes if on else problems).append(
+                what if on else what + ": from there on the corrections are not the "
+                "designed controller's")
     sub = None
     if "substituted" in present:        # the predictions that acted at misses (on_miss)
         sub = reader.decode_twist_stamped(raw, present["substituted"])

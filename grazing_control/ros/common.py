@@ -583,6 +583,34 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
     return code
 
 
+# ------------------------------------------------------------- parameters at runtime
+LIVE_CHANGES_DOC = ("allow parameter changes while the scene runs (each is logged and, "
+                    "through the parameter record, recorded); false: read-only once the "
+                    "scene has started")
+
+
+def refuse_while_running(node, params, running: bool):
+    """The refusal of a set-parameters request while the scene runs (issue 21 §3), else
+    None. Anyone on the domain can call a node's parameter services: a scene's gains and
+    model change only when the node was started with ``live_changes:=true``."""
+    from rcl_interfaces.msg import SetParametersResult
+
+    if not running or node.get_parameter("live_changes").value:
+        return None
+    names = ", ".join(p.name for p in params)
+    node.get_logger().warning(f"parameter change refused while the scene runs: {names}")
+    return SetParametersResult(successful=False, reason=(
+        f"{names}: read-only while the scene runs (start the node with live_changes:=true "
+        "to allow changes; each is logged and recorded)"))
+
+
+def log_parameter_changes(node, params) -> None:
+    """Log each accepted change, old -> new (the parameter record also records it)."""
+    for p in params:
+        old = node.get_parameter(p.name).value if node.has_parameter(p.name) else None
+        node.get_logger().warning(f"parameter changed: {p.name} {old!r} -> {p.value!r}")
+
+
 # ------------------------------------------------------------------ parameter record
 def publish_parameter_record(node):
     """Publish the node's parameters on ``grazing/parameters``, now and after each change.

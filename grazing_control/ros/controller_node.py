@@ -99,6 +99,7 @@ from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
 from grazing_control.dynamics.estimation import ESTIMATORS
@@ -107,9 +108,10 @@ from grazing_control.oscillator.control import Gains, correction
 from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
-from .common import (DATA_QOS, EXECUTORS, REPLAY_QOS, deserialize, StartupError, Throttled,
-                     bool_descriptor, float_descriptor, int_descriptor,
-                     publish_parameter_record, run_node, spin, stamp_key, string_descriptor)
+from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
+                     deserialize, StartupError, Throttled, bool_descriptor, float_descriptor,
+                     int_descriptor, log_parameter_changes, publish_parameter_record,
+                     refuse_while_running, run_node, spin, stamp_key, string_descriptor)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
@@ -208,8 +210,21 @@ class ControlLaw:
         return dv
 
 
+#: Largest |c1|, |c2| accepted (the design's search limit, dynamics.design.C2_LIMIT).
+GAIN_LIMIT = 1e6
+
+
 def law_from_values(values: dict) -> ControlLaw:
-    """Validate the controller's parameters into a :class:`ControlLaw` (ParameterError)."""
+    """Validate the controller's parameters into a :class:`ControlLaw` (ParameterError).
+
+    |c1|, |c2| <= GAIN_LIMIT: a gain of 1e308 passed the finiteness check and the next
+    correction (inf) stopped the simulator (issue 21); the design's admissible sets end
+    within 1e6 (dynamics.design.C2_LIMIT).
+    """
+    for name in ("c1", "c2"):
+        if not abs(float(values[name])) <= GAIN_LIMIT:
+            raise ParameterError(f"{name}={values[name]!r} is invalid: valid range is "
+                                 f"|{name}| <= {GAIN_LIMIT:g}")
     gains = Gains(values["c1"], values["c2"])
     x_ref, v_ref = float(values["x_ref"]), float(values["v_ref"])
     if math.isnan(x_ref) or math.isnan(v_ref):
@@ -332,6 +347,7 @@ class ControllerNode(Node):
             "model filter's process noise per period, in units of sensor_noise", 0.0,
             read_only=True))
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
+        d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
         d("answer_after_section", False, bool_descriptor(
             "stream mode: answer section k with the first sample after t_k (realtime: the "
             "simulator takes an answer only after its Pi2 sample), not with the last "
@@ -386,6 +402,7 @@ class ControllerNode(Node):
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0
+        self.pub_enabled = self.create_publisher(Bool, "controller/enabled", LATCHED_QOS)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
@@ -586,14 +603,20 @@ class ControllerNode(Node):
         return self.get_clock().ros_time_is_active
 
     def _on_enable(self, request, response):
+        """~/enable: the explicit path to switch the control on or off during a scene;
+        logged and published on controller/enabled (recorded: the analysis reports it)."""
         self.law.forced = bool(request.data)
         response.success = True
         response.message = f"controller {'on' if request.data else 'off'} at sample " \
                            f"{self.law.count}"
-        self.get_logger().info(response.message)
+        self.get_logger().warning(f"~/enable: {response.message}")
+        self.pub_enabled.publish(Bool(data=bool(request.data)))
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
+        refused = refuse_while_running(self, params, self.answered > 0)
+        if refused is not None:
+            return refused
         values = self._values()
         values.update({p.name: p.value for p in params if p.name in values})
         try:
@@ -602,6 +625,7 @@ class ControllerNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         self.law.configure(new.gains, new.x_ref, new.v_ref, new.enable_after, new.saturation)
         self.stale_after = float(values["stale_after"])
+        log_parameter_changes(self, params)
         return SetParametersResult(successful=True)
 
     def on_exit(self) -> None:

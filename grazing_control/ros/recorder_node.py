@@ -142,7 +142,8 @@ PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
 #: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
 EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
                 "oscillator/latency": "std_msgs/msg/Float64",
-                "controller/estimate": "sensor_msgs/msg/JointState"}
+                "controller/estimate": "sensor_msgs/msg/JointState",
+                "controller/enabled": "std_msgs/msg/Bool"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
 #: nothing (used for a topic's metadata when it never had a publisher).
