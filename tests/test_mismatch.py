@@ -111,3 +111,28 @@ def test_mismatched_validates():
     with pytest.raises(ParameterError, match="error"):
         mismatched(P, "zeta", math.nan)
     assert np.isclose(mismatched(P, "omega", 1e-3).omega, P.omega * 1.001)
+
+
+@pytest.mark.parametrize("amplitude", [0.95, 1.05])
+def test_a_forcing_amplitude_error_opens_no_band(amplitude):
+    """docs/theory_mismatch.md §1: a plant whose forcing amplitude is A times the model's
+    is, in its own units, the nominal oscillator; the controller's nominal X** is then off
+    by X**(1/A - 1), a constant kick per period that moves the orbit but not the
+    linearisation (N_g,12 stays 0). Checked by simulation: the loop settles on a period-one
+    motion (each step of the last 200 samples below 1e-12) down to Delta d = -1e-10, where
+    a 5 % error in zeta is unstable from about -1e-7 on."""
+    from grazing_control.dynamics.simulate import period_step
+
+    nom = OscillatorParams()
+    g = Gains(degenerate_c1(nom, -1.0), -1.0)
+    for dd in (-1e-6, -1e-8, -1e-10):
+        p = nom.with_(delta_d=dd)
+        xo, vo = p.x_ref * (1 / amplitude - 1), p.v_ref * (1 / amplitude - 1)
+        dx, dv, steps, impacts = 1e-5, 0.0, [], set()
+        for k in range(1500):
+            s = period_step(p, dx, dv, g.c1 * (dx - xo) + g.c2 * (dv - vo))
+            if k >= 1300:
+                steps.append(max(abs(s.dx - dx), abs(s.dv - dv)))
+                impacts.add(len(s.impacts))
+            dx, dv = s.dx, s.dv
+        assert max(steps) < 1e-12 and len(impacts) == 1, (dd, max(steps), impacts)
