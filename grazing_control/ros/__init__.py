@@ -6,7 +6,9 @@ files). :mod:`.controller_node`, :mod:`.recorder_node` (and sim_node at the top 
 of the repository) are thin adapters over the layers below; :mod:`.common` holds what
 the nodes share (QoS, descriptors, the spin loop), :mod:`.cdr` the packed messages,
 :mod:`.launcher` starts a scene as processes, :mod:`.recording` writes and reads
-rosbag2-style MCAP bags.
+rosbag2-style MCAP bags, :mod:`.live_node` serves a scene to Foxglove/Lichtblick,
+:mod:`.scene` tells a scene's nodes from another's (the scene token),
+:mod:`.scheduling` applies the real-time scheduling options.
 
 May import: :mod:`grazing_control.plant` and below.
 """
