@@ -519,8 +519,10 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
     out["realtime"] = realtime_numbers(sd, setup) if setup.mode == "realtime" else None
     dc = (out["realtime"] or {}).get("delay_check")
     if dc and "_departures" in out:
-        active = np.flatnonzero(scene.correction[:-1] != 0.0)
-        dc["median_departure_kicks_on_pi2"] = float(np.median(out["_departures"][active]))
+        dep = out["_departures"]          # the model check's periods (at most its limit)
+        active = np.flatnonzero(scene.correction[:dep.size] != 0.0)
+        dc["median_departure_kicks_on_pi2"] = (float(np.median(dep[active])) if active.size
+                                               else None)
     return out
 
 
