@@ -53,7 +53,7 @@ from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
                                         publish_parameter_record, refuse_while_running,
                                         run_node, spin, stamp_key, string_descriptor)
 from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
-from grazing_control.ros.scheduling import apply_scheduling, parse_cpus
+from grazing_control.ros.scheduling import apply_node_scheduling
 
 from sim_node.messages import Outputs, read_answer
 
@@ -118,15 +118,9 @@ class SimNode(Node):
             self.declare_parameter(p.name, p.default, descriptor(p))
         try:
             self.settings = settings_from_values(self._values())
-            sched = apply_scheduling(self.get_parameter("thread_priority").value,
-                                     parse_cpus(self.get_parameter("cpu_affinity").value),
-                                     self.get_parameter("lock_memory").value)
+            apply_node_scheduling(self)
         except (ParameterError, ValueError) as exc:
             raise StartupError(str(exc)) from None
-        for warning in sched.warnings:
-            self.get_logger().warning(warning)
-        if sched.applied:
-            self.get_logger().info("real-time scheduling: " + ", ".join(sched.applied))
         self.engine = Engine(self.settings)
         self.exit_when_done = self.get_parameter("exit_when_done").value
         self.exit_code = 0
