@@ -63,6 +63,27 @@ def test_each_point_is_simulate_after_the_transient(engine):
             assert np.all(res.c1 == gains.c1) and res.control_after == 30
 
 
+@pytest.mark.parametrize("engine", ["kernel", "python"])
+def test_a_delayed_kick_is_simulate_with_the_same_gains(engine):
+    """Gains.delay is honoured as simulate honours it (the kick acts delay after the
+    sample, from the sample control_after on); a delay of T or more is refused."""
+    q = STUDY.with_(delta_d=-9e-6)
+    gains = Gains(degenerate_c1(q, -1.0, 0.3), -1.0, 0.3)
+    res = sweep(q, {"delta_d": [-9e-6, -5e-6]}, periods=50, transient=20, gains=gains,
+                control_after=10, workers=1, engine=engine)
+    assert res.delay == 0.3
+    for i, dd in enumerate((-9e-6, -5e-6)):
+        one = simulate(STUDY.with_(delta_d=dd), 50, gains=gains, control_after=10)
+        assert np.array_equal(res.pi2_deviation[i], one.pi2_deviation[20:])
+        assert np.array_equal(res.impacts_per_period[i], one.impacts_per_period[20:])
+    undelayed = sweep(q, {"delta_d": [-9e-6]}, periods=50, transient=20,
+                      gains=Gains(gains.c1, -1.0), control_after=10, workers=1, engine=engine)
+    assert not np.array_equal(undelayed.pi2_deviation[0], res.pi2_deviation[0])
+    with pytest.raises(ParameterError, match=r"delay=.* is invalid: valid range is 0 <= delay"):
+        sweep(q, {"delta_d": [-9e-6]}, periods=5, transient=1, workers=1,
+              gains=Gains(gains.c1, -1.0, q.period))
+
+
 def test_kernel_and_python_engines_agree_bit_for_bit(monkeypatch):
     from grazing_control.oscillator import kernel
 

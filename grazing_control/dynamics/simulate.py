@@ -28,8 +28,8 @@ from grazing_control.oscillator.impact import (NonFiniteStateError, Segment, adv
                                                check_state)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
-__all__ = ["SimulationResult", "period_step", "states_between", "simulate", "simulate_batch",
-           "MAX_PERIODS"]
+__all__ = ["SimulationResult", "period_step", "core_period_step", "states_between", "simulate",
+           "simulate_batch", "MAX_PERIODS"]
 
 TWO_PI = 2.0 * math.pi
 #: Largest number of periods of one :func:`simulate` call: it keeps 4 floats and an
@@ -49,6 +49,13 @@ def period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float 
     """
     if _kernel.use_kernel() and (delay == 0.0 or 0.0 < delay < p.period):
         return _kernel.period_step(p, dx, dv, dv_correction, delay=delay)
+    return core_period_step(p, dx, dv, dv_correction, delay=delay)
+
+
+def core_period_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float = 0.0, *,
+                     delay: float = 0.0) -> Segment:
+    """:func:`period_step` on the pure-Python core (the reference), whatever
+    ``GRAZING_KERNEL`` says: the sweeps' python engine runs it."""
     if delay == 0.0:
         return advance(p, p.tau2, dx, dv + dv_correction, p.period)
     if not 0.0 < delay < p.period:

@@ -321,9 +321,11 @@ def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=
     return _run(p, int(periods), dx, dv, c1, c2, control_after, delay, 0, True, progress)
 
 
-def run_point(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_after=0):
+def run_point(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_after=0,
+              delay=0.0):
     """One sweep point: the deviation (m, 2) and impact counts (m,) of the last m =
-    periods - transient samples (c1 = nan: uncontrolled)."""
-    dev, _corr, counts, _imps, _end = _run(p, int(periods), dx, dv, c1, c2, control_after, 0.0,
-                                           int(transient), False)
+    periods - transient samples (c1 = nan: uncontrolled; ``delay``: the kick acts that long
+    after the sample, 0 <= delay < T, as in :func:`simulate_exact`)."""
+    dev, _corr, counts, _imps, _end = _run(p, int(periods), dx, dv, c1, c2, control_after,
+                                           float(delay), int(transient), False)
     return dev, counts

@@ -13,7 +13,9 @@ Public API (stable; figures and the ``grazing sweep`` command use it)::
     deviation : (dx, dv) or (n_starts, 2) array of starts on Pi2, as (x - x**, v - v**);
         several starts are the last, fastest axis of the points.
     gains, control_after : the controller (Eq. 28) acts at samples k >= control_after;
-        control_after=None means 0 when there are gains (and never without).
+        control_after=None means 0 when there are gains (and never without). The gains'
+        actuation delay (Gains.delay, 0 <= delay < T) is honoured as simulate does: the
+        kick acts that long after the sample.
     workers : processes on this machine (None: all cores; 1: in this process).
     scheduler : a Dask scheduler address ("tcp://host:port") or a distributed.Client;
         then the points run on that cluster (identical results to the local run).
@@ -32,6 +34,7 @@ Public API (stable; figures and the ``grazing sweep`` command use it)::
                                slow a transient), -1 the point failed (see ``errors``)
         errors                 (n,) str, '' where the point ran
         c1, c2                 (n,) gains per point (nan: uncontrolled)
+        delay                  the actuation delay of the gains (0.0 without)
         to_npz(path), SweepResult.from_npz(path)
 
 Every point is an independent run from its own start (no continuation from the

@@ -38,6 +38,7 @@ class SweepResult:
     control_after: int  # -1: never
     base: dict = field(default_factory=dict)  # the OscillatorParams fields not gridded
     engine: str = ""
+    delay: float = 0.0  # the actuation delay of the gains (0: the kick acts on Pi2)
 
     @property
     def pi2(self) -> np.ndarray:
@@ -56,7 +57,8 @@ class SweepResult:
         """
         meta = {"format": _FORMAT, "names": list(self.names), "shape": list(self.shape),
                 "periods": self.periods, "transient": self.transient,
-                "control_after": self.control_after, "base": self.base, "engine": self.engine}
+                "control_after": self.control_after, "base": self.base, "engine": self.engine,
+                "delay": self.delay}
         arrays = {f"axis_{n}": np.asarray(a) for n, a in zip(self.names, self.axes)}
         arrays.update({f"point_{n}": np.asarray(v) for n, v in self.points.items()})
         arrays.update(meta=np.array(json.dumps(meta, sort_keys=True)), starts=self.starts,
@@ -87,7 +89,8 @@ class SweepResult:
                 impacts_per_period=f["impacts_per_period"], period=f["period"],
                 errors=f["errors"], c1=f["c1"], c2=f["c2"], periods=int(meta["periods"]),
                 transient=int(meta["transient"]), control_after=int(meta["control_after"]),
-                base=dict(meta["base"]), engine=str(meta["engine"]))
+                base=dict(meta["base"]), engine=str(meta["engine"]),
+                delay=float(meta.get("delay", 0.0)))
 
     def same_as(self, other: "SweepResult") -> bool:
         """Bitwise equality of every array and of the metadata (local vs Dask checks)."""
@@ -98,5 +101,5 @@ class SweepResult:
                 and all(np.array_equal(self.points[n], other.points[n]) for n in self.names)
                 and all(np.array_equal(getattr(self, a), getattr(other, a), equal_nan=a != "errors")
                         for a in arrays)
-                and (self.periods, self.transient, self.control_after, self.base)
-                == (other.periods, other.transient, other.control_after, other.base))
+                and (self.periods, self.transient, self.control_after, self.base, self.delay)
+                == (other.periods, other.transient, other.control_after, other.base, other.delay))

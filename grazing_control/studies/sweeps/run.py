@@ -91,13 +91,15 @@ def _points(params, grid, starts, gains, control_after):
     return names, axes, out
 
 
-def _run_point_python(p, start, c1, c2, periods, transient, control_after):
+def _run_point_python(p, start, c1, c2, periods, transient, control_after, delay=0.0):
     """One point by the pure-Python reference core: (deviation (m, 2), counts (m,)).
 
-    Each period is simulate.period_step's exact flow with impacts (delay 0) on
-    impact.advance itself, whichever path period_step would take.
+    Each period is simulate.period_step's exact flow with impacts on the pure-Python
+    core (simulate.core_period_step), whichever path period_step would take; the kick
+    acts ``delay`` after the sample while the controller is on, as in simulate.
     """
-    from grazing_control.oscillator.impact import NonFiniteStateError, advance
+    from grazing_control.dynamics.simulate import core_period_step
+    from grazing_control.oscillator.impact import NonFiniteStateError
 
     m = periods - transient
     dev = np.full((m, 2), np.nan)
@@ -106,7 +108,9 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
     controlled = not math.isnan(c1)
     for k in range(periods):
         dvc = 0.0
+        kick_delay = 0.0
         if controlled and k >= control_after:  # as simulate: Eq. 28 and its overflow check
+            kick_delay = delay
             dvc = c1 * dx + c2 * dv
             if not abs(dvc) <= 1e150:
                 raise NonFiniteStateError(
@@ -114,7 +118,7 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
                     f"exceeds 1e150: an input overflowed (c1={c1!r}, c2={c2!r}, dx={dx!r}, "
                     f"dv={dv!r})")
         try:
-            seg = advance(p, p.tau2, dx, dv + dvc, p.period)
+            seg = core_period_step(p, dx, dv, dvc, delay=kick_delay)
         except NonFiniteStateError as exc:
             raise NonFiniteStateError(f"at period {k}: {exc}") from None
         if k >= transient:
@@ -124,7 +128,8 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after):
     return dev, counts
 
 
-def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_period):
+def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_period,
+              delay=0.0):
     """Run a list of points; returns (indices, deviation, counts, period, errors).
 
     The unit of work of a local process or a Dask worker; a point that fails (state
@@ -143,11 +148,13 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
     if engine == "kernel":
         from grazing_control.oscillator.kernel import run_point as kernel_point
 
-        def run_point(p, start, c1, c2, periods, transient, control_after):
-            return kernel_point(p, periods, transient, start[0], start[1], c1, c2, control_after)
+        def run_point(p, start, c1, c2, periods, transient, control_after, delay):
+            return kernel_point(p, periods, transient, start[0], start[1], c1, c2, control_after,
+                                delay)
     for j, (_i, p, start, c1, c2) in enumerate(chunk):
         try:
-            dev[j], counts[j] = run_point(p, start, c1, c2, periods, transient, control_after)
+            dev[j], counts[j] = run_point(p, start, c1, c2, periods, transient, control_after,
+                                          delay)
         except (ImpactCapError, InitialStateError, ValueError, ArithmeticError) as exc:
             errors[j] = f"{type(exc).__name__}: {exc}"
             period[j] = -1
@@ -219,12 +226,18 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
         max_period = _count("max_period", max_period, 1)
     starts = _starts(deviation)
     names, axes, pts = _points(params, grid, starts, gains, control_after)
+    delay = gains.delay if gains is not None and control_after is not None else 0.0
+    for p, *_rest in pts:
+        if not delay < p.period:
+            raise ParameterError(f"delay={delay!r} is invalid: valid range is 0 <= delay < T = "
+                                 f"{p.period!r} (the correction acts within the period it "
+                                 "answers)")
     engine = _resolve_engine(engine)
     n = len(pts)
     m = periods - transient
     indexed = [(i,) + pt for i, pt in enumerate(pts)]
     args = (periods, transient, -1 if control_after is None else control_after, engine,
-            float(period_tol), max_period)
+            float(period_tol), max_period, delay)
 
     dev = np.empty((n, m, 2))
     counts = np.empty((n, m), dtype=np.int32)
@@ -268,7 +281,8 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
         impacts_per_period=counts, period=period, errors=errors.astype(str),
         c1=np.array([pt[2] for pt in pts]), c2=np.array([pt[3] for pt in pts]),
         periods=periods, transient=transient,
-        control_after=-1 if control_after is None else control_after, base=base, engine=engine)
+        control_after=-1 if control_after is None else control_after, base=base, engine=engine,
+        delay=delay)
 
 
 def _point_value(pt, name):
