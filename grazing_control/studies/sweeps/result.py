@@ -8,9 +8,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["SweepResult"]
+__all__ = ["SweepResult", "write_npz"]
 
 _FORMAT = "grazing_control.sweep/1"
+
+
+def write_npz(path, arrays: dict) -> None:
+    """An uncompressed npz of ``arrays`` (name -> array, no pickles) that is a function of
+    them alone: members in sorted order with a fixed zip timestamp, so equal arrays give
+    byte-identical files (the local-against-Dask checks compare files)."""
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for name in sorted(arrays):
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            with zf.open(info, "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(arrays[name]),
+                                          allow_pickle=False)
 
 
 @dataclass(frozen=True)
@@ -65,12 +77,7 @@ class SweepResult:
                       pi2=self.pi2, pi2_deviation=self.pi2_deviation, reference=self.reference,
                       impacts_per_period=self.impacts_per_period, period=self.period,
                       errors=self.errors, c1=self.c1, c2=self.c2)
-        with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
-            for name in sorted(arrays):
-                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-                with zf.open(info, "w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, np.asanyarray(arrays[name]),
-                                              allow_pickle=False)
+        write_npz(path, arrays)
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":
