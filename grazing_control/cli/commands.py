@@ -635,6 +635,9 @@ def build_parser() -> argparse.ArgumentParser:
     from grazing_control.studies.sweeps.cli import add_sweep_command
 
     add_sweep_command(sub, _common, _finite, _count)
+    from .basins import add_basins_parser
+
+    add_basins_parser(sub)
 
     try:
         from grazing_control.ros.launcher import add_run_arguments
