@@ -19,10 +19,10 @@ identified across starts by their cycles' points (:mod:`.attractors`). The comma
 ``grazing basins`` (docs/basins.md).
 """
 
-from .attractors import Attractor, canonical_cycle, cycle_distance, identify
+from .attractors import Attractor, canonical_cycle, cycle_distance, identify, reduced_period
 from .plot import picture
 from .result import BasinResult, attractor_colors
 from .run import basins, default_box
 
 __all__ = ["basins", "default_box", "identify", "picture", "BasinResult", "Attractor",
-           "attractor_colors", "cycle_distance", "canonical_cycle"]
+           "attractor_colors", "cycle_distance", "canonical_cycle", "reduced_period"]

@@ -13,7 +13,9 @@ and n and coincide point by point, up to where the cycle was entered:
 
     min over s of max_k |z^a_k - z^b_{(k+s) mod p}| <= match_tol   (both components),
 
-so two starts on the two points of one 2-cycle are one attractor. Starts are taken in
+so two starts on the two points of one 2-cycle are one attractor. A detected period
+whose cycle repeats within ``match_tol`` after a divisor q of it is taken as q
+(:func:`reduced_period`: a slow alternating transient onto a q-cycle). Starts are taken in
 index order and each joins the first attractor it matches (its representative is the
 first start that reached it), so the result depends on the records alone, not on how
 they were computed. Records without a period up to the maximum are one class,
@@ -28,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Attractor", "identify", "cycle_distance", "canonical_cycle"]
+__all__ = ["Attractor", "identify", "reduced_period", "cycle_distance", "canonical_cycle"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,26 @@ def cycle_distance(a, b) -> float:
     return float(min(np.max(np.abs(a - np.roll(b, -s, axis=0))) for s in range(a.shape[0])))
 
 
+def reduced_period(cycle, counts, match_tol: float) -> int:
+    """The least divisor q of p = len(cycle) with the cycle q-periodic to ``match_tol``
+    (|z_{k+q} - z_k| <= match_tol, both components) and the same impacts every q periods.
+
+    The detection's p is exact to period_tol, but a transient that approaches a q-cycle
+    along a multiplier near -1 of P^q alternates about it: z_{k+2q} - z_k is then
+    smaller than z_{k+q} - z_k by the factor 1 + lambda, so the record can pass as a 2q
+    cycle (a 3/3 cycle with lambda = -0.965 shows as "6/6" after 1500 periods). At the
+    tolerance that decides which points are one, such a cycle is the q-cycle.
+    """
+    cycle = np.asarray(cycle, dtype=float)
+    counts = np.asarray(counts)
+    p = cycle.shape[0]
+    for q in range(1, p):
+        if p % q == 0 and np.array_equal(counts[q:], counts[:-q]) \
+                and np.max(np.abs(cycle[q:] - cycle[:-q])) <= match_tol:
+            return q
+    return p
+
+
 def identify(records, counts, period, match_tol: float):
     """Group starts by attractor.
 
@@ -113,6 +135,7 @@ def identify(records, counts, period, match_tol: float):
     for i in range(n):
         p = int(period[i])
         if p >= 1:
+            p = reduced_period(records[i, -p:], counts[i, -p:], match_tol)
             cycle = records[i, -p:]
             key = (p, int(np.sum(counts[i, -p:])))
             for g in by_key.setdefault(key, []):
