@@ -287,12 +287,23 @@ def test_cli_writes_the_files_and_the_summary(tmp_path):
         assert np.array_equal(f["final"], same.final)
 
 
+def test_cli_takes_the_scene_from_a_parameter_file(tmp_path):
+    """config/study.yaml is the study's first scene (Delta d = -5e-6): chaotic uncontrolled."""
+    run = _grazing("--params", str(ROOT / "config" / "study.yaml"), "--nx", "2", "--nv", "2",
+                   "--transient", "300", "--max-period", "8", "--workers", "1", "--no-png",
+                   "--out", str(tmp_path / "s"))
+    assert run.returncode == 0, run.stderr
+    assert "basins at Delta d = -5e-06, uncontrolled" in run.stdout and "chaotic" in run.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json", "s.npz"]
+
+
 @pytest.mark.parametrize("args,message", [
     (["--delta-d", "-1e-5", "--dx", "1:0"], "argument --dx: '1:0' is invalid: expected finite"),
     (["--delta-d", "-1e-5", "--dv=a:b"], "'a:b' is invalid: expected LO:HI"),
     (["--delta-d", "-1e-5", "--control-after", "3"], "--control-after needs the gains"),
     (["--delta-d", "-1e-5", "--c2", "-1", "--delay", "99"], "delay=99.0 is invalid"),
     (["--delta-d", "0"], "delta_d=0.0 has no default box"),
+    (["--zeta", "0.02"], "--delta-d is required (or a --params FILE with delta_d)"),
     (["--delta-d", "-1e-5", "--nx", "0"], "argument --nx: '0' is invalid"),
 ])
 def test_cli_bad_input_is_one_line_and_status_2(args, message, tmp_path):

@@ -55,7 +55,8 @@ def add_basins_parser(sub):
     s = sub.add_parser("basins", help="basins of attraction: the attractor of each start "
                                       "of a grid on Pi2")
     _common(s)
-    s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d*")
+    s.add_argument("--delta-d", type=_finite,
+                   help="Delta d = d - d* (required, unless --params gives it)")
     s.add_argument("--dx", type=parse_range, metavar="LO:HI",
                    help="starts' x - x** on Pi2 (default: a square around X** of half-width "
                         "4 x the 1/1 orbit's distance from it at -|Delta d|); write "
@@ -108,6 +109,8 @@ def cmd_basins(args):
     from grazing_control.studies.basins import basins, picture
     from .commands import _gains, _params
 
+    if args.delta_d is None:
+        raise ParameterError("--delta-d is required (or a --params FILE with delta_d)")
     p = _params(args, args.delta_d)
     gains = _gains(args, p)
     if args.control_after is not None and gains is None:

@@ -13,7 +13,7 @@ namespace), the format sim_node loads with ``--params-file`` and ``grazing run
         delta_d: -5.0e-06
 
 ``--params FILE`` (the commands that take the model: design, orbit, continue, simulate,
-sweep, robustness, run) reads the model's keys from such a file, or from any ROS 2
+sweep, basins, robustness, run) reads the model's keys from such a file, or from any ROS 2
 parameter file with them (``grazing design --out``'s controller file too); an option given
 on the command line wins over the file.
 """
