@@ -21,7 +21,8 @@ from grazing_control.dynamics.simulate import simulate
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.studies.basins import (basins, canonical_cycle, cycle_distance,
-                                            default_box, identify, reduced_period)
+                                            default_box, identify, orbit_scale,
+                                            reduced_period)
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = OscillatorParams()
@@ -99,6 +100,25 @@ def test_a_slow_alternating_approach_is_the_short_cycle():
     assert reduced_period(record[-6:], np.array([1, 1, 1, 1, 1, 2]), 1e-6) == 6  # impacts differ
     index, atts = identify(record[None], np.ones((1, 128), dtype=int), np.array([6]), 1e-6)
     assert [a.label for a in atts] == ["3/3"] and atts[0].points.shape == (3, 2)
+
+
+def test_a_record_periodic_only_at_match_tol_is_a_slow_start_of_its_cycle():
+    """No period at 1e-10 (the alternation about a fixed point decays like 0.995^k), one at
+    match_tol: it joins the settled start's 1/1 attractor (whose point is kept), counted
+    slow; a record periodic at neither is chaotic."""
+    rng = np.random.default_rng(11)
+    k = np.arange(128)
+    fixed = np.array([1e-3, -1e-3])
+    slowly = fixed + 1e-8 * (-0.995) ** k[:, None] * [1.0, 2.0]
+    records = np.stack([slowly, np.tile(fixed, (128, 1)), rng.normal(size=(128, 2))])
+    from grazing_control.studies.sweeps import detect_period
+
+    period = np.array([detect_period(r, 1e-10, 64) for r in records])
+    assert period.tolist() == [0, 1, 0]
+    index, atts = identify(records, np.ones((3, 128), dtype=int), period, 1e-6)
+    assert [(a.label, a.starts, a.slow, a.first) for a in atts] == [("1/1", 2, 1, 1),
+                                                                    ("chaotic", 1, 0, 2)]
+    assert np.array_equal(atts[0].points[0], fixed) and index.tolist() == [0, 0, 1]
 
 
 def test_cycle_distance_is_the_least_over_shifts():
@@ -195,6 +215,22 @@ def test_control_captures_the_study_scene():
     assert [a.label for a in ctl.attractors] == ["1/1"]
     target = orbit_11(q, gains).pi2_deviation
     assert np.max(np.abs(ctl.attractors[0].points[0] - target)) < 1e-10
+
+
+def test_control_near_the_end_of_the_admissible_set_converges_slowly():
+    """c2 = -2 (admissible down to -2.019): the controlled 1/1 orbit's multiplier is -0.995,
+    so after 2000 periods the starts are within 1e-7 of it but not periodic to 1e-10; they
+    are its slow starts, not chaos."""
+    q = STUDY.with_(delta_d=-9e-6)
+    gains = Gains(degenerate_c1(q, -2.0), -2.0)
+    exact = orbit_11(q, gains)
+    assert -1.0 < exact.multipliers[0] < -0.99
+    res = basins(q, dx_range=(2e-3, 3e-3), dv_range=(0.0, 1e-3), nx=2, nv=2, gains=gains,
+                 transient=2000, max_period=8, workers=1)
+    assert res.match_tol == 1e-3 * orbit_scale(q)          # the default, box-independent
+    assert [a.label for a in res.attractors] == ["1/1"] and res.attractors[0].slow >= 1
+    assert np.any(res.period == 0)
+    assert np.max(np.abs(res.final - exact.pi2_deviation)) < res.match_tol
 
 
 def test_default_box_is_the_1_1_orbit_scale_around_x_star():

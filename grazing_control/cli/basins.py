@@ -74,8 +74,8 @@ def add_basins_parser(sub):
     s.add_argument("--period-tol", type=_finite, default=1e-10,
                    help="tolerance of the period detection on Pi2 (default 1e-10)")
     s.add_argument("--match-tol", type=_finite,
-                   help="largest distance of two cycles of one attractor (default 1e-4 x the "
-                        "box's half-width)")
+                   help="largest distance of two cycles of one attractor (default 1e-3 x the "
+                        "1/1 orbit's distance from X** at -|Delta d|)")
     _gain_args(s)
     s.add_argument("--control-after", type=_count,
                    help="controller on from this sample (default 0 with --c2)")
@@ -156,8 +156,9 @@ def cmd_basins(args):
         at = f", at ({a['cycle_pi2'][0][0]:.8g}, {a['cycle_pi2'][0][1]:.8g})" \
             if a["kind"] == "periodic" else ""
         error = f" (first: {a['first_error']})" if a["kind"] == "failed" else ""
+        slow = f", {a['slow_starts']} still converging" if a["slow_starts"] else ""
         lines.append(f"    {a['label']:10s}: {100 * a['fraction']:6.2f} % "
-                     f"({a['starts']} starts){at}{error}")
+                     f"({a['starts']} starts{slow}){at}{error}")
     lines.append(f"  written           : {stem}.npz, {stem}.json"
                  + ("" if args.no_png else f", {stem}.png, {stem}.svg"))
     return "\n".join(lines)

@@ -7,6 +7,7 @@ Public API::
            match_tol=None, workers=None, scheduler=None, engine="auto",
            progress=False) -> BasinResult
     default_box(params) -> (dx_range, dv_range)
+    orbit_scale(params) -> float   (the 1/1 orbit's distance from X** at -|Delta d|)
     identify(records, counts, period, match_tol) -> (index, attractors)
     picture(result, out, name="basins") -> [png, svg]
 
@@ -22,7 +23,7 @@ identified across starts by their cycles' points (:mod:`.attractors`). The comma
 from .attractors import Attractor, canonical_cycle, cycle_distance, identify, reduced_period
 from .plot import picture
 from .result import BasinResult, attractor_colors
-from .run import basins, default_box
+from .run import basins, default_box, orbit_scale
 
-__all__ = ["basins", "default_box", "identify", "picture", "BasinResult", "Attractor",
+__all__ = ["basins", "default_box", "orbit_scale", "identify", "picture", "BasinResult", "Attractor",
            "attractor_colors", "cycle_distance", "canonical_cycle", "reduced_period"]

@@ -22,6 +22,12 @@ they were computed. Records without a period up to the maximum are one class,
 ``chaotic`` (chaos, a quasi-periodic motion, a period above the maximum, or a transient
 longer than the run: coexisting chaotic attractors are not told apart), and failed runs
 another, ``failed``.
+
+A record with no period at period_tol that is periodic at ``match_tol`` (the tolerance
+at which two points are one) is a transient still converging onto a cycle, slowly: a
+multiplier near -1 (|lambda| = 0.995 for the controlled 1/1 orbit at c2 = -2 near the
+end of the admissible set) leaves 1e-8 after 2000 periods. It joins that cycle's
+attractor and is counted in its ``slow`` starts, not called chaotic.
 """
 
 from __future__ import annotations
@@ -54,8 +60,12 @@ class Attractor:
         periodic; the representative start's record when chaotic; empty when failed.
     starts : int
         Starts that reach it.
+    slow : int
+        Of those, the starts whose record is periodic only at match_tol, not at period_tol
+        (still converging at the end of the transient).
     first : int
-        Index of the representative start (the first that reaches it).
+        Index of the representative start, whose cycle is ``points``: the first settled
+        start that reaches it (the first slow one when none settled).
     """
 
     label: str
@@ -65,6 +75,7 @@ class Attractor:
     points: np.ndarray
     starts: int
     first: int
+    slow: int = 0
 
 
 def canonical_cycle(cycle) -> np.ndarray:
@@ -123,8 +134,11 @@ def identify(records, counts, period, match_tol: float):
     index : (n,) int array
         The attractor of each start, an index into ``attractors``.
     attractors : tuple of Attractor
-        Periodic ones ordered by (p, n, first start), then ``chaotic``, then ``failed``.
+        Periodic ones ordered by (p, n, representative start), then ``chaotic``, then
+        ``failed``.
     """
+    from grazing_control.studies.sweeps.period import detect_period
+
     records = np.asarray(records, dtype=float)
     counts = np.asarray(counts)
     period = np.asarray(period)
@@ -132,8 +146,14 @@ def identify(records, counts, period, match_tol: float):
     groups = []          # [kind, p, impacts, cycle, [members]]
     by_key = {}
     special = {}
-    for i in range(n):
-        p = int(period[i])
+    periods = period.astype(np.int64).copy()
+    slow = np.zeros(n, dtype=bool)
+    for i in np.flatnonzero(periods == 0):  # a slow transient onto a cycle, or chaos
+        periods[i] = detect_period(records[i], match_tol, records.shape[1] // 2)
+        slow[i] = periods[i] > 0
+    # settled starts first, so that an attractor's cycle is a settled record where any is
+    for i in sorted(range(n), key=lambda i: (bool(slow[i]), i)):
+        p = int(periods[i])
         if p >= 1:
             p = reduced_period(records[i, -p:], counts[i, -p:], match_tol)
             cycle = records[i, -p:]
@@ -154,6 +174,7 @@ def identify(records, counts, period, match_tol: float):
             special[kind][4].append(i)
     periodic = sorted(groups, key=lambda g: (g[1], g[2], g[4][0]))
     ordered = periodic + [special[k] for k in ("chaotic", "failed") if k in special]
+    # members[0] is the representative (its cycle is the attractor's), the rest in order
     index = np.empty(n, dtype=np.int64)
     attractors = []
     for j, (kind, p, impacts, points, members) in enumerate(ordered):
@@ -167,5 +188,5 @@ def identify(records, counts, period, match_tol: float):
         else:
             label = kind
         attractors.append(Attractor(label, kind, p, impacts, np.array(points), len(members),
-                                    members[0]))
+                                    members[0], int(np.sum(slow[members]))))
     return index, tuple(attractors)

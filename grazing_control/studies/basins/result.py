@@ -104,7 +104,7 @@ class BasinResult:
         rows = []
         for a, f, c in zip(self.attractors, self.fractions(), colors):
             row = {"label": a.label, "kind": a.kind, "period": a.period, "impacts": a.impacts,
-                   "starts": a.starts, "fraction": f, "color": c,
+                   "starts": a.starts, "slow_starts": a.slow, "fraction": f, "color": c,
                    "first_start": [float(self.xs[a.first % self.xs.size]),
                                    float(self.vs[a.first // self.xs.size])]}
             if a.kind == "periodic":
@@ -143,7 +143,8 @@ class BasinResult:
                   "attractor_kind": np.array([a.kind for a in self.attractors]),
                   "attractor_period": np.array([a.period for a in self.attractors]),
                   "attractor_impacts": np.array([a.impacts for a in self.attractors]),
-                  "attractor_starts": np.array([a.starts for a in self.attractors])}
+                  "attractor_starts": np.array([a.starts for a in self.attractors]),
+                  "attractor_slow": np.array([a.slow for a in self.attractors])}
         for j, a in enumerate(self.attractors):
             arrays[f"attractor_points_{j}"] = a.points
         write_npz(path, arrays)
@@ -160,6 +161,6 @@ class BasinResult:
 
 
 def _same_attractor(a: Attractor, b: Attractor) -> bool:
-    return ((a.label, a.kind, a.period, a.impacts, a.starts, a.first)
-            == (b.label, b.kind, b.period, b.impacts, b.starts, b.first)
+    return ((a.label, a.kind, a.period, a.impacts, a.starts, a.first, a.slow)
+            == (b.label, b.kind, b.period, b.impacts, b.starts, b.first, b.slow)
             and np.array_equal(a.points, b.points, equal_nan=True))

@@ -21,7 +21,8 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .attractors import identify
 from .result import BasinResult
 
-__all__ = ["BLOCK", "MAX_STARTS", "DEFAULT_MAX_PERIOD", "default_box", "basins"]
+__all__ = ["BLOCK", "MAX_STARTS", "DEFAULT_MAX_PERIOD", "BOX_SCALE", "MATCH_SCALE", "orbit_scale",
+           "default_box", "basins"]
 
 #: Starts per call of the sweep runner (records of 2 * max_period samples each).
 BLOCK = 16384
@@ -33,28 +34,38 @@ DEFAULT_MAX_PERIOD = 64
 BOX_SCALE = 4.0
 
 
-def default_box(params: OscillatorParams):
-    """((dx_lo, dx_hi), (dv_lo, dv_hi)): the default square of starts around X**.
+#: The default match_tol in units of the same distance.
+MATCH_SCALE = 1e-3
 
-    Centred on X** (the grazing orbit's point, the origin of the deviations), of
-    half-width BOX_SCALE times max(|x - x**|, |v - v**|) of the uncontrolled 1/1 orbit
-    born at grazing (:func:`grazing_control.dynamics.orbits.orbit_11`) at -|Delta d|: the
-    scale of the near-grazing motions on Pi2, which grows like |Delta d| (spec section 2).
-    The same box with and without control, so that the two pictures compare; on the
-    non-impacting side the orbit at the mirrored Delta d gives the scale.
-    """
+
+def orbit_scale(params: OscillatorParams) -> float:
+    """max(|x - x**|, |v - v**|) of the uncontrolled 1/1 orbit born at grazing
+    (:func:`grazing_control.dynamics.orbits.orbit_11`) at -|Delta d|: the scale of the
+    near-grazing motions on Pi2, which grows like |Delta d| (spec section 2); on the
+    non-impacting side the orbit at the mirrored Delta d gives it. ParameterError where
+    there is none (Delta d = 0: the orbit is X** itself)."""
     from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
 
     if params.delta_d == 0.0:
         raise ParameterError("delta_d=0.0 has no default box of starts (the 1/1 orbit is X** "
-                             "itself): give dx_range and dv_range")
+                             "itself): give dx_range and dv_range (--dx, --dv)")
     try:
         orbit = orbit_11(params.with_(delta_d=-abs(params.delta_d)), branch="grazing")
     except OrbitNotFound:
         raise ParameterError(f"delta_d={params.delta_d!r} has no 1/1 orbit at -|delta_d| to "
-                             "scale the default box of starts: give dx_range and dv_range") \
-            from None
-    h = BOX_SCALE * float(np.max(np.abs(orbit.pi2_deviation)))
+                             "scale the default box of starts: give dx_range and dv_range "
+                             "(--dx, --dv)") from None
+    return float(np.max(np.abs(orbit.pi2_deviation)))
+
+
+def default_box(params: OscillatorParams):
+    """((dx_lo, dx_hi), (dv_lo, dv_hi)): the default square of starts around X**.
+
+    Centred on X** (the grazing orbit's point, the origin of the deviations), of
+    half-width BOX_SCALE times :func:`orbit_scale`. The same box with and without
+    control, so that the two pictures compare.
+    """
+    h = BOX_SCALE * orbit_scale(params)
     return (-h, h), (-h, h)
 
 
@@ -105,7 +116,8 @@ def basins(params: OscillatorParams, *, dx_range=None, dv_range=None, nx: int = 
         Tolerance of the period detection (deviation coordinates, > 0).
     match_tol : float, optional
         Largest distance of two cycles of one attractor (:func:`.attractors.cycle_distance`);
-        default 1e-4 times the larger half-width of the box, at least 10 period_tol.
+        default MATCH_SCALE (1e-3) times :func:`orbit_scale` (without one, at Delta d = 0,
+        the box's half-width / BOX_SCALE), at least 10 period_tol.
     workers, scheduler, engine, progress
         As :func:`grazing_control.studies.sweeps.sweep`: local processes (None: all cores,
         1: this process), a Dask address or Client, the kernel or the Python core.
@@ -147,8 +159,11 @@ def basins(params: OscillatorParams, *, dx_range=None, dv_range=None, nx: int = 
     dx_range = _range("dx_range", dx_range)
     dv_range = _range("dv_range", dv_range)
     if match_tol is None:
-        half = max(dx_range[1] - dx_range[0], dv_range[1] - dv_range[0]) / 2.0
-        match_tol = max(1e-4 * half, 10.0 * period_tol)
+        try:
+            scale = orbit_scale(params)
+        except ParameterError:  # Delta d = 0 with a box given: the box's scale
+            scale = max(dx_range[1] - dx_range[0], dv_range[1] - dv_range[0]) / (2 * BOX_SCALE)
+        match_tol = max(MATCH_SCALE * scale, 10.0 * period_tol)
     elif not (isinstance(match_tol, (int, float)) and math.isfinite(match_tol)
               and match_tol > 0):
         raise ParameterError(
