@@ -1,0 +1,377 @@
+"""Two-parameter continuation of the 1/1 orbit's period-doubling and fold curves.
+
+The plane is (mu, Delta d), mu one of :data:`PARAMETERS` (omega, zeta, r, or the gain
+c2 of the controlled orbit, c1 held); Delta d = d - d*(mu) is measured from the grazing
+clearance, so the **grazing curve** is Delta d = 0, i.e. d = d*(mu) = a(omega) in the
+absolute clearance (spec section 2, Eq. 2). Derivation: docs/theory_two_parameter.md.
+
+The 1/1 branch is explicit in the impact phase psi (docs/theory.md section 5,
+:func:`grazing_control.dynamics.orbits.branch_point`): psi -> (Delta d, v-, M). Its
+monodromy J = M S has tr J = -r tr M + M12 K / v-, K = (1 + r)(cos theta - d), and the
+exact det J (spec section 5). The period-doubling and fold conditions det(J + I) = 0,
+det(J - I) = 0 are multiplied by v- (docs/theory_two_parameter.md, (T1)):
+
+    g_PD(psi, mu) = v- (1 + det J - r tr M) + M12 K,
+    g_F (psi, mu) = v- (1 + det J + r tr M) - M12 K,
+
+smooth through psi = 0, where v- = 0 and g = N12 K. So each curve is the zero set of
+one smooth scalar function of (psi, mu), continued by pseudo-arclength
+(:func:`continue_curve`: secant-free tangent predictor, Newton corrector on
+[g; t . (y - y_pred)] = 0), and mapped to the plane by Delta d(psi; mu).
+
+**Codimension two.** At psi = 0, g = N12 K with K = (1 + r) a* != 0 (regular grazing,
+Eq. 3): a PD or fold curve meets the grazing curve exactly where N_g,12(mu) = 0, the
+degenerate grazing of Eq. 33 (uncontrolled: omega* = 2 omega_d / m). Along a continued
+curve the meeting is detected as a sign change of psi and refined by Brent's method on
+g(0, mu) = 0 (:func:`codim2_points` finds the same points by a scan of N_g,12).
+Near such a point both curves leave the grazing curve tangentially,
+Delta d = kappa (mu - mu*)^2 + O((mu - mu*)^3), PD on one side of mu* and fold on the
+other, with kappa from the ZDM series (:func:`asymptotic_coefficient`, (T4)-(T6)).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from .continuation import branch_monodromy
+from .maps import period_matrix
+from .orbits import OrbitNotFound, _orbit_from_phase, branch_point, monodromy_det, multipliers
+
+__all__ = ["PARAMETERS", "KINDS", "Family", "regular_tests", "codim2_points",
+           "branch_seeds", "curve_point", "CurvePoint", "Curve", "continue_curve",
+           "asymptotic_coefficient", "Asymptotics", "two_parameter_diagram", "Diagram"]
+
+#: The second parameter of the plane (the first is Delta d).
+PARAMETERS = ("omega", "zeta", "r", "c2")
+#: The curves continued: multiplier -1 and multiplier +1 of the 1/1 orbit.
+KINDS = ("period-doubling", "fold")
+
+TWO_PI = 2.0 * math.pi
+_EPS = np.finfo(float).eps
+
+
+@dataclass(frozen=True)
+class Family:
+    """The system as a function of one parameter ``name`` (the others from ``params``,
+    ``gains``). For 'c2' the gains are required and c1 is held at ``gains.c1``."""
+
+    params: OscillatorParams
+    gains: Gains | None
+    name: str
+
+    def __post_init__(self):
+        if self.name not in PARAMETERS:
+            raise ParameterError(f"parameter={self.name!r} is invalid: valid values are "
+                                 f"{', '.join(PARAMETERS)}")
+        if self.name == "c2" and self.gains is None:
+            raise ParameterError("parameter='c2' needs the controller's gains: give --c2 "
+                                 "(and optionally --c1, held fixed)")
+
+    @property
+    def base(self) -> float:
+        """The parameter's value in ``params`` / ``gains``."""
+        if self.name == "c2":
+            return self.gains.c2
+        return getattr(self.params, self.name)
+
+    def at(self, value: float):
+        """(params, gains) at parameter ``value`` (validated: ParameterError outside)."""
+        value = float(value)
+        if self.name == "c2":
+            g = self.gains
+            return self.params, Gains(g.c1, value, g.delay)
+        return self.params.with_(**{self.name: value}), self.gains
+
+
+def regular_tests(p: OscillatorParams, gains: Gains | None, psi: float):
+    """(Delta d, v-, g_PD, g_F) on the 1/1 branch at impact phase tau* + psi ((T1)).
+
+    g = v- det(J +- I): smooth at psi = 0 (v- = 0), where both equal +-N_g,12 K.
+    """
+    dd, v, m = branch_point(p, psi, gains)
+    theta = (p.tau_star + psi) % TWO_PI
+    k = (1.0 + p.r) * (math.cos(theta) - (p.d_star + dd))
+    det = monodromy_det(p, gains, 1, 1)
+    rtr = p.r * (m[0] + m[3])
+    return dd, v, v * (1.0 + det - rtr) + m[1] * k, v * (1.0 + det + rtr) - m[1] * k
+
+
+def _g(fam: Family, kind: str, psi: float, value: float) -> float:
+    p, gains = fam.at(value)
+    return regular_tests(p, gains, psi)[2 if kind == KINDS[0] else 3]
+
+
+def _grazing_n12(fam: Family, value: float) -> float:
+    """N_g,12 at parameter ``value``: g(0, mu) / (+-K) (the degenerate condition, Eq. 33)."""
+    p, gains = fam.at(value)
+    return period_matrix(p, gains)[1]
+
+
+def codim2_points(fam: Family, lo: float, hi: float, n: int = 400) -> list:
+    """Parameter values in [lo, hi] where N_g,12 = 0: the degenerate grazing points, where
+    the PD and fold curves meet the grazing curve. A scan of ``n`` points, each sign
+    change refined by Brent's method to a few ulps."""
+    grid = np.linspace(lo, hi, n)
+    vals = [_grazing_n12(fam, float(x)) for x in grid]
+    out = []
+    for a, b, fa, fb in zip(grid[:-1], grid[1:], vals[:-1], vals[1:]):
+        if fa == 0.0:
+            out.append(float(a))
+        elif fa * fb < 0.0:
+            out.append(float(brentq(lambda x: _grazing_n12(fam, x), a, b, xtol=1e-300,
+                                    rtol=4.0 * _EPS, maxiter=200)))
+    if vals[-1] == 0.0:
+        out.append(float(grid[-1]))
+    return out
+
+
+def branch_seeds(fam: Family, kinds=KINDS, n: int = 241) -> list:
+    """(kind, psi) of the PD and fold points of the 1/1 branch at the base value.
+
+    The regularised tests on both sides of grazing on a logarithmic grid of |psi|
+    (1e-12 ... pi), each sign change where v- > 0 refined by Brent's method: every PD and
+    fold point of the 1/1 solution curve at this parameter value.
+    """
+    p, gains = fam.at(fam.base)
+    mags = np.logspace(-12.0, math.log10(math.pi * 0.999), n)
+    out = []
+    for sign in (-1.0, 1.0):
+        rows = [(sign * m, regular_tests(p, gains, sign * m)) for m in mags]
+        for (sa, ta), (sb, tb) in zip(rows[:-1], rows[1:]):
+            if not (ta[1] > 0.0 and tb[1] > 0.0):
+                continue
+            for i, kind in ((2, KINDS[0]), (3, KINDS[1])):
+                if kind in kinds and ta[i] * tb[i] < 0.0:
+                    lo, hi = sorted((sa, sb))
+                    psi = brentq(lambda s, i=i: regular_tests(p, gains, s)[i], lo, hi,
+                                 xtol=1e-300, rtol=4.0 * _EPS, maxiter=200)
+                    out.append((kind, float(psi)))
+    return out
+
+
+def curve_point(fam: Family, kind: str, value: float, psi_guess: float,
+                tol: float = 1e-14, max_iter: int = 50) -> float:
+    """psi with g_kind(psi, value) = 0 near ``psi_guess``, by Newton's method with a
+    central-difference derivative (the curve at a fixed parameter value)."""
+    psi = float(psi_guess)
+    for _ in range(max_iter):
+        h = 1e-7 * max(abs(psi), 1e-3)
+        f = _g(fam, kind, psi, value)
+        df = (_g(fam, kind, psi + h, value) - _g(fam, kind, psi - h, value)) / (2.0 * h)
+        if not (math.isfinite(f) and math.isfinite(df)) or df == 0.0:
+            break
+        step = f / df
+        psi -= step
+        if abs(step) <= tol * max(abs(psi), 1e-300):
+            return psi
+    raise OrbitNotFound(f"no {kind} point near psi={psi_guess!r} at {fam.name}={value!r}")
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """One point of a PD or fold curve: the parameter, the impact phase offset psi, the
+    clearance (Delta d and absolute d = d*(mu) + Delta d), v-, the multipliers, and
+    whether it is a physical 1/1 orbit (v- > 0, one impact per period by the exact flow)."""
+
+    value: float
+    psi: float
+    delta_d: float
+    d: float
+    v_minus: float
+    multipliers: np.ndarray
+    physical: bool
+
+
+@dataclass(frozen=True)
+class Curve:
+    """A PD or fold curve, points in the order continued from ``seed``; ``ends`` says why
+    each direction stopped; ``codim2``: parameter values where it met the grazing curve."""
+
+    kind: str
+    parameter: str
+    seed: str
+    points: tuple
+    ends: tuple
+    codim2: tuple
+
+
+def _point(fam: Family, psi: float, value: float, check: bool = True) -> CurvePoint:
+    p, gains = fam.at(value)
+    if psi == 0.0:   # on the grazing curve: v- = 0, the multipliers are not defined
+        lam, dd, v = np.array([math.inf, math.inf], dtype=complex), 0.0, 0.0
+    else:
+        dd, v, tr, det = branch_monodromy(p, psi, gains)
+        lam = multipliers(np.array([[tr, -det], [1.0, 0.0]]), det)
+    physical = v > 0.0
+    if physical and check:
+        try:
+            _orbit_from_phase(p, psi, gains, check=True)
+        except (OrbitNotFound, ValueError, ArithmeticError):
+            physical = False
+    return CurvePoint(float(value), float(psi), float(dd), float(p.d_star + dd), float(v),
+                      lam, physical)
+
+
+def _gradient(fam, kind, y):
+    psi, mu = y
+    hp = 1e-7 * max(abs(psi), 1e-2)
+    hm = 1e-7 * max(abs(mu), 1.0)
+    gp = (_g(fam, kind, psi + hp, mu) - _g(fam, kind, psi - hp, mu)) / (2.0 * hp)
+    gm = (_g(fam, kind, psi, mu + hm) - _g(fam, kind, psi, mu - hm)) / (2.0 * hm)
+    return np.array([gp, gm])
+
+
+def _tangent(fam, kind, y, previous=None):
+    gp, gm = _gradient(fam, kind, y)
+    t = np.array([-gm, gp])
+    t /= np.hypot(*t)
+    if previous is not None and float(t @ previous) < 0.0:
+        t = -t
+    return t
+
+
+def _correct(fam, kind, y_pred, t, max_iter=8):
+    """Newton on [g(y); t . (y - y_pred)] = 0 (the pseudo-arclength corrector)."""
+    y = y_pred.copy()
+    for it in range(max_iter):
+        f = _g(fam, kind, y[0], y[1])
+        grad = _gradient(fam, kind, y)
+        jac = np.array([grad, t])
+        rhs = -np.array([f, float(t @ (y - y_pred))])
+        det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
+        if not (math.isfinite(f) and math.isfinite(det)) or det == 0.0:
+            return None, it
+        step = np.array([(rhs[0] * jac[1, 1] - jac[0, 1] * rhs[1]) / det,
+                         (jac[0, 0] * rhs[1] - rhs[0] * jac[1, 0]) / det])
+        y = y + step
+        if np.max(np.abs(step)) <= 1e-13 * (1.0 + np.max(np.abs(y))):
+            return y, it + 1
+    return None, max_iter
+
+
+def _limit(fam, psi, lo, hi):
+    """Why (psi, mu) is outside the continued region, or ''."""
+    p = fam.params
+    if not lo <= psi[1] <= hi:
+        return "range"
+    if abs(psi[0]) >= math.pi:
+        return "phase"
+    if fam.gains is not None:
+        # the impact at the controller's phase: M(theta) jumps there (s = 0 or T)
+        kick = (p.pi2_offset + math.pi) % TWO_PI - math.pi
+        return "controller phase" if abs(psi[0] - kick) < 1e-9 else ""
+    return ""
+
+
+def _meets_grazing(fam, kind, a, b):
+    """The parameter value between a[1] and b[1] where g(0, mu) = 0 (psi crossed 0)."""
+    f = lambda mu: _grazing_n12(fam, mu)  # noqa: E731 (g(0, mu) = +-K N12, K != 0)
+    lo, hi = sorted((float(a[1]), float(b[1])))
+    if f(lo) * f(hi) > 0.0:
+        return None
+    return float(brentq(f, lo, hi, xtol=1e-300, rtol=4.0 * _EPS, maxiter=200))
+
+
+def _v_minus(fam, psi, value):
+    p, gains = fam.at(value)
+    return branch_point(p, psi, gains)[1]
+
+
+def _walk(fam, kind, y0, t0, lo, hi, step, max_step, max_points):
+    """Pseudo-arclength from y0 = (psi, mu) along t0: (points, why it stopped, mu*)."""
+    kick = None
+    if fam.gains is not None:
+        kick = (fam.params.pi2_offset + math.pi) % TWO_PI - math.pi
+    y, t, h = np.array(y0, dtype=float), np.array(t0, dtype=float), step
+    out = []
+    while len(out) < max_points:
+        y_pred = y + h * t
+        if not lo <= y_pred[1] <= hi:
+            # land on the range's end exactly
+            bound = hi if y_pred[1] > hi else lo
+            frac = (bound - y[1]) / (y_pred[1] - y[1])
+            try:
+                psi = curve_point(fam, kind, bound, y[0] + frac * (y_pred[0] - y[0]))
+            except (OrbitNotFound, ParameterError):
+                return out, "range", None
+            y_new = np.array([psi, bound])
+            if y[0] != 0.0 and y_new[0] * y[0] < 0.0:
+                mu = _meets_grazing(fam, kind, y, y_new)
+                if mu is not None:
+                    return out + [np.array([0.0, mu])], "grazing", mu
+            return out + [y_new], "range", None
+        try:
+            y_new, its = _correct(fam, kind, y_pred, t)
+        except ParameterError:
+            y_new, its = None, 0
+        t_new = None
+        if y_new is not None:
+            t_new = _tangent(fam, kind, y_new, t)
+            if np.hypot(*(y_new - y)) > 2.0 * h or float(t_new @ t) < 0.9:
+                y_new = None
+        if y_new is None:
+            h *= 0.5
+            if h < 1e-12:
+                return out, "step size", None
+            continue
+        if y[0] != 0.0 and y_new[0] * y[0] <= 0.0:
+            mu = _meets_grazing(fam, kind, y, y_new)
+            if mu is not None:
+                return out + [np.array([0.0, mu])], "grazing", mu
+        if kick is not None and (y[0] - kick) * (y_new[0] - kick) <= 0.0:
+            return out, "controller phase", None
+        if abs(y_new[0]) >= math.pi:
+            return out, "phase", None
+        out.append(y_new)
+        y, t = y_new, t_new
+        if its <= 3:
+            h = min(1.5 * h, max_step)
+    return out, "points", None
+
+
+def continue_curve(fam: Family, kind: str, psi: float, value: float, lo: float, hi: float, *,
+                   step: float = 1e-4, max_step: float | None = None, max_points: int = 400,
+                   check: bool = True, seed: str = "") -> Curve:
+    """Continue the ``kind`` curve (:data:`KINDS`) through (psi, value) in both directions
+    by pseudo-arclength in (psi, mu), mu within [lo, hi] (module docstring).
+
+    A seed on the grazing curve (psi = 0, a codimension-two point) is continued only
+    into v- > 0, the physical side. Each direction stops at the range's end, where psi
+    crosses 0 (the curve meets the grazing curve: the parameter value refined by
+    Brent's method on N_g,12 = 0 is recorded in ``codim2``), at |psi| = pi, where the
+    impact reaches the controller's phase (M(theta) jumps there), after ``max_points``,
+    or where the step falls below 1e-12.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(KINDS)}")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ParameterError(f"range=({lo!r}, {hi!r}) is invalid: valid range is finite lo < hi")
+    max_step = (hi - lo) / 50.0 if max_step is None else max_step
+    y0 = np.array([float(psi), float(value)])
+    t0 = _tangent(fam, kind, y0)
+    directions = (1.0, -1.0)
+    if psi == 0.0:
+        # into the physical side only: v- > 0 a short step along +-t0
+        probe = [_v_minus(fam, s * step * t0[0], value + s * step * t0[1])
+                 if lo <= value + s * step * t0[1] <= hi else -1.0 for s in directions]
+        directions = tuple(s for s, v in zip(directions, probe) if v > 0.0)
+    legs, ends, met = {}, [], []
+    for s in (1.0, -1.0):
+        if s not in directions:
+            legs[s], why = [], "unphysical side (v- < 0)"
+        else:
+            legs[s], why, mu = _walk(fam, kind, y0, s * t0, lo, hi, step, max_step, max_points)
+            if mu is not None:
+                met.append(mu)
+        ends.append(why)
+    if psi == 0.0:
+        met.append(float(value))
+    ys = list(reversed(legs[-1.0])) + [y0] + legs[1.0]
+    points = tuple(_point(fam, float(a), float(b), check) for a, b in ys)
+    return Curve(kind, fam.name, seed, points, (ends[1], ends[0]), tuple(sorted(met)))
