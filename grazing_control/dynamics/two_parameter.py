@@ -159,10 +159,12 @@ def curve_point(fam: Family, kind: str, value: float, psi_guess: float,
                 tol: float = 1e-14, max_iter: int = 50) -> float:
     """psi with g_kind(psi, value) = 0 near ``psi_guess``, by Newton's method with a
     central-difference derivative (the curve at a fixed parameter value)."""
-    psi = float(psi_guess)
+    psi, step = float(psi_guess), math.inf
     for _ in range(max_iter):
         h = 1e-7 * max(abs(psi), 1e-3)
         f = _g(fam, kind, psi, value)
+        if f == 0.0:
+            return psi
         df = (_g(fam, kind, psi + h, value) - _g(fam, kind, psi - h, value)) / (2.0 * h)
         if not (math.isfinite(f) and math.isfinite(df)) or df == 0.0:
             break
@@ -170,6 +172,8 @@ def curve_point(fam: Family, kind: str, value: float, psi_guess: float,
         psi -= step
         if abs(step) <= tol * max(abs(psi), 1e-300):
             return psi
+    if abs(step) <= 1e3 * tol * max(abs(psi), 1e-300):
+        return psi   # the last steps wander at the rounding level of g
     raise OrbitNotFound(f"no {kind} point near psi={psi_guess!r} at {fam.name}={value!r}")
 
 
@@ -375,3 +379,182 @@ def continue_curve(fam: Family, kind: str, psi: float, value: float, lo: float, 
     ys = list(reversed(legs[-1.0])) + [y0] + legs[1.0]
     points = tuple(_point(fam, float(a), float(b), check) for a, b in ys)
     return Curve(kind, fam.name, seed, points, (ends[1], ends[0]), tuple(sorted(met)))
+
+
+# ------------------------------------------------------------ near a codimension-two point
+@dataclass(frozen=True)
+class Asymptotics:
+    """The leading order of a curve next to a degenerate grazing point mu* ((T5), (T6)):
+    Delta d = kappa (mu - mu*)^2 on the side ``side`` (+1: mu > mu*, -1: mu < mu*),
+    where the impact velocity is v- = rate |mu - mu*| > 0."""
+
+    kind: str
+    value: float
+    kappa: float
+    side: int
+    rate: float
+
+
+def asymptotic_coefficient(fam: Family, kind: str, value: float, h: float | None = None
+                           ) -> Asymptotics:
+    """kappa of Delta d = kappa (mu - mu*)^2 for the ``kind`` curve at mu* = ``value``
+    (N_g,12(mu*) = 0), from the ZDM series of the 1/1 motion (docs/theory_zdm.md
+    (P3), (P6), (P8); docs/theory_two_parameter.md (T4)-(T6)).
+
+    kappa1 and chi_{-1} are proportional to N_g,12, so linear in mu - mu*: their
+    derivatives k1', x' by central differences (step ``h``, default 1e-6 max(1, |mu*|));
+    chi0, psi0, kappa2 are taken at mu*. Then v- = c (mu - mu*) with
+    c = -x' / (1 + chi0 + psi0) (PD) or x' / (1 + psi0 - chi0) (fold), and
+    kappa = k1' c + kappa2 c^2.
+    """
+    from .perturbation import series_coefficients
+
+    if kind not in KINDS:
+        raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(KINDS)}")
+    h = 1e-6 * max(1.0, abs(value)) if h is None else h
+    at = series_coefficients(*fam.at(value))
+    up, down = series_coefficients(*fam.at(value + h)), series_coefficients(*fam.at(value - h))
+    k1 = (up.kappa1 - down.kappa1) / (2.0 * h)
+    xm1 = (up.chi_m1 - down.chi_m1) / (2.0 * h)
+    if kind == KINDS[0]:
+        c = -xm1 / (1.0 + at.chi0 + at.psi0)
+    else:
+        c = xm1 / (1.0 + at.psi0 - at.chi0)
+    return Asymptotics(kind, float(value), float(k1 * c + at.kappa2 * c * c),
+                       1 if c > 0.0 else -1, float(abs(c)))
+
+
+def local_shape(fam: Family, kind: str, value: float, offsets) -> np.ndarray:
+    """Exact points of the ``kind`` curve at mu* + side * delta for each delta in
+    ``offsets`` (side from :func:`asymptotic_coefficient`): rows (delta, Delta d, psi).
+
+    Each is :func:`curve_point` at the fixed parameter value, started from the tangent
+    of the curve at (psi, mu) = (0, mu*) and then from the previous point."""
+    side = asymptotic_coefficient(fam, kind, value).side
+    t = _tangent(fam, kind, np.array([0.0, value]))
+    slope = t[0] / t[1]
+    rows = []
+    guess = None
+    for delta in sorted(float(x) for x in offsets):
+        mu = value + side * delta
+        psi0 = slope * (mu - value) if guess is None else guess * delta / rows[-1][0]
+        psi = curve_point(fam, kind, mu, psi0)
+        p, gains = fam.at(mu)
+        rows.append((delta, branch_point(p, psi, gains)[0], psi))
+        guess = psi
+    return np.array(rows)
+
+
+def fitted_exponent(shape: np.ndarray):
+    """(p, kappa) of |Delta d| = |kappa| delta^p through the two smallest offsets of a
+    :func:`local_shape` table (the log-log slope), kappa = Delta d / delta^p there."""
+    (d0, f0, _), (d1, f1, _) = shape[0], shape[1]
+    p = math.log(abs(f1 / f0)) / math.log(d1 / d0)
+    return p, f0 / d0 ** p
+
+
+# ------------------------------------------------------------------------------ diagram
+#: Offsets |mu - mu*| at which the local shape is measured (times max(1, |mu*|)).
+SHAPE_OFFSETS = (1e-7, 1e-6, 1e-5, 1e-4)
+
+
+@dataclass(frozen=True)
+class Codim2Point:
+    """A degenerate grazing point mu* (N_g,12 = 0) and, per curve kind, the predicted
+    :class:`Asymptotics` with the measured local shape (:func:`local_shape` rows) and its
+    fitted (exponent, kappa); ``shape`` is empty where the curve could not be solved."""
+
+    value: float
+    asymptotics: tuple
+    shapes: tuple
+    fits: tuple
+
+
+@dataclass(frozen=True)
+class Diagram:
+    """The two-parameter diagram over mu in [lo, hi]: the grazing curve sampled as rows
+    (mu, d*(mu)) (Delta d = 0), the degenerate grazing points, and the PD and fold curves."""
+
+    parameter: str
+    lo: float
+    hi: float
+    base: float
+    grazing: np.ndarray
+    codim2: tuple
+    curves: tuple
+
+
+def _passes(curve: Curve, fam: Family, psi: float, value: float) -> bool:
+    """Whether ``curve`` goes through (psi, value): solved at ``value`` from the
+    interpolation between its two points around it."""
+    pts = curve.points
+    for a, b in zip(pts[:-1], pts[1:]):
+        if (a.value - value) * (b.value - value) <= 0.0 and a.value != b.value:
+            w = (value - a.value) / (b.value - a.value)
+            try:
+                at = curve_point(fam, curve.kind, value, a.psi + w * (b.psi - a.psi))
+            except OrbitNotFound:
+                continue
+            if abs(at - psi) <= 1e-8 * max(abs(psi), 1e-6):
+                return True
+    return False
+
+
+def two_parameter_diagram(fam: Family, lo: float, hi: float, kinds=KINDS, *,
+                          max_points: int = 400, samples: int = 401,
+                          check: bool = True) -> Diagram:
+    """The PD and fold curves of the 1/1 orbit over mu in [lo, hi] (module docstring).
+
+    Seeds, each curve continued once: every degenerate grazing point in the range
+    (:func:`codim2_points`), then every PD and fold point of the 1/1 branch at the base
+    value (:func:`branch_seeds`) that no curve found so far goes through. A seed on the
+    grazing curve that an earlier curve of its kind ended at is not continued again.
+    """
+    for kind in kinds:
+        if kind not in KINDS:
+            raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(KINDS)}")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ParameterError(f"range=({lo!r}, {hi!r}) is invalid: valid range is finite "
+                             "from < to")
+    fam.at(lo), fam.at(hi)    # both ends valid parameter values, else ParameterError
+    stars = codim2_points(fam, lo, hi)
+    curves = []
+
+    def known(kind, mu):
+        return any(c.kind == kind and any(abs(m - mu) <= 1e-12 * max(1.0, abs(mu))
+                                          for m in c.codim2) for c in curves)
+
+    for mu in stars:
+        for kind in kinds:
+            if not known(kind, mu):
+                curves.append(continue_curve(fam, kind, 0.0, mu, lo, hi, max_points=max_points,
+                                             check=check, seed="degenerate grazing"))
+    if lo <= fam.base <= hi:
+        base_p, base_gains = fam.at(fam.base)
+        for kind, psi in branch_seeds(fam, kinds):
+            try:   # a 1/1 orbit: one impact per period by the exact flow
+                _orbit_from_phase(base_p, psi, base_gains, check=True)
+            except (OrbitNotFound, ValueError, ArithmeticError):
+                continue
+            if not any(c.kind == kind and _passes(c, fam, psi, fam.base) for c in curves):
+                curves.append(continue_curve(fam, kind, psi, fam.base, lo, hi,
+                                             max_points=max_points, check=check,
+                                             seed="1/1 branch at the base value"))
+    points = []
+    for mu in stars:
+        scale = max(1.0, abs(mu))
+        asym, shapes, fits = [], [], []
+        for kind in kinds:
+            asym.append(asymptotic_coefficient(fam, kind, mu))
+            try:
+                shape = local_shape(fam, kind, mu, [scale * x for x in SHAPE_OFFSETS])
+                fit = fitted_exponent(shape)
+            except (OrbitNotFound, ParameterError, ArithmeticError):
+                shape, fit = np.empty((0, 3)), (math.nan, math.nan)
+            shapes.append(shape)
+            fits.append(tuple(float(x) for x in fit))
+        points.append(Codim2Point(mu, tuple(asym), tuple(shapes), tuple(fits)))
+    grid = np.linspace(lo, hi, samples)
+    grazing = np.array([(x, fam.at(float(x))[0].d_star) for x in grid])
+    return Diagram(fam.name, float(lo), float(hi), float(fam.base), grazing, tuple(points),
+                   tuple(curves))
