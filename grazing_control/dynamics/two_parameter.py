@@ -160,11 +160,18 @@ def curve_point(fam: Family, kind: str, value: float, psi_guess: float,
     """psi with g_kind(psi, value) = 0 near ``psi_guess``, by Newton's method with a
     central-difference derivative (the curve at a fixed parameter value)."""
     psi, step = float(psi_guess), math.inf
+    best, stalled = (math.inf, psi), 0
     for _ in range(max_iter):
         h = 1e-7 * max(abs(psi), 1e-3)
         f = _g(fam, kind, psi, value)
         if f == 0.0:
             return psi
+        if abs(f) < best[0]:
+            best, stalled = (abs(f), psi), 0
+        else:
+            stalled += 1   # |g| no longer falls: its rounding level is reached
+            if stalled >= 2:
+                break
         df = (_g(fam, kind, psi + h, value) - _g(fam, kind, psi - h, value)) / (2.0 * h)
         if not (math.isfinite(f) and math.isfinite(df)) or df == 0.0:
             break
@@ -172,8 +179,8 @@ def curve_point(fam: Family, kind: str, value: float, psi_guess: float,
         psi -= step
         if abs(step) <= tol * max(abs(psi), 1e-300):
             return psi
-    if abs(step) <= 1e3 * tol * max(abs(psi), 1e-300):
-        return psi   # the last steps wander at the rounding level of g
+    if abs(step) <= 1e-8 * max(abs(best[1]), 1e-300):
+        return best[1]
     raise OrbitNotFound(f"no {kind} point near psi={psi_guess!r} at {fam.name}={value!r}")
 
 
@@ -455,7 +462,7 @@ def fitted_exponent(shape: np.ndarray):
 
 # ------------------------------------------------------------------------------ diagram
 #: Offsets |mu - mu*| at which the local shape is measured (times max(1, |mu*|)).
-SHAPE_OFFSETS = (1e-7, 1e-6, 1e-5, 1e-4)
+SHAPE_OFFSETS = (1e-6, 1e-5, 1e-4, 1e-3)
 
 
 @dataclass(frozen=True)
