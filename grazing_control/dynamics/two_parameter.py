@@ -453,11 +453,10 @@ def local_shape(fam: Family, kind: str, value: float, offsets) -> np.ndarray:
 
 
 def fitted_exponent(shape: np.ndarray):
-    """(p, kappa) of |Delta d| = |kappa| delta^p through the two smallest offsets of a
-    :func:`local_shape` table (the log-log slope), kappa = Delta d / delta^p there."""
+    """(p, kappa): p the log-log slope of |Delta d| against delta through the two smallest
+    offsets of a :func:`local_shape` table, kappa = Delta d / delta^2 at the smallest."""
     (d0, f0, _), (d1, f1, _) = shape[0], shape[1]
-    p = math.log(abs(f1 / f0)) / math.log(d1 / d0)
-    return p, f0 / d0 ** p
+    return math.log(abs(f1 / f0)) / math.log(d1 / d0), f0 / (d0 * d0)
 
 
 # ------------------------------------------------------------------------------ diagram
