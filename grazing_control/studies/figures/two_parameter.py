@@ -136,8 +136,13 @@ def _panel_delta_d(diagram: Diagram, params, out: Path) -> list:
         ax.annotate(text, (c.value, 0.0), textcoords="offset points", xytext=(3, 6), fontsize=8)
     if diagram.codim2:
         ax.plot([], [], "o", ms=5, mfc="white", mec="k", label="degenerate grazing (N_g,12 = 0)")
-    small = [abs(q.delta_d) for c in diagram.curves for q in c.points if q.delta_d != 0.0]
-    ax.set_yscale("symlog", linthresh=max(min(small, default=1e-9), 1e-12) * 10.0)
+    sizes = [abs(q.delta_d) for c in diagram.curves for q in c.points if q.delta_d != 0.0]
+    low = math.floor(math.log10(max(min(sizes, default=1e-9), 1e-12))) + 1
+    high = math.ceil(math.log10(max(sizes, default=1.0)))
+    ax.set_yscale("symlog", linthresh=10.0 ** low)
+    step = max(1, (high - low + 5) // 6)   # about six labelled decades a side
+    decades = [10.0 ** k for k in range(high, low, -step)]
+    ax.set_yticks([-x for x in decades] + [0.0] + decades[::-1])
     name = LABELS[diagram.parameter]
     ax.set(xlim=(diagram.lo, diagram.hi), xlabel=name, ylabel="Δd = d − d*  (symlog)",
            title=f"1/1 orbit: period-doubling and fold curves in ({name}, Δd)")
