@@ -256,3 +256,30 @@ class _nothing:
 
     def __exit__(self, *exc):
         return False
+
+
+def test_uncontrolled_branch_closed_form_of_the_derivation():
+    # (T3): Delta d(psi) = (1 + r) a omega M12 sin psi / D - 2 a sin^2(psi/2),
+    # v- = -a omega sin psi det(I - M) / D, D = (1 - M11)(1 + r M22) + r M12 M21, M = Phi(T)
+    from grazing_control.oscillator.flow import transition_matrix
+
+    for p in (P, P.with_(omega=0.9), P.with_(zeta=0.2, r=0.3, omega=1.5)):
+        m11, m12, m21, m22 = transition_matrix(p.zeta, p.period)
+        d = (1 - m11) * (1 + p.r * m22) + p.r * m12 * m21
+        a, w = p.amplitude, p.omega
+        for psi in (-1e-3, -0.1, 0.5, 2.0):
+            dd = (1 + p.r) * a * w * m12 * math.sin(psi) / d - 2 * a * math.sin(psi / 2) ** 2
+            v = -a * w * math.sin(psi) * ((1 - m11) * (1 - m22) - m12 * m21) / d
+            got = branch_point(p, psi)
+            assert dd == pytest.approx(got[0], rel=1e-12) and v == pytest.approx(got[1], rel=1e-12)
+
+
+def test_controlled_pd_curve_is_the_end_of_the_mistuning_band():
+    # the controlled orbit (study design) on a plant with omega (1 + e): the exact band
+    # end of dynamics.mismatch (orbit_11 scanned and bisected in log|Delta d| to 1e-3)
+    from grazing_control.dynamics.mismatch import instability_band
+
+    e = 1e-4
+    band = instability_band(P, G_STUDY, "omega", e)
+    shape = local_shape(Family(P, G_STUDY, "omega"), PD, P.omega, [P.omega * e])
+    assert shape[0, 1] == pytest.approx(band.end, rel=2e-3)

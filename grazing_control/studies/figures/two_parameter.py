@@ -185,9 +185,15 @@ def _panel_local(diagram: Diagram, params, out: Path) -> list:
                             label=f"{where} {_SHORT[a.kind]}: κ = {a.kappa:.4g}, p = {p:.4f}")
             xs = np.array([shape[0, 0], shape[-1, 0]])
             ax.plot(xs, abs(a.kappa) * xs ** 2, "--", lw=0.8, color=line.get_color())
-    ax.set(xscale="log", yscale="log", xlabel=f"|{name} − {name}*|", ylabel="|Δd| on the curve",
+    ax.set(xlabel=f"|{name} − {name}*|", ylabel="|Δd| on the curve",
            title="near degenerate grazing: exact (markers), κ (μ − μ*)² (dashed)")
-    ax.legend(fontsize=6, loc="best")
+    if ax.lines:
+        ax.set(xscale="log", yscale="log")
+        ax.legend(fontsize=6, loc="best")
+    else:
+        ax.text(0.5, 0.5, f"no degenerate grazing point (N_g,12 = 0) in {name} ∈ "
+                f"[{diagram.lo:g}, {diagram.hi:g}]", ha="center", va="center",
+                transform=ax.transAxes)
     return save(fig, out, "two_parameter_local")
 
 
