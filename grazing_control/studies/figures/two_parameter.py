@@ -124,7 +124,14 @@ def _draw_curves(ax, diagram, y):
                     label=label)
 
 
-def _panel_delta_d(diagram: Diagram, params, out: Path) -> list:
+def _title(gains, parameter) -> str:
+    if gains is None:
+        return "1/1 orbit"
+    c2 = "" if parameter == "c2" else f", c2 = {gains.c2:.4g}"
+    return f"controlled 1/1 orbit (c1 = {gains.c1:.4g}{c2})"
+
+
+def _panel_delta_d(diagram: Diagram, params, out: Path, gains=None) -> list:
     plt = pyplot()
     fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
     ax.axhline(0.0, color="k", lw=1.2, label="grazing, Δd = 0")
@@ -145,7 +152,7 @@ def _panel_delta_d(diagram: Diagram, params, out: Path) -> list:
     ax.set_yticks([-x for x in decades] + [0.0] + decades[::-1])
     name = LABELS[diagram.parameter]
     ax.set(xlim=(diagram.lo, diagram.hi), xlabel=name, ylabel="Δd = d − d*  (symlog)",
-           title=f"1/1 orbit: period-doubling and fold curves in ({name}, Δd)")
+           title=f"{_title(gains, diagram.parameter)}: PD and fold curves in ({name}, Δd)")
     ax.legend(fontsize=7, loc="best")
     return save(fig, out, "two_parameter")
 
@@ -203,7 +210,7 @@ def write_diagram(diagram: Diagram, out, params=None, gains=None) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = diagram_dict(diagram, params, gains)
-    files = _panel_delta_d(diagram, params if gains is None else None, out)
+    files = _panel_delta_d(diagram, params if gains is None else None, out, gains)
     files += _panel_absolute(diagram, out)
     files += _panel_local(diagram, params if gains is None else None, out)
     _write_csv(diagram, out / "continue2_curves.csv")
