@@ -6,7 +6,7 @@ Independent references:
   spec after Eq. 17), zeta* = sqrt(1 - (m omega / 2)^2), and for the controlled orbit
   the design itself (c1 from Eq. 38 at the study's omega and c2);
 * the closed-form kappa of the uncontrolled curves at omega = 2 omega_d / m, written out
-  here from docs/theory_two_parameter.md (T8), against the ZDM-series route of the code;
+  here from docs/theory_two_parameter.md (T7), against the ZDM-series route of the code;
 * Newton shooting on the exact Pi2 map (orbits.shoot: exact flow, certified impacts) for
   the multipliers -1 and +1 on the curves, instead of the impact-phase branch;
 * the fold as the turning point of Delta d(psi) (central differences of the branch);
@@ -42,7 +42,7 @@ def omega_diagram():
 
 
 def _closed_form_kappa(p, kind):
-    """(T8): kappa at omega* = 2 omega_d / m, uncontrolled, sigma = (-1)^m e^{-zeta T}."""
+    """(T7): kappa at omega* = 2 omega_d / m, uncontrolled, sigma = (-1)^m e^{-zeta T}."""
     m = round(2.0 * p.omega_d / p.omega)
     t, a, r, w = p.period, p.amplitude, p.r, p.omega
     s = (-1) ** m * math.exp(-p.zeta * t)
@@ -170,8 +170,24 @@ def test_kappa_from_the_zdm_series_equals_the_closed_form(m):
     for kind in KINDS:
         a = asymptotic_coefficient(Family(P, None, "omega"), kind, star)
         assert a.kappa == pytest.approx(_closed_form_kappa(P.with_(omega=star), kind), rel=1e-6)
-        # PD on the side where Phi12(T) > 0, fold on the other (T7)
+        # PD on the side where Phi12(T) > 0, fold on the other ((T6), section 4.3)
         assert a.side == (1 if (kind == PD) == (m % 2 == 1) else -1)
+
+
+def test_fold_from_the_multiplier_is_the_turning_point_of_the_series():
+    # c_F of (T4) from the multiplier +1 against the turning point of (P3), -kappa1'/(2 kappa2)
+    from grazing_control.dynamics.perturbation import series_coefficients
+
+    for fam, star in ((Family(P, None, "omega"), 2.0 * P.omega_d / 3.0),
+                      (Family(P, None, "zeta"), math.sqrt(1.0 - P.omega ** 2)),
+                      (Family(P, G_STUDY, "c2"), -1.0)):
+        h = 1e-6
+        up, down = (series_coefficients(*fam.at(star + s * h)) for s in (1, -1))
+        at = series_coefficients(*fam.at(star))
+        k1 = (up.kappa1 - down.kappa1) / (2.0 * h)
+        a = asymptotic_coefficient(fam, FOLD, star)
+        assert a.kappa == pytest.approx(-k1 * k1 / (4.0 * at.kappa2), rel=1e-9)
+        assert a.side * a.rate == pytest.approx(-k1 / (2.0 * at.kappa2), rel=1e-9)
 
 
 def test_local_shape_fits_exponent_two_and_kappa(omega_diagram):
