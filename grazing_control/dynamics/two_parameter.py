@@ -45,7 +45,8 @@ from .orbits import OrbitNotFound, _orbit_from_phase, branch_point, monodromy_de
 
 __all__ = ["PARAMETERS", "KINDS", "Family", "regular_tests", "codim2_points",
            "branch_seeds", "curve_point", "CurvePoint", "Curve", "continue_curve",
-           "asymptotic_coefficient", "Asymptotics", "two_parameter_diagram", "Diagram"]
+           "asymptotic_coefficient", "Asymptotics", "local_shape", "fitted_exponent",
+           "SHAPE_OFFSETS", "Codim2Point", "two_parameter_diagram", "Diagram"]
 
 #: The second parameter of the plane (the first is Delta d).
 PARAMETERS = ("omega", "zeta", "r", "c2")
@@ -264,20 +265,6 @@ def _correct(fam, kind, y_pred, t, max_iter=8):
         if np.max(np.abs(step)) <= 1e-13 * (1.0 + np.max(np.abs(y))):
             return y, it + 1
     return None, max_iter
-
-
-def _limit(fam, psi, lo, hi):
-    """Why (psi, mu) is outside the continued region, or ''."""
-    p = fam.params
-    if not lo <= psi[1] <= hi:
-        return "range"
-    if abs(psi[0]) >= math.pi:
-        return "phase"
-    if fam.gains is not None:
-        # the impact at the controller's phase: M(theta) jumps there (s = 0 or T)
-        kick = (p.pi2_offset + math.pi) % TWO_PI - math.pi
-        return "controller phase" if abs(psi[0] - kick) < 1e-9 else ""
-    return ""
 
 
 def _meets_grazing(fam, kind, a, b):
