@@ -257,9 +257,12 @@ def test_command_writes_the_diagram_and_data(tmp_path, capsys):
     (["--from", "0.8", "--to", "0.7"], "--from=0.8, --to=0.7 are invalid"),
     (["--parameter", "zeta", "--from", "0.5", "--to", "1.5"], "zeta=1.5 is invalid"),
     (["--max-points", "1"], "invalid"),
+    (["--max-points", "1000000"], "--max-points=1000000 is invalid"),
+    (["--from", "1e-6", "--to", "0.5"], "omega=1e-06 is invalid with zeta=0.01"),
+    (["--parameter", "r", "--from", "0.5", "--to", "1.0"], "r=1.0 is invalid"),
 ])
 def test_command_refuses_bad_input_in_one_line(argv, message, capsys, tmp_path):
-    with pytest.raises(SystemExit) if argv[0] == "--max-points" else _nothing():
+    with pytest.raises(SystemExit) if argv == ["--max-points", "1"] else _nothing():
         status = main(["continue2", "--out", str(tmp_path / "x")] + argv)
         assert status == 2
     err = capsys.readouterr().err

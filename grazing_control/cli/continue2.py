@@ -16,6 +16,9 @@ __all__ = ["add_parser", "run"]
 DEFAULT_RANGE = {"omega": (0.45, 2.1), "zeta": (0.001, 0.9), "r": (0.05, 0.95),
                  "c2": (-3.0, 1.0)}
 
+#: Most points per direction of a curve (a run of 400 takes ~0.2 s per curve).
+MAX_POINTS = 100_000
+
 
 def add_parser(sub, common, gain_args):
     """Register ``continue2`` (``common``, ``gain_args``: the shared option groups)."""
@@ -43,6 +46,7 @@ def add_parser(sub, common, gain_args):
 
 
 def run(args):
+    import argparse
     from pathlib import Path
 
     from grazing_control.dynamics.two_parameter import KINDS, Family, two_parameter_diagram
@@ -60,6 +64,12 @@ def run(args):
     hi = hi if args.stop is None else args.stop
     if not lo < hi:
         raise ParameterError(f"--from={lo!r}, --to={hi!r} are invalid: valid range is from < to")
+    if args.parameter != "c2":
+        for end in (lo, hi):   # each end a computable model, as the shared options are
+            _params(argparse.Namespace(**{**vars(args), args.parameter: end}))
+    if args.max_points > MAX_POINTS:
+        raise ParameterError(f"--max-points={args.max_points!r} is invalid: valid range is "
+                             f"2 <= max-points <= {MAX_POINTS}")
     fam = Family(p, gains, args.parameter)
     kinds = KINDS if args.curves == "both" else (args.curves,)
     diagram = two_parameter_diagram(fam, lo, hi, kinds, max_points=args.max_points)
