@@ -302,3 +302,12 @@ def test_controlled_pd_curve_is_the_end_of_the_mistuning_band():
     band = instability_band(P, G_STUDY, "omega", e)
     shape = local_shape(Family(P, G_STUDY, "omega"), PD, P.omega, [P.omega * e])
     assert shape[0, 1] == pytest.approx(band.end, rel=2e-3)
+
+
+def test_degenerate_points_crowding_at_low_omega_are_all_found():
+    stars = codim2_points(Family(P, None, "omega"), 0.08, 0.3)
+    ms = sorted(round(2.0 * P.omega_d / x) for x in stars)
+    assert ms == list(range(7, 25))          # 2 omega_d / 25 = 0.079996 < 0.08
+    assert max(abs(x - 2.0 * P.omega_d / round(2.0 * P.omega_d / x)) for x in stars) < 1e-10
+    with pytest.raises(ParameterError, match="degenerate grazing points"):
+        codim2_points(Family(P, None, "omega"), 0.01, 2.0)

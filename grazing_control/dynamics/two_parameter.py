@@ -55,6 +55,8 @@ KINDS = ("period-doubling", "fold")
 
 TWO_PI = 2.0 * math.pi
 _EPS = np.finfo(float).eps
+#: Most degenerate grazing points one diagram looks for (each seeds two curves).
+MAX_CODIM2 = 50
 
 
 @dataclass(frozen=True)
@@ -117,8 +119,23 @@ def _grazing_n12(fam: Family, value: float) -> float:
 def codim2_points(fam: Family, lo: float, hi: float, n: int = 400) -> list:
     """Parameter values in [lo, hi] where N_g,12 = 0: the degenerate grazing points, where
     the PD and fold curves meet the grazing curve. A scan of ``n`` points, each sign
-    change refined by Brent's method to a few ulps."""
-    grid = np.linspace(lo, hi, n)
+    change refined by Brent's method to a few ulps. In omega the scan is uniform in the
+    period T with at least 8 points per half-period of the damped motion (N_g,12
+    oscillates like sin(omega_d T): the points 2 omega_d / m crowd towards omega = 0);
+    more than :data:`MAX_CODIM2` points is refused (narrow the range)."""
+    if fam.name == "omega":
+        p = fam.params
+        t_lo, t_hi = TWO_PI / hi, TWO_PI / lo
+        halves = p.omega_d * (t_hi - t_lo) / math.pi
+        if halves > MAX_CODIM2 + 2:
+            raise ParameterError(
+                f"range=({lo!r}, {hi!r}) is invalid: it holds about {halves:.0f} degenerate "
+                f"grazing points (omega = 2 omega_d / m), valid: at most {MAX_CODIM2}; "
+                "narrow the range")
+        grid = TWO_PI / np.linspace(t_hi, t_lo, max(n, int(8 * halves) + 2))
+        grid[0], grid[-1] = lo, hi
+    else:
+        grid = np.linspace(lo, hi, n)
     vals = [_grazing_n12(fam, float(x)) for x in grid]
     out = []
     for a, b, fa, fb in zip(grid[:-1], grid[1:], vals[:-1], vals[1:]):

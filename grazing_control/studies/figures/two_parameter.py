@@ -33,6 +33,8 @@ __all__ = ["diagram_dict", "write_diagram", "LABELS"]
 LABELS = {"omega": "ω", "zeta": "ζ", "r": "r", "c2": "c2"}
 _COLOR = {KINDS[0]: COLORS["bifurcation"], KINDS[1]: COLORS["perturbation"]}
 _SHORT = {KINDS[0]: "PD", KINDS[1]: "fold"}
+#: Most series the local panel's legend names.
+_LEGEND = 10
 
 
 def _finite(x):
@@ -136,8 +138,11 @@ def _panel_delta_d(diagram: Diagram, params, out: Path, gains=None) -> list:
     fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
     ax.axhline(0.0, color="k", lw=1.2, label="grazing, Δd = 0")
     _draw_curves(ax, diagram, lambda q: q.delta_d)
-    for c in diagram.codim2:
+    every = max(1, math.ceil(len(diagram.codim2) / 8))   # at most ~8 labels
+    for i, c in enumerate(diagram.codim2):
         ax.plot([c.value], [0.0], "o", ms=5, mfc="white", mec="k", zorder=5)
+        if i % every:
+            continue
         res = _resonance(diagram, c.value, params)
         text = f"m={res[0]}" if res else f"{c.value:.6g}"
         ax.annotate(text, (c.value, 0.0), textcoords="offset points", xytext=(3, 6), fontsize=8)
@@ -196,7 +201,11 @@ def _panel_local(diagram: Diagram, params, out: Path) -> list:
            title="near degenerate grazing: exact (markers), κ (μ − μ*)² (dashed)")
     if ax.lines:
         ax.set(xscale="log", yscale="log")
-        ax.legend(fontsize=6, loc="best")
+        if len(ax.lines) <= 2 * _LEGEND:   # each series drawn twice (markers, line)
+            ax.legend(fontsize=6, loc="best")
+        else:
+            ax.text(0.02, 0.98, f"{len(ax.lines) // 2} curves: κ, p in continue2.json",
+                    transform=ax.transAxes, va="top", fontsize=7)
     else:
         ax.text(0.5, 0.5, f"no degenerate grazing point (N_g,12 = 0) in {name} ∈ "
                 f"[{diagram.lo:g}, {diagram.hi:g}]", ha="center", va="center",
