@@ -33,6 +33,10 @@ def add_parser(sub, common, gain_args):
                         "r 0.05, c2 -3)")
     s.add_argument("--to", dest="stop", type=finite,
                    help="end of the range (default: omega 2.1, zeta 0.9, r 0.95, c2 1)")
+    s.add_argument("--design", action="store_true",
+                   help="with --parameter c2: c1 follows c2 by the degenerate condition (Eq. 38), "
+                        "the study's family of designs; the curves meet grazing where lambda0 "
+                        "= -1 (PD) or +1 (fold), the ends of the admissible c2 set")
     s.add_argument("--curves", choices=("both", "period-doubling", "fold"), default="both",
                    help="which curves (default both)")
     s.add_argument("--max-points", type=integer_at_least(2), default=400,
@@ -70,7 +74,7 @@ def run(args):
     if args.max_points > MAX_POINTS:
         raise ParameterError(f"--max-points={args.max_points!r} is invalid: valid range is "
                              f"2 <= max-points <= {MAX_POINTS}")
-    fam = Family(p, gains, args.parameter)
+    fam = Family(p, gains, args.parameter, design=args.design)
     kinds = KINDS if args.curves == "both" else (args.curves,)
     diagram = two_parameter_diagram(fam, lo, hi, kinds, max_points=args.max_points)
     doc = write_diagram(diagram, out, p, gains)
@@ -78,18 +82,21 @@ def run(args):
         return doc
     name = args.parameter
     lines = [f"two-parameter diagram in ({name}, Delta d), {name} in [{lo:g}, {hi:g}]"
-             + ("" if gains is None else f", c1={gains.c1:.6g}, c2={gains.c2:.6g}"),
+             + ("" if gains is None else ", c1 from Eq. 38 at every c2 (the design family)"
+                if args.design else f", c1={gains.c1:.6g}, c2={gains.c2:.6g}"),
              "grazing curve: Delta d = 0, i.e. d = d*(" + name + ")"]
     for c in doc["codim2"]:
         ref = ""
         if "m" in c:
             ref = (f"  (2 omega_d/{c['m']} = {c['omega_star']:.16g}, "
                    f"difference {c['difference']:.1e})")
-        lines.append(f"degenerate grazing at {name} = {c['value']:.16g}{ref}")
+        what = ("lambda0 = -1 or +1 at grazing (an end of the admissible c2 set)"
+                if args.design else "degenerate grazing")
+        lines.append(f"{what} at {name} = {c['value']:.16g}{ref}")
         for kind, k in c["curves"].items():
             side = ">" if k["side"] > 0 else "<"
             p_fit = k["fitted_exponent"]
-            lines.append(f"  {kind:16s} Delta d ~ {k['kappa']:.6g} ({name} - {name}*)^2 on "
+            lines.append(f"  {kind:16s} Delta d ~ {k['kappa']:.6g} |{name} - {name}*|^{k['exponent']} on "
                          f"{name} {side} {name}*; measured exponent "
                          f"{'n/a' if p_fit is None else format(p_fit, '.5f')}, kappa "
                          f"{'n/a' if k['measured_kappa'] is None else format(k['measured_kappa'], '.6g')}")

@@ -62,11 +62,14 @@ MAX_CODIM2 = 50
 @dataclass(frozen=True)
 class Family:
     """The system as a function of one parameter ``name`` (the others from ``params``,
-    ``gains``). For 'c2' the gains are required and c1 is held at ``gains.c1``."""
+    ``gains``). For 'c2' the gains are required and c1 is held at ``gains.c1``, or, with
+    ``design``, follows c2 by the degenerate condition (Eq. 38): the study's family of
+    designs, N_g,12 = 0 at every c2 (docs/theory_two_parameter.md section 6)."""
 
     params: OscillatorParams
     gains: Gains | None
     name: str
+    design: bool = False
 
     def __post_init__(self):
         if self.name not in PARAMETERS:
@@ -75,6 +78,9 @@ class Family:
         if self.name == "c2" and self.gains is None:
             raise ParameterError("parameter='c2' needs the controller's gains: give --c2 "
                                  "(and optionally --c1, held fixed)")
+        if self.design and self.name != "c2":
+            raise ParameterError(f"design=True is invalid with parameter={self.name!r}: the "
+                                 "degenerate design family is continued in c2 only")
 
     @property
     def base(self) -> float:
@@ -88,6 +94,11 @@ class Family:
         value = float(value)
         if self.name == "c2":
             g = self.gains
+            if self.design:
+                from .design import degenerate_c1
+
+                return self.params, Gains(degenerate_c1(self.params, value, g.delay), value,
+                                          g.delay)
             return self.params, Gains(g.c1, value, g.delay)
         return self.params.with_(**{self.name: value}), self.gains
 
@@ -105,20 +116,49 @@ def regular_tests(p: OscillatorParams, gains: Gains | None, psi: float):
     return dd, v, v * (1.0 + det - rtr) + m[1] * k, v * (1.0 + det + rtr) - m[1] * k
 
 
+#: Along the design family g = psi h: below this |psi| h is its Taylor polynomial
+#: from g at +-_PSI0 and +-_PSI0/2 (T8).
+_PSI0 = 2e-6
+
+
 def _g(fam: Family, kind: str, psi: float, value: float) -> float:
     p, gains = fam.at(value)
-    return regular_tests(p, gains, psi)[2 if kind == KINDS[0] else 3]
+    i = 2 if kind == KINDS[0] else 3
+    if not fam.design:
+        return regular_tests(p, gains, psi)[i]
+    # N_g,12 = 0 for every c2: g vanishes on psi = 0, the curve is h = g / psi = 0 (T8)
+    if abs(psi) >= _PSI0:
+        return regular_tests(p, gains, psi)[i] / psi
+    g = {x: regular_tests(p, gains, x)[i] for x in (_PSI0, -_PSI0, 0.5 * _PSI0, -0.5 * _PSI0)}
+    d1 = (g[_PSI0] - g[-_PSI0]) / (2.0 * _PSI0)            # h1 + h3 PSI0^2 + ...
+    d2 = (g[0.5 * _PSI0] - g[-0.5 * _PSI0]) / _PSI0        # h1 + h3 PSI0^2 / 4 + ...
+    h1 = (4.0 * d2 - d1) / 3.0                             # Richardson: h3 (~1e5) cancels
+    h3 = (d1 - d2) / (0.75 * _PSI0 * _PSI0)
+    h2 = (g[_PSI0] + g[-_PSI0]) / (2.0 * _PSI0 * _PSI0)
+    return h1 + psi * (h2 + psi * h3)
 
 
-def _grazing_n12(fam: Family, value: float) -> float:
-    """N_g,12 at parameter ``value``: g(0, mu) / (+-K) (the degenerate condition, Eq. 33)."""
+def _grazing_test(fam: Family, kind: str, value: float) -> float:
+    """The function of mu whose zeros are where the ``kind`` curve meets grazing:
+    N_g,12 (g(0, mu) / (+-K), the degenerate condition Eq. 33, the same for both kinds);
+    along the design family 1 + tr J0 + det J0 (PD) or 1 - tr J0 + det J0 (fold), lambda0
+    at -1 or +1 (Eq. 23, :func:`grazing_control.dynamics.design.limit_monodromy`; (T8))."""
     p, gains = fam.at(value)
-    return period_matrix(p, gains)[1]
+    if not fam.design:
+        return period_matrix(p, gains)[1]
+    from .design import limit_monodromy
+
+    j0 = limit_monodromy(p, gains)
+    tr0, det0 = j0[0, 0], -j0[0, 1]
+    return 1.0 + det0 + (tr0 if kind == KINDS[0] else -tr0)
 
 
-def codim2_points(fam: Family, lo: float, hi: float, n: int = 400) -> list:
+def codim2_points(fam: Family, lo: float, hi: float, n: int = 400,
+                  kind: str = KINDS[0]) -> list:
     """Parameter values in [lo, hi] where N_g,12 = 0: the degenerate grazing points, where
-    the PD and fold curves meet the grazing curve. A scan of ``n`` points, each sign
+    the PD and fold curves meet the grazing curve (``kind`` matters only along the design
+    family, where the ``kind`` curve meets grazing at lambda0 = -1 or +1,
+    :func:`_grazing_test`). A scan of ``n`` points, each sign
     change refined by Brent's method to a few ulps. In omega the scan is uniform in the
     period T with at least 8 points per half-period of the damped motion (N_g,12
     oscillates like sin(omega_d T): the points 2 omega_d / m crowd towards omega = 0);
@@ -136,13 +176,13 @@ def codim2_points(fam: Family, lo: float, hi: float, n: int = 400) -> list:
         grid[0], grid[-1] = lo, hi
     else:
         grid = np.linspace(lo, hi, n)
-    vals = [_grazing_n12(fam, float(x)) for x in grid]
+    vals = [_grazing_test(fam, kind, float(x)) for x in grid]
     out = []
     for a, b, fa, fb in zip(grid[:-1], grid[1:], vals[:-1], vals[1:]):
         if fa == 0.0:
             out.append(float(a))
         elif fa * fb < 0.0:
-            out.append(float(brentq(lambda x: _grazing_n12(fam, x), a, b, xtol=1e-300,
+            out.append(float(brentq(lambda x: _grazing_test(fam, kind, x), a, b, xtol=1e-300,
                                     rtol=4.0 * _EPS, maxiter=200)))
     if vals[-1] == 0.0:
         out.append(float(grid[-1]))
@@ -173,32 +213,49 @@ def branch_seeds(fam: Family, kinds=KINDS, n: int = 241) -> list:
     return out
 
 
+def _psi_step(fam: Family, psi: float) -> float:
+    """Central-difference step in psi: 1e-7 max(|psi|, 1e-2), or 1e-4 along the design
+    family, whose h = g / psi carries an absolute rounding of ~1e-11 (T8)."""
+    return 1e-4 if fam.design else 1e-7 * max(abs(psi), 1e-2)
+
+
 def curve_point(fam: Family, kind: str, value: float, psi_guess: float,
-                tol: float = 1e-14, max_iter: int = 50) -> float:
-    """psi with g_kind(psi, value) = 0 near ``psi_guess``, by Newton's method with a
-    central-difference derivative (the curve at a fixed parameter value)."""
-    psi, step = float(psi_guess), math.inf
-    best, stalled = (math.inf, psi), 0
+                max_iter: int = 30) -> float:
+    """psi with g_kind(psi, value) = 0 near ``psi_guess`` (the curve at a fixed parameter
+    value): Newton's method with a central-difference derivative until its step stops
+    shrinking, then a bracket around that point (widened by 2 until g changes sign, 60
+    times at most) refined by Brent's method to a few ulps, so that the root is located
+    to g's own rounding whatever its size."""
+    psi, last = float(psi_guess), math.inf
     for _ in range(max_iter):
-        h = 1e-7 * max(abs(psi), 1e-3)
         f = _g(fam, kind, psi, value)
         if f == 0.0:
             return psi
-        if abs(f) < best[0]:
-            best, stalled = (abs(f), psi), 0
-        else:
-            stalled += 1   # |g| no longer falls: its rounding level is reached
-            if stalled >= 2:
-                break
+        h = _psi_step(fam, psi)
         df = (_g(fam, kind, psi + h, value) - _g(fam, kind, psi - h, value)) / (2.0 * h)
         if not (math.isfinite(f) and math.isfinite(df)) or df == 0.0:
             break
         step = f / df
         psi -= step
-        if abs(step) <= tol * max(abs(psi), 1e-300):
-            return psi
-    if abs(step) <= 1e-8 * max(abs(best[1]), 1e-300):
-        return best[1]
+        if abs(step) >= 0.5 * last or abs(step) <= 1e-15 * abs(psi):
+            break
+        last = abs(step)
+    if not math.isfinite(psi):
+        raise OrbitNotFound(f"no {kind} point near psi={psi_guess!r} at {fam.name}={value!r}")
+    width = max(abs(psi) * 1e-12, 1e-300)
+    f0 = _g(fam, kind, psi, value)
+    if f0 == 0.0:
+        return psi
+    for _ in range(60):
+        for other in (psi - width, psi + width):
+            f1 = _g(fam, kind, other, value)
+            if math.isfinite(f1) and f1 * f0 <= 0.0:
+                lo, hi = sorted((psi, other))
+                return float(brentq(lambda x: _g(fam, kind, x, value), lo, hi, xtol=1e-300,
+                                    rtol=4.0 * _EPS, maxiter=200))
+        width *= 2.0
+        if width > 0.5 * max(abs(psi), 1e-6):
+            break
     raise OrbitNotFound(f"no {kind} point near psi={psi_guess!r} at {fam.name}={value!r}")
 
 
@@ -249,7 +306,7 @@ def _point(fam: Family, psi: float, value: float, check: bool = True) -> CurvePo
 
 def _gradient(fam, kind, y):
     psi, mu = y
-    hp = 1e-7 * max(abs(psi), 1e-2)
+    hp = _psi_step(fam, psi)
     hm = 1e-7 * max(abs(mu), 1.0)
     gp = (_g(fam, kind, psi + hp, mu) - _g(fam, kind, psi - hp, mu)) / (2.0 * hp)
     gm = (_g(fam, kind, psi, mu + hm) - _g(fam, kind, psi, mu - hm)) / (2.0 * hm)
@@ -286,7 +343,7 @@ def _correct(fam, kind, y_pred, t, max_iter=8):
 
 def _meets_grazing(fam, kind, a, b):
     """The parameter value between a[1] and b[1] where g(0, mu) = 0 (psi crossed 0)."""
-    f = lambda mu: _grazing_n12(fam, mu)  # noqa: E731 (g(0, mu) = +-K N12, K != 0)
+    f = lambda mu: _grazing_test(fam, kind, mu)  # noqa: E731 (g(0, mu) = +-K N12, K != 0)
     lo, hi = sorted((float(a[1]), float(b[1])))
     if f(lo) * f(hi) > 0.0:
         return None
@@ -396,14 +453,16 @@ def continue_curve(fam: Family, kind: str, psi: float, value: float, lo: float, 
 @dataclass(frozen=True)
 class Asymptotics:
     """The leading order of a curve next to a degenerate grazing point mu* ((T5), (T6)):
-    Delta d = kappa (mu - mu*)^2 on the side ``side`` (+1: mu > mu*, -1: mu < mu*),
-    where the impact velocity is v- = rate |mu - mu*| > 0."""
+    Delta d = kappa |mu - mu*|^exponent on the side ``side`` (+1: mu > mu*, -1: mu < mu*),
+    where the impact velocity is v- = rate |mu - mu*| > 0. The exponent is 2, except for
+    the fold along the design family, 3 ((T10))."""
 
     kind: str
     value: float
     kappa: float
     side: int
     rate: float
+    exponent: int = 2
 
 
 def asymptotic_coefficient(fam: Family, kind: str, value: float, h: float | None = None
@@ -425,6 +484,15 @@ def asymptotic_coefficient(fam: Family, kind: str, value: float, h: float | None
     h = 1e-6 * max(1.0, abs(value)) if h is None else h
     at = series_coefficients(*fam.at(value))
     up, down = series_coefficients(*fam.at(value + h)), series_coefficients(*fam.at(value - h))
+    if fam.design and kind == KINDS[1]:
+        return _design_fold(fam, value, at, up, down, h)
+    if fam.design:
+        # kappa1 = chi_{-1} = 0 at every c2: 1 +- (chi0 + chi1 delta2) + psi0 = 0 (T9)
+        s = 1.0
+        slope = ((up.psi0 + s * up.chi0) - (down.psi0 + s * down.chi0)) / (2.0 * h)
+        c = -slope / (s * at.chi1)
+        return Asymptotics(kind, float(value), float(at.kappa2 * c * c), 1 if c > 0.0 else -1,
+                           float(abs(c)))
     k1 = (up.kappa1 - down.kappa1) / (2.0 * h)
     xm1 = (up.chi_m1 - down.chi_m1) / (2.0 * h)
     if kind == KINDS[0]:
@@ -433,6 +501,26 @@ def asymptotic_coefficient(fam: Family, kind: str, value: float, h: float | None
         c = xm1 / (1.0 + at.psi0 - at.chi0)
     return Asymptotics(kind, float(value), float(k1 * c + at.kappa2 * c * c),
                        1 if c > 0.0 else -1, float(abs(c)))
+
+
+def _design_fold(fam, value, at, up, down, h):
+    """(T10): along the design family lambda0 = +1 where gamma1 = -kappa2 = 0, and the
+    fold is the turning point of Delta d = kappa2 v^2 + kappa3 v^3 with kappa2 =
+    kappa2' (c2 - c2*): v = -2 kappa2' delta / (3 kappa3),
+    Delta d = 4 kappa2'^3 delta^3 / (27 kappa3^2). kappa3 = lim Delta d / v^3 on the
+    exact branch at c2* (branch_point at |psi| = 1e-3, 1e-4 where v > 0, Richardson)."""
+    p, gains = fam.at(value)
+    k2 = (up.kappa2 - down.kappa2) / (2.0 * h)
+    sign = 1.0 if branch_point(p, 1e-3, gains)[1] > 0.0 else -1.0
+    ratio = []
+    for psi in (1e-3, 1e-4):
+        dd, v, _m = branch_point(p, sign * psi, gains)
+        ratio.append(dd / v ** 3)
+    k3 = (10.0 * ratio[1] - ratio[0]) / 9.0      # the error is O(v), v ~ psi
+    c = -2.0 * k2 / (3.0 * k3)
+    kappa = 4.0 * k2 ** 3 / (27.0 * k3 * k3)
+    side = 1 if c > 0.0 else -1
+    return Asymptotics(KINDS[1], float(value), float(kappa * side), side, float(abs(c)), 3)
 
 
 def local_shape(fam: Family, kind: str, value: float, offsets) -> np.ndarray:
@@ -456,11 +544,12 @@ def local_shape(fam: Family, kind: str, value: float, offsets) -> np.ndarray:
     return np.array(rows)
 
 
-def fitted_exponent(shape: np.ndarray):
+def fitted_exponent(shape: np.ndarray, exponent: int = 2):
     """(p, kappa): p the log-log slope of |Delta d| against delta through the two smallest
-    offsets of a :func:`local_shape` table, kappa = Delta d / delta^2 at the smallest."""
+    offsets of a :func:`local_shape` table, kappa = Delta d / delta^exponent at the
+    smallest (the derived exponent, :class:`Asymptotics`)."""
     (d0, f0, _), (d1, f1, _) = shape[0], shape[1]
-    return math.log(abs(f1 / f0)) / math.log(d1 / d0), f0 / (d0 * d0)
+    return math.log(abs(f1 / f0)) / math.log(d1 / d0), f0 / d0 ** exponent
 
 
 # ------------------------------------------------------------------------------ diagram
@@ -492,6 +581,7 @@ class Diagram:
     grazing: np.ndarray
     codim2: tuple
     curves: tuple
+    design: bool = False
 
 
 def _passes(curve: Curve, fam: Family, psi: float, value: float) -> bool:
@@ -527,7 +617,8 @@ def two_parameter_diagram(fam: Family, lo: float, hi: float, kinds=KINDS, *,
         raise ParameterError(f"range=({lo!r}, {hi!r}) is invalid: valid range is finite "
                              "from < to")
     fam.at(lo), fam.at(hi)    # both ends valid parameter values, else ParameterError
-    stars = codim2_points(fam, lo, hi)
+    meets = {kind: codim2_points(fam, lo, hi, kind=kind) for kind in kinds}
+    stars = sorted({mu for kind in kinds for mu in meets[kind]})
     curves = []
 
     def known(kind, mu):
@@ -536,7 +627,7 @@ def two_parameter_diagram(fam: Family, lo: float, hi: float, kinds=KINDS, *,
 
     for mu in stars:
         for kind in kinds:
-            if not known(kind, mu):
+            if mu in meets[kind] and not known(kind, mu):
                 curves.append(continue_curve(fam, kind, 0.0, mu, lo, hi, max_points=max_points,
                                              check=check, seed="degenerate grazing"))
     if lo <= fam.base <= hi:
@@ -554,11 +645,11 @@ def two_parameter_diagram(fam: Family, lo: float, hi: float, kinds=KINDS, *,
     for mu in stars:
         scale = max(1.0, abs(mu))
         asym, shapes, fits = [], [], []
-        for kind in kinds:
+        for kind in (k for k in kinds if mu in meets[k]):
             asym.append(asymptotic_coefficient(fam, kind, mu))
             try:
                 shape = local_shape(fam, kind, mu, [scale * x for x in SHAPE_OFFSETS])
-                fit = fitted_exponent(shape)
+                fit = fitted_exponent(shape, asym[-1].exponent)
             except (OrbitNotFound, ParameterError, ArithmeticError):
                 shape, fit = np.empty((0, 3)), (math.nan, math.nan)
             shapes.append(shape)
@@ -567,4 +658,4 @@ def two_parameter_diagram(fam: Family, lo: float, hi: float, kinds=KINDS, *,
     grid = np.linspace(lo, hi, samples)
     grazing = np.array([(x, fam.at(float(x))[0].d_star) for x in grid])
     return Diagram(fam.name, float(lo), float(hi), float(fam.base), grazing, tuple(points),
-                   tuple(curves))
+                   tuple(curves), fam.design)

@@ -60,7 +60,8 @@ def diagram_dict(diagram: Diagram, params=None, gains=None) -> dict:
             row.update(m=res[0], omega_star=res[1], difference=c.value - res[1])
         for a, shape, (p, kappa) in zip(c.asymptotics, c.shapes, c.fits):
             row["curves"][a.kind] = {
-                "kappa": a.kappa, "side": a.side, "v_minus_rate": a.rate,
+                "kappa": a.kappa, "exponent": a.exponent, "side": a.side,
+                "v_minus_rate": a.rate,
                 "fitted_exponent": _finite(p), "measured_kappa": _finite(kappa),
                 "shape": [{"offset": float(d), "delta_d": float(dd), "psi": float(s)}
                           for d, dd, s in shape]}
@@ -81,6 +82,7 @@ def diagram_dict(diagram: Diagram, params=None, gains=None) -> dict:
                                               "pi2_offset": params.pi2_offset},
         "gains": None if gains is None else {"c1": gains.c1, "c2": gains.c2,
                                              "delay": gains.delay},
+        "design": diagram.design,
         "grazing": [{"value": float(x), "delta_d": 0.0, "d": float(d)}
                     for x, d in diagram.grazing],
         "codim2": codim2, "curves": curves,
@@ -133,6 +135,10 @@ def _title(gains, parameter) -> str:
     return f"controlled 1/1 orbit (c1 = {gains.c1:.4g}{c2})"
 
 
+def _design_title(diagram, gains) -> str:
+    return "design family (c1 from Eq. 38)" if diagram.design else _title(gains, diagram.parameter)
+
+
 def _panel_delta_d(diagram: Diagram, params, out: Path, gains=None) -> list:
     plt = pyplot()
     fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
@@ -147,7 +153,8 @@ def _panel_delta_d(diagram: Diagram, params, out: Path, gains=None) -> list:
         text = f"m={res[0]}" if res else f"{c.value:.6g}"
         ax.annotate(text, (c.value, 0.0), textcoords="offset points", xytext=(3, 6), fontsize=8)
     if diagram.codim2:
-        ax.plot([], [], "o", ms=5, mfc="white", mec="k", label="degenerate grazing (N_g,12 = 0)")
+        ax.plot([], [], "o", ms=5, mfc="white", mec="k",
+                label="λ0 = ∓1 at grazing" if diagram.design else "degenerate grazing (N_g,12 = 0)")
     sizes = [abs(q.delta_d) for c in diagram.curves for q in c.points if q.delta_d != 0.0]
     low = math.floor(math.log10(max(min(sizes, default=1e-9), 1e-12))) + 1
     high = math.ceil(math.log10(max(sizes, default=1.0)))
@@ -157,7 +164,7 @@ def _panel_delta_d(diagram: Diagram, params, out: Path, gains=None) -> list:
     ax.set_yticks([-x for x in decades] + [0.0] + decades[::-1])
     name = LABELS[diagram.parameter]
     ax.set(xlim=(diagram.lo, diagram.hi), xlabel=name, ylabel="Δd = d − d*  (symlog)",
-           title=f"{_title(gains, diagram.parameter)}: PD and fold curves in ({name}, Δd)")
+           title=f"{_design_title(diagram, gains)}: PD and fold curves in ({name}, Δd)")
     ax.legend(fontsize=7, loc="best")
     return save(fig, out, "two_parameter")
 
@@ -196,9 +203,9 @@ def _panel_local(diagram: Diagram, params, out: Path) -> list:
             line, = ax.plot(shape[:, 0], np.abs(shape[:, 1]), marker, ms=4, mfc="none",
                             label=f"{where} {_SHORT[a.kind]}: κ = {a.kappa:.4g}, p = {p:.4f}")
             xs = np.array([shape[0, 0], shape[-1, 0]])
-            ax.plot(xs, abs(a.kappa) * xs ** 2, "--", lw=0.8, color=line.get_color())
+            ax.plot(xs, abs(a.kappa) * xs ** a.exponent, "--", lw=0.8, color=line.get_color())
     ax.set(xlabel=f"|{name} − {name}*|", ylabel="|Δd| on the curve",
-           title="near degenerate grazing: exact (markers), κ (μ − μ*)² (dashed)")
+           title="near degenerate grazing: exact (markers), κ |μ − μ*|^p (dashed)")
     if ax.lines:
         ax.set(xscale="log", yscale="log")
         if len(ax.lines) <= 2 * _LEGEND:   # each series drawn twice (markers, line)
