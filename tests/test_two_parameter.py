@@ -260,6 +260,7 @@ def test_command_writes_the_diagram_and_data(tmp_path, capsys):
     (["--max-points", "1000000"], "--max-points=1000000 is invalid"),
     (["--from", "1e-6", "--to", "0.5"], "omega=1e-06 is invalid with zeta=0.01"),
     (["--parameter", "r", "--from", "0.5", "--to", "1.0"], "r=1.0 is invalid"),
+    (["--design"], "design=True is invalid with parameter='omega'"),
 ])
 def test_command_refuses_bad_input_in_one_line(argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) if argv == ["--max-points", "1"] else _nothing():
@@ -311,3 +312,72 @@ def test_degenerate_points_crowding_at_low_omega_are_all_found():
     assert max(abs(x - 2.0 * P.omega_d / round(2.0 * P.omega_d / x)) for x in stars) < 1e-10
     with pytest.raises(ParameterError, match="degenerate grazing points"):
         codim2_points(Family(P, None, "omega"), 0.01, 2.0)
+
+
+# ------------------------------------------------------------------ the design family
+DESIGN = Family(P, G_STUDY, "c2", design=True)
+
+
+def test_design_family_curves_meet_grazing_at_the_ends_of_the_admissible_set():
+    from grazing_control.dynamics.design import admissible_c2, limit_multipliers
+
+    ((lo, hi),) = admissible_c2(P, conditions="impacting")     # the design module's own ends
+    (pd,) = codim2_points(DESIGN, -4.0, 2.0, kind=PD)
+    (fold,) = codim2_points(DESIGN, -4.0, 2.0, kind=FOLD)
+    assert abs(pd - lo) < 1e-10 and abs(fold - hi) < 1e-10
+    assert np.min(np.abs(limit_multipliers(*DESIGN.at(pd)) + 1.0)) < 1e-12
+    assert np.min(np.abs(limit_multipliers(*DESIGN.at(fold)) - 1.0)) < 1e-12
+    d = two_parameter_diagram(DESIGN, -4.0, 2.0, max_points=150)
+    met = {(c.kind, round(x, 9)) for c in d.curves for x in c.codim2}
+    assert {(PD, round(pd, 9)), (FOLD, round(fold, 9))} <= met
+
+
+def test_design_family_local_shapes_quadratic_pd_cubic_fold():
+    from grazing_control.dynamics.perturbation import series_coefficients
+
+    (pd,) = codim2_points(DESIGN, -4.0, 2.0, kind=PD)
+    (fold,) = codim2_points(DESIGN, -4.0, 2.0, kind=FOLD)
+    # the upper end: lambda0 = +1 and gamma1 = -kappa2 = 0 at once (T10)
+    assert abs(series_coefficients(*DESIGN.at(fold)).kappa2) < 1e-12
+    for kind, star, exponent in ((PD, pd, 2), (FOLD, fold, 3)):
+        a = asymptotic_coefficient(DESIGN, kind, star)
+        assert a.exponent == exponent
+        shape = local_shape(DESIGN, kind, star, [1e-6, 1e-5, 1e-4])
+        p, kappa = fitted_exponent(shape, exponent)
+        assert abs(p - exponent) < 1e-3 and kappa == pytest.approx(a.kappa, rel=1e-3)
+
+
+def test_design_family_curve_points_have_the_multiplier():
+    d = two_parameter_diagram(DESIGN, -4.0, 2.0, max_points=150)
+    checked = 0
+    for c in d.curves:
+        target = -1.0 if c.kind == PD else 1.0
+        # next to grazing the Pi2 map's own monodromy loses digits (4e-8 from -1 at
+        # Delta d = -2.3e-9, where the branch's is within 3e-12): |Delta d| >= 1e-7 here
+        for q in [q for q in c.points if q.physical and abs(q.delta_d) >= 1e-7][3::12]:
+            p, gains = DESIGN.at(q.value)
+            z = _orbit_from_phase(p.with_(delta_d=q.delta_d), q.psi, gains).pi2_deviation
+            seg = pi2_map(p.with_(delta_d=q.delta_d), *z, gains, monodromy=True)
+            lam = np.linalg.eigvals(np.array(seg.monodromy).reshape(2, 2))
+            assert len(seg.impacts) == 1 and np.min(np.abs(lam - target)) < 1e-8
+            checked += 1
+    assert checked >= 6
+
+
+def test_design_needs_c2():
+    with pytest.raises(ParameterError, match="design=True is invalid with parameter='omega'"):
+        Family(P, G_STUDY, "omega", design=True)
+
+
+def test_command_design_family(tmp_path, capsys):
+    import json
+
+    assert main(["continue2", "--parameter", "c2", "--c2", "-1", "--design", "--max-points",
+                 "40", "--json", "--out", str(tmp_path / "d")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["design"] is True
+    ends = sorted((c["value"], tuple(c["curves"])) for c in doc["codim2"])
+    assert [k for _v, k in ends] == [(PD,), (FOLD,)]
+    assert ends[0][0] == pytest.approx(-2.0190440882008294, abs=1e-10)
+    assert ends[1][0] == pytest.approx(0.2820918413267971, abs=1e-10)
+    assert [c["curves"][k]["exponent"] for c, k in zip(sorted(doc["codim2"], key=lambda c: c["value"]), (PD, FOLD))] == [2, 3]
