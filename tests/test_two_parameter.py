@@ -378,6 +378,8 @@ def test_command_design_family(tmp_path, capsys):
     assert doc["design"] is True
     ends = sorted((c["value"], tuple(c["curves"])) for c in doc["codim2"])
     assert [k for _v, k in ends] == [(PD,), (FOLD,)]
-    assert ends[0][0] == pytest.approx(-2.0190440882008294, abs=1e-10)
-    assert ends[1][0] == pytest.approx(0.2820918413267971, abs=1e-10)
+    from grazing_control.dynamics.design import admissible_c2
+
+    ((lo, hi),) = admissible_c2(P, conditions="impacting")
+    assert abs(ends[0][0] - lo) < 1e-10 and abs(ends[1][0] - hi) < 1e-10
     assert [c["curves"][k]["exponent"] for c, k in zip(sorted(doc["codim2"], key=lambda c: c["value"]), (PD, FOLD))] == [2, 3]
