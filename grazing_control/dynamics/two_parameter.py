@@ -27,6 +27,12 @@ g(0, mu) = 0 (:func:`codim2_points` finds the same points by a scan of N_g,12).
 Near such a point both curves leave the grazing curve tangentially,
 Delta d = kappa (mu - mu*)^2 + O((mu - mu*)^3), PD on one side of mu* and fold on the
 other, with kappa from the ZDM series (:func:`asymptotic_coefficient`, (T4)-(T6)).
+
+**The family of designs** (``Family(..., 'c2', design=True)``: c1 from Eq. 38 at every
+c2). There N_g,12 = 0 for every c2, g vanishes on the whole line psi = 0, and the
+curves are continued as h = g / psi = 0 ((T8)): they meet grazing where lambda0 = -1
+(PD) or +1 (fold), the ends of the admissible c2 set; the PD leaves quadratically (T9),
+the fold cubically (T10, where gamma1 = 0 as well).
 """
 
 from __future__ import annotations
