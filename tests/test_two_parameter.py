@@ -383,3 +383,13 @@ def test_command_design_family(tmp_path, capsys):
     ((lo, hi),) = admissible_c2(P, conditions="impacting")
     assert abs(ends[0][0] - lo) < 1e-10 and abs(ends[1][0] - hi) < 1e-10
     assert [c["curves"][k]["exponent"] for c, k in zip(sorted(doc["codim2"], key=lambda c: c["value"]), (PD, FOLD))] == [2, 3]
+
+
+def test_every_point_lies_in_the_range(omega_diagram):
+    assert all(0.45 <= q.value <= 2.1 for c in omega_diagram.curves for q in c.points)
+    # a corrector step that left the range landed the curve outside it before (0.599992)
+    p = P.with_(pi2_offset=3.0)
+    fam = Family(p, Gains(degenerate_c1(p, -1.0), -1.0), "omega")
+    d = two_parameter_diagram(fam, 0.6, 0.7, max_points=100)
+    values = [q.value for c in d.curves for q in c.points]
+    assert min(values) == 0.6 and max(values) <= 0.7

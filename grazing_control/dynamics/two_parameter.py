@@ -368,26 +368,31 @@ def _walk(fam, kind, y0, t0, lo, hi, step, max_step, max_points):
         kick = (fam.params.pi2_offset + math.pi) % TWO_PI - math.pi
     y, t, h = np.array(y0, dtype=float), np.array(t0, dtype=float), step
     out = []
+    def land(y, y_far):
+        """The last point: the curve solved on the range's end between y and y_far."""
+        bound = hi if y_far[1] > hi else lo
+        frac = (bound - y[1]) / (y_far[1] - y[1])
+        try:
+            psi = curve_point(fam, kind, bound, y[0] + frac * (y_far[0] - y[0]))
+        except (OrbitNotFound, ParameterError):
+            return out, "range", None
+        y_end = np.array([psi, bound])
+        if y[0] != 0.0 and y_end[0] * y[0] < 0.0:
+            mu = _meets_grazing(fam, kind, y, y_end)
+            if mu is not None:
+                return out + [np.array([0.0, mu])], "grazing", mu
+        return out + [y_end], "range", None
+
     while len(out) < max_points:
         y_pred = y + h * t
         if not lo <= y_pred[1] <= hi:
-            # land on the range's end exactly
-            bound = hi if y_pred[1] > hi else lo
-            frac = (bound - y[1]) / (y_pred[1] - y[1])
-            try:
-                psi = curve_point(fam, kind, bound, y[0] + frac * (y_pred[0] - y[0]))
-            except (OrbitNotFound, ParameterError):
-                return out, "range", None
-            y_new = np.array([psi, bound])
-            if y[0] != 0.0 and y_new[0] * y[0] < 0.0:
-                mu = _meets_grazing(fam, kind, y, y_new)
-                if mu is not None:
-                    return out + [np.array([0.0, mu])], "grazing", mu
-            return out + [y_new], "range", None
+            return land(y, y_pred)
         try:
             y_new, its = _correct(fam, kind, y_pred, t)
         except ParameterError:
             y_new, its = None, 0
+        if y_new is not None and not lo <= y_new[1] <= hi:
+            return land(y, y_new)   # the corrector left the range
         t_new = None
         if y_new is not None:
             t_new = _tangent(fam, kind, y_new, t)
