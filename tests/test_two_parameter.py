@@ -393,3 +393,24 @@ def test_every_point_lies_in_the_range(omega_diagram):
     d = two_parameter_diagram(fam, 0.6, 0.7, max_points=100)
     values = [q.value for c in d.curves for q in c.points]
     assert min(values) == 0.6 and max(values) <= 0.7
+
+
+def test_pd_curve_agrees_with_one_parameter_continuation_along_it(omega_diagram):
+    # continue_11 at fixed omega: Brent on 1 + tr J + det J (the 1/v- form, unregularised)
+    curve = next(c for c in omega_diagram.curves if c.kind == PD and len(c.codim2) == 2)
+    fam = Family(P, None, "omega")
+    for w in (0.67, 0.72, 0.8, 0.9):
+        dd = branch_point(P.with_(omega=w), _point_at(curve, fam, w))[0]
+        one = continue_11(P.with_(omega=w), 2.0 * dd, 0.5 * dd, points=40)
+        (b,) = [b for b in one.bifurcations if b.type == "period-doubling"]
+        assert abs(b.delta_d - dd) < 1e-11 * abs(dd)
+
+
+def test_grazing_curve_in_absolute_clearance(omega_diagram):
+    w = omega_diagram.grazing[:, 0]
+    a = 1.0 / np.sqrt((1.0 - w ** 2) ** 2 + (2.0 * P.zeta * w) ** 2)
+    assert np.max(np.abs(omega_diagram.grazing[:, 1] / a - 1.0)) < 1e-14
+    for c in omega_diagram.curves:
+        for q in c.points[::10]:
+            aq = 1.0 / math.hypot(1.0 - q.value ** 2, 2.0 * P.zeta * q.value)
+            assert q.d == pytest.approx(aq + q.delta_d, rel=1e-14, abs=1e-15)
