@@ -221,3 +221,59 @@ def test_a_crafted_length_field_through_the_command_line_is_one_line_status_2(tm
     assert out.returncode == 2, (out.stdout, out.stderr)
     assert "Traceback" not in out.stderr and "malformed" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_a_bomb_is_refused_by_its_ratio_to_the_file_without_any_setting(tmp_path, monkeypatch):
+    # no GRAZING_BAG_MAX_BYTES: a small file may inflate to max(64 MiB, 200 x its size)
+    monkeypatch.delenv("GRAZING_BAG_MAX_BYTES", raising=False)
+    import zstandard
+    assert reader.max_bytes(1000) == 64 << 20
+    assert reader.max_bytes(1 << 20) == 200 * (1 << 20)
+    assert reader.max_bytes(1 << 40) == reader.MAX_BYTES
+    tiny = zstandard.ZstdCompressor().compress(b"")
+    liar = write(tmp_path, mcap(chunk(b"", "zstd", tiny, size=100 << 20)))
+    with pytest.raises(reader.BagReadError, match="104857600 uncompressed bytes.*bomb"):
+        reader.read_raw(liar)
+
+
+def test_zeros_inside_a_chunk_end_it_as_a_reserved_opcode(tmp_path, monkeypatch):
+    # a zero-filled chunk within the budget is 9-byte "records" of opcode 0: reserved by
+    # the MCAP spec, so the chunk's records end there (one problem), not after 1e6 steps
+    monkeypatch.setenv("GRAZING_BAG_MAX_BYTES", str(1 << 30))
+    import zstandard
+    inner = schema() + channel() + message(1, 0, 0, 1.5) + bytes(8 << 20)
+    data = mcap(chunk(inner, "zstd", zstandard.ZstdCompressor().compress(inner)))
+    raw = reader.read_raw(write(tmp_path, data))
+    assert reader.decode_float64(raw, "/oscillator/latency")["data"].tolist() == [1.5]
+    assert any("ends inside a record" in p for p in raw.problems)
+
+
+def test_reindex_refuses_a_bomb_and_a_fifo_and_leaves_the_file_as_it_was(tmp_path, monkeypatch):
+    monkeypatch.delenv("GRAZING_BAG_MAX_BYTES", raising=False)
+    import zstandard
+    from grazing_control.ros.recording.recovery import reindex
+    tiny = zstandard.ZstdCompressor().compress(bytes(1 << 20))
+    folder = write(tmp_path, mcap(chunk(b"", "zstd", tiny, size=1 << 30)), "bomb")
+    before = (folder / "bomb_0.mcap").read_bytes()
+    with pytest.raises(reader.BagReadError, match="decompression budget"):
+        reindex(folder)
+    assert (folder / "bomb_0.mcap").read_bytes() == before
+    fifo = tmp_path / "fifo"
+    fifo.mkdir()
+    os.mkfifo(fifo / "fifo_0.mcap")
+    with pytest.raises(reader.BagReadError, match="not a regular file"):
+        reindex(fifo)
+
+
+def test_reindex_keeps_the_records_before_zeros_and_recovers_the_rest(tmp_path, monkeypatch):
+    monkeypatch.setenv("GRAZING_BAG_MAX_BYTES", str(1 << 30))
+    import zstandard
+    from grazing_control.ros.recording.recovery import reindex
+    good = schema() + channel() + b"".join(message(1, k, k, k * 0.25) for k in range(4))
+    zeros = good + bytes(4 << 20)
+    data = mcap(chunk(zeros, "zstd", zstandard.ZstdCompressor().compress(zeros)))
+    result = reindex(write(tmp_path, data, "z"))
+    assert result.message_count == 4
+    raw = reader.read_raw(tmp_path / "z")
+    assert reader.decode_float64(raw, "/oscillator/latency")["data"].tolist() == \
+        [k * 0.25 for k in range(4)]

@@ -614,6 +614,9 @@ def build_parser() -> argparse.ArgumentParser:
     _gain_args(s)
     s.set_defaults(func=cmd_continue)
 
+    from .continue2 import add_parser as add_continue2_parser
+    add_continue2_parser(sub, _common, _gain_args)
+
     s = sub.add_parser("simulate", help="simulate on Pi2, optionally switching control on")
     _common(s)
     s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d*")

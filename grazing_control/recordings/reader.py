@@ -23,15 +23,17 @@ state stream also effort[0], effort[1], velocity possibly empty),
 
 from __future__ import annotations
 
-import io
 import os
-import stat
 import struct
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from grazing_control.ros.recording.bounded import (  # noqa: F401  (re-exported)
+    MAX_BYTES, BagReadError, decompress as _decompress, max_bytes, read_zstd as _read_zstd,
+    regular_file as _regular_file)
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
            "decode_joint_state", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
@@ -45,47 +47,6 @@ _OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
 _REC = struct.Struct("<BQ")
 _MSG = struct.Struct("<BQH")
 _U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
-
-
-class BagReadError(ValueError):
-    """The file is not an MCAP bag this reader can use (message says why)."""
-
-
-#: The most bytes a bag may decompress to (chunks and whole-file compression together),
-#: unless the environment variable ``GRAZING_BAG_MAX_BYTES`` says otherwise. The package's
-#: bags decompress 3-10x (a 1e6-message bag: about 0.2 GB); a decompression bomb (a 33 kB
-#: chunk that inflates to 1 GiB) is refused before its output is allocated.
-MAX_BYTES = 2 ** 30
-
-
-def max_bytes() -> int:
-    """The decompression budget: ``GRAZING_BAG_MAX_BYTES`` (a positive integer) or MAX_BYTES."""
-    text = os.environ.get("GRAZING_BAG_MAX_BYTES", "")
-    if not text:
-        return MAX_BYTES
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value <= 0:
-        raise BagReadError(f"GRAZING_BAG_MAX_BYTES={text!r}: must be a positive integer "
-                           "(bytes a bag may decompress to)")
-    return value
-
-
-def _regular_file(path: Path) -> Path:
-    """``path`` if it is a regular file (after links); a FIFO, device or folder is refused.
-
-    Opening a FIFO blocks until a writer appears, so the type is checked before opening.
-    """
-    try:
-        mode = os.stat(path).st_mode
-    except OSError as exc:
-        raise BagReadError(f"{path}: cannot be read ({exc.strerror})") from None
-    if not stat.S_ISREG(mode):
-        raise BagReadError(f"{path}: not a regular file (a FIFO, device or folder); "
-                           "a bag's .mcap must be a plain file")
-    return path
 
 
 class _Malformed(ValueError):
@@ -194,47 +155,6 @@ def _map(buf, p, end):
     return out, stop
 
 
-def _read_zstd(data: bytes, limit: int) -> bytes:
-    """Decompress every zstd frame of ``data``, never producing more than ``limit + 1`` bytes."""
-    import zstandard
-    parts, n = [], 0
-    with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data),
-                                                    read_across_frames=True) as r:
-        while n <= limit:
-            piece = r.read(min(limit + 1 - n, 1 << 24))
-            if not piece:
-                break
-            parts.append(piece)
-            n += len(piece)
-    return b"".join(parts)
-
-
-def _decompress(kind: str, data: bytes, size: int, budget: int) -> bytes:
-    """A chunk's records: at most ``min(size, budget)`` bytes are ever produced."""
-    if kind == "":
-        return data
-    if size > budget:
-        raise BagReadError(f"a chunk declares {size} uncompressed bytes, beyond what is left "
-                           f"of the {max_bytes()}-byte budget (a decompression bomb?); "
-                           "GRAZING_BAG_MAX_BYTES raises the limit")
-    if kind == "zstd":
-        out = _read_zstd(bytes(data), size)
-        if len(out) > size:
-            raise ValueError(f"more than the {size} bytes the chunk header says")
-        return out
-    if kind == "lz4":
-        try:
-            import lz4.frame
-        except ImportError:
-            raise BagReadError("an lz4-compressed chunk needs the lz4 package") from None
-        d = lz4.frame.LZ4FrameDecompressor()
-        out = d.decompress(bytes(data), max_length=size + 1)
-        if len(out) > size:
-            raise ValueError(f"more than the {size} bytes the chunk header says")
-        return out
-    raise BagReadError(f"unknown chunk compression {kind!r}")
-
-
 class _Scan:
     def __init__(self, wanted):
         self.wanted = wanted
@@ -278,6 +198,8 @@ class _Scan:
                                        f"({exc})") from None
             elif op in (_OP_DATA_END, _OP_FOOTER) and top:
                 return "end", q
+            elif op == 0:       # reserved (MCAP spec): zeros, not records (a zero-filled bomb)
+                return "torn", p
             p = q
         return ("torn" if p < end else "eof"), p
 
@@ -370,6 +292,7 @@ def read_raw(bag, topics=None) -> RawBag:
     with open(path, "rb") as fh:
         data = fh.read()
     scan = _Scan(None if topics is None else set(topics))
+    scan.budget = max_bytes(len(data))
     if data.startswith(_ZSTD_FRAME):     # rosbag2 "file" compression mode: a .mcap.zstd
         import zstandard
         try:

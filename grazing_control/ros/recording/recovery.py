@@ -2,19 +2,105 @@
 """
 
 
+import io
 import os
 import struct
+import zlib
 from pathlib import Path
 from typing import NamedTuple
 
 import yaml
-from mcap.exceptions import McapError
-from mcap.records import Channel, DataEnd, Footer, Message, Schema
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
 from mcap.stream_reader import StreamReader
 
+from .bounded import decompress, max_bytes, regular_file
 from .reading import _has_summary, bag_file, read_metadata
 from .schemas import DEFAULT_CHUNK_SIZE
 from .writer import BagWriter
+
+
+_RECORD = struct.Struct("<BQ")
+_OP_CHUNK = 0x06
+
+
+def _parse(data: bytes) -> list:
+    """The whole records of ``data`` (no magic) parsed by mcap's stream reader, a chunk as a
+    Chunk record (never inflated there: :func:`_records` does it, bounded).
+
+    mcap's reader reads on to a footer: the end of ``data`` ends the list.
+    """
+    out = []
+    records = StreamReader(io.BytesIO(data), skip_magic=True, emit_chunks=True,
+                           validate_crcs=False).records
+    try:
+        for record in records:
+            out.append(record)
+    except EndOfFile:
+        pass
+    return out
+
+
+def _whole_records(data: bytes) -> bytes:
+    """The prefix of a chunk's records up to a torn record or a reserved opcode 0 (zeros)."""
+    p, n = 0, len(data)
+    while p + _RECORD.size <= n:
+        op, length = _RECORD.unpack_from(data, p)
+        if op == 0 or p + _RECORD.size + length > n:
+            break
+        p += _RECORD.size + length
+    return data[:p]
+
+
+def _records(stream, budget: int):
+    """Yield (record, end offset, bytes inflated) for every complete record of ``stream``.
+
+    The file is walked record by record from its magic; a chunk is inflated within what
+    is left of the decompression budget (:func:`.bounded.decompress`: a bomb, honest or
+    lying about its size, never costs more), its CRC checked, and its inner records
+    yielded in order. The walk stops quietly where the file ends inside a record or a
+    record is malformed (a killed recorder's torn tail); a chunk beyond the budget raises
+    :class:`.bounded.BagReadError`.
+    """
+    while True:
+        start = stream.tell()
+        head = stream.read(_RECORD.size)
+        if len(head) < _RECORD.size:
+            return
+        op, length = _RECORD.unpack(head)
+        if op == 0:         # reserved (MCAP spec): zeros, not records
+            return
+        body = stream.read(length) if length <= budget + (1 << 20) else b""
+        if len(body) < length:
+            return
+        end = start + _RECORD.size + length
+        try:
+            parsed = _parse(head + body)
+        except (McapError, EOFError, ValueError, struct.error):
+            return
+        if not parsed:
+            return
+        record = parsed[0]
+        if op != _OP_CHUNK or not isinstance(record, Chunk):
+            yield record, end, 0
+            continue
+        try:
+            inner = decompress(record.compression, record.data, record.uncompressed_size,
+                               budget)
+        except ValueError as exc:
+            if type(exc) is not ValueError:     # BagReadError: over the budget
+                raise
+            return
+        if record.uncompressed_crc and zlib.crc32(inner) != record.uncompressed_crc:
+            return
+        try:
+            records = _parse(_whole_records(bytes(inner)))
+        except (McapError, EOFError, ValueError, struct.error):
+            return
+        yield None, end, len(inner) if record.compression else 0
+        for r in records:
+            if r is not None:
+                yield r, end, 0
 
 
 # --------------------------------------------------------------------------
@@ -67,30 +153,27 @@ def reindex(bag_dir: str | os.PathLike, *, compression: str = "zstd",
     bag_dir = Path(bag_dir)
     if not bag_dir.is_dir():
         raise FileNotFoundError(f"{bag_dir}: no such bag directory")
-    path = bag_file(bag_dir)
+    path = regular_file(bag_file(bag_dir))
     size = path.stat().st_size
     with open(path, "rb") as stream:
         had_summary = _has_summary(stream)
-        head = stream.read(8)
         stream.seek(0)
-        if head != b"\x89MCAP0\r\n":
+        if stream.read(8) != b"\x89MCAP0\r\n":
             raise ValueError(f"{path}: not an MCAP file")
         schemas, channels, messages = {}, {}, []
         end = 8
-        reader = StreamReader(stream, validate_crcs=True)
-        try:
-            for record in reader.records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    messages.append(record)
-                elif isinstance(record, (DataEnd, Footer)):
-                    break
-                end = stream.tell()
-        except (McapError, EOFError, ValueError, struct.error):
-            pass    # the file ends inside a record: keep what came before it
+        budget = max_bytes(size)
+        for record, end_of_record, inflated in _records(stream, budget):
+            budget -= inflated
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                messages.append(record)
+            elif isinstance(record, (DataEnd, Footer)):
+                break
+            end = end_of_record
     custom = {}
     try:
         custom = dict(read_metadata(bag_dir).get("custom_data") or {})

@@ -1,0 +1,115 @@
+"""Reading a bag's bytes within a memory bound: the decompression budget and plain files only.
+
+Shared by the analysis's reader (:mod:`grazing_control.recordings.reader`) and the
+recovery of a killed recording (:mod:`.recovery`, ``grazing bag reindex``): a chunk's
+declared uncompressed size is checked against what is left of the budget before anything
+is allocated, and no decompressor ever produces more than the size a chunk declares
+(zstd read in bounded pieces, lz4 with ``max_length``), so a decompression bomb, honest
+about its size or lying, costs at most the budget. A FIFO or device named like a bag's
+file is refused before it is opened (opening a FIFO blocks until a writer appears).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import stat
+from pathlib import Path
+
+__all__ = ["BagReadError", "MAX_BYTES", "max_bytes", "regular_file", "read_zstd",
+           "decompress"]
+
+
+class BagReadError(ValueError):
+    """The file is not an MCAP bag this reader can use (message says why)."""
+
+
+#: The most bytes a bag may decompress to (chunks and whole-file compression together),
+#: unless the environment variable ``GRAZING_BAG_MAX_BYTES`` says otherwise.
+MAX_BYTES = 2 ** 30
+
+#: Without ``GRAZING_BAG_MAX_BYTES``, a file may also inflate at most RATIO times its own
+#: size (and always to MIN_BYTES). The package's bags inflate about 2x (bags/: 2.1 and
+#: 2.2), rosbag2's zstd chunks of numeric messages 3-10x; a decompression bomb inflates
+#: 1,000-30,000x (a 33 kB chunk to 1 GiB). Scanning a GiB of minimal records costs a
+#: minute of Python, so the ratio, not only the absolute cap, is what keeps a bomb cheap.
+RATIO = 200
+MIN_BYTES = 64 << 20
+
+
+def max_bytes(file_size: int | None = None) -> int:
+    """The decompression budget of a file of ``file_size`` bytes.
+
+    ``GRAZING_BAG_MAX_BYTES`` (a positive integer) when set, else
+    ``min(MAX_BYTES, max(MIN_BYTES, RATIO * file_size))`` (MAX_BYTES when the size is
+    not given).
+    """
+    text = os.environ.get("GRAZING_BAG_MAX_BYTES", "")
+    if not text:
+        if file_size is None:
+            return MAX_BYTES
+        return min(MAX_BYTES, max(MIN_BYTES, RATIO * int(file_size)))
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value <= 0:
+        raise BagReadError(f"GRAZING_BAG_MAX_BYTES={text!r}: must be a positive integer "
+                           "(bytes a bag may decompress to)")
+    return value
+
+
+def regular_file(path: Path) -> Path:
+    """``path`` if it is a regular file (after links); a FIFO, device or folder is refused.
+
+    Opening a FIFO blocks until a writer appears, so the type is checked before opening.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        raise BagReadError(f"{path}: cannot be read ({exc.strerror})") from None
+    if not stat.S_ISREG(mode):
+        raise BagReadError(f"{path}: not a regular file (a FIFO, device or folder); "
+                           "a bag's .mcap must be a plain file")
+    return path
+
+
+def read_zstd(data: bytes, limit: int) -> bytes:
+    """Decompress every zstd frame of ``data``, never producing more than ``limit + 1`` bytes."""
+    import zstandard
+    parts, n = [], 0
+    with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data),
+                                                    read_across_frames=True) as r:
+        while n <= limit:
+            piece = r.read(min(limit + 1 - n, 1 << 24))
+            if not piece:
+                break
+            parts.append(piece)
+            n += len(piece)
+    return b"".join(parts)
+
+
+def decompress(kind: str, data: bytes, size: int, budget: int) -> bytes:
+    """A chunk's records: at most ``min(size, budget)`` bytes are ever produced."""
+    if kind == "":
+        return data
+    if size > budget:
+        raise BagReadError(f"a chunk declares {size} uncompressed bytes, beyond the {budget} "
+                           "bytes left of the file's decompression budget (a decompression "
+                           "bomb?); GRAZING_BAG_MAX_BYTES raises the limit")
+    if kind == "zstd":
+        out = read_zstd(bytes(data), size)
+        if len(out) > size:
+            raise ValueError(f"more than the {size} bytes the chunk header says")
+        return out
+    if kind == "lz4":
+        try:
+            import lz4.frame
+        except ImportError:
+            raise BagReadError("an lz4-compressed chunk needs the lz4 package") from None
+        d = lz4.frame.LZ4FrameDecompressor()
+        out = d.decompress(bytes(data), max_length=size + 1)
+        if len(out) > size:
+            raise ValueError(f"more than the {size} bytes the chunk header says")
+        return out
+    raise BagReadError(f"unknown chunk compression {kind!r}")
