@@ -119,6 +119,17 @@ def test_a_record_periodic_only_at_match_tol_is_a_slow_start_of_its_cycle():
     assert [(a.label, a.starts, a.slow, a.first) for a in atts] == [("1/1", 2, 1, 1),
                                                                     ("chaotic", 1, 0, 2)]
     assert np.array_equal(atts[0].points[0], fixed) and index.tolist() == [0, 0, 1]
+    # block by block (the slow start alone in the first block): the same result
+    from grazing_control.studies.basins.attractors import Grouping
+
+    grouping = Grouping(1e-6)
+    for lo, hi in ((0, 1), (1, 3)):
+        grouping.add(records[lo:hi], np.ones((hi - lo, 128), dtype=int), period[lo:hi])
+    index_b, atts_b = grouping.finish()
+    assert np.array_equal(index_b, index) and [(a.label, a.starts, a.slow, a.first)
+                                               for a in atts_b] == [("1/1", 2, 1, 1),
+                                                                    ("chaotic", 1, 0, 2)]
+    assert np.array_equal(atts_b[0].points, atts[0].points)
 
 
 def test_cycle_distance_is_the_least_over_shifts():

@@ -16,9 +16,10 @@ and n and coincide point by point, up to where the cycle was entered:
 so two starts on the two points of one 2-cycle are one attractor. A detected period
 whose cycle repeats within ``match_tol`` after a divisor q of it is taken as q
 (:func:`reduced_period`: a slow alternating transient onto a q-cycle). Starts are taken in
-index order and each joins the first attractor it matches (its representative is the
-first start that reached it), so the result depends on the records alone, not on how
-they were computed. Records without a period up to the maximum are one class,
+index order, the settled ones before the slow ones (below), and each joins the first
+attractor it matches (its representative, whose cycle the attractor keeps, is the first
+start that reached it), so the result depends on the records alone, not on how they
+were computed or split into blocks (:class:`Grouping`). Records without a period up to the maximum are one class,
 ``chaotic`` (chaos, a quasi-periodic motion, a period above the maximum, or a transient
 longer than the run: coexisting chaotic attractors are not told apart), and failed runs
 another, ``failed``.
@@ -36,7 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Attractor", "identify", "reduced_period", "cycle_distance", "canonical_cycle"]
+__all__ = ["Attractor", "Grouping", "identify", "reduced_period", "cycle_distance",
+           "canonical_cycle"]
 
 
 @dataclass(frozen=True)
@@ -116,7 +118,7 @@ def reduced_period(cycle, counts, match_tol: float) -> int:
 
 
 def identify(records, counts, period, match_tol: float):
-    """Group starts by attractor.
+    """Group starts by attractor (all records at once; :class:`Grouping` block by block).
 
     Parameters
     ----------
@@ -137,56 +139,88 @@ def identify(records, counts, period, match_tol: float):
         Periodic ones ordered by (p, n, representative start), then ``chaotic``, then
         ``failed``.
     """
-    from grazing_control.studies.sweeps.period import detect_period
+    grouping = Grouping(match_tol)
+    grouping.add(records, counts, period)
+    return grouping.finish()
 
-    records = np.asarray(records, dtype=float)
-    counts = np.asarray(counts)
-    period = np.asarray(period)
-    n = period.shape[0]
-    groups = []          # [kind, p, impacts, cycle, [members]]
-    by_key = {}
-    special = {}
-    periods = period.astype(np.int64).copy()
-    slow = np.zeros(n, dtype=bool)
-    for i in np.flatnonzero(periods == 0):  # a slow transient onto a cycle, or chaos
-        periods[i] = detect_period(records[i], match_tol, records.shape[1] // 2)
-        slow[i] = periods[i] > 0
-    # settled starts first, so that an attractor's cycle is a settled record where any is
-    for i in sorted(range(n), key=lambda i: (bool(slow[i]), i)):
-        p = int(periods[i])
-        if p >= 1:
-            p = reduced_period(records[i, -p:], counts[i, -p:], match_tol)
-            cycle = records[i, -p:]
-            key = (p, int(np.sum(counts[i, -p:])))
-            for g in by_key.setdefault(key, []):
-                if cycle_distance(cycle, g[3]) <= match_tol:
-                    g[4].append(i)
-                    break
-            else:
-                g = ["periodic", p, key[1], cycle, [i]]
-                by_key[key].append(g)
-                groups.append(g)
-        else:
+
+class Grouping:
+    """:func:`identify` over blocks of consecutive starts: :meth:`add` each block in
+    order, then :meth:`finish`. It keeps a cycle per attractor, each slow start's cycle
+    (at most max_period points) and one chaotic record, not the blocks' records, and
+    gives the result :func:`identify` gives on all the records at once."""
+
+    def __init__(self, match_tol: float):
+        self.match_tol = float(match_tol)
+        self.n = 0
+        self.groups = []      # [kind, p, impacts, cycle, [members]]
+        self.by_key = {}
+        self.special = {}
+        self.pending = []     # slow starts: (index, cycle, impacts), grouped at the end
+        self.slow = []
+
+    def add(self, records, counts, period) -> None:
+        """The next block: records (b, m, 2), counts (b, m), detected periods (b,)."""
+        from grazing_control.studies.sweeps.period import detect_period
+
+        records = np.asarray(records, dtype=float)
+        counts = np.asarray(counts)
+        for j, p in enumerate(np.asarray(period)):
+            i, p = self.n + j, int(p)
+            slow = False
+            if p == 0:    # a slow transient onto a cycle, or chaos (module docstring)
+                p = detect_period(records[j], self.match_tol, records.shape[1] // 2)
+                slow = p > 0
+            if p >= 1:
+                p = reduced_period(records[j, -p:], counts[j, -p:], self.match_tol)
+                entry = (i, records[j, -p:].copy(), int(np.sum(counts[j, -p:])))
+                if slow:  # settled starts first: an attractor's cycle is a settled one's
+                    self.pending.append(entry)
+                    self.slow.append(i)
+                else:
+                    self._join(*entry)
+                continue
             kind = "chaotic" if p == 0 else "failed"
-            if kind not in special:
-                record = records[i] if kind == "chaotic" else np.empty((0, 2))
-                special[kind] = [kind, p, int(np.sum(counts[i])) if p == 0 else -1, record, []]
-            special[kind][4].append(i)
-    periodic = sorted(groups, key=lambda g: (g[1], g[2], g[4][0]))
-    ordered = periodic + [special[k] for k in ("chaotic", "failed") if k in special]
-    # members[0] is the representative (its cycle is the attractor's), the rest in order
-    index = np.empty(n, dtype=np.int64)
-    attractors = []
-    for j, (kind, p, impacts, points, members) in enumerate(ordered):
-        index[members] = j
-        if kind == "periodic":
-            same = [g for g in periodic if (g[1], g[2]) == (p, impacts)]
-            label = f"{impacts}/{p}"
-            if len(same) > 1:
-                label += f" #{next(k for k, g in enumerate(same) if g is ordered[j]) + 1}"
-            points = canonical_cycle(points)
-        else:
-            label = kind
-        attractors.append(Attractor(label, kind, p, impacts, np.array(points), len(members),
-                                    members[0], int(np.sum(slow[members]))))
-    return index, tuple(attractors)
+            if kind not in self.special:
+                record = records[j].copy() if kind == "chaotic" else np.empty((0, 2))
+                self.special[kind] = [kind, p, int(np.sum(counts[j])) if p == 0 else -1,
+                                      record, []]
+            self.special[kind][4].append(i)
+        self.n += records.shape[0]
+
+    def _join(self, i, cycle, impacts):
+        key = (cycle.shape[0], impacts)
+        for g in self.by_key.setdefault(key, []):
+            if cycle_distance(cycle, g[3]) <= self.match_tol:
+                g[4].append(i)
+                return
+        g = ["periodic", key[0], impacts, cycle, [i]]
+        self.by_key[key].append(g)
+        self.groups.append(g)
+
+    def finish(self):
+        """(index (n,), attractors) as :func:`identify` returns them."""
+        for entry in self.pending:
+            self._join(*entry)
+        self.pending = []
+        slow = np.zeros(self.n, dtype=bool)
+        slow[self.slow] = True
+        periodic = sorted(self.groups, key=lambda g: (g[1], g[2], g[4][0]))
+        ordered = periodic + [self.special[k] for k in ("chaotic", "failed")
+                              if k in self.special]
+        # members[0] is the representative (its cycle is the attractor's)
+        index = np.empty(self.n, dtype=np.int64)
+        attractors = []
+        for j, (kind, p, impacts, points, members) in enumerate(ordered):
+            index[members] = j
+            if kind == "periodic":
+                same = [g for g in periodic if (g[1], g[2]) == (p, impacts)]
+                label = f"{impacts}/{p}"
+                if len(same) > 1:
+                    label += f" #{next(k for k, g in enumerate(same) if g is ordered[j]) + 1}"
+                points = canonical_cycle(points)
+            else:
+                label = kind
+            attractors.append(Attractor(label, kind, p, impacts, np.array(points),
+                                        len(members), members[0], int(np.sum(slow[members]))))
+        return index, tuple(attractors)

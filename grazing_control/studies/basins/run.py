@@ -6,8 +6,9 @@ the pure-Python core, in this process, on local processes or on a Dask cluster e
 as a sweep does, with the same chunking, the same failures per start and the same period
 detection; each start runs ``transient`` periods and then a record of 2 max_period
 samples, on which its period is detected. The records are then grouped by attractor
-(:func:`.attractors.identify`). Large grids run in blocks of :data:`BLOCK` starts, so
-the records held at once stay bounded; blocks do not change any start's result.
+(:class:`.attractors.Grouping`). Large grids run in blocks of :data:`BLOCK` starts, so
+the records held at once stay bounded (one block's, plus a cycle per attractor and per
+slow start); blocks do not change the result.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from .attractors import identify
+from .attractors import Grouping
 from .result import BasinResult
 
 __all__ = ["BLOCK", "MAX_STARTS", "DEFAULT_MAX_PERIOD", "BOX_SCALE", "MATCH_SCALE", "orbit_scale",
@@ -175,10 +176,11 @@ def basins(params: OscillatorParams, *, dx_range=None, dv_range=None, nx: int = 
     record = 2 * max_period
     periods = transient + record
     n = starts.shape[0]
-    records = np.empty((n, record, 2))
-    counts = np.empty((n, record), dtype=np.int32)
     period = np.empty(n, dtype=np.int64)
+    mean_impacts = np.empty(n)
+    final = np.empty((n, 2))
     errors = np.empty(n, dtype=object)
+    grouping = Grouping(match_tol)
     engine_used = ""
     for lo in range(0, n, BLOCK):
         hi = min(n, lo + BLOCK)
@@ -186,17 +188,18 @@ def basins(params: OscillatorParams, *, dx_range=None, dv_range=None, nx: int = 
                     deviation=starts[lo:hi], gains=gains, control_after=control_after,
                     workers=workers, scheduler=scheduler, engine=engine,
                     period_tol=float(period_tol), max_period=max_period, progress=progress)
-        records[lo:hi] = res.pi2_deviation
-        counts[lo:hi] = res.impacts_per_period
+        grouping.add(res.pi2_deviation, res.impacts_per_period, res.period)
         period[lo:hi] = res.period
+        mean_impacts[lo:hi] = res.impacts_per_period.mean(axis=1)
+        final[lo:hi] = res.pi2_deviation[:, -1]
         errors[lo:hi] = res.errors
         engine_used = res.engine
-    index, attractors = identify(records, counts, period, match_tol)
+    index, attractors = grouping.finish()
     controlled = gains is not None
     return BasinResult(
         params=params, xs=xs, vs=vs, attractor=index.reshape(nv, nx),
-        period=period.reshape(nv, nx), mean_impacts=counts.mean(axis=1).reshape(nv, nx),
-        final=records[:, -1].reshape(nv, nx, 2), errors=errors.astype(str).reshape(nv, nx),
+        period=period.reshape(nv, nx), mean_impacts=mean_impacts.reshape(nv, nx),
+        final=final.reshape(nv, nx, 2), errors=errors.astype(str).reshape(nv, nx),
         attractors=attractors, c1=gains.c1 if controlled else math.nan,
         c2=gains.c2 if controlled else math.nan, delay=gains.delay if controlled else 0.0,
         control_after=(control_after or 0) if controlled else -1, transient=transient,
