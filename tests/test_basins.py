@@ -276,6 +276,23 @@ def test_blocks_do_not_change_the_result(monkeypatch):
     whole = basins(COEXIST, **kw)
     monkeypatch.setattr(run, "BLOCK", 5)
     assert basins(COEXIST, **kw).same_as(whole)
+    monkeypatch.setattr(run, "BLOCK_SAMPLES", 3 * 8)   # 3 starts of 8 samples per block
+    assert basins(COEXIST, **kw).same_as(whole)
+
+
+def test_the_python_core_gives_the_kernel_result(monkeypatch):
+    """engine='python': the pure-Python reference core, not the kernel (switched off)."""
+    from grazing_control.oscillator import kernel
+
+    kw = dict(dx_range=BOX[0], dv_range=BOX[1], nx=2, nv=2, transient=150, max_period=4,
+              workers=1)
+    compiled = basins(COEXIST, engine="kernel", **kw)
+    monkeypatch.setattr(kernel, "run_point", None)
+    reference = basins(COEXIST, engine="python", **kw)
+    assert reference.engine == "python" and compiled.engine == "kernel"
+    assert np.array_equal(reference.final, compiled.final)
+    assert np.array_equal(reference.attractor, compiled.attractor)
+    assert [a.label for a in reference.attractors] == [a.label for a in compiled.attractors]
 
 
 # ------------------------------------------------------------------ bad input

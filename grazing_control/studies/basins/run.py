@@ -22,11 +22,13 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .attractors import Grouping
 from .result import BasinResult
 
-__all__ = ["BLOCK", "MAX_STARTS", "DEFAULT_MAX_PERIOD", "BOX_SCALE", "MATCH_SCALE", "orbit_scale",
+__all__ = ["BLOCK", "BLOCK_SAMPLES", "MAX_STARTS", "DEFAULT_MAX_PERIOD", "BOX_SCALE", "MATCH_SCALE", "orbit_scale",
            "default_box", "basins"]
 
-#: Starts per call of the sweep runner (records of 2 * max_period samples each).
+#: Starts per call of the sweep runner (records of 2 * max_period samples each), at most;
 BLOCK = 16384
+#: and at most this many recorded samples per call (~100 MB of records and counts).
+BLOCK_SAMPLES = 4 * 1024 * 1024
 #: Largest grid accepted (nx * nv).
 MAX_STARTS = 4_000_000
 #: The sweep's default longest detected period.
@@ -182,8 +184,9 @@ def basins(params: OscillatorParams, *, dx_range=None, dv_range=None, nx: int = 
     errors = np.empty(n, dtype=object)
     grouping = Grouping(match_tol)
     engine_used = ""
-    for lo in range(0, n, BLOCK):
-        hi = min(n, lo + BLOCK)
+    block = min(BLOCK, max(1, BLOCK_SAMPLES // record))
+    for lo in range(0, n, block):
+        hi = min(n, lo + block)
         res = sweep(params, {"delta_d": [params.delta_d]}, periods=periods, transient=transient,
                     deviation=starts[lo:hi], gains=gains, control_after=control_after,
                     workers=workers, scheduler=scheduler, engine=engine,
