@@ -38,7 +38,7 @@ from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialSt
                                                NonFiniteStateError, Segment, check_state)
 
 __all__ = ["ENV", "available", "use_kernel", "warm_up", "next_impact", "advance",
-           "period_step", "simulate_exact", "run_point"]
+           "period_step", "simulate_exact", "run_point", "lyapunov_sums"]
 
 #: Environment variable that chooses the path: auto (default), python, numba.
 ENV = "GRAZING_KERNEL"
@@ -193,6 +193,7 @@ def _first_calls():
     advance(p, p.tau2, 0.0, 0.0, p.period)
     simulate_exact(p, 2, 0.0, 0.0)
     run_point(p, 2, 1, 0.0, 0.0)
+    lyapunov_sums(p, 2, 1, 0.0, 0.0)
 
 
 def exact_advance():
@@ -329,3 +330,32 @@ def run_point(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_a
     dev, _corr, counts, _imps, _end = _run(p, int(periods), dx, dv, c1, c2, control_after,
                                            float(delay), int(transient), False)
     return dev, counts
+
+
+def lyapunov_sums(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, control_after=0,
+                  delay=0.0):
+    """The compiled tangent propagation along the orbit of :func:`run_point` (same floats).
+
+    Returns (sum log R11, sum log R22, impacts, stuck periods, sum log|1 + c2|, final
+    deviation) over periods transient..periods-1
+    (:func:`grazing_control.dynamics.lyapunov.lyapunov_exact` makes exponents of them);
+    errors as :func:`simulate_exact`.
+    """
+    ki, ks = _compiled()
+    controlled = not (math.isnan(c1) or control_after is None)
+    after = 0 if control_after is None else int(control_after)
+    k, ndx, ndv, status, info, l1, l2, imps, stuck, lg = ks.lyapunov_run(
+        _params(p), int(periods), int(transient), float(dx), float(dv), controlled,
+        float(c1), float(c2), after, float(delay), *_scratch())
+    if status == ks.STATUS_CORRECTION:
+        raise NonFiniteStateError(
+            f"the correction c1*dx + c2*dv = {info!r} at period {k} is not finite or "
+            f"exceeds 1e150: an input overflowed (c1={c1!r}, c2={c2!r}, dx={ndx!r}, "
+            f"dv={ndv!r})")
+    if status != ki.STATUS_OK:
+        try:
+            _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
+                   state=(ndx, ndv), times=(p.tau2, p.period))
+        except NonFiniteStateError as exc:
+            raise NonFiniteStateError(f"at period {k}: {exc}") from None
+    return l1, l2, int(imps), int(stuck), lg, (ndx, ndv)

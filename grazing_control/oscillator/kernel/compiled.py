@@ -60,7 +60,8 @@ __all__ = ["params_tuple", "check_state", "wall_rounding", "make_eval", "evaluat
            "resting_on_wall", "release_skip", "on_wall_at_rest", "leave_wall", "advance",
            "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
            "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run", "scratch_buffer",
-           "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS"]
+           "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS", "period_jacobian",
+           "lyapunov_run"]
 
 TWO_PI = 2.0 * math.pi
 _MAX_DEPTH = 64
@@ -719,6 +720,118 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
             counts[j] = n
         dx, dv = ndx, ndv
     return periods, dx, dv, n_impacts, STATUS_OK, 0.0
+
+
+# --------------------------------------------------------------------------
+# Tangent propagation: the Lyapunov spectrum on Pi2 (docs/theory_lyapunov.md)
+# --------------------------------------------------------------------------
+
+@jit
+def period_jacobian(P, rows, n, kick_time, c1, c2):
+    """DP of one period from its impact rows: (m11, m12, m21, m22, stuck).
+
+    The product, in time order, of the flow's transition matrices Phi(h), the saltation
+    matrix S = [[-r, 0], [(1 + r)(cos tau - d) / v-, -r]] of every impact and, at
+    ``kick_time`` after the sample (the actuation delay; 0: at the sample), the kick
+    M <- M + e2 (c1, c2) (c1 = c2 = 0: no kick): M2 (M1 + e2 k^T), as
+    :func:`grazing_control.dynamics.maps.pi2_map`'s monodromy (docs/theory_delay.md, D3).
+    A sticking impact makes the map singular (every nearby state leaves the wall at the
+    same release): M = 0 and stuck = 1.
+    """
+    zeta, r, d, period = P[_ZETA], P[_R], P[_D], P[_PERIOD]
+    m11, m12, m21, m22 = 1.0, 0.0, 0.0, 1.0
+    t = 0.0
+    kicked = False
+    stuck = 0
+    for i in range(n + 1):
+        at = rows[i, 0] if i < n else period
+        if not kicked and kick_time < at or (not kicked and i == n):
+            f11, f12, f21, f22 = transition_matrix(zeta, kick_time - t)
+            m11, m12, m21, m22 = (f11 * m11 + f12 * m21, f11 * m12 + f12 * m22,
+                                  f21 * m11 + f22 * m21, f21 * m12 + f22 * m22)
+            m21 += c1
+            m22 += c2
+            t = kick_time
+            kicked = True
+        f11, f12, f21, f22 = transition_matrix(zeta, at - t)
+        m11, m12, m21, m22 = (f11 * m11 + f12 * m21, f11 * m12 + f12 * m22,
+                              f21 * m11 + f22 * m21, f21 * m12 + f22 * m22)
+        t = at
+        if i == n:
+            break
+        if rows[i, 4] != 0.0:
+            m11, m12, m21, m22 = 0.0, 0.0, 0.0, 0.0
+            stuck = 1
+            continue
+        s21 = (1.0 + r) * (math.cos(rows[i, 1]) - d) / rows[i, 2]
+        m11, m12, m21, m22 = -r * m11, -r * m12, s21 * m11 - r * m21, s21 * m12 - r * m22
+    return m11, m12, m21, m22, stuck
+
+
+@jit
+def lyapunov_run(P, periods, transient, dx, dv, controlled, c1, c2, control_after, delay,
+                 scratch, stack):
+    """The Lyapunov spectrum of the Pi2 map along the orbit from (dx, dv).
+
+    The orbit is :func:`run`'s (the same period_step calls, so the same floats); from
+    period ``transient`` on, an orthonormal pair of tangent vectors Q is carried through
+    each period's Jacobian (:func:`period_jacobian`) and re-orthonormalised
+    (Gram-Schmidt: DP Q = Q' R), accumulating log R11, log R22.
+
+    Returns (k, dx, dv, status, info, sum_log1, sum_log2, impacts, stuck_periods,
+    sum_log_det_gain): k = periods when done; the sums run over periods transient..k-1;
+    ``sum_log_det_gain`` is the sum of log|1 + c2| over controlled measured periods (for
+    the determinant identity, docs/theory_lyapunov.md).
+    """
+    period = P[_PERIOD]
+    grid = window_grid(P, P[_TAU2], period)
+    q11, q12, q21, q22 = 1.0, 0.0, 0.0, 1.0
+    l1 = 0.0
+    l2 = 0.0
+    lg = 0.0
+    impacts = 0
+    stuck_periods = 0
+    for k in range(periods):
+        dvc = 0.0
+        kick_delay = 0.0
+        on = controlled and k >= control_after
+        if on:
+            dvc = c1 * dx + c2 * dv
+            kick_delay = delay
+            if not abs(dvc) <= 1e150:
+                return k, dx, dv, STATUS_CORRECTION, dvc, l1, l2, impacts, stuck_periods, lg
+        ndx, ndv, n, status, info = period_step(P, dx, dv, dvc, kick_delay, scratch, 0, stack,
+                                                grid)
+        if status != STATUS_OK:
+            return k, ndx, ndv, status, info, l1, l2, impacts, stuck_periods, lg
+        if k >= transient:
+            a1 = c1 if on else 0.0
+            a2 = c2 if on else 0.0
+            m11, m12, m21, m22, stuck = period_jacobian(P, scratch, n, kick_delay, a1, a2)
+            impacts += n
+            stuck_periods += stuck
+            if on:
+                lg += math.log(abs(1.0 + c2))
+            # (b1 b2) = DP Q, Gram-Schmidt
+            b11 = m11 * q11 + m12 * q21
+            b21 = m21 * q11 + m22 * q21
+            b12 = m11 * q12 + m12 * q22
+            b22 = m21 * q12 + m22 * q22
+            r11 = math.hypot(b11, b21)
+            if r11 > 0.0:
+                q11, q21 = b11 / r11, b21 / r11
+            proj = q11 * b12 + q21 * b22
+            u1 = b12 - proj * q11
+            u2 = b22 - proj * q21
+            r22 = math.hypot(u1, u2)
+            if r22 > 0.0:
+                q12, q22 = u1 / r22, u2 / r22
+            else:
+                q12, q22 = -q21, q11
+            l1 += math.log(r11) if r11 > 0.0 else -math.inf
+            l2 += math.log(r22) if r22 > 0.0 else -math.inf
+        dx, dv = ndx, ndv
+    return periods, dx, dv, STATUS_OK, 0.0, l1, l2, impacts, stuck_periods, lg
 
 
 def scratch_buffer():

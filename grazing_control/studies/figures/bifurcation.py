@@ -43,7 +43,8 @@ STARTS = ((0.0, 0.0), (1e-3, 0.0))
 class DiagramData:
     """A brute-force diagram: delta_d (n,), starts (s, 2), x (n, s, m) physical Pi2
     samples after the transient, last (n, s, 2) the last sample as a deviation from X**,
-    period (n, s), impacts (n, s, m), and how it was run."""
+    period (n, s), impacts (n, s, m), lyapunov (n, s, 2) the Lyapunov exponents per
+    period of the kept orbit (dynamics.lyapunov), and how it was run."""
 
     delta_d: np.ndarray
     starts: np.ndarray
@@ -55,22 +56,26 @@ class DiagramData:
     transient: int
     engine: str
     seconds: float
+    lyapunov: np.ndarray | None = None
 
 
 def diagram_data(p: OscillatorParams, delta_d, *, periods: int, transient: int,
-                 starts=STARTS, workers: int | None = None, progress: bool = False) -> DiagramData:
-    """Run the sweep over ``delta_d`` from each start; keep x on Pi2 and the periods."""
+                 starts=STARTS, workers: int | None = None, progress: bool = False,
+                 lyapunov: bool = True) -> DiagramData:
+    """Run the sweep over ``delta_d`` from each start; keep x on Pi2, the periods and (with
+    ``lyapunov``) the Lyapunov exponents of the kept orbits."""
     dd = np.asarray(delta_d, dtype=float)
     st = np.asarray(starts, dtype=float).reshape(-1, 2)
     t0 = time.perf_counter()
     res = sweep(p, {"delta_d": dd}, periods=periods, transient=transient, deviation=st,
-                workers=workers, progress=progress)
+                workers=workers, progress=progress, lyapunov=lyapunov)
     seconds = time.perf_counter() - t0
     n, s, m = dd.size, st.shape[0], periods - transient
     return DiagramData(dd, st, res.pi2[:, :, 0].reshape(n, s, m),
                        res.pi2_deviation[:, -1, :].reshape(n, s, 2), res.period.reshape(n, s),
                        res.impacts_per_period.reshape(n, s, m), periods, transient,
-                       str(res.engine), seconds)
+                       str(res.engine), seconds,
+                       None if res.lyapunov is None else res.lyapunov.reshape(n, s, 2))
 
 
 def _scatter(ax, data: DiagramData, size: float):
@@ -107,13 +112,28 @@ def _branch_agreement(p, data: DiagramData, limit: int = 25) -> float | None:
 def panel_1a(p: OscillatorParams, data: DiagramData, branch: BranchData, out) -> Panel:
     """Fig. 1(a): the brute-force diagram across grazing with the 1/1 branch."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
+    if data.lyapunov is None:
+        fig, ax = plt.subplots(figsize=PANEL_SIZE, constrained_layout=True)
+    else:   # lambda_max beneath the diagram, on the same Delta d axis
+        w, h = PANEL_SIZE
+        fig, (ax, lx) = plt.subplots(2, 1, figsize=(w, h * 1.45), sharex=True,
+                                     gridspec_kw={"height_ratios": (3, 1.2)},
+                                     constrained_layout=True)
     _scatter(ax, data, size=1.0 if data.delta_d.size > 300 else 4.0)
     window = (float(data.delta_d[0]), float(data.delta_d[-1]))
     draw_branch(ax, branch, p.x_ref, window, COLORS["stable"], COLORS["unstable"], "1/1 branch")
     ax.axvline(0.0, color="0.5", lw=0.6)
-    ax.set(xlim=window, xlabel="Δd = d − d*", ylabel="x on Π2",
-           title="Fig. 1(a): bifurcation diagram on Π2 (uncontrolled)")
+    ax.set(xlim=window, xlabel="" if data.lyapunov is not None else "Δd = d − d*",
+           ylabel="x on Π2", title="Fig. 1(a): bifurcation diagram on Π2 (uncontrolled)")
+    if data.lyapunov is not None:
+        lmax = data.lyapunov[:, 0, 0]
+        ok = np.isfinite(lmax)
+        lx.axhline(0.0, color="0.5", lw=0.6)
+        lx.axvline(0.0, color="0.5", lw=0.6)
+        lx.plot(data.delta_d[ok], lmax[ok], ".", color=COLORS["brute"], markersize=2.0,
+                markeredgewidth=0)
+        lx.set(xlim=window, xlabel="Δd = d − d*", ylabel="λ_max / period (from X**)")
+        lx.ticklabel_format(axis="x", style="sci", scilimits=(-3, 3))
     ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 3))
     ax.legend(fontsize=7.5, loc="lower left", markerscale=6)
     files = save(fig, out, "fig1a")
@@ -145,7 +165,7 @@ def panel_1a(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
         Number("branch_agreement", "max |x − x(1/1 orbit)| at period-1 points",
                _branch_agreement(p, data), fmt=".2e",
                note="brute force vs exact shooting (orbit_11), up to 25 points"),
-    )
+    ) + _lyapunov_numbers(p, data)
     return Panel("fig1a", "bifurcation diagram on Π2 across grazing",
                  "Brute force: for each Δd the uncontrolled oscillator runs from X** (black) "
                  "and from X** + (1e-3, 0) (grey); the Π2 samples x after the transient are "
@@ -155,6 +175,33 @@ def panel_1a(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
                  "near grazing, and on the non-impacting side Δd > 0 the 0/1 motion "
                  "(x = x**) with a chaotic attractor coexisting just past grazing.",
                  tuple(files), numbers)
+
+
+def _lyapunov_numbers(p, data: DiagramData) -> tuple:
+    """λ_max's sign against the detected period, and the worst residual of the sum
+    identity (L3) over the Δd < 0 points from X** (docs/theory_lyapunov.md)."""
+    if data.lyapunov is None:
+        return ()
+    lam = data.lyapunov[:, 0, :]
+    per = data.period[:, 0]
+    neg = data.delta_d < 0.0
+    chaotic = neg & (per == 0) & np.isfinite(lam[:, 0])
+    periodic = neg & (per > 0) & np.isfinite(lam[:, 0])
+    nu = data.impacts[:, 0, :].mean(axis=1)
+    expected = -2.0 * p.zeta * p.period + 2.0 * nu * np.log(p.r)
+    ok = neg & np.all(np.isfinite(lam), axis=1)
+    resid = np.abs(lam.sum(axis=1) - expected)[ok]
+    return (
+        Number("lyapunov_chaotic_positive", "Δd < 0 from X**, no period ≤ 64: fraction with "
+               "λ_max > 0", float(np.mean(lam[chaotic, 0] > 0)) if chaotic.any() else None,
+               fmt=".3f", note="tangent propagation through flow and saltation matrices"),
+        Number("lyapunov_periodic_max", "Δd < 0 from X**, periodic points: largest λ_max",
+               float(lam[periodic, 0].max()) if periodic.any() else None, fmt=".3g",
+               note="≤ 0 on periodic windows (0 at a bifurcation)"),
+        Number("lyapunov_sum_residual", "max |λ1 + λ2 − (−2ζT + 2ν ln r)|",
+               float(resid.max()) if resid.size else None, fmt=".2e",
+               note="the determinant identity (L3), exact to rounding"),
+    )
 
 
 def _runs(dd, mask):

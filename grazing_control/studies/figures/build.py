@@ -135,7 +135,7 @@ def make_figures(out, settings: Settings = FULL, *, bags=None, workers=None,
     def fig_1b():
         dd = np.linspace(*s.zoom, s.zoom_points)
         data = diagram_data(p, dd, periods=s.zoom_periods, transient=s.zoom_transient,
-                            workers=workers, progress=progress)
+                            workers=workers, progress=progress, lyapunov=False)
         return panel_1b(p, data, uncontrolled_win, out)
 
     circles = -np.logspace(np.log10(lo), np.log10(hi), s.circles)

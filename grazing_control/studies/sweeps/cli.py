@@ -108,6 +108,10 @@ def add_sweep_command(sub, common, finite, count):
     s.add_argument("--component", choices=("x", "v"), default="x",
                    help="Pi2 coordinate drawn in the PNG (default x)")
     s.add_argument("--no-png", action="store_true", help="write only the npz")
+    s.add_argument("--lyapunov", action="store_true",
+                   help="also the Lyapunov exponents of each point's kept orbit (npz column "
+                        "'lyapunov', a lambda_max panel; with two grid axes an atlas PNG of "
+                        "lambda_max and the detected period)")
     s.set_defaults(func=cmd_sweep)
     return s
 
@@ -117,7 +121,7 @@ def cmd_sweep(args):
     from grazing_control.oscillator.control import Gains
     from grazing_control.dynamics.design import degenerate_c1
     from grazing_control.oscillator.params import OscillatorParams
-    from .plot import diagram
+    from .plot import atlas, diagram
     from .run import sweep
 
     grid = {}
@@ -147,12 +151,15 @@ def cmd_sweep(args):
                 deviation=np.array(args.start) if args.start else (0.0, 0.0), gains=gains,
                 control_after=args.control_after, workers=args.workers,
                 scheduler=args.scheduler, engine=args.engine, period_tol=args.period_tol,
-                max_period=args.max_period, progress=not args.json and sys.stderr.isatty())
+                max_period=args.max_period, progress=not args.json and sys.stderr.isatty(),
+                lyapunov=args.lyapunov)
     seconds = time.perf_counter() - t0
     res.to_npz(out)
-    png = None
+    png = atlas_png = None
     if not args.no_png:
         png = diagram(res, out[:-4] + ".png", component=args.component)
+        if len(res.names) == 2:
+            atlas_png = atlas(res, out[:-4] + "_atlas.png")
     periods, n_of = np.unique(res.period, return_counts=True)
     summary = {
         "npz": out, "png": png, "points": res.n_points, "grid": list(res.names),
@@ -162,6 +169,15 @@ def cmd_sweep(args):
         "detected_periods": {str(int(k)): int(v) for k, v in zip(periods, n_of)},
         "failed": int(np.sum(res.period == -1)),
     }
+    if atlas_png:
+        summary["atlas_png"] = atlas_png
+    if res.lyapunov is not None:
+        lmax = res.lyapunov[:, 0]
+        ok = np.isfinite(lmax)
+        summary["lyapunov_max"] = {
+            "positive": int(np.sum(lmax[ok] > 0)), "min": float(lmax[ok].min()) if ok.any() else None,
+            "max": float(lmax[ok].max()) if ok.any() else None,
+            "minus_infinity": int(np.sum(lmax == -np.inf))}
     if args.json:
         return summary
     hist = ", ".join(f"{'failed' if k == '-1' else 'none' if k == '0' else 'period ' + k}: {v}"
@@ -176,6 +192,13 @@ def cmd_sweep(args):
         f"  detected on Pi2   : {hist}",
         f"  written           : {out}" + (f"\n                      {png}" if png else ""),
     ]
+    if res.lyapunov is not None:
+        ly = summary["lyapunov_max"]
+        lines.insert(4, f"  lambda_max        : > 0 at {ly['positive']} of {res.n_points} points"
+                        + (f", range {ly['min']:.4g} .. {ly['max']:.4g} per period"
+                           if ly["min"] is not None else ""))
+    if atlas_png:
+        lines.append(f"                      {atlas_png}")
     if summary["failed"]:
         first = next(e for e in res.errors if e)
         lines.append(f"  failed points     : {summary['failed']} (first: {first})")

@@ -51,6 +51,9 @@ class SweepResult:
     base: dict = field(default_factory=dict)  # the OscillatorParams fields not gridded
     engine: str = ""
     delay: float = 0.0  # the actuation delay of the gains (0: the kick acts on Pi2)
+    #: (n, 2) Lyapunov exponents per period of the kept samples' orbit, largest first
+    #: (sweep(lyapunov=True); nan for a failed point), or None when not computed
+    lyapunov: np.ndarray | None = None
 
     @property
     def pi2(self) -> np.ndarray:
@@ -77,6 +80,8 @@ class SweepResult:
                       pi2=self.pi2, pi2_deviation=self.pi2_deviation, reference=self.reference,
                       impacts_per_period=self.impacts_per_period, period=self.period,
                       errors=self.errors, c1=self.c1, c2=self.c2)
+        if self.lyapunov is not None:
+            arrays["lyapunov"] = self.lyapunov
         write_npz(path, arrays)
 
     @classmethod
@@ -97,7 +102,8 @@ class SweepResult:
                 errors=f["errors"], c1=f["c1"], c2=f["c2"], periods=int(meta["periods"]),
                 transient=int(meta["transient"]), control_after=int(meta["control_after"]),
                 base=dict(meta["base"]), engine=str(meta["engine"]),
-                delay=float(meta.get("delay", 0.0)))
+                delay=float(meta.get("delay", 0.0)),
+                lyapunov=f["lyapunov"] if "lyapunov" in f.files else None)
 
     def same_as(self, other: "SweepResult") -> bool:
         """Bitwise equality of every array and of the metadata (local vs Dask checks)."""
@@ -108,5 +114,8 @@ class SweepResult:
                 and all(np.array_equal(self.points[n], other.points[n]) for n in self.names)
                 and all(np.array_equal(getattr(self, a), getattr(other, a), equal_nan=a != "errors")
                         for a in arrays)
+                and (self.lyapunov is None) == (other.lyapunov is None)
+                and (self.lyapunov is None
+                     or np.array_equal(self.lyapunov, other.lyapunov, equal_nan=True))
                 and (self.periods, self.transient, self.control_after, self.base, self.delay)
                 == (other.periods, other.transient, other.control_after, other.base, other.delay))

@@ -129,8 +129,13 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after, delay
 
 
 def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_period,
-              delay=0.0):
-    """Run a list of points; returns (indices, deviation, counts, period, errors).
+              delay=0.0, lyapunov=False):
+    """Run a list of points; returns (indices, deviation, counts, period, errors, spectrum).
+
+    ``spectrum`` (n, 2): with ``lyapunov``, the Lyapunov exponents per period of the kept
+    samples' orbit (dynamics.lyapunov.lyapunov_exact from the first kept sample over the
+    same periods, the controller switched on at the same sample: the same orbit, the same
+    floats); nan otherwise and for a failed point.
 
     The unit of work of a local process or a Dask worker; a point that fails (state
     beyond the wall, more impacts than the cap, non-finite state) is reported in
@@ -144,6 +149,7 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
     counts = np.zeros((len(chunk), m), dtype=np.int32)
     period = np.zeros(len(chunk), dtype=np.int64)
     errors = [""] * len(chunk)
+    spectrum = np.full((len(chunk), 2), np.nan)
     run_point = _run_point_python
     if engine == "kernel":
         from grazing_control.oscillator.kernel import run_point as kernel_point
@@ -162,7 +168,21 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
         period[j] = detect_period(dev[j], period_tol, max_period)
         if period[j] == -1:
             errors[j] = "non-finite state"
-    return idx, dev, counts, period, errors
+        elif lyapunov:
+            spectrum[j] = _spectrum(p, dev[j][0], c1, c2, periods - transient, control_after,
+                                    transient, delay, engine)
+    return idx, dev, counts, period, errors, spectrum
+
+
+def _spectrum(p, first, c1, c2, m, control_after, transient, delay, engine):
+    """The kept samples' Lyapunov exponents (largest first), by the sweep's engine."""
+    from grazing_control.dynamics.lyapunov import lyapunov_exact
+
+    gains = None if math.isnan(c1) or control_after < 0 else Gains(c1, c2, delay=delay)
+    after = None if gains is None else max(0, control_after - transient)
+    res = lyapunov_exact(p, (float(first[0]), float(first[1])), m, 0, gains, after,
+                         engine=engine)
+    return res.exponents
 
 
 def _local_workers(workers):
@@ -193,7 +213,7 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
           deviation=(0.0, 0.0), gains: Gains | None = None, control_after: int | None = None,
           workers: int | None = None, scheduler=None, engine: str = "auto",
           period_tol: float = 1e-10, max_period: int | None = None,
-          progress: bool = False) -> SweepResult:
+          progress: bool = False, lyapunov: bool = False) -> SweepResult:
     """Simulate every point of a parameter grid and keep its Pi2 samples after a transient.
 
     See :mod:`grazing_control.studies.sweeps` for the parameters and the result. Raises
@@ -237,16 +257,17 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
     m = periods - transient
     indexed = [(i,) + pt for i, pt in enumerate(pts)]
     args = (periods, transient, -1 if control_after is None else control_after, engine,
-            float(period_tol), max_period, delay)
+            float(period_tol), max_period, delay, bool(lyapunov))
 
     dev = np.empty((n, m, 2))
     counts = np.empty((n, m), dtype=np.int32)
     period = np.empty(n, dtype=np.int64)
     errors = np.empty(n, dtype=object)
+    spectrum = np.full((n, 2), np.nan)
 
     def store(out):
-        idx, d, c, pr, er = out
-        dev[idx], counts[idx], period[idx] = d, c, pr
+        idx, d, c, pr, er, ly = out
+        dev[idx], counts[idx], period[idx], spectrum[idx] = d, c, pr, ly
         for i, e in zip(idx, er):
             errors[i] = e
         if bar is not None:
@@ -282,7 +303,7 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
         c1=np.array([pt[2] for pt in pts]), c2=np.array([pt[3] for pt in pts]),
         periods=periods, transient=transient,
         control_after=-1 if control_after is None else control_after, base=base, engine=engine,
-        delay=delay)
+        delay=delay, lyapunov=spectrum if lyapunov else None)
 
 
 def _point_value(pt, name):
