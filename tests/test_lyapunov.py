@@ -129,3 +129,21 @@ def test_bad_arguments_name_the_parameter(bad):
     args = dict(periods=10, transient=0, engine="kernel") | bad
     with pytest.raises(ValueError, match=next(iter(bad))):
         lyapunov_exact(OscillatorParams(delta_d=-5e-6), (0.0, 0.0), **args)
+
+
+def test_grazing_simulate_reports_the_exponents_and_the_identity():
+    import json
+    import subprocess
+    import sys
+    run = subprocess.run([sys.executable, "-m", "grazing_control.cli", "simulate", "--delta-d",
+                          "-5e-6", "--periods", "1000", "--lyapunov", "--json"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    ly = json.loads(run.stdout)["lyapunov"]
+    assert ly["periods"] == 500 and ly["exponents"][0] > 0.05
+    assert abs(sum(ly["exponents"]) - ly["expected_sum"]) < 1e-10
+    bad = subprocess.run([sys.executable, "-m", "grazing_control.cli", "simulate", "--delta-d",
+                          "-5e-6", "--periods", "10", "--lyapunov", "--fidelity", "zdm1"],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1
+    assert "--lyapunov needs --fidelity exact" in bad.stderr

@@ -459,6 +459,22 @@ def cmd_simulate(args):
     if args.fidelity != "exact":
         out.update(fidelity=res.fidelity, fidelity_reason=res.fidelity_reason)
     _require_finite(out, "simulate")
+    spectrum = None
+    if args.lyapunov:
+        from grazing_control.dynamics.lyapunov import lyapunov_exact
+
+        if args.fidelity != "exact" or args.periods < 2:
+            raise ParameterError("--lyapunov needs --fidelity exact and --periods >= 2 (the "
+                                 "exponents average the last half of the periods)")
+        start = (res.pi2[0][0] - p.x_ref, res.pi2[0][1] - p.v_ref)
+        spectrum = lyapunov_exact(p, start, args.periods, args.periods // 2, gains,
+                                  control_after)
+        out["lyapunov"] = {"exponents": list(spectrum.exponents),
+                           "periods": spectrum.periods,
+                           "impacts_per_period": spectrum.impacts_per_period,
+                           "stuck_periods": spectrum.stuck_periods,
+                           "expected_sum": spectrum.expected_sum,
+                           "sum_residual": spectrum.sum_residual}
     if args.json:
         return out
     n = args.periods
@@ -471,7 +487,15 @@ def cmd_simulate(args):
         f"  impacts per period, last {len(tail)}: {tail}",
         f"  last Pi2 sample    = {last}",
         f"  model              = {res.fidelity_reason}",
-    ])
+    ] + ([] if spectrum is None else [
+        f"  Lyapunov exponents = {spectrum.exponents[0]:.10g}, {spectrum.exponents[1]:.10g} "
+        f"per period (last {spectrum.periods} periods, {spectrum.impacts_per_period:.4g} "
+        "impacts per period)",
+        f"  sum identity       = {spectrum.expected_sum:.15g} (-2 zeta T + 2 nu ln r"
+        f"{' + ln|1 + c2| share' if gains is not None else ''}), residual "
+        f"{spectrum.sum_residual:.2e}"
+        + (f"; {spectrum.stuck_periods} periods stuck (singular map)"
+           if spectrum.stuck_periods else "")]))
 
 
 # ---------------------------------------------------------------------------- run / demo
@@ -627,6 +651,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dx0", type=_finite,
                    help="initial x - x** on Pi2 (deviation; full precision near grazing)")
     s.add_argument("--dv0", type=_finite, help="initial v - v** on Pi2 (deviation)")
+    s.add_argument("--lyapunov", action="store_true",
+                   help="also the Lyapunov exponents per period over the last half of the "
+                        "periods, with the sum identity (docs/theory_lyapunov.md)")
     s.add_argument("--fidelity", choices=("exact", "zdm2", "zdm1", "ode", "auto"), default="exact",
                    help="model: exact flow (default), normal-form maps zdm2/zdm1, solve_ivp "
                         "(ode, comparison), or auto: the cheapest meeting --tol over the horizon")
