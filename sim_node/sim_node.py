@@ -32,6 +32,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
@@ -44,7 +45,7 @@ from grazing_control.plant.lockstep import Lockstep
 from grazing_control.plant.loop import Loop
 from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
-                                            settings_from_values)
+                                            check_live_change, settings_from_values)
 from grazing_control.ros import cdr
 from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
@@ -86,6 +87,10 @@ NODE_PARAMETERS = (
               read_only=True),
     Parameter("scene", "string", "", SCENE_PARAMETER_DOC, read_only=True),
     Parameter("live_changes", "bool", False, LIVE_CHANGES_DOC, read_only=True),
+    Parameter("history_depth", "integer", 100_000, "keep-last depth of each data publisher: "
+              "the backlog a reliable reader may fall behind without loss, and the bound of "
+              "the memory a slow reader can hold (about 1 kB per unacknowledged message per "
+              "topic; docs/nodes.md, QoS)", 100, 1_000_000, read_only=True),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
     Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "
@@ -126,8 +131,12 @@ class SimNode(Node):
         self.exit_code = 0
         self.exit_now = False
 
+        qos = QoSProfile(history=PUBLISHER_QOS.history, reliability=PUBLISHER_QOS.reliability,
+                         durability=PUBLISHER_QOS.durability,
+                         depth=self.get_parameter("history_depth").value)
+
         def publisher(kind, topic):
-            return self.create_publisher(kind, topic, PUBLISHER_QOS, event_callbacks=_NO_EVENTS)
+            return self.create_publisher(kind, topic, qos, event_callbacks=_NO_EVENTS)
 
         (self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
          self.pub_latency, self.pub_miss) = (publisher(kind, topic) for kind, topic in (
@@ -370,7 +379,10 @@ class SimNode(Node):
         values.update({p.name: p.value for p in params if p.name in values})
         try:
             new = settings_from_values(values)
+            if self.loop is not None:        # running: the change's consequences too
+                check_live_change(self.settings, new, self.engine.k)
         except ParameterError as exc:
+            self.get_logger().warning(f"parameter change refused: {exc}")
             return SetParametersResult(successful=False, reason=str(exc))
         old = self.settings
         if new.params != old.params:

@@ -284,6 +284,79 @@ def test_parameters_are_read_only_while_the_scene_runs_by_default(node_env):
     assert "parameter change refused while the scene runs: delta_d" in log.read_text()
 
 
+def test_live_changes_with_absurd_consequences_are_refused_and_nothing_is_applied(node_env):
+    """With live_changes a change is still refused when its consequences are absurd for
+    the running scene (plant.settings.check_live_change): the wall beyond the motion's
+    reach, an unbounded scene, a tenfold jump of a model parameter, noise larger than the
+    motion; the reason names the parameter and the range, and a refused request with a
+    valid value beside it applies neither (the run stays the core's simulate)."""
+    domain, collector, start = node_env
+    ans = Answerer(collector)
+    ans.hold_at = 3
+    proc, log = start(max_periods=6, exit_when_done=True, answer_timeout=30.0,
+                      live_changes=True, history_depth=5000)
+    held = ans.wait_held()
+    client = AsyncParameterClient(collector.node, "sim_node")
+    assert client.wait_for_services(10.0)
+    for params, text in (
+            ([Parameter("delta_d", value=1e300)], "delta_d=1e+300 is invalid while the scene"),
+            ([Parameter("delta_d", value=-3.0)], "[-"),
+            ([Parameter("max_periods", value=0)], "not 0: the scene was bounded"),
+            ([Parameter("max_periods", value=2)], "valid range is > 3"),
+            ([Parameter("omega", value=7.0)], "within a factor 2"),
+            ([Parameter("noise", value=5.0)], "noise=5.0 is invalid while the scene runs"),
+            ([Parameter("zeta", value=0.011), Parameter("delta_d", value=1e300)], "delta_d")):
+        res = call(collector, client.set_parameters_atomically(params))
+        assert not res.result.successful and text in res.result.reason, res
+    got = call(collector, client.get_parameters(["delta_d", "zeta", "max_periods"]))
+    assert got.values[0].double_value == -5e-6 and got.values[1].double_value == 0.01
+    assert got.values[2].integer_value == 6
+    ans.answer(held)
+    assert proc.wait(30) == 0, log.read_text()
+    np.testing.assert_array_equal(xv(ans.samples),
+                                  simulate(OscillatorParams(delta_d=-5e-6), 6).pi2)
+    assert "parameter change refused: delta_d=1e+300" in log.read_text()
+
+
+def test_check_live_change_over_fuzzed_changes():
+    """Seeded: 3000 random changes of one parameter; refused exactly by the documented
+    rule, and an accepted change never makes the next period fail."""
+    import random
+
+    from grazing_control.plant.settings import (LIVE_FACTOR, check_live_change, default_values,
+                                                settings_from_values)
+    rng = random.Random(2126)
+    base = default_values() | {"delta_d": -5e-6, "max_periods": 100}
+    old = settings_from_values(base)
+    a = old.params.amplitude
+    for _ in range(3000):
+        name = rng.choice(["delta_d", "zeta", "omega", "r", "noise", "max_periods"])
+        value = {"delta_d": lambda: rng.choice([-1, 1]) * 10 ** rng.uniform(-8, 3),
+                 "zeta": lambda: rng.uniform(0.001, 0.999),
+                 "omega": lambda: 10 ** rng.uniform(-1.5, 1.5),
+                 "r": lambda: rng.uniform(0.01, 1.0),
+                 "noise": lambda: 10 ** rng.uniform(-8, 2),
+                 "max_periods": lambda: rng.randrange(0, 200)}[name]()
+        try:
+            new = settings_from_values(base | {name: value})
+        except ParameterError:
+            continue
+        o = base[name]
+        expect_ok = {"delta_d": -a <= value <= a,
+                     "zeta": o / LIVE_FACTOR <= value <= o * LIVE_FACTOR,
+                     "omega": o / LIVE_FACTOR <= value <= o * LIVE_FACTOR,
+                     "r": o / LIVE_FACTOR <= value <= o * LIVE_FACTOR,
+                     "noise": value <= a,
+                     "max_periods": value > 50}[name]
+        try:
+            check_live_change(old, new, 50)
+            ok = True
+        except ParameterError as exc:
+            ok = False
+            assert str(exc).startswith(f"{name}=") and "valid range" in str(exc)
+        assert ok == expect_ok, (name, value)
+
+
 def test_reset_restarts_from_the_initial_state(node_env):
     domain, collector, start = node_env
     ans = Answerer(collector)

@@ -28,7 +28,8 @@ from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
 
 __all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "ON_MISS",
            "MODEL_KEYS",
-           "SimSettings", "settings_from_values", "default_values", "initial_deviation"]
+           "SimSettings", "settings_from_values", "default_values", "initial_deviation",
+           "check_live_change", "LIVE_FACTOR"]
 
 TWO_PI = 2.0 * math.pi
 MODES = ("lockstep", "realtime")
@@ -319,3 +320,57 @@ def initial_deviation(p: OscillatorParams, x0: float, v0: float) -> tuple:
     x = p.x_ref if math.isnan(x0) else x0
     v = p.v_ref if math.isnan(v0) else v0
     return x - p.x_ref, v - p.v_ref
+
+
+#: A live change (``live_changes:=true``) may move zeta, r, omega and time_scale by at most
+#: this factor either way: exploring nearby parameters of a running scene, not a new one.
+LIVE_FACTOR = 2.0
+
+
+def check_live_change(old: SimSettings, new: SimSettings, periods_done: int) -> None:
+    """Refuse a change, while the scene runs, whose consequences are absurd (issue 21 §3).
+
+    :func:`settings_from_values` has checked each value's own range; here the change is
+    checked against the running scene: the free motion's amplitude a (``old.params``) is
+    the scale of the model. Refused (ParameterError naming the parameter and the range):
+
+    * ``delta_d`` outside [-a, a] (the wall beyond the whole motion's reach: a state
+      placed on a wall a further away is no longer this oscillator);
+    * ``zeta``, ``r``, ``omega`` or ``time_scale`` changed by more than LIVE_FACTOR;
+    * ``noise``, ``measurement_noise`` or ``sensor_noise`` above a (noise larger than the
+      motion itself);
+    * ``state_period`` in (0, T/10^4) (over 10^4 state messages per period);
+    * ``max_periods`` 0 (unbounded) where it was bounded, or at most ``periods_done``.
+
+    Static settings (the mode, the actuation, seeds) are read-only while running anyway.
+    """
+    a = old.params.amplitude
+    dd = new.params.delta_d
+    if new.params.delta_d != old.params.delta_d and not -a <= dd <= a:
+        raise ParameterError(f"delta_d={dd!r} is invalid while the scene runs: valid range is "
+                             f"[-{a:.6g}, {a:.6g}] (the free motion's amplitude a)")
+    for name, o, n in (("zeta", old.params.zeta, new.params.zeta),
+                       ("r", old.params.r, new.params.r),
+                       ("omega", old.params.omega, new.params.omega),
+                       ("time_scale", old.time_scale, new.time_scale)):
+        if n != o and not o / LIVE_FACTOR <= n <= o * LIVE_FACTOR:
+            raise ParameterError(
+                f"{name}={n!r} is invalid while the scene runs: valid range is "
+                f"[{o / LIVE_FACTOR:.6g}, {o * LIVE_FACTOR:.6g}] (within a factor "
+                f"{LIVE_FACTOR:g} of the running {o:.6g}; a larger change is a new scene)")
+    for name, o, n in (("noise", old.noise, new.noise),
+                       ("measurement_noise", old.measurement_noise, new.measurement_noise),
+                       ("sensor_noise", old.sensor.noise, new.sensor.noise)):
+        if n != o and not n <= a:
+            raise ParameterError(f"{name}={n!r} is invalid while the scene runs: valid range "
+                                 f"is [0, {a:.6g}] (at most the motion's amplitude a)")
+    sp = new.state_period
+    if sp != old.state_period and 0.0 < sp < old.params.period * 1e-4:
+        raise ParameterError(f"state_period={sp!r} is invalid while the scene runs: valid "
+                             f"range is 0 (off) or >= T/1e4 = {old.params.period * 1e-4:.6g}")
+    mp = new.max_periods
+    if mp != old.max_periods and (mp == 0 and old.max_periods != 0 or 0 < mp <= periods_done):
+        raise ParameterError(
+            f"max_periods={mp!r} is invalid while the scene runs: valid range is > "
+            f"{periods_done} (the periods done)" + (", not 0: the scene was bounded"
+                                                   if mp == 0 else ""))
