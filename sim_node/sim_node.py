@@ -47,6 +47,7 @@ from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, settings_from_values)
 from grazing_control.ros import cdr
+from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
 from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
                                         StartupError, bool_descriptor, deserialize,
@@ -128,6 +129,7 @@ class SimNode(Node):
             raise StartupError(str(exc)) from None
         self.engine = Engine(self.settings)
         self.exit_when_done = self.get_parameter("exit_when_done").value
+        self._strays = set()          # (topic, node) of bystander publishers, logged once
         self.exit_code = 0
         self.exit_now = False
 
@@ -181,16 +183,37 @@ class SimNode(Node):
         self._recorder_ready = bool(msg.data)
 
     def _intruders(self) -> list:
-        """Other simulators or controllers on this scene's topics (publisher counts)."""
+        """Other simulators or controllers on this scene's topics.
+
+        A simulator or a controller of this package publishes its parameter record
+        (``grazing/parameters``): only publishers whose node does count. Any other
+        publisher on the scene's topics (a stray ``ros2 topic pub --once``) is a bystander:
+        logged once, its messages counted as ignored (or malformed) like any input that
+        answers no waiting sample, and the scene goes on (issue 19 §4).
+        """
         found = []
-        n = self.count_publishers(self.pub_pi2.topic_name)
-        if n > 1:
-            found.append(f"{n - 1} other publisher(s) on {self.pub_pi2.topic_name} "
-                         "(another simulator)")
-        n = self.count_publishers(self.sub_correction.topic_name)
-        if n > 1:
-            found.append(f"{n} publishers on {self.sub_correction.topic_name} "
-                         "(more than one controller)")
+        nodes = {(i.node_namespace, i.node_name) for i in
+                 self.get_publishers_info_by_topic(self.resolve_topic_name(RECORD_TOPIC))}
+        for topic, what, own in ((self.pub_pi2.topic_name, "another simulator", 1),
+                                 (self.sub_correction.topic_name, "more than one controller",
+                                  0)):
+            infos = self.get_publishers_info_by_topic(topic)
+            ours = [i for i in infos if (i.node_namespace, i.node_name) in nodes]
+            if len(ours) > 1:
+                found.append(f"{len(ours) - own} other publisher(s) of this package on "
+                             f"{topic} ({what})" if own else
+                             f"{len(ours)} controllers publish on {topic} ({what})")
+            if self.loop is None:        # a controller's record may not be discovered yet
+                continue
+            strays = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos
+                            if (i.node_namespace, i.node_name) not in nodes
+                            and i.node_name != self.get_name())
+            for name in strays:
+                if (topic, name) not in self._strays:
+                    self._strays.add((topic, name))
+                    self.get_logger().warning(
+                        f"a publisher that is not a node of this package on {topic}: "
+                        f"{name} (a bystander: its messages are counted, the scene goes on)")
         return found + self.scene.intruders()
 
     def _check_isolation(self) -> None:

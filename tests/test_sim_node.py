@@ -357,6 +357,35 @@ def test_check_live_change_over_fuzzed_changes():
         assert ok == expect_ok, (name, value)
 
 
+def test_a_stray_publisher_on_the_correction_topic_is_counted_not_fatal(node_env):
+    """`ros2 topic pub --once /controller/velocity_correction ...` from a bystander (a
+    second publisher without this package's parameter record) once ended the scene with
+    status 1 ("not isolated"): now it is logged once as a bystander, its message is
+    counted as ignored, and the scene finishes with status 0 and the core's samples."""
+    domain, collector, start = node_env
+    ans = Answerer(collector)
+    ans.hold_at = 4
+    proc, log = start(max_periods=10, exit_when_done=True, answer_timeout=30.0)
+    held = ans.wait_held()
+    stray = collector.node.create_publisher(TwistStamped, "controller/velocity_correction",
+                                            DATA_QOS)     # a second publisher, no record
+    msg = TwistStamped()
+    msg.header.stamp.sec = 123456
+    msg.twist.linear.x = 0.25
+    deadline = 20.0
+    assert collector.wait_for(lambda: stray.get_subscription_count() > 0, deadline)
+    stray.publish(msg)
+    assert collector.wait_for(lambda: "a bystander" in log.read_text(), deadline), \
+        log.read_text()
+    ans.answer(held)
+    assert proc.wait(30) == 0, log.read_text()
+    text = log.read_text()
+    assert "not isolated" not in text and text.count("a bystander") == 1
+    assert re.search(r"ignored=1\b", text), text
+    np.testing.assert_array_equal(xv(ans.samples),
+                                  simulate(OscillatorParams(delta_d=-5e-6), 10).pi2)
+
+
 def test_reset_restarts_from_the_initial_state(node_env):
     domain, collector, start = node_env
     ans = Answerer(collector)
