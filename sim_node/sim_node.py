@@ -238,6 +238,13 @@ class SimNode(Node):
             else:
                 self._fail(RuntimeError(f"{what}: the scene is not isolated (another scene "
                                         "on this ROS_DOMAIN_ID and namespace?)"))
+            return
+        if (self.loop is not None and self._recorder_ready
+                and self.get_parameter("wait_for_recorder").value
+                and self.count_publishers(self.resolve_topic_name(READY_TOPIC)) == 0):
+            # the recorder that matched every topic before the start has left the graph
+            self._fail(RuntimeError("the recorder (recorder/ready) has gone: the scene's "
+                                    "recording is lost (recorder_node killed?)"))
 
     def _ready(self) -> bool:
         if self.get_parameter("wait_for_recorder").value and not self._recorder_ready:

@@ -43,7 +43,9 @@ TEST_DEPENDS = {'python3-pytest', 'rclpy', 'rmw_fastrtps_cpp'}
 ROSDEP_MODULES = {'python3-numpy': 'numpy', 'python3-scipy': 'scipy', 'python3-yaml': 'yaml',
                   'python3-matplotlib': 'matplotlib', 'python3-tqdm': 'tqdm',
                   'mcap-ros2-support': 'mcap_ros2', 'python3-rosbags-pip': 'rosbags',
-                  'python3-pytest': 'pytest', 'rmw_fastrtps_cpp': 'rclpy'}
+                  'python3-pytest': 'pytest', 'rmw_fastrtps_cpp': 'rclpy',
+                  'python3-numba': 'numba', 'python3-pil': 'PIL',
+                  'python3-zstandard': 'zstandard', 'python3-lz4': 'lz4'}
 # Only on a ROS install (no PyPI wheels): the launch file's; `grazing run` needs neither.
 ROS_INSTALL_ONLY = {'launch', 'launch_ros'}
 

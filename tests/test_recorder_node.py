@@ -518,3 +518,40 @@ def test_sigkilled_recording_opens_in_every_reader_after_reindex(tmp_path, isola
         assert [message_to_dict(m.message) for m in read(bag)] == want[:n], read.__name__
     assert read_metadata(bag)["message_count"] == n
     print(f"recovered {n} of {len(want)} messages")
+
+
+def test_a_simulator_waiting_for_its_recorder_fails_when_the_recorder_dies(tmp_path):
+    """A scene that waits for its recorder (wait_for_recorder, as `grazing run --bag` and a
+    launch with a bag) is recorded; when the recorder is SIGKILLed mid-scene the
+    simulator, once the recorder has left the graph (DDS liveliness: about 20 s here),
+    stops with one error line and status 1 instead of finishing with status 0 and no
+    record (issue 19 §4)."""
+    from grazing_control.ros import launcher as L
+
+    root = Path(__file__).resolve().parents[1]
+    domain = new_domain()
+    procs = []
+    try:
+        rec = L.start_node(L.RECORDER_MODULE, [], {"output": str(tmp_path / "bag")},
+                           domain_id=domain, log=tmp_path / "rec.log")
+        procs.append(rec)
+        procs.append(L.start_node(L.CONTROLLER_MODULE, [root / "config" / "controller.yaml"],
+                                  {}, domain_id=domain, log=tmp_path / "ctl.log"))
+        sim = L.start_node(L.SIM_MODULE, [root / "config" / "study.yaml"],
+                           {"max_periods": 10_000_000, "exit_when_done": True,
+                            "wait_for_recorder": True, "state_period": 0.0},
+                           domain_id=domain, log=tmp_path / "sim.log")
+        procs.append(sim)
+        deadline = time.monotonic() + 60
+        while "mode=" not in (tmp_path / "sim.log").read_text() or \
+                "summary" in (tmp_path / "sim.log").read_text():
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        time.sleep(2.0)                       # the scene runs, recorded
+        rec.kill()
+        assert sim.wait(90) == 1
+        text = (tmp_path / "sim.log").read_text()
+        assert text.count("[ERROR]") == 1 and "the scene's recording is lost" in text, text
+        assert "Traceback" not in text and "FATAL" not in text
+    finally:
+        L.stop_nodes(procs)
