@@ -10,15 +10,19 @@ there and the simulator waits until it has matched every topic (``recorder/ready
 before starting; the bag path is compared as text (NotEqualsSubstitution, launch >= 3.1,
 Jazzy), never evaluated, so any path works. The launch shuts everything
 down when the simulator exits after ``max_periods`` (the recorder closes its bag on the
-SIGINT that follows). Machines without ``ros2 launch`` use ``grazing run``
-(grazing_control.ros.launcher), which does the same with plain processes.
+SIGINT that follows). The simulator applies the actuation delay the controller's gains
+were designed for (``actuation_delay`` of ``controller_params``, as ``grazing run``
+does; a simulator started with another delay refuses to start, naming both). Machines
+without ``ros2 launch`` use ``grazing run`` (grazing_control.ros.launcher), which does
+the same with plain processes.
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
+                            RegisterEventHandler)
 from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
@@ -50,15 +54,6 @@ def generate_launch_description():
                               description="record to this bag directory ('' = no recording)"),
     ]
 
-    sim = Node(
-        package="grazing_control", executable="sim_node", name="sim_node", output="screen",
-        parameters=[LaunchConfiguration("sim_params"), {
-            "delta_d": LaunchConfiguration("delta_d"),
-            "max_periods": LaunchConfiguration("max_periods"),
-            "exit_when_done": True,
-            "wait_for_subscribers": IfElseSubstitution(recording, "1", "0"),
-            "wait_for_recorder": IfElseSubstitution(recording, "true", "false"),
-        }])
     controller = Node(
         package="grazing_control", executable="controller_node", name="controller_node",
         output="screen", parameters=[LaunchConfiguration("controller_params"), {
@@ -68,8 +63,27 @@ def generate_launch_description():
         output="screen", condition=IfCondition(recording),
         parameters=[{"output": ParameterValue(bag, value_type=str),
                      "require_complete": True}])
-    end_with_sim = RegisterEventHandler(OnProcessExit(
-        target_action=sim,
-        on_exit=[EmitEvent(event=Shutdown(reason="sim_node finished the scene"))]))
+    def simulator(context):
+        """sim_node with the design's actuation delay read from controller_params (the
+        file is known only once the arguments are), and the scene's end with it."""
+        from grazing_control.ros.launcher import design_delay
 
-    return LaunchDescription(args + [recorder, controller, sim, end_with_sim])
+        overrides = {
+            "delta_d": LaunchConfiguration("delta_d"),
+            "max_periods": LaunchConfiguration("max_periods"),
+            "exit_when_done": True,
+            "wait_for_subscribers": IfElseSubstitution(recording, "1", "0"),
+            "wait_for_recorder": IfElseSubstitution(recording, "true", "false"),
+        }
+        delay = design_delay(LaunchConfiguration("controller_params").perform(context))
+        if delay is not None:
+            overrides["actuation_delay"] = delay
+        sim = Node(
+            package="grazing_control", executable="sim_node", name="sim_node", output="screen",
+            parameters=[LaunchConfiguration("sim_params"), overrides])
+        end_with_sim = RegisterEventHandler(OnProcessExit(
+            target_action=sim,
+            on_exit=[EmitEvent(event=Shutdown(reason="sim_node finished the scene"))]))
+        return [sim, end_with_sim]
+
+    return LaunchDescription(args + [recorder, controller, OpaqueFunction(function=simulator)])

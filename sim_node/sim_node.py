@@ -226,18 +226,19 @@ class SimNode(Node):
         if self._finished or (self.loop is not None and self.loop.finished):
             return
         found = self._intruders()
-        if found:
-            what = "; ".join(found)
+        why = self.scene.delay_mismatch(self.settings.actuation_delay)
+        if why is None and found:
+            why = (f"{'; '.join(found)}: the scene is not isolated (another scene on this "
+                   "ROS_DOMAIN_ID and namespace?)")
+        if why is not None:
             if self.loop is None:
-                self.get_logger().error(f"not starting: {what}: the scene is not isolated "
-                                        "(another scene on this ROS_DOMAIN_ID and namespace?)")
+                self.get_logger().error(f"not starting: {why}")
                 self.exit_code = 1
                 self._finished = True
                 self.exit_now = True
                 self.destroy_timer(self._start_timer)
             else:
-                self._fail(RuntimeError(f"{what}: the scene is not isolated (another scene "
-                                        "on this ROS_DOMAIN_ID and namespace?)"))
+                self._fail(RuntimeError(why))
             return
         if (self.loop is not None and self._recorder_ready
                 and self.get_parameter("wait_for_recorder").value
@@ -249,7 +250,7 @@ class SimNode(Node):
     def _ready(self) -> bool:
         if self.get_parameter("wait_for_recorder").value and not self._recorder_ready:
             return False
-        if self._intruders():
+        if self._intruders() or self.scene.delay_mismatch(self.settings.actuation_delay):
             return False                   # _check_isolation refuses
         n = self.get_parameter("wait_for_subscribers").value
         controller = self.get_parameter("wait_for_controller").value

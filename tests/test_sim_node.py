@@ -12,6 +12,7 @@ import math
 import re
 import subprocess
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -567,3 +568,45 @@ def test_scheduling_options_warn_where_refused_and_bad_ones_stop_the_start(node_
     lines = [ln for ln in (bad.stdout + bad.stderr).splitlines() if ln.strip()]
     assert bad.returncode == 2 and len(lines) == 1, lines
     assert "cpu_affinity='zero' is invalid" in lines[0]
+
+
+def test_a_simulator_refuses_a_controller_designed_for_another_delay(tmp_path):
+    """The gains are designed for one actuation delay (docs/theory_delay.md): a controller
+    whose parameter record says actuation_delay=3.0 and a simulator applying 0.0 (the
+    launch file once gave the simulator no delay) make the simulator refuse to start,
+    naming both and the fix, with status 1; the same delay on both starts the scene."""
+    root = Path(__file__).resolve().parents[1]
+    for sim_delay, expect in ((0.0, 1), (3.0, 0)):
+        domain = new_domain()
+        procs = []
+        try:
+            procs.append(launcher.start_node(
+                launcher.CONTROLLER_MODULE, [root / "config" / "controller.yaml"],
+                {"actuation_delay": 3.0}, domain_id=domain, log=tmp_path / "ctl.log"))
+            sim = launcher.start_node(
+                launcher.SIM_MODULE, [STUDY], {"max_periods": 30, "exit_when_done": True,
+                                               "actuation_delay": sim_delay},
+                domain_id=domain, log=tmp_path / f"sim{sim_delay}.log")
+            procs.append(sim)
+            assert sim.wait(60) == expect
+            text = (tmp_path / f"sim{sim_delay}.log").read_text()
+            if expect:
+                assert ("not starting: /controller_node was designed for actuation_delay=3.0, "
+                        "this simulator applies actuation_delay=0.0") in text, text
+                assert "-p actuation_delay:=3.0" in text and "Traceback" not in text
+            else:
+                assert "summary: periods=30 " in text, text
+        finally:
+            launcher.stop_nodes(procs)
+
+
+def test_the_design_delay_is_read_from_the_controller_parameter_file(tmp_path):
+    """launcher.design_delay: what `grazing run` and the launch file give the simulator."""
+    f = tmp_path / "d6.yaml"
+    f.write_text("/**:\n  ros__parameters:\n    c1: -1.0\n    c2: -1.0\n"
+                 "    actuation_delay: 6.0\n")
+    assert launcher.design_delay(str(f)) == 6.0
+    f.write_text("/**:\n  ros__parameters:\n    c1: -1.0\n")
+    assert launcher.design_delay(str(f)) is None
+    assert launcher.design_delay(str(tmp_path / "missing.yaml")) is None
+    assert launcher.design_delay({"actuation_delay": 2}) == 2.0

@@ -318,7 +318,7 @@ def _params_file(params, node: str, tmp: Path) -> Path:
     return path
 
 
-def _design_delay(controller_params):
+def design_delay(controller_params):
     """``actuation_delay`` of the controller's parameters (``grazing design --delay``), or None."""
     if isinstance(controller_params, (str, os.PathLike)):
         try:
@@ -419,7 +419,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     if mode is not None:
         sim_over["mode"] = str(mode)
     delay = dict(controller_overrides or {}).get("actuation_delay",
-                                                 _design_delay(controller_params))
+                                                 design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim_over["actuation_delay"] = delay
     sim_over.update(sim_overrides or {})

@@ -34,21 +34,38 @@ class SceneGuard:
         self.token = token
         self.own_controller = False
         self.foreign = set()                # "node (scene token)" of other scenes
-        if token:
-            node.create_subscription(String, TOPIC, self._on_record, LATCHED_QOS)
+        #: node name -> the actuation_delay its gains were designed for, from the records
+        #: of this scene's controllers (any controller's when there is no token)
+        self.controller_delays = {}
+        node.create_subscription(String, TOPIC, self._on_record, LATCHED_QOS)
 
     def _on_record(self, msg) -> None:
         try:
             name, params = decode(msg.data)
-        except ValueError:
+        except (ValueError, TypeError, RecursionError):
             return
-        other = params.get("scene")
-        if not isinstance(other, str) or not other:
-            return
-        if other != self.token:
+        other = params.get("scene") if isinstance(params, dict) else None
+        if self.token and isinstance(other, str) and other and other != self.token:
             self.foreign.add(f"{name} (scene {other})")
-        elif name.rsplit("/", 1)[-1] == "controller_node":
+            return
+        if not isinstance(params, dict) or ("c2" not in params and str(name).rsplit("/", 1)[-1] != "controller_node"):
+            return
+        delay = params.get("actuation_delay")
+        if isinstance(delay, (int, float)) and not isinstance(delay, bool):
+            self.controller_delays[str(name)] = float(delay)
+        if self.token and other == self.token:
             self.own_controller = True
+
+    def delay_mismatch(self, delay: float) -> str | None:
+        """Why the simulator's ``actuation_delay`` differs from a controller's design, or
+        None: the gains are designed for one delay (docs/theory_delay.md) and the
+        simulator must apply that one (issue 19 §3)."""
+        for name, d in sorted(self.controller_delays.items()):
+            if d != delay:
+                return (f"{name} was designed for actuation_delay={d!r}, this simulator applies "
+                        f"actuation_delay={delay!r}: give both nodes the same delay (the "
+                        f"controller's parameter file, or -p actuation_delay:={d!r})")
+        return None
 
     def intruders(self) -> list:
         """One line per node of another scene seen on the domain."""
