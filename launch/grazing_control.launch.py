@@ -10,7 +10,8 @@ there and the simulator waits until it has matched every topic (``recorder/ready
 before starting; the bag path is compared as text (NotEqualsSubstitution, launch >= 3.1,
 Jazzy), never evaluated, so any path works. The launch shuts everything
 down when the simulator exits after ``max_periods`` (the recorder closes its bag on the
-SIGINT that follows). The simulator applies the actuation delay the controller's gains
+SIGINT that follows); any node exiting with a nonzero status stops the scene and the launch
+returns 1. The simulator applies the actuation delay the controller's gains
 were designed for (``actuation_delay`` of ``controller_params``, as ``grazing run``
 does; a simulator started with another delay refuses to start, naming both). Machines
 without ``ros2 launch`` use ``grazing run`` (grazing_control.ros.launcher), which does
@@ -81,9 +82,30 @@ def generate_launch_description():
         sim = Node(
             package="grazing_control", executable="sim_node", name="sim_node", output="screen",
             parameters=[LaunchConfiguration("sim_params"), overrides])
-        end_with_sim = RegisterEventHandler(OnProcessExit(
-            target_action=sim,
-            on_exit=[EmitEvent(event=Shutdown(reason="sim_node finished the scene"))]))
-        return [sim, end_with_sim]
+        return [sim, RegisterEventHandler(OnProcessExit(target_action=sim, on_exit=_ended))]
 
-    return LaunchDescription(args + [recorder, controller, OpaqueFunction(function=simulator)])
+    watch = [RegisterEventHandler(OnProcessExit(target_action=node, on_exit=_ended))
+             for node in (controller, recorder)]
+    return LaunchDescription(args + [recorder, controller, OpaqueFunction(function=simulator)]
+                             + watch)
+
+
+class NodeFailed(RuntimeError):
+    """A node of the scene exited with a nonzero status: the launch ends with status 1."""
+
+
+def _ended(event, context):
+    """A node exited. The simulator with status 0 ends the scene (Shutdown); any node with
+    another status, unless the launch is already shutting down, raises NodeFailed:
+    launch catches it, shuts everything down and returns 1 (LaunchService.run_async), so
+    a refused controller or recorder no longer leaves the simulator running with status 0
+    (issue 19 §3)."""
+    if context.is_shutdown:
+        return None
+    name = event.process_name              # e.g. "sim_node-3"
+    if event.returncode != 0:
+        raise NodeFailed(f"{name} exited with status {event.returncode}: the scene is "
+                         "stopped")
+    if name.startswith("sim_node"):
+        return [EmitEvent(event=Shutdown(reason="sim_node finished the scene"))]
+    return None
