@@ -333,3 +333,26 @@ def test_a_bag_without_estimates_reports_none(tmp_path):
     bag = write_rosbags(tmp_path / "plain", msgs[:300])
     rep = analyze([bag], tmp_path / "out", figures=False)
     assert "estimate" not in rep["bags"][0]["scenes"][0]
+
+
+def test_a_scene_launched_under_a_namespace_is_found_there(tmp_path, capsys):
+    """A scene included under a namespace (ros2 launch with PushRosNamespace: /a/oscillator/
+    pi2, ...) is analysed from that namespace without --topic, with a note; two
+    namespaces in one bag still need --topic (one line, status 2)."""
+    ns = {r: "/a" + t for r, t in {"pi2": "/oscillator/pi2",
+                                   "correction": "/controller/velocity_correction",
+                                   "impact": "/oscillator/impact"}.items()}
+    msgs, scene = scene_messages(BAGS / "scene_5e-6", ns)
+    bag = write_rosbags(tmp_path / "ns", msgs)
+    code, out, err = run_cli(["analyze", str(bag), "--out", str(tmp_path / "o"), "--json",
+                              "--no-figures"], capsys)
+    assert code == 0, err
+    rep = json.loads(out)["bags"][0]
+    assert any("under the namespace /a" in n for n in rep["notes"])
+    assert rep["scenes"][0]["final_pi2"] == scene.pi2[-1].tolist()
+    assert rep["scenes"][0]["model_check"]["max_departure"] < 1e-12
+    two = msgs + [("/b/oscillator/pi2", m[1], m[2], m[3]) for m in msgs
+                  if m[0] == "/a/oscillator/pi2"][:5]
+    bag2 = write_rosbags(tmp_path / "two", sorted(two, key=lambda m: m[2]))
+    code, out, err = run_cli(["analyze", str(bag2), "--out", str(tmp_path / "o2")], capsys)
+    assert code == 2 and "--topic pi2=" in err and err.count("\n") == 1

@@ -127,6 +127,18 @@ def _scene_index(starts_log, log):
     return np.clip(np.searchsorted(starts_log, log, side="right") - 1, 0, None)
 
 
+def _namespace(channels, topics) -> str | None:
+    """The namespace of a scene recorded under one (``/a/oscillator/pi2``: ``/a``) when the
+    Pi2 topic is the default one, absent, and present under exactly one namespace; else
+    None (a bag of two namespaced scenes needs ``--topic``)."""
+    pi2 = topics["pi2"]
+    if pi2 != DEFAULT_TOPICS["pi2"] or pi2 in channels:
+        return None
+    found = [t[:-len(pi2)] for t in channels if t.endswith(pi2) and t != pi2
+             and t[:-len(pi2)].startswith("/")]
+    return found[0] if len(found) == 1 else None
+
+
 def load(bag, topics: dict | None = None) -> BagData:
     """Read one bag for the analysis.
 
@@ -170,6 +182,14 @@ def load(bag, topics: dict | None = None) -> BagData:
     if missing:
         notes.append(f"absent: {', '.join(missing)}")
     if "pi2" not in present:
+        ns = _namespace(raw.channels, topics)
+        if ns is not None:      # a scene launched under a namespace: its topics, all of them
+            renamed = {r: (ns + t if t == DEFAULT_TOPICS.get(r) else t)
+                       for r, t in topics.items()}
+            data = load(bag, renamed)
+            data.notes.insert(0, f"the scene's topics are under the namespace {ns} (the only "
+                                 f"one with {topics['pi2']}): read from there")
+            return data
         available = ", ".join(f"{t} [{c.type}]" for t, c in sorted(raw.channels.items())) or "none"
         raise reader.BagReadError(
             f"{path}: no usable Pi2 sample topic {topics['pi2']} (sensor_msgs/msg/JointState); "
