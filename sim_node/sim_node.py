@@ -47,6 +47,7 @@ from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, settings_from_values)
 from grazing_control.ros import cdr
+from grazing_control.ros.diagnostics import SceneWindow, Updater
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
 from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
@@ -92,6 +93,19 @@ NODE_PARAMETERS = (
               "the backlog a reliable reader may fall behind without loss, and the bound of "
               "the memory a slow reader can hold (about 1 kB per unacknowledged message per "
               "topic; docs/nodes.md, QoS)", 100, 1_000_000, read_only=True),
+    Parameter("diagnostics_period", "double", 1.0, "wall seconds between /diagnostics "
+              "messages (grazing_control.ros.diagnostics); 0 = none", 0.0, 3600.0,
+              read_only=True),
+    Parameter("diag_misses_warn", "integer", 1, "/diagnostics WARN from this many missed, "
+              "timed-out or lost corrections in one diagnostics period (0 = off)", 0),
+    Parameter("diag_misses_error", "integer", 10, "/diagnostics ERROR from this many (0 = off)",
+              0),
+    Parameter("diag_latency_warn", "double", 0.005, "/diagnostics WARN from this latency "
+              "p99 over one period, wall seconds (realtime; 0 = off)", 0.0),
+    Parameter("diag_latency_error", "double", 0.05, "/diagnostics ERROR from this latency "
+              "p99, wall seconds (0 = off)", 0.0),
+    Parameter("diag_pace_warn", "double", 0.9, "/diagnostics WARN when realtime runs slower "
+              "than this fraction of time_scale (0 = off)", 0.0, 1.0),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
     Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "
@@ -161,6 +175,10 @@ class SimNode(Node):
         self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
         self._tick_timer = None
         self.out = Outputs(self)
+        self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value,
+                                   hardware_id="grazing_control/sim_node")
+        self._window = SceneWindow()
+        self.diagnostics.add("scene", self._diagnose)
         self.executor_kind = self.get_parameter("executor").value
         self.loop = None              # the Lockstep or Realtime loop, once started
         self._finished = False        # refused to start, or failed
@@ -359,6 +377,17 @@ class SimNode(Node):
         self._finished = True
         self.exit_now = True
 
+    def _diagnose(self, stat):
+        """The scene's diagnostics task (ros.diagnostics.SceneWindow), thresholds read now
+        (they may change while the scene runs)."""
+        out = self.out
+        counts = {"missed": out.misses.count, "timeouts": out.timeout.count,
+                  "ignored": out.ignored.count, "malformed": out.malformed.count}
+        th = {k: self.get_parameter(f"diag_{k}").value for k in
+              ("misses_warn", "misses_error", "latency_warn", "latency_error", "pace_warn")}
+        return self._window.status(stat, self.loop, counts, time.monotonic(), th,
+                                   self.settings.mode == "realtime", self.settings.time_scale)
+
     def summary(self) -> str:
         """One line: periods, impacts, corrections, ignored input, rate, latency."""
         wall = time.monotonic() - self._wall_start if self._wall_start else 0.0
@@ -403,6 +432,9 @@ class SimNode(Node):
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
+        if all(p.name.startswith("diag_") for p in params):
+            log_parameter_changes(self, params)      # /diagnostics thresholds: any time
+            return SetParametersResult(successful=True)
         refused = refuse_while_running(self, params, self.loop is not None)
         if refused is not None:
             return refused

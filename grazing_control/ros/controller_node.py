@@ -108,6 +108,7 @@ from grazing_control.oscillator.control import Gains, correction
 from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
+from .diagnostics import OK, WARN, Updater
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
                      deserialize, StartupError, Throttled, bool_descriptor, float_descriptor,
                      int_descriptor, log_parameter_changes, publish_parameter_record,
@@ -348,6 +349,9 @@ class ControllerNode(Node):
             read_only=True))
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
+        d("diagnostics_period", 1.0, float_descriptor(
+            "wall seconds between /diagnostics messages (grazing_control.ros.diagnostics); "
+            "0 = none", 0.0, 3600.0, read_only=True))
         d("answer_after_section", False, bool_descriptor(
             "stream mode: answer section k with the first sample after t_k (realtime: the "
             "simulator takes an answer only after its Pi2 sample), not with the last "
@@ -412,6 +416,10 @@ class ControllerNode(Node):
         self.nonfinite = Throttled(log, "non-finite correction not published")
         self.phase_mismatch = Throttled(log, "stream phase reference off")
         self.answered = 0
+        self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value,
+                                   hardware_id="grazing_control/controller_node")
+        self.diagnostics.add("controller", self._diagnose)
+        self._diag_last = (0, 0)
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
@@ -627,6 +635,29 @@ class ControllerNode(Node):
         self.stale_after = float(values["stale_after"])
         log_parameter_changes(self, params)
         return SetParametersResult(successful=True)
+
+    def _diagnose(self, stat):
+        """The controller's /diagnostics task: answers, whether the control is on, and
+        what it refused; WARN when a sample went unanswered (stale, malformed, non-finite)
+        since the last message, or when it has not answered for a whole period while
+        it had before (the scene over, the simulator gone, or the controller starved)."""
+        refused = self.malformed.count + self.stale.count + self.nonfinite.count
+        last_answered, last_refused = self._diag_last
+        self._diag_last = (self.answered, refused)
+        stat.summary(OK, "controlling" if self.law.enabled else "answering (control off)")
+        stat.add("answered", self.answered)
+        stat.add("control on", str(self.law.enabled).lower())
+        stat.add("enable_after", self.law.enable_after)
+        stat.add("malformed", self.malformed.count)
+        stat.add("stale", self.stale.count)
+        stat.add("nonfinite", self.nonfinite.count)
+        stat.add("out_of_order", self.law.out_of_order)
+        if refused > last_refused:
+            stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
+                                     "(malformed, stale or non-finite)")
+        if last_answered and self.answered == last_answered:
+            stat.merge_summary(WARN, "no sample answered in the last period")
+        return stat
 
     def on_exit(self) -> None:
         """Log what was answered and ignored (after the readers acknowledged, 1 s at most)."""
