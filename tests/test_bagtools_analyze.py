@@ -21,7 +21,8 @@ from grazing_control.dynamics.design import degenerate_c1
 from grazing_control.dynamics.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
 
-from bagtools_helpers import BAGS, joint_state, scene_messages, string, write_rosbags
+from bagtools_helpers import (BAGS, joint_state, scene_messages, string, twist_stamped,
+                              write_rosbags)
 
 SCENES = (("scene_5e-6", -5e-6), ("scene_9e-6", -9e-6))
 
@@ -356,3 +357,40 @@ def test_a_scene_launched_under_a_namespace_is_found_there(tmp_path, capsys):
     bag2 = write_rosbags(tmp_path / "two", sorted(two, key=lambda m: m[2]))
     code, out, err = run_cli(["analyze", str(bag2), "--out", str(tmp_path / "o2")], capsys)
     assert code == 2 and "--topic pi2=" in err and err.count("\n") == 1
+
+
+def test_the_message_count_is_the_files_not_the_decoded_ones(tmp_path, capsys):
+    """"(N messages)" once counted only the messages of the analysed topics: it is the
+    file's count (against the MCAP summary's statistics), the analysed ones beside it."""
+    from mcap.reader import make_reader
+    for name in ("scene_5e-6", "scene_9e-6"):
+        code, out, err = run_cli(["analyze", str(BAGS / name), "--out", str(tmp_path / name),
+                                  "--json", "--no-figures"], capsys)
+        assert code == 0, err
+        rep = json.loads(out)["bags"][0]
+        with open(next((BAGS / name).glob("*.mcap")), "rb") as fh:
+            stats = make_reader(fh).get_summary().statistics
+        assert rep["messages"] == stats.message_count
+        assert 0 < rep["messages_read"] < rep["messages"]
+
+
+def test_an_uncontrolled_scene_reports_no_controlled_orbit(tmp_path, capsys):
+    """A scene whose controller never acted: the impact histogram of all its periods, no
+    distance to a controlled orbit, no predicted contraction (issue 19 §4)."""
+    msgs, scene = scene_messages(BAGS / "scene_9e-6")
+    zero = [(t, ty, ti, twist_stamped(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, 0.0))
+            if ty == "geometry_msgs/msg/TwistStamped" else (t, ty, ti, m)
+            for t, ty, ti, m in msgs]
+    bag = write_rosbags(tmp_path / "unc", zero)
+    code, out, err = run_cli(["analyze", str(bag), "--out", str(tmp_path / "o")], capsys)
+    assert code == 0, err
+    assert "uncontrolled (the controller never acted)" in out and "None" not in out
+    report = (tmp_path / "o" / "report.md").read_text()
+    assert "histogram 0, 1, 2, …): [" in report and "vs the exact controlled" not in report
+    assert "no controlled orbit or contraction to compare with" in report
+    code, out, err = run_cli(["analyze", str(bag), "--out", str(tmp_path / "j"), "--json",
+                              "--no-figures"], capsys)
+    s = json.loads(out)["bags"][0]["scenes"][0]
+    hist = s["uncontrolled"]["impacts_per_period_histogram"]
+    assert sum(hist) == s["samples"] and "final_vs_exact_orbit" not in s
+    assert s["measured_contraction"] is None and "rho" not in s["predicted"]

@@ -125,7 +125,7 @@ def summarize(scene: Scene, tol: float = 1e-8, window: int = 200) -> dict:
         "impacts": int(len(scene.impacts)),
         "control_on": on,
         "uncontrolled_period": period,
-        "uncontrolled_impacts_per_period": (np.bincount(counts[:on]).tolist() if on else None),
+        "uncontrolled_impacts_per_period": _histogram(counts if on is None else counts[:on]),
         "samples_to_converge": None,
         "final_pi2": scene.pi2[-1].tolist() if n else None,
         "final_impacts_per_period": (int(counts[-2]) if n >= 2 else None),
@@ -176,3 +176,9 @@ def plot_scene(scene: Scene, title: str, path) -> None:
     a.set(xlabel="sample k", ylabel="Δv", title="velocity corrections")
     fig.suptitle(title)
     save_png(fig, path, dpi=110)
+
+
+def _histogram(counts):
+    """Impacts per period 0, 1, 2, ... as counts of periods (None for no period)."""
+    counts = np.asarray(counts, dtype=np.int64)
+    return np.bincount(counts).tolist() if counts.size else None

@@ -145,7 +145,7 @@ def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
     a.set(xlabel="sample k", ylabel="|core step − recorded next sample|",
           title="model check (recorded sample + correction → core)")
     if rt:
-        for a, key, lab in ((ax[2, 0], None, "latency (sim: published → applied) [ms]"),
+        for a, key, lab in ((ax[2, 0], None, "latency (sim: sample published → answer received) [ms]"),
                             (ax[2, 1], "_answer_ms", "answer time (controller) [ms]"),
                             (ax[2, 2], "_lag_ms", "sample lag [ms]")):
             data = sd.latency_s * 1e3 if key is None else rt.get(key)
@@ -324,7 +324,7 @@ def _scene_lines(label, numbers, fig_name):
         def d(x):
             return ("—" if not x else f"p50 {x['p50']:.3g}, p90 {x['p90']:.3g}, p99 {x['p99']:.3g},"
                     f" max {x['max']:.3g} ms (n = {x['n']})")
-        lines += [f"* realtime latency (sim, published → applied): {d(rt.get('latency_ms'))}",
+        lines += [f"* realtime latency (sim, sample published → answer received): {d(rt.get('latency_ms'))}",
                   f"* answer time (controller, source timestamps): {d(rt.get('answer_time_ms'))}",
                   f"* late answers (sent after the next sample): {rt['late_answers']}; samples "
                   f"without an answer: {rt['missing_answers']}; deadline misses: "
@@ -394,6 +394,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
+                 "messages_read": data.messages_read,
                  "topics_used": data.present, "notes": data.notes + setup.notes,
                  "problems": data.problems,
                  "parameter_record": bool(data.parameters.get("nodes")),
@@ -407,7 +408,8 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                            "actuation_delay": setup.actuation_delay,
                            "sources": setup.sources},
                  "scenes": []}
-        lines += [f"## {label}", "", f"* file: `{data.file}` ({data.message_count} messages"
+        lines += [f"## {label}", "", f"* file: `{data.file}` ({data.message_count} messages, "
+                  f"{data.messages_read} of them on the topics analysed"
                   f"{'' if data.complete else ', not closed cleanly'})",
                   "* parameter record: " + ("yes" if entry["parameter_record"] else
                                             "none in this bag (it predates the record, or the "
@@ -501,7 +503,12 @@ def main(args):
     for b in report["bags"]:
         for i, s in enumerate(b["scenes"]):
             m = s.get("measured_contraction") or {}
-            print(f"{b['label']}{'' if len(b['scenes']) == 1 else f' scene {i}'}: "
+            where = f"{b['label']}{'' if len(b['scenes']) == 1 else f' scene {i}'}"
+            if s["control_on_sample"] is None:
+                print(f"{where}: {b['setup']['mode']}, uncontrolled (the controller never "
+                      f"acted), {s['samples']} samples, {s['uncontrolled']['kind']}")
+                continue
+            print(f"{where}: "
                   f"{b['setup']['mode']}, control on at {s['control_on_sample']}, converged after "
                   f"{s['samples_to_converge']}, contraction measured {_fmt(m.get('rho'), '.5f')} vs "
                   f"predicted {_fmt(s['predicted'].get('rho'), '.5f')}, |final - exact| "

@@ -476,8 +476,11 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
     out["control_on_time_s"] = float(scene.t[on]) if on is not None else None
     out["samples_to_converge"] = base["samples_to_converge"]
     pred = _predicted(setup)
+    if on is None:       # the controller never acted: nothing controlled to compare with
+        pred = {"note": "the controller never acted in this scene: no controlled orbit or "
+                        "contraction to compare with"}
     out["predicted"] = pred
-    meas = measured_contraction(scene.pi2, on)
+    meas = measured_contraction(scene.pi2, on) if on is not None else None
     if meas is not None and base["samples_to_converge"] is None:
         meas = {"rho": None, "samples": 0, "reason": f"the scene did not converge to {tol:g} "
                 "by its end, so there is no fixed point to measure the contraction against"}
@@ -531,7 +534,7 @@ def realtime_numbers(sd, setup: Setup) -> dict:
     out = {}
     if sd.latency_s.size:
         out["latency_ms"] = _dist(sd.latency_s * 1e3)
-        out["latency_source"] = "the simulator's latency messages (sample published -> applied)"
+        out["latency_source"] = "the simulator's latency messages (sample published -> answer received)"
     ans = sd.answered & (sd.corr_pub_ns >= 0) & (sd.pi2_pub_ns > 0)
     rt = (sd.corr_pub_ns[ans] - sd.pi2_pub_ns[ans]) / 1e6
     out["answer_time_ms"] = _dist(rt)

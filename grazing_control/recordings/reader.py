@@ -86,6 +86,8 @@ class RawBag:
     metadata: list
     complete: bool
     problems: list
+    #: every message record of the file (all channels, read or not)
+    message_count: int = 0
 
     def offsets(self, topic: str) -> np.ndarray:
         """Pool offsets (int64) of the message records of ``topic``, in file order."""
@@ -165,6 +167,7 @@ class _Scan:
         self.pieces = []
         self.base = 0
         self.problems = []
+        self.messages = 0            # every message record, wanted or not
         self.budget = max_bytes()
 
     def records(self, buf, start, end, top):
@@ -179,6 +182,7 @@ class _Scan:
             if q > end:
                 return "torn", p
             if op == _OP_MESSAGE:
+                self.messages += 1
                 lst = by_id.get(cid)
                 if lst is not None:
                     lst.append(base + p)
@@ -327,7 +331,8 @@ def read_raw(bag, topics=None) -> RawBag:
             channels[ch.topic].records.sort()
         else:
             channels[ch.topic] = ch
-    return RawBag(path, pool, channels, scan.metadata, reason == "end", problems)
+    return RawBag(path, pool, channels, scan.metadata, reason == "end", problems,
+                  scan.messages)
 
 
 # ----------------------------------------------------------------- vectorised CDR

@@ -120,7 +120,8 @@ class BagData:
     parameters: dict
     notes: list
     problems: list
-    message_count: int
+    message_count: int        # every message record of the file
+    messages_read: int = 0    # those on the topics the analysis reads
 
 
 def _scene_index(starts_log, log):
@@ -340,6 +341,6 @@ def load(bag, topics: dict | None = None) -> BagData:
     if not raw.complete:
         notes.append("the file was not closed cleanly (no summary): read by streaming up to "
                      "its last complete record")
-    count = sum(len(c.records) for c in raw.channels.values())
+    read = sum(len(c.records) for c in raw.channels.values())
     return BagData(path, raw.path, raw.complete, topics, present, scenes, parameters, notes,
-                   problems, count)
+                   problems, raw.message_count, read)
