@@ -18,6 +18,15 @@ core followed by a matplotlib (Agg) drawing of exactly that data:
 ``grazing figures [--out DIR] [--quick]`` (:mod:`.command`) is the command line.
 """
 
-from .build import FULL, QUICK, Settings, make_figures
-
 __all__ = ["make_figures", "Settings", "FULL", "QUICK"]
+
+
+def __getattr__(name):
+    """The build's names, imported on first use (PEP 562): the command line registers
+    `grazing figures` through :mod:`.command` without importing the core, scipy and
+    matplotlib, so `grazing --version` and every other command start faster."""
+    if name in __all__:
+        from . import build
+
+        return getattr(build, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
