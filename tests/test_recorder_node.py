@@ -555,3 +555,29 @@ def test_a_simulator_waiting_for_its_recorder_fails_when_the_recorder_dies(tmp_p
         assert "Traceback" not in text and "FATAL" not in text
     finally:
         L.stop_nodes(procs)
+
+
+@pytest.mark.parametrize("module, params, overrides, text", [
+    ("RECORDER_MODULE", [], {"chunk_size": 0}, "chunk_size=0 is invalid: Parameter chunk_size "
+     "out of range. Min: 1"),
+    ("RECORDER_MODULE", [], {"compression": "bogus"}, "valid values are zstd, lz4, none"),
+    ("CONTROLLER_MODULE", ["controller.yaml"], {"saturation": 0.0},
+     "saturation=0.0 is invalid: Parameter saturation out of range Min: 5e-324"),
+])
+def test_descriptors_advertise_what_validation_accepts(tmp_path, module, params, overrides, text):
+    """The ranges a node advertises (ros2 param describe) are the ones it enforces:
+    saturation > 0 (it advertised [0, inf] and refused 0), chunk_size > 0 (no range),
+    compression one of three (only in the description); one line, status 2."""
+    from grazing_control.ros import launcher as L
+
+    root = Path(__file__).resolve().parents[1]
+    overrides = {"output": str(tmp_path / "bag"), **overrides} if module == "RECORDER_MODULE" \
+        else overrides
+    proc = L.start_node(getattr(L, module), [root / "config" / p for p in params], overrides,
+                        domain_id=new_domain(), log=tmp_path / "node.log")
+    try:
+        assert proc.wait(60) == 2
+    finally:
+        L.stop_nodes([proc])
+    log = (tmp_path / "node.log").read_text()
+    assert text in log and log.count("[ERROR]") == 1 and "Traceback" not in log, log

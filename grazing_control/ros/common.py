@@ -123,10 +123,12 @@ def seconds_from_stamp(stamp) -> float:
 
 # ----------------------------------------------------------------------- descriptors
 def float_descriptor(description: str, lo: float | None = None, hi: float | None = None,
-                     read_only: bool = False) -> ParameterDescriptor:
-    """A double parameter; with ``lo``/``hi`` a FloatingPointRange (closed, ends included)."""
+                     read_only: bool = False, constraints: str = "") -> ParameterDescriptor:
+    """A double parameter; with ``lo``/``hi`` a FloatingPointRange (closed, ends included:
+    an open end is the next double, ``math.nextafter``); ``constraints``: what a range
+    cannot say (additional_constraints, shown by ``ros2 param describe``)."""
     d = ParameterDescriptor(type=ParameterType.PARAMETER_DOUBLE, description=description,
-                            read_only=read_only)
+                            read_only=read_only, additional_constraints=constraints)
     if lo is not None or hi is not None:
         d.floating_point_range = [FloatingPointRange(
             from_value=-math.inf if lo is None else float(lo),
@@ -135,10 +137,10 @@ def float_descriptor(description: str, lo: float | None = None, hi: float | None
 
 
 def int_descriptor(description: str, lo: int | None = None, hi: int | None = None,
-                   read_only: bool = False) -> ParameterDescriptor:
+                   read_only: bool = False, constraints: str = "") -> ParameterDescriptor:
     """An integer parameter; with ``lo``/``hi`` an IntegerRange (ends included)."""
     d = ParameterDescriptor(type=ParameterType.PARAMETER_INTEGER, description=description,
-                            read_only=read_only)
+                            read_only=read_only, additional_constraints=constraints)
     if lo is not None or hi is not None:
         d.integer_range = [IntegerRange(from_value=-2**63 if lo is None else int(lo),
                                         to_value=2**63 - 1 if hi is None else int(hi), step=1)]

@@ -321,12 +321,14 @@ class ControllerNode(Node):
                                                          0.0, 2.0 * math.pi))
         d("enable_after", 1000, int_descriptor(
             "first controlled sample (from 0); -1: only through ~/enable", -1))
-        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0", 0.0))
+        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0",
+                                                   math.nextafter(0.0, 1.0)))
         d("stale_after", math.inf, float_descriptor(
             "max age of a sample in simulation seconds (with use_sim_time)", 0.0))
         d("actuation_delay", 0.0, float_descriptor(
             "simulation time from a sample to its correction that the gains were designed "
-            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True))
+            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True,
+            constraints="actuation_delay < T = 2 pi / omega (checked at start)"))
         d("delta_d", math.nan, float_descriptor(
             "the plant's Delta d (the model of the estimator and of the predicted next "
             "correction); NaN: no model", read_only=True))

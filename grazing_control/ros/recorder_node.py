@@ -114,7 +114,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
 from std_msgs.msg import Bool
 
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
-                     check_overrides, init_ros, usage)
+                     check_overrides, init_ros, int_descriptor, string_descriptor, usage)
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
@@ -359,10 +359,10 @@ class RecorderNode(Node):
                                                                   *EXTRA_TOPICS.items())],
                                read_only("'name' or 'name pkg/msg/Type' per topic",
                                          ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter("compression", "zstd", read_only(
-            f"chunk compression: {', '.join(COMPRESSIONS)}", ParameterType.PARAMETER_STRING))
-        self.declare_parameter("chunk_size", DEFAULT_CHUNK_SIZE, read_only(
-            "uncompressed chunk size, bytes", ParameterType.PARAMETER_INTEGER))
+        self.declare_parameter("compression", "zstd", string_descriptor(
+            f"chunk compression: {', '.join(COMPRESSIONS)}", True, COMPRESSIONS))
+        self.declare_parameter("chunk_size", DEFAULT_CHUNK_SIZE, int_descriptor(
+            "uncompressed chunk size, bytes, > 0", 1, None, read_only=True))
         self.declare_parameter("require_complete", False, read_only(
             "exit with status 1 when messages were missed", ParameterType.PARAMETER_BOOL))
         self.declare_parameter("adapt_qos", False, read_only(
