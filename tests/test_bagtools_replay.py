@@ -60,6 +60,27 @@ def test_replay_of_a_bag_without_parameter_record_uses_the_default_gains_it_show
     assert res["comparison"]["all_bit_identical"] and res["comparison"]["bit_identical"] == 1300
 
 
+def test_replay_without_a_record_uses_the_model_options_for_x_star_star(tmp_path):
+    """A scene of another model (r 0.75, zeta 0.02, Delta d -6e-6, c2 -0.6) rewritten
+    without its parameter record: replayed with those model options, the controller's X**
+    and gains are the run's, not config/controller.yaml's, and every answer is the
+    recorded one bit for bit (it differed by up to 6.2e-4, issue 19 §4)."""
+    from bagtools_helpers import scene_messages, write_rosbags
+
+    p = OscillatorParams(r=0.75, zeta=0.02, delta_d=-6e-6)
+    gains = Gains(degenerate_c1(p, -0.6), -0.6)
+    write_controller_yaml(tmp_path / "ctl.yaml", p, gains)
+    res = launcher.run({"r": 0.75, "zeta": 0.02, "delta_d": -6e-6}, tmp_path / "ctl.yaml",
+                       tmp_path / "bag", 300, enable_after=100, domain_id=new_domain())
+    assert res.ok, res
+    bag = write_rosbags(tmp_path / "norec", scene_messages(tmp_path / "bag")[0])
+    out = replay_controller(bag, tmp_path / "re", domain_id=new_domain(),
+                            options={"r": 0.75, "zeta": 0.02, "delta_d": -6e-6, "c2": -0.6})
+    assert any("x_ref" in n and "this run's model" in n for n in out["notes"])
+    cmp_ = out["comparison"]
+    assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == 300, cmp_
+
+
 def test_replay_with_other_gains_gives_what_eq28_commands(tmp_path, capsys):
     p = OscillatorParams(delta_d=-5e-6)
     gains = Gains(degenerate_c1(p, -0.5), -0.5)

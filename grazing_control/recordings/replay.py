@@ -81,6 +81,15 @@ def _controller_values(data, setup, controller_params, notes):
     values["enable_after"] = _bag_enable_after(data)
     notes.append(f"no parameter record: enable_after = {values['enable_after']} from the first "
                  "non-zero correction")
+    p = setup.params
+    if p is not None:       # the model of this run (options, else inferred): its X**
+        model = dict(zeta=p.zeta, r=p.r, omega=p.omega, pi2_offset=p.pi2_offset,
+                     x_ref=p.x_ref, v_ref=p.v_ref)
+        changed = sorted(k for k, v in model.items() if values.get(k) != v)
+        values.update(model)
+        if changed:
+            notes.append(f"no parameter record: the controller's {', '.join(changed)} from this "
+                         "run's model (the options, else inferred), not config/controller.yaml's")
     g = setup.gains
     if g is not None and math.isclose(g.c1, values["c1"], rel_tol=1e-9) and \
             math.isclose(g.c2, values["c2"], rel_tol=1e-9):
