@@ -394,3 +394,23 @@ def test_an_uncontrolled_scene_reports_no_controlled_orbit(tmp_path, capsys):
     hist = s["uncontrolled"]["impacts_per_period_histogram"]
     assert sum(hist) == s["samples"] and "final_vs_exact_orbit" not in s
     assert s["measured_contraction"] is None and "rho" not in s["predicted"]
+
+
+def test_a_rig_bag_is_compared_with_a_package_bag_by_per_bag_topics(tmp_path, capsys):
+    """--topic N:ROLE=TOPIC remaps in the N-th bag only (it applied to every bag, so a rig
+    bag could not be compared with a package bag, issue 19 §4)."""
+    rig = {"pi2": "/rig/pi2", "correction": "/rig/dv", "impact": "/rig/impact"}
+    bag = write_rosbags(tmp_path / "rig", scene_messages(BAGS / "scene_5e-6", rig)[0])
+    code, out, err = run_cli(["analyze", str(BAGS / "scene_9e-6"), str(bag), "--out",
+                              str(tmp_path / "a"), "--json", "--no-figures",
+                              "--topic", "2:pi2=/rig/pi2", "--topic", "2:correction=/rig/dv",
+                              "--topic", "2:impact=/rig/impact"], capsys)
+    assert code == 0, err
+    b1, b2 = json.loads(out)["bags"]
+    assert b1["topics_used"]["pi2"] == "/oscillator/pi2"
+    assert b2["topics_used"]["pi2"] == "/rig/pi2" and b2["topics_used"]["correction"] == "/rig/dv"
+    for bad, text in (("3:pi2=/x", "bag number 3 is not in 1..2"),
+                      ("1:bogus=/x", "ROLE must be one of")):
+        code, out, err = run_cli(["analyze", str(BAGS / "scene_9e-6"), str(bag), "--out",
+                                  str(tmp_path / "b"), "--topic", bad], capsys)
+        assert code == 2 and text in err and err.count("\n") == 1, err

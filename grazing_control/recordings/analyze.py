@@ -18,7 +18,7 @@ import numpy as np
 from grazing_control.support.arguments import finite, positive
 from . import reader
 from .numbers import resolve_setup, scene_numbers, section_phase_problems
-from .scenes import load, parse_topic_option
+from .scenes import load, parse_topic_options
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
 ESTIMATE_TOPIC = "/controller/estimate"
@@ -387,8 +387,9 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     lines = ["# Bag analysis", ""]
     rows = []
     used = set()
-    for bag in bags:
-        data = load(bag, topics)
+    per_bag = topics if isinstance(topics, list) else [topics] * len(bags)
+    for bag, bag_topics in zip(bags, per_bag):
+        data = load(bag, bag_topics)
         setup = resolve_setup(data, options)
         data.problems.extend(section_phase_problems(data, setup))
         label = _label(Path(bag), used)
@@ -465,9 +466,10 @@ def add_model_options(parser) -> None:
                        default=None, help=help_)
     g.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
                    help="simulator mode of the run")
-    parser.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
+    parser.add_argument("--topic", action="append", default=[], metavar="[N:]ROLE=TOPIC",
                         help="remap a topic (repeatable); roles: pi2, correction, impact, pi1, "
-                             "state, latency, deadline_miss, parameters")
+                             "state, latency, deadline_miss, parameters; N: only in the N-th "
+                             "bag given (e.g. 2:pi2=/rig/pi2)")
 
 
 def options_from_args(args) -> dict:
@@ -495,7 +497,7 @@ def main(args):
         raise ValueError(f"--tol={args.tol!r} is invalid: valid range is tol > 0")
     if args.c1 is not None and args.c2 is None:
         raise ValueError("--c1 given without --c2: give both, or --c2 alone (c1 from Eq. 38)")
-    topics = parse_topic_option(args.topic)
+    topics = parse_topic_options(args.topic, len(args.bags))
     report = analyze(args.bags, args.out, topics=topics, options=options_from_args(args),
                      tol=args.tol, figures=not args.no_figures)
     if args.json:

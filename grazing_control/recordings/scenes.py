@@ -21,7 +21,7 @@ from . import reader
 from grazing_control.ros.recording.record import run_parameters
 
 __all__ = ["DEFAULT_TOPICS", "EXPECTED_TYPES", "DuplicateStampsError", "SceneData", "BagData",
-           "load", "parse_topic_option"]
+           "load", "parse_topic_option", "parse_topic_options"]
 
 #: Role -> default topic name (the names the nodes publish in the root namespace).
 DEFAULT_TOPICS = {
@@ -73,6 +73,29 @@ def parse_topic_option(values) -> dict:
                              f"{', '.join(DEFAULT_TOPICS)}")
         topics[role] = name if name.startswith("/") else "/" + name
     return topics
+
+
+def parse_topic_options(values, n_bags: int) -> list:
+    """``--topic [N:]ROLE=TOPIC`` for ``n_bags`` bags -> one role -> topic dict per bag.
+
+    Without ``N:`` a remap applies to every bag; with it (1-based, in the order the bags
+    are given) to bag N only, so a rig's bag can be compared with a package bag
+    (``--topic 2:pi2=/rig/pi2``). A per-bag remap wins over an all-bags one.
+    """
+    common, per = [], [[] for _ in range(n_bags)]
+    for text in values or ():
+        head, colon, rest = text.partition(":")
+        if colon and head.isdigit() and "=" not in head:
+            k = int(head)
+            if not 1 <= k <= n_bags:
+                raise ValueError(f"--topic {text!r} is invalid: bag number {k} is not in "
+                                 f"1..{n_bags} (the bags in the order given)")
+            parse_topic_option([rest])               # validated alone first
+            per[k - 1].append(rest)
+        else:
+            parse_topic_option([text])
+            common.append(text)
+    return [parse_topic_option(common + own) for own in per]
 
 
 @dataclass
