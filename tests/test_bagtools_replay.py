@@ -45,6 +45,13 @@ def test_replay_with_the_recorded_gains_is_bit_identical_through_both_nodes(tmp_
     assert data.parameters["nodes"]["controller_node"][0]["enable_after"] == 1000
     sim = replay_simulator(BAGS / "scene_9e-6", tmp_path / "sim", domain_id=new_domain())
     assert sim["samples_replayed"] == 1300 and sim["stamps_equal"]
+    # replay bags carry rosbag2's offered_qos_profiles like the recorder's (they had none)
+    from mcap.reader import make_reader
+    for bag in ("ctl", "sim"):
+        with open(next((tmp_path / bag).glob("*.mcap")), "rb") as fh:
+            channels = make_reader(fh).get_summary().channels.values()
+        for ch in channels:
+            assert "reliability: reliable" in ch.metadata["offered_qos_profiles"], (bag, ch)
     assert sim["bit_identical_samples"] == 1300 and sim["max_departure"] == 0.0
 
 

@@ -259,13 +259,22 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
             recs = []
             pub = node.create_publisher(JointState, "oscillator/pi2", _qos())
 
+            def offered(topic):
+                """The QoS its publishers offer, as the recorder stores it (rosbag2's
+                offered_qos_profiles): the replay's own pi2 publisher, the controller's."""
+                from grazing_control.ros.recorder_node import qos_to_dict
+
+                return [qos_to_dict(i.qos_profile)
+                        for i in node.get_publishers_info_by_topic(topic)]
+
             def on_answer(msg_raw, info=None):
                 recv = time.time_ns()
                 key = _stamp_of(msg_raw)
                 answers.setdefault(key, (msg_raw, recv))
                 if not writer.has_topic("/controller/velocity_correction"):
                     writer.add_topic("/controller/velocity_correction",
-                                     "geometry_msgs/msg/TwistStamped", [])
+                                     "geometry_msgs/msg/TwistStamped",
+                                     offered("/controller/velocity_correction"))
                 writer.write("/controller/velocity_correction", msg_raw, recv)
 
             def on_record(msg_raw, info=None):
@@ -282,7 +291,8 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
                 raise RuntimeError(f"controller_node did not start (exit status {proc.poll()}); "
                                    f"see {log_dir.parent / (out.name + '_controller.log')}")
             session.wait_for(lambda: False, 0.3)
-            writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState", [])
+            writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState",
+                             offered("/oscillator/pi2"))
             order = _pi2_raw_order(raw, data.present["pi2"])
             msg = JointState(name=["mass"])
             t0 = time.monotonic()
@@ -312,7 +322,8 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
                 last = samples[-1][0] if samples else None
                 session.wait_for(lambda: last in answers, answer_timeout)
             session.wait_for(lambda: False, 0.2)
-            writer.add_topic("/grazing/parameters", "std_msgs/msg/String", [])
+            writer.add_topic("/grazing/parameters", "std_msgs/msg/String",
+                             offered("/grazing/parameters"))
             for data_, t in recs:
                 writer.write("/grazing/parameters", data_, t)
             # the replay's own record: what was replayed, how
@@ -461,8 +472,15 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
             node = session.node
             pub = node.create_publisher(TwistStamped, "controller/velocity_correction", _qos())
             answer = TwistStamped()
-            writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState", [])
-            writer.add_topic("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped", [])
+            from grazing_control.ros.common import PUBLISHER_QOS
+            from grazing_control.ros.recorder_node import qos_to_dict
+
+            # offered_qos_profiles as the recorder stores them: the simulator's data
+            # publisher (PUBLISHER_QOS) and this replay's correction publisher
+            writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState",
+                             [qos_to_dict(PUBLISHER_QOS)])
+            writer.add_topic("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped",
+                             [qos_to_dict(_qos())])
             from rclpy.serialization import serialize_message
 
             def on_sample(msg_raw, info=None):
