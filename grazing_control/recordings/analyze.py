@@ -143,7 +143,7 @@ def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
     if dep is not None and len(dep):
         a.semilogy(np.arange(len(dep)), np.maximum(dep, 1e-18), ".", ms=2)
     a.set(xlabel="sample k", ylabel="|core step − recorded next sample|",
-          title="model check (recorded sample + correction → core)")
+          title="model check: core step vs recorded")
     if rt:
         for a, key, lab in ((ax[2, 0], None, "latency (sim: sample published → answer received) [ms]"),
                             (ax[2, 1], "_answer_ms", "answer time (controller) [ms]"),
@@ -155,6 +155,12 @@ def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
             else:
                 a.text(0.5, 0.5, "not recorded", ha="center", transform=a.transAxes)
             a.set(xlabel=lab, ylabel="count")
+    from matplotlib.ticker import MaxNLocator
+
+    for a in ax.flat:           # sample numbers are integers, whatever the scene's length
+        if a.get_xlabel() == "sample k":
+            a.xaxis.set_major_locator(MaxNLocator(integer=True))
+        a.title.set_fontsize(10)
     fig.suptitle(title)
     save_png(fig, path, dpi=90)
 
