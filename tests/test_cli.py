@@ -572,7 +572,9 @@ def test_ctrl_c_at_any_moment_of_the_console_script_is_quiet(delay, startup):
     import signal
     import time
 
-    script = Path(sys.executable).parent / "grazing"
+    from console_scripts import script as console_script
+
+    script = console_script("grazing")
     proc = subprocess.Popen([str(script), "simulate", "--delta-d", "-5e-6", "--periods",
                              "5000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)

@@ -110,7 +110,9 @@ def test_entry_points_declared():
 def test_console_script_installed(name):
     module = CONSOLE_SCRIPTS[name]
     skip_unless_module(module)
-    script = BIN_DIR / name
+    from console_scripts import script as console_script
+
+    script = console_script(name)
     assert script.is_file(), f'{script} missing: run `make venv`'
     assert os.access(script, os.X_OK)
     assert callable(getattr(importlib.import_module(module), 'main', None)), \
@@ -119,7 +121,9 @@ def test_console_script_installed(name):
 
 def test_grazing_cli_help_runs():
     skip_unless_module(CONSOLE_SCRIPTS['grazing'])
-    result = subprocess.run([str(BIN_DIR / 'grazing'), '--help'], capture_output=True,
+    from console_scripts import script as console_script
+
+    result = subprocess.run([str(console_script('grazing')), '--help'], capture_output=True,
                             text=True, timeout=120, cwd=os.path.expanduser('~'))
     assert result.returncode == 0, result.stderr
 
