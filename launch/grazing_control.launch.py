@@ -5,19 +5,19 @@
 
 Parameters come from the package's config/ (study.yaml, controller.yaml) unless other
 files are given; ``delta_d`` and ``max_periods`` override the simulator's (write floats
-with a decimal point, e.g. -9.0e-06). With ``bag`` set, the recorder records the scene
-there and the simulator waits until it has matched every topic (``recorder/ready``)
-before starting; the bag path is compared as text (NotEqualsSubstitution, launch >= 3.1,
-Jazzy), never evaluated, so any path works. When the simulator exits after
-``max_periods`` its scene's controller and recorder get SIGINT (the recorder closes its
-bag) and the launch ends once nothing runs: included twice under two namespaces, each
-scene ends on its own. Any node exiting with a nonzero status stops everything and the
-launch returns 1. ``/clock`` is remapped to ``clock`` (the namespace's own clock) and
-``use_sim_time:=true`` puts the controller and recorder on it. The simulator applies the actuation delay the controller's gains
-were designed for (``actuation_delay`` of ``controller_params``, as ``grazing run``
-does; a simulator started with another delay refuses to start, naming both). Machines
-without ``ros2 launch`` use ``grazing run`` (grazing_control.ros.launcher), which does
-the same with plain processes.
+with a decimal point, e.g. -9.0e-06). Every node's overrides come from
+``grazing_control.ros.scene_nodes.scene_overrides``, the description ``grazing run``
+uses too (one source: the design's actuation delay from ``controller_params``, the scene
+token, the controller's model of the plant). With ``bag`` set, the recorder records the
+scene there and the simulator waits until it has matched every topic
+(``recorder/ready``). When the simulator exits after ``max_periods`` its scene's
+controller and recorder get SIGINT (the recorder closes its bag) and the launch ends
+once nothing runs: included twice under two namespaces, each scene ends on its own. Any
+node exiting with a nonzero status stops everything and the launch returns 1.
+``/clock`` is remapped to ``clock`` (the namespace's own clock) and
+``use_sim_time:=true`` puts the controller and recorder on it. Machines without
+``ros2 launch`` use ``grazing run`` (grazing_control.ros.launcher), the same scene with
+plain processes.
 """
 
 import os
@@ -26,13 +26,11 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
                             RegisterEventHandler)
-from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import matches_action
 from launch.events.process import ShutdownProcess
-from launch.substitutions import IfElseSubstitution, LaunchConfiguration, NotEqualsSubstitution
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
 
 
 #: /clock is absolute; remapped to the relative "clock", each scene (the include's
@@ -44,10 +42,6 @@ CLOCK = [("/clock", "clock")]
 def generate_launch_description():
     share = get_package_share_directory("grazing_control")
     config = os.path.join(share, "config")
-    bag = LaunchConfiguration("bag")
-    # compared as text, never evaluated: any bag path works (quotes included)
-    recording = NotEqualsSubstitution(bag, "")
-
     args = [
         DeclareLaunchArgument("sim_params", default_value=os.path.join(config, "study.yaml"),
                               description="sim_node parameter file"),
@@ -66,42 +60,40 @@ def generate_launch_description():
                               description="controller and recorder on the simulator's clock "
                                           "(the scene's own: clock in its namespace)"),
     ]
-    sim_time = ParameterValue(LaunchConfiguration("use_sim_time"), value_type=bool)
+    return LaunchDescription(args + [OpaqueFunction(function=_scene)])
 
-    controller = Node(
-        package="grazing_control", executable="controller_node", name="controller_node",
-        output="screen", remappings=CLOCK, parameters=[LaunchConfiguration("controller_params"), {
-            "enable_after": LaunchConfiguration("enable_after"), "use_sim_time": sim_time}])
-    recorder = Node(
-        package="grazing_control", executable="recorder_node", name="recorder_node",
-        output="screen", condition=IfCondition(recording), remappings=CLOCK,
-        parameters=[{"output": ParameterValue(bag, value_type=str),
-                     "require_complete": True, "use_sim_time": sim_time}])
-    ended = _on_exit((controller, recorder))
-    def simulator(context):
-        """sim_node with the design's actuation delay read from controller_params (the
-        file is known only once the arguments are), and the scene's end with it."""
-        from grazing_control.ros.launcher import design_delay
 
-        overrides = {
-            "delta_d": LaunchConfiguration("delta_d"),
-            "max_periods": LaunchConfiguration("max_periods"),
-            "exit_when_done": True,
-            "wait_for_subscribers": IfElseSubstitution(recording, "1", "0"),
-            "wait_for_recorder": IfElseSubstitution(recording, "true", "false"),
-        }
-        delay = design_delay(LaunchConfiguration("controller_params").perform(context))
-        if delay is not None:
-            overrides["actuation_delay"] = delay
-        sim = Node(
-            package="grazing_control", executable="sim_node", name="sim_node", output="screen",
-            remappings=CLOCK, parameters=[LaunchConfiguration("sim_params"), overrides])
-        return [sim, RegisterEventHandler(OnProcessExit(target_action=sim, on_exit=ended))]
+def _scene(context):
+    """The scene's nodes with the overrides of grazing_control.ros.scene_nodes (the ones
+    `grazing run` gives them: one description, issue 19 §3), once the arguments are
+    known; launch adds its own: the clock remapping, use_sim_time, the exit handlers."""
+    from grazing_control.ros.scene_nodes import NODES, scene_overrides
 
-    watch = [RegisterEventHandler(OnProcessExit(target_action=node, on_exit=ended))
-             for node in (controller, recorder)]
-    return LaunchDescription(args + [recorder, controller, OpaqueFunction(function=simulator)]
-                             + watch)
+    def arg(name):
+        return LaunchConfiguration(name).perform(context)
+
+    bag = arg("bag")
+    controller_params = arg("controller_params")
+    over = scene_overrides(controller_params, periods=int(arg("max_periods")),
+                           delta_d=float(arg("delta_d")),
+                           enable_after=int(arg("enable_after")), bag=bag or None)
+    sim_time = arg("use_sim_time").lower() in ("true", "1", "yes")
+    files = {"sim_node": [arg("sim_params")], "controller_node": [controller_params],
+             "recorder_node": []}
+    nodes = {}
+    for name in NODES:
+        if over[name] is None:
+            continue
+        params = dict(over[name])
+        if name != "sim_node":
+            params["use_sim_time"] = sim_time
+        nodes[name] = Node(package="grazing_control", executable=name, name=name,
+                           output="screen", remappings=CLOCK,
+                           parameters=files[name] + [params])
+    ended = _on_exit([nodes[n] for n in nodes if n != "sim_node"])
+    return list(nodes.values()) + [
+        RegisterEventHandler(OnProcessExit(target_action=node, on_exit=ended))
+        for node in nodes.values()]
 
 
 class NodeFailed(RuntimeError):

@@ -22,7 +22,7 @@ from grazing_control.dynamics.design import degenerate_c1
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.ros.recording import read_messages
 from grazing_control.dynamics.simulate import simulate
-from test_closed_loop import CONTROLLER, STUDY, new_domain
+from test_closed_loop import CONTROLLER, ROOT, STUDY, new_domain
 
 GRAZING = [sys.executable, "-c", "import sys; from grazing_control.cli import main; "
            "sys.exit(main())"]
@@ -202,3 +202,60 @@ def test_nodes_stop_and_the_bag_closes_when_the_launcher_is_killed(tmp_path):
         time.sleep(0.1)
     assert not _processes_mentioning(str(bag))
     assert (bag / "metadata.yaml").is_file()
+
+
+# ------------------------------------------------------- one source for the node set
+def test_grazing_run_and_the_launch_file_take_the_nodes_from_one_description(tmp_path,
+                                                                              monkeypatch):
+    """`grazing run` starts exactly the nodes and overrides of scene_nodes.scene_overrides
+    (captured instead of started), and the launch file builds its nodes from the same
+    function with no parameter of its own beyond launch's (use_sim_time): the two cannot
+    drift apart again (they had: the design delay, the token, the failure handling)."""
+    import ast
+
+    from grazing_control.ros import scene_nodes
+
+    started = []
+
+    class Done:
+        returncode = 0
+
+        def poll(self):
+            return 0
+
+        def wait(self, timeout=None):
+            return 0
+
+    def fake_start(module, params, overrides, **kw):
+        started.append((module, dict(overrides)))
+        return Done()
+
+    monkeypatch.setattr(launcher, "start_node", fake_start)
+    monkeypatch.setattr(launcher, "stop_nodes", lambda procs, grace=15.0: None)
+    monkeypatch.setattr(scene_nodes, "new_token", lambda: "tok")
+    design = tmp_path / "d6.yaml"
+    design.write_text("/**:\n  ros__parameters:\n    c1: -1.0\n    c2: -1.0\n"
+                      "    actuation_delay: 6.0\n")
+    res = launcher.run(STUDY, design, tmp_path / "bag", 50, delta_d=-9e-6, enable_after=10,
+                       domain_id=new_domain())
+    assert res.sim == res.controller == res.recorder == 0
+    want = scene_nodes.scene_overrides(design, periods=50, delta_d=-9e-6, enable_after=10,
+                                       bag=tmp_path / "bag", token="tok")
+    assert started == [(launcher.RECORDER_MODULE, want["recorder_node"]),
+                       (launcher.CONTROLLER_MODULE, want["controller_node"]),
+                       (launcher.SIM_MODULE, want["sim_node"])]
+    assert want["sim_node"]["actuation_delay"] == 6.0 and want["controller_node"]["scene"] \
+        == want["sim_node"]["scene"] == "tok"
+    # the launch file: nodes from scene_overrides over NODES, no parameter names of its own
+    source = (ROOT / "launch" / "grazing_control.launch.py").read_text()
+    tree = ast.parse(source)
+    calls = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call)
+             and isinstance(n.func, ast.Name)}
+    assert {"scene_overrides", "Node"} <= calls
+    literals = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+                and isinstance(n.value, str)}
+    arguments = {n.args[0].value for n in ast.walk(tree) if isinstance(n, ast.Call)
+                 and getattr(n.func, "id", "") == "DeclareLaunchArgument"}
+    assert {"delta_d", "max_periods", "enable_after", "bag", "controller_params"} <= arguments
+    every = set().union(*(set(v) for v in want.values() if v))
+    assert not (every & (literals - arguments)), every & (literals - arguments)

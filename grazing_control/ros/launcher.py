@@ -54,6 +54,8 @@ from pathlib import Path
 import yaml
 
 from grazing_control.oscillator import kernel
+
+from .scene_nodes import design_delay, scene_overrides  # noqa: F401 (design_delay: API)
 from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
@@ -318,25 +320,6 @@ def _params_file(params, node: str, tmp: Path) -> Path:
     return path
 
 
-def design_delay(controller_params):
-    """``actuation_delay`` of the controller's parameters (``grazing design --delay``), or None."""
-    if isinstance(controller_params, (str, os.PathLike)):
-        try:
-            with open(controller_params) as fh:
-                doc = yaml.safe_load(fh) or {}
-        except (OSError, yaml.YAMLError):
-            return None             # the node reports an unreadable file itself
-        values = {}
-        for section in doc.values() if isinstance(doc, dict) else ():
-            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-                values.update(section["ros__parameters"])
-    else:
-        values = dict(controller_params or {})
-    delay = values.get("actuation_delay")
-    return float(delay) if isinstance(delay, (int, float)) and not isinstance(delay, bool) \
-        else None
-
-
 def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | None = None, *,
         delta_d: float | None = None, enable_after: int | None = None,
         mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
@@ -410,32 +393,12 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
         names += ("live_node",) if live is not None else ()
         logs = {n: str(Path(log_dir) / f"{n}.log") for n in names}
-    sim_over = {"exit_when_done": True, "wait_for_controller": True,
-                "wait_for_subscribers": 1 if record else 0, "wait_for_recorder": record}
-    if periods is not None:
-        sim_over["max_periods"] = int(periods)
-    if delta_d is not None:
-        sim_over["delta_d"] = float(delta_d)
-    if mode is not None:
-        sim_over["mode"] = str(mode)
-    delay = dict(controller_overrides or {}).get("actuation_delay",
-                                                 design_delay(controller_params))
-    if delay is not None:               # the gains' design delay is the simulator's too
-        sim_over["actuation_delay"] = delay
-    sim_over.update(sim_overrides or {})
-    controller_overrides = dict(controller_overrides or {})
-    for key in ("delta_d", "sensor_noise", "state_period"):  # the controller's model of
-        if key in sim_over:                                   # the plant and its sensor
-            controller_overrides.setdefault(key, sim_over[key])
-    if sim_over.get("mode") == "realtime":     # a stream controller answers after t_k
-        controller_overrides.setdefault("answer_after_section", True)
-    if enable_after is not None:
-        controller_overrides["enable_after"] = int(enable_after)
-    # one token for this scene's nodes (ros/scene.py): the simulator starts with its own
-    # controller only, and a node of another scene on the domain is an intruder
-    token = f"{os.getpid():x}-{random.getrandbits(48):012x}"
-    sim_over.setdefault("scene", token)
-    controller_overrides.setdefault("scene", sim_over["scene"])
+    over = scene_overrides(controller_params, periods=periods, delta_d=delta_d,
+                           enable_after=enable_after, mode=mode,
+                           bag=bag_dir if record else None, sim_overrides=sim_overrides,
+                           controller_overrides=controller_overrides,
+                           recorder_overrides=recorder_overrides)
+    sim_over, controller_overrides = over["sim_node"], over["controller_node"]
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
     timed_out = interrupted = False
@@ -453,10 +416,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         tmp = Path(tmp)
         try:
             if record:
-                rec_over = {"output": os.fspath(bag_dir), "require_complete": True}
-                rec_over.update(recorder_overrides or {})
                 procs["recorder_node"] = start_node(
-                    RECORDER_MODULE, (), rec_over, domain_id=domain_id,
+                    RECORDER_MODULE, (), over["recorder_node"], domain_id=domain_id,
                     log=logs.get("recorder_node"), python=python)
             if live is not None:
                 procs["live_node"] = start_node(LIVE_MODULE, (), {"port": int(live)},

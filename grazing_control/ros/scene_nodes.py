@@ -1,0 +1,93 @@
+"""One description of a scene's nodes, for `grazing run` and for `ros2 launch` alike.
+
+The launcher (:mod:`.launcher`, plain processes) and the launch file
+(``launch/grazing_control.launch.py``) had drifted apart: the design's actuation delay
+reached the simulator through one and not the other, and so did the scene token, the
+controller's model of the plant and the realtime answer rule (issue 19 §3). Both now take
+every node's parameter overrides from :func:`scene_overrides`; the launch file adds only
+what is launch's own (namespaces, remappings, the exit handlers).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+
+__all__ = ["NODES", "scene_overrides", "design_delay", "new_token"]
+
+#: The scene's nodes in start order (the recorder first, so that it matches every topic
+#: before the simulator starts; the simulator last).
+NODES = ("recorder_node", "controller_node", "sim_node")
+
+
+def design_delay(controller_params):
+    """``actuation_delay`` of the controller's parameters (``grazing design --delay``): a
+    parameter file's path (any node key, e.g. ``/**``) or a dict; None if absent or the
+    file cannot be read (the node then reports the file itself)."""
+    import yaml
+
+    if isinstance(controller_params, (str, os.PathLike)):
+        try:
+            with open(controller_params) as fh:
+                doc = yaml.safe_load(fh) or {}
+        except (OSError, yaml.YAMLError):
+            return None
+        values = {}
+        for section in doc.values() if isinstance(doc, dict) else ():
+            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+                values.update(section["ros__parameters"])
+    else:
+        values = dict(controller_params or {})
+    delay = values.get("actuation_delay")
+    return float(delay) if isinstance(delay, (int, float)) and not isinstance(delay, bool) \
+        else None
+
+
+def new_token() -> str:
+    """A random scene token (ros/scene.py): this scene's nodes recognise each other."""
+    return f"{os.getpid():x}-{random.getrandbits(48):012x}"
+
+
+def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
+                    mode=None, bag=None, token=None, sim_overrides=None,
+                    controller_overrides=None, recorder_overrides=None) -> dict:
+    """Node name -> its ``-p key:=value`` overrides (recorder: None without ``bag``).
+
+    - sim_node: exits when done, waits for its controller (and, recording, for the
+      recorder's ``recorder/ready`` and one subscriber per topic), ``max_periods``,
+      ``delta_d``, ``mode``, and the design's ``actuation_delay`` from the controller's
+      parameters (a simulator applying another delay refuses to start);
+    - controller_node: ``enable_after``; the plant's ``delta_d``, ``sensor_noise`` and
+      ``state_period`` when the simulator's are set (its estimator's model); answers
+      after the section in realtime;
+    - recorder_node: ``output`` = bag, ``require_complete``;
+    - both simulator and controller: the scene token.
+    """
+    sim = {"exit_when_done": True, "wait_for_controller": True,
+           "wait_for_subscribers": 1 if bag is not None else 0,
+           "wait_for_recorder": bag is not None}
+    if periods is not None:
+        sim["max_periods"] = int(periods)
+    if delta_d is not None:
+        sim["delta_d"] = float(delta_d)
+    if mode is not None:
+        sim["mode"] = str(mode)
+    controller = dict(controller_overrides or {})
+    delay = controller.get("actuation_delay", design_delay(controller_params))
+    if delay is not None:               # the gains' design delay is the simulator's too
+        sim["actuation_delay"] = delay
+    sim.update(sim_overrides or {})
+    for key in ("delta_d", "sensor_noise", "state_period"):  # the controller's model of
+        if key in sim:                                        # the plant and its sensor
+            controller.setdefault(key, sim[key])
+    if sim.get("mode") == "realtime":     # a stream controller answers after t_k
+        controller.setdefault("answer_after_section", True)
+    if enable_after is not None:
+        controller["enable_after"] = int(enable_after)
+    sim.setdefault("scene", token if token is not None else new_token())
+    controller.setdefault("scene", sim["scene"])
+    recorder = None
+    if bag is not None:
+        recorder = {"output": os.fspath(bag), "require_complete": True}
+        recorder.update(recorder_overrides or {})
+    return {"sim_node": sim, "controller_node": controller, "recorder_node": recorder}
