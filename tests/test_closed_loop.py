@@ -293,6 +293,7 @@ def test_launch_file_is_valid_python():
     source = (ROOT / "launch" / "grazing_control.launch.py").read_text()
     compile(source, "grazing_control.launch.py", "exec")
     assert "def generate_launch_description" in source
-    # the bag path is compared as text, never pasted into Python (a quote broke it)
-    assert "PythonExpression" not in source and "NotEqualsSubstitution(bag, \"\")" in source
-    assert '"wait_for_recorder"' in source and '"require_complete": True' in source
+    # the bag path is read as text (LaunchConfiguration.perform), never pasted into Python
+    # (a quote broke it); the nodes' parameters come from scene_nodes.scene_overrides
+    assert "PythonExpression" not in source and 'bag = arg("bag")' in source
+    assert "scene_overrides(" in source
