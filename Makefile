@@ -44,7 +44,7 @@ venv: $(VENV)/.stamp
 # tests run real processes over Fast DDS on a 2-core machine, where scheduling can make a
 # timing assertion miss. A deterministic failure still fails.
 test: $(VENV)/.stamp
-	$(PY) -m pytest -q --reruns 2 --reruns-delay 1 tests
+	$(PY) -m pytest -q -r fER --reruns 2 --reruns-delay 1 tests
 
 demo: $(VENV)/.stamp
 	$(VENV)/bin/grazing demo --out out/demo

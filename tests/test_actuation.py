@@ -121,7 +121,7 @@ def test_new_parameters_refused_with_a_reason():
 
 
 def test_controller_validates_the_design_delay_and_the_launcher_passes_it_on(tmp_path):
-    from grazing_control.ros.launcher import _design_delay
+    from grazing_control.ros.launcher import design_delay as _design_delay
     from grazing_control.ros.controller_node import actuation_delay_from_values
 
     omega = OscillatorParams().omega

@@ -124,7 +124,10 @@ class SceneWindow:
         eng, stats = loop.engine, loop.stats
         bad = counts["missed"] + counts["timeouts"] + stats["lost"]
         now = (wall, eng.k, eng.t, bad, len(loop.latencies), len(loop.lags))
-        prev = self.last or (0.0, 0, 0.0, 0, 0, 0)
+        # the first status of a running scene sets the window's start: the pace of the
+        # time before it (start-up, waiting for the controller) would read as a crawl
+        first = self.last is None
+        prev = now if first else self.last
         self.last = now
         dwall = now[0] - prev[0]
         stat.summary(OK, "finished" if loop.finished else "running")
