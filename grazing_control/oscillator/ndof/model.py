@@ -75,9 +75,8 @@ class NdofModel:
     Parameters
     ----------
     M, C, K : (n, n) array_like
-        Mass (symmetric positive definite), damping and stiffness (symmetric, and
-        C, K positive semi-definite with M^-1 K having no zero eigenvalue... checked
-        only for symmetry/semi-definiteness here; the flow refuses an undamped mode).
+        Mass (symmetric positive definite), damping and stiffness (symmetric positive
+        semi-definite); a forcing at an undamped resonance is refused by the flow.
     f : (n,) array_like
         Forcing amplitude vector: the forcing is ``f cos(omega t + phase)``.
     omega : float
