@@ -167,6 +167,24 @@ def test_repeated_recorded_scenes_lose_no_correction(tmp_path):
         counts = Counter(m.topic for m in read_messages(bag))
         assert counts["/oscillator/pi2"] == n and counts["/controller/velocity_correction"] == n
         assert "missed" not in (tmp_path / f"logs{i}" / "recorder_node.log").read_text()
+        assert launcher.recorded_status(bag) == 0      # the closed record
+
+
+def test_the_recorders_closed_record_is_read_from_the_bag(tmp_path):
+    """A bag's metadata.yaml carries the recorder's status (written last, on close): a
+    recorder killed after closing is judged by it; no record (killed before closing, or
+    not a bag) gives None, and the exit status counts."""
+    import yaml
+
+    assert launcher.recorded_status(tmp_path) is None
+    for status in (0, 1):
+        info = {"rosbag2_bagfile_information": {"custom_data": {"recorder_status": str(status)}}}
+        (tmp_path / "metadata.yaml").write_text(yaml.safe_dump(info))
+        assert launcher.recorded_status(tmp_path) == status
+    (tmp_path / "metadata.yaml").write_text("rosbag2_bagfile_information: {custom_data: null}")
+    assert launcher.recorded_status(tmp_path) is None
+    (tmp_path / "metadata.yaml").write_text("{{{")
+    assert launcher.recorded_status(tmp_path) is None
 
 
 def _processes_mentioning(text: str) -> list:

@@ -285,6 +285,22 @@ def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, 
             out.close()
 
 
+def recorded_status(bag_dir) -> int | None:
+    """The recorder's exit status from its closed record, or None if it has none.
+
+    The recorder writes its status (0, or 1 for missed messages with
+    ``require_complete``) into ``metadata.yaml``'s ``custom_data`` as the last step of
+    closing the bag (ros/recorder_node.py, ``RecorderNode.close``): a bag with that
+    record is complete whatever happened to the process after it.
+    """
+    try:
+        text = (Path(bag_dir) / "metadata.yaml").read_text(encoding="utf-8")
+        info = yaml.safe_load(text)["rosbag2_bagfile_information"]
+        return int((info.get("custom_data") or {})["recorder_status"])
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
 def stop_nodes(procs, grace: float = 15.0) -> None:
     """SIGTERM every running process, wait ``grace`` s, then SIGKILL.
 
@@ -466,8 +482,16 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         p = procs[name]
         return None if p is None else p.returncode
 
+    recorder = code("recorder_node")
+    closed = recorded_status(bag_dir) if record else None
+    if recorder is not None and recorder < 0 and closed is not None:
+        # killed after it closed its bag (teardown past the grace under CPU starvation):
+        # the bag's own closed record says how the recording ended
+        print(f"warning: recorder_node was killed (signal {-recorder}) after closing its "
+              f"bag; its closed record says status {closed}", file=sys.stderr)
+        recorder = closed
     return RunResult(sim=code("sim_node"), controller=code("controller_node"),
-                     recorder=code("recorder_node"),
+                     recorder=recorder,
                      bag_dir=os.fspath(bag_dir) if record else None,
                      wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
                      logs=logs, domain_id=domain_id, live=code("live_node"))

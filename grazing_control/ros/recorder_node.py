@@ -534,6 +534,12 @@ class RecorderNode(Node):
             if not self.bag.has_topic(topic):          # listed, with no message
                 self.bag.add_topic(topic, kind, self._offered.get(topic)
                                    or [qos_to_dict(RECORDER_QOS)])
+        missed = self.missed()
+        status = 1 if missed and self.require_complete else 0
+        # The closed record: metadata.yaml, written last and atomically, carries the
+        # status, so the launcher reads success from the bag itself, not from how fast
+        # the process ends afterwards (issue 21 section 6).
+        self.bag.custom_data["recorder_status"] = str(status)
         try:
             info = self.bag.close()
         except OSError as exc:
@@ -552,13 +558,11 @@ class RecorderNode(Node):
             self.get_logger().warning(
                 f"not checked for losses: {', '.join(unchecked)} (several "
                 "publishers sent on it: their sequence numbers interleave)")
-        missed = self.missed()
         if missed:
             text = ", ".join(f"{t} {n}" for t, n in missed.items())
             log.warning(f"missed: {text} (published before the recorder matched the "
                         "publisher, or lost)")
-            return 1 if self.require_complete else 0
-        return 0
+        return status
 
 def _stop_on_signals(stop):
     """SIGINT and SIGTERM set `stop` (the spin loop then ends and the bag closes)."""
