@@ -13,9 +13,9 @@ components fix v- and Delta d:
     Delta d = (1 + r) v- w^T R e_v - 2 d* sin^2(psi/2),
 
 so the branch is an explicit curve psi -> (Delta d, v-, z-), exact up to rounding. Its
-monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impact.py). This is the exact reference for the
-limit multipliers and the existence coefficient of ndof_design (no shooting, no
-expansion); it assumes the one impact of the period is the only contact (a local
+monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impact.py).
+This is the exact reference for the limit multipliers and the existence coefficient of
+ndof_design (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
 statement: the orbit near grazing; shooting on the exact period map is the global check).
 """
 
@@ -58,7 +58,8 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float):
     sigma = s - psi / om
     if not (0.0 < sigma < model.period) or not math.isfinite(psi):
         raise ParameterError(f"psi={psi!r} is invalid: valid range is "
-                             f"{-om * (model.period - s)!r} < psi < {om * s!r} (impact between kicks)")
+                             f"{-om * (model.period - s)!r} < psi < {om * s!r} "
+                             f"(impact between kicks)")
     _w, _ev, b = _vectors(model)
     pm = _transition(model, sigma)
     eye = np.eye(2 * model.n)
@@ -100,8 +101,8 @@ def branch_coefficients(model: NdofModel, gains):
     on the 1/1 branch born at grazing, for any gains (§7, Eq. (N7')).
 
     With N = N(k), R = (N - I)^-1, M' = [A, N]/omega, q0 = r + (1 + r) e_v^T R e_v:
-    v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (= -(1 + r) v1 G(1): zero iff the
-    branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
+    v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (proportional to G(1) of §2: zero iff
+    the branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
     b1 = -w^T R M' R e_v, v2 = -(1 + r) v1 a1' / q0, a1' = -e_v^T R M' R e_v.
     On the family (w^T N = mu w^T) gamma1 is ndof_design.existence_coefficient.
     """

@@ -432,7 +432,7 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
     """A gain that kills the first Markov parameter w^T N e_v but not the others (§9):
     k = k(mu) + offset d, d a unit vector off the family.
 
-    With ``smooth_branch`` the step also keeps G(1) = w^T (I - N)^-1 e_v = 0 (an affine
+    With ``smooth_branch`` the step also keeps G(1) = 0, i.e. w^T (I - N)^-1 e_v = 0 (an affine
     condition on k, §9): the 1/1 branch stays smooth (Delta d ~ psi^2) and the largest
     multiplier grows like |Delta d|^-1/4; d is then the direction of that set orthogonal
     to the family along which w^T N^2 e_v grows fastest. Without it d breaks G(1) (the
@@ -494,8 +494,8 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
     """Write the n-DOF controller's ROS 2 parameter file.
 
     Shape ``/**: ros__parameters: {model_file, gains: [k0 .. k_{2n-1}], n, i_a, omega,
-    pi2_offset, mu}``, keyed ``/**`` as :func:`grazing_control.dynamics.design.write_controller_yaml`
-    so that it applies under a namespace or a renamed node. Refuses a design that is not
+    pi2_offset, mu}``, keyed ``/**`` as
+    :func:`grazing_control.dynamics.design.write_controller_yaml` so that it applies under a namespace or a renamed node. Refuses a design that is not
     on this model's family (w^T N(k) != mu w^T). Written to a temporary file and renamed.
     """
     import tempfile
@@ -516,7 +516,8 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".yaml.tmp")
     try:
         with os.fdopen(fd, "w") as fh:
-            fh.write("# n-DOF controller gains from the design (docs/theory_ndof.md, w^T N = mu w^T)\n")
+            fh.write("# n-DOF controller gains from the design "
+                     "(docs/theory_ndof.md, w^T N = mu w^T)\n")
             yaml.safe_dump(doc, fh, sort_keys=False)
         mask = os.umask(0)
         os.umask(mask)

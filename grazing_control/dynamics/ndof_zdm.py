@@ -208,8 +208,9 @@ def zdm_jacobian(model: NdofModel, z, order=2) -> np.ndarray:
         if t1 is None:
             return np.eye(d)
         flow = _flow(model)
-        zt = _transition(model, t1) @ z
-        return _transition(model, -t1) @ saltation_matrix(flow, flow.tau_star + model.omega * t1, zt) @ _transition(model, t1)
+        fwd = _transition(model, t1)
+        sal = saltation_matrix(flow, flow.tau_star + model.omega * t1, fwd @ z)
+        return _transition(model, -t1) @ sal @ fwd
     if order not in (1, 2):
         raise ValueError(f"order={order!r} is invalid: valid values are {ORDERS}")
     _out, t1, v = _event(model, z, order)
