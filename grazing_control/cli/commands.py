@@ -714,7 +714,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_robustness_parser(sub, _common, _finite)
     from grazing_control.studies.figures.command import add_parser as add_figures_parser
 
-    add_figures_parser(sub)
+    s = add_figures_parser(sub)
+    ndof.add_figures_options(s)
+    s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_figures))
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
     s.add_argument("--out", type=_path, default="out/demo", help="report folder (default out/demo)")

@@ -25,7 +25,8 @@ from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
            "add_sweep_options", "check_options", "load", "gains_of", "dispatch",
-           "cmd_design", "cmd_orbit", "cmd_continue", "cmd_simulate", "cmd_sweep"]
+           "add_figures_options", "cmd_design", "cmd_orbit", "cmd_continue", "cmd_simulate",
+           "cmd_sweep", "cmd_figures"]
 
 #: Options of the 1-DOF commands that a model file replaces (refused with --model).
 ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--c1", "--c2",
@@ -569,4 +570,45 @@ def cmd_sweep(args):
     if summary["failed"]:
         first = next(e for e in res.errors if e)
         lines.append(f"  failed points     : {summary['failed']} (first: {first})")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- figures
+def add_figures_options(parser) -> None:
+    """--model and --mu of ``figures --model``."""
+    add_model_option(parser)
+    parser.add_argument("--mu", type=_finite,
+                        help="with --model: the design family's member drawn (default: the "
+                             "middle of the widest admissible interval)")
+
+
+def cmd_figures(args):
+    """figures --model FILE [--out DIR] [--mu MU] [--quick] (docs/ndof_commands.md)."""
+    import sys
+    from dataclasses import replace
+
+    from grazing_control.studies.figures.ndof import DEFAULT, QUICK, make_ndof_figures
+
+    model = load(args.model)
+    settings = replace(QUICK if args.quick else DEFAULT, mu=args.mu)
+    out = args.out if args.out != "out/figures" else "out/figures_ndof"
+    log = None if args.json else (lambda line: print(line, file=sys.stderr))
+    numbers = make_ndof_figures(model, out, settings, model_file=args.model,
+                                workers=args.workers, log=log)
+    if args.json:
+        return _nulls(numbers)
+    m = numbers["multipliers"]
+    lines = [f"n-DOF figures of {args.model} in {out}: ndof_diagram.png, ndof_multipliers.png, "
+             "ndof_scene.png, ndof_figures.json",
+             f"  mu = {numbers['mu']:.6g} ({numbers['mu_chosen']})"]
+    for label, entry in m.items():
+        if not isinstance(entry, dict):
+            continue
+        slope = entry["fitted_exponent"]
+        lines.append(f"  {label:16s}: fitted exponent "
+                     f"{'n/a' if slope is None else f'{slope:.4f}'} over {entry['fit_points']} "
+                     f"points; smallest |Delta d| reached {entry['smallest_delta_d_found']}")
+    sc = numbers["scene"]
+    lines.append(f"  scene at Delta d = {sc['delta_d']:g}: final distance to the controlled "
+                 f"orbit {sc['final_distance']}")
     return "\n".join(lines)
