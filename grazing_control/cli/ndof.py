@@ -334,7 +334,9 @@ def _orbit_json(o):
             "v_minus": o.v_minus, "section_pi2": o.physical.tolist(),
             "section_pi2_deviation": o.state.tolist(),
             "multipliers": _complex_list(o.multipliers), "stable": o.stable,
-            "guess": o.guess}
+            "guess": o.guess, "branch": "grazing" if o.near_grazing else "other",
+            "prediction_offset": o.prediction_offset if math.isfinite(o.prediction_offset)
+            else None}
 
 
 def cmd_orbit(args):
@@ -362,6 +364,10 @@ def cmd_orbit(args):
         f"(|max| {np.max(np.abs(o.multipliers)):.6g}; shooting, {seconds:.3g} s)",
         f"  stable        = {o.stable}",
         f"  found from    : {o.guess}",
+        f"  branch        = " + ("born at grazing (the local map's prediction, "
+                                 f"{o.prediction_offset:.2g} relative away)" if o.near_grazing
+                                 else "another 1/1 orbit, not the one born at grazing "
+                                      "(docs/ndof_commands.md)"),
     ])
 
 

@@ -4,8 +4,9 @@
 
 * (a) ``ndof_diagram.png``: the brute-force bifurcation diagram on Pi2 against Delta d
   near grazing, uncontrolled (:func:`grazing_control.studies.ndof.diagram.diagram`);
-* (b) ``ndof_multipliers.png``: max |lambda| of the 1/1 orbit against |Delta d| on
-  log-log axes (:func:`grazing_control.studies.ndof.branch.multiplier_scaling`):
+* (b) ``ndof_multipliers.png``: max |lambda| of the 1/1 orbit born at grazing against
+  |Delta d| on log-log axes, on the side of grazing where it exists
+  (:func:`grazing_control.studies.ndof.branch.grazing_side`) (:func:`grazing_control.studies.ndof.branch.multiplier_scaling`):
   uncontrolled, with a gain of the design family (bounded, the predicted limit
   :func:`grazing_control.dynamics.ndof_design.limit_multipliers` dashed) and with the gain
   that cancels only w^T N u (and G(1); ``cancel_first_markov``), each with its fitted
@@ -82,9 +83,10 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     """The three curves of (b) with their fitted exponents and the predicted limit."""
     from grazing_control.dynamics.ndof_design import (cancel_first_markov, gain_family,
                                                       limit_multipliers)
-    from grazing_control.studies.ndof.branch import fit_exponent, multiplier_scaling
+    from grazing_control.studies.ndof.branch import (fit_exponent, grazing_side,
+                                                     multiplier_scaling)
 
-    deltas = -np.geomspace(settings.scaling_from, settings.scaling_to, settings.scaling_points)
+    sizes = np.geomspace(settings.scaling_from, settings.scaling_to, settings.scaling_points)
     cases = [("uncontrolled", None, "tab:red"),
              (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu)), "tab:green"),
              ("cancels only w^T N u (and G(1))",
@@ -92,14 +94,16 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     limit = float(np.max(np.abs(limit_multipliers(model, mu))))
     curves, numbers = [], {}
     for label, k, color in cases:
-        sc = multiplier_scaling(model, k, deltas)
+        side = grazing_side(model, k, settings.fit_below)
+        sc = multiplier_scaling(model, k, side * sizes)
         big = sc.largest
         near = np.abs(sc.delta_d) <= settings.fit_below
         slope = fit_exponent(sc.delta_d[near], big[near])
         curve = {"delta_d": sc.delta_d, "largest": big, "label": label, "color": color,
                  "slope": slope}
         ok = np.isfinite(big)
-        entry = {"gains": None if k is None else k.tolist(), "delta_d": sc.delta_d.tolist(),
+        entry = {"gains": None if k is None else k.tolist(), "side": side,
+                 "delta_d": sc.delta_d.tolist(),
                  "largest": [_finite_or_none(x) for x in big],
                  "fitted_exponent": _finite_or_none(slope),
                  "fit_points": int(np.sum(near & ok)),

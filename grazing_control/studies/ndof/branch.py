@@ -1,22 +1,25 @@
 """The 1/1 orbit of an n-DOF model near grazing: prediction, shooting, multipliers vs Delta d.
 
-The prediction is the leading-order local map of docs/theory_ndof.md ("Local map near
-grazing"), written on Pi2 (docs/ndof_commands.md, "The starting guess"). With the state z
-sampled on Pi2 before the kick (deviation from the grazing orbit), the kick
-K = I + b k^T, the flow Phi_a from Pi2 to the next Pi1 and Phi_b from Pi1 to Pi2,
+The prediction is the local map near grazing of docs/theory_ndof.md ("Local map near
+grazing"), written on Pi2 and carried to order H (docs/ndof_commands.md, "The starting
+guess"). With the state z sampled on Pi2 before the kick (deviation from the grazing
+orbit), the kick K = I + b k^T, the flow Phi_a from Pi2 to the next Pi1 and Phi_b from
+Pi1 to Pi2, P(z) = Phi_b D(Phi_a K z), where on Pi1, for the free flight
+x_w(t) = y_w + v_w t - |a| t^2 / 2 of the wall coordinate (|a| = omega^2 d*, the
+grazing acceleration of the harmonic response),
 
-    P(z) = Phi_b D(Phi_a K z),    D(y) = y + u sqrt(H),
-    H = w^T y + (e_{v_i_w}^T y)^2 / (2 |a|) - Delta d,   u = -(1 + r) omega sqrt(2 d*) e_{v_i_w},
+    H = y_w + v_w^2 / (2 |a|) - Delta d            (largest penetration)
+    v- = sqrt(2 |a| H),  t_i = (v_w - v-) / |a|     (impact velocity and time)
+    D(y) = y - (1 + r) v- e_{v_w} + (1 + r) v- t_i e_{x_w}     (H > 0; else D(y) = y)
 
-(H: the largest penetration of the free flight x_w + v_w t - |a| t^2 / 2; u: the
-velocity jump of the wall coordinate, v- = sqrt(2 |a| H) with the grazing acceleration
-|a| = omega^2 d* of the harmonic response). With N = Phi_a K Phi_b, a fixed point has
-y = (I - N)^-1 N u s at Pi1, and s = sqrt(H) solves s^2 (1 - c) = G1 s - Delta d with
-G1 = w^T (I - N)^-1 N u = G(1), the singular transfer function at lambda = 1, and
-c = (e_v^T (I - N)^-1 N u)^2 / (2 |a|): the positive root is the impact of the predicted
-1/1 orbit. The velocity term is kept because on the design family (G == 0, so
-w^T y = 0) it is of the order of H itself: without it the prediction is off by a
-relative O(1) (measured: 40 % on the n = 1 file at c2 = -1). Newton shooting
+(the velocity jump of the impact, and the position it leaves at the section time when
+flowed back along the parabola). Leading order, D(y) = y + u s, u = -(1 + r) sqrt(2|a|)
+e_{v_w}, s = sqrt(H); with N = Phi_a K Phi_b a fixed point has y = (I - N)^-1 N u s and
+s^2 (1 - c) = G(1) s - Delta d, G(1) = w^T (I - N)^-1 N u, c = (e_v^T (I - N)^-1 N u)^2
+/ (2 |a|). Newton's method on y = N D(y) refines that closed form. Both order-H terms
+matter on the design family, where G == 0 makes w^T y of order H: without the velocity
+term the guess was 40 % off on the n = 1 file at c2 = -1, without the position term
+80 % off on a 3-mass chain at mu = 0.3 (both independent of Delta d). Newton shooting
 (:func:`grazing_control.dynamics.shooting.find_periodic`) on the exact map then gives the
 orbit and its monodromy; the prediction is only its starting guess.
 """
@@ -36,9 +39,14 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
-           "smooth_map", "predicted_orbit", "orbit_11", "multiplier_scaling", "fit_exponent"]
+           "smooth_map", "local_map", "predicted_orbit", "grazing_side", "orbit_11",
+           "multiplier_scaling", "fit_exponent"]
 
 TWO_PI = 2.0 * math.pi
+#: An orbit within this relative distance of the local map's prediction is the one born
+#: at grazing (measured offsets: O(sqrt|Delta d|), below 1e-2 at |Delta d| = 1e-4 on the
+#: shipped models and a 3-mass chain; another 1/1 orbit is O(1) or more away).
+NEAR = 0.25
 
 
 class OrbitNotFound(RuntimeError):
@@ -48,7 +56,9 @@ class OrbitNotFound(RuntimeError):
 class NdofOrbit(NamedTuple):
     """A 1/1 orbit: Pi2 state (deviation, before the kick), its physical value, the
     Floquet multipliers (decreasing modulus), impact time since the sample, phase and
-    velocity v-, and which starting guess converged."""
+    velocity v-, which starting guess converged, and the relative distance of the orbit
+    to the local map's prediction (inf without one): the orbit is the one born at
+    grazing when it is small (:attr:`near_grazing`, below :data:`NEAR`)."""
 
     delta_d: float
     state: np.ndarray
@@ -59,10 +69,16 @@ class NdofOrbit(NamedTuple):
     impact_phase: float
     v_minus: float
     guess: str
+    prediction_offset: float = math.inf
 
     @property
     def stable(self) -> bool:
         return bool(np.max(np.abs(self.multipliers)) < 1.0)
+
+    @property
+    def near_grazing(self) -> bool:
+        """The orbit is the local map's (born at grazing), not another 1/1 orbit."""
+        return bool(self.prediction_offset < NEAR)
 
 
 def with_delta_d(model, delta_d: float):
@@ -103,35 +119,87 @@ def smooth_map(model, gains=None):
     return phi_a @ K @ phi_b, phi_a, phi_b, K
 
 
+def local_map(model, y, delta_d: float) -> np.ndarray:
+    """The discontinuity map D on Pi1 to order H (module docstring): identity when the
+    free flight misses the wall (H <= 0), else the jump of the parabola's impact."""
+    flow = NdofFlow.of(model)
+    n, w, v = model.n, model.i_w, model.n + model.i_w
+    acc = model.omega ** 2 * flow.d_star
+    h = y[w] + y[v] ** 2 / (2.0 * acc) - delta_d
+    out = np.array(y, dtype=float)
+    if not h > 0.0:
+        return out
+    vm = math.sqrt(2.0 * acc * h)
+    out[v] -= (1.0 + model.r) * vm
+    out[w] += (1.0 + model.r) * vm * (y[v] - vm) / acc
+    return out
+
+
 def predicted_orbit(model, gains=None, delta_d: float | None = None):
-    """Leading-order 1/1 orbit on Pi2 and its s = sqrt(H) (module docstring), or
-    (None, nan) when the local map has no impacting fixed point there."""
+    """The 1/1 orbit of the local map on Pi2 and its s = sqrt(H) (module docstring), or
+    (None, nan) when the local map has no impacting fixed point there.
+
+    First the leading order (closed form in s), then Newton's method on
+    y = N D(y) with :func:`local_map` (finite-difference Jacobian, a few steps)."""
     dd = model.delta_d if delta_d is None else float(delta_d)
     flow = NdofFlow.of(model)
     n, n2 = model.n, 2 * model.n
     N, _phi_a, phi_b, _K = smooth_map(model, gains)
+    acc = model.omega ** 2 * flow.d_star
     u = np.zeros(n2)
-    u[n + model.i_w] = -(1.0 + model.r) * model.omega * math.sqrt(2.0 * flow.d_star)
-    w = np.zeros(n2)
-    w[model.i_w] = 1.0
+    u[n + model.i_w] = -(1.0 + model.r) * math.sqrt(2.0 * acc)
     try:
         y_unit = np.linalg.solve(np.eye(n2) - N, N @ u)
     except np.linalg.LinAlgError:
         return None, math.nan
-    g1 = float(w @ y_unit)
-    # H = w^T y + v_w^2 / (2 |a|) - Delta d: the velocity term is of the order of H when
-    # y ~ s (on the family, where w^T y = 0), so it stays: s^2 (1 - c) - G1 s + Delta d = 0
-    c = float(y_unit[n + model.i_w]) ** 2 / (2.0 * model.omega ** 2 * flow.d_star)
+    g1 = float(y_unit[model.i_w])
+    c = float(y_unit[n + model.i_w]) ** 2 / (2.0 * acc)
     s = math.nan
-    for a in ((1.0 - c), 1.0):
+    for a in ((1.0 - c), 1.0):   # the smallest positive root: the orbit born at grazing
         disc = g1 * g1 - 4.0 * a * dd
         if a > 0.0 and disc >= 0.0:
-            s = (g1 + math.sqrt(disc)) / (2.0 * a)
-            if s > 0.0:
+            roots = [x for x in ((g1 - math.sqrt(disc)) / (2.0 * a),
+                                 (g1 + math.sqrt(disc)) / (2.0 * a)) if x > 0.0]
+            if roots:
+                s = min(roots)
                 break
     if not s > 0.0:
         return None, math.nan
-    return phi_b @ (y_unit * s + u * s), s
+    y = y_unit * s
+
+    def residual(y):
+        return N @ local_map(model, y, dd) - y
+
+    for _ in range(8):   # Newton on the order-H local map
+        r = residual(y)
+        scale = max(float(np.max(np.abs(y))), 1e-300)
+        if float(np.max(np.abs(r))) <= 1e-15 * scale:
+            break
+        h = 1e-7 * scale
+        J = np.column_stack([(residual(y + h * e) - residual(y - h * e)) / (2 * h)
+                             for e in np.eye(n2)])
+        try:
+            y = y - np.linalg.solve(J, r)
+        except np.linalg.LinAlgError:
+            break
+    d = local_map(model, y, dd)
+    h = y[model.i_w] + y[n + model.i_w] ** 2 / (2.0 * acc) - dd
+    if not (np.all(np.isfinite(d)) and h > 0.0):
+        return None, math.nan
+    return phi_b @ d, math.sqrt(h)
+
+
+def grazing_side(model, gains=None, size: float = 1e-8) -> float:
+    """-1 or +1: the sign of Delta d on which the local map has a 1/1 orbit born at
+    grazing, i.e. the side whose predicted s at |Delta d| = ``size`` is the smaller
+    (s ~ |Delta d| or sqrt|Delta d| there, O(1) on the other side); -1 when neither has
+    one."""
+    found = []
+    for sign in (-1.0, 1.0):
+        _z, s = predicted_orbit(model, gains, sign * size)
+        if s > 0.0:
+            found.append((s, sign))
+    return min(found)[1] if found else -1.0
 
 
 def _multipliers(pmap, monodromy, impacts):
@@ -178,9 +246,11 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
                 imp = o.impacts[0]
                 lam = _multipliers(pmap, o.monodromy, o.impacts)
                 flow = NdofFlow.of(model)
+                offset = math.inf if pred is None else float(
+                    np.linalg.norm(o.state - pred) / max(np.linalg.norm(pred), 1e-300))
                 return NdofOrbit(model.delta_d, o.state, flow.to_physical(flow.tau2, o.state),
                                  lam, o.monodromy, float(imp.dt), float(imp.phase),
-                                 float(imp.v_minus), name)
+                                 float(imp.v_minus), name, offset)
             why.append(f"{name}: converged to an orbit with {len(o.impacts)} impacts per period")
         if i == len(guesses) and not tried_simulation:
             tried_simulation = True
@@ -209,8 +279,9 @@ class Scaling(NamedTuple):
 
 
 def multiplier_scaling(model, gains, deltas) -> Scaling:
-    """The 1/1 orbit's multipliers at each Delta d of ``deltas`` (each by :func:`orbit_11`;
-    the previous point's orbit is tried after the prediction)."""
+    """The multipliers of the 1/1 orbit born at grazing at each Delta d of ``deltas`` (each
+    by :func:`orbit_11`, the previous point's orbit tried after the prediction); another
+    1/1 orbit (not :attr:`NdofOrbit.near_grazing`) counts as not found."""
     deltas = np.asarray(deltas, dtype=float).reshape(-1)
     n2 = 2 * model.n
     lam = np.full((deltas.size, n2), np.nan, dtype=complex)
@@ -223,6 +294,12 @@ def multiplier_scaling(model, gains, deltas) -> Scaling:
             o = orbit_11(model, gains, dd, extra_guesses=extra)
         except (OrbitNotFound, ValueError) as exc:
             errors.append(str(exc))
+            prev = None
+            continue
+        if not o.near_grazing:
+            errors.append(f"the 1/1 orbit found at delta_d={dd!r} is not the one born at "
+                          f"grazing (v- = {o.v_minus:.3g}, {o.prediction_offset:.3g} away "
+                          "from the local map's prediction)")
             prev = None
             continue
         lam[j], vm[j] = o.multipliers, o.v_minus
