@@ -27,7 +27,8 @@ import pytest
 from grazing_control.cli.commands import main
 from grazing_control.dynamics.ndof_map import NdofMap
 from grazing_control.oscillator.ndof import load_model
-from grazing_control.studies.ndof.branch import smooth_map, with_delta_d
+from grazing_control.dynamics.ndof_design import gain_family
+from grazing_control.studies.ndof.branch import grazing_side, smooth_map, with_delta_d
 
 ROOT = Path(__file__).resolve().parents[1]
 ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
@@ -148,9 +149,14 @@ def test_human_reports(capsys, three):
 
 # ------------------------------------------------------------------ a 3-DOF model
 def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, three):
-    for extra in ((), ("--mu", "0")):
-        got = run_json(capsys, "orbit", "--model", three, "--delta-d", "-1e-5", *extra)
-        model = with_delta_d(load_model(three), -1e-5)
+    mu = run_json(capsys, "design", "--model", three)["mu"]
+    for extra in ((), ("--mu", str(mu))):
+        side = grazing_side(load_model(three), None if not extra else
+                            gain_family(load_model(three), mu))
+        dd = f"{side * 1e-5:g}"
+        got = run_json(capsys, "orbit", "--model", three, "--delta-d", dd, *extra)
+        assert got["branch"] == "grazing" and got["grazing_side"] == side
+        model = with_delta_d(load_model(three), float(dd))
         pmap = NdofMap(model, None if not extra else got["gains"])
         z = np.array(got["section_pi2_deviation"])
         step = pmap.step(z)
@@ -167,8 +173,10 @@ def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, thre
 
 
 def test_continue_on_three_masses_reaches_towards_grazing(capsys, three):
+    mu = run_json(capsys, "design", "--model", three)["mu"]
     got = run_json(capsys, "continue", "--model", three, "--from", "-1e-4", "--to", "-1e-9",
-                   "--points", "6", "--mu", "0")
+                   "--points", "6", "--mu", str(mu))
+    assert got["start_branch"] == "grazing"
     dd = [p["delta_d"] for p in got["branch"]]
     assert len(dd) >= 2 and dd[0] == pytest.approx(-1e-4)
     assert all(p["impacts"] == 1 for p in got["branch"])

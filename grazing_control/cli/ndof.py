@@ -341,15 +341,24 @@ def _orbit_json(o):
 
 def cmd_orbit(args):
     """orbit --model FILE --delta-d DD [gains] (docs/ndof_commands.md)."""
-    from grazing_control.studies.ndof.branch import orbit_11, with_delta_d
+    from grazing_control.studies.ndof.branch import grazing_side, orbit_11, with_delta_d
 
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = gains_of(args, model)
     t0 = time.perf_counter()
-    o = orbit_11(model, k)
+    side = grazing_side(model, k)
+    try:
+        o = orbit_11(model, k)
+    except RuntimeError as exc:
+        if side * args.delta_d < 0.0:
+            raise RuntimeError(f"{exc}; note: the local map puts the 1/1 orbit born at "
+                               f"grazing on the side Delta d {'>' if side > 0 else '<'} 0 for "
+                               "this model and gains") from None
+        raise
     seconds = time.perf_counter() - t0
     out = _header(model, args.model)
     out.update(_orbit_json(o))
+    out["grazing_side"] = side
     out.update(gains=None if k is None else k.tolist(), mu=mu, control=how, seconds=seconds)
     if args.json:
         return out
@@ -373,16 +382,16 @@ def cmd_orbit(args):
 
 # ---------------------------------------------------------------------------- continue
 def continuation_values(start: float, stop: float, points: int) -> np.ndarray:
-    """Delta d from ``start`` to ``stop``: log-spaced in |Delta d| when both are < 0 (points
-    crowd towards grazing), down to 1e-12 |start| when ``stop`` is 0; else linear."""
+    """Delta d from ``start`` to ``stop``: log-spaced in |Delta d| when both have one sign
+    (points crowd towards grazing; ``stop`` = 0: down to 1e-12 |start|), else linear."""
     if points < 2:
         raise ParameterError(f"points={points!r} is invalid: valid range is points >= 2")
     if start == stop:
         raise ParameterError("--from and --to must differ")
-    if start < 0.0 and stop < 0.0:
-        return -np.geomspace(-start, -stop, points)
-    if start < 0.0 and stop == 0.0:
-        return -np.geomspace(-start, -start * 1e-12, points)
+    if start != 0.0 and stop == 0.0:
+        stop = start * 1e-12
+    if start * stop > 0.0:
+        return math.copysign(1.0, start) * np.geomspace(abs(start), abs(stop), points)
     return np.linspace(start, stop, points)
 
 
@@ -415,6 +424,7 @@ def cmd_continue(args):
                           "multipliers": _complex_list(b.multipliers)}
                          for b in branch.bifurcations],
         "stopped": branch.stopped,
+        "start_branch": "grazing" if first.near_grazing else "other",
         "multipliers_limit": None if limit is None else _complex_list(limit),
         "seconds": seconds,
     })
@@ -432,6 +442,9 @@ def cmd_continue(args):
     for b in branch.bifurcations:
         lines.append(f"  {b.type:16s} at Delta d = {b.value:.15g}")
     lines.append(f"  stopped: {branch.stopped}")
+    if not first.near_grazing:
+        lines.append("  note: the orbit at the start is another 1/1 orbit, not the one born at "
+                     "grazing (docs/ndof_commands.md)")
     if limit is not None:
         lines.append(f"  predicted limit |lambda0| = "
                      f"{', '.join(f'{abs(z):.6g}' for z in limit)} (Delta d -> 0-)")

@@ -39,7 +39,7 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
-           "smooth_map", "local_map", "predicted_orbit", "grazing_side", "orbit_11",
+           "smooth_map", "local_map", "predicted_orbit", "grazing_side", "monodromy_det", "orbit_11",
            "multiplier_scaling", "fit_exponent"]
 
 TWO_PI = 2.0 * math.pi
@@ -202,11 +202,27 @@ def grazing_side(model, gains=None, size: float = 1e-8) -> float:
     return min(found)[1] if found else -1.0
 
 
-def _multipliers(pmap, monodromy, impacts):
+def monodromy_det(model, gains, impacts: int) -> float:
+    """det of DP over one period with ``impacts`` impacts: det Phi(T) = e^{T tr A} =
+    e^{-T tr(M^-1 C)}, det S = r^2 per impact (the saltation matrix, docs/theory_ndof_flow.md)
+    and det K = 1 + k_{v_i_a} (matrix determinant lemma); the n-DOF counterpart of
+    OneDOF.jacobian_det (dynamics/model.py)."""
+    k = _gains(model, gains)
+    det_k = 1.0 if k is None else 1.0 + float(k[model.n + model.i_a])
+    trace = float(np.trace(np.linalg.solve(model.M, model.C)))
+    return math.exp(-trace * model.period) * model.r ** (2 * impacts) * det_k
+
+
+def _multipliers(pmap, model, gains, monodromy, impacts):
+    """Floquet multipliers; the exact determinant (the map's, else :func:`monodromy_det`)
+    keeps the small multiplier of a 2x2 monodromy accurate when the large one grows like
+    1/v- (dynamics/shooting.floquet_multipliers)."""
     det = None
-    jd = getattr(pmap, "jacobian_det", None)
-    if jd is not None and not any(getattr(i, "sticking", False) for i in impacts):
-        det = jd(1, len(impacts))
+    if not any(getattr(i, "sticking", False) for i in impacts):
+        jd = getattr(pmap, "jacobian_det", None)
+        det = jd(1, len(impacts)) if jd is not None else None
+        if det is None:
+            det = monodromy_det(model, gains, len(impacts))
     return floquet_multipliers(monodromy, det)
 
 
@@ -244,7 +260,7 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
         else:
             if len(o.impacts) == 1 and o.impacts[0].v_minus > 0.0:
                 imp = o.impacts[0]
-                lam = _multipliers(pmap, o.monodromy, o.impacts)
+                lam = _multipliers(pmap, model, gains, o.monodromy, o.impacts)
                 flow = NdofFlow.of(model)
                 offset = math.inf if pred is None else float(
                     np.linalg.norm(o.state - pred) / max(np.linalg.norm(pred), 1e-300))
