@@ -18,6 +18,8 @@ Contract (docs/ndof_commands.md):
 Commands run in-process (``main(argv)``) so that the numpy/scipy import is paid once.
 """
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
@@ -49,18 +51,19 @@ i_a: 2
 """
 
 
-def run(capsys, *argv):
+def run(_capsys, *argv):
     """(status, stdout, stderr) of ``grazing ARGV`` (argparse's errors exit: caught)."""
-    try:
-        code = main(list(argv))
-    except SystemExit as exc:
-        code = exc.code
-    cap = capsys.readouterr()
-    return code, cap.out, cap.err
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(argv))
+        except SystemExit as exc:
+            code = exc.code
+    return code, out.getvalue(), err.getvalue()
 
 
-def run_json(capsys, *argv):
-    code, out, err = run(capsys, *argv, "--json")
+def run_json(_capsys, *argv):
+    code, out, err = run(None, *argv, "--json")
     assert code == 0, err
     return json.loads(out)
 
@@ -74,6 +77,12 @@ def three(tmp_path_factory):
     path = tmp_path_factory.mktemp("models") / "three_mass_chain.yaml"
     path.write_text(THREE_MASS, encoding="utf-8")
     return str(path)
+
+
+@pytest.fixture(scope="module")
+def design3(three):
+    """``design --model THREE --json`` (run once: the admissible set costs seconds)."""
+    return run_json(None, "design", "--model", three)
 
 
 # ------------------------------------------------------------------ n = 1 is the 1-DOF
@@ -90,9 +99,13 @@ def test_design_of_the_n1_file_is_the_1dof_design(capsys):
     assert got["admissible"] == ref["admissible"]
 
 
-@pytest.mark.parametrize("gains", [(), ("--c2", "-1")])
-def test_orbit_of_the_n1_file_is_the_1dof_orbit(capsys, gains):
-    ndof = ("--free-gain", "v0=-1") if gains else ()
+@pytest.mark.parametrize("controlled", [False, True])
+def test_orbit_of_the_n1_file_is_the_1dof_orbit(capsys, controlled):
+    """The same gains on both routes (the design's c1 is checked above): the orbit."""
+    gains, ndof = (), ()
+    if controlled:
+        c1 = run_json(capsys, "design", "--c2", "-1")["c1"]
+        gains, ndof = ("--c1", repr(c1), "--c2", "-1"), (f"--gains={c1!r},-1",)
     ref = run_json(capsys, "orbit", "--delta-d", "-1e-6", *gains)
     got = run_json(capsys, "orbit", "--model", ONE, "--delta-d", "-1e-6", *ndof)
     np.testing.assert_allclose(lam(got["multipliers"]), lam(ref["multipliers"]),
@@ -100,7 +113,7 @@ def test_orbit_of_the_n1_file_is_the_1dof_orbit(capsys, gains):
     assert got["v_minus"] == pytest.approx(ref["v_minus"], rel=1e-10)
     assert got["impact_phase"] == pytest.approx(ref["impact_phase"], abs=1e-12)
     np.testing.assert_allclose(got["section_pi2"], ref["section_pi2"], rtol=0, atol=1e-12)
-    assert got["stable"] == ref["stable"]
+    assert got["stable"] == ref["stable"] and got["branch"] == ref["branch"] == "grazing"
 
 
 # ------------------------------------------------------------------ the 2-mass example
@@ -120,9 +133,12 @@ def test_design_gains_are_on_the_family(capsys):
     assert got["transmission_zeros_max_modulus"] == pytest.approx(np.max(np.abs(zeros)))
 
 
-def test_design_out_writes_the_gains_only_when_admissible(capsys, tmp_path, three):
+def test_design_out_writes_the_gains_only_when_admissible(capsys, tmp_path, three, design3):
     out = tmp_path / "gains.yaml"
-    d = run_json(capsys, "design", "--model", three)
+    d = design3
+    assert d["admissible"] and d["admissible_mu"]
+    lo, hi = d["admissible_mu"][0]
+    assert lo < d["mu"] < hi
     if d["admissible"]:
         code, _o, err = run(capsys, "design", "--model", three, "--mu", str(d["mu"]),
                             "--out", str(out))
@@ -138,18 +154,18 @@ def test_design_out_writes_the_gains_only_when_admissible(capsys, tmp_path, thre
 
 
 def test_human_reports(capsys, three):
-    code, out, err = run(capsys, "design", "--model", three)
+    code, out, err = run(capsys, "design", "--model", ONE, "--mu", "0.1")
     assert code == 0, err
     for word in ("transmission zeros", "admissible mu", "gains k", "lambda0", "gamma1"):
         assert word in out
-    code, out, err = run(capsys, "orbit", "--model", three, "--delta-d", "-1e-5")
+    code, out, err = run(capsys, "orbit", "--model", three, "--delta-d", "1e-5")
     assert code == 0, err
-    assert "1/1 orbit" in out and "multipliers" in out
+    assert "1/1 orbit" in out and "multipliers" in out and "born at grazing" in out
 
 
 # ------------------------------------------------------------------ a 3-DOF model
-def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, three):
-    mu = run_json(capsys, "design", "--model", three)["mu"]
+def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, three, design3):
+    mu = design3["mu"]
     for extra in ((), ("--mu", str(mu))):
         side = grazing_side(load_model(three), None if not extra else
                             gain_family(load_model(three), mu))
@@ -172,8 +188,8 @@ def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, thre
         np.testing.assert_allclose(mult, fd, atol=1e-5 * max(1.0, big))
 
 
-def test_continue_on_three_masses_reaches_towards_grazing(capsys, three):
-    mu = run_json(capsys, "design", "--model", three)["mu"]
+def test_continue_on_three_masses_reaches_towards_grazing(capsys, three, design3):
+    mu = design3["mu"]
     got = run_json(capsys, "continue", "--model", three, "--from", "-1e-4", "--to", "-1e-9",
                    "--points", "6", "--mu", str(mu))
     assert got["start_branch"] == "grazing"
@@ -187,8 +203,8 @@ def test_continue_on_three_masses_reaches_towards_grazing(capsys, three):
     assert biggest < 10 * max(1.0, limit)  # on the family: bounded
 
 
-def test_simulate_with_control_converges_on_three_masses(capsys, three):
-    d = run_json(capsys, "design", "--model", three)
+def test_simulate_with_control_converges_on_three_masses(capsys, three, design3):
+    d = design3
     assert d["transmission_zeros_max_modulus"] < 1
     got = run_json(capsys, "simulate", "--model", three, "--delta-d", "-1e-5",
                    "--periods", "150", "--control-after", "30", "--mu", str(d["mu"]))

@@ -226,6 +226,17 @@ def _intervals(raw):
     return [(float(lo), float(hi)) for lo, hi in raw]
 
 
+def _intersection(a, b):
+    """The intervals common to two unions of disjoint open intervals."""
+    out = []
+    for lo1, hi1 in a:
+        for lo2, hi2 in b:
+            lo, hi = max(lo1, lo2), min(hi1, hi2)
+            if lo < hi:
+                out.append((lo, hi))
+    return sorted(out)
+
+
 def _json_interval(iv):
     return [x if math.isfinite(x) else None for x in iv]
 
@@ -249,7 +260,8 @@ def cmd_design(args):
     k0 = np.asarray(nd.gain_family(model, 0.0), dtype=float)
     k1 = np.asarray(nd.gain_family(model, 1.0), dtype=float) - k0
     zeros = np.asarray(nd.transmission_zeros(model), dtype=complex)
-    intervals = _intervals(nd.admissible_mu(model))
+    sets = {c: _intervals(nd.admissible_mu(model, c)) for c in ("impacting", "non-impacting")}
+    intervals = _intersection(sets["impacting"], sets["non-impacting"])   # "combined"
     given = [f for f, v in (("--mu", args.mu), ("--free-gain", args.free_gain)) if v is not None]
     if len(given) > 1:
         raise ParameterError("--mu and --free-gain are given: give one of them")
@@ -274,7 +286,6 @@ def cmd_design(args):
     conditions = {"limit_stable": bool(design.stable), "exists_impacting": bool(design.exists),
                   "free_stable": bool(design.free_stable)}
     admissible = bool(design.admissible)
-    sets = {c: _intervals(nd.admissible_mu(model, c)) for c in ("impacting", "non-impacting")}
     seconds = time.perf_counter() - t0
     out = _header(model, args.model)
     out.update({

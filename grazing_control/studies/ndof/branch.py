@@ -119,20 +119,30 @@ def smooth_map(model, gains=None):
     return phi_a @ K @ phi_b, phi_a, phi_b, K
 
 
-def local_map(model, y, delta_d: float) -> np.ndarray:
+def local_map(model, y, delta_d: float, jacobian: bool = False):
     """The discontinuity map D on Pi1 to order H (module docstring): identity when the
-    free flight misses the wall (H <= 0), else the jump of the parabola's impact."""
+    free flight misses the wall (H <= 0), else the jump of the parabola's impact. With
+    ``jacobian``, (D(y), dD/dy): with g = dH/dy = e_w + (v_w / |a|) e_v and
+    dv-/dy = |a| g / v-, dD/dy = I - (1 + r) e_v dv-^T
+    + ((1 + r) / |a|) e_w ((v_w - 2 v-) dv-^T + v- e_v^T)."""
     flow = NdofFlow.of(model)
     n, w, v = model.n, model.i_w, model.n + model.i_w
     acc = model.omega ** 2 * flow.d_star
     h = y[w] + y[v] ** 2 / (2.0 * acc) - delta_d
     out = np.array(y, dtype=float)
-    if not h > 0.0:
-        return out
-    vm = math.sqrt(2.0 * acc * h)
-    out[v] -= (1.0 + model.r) * vm
-    out[w] += (1.0 + model.r) * vm * (y[v] - vm) / acc
-    return out
+    jac = np.eye(out.size)
+    if h > 0.0:
+        vm = math.sqrt(2.0 * acc * h)
+        out[v] -= (1.0 + model.r) * vm
+        out[w] += (1.0 + model.r) * vm * (y[v] - vm) / acc
+        if jacobian:
+            g = np.zeros(out.size)
+            g[w], g[v] = 1.0, y[v] / acc
+            dvm = acc * g / vm
+            jac[v] -= (1.0 + model.r) * dvm
+            jac[w] += (1.0 + model.r) / acc * ((y[v] - 2.0 * vm) * dvm)
+            jac[w, v] += (1.0 + model.r) / acc * vm
+    return (out, jac) if jacobian else out
 
 
 def predicted_orbit(model, gains=None, delta_d: float | None = None):
@@ -140,7 +150,7 @@ def predicted_orbit(model, gains=None, delta_d: float | None = None):
     (None, nan) when the local map has no impacting fixed point there.
 
     First the leading order (closed form in s), then Newton's method on
-    y = N D(y) with :func:`local_map` (finite-difference Jacobian, a few steps)."""
+    y = N D(y) with :func:`local_map` and its Jacobian."""
     dd = model.delta_d if delta_d is None else float(delta_d)
     flow = NdofFlow.of(model)
     n, n2 = model.n, 2 * model.n
@@ -166,30 +176,27 @@ def predicted_orbit(model, gains=None, delta_d: float | None = None):
     if not s > 0.0:
         return None, math.nan
     y = y_unit * s
-
-    def residual(y):
-        return N @ local_map(model, y, dd) - y
-
-    for _ in range(8):   # Newton on the order-H local map
-        r = residual(y)
-        scale = max(float(np.max(np.abs(y))), 1e-300)
-        if float(np.max(np.abs(r))) <= 1e-15 * scale:
-            break
-        h = 1e-7 * scale
-        J = np.column_stack([(residual(y + h * e) - residual(y - h * e)) / (2 * h)
-                             for e in np.eye(n2)])
+    eye = np.eye(n2)
+    converged = False
+    for _ in range(12):   # Newton on y = N D(y), the order-H local map
+        d, jac = local_map(model, y, dd, jacobian=True)
         try:
-            y = y - np.linalg.solve(J, r)
+            step = np.linalg.solve(N @ jac - eye, y - N @ d)
         except np.linalg.LinAlgError:
             break
-    d = local_map(model, y, dd)
-    h = y[model.i_w] + y[n + model.i_w] ** 2 / (2.0 * acc) - dd
-    if not (np.all(np.isfinite(d)) and h > 0.0):
+        y = y + step
+        if not np.all(np.isfinite(y)):
+            break
+        if float(np.max(np.abs(step))) <= 1e-13 * max(float(np.max(np.abs(y))), 1e-300):
+            converged = True
+            break
+    h = y[model.i_w] + y[n + model.i_w] ** 2 / (2.0 * acc) - dd if converged else -1.0
+    if not h > 0.0:   # Newton found no impacting orbit of the local map near y0
         return None, math.nan
-    return phi_b @ d, math.sqrt(h)
+    return phi_b @ local_map(model, y, dd), math.sqrt(h)
 
 
-def grazing_side(model, gains=None, size: float = 1e-8) -> float:
+def grazing_side(model, gains=None, size: float = 1e-6) -> float:
     """-1 or +1: the sign of Delta d on which the local map has a 1/1 orbit born at
     grazing, i.e. the side whose predicted s at |Delta d| = ``size`` is the smaller
     (s ~ |Delta d| or sqrt|Delta d| there, O(1) on the other side); -1 when neither has
