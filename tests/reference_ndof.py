@@ -194,8 +194,10 @@ class NdofRef:
         pe = self.particular(tau)
         return [X[i] - pe[i] for i in range(2 * n)], impacts
 
-    def jacobian(self, z, gains=None, step=mpf("1e-15")):
-        """D(pi2_map) at z by central differences (truncation ~ step^2, far below 1e-12)."""
+    def jacobian(self, z, gains=None, step=mpf("1e-20")):
+        """D(pi2_map) at z by central differences: truncation ~ step^2 |D^3 P|, and near
+        grazing |D^3 P| ~ v-^-5 (1e28 at v- = 1e-6), rounding ~ 1e-50 / step: both far
+        below 1e-12 of |DP| for v- >= 1e-7."""
         m = 2 * self.n
         J = mp.zeros(m, m)
         z = [_f(x) for x in z]

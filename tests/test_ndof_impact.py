@@ -392,3 +392,9 @@ def test_no_trajectory_passes_through_the_wall():
             refused += 1
     assert runs > 35 and impacts > 80  # measured: 45 runs (5 refused), 101 impacts
     assert worst < 1e-12
+
+
+def test_impact_records_have_the_1dof_field_names():
+    """Generic code (shooting, continuation, the nodes) reads impacts of both cores alike."""
+    assert NdofImpact._fields == impact1.Impact._fields
+    assert ImpactCapError is impact1.ImpactCapError

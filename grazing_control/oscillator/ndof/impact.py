@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.oscillator.impact import (MAX_AMPLITUDE, ImpactCapError, InitialStateError,
-                                               NonFiniteStateError, _bracket, _danger_halfwidth,
+                                               NonFiniteStateError, _danger_halfwidth,
                                                _far_from_wall, _search)
 from grazing_control.oscillator.params import ParameterError
 
@@ -55,10 +55,6 @@ __all__ = ["NdofImpact", "NdofSegment", "ChatteringError", "ImpactCapError",
 
 TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
-
-# _bracket is used by _search (imported for the record: the whole interval logic is the
-# 1-DOF one, docs/theory.md section 2)
-_ = _bracket
 
 
 class NdofImpact(NamedTuple):
