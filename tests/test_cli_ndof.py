@@ -133,21 +133,25 @@ def test_design_gains_are_on_the_family(capsys):
     assert got["transmission_zeros_max_modulus"] == pytest.approx(np.max(np.abs(zeros)))
 
 
-def test_design_out_writes_the_gains_only_when_admissible(capsys, tmp_path, three, design3):
-    out = tmp_path / "gains.yaml"
+def test_design_chooses_an_admissible_mu_on_three_masses(design3):
     d = design3
+    assert d["n"] == 3 and len(d["gains"]) == 6 and len(d["transmission_zeros"]) == 5
     assert d["admissible"] and d["admissible_mu"]
-    lo, hi = d["admissible_mu"][0]
-    assert lo < d["mu"] < hi
-    if d["admissible"]:
-        code, _o, err = run(capsys, "design", "--model", three, "--mu", str(d["mu"]),
-                            "--out", str(out))
-        assert code == 0, err
-        import yaml
-        doc = yaml.safe_load(out.read_text())
-        params = next(iter(doc.values()))["ros__parameters"]
-        np.testing.assert_allclose(params["gains"], d["gains"], rtol=1e-15)
-    code, o, err = run(capsys, "design", "--model", three, "--mu", "5", "--out",
+    assert any(lo < d["mu"] < hi for lo, hi in d["admissible_mu"])
+    assert d["conditions"] == {"limit_stable": True, "exists_impacting": True,
+                               "free_stable": True}
+
+
+def test_design_out_writes_the_gains_only_when_admissible(capsys, tmp_path):
+    import yaml
+
+    out = tmp_path / "gains.yaml"
+    code, _o, err = run(capsys, "design", "--model", ONE, "--mu", "0.1", "--out", str(out))
+    assert code == 0, err
+    d = run_json(capsys, "design", "--model", ONE, "--mu", "0.1")
+    params = next(iter(yaml.safe_load(out.read_text()).values()))["ros__parameters"]
+    np.testing.assert_allclose(params["gains"], d["gains"], rtol=1e-15)
+    code, o, err = run(capsys, "design", "--model", ONE, "--mu", "5", "--out",
                        str(tmp_path / "bad.yaml"))
     assert code == 2 and o == "" and "not admissible" in err and err.count("\n") == 1
     assert not (tmp_path / "bad.yaml").exists()

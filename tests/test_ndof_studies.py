@@ -23,8 +23,8 @@ from grazing_control.dynamics.orbits import orbit_11 as orbit_11_1dof
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.studies.ndof.branch import (fit_exponent, multiplier_scaling, orbit_11,
-                                                 predicted_orbit, with_delta_d)
+from grazing_control.studies.ndof.branch import (fit_exponent, grazing_side,
+                                                 multiplier_scaling, orbit_11, predicted_orbit)
 from grazing_control.studies.ndof.diagram import diagram
 from grazing_control.studies.ndof.scene import control_scene
 
@@ -143,3 +143,44 @@ def test_quick_figure_set(tmp_path):
     assert fam["predicted_limit"] == pytest.approx(limit)
     assert fam["difference_to_limit_at_smallest"] < 1e-3
     assert nums["scene"]["final_distance"] < 1e-8
+
+
+# ------------------------------------------------------------------ acceptance, 2-mass
+# Issue 17's acceptance on config/models/two_mass_chain.yaml, with what the local map
+# (docs/ndof_commands.md, "The starting guess") says about the exponents: the singular
+# multiplier is ~ w^T N u / (2 s); s ~ |Delta d| / |G(1)| when G(1) != 0 (uncontrolled:
+# exponent -1, on the side Delta d ~ -G(1) s), s ~ sqrt|Delta d| when G(1) = 0; with
+# w^T N u = 0 too the growth is sqrt(w^T N^2 u / 2 s) ~ |Delta d|^-1/4.
+def test_two_mass_uncontrolled_grows_like_one_over_delta_d_on_its_side():
+    side = grazing_side(TWO)
+    sc = multiplier_scaling(TWO, None, side * np.geomspace(1e-5, 1e-7, 3))
+    assert all(e == "" for e in sc.errors), sc.errors
+    assert fit_exponent(sc.delta_d, sc.largest) == pytest.approx(-1.0, abs=0.02)
+    assert fit_exponent(sc.delta_d, sc.v_minus) == pytest.approx(1.0, abs=0.02)
+
+
+def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit():
+    from grazing_control.dynamics.ndof_design import transmission_zeros
+    from grazing_control.studies.figures.ndof import choose_mu
+
+    assert np.max(np.abs(transmission_zeros(TWO))) < 1.0   # the issue's premise
+    mu, _why = choose_mu(TWO)
+    k = gain_family(TWO, mu)
+    deltas = -np.geomspace(1e-4, 1e-10, 4)
+    sc = multiplier_scaling(TWO, k, deltas)
+    assert all(e == "" for e in sc.errors), sc.errors
+    limit = np.max(np.abs(limit_multipliers(TWO, mu)))
+    gap = np.abs(sc.largest - limit)
+    assert np.all(sc.largest < 1.0) and limit < 1.0
+    assert gap[-1] < 1e-4
+    assert fit_exponent(sc.delta_d, gap) == pytest.approx(0.5, abs=0.1)   # O(s)
+
+
+def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter():
+    from grazing_control.studies.figures.ndof import DEFAULT, markov_gain
+
+    k = markov_gain(TWO, 0.3, DEFAULT)
+    side = grazing_side(TWO, k)
+    sc = multiplier_scaling(TWO, k, side * np.geomspace(1e-6, 1e-8, 3))
+    assert all(e == "" for e in sc.errors), sc.errors
+    assert fit_exponent(sc.delta_d, sc.largest) == pytest.approx(-0.25, abs=0.02)

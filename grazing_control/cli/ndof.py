@@ -81,10 +81,11 @@ def add_gain_options(parser, *, markov: bool = False) -> None:
     g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
                    help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
     if markov:
-        g.add_argument("--cancel-first-markov", action="store_true",
-                       help="the gain that cancels only w^T N u (not the family: the singular "
-                            "eigenvalue then grows like |Delta d|^(-1/4) instead of staying "
-                            "bounded; docs/ndof_commands.md)")
+        g.add_argument("--cancel-first-markov", type=_finite, metavar="OFFSET",
+                       help="with --mu: the gain k(mu) + OFFSET d that cancels only w^T N u "
+                            "and G(1), d a unit vector off the family (the singular eigenvalue "
+                            "then grows like |Delta d|^(-1/4) instead of staying bounded; "
+                            "docs/ndof_commands.md)")
 
 
 def add_design_options(parser) -> None:
@@ -180,17 +181,24 @@ def family_member(model, name: str, value: float) -> float:
 
 
 def gains_of(args, model):
-    """(gains or None, mu or None, how): the gains of --gains / --mu / --free-gain /
-    --cancel-first-markov (at most one); None: uncontrolled."""
+    """(gains or None, mu or None, how): the gains of --gains / --mu / --free-gain (at most
+    one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled."""
+    offset = getattr(args, "cancel_first_markov", None)
     given = [f for f, v in (("--gains", getattr(args, "gains", None)),
                             ("--mu", getattr(args, "mu", None)),
-                            ("--free-gain", getattr(args, "free_gain", None)),
-                            ("--cancel-first-markov", getattr(args, "cancel_first_markov", False) or None))
-             if v is not None]
+                            ("--free-gain", getattr(args, "free_gain", None))) if v is not None]
+    if offset is not None:
+        if given != ["--mu"]:
+            raise ParameterError("--cancel-first-markov OFFSET needs --mu MU (the family member "
+                                 "it moves off by OFFSET), and neither --gains nor --free-gain")
+        from grazing_control.dynamics.ndof_design import cancel_first_markov
+
+        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=True),
+                       dtype=float)
+        return k, None, f"cancels only w^T N u and G(1): k(mu = {args.mu:g}) + {offset:g} d"
     if len(given) > 1:
         raise ParameterError(f"{' and '.join(given)} are given: give one of --gains, --mu, "
-                             "--free-gain" + (", --cancel-first-markov"
-                                              if hasattr(args, "cancel_first_markov") else ""))
+                             "--free-gain")
     if not given:
         return None, None, "uncontrolled"
     if given[0] == "--gains":
@@ -199,11 +207,8 @@ def gains_of(args, model):
             raise ParameterError(f"--gains has {k.size} values: the model has n = {model.n}, "
                                  f"give 2n = {2 * model.n} ({', '.join(coordinates(model))})")
         return k, None, "given"
-    from grazing_control.dynamics.ndof_design import cancel_first_markov, gain_family
+    from grazing_control.dynamics.ndof_design import gain_family
 
-    if given[0] == "--cancel-first-markov":
-        return (np.asarray(cancel_first_markov(model, smooth_branch=True), dtype=float), None,
-                "cancels only w^T N u (and G(1))")
     mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain)
     return np.asarray(gain_family(model, mu), dtype=float), mu, "design family"
 
@@ -633,6 +638,9 @@ def cmd_figures(args):
              f"  mu = {numbers['mu']:.6g} ({numbers['mu_chosen']})"]
     for label, entry in m.items():
         if not isinstance(entry, dict):
+            continue
+        if "error" in entry:
+            lines.append(f"  {label:16s}: not drawn ({entry['error']})")
             continue
         slope = entry["fitted_exponent"]
         lines.append(f"  {label:16s}: fitted exponent "

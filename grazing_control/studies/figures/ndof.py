@@ -46,6 +46,7 @@ class NdofFigureSettings:
     scaling_to: float = 1e-10
     scaling_points: int = 15
     fit_below: float = 1e-6              # fit exponents over |Delta d| <= fit_below
+    markov_offset: float = 0.05          # the cancel-first-Markov gain: k(mu) + this |k| d
     scene_delta_d: float = -5e-6         # (c) the scene
     scene_before: int = 300
     scene_after: int = 200
@@ -79,20 +80,33 @@ def choose_mu(model) -> tuple[float, str]:
     return (hi - 1.0 if math.isfinite(hi) else lo + 1.0), "inside an unbounded admissible interval"
 
 
+def markov_gain(model, mu: float, settings) -> np.ndarray:
+    """k(mu) + offset d: the gain that cancels only w^T N u and G(1)
+    (``ndof_design.cancel_first_markov``), ``offset`` = ``markov_offset`` |k(mu)|."""
+    from grazing_control.dynamics.ndof_design import cancel_first_markov, gain_family
+
+    size = float(np.linalg.norm(gain_family(model, mu)))
+    return np.asarray(cancel_first_markov(model, mu, settings.markov_offset * max(size, 1.0),
+                                          smooth_branch=True), dtype=float)
+
+
 def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     """The three curves of (b) with their fitted exponents and the predicted limit."""
-    from grazing_control.dynamics.ndof_design import (cancel_first_markov, gain_family,
-                                                      limit_multipliers)
+    from grazing_control.dynamics.ndof_design import gain_family, limit_multipliers
     from grazing_control.studies.ndof.branch import (fit_exponent, grazing_side,
                                                      multiplier_scaling)
 
     sizes = np.geomspace(settings.scaling_from, settings.scaling_to, settings.scaling_points)
     cases = [("uncontrolled", None, "tab:red"),
-             (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu)), "tab:green"),
-             ("cancels only w^T N u (and G(1))",
-              np.asarray(cancel_first_markov(model, smooth_branch=True)), "tab:orange")]
+             (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu)), "tab:green")]
+    numbers = {}
+    try:
+        cases.append(("cancels only w^T N u (and G(1))", markov_gain(model, mu, settings),
+                      "tab:orange"))
+    except ParameterError as exc:   # n = 1: w^T N u = 0 is the whole family (Eq. 33)
+        numbers["cancels only w^T N u"] = {"error": " ".join(str(exc).split())}
     limit = float(np.max(np.abs(limit_multipliers(model, mu))))
-    curves, numbers = [], {}
+    curves = []
     for label, k, color in cases:
         side = grazing_side(model, k, settings.fit_below)
         sc = multiplier_scaling(model, k, side * sizes)
