@@ -177,9 +177,9 @@ def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit():
 
 
 def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter():
-    from grazing_control.studies.figures.ndof import DEFAULT, markov_gain
+    from grazing_control.studies.figures.ndof import DEFAULT, choose_mu, markov_gain
 
-    k = markov_gain(TWO, 0.3, DEFAULT)
+    k = markov_gain(TWO, choose_mu(TWO)[0], DEFAULT)
     side = grazing_side(TWO, k)
     sc = multiplier_scaling(TWO, k, side * np.geomspace(1e-6, 1e-8, 3))
     assert all(e == "" for e in sc.errors), sc.errors

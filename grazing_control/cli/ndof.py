@@ -647,6 +647,8 @@ def cmd_figures(args):
                      f"{'n/a' if slope is None else f'{slope:.4f}'} over {entry['fit_points']} "
                      f"points; smallest |Delta d| reached {entry['smallest_delta_d_found']}")
     sc = numbers["scene"]
+    dist = sc["final_distance"]
     lines.append(f"  scene at Delta d = {sc['delta_d']:g}: final distance to the controlled "
-                 f"orbit {sc['final_distance']}")
+                 "orbit " + ("n/a (" + sc["orbit_error"][:120] + ")" if dist is None
+                             else f"{dist:.3e}"))
     return "\n".join(lines)

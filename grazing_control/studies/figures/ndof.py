@@ -30,7 +30,8 @@ import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["NdofFigureSettings", "DEFAULT", "QUICK", "make_ndof_figures"]
+__all__ = ["NdofFigureSettings", "DEFAULT", "QUICK", "choose_mu", "markov_gain", "scaling_curves",
+           "make_ndof_figures"]
 
 
 @dataclass(frozen=True)
@@ -68,26 +69,52 @@ def _finite_or_none(x):
 
 def choose_mu(model) -> tuple[float, str]:
     """The family member drawn: the middle of the widest admissible interval of mu
-    (docs/ndof_commands.md), or 0 when none is admissible."""
-    from grazing_control.dynamics.ndof_design import admissible_mu
+    (docs/ndof_commands.md); without one, of the widest interval where only the
+    impacting-side conditions hold, else where the controlled 1/1 orbit exists
+    (gamma1 > 0, on a grid of [-1, 1]); else 0."""
+    from grazing_control.dynamics.ndof_design import admissible_mu, existence_coefficient
 
-    intervals = [(float(a), float(b)) for a, b in admissible_mu(model)]
-    if not intervals:
-        return 0.0, "mu = 0: no admissible mu for this model"
-    lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
-    if math.isfinite(lo) and math.isfinite(hi):
-        return 0.5 * (lo + hi) + 0.0, "the middle of the widest admissible interval"
-    return (hi - 1.0 if math.isfinite(hi) else lo + 1.0), "inside an unbounded admissible interval"
+    for conditions, why in (("combined", "the middle of the widest admissible interval"),
+                            ("impacting", "no admissible mu: the middle of the widest "
+                                          "interval where |lambda0| < 1 and gamma1 > 0")):
+        intervals = [(float(a), float(b)) for a, b in admissible_mu(model, conditions)]
+        if intervals:
+            lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
+            if math.isfinite(lo) and math.isfinite(hi):
+                return 0.5 * (lo + hi) + 0.0, why
+            return (hi - 1.0 if math.isfinite(hi) else lo + 1.0), why
+    grid = np.linspace(-1.0, 1.0, 41)
+    ok = np.array([existence_coefficient(model, mu) > 0.0 for mu in grid])
+    if ok.any():
+        runs, start = [], None
+        for i, flag in enumerate(list(ok) + [False]):
+            if flag and start is None:
+                start = i
+            elif not flag and start is not None:
+                runs.append((i - start, start, i - 1))
+                start = None
+        _n, a, b = max(runs)
+        return float(0.5 * (grid[a] + grid[b])) + 0.0, ("no mu with |lambda0| < 1: the middle "
+                                                        "of the widest run where gamma1 > 0")
+    return 0.0, "mu = 0: the controlled 1/1 orbit exists for no mu in [-1, 1]"
 
 
 def markov_gain(model, mu: float, settings) -> np.ndarray:
-    """k(mu) + offset d: the gain that cancels only w^T N u and G(1)
-    (``ndof_design.cancel_first_markov``), ``offset`` = ``markov_offset`` |k(mu)|."""
+    """k(mu) + offset d: a gain that cancels only w^T N u and G(1)
+    (``ndof_design.cancel_first_markov``), |offset| = ``markov_offset`` |k(mu)|, of the
+    sign for which the local map has a 1/1 orbit born at grazing (whether it exists for
+    d < d* depends on that sign; ndof_design's docstring)."""
     from grazing_control.dynamics.ndof_design import cancel_first_markov, gain_family
+    from grazing_control.studies.ndof.branch import predicted_orbit
 
-    size = float(np.linalg.norm(gain_family(model, mu)))
-    return np.asarray(cancel_first_markov(model, mu, settings.markov_offset * max(size, 1.0),
-                                          smooth_branch=True), dtype=float)
+    size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu))), 1.0)
+    candidates = [np.asarray(cancel_first_markov(model, mu, sign * size, smooth_branch=True),
+                             dtype=float) for sign in (1.0, -1.0)]
+    for k in candidates:
+        if any(predicted_orbit(model, k, side * settings.fit_below)[0] is not None
+               for side in (-1.0, 1.0)):
+            return k
+    return candidates[0]
 
 
 def scaling_curves(model, settings: NdofFigureSettings, mu: float):
@@ -113,8 +140,8 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
         big = sc.largest
         near = np.abs(sc.delta_d) <= settings.fit_below
         slope = fit_exponent(sc.delta_d[near], big[near])
-        curve = {"delta_d": sc.delta_d, "largest": big, "label": label, "color": color,
-                 "slope": slope}
+        curve = {"delta_d": sc.delta_d, "largest": big, "color": color, "slope": slope,
+                 "label": label + (" (on Delta d > 0)" if side > 0 else "")}
         ok = np.isfinite(big)
         entry = {"gains": None if k is None else k.tolist(), "side": side,
                  "delta_d": sc.delta_d.tolist(),

@@ -190,6 +190,9 @@ def predicted_orbit(model, gains=None, delta_d: float | None = None):
         if float(np.max(np.abs(step))) <= 1e-13 * max(float(np.max(np.abs(y))), 1e-300):
             converged = True
             break
+    if not converged and np.all(np.isfinite(y)):   # stagnated at rounding: the residual
+        res = N @ local_map(model, y, dd) - y
+        converged = float(np.max(np.abs(res))) <= 1e-10 * float(np.max(np.abs(y)))
     h = y[model.i_w] + y[n + model.i_w] ** 2 / (2.0 * acc) - dd if converged else -1.0
     if not h > 0.0:   # Newton found no impacting orbit of the local map near y0
         return None, math.nan
