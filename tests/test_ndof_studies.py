@@ -101,6 +101,18 @@ def test_n1_diagram_is_the_1dof_sweep_and_independent_of_the_split():
     np.testing.assert_array_equal(two.samples, got.samples)
 
 
+def test_diagram_on_a_dask_client_is_the_local_diagram():
+    distributed = pytest.importorskip("distributed")
+    values = np.linspace(-2e-5, 0.0, 4)
+    local = diagram(TWO, values, periods=12, transient=6, workers=1)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        remote = diagram(TWO, values, periods=12, transient=6, scheduler=client)
+    np.testing.assert_array_equal(remote.samples, local.samples)
+    np.testing.assert_array_equal(remote.period, local.period)
+
+
 def test_diagram_refuses_bad_input_naming_it():
     from grazing_control.oscillator.params import ParameterError
 

@@ -37,7 +37,7 @@ def diagram_png(result, path, *, coordinate: str, deviation: bool = False,
     ys = ys.ravel()
     ok = np.isfinite(ys)
     fig, ax = plt.subplots(figsize=(7.0, 4.5), constrained_layout=True)
-    ax.plot(xs[ok], ys[ok], ".", color=COLORS["brute"], markersize=1.0, markeredgewidth=0,
+    ax.plot(xs[ok], ys[ok], ".", color=COLORS["brute"], markersize=1.5, markeredgewidth=0,
             rasterized=True)
     ax.set_xlabel(LABELS.get(result.name, result.name))
     ax.set_ylabel(f"{coordinate}{' - grazing' if deviation else ''} on $\\Pi_2$")
