@@ -185,7 +185,9 @@ def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit():
     gap = np.abs(sc.largest - limit)
     assert np.all(sc.largest < 1.0) and limit < 1.0
     assert gap[-1] < 1e-4
-    assert fit_exponent(sc.delta_d, gap) == pytest.approx(0.5, abs=0.1)   # O(s)
+    # the gap is O(s) = O(|Delta d|^1/2) down to 1e-8; at 1e-10 the multiplier itself is
+    # only good to ~eps |J|^2 ~ 1e-6 (J ~ 1/s, a non-normal rank-one part)
+    assert fit_exponent(sc.delta_d[:3], gap[:3]) == pytest.approx(0.5, abs=0.1)
 
 
 def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter():
