@@ -142,26 +142,26 @@ def test_design_chooses_an_admissible_mu_on_three_masses(design3):
                                "free_stable": True}
 
 
-def test_design_out_writes_the_gains_only_when_admissible(capsys, tmp_path):
+def test_design_report_and_out_file(capsys, tmp_path):
+    """The human report names every design quantity; --out writes the family's gains
+    (and only for an admissible mu: nothing is written for mu = 5)."""
     import yaml
 
     out = tmp_path / "gains.yaml"
-    code, _o, err = run(capsys, "design", "--model", ONE, "--mu", "0.1", "--out", str(out))
+    code, text, err = run(capsys, "design", "--model", ONE, "--mu", "0.1", "--out", str(out))
     assert code == 0, err
-    d = run_json(capsys, "design", "--model", ONE, "--mu", "0.1")
+    for word in ("transmission zeros", "admissible mu", "gains k", "lambda0", "gamma1",
+                 "this mu            : admissible", f"gains written to {out}"):
+        assert word in text
     params = next(iter(yaml.safe_load(out.read_text()).values()))["ros__parameters"]
-    np.testing.assert_allclose(params["gains"], d["gains"], rtol=1e-15)
+    np.testing.assert_allclose(params["gains"], gain_family(load_model(ONE), 0.1), rtol=1e-15)
     code, o, err = run(capsys, "design", "--model", ONE, "--mu", "5", "--out",
                        str(tmp_path / "bad.yaml"))
     assert code == 2 and o == "" and "not admissible" in err and err.count("\n") == 1
     assert not (tmp_path / "bad.yaml").exists()
 
 
-def test_human_reports(capsys, three):
-    code, out, err = run(capsys, "design", "--model", ONE, "--mu", "0.1")
-    assert code == 0, err
-    for word in ("transmission zeros", "admissible mu", "gains k", "lambda0", "gamma1"):
-        assert word in out
+def test_orbit_report(capsys, three):
     code, out, err = run(capsys, "orbit", "--model", three, "--delta-d", "1e-5")
     assert code == 0, err
     assert "1/1 orbit" in out and "multipliers" in out and "born at grazing" in out

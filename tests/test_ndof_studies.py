@@ -171,12 +171,20 @@ def test_two_mass_uncontrolled_grows_like_one_over_delta_d_on_its_side():
     assert fit_exponent(sc.delta_d, sc.v_minus) == pytest.approx(1.0, abs=0.02)
 
 
-def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit():
-    from grazing_control.dynamics.ndof_design import transmission_zeros
+@pytest.fixture(scope="module")
+def two_mu():
+    """The family member the figure set draws for the 2-mass chain (its design's choice)."""
     from grazing_control.studies.figures.ndof import choose_mu
 
+    return choose_mu(TWO)
+
+
+def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit(two_mu):
+    from grazing_control.dynamics.ndof_design import transmission_zeros
+
     assert np.max(np.abs(transmission_zeros(TWO))) < 1.0   # the issue's premise
-    mu, _why = choose_mu(TWO)
+    mu, why = two_mu
+    assert why == "the middle of the widest admissible interval"
     k = gain_family(TWO, mu)
     deltas = -np.geomspace(1e-4, 1e-10, 4)
     sc = multiplier_scaling(TWO, k, deltas)
@@ -190,10 +198,10 @@ def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit():
     assert fit_exponent(sc.delta_d[:3], gap[:3]) == pytest.approx(0.5, abs=0.1)
 
 
-def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter():
-    from grazing_control.studies.figures.ndof import DEFAULT, choose_mu, markov_gain
+def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter(two_mu):
+    from grazing_control.studies.figures.ndof import DEFAULT, markov_gain
 
-    k = markov_gain(TWO, choose_mu(TWO)[0], DEFAULT)
+    k = markov_gain(TWO, two_mu[0], DEFAULT)
     side = grazing_side(TWO, k)
     sc = multiplier_scaling(TWO, k, side * np.geomspace(1e-6, 1e-8, 3))
     assert all(e == "" for e in sc.errors), sc.errors
