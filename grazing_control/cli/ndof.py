@@ -650,5 +650,7 @@ def cmd_figures(args):
     dist = sc["final_distance"]
     lines.append(f"  scene at Delta d = {sc['delta_d']:g}: final distance to the controlled "
                  "orbit " + ("n/a (" + sc["orbit_error"][:120] + ")" if dist is None
-                             else f"{dist:.3e}"))
+                             else f"{dist:.3e}" + (" (captured)" if dist < 1e-8 else
+                                                   " (not captured: the controller acts "
+                                                   "locally, near the grazing orbit)")))
     return "\n".join(lines)
