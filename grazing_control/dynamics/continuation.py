@@ -172,6 +172,8 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
 #: The end of a branch continued by shooting is a grazing when its smallest impact
 #: velocity has fallen below this fraction of the branch's largest.
 GRAZED = 1e-3
+#: Halvings of one failed continuation step before the branch is declared ended there.
+MAX_HALVINGS = 60
 
 
 @dataclass(frozen=True)
@@ -222,19 +224,25 @@ def continue_orbit(model, name: str, values, guess, periods: int = 1, *,
     through the last two points (the first from ``guess``). Between neighbours the test
     functions of :func:`~grazing_control.dynamics.shooting.bifurcation_tests` are
     compared; a sign change is refined by Brent's method in the parameter, each
-    evaluation a shooting from the nearer neighbour. The continuation stops where
-    shooting fails or the orbit's number of impacts changes: past its last point the
-    orbit has grazed (an impact velocity went to 0) or changed type; the end is found by
-    bisection between the last orbit and the failure (60 halvings at most, every
-    orbit found on the way is kept). A 'grazing' event is then located where v-_min,
+    evaluation a shooting from the nearer neighbour. A step where shooting fails or the
+    orbit's number of impacts changes is halved and retried with the secant predictor
+    from the last orbit, and after a success the continuation goes on (a predictor from
+    too far can land on a coexisting orbit: the non-impacting one next to a grazing
+    with Delta d > 0, issue 17); the continuation stops where the step has been halved
+    :data:`MAX_HALVINGS` times: past its last point the orbit has grazed (an impact
+    velocity went to 0) or changed type (every orbit found on the way is kept, so
+    points between the given values may appear). A 'grazing' event is then located where v-_min,
     extrapolated as v-_min^2 linear in the parameter through the last point and the
     last with twice its v-_min (the
     square-root law of grazing, docs/theory.md section 5), vanishes, when it falls
     towards 0 and the end's v-_min is below :data:`GRAZED` times the branch's largest (a
     fold, or a Newton failure in the singular regime next to grazing, ends the branch
     without a grazing event: the 1-DOF 1/1 branch without control is found only down to
-    |Delta d| ~ 1e-6 by shooting, its multiplier growing like |Delta d|^(-1/2); the
-    explicit route reaches 1e-12).
+    |Delta d| ~ 1e-6 by shooting, its multiplier growing like |Delta d|^(-1) (v- is
+    linear in Delta d there, measured: docs/theory_ndof_flow.md, section 8); the
+    explicit route reaches 1e-12). Where v- is linear in the parameter the square-root
+    extrapolation puts the grazing 2/3 of the last point's distance from it: the halved
+    steps make that distance small.
 
     For the 1-DOF 1/1 branch the explicit impact-phase route (:func:`continue_11`) is
     exact to rounding; this one agrees with it to the shooting tolerance (tests).
@@ -257,41 +265,45 @@ def continue_orbit(model, name: str, values, guess, periods: int = 1, *,
         v_min = min((i.v_minus for i in o.impacts), default=math.inf)
         return OrbitPoint(value, o.state, lam, len(o.impacts), v_min)
 
-    points, stopped, failed_at = [], "end", None
-    for value in values:
+    def predict(value):
+        """Secant through the last two points (the first from ``guess``)."""
         if len(points) >= 2:
             a, b = points[-2], points[-1]
             t = (value - b.value) / (b.value - a.value)
-            start = b.state + t * (b.state - a.state)
-        else:
-            start = points[-1].state if points else guess
-        try:
-            pt = solve(value, start)
-        except (ShootingFailed, ValueError, ArithmeticError) as exc:
-            stopped, failed_at = f"shooting failed at {name}={value!r}: {exc}", value
-            break
-        if points and pt.impacts != points[-1].impacts:
-            stopped = (f"the orbit changed from {points[-1].impacts} to {pt.impacts} impacts "
-                       f"between {name}={points[-1].value!r} and {value!r}")
-            failed_at = value
-            break
-        points.append(pt)
-    if failed_at is not None and points:
-        # the end of the branch, by bisection between the last orbit and the failure
-        good = points[-1]
-        for _ in range(60):
-            mid = 0.5 * (good.value + failed_at)
-            if mid in (good.value, failed_at):
-                break
+            return b.state + t * (b.state - a.state)
+        return points[-1].state if points else guess
+
+    points, stopped, failed_at = [], "end", None
+    for value in values:
+        # step to ``value``; a failed step (shooting fails, or the orbit's impact count
+        # changes: a poor predictor can land in the basin of a coexisting orbit) is halved
+        # and retried from the last orbit with the secant predictor, and after a success
+        # the continuation goes on to ``value``: a real end of the branch is where the
+        # step has been halved MAX_HALVINGS times (docs/theory_ndof_flow.md, section 8)
+        trial, halvings, first = value, 0, None
+        while failed_at is None:
             try:
-                pt = solve(mid, good.state)
-            except (ShootingFailed, ValueError, ArithmeticError):
+                pt, reason = solve(trial, predict(trial)), None
+            except (ShootingFailed, ValueError, ArithmeticError) as exc:
+                pt, reason = None, f"shooting failed at {name}={trial!r}: {exc}"
+            if pt is not None and points and pt.impacts != points[-1].impacts:
+                reason = (f"the orbit changed from {points[-1].impacts} to {pt.impacts} impacts "
+                          f"between {name}={points[-1].value!r} and {trial!r}")
                 pt = None
-            if pt is not None and pt.impacts == good.impacts:
+            if pt is not None:
                 points.append(pt)
-                good = pt
-            else:
-                failed_at = mid
+                if trial == value:
+                    break
+                trial = value
+                continue
+            first = first if halvings else reason  # the failure at the value itself
+            mid = 0.5 * (points[-1].value + trial) if points else trial
+            if not points or halvings >= MAX_HALVINGS or mid in (points[-1].value, trial):
+                stopped, failed_at = first, trial
+                break
+            trial, halvings = mid, halvings + 1
+        if failed_at is not None:
+            break
 
     bifs = []
     for a, b in zip(points[:-1], points[1:]):

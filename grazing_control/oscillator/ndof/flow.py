@@ -1,4 +1,4 @@
-"""Non-impacting periodic response of the n-DOF oscillator and its grazing (issue 17).
+"""Exact free flow of the n-DOF oscillator, its periodic response and grazing (issue 17).
 
 With forcing ``f cos(omega t + phase)`` the periodic (particular) solution is
 ``x_p(t) = Re(X exp(i(omega t + phase)))`` where X solves the complex linear system
@@ -15,9 +15,18 @@ import math
 
 import numpy as np
 
-from grazing_control.oscillator.ndof.model import NdofModel
+from dataclasses import dataclass
 
-__all__ = ["harmonic_amplitudes", "grazing_clearance", "grazing_phase", "periodic_response"]
+from grazing_control.oscillator.ndof.model import NdofModel
+from grazing_control.oscillator.params import ParameterError
+
+__all__ = ["harmonic_amplitudes", "grazing_clearance", "grazing_phase", "periodic_response",
+           "NdofFlow", "MAX_CONDITION"]
+
+TWO_PI = 2.0 * math.pi
+#: Largest condition number of the modal matrix V accepted: the flow's rounding grows like
+#: cond(V) eps (docs/theory_ndof_flow.md, "Rounding"); beyond it A is (nearly) defective.
+MAX_CONDITION = 1e8
 
 
 def harmonic_amplitudes(model: NdofModel) -> np.ndarray:
@@ -25,7 +34,7 @@ def harmonic_amplitudes(model: NdofModel) -> np.ndarray:
     w = model.omega
     D = model.K - w * w * model.M + 1j * w * model.C
     if np.linalg.cond(D) > 1e14:
-        raise ValueError(f"omega={w!r} is invalid: at an undamped resonance of the model")
+        raise ParameterError(f"omega={w!r} is invalid: at an undamped resonance of the model")
     return np.linalg.solve(D, model.f.astype(complex))
 
 
@@ -44,3 +53,143 @@ def periodic_response(model: NdofModel, t) -> tuple[np.ndarray, np.ndarray]:
     X = harmonic_amplitudes(model)
     e = np.exp(1j * (model.omega * np.asarray(t, dtype=float)[..., None] + model.phase))
     return np.real(X * e), np.real(1j * model.omega * X * e)
+
+
+@dataclass(frozen=True, eq=False)
+class NdofFlow:
+    """The exact flow of an :class:`NdofModel` between impacts (docs/theory_ndof_flow.md).
+
+    Build it once with :meth:`NdofFlow.of`; it caches the periodic response (d*, tau*,
+    the complex amplitudes) and the modal decomposition of A.
+
+    Attributes
+    ----------
+    model : NdofModel
+    A : (2n, 2n) ndarray
+        Free-flight matrix [[0, I], [-M^-1 K, -M^-1 C]] (section 1).
+    d_star, tau_star, tau2 : float
+        Grazing clearance |X_w|, grazing phase -arg X_w and the phase of Pi2,
+        (tau* + pi2_offset) mod 2 pi.
+    amplitudes : (n,) complex ndarray
+        X of the periodic response x_p = Re(X e^{i tau}).
+    eigenvalues : (m,) complex ndarray
+        One eigenvalue of A per real eigenvalue and per complex-conjugate pair (the one
+        with positive imaginary part); ``weights`` (2 for a pair, 1 for a real one).
+    condition : float
+        cond_2(V) of the modal matrix (<= :data:`MAX_CONDITION`).
+    defect : float
+        ||A V - V Lambda||_2 ||V^-1||_2: the computed decomposition is exact for A + E,
+        ||E|| <= defect (section 5, "Rounding").
+    """
+
+    model: NdofModel
+    A: np.ndarray
+    d_star: float
+    tau_star: float
+    tau2: float
+    amplitudes: np.ndarray
+    eigenvalues: np.ndarray
+    weights: np.ndarray
+    modes: np.ndarray
+    inverse: np.ndarray
+    condition: float
+    defect: float
+
+    @classmethod
+    def of(cls, model: NdofModel) -> "NdofFlow":
+        """The flow of ``model`` (docs/theory_ndof_flow.md, sections 1-2).
+
+        Raises
+        ------
+        ParameterError
+            omega at an undamped resonance, a wall coordinate that the forcing does not
+            move (d* = 0: no grazing), or a (nearly) defective A (cond(V) above
+            :data:`MAX_CONDITION`: a critically damped mode, or an undamped rigid-body
+            mode), whose modal flow would not be exact.
+        """
+        if not isinstance(model, NdofModel):
+            raise ParameterError(f"model={model!r} is invalid: expected an NdofModel")
+        n = model.n
+        X = harmonic_amplitudes(model)
+        d_star = float(abs(X[model.i_w]))
+        if not d_star > 0.0:
+            raise ParameterError(f"f={model.f.tolist()!r} is invalid: it does not move the wall "
+                                 f"coordinate i_w={model.i_w} (d* = 0: no grazing)")
+        tau_star = float((-np.angle(X[model.i_w])) % TWO_PI)
+        tau2 = (tau_star + model.pi2_offset) % TWO_PI
+        A = np.zeros((2 * n, 2 * n))
+        A[:n, n:] = np.eye(n)
+        A[n:, :n] = -np.linalg.solve(model.M, model.K)
+        A[n:, n:] = -np.linalg.solve(model.M, model.C)
+        lam, V = np.linalg.eig(A)
+        cond = float(np.linalg.cond(V))
+        if not cond <= MAX_CONDITION:
+            raise ParameterError(
+                f"C, K are invalid: the free flow's matrix A is (nearly) defective, cond(V) = "
+                f"{cond:.3g} > {MAX_CONDITION:.0e} (a critically damped mode or an undamped "
+                f"rigid-body mode); valid: damping away from critical on every mode")
+        U = np.linalg.inv(V)
+        defect = float(np.linalg.norm(A @ V - V * lam, 2) * np.linalg.norm(U, 2))
+        keep = lam.imag >= 0.0
+        weights = np.where(lam.imag > 0.0, 2.0, 1.0)[keep]
+        if weights.sum() != 2 * n or np.sum(lam.imag > 0.0) != np.sum(lam.imag < 0.0):
+            raise ParameterError("C, K are invalid: the eigenvalues of A do not come in "
+                                 "conjugate pairs (non-finite matrices?)")
+        for a in (A, X):
+            a.setflags(write=False)
+        return cls(model, A, d_star, tau_star, tau2, X, lam[keep], weights,
+                   V[:, keep] * weights, U[keep, :], cond, defect)
+
+    # ------------------------------------------------------------- the free flow
+    @property
+    def n(self) -> int:
+        """Degrees of freedom."""
+        return self.model.n
+
+    def transition(self, h: float) -> np.ndarray:
+        """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n)."""
+        e = np.exp(self.eigenvalues * float(h))
+        return ((self.modes * e) @ self.inverse).real
+
+    def particular(self, tau: float) -> np.ndarray:
+        """X_p(tau) = (Re(X e^{i tau}), Re(i omega X e^{i tau})), the periodic response."""
+        e = self.amplitudes * np.exp(1j * float(tau))
+        return np.concatenate([e.real, (1j * self.model.omega * e).real])
+
+    def to_deviation(self, tau: float, X) -> np.ndarray:
+        """Physical state X at phase tau -> deviation z = X - X_p(tau)."""
+        return np.asarray(X, dtype=float) - self.particular(tau)
+
+    def to_physical(self, tau: float, z) -> np.ndarray:
+        """Deviation z at phase tau -> physical state X = X_p(tau) + z."""
+        return self.particular(tau) + np.asarray(z, dtype=float)
+
+    # --------------------------------------------------------- the wall coordinate
+    def gap(self, tau: float, z) -> float:
+        """g = x_w - d = z_w - Delta d - 2 d* sin^2((tau - tau*) / 2) (section 3).
+
+        x_p,w - d* = d* (cos psi - 1) = -2 d* sin^2(psi / 2), psi = tau - tau*: no
+        cancellation near grazing.
+        """
+        s = math.sin(0.5 * (tau - self.tau_star))
+        return float(z[self.model.i_w]) - self.model.delta_d - 2.0 * self.d_star * s * s
+
+    def wall_velocity(self, tau: float, z) -> float:
+        """v_w = -d* omega sin(tau - tau*) + z_{n + i_w}."""
+        m = self.model
+        return -self.d_star * m.omega * math.sin(tau - self.tau_star) + float(z[m.n + m.i_w])
+
+    def wall_acceleration(self, tau: float, z) -> float:
+        """Free acceleration of x_w: -d* omega^2 cos(tau - tau*) + (A z)_{n + i_w}."""
+        m = self.model
+        row = self.A[m.n + m.i_w]
+        return (-self.d_star * m.omega ** 2 * math.cos(tau - self.tau_star)
+                + float(row @ np.asarray(z, dtype=float)))
+
+    def on_wall(self, tau: float) -> tuple:
+        """(z_w, z_{n+w}) of x_w = d, v_w = 0 at phase tau: (Delta d + 2 d* sin^2(psi/2),
+        d* omega sin psi)."""
+        psi = tau - self.tau_star
+        s = math.sin(0.5 * psi)
+        return (self.model.delta_d + 2.0 * self.d_star * s * s,
+                self.d_star * self.model.omega * math.sin(psi))

@@ -1,0 +1,499 @@
+"""Impacts of the n-DOF oscillator: certified detection, impact law, saltation (issue 17).
+
+The flow between impacts is the exact modal flow of
+:class:`~grazing_control.oscillator.ndof.flow.NdofFlow` in deviation coordinates. An
+impact is the first h > 0 with gap g(h) = x_w(h) - d = 0 and v_w >= 0; the search must
+never miss a low-velocity (near-grazing) impact and never report a spurious one.
+
+Certified search (docs/theory_ndof_flow.md, section 4)
+-----------------------------------------------------
+The gap is the forced harmonic plus a sum of damped modes,
+
+    g(h) = sum_k Re(c_k e^{lambda_k h}) - Delta d - 2 d* sin^2(psi / 2),
+    psi = tau0 + omega h - tau*,
+
+(c_k = w_k V_{i_w k} (V^-1 z0)_k, one term per real eigenvalue or conjugate pair), so
+
+    |g'''(h)| <= d* omega^3 + sum_k |c_k| |lambda_k|^3 e^{Re(lambda_k) h}
+
+bounds the jerk on [h, inf) (Re lambda_k <= 0). With this J the interval logic of the
+1-DOF search (oscillator/impact.py, docs/theory.md section 2: convex/concave intervals,
+the chord bound, bisection, bracketed Newton) applies unchanged and is reused from
+there; only the evaluator, its bounds and its rounding margins are n-DOF.
+
+The impact law v_w+ = -r v_w- (other velocities unchanged) at x_w = d is applied in
+deviation coordinates; :func:`saltation_matrix` is its (2n x 2n) saltation matrix.
+
+Chattering and sticking are refused
+-----------------------------------
+In n-DOF a stuck wall coordinate is a constrained, reduced (n - 1)-DOF motion; it is not
+modelled here. A contact at rest pushed into the wall, or a chattering sequence that
+would accumulate (t_inf = 2 r v- / ((1 - r) F) below ``chatter_time``, or a next bounce
+below resolution), raises :class:`ChatteringError` naming the time and phase; any other
+accumulation of contacts hits the cap ``max_impacts`` (:class:`ImpactCapError`). The
+trajectory never passes through the wall and the search never hangs.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from grazing_control.oscillator.impact import (MAX_AMPLITUDE, ImpactCapError, InitialStateError,
+                                               NonFiniteStateError, _danger_halfwidth,
+                                               _far_from_wall, _search)
+from grazing_control.oscillator.params import ParameterError
+
+from .flow import NdofFlow
+
+__all__ = ["NdofImpact", "NdofSegment", "ChatteringError", "ImpactCapError",
+           "InitialStateError", "NonFiniteStateError", "check_state", "next_impact",
+           "saltation_matrix", "advance"]
+
+TWO_PI = 2.0 * math.pi
+_EPS = 2.0 ** -52
+
+
+class NdofImpact(NamedTuple):
+    """One impact: time since the segment start, phase, wall-coordinate velocities.
+
+    The field names are those of :class:`grazing_control.oscillator.impact.Impact`, so
+    generic code treats both alike. ``sticking`` is always False here (sticking raises
+    :class:`ChatteringError`); ``release`` is nan.
+    """
+
+    dt: float
+    phase: float
+    v_minus: float
+    v_plus: float
+    sticking: bool = False
+    release: float = math.nan
+
+
+class NdofSegment(NamedTuple):
+    """Result of :func:`advance`: final deviation z (2n,), final phase, impacts, and the
+    monodromy d z(end) / d z(start) ((2n, 2n)) or None."""
+
+    z: np.ndarray
+    tau: float
+    impacts: list
+    monodromy: np.ndarray | None
+
+
+class ChatteringError(RuntimeError):
+    """The wall coordinate would chatter to rest or stick on the wall: not modelled in
+    n-DOF (module docstring). The message names the time and phase."""
+
+
+def check_state(flow: NdofFlow, z, where: str = "the state") -> np.ndarray:
+    """z as a float array of shape (2n,), finite and not absurdly large, else raise.
+
+    Raises
+    ------
+    ParameterError
+        Wrong shape.
+    NonFiniteStateError
+        Not finite, or its modal size cond(V) max|z| exceeds
+        :data:`~grazing_control.oscillator.impact.MAX_AMPLITUDE`.
+    """
+    try:
+        a = np.array(z, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{where}={z!r} is invalid: expected {2 * flow.n} real numbers") from None
+    if a.shape != (2 * flow.n,):
+        raise ParameterError(f"{where} has {a.size} entries: valid is 2n = {2 * flow.n}")
+    if not np.all(np.isfinite(a)):
+        raise NonFiniteStateError(f"{where} is not finite: deviation z = {a.tolist()!r}")
+    size = flow.condition * float(np.max(np.abs(a)))
+    if not size <= MAX_AMPLITUDE:
+        raise NonFiniteStateError(
+            f"{where} is absurdly large: cond(V) max|z| = {size:.3e} > {MAX_AMPLITUDE:.0e}; "
+            f"an input overflowed")
+    return a
+
+
+def _mode_sizes(flow: NdofFlow, z: np.ndarray) -> np.ndarray:
+    """sum_k |w_k V_wk| |lambda_k|^j sum_l |U_kl z_l| for j = 0, 1, 2: bounds of the terms
+    of z_w, v_w, a_w (section 5, "Rounding")."""
+    i_w = flow.model.i_w
+    per = np.abs(flow.modes[i_w]) * (np.abs(flow.inverse) @ np.abs(z))
+    lam = np.abs(flow.eigenvalues)
+    return np.array([per.sum(), (per * lam).sum(), (per * lam * lam).sum()])
+
+
+class _Eval:
+    """Gap, velocity and acceleration of the wall coordinate along the free flow from one
+    start (docs/theory_ndof_flow.md, section 4); the interface of the 1-DOF evaluator that
+    oscillator.impact._search and _bracket use."""
+
+    __slots__ = ("terms", "omega", "lag", "amp", "dd", "tau0", "cabs", "jerk_terms", "aw3",
+                 "acc_err", "m0", "m1", "zmag", "rho", "drift", "n", "horizon")
+
+    def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float):
+        m = flow.model
+        beta = flow.inverse @ z0
+        c = flow.modes[m.i_w] * beta
+        lam = flow.eigenvalues
+        self.terms = [(complex(l), complex(ck), complex(ck * l), complex(ck * l * l))
+                      for l, ck in zip(lam, c)]
+        self.omega = m.omega
+        self.lag = flow.tau_star
+        self.amp = flow.d_star
+        self.dd = m.delta_d
+        self.tau0 = tau0
+        self.horizon = horizon
+        self.n = m.n
+        grow = np.exp(np.maximum(lam.real, 0.0) * horizon)  # 1 unless rounding made Re > 0
+        cab = np.abs(c)
+        self.cabs = float((cab * grow).sum())
+        self.jerk_terms = [(float(l.real), float(a * abs(l) ** 3), float(g))
+                           for l, a, g in zip(lam, cab, grow)]
+        self.aw3 = self.amp * self.omega ** 3
+        # rounding (docs/theory_ndof_flow.md, section 5): terms of size zmag, and the
+        # decomposition's defect, which moves z by <= t defect cond(V)^2 |z0| after time t
+        self.zmag = float(_mode_sizes(flow, z0)[0] * grow.max())
+        self.rho = float(np.abs(lam).max())
+        self.drift = flow.defect * flow.condition ** 2 * float(np.linalg.norm(z0))
+        k = 2.0 * self.n + 2.0
+        phase0 = abs(tau0) + abs(self.lag) + 1.0
+        self.acc_err = (8.0 * _EPS * (self.amp * self.omega ** 2 * (4.0 + phase0 + self.omega * horizon)
+                                      + self.zmag * self.rho ** 2 * (k + self.rho * horizon))
+                        + 2.0 * horizon * self.drift * self.rho ** 2)
+        self.m0 = 8.0 * _EPS * (self.zmag * k + abs(self.dd) + 2.0 * self.amp * (1.0 + phase0))
+        self.m1 = 8.0 * _EPS * (self.zmag * self.rho + 2.0 * self.amp * self.omega) + 2.0 * self.drift
+
+    def __call__(self, h: float):
+        """(g, v, acc, z_w) at time h: the exact closed form."""
+        zx = v = a = 0.0
+        for lam, c, cl, cl2 in self.terms:
+            e = cmath.exp(lam * h)
+            zx += (c * e).real
+            v += (cl * e).real
+            a += (cl2 * e).real
+        psi = self.tau0 + self.omega * h - self.lag
+        sh = math.sin(0.5 * psi)
+        g = zx - self.dd - 2.0 * self.amp * sh * sh
+        vel = -self.amp * self.omega * math.sin(psi) + v
+        acc = -self.amp * self.omega * self.omega * math.cos(psi) + a
+        return g, vel, acc, zx
+
+    def psi(self, h: float) -> float:
+        """Phase psi = tau0 + omega h - tau* of the forcing, as in the gap."""
+        return self.tau0 + self.omega * h - self.lag
+
+    def jerk_bound(self, h: float) -> float:
+        """J >= max |g'''| on [h, horizon]: d* omega^3 + sum |c_k| |lambda_k|^3 e^{Re lambda_k h}."""
+        j = self.aw3
+        for re, a, grow in self.jerk_terms:
+            j += a * (math.exp(re * h) if re <= 0.0 else grow)
+        return j
+
+    def gap_rounding(self, h: float, vals) -> float:
+        """Bound on |computed g(h) - exact g(h)| (docs/theory_ndof_flow.md, section 5)."""
+        g, zx = vals[0], vals[3]
+        s2 = abs(zx - self.dd - g)
+        phase = abs(self.tau0) + self.omega * h + abs(self.lag) + 1.0
+        return (8.0 * _EPS * (self.zmag * (2.0 * self.n + 2.0 + self.rho * h) + abs(self.dd) + s2
+                              + math.sqrt(2.0 * self.amp * s2) * phase)
+                + 2.0 * h * self.drift)
+
+
+def next_impact(flow: NdofFlow, tau0: float, z0, horizon: float,
+                max_step: float | None = None) -> float | None:
+    """Time of the first impact in (0, horizon] from deviation z0 at phase tau0, or None.
+
+    Certified (module docstring): a low-velocity impact is never missed, a spurious one
+    never reported, up to the rounding margins of docs/theory_ndof_flow.md section 5. The
+    start may be on the wall (g = 0); a root at h = 0 is reported only if v_w > 0.
+
+    Parameters
+    ----------
+    flow : NdofFlow
+    tau0 : float
+        Forcing phase at the start.
+    z0 : (2n,) array_like
+        Deviation from X_p at the start (x_w <= d required).
+    horizon : float
+        Length of the window.
+    max_step : float, optional
+        Initial subdivision (default min(T / 8, pi / (4 max|lambda|))).
+
+    Returns
+    -------
+    float or None
+        Time since the start of the first impact.
+    """
+    z = check_state(flow, z0, "the start state")
+    if not (math.isfinite(tau0) and math.isfinite(horizon)):
+        raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+    return _next_impact(flow, tau0, z, horizon, max_step)
+
+
+def _next_impact(flow, tau0, z0, horizon, max_step=None):
+    """:func:`next_impact` without the checks of its inputs."""
+    if horizon <= 0.0:
+        return None
+    f = _Eval(flow, tau0, z0, horizon)
+    # whole-window exclusion: g <= sup |z_w| - Delta d <= sum |c_k| - Delta d
+    if f.cabs * (1.0 + 4.0 * _EPS) + f.m0 + f.m1 * horizon < f.dd:
+        return None
+    step = max_step or min(flow.model.period / 8.0, 0.25 * math.pi / f.rho)
+    count = max(1, int(math.ceil(horizon / step)))
+    a = 0.0
+    fa = f(0.0)
+    # on the wall up to rounding (docs/theory.md, "A start on the wall")
+    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and abs(fa[0]) <= f.gap_rounding(0.0, fa):
+        fa = (0.0,) + fa[1:]
+    if fa[0] > 0.0:
+        raise InitialStateError(f"state beyond the wall: x_w - d = {fa[0]:.3e} > 0 (valid: x_w <= d)")
+    if fa[0] == 0.0 and fa[1] > 0.0:
+        return 0.0  # on the wall, moving into it
+    w = _danger_halfwidth(f, horizon)
+    for k in range(1, count + 1):
+        b = horizon if k == count else k * (horizon / count)
+        if k > 1 and w is not None and _far_from_wall(f.psi(a), f.psi(b), w):
+            a, fa = b, None
+            continue
+        if fa is None:
+            fa = f(a)
+        fb = f(b)
+        r = _search(f, a, b, fa, fb, 0)
+        if r is not None:
+            return r
+        a, fa = b, fb
+    return None
+
+
+def saltation_matrix(flow: NdofFlow, phase: float, z_minus) -> np.ndarray:
+    """Saltation matrix of the impact x_w = d, v_w+ = -r v_w- (docs/theory_ndof_flow.md,
+    section 6), (2n, 2n), from the deviation z_minus just before it at ``phase``.
+
+    S = R + (F+ - R F-) e_w^T / (e_w^T F-), R = I - (1 + r) e_{n+w} e_{n+w}^T, which
+    reduces to S = R + u e_w^T with
+
+        u = (1 + r) (-e_w ; M^-1 C e_w + (a_w- / v_w-) e_w),
+
+    a_w-, v_w- the wall coordinate's acceleration and velocity before the impact; for
+    n = 1 this is [[-r, 0], [(1 + r)(cos tau - d) / v-, -r]] (docs/theory.md, section 3).
+    det S = r^2.
+    """
+    m = flow.model
+    n, w, r = m.n, m.i_w, m.r
+    z = np.asarray(z_minus, dtype=float)
+    v = flow.wall_velocity(phase, z)
+    if not v > 0.0:
+        raise ValueError(f"v_minus={v!r} is invalid: the saltation matrix needs v_w- > 0")
+    a = flow.wall_acceleration(phase, z)
+    S = np.eye(2 * n)
+    S[n + w, n + w] = -r
+    S[w, w] -= 1.0 + r
+    S[n:, w] -= (1.0 + r) * flow.A[n:, n + w]
+    S[n + w, w] += (1.0 + r) * a / v
+    return S
+
+
+def _jerk_at_rest(flow: NdofFlow, tau: float, z: np.ndarray) -> float:
+    """g''' at (tau, z): d* omega^3 sin psi + (A^2 z)_{n+w}."""
+    m = flow.model
+    row = flow.A[m.n + m.i_w] @ flow.A
+    return flow.d_star * m.omega ** 3 * math.sin(tau - flow.tau_star) + float(row @ z)
+
+
+def _release_skip(flow: NdofFlow, tau: float, z: np.ndarray) -> float:
+    """Time after leaving the wall at rest during which the gap stays below its rounding
+    (g ~ F h^2 / 2 + F' h^3 / 6, F <= 0): no impact is possible there."""
+    m = flow.model
+    eps = 8.0 * math.ulp(abs(z[m.i_w]) + abs(m.delta_d) + 2.0 * flow.d_star)
+    force = abs(flow.wall_acceleration(tau, z))
+    jerk = abs(_jerk_at_rest(flow, tau, z))
+    times = [math.sqrt(2.0 * eps / force)] if force > 0.0 else []
+    if jerk > 0.0:
+        times.append((6.0 * eps / jerk) ** (1.0 / 3.0))
+    return min(times) if times else 0.0
+
+
+def _roundings(flow: NdofFlow, tau: float, z: np.ndarray):
+    """(gap, velocity) rounding of a state at phase tau (docs/theory_ndof_flow.md, section 5)."""
+    m = flow.model
+    n, w = m.n, m.i_w
+    psi = tau - flow.tau_star
+    s2 = 2.0 * flow.d_star * math.sin(0.5 * psi) ** 2
+    vp = -flow.d_star * m.omega * math.sin(psi)
+    phase = abs(tau) + abs(flow.tau_star) + TWO_PI + 1.0
+    eg = 8.0 * _EPS * (abs(z[w]) + abs(m.delta_d) + s2 + math.sqrt(2.0 * flow.d_star * s2) * phase)
+    ev = 8.0 * _EPS * (abs(vp) + abs(z[n + w]) + flow.d_star * m.omega * phase)
+    return eg, ev
+
+
+def _resting_on_wall(flow: NdofFlow, tau: float, z: np.ndarray) -> bool:
+    """x_w = d and v_w = 0 up to the rounding of the deviation coordinates and the phase."""
+    eg, ev = _roundings(flow, tau, z)
+    return abs(flow.gap(tau, z)) <= eg and abs(flow.wall_velocity(tau, z)) <= ev
+
+
+def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool = False,
+            max_impacts: int = 10000, chatter_time: float | None = None) -> NdofSegment:
+    """Flow with impacts for a fixed time: the exact event-driven trajectory segment.
+
+    Parameters
+    ----------
+    flow : NdofFlow
+    tau0 : float
+        Forcing phase at the start.
+    z0 : (2n,) array_like
+        Deviation from X_p at the start (x_w <= d).
+    duration : float
+        Time to advance, >= 0.
+    monodromy : bool
+        Also return d z(end) / d z(start): Phi over each smooth piece and S at each impact,
+        in time order (docs/theory_ndof_flow.md, section 7).
+    max_impacts : int
+        Cap on contacts (impacts and tangencies) in this call: :class:`ImpactCapError`.
+    chatter_time : float, optional
+        A chattering sequence whose accumulation time 2 r v- / ((1 - r) F) is below this
+        (default 1e-6 T), or whose next bounce v+^2 / (2 F) is below ~1e3 ulps of the gap,
+        raises :class:`ChatteringError` (F > 0: the free acceleration of x_w at rest on
+        the wall pushes into it).
+
+    Returns
+    -------
+    NdofSegment
+
+    Notes
+    -----
+    A contact whose approach velocity is within the velocity's rounding of 0 is a
+    contact at rest (docs/theory.md, "Tangency below rounding"): with F <= 0 a tangency,
+    not an impact (nothing reported, the flow goes on); with F > 0 sticking, refused
+    with :class:`ChatteringError`. Every reported impact has v- > 0.
+
+    Raises
+    ------
+    NonFiniteStateError, ParameterError
+        Bad start state, tau0 or duration.
+    InitialStateError
+        The start lies beyond the wall.
+    ImpactCapError, ChatteringError
+        See above.
+    """
+    z = check_state(flow, z0, "the start state")
+    if not (math.isfinite(tau0) and math.isfinite(duration)):
+        raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
+    m = flow.model
+    n, w, r, omega = m.n, m.i_w, m.r, m.omega
+    chatter = chatter_time if chatter_time is not None else 1e-6 * m.period
+    rho = float(np.abs(flow.eigenvalues).max())
+    impacts = []
+    mono = np.eye(2 * n) if monodromy else None
+    t = 0.0
+    tau = tau0
+    contacts = 0
+    h = 0.0 if _resting_on_wall(flow, tau, z) else \
+        (_next_impact(flow, tau, z, duration) if duration > 0.0 else None)
+    while True:
+        remaining = duration - t
+        if h is None or remaining <= 0.0:
+            if remaining > 0.0:
+                phi = flow.transition(remaining)
+                z = phi @ z
+                if monodromy:
+                    mono = phi @ mono
+                tau = (tau + omega * remaining) % TWO_PI
+            return NdofSegment(z, tau, impacts, mono)
+        if contacts >= max_impacts:
+            raise ImpactCapError(
+                f"more than max_impacts={max_impacts} impacts in {duration:.6g} time units "
+                f"at phase {tau % TWO_PI:.6f}: the motion is not resolvable at this cap")
+        contacts += 1
+        # velocity rounding after the flow (docs/theory_ndof_flow.md, section 5)
+        sizes = _mode_sizes(flow, z)
+        flow_err = (8.0 * _EPS * sizes[1] * (2.0 * n + 2.0 + rho * h)
+                    + 2.0 * h * rho * flow.defect * flow.condition ** 2 * float(np.linalg.norm(z)))
+        phi = flow.transition(h)
+        z = phi @ z
+        if monodromy:
+            mono = phi @ mono
+        t += h
+        tau = (tau + omega * h) % TWO_PI
+        wall_x, rest_v = flow.on_wall(tau)  # x_w = d, v_w = 0 at this phase
+        vp = -rest_v
+        v_minus = vp + z[n + w]
+        v_tol = _roundings(flow, tau, z)[1] + flow_err
+        if v_minus <= v_tol:  # contact at rest, below the velocity's rounding
+            z[w] = wall_x
+            z[n + w] = rest_v
+            if flow.wall_acceleration(tau, z) > 0.0:
+                raise ChatteringError(
+                    f"the wall coordinate x{w} comes to rest on the wall, pushed into it, at "
+                    f"t={t:.9g} (phase {tau:.6f}): sticking is not modelled in n-DOF")
+            t, tau, z, mono = _leave_wall(flow, tau0, t, duration, z, mono)
+            h = _next_impact(flow, tau, z, duration - t) if t < duration else None
+            continue
+        z_minus, z, v_minus, delta = _impact_law(flow, tau, z, wall_x, v_minus)
+        v_plus = -r * v_minus
+        tau_i = (tau - omega * delta) % TWO_PI
+        rest = z_minus.copy()
+        rest[n + w] = flow.on_wall(tau_i)[1]
+        force = flow.wall_acceleration(tau_i, rest)  # free acceleration of x_w at rest on the wall
+        if force > 0.0:
+            t_inf = 2.0 * r * v_minus / ((1.0 - r) * force) if r < 1.0 else math.inf
+            height = (r * v_minus) ** 2 / (2.0 * force)
+            if t_inf < chatter or height < 1e3 * math.ulp(abs(z[w]) + abs(m.delta_d) + flow.d_star):
+                raise ChatteringError(
+                    f"the wall coordinate x{w} chatters at t={t:.9g} (phase {tau:.6f}, "
+                    f"v-={v_minus:.3e}, accumulating in {t_inf:.3e}): sticking is not "
+                    f"modelled in n-DOF")
+        impacts.append(NdofImpact(t - delta, tau_i, v_minus, v_plus, False))
+        if monodromy:
+            mono = saltation_matrix(flow, tau_i, z_minus) @ mono
+        h = _next_impact(flow, tau, z, duration - t) if t < duration else None
+
+
+def _impact_law(flow: NdofFlow, tau: float, z: np.ndarray, wall_x: float, v: float):
+    """The impact law applied at the exact impact time t - delta, seen at the float time t
+    the search returned (docs/theory_ndof_flow.md, section 6).
+
+    The flight has overshot the wall by g = z_w - wall_x (a few ulps of time: delta = g / v,
+    either sign). To first order in delta the exact state before the impact is
+    z- = z - delta A z, with v- = v - delta a_w, and the state at t after it is
+    z+ = R z + u g in physical terms: v_w -> -r v_w, plus the saltation column
+    u = (1 + r)(-e_w ; M^-1 C e_w + (a_w / v) e_w) times the overshoot. A correction that
+    would not be small (|delta a_w| > 1e-6 v) is not made: the state is put on the wall.
+
+    Returns (z-, z+, v-, delta).
+    """
+    m = flow.model
+    n, w, r = m.n, m.i_w, m.r
+    overshoot = float(z[w] - wall_x)
+    acc = flow.wall_acceleration(tau, z)
+    delta = overshoot / v
+    if not abs(delta * acc) <= 1e-6 * v:
+        overshoot = delta = 0.0
+    # before the impact, at phase tau - omega delta (deviation coordinates: z' = A z)
+    z_minus = z - delta * (flow.A @ z)
+    z_minus[w] = flow.on_wall(tau - m.omega * delta)[0]
+    v_minus = v - delta * acc
+    z_plus = z.copy()
+    z_plus[n + w] -= (1.0 + r) * v
+    if overshoot != 0.0:
+        z_plus[w] -= (1.0 + r) * overshoot
+        z_plus[n:] -= (1.0 + r) * overshoot * flow.A[n:, n + w]
+        z_plus[n + w] += (1.0 + r) * overshoot * acc / v
+    else:
+        z_plus[w] = wall_x
+    return z_minus, z_plus, v_minus, delta
+
+
+def _leave_wall(flow: NdofFlow, tau0: float, t: float, duration: float, z: np.ndarray, mono):
+    """Leave the wall from rest at time t: flow, without searching, while the gap is below
+    its rounding (no impact is possible there)."""
+    tau = (tau0 + flow.model.omega * t) % TWO_PI
+    skip = min(duration - t, _release_skip(flow, tau, z))
+    phi = flow.transition(skip)
+    z = phi @ z
+    if mono is not None:
+        mono = phi @ mono
+    t += skip
+    return t, (tau0 + flow.model.omega * t) % TWO_PI, z, mono

@@ -1,0 +1,289 @@
+"""Independent high-precision reference of the n-DOF impact oscillator (mpmath, physical
+coordinates).
+
+The yardstick of tests/test_ndof_impact.py and tests/test_ndof_map.py; it shares no code
+with :mod:`grazing_control`: every formula is written again from the model
+(docs/ndof_model.md)::
+
+    M x'' + C x' + K x = f cos(omega t + phase)    while x[i_w] < d,  d = d* + delta_d
+    v[i_w]+ = -r v[i_w]-                           at x[i_w] = d, v[i_w]- > 0
+
+at ``DPS`` = 50 digits (the precision tests/reference.py sets too). The periodic response is x_p = Re(X e^{i tau}) with
+(K - omega^2 M + i omega C) X = f solved by mpmath's LU; d* = |X_w|, tau* = -arg X_w.
+Free flight is X(h) = X_p(tau + omega h) + e^{A h} (X(0) - X_p(tau)) with
+A = [[0, I], [-M^-1 K, -M^-1 C]]; e^{A h} comes from mpmath's eigendecomposition of A at
+50 digits (:meth:`NdofRef.transition`), checked against mpmath's own ``expm``
+(:meth:`NdofRef.transition_expm`) by the tests.
+
+Impacts: the first h > 0 with x_w(h) = d, v_w >= 0. Each forcing period is cut into
+``SAMPLES`` cells; a cell whose acceleration changes sign is split at its zero (located
+by mp.findroot), so v_w is monotone on each piece; a piece with g < 0 <= g at its ends
+brackets a root, and a piece where v_w goes from + to - holds a maximum of g (located by
+mp.findroot on v_w) that is tested, so a grazing hump negative at every grid point is
+still found. Roots are refined by mp.findroot (Anderson's bracketing method) to
+``ROOT_TOL``. Assumption (true for the example models: cells of T/128 against the
+fastest mode's period): no cell holds two zeros of the acceleration. Sticking is not
+modelled (more than ``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
+
+The controller: on Pi2 (phase tau* + pi2_offset) the velocity of coordinate i_a gets
+k^T (X - X**), X** = X_p(tau2) the grazing orbit's point.
+"""
+
+from __future__ import annotations
+
+from mpmath import mp, mpc, mpf
+
+__all__ = ["DPS", "NdofRef", "load_reference"]
+
+DPS = 50
+mp.dps = DPS
+SAMPLES = 128
+ROOT_TOL = mpf(10) ** -36
+MAX_IMPACTS_PER_PERIOD = 60
+
+
+def _f(value):
+    """A float (exact dyadic) or an mpf, as an mpf."""
+    return value if isinstance(value, (mpf, mpc)) else mpf(float(value))
+
+
+def load_reference(path, **changes) -> "NdofRef":
+    """The reference of a model YAML file (schema docs/ndof_model.md), fields changed."""
+    import yaml
+
+    with open(path, encoding="utf-8") as fh:
+        data = dict(yaml.safe_load(fh))
+    data.update(changes)
+    return NdofRef(**data)
+
+
+class NdofRef:
+    """The model at ``DPS`` digits; parameters taken exactly from their float values."""
+
+    def __init__(self, M, C, K, f, omega, i_w, delta_d=0.0, r=0.68, i_a=0, phase=0.0,
+                 pi2_offset=None):
+        n = len(M)
+        self.n, self.i_w, self.i_a = n, int(i_w), int(i_a)
+        self.M = mp.matrix([[_f(x) for x in row] for row in M])
+        self.C = mp.matrix([[_f(x) for x in row] for row in C])
+        self.K = mp.matrix([[_f(x) for x in row] for row in K])
+        self.f = mp.matrix([_f(x) for x in f])
+        self.omega = _f(omega)
+        self.delta_d = _f(delta_d)
+        self.r = _f(r)
+        self.phase = _f(phase)
+        self.pi2_offset = mp.pi / 2 if pi2_offset is None else _f(pi2_offset)
+        w = self.omega
+        D = self.K - w * w * self.M + mpc(0, 1) * w * self.C
+        self.X = mp.lu_solve(D, self.f)
+        Xw = self.X[self.i_w]
+        self.d_star = abs(Xw)
+        self.tau_star = (-mp.arg(Xw)) % (2 * mp.pi)
+        self.tau2 = (self.tau_star + self.pi2_offset) % (2 * mp.pi)
+        self.d = self.d_star + self.delta_d
+        self.period = 2 * mp.pi / w
+        Minv = mp.inverse(self.M)
+        MK, MC = Minv * self.K, Minv * self.C
+        A = mp.zeros(2 * n, 2 * n)
+        for i in range(n):
+            A[i, n + i] = 1
+            for j in range(n):
+                A[n + i, j] = -MK[i, j]
+                A[n + i, n + j] = -MC[i, j]
+        self.A = A
+        self.lam, self.ER = mp.eig(A)
+        self.ERinv = mp.inverse(self.ER)
+
+    # ------------------------------------------------------------------ flow
+    def transition(self, h):
+        """e^{A h} = V diag(e^{lambda h}) V^-1 (real part), 2n x 2n mp.matrix."""
+        h = _f(h)
+        m = 2 * self.n
+        out = mp.zeros(m, m)
+        e = [mp.exp(l * h) for l in self.lam]
+        for i in range(m):
+            for j in range(m):
+                out[i, j] = mp.re(mp.fsum(self.ER[i, k] * e[k] * self.ERinv[k, j] for k in range(m)))
+        return out
+
+    def transition_expm(self, h):
+        """e^{A h} by mpmath's expm (Pade / Taylor with scaling), for the cross-check."""
+        return mp.expm(self.A * _f(h))
+
+    def particular(self, tau):
+        """X_p(tau) = (Re(X e^{i tau}), Re(i omega X e^{i tau})) as a list of 2n mpf."""
+        e = mp.expj(_f(tau))
+        xs = [mp.re(x * e) for x in self.X]
+        vs = [mp.re(mpc(0, 1) * self.omega * x * e) for x in self.X]
+        return xs + vs
+
+    def state(self, tau, X, h):
+        """Physical state after free flight h from X at phase tau (a list of 2n mpf)."""
+        p0 = self.particular(tau)
+        dev = mp.matrix([_f(X[i]) - p0[i] for i in range(2 * self.n)])
+        z = self.transition(h) * dev
+        p1 = self.particular(_f(tau) + self.omega * _f(h))
+        return [p1[i] + z[i] for i in range(2 * self.n)]
+
+    def arc(self, tau, X):
+        return _Arc(self, _f(tau), [_f(x) for x in X])
+
+    # --------------------------------------------------------------- impacts
+    def next_impact(self, tau, X, horizon, samples=SAMPLES):
+        """First impact time in (0, horizon] from physical X at phase tau, or None."""
+        arc = self.arc(tau, X)
+        horizon = _f(horizon)
+        cells = max(4, int(mp.ceil(samples * horizon / self.period)))
+        hs = [horizon * k / cells for k in range(cells + 1)]
+        g0, v0, a0 = arc(hs[0])
+        if abs(g0) <= ROOT_TOL:
+            if v0 > 0:
+                return mpf(0)
+            g0 = -ROOT_TOL  # leaving the wall
+        prev = (hs[0], (g0, v0, a0))
+        for h in hs[1:]:
+            cur = (h, arc(h))
+            found = self._search_cell(arc, prev, cur)
+            if found is not None:
+                return found
+            prev = cur
+        return None
+
+    def _search_cell(self, arc, lo, hi):
+        (a, fa), (b, fb) = lo, hi
+        pieces = [(lo, hi)]
+        if fa[2] * fb[2] < 0:
+            tm = _root(arc, 2, a, b)
+            mid = (tm, arc(tm))
+            pieces = [(lo, mid), (mid, hi)]
+        for (a, fa), (b, fb) in pieces:
+            if fa[0] < 0 <= fb[0]:
+                return _root(arc, 0, a, b)
+            if fa[0] < 0 and fb[0] < 0 and fa[1] > 0 and fb[1] <= 0:
+                tm = _root(arc, 1, a, b)  # the maximum of g
+                if arc(tm)[0] >= 0:
+                    return _root(arc, 0, a, tm)
+        return None
+
+    # -------------------------------------------------------------- the map
+    def pi2_map(self, z, gains=None):
+        """One period of the Pi2 map from deviation z (from X** = X_p(tau2), before the
+        kick); returns (z_next as a list of mpf, impacts [(t, phase mod 2 pi, v-, v+)])."""
+        n = self.n
+        p2 = self.particular(self.tau2)
+        X = [p2[i] + _f(z[i]) for i in range(2 * n)]
+        if gains is not None:
+            X[n + self.i_a] += mp.fsum(_f(k) * _f(zi) for k, zi in zip(gains, z))
+        tau, t_in, T = self.tau2, mpf(0), self.period
+        impacts = []
+        while True:
+            h = self.next_impact(tau, X, T - t_in)
+            if h is None:
+                X = self.state(tau, X, T - t_in)
+                tau = tau + self.omega * (T - t_in)
+                break
+            if len(impacts) >= MAX_IMPACTS_PER_PERIOD:
+                raise RuntimeError("reference: chattering/sticking is not modelled")
+            X = self.state(tau, X, h)
+            t_in += h
+            tau = tau + self.omega * h
+            vm = X[n + self.i_w]
+            X[self.i_w] = self.d
+            X[n + self.i_w] = -self.r * vm
+            impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
+        pe = self.particular(tau)
+        return [X[i] - pe[i] for i in range(2 * n)], impacts
+
+    def jacobian(self, z, gains=None, step=mpf("1e-20")):
+        """D(pi2_map) at z by central differences: truncation ~ step^2 |D^3 P|, and near
+        grazing |D^3 P| ~ v-^-5 (1e28 at v- = 1e-6), rounding ~ 1e-50 / step: both far
+        below 1e-12 of |DP| for v- >= 1e-7."""
+        m = 2 * self.n
+        J = mp.zeros(m, m)
+        z = [_f(x) for x in z]
+        for j in range(m):
+            zp, zm = list(z), list(z)
+            zp[j] += step
+            zm[j] -= step
+            fp, ip = self.pi2_map(zp, gains)
+            fm, im = self.pi2_map(zm, gains)
+            if len(ip) != len(im):
+                raise RuntimeError("reference: the impact count changes inside the difference")
+            for i in range(m):
+                J[i, j] = (fp[i] - fm[i]) / (2 * step)
+        return J
+
+    def fixed_point(self, z, gains=None, tol=mpf("1e-30"), max_iter=20):
+        """A fixed point of the Pi2 map near z by Newton with the differenced Jacobian;
+        returns (z*, J at z*, impacts)."""
+        m = 2 * self.n
+        z = mp.matrix([_f(x) for x in z])
+        for _ in range(max_iter):
+            fz, _imp = self.pi2_map(list(z), gains)
+            J = self.jacobian(list(z), gains)
+            res = mp.matrix([fz[i] - z[i] for i in range(m)])
+            dz = mp.lu_solve(J - mp.eye(m), -res)
+            z = z + dz
+            if mp.norm(dz) < tol * (1 + mp.norm(z)):
+                break
+        else:
+            raise RuntimeError("reference Newton did not converge")
+        zs = list(z)
+        fz, imp = self.pi2_map(zs, gains)
+        return zs, self.jacobian(zs, gains), imp
+
+    def multipliers(self, J):
+        """Eigenvalues of J at DPS digits, by decreasing modulus."""
+        ev, _ = mp.eig(J)
+        return sorted(ev, key=lambda x: -abs(x))
+
+
+class _Arc:
+    """Gap g = x_w - d, velocity and acceleration of the wall coordinate along one free
+    flight: the harmonic of X_w plus the modes of the homogeneous part."""
+
+    def __init__(self, ref: NdofRef, tau, X):
+        self.ref = ref
+        p0 = ref.particular(tau)
+        m = 2 * ref.n
+        dev = [X[i] - p0[i] for i in range(m)]
+        w = ref.i_w
+        self.c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
+                  for k in range(m)]
+        self.Xw = ref.X[w] * mp.expj(tau)
+
+    def __call__(self, h):
+        ref = self.ref
+        io = mpc(0, 1) * ref.omega
+        eh = self.Xw * mp.expj(ref.omega * h)
+        y = v = a = mpc(0)
+        for l, c in zip(ref.lam, self.c):
+            e = c * mp.exp(l * h)
+            y += e
+            v += l * e
+            a += l * l * e
+        g = mp.re(eh) + mp.re(y) - ref.d
+        return g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a)
+
+
+def _root(arc, which, lo, hi):
+    """Root of component ``which`` (0 gap, 1 velocity, 2 acceleration) of the arc in the
+    bracket [lo, hi], by mp.findroot (Anderson's bracketing method), kept in the bracket."""
+    def fn(h):
+        return arc(h)[which]
+
+    try:
+        x = mp.findroot(fn, (lo, hi), solver="anderson", tol=ROOT_TOL ** 2, verify=False)
+    except (ValueError, ZeroDivisionError):
+        x = None
+    if x is None or not lo <= x <= hi or abs(fn(x)) > ROOT_TOL * 1e3:
+        flo = fn(lo)
+        for _ in range(200):  # bisection fallback
+            mid = (lo + hi) / 2
+            fm = fn(mid)
+            if (fm >= 0) == (flo >= 0):
+                lo, flo = mid, fm
+            else:
+                hi = mid
+        x = hi
+    return x
