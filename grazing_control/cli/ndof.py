@@ -117,8 +117,15 @@ def _given(argv, flag):
     return any(a == flag or a.startswith(flag + "=") for a in argv)
 
 
+#: The commands of this module (``run --model`` is the launcher's: ros/launcher.py).
+COMMANDS = ("design", "orbit", "continue", "simulate", "sweep", "figures")
+
+
 def check_options(args, argv) -> None:
-    """Refuse 1-DOF model options with --model, and n-DOF options without it."""
+    """Refuse 1-DOF model options with --model, and n-DOF options without it (the
+    commands of :data:`COMMANDS`)."""
+    if getattr(args, "command", None) not in COMMANDS:
+        return
     model = getattr(args, "model", None)
     if model is not None:
         bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)]
