@@ -2,6 +2,8 @@
 
     ros2 launch grazing_control grazing_control.launch.py                       # study scene
     ros2 launch grazing_control grazing_control.launch.py delta_d:=-9.0e-06 bag:=bags/scene2
+    ros2 launch grazing_control grazing_control.launch.py model:=config/models/two_mass_scene.yaml \
+        controller_params:=gains.yaml                                          # n-DOF scene
 
 Parameters come from the package's config/ (study.yaml, controller.yaml) unless other
 files are given; ``delta_d`` and ``max_periods`` override the simulator's (write floats
@@ -15,7 +17,11 @@ controller and recorder get SIGINT (the recorder closes its bag) and the launch 
 once nothing runs: included twice under two namespaces, each scene ends on its own. Any
 node exiting with a nonzero status stops everything and the launch returns 1.
 ``/clock`` is remapped to ``clock`` (the namespace's own clock) and
-``use_sim_time:=true`` puts the controller and recorder on it. Machines without
+``use_sim_time:=true`` puts the controller and recorder on it. ``model`` runs an n-DOF
+scene of a model file (issue 17; docs/nodes.md, "n-DOF scenes"): both nodes read it, the
+controller's parameter file must give its ``gains``, the simulator's file is used without
+its 1-DOF model parameters, and ``delta_d`` left empty is the model file's (the study's
+-5.0e-06 without a model). Machines without
 ``ros2 launch`` use ``grazing run`` (grazing_control.ros.launcher), the same scene with
 plain processes.
 """
@@ -48,8 +54,12 @@ def generate_launch_description():
         DeclareLaunchArgument("controller_params",
                               default_value=os.path.join(config, "controller.yaml"),
                               description="controller_node parameter file (grazing design --out)"),
-        DeclareLaunchArgument("delta_d", default_value="-5.0e-06",
-                              description="wall clearance Delta d = d - d*"),
+        DeclareLaunchArgument("delta_d", default_value="",
+                              description="wall clearance Delta d = d - d* ('' = -5.0e-06, "
+                                          "or the model file's with model)"),
+        DeclareLaunchArgument("model", default_value="",
+                              description="n-DOF model file (docs/ndof_model.md); '' = the "
+                                          "study's 1-DOF oscillator"),
         DeclareLaunchArgument("max_periods", default_value="1200",
                               description="forcing periods of the scene"),
         DeclareLaunchArgument("enable_after", default_value="1000",
@@ -67,19 +77,23 @@ def _scene(context):
     """The scene's nodes with the overrides of grazing_control.ros.scene_nodes (the ones
     `grazing run` gives them: one description, issue 19 §3), once the arguments are
     known; launch adds its own: the clock remapping, use_sim_time, the exit handlers."""
-    from grazing_control.ros.scene_nodes import NODES, scene_overrides
+    from grazing_control.ros.scene_nodes import NODES, scene_overrides, sim_values_for_model
 
     def arg(name):
         return LaunchConfiguration(name).perform(context)
 
     bag = arg("bag")
     controller_params = arg("controller_params")
+    model = arg("model") or None
+    delta_d = float(arg("delta_d")) if arg("delta_d") else None if model else -5.0e-06
     over = scene_overrides(controller_params, periods=int(arg("max_periods")),
-                           delta_d=float(arg("delta_d")),
-                           enable_after=int(arg("enable_after")), bag=bag or None)
+                           delta_d=delta_d, enable_after=int(arg("enable_after")),
+                           bag=bag or None, model=model)
     sim_time = arg("use_sim_time").lower() in ("true", "1", "yes")
     files = {"sim_node": [arg("sim_params")], "controller_node": [controller_params],
              "recorder_node": []}
+    if model is not None:     # the simulator file's scene settings, not its 1-DOF model
+        files["sim_node"] = [sim_values_for_model(arg("sim_params"))]
     nodes = {}
     for name in NODES:
         if over[name] is None:

@@ -14,10 +14,32 @@ from __future__ import annotations
 import math
 
 from grazing_control.plant.engine import Event
+from grazing_control.plant.ndof_engine import NdofEvent
 from grazing_control.ros import cdr
 from grazing_control.ros.common import Throttled
 
-__all__ = ["Outputs", "read_answer"]
+__all__ = ["Outputs", "read_answer", "joint_names", "ndof_joint_state"]
+
+
+def joint_names(n: int) -> list:
+    """The joint names of an n-DOF scene's JointState messages: mass0 .. mass{n-1}."""
+    return [f"mass{i}" for i in range(n)]
+
+
+def ndof_joint_state(ev: NdofEvent, names: list):
+    """sensor_msgs/JointState of an n-DOF state (issue 17): stamp = ev.t, one joint per
+    coordinate (``names``), position [x_0 .. x_{n-1}], velocity [v_0 .. v_{n-1}], effort
+    [cos tau] (Pi1, Pi2) or [cos tau, sin tau] (the state stream), as the 1-DOF messages."""
+    from sensor_msgs.msg import JointState
+
+    msg = JointState()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = cdr.stamp_parts(ev.t)
+    msg.name = names
+    msg.position = [float(x) for x in ev.x]
+    msg.velocity = [float(v) for v in ev.v]
+    msg.effort = ([math.cos(ev.phase), math.sin(ev.phase)] if ev.kind == "state"
+                  else [math.cos(ev.phase)])
+    return msg
 
 def read_answer(data: bytes):
     """(stamp key, Delta v = twist.linear.x, the Delta v predicted for the next sample =
@@ -43,11 +65,14 @@ class Outputs:
                                      "none applied")
         self.late = Throttled(log, "answer after its deadline dropped")
         self.warn = log.warning
+        self._names = None         # joint names of n-DOF messages (mass0 ..)
 
     def publish(self, ev: Event) -> tuple:
         """Publish an event as packed CDR; its stamp as (sec, nanosec)."""
         n = self.node
         sec, ns = stamp = cdr.stamp_parts(ev.t)
+        if isinstance(ev, NdofEvent):
+            return self._publish_ndof(ev, stamp)
         if ev.kind == "impact":
             n.pub_impact.publish(cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase))
             return stamp
@@ -63,6 +88,22 @@ class Outputs:
             if n.settings.mode == "lockstep":
                 n.pub_clock.publish(cdr.clock(sec, ns))
             n.pub_pi2.publish(data)
+        return stamp
+
+    def _publish_ndof(self, ev: NdofEvent, stamp: tuple) -> tuple:
+        """An n-DOF state (state stream, Pi1, Pi2) as a JointState with n joints."""
+        n = self.node
+        if self._names is None or len(self._names) != len(ev.x):
+            self._names = joint_names(len(ev.x))
+        msg = ndof_joint_state(ev, self._names)
+        if ev.kind == "state":
+            n.pub_state.publish(msg)
+        elif ev.kind == "pi1":
+            n.pub_pi1.publish(msg)
+        elif ev.kind == "pi2":
+            if n.settings.mode == "lockstep":
+                n.pub_clock.publish(cdr.clock(*stamp))
+            n.pub_pi2.publish(msg)
         return stamp
 
     def latency(self, seconds: float) -> None:

@@ -43,6 +43,8 @@ from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.lockstep import Lockstep
 from grazing_control.plant.loop import Loop
+from grazing_control.plant.ndof_engine import NdofEngine
+from grazing_control.plant.ndof_settings import load_model_file, ndof_settings_from_values
 from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, settings_from_values)
@@ -73,8 +75,15 @@ CLOCK_EVERY = 1e-3
 #: every executor wait (measured: about 10 % of the lockstep rate).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 
+#: An n-DOF scene (issue 17): declared first, its model gives delta_d's default.
+MODEL_FILE = Parameter("model_file", "string", "", "path of an n-DOF model YAML file "
+                       "(docs/ndof_model.md): simulate it and publish every coordinate "
+                       "(JointState with n joints); '' = the study's 1-DOF oscillator",
+                       read_only=True)
+
 #: The node's own parameters (how it starts and spins), after the simulation's.
 NODE_PARAMETERS = (
+    MODEL_FILE,
     Parameter("executor", "string", "events", "rclpy executor: single_threaded "
               "(SingleThreadedExecutor) or events (rclpy.experimental EventsExecutor)",
               choices=EXECUTORS, read_only=True),
@@ -134,14 +143,27 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
+        self.model_file = self.declare_parameter(MODEL_FILE.name, MODEL_FILE.default,
+                                                  descriptor(MODEL_FILE)).value
+        self.model = None            # the n-DOF model file's model (issue 17), or None
+        if self.model_file:
+            try:
+                self.model = load_model_file(self.model_file)
+            except ParameterError as exc:
+                raise StartupError(str(exc)) from None
         for p in PARAMETERS + NODE_PARAMETERS:
-            self.declare_parameter(p.name, p.default, descriptor(p))
+            if p is MODEL_FILE:
+                continue
+            default = p.default     # with a model file, delta_d defaults to the file's
+            if p.name == "delta_d" and self.model is not None:
+                default = self.model.delta_d
+            self.declare_parameter(p.name, default, descriptor(p))
         try:
-            self.settings = settings_from_values(self._values())
+            self.settings = self._validate(self._values())
             apply_node_scheduling(self)
         except (ParameterError, ValueError) as exc:
             raise StartupError(str(exc)) from None
-        self.engine = Engine(self.settings)
+        self.engine = (Engine if self.model is None else NdofEngine)(self.settings)
         self.exit_when_done = self.get_parameter("exit_when_done").value
         self._strays = set()          # (topic, node) of bystander publishers, logged once
         self.exit_code = 0
@@ -190,6 +212,13 @@ class SimNode(Node):
 
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in SETTING_KEYS}
+
+    def _validate(self, values: dict):
+        """The settings of ``values``: the 1-DOF scene's, or with ``model_file`` the
+        n-DOF scene's (plant.ndof_settings); ParameterError naming a bad value."""
+        if self.model is None:
+            return settings_from_values(values)
+        return ndof_settings_from_values(values, self.model_file, self.model)
 
     @property
     def running(self) -> bool:
@@ -441,14 +470,22 @@ class SimNode(Node):
         values = self._values()
         values.update({p.name: p.value for p in params if p.name in values})
         try:
-            new = settings_from_values(values)
+            new = self._validate(values)
             if self.loop is not None:        # running: the change's consequences too
                 check_live_change(self.settings, new, self.engine.k)
+                if self.model is not None and new.model.delta_d != self.settings.model.delta_d:
+                    raise ParameterError(
+                        f"delta_d={new.model.delta_d!r} is invalid while an n-DOF scene runs: "
+                        "a live change of the n-DOF model is not built (valid: "
+                        f"{self.settings.model.delta_d!r}; set it before the start)")
         except ParameterError as exc:
             self.get_logger().warning(f"parameter change refused: {exc}")
             return SetParametersResult(successful=False, reason=str(exc))
         old = self.settings
-        if new.params != old.params:
+        if self.model is not None:
+            if self.loop is None and new.model.delta_d != old.model.delta_d:
+                self.engine = NdofEngine(new)    # not started yet: the new wall from t = 0
+        elif new.params != old.params:
             self.engine.pending = new.params     # whole, at the next Pi2 sample
         if isinstance(self.loop, Realtime) and new.time_scale != old.time_scale:
             self.loop.rebase()

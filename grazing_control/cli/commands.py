@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 
 from grazing_control.support.arguments import finite, integer_at_least, non_empty_path
+from . import ndof
 from .parameter_file import add_params_option, apply_to_args
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import (STUDY_R, STUDY_ZETA, OscillatorParams,
@@ -158,6 +159,8 @@ def _gains(args, p):
 
 # ---------------------------------------------------------------------------- design
 def cmd_design(args):
+    if args.model is not None:
+        return ndof.cmd_design(args)
     from grazing_control.dynamics.design import (C2_LIMIT, admissible_c2, evaluate_design,
                                                  write_controller_yaml)
 
@@ -345,6 +348,8 @@ def _json_interval(iv):
 
 # ---------------------------------------------------------------------------- orbit
 def cmd_orbit(args):
+    if args.model is not None:
+        return ndof.cmd_orbit(args)
     from grazing_control.dynamics.orbits import orbit_11
 
     p = _params(args, args.delta_d)
@@ -406,6 +411,8 @@ _BRANCH_TEXT = {
 
 # ---------------------------------------------------------------------------- continue
 def cmd_continue(args):
+    if args.model is not None:
+        return ndof.cmd_continue(args)
     from grazing_control.dynamics.continuation import continue_11
 
     p = _params(args)
@@ -437,6 +444,8 @@ def cmd_continue(args):
 
 # ---------------------------------------------------------------------------- simulate
 def cmd_simulate(args):
+    if args.model is not None:
+        return ndof.cmd_simulate(args)
     from grazing_control.dynamics.simulate import simulate
 
     p = _params(args, args.delta_d)
@@ -621,6 +630,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here "
                                              "(c1, c2, actuation_delay, X**, the model)")
     _method_arg(s)
+    ndof.add_model_option(s)
+    ndof.add_design_options(s)
     s.set_defaults(func=cmd_design)
 
     s = sub.add_parser("orbit", help="the 1/1 orbit and its Floquet multipliers")
@@ -628,6 +639,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d* (< 0)")
     _gain_args(s)
     _method_arg(s)
+    ndof.add_model_option(s)
+    ndof.add_gain_options(s, markov=True)
     s.set_defaults(func=cmd_orbit)
 
     s = sub.add_parser("continue", help="continue the 1/1 branch in Delta d, find bifurcations")
@@ -636,6 +649,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--to", dest="stop", type=_finite, required=True, help="end Delta d <= 0")
     s.add_argument("--points", type=_count, default=200, help="grid points (default 200)")
     _gain_args(s)
+    ndof.add_model_option(s)
+    ndof.add_gain_options(s, markov=True)
     s.set_defaults(func=cmd_continue)
 
     from .continue2 import add_parser as add_continue2_parser
@@ -660,11 +675,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--tol", type=_finite, default=1e-9,
                    help="Pi2 error tolerance for --fidelity auto (default 1e-9)")
     _gain_args(s)
+    ndof.add_model_option(s)
+    ndof.add_gain_options(s)
+    ndof.add_start_option(s)
     s.set_defaults(func=cmd_simulate)
 
     from grazing_control.studies.sweeps.cli import add_sweep_command
 
-    add_sweep_command(sub, _common, _finite, _count)
+    s = add_sweep_command(sub, _common, _finite, _count)
+    ndof.add_sweep_options(s)
+    s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_sweep))
     from .basins import add_basins_parser
 
     add_basins_parser(sub)
@@ -694,7 +714,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_robustness_parser(sub, _common, _finite)
     from grazing_control.studies.figures.command import add_parser as add_figures_parser
 
-    add_figures_parser(sub)
+    s = add_figures_parser(sub)
+    ndof.add_figures_options(s)
+    s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_figures))
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
     s.add_argument("--out", type=_path, default="out/demo", help="report folder (default out/demo)")
@@ -723,6 +745,7 @@ def main(argv=None) -> int:
         # below with one line; numpy's warnings would add lines of their own
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
+            ndof.check_options(args, argv)   # --model and the 1-DOF options (cli/ndof.py)
             apply_to_args(args, argv)     # --params FILE (cli/parameter_file.py)
             result = args.func(args)
     except (ParameterError, ValueError, RuntimeError, OSError) as exc:

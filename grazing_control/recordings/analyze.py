@@ -17,6 +17,7 @@ import numpy as np
 
 from grazing_control.support.arguments import finite, positive
 from . import reader
+from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
 from .numbers import resolve_setup, scene_numbers, section_phase_problems
 from .scenes import load, parse_topic_options
 
@@ -396,6 +397,12 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     per_bag = topics if isinstance(topics, list) else [topics] * len(bags)
     for bag, bag_topics in zip(bags, per_bag):
         data = load(bag, bag_topics)
+        if is_ndof(data):            # an n-DOF scene (issue 17): per-coordinate numbers
+            entry, bag_lines = _ndof_bag(bag, data, _label(Path(bag), used), out, tol,
+                                         figures)
+            lines += bag_lines
+            report["bags"].append(_jsonable(entry))
+            continue
         setup = resolve_setup(data, options)
         data.problems.extend(section_phase_problems(data, setup))
         label = _label(Path(bag), used)
@@ -458,6 +465,45 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
 
 
 _finite = finite
+
+
+def _ndof_bag(bag, data, label, out, tol, figures):
+    """The report entry and markdown lines of an n-DOF bag (.ndof_analysis): the model
+    and gains from its parameter record; options for the 1-DOF model do not apply."""
+    setup = ndof_setup(data)
+    entry = {"bag": str(bag), "file": str(data.file), "label": label,
+             "closed_cleanly": data.complete, "messages": data.message_count,
+             "messages_read": data.messages_read, "topics_used": data.present,
+             "notes": data.notes + setup.notes, "problems": data.problems,
+             "parameter_record": bool(data.parameters.get("nodes")),
+             "setup": {"model_file": setup.model_file, "n": setup.n,
+                       "delta_d": setup.model.delta_d if setup.model is not None else None,
+                       "gains": setup.gains.tolist() if setup.gains is not None else None,
+                       "mode": setup.mode, "enable_after": setup.enable_after,
+                       "saturation": setup.saturation,
+                       "actuation_delay": setup.actuation_delay},
+             "scenes": []}
+    lines = [f"## {label}", "", f"* file: `{data.file}` ({data.message_count} messages, "
+             f"{data.messages_read} of them on the topics analysed"
+             f"{'' if data.complete else ', not closed cleanly'})",
+             "* topics used: " + ", ".join(f"{r} = {t}" for r, t in data.present.items())]
+    lines += [f"* note: {s}" for s in entry["notes"]]
+    lines += [f"* **cannot use**: {s}" for s in data.problems]
+    lines.append("")
+    for sd in data.scenes:
+        n = ndof_scene_numbers(sd, setup, tol)
+        slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
+        fig_name = f"{slabel.replace(' ', '_')}.png"
+        if out is not None and figures:
+            dd = setup.model.delta_d if setup.model is not None else None
+            plot_ndof_scene(sd, n, f"{slabel}: {setup.mode}, n = {setup.n}, Δd = "
+                                   f"{_fmt(dd, '.3g')}", out / fig_name)
+            n["figure"] = fig_name
+        else:
+            fig_name = None
+        lines += ndof_lines(slabel, setup, n, fig_name)
+        entry["scenes"].append(_jsonable(n))
+    return entry, lines
 
 
 def add_model_options(parser) -> None:

@@ -36,7 +36,7 @@ from grazing_control.ros.recording.bounded import (  # noqa: F401  (re-exported)
     regular_file as _regular_file)
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
-           "decode_joint_state", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
+           "decode_joint_state", "decode_joint_states", "joint_count", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
            "decode_vector3_stamped",
            "decode_float64", "decode_strings"]
 
@@ -459,6 +459,34 @@ def decode_joint_state(bag: RawBag, topic: str) -> dict:
     v, nv, pos = b.first_double(pos)
     b.ok &= (nx > 0) & (nv > 0)
     return _columns(b, stamp=stamp, x=x, v=v)
+
+
+def joint_count(bag: RawBag, topic: str) -> int:
+    """The largest position count of the JointState messages on ``topic`` (0 if none):
+    1 for the 1-DOF scenes, n for an n-DOF scene (issue 17)."""
+    b, _stamp, pos = decode_stamped(bag, topic)
+    pos = _align(b.skip_strings(pos), 4)
+    n = np.where(b.ok, b.u32(pos), 0)
+    n = n[b.ok & (n <= b.end - b.body)]
+    return int(n.max()) if n.size else 0
+
+
+def decode_joint_states(bag: RawBag, topic: str, n: int) -> dict:
+    """JointState columns of an n-DOF scene (issue 17): stamp_ns, x (N, n) = position,
+    v (N, n) = velocity, times, ok (ok: exactly n positions and n velocities)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = b.skip_strings(pos)
+    cols = []
+    for _ in range(2):                  # position, velocity
+        pos = _align(pos, 4)
+        count = np.where(b.ok, b.u32(pos), 0)
+        b.ok &= count == n
+        p8 = _align(pos + 4, 8)
+        cols.append(np.column_stack([np.where(b.ok, b.f64(np.where(b.ok, p8 + 8 * j, 0)),
+                                              np.nan) for j in range(n)])
+                    if n else np.zeros((b.ok.size, 0)))
+        pos = np.where(b.ok, p8 + 8 * n, pos)
+    return _columns(b, stamp=stamp, x=cols[0], v=cols[1])
 
 
 def decode_estimate(bag: RawBag, topic: str) -> dict:

@@ -145,6 +145,8 @@ class BagData:
     problems: list
     message_count: int        # every message record of the file
     messages_read: int = 0    # those on the topics the analysis reads
+    joints: int = 1           # coordinates per Pi2 sample (n of an n-DOF scene; its Scene.pi2
+    #                           is then (N, 2n): x_0 .. x_{n-1}, v_0 .. v_{n-1})
 
 
 def _scene_index(starts_log, log):
@@ -221,13 +223,16 @@ def load(bag, topics: dict | None = None) -> BagData:
             + "".join(f"; {msg}" for msg in problems if "(pi2)" in msg))
 
     pi2 = reader.decode_joint_state(raw, present["pi2"])
+    joints = reader.joint_count(raw, present["pi2"])
+    if joints > 1:           # an n-DOF scene (issue 17): every coordinate, x (N, n), v (N, n)
+        pi2 = reader.decode_joint_states(raw, present["pi2"], joints)
     bad = int(np.count_nonzero(~pi2["ok"]))
     if bad:
         problems.append(f"{bad} malformed Pi2 messages (too short, no position/velocity, "
                         "or big-endian CDR): not used")
     order = np.argsort(pi2["log_time"], kind="stable")
     order = order[pi2["ok"][order]]
-    finite = np.isfinite(pi2["x"][order]) & np.isfinite(pi2["v"][order])
+    finite = np.all(np.isfinite(np.column_stack([pi2["x"][order], pi2["v"][order]])), axis=1)
     if not finite.all():
         bad_t = pi2["stamp"][order][~finite] / _NS
         problems.append(f"{int(np.count_nonzero(~finite))} Pi2 samples with a non-finite state "
@@ -366,4 +371,4 @@ def load(bag, topics: dict | None = None) -> BagData:
                      "its last complete record")
     read = sum(len(c.records) for c in raw.channels.values())
     return BagData(path, raw.path, raw.complete, topics, present, scenes, parameters, notes,
-                   problems, raw.message_count, read)
+                   problems, raw.message_count, read, max(joints, 1))

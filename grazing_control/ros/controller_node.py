@@ -93,11 +93,15 @@ import math
 import time
 from collections import deque
 
+import numpy as np
+
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
@@ -114,11 +118,12 @@ from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_
                      int_descriptor, log_parameter_changes, publish_parameter_record,
                      refuse_while_running, run_node, spin, stamp_key, string_descriptor)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from .ndof_control import NdofLaw, ndof_controller_from_values
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
 ISOLATION_CHECK = 0.25
 
-__all__ = ["ControlLaw", "law_from_values", "model_from_values", "stream_from_values",
+__all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values", "stream_from_values",
            "ControllerNode", "main", "PI2_SOURCES"]
 
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
@@ -192,7 +197,7 @@ class ControlLaw:
             self.out_of_order += 1
         dv = 0.0
         if self.enabled:
-            dv = correction(self.gains, x, v, self.x_ref, self.v_ref)
+            dv = self._law(x, v)
             if abs(dv) > self.saturation:
                 dv = math.copysign(self.saturation, dv)
         self.newest = key if self.newest is None else max(self.newest, key)
@@ -205,10 +210,20 @@ class ControlLaw:
         saturation when the next sample is controlled, else 0 (issue 16 section 3)."""
         if not self.enabled:
             return 0.0
-        dv = correction(self.gains, x, v, self.x_ref, self.v_ref)
+        dv = self._law(x, v)
         if abs(dv) > self.saturation:
             dv = math.copysign(self.saturation, dv)
         return dv
+
+    def _law(self, x: float, v: float) -> float:
+        """Eq. 28 before the saturation."""
+        return correction(self.gains, x, v, self.x_ref, self.v_ref)
+
+
+class NdofControlLaw(NdofLaw, ControlLaw):
+    """:class:`ControlLaw` with the n-DOF law Delta v = k^T (X - X**) (issue 17,
+    :mod:`grazing_control.ros.ndof_control`): ``gains`` k, ``x_ref``/``v_ref`` X**'s
+    positions and velocities (arrays)."""
 
 
 #: Largest |c1|, |c2| accepted (the design's search limit, dynamics.design.C2_LIMIT).
@@ -361,17 +376,32 @@ class ControllerNode(Node):
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
+        self.model_file = d("model_file", "", string_descriptor(
+            "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
+            "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
+            "1-DOF law", True)).value
+        d("gains", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
+            type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
+                "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "
+                "(grazing design --model FILE --out)")))
         declare_scheduling(self)
         self.executor_kind = self.get_parameter("executor").value
         try:
             apply_node_scheduling(self)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
+        self.ndof = None         # an n-DOF scene's controller (issue 17), or None
         try:
-            self.law = law_from_values(self._values())
-            self.actuation_delay = actuation_delay_from_values(self._values())
-            self.model = model_from_values(self._values())
-            self.stream = stream_from_values(self._values(), self.model)
+            if self.model_file:
+                self.law = self._ndof_law(self._values(), self._gains())
+                self.actuation_delay = actuation_delay_from_values(
+                    {**self._values(), "omega": self.ndof.model.omega})
+                self.model = self.stream = None
+            else:
+                self.law = law_from_values(self._values())
+                self.actuation_delay = actuation_delay_from_values(self._values())
+                self.model = model_from_values(self._values())
+                self.stream = stream_from_values(self._values(), self.model)
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -426,6 +456,14 @@ class ControllerNode(Node):
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
         self._warn_gains()
+        if self.ndof is not None:
+            log.info(f"model_file={self.model_file} n={self.ndof.model.n} "
+                     f"i_a={self.ndof.model.i_a} gains={self.ndof.gains.tolist()!r} "
+                     f"X**={self.law.x_ref.tolist() + self.law.v_ref.tolist()!r} "
+                     f"enable_after={self.law.enable_after} "
+                     f"actuation_delay={self.actuation_delay!r} "
+                     f"predicts={str(self.ndof.predicts).lower()} executor={self.executor_kind}")
+            return
         source = "sample" if self.stream is None else (
             f"stream estimator={self.stream.estimator} impact_source="
             f"{self.stream.impact_source} sensor_noise={self.stream.sigma!r}")
@@ -439,6 +477,11 @@ class ControllerNode(Node):
         answers every sample with Delta v = 0): typically a parameter file keyed for
         another node name, which rcl ignores silently."""
         given = getattr(self, "_parameter_overrides", {})
+        if self.ndof is not None:
+            if not np.any(self.ndof.gains):
+                self.get_logger().warning("gains are all 0: every correction is 0, the "
+                                          "controller does not control")
+            return
         missing = [k for k in ("c1", "c2") if k not in given]
         if missing:
             self.get_logger().warning(
@@ -452,9 +495,54 @@ class ControllerNode(Node):
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in _KEYS}
 
+    def _gains(self):
+        """The ``gains`` parameter, None when not given."""
+        try:
+            return self.get_parameter("gains").value
+        except ParameterUninitializedException:
+            return None
+
+    def _ndof_law(self, values: dict, gains) -> "NdofControlLaw":
+        """The n-DOF law of ``values`` and ``gains`` (ros/ndof_control.py); sets
+        :attr:`ndof`. The switches (enable_after, saturation, stale_after) are validated
+        as the 1-DOF law's."""
+        ndof = ndof_controller_from_values(values, self.model_file, gains)
+        base = law_from_values({**values, "c1": 0.0, "c2": 0.0, "x_ref": 0.0, "v_ref": 0.0})
+        self.ndof = ndof
+        return NdofControlLaw(ndof.gains, ndof.x_ref, ndof.v_ref, base.enable_after,
+                              base.saturation)
+
+    def _ndof_sample(self, data: bytes):
+        """(key, x, v) of an n-DOF Pi2 sample (a JointState with n positions and n
+        velocities), else None (counted as malformed)."""
+        msg = deserialize(data, JointState, self.malformed)
+        if msg is None:
+            return None
+        key = stamp_key(msg.header.stamp)
+        n = self.ndof.model.n
+        if len(msg.position) != n or len(msg.velocity) != n:
+            self.malformed(f"stamp {key}: {len(msg.position)} positions and "
+                           f"{len(msg.velocity)} velocities, expected {n} of each (the "
+                           f"{n}-DOF model of {self.model_file})")
+            return None
+        return key, np.array(msg.position, dtype=float), np.array(msg.velocity, dtype=float)
+
     def _on_sample(self, data: bytes) -> None:
         """A Pi2 sample as received (serialized): the simulator's layout is read directly
-        (:func:`cdr.read_sample`), any other JointState through rclpy's deserializer."""
+        (:func:`cdr.read_sample`), any other JointState through rclpy's deserializer; an
+        n-DOF scene's samples (n joints) through rclpy's."""
+        if self.ndof is not None:
+            sample = self._ndof_sample(data)
+            if sample is None:
+                return
+            key, x, v = sample
+            if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
+                self.malformed(f"stamp {key}: x={x.tolist()!r} v={v.tolist()!r}")
+                return
+            if self._stale(key):
+                return
+            self._answer(key, x, v)
+            return
         sample = cdr.read_sample(data)
         if sample is None:
             msg = deserialize(data, JointState, self.malformed)
@@ -470,12 +558,19 @@ class ControllerNode(Node):
         if not (math.isfinite(x) and math.isfinite(v)):
             self.malformed(f"stamp {key}: x={x!r} v={v!r}")
             return
+        if self._stale(key):
+            return
+        self._answer(key, x, v)
+
+    def _stale(self, key: tuple) -> bool:
+        """Whether the sample stamped ``key`` is older than ``stale_after`` (with
+        use_sim_time; counted and logged)."""
         if math.isfinite(self.stale_after) and self._use_sim_time():
-            age = self.get_clock().now().nanoseconds * 1e-9 - (sec + ns * 1e-9)
+            age = self.get_clock().now().nanoseconds * 1e-9 - (key[0] + key[1] * 1e-9)
             if age > self.stale_after:
                 self.stale(f"stamp {key} is {age:.6g} s old")
-                return
-        self._answer(key, x, v)
+                return True
+        return False
 
     def _answer(self, key: tuple, x: float, v: float):
         """Answer the Pi2 state (x, v) stamped ``key``: the correction and, with a model,
@@ -496,6 +591,14 @@ class ControllerNode(Node):
     def _predict(self, x: float, v: float, dv: float) -> float:
         """The correction of the next sample predicted by one exact period of the model
         from (x, v) with ``dv`` applied (NaN without a model or where it fails)."""
+        if self.ndof is not None:
+            if not self.ndof.predicts:
+                return math.nan
+            try:
+                xn, vn = self.ndof.predict(x, v, dv, self.actuation_delay)
+            except (ValueError, ArithmeticError, RuntimeError):
+                return math.nan
+            return self.law.preview(xn, vn)
         if self.model is None:
             return math.nan
         p = self.model
@@ -630,7 +733,11 @@ class ControllerNode(Node):
         values = self._values()
         values.update({p.name: p.value for p in params if p.name in values})
         try:
-            new = law_from_values(values)
+            if self.ndof is None:
+                new = law_from_values(values)
+            else:
+                gains = next((p.value for p in params if p.name == "gains"), self._gains())
+                new = self._ndof_law(values, gains)     # sets self.ndof when valid
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self.law.configure(new.gains, new.x_ref, new.v_ref, new.enable_after, new.saturation)

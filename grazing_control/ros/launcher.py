@@ -55,7 +55,8 @@ import yaml
 
 from grazing_control.oscillator import kernel
 
-from .scene_nodes import design_delay, scene_overrides  # noqa: F401 (design_delay: API)
+from .scene_nodes import (design_delay, scene_overrides,  # noqa: F401 (design_delay: API)
+                          sim_values_for_model)
 from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
@@ -341,7 +342,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
         sim_overrides: dict | None = None, controller_overrides: dict | None = None,
         recorder_overrides: dict | None = None, log_dir=None,
-        python: str | None = None, live: int | None = None) -> RunResult:
+        python: str | None = None, live: int | None = None, model=None) -> RunResult:
     """Run one scene through the three node processes and wait for it to finish.
 
     Parameters
@@ -380,6 +381,12 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         Start ``live_node`` (docs/live.md) with this WebSocket port (0..65535, 0: any
         free port, logged): a live view for Foxglove/Lichtblick that the scene does not
         wait for. None: no live view.
+    model : path, optional
+        An n-DOF model file (docs/ndof_model.md; issue 17): both nodes get it as
+        ``model_file``; the controller's parameters must then give ``gains`` (required),
+        and the simulator's parameter file is used without its 1-DOF model parameters
+        (zeta, r, omega, delta_d, tau0, pi2_offset: the model file's delta_d applies
+        unless ``delta_d`` is given).
 
     Returns
     -------
@@ -395,6 +402,14 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                                     and math.isfinite(timeout)):
         raise ValueError(f"timeout={timeout!r} is invalid: valid range is a finite "
                          "number of seconds > 0 (None: no timeout)")
+    if model is not None:
+        if controller_params is None:
+            raise ValueError(f"model={os.fspath(model)!r} needs the controller's gains: give "
+                             "controller parameters with gains (2n values; grazing run "
+                             "--controller-params GAINS.yaml)")
+        # the scene settings of the simulator's file, not its 1-DOF model
+        sim_params = sim_values_for_model(CONFIG_DIR / "study.yaml" if sim_params is None
+                                          else sim_params)
     sim_params = CONFIG_DIR / "study.yaml" if sim_params is None else sim_params
     controller_params = (CONFIG_DIR / "controller.yaml" if controller_params is None
                          else controller_params)
@@ -413,7 +428,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                            enable_after=enable_after, mode=mode,
                            bag=bag_dir if record else None, sim_overrides=sim_overrides,
                            controller_overrides=controller_overrides,
-                           recorder_overrides=recorder_overrides)
+                           recorder_overrides=recorder_overrides, model=model)
     sim_over, controller_overrides = over["sim_node"], over["controller_node"]
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
@@ -575,6 +590,10 @@ class _Pairs(argparse.Action):
 
 def add_run_arguments(parser) -> None:
     """The options of ``grazing run``; their names are :func:`run`'s keyword arguments."""
+    parser.add_argument("--model", default=None, metavar="FILE",
+                        help="run an n-DOF scene of this model file (docs/ndof_model.md); "
+                             "--controller-params must give its gains (default: the "
+                             "study's 1-DOF oscillator)")
     parser.add_argument("--sim-params", dest="sim_params", default=None,
                         help="sim_node parameter file (default: config/study.yaml)")
     parser.add_argument("--controller-params", dest="controller_params", default=None,

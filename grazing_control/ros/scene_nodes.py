@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import random
 
-__all__ = ["NODES", "scene_overrides", "design_delay", "new_token"]
+__all__ = ["NODES", "scene_overrides", "design_delay", "new_token", "sim_values_for_model"]
 
 #: The scene's nodes in start order (the recorder first, so that it matches every topic
 #: before the simulator starts; the simulator last).
@@ -43,6 +43,27 @@ def design_delay(controller_params):
         else None
 
 
+def sim_values_for_model(sim_params) -> dict:
+    """The simulator's parameter file (a path: its ``ros__parameters`` under any node
+    key; or a dict) without the study model's parameters (zeta, r, omega, delta_d, tau0,
+    pi2_offset): what an n-DOF scene's simulator takes from the study's file, whose model
+    the model file replaces (docs/nodes.md, "n-DOF scenes")."""
+    import yaml
+
+    from grazing_control.plant.settings import MODEL_KEYS
+
+    if isinstance(sim_params, (str, os.PathLike)):
+        with open(sim_params) as fh:
+            doc = yaml.safe_load(fh) or {}
+        values = {}
+        for section in doc.values() if isinstance(doc, dict) else ():
+            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+                values.update(section["ros__parameters"])
+    else:
+        values = dict(sim_params or {})
+    return {k: v for k, v in values.items() if k not in MODEL_KEYS}
+
+
 def new_token() -> str:
     """A random scene token (ros/scene.py): this scene's nodes recognise each other."""
     return f"{os.getpid():x}-{random.getrandbits(48):012x}"
@@ -50,7 +71,7 @@ def new_token() -> str:
 
 def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
                     mode=None, bag=None, token=None, sim_overrides=None,
-                    controller_overrides=None, recorder_overrides=None) -> dict:
+                    controller_overrides=None, recorder_overrides=None, model=None) -> dict:
     """Node name -> its ``-p key:=value`` overrides (recorder: None without ``bag``).
 
     - sim_node: exits when done, waits for its controller (and, recording, for the
@@ -61,7 +82,8 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       ``state_period`` when the simulator's are set (its estimator's model); answers
       after the section in realtime;
     - recorder_node: ``output`` = bag, ``require_complete``;
-    - both simulator and controller: the scene token.
+    - both simulator and controller: the scene token; with ``model`` (an n-DOF model
+      file, issue 17) its path as ``model_file``.
     """
     sim = {"exit_when_done": True, "wait_for_controller": True,
            "wait_for_subscribers": 1 if bag is not None else 0,
@@ -73,6 +95,8 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     if mode is not None:
         sim["mode"] = str(mode)
     controller = dict(controller_overrides or {})
+    if model is not None:               # an n-DOF scene: both read the model file
+        sim["model_file"] = controller["model_file"] = os.fspath(model)
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay

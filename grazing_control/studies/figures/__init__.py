@@ -13,7 +13,8 @@ core followed by a matplotlib (Agg) drawing of exactly that data:
   admissible set;
 * :mod:`.scenes`: 2(f), 2(g), the two control scenes;
 * :mod:`.report`: figures.md, the numbers read off each panel next to the study's;
-* :mod:`.build`: everything in one call (:func:`make_figures`), full or quick.
+* :mod:`.build`: everything in one call (:func:`make_figures`), full or quick;
+* :mod:`.ndof`: the n-DOF figure set of issue 17 (``grazing figures --model FILE``).
 
 ``grazing figures [--out DIR] [--quick]`` (:mod:`.command`) is the command line.
 """

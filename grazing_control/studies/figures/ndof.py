@@ -1,0 +1,226 @@
+"""The n-DOF figure set (issue 17): diagram, multipliers against |Delta d|, control scene.
+
+``grazing figures --model FILE`` draws, for any model file:
+
+* (a) ``ndof_diagram.png``: the brute-force bifurcation diagram on Pi2 against Delta d
+  near grazing, uncontrolled (:func:`grazing_control.studies.ndof.diagram.diagram`);
+* (b) ``ndof_multipliers.png``: max |lambda| of the 1/1 orbit born at grazing against
+  |Delta d| on log-log axes, on the side of grazing where it exists
+  (:func:`grazing_control.studies.ndof.branch.grazing_side`) (:func:`grazing_control.studies.ndof.branch.multiplier_scaling`):
+  uncontrolled, with a gain of the design family (bounded, the predicted limit
+  :func:`grazing_control.dynamics.ndof_design.limit_multipliers` dashed) and with the gain
+  that cancels only w^T N u (and G(1); ``cancel_first_markov``), each with its fitted
+  exponent over |Delta d| <= ``fit_below``;
+* (c) ``ndof_scene.png``: uncontrolled iterations, then the controller on, and the
+  distance to the controlled 1/1 orbit (:func:`grazing_control.studies.ndof.scene.control_scene`),
+  like the study's Figs. 2(f, g).
+
+The numbers read off the panels go to ``ndof_figures.json``. The default settings keep
+the whole set under a minute on two cores.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from grazing_control.oscillator.params import ParameterError
+
+__all__ = ["NdofFigureSettings", "DEFAULT", "QUICK", "choose_mu", "markov_gain", "scaling_curves",
+           "make_ndof_figures"]
+
+
+@dataclass(frozen=True)
+class NdofFigureSettings:
+    """What the figure set computes (all Delta d in the model's length unit)."""
+
+    diagram_from: float = -2e-5          # (a) Delta d range, points, periods per point
+    diagram_to: float = 0.0
+    diagram_points: int = 60
+    diagram_periods: int = 300
+    diagram_transient: int = 200
+    scaling_from: float = 1e-3           # (b) |Delta d| grid, log-spaced, largest first
+    scaling_to: float = 1e-10
+    scaling_points: int = 15
+    fit_below: float = 1e-6              # fit exponents over |Delta d| <= fit_below
+    markov_offset: float = 0.05          # the cancel-first-Markov gain: k(mu) + this |k| d
+    scene_delta_d: float = -5e-6         # (c) the scene
+    scene_before: int = 300
+    scene_after: int = 200
+    mu: float | None = None              # the family's member (default: design's choice)
+
+
+DEFAULT = NdofFigureSettings()
+QUICK = replace(DEFAULT, diagram_points=20, diagram_periods=120, diagram_transient=80,
+                scaling_points=8, scene_before=100, scene_after=100)
+
+
+def _complex_list(values):
+    return [[float(np.real(z)), float(np.imag(z))] for z in np.atleast_1d(values)]
+
+
+def _finite_or_none(x):
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def choose_mu(model) -> tuple[float, str]:
+    """The family member drawn: the middle of the widest admissible interval of mu
+    (docs/ndof_commands.md); without one, of the widest interval where only the
+    impacting-side conditions hold, else where the controlled 1/1 orbit exists
+    (gamma1 > 0, on a grid of [-1, 1]); else 0."""
+    from grazing_control.dynamics.ndof_design import admissible_mu, existence_coefficient
+
+    for conditions, why in (("combined", "the middle of the widest admissible interval"),
+                            ("impacting", "no admissible mu: the middle of the widest "
+                                          "interval where |lambda0| < 1 and gamma1 > 0")):
+        intervals = [(float(a), float(b)) for a, b in admissible_mu(model, conditions)]
+        if intervals:
+            lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
+            if math.isfinite(lo) and math.isfinite(hi):
+                return 0.5 * (lo + hi) + 0.0, why
+            return (hi - 1.0 if math.isfinite(hi) else lo + 1.0), why
+    grid = np.linspace(-1.0, 1.0, 41)
+    ok = np.array([existence_coefficient(model, mu) > 0.0 for mu in grid])
+    if ok.any():
+        runs, start = [], None
+        for i, flag in enumerate(list(ok) + [False]):
+            if flag and start is None:
+                start = i
+            elif not flag and start is not None:
+                runs.append((i - start, start, i - 1))
+                start = None
+        _n, a, b = max(runs)
+        return float(0.5 * (grid[a] + grid[b])) + 0.0, ("no mu with |lambda0| < 1: the middle "
+                                                        "of the widest run where gamma1 > 0")
+    return 0.0, "mu = 0: the controlled 1/1 orbit exists for no mu in [-1, 1]"
+
+
+def markov_gain(model, mu: float, settings) -> np.ndarray:
+    """k(mu) + offset d: a gain that cancels only w^T N u and G(1)
+    (``ndof_design.cancel_first_markov``), |offset| = ``markov_offset`` |k(mu)|, of the
+    sign for which the local map has a 1/1 orbit born at grazing (whether it exists for
+    d < d* depends on that sign; ndof_design's docstring)."""
+    from grazing_control.dynamics.ndof_design import cancel_first_markov, gain_family
+    from grazing_control.studies.ndof.branch import predicted_orbit
+
+    size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu))), 1.0)
+    candidates = [np.asarray(cancel_first_markov(model, mu, sign * size, smooth_branch=True),
+                             dtype=float) for sign in (1.0, -1.0)]
+    for k in candidates:
+        if any(predicted_orbit(model, k, side * settings.fit_below)[0] is not None
+               for side in (-1.0, 1.0)):
+            return k
+    return candidates[0]
+
+
+def scaling_curves(model, settings: NdofFigureSettings, mu: float):
+    """The three curves of (b) with their fitted exponents and the predicted limit."""
+    from grazing_control.dynamics.ndof_design import gain_family, limit_multipliers
+    from grazing_control.studies.ndof.branch import (fit_exponent, grazing_side,
+                                                     multiplier_scaling)
+
+    sizes = np.geomspace(settings.scaling_from, settings.scaling_to, settings.scaling_points)
+    cases = [("uncontrolled", None, "tab:red"),
+             (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu)), "tab:green")]
+    numbers = {}
+    try:
+        cases.append(("cancels only w^T N u (and G(1))", markov_gain(model, mu, settings),
+                      "tab:orange"))
+    except ParameterError as exc:   # n = 1: w^T N u = 0 is the whole family (Eq. 33)
+        numbers["cancels only w^T N u"] = {"error": " ".join(str(exc).split())}
+    limit = float(np.max(np.abs(limit_multipliers(model, mu))))
+    curves = []
+    for label, k, color in cases:
+        side = grazing_side(model, k, settings.fit_below)
+        sc = multiplier_scaling(model, k, side * sizes)
+        big = sc.largest
+        near = np.abs(sc.delta_d) <= settings.fit_below
+        slope = fit_exponent(sc.delta_d[near], big[near])
+        curve = {"delta_d": sc.delta_d, "largest": big, "color": color, "slope": slope,
+                 "label": label + (" (on Delta d > 0)" if side > 0 else "")}
+        ok = np.isfinite(big)
+        entry = {"gains": None if k is None else k.tolist(), "side": side,
+                 "delta_d": sc.delta_d.tolist(),
+                 "largest": [_finite_or_none(x) for x in big],
+                 "fitted_exponent": _finite_or_none(slope),
+                 "fit_points": int(np.sum(near & ok)),
+                 "smallest_delta_d_found": _finite_or_none(
+                     float(sc.delta_d[ok][np.argmin(np.abs(sc.delta_d[ok]))]) if ok.any() else None),
+                 "failures": [e.split(" (")[0] for e in sc.errors if e][:3]}
+        if k is not None and label.startswith("design"):
+            curve["limit"] = limit
+            entry["predicted_limit"] = limit
+            entry["limit_multipliers"] = _complex_list(limit_multipliers(model, mu))
+            if ok.any():
+                last = big[ok][np.argmin(np.abs(sc.delta_d[ok]))]
+                entry["difference_to_limit_at_smallest"] = float(abs(last - limit))
+            entry["bounded"] = bool(ok.any() and np.nanmax(big) < 1e3 * max(1.0, limit))
+        curves.append(curve)
+        numbers[label.split(",")[0].split(" (")[0]] = entry
+    return curves, numbers
+
+
+def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
+                      model_file: str = "", workers: int | None = None, log=None) -> dict:
+    """Compute and draw (a), (b), (c) of the module docstring into ``out``; returns the
+    numbers (also written to ``out/ndof_figures.json``)."""
+    from grazing_control.dynamics.ndof_design import gain_family
+    from grazing_control.studies.ndof.diagram import diagram
+    from grazing_control.studies.ndof.plot import diagram_png, scaling_png, scene_png
+    from grazing_control.studies.ndof.scene import control_scene
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"--out={str(out)!r} is invalid: it exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    say = log or (lambda line: None)
+    if settings.mu is None:
+        mu, why = choose_mu(model)
+    else:
+        mu, why = float(settings.mu), "given"
+    k = np.asarray(gain_family(model, mu), dtype=float)
+    coord = f"x{model.i_w}"
+    numbers = {"model": model_file, "n": model.n, "mu": mu, "mu_chosen": why,
+               "gains": k.tolist(), "settings": asdict(settings)}
+
+    say("(a) brute-force diagram on Pi2 against Delta d ...")
+    values = np.linspace(settings.diagram_from, settings.diagram_to, settings.diagram_points)
+    dia = diagram(model, values, periods=settings.diagram_periods,
+                  transient=settings.diagram_transient, workers=workers)
+    diagram_png(dia, out / "ndof_diagram.png", coordinate=coord,
+                title=f"uncontrolled, {dia.values.size} values of Delta d x "
+                      f"{dia.periods - dia.transient} kept periods")
+    per, cnt = np.unique(dia.period, return_counts=True)
+    numbers["diagram"] = {"png": "ndof_diagram.png", "coordinate": coord,
+                          "detected_periods": {str(int(p)): int(c) for p, c in zip(per, cnt)},
+                          "failed": int(np.sum(dia.period == -1))}
+
+    say("(b) multipliers of the 1/1 orbit against |Delta d| ...")
+    curves, scal = scaling_curves(model, settings, mu)
+    scaling_png(curves, out / "ndof_multipliers.png",
+                title=f"1/1 orbit by shooting; exponents fitted over |Delta d| <= "
+                      f"{settings.fit_below:g}")
+    numbers["multipliers"] = {"png": "ndof_multipliers.png", **scal}
+
+    say("(c) control scene ...")
+    sc = control_scene(model, k, delta_d=settings.scene_delta_d,
+                       control_after=settings.scene_before,
+                       periods=settings.scene_before + settings.scene_after)
+    scene_png(sc, out / "ndof_scene.png", coordinate_index_=model.i_w, coordinate=coord)
+    before = sc.impacts_per_period[:settings.scene_before]
+    numbers["scene"] = {
+        "png": "ndof_scene.png", "delta_d": sc.delta_d,
+        "impacts_per_period_before_last_20": before[-20:].tolist(),
+        "impacts_per_period_after_last_20": sc.impacts_per_period[-20:].tolist(),
+        "final_distance": None if sc.distance is None else float(sc.distance[-1]),
+        "distance_at_switch": None if sc.distance is None else float(
+            sc.distance[settings.scene_before]),
+        "orbit_error": sc.orbit_error,
+    }
+    (out / "ndof_figures.json").write_text(json.dumps(numbers, indent=1, allow_nan=False)
+                                           + "\n", encoding="utf-8")
+    return numbers

@@ -1,0 +1,345 @@
+"""The 1/1 orbit of an n-DOF model near grazing: prediction, shooting, multipliers vs Delta d.
+
+The prediction is the local map near grazing of docs/theory_ndof.md ("Local map near
+grazing"), written on Pi2 and carried to order H (docs/ndof_commands.md, "The starting
+guess"). With the state z sampled on Pi2 before the kick (deviation from the grazing
+orbit), the kick K = I + b k^T, the flow Phi_a from Pi2 to the next Pi1 and Phi_b from
+Pi1 to Pi2, P(z) = Phi_b D(Phi_a K z), where on Pi1, for the free flight
+x_w(t) = y_w + v_w t - |a| t^2 / 2 of the wall coordinate (|a| = omega^2 d*, the
+grazing acceleration of the harmonic response),
+
+    H = y_w + v_w^2 / (2 |a|) - Delta d            (largest penetration)
+    v- = sqrt(2 |a| H),  t_i = (v_w - v-) / |a|     (impact velocity and time)
+    D(y) = y - (1 + r) v- e_{v_w} + (1 + r) v- t_i e_{x_w}     (H > 0; else D(y) = y)
+
+(the velocity jump of the impact, and the position it leaves at the section time when
+flowed back along the parabola). Leading order, D(y) = y + u s, u = -(1 + r) sqrt(2|a|)
+e_{v_w}, s = sqrt(H); with N = Phi_a K Phi_b a fixed point has y = (I - N)^-1 N u s and
+s^2 (1 - c) = G(1) s - Delta d, G(1) = w^T (I - N)^-1 N u, c = (e_v^T (I - N)^-1 N u)^2
+/ (2 |a|). Newton's method on y = N D(y) refines that closed form. Both order-H terms
+matter on the design family, where G == 0 makes w^T y of order H: without the velocity
+term the guess was 40 % off on the n = 1 file at c2 = -1, without the position term
+80 % off on a 3-mass chain at mu = 0.3 (both independent of Delta d). Newton shooting
+(:func:`grazing_control.dynamics.shooting.find_periodic`) on the exact map then gives the
+orbit and its monodromy; the prediction is only its starting guess.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.dynamics.shooting import (ShootingFailed, find_periodic,
+                                               floquet_multipliers, iterate)
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.params import ParameterError
+
+__all__ = ["OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
+           "smooth_map", "local_map", "predicted_orbit", "grazing_side", "monodromy_det", "orbit_11",
+           "multiplier_scaling", "fit_exponent"]
+
+TWO_PI = 2.0 * math.pi
+#: An orbit within this relative distance of the local map's prediction is the one born
+#: at grazing (measured offsets: O(sqrt|Delta d|), below 1e-2 at |Delta d| = 1e-4 on the
+#: shipped models and a 3-mass chain; another 1/1 orbit is O(1) or more away).
+NEAR = 0.25
+
+
+class OrbitNotFound(RuntimeError):
+    """No 1/1 orbit near grazing was found from any of the starting guesses."""
+
+
+class NdofOrbit(NamedTuple):
+    """A 1/1 orbit: Pi2 state (deviation, before the kick), its physical value, the
+    Floquet multipliers (decreasing modulus), impact time since the sample, phase and
+    velocity v-, which starting guess converged, and the relative distance of the orbit
+    to the local map's prediction (inf without one): the orbit is the one born at
+    grazing when it is small (:attr:`near_grazing`, below :data:`NEAR`)."""
+
+    delta_d: float
+    state: np.ndarray
+    physical: np.ndarray
+    multipliers: np.ndarray
+    monodromy: np.ndarray
+    impact_dt: float
+    impact_phase: float
+    v_minus: float
+    guess: str
+    prediction_offset: float = math.inf
+
+    @property
+    def stable(self) -> bool:
+        return bool(np.max(np.abs(self.multipliers)) < 1.0)
+
+    @property
+    def near_grazing(self) -> bool:
+        """The orbit is the local map's (born at grazing), not another 1/1 orbit."""
+        return bool(self.prediction_offset < NEAR)
+
+
+def with_delta_d(model, delta_d: float):
+    """The same model with the wall at Delta d (validated by the model)."""
+    return dataclasses.replace(model, delta_d=float(delta_d))
+
+
+def _gains(model, gains):
+    if gains is None:
+        return None
+    k = np.asarray(gains, dtype=float).reshape(-1)
+    if k.shape != (2 * model.n,) or not np.all(np.isfinite(k)):
+        raise ParameterError(f"gains={np.asarray(gains).tolist()!r} is invalid: expected "
+                             f"2n = {2 * model.n} finite values (x0..x{model.n - 1}, "
+                             f"v0..v{model.n - 1})")
+    return k
+
+
+def kick_matrix(model, gains) -> np.ndarray:
+    """K = I + b k^T, b the velocity unit vector of the actuated coordinate (the kick
+    v[i_a] += k^T z at Pi2; issue 17, "The design"); I without gains."""
+    n2 = 2 * model.n
+    K = np.eye(n2)
+    k = _gains(model, gains)
+    if k is not None:
+        K[model.n + model.i_a] += k
+    return K
+
+
+def smooth_map(model, gains=None):
+    """(N, Phi_a, Phi_b, K): the smooth return map on Pi1 N = Phi_a K Phi_b and its
+    factors (module docstring)."""
+    flow = NdofFlow.of(model)
+    off = model.pi2_offset / model.omega
+    phi_a = flow.transition(model.period - off)
+    phi_b = flow.transition(off)
+    K = kick_matrix(model, gains)
+    return phi_a @ K @ phi_b, phi_a, phi_b, K
+
+
+def local_map(model, y, delta_d: float, jacobian: bool = False):
+    """The discontinuity map D on Pi1 to order H (module docstring): identity when the
+    free flight misses the wall (H <= 0), else the jump of the parabola's impact. With
+    ``jacobian``, (D(y), dD/dy): with g = dH/dy = e_w + (v_w / |a|) e_v and
+    dv-/dy = |a| g / v-, dD/dy = I - (1 + r) e_v dv-^T
+    + ((1 + r) / |a|) e_w ((v_w - 2 v-) dv-^T + v- e_v^T)."""
+    flow = NdofFlow.of(model)
+    n, w, v = model.n, model.i_w, model.n + model.i_w
+    acc = model.omega ** 2 * flow.d_star
+    h = y[w] + y[v] ** 2 / (2.0 * acc) - delta_d
+    out = np.array(y, dtype=float)
+    jac = np.eye(out.size)
+    if h > 0.0:
+        vm = math.sqrt(2.0 * acc * h)
+        out[v] -= (1.0 + model.r) * vm
+        out[w] += (1.0 + model.r) * vm * (y[v] - vm) / acc
+        if jacobian:
+            g = np.zeros(out.size)
+            g[w], g[v] = 1.0, y[v] / acc
+            dvm = acc * g / vm
+            jac[v] -= (1.0 + model.r) * dvm
+            jac[w] += (1.0 + model.r) / acc * ((y[v] - 2.0 * vm) * dvm)
+            jac[w, v] += (1.0 + model.r) / acc * vm
+    return (out, jac) if jacobian else out
+
+
+def predicted_orbit(model, gains=None, delta_d: float | None = None):
+    """The 1/1 orbit of the local map on Pi2 and its s = sqrt(H) (module docstring), or
+    (None, nan) when the local map has no impacting fixed point there.
+
+    First the leading order (closed form in s), then Newton's method on
+    y = N D(y) with :func:`local_map` and its Jacobian."""
+    dd = model.delta_d if delta_d is None else float(delta_d)
+    flow = NdofFlow.of(model)
+    n, n2 = model.n, 2 * model.n
+    N, _phi_a, phi_b, _K = smooth_map(model, gains)
+    acc = model.omega ** 2 * flow.d_star
+    u = np.zeros(n2)
+    u[n + model.i_w] = -(1.0 + model.r) * math.sqrt(2.0 * acc)
+    try:
+        y_unit = np.linalg.solve(np.eye(n2) - N, N @ u)
+    except np.linalg.LinAlgError:
+        return None, math.nan
+    g1 = float(y_unit[model.i_w])
+    c = float(y_unit[n + model.i_w]) ** 2 / (2.0 * acc)
+    s = math.nan
+    for a in ((1.0 - c), 1.0):   # the smallest positive root: the orbit born at grazing
+        disc = g1 * g1 - 4.0 * a * dd
+        if a > 0.0 and disc >= 0.0:
+            roots = [x for x in ((g1 - math.sqrt(disc)) / (2.0 * a),
+                                 (g1 + math.sqrt(disc)) / (2.0 * a)) if x > 0.0]
+            if roots:
+                s = min(roots)
+                break
+    if not s > 0.0:
+        return None, math.nan
+    y = y_unit * s
+    eye = np.eye(n2)
+    converged = False
+    for _ in range(12):   # Newton on y = N D(y), the order-H local map
+        d, jac = local_map(model, y, dd, jacobian=True)
+        try:
+            step = np.linalg.solve(N @ jac - eye, y - N @ d)
+        except np.linalg.LinAlgError:
+            break
+        y = y + step
+        if not np.all(np.isfinite(y)):
+            break
+        if float(np.max(np.abs(step))) <= 1e-13 * max(float(np.max(np.abs(y))), 1e-300):
+            converged = True
+            break
+    if not converged and np.all(np.isfinite(y)):   # stagnated at rounding: the residual
+        res = N @ local_map(model, y, dd) - y
+        converged = float(np.max(np.abs(res))) <= 1e-10 * float(np.max(np.abs(y)))
+    h = y[model.i_w] + y[n + model.i_w] ** 2 / (2.0 * acc) - dd if converged else -1.0
+    if not h > 0.0:   # Newton found no impacting orbit of the local map near y0
+        return None, math.nan
+    return phi_b @ local_map(model, y, dd), math.sqrt(h)
+
+
+def grazing_side(model, gains=None, size: float = 1e-6) -> float:
+    """-1 or +1: the sign of Delta d on which the local map has a 1/1 orbit born at
+    grazing, i.e. the side whose predicted s at |Delta d| = ``size`` is the smaller
+    (s ~ |Delta d| or sqrt|Delta d| there, O(1) on the other side); -1 when neither has
+    one."""
+    found = []
+    for sign in (-1.0, 1.0):
+        _z, s = predicted_orbit(model, gains, sign * size)
+        if s > 0.0:
+            found.append((s, sign))
+    return min(found)[1] if found else -1.0
+
+
+def monodromy_det(model, gains, impacts: int) -> float:
+    """det of DP over one period with ``impacts`` impacts: det Phi(T) = e^{T tr A} =
+    e^{-T tr(M^-1 C)}, det S = r^2 per impact (the saltation matrix, docs/theory_ndof_flow.md)
+    and det K = 1 + k_{v_i_a} (matrix determinant lemma); the n-DOF counterpart of
+    OneDOF.jacobian_det (dynamics/model.py)."""
+    k = _gains(model, gains)
+    det_k = 1.0 if k is None else 1.0 + float(k[model.n + model.i_a])
+    trace = float(np.trace(np.linalg.solve(model.M, model.C)))
+    return math.exp(-trace * model.period) * model.r ** (2 * impacts) * det_k
+
+
+def _multipliers(pmap, model, gains, monodromy, impacts):
+    """Floquet multipliers; the exact determinant (the map's, else :func:`monodromy_det`)
+    keeps the small multiplier of a 2x2 monodromy accurate when the large one grows like
+    1/v- (dynamics/shooting.floquet_multipliers)."""
+    det = None
+    if not any(getattr(i, "sticking", False) for i in impacts):
+        jd = getattr(pmap, "jacobian_det", None)
+        det = jd(1, len(impacts)) if jd is not None else None
+        if det is None:
+            det = monodromy_det(model, gains, len(impacts))
+    return floquet_multipliers(monodromy, det)
+
+
+def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e-14,
+             extra_guesses=()) -> NdofOrbit:
+    """The 1/1 orbit at ``delta_d`` (default the model's), by Newton shooting.
+
+    Starting guesses, in order: the leading-order prediction (:func:`predicted_orbit`),
+    ``extra_guesses`` (name, state pairs), the grazing point z = 0, and the end of a
+    200-period simulation from the prediction. The first that converges to an orbit with
+    exactly one impact per period wins.
+
+    Raises
+    ------
+    OrbitNotFound
+        None converged to a 1/1 orbit (the message lists why each failed).
+    """
+    if delta_d is not None:
+        model = with_delta_d(model, delta_d)
+    pmap = NdofMap(model, _gains(model, gains))
+    pred, _s = predicted_orbit(model, gains)
+    guesses = [] if pred is None else [("discontinuity map", pred)]
+    guesses += list(extra_guesses)
+    guesses.append(("grazing point", np.zeros(pmap.dimension)))
+    why = []
+    tried_simulation = False
+    i = 0
+    while i < len(guesses):
+        name, guess = guesses[i]
+        i += 1
+        try:
+            o = find_periodic(pmap, guess, 1, tol=tol)
+        except (ShootingFailed, ValueError, ArithmeticError) as exc:
+            why.append(f"{name}: {' '.join(str(exc).split())[:120]}")
+        else:
+            if len(o.impacts) == 1 and o.impacts[0].v_minus > 0.0:
+                imp = o.impacts[0]
+                lam = _multipliers(pmap, model, gains, o.monodromy, o.impacts)
+                flow = NdofFlow.of(model)
+                offset = math.inf if pred is None else float(
+                    np.linalg.norm(o.state - pred) / max(np.linalg.norm(pred), 1e-300))
+                return NdofOrbit(model.delta_d, o.state, flow.to_physical(flow.tau2, o.state),
+                                 lam, o.monodromy, float(imp.dt), float(imp.phase),
+                                 float(imp.v_minus), name, offset)
+            why.append(f"{name}: converged to an orbit with {len(o.impacts)} impacts per period")
+        if i == len(guesses) and not tried_simulation:
+            tried_simulation = True
+            try:
+                z, _jac, _imp = iterate(pmap, pred if pred is not None else guesses[-1][1], 200)
+                if np.all(np.isfinite(z)):
+                    guesses.append(("simulation", z))
+            except (ValueError, ArithmeticError, RuntimeError) as exc:
+                why.append(f"simulation: {' '.join(str(exc).split())[:120]}")
+    raise OrbitNotFound(f"no 1/1 orbit found at delta_d={model.delta_d!r} "
+                        f"({'; '.join(why)})")
+
+
+class Scaling(NamedTuple):
+    """Multipliers of the 1/1 orbit on a grid of Delta d (rows in grid order; nan where
+    no orbit was found, with the reason in ``errors``)."""
+
+    delta_d: np.ndarray
+    multipliers: np.ndarray
+    v_minus: np.ndarray
+    errors: tuple
+
+    @property
+    def largest(self) -> np.ndarray:
+        return np.max(np.abs(self.multipliers), axis=1)
+
+
+def multiplier_scaling(model, gains, deltas) -> Scaling:
+    """The multipliers of the 1/1 orbit born at grazing at each Delta d of ``deltas`` (each
+    by :func:`orbit_11`, the previous point's orbit tried after the prediction); another
+    1/1 orbit (not :attr:`NdofOrbit.near_grazing`) counts as not found."""
+    deltas = np.asarray(deltas, dtype=float).reshape(-1)
+    n2 = 2 * model.n
+    lam = np.full((deltas.size, n2), np.nan, dtype=complex)
+    vm = np.full(deltas.size, np.nan)
+    errors = []
+    prev = None
+    for j, dd in enumerate(deltas):
+        extra = () if prev is None else (("previous point", prev),)
+        try:
+            o = orbit_11(model, gains, dd, extra_guesses=extra)
+        except (OrbitNotFound, ValueError) as exc:
+            errors.append(str(exc))
+            prev = None
+            continue
+        if not o.near_grazing:
+            errors.append(f"the 1/1 orbit found at delta_d={dd!r} is not the one born at "
+                          f"grazing (v- = {o.v_minus:.3g}, {o.prediction_offset:.3g} away "
+                          "from the local map's prediction)")
+            prev = None
+            continue
+        lam[j], vm[j] = o.multipliers, o.v_minus
+        prev = o.state
+        errors.append("")
+    return Scaling(deltas, lam, vm, tuple(errors))
+
+
+def fit_exponent(delta_d, values) -> float:
+    """Least-squares slope of log|values| against log|Delta d| (the growth exponent:
+    -1/2 for |lambda| ~ |Delta d|^(-1/2)); nan with fewer than two finite points."""
+    x = np.log(np.abs(np.asarray(delta_d, dtype=float)))
+    y = np.log(np.abs(np.asarray(values, dtype=float)))
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < 2:
+        return math.nan
+    return float(np.polyfit(x[ok], y[ok], 1)[0])

@@ -1,0 +1,81 @@
+"""A control scene of an n-DOF model on Pi2 (issue 17, figure (c); the study's Figs. 2(f, g)).
+
+The period map (:class:`~grazing_control.dynamics.ndof_map.NdofMap`) is iterated without
+control for ``control_after`` periods, then with the kick v[i_a] += k^T z at every Pi2
+sample. The distance of each sample to the controlled 1/1 orbit
+(:func:`.branch.orbit_11`, shooting) says whether, and how fast, the controller captures
+the motion: near the orbit it shrinks like |lambda_max|^k.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.oscillator.params import ParameterError
+
+from .branch import OrbitNotFound, orbit_11, with_delta_d
+
+__all__ = ["Scene", "simulate_pi2", "control_scene"]
+
+
+class Scene(NamedTuple):
+    """Pi2 samples (periods + 1, 2n) as deviations from the grazing orbit (sample k is
+    taken before the kick of period k), impacts in each period, the sample at which
+    control went on (-1: never), and, with gains, the controlled 1/1 orbit and each
+    sample's Euclidean distance to it (None when that orbit was not found: ``orbit_error``)."""
+
+    delta_d: float
+    samples: np.ndarray
+    impacts_per_period: np.ndarray
+    control_after: int
+    orbit: np.ndarray | None
+    distance: np.ndarray | None
+    orbit_error: str
+
+
+def simulate_pi2(model, periods: int, start=None, gains=None, control_after: int | None = None):
+    """(samples, impacts per period): ``periods`` applications of the period map from
+    ``start`` (default the grazing point), the kick on from sample ``control_after``."""
+    if isinstance(periods, bool) or int(periods) != periods or periods < 0:
+        raise ParameterError(f"periods={periods!r} is invalid: valid range is an integer >= 0")
+    n2 = 2 * model.n
+    z = np.zeros(n2) if start is None else np.asarray(start, dtype=float).reshape(-1)
+    if z.shape != (n2,) or not np.all(np.isfinite(z)):
+        raise ParameterError(f"start is invalid: expected {n2} finite values (deviation from "
+                             "the grazing orbit on Pi2)")
+    free = NdofMap(model)
+    ctl = None if gains is None else NdofMap(model, np.asarray(gains, dtype=float))
+    after = periods if ctl is None else (0 if control_after is None else int(control_after))
+    samples = np.empty((int(periods) + 1, n2))
+    counts = np.zeros(int(periods), dtype=np.int32)
+    samples[0] = z
+    for k in range(int(periods)):
+        step = (ctl if k >= after else free).step(z)
+        z = step.state
+        if not np.all(np.isfinite(z)):
+            raise ArithmeticError(f"the state is not finite after period {k}: an input is "
+                                  "outside the computable range")
+        samples[k + 1] = z
+        counts[k] = len(step.impacts)
+    return samples, counts
+
+
+def control_scene(model, gains, *, delta_d: float | None = None, control_after: int,
+                  periods: int, start=None) -> Scene:
+    """Run a scene (module docstring) and measure the distance to the controlled orbit."""
+    if delta_d is not None:
+        model = with_delta_d(model, delta_d)
+    samples, counts = simulate_pi2(model, periods, start, gains, control_after)
+    orbit = distance = None
+    error = ""
+    if gains is not None:
+        try:
+            orbit = orbit_11(model, gains).state
+            distance = np.linalg.norm(samples - orbit, axis=1)
+        except OrbitNotFound as exc:
+            error = str(exc)
+    after = -1 if gains is None else int(control_after)
+    return Scene(model.delta_d, samples, counts, after, orbit, distance, error)

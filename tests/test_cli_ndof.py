@@ -1,0 +1,273 @@
+"""`grazing design|orbit|continue|simulate|sweep|figures --model FILE` (cli/ndof.py).
+
+Contract (docs/ndof_commands.md):
+
+* the n = 1 model file (config/models/study_1dof.yaml) reproduces the 1-DOF commands'
+  numbers to 1e-12: design (c1 for a given c2 is the family's x0 gain for the same v0
+  gain, the limit multipliers) and orbit (multipliers, v-, impact phase, Pi2 point),
+  uncontrolled and controlled;
+* on the 2-mass example and on a 3-mass chain written here, each command runs and its
+  numbers hold up against independent checks: the design's gains put the wall row of
+  N = Phi_a K Phi_b at mu w^T, the orbit is a fixed point of the period map with
+  one impact, its multipliers are those of a finite-difference Jacobian, the controlled
+  simulation converges to the controlled orbit;
+* user errors are one line ``grazing: error: ...`` on stderr, status 2, nothing on
+  stdout: a 1-DOF option with --model, an n-DOF option without it, a missing or
+  malformed model file, gains of the wrong length, an unknown coordinate name.
+
+Commands run in-process (``main(argv)``) so that the numpy/scipy import is paid once.
+"""
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grazing_control.cli.commands import main
+from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.oscillator.ndof import load_model
+from grazing_control.dynamics.ndof_design import gain_family
+from grazing_control.studies.ndof.branch import grazing_side, smooth_map, with_delta_d
+
+ROOT = Path(__file__).resolve().parents[1]
+ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
+TWO = str(ROOT / "config" / "models" / "two_mass_chain.yaml")
+
+#: A 3-mass chain of our own (wall - m0 - m1 - m2 - ground), forced and kicked on m2.
+THREE_MASS = """\
+# 3-mass chain for the tests: wall -- x0 -- x1 -- x2 -- ground, unit masses and springs,
+# damping C = 0.02 K + 0.01 I, forcing and kick on the inner mass x2.
+M: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+C: [[0.05, -0.02, 0.0], [-0.02, 0.05, -0.02], [0.0, -0.02, 0.05]]
+K: [[2.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 2.0]]
+f: [0.0, 0.0, 1.0]
+omega: 0.85
+i_w: 0
+r: 0.7
+i_a: 2
+"""
+
+
+def run(_capsys, *argv):
+    """(status, stdout, stderr) of ``grazing ARGV`` (argparse's errors exit: caught)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(argv))
+        except SystemExit as exc:
+            code = exc.code
+    return code, out.getvalue(), err.getvalue()
+
+
+def run_json(_capsys, *argv):
+    code, out, err = run(None, *argv, "--json")
+    assert code == 0, err
+    return json.loads(out)
+
+
+def lam(pairs):
+    return np.array([complex(a, b) for a, b in pairs])
+
+
+@pytest.fixture(scope="module")
+def three(tmp_path_factory):
+    path = tmp_path_factory.mktemp("models") / "three_mass_chain.yaml"
+    path.write_text(THREE_MASS, encoding="utf-8")
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def design3(three):
+    """``design --model THREE --json`` (run once: the admissible set costs seconds)."""
+    return run_json(None, "design", "--model", three)
+
+
+# ------------------------------------------------------------------ n = 1 is the 1-DOF
+def test_design_of_the_n1_file_is_the_1dof_design(capsys):
+    ref = run_json(capsys, "design", "--c2", "-0.5")
+    got = run_json(capsys, "design", "--model", ONE, "--free-gain", "v0=-0.5")
+    assert got["n"] == 1 and got["coordinates"] == ["x0", "v0"]
+    assert got["gains"][1] == pytest.approx(-0.5, abs=1e-15)
+    assert got["gains"][0] == pytest.approx(ref["c1"], rel=1e-12, abs=1e-12)
+    a = sorted(lam(ref["multipliers_limit"]), key=lambda z: (-abs(z), z.imag))
+    b = sorted(lam(got["multipliers_limit"]), key=lambda z: (-abs(z), z.imag))
+    np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
+    assert got["gamma1"] == pytest.approx(ref["gamma1"], rel=1e-12)
+    assert got["admissible"] == ref["admissible"]
+
+
+@pytest.mark.parametrize("controlled", [False, True])
+def test_orbit_of_the_n1_file_is_the_1dof_orbit(capsys, controlled):
+    """The same gains on both routes (the design's c1 is checked above): the orbit."""
+    gains, ndof = (), ()
+    if controlled:
+        c1 = run_json(capsys, "design", "--c2", "-1")["c1"]
+        gains, ndof = ("--c1", repr(c1), "--c2", "-1"), (f"--gains={c1!r},-1",)
+    ref = run_json(capsys, "orbit", "--delta-d", "-1e-6", *gains)
+    got = run_json(capsys, "orbit", "--model", ONE, "--delta-d", "-1e-6", *ndof)
+    np.testing.assert_allclose(lam(got["multipliers"]), lam(ref["multipliers"]),
+                               rtol=1e-12, atol=1e-12)
+    assert got["v_minus"] == pytest.approx(ref["v_minus"], rel=1e-10)
+    assert got["impact_phase"] == pytest.approx(ref["impact_phase"], abs=1e-12)
+    np.testing.assert_allclose(got["section_pi2"], ref["section_pi2"], rtol=0, atol=1e-12)
+    assert got["stable"] == ref["stable"] and got["branch"] == ref["branch"] == "grazing"
+
+
+# ------------------------------------------------------------------ the 2-mass example
+def test_design_gains_are_on_the_family(capsys):
+    got = run_json(capsys, "design", "--model", TWO, "--mu", "0.2")
+    model = load_model(TWO)
+    N = smooth_map(model, got["gains"])[0]          # independent: Phi_a (I + b k^T) Phi_b
+    w = np.eye(4)[model.i_w]
+    np.testing.assert_allclose(w @ N, 0.2 * w, atol=1e-10)
+    k0, dk = np.array(got["family"]["k_at_mu_0"]), np.array(got["family"]["dk_dmu"])
+    np.testing.assert_allclose(k0 + 0.2 * dk, got["gains"], rtol=1e-10, atol=1e-12)
+    # the other eigenvalues of N are the transmission zeros, whatever mu
+    eig = np.linalg.eigvals(N)
+    zeros = lam(got["transmission_zeros"])
+    for z in zeros:
+        assert np.min(np.abs(eig - z)) < 1e-8
+    assert got["transmission_zeros_max_modulus"] == pytest.approx(np.max(np.abs(zeros)))
+
+
+def test_design_chooses_an_admissible_mu_on_three_masses(design3):
+    d = design3
+    assert d["n"] == 3 and len(d["gains"]) == 6 and len(d["transmission_zeros"]) == 5
+    assert d["admissible"] and d["admissible_mu"]
+    assert any(lo < d["mu"] < hi for lo, hi in d["admissible_mu"])
+    assert d["conditions"] == {"limit_stable": True, "exists_impacting": True,
+                               "free_stable": True}
+
+
+def test_design_report_and_out_file(capsys, tmp_path):
+    """The human report names every design quantity; --out writes the family's gains
+    (and only for an admissible mu: nothing is written for mu = 5)."""
+    import yaml
+
+    out = tmp_path / "gains.yaml"
+    code, text, err = run(capsys, "design", "--model", ONE, "--mu", "0.1", "--out", str(out))
+    assert code == 0, err
+    for word in ("transmission zeros", "admissible mu", "gains k", "lambda0", "gamma1",
+                 "this mu            : admissible", f"gains written to {out}"):
+        assert word in text
+    params = next(iter(yaml.safe_load(out.read_text()).values()))["ros__parameters"]
+    np.testing.assert_allclose(params["gains"], gain_family(load_model(ONE), 0.1), rtol=1e-15)
+    code, o, err = run(capsys, "design", "--model", ONE, "--mu", "5", "--out",
+                       str(tmp_path / "bad.yaml"))
+    assert code == 2 and o == "" and "not admissible" in err and err.count("\n") == 1
+    assert not (tmp_path / "bad.yaml").exists()
+
+
+def test_orbit_report(capsys, three):
+    code, out, err = run(capsys, "orbit", "--model", three, "--delta-d", "1e-5")
+    assert code == 0, err
+    assert "1/1 orbit" in out and "multipliers" in out and "born at grazing" in out
+
+
+# ------------------------------------------------------------------ a 3-DOF model
+def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, three, design3):
+    """Uncontrolled at |Delta d| = 1e-3 (G(1) > 0 here: the orbit born at grazing is on
+    Delta d > 0, and its multiplier ~ 1/Delta d makes a finite difference meaningless
+    much closer), controlled at -1e-5 (bounded multipliers)."""
+    model3 = load_model(three)
+    mu = design3["mu"]
+    for size, extra in ((1e-3, ()), (1e-5, ("--mu", str(mu)))):
+        k = None if not extra else gain_family(model3, mu)
+        side = grazing_side(model3, k)
+        dd = f"{side * size:g}"
+        got = run_json(capsys, "orbit", "--model", three, "--delta-d", dd, *extra)
+        assert got["branch"] == "grazing" and got["grazing_side"] == side
+        model = with_delta_d(model3, float(dd))
+        pmap = NdofMap(model, k)
+        z = np.array(got["section_pi2_deviation"])
+        step = pmap.step(z)
+        assert len(step.impacts) == 1
+        np.testing.assert_allclose(step.state, z, rtol=0, atol=1e-11)
+        # multipliers against a central-difference Jacobian of the period map
+        h = 1e-6 * float(np.max(np.abs(z)))
+        J = np.column_stack([(pmap.step(z + h * e).state - pmap.step(z - h * e).state) / (2 * h)
+                             for e in np.eye(6)])
+        fd = np.sort_complex(np.linalg.eigvals(J))
+        mult = np.sort_complex(lam(got["multipliers"]))
+        np.testing.assert_allclose(mult, fd, atol=1e-5 * max(1.0, np.max(np.abs(fd))))
+
+
+def test_continue_on_three_masses_reaches_towards_grazing(capsys, three, design3):
+    mu = design3["mu"]
+    got = run_json(capsys, "continue", "--model", three, "--from", "-1e-4", "--to", "-1e-9",
+                   "--points", "6", "--mu", str(mu))
+    assert got["start_branch"] == "grazing"
+    dd = [p["delta_d"] for p in got["branch"]]
+    assert len(dd) >= 2 and dd[0] == pytest.approx(-1e-4)
+    assert all(p["impacts"] == 1 for p in got["branch"])
+    v = [p["v_minus"] for p in got["branch"]]
+    assert v[-1] < v[0]                    # impact velocity falls towards grazing
+    biggest = max(np.max(np.abs(lam(p["multipliers"]))) for p in got["branch"])
+    limit = np.max(np.abs(lam(got["multipliers_limit"])))
+    assert biggest < 10 * max(1.0, limit)  # on the family: bounded
+
+
+def test_simulate_with_control_converges_on_three_masses(capsys, three, design3):
+    """From the grazing point with the controller on: the controlled 1/1 orbit. Without
+    it the motion leaves grazing for a large 1/1 orbit (v- ~ 3.8) within tens of
+    periods, an attractor the local controller does not reach back from."""
+    d = design3
+    assert d["transmission_zeros_max_modulus"] < 1
+    got = run_json(capsys, "simulate", "--model", three, "--delta-d", "-1e-5",
+                   "--periods", "150", "--control-after", "0", "--mu", str(d["mu"]))
+    assert len(got["pi2"]) == 150 and len(got["impacts_per_period"]) == 150
+    assert got["impacts_per_period"][-20:] == [1] * 20
+    assert got["distance_to_orbit"] < 1e-10
+    free = run_json(capsys, "simulate", "--model", three, "--delta-d", "-1e-5",
+                    "--periods", "60")
+    assert np.max(np.abs(free["final_deviation"])) > 1.0
+    assert "distance_to_orbit" not in free
+
+
+def test_sweep_with_model_writes_npz_and_png(capsys, tmp_path, three):
+    got = run_json(capsys, "sweep", "--model", three, "--grid", "delta_d=-1e-4:0:3",
+                   "--periods", "20", "--workers", "1", "--out", str(tmp_path / "s.npz"))
+    data = np.load(got["npz"])
+    assert data["samples"].shape == (3, 10, 6)
+    assert Path(got["png"]).stat().st_size > 1000
+    assert got["points"] == 3 and got["failed"] == 0
+
+
+# ------------------------------------------------------------------ errors
+@pytest.mark.parametrize("argv, needle", [
+    (["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"], "--c2 is a 1-DOF option"),
+    (["design", "--model", ONE, "--zeta", "0.02"], "--zeta is a 1-DOF option"),
+    (["orbit", "--delta-d", "-1e-6", "--mu", "0"], "--mu needs --model"),
+    (["orbit", "--model", "/nonexistent/m.yaml", "--delta-d", "-1e-6"], "no such file"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--gains", "1,2,3"], "give 2n = 4"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--mu", "0", "--gains", "1,2,3,4"],
+     "give one of"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--free-gain", "q3=1"],
+     "valid names are x0, x1, v0, v1"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--gains", "1,x"], "comma-separated"),
+    (["simulate", "--model", TWO, "--delta-d", "-1e-6", "--periods", "3", "--z0", "1,2"],
+     "give 2n = 4"),
+    (["sweep", "--model", TWO, "--grid", "zeta=0.1:0.2:2", "--periods", "3"],
+     "valid names are delta_d"),
+])
+def test_errors_are_one_line_status_2(capsys, argv, needle):
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert out == ""
+    assert err.startswith("grazing: error: ") and err.count("\n") == 1, err
+    assert needle in err
+
+
+def test_malformed_model_file_is_one_line(capsys, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("M: [[1.0]]\nC: [[-1.0]]\nK: [[1.0]]\nf: [1.0]\nomega: 0.5\ni_w: 0\n")
+    code, out, err = run(capsys, "design", "--model", str(bad))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"--model {bad}: C is invalid" in err
+    bad.write_text("M: [[1.0]\n")
+    code, out, err = run(capsys, "design", "--model", str(bad))
+    assert code == 2 and "not YAML" in err and err.count("\n") == 1
+
