@@ -198,11 +198,15 @@ def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit(two
     assert fit_exponent(sc.delta_d[:3], gap[:3]) == pytest.approx(0.5, abs=0.1)
 
 
-def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter(two_mu):
+@pytest.mark.parametrize("smooth_branch,exponent", [(True, -0.25), (False, -0.5)])
+def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter_or_half(
+        two_mu, smooth_branch, exponent):
+    """w^T N u = 0 and G(1) = 0: |Delta d|^-1/4; w^T N u = 0 alone: |Delta d|^-1/2
+    (docs/theory_ndof.md section 9)."""
     from grazing_control.studies.figures.ndof import DEFAULT, markov_gain
 
-    k = markov_gain(TWO, two_mu[0], DEFAULT)
+    k = markov_gain(TWO, two_mu[0], DEFAULT, smooth_branch)
     side = grazing_side(TWO, k)
     sc = multiplier_scaling(TWO, k, side * np.geomspace(1e-6, 1e-8, 3))
     assert all(e == "" for e in sc.errors), sc.errors
-    assert fit_exponent(sc.delta_d, sc.largest) == pytest.approx(-0.25, abs=0.02)
+    assert fit_exponent(sc.delta_d, sc.largest) == pytest.approx(exponent, abs=0.02)

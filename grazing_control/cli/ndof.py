@@ -35,7 +35,7 @@ ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--c1
                    "--engine", "--component", "--start", "--bags", "--docs")
 #: Options that need --model.
 MODEL_OPTIONS = ("--mu", "--gains", "--free-gain", "--z0", "--coordinate",
-                 "--cancel-first-markov")
+                 "--cancel-first-markov", "--markov-only")
 
 
 def add_model_option(parser) -> None:
@@ -82,10 +82,14 @@ def add_gain_options(parser, *, markov: bool = False) -> None:
                    help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
     if markov:
         g.add_argument("--cancel-first-markov", type=_finite, metavar="OFFSET",
-                       help="with --mu: the gain k(mu) + OFFSET d that cancels only w^T N u "
+                       help="with --mu: the gain k(mu) + OFFSET d that cancels w^T N u "
                             "and G(1), d a unit vector off the family (the singular eigenvalue "
                             "then grows like |Delta d|^(-1/4) instead of staying bounded; "
                             "docs/ndof_commands.md)")
+        parser.add_argument("--markov-only", action="store_true",
+                            help="with --cancel-first-markov: cancel w^T N u only, G(1) left "
+                                 "free (the branch is linear in the impact phase and the "
+                                 "singular eigenvalue grows like |Delta d|^(-1/2))")
 
 
 def add_design_options(parser) -> None:
@@ -200,9 +204,13 @@ def gains_of(args, model):
                                  "it moves off by OFFSET), and neither --gains nor --free-gain")
         from grazing_control.dynamics.ndof_design import cancel_first_markov
 
-        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=True),
+        only = bool(getattr(args, "markov_only", False))
+        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only),
                        dtype=float)
-        return k, None, f"cancels only w^T N u and G(1): k(mu = {args.mu:g}) + {offset:g} d"
+        what = "only w^T N u" if only else "w^T N u and G(1)"
+        return k, None, f"cancels {what}: k(mu = {args.mu:g}) + {offset:g} d"
+    if getattr(args, "markov_only", False):
+        raise ParameterError("--markov-only goes with --cancel-first-markov OFFSET --mu MU")
     if len(given) > 1:
         raise ParameterError(f"{' and '.join(given)} are given: give one of --gains, --mu, "
                              "--free-gain")

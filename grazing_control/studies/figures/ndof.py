@@ -9,7 +9,8 @@
   (:func:`grazing_control.studies.ndof.branch.grazing_side`) (:func:`grazing_control.studies.ndof.branch.multiplier_scaling`):
   uncontrolled, with a gain of the design family (bounded, the predicted limit
   :func:`grazing_control.dynamics.ndof_design.limit_multipliers` dashed) and with the gain
-  that cancels only w^T N u (and G(1); ``cancel_first_markov``), each with its fitted
+  that cancels only w^T N u and one that cancels w^T N u and G(1)
+  (``cancel_first_markov``), each with its fitted
   exponent over |Delta d| <= ``fit_below``;
 * (c) ``ndof_scene.png``: uncontrolled iterations, then the controller on, and the
   distance to the controlled 1/1 orbit (:func:`grazing_control.studies.ndof.scene.control_scene`),
@@ -99,8 +100,8 @@ def choose_mu(model) -> tuple[float, str]:
     return 0.0, "mu = 0: the controlled 1/1 orbit exists for no mu in [-1, 1]"
 
 
-def markov_gain(model, mu: float, settings) -> np.ndarray:
-    """k(mu) + offset d: a gain that cancels only w^T N u and G(1)
+def markov_gain(model, mu: float, settings, smooth_branch: bool = True) -> np.ndarray:
+    """k(mu) + offset d: a gain that cancels w^T N u, and G(1) too with ``smooth_branch``
     (``ndof_design.cancel_first_markov``), |offset| = ``markov_offset`` |k(mu)|, of the
     sign for which the local map has a 1/1 orbit born at grazing (whether it exists for
     d < d* depends on that sign; ndof_design's docstring)."""
@@ -108,7 +109,8 @@ def markov_gain(model, mu: float, settings) -> np.ndarray:
     from grazing_control.studies.ndof.branch import predicted_orbit
 
     size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu))), 1.0)
-    candidates = [np.asarray(cancel_first_markov(model, mu, sign * size, smooth_branch=True),
+    candidates = [np.asarray(cancel_first_markov(model, mu, sign * size,
+                                                 smooth_branch=smooth_branch),
                              dtype=float) for sign in (1.0, -1.0)]
     for k in candidates:
         if any(predicted_orbit(model, k, side * settings.fit_below)[0] is not None
@@ -127,11 +129,15 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     cases = [("uncontrolled", None, "tab:red"),
              (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu)), "tab:green")]
     numbers = {}
-    try:
-        cases.append(("cancels only w^T N u (and G(1))", markov_gain(model, mu, settings),
-                      "tab:orange"))
-    except ParameterError as exc:   # n = 1: w^T N u = 0 is the whole family (Eq. 33)
-        numbers["cancels only w^T N u"] = {"error": " ".join(str(exc).split())}
+    # w^T N u = 0 alone leaves the branch linear in psi (v- ~ |Delta d|): |Delta d|^-1/2;
+    # with G(1) = 0 too the branch is smooth (v- ~ |Delta d|^1/2): |Delta d|^-1/4
+    # (docs/theory_ndof.md section 9)
+    for label, smooth, color in (("cancels only w^T N u", False, "tab:purple"),
+                                 ("cancels w^T N u and G(1)", True, "tab:orange")):
+        try:
+            cases.append((label, markov_gain(model, mu, settings, smooth), color))
+        except ParameterError as exc:   # n = 1: w^T N u = 0 is the whole family (Eq. 33)
+            numbers[label] = {"error": " ".join(str(exc).split())}
     limit = float(np.max(np.abs(limit_multipliers(model, mu))))
     curves = []
     for label, k, color in cases:
