@@ -1,5 +1,11 @@
-"""The linear n-DOF impact oscillator (issue 17): model and loader (docs/ndof_model.md)."""
+"""The linear n-DOF impact oscillator (issue 17): the model file and its loader
+(``model``, docs/ndof_model.md), the exact flow and periodic response (``flow``), and
+certified impacts, saltation and the refusal of chattering (``impact``)
+(docs/theory_ndof_flow.md). Imports only ``oscillator.params`` and ``support``."""
 
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.impact import ChatteringError, NdofImpact, NdofSegment
 from grazing_control.oscillator.ndof.model import NdofModel, load_model, model_from_mapping
 
-__all__ = ["NdofModel", "load_model", "model_from_mapping"]
+__all__ = ["NdofModel", "load_model", "model_from_mapping", "NdofFlow", "NdofImpact",
+           "NdofSegment", "ChatteringError"]
