@@ -126,7 +126,7 @@ ISOLATION_CHECK = 0.25
 __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values", "stream_from_values",
            "ControllerNode", "main", "PI2_SOURCES"]
 
-_KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
+_KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section")
@@ -384,6 +384,14 @@ class ControllerNode(Node):
             type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
                 "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "
                 "(grazing design --model FILE --out)")))
+        d("n", -1, int_descriptor("with model_file: the degrees of freedom the gains were "
+                                  "designed for (checked against the model; -1: not given)",
+                                  -1, read_only=True))
+        d("i_a", -1, int_descriptor("with model_file: the actuated coordinate the gains were "
+                                    "designed for (checked; -1: not given)", -1,
+                                    read_only=True))
+        d("mu", math.nan, float_descriptor("with model_file: the design's mu (w^T N = mu w^T; "
+                                           "recorded, not used)", read_only=True))
         declare_scheduling(self)
         self.executor_kind = self.get_parameter("executor").value
         try:
