@@ -13,10 +13,9 @@ components fix v- and Delta d:
     Delta d = (1 + r) v- w^T R e_v - 2 d* sin^2(psi/2),
 
 so the branch is an explicit curve psi -> (Delta d, v-, z-), exact up to rounding. Its
-monodromy at the
-impact is J = M S, S the saltation matrix (§5). This is the exact reference for the
-limit multipliers and the existence coefficient of ndof_design (no shooting, no
-expansion); it assumes the one impact of the period is the only contact (a local
+monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impact.py).
+This is the exact reference for the limit multipliers and the existence coefficient of
+ndof_design (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
 statement: the orbit near grazing; shooting on the exact period map is the global check).
 """
 
@@ -28,19 +27,20 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from grazing_control.oscillator.ndof.flow import grazing_clearance
+from grazing_control.oscillator.ndof.impact import saltation_matrix
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
-from .ndof_design import _gains, _vectors, smooth_map, state_matrix, transition
+from .ndof_design import _flow, _gains, _transition, _vectors, smooth_map
 
-__all__ = ["BranchPoint", "saltation_matrix", "branch_point", "branch_coefficients", "orbit_at"]
+__all__ = ["BranchPoint", "branch_point", "branch_coefficients", "orbit_at"]
 
 
 class BranchPoint(NamedTuple):
     """One 1/1 orbit on the branch: impact phase psi (after tau*), wall offset Delta d,
-    impact velocity v-, the deviation z- just before the impact, its monodromy J there,
-    and the Pi2 state (before the kick) of the same orbit."""
+    impact velocity v-, the deviation z- just before the impact, its monodromy J there
+    (None where v- <= 0: not a physical orbit), and the Pi2 state (before the kick) of
+    the same orbit."""
 
     psi: float
     delta_d: float
@@ -48,22 +48,6 @@ class BranchPoint(NamedTuple):
     state: np.ndarray
     monodromy: np.ndarray
     pi2_state: np.ndarray
-
-
-def saltation_matrix(model: NdofModel, acceleration: float, v_minus: float) -> np.ndarray:
-    """S of an impact of the wall coordinate (§5):
-
-        S = I - (1 + r)(e_v e_v^T + w w^T) + (1 + r)(c + (a-/v-) e_v) w^T,
-
-    c = (0, M^-1 C e_{i_w}) (the damping force's jump), a- the wall coordinate's
-    acceleration just before the impact; det S = r^2. For n = 1 it is spec section 5's.
-    """
-    n, r = model.n, model.r
-    w, ev, _b = _vectors(model)
-    c = np.zeros(2 * n)
-    c[n:] = np.linalg.solve(model.M, model.C[:, model.i_w])
-    return (np.eye(2 * n) - (1.0 + r) * (np.outer(ev, ev) + np.outer(w, w))
-            + (1.0 + r) * np.outer(c + (acceleration / v_minus) * ev, w))
 
 
 def _impact_map(model: NdofModel, k: np.ndarray, psi: float):
@@ -74,11 +58,12 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float):
     sigma = s - psi / om
     if not (0.0 < sigma < model.period) or not math.isfinite(psi):
         raise ParameterError(f"psi={psi!r} is invalid: valid range is "
-                             f"{-om * (model.period - s)!r} < psi < {om * s!r} (impact between kicks)")
+                             f"{-om * (model.period - s)!r} < psi < {om * s!r} "
+                             f"(impact between kicks)")
     _w, _ev, b = _vectors(model)
-    pm = transition(model, sigma)
+    pm = _transition(model, sigma)
     eye = np.eye(2 * model.n)
-    return transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
+    return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
 
 
 def branch_point(model: NdofModel, gains, psi: float) -> BranchPoint:
@@ -96,7 +81,7 @@ def branch_point(model: NdofModel, gains, psi: float) -> BranchPoint:
     psi = float(psi)
     m, pm = _impact_map(model, k, psi)
     w, ev, _b = _vectors(model)
-    dstar, om, r = grazing_clearance(model), model.omega, model.r
+    dstar, om, r = _flow(model).d_star, model.omega, model.r
     try:
         rev = np.linalg.solve(m - np.eye(2 * model.n), ev)
     except np.linalg.LinAlgError:
@@ -105,8 +90,8 @@ def branch_point(model: NdofModel, gains, psi: float) -> BranchPoint:
     v = dstar * om * math.sin(psi) / (r + (1.0 + r) * float(ev @ rev))
     dd = (1.0 + r) * v * float(w @ rev) - 2.0 * dstar * math.sin(0.5 * psi) ** 2
     z = (1.0 + r) * v * (ev + rev)
-    acc = float(state_matrix(model)[model.n + model.i_w] @ z) - om * om * dstar * math.cos(psi)
-    jac = m @ saltation_matrix(model, acc, v)
+    flow = _flow(model)
+    jac = m @ saltation_matrix(flow, flow.tau_star + psi, z) if v > 0.0 else None
     z2 = pm @ (z - (1.0 + r) * v * ev)
     return BranchPoint(psi, dd, v, z, jac, z2)
 
@@ -116,16 +101,16 @@ def branch_coefficients(model: NdofModel, gains):
     on the 1/1 branch born at grazing, for any gains (§7, Eq. (N7')).
 
     With N = N(k), R = (N - I)^-1, M' = [A, N]/omega, q0 = r + (1 + r) e_v^T R e_v:
-    v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (= -(1 + r) v1 G(1): zero iff the
-    branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
+    v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (proportional to G(1) of §2: zero iff
+    the branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
     b1 = -w^T R M' R e_v, v2 = -(1 + r) v1 a1' / q0, a1' = -e_v^T R M' R e_v.
     On the family (w^T N = mu w^T) gamma1 is ndof_design.existence_coefficient.
     """
     k = _gains(model, gains)
     n_mat = smooth_map(model, k)
     w, ev, _b = _vectors(model)
-    a = state_matrix(model)
-    dstar, om, r = grazing_clearance(model), model.omega, model.r
+    a = _flow(model).A
+    dstar, om, r = _flow(model).d_star, model.omega, model.r
     res = np.linalg.inv(n_mat - np.eye(2 * model.n))
     mp = (a @ n_mat - n_mat @ a) / om
     q0 = r + (1.0 + r) * float(ev @ res @ ev)

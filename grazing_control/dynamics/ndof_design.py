@@ -25,6 +25,7 @@ grazing on Pi1 is (§2)
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from grazing_control.oscillator.ndof.flow import grazing_clearance
+from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
@@ -41,8 +42,6 @@ from .design import admissible_intervals
 __all__ = [
     "CONDITIONS",
     "MU_LIMIT",
-    "state_matrix",
-    "transition",
     "smooth_map",
     "markov_parameters",
     "gain_family",
@@ -72,17 +71,15 @@ MU_LIMIT = 1e6
 
 # -- the smooth flow -------------------------------------------------------------------
 
-def state_matrix(model: NdofModel) -> np.ndarray:
-    """A = [[0, I], [-M^-1 K, -M^-1 C]]: z' = A z between impacts (§1)."""
-    n = model.n
-    mk = np.linalg.solve(model.M, model.K)
-    mc = np.linalg.solve(model.M, model.C)
-    return np.block([[np.zeros((n, n)), np.eye(n)], [-mk, -mc]])
+@functools.lru_cache(maxsize=32)
+def _flow(model: NdofModel) -> NdofFlow:
+    """The model's exact flow (NdofFlow.of, built once per model object)."""
+    return NdofFlow.of(model)
 
 
-def transition(model: NdofModel, t: float) -> np.ndarray:
-    """Phi(t) = exp(A t), the transition matrix of the deviation (§1)."""
-    return scipy.linalg.expm(state_matrix(model) * float(t))
+def _transition(model: NdofModel, t: float) -> np.ndarray:
+    """Phi(t) = exp(A t) of the deviation, A = [[0, I], [-M^-1 K, -M^-1 C]] (§1)."""
+    return _flow(model).transition(t)
 
 
 def _vectors(model: NdofModel):
@@ -95,7 +92,7 @@ def _vectors(model: NdofModel):
 def _sections(model: NdofModel):
     """(P, Q, Phi(-s)) with P = Phi(s), Q = Phi(T - s), s = pi2_offset / omega."""
     s = model.pi2_offset / model.omega
-    return transition(model, s), transition(model, model.period - s), transition(model, -s)
+    return _transition(model, s), _transition(model, model.period - s), _transition(model, -s)
 
 
 def smooth_map(model: NdofModel, gains=None) -> np.ndarray:
@@ -134,12 +131,16 @@ def markov_parameters(model: NdofModel, gains=None) -> np.ndarray:
 
 # -- the family and its zeros (§3, §4) ---------------------------------------------------
 
+def _reach_value(model: NdofModel) -> float:
+    """c = w^T Phi(T - s) b: how a kick on Pi2 moves the wall coordinate at tau* (§3)."""
+    w, _ev, b = _vectors(model)
+    return float(w @ _sections(model)[1] @ b)
+
+
 def _reach(model: NdofModel) -> float:
     """c = w^T Phi(T - s) b, refused when the kick cannot reach the wall coordinate."""
-    _p, q, _pinv = _sections(model)
-    w, _ev, b = _vectors(model)
-    c = float(w @ q @ b)
-    if not abs(c) > 1e-12 * max(1.0, float(np.abs(q).max())):
+    c = _reach_value(model)
+    if not abs(c) > 1e-12 * max(1.0, float(np.abs(_sections(model)[1]).max())):
         raise ParameterError(
             f"pi2_offset={model.pi2_offset!r} is invalid with i_a={model.i_a}, i_w={model.i_w}: "
             f"w^T Phi(T - s) b = {c!r}, a kick on Pi2 does not reach the wall coordinate's "
@@ -270,7 +271,7 @@ def existence_coefficient(model: NdofModel, mu: float) -> float:
     """
     mu = _mu(mu)
     _nt, _iv, a1, q = _reduced(model)
-    dstar, r = grazing_clearance(model), model.r
+    dstar, r = _flow(model).d_star, model.r
     num, den = (1.0 + r) * dstar * (1.0 + a1 - mu * a1), q * (mu - 1.0)
     if den == 0.0:
         return 0.5 * dstar if num == 0.0 else math.copysign(math.inf, num)
@@ -431,7 +432,7 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
     """A gain that kills the first Markov parameter w^T N e_v but not the others (§9):
     k = k(mu) + offset d, d a unit vector off the family.
 
-    With ``smooth_branch`` the step also keeps G(1) = w^T (I - N)^-1 e_v = 0 (an affine
+    With ``smooth_branch`` the step also keeps G(1) = 0, i.e. w^T (I - N)^-1 e_v = 0 (an affine
     condition on k, §9): the 1/1 branch stays smooth (Delta d ~ psi^2) and the largest
     multiplier grows like |Delta d|^-1/4; d is then the direction of that set orthogonal
     to the family along which w^T N^2 e_v grows fastest. Without it d breaks G(1) (the
@@ -493,8 +494,8 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
     """Write the n-DOF controller's ROS 2 parameter file.
 
     Shape ``/**: ros__parameters: {model_file, gains: [k0 .. k_{2n-1}], n, i_a, omega,
-    pi2_offset, mu}``, keyed ``/**`` as :func:`grazing_control.dynamics.design.write_controller_yaml`
-    so that it applies under a namespace or a renamed node. Refuses a design that is not
+    pi2_offset, mu}``, keyed ``/**`` as
+    :func:`grazing_control.dynamics.design.write_controller_yaml` so that it applies under a namespace or a renamed node. Refuses a design that is not
     on this model's family (w^T N(k) != mu w^T). Written to a temporary file and renamed.
     """
     import tempfile
@@ -515,7 +516,8 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".yaml.tmp")
     try:
         with os.fdopen(fd, "w") as fh:
-            fh.write("# n-DOF controller gains from the design (docs/theory_ndof.md, w^T N = mu w^T)\n")
+            fh.write("# n-DOF controller gains from the design "
+                     "(docs/theory_ndof.md, w^T N = mu w^T)\n")
             yaml.safe_dump(doc, fh, sort_keys=False)
         mask = os.umask(0)
         os.umask(mask)

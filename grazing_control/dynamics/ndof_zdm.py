@@ -9,7 +9,7 @@ maximum d* with zero velocity, so the gap and its rate are
 
 and along the smooth flow through z the gap is (exactly)
 
-    g(t) = w^T Phi(t) z + d* (cos(omega t) - 1) - Delta d.                 (Z0)
+    g(t) = w^T Phi(t) z - 2 d* sin^2(omega t / 2) - Delta d.               (Z0)
 
 If it crosses the wall near t = 0 (local time t1, velocity v- > 0) the real motion
 differs from the smooth one by the impact, and since the deviation flow is linear,
@@ -40,11 +40,10 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from grazing_control.oscillator.ndof.flow import grazing_clearance
+from grazing_control.oscillator.ndof.impact import saltation_matrix
 from grazing_control.oscillator.ndof.model import NdofModel
 
-from .ndof_branch import saltation_matrix
-from .ndof_design import _vectors, smooth_map, state_matrix, transition
+from .ndof_design import _flow, _transition, _vectors, smooth_map
 
 __all__ = [
     "ORDERS",
@@ -77,9 +76,10 @@ class LocalGrazing(NamedTuple):
 
 def local_grazing(model: NdofModel) -> LocalGrazing:
     """alpha*, kappa, c of the model (§10)."""
-    a = state_matrix(model)
+    flow = _flow(model)
+    a = flow.A
     w, ev, _b = _vectors(model)
-    dstar = grazing_clearance(model)
+    dstar = flow.d_star
     return LocalGrazing(model.omega ** 2 * dstar, a[model.n + model.i_w].copy(), w - a @ ev,
                         w, ev, dstar)
 
@@ -120,9 +120,10 @@ class _Gap:
         self.loc = local_grazing(model)
 
     def __call__(self, t):
-        zt = transition(self.model, t) @ self.z
+        zt = _transition(self.model, t) @ self.z
         om, ds = self.model.omega, self.loc.d_star
-        return (float(self.loc.w @ zt) + ds * (math.cos(om * t) - 1.0) - self.model.delta_d,
+        sh = math.sin(0.5 * om * t)            # cos - 1 = -2 sin^2: no cancellation
+        return (float(self.loc.w @ zt) - 2.0 * ds * sh * sh - self.model.delta_d,
                 float(self.loc.ev @ zt) - ds * om * math.sin(om * t),
                 float(self.loc.kappa @ zt) - ds * om * om * math.cos(om * t))
 
@@ -188,7 +189,7 @@ def zdm(model: NdofModel, z, order=2) -> np.ndarray:
     _tm, _hm, t1, v = crossing(model, z)
     if t1 is None:
         return z.copy()
-    return z - (1.0 + model.r) * v * (transition(model, -t1) @ local_grazing(model).ev)
+    return z - (1.0 + model.r) * v * (_transition(model, -t1) @ local_grazing(model).ev)
 
 
 def zdm_jacobian(model: NdofModel, z, order=2) -> np.ndarray:
@@ -206,8 +207,10 @@ def zdm_jacobian(model: NdofModel, z, order=2) -> np.ndarray:
         _tm, _hm, t1, v = crossing(model, z)
         if t1 is None:
             return np.eye(d)
-        acc = _Gap(model, z)(t1)[2]
-        return transition(model, -t1) @ saltation_matrix(model, acc, v) @ transition(model, t1)
+        flow = _flow(model)
+        fwd = _transition(model, t1)
+        sal = saltation_matrix(flow, flow.tau_star + model.omega * t1, fwd @ z)
+        return _transition(model, -t1) @ sal @ fwd
     if order not in (1, 2):
         raise ValueError(f"order={order!r} is invalid: valid values are {ORDERS}")
     _out, t1, v = _event(model, z, order)

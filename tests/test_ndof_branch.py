@@ -1,0 +1,75 @@
+"""The explicit n-DOF 1/1 branch (docs/theory_ndof.md §5, §7) against the exact period
+map NdofMap, the 1-DOF branch for n = 1, and its own Taylor coefficients."""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grazing_control.dynamics import ndof_branch as nb, ndof_design as nd, orbits
+from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.ndof import load_model
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+MODELS = Path(__file__).resolve().parents[1] / "config" / "models"
+CHAIN = MODELS / "two_mass_chain.yaml"
+
+
+@pytest.mark.parametrize("gains", ["design", "none", "bad"])
+def test_branch_orbit_is_a_fixed_point_of_the_exact_period_map(gains):
+    """The Pi2 state of a branch point, stepped once by NdofMap at its Delta d, returns to
+    itself with one impact of the same v-, and the exact Jacobian has the branch's
+    multipliers."""
+    base = load_model(CHAIN)
+    k = {"design": nd.gain_family(base, 0.2), "none": np.zeros(4),
+         "bad": nd.cancel_first_markov(base, 0.2, 0.5, smooth_branch=False)}[gains]
+    v1 = nb.branch_coefficients(base, k)[2]
+    for psi in (1e-2, 1e-4):
+        bp = nb.branch_point(base, k, math.copysign(psi, v1))
+        assert bp.v_minus > 0
+        step = NdofMap(dataclasses.replace(base, delta_d=bp.delta_d), k).step(bp.pi2_state, True)
+        # the core works with physical states of size ~ d* = 3.2: absolute rounding ~1e-15
+        assert np.abs(step.state - bp.pi2_state).max() < 1e-14 + 1e-12 * np.abs(bp.pi2_state).max()
+        assert len(step.impacts) == 1
+        assert step.impacts[0].v_minus == pytest.approx(bp.v_minus, rel=1e-9)
+        ours = np.sort_complex(np.linalg.eigvals(bp.monodromy))
+        theirs = np.sort_complex(np.linalg.eigvals(step.jacobian))
+        assert np.abs(ours - theirs).max() < 1e-10 * np.abs(ours).max() / bp.v_minus
+
+
+def test_n1_branch_is_the_1dof_branch():
+    m = load_model(MODELS / "study_1dof.yaml")
+    p = OscillatorParams(zeta=0.01, r=m.r, omega=m.omega, pi2_offset=m.pi2_offset)
+    for gains in (None, Gains(-0.3, -1.0)):
+        k = np.zeros(2) if gains is None else np.array([gains.c1, gains.c2])
+        for psi in (0.05, -1e-3, 1e-6):
+            dd, v, _m = orbits.branch_point(p, psi, gains)
+            bp = nb.branch_point(m, k, psi)
+            assert bp.delta_d == pytest.approx(dd, rel=1e-9, abs=1e-15 * abs(v))
+            assert bp.v_minus == pytest.approx(v, rel=1e-10)
+
+
+def test_branch_coefficients_are_the_taylor_coefficients():
+    """Delta d = d1 psi - gamma1 psi^2 + ..., v- = v1 psi + ...: for gains off the family
+    (d1 != 0) and on it (d1 = 0), checked by symmetric quotients of the exact branch."""
+    base = load_model(CHAIN)
+    for k in (np.zeros(4), nd.gain_family(base, -0.1),
+              nd.cancel_first_markov(base, 0.2, 0.5, smooth_branch=True)):
+        d1, g1, v1 = nb.branch_coefficients(base, k)
+        h = 1e-4
+        a, b = nb.branch_point(base, k, h), nb.branch_point(base, k, -h)
+        assert (a.delta_d - b.delta_d) / (2 * h) == pytest.approx(d1, rel=1e-6, abs=1e-6)  # + O(h^2)
+        assert -(a.delta_d + b.delta_d) / (2 * h * h) == pytest.approx(g1, rel=1e-5)
+        assert (a.v_minus - b.v_minus) / (2 * h) == pytest.approx(v1, rel=1e-7)
+
+
+def test_bad_psi_and_no_orbit_are_refused():
+    base = load_model(CHAIN)
+    k = nd.gain_family(base, 0.2)
+    with pytest.raises(ParameterError, match="psi"):
+        nb.branch_point(base, k, base.pi2_offset + 0.01)
+    with pytest.raises(ValueError, match="no 1/1 orbit"):
+        nb.orbit_at(base, k, 1e-6)       # gamma1 > 0: none on the non-impacting side
