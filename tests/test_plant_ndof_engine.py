@@ -20,7 +20,6 @@ from grazing_control.dynamics.ndof_design import gain_family
 from grazing_control.dynamics.ndof_map import NdofMap
 from grazing_control.dynamics.shooting import find_periodic
 from grazing_control.oscillator.ndof.impact import advance
-from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.plant.engine import Event
 from grazing_control.plant.lockstep import Lockstep
 from grazing_control.plant.ndof_engine import NdofEngine, NdofEvent
@@ -210,3 +209,30 @@ def test_realtime_scheduled_is_the_lockstep_run_bit_for_bit():
         assert loop.stats["applied"] == n and loop.stats["late"] == 0
         runs.append(np.array([xv(e) for e in sink.samples()]))
     np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_injected_loss_and_jitter_are_the_fault_models_draws():
+    """loss drops the corrections FaultModel.draw(k) drops; jitter moves each kick to
+    actuation_delay + e_k (FaultModel.actuation_delay), as in 1-DOF."""
+    n = 30
+    s = settings(max_periods=n, state_period=0.0, actuation_delay=4.0, jitter=0.5,
+                 loss=0.3, seed=11)
+    sink = Recorder()
+    loop = Lockstep(NdofEngine(s), sink, Clock())
+    loop.start()
+    while not loop.finished:
+        loop.answer(loop.waiting, 1e-4)
+    lost = [s.faults.draw(k).dropped for k in range(n)]
+    assert loop.stats["lost"] == sum(lost) and 0 < sum(lost) < n
+    # the reference: the engine's calls by hand, the delays and losses drawn from the model
+    eng = NdofEngine(s)
+    f, m = eng.flow, s.model
+    z = np.zeros(4)
+    for k in range(n):
+        delay = s.faults.actuation_delay(4.0, k, m.period)
+        assert delay != 4.0
+        head = advance(f, f.tau2, z, delay)
+        zk = head.z.copy()
+        zk[m.n + m.i_a] += 0.0 if lost[k] else 1e-4
+        z = advance(f, (f.tau2 + m.omega * delay) % (2 * math.pi), zk, m.period - delay).z
+    np.testing.assert_array_equal(loop.engine.z, z)      # after the last period

@@ -48,7 +48,7 @@ def _controller_values(controller_params) -> dict:
             with open(controller_params) as fh:
                 doc = yaml.safe_load(fh) or {}
         except (OSError, yaml.YAMLError):
-            return None
+            return {}
         values = {}
         for section in doc.values() if isinstance(doc, dict) else ():
             if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
