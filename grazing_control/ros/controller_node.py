@@ -83,7 +83,9 @@ stale_after, actuation_delay (the delay the gains were designed for, 0 <= delay 
 simulator applies it, the controller validates and reports it: docs/nodes.md,
 "Scheduled actuation"), executor (single_threaded or events); delta_d (the plant's
 model, NaN: none), pi2_source, estimator, impact_source, sensor_noise, state_period,
-model_noise (stream mode, above). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+model_noise (stream mode, above); model_file and gains (an n-DOF scene, issue 17:
+Delta v = k^T (X - X**) on samples with n joints, :mod:`grazing_control.ros.ndof_control`;
+n, i_a, mu: the design file's section data, checked against the model). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
 """
 
