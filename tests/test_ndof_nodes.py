@@ -112,6 +112,13 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert set(s["final_vs_exact_orbit_per_coordinate"]) == {"x0", "x1", "v0", "v1"}
     text = (tmp_path / "report" / "report.md").read_text()
     assert "n-DOF scene" in text and "v1" in text and (tmp_path / "report" / "bag.png").is_file()
+    # grazing replay is built for 1-DOF bags: it says so instead of waiting for answers
+    from grazing_control.recordings.replay import replay_controller, replay_simulator
+
+    for replay in (replay_controller, replay_simulator):
+        with pytest.raises(ValueError, match="an n-DOF scene .* grazing replay is built"):
+            replay(bag, tmp_path / "replay")
+        assert not (tmp_path / "replay").exists()
 
 
 def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
