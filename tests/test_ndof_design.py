@@ -225,6 +225,7 @@ def test_two_mass_chain_has_a_design():
     assert lo < -0.3 and hi > 0.7
     best = nd.evaluate_design(m, 0.5 * (lo + hi))
     assert best.admissible and best.limit_radius < 0.8
+    assert best.lambda0 is best.limit_multipliers and best.zeros_radius < 0.65
     free = np.zeros(2 * m.n)
     d1, _g1, v1 = ndof_branch.branch_coefficients(m, free)
     assert d1 / v1 < 0          # Delta d < 0 where v- > 0

@@ -309,6 +309,11 @@ class NdofDesign:
     gamma1: float
 
     @property
+    def lambda0(self) -> np.ndarray:
+        """The study's name (Eq. 23) for :attr:`limit_multipliers`."""
+        return self.limit_multipliers
+
+    @property
     def zeros_radius(self) -> float:
         """max |zero|: < 1 is needed for the non-impacting side (§4)."""
         return float(np.max(np.abs(self.zeros)))
