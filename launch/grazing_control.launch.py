@@ -58,8 +58,10 @@ def generate_launch_description():
                               description="wall clearance Delta d = d - d* ('' = -5.0e-06, "
                                           "or the model file's with model)"),
         DeclareLaunchArgument("model", default_value="",
-                              description="n-DOF model file (docs/ndof_model.md); '' = the "
-                                          "study's 1-DOF oscillator"),
+                              description="n-DOF model file (docs/ndof_model.md); '' = "
+                                          "controller_params' model_file if it has one "
+                                          "(an n-DOF design), else the study's 1-DOF "
+                                          "oscillator"),
         DeclareLaunchArgument("max_periods", default_value="1200",
                               description="forcing periods of the scene"),
         DeclareLaunchArgument("enable_after", default_value="1000",
@@ -77,14 +79,15 @@ def _scene(context):
     """The scene's nodes with the overrides of grazing_control.ros.scene_nodes (the ones
     `grazing run` gives them: one description, issue 19 §3), once the arguments are
     known; launch adds its own: the clock remapping, use_sim_time, the exit handlers."""
-    from grazing_control.ros.scene_nodes import NODES, scene_overrides, sim_values_for_model
+    from grazing_control.ros.scene_nodes import (NODES, design_model, scene_overrides,
+                                                 sim_values_for_model)
 
     def arg(name):
         return LaunchConfiguration(name).perform(context)
 
     bag = arg("bag")
     controller_params = arg("controller_params")
-    model = arg("model") or None
+    model = arg("model") or design_model(controller_params)
     delta_d = float(arg("delta_d")) if arg("delta_d") else None if model else -5.0e-06
     over = scene_overrides(controller_params, periods=int(arg("max_periods")),
                            delta_d=delta_d, enable_after=int(arg("enable_after")),

@@ -18,6 +18,11 @@ missing answer), ``/done``, ``/clock``; stamps are simulation time. Subscribes
 ``controller/velocity_correction`` (linear.x = Delta v, linear.y = the predicted next
 one, stamp = the Pi2 sample answered). Service ``~/reset``: back to t = 0.
 
+With ``model_file`` (an n-DOF model YAML, docs/ndof_model.md; issue 17) the node simulates
+that oscillator (:mod:`grazing_control.plant.ndof_engine`) and publishes every coordinate:
+``oscillator/state``, ``/pi1``, ``/pi2`` as JointState with n joints ``mass0`` ..
+(docs/nodes.md, "n-DOF scenes").
+
 Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.yaml`` or
 ``python -m sim_node.sim_node --ros-args ...``.
 """

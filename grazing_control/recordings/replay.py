@@ -223,6 +223,17 @@ def _bag_writer(out: Path):
                                        "written_by": "grazing replay"}).open()
 
 
+def _refuse_ndof(bag, data) -> None:
+    """An n-DOF scene's bag (issue 17) is not replayed: ValueError saying so (its
+    numbers: grazing analyze, recordings/ndof_analysis.py)."""
+    from .ndof_analysis import is_ndof
+
+    if is_ndof(data):
+        raise ValueError(f"{bag}: an n-DOF scene (model_file in its parameter record, or "
+                         f"{data.joints} joints per Pi2 sample): grazing replay is built for "
+                         "the 1-DOF scenes only; grazing analyze reports its numbers")
+
+
 def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=None,
                       answer_timeout=2.0, topics=None, options=None, log_dir=None) -> dict:
     """Replay a bag's Pi2 samples through a real controller_node; compare (module doc).
@@ -240,6 +251,7 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
     from grazing_control.ros.launcher import CONTROLLER_MODULE
 
     data = load(bag, topics)
+    _refuse_ndof(bag, data)
     setup = resolve_setup(data, options or {})
     notes = []
     values, source = _controller_values(data, setup, controller_params, notes)
@@ -430,6 +442,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
     from grazing_control.ros.launcher import SIM_MODULE
 
     data = load(bag, topics)
+    _refuse_ndof(bag, data)
     setup = resolve_setup(data, options or {})
     if setup.params is None:
         raise ValueError(f"{bag}: Delta d unknown: give --delta-d for the simulator replay")

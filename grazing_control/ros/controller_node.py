@@ -83,7 +83,9 @@ stale_after, actuation_delay (the delay the gains were designed for, 0 <= delay 
 simulator applies it, the controller validates and reports it: docs/nodes.md,
 "Scheduled actuation"), executor (single_threaded or events); delta_d (the plant's
 model, NaN: none), pi2_source, estimator, impact_source, sensor_noise, state_period,
-model_noise (stream mode, above). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+model_noise (stream mode, above); model_file and gains (an n-DOF scene, issue 17:
+Delta v = k^T (X - X**) on samples with n joints, :mod:`grazing_control.ros.ndof_control`;
+n, i_a, mu: the design file's section data, checked against the model). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
 """
 
@@ -126,7 +128,7 @@ ISOLATION_CHECK = 0.25
 __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values", "stream_from_values",
            "ControllerNode", "main", "PI2_SOURCES"]
 
-_KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset",
+_KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section")
@@ -384,6 +386,14 @@ class ControllerNode(Node):
             type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
                 "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "
                 "(grazing design --model FILE --out)")))
+        d("n", -1, int_descriptor("with model_file: the degrees of freedom the gains were "
+                                  "designed for (checked against the model; -1: not given)",
+                                  -1, read_only=True))
+        d("i_a", -1, int_descriptor("with model_file: the actuated coordinate the gains were "
+                                    "designed for (checked; -1: not given)", -1,
+                                    read_only=True))
+        d("mu", math.nan, float_descriptor("with model_file: the design's mu (w^T N = mu w^T; "
+                                           "recorded, not used)", read_only=True))
         declare_scheduling(self)
         self.executor_kind = self.get_parameter("executor").value
         try:

@@ -55,8 +55,8 @@ import yaml
 
 from grazing_control.oscillator import kernel
 
-from .scene_nodes import (design_delay, scene_overrides,  # noqa: F401 (design_delay: API)
-                          sim_values_for_model)
+from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
+                          scene_overrides, sim_values_for_model)
 from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
@@ -383,7 +383,9 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         wait for. None: no live view.
     model : path, optional
         An n-DOF model file (docs/ndof_model.md; issue 17): both nodes get it as
-        ``model_file``; the controller's parameters must then give ``gains`` (required),
+        ``model_file``; default: the ``model_file`` of the controller's parameters (an
+        n-DOF design's gain file), else none (the study's 1-DOF scene). The controller's
+        parameters must then give ``gains`` (required),
         and the simulator's parameter file is used without its 1-DOF model parameters
         (zeta, r, omega, delta_d, tau0, pi2_offset: the model file's delta_d applies
         unless ``delta_d`` is given).
@@ -402,6 +404,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                                     and math.isfinite(timeout)):
         raise ValueError(f"timeout={timeout!r} is invalid: valid range is a finite "
                          "number of seconds > 0 (None: no timeout)")
+    if model is None and controller_params is not None:
+        model = design_model(controller_params)    # the model the gains were designed for
     if model is not None:
         if controller_params is None:
             raise ValueError(f"model={os.fspath(model)!r} needs the controller's gains: give "

@@ -10,9 +10,12 @@ X** the grazing orbit's state on Pi2: the periodic response at the section phase
 ``NdofFlow.particular(tau2)`` (docs/theory_ndof.md, "Kick design"; the kick of
 :class:`grazing_control.dynamics.ndof_map.NdofMap`). The switch-on (``enable_after``,
 ``~/enable``), the saturation and the stale-sample rules are the 1-DOF controller's
-(:class:`grazing_control.ros.controller_node.ControlLaw`); the 1-DOF gains and model
-(c1, c2, x_ref, v_ref, zeta, r, omega, pi2_offset) must be left at their defaults and the
-stream mode is not built for n-DOF: either is refused with the reason. No rclpy.
+(:class:`grazing_control.ros.controller_node.ControlLaw`); the 1-DOF law's parameters
+(c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults and the stream mode is not
+built for n-DOF: either is refused with the reason. The section data the design's
+parameter file carries with the gains (``n``, ``i_a``, ``omega``, ``pi2_offset``:
+:func:`grazing_control.dynamics.ndof_design.write_gain_yaml`) must be the model file's:
+gains designed for another model are refused, naming both values. No rclpy.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
-from grazing_control.oscillator.params import ParameterError
+from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 
 __all__ = ["NdofLaw", "NdofController", "ndof_controller_from_values", "GAIN_LIMIT",
@@ -36,7 +39,12 @@ GAIN_LIMIT = 1e6
 #: The 1-DOF law's parameters and their defaults: an n-DOF controller refuses any other
 #: value (the model file and ``gains`` give the n-DOF law). The 1-DOF model's defaults
 #: are filled in by :func:`ndof_controller_from_values`.
-ONE_DOF_DEFAULTS = {"c1": 0.0, "c2": 0.0, "x_ref": math.nan, "v_ref": math.nan}
+ONE_DOF_DEFAULTS = {"c1": 0.0, "c2": 0.0, "x_ref": math.nan, "v_ref": math.nan,
+                    "zeta": OscillatorParams().zeta, "r": OscillatorParams().r}
+#: The section data of the design's parameter file and the value meaning "not given":
+#: given, each must be the model's.
+SECTION_DATA = {"n": -1, "i_a": -1, "omega": study_omega(),
+                "pi2_offset": OscillatorParams().pi2_offset}
 
 
 class NdofLaw:
@@ -99,6 +107,13 @@ def ndof_controller_from_values(values: dict, model_file: str, gains) -> NdofCon
                                  f" valid is its default {default!r} (the n-DOF law is "
                                  "Delta v = k^T (X - X**) with k = gains and X** from the "
                                  "model)")
+    for name, unset in SECTION_DATA.items():
+        value = values.get(name, unset)
+        want = getattr(model, name)
+        if value != unset and value != want:
+            raise ParameterError(f"{name}={value!r} is invalid with model_file={model_file!r}: "
+                                 f"valid is the model's {want!r} (the gains were designed "
+                                 "for another model)")
     if values.get("pi2_source", "sample") != "sample":
         raise ParameterError(f"pi2_source={values['pi2_source']!r} is invalid with "
                              "model_file: valid is sample (the stream estimator is not "

@@ -13,7 +13,8 @@ from __future__ import annotations
 import os
 import random
 
-__all__ = ["NODES", "scene_overrides", "design_delay", "new_token", "sim_values_for_model"]
+__all__ = ["NODES", "scene_overrides", "design_delay", "design_model", "new_token",
+           "sim_values_for_model"]
 
 #: The scene's nodes in start order (the recorder first, so that it matches every topic
 #: before the simulator starts; the simulator last).
@@ -24,6 +25,22 @@ def design_delay(controller_params):
     """``actuation_delay`` of the controller's parameters (``grazing design --delay``): a
     parameter file's path (any node key, e.g. ``/**``) or a dict; None if absent or the
     file cannot be read (the node then reports the file itself)."""
+    delay = _controller_values(controller_params).get("actuation_delay")
+    return float(delay) if isinstance(delay, (int, float)) and not isinstance(delay, bool) \
+        else None
+
+
+def design_model(controller_params):
+    """``model_file`` of the controller's parameters (an n-DOF design's gain file,
+    :func:`grazing_control.dynamics.ndof_design.write_gain_yaml`), else None: the model the
+    gains were designed for, the scene's model when none is given (issue 17)."""
+    path = _controller_values(controller_params).get("model_file")
+    return path if isinstance(path, str) and path else None
+
+
+def _controller_values(controller_params) -> dict:
+    """The controller's parameters: a file's ``ros__parameters`` (any node key) or a
+    dict; {} if the file cannot be read."""
     import yaml
 
     if isinstance(controller_params, (str, os.PathLike)):
@@ -31,16 +48,14 @@ def design_delay(controller_params):
             with open(controller_params) as fh:
                 doc = yaml.safe_load(fh) or {}
         except (OSError, yaml.YAMLError):
-            return None
+            return {}
         values = {}
         for section in doc.values() if isinstance(doc, dict) else ():
             if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
                 values.update(section["ros__parameters"])
     else:
         values = dict(controller_params or {})
-    delay = values.get("actuation_delay")
-    return float(delay) if isinstance(delay, (int, float)) and not isinstance(delay, bool) \
-        else None
+    return values
 
 
 def sim_values_for_model(sim_params) -> dict:
@@ -96,7 +111,7 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
         sim["mode"] = str(mode)
     controller = dict(controller_overrides or {})
     if model is not None:               # an n-DOF scene: both read the model file
-        sim["model_file"] = controller["model_file"] = os.fspath(model)
+        sim["model_file"] = controller["model_file"] = os.path.abspath(os.fspath(model))
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay

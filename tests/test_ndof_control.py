@@ -1,0 +1,107 @@
+"""The n-DOF controller's law and its validation (grazing_control.ros.ndof_control), without
+middleware: X** is the grazing orbit's Pi2 state, the answer is k^T (X - X**), the
+prediction is one exact period of the engine, and wrong gains are refused with a reason."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grazing_control.dynamics.ndof_design import evaluate_design, gain_family, write_gain_yaml
+from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.oscillator.ndof.flow import periodic_response
+from grazing_control.oscillator.ndof.model import load_model
+from grazing_control.oscillator.params import ParameterError
+from grazing_control.plant.ndof_engine import NdofEngine
+from grazing_control.plant.ndof_settings import ndof_settings_from_values
+from grazing_control.ros.ndof_control import NdofLaw, ndof_controller_from_values
+
+SCENE = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml")
+MODEL = load_model(SCENE)
+K = gain_family(MODEL, 0.0)
+
+
+def test_x_ref_is_the_grazing_orbit_on_pi2():
+    c = ndof_controller_from_values({}, SCENE, K.tolist())
+    m = MODEL
+    # independent: the periodic response at the time of Pi2, pi2_offset / omega after the
+    # grazing maximum of the wall coordinate (a grid maximum, then the root of its
+    # velocity there by bisection)
+    from scipy.optimize import brentq
+
+    ts = np.linspace(0.0, m.period, 20001)
+    xw = periodic_response(m, ts)[0][:, m.i_w]
+    j = int(np.argmax(xw))
+    t_star = brentq(lambda t: float(periodic_response(m, t)[1][m.i_w]), ts[j - 1], ts[j + 1],
+                    xtol=1e-14)
+    x, v = periodic_response(m, t_star + m.pi2_offset / m.omega)
+    np.testing.assert_allclose(c.x_ref, x, atol=1e-8)
+    np.testing.assert_allclose(c.v_ref, v, atol=1e-8)
+    assert abs(c.v_ref[m.i_w] + m.omega * abs(xw.max())) < 1e-8   # a quarter period on
+    assert not c.predicts and c.model.delta_d == m.delta_d
+
+
+class Law(NdofLaw):
+    def __init__(self, c):
+        self.gains, self.x_ref, self.v_ref = c.gains, c.x_ref, c.v_ref
+
+
+def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
+    c = ndof_controller_from_values({"delta_d": -2e-5}, SCENE, K.tolist())
+    assert c.predicts and c.model.delta_d == -2e-5
+    rng = np.random.default_rng(3)
+    z = rng.normal(scale=1e-3, size=4)
+    X = np.concatenate([c.x_ref, c.v_ref]) + z
+    law = Law(c)
+    assert law._law(X[:2], X[2:]) == pytest.approx(float(K @ z), rel=1e-12)
+    # the predicted next sample is the engine's next sample from that state and kick
+    s = ndof_settings_from_values({"delta_d": -2e-5}, SCENE)
+    eng = NdofEngine(s)
+    eng.z = eng.flow.to_deviation(eng.flow.tau2, X)
+    dv = law._law(X[:2], X[2:])
+    eng.begin_period(dv)
+    ev, _ = eng.end_period()
+    xn, vn = c.predict(X[:2], X[2:], dv, 0.0)
+    np.testing.assert_allclose(np.concatenate([xn, vn]), ev.x + ev.v, rtol=0, atol=1e-14)
+    # and NdofMap with the gains (its kick is k^T z of the same state)
+    step = NdofMap(c.model, K).step(z)
+    np.testing.assert_allclose(eng.z, step.state, rtol=0, atol=1e-14)
+
+
+def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
+    with pytest.raises(ParameterError, match=r"gains has 3 values: valid is 2n = 4"):
+        ndof_controller_from_values({}, SCENE, [1.0, 2.0, 3.0])
+    with pytest.raises(ParameterError, match=r"gains is not given: with model_file it is "
+                                             r"required, 4 values"):
+        ndof_controller_from_values({}, SCENE, None)
+    with pytest.raises(ParameterError, match=r"gains=.* is invalid: valid range is \|k_i\|"):
+        ndof_controller_from_values({}, SCENE, [1e300, 0.0, 0.0, 0.0])
+    with pytest.raises(ParameterError, match=r"gains=.* is invalid"):
+        ndof_controller_from_values({}, SCENE, [math.nan, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("values, text", [
+    ({"c1": -1.0}, "c1=-1.0 is invalid with model_file"),
+    ({"x_ref": 0.5}, "x_ref=0.5 is invalid with model_file"),
+    ({"zeta": 0.05}, "zeta=0.05 is invalid with model_file"),
+    ({"pi2_source": "stream"}, "pi2_source='stream' is invalid with model_file"),
+    ({"n": 3}, "n=3 is invalid with model_file=.*valid is the model's 2"),
+    ({"i_a": 0}, "i_a=0 is invalid .* valid is the model's 1"),
+    ({"omega": 0.8}, "omega=0.8 is invalid .* valid is the model's 0.275"),
+    ({"delta_d": math.inf}, "delta_d=inf is invalid")])
+def test_one_dof_parameters_and_another_models_design_are_refused(values, text):
+    with pytest.raises(ParameterError, match=text):
+        ndof_controller_from_values(values, SCENE, K.tolist())
+
+
+def test_the_designs_parameter_file_is_accepted(tmp_path):
+    import yaml
+
+    path = tmp_path / "gains.yaml"
+    write_gain_yaml(path, MODEL, evaluate_design(MODEL, 0.2), SCENE)
+    values = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+    c = ndof_controller_from_values(values, values["model_file"], values["gains"])
+    np.testing.assert_array_equal(c.gains, gain_family(MODEL, 0.2))
