@@ -20,6 +20,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.py'))),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
+        ('share/' + package_name + '/config/models', sorted(glob('config/models/*.yaml'))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
