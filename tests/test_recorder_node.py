@@ -254,7 +254,7 @@ def test_use_sim_time_stamps_log_time_with_clock(tmp_path, isolation, ros):
         rc, output = stop(recorder, signal.SIGTERM)
     assert rc == 0, output
     assert_bag_holds(bag, sent)
-    assert read_metadata(bag)["custom_data"] == {"log_time": "ros_clock"}
+    assert read_metadata(bag)["custom_data"] == {"log_time": "ros_clock", "recorder_status": "0"}
     clock_ns = {0} | {m.clock.sec * 10**9 + m.clock.nanosec for m in sent["/clock"]}
     assert {m.log_time_ns for m in read_messages(bag)} <= clock_ns
 
@@ -520,13 +520,19 @@ def test_sigkilled_recording_opens_in_every_reader_after_reindex(tmp_path, isola
     print(f"recovered {n} of {len(want)} messages")
 
 
-def test_a_simulator_waiting_for_its_recorder_fails_when_the_recorder_dies(tmp_path):
+def test_a_simulator_waiting_for_its_recorder_fails_when_the_recorder_dies(tmp_path,
+                                                                          monkeypatch):
     """A scene that waits for its recorder (wait_for_recorder, as `grazing run --bag` and a
     launch with a bag) is recorded; when the recorder is SIGKILLed mid-scene the
-    simulator, once the recorder has left the graph (DDS liveliness: about 20 s here),
+    simulator, once the recorder has left the graph (DDS liveliness: the participants
+    here announce a 2 s lease, tests/fastdds_short_lease.xml; Fast DDS's default is 20 s),
     stops with one error line and status 1 instead of finishing with status 0 and no
     record (issue 19 §4)."""
     from grazing_control.ros import launcher as L
+
+    profile = str(Path(__file__).with_name("fastdds_short_lease.xml"))
+    monkeypatch.setenv("FASTRTPS_DEFAULT_PROFILES_FILE", profile)
+    monkeypatch.setenv("FASTDDS_DEFAULT_PROFILES_FILE", profile)
 
     root = Path(__file__).resolve().parents[1]
     domain = new_domain()
