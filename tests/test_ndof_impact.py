@@ -349,19 +349,16 @@ def test_at_rest_on_the_wall_pushed_into_it_is_refused_not_passed_through():
     assert issubclass(ChatteringError, RuntimeError)
 
 
-def test_chattering_sequence_is_refused_quickly():
+@pytest.mark.timeout(60)     # a hang guard, not a speed measurement
+def test_chattering_sequence_is_refused():
     """A small bounce with the wall pushing back: the sequence v_{k+1} ~ r v_k is followed
     bounce by bounce until it would accumulate within chatter_time, then refused with
     ChatteringError; never a hang, never through the wall."""
-    import time
-
     m, flow = _chain(delta_d=-1.5)
     tau, z = _pushed_into_wall(flow)
     z[m.n + m.i_w] += 1e-3  # arriving at 1e-3
-    start = time.perf_counter()
     with pytest.raises(ChatteringError, match="chatters at t="):
         advance(flow, tau, z, m.period)
-    assert time.perf_counter() - start < 1.0
 
 
 def test_no_trajectory_passes_through_the_wall():
