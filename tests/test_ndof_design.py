@@ -299,3 +299,30 @@ def test_write_gain_yaml_round_trips_and_refuses_a_foreign_design(tmp_path):
         nd.write_gain_yaml(tmp_path / "x.yaml", other, d, CHAIN)
     assert not (tmp_path / "x.yaml").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gains.yaml"]
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_sections_with_stable_zeros_are_where_every_zero_is_inside(seed):
+    """The design aid of `grazing design --model` when no mu is admissible: the pi2_offset
+    intervals it reports have all transmission zeros inside the unit circle, and the
+    offsets between them do not (checked directly, at the midpoints and just beyond
+    each bisected end); the shipped chain's own section lies in one."""
+    model = _random_model(seed, 2)
+    found = nd.sections_with_stable_zeros(model, points=240)
+
+    def radius(s):
+        return float(np.max(np.abs(nd.transmission_zeros(dataclasses.replace(model,
+                                                                              pi2_offset=s)))))
+
+    edges = [0.0] + [e for iv in found for e in iv] + [2 * math.pi]
+    for i, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        if b - a > 1e-6:
+            assert (radius(0.5 * (a + b)) < 1.0) == (i % 2 == 1), (i, a, b, found)
+    for a, b in found:
+        for end, outward in ((a, -1e-6), (b, 1e-6)):
+            if 1e-5 < end < 2 * math.pi - 1e-5:
+                assert radius(end + outward) >= 1.0 - 1e-9 and radius(end - outward) < 1.0
+    chain = load_model(CHAIN)
+    assert any(a < chain.pi2_offset < b for a, b in nd.sections_with_stable_zeros(chain))
+    with pytest.raises(ParameterError, match="points=1 is invalid"):
+        nd.sections_with_stable_zeros(chain, points=1)

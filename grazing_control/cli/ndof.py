@@ -306,6 +306,8 @@ def cmd_design(args):
     conditions = {"limit_stable": bool(design.stable), "exists_impacting": bool(design.exists),
                   "free_stable": bool(design.free_stable)}
     admissible = bool(design.admissible)
+    # no design anywhere on the family: say where the section could go (a scan, §4)
+    sections = None if intervals else nd.sections_with_stable_zeros(model)
     seconds = time.perf_counter() - t0
     out = _header(model, args.model)
     out.update({
@@ -319,6 +321,8 @@ def cmd_design(args):
         "mu": mu, "mu_chosen": chosen, "gains": k.tolist(),
         "multipliers_limit": _complex_list(lam0), "gamma1": gamma,
         "spectral_radius_free": rho_free, "conditions": conditions, "admissible": admissible,
+        "pi2_offsets_with_stable_zeros": None if sections is None else
+        [list(iv) for iv in sections],
         "seconds": seconds,
     })
     if args.out:
@@ -354,6 +358,10 @@ def cmd_design(args):
         f"{ok[conditions['free_stable']]} < 1)",
         f"  this mu            : {'admissible' if admissible else 'NOT admissible'}",
     ]
+    if sections is not None:
+        where = " U ".join(f"({a:.4f}, {b:.4f})" for a, b in sections) or "none"
+        lines.append(f"  no admissible mu: pi2_offset values whose zeros all lie inside the "
+                     f"unit circle (scan): {where} (this file: {model.pi2_offset:.4g})")
     if args.out:
         lines.append(f"  gains written to {args.out}")
     return "\n".join(lines)

@@ -47,6 +47,7 @@ __all__ = [
     "gain_family",
     "family_mu",
     "transmission_zeros",
+    "sections_with_stable_zeros",
     "limit_monodromy",
     "limit_multipliers",
     "existence_coefficient",
@@ -196,6 +197,55 @@ def transmission_zeros(model: NdofModel) -> np.ndarray:
     keep = np.argsort(ratio, kind="stable")[: d - 1]
     z = (alpha[keep] / beta[keep]).astype(complex)
     return z[np.argsort(-np.abs(z), kind="stable")]
+
+
+def _zeros_radius_at(model: NdofModel, offset: float) -> float:
+    """max |zero| with Pi2 at ``offset`` after Pi1 (inf where the kick cannot reach the
+    wall coordinate by the grazing section, w^T Phi(T - s) b = 0)."""
+    import dataclasses
+
+    try:
+        z = transmission_zeros(dataclasses.replace(model, pi2_offset=offset))
+    except ParameterError:
+        return math.inf
+    return float(np.max(np.abs(z))) if z.size else 0.0
+
+
+def sections_with_stable_zeros(model: NdofModel, points: int = 720,
+                               tol: float = 1e-9) -> list:
+    """The intervals of ``pi2_offset`` in (0, 2 pi) where every transmission zero lies
+    inside the unit circle (§4): where the section Pi2 may be placed for a design to
+    exist (the zeros are fixed by the plant, the actuated coordinate and the section,
+    whatever the gain). A scan of ``points`` offsets with each switch bisected to
+    ``tol``: a design aid, not a certified set (an interval narrower than the scan's
+    step, 2 pi / points, can be missed).
+    """
+    if isinstance(points, bool) or not isinstance(points, int) or points < 2:
+        raise ParameterError(f"points={points!r} is invalid: valid range is an integer >= 2")
+    grid = np.linspace(0.0, 2.0 * math.pi, points + 1)[1:-1]
+    inside = [_zeros_radius_at(model, float(s)) < 1.0 for s in grid]
+
+    def switch(a, b, a_in):
+        while b - a > tol:
+            m = 0.5 * (a + b)
+            if (_zeros_radius_at(model, m) < 1.0) == a_in:
+                a = m
+            else:
+                b = m
+        return 0.5 * (a + b)
+
+    intervals, start = [], (0.0 if inside[0] else None)
+    for i in range(1, len(grid)):
+        if inside[i] != inside[i - 1]:
+            edge = switch(float(grid[i - 1]), float(grid[i]), inside[i - 1])
+            if inside[i]:
+                start = edge
+            else:
+                intervals.append((start, edge))
+                start = None
+    if start is not None:
+        intervals.append((start, 2.0 * math.pi))
+    return intervals
 
 
 # -- the limit of the controlled 1/1 orbit (§5-§7) ----------------------------------------
