@@ -145,7 +145,12 @@ def domain():
 
 @pytest.fixture
 def collector(domain):
-    c = Collector(domain)
+    """The test's listener. It says ready once every subscription has matched its
+    publisher, and the scenes below start with ``wait_for_recorder``: with
+    ``wait_for_subscribers`` alone, the controller's own subscription to oscillator/pi2
+    could let the simulator start before this node had matched it, and the first
+    samples were lost (1 of ~10 full runs: a rerun)."""
+    c = Collector(domain, ready=True)
     yield c
     c.close()
 
@@ -170,7 +175,8 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
     ref = simulate(p, N, gains=gains, control_after=ON)
 
     res = launcher.run(STUDY, CONTROLLER, None, N, domain_id=domain, timeout=60,
-                       sim_overrides={"delta_d": delta_d, "wait_for_subscribers": 1},
+                       sim_overrides={"delta_d": delta_d, "wait_for_subscribers": 1,
+                                      "wait_for_recorder": True},
                        controller_overrides={"enable_after": ON}, log_dir=tmp_path)
     assert res.ok, (res, Path(res.logs["sim_node"]).read_text())
     assert collector.wait_for(lambda: len(collector.get("done")) == 1, 5.0)
@@ -228,7 +234,7 @@ def test_realtime_keeps_pace_and_measures_latency(tmp_path, domain, collector):
     scale, n = 200.0, 40
     res = launcher.run(STUDY, CONTROLLER, None, n, domain_id=domain, timeout=60,
                        sim_overrides={"mode": "realtime", "time_scale": scale,
-                                      "wait_for_subscribers": 1},
+                                      "wait_for_subscribers": 1, "wait_for_recorder": True},
                        controller_overrides={"enable_after": 10}, log_dir=tmp_path)
     log = Path(res.logs["sim_node"]).read_text()
     assert res.ok, (res, log)
