@@ -21,8 +21,6 @@ on the command line wins over the file.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 
 from grazing_control.oscillator.params import ParameterError
 
@@ -36,25 +34,10 @@ MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "pi2_offset")
 def write_parameter_file(path, values: dict, comments=()) -> None:
     """Write ``values`` (model keys -> floats) as a ``/**`` ROS 2 parameter file, with
     ``comments`` as ``#`` lines on top; written to a temporary file and renamed."""
-    import yaml
+    from grazing_control.support.files import write_yaml_atomic
 
-    path = os.fspath(path)
     body = {k: float(values[k]) for k in MODEL_KEYS if k in values}
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".yaml.tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            for line in comments:
-                fh.write(f"# {line}\n")
-            yaml.safe_dump({"/**": {"ros__parameters": body}}, fh, sort_keys=False)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_yaml_atomic(path, {"/**": {"ros__parameters": body}}, comments)
 
 
 def read_parameter_file(path) -> dict:

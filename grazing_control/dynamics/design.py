@@ -442,26 +442,8 @@ def write_controller_yaml(path, p: OscillatorParams, gains: Gains,
     temporary file and renamed, so a failure leaves no
     half-written file.
     """
-    import os
-    import tempfile
-
-    import yaml
+    from grazing_control.support.files import write_yaml_atomic
 
     doc = {f"/{node_name}": {"ros__parameters": controller_parameters(p, gains)}}
-    path = os.fspath(path)
-    if not path.strip():
-        raise ValueError(f"path={path!r} is invalid: expected a non-empty file path")
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".yaml.tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write("# controller gains from `grazing design` (degenerate grazing, Eq. 38)\n")
-            yaml.safe_dump(doc, fh, sort_keys=False)
-        mask = os.umask(0)  # mkstemp creates 0600: give the usual 0666 & ~umask
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_yaml_atomic(path, doc,
+                      ["controller gains from `grazing design` (degenerate grazing, Eq. 38)"])

@@ -553,9 +553,7 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
     :func:`grazing_control.dynamics.design.write_controller_yaml` so that it applies under a namespace or a renamed node. Refuses a design that is not
     on this model's family (w^T N(k) != mu w^T). Written to a temporary file and renamed.
     """
-    import tempfile
-
-    import yaml
+    from grazing_control.support.files import write_yaml_atomic
 
     k = _gains(model, design.gains)
     w, _ev, _b = _vectors(model)
@@ -563,22 +561,6 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
     if not np.allclose(row, design.mu * w, atol=1e-9 * (1.0 + np.abs(row).max())):
         raise ParameterError(f"design is invalid for this model: its gains are not on the "
                              f"family w^T N = mu w^T (row {row.tolist()}, mu {design.mu!r})")
-    path = os.fspath(path)
-    if not path.strip():
-        raise ValueError(f"path={path!r} is invalid: expected a non-empty file path")
     doc = {f"/{node_name}": {"ros__parameters": controller_parameters(model, design, model_file)}}
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".yaml.tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write("# n-DOF controller gains from the design "
-                     "(docs/theory_ndof.md, w^T N = mu w^T)\n")
-            yaml.safe_dump(doc, fh, sort_keys=False)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_yaml_atomic(path, doc, ["n-DOF controller gains from the design "
+                                  "(docs/theory_ndof.md, w^T N = mu w^T)"])
