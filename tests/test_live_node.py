@@ -315,8 +315,12 @@ def test_grazing_run_live_streams_the_scene_that_the_bag_records(tmp_path):
     port = free_port()
     bag = tmp_path / "bag"
     result = {}
+    # realtime at 300x: the 200 periods last ~6 s of wall time, time for the client to
+    # connect and subscribe (a lockstep scene can end in ~1 s, before it has: the live
+    # view is a best-effort reader the scene never waits for; a rerun in the full suite)
     scene = threading.Thread(target=lambda: result.update(res=launcher.run(
         None, None, bag, 200, domain_id=new_domain(), live=port, timeout=240,
+        sim_overrides={"mode": "realtime", "time_scale": 300.0},
         log_dir=tmp_path / "logs")))
     scene.start()
     try:
