@@ -73,3 +73,55 @@ def test_bad_psi_and_no_orbit_are_refused():
         nb.branch_point(base, k, base.pi2_offset + 0.01)
     with pytest.raises(ValueError, match="no 1/1 orbit"):
         nb.orbit_at(base, k, 1e-6)       # gamma1 > 0: none on the non-impacting side
+
+
+# ------------------------------------------------------------------ the branch's fold
+def test_the_fold_of_the_chain_branch_has_the_multiplier_one_and_is_an_exact_orbit():
+    """The chain at omega 0.8 (tests/models): its branch born at grazing (on Delta d > 0)
+    turns back at a fold. There Delta d(psi) is extremal, the monodromy has the
+    multiplier 1, and one period of the exact map (NdofMap) returns to the orbit."""
+    m = load_model(Path(__file__).parent / "models" / "two_mass_chain_w08.yaml")
+    fold = nb.branch_fold(m, None)
+    assert fold is not None and fold.v_minus > 0.0
+    lam = np.linalg.eigvals(fold.monodromy)
+    assert np.min(np.abs(lam - 1.0)) < 1e-6, lam
+    for h in (1e-3, -1e-3):                       # a maximum of Delta d(psi)
+        assert nb.branch_point(m, np.zeros(4), fold.psi + h).delta_d < fold.delta_d
+    step = NdofMap(dataclasses.replace(m, delta_d=fold.delta_d)).step(fold.pi2_state)
+    assert len(step.impacts) == 1
+    assert np.max(np.abs(step.state - fold.pi2_state)) < 1e-12 * max(1.0, np.abs(fold.pi2_state).max())
+
+
+def test_for_n_1_the_fold_is_the_turning_point_of_the_1dof_closed_form_branch():
+    """n = 1: the turning point of Delta d(psi) found by branch_fold equals the extremum
+    of the 1-DOF core's explicit branch (orbits.branch_point, an independent closed form)
+    located on a dense grid and refined by a parabola, to 1e-9 relative."""
+    from grazing_control.dynamics import orbits
+
+    m = load_model(MODELS / "study_1dof.yaml")
+    fold = nb.branch_fold(m, None)
+    p = OscillatorParams(zeta=0.01, r=m.r, omega=m.omega, delta_d=0.0)
+    psi = fold.psi + np.linspace(-1e-3, 1e-3, 41)
+    dd = np.array([orbits.branch_point(p, float(x))[0] for x in psi])
+    i = int(np.argmax(dd) if dd[20] > dd[0] else np.argmin(dd))
+    c = np.polyfit(psi[i - 2:i + 3] - psi[i], dd[i - 2:i + 3], 2)
+    extremum = c[2] - c[1] ** 2 / (4.0 * c[0])
+    assert abs(fold.delta_d - extremum) < 1e-9 * abs(extremum)
+
+
+def test_continue_names_the_fold_where_it_stops(capsys):
+    """`grazing continue --model` on the chain at omega 0.8 from 1e-3 towards 0.1: the
+    continuation in Delta d stops at the turning point, and the command names the fold
+    (the explicit branch's) beyond its last point."""
+    import json
+
+    from grazing_control import cli
+
+    path = Path(__file__).parent / "models" / "two_mass_chain_w08.yaml"
+    assert cli.main(["continue", "--model", str(path), "--from", "1e-3", "--to", "0.1",
+                     "--json"]) in (0, None)
+    out = json.loads(capsys.readouterr().out)
+    fold = nb.branch_fold(load_model(path), None)
+    assert out["fold"] is not None and out["fold"]["delta_d"] == pytest.approx(fold.delta_d,
+                                                                             rel=1e-12)
+    assert out["branch"][-1]["delta_d"] < out["fold"]["delta_d"]

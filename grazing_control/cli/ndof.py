@@ -438,7 +438,7 @@ def cmd_continue(args):
     """continue --model FILE --from A --to B [gains] (docs/ndof_commands.md)."""
     from grazing_control.dynamics.continuation import continue_orbit
     from grazing_control.dynamics.ndof_map import NdofMap
-    from grazing_control.studies.ndof.branch import orbit_11, with_delta_d
+    from grazing_control.studies.ndof.branch import fold_beyond, orbit_11, with_delta_d
 
     values = continuation_values(args.start, args.stop, args.points)
     model = with_delta_d(load(args.model), float(values[0]))
@@ -446,6 +446,7 @@ def cmd_continue(args):
     t0 = time.perf_counter()
     first = orbit_11(model, k)
     branch = continue_orbit(NdofMap(model, k), "delta_d", values, first.state)
+    fold = fold_beyond(model, k, branch, float(values[-1]))
     seconds = time.perf_counter() - t0
     limit = None
     if mu is not None:
@@ -462,7 +463,7 @@ def cmd_continue(args):
         "bifurcations": [{"type": b.type, "delta_d": b.value,
                           "multipliers": _complex_list(b.multipliers)}
                          for b in branch.bifurcations],
-        "stopped": branch.stopped,
+        "stopped": branch.stopped, "fold": fold,
         "start_branch": "grazing" if first.near_grazing else "other",
         "multipliers_limit": None if limit is None else _complex_list(limit),
         "seconds": seconds,
@@ -481,6 +482,11 @@ def cmd_continue(args):
     for b in branch.bifurcations:
         lines.append(f"  {b.type:16s} at Delta d = {b.value:.15g}")
     lines.append(f"  stopped: {branch.stopped}")
+    if fold is not None:
+        lines.append(f"  fold at Delta d = {fold['delta_d']:.15g} (psi = {fold['psi']:.6g}, "
+                     f"v- = {fold['v_minus']:.6g}): the branch turns back, a multiplier "
+                     f"{complex(*fold['multiplier_near_1']):.10g}; the exact map keeps its "
+                     f"orbit to {fold['residual']:.1e}")
     if not first.near_grazing:
         lines.append("  note: the orbit at the start is another 1/1 orbit, not the one born at "
                      "grazing (docs/ndof_commands.md)")

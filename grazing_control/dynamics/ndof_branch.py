@@ -33,7 +33,7 @@ from grazing_control.oscillator.params import ParameterError
 
 from .ndof_design import _flow, _gains, _transition, _vectors, smooth_map
 
-__all__ = ["BranchPoint", "branch_point", "branch_coefficients", "orbit_at"]
+__all__ = ["BranchPoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold"]
 
 
 class BranchPoint(NamedTuple):
@@ -150,3 +150,42 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3) -> B
     psi = brentq(lambda x: branch_point(model, k, x).delta_d - delta_d, best[0], best[1],
                  xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
     return branch_point(model, k, psi)
+
+
+def branch_fold(model: NdofModel, gains, steps: int = 2000):
+    """The first fold of the branch born at grazing (``gains`` None: uncontrolled),
+    walking away from grazing in the impact phase, or None if there is none before v-
+    or the window of psi ends.
+
+    A fold is a turning point of Delta d(psi) (§5): there d(Delta d)/dpsi = 0 and the
+    orbit is not isolated in Delta d, so its monodromy has the multiplier 1. Where a
+    continuation in Delta d stops (it cannot pass a turning point), this names it.
+    The side of grazing is that of v- ~ v1 psi > 0 (``branch_coefficients``); the fold
+    is bracketed on a grid of ``steps`` phases up to the end of the window
+    -omega (T - s) < psi < omega s and located by Brent's method on a central-difference
+    slope.
+    """
+    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    sgn = math.copysign(1.0, branch_coefficients(model, k)[2])
+    s = model.pi2_offset / model.omega
+    bound = model.omega * s if sgn > 0 else model.omega * (model.period - s)
+    grid = sgn * np.linspace(1e-6 * bound, 0.999 * bound, steps)
+
+    def slope(psi):
+        h = 1e-7 * max(1e-3, abs(psi))
+        return (branch_point(model, k, psi + h).delta_d
+                - branch_point(model, k, psi - h).delta_d) / (2.0 * h)
+
+    first = slope(grid[0]) > 0.0
+    prev = grid[0]
+    for psi in grid[1:]:
+        try:
+            if branch_point(model, k, psi).v_minus <= 0.0:
+                return None
+            turned = (slope(psi) > 0.0) != first
+        except ParameterError:
+            return None
+        if turned:
+            return branch_point(model, k, brentq(slope, prev, psi, xtol=1e-13))
+        prev = psi
+    return None

@@ -38,7 +38,7 @@ from grazing_control.dynamics.shooting import (ShootingFailed, find_periodic,
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
+__all__ = ["fold_beyond", "OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
            "smooth_map", "local_map", "predicted_orbit", "grazing_side", "monodromy_det", "orbit_11",
            "multiplier_scaling", "fit_exponent"]
 
@@ -343,3 +343,37 @@ def fit_exponent(delta_d, values) -> float:
     if ok.sum() < 2:
         return math.nan
     return float(np.polyfit(x[ok], y[ok], 1)[0])
+
+
+def fold_beyond(model, gains, branch, stop: float):
+    """The fold where a continuation in Delta d stopped short of ``stop``, or None.
+
+    A continuation in Delta d cannot pass a turning point of the branch; the branch
+    explicit in the impact phase can (``dynamics.ndof_branch.branch_fold``). The fold is
+    reported only if it lies beyond the last point reached, towards ``stop``, and its
+    orbit is an orbit of the exact map (one period of ``NdofMap`` from its Pi2 state
+    returns there to 1e-8 with one impact: the explicit branch assumes that impact is the
+    period's only contact). Returns a dict: delta_d, psi, v_minus, the multiplier nearest
+    1 and the exact map's residual.
+    """
+    from grazing_control.dynamics.ndof_branch import branch_fold
+
+    if not branch.points or branch.stopped == "end":
+        return None
+    last = branch.points[-1].value
+    try:
+        fold = branch_fold(model, gains)
+    except (ValueError, ParameterError, np.linalg.LinAlgError):
+        return None
+    if fold is None or fold.monodromy is None or (fold.delta_d - last) * (stop - last) < 0.0:
+        return None
+    step = NdofMap(with_delta_d(model, fold.delta_d), gains).step(fold.pi2_state)
+    size = max(1.0, float(np.max(np.abs(fold.pi2_state))))
+    residual = float(np.max(np.abs(step.state - fold.pi2_state))) / size
+    if residual > 1e-8 or len(step.impacts) != 1:
+        return None
+    lam = np.linalg.eigvals(fold.monodromy)
+    near = lam[np.argmin(np.abs(lam - 1.0))]
+    return {"delta_d": float(fold.delta_d), "psi": float(fold.psi),
+            "v_minus": float(fold.v_minus), "multiplier_near_1": [near.real, near.imag],
+            "residual": residual}
