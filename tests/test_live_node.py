@@ -127,7 +127,8 @@ def test_channels_advertise_cdr_with_the_ros2msg_definitions_of_the_recorder():
     port = free_port()
     proc = start_live(new_domain(), port)
     try:
-        client = FoxgloveClient(port)
+        # every topic named: the server may advertise them in several frames
+        client = FoxgloveClient(port, topics=[f"/{name}" for name in LIVE_TOPICS])
         client.close()
     finally:
         out = stop(proc)
