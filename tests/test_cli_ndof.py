@@ -271,3 +271,19 @@ def test_malformed_model_file_is_one_line(capsys, tmp_path):
     code, out, err = run(capsys, "design", "--model", str(bad))
     assert code == 2 and "not YAML" in err and err.count("\n") == 1
 
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--mu", "1e308"], "mu=1e+308 is invalid: valid range is |mu| <= 1e+06"),
+    (["--free-gain", "v1=1e308"], "--free-gain v1=1e+308 is invalid: it is the member"),
+])
+def test_design_refuses_a_family_member_beyond_the_search_range_in_one_line(args, message,
+                                                                          capsys):
+    """An absurd member of the family is refused naming the option and its valid range
+    (it gave numpy's "Array must not contain infs or NaNs")."""
+    from grazing_control import cli
+
+    model = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_chain.yaml")
+    assert cli.main(["design", "--model", model, *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err

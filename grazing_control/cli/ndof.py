@@ -188,7 +188,16 @@ def family_member(model, name: str, value: float) -> float:
         raise ParameterError(f"--free-gain {name}={value!r} is invalid: the gain on {name} is "
                              f"the same ({k0[j]:.12g}) for every member of the family; choose "
                              "another coordinate, or --mu")
-    return float((value - k0[j]) / k1[j])
+    mu = float((value - k0[j]) / k1[j])
+    from grazing_control.dynamics.ndof_design import MU_LIMIT
+
+    if not abs(mu) <= MU_LIMIT:
+        raise ParameterError(f"--free-gain {name}={value!r} is invalid: it is the member "
+                             f"mu = {mu:g} of the family; valid are the gains of |mu| <= "
+                             f"{MU_LIMIT:g}, i.e. {name} between "
+                             f"{k0[j] - MU_LIMIT * abs(k1[j]):.6g} and "
+                             f"{k0[j] + MU_LIMIT * abs(k1[j]):.6g}")
+    return mu
 
 
 def gains_of(args, model):

@@ -170,8 +170,9 @@ def family_mu(model: NdofModel, gains) -> float:
 
 def _mu(mu) -> float:
     if isinstance(mu, bool) or not isinstance(mu, (int, float, np.floating, np.integer)) \
-            or not math.isfinite(float(mu)):
-        raise ParameterError(f"mu={mu!r} is invalid: valid range is a finite real number")
+            or not math.isfinite(float(mu)) or abs(float(mu)) > MU_LIMIT:
+        raise ParameterError(f"mu={mu!r} is invalid: valid range is |mu| <= {MU_LIMIT:g} "
+                             "(the family's search range; a stable design has |mu| < 1)")
     return float(mu)
 
 
