@@ -258,3 +258,22 @@ def test_a_realtime_n_dof_scene_with_scheduled_kicks_is_the_engines_period_loop(
         eng.begin_period(float(acted), delay)
         eng.end_period()
     assert np.count_nonzero(scene.correction) == n - on
+
+
+def test_an_uncontrolled_n_dof_scene_is_analysed_in_one_report_line(tmp_path, capsys):
+    """`grazing analyze` of an n-DOF bag whose controller never acted (switch-on after
+    the end) says so with the attractor's period, as for 1-DOF scenes (it raised
+    KeyError 'kind' on the n-DOF summary)."""
+    from grazing_control import cli
+
+    model = dataclasses.replace(load_model(CHAIN), delta_d=DELTA_D)
+    gains = tmp_path / "gains.yaml"
+    write_gain_yaml(gains, model, evaluate_design(model, MU), CHAIN)
+    bag = tmp_path / "bag"
+    res = launcher.run(None, gains, bag, 40, delta_d=DELTA_D, enable_after=1000,
+                       domain_id=new_domain(), timeout=90, log_dir=tmp_path / "logs")
+    assert res.ok, res
+    capsys.readouterr()
+    assert cli.main(["analyze", str(bag), "--out", str(tmp_path / "report")]) in (0, None)
+    out = capsys.readouterr().out
+    assert "uncontrolled (the controller never acted), 40 samples" in out, out

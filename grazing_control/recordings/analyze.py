@@ -559,8 +559,11 @@ def main(args):
             m = s.get("measured_contraction") or {}
             where = f"{b['label']}{'' if len(b['scenes']) == 1 else f' scene {i}'}"
             if s["control_on_sample"] is None:
+                u = s.get("uncontrolled") or {}
+                kind = u.get("kind") or (f"period {u['period']}" if u.get("period") else
+                                         "not periodic to 1e-8")   # n-DOF scenes: a period
                 print(f"{where}: {b['setup']['mode']}, uncontrolled (the controller never "
-                      f"acted), {s['samples']} samples, {s['uncontrolled']['kind']}")
+                      f"acted), {s['samples']} samples, {kind}")
                 continue
             print(f"{where}: "
                   f"{b['setup']['mode']}, control on at {s['control_on_sample']}, converged after "
