@@ -211,27 +211,15 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
 
 
 def _run_dask(scheduler, index, vals, args, rest, store):
-    """The chunks on a Dask cluster (studies/sweeps/run.py's address check and timeout)."""
-    from distributed import Client, as_completed as dask_completed
+    """The chunks on a Dask cluster (studies/sweeps/run.py's client: address check,
+    timeout, closing)."""
+    from distributed import as_completed as dask_completed
 
-    from grazing_control.studies.sweeps.run import CONNECT_TIMEOUT, check_scheduler
+    from grazing_control.studies.sweeps.run import dask_client
 
-    own = not isinstance(scheduler, Client)
-    if own:
-        check_scheduler(scheduler)
-    try:
-        client = Client(scheduler, set_as_default=False, timeout=CONNECT_TIMEOUT) if own \
-            else scheduler
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise ParameterError(f"scheduler={scheduler!r} is invalid: cannot connect within "
-                             f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__})") from None
-    try:
-        nw = max(1, sum(client.nthreads().values()))
+    with dask_client(scheduler) as (client, nw):
         chunks = [index[i::4 * nw] for i in range(min(index.size, 4 * nw))]
         futs = [client.submit(run_points, *args, vals[idx], *rest, pure=False) for idx in chunks]
         where = {f.key: idx for f, idx in zip(futs, chunks)}
         for fut in dask_completed(futs, loop=client.loop):
             store(where[fut.key], fut.result())
-    finally:
-        if own:
-            client.close()

@@ -9,6 +9,7 @@ a process pool or a Dask worker, and the result is the same however they are spl
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
@@ -349,9 +350,13 @@ def check_scheduler(scheduler) -> str:
     return scheduler.strip()
 
 
-def _run_dask(scheduler, indexed, args, store):
-    """Run the chunks on a Dask cluster: an address (tcp://host:port) or a Client."""
-    from distributed import Client, as_completed as dask_completed
+@contextlib.contextmanager
+def dask_client(scheduler):
+    """``(client, threads)`` for an address (tcp://host:port, checked first) or a Client;
+    a Client made here is closed on exit. A cluster that cannot be reached within
+    CONNECT_TIMEOUT is a ParameterError naming the address. The sweeps, the basins and
+    the n-DOF diagram share it."""
+    from distributed import Client
 
     own = not isinstance(scheduler, Client)
     if own:
@@ -363,11 +368,18 @@ def _run_dask(scheduler, indexed, args, store):
         raise ParameterError(f"scheduler={scheduler!r} is invalid: cannot connect within "
                              f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__})") from None
     try:
-        nw = max(1, sum(client.nthreads().values()))
+        yield client, max(1, sum(client.nthreads().values()))
+    finally:
+        if own:
+            client.close()
+
+
+def _run_dask(scheduler, indexed, args, store):
+    """Run the chunks on a Dask cluster: an address (tcp://host:port) or a Client."""
+    from distributed import as_completed as dask_completed
+
+    with dask_client(scheduler) as (client, nw):
         chunks = _chunks(indexed, 8 * nw)
         futs = client.map(run_chunk, chunks, *[[a] * len(chunks) for a in args], pure=False)
         for fut in dask_completed(futs, loop=client.loop):
             store(fut.result())
-    finally:
-        if own:
-            client.close()
