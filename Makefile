@@ -12,7 +12,7 @@ BENCHES = $(sort $(wildcard benchmarks/bench_*.py))
 
 help:
 	@echo "make venv         create $(VENV) (pinned: requirements.txt + constraints.txt) and install the package editable"
-	@echo "make test         run the test suite: $(PY) -m pytest -q --reruns 2 tests"
+	@echo "make test         run the test suite on both cores: $(PY) -m pytest -n 2 --dist loadgroup --reruns 2 tests"
 	@echo "make demo         run the demo: $(VENV)/bin/grazing demo --out out/demo"
 	@echo "make figures      the study's Figs. 1 and 2: $(VENV)/bin/grazing figures --out out/figures"
 	@echo "make bench        run every benchmarks/bench_*.py"
@@ -44,7 +44,7 @@ venv: $(VENV)/.stamp
 # tests run real processes over Fast DDS on a 2-core machine, where scheduling can make a
 # timing assertion miss. A deterministic failure still fails.
 test: $(VENV)/.stamp
-	$(PY) -m pytest -q -r fER --reruns 2 --reruns-delay 1 tests
+	$(PY) -m pytest -q -r fER -n 2 --dist loadgroup --reruns 2 --reruns-delay 1 tests
 
 demo: $(VENV)/.stamp
 	$(VENV)/bin/grazing demo --out out/demo
