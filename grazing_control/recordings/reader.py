@@ -113,12 +113,12 @@ def bag_path(bag) -> Path:
         raise BagReadError(f"{bag}: no such bag directory or .mcap file")
     meta = bag / "metadata.yaml"
     if meta.is_file():
-        import yaml
+        from grazing_control.support.files import YamlFileError, read_yaml_file
         try:
-            info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+            info = read_yaml_file(meta)["rosbag2_bagfile_information"]
             files = [f for f in info.get("relative_file_paths", [])
-                 if str(f).endswith((".mcap", ".mcap.zstd"))]
-        except (KeyError, TypeError, yaml.YAMLError):
+                     if str(f).endswith((".mcap", ".mcap.zstd"))]
+        except (KeyError, TypeError, AttributeError, YamlFileError):
             files = []
         if len(files) == 1 and (bag / files[0]).is_file():
             return bag / files[0]
