@@ -63,7 +63,7 @@ MAX_SHIFTS = 4
 #: refused before anything of its size exists (issue 27: the 1,420 arcs of a
 #: 1,300-period bag, --max-arcs 100000, took over 2 GB for a 702 MiB Jacobian). m and n
 #: grow with the arcs, so the bytes grow as arcs^2 and the time as arcs^3 (100 arcs:
-#: about 30 s on a loaded 2-core machine, 400 arcs over 300 s).
+#: 4 s idle, 33 s on a loaded 2-core machine; 400 arcs over 300 s there).
 JACOBIAN_BYTES = 32 << 20
 _H = 1e-30
 
