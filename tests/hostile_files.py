@@ -1,12 +1,12 @@
 """Hostile inputs for the command line, and a command's peak memory.
 
-:func:`bomb_bag`: decompression bombs within the reader's budget rule, written without
-holding their output.
-
-A bag of one padding Metadata record (so that the file is large enough for the budget
-to admit the chunk: recordings/reader.max_bytes) and one honest chunk, CRC-correct, whose
-records are ``block`` repeated until ``size`` bytes: zeros, or copies of a valid message
-record on a real topic. The chunk is compressed as a stream, so building a 1 GiB bomb
+MCAP records by hand (:func:`rec`, :func:`s`, :func:`m`: tests/test_reader_hostile.py
+builds its files with them) and :func:`bomb_bag`, decompression bombs within the
+reader's budget rule, written without holding their output: a bag of one padding
+Metadata record (so that the file is large enough for the budget to admit the chunk:
+recordings/reader.max_bytes) and one honest chunk, CRC-correct, whose records are
+``block`` repeated until ``size`` bytes: zeros, or copies of a valid message record on a
+real topic. The chunk is compressed as a stream, so building a 1 GiB bomb
 costs the compressed size in memory, not the GiB.
 """
 

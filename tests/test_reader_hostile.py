@@ -16,22 +16,7 @@ import pytest
 
 from grazing_control.recordings import reader
 from grazing_control.recordings.scenes import load
-
-MAGIC = b"\x89MCAP0\r\n"
-
-
-def rec(op, body):
-    return struct.pack("<BQ", op, len(body)) + body
-
-
-def s(text):
-    b = text.encode() if isinstance(text, str) else text
-    return struct.pack("<I", len(b)) + b
-
-
-def m(pairs):
-    body = b"".join(s(k) + s(v) for k, v in pairs)
-    return struct.pack("<I", len(body)) + body
+from hostile_files import MAGIC, m, rec, s
 
 
 def header():
