@@ -23,6 +23,8 @@ CASES = [
     (["sweep", "--grid", "delta_d=-2e-5:-1e-5:3", "--scheduler", "tcp://host:99999"],
      "port 1..65535"),
     (["sweep", "--grid", "delta_d=-2e-5:-1e-5:3", "--out", ""], "--out: '' is invalid"),
+    # issue 27: analyze wrote its report into the current folder
+    (["analyze", "bags/scene_5e-6", "--out", ""], "--out: '' is invalid"),
 ]
 
 
@@ -84,3 +86,15 @@ def test_a_list_of_negative_numbers_in_exponent_form_is_values_not_options():
     assert args.delta_d == [-5e-6, -1e-6, -2.5e-7]
     args = build_parser().parse_args(["orbit", "--delta-d", "-1e-10", "--c2", "-.5"])
     assert (args.delta_d, args.c2) == (-1e-10, -0.5)
+
+
+def test_identify_beyond_the_arcs_a_fit_can_hold_is_one_line_in_little_memory():
+    # issue 27: --max-arcs 100000 on a 1300-period bag (1420 arcs) took over 2 GB; the
+    # dense Jacobian of the arcs that exist is measured before it is allocated
+    import hostile_files
+
+    status, out, err, peak = hostile_files.grazing_measured(
+        "identify", "bags/scene_5e-6", "--max-arcs", "100000", timeout=300)
+    assert status == 2 and len(err.strip().splitlines()) == 1, err
+    assert "the fit of the 1420 arcs used needs a dense Jacobian" in err and "--max-arcs" in err
+    assert peak < 200, peak

@@ -269,7 +269,7 @@ def test_malformed_model_file_is_one_line(capsys, tmp_path):
     assert f"--model {bad}: C is invalid" in err
     bad.write_text("M: [[1.0]\n")
     code, out, err = run(capsys, "design", "--model", str(bad))
-    assert code == 2 and "not YAML" in err and err.count("\n") == 1
+    assert code == 2 and "is not valid YAML (line 2)" in err and err.count("\n") == 1
 
 
 

@@ -11,26 +11,12 @@ import subprocess
 import sys
 import zlib
 
+import hostile_files
 import pytest
 
 from grazing_control.recordings import reader
 from grazing_control.recordings.scenes import load
-
-MAGIC = b"\x89MCAP0\r\n"
-
-
-def rec(op, body):
-    return struct.pack("<BQ", op, len(body)) + body
-
-
-def s(text):
-    b = text.encode() if isinstance(text, str) else text
-    return struct.pack("<I", len(b)) + b
-
-
-def m(pairs):
-    body = b"".join(s(k) + s(v) for k, v in pairs)
-    return struct.pack("<I", len(body)) + body
+from hostile_files import MAGIC, m, rec, s
 
 
 def header():
@@ -224,11 +210,12 @@ def test_a_crafted_length_field_through_the_command_line_is_one_line_status_2(tm
 
 
 def test_a_bomb_is_refused_by_its_ratio_to_the_file_without_any_setting(tmp_path, monkeypatch):
-    # no GRAZING_BAG_MAX_BYTES: a small file may inflate to max(64 MiB, 200 x its size)
+    # no GRAZING_BAG_MAX_BYTES: a small file may inflate to max(64 MiB, 50 x its size)
     monkeypatch.delenv("GRAZING_BAG_MAX_BYTES", raising=False)
     import zstandard
     assert reader.max_bytes(1000) == 64 << 20
-    assert reader.max_bytes(1 << 20) == 200 * (1 << 20)
+    assert reader.max_bytes(4 << 20) == 50 * (4 << 20)
+    assert reader.MAX_BYTES == 256 << 20
     assert reader.max_bytes(1 << 40) == reader.MAX_BYTES
     tiny = zstandard.ZstdCompressor().compress(b"")
     liar = write(tmp_path, mcap(chunk(b"", "zstd", tiny, size=100 << 20)))
@@ -277,3 +264,55 @@ def test_reindex_keeps_the_records_before_zeros_and_recovers_the_rest(tmp_path, 
     raw = reader.read_raw(tmp_path / "z")
     assert reader.decode_float64(raw, "/oscillator/latency")["data"].tolist() == \
         [k * 0.25 for k in range(4)]
+
+
+# --- bombs within the budget rule, through the command line: one line, bounded memory
+# (issue 27: a 5.4 MB file with one honest 1 GiB chunk took 2.1-3.4 GB and 6-39 s)
+
+def _pi2_record():
+    from bagtools_helpers import TYPESTORE, joint_state
+    cdr = TYPESTORE.serialize_cdr(joint_state(1_000_000_000, 0.1, 0.2),
+                                  "sensor_msgs/msg/JointState")
+    return hostile_files.message(bytes(cdr))
+
+
+@pytest.mark.parametrize("kind", ["zstd", "lz4"])
+def test_a_gib_chunk_in_a_padded_file_is_refused_at_once_in_little_memory(tmp_path, kind,
+                                                                          monkeypatch):
+    monkeypatch.delenv("GRAZING_BAG_MAX_BYTES", raising=False)
+    size = (1 << 30) - (1 << 20)
+    bag = hostile_files.bomb_bag(tmp_path / "bomb", size, kind=kind, file_size=size // 200 + 1)
+    status, _, err, peak = hostile_files.grazing_measured("analyze", bag, "--out",
+                                                          tmp_path / "out")
+    assert status == 2 and len(err.strip().splitlines()) == 1, err
+    assert str(bag) in err and "decompression bomb" in err
+    assert peak < 150, peak
+
+
+@pytest.mark.parametrize("kind", ["zstd", "lz4"])
+def test_a_zero_filled_chunk_within_the_budget_costs_one_piece(tmp_path, kind, monkeypatch):
+    # a tiny file may always inflate to MIN_BYTES (64 MiB): the zeros are never kept
+    monkeypatch.delenv("GRAZING_BAG_MAX_BYTES", raising=False)
+    bag = hostile_files.bomb_bag(tmp_path / "zeros", reader.bounded.MIN_BYTES - 4096,
+                                 kind=kind, prefix=hostile_files.definitions())
+    raw = reader.read_raw(bag)
+    assert len(raw.pool) == raw.path.stat().st_size         # the file only: no zeros kept
+    assert any("ends inside a record" in p for p in raw.problems)
+    status, _, err, peak = hostile_files.grazing_measured("analyze", bag, "--out",
+                                                          tmp_path / "out")
+    assert status == 2 and len(err.strip().splitlines()) == 1 and "/oscillator/pi2" in err
+    assert peak < 120, peak          # before: 64 MiB of zeros held twice (190 MB)
+
+
+def test_valid_records_within_the_budget_stay_within_the_memory_bound(tmp_path, monkeypatch):
+    # 64 MiB of copies of one valid Pi2 record: read, decoded, refused for their stamps;
+    # the documented bound (bounded.py): about 3 x the records plus the interpreter
+    monkeypatch.delenv("GRAZING_BAG_MAX_BYTES", raising=False)
+    block = _pi2_record()
+    n = (reader.bounded.MIN_BYTES - 4096) // len(block)
+    bag = hostile_files.bomb_bag(tmp_path / "pi2", n * len(block), kind="zstd", block=block,
+                                 prefix=hostile_files.definitions())
+    status, _, err, peak = hostile_files.grazing_measured("analyze", bag, "--out",
+                                                          tmp_path / "out")
+    assert status == 2 and len(err.strip().splitlines()) == 1 and "duplicate stamps" in err
+    assert peak < 60 + 3.2 * 64, peak

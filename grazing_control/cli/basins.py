@@ -87,7 +87,15 @@ def add_basins_parser(sub):
                    help="compiled kernel (auto: if numba imports) or the pure-Python core")
     s.add_argument("--out", default="out/basins/basins", type=non_empty_path,
                    help="file stem (default out/basins/basins: .npz, .json, .png, .svg), or "
-                        "an existing folder (then FOLDER/basins.*)")
+                        "an existing folder (then FOLDER/basins.*). The npz arrays: xs, vs "
+                        "(the starts' deviations from X** on Pi2), the (nv, nx) grids "
+                        "attractor (index into the attractors' table), period (detected: 0 "
+                        "none, -1 failed), mean_impacts (impacts per period over the record), "
+                        "final (last sample, deviation), errors; the attractors' table "
+                        "attractor_label, attractor_kind, attractor_period, "
+                        "attractor_impacts, attractor_starts, attractor_slow, "
+                        "attractor_points_J (attractor J's cycle, or the record of its "
+                        "representative start); meta (the JSON summary) (docs/basins.md)")
     s.add_argument("--no-png", action="store_true", help="write only the npz and the JSON")
     s.set_defaults(func=cmd_basins)
     return s

@@ -555,12 +555,29 @@ def _port_in_use(port: int, host: str = "127.0.0.1") -> str | None:
     return None
 
 
+def _check_run_files(args) -> None:
+    """Read the files a scene's nodes will read, here and once, before any node starts:
+    a FIFO, an alias bomb or a file beyond the limits of
+    :func:`grazing_control.support.files.read_yaml_file` is one ParameterError line
+    naming the option (a node would block on a FIFO, or take the bomb's memory)."""
+    from grazing_control.support.files import YamlFileError, read_yaml_file
+
+    for option, path in (("--sim-params", args.sim_params), ("--model", args.model),
+                         ("--controller-params", args.controller_params)):
+        if path is not None:
+            try:
+                read_yaml_file(path)
+            except YamlFileError as exc:
+                raise ParameterError(f"{option} {exc}") from None
+
+
 def cmd_run(args):
     import dataclasses
 
     from grazing_control.ros.launcher import run
 
     kwargs = {k: v for k, v in vars(args).items() if k not in ("func", "command", "json")}
+    _check_run_files(args)
     if getattr(args, "live", None):
         busy = _port_in_use(args.live)
         if busy:

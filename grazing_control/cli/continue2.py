@@ -19,11 +19,32 @@ DEFAULT_RANGE = {"omega": (0.45, 2.1), "zeta": (0.001, 0.9), "r": (0.05, 0.95),
 #: Most points per direction of a curve (a run of 400 takes ~0.2 s per curve).
 MAX_POINTS = 100_000
 
+#: ``grazing continue2 --help``: the files and the words of the summary
+#: (docs/theory_two_parameter.md, sections 3 and 5).
+DESCRIPTION = (
+    "PD and fold curves of the 1/1 orbit in the plane (mu, Delta d), mu = --parameter; the "
+    "degenerate grazing points (N_g,12 = 0, Eq. 33) where they meet the grazing curve "
+    "Delta d = 0 (docs/theory_two_parameter.md). "
+    "continue2_curves.csv has one row per curve point, with the columns: curve (the "
+    "curve's index in continue2.json), kind (period-doubling or fold), then a column named "
+    "after --parameter (omega, zeta, r or c2: the value of mu), psi (impact phase - tau*, "
+    "rad), delta_d (d - d*), d (the absolute clearance), v_minus (the impact velocity), "
+    "abs_lambda1, abs_lambda2 (the moduli of the two multipliers, largest first), physical "
+    "(1: a 1/1 motion, one impact per period by the exact flow; 0: drawn dotted). "
+    "Each curve has two ends, one per direction: grazing (psi crossed 0: the curve meets "
+    "the grazing curve at a degenerate point), unphysical side (v- < 0, a seed on the "
+    "grazing curve continues into v- > 0 only), range (the end of --from/--to), points "
+    "(--max-points reached), controller phase (the impact reaches the phase of the "
+    "controller's kick, pi2_offset after tau*, where the branch jumps: the curve stops "
+    "there), phase (|psi| = pi), step size (the corrector failed down to a step of 1e-12 "
+    "elsewhere).")
+
 
 def add_parser(sub, common, gain_args):
     """Register ``continue2`` (``common``, ``gain_args``: the shared option groups)."""
     s = sub.add_parser("continue2", help="PD and fold curves of the 1/1 orbit in two "
-                                         "parameters, degenerate grazing points, diagram")
+                                         "parameters, degenerate grazing points, diagram",
+                       description=DESCRIPTION)
     common(s)
     s.add_argument("--parameter", choices=("omega", "zeta", "r", "c2"), default="omega",
                    help="the second parameter next to Delta d (default omega; c2 needs --c2, "
@@ -43,7 +64,7 @@ def add_parser(sub, common, gain_args):
                    help="points per direction of each curve (default 400), >= 2")
     s.add_argument("--out", type=non_empty_path, default="out/continue2",
                    help="folder for the panels (PNG, SVG), continue2.json and "
-                        "continue2_curves.csv (default out/continue2)")
+                        "continue2_curves.csv (columns above; default out/continue2)")
     gain_args(s)
     s.set_defaults(func=run)
     return s

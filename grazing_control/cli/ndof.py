@@ -147,22 +147,13 @@ def check_options(args, argv) -> None:
 
 def load(path):
     """The model of ``--model FILE``; one-line ParameterError for an unreadable file."""
-    import yaml
-
     from grazing_control.oscillator.ndof import load_model
+    from grazing_control.support.files import YamlFileError
 
     try:
         return load_model(path)
-    except FileNotFoundError:
-        raise ParameterError(f"--model {path}: no such file") from None
-    except IsADirectoryError:
-        raise ParameterError(f"--model {path}: is a folder, expected a model file") from None
-    except OSError as exc:
-        raise ParameterError(f"--model {path}: cannot read it ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise ParameterError(f"--model {path}: not a text file") from None
-    except yaml.YAMLError as exc:
-        raise ParameterError(f"--model {path}: not YAML ({type(exc).__name__})") from None
+    except YamlFileError as exc:
+        raise ParameterError(f"--model {exc}") from None
     except ParameterError as exc:
         raise ParameterError(f"--model {path}: {exc}") from None
 

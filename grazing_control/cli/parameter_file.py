@@ -42,16 +42,14 @@ def write_parameter_file(path, values: dict, comments=()) -> None:
 
 def read_parameter_file(path) -> dict:
     """The model's keys of a ROS 2 parameter file (``/**`` first, then the other node
-    keys in file order). ParameterError naming the file and key for a non-number."""
-    import yaml
+    keys in file order). ParameterError naming the file and key for a non-number, and
+    for a file beyond the limits of :func:`grazing_control.support.files.read_yaml_file`."""
+    from grazing_control.support.files import YamlFileError, read_yaml_file
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = yaml.safe_load(fh)
-    except OSError as exc:
-        raise ParameterError(f"--params {path}: cannot read it ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ParameterError(f"--params {path}: not YAML ({type(exc).__name__})") from None
+        doc = read_yaml_file(path)
+    except YamlFileError as exc:
+        raise ParameterError(f"--params {exc}") from None
     if not isinstance(doc, dict):
         raise ParameterError(f"--params {path}: not a ROS 2 parameter file (expected "
                              "'/**: ros__parameters: {...}')")

@@ -368,6 +368,7 @@ def _walk(fam, kind, y0, t0, lo, hi, step, max_step, max_points):
         kick = (fam.params.pi2_offset + math.pi) % TWO_PI - math.pi
     y, t, h = np.array(y0, dtype=float), np.array(t0, dtype=float), step
     out = []
+    against_kick = False     # a step since the last point was refused across the kick
     def land(y, y_far):
         """The last point: the curve solved on the range's end between y and y_far."""
         bound = hi if y_far[1] > hi else lo
@@ -399,9 +400,13 @@ def _walk(fam, kind, y0, t0, lo, hi, step, max_step, max_points):
             if np.hypot(*(y_new - y)) > 2.0 * h or float(t_new @ t) < 0.9:
                 y_new = None
         if y_new is None:
+            if kick is not None and (y[0] - kick) * (y_pred[0] - kick) <= 0.0:
+                against_kick = True
             h *= 0.5
             if h < 1e-12:
-                return out, "step size", None
+                # a curve running into the kick's phase, where the branch jumps, stalls
+                # there (docs/theory_two_parameter.md section 5, "How a curve ends")
+                return out, "controller phase" if against_kick else "step size", None
             continue
         if y[0] != 0.0 and y_new[0] * y[0] <= 0.0:
             mu = _meets_grazing(fam, kind, y, y_new)
@@ -412,7 +417,7 @@ def _walk(fam, kind, y0, t0, lo, hi, step, max_step, max_points):
         if abs(y_new[0]) >= math.pi:
             return out, "phase", None
         out.append(y_new)
-        y, t = y_new, t_new
+        y, t, against_kick = y_new, t_new, False
         if its <= 3:
             h = min(1.5 * h, max_step)
     return out, "points", None
@@ -428,8 +433,9 @@ def continue_curve(fam: Family, kind: str, psi: float, value: float, lo: float, 
     into v- > 0, the physical side. Each direction stops at the range's end, where psi
     crosses 0 (the curve meets the grazing curve: the parameter value refined by
     Brent's method on N_g,12 = 0 is recorded in ``codim2``), at |psi| = pi, where the
-    impact reaches the controller's phase (M(theta) jumps there), after ``max_points``,
-    or where the step falls below 1e-12.
+    impact reaches the controller's phase (M(theta) jumps there; also where the step
+    falls below 1e-12 after a step across that phase was refused: the curve runs into
+    it), after ``max_points``, or where the step falls below 1e-12 ("step size").
     """
     if kind not in KINDS:
         raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(KINDS)}")

@@ -74,13 +74,15 @@ class NdofSettings(SimSettings):
 def load_model_file(path: str) -> NdofModel:
     """The model of a YAML file (docs/ndof_model.md); ParameterError naming ``model_file``
     and the reason for a file that is missing, unreadable or invalid."""
-    import yaml
+    from grazing_control.support.files import YamlFileError
 
     try:
         return load_model(path)
     except ParameterError as exc:
         raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
-    except (OSError, yaml.YAMLError, TypeError) as exc:
+    except YamlFileError as exc:
+        raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
+    except (OSError, TypeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
                              f"YAML file ({reason.splitlines()[0] if reason else type(exc).__name__})"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.support.arguments import finite, positive
+from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
 from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
 from .numbers import resolve_setup, scene_numbers, section_phase_problems
@@ -534,7 +534,8 @@ def add_arguments(parser) -> None:
     """The options of ``grazing analyze``."""
     parser.add_argument("bags", nargs="+", metavar="BAG",
                         help="rosbag2 directory or .mcap file (several: a comparison table)")
-    parser.add_argument("--out", default="out/analyze", help="report folder (default out/analyze)")
+    parser.add_argument("--out", default="out/analyze", type=non_empty_path,
+                        help="report folder (default out/analyze)")
     parser.add_argument("--json", action="store_true",
                         help="print the report as one JSON object (files are written too)")
     parser.add_argument("--tol", type=_finite, default=1e-8,

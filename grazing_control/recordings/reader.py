@@ -6,7 +6,10 @@ specification, "Records"): it never needs the summary, so a file whose recorder 
 killed (no summary, no ``metadata.yaml``, a torn last record) is read up to its last
 complete record, and a file written by any other writer (rosbag2, rosbags, the
 ``mcap`` library) is read the same way. Chunks are decompressed (zstd, lz4 or none) and
-concatenated into one byte pool; each message is kept as its offset into the pool.
+appended to one byte pool after the file's own bytes, piece by piece as they inflate
+(:func:`grazing_control.ros.recording.bounded.pieces`), keeping only complete records; each
+message is kept as its offset into the pool (an int64 array per channel). The pool is at
+most the file plus the decompression budget (the memory bound: bounded.py).
 
 CDR decoding is vectorised: for all messages of a channel at once, the offsets of the
 fields follow the plain little-endian CDR layout of the ROS 2 type (strings and
@@ -25,15 +28,17 @@ from __future__ import annotations
 
 import os
 import struct
+from array import array
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from grazing_control.ros.recording import bounded  # noqa: F401  (the memory bound)
 from grazing_control.ros.recording.bounded import (  # noqa: F401  (re-exported)
-    MAX_BYTES, BagReadError, decompress as _decompress, max_bytes, read_zstd as _read_zstd,
-    regular_file as _regular_file)
+    MAX_BYTES, BagReadError, check_size as _check_size, max_bytes, pieces as _pieces,
+    read_zstd as _read_zstd, regular_file as _regular_file)
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
            "decode_joint_state", "decode_joint_states", "joint_count", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
@@ -62,7 +67,7 @@ class Channel:
     type: str
     encoding: str
     metadata: dict
-    records: list = field(default_factory=list, repr=False)
+    records: array = field(default_factory=lambda: array("q"), repr=False)
 
 
 @dataclass
@@ -72,8 +77,8 @@ class RawBag:
     Attributes
     ----------
     path : the MCAP file.
-    pool : np.ndarray of uint8, the decompressed records of every chunk (and the
-        top-level messages), concatenated.
+    pool : np.ndarray of uint8, the file's bytes (its top-level records), then the
+        decompressed records of every chunk.
     channels : dict topic -> Channel.
     metadata : list of (name, dict) MCAP Metadata records.
     complete : True if the data section ended with DataEnd/Footer (a clean close).
@@ -108,12 +113,12 @@ def bag_path(bag) -> Path:
         raise BagReadError(f"{bag}: no such bag directory or .mcap file")
     meta = bag / "metadata.yaml"
     if meta.is_file():
-        import yaml
+        from grazing_control.support.files import YamlFileError, read_yaml_file
         try:
-            info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+            info = read_yaml_file(meta)["rosbag2_bagfile_information"]
             files = [f for f in info.get("relative_file_paths", [])
-                 if str(f).endswith((".mcap", ".mcap.zstd"))]
-        except (KeyError, TypeError, yaml.YAMLError):
+                     if str(f).endswith((".mcap", ".mcap.zstd"))]
+        except (KeyError, TypeError, AttributeError, YamlFileError):
             files = []
         if len(files) == 1 and (bag / files[0]).is_file():
             return bag / files[0]
@@ -164,8 +169,7 @@ class _Scan:
         self.channels = {}           # id -> Channel
         self.by_id_records = {}      # id -> list (only wanted channels)
         self.metadata = []
-        self.pieces = []
-        self.base = 0
+        self.pool = bytearray()       # the file, then every chunk's records
         self.problems = []
         self.messages = 0            # every message record, wanted or not
         self.budget = max_bytes()
@@ -175,7 +179,6 @@ class _Scan:
         p = start
         by_id = self.by_id_records
         unpack_msg = _MSG.unpack_from
-        base = self.base
         while p + 9 <= end:
             op, ln, cid = unpack_msg(buf, p) if p + 11 <= end else (*_REC.unpack_from(buf, p), 0)
             q = p + 9 + ln
@@ -185,12 +188,11 @@ class _Scan:
                 self.messages += 1
                 lst = by_id.get(cid)
                 if lst is not None:
-                    lst.append(base + p)
+                    lst.append(p)
                 elif cid not in self.channels and not top:
                     self.problems.append(f"message on unknown channel {cid} skipped")
             elif op == _OP_CHUNK and top:
                 self.chunk(buf, p + 9, q)
-                base = self.base
             elif op in (_OP_SCHEMA, _OP_CHANNEL, _OP_METADATA):
                 try:
                     self.definition(buf, op, p + 9, q)
@@ -203,7 +205,7 @@ class _Scan:
             elif op in (_OP_DATA_END, _OP_FOOTER) and top:
                 return "end", q
             elif op == 0:       # reserved (MCAP spec): zeros, not records (a zero-filled bomb)
-                return "torn", p
+                return "zero", p
             p = q
         return ("torn" if p < end else "eof"), p
 
@@ -237,17 +239,31 @@ class _Scan:
             self.metadata.append((name, meta))
 
     def chunk(self, buf, p, end):
+        """Read the Chunk record whose body is ``buf[p:end]``.
+
+        Twice streamed, never held whole: a first pass checks the size and CRC of the
+        inflated records (a corrupt chunk is skipped, said in problems), a second appends
+        them to the pool piece by piece and walks them as they come, stopping at the first
+        zero opcode or torn record (a zero-filled bomb costs one piece, not its size).
+        """
         try:
             _t0, _t1, size, crc = struct.unpack_from("<QQQI", buf, p)
             kind, r = _string(buf, p + 28, end)
             (n,) = _U64.unpack_from(buf, r)
             if r + 8 + n > end:
                 raise _Malformed(f"records of {n} bytes run past the chunk's end")
-            data = bytes(buf[r + 8:r + 8 + n]) if kind else buf[r + 8:r + 8 + n]
-            raw = bytes(_decompress(kind, data, size, self.budget))
-            if len(raw) != size:
-                raise ValueError(f"{len(raw)} bytes, the chunk header says {size}")
-            if crc and zlib.crc32(raw) != crc:
+            data = bytes(buf[r + 8:r + 8 + n])
+            if kind:
+                _check_size(size, self.budget)
+            got, check = 0, 0
+            for piece in _pieces(kind, data, size) if kind else (data,):
+                got += len(piece)
+                check = zlib.crc32(piece, check)
+            if got > size:
+                raise ValueError(f"more than the {size} bytes the chunk header says")
+            if got < size:
+                raise ValueError(f"{got} bytes, the chunk header says {size}")
+            if crc and check != crc:
                 raise ValueError("CRC mismatch")
         except BagReadError:
             raise
@@ -255,12 +271,25 @@ class _Scan:
             self.problems.append(f"chunk at byte {p - 9} skipped (corrupt): "
                                  f"{type(exc).__name__}: {exc}")
             return
-        self.budget -= len(raw)
-        self.pieces.append(raw)
-        reason, _ = self.records(raw, 0, len(raw), False)
-        if reason == "torn":
+        self.budget -= size
+        pool = self.pool
+        pos = len(pool)
+        stop = pos + size
+        for piece in _pieces(kind, data, size) if kind else (data,):
+            pool += piece
+            reason, pos = self.records(pool, pos, len(pool), False)
+            if reason == "zero" or (reason == "torn" and _runs_past(pool, pos, stop)):
+                break
+        if pos < stop:
             self.problems.append(f"chunk at byte {p - 9} ends inside a record")
-        self.base += len(raw)
+        del pool[pos:]        # zeros or a torn record: not records, not kept
+
+
+def _runs_past(pool, pos, stop) -> bool:
+    """Whether the record at ``pos`` (its header whole or cut) cannot end by ``stop``."""
+    if pos + 9 > len(pool):
+        return pos + 9 > stop
+    return pos + 9 + _REC.unpack_from(pool, pos)[1] > stop
 
 
 #: A file without summary that changed less than this many seconds ago may still be
@@ -293,8 +322,15 @@ def read_raw(bag, topics=None) -> RawBag:
         decompressed bytes than :func:`max_bytes` allows (the memory bound).
     """
     path = _regular_file(bag_path(bag))
+    cap = max_bytes()
     with open(path, "rb") as fh:
-        data = fh.read()
+        size = os.fstat(fh.fileno()).st_size
+        if size > cap:
+            raise BagReadError(f"{path}: {size} bytes, beyond the {cap} bytes a bag may have "
+                               "(the analysis's memory bound); GRAZING_BAG_MAX_BYTES raises "
+                               "the limit")
+        data = bytearray(size)
+        data[fh.readinto(data):] = b""
     scan = _Scan(None if topics is None else set(topics))
     scan.budget = max_bytes(len(data))
     if data.startswith(_ZSTD_FRAME):     # rosbag2 "file" compression mode: a .mcap.zstd
@@ -312,23 +348,26 @@ def read_raw(bag, topics=None) -> RawBag:
     if not data.startswith(MAGIC):
         raise BagReadError(f"{path}: not an MCAP file (bad magic bytes)")
     # top-level messages (unchunked files) point into the file itself: it goes first
-    scan.pieces.append(data)
-    scan.base = len(data)
-    reason, stop = scan.records(memoryview(data), len(MAGIC), len(data), True)
+    scan.pool = data
+    size = len(data)
+    try:
+        reason, stop = scan.records(data, len(MAGIC), size, True)
+    except BagReadError as exc:
+        raise BagReadError(f"{path}: {exc}") from None
     problems = scan.problems
     if reason != "end":
         age = _age(path)
         why = (f"still being written? it changed {age:.1f} s ago" if age < WRITING_AGE
                else "recorder killed?")
         problems.insert(0, f"the file has no summary ({why}): read up to byte "
-                           f"{stop} of {len(data)}" + (", the rest is a torn record"
-                                                     if stop < len(data) else ""))
-    pool = np.frombuffer(b"".join(scan.pieces), dtype=np.uint8)
+                           f"{stop} of {size}" + (", the rest is a torn record"
+                                                  if stop < size else ""))
+    pool = np.frombuffer(scan.pool, dtype=np.uint8)
     channels = {}
     for ch in scan.channels.values():
         if ch.topic in channels:           # two channels on one topic (two types): merge
-            channels[ch.topic].records.extend(ch.records)
-            channels[ch.topic].records.sort()
+            merged = channels[ch.topic].records
+            merged[:] = array("q", sorted(merged + ch.records))
         else:
             channels[ch.topic] = ch
     return RawBag(path, pool, channels, scan.metadata, reason == "end", problems,

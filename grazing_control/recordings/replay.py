@@ -38,6 +38,8 @@ import yaml
 
 from .analyze import _fmt, _jsonable, add_model_options, options_from_args
 from .numbers import resolve_setup
+from grazing_control.support.files import YamlFileError, read_yaml_file
+
 from .reader import read_raw
 from grazing_control.ros.recording.record import encode
 from .scenes import load, parse_topic_option
@@ -58,12 +60,13 @@ def _controller_values(data, setup, controller_params, notes):
 
     if controller_params is not None:
         path = Path(controller_params)
-        if not path.is_file():
-            raise ValueError(f"--controller-params {path}: no such file")
         try:
-            doc = yaml.safe_load(path.read_text())
+            doc = read_yaml_file(path)
+        except YamlFileError as exc:
+            raise ValueError(f"--controller-params {exc}") from None
+        try:
             values = dict(next(iter(doc.values()))["ros__parameters"])
-        except (yaml.YAMLError, AttributeError, KeyError, StopIteration, TypeError):
+        except (AttributeError, KeyError, StopIteration, TypeError):
             raise ValueError(f"--controller-params {path}: not a ROS parameter file "
                              "('/controller_node: ros__parameters: ...')") from None
         if "enable_after" not in values:

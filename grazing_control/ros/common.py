@@ -351,20 +351,14 @@ def parse_node_arguments(args) -> NodeArguments:
 
 
 def _load_params_file(path: str) -> dict:
-    """{node key: {name: value}} of a ROS parameter file; StartupError if unusable."""
-    import yaml
+    """{node key: {name: value}} of a ROS parameter file; StartupError if unusable
+    (beyond the limits of :func:`grazing_control.support.files.read_yaml_file` too)."""
+    from grazing_control.support.files import YamlFileError, read_yaml_file
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except OSError as exc:
-        raise StartupError(f"--params-file {path!r} cannot be read: "
-                           f"{exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        where = getattr(exc, "problem_mark", None)
-        at = f" (line {where.line + 1})" if where is not None else ""
-        raise StartupError(f"--params-file {path!r} is not valid YAML{at}: "
-                           f"{getattr(exc, 'problem', None) or exc}") from None
+        data = read_yaml_file(path)
+    except YamlFileError as exc:
+        raise StartupError(f"--params-file {exc}") from None
     shape = ("expected '<node name or /**>: ros__parameters: {name: value, ...}' "
              "at the top level")
     if not isinstance(data, dict) or not data:

@@ -294,11 +294,12 @@ def recorded_status(bag_dir) -> int | None:
     closing the bag (ros/recorder_node.py, ``RecorderNode.close``): a bag with that
     record is complete whatever happened to the process after it.
     """
+    from grazing_control.support.files import read_yaml_file
+
     try:
-        text = (Path(bag_dir) / "metadata.yaml").read_text(encoding="utf-8")
-        info = yaml.safe_load(text)["rosbag2_bagfile_information"]
+        info = read_yaml_file(Path(bag_dir) / "metadata.yaml")["rosbag2_bagfile_information"]
         return int((info.get("custom_data") or {})["recorder_status"])
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError):
+    except (KeyError, TypeError, ValueError, AttributeError):      # YamlFileError too
         return None
 
 

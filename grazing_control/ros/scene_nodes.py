@@ -41,13 +41,12 @@ def design_model(controller_params):
 def _controller_values(controller_params) -> dict:
     """The controller's parameters: a file's ``ros__parameters`` (any node key) or a
     dict; {} if the file cannot be read."""
-    import yaml
+    from grazing_control.support.files import YamlFileError, read_yaml_file
 
     if isinstance(controller_params, (str, os.PathLike)):
         try:
-            with open(controller_params) as fh:
-                doc = yaml.safe_load(fh) or {}
-        except (OSError, yaml.YAMLError):
+            doc = read_yaml_file(controller_params) or {}
+        except YamlFileError:
             return {}
         values = {}
         for section in doc.values() if isinstance(doc, dict) else ():
@@ -63,13 +62,11 @@ def sim_values_for_model(sim_params) -> dict:
     key; or a dict) without the study model's parameters (zeta, r, omega, delta_d, tau0,
     pi2_offset): what an n-DOF scene's simulator takes from the study's file, whose model
     the model file replaces (docs/nodes.md, "n-DOF scenes")."""
-    import yaml
-
     from grazing_control.plant.settings import MODEL_KEYS
+    from grazing_control.support.files import read_yaml_file
 
     if isinstance(sim_params, (str, os.PathLike)):
-        with open(sim_params) as fh:
-            doc = yaml.safe_load(fh) or {}
+        doc = read_yaml_file(sim_params) or {}
         values = {}
         for section in doc.values() if isinstance(doc, dict) else ():
             if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):

@@ -48,7 +48,7 @@ from .model import (GLOBAL_NAMES, NONDIMENSIONAL_NAMES, RigModel, free_flight,
                     nondimensional_vector)
 from .phase import PhaseError, PhaseReference, fit_phase
 
-__all__ = ["CONSTRAINT_WEIGHT", "IdentificationError", "Problem", "Identification",
+__all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem", "Identification",
            "identify"]
 
 #: Weight of the impact and continuity constraints against the data residuals.
@@ -57,6 +57,14 @@ CONSTRAINT_WEIGHT = 1e4
 CONTINUATION = (1.0, 1e2, CONSTRAINT_WEIGHT)
 #: Rounds of moving event times that stopped at a bound to the next sample interval.
 MAX_SHIFTS = 4
+#: The most bytes of the dense (m, n) Jacobian a fit may allocate (about 300 arcs of the
+#: study's recordings). The solver (trf, a dense SVD per step) and the covariance hold a
+#: few arrays of this size, so a fit stays below about 0.2 GB; a fit beyond it is
+#: refused before anything of its size exists (issue 27: the 1,420 arcs of a
+#: 1,300-period bag, --max-arcs 100000, took over 2 GB for a 702 MiB Jacobian). m and n
+#: grow with the arcs, so the bytes grow as arcs^2 and the time as arcs^3 (100 arcs:
+#: 4 s idle, 33 s on a loaded 2-core machine; 400 arcs over 300 s there).
+JACOBIAN_BYTES = 32 << 20
 _H = 1e-30
 
 
@@ -281,8 +289,16 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
         raise IdentificationError(
             "the recording has no impact: r and d (so delta_d) are not identifiable "
             "from free flight alone (record a scene with impacts)")
-    g0, start0, X0, V0 = initial_guess(rec, arcs, phase)
     prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
+    need = 8 * prob.m * prob.n
+    if need > JACOBIAN_BYTES:
+        fits = max(2, int(arcs.count * math.sqrt(JACOBIAN_BYTES / need)))
+        raise IdentificationError(
+            f"max_arcs: the fit of the {arcs.count} arcs used needs a dense Jacobian of "
+            f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
+            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
+            "(--max-arcs)")
+    g0, start0, X0, V0 = initial_guess(rec, arcs, phase)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
     f = np.isfinite(lo)

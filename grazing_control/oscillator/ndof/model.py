@@ -161,9 +161,9 @@ def model_from_mapping(data) -> NdofModel:
 
 
 def load_model(path) -> NdofModel:
-    """Load and validate a model YAML file (schema: docs/ndof_model.md)."""
-    import yaml
+    """Load and validate a model YAML file (schema: docs/ndof_model.md), read within the
+    limits of :func:`grazing_control.support.files.read_yaml_file` (YamlFileError, a
+    ValueError naming the file, beyond them)."""
+    from grazing_control.support.files import read_yaml_file
 
-    with open(Path(path), encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    return model_from_mapping(data)
+    return model_from_mapping(read_yaml_file(Path(path)))

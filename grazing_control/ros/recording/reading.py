@@ -8,7 +8,6 @@ import struct
 from pathlib import Path
 from typing import Any, Iterable, Iterator, NamedTuple
 
-import yaml
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, SeekingReader
 
@@ -28,9 +27,12 @@ class BagMessage(NamedTuple):
 
 
 def read_metadata(bag_dir: str | os.PathLike) -> dict[str, Any]:
-    """The ``rosbag2_bagfile_information`` mapping of a bag's ``metadata.yaml``."""
-    text = (Path(bag_dir) / "metadata.yaml").read_text(encoding="utf-8")
-    return yaml.safe_load(text)["rosbag2_bagfile_information"]
+    """The ``rosbag2_bagfile_information`` mapping of a bag's ``metadata.yaml``, read
+    within the limits of a parameter file (:func:`grazing_control.support.files.read_yaml_file`:
+    a YamlFileError, a ValueError naming the file, beyond them or for a missing file)."""
+    from grazing_control.support.files import read_yaml_file
+
+    return read_yaml_file(Path(bag_dir) / "metadata.yaml")["rosbag2_bagfile_information"]
 
 
 def bag_file(bag_dir: str | os.PathLike) -> Path:

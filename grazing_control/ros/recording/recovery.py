@@ -9,12 +9,13 @@ import zlib
 from pathlib import Path
 from typing import NamedTuple
 
-import yaml
 from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
 from mcap.stream_reader import StreamReader
 
 from .bounded import decompress, max_bytes, regular_file
+from grazing_control.support.files import YamlFileError
+
 from .reading import _has_summary, bag_file, read_metadata
 from .schemas import DEFAULT_CHUNK_SIZE
 from .writer import BagWriter
@@ -177,7 +178,7 @@ def reindex(bag_dir: str | os.PathLike, *, compression: str = "zstd",
     custom = {}
     try:
         custom = dict(read_metadata(bag_dir).get("custom_data") or {})
-    except (OSError, KeyError, TypeError, yaml.YAMLError):
+    except (YamlFileError, KeyError, TypeError):
         pass
     tmp_root = Path(tempfile.mkdtemp(prefix=f".{bag_dir.name}.reindex-", dir=bag_dir.parent))
     try:

@@ -104,14 +104,27 @@ def add_sweep_command(sub, common, finite, count):
     s.add_argument("--max-period", type=count, help="longest period detected (default 64)")
     s.add_argument("--out", default="out/sweep/sweep.npz", type=non_empty_path,
                    help="npz file (default out/sweep/sweep.npz), or an existing folder "
-                        "(then FOLDER/sweep.npz); the PNG goes next to it")
+                        "(then FOLDER/sweep.npz); the PNG goes next to it. Its arrays, one "
+                        "row per point (grid values x start, np.ndindex order): axis_NAME "
+                        "(each grid axis), point_NAME (each point's value of NAME), c1, c2 "
+                        "(the gains, nan uncontrolled), starts (the start deviation), pi2 "
+                        "(the kept Pi2 samples x, v), pi2_deviation (pi2 - X**), reference "
+                        "(X** of the point), impacts_per_period (per kept period), period "
+                        "(detected on Pi2: 0 none, -1 failed), errors ('' where the point "
+                        "ran), lyapunov (with --lyapunov), meta (JSON: names, shape, "
+                        "periods, transient, control_after, base, engine, delay) "
+                        "(docs/sweeps.md)")
     s.add_argument("--component", choices=("x", "v"), default="x",
                    help="Pi2 coordinate drawn in the PNG (default x)")
     s.add_argument("--no-png", action="store_true", help="write only the npz")
     s.add_argument("--lyapunov", action="store_true",
-                   help="also the Lyapunov exponents of each point's kept orbit (npz column "
-                        "'lyapunov', a lambda_max panel; with two grid axes an atlas PNG of "
-                        "lambda_max and the detected period)")
+                   help="also the Lyapunov exponents of each point's kept orbit, per forcing "
+                        "period (not per unit time), largest first: npz array 'lyapunov' of "
+                        "shape (points, 2), nan for a failed point, -inf where the map is "
+                        "singular (a sticking impact; c2 = -1 makes the second one -inf) "
+                        "(docs/theory_lyapunov.md); a "
+                        "lambda_max panel; with two grid axes an atlas PNG of lambda_max and "
+                        "the detected period")
     s.set_defaults(func=cmd_sweep)
     return s
 
