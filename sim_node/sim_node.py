@@ -52,16 +52,19 @@ from grazing_control.plant.ndof_engine import NdofEngine
 from grazing_control.plant.ndof_settings import load_model_file, ndof_settings_from_values
 from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
-                                            check_live_change, settings_from_values)
+                                            check_live_change, described_range,
+                                            settings_from_values)
 from grazing_control.ros import cdr
 from grazing_control.ros.diagnostics import SceneWindow, Updater
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
 from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
-                                        StartupError, bool_descriptor, deserialize,
-                                        float_descriptor, int_descriptor, log_parameter_changes,
-                                        publish_parameter_record, refuse_while_running,
-                                        run_node, spin, stamp_key, string_descriptor)
+                                        StartupError, bool_descriptor, check_ranges,
+                                        deserialize, executor_kind, float_descriptor,
+                                        int_descriptor, log_parameter_changes,
+                                        publish_parameter_record, refuse_out_of_range,
+                                        refuse_while_running, run_node, spin, stamp_key,
+                                        string_descriptor)
 from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
 from grazing_control.ros.scheduling import apply_node_scheduling
 
@@ -132,12 +135,22 @@ NODE_PARAMETERS = (
 )
 
 
-def descriptor(p: Parameter):
-    """The ROS descriptor of one parameter of the table (type, range, choices, read-only)."""
+#: The simulator is the source of /clock: it never follows it (issue 27: a third party's
+#: use_sim_time:=true froze a realtime scene, its timers waiting for its own /clock).
+SIM_TIME_REFUSED = ("use_sim_time=true is invalid for sim_node: valid is false only (the "
+                    "simulator publishes /clock; on simulation time its own timers would "
+                    "wait for it)")
+
+
+def descriptor(p: Parameter, declared: dict | None = None):
+    """The ROS descriptor of one parameter of the table (type, range, choices, read-only);
+    ``declared``: the values declared before it, which bound some ranges
+    (:func:`grazing_control.plant.settings.described_range`)."""
     if p.kind == "double":
-        return float_descriptor(p.doc, p.lo, p.hi, p.read_only)
+        lo, hi = described_range(p, declared or {})
+        return float_descriptor(p.doc, lo, hi, p.read_only, p.constraints)
     if p.kind == "integer":
-        return int_descriptor(p.doc, p.lo, p.hi, p.read_only)
+        return int_descriptor(p.doc, p.lo, p.hi, p.read_only, p.constraints)
     if p.kind == "string":
         return string_descriptor(p.doc, p.read_only, p.choices)
     return bool_descriptor(p.doc, p.read_only)
@@ -156,13 +169,21 @@ class SimNode(Node):
                 self.model = load_model_file(self.model_file)
             except ParameterError as exc:
                 raise StartupError(str(exc)) from None
+        declared = {}
         for p in PARAMETERS + NODE_PARAMETERS:
             if p is MODEL_FILE:
                 continue
             default = p.default     # with a model file, delta_d defaults to the file's
             if p.name == "delta_d" and self.model is not None:
                 default = self.model.delta_d
-            self.declare_parameter(p.name, default, descriptor(p))
+            declared[p.name] = self.declare_parameter(p.name, default,
+                                                      descriptor(p, declared)).value
+        self.set_descriptor("use_sim_time", bool_descriptor(
+            "follow /clock (rclpy's parameter)", constraints="false only: sim_node "
+            "publishes /clock"))
+        if self.get_parameter("use_sim_time").value:
+            raise StartupError(SIM_TIME_REFUSED)
+        check_ranges(self)
         try:
             self.settings = self._validate(self._values())
             apply_node_scheduling(self)
@@ -206,7 +227,7 @@ class SimNode(Node):
                                    hardware_id="grazing_control/sim_node")
         self._window = SceneWindow()
         self.diagnostics.add("scene", self._diagnose)
-        self.executor_kind = self.get_parameter("executor").value
+        self.executor_kind = executor_kind(self)
         self.loop = None              # the Lockstep or Realtime loop, once started
         self._finished = False        # refused to start, or failed
         self._created = time.monotonic()
@@ -466,6 +487,12 @@ class SimNode(Node):
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
+        refused = refuse_out_of_range(self, params)
+        if refused is not None:
+            return refused
+        if any(p.name == "use_sim_time" and p.value for p in params):
+            self.get_logger().warning(f"parameter change refused: {SIM_TIME_REFUSED}")
+            return SetParametersResult(successful=False, reason=SIM_TIME_REFUSED)
         if all(p.name.startswith("diag_") for p in params):
             log_parameter_changes(self, params)      # /diagnostics thresholds: any time
             return SetParametersResult(successful=True)

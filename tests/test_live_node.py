@@ -9,19 +9,25 @@ the node, which never decodes what it forwards).
 
 from __future__ import annotations
 
+import base64
 import glob
+import json
+import math
 import os
+import shutil
 import socket
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2._dynamic import generate_dynamic
 
+from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.ros import launcher
 from grazing_control.ros.live_node import LIVE_TOPICS
 from grazing_control.ros.recording import message_definition
@@ -308,39 +314,88 @@ def _bag_messages(bag_dir):
     return out
 
 
-def test_grazing_run_live_streams_the_scene_that_the_bag_records(tmp_path):
-    """``grazing run --live PORT --periods 200 --bag DIR`` (the launcher's API): the
-    client, connected while the scene starts, receives Π2 samples, corrections, impacts
-    and state; every payload is one the recorder stored (the same bytes) and decodes
-    against the advertised schema to the bag's values."""
+#: The scene's topics both clients read.
+WANTED = ("/oscillator/pi2", "/controller/velocity_correction", "/oscillator/impact",
+          "/oscillator/state")
+#: The protocol authors' client (tests/js: @foxglove/ws-protocol, @foxglove/rosmsg2-
+#: serialization, pinned by its package-lock.json; node_modules is installed here).
+JS = ROOT / "tests" / "js"
+
+
+def js_client():
+    """(the command running tests/js/live_client.mjs, None) or (None, why it cannot run):
+    node and npm must exist, and ``npm ci`` installs the locked packages into
+    tests/js/node_modules (again when package-lock.json is newer than the install)."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if not (node and npm):
+        return None, "node and npm are needed for the protocol authors' client (tests/js)"
+    installed = JS / "node_modules" / ".package-lock.json"
+    if not installed.exists() or \
+            installed.stat().st_mtime < (JS / "package-lock.json").stat().st_mtime:
+        try:
+            done = subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=JS,
+                                  capture_output=True, text=True, timeout=300)
+        except subprocess.TimeoutExpired:
+            return None, "npm ci in tests/js took over 300 s (no registry?)"
+        if done.returncode != 0:
+            tail = " ".join((done.stderr or done.stdout).split())[-300:]
+            return None, f"npm ci in tests/js failed (no registry?): {tail}"
+    return [node, str(JS / "live_client.mjs")], None
+
+
+@pytest.fixture(scope="module")
+def live_scene(tmp_path_factory):
+    """``grazing run --live PORT --periods 200 --bag DIR`` (the launcher's API), read while
+    it runs by two clients at once: tests/foxglove_client.py and, where node exists, the
+    protocol authors' own (tests/js/live_client.mjs). One scene for both tests."""
+    tmp = tmp_path_factory.mktemp("live_scene")
+    command, js_skip = js_client()      # installed before the scene: it must connect
     port = free_port()
-    bag = tmp_path / "bag"
+    bag = tmp / "bag"
     result = {}
-    # realtime at 300x: the 200 periods last ~6 s of wall time, time for the client to
-    # connect and subscribe (a lockstep scene can end in ~1 s, before it has: the live
+    # realtime at 300x: the 200 periods last ~6 s of wall time, time for the clients to
+    # connect and subscribe (a lockstep scene can end in ~1 s, before they have: the live
     # view is a best-effort reader the scene never waits for; a rerun in the full suite)
     scene = threading.Thread(target=lambda: result.update(res=launcher.run(
         None, None, bag, 200, domain_id=new_domain(), live=port, timeout=240,
         sim_overrides={"mode": "realtime", "time_scale": 300.0},
-        log_dir=tmp_path / "logs")))
+        log_dir=tmp / "logs")))
+    js = None
+    if command:
+        js = subprocess.Popen(command + [f"ws://127.0.0.1:{port}", ",".join(WANTED), "240"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     scene.start()
-    wanted = ("/oscillator/pi2", "/controller/velocity_correction", "/oscillator/impact",
-              "/oscillator/state")
     try:
         # the topics named: the client subscribes once all four are advertised (the
         # server may advertise a starting node's channels in several frames)
-        client = FoxgloveClient(port, topics=wanted, timeout=60)
+        client = FoxgloveClient(port, topics=WANTED, timeout=60)
     finally:
         scene.join(300)
     client.wait_for(lambda c: False, 1.0)        # the last frames in flight
     client.close()
-    res = result["res"]
+    js_result = None
+    if js is not None:
+        try:
+            out, err = js.communicate(timeout=60)    # it ends when the server closes
+        except subprocess.TimeoutExpired:
+            js.kill()
+            out, err = js.communicate()
+        js_result = (js.returncode, out, err)
+    return SimpleNamespace(res=result["res"], bag=bag, client=client, js=js_result,
+                           js_skip=js_skip)
+
+
+def test_grazing_run_live_streams_the_scene_that_the_bag_records(live_scene):
+    """The client, connected while the scene starts, receives Π2 samples, corrections,
+    impacts and state; every payload is one the recorder stored (the same bytes) and
+    decodes against the advertised schema to the bag's values."""
+    res, client = live_scene.res, live_scene.client
     assert res.ok and res.live == 0, (res, Path(res.logs["live_node"]).read_text())
-    recorded = _bag_messages(bag)
+    recorded = _bag_messages(live_scene.bag)
     got = {}
     for topic, _stamp, payload in client.messages:
         got.setdefault(topic, []).append(payload)
-    for topic in wanted:
+    for topic in WANTED:
         assert got.get(topic), (topic, {t: len(v) for t, v in got.items()})
         channel = client.channels[topic]
         reader = generate_dynamic(channel["schemaName"], channel["schema"])
@@ -350,3 +405,52 @@ def test_grazing_run_live_streams_the_scene_that_the_bag_records(tmp_path):
     log = Path(res.logs["live_node"]).read_text()
     assert "live view stopped: forwarded" in log
     print({t: (len(v), len(recorded.get(t, ()))) for t, v in got.items()})
+
+
+def _plain(msg):
+    """A message decoded by mcap_ros2 as nested dicts and lists, as the JS client's JSON
+    writes it (non-finite doubles as strings)."""
+    if hasattr(msg, "__slots__"):
+        return {k: _plain(getattr(msg, k)) for k in msg.__slots__}
+    if isinstance(msg, (list, tuple)):
+        return [_plain(v) for v in msg]
+    if isinstance(msg, float) and not math.isfinite(msg):
+        return {"nan": "NaN", "inf": "Infinity", "-inf": "-Infinity"}[repr(msg)]
+    return msg
+
+
+def test_the_protocol_authors_client_subscribes_and_decodes_the_scene(live_scene):
+    """@foxglove/ws-protocol's FoxgloveClient (over ws) reads the same scene: it
+    negotiates the protocol, sees the four channels as cdr / ros2msg, subscribes, and
+    each message it decodes with @foxglove/rosmsg2-serialization (from the advertised
+    schema, independent of this package and of mcap_ros2) is a message of the bag, with
+    the values mcap_ros2 reads from the bag's bytes: the stamps, x and v of Π2, the
+    corrections Delta v, the state samples."""
+    if live_scene.js is None:
+        pytest.skip(live_scene.js_skip)
+    code, out, err = live_scene.js
+    assert code == 0 and out, (code, out[-2000:], err[-2000:])
+    got = json.loads(out)
+    assert got["errors"] == [], got["errors"]
+    assert got["subprotocol"] == "foxglove.sdk.v1"     # foxglove.websocket.v1: a 400
+    for topic in WANTED:
+        ch = got["channels"][topic]
+        assert (ch["encoding"], ch["schemaEncoding"]) == ("cdr", "ros2msg")
+    recorded = _bag_messages(live_scene.bag)
+    counts = {}
+    for m in got["messages"]:
+        payload = base64.b64decode(m["payload"])
+        assert payload in recorded[m["topic"]], m["topic"]    # the scene's own message
+        channel = live_scene.client.channels[m["topic"]]
+        want = decode(channel, payload)
+        assert m["value"] == _plain(want), (m["topic"], m["value"], want)
+        counts[m["topic"]] = counts.get(m["topic"], 0) + 1
+    assert set(counts) == set(WANTED), counts
+    pi2 = [m["value"] for m in got["messages"] if m["topic"] == "/oscillator/pi2"]
+    assert all(len(v["position"]) == 1 and len(v["velocity"]) == 1 for v in pi2)
+    # the Π2 samples are the scene's: stamps k T of the study's forcing period
+    period = 2 * math.pi / OscillatorParams().omega
+    for v in pi2:
+        t = v["header"]["stamp"]["sec"] + v["header"]["stamp"]["nanosec"] * 1e-9
+        assert abs(t / period - round(t / period)) < 1e-6, t
+    print(counts)

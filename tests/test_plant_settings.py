@@ -17,7 +17,7 @@ import pytest
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, ON_MISS,
                                             PARAMETERS,
-                                            SETTING_KEYS, SimSettings, default_values,
+                                            SETTING_KEYS, SimSettings, default_values, described_range,
                                             initial_deviation, settings_from_values)
 
 
@@ -43,8 +43,14 @@ def test_the_defaults_are_valid_and_are_the_study_scene():
 
 @pytest.mark.parametrize("p", [p for p in PARAMETERS if p.kind == "double" and p.lo is not None],
                          ids=lambda p: p.name)
-def test_doubles_below_their_range_or_not_finite_are_refused_by_name(p):
-    for bad in (p.lo - 1.0, math.inf):
+def test_the_described_range_ends_are_accepted_and_the_next_doubles_refused_by_name(p):
+    """The closed range a descriptor states (issue 27: [0, 1] for 0 < zeta < 1, [0, inf]
+    for finite values) is exactly what the validation accepts, with the other
+    parameters at their defaults (described_range narrows actuation_delay to < T)."""
+    lo, hi = described_range(p, default_values())
+    for end in (lo, hi):
+        settings_from_values({p.name: end})
+    for bad in (math.nextafter(lo, -math.inf), math.nextafter(hi, math.inf), math.nan):
         with pytest.raises(ParameterError, match=rf"^{p.name}=.*invalid.*valid"):
             settings_from_values({p.name: bad})
 

@@ -289,8 +289,9 @@ def test_live_changes_with_absurd_consequences_are_refused_and_nothing_is_applie
     """With live_changes a change is still refused when its consequences are absurd for
     the running scene (plant.settings.check_live_change): the wall beyond the motion's
     reach, an unbounded scene, a tenfold jump of a model parameter, noise larger than the
-    motion; the reason names the parameter and the range, and a refused request with a
-    valid value beside it applies neither (the run stays the core's simulate)."""
+    motion, use_sim_time (the simulator publishes /clock); the reason names the parameter
+    and the range, and a refused request with a valid value beside it applies neither (the
+    run stays the core's simulate)."""
     domain, collector, start = node_env
     ans = Answerer(collector)
     ans.hold_at = 3
@@ -306,6 +307,10 @@ def test_live_changes_with_absurd_consequences_are_refused_and_nothing_is_applie
             ([Parameter("max_periods", value=2)], "valid range is > 3"),
             ([Parameter("omega", value=7.0)], "within a factor 2"),
             ([Parameter("noise", value=5.0)], "noise=5.0 is invalid while the scene runs"),
+            # a third party's use_sim_time froze a realtime scene (issue 27): the
+            # simulator is the source of /clock
+            ([Parameter("use_sim_time", value=True)], "use_sim_time=true is invalid for "
+                                                      "sim_node: valid is false only"),
             ([Parameter("zeta", value=0.011), Parameter("delta_d", value=1e300)], "delta_d")):
         res = call(collector, client.set_parameters_atomically(params))
         assert not res.result.successful and text in res.result.reason, res
@@ -317,6 +322,7 @@ def test_live_changes_with_absurd_consequences_are_refused_and_nothing_is_applie
     np.testing.assert_array_equal(xv(ans.samples),
                                   simulate(OscillatorParams(delta_d=-5e-6), 6).pi2)
     assert "parameter change refused: delta_d=1e+300" in log.read_text()
+    assert "parameter change refused: use_sim_time=true is invalid" in log.read_text()
 
 
 def test_check_live_change_over_fuzzed_changes():

@@ -15,6 +15,8 @@ are :class:`grazing_control.plant.faults.FaultModel`'s (issue 8 section 3).
 from __future__ import annotations
 
 import math
+import struct
+import sys
 from dataclasses import dataclass
 from functools import cached_property
 from typing import NamedTuple
@@ -27,7 +29,7 @@ from grazing_control.plant.faults import FaultModel
 from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
 
 __all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "ON_MISS",
-           "MODEL_KEYS",
+           "MODEL_KEYS", "ABOVE_0", "FINITE", "below", "described_range",
            "SimSettings", "settings_from_values", "default_values", "initial_deviation",
            "check_live_change", "LIVE_FACTOR"]
 
@@ -41,12 +43,27 @@ ACTUATIONS = ("auto", "scheduled", "on_arrival")
 ON_MISS = ("predict", "drop")
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
 
+#: The closed ranges a ROS descriptor states (FloatingPointRange: both ends included)
+#: for the open and the finite bounds of the validation: a bound "> 0" is the least
+#: double above 0, a bound "< x" the double :func:`below` x, "finite" the largest finite
+#: double (issue 27: ``ros2 param describe`` said [0, 1] for 0 < zeta < 1, and [0, inf]
+#: where the node refuses inf).
+ABOVE_0 = math.nextafter(0.0, 1.0)
+FINITE = sys.float_info.max
+
+
+def below(x: float) -> float:
+    """The largest double below ``x``: the closed end of an open bound ``< x``."""
+    return math.nextafter(x, -math.inf)
+
 
 class Parameter(NamedTuple):
     """One node parameter: ``kind`` is double, integer, string or bool; ``lo``/``hi`` the
-    closed range a ROS descriptor states (None: unbounded; the validation is
-    :func:`settings_from_values`'), ``choices`` the valid strings, ``read_only`` whether it
-    may change while the node runs."""
+    closed range a ROS descriptor states, exactly the values :func:`settings_from_values`
+    accepts (None: no range; :func:`described_range` narrows it by the parameters
+    declared before), ``choices`` the valid strings, ``read_only`` whether it may change
+    while the node runs, ``constraints`` what a range cannot say (a double that may be
+    NaN, a bound set by another parameter)."""
 
     name: str
     kind: str
@@ -56,43 +73,52 @@ class Parameter(NamedTuple):
     hi: float | None = None
     choices: tuple = ()
     read_only: bool = False
+    constraints: str = ""
 
 
 _REF = OscillatorParams()
 
 #: The simulation parameters of sim_node, in declaration order (docs/nodes.md).
 PARAMETERS = (
-    Parameter("zeta", "double", _REF.zeta, "damping ratio zeta, 0 < zeta < 1", 0.0, 1.0),
-    Parameter("r", "double", _REF.r, "coefficient of restitution r, 0 < r < 1", 0.0, 1.0),
+    Parameter("zeta", "double", _REF.zeta, "damping ratio zeta, 0 < zeta < 1", ABOVE_0,
+              below(1.0)),
+    Parameter("r", "double", _REF.r, "coefficient of restitution r, 0 < r < 1",
+              ABOVE_0, below(1.0)),
     Parameter("omega", "double", study_omega(), "forcing frequency omega > 0 (nondimensional)",
-              0.0),
+              ABOVE_0, FINITE, constraints="actuation_delay < T = 2 pi / omega"),
     Parameter("delta_d", "double", 0.0,
-              "wall clearance Delta d = d - d* (< 0: impacting side)"),
+              "wall clearance Delta d = d - d* (< 0: impacting side)", -FINITE, FINITE),
     Parameter("tau0", "double", 0.0, "forcing phase tau0 (reduced mod 2 pi; the sampled "
-              "dynamics start on Pi2 and do not depend on it)"),
+              "dynamics start on Pi2 and do not depend on it)", -FINITE, FINITE),
     Parameter("pi2_offset", "double", _REF.pi2_offset,
-              "phase of Pi2 after Pi1, 0 < pi2_offset < 2 pi (study: pi/2)", 0.0, TWO_PI),
-    Parameter("x0", "double", math.nan, "initial position on Pi2; NaN = x** (grazing point)"),
-    Parameter("v0", "double", math.nan, "initial velocity on Pi2; NaN = v** (grazing point)"),
+              "phase of Pi2 after Pi1, 0 < pi2_offset < 2 pi (study: pi/2)", ABOVE_0,
+              below(TWO_PI)),
+    Parameter("x0", "double", math.nan, "initial position on Pi2; NaN = x** (grazing point)",
+              constraints="finite and x0 <= d (not beyond the wall), or NaN"),
+    Parameter("v0", "double", math.nan, "initial velocity on Pi2; NaN = v** (grazing point)",
+              constraints="finite, or NaN"),
     Parameter("mode", "string", "lockstep", "lockstep (wait for each correction) or realtime "
               "(paced to the wall clock)", choices=MODES, read_only=True),
     Parameter("time_scale", "double", 1.0,
-              "realtime: simulation seconds per wall second, > 0", 0.0),
+              "realtime: simulation seconds per wall second, > 0", ABOVE_0, FINITE),
     Parameter("state_period", "double", 1.0, "simulation time between oscillator/state "
-              "messages; 0 disables them", 0.0),
+              "messages; 0 disables them", 0.0, FINITE),
     Parameter("answer_timeout", "double", 1.0, "lockstep: wall seconds to wait for the "
-              "correction of a sample, then apply none", 0.0),
+              "correction of a sample, then apply none", ABOVE_0, FINITE),
     Parameter("max_periods", "integer", 0, "forcing periods to simulate; 0 = unbounded", 0),
     Parameter("fidelity", "string", "exact", "model fidelity: exact (closed-form flow), zdm2 / "
               "zdm1 (normal-form maps), ode (solve_ivp, comparison); lockstep only for all "
               "but exact", choices=FIDELITIES),
     Parameter("noise", "double", 0.0,
-              "std of Gaussian velocity noise added at each Pi2 sample", 0.0),
+              "std of Gaussian velocity noise added at each Pi2 sample", 0.0, FINITE),
     Parameter("seed", "integer", 0, "seed of the noise generator, >= 0 (applied at start and "
               "reset)", 0),
     Parameter("actuation_delay", "double", 0.0,
               "simulation time from a Pi2 sample to its correction, 0 <= actuation_delay < T "
-              "(the controller YAML's actuation_delay)", 0.0, read_only=True),
+              "(the controller YAML's actuation_delay)", 0.0, FINITE, read_only=True,
+              constraints="actuation_delay < T = 2 pi / omega; 0 with a fidelity other than "
+              "exact; > 0 in realtime with actuation scheduled (unless jitter or "
+              "pulse_width > 0)"),
     Parameter("actuation", "string", "auto",
               "realtime: scheduled (act at t_k + actuation_delay; a later answer is a "
               "deadline miss), on_arrival (act when the answer arrives), auto (scheduled if "
@@ -101,31 +127,37 @@ PARAMETERS = (
               "dropped, 0..1 (FaultModel, seed)", 0.0, 1.0, read_only=True),
     Parameter("measurement_noise", "double", 0.0,
               "injected fault: std of Gaussian noise on the x and v of the published Pi2 "
-              "sample (FaultModel, seed)", 0.0, read_only=True),
+              "sample (FaultModel, seed)", 0.0, FINITE, read_only=True),
     Parameter("jitter", "double", 0.0,
               "injected fault: std of the actuation time around actuation_delay, simulation "
-              "time (FaultModel, seed)", 0.0, read_only=True),
+              "time (FaultModel, seed)", 0.0, FINITE, read_only=True,
+              constraints="0 with a fidelity other than exact, or with actuation on_arrival "
+              "in realtime"),
     Parameter("on_miss", "string", "predict",
               "when a scheduled correction misses its deadline or is lost: predict (apply "
               "the prediction the previous answer carried for this sample, twist.linear.y) "
               "or drop (apply none)", choices=ON_MISS, read_only=True),
     Parameter("sensor_noise", "double", 0.0,
               "std of the Gaussian noise on each oscillator/state sample's position, and "
-              "velocity where carried (SensorModel, sensor_seed)", 0.0, read_only=True),
+              "velocity where carried (SensorModel, sensor_seed)", 0.0, FINITE, read_only=True),
     Parameter("sensor_velocity", "bool", True, "oscillator/state carries the velocity (false: "
               "position only, velocity empty)", read_only=True),
     Parameter("sensor_quantum", "double", 0.0, "quantisation step of the measured position, "
-              ">= 0 (0: none)", 0.0, read_only=True),
+              ">= 0 (0: none)", 0.0, FINITE, read_only=True),
     Parameter("sensor_bias", "double", 0.0, "bias added to the measured position",
-              read_only=True),
+              -FINITE, FINITE, read_only=True),
     Parameter("sensor_seed", "integer", 0, "seed of the sensor noise, >= 0 (draws a pure "
               "function of (sensor_seed, sample index))", 0, read_only=True),
     Parameter("pulse_width", "double", 0.0,
               "actuation as a force pulse of this width (simulation time) centred at the "
               "actuation time, impulse = the commanded Delta v; 0 = the velocity jump",
-              0.0, read_only=True),
+              0.0, FINITE, read_only=True,
+              constraints="pulse_width <= 2 actuation_delay and actuation_delay + "
+              "pulse_width / 2 < T; 0 with a fidelity other than exact, or with actuation "
+              "on_arrival in realtime"),
     Parameter("force_limit", "double", 0.0, "largest |force| of a pulse, > 0; 0 = no limit "
-              "(the impulse delivered is then smaller than commanded)", 0.0, read_only=True),
+              "(the impulse delivered is then smaller than commanded)", 0.0, FINITE,
+              read_only=True),
 )
 
 SETTING_KEYS = tuple(p.name for p in PARAMETERS)
@@ -134,6 +166,62 @@ SETTING_KEYS = tuple(p.name for p in PARAMETERS)
 def default_values() -> dict:
     """{name: default} of :data:`PARAMETERS` (what a node without overrides starts with)."""
     return {p.name: p.default for p in PARAMETERS}
+
+
+def described_range(p: Parameter, declared: dict) -> tuple:
+    """(lo, hi): the closed range ``ros2 param describe`` states for ``p``, given the
+    values ``declared`` before it (the node declares :data:`PARAMETERS` in order).
+
+    The table's range, narrowed where another parameter bounds it, so that with the
+    others at these values :func:`settings_from_values` accepts exactly [lo, hi]:
+    actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter 0 without
+    the exact flow or with actuation on_arrival in realtime; pulse_width <= 2
+    actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where jitter is.
+    Where the model declared is invalid, the table's range (the model is refused by
+    name anyway).
+    """
+    if p.name not in ("actuation_delay", "jitter", "pulse_width"):
+        return p.lo, p.hi
+    try:
+        period = OscillatorParams(**{k: declared[k] for k in MODEL_KEYS}).period
+    except (KeyError, TypeError, ParameterError):
+        return p.lo, p.hi
+    exact = declared.get("fidelity", "exact") == "exact"
+    if p.name == "actuation_delay":
+        return p.lo, below(period) if exact else 0.0
+    on_arrival = declared.get("mode") == "realtime" and declared.get("actuation") == "on_arrival"
+    if not exact or on_arrival:
+        return p.lo, 0.0
+    if p.name == "jitter":
+        return p.lo, p.hi
+    delay = declared.get("actuation_delay", 0.0)
+    if not 0.0 < delay < period:
+        return p.lo, 0.0
+
+    # the last double that fits: bisection over the doubles in [0, 2 delay], whose bit
+    # patterns are ordered as their values (a width 0 fits, and fitting is monotone)
+    lo, hi = 0, _bits(min(2.0 * delay, FINITE))
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if _pulse_fits(_double(mid), delay, period) else (lo, mid - 1)
+    return p.lo, _double(lo)
+
+
+def _pulse_fits(width: float, delay: float, period: float) -> bool:
+    """A pulse of ``width`` centred at ``delay`` lies within the period: it starts at or
+    after the sample (width <= 2 delay; not width / 2 <= delay, which a subnormal width
+    passes with delay 0) and ends before the next one (delay + width / 2 < T)."""
+    return width <= 2.0 * delay and delay + width / 2.0 < period
+
+
+def _bits(x: float) -> int:
+    """The bit pattern of a double >= 0, as an integer (ordered as the doubles)."""
+    return struct.unpack("<q", struct.pack("<d", x))[0]
+
+
+def _double(bits: int) -> float:
+    """The double >= 0 of a bit pattern (:func:`_bits`)."""
+    return struct.unpack("<d", struct.pack("<q", bits))[0]
 
 
 @dataclass(frozen=True)
@@ -281,7 +369,7 @@ def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: st
     out["force_limit"] = _finite("force_limit", values["force_limit"], lambda v: v >= 0.0,
                                  "a finite force_limit >= 0 (0: no limit)")
     delay = out["actuation_delay"]
-    if w > 0.0 and not (w / 2.0 <= delay and delay + w / 2.0 < p.period):
+    if w > 0.0 and not _pulse_fits(w, delay, p.period):
         raise ParameterError(
             f"pulse_width={w!r} is invalid with actuation_delay={delay!r}: valid range is "
             "pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < "

@@ -45,6 +45,7 @@ from .cdr import stamp_parts
 __all__ = [
     "DATA_QOS",
     "EXECUTORS",
+    "executor_kind",
     "make_executor",
     "deserialize",
     "PUBLISHER_QOS",
@@ -57,6 +58,9 @@ __all__ = [
     "Throttled",
     "bool_descriptor",
     "check_overrides",
+    "check_ranges",
+    "range_problem",
+    "refuse_out_of_range",
     "init_ros",
     "node_key_matches",
     "parse_node_arguments",
@@ -157,10 +161,51 @@ def string_descriptor(description: str, read_only: bool = False,
     return d
 
 
-def bool_descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
+def bool_descriptor(description: str, read_only: bool = False,
+                    constraints: str = "") -> ParameterDescriptor:
     """A boolean parameter."""
     return ParameterDescriptor(type=ParameterType.PARAMETER_BOOL, description=description,
-                               read_only=read_only)
+                               read_only=read_only, additional_constraints=constraints)
+
+
+def range_problem(node, name: str, value) -> str | None:
+    """Why ``value`` lies outside the range the node describes for ``name``, or None.
+
+    rclpy accepts a double within a relative 1e-6 of an end of its FloatingPointRange
+    (``Node.PARAM_REL_TOL``): diagnostics_period 3600.0000000000005 passed though
+    described as at most 3600 (issue 27). The nodes hold each range exactly, so that
+    ``ros2 param describe`` states what they accept.
+    """
+    if not isinstance(value, float) or not node.has_parameter(name):
+        return None
+    ranges = node.describe_parameter(name).floating_point_range
+    if not ranges:
+        return None
+    lo = min(ranges[0].from_value, ranges[0].to_value)
+    hi = max(ranges[0].from_value, ranges[0].to_value)
+    if lo <= value <= hi:
+        return None
+    return f"{name}={value!r} is invalid: valid range is [{lo!r}, {hi!r}]"
+
+
+def check_ranges(node) -> None:
+    """StartupError naming the first declared double outside its described range."""
+    for name in node.list_parameters([], 0).names:
+        problem = range_problem(node, name, node.get_parameter(name).value)
+        if problem:
+            raise StartupError(problem)
+
+
+def refuse_out_of_range(node, params):
+    """The refusal of a set-parameters request with a double outside its described
+    range (:func:`range_problem`), else None."""
+    from rcl_interfaces.msg import SetParametersResult
+
+    for p in params:
+        problem = range_problem(node, p.name, p.value)
+        if problem:
+            return SetParametersResult(successful=False, reason=problem)
+    return None
 
 
 # ------------------------------------------------------------------ throttled logging
@@ -230,6 +275,15 @@ def _startup_message(exc: BaseException) -> str:
 #: sim_node and controller_node, measured faster in docs/benchmarks.md). A node without
 #: an ``executor_kind`` attribute gets the SingleThreadedExecutor.
 EXECUTORS = ("single_threaded", "events")
+
+
+def executor_kind(node) -> str:
+    """The node's ``executor`` parameter, one of :data:`EXECUTORS` (StartupError)."""
+    kind = node.get_parameter("executor").value
+    if kind not in EXECUTORS:
+        raise StartupError(f"executor={kind!r} is invalid: valid values are "
+                           f"{', '.join(EXECUTORS)}")
+    return kind
 
 
 def make_executor(kind: str = "single_threaded"):

@@ -116,9 +116,12 @@ from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import OK, WARN, Updater
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
-                     deserialize, StartupError, Throttled, bool_descriptor, float_descriptor,
-                     int_descriptor, log_parameter_changes, publish_parameter_record,
-                     refuse_while_running, run_node, spin, stamp_key, string_descriptor)
+                     deserialize, StartupError, Throttled, bool_descriptor, check_ranges,
+                     executor_kind,
+                     float_descriptor, int_descriptor, log_parameter_changes,
+                     publish_parameter_record, refuse_out_of_range, refuse_while_running,
+                     run_node, spin, stamp_key, string_descriptor)
+from grazing_control.plant.settings import ABOVE_0, FINITE, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from .ndof_control import NdofLaw, ndof_controller_from_values
 
@@ -299,6 +302,11 @@ def stream_from_values(values: dict, model):
     if not (math.isfinite(floor) and floor >= 0.0):
         raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "
                              "model_noise >= 0 (process noise per period, in sensor_noise)")
+    for name in ("sensor_noise", "state_period"):
+        value = float(values[name])
+        if not (math.isfinite(value) and value >= 0.0):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
+                                 f"{name} >= 0")
     if source == "sample":
         return None
     if model is None:
@@ -319,6 +327,15 @@ def actuation_delay_from_values(values: dict) -> float:
     return delay
 
 
+def _below_period(omega: float) -> float:
+    """The largest actuation delay below T = 2 pi / omega (the described range's end;
+    inf where omega itself is invalid: refused by name at start)."""
+    try:
+        return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
+    except (ZeroDivisionError, OverflowError):
+        return math.inf
+
+
 class ControllerNode(Node):
     """The controller node (module docstring: topics, switching, stale samples)."""
 
@@ -326,29 +343,40 @@ class ControllerNode(Node):
         super().__init__("controller_node", **kwargs)
         ref = OscillatorParams()
         d = self.declare_parameter
-        d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)"))
-        d("c2", 0.0, float_descriptor("gain c2 on v - v** (Eq. 28)"))
-        d("x_ref", math.nan, float_descriptor("x** on Pi2; NaN: from the model parameters"))
-        d("v_ref", math.nan, float_descriptor("v** on Pi2; NaN: from the model parameters"))
-        d("zeta", ref.zeta, float_descriptor("damping ratio (for X**)", 0.0, 1.0))
-        d("r", ref.r, float_descriptor("coefficient of restitution (recorded with the gains)",
-                                       0.0, 1.0))
-        d("omega", study_omega(), float_descriptor("forcing frequency (for X**)", 0.0))
-        d("pi2_offset", ref.pi2_offset, float_descriptor("phase of Pi2 after Pi1 (for X**)",
-                                                         0.0, 2.0 * math.pi))
+        # each range is exactly what law_from_values & co. accept (issue 27): open bounds
+        # as the next double (plant.settings.ABOVE_0, below), "finite" as FINITE
+        d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)", -GAIN_LIMIT, GAIN_LIMIT))
+        d("c2", 0.0, float_descriptor("gain c2 on v - v** (Eq. 28)", -GAIN_LIMIT, GAIN_LIMIT))
+        d("x_ref", math.nan, float_descriptor("x** on Pi2; NaN: from the model parameters",
+                                              constraints="finite, or NaN"))
+        d("v_ref", math.nan, float_descriptor("v** on Pi2; NaN: from the model parameters",
+                                              constraints="finite, or NaN"))
+        d("zeta", ref.zeta, float_descriptor("damping ratio (for X**), 0 < zeta < 1", ABOVE_0,
+                                             below(1.0)))
+        d("r", ref.r, float_descriptor("coefficient of restitution (recorded with the gains), "
+                                       "0 < r < 1", ABOVE_0, below(1.0)))
+        omega = d("omega", study_omega(), float_descriptor(
+            "forcing frequency (for X**), > 0", ABOVE_0, FINITE,
+            constraints="actuation_delay < T = 2 pi / omega")).value
+        d("pi2_offset", ref.pi2_offset, float_descriptor(
+            "phase of Pi2 after Pi1 (for X**), 0 < pi2_offset < 2 pi", ABOVE_0,
+            below(2.0 * math.pi)))
         d("enable_after", 1000, int_descriptor(
             "first controlled sample (from 0); -1: only through ~/enable", -1))
-        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0",
-                                                   math.nextafter(0.0, 1.0)))
+        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0 (inf: none)",
+                                                   ABOVE_0, math.inf))
         d("stale_after", math.inf, float_descriptor(
-            "max age of a sample in simulation seconds (with use_sim_time)", 0.0))
+            "max age of a sample in simulation seconds (with use_sim_time), > 0 (inf: none)",
+            ABOVE_0, math.inf))
         d("actuation_delay", 0.0, float_descriptor(
             "simulation time from a sample to its correction that the gains were designed "
-            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0, read_only=True,
-            constraints="actuation_delay < T = 2 pi / omega (checked at start)"))
+            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0,
+            _below_period(omega), read_only=True,
+            constraints="actuation_delay < T = 2 pi / omega (with model_file: the model's "
+            "omega)"))
         d("delta_d", math.nan, float_descriptor(
             "the plant's Delta d (the model of the estimator and of the predicted next "
-            "correction); NaN: no model", read_only=True))
+            "correction); NaN: no model", read_only=True, constraints="finite, or NaN"))
         d("pi2_source", "sample", string_descriptor(
             "sample: the simulator's Pi2 samples (oscillator/pi2); stream: estimated from "
             "the sensor stream (oscillator/state)", True, PI2_SOURCES))
@@ -359,12 +387,13 @@ class ControllerNode(Node):
             "stream mode: impacts from oscillator/impact (topic) or detected in the stream",
             True, IMPACT_SOURCES))
         d("sensor_noise", 1e-4, float_descriptor(
-            "std of the stream's noise (> 0 for arc and model)", 0.0, read_only=True))
+            "std of the stream's noise (> 0 for arc and model)", 0.0, FINITE,
+            read_only=True))
         d("state_period", 0.0, float_descriptor(
-            "simulation time between stream samples; 0: from the stamps", 0.0,
+            "simulation time between stream samples; 0: from the stamps", 0.0, FINITE,
             read_only=True))
         d("model_noise", 1e-2, float_descriptor(
-            "model filter's process noise per period, in units of sensor_noise", 0.0,
+            "model filter's process noise per period, in units of sensor_noise", 0.0, FINITE,
             read_only=True))
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
@@ -385,7 +414,11 @@ class ControllerNode(Node):
         d("gains", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
             type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
                 "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "
-                "(grazing design --model FILE --out)")))
+                "(grazing design --model FILE --out); unused without (empty)")))
+        if not self.model_file and self._gains() is None:
+            # a value, so that a get over every name answers (ros2 param dump, get): an
+            # unset parameter made rclpy's GetParameters return nothing at all (issue 27)
+            self.set_parameters([Parameter("gains", Parameter.Type.DOUBLE_ARRAY, [])])
         d("n", -1, int_descriptor("with model_file: the degrees of freedom the gains were "
                                   "designed for (checked against the model; -1: not given)",
                                   -1, read_only=True))
@@ -395,7 +428,8 @@ class ControllerNode(Node):
         d("mu", math.nan, float_descriptor("with model_file: the design's mu (w^T N = mu w^T; "
                                            "recorded, not used)", read_only=True))
         declare_scheduling(self)
-        self.executor_kind = self.get_parameter("executor").value
+        check_ranges(self)
+        self.executor_kind = executor_kind(self)
         try:
             apply_node_scheduling(self)
         except ValueError as exc:
@@ -737,7 +771,8 @@ class ControllerNode(Node):
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
-        refused = refuse_while_running(self, params, self.answered > 0)
+        refused = (refuse_out_of_range(self, params)
+                   or refuse_while_running(self, params, self.answered > 0))
         if refused is not None:
             return refused
         values = self._values()
@@ -745,6 +780,7 @@ class ControllerNode(Node):
         try:
             if self.ndof is None:
                 new = law_from_values(values)
+                actuation_delay_from_values(values)     # omega: T must stay > the delay
             else:
                 gains = next((p.value for p in params if p.name == "gains"), self._gains())
                 new = self._ndof_law(values, gains)     # sets self.ndof when valid

@@ -114,7 +114,8 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
 from std_msgs.msg import Bool
 
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
-                     check_overrides, init_ros, int_descriptor, string_descriptor, usage)
+                     check_overrides, float_descriptor, init_ros, int_descriptor,
+                     string_descriptor, usage)
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
@@ -296,6 +297,11 @@ class RecorderNode(Node):
             check_overrides(self, arguments)
         output, topics, compression, chunk_size = self._read_parameters()
         self._sim_time = self.get_parameter("use_sim_time").value
+        self.set_descriptor("use_sim_time", ParameterDescriptor(
+            type=ParameterType.PARAMETER_BOOL, description="log time from /clock instead "
+            "of the receive time (rclpy's parameter)", additional_constraints="set at "
+            "start only: the bag states one time base"))
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.require_complete = self.get_parameter("require_complete").value
         self.bag = BagWriter(
             output, compression=compression, chunk_size=chunk_size,
@@ -327,6 +333,23 @@ class RecorderNode(Node):
         self.get_logger().info(
             f"recording {', '.join(self._types)} to {self.bag.bag_dir} "
             f"({compression}, log_time = {'ROS clock' if self._sim_time else 'receive time'})")
+
+    def _on_set_parameters(self, params):
+        """Refuse a change of ``use_sim_time`` (every other parameter is read-only): the
+        bag states one time base for its log times (custom_data ``log_time``, chosen at
+        start), and a third party's switch would mix two in one bag unseen (issue 27).
+        Logged, and refused naming the parameter."""
+        from rcl_interfaces.msg import SetParametersResult
+
+        names = [p.name for p in params if p.name == "use_sim_time"
+                 and p.value != self._sim_time]
+        if not names:
+            return SetParametersResult(successful=True)
+        reason = (f"use_sim_time={str(not self._sim_time).lower()} is invalid while "
+                  f"recording: valid is {str(self._sim_time).lower()} (the bag's log_time "
+                  "is the time base chosen at start; restart the recorder to change it)")
+        self.get_logger().warning(f"parameter change refused: {reason}")
+        return SetParametersResult(successful=False, reason=reason)
 
     def _watch(self):
         """Subscribe to each topic once it has publishers; say when all are matched.
@@ -368,10 +391,10 @@ class RecorderNode(Node):
         self.declare_parameter("adapt_qos", False, read_only(
             "subscribe to the package's own topics with ros2 bag's adapted QoS too (default: "
             "reliable, a best-effort publisher is left out)", ParameterType.PARAMETER_BOOL))
-        self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, read_only(
+        self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, float_descriptor(
             f"seconds the recorder lets messages gather after each wake-up before taking "
             f"all of them, in [0, {MAX_BATCH_WINDOW:g}] (0: take each one as it arrives)",
-            ParameterType.PARAMETER_DOUBLE))
+            0.0, MAX_BATCH_WINDOW, read_only=True))
 
     def _read_parameters(self):
         output = self.get_parameter("output").value
