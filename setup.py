@@ -33,10 +33,10 @@ setup(
     entry_points={
         'console_scripts': [
             'grazing = grazing_control.cli.console:main',
-            'sim_node = sim_node.sim_node:main',
-            'controller_node = grazing_control.ros.controller_node:main',
-            'recorder_node = grazing_control.ros.recorder_node:main',
-            'live_node = grazing_control.ros.live_node:main',
+            'sim_node = grazing_control.ros.entry:sim_node',
+            'controller_node = grazing_control.ros.entry:controller_node',
+            'recorder_node = grazing_control.ros.entry:recorder_node',
+            'live_node = grazing_control.ros.entry:live_node',
         ],
     },
 )

@@ -1,7 +1,9 @@
-"""Launch one control scene on a ROS 2 install: sim_node, controller_node, recorder_node.
+"""Launch one control scene on a ROS 2 install: sim_node, controller_node, recorder_node,
+live_node.
 
     ros2 launch grazing_control grazing_control.launch.py                       # study scene
     ros2 launch grazing_control grazing_control.launch.py delta_d:=-9.0e-06 bag:=bags/scene2
+    ros2 launch grazing_control grazing_control.launch.py live:=8765       # + live view
     ros2 launch grazing_control grazing_control.launch.py model:=config/models/two_mass_scene.yaml \
         controller_params:=gains.yaml                                          # n-DOF scene
 
@@ -13,12 +15,13 @@ uses too (one source: the design's actuation delay from ``controller_params``, t
 token, the controller's model of the plant). With ``bag`` set, the recorder records the
 scene there and the simulator waits until it has matched every topic
 (``recorder/ready``). When the simulator exits after ``max_periods`` its scene's
-controller and recorder get SIGINT (the recorder closes its bag) and the launch ends
-once nothing runs: included twice under two namespaces, each scene ends on its own. Any
+controller, recorder and live view get SIGINT (the recorder closes its bag) and the
+launch ends once nothing runs: included twice under two namespaces, each scene ends on its own. Any
 node exiting with a nonzero status stops everything and the launch returns 1.
 ``/clock`` is remapped to ``clock`` (the namespace's own clock) and
-``use_sim_time:=true`` puts the controller and recorder on it. ``model`` runs an n-DOF
-scene of a model file (issue 17; docs/nodes.md, "n-DOF scenes"): both nodes read it, the
+``use_sim_time:=true`` puts the controller and recorder on it. ``live`` starts live_node
+(docs/live.md) on that WebSocket port beside the scene, as ``grazing run --live PORT``;
+the simulator does not wait for it. ``model`` runs an n-DOF scene of a model file (issue 17; docs/nodes.md, "n-DOF scenes"): both nodes read it, the
 controller's parameter file must give its ``gains``, the simulator's file is used without
 its 1-DOF model parameters, and ``delta_d`` left empty is the model file's (the study's
 -5.0e-06 without a model). Machines without
@@ -68,6 +71,11 @@ def generate_launch_description():
                               description="first controlled Pi2 sample"),
         DeclareLaunchArgument("bag", default_value="",
                               description="record to this bag directory ('' = no recording)"),
+        DeclareLaunchArgument("live", default_value="",
+                              description="start live_node (docs/live.md), a live view for "
+                                          "Foxglove/Lichtblick, on this WebSocket port "
+                                          "(0..65535, 0: any free port, logged); '' = none. "
+                                          "As grazing run --live PORT"),
         DeclareLaunchArgument("use_sim_time", default_value="false",
                               description="controller and recorder on the simulator's clock "
                                           "(the scene's own: clock in its namespace)"),
@@ -91,10 +99,10 @@ def _scene(context):
     delta_d = float(arg("delta_d")) if arg("delta_d") else None if model else -5.0e-06
     over = scene_overrides(controller_params, periods=int(arg("max_periods")),
                            delta_d=delta_d, enable_after=int(arg("enable_after")),
-                           bag=bag or None, model=model)
+                           bag=bag or None, model=model, live=_port(arg("live")))
     sim_time = arg("use_sim_time").lower() in ("true", "1", "yes")
     files = {"sim_node": [arg("sim_params")], "controller_node": [controller_params],
-             "recorder_node": []}
+             "recorder_node": [], "live_node": []}
     if model is not None:     # the simulator file's scene settings, not its 1-DOF model
         files["sim_node"] = [sim_values_for_model(arg("sim_params"))]
     nodes = {}
@@ -111,6 +119,20 @@ def _scene(context):
     return list(nodes.values()) + [
         RegisterEventHandler(OnProcessExit(target_action=node, on_exit=ended))
         for node in nodes.values()]
+
+
+def _port(text):
+    """The ``live`` argument: None for '', else a port 0..65535 (ValueError naming it)."""
+    if not text:
+        return None
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise ValueError(f"live:={text} is invalid: valid range is a port 0..65535 "
+                         "(0: any free port) or '' for no live view")
+    return port
 
 
 class NodeFailed(RuntimeError):

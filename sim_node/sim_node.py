@@ -320,43 +320,72 @@ class SimNode(Node):
             self._fail(RuntimeError("the recorder (recorder/ready) has gone: the scene's "
                                     "recording is lost (recorder_node killed?)"))
 
-    def _ready(self) -> bool:
+    def _missing(self) -> list:
+        """What the start still waits for, one phrase per missing peer ([]: ready).
+
+        The conditions (docs/nodes.md, "Start handshake"): with ``wait_for_recorder`` the
+        recorder's ``recorder/ready``; with ``wait_for_controller`` a controller
+        subscribed to the samples (Pi2 or the stream) and publishing corrections and,
+        with a scene token, the parameter record of a controller of this scene; with
+        ``wait_for_subscribers`` n, n subscribers (besides the controller) on every data
+        topic of this scene. A scene that refuses to start (another scene's node, a
+        controller designed for another delay) is :meth:`_check_isolation`'s.
+        """
+        refused = self._intruders() + [why for why in (
+            self.scene.delay_mismatch(self.settings.actuation_delay),) if why]
+        if refused:                          # _check_isolation refuses to start
+            return refused
+        missing = []
         if self.get_parameter("wait_for_recorder").value and not self._recorder_ready:
-            return False
-        if self._intruders() or self.scene.delay_mismatch(self.settings.actuation_delay):
-            return False                   # _check_isolation refuses
+            missing.append(f"the recorder's True on {self.resolve_topic_name(READY_TOPIC)} "
+                           "(recorder_node not running, or not matched to every topic yet)")
         n = self.get_parameter("wait_for_subscribers").value
-        controller = self.get_parameter("wait_for_controller").value
-        samples = max(self.pub_pi2.get_subscription_count(),      # a controller reads
-                      self.pub_state.get_subscription_count())    # Pi2 or the stream
-        if controller and (samples < n + 1 or self.sub_correction.get_publisher_count() < 1
-                           or (self.scene.token and not self.scene.own_controller)):
-            return False
+        if self.get_parameter("wait_for_controller").value:
+            samples = max(self.pub_pi2.get_subscription_count(),    # a controller reads
+                          self.pub_state.get_subscription_count())  # Pi2 or the stream
+            if samples < n + 1:
+                missing.append(f"the controller{f' and {n} recorder(s)' if n else ''} "
+                               f"subscribed to {self.pub_pi2.topic_name} or "
+                               f"{self.pub_state.topic_name} ({samples} subscriber(s) of "
+                               f"{n + 1})")
+            if self.sub_correction.get_publisher_count() < 1:
+                missing.append(f"a controller publishing {self.sub_correction.topic_name}")
+            why = self.scene.missing_controller()
+            if why is not None:
+                missing.append(why)
         if n > 0:
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]
             if self.settings.state_period > 0.0:
                 pubs.append(self.pub_state)
             if self.settings.mode == "realtime":     # the latency of every sample is recorded
                 pubs.append(self.pub_latency)
-            if any(pub.get_subscription_count() < n for pub in pubs):
-                return False
-            if self.count_subscribers("controller/velocity_correction") < n + 1:
-                return False
-        return True
+            for pub in pubs:
+                have = pub.get_subscription_count()
+                if have < n:
+                    missing.append(f"a subscriber of {pub.topic_name} ({have} of {n})")
+            topic = self.sub_correction.topic_name
+            have = self.count_subscribers(topic)
+            if have < n + 1:
+                missing.append(f"a recorder subscribed to {topic} ({have} subscriber(s) of "
+                               f"{n + 1}, this node's own included)")
+        return missing
 
     def _try_start(self) -> None:
         waited = time.monotonic() - self._created
-        if not self._ready():
+        missing = self._missing()
+        if missing:
+            self._ready_since = None
             if waited < self.get_parameter("start_timeout").value:
                 return
             self.get_logger().warning(
-                f"starting after start_timeout={waited:.1f} s without the expected "
-                "controller/subscribers")
+                f"starting after start_timeout={waited:.1f} s without: {'; '.join(missing)}")
         elif self._ready_since is None:
             self._ready_since = time.monotonic()   # let both ends of every match settle
             return
         elif time.monotonic() - self._ready_since < 0.2:
             return
+        else:
+            self.get_logger().info(f"start conditions met after {waited:.1f} s: starting")
         self.destroy_timer(self._start_timer)
         if kernel.use_kernel():   # compile, or load numba's cache, now: not in the first period
             kernel.warm_up()

@@ -28,3 +28,18 @@ def script(name: str) -> Path:
         return Path(found)
     raise FileNotFoundError(f"console script {name!r}: not next to {sys.executable}, not in "
                             f"<AMENT_PREFIX_PATH>/lib/{PACKAGE}/, not on PATH")
+
+
+def startup_seconds(module: str, runs: int = 3) -> float:
+    """Longest of ``runs`` wall times from exec to ``module`` imported, on this machine
+    now: Python's own start comes before any handler of the console script can exist, so
+    a test that signals "right after the start" waits this long first."""
+    import subprocess
+    import time
+
+    times = []
+    for _ in range(runs):
+        t0 = time.monotonic()
+        subprocess.run([sys.executable, "-c", f"import {module}"], check=True)
+        times.append(time.monotonic() - t0)
+    return max(times)

@@ -255,13 +255,14 @@ def test_grazing_run_and_the_launch_file_take_the_nodes_from_one_description(tmp
     design.write_text("/**:\n  ros__parameters:\n    c1: -1.0\n    c2: -1.0\n"
                       "    actuation_delay: 6.0\n")
     res = launcher.run(STUDY, design, tmp_path / "bag", 50, delta_d=-9e-6, enable_after=10,
-                       domain_id=new_domain())
-    assert res.sim == res.controller == res.recorder == 0
+                       domain_id=new_domain(), live=0)
+    assert res.sim == res.controller == res.recorder == res.live == 0
     want = scene_nodes.scene_overrides(design, periods=50, delta_d=-9e-6, enable_after=10,
-                                       bag=tmp_path / "bag", token="tok")
-    assert started == [(launcher.RECORDER_MODULE, want["recorder_node"]),
-                       (launcher.CONTROLLER_MODULE, want["controller_node"]),
-                       (launcher.SIM_MODULE, want["sim_node"])]
+                                       bag=tmp_path / "bag", token="tok", live=0)
+    modules = {"sim_node": launcher.SIM_MODULE, "controller_node": launcher.CONTROLLER_MODULE,
+               "recorder_node": launcher.RECORDER_MODULE, "live_node": launcher.LIVE_MODULE}
+    assert started == [(modules[n], want[n]) for n in scene_nodes.NODES]
+    assert want["live_node"] == {"port": 0}
     assert want["sim_node"]["actuation_delay"] == 6.0 and want["controller_node"]["scene"] \
         == want["sim_node"]["scene"] == "tok"
     # the launch file: nodes from scene_overrides over NODES, no parameter names of its own
@@ -274,6 +275,65 @@ def test_grazing_run_and_the_launch_file_take_the_nodes_from_one_description(tmp
                 and isinstance(n.value, str)}
     arguments = {n.args[0].value for n in ast.walk(tree) if isinstance(n, ast.Call)
                  and getattr(n.func, "id", "") == "DeclareLaunchArgument"}
-    assert {"delta_d", "max_periods", "enable_after", "bag", "controller_params"} <= arguments
+    assert {"delta_d", "max_periods", "enable_after", "bag", "controller_params",
+            "live"} <= arguments          # live:= as grazing run --live (issue 27 §2)
     every = set().union(*(set(v) for v in want.values() if v))
     assert not (every & (literals - arguments)), every & (literals - arguments)
+
+
+# ------------------------------------------------------------ the real launch file
+#: Two scenes of launch/grazing_control.launch.py included in one LaunchService under
+#: the namespaces a and b, each recording (argv: the output folder, periods).
+TWO_SCENES = """
+import os, sys
+from launch import LaunchDescription, LaunchService
+from launch.actions import GroupAction, IncludeLaunchDescription
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch_ros.actions import PushRosNamespace
+out, periods, src = sys.argv[1], sys.argv[2], sys.argv[3]
+ls = LaunchService()
+ls.include_launch_description(LaunchDescription([GroupAction([
+    PushRosNamespace(ns), IncludeLaunchDescription(PythonLaunchDescriptionSource(src),
+        launch_arguments={"max_periods": periods, "bag": os.path.join(out, ns)}.items())])
+    for ns in ("a", "b")]))
+print("launch status", ls.run(), flush=True)
+"""
+
+
+def _ament_prefix(root) -> str:
+    """A minimal ament prefix of this checkout: the package's marker, share/ (config and
+    launch linked to the source tree) and lib/grazing_control/ (the console scripts)."""
+    from console_scripts import script
+
+    (root / "share/ament_index/resource_index/packages").mkdir(parents=True)
+    (root / "share/ament_index/resource_index/packages/grazing_control").touch()
+    (root / "share/grazing_control").mkdir()
+    for folder in ("config", "launch"):
+        (root / "share/grazing_control" / folder).symlink_to(ROOT / folder)
+    (root / "lib/grazing_control").mkdir(parents=True)
+    for name in ("sim_node", "controller_node", "recorder_node", "live_node"):
+        (root / "lib/grazing_control" / name).symlink_to(script(name))
+    return str(root)
+
+
+def test_two_scenes_included_in_one_launch_both_start_at_once(tmp_path):
+    """ros2 launch with the launch file included twice (namespaces a and b, bags): both
+    scenes start when their peers are matched, neither waits its start_timeout (scene a
+    did, 3 of 3 runs, issue 27 §2: the simulator's depth-1 reader of the parameter
+    records lost its controller's record), and each bag holds its scene. Needs launch
+    and launch_ros (a ROS install, or docs/ros_build.md §4)."""
+    pytest.importorskip("launch_ros", reason="launch_ros is not installed (no ROS install; "
+                        "docs/ros_build.md §4 installs it from source)")
+    env = dict(launcher.node_env(new_domain()))
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join(filter(None, [
+        _ament_prefix(tmp_path / "prefix"), env.get("AMENT_PREFIX_PATH")]))
+    done = subprocess.run([sys.executable, "-c", TWO_SCENES, str(tmp_path), "40",
+                           str(ROOT / "launch" / "grazing_control.launch.py")], env=env,
+                          capture_output=True, text=True, timeout=240)
+    out = done.stdout + done.stderr
+    assert "launch status 0" in out, out[-4000:]
+    assert "start_timeout" not in out and out.count("start conditions met after") == 2, out
+    for ns in ("a", "b"):
+        counts = Counter(m.topic for m in read_messages(tmp_path / ns))
+        assert counts[f"/{ns}/oscillator/pi2"] == 40, (ns, counts)
+        assert counts[f"/{ns}/controller/velocity_correction"] == 40, (ns, counts)

@@ -301,6 +301,25 @@ def test_the_shipped_layout_plots_fields_that_exist_on_the_channels_the_node_ser
                 assert getattr(value, "typecode", None) == "d", path
                 value = 0.0
         assert isinstance(value, float), path
+    # the node's --help says which time the layout plots (it said header stamps while
+    # every path used reception time, issue 27 §2): reception time, the one time every
+    # topic has (oscillator/latency, a Float64, has no header stamp)
+    methods = []
+    stack = [layout["configById"]]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, dict):
+            methods += [v for k, v in node.items() if k == "timestampMethod"]
+            stack += list(node.values())
+        elif isinstance(node, list):
+            stack += node
+    assert len(methods) >= len(paths) and set(methods) == {"receiveTime"}, methods
+    from grazing_control.ros import live_node
+
+    usage = " ".join(live_node.__doc__.split())
+    assert "the shipped layout (config/live_layout.json, docs/live.md) plots against it" \
+        in usage and "header stamp is the simulation time" in usage, usage
+    assert "which the shipped layout plots against" not in usage
 
 
 # --------------------------------------------------------------------- a real scene

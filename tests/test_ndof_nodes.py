@@ -183,7 +183,7 @@ def test_the_launch_file_runs_an_n_dof_scene_from_the_same_description(tmp_path,
 
     args = {"sim_params": str(ROOT / "config" / "study.yaml"), "controller_params": "",
             "delta_d": "", "model": str(CHAIN), "max_periods": "50", "enable_after": "10",
-            "bag": "", "use_sim_time": "false"}
+            "bag": "", "use_sim_time": "false", "live": ""}
     gains = tmp_path / "gains.yaml"
     model = load_model(CHAIN)
     write_gain_yaml(gains, model, evaluate_design(model, MU), CHAIN)
@@ -222,6 +222,15 @@ def test_the_launch_file_runs_an_n_dof_scene_from_the_same_description(tmp_path,
     ns["_scene"](None)
     sim = {n["name"]: n["parameters"] for n in nodes}["sim_node"][1]
     assert sim["model_file"] == str(CHAIN) and sim["delta_d"] == -3e-6
+    args["live"] = "0"              # live:= as grazing run --live (issue 27 §2)
+    nodes.clear()
+    ns["_scene"](None)
+    live = {n["name"]: n for n in nodes}["live_node"]
+    assert live["executable"] == "live_node" and live["parameters"] == [
+        {"port": 0, "use_sim_time": False}]
+    args["live"] = "70000"
+    with pytest.raises(ValueError, match="live:=70000 is invalid: valid range is a port"):
+        ns["_scene"](None)
 
 
 def test_a_realtime_n_dof_scene_with_scheduled_kicks_is_the_engines_period_loop(tmp_path):

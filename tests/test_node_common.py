@@ -168,6 +168,39 @@ def test_a_signal_during_a_realtime_scene_ends_it_quietly(signum):
         assert "(interrupted)" in out and "FATAL" not in out and "Error occurred" not in out, out
 
 
+@pytest.fixture(scope="module")
+def entry_startup():
+    """Seconds from exec to the node entry module (grazing_control.ros.entry)."""
+    from console_scripts import startup_seconds
+
+    return startup_seconds("grazing_control.ros.entry")
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.05, 0.3])
+def test_ctrl_c_while_a_node_imports_is_quiet(delay, entry_startup):
+    """SIGINT right after the ``sim_node`` console script started, while it still imports
+    rclpy and the layers below (``ros2 launch`` stopped while its nodes start): status 0
+    and no traceback (issue 27 §2: the console script imported the node module before
+    any handler existed, a KeyboardInterrupt traceback and status 1)."""
+    import signal as signals
+
+    from console_scripts import script
+
+    proc = subprocess.Popen([str(script("sim_node")), "--ros-args", "-p",
+                             "wait_for_controller:=false", "-p", "max_periods:=0"],
+                            env=launcher.node_env(new_domain()), text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        time.sleep(entry_startup + delay)
+        proc.send_signal(signals.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, out
+    assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
+
+
 def test_security_enforced_without_the_plugins_is_refused(tmp_path):
     """SROS2 (docs/nodes.md, 'Who may talk to a scene'): the wheels' Fast DDS has no
     security plugins, so a node asked to enforce security refuses to start with one line

@@ -576,11 +576,14 @@ def test_scheduling_options_warn_where_refused_and_bad_ones_stop_the_start(node_
     assert "cpu_affinity='zero' is invalid" in lines[0]
 
 
-def test_a_simulator_refuses_a_controller_designed_for_another_delay(tmp_path):
+def test_a_controller_designed_for_another_delay_is_refused_and_a_restart_accepted(tmp_path):
     """The gains are designed for one actuation delay (docs/theory_delay.md): a controller
     whose parameter record says actuation_delay=3.0 and a simulator applying 0.0 (the
     launch file once gave the simulator no delay) make the simulator refuse to start,
-    naming both and the fix, with status 1; the same delay on both starts the scene."""
+    naming both and the fix, with status 1; the same delay on both starts the scene,
+    and a simulator restarted against the same controller runs too."""
+    import time
+
     root = Path(__file__).resolve().parents[1]
     for sim_delay, expect in ((0.0, 1), (3.0, 0)):
         domain = new_domain()
@@ -602,6 +605,28 @@ def test_a_simulator_refuses_a_controller_designed_for_another_delay(tmp_path):
                 assert "-p actuation_delay:=3.0" in text and "Traceback" not in text
             else:
                 assert "summary: periods=30 " in text, text
+                # a simulator restarted 1 s after the first exited (issue 27 §2): the
+                # first left the graph on exit, so the controller accepts the second
+                # (it counted the exited one's publisher for the 20 s of its lease:
+                # "2 publishers on /oscillator/pi2 ... not isolated", status 1); the
+                # second lacks a recorder and says which peers it started without
+                time.sleep(1.0)
+                again = launcher.start_node(
+                    launcher.SIM_MODULE, [STUDY], {
+                        "max_periods": 30, "exit_when_done": True, "actuation_delay": 3.0,
+                        "wait_for_recorder": True, "wait_for_subscribers": 1,
+                        "start_timeout": 2.0}, domain_id=domain, log=tmp_path / "again.log")
+                procs.append(again)
+                assert again.wait(60) == 0, (tmp_path / "again.log").read_text()
+                text = (tmp_path / "again.log").read_text()
+                assert "summary: periods=30 " in text, text
+                assert re.search(r"starting after start_timeout=2\.\d s without: the "
+                                 r"recorder's True on /recorder/ready .*; the controller and "
+                                 r"1 recorder\(s\) subscribed to /oscillator/pi2 or "
+                                 r"/oscillator/state \(1 subscriber\(s\) of 2\); a subscriber "
+                                 r"of /oscillator/impact \(0 of 1\)", text), text
+                assert procs[0].poll() is None, (tmp_path / "ctl.log").read_text()
+                assert "not isolated" not in (tmp_path / "ctl.log").read_text()
         finally:
             launcher.stop_nodes(procs)
 
@@ -616,3 +641,51 @@ def test_the_design_delay_is_read_from_the_controller_parameter_file(tmp_path):
     assert launcher.design_delay(str(f)) is None
     assert launcher.design_delay(str(tmp_path / "missing.yaml")) is None
     assert launcher.design_delay({"actuation_delay": 2}) == 2.0
+
+
+def test_the_scene_guard_keeps_every_latched_record_not_only_the_last():
+    """The start handshake's record condition (issue 27 §1: scenes waited their whole
+    start_timeout). The simulator publishes its own parameter record before its guard
+    subscribes; the guard's reader then gets that record and the controller's from the
+    writers' histories. At depth 1 the one delivered last replaced the other before the
+    executor took it (a loaded machine: the executor busy), so the controller's record
+    was read by the middleware and never by the guard. Here the executor takes nothing
+    until both records are in, as under load: the guard must still see its controller,
+    and a guard of another scene names every record it read."""
+    import time
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from grazing_control.ros.common import publish_parameter_record
+    from grazing_control.ros.scene import SceneGuard
+
+    context = Context()
+    rclpy.init(context=context, domain_id=new_domain())
+    try:
+        def node(name, **params):
+            return rclpy.create_node(
+                name, context=context, automatically_declare_parameters_from_overrides=True,
+                parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+        publish_parameter_record(node("controller_node", scene="T", c2=-1.0))
+        sim = node("sim_node", scene="T")
+        publish_parameter_record(sim)          # as sim_node: its own record first
+        guard, other = SceneGuard(sim, "T"), SceneGuard(sim, "U")
+        record = next(s for s in sim.subscriptions if s.topic_name.endswith("parameters"))
+        end = time.monotonic() + 20
+        while record.get_publisher_count() < 2 and time.monotonic() < end:
+            time.sleep(0.05)
+        time.sleep(0.5)                        # both histories delivered, nothing taken
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(sim)
+        while len(other.seen) < 2 and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.1)
+        assert guard.own_controller and guard.missing_controller() is None, guard.seen
+        assert other.missing_controller() == (
+            "the parameter record of a controller of this scene (scene U) on "
+            "/grazing/parameters; records read: /controller_node (scene T), "
+            "/sim_node (scene T)")
+    finally:
+        context.try_shutdown()

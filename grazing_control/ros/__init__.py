@@ -8,7 +8,8 @@ the nodes share (QoS, descriptors, the spin loop), :mod:`.cdr` the packed messag
 :mod:`.launcher` starts a scene as processes, :mod:`.recording` writes and reads
 rosbag2-style MCAP bags, :mod:`.live_node` serves a scene to Foxglove/Lichtblick,
 :mod:`.scene` tells a scene's nodes from another's (the scene token),
-:mod:`.scheduling` applies the real-time scheduling options.
+:mod:`.scheduling` applies the real-time scheduling options, :mod:`.entry` holds the
+executables' entry points (quiet on a Ctrl-C while a node imports).
 
 May import: :mod:`grazing_control.plant` and below.
 """

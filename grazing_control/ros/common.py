@@ -15,7 +15,9 @@ second, faster than a recorder takes them; the history holds them until it does 
 memory is used only while a reader lags). The nodes' own subscriptions use
 :data:`DATA_QOS` (reliable, keep last 1000): they need only the newest samples.
 :data:`LATCHED_QOS` (reliable, transient local, depth 1) is for ``oscillator/done``, so
-that a late subscriber still learns that the scene has finished.
+that a late subscriber still learns that the scene has finished. A reader of a latched
+topic with several writers (the parameter records) uses :data:`RECORDS_QOS` (depth
+1000): a reader's depth counts every writer's samples together.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import os
 import re
 import signal
 import sys
+import threading
 import time
 import warnings
 from typing import NamedTuple
@@ -52,8 +55,11 @@ __all__ = [
     "READY_TOPIC",
     "REPLAY_QOS",
     "LATCHED_QOS",
+    "RECORDS_QOS",
     "NodeArguments",
     "publish_parameter_record",
+    "fast_exit_process",
+    "leave_graph",
     "StartupError",
     "Throttled",
     "bool_descriptor",
@@ -95,6 +101,16 @@ REPLAY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
 
 #: Reliable, transient local, depth 1: ``oscillator/done``.
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: Reliable, transient local, keep last 1000: a reader of a latched topic that several
+#: nodes publish (the parameter records, ``grazing/parameters``). A reader's depth bounds
+#: the samples of *all* writers together (the topic has no key): at depth 1, the record
+#: of the simulator itself, arriving after its controller's and before the executor took
+#: it, replaced the controller's, and the simulator waited its whole start_timeout for a
+#: record it had received (issue 27, docs/nodes.md "Start handshake").
+RECORDS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -581,7 +597,7 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
     args = list(sys.argv if args is None else args)
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
-    node = None
+    node = executor = None
     code = 0
     try:
         arguments = init_ros(args, name)
@@ -620,17 +636,57 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
                 node.on_exit()
             code = code or int(getattr(node, "exit_code", 0))
     # Reached when nothing escaped. The summary is logged and every reliable reader has
-    # acknowledged (the nodes' spin_until / on_exit): leave now. Destroying the node, the
-    # DDS participant and the interpreter (the collection of every history) took up to
-    # 30 s under CPU starvation, past the launcher's grace (issue 21).
+    # acknowledged (the nodes' spin_until / on_exit): leave the graph, then end the
+    # process without tearing the interpreter down (issue 21: that took up to 30 s under
+    # CPU starvation, past the launcher's grace).
     if fast_exit:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
+        fast_exit_process(code, node, executor)
     if node is not None:
         node.destroy_node()
     rclpy.try_shutdown()
     return code
+
+
+#: Wall seconds an exiting node waits for its node and DDS participant to be destroyed
+#: (:func:`leave_graph`) before it ends the process all the same.
+LEAVE_TIMEOUT = 3.0
+
+
+def leave_graph(node, executor=None, timeout: float = LEAVE_TIMEOUT) -> bool:
+    """Destroy ``node`` and shut its context down, so that the peers see it leave at once.
+
+    Destroying the last node of a context deletes the context's DDS participant, which
+    announces its endpoints' and its own removal. A process that ends through
+    ``os._exit`` without it stays in every peer's graph until its participant's lease
+    runs out (Fast DDS: 20 s): a controller then counted the exited simulator's
+    publisher and a restarted one's, called the scene "not isolated" and exited 1
+    (issue 27 §2). Runs in a daemon thread, waited for ``timeout`` s at most, so that a
+    starved machine still ends the process in time (the caller exits either way).
+    Returns whether the teardown finished.
+    """
+    def teardown():
+        try:
+            if executor is not None:
+                executor.remove_node(node)
+            node.destroy_node()
+            rclpy.try_shutdown(context=node.context)
+        except Exception:  # noqa: BLE001 - leaving anyway: the lease ends what is left
+            pass
+
+    worker = threading.Thread(target=teardown, name="leave_graph", daemon=True)
+    worker.start()
+    worker.join(timeout)
+    return not worker.is_alive()
+
+
+def fast_exit_process(code: int, node=None, executor=None) -> None:
+    """End a node's process with status ``code``: leave the graph (:func:`leave_graph`),
+    flush the output, ``os._exit``."""
+    if node is not None:
+        leave_graph(node, executor)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 # ------------------------------------------------------------- parameters at runtime

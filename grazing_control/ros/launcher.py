@@ -433,7 +433,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                            enable_after=enable_after, mode=mode,
                            bag=bag_dir if record else None, sim_overrides=sim_overrides,
                            controller_overrides=controller_overrides,
-                           recorder_overrides=recorder_overrides, model=model)
+                           recorder_overrides=recorder_overrides, model=model, live=live)
     sim_over, controller_overrides = over["sim_node"], over["controller_node"]
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
@@ -456,7 +456,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                     RECORDER_MODULE, (), over["recorder_node"], domain_id=domain_id,
                     log=logs.get("recorder_node"), python=python)
             if live is not None:
-                procs["live_node"] = start_node(LIVE_MODULE, (), {"port": int(live)},
+                procs["live_node"] = start_node(LIVE_MODULE, (), over["live_node"],
                                                 domain_id=domain_id, log=logs.get("live_node"),
                                                 python=python)
             procs["controller_node"] = start_node(

@@ -8,9 +8,11 @@ channel: topic = the fully qualified ROS name, ``encoding`` ``cdr``, ``schemaEnc
 ``ros2msg``, ``schemaName`` ``pkg/msg/Type`` and ``schema`` the ``.msg`` definition with
 its nested types, exactly as rosbag2 stores it in an MCAP bag
 (:func:`grazing_control.ros.recording.message_definition`). A message's timestamp is its
-reception time (ns since the Unix epoch); its header stamp is the simulation time
-(docs/nodes.md, "Units and time"), which the shipped layout plots against
-(config/live_layout.json, docs/live.md).
+reception time (ns since the Unix epoch), and the shipped layout (config/live_layout.json,
+docs/live.md) plots against it: it is the one time every topic has (``oscillator/latency``
+is a std_msgs/Float64 without a header), and in realtime it is the simulation time divided
+by ``time_scale``. The header stamp is the simulation time (docs/nodes.md, "Units and
+time"): a Raw Messages panel shows it.
 
 What it forwards by default (names relative to the node's namespace; docs/nodes.md):
 

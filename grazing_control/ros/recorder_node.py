@@ -95,7 +95,6 @@ Run: ``ros2 run grazing_control recorder_node --ros-args -p output:=bags/run1``
 """
 
 import importlib
-import os
 import signal
 import sys
 import time
@@ -114,7 +113,8 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
 from std_msgs.msg import Bool
 
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
-                     check_overrides, float_descriptor, init_ros, int_descriptor,
+                     check_overrides, fast_exit_process, float_descriptor, init_ros,
+                     int_descriptor,
                      string_descriptor, usage)
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
@@ -600,7 +600,7 @@ def main(args=None):
     stop = SignalStop()
     _stop_on_signals(stop)
     status = 0
-    node = None
+    node = executor = None
     try:
         arguments = init_ros(args, "recorder_node")
         if arguments is None:
@@ -629,12 +629,10 @@ def main(args=None):
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
             status = node.close() or status
-    # The bag is closed and its summary logged: leave now. Tearing the node, the DDS
-    # participant and the interpreter down (GC of every history) took up to 30 s under
-    # CPU starvation, past the launcher's grace (issue 21: a complete bag, then SIGKILL).
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(status)
+    # The bag is closed and its summary logged: leave the graph and end the process.
+    # Tearing the interpreter down (GC of every history) took up to 30 s under CPU
+    # starvation, past the launcher's grace (issue 21: a complete bag, then SIGKILL).
+    fast_exit_process(status, node, executor)
 
 if __name__ == "__main__":
     sys.exit(main())

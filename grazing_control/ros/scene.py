@@ -10,6 +10,12 @@ names its scene: the simulator starts only once the record of a controller of it
 scene has arrived, and a record of another scene is an intruder (the scene is not
 isolated: refused, as for two simulators on one topic). An empty token (``ros2 run``)
 checks nothing.
+
+The records are read with :data:`~grazing_control.ros.common.RECORDS_QOS` (keep last
+1000), not the writers' depth 1: a reader's depth holds the samples of every writer
+together, and at depth 1 the simulator's own record, delivered after its controller's,
+replaced it before the executor took it; the simulator then waited its whole
+start_timeout (5 of 6 loaded scenes, issue 27; docs/nodes.md, "Start handshake").
 """
 
 from __future__ import annotations
@@ -18,7 +24,7 @@ from std_msgs.msg import String
 
 from grazing_control.ros.recording.record import TOPIC, decode
 
-from .common import LATCHED_QOS
+from .common import RECORDS_QOS
 
 __all__ = ["SceneGuard", "SCENE_PARAMETER_DOC"]
 
@@ -34,10 +40,15 @@ class SceneGuard:
         self.token = token
         self.own_controller = False
         self.foreign = set()                # "node (scene token)" of other scenes
+        #: node name -> its scene token ('' without one), of every record read: what the
+        #: start wait names when this scene's controller is missing
+        self.seen = {}
         #: node name -> the actuation_delay its gains were designed for, from the records
         #: of this scene's controllers (any controller's when there is no token)
         self.controller_delays = {}
-        node.create_subscription(String, TOPIC, self._on_record, LATCHED_QOS)
+        self.topic = node.resolve_topic_name(TOPIC)
+        # every node's latched record, not only the last to arrive (RECORDS_QOS)
+        node.create_subscription(String, TOPIC, self._on_record, RECORDS_QOS)
 
     def _on_record(self, msg) -> None:
         try:
@@ -45,6 +56,8 @@ class SceneGuard:
         except (ValueError, TypeError, RecursionError):
             return
         other = params.get("scene") if isinstance(params, dict) else None
+        if len(self.seen) < 32 or str(name) in self.seen:    # bounded: names are anyone's
+            self.seen[str(name)] = other if isinstance(other, str) else ""
         if self.token and isinstance(other, str) and other and other != self.token:
             self.foreign.add(f"{name} (scene {other})")
             return
@@ -66,6 +79,15 @@ class SceneGuard:
                         f"actuation_delay={delay!r}: give both nodes the same delay (the "
                         f"controller's parameter file, or -p actuation_delay:={d!r})")
         return None
+
+    def missing_controller(self) -> str | None:
+        """What the start still waits for from the records, or None: with a token, the
+        record of a controller of this scene (naming the records read so far)."""
+        if not self.token or self.own_controller:
+            return None
+        seen = ", ".join(f"{n} (scene {t or 'none'})" for n, t in sorted(self.seen.items()))
+        return (f"the parameter record of a controller of this scene (scene {self.token}) on "
+                f"{self.topic}; records read: {seen or 'none'}")
 
     def intruders(self) -> list:
         """One line per node of another scene seen on the domain."""

@@ -17,8 +17,9 @@ __all__ = ["NODES", "scene_overrides", "design_delay", "design_model", "new_toke
            "sim_values_for_model"]
 
 #: The scene's nodes in start order (the recorder first, so that it matches every topic
-#: before the simulator starts; the simulator last).
-NODES = ("recorder_node", "controller_node", "sim_node")
+#: before the simulator starts; the live view, which nothing waits for; the simulator
+#: last).
+NODES = ("recorder_node", "live_node", "controller_node", "sim_node")
 
 
 def design_delay(controller_params):
@@ -83,8 +84,10 @@ def new_token() -> str:
 
 def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
                     mode=None, bag=None, token=None, sim_overrides=None,
-                    controller_overrides=None, recorder_overrides=None, model=None) -> dict:
-    """Node name -> its ``-p key:=value`` overrides (recorder: None without ``bag``).
+                    controller_overrides=None, recorder_overrides=None, model=None,
+                    live=None) -> dict:
+    """Node name -> its ``-p key:=value`` overrides (recorder: None without ``bag``; live
+    view: None without ``live``).
 
     - sim_node: exits when done, waits for its controller (and, recording, for the
       recorder's ``recorder/ready`` and one subscriber per topic), ``max_periods``,
@@ -94,6 +97,7 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       ``state_period`` when the simulator's are set (its estimator's model); answers
       after the section in realtime;
     - recorder_node: ``output`` = bag, ``require_complete``;
+    - live_node (docs/live.md): ``port`` = live (0..65535; 0: any free port, logged);
     - both simulator and controller: the scene token; with ``model`` (an n-DOF model
       file, issue 17) its path as ``model_file``.
     """
@@ -126,4 +130,5 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     if bag is not None:
         recorder = {"output": os.fspath(bag), "require_complete": True}
         recorder.update(recorder_overrides or {})
-    return {"sim_node": sim, "controller_node": controller, "recorder_node": recorder}
+    return {"sim_node": sim, "controller_node": controller, "recorder_node": recorder,
+            "live_node": None if live is None else {"port": int(live)}}
