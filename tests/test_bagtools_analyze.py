@@ -486,3 +486,35 @@ def test_a_pulse_scene_is_compared_with_the_pulse_orbit(tmp_path):
     assert n["measured_spread"] == pytest.approx(np.sqrt(np.mean((x - limit) ** 2)), rel=1e-6)
     about_kick = np.sqrt(np.mean((x - kick[0]) ** 2))
     assert about_kick > 1.1 * n["measured_spread"]
+
+
+def test_a_lost_correction_is_a_named_problem(tmp_path, capsys):
+    """Issue 27: a bag without the corrections of its last 50 samples (the recorder
+    stopped before it had them) showed `missing: 50` and a model-check departure but no
+    problem. Now each is a problem, and so is the controller's published record saying
+    it published 50 more than the bag holds; the complete bag has none."""
+    from grazing_control.recordings.analyze import analyze
+
+    msgs, scene = scene_messages(BAGS / "scene_9e-6")
+    n = len(scene.t)
+    lost = {int(round(t * 1e9)) for t in scene.t[-50:]}
+    published = ("/grazing/published", "std_msgs/msg/String", 0, string(
+        record.encode_published("/controller_node", {"/controller/velocity_correction": n})))
+    complete = write_rosbags(tmp_path / "complete", [published] + msgs)
+    kept = [m for m in msgs if not (m[0] == "/controller/velocity_correction"
+                                    and m[3].header.stamp.sec * 10**9
+                                    + m[3].header.stamp.nanosec in lost)]
+    assert len(msgs) - len(kept) == 50
+    bag = write_rosbags(tmp_path / "lossy", [published] + kept)
+
+    assert analyze([complete], tmp_path / "out", figures=False)["bags"][0]["problems"] == []
+    rep = analyze([bag], tmp_path / "out", figures=False)["bags"][0]
+    problems = "\n".join(rep["problems"])
+    assert f"50 of {n} samples have no recorded correction (samples {n - 50}–{n - 1})" \
+        in problems
+    assert "the model check departs" in problems
+    assert (f"/controller/velocity_correction: 50 of the {n} messages controller_node "
+            "published are not in the bag") in problems
+    code, out, _ = run_cli(["analyze", str(bag), "--no-figures", "--out",
+                            str(tmp_path / "cli")], capsys)
+    assert code == 0 and "no recorded correction" in out

@@ -18,7 +18,8 @@ import numpy as np
 from grazing_control.support.arguments import finite, positive
 from . import reader
 from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
-from .numbers import controlled_orbit, resolve_setup, scene_numbers, section_phase_problems
+from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
+                      section_phase_problems)
 from .scenes import load, parse_topic_options
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
@@ -407,6 +408,14 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
             continue
         setup = resolve_setup(data, options)
         data.problems.extend(section_phase_problems(data, setup))
+        estimates = read_estimates(bag)
+        numbers = []
+        for sd in data.scenes:
+            n = scene_numbers(sd, setup, tol)
+            if estimates is not None:
+                n["estimate"] = estimate_numbers(estimates, sd, setup)
+            data.problems.extend(scene_problems(sd, setup, n))
+            numbers.append(n)
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
@@ -437,11 +446,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
         lines.append("")
-        estimates = read_estimates(bag)
-        for sd in data.scenes:
-            n = scene_numbers(sd, setup, tol)
-            if estimates is not None:
-                n["estimate"] = estimate_numbers(estimates, sd, setup)
+        for sd, n in zip(data.scenes, numbers):
             slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
             fig_name = f"{slabel.replace(' ', '_')}.png"
             if out is not None and figures:
