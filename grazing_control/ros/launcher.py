@@ -511,8 +511,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 # in this order: a node that stops says what it published and waits for
                 # the recorder's acknowledgements; the recorder closes after them
                 stop_nodes([procs["sim_node"]])
-                stop_nodes([procs["controller_node"], procs["live_node"]])
-                stop_nodes([procs["recorder_node"]])
+                stop_nodes([procs["controller_node"]])
+                stop_nodes([procs["recorder_node"], procs["live_node"]])
             except KeyboardInterrupt:
                 interrupted = True
                 stop_nodes(list(procs.values()), grace=2.0)

@@ -19,6 +19,9 @@ What it records by default (names relative to the node's namespace):
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
     realtime, scheduled actuation: a sample whose correction missed its actuation
     time (docs/nodes.md, "Scheduled actuation").
+``grazing/parameters``, ``grazing/published`` (std_msgs/msg/String)
+    the nodes' parameter records, and their published records: what each published,
+    sent when it stops (below).
 
 Each message is stored as the serialized CDR bytes the middleware delivered
 (a ``raw=True`` subscription): nothing is deserialized on the way. The bag
@@ -52,6 +55,19 @@ the match or lost on the way are reported as ``missed`` in a warning, and with
 sent cannot be checked (their sequences interleave) and is named in a warning; a silent
 second publisher does not stop the check.
 
+The tail (issue 27): each node of the package publishes, when it stops, how many
+messages it published per topic (``grazing/published``, grazing_control/ros/published.py).
+Once stopped, the recorder keeps taking messages until every node that sent a parameter
+record has sent that record and every count is recorded (``close_timeout`` seconds at
+most); what is still missing counts as missed, and a node that never sent its record
+leaves its tail unchecked (incomplete too, with ``require_complete``). The closed record
+in ``metadata.yaml`` carries ``recorder_status``, ``recorder_received`` and
+``recorder_missed`` ("topic n, ..."), which ``grazing run`` reports.
+
+Diagnostics: one ``diagnostic_msgs/DiagnosticArray`` per second on ``/diagnostics``,
+status ``recorder_node: recording`` with the messages received, written, dropped (after
+a failed write) and missed; WARN on a miss, ERROR after a failed write.
+
 QoS: the package's own topics (those above and ``grazing/parameters``,
 ``oscillator/latency``) are subscribed reliably whatever else is offered: a best-effort
 publisher on them (a bystander) is not matched and is named in a warning, so it cannot
@@ -73,6 +89,8 @@ Parameters (all read-only):
     Exit with status 1 when messages were missed (see above).
 ``adapt_qos`` (bool, false)
     ros2 bag's QoS rule for the package's own topics too (see QoS above).
+``close_timeout`` (double, seconds, 5.0; range [0, 60])
+    Once stopped, how long to wait for the messages the nodes said they published.
 ``batch_window`` (double, seconds, 0.001; range [0, 0.1])
     After each wake-up the recorder waits this long and then takes every message
     queued on every topic: one wake-up records a batch instead of one message, which
@@ -83,7 +101,8 @@ Parameters (all read-only):
     later; 0 takes each message as it arrives).
 
 On SIGINT or SIGTERM the node stops spinning, takes every message already
-received by the middleware, finishes the MCAP file, writes ``metadata.yaml``
+received by the middleware and what the nodes said they published (up to
+``close_timeout``), finishes the MCAP file, writes ``metadata.yaml``
 and logs the message count per topic; it exits with status 0. A bad parameter
 or argument is logged in one line and the process exits with status 2. A write
 that fails (disk full, file too large) stops the recording with one error line and
@@ -114,7 +133,8 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
 from std_msgs.msg import Bool
 
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
-                     check_overrides, init_ros, int_descriptor, string_descriptor, usage)
+                     check_overrides, float_descriptor, init_ros, int_descriptor,
+                     string_descriptor, usage)
 from .diagnostics import OK, ERROR, WARN, Updater
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
@@ -122,7 +142,8 @@ from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_def
                         qos_profile_dict)
 from .recording import record as records
 
-__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "READY_TOPIC", "RECORDER_QOS",
+__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "PUBLISHED_TOPIC",
+           "READY_TOPIC", "RECORDER_QOS",
            "RecorderNode", "adapted_qos", "main", "parse_topics"]
 
 #: Topics recorded by default (relative names) and their types.
@@ -389,10 +410,10 @@ class RecorderNode(Node):
         self.declare_parameter("adapt_qos", False, read_only(
             "subscribe to the package's own topics with ros2 bag's adapted QoS too (default: "
             "reliable, a best-effort publisher is left out)", ParameterType.PARAMETER_BOOL))
-        self.declare_parameter("close_timeout", DEFAULT_CLOSE_TIMEOUT, read_only(
+        self.declare_parameter("close_timeout", DEFAULT_CLOSE_TIMEOUT, float_descriptor(
             f"wall seconds the recorder waits, once stopped, for the messages the nodes said "
             f"they published (grazing/published), in [0, {MAX_CLOSE_TIMEOUT:g}]",
-            ParameterType.PARAMETER_DOUBLE))
+            0.0, MAX_CLOSE_TIMEOUT, read_only=True))
         self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, read_only(
             f"seconds the recorder lets messages gather after each wake-up before taking "
             f"all of them, in [0, {MAX_BATCH_WINDOW:g}] (0: take each one as it arrives)",
@@ -636,16 +657,20 @@ class RecorderNode(Node):
                 self.bag.add_topic(topic, kind, self._offered.get(topic)
                                    or [qos_to_dict(RECORDER_QOS)])
         missed = self.missed()
-        status = 1 if missed and self.require_complete else 0
+        unannounced = self.unannounced()
+        # a node that never said what it published (killed, or its record lost with it)
+        # leaves the tail of its topics unchecked: not complete either
+        status = 1 if (missed or unannounced) and self.require_complete else 0
         # The closed record: metadata.yaml, written last and atomically, carries the
         # status, so the launcher reads success from the bag itself, not from how fast
         # the process ends afterwards (issue 21 section 6), and what was missed, so that
         # it can name the loss (issue 27).
         self.bag.custom_data["recorder_status"] = str(status)
         self.bag.custom_data["recorder_received"] = str(self.received)
-        if missed:
+        if missed or unannounced:
             self.bag.custom_data["recorder_missed"] = ", ".join(
-                f"{t} {n}" for t, n in sorted(missed.items()))
+                [f"{t} {n}" for t, n in sorted(missed.items())]
+                + [f"{node}'s tail (no published record)" for node in unannounced])
         try:            # the last status, with the final counts
             self.diagnostics.update()
         except Exception:
@@ -660,15 +685,14 @@ class RecorderNode(Node):
         if info:
             counts = ", ".join(f"{name} {n}" for name, n in self.bag.message_counts.items())
             log.info(f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
-        # the parameter record has one publisher per node by design (depth 1, latched):
-        # not a loss check's business, and not worth a warning
+        # the parameter and published records have one publisher per node by design
+        # (depth 1, latched): not a loss check's business, and not worth a warning
         unchecked = sorted(t for t in self._interleaved
-                           if self._names[t].lstrip("/") != PARAMETER_TOPIC[0])
+                           if t not in self._record_topics)
         if unchecked:
             self.get_logger().warning(
                 f"not checked for losses: {', '.join(unchecked)} (several "
                 "publishers sent on it: their sequence numbers interleave)")
-        unannounced = self.unannounced()
         if unannounced:
             log.warning(f"no published record (grazing/published) from "
                         f"{', '.join(unannounced)}: the tail of its topics is not checked")
