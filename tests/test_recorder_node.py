@@ -590,15 +590,22 @@ def test_descriptors_advertise_what_validation_accepts(tmp_path, module, params,
     assert text in log and log.count("[ERROR]") == 1 and "Traceback" not in log, log
 
 
-def _end_of_scene(ros, recorder, extra, announce, namespace):
-    """A controller's end of scene as the recorder sees it: 30 corrections taken, then
-    the recorder is stopped (SIGTERM) while ``extra`` more are still to come, then the
-    published record saying ``announce`` were published. Returns the recorder's exit
-    status and output, and the /diagnostics statuses it sent."""
+def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
+    """A controller's end of scene as a recorder (require_complete, ``close_timeout``)
+    sees it: 30 corrections taken, then the recorder is stopped (SIGTERM) while
+    ``extra`` more are still to come, then the published record saying ``announce`` were
+    published. Returns the recorder's exit status and output, the /diagnostics statuses
+    it sent, and the corrections' topic."""
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
 
     from grazing_control.ros.recording import record
+
+    _, namespace, env = isolation
+    recorder = start_recorder(
+        bag, namespace, env, "require_complete:=true", f"close_timeout:={close_timeout}",
+        "topics:=['controller/velocity_correction', 'grazing/parameters', "
+        "'grazing/published']")
 
     corrections = ros.create_publisher(TwistStamped, "controller/velocity_correction",
                                        QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -627,7 +634,7 @@ def _end_of_scene(ros, recorder, extra, announce, namespace):
         executor.spin_once(timeout_sec=0.05)
     executor.remove_node(ros)
     output, _ = recorder.communicate(timeout=15)
-    return recorder.returncode, output, statuses
+    return recorder.returncode, output, statuses, corrections.topic_name
 
 
 def test_a_stopped_recorder_waits_for_what_the_nodes_said_they_published(tmp_path,
@@ -637,13 +644,8 @@ def test_a_stopped_recorder_waits_for_what_the_nodes_said_they_published(tmp_pat
     said nothing, since a lost tail leaves no gap in the sequence numbers. Stopped
     while 20 corrections are still to come, it waits for the controller's published
     record and records all 50; its /diagnostics status counts them."""
-    _, namespace, env = isolation
     bag = tmp_path / "bag"
-    recorder = start_recorder(
-        bag, namespace, env, "require_complete:=true", "close_timeout:=30.0",
-        "topics:=['controller/velocity_correction', 'grazing/parameters', "
-        "'grazing/published']")
-    rc, output, statuses = _end_of_scene(ros, recorder, 20, 50, namespace)
+    rc, output, statuses, _ = _end_of_scene(bag, isolation, ros, 30.0, 20, 50)
     assert rc == 0, output
     stamps = [m.message.header.stamp.sec for m in read_messages(bag)
               if m.topic.endswith("velocity_correction")]
@@ -662,14 +664,8 @@ def test_a_recorder_names_the_tail_it_never_received(tmp_path, isolation, ros):
     """The controller says it published 60, 50 come: after close_timeout the recorder
     closes, names the 10 it lacks (the tail: no sequence gap shows it), exits with status
     1 (require_complete) and writes them into its closed record for the launcher."""
-    _, namespace, env = isolation
     bag = tmp_path / "bag"
-    recorder = start_recorder(
-        bag, namespace, env, "require_complete:=true", "close_timeout:=2.0",
-        "topics:=['controller/velocity_correction', 'grazing/parameters', "
-        "'grazing/published']")
-    rc, output, _ = _end_of_scene(ros, recorder, 20, 60, namespace)
-    topic = f"{namespace}/controller/velocity_correction"
+    rc, output, _, topic = _end_of_scene(bag, isolation, ros, 2.0, 20, 60)
     assert rc == 1, output
     assert f"missed: {topic} 10 " in output, output
     assert read_metadata(bag)["custom_data"]["recorder_missed"] == f"{topic} 10"

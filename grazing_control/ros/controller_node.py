@@ -115,10 +115,11 @@ from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import OK, WARN, Updater
 from .published import ACK_TIMEOUT, Counted, PublishedRecord, close_publishers
-from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, READY_TOPIC,
-                     REPLAY_QOS, deserialize, StartupError, Throttled, bool_descriptor, float_descriptor,
+from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
+                     deserialize, StartupError, Throttled, bool_descriptor, float_descriptor,
                      int_descriptor, log_parameter_changes, publish_parameter_record,
                      refuse_while_running, run_node, spin, stamp_key, string_descriptor)
+from .common import READY_TOPIC
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from .ndof_control import NdofLaw, ndof_controller_from_values
 
@@ -786,7 +787,8 @@ class ControllerNode(Node):
         while a recorder is there (it may lag behind on a loaded machine, issue 27), 1 s
         otherwise (the simulator has gone)."""
         recording = self.count_publishers(self.resolve_topic_name(READY_TOPIC)) > 0
-        close_publishers(self.published, ACK_TIMEOUT if recording else 1.0)
+        # without a recorder the only reader is the simulator, which has gone: no warning
+        close_publishers(self.published, ACK_TIMEOUT if recording else 1.0, warn=recording)
         self.get_logger().info(
             f"summary: answered={self.answered} controlled_from_sample="
             f"{self.law.enable_after} malformed={self.malformed.count} "

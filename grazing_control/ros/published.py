@@ -66,11 +66,12 @@ class PublishedRecord:
         self.sent = True
 
 
-def close_publishers(record: PublishedRecord, timeout: float, also=()) -> list:
+def close_publishers(record: PublishedRecord, timeout: float, also=(),
+                     warn: bool = True) -> list:
     """Publish the record, then wait (``timeout`` wall seconds at most in all) until every
     reliable reader has acknowledged every message of the counted publishers, of the
     record and of the publishers ``also``. Returns the topics not acknowledged in time
-    (logged in one warning)."""
+    (logged in one warning if ``warn``)."""
     record.publish()
     end = time.monotonic() + timeout
     late = []
@@ -78,7 +79,7 @@ def close_publishers(record: PublishedRecord, timeout: float, also=()) -> list:
         left = max(0.0, end - time.monotonic())
         if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
             late.append(pub.topic_name)
-    if late:
+    if late and warn:
         record.node.get_logger().warning(
             f"not every message acknowledged at exit within {timeout:g} s: {', '.join(late)} "
             "(a reader that lags, or one that has gone)")
