@@ -34,7 +34,6 @@ import time
 
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -56,6 +55,8 @@ from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             settings_from_values)
 from grazing_control.ros import cdr
 from grazing_control.ros.diagnostics import SceneWindow, Updater
+from grazing_control.ros.published import (ACK_TIMEOUT, Counted, PublishedRecord,
+                                          close_publishers)
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
 from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
@@ -74,8 +75,9 @@ __all__ = ["SimNode", "main"]
 
 #: Wall seconds between two checks for another simulator or controller on the topics.
 ISOLATION_CHECK = 0.25
-#: Wall seconds to wait at exit for every reader to acknowledge every message.
-ACK_TIMEOUT = 10.0
+#: The wait at exit for the readers' acknowledgements (published.ACK_TIMEOUT, 10 s, after
+#: the scene) when stopped by a signal before the end (the launcher's grace is 15 s).
+INTERRUPTED_ACK_TIMEOUT = 2.0
 #: Realtime: /clock goes out at a wake-up at most every this many wall seconds (and at
 #: least every CLOCK_TICK of the loop); one per wake-up was one message per stream sample.
 CLOCK_EVERY = 1e-3
@@ -199,8 +201,8 @@ class SimNode(Node):
                          durability=PUBLISHER_QOS.durability,
                          depth=self.get_parameter("history_depth").value)
 
-        def publisher(kind, topic):
-            return self.create_publisher(kind, topic, qos, event_callbacks=_NO_EVENTS)
+        def publisher(kind, topic):     # counted: the published record at exit (issue 27)
+            return Counted(self.create_publisher(kind, topic, qos, event_callbacks=_NO_EVENTS))
 
         (self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
          self.pub_latency, self.pub_miss) = (publisher(kind, topic) for kind, topic in (
@@ -209,6 +211,9 @@ class SimNode(Node):
              (Float64, "oscillator/latency"), (Vector3Stamped, "oscillator/deadline_miss")))
         self.pub_substituted = publisher(TwistStamped, "oscillator/substituted")
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
+        self.published = PublishedRecord(self, (
+            self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
+            self.pub_latency, self.pub_miss, self.pub_substituted))
         self.sub_correction = self.create_subscription(
             TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS,
             raw=True, event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
@@ -483,25 +488,25 @@ class SimNode(Node):
     def spin_until(self, executor) -> None:
         """Spin until shutdown, or until done when exit_when_done.
 
-        Before returning after the scene, wait (ACK_TIMEOUT s at most in all) until every
-        reliable reader has acknowledged every message: a reader that lagged behind
-        (a recorder) gets the rest from the publishers' history, not from a dead process.
+        After the scene: stop listening for corrections (the subscription's end is
+        announced, so the controller does not wait for this reader's acknowledgements
+        once it has gone), publish the published record (:mod:`grazing_control.ros.
+        published`) and wait (ACK_TIMEOUT s at most in all) until every reliable reader
+        has acknowledged every message: a reader that lagged behind (a recorder) gets the
+        rest from the publishers' history, not from a dead process.
         """
         spin(executor, lambda: self.exit_now)
         if self.exit_now:
-            end = time.monotonic() + ACK_TIMEOUT
-            for pub in (self.pub_pi2, self.pub_state, self.pub_impact, self.pub_pi1,
-                        self.pub_clock, self.pub_latency, self.pub_miss,
-                        self.pub_substituted, self.pub_done):
-                left = max(0.0, end - time.monotonic())
-                if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
-                    self.get_logger().warning(
-                        f"{pub.topic_name}: not every message acknowledged at exit")
+            self.destroy_subscription(self.sub_correction)
+            close_publishers(self.published, ACK_TIMEOUT, also=(self.pub_done,))
 
     def on_exit(self) -> None:
-        """Log the summary when stopped before the end (Ctrl-C)."""
+        """Log the summary when stopped before the end (Ctrl-C), and say what was
+        published (a recorder checks the bag's tail with it)."""
         if self.loop is None or not self.loop.finished:
             self.get_logger().info(self.summary() + " (interrupted)")
+        if not self.published.sent:
+            close_publishers(self.published, INTERRUPTED_ACK_TIMEOUT)
 
     # ----------------------------------------------------------- services, params
     def _on_reset(self, request, response):

@@ -20,8 +20,11 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 P = OscillatorParams(delta_d=-1e-3)
 
 
-def _reference(p, tau0, x, v, duration, force):
-    """x'' + 2 zeta x' + x = cos(tau0 + omega t) + F, impacts x = d: v -> -r v (DOP853)."""
+def _reference(p, tau0, x, v, duration, force, max_step=np.inf):
+    """x'' + 2 zeta x' + x = cos(tau0 + omega t) + F, impacts x = d: v -> -r v (DOP853).
+
+    ``max_step``: below the time a near-grazing motion spends beyond the wall, so that the
+    solver's steps do not jump over both sign changes of the event function."""
     def rhs(t, y):
         return [y[1], -2 * p.zeta * y[1] - y[0] + math.cos(tau0 + p.omega * t) + force]
 
@@ -31,7 +34,7 @@ def _reference(p, tau0, x, v, duration, force):
     t, y, impacts = 0.0, [x, v], []
     while t < duration:
         sol = solve_ivp(rhs, (t, duration), y, method="DOP853", rtol=1e-13, atol=1e-15,
-                        events=wall)
+                        events=wall, max_step=max_step)
         if sol.status == 1:
             t = float(sol.t_events[0][0])
             xe, ve = sol.y_events[0][0]
@@ -113,3 +116,54 @@ def test_the_impulse_is_the_correction_unless_the_force_is_limited():
 def test_bad_pulses_are_refused_naming_the_parameter(kw, name):
     with pytest.raises(ParameterError, match=f"{name}=.* is invalid"):
         pulse_step(P, 0.0, 0.0, 0.01, **kw)
+
+
+def test_the_pulse_orbit_is_the_fixed_point_of_the_integrated_pulse_loop():
+    """The controlled 1/1 orbit with the correction as a pulse (the rig scene of issue 27:
+    Delta d = -3e-6, delay 3, pulse 0.1, the least-noise gains) against the fixed point of
+    the same loop integrated by DOP853 with wall events (scipy's fsolve): they agree to
+    the ODE solver's accuracy, while the kick's orbit is 1.5e-5 away (what the analysis
+    of pulse bags compared with before)."""
+    from scipy.optimize import fsolve
+
+    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.oscillator.control import Gains
+
+    p = OscillatorParams(delta_d=-3e-6)
+    c2, delay, width = -0.006074716135226413, 3.0, 0.1
+    gains = Gains(degenerate_c1(p, c2, delay), c2, delay)
+    start = delay - width / 2
+
+    def loop(state):
+        x, v = state
+        force = (gains.c1 * (x - p.x_ref) + gains.c2 * (v - p.v_ref)) / width
+        t, y = 0.0, np.array([x, v])
+        for duration, f in ((start, 0.0), (width, force), (p.period - start - width, 0.0)):
+            y, _ = _reference(p, (p.tau2 + p.omega * t) % (2 * math.pi), *y, duration, f,
+                              max_step=1e-2)
+            t += duration
+        return y
+
+    kick = np.array(orbit_11(p, gains, branch="grazing").pi2)
+    ode = fsolve(lambda s: loop(s) - s, kick, xtol=1e-13, epsfcn=1e-14)
+    orbit = pulse_orbit(p, gains, width)
+    assert np.max(np.abs(np.array(orbit.pi2) - ode)) < 1e-10
+    assert np.max(np.abs(kick - ode)) > 1e-5
+    assert len(orbit.impacts) == 1 and orbit.residual < 1e-15
+    # the multipliers: the Jacobian of the integrated loop by central differences
+    h = 1e-7
+    jac = np.column_stack([(loop(ode + e) - loop(ode - e)) / (2 * h) for e in np.eye(2) * h])
+    ref = np.sort(np.abs(np.linalg.eigvals(jac)))[::-1]
+    assert np.allclose(np.abs(orbit.multipliers), ref, rtol=0, atol=1e-5)
+
+
+def test_a_pulse_orbit_of_width_zero_is_the_kick_orbit():
+    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.oscillator.control import Gains
+
+    p = OscillatorParams(delta_d=-5e-6)
+    gains = Gains(degenerate_c1(p, -1.0, 6.0), -1.0, 6.0)
+    kick = orbit_11(p, gains, branch="grazing")
+    orbit = pulse_orbit(p, gains, 0.0)
+    assert np.allclose(orbit.pi2, kick.pi2, rtol=0, atol=1e-14)
+    assert np.allclose(np.abs(orbit.multipliers), np.abs(kick.multipliers), rtol=0, atol=1e-5)

@@ -168,6 +168,10 @@ def test_repeated_recorded_scenes_lose_no_correction(tmp_path):
         assert counts["/oscillator/pi2"] == n and counts["/controller/velocity_correction"] == n
         assert "missed" not in (tmp_path / f"logs{i}" / "recorder_node.log").read_text()
         assert launcher.recorded_status(bag) == 0      # the closed record
+        # each node said what it published (issue 27): the bag holds all of it
+        assert counts["/grazing/published"] == 2 and res.lost == ""
+        assert "no published record" not in (tmp_path / f"logs{i}" /
+                                              "recorder_node.log").read_text()
 
 
 def test_the_recorders_closed_record_is_read_from_the_bag(tmp_path):
@@ -337,3 +341,34 @@ def test_two_scenes_included_in_one_launch_both_start_at_once(tmp_path):
         counts = Counter(m.topic for m in read_messages(tmp_path / ns))
         assert counts[f"/{ns}/oscillator/pi2"] == 40, (ns, counts)
         assert counts[f"/{ns}/controller/velocity_correction"] == 40, (ns, counts)
+def test_grazing_run_fails_naming_the_messages_its_recording_lost(tmp_path, monkeypatch,
+                                                                  capsys):
+    """Issue 27: the recorder lost the last corrections of a scene and `grazing run` said
+    ok. Here the recorder (tests/lossy_recorder.py: the package's recorder_node, which
+    drops every correction after the 40th as if it had been stopped before taking them)
+    records a real scene; the controller's published record says how many it published,
+    so the recorder's closed record names the tail it lacks, the run fails and says what
+    was lost, and `grazing analyze` names it as a problem."""
+    import json
+
+    from grazing_control import cli
+    from grazing_control.recordings.analyze import analyze
+
+    monkeypatch.setattr(launcher, "RECORDER_MODULE", "lossy_recorder")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
+        [str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]))
+    bag, logs = tmp_path / "bag", tmp_path / "logs"
+    code = cli.main(["run", "--periods", "50", "--enable-after", "20", "--bag", str(bag),
+                     "--log-dir", str(logs), "--timeout", "120", "--json"])
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
+    answered = Counter(m.topic for m in read_messages(bag))["/controller/velocity_correction"]
+    assert answered == 40
+    lost = f"/controller/velocity_correction {50 - 40}"     # samples 0..49 answered
+    assert code == 1 and not summary["ok"] and summary["lost"] == lost, summary
+    assert summary["recorder"] == 1 and summary["sim"] == summary["controller"] == 0
+    assert f"the recording lost messages: {lost}" in summary["summary"]
+    assert f"missed: {lost}" in (logs / "recorder_node.log").read_text()
+    problems = analyze([bag], None, figures=False)["bags"][0]["problems"]
+    assert any("10 of the 50 messages controller_node published are not in the bag" in p
+               for p in problems), problems

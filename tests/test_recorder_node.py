@@ -254,7 +254,8 @@ def test_use_sim_time_stamps_log_time_with_clock(tmp_path, isolation, ros):
         rc, output = stop(recorder, signal.SIGTERM)
     assert rc == 0, output
     assert_bag_holds(bag, sent)
-    assert read_metadata(bag)["custom_data"] == {"log_time": "ros_clock", "recorder_status": "0"}
+    assert read_metadata(bag)["custom_data"] == {"log_time": "ros_clock", "recorder_status": "0",
+                                                 "recorder_received": "60"}
     clock_ns = {0} | {m.clock.sec * 10**9 + m.clock.nanosec for m in sent["/clock"]}
     assert {m.log_time_ns for m in read_messages(bag)} <= clock_ns
 
@@ -587,3 +588,84 @@ def test_descriptors_advertise_what_validation_accepts(tmp_path, module, params,
         L.stop_nodes([proc])
     log = (tmp_path / "node.log").read_text()
     assert text in log and log.count("[ERROR]") == 1 and "Traceback" not in log, log
+
+
+def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
+    """A controller's end of scene as a recorder (require_complete, ``close_timeout``)
+    sees it: 30 corrections taken, then the recorder is stopped (SIGTERM) while
+    ``extra`` more are still to come, then the published record saying ``announce`` were
+    published. Returns the recorder's exit status and output, the /diagnostics statuses
+    it sent, and the corrections' topic."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import String
+
+    from grazing_control.ros.recording import record
+
+    _, namespace, env = isolation
+    recorder = start_recorder(
+        bag, namespace, env, "require_complete:=true", f"close_timeout:={close_timeout}",
+        "topics:=['controller/velocity_correction', 'grazing/parameters', "
+        "'grazing/published']")
+
+    corrections = ros.create_publisher(TwistStamped, "controller/velocity_correction",
+                                       QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                                                  reliability=ReliabilityPolicy.RELIABLE))
+    params = ros.create_publisher(String, record.TOPIC, LATCHED_QOS)
+    published = ros.create_publisher(String, record.PUBLISHED_TOPIC, LATCHED_QOS)
+    statuses = []
+    ros.create_subscription(DiagnosticArray, "/diagnostics",
+                            lambda m: statuses.extend(m.status), 10)
+    node = f"{namespace}/controller_node"
+    params.publish(String(data=record.encode(node, {"c2": -1.0})))
+    wait_ready(ros, recorder)
+    for i in range(30):
+        corrections.publish(make_message("geometry_msgs/msg/TwistStamped", i))
+    assert corrections.wait_for_all_acked(Duration(seconds=10))
+    recorder.send_signal(signal.SIGTERM)       # the launcher stopped it here, at once
+    time.sleep(1.0)                            # the stopped recorder is still waiting
+    for i in range(30, 30 + extra):
+        corrections.publish(make_message("geometry_msgs/msg/TwistStamped", i))
+    published.publish(String(data=record.encode_published(
+        node, {corrections.topic_name: announce})))
+    executor = SingleThreadedExecutor(context=ros.context)
+    executor.add_node(ros)
+    deadline = time.monotonic() + 30
+    while recorder.poll() is None and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    executor.remove_node(ros)
+    output, _ = recorder.communicate(timeout=15)
+    return recorder.returncode, output, statuses, corrections.topic_name
+
+
+def test_a_stopped_recorder_waits_for_what_the_nodes_said_they_published(tmp_path,
+                                                                          isolation, ros):
+    """Issue 27, the mechanism: the recorder was stopped while the last corrections of a
+    loaded scene were still on their way, closed with what it had (1412 of 1501) and
+    said nothing, since a lost tail leaves no gap in the sequence numbers. Stopped
+    while 20 corrections are still to come, it waits for the controller's published
+    record and records all 50; its /diagnostics status counts them."""
+    bag = tmp_path / "bag"
+    rc, output, statuses, _ = _end_of_scene(bag, isolation, ros, 30.0, 20, 50)
+    assert rc == 0, output
+    stamps = [m.message.header.stamp.sec for m in read_messages(bag)
+              if m.topic.endswith("velocity_correction")]
+    assert stamps == list(range(50))
+    assert "missed" not in output and "no published record" not in output
+    info = read_metadata(bag)["custom_data"]
+    assert info["recorder_status"] == "0" and "recorder_missed" not in info
+    ours = [s for s in statuses if s.name.endswith("recorder_node: recording")]
+    assert ours and "recorder_node" in ours[-1].hardware_id
+    values = {kv.key: kv.value for kv in ours[-1].values}
+    assert values["dropped"] == "0" and values["missed"] == "0"
+    assert int(values["written"]) == int(values["received"]) >= 30
+
+
+def test_a_recorder_names_the_tail_it_never_received(tmp_path, isolation, ros):
+    """The controller says it published 60, 50 come: after close_timeout the recorder
+    closes, names the 10 it lacks (the tail: no sequence gap shows it), exits with status
+    1 (require_complete) and writes them into its closed record for the launcher."""
+    bag = tmp_path / "bag"
+    rc, output, _, topic = _end_of_scene(bag, isolation, ros, 2.0, 20, 60)
+    assert rc == 1, output
+    assert f"missed: {topic} 10 " in output, output
+    assert read_metadata(bag)["custom_data"]["recorder_missed"] == f"{topic} 10"

@@ -22,20 +22,29 @@ bit for bit (:func:`grazing_control.dynamics.simulate.period_step`).
 Kick versus pulse: a pulse of width w starting at s delivers, to first order in w,
 the kick Delta v at its centre s + w/2; the difference is O(w^2) (docs/theory_pulse.md).
 A design for an actuation delay delta therefore matches a pulse *centred* delta after
-the sample, i.e. starting at delta - w/2.
+the sample, i.e. starting at delta - w/2 (:func:`pulse_start`).
+
+The loop closed with a pulse has its own 1/1 orbit, O(w^2) away from the kick's
+(:func:`pulse_orbit`: the fixed point of the exact pulse map by Newton, docs/theory_pulse.md
+section 4); a recording of a pulse scene is compared with it, not with the kick's.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from grazing_control.oscillator import kernel as _kernel
+from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.impact import Segment
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
 from .simulate import period_step
 
-__all__ = ["pulse_force", "pulse_step", "flow_with_force"]
+__all__ = ["pulse_force", "pulse_start", "pulse_step", "flow_with_force", "PulseOrbit",
+           "pulse_orbit"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -45,6 +54,16 @@ def pulse_force(dv_correction: float, width: float, force_limit: float = math.in
     Delta v / w, clipped to [-force_limit, force_limit]."""
     force = dv_correction / width
     return max(-force_limit, min(force_limit, force))
+
+
+def pulse_start(period: float, delay: float, width: float) -> float:
+    """When a pulse of ``width`` carrying a correction designed to act ``delay`` after the
+    sample starts: centred at the delay (module docstring), kept within [0, T - w);
+    ``delay`` itself for the kick (width 0). The simulator's rule
+    (:meth:`grazing_control.plant.engine.Engine.actuation_start`)."""
+    if width == 0.0:
+        return delay
+    return min(max(delay - 0.5 * width, 0.0), math.nextafter(period - width, 0.0))
 
 
 def flow_with_force(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: float,
@@ -100,3 +119,106 @@ def pulse_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float =
         t += duration
         tau = (p.tau2 + p.omega * t) % TWO_PI
     return Segment(dx, dv, impacts, None)
+
+
+@dataclass(frozen=True)
+class PulseOrbit:
+    """The 1/1 orbit of the loop closed with a force pulse (:func:`pulse_orbit`).
+
+    ``pi2``: (x, v) on Pi2 before the correction; ``pi2_deviation``: (x - x**, v - v**);
+    ``correction``: the Delta v the controller answers there; ``impacts``: the impacts of
+    one period (times from the sample); ``monodromy``: the Jacobian of the closed-loop
+    period map there (central differences of the exact map); ``residual``: the largest
+    |P(z) - z| left; ``start``, ``width``: the pulse.
+    """
+
+    pi2: tuple
+    pi2_deviation: tuple
+    correction: float
+    impacts: tuple
+    monodromy: np.ndarray = field(repr=False)
+    residual: float
+    start: float
+    width: float
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        """Eigenvalues of the monodromy, largest modulus first."""
+        mult = np.linalg.eigvals(self.monodromy)
+        return mult[np.argsort(-np.abs(mult))]
+
+    @property
+    def v_minus(self) -> float:
+        """Impact velocity of the orbit's impact."""
+        return self.impacts[0].v_minus
+
+
+def pulse_orbit(p: OscillatorParams, gains: Gains, width: float, *,
+                force_limit: float = math.inf, saturation: float = math.inf,
+                max_iter: int = 30) -> PulseOrbit:
+    """The controlled 1/1 orbit when each correction acts as a force pulse of ``width``.
+
+    The closed-loop period map is z -> :func:`pulse_step` (z, Delta v(z)) with the
+    correction of Eq. 28, Delta v = c1 z_x + c2 z_v clipped to +-``saturation`` (as the
+    controller answers), carried by a pulse centred ``gains.delay`` after the sample
+    (:func:`pulse_start`, as the simulator applies it). Its fixed point is found by Newton
+    from the kick's orbit (:func:`grazing_control.dynamics.orbits.orbit_11` with the
+    same delay, O(w^2) away: docs/theory_pulse.md), with the Jacobian by central
+    differences of the exact map, until the step is at the rounding level; the orbit must
+    have exactly one impact per period. Width 0 gives the kick's orbit to rounding.
+
+    Raises
+    ------
+    OrbitNotFound
+        No kick orbit to start from, Newton does not converge, or the fixed point does
+        not have one impact per period.
+    ParameterError
+        A pulse that does not fit in the period (:func:`pulse_step`).
+    """
+    from .orbits import OrbitNotFound, orbit_11
+
+    start = pulse_start(p.period, gains.delay, width)
+    pulse_step(p, 0.0, 0.0, 0.0, start=start, width=width, force_limit=force_limit)  # checks
+    kick = orbit_11(p, gains, branch="grazing")
+    z = np.array(kick.pi2_deviation, dtype=float)
+
+    def correction(z):
+        return max(-saturation, min(saturation, gains.c1 * z[0] + gains.c2 * z[1]))
+
+    def step(z):
+        seg = pulse_step(p, float(z[0]), float(z[1]), correction(z), start=start,
+                         width=width, force_limit=force_limit)
+        return np.array([seg.dx, seg.dv]), seg
+
+    # a difference step well inside the region of one transversal impact: its size in
+    # position is of order v-^2 (the gap's parabola at the impact), its rounding error
+    # eps |z| / h
+    h = max(1e-3 * kick.v_minus ** 2, 1e-7 * float(np.max(np.abs(z))), 1e-13)
+
+    def jacobian(z):
+        jac = np.empty((2, 2))
+        for i in range(2):
+            e = np.zeros(2)
+            e[i] = h
+            jac[:, i] = (step(z + e)[0] - step(z - e)[0]) / (2.0 * h)
+        return jac
+
+    # the states are of order 1 (x** and the forcing), so the map rounds at ~1e-16
+    # absolute: Newton stops there, or when a step no longer lowers the residual
+    fz, seg = step(z)
+    residual = float(np.max(np.abs(fz - z)))
+    for _ in range(max_iter):
+        if residual <= 1e-15:
+            break
+        trial = z - np.linalg.solve(jacobian(z) - np.eye(2), fz - z)
+        ft, st = step(trial)
+        res_t = float(np.max(np.abs(ft - trial)))
+        if res_t >= residual:
+            break
+        z, fz, seg, residual = trial, ft, st, res_t
+    if residual > 1e-12 or len(seg.impacts) != 1:
+        raise OrbitNotFound(f"no 1/1 pulse orbit (width {width!r}) near the kick's: residual "
+                            f"{residual:.1e}, {len(seg.impacts)} impacts per period")
+    x, v = p.x_ref + z[0], p.v_ref + z[1]
+    return PulseOrbit((float(x), float(v)), (float(z[0]), float(z[1])), correction(z),
+                      tuple(seg.impacts), jacobian(z), residual, start, width)

@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.actuation import flow_with_force, pulse_force
+from grazing_control.dynamics.actuation import flow_with_force, pulse_force, pulse_start
 from grazing_control.dynamics.fidelity import period_step
 from grazing_control.dynamics.simulate import states_between
 from grazing_control.oscillator import kernel
@@ -169,10 +169,7 @@ class Engine:
         """When the correction of a sample acting ``delay`` after it starts to act: at
         ``delay`` (the velocity jump), or, for a force pulse of width w, at delay - w/2
         (centred at the actuation time, docs/theory_pulse.md), kept within [0, T - w)."""
-        w = self.settings.pulse_width
-        if w == 0.0:
-            return delay
-        return min(max(delay - 0.5 * w, 0.0), math.nextafter(self.p.period - w, 0.0))
+        return pulse_start(self.p.period, delay, self.settings.pulse_width)
 
     def actuate(self, dv_correction: float, delay: float) -> list:
         """Apply ``dv_correction`` exactly ``delay`` after the current sample (scheduled).

@@ -18,7 +18,8 @@ import numpy as np
 from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
 from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
-from .numbers import resolve_setup, scene_numbers, section_phase_problems
+from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
+                      section_phase_problems)
 from .scenes import load, parse_topic_options
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
@@ -186,11 +187,13 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     errors e_x / sqrt(var x), e_v / sqrt(var v) (unit std if the covariance is right) and
     chi^2 = e^T P^-1 e (mean 2); coverage of the 95 % ellipse; all over the last
     :data:`SPREAD_WINDOW` samples (at most half of those since control is on): the
-    measured Pi2 spread (std of x about the exact
-    controlled orbit) and the spread predicted from the reported covariance by the loop
-    linearised about that orbit (:func:`grazing_control.dynamics.noise.noise_covariance`
-    with the mean reported covariance as the measurement covariance; errors correlated
-    from period to period, as the model filter's are, break its white-noise premise).
+    measured Pi2 spread (rms of x about the exact controlled orbit of the scene's
+    actuation, :func:`.numbers.controlled_orbit`: the pulse's for a pulse scene, O(w^2) away
+    from the kick's) and the spread predicted from the reported covariance by the kick's
+    loop linearised about its orbit (:func:`grazing_control.dynamics.noise.noise_covariance`
+    with the mean reported covariance as the measurement covariance; a pulse changes the
+    multipliers by O(w^2), docs/theory_pulse.md; errors correlated from period to period,
+    as the model filter's are, break its white-noise premise).
     """
     if est is None:
         return None
@@ -235,15 +238,15 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     if p is None or g is None:
         return out
     from grazing_control.dynamics.noise import noise_covariance
-    from grazing_control.dynamics.orbits import orbit_11
     from grazing_control.oscillator.control import Gains
 
     try:
         gains = Gains(g.c1, g.c2, setup.actuation_delay)
-        z = orbit_11(p, gains).pi2_deviation
+        orbit, _ = controlled_orbit(setup)       # the pulse's orbit for a pulse scene
         x = sd.scene.pi2[-window:, 0]
-        out["measured_spread"] = float(np.sqrt(np.mean((x - p.x_ref - z[0]) ** 2)))
-        pred = noise_covariance(p, gains, cu.mean(axis=0), z)
+        out["measured_spread"] = float(np.sqrt(np.mean((x - orbit.pi2[0]) ** 2)))
+        out["spread_about"] = [float(orbit.pi2[0]), float(orbit.pi2[1])]
+        pred = noise_covariance(p, gains, cu.mean(axis=0))    # the kick's linearised loop
         out["predicted_spread"] = float(math.sqrt(max(pred[0, 0], 0.0)))
     except (ValueError, RuntimeError, ArithmeticError) as exc:
         out["spread_note"] = f"no predicted spread: {exc}"
@@ -405,6 +408,14 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
             continue
         setup = resolve_setup(data, options)
         data.problems.extend(section_phase_problems(data, setup))
+        estimates = read_estimates(bag)
+        numbers = []
+        for sd in data.scenes:
+            n = scene_numbers(sd, setup, tol)
+            if estimates is not None:
+                n["estimate"] = estimate_numbers(estimates, sd, setup)
+            data.problems.extend(scene_problems(sd, setup, n))
+            numbers.append(n)
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
@@ -435,11 +446,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
         lines.append("")
-        estimates = read_estimates(bag)
-        for sd in data.scenes:
-            n = scene_numbers(sd, setup, tol)
-            if estimates is not None:
-                n["estimate"] = estimate_numbers(estimates, sd, setup)
+        for sd, n in zip(data.scenes, numbers):
             slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
             fig_name = f"{slabel.replace(' ', '_')}.png"
             if out is not None and figures:

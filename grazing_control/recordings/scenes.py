@@ -35,6 +35,7 @@ DEFAULT_TOPICS = {
     "substituted": "/oscillator/substituted",
     "enabled": "/controller/enabled",
     "parameters": "/grazing/parameters",
+    "published": "/grazing/published",
 }
 
 #: Role -> the message type the analysis can decode (None: any type, counted only).
@@ -49,6 +50,7 @@ EXPECTED_TYPES = {
     "substituted": "geometry_msgs/msg/TwistStamped",
     "enabled": "std_msgs/msg/Bool",
     "parameters": "std_msgs/msg/String",
+    "published": "std_msgs/msg/String",
 }
 
 #: Roles not needed by the analysis: listed as present or absent, not decoded.
@@ -165,6 +167,41 @@ def _namespace(channels, topics) -> str | None:
     return found[0] if len(found) == 1 else None
 
 
+def published_problems(raw, present: dict, topics: dict, parameters: dict, notes: list) -> list:
+    """Messages the nodes published that the bag lacks (issue 27), as problems.
+
+    Each node of the package says, when it stops, how many messages it published on each
+    topic (``grazing/published``, :func:`grazing_control.ros.recording.record.
+    decode_published`); a topic that the analysis reads holding fewer is named with the
+    number lost. A node with a parameter record but no published record (a bag recorded
+    before the record existed, or a node killed) is a note: the tail is not checked.
+    """
+    from grazing_control.ros.recording.record import decode_published
+
+    out, published = [], {}
+    if "published" in present:
+        for _t, text in reader.decode_strings(raw, present["published"]):
+            try:
+                node, counts = decode_published(text)
+            except ValueError:
+                out.append(f"a message on {present['published']} is not a published record: "
+                           "ignored")
+                continue
+            published[node.rsplit("/", 1)[-1] or node] = counts
+    read = {name for role, name in topics.items() if role not in _COUNTED_ONLY}
+    for node, counts in sorted(published.items()):
+        for topic, n in sorted(counts.items()):
+            have = raw.count(topic)
+            if topic in read and have < n:
+                out.append(f"{topic}: {n - have} of the {n} messages {node} published are "
+                           f"not in the bag (lost in the recording)")
+    silent = sorted(set(parameters.get("nodes", {})) - set(published))
+    if silent:
+        notes.append(f"no published record from {', '.join(silent)}: whether the bag holds "
+                     "every message it published (its tail) is not checked")
+    return out
+
+
 def load(bag, topics: dict | None = None) -> BagData:
     """Read one bag for the analysis.
 
@@ -204,7 +241,7 @@ def load(bag, topics: dict | None = None) -> BagData:
     if extra:
         notes.append(f"other topics not used by the analysis: {', '.join(extra)}")
     missing = [f"{topics[r]} ({r})" for r in topics if r not in present
-               and r not in ("deadline_miss", "substituted", "enabled")]
+               and r not in ("deadline_miss", "substituted", "enabled", "published")]
     if missing:
         notes.append(f"absent: {', '.join(missing)}")
     if "pi2" not in present:
@@ -270,6 +307,8 @@ def load(bag, topics: dict | None = None) -> BagData:
         if parameters["rejected"]:
             problems.append(f"{parameters['rejected']} messages on {present['parameters']} are "
                             "not parameter records: ignored")
+
+    problems += published_problems(raw, present, topics, parameters, notes)
 
     corr = None
     if "correction" in present:

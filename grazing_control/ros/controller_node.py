@@ -99,7 +99,6 @@ import numpy as np
 
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
@@ -115,6 +114,7 @@ from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import OK, WARN, Updater
+from .published import ACK_TIMEOUT, Counted, PublishedRecord, close_publishers
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
                      deserialize, StartupError, Throttled, bool_descriptor, check_ranges,
                      executor_kind,
@@ -122,6 +122,7 @@ from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key, string_descriptor)
 from grazing_control.plant.settings import ABOVE_0, FINITE, below
+from .common import READY_TOPIC
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from .ndof_control import NdofLaw, ndof_controller_from_values
 
@@ -450,15 +451,15 @@ class ControllerNode(Node):
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
         # no default QoS-event handlers: each is one more entity in every executor wait
-        self.pub = self.create_publisher(
+        self.pub = Counted(self.create_publisher(
             TwistStamped, "controller/velocity_correction", REPLAY_QOS,
-            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
         quiet = SubscriptionEventCallbacks(use_default_callbacks=False)
         # created in both modes (published in stream mode only): the recorder records it by
         # default and says it is ready once every recorded topic has its publisher
-        self.pub_estimate = self.create_publisher(
+        self.pub_estimate = Counted(self.create_publisher(
             JointState, "controller/estimate", REPLAY_QOS,
-            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
         if self.stream is None:
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
@@ -482,7 +483,9 @@ class ControllerNode(Node):
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0
-        self.pub_enabled = self.create_publisher(Bool, "controller/enabled", LATCHED_QOS)
+        self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
+                                                         LATCHED_QOS))
+        self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled))
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
@@ -815,8 +818,13 @@ class ControllerNode(Node):
         return stat
 
     def on_exit(self) -> None:
-        """Log what was answered and ignored (after the readers acknowledged, 1 s at most)."""
-        self.pub.wait_for_all_acked(Duration(seconds=1))
+        """Say what was published (grazing/published) and log what was answered and
+        ignored, once the readers have acknowledged every message: ACK_TIMEOUT s at most
+        while a recorder is there (it may lag behind on a loaded machine, issue 27), 1 s
+        otherwise (the simulator has gone)."""
+        recording = self.count_publishers(self.resolve_topic_name(READY_TOPIC)) > 0
+        # without a recorder the only reader is the simulator, which has gone: no warning
+        close_publishers(self.published, ACK_TIMEOUT if recording else 1.0, warn=recording)
         self.get_logger().info(
             f"summary: answered={self.answered} controlled_from_sample="
             f"{self.law.enable_after} malformed={self.malformed.count} "

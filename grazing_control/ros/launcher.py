@@ -3,9 +3,15 @@
 :func:`run` starts ``sim_node``, ``controller_node`` and (with a bag directory)
 ``recorder_node`` as ``sys.executable -m <module> --ros-args --params-file ... -p key:=value``,
 waits for the simulator to finish the scene (it runs ``max_periods`` forcing periods with
-``exit_when_done:=true`` and exits with status 0), then stops the controller and the
-recorder with SIGINT (the recorder closes its bag) and returns every exit status.
+``exit_when_done:=true`` and exits with status 0), then stops the controller and, once it
+has exited, the recorder (which closes its bag), and returns every exit status.
 It only spawns processes: it does not import rclpy.
+
+End of a scene (issue 27): each node, when it stops, says how many messages it published
+(``grazing/published``) and waits until every reliable reader has acknowledged them; the
+recorder is stopped last, waits for what the nodes said they published, and its closed
+record (``metadata.yaml``) names what it missed: the run then fails with that list
+(:func:`recorded_losses`).
 
 Start order and readiness: the recorder and the controller start first; the simulator
 waits until the controller is matched (``wait_for_controller``) and, with a recorder,
@@ -60,6 +66,7 @@ from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_dela
 from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
+           "recorded_losses",
            "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
            "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",
            "RECORDER_MODULE", "CONFIG_DIR"]
@@ -103,6 +110,7 @@ class RunResult:
     logs: dict = field(default_factory=dict)
     domain_id: int | None = None
     live: int | None = None            # live_node's exit status (None: no live view)
+    lost: str = ""                     # what the recorder missed (its closed record)
 
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
@@ -111,6 +119,8 @@ class RunResult:
                 f"controller_node={self.controller}")
         if self.recorder is not None:
             text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
+        if self.lost:
+            text += f"; the recording lost messages: {self.lost}"
         if self.live is not None:
             text += f"; live_node={self.live}"
         if self.domain_id is not None:
@@ -130,7 +140,8 @@ class RunResult:
         codes = [self.sim, self.controller] + ([self.recorder] if self.recorder is not None
                                                else [])
         codes += [self.live] if self.live is not None else []
-        return not (self.timed_out or self.interrupted) and all(c == 0 for c in codes)
+        return (not (self.timed_out or self.interrupted or self.lost)
+                and all(c == 0 for c in codes))
 
 
 class ParamText(str):
@@ -301,6 +312,17 @@ def recorded_status(bag_dir) -> int | None:
         return int((info.get("custom_data") or {})["recorder_status"])
     except (KeyError, TypeError, ValueError, AttributeError):      # YamlFileError too
         return None
+
+
+def recorded_losses(bag_dir) -> str:
+    """What the recorder missed, from its closed record (``custom_data:
+    recorder_missed``, "topic n, ..."), or "" (none, or no closed record)."""
+    try:
+        text = (Path(bag_dir) / "metadata.yaml").read_text(encoding="utf-8")
+        info = yaml.safe_load(text)["rosbag2_bagfile_information"]
+        return str((info.get("custom_data") or {}).get("recorder_missed", ""))
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return ""
 
 
 def stop_nodes(procs, grace: float = 15.0) -> None:
@@ -487,9 +509,11 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
             interrupted = True
         finally:
             try:
+                # in this order: a node that stops says what it published and waits for
+                # the recorder's acknowledgements; the recorder closes after them
                 stop_nodes([procs["sim_node"]])
-                stop_nodes([procs["controller_node"], procs["recorder_node"],
-                            procs["live_node"]])
+                stop_nodes([procs["controller_node"]])
+                stop_nodes([procs["recorder_node"], procs["live_node"]])
             except KeyboardInterrupt:
                 interrupted = True
                 stop_nodes(list(procs.values()), grace=2.0)
@@ -510,11 +534,15 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         print(f"warning: recorder_node was killed (signal {-recorder}) after closing its "
               f"bag; its closed record says status {closed}", file=sys.stderr)
         recorder = closed
+    lost = recorded_losses(bag_dir) if record else ""
+    if lost:
+        print(f"error: the recording {os.fspath(bag_dir)} lost messages: {lost} (published "
+              "by the nodes, not in the bag)", file=sys.stderr)
     return RunResult(sim=code("sim_node"), controller=code("controller_node"),
                      recorder=recorder,
                      bag_dir=os.fspath(bag_dir) if record else None,
                      wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
-                     logs=logs, domain_id=domain_id, live=code("live_node"))
+                     logs=logs, domain_id=domain_id, live=code("live_node"), lost=lost)
 
 
 def threading_is_main() -> bool:

@@ -19,6 +19,9 @@ What it records by default (names relative to the node's namespace):
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
     realtime, scheduled actuation: a sample whose correction missed its actuation
     time (docs/nodes.md, "Scheduled actuation").
+``grazing/parameters``, ``grazing/published`` (std_msgs/msg/String)
+    the nodes' parameter records, and their published records: what each published,
+    sent when it stops (below).
 
 Each message is stored as the serialized CDR bytes the middleware delivered
 (a ``raw=True`` subscription): nothing is deserialized on the way. The bag
@@ -52,6 +55,19 @@ the match or lost on the way are reported as ``missed`` in a warning, and with
 sent cannot be checked (their sequences interleave) and is named in a warning; a silent
 second publisher does not stop the check.
 
+The tail (issue 27): each node of the package publishes, when it stops, how many
+messages it published per topic (``grazing/published``, grazing_control/ros/published.py).
+Once stopped, the recorder keeps taking messages until every node that sent a parameter
+record has sent that record and every count is recorded (``close_timeout`` seconds at
+most); what is still missing counts as missed, and a node that never sent its record
+leaves its tail unchecked (incomplete too, with ``require_complete``). The closed record
+in ``metadata.yaml`` carries ``recorder_status``, ``recorder_received`` and
+``recorder_missed`` ("topic n, ..."), which ``grazing run`` reports.
+
+Diagnostics: one ``diagnostic_msgs/DiagnosticArray`` per second on ``/diagnostics``,
+status ``recorder_node: recording`` with the messages received, written, dropped (after
+a failed write) and missed; WARN on a miss, ERROR after a failed write.
+
 QoS: the package's own topics (those above and ``grazing/parameters``,
 ``oscillator/latency``) are subscribed reliably whatever else is offered: a best-effort
 publisher on them (a bystander) is not matched and is named in a warning, so it cannot
@@ -73,6 +89,8 @@ Parameters (all read-only):
     Exit with status 1 when messages were missed (see above).
 ``adapt_qos`` (bool, false)
     ros2 bag's QoS rule for the package's own topics too (see QoS above).
+``close_timeout`` (double, seconds, 5.0; range [0, 60])
+    Once stopped, how long to wait for the messages the nodes said they published.
 ``batch_window`` (double, seconds, 0.001; range [0, 0.1])
     After each wake-up the recorder waits this long and then takes every message
     queued on every topic: one wake-up records a batch instead of one message, which
@@ -83,7 +101,8 @@ Parameters (all read-only):
     later; 0 takes each message as it arrives).
 
 On SIGINT or SIGTERM the node stops spinning, takes every message already
-received by the middleware, finishes the MCAP file, writes ``metadata.yaml``
+received by the middleware and what the nodes said they published (up to
+``close_timeout``), finishes the MCAP file, writes ``metadata.yaml``
 and logs the message count per topic; it exits with status 0. A bad parameter
 or argument is logged in one line and the process exits with status 2. A write
 that fails (disk full, file too large) stops the recording with one error line and
@@ -114,14 +133,16 @@ from std_msgs.msg import Bool
 
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
                      check_overrides, fast_exit_process, float_descriptor, init_ros,
-                     int_descriptor,
-                     string_descriptor, usage)
+                     int_descriptor, string_descriptor, usage)
+from .diagnostics import OK, ERROR, WARN, Updater
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
                         qos_profile_dict)
+from .recording import record as records
 
-__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "READY_TOPIC", "RECORDER_QOS",
+__all__ = ["DEFAULT_TOPICS", "EXTRA_TOPICS", "PARAMETER_TOPIC", "PUBLISHED_TOPIC",
+           "READY_TOPIC", "RECORDER_QOS",
            "RecorderNode", "adapted_qos", "main", "parse_topics"]
 
 #: Topics recorded by default (relative names) and their types.
@@ -140,8 +161,12 @@ DEFAULT_TOPICS = {
 #: its publishers are transient local, so the adapted subscription is too and a record
 #: published before the match is received.
 PARAMETER_TOPIC = ("grazing/parameters", "std_msgs/msg/String")
+#: The nodes' published record (what each published, sent when it stops: issue 27),
+#: recorded by default; the recorder checks the tail of every topic against it.
+PUBLISHED_TOPIC = (records.PUBLISHED_TOPIC, "std_msgs/msg/String")
 #: Also recorded by default: what the analysis of a realtime run reads (docs/analysis.md).
 EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
+                PUBLISHED_TOPIC[0]: PUBLISHED_TOPIC[1],
                 "oscillator/latency": "std_msgs/msg/Float64",
                 "controller/estimate": "sensor_msgs/msg/JointState",
                 "controller/enabled": "std_msgs/msg/Bool"}
@@ -163,6 +188,13 @@ _BATCH = 256
 #: every message queued on every topic (docs/nodes.md, "Wire format and batching").
 DEFAULT_BATCH_WINDOW = 0.001
 MAX_BATCH_WINDOW = 0.1
+#: Default ``close_timeout``: wall seconds the recorder waits, once stopped, for what the
+#: nodes said they published (ros2 launch sends SIGTERM 5 s after SIGINT, SIGKILL 5 s
+#: later; the launcher stops the recorder only after the controller has exited).
+DEFAULT_CLOSE_TIMEOUT = 5.0
+MAX_CLOSE_TIMEOUT = 60.0
+#: Wall seconds between two /diagnostics messages of the recorder.
+DIAGNOSTICS_PERIOD = 1.0
 
 def parse_topics(entries):
     """Topics to record from the ``topics`` parameter.
@@ -307,8 +339,11 @@ class RecorderNode(Node):
             output, compression=compression, chunk_size=chunk_size,
             custom_data={"log_time": "ros_clock" if self._sim_time else "received_timestamp"})
         self.bag.open()
-        self.received = 0
+        self.received = 0           # messages written to the bag
+        self.dropped = 0            # messages taken after a failed write (not written)
         self.failed = None          # the OSError that stopped the recording
+        self._published = {}        # node -> {topic: count} of its published record
+        self._nodes = set()         # nodes that sent a parameter record (and owe a published one)
         self._types = {}            # fully qualified topic -> message type
         self._subs = {}             # fully qualified topic -> Subscription
         self._offered = {}          # fully qualified topic -> offered QoS dicts
@@ -323,8 +358,13 @@ class RecorderNode(Node):
             topic = self.resolve_topic_name(name)            # fully qualified
             self._types[topic] = kind
             self._names[topic] = name
+        self._record_topics = {self.resolve_topic_name(PARAMETER_TOPIC[0]): "parameters",
+                               self.resolve_topic_name(PUBLISHED_TOPIC[0]): "published"}
         self._ready = False
         self._pub_ready = self.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
+        self.diagnostics = Updater(self, DIAGNOSTICS_PERIOD,
+                                   hardware_id="grazing_control/recorder_node")
+        self.diagnostics.add("recording", self._diagnose)
         self._pub_ready.publish(Bool(data=False))
         self._watch()
         # a steady clock: with use_sim_time a ROS-time timer would wait for /clock
@@ -391,6 +431,10 @@ class RecorderNode(Node):
         self.declare_parameter("adapt_qos", False, read_only(
             "subscribe to the package's own topics with ros2 bag's adapted QoS too (default: "
             "reliable, a best-effort publisher is left out)", ParameterType.PARAMETER_BOOL))
+        self.declare_parameter("close_timeout", DEFAULT_CLOSE_TIMEOUT, float_descriptor(
+            f"wall seconds the recorder waits, once stopped, for the messages the nodes said "
+            f"they published (grazing/published), in [0, {MAX_CLOSE_TIMEOUT:g}]",
+            0.0, MAX_CLOSE_TIMEOUT, read_only=True))
         self.declare_parameter("batch_window", DEFAULT_BATCH_WINDOW, float_descriptor(
             f"seconds the recorder lets messages gather after each wake-up before taking "
             f"all of them, in [0, {MAX_BATCH_WINDOW:g}] (0: take each one as it arrives)",
@@ -412,6 +456,10 @@ class RecorderNode(Node):
         if not 0.0 <= window <= MAX_BATCH_WINDOW:
             raise ParameterError(f"batch_window={window!r} is invalid: valid range is "
                                  f"[0, {MAX_BATCH_WINDOW:g}] seconds")
+        wait = self.get_parameter("close_timeout").value
+        if not 0.0 <= wait <= MAX_CLOSE_TIMEOUT:
+            raise ParameterError(f"close_timeout={wait!r} is invalid: valid range is "
+                                 f"[0, {MAX_CLOSE_TIMEOUT:g}] seconds")
         try:
             entries = self.get_parameter("topics").value
         except ParameterUninitializedException:      # -p topics:=[] has no type
@@ -468,6 +516,7 @@ class RecorderNode(Node):
     def _record(self, topic, data, info):
         """Write one serialized message as received (nothing after a failed write)."""
         if self.failed is not None:
+            self.dropped += 1
             return
         if self._sim_time:
             log_time = self.get_clock().now().nanoseconds
@@ -490,6 +539,24 @@ class RecorderNode(Node):
             return
         self.received += 1
         self._track_sequence(topic, sequence)
+        if topic in self._record_topics:
+            self._read_record(self._record_topics[topic], data)
+
+    def _read_record(self, kind, data):
+        """Note a node's parameter record (it owes a published record at its end) or its
+        published record (the counts the tail is checked against)."""
+        from rclpy.serialization import deserialize_message
+        from std_msgs.msg import String
+
+        try:
+            text = deserialize_message(data, String).data
+            if kind == "parameters":
+                self._nodes.add(records.decode(text)[0])
+            else:
+                node, counts = records.decode_published(text)
+                self._published[node] = counts
+        except Exception:        # a foreign or malformed message: recorded, not used
+            return
 
     def _track_sequence(self, topic, sequence):
         if not sequence:
@@ -508,10 +575,11 @@ class RecorderNode(Node):
         """{topic: messages missed} from the publisher's sequence numbers.
 
         Messages published before the recorder matched the publisher (the first one
-        recorded has sequence number n > 1: n - 1 missed) or lost in between (gaps).
-        A topic on which two publishers both send interleaves their sequences and cannot
-        be checked: :meth:`unchecked` lists it (a silent second publisher, e.g. a passive
-        bystander, does not prevent the check).
+        recorded has sequence number n > 1: n - 1 missed), lost in between (gaps), or
+        after the last one recorded: the tail, from the count the publishing node said
+        in its published record (:meth:`tails`). A topic on which two publishers both
+        send interleaves their sequences and cannot be checked (a silent second
+        publisher, e.g. a passive bystander, does not prevent the check).
         """
         out = {}
         for topic, first in self._first_seq.items():
@@ -520,7 +588,59 @@ class RecorderNode(Node):
             n = first - 1 + self._gaps[topic]
             if n:
                 out[topic] = n
+        for topic, n in self.tails().items():
+            out[topic] = out.get(topic, 0) + n
         return out
+
+    def tails(self):
+        """{topic: messages published after the last one recorded}: the nodes' published
+        records (:mod:`grazing_control.ros.published`) against the last sequence number
+        received (0: none). Only topics this recorder records, with one publisher."""
+        out = {}
+        for counts in self._published.values():
+            for topic, count in counts.items():
+                if topic not in self._types or topic in self._interleaved:
+                    continue
+                n = count - self._last_seq.get(topic, 0)
+                if n > 0:
+                    out[topic] = out.get(topic, 0) + n
+        return out
+
+    def unannounced(self):
+        """Nodes that sent a parameter record but no published record (yet): the tails
+        of their topics cannot be checked."""
+        return sorted(self._nodes - set(self._published))
+
+    def settle(self, executor, timeout: float) -> None:
+        """Once stopped: take messages until every node's published record has come and
+        every count in it is recorded, ``timeout`` wall seconds at most (issue 27: a
+        recorder behind a loaded scene still had the last corrections to take)."""
+        end = time.monotonic() + timeout
+        self.drain()
+        while (self.failed is None and (self.tails() or self.unannounced())
+               and time.monotonic() < end and rclpy.ok()):
+            executor.spin_once(timeout_sec=0.02)
+            self.drain()
+
+    def _diagnose(self, stat):
+        """The recorder's /diagnostics task: messages received, written, dropped (after a
+        failed write), missed so far (sequence gaps; the tail once the nodes have said
+        what they published)."""
+        missed = sum(self.missed().values())
+        stat.summary(OK, "recording" if self._ready else "waiting for every topic's publisher")
+        stat.add("received", self.received + self.dropped)
+        stat.add("written", self.received)
+        stat.add("dropped", self.dropped)
+        stat.add("missed", missed)
+        stat.add("topics matched", f"{len(self._subs)}/{len(self._types)}")
+        stat.add("bag", str(self.bag.bag_dir))
+        if missed:
+            stat.merge_summary(WARN, f"{missed} messages missed (published, not received)")
+        if self.failed is not None:
+            stat.merge_summary(ERROR, f"writing the bag failed: "
+                                      f"{self.failed.strerror or self.failed}; "
+                                      f"{self.dropped} messages dropped")
+        return stat
 
     def _on_incompatible_qos(self, topic, event):
         self.get_logger().warning(
@@ -558,11 +678,24 @@ class RecorderNode(Node):
                 self.bag.add_topic(topic, kind, self._offered.get(topic)
                                    or [qos_to_dict(RECORDER_QOS)])
         missed = self.missed()
-        status = 1 if missed and self.require_complete else 0
+        unannounced = self.unannounced()
+        # a node that never said what it published (killed, or its record lost with it)
+        # leaves the tail of its topics unchecked: not complete either
+        status = 1 if (missed or unannounced) and self.require_complete else 0
         # The closed record: metadata.yaml, written last and atomically, carries the
         # status, so the launcher reads success from the bag itself, not from how fast
-        # the process ends afterwards (issue 21 section 6).
+        # the process ends afterwards (issue 21 section 6), and what was missed, so that
+        # it can name the loss (issue 27).
         self.bag.custom_data["recorder_status"] = str(status)
+        self.bag.custom_data["recorder_received"] = str(self.received)
+        if missed or unannounced:
+            self.bag.custom_data["recorder_missed"] = ", ".join(
+                [f"{t} {n}" for t, n in sorted(missed.items())]
+                + [f"{node}'s tail (no published record)" for node in unannounced])
+        try:            # the last status, with the final counts
+            self.diagnostics.update()
+        except Exception:
+            pass
         try:
             info = self.bag.close()
         except OSError as exc:
@@ -573,18 +706,21 @@ class RecorderNode(Node):
         if info:
             counts = ", ".join(f"{name} {n}" for name, n in self.bag.message_counts.items())
             log.info(f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
-        # the parameter record has one publisher per node by design (depth 1, latched):
-        # not a loss check's business, and not worth a warning
+        # the parameter and published records have one publisher per node by design
+        # (depth 1, latched): not a loss check's business, and not worth a warning
         unchecked = sorted(t for t in self._interleaved
-                           if self._names[t].lstrip("/") != PARAMETER_TOPIC[0])
+                           if t not in self._record_topics)
         if unchecked:
             self.get_logger().warning(
                 f"not checked for losses: {', '.join(unchecked)} (several "
                 "publishers sent on it: their sequence numbers interleave)")
+        if unannounced:
+            log.warning(f"no published record (grazing/published) from "
+                        f"{', '.join(unannounced)}: the tail of its topics is not checked")
         if missed:
             text = ", ".join(f"{t} {n}" for t, n in missed.items())
             log.warning(f"missed: {text} (published before the recorder matched the "
-                        "publisher, or lost)")
+                        "publisher, lost, or published after the recording stopped)")
         return status
 
 def _stop_on_signals(stop):
@@ -617,7 +753,7 @@ def main(args=None):
             if window > 0.0:    # let a batch gather, then take all of it in one go
                 stop.wait(window)
                 node.drain()
-        node.drain()
+        node.settle(executor, node.get_parameter("close_timeout").value)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (StartupError, ParameterError, ParameterException, OSError) as exc:

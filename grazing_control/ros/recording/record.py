@@ -9,8 +9,21 @@ object::
      "parameters": {"delta_d": -5e-06, "mode": "lockstep", ...}}
 
 Non-finite numbers are written as the strings "nan", "inf", "-inf" (strict JSON).
-This module has no ROS dependency: the nodes call :func:`encode`, the analysis
-:func:`decode` and :func:`run_parameters`.
+
+The published record (issue 27): when a node stops it says how many messages it published
+on each of its recorded topics, on ``grazing/published`` (std_msgs/String, reliable,
+transient local, depth 1)::
+
+    {"record": "grazing_control/published", "version": 1, "node": "/controller_node",
+     "topics": {"/controller/velocity_correction": 1501, "/controller/estimate": 1501}}
+
+so that a recording can be checked for completeness up to its last message: the recorder
+waits for those counts before it closes and reports what is still missing; the analysis
+names a topic the bag holds fewer messages of than its publisher published.
+
+This module has no ROS dependency: the nodes call :func:`encode` and
+:func:`encode_published`, the analysis :func:`decode`, :func:`run_parameters` and
+:func:`decode_published`.
 """
 
 from __future__ import annotations
@@ -18,13 +31,18 @@ from __future__ import annotations
 import json
 import math
 
-__all__ = ["TOPIC", "KIND", "encode", "decode", "run_parameters"]
+__all__ = ["TOPIC", "KIND", "encode", "decode", "run_parameters", "PUBLISHED_TOPIC",
+           "PUBLISHED_KIND", "encode_published", "decode_published"]
 
 #: Relative topic name of the record (``/grazing/parameters`` in the root namespace).
 TOPIC = "grazing/parameters"
 #: Value of the "record" key, so that a foreign String on the topic is recognised.
 KIND = "grazing_control/parameters"
 VERSION = 1
+#: Relative topic name of the published record (module docstring).
+PUBLISHED_TOPIC = "grazing/published"
+#: Value of its "record" key.
+PUBLISHED_KIND = "grazing_control/published"
 
 
 def _plain(value):
@@ -85,3 +103,29 @@ def run_parameters(records) -> dict:
         if not seq or seq[-1] != params:
             seq.append(params)
     return {"nodes": nodes, "rejected": rejected}
+
+
+def encode_published(node: str, counts: dict) -> str:
+    """The JSON text of a published record: ``counts`` = fully qualified topic -> number
+    of messages the node published on it."""
+    body = {str(k): int(v) for k, v in sorted(counts.items())}
+    return json.dumps({"record": PUBLISHED_KIND, "version": VERSION, "node": node,
+                       "topics": body}, separators=(",", ":"))
+
+
+def decode_published(text: str):
+    """(node, {topic: count}) of a published record's text; ValueError if it is not one
+    (not JSON, another record, a count that is not an integer >= 0)."""
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"not JSON ({exc.msg})") from None
+    except RecursionError:
+        raise ValueError("JSON nested too deeply") from None
+    if not isinstance(obj, dict) or obj.get("record") != PUBLISHED_KIND:
+        raise ValueError("not a grazing_control published record")
+    topics = obj.get("topics")
+    if not isinstance(topics, dict) or not all(
+            isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in topics.values()):
+        raise ValueError("published record without a 'topics' object of counts >= 0")
+    return str(obj.get("node", "")), {str(k): v for k, v in topics.items()}
