@@ -233,5 +233,6 @@ def test_a_node_refuses_a_bomb_as_its_model_file(tmp_path):
     from grazing_control.plant.ndof_settings import load_model_file
 
     bomb = write(tmp_path, "bomb.yaml", model_bomb("M"))
-    with pytest.raises(ParameterError, match=r"model_file=.*bomb.yaml.* more than 50000"):
+    with pytest.raises(ParameterError, match=r"model_file=.*bomb.yaml' is invalid: cannot "
+                                             r"read it as a model YAML file \(more than 50000"):
         load_model_file(str(bomb))

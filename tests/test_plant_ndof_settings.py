@@ -65,7 +65,7 @@ def test_bad_values_keep_the_one_dof_messages():
 def test_a_bad_model_file_is_one_line_naming_model_file(tmp_path):
     missing = tmp_path / "none.yaml"
     with pytest.raises(ParameterError, match=r"^model_file='.*none.yaml' is invalid: cannot "
-                                             r"read it .*No such file"):
+                                             r"read it .*no such file"):
         ndof_settings_from_values({}, str(missing))
     broken = tmp_path / "broken.yaml"
     broken.write_text("M: [[1.0, 0.0], [0.0\n")

@@ -80,8 +80,10 @@ def load_model_file(path: str) -> NdofModel:
         return load_model(path)
     except ParameterError as exc:
         raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
-    except YamlFileError as exc:
-        raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
+    except YamlFileError as exc:       # "PATH: why" (support/files.read_yaml_file)
+        why = str(exc).removeprefix(f"{path}: ")
+        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
+                             f"YAML file ({why})") from None
     except (OSError, TypeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
