@@ -52,6 +52,10 @@ class Sink(Protocol):
     def warn(self, text: str) -> None:
         """Anything else worth a warning (new model parameters at a sample)."""
 
+    def tripped(self, trip) -> None:
+        """The watchdog tripped (:class:`grazing_control.plant.watchdog.Trip`): the loop
+        has stopped actuating and the scene ends (``finish`` follows)."""
+
     def finish(self) -> None:
         """``max_periods`` periods have run."""
 
@@ -74,6 +78,7 @@ class Loop:
         self.latencies = []
         self.lags = []
         self.finished = False
+        self.watchdog = None       # realtime: the plant.watchdog.Watchdog
 
     @property
     def settings(self):
@@ -123,6 +128,14 @@ class Loop:
         """The run is over (max_periods): no more samples."""
         self.finished = True
         self.sink.finish()
+
+    def trip(self, trip) -> None:
+        """The watchdog tripped: the safe state (no correction acts from now on: the
+        scene ends here, every later answer is ignored), the sink told, the run over."""
+        if trip is None or self.finished:
+            return
+        self.sink.tripped(trip)
+        self.finish()
 
     def summary(self, wall: float, counts: dict) -> str:
         """The run in one line: periods, impacts, corrections, then ``counts`` (what the
