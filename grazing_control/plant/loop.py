@@ -155,4 +155,7 @@ class Loop:
                 text += (f" {name} p50={np.percentile(ms, 50):.3f} "
                          f"p99={np.percentile(ms, 99):.3f} max={ms.max():.3f}"
                          + (f" n={ms.size}" if name == "latency_ms" else ""))
+        trip = self.watchdog.tripped if self.watchdog is not None else None
+        if trip is not None:
+            text += f" watchdog={trip.kind} tripped_at={trip.k}"
         return text
