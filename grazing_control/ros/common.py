@@ -51,6 +51,7 @@ __all__ = [
     "READY_TOPIC",
     "REPLAY_QOS",
     "LATCHED_QOS",
+    "EVENT_QOS",
     "NodeArguments",
     "publish_parameter_record",
     "StartupError",
@@ -93,6 +94,12 @@ REPLAY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000,
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: The simulator's event records on grazing/parameters (the watchdog's trip, the
+#: feasibility verdict): reliable, transient local, deep enough for every event of a run.
+EVENT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=16,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: Latched topic (std_msgs/Bool) on which recorder_node says it has matched a publisher
 #: on every topic it records; sim_node waits for it with ``wait_for_recorder``.

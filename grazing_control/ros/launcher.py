@@ -103,6 +103,9 @@ class RunResult:
     logs: dict = field(default_factory=dict)
     domain_id: int | None = None
     live: int | None = None            # live_node's exit status (None: no live view)
+    reason: str | None = None          # why the scene failed, one line (None when ok)
+    sim_verdict: dict | None = None    # sim_node's verdict_file: status, reason, summary,
+    #                                    watchdog trip, feasibility verdict
 
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
@@ -117,6 +120,8 @@ class RunResult:
             text += f"; ROS_DOMAIN_ID={self.domain_id}"
         if self.logs:
             text += f"; logs in {Path(next(iter(self.logs.values()))).parent}"
+        if self.reason and not self.ok:
+            text += f"; reason: {self.reason}"
         return text
 
     @property
@@ -437,6 +442,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
     timed_out = interrupted = False
+    early = []
+    verdict = None
 
     def on_term(signum, frame):
         raise KeyboardInterrupt
@@ -449,6 +456,9 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         domain_id, lock = claim_domain()
     with tempfile.TemporaryDirectory(prefix="grazing_run_") as tmp:
         tmp = Path(tmp)
+        verdict_file = tmp / "sim_node.verdict.json"     # how the scene ended (reason)
+        if "verdict_file" not in sim_over:
+            sim_over = {**sim_over, "verdict_file": str(verdict_file)}
         try:
             if record:
                 procs["recorder_node"] = start_node(
@@ -496,6 +506,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 signal.signal(signal.SIGTERM, previous)
             if lock is not None:
                 lock.close()
+            verdict = read_verdict(Path(sim_over["verdict_file"]))
 
     def code(name):
         p = procs[name]
@@ -509,11 +520,52 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         print(f"warning: recorder_node was killed (signal {-recorder}) after closing its "
               f"bag; its closed record says status {closed}", file=sys.stderr)
         recorder = closed
-    return RunResult(sim=code("sim_node"), controller=code("controller_node"),
-                     recorder=recorder,
-                     bag_dir=os.fspath(bag_dir) if record else None,
-                     wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
-                     logs=logs, domain_id=domain_id, live=code("live_node"))
+    res = RunResult(sim=code("sim_node"), controller=code("controller_node"),
+                    recorder=recorder,
+                    bag_dir=os.fspath(bag_dir) if record else None,
+                    wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
+                    logs=logs, domain_id=domain_id, live=code("live_node"),
+                    sim_verdict=verdict)
+    res.reason = None if res.ok else failure_reason(res, early, timeout)
+    return res
+
+
+def read_verdict(path: Path):
+    """sim_node's ``verdict_file`` (a JSON object), or None when it wrote none (killed,
+    refused at start) or it is unreadable."""
+    import json
+
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def failure_reason(res: RunResult, early=(), timeout=None) -> str:
+    """Why a scene failed, in one line: the simulator's own reason (the watchdog's trip,
+    the feasibility refusal, a stopped simulation: its verdict_file), else what the
+    launcher saw (a timeout, an interruption, a node that left early or failed)."""
+    parts = []
+    verdict = res.sim_verdict or {}
+    if verdict.get("reason") and res.sim != 0:
+        parts.append(f"sim_node: {verdict['reason']}")
+    if res.timed_out:
+        parts.append(f"timed out after {timeout:g} s" if timeout else "timed out")
+    if res.interrupted:
+        parts.append("interrupted")
+    for name in early:
+        parts.append(f"{name} exited early with status {getattr(res, _FIELD[name])}")
+    for name, field in _FIELD.items():
+        code = getattr(res, field)
+        if code not in (None, 0) and name not in early and not (
+                name == "sim_node" and parts and verdict.get("reason")):
+            parts.append(f"{name} exited with status {code}")
+    return "; ".join(parts) or "unknown"
+
+
+_FIELD = {"sim_node": "sim", "controller_node": "controller", "recorder_node": "recorder",
+          "live_node": "live"}
 
 
 def threading_is_main() -> bool:
