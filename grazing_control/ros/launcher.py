@@ -23,6 +23,10 @@ without renaming a topic; a namespace would leave the absolute ones shared. The
 simulator also refuses to run when another simulator or controller shares its topics.
 
 Failing fast: a node that exits early (a refused parameter) stops the scene at once.
+A failed scene names its reason (:attr:`RunResult.reason`): the simulator's own (the
+realtime watchdog's trip, a refused feasibility check, a stopped simulation), which it
+writes to its ``verdict_file`` at exit, else what the launcher saw (a timeout, a node that
+left early or failed).
 Ctrl-C (or SIGTERM to the launcher): the nodes run in process groups of their own, so
 only the launcher gets the terminal's SIGINT; it sends SIGTERM to every node still
 running (handled as SIGINT: summaries, the bag closed; a node still starting ends
