@@ -617,3 +617,23 @@ def test_a_loop_that_loses_the_orbit_while_correcting_trips_on_the_excursion():
     assert math.hypot(last.x - P.x_ref, last.v - P.v_ref) > bound
     assert trip.k == 51 and f"= {bound:.3g}" in trip.reason
     assert loop.stats["applied"] == 51 and not sink.misses
+
+
+def test_a_reset_after_a_trip_starts_a_new_run_with_a_new_watchdog():
+    """~/reset after a trip: sample 0 again, the trip forgotten by the loop (the node keeps
+    it for its exit status), answers in time act again."""
+    c1, c2, delay = RIG
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=100,
+                 state_period=0.0, watchdog_window=4, watchdog_misses=2)
+    clock, sink = Clock(), Recorder()
+    loop = run_realtime(s, 100, late_controller(c1, c2), clock, sink)
+    assert loop.watchdog.tripped.k == 1 and loop.finished
+    loop.reset(loop.engine.reset())
+    assert loop.watchdog.tripped is None and not loop.finished
+    ev = sink.samples()[-1]
+    assert ev.t == 0.0
+    clock.now += 1e-3
+    loop.answer(key(ev), 1e-4)
+    clock.now += 5e-3
+    loop.tick()
+    assert loop.stats["applied"] == 1 and loop.engine.k == 0

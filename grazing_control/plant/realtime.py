@@ -76,11 +76,9 @@ class Realtime(Loop):
         self.early = {}        # stamp key -> (dv, wall, predicted): answers of samples
         #                        not yet published (a stream controller may answer first)
         self.queue = []        # the current period's events not yet published, in time order
-        limits = self.settings.watchdog
-        one_dof = type(self.engine) is Engine
-        self.watchdog = Watchdog(limits, excursion_scale(self.engine.p)
-                                 if one_dof and limits.excursion else None)
-        self._deviation = one_dof   # the excursion check reads the engine's (dx, dv)
+        self._deviation = type(self.engine) is Engine   # the excursion check reads (dx, dv)
+        self._scaled = None     # the model the watchdog's excursion scale is for
+        self.watchdog = Watchdog(self.settings.watchdog)
 
     def now(self, wall: float | None = None) -> float:
         """Simulation time at wall time ``wall`` (default: now)."""
@@ -98,7 +96,8 @@ class Realtime(Loop):
         self.pending.clear()
         self.early.clear()
         self.deadline = None
-        self.watchdog.reset()
+        self.watchdog = Watchdog(self.settings.watchdog)   # a new run: a new watchdog
+        self._scaled = None
         self.publish_sample(ev)
         for e in self.engine.initial_states():
             self.emit(e)
@@ -129,6 +128,9 @@ class Realtime(Loop):
         # pace: how late the sample went out against its simulation time
         lag = sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale
         self.lags.append(lag)
+        if self._deviation and engine.p is not self._scaled:   # the model (Delta d) changed
+            self._scaled = engine.p
+            self.watchdog.scale = excursion_scale(engine.p)
         self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag, self.settings.time_scale,
                                        (engine.dx, engine.dv) if self._deviation else None))
         if self.finished:
