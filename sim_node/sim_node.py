@@ -357,7 +357,7 @@ class SimNode(Node):
         if kernel.use_kernel() and not self._warm:   # compile, or load numba's cache, now:
             kernel.warm_up()                         # not in the first period
             self._warm = True
-        if not self._feasible(self._ready_since is not None):
+        if not self._feasible():
             return
         self.destroy_timer(self._start_timer)
         self._wall_start = time.monotonic()
@@ -371,7 +371,7 @@ class SimNode(Node):
             self._tick_timer = self.create_timer(MIN_TICK, self._on_tick)
             self._guard(self.loop.start)
 
-    def _feasible(self, ready: bool) -> bool:
+    def _feasible(self) -> bool:
         """Realtime: the check before the start (plant.feasibility); True when the scene
         may start now, False while the round trips are measured or when it is refused.
 
@@ -382,13 +382,10 @@ class SimNode(Node):
         s = self.settings
         if s.mode != "realtime" or s.feasibility == "off" or self.feasibility is not None:
             return True
-        if self._probe is False:
-            target = None
-            if ready and self.get_parameter("wait_for_controller").value:
-                nodes = {(i.node_namespace, i.node_name) for i in
-                         self.get_publishers_info_by_topic(
-                             self.resolve_topic_name(RECORD_TOPIC))}
-                target = controller_name(self, self.sub_correction.topic_name, nodes)
+        if self._probe is False:     # the controller of this package answering, if any
+            nodes = {(i.node_namespace, i.node_name) for i in
+                     self.get_publishers_info_by_topic(self.resolve_topic_name(RECORD_TOPIC))}
+            target = controller_name(self, self.sub_correction.topic_name, nodes)
             self._probe = (RoundTrips(self, target, ROUND_TRIPS, PROBE_TIMEOUT)
                            if target else None)
             self._probe_start = time.monotonic()
@@ -397,8 +394,15 @@ class SimNode(Node):
             return False
         period = self.engine.p.period
         sustained, _ = sustained_rate(type(self.engine)(s), self.out.serialise)
+        waited = time.monotonic() - self._probe_start
+        note = None
+        if probe is None:
+            note = "no controller of this package found: its round trip is not measured"
+        elif not probe.asked:
+            note = (f"the controller's get_parameters service did not appear in "
+                    f"{waited:.3g} s: its round trip is not measured")
         verdict = check(s, period, probe.times if probe else (), sustained,
-                        probe.asked if probe else 0, time.monotonic() - self._probe_start)
+                        probe.asked if probe else 0, waited, note)
         self.feasibility = verdict
         self._event("feasibility", level=verdict.level, line=verdict.line, **verdict.numbers)
         log = self.get_logger()

@@ -55,6 +55,11 @@ def test_a_controller_that_answers_nothing_is_refused():
     assert v.level == "refuse" and "answered none of 1 requests in 5 s" in v.line
 
 
+def test_a_round_trip_not_measured_is_a_warning_naming_why():
+    v = check(settings(), P.period, [], 1000.0, note="no controller found")
+    assert v.level == "warn" and v.line.endswith("no controller found")
+
+
 def test_the_measured_rate_runs_the_scenes_engine_and_hands_over_every_event():
     s = settings(time_scale=1000.0)
     seen = []

@@ -104,11 +104,12 @@ def sustained_rate(engine, emit=None, clock=time.perf_counter, wall: float = MEA
 
 
 def check(settings, period: float, round_trips, sustained: float | None,
-          asked: int = 0, waited: float = 0.0) -> Verdict:
+          asked: int = 0, waited: float = 0.0, note: str | None = None) -> Verdict:
     """The verdict on a realtime scene (module docstring): ``round_trips`` the measured
     wall seconds (empty: no controller was measured), ``sustained`` the measured periods
     per wall second (None: not measured); ``asked`` requests sent to the controller over
-    ``waited`` wall seconds (none answered: refused)."""
+    ``waited`` wall seconds (none answered: refused); ``note``: why the round trip was
+    not measured (a warning)."""
     budget = answer_budget(settings, period)
     want, want_events = requested_rate(settings, period)
     numbers = {"budget_ms": budget * 1e3, "requested_periods_per_s": want,
@@ -130,6 +131,8 @@ def check(settings, period: float, round_trips, sustained: float | None,
     elif asked:
         refuse.append(f"the controller's process answered none of {asked} requests in "
                       f"{waited:.3g} s (answer budget {budget * 1e3:.3g} ms)")
+    if note:
+        warn.append(note)
     if sustained is not None and math.isfinite(sustained):
         numbers["sustained_periods_per_s"] = sustained
         text = (f"this machine simulates {sustained:.4g} periods per wall second against the "
