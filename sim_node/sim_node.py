@@ -215,6 +215,7 @@ class SimNode(Node):
         self._probe = False           # False: not started; None: no controller; RoundTrips
         self._probe_start = 0.0
         self._warm = False
+        self._summary = None          # the summary line logged when the scene ended
         self.scene = SceneGuard(self, self.get_parameter("scene").value)
         self._start_timer = self.create_timer(0.02, self._try_start)
         self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
@@ -485,7 +486,8 @@ class SimNode(Node):
     def finish(self) -> None:
         """max_periods have run: oscillator/done, the summary, exit if asked."""
         self.pub_done.publish(Bool(data=True))
-        self.get_logger().info(self.summary())
+        self._summary = self.summary()      # the wall time of the scene, not of the exit
+        self.get_logger().info(self._summary)
         if self.exit_when_done:
             self.exit_now = True
 
@@ -555,7 +557,7 @@ class SimNode(Node):
         trip, fe = self.trip, self.feasibility
         return {"node": self.get_fully_qualified_name(), "status": self.exit_code,
                 "finished": bool(self.loop is not None and self.loop.finished),
-                "reason": self.reason, "summary": self.summary(),
+                "reason": self.reason, "summary": self._summary or self.summary(),
                 "watchdog": None if trip is None else trip._asdict(),
                 "feasibility": None if fe is None else {"level": fe.level, "line": fe.line,
                                                         **fe.numbers}}

@@ -17,9 +17,9 @@ feasibility"):
 :func:`check` compares them: **refuse** when the median round trip is at least the
 budget (most answers would miss their deadline) or when the measured rate is below the
 requested one (the scene would fall further behind the wall clock every period); **warn**
-when the largest round trip reaches the budget, or when the rate is below twice the
-requested one (the measurement is the simulation alone: publishing, the middleware and
-the controller share the same CPUs). Each verdict is one line with the numbers. What is
+when the largest round trip reaches the budget, or when the rate is below RATE_MARGIN
+times the requested one (the measurement is the simulation alone: publishing, the
+middleware and the controller share the same CPUs). Each verdict is one line with the numbers. What is
 then done with it is sim_node's ``feasibility`` parameter (refuse: exit status 2, warn,
 off); the watchdog (:mod:`grazing_control.plant.watchdog`) covers what changes after the
 start.
@@ -41,8 +41,11 @@ ROUND_TRIPS = 8
 #: Wall seconds of the simulation-rate measurement (at most MEASURE_PERIODS periods).
 MEASURE_WALL = 0.25
 MEASURE_PERIODS = 2000
-#: Warn below this multiple of the requested rate (the measurement is the simulation alone).
-RATE_MARGIN = 2.0
+#: Warn below this multiple of the requested rate: the measurement is the simulation alone,
+#: and the node publishing the rig scene (200 stream samples per period) sustained 116
+#: periods/s where this measured 321 (ratio 2.8; load average 10 on 2 cores, sim_node at
+#: time_scale 1e5 with the watchdog off, issue 27).
+RATE_MARGIN = 3.0
 
 
 class Verdict(NamedTuple):
