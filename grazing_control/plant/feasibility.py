@@ -19,10 +19,10 @@ budget (most answers would miss their deadline) or when the measured rate is bel
 requested one (the scene would fall further behind the wall clock every period); **warn**
 when the largest round trip reaches the budget, or when the rate is below RATE_MARGIN
 times the requested one (the measurement is the simulation alone: publishing, the
-middleware and the controller share the same CPUs). Each verdict is one line with the numbers. What is
-then done with it is sim_node's ``feasibility`` parameter (refuse: exit status 2, warn,
-off); the watchdog (:mod:`grazing_control.plant.watchdog`) covers what changes after the
-start.
+middleware and the controller share the same CPUs), or when the controller's round trip
+could not be measured. Each verdict is one line with the numbers. What is then done
+with it is sim_node's ``feasibility`` parameter (refuse: exit status 2, warn, off); the
+watchdog (:mod:`grazing_control.plant.watchdog`) covers what changes after the start.
 """
 
 from __future__ import annotations

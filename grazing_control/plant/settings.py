@@ -136,7 +136,8 @@ PARAMETERS = (
               read_only=True),
     Parameter("watchdog_misses", "integer", _WD.misses, "realtime watchdog: stop actuating "
               "and fail the scene at this many samples without an answer in time within "
-              "the window, 0..1000000 (0 = off; more than the window: never)", 0, 1_000_000, read_only=True),
+              "the window, 0..1000000 (0 = off; more than the window: never)", 0, 1_000_000,
+              read_only=True),
     Parameter("watchdog_pace", "double", _WD.pace, "realtime watchdog: ... when the "
               "simulation ran slower than this fraction of time_scale over a full window, "
               "0..1 (0 = off)", 0.0, 1.0, read_only=True),

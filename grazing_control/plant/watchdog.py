@@ -84,11 +84,6 @@ class WatchdogLimits:
     lag: float = 1.0
     excursion: float = 15.0
 
-    @property
-    def active(self) -> bool:
-        """Whether any check is on."""
-        return bool(self.misses or self.pace or self.lag or self.excursion)
-
 
 class Trip(NamedTuple):
     """Why and where the watchdog tripped: ``kind`` (one of TRIP_KINDS), sample ``k``,
