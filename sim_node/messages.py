@@ -117,5 +117,24 @@ class Outputs:
     def substituted(self, k: int, key: tuple, dv: float) -> None:
         self.node.pub_substituted.publish(cdr.twist_stamped(*key, dv))
 
+    def tripped(self, trip) -> None:
+        self.node.on_trip(trip)
+
+    def serialise(self, ev: Event) -> None:
+        """What :meth:`publish` makes of ``ev`` without publishing it (the feasibility
+        check's rate measurement, plant.feasibility.sustained_rate)."""
+        sec, ns = cdr.stamp_parts(ev.t)
+        if isinstance(ev, NdofEvent):
+            if self._names is None or len(self._names) != len(ev.x):
+                self._names = joint_names(len(ev.x))
+            ndof_joint_state(ev, self._names)
+        elif ev.kind == "impact":
+            cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase)
+        elif ev.kind == "state":
+            cdr.stream_sample(sec, ns, ev.x, ev.v if self.node.settings.sensor.velocity
+                              else None, math.cos(ev.phase), math.sin(ev.phase))
+        else:
+            cdr.joint_state(sec, ns, ev.x, ev.v, math.cos(ev.phase))
+
     def finish(self) -> None:
         self.node.finish()

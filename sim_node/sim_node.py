@@ -14,7 +14,9 @@ scene sample for sample (docs/nodes.md).
 Topics (docs/nodes.md has every field, unit and QoS): publishes ``oscillator/state`` (the
 rig's sensor stream), ``oscillator/pi1``, ``/pi2`` (the ground truth), ``/impact``,
 ``/latency``, ``/deadline_miss``, ``/substituted`` (the prediction that acted for a
-missing answer), ``/done``, ``/clock``; stamps are simulation time. Subscribes
+missing answer), ``/done``, ``/clock``; stamps are simulation time; ``grazing/parameters``
+carries its parameter record and its events (the watchdog's trip, the feasibility
+verdict: :mod:`grazing_control.ros.recording.record`). Subscribes
 ``controller/velocity_correction`` (linear.x = Delta v, linear.y = the predicted next
 one, stamp = the Pi2 sample answered). Service ``~/reset``: back to t = 0.
 
@@ -39,12 +41,13 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64
+from std_msgs.msg import Bool, Float64, String
 from std_srvs.srv import Trigger
 
 from grazing_control.oscillator import kernel
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.engine import Engine
+from grazing_control.plant.feasibility import ROUND_TRIPS, check, sustained_rate
 from grazing_control.plant.lockstep import Lockstep
 from grazing_control.plant.loop import Loop
 from grazing_control.plant.ndof_engine import NdofEngine
@@ -54,11 +57,12 @@ from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, described_range,
                                             settings_from_values)
 from grazing_control.ros import cdr
-from grazing_control.ros.diagnostics import SceneWindow, Updater
+from grazing_control.ros.diagnostics import ERROR, SceneWindow, Updater
 from grazing_control.ros.published import (ACK_TIMEOUT, Counted, PublishedRecord,
                                           close_publishers)
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
-from grazing_control.ros.common import (DATA_QOS, EXECUTORS, LATCHED_QOS,
+from grazing_control.ros.recording.record import encode_event
+from grazing_control.ros.common import (DATA_QOS, EVENT_QOS, EXECUTORS, LATCHED_QOS,
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
                                         StartupError, bool_descriptor, check_ranges,
                                         deserialize, executor_kind, float_descriptor,
@@ -70,6 +74,7 @@ from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
 from grazing_control.ros.scheduling import apply_node_scheduling
 
 from sim_node.messages import Outputs, read_answer
+from sim_node.probe import RoundTrips, controller_name
 
 __all__ = ["SimNode", "main"]
 
@@ -81,6 +86,8 @@ INTERRUPTED_ACK_TIMEOUT = 2.0
 #: Realtime: /clock goes out at a wake-up at most every this many wall seconds (and at
 #: least every CLOCK_TICK of the loop); one per wake-up was one message per stream sample.
 CLOCK_EVERY = 1e-3
+#: Wall seconds the round trips to the controller before a realtime start may take.
+PROBE_TIMEOUT = 5.0
 #: No default QoS-event handlers on the data publishers: each one is one more entity in
 #: every executor wait (measured: about 10 % of the lockstep rate).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
@@ -125,6 +132,9 @@ NODE_PARAMETERS = (
               "p99, wall seconds (0 = off)", 0.0),
     Parameter("diag_pace_warn", "double", 0.9, "/diagnostics WARN when realtime runs slower "
               "than this fraction of time_scale (0 = off)", 0.0, 1.0),
+    Parameter("verdict_file", "string", "", "write how the scene ended (exit status, "
+              "reason, summary, watchdog trip, feasibility verdict) as one JSON object to "
+              "this file at exit; grazing run reads it ('' = none)", read_only=True),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
     Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "
@@ -223,13 +233,21 @@ class SimNode(Node):
         if self.get_parameter("wait_for_recorder").value:
             self.create_subscription(Bool, READY_TOPIC, self._on_recorder_ready, LATCHED_QOS)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
+        # the scene's events on the same topic (record.encode_event): watchdog, feasibility
+        self.pub_events = self.create_publisher(String, RECORD_TOPIC, EVENT_QOS)
+        self.trip = None              # the watchdog's Trip, once tripped
+        self.feasibility = None       # the check before a realtime start (Verdict)
+        self.reason = None            # why the scene failed, in one line
+        self._probe = False           # False: not started; None: no controller; RoundTrips
+        self._probe_start = 0.0
+        self._warm = False
+        self._summary = None          # the summary line logged when the scene ended
         self.scene = SceneGuard(self, self.get_parameter("scene").value)
         self._start_timer = self.create_timer(0.02, self._try_start)
         self._isolation_timer = self.create_timer(ISOLATION_CHECK, self._check_isolation)
         self._tick_timer = None
         self.out = Outputs(self)
-        self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value,
-                                   hardware_id="grazing_control/sim_node")
+        self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value)
         self._window = SceneWindow()
         self.diagnostics.add("scene", self._diagnose)
         self.executor_kind = executor_kind(self)
@@ -310,6 +328,7 @@ class SimNode(Node):
                    "ROS_DOMAIN_ID and namespace?)")
         if why is not None:
             if self.loop is None:
+                self.reason = f"not starting: {why}"
                 self.get_logger().error(f"not starting: {why}")
                 self.exit_code = 1
                 self._finished = True
@@ -389,11 +408,14 @@ class SimNode(Node):
             return
         elif time.monotonic() - self._ready_since < 0.2:
             return
-        else:
+        if kernel.use_kernel() and not self._warm:   # compile, or load numba's cache, now:
+            kernel.warm_up()                         # not in the first period
+            self._warm = True
+        if not self._feasible():
+            return
+        if not missing:
             self.get_logger().info(f"start conditions met after {waited:.1f} s: starting")
         self.destroy_timer(self._start_timer)
-        if kernel.use_kernel():   # compile, or load numba's cache, now: not in the first period
-            kernel.warm_up()
         self._wall_start = time.monotonic()
         if self.settings.mode == "lockstep":
             self.loop = Lockstep(self.engine, self.out)
@@ -404,6 +426,69 @@ class SimNode(Node):
             self.loop = Realtime(self.engine, self.out)
             self._tick_timer = self.create_timer(MIN_TICK, self._on_tick)
             self._guard(self.loop.start)
+
+    def _feasible(self) -> bool:
+        """Realtime: the check before the start (plant.feasibility); True when the scene
+        may start now, False while the round trips are measured or when it is refused.
+
+        The controller's round trips (sim_node.probe) while nothing of the scene is
+        published, then the simulation rate of a copy of the engine with every event
+        serialised; the verdict is logged, published as an event record, and with
+        ``feasibility`` refuse an infeasible scene ends here with exit status 2."""
+        s = self.settings
+        if s.mode != "realtime" or s.feasibility == "off" or self.feasibility is not None:
+            return True
+        if self._probe is False:     # the controller of this package answering, if any
+            nodes = {(i.node_namespace, i.node_name) for i in
+                     self.get_publishers_info_by_topic(self.resolve_topic_name(RECORD_TOPIC))}
+            target = controller_name(self, self.sub_correction.topic_name, nodes)
+            self._probe = (RoundTrips(self, target, ROUND_TRIPS, PROBE_TIMEOUT)
+                           if target else None)
+            self._probe_start = time.monotonic()
+        probe = self._probe
+        if probe is not None and not probe.poll():
+            return False
+        period = self.engine.p.period
+        sustained, _ = sustained_rate(type(self.engine)(s), self.out.serialise)
+        waited = time.monotonic() - self._probe_start
+        note = None
+        if probe is None:
+            note = "no controller of this package found: its round trip is not measured"
+        elif not probe.asked:
+            note = (f"the controller's get_parameters service did not appear in "
+                    f"{waited:.3g} s: its round trip is not measured")
+        verdict = check(s, period, probe.times if probe else (), sustained,
+                        probe.asked if probe else 0, waited, note)
+        self.feasibility = verdict
+        self._event("feasibility", level=verdict.level, line=verdict.line, **verdict.numbers)
+        log = self.get_logger()
+        if verdict.level == "refuse" and s.feasibility == "refuse":
+            self.reason = verdict.line
+            log.error(f"not starting: {verdict.line} (feasibility:=warn starts anyway)")
+            self.exit_code = 2
+            self._finished = True
+            self.exit_now = True
+            self.destroy_timer(self._start_timer)
+            return False
+        (log.info if verdict.level == "ok" else log.warning)(verdict.line)
+        return True
+
+    def _event(self, event: str, **fields) -> None:
+        """Publish one event record on grazing/parameters (recorded with the scene)."""
+        self.pub_events.publish(String(data=encode_event(
+            self.get_fully_qualified_name(), event, **fields)))
+
+    def on_trip(self, trip) -> None:
+        """The watchdog tripped (the loop has stopped actuating; the scene ends next):
+        an error naming the reason, exit status 1, an event record, /diagnostics now."""
+        self.trip = trip
+        self.reason = f"watchdog ({trip.kind}): {trip.reason}"
+        self.exit_code = 1
+        self.get_logger().error(
+            f"watchdog tripped at sample {trip.k} (t={trip.t:.9g}): {trip.reason}; no "
+            "correction acts from now on (safe state) and the scene ends")
+        self._event("watchdog", kind=trip.kind, k=trip.k, t=trip.t, reason=trip.reason)
+        self.diagnostics.force_update()
 
     # ---------------------------------------------------------------- answers, time
     def _on_correction(self, data: bytes) -> None:
@@ -456,11 +541,13 @@ class SimNode(Node):
     def finish(self) -> None:
         """max_periods have run: oscillator/done, the summary, exit if asked."""
         self.pub_done.publish(Bool(data=True))
-        self.get_logger().info(self.summary())
+        self._summary = self.summary()      # the wall time of the scene, not of the exit
+        self.get_logger().info(self._summary)
         if self.exit_when_done:
             self.exit_now = True
 
     def _fail(self, exc: Exception) -> None:
+        self.reason = self.reason or f"simulation stopped at t={self.engine.t:.9g}: {exc}"
         self.get_logger().error(f"simulation stopped at t={self.engine.t:.9g}: {exc}")
         self.exit_code = 1
         self._finished = True
@@ -474,8 +561,17 @@ class SimNode(Node):
                   "ignored": out.ignored.count, "malformed": out.malformed.count}
         th = {k: self.get_parameter(f"diag_{k}").value for k in
               ("misses_warn", "misses_error", "latency_warn", "latency_error", "pace_warn")}
-        return self._window.status(stat, self.loop, counts, time.monotonic(), th,
+        stat = self._window.status(stat, self.loop, counts, time.monotonic(), th,
                                    self.settings.mode == "realtime", self.settings.time_scale)
+        if self.feasibility is not None:
+            stat.add("feasibility", self.feasibility.level)
+        if self.trip is not None:
+            stat.add("watchdog", self.trip.kind)
+            stat.merge_summary(ERROR, f"watchdog tripped at sample {self.trip.k}: "
+                                      f"{self.trip.reason}; not actuating")
+        elif self.feasibility is not None and self.feasibility.level == "refuse":
+            stat.merge_summary(ERROR, self.feasibility.line)
+        return stat
 
     def summary(self) -> str:
         """One line: periods, impacts, corrections, ignored input, rate, latency."""
@@ -501,12 +597,25 @@ class SimNode(Node):
             close_publishers(self.published, ACK_TIMEOUT, also=(self.pub_done,))
 
     def on_exit(self) -> None:
-        """Log the summary when stopped before the end (Ctrl-C), and say what was
-        published (a recorder checks the bag's tail with it)."""
+        """Log the summary when stopped before the end (Ctrl-C), say what was published
+        (a recorder checks the bag's tail with it) and write ``verdict_file``."""
         if self.loop is None or not self.loop.finished:
             self.get_logger().info(self.summary() + " (interrupted)")
         if not self.published.sent:
             close_publishers(self.published, INTERRUPTED_ACK_TIMEOUT)
+        path = self.get_parameter("verdict_file").value
+        if path:
+            write_verdict(path, self.verdict())
+
+    def verdict(self) -> dict:
+        """How the scene ended, for ``verdict_file`` (grazing run's JSON)."""
+        trip, fe = self.trip, self.feasibility
+        return {"node": self.get_fully_qualified_name(), "status": self.exit_code,
+                "finished": bool(self.loop is not None and self.loop.finished),
+                "reason": self.reason, "summary": self._summary or self.summary(),
+                "watchdog": None if trip is None else trip._asdict(),
+                "feasibility": None if fe is None else {"level": fe.level, "line": fe.line,
+                                                        **fe.numbers}}
 
     # ----------------------------------------------------------- services, params
     def _on_reset(self, request, response):
@@ -559,6 +668,22 @@ class SimNode(Node):
         self.engine.settings = new
         log_parameter_changes(self, params)
         return SetParametersResult(successful=True)
+
+
+def write_verdict(path: str, verdict: dict) -> None:
+    """Write ``verdict`` as one JSON object to ``path`` (whole or not at all: a file next
+    to it renamed over it); an error is one line on stderr, never a crash at exit."""
+    import json
+    import os
+    import sys
+
+    tmp = f"{path}.{os.getpid()}.tmp"
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(verdict, f, default=str)
+        os.replace(tmp, path)
+    except OSError as exc:
+        print(f"sim_node: verdict_file={path!r}: {exc.strerror or exc}", file=sys.stderr)
 
 
 def main(args=None) -> int:

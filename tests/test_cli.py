@@ -547,6 +547,8 @@ def test_grazing_run_json_prints_one_summary_object(tmp_path):
     obj = _strict_json(r.stdout)
     assert obj["ok"] is True and obj["exit_code"] == 0 and obj["sim"] == 0
     assert "finished" in obj["summary"]
+    assert obj["reason"] is None and obj["sim_verdict"]["status"] == 0   # issue 27 §1
+    assert obj["sim_verdict"]["watchdog"] is None
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ and the simulator replay apply 0 for it and the recording is reproduced to round
 without the miss messages the same bag departs (issue 19 §4)."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -14,6 +15,8 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.analyze import analyze
 from grazing_control.ros.recording import record
+
+from grazing_control.ros.diagnostics import ERROR as ERROR_LEVEL
 
 from bagtools_helpers import joint_state, string, twist_stamped, vector3_stamped, write_rosbags
 
@@ -102,3 +105,103 @@ def test_without_the_miss_messages_the_replay_departs_at_the_first_miss(tmp_path
     res = replay_simulator(_bag(tmp_path / "bag", False), tmp_path / "replayed",
                            domain_id=new_domain())
     assert res["first_sample_above_1e-12"] == MISSES[0] + 1, res
+
+
+# ======================================================= the watchdog through the nodes
+#: A realtime scene whose every answer misses its deadline, whatever the machine: a
+#: budget of 10 us (actuation delay 0.01 at time_scale 1000) against a ROS round trip of
+#: about a millisecond (the 'yes > /dev/null' scene of issue 27 §1, made deterministic).
+TINY_BUDGET = ["--mode", "realtime", "--sim-param", "time_scale:=1000.0",
+               "--sim-param", "actuation_delay:=0.01",
+               "--controller-param", "actuation_delay:=0.01", "--enable-after", "0"]
+
+
+@pytest.fixture(scope="module")
+def watchdog_scenes(tmp_path_factory):
+    """Two scenes at once (own domains): the tiny budget with feasibility:=warn through
+    `grazing run --json` with a bag and a /diagnostics subscriber (the watchdog trips),
+    and the same scene with the default feasibility:=refuse (refused before it starts)."""
+    import concurrent.futures
+    import json
+
+    from grazing_control.ros import launcher
+    from test_cli import _run as cli
+    from test_closed_loop import CONTROLLER, STUDY, new_domain
+    from test_diagnostics import Probe
+
+    tmp = tmp_path_factory.mktemp("watchdog")
+    tripped, refused = new_domain(), new_domain()
+    probe = Probe(tripped)
+    try:
+        with concurrent.futures.ThreadPoolExecutor(2) as pool:
+            run = pool.submit(cli, ["run", "--periods", "200", *TINY_BUDGET,
+                                     "--sim-param", "feasibility:=warn",
+                                     "--bag", str(tmp / "bag"), "--json", "--timeout", "100",
+                                     "--domain-id", str(tripped)], tmp)
+            refusal = pool.submit(
+                launcher.run, STUDY, CONTROLLER, None, 200, mode="realtime", enable_after=0,
+                domain_id=refused, timeout=100.0,
+                sim_overrides={"time_scale": 1000.0, "actuation_delay": 0.01},
+                controller_overrides={"actuation_delay": 0.01}, log_dir=tmp / "logs")
+            r, res = run.result(), refusal.result()
+        time.sleep(1.0)
+        statuses = probe.statuses("sim_node: scene")
+    finally:
+        probe.close()
+    obj = json.loads(r.stdout) if r.stdout.strip() else {}
+    return {"run": r, "json": obj, "bag": tmp / "bag", "refused": res, "statuses": statuses,
+            "tmp": tmp}
+
+
+def test_the_watchdog_stops_an_open_loop_scene_and_grazing_run_fails_naming_it(
+        watchdog_scenes):
+    r, obj = watchdog_scenes["run"], watchdog_scenes["json"]
+    assert r.returncode == 1, r.stderr[-3000:]
+    assert obj["ok"] is False and obj["exit_code"] == 1 and obj["sim"] == 1
+    assert obj["reason"].startswith("sim_node: watchdog (misses): 25 of the last 50 samples "
+                                    "without an answer in time"), obj["reason"]
+    verdict = obj["sim_verdict"]
+    assert verdict["status"] == 1 and verdict["watchdog"]["kind"] == "misses"
+    assert verdict["watchdog"]["k"] == 24
+    # nothing acted: no correction applied, no prediction substituted; the scene ended
+    summary = verdict["summary"]
+    assert " applied=0 " in summary and " predicted=0 " in summary
+    assert "periods=24 " in summary and summary.endswith("watchdog=misses tripped_at=24")
+    # the check before the start measured the round trip against the 10 us and warned
+    assert verdict["feasibility"]["level"] == "refuse"
+    assert verdict["feasibility"]["budget_ms"] == pytest.approx(0.01)
+    assert "reason: sim_node: watchdog (misses)" in obj["summary"]
+
+
+def test_the_trip_is_an_error_on_diagnostics(watchdog_scenes):
+    errors = [s for s in watchdog_scenes["statuses"] if s.level == ERROR_LEVEL]
+    assert errors and all("watchdog tripped at sample 24" in s.message for s in errors), \
+        [(s.level, s.message) for s in watchdog_scenes["statuses"]]
+    assert {kv.key: kv.value for kv in errors[-1].values}["watchdog"] == "misses"
+
+
+def test_the_trip_is_in_the_recording_and_analyze_names_it(watchdog_scenes, tmp_path):
+    rep = analyze([watchdog_scenes["bag"]], tmp_path / "report", figures=False)["bags"][0]
+    problems = rep["problems"]
+    assert any("the simulator's watchdog tripped (misses) at sample 24" in p
+               for p in problems), problems
+    assert any("feasibility check before the start: infeasible realtime scene" in n
+               for n in rep["notes"]), rep["notes"]
+    from grazing_control.ros.recording.reading import read_messages
+
+    pi2 = [m for m in read_messages(watchdog_scenes["bag"])
+           if m.topic == "/oscillator/pi2"]
+    assert len(pi2) == 25                                      # samples 0..24, then the end
+
+
+def test_an_infeasible_realtime_scene_is_refused_before_it_starts(watchdog_scenes):
+    res = watchdog_scenes["refused"]
+    assert res.sim == 2 and not res.ok, res
+    assert res.reason.startswith("sim_node: infeasible realtime scene: the controller's round "
+                                 "trip"), res.reason
+    assert "against the answer budget 0.01 ms (actuation delay / time_scale)" in res.reason
+    v = res.sim_verdict
+    assert v["status"] == 2 and v["feasibility"]["level"] == "refuse"
+    assert v["feasibility"]["round_trips"] == 8 and "periods=0 " in v["summary"]
+    log = open(res.logs["sim_node"]).read()
+    assert log.count("not starting: infeasible realtime scene") == 1

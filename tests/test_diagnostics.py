@@ -13,7 +13,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from grazing_control.ros import launcher
 from grazing_control.ros.diagnostics import (ERROR, OK, WARN, DiagnosticStatusWrapper,
-                                             Updater, level_of)
+                                             SceneWindow, Updater, level_of)
 from test_closed_loop import CONTROLLER, STUDY, new_domain
 
 
@@ -45,6 +45,115 @@ def test_a_failing_task_is_an_error_status_not_a_crash():
         good, bad = up.statuses()
         assert (good.name, good.level, good.message) == ("diag_unit: good", OK, "fine")
         assert bad.level == ERROR and "ZeroDivisionError" in bad.message
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
+def test_names_and_hardware_ids_carry_the_namespace():
+    """Two scenes in two namespaces must not merge in a monitor (issue 27 §2)."""
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    try:
+        for ns, prefix in (("", ""), ("a", "a/"), ("/b/c", "b/c/")):
+            node = rclpy.create_node("diag_ns", namespace=ns, context=ctx)
+            up = Updater(node, period=0.0)
+            up.add("task", lambda st: st.summary(OK, "fine"))
+            (status,) = up.statuses()
+            assert status.name == f"{prefix}diag_ns: task"
+            assert status.hardware_id == f"grazing_control/{prefix}diag_ns"
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
+def test_the_period_is_wall_time_under_use_sim_time():
+    """Under use_sim_time the updater's timer follows the wall clock: it fires while the
+    simulated clock stands (a ROS-clock timer never did) and no faster than its period
+    while /clock runs 10^5 times faster than the wall (a ROS-clock timer fired at the
+    executor's pace: 499 arrays/s in lockstep). Counted, not timed: the bound is the
+    number of periods in the wall time the test happened to take."""
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock as ClockMsg
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    try:
+        node = rclpy.create_node("diag_sim", context=ctx, parameter_overrides=[
+            Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+        clock_node = rclpy.create_node("diag_clock", context=ctx)
+        pub = clock_node.create_publisher(ClockMsg, "/clock", 10)
+        period = 0.2
+        up = Updater(node, period=period)
+        calls = []
+        up.add("count", lambda st: calls.append(time.monotonic()))
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(clock_node)
+
+        def spin_until(n, fast_clock):
+            t0, sim = time.monotonic(), 0
+            while len(calls) < n and time.monotonic() - t0 < 30.0:
+                if fast_clock:
+                    sim += 20_000_000_000          # 20 s of simulation per message
+                    msg = ClockMsg()
+                    msg.clock.sec, msg.clock.nanosec = divmod(sim, 1_000_000_000)
+                    pub.publish(msg)
+                ex.spin_once(timeout_sec=0.001)
+            return time.monotonic() - t0
+
+        spin_until(3, fast_clock=False)             # no /clock at all: time stands at 0
+        assert len(calls) >= 3
+        start = len(calls)
+        wall = spin_until(start + 3, fast_clock=True)
+        assert len(calls) - start <= wall / period + 2, (len(calls) - start, wall)
+        node.destroy_node()
+        clock_node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
+def test_the_simulators_status_carries_predicted():
+    from types import SimpleNamespace
+
+    loop = SimpleNamespace(engine=SimpleNamespace(k=10, t=94.2), finished=False,
+                           stats={"applied": 7, "late": 1, "lost": 0, "predicted": 2},
+                           latencies=[1e-3] * 7, lags=[0.0] * 10)
+    counts = {"missed": 3, "timeouts": 0, "ignored": 0, "malformed": 0}
+    th = {"misses_warn": 1, "misses_error": 10, "latency_warn": 0.0, "latency_error": 0.0,
+          "pace_warn": 0.0}
+    stat = SceneWindow().status(DiagnosticStatusWrapper("s", "h"), loop, counts, 1.0, th,
+                                True, 1000.0)
+    assert ("predicted", "2") in [(kv.key, kv.value) for kv in stat.to_msg().values]
+
+
+def test_the_controller_warns_of_no_answer_only_while_simulation_time_runs():
+    """Under use_sim_time a diagnostics period in which the simulated clock stood (the
+    scene over, not started) expected no sample: no WARN "no sample answered"; one in
+    which it ran and nothing was answered still warns (issue 27 §2)."""
+    from rclpy.parameter import Parameter
+    from rclpy.time import Time
+
+    from grazing_control.ros.controller_node import ControllerNode
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    try:
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("use_sim_time", Parameter.Type.BOOL, True),
+            Parameter("diagnostics_period", Parameter.Type.DOUBLE, 0.0)])
+        clock = node.get_clock()
+        clock.set_ros_time_override(Time(seconds=10, clock_type=clock.clock_type))
+
+        def status():
+            st = node._diagnose(DiagnosticStatusWrapper("c", "h"))
+            return st.level, st.message
+
+        node.answered = 5
+        assert status()[0] == OK
+        assert status() == (OK, "answering (control off)")      # clock stood: nothing due
+        clock.set_ros_time_override(Time(seconds=20, clock_type=clock.clock_type))
+        assert status() == (WARN, "no sample answered in the last period")
         node.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)

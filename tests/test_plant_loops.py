@@ -40,6 +40,10 @@ class Recorder:
         self.substitutions = []
         self.counts = {"ignored": 0, "late": 0, "timeout": 0, "warn": 0}
         self.finished = 0
+        self.trips = []
+
+    def tripped(self, trip):
+        self.trips.append(trip)
 
     def publish(self, ev):
         self.events.append(ev)
@@ -475,3 +479,161 @@ def test_realtime_a_late_answers_prediction_serves_the_next_sample():
             dvc = ctl(ev.x, ev.v)[0]
         seg = period_step(P, dx, dv, dvc, delay=delay)
         dx, dv = seg.dx, seg.dv
+
+
+# ==================================================================== watchdog (issue 27 §1)
+RIG = (0.006031909726621269, -0.0060746847760492625, 3.0)   # design --optimize noise --delay 3
+NO_WATCHDOG = dict(watchdog_misses=0, watchdog_pace=0.0, watchdog_lag=0.0,
+                   watchdog_excursion=0.0)
+
+
+def late_controller(c1, c2):
+    """A controller that answers each sample only when the next one has gone out: 9.4 ms
+    after it at time_scale 1000, past the 3 ms budget of delay 3 (a starved process)."""
+    held = []
+
+    def answer(loop, ev):
+        if held:
+            loop.answer(*held.pop())
+        held.append((key(ev), law(c1, c2, ev)))
+    return answer
+
+
+def test_open_loop_under_load_trips_the_watchdog_and_nothing_acts_after_it():
+    """The rig scene of issue 27 with every answer after its deadline: without the
+    watchdog it runs all its periods open loop (missed = n, applied = 0, and nothing
+    says so); with the default watchdog it stops at the 25th miss in 50 samples, having
+    applied nothing, tells the sink why, and ignores every later answer."""
+    c1, c2, delay = RIG
+    n = 150
+    base = dict(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=n,
+                state_period=0.0)
+    clock, sink = Clock(), Recorder()
+    loop = run_realtime(settings(**base, **NO_WATCHDOG), n, late_controller(c1, c2), clock,
+                        sink)
+    assert len(sink.misses) == n and loop.stats["applied"] == 0 and not sink.trips
+    assert loop.watchdog.tripped is None and "watchdog" not in loop.summary(1.0, {
+        "missed": n, "timeouts": 0, "ignored": 0, "malformed": 0})
+
+    clock, sink = Clock(), Recorder()
+    loop = run_realtime(settings(**base), n, late_controller(c1, c2), clock, sink)
+    trip = loop.watchdog.tripped
+    assert sink.trips == [trip] and trip.kind == "misses" and trip.k == 24
+    assert "25 of the last 50 samples without an answer in time" in trip.reason
+    assert loop.finished and sink.finished == 1
+    assert [m[0] for m in sink.misses] == list(range(24))   # the 25th: the trip, not acted
+    assert loop.stats["applied"] == 0 and not sink.substitutions
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    assert len(got) == 25
+    np.testing.assert_array_equal(got, reference(25, 0.0, 0.0, 0, delay))
+    # the safe state: an answer after the trip is ignored, the plant does not move
+    k, events = loop.engine.k, len(sink.events)
+    loop.answer(key(sink.samples()[-1]), 1e-3)
+    clock.now += 1.0
+    assert loop.tick() is None
+    assert loop.engine.k == k and len(sink.events) == events and loop.stats["applied"] == 0
+    assert sink.counts["ignored"] == 1
+    summary = loop.summary(1.0, {"missed": 24, "timeouts": 0, "ignored": 1, "malformed": 0})
+    assert summary.endswith("watchdog=misses tripped_at=24")
+
+
+def test_on_arrival_an_answer_after_the_next_sample_is_a_miss():
+    c1, c2, _ = RIG
+    s = settings(mode="realtime", time_scale=1000.0, max_periods=100, state_period=0.0,
+                 watchdog_window=10, watchdog_misses=4)
+    clock, sink = Clock(), Recorder()
+    loop = run_realtime(s, 100, late_controller(c1, c2), clock, sink)
+    trip = loop.watchdog.tripped
+    # sample k's miss is seen when sample k + 1 goes out; the 4th (sample 3) at sample 4
+    assert trip.kind == "misses" and trip.k == 3 and len(sink.samples()) == 4
+    assert loop.stats["late"] == 3 and loop.stats["applied"] == 3
+
+
+class SlowSink(Recorder):
+    """Publishing a Pi2 sample costs ``cost`` wall seconds (a machine that cannot keep up)."""
+
+    def __init__(self, clock, cost):
+        super().__init__()
+        self.clock, self.cost = clock, cost
+
+    def publish(self, ev):
+        if ev.kind == "pi2":
+            self.clock.now += self.cost
+        return super().publish(ev)
+
+
+def test_a_simulator_that_cannot_keep_pace_trips_on_pace():
+    """Each sample costs 20 ms of wall time, a period 9.4 ms at time_scale 1000: the
+    loop falls behind at 0.47 of the requested pace; the watchdog trips on the first
+    full window (sample 50), before the lag reaches 1 s (0.53 s there). (The misses,
+    which a loop publishing its samples in bursts also has, are off here.)"""
+    clock = Clock()
+    sink = SlowSink(clock, 0.02)
+    s = settings(mode="realtime", time_scale=1000.0, max_periods=200, state_period=0.0,
+                 watchdog_misses=0)
+    loop = run_realtime(s, 200, lambda loop, ev: loop.answer(key(ev), 0.0), clock, sink)
+    trip = loop.watchdog.tripped
+    assert trip.kind == "pace" and trip.k == 50, trip
+    assert f"pace {P.period / 20.0:.3g} of time_scale 1000" in trip.reason
+    assert max(loop.lags) < 1.0
+
+
+def test_a_stall_trips_on_the_lag():
+    clock, sink = Clock(), Recorder()
+    stalled = []
+
+    def answer(loop, ev):
+        loop.answer(key(ev), 0.0)
+        if round(ev.t / P.period) == 30 and not stalled:
+            stalled.append(True)
+            clock.now += 1.5                          # the process did not run for 1.5 s
+
+    s = settings(mode="realtime", time_scale=1000.0, max_periods=200, state_period=0.0,
+                 watchdog_misses=0)
+    loop = run_realtime(s, 200, answer, clock, sink)
+    trip = loop.watchdog.tripped
+    assert trip.kind == "lag" and trip.k == 31 and loop.lags[-1] > 1.0
+
+
+def test_a_loop_that_loses_the_orbit_while_correcting_trips_on_the_excursion():
+    """Corrections in time but destabilising (c1 = 0, c2 = +0.5: the state is 35 times
+    the bound away after 50 samples, ``simulate``): once they have acted for a window
+    (samples 1..50; sample 0, at X**, is corrected by 0) the state is beyond 15
+    sqrt(|Delta d|) of X**, and the trip names the distance and the bound."""
+    delay = 3.0
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=300,
+                 state_period=0.0)
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        clock.now += 1e-3
+        loop.answer(key(ev), law(0.0, 0.5, ev))
+
+    loop = run_realtime(s, 300, answer, clock, sink)
+    trip = loop.watchdog.tripped
+    assert trip is not None and trip.kind == "excursion", (trip, loop.engine.k)
+    bound = 15.0 * math.sqrt(-P.delta_d)
+    last = sink.samples()[-1]
+    assert math.hypot(last.x - P.x_ref, last.v - P.v_ref) > bound
+    assert trip.k == 51 and f"= {bound:.3g}" in trip.reason
+    assert loop.stats["applied"] == 51 and not sink.misses
+
+
+def test_a_reset_after_a_trip_starts_a_new_run_with_a_new_watchdog():
+    """~/reset after a trip: sample 0 again, the trip forgotten by the loop (the node keeps
+    it for its exit status), answers in time act again."""
+    c1, c2, delay = RIG
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=100,
+                 state_period=0.0, watchdog_window=4, watchdog_misses=2)
+    clock, sink = Clock(), Recorder()
+    loop = run_realtime(s, 100, late_controller(c1, c2), clock, sink)
+    assert loop.watchdog.tripped.k == 1 and loop.finished
+    loop.reset(loop.engine.reset())
+    assert loop.watchdog.tripped is None and not loop.finished
+    ev = sink.samples()[-1]
+    assert ev.t == 0.0
+    clock.now += 1e-3
+    loop.answer(key(ev), 1e-4)
+    clock.now += 5e-3
+    loop.tick()
+    assert loop.stats["applied"] == 1 and loop.engine.k == 0

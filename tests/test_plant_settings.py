@@ -24,8 +24,9 @@ from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, ON_MI
 def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     names = [p.name for p in PARAMETERS]
     assert len(set(names)) == len(names) and tuple(names) == SETTING_KEYS
-    fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params", "sensor"}
-    sensor = {n for n in names if n.startswith("sensor_")}
+    fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params", "sensor",
+                                                                 "watchdog"}
+    sensor = {n for n in names if n.startswith(("sensor_", "watchdog_"))}
     assert fields | set(MODEL_KEYS) | sensor == set(names)
     kinds = {"double": float, "integer": int, "string": str, "bool": bool}
     for p in PARAMETERS:
@@ -56,7 +57,8 @@ def test_the_described_range_ends_are_accepted_and_the_next_doubles_refused_by_n
 
 
 @pytest.mark.parametrize("name, choices", [("mode", MODES), ("actuation", ACTUATIONS),
-                                           ("on_miss", ON_MISS)])
+                                           ("on_miss", ON_MISS),
+                                           ("feasibility", ("refuse", "warn", "off"))])
 def test_strings_outside_their_choices_are_refused_with_the_choices(name, choices):
     with pytest.raises(ParameterError, match=re.escape(", ".join(choices))):
         settings_from_values({name: "nonsense"})

@@ -718,7 +718,12 @@ def build_parser() -> argparse.ArgumentParser:
                             "(e.g. 8765) streaming the scene to Foxglove/Lichtblick "
                             "(docs/live.md)")
         s.add_argument("--json", action="store_true",
-                       help="print one JSON summary object (node output goes to stderr)")
+                       help="print one JSON summary object: ok, exit_code, each node's "
+                            "exit status, reason (why a failed scene failed: the realtime "
+                            "watchdog's trip, a refused feasibility check, a node that "
+                            "failed; docs/nodes.md), sim_verdict (the simulator's summary, "
+                            "watchdog trip and feasibility verdict); node output goes to "
+                            "stderr")
         add_params_option(s)
         s.set_defaults(func=cmd_run)
 

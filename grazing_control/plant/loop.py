@@ -52,6 +52,10 @@ class Sink(Protocol):
     def warn(self, text: str) -> None:
         """Anything else worth a warning (new model parameters at a sample)."""
 
+    def tripped(self, trip) -> None:
+        """The watchdog tripped (:class:`grazing_control.plant.watchdog.Trip`): the loop
+        has stopped actuating and the scene ends (``finish`` follows)."""
+
     def finish(self) -> None:
         """``max_periods`` periods have run."""
 
@@ -74,6 +78,7 @@ class Loop:
         self.latencies = []
         self.lags = []
         self.finished = False
+        self.watchdog = None       # realtime: the plant.watchdog.Watchdog
 
     @property
     def settings(self):
@@ -124,6 +129,14 @@ class Loop:
         self.finished = True
         self.sink.finish()
 
+    def trip(self, trip) -> None:
+        """The watchdog tripped: the safe state (no correction acts from now on: the
+        scene ends here, every later answer is ignored), the sink told, the run over."""
+        if trip is None or self.finished:
+            return
+        self.sink.tripped(trip)
+        self.finish()
+
     def summary(self, wall: float, counts: dict) -> str:
         """The run in one line: periods, impacts, corrections, then ``counts`` (what the
         node counted: missed, timeouts, ignored, malformed), the rate over ``wall``
@@ -142,4 +155,7 @@ class Loop:
                 text += (f" {name} p50={np.percentile(ms, 50):.3f} "
                          f"p99={np.percentile(ms, 99):.3f} max={ms.max():.3f}"
                          + (f" n={ms.size}" if name == "latency_ms" else ""))
+        trip = self.watchdog.tripped if self.watchdog is not None else None
+        if trip is not None:
+            text += f" watchdog={trip.kind} tripped_at={trip.k}"
         return text

@@ -19,6 +19,11 @@ the answer does not include that work). Two ways to act (docs/nodes.md, "Modes")
 
 The node calls :meth:`Realtime.tick` when woken up, arms its timer with
 :meth:`Realtime.wake_in`, and hands each answer to :meth:`Realtime.answer`.
+
+Every sample and every answer's outcome (in time, or missed: a scheduled deadline
+passed, or on arrival no answer before the next sample went out) is shown to the
+:class:`~grazing_control.plant.watchdog.Watchdog`; when it trips, no correction acts any
+more (the rig's safe state), the sink is told (``tripped``) and the scene ends.
 """
 
 from __future__ import annotations
@@ -26,8 +31,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from grazing_control.plant.engine import Event
+from grazing_control.plant.engine import Engine, Event
 from grazing_control.plant.loop import Loop
+from grazing_control.plant.watchdog import Watchdog, excursion_scale
 
 __all__ = ["Deadline", "Realtime", "CLOCK_TICK", "MIN_TICK", "STREAM_TICK"]
 
@@ -70,6 +76,9 @@ class Realtime(Loop):
         self.early = {}        # stamp key -> (dv, wall, predicted): answers of samples
         #                        not yet published (a stream controller may answer first)
         self.queue = []        # the current period's events not yet published, in time order
+        self._deviation = type(self.engine) is Engine   # the excursion check reads (dx, dv)
+        self._scaled = None     # the model the watchdog's excursion scale is for
+        self.watchdog = Watchdog(self.settings.watchdog)
 
     def now(self, wall: float | None = None) -> float:
         """Simulation time at wall time ``wall`` (default: now)."""
@@ -87,6 +96,8 @@ class Realtime(Loop):
         self.pending.clear()
         self.early.clear()
         self.deadline = None
+        self.watchdog = Watchdog(self.settings.watchdog)   # a new run: a new watchdog
+        self._scaled = None
         self.publish_sample(ev)
         for e in self.engine.initial_states():
             self.emit(e)
@@ -98,18 +109,32 @@ class Realtime(Loop):
 
     def publish_sample(self, ev: Event) -> None:
         """Sample k goes out (as measured); its uncorrected period is integrated first."""
-        self.queue = self.engine.begin_period(0.0)
+        engine = self.engine
+        if not self.settings.scheduled and self.sample in self.pending:
+            # on arrival: the previous sample had no answer before this one (a miss)
+            self.trip(self.watchdog.outcome(self.pending[self.sample][1], missed=True))
+            if self.finished:
+                return
+        self.queue = engine.begin_period(0.0)
         sent = self.clock()
-        self.sample = self.emit(self.engine.measured(ev))
-        self.pending[self.sample] = (sent, self.engine.k)
+        self.sample = self.emit(engine.measured(ev))
+        self.pending[self.sample] = (sent, engine.k)
         if len(self.pending) > 2:                        # keep the last two samples
             del self.pending[next(iter(self.pending))]
         if self.settings.scheduled:                      # sample k's actuation instant
-            delay = self.engine.actuation_delay()
-            self.deadline = Deadline(ev.t + self.engine.actuation_start(delay), delay,
-                                     self.sample, self.engine.k, sent, None)
+            delay = engine.actuation_delay()
+            self.deadline = Deadline(ev.t + engine.actuation_start(delay), delay,
+                                     self.sample, engine.k, sent, None)
         # pace: how late the sample went out against its simulation time
-        self.lags.append(sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale)
+        lag = sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale
+        self.lags.append(lag)
+        if self._deviation and engine.p is not self._scaled:   # the model (Delta d) changed
+            self._scaled = engine.p
+            self.watchdog.scale = excursion_scale(engine.p)
+        self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag, self.settings.time_scale,
+                                       (engine.dx, engine.dv) if self._deviation else None))
+        if self.finished:
+            return
         early = self.early.pop(self.sample, None)
         if early is not None:                            # answered before it went out
             dv, wall, predicted = early
@@ -118,10 +143,14 @@ class Realtime(Loop):
             self.sink.latency(wall - sent)
             if self.deadline is not None:
                 self.deadline = self.deadline._replace(dv=dv, predicted=predicted)
-            elif self.engine.correction_lost():
+                return
+            self.trip(self.watchdog.outcome(engine.k, missed=False, acting=dv != 0.0))
+            if self.finished:
+                return
+            if engine.correction_lost():
                 self.stats["lost"] += 1
             else:
-                self.queue = self.engine.split(ev.t, dv)
+                self.queue = engine.split(ev.t, dv)
                 self.stats["applied"] += 1
 
     def tick(self):
@@ -148,7 +177,7 @@ class Realtime(Loop):
 
     def advance(self, now: float) -> None:
         """Publish everything due up to simulation time ``now``, actuating on schedule."""
-        while True:
+        while not self.finished:
             q = self.queue
             dl = self.deadline
             due = dl is not None and dl.t <= now
@@ -235,6 +264,9 @@ class Realtime(Loop):
         a lost answer the previous answer's prediction (on_miss = predict) or none."""
         self.deadline = None
         dv = dl.dv
+        self.trip(self.watchdog.outcome(dl.k, missed=dv is None, acting=bool(dv)))
+        if self.finished:
+            return                       # the safe state: nothing acts
         if dv is None:
             self.sink.miss(dl.k, dl.key, dl.t, self.clock() - dl.sent)
             dv = self.substitute(dl.k, dl.key)
@@ -267,7 +299,11 @@ class Realtime(Loop):
         if self.finished:
             return False
         if key != self.sample:
-            self.stats["late"] += 1
+            self.stats["late"] += 1      # counted as a miss when the next sample went out
+        else:
+            self.trip(self.watchdog.outcome(self.engine.k, missed=False, acting=dv != 0.0))
+            if self.finished:
+                return False
         latency = wall - sent
         self.latencies.append(latency)
         self.sink.latency(latency)

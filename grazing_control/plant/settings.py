@@ -27,9 +27,10 @@ from grazing_control.dynamics.fidelity import FIDELITIES
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.faults import FaultModel
 from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
+from grazing_control.plant.watchdog import WatchdogLimits
 
 __all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "ON_MISS",
-           "MODEL_KEYS", "ABOVE_0", "FINITE", "below", "described_range",
+           "MODEL_KEYS", "ABOVE_0", "FINITE", "below", "described_range", "FEASIBILITY",
            "SimSettings", "settings_from_values", "default_values", "initial_deviation",
            "check_live_change", "LIVE_FACTOR"]
 
@@ -42,6 +43,10 @@ ACTUATIONS = ("auto", "scheduled", "on_arrival")
 #: At a deadline miss or a lost answer: the previous answer's prediction, or nothing.
 ON_MISS = ("predict", "drop")
 MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")
+#: Realtime: what the check before the start does when the scene cannot keep its budget
+#: (plant.feasibility): refuse to start (status 2), warn and start, or skip the check.
+FEASIBILITY = ("refuse", "warn", "off")
+_WD = WatchdogLimits()
 
 #: The closed ranges a ROS descriptor states (FloatingPointRange: both ends included)
 #: for the open and the finite bounds of the validation: a bound "> 0" is the least
@@ -158,6 +163,27 @@ PARAMETERS = (
     Parameter("force_limit", "double", 0.0, "largest |force| of a pulse, > 0; 0 = no limit "
               "(the impulse delivered is then smaller than commanded)", 0.0, FINITE,
               read_only=True),
+    Parameter("watchdog_window", "integer", _WD.window, "realtime watchdog "
+              "(plant.watchdog): samples of its sliding window, 1..1000000", 1, 1_000_000,
+              read_only=True),
+    Parameter("watchdog_misses", "integer", _WD.misses, "realtime watchdog: stop actuating "
+              "and fail the scene at this many samples without an answer in time within "
+              "the window, 0..1000000 (0 = off; more than the window: never)", 0, 1_000_000,
+              read_only=True),
+    Parameter("watchdog_pace", "double", _WD.pace, "realtime watchdog: ... when the "
+              "simulation ran slower than this fraction of time_scale over a full window, "
+              "0..1 (0 = off)", 0.0, 1.0, read_only=True),
+    Parameter("watchdog_lag", "double", _WD.lag, "realtime watchdog: ... when a sample "
+              "goes out more than this many wall seconds late, >= 0 (0 = off)", 0.0,
+              FINITE, read_only=True),
+    Parameter("watchdog_excursion", "double", _WD.excursion, "realtime watchdog: ... when, "
+              "while corrections act, the Pi2 state is farther from X** than this many "
+              "times sqrt(|delta_d|), >= 0 (0 = off)", 0.0, FINITE, read_only=True),
+    Parameter("feasibility", "string", "refuse", "realtime: before the start, the "
+              "controller's measured round trip against the budget (actuation delay / "
+              "time_scale) and the simulation rate this machine sustains against the "
+              "requested one (plant.feasibility): refuse (exit status 2), warn, or off",
+              choices=FEASIBILITY, read_only=True),
 )
 
 SETTING_KEYS = tuple(p.name for p in PARAMETERS)
@@ -248,6 +274,8 @@ class SimSettings:
     sensor: SensorModel = EXACT_SENSOR
     pulse_width: float = 0.0
     force_limit: float = 0.0
+    watchdog: WatchdogLimits = WatchdogLimits()
+    feasibility: str = "refuse"
 
     @property
     def scheduled(self) -> bool:
@@ -333,7 +361,36 @@ def settings_from_values(values: dict) -> SimSettings:
                                lambda v: v > 0.0, "a finite answer_timeout > 0"),
         max_periods=max_periods, fidelity=fidelity,
         noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
-        seed=seed, sensor=_sensor(values), **actuation)
+        seed=seed, sensor=_sensor(values), watchdog=_watchdog(values),
+        feasibility=_choice(values, "feasibility", FEASIBILITY), **actuation)
+
+
+def _choice(values: dict, name: str, choices: tuple) -> str:
+    value = str(values[name])
+    if value not in choices:
+        raise ParameterError(f"{name}={value!r} is invalid: valid values are "
+                             f"{', '.join(choices)}")
+    return value
+
+
+def _watchdog(values: dict) -> WatchdogLimits:
+    """The realtime watchdog's thresholds (plant.watchdog), each in its range."""
+    ints = {}
+    for name, lo in (("watchdog_window", 1), ("watchdog_misses", 0)):
+        value = values[name]
+        if (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                or not lo <= value <= 1_000_000):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is an integer "
+                                 f"{lo}..1000000" + (" (0 = off)" if lo == 0 else ""))
+        ints[name] = int(value)
+    return WatchdogLimits(
+        window=ints["watchdog_window"], misses=ints["watchdog_misses"],
+        pace=_finite("watchdog_pace", values["watchdog_pace"], lambda v: 0.0 <= v <= 1.0,
+                     "0 <= watchdog_pace <= 1 (0 = off)"),
+        lag=_finite("watchdog_lag", values["watchdog_lag"], lambda v: v >= 0.0,
+                    "a finite watchdog_lag >= 0 wall seconds (0 = off)"),
+        excursion=_finite("watchdog_excursion", values["watchdog_excursion"],
+                          lambda v: v >= 0.0, "a finite watchdog_excursion >= 0 (0 = off)"))
 
 
 def _sensor(values: dict) -> SensorModel:

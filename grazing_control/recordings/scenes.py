@@ -301,12 +301,19 @@ def load(bag, topics: dict | None = None) -> BagData:
                 "(`grazing run --domain-id`) or remap one simulator's topics")
     starts_log = log[starts]
 
-    parameters = {"nodes": {}, "rejected": 0}
+    parameters = {"nodes": {}, "events": [], "rejected": 0}
     if "parameters" in present:
         parameters = run_parameters(reader.decode_strings(raw, present["parameters"]))
         if parameters["rejected"]:
             problems.append(f"{parameters['rejected']} messages on {present['parameters']} are "
                             "not parameter records: ignored")
+        for ev in parameters["events"]:          # the simulator's watchdog, feasibility
+            if ev["event"] == "watchdog":
+                problems.append(f"the simulator's watchdog tripped ({ev.get('kind')}) at "
+                                f"sample {ev.get('k')}, t = {ev.get('t')}: {ev.get('reason')}; "
+                                "no correction acted from there and the scene ended")
+            elif ev["event"] == "feasibility" and ev.get("level") != "ok":
+                notes.append(f"feasibility check before the start: {ev.get('line')}")
 
     problems += published_problems(raw, present, topics, parameters, notes)
 

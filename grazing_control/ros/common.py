@@ -56,6 +56,7 @@ __all__ = [
     "REPLAY_QOS",
     "LATCHED_QOS",
     "RECORDS_QOS",
+    "EVENT_QOS",
     "NodeArguments",
     "publish_parameter_record",
     "fast_exit_process",
@@ -113,6 +114,11 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 RECORDS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: The simulator's event records on grazing/parameters (the watchdog's trip, the
+#: feasibility verdict): reliable, transient local, deep enough for every event of a run.
+EVENT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=16,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: Latched topic (std_msgs/Bool) on which recorder_node says it has matched a publisher
 #: on every topic it records; sim_node waits for it with ``wait_for_recorder``.

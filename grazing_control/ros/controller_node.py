@@ -495,10 +495,9 @@ class ControllerNode(Node):
         self.nonfinite = Throttled(log, "non-finite correction not published")
         self.phase_mismatch = Throttled(log, "stream phase reference off")
         self.answered = 0
-        self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value,
-                                   hardware_id="grazing_control/controller_node")
+        self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value)
         self.diagnostics.add("controller", self._diagnose)
-        self._diag_last = (0, 0)
+        self._diag_last = (0, 0, None)   # answered, refused, ROS time (sim time)
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
@@ -798,10 +797,15 @@ class ControllerNode(Node):
         """The controller's /diagnostics task: answers, whether the control is on, and
         what it refused; WARN when a sample went unanswered (stale, malformed, non-finite)
         since the last message, or when it has not answered for a whole period while
-        it had before (the scene over, the simulator gone, or the controller starved)."""
+        it had before (the simulator gone, or the controller starved). Under
+        use_sim_time a period in which the simulation time stood (the scene over, or
+        not started) expected no sample: no WARN for it (issue 27 §2)."""
         refused = self.malformed.count + self.stale.count + self.nonfinite.count
-        last_answered, last_refused = self._diag_last
-        self._diag_last = (self.answered, refused)
+        last_answered, last_refused, last_clock = self._diag_last
+        clock = self.get_clock()
+        now = clock.now().nanoseconds if clock.ros_time_is_active else None
+        self._diag_last = (self.answered, refused, now)
+        standing = now is not None and now == last_clock
         stat.summary(OK, "controlling" if self.law.enabled else "answering (control off)")
         stat.add("answered", self.answered)
         stat.add("control on", str(self.law.enabled).lower())
@@ -813,7 +817,9 @@ class ControllerNode(Node):
         if refused > last_refused:
             stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
                                      "(malformed, stale or non-finite)")
-        if last_answered and self.answered == last_answered:
+        if standing:
+            stat.add("simulation time", "standing")
+        elif last_answered and self.answered == last_answered:
             stat.merge_summary(WARN, "no sample answered in the last period")
         return stat
 

@@ -6,9 +6,16 @@ added with :meth:`Updater.add` (a name and a callable filling a
 :class:`DiagnosticStatusWrapper` with ``summary(level, message)`` and ``add(key,
 value)``), published as one ``diagnostic_msgs/DiagnosticArray`` per period on the
 absolute topic ``/diagnostics`` (what rqt_robot_monitor, Foxglove's diagnostics panels
-and diagnostic_aggregator read), each status named ``"<node>: <task>"`` with the node's
-hardware id. A task that raises gives an ERROR status naming the exception instead of
+and diagnostic_aggregator read), each status named ``"<namespace>/<node>: <task>"``
+(``"sim_node: scene"`` in the root namespace) with the hardware id
+``grazing_control/<namespace>/<node>``, so that two scenes in two namespaces stay apart
+in a monitor. A task that raises gives an ERROR status naming the exception instead of
 stopping the node.
+
+The period is wall time (a steady clock) whatever ``use_sim_time`` says: a timer on the
+node's ROS clock followed the simulation, 499 arrays per wall second in a fast lockstep
+scene and none while the simulated clock stood (issue 27 §2). The header stamp is the
+node's ROS time, as ROS stamps are.
 
 The per-sample cost is nothing: the nodes keep counters and latency lists they already
 had, and the tasks summarise them in the 1 Hz timer.
@@ -17,8 +24,10 @@ had, and the tasks summarise them in the 1 Hz timer.
 from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
 
-__all__ = ["OK", "WARN", "ERROR", "STALE", "DiagnosticStatusWrapper", "Updater", "level_of"]
+__all__ = ["OK", "WARN", "ERROR", "STALE", "DiagnosticStatusWrapper", "Updater", "level_of",
+           "qualified_name"]
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
@@ -63,15 +72,26 @@ class DiagnosticStatusWrapper:
                                 hardware_id=self.hardware_id, values=list(self.values))
 
 
-class Updater:
-    """diagnostic_updater.Updater: tasks run every ``period`` seconds, one array published."""
+def qualified_name(node) -> str:
+    """The node's name with its namespace, without the leading slash: ``sim_node`` in the
+    root namespace, ``a/sim_node`` in ``/a``."""
+    return node.get_fully_qualified_name().lstrip("/")
 
-    def __init__(self, node, period: float = 1.0, hardware_id: str = "grazing_control"):
+
+class Updater:
+    """diagnostic_updater.Updater: tasks run every ``period`` wall seconds (a steady
+    clock, also under use_sim_time), one array published. ``hardware_id`` None:
+    ``grazing_control/<namespace>/<node>``."""
+
+    def __init__(self, node, period: float = 1.0, hardware_id: str | None = None):
         self.node = node
-        self.hardware_id = hardware_id
+        self.hardware_id = (f"grazing_control/{qualified_name(node)}" if hardware_id is None
+                            else hardware_id)
         self.tasks: list = []
         self.publisher = node.create_publisher(DiagnosticArray, TOPIC, 10)
-        self.timer = node.create_timer(period, self.update) if period > 0 else None
+        self.timer = (node.create_timer(period, self.update,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+                      if period > 0 else None)
 
     def set_hardware_id(self, hardware_id: str) -> None:
         self.hardware_id = hardware_id
@@ -83,7 +103,8 @@ class Updater:
     def statuses(self) -> list:
         out = []
         for name, task in self.tasks:
-            stat = DiagnosticStatusWrapper(f"{self.node.get_name()}: {name}", self.hardware_id)
+            stat = DiagnosticStatusWrapper(f"{qualified_name(self.node)}: {name}",
+                                           self.hardware_id)
             try:
                 stat = task(stat) or stat
             except Exception as exc:      # a task's bug is a status, never a crash
@@ -104,7 +125,8 @@ class SceneWindow:
 
     ``status(stat, loop, counts, wall, thresholds)`` fills ``stat``: periods and simulated
     time, the pace (simulated seconds per wall second over the window, against
-    ``time_scale`` in realtime), corrections applied / late / lost, deadline misses and
+    ``time_scale`` in realtime), corrections applied / late / lost / predicted (a
+    prediction acted for a missing answer, as the node's summary), deadline misses and
     answer timeouts in the window, the latency and sample-lag p50/p99 of the window.
     Levels (thresholds, 0 = off): misses + timeouts + lost in the window >=
     ``misses_warn`` / ``misses_error``; latency p99 >= ``latency_warn`` / ``latency_error``
@@ -136,6 +158,7 @@ class SceneWindow:
         stat.add("corrections applied", stats["applied"])
         stat.add("late", stats["late"])
         stat.add("lost", stats["lost"])
+        stat.add("predicted", stats["predicted"])
         stat.add("deadline misses", counts["missed"])
         stat.add("answer timeouts", counts["timeouts"])
         stat.add("ignored", counts["ignored"])

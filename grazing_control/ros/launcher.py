@@ -29,6 +29,10 @@ without renaming a topic; a namespace would leave the absolute ones shared. The
 simulator also refuses to run when another simulator or controller shares its topics.
 
 Failing fast: a node that exits early (a refused parameter) stops the scene at once.
+A failed scene names its reason (:attr:`RunResult.reason`): the simulator's own (the
+realtime watchdog's trip, a refused feasibility check, a stopped simulation), which it
+writes to its ``verdict_file`` at exit, else what the launcher saw (a timeout, a node that
+left early or failed).
 Ctrl-C (or SIGTERM to the launcher): the nodes run in process groups of their own, so
 only the launcher gets the terminal's SIGINT; it sends SIGTERM to every node still
 running (handled as SIGINT: summaries, the bag closed; a node still starting ends
@@ -111,6 +115,9 @@ class RunResult:
     domain_id: int | None = None
     live: int | None = None            # live_node's exit status (None: no live view)
     lost: str = ""                     # what the recorder missed (its closed record)
+    reason: str | None = None          # why the scene failed, one line (None when ok)
+    sim_verdict: dict | None = None    # sim_node's verdict_file: status, reason, summary,
+    #                                    watchdog trip, feasibility verdict
 
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
@@ -127,6 +134,8 @@ class RunResult:
             text += f"; ROS_DOMAIN_ID={self.domain_id}"
         if self.logs:
             text += f"; logs in {Path(next(iter(self.logs.values()))).parent}"
+        if self.reason and not self.ok:
+            text += f"; reason: {self.reason}"
         return text
 
     @property
@@ -460,6 +469,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
     timed_out = interrupted = False
+    early = []
+    verdict = None
 
     def on_term(signum, frame):
         raise KeyboardInterrupt
@@ -472,6 +483,9 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         domain_id, lock = claim_domain()
     with tempfile.TemporaryDirectory(prefix="grazing_run_") as tmp:
         tmp = Path(tmp)
+        verdict_file = tmp / "sim_node.verdict.json"     # how the scene ended (reason)
+        if "verdict_file" not in sim_over:
+            sim_over = {**sim_over, "verdict_file": str(verdict_file)}
         try:
             if record:
                 procs["recorder_node"] = start_node(
@@ -521,6 +535,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 signal.signal(signal.SIGTERM, previous)
             if lock is not None:
                 lock.close()
+            verdict = read_verdict(Path(sim_over["verdict_file"]))
 
     def code(name):
         p = procs[name]
@@ -538,11 +553,54 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     if lost:
         print(f"error: the recording {os.fspath(bag_dir)} lost messages: {lost} (published "
               "by the nodes, not in the bag)", file=sys.stderr)
-    return RunResult(sim=code("sim_node"), controller=code("controller_node"),
-                     recorder=recorder,
-                     bag_dir=os.fspath(bag_dir) if record else None,
-                     wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
-                     logs=logs, domain_id=domain_id, live=code("live_node"), lost=lost)
+    res = RunResult(sim=code("sim_node"), controller=code("controller_node"),
+                    recorder=recorder,
+                    bag_dir=os.fspath(bag_dir) if record else None,
+                    wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
+                    logs=logs, domain_id=domain_id, live=code("live_node"),
+                    sim_verdict=verdict, lost=lost)
+    res.reason = None if res.ok else failure_reason(res, early, timeout)
+    return res
+
+
+def read_verdict(path: Path):
+    """sim_node's ``verdict_file`` (a JSON object), or None when it wrote none (killed,
+    refused at start) or it is unreadable."""
+    import json
+
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def failure_reason(res: RunResult, early=(), timeout=None) -> str:
+    """Why a scene failed, in one line: the simulator's own reason (the watchdog's trip,
+    the feasibility refusal, a stopped simulation: its verdict_file), else what the
+    launcher saw (a timeout, an interruption, a node that left early or failed)."""
+    parts = []
+    verdict = res.sim_verdict or {}
+    if verdict.get("reason") and res.sim != 0:
+        parts.append(f"sim_node: {verdict['reason']}")
+    if res.timed_out:
+        parts.append(f"timed out after {timeout:g} s" if timeout else "timed out")
+    if res.interrupted:
+        parts.append("interrupted")
+    if res.lost:
+        parts.append(f"the recording lost messages: {res.lost}")
+    for name in early:
+        parts.append(f"{name} exited early with status {getattr(res, _FIELD[name])}")
+    for name, field in _FIELD.items():
+        code = getattr(res, field)
+        if code not in (None, 0) and name not in early and not (
+                name == "sim_node" and parts and verdict.get("reason")):
+            parts.append(f"{name} exited with status {code}")
+    return "; ".join(parts) or "unknown"
+
+
+_FIELD = {"sim_node": "sim", "controller_node": "controller", "recorder_node": "recorder",
+          "live_node": "live"}
 
 
 def threading_is_main() -> bool:

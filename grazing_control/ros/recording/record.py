@@ -21,9 +21,16 @@ so that a recording can be checked for completeness up to its last message: the 
 waits for those counts before it closes and reports what is still missing; the analysis
 names a topic the bag holds fewer messages of than its publisher published.
 
-This module has no ROS dependency: the nodes call :func:`encode` and
-:func:`encode_published`, the analysis :func:`decode`, :func:`run_parameters` and
-:func:`decode_published`.
+The same topic carries the simulator's **events** (issue 27 §1), so that a recording says
+how its scene ended without a topic of its own: the realtime watchdog's trip and the
+verdict of the check before the start (plant.watchdog, plant.feasibility)::
+
+    {"record": "grazing_control/event", "version": 1, "node": "/sim_node",
+     "event": "watchdog", "kind": "misses", "k": 24, "t": 226.04, "reason": "25 of ..."}
+
+This module has no ROS dependency: the nodes call :func:`encode`,
+:func:`encode_published` and :func:`encode_event`, the analysis :func:`decode`,
+:func:`run_parameters`, :func:`decode_published` and :func:`decode_event`.
 """
 
 from __future__ import annotations
@@ -31,8 +38,9 @@ from __future__ import annotations
 import json
 import math
 
-__all__ = ["TOPIC", "KIND", "encode", "decode", "run_parameters", "PUBLISHED_TOPIC",
-           "PUBLISHED_KIND", "encode_published", "decode_published"]
+__all__ = ["TOPIC", "KIND", "EVENT_KIND", "encode", "encode_event", "decode",
+           "decode_event", "run_parameters", "PUBLISHED_TOPIC", "PUBLISHED_KIND",
+           "encode_published", "decode_published"]
 
 #: Relative topic name of the record (``/grazing/parameters`` in the root namespace).
 TOPIC = "grazing/parameters"
@@ -43,6 +51,8 @@ VERSION = 1
 PUBLISHED_TOPIC = "grazing/published"
 #: Value of its "record" key.
 PUBLISHED_KIND = "grazing_control/published"
+#: Value of the "record" key of an event record (the watchdog, the feasibility check).
+EVENT_KIND = "grazing_control/event"
 
 
 def _plain(value):
@@ -68,6 +78,27 @@ def encode(node: str, parameters: dict) -> str:
                       allow_nan=False, separators=(",", ":"))
 
 
+def encode_event(node: str, event: str, **fields) -> str:
+    """The JSON text of one event record: ``event`` ('watchdog', 'feasibility') and its
+    ``fields`` (plain values)."""
+    body = {k: _plain(v) for k, v in fields.items()}
+    return json.dumps({"record": EVENT_KIND, "version": VERSION, "node": node,
+                       "event": str(event), **body}, allow_nan=False, separators=(",", ":"))
+
+
+def decode_event(text: str) -> dict:
+    """The fields of an event record's text (node, event, ...); ValueError if it is not
+    one."""
+    try:
+        obj = json.loads(text)
+    except (json.JSONDecodeError, RecursionError):
+        raise ValueError("not JSON") from None
+    if not isinstance(obj, dict) or obj.get("record") != EVENT_KIND or not isinstance(
+            obj.get("event"), str):
+        raise ValueError("not a grazing_control event record")
+    return {k: _number(v) for k, v in obj.items() if k not in ("record", "version")}
+
+
 def decode(text: str):
     """(node, parameters) of a record's text; ValueError if it is not one."""
     try:
@@ -88,21 +119,25 @@ def run_parameters(records) -> dict:
     """Per node short name ("sim_node", "controller_node"): the records in time order.
 
     ``records``: (log_time_ns, text) pairs. Returns ``{"nodes": {name: [params, ...]},
-    "rejected": n}`` where the first entry of each list is the parameters at start and the
-    others are later changes.
+    "events": [event, ...], "rejected": n}`` where the first entry of each list is the
+    parameters at start and the others are later changes; ``events`` the event records
+    (:func:`decode_event`) in time order.
     """
-    nodes, rejected = {}, 0
+    nodes, rejected, events = {}, 0, []
     for _t, text in sorted(records, key=lambda r: r[0]):
         try:
             node, params = decode(text)
         except ValueError:
-            rejected += 1
+            try:
+                events.append(decode_event(text))
+            except ValueError:
+                rejected += 1
             continue
         name = node.rsplit("/", 1)[-1] or node
         seq = nodes.setdefault(name, [])
         if not seq or seq[-1] != params:
             seq.append(params)
-    return {"nodes": nodes, "rejected": rejected}
+    return {"nodes": nodes, "events": events, "rejected": rejected}
 
 
 def encode_published(node: str, counts: dict) -> str:

@@ -1,0 +1,74 @@
+"""plant.feasibility: the check before a realtime scene starts (issue 27 §1): the answer
+budget, the requested rate, the verdicts with their numbers, and the measured rate of
+the scene's own engine (no ROS)."""
+
+from __future__ import annotations
+
+import pytest
+
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.feasibility import (RATE_MARGIN, answer_budget, check,
+                                               requested_rate, sustained_rate)
+from grazing_control.plant.settings import settings_from_values
+
+P = OscillatorParams(delta_d=-5e-6)
+RIG = dict(delta_d=-5e-6, mode="realtime", time_scale=1000.0, state_period=0.0471,
+           sensor_noise=1e-4, sensor_velocity=False, pulse_width=0.1, actuation_delay=3.0)
+
+
+def settings(**kw):
+    return settings_from_values({**RIG, **kw})
+
+
+def test_the_budget_is_the_delay_or_the_period_over_time_scale():
+    assert answer_budget(settings(), P.period) == pytest.approx(2.95e-3)   # (3 - 0.05)/1000
+    s = settings(pulse_width=0.0)
+    assert answer_budget(s, P.period) == pytest.approx(3e-3)
+    s = settings(pulse_width=0.0, actuation_delay=0.0, actuation="on_arrival")
+    assert answer_budget(s, P.period) == pytest.approx(P.period / 1000.0)
+
+
+def test_the_requested_rate_counts_the_stream():
+    periods, events = requested_rate(settings(), P.period)
+    assert periods == pytest.approx(1000.0 / P.period)                    # 106.2
+    assert events == pytest.approx(periods * (2.0 + P.period / 0.0471))    # 21,440
+
+
+@pytest.mark.parametrize("trips, sustained, level, words", [
+    ([1e-3] * 8, 1000.0, "ok", "feasible"),
+    ([1e-3] * 7 + [4e-3], 1000.0, "warn", "max 4 ms"),
+    ([3e-3] * 8, 1000.0, "refuse", "round trip 3 ms (median of 8"),
+    ([1e-3] * 8, 150.0, "warn", "150 periods per wall second against the 106.2"),
+    ([1e-3] * 8, 100.0, "refuse", "100 periods per wall second against the 106.2"),
+    ((), 1000.0, "ok", "feasible"),
+])
+def test_verdicts_name_their_numbers(trips, sustained, level, words):
+    v = check(settings(), P.period, trips, sustained)
+    assert v.level == level and words in v.line, v.line
+    assert v.numbers["budget_ms"] == pytest.approx(2.95)
+    assert "\n" not in v.line
+
+
+def test_a_controller_that_answers_nothing_is_refused():
+    v = check(settings(), P.period, [], None, asked=1, waited=5.0)
+    assert v.level == "refuse" and "answered none of 1 requests in 5 s" in v.line
+
+
+def test_a_round_trip_not_measured_is_a_warning_naming_why():
+    v = check(settings(), P.period, [], 1000.0, note="no controller found")
+    assert v.level == "warn" and v.line.endswith("no controller found")
+
+
+def test_the_measured_rate_runs_the_scenes_engine_and_hands_over_every_event():
+    s = settings(time_scale=1000.0)
+    seen = []
+    periods, events = sustained_rate(Engine(s), seen.append, periods=40, wall=60.0)
+    # 40 periods: each its Pi2 sample, ~200 stream samples, a Pi1 crossing, impacts
+    pi2 = [e for e in seen if e.kind == "pi2"]
+    assert len(pi2) == 40 and [e.t for e in pi2] == pytest.approx(
+        [k * P.period for k in range(40)])
+    assert events / periods == pytest.approx(len(seen) / 40)
+    assert sum(e.kind == "state" for e in seen) == pytest.approx(40 * P.period / 0.0471,
+                                                                 abs=41)
+    assert periods > 0 and RATE_MARGIN >= 1.0
