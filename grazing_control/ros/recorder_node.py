@@ -362,8 +362,7 @@ class RecorderNode(Node):
                                self.resolve_topic_name(PUBLISHED_TOPIC[0]): "published"}
         self._ready = False
         self._pub_ready = self.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
-        self.diagnostics = Updater(self, DIAGNOSTICS_PERIOD,
-                                   hardware_id="grazing_control/recorder_node")
+        self.diagnostics = Updater(self, DIAGNOSTICS_PERIOD)   # hardware id: its namespace
         self.diagnostics.add("recording", self._diagnose)
         self._pub_ready.publish(Bool(data=False))
         self._watch()
