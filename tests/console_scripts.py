@@ -30,16 +30,27 @@ def script(name: str) -> Path:
                             f"<AMENT_PREFIX_PATH>/lib/{PACKAGE}/, not on PATH")
 
 
-def startup_seconds(module: str, runs: int = 3) -> float:
-    """Longest of ``runs`` wall times from exec to ``module`` imported, on this machine
-    now: Python's own start comes before any handler of the console script can exist, so
-    a test that signals "right after the start" waits this long first."""
-    import subprocess
+
+def wait_until_mapped(proc, library: str = "_multiarray_umath", timeout: float = 60.0) -> bool:
+    """Wait until the process ``proc`` has mapped a shared library whose path contains
+    ``library`` (numpy's core by default), or has ended; True if mapped.
+
+    A console script's quiet SIGINT handler is installed before it imports its heavy
+    modules (grazing_control.cli.console, grazing_control.ros.entry), and nothing imports
+    numpy before them, so numpy's core in /proc/PID/maps says the handler is in place
+    and the heavy import under way. Sleeping "Python's start time" instead (measured in
+    another process) missed the handler under load: a KeyboardInterrupt traceback from
+    ``import signal`` (the baseline's one failure, issue 27 §2).
+    """
     import time
 
-    times = []
-    for _ in range(runs):
-        t0 = time.monotonic()
-        subprocess.run([sys.executable, "-c", f"import {module}"], check=True)
-        times.append(time.monotonic() - t0)
-    return max(times)
+    end = time.monotonic() + timeout
+    while proc.poll() is None and time.monotonic() < end:
+        try:
+            with open(f"/proc/{proc.pid}/maps") as fh:
+                if library in fh.read():
+                    return True
+        except OSError:
+            return False
+        time.sleep(0.002)
+    return False

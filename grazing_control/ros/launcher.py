@@ -65,6 +65,7 @@ import yaml
 
 from grazing_control.oscillator import kernel
 
+from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
                           scene_overrides, sim_values_for_model)
 from grazing_control.support.arguments import finite
@@ -75,10 +76,11 @@ __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain",
            "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",
            "RECORDER_MODULE", "CONFIG_DIR"]
 
-SIM_MODULE = "sim_node.sim_node"
-CONTROLLER_MODULE = "grazing_control.ros.controller_node"
-RECORDER_MODULE = "grazing_control.ros.recorder_node"
-LIVE_MODULE = "grazing_control.ros.live_node"
+#: The nodes' modules, as the executables run them (:data:`.entry.MODULES`).
+SIM_MODULE = MODULES["sim_node"]
+CONTROLLER_MODULE = MODULES["controller_node"]
+RECORDER_MODULE = MODULES["recorder_node"]
+LIVE_MODULE = MODULES["live_node"]
 #: The source tree's root (so that ``-m sim_node.sim_node`` works from a checkout).
 SOURCE_ROOT = Path(__file__).resolve().parents[2]
 
