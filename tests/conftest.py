@@ -80,7 +80,8 @@ def no_process_outlives_its_test(request):
 #: launcher, replay, colcon) or DDS participants: one xdist group, one scene at a time.
 SCENE_MODULES = frozenset({
     "test_actuation", "test_bagtools_analyze", "test_bagtools_replay", "test_cli",
-    "test_cli_hostile", "test_closed_loop", "test_controller_node", "test_demo",
+    "test_cli_hostile", "test_closed_loop", "test_controller_node", "test_deadline_misses",
+    "test_demo",
     "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
     "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_recorder_node", "test_recording", "test_scheduling", "test_signals",
@@ -88,7 +89,8 @@ SCENE_MODULES = frozenset({
 })
 
 #: Scene modules with realtime (wall-clock paced) scenes: last in the scene group.
-REALTIME_MODULES = ("test_node_common", "test_diagnostics", "test_bagtools_replay",
+REALTIME_MODULES = ("test_node_common", "test_diagnostics", "test_deadline_misses",
+                    "test_bagtools_replay",
                     "test_live_node", "test_ndof_nodes", "test_actuation")
 
 
