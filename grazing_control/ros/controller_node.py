@@ -117,8 +117,7 @@ from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import OK, WARN, Updater
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
                      deserialize, StartupError, Throttled, bool_descriptor, check_ranges,
-                     executor_kind,
-                     float_descriptor, int_descriptor, log_parameter_changes,
+                     executor_kind, float_descriptor, int_descriptor, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key, string_descriptor)
 from grazing_control.plant.settings import ABOVE_0, FINITE, below
@@ -328,12 +327,10 @@ def actuation_delay_from_values(values: dict) -> float:
 
 
 def _below_period(omega: float) -> float:
-    """The largest actuation delay below T = 2 pi / omega (the described range's end;
-    inf where omega itself is invalid: refused by name at start)."""
-    try:
-        return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
-    except (ZeroDivisionError, OverflowError):
-        return math.inf
+    """The largest actuation delay below T = 2 pi / omega, the same expression as
+    :func:`actuation_delay_from_values` (the described range's end; inf where omega is
+    not > 0: refused by name at start)."""
+    return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
 
 
 class ControllerNode(Node):
