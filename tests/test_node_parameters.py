@@ -263,6 +263,22 @@ def test_pulse_width_is_described_up_to_the_last_pulse_that_fits_the_period(cont
     assert hi == pytest.approx(2 * (period - delay), rel=1e-12)
 
 
+def test_an_n_dof_controller_describes_and_accepts_the_delays_of_its_model(context):
+    """With model_file the period is the model's (two_mass_chain: omega 0.5, T = 4 pi,
+    longer than the 1-DOF study's 9.42): a delay of 12 is described and accepted, the
+    next double below 4 pi is the range's end, and 4 pi is refused."""
+    chain = str(Path(__file__).resolve().parents[1] / "config" / "models"
+                / "two_mass_chain.yaml")
+    base = {"model_file": chain, "gains": [0.1, 0.0, 0.0, 0.0]}
+    kind = NodeKind(ControllerNode, base=base)
+    node = kind.build(context, {"actuation_delay": 12.0})
+    hi = node.describe_parameter("actuation_delay").floating_point_range[0].to_value
+    node.destroy_node()
+    assert hi == math.nextafter(4 * math.pi, 0.0)
+    assert kind.accepts(context, {"actuation_delay": hi})[0]
+    assert not kind.accepts(context, {"actuation_delay": 4 * math.pi})[0]
+
+
 # ------------------------------------------------------------- dump and its round trip
 def dump(spun) -> dict:
     """``ros2 param dump`` (ros2param/verb/dump.py): ListParameters, then GetParameters

@@ -122,6 +122,7 @@ from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_
                      run_node, spin, stamp_key, string_descriptor)
 from grazing_control.plant.settings import ABOVE_0, FINITE, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
@@ -333,6 +334,17 @@ def _below_period(omega: float) -> float:
     return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
 
 
+def _model_omega(model_file: str, omega: float) -> float:
+    """The forcing frequency of the scene: the n-DOF model file's, else ``omega``
+    (also where the file cannot be read: refused by name when the law is built)."""
+    if not model_file:
+        return omega
+    try:
+        return load_model_file(model_file).omega
+    except ParameterError:
+        return omega
+
+
 class ControllerNode(Node):
     """The controller node (module docstring: topics, switching, stale samples)."""
 
@@ -340,6 +352,10 @@ class ControllerNode(Node):
         super().__init__("controller_node", **kwargs)
         ref = OscillatorParams()
         d = self.declare_parameter
+        self.model_file = d("model_file", "", string_descriptor(
+            "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
+            "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
+            "1-DOF law", True)).value
         # each range is exactly what law_from_values & co. accept (issue 27): open bounds
         # as the next double (plant.settings.ABOVE_0, below), "finite" as FINITE
         d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)", -GAIN_LIMIT, GAIN_LIMIT))
@@ -368,7 +384,7 @@ class ControllerNode(Node):
         d("actuation_delay", 0.0, float_descriptor(
             "simulation time from a sample to its correction that the gains were designed "
             "for (applied by sim_node), 0 <= actuation_delay < T", 0.0,
-            _below_period(omega), read_only=True,
+            _below_period(_model_omega(self.model_file, omega)), read_only=True,
             constraints="actuation_delay < T = 2 pi / omega (with model_file: the model's "
             "omega)"))
         d("delta_d", math.nan, float_descriptor(
@@ -404,10 +420,6 @@ class ControllerNode(Node):
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
-        self.model_file = d("model_file", "", string_descriptor(
-            "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
-            "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
-            "1-DOF law", True)).value
         d("gains", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
             type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
                 "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "
