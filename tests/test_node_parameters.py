@@ -279,6 +279,24 @@ def test_an_n_dof_controller_describes_and_accepts_the_delays_of_its_model(conte
     assert not kind.accepts(context, {"actuation_delay": 4 * math.pi})[0]
 
 
+def test_an_n_dof_simulator_describes_its_model_s_period_and_the_defaults_it_needs(context):
+    """With model_file, sim_node's times are bounded by the model's period (4 pi for
+    two_mass_chain) and what it does not build (the force pulse, sensor noise) is
+    described as its default only; each end is accepted, the next double refused."""
+    chain = str(Path(__file__).resolve().parents[1] / "config" / "models"
+                / "two_mass_chain.yaml")
+    kind = NodeKind(SimNode, base={"model_file": chain})
+    node = kind.build(context)
+    ranges = {n: node.describe_parameter(n).floating_point_range[0]
+              for n in ("actuation_delay", "pulse_width", "sensor_noise")}
+    node.destroy_node()
+    assert ranges["actuation_delay"].to_value == math.nextafter(4 * math.pi, 0.0)
+    assert (ranges["pulse_width"].to_value, ranges["sensor_noise"].to_value) == (0.0, 0.0)
+    for name, r in ranges.items():
+        assert kind.accepts(context, {name: r.to_value})[0], name
+        assert not kind.accepts(context, {name: math.nextafter(r.to_value, math.inf)})[0]
+
+
 # ------------------------------------------------------------- dump and its round trip
 def dump(spun) -> dict:
     """``ros2 param dump`` (ros2param/verb/dump.py): ListParameters, then GetParameters
