@@ -239,16 +239,15 @@ class SimNode(Node):
 
     def _descriptor(self, p: Parameter, declared: dict):
         """:func:`descriptor`; in an n-DOF scene with the model's forcing frequency (its
-        times are bounded by its period), and a parameter it does not build described
-        as its default only (plant.ndof_settings.UNSUPPORTED)."""
+        times are bounded by its period), and a parameter it does not build states that
+        only its default is valid (plant.ndof_settings.UNSUPPORTED; the range stays, so
+        that a refusal says why: "zeta=0.02 is invalid with model_file=...")."""
         if self.model is None:
             return descriptor(p, declared)
         d = descriptor(p, {**declared, "omega": self.model.omega})
         if p.name in UNSUPPORTED:
-            d.additional_constraints = f"its default only with model_file: {UNSUPPORTED[p.name]}"
-            if d.floating_point_range and p.default == p.default:     # not NaN
-                d.floating_point_range[0].from_value = p.default
-                d.floating_point_range[0].to_value = p.default
+            d.additional_constraints = (f"only its default {p.default!r} with model_file "
+                                        f"({UNSUPPORTED[p.name]})")
         return d
 
     def _values(self) -> dict:
