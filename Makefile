@@ -17,7 +17,7 @@ help:
 	@echo "make figures      the study's Figs. 1 and 2: $(VENV)/bin/grazing figures --out out/figures"
 	@echo "make bench        run every benchmarks/bench_*.py"
 	@echo "make constraints  re-pin constraints.txt from requirements.txt (full freeze of a fresh venv)"
-	@echo "make clean        remove $(VENV) and everything generated (out/, build/, install/, log/, caches)"
+	@echo "make clean        remove $(VENV) and everything generated (out/, build/, install/, log/, caches, tests/js/node_modules)"
 
 # Two stamps, each written last so that an interrupted step is redone on the next run.
 # $(VENV)/.deps: the venv, recreated from scratch whenever a pin changes.
@@ -67,5 +67,6 @@ constraints:
 	rm -rf $(LOCKVENV)
 
 clean:
-	rm -rf $(VENV) $(LOCKVENV) out build install log .pytest_cache benchmarks/out *.egg-info
+	rm -rf $(VENV) $(LOCKVENV) out build install log .pytest_cache benchmarks/out *.egg-info \
+		tests/js/node_modules
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

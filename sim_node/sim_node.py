@@ -51,7 +51,8 @@ from grazing_control.plant.feasibility import ROUND_TRIPS, check, sustained_rate
 from grazing_control.plant.lockstep import Lockstep
 from grazing_control.plant.loop import Loop
 from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import load_model_file, ndof_settings_from_values
+from grazing_control.plant.ndof_settings import (UNSUPPORTED, load_model_file,
+                                                 ndof_settings_from_values)
 from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, described_range,
@@ -188,8 +189,8 @@ class SimNode(Node):
             default = p.default     # with a model file, delta_d defaults to the file's
             if p.name == "delta_d" and self.model is not None:
                 default = self.model.delta_d
-            declared[p.name] = self.declare_parameter(p.name, default,
-                                                      descriptor(p, declared)).value
+            declared[p.name] = self.declare_parameter(
+                p.name, default, self._descriptor(p, declared)).value
         self.set_descriptor("use_sim_time", bool_descriptor(
             "follow /clock (rclpy's parameter)", constraints="false only: sim_node "
             "publishes /clock"))
@@ -258,6 +259,19 @@ class SimNode(Node):
         self._ready_since = None
         self._clock_wall = -math.inf   # wall time of the last /clock (realtime)
         self.get_logger().info(f"{self.settings.describe()} executor={self.executor_kind}")
+
+    def _descriptor(self, p: Parameter, declared: dict):
+        """:func:`descriptor`; in an n-DOF scene with the model's forcing frequency (its
+        times are bounded by its period), and a parameter it does not build states that
+        only its default is valid (plant.ndof_settings.UNSUPPORTED; the range stays, so
+        that a refusal says why: "zeta=0.02 is invalid with model_file=...")."""
+        if self.model is None:
+            return descriptor(p, declared)
+        d = descriptor(p, {**declared, "omega": self.model.omega})
+        if p.name in UNSUPPORTED:
+            d.additional_constraints = (f"only its default {p.default!r} with model_file "
+                                        f"({UNSUPPORTED[p.name]})")
+        return d
 
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in SETTING_KEYS}

@@ -263,6 +263,46 @@ def test_pulse_width_is_described_up_to_the_last_pulse_that_fits_the_period(cont
     assert hi == pytest.approx(2 * (period - delay), rel=1e-12)
 
 
+def test_an_n_dof_controller_describes_and_accepts_the_delays_of_its_model(context):
+    """With model_file the period is the model's (two_mass_chain: omega 0.5, T = 4 pi,
+    longer than the 1-DOF study's 9.42): a delay of 12 is described and accepted, the
+    next double below 4 pi is the range's end, and 4 pi is refused."""
+    chain = str(Path(__file__).resolve().parents[1] / "config" / "models"
+                / "two_mass_chain.yaml")
+    base = {"model_file": chain, "gains": [0.1, 0.0, 0.0, 0.0]}
+    kind = NodeKind(ControllerNode, base=base)
+    node = kind.build(context, {"actuation_delay": 12.0})
+    hi = node.describe_parameter("actuation_delay").floating_point_range[0].to_value
+    node.destroy_node()
+    assert hi == math.nextafter(4 * math.pi, 0.0)
+    assert kind.accepts(context, {"actuation_delay": hi})[0]
+    assert not kind.accepts(context, {"actuation_delay": 4 * math.pi})[0]
+
+
+def test_an_n_dof_simulator_describes_its_model_s_period_and_what_it_does_not_build(
+        context):
+    """With model_file, sim_node's times are bounded by the model's period (4 pi for
+    two_mass_chain): the ends of actuation_delay's and pulse_width's ranges are
+    accepted, the next doubles refused; what it does not build (sensor noise) states
+    that only its default is valid, and a refusal says why."""
+    chain = str(Path(__file__).resolve().parents[1] / "config" / "models"
+                / "two_mass_chain.yaml")
+    kind = NodeKind(SimNode, base={"model_file": chain})
+    node = kind.build(context)
+    ranges = {n: node.describe_parameter(n).floating_point_range[0]
+              for n in ("actuation_delay", "pulse_width")}
+    noise = node.describe_parameter("sensor_noise").additional_constraints
+    node.destroy_node()
+    assert ranges["actuation_delay"].to_value == math.nextafter(4 * math.pi, 0.0)
+    assert ranges["pulse_width"].to_value == 0.0
+    for name, r in ranges.items():
+        assert kind.accepts(context, {name: r.to_value})[0], name
+        assert not kind.accepts(context, {name: math.nextafter(r.to_value, math.inf)})[0]
+    assert noise.startswith("only its default 0.0 with model_file")
+    ok, why = kind.accepts(context, {"sensor_noise": 1e-4})
+    assert not ok and "sensor_noise=0.0001 is invalid with model_file" in why
+
+
 # ------------------------------------------------------------- dump and its round trip
 def dump(spun) -> dict:
     """``ros2 param dump`` (ros2param/verb/dump.py): ListParameters, then GetParameters

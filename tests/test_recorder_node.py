@@ -196,8 +196,11 @@ def test_selected_topics_and_lz4(tmp_path, isolation, ros):
     (["topics:=[]"], "topics=[] is invalid"),
     (["topics:=a_string"], "topics=a_string is invalid: expected type STRING_ARRAY"),
     (["chunk_size:=abc"], "chunk_size=abc is invalid: expected type INTEGER"),
-    (["batch_window:=-0.001"], "batch_window=-0.001 is invalid: valid range is [0, 0.1]"),
-    (["batch_window:=5.0"], "batch_window=5.0 is invalid: valid range is [0, 0.1]"),
+    # the described range refuses them (ros2 param describe: Min 0.0, Max 0.1)
+    (["batch_window:=-0.001"], "batch_window=-0.001 is invalid: Parameter batch_window out "
+                               "of range Min: 0.0, Max: 0.1"),
+    (["batch_window:=5.0"], "batch_window=5.0 is invalid: Parameter batch_window out of "
+                            "range Min: 0.0, Max: 0.1"),
     (["output:=123"], "output=123 is invalid: expected type STRING"),
     (["outptu:=x"], "unknown parameter outptu"),
 ])

@@ -213,7 +213,11 @@ def range_problem(node, name: str, value) -> str | None:
 def check_ranges(node) -> None:
     """StartupError naming the first declared double outside its described range."""
     for name in node.list_parameters([], 0).names:
-        problem = range_problem(node, name, node.get_parameter(name).value)
+        try:
+            value = node.get_parameter(name).value
+        except ParameterUninitializedException:     # declared by type, no value yet
+            continue
+        problem = range_problem(node, name, value)
         if problem:
             raise StartupError(problem)
 

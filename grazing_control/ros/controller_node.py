@@ -117,13 +117,13 @@ from .diagnostics import OK, WARN, Updater
 from .published import ACK_TIMEOUT, Counted, PublishedRecord, close_publishers
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
                      deserialize, StartupError, Throttled, bool_descriptor, check_ranges,
-                     executor_kind,
-                     float_descriptor, int_descriptor, log_parameter_changes,
+                     executor_kind, float_descriptor, int_descriptor, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key, string_descriptor)
 from grazing_control.plant.settings import ABOVE_0, FINITE, below
 from .common import READY_TOPIC
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
@@ -329,12 +329,21 @@ def actuation_delay_from_values(values: dict) -> float:
 
 
 def _below_period(omega: float) -> float:
-    """The largest actuation delay below T = 2 pi / omega (the described range's end;
-    inf where omega itself is invalid: refused by name at start)."""
+    """The largest actuation delay below T = 2 pi / omega, the same expression as
+    :func:`actuation_delay_from_values` (the described range's end; inf where omega is
+    not > 0: refused by name at start)."""
+    return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
+
+
+def _model_omega(model_file: str, omega: float) -> float:
+    """The forcing frequency of the scene: the n-DOF model file's, else ``omega``
+    (also where the file cannot be read: refused by name when the law is built)."""
+    if not model_file:
+        return omega
     try:
-        return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
-    except (ZeroDivisionError, OverflowError):
-        return math.inf
+        return load_model_file(model_file).omega
+    except ParameterError:
+        return omega
 
 
 class ControllerNode(Node):
@@ -344,6 +353,10 @@ class ControllerNode(Node):
         super().__init__("controller_node", **kwargs)
         ref = OscillatorParams()
         d = self.declare_parameter
+        self.model_file = d("model_file", "", string_descriptor(
+            "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
+            "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
+            "1-DOF law", True)).value
         # each range is exactly what law_from_values & co. accept (issue 27): open bounds
         # as the next double (plant.settings.ABOVE_0, below), "finite" as FINITE
         d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)", -GAIN_LIMIT, GAIN_LIMIT))
@@ -372,7 +385,7 @@ class ControllerNode(Node):
         d("actuation_delay", 0.0, float_descriptor(
             "simulation time from a sample to its correction that the gains were designed "
             "for (applied by sim_node), 0 <= actuation_delay < T", 0.0,
-            _below_period(omega), read_only=True,
+            _below_period(_model_omega(self.model_file, omega)), read_only=True,
             constraints="actuation_delay < T = 2 pi / omega (with model_file: the model's "
             "omega)"))
         d("delta_d", math.nan, float_descriptor(
@@ -408,10 +421,6 @@ class ControllerNode(Node):
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
-        self.model_file = d("model_file", "", string_descriptor(
-            "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
-            "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
-            "1-DOF law", True)).value
         d("gains", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
             type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
                 "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "

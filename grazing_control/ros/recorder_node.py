@@ -380,9 +380,7 @@ class RecorderNode(Node):
         Logged, and refused naming the parameter."""
         from rcl_interfaces.msg import SetParametersResult
 
-        names = [p.name for p in params if p.name == "use_sim_time"
-                 and p.value != self._sim_time]
-        if not names:
+        if not any(p.name == "use_sim_time" and p.value != self._sim_time for p in params):
             return SetParametersResult(successful=True)
         reason = (f"use_sim_time={str(not self._sim_time).lower()} is invalid while "
                   f"recording: valid is {str(self._sim_time).lower()} (the bag's log_time "
