@@ -384,6 +384,10 @@ def test_a_stray_publisher_on_the_correction_topic_is_counted_not_fatal(node_env
     stray.publish(msg)
     assert collector.wait_for(lambda: "a bystander" in log.read_text(), deadline), \
         log.read_text()
+    # the bystander is logged when it is discovered, its message counted when it arrives:
+    # the scene is released only after both (it could finish first: ignored=0, a rerun)
+    assert collector.wait_for(lambda: "correction ignored (1 so far)" in log.read_text(),
+                              deadline), log.read_text()
     ans.answer(held)
     assert proc.wait(30) == 0, log.read_text()
     text = log.read_text()
