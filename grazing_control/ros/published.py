@@ -6,10 +6,11 @@ tail is invisible to the check by sequence numbers (a gap needs a later message)
 node of the package counts what it publishes on its recorded topics (:class:`Counted`)
 and, when it stops, says so on ``grazing/published``
 (:func:`grazing_control.ros.recording.record.encode_published`, reliable, transient
-local) and waits until every reliable reader has acknowledged its messages
-(:func:`close_publishers`). The recorder waits for those counts before it closes and
-names what is missing (ros/recorder_node.py); the analysis compares the bag with them
-(docs/recording.md, "Completeness").
+local) and waits until its messages are safe (:func:`close_publishers`): every reliable
+reader has acknowledged them, or a recorder has said on ``recorder/complete`` that it holds
+them all (:class:`RecorderConfirmation`). The recorder waits for those counts before it
+closes and names what is missing (ros/recorder_node.py); the analysis compares the bag
+with them (docs/recording.md, "Completeness").
 """
 
 from __future__ import annotations

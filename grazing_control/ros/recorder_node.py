@@ -60,7 +60,10 @@ messages it published per topic (``grazing/published``, grazing_control/ros/publ
 Once stopped, the recorder keeps taking messages until every node that sent a parameter
 record has sent that record and every count is recorded (``close_timeout`` seconds at
 most); what is still missing counts as missed, and a node that never sent its record
-leaves its tail unchecked (incomplete too, with ``require_complete``). The closed record
+leaves its tail unchecked (incomplete too, with ``require_complete``). Once a node's
+counts are all recorded, its name goes out on ``recorder/complete`` (std_msgs/String,
+latched, a JSON list of node names): the controller waits for it before it exits. The
+closed record
 in ``metadata.yaml`` carries ``recorder_status``, ``recorder_received`` and
 ``recorder_missed`` ("topic n, ..."), which ``grazing run`` reports.
 
