@@ -114,13 +114,12 @@ from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import OK, WARN, Updater
-from .published import (ACK_TIMEOUT, Counted, PublishedRecord, RecorderConfirmation,
-                        close_publishers)
+from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
+                        RecorderConfirmation, close_publishers)
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
                      deserialize, StartupError, Throttled, bool_descriptor, float_descriptor,
                      int_descriptor, log_parameter_changes, publish_parameter_record,
                      refuse_while_running, run_node, spin, stamp_key, string_descriptor)
-from .common import READY_TOPIC
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from .ndof_control import NdofLaw, ndof_controller_from_values
 
@@ -788,7 +787,7 @@ class ControllerNode(Node):
         ignored, once a recorder has confirmed that it holds every message (ACK_TIMEOUT s
         at most: it may lag behind on a loaded machine, issue 27), or without one once the
         readers have acknowledged them (1 s at most: the simulator has gone)."""
-        if self.count_publishers(self.resolve_topic_name(READY_TOPIC)) > 0:
+        if self.count_publishers(self.resolve_topic_name(COMPLETE_TOPIC)) > 0:
             close_publishers(self.published, ACK_TIMEOUT, recorder=self.recorder)
         else:       # the only reader is the simulator, which has gone: no warning
             close_publishers(self.published, 1.0, warn=False)
