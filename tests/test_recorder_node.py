@@ -598,7 +598,7 @@ def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
     sees it: 30 corrections taken, then the recorder is stopped (SIGTERM) while
     ``extra`` more are still to come, then the published record saying ``announce`` were
     published. Returns the recorder's exit status and output, the /diagnostics statuses
-    it sent, and the corrections' topic."""
+    and recorder/complete messages it sent, and the corrections' topic."""
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import String
 
@@ -615,15 +615,18 @@ def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
                                                   reliability=ReliabilityPolicy.RELIABLE))
     params = ros.create_publisher(String, record.TOPIC, LATCHED_QOS)
     published = ros.create_publisher(String, record.PUBLISHED_TOPIC, LATCHED_QOS)
-    statuses = []
+    statuses, confirmed = [], []
     ros.create_subscription(DiagnosticArray, "/diagnostics",
                             lambda m: statuses.extend(m.status), 10)
+    ros.create_subscription(String, "recorder/complete", lambda m: confirmed.append(m.data),
+                            LATCHED_QOS)
     node = f"{namespace}/controller_node"
     params.publish(String(data=record.encode(node, {"c2": -1.0})))
     wait_ready(ros, recorder)
     for i in range(30):
         corrections.publish(make_message("geometry_msgs/msg/TwistStamped", i))
     assert corrections.wait_for_all_acked(Duration(seconds=10))
+    assert params.wait_for_all_acked(Duration(seconds=10))    # it knows the node
     recorder.send_signal(signal.SIGTERM)       # the launcher stopped it here, at once
     time.sleep(1.0)                            # the stopped recorder is still waiting
     for i in range(30, 30 + extra):
@@ -637,7 +640,7 @@ def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
         executor.spin_once(timeout_sec=0.05)
     executor.remove_node(ros)
     output, _ = recorder.communicate(timeout=15)
-    return recorder.returncode, output, statuses, corrections.topic_name
+    return recorder.returncode, output, (statuses, confirmed), corrections.topic_name
 
 
 def test_a_stopped_recorder_waits_for_what_the_nodes_said_they_published(tmp_path,
@@ -646,9 +649,11 @@ def test_a_stopped_recorder_waits_for_what_the_nodes_said_they_published(tmp_pat
     loaded scene were still on their way, closed with what it had (1412 of 1501) and
     said nothing, since a lost tail leaves no gap in the sequence numbers. Stopped
     while 20 corrections are still to come, it waits for the controller's published
-    record and records all 50; its /diagnostics status counts them."""
+    record and records all 50, then says so on recorder/complete (the controller exits
+    on it); its /diagnostics status counts them."""
     bag = tmp_path / "bag"
-    rc, output, statuses, _ = _end_of_scene(bag, isolation, ros, 30.0, 20, 50)
+    rc, output, (statuses, confirmed), topic = _end_of_scene(bag, isolation, ros, 30.0, 20,
+                                                             50)
     assert rc == 0, output
     stamps = [m.message.header.stamp.sec for m in read_messages(bag)
               if m.topic.endswith("velocity_correction")]
@@ -661,6 +666,8 @@ def test_a_stopped_recorder_waits_for_what_the_nodes_said_they_published(tmp_pat
     values = {kv.key: kv.value for kv in ours[-1].values}
     assert values["dropped"] == "0" and values["missed"] == "0"
     assert int(values["written"]) == int(values["received"]) >= 30
+    namespace = topic[:-len("/controller/velocity_correction")]
+    assert confirmed == [f'["{namespace}/controller_node"]']
 
 
 def test_a_recorder_names_the_tail_it_never_received(tmp_path, isolation, ros):

@@ -114,14 +114,14 @@ from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import OK, WARN, Updater
-from .published import ACK_TIMEOUT, Counted, PublishedRecord, close_publishers
+from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
+                        RecorderConfirmation, close_publishers)
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
                      deserialize, StartupError, Throttled, bool_descriptor, check_ranges,
                      executor_kind, float_descriptor, int_descriptor, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key, string_descriptor)
 from grazing_control.plant.settings import ABOVE_0, FINITE, below
-from .common import READY_TOPIC
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
@@ -495,6 +495,7 @@ class ControllerNode(Node):
         self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
                                                          LATCHED_QOS))
         self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled))
+        self.recorder = RecorderConfirmation(self)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
@@ -834,12 +835,13 @@ class ControllerNode(Node):
 
     def on_exit(self) -> None:
         """Say what was published (grazing/published) and log what was answered and
-        ignored, once the readers have acknowledged every message: ACK_TIMEOUT s at most
-        while a recorder is there (it may lag behind on a loaded machine, issue 27), 1 s
-        otherwise (the simulator has gone)."""
-        recording = self.count_publishers(self.resolve_topic_name(READY_TOPIC)) > 0
-        # without a recorder the only reader is the simulator, which has gone: no warning
-        close_publishers(self.published, ACK_TIMEOUT if recording else 1.0, warn=recording)
+        ignored, once a recorder has confirmed that it holds every message (ACK_TIMEOUT s
+        at most: it may lag behind on a loaded machine, issue 27), or without one once the
+        readers have acknowledged them (1 s at most: the simulator has gone)."""
+        if self.count_publishers(self.resolve_topic_name(COMPLETE_TOPIC)) > 0:
+            close_publishers(self.published, ACK_TIMEOUT, recorder=self.recorder)
+        else:       # the only reader is the simulator, which has gone: no warning
+            close_publishers(self.published, 1.0, warn=False)
         self.get_logger().info(
             f"summary: answered={self.answered} controlled_from_sample="
             f"{self.law.enable_after} malformed={self.malformed.count} "

@@ -6,10 +6,11 @@ tail is invisible to the check by sequence numbers (a gap needs a later message)
 node of the package counts what it publishes on its recorded topics (:class:`Counted`)
 and, when it stops, says so on ``grazing/published``
 (:func:`grazing_control.ros.recording.record.encode_published`, reliable, transient
-local) and waits until every reliable reader has acknowledged its messages
-(:func:`close_publishers`). The recorder waits for those counts before it closes and
-names what is missing (ros/recorder_node.py); the analysis compares the bag with them
-(docs/recording.md, "Completeness").
+local) and waits until its messages are safe (:func:`close_publishers`): every reliable
+reader has acknowledged them, or a recorder has said on ``recorder/complete`` that it holds
+them all (:class:`RecorderConfirmation`). The recorder waits for those counts before it
+closes and names what is missing (ros/recorder_node.py); the analysis compares the bag
+with them (docs/recording.md, "Completeness").
 """
 
 from __future__ import annotations
@@ -21,7 +22,14 @@ from rclpy.duration import Duration
 from .common import LATCHED_QOS
 from .recording.record import PUBLISHED_TOPIC, encode_published
 
-__all__ = ["ACK_TIMEOUT", "Counted", "PublishedRecord", "close_publishers"]
+__all__ = ["ACK_TIMEOUT", "COMPLETE_TOPIC", "Counted", "PublishedRecord", "close_publishers",
+           "RecorderConfirmation"]
+
+#: Latched topic (std_msgs/String, a JSON list of node names) on which recorder_node says
+#: whose published records it holds in full: a node that waits for it waits for the
+#: recorder, not for every reader (a simulator that has gone stays matched for its DDS
+#: lease, 20 s, and would make wait_for_all_acked time out).
+COMPLETE_TOPIC = "recorder/complete"
 
 #: Wall seconds a node waits at exit for every reliable reader to acknowledge every
 #: message (a recorder that lags behind gets the rest from the node's history).
@@ -66,13 +74,53 @@ class PublishedRecord:
         self.sent = True
 
 
+class RecorderConfirmation:
+    """Whether recorder_node has said (on :data:`COMPLETE_TOPIC`) that it holds everything
+    this node said it published; subscribed at start, so the latched answer is there."""
+
+    def __init__(self, node):
+        from std_msgs.msg import String
+
+        self.node = node
+        self.confirmed = False
+        node.create_subscription(String, COMPLETE_TOPIC, self._on_complete, LATCHED_QOS)
+
+    def _on_complete(self, msg) -> None:
+        import json
+
+        try:
+            names = json.loads(msg.data)
+        except ValueError:
+            return
+        if isinstance(names, list) and self.node.get_fully_qualified_name() in names:
+            self.confirmed = True
+
+    def wait(self, timeout: float) -> bool:
+        """Spin the node's executor until confirmed, ``timeout`` wall seconds at most."""
+        end = time.monotonic() + timeout
+        executor = self.node.executor
+        while not self.confirmed and time.monotonic() < end and executor is not None:
+            executor.spin_once(timeout_sec=0.05)
+        return self.confirmed
+
+
 def close_publishers(record: PublishedRecord, timeout: float, also=(),
-                     warn: bool = True) -> list:
+                     warn: bool = True, recorder: RecorderConfirmation | None = None) -> list:
     """Publish the record, then wait (``timeout`` wall seconds at most in all) until every
     reliable reader has acknowledged every message of the counted publishers, of the
-    record and of the publishers ``also``. Returns the topics not acknowledged in time
-    (logged in one warning if ``warn``)."""
+    record and of the publishers ``also``, or, with ``recorder``, until the recorder says
+    it holds them all. Returns the topics not acknowledged in time (logged in one warning
+    if ``warn``)."""
     record.publish()
+    if recorder is not None:
+        if recorder.wait(timeout):
+            return []
+        late = [p.topic_name for p in record.publishers]
+        if warn:
+            record.node.get_logger().warning(
+                f"the recorder did not confirm within {timeout:g} s that it holds every "
+                f"message of {', '.join(late)} (it will name what it lacks)")
+        return late
     end = time.monotonic() + timeout
     late = []
     for pub in [*record.publishers, record.pub, *also]:

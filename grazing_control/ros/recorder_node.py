@@ -60,7 +60,10 @@ messages it published per topic (``grazing/published``, grazing_control/ros/publ
 Once stopped, the recorder keeps taking messages until every node that sent a parameter
 record has sent that record and every count is recorded (``close_timeout`` seconds at
 most); what is still missing counts as missed, and a node that never sent its record
-leaves its tail unchecked (incomplete too, with ``require_complete``). The closed record
+leaves its tail unchecked (incomplete too, with ``require_complete``). Once a node's
+counts are all recorded, its name goes out on ``recorder/complete`` (std_msgs/String,
+latched, a JSON list of node names): the controller waits for it before it exits. The
+closed record
 in ``metadata.yaml`` carries ``recorder_status``, ``recorder_received`` and
 ``recorder_missed`` ("topic n, ..."), which ``grazing run`` reports.
 
@@ -114,6 +117,7 @@ Run: ``ros2 run grazing_control recorder_node --ros-args -p output:=bags/run1``
 """
 
 import importlib
+import json
 import signal
 import sys
 import time
@@ -129,12 +133,13 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
                        ReliabilityPolicy)
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, String
 
 from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
                      check_overrides, fast_exit_process, float_descriptor, init_ros,
                      int_descriptor, string_descriptor, usage)
 from .diagnostics import OK, ERROR, WARN, Updater
+from .published import COMPLETE_TOPIC
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
@@ -343,6 +348,7 @@ class RecorderNode(Node):
         self.dropped = 0            # messages taken after a failed write (not written)
         self.failed = None          # the OSError that stopped the recording
         self._published = {}        # node -> {topic: count} of its published record
+        self._confirmed = set()     # nodes told (recorder/complete) that all is recorded
         self._nodes = set()         # nodes that sent a parameter record (and owe a published one)
         self._types = {}            # fully qualified topic -> message type
         self._subs = {}             # fully qualified topic -> Subscription
@@ -362,6 +368,7 @@ class RecorderNode(Node):
                                self.resolve_topic_name(PUBLISHED_TOPIC[0]): "published"}
         self._ready = False
         self._pub_ready = self.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
+        self._pub_complete = self.create_publisher(String, COMPLETE_TOPIC, LATCHED_QOS)
         self.diagnostics = Updater(self, DIAGNOSTICS_PERIOD)   # hardware id: its namespace
         self.diagnostics.add("recording", self._diagnose)
         self._pub_ready.publish(Bool(data=False))
@@ -603,6 +610,17 @@ class RecorderNode(Node):
                     out[topic] = out.get(topic, 0) + n
         return out
 
+    def confirm(self):
+        """Say on ``recorder/complete`` which nodes' published records are recorded in
+        full (their counts reached), so that they stop waiting and exit."""
+        done = {node for node, counts in self._published.items()
+                if node not in self._confirmed and all(
+                    self._last_seq.get(t, 0) >= n for t, n in counts.items()
+                    if t in self._types and t not in self._interleaved)}
+        if done:
+            self._confirmed |= done
+            self._pub_complete.publish(String(data=json.dumps(sorted(self._confirmed))))
+
     def unannounced(self):
         """Nodes that sent a parameter record but no published record (yet): the tails
         of their topics cannot be checked."""
@@ -614,10 +632,12 @@ class RecorderNode(Node):
         recorder behind a loaded scene still had the last corrections to take)."""
         end = time.monotonic() + timeout
         self.drain()
+        self.confirm()
         while (self.failed is None and (self.tails() or self.unannounced())
                and time.monotonic() < end and rclpy.ok()):
             executor.spin_once(timeout_sec=0.02)
             self.drain()
+            self.confirm()
 
     def _diagnose(self, stat):
         """The recorder's /diagnostics task: messages received, written, dropped (after a
@@ -750,6 +770,8 @@ def main(args=None):
             if window > 0.0:    # let a batch gather, then take all of it in one go
                 stop.wait(window)
                 node.drain()
+            if len(node._published) > len(node._confirmed):
+                node.confirm()
         node.settle(executor, node.get_parameter("close_timeout").value)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
