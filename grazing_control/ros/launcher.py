@@ -593,8 +593,8 @@ def failure_reason(res: RunResult, early=(), timeout=None) -> str:
         parts.append(f"the recording lost messages: {res.lost}")
     for name in early:
         parts.append(f"{name} exited early with status {getattr(res, _FIELD[name])}")
-    for name, field in _FIELD.items():
-        code = getattr(res, field)
+    for name, attr in _FIELD.items():
+        code = getattr(res, attr)
         if code not in (None, 0) and name not in early and not (
                 name == "sim_node" and parts and verdict.get("reason")):
             parts.append(f"{name} exited with status {code}")
