@@ -131,11 +131,12 @@ def watchdog_scenes(tmp_path_factory):
 
     tmp = tmp_path_factory.mktemp("watchdog")
     tripped, refused = new_domain(), new_domain()
-    probe = Probe(tripped)
+    probe = Probe(tripped, peer=True)      # the simulator starts once it has matched it
     try:
         with concurrent.futures.ThreadPoolExecutor(2) as pool:
             run = pool.submit(cli, ["run", "--periods", "200", *TINY_BUDGET,
                                      "--sim-param", "feasibility:=warn",
+                                     "--sim-param", "wait_for_subscribers:=2",
                                      "--bag", str(tmp / "bag"), "--json", "--timeout", "100",
                                      "--domain-id", str(tripped)], tmp)
             refusal = pool.submit(
@@ -157,6 +158,8 @@ def test_the_watchdog_stops_an_open_loop_scene_and_grazing_run_fails_naming_it(
         watchdog_scenes):
     r, obj = watchdog_scenes["run"], watchdog_scenes["json"]
     assert r.returncode == 1, r.stderr[-3000:]
+    assert "start conditions met" in r.stderr and "start_timeout" not in r.stderr, \
+        r.stderr[-3000:]                          # the probe was matched before the start
     assert obj["ok"] is False and obj["exit_code"] == 1 and obj["sim"] == 1
     assert obj["reason"].startswith("sim_node: watchdog (misses): 25 of the last 50 samples "
                                     "without an answer in time"), obj["reason"]

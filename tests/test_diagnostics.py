@@ -160,12 +160,30 @@ def test_the_controller_warns_of_no_answer_only_while_simulation_time_runs():
 
 
 class Probe:
-    def __init__(self, domain):
+    """Keeps every status on /diagnostics of a domain. ``peer``: also subscribe to the
+    scene's data topics, so that a simulator started with ``wait_for_subscribers`` 2
+    (the recorder and this probe) starts only once the probe has discovered it: a status
+    published right after the start (a watchdog that trips at once) is not published
+    before the probe has matched the simulator."""
+
+    def __init__(self, domain, peer=False):
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=domain)
         self.node = rclpy.create_node("diag_probe", context=self.ctx)
         self.msgs, self.lock = [], threading.Lock()
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._keep, 100)
+        if peer:
+            from geometry_msgs.msg import TwistStamped, Vector3Stamped
+            from rosgraph_msgs.msg import Clock
+            from sensor_msgs.msg import JointState
+            from std_msgs.msg import Float64
+
+            for topic, kind in (("oscillator/pi2", JointState), ("oscillator/pi1", JointState),
+                                ("oscillator/state", JointState),
+                                ("oscillator/impact", Vector3Stamped), ("/clock", Clock),
+                                ("oscillator/latency", Float64),
+                                ("controller/velocity_correction", TwistStamped)):
+                self.node.create_subscription(kind, topic, lambda m: None, 10)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
