@@ -58,7 +58,7 @@ from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, described_range,
                                             settings_from_values)
 from grazing_control.ros import cdr
-from grazing_control.ros.diagnostics import ERROR, SceneWindow, Updater
+from grazing_control.ros.diagnostics import ERROR, WARN, SceneWindow, Updater
 from grazing_control.ros.published import (ACK_TIMEOUT, Counted, PublishedRecord,
                                           close_publishers)
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
@@ -584,7 +584,10 @@ class SimNode(Node):
             stat.merge_summary(ERROR, f"watchdog tripped at sample {self.trip.k}: "
                                       f"{self.trip.reason}; not actuating")
         elif self.feasibility is not None and self.feasibility.level == "refuse":
-            stat.merge_summary(ERROR, self.feasibility.line)
+            # refused: the node ends with status 2; started anyway (feasibility:=warn): a
+            # warning, as asked, until the watchdog says what it cost
+            warned = self.get_parameter("feasibility").value == "warn"
+            stat.merge_summary(WARN if warned else ERROR, self.feasibility.line)
         return stat
 
     def summary(self) -> str:
