@@ -29,7 +29,7 @@ from grazing_control.dynamics.simulate import period_step
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
 from test_closed_loop import TOPICS as CLOSED_LOOP_TOPICS
-from test_closed_loop import STUDY, Collector, new_domain, xv
+from test_closed_loop import NO_WATCHDOG, STUDY, Collector, new_domain, xv
 
 BASE = dict(zeta=0.01, r=0.68, omega=OscillatorParams().omega, delta_d=-5e-6, tau0=0.0,
             pi2_offset=math.pi / 2, x0=math.nan, v0=math.nan, mode="lockstep",
@@ -194,9 +194,8 @@ def _scene(tmp_path, domain, n, on, c1, delay, mode="lockstep", sim=None, ex="ev
     over = {"state_period": 0.0, "wait_for_subscribers": 1, "wait_for_recorder": True,
             "executor": ex, "on_miss": "drop",   # these scenes specify the drop
             # and replay what the loop did however many answers missed (40 % under a
-            # load measured here); the watchdog that stops such a scene is tested in
-            # test_watchdog.py, test_plant_loops.py and test_deadline_misses.py
-            "watchdog_misses": 0}
+            # load measured here; the pace tripped once with the pure tests beside)
+            **NO_WATCHDOG}
     over.update(sim or {})
     res = launcher.run(STUDY, ctl, None, n, mode=mode, enable_after=on, domain_id=domain,
                        timeout=120, sim_overrides=over, log_dir=tmp_path)

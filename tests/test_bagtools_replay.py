@@ -28,6 +28,7 @@ from grazing_control.oscillator.params import OscillatorParams             # noq
 from grazing_control.dynamics.simulate import simulate                   # noqa: E402
 
 from bagtools_helpers import BAGS                               # noqa: E402
+from test_closed_loop import NO_WATCHDOG                          # noqa: E402
 
 
 def new_domain():
@@ -111,7 +112,7 @@ def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     n, on, scale = 60, 30, 100.0
     res = launcher.run(None, None, bag, n, domain_id=new_domain(), timeout=90,
                        sim_overrides={"mode": "realtime", "time_scale": scale,
-                                      "delta_d": -5e-6},
+                                      "delta_d": -5e-6, **NO_WATCHDOG},
                        controller_overrides={"enable_after": on}, log_dir=tmp_path / "logs")
     assert res.ok, res
     rep = analyze([bag], tmp_path / "report")["bags"][0]

@@ -32,7 +32,7 @@ from grazing_control.ros import launcher
 from grazing_control.ros.live_node import LIVE_TOPICS
 from grazing_control.ros.recording import message_definition
 from foxglove_client import FoxgloveClient, parse_message_data
-from test_closed_loop import new_domain
+from test_closed_loop import NO_WATCHDOG, new_domain
 
 ROOT = Path(__file__).resolve().parents[1]
 LIVE = "grazing_control.ros.live_node"
@@ -377,7 +377,7 @@ def live_scene(tmp_path_factory):
     # view is a best-effort reader the scene never waits for; a rerun in the full suite)
     scene = threading.Thread(target=lambda: result.update(res=launcher.run(
         None, None, bag, 200, domain_id=new_domain(), live=port, timeout=240,
-        sim_overrides={"mode": "realtime", "time_scale": 300.0},
+        sim_overrides={"mode": "realtime", "time_scale": 300.0, **NO_WATCHDOG},
         log_dir=tmp / "logs")))
     js = None
     if command:

@@ -31,7 +31,7 @@ from grazing_control.recordings import reader
 from grazing_control.recordings.analyze import analyze
 from grazing_control.recordings.scenes import load
 from grazing_control.ros import launcher, scene_nodes
-from test_closed_loop import new_domain
+from test_closed_loop import NO_WATCHDOG, new_domain
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "config" / "models" / "two_mass_scene.yaml"
@@ -247,7 +247,7 @@ def test_a_realtime_n_dof_scene_with_scheduled_kicks_is_the_engines_period_loop(
     res = launcher.run(None, gains, bag, n, delta_d=DELTA_D, enable_after=on,
                        mode="realtime", domain_id=new_domain(), timeout=90,
                        log_dir=tmp_path / "logs",
-                       sim_overrides={"time_scale": 100.0, "state_period": 0.0},
+                       sim_overrides={"time_scale": 100.0, "state_period": 0.0, **NO_WATCHDOG},
                        controller_overrides={"actuation_delay": delay})
     log = Path(res.logs["sim_node"]).read_text()
     assert res.ok, (res, log)
