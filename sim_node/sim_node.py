@@ -395,6 +395,9 @@ class SimNode(Node):
         return missing
 
     def _try_start(self) -> None:
+        if kernel.use_kernel() and not self._warm:   # compile, or load numba's cache, now:
+            kernel.warm_up()     # not in the first period; the middleware discovers meanwhile
+            self._warm = True
         waited = time.monotonic() - self._created
         missing = self._missing()
         if missing:
@@ -408,9 +411,6 @@ class SimNode(Node):
             return
         elif time.monotonic() - self._ready_since < 0.2:
             return
-        if kernel.use_kernel() and not self._warm:   # compile, or load numba's cache, now:
-            kernel.warm_up()                         # not in the first period
-            self._warm = True
         if not self._feasible():
             return
         if not missing:
