@@ -3,16 +3,15 @@
 :func:`run` starts ``sim_node``, ``controller_node`` and (with a bag directory)
 ``recorder_node`` as ``sys.executable -m <module> --ros-args --params-file ... -p key:=value``,
 waits for the simulator to finish the scene (it runs ``max_periods`` forcing periods with
-``exit_when_done:=true`` and exits with status 0), then stops the controller and the
-recorder together (the recorder closes its bag once it has every node's published record),
-and returns every exit status.
+``exit_when_done:=true`` and exits with status 0), then stops the controller and, once it
+has exited, the recorder (which closes its bag), and returns every exit status.
 It only spawns processes: it does not import rclpy.
 
 End of a scene (issue 27): each node, when it stops, says how many messages it published
 (``grazing/published``) and waits until every reliable reader has acknowledged them; the
-recorder, stopped with the controller, waits for what the nodes said they published, and
-its closed record (``metadata.yaml``) names what it missed: the run then fails with that
-list (:func:`recorded_losses`).
+recorder is stopped last, waits for what the nodes said they published, and its closed
+record (``metadata.yaml``) names what it missed: the run then fails with that list
+(:func:`recorded_losses`).
 
 Start order and readiness: the recorder and the controller start first; the simulator
 waits until the controller is matched (``wait_for_controller``) and, with a recorder,
@@ -206,11 +205,6 @@ BOOTSTRAP = ("import os, runpy, signal, sys; "
              "except Exception: pass') if parent else None; "
              "os._exit(143) if parent and os.getppid() != parent else None; "
              "runpy.run_module(sys.argv.pop(1), run_name='__main__', alter_sys=True)")
-
-#: The recorder's ``close_timeout`` in a scene of :func:`run` (its default is 5 s): it is
-#: stopped together with the controller, and waits for the controller's published record
-#: (issue 30), which a starved controller may send seconds after its SIGTERM.
-CLOSE_TIMEOUT = 10.0
 
 #: Largest ROS_DOMAIN_ID: Fast DDS's ports (7400 + 250 d + 11 + 2 i) must stay below 65536.
 MAX_DOMAIN_ID = 232
@@ -483,10 +477,6 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                            controller_overrides=controller_overrides,
                            recorder_overrides=recorder_overrides, model=model, live=live)
     sim_over, controller_overrides = over["sim_node"], over["controller_node"]
-    if record and "close_timeout" not in over["recorder_node"]:
-        # stopped with the controller (not after it): its wait for the controller's
-        # published record spans the controller's stop too (stop_nodes' grace is 15 s)
-        over["recorder_node"] = {**over["recorder_node"], "close_timeout": CLOSE_TIMEOUT}
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
     timed_out = interrupted = False
@@ -544,14 +534,11 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
             interrupted = True
         finally:
             try:
-                # the simulator first (it has ended the scene); then the others at once,
-                # as ros2 launch does: a node that stops says what it published and waits
-                # for the recorder's acknowledgements, and the recorder, stopped, waits for
-                # every node's published record before it closes (its settle), so it
-                # still closes after them without a stop of its own (issue 30: ~1 s less)
+                # in this order: a node that stops says what it published and waits for
+                # the recorder's acknowledgements; the recorder closes after them
                 stop_nodes([procs["sim_node"]])
-                stop_nodes([procs["controller_node"], procs["recorder_node"],
-                            procs["live_node"]])
+                stop_nodes([procs["controller_node"]])
+                stop_nodes([procs["recorder_node"], procs["live_node"]])
             except KeyboardInterrupt:
                 interrupted = True
                 stop_nodes(list(procs.values()), grace=2.0)

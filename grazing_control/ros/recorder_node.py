@@ -190,7 +190,7 @@ DEFAULT_BATCH_WINDOW = 0.001
 MAX_BATCH_WINDOW = 0.1
 #: Default ``close_timeout``: wall seconds the recorder waits, once stopped, for what the
 #: nodes said they published (ros2 launch sends SIGTERM 5 s after SIGINT, SIGKILL 5 s
-#: later; the launcher stops it with the controller and gives it launcher.CLOSE_TIMEOUT).
+#: later; the launcher stops the recorder only after the controller has exited).
 DEFAULT_CLOSE_TIMEOUT = 5.0
 MAX_CLOSE_TIMEOUT = 60.0
 #: Wall seconds between two /diagnostics messages of the recorder.
