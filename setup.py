@@ -22,6 +22,7 @@ setup(
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
         ('share/' + package_name + '/config/models', sorted(glob('config/models/*.yaml'))),
     ],
+    package_data={package_name + '.ros': ['fastdds_profile.xml']},
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='grazing_control maintainers',

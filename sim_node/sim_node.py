@@ -32,6 +32,7 @@ Run: ``ros2 run grazing_control sim_node --ros-args --params-file config/study.y
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
@@ -241,7 +242,13 @@ class SimNode(Node):
         self.reason = None            # why the scene failed, in one line
         self._probe = False           # False: not started; None: no controller; RoundTrips
         self._probe_start = 0.0
-        self._warm = False
+        # compile, or load numba's cache (0.5-0.8 s), while the peers are discovered and
+        # the start conditions settle, not in the first period (issue 30)
+        self._warming = None
+        if kernel.use_kernel():
+            self._warming = threading.Thread(target=kernel.warm_up, name="kernel_warm_up",
+                                             daemon=True)
+            self._warming.start()
         self._summary = None          # the summary line logged when the scene ended
         self.scene = SceneGuard(self, self.get_parameter("scene").value)
         self._start_timer = self.create_timer(0.02, self._try_start)
@@ -410,10 +417,11 @@ class SimNode(Node):
 
     def _try_start(self) -> None:
         waited = time.monotonic() - self._created
+        loading = self._warming is not None and self._warming.is_alive()   # the kernel
         missing = self._missing()
         if missing:
             self._ready_since = None
-            if waited < self.get_parameter("start_timeout").value:
+            if waited < self.get_parameter("start_timeout").value or loading:
                 return
             self.get_logger().warning(
                 f"starting after start_timeout={waited:.1f} s without: {'; '.join(missing)}")
@@ -422,9 +430,11 @@ class SimNode(Node):
             return
         elif time.monotonic() - self._ready_since < 0.2:
             return
-        if kernel.use_kernel() and not self._warm:   # compile, or load numba's cache, now:
-            kernel.warm_up()                         # not in the first period
-            self._warm = True
+        if loading:
+            return
+        if self._warming is not None:
+            self._warming = None
+            kernel.warm_up()            # at once when loaded; raises what the load raised
         if not self._feasible():
             return
         if not missing:

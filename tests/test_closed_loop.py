@@ -27,12 +27,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64
+from std_msgs.msg import Bool, Float64, String
 
 from grazing_control.ros import launcher
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.ros.common import LATCHED_QOS, READY_TOPIC, seconds_from_stamp
+from grazing_control.ros.common import (LATCHED_QOS, READY_TOPIC, RECORDS_QOS,
+                                        seconds_from_stamp)
+from grazing_control.ros.recording.record import PUBLISHED_TOPIC, decode_published
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.simulate import simulate
 
@@ -95,6 +97,8 @@ class Collector:
                      for topic, kind in topics.items()}
         self.node.create_subscription(Bool, "oscillator/done", self._keeper("done"),
                                       LATCHED_QOS)
+        self.node.create_subscription(String, PUBLISHED_TOPIC, self._keeper("published"),
+                                      RECORDS_QOS)
         if ready:
             self._ready = self.node.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
             self._ready_timer = self.node.create_timer(0.02, self._say_ready)
@@ -124,6 +128,19 @@ class Collector:
     def get(self, topic):
         with self.lock:
             return [m for _, m in self.msgs[topic]]
+
+    def has_all_of(self, node: str = "sim_node") -> bool:
+        """Whether ``node``'s published record (``grazing/published``, sent when it stops)
+        has come and this collector has taken every message it counts on the topics
+        collected. The record comes after the messages acknowledged, not after this
+        node's executor took them: a scene that ends fast (issue 30) ended before the
+        executor had taken its last 1200 state messages."""
+        records = dict(decode_published(m.data) for m in self.get("published"))
+        counts = records.get(f"/{node}")
+        if counts is None:
+            return False
+        return all(len(self.get(topic)) >= counts.get("/" + topic.lstrip("/"), 0)
+                   for topic in self.subs)
 
     def timed(self, topic):
         with self.lock:
@@ -186,6 +203,7 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
                        controller_overrides={"enable_after": ON}, log_dir=tmp_path)
     assert res.ok, (res, Path(res.logs["sim_node"]).read_text())
     assert collector.wait_for(lambda: len(collector.get("done")) == 1, 5.0)
+    assert collector.wait_for(collector.has_all_of, 20.0)
     pi2 = collector.get("oscillator/pi2")
     assert len(pi2) == N
     T = p.period

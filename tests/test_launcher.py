@@ -191,6 +191,32 @@ def test_the_recorders_closed_record_is_read_from_the_bag(tmp_path):
     assert launcher.recorded_status(tmp_path) is None
 
 
+def test_the_nodes_get_the_packages_fastdds_profile_unless_one_is_given(monkeypatch):
+    """Issue 30: a node waits at exit until its messages are acknowledged, and a Fast DDS
+    reader acknowledges when a heartbeat asks (default every 3 s): 2.2 s of a scene's
+    end. The launcher gives the nodes the package's profile (a 50 ms heartbeat) under
+    both of Fast DDS's names for it, and leaves a profile the user named alone."""
+    import xml.etree.ElementTree as ET
+
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.delenv(name, raising=False)
+    env = launcher.node_env()
+    profile = str(launcher.FASTDDS_PROFILE)
+    assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == env["FASTDDS_DEFAULT_PROFILES_FILE"] == profile
+    ns = {"p": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    writer = ET.parse(profile).getroot().find("p:data_writer", ns)
+    assert writer.get("is_default_profile") == "true"
+    period = writer.find("p:times/p:heartbeatPeriod", ns)
+    assert (period.find("p:sec", ns).text, period.find("p:nanosec", ns).text) == ("0", "50000000")
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.setenv(name, "/elsewhere/profile.xml")
+        env = launcher.node_env()
+        assert env[name] == "/elsewhere/profile.xml"
+        assert all(env.get(n) in (None, "/elsewhere/profile.xml") for n in (
+            "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"))
+        monkeypatch.delenv(name)
+
+
 def _processes_mentioning(text: str) -> list:
     """PIDs of live processes whose command line contains ``text``."""
     found = []

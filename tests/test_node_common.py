@@ -213,3 +213,19 @@ def test_security_enforced_without_the_plugins_is_refused(tmp_path):
     assert done.returncode == 2, out
     assert "doesn't have the security libraries" in out and "Traceback" not in out, out
     assert os.path.isdir(tmp_path / "enclaves")
+
+
+def test_the_nodes_import_no_solver_they_do_not_use():
+    """Issue 30: every node imported scipy.optimize (0.25 s of a scene's start) through
+    plant.settings -> dynamics.fidelity -> dynamics.zdm, for a root finder that only the
+    zdm analysis calls; it is imported where it is used. Imports only: no node starts."""
+    import sys
+
+    code = ("import sys, sim_node.sim_node, grazing_control.ros.controller_node, "
+            "grazing_control.ros.recorder_node; "
+            "print(sorted(m for m in ('scipy.optimize', 'scipy.integrate', 'numba') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], env=launcher.node_env(),
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

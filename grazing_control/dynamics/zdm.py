@@ -38,8 +38,6 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from scipy.optimize import brentq
-
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.flow import matmul2, propagate, transition_matrix
 from grazing_control.oscillator.impact import Segment
@@ -219,6 +217,8 @@ def crossing(p: OscillatorParams, dx: float, dv: float):
     lo = t_max - 2.0 * width
     while f(lo)[0] >= 0.0:
         lo = t_max - 2.0 * (t_max - lo)
+    from scipy.optimize import brentq   # lazily: 0.25 s of import that a node never needs
+
     t1 = brentq(lambda s: f(s)[0], lo, t_max, xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
     return t_max, hm, t1, f(t1)[1]
 

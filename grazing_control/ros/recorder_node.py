@@ -135,7 +135,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
                        ReliabilityPolicy)
 from std_msgs.msg import Bool, String
 
-from .common import (LATCHED_QOS, READY_TOPIC, StartupError, _startup_message,
+from .common import (LATCHED_QOS, READY_TOPIC, SIGNAL_POLL, StartupError, _startup_message,
                      check_overrides, fast_exit_process, float_descriptor, init_ros,
                      int_descriptor, string_descriptor, usage)
 from .diagnostics import OK, ERROR, WARN, Updater
@@ -766,7 +766,7 @@ def main(args=None):
         executor.add_node(node)
         window = node.get_parameter("batch_window").value
         while not stop.is_set() and rclpy.ok() and node.failed is None:
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=SIGNAL_POLL)     # an idle one notices a stop
             if window > 0.0:    # let a batch gather, then take all of it in one go
                 stop.wait(window)
                 node.drain()
