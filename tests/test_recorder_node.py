@@ -285,6 +285,17 @@ def wait_ready(node, recorder):
         executor.spin_once(timeout_sec=0.05)
     executor.remove_node(node)
     node.destroy_subscription(sub)
+    # "ready" says the recorder matched this node's publishers; a message is delivered
+    # only once the publisher has matched the recorder's reader too (the other end of the
+    # match, under load later): wait for that end as well (a burst published at once lost
+    # its first messages: the disk-full test read a bag that did not start at 0, a rerun)
+    end = time.monotonic() + 5.0              # an incompatible pair never matches
+    while time.monotonic() < end and not all(
+            pub.get_subscription_count() >= sum(
+                info.node_name != node.get_name()
+                for info in node.get_subscriptions_info_by_topic(pub.topic_name))
+            for pub in node.publishers):
+        time.sleep(0.02)
 
 
 def test_adapts_to_best_effort_and_transient_local_publishers(tmp_path, isolation, ros):
