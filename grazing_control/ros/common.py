@@ -114,6 +114,7 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 RECORDS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
 #: The simulator's event records on grazing/parameters (the watchdog's trip, the
 #: feasibility verdict): reliable, transient local, deep enough for every event of a run.
 EVENT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=16,
