@@ -2,17 +2,16 @@
 
 `make test` runs pytest on two workers (pytest-xdist, ``-n 2 --dist loadgroup``). The
 modules that start node processes or DDS participants (:data:`SCENE_MODULES`) form one
-group, run by one worker in collection order, one scene at a time as before; every other
-test (the numerical core, bags written in-process, the command line without nodes) is
-shared out to the other worker beside them. Within the scene group the modules with
-realtime scenes come last (:data:`REALTIME_MODULES`), and each of their tests waits
-until the other worker has been idle for IDLE_SECONDS (at most REALTIME_WAIT): a
-realtime deadline is measured on a machine that runs one scene and nothing else of the
-suite, as before the suite ran on two workers (a CPU-bound test beside a realtime scene
-made its answers miss: 12 of 40 where 4 is the bound).
+xdist group, run by one worker in collection order, one scene at a time as before; every
+other test (the numerical core, bags written in-process, the command line without nodes)
+is shared out to whichever worker is free, beside the scenes and after them. The modules
+with realtime scenes (:data:`REALTIME_MODULES`) form a second group, last in the queue,
+and each of their tests waits until the other worker has been idle for IDLE_SECONDS (at
+most REALTIME_WAIT): a realtime deadline is measured on a machine that runs one scene and
+nothing else of the suite, as before the suite ran on two workers (a CPU-bound test
+beside a realtime scene made its answers miss: 12 of 40 where 4 is the bound).
 """
 
-import os
 import tempfile
 import time
 from pathlib import Path
@@ -93,13 +92,6 @@ SCENE_MODULES = frozenset({
     "test_sim_node", "test_test_cleanup",
 })
 
-#: Pure-core modules run by the scene group's worker, before its realtime modules: the
-#: realtime tests wait for the other worker to be idle, so the two workers should reach
-#: that point together. Measured with --durations=0 on main (idle, 2 cores): scene
-#: modules 262 s before the realtime ones, 120 s realtime, the other modules 357 s; these
-#: two (about 43 s) even it out.
-BALANCE_MODULES = frozenset({"test_tuning", "test_impact"})
-
 #: Scene modules with realtime (wall-clock paced) scenes: last in the scene group.
 REALTIME_MODULES = ("test_node_common", "test_diagnostics", "test_deadline_misses",
                     "test_bagtools_replay", "test_live_node", "test_ndof_nodes",
@@ -107,12 +99,14 @@ REALTIME_MODULES = ("test_node_common", "test_diagnostics", "test_deadline_misse
 
 
 def pytest_collection_modifyitems(config, items):
-    """Put the scene modules (and BALANCE_MODULES) in one xdist group, the realtime ones
-    last (module order kept within each, so that module-scoped scenes are set up once)."""
-    group = pytest.mark.xdist_group("scenes")
+    """Put the scene modules in one xdist group and the realtime ones in another, last
+    (module order kept within each, so that module-scoped scenes are set up once)."""
+    scenes, realtime = pytest.mark.xdist_group("scenes"), pytest.mark.xdist_group("realtime")
     for item in items:
-        if item.path.stem in SCENE_MODULES | BALANCE_MODULES:
-            item.add_marker(group)
+        if item.path.stem in REALTIME_MODULES:
+            item.add_marker(realtime)
+        elif item.path.stem in SCENE_MODULES:
+            item.add_marker(scenes)
 
     def late(item):
         stem = item.path.stem

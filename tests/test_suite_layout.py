@@ -19,7 +19,6 @@ def test_the_scene_group_names_existing_modules():
     modules = {p.stem for p in HERE.glob("test_*.py")}
     assert conftest.SCENE_MODULES <= modules, conftest.SCENE_MODULES - modules
     assert set(conftest.REALTIME_MODULES) <= conftest.SCENE_MODULES
-    assert conftest.BALANCE_MODULES <= modules - conftest.SCENE_MODULES
 
 
 def test_every_module_that_starts_nodes_is_in_the_scene_group():
