@@ -649,6 +649,11 @@ def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
     deadline = time.monotonic() + 30
     while recorder.poll() is None and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
+    # what the recorder published last (recorder/complete, its final status) may still be
+    # in this reader's queue when the process is gone: take it
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end and not confirmed:
+        executor.spin_once(timeout_sec=0.05)
     executor.remove_node(ros)
     output, _ = recorder.communicate(timeout=15)
     return recorder.returncode, output, (statuses, confirmed), corrections.topic_name

@@ -130,6 +130,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
                        ReliabilityPolicy)
@@ -198,6 +199,10 @@ MAX_BATCH_WINDOW = 0.1
 #: later; the launcher stops the recorder only after the controller has exited).
 DEFAULT_CLOSE_TIMEOUT = 5.0
 MAX_CLOSE_TIMEOUT = 60.0
+#: Wall seconds the recorder waits, after closing, for its confirmation and last status
+#: to be acknowledged by their readers.
+CONFIRM_ACK_TIMEOUT = 1.0
+
 #: Wall seconds between two /diagnostics messages of the recorder.
 DIAGNOSTICS_PERIOD = 1.0
 
@@ -723,6 +728,14 @@ class RecorderNode(Node):
         if info:
             counts = ", ".join(f"{name} {n}" for name, n in self.bag.message_counts.items())
             log.info(f"closed {self.bag.path}: {info['message_count']} messages ({counts})")
+        # the confirmation (recorder/complete) and the last status reach their readers
+        # before this node leaves the graph (a reader that had not taken them lost them
+        # with the participant: a controller then waited its whole ACK_TIMEOUT)
+        for pub in (self._pub_complete, self.diagnostics.publisher):
+            try:
+                pub.wait_for_all_acked(Duration(seconds=CONFIRM_ACK_TIMEOUT))
+            except Exception:           # noqa: BLE001 - leaving must not fail
+                pass
         # the parameter and published records have one publisher per node by design
         # (depth 1, latched): not a loss check's business, and not worth a warning
         unchecked = sorted(t for t in self._interleaved
