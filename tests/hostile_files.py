@@ -8,12 +8,20 @@ recordings/reader.max_bytes) and one honest chunk, CRC-correct, whose records ar
 ``block`` repeated until ``size`` bytes: zeros, or copies of a valid message record on a
 real topic. The chunk is compressed as a stream, so building a 1 GiB bomb
 costs the compressed size in memory, not the GiB.
+
+Memory bounds are stated above :func:`analyze_floor_mb`, the peak of the same command on a
+4 KiB chunk on the same machine: the interpreter and its libraries differ between
+machines by tens of MB (a fresh CI clone measured 122.8 MB where this machine measures
+101.7 MB for the same bag), the excess over the floor is what the reader costs.
 """
 
+import functools
 import json
+import pathlib
 import struct
 import subprocess
 import sys
+import tempfile
 import zlib
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -99,3 +107,15 @@ def grazing_measured(*args, timeout=120):
                          capture_output=True, text=True, timeout=timeout)
     status, stdout, stderr, peak_kb = json.loads(out.stdout)
     return status, stdout, stderr, peak_kb / 1024
+
+
+@functools.lru_cache(maxsize=None)
+def analyze_floor_mb(kind="zstd"):
+    """Peak memory (MB) of ``grazing analyze`` refusing a bag whose chunk is 4 KiB of
+    zeros (the same definitions, the same one-line error): the cost of the interpreter,
+    its libraries and the analysis, with nothing worth measuring decompressed."""
+    folder = pathlib.Path(tempfile.mkdtemp(prefix="grazing-floor-"))
+    bag = bomb_bag(folder / "floor", 4096, kind=kind, prefix=definitions())
+    status, _, err, peak = grazing_measured("analyze", bag, "--out", folder / "out")
+    assert status == 2 and "/oscillator/pi2" in err, err
+    return peak
