@@ -1,0 +1,470 @@
+"""A rig in SI units, and the study's dimensionless model it is (docs/rig.md).
+
+A rig file (YAML, every dimensional value written with its unit) describes a mass on a
+spring and damper driven towards a rigid stop:
+
+    m x'' + c x' + k x = F0 cos(Omega t + phi),   x < g;    x'+ = -r x'-  at x = g,
+
+with the forcing a force of amplitude F0, or a base excitation y = Y cos(Omega t + phi)
+of a frame carrying the stop (then x is the mass's displacement relative to the frame and
+F0 = m Omega^2 Y). Time tau = omega_n t and length x~ = x / l with omega_n = sqrt(k/m) and
+l = F0 / k (the static deflection) give the study's Eq. 1 exactly,
+
+    x~'' + 2 zeta x~' + x~ = cos(omega tau + phi),   zeta = c / (2 sqrt(k m)),
+    omega = Omega / omega_n,   d = g / l,   Delta d = d - d*(zeta, omega),
+
+derived in docs/rig.md. Velocities scale by omega_n l, forces by k l, times by
+1/omega_n. A correction Delta v~ on Pi2 is Delta v = omega_n l Delta v~ (m/s), an impulse
+m Delta v; as a pulse of width w its force is m Delta v / w. The study's law
+Delta v~ = c1 Delta x~ + c2 Delta v~ reads Delta v = (c1 omega_n) Delta x + c2 Delta v.
+
+:func:`load_rig` reads and validates a file (each refusal one :class:`RigError` line
+naming the field); :class:`Rig` is the immutable rig, with :attr:`Rig.scales`,
+:meth:`Rig.params` (the :class:`OscillatorParams`), :meth:`Rig.dimensionless` (the
+sensor, actuator and timing in the model's units), and :func:`rig_with_model`, the
+inverse used by ``grazing identify`` (a fitted model written back as a rig file).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.support.units import UnitError, format_quantity, quantity
+
+__all__ = ["RigError", "Scales", "Sensor", "Actuator", "Rig", "load_rig", "rig_from_dict",
+           "rig_to_dict", "rig_with_model", "MIN_SAMPLES_PER_PERIOD"]
+
+TWO_PI = 2.0 * math.pi
+
+#: Fewest sensor samples per forcing period a Pi2 estimate from the stream is made from
+#: (the model estimator fits the period's samples, docs/theory_estimation.md).
+MIN_SAMPLES_PER_PERIOD = 20
+
+
+class RigError(ParameterError):
+    """A rig file that cannot be used; one line naming the field and its valid range."""
+
+
+@dataclass(frozen=True)
+class Scales:
+    """The rig's units of the dimensionless model: tau = omega_n t, x~ = x / length."""
+
+    omega_n: float       # rad/s: 1 / time unit
+    length: float        # m: l = F0 / k
+    mass: float          # kg
+
+    @property
+    def time(self) -> float:
+        """Seconds per unit of dimensionless time, 1 / omega_n."""
+        return 1.0 / self.omega_n
+
+    @property
+    def velocity(self) -> float:
+        """m/s per unit of dimensionless velocity, omega_n l."""
+        return self.omega_n * self.length
+
+    @property
+    def force(self) -> float:
+        """N per unit of dimensionless force, k l = m omega_n^2 l (= F0 for a force)."""
+        return self.mass * self.omega_n ** 2 * self.length
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """The motion sensor: rate (Hz), position noise (m, std), resolution (m, 0: none),
+    latency (s), velocity noise (m/s, std) when it also measures the velocity."""
+
+    rate: float
+    noise: float
+    resolution: float
+    latency: float
+    velocity: bool
+    velocity_noise: float = 0.0
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """The actuator: force pulse width (s), force limit (N, 0: none), latency (s) from a
+    command's apply time to the force, force constant (N/A, 0: not given)."""
+
+    pulse_width: float
+    force_limit: float
+    latency: float
+    force_constant: float = 0.0
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A rig in SI units (module docstring). ``forcing`` 'force' (amplitude in N) or
+    'base' (amplitude in m, the stop on the frame); ``phase`` the forcing phase at the
+    rig clock's t = 0 (rad); ``budget`` (s): from a Pi2 section to the centre of its
+    force pulse, the actuation delay the design is made for."""
+
+    mass: float
+    omega_n: float
+    zeta: float
+    restitution: float
+    gap: float
+    forcing: str
+    amplitude: float
+    frequency: float
+    phase: float
+    sensor: Sensor
+    actuator: Actuator
+    budget: float
+    pi2_offset: float = math.pi / 2
+
+    @property
+    def stiffness(self) -> float:
+        """k = m omega_n^2 (N/m)."""
+        return self.mass * self.omega_n ** 2
+
+    @property
+    def damping(self) -> float:
+        """c = 2 zeta sqrt(k m) (N s/m)."""
+        return 2.0 * self.zeta * math.sqrt(self.stiffness * self.mass)
+
+    @property
+    def natural_frequency(self) -> float:
+        """f_n = omega_n / 2 pi (Hz)."""
+        return self.omega_n / TWO_PI
+
+    @property
+    def force_amplitude(self) -> float:
+        """F0 (N): the force, or m Omega^2 Y for a base excitation."""
+        if self.forcing == "force":
+            return self.amplitude
+        return self.mass * (TWO_PI * self.frequency) ** 2 * self.amplitude
+
+    @property
+    def scales(self) -> Scales:
+        return Scales(self.omega_n, self.force_amplitude / self.stiffness, self.mass)
+
+    @property
+    def forcing_period(self) -> float:
+        """1 / f (s)."""
+        return 1.0 / self.frequency
+
+    def params(self) -> OscillatorParams:
+        """The study's model of this rig: zeta, r, omega = f / f_n, Delta d = g / l - d*,
+        tau0 = 0 (the simulator's time origin is a Pi2 sample: :meth:`rig_time`)."""
+        s = self.scales
+        base = OscillatorParams(zeta=self.zeta, r=self.restitution,
+                                omega=TWO_PI * self.frequency / self.omega_n,
+                                pi2_offset=self.pi2_offset)
+        return base.with_(delta_d=self.gap / s.length - base.d_star)
+
+    def section_time(self) -> float:
+        """The rig-clock time (s) of the first Pi2 section at or after t = 0: where the
+        forcing phase Omega t + phi equals tau2 (mod 2 pi). The model's t = 0 is there."""
+        p = self.params()
+        return ((p.tau2 - self.phase) % TWO_PI) / (TWO_PI * self.frequency)
+
+    def rig_time(self, tau: float) -> float:
+        """Rig-clock seconds of dimensionless model time tau."""
+        return self.section_time() + tau / self.omega_n
+
+    def model_time(self, t: float) -> float:
+        """Dimensionless model time of rig-clock seconds t (inverse of :meth:`rig_time`)."""
+        return (t - self.section_time()) * self.omega_n
+
+    def dimensionless(self) -> dict:
+        """The sensor, actuator and timing in the model's units: state_period (between
+        two sensor samples), sensor_noise, sensor_quantum, sensor_velocity,
+        sensor_velocity_noise, sensor_latency, pulse_width, force_limit (0: none),
+        actuator_latency, actuation_delay (the budget), time_scale (model time per second
+        of wall time at physical speed: omega_n)."""
+        s, sen, act = self.scales, self.sensor, self.actuator
+        return {
+            "state_period": self.omega_n / sen.rate,
+            "sensor_noise": sen.noise / s.length,
+            "sensor_quantum": sen.resolution / s.length,
+            "sensor_velocity": sen.velocity,
+            "sensor_velocity_noise": sen.velocity_noise / s.velocity,
+            "sensor_latency": sen.latency * self.omega_n,
+            "pulse_width": act.pulse_width * self.omega_n,
+            "force_limit": act.force_limit / s.force,
+            "actuator_latency": act.latency * self.omega_n,
+            "actuation_delay": self.budget * self.omega_n,
+            "time_scale": self.omega_n,
+        }
+
+    # ------------------------------------------------------------------ SI of results
+    def gains_si(self, c1: float, c2: float) -> dict:
+        """The law Delta v~ = c1 Delta x~ + c2 Delta v~ in SI: Delta v = c1_si Delta x +
+        c2 Delta v (c1_si = c1 omega_n, 1/s), and as the pulse's force
+        F = kx Delta x + kv Delta v (kx = m c1 omega_n / w in N/m, kv = m c2 / w in N s/m)."""
+        w = self.actuator.pulse_width
+        out = {"c1_per_s": c1 * self.omega_n, "c2": c2}
+        if w > 0.0:
+            out["force_gain_position_N_per_m"] = self.mass * c1 * self.omega_n / w
+            out["force_gain_velocity_N_s_per_m"] = self.mass * c2 / w
+        return out
+
+    def correction_si(self, dv: float) -> dict:
+        """A dimensionless correction Delta v~ as a velocity change (m/s), an impulse
+        (N s) and, with a pulse width w, the pulse's force (N) over w."""
+        v = dv * self.scales.velocity
+        out = {"velocity_m_per_s": v, "impulse_N_s": self.mass * v}
+        if self.actuator.pulse_width > 0.0:
+            out["force_N"] = self.mass * v / self.actuator.pulse_width
+            out["pulse_width_s"] = self.actuator.pulse_width
+        return out
+
+
+# ---------------------------------------------------------------------- reading
+_TOP = {"mass", "natural_frequency", "stiffness", "damping_ratio", "damping", "restitution",
+        "gap", "forcing", "sensor", "actuator", "controller"}
+_FORCING = {"type", "amplitude", "frequency", "phase", "stop"}
+_SENSOR = {"rate", "noise", "resolution", "latency", "measures", "velocity_noise"}
+_ACTUATOR = {"pulse_width", "force_limit", "latency", "force_constant"}
+_CONTROLLER = {"budget", "pi2_offset"}
+
+
+def load_rig(path) -> Rig:
+    """Read and validate a rig file (support.files.read_yaml_file: bounded, safe YAML)."""
+    from grazing_control.support.files import read_yaml_file
+
+    doc = read_yaml_file(path)
+    try:
+        return rig_from_dict(doc)
+    except RigError as exc:
+        raise RigError(f"{path}: {exc}") from None
+
+
+def _section(doc, name, keys, required=True):
+    value = doc.get(name)
+    if value is None:
+        if required:
+            raise RigError(f"{name} is missing: a mapping of {', '.join(sorted(keys))}")
+        return {}
+    if not isinstance(value, dict):
+        raise RigError(f"{name}={value!r} is invalid: expected a mapping of "
+                       f"{', '.join(sorted(keys))}")
+    unknown = sorted(set(map(str, value)) - keys)
+    if unknown:
+        raise RigError(f"{name}.{unknown[0]} is not a rig field: valid fields of {name} are "
+                       f"{', '.join(sorted(keys))}")
+    return value
+
+
+def _q(doc, prefix, key, dimension, *, ok=None, valid="", default=None):
+    field = f"{prefix}{key}"
+    if key not in doc or doc[key] is None:
+        if default is not None:
+            return default
+        raise RigError(f"{field} is missing: give it with a unit ({dimension.replace('_', ' ')})")
+    try:
+        value = quantity(field, doc[key], dimension)
+    except UnitError as exc:
+        raise RigError(str(exc)) from None
+    if ok is not None and not ok(value):
+        raise RigError(f"{field}={doc[key]!r} is invalid: valid range is {valid}")
+    return value
+
+
+def _number(doc, key, ok, valid, default=None):
+    if key not in doc or doc[key] is None:
+        if default is not None:
+            return default
+        raise RigError(f"{key} is missing: a number, {valid}")
+    value = doc[key]
+    if isinstance(value, str):
+        raise RigError(f"{key}={value!r} is invalid: a dimensionless number, {valid} "
+                       "(no unit)")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value) or not ok(value):
+        raise RigError(f"{key}={value!r} is invalid: valid range is {valid}")
+    return float(value)
+
+
+def _one_of(doc, prefix, a, b):
+    have = [k for k in (a, b) if doc.get(k) is not None]
+    if len(have) != 1:
+        raise RigError(f"{prefix}{a} / {prefix}{b}: give exactly one of them "
+                       f"({'both' if have else 'neither'} given)")
+    return have[0]
+
+
+def rig_from_dict(doc) -> Rig:
+    """A :class:`Rig` from a rig file's mapping (module docstring; docs/rig.md)."""
+    if not isinstance(doc, dict):
+        raise RigError(f"the rig file holds {type(doc).__name__}, not a mapping of rig fields")
+    unknown = sorted(set(map(str, doc)) - _TOP)
+    if unknown:
+        raise RigError(f"{unknown[0]} is not a rig field: valid fields are "
+                       f"{', '.join(sorted(_TOP))}")
+    positive = (lambda v: v > 0.0)
+    mass = _q(doc, "", "mass", "mass", ok=positive, valid="mass > 0")
+    if _one_of(doc, "", "natural_frequency", "stiffness") == "natural_frequency":
+        omega_n = TWO_PI * _q(doc, "", "natural_frequency", "frequency", ok=positive,
+                              valid="natural_frequency > 0")
+    else:
+        omega_n = math.sqrt(_q(doc, "", "stiffness", "stiffness", ok=positive,
+                               valid="stiffness > 0") / mass)
+    if _one_of(doc, "", "damping_ratio", "damping") == "damping_ratio":
+        zeta = _number(doc, "damping_ratio", lambda v: 0.0 < v < 1.0, "0 < damping_ratio < 1")
+    else:
+        c = _q(doc, "", "damping", "damping", ok=positive, valid="damping > 0")
+        zeta = c / (2.0 * mass * omega_n)
+        if not zeta < 1.0:
+            raise RigError(f"damping={doc['damping']!r} is invalid: the damping ratio "
+                           f"c / (2 sqrt(k m)) = {zeta:.6g} must be < 1 (an underdamped "
+                           f"oscillator): valid range is damping < {2 * mass * omega_n:.6g} N*s/m")
+    r = _number(doc, "restitution", lambda v: 0.0 < v < 1.0, "0 < restitution < 1")
+    gap = _q(doc, "", "gap", "length", ok=positive,
+             valid="gap > 0 (the stop on the +x side of the rest position: the mass "
+                   "moves towards it by a positive distance)")
+
+    f = _section(doc, "forcing", _FORCING)
+    kind = f.get("type", "force")
+    if kind not in ("force", "base"):
+        raise RigError(f"forcing.type={kind!r} is invalid: valid values are force, base")
+    if kind == "force":
+        if f.get("stop") is not None:
+            raise RigError("forcing.stop is a base excitation's field (where the stop is "
+                           "mounted): remove it for forcing.type force")
+        amplitude = _q(f, "forcing.", "amplitude", "force", ok=positive,
+                       valid="forcing.amplitude > 0 N")
+    else:
+        stop = f.get("stop")
+        if stop != "frame":
+            raise RigError(f"forcing.stop={stop!r} is invalid: a base excitation is modelled "
+                           "with the stop riding on the frame (stop: frame); a stop fixed to "
+                           "the ground is a moving wall in the frame's coordinate, not the "
+                           "study's model (docs/rig.md)")
+        amplitude = _q(f, "forcing.", "amplitude", "length", ok=positive,
+                       valid="forcing.amplitude > 0 m (the frame's displacement amplitude)")
+    frequency = _q(f, "forcing.", "frequency", "frequency", ok=positive,
+                   valid="forcing.frequency > 0")
+    phase = _q(f, "forcing.", "phase", "angle", default=0.0)
+
+    s = _section(doc, "sensor", _SENSOR)
+    measures = s.get("measures", "position")
+    if measures not in ("position", "position_velocity"):
+        raise RigError(f"sensor.measures={measures!r} is invalid: valid values are position, "
+                       "position_velocity")
+    rate = _q(s, "sensor.", "rate", "frequency", ok=positive, valid="sensor.rate > 0")
+    nonneg = (lambda v: v >= 0.0)
+    noise = _q(s, "sensor.", "noise", "length", ok=nonneg, valid="sensor.noise >= 0")
+    resolution = _q(s, "sensor.", "resolution", "length", ok=nonneg,
+                    valid="sensor.resolution >= 0 (0: none)", default=0.0)
+    latency = _q(s, "sensor.", "latency", "time", ok=nonneg, valid="sensor.latency >= 0")
+    vnoise = 0.0
+    if measures == "position_velocity":
+        vnoise = _velocity(s)
+    elif s.get("velocity_noise") is not None:
+        raise RigError("sensor.velocity_noise is given but sensor.measures is position: "
+                       "set measures: position_velocity, or remove it")
+    sensor = Sensor(rate, noise, resolution, latency, measures == "position_velocity", vnoise)
+
+    a = _section(doc, "actuator", _ACTUATOR)
+    width = _q(a, "actuator.", "pulse_width", "time", ok=nonneg,
+               valid="actuator.pulse_width >= 0 (0: an impulse)")
+    limit = _q(a, "actuator.", "force_limit", "force", ok=nonneg,
+               valid="actuator.force_limit >= 0 (0: no limit)", default=0.0)
+    alat = _q(a, "actuator.", "latency", "time", ok=nonneg, valid="actuator.latency >= 0",
+              default=0.0)
+    kf = _q(a, "actuator.", "force_constant", "force_constant", ok=positive,
+            valid="actuator.force_constant > 0", default=0.0)
+    actuator = Actuator(width, limit, alat, kf)
+
+    c = _section(doc, "controller", _CONTROLLER)
+    budget = _q(c, "controller.", "budget", "time", ok=positive, valid="controller.budget > 0")
+    pi2_offset = _q(c, "controller.", "pi2_offset", "angle",
+                    ok=lambda v: 0.0 < v < TWO_PI, valid="0 < pi2_offset < 2 pi",
+                    default=math.pi / 2)
+
+    rig = Rig(mass, omega_n, zeta, r, gap, kind, amplitude, frequency, phase, sensor,
+              actuator, budget, pi2_offset)
+    _check_model(rig, doc)
+    return rig
+
+
+def _velocity(s):
+    value = s.get("velocity_noise")
+    field = "sensor.velocity_noise"
+    if value is None:
+        raise RigError(f"{field} is missing: the std of the measured velocity, in m/s")
+    if not isinstance(value, str):
+        raise RigError(f"{field}={value!r} has no unit: write it in m/s or mm/s")
+    text = value.strip()
+    for unit, factor in (("mm/s", 1e-3), ("um/s", 1e-6), ("m/s", 1.0)):
+        if text.endswith(unit):
+            try:
+                v = float(text[: -len(unit)])
+            except ValueError:
+                break
+            if math.isfinite(v) and v >= 0.0:
+                return v * factor
+            break
+    raise RigError(f"{field}={value!r} is invalid: a velocity >= 0 in m/s, mm/s or um/s")
+
+
+def _check_model(rig: Rig, doc) -> None:
+    """The derived model exists: omega away from resonance, the pulse inside the period."""
+    try:
+        p = rig.params()
+    except ParameterError as exc:
+        raise RigError(f"the model of this rig is invalid: {exc}") from None
+    period = rig.forcing_period
+    w = rig.actuator.pulse_width
+    if not rig.budget + w / 2.0 < period:
+        raise RigError(f"controller.budget={doc['controller']['budget']!r} is invalid: the "
+                       f"pulse's end, budget + pulse_width / 2 = {rig.budget + w / 2:.6g} s, "
+                       f"must lie within the forcing period {period:.6g} s")
+    if not w <= 2.0 * rig.budget:
+        raise RigError(f"actuator.pulse_width={doc['actuator']['pulse_width']!r} is invalid: a "
+                       f"pulse centred at the budget must start after the section: valid "
+                       f"range is pulse_width <= 2 budget = {2 * rig.budget:.6g} s")
+    spp = rig.sensor.rate * period
+    if spp < MIN_SAMPLES_PER_PERIOD:
+        raise RigError(f"sensor.rate={doc['sensor']['rate']!r} is invalid: {spp:.3g} samples "
+                       f"per forcing period; valid range is sensor.rate >= "
+                       f"{MIN_SAMPLES_PER_PERIOD} x forcing.frequency = "
+                       f"{MIN_SAMPLES_PER_PERIOD * rig.frequency:.6g} Hz")
+    if not 1e-100 < p.amplitude < 1e100 or p.zeta * p.period > 300.0:
+        raise RigError(f"forcing.frequency={doc['forcing']['frequency']!r} is invalid: the "
+                       f"model's omega = {p.omega:.6g} is outside the computable range")
+
+
+# ---------------------------------------------------------------------- writing
+def rig_to_dict(rig: Rig) -> dict:
+    """The rig file's mapping of ``rig`` (every value with its unit, 17 digits: a round
+    trip through YAML is exact)."""
+    s, a = rig.sensor, rig.actuator
+    q = format_quantity
+    forcing = {"type": rig.forcing,
+               "amplitude": q(rig.amplitude, "force" if rig.forcing == "force" else "length"),
+               "frequency": q(rig.frequency, "frequency"), "phase": q(rig.phase, "angle")}
+    if rig.forcing == "base":
+        forcing["stop"] = "frame"
+    sensor = {"rate": q(s.rate, "frequency"), "noise": q(s.noise, "length"),
+              "resolution": q(s.resolution, "length"), "latency": q(s.latency, "time"),
+              "measures": "position_velocity" if s.velocity else "position"}
+    if s.velocity:
+        sensor["velocity_noise"] = f"{s.velocity_noise:.17g} m/s"
+    actuator = {"pulse_width": q(a.pulse_width, "time"),
+                "force_limit": q(a.force_limit, "force"), "latency": q(a.latency, "time")}
+    if a.force_constant > 0.0:
+        actuator["force_constant"] = q(a.force_constant, "force_constant")
+    return {"mass": q(rig.mass, "mass"),
+            "natural_frequency": q(rig.natural_frequency, "frequency"),
+            "damping_ratio": rig.zeta, "restitution": rig.restitution,
+            "gap": q(rig.gap, "length"), "forcing": forcing, "sensor": sensor,
+            "actuator": actuator,
+            "controller": {"budget": q(rig.budget, "time"),
+                           "pi2_offset": q(rig.pi2_offset, "angle")}}
+
+
+def rig_with_model(rig: Rig, p: OscillatorParams) -> Rig:
+    """``rig`` with its model replaced by ``p`` (fitted by ``grazing identify``): the
+    forcing frequency, amplitude and phase, the mass, sensor and actuator are what the
+    lab set and stay; the natural frequency is f / omega, the damping ratio zeta, the
+    restitution r, and the gap (Delta d + d*) l with the new length scale l = F0 / k."""
+    omega_n = TWO_PI * rig.frequency / p.omega
+    new = replace(rig, omega_n=omega_n, zeta=p.zeta, restitution=p.r,
+                  pi2_offset=p.pi2_offset)
+    return replace(new, gap=p.d * new.scales.length)
