@@ -21,7 +21,11 @@ node exiting with a nonzero status stops everything and the launch returns 1.
 ``/clock`` is remapped to ``clock`` (the namespace's own clock) and
 ``use_sim_time:=true`` puts the controller and recorder on it. ``live`` starts live_node
 (docs/live.md) on that WebSocket port beside the scene, as ``grazing run --live PORT``;
-the simulator does not wait for it. ``model`` runs an n-DOF scene of a model file (issue 17; docs/nodes.md, "n-DOF scenes"): both nodes read it, the
+the simulator does not wait for it. ``rig`` runs a simulated rig of a rig file in SI
+at physical speed (issue 28; docs/rig_scene.md), as ``grazing run --rig FILE``: both
+nodes read it and speak the driver contract, no controller file is used (the gains are
+designed for the rig's budget) and the recorder also records the contract's topics.
+``model`` runs an n-DOF scene of a model file (issue 17; docs/nodes.md, "n-DOF scenes"): both nodes read it, the
 controller's parameter file must give its ``gains``, the simulator's file is used without
 its 1-DOF model parameters, and ``delta_d`` left empty is the model file's (the study's
 -5.0e-06 without a model). Machines without
@@ -65,6 +69,11 @@ def generate_launch_description():
                                           "controller_params' model_file if it has one "
                                           "(an n-DOF design), else the study's 1-DOF "
                                           "oscillator"),
+        DeclareLaunchArgument("rig", default_value="",
+                              description="rig file (docs/rig.md): a simulated rig in SI at "
+                                          "physical speed, both nodes speaking the driver "
+                                          "contract (docs/rig_scene.md), as grazing run "
+                                          "--rig FILE; '' = the dimensionless scene"),
         DeclareLaunchArgument("max_periods", default_value="1200",
                               description="forcing periods of the scene"),
         DeclareLaunchArgument("enable_after", default_value="1000",
@@ -88,23 +97,29 @@ def _scene(context):
     `grazing run` gives them: one description, issue 19 §3), once the arguments are
     known; launch adds its own: the clock remapping, use_sim_time, the exit handlers."""
     from grazing_control.ros.scene_nodes import (NODES, design_model, scene_overrides,
-                                                 sim_values_for_model)
+                                                 sim_values_for_model, sim_values_for_rig)
 
     def arg(name):
         return LaunchConfiguration(name).perform(context)
 
     bag = arg("bag")
+    rig = arg("rig") or None
     controller_params = arg("controller_params")
+    if rig is not None:       # the rig file gives the gains' model; no controller file
+        controller_params = {}
     model = arg("model") or design_model(controller_params)
-    delta_d = float(arg("delta_d")) if arg("delta_d") else None if model else -5.0e-06
+    delta_d = float(arg("delta_d")) if arg("delta_d") else None if model or rig else -5.0e-06
     over = scene_overrides(controller_params, periods=int(arg("max_periods")),
                            delta_d=delta_d, enable_after=int(arg("enable_after")),
-                           bag=bag or None, model=model, live=_port(arg("live")))
+                           bag=bag or None, model=model, live=_port(arg("live")), rig=rig)
     sim_time = arg("use_sim_time").lower() in ("true", "1", "yes")
     files = {"sim_node": [arg("sim_params")], "controller_node": [controller_params],
              "recorder_node": [], "live_node": []}
     if model is not None:     # the simulator file's scene settings, not its 1-DOF model
         files["sim_node"] = [sim_values_for_model(arg("sim_params"))]
+    if rig is not None:       # ... nor what the rig file sets (its model, sensor, pace)
+        files["sim_node"] = [sim_values_for_rig(arg("sim_params"))]
+        files["controller_node"] = []
     nodes = {}
     for name in NODES:
         if over[name] is None:

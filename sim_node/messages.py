@@ -73,6 +73,8 @@ class Outputs:
         sec, ns = stamp = cdr.stamp_parts(ev.t)
         if isinstance(ev, NdofEvent):
             return self._publish_ndof(ev, stamp)
+        if n.driver is not None:              # a simulated rig: the contract's topics too
+            n.driver.event(ev)
         if ev.kind == "impact":
             n.pub_impact.publish(cdr.vector3_stamped(sec, ns, ev.x, ev.v, ev.phase))
             return stamp
@@ -116,6 +118,8 @@ class Outputs:
 
     def substituted(self, k: int, key: tuple, dv: float) -> None:
         self.node.pub_substituted.publish(cdr.twist_stamped(*key, dv))
+        if self.node.driver is not None:     # rig/applied says a prediction acted
+            self.node.driver.substituted[k] = dv
 
     def tripped(self, trip) -> None:
         self.node.on_trip(trip)

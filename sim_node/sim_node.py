@@ -35,7 +35,7 @@ import math
 import threading
 import time
 
-from geometry_msgs.msg import TwistStamped, Vector3Stamped
+from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -55,6 +55,7 @@ from grazing_control.plant.ndof_engine import NdofEngine
 from grazing_control.plant.ndof_settings import (UNSUPPORTED, load_model_file,
                                                  ndof_settings_from_values)
 from grazing_control.plant.realtime import MIN_TICK, Realtime
+from grazing_control.plant.rig import load_rig
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, described_range,
                                             settings_from_values)
@@ -72,11 +73,13 @@ from grazing_control.ros.common import (DATA_QOS, EVENT_QOS, EXECUTORS, LATCHED_
                                         publish_parameter_record, refuse_out_of_range,
                                         refuse_while_running, run_node, spin, stamp_key,
                                         string_descriptor)
+from grazing_control.ros.rig_boundary import check_rig_values, sim_values
 from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
 from grazing_control.ros.scheduling import apply_node_scheduling
 
 from sim_node.messages import Outputs, read_answer
 from sim_node.probe import RoundTrips, controller_name
+from sim_node.rig_io import RigDriver
 
 __all__ = ["SimNode", "main"]
 
@@ -100,9 +103,30 @@ MODEL_FILE = Parameter("model_file", "string", "", "path of an n-DOF model YAML 
                        "(JointState with n joints); '' = the study's 1-DOF oscillator",
                        read_only=True)
 
+#: A simulated rig in SI (issue 28, sim_node/rig_io.py): declared first, its rig file
+#: gives the simulation's defaults (plant.rig.Rig.dimensionless).
+RIG_FILE = Parameter("rig_file", "string", "", "path of a rig file (docs/rig.md): simulate "
+                     "that rig at physical speed and speak the driver contract in SI "
+                     "(docs/driver_contract.md: rig/sensor, rig/phase, rig/clock, "
+                     "rig/applied, grazing/rig; answers on rig/force_pulse); '' = the "
+                     "dimensionless scene", read_only=True)
+#: The simulated rig's clock against ROS time (rig_boundary.SimulatedClock).
+RIG_CLOCK = (
+    Parameter("clock_start", "double", 1000.0, "rig_file: the rig clock's reading (s) when "
+              "the scene starts (snapped to the next Pi2 section): a DAQ that has been "
+              "running, so its clock is offset from ROS time", 0.0, 1e9, read_only=True),
+    Parameter("clock_drift", "double", 5e-5, "rig_file: the rig clock's drift against ROS "
+              "time (ROS s per rig s, less 1; 5e-5: 50 ppm): the default time_scale is "
+              "omega_n / (1 + clock_drift)", -0.01, 0.01, read_only=True),
+    Parameter("clock_rate", "double", 20.0, "rig_file: rig/clock messages per wall second, "
+              "10..1000", 10.0, 1000.0, read_only=True),
+)
+
 #: The node's own parameters (how it starts and spins), after the simulation's.
 NODE_PARAMETERS = (
     MODEL_FILE,
+    RIG_FILE,
+    *RIG_CLOCK,
     Parameter("executor", "string", "events", "rclpy executor: single_threaded "
               "(SingleThreadedExecutor) or events (rclpy.experimental EventsExecutor)",
               choices=EXECUTORS, read_only=True),
@@ -156,6 +180,17 @@ SIM_TIME_REFUSED = ("use_sim_time=true is invalid for sim_node: valid is false o
                     "wait for it)")
 
 
+def check_rig_scene(rig_file: str, rig_values: dict, values: dict) -> None:
+    """A rig scene's parameters are the rig file's, time_scale excepted (a faster
+    scene: rig_boundary.check_rig_values); its mode is realtime (the rig's clock runs)."""
+    if not rig_values:
+        return
+    check_rig_values(rig_file, rig_values, values, free=("time_scale",))
+    if values["mode"] != "realtime":
+        raise ParameterError(f"mode={values['mode']!r} is invalid with rig_file={rig_file}: "
+                             "valid is realtime (a rig's clock runs)")
+
+
 def descriptor(p: Parameter, declared: dict | None = None):
     """The ROS descriptor of one parameter of the table (type, range, choices, read-only);
     ``declared``: the values declared before it, which bound some ranges
@@ -183,13 +218,15 @@ class SimNode(Node):
                 self.model = load_model_file(self.model_file)
             except ParameterError as exc:
                 raise StartupError(str(exc)) from None
+        self.rig, rig_values = self._declare_rig()
         declared = {}
         for p in PARAMETERS + NODE_PARAMETERS:
-            if p is MODEL_FILE:
+            if p is MODEL_FILE or p is RIG_FILE or p in RIG_CLOCK:
                 continue
             default = p.default     # with a model file, delta_d defaults to the file's
             if p.name == "delta_d" and self.model is not None:
                 default = self.model.delta_d
+            default = rig_values.get(p.name, default)     # with a rig file, the rig's
             declared[p.name] = self.declare_parameter(
                 p.name, default, self._descriptor(p, declared)).value
         self.set_descriptor("use_sim_time", bool_descriptor(
@@ -199,6 +236,7 @@ class SimNode(Node):
             raise StartupError(SIM_TIME_REFUSED)
         check_ranges(self)
         try:
+            check_rig_scene(self.rig_file, rig_values, self._values())
             self.settings = self._validate(self._values())
             apply_node_scheduling(self)
         except (ParameterError, ValueError) as exc:
@@ -223,12 +261,24 @@ class SimNode(Node):
              (Float64, "oscillator/latency"), (Vector3Stamped, "oscillator/deadline_miss")))
         self.pub_substituted = publisher(TwistStamped, "oscillator/substituted")
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
+        self.driver = None            # the simulated rig's side of the contract (rig_file)
+        if self.rig is not None:
+            self.driver = RigDriver(self, self.rig, publisher,
+                                    *(self.get_parameter(p.name).value for p in RIG_CLOCK[:1]),
+                                    self.get_parameter("clock_rate").value)
         self.published = PublishedRecord(self, (
             self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
-            self.pub_latency, self.pub_miss, self.pub_substituted))
-        self.sub_correction = self.create_subscription(
-            TwistStamped, "controller/velocity_correction", self._on_correction, DATA_QOS,
-            raw=True, event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+            self.pub_latency, self.pub_miss, self.pub_substituted)
+            + (self.driver.publishers if self.driver else ()))
+        if self.driver is None:
+            self.sub_correction = self.create_subscription(
+                TwistStamped, "controller/velocity_correction", self._on_correction,
+                DATA_QOS, raw=True,
+                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        else:   # a rig's answer: the scheduled force pulse (docs/driver_contract.md)
+            self.sub_correction = self.create_subscription(
+                WrenchStamped, "rig/force_pulse", self._on_force_pulse, DATA_QOS,
+                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._recorder_ready = False
@@ -266,6 +316,24 @@ class SimNode(Node):
         self._ready_since = None
         self._clock_wall = -math.inf   # wall time of the last /clock (realtime)
         self.get_logger().info(f"{self.settings.describe()} executor={self.executor_kind}")
+
+    def _declare_rig(self):
+        """Declare rig_file and the rig clock's parameters; (the Rig or None, the
+        simulation's values the rig file sets: rig_boundary.sim_values)."""
+        self.rig_file = self.declare_parameter(RIG_FILE.name, RIG_FILE.default,
+                                               descriptor(RIG_FILE)).value
+        for p in RIG_CLOCK:
+            self.declare_parameter(p.name, p.default, descriptor(p))
+        if not self.rig_file:
+            return None, {}
+        if self.model is not None:
+            raise StartupError(f"rig_file={self.rig_file} is invalid with model_file: a rig "
+                               "file describes a 1-DOF rig; give one of them")
+        try:
+            rig = load_rig(self.rig_file)
+            return rig, sim_values(rig, self.get_parameter("clock_drift").value)
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
 
     def _descriptor(self, p: Parameter, declared: dict):
         """:func:`descriptor`; in an n-DOF scene with the model's forcing frequency (its
@@ -388,6 +456,9 @@ class SimNode(Node):
         if self.get_parameter("wait_for_controller").value:
             samples = max(self.pub_pi2.get_subscription_count(),    # a controller reads
                           self.pub_state.get_subscription_count())  # Pi2 or the stream
+            if self.driver is not None:         # a rig's controller: the SI stream, phase
+                samples = min(self.driver.pub_sensor.get_subscription_count(),
+                              self.driver.pub_phase.get_subscription_count())
             if samples < n + 1:
                 missing.append(f"the controller{f' and {n} recorder(s)' if n else ''} "
                                f"subscribed to {self.pub_pi2.topic_name} or "
@@ -404,6 +475,8 @@ class SimNode(Node):
                 pubs.append(self.pub_state)
             if self.settings.mode == "realtime":     # the latency of every sample is recorded
                 pubs.append(self.pub_latency)
+            if self.driver is not None:
+                pubs.extend(self.driver.publishers)
             for pub in pubs:
                 have = pub.get_subscription_count()
                 if have < n:
@@ -450,6 +523,8 @@ class SimNode(Node):
             self.loop = Realtime(self.engine, self.out)
             self._tick_timer = self.create_timer(MIN_TICK, self._on_tick)
             self._guard(self.loop.start)
+            if self.driver is not None:
+                self.driver.started()
 
     def _feasible(self) -> bool:
         """Realtime: the check before the start (plant.feasibility); True when the scene
@@ -534,11 +609,30 @@ class SimNode(Node):
         if self._guard(self.loop.answer, key, dv, predicted) and self._tick_timer is not None:
             self._arm(self.loop.now())       # a split may have brought an event forward
 
+    def _on_force_pulse(self, msg: WrenchStamped) -> None:
+        """A rig/force_pulse (rig_file): the answer of its section, as a correction."""
+        answer = self.driver.answer(msg)
+        if answer is None:
+            return
+        if not self.running:
+            self.out.ignored(f"stamp {answer[0]}: the scene is not running")
+            return
+        before = self.loop.deadline
+        rearm = self._guard(self.loop.answer, *answer)
+        self.driver.acted(before, self.loop.deadline)
+        if rearm and self._tick_timer is not None:
+            self._arm(self.loop.now())
+
     def _on_tick(self) -> None:
         """Realtime wake-up: publish what is due, /clock, and sleep until the next event."""
         if not self.running:
             return
+        before = self.loop.deadline
         now = self._guard(self.loop.tick)
+        if self.driver is not None:
+            self.driver.acted(before, self.loop.deadline)
+            if now is not None:
+                self.driver.flush(now)
         if now is not None and self.running:
             wall = time.monotonic()
             if wall - self._clock_wall >= CLOCK_EVERY:     # /clock at most every 1 ms
@@ -547,7 +641,10 @@ class SimNode(Node):
             self._arm(now)
 
     def _arm(self, now: float) -> None:
-        self._tick_timer.timer_period_ns = int(self.loop.wake_in(now) * 1e9)
+        wake = self.loop.wake_in(now)
+        if self.driver is not None:     # a sensor sample whose latency ends sooner
+            wake = min(wake, max(self.driver.wake_in(now), MIN_TICK))
+        self._tick_timer.timer_period_ns = int(wake * 1e9)
         self._tick_timer.reset()
 
     def _guard(self, call, *args):
@@ -606,7 +703,8 @@ class SimNode(Node):
         out = self.out
         counts = {"missed": out.misses.count, "timeouts": out.timeout.count,
                   "ignored": out.ignored.count, "malformed": out.malformed.count}
-        return (self.loop or Loop(self.engine, out)).summary(wall, counts)
+        text = (self.loop or Loop(self.engine, out)).summary(wall, counts)
+        return text + (self.driver.summary() if self.driver is not None else "")
 
     def spin_until(self, executor) -> None:
         """Spin until shutdown, or until done when exit_when_done.

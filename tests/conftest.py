@@ -88,14 +88,14 @@ SCENE_MODULES = frozenset({
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
     "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_parameter_files_hostile",
-    "test_recorder_node", "test_recording", "test_scheduling", "test_signals",
-    "test_sim_node", "test_test_cleanup",
+    "test_recorder_node", "test_recording", "test_rig_scene", "test_scheduling",
+    "test_signals", "test_sim_node", "test_test_cleanup",
 })
 
 #: Scene modules with realtime (wall-clock paced) scenes: last in the scene group.
 REALTIME_MODULES = ("test_node_common", "test_diagnostics", "test_deadline_misses",
                     "test_bagtools_replay", "test_live_node", "test_ndof_nodes",
-                    "test_actuation")
+                    "test_actuation", "test_rig_scene")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -569,6 +569,13 @@ def _check_run_files(args) -> None:
                 read_yaml_file(path)
             except YamlFileError as exc:
                 raise ParameterError(f"{option} {exc}") from None
+    if getattr(args, "rig", None) is not None:     # the rig file, validated once here
+        from grazing_control.plant.rig import load_rig
+
+        try:
+            load_rig(args.rig)
+        except (ParameterError, YamlFileError) as exc:
+            raise ParameterError(f"--rig {exc}") from None
 
 
 def cmd_run(args):

@@ -84,6 +84,19 @@ def stream_sample(sec: int, nanosec: int, x: float, v: float | None, cos_tau: fl
                            cos_tau, sin_tau)
 
 
+_RIG_XV = struct.Struct("<4siII4sII8sI4xdI4xdI")
+_RIG_X = struct.Struct("<4siII4sII8sI4xdII")
+
+
+def rig_sample(sec: int, nanosec: int, x: float, v: float | None) -> bytes:
+    """sensor_msgs/JointState of ``rig/sensor`` (docs/driver_contract.md): joint
+    ``mass``, position [x] (m), velocity [v] (m/s) or empty (``v`` None: a position-only
+    sensor), effort empty; read back by :func:`read_state`."""
+    if v is None:
+        return _RIG_X.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 0, 0)
+    return _RIG_XV.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 1, v, 0)
+
+
 def vector3_stamped(sec: int, nanosec: int, x: float, y: float, z: float) -> bytes:
     """geometry_msgs/Vector3Stamped with an empty frame_id."""
     return _VECTOR3_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, x, y, z)

@@ -97,13 +97,13 @@ from collections import deque
 
 import numpy as np
 
-from geometry_msgs.msg import TwistStamped, Vector3Stamped
+from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
@@ -125,6 +125,8 @@ from grazing_control.plant.settings import ABOVE_0, FINITE, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
+from .rig_control import RigSide
+from .rig_boundary import check_rig_values, controller_values
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
 ISOLATION_CHECK = 0.25
@@ -352,7 +354,11 @@ class ControllerNode(Node):
     def __init__(self, **kwargs):
         super().__init__("controller_node", **kwargs)
         ref = OscillatorParams()
-        d = self.declare_parameter
+        self.rig, self.rig_values = self._declare_rig()
+
+        def d(name, default, desc):     # with a rig file, the rig's values are the defaults
+            return self.declare_parameter(name, self.rig_values.get(name, default), desc)
+
         self.model_file = d("model_file", "", string_descriptor(
             "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
             "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
@@ -442,7 +448,9 @@ class ControllerNode(Node):
         self.executor_kind = executor_kind(self)
         try:
             apply_node_scheduling(self)
-        except ValueError as exc:
+            check_rig_values(self.get_parameter("rig_file").value, self.rig_values,
+                             self._values())
+        except (ValueError, ParameterError) as exc:
             raise StartupError(str(exc)) from None
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None
         try:
@@ -469,7 +477,22 @@ class ControllerNode(Node):
         self.pub_estimate = Counted(self.create_publisher(
             JointState, "controller/estimate", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
-        if self.stream is None:
+        self.rig_side = None     # the driver contract's side (rig_file), or None
+        if self.rig is not None:
+            self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
+            self.pub_force = Counted(self.create_publisher(
+                WrenchStamped, "rig/force_pulse", REPLAY_QOS,
+                event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
+            self.sub_samples = self.create_subscription(
+                JointState, "rig/sensor", self.rig_side.on_sensor, DATA_QOS, raw=True,
+                event_callbacks=quiet)
+            self.create_subscription(Vector3Stamped, "rig/phase", self.rig_side.on_phase,
+                                     DATA_QOS, event_callbacks=quiet)
+            self.create_subscription(TimeReference, "rig/clock", self.rig_side.on_clock,
+                                     DATA_QOS, event_callbacks=quiet)
+            self.create_subscription(WrenchStamped, "rig/applied", self.rig_side.on_applied,
+                                     DATA_QOS, event_callbacks=quiet)
+        elif self.stream is None:
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
                 event_callbacks=quiet)
@@ -494,7 +517,8 @@ class ControllerNode(Node):
         self._next_check = 0.0
         self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
                                                          LATCHED_QOS))
-        self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled))
+        self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled)
+                                         + ((self.pub_force,) if self.rig_side else ()))
         self.recorder = RecorderConfirmation(self)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -505,6 +529,7 @@ class ControllerNode(Node):
         self.nonfinite = Throttled(log, "non-finite correction not published")
         self.phase_mismatch = Throttled(log, "stream phase reference off")
         self.answered = 0
+        self.prediction = math.nan       # the last answer's predicted next correction
         self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value)
         self.diagnostics.add("controller", self._diagnose)
         self._diag_last = (0, 0, None)   # answered, refused, ROS time (sim time)
@@ -527,6 +552,35 @@ class ControllerNode(Node):
                  f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after} "
                  f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind} "
                  f"pi2_source={source}")
+
+    def _declare_rig(self):
+        """Declare rig_file, rig_c2 and clock_window; (the Rig or None, the parameters
+        its file sets: rig_boundary.controller_values, the design for its budget)."""
+        from grazing_control.plant.rig import load_rig
+
+        path = self.declare_parameter("rig_file", "", string_descriptor(
+            "path of a rig file (docs/rig.md): speak the driver contract in SI "
+            "(docs/driver_contract.md: reads rig/sensor, rig/phase, rig/clock, rig/applied;"
+            " answers on rig/force_pulse and, dimensionless, on "
+            "controller/velocity_correction), the model, sensor and gains from the rig; "
+            "'' = the dimensionless scene", True)).value
+        c2 = self.declare_parameter("rig_c2", math.nan, float_descriptor(
+            "rig_file: the design's c2 (c1 from the degenerate condition for the budget's "
+            "delay); NaN: the c2 of least noise gain", read_only=True,
+            constraints=f"|rig_c2| <= {GAIN_LIMIT:g}, or NaN")).value
+        if not (math.isnan(c2) or abs(c2) <= GAIN_LIMIT):
+            raise StartupError(f"rig_c2={c2!r} is invalid: valid range is |rig_c2| <= "
+                               f"{GAIN_LIMIT:g}, or NaN for the c2 of least noise gain")
+        self.declare_parameter("clock_window", 200, int_descriptor(
+            "rig_file: rig/clock pairs of the clock relation's sliding window", 2, 100_000,
+            read_only=True))
+        if not path:
+            return None, {}
+        try:
+            rig = load_rig(path)
+            return rig, controller_values(rig, c2)
+        except (ParameterError, ValueError, ArithmeticError) as exc:
+            raise StartupError(f"rig_file={path}: {exc}") from None
 
     def _warn_gains(self) -> None:
         """Warn when the gains were not given or are both zero (the controller then
@@ -640,7 +694,8 @@ class ControllerNode(Node):
         if not math.isfinite(dv):
             self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
             return None
-        self.pub.publish(cdr.twist_stamped(*key, dv, self._predict(x, v, dv)))
+        self.prediction = self._predict(x, v, dv)
+        self.pub.publish(cdr.twist_stamped(*key, dv, self.prediction))
         self.answered += 1
         return dv
 
@@ -684,10 +739,16 @@ class ControllerNode(Node):
             return
         t = sec + ns * 1e-9
         self._check_phase(t, effort)
+        self.add_stream_sample(t, x, v)
+
+    def add_stream_sample(self, t: float, x: float, v: float) -> None:
+        """A stream sample (model time and units): the sections it completes are
+        estimated, published on controller/estimate and answered (with a rig file also
+        as the force pulse, rig_control.RigSide.answered)."""
         try:
             due = self.stream.add_sample(t, x, v)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
-            self.malformed(f"stamp {(sec, ns)}: the estimator failed: {exc}")
+            self.malformed(f"stamp {cdr.stamp_parts(t)}: the estimator failed: {exc}")
             return
         p = self.model
         for k, tk, est in due:
@@ -701,6 +762,8 @@ class ControllerNode(Node):
                 continue
             dv = self._answer(key, xh, vh)
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
+            if dv is not None and self.rig_side is not None:
+                self.rig_side.answered(tk, dv, self.prediction)
 
     def _check_phase(self, t: float, effort) -> None:
         """The shaker's phase reference (effort [cos tau, sin tau] or [cos tau]) against the
@@ -824,6 +887,8 @@ class ControllerNode(Node):
         stat.add("stale", self.stale.count)
         stat.add("nonfinite", self.nonfinite.count)
         stat.add("out_of_order", self.law.out_of_order)
+        if self.rig_side is not None:
+            self.rig_side.diagnose(stat)
         if refused > last_refused:
             stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
                                      "(malformed, stale or non-finite)")
@@ -849,7 +914,8 @@ class ControllerNode(Node):
             f"nonfinite={self.nonfinite.count}"
             + ("" if self.stream is None else
                f" phase_mismatch={self.phase_mismatch.count} stream_ignored="
-               f"{self.stream.ignored} model_resets={self.stream.resets}"))
+               f"{self.stream.ignored} model_resets={self.stream.resets}")
+            + ("" if self.rig_side is None else self.rig_side.summary()))
 
 
 def main(args=None) -> int:

@@ -65,7 +65,7 @@ import yaml
 
 from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
-                          scene_overrides, sim_values_for_model)
+                          scene_overrides, sim_values_for_model, sim_values_for_rig)
 from grazing_control.support.arguments import finite
 
 __all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
@@ -387,7 +387,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         mode: str | None = None, domain_id: int | None = None, timeout: float | None = None,
         sim_overrides: dict | None = None, controller_overrides: dict | None = None,
         recorder_overrides: dict | None = None, log_dir=None,
-        python: str | None = None, live: int | None = None, model=None) -> RunResult:
+        python: str | None = None, live: int | None = None, model=None,
+        rig=None) -> RunResult:
     """Run one scene through the three node processes and wait for it to finish.
 
     Parameters
@@ -434,6 +435,15 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         and the simulator's parameter file is used without its 1-DOF model parameters
         (zeta, r, omega, delta_d, tau0, pi2_offset: the model file's delta_d applies
         unless ``delta_d`` is given).
+    rig : path, optional
+        A rig file (docs/rig.md; issue 28): a simulated rig in SI at physical speed
+        (docs/rig_scene.md). Both nodes get it as ``rig_file``: the simulator is the rig's
+        driver (docs/driver_contract.md), realtime; the controller estimates each section
+        from ``rig/sensor`` and answers with ``rig/force_pulse``, its model, sensor and
+        gains from the rig (``--controller-param rig_c2:=C2``; default the c2 of least
+        noise gain); the recorder also records the contract's topics. The simulator's
+        parameter file is used without what the rig sets, and no controller file is
+        needed (default: none).
 
     Returns
     -------
@@ -457,6 +467,13 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         # the scene settings of the simulator's file, not its 1-DOF model
         sim_params = sim_values_for_model(CONFIG_DIR / "study.yaml" if sim_params is None
                                           else sim_params)
+    if rig is not None:
+        if model is not None:
+            raise ValueError(f"rig={os.fspath(rig)!r} is invalid with model: a rig file "
+                             "describes a 1-DOF rig; give one of them")
+        sim_params = sim_values_for_rig(CONFIG_DIR / "study.yaml" if sim_params is None
+                                        else sim_params)
+        controller_params = {} if controller_params is None else controller_params
     sim_params = CONFIG_DIR / "study.yaml" if sim_params is None else sim_params
     controller_params = (CONFIG_DIR / "controller.yaml" if controller_params is None
                          else controller_params)
@@ -475,7 +492,8 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                            enable_after=enable_after, mode=mode,
                            bag=bag_dir if record else None, sim_overrides=sim_overrides,
                            controller_overrides=controller_overrides,
-                           recorder_overrides=recorder_overrides, model=model, live=live)
+                           recorder_overrides=recorder_overrides, model=model, live=live,
+                           rig=rig)
     sim_over, controller_overrides = over["sim_node"], over["controller_node"]
     procs = {"sim_node": None, "controller_node": None, "recorder_node": None,
              "live_node": None}
@@ -696,6 +714,12 @@ def add_run_arguments(parser) -> None:
                         help="run an n-DOF scene of this model file (docs/ndof_model.md); "
                              "--controller-params must give its gains (default: the "
                              "study's 1-DOF oscillator)")
+    parser.add_argument("--rig", default=None, metavar="FILE",
+                        help="run a simulated rig of this rig file (docs/rig.md) in SI at "
+                             "physical speed, both nodes speaking the driver contract "
+                             "(docs/rig_scene.md); realtime, the gains designed for the "
+                             "rig's budget (--controller-param rig_c2:=C2, default the c2 "
+                             "of least noise gain)")
     parser.add_argument("--sim-params", dest="sim_params", default=None,
                         help="sim_node parameter file (default: config/study.yaml)")
     parser.add_argument("--controller-params", dest="controller_params", default=None,

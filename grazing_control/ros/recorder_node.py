@@ -141,6 +141,7 @@ from .common import (LATCHED_QOS, READY_TOPIC, SIGNAL_POLL, StartupError, _start
                      int_descriptor, string_descriptor, usage)
 from .diagnostics import OK, ERROR, WARN, Updater
 from .published import COMPLETE_TOPIC
+from .rig_boundary import RIG_TOPICS
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.signals import SignalStop
 from .recording import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, BagWriter, message_definition,
@@ -292,7 +293,7 @@ def _is_own(topic: str) -> bool:
     return topic.lstrip("/") in _OWN
 
 
-_OWN = {name.lstrip("/") for name in (*DEFAULT_TOPICS, *EXTRA_TOPICS)}
+_OWN = {name.lstrip("/") for name in (*DEFAULT_TOPICS, *EXTRA_TOPICS, *RIG_TOPICS)}
 
 
 def qos_to_dict(qos):
@@ -431,6 +432,10 @@ class RecorderNode(Node):
                                                                   *EXTRA_TOPICS.items())],
                                read_only("'name' or 'name pkg/msg/Type' per topic",
                                          ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter("rig_topics", False, read_only(
+            "also record the driver contract's topics (rig/sensor, rig/phase, rig/clock, "
+            "rig/force_pulse, rig/applied, grazing/rig: docs/driver_contract.md); grazing "
+            "run --rig sets it", ParameterType.PARAMETER_BOOL))
         self.declare_parameter("compression", "zstd", string_descriptor(
             f"chunk compression: {', '.join(COMPRESSIONS)}", True, COMPRESSIONS))
         self.declare_parameter("chunk_size", DEFAULT_CHUNK_SIZE, int_descriptor(
@@ -474,6 +479,8 @@ class RecorderNode(Node):
         except ParameterUninitializedException:      # -p topics:=[] has no type
             entries = []
         topics = parse_topics(entries)
+        if self.get_parameter("rig_topics").value:      # a rig scene (issue 28)
+            topics.update({k: v for k, v in RIG_TOPICS.items() if k not in topics})
         for kind in topics.values():
             try:
                 _message_class(kind)

@@ -14,7 +14,7 @@ import os
 import random
 
 __all__ = ["NODES", "scene_overrides", "design_delay", "design_model", "new_token",
-           "sim_values_for_model"]
+           "sim_values_for_model", "sim_values_for_rig"]
 
 #: The scene's nodes in start order (the recorder first, so that it matches every topic
 #: before the simulator starts; the live view, which nothing waits for; the simulator
@@ -77,6 +77,16 @@ def sim_values_for_model(sim_params) -> dict:
     return {k: v for k, v in values.items() if k not in MODEL_KEYS}
 
 
+def sim_values_for_rig(sim_params) -> dict:
+    """The simulator's parameter file without what a rig file sets (its model, sensor,
+    pulse, budget, pace: ros.rig_boundary.SIM_KEYS) and without its mode (a rig scene is
+    realtime): what a rig scene's simulator takes from the study's file."""
+    from grazing_control.ros.rig_boundary import SIM_KEYS
+
+    return {k: v for k, v in sim_values_for_model(sim_params).items()
+            if k not in SIM_KEYS and k != "mode"}
+
+
 def new_token() -> str:
     """A random scene token (ros/scene.py): this scene's nodes recognise each other."""
     return f"{os.getpid():x}-{random.getrandbits(48):012x}"
@@ -85,7 +95,7 @@ def new_token() -> str:
 def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
                     mode=None, bag=None, token=None, sim_overrides=None,
                     controller_overrides=None, recorder_overrides=None, model=None,
-                    live=None) -> dict:
+                    live=None, rig=None) -> dict:
     """Node name -> its ``-p key:=value`` overrides (recorder: None without ``bag``; live
     view: None without ``live``).
 
@@ -99,7 +109,10 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     - recorder_node: ``output`` = bag, ``require_complete``;
     - live_node (docs/live.md): ``port`` = live (0..65535; 0: any free port, logged);
     - both simulator and controller: the scene token; with ``model`` (an n-DOF model
-      file, issue 17) its path as ``model_file``.
+      file, issue 17) its path as ``model_file``; with ``rig`` (a rig file, issue 28) its
+      path as ``rig_file`` (the simulated rig and the controller speak the driver
+      contract, docs/driver_contract.md), the simulator in realtime (physical speed) and
+      the recorder also recording the contract's topics (``rig_topics``).
     """
     sim = {"exit_when_done": True, "wait_for_controller": True,
            "wait_for_subscribers": 1 if bag is not None else 0,
@@ -113,6 +126,9 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     controller = dict(controller_overrides or {})
     if model is not None:               # an n-DOF scene: both read the model file
         sim["model_file"] = controller["model_file"] = os.path.abspath(os.fspath(model))
+    if rig is not None:                 # a rig scene: both read the rig file
+        sim["rig_file"] = controller["rig_file"] = os.path.abspath(os.fspath(rig))
+        sim["mode"] = "realtime" if mode is None else str(mode)
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay
@@ -120,7 +136,7 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     for key in ("delta_d", "sensor_noise", "state_period"):  # the controller's model of
         if key in sim:                                        # the plant and its sensor
             controller.setdefault(key, sim[key])
-    if sim.get("mode") == "realtime":     # a stream controller answers after t_k
+    if sim.get("mode") == "realtime" and rig is None:   # a stream controller answers after t_k
         controller.setdefault("answer_after_section", True)
     if enable_after is not None:
         controller["enable_after"] = int(enable_after)
@@ -129,6 +145,8 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     recorder = None
     if bag is not None:
         recorder = {"output": os.fspath(bag), "require_complete": True}
+        if rig is not None:
+            recorder["rig_topics"] = True
         recorder.update(recorder_overrides or {})
     return {"sim_node": sim, "controller_node": controller, "recorder_node": recorder,
             "live_node": None if live is None else {"port": int(live)}}

@@ -1,0 +1,195 @@
+"""Issue 28's acceptance scene: a simulated rig in SI at physical speed (time_scale 1).
+
+`grazing run --rig config/rigs/acceptance.yaml` (docs/rig_scene.md): sim_node simulates
+the rig file's rig and speaks the driver contract (rig/sensor at 2 kHz with 2 um noise
+and 0.5 ms latency, position only; rig/phase; rig/clock with a drifting rig clock);
+controller_node estimates each Pi2 section from rig/sensor with the model estimator and
+answers with rig/force_pulse (2 ms pulses, 5 ms budget), the gains designed for the
+budget's delay. The first ``--enable-after`` periods are uncontrolled (chaotic near
+grazing), then the control is switched on.
+
+Printed, against the design (the core: dynamics/noise.py, dynamics/estimation.py):
+
+* uncontrolled: the largest Lyapunov exponent of the rig's model at its Delta d (exact
+  core, 20000 periods), and in the scene the Pi2 position's range and the share of
+  periods with one impact;
+* controlled: the periods to capture (|x - x*| below 5 predicted spreads for 50 periods
+  in a row), then over the held periods (at least 600): the Pi2 spread (RMS about the
+  exact orbit of the pulse loop, dynamics.actuation.pulse_orbit, and the std), the
+  design's predicted spread (the noise gain, position only, model estimator at the
+  sensor's samples per period, times the sensor noise in model units: what `grazing
+  design --delta-d D --delay B --sensor-rate N --c2 C2` prints) and their ratio, the
+  share of periods with one impact, the deadline misses (the simulator's count) and the
+  controller's clock relation and sensor latency (its summary line).
+
+    .venv/bin/python benchmarks/bench_rig_scene.py [--rig config/rigs/acceptance.yaml]
+        [--periods 900] [--enable-after 200] [--c2 C2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from grazing_control.dynamics.actuation import pulse_orbit
+from grazing_control.dynamics.estimation import estimate_covariance
+from grazing_control.dynamics.lyapunov import lyapunov_exact
+from grazing_control.dynamics.tuning import design_noise_gain
+from grazing_control.oscillator.control import Gains
+from grazing_control.plant.rig import load_rig
+from grazing_control.recordings.scenes import load
+from grazing_control.ros import launcher
+from grazing_control.ros.rig_boundary import controller_values
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def design(rig, c2):
+    """(gains, predicted spread, samples per period) of the rig's design."""
+    p, d = rig.params(), rig.dimensionless()
+    values = controller_values(rig, c2)
+    g = Gains(values["c1"], values["c2"], values["actuation_delay"])
+    rate = round(p.period / d["state_period"])
+    r = estimate_covariance(p, g, rate, estimator="model")
+    gain = design_noise_gain(p, g.c2, g.delay, measurement=r)
+    return g, gain * d["sensor_noise"], rate
+
+
+def core(rig, c2, forces, periods, enable_after, seed=7):
+    """The acceptance in the core, for the rig with each force amplitude F0 (N) and the
+    same Delta d: the closed loop on the sensor stream (dynamics.stream.simulate_stream:
+    the exact plant, the rig's sensor at the nearest integer samples per period, the
+    model estimator, the kick at the budget's delay), uncontrolled for ``enable_after``
+    periods, then controlled; the noise in model units is the sensor's 2 um / l, l = F0/k."""
+    from dataclasses import replace
+
+    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.plant.sensor import SensorModel
+
+    dd = rig.params().delta_d
+    for f0 in forces:
+        r = replace(rig, amplitude=f0)
+        r = replace(r, gap=(r.params().d_star + dd) * r.scales.length)
+        p, d = r.params(), r.dimensionless()
+        g, predicted, rate = design(r, c2)
+        sigma = d["sensor_noise"]
+        run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=seed).measure,
+                              enable_after + periods, rate, sigma=sigma,
+                              control_after=enable_after)
+        z = orbit_11(p, g).pi2_deviation
+        x = run.truth[:, 0]
+        err = np.abs(x - z[0])
+        cap = next((k for k in range(enable_after, len(x) - 50)
+                    if np.all(err[k:k + 50] < 5.0 * predicted)), None)
+        if cap is None:
+            print(f"core F0 = {f0:g} N: sigma {sigma:.3g}, not captured")
+            continue
+        held = slice(cap, len(x))
+        rms = float(np.sqrt(np.mean((x[held] - z[0]) ** 2)))
+        one = float(np.mean(run.impacts_per_period[held] == 1))
+        unc = float(np.mean(run.impacts_per_period[:enable_after] == 1))
+        print(f"core F0 = {f0:g} N: l = {r.scales.length * 1e3:.4g} mm, sigma {sigma:.3g} "
+              f"({sigma / abs(dd):.3g} |Delta d|); uncontrolled one impact in "
+              f"{100 * unc:.0f} %; captured after {cap - enable_after} periods; held "
+              f"{len(x) - cap}: spread {rms:.3g}, predicted {predicted:.3g}, ratio "
+              f"{rms / predicted:.3f}; one impact in {100 * one:.1f} %; model resets "
+              f"{run.resets}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rig", default=str(ROOT / "config" / "rigs" / "acceptance.yaml"))
+    ap.add_argument("--periods", type=int, default=900)
+    ap.add_argument("--enable-after", type=int, default=200)
+    ap.add_argument("--c2", type=float, default=math.nan,
+                    help="the design's c2 (default: the c2 of least noise gain)")
+    ap.add_argument("--out", default=None, help="keep the bag and logs here")
+    ap.add_argument("--core", type=float, nargs="*", default=None, metavar="F0",
+                    help="only the core's closed loop (no nodes), for the rig with each of "
+                         "these force amplitudes in N and its Delta d (default F0s: 20 50 "
+                         "200 1000)")
+    ap.add_argument("--slow", type=float, default=1.0,
+                    help="run at 1/SLOW of physical speed (time_scale = omega_n / SLOW): the "
+                         "controller's budget in wall time SLOW times the rig's (default 1: "
+                         "physical speed, the acceptance)")
+    ap.add_argument("--watchdog-misses", type=int, default=None,
+                    help="sim_node's watchdog_misses (default: its own, 25 of 50; 0: off, "
+                         "to measure a scene that misses)")
+    args = ap.parse_args(argv)
+    rig = load_rig(args.rig)
+    p, d = rig.params(), rig.dimensionless()
+    g, predicted, rate = design(rig, args.c2)
+    lyap = lyapunov_exact(p, (0.0, 0.0), 20000, 1000, None, None)
+    print(f"rig {args.rig}: Delta d = {p.delta_d:.3g}, omega = {p.omega:.8g}, l = "
+          f"{rig.scales.length * 1e3:.4g} mm, sensor noise {d['sensor_noise']:.3g} (model "
+          f"units), {p.period / d['state_period']:.1f} samples per period, delay "
+          f"{g.delay:.4g}, pulse {d['pulse_width']:.4g}")
+    print(f"design: c2 = {g.c2:.6g}, c1 = {g.c1:.6g}; predicted Pi2 spread {predicted:.4g} "
+          f"(noise gain, position only, model estimator at {rate} samples per period)")
+    print(f"uncontrolled model: largest Lyapunov exponent {lyap.exponents[0]:.3f} per period "
+          f"({'chaotic' if lyap.exponents[0] > 0 else 'not chaotic'}), "
+          f"{lyap.impacts_per_period:.3f} impacts per period")
+    if args.core is not None:
+        core(rig, args.c2, args.core or (20.0, 50.0, 200.0, 1000.0), args.periods - args.enable_after,
+             args.enable_after)
+        return 0
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_rig_"))
+    t0 = time.time()
+    res = launcher.run(None, None, str(out / "bag"), args.periods, rig=args.rig,
+                       enable_after=args.enable_after, timeout=args.periods * 0.1 * args.slow + 120,
+                       controller_overrides={"rig_c2": g.c2}, log_dir=str(out / "logs"),
+                       sim_overrides=dict(
+                           {} if args.slow == 1.0 else {"time_scale": rig.omega_n / args.slow},
+                           **({} if args.watchdog_misses is None else
+                              {"watchdog_misses": args.watchdog_misses})))
+    wall = time.time() - t0
+    print(f"scene: {res} ({wall:.0f} s)")
+    for name in ("sim_node", "controller_node"):
+        log = Path(res.logs.get(name, ""))
+        if log.is_file():
+            lines = [ln for ln in log.read_text(errors="replace").splitlines() if "summary:" in ln]
+            if lines:
+                print(f"{name}: {lines[-1].split('summary: ', 1)[1]}")
+    try:
+        sd = load(out / "bag").scenes[0]
+    except (OSError, ValueError) as exc:
+        print(f"no scene to measure: {exc}")
+        return 1
+    t, x = sd.scene.t, sd.scene.pi2[:, 0]
+    edges = np.append(t, t[-1] + p.period)
+    counts = np.histogram(sd.scene.impacts[:, 0], edges)[0]
+    k0 = args.enable_after
+    unc = slice(0, min(k0, len(t)))
+    print(f"uncontrolled ({unc.stop} periods): Pi2 x in [{x[unc].min():.4g}, "
+          f"{x[unc].max():.4g}], one impact in {100 * np.mean(counts[unc] == 1):.1f} % "
+          f"(impacts per period {np.bincount(counts[unc]).tolist()})")
+    orbit = pulse_orbit(p, g, d["pulse_width"],
+                        force_limit=d["force_limit"] if d["force_limit"] > 0 else math.inf)
+    err = np.abs(x - orbit.pi2[0])
+    band = 5.0 * predicted
+    captured = next((k for k in range(k0, len(x) - 50) if np.all(err[k:k + 50] < band)), None)
+    if captured is None:
+        print("controlled: not captured")
+        return 1
+    held = slice(captured, len(x))
+    n = len(x) - captured
+    rms = float(np.sqrt(np.mean((x[held] - orbit.pi2[0]) ** 2)))
+    std = float(np.std(x[held]))
+    print(f"controlled: captured {captured - k0} periods after the switch; held {n} periods: "
+          f"Pi2 spread RMS about the pulse orbit {rms:.4g}, std {std:.4g}, predicted "
+          f"{predicted:.4g}: ratio {rms / predicted:.3f} (std {std / predicted:.3f}); one "
+          f"impact in {100 * np.mean(counts[held] == 1):.2f} %; deadline misses "
+          f"{sd.deadline_misses} in the whole scene, "
+          f"{int(np.count_nonzero(np.isin(sd.missed_stamp_ns, sd.stamp_ns[held])))} "
+          "while held")
+    return 0 if res.ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,224 @@
+"""The rig boundary of the nodes: SI and the rig clock outside, the model's units inside.
+
+The driver contract (docs/driver_contract.md) speaks SI in the rig's own clock; the
+simulator and the controller compute in the study's dimensionless units
+(:mod:`grazing_control.plant.rig`: tau = omega_n t, x~ = x / l, v~ = v / (omega_n l)).
+This module holds the conversions both nodes make at that boundary, with no rclpy in
+it (the nodes build the messages):
+
+* :func:`sim_values`: the simulator's parameters that a rig file sets (its model, the
+  sensor stream, the pulse, the budget as the actuation delay, the pace);
+* :class:`SimulatedClock`: the simulated rig's clock, which starts at ``clock_start``
+  seconds (a DAQ that has been running) snapped to the next Pi2 section, and runs at
+  ``time_scale / omega_n`` rig seconds per wall second: against ROS time it has an
+  offset and the drift omega_n / time_scale - 1 (``clock_drift``), as a real rig's
+  clock does;
+* :class:`DelayLine`: the sensor's latency (each sample published no earlier than its
+  time + latency);
+* :class:`Sections`: the controller's side: the section times from ``rig/phase`` (where
+  the forcing phase equals tau2), rig time <-> model time, and the pulse's force of a
+  correction and back (F = m Delta v / w, Delta v = omega_n l Delta v~).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from grazing_control.oscillator.params import ParameterError
+from grazing_control.plant.rig import Rig
+
+__all__ = ["SIM_KEYS", "sim_values", "controller_values", "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
+           "force_of", "correction_of", "APPLIED_IN_TIME", "APPLIED_PREDICTED",
+           "APPLIED_NOTHING", "APPLIED_SAFE", "RIG_TOPICS"]
+
+TWO_PI = 2.0 * math.pi
+
+#: rig/applied's wrench.force.z (docs/driver_contract.md): what acted at a section.
+APPLIED_IN_TIME, APPLIED_PREDICTED, APPLIED_NOTHING, APPLIED_SAFE = 0.0, 1.0, 2.0, 3.0
+
+#: The contract's topics (relative names) and types, for the recorder.
+RIG_TOPICS = {"rig/sensor": "sensor_msgs/msg/JointState",
+              "rig/phase": "geometry_msgs/msg/Vector3Stamped",
+              "rig/clock": "sensor_msgs/msg/TimeReference",
+              "rig/force_pulse": "geometry_msgs/msg/WrenchStamped",
+              "rig/applied": "geometry_msgs/msg/WrenchStamped",
+              "grazing/rig": "std_msgs/msg/String"}
+
+#: The simulator's parameters set by a rig file (:func:`sim_values`); ``time_scale``
+#: may be given (a faster scene), the others are the rig's.
+SIM_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset", "state_period",
+            "sensor_noise", "sensor_quantum", "sensor_velocity", "pulse_width",
+            "force_limit", "actuation_delay", "time_scale")
+
+
+def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
+    """The simulator's parameters of ``rig`` (:meth:`Rig.dimensionless`): physical speed
+    is time_scale = omega_n, here omega_n / (1 + clock_drift) so that the simulated rig
+    clock drifts by ``clock_drift`` against ROS time (:class:`SimulatedClock`).
+    ParameterError (one line naming the rig field) for what the simulator does not
+    model: a velocity noise other than the position noise, an actuator latency."""
+    p, d = rig.params(), rig.dimensionless()
+    if d["sensor_velocity"] and d["sensor_velocity_noise"] != d["sensor_noise"]:
+        raise ParameterError(
+            f"sensor.velocity_noise={rig.sensor.velocity_noise!r} m/s is not simulated: "
+            "sim_node's sensor draws one noise std for x~ and v~; valid is "
+            f"{d['sensor_noise'] * rig.scales.velocity!r} m/s (= noise / l * omega_n l), or "
+            "measures: position")
+    if rig.actuator.latency != 0.0:
+        raise ParameterError(f"actuator.latency={rig.actuator.latency!r} s is not simulated: "
+                             "valid in a simulated rig is 0 s")
+    return {"zeta": p.zeta, "r": p.r, "omega": p.omega, "delta_d": p.delta_d, "tau0": 0.0,
+            "pi2_offset": p.pi2_offset, "state_period": d["state_period"],
+            "sensor_noise": d["sensor_noise"], "sensor_quantum": d["sensor_quantum"],
+            "sensor_velocity": bool(d["sensor_velocity"]), "pulse_width": d["pulse_width"],
+            "force_limit": d["force_limit"], "actuation_delay": d["actuation_delay"],
+            "time_scale": rig.omega_n / (1.0 + clock_drift)}
+
+
+def check_rig_values(rig_file: str, rig_values: dict, values: dict, free=()) -> None:
+    """The parameters a rig file sets (``rig_values``) must not be given otherwise
+    (``values``: what the node declared): ParameterError naming the first that differs,
+    ``free`` excepted."""
+    for key, value in rig_values.items():
+        if key not in free and key in values and values[key] != value and not (
+                isinstance(value, float) and math.isnan(value) and math.isnan(values[key])):
+            raise ParameterError(f"{key}={values[key]!r} is invalid with rig_file={rig_file}: "
+                                 f"valid is the rig's {value!r} (docs/rig.md; change the "
+                                 "rig file, not the parameter)")
+
+
+def controller_values(rig: Rig, c2: float) -> dict:
+    """The controller's parameters of ``rig``: its model and sensor in the model's units,
+    the stream estimator answering each section with its last sample (the simulated rig
+    keeps an answer that comes before its section), and the design for the budget's
+    delay: c1 from the degenerate condition (Eq. 38 / (D5)) for ``c2``, or with ``c2``
+    NaN for the c2 of least noise gain (dynamics.tuning.optimize_noise)."""
+    from grazing_control.dynamics.design import degenerate_c1
+
+    p, d = rig.params(), rig.dimensionless()
+    delay = d["actuation_delay"]
+    if math.isnan(c2):
+        from grazing_control.dynamics.tuning import optimize_noise
+
+        c2 = optimize_noise(p, delay).c2
+    return {"zeta": p.zeta, "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset,
+            "delta_d": p.delta_d, "actuation_delay": delay, "c1": degenerate_c1(p, c2, delay),
+            "c2": float(c2), "x_ref": math.nan, "v_ref": math.nan, "pi2_source": "stream",
+            "answer_after_section": False, "sensor_noise": d["sensor_noise"],
+            "state_period": d["state_period"]}
+
+
+def first_section(rig: Rig, t: float) -> float:
+    """The rig time of the first Pi2 section at or after rig time ``t``: where the
+    forcing phase Omega t + phi equals tau2 (mod 2 pi)."""
+    tau2 = rig.params().tau2
+    phase = TWO_PI * rig.frequency * t + rig.phase
+    return t + ((tau2 - phase) % TWO_PI) / (TWO_PI * rig.frequency)
+
+
+class SimulatedClock:
+    """The simulated rig's clock (module docstring): rig time = ``start`` + t / omega_n
+    at model time t, ``start`` the first section at or after ``clock_start``."""
+
+    def __init__(self, rig: Rig, clock_start: float, time_scale: float):
+        self.rig = rig
+        self.start = first_section(rig, clock_start)
+        self.drift = rig.omega_n / time_scale - 1.0   # ROS s per rig s, less 1
+        self.offset = math.nan                        # known once the scene has started
+
+    def rig_time(self, t: float) -> float:
+        """Rig-clock seconds of model time t."""
+        return self.start + t / self.rig.omega_n
+
+    def model_time(self, s: float) -> float:
+        """Model time of rig-clock seconds s."""
+        return (s - self.start) * self.rig.omega_n
+
+    def started(self, ros_now: float, model_now: float) -> None:
+        """The relation ROS = offset + (1 + drift) rig, from one reading of both clocks."""
+        self.offset = ros_now - (1.0 + self.drift) * self.rig_time(model_now)
+
+    def phase(self, s: float) -> float:
+        """The forcing phase (rad, in [0, 2 pi)) at rig time s."""
+        return (TWO_PI * self.rig.frequency * s + self.rig.phase) % TWO_PI
+
+
+class DelayLine:
+    """Items held until their time + ``latency`` (the sensor's latency, model time)."""
+
+    def __init__(self, latency: float):
+        self.latency = float(latency)
+        self.items = deque()
+
+    def push(self, t: float, item) -> None:
+        self.items.append((t + self.latency, item))
+
+    def due(self, now: float) -> list:
+        """The items whose time + latency <= ``now``, oldest first."""
+        out = []
+        while self.items and self.items[0][0] <= now:
+            out.append(self.items.popleft()[1])
+        return out
+
+    def next_time(self) -> float:
+        """When the oldest item is due (inf: none held)."""
+        return self.items[0][0] if self.items else math.inf
+
+
+def force_of(rig: Rig, dv: float) -> float:
+    """The pulse's force (N) of a correction Delta v~: F = m omega_n l Delta v~ / w
+    (an impulse m Delta v spread over the width w)."""
+    return rig.mass * rig.scales.velocity * dv / rig.actuator.pulse_width
+
+
+def correction_of(rig: Rig, force: float, width: float) -> float:
+    """The correction Delta v~ of a pulse of ``force`` N over ``width`` s:
+    Delta v~ = F w / (m omega_n l)."""
+    return force * width / (rig.mass * rig.scales.velocity)
+
+
+class Sections:
+    """The controller's sections in the rig clock (docs/driver_contract.md, "Sections").
+
+    The first ``rig/phase`` reference fixes the origin: the first section at or after
+    its stamp is the model's t = 0 (the simulated rig publishes a reference at each
+    section, its first at its own t = 0, so both count sections alike); later references
+    are checked against it (:meth:`check`). Model time tau = omega_n (s - origin).
+    """
+
+    #: A reference whose phase differs from the origin's sections by more than this
+    #: (rad) is a mismatch (counted).
+    PHASE_TOLERANCE = 1e-6
+
+    def __init__(self, rig: Rig):
+        self.rig = rig
+        self.p = rig.params()
+        self.origin = None
+
+    def reference(self, t_ref: float, frequency: float, phase: float) -> bool:
+        """A ``rig/phase`` reference; False when it disagrees with the origin's sections
+        (another frequency, or a phase off by more than PHASE_TOLERANCE)."""
+        if not (math.isfinite(t_ref) and math.isfinite(frequency) and frequency > 0.0
+                and math.isfinite(phase)):
+            return False
+        if self.origin is None:
+            ahead = (self.p.tau2 - phase) % TWO_PI
+            if ahead > TWO_PI - self.PHASE_TOLERANCE:     # the reference is on a section
+                ahead = 0.0
+            self.origin = t_ref + ahead / (TWO_PI * frequency)
+        if abs(frequency - self.rig.frequency) > 1e-9 * self.rig.frequency:
+            return False
+        want = self.p.tau2 + TWO_PI * self.rig.frequency * (t_ref - self.origin)
+        err = abs(math.remainder(phase - want, TWO_PI))
+        return err <= self.PHASE_TOLERANCE
+
+    def model_time(self, s: float) -> float:
+        return (s - self.origin) * self.rig.omega_n
+
+    def rig_time(self, t: float) -> float:
+        return self.origin + t / self.rig.omega_n
+
+    def apply_time(self, t_k: float) -> float:
+        """The rig time at which section k's pulse starts: t_k + budget - w / 2."""
+        return t_k + self.rig.budget - self.rig.actuator.pulse_width / 2.0

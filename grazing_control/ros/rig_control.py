@@ -1,0 +1,171 @@
+"""controller_node's side of the driver contract (docs/driver_contract.md), with a rig file.
+
+The controller reads the rig's ``rig/sensor`` (SI, rig clock) and ``rig/phase`` (the
+forcing's phase reference), converts each sample to the model's units and time
+(:class:`grazing_control.ros.rig_boundary.Sections`: the sections are where the rig's
+forcing phase equals tau2) and feeds the node's stream estimator with it; each section's
+answer goes out as the dimensionless ``controller/velocity_correction`` (analyze and
+replay read it) and as the scheduled ``rig/force_pulse`` (force F = m Delta v / w in N,
+apply time t_k + budget - w / 2 and section time t_k in the rig clock, the predicted next
+force in force.y). ``rig/clock`` gives the clock relation (offset and drift of the rig
+clock against ROS time, :class:`grazing_control.dynamics.clock_relation.ClockRelation`);
+with it each sample's arrival latency (ROS time of its arrival less the ROS time of its
+stamp) is measured. ``rig/applied`` tells the estimator what acted where a prediction
+stood in or nothing acted (its model must integrate the kick that acted).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import JointState
+
+from grazing_control.dynamics.clock_relation import ClockRelation
+from . import cdr
+from .common import deserialize, seconds_from_stamp, stamp_from_seconds, stamp_key
+from .diagnostics import WARN
+from .rig_boundary import (APPLIED_IN_TIME, APPLIED_PREDICTED, Sections, correction_of,
+                           force_of)
+
+__all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES"]
+
+#: Sensor samples kept until the first phase reference fixes the sections.
+PENDING_SAMPLES = 4096
+#: Arrival latencies kept for the percentiles (/diagnostics, the exit summary).
+LATENCIES = 100_000
+
+
+class RigSide:
+    """The contract's topics for one controller node (module docstring)."""
+
+    def __init__(self, node, rig, clock_window: int):
+        self.node, self.rig = node, rig
+        self.sections = Sections(rig)
+        self.clock = ClockRelation(clock_window)
+        self.length, self.velocity = rig.scales.length, rig.scales.velocity
+        self.pending = deque(maxlen=PENDING_SAMPLES)
+        self.latencies = deque(maxlen=LATENCIES)
+        self.phase_mismatch = 0
+        self.pulses = 0
+        self.applied = [0, 0, 0, 0]
+
+    # ---------------------------------------------------------------- driver -> us
+    def on_phase(self, msg) -> None:
+        ok = self.sections.reference(seconds_from_stamp(msg.header.stamp), msg.vector.x,
+                                     msg.vector.y)
+        if not ok:
+            self.phase_mismatch += 1
+            self.node.phase_mismatch(
+                f"rig/phase at {seconds_from_stamp(msg.header.stamp)!r} s: f={msg.vector.x!r} "
+                f"Hz, phase {msg.vector.y!r} rad disagree with the rig file's forcing "
+                f"({self.rig.frequency!r} Hz) and the sections fixed by the first reference")
+        while self.pending and self.sections.origin is not None:
+            self._sample(*self.pending.popleft())
+
+    def on_clock(self, msg) -> None:
+        self.clock.add(seconds_from_stamp(msg.time_ref), seconds_from_stamp(msg.header.stamp))
+
+    def on_sensor(self, data: bytes) -> None:
+        """A rig/sensor sample as received (serialized: read directly, cdr.read_state,
+        else through rclpy; SI, rig clock): its arrival latency, then to the estimator in
+        the model's units (held until the first phase reference)."""
+        arrival = self.node.get_clock().now().nanoseconds * 1e-9
+        sample = cdr.read_state(data)
+        if sample is None:
+            msg = deserialize(data, JointState, self.node.malformed)
+            if msg is None:
+                return
+            if len(msg.position) < 1:
+                self.node.malformed(f"rig/sensor at {stamp_key(msg.header.stamp)}: no position")
+                return
+            v = msg.velocity[0] if len(msg.velocity) else math.nan
+            sample = stamp_key(msg.header.stamp) + (msg.position[0], v, ())
+        sec, ns, x, v, _effort = sample
+        s = sec + ns * 1e-9
+        if not math.isfinite(x) or math.isinf(v):
+            self.node.malformed(f"rig/sensor at {s!r} s: x={x!r} v={v!r}")
+            return
+        fit = self.clock.fit
+        if fit is not None and fit.n >= 2:
+            self.latencies.append(arrival - fit.ros_time(s))
+        if self.sections.origin is None:
+            self.pending.append((s, x, v))
+            return
+        self._sample(s, x, v)
+
+    def _sample(self, s: float, x: float, v: float) -> None:
+        self.node.add_stream_sample(self.sections.model_time(s), x / self.length,
+                                    v / self.velocity)
+
+    def on_applied(self, msg) -> None:
+        """What acted at a section (rig/applied): where a prediction stood in (1) the
+        estimator integrates its force, where nothing acted (2, 3) none."""
+        status = msg.wrench.force.z
+        if status not in (0.0, 1.0, 2.0, 3.0) or self.sections.origin is None:
+            return
+        self.applied[int(status)] += 1
+        if status == APPLIED_IN_TIME:
+            return
+        t = self.sections.model_time(msg.wrench.torque.y)
+        period = self.node.model.period
+        k = round(t / period)
+        if k < 0 or abs(t - k * period) > 1e-6 * period:
+            return
+        dv = 0.0
+        if status == APPLIED_PREDICTED and msg.wrench.torque.x > 0.0:
+            dv = correction_of(self.rig, msg.wrench.force.x, msg.wrench.torque.x)
+        self.node.stream.acted(k, dv, self.node.actuation_delay)
+
+    # ---------------------------------------------------------------- us -> driver
+    def answered(self, t: float, dv: float, predicted: float) -> None:
+        """Section k at model time ``t`` answered with ``dv`` (its ``predicted`` next):
+        rig/force_pulse."""
+        t_k = self.sections.rig_time(t)
+        msg = WrenchStamped()
+        msg.header.stamp = stamp_from_seconds(self.sections.apply_time(t_k))
+        msg.header.frame_id = "mass"
+        msg.wrench.force.x = float(force_of(self.rig, dv))
+        msg.wrench.force.y = (float(force_of(self.rig, predicted)) if math.isfinite(predicted)
+                              else math.nan)
+        msg.wrench.torque.x = float(self.rig.actuator.pulse_width)
+        msg.wrench.torque.y = float(t_k)
+        self.node.pub_force.publish(msg)
+        self.pulses += 1
+
+    # ---------------------------------------------------------------- reporting
+    def numbers(self) -> dict:
+        """The clock relation and the sensor samples' arrival latency (s)."""
+        fit = self.clock.fit
+        out = {"clock_offset": math.nan, "clock_drift": math.nan, "clock_jitter": math.nan,
+               "clock_pairs": 0}
+        if fit is not None:
+            out.update(clock_offset=fit.offset, clock_drift=fit.drift,
+                       clock_jitter=fit.jitter, clock_pairs=fit.n)
+        if self.latencies:
+            lat = np.asarray(self.latencies)
+            out.update(sensor_latency_p50=float(np.percentile(lat, 50)),
+                       sensor_latency_p99=float(np.percentile(lat, 99)),
+                       sensor_latency_max=float(lat.max()))
+        return out
+
+    def diagnose(self, stat) -> None:
+        for key, value in self.numbers().items():
+            stat.add(key, f"{value:.9g}" if isinstance(value, float) else str(value))
+        stat.add("force_pulses", self.pulses)
+        stat.add("phase_mismatch", self.phase_mismatch)
+        if self.clock.fit is None:
+            stat.merge_summary(WARN, "no rig/clock pair yet: the clock relation is unknown")
+
+    def summary(self) -> str:
+        n = self.numbers()
+        text = (f" force_pulses={self.pulses} rig_applied={','.join(map(str, self.applied))}"
+                f" clock_offset={n['clock_offset']:.9f} clock_drift={n['clock_drift']:.6g}"
+                f" clock_jitter={n['clock_jitter']:.3g} clock_pairs={n['clock_pairs']}")
+        if "sensor_latency_p50" in n:
+            text += (f" sensor_latency_ms p50={n['sensor_latency_p50'] * 1e3:.3f} "
+                     f"p99={n['sensor_latency_p99'] * 1e3:.3f} "
+                     f"max={n['sensor_latency_max'] * 1e3:.3f}")
+        return text

@@ -1,0 +1,177 @@
+"""sim_node as a driver of the rig contract (docs/driver_contract.md): the simulated rig.
+
+With ``rig_file`` the simulator is one backend of the contract: besides its
+dimensionless topics (the ground truth, which analyze and the recorder read) it
+publishes what a rig's driver publishes, in SI and in the rig's own clock
+(:class:`grazing_control.ros.rig_boundary.SimulatedClock`):
+
+* ``rig/sensor`` (sensor_msgs/JointState): each sample of the sensor stream in metres
+  (and m/s where the sensor measures velocity), stamped with the rig time it was taken,
+  published no earlier than that time + the sensor's latency
+  (:class:`~grazing_control.ros.rig_boundary.DelayLine`);
+* ``rig/phase`` (geometry_msgs/Vector3Stamped): at each Pi2 section, the forcing
+  frequency (Hz) and its phase (rad) at that rig time;
+* ``rig/clock`` (sensor_msgs/TimeReference): ROS time against the rig clock, read
+  together, ``clock_rate`` times a second;
+* ``grazing/rig`` (std_msgs/String, transient local, depth 1): the rig file's YAML
+  (:func:`grazing_control.plant.rig.rig_to_dict`);
+* ``rig/applied`` (geometry_msgs/WrenchStamped): what acted at each section, at its
+  actuation instant.
+
+It takes ``rig/force_pulse`` (geometry_msgs/WrenchStamped) as the answer of its section:
+the force F over the width w is the correction Delta v~ = F w / (m omega_n l) of the
+section t_k (torque.y, rig clock), with force.y the prediction, handed to the loop's
+``answer`` like a ``controller/velocity_correction``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import yaml
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from sensor_msgs.msg import JointState, TimeReference
+from std_msgs.msg import String
+
+from grazing_control.plant.rig import rig_to_dict
+from grazing_control.ros import cdr
+from grazing_control.ros.common import LATCHED_QOS, stamp_from_seconds
+from grazing_control.ros.rig_boundary import (APPLIED_IN_TIME, APPLIED_NOTHING,
+                                              APPLIED_PREDICTED, APPLIED_SAFE, DelayLine,
+                                              SimulatedClock, correction_of, force_of)
+
+__all__ = ["RigDriver"]
+
+
+class RigDriver:
+    """The simulated rig's side of the contract for one :class:`~sim_node.sim_node.SimNode`
+    (module docstring). ``publisher(kind, topic)`` makes the node's counted publishers."""
+
+    def __init__(self, node, rig, publisher, clock_start: float, clock_rate: float):
+        self.node, self.rig = node, rig
+        s = node.settings
+        self.clock = SimulatedClock(rig, clock_start, s.time_scale)
+        self.latency = DelayLine(rig.sensor.latency * rig.omega_n)
+        self.velocity = rig.sensor.velocity
+        self.pub_sensor = publisher(JointState, "rig/sensor")
+        self.pub_phase = publisher(Vector3Stamped, "rig/phase")
+        self.pub_clock = publisher(TimeReference, "rig/clock")
+        self.pub_applied = publisher(WrenchStamped, "rig/applied")
+        self.pub_rig = node.create_publisher(String, "grazing/rig", LATCHED_QOS)
+        self.pub_rig.publish(String(data=yaml.safe_dump(rig_to_dict(rig), sort_keys=False)))
+        self.substituted = {}        # section k -> the prediction that acted
+        self.applied = [0, 0, 0, 0]  # counts per rig/applied status
+        self.name = node.get_fully_qualified_name()
+        self._clock_timer = node.create_timer(1.0 / clock_rate, self.publish_clock)
+
+    @property
+    def publishers(self) -> tuple:
+        return self.pub_sensor, self.pub_phase, self.pub_clock, self.pub_applied
+
+    # --------------------------------------------------------------- the loop's events
+    def started(self) -> None:
+        """The loop has started: the relation of the rig clock to ROS time."""
+        loop = self.node.loop
+        self.clock.started(self.node.get_clock().now().nanoseconds * 1e-9, loop.now())
+        self.node.get_logger().info(
+            f"simulated rig clock: ROS time = {self.clock.offset:.9f} s + (1 + "
+            f"{self.clock.drift:.6g}) x rig time; the scene starts at rig time "
+            f"{self.clock.start:.9f} s")
+
+    def event(self, ev) -> None:
+        """A published event of the loop: a stream sample into the latency's delay line,
+        a Pi2 sample as the phase reference of its section."""
+        if ev.kind == "state":
+            self.latency.push(ev.t, (ev.t, ev.x, ev.v))
+        elif ev.kind == "pi2":
+            s = self.clock.rig_time(ev.t)
+            msg = Vector3Stamped()
+            msg.header.stamp = stamp_from_seconds(s)
+            msg.vector.x = float(self.rig.frequency)
+            msg.vector.y = float(self.clock.phase(s))
+            self.pub_phase.publish(msg)
+
+    def flush(self, now: float) -> None:
+        """Publish the stream samples whose latency has passed at model time ``now``."""
+        l, vs = self.rig.scales.length, self.rig.scales.velocity
+        for t, x, v in self.latency.due(now):
+            sec, ns = cdr.stamp_parts(self.clock.rig_time(t))
+            self.pub_sensor.publish(cdr.rig_sample(sec, ns, float(x) * l,
+                                                   float(v) * vs if self.velocity else None))
+
+    def wake_in(self, now: float) -> float:
+        """Wall seconds until the next held sample is due (inf: none)."""
+        return (self.latency.next_time() - now) / self.node.settings.time_scale
+
+    def publish_clock(self) -> None:
+        """rig/clock: ROS time and the rig clock, read together (while the scene runs)."""
+        node = self.node
+        if not node.running:
+            return
+        ros = node.get_clock().now()
+        rig = self.clock.rig_time(node.loop.now())
+        msg = TimeReference()
+        msg.header.stamp = ros.to_msg()
+        msg.time_ref = stamp_from_seconds(rig)
+        msg.source = self.name
+        self.pub_clock.publish(msg)
+
+    # ------------------------------------------------------------------ answers
+    def answer(self, msg: WrenchStamped):
+        """(stamp key, Delta v~, predicted Delta v~) of a rig/force_pulse, or None
+        (counted as malformed) when it names no section or is not finite."""
+        w = msg.wrench.torque.x
+        f, fy = msg.wrench.force.x, msg.wrench.force.y
+        t_k = msg.wrench.torque.y
+        if not (math.isfinite(f) and math.isfinite(w) and w > 0.0 and math.isfinite(t_k)
+                and not math.isinf(fy)):
+            self.node.out.malformed(f"rig/force_pulse force={f!r} width={w!r} "
+                                    f"section={t_k!r}: not a finite force, width > 0 and "
+                                    "section time")
+            return None
+        period = self.node.engine.p.period
+        t = self.clock.model_time(t_k)
+        k = round(t / period)
+        if k < 0 or abs(t - k * period) > 1e-6 * period:
+            self.node.out.malformed(f"rig/force_pulse section={t_k!r} s is no section of "
+                                    f"this rig (model time {t!r})")
+            return None
+        return (cdr.stamp_parts(k * period), correction_of(self.rig, f, w),
+                correction_of(self.rig, fy, w))
+
+    def acted(self, before, after) -> None:
+        """The loop's scheduled deadline ``before`` a call and ``after`` it: when the
+        section of ``before`` was actuated in between, rig/applied says what acted."""
+        if before is None or (after is not None and after.key == before.key):
+            return
+        loop = self.node.loop
+        if loop.watchdog is not None and loop.watchdog.tripped is not None:
+            status, dv = APPLIED_SAFE, 0.0
+        elif before.dv is not None:
+            status, dv = APPLIED_IN_TIME, before.dv
+        elif before.k in self.substituted:
+            status, dv = APPLIED_PREDICTED, self.substituted.pop(before.k)
+        else:
+            status, dv = APPLIED_NOTHING, 0.0
+        for k in [k for k in self.substituted if k < before.k]:
+            del self.substituted[k]
+        self.applied[int(status)] += 1
+        force = force_of(self.rig, dv)
+        limit = self.rig.actuator.force_limit
+        if limit > 0.0:
+            force = max(-limit, min(limit, force))
+        t_k = before.k * self.node.engine.p.period     # the section's model time
+        msg = WrenchStamped()
+        msg.header.stamp = stamp_from_seconds(self.clock.rig_time(before.t))
+        msg.header.frame_id = "mass"
+        msg.wrench.force.x = float(force)
+        msg.wrench.force.y = math.nan
+        msg.wrench.force.z = status
+        msg.wrench.torque.x = float(self.rig.actuator.pulse_width)
+        msg.wrench.torque.y = float(self.clock.rig_time(t_k))
+        self.pub_applied.publish(msg)
+
+    def summary(self) -> str:
+        a = self.applied
+        return (f" rig_applied in_time={a[0]} predicted={a[1]} nothing={a[2]} safe={a[3]} "
+                f"clock_offset={self.clock.offset:.9f} clock_drift={self.clock.drift:.6g}")
