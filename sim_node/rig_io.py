@@ -40,7 +40,11 @@ from grazing_control.ros.rig_boundary import (APPLIED_IN_TIME, APPLIED_NOTHING,
                                               APPLIED_PREDICTED, APPLIED_SAFE, DelayLine,
                                               SimulatedClock, correction_of, force_of)
 
-__all__ = ["RigDriver"]
+__all__ = ["RigDriver", "CLOCK_READ"]
+
+#: Longest wall time (s) between the two wall-clock reads around a ROS clock read of a
+#: rig/clock pair: beyond, the process was preempted in between and the pair is skipped.
+CLOCK_READ = 5e-5
 
 
 class RigDriver:
@@ -69,10 +73,25 @@ class RigDriver:
         return self.pub_sensor, self.pub_phase, self.pub_clock, self.pub_applied
 
     # --------------------------------------------------------------- the loop's events
+    def read_clocks(self):
+        """(ROS time, model time) read at one moment: the wall clock read on both sides of
+        the ROS clock, the model time at their midpoint; None when the two reads lie more
+        than CLOCK_READ apart (the process was preempted: the pair would be off)."""
+        loop, clock = self.node.loop, self.node.get_clock()
+        before = loop.clock()
+        ros = clock.now()
+        after = loop.clock()
+        if after - before > CLOCK_READ:
+            return None
+        return ros, loop.now(0.5 * (before + after))
+
     def started(self) -> None:
         """The loop has started: the relation of the rig clock to ROS time."""
-        loop = self.node.loop
-        self.clock.started(self.node.get_clock().now().nanoseconds * 1e-9, loop.now())
+        read = None
+        while read is None:
+            read = self.read_clocks()
+        ros, t = read
+        self.clock.started(ros.nanoseconds * 1e-9, t)
         self.node.get_logger().info(
             f"simulated rig clock: ROS time = {self.clock.offset:.9f} s + (1 + "
             f"{self.clock.drift:.6g}) x rig time; the scene starts at rig time "
@@ -108,8 +127,11 @@ class RigDriver:
         node = self.node
         if not node.running:
             return
-        ros = node.get_clock().now()
-        rig = self.clock.rig_time(node.loop.now())
+        read = self.read_clocks()
+        if read is None:
+            return                      # preempted between the reads: the next one
+        ros, t = read
+        rig = self.clock.rig_time(t)
         msg = TimeReference()
         msg.header.stamp = ros.to_msg()
         msg.time_ref = stamp_from_seconds(rig)
