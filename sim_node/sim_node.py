@@ -643,7 +643,7 @@ class SimNode(Node):
     def _arm(self, now: float) -> None:
         wake = self.loop.wake_in(now)
         if self.driver is not None:     # a sensor sample whose latency ends sooner
-            wake = min(wake, max(self.driver.wake_in(now), MIN_TICK))
+            wake = min(wake, self.driver.wake_in(now))
         self._tick_timer.timer_period_ns = int(wake * 1e9)
         self._tick_timer.reset()
 
