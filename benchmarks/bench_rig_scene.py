@@ -181,6 +181,12 @@ def main(argv=None):
     n = len(x) - captured
     rms = float(np.sqrt(np.mean((x[held] - orbit.pi2[0]) ** 2)))
     std = float(np.std(x[held]))
+    from grazing_control.dynamics.orbits import orbit_11
+
+    kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
+    print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - orbit.pi2[0]:+.3g} from the "
+          f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the model "
+          "the controller's estimator and prediction integrate)")
     print(f"controlled: captured {captured - k0} periods after the switch; held {n} periods: "
           f"Pi2 spread RMS about the pulse orbit {rms:.4g}, std {std:.4g}, predicted "
           f"{predicted:.4g}: ratio {rms / predicted:.3f} (std {std / predicted:.3f}); one "

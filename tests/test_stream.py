@@ -192,6 +192,28 @@ def test_after_section_makes_a_section_due_with_the_first_sample_after_it():
     assert np.allclose([r[2] for r in a[1:]], [r[2] for r in b[1:]], rtol=0, atol=1e-12)
 
 
+def test_a_lead_makes_a_section_due_earlier_without_its_last_samples():
+    """A realtime rig (issue 28): with lead 2.5 h section k is due with the sample at
+    t_k - 3 h, and its estimate is the one of the samples up to there (the last ones are
+    not used for it); a lead must lie in [0, T)."""
+    p = OscillatorParams(delta_d=0.1)
+    h = p.period / 10
+    t = np.arange(0, 22) * h
+    x, _v = _xv(p, t, (1e-3, -2e-3))
+    early = StreamEstimator(p, "arc", 1e-6, "stream", h, lead=2.5 * h)
+    cut = StreamEstimator(p, "arc", 1e-6, "stream", h)
+    e = [(j, d[0], d[2].z) for j, (ti, xi) in enumerate(zip(t, x)) for d in early.add_sample(ti, xi)]
+    assert [r[:2] for r in e] == [(0, 0), (7, 1), (17, 2)]
+    # section 1 from samples 1..7 only: what an estimator that never got 8..10 says at t_1
+    for ti, xi in zip(t[:8], x[:8]):
+        cut.add_sample(ti, xi)
+    (k, _tk, est), = cut.flush(1)[-1:]
+    assert k == 1 and np.allclose(est.z, e[1][2], rtol=0, atol=1e-15)
+    for lead in (-1e-9, p.period, math.nan):
+        with pytest.raises(ParameterError, match="answer_lead"):
+            StreamEstimator(p, "arc", 1e-6, "stream", h, lead=lead)
+
+
 def test_what_the_plant_reports_as_acted_replaces_the_answer():
     """A deadline miss (0) or a substituted prediction reported by the plant is the kick
     the filter integrates, before or after the controller's own late answer."""

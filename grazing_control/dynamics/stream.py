@@ -60,11 +60,17 @@ class StreamEstimator:
         Make a section due only with the first sample after t_k (a realtime simulator
         takes an answer only once it has published its Pi2 sample), not with the last
         sample before it (lockstep: the simulator waits for the answer before it goes on).
+    lead : float
+        Make a section due ``lead`` (time, >= 0) before its last sample: with the newest
+        sample t at t + h + lead >= t_k (a realtime rig, issue 28: the answer is computed
+        while the last samples before t_k are on their way; this section's estimate has
+        not got them, and the model filter, which fits each period's own samples, never
+        uses them). 0: with the last sample (the default).
     """
 
     def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
                  impact_source: str = "stream", sample_period: float = 0.0,
-                 floor: float = 1e-2, after_section: bool = False):
+                 floor: float = 1e-2, after_section: bool = False, lead: float = 0.0):
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -83,6 +89,11 @@ class StreamEstimator:
         self.p, self.estimator, self.sigma = p, estimator, sigma
         self.impact_source, self.sample_period, self.floor = impact_source, sample_period, floor
         self.after_section = bool(after_section)
+        lead = float(lead)
+        if not (math.isfinite(lead) and 0.0 <= lead < p.period):
+            raise ParameterError(f"answer_lead={lead!r} is invalid: valid range is "
+                                 f"0 <= answer_lead < T = {p.period!r}")
+        self.lead = lead
         self.reset()
 
     def reset(self) -> None:
@@ -165,7 +176,8 @@ class StreamEstimator:
         # due when the next sample would be at t_k or after it: a sample at t_k itself
         # (up to rounding, 1e-3 h) is not waited for (a simulator publishes the samples
         # before t_k, then waits for the answer)
-        if not self.after_section and (h <= 0.0 or t + h >= self.next_k * T - 1e-3 * h):
+        if not self.after_section and (h <= 0.0 or
+                                       t + h + self.lead >= self.next_k * T - 1e-3 * h):
             due.append(self._due(self.next_k))
         return due
 

@@ -137,7 +137,7 @@ __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
-         "model_noise", "answer_after_section")
+         "model_noise", "answer_after_section", "answer_lead")
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
@@ -317,7 +317,7 @@ def stream_from_values(values: dict, model):
                              "the plant's finite Delta d (the estimator's model needs the wall)")
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
                            values["impact_source"], values["state_period"], floor,
-                           bool(values["answer_after_section"]))
+                           bool(values["answer_after_section"]), values["answer_lead"])
 
 
 def actuation_delay_from_values(values: dict) -> float:
@@ -424,6 +424,10 @@ class ControllerNode(Node):
             "stream mode: answer section k with the first sample after t_k (realtime: the "
             "simulator takes an answer only after its Pi2 sample), not with the last "
             "before it (lockstep)", read_only=True))
+        d("answer_lead", 0.0, float_descriptor(
+            "stream mode: answer a section this much simulation time before its last "
+            "sample (those samples are not used); 0: with its last sample", 0.0, FINITE,
+            read_only=True, constraints="answer_lead < T = 2 pi / omega"))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
