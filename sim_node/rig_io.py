@@ -201,4 +201,4 @@ class RigDriver:
     def summary(self) -> str:
         a = self.applied
         return (f" rig_applied in_time={a[0]} predicted={a[1]} nothing={a[2]} safe={a[3]} "
-                f"clock_offset={self.clock.offset:.9f} clock_drift={self.clock.drift:.6g}")
+                f"clock_offset={self.clock.offset:.9f} clock_drift={self.clock.drift:.12g}")

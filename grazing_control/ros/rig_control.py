@@ -162,7 +162,7 @@ class RigSide:
     def summary(self) -> str:
         n = self.numbers()
         text = (f" force_pulses={self.pulses} rig_applied={','.join(map(str, self.applied))}"
-                f" clock_offset={n['clock_offset']:.9f} clock_drift={n['clock_drift']:.6g}"
+                f" clock_offset={n['clock_offset']:.9f} clock_drift={n['clock_drift']:.12g}"
                 f" clock_jitter={n['clock_jitter']:.3g} clock_pairs={n['clock_pairs']}")
         if "sensor_latency_p50" in n:
             text += (f" sensor_latency_ms p50={n['sensor_latency_p50'] * 1e3:.3f} "
