@@ -264,7 +264,7 @@ class SimNode(Node):
         self.driver = None            # the simulated rig's side of the contract (rig_file)
         if self.rig is not None:
             self.driver = RigDriver(self, self.rig, publisher,
-                                    *(self.get_parameter(p.name).value for p in RIG_CLOCK[:1]),
+                                    self.get_parameter("clock_start").value,
                                     self.get_parameter("clock_rate").value)
         self.published = PublishedRecord(self, (
             self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
@@ -460,10 +460,12 @@ class SimNode(Node):
                 samples = min(self.driver.pub_sensor.get_subscription_count(),
                               self.driver.pub_phase.get_subscription_count())
             if samples < n + 1:
+                topics = (f"{self.pub_pi2.topic_name} or {self.pub_state.topic_name}"
+                          if self.driver is None else
+                          f"{self.driver.pub_sensor.topic_name} and "
+                          f"{self.driver.pub_phase.topic_name}")
                 missing.append(f"the controller{f' and {n} recorder(s)' if n else ''} "
-                               f"subscribed to {self.pub_pi2.topic_name} or "
-                               f"{self.pub_state.topic_name} ({samples} subscriber(s) of "
-                               f"{n + 1})")
+                               f"subscribed to {topics} ({samples} subscriber(s) of {n + 1})")
             if self.sub_correction.get_publisher_count() < 1:
                 missing.append(f"a controller publishing {self.sub_correction.topic_name}")
             why = self.scene.missing_controller()

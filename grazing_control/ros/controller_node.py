@@ -317,7 +317,8 @@ def stream_from_values(values: dict, model):
                              "the plant's finite Delta d (the estimator's model needs the wall)")
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
                            values["impact_source"], values["state_period"], floor,
-                           bool(values["answer_after_section"]), values["answer_lead"])
+                           bool(values["answer_after_section"]),
+                           values.get("answer_lead", 0.0))
 
 
 def actuation_delay_from_values(values: dict) -> float:
@@ -597,7 +598,7 @@ class ControllerNode(Node):
                                           "controller does not control")
             return
         missing = [k for k in ("c1", "c2") if k not in given]
-        if missing:
+        if missing and self.rig is None:        # a rig file's design gives them
             self.get_logger().warning(
                 f"{' and '.join(missing)} not given to {self.get_fully_qualified_name()} "
                 "(no -p and no parameter-file entry that applies to this node name): "
