@@ -118,6 +118,9 @@ def main(argv=None):
                     help="run at 1/SLOW of physical speed (time_scale = omega_n / SLOW): the "
                          "controller's budget in wall time SLOW times the rig's (default 1: "
                          "physical speed, the acceptance)")
+    ap.add_argument("--answer-lead", type=float, default=None, metavar="SECONDS",
+                    help="the controller's answer_lead in rig seconds (default: the rig "
+                         "controller's, (budget - w/2)/2)")
     ap.add_argument("--watchdog-misses", type=int, default=None,
                     help="sim_node's watchdog_misses (default: its own, 25 of 50; 0: off, "
                          "to measure a scene that misses)")
@@ -143,7 +146,10 @@ def main(argv=None):
     t0 = time.time()
     res = launcher.run(None, None, str(out / "bag"), args.periods, rig=args.rig,
                        enable_after=args.enable_after, timeout=args.periods * 0.1 * args.slow + 120,
-                       controller_overrides={"rig_c2": g.c2}, log_dir=str(out / "logs"),
+                       controller_overrides=dict(
+                           {"rig_c2": g.c2}, **({} if args.answer_lead is None else
+                                                {"answer_lead": args.answer_lead * rig.omega_n})),
+                       log_dir=str(out / "logs"),
                        sim_overrides=dict(
                            {} if args.slow == 1.0 else {"time_scale": rig.omega_n / args.slow},
                            **({} if args.watchdog_misses is None else

@@ -454,7 +454,7 @@ class ControllerNode(Node):
         try:
             apply_node_scheduling(self)
             check_rig_values(self.get_parameter("rig_file").value, self.rig_values,
-                             self._values())
+                             self._values(), free=("answer_lead",))
         except (ValueError, ParameterError) as exc:
             raise StartupError(str(exc)) from None
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None

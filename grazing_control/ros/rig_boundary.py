@@ -112,11 +112,14 @@ def controller_values(rig: Rig, c2: float) -> dict:
 
 def answer_lead(rig: Rig) -> float:
     """How long (model time) before a section's last sample the controller answers it:
-    half the time from the section to its pulse's start, (budget - w/2)/2 (2 ms of the
-    acceptance rig's 4). Measured at physical speed on the 2-core machine: answering
-    with the last sample, the answer came 6.3 ms (p50) after the section went out,
-    every deadline missed; the samples of that last stretch (13 of 150) are not used."""
-    return 0.5 * (rig.budget - rig.actuator.pulse_width / 2.0) * rig.omega_n
+    the time from the section to its pulse's start, budget - w/2 (4 ms of the acceptance
+    rig's 5 ms budget, 2 ms pulse), so that the controller has that long, and the sensor's
+    latency, to answer before the pulse must start; the samples of that stretch (9 of 150)
+    are not used. Measured at physical speed on the loaded 2-core machine (900 periods,
+    docs/benchmarks.md): answering with the last sample every deadline was missed
+    (answer p50 6.3 ms after the section's sample went out), with 2 ms 594, with 4 ms 153;
+    the spread stayed within 1.1x of the prediction."""
+    return (rig.budget - rig.actuator.pulse_width / 2.0) * rig.omega_n
 
 
 def first_section(rig: Rig, t: float) -> float:
