@@ -21,6 +21,7 @@ setup(
         ('share/' + package_name + '/launch', sorted(glob('launch/*.py'))),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
         ('share/' + package_name + '/config/models', sorted(glob('config/models/*.yaml'))),
+        ('share/' + package_name + '/config/rigs', sorted(glob('config/rigs/*.yaml'))),
     ],
     package_data={package_name + '.ros': ['fastdds_profile.xml']},
     install_requires=['setuptools'],
