@@ -43,7 +43,7 @@ def test_format_quantity_round_trips_over_random_values():
 
 
 BAD = [
-    (0.5, "has no unit"), (2, "has no unit"), (True, "has no unit"), ("0.5", "has no unit"),
+    (0.5, "has no unit"), (2, "has no unit"), (True, "invalid"), ("0.5", "has no unit"),
     ("0.5 kg", "not a length unit"), ("2 Hz", "not a length unit"), ("2 mm/s", "not a length"),
     ("nan m", "invalid"), ("inf m", "invalid"), ("1e400 m", "not a finite length"),
     ("m", "invalid"), ("", "invalid"), ("two m", "invalid"), (None, "invalid"),
