@@ -190,7 +190,8 @@ def test_colcon_build(tmp_path, symlink):
         exe = prefix / 'lib' / PACKAGE / name
         assert exe.is_file() and os.access(exe, os.X_OK), f'{exe} missing'
     for pattern, subdir in (('launch/*.py', 'launch'), ('config/*.yaml', 'config'),
-                          ('config/*.json', 'config'), ('config/models/*.yaml', 'config/models')):
+                          ('config/*.json', 'config'), ('config/models/*.yaml', 'config/models'),
+                          ('config/rigs/*.yaml', 'config/rigs')):
         for f in src.glob(pattern):
             assert (prefix / 'share' / PACKAGE / subdir / f.name).is_file(), f
 
