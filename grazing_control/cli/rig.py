@@ -138,7 +138,13 @@ def _design(rig, args) -> tuple:
         how += ", unit noise on x and v)"
     else:
         how = "--c2"
-    return cmd_design(ns), how, ns
+    try:
+        return cmd_design(ns), how, ns
+    except ParameterError as exc:
+        if not str(exc).startswith("delay="):
+            raise
+        raise ParameterError(f"controller.budget={rig.budget * 1e3:.6g} ms: the design for its "
+                             f"actuation delay (budget x omega_n): {exc}") from None
 
 
 def _pulse(rig, dv_model: float) -> dict:
