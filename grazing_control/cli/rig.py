@@ -408,11 +408,23 @@ def _seconds(text):
     return value
 
 
+DESCRIPTION = (
+    "Read a rig file in SI units (docs/rig.md) and print the rig as understood, the scales "
+    "(1/omega_n, l = F0/k, omega_n l, k l), the study's dimensionless model (zeta, r, omega, "
+    "Delta d, d*, tau2, the sensor, pulse and budget in model units), d* l (the gap at "
+    "grazing), the design for the budget's actuation delay in SI (c1 omega_n in 1/s, c2, the "
+    "pulse's force gains in N/m and N*s/m), corrections as force pulses, the predicted Pi2 "
+    "spread (the design's position-only noise gain x the sensor noise) and the timing budget: "
+    "sensor latency + one sample interval + the Pi2 estimate's measured p99 + actuator latency "
+    "<= budget - pulse_width / 2. An infeasible budget or too slow a sensor: status 2, one "
+    "line naming controller.budget or sensor.rate with the numbers.")
+
+
 def add_rig_parser(sub) -> None:
     """Register ``grazing rig`` on the subcommands of the ``grazing`` parser."""
     s = sub.add_parser("rig", help="a rig file in SI: its dimensionless model, the design in "
                                    "SI, the predicted spread, the timing budget",
-                       description=__doc__.split("\n\n")[1])
+                       description=DESCRIPTION)
     s.add_argument("file", metavar="FILE", help="the rig file (YAML, docs/rig.md)")
     s.add_argument("--c2", type=finite, help="the gain c2 (default: --optimize noise)")
     s.add_argument("--optimize", choices=("noise",),
