@@ -395,3 +395,29 @@ def test_the_mutations_are_valid_but_for_the_mutation():
     """The lab rig itself loads: every refusal above is the mutation's."""
     assert rig_from_dict(copy.deepcopy(LAB)).mass == 0.5
     assert np.isfinite(rig_from_dict(LAB).params().delta_d)
+
+
+def test_the_predicted_spread_is_what_the_closed_loop_gives(lab_report):
+    """The reference of the rig scene: the design's position-only noise gain x sigma
+    against the exact closed loop on the stream (dynamics.stream.simulate_stream: the
+    model filter at 150 samples per period, the kick at the budget's delay), 1200
+    periods after 300 of transient. Measured 0.203 and 0.210 x sigma (seeds 1, 2)
+    against 0.218 predicted: the filter's errors are correlated from period to period,
+    which the prediction's white-noise premise leaves out (docs/rig.md)."""
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.plant.sensor import SensorModel
+
+    rig = rig_from_dict(LAB)
+    p, dl = rig.params(), rig.dimensionless()
+    c2, delay, sigma = lab_report["design"]["c2"], dl["actuation_delay"], dl["sensor_noise"]
+    g = Gains(degenerate_c1(p, c2, delay), c2, delay)
+    target = orbit_11(p, g).pi2_deviation
+    run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=1).measure,
+                          1500, 150, sigma=sigma, deviation=target)
+    assert run.resets == 0 and np.all(run.impacts_per_period == 1)
+    measured = float(np.sqrt(np.mean((run.truth[300:, 0] - target[0]) ** 2))) * rig.scales.length
+    predicted = lab_report["predicted_spread"]["spread_m"]
+    assert 0.85 < measured / predicted < 1.05
