@@ -44,7 +44,7 @@ import math
 from typing import Hashable, NamedTuple
 
 __all__ = ["PREDICTION_HOLD", "COUNTS", "Prediction", "Section", "Answer", "Act",
-           "ActuationSchedule", "RigSchedule"]
+           "ActuationSchedule", "RigSchedule", "PulseTrain"]
 
 #: Consecutive missing answers a prediction stands in for.
 PREDICTION_HOLD = 10
@@ -324,3 +324,23 @@ class RigSchedule(ActuationSchedule):
                 self.section(nxt, nxt, sec.t + self.period, sec.start + self.period,
                              width=sec.width)
         return acts
+
+
+class PulseTrain:
+    """The pulses that acted, as a force over time (an effort stream samples it).
+
+    ``add(start, width, force)`` for each act; ``force(t)`` is the sum of the forces of
+    the pulses with start <= t < start + width (0 between pulses); pulses that ended
+    before ``t`` are forgotten.
+    """
+
+    def __init__(self):
+        self.pulses = []
+
+    def add(self, start: float, width: float, force: float) -> None:
+        if force != 0.0 and width > 0.0:
+            self.pulses.append((start, start + width, force))
+
+    def force(self, t: float) -> float:
+        self.pulses = [p for p in self.pulses if p[1] > t]
+        return sum(f for start, end, f in self.pulses if start <= t)
