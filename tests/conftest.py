@@ -88,7 +88,8 @@ SCENE_MODULES = frozenset({
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
     "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_parameter_files_hostile",
-    "test_recorder_node", "test_recording", "test_scheduling", "test_signals",
+    "test_recorder_node", "test_recording", "test_rig_drivers", "test_scheduling",
+    "test_signals",
     "test_sim_node", "test_test_cleanup",
 })
 

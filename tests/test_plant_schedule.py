@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from grazing_control.plant.schedule import (COUNTS, PREDICTION_HOLD, ActuationSchedule,
-                                            Prediction, RigSchedule)
+                                            Prediction, PulseTrain, RigSchedule)
 
 NAN = math.nan
 T, D = 1.0, 0.6          # section period and delay of the hand-driven schedule
@@ -302,3 +302,13 @@ def test_a_driver_schedule_without_a_period_acts_the_commands_it_gets():
     assert [a.section.k for a in s.due(101.0)] == [0, 1]
     assert s.open == {}                                     # nothing expected
     assert pulse(s, 1, now=101.0).outcome == "ignored"      # before the latest: stale
+
+
+def test_a_pulse_train_is_each_force_over_its_window_and_zero_between():
+    train = PulseTrain()
+    train.add(1.0, 0.5, 2.0)
+    train.add(1.2, 0.1, -0.5)           # overlapping: the forces add
+    train.add(3.0, 0.1, 0.0)            # nothing acts
+    assert [train.force(t) for t in (0.99, 1.0, 1.25, 1.3, 1.49, 1.5, 3.05)] == [
+        0.0, 2.0, 1.5, 2.0, 2.0, 0.0, 0.0]
+    assert train.pulses == []           # ended pulses are forgotten

@@ -156,7 +156,8 @@ class ActuationSchedule:
         self.unanswered[key] = sec
         if len(self.unanswered) > self.memory:
             del self.unanswered[next(iter(self.unanswered))]
-        self.latest, self.early_until = key, early_until
+        if self.latest is None or key > self.latest:    # (a driver may announce an
+            self.latest, self.early_until = key, early_until   # expected one later)
         kept = self.early.pop(key, None)
         if kept is not None:
             del self.unanswered[key]
@@ -271,6 +272,7 @@ class RigSchedule(ActuationSchedule):
         super().clear()
         self.ref = None              # (k, t_k) of the latest section announced
         self.last_answered = None    # index of the last section answered in time
+        self.acted = -math.inf       # index of the latest section acted
 
     def section(self, k, key, t, start, sent=None, early_until=math.inf, width=0.0):
         self.ref = (k, t)
@@ -315,12 +317,13 @@ class RigSchedule(ActuationSchedule):
         acts = super().due(now + self.lead, on_miss)
         for act in acts:
             sec = act.section
+            self.acted = max(self.acted, sec.k)
             if act.outcome == "applied":
                 self.last_answered = sec.k
             nxt = sec.k + 1
             if (self.period > 0.0 and self.last_answered is not None
                     and nxt - self.last_answered <= PREDICTION_HOLD
-                    and (self.latest is None or nxt > self.latest)):
+                    and nxt not in self.open and nxt > self.acted):
                 self.section(nxt, nxt, sec.t + self.period, sec.start + self.period,
                              width=sec.width)
         return acts

@@ -55,7 +55,7 @@ _NS = 1_000_000_000
 #: match up, as sim_node's start: docs/nodes.md, "Start, end, summary").
 MATCH_SETTLE = 0.2
 #: The replayed topics (relative to ``bag_namespace``).
-REPLAYED = ("rig/sensor", "rig/phase", "rig/clock")
+REPLAYED = {"sensor": "rig/sensor", "phase": "rig/phase", "clock": "rig/clock"}
 
 
 def _message_bytes(pool, rec: int) -> bytes:
@@ -72,7 +72,7 @@ def load_replay(bag, namespace: str = "") -> tuple:
     :class:`~grazing_control.dynamics.clock_relation.ClockFit` of the recorded pairs.
     StartupError (one line) when the bag cannot be replayed."""
     prefix = "/" + namespace.strip("/") + "/" if namespace.strip("/") else "/"
-    topics = {kind: prefix + kind for kind in REPLAYED}
+    topics = {kind: prefix + name for kind, name in REPLAYED.items()}
     try:
         raw = read_raw(bag, topics.values())
     except (BagReadError, OSError) as exc:

@@ -234,7 +234,7 @@ class RigDriver(Node):
 
     def summary(self) -> str:
         return "summary: " + " ".join(f"{k}={v}" for k, v in self.counts().items()) + \
-            " " + " ".join(f"{k}={v}" for k, v in self.published.items())
+            " " + " ".join(f"{k}_msgs={v}" for k, v in self.published.items())
 
     def on_exit(self) -> None:
         self.get_logger().info(self.summary())
