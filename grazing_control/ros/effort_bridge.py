@@ -39,8 +39,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Float64MultiArray
 
-from .common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled, deserialize,
-                     float_descriptor, int_descriptor, run_node, seconds_from_stamp,
+from .common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled, check_ranges,
+                     deserialize, float_descriptor, int_descriptor, run_node, seconds_from_stamp,
                      string_descriptor)
 from .rig_driver import ON_MISS, pulse_fields
 from grazing_control.dynamics.clock_relation import ClockRelation
@@ -54,8 +54,8 @@ COMMANDS_TOPIC = "forward_effort_controller/commands"
 class EffortBridge(Node):
     """rig/force_pulse + rig/clock -> forward_effort_controller/commands (module docstring)."""
 
-    def __init__(self):
-        super().__init__("effort_bridge")
+    def __init__(self, **kwargs):
+        super().__init__("effort_bridge", **kwargs)
         rate = self.declare_parameter("control_rate", 1000.0, float_descriptor(
             "effort samples per second (Hz)", 1.0, 1e5, read_only=True)).value
         latency = self.declare_parameter("actuator_latency", 0.0, float_descriptor(
@@ -69,6 +69,7 @@ class EffortBridge(Node):
         if self.on_miss not in ON_MISS:
             raise StartupError(f"on_miss={self.on_miss!r} is invalid: valid values are "
                                + ", ".join(ON_MISS))
+        check_ranges(self)           # exactly the described ranges (docs/nodes.md)
         self.schedule = RigSchedule(lead=latency)
         self.train = PulseTrain()
         self.relation = ClockRelation(window)

@@ -44,8 +44,9 @@ from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, TimeReference
 
-from .common import (DATA_QOS, PUBLISHER_QOS, Throttled, deserialize, float_descriptor,
-                     seconds_from_stamp, stamp_from_seconds, string_descriptor)
+from .common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled, check_ranges,
+                     deserialize, float_descriptor, seconds_from_stamp, stamp_from_seconds,
+                     string_descriptor)
 from grazing_control.plant.schedule import COUNTS, RigSchedule
 
 __all__ = ["RigDriver", "pulse_fields", "applied_message", "ON_MISS", "TOPICS"]
@@ -113,7 +114,6 @@ class RigDriver(Node):
                 "what acts when a command misses its deadline", read_only=True,
                 choices=ON_MISS)).value
         if self.on_miss not in ON_MISS:
-            from .common import StartupError
             raise StartupError(f"on_miss={self.on_miss!r} is invalid: valid values are "
                                + ", ".join(ON_MISS))
         self.schedule = RigSchedule(lead=latency)
@@ -132,7 +132,9 @@ class RigDriver(Node):
         self.timer = None
 
     def start(self) -> None:
-        """Start the poll (a subclass calls it once its hardware is ready)."""
+        """Start the poll (a subclass calls it once its hardware is ready, after
+        declaring its own parameters: their ranges are held exactly from here)."""
+        check_ranges(self)
         self.timer = self.create_timer(self.poll_period, self.poll)
 
     # ------------------------------------------------------------------ hooks
