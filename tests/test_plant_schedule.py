@@ -26,6 +26,15 @@ def announce(s, k, early=True):
                      early_until=k * T + 2 * T + 1e-6 if early else -math.inf)
 
 
+def answered_first():
+    """A schedule whose section 0 acted with its answer 0.5, predicting 0.25 for 1."""
+    s = ActuationSchedule()
+    announce(s, 0)
+    s.command(0, 0.5, 0.25)
+    s.due(D)
+    return s
+
+
 def test_an_answer_in_time_acts_at_its_start_and_brings_its_prediction():
     s = ActuationSchedule()
     announce(s, 0)
@@ -40,10 +49,7 @@ def test_an_answer_in_time_acts_at_its_start_and_brings_its_prediction():
 
 
 def test_a_miss_is_covered_by_the_prediction_for_up_to_the_hold():
-    s = ActuationSchedule()
-    announce(s, 0)
-    s.command(0, 0.5, 0.25)
-    s.due(D)
+    s = answered_first()
     acts = []
     for k in range(1, PREDICTION_HOLD + 3):
         announce(s, k)
@@ -55,10 +61,7 @@ def test_a_miss_is_covered_by_the_prediction_for_up_to_the_hold():
 
 
 def test_on_miss_drop_acts_nothing_and_a_nan_prediction_is_none():
-    s = ActuationSchedule()
-    announce(s, 0)
-    s.command(0, 0.5, 0.25)
-    s.due(D)
+    s = answered_first()
     announce(s, 1)
     (act,) = s.due(T + D, on_miss="drop")
     assert (act.value, act.substituted) == (0.0, False) and s.counts["predicted"] == 0
@@ -70,10 +73,7 @@ def test_on_miss_drop_acts_nothing_and_a_nan_prediction_is_none():
 
 
 def test_a_lost_answer_is_counted_and_the_prediction_stands_in():
-    s = ActuationSchedule()
-    announce(s, 0)
-    s.command(0, 0.5, 0.25)
-    s.due(D)
+    s = answered_first()
     announce(s, 1)
     s.command(1, 0.7, 0.3)
     act = s.act(s.pop_due(T + D), lost=True)
@@ -83,10 +83,7 @@ def test_a_lost_answer_is_counted_and_the_prediction_stands_in():
 
 
 def test_a_late_answer_is_dropped_counted_and_its_prediction_serves_the_next_section():
-    s = ActuationSchedule()
-    announce(s, 0)
-    s.command(0, 0.5, 0.25)
-    s.due(D)
+    s = answered_first()
     announce(s, 1)
     assert s.due(T + D)[0].value == 0.25          # missed: predicted
     answer = s.command(1, 0.9, 0.4)               # after its start

@@ -34,7 +34,7 @@ from bagtools_helpers import TYPESTORE, joint_state, vector3_stamped, write_rosb
 from grazing_control.dynamics.clock_relation import fit_clock
 from grazing_control.plant.schedule import PREDICTION_HOLD
 from grazing_control.ros.common import seconds_from_stamp, stamp_from_seconds
-from test_closed_loop import new_domain
+from test_closed_loop import Collector, new_domain
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -43,8 +43,9 @@ KEEP_ALL = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPol
 TWO_PI = 2.0 * math.pi
 
 
-class Peer:
-    """This test's node on the scene's domain: keeps (wall, source time, msg) per topic."""
+class Peer(Collector):
+    """This test's node on the scene's domain: keeps (wall, source time, msg) per topic
+    and publishes rig/force_pulse (the Collector's spin, wait and close)."""
 
     def __init__(self, domain: int, topics: dict):
         self.context = Context()
@@ -66,30 +67,12 @@ class Peer:
                 self.msgs[topic].append((time.time(), info["source_timestamp"] * 1e-9, msg))
         return keep
 
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:  # noqa: BLE001 - context shut down while waiting
-                break
-
     def get(self, topic):
         with self.lock:
             return list(self.msgs[topic])
 
     def wait_for(self, predicate, timeout: float = 30.0) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if predicate():
-                return True
-            time.sleep(0.02)
-        return predicate()
-
-    def close(self):
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(timeout=2.0)
+        return super().wait_for(predicate, timeout)
 
 
 def pulse(t, start, force, predicted=math.nan, width=0.002):

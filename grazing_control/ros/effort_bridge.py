@@ -42,7 +42,7 @@ from std_msgs.msg import Float64MultiArray
 from .common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled, check_ranges,
                      deserialize, float_descriptor, int_descriptor, run_node, seconds_from_stamp,
                      string_descriptor)
-from .rig_driver import ON_MISS, pulse_fields
+from .rig_driver import ON_MISS, read_pulse
 from grazing_control.dynamics.clock_relation import ClockRelation
 from grazing_control.plant.schedule import COUNTS, PulseTrain, RigSchedule
 
@@ -109,12 +109,8 @@ class EffortBridge(Node):
         self.sent += 1
 
     def on_pulse(self, data: bytes) -> None:
-        msg = deserialize(data, WrenchStamped, self.malformed)
-        if msg is None:
-            return
-        fields = pulse_fields(msg)
-        if isinstance(fields, str):
-            self.malformed(f"rig/force_pulse: {fields}")
+        fields = read_pulse(data, self.malformed)
+        if fields is None:
             return
         now = self.rig_now()
         if now is None:

@@ -49,7 +49,7 @@ from .common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled, check_ran
                      string_descriptor)
 from grazing_control.plant.schedule import COUNTS, RigSchedule
 
-__all__ = ["RigDriver", "pulse_fields", "applied_message", "ON_MISS", "TOPICS"]
+__all__ = ["RigDriver", "pulse_fields", "read_pulse", "applied_message", "ON_MISS", "TOPICS"]
 
 #: The contract's topics (relative names) and types.
 TOPICS = {
@@ -79,6 +79,19 @@ def pulse_fields(msg) -> tuple:
     if math.isinf(predicted):
         return f"wrench.force.y (prediction)={predicted!r} is invalid: finite or NaN"
     return t, start, force, predicted, width
+
+
+def read_pulse(data: bytes, malformed: Throttled):
+    """The fields of a serialized ``rig/force_pulse`` (:func:`pulse_fields`), or None when
+    it is malformed (counted and logged by ``malformed``: never fatal)."""
+    msg = deserialize(data, WrenchStamped, malformed)
+    if msg is None:
+        return None
+    fields = pulse_fields(msg)
+    if isinstance(fields, str):
+        malformed(f"rig/force_pulse: {fields}")
+        return None
+    return fields
 
 
 def applied_message(start: float, t: float, width: float, force: float, predicted: float,
@@ -214,12 +227,8 @@ class RigDriver(Node):
 
     def on_pulse(self, data: bytes) -> None:
         """A command: checked (malformed: counted), then into the schedule."""
-        msg = deserialize(data, WrenchStamped, self.malformed)
-        if msg is None:
-            return
-        fields = pulse_fields(msg)
-        if isinstance(fields, str):
-            self.malformed(fields)
+        fields = read_pulse(data, self.malformed)
+        if fields is None:
             return
         now = self.rig_time()
         self.act(now)                   # a deadline already due is handled first
