@@ -262,6 +262,7 @@ def test_effort_bridge_streams_each_pulse_in_its_ros_time_window():
         peer.pulses.publish(pulse(t0, t0 + 0.005, 1.5, 0.7, width))
         peer.pulses.publish(pulse(t0 + 0.4, t0 + 0.405, -2.0, math.nan, width))
         send_malformed(peer)
+        clock.publish(b"\x00\x01\x00\x00\x05")          # no TimeReference: counted
         windows = {1.5: t0 + 0.005, 0.7: t0 + 0.205, -2.0: t0 + 0.405}
         end = ros_of(t0 + 0.405 + width)
         assert peer.wait_for(lambda: any(
@@ -288,7 +289,7 @@ def test_effort_bridge_streams_each_pulse_in_its_ros_time_window():
         inside = [f for src, f in stream if lo + tol + slack < src < hi - tol - slack]
         assert all(f == force for f in inside)
     assert (counts["applied"], counts["predicted"], counts["late"]) == ("2", "1", "1")
-    assert counts["malformed"] == "3" and counts["unclocked"] == "0"
+    assert counts["malformed"] == "4" and counts["unclocked"] == "0"
     # the fit found the relation the pairs were made with
     assert abs(float(counts["clock_drift"]) - DRIFT) < 1e-6
 
@@ -325,13 +326,13 @@ def write_rig_bag(path, seconds=0.8, rate=500, f=10.0, rig0=2000, ros0=1_700_000
         out.append((ros + 20_000, "/rig/clock", "sensor_msgs/msg/TimeReference",
                     _time_reference(ros, rig0 * ns + i * (ns // 20))))
     out.sort(key=lambda m: m[0])
-    write_rosbags(path, [(topic, kind, log, msg) for log, topic, kind, msg in out])
-    return sensor, out
+    bag = write_rosbags(path, [(topic, kind, log, msg) for log, topic, kind, msg in out])
+    return sensor, out, bag
 
 
 def test_rig_mock_replays_the_bag_message_for_message_and_echoes_commands(tmp_path):
     bag = tmp_path / "rig_bag"
-    sensor, written = write_rig_bag(bag)
+    sensor, written, _ = write_rig_bag(bag)
     span = (written[-1][0] - written[0][0]) * 1e-9
     domain = new_domain()
     peer = Peer(domain, CONTRACT)

@@ -111,8 +111,8 @@ def load_replay(bag, namespace: str = "") -> tuple:
 class RigMock(RigDriver):
     """The replaying driver (module docstring)."""
 
-    def __init__(self):
-        super().__init__("rig_mock")
+    def __init__(self, **kwargs):
+        super().__init__("rig_mock", **kwargs)
         bag = self.declare_parameter("bag", "", string_descriptor(
             "the bag (directory or .mcap) whose rig streams are replayed",
             read_only=True)).value
@@ -139,9 +139,10 @@ class RigMock(RigDriver):
         self.start()
 
     def position(self) -> float:
-        """The replay position: the recording's ROS time now (s)."""
+        """The replay position: the recording's ROS time now (s); its first message's
+        log time until the replay starts."""
         if self.wall0 is None:
-            self.wall0 = time.monotonic()
+            return self.log0
         return self.log0 + (time.monotonic() - self.wall0) * self.time_scale
 
     def rig_time(self) -> float:
@@ -157,6 +158,7 @@ class RigMock(RigDriver):
                 self.matched = time.monotonic()
             if time.monotonic() - self.matched < MATCH_SETTLE:
                 return                    # both ends of each match up
+            self.wall0 = time.monotonic()    # the replay starts
         pos_ns = self.position() * _NS
         msgs = self.messages
         while self.next < len(msgs) and msgs[self.next][0] <= pos_ns:
