@@ -308,4 +308,8 @@ def test_a_pulse_train_is_each_force_over_its_window_and_zero_between():
     train.add(3.0, 0.1, 0.0)            # nothing acts
     assert [train.force(t) for t in (0.99, 1.0, 1.25, 1.3, 1.49, 1.5, 3.05)] == [
         0.0, 2.0, 1.5, 2.0, 2.0, 0.0, 0.0]
-    assert train.pulses == []           # ended pulses are forgotten
+    assert train.pulses == [] and train.unsent == 0     # ended pulses are forgotten
+    train.add(4.0, 0.002, 1.0)          # a stream that stalls over a whole pulse
+    train.add(4.1, 0.002, 1.0)
+    assert train.force(4.001) == 1.0 and train.force(4.5) == 0.0
+    assert train.unsent == 1

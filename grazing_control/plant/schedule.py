@@ -334,16 +334,24 @@ class PulseTrain:
 
     ``add(start, width, force)`` for each act; ``force(t)`` is the sum of the forces of
     the pulses with start <= t < start + width (0 between pulses); pulses that ended
-    before ``t`` are forgotten.
+    before ``t`` are forgotten, and counted in ``unsent`` when no ``force`` call fell
+    inside them (a stream that stalled for longer than a pulse never carried it).
     """
 
     def __init__(self):
-        self.pulses = []
+        self.pulses = []     # [start, end, force, carried]
+        self.unsent = 0
 
     def add(self, start: float, width: float, force: float) -> None:
         if force != 0.0 and width > 0.0:
-            self.pulses.append((start, start + width, force))
+            self.pulses.append([start, start + width, force, False])
 
     def force(self, t: float) -> float:
+        self.unsent += sum(1 for p in self.pulses if p[1] <= t and not p[3])
         self.pulses = [p for p in self.pulses if p[1] > t]
-        return sum(f for start, end, f in self.pulses if start <= t)
+        total = 0.0
+        for p in self.pulses:
+            if p[0] <= t:
+                p[3] = True
+                total += p[2]
+        return total

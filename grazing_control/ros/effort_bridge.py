@@ -20,7 +20,8 @@ late (counted, never sent late). The forcing period (a section per period, for t
 prediction) comes from ``rig/phase``. Until the first clock pair the stream is 0 and a
 command cannot be timed (dropped, counted as ``unclocked``). A pulse's edges fall on the
 stream's ticks: within one control period plus the relation's uncertainty of their
-ROS-time instants.
+ROS-time instants while the timer keeps its rate; a tick is never early, and a pulse
+that a stalled timer stepped over entirely is counted (``unsent``).
 
 A malformed message (bytes that are no such message, non-finite fields, a width <= 0)
 is counted and logged, never fatal. The summary at exit counts what acted.
@@ -147,7 +148,7 @@ class EffortBridge(Node):
         counts = {name: self.schedule.counts[name] for name in COUNTS}
         text = ("summary: " + " ".join(f"{k}={v}" for k, v in counts.items())
                 + f" unclocked={self.unclocked.count} malformed={self.malformed.count}"
-                + f" sent={self.sent}")
+                + f" unsent={self.train.unsent} sent={self.sent}")
         if fit is not None:
             text += (f" clock_offset={fit.offset:.9f}s clock_drift={fit.drift:.3e}"
                      f" clock_jitter={fit.jitter:.3e}s pairs={fit.n}")
