@@ -21,6 +21,8 @@ setup(
         ('share/' + package_name + '/launch', sorted(glob('launch/*.py'))),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
         ('share/' + package_name + '/config/models', sorted(glob('config/models/*.yaml'))),
+        ('share/' + package_name + '/config/rigs', sorted(glob('config/rigs/*.yaml'))),
+        ('share/' + package_name + '/drivers', sorted(glob('drivers/*.py'))),
     ],
     package_data={package_name + '.ros': ['fastdds_profile.xml']},
     install_requires=['setuptools'],
@@ -38,6 +40,8 @@ setup(
             'controller_node = grazing_control.ros.entry:controller_node',
             'recorder_node = grazing_control.ros.entry:recorder_node',
             'live_node = grazing_control.ros.entry:live_node',
+            'effort_bridge = grazing_control.ros.entry:effort_bridge',
+            'rig_mock = grazing_control.ros.entry:rig_mock',
         ],
     },
 )

@@ -118,8 +118,6 @@ class Outputs:
 
     def substituted(self, k: int, key: tuple, dv: float) -> None:
         self.node.pub_substituted.publish(cdr.twist_stamped(*key, dv))
-        if self.node.driver is not None:     # rig/applied says a prediction acted
-            self.node.driver.substituted[k] = dv
 
     def tripped(self, trip) -> None:
         self.node.on_trip(trip)

@@ -37,18 +37,18 @@ from grazing_control.plant.realtime import STREAM_TICK
 from grazing_control.plant.rig import rig_to_dict
 from grazing_control.ros import cdr
 from grazing_control.ros.common import LATCHED_QOS, stamp_from_seconds
-from grazing_control.ros.rig_boundary import (APPLIED_IN_TIME, APPLIED_NOTHING,
-                                              APPLIED_PREDICTED, APPLIED_SAFE, DelayLine,
-                                              SimulatedClock, correction_of, force_of)
+from grazing_control.ros.rig_driver import applied_message, read_pulse
+from grazing_control.ros.rig_boundary import (APPLIED_SAFE, DelayLine, SimulatedClock,
+                                              correction_of, force_of)
 
-__all__ = ["RigDriver", "CLOCK_READ"]
+__all__ = ["SimulatedRig", "CLOCK_READ"]
 
 #: Longest wall time (s) between the two wall-clock reads around a ROS clock read of a
 #: rig/clock pair: beyond, the process was preempted in between and the pair is skipped.
 CLOCK_READ = 5e-5
 
 
-class RigDriver:
+class SimulatedRig:
     """The simulated rig's side of the contract for one :class:`~sim_node.sim_node.SimNode`
     (module docstring). ``publisher(kind, topic)`` makes the node's counted publishers."""
 
@@ -64,7 +64,6 @@ class RigDriver:
         self.pub_applied = publisher(WrenchStamped, "rig/applied")
         self.pub_rig = node.create_publisher(String, "grazing/rig", LATCHED_QOS)
         self.pub_rig.publish(String(data=yaml.safe_dump(rig_to_dict(rig), sort_keys=False)))
-        self.substituted = {}        # section k -> the prediction that acted
         self.applied = [0, 0, 0, 0]  # counts per rig/applied status
         self.name = node.get_fully_qualified_name()
         self._clock_timer = node.create_timer(1.0 / clock_rate, self.publish_clock)
@@ -87,7 +86,18 @@ class RigDriver:
         return ros, loop.now(0.5 * (before + after))
 
     def started(self) -> None:
-        """The loop has started: the relation of the rig clock to ROS time."""
+        """The loop has started: the relation of the rig clock to ROS time, and what its
+        actuation engine acts is also said on rig/applied (ActuationSchedule.act, called
+        by the loop at each section's start, is wrapped)."""
+        schedule = self.node.loop.schedule
+        engine_act = schedule.act
+
+        def act(sec, lost=False, on_miss="predict"):
+            done = engine_act(sec, lost=lost, on_miss=on_miss)
+            self.act(done)
+            return done
+
+        schedule.act = act
         read = None
         while read is None:
             read = self.read_clocks()
@@ -144,18 +154,14 @@ class RigDriver:
         self.pub_clock.publish(msg)
 
     # ------------------------------------------------------------------ answers
-    def answer(self, msg: WrenchStamped):
-        """(stamp key, Delta v~, predicted Delta v~) of a rig/force_pulse, or None
-        (counted as malformed) when it names no section or is not finite."""
-        w = msg.wrench.torque.x
-        f, fy = msg.wrench.force.x, msg.wrench.force.y
-        t_k = msg.wrench.torque.y
-        if not (math.isfinite(f) and math.isfinite(w) and w > 0.0 and math.isfinite(t_k)
-                and not math.isinf(fy)):
-            self.node.out.malformed(f"rig/force_pulse force={f!r} width={w!r} "
-                                    f"section={t_k!r}: not a finite force, width > 0 and "
-                                    "section time")
+    def answer(self, data: bytes):
+        """(stamp key, Delta v~, predicted Delta v~) of a serialized rig/force_pulse
+        (:func:`grazing_control.ros.rig_driver.read_pulse`), or None (counted as
+        malformed) when it is malformed or names no section of this rig."""
+        fields = read_pulse(data, self.node.out.malformed)
+        if fields is None:
             return None
+        t_k, _start, f, fy, w = fields
         period = self.node.engine.p.period
         t = self.clock.model_time(t_k)
         k = round(t / period)
@@ -166,37 +172,31 @@ class RigDriver:
         return (cdr.stamp_parts(k * period), correction_of(self.rig, f, w),
                 correction_of(self.rig, fy, w))
 
-    def acted(self, before, after) -> None:
-        """The loop's scheduled deadline ``before`` a call and ``after`` it: when the
-        section of ``before`` was actuated in between, rig/applied says what acted."""
-        if before is None or (after is not None and after.key == before.key):
-            return
-        loop = self.node.loop
-        if loop.watchdog is not None and loop.watchdog.tripped is not None:
-            status, dv = APPLIED_SAFE, 0.0
-        elif before.dv is not None:
-            status, dv = APPLIED_IN_TIME, before.dv
-        elif before.k in self.substituted:
-            status, dv = APPLIED_PREDICTED, self.substituted.pop(before.k)
-        else:
-            status, dv = APPLIED_NOTHING, 0.0
-        for k in [k for k in self.substituted if k < before.k]:
-            del self.substituted[k]
+    def act(self, act) -> None:
+        """What acted at a section (the actuation engine's
+        :class:`~grazing_control.plant.schedule.Act`): rig/applied."""
+        sec = act.section
+        self.publish_applied(float(act.code), act.value, sec.start, sec.t)
+
+    def tripped(self, k: int) -> None:
+        """The watchdog tripped at section k: nothing acts there (the safe state)."""
+        period = self.node.engine.p.period
+        t = k * period
+        self.publish_applied(APPLIED_SAFE, 0.0,
+                             t + self.node.engine.actuation_start(self.node.loop.delay), t)
+
+    def publish_applied(self, status: float, dv: float, start: float, t_k: float) -> None:
+        """rig/applied (:func:`grazing_control.ros.rig_driver.applied_message`): the
+        force that acted (N, clipped to the force limit) from the pulse's start
+        ``start`` of the section at ``t_k`` (model times)."""
         self.applied[int(status)] += 1
         force = force_of(self.rig, dv)
         limit = self.rig.actuator.force_limit
         if limit > 0.0:
             force = max(-limit, min(limit, force))
-        t_k = before.k * self.node.engine.p.period     # the section's model time
-        msg = WrenchStamped()
-        msg.header.stamp = stamp_from_seconds(self.clock.rig_time(before.t))
-        msg.header.frame_id = "mass"
-        msg.wrench.force.x = float(force)
-        msg.wrench.force.y = math.nan
-        msg.wrench.force.z = status
-        msg.wrench.torque.x = float(self.rig.actuator.pulse_width)
-        msg.wrench.torque.y = float(self.clock.rig_time(t_k))
-        self.pub_applied.publish(msg)
+        self.pub_applied.publish(applied_message(
+            self.clock.rig_time(start), self.clock.rig_time(t_k),
+            self.rig.actuator.pulse_width, force, math.nan, int(status)))
 
     def summary(self) -> str:
         a = self.applied

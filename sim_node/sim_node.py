@@ -79,7 +79,7 @@ from grazing_control.ros.scheduling import apply_node_scheduling
 
 from sim_node.messages import Outputs, read_answer
 from sim_node.probe import RoundTrips, controller_name
-from sim_node.rig_io import RigDriver
+from sim_node.rig_io import SimulatedRig
 
 __all__ = ["SimNode", "main"]
 
@@ -263,7 +263,7 @@ class SimNode(Node):
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
         self.driver = None            # the simulated rig's side of the contract (rig_file)
         if self.rig is not None:
-            self.driver = RigDriver(self, self.rig, publisher,
+            self.driver = SimulatedRig(self, self.rig, publisher,
                                     self.get_parameter("clock_start").value,
                                     self.get_parameter("clock_rate").value)
         self.published = PublishedRecord(self, (
@@ -277,7 +277,7 @@ class SimNode(Node):
                 event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         else:   # a rig's answer: the scheduled force pulse (docs/driver_contract.md)
             self.sub_correction = self.create_subscription(
-                WrenchStamped, "rig/force_pulse", self._on_force_pulse, DATA_QOS,
+                WrenchStamped, "rig/force_pulse", self._on_force_pulse, DATA_QOS, raw=True,
                 event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -583,6 +583,8 @@ class SimNode(Node):
         """The watchdog tripped (the loop has stopped actuating; the scene ends next):
         an error naming the reason, exit status 1, an event record, /diagnostics now."""
         self.trip = trip
+        if self.driver is not None:       # rig/applied: the safe state at its section
+            self.driver.tripped(trip.k)
         self.reason = f"watchdog ({trip.kind}): {trip.reason}"
         self.exit_code = 1
         self.get_logger().error(
@@ -611,17 +613,15 @@ class SimNode(Node):
         if self._guard(self.loop.answer, key, dv, predicted) and self._tick_timer is not None:
             self._arm(self.loop.now())       # a split may have brought an event forward
 
-    def _on_force_pulse(self, msg: WrenchStamped) -> None:
+    def _on_force_pulse(self, data: bytes) -> None:
         """A rig/force_pulse (rig_file): the answer of its section, as a correction."""
-        answer = self.driver.answer(msg)
+        answer = self.driver.answer(data)
         if answer is None:
             return
         if not self.running:
             self.out.ignored(f"stamp {answer[0]}: the scene is not running")
             return
-        before = self.loop.deadline
         rearm = self._guard(self.loop.answer, *answer)
-        self.driver.acted(before, self.loop.deadline)
         if rearm and self._tick_timer is not None:
             self._arm(self.loop.now())
 
@@ -629,12 +629,9 @@ class SimNode(Node):
         """Realtime wake-up: publish what is due, /clock, and sleep until the next event."""
         if not self.running:
             return
-        before = self.loop.deadline
         now = self._guard(self.loop.tick)
-        if self.driver is not None:
-            self.driver.acted(before, self.loop.deadline)
-            if now is not None:
-                self.driver.flush(now)
+        if self.driver is not None and now is not None:
+            self.driver.flush(now)
         if now is not None and self.running:
             wall = time.monotonic()
             if wall - self._clock_wall >= CLOCK_EVERY:     # /clock at most every 1 ms

@@ -4,12 +4,16 @@
 modules that start node processes or DDS participants (:data:`SCENE_MODULES`) form one
 xdist group, run by one worker in collection order, one scene at a time as before; every
 other test (the numerical core, bags written in-process, the command line without nodes)
-is shared out to whichever worker is free, beside the scenes and after them. The modules
-with realtime scenes (:data:`REALTIME_MODULES`) form a second group, last in the queue,
-and each of their tests waits until the other worker has been idle for IDLE_SECONDS (at
-most REALTIME_WAIT): a realtime deadline is measured on a machine that runs one scene and
-nothing else of the suite, as before the suite ran on two workers (a CPU-bound test
-beside a realtime scene made its answers miss: 12 of 40 where 4 is the bound).
+is shared out to whichever worker is free, beside the scenes and after them. The tests
+marked ``realtime`` (their assertions hold only if the scene's answers meet wall-clock
+deadlines) form a second group, last in the queue, and each waits until the other worker
+has been idle for IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a
+machine that runs one scene and nothing else of the suite, as before the suite ran on two
+workers (a CPU-bound test beside a realtime scene made its answers miss: 12 of 40 where 4
+is the bound). A realtime scene whose assertions do not depend on meeting deadlines (one
+that misses by design, a refused start, a signal) is not marked: it runs in the scene
+group. A module whose module-scoped scene is realtime marks the whole module
+(``pytestmark``), so that the scene is set up once.
 """
 
 import tempfile
@@ -88,31 +92,33 @@ SCENE_MODULES = frozenset({
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
     "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_parameter_files_hostile",
-    "test_recorder_node", "test_recording", "test_rig_scene", "test_scheduling",
-    "test_signals", "test_sim_node", "test_test_cleanup",
+    "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_scene",
+    "test_scheduling",
+    "test_signals",
+    "test_sim_node", "test_test_cleanup",
 })
 
-#: Scene modules with realtime (wall-clock paced) scenes: last in the scene group.
-REALTIME_MODULES = ("test_node_common", "test_diagnostics", "test_deadline_misses",
-                    "test_bagtools_replay", "test_live_node", "test_ndof_nodes",
-                    "test_actuation", "test_rig_scene")
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "realtime: a realtime scene whose assertions need its answers to meet "
+                   "wall-clock deadlines: run last, with the other worker idle (conftest.py)")
+
+
+def is_realtime(item) -> bool:
+    return item.get_closest_marker("realtime") is not None
 
 
 def pytest_collection_modifyitems(config, items):
-    """Put the scene modules in one xdist group and the realtime ones in another, last
-    (module order kept within each, so that module-scoped scenes are set up once)."""
+    """Put the scene modules' tests in one xdist group and the realtime tests in
+    another, last (collection order kept within each, so that module-scoped scenes are
+    set up once)."""
     scenes, realtime = pytest.mark.xdist_group("scenes"), pytest.mark.xdist_group("realtime")
     for item in items:
-        if item.path.stem in REALTIME_MODULES:
+        if is_realtime(item):
             item.add_marker(realtime)
         elif item.path.stem in SCENE_MODULES:
             item.add_marker(scenes)
-
-    def late(item):
-        stem = item.path.stem
-        return REALTIME_MODULES.index(stem) + 1 if stem in REALTIME_MODULES else 0
-
-    items.sort(key=late)        # stable: collection order within each rank
+    items.sort(key=is_realtime)        # stable: collection order within each rank
 
 
 #: Seconds the other worker must have been idle before a realtime test starts, and the
@@ -151,7 +157,7 @@ def pytest_runtest_protocol(item, nextitem):
     flag = _busy_file(item.config)
     if flag is None:
         return (yield)
-    if item.path.stem in REALTIME_MODULES:
+    if is_realtime(item):
         end = time.monotonic() + REALTIME_WAIT
         while time.monotonic() < end and not _others_idle(flag):
             time.sleep(0.2)

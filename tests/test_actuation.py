@@ -237,6 +237,7 @@ def _fault_scene(tmp_path, name, n, on, delay, seed):
         col.close()
 
 
+@pytest.mark.realtime
 def test_faults_through_the_nodes_reproduce_the_core_fault_run(tmp_path):
     """Issue 8 section 3 through the nodes: delay 5 with the delay-aware gains and one
     fault at a time (loss 0.3; measurement noise 2e-4; jitter 0.3) in lockstep, and all
@@ -283,6 +284,7 @@ def test_faults_through_the_nodes_reproduce_the_core_fault_run(tmp_path):
         assert int(summary["missed"]) == 0 and not missed
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("delta_d", [-5e-6, -9e-6])
 def test_realtime_scheduled_matches_lockstep_and_suppresses_the_chaos(tmp_path, delta_d):
     """time_scale 1000 (a period is 9.4 ms of wall time), delay 6 (6 ms of wall time,

@@ -107,6 +107,7 @@ def test_replay_with_other_gains_gives_what_eq28_commands(tmp_path, capsys):
     assert new.answered.all() and new.scene.correction.tolist() == want
 
 
+@pytest.mark.realtime
 def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     bag = tmp_path / "rt"
     n, on, scale = 60, 30, 100.0

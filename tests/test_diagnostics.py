@@ -209,6 +209,7 @@ class Probe:
         self.thread.join(5)
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("latency_warn, expect", [(0.0, OK), (1e-9, WARN)])
 def test_a_realtime_scene_reports_its_state_and_the_latency_threshold(tmp_path, latency_warn,
                                                                         expect):

@@ -404,6 +404,7 @@ def live_scene(tmp_path_factory):
                            js_skip=js_skip)
 
 
+@pytest.mark.realtime
 def test_grazing_run_live_streams_the_scene_that_the_bag_records(live_scene):
     """The client, connected while the scene starts, receives Π2 samples, corrections,
     impacts and state; every payload is one the recorder stored (the same bytes) and
@@ -438,6 +439,7 @@ def _plain(msg):
     return msg
 
 
+@pytest.mark.realtime
 def test_the_protocol_authors_client_subscribes_and_decodes_the_scene(live_scene):
     """@foxglove/ws-protocol's FoxgloveClient (over ws) reads the same scene: it
     negotiates the protocol, sees the four channels as cdr / ros2msg, subscribes, and

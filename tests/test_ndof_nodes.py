@@ -233,6 +233,7 @@ def test_the_launch_file_runs_an_n_dof_scene_from_the_same_description(tmp_path,
         ns["_scene"](None)
 
 
+@pytest.mark.realtime
 def test_a_realtime_n_dof_scene_with_scheduled_kicks_is_the_engines_period_loop(tmp_path):
     """Realtime, paced to the wall clock (time scale 100), each kick scheduled
     actuation_delay = 3.0 after its sample (30 ms of wall time, above the round trip):

@@ -40,10 +40,13 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 
 from grazing_control.ros.controller_node import ControllerNode
+from grazing_control.recordings.rig_mock import RigMock
+from grazing_control.ros.effort_bridge import EffortBridge
 from grazing_control.ros.live_node import LiveNode
 from grazing_control.ros.recorder_node import RecorderNode
 from sim_node.sim_node import SimNode
 from test_closed_loop import new_domain
+from test_rig_drivers import write_rig_bag
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -132,6 +135,8 @@ def kinds(tmp_path):
         "recorder_node": NodeKind(RecorderNode, fresh=lambda: {
             "output": str(tmp_path / f"bag{next(count)}")}),
         "live_node": NodeKind(LiveNode, base={"port": 0}),
+        "effort_bridge": NodeKind(EffortBridge),
+        "rig_mock": NodeKind(RigMock, base={"bag": str(write_rig_bag(tmp_path / "rig")[2])}),
     }
 
 
@@ -181,7 +186,8 @@ def same(a, b) -> bool:
 #: narrowed by the delay, which its constraints state: actuation_delay < 2 pi / omega.)
 CONTEXTS = {"sim_node": (({}, None), ({"actuation_delay": 1.0}, {"pulse_width"})),
             "controller_node": (({}, None),), "recorder_node": (({}, None),),
-            "live_node": (({}, None),)}
+            "live_node": (({}, None),), "effort_bridge": (({}, None),),
+            "rig_mock": (({}, None),)}
 
 
 @pytest.mark.parametrize("name", sorted(CONTEXTS))

@@ -30,11 +30,13 @@ CONSOLE_SCRIPTS = {
     'controller_node': 'grazing_control.ros.controller_node',
     'recorder_node': 'grazing_control.ros.recorder_node',
     'live_node': 'grazing_control.ros.live_node',
+    'effort_bridge': 'grazing_control.ros.effort_bridge',
+    'rig_mock': 'grazing_control.recordings.rig_mock',
 }
 
 #: What each console script calls: the nodes' go through grazing_control.ros.entry (a
 #: thin module, quiet on a Ctrl-C while the node's module imports; issue 27).
-ENTRY_POINTS = {name: f'grazing_control.ros.entry:{name}' if name.endswith('_node')
+ENTRY_POINTS = {name: f'grazing_control.ros.entry:{name}' if name != 'grazing'
                 else f'{mod}:main' for name, mod in CONSOLE_SCRIPTS.items()}
 
 EXEC_DEPENDS = {
@@ -190,7 +192,8 @@ def test_colcon_build(tmp_path, symlink):
         exe = prefix / 'lib' / PACKAGE / name
         assert exe.is_file() and os.access(exe, os.X_OK), f'{exe} missing'
     for pattern, subdir in (('launch/*.py', 'launch'), ('config/*.yaml', 'config'),
-                          ('config/*.json', 'config'), ('config/models/*.yaml', 'config/models')):
+                          ('config/*.json', 'config'), ('config/models/*.yaml', 'config/models'),
+                          ('config/rigs/*.yaml', 'config/rigs')):
         for f in src.glob(pattern):
             assert (prefix / 'share' / PACKAGE / subdir / f.name).is_file(), f
 

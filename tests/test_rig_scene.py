@@ -69,6 +69,7 @@ def scene(tmp_path_factory):
     return rig, res, _messages(out / "bag", topics)
 
 
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
 def test_the_simulated_rig_publishes_its_file_and_every_contract_topic(scene):
     rig, res, m = scene
     (_, text), = m["/grazing/rig"]
@@ -83,6 +84,7 @@ def test_the_simulated_rig_publishes_its_file_and_every_contract_topic(scene):
     assert len(m["/rig/clock"]) >= 10 * wall
 
 
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
 def test_the_sensor_speaks_si_in_the_rig_clock_no_earlier_than_its_latency(scene):
     rig, res, m = scene
     l = rig.scales.length
@@ -112,6 +114,7 @@ def test_the_sensor_speaks_si_in_the_rig_clock_no_earlier_than_its_latency(scene
     assert min(early) > -2e-4      # 0.2 ms: the two clocks are read one after the other
 
 
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
 def test_force_pulses_answer_each_section_and_act_in_time(scene):
     rig, res, m = scene
     w, budget = rig.actuator.pulse_width, rig.budget
@@ -143,6 +146,7 @@ def test_force_pulses_answer_each_section_and_act_in_time(scene):
     assert correction_of(rig, force_of(rig, 1.3e-4), w) == pytest.approx(1.3e-4, rel=1e-15)
 
 
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
 def test_the_controller_estimates_the_rig_clocks_offset_and_drift(scene):
     rig, res, m = scene
     pat = r"(clock_offset|clock_drift|clock_pairs|p50|p99)=([-\d.e+]+)"

@@ -18,7 +18,15 @@ STARTS_NODES = re.compile(r"launcher\.run\(|start_node\(|run_scene\(|node_comman
 def test_the_scene_group_names_existing_modules():
     modules = {p.stem for p in HERE.glob("test_*.py")}
     assert conftest.SCENE_MODULES <= modules, conftest.SCENE_MODULES - modules
-    assert set(conftest.REALTIME_MODULES) <= conftest.SCENE_MODULES
+
+
+def test_the_realtime_tests_are_scene_tests():
+    """A test marked realtime waits for the other worker to be idle: it must be a scene
+    module's (the scene group runs one scene at a time), and the marker must be in use."""
+    marked = {p.stem for p in HERE.glob("test_*.py")
+              if p.stem != "test_suite_layout" and "pytest.mark.realtime" in p.read_text()}
+    assert marked, "no test is marked realtime: the marker no longer matches the tests"
+    assert marked <= conftest.SCENE_MODULES, marked - conftest.SCENE_MODULES
 
 
 def test_every_module_that_starts_nodes_is_in_the_scene_group():

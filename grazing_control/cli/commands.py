@@ -23,6 +23,7 @@ import numpy as np
 from grazing_control.support.arguments import finite, integer_at_least, non_empty_path
 from . import ndof
 from .parameter_file import add_params_option, apply_to_args
+from .rig import add_rig_option, apply_rig
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import (STUDY_R, STUDY_ZETA, OscillatorParams,
                                                ParameterError, study_omega)
@@ -102,6 +103,7 @@ def _common(parser):
                    help="phase of Pi2 after Pi1, in (0, 2 pi)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_params_option(g)
+    add_rig_option(g)
 
 
 def _method_arg(parser):
@@ -660,7 +662,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("orbit", help="the 1/1 orbit and its Floquet multipliers")
     _common(s)
-    s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d* (< 0)")
+    s.add_argument("--delta-d", type=_finite, help="Delta d = d - d* (< 0); required unless "
+                                                  "--rig or --params gives it")
     _gain_args(s)
     _method_arg(s)
     ndof.add_model_option(s)
@@ -682,7 +685,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("simulate", help="simulate on Pi2, optionally switching control on")
     _common(s)
-    s.add_argument("--delta-d", type=_finite, required=True, help="Delta d = d - d*")
+    s.add_argument("--delta-d", type=_finite, help="Delta d = d - d*; required unless --rig "
+                                                  "or --params gives it")
     s.add_argument("--periods", type=_count, required=True, help="number of forcing periods")
     s.add_argument("--control-after", type=_count, help="switch control on at this sample")
     s.add_argument("--x0", type=_finite, help="initial x on Pi2 (default x**)")
@@ -736,6 +740,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .bag import add_bag_parser
     add_bag_parser(sub)
+    from .rig import add_rig_parser
+    add_rig_parser(sub)
     from .identify import add_identify_parser
     add_identify_parser(sub)
     from grazing_control.studies.robustness.cli import add_robustness_parser
@@ -760,6 +766,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 
+def _require_delta_d(args) -> None:
+    """orbit and simulate need Delta d: from --delta-d, --rig or --params."""
+    if args.command in ("orbit", "simulate") and args.delta_d is None:
+        raise ParameterError(f"{args.command}: the following arguments are required: "
+                             "--delta-d (or --rig FILE, or --params FILE with delta_d)")
+
+
 def _one_line(exc) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
@@ -775,7 +788,9 @@ def main(argv=None) -> int:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
             ndof.check_options(args, argv)   # --model and the 1-DOF options (cli/ndof.py)
+            apply_rig(args, argv)         # --rig FILE (cli/rig.py)
             apply_to_args(args, argv)     # --params FILE (cli/parameter_file.py)
+            _require_delta_d(args)
             result = args.func(args)
     except (ParameterError, ValueError, RuntimeError, OSError) as exc:
         print(f"grazing: error: {_one_line(exc)}", file=sys.stderr)

@@ -6,7 +6,10 @@ amplitude and phase) to each bag's state stream and impacts
 prints each parameter with its standard error, the residuals and a re-simulation check,
 and with ``--out`` writes the parameter file (:mod:`.parameter_file`) that ``grazing
 design --params``, ``grazing run --params`` / ``--sim-params`` and the nodes
-(``--params-file``) take.
+(``--params-file``) take. Where a bag carries its rig (``grazing/rig``) or ``--rig FILE``
+gives it, the model in SI as well (natural frequency, damping ratio, restitution, gap,
+standard errors propagated), and ``--out-rig FILE`` writes it as a rig file
+(docs/rig.md, "Recordings").
 
 Exit status: 0 good fit; 1 poor fit (the motion is not this model's: the report says
 why; nothing is written); 2 bad input (unreadable bag, no state stream, too few samples,
@@ -39,11 +42,27 @@ def _plain(obj):
 
 def cmd_identify(args) -> int:
     """Run ``grazing identify``; the exit status (module docstring)."""
-    from grazing_control.recordings.identify import format_report, identify_bags
+    from grazing_control.recordings.identify import format_report, identify_bags, si_report
 
+    rig = None
+    if args.rig is not None:
+        from .rig import load
+
+        rig = load(args.rig)
     result = identify_bags(args.bags, position_only=args.position_only,
                            impacts=not args.no_impacts, max_arcs=args.max_arcs)
+    si_report(result, args.bags, rig)
+    fitted_rig = result.pop("_rig", None)
+    if args.out_rig and fitted_rig is None:
+        from grazing_control.oscillator.params import ParameterError
+
+        raise ParameterError(f"--out-rig {args.out_rig}: no rig to write the model into: the "
+                             "bags carry none on grazing/rig; give --rig FILE")
     good = result["fit"] == "good"
+    if args.out_rig:
+        result["out_rig"] = args.out_rig if good else None
+        if good:
+            _write_rig(args.out_rig, fitted_rig, result)
     if args.out:
         if good:
             from .parameter_file import write_parameter_file
@@ -66,8 +85,24 @@ def cmd_identify(args) -> int:
         if args.out:
             print(f"  parameter file written to {args.out}" if good else
                   f"  poor fit: nothing written to {args.out}")
+        if args.out_rig:
+            print(f"  rig file written to {args.out_rig}" if good else
+                  f"  poor fit: nothing written to {args.out_rig}")
     sys.stdout.flush()
     return 0 if good else 1
+
+
+def _write_rig(path, rig, result) -> None:
+    """The identified model as a rig file (docs/rig.md), written atomically."""
+    from grazing_control.plant.rig import rig_to_dict
+    from grazing_control.support.files import write_yaml_atomic
+
+    si = result["si"]
+    write_yaml_atomic(path, rig_to_dict(rig),
+                      [f"rig identified by `grazing identify` from {', '.join(result['bags'])} "
+                       f"(with the rig of {result['rig_from']}: its forcing, mass, sensor, "
+                       "actuator and budget)"]
+                      + [f"{k} = {v['value']!r} +- {v['stderr']:.3g}" for k, v in si.items()])
 
 
 def add_identify_parser(sub) -> None:
@@ -80,6 +115,14 @@ def add_identify_parser(sub) -> None:
     s.add_argument("--out", type=non_empty_path, metavar="FILE",
                    help="write the identified model as a ROS 2 parameter file (only after a "
                         "good fit)")
+    s.add_argument("--rig", metavar="FILE",
+                   help="the rig file the bags were recorded on, for the model in SI "
+                        "(natural frequency, damping ratio, restitution, gap) when the bags "
+                        "carry none on grazing/rig (docs/rig.md)")
+    s.add_argument("--out-rig", type=non_empty_path, metavar="FILE",
+                   help="write the identified model as a rig file (the bag's or --rig's rig "
+                        "with the fitted natural frequency, damping, restitution and gap; only "
+                        "after a good fit)")
     s.add_argument("--no-impacts", action="store_true",
                    help="ignore the recorded impacts (oscillator/impact): find them in the "
                         "motion")

@@ -29,7 +29,7 @@ __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_st
            "cmd_sweep", "cmd_figures"]
 
 #: Options of the 1-DOF commands that a model file replaces (refused with --model).
-ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--c1", "--c2",
+ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--rig", "--c1", "--c2",
                    "--delay", "--method", "--optimize", "--sensor-rate", "--estimator",
                    "--x0", "--v0", "--dx0", "--dv0", "--lyapunov", "--fidelity", "--tol",
                    "--engine", "--component", "--start", "--bags", "--docs")

@@ -10,18 +10,15 @@ through the ``clock`` they are given (``time.monotonic`` in the node, a fake in 
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Protocol
 
 import numpy as np
 
 from grazing_control.plant.engine import Engine, Event
+from grazing_control.plant.schedule import PREDICTION_HOLD, Prediction
 
 __all__ = ["Sink", "Loop", "PREDICTION_HOLD"]
-
-#: Consecutive missing answers a prediction stands in for (Loop.substitute).
-PREDICTION_HOLD = 10
 
 
 class Sink(Protocol):
@@ -74,7 +71,7 @@ class Loop:
         self.sink = sink
         self.clock = clock
         self.stats = {"applied": 0, "late": 0, "lost": 0, "predicted": 0}
-        self.prediction = None     # (k, dv): the last answer's prediction for sample k
+        self.prediction = Prediction()   # the last applied answer's, for the next sample
         self.latencies = []
         self.lags = []
         self.finished = False
@@ -88,7 +85,7 @@ class Loop:
     def remember(self, k: int, predicted: float) -> None:
         """Sample k's answer was applied: keep its prediction for sample k + 1 (NaN:
         none; issue 16 §3)."""
-        self.prediction = (k + 1, predicted) if math.isfinite(predicted) else None
+        self.prediction.remember(k, predicted)
 
     def substitute(self, k: int, key: tuple) -> float:
         """Sample k's answer missed its deadline or was lost: with on_miss = predict the
@@ -98,15 +95,14 @@ class Loop:
         to PREDICTION_HOLD consecutive missing answers: near the controlled orbit (a
         fixed point of the controlled map, the study's Eq. 28 on Pi2) the correction is
         the same at every sample, so a second miss in a row costs nothing either. An
-        older prediction is not used (no correction).
+        older prediction is not used (no correction; plant.schedule.Prediction).
         """
-        pred = self.prediction
-        if (self.settings.on_miss == "predict" and pred is not None
-                and 0 <= k - pred[0] < PREDICTION_HOLD):
-            self.stats["predicted"] += 1
-            self.sink.substituted(k, key, pred[1])
-            return pred[1]
-        return 0.0
+        value = self.prediction.stand_in(k) if self.settings.on_miss == "predict" else None
+        if value is None:
+            return 0.0
+        self.stats["predicted"] += 1
+        self.sink.substituted(k, key, value)
+        return value
 
     def emit(self, ev: Event) -> tuple:
         """Publish one event (counting impacts); its stamp key."""

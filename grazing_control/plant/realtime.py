@@ -9,9 +9,11 @@ the answer does not include that work). Two ways to act (docs/nodes.md, "Modes")
   t_k + actuation_delay (+ jitter), the lockstep period bit for bit
   (:meth:`grazing_control.plant.engine.Engine.actuate`, docs/theory_delay.md), if it
   has arrived by then; otherwise the deadline is missed (counted and handed to the
-  sink): the last answer's prediction acts in its place (``on_miss`` = predict,
-  :meth:`~grazing_control.plant.loop.Loop.substitute`) or nothing (drop), and the
-  answer, when it comes, is dropped as late;
+  sink): the last answer's prediction acts in its place (``on_miss`` = predict) or
+  nothing (drop), and the answer, when it comes, is dropped as late. The timing is
+  the actuation engine's, :class:`grazing_control.plant.schedule.ActuationSchedule`
+  (in simulation time, each sample a section keyed by its stamp), the one any rig
+  driver uses;
 * on arrival: the correction acts at the simulation time of its arrival, splitting
   the period there (:meth:`~grazing_control.plant.engine.Engine.split`); it must answer
   one of the last two samples, once; an answer after the next sample went out is still
@@ -29,13 +31,13 @@ more (the rig's safe state), the sink is told (``tripped``) and the scene ends.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 from grazing_control.plant.engine import Engine, Event
 from grazing_control.plant.loop import Loop
+from grazing_control.plant.schedule import ActuationSchedule, Section
 from grazing_control.plant.watchdog import Watchdog, excursion_scale
 
-__all__ = ["Deadline", "Realtime", "CLOCK_TICK", "MIN_TICK", "STREAM_TICK"]
+__all__ = ["Realtime", "CLOCK_TICK", "MIN_TICK", "STREAM_TICK"]
 
 #: Longest wall time between two wake-ups (each publishes /clock), seconds.
 CLOCK_TICK = 5e-3
@@ -50,31 +52,19 @@ MIN_TICK = 5e-5
 STREAM_TICK = 5e-4
 
 
-class Deadline(NamedTuple):
-    """Scheduled actuation: sample k's actuation instant and its answer once it arrives."""
-
-    t: float          # actuation time t_k + delay (simulation time)
-    delay: float      # delay after the sample (actuation_delay + jitter)
-    key: tuple        # the sample's stamp key
-    k: int            # sample index
-    sent: float       # wall time the sample was published
-    dv: float | None  # the answer, None until it arrives
-    predicted: float = math.nan   # the answer's prediction for sample k + 1
-
-
 class Realtime(Loop):
     """The realtime loop over an engine (see the module docstring)."""
 
     t0 = 0.0           # simulation time at wall time wall0
     wall0 = 0.0
     sample = None      # stamp key of the latest sample
-    deadline = None    # scheduled: the current sample's Deadline
+    delay = 0.0        # scheduled: the current sample's delay (actuation_delay + jitter)
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.pending = {}      # stamp key -> (wall time sent, k), the last two unanswered
-        self.early = {}        # stamp key -> (dv, wall, predicted): answers of samples
-        #                        not yet published (a stream controller may answer first)
+        # each sample a section keyed by its stamp (wall time it went out as ``sent``);
+        # its answers, early ones included, and (scheduled) its deadline
+        self.schedule = ActuationSchedule(prediction=self.prediction, counts=self.stats)
         self.queue = []        # the current period's events not yet published, in time order
         self._deviation = type(self.engine) is Engine   # the excursion check reads (dx, dv)
         self._scaled = None     # the model the watchdog's excursion scale is for
@@ -93,9 +83,7 @@ class Realtime(Loop):
         """After ``engine.reset()``: t = 0 now, and its sample 0 ``ev`` goes out."""
         self.t0, self.wall0 = 0.0, self.clock()
         self.finished = False
-        self.pending.clear()
-        self.early.clear()
-        self.deadline = None
+        self.schedule.clear()
         self.watchdog = Watchdog(self.settings.watchdog)   # a new run: a new watchdog
         self._scaled = None
         self.publish_sample(ev)
@@ -110,21 +98,22 @@ class Realtime(Loop):
     def publish_sample(self, ev: Event) -> None:
         """Sample k goes out (as measured); its uncorrected period is integrated first."""
         engine = self.engine
-        if not self.settings.scheduled and self.sample in self.pending:
+        schedule = self.schedule
+        if not self.settings.scheduled and schedule.waiting(self.sample):
             # on arrival: the previous sample had no answer before this one (a miss)
-            self.trip(self.watchdog.outcome(self.pending[self.sample][1], missed=True))
+            self.trip(self.watchdog.outcome(schedule.unanswered[self.sample].k, missed=True))
             if self.finished:
                 return
         self.queue = engine.begin_period(0.0)
         sent = self.clock()
         self.sample = self.emit(engine.measured(ev))
-        self.pending[self.sample] = (sent, engine.k)
-        if len(self.pending) > 2:                        # keep the last two samples
-            del self.pending[next(iter(self.pending))]
+        start = None                                     # on arrival: no deadline
         if self.settings.scheduled:                      # sample k's actuation instant
-            delay = engine.actuation_delay()
-            self.deadline = Deadline(ev.t + engine.actuation_start(delay), delay,
-                                     self.sample, engine.k, sent, None)
+            self.delay = engine.actuation_delay()
+            start = ev.t + engine.actuation_start(self.delay)
+        # an answer may come before its sample, for the next two periods at most
+        sec = schedule.section(engine.k, self.sample, ev.t, start, sent,
+                               early_until=ev.t + 2.0 * engine.p.period + 1e-6)
         # pace: how late the sample went out against its simulation time
         lag = sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale
         self.lags.append(lag)
@@ -135,14 +124,11 @@ class Realtime(Loop):
                                        (engine.dx, engine.dv) if self._deviation else None))
         if self.finished:
             return
-        early = self.early.pop(self.sample, None)
-        if early is not None:                            # answered before it went out
-            dv, wall, predicted = early
-            self.pending.pop(self.sample)
-            self.latencies.append(wall - sent)
-            self.sink.latency(wall - sent)
-            if self.deadline is not None:
-                self.deadline = self.deadline._replace(dv=dv, predicted=predicted)
+        if sec.value is not None:                        # answered before it went out
+            dv = sec.value
+            self.latencies.append(sec.received - sent)
+            self.sink.latency(sec.received - sent)
+            if start is not None:                        # acts at its deadline
                 return
             self.trip(self.watchdog.outcome(engine.k, missed=False, acting=dv != 0.0))
             if self.finished:
@@ -167,9 +153,7 @@ class Realtime(Loop):
         or actuation deadline exactly, at the next stream event no sooner than STREAM_TICK
         from now."""
         ts = self.settings.time_scale
-        exact = self.engine.seg.te
-        if self.deadline is not None:
-            exact = min(exact, self.deadline.t)
+        exact = min(self.engine.seg.te, self.schedule.next_start())
         due = exact
         if self.queue and self.queue[0].t < exact:
             due = min(exact, max(self.queue[0].t, now + STREAM_TICK * ts))
@@ -179,15 +163,15 @@ class Realtime(Loop):
         """Publish everything due up to simulation time ``now``, actuating on schedule."""
         while not self.finished:
             q = self.queue
-            dl = self.deadline
-            due = dl is not None and dl.t <= now
+            start = self.schedule.next_start()
+            due = start <= now
             i = 0
-            while i < len(q) and (q[i].t < dl.t if due else q[i].t <= now):
+            while i < len(q) and (q[i].t < start if due else q[i].t <= now):
                 self.emit(q[i])
                 i += 1
             del q[:i]
             if due:
-                self._actuate(dl)
+                self._actuate(self.schedule.pop_due(now))
                 continue
             if now < self.engine.seg.te:
                 return
@@ -221,62 +205,35 @@ class Realtime(Loop):
         self.advance(self.now(wall))     # a deadline already due is handled first
         if self.finished:
             return
-        dl = self.deadline
-        sent = self.pending.pop(key, None)
-        if sent is None and self._keep_early(key, (dv, wall, predicted)):
+        answer = self.schedule.command(key, dv, predicted, wall, key[0] + key[1] * 1e-9)
+        if answer.outcome == "early":
             return
-        if sent is None:
+        if answer.outcome == "ignored":
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
             return
-        sent, k = sent
-        latency = wall - sent
+        latency = wall - answer.section.sent
         self.latencies.append(latency)
         self.sink.latency(latency)
-        if dl is None or dl.key != key:
-            self.stats["late"] += 1
+        if answer.outcome == "late":      # counted; its prediction kept if the newest
             self.sink.late(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
                            "after its actuation time")
-            # too late for its own sample, but its prediction is the newest for the next
-            if self.prediction is None or self.prediction[0] <= k:
-                if math.isfinite(predicted):
-                    self.remember(k, predicted)
-            return
-        self.deadline = dl._replace(dv=dv, predicted=predicted)
 
-    def _keep_early(self, key: tuple, answer: tuple) -> bool:
-        """Keep the answer of a sample not yet published (its stamp lies after the
-        latest sample's, within the next two periods): it acts when that sample goes
-        out, as if it had arrived then. A stream controller may estimate the Pi2 state
-        from the stream's samples before the sample instant and answer before it."""
-        if self.sample is None or key <= self.sample or key in self.early:
-            return False
-        period = self.engine.p.period
-        if key[0] + key[1] * 1e-9 > self.engine.t + 2.0 * period + 1e-6:
-            return False
-        self.early[key] = answer
-        if len(self.early) > 2:
-            del self.early[next(iter(self.early))]
-        return True
-
-    def _actuate(self, dl: Deadline) -> None:
+    def _actuate(self, sec: Section) -> None:
         """Sample k's actuation instant: its answer at t_k + delay; at a deadline miss or
-        a lost answer the previous answer's prediction (on_miss = predict) or none."""
-        self.deadline = None
-        dv = dl.dv
-        self.trip(self.watchdog.outcome(dl.k, missed=dv is None, acting=bool(dv)))
+        a lost answer the previous answer's prediction (on_miss = predict) or none
+        (ActuationSchedule.act); the watchdog sees the outcome first."""
+        self.trip(self.watchdog.outcome(sec.k, missed=sec.value is None,
+                                        acting=bool(sec.value)))
         if self.finished:
             return                       # the safe state: nothing acts
-        if dv is None:
-            self.sink.miss(dl.k, dl.key, dl.t, self.clock() - dl.sent)
-            dv = self.substitute(dl.k, dl.key)
-        elif self.engine.correction_lost():
-            self.stats["lost"] += 1
-            dv = self.substitute(dl.k, dl.key)
-        else:
-            self.stats["applied"] += 1
-            self.remember(dl.k, dl.predicted)
-        self.queue = self.engine.actuate(dv, dl.delay)
+        lost = sec.value is not None and self.engine.correction_lost()
+        act = self.schedule.act(sec, lost=lost, on_miss=self.settings.on_miss)
+        if act.outcome == "missed":
+            self.sink.miss(sec.k, sec.key, sec.start, self.clock() - sec.sent)
+        if act.substituted:
+            self.sink.substituted(sec.k, sec.key, act.value)
+        self.queue = self.engine.actuate(act.value, self.delay)
 
     def _on_arrival(self, key: tuple, dv: float) -> bool:
         """Apply a correction at the simulation time of its arrival.
@@ -285,11 +242,11 @@ class Realtime(Loop):
         one before, when the answer comes after the next sample went out (counted as
         late, applied all the same: the next opportunity). Anything else is ignored.
         """
-        sent, _ = self.pending.pop(key, (None, None))
-        if sent is None and not self.finished and self._keep_early(
-                key, (dv, self.clock(), math.nan)):
+        sec = self.schedule.claim(key)
+        if sec is None and not self.finished and self.schedule.keep_early(
+                key, key[0] + key[1] * 1e-9, dv, math.nan, self.clock()):
             return False
-        if sent is None or self.finished:
+        if sec is None or self.finished:
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
             return False
@@ -304,7 +261,7 @@ class Realtime(Loop):
             self.trip(self.watchdog.outcome(self.engine.k, missed=False, acting=dv != 0.0))
             if self.finished:
                 return False
-        latency = wall - sent
+        latency = wall - sec.sent
         self.latencies.append(latency)
         self.sink.latency(latency)
         if self.engine.correction_lost():

@@ -31,16 +31,23 @@ import math
 from dataclasses import dataclass, replace
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.support.units import UnitError, format_quantity, quantity
+from grazing_control.support.units import SI_UNIT, UnitError, format_quantity, quantity
 
 __all__ = ["RigError", "Scales", "Sensor", "Actuator", "Rig", "load_rig", "rig_from_dict",
-           "rig_to_dict", "rig_with_model", "MIN_SAMPLES_PER_PERIOD"]
+           "rig_to_dict", "rig_with_model", "MIN_SAMPLES_PER_PERIOD", "MAX_SAMPLES_PER_PERIOD",
+           "MAGNITUDE"]
 
 TWO_PI = 2.0 * math.pi
 
 #: Fewest sensor samples per forcing period a Pi2 estimate from the stream is made from
 #: (the model estimator fits the period's samples, docs/theory_estimation.md).
 MIN_SAMPLES_PER_PERIOD = 20
+#: Most sensor samples per forcing period: the estimator handles every sample of a
+#: period at each section (its work grows with their number); decimate a faster stream.
+MAX_SAMPLES_PER_PERIOD = 10000
+#: Every dimensional value other than an angle is 0 (where the field allows it) or of
+#: magnitude in [1e-12, 1e12] in SI units: beyond, the model's scales under- or overflow.
+MAGNITUDE = (1e-12, 1e12)
 
 
 class RigError(ParameterError):
@@ -262,6 +269,11 @@ def _q(doc, prefix, key, dimension, *, ok=None, valid="", default=None):
         raise RigError(str(exc)) from None
     if ok is not None and not ok(value):
         raise RigError(f"{field}={doc[key]!r} is invalid: valid range is {valid}")
+    lo, hi = MAGNITUDE
+    if dimension != "angle" and value != 0.0 and not lo <= abs(value) <= hi:
+        raise RigError(f"{field}={doc[key]!r} is invalid: valid range is {lo:g} to {hi:g} "
+                       f"{SI_UNIT[dimension]} in magnitude (the model's scales under- or "
+                       "overflow beyond)")
     return value
 
 
@@ -420,14 +432,24 @@ def _check_model(rig: Rig, doc) -> None:
                        f"pulse centred at the budget must start after the section: valid "
                        f"range is pulse_width <= 2 budget = {2 * rig.budget:.6g} s")
     spp = rig.sensor.rate * period
-    if spp < MIN_SAMPLES_PER_PERIOD:
+    if not MIN_SAMPLES_PER_PERIOD <= spp <= MAX_SAMPLES_PER_PERIOD:
         raise RigError(f"sensor.rate={doc['sensor']['rate']!r} is invalid: {spp:.3g} samples "
-                       f"per forcing period; valid range is sensor.rate >= "
-                       f"{MIN_SAMPLES_PER_PERIOD} x forcing.frequency = "
-                       f"{MIN_SAMPLES_PER_PERIOD * rig.frequency:.6g} Hz")
+                       f"per forcing period; valid range is {MIN_SAMPLES_PER_PERIOD} x "
+                       f"forcing.frequency <= sensor.rate <= {MAX_SAMPLES_PER_PERIOD} x "
+                       f"forcing.frequency, {MIN_SAMPLES_PER_PERIOD * rig.frequency:.6g} to "
+                       f"{MAX_SAMPLES_PER_PERIOD * rig.frequency:.6g} Hz")
     if not 1e-100 < p.amplitude < 1e100 or p.zeta * p.period > 300.0:
         raise RigError(f"forcing.frequency={doc['forcing']['frequency']!r} is invalid: the "
                        f"model's omega = {p.omega:.6g} is outside the computable range")
+    # the design's delay limit (docs/theory_delay.md, 2): the pulse acts before the
+    # grazing phase tau* of the next period, T - pi2_offset / omega after the section
+    limit = (p.period - p.pi2_offset / p.omega) / rig.omega_n
+    if not rig.budget + w / 2.0 < limit:
+        raise RigError(f"controller.budget={doc['controller']['budget']!r} is invalid: the "
+                       f"pulse's end, budget + pulse_width / 2 = {rig.budget + w / 2:.6g} s, "
+                       f"must come before the grazing phase of the next period, "
+                       f"(T - pi2_offset / omega) / omega_n = {limit:.6g} s after the section "
+                       "(a later correction cannot cancel the grazing singularity)")
 
 
 # ---------------------------------------------------------------------- writing

@@ -20,6 +20,7 @@ from . import reader
 from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
 from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
                       section_phase_problems)
+from .rig_record import check_against_model, read_rig, si_numbers
 from .scenes import load, parse_topic_options
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
@@ -416,13 +417,20 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                 n["estimate"] = estimate_numbers(estimates, sd, setup)
             data.problems.extend(scene_problems(sd, setup, n))
             numbers.append(n)
+        rig, rig_notes = read_rig(bag)
+        if rig is not None:
+            rig_notes += [f"rig mismatch: {m} (the SI numbers use the rig's scales)"
+                          for m in check_against_model(rig, setup.params)]
+            for sd, n in zip(data.scenes, numbers):
+                n["si"] = si_numbers(rig, n, sd.scene)
         label = _label(Path(bag), used)
         entry = {"bag": str(bag), "file": str(data.file), "label": label,
                  "closed_cleanly": data.complete, "messages": data.message_count,
                  "messages_read": data.messages_read,
-                 "topics_used": data.present, "notes": data.notes + setup.notes,
+                 "topics_used": data.present, "notes": data.notes + setup.notes + rig_notes,
                  "problems": data.problems,
                  "parameter_record": bool(data.parameters.get("nodes")),
+                 "rig": None if rig is None else _rig_entry(rig),
                  "setup": {"params": ({k: getattr(setup.params, k) for k in
                                        ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")}
                                       if setup.params else None),
@@ -443,6 +451,8 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                   "* parameters: " + "; ".join(
                       f"{k} = {_setup_value(setup, k)} ({v})" for k, v in setup.sources.items()),
                   "* topics used: " + ", ".join(f"{r} = {t}" for r, t in data.present.items())]
+        if rig is not None:
+            lines.append(_rig_line(entry["rig"]))
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
         lines.append("")
@@ -454,6 +464,8 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                 plot_scene(sd, n, setup, title, out / fig_name)
                 n["figure"] = fig_name
             lines += _scene_lines(slabel, n, fig_name)
+            if "si" in n:
+                lines[-1:-1] = _si_lines(n["si"])
             rows.append(_row(slabel, setup, n))
             entry["scenes"].append(_jsonable(n))
         report["bags"].append(_jsonable(entry))
@@ -472,6 +484,56 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
 
 
 _finite = finite
+
+
+def _rig_entry(rig) -> dict:
+    """The report's summary of the bag's rig (grazing/rig)."""
+    s = rig.scales
+    return {"mass_kg": rig.mass, "natural_frequency_Hz": rig.natural_frequency,
+            "forcing_frequency_Hz": rig.frequency, "force_amplitude_N": rig.force_amplitude,
+            "pulse_width_s": rig.actuator.pulse_width, "sensor_noise_m": rig.sensor.noise,
+            "length_scale_m": s.length, "velocity_scale_m_per_s": s.velocity,
+            "time_scale_s": s.time}
+
+
+def _rig_line(r) -> str:
+    return (f"* rig (grazing/rig): m = {r['mass_kg']:.6g} kg, f_n = "
+            f"{r['natural_frequency_Hz']:.6g} Hz, f = {r['forcing_frequency_Hz']:.9g} Hz, "
+            f"F0 = {r['force_amplitude_N']:.6g} N; scales l = {r['length_scale_m']:.6g} m, "
+            f"omega_n l = {r['velocity_scale_m_per_s']:.6g} m/s, 1/omega_n = "
+            f"{r['time_scale_s']:.6g} s (docs/rig.md)")
+
+
+def _si_lines(si) -> list:
+    """The scene's main numbers in the rig's SI units (:func:`.rig_record.si_numbers`)."""
+    def pair(key):
+        x, v = si[key]
+        return f"{x:.4g} m, {v:.4g} m/s"
+
+    parts = [f"{si['duration_s']:.6g} s"]
+    if "control_on_after_s" in si:
+        parts.append(f"control on after {si['control_on_after_s']:.6g} s")
+    if "converged_after_s" in si:
+        parts.append(f"converged after {si['converged_after_s']:.6g} s")
+    lines = ["* in SI (the rig's units): " + ", ".join(parts)]
+    if "orbit_pi2_m_and_m_per_s" in si:
+        lines.append(f"* in SI: controlled orbit on Π2 ({pair('orbit_pi2_m_and_m_per_s')}), "
+                     f"impact velocity {si['orbit_v_minus_m_per_s']:.4g} m/s; final Π2 "
+                     f"{pair('final_pi2_m_and_m_per_s')}, "
+                     f"{pair('final_vs_exact_orbit_m_and_m_per_s')} from the orbit")
+    if "pi2_spread_m_and_m_per_s" in si:
+        lines.append(f"* in SI: Π2 spread about the controlled orbit (rms, last "
+                     f"{si['pi2_spread_window']} samples): {pair('pi2_spread_m_and_m_per_s')}")
+    c = si["largest_correction"]
+    force = (f", force {c['force_N']:.4g} N over {c['pulse_width_s'] * 1e3:.4g} ms"
+             if "force_N" in c else "")
+    lines.append(f"* in SI: largest correction Δv {c['velocity_m_per_s']:.4g} m/s, impulse "
+                 f"{c['impulse_N_s']:.4g} N s{force}")
+    if "estimate_measured_spread_m" in si:
+        lines.append(f"* in SI: estimate error std {pair('estimate_error_std_m_and_m_per_s')}; "
+                     f"Π2 spread measured {si['estimate_measured_spread_m']:.4g} m, predicted "
+                     f"from the reported covariance {si['estimate_predicted_spread_m']:.4g} m")
+    return lines
 
 
 def _ndof_bag(bag, data, label, out, tol, figures):
@@ -573,11 +635,13 @@ def main(args):
                 print(f"{where}: {b['setup']['mode']}, uncontrolled (the controller never "
                       f"acted), {s['samples']} samples, {kind}")
                 continue
+            spread = (s.get("si") or {}).get("pi2_spread_m_and_m_per_s")
             print(f"{where}: "
                   f"{b['setup']['mode']}, control on at {s['control_on_sample']}, converged after "
                   f"{s['samples_to_converge']}, contraction measured {_fmt(m.get('rho'), '.5f')} vs "
                   f"predicted {_fmt(s['predicted'].get('rho'), '.5f')}, |final - exact| "
-                  f"{_fmt(s.get('final_vs_exact_orbit'), '.1e')}")
+                  f"{_fmt(s.get('final_vs_exact_orbit'), '.1e')}"
+                  + (f", Π2 spread {spread[0]:.3g} m (rig units)" if spread else ""))
         for p_ in b["problems"]:
             print(f"  cannot use: {p_}")
     print(f"report: {Path(args.out) / 'report.md'} (numbers: {Path(args.out) / 'report.json'})")

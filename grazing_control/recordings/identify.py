@@ -25,7 +25,7 @@ from grazing_control.ros.recording.record import run_parameters
 from . import reader
 
 __all__ = ["TOPICS", "load_recording", "identify_bag", "identify_bags", "combine",
-           "format_report", "PARAMETER_ORDER"]
+           "format_report", "si_report", "PARAMETER_ORDER"]
 
 #: Role -> default topic (the simulator's names in the root namespace).
 TOPICS = {
@@ -192,7 +192,57 @@ def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
     record = {k: sim[k] for k in ("zeta", "r", "omega", "delta_d") if k in sim}
     if record:
         report["parameter_record"] = record
+    cov = ident.nondimensional_covariance
+    report["covariance"] = {"names": list(_SI_FROM),
+                            "matrix": None if cov is None else cov[:4, :4].tolist()}
     return report
+
+
+#: The nondimensional parameters the SI model is made of (their covariance is reported).
+_SI_FROM = ("zeta", "r", "omega", "d")
+
+
+def _bag_rig(bags, rig, notes):
+    """(Rig, where from): the first bag's rig on grazing/rig, else ``rig`` (--rig)."""
+    from .rig_record import read_rig
+
+    found = []
+    for b in bags:
+        r, why = read_rig(b)
+        notes += [f"{b}: {w}" for w in why if "cannot be used" in w or "type" in w]
+        if r is not None:
+            found.append((b, r))
+    if found:
+        if any(r != found[0][1] for _, r in found[1:]):
+            notes.append("the bags carry different rigs: the first one's is used")
+        return found[0][1], f"{found[0][0]} (grazing/rig)"
+    if rig is not None:
+        return rig, "--rig"
+    return None, None
+
+
+def si_report(result: dict, bags, rig=None) -> None:
+    """Add the identified model in SI to ``result`` (``si``: natural frequency, damping
+    ratio, restitution, gap with standard errors; ``rig_from``; ``_rig``: the rig file's
+    Rig for --out-rig) where a bag carries its rig, or ``rig`` is given (docs/rig.md)."""
+    from .rig_record import model_in_si
+
+    notes = []
+    found, where = _bag_rig(bags, rig, notes)
+    if notes:
+        result.setdefault("notes", [])
+        result["notes"] = list(result["notes"]) + notes
+    if found is None:
+        return
+    par = result["parameters"]
+    values = {k: par[k]["value"] for k in _SI_FROM}
+    cov = result.get("covariance", {}).get("matrix")
+    if cov is None or "per_bag" in result:     # combined bags: their combined errors
+        cov = np.diag([par[k]["stderr"] ** 2 for k in _SI_FROM])
+    si = model_in_si(found, values, cov)
+    result["si"] = si["parameters"]
+    result["rig_from"] = where
+    result["_rig"] = si["rig"]
 
 
 def combine(reports) -> dict:
@@ -235,7 +285,11 @@ def format_report(result: dict) -> str:
     lines = [f"identification of {', '.join(result['bags'])}: fit {result['fit'].upper()}"]
     lines += [_fmt(n, result["parameters"][n]) for n in PARAMETER_ORDER]
     lines.append("  (zeta, r, omega, delta_d, d: the study's nondimensional model; "
-                 "natural_frequency, forcing_amplitude, forcing_phase: the rig's units)")
+                 "natural_frequency, forcing_amplitude, forcing_phase: the recording's units)")
+    if "si" in result:
+        lines.append(f"  in SI, with the rig of {result['rig_from']} (its forcing, amplitude "
+                     "and mass held):")
+        lines += ["  " + _fmt(n, e) for n, e in result["si"].items()]
     for rep in result.get("per_bag", [result]):
         res, sim = rep["residuals"], rep["resimulation"]
         lines.append(f"  {rep['bag']}: {rep['samples']} samples, {rep['arcs']} arcs, "

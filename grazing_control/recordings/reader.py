@@ -42,7 +42,7 @@ from grazing_control.ros.recording.bounded import (  # noqa: F401  (re-exported)
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
            "decode_joint_state", "decode_joint_states", "joint_count", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
-           "decode_vector3_stamped",
+           "decode_vector3_stamped", "decode_time_reference",
            "decode_float64", "decode_strings"]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -578,6 +578,15 @@ def decode_vector3_stamped(bag: RawBag, topic: str) -> dict:
     b, stamp, pos = decode_stamped(bag, topic)
     p = _align(pos, 8)
     return _columns(b, stamp=stamp, vx=b.f64(p), vy=b.f64(p + 8), vz=b.f64(p + 16))
+
+
+def decode_time_reference(bag: RawBag, topic: str) -> dict:
+    """sensor_msgs/TimeReference columns: stamp_ns (header.stamp: ROS time), time_ref_ns
+    (the rig clock, docs/driver_contract.md), times, ok (the source string is skipped)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    p = _align(pos, 4)
+    sec, nsec = b.i32(p), b.u32(p + 4)
+    return _columns(b, stamp=stamp, time_ref=sec * 1_000_000_000 + nsec)
 
 
 def decode_float64(bag: RawBag, topic: str) -> dict:

@@ -237,7 +237,8 @@ def load(bag, topics: dict | None = None) -> BagData:
             continue
         present[role] = name
     known = set(topics.values())
-    extra = sorted(t for t in raw.channels if t not in known)
+    extra = sorted(t for t in raw.channels if t not in known
+                   and not t.endswith("/grazing/rig"))     # the rig: read by .rig_record
     if extra:
         notes.append(f"other topics not used by the analysis: {', '.join(extra)}")
     missing = [f"{topics[r]} ({r})" for r in topics if r not in present

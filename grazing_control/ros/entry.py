@@ -25,7 +25,8 @@ import os
 import signal
 import sys
 
-__all__ = ["MODULES", "sim_node", "controller_node", "recorder_node", "live_node"]
+__all__ = ["MODULES", "sim_node", "controller_node", "recorder_node", "live_node",
+           "effort_bridge", "rig_mock"]
 
 #: Executable name -> the module whose ``main(args=None)`` runs it.
 MODULES = {
@@ -33,6 +34,8 @@ MODULES = {
     "controller_node": "grazing_control.ros.controller_node",
     "recorder_node": "grazing_control.ros.recorder_node",
     "live_node": "grazing_control.ros.live_node",
+    "effort_bridge": "grazing_control.ros.effort_bridge",
+    "rig_mock": "grazing_control.recordings.rig_mock",
 }
 
 
@@ -66,3 +69,13 @@ def recorder_node():
 def live_node():
     """The ``live_node`` executable (:mod:`grazing_control.ros.live_node`)."""
     return _run("live_node")
+
+
+def effort_bridge():
+    """The ``effort_bridge`` executable (:mod:`grazing_control.ros.effort_bridge`)."""
+    return _run("effort_bridge")
+
+
+def rig_mock():
+    """The ``rig_mock`` executable (:mod:`grazing_control.recordings.rig_mock`)."""
+    return _run("rig_mock")

@@ -30,7 +30,7 @@ import os
 import stat
 import tempfile
 
-__all__ = ["write_yaml_atomic", "read_yaml_file", "YamlFileError", "MAX_FILE_BYTES",
+__all__ = ["write_yaml_atomic", "read_yaml_file", "parse_yaml_bytes", "YamlFileError", "MAX_FILE_BYTES",
            "MAX_NODES", "MAX_DEPTH"]
 
 #: The largest parameter file read (a parameter file is a few kB; an n-DOF model of 100
@@ -51,8 +51,6 @@ class YamlFileError(ValueError):
 def read_yaml_file(path):
     """The YAML document of ``path`` (None for an empty file), within the limits of the
     module docstring; YamlFileError (one line naming the file) otherwise."""
-    import yaml
-
     path = os.fspath(path)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO must not block here
@@ -73,23 +71,32 @@ def read_yaml_file(path):
         raise YamlFileError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     finally:
         os.close(fd)
+    return parse_yaml_bytes(data, path)
+
+
+def parse_yaml_bytes(data: bytes, name: str):
+    """The YAML document of ``data`` (a file's bytes, or a recorded text's) within the
+    limits of the module docstring; YamlFileError (one line starting with ``name``)
+    otherwise."""
+    import yaml
+
     if len(data) > MAX_FILE_BYTES:
-        raise YamlFileError(f"{path}: larger than {MAX_FILE_BYTES} bytes, the limit of a "
+        raise YamlFileError(f"{name}: larger than {MAX_FILE_BYTES} bytes, the limit of a "
                             "parameter file")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise YamlFileError(f"{path}: not UTF-8 text (byte 0x{data[exc.start]:02x} at "
+        raise YamlFileError(f"{name}: not UTF-8 text (byte 0x{data[exc.start]:02x} at "
                             f"offset {exc.start})") from None
     try:
         return yaml.load(text, Loader=_get_loader())
     except _LimitError as exc:
-        raise YamlFileError(f"{path}: {exc}") from None
+        raise YamlFileError(f"{name}: {exc}") from None
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         at = f" (line {where.line + 1})" if where is not None else ""
         why = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise YamlFileError(f"{path}: is not valid YAML{at}: {why}") from None
+        raise YamlFileError(f"{name}: is not valid YAML{at}: {why}") from None
 
 
 class _LimitError(ValueError):

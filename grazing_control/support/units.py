@@ -62,7 +62,10 @@ def quantity(field: str, value, dimension: str) -> float:
     """
     units = DIMENSIONS[dimension]
     accepted = ", ".join(units)
-    if isinstance(value, bool) or isinstance(value, (int, float)):
+    if isinstance(value, bool):
+        raise UnitError(f"{field}={value!r} is invalid: expected a number with a unit "
+                        f"({accepted})")
+    if isinstance(value, (int, float)):
         raise UnitError(f"{field}={value!r} has no unit: write it with one of {accepted} "
                         f"(e.g. '{value} {next(iter(units))}')")
     if not isinstance(value, str):

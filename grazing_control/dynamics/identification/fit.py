@@ -230,6 +230,8 @@ class Identification:
     stderr : dict name -> standard error of the model's parameters (GLOBAL_NAMES).
     nondimensional : dict name -> (value, stderr) of the study's zeta, r, omega, d, delta_d.
     covariance : (6, 6) covariance of g.
+    nondimensional_covariance : (5, 5) covariance of (zeta, r, omega, d, delta_d) by the
+        delta method (inf on the diagonal of a parameter not identified).
     sigma : estimated noise standard deviation (data residuals).
     rms_x, rms_v : RMS of the position and velocity residuals.
     constraint_rms : RMS of the (unweighted) constraint violations.
@@ -261,6 +263,7 @@ class Identification:
     message: str
     events_moved: int = 0
     checks: dict = field(default_factory=dict)
+    nondimensional_covariance: np.ndarray | None = None
 
 
 def _covariance(J, sigma2, k=6):
@@ -443,6 +446,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     cov_nd[2, 2] += (phase.omega_stderr / g[1]) ** 2
     se_nd = np.sqrt(np.maximum(np.diag(cov_nd), 0.0))
     se_nd[inf_nd] = np.inf
+    cov_nd[np.flatnonzero(inf_nd), np.flatnonzero(inf_nd)] = np.inf
     xres = data[:rec.t.size]
     vres = data[rec.t.size:prob.offsets[2]]
     cons = res[prob.m_data:] / prob.weight
@@ -458,4 +462,5 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
         phase=phase, problem=prob, solution=p, arcs_used=prob.arcs.count,
         impacts_used=int(np.count_nonzero(prob.arcs.kind == 1)), samples_used=int(rec.t.size),
         dof=int(dof), converged=bool(sol.status > 0), message=str(sol.message),
+        nondimensional_covariance=cov_nd,
         events_moved=shifts)

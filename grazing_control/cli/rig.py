@@ -1,0 +1,454 @@
+"""``grazing rig FILE`` and ``--rig FILE``: a rig in SI units at the command line (docs/rig.md).
+
+``grazing rig FILE [--c2 C2 | --optimize noise] [--json]`` reads a rig file
+(:func:`grazing_control.plant.rig.load_rig`) and says what the package makes of it: the
+rig in SI as understood, the scales, the study's dimensionless model, d* and the gap at
+grazing, the design for the budget's actuation delay in SI (c1 in 1/s, c2, the pulse's
+force gains), the correction as a force pulse, the predicted Pi2 spread of the controlled
+orbit and whether the timing budget is feasible
+(:mod:`grazing_control.plant.rig_budget`). An infeasible budget or too slow a sensor is
+status 2 with one line naming ``controller.budget`` or ``sensor.rate`` and the numbers.
+
+``--rig FILE`` on design, orbit, continue, continue2, simulate, sweep, basins and
+robustness sets the model's options from the file (:func:`apply_rig`, the table
+:func:`rig_options`); an option the rig sets given as well is refused, naming both.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from grazing_control.oscillator.params import ParameterError
+from grazing_control.support.arguments import finite, integer_at_least
+
+__all__ = ["add_rig_option", "add_rig_parser", "apply_rig", "rig_options", "load",
+           "cmd_rig", "RIG_COMMANDS", "POSITION_ERROR", "VELOCITY_ERROR"]
+
+#: The commands that take ``--rig`` (their model options come from the file).
+RIG_COMMANDS = ("design", "orbit", "continue", "continue2", "simulate", "sweep", "basins",
+                "robustness")
+#: The errors ``grazing rig`` shows as force pulses: 1 um of position, 1 mm/s of velocity.
+POSITION_ERROR = 1e-6
+VELOCITY_ERROR = 1e-3
+
+
+def add_rig_option(parser) -> None:
+    """``--rig FILE`` on a subcommand's parser or group."""
+    parser.add_argument("--rig", metavar="FILE", default=None,
+                        help="take the model from this rig file in SI units (docs/rig.md, "
+                             "e.g. config/rigs/lab_20hz.yaml): zeta, r, omega, pi2_offset and "
+                             "Delta d, and where the command has them the actuation delay "
+                             "(the budget) and the sensor's samples per period; those options "
+                             "are then refused")
+
+
+def load(path, option: str = "--rig"):
+    """The Rig of ``path``; a ParameterError line naming ``option`` (if any), the file and
+    the field otherwise."""
+    from grazing_control.plant.rig import load_rig
+    from grazing_control.support.files import YamlFileError
+
+    prefix = f"{option} " if option else ""
+    try:
+        return load_rig(path)
+    except (YamlFileError, ParameterError) as exc:
+        raise ParameterError(f"{prefix}{exc}") from None
+
+
+def _given(argv, flag) -> bool:
+    return any(a == flag or a.startswith(flag + "=") for a in argv)
+
+
+def rig_options(rig, args) -> dict:
+    """option -> (attribute, value) that ``--rig`` sets on the parsed ``args`` of its
+    command (docs/rig.md, "--rig on the commands")."""
+    from grazing_control.plant.rig_budget import samples_per_period
+
+    p = rig.params()
+    out = {"--zeta": ("zeta", p.zeta), "--r": ("r", p.r), "--omega": ("omega", p.omega),
+           "--pi2-offset": ("pi2_offset", p.pi2_offset)}
+    delay = rig.dimensionless()["actuation_delay"]
+    command, study = args.command, getattr(args, "study", None)
+    if command == "design":
+        if p.delta_d < 0.0:          # the noise gain is that of the controlled 1/1 orbit
+            out["--delta-d"] = ("delta_d", p.delta_d)
+        out["--delay"] = ("delay", delay)
+        out["--sensor-rate"] = ("sensor_rate", samples_per_period(rig))
+    elif command in ("orbit", "simulate", "basins"):
+        out["--delta-d"] = ("delta_d", p.delta_d)
+    elif command == "robustness" and hasattr(args, "delta_d"):
+        if not p.delta_d < 0.0:
+            raise ParameterError(f"--rig: the rig's Delta d = {p.delta_d!r} >= 0 (its gap is "
+                                 "at or beyond grazing): robustness studies the controlled "
+                                 "1/1 orbit, Delta d < 0")
+        out["--delta-d"] = ("delta_d", [p.delta_d])
+    if command == "robustness" and study == "noise":
+        out["--delay"] = ("delay", delay)
+    elif command != "design" and hasattr(args, "delay") and getattr(args, "c2", None) is not None:
+        out["--delay"] = ("delay", delay)   # control on: it acts at the rig's budget
+    return out
+
+
+def apply_rig(args, argv) -> None:
+    """Apply ``args.rig`` (if any) to the parsed options of a :data:`RIG_COMMANDS`
+    command; refuse it with ``--params`` or with an option it sets. Removes ``args.rig``."""
+    path = getattr(args, "rig", None)
+    if getattr(args, "command", None) not in RIG_COMMANDS:
+        return
+    if hasattr(args, "rig"):
+        delattr(args, "rig")
+    if path is None:
+        return
+    if getattr(args, "params", None) is not None:
+        raise ParameterError("--rig FILE and --params FILE are both given: each gives the "
+                             "model; give one of them")
+    rig = load(path)
+    table = rig_options(rig, args)
+    both = [f for f in table if _given(argv, f)]
+    if both:
+        raise ParameterError(f"--rig FILE and {', '.join(both)} are both given: the rig file "
+                             f"sets {', '.join(table[f][0] for f in both)} (docs/rig.md); "
+                             "give one of them")
+    for attr, value in table.values():
+        setattr(args, attr, value)
+    if args.command == "sweep" and not any(name == "delta_d" for name, _ in args.grid):
+        import numpy as np
+
+        args.grid.append(("delta_d", np.array([rig.params().delta_d])))
+
+
+# ---------------------------------------------------------------------- grazing rig
+def _design(rig, args) -> tuple:
+    """(``grazing design``'s JSON for this rig, which c2 and why): the design of
+    cli/commands.py on the rig's options, with --c2 or --optimize noise."""
+    from .commands import cmd_design
+
+    ns = argparse.Namespace(command="design", model=None, json=True, c2=args.c2,
+                            optimize=None, estimator="model", out=None, method="exact",
+                            delta_d=None)
+    for attr, value in rig_options(rig, ns).values():
+        setattr(ns, attr, value)
+    if args.c2 is None:
+        ns.optimize = "noise"
+        how = ("the least noise gain in the admissible set (--optimize noise of grazing "
+               "design, at the rig's Delta d" if ns.delta_d is not None else
+               "the least noise gain in the admissible set (--optimize noise of grazing "
+               "design, at Delta d = -5e-6: the rig's gap is at or beyond grazing")
+        how += ", unit noise on x and v)"
+    else:
+        how = "--c2"
+    try:
+        return cmd_design(ns), how, ns
+    except ParameterError as exc:
+        if not str(exc).startswith("delay="):
+            raise
+        raise ParameterError(f"controller.budget={rig.budget * 1e3:.6g} ms: the design for its "
+                             f"actuation delay (budget x omega_n): {exc}") from None
+
+
+def _pulse(rig, dv_model: float) -> dict:
+    """A dimensionless correction as SI (m/s, N s, N over the pulse) and whether the
+    force is within the actuator's limit."""
+    out = rig.correction_si(dv_model)
+    limit = rig.actuator.force_limit
+    if "force_N" in out:
+        out["within_force_limit"] = bool(limit == 0.0 or abs(out["force_N"]) <= limit)
+    return out
+
+
+def _timing(rig, p, gains, args, target) -> dict:
+    from grazing_control.plant.rig_budget import (check_budget, samples_per_period,
+                                                  time_estimate, timing_budget)
+
+    n = samples_per_period(rig)
+    if args.compute_tail is not None:
+        measured = None
+        tail, how = args.compute_tail, "given by --compute-tail"
+    else:
+        measured = time_estimate(p, gains, n, rig.dimensionless()["sensor_noise"],
+                                 runs=args.runs, target=target or (0.0, 0.0))
+        if args.tail == "cpu":
+            tail = measured.cpu_p99
+            how = (f"CPU-time p99 of {measured.runs} measured here; wall p99 "
+                   f"{measured.p99 * 1e3:.3g} ms at load {measured.load:.2f}")
+        else:
+            tail = measured.p99
+            how = (f"wall-clock p99 of {measured.runs} measured here at load "
+                   f"{measured.load:.2f}; CPU p99 {measured.cpu_p99 * 1e3:.3g} ms")
+    b = timing_budget(rig, tail)
+    check_budget(b, rig.sensor.rate, how)
+    out = {"sensor_latency_s": b.sensor_latency, "sample_interval_s": b.sample_interval,
+           "estimate_s": b.compute, "estimate_from": how,
+           "actuator_latency_s": b.actuator_latency, "needed_s": b.needed,
+           "available_s": b.available, "slack_s": b.slack, "feasible": b.feasible}
+    if measured is not None:
+        out["measured"] = {"estimator": measured.estimator,
+                           "samples_per_period": measured.samples_per_period,
+                           "runs": measured.runs, "p50_s": measured.p50, "p99_s": measured.p99,
+                           "max_s": measured.max, "cpu_p99_s": measured.cpu_p99,
+                           "resets": measured.resets, "load_average": measured.load,
+                           "on": ("the controlled 1/1 orbit" if target else
+                                  "the motion from the grazing orbit's section (no "
+                                  "controlled 1/1 orbit)")}
+    return out
+
+
+def rig_report(rig, path, args) -> dict:
+    """The JSON of ``grazing rig`` (docs/rig.md, "grazing rig")."""
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.plant.rig_budget import samples_per_period
+
+    p = rig.params()
+    s = rig.scales
+    dl = rig.dimensionless()
+    design, how, ns = _design(rig, args)
+    c1, c2 = design["c1"], design["c2"]
+    gains = Gains(c1, c2, design["actuation_delay"])
+    n = samples_per_period(rig)
+    report = {
+        "rig": str(path),
+        "si": {"mass_kg": rig.mass, "stiffness_N_per_m": rig.stiffness,
+               "damping_N_s_per_m": rig.damping, "natural_frequency_Hz": rig.natural_frequency,
+               "omega_n_rad_per_s": rig.omega_n, "damping_ratio": rig.zeta,
+               "restitution": rig.restitution, "gap_m": rig.gap, "forcing": rig.forcing,
+               "forcing_amplitude": rig.amplitude,
+               "forcing_amplitude_unit": "N" if rig.forcing == "force" else "m",
+               "force_amplitude_N": rig.force_amplitude,
+               "forcing_frequency_Hz": rig.frequency, "forcing_period_s": rig.forcing_period,
+               "forcing_phase_rad": rig.phase,
+               "sensor": {"rate_Hz": rig.sensor.rate, "noise_m": rig.sensor.noise,
+                          "resolution_m": rig.sensor.resolution,
+                          "latency_s": rig.sensor.latency,
+                          "measures": "position_velocity" if rig.sensor.velocity else "position",
+                          "samples_per_period": rig.sensor.rate / rig.frequency},
+               "actuator": {"pulse_width_s": rig.actuator.pulse_width,
+                            "force_limit_N": rig.actuator.force_limit,
+                            "latency_s": rig.actuator.latency},
+               "budget_s": rig.budget, "section_time_s": rig.section_time()},
+        "scales": {"time_s": s.time, "length_m": s.length, "velocity_m_per_s": s.velocity,
+                   "force_N": s.force},
+        "dimensionless": {"zeta": p.zeta, "r": p.r, "omega": p.omega, "delta_d": p.delta_d,
+                          "d_star": p.d_star, "d": p.d, "tau2": p.tau2,
+                          "pi2_offset": p.pi2_offset, "period": p.period,
+                          "samples_per_period": n,
+                          **{k: v for k, v in dl.items() if k != "sensor_velocity"}},
+        "grazing": {"d_star": p.d_star, "gap_at_grazing_m": p.d_star * s.length,
+                    "gap_m": rig.gap, "gap_minus_grazing_m": p.delta_d * s.length},
+        "design": {"c2_from": how, "c1": c1, "c2": c2,
+                   "actuation_delay": design["actuation_delay"],
+                   "admissible_c2": design["admissible_c2"],
+                   "admissible": design["admissible"],
+                   "multipliers_limit": design["multipliers_limit"],
+                   "si": rig.gains_si(c1, c2)},
+        "corrections": {
+            "position_error_m": POSITION_ERROR,
+            "for_position_error": _pulse(rig, c1 * POSITION_ERROR / s.length),
+            "velocity_error_m_per_s": VELOCITY_ERROR,
+            "for_velocity_error": _pulse(rig, c2 * VELOCITY_ERROR / s.velocity)},
+    }
+    if "optimize" in design:
+        report["design"]["optimize"] = design["optimize"]
+    target = None
+    if p.delta_d < 0.0:
+        from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
+
+        try:
+            z = target = orbit_11(p, gains).pi2_deviation
+            dv = c1 * z[0] + c2 * z[1]
+            report["corrections"]["at_controlled_orbit"] = {
+                "pi2_deviation": [z[0], z[1]],
+                "pi2_deviation_m_and_m_per_s": [z[0] * s.length, z[1] * s.velocity],
+                **_pulse(rig, dv)}
+        except (OrbitNotFound, ValueError, ArithmeticError) as exc:
+            report["corrections"]["at_controlled_orbit"] = {"note": f"no controlled orbit: {exc}"}
+    report["predicted_spread"] = _spread(rig, design, ns, n)
+    report["timing"] = _timing(rig, p, gains, args, target)
+    return report
+
+
+def _spread(rig, design, ns, n) -> dict:
+    """The predicted Pi2 spread: the design's position-only noise gain at the rig's
+    samples per period (model estimator) x the sensor noise (docs/rig.md)."""
+    out = {"samples_per_period": n, "estimator": "model", "sensor_noise_m": rig.sensor.noise,
+           "sensor_noise": rig.dimensionless()["sensor_noise"],
+           "reference": f"grazing design --rig FILE --c2 {design['c2']!r}: "
+                        "noise_gain_position_only x sensor.noise"}
+    gain = design.get("noise_gain_position_only")
+    if ns.delta_d is None or gain is None:
+        why = ("the rig's gap is at or beyond grazing (Delta d >= 0): there is no impacting "
+               "orbit to hold" if ns.delta_d is None else
+               "no stable controlled 1/1 orbit for this design at the rig's Delta d")
+        out.update(noise_gain_position_only=None, spread_m=None, note=why)
+        return out
+    out.update(noise_gain_position_only=gain, delta_d=design["noise_gain_delta_d"],
+               spread_m=gain * rig.sensor.noise,
+               spread=gain * rig.dimensionless()["sensor_noise"])
+    notes = []
+    if abs(rig.sensor.rate / rig.frequency - n) > 1e-9 * n:
+        notes.append(f"the sensor gives {rig.sensor.rate / rig.frequency:.6g} samples per "
+                     f"period; the design takes the nearest integer, {n}")
+    if rig.sensor.velocity:
+        notes.append("the sensor also measures the velocity: the position-only gain is an "
+                     "upper bound")
+    if rig.sensor.resolution > 0.0:
+        q = rig.sensor.resolution
+        notes.append(f"quantisation of {q:.3g} m not included; as uniform noise it would give "
+                     f"{gain * math.sqrt(rig.sensor.noise ** 2 + q * q / 12.0):.4g} m")
+    if notes:
+        out["note"] = "; ".join(notes)
+    return out
+
+
+def _g(v, spec=".6g") -> str:
+    return "none" if v is None else format(v, spec)
+
+
+def format_report(r: dict) -> str:
+    """The text of ``grazing rig`` (docs/rig.md explains each line)."""
+    si, sc, dl, gz = r["si"], r["scales"], r["dimensionless"], r["grazing"]
+    de, co, sp, ti = r["design"], r["corrections"], r["predicted_spread"], r["timing"]
+    sen, act = si["sensor"], si["actuator"]
+    amp = (f"force F0 = {si['forcing_amplitude']:.6g} N" if si["forcing"] == "force" else
+           f"base excitation Y = {si['forcing_amplitude']:.6g} m (F0 = m Omega^2 Y = "
+           f"{si['force_amplitude_N']:.6g} N), stop on the frame")
+    lines = [
+        f"rig {r['rig']} (SI, as understood)",
+        f"  mass m             = {si['mass_kg']:.6g} kg",
+        f"  stiffness k        = {si['stiffness_N_per_m']:.6g} N/m  (f_n = "
+        f"{si['natural_frequency_Hz']:.6g} Hz, omega_n = {si['omega_n_rad_per_s']:.6g} rad/s)",
+        f"  damping c          = {si['damping_N_s_per_m']:.6g} N*s/m  (zeta = "
+        f"{si['damping_ratio']:.6g})",
+        f"  restitution r      = {si['restitution']:.6g}",
+        f"  gap g              = {si['gap_m']:.9g} m  (stop at rest distance, +x side)",
+        f"  forcing            = {amp}, f = {si['forcing_frequency_Hz']:.9g} Hz (period "
+        f"{si['forcing_period_s'] * 1e3:.6g} ms), phase {si['forcing_phase_rad']:.6g} rad",
+        f"  sensor             = {sen['measures']} at {sen['rate_Hz']:.6g} Hz "
+        f"({sen['samples_per_period']:.6g} samples per period), noise {sen['noise_m']:.3g} m, "
+        f"resolution {_g(sen['resolution_m'] or None, '.3g')}, latency "
+        f"{sen['latency_s'] * 1e3:.4g} ms",
+        f"  actuator           = pulse {act['pulse_width_s'] * 1e3:.4g} ms, force limit "
+        f"{_g(act['force_limit_N'] or None, '.4g')} N, latency {act['latency_s'] * 1e3:.4g} ms",
+        f"  controller budget  = {si['budget_s'] * 1e3:.4g} ms (section to pulse centre); first "
+        f"Pi2 section at rig time {si['section_time_s'] * 1e3:.6g} ms",
+        "scales",
+        f"  time 1/omega_n     = {sc['time_s']:.6g} s",
+        f"  length l = F0/k    = {sc['length_m']:.6g} m",
+        f"  velocity omega_n l = {sc['velocity_m_per_s']:.6g} m/s",
+        f"  force k l          = {sc['force_N']:.6g} N",
+        "dimensionless model (the study's Eq. 1)",
+        f"  zeta = {dl['zeta']!r}, r = {dl['r']!r}, omega = {dl['omega']!r}",
+        f"  Delta d = {dl['delta_d']:.12g}, d* = {dl['d_star']:.15g}, d = {dl['d']:.15g}",
+        f"  tau2 = {dl['tau2']:.12g} (pi2_offset {dl['pi2_offset']:.6g}), period T = "
+        f"{dl['period']:.12g}",
+        f"  state_period = {dl['state_period']:.6g} ({dl['samples_per_period']} samples per "
+        f"period), sensor_noise = {dl['sensor_noise']:.6g}, pulse_width = "
+        f"{dl['pulse_width']:.6g}",
+        f"  actuation_delay = {dl['actuation_delay']:.6g} (budget x omega_n), time_scale = "
+        f"{dl['time_scale']:.6g} (omega_n: model time per second)",
+        "grazing",
+        f"  d* l               = {gz['gap_at_grazing_m']:.9g} m (the gap at grazing); the rig's "
+        f"gap is {gz['gap_minus_grazing_m']:.4g} m from it (Delta d l)",
+        f"design for the actuation delay {de['actuation_delay']:.6g} (c2 from {de['c2_from']})",
+        f"  c1 = {de['c1']:.12g}, c2 = {de['c2']:.12g}  ("
+        f"{'admissible' if de['admissible'] else 'NOT admissible'}; admissible c2 = "
+        f"({_g(de['admissible_c2'][0] if de['admissible_c2'] else None)}, "
+        f"{_g(de['admissible_c2'][1] if de['admissible_c2'] else None)}))",
+        f"  in SI: Delta v = c1 omega_n Delta x + c2 Delta v with c1 omega_n = "
+        f"{de['si']['c1_per_s']:.6g} 1/s, c2 = {de['si']['c2']:.6g}",
+    ]
+    if "force_gain_position_N_per_m" in de["si"]:
+        lines.append(f"  as the pulse's force F = kx Delta x + kv Delta v: kx = "
+                     f"{de['si']['force_gain_position_N_per_m']:.6g} N/m, kv = "
+                     f"{de['si']['force_gain_velocity_N_s_per_m']:.6g} N*s/m")
+    lines.append(f"correction as a force pulse over {act['pulse_width_s'] * 1e3:.4g} ms")
+    for label, key in ((f"{co['position_error_m'] * 1e6:g} um position error", "for_position_error"),
+                       (f"{co['velocity_error_m_per_s'] * 1e3:g} mm/s velocity error",
+                        "for_velocity_error"), ("at the controlled orbit", "at_controlled_orbit")):
+        c = co.get(key)
+        if c is None:
+            continue
+        if "note" in c and "velocity_m_per_s" not in c:
+            lines.append(f"  {label:24s}: {c['note']}")
+            continue
+        force = (f", force {c['force_N']:.6g} N"
+                 + ("" if c["within_force_limit"] else " (beyond the force limit)")
+                 if "force_N" in c else "")
+        lines.append(f"  {label:24s}: Delta v = {c['velocity_m_per_s']:.6g} m/s, impulse "
+                     f"{c['impulse_N_s']:.6g} N s{force}")
+    lines.append("predicted Pi2 spread of the controlled orbit")
+    if sp["spread_m"] is None:
+        lines.append(f"  none: {sp['note']}")
+    else:
+        lines.append(f"  noise gain {sp['noise_gain_position_only']:.6g} (position only, "
+                     f"{sp['samples_per_period']} samples per period, model estimator) x "
+                     f"sensor noise {sp['sensor_noise_m']:.4g} m = {sp['spread_m']:.6g} m "
+                     f"(std of the Pi2 position)")
+        if "note" in sp:
+            lines.append(f"  note: {sp['note']}")
+    m = ti.get("measured")
+    lines += ["timing budget",
+              f"  sensor latency {ti['sensor_latency_s'] * 1e3:.4g} ms + sample interval "
+              f"{ti['sample_interval_s'] * 1e3:.4g} ms + estimate {ti['estimate_s'] * 1e3:.4g} ms "
+              f"+ actuator latency {ti['actuator_latency_s'] * 1e3:.4g} ms = "
+              f"{ti['needed_s'] * 1e3:.4g} ms <= budget - pulse_width / 2 = "
+              f"{ti['available_s'] * 1e3:.4g} ms: feasible (slack {ti['slack_s'] * 1e3:.4g} ms)",
+              f"  estimate: {ti['estimate_from'] if m is None else 'p99 of %d measured here' % m['runs']}"
+              + ("" if m is None else
+                 f" ({m['estimator']} estimator, {m['samples_per_period']} samples per period: "
+                 f"p50 {m['p50_s'] * 1e3:.3g} ms, p99 {m['p99_s'] * 1e3:.3g} ms, max "
+                 f"{m['max_s'] * 1e3:.3g} ms, CPU p99 {m['cpu_p99_s'] * 1e3:.3g} ms, load "
+                 f"{m['load_average']:.2f}; on {m['on']})")]
+    return "\n".join(lines)
+
+
+def cmd_rig(args):
+    """``grazing rig``: the report (dict with --json, text otherwise)."""
+    if args.c2 is not None and args.optimize is not None:
+        raise ParameterError("--c2 and --optimize are both given: give one of them")
+    rig = load(args.file, option="")
+    report = rig_report(rig, args.file, args)
+    return report if args.json else format_report(report)
+
+
+def _seconds(text):
+    value = finite(text)
+    if not value >= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: valid range is >= 0 (seconds)")
+    return value
+
+
+DESCRIPTION = (
+    "Read a rig file in SI units (docs/rig.md) and print the rig as understood, the scales "
+    "(1/omega_n, l = F0/k, omega_n l, k l), the study's dimensionless model (zeta, r, omega, "
+    "Delta d, d*, tau2, the sensor, pulse and budget in model units), d* l (the gap at "
+    "grazing), the design for the budget's actuation delay in SI (c1 omega_n in 1/s, c2, the "
+    "pulse's force gains in N/m and N*s/m), corrections as force pulses, the predicted Pi2 "
+    "spread (the design's position-only noise gain x the sensor noise) and the timing budget: "
+    "sensor latency + one sample interval + the Pi2 estimate's measured p99 + actuator latency "
+    "<= budget - pulse_width / 2. An infeasible budget or too slow a sensor: status 2, one "
+    "line naming controller.budget or sensor.rate with the numbers.")
+
+
+def add_rig_parser(sub) -> None:
+    """Register ``grazing rig`` on the subcommands of the ``grazing`` parser."""
+    s = sub.add_parser("rig", help="a rig file in SI: its dimensionless model, the design in "
+                                   "SI, the predicted spread, the timing budget",
+                       description=DESCRIPTION)
+    s.add_argument("file", metavar="FILE", help="the rig file (YAML, docs/rig.md)")
+    s.add_argument("--c2", type=finite, help="the gain c2 (default: --optimize noise)")
+    s.add_argument("--optimize", choices=("noise",),
+                   help="c2 of least noise gain at the rig's Delta d (the default)")
+    s.add_argument("--compute-tail", type=_seconds, metavar="SECONDS",
+                   help="the Pi2 estimate's compute time to budget (e.g. a p99 measured on "
+                        "the controller's computer) instead of timing it here")
+    s.add_argument("--tail", choices=("cpu", "wall"), default="cpu",
+                   help="which measured p99 is budgeted: cpu (default: the estimate's own "
+                        "CPU time, what it costs on a core of its own, as on the rig's "
+                        "controller computer; the same on an idle and a loaded machine) or "
+                        "wall (wall-clock time on this machine now: what other processes "
+                        "cost it too); both are reported")
+    s.add_argument("--runs", type=integer_at_least(10), default=300,
+                   help="estimates timed for the compute tail (default 300; its p99 is used)")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=cmd_rig)
