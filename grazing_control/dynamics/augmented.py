@@ -37,6 +37,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .estimation import CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples, trajectory
@@ -76,7 +77,7 @@ class AugmentedState:
 def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma: float,
                      correction: float, delay: float = 0.0, *, bias: bool = True,
                      wall: bool = True, wall_noise: float = WALL_NOISE,
-                     floor: float = 1e-2, iterations: int = 8):
+                     floor: float = 1e-2, iterations: int = 8, innovation: bool = False):
     """One period of the augmented filter, from the prior at t_{k-1} and the samples at
     times ``s`` in (0, T] after it to the state at t_k (module docstring; (E8, E9)).
 
@@ -109,8 +110,13 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
         r = np.concatenate([y - pred[:, 0] - theta[2], w[has_v] - pred[has_v, 1]])
         return h, r, end, mono, gend
 
+    whitened = None
     for _ in range(iterations):
         h, r, *_ = linearise(theta)
+        if whitened is None:
+            # the innovation at the prior, whitened by S = sigma^2 I + H P H^T (E10)
+            cov_s = sigma * sigma * np.eye(r.size) + h @ prior.cov[np.ix_(act, act)] @ h.T
+            whitened = solve_triangular(np.linalg.cholesky(cov_s), r, lower=True)
         info = info_prior + inv_var * (h.T @ h)
         grad = info_prior @ (theta_prior - theta)[act] + inv_var * (h.T @ r)
         step = np.linalg.solve(info, grad)
@@ -136,8 +142,11 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
     cov = f @ post @ f.T + q
     d = (theta - theta_prior)[act]
     cost = float(d @ info_prior @ d) + float(r @ r) * inv_var
-    return (AugmentedState((float(end[0]), float(end[1])), float(theta[2]), float(theta[3]),
-                           0.5 * (cov + cov.T), prior.periods + 1), cost, r.size)
+    state = AugmentedState((float(end[0]), float(end[1])), float(theta[2]), float(theta[3]),
+                           0.5 * (cov + cov.T), prior.periods + 1)
+    if innovation:
+        return state, cost, r.size, whitened
+    return state, cost, r.size
 
 
 class AugmentedStreamEstimator(StreamEstimator):
@@ -245,15 +254,15 @@ class AugmentedStreamEstimator(StreamEstimator):
         y, w = deviation_samples(p, s, x + self.params[0], v, tau_start=p.tau2)
         at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
         try:
-            new, cost, n = augmented_update(p, self.state, s, y, w, self.sigma, dv,
-                                            at - (k - 1) * T, bias=self.use_bias,
-                                            wall=self.use_wall, wall_noise=self.wall_noise,
-                                            floor=self.floor)
+            new, cost, n, white = augmented_update(
+                p, self.state, s, y, w, self.sigma, dv, at - (k - 1) * T, bias=self.use_bias,
+                wall=self.use_wall, wall_noise=self.wall_noise, floor=self.floor,
+                innovation=True)
         except (ValueError, np.linalg.LinAlgError, ArithmeticError):
             self.filter = self.state = None
             self.resets += 1
             return None
-        self.innovation = (k, cost, n)
+        self.innovation = (k, cost, n, white)
         if cost > n + CHI2_SIGMAS * math.sqrt(2.0 * n):
             self.filter = self.state = None
             self.resets += 1
