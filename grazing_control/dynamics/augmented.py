@@ -43,7 +43,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .estimation import CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples, trajectory
 from .stream import _TOL, StreamEstimator
 
-__all__ = ["AugmentedState", "augmented_update", "AugmentedStreamEstimator",
+__all__ = ["AugmentedState", "augmented_update", "AugmentedStreamEstimator", "augmented_covariance",
            "WALL_NOISE", "BIAS_STD", "WALL_STD"]
 
 #: The random walk of Delta d per period (variance q_d = WALL_NOISE^2): a ramp of
@@ -273,3 +273,48 @@ class AugmentedStreamEstimator(StreamEstimator):
         self.p = self.identified.with_(delta_d=new.delta_d)
         self.filter, self.filter_k = FilterState(new.z, new.cov[:2, :2], new.periods), k
         return Estimate(new.z, new.cov[:2, :2], "model")
+
+
+def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = True,
+                         wall: bool = True, wall_noise: float = WALL_NOISE,
+                         sigma: float = 1e-4, floor: float = 1e-2, target=None,
+                         periods: int = 5000) -> np.ndarray:
+    """The augmented filter's stationary covariance on the controlled 1/1 orbit (4x4 over
+    (dx, dv, b, Delta d), absolute units for the noise ``sigma``), position only at
+    ``rate`` samples per period: the fixed point of
+    P = F (P^-1 + H^T H / sigma^2)^-1 F^T + Q along the orbit (E5 with the augmented H
+    and F of :func:`augmented_update`), iterated from the bias and wall priors.
+
+    Its (dx, dv) block over sigma^2 is the design's measurement covariance R with the
+    augmentation (:func:`grazing_control.dynamics.noise.noise_covariance`): the bias
+    has no process noise, so its variance goes to 0 and leaves R as without it; the
+    wall's random walk keeps a share (docs/theory_estimation.md section 10). Unlike the
+    plain filter's (E7) this needs sigma: the walk's std is absolute.
+    """
+    from .orbits import orbit_11
+
+    if target is None:
+        target = orbit_11(p, gains).pi2_deviation
+    dv = gains.c1 * target[0] + gains.c2 * target[1]
+    h = p.period / rate
+    s = np.arange(1, int(rate)) * h
+    _pred, jac, _end, mono, _imps, gw, gend = trajectory(p, target, s, dv, gains.delay,
+                                                         wall=True)
+    act = [0, 1] + ([2] if bias else []) + ([3] if wall else [])
+    hm = np.column_stack([jac[:, 0, :], np.ones(s.size), gw[:, 0]])[:, act]
+    info_data = hm.T @ hm / sigma ** 2
+    f = np.eye(4)
+    f[:2, :2] = mono
+    f[:2, 3] = gend
+    f = f[np.ix_(act, act)]
+    q = np.diag([(floor * sigma) ** 2, (floor * sigma) ** 2, 0.0, wall_noise ** 2])[np.ix_(act, act)]
+    cov = np.diag([sigma ** 2, sigma ** 2, BIAS_STD ** 2, WALL_STD ** 2])[np.ix_(act, act)]
+    for _ in range(periods):
+        new = f @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ f.T + q
+        done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
+        cov = 0.5 * (new + new.T)
+        if done:
+            break
+    out = np.zeros((4, 4))
+    out[np.ix_(act, act)] = cov
+    return out
