@@ -98,7 +98,7 @@ def test_a_sensor_bias_is_estimated_and_the_orbit_held_on_x_star_star(design):
 def test_the_bias_standard_error_is_that_of_its_errors(design):
     """4 seeds x 250 periods: the normalised bias errors (b^ - b) / se have a mean
     square within the 99.9 % range of chi^2_4 / 4 ([0.0045, 4.6]) and none beyond 3.
-    (docs/theory_estimation.md section 10 has the 40-seed Monte Carlo.)"""
+    (docs/theory_estimation.md, "Measured (issue 29)", has the 40-seed Monte Carlo.)"""
     errs = []
     for seed in range(4):
         _run, est = _bias_run(10 + seed, design, periods=250)
@@ -145,3 +145,24 @@ def test_a_drifting_wall_is_tracked_with_one_impact_per_period(design):
 def test_bad_settings_are_refused_naming_the_parameter(kwargs, match):
     with pytest.raises(ParameterError, match=match):
         _estimator(**kwargs)
+
+
+def test_the_designs_covariance_with_the_augmented_states(design):
+    """augmented_covariance: without augmentation the plain filter's E7 (times sigma^2, to
+    1e-8); with the bias and the wall's walk the (dx, dv) block grows by 0.06 % (the
+    predicted spread 1.8436e-5 -> 1.8444e-5), the bias's variance keeps falling (no
+    process noise) and Delta d's settles where its walk and the data balance (7.1e-8);
+    a 10x larger walk costs more (the block grows by 0.5 %)."""
+    from grazing_control.dynamics.augmented import augmented_covariance
+    from grazing_control.dynamics.estimation import estimate_covariance
+
+    g, _z = design
+    plain = estimate_covariance(P, g, RATE) * SIGMA ** 2
+    off = augmented_covariance(P, g, RATE, bias=False, wall=False)
+    assert np.allclose(off[:2, :2], plain, rtol=1e-8, atol=0.0)
+    on = augmented_covariance(P, g, RATE)
+    grow = np.diag(on[:2, :2]) / np.diag(plain) - 1.0
+    assert np.all((0.0 < grow) & (grow < 2e-3))
+    assert 5e-8 < math.sqrt(on[3, 3]) < 1e-7 and math.sqrt(on[2, 2]) < 2e-7
+    walk = augmented_covariance(P, g, RATE, wall_noise=1e-7)
+    assert np.all(np.diag(walk[:2, :2]) / np.diag(plain) - 1.0 > 3e-3)

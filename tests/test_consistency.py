@@ -5,7 +5,7 @@ of the core (issue 29's measurement: position only, sigma 1e-4, 200 samples per 
 Delta d = -5e-6, least-noise gains with delay 3): under the right model the period's
 normalised innovation squared has the mean and the tail of chi^2_n; with the
 controller's model at zeta +5 % and Delta d +10 % the mismatch is named within 50
-periods. docs/theory_estimation.md section 11 has the larger Monte Carlo
+periods. docs/theory_estimation.md, "Measured (issue 29)", has the larger Monte Carlo
 (benchmarks/watchful_core.py).
 """
 

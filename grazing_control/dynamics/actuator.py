@@ -43,7 +43,7 @@ from scipy.optimize import brentq
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.impact import Impact
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from .actuation import pulse_force, pulse_start, pulse_step
+from .actuation import newton_fixed_point, pulse_force, pulse_start, pulse_step
 from .estimation import phi_rows
 
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay",
@@ -309,25 +309,7 @@ def actuated_orbit(p: OscillatorParams, gains: Gains, width: float, actuator: Ac
         v_minus = imps[0].v_minus if imps else 1e-2
     h = max(1e-3 * v_minus ** 2, 1e-13)
 
-    def jacobian(z):
-        jac = np.empty((3, 3))
-        for i in range(3):
-            e = np.zeros(3)
-            e[i] = h
-            jac[:, i] = (step(z + e)[0] - step(z - e)[0]) / (2.0 * h)
-        return jac
-
-    fz, imps = step(z)
-    residual = float(np.max(np.abs(fz - z)))
-    for _ in range(max_iter):
-        if residual <= 1e-15:
-            break
-        trial = z - np.linalg.solve(jacobian(z) - np.eye(3), fz - z)
-        ft, it = step(trial)
-        res_t = float(np.max(np.abs(ft - trial)))
-        if res_t >= residual:
-            break
-        z, fz, imps, residual = trial, ft, it, res_t
+    z, imps, residual, jacobian = newton_fixed_point(step, z, h, max_iter)
     if residual > 1e-12 or len(imps) != 1:
         raise OrbitNotFound(f"no 1/1 orbit through the actuator (tau_a "
                             f"{actuator.time_constant!r}, latency {actuator.latency!r}): "

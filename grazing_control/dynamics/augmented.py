@@ -5,7 +5,7 @@ constant position bias b of the sensor reads as a displaced orbit (the loop then
 the *measured* orbit on X**, i.e. the true one b away and worse, issue 29: 3.4 b), and a
 clearance Delta d that drifts away from the identified one moves the impacts the filter
 predicts. Here both are states of the filter, estimated from the same stream
-(docs/theory_estimation.md, sections 8-10):
+(docs/theory_estimation.md, E8-E10):
 
     theta_k = (z_k, b, Delta d_k),    b_{k+1} = b,    Delta d_{k+1} = Delta d_k + eta_k,
 
@@ -48,7 +48,7 @@ __all__ = ["AugmentedState", "augmented_update", "AugmentedStreamEstimator", "au
 
 #: The random walk of Delta d per period (variance q_d = WALL_NOISE^2): a ramp of
 #: 5e-10 per period (20 % of 5e-6 over 2000 periods) is followed with a lag of 2.3e-8
-#: (1.2e-7 with 2e-9); docs/theory_estimation.md section 9 for the choice.
+#: (1.2e-7 with 2e-9); docs/theory_estimation.md E8, "Tuning".
 WALL_NOISE = 1e-8
 #: The prior std of the sensor bias when nothing is known (dimensionless position;
 #: 10 sigma of the issue's sensor).
@@ -222,7 +222,7 @@ class AugmentedStreamEstimator(StreamEstimator):
     def _from_arc(self, k: int, est: Estimate) -> AugmentedState:
         """The augmented prior after a (re)start from the arc fit: the arc's z was fitted
         to samples less b^, so its error is -c (b^ - b) + noise with c the arc fit of a
-        unit offset (docs/theory_estimation.md section 8): P_zz = P_arc + c P_bb c^T,
+        unit offset (docs/theory_estimation.md E8): P_zz = P_arc + c P_bb c^T,
         P_zb = -c P_bb."""
         cov = np.zeros((4, 4))
         cov[2:, 2:] = self.params_cov
@@ -288,7 +288,7 @@ def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = 
     Its (dx, dv) block over sigma^2 is the design's measurement covariance R with the
     augmentation (:func:`grazing_control.dynamics.noise.noise_covariance`): the bias
     has no process noise, so its variance goes to 0 and leaves R as without it; the
-    wall's random walk keeps a share (docs/theory_estimation.md section 10). Unlike the
+    wall's random walk keeps a share (docs/theory_estimation.md, "Measured (issue 29)"). Unlike the
     plain filter's (E7) this needs sigma: the walk's std is absolute.
     """
     from .orbits import orbit_11

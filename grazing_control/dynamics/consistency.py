@@ -4,7 +4,7 @@ Under the right model every period of the model filter's fit has an innovation n
 (the samples less their prediction from the prior) of covariance S_k = H P H^T +
 sigma^2 I, and the innovations of different periods are independent (white). Two
 statistics over a sliding window of the last W periods (docs/theory_estimation.md
-section 11):
+E9, E10):
 
 ``nis``
     The normalised innovation squared, J_k = nu^T S^-1 nu: the minimised cost of the
