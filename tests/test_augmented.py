@@ -166,3 +166,21 @@ def test_the_designs_covariance_with_the_augmented_states(design):
     assert 5e-8 < math.sqrt(on[3, 3]) < 1e-7 and math.sqrt(on[2, 2]) < 2e-7
     walk = augmented_covariance(P, g, RATE, wall_noise=1e-7)
     assert np.all(np.diag(walk[:2, :2]) / np.diag(plain) - 1.0 > 3e-3)
+
+
+def test_the_whitening_is_the_symmetric_inverse_square_root():
+    """_whiten(nu) = S^{-1/2} nu (S = sigma^2 I + H P H^T, eigendecomposition reference)
+    to 1e-9 of its size, so |eps|^2 = nu^T S^-1 nu (E9, E10)."""
+    from grazing_control.dynamics.augmented import _whiten
+
+    rng = np.random.default_rng(1)
+    h = rng.standard_normal((199, 4))
+    a = rng.standard_normal((4, 4))
+    cov = a @ a.T + 0.1 * np.eye(4)
+    nu = rng.standard_normal(199)
+    s = 0.3 ** 2 * np.eye(199) + h @ cov @ h.T
+    lam, vec = np.linalg.eigh(s)
+    ref = vec @ ((vec.T @ nu) / np.sqrt(lam))
+    eps = _whiten(nu, h, cov, 0.3)
+    assert np.allclose(eps, ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)))
+    assert eps @ eps == pytest.approx(nu @ np.linalg.solve(s, nu), rel=1e-10)

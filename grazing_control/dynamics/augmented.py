@@ -37,7 +37,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .estimation import CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples, trajectory
@@ -72,6 +71,15 @@ class AugmentedState:
     @property
     def theta(self) -> np.ndarray:
         return np.array([self.z[0], self.z[1], self.bias, self.delta_d], dtype=float)
+
+
+def _whiten(nu, h, cov, sigma: float) -> np.ndarray:
+    """S^{-1/2} nu for S = sigma^2 I + H P H^T, the symmetric square root, in O(n m^2):
+    with U = H L / sigma (P = L L^T) = Q diag(s) V^T (thin SVD),
+    S^{-1/2} = (I + Q ((1 + s^2)^{-1/2} - 1) Q^T) / sigma (E10). |result|^2 = nu^T S^-1 nu."""
+    u = h @ np.linalg.cholesky(cov) / sigma
+    q, sv, _vt = np.linalg.svd(u, full_matrices=False)
+    return (nu + q @ ((1.0 / np.sqrt(1.0 + sv * sv) - 1.0) * (q.T @ nu))) / sigma
 
 
 def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma: float,
@@ -114,9 +122,7 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
     for _ in range(iterations):
         h, r, *_ = linearise(theta)
         if whitened is None:
-            # the innovation at the prior, whitened by S = sigma^2 I + H P H^T (E10)
-            cov_s = sigma * sigma * np.eye(r.size) + h @ prior.cov[np.ix_(act, act)] @ h.T
-            whitened = solve_triangular(np.linalg.cholesky(cov_s), r, lower=True)
+            whitened = _whiten(r, h, prior.cov[np.ix_(act, act)], sigma)
         info = info_prior + inv_var * (h.T @ h)
         grad = info_prior @ (theta_prior - theta)[act] + inv_var * (h.T @ r)
         step = np.linalg.solve(info, grad)
