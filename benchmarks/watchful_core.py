@@ -69,7 +69,7 @@ def bias_one(seed, periods=300):
 
 
 def drift_one(args):
-    frac, seed, n, augmented = args
+    frac, seed, augmented, n = args
     g, z = _design()
 
     def wall(k):

@@ -171,9 +171,16 @@ class AugmentedStreamEstimator(StreamEstimator):
         The random walk's std per period, sqrt(q_d) (default :data:`WALL_NOISE`).
 
     After each section: :attr:`state` (the :class:`AugmentedState`), and
-    :attr:`innovation` = (k, J, n): the period's normalised innovation squared and its
-    degrees of freedom, for :class:`grazing_control.dynamics.consistency.ConsistencyMonitor`
-    (None for a section the model filter did not fit).
+    :attr:`innovation` = (k, J, n, eps): the period's normalised innovation squared, its
+    degrees of freedom and the whitened innovation (E9, E10), for
+    :class:`grazing_control.dynamics.consistency.ConsistencyMonitor`
+    (``monitor.add(*innovation)``; None for a section the model filter did not fit).
+
+    Per section, a controller does what :func:`grazing_control.dynamics.stream.simulate_stream`
+    does with it: ``add_sample`` for each sample (the due sections come back), then
+    ``monitor.add(*est.innovation)`` when it is not None, Eq. 28 on ``Estimate.z``
+    times ``switch(k, estimate)`` (:mod:`grazing_control.dynamics.capture`), and
+    ``set_correction``.
     """
 
     def __init__(self, p: OscillatorParams, sigma: float = 1e-4, impact_source: str = "stream",
