@@ -5,18 +5,39 @@ augmented one (issue 29), 3 x 300 periods each, the minimum (docs/benchmarks.md,
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_augmented.py
 """
 
-import time, os, numpy as np
+import os
+import time
+
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.orbits import orbit_11
 from grazing_control.dynamics.stream import simulate_stream
 from grazing_control.dynamics.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel
-P = OscillatorParams(delta_d=-5e-6); g = optimize_noise(P, 3.0).gains(); z = orbit_11(P, g).pi2_deviation
-sensor = SensorModel(noise=1e-4, velocity=False, seed=1)
-for name, mk in [("plain", lambda: None), ("augmented off", lambda: AugmentedStreamEstimator(P, 1e-4, "stream", P.period/200, bias=False, wall=False)), ("augmented b+Δd", lambda: AugmentedStreamEstimator(P, 1e-4, "stream", P.period/200))]:
-    ts=[]
-    for rep in range(3):
-        t=time.process_time(); simulate_stream(P, g, sensor.measure, 300, 200, deviation=z, stream_estimator=mk()); ts.append((time.process_time()-t)/300*1e3)
-    print(f"{name}: {min(ts):.2f} ms CPU per period (min of 3 x 300)")
-print("load", os.getloadavg())
+
+P = OscillatorParams(delta_d=-5e-6)
+SIGMA, RATE, PERIODS, REPS = 1e-4, 200, 300, 3
+
+
+def main():
+    g = optimize_noise(P, 3.0).gains()
+    z = orbit_11(P, g).pi2_deviation
+    sensor = SensorModel(noise=SIGMA, velocity=False, seed=1)
+    h = P.period / RATE
+    cases = (("plain model filter", lambda: None),
+             ("augmented, bias and wall off",
+              lambda: AugmentedStreamEstimator(P, SIGMA, "stream", h, bias=False, wall=False)),
+             ("augmented, bias and Delta d", lambda: AugmentedStreamEstimator(P, SIGMA, "stream", h)))
+    for name, make in cases:
+        times = []
+        for _ in range(REPS):
+            t0 = time.process_time()
+            simulate_stream(P, g, sensor.measure, PERIODS, RATE, sigma=SIGMA, deviation=z,
+                            stream_estimator=make())
+            times.append((time.process_time() - t0) / PERIODS * 1e3)
+        print(f"{name}: {min(times):.2f} ms CPU per period (min of {REPS} x {PERIODS})")
+    print(f"load average {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()

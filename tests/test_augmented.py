@@ -16,7 +16,7 @@ import pytest
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation import trajectory
 from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
+from grazing_control.dynamics.stream import simulate_stream
 from grazing_control.dynamics.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.sensor import SensorModel
