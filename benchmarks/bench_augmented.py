@@ -27,7 +27,8 @@ def main():
     cases = (("plain model filter", lambda: None),
              ("augmented, bias and wall off",
               lambda: AugmentedStreamEstimator(P, SIGMA, "stream", h, bias=False, wall=False)),
-             ("augmented, bias and Delta d", lambda: AugmentedStreamEstimator(P, SIGMA, "stream", h)))
+             ("augmented, bias and Delta d",
+              lambda: AugmentedStreamEstimator(P, SIGMA, "stream", h)))
     for name, make in cases:
         times = []
         for _ in range(REPS):

@@ -97,8 +97,7 @@ def _verdicts(model, seed, periods, **kwargs):
     out = []
 
     def observe(k, e):
-        s = e.innovation
-        out.append(mon.add(k, *(s[1:] if s else (None, 0))))
+        out.append(mon.add(*e.innovation) if e.innovation is not None else None)
     simulate_stream(P, g, SensorModel(noise=SIGMA, velocity=False, seed=seed).measure,
                     periods, RATE, sigma=SIGMA, deviation=z, stream_estimator=est,
                     observe=observe)
@@ -158,7 +157,8 @@ def main(argv=None):
             rows = list(pool.map(bias_one, range(args.seeds)))
             off = np.array([r[1] for r in rows])
             zn = np.array([r[2] for r in rows])
-            print(f"bias 1e-4, {args.seeds} seeds x 300 periods: |offset| max {np.max(np.abs(off)):.2e}"
+            print(f"bias 1e-4, {args.seeds} seeds x 300 periods: |offset| max "
+                  f"{np.max(np.abs(off)):.2e}"
                   f" mean {np.mean(off):.2e}; (b^-b)/se: mean {np.mean(zn):.3f}, rms "
                   f"{np.sqrt(np.mean(zn ** 2)):.3f}, |.|>3: {np.sum(np.abs(zn) > 3)}, "
                   f"se {np.median([r[3] for r in rows]):.2e}, min impacts/period "

@@ -45,10 +45,10 @@ def test_the_ramp_rises_linearly_to_one():
     assert GainRamp(1)(0) == 1.0
 
 
-@pytest.mark.parametrize("make, match", [(lambda: CaptureRule((0, 0), 0.0), "capture_radius=0.0"),
-                                         (lambda: CaptureRule((0, 0), math.inf), "capture_radius=inf"),
-                                         (lambda: GainRamp(0), "ramp_sections=0"),
-                                         (lambda: GainRamp(2.5), "ramp_sections=2.5")])
+@pytest.mark.parametrize("make, match", [
+    (lambda: CaptureRule((0, 0), 0.0), "capture_radius=0.0"),
+    (lambda: CaptureRule((0, 0), math.inf), "capture_radius=inf"),
+    (lambda: GainRamp(0), "ramp_sections=0"), (lambda: GainRamp(2.5), "ramp_sections=2.5")])
 def test_bad_settings_are_refused_naming_the_parameter(make, match):
     with pytest.raises(ParameterError, match=match):
         make()

@@ -61,6 +61,21 @@ def test_the_window_sums_its_periods_against_the_chi2_bound():
     assert v.status == "mismatch" and v.bound > 400.0
 
 
+def test_a_filter_that_keeps_failing_is_a_mismatch():
+    """Half the window (at least 2) of failed fits names ``resets``, with or without fits
+    in the window; one failure does not."""
+    m = ConsistencyMonitor(window=6)
+    assert m.add(0, None) is None
+    assert m.add(1, 200.0, 200).status == "ok"
+    assert m.add(2, None).status == "ok"
+    v = m.add(3, None)
+    assert (v.status, v.failing, v.failed, v.periods) == ("mismatch", ("resets",), 3, 1)
+    m = ConsistencyMonitor(window=4)
+    m.add(0, None)
+    v = m.add(1, None)
+    assert (v.status, v.failing, v.periods) == ("mismatch", ("resets",), 0)
+
+
 @pytest.mark.parametrize("kwargs, match", [({"window": 0}, "consistency_window=0"),
                                            ({"window": 2.5}, "consistency_window=2.5"),
                                            ({"false_alarm": 0.0}, "false_alarm=0.0"),
@@ -94,7 +109,7 @@ def test_under_the_right_model_the_innovations_are_chi2(design):
     for seed in range(4):
         _run, seen = _innovations(design, 20 + seed, 200)
         fitted = [s for s in seen[20:] if s is not None]
-        assert len(fitted) == 180
+        assert len(fitted) == 180 and all(s[1] is not None for s in fitted)
         js += [j / n for _k, j, n, _e in fitted]
         exceed += sum(j > chi2.isf(0.05, n) for _k, j, n, _e in fitted)
     n = RATE - 1
@@ -117,6 +132,6 @@ def test_a_wrong_model_is_named_within_50_periods(design, augmented):
         for model, alarm in ((wrong, True), (P, False)):
             _run, seen = _innovations(design, 40 + seed, 50, model=model, **kwargs)
             m = ConsistencyMonitor(window=10, false_alarm=1e-3)
-            verdicts = [m.add(k, *(s[1:] if s else (None, 0))) for k, s in enumerate(seen)]
+            verdicts = [m.add(*s) for s in seen if s is not None]
             named = [v.k for v in verdicts if v is not None and v.status == "mismatch"]
             assert bool(named) == alarm

@@ -31,8 +31,10 @@ plant's; a sensor bias the filter does not know) fails them.
 and gets a :class:`Verdict` back, ``ok`` or ``mismatch`` with the statistics and their
 bounds. A window not yet full is tested with what it holds (the same alpha), so a gross
 mismatch is named in its first period. A section without a fit (the filter restarted
-from the arc fit) adds nothing; a fit that failed outright is counted in
-:attr:`Verdict.failed`.
+from the arc fit) adds nothing; a fit that failed (no convergence, or a reset by the
+filter's own chi^2 test) is counted in :attr:`Verdict.failed`, and when half the window
+(at least 2) has failed, the verdict is a mismatch named ``resets``: a model so wrong
+that the filter keeps restarting has no innovations left to test.
 """
 
 from __future__ import annotations
@@ -59,8 +61,8 @@ WINDOW = 10
 @dataclass(frozen=True)
 class Verdict:
     """The tests at section ``k``: ``status`` (``ok`` or ``mismatch``), ``failing`` (the
-    tests that fail: a tuple of ``nis``, ``mean``); the nis test's ``statistic`` q =
-    sum J, its degrees of freedom ``dof`` and ``bound``; the mean test's
+    tests that fail: a tuple of ``nis``, ``mean``, ``resets``); the nis test's
+    ``statistic`` q = sum J, its degrees of freedom ``dof`` and ``bound``; the mean test's
     ``mean_statistic``, ``mean_dof`` and ``mean_bound`` (NaN, 0 without whitened
     innovations); the ``periods`` in the window and ``failed`` (fits that failed in it)."""
 
@@ -134,11 +136,17 @@ class ConsistencyMonitor:
     def verdict(self, k: int) -> Verdict | None:
         fitted = [t for t in self._terms if t[1] is not None]
         if not fitted:
+            if len(self._terms) >= max(2, math.ceil(self.window / 2)):
+                return Verdict(int(k), "mismatch", 0.0, 0, math.nan, 0, len(self._terms),
+                               failing=("resets",))
             return None
         q = math.fsum(t[1] for t in fitted)
         dof = sum(t[2] for t in fitted)
         bound = self.bound(dof)
         failing = ("nis",) if q > bound else ()
+        failed = len(self._terms) - len(fitted)
+        if failed >= max(2, math.ceil(self.window / 2)):
+            failing += ("resets",)     # the filter fails as often as it fits
         mean_q, mean_dof, mean_bound = math.nan, 0, math.nan
         vectors = [t[3] for t in fitted if t[3] is not None]
         if vectors:
@@ -149,4 +157,4 @@ class ConsistencyMonitor:
             if mean_q > mean_bound:
                 failing += ("mean",)
         return Verdict(int(k), "mismatch" if failing else "ok", q, dof, bound, len(fitted),
-                       len(self._terms) - len(fitted), mean_q, mean_dof, mean_bound, failing)
+                       failed, mean_q, mean_dof, mean_bound, failing)
