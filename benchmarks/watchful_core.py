@@ -13,6 +13,8 @@ noise --delay 3``), started on the controlled orbit. Parts (``--part``):
               false alarms per evaluated window, and per disjoint window.
 ``detect``    the controller's model at zeta +5 %, Delta d +10 %: the detection time
               (first mismatch verdict) per seed, plain and augmented filter.
+``power``     other model errors (zeta +2 %, -5 %, Delta d +10 %, -20 %, r +2 %): the
+              first mismatch verdict per seed within 80 periods (None: not seen).
 ``capture``   capture time and largest correction against the starting distance for the
               rule, the ramp and switching on at once (study gains c2 = -1 and the
               least-noise gains); writes out/watchful/capture.png.
@@ -122,6 +124,20 @@ def detect_one(args):
     return seed, augmented, first
 
 
+POWER_CASES = {"zeta +2 %": {"zeta": 1.02}, "zeta -5 %": {"zeta": 0.95},
+               "Delta d +10 %": {"delta_d": 1.1}, "Delta d -20 %": {"delta_d": 0.8},
+               "r +2 %": {"r": 1.02}}
+
+
+def power_one(args):
+    name, seed, augmented = args
+    model = P.with_(**{k: getattr(P, k) * f for k, f in POWER_CASES[name].items()})
+    kwargs = {} if augmented else {"bias": False, "wall": False}
+    vs = _verdicts(model, 100 + seed, 80, **kwargs)
+    return name, augmented, next((v.k for v in vs if v is not None and v.status == "mismatch"),
+                                 None)
+
+
 def capture_one(args):
     gains_name, mode, dist, seed = args
     if gains_name == "study":
@@ -145,7 +161,7 @@ def capture_one(args):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", choices=("bias", "drift", "alarm", "detect", "capture"),
+    ap.add_argument("--part", choices=("bias", "drift", "alarm", "detect", "power", "capture"),
                     required=True)
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--periods", type=int, default=1000, help="alarm: periods per seed")
@@ -187,6 +203,13 @@ def main(argv=None):
                 print(f"{'augmented' if a else 'plain'}: detected {len(ok)} of {len(t)}; "
                       f"periods: min {min(ok)} median {np.median(ok):.0f} max {max(ok)}; "
                       f"{sorted(ok)}")
+        elif args.part == "power":
+            rows = list(pool.map(power_one, [(n, s, a) for n in POWER_CASES for a in (False, True)
+                                             for s in range(args.seeds)]))
+            for n in POWER_CASES:
+                for a in (False, True):
+                    print(f"{n:14s} {'augmented' if a else 'plain':9s}: first verdict "
+                          f"{[r[2] for r in rows if r[0] == n and r[1] == a]}")
         else:
             dists = (1e-4, 1e-3, 3e-3, 1e-2, 2e-2, 4.5e-2)
             cases = [(gn, m, d, s) for gn in ("study", "least") for m in ("now", "rule", "ramp")
