@@ -177,3 +177,35 @@ def test_a_slow_actuator_loses_the_loop(least_noise):
     assert o.spectral_radius > 1.0
     with pytest.raises(OrbitNotFound):
         actuated_orbit(P, g, W, bandwidth_actuator(P, 1.0))
+
+
+def test_the_exact_design_puts_the_orbit_back_on_x_star_star(least_noise):
+    """actuated_c1 (N_g,12 = 0 with the force profile, docs/theory_pulse.md (P1)): with the
+    ideal actuator the pulse loop's orbit lands 5.3e-8 from the kick design's X** (the
+    kick's c1: 1.5e-5); through the lag at 10x and 3x within 2.4e-5 and 1.04e-4 of it
+    (naive 3.5e-3, 6.6e-3), with the spectral radius below 0.623."""
+    from grazing_control.dynamics.actuator import IDEAL_ACTUATOR, actuated_c1
+    from grazing_control.dynamics.orbits import orbit_11
+
+    g, orbit = least_noise
+    target = orbit_11(P, g).pi2_deviation[0]
+    start = pulse_start(P.period, g.delay, W)
+    g0 = Gains(actuated_c1(P, g.c2, IDEAL_ACTUATOR, start, W), g.c2, g.delay)
+    assert abs(orbit.pi2_deviation[0] - target) > 1e-5
+    assert abs(pulse_orbit(P, g0, W).pi2_deviation[0] - target) < 1e-7
+    guess = None
+    for ratio, bound in ((30.0, None), (10.0, 3e-5), (5.0, None), (3.0, 1.2e-4)):
+        act = bandwidth_actuator(P, ratio)
+        ge = Gains(actuated_c1(P, g.c2, act, start, W), g.c2, g.delay)
+        o = actuated_orbit(P, ge, W, act, guess=guess)
+        guess = o.state
+        assert o.spectral_radius < 0.623 and len(o.impacts) == 1
+        if bound:
+            assert abs(o.state[0] - target) < bound
+
+
+def test_the_exact_design_needs_the_force_before_the_grazing_phase():
+    from grazing_control.dynamics.actuator import actuated_c1
+
+    with pytest.raises(ParameterError, match="before the grazing phase"):
+        actuated_c1(P, -1.0, Actuator(0.1, 5.0), 3.0, W)

@@ -27,7 +27,8 @@ tau_a = 0 and L = 0 is the ideal pulse of :func:`grazing_control.dynamics.actuat
 the force's impulse is F w whatever tau_a (the lag has unit DC gain) and its centre of
 mass is shifted by L + tau_a, so to first order in tau_a the actuator is the ideal pulse
 delayed by L + tau_a (:func:`equivalent_delay`; the O(tau_a) and O(tau_a^2) orders are
-measured in tests/test_actuator.py). :func:`actuated_orbit` is the closed loop's 1/1
+measured in tests/test_actuator.py), and :func:`actuated_c1` is the exact design for the
+force profile (N_g,12 = 0 with the kick direction replaced by the profile's). :func:`actuated_orbit` is the closed loop's 1/1
 orbit with its 3x3 multipliers (the margin charted against the bandwidth by
 benchmarks/chart_actuator.py).
 """
@@ -46,7 +47,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .actuation import newton_fixed_point, pulse_force, pulse_start, pulse_step
 from .estimation import phi_rows
 
-__all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay",
+__all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
            "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator"]
 
 TWO_PI = 2.0 * math.pi
@@ -92,6 +93,59 @@ def equivalent_delay(actuator: Actuator) -> float:
     delay delta + L + tau_a with the command centred at delta matches the actuator to
     first order in tau_a (docs/theory_pulse.md section 6)."""
     return actuator.latency + actuator.time_constant
+
+
+def actuated_c1(p: OscillatorParams, c2: float, actuator: Actuator, start: float,
+                width: float) -> float:
+    """c1 that makes N_g,12 = 0 for a pulse commanded on [start, start + width] after Pi2
+    through ``actuator`` (docs/theory_pulse.md section 7, (P1)): the delayed kick's
+    condition (D5), N_g,12 = Phi12(T) + h (c1 Phi12(s) + c2 Phi22(s)) = 0, with the kick's
+    h = Phi12(T - s - delta) replaced by the force profile's
+
+        h_f = int_0^{T - s} Phi12(T - s - t) f(t) dt,     int f = 1,
+
+    f the actuator's response to the unit-impulse command (quadrature, 1e-12 relative).
+    The force left after the grazing phase T - s (a share e^{-(T - s - start - L - w) /
+    tau_a} of it) acts after the impact and is not in N_g: :func:`actuated_orbit`
+    measures what it costs. With the ideal actuator this is the exact design for the
+    pulse itself (the O(w^2) of docs/theory_pulse.md section 2 removed).
+
+    Raises ParameterError when the command does not end before the grazing phase or
+    h_f = 0 (no c1 exists).
+    """
+    from scipy.integrate import quad
+
+    from .design import max_design_delay
+    from grazing_control.oscillator.flow import transition_matrix
+
+    top = max_design_delay(p)
+    tau, a = actuator.time_constant, start + actuator.latency
+    b = a + width
+    if not (0.0 <= a and width > 0.0 and b < top):
+        raise ParameterError(f"start={start!r} is invalid with width={width!r} and latency="
+                             f"{actuator.latency!r}: valid range is 0 <= start and start + "
+                             f"latency + width < T - s = {top!r} (before the grazing phase)")
+    wd = p.omega_d
+
+    def phi12(u):
+        return math.exp(-p.zeta * u) * math.sin(wd * u) / wd
+
+    def force(t):                      # the response to a command of impulse 1
+        if tau == 0.0:
+            return 1.0 / width if t < b else 0.0
+        if t < b:
+            return -math.expm1(-(t - a) / tau) / width
+        return -math.expm1(-width / tau) * math.exp(-(t - b) / tau) / width
+
+    h = sum(quad(lambda t: phi12(top - t) * force(t), lo, hi, epsabs=0.0, epsrel=1e-12,
+                 limit=200)[0] for lo, hi in ((a, b), (b, top)) if hi > lo)
+    s = p.pi2_offset / p.omega
+    _p11, p12, _p21, p22 = transition_matrix(p.zeta, s)
+    n12 = transition_matrix(p.zeta, p.period)[1]
+    if h == 0.0 or p12 == 0.0:
+        raise ParameterError(f"start={start!r}: the force profile's h_f = {h!r}, no gain c1 "
+                             "makes N_g,12 = 0")
+    return -(n12 / h + c2 * p22) / p12
 
 
 def _gap_parts(p, tau0, zp, f_inf, k, tau_a):
