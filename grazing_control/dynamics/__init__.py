@@ -11,8 +11,11 @@ on Pi2), :mod:`.estimation` (the Pi2 state from a sampled sensor stream: nearest
 arc fit, model filter), :mod:`.stream` (which samples make which section; the closed
 loop on a stream), :mod:`.noise` (the loop's stationary covariance per unit measurement
 noise), :mod:`.tuning` (the least-noise design), :mod:`.mismatch` (model-error bands),
-:mod:`.actuation` (a correction as a force pulse) and :mod:`.identification` (the
-model's parameters from a recorded motion).
+:mod:`.actuation` (a correction as a force pulse), :mod:`.actuator` (a first-order
+actuator with latency, exactly), :mod:`.augmented` (the model filter with a sensor bias
+and a drifting Delta d), :mod:`.consistency` (the windowed innovation test),
+:mod:`.capture` (switching the correction on) and :mod:`.identification` (the model's
+parameters from a recorded motion).
 
 May import: :mod:`grazing_control.oscillator`, :mod:`grazing_control.support`. Never rclpy.
 """

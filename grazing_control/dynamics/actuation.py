@@ -44,7 +44,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .simulate import period_step
 
 __all__ = ["pulse_force", "pulse_start", "pulse_step", "flow_with_force", "PulseOrbit",
-           "pulse_orbit"]
+           "pulse_orbit", "newton_fixed_point"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -121,6 +121,37 @@ def pulse_step(p: OscillatorParams, dx: float, dv: float, dv_correction: float =
     return Segment(dx, dv, impacts, None)
 
 
+def newton_fixed_point(step, z, h: float, max_iter: int = 30):
+    """Newton on z = P(z) for an exact period map ``step(z) -> (P(z), aux)``, the
+    Jacobian by central differences of step h: until the residual |P(z) - z| is at the
+    rounding of the O(1) states (1e-15) or a step no longer lowers it.
+    Returns (z, aux at z, residual, jacobian: z -> dP/dz)."""
+    n = z.size
+
+    def jacobian(z):
+        jac = np.empty((n, n))
+        for i in range(n):
+            e = np.zeros(n)
+            e[i] = h
+            jac[:, i] = (step(z + e)[0] - step(z - e)[0]) / (2.0 * h)
+        return jac
+
+    # the states are of order 1 (x** and the forcing), so the map rounds at ~1e-16
+    # absolute: Newton stops there, or when a step no longer lowers the residual
+    fz, aux = step(z)
+    residual = float(np.max(np.abs(fz - z)))
+    for _ in range(max_iter):
+        if residual <= 1e-15:
+            break
+        trial = z - np.linalg.solve(jacobian(z) - np.eye(n), fz - z)
+        ft, at = step(trial)
+        res_t = float(np.max(np.abs(ft - trial)))
+        if res_t >= residual:
+            break
+        z, fz, aux, residual = trial, ft, at, res_t
+    return z, aux, residual, jacobian
+
+
 @dataclass(frozen=True)
 class PulseOrbit:
     """The 1/1 orbit of the loop closed with a force pulse (:func:`pulse_orbit`).
@@ -195,27 +226,7 @@ def pulse_orbit(p: OscillatorParams, gains: Gains, width: float, *,
     # eps |z| / h
     h = max(1e-3 * kick.v_minus ** 2, 1e-7 * float(np.max(np.abs(z))), 1e-13)
 
-    def jacobian(z):
-        jac = np.empty((2, 2))
-        for i in range(2):
-            e = np.zeros(2)
-            e[i] = h
-            jac[:, i] = (step(z + e)[0] - step(z - e)[0]) / (2.0 * h)
-        return jac
-
-    # the states are of order 1 (x** and the forcing), so the map rounds at ~1e-16
-    # absolute: Newton stops there, or when a step no longer lowers the residual
-    fz, seg = step(z)
-    residual = float(np.max(np.abs(fz - z)))
-    for _ in range(max_iter):
-        if residual <= 1e-15:
-            break
-        trial = z - np.linalg.solve(jacobian(z) - np.eye(2), fz - z)
-        ft, st = step(trial)
-        res_t = float(np.max(np.abs(ft - trial)))
-        if res_t >= residual:
-            break
-        z, fz, seg, residual = trial, ft, st, res_t
+    z, seg, residual, jacobian = newton_fixed_point(step, z, h, max_iter)
     if residual > 1e-12 or len(seg.impacts) != 1:
         raise OrbitNotFound(f"no 1/1 pulse orbit (width {width!r}) near the kick's: residual "
                             f"{residual:.1e}, {len(seg.impacts)} impacts per period")

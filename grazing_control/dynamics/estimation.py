@@ -232,7 +232,7 @@ def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
 
 
 def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
-               duration: float | None = None):
+               duration: float | None = None, *, wall: bool = False):
     """The exact motion from the section state ``z0`` (before the correction): the
     deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
     (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
@@ -245,6 +245,12 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     -------
     z : (n, 2) deviations, jac : (n, 2, 2), end : (dx, dv) at ``duration`` (default T),
     monodromy : (2, 2) d end / d z0, impacts : list of (time, phase, v-, v+).
+
+    With ``wall`` also the sensitivities to the wall, d z(s_j) / d Delta d (n, 2) and
+    d end / d Delta d (2,): zero before the first impact; an impact adds
+    (I - S) e1 to the perturbation carried up to it, d z+ = S d z- + (I - S) e1 d(Delta d)
+    (docs/theory_estimation.md, (E8)); the flow carries it on by Phi and S. The other
+    outputs are the same as without it, bit for bit.
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
@@ -253,13 +259,14 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     tau = p.tau2
     z = (float(z0[0]), float(z0[1]))
     m = np.eye(2)
+    g = np.zeros(2)                     # d z / d Delta d (``wall``)
     t0 = 0.0
     impacts = []
     legs = [(0.0, delay, 0.0), (delay, duration, correction)] if delay > 0.0 else \
         [(0.0, duration, correction)]
     for start, end, kick in legs:
         z = (z[0], z[1] + kick)
-        events.append((start, z, m))
+        events.append((start, z, m, g))
         seg = advance(p, (tau + p.omega * start) % TWO_PI, z[0], z[1], end - start)
         for imp in seg.impacts:
             if imp.sticking:
@@ -268,14 +275,18 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
             f = np.array(transition_matrix(p.zeta, ti - t0)).reshape(2, 2)
             sal = np.array(saltation_matrix(p, imp.phase, imp.v_minus)).reshape(2, 2)
             m = sal @ f @ m
+            if wall:
+                g = sal @ (f @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
             psi = imp.phase - p.lag
             z = (p.d - p.amplitude * math.cos(psi),
                  imp.v_plus + p.amplitude * p.omega * math.sin(psi))
             t0 = ti
-            events.append((ti, z, m))
+            events.append((ti, z, m, g))
             impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
         f = np.array(transition_matrix(p.zeta, end - t0)).reshape(2, 2)
         m = f @ m
+        if wall:
+            g = f @ g
         z = (seg.dx, seg.dv)
         t0 = end
     times = np.array([e[0] for e in events])
@@ -286,6 +297,9 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     phi = phi_rows(p.zeta, s - times[idx])
     out = np.einsum("nij,nj->ni", phi, zs)
     jac = np.einsum("nij,njk->nik", phi, ms)
+    if wall:
+        gs = np.array([e[3] for e in events])[idx]
+        return out, jac, z, m, impacts, np.einsum("nij,nj->ni", phi, gs), g
     return out, jac, z, m, impacts
 
 

@@ -301,21 +301,31 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
                     estimator: str = "model", sigma: float = 1e-4,
                     impact_source: str = "stream", deviation=(0.0, 0.0),
                     control_after: int = 0, floor: float = 1e-2,
-                    model: OscillatorParams | None = None) -> StreamRun:
+                    model: OscillatorParams | None = None, stream_estimator=None,
+                    plant_at=None, switch=None, observe=None) -> StreamRun:
     """The closed loop on a sensor stream: exact plant (:func:`trajectory`), samples at
     t_j = j T / ``rate`` measured by ``measure(j0, x, v) -> (x~, v~)`` (a
     :class:`grazing_control.plant.sensor.SensorModel`'s ``measure``), the estimator of
     :class:`StreamEstimator`, and Eq. 28 on the estimate from section ``control_after``
     on, applied ``gains.delay`` after the section. ``model``: the estimator's model of
     the plant when it is not ``p`` (a model error); default ``p``.
+
+    Hooks for the watchful loop (issue 29; none changes the run when left out):
+    ``stream_estimator`` an estimator object to use instead of building one (e.g.
+    :class:`grazing_control.dynamics.augmented.AugmentedStreamEstimator`);
+    ``plant_at(k)`` the plant's parameters in period k (a drifting wall; same period
+    and forcing as ``p``); ``switch(k, estimate) -> factor`` the share of Eq. 28's
+    correction applied at section k (a capture rule or a gain ramp,
+    :mod:`grazing_control.dynamics.capture`); ``observe(k, estimator)`` called after
+    each section's estimate (to feed a consistency monitor).
     """
     if int(rate) != rate or rate < 2:
         raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
                              "samples per period")
     T = p.period
     h = T / rate
-    est = StreamEstimator(p if model is None else model, estimator, sigma, impact_source,
-                          h, floor)
+    est = stream_estimator if stream_estimator is not None else StreamEstimator(
+        p if model is None else model, estimator, sigma, impact_source, h, floor)
     z = (float(deviation[0]), float(deviation[1]))
     truth = np.empty((periods, 2))
     zhat = np.empty((periods, 2))
@@ -329,16 +339,21 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
         pending += est.flush(k)
         (_, _, e), = [d for d in pending if d[0] == k]
         zhat[k], cov[k] = e.z, e.cov
+        if observe is not None:
+            observe(k, est)
         dv = 0.0
         if k >= control_after and np.all(np.isfinite(e.z)):
             dv = gains.c1 * e.z[0] + gains.c2 * e.z[1]
+            if switch is not None:
+                dv *= switch(k, e)
         corr[k] = dv
         est.set_correction(k, dv, gains.delay)
         j0 = math.floor((k * T + _TOL * T) / h) + 1
         j1 = math.floor(((k + 1) * T + _TOL * T) / h)
         js = np.arange(j0, j1 + 1)
         s = js * h - k * T
-        dev, _jac, z, _m, imps = trajectory(p, z, s, dv, gains.delay)
+        plant = p if plant_at is None else plant_at(k)
+        dev, _jac, z, _m, imps = trajectory(plant, z, s, dv, gains.delay)
         counts[k] = len(imps)
         psi = p.tau2 + p.omega * s - p.lag
         x = p.amplitude * np.cos(psi) + dev[:, 0]
