@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from grazing_control.oscillator.contact import (KelvinVoigt, advance_compliant,
+from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, advance_compliant,
                                                 compliant_period_step,
                                                 kelvin_voigt_damping,
                                                 kelvin_voigt_restitution)
@@ -27,6 +27,7 @@ from reference_contact import reference_advance
 
 #: seeded cases per test run; CONTACT_CASES=6000 for the long run of docs/theory_contact.md
 CASES = int(os.environ.get("CONTACT_CASES", "1000"))
+FRICTION_CASES = int(os.environ.get("CONTACT_FRICTION_CASES", "400"))
 TWO_PI = 2.0 * math.pi
 
 
@@ -168,3 +169,46 @@ def test_a_mass_held_in_the_stop_never_hangs_and_the_cap_is_a_clear_error():
     assert 1 < len(seg.contacts) < 200
     with pytest.raises(ImpactCapError, match="max_contacts=2"):
         advance_compliant(p, law, 0.0, p.d - 0.01, 0.3, 5 * p.period, max_contacts=2)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_friction_matches_the_reference_over_seeded_cases(seed):
+    """Coulomb friction with the Kelvin-Voigt stop: states to 2e-12 (times 1 + |x| + |v|;
+    the reference's own error at rtol 2.3e-14 reached 1.7e-12, docs/theory_contact.md),
+    contacts and sticks counted exactly, stick ends to 1e-9."""
+    rng = random.Random(2000 + seed)
+    sticks = contacts = 0
+    for _ in range(FRICTION_CASES // 2):
+        p = OscillatorParams(delta_d=-10 ** rng.uniform(-3, 0.2), zeta=rng.uniform(0.005, 0.2))
+        law = KelvinVoigt.from_restitution(10 ** rng.uniform(0.5, 4), rng.uniform(0.2, 1.0))
+        f_kin = 10 ** rng.uniform(-2, -0.3)
+        friction = Coulomb(f_kin, f_kin * rng.uniform(1.0, 1.5))
+        tau0, x, v = rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 1), rng.uniform(-1, 1)
+        seg = advance_compliant(p, law, tau0, x, v, p.period, friction=friction)
+        xr, vr, ref, ref_sticks = reference_advance(p, law, tau0, x, v, p.period, friction)
+        tol = 2e-12 * (1.0 + abs(xr) + abs(vr))
+        assert abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol, (seg, xr, vr)
+        assert len(seg.contacts) == len(ref)
+        assert len(seg.sticks) == len(ref_sticks), (seg.sticks, ref_sticks)
+        for (a, b), (ar, br) in zip(seg.sticks, ref_sticks):
+            assert a == pytest.approx(ar, abs=1e-9)
+            assert b == pytest.approx(br, abs=1e-9) if math.isfinite(br) else math.isinf(b)
+        sticks += len(seg.sticks)
+        contacts += len(seg.contacts)
+    assert sticks > 10 and contacts > 50, (sticks, contacts)
+
+
+def test_bad_friction_names_the_parameter():
+    with pytest.raises(ParameterError, match="kinetic"):
+        Coulomb(-0.1)
+    with pytest.raises(ParameterError, match="static"):
+        Coulomb(0.2, 0.1)
+
+
+def test_friction_above_the_forcing_sticks_for_ever():
+    """F_s larger than every force at rest: the mass stops once and stays (one stick to
+    the end), found without a search."""
+    p = OscillatorParams(delta_d=-0.05)
+    seg = advance_compliant(p, KelvinVoigt(1e3, 1.0), 0.0, 0.0, 0.1, 3 * p.period,
+                            friction=Coulomb(5.0))
+    assert len(seg.sticks) == 1 and math.isinf(seg.sticks[0][1]) and seg.v == 0.0

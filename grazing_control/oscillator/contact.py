@@ -40,6 +40,7 @@ from .params import OscillatorParams, ParameterError, _check_real
 
 __all__ = [
     "KelvinVoigt",
+    "Coulomb",
     "Contact",
     "CompliantSegment",
     "kelvin_voigt_restitution",
@@ -160,12 +161,33 @@ class Contact(NamedTuple):
     exit_gap: float
 
 
+@dataclass(frozen=True)
+class Coulomb:
+    """Coulomb dry friction on the mass: -F_f sign(x') in slip, a stick at x' = 0 while
+    the force without friction |G| <= F_s (F_s >= F_f; default F_s = F_f)."""
+
+    kinetic: float
+    static: float | None = None
+
+    def __post_init__(self) -> None:
+        f = _check_real("kinetic", self.kinetic)
+        if not f >= 0.0:
+            raise ParameterError(f"kinetic={f!r} is invalid: valid range is F_f >= 0")
+        s = f if self.static is None else _check_real("static", self.static)
+        if not s >= f:
+            raise ParameterError(f"static={s!r} is invalid: valid range is F_s >= F_f = {f!r}")
+        object.__setattr__(self, "kinetic", f)
+        object.__setattr__(self, "static", s)
+
+
 class CompliantSegment(NamedTuple):
-    """Result of :func:`advance_compliant`: end state (x, v) and the contacts."""
+    """Result of :func:`advance_compliant`: end state (x, v), the contacts, and the
+    sticks of the friction as (start, end) times (end inf: stuck at the segment's end)."""
 
     x: float
     v: float
     contacts: list
+    sticks: tuple = ()
 
 
 class _Region:
@@ -180,7 +202,7 @@ class _Region:
                  "c1", "c2", "cabs")
 
     def __init__(self, w2: float, beta: float, p: OscillatorParams, tau0: float,
-                 delta0: float, v0: float):
+                 delta0: float, v0: float, push: float = 0.0):
         w = p.omega
         self.beta = beta
         self.big_w = math.sqrt(w2)
@@ -188,7 +210,7 @@ class _Region:
         self.omega = w
         self.amp = 1.0 / math.hypot(w2 - w * w, 2.0 * beta * w)
         self.lag = math.atan2(2.0 * beta * w, w2 - w * w)
-        self.offset = -p.d / w2
+        self.offset = -(p.d + push) / w2
         self.tau0 = tau0
         pd, pv = self._particular(0.0)
         self.c1 = delta0 - pd
@@ -294,30 +316,60 @@ def _check_law(p: OscillatorParams, law: KelvinVoigt) -> None:
             f"underdamped, (2 zeta + c_c)^2 < 4 (1 + k_c) = {4.0 * (1.0 + law.stiffness)!r}")
 
 
-def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
-                      duration: float, *, max_contacts: int = 10000) -> CompliantSegment:
-    """Exact flow with a Kelvin-Voigt stop for a fixed time (physical state x, v).
+def _release_time(tau: float, omega: float, lo: float, hi: float) -> float:
+    """Time until cos(tau) leaves [lo, hi] (inf if never): the end of a stick.
 
-    The regions (docs/theory_contact.md, "The Kelvin-Voigt stop"):
+    cos leaves through hi where it increases through it, at tau = -acos(hi) mod 2 pi, and
+    through lo where it decreases through it, at tau = acos(lo) mod 2 pi
+    (docs/theory_contact.md, "Coulomb friction").
+    """
+    exits = []
+    if hi < 1.0:
+        exits.append(-math.acos(max(-1.0, hi)))
+    if lo > -1.0:
+        exits.append(math.acos(min(1.0, lo)))
+    if not exits:
+        return math.inf
+    gaps = []
+    for e in exits:
+        g = (e - tau) % TWO_PI
+        gaps.append(0.0 if g > TWO_PI - 1e-12 else g)
+    return min(gaps) / omega
+
+
+def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
+                      duration: float, *, friction: "Coulomb | None" = None,
+                      max_contacts: int = 10000) -> CompliantSegment:
+    """Exact flow with a Kelvin-Voigt stop (and Coulomb friction) for a fixed time.
+
+    Physical state (x, v) in and out. The regions (docs/theory_contact.md, "The
+    Kelvin-Voigt stop"):
 
     * below: x <= d, free; contact starts at the first x = d with x' >= 0
-      (the wall's certified search);
+      (without friction the wall's certified search, full relative precision);
     * contact: x > d and F_c > 0; ends at the first zero of F_c;
     * above: x > d and F_c <= 0 (after a damped contact), free; ends at the first
       F_c >= 0 (a new contact) or x = d (below again), whichever comes first.
 
-    Never hangs: every switch consumes one of ``max_contacts`` contacts' worth of switches
-    (3 per contact), beyond which :class:`ImpactCapError` is raised
-    (docs/theory_contact.md, "Bounded switching").
+    With ``friction`` each region slips with the force -F_f sign(x') (a constant on the
+    right-hand side: the same closed form), ends a slip at the first zero of x', and
+    sticks there while |G| <= F_s, G = cos tau - x - k_c max(x - d, 0) the force without
+    friction at rest; the stick ends in closed form (:func:`_release_time`).
+
+    Never hangs: at most 3 ``max_contacts`` + 3 region changes and as many sticks, beyond
+    which :class:`ImpactCapError` is raised (docs/theory_contact.md, "Bounded switching").
     """
     _check_law(p, law)
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
             raise NonFiniteStateError(f"{name}={value!r} must be finite")
     k, c = law.stiffness, law.damping
+    f_kin = friction.kinetic if friction is not None else 0.0
+    f_sta = friction.static if friction is not None else 0.0
     t, tau = 0.0, tau0 % TWO_PI
     delta, vel = x - p.d, v
     contacts: list = []
+    sticks: list = []
     switches = 0
     free = (1.0, p.zeta)
     touch = (1.0 + k, p.zeta + 0.5 * c)
@@ -326,54 +378,105 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         region = "contact" if law.force(delta, vel) > 0.0 else "above"
     else:
         region = "below"
-    entry = None  # (t, tau, v-) of the contact in progress
-    if region == "contact":
-        entry = (0.0, tau, math.nan)
-    while True:
+    entry = (0.0, tau, math.nan) if region == "contact" else None
+    forced = None
+
+    def at_rest_force(tau, delta):
+        return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0)
+
+    def slip_sign(tau, delta, vel):
+        """Direction of the friction's slip; 0 for a stick (x' = 0, |G| <= F_s)."""
+        if f_kin == 0.0 and f_sta == 0.0:
+            return 0.0 if vel == 0.0 else math.copysign(1.0, vel)
+        if vel != 0.0:
+            return math.copysign(1.0, vel)
+        g = at_rest_force(tau, delta)
+        return 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
+
+    while t < duration:
         remaining = duration - t
-        if remaining <= 0.0:
-            break
         switches += 1
-        if switches > 3 * max_contacts + 3:
+        if switches > 2 * (3 * max_contacts + 3):
             raise ImpactCapError(
                 f"more than max_contacts={max_contacts} contacts in {duration:.6g} time "
                 f"units at phase {tau:.6f}: the motion is not resolvable at this cap")
+        s = forced if forced is not None else slip_sign(tau, delta, vel)
+        forced = None
+        if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s
+            rest = p.d + delta + k * max(delta, 0.0)
+            h = _release_time(tau, p.omega, rest - f_sta, rest + f_sta)
+            h = min(h, remaining)
+            sticks.append((t, t + h if t + h < duration else math.inf))
+            t += h
+            tau = (tau0 + p.omega * t) % TWO_PI
+            vel = 0.0
+            if t >= duration:
+                break
+            g = at_rest_force(tau, delta)
+            forced = math.copysign(1.0, g) if g != 0.0 else 1.0  # released: slips along G
+            continue
+        push = s * f_kin
+        geometry = free if region != "contact" else touch
+        reg = _Region(*geometry, p, tau, delta, vel, push)
+        h_stop = None
+        if friction is not None and s != 0.0:
+            h_stop = _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
+                                     lambda h: reg.bound(3, h), remaining, 1.0,
+                                     reg.cabs + reg.amp + abs(vel) + 1.0)
+        horizon = h_stop if h_stop is not None else remaining
+        kind, h = None, None
         if region == "below":
-            xp, vp = particular(p, tau)
-            dx, dv = (delta + p.d) - xp, vel - vp
-            if delta == 0.0:  # on the stop: its deviation without cancellation (impact.py)
-                dx = _on_wall_at_rest(p, tau)[0]
-            h = _next_impact(p, tau, dx, dv, remaining)
-            reg = _Region(*free, p, tau, delta, vel)
-            if h is None:
+            if friction is None:
+                xp, vp = particular(p, tau)
+                dx, dv = (delta + p.d) - xp, vel - vp
+                if delta == 0.0:  # on the stop: its deviation without cancellation (impact.py)
+                    dx = _on_wall_at_rest(p, tau)[0]
+                h = _next_impact(p, tau, dx, dv, horizon)
+            else:
+                h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
+                                    1.0, reg.cabs + reg.amp + abs(reg.offset))
+            kind = "entry" if h is not None else None
+        elif region == "contact":
+            sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
+            h = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon,
+                                -1.0, sc)
+            kind = "exit" if h is not None else None
+        else:
+            sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
+            h_force = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c),
+                                      horizon, 1.0, sc)
+            h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
+                                    h_force if h_force is not None else horizon, -1.0,
+                                    reg.cabs + reg.amp + abs(reg.offset))
+            if h_gap is not None and (h_force is None or h_gap < h_force):
+                kind, h = "below", h_gap
+            elif h_force is not None:
+                kind, h = "entry", h_force
+        if kind is None:
+            if h_stop is None:
                 delta, vel, _ = reg(remaining)
                 t = duration
                 break
-            _, vel, _ = reg(h)
-            delta = 0.0
-            t += h
+            delta, _, _ = reg(h_stop)
+            vel = 0.0  # the slip ends: stick or slip the other way (slip_sign)
+            t += h_stop
             tau = (tau0 + p.omega * t) % TWO_PI
-            if vel <= 8.0 * _EPS * scale_x and math.cos(tau) - p.d <= 0.0:
-                vel = 0.0  # a tangency below rounding, pulled away: no contact (impact.py)
-                continue
-            vel = max(vel, 0.0)
+            if region == "below":
+                delta = min(delta, 0.0)
+            continue
+        delta, vel, _ = reg(h)
+        t += h
+        tau = (tau0 + p.omega * t) % TWO_PI
+        if kind == "entry":
+            if region == "below":
+                delta = 0.0
+                if vel <= 8.0 * _EPS * scale_x and math.cos(tau) - p.d - push <= 0.0:
+                    vel = 0.0  # a tangency below rounding, pulled away: no contact (impact.py)
+                    continue
+                vel = max(vel, 0.0)
             entry = (t, tau, vel)
             region = "contact"
-            continue
-        if region == "contact":
-            reg = _Region(*touch, p, tau, delta, vel)
-            ev = _force_event(reg, k, c)
-            sc = k * (reg.cabs + reg.amp + abs(reg.offset) + 1e-300) + c * scale_x
-            h = _first_crossing(ev, _force_bound(reg, k, c), remaining, -1.0, sc)
-            if h is None:
-                delta, vel, _ = reg(remaining)
-                t = duration
-                contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf,
-                                        math.nan))
-                break
-            delta, vel, _ = reg(h)
-            t += h
-            tau = (tau0 + p.omega * t) % TWO_PI
+        elif kind == "exit":
             contacts.append(Contact(entry[0], entry[1], entry[2], vel, t - entry[0], delta))
             if len(contacts) > max_contacts:
                 raise ImpactCapError(
@@ -383,32 +486,12 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             region = "above" if delta > 0.0 else "below"
             if region == "below":
                 delta = min(delta, 0.0)
-            continue
-        # above: free flight with x > d, the force <= 0
-        reg = _Region(*free, p, tau, delta, vel)
-        ev_f = _force_event(reg, k, c)
-        sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
-        h_force = _first_crossing(ev_f, _force_bound(reg, k, c), remaining, 1.0, sc)
-        horizon = h_force if h_force is not None else remaining
-        h_gap = _first_crossing(lambda s: reg(s)[:2], lambda s: reg.bound(2, s), horizon, -1.0,
-                                reg.cabs + reg.amp + abs(reg.offset))
-        if h_gap is not None and (h_force is None or h_gap < h_force):
-            _, vel, _ = reg(h_gap)
+        else:
             delta = 0.0
-            t += h_gap
-            tau = (tau0 + p.omega * t) % TWO_PI
             region = "below"
-            continue
-        if h_force is None:
-            delta, vel, _ = reg(remaining)
-            t = duration
-            break
-        delta, vel, _ = reg(h_force)
-        t += h_force
-        tau = (tau0 + p.omega * t) % TWO_PI
-        entry = (t, tau, vel)
-        region = "contact"
-    return CompliantSegment(delta + p.d, vel, contacts)
+    if entry is not None:
+        contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
+    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks))
 
 
 def _force_event(reg: _Region, k: float, c: float):
@@ -423,7 +506,8 @@ def _force_bound(reg: _Region, k: float, c: float):
 
 
 def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: float,
-                          dv_correction: float = 0.0) -> CompliantSegment:
+                          dv_correction: float = 0.0, *,
+                          friction: Coulomb | None = None) -> CompliantSegment:
     """One forcing period from a Pi2 sample with a Kelvin-Voigt stop.
 
     The shape of :func:`grazing_control.dynamics.fidelity.period_step`: deviation (dx, dv)
@@ -435,7 +519,7 @@ def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: 
     x0, v0 = xp + dx, vp + dv + dv_correction
     if x0 - p.d > 0.0 and law.force(x0 - p.d, v0) > 0.0 and x0 - p.d > 1e-3:
         raise InitialStateError(f"state deep in the stop: x - d = {x0 - p.d:.3e}")
-    seg = advance_compliant(p, law, p.tau2, x0, v0, p.period)
+    seg = advance_compliant(p, law, p.tau2, x0, v0, p.period, friction=friction)
     tau = (p.tau2 + p.omega * p.period) % TWO_PI
     xe, ve = particular(p, tau)
-    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts)
+    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks)
