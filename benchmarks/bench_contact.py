@@ -3,7 +3,7 @@ the rigid limit k_c -> inf (docs/benchmarks.md "Compliant stop", docs/theory_con
 
     PYTHONPATH=. python benchmarks/bench_contact.py [--periods 200] [--repeat 3]
 
-Scene: the study's parameters at Delta d = -1e-3 from X** on Pi2 (the stable 1/1 orbit's
+Scene: the study's parameters (Hertz / Hunt-Crossley: alpha from r at v0 = 0.15, Eq. C5) at Delta d = -1e-3 from X** on Pi2 (the stable 1/1 orbit's
 neighbourhood, one contact a period), the stop given by its stiffness ratio and the
 study's r = 0.68 (Eq. C3). CPU time per period (time.process_time, best of --repeat).
 The rigid limit: one period from (dx, dv) = (0.01, 0) at Delta d = -0.05, the distance
@@ -20,6 +20,7 @@ import numpy as np
 
 from grazing_control.dynamics.simulate import core_period_step
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, compliant_period_step
+from grazing_control.oscillator.hertz import HuntCrossley, hertz_period_step
 from grazing_control.oscillator.params import OscillatorParams
 
 
@@ -58,6 +59,14 @@ def main(argv=None):
             cost, n = _per_period(compliant, args.periods, args.repeat)
             name = f"KV k_c={k:.0e}" + (" + friction" if fr else "")
             print(f"{name:<28} {cost * 1e6:10.1f} {n:16.2f}")
+    for k in (1e2, 1e4, 1e6):
+        law = HuntCrossley.from_restitution(k, p.r, 0.15)  # v- of the 1/1 orbit ~ 0.15
+
+        def hertz(dx, dv, law=law):
+            s = hertz_period_step(p, law, dx, dv)
+            return s.x, s.v, len(s.contacts)
+        cost, n = _per_period(hertz, args.periods // 4, args.repeat)
+        print(f"{'Hertz-HC k_c=' + format(k, '.0e'):<28} {cost * 1e6:10.1f} {n:16.2f}")
     print()
     q = OscillatorParams(delta_d=-0.05, r=0.68)
     rig = core_period_step(q, 0.01, 0.0)

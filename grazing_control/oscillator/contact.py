@@ -47,6 +47,7 @@ __all__ = [
     "kelvin_voigt_damping",
     "advance_compliant",
     "compliant_period_step",
+    "grazing_jump",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -523,3 +524,26 @@ def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: 
     tau = (p.tau2 + p.omega * p.period) % TWO_PI
     xe, ve = particular(p, tau)
     return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks)
+
+
+def grazing_jump(law: KelvinVoigt, alpha: float, penetration: float):
+    """Leading order of the Kelvin-Voigt stop's grazing discontinuity map (Eq. C7).
+
+    A free flight whose virtual maximum is ``penetration`` H > 0 above the stop, with
+    deceleration ``alpha`` = d - cos tau* > 0 there, leaves the contact with its velocity
+    changed, relative to the free flow at the apex, by
+
+        dv = -c_c H                                    (c_c > 0: order 1),
+        dv = -(4/3) k_c sqrt(2 / alpha) H^{3/2}        (c_c = 0: order 3/2),
+
+    while k_c H / alpha << 1 (the contact is much shorter than the stop's own period);
+    the rigid map's -(1 + r) sqrt(2 alpha H) is the limit for k_c H / alpha >> 1
+    (docs/theory_contact.md, "The compliant discontinuity map").
+
+    Returns (order, coefficient, dv).
+    """
+    if law.damping > 0.0:
+        order, coef = 1.0, law.damping
+    else:
+        order, coef = 1.5, (4.0 / 3.0) * law.stiffness * math.sqrt(2.0 / alpha)
+    return order, coef, -coef * penetration ** order
