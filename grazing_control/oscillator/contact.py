@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from .flow import particular
+from .flow import matmul2, particular
 from .impact import (ImpactCapError, InitialStateError, NonFiniteStateError, _next_impact,
                      _on_wall_at_rest)
 from .params import OscillatorParams, ParameterError, _check_real
@@ -189,6 +189,7 @@ class CompliantSegment(NamedTuple):
     v: float
     contacts: list
     sticks: tuple = ()
+    monodromy: tuple | None = None
 
 
 class _Region:
@@ -237,6 +238,14 @@ class _Region:
         # the equation itself gives delta'' (no cancellation beyond that of its terms)
         acc = -self.amp * self.omega * self.omega * cp - 2.0 * b * wv - self.big_w ** 2 * w
         return d, v, acc
+
+    def transition(self, h: float):
+        """Phi(h) of the homogeneous region flow, (Phi11, Phi12, Phi21, Phi22):
+        e^{-beta h} [[c + beta s / Omega, s / Omega], [-W^2 s / Omega, c - beta s / Omega]]."""
+        e = math.exp(-self.beta * h)
+        c = math.cos(self.big_om * h)
+        s = math.sin(self.big_om * h) / self.big_om
+        return (e * (c + self.beta * s), e * s, -e * self.big_w ** 2 * s, e * (c - self.beta * s))
 
     def bound(self, n: int, h: float) -> float:
         """max |delta^(n)| on [h, inf), n >= 1."""
@@ -340,7 +349,7 @@ def _release_time(tau: float, omega: float, lo: float, hi: float) -> float:
 
 def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
                       duration: float, *, friction: "Coulomb | None" = None,
-                      max_contacts: int = 10000) -> CompliantSegment:
+                      max_contacts: int = 10000, monodromy: bool = False) -> CompliantSegment:
     """Exact flow with a Kelvin-Voigt stop (and Coulomb friction) for a fixed time.
 
     Physical state (x, v) in and out. The regions (docs/theory_contact.md, "The
@@ -364,6 +373,10 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
             raise NonFiniteStateError(f"{name}={value!r} must be finite")
+    if monodromy and friction is not None:
+        raise ValueError("monodromy=True is invalid with friction: only the frictionless "
+                         "stop's Jacobian is built (docs/theory_contact.md, C8)")
+    mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
     k, c = law.stiffness, law.damping
     f_kin = friction.kinetic if friction is not None else 0.0
     f_sta = friction.static if friction is not None else 0.0
@@ -456,6 +469,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         if kind is None:
             if h_stop is None:
                 delta, vel, _ = reg(remaining)
+                if mono is not None:
+                    mono = matmul2(reg.transition(remaining), mono)
                 t = duration
                 break
             delta, _, _ = reg(h_stop)
@@ -466,6 +481,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                 delta = min(delta, 0.0)
             continue
         delta, vel, _ = reg(h)
+        if mono is not None:
+            mono = matmul2(reg.transition(h), mono)
         t += h
         tau = (tau0 + p.omega * t) % TWO_PI
         if kind == "entry":
@@ -475,6 +492,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                     vel = 0.0  # a tangency below rounding, pulled away: no contact (impact.py)
                     continue
                 vel = max(vel, 0.0)
+                if mono is not None:  # the dashpot's force c_c v jumps on (C8)
+                    mono = matmul2((1.0, 0.0, -c, 1.0), mono)
             entry = (t, tau, vel)
             region = "contact"
         elif kind == "exit":
@@ -492,7 +511,7 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             region = "below"
     if entry is not None:
         contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
-    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks))
+    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), mono)
 
 
 def _force_event(reg: _Region, k: float, c: float):
@@ -507,8 +526,8 @@ def _force_bound(reg: _Region, k: float, c: float):
 
 
 def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: float,
-                          dv_correction: float = 0.0, *,
-                          friction: Coulomb | None = None) -> CompliantSegment:
+                          dv_correction: float = 0.0, *, friction: Coulomb | None = None,
+                          monodromy: bool = False) -> CompliantSegment:
     """One forcing period from a Pi2 sample with a Kelvin-Voigt stop.
 
     The shape of :func:`grazing_control.dynamics.fidelity.period_step`: deviation (dx, dv)
@@ -520,10 +539,11 @@ def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: 
     x0, v0 = xp + dx, vp + dv + dv_correction
     if x0 - p.d > 0.0 and law.force(x0 - p.d, v0) > 0.0 and x0 - p.d > 1e-3:
         raise InitialStateError(f"state deep in the stop: x - d = {x0 - p.d:.3e}")
-    seg = advance_compliant(p, law, p.tau2, x0, v0, p.period, friction=friction)
+    seg = advance_compliant(p, law, p.tau2, x0, v0, p.period, friction=friction,
+                            monodromy=monodromy)
     tau = (p.tau2 + p.omega * p.period) % TWO_PI
     xe, ve = particular(p, tau)
-    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks)
+    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks, seg.monodromy)
 
 
 def grazing_jump(law: KelvinVoigt, alpha: float, penetration: float):
