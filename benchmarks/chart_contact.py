@@ -44,7 +44,7 @@ def main():
         for c2 in C2S:
             gains = Gains(degenerate_c1(p, c2), c2)
             rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
-            model = CompliantOneDOF(p, KelvinVoigt.from_restitution(1e8, p.r), gains)
+            model = CompliantOneDOF(p, gains, law=KelvinVoigt.from_restitution(1e8, p.r))
             branch = continue_orbit(model, "log10_stiffness", DECADES, rigid.state)
             rows.append((dd, c2, rho(rigid.monodromy), branch))
     print(f"{'Delta d':>8} {'c2':>5} {'rigid':>6} | largest |multiplier| at log10 k_c = "
@@ -60,8 +60,8 @@ def main():
         guess = np.zeros(2)
         for lk in range(1, 9):
             try:
-                o = find_periodic(CompliantOneDOF(p, KelvinVoigt.from_restitution(10.0 ** lk,
-                                                                                  p.r)), guess)
+                law = KelvinVoigt.from_restitution(10.0 ** lk, p.r)
+                o = find_periodic(CompliantOneDOF(p, law=law), guess)
                 out.append(f"1e{lk}:{rho(o.monodromy):.3f}")
             except ShootingFailed:
                 out.append(f"1e{lk}:--")

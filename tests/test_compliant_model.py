@@ -20,8 +20,8 @@ from grazing_control.oscillator.params import OscillatorParams
 
 def _model(dd=-1e-3, k=1e6, c2=-1.0):
     p = OscillatorParams(delta_d=dd)
-    return CompliantOneDOF(p, KelvinVoigt.from_restitution(k, p.r),
-                           Gains(degenerate_c1(p, c2), c2))
+    return CompliantOneDOF(p, Gains(degenerate_c1(p, c2), c2),
+                           law=KelvinVoigt.from_restitution(k, p.r))
 
 
 def test_is_a_period_map_and_names_bad_parameters():
@@ -32,7 +32,9 @@ def test_is_a_period_map_and_names_bad_parameters():
     with pytest.raises(ValueError, match="bogus"):
         m.parameter("bogus")
     with pytest.raises(ValueError, match="delay"):
-        CompliantOneDOF(m.params, m.law, Gains(-1.0, -1.0, delay=0.1))
+        CompliantOneDOF(m.params, Gains(-1.0, -1.0, delay=0.1), law=m.law)
+    with pytest.raises(ValueError, match="law"):
+        CompliantOneDOF(m.params)
 
 
 def test_jacobian_matches_central_differences():

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from grazing_control.oscillator.contact import KelvinVoigt, compliant_period_step
-from grazing_control.oscillator.control import Gains, gain_matrix
+from grazing_control.oscillator.control import gain_matrix
 from grazing_control.oscillator.flow import matmul2
 from grazing_control.oscillator.params import OscillatorParams
-from .model import Step
+from .model import OneDOF, Step
 
 __all__ = ["CompliantOneDOF"]
 
@@ -32,30 +32,21 @@ _LAW_NAMES = ("stiffness", "log10_stiffness", "contact_zeta")
 
 
 @dataclass(frozen=True)
-class CompliantOneDOF:
-    """The study's oscillator with a Kelvin-Voigt stop, on Pi2 before the correction."""
+class CompliantOneDOF(OneDOF):
+    """The study's oscillator with a Kelvin-Voigt stop, on Pi2 before the correction.
 
-    params: OscillatorParams
-    law: KelvinVoigt
-    gains: Gains | None = None
-    dimension: int = 2
+    :class:`~.model.OneDOF`'s section, coordinates and grazing point, with the stop
+    ``law`` (keyword, required) in place of the rigid wall.
+    """
+
+    law: KelvinVoigt | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.law, KelvinVoigt):
+            raise ValueError(f"law={self.law!r} is invalid: a KelvinVoigt stop is required")
         if self.gains is not None and self.gains.delay != 0.0:
             raise ValueError(f"delay={self.gains.delay!r} is invalid: the compliant map takes "
                              f"the correction on Pi2 only (delay 0)")
-
-    @property
-    def period(self) -> float:
-        return self.params.period
-
-    @property
-    def section_phase(self) -> float:
-        return self.params.tau2
-
-    @property
-    def coordinates(self) -> tuple:
-        return ("x - x**", "v - v**")
 
     def step(self, state, jacobian: bool = False) -> Step:
         dx, dv = float(state[0]), float(state[1])
@@ -66,30 +57,23 @@ class CompliantOneDOF:
             jac = np.array(matmul2(seg.monodromy, gain_matrix(self.gains))).reshape(2, 2)
         return Step(np.array([seg.x, seg.v]), jac, tuple(seg.contacts))
 
-    def grazing_state(self) -> np.ndarray:
-        return np.zeros(2)
-
     def parameter(self, name: str) -> float:
-        if name in ("c1", "c2"):
-            if self.gains is None:
-                raise ValueError(f"parameter {name!r} is invalid without gains")
-            return float(getattr(self.gains, name))
         if name == "stiffness":
             return self.law.stiffness
         if name == "log10_stiffness":
             return math.log10(self.law.stiffness)
         if name == "contact_zeta":
             return self.law.contact_zeta
-        if name in _PARAM_NAMES:
-            return float(getattr(self.params, name))
-        raise ValueError(f"parameter {name!r} is invalid: valid names are "
-                         f"{', '.join(_PARAM_NAMES + ('c1', 'c2') + _LAW_NAMES)}")
+        if name == "delay":
+            raise ValueError("parameter 'delay' is invalid: the compliant map has no delay")
+        try:
+            return super().parameter(name)
+        except ValueError:
+            raise ValueError(f"parameter {name!r} is invalid: valid names are "
+                             f"{', '.join(_PARAM_NAMES + ('c1', 'c2') + _LAW_NAMES)}") from None
 
     def with_parameter(self, name: str, value: float) -> "CompliantOneDOF":
         self.parameter(name)
-        if name in ("c1", "c2"):
-            return dataclasses.replace(self, gains=dataclasses.replace(self.gains,
-                                                                       **{name: value}))
         if name in _LAW_NAMES:
             k, z = self.law.stiffness, self.law.contact_zeta
             if name == "stiffness":
@@ -99,7 +83,7 @@ class CompliantOneDOF:
             else:
                 z = value
             return dataclasses.replace(self, law=KelvinVoigt(k, 2.0 * z * math.sqrt(k)))
-        return dataclasses.replace(self, params=self.params.with_(**{name: value}))
+        return super().with_parameter(name, value)
 
     def jacobian_det(self, periods: int, impacts: int) -> float | None:
         """None: the contact's time in the stop's damping makes no product formula."""
