@@ -150,7 +150,10 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
             if ev:
                 te0, i = min(ev)
                 if i == 0 and sol.sol(te0)[0] < d:  # a missed return below x = d first
-                    te0, i = brentq(lambda s: sol.sol(s)[0] - d, t, te0, xtol=1e-16), 1
+                    if sol.sol(t)[0] <= d:  # already on the stop at the start (rounding)
+                        te0, i = t, 1
+                    else:
+                        te0, i = brentq(lambda s: sol.sol(s)[0] - d, t, te0, xtol=1e-16), 1
                 t, y = te0, list(sol.sol(te0))
                 if i == 0:
                     region, entry = "contact", t
