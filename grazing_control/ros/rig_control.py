@@ -11,7 +11,13 @@ force in force.y). ``rig/clock`` gives the clock relation (offset and drift of t
 clock against ROS time, :class:`grazing_control.dynamics.clock_relation.ClockRelation`);
 with it each sample's arrival latency (ROS time of its arrival less the ROS time of its
 stamp) is measured. ``rig/applied`` tells the estimator what acted where a prediction
-stood in or nothing acted (its model must integrate the kick that acted).
+stood in or nothing acted (its model must integrate the kick that acted). The commands
+are a function of the stamps and values of these inputs, never of their arrival time
+(the answer_lead is a stretch of stamps), with one condition on the order: section k's
+rig/applied must come before the sample that makes section k + 1 due (most of a period
+after the pulse); one that comes later is counted (``applied_after_use``: the estimate of
+k + 1 used the answer instead), so that a replay through mock hardware
+(:mod:`grazing_control.recordings.rig_replay`) can be bit-identical.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ class RigSide:
         self.phase_mismatch = 0
         self.pulses = 0
         self.applied = [0, 0, 0, 0]
+        self.applied_after_use = 0       # rig/applied after the estimate that needed it
 
     # ---------------------------------------------------------------- driver -> us
     def on_phase(self, msg) -> None:
@@ -114,6 +121,9 @@ class RigSide:
         k = round(t / period)
         if k < 0 or abs(t - k * period) > 1e-6 * period:
             return
+        stream = self.node.stream
+        if stream.next_k is not None and k + 1 < stream.next_k:
+            self.applied_after_use += 1  # section k + 1 was estimated with the answer
         dv = 0.0
         if status == APPLIED_PREDICTED and msg.wrench.torque.x > 0.0:
             dv = correction_of(self.rig, msg.wrench.force.x, msg.wrench.torque.x)
@@ -162,6 +172,7 @@ class RigSide:
     def summary(self) -> str:
         n = self.numbers()
         text = (f" force_pulses={self.pulses} rig_applied={','.join(map(str, self.applied))}"
+                f" applied_after_use={self.applied_after_use}"
                 f" clock_offset={n['clock_offset']:.9f} clock_drift={n['clock_drift']:.12g}"
                 f" clock_jitter={n['clock_jitter']:.3g} clock_pairs={n['clock_pairs']}")
         if "sensor_latency_p50" in n:
