@@ -29,6 +29,15 @@ message, for the last commands; then it exits 0), ``wait_for_subscribers`` (1: t
 replay starts 0.2 s after each replayed topic has that many subscribers, so that nothing
 is lost to a late match; 0: at once). A bag without rig/clock pairs or rig
 messages is refused in one line (exit status 2).
+
+``compare`` (the bag's recorded commands, e.g. ``rig/force_pulse``; "" none): replay and
+compare (docs/driver_contract.md, "Mock hardware"). The recorded ``rig/applied`` (what the
+hardware did, which the controller's estimator integrates) is replayed on ``rig/applied``
+at its recorded place among the samples, this run's echo goes to ``rig/echo``, and each
+``rig/force_pulse`` received is compared with the recorded one of its section
+(:class:`CommandComparison`: every field, floats as float64 bytes); the summary counts
+identical / differing / missing / extra commands and the node exits 1 naming the first
+difference (:mod:`grazing_control.recordings.rig_replay` runs it beside a controller).
 """
 
 from __future__ import annotations
