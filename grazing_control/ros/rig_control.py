@@ -23,8 +23,9 @@ are a function of the stamps and values of these inputs, never of their arrival 
   sent a first rig/applied (it reports each section, docs/driver_contract.md), a sample
   that would make section k + 1 due is held until section k's rig/applied has come
   (:meth:`RigSide._sample`; it normally comes most of a period earlier, and nothing
-  waits); held samples are fed in order. A driver that stays silent is waited for only
-  up to the samples of one more period (stamps, not a clock: ``applied_waited_out``
+  waits; a later section's rig/applied ends the wait: that one was skipped); held
+  samples are fed in order. A driver that stays silent is waited for only up to the
+  samples of HOLD_PERIODS more periods (stamps, not a clock: ``applied_waited_out``
   counts it), and a rig/applied after the estimate that needed it is counted
   (``applied_after_use``).
 """
@@ -53,6 +54,10 @@ PENDING_SAMPLES = 4096
 #: rig/sensor and rig/applied: reliable, keep last 100000 (a lagging controller loses
 #: nothing; module docstring).
 RIG_INPUT_QOS = PUBLISHER_QOS
+#: How long a sample waits for the previous section's rig/applied: until the samples of
+#: this many periods after its section have come (the simulated rig at load 10 sent one
+#: 2.2 periods after the samples it followed; a driver that stays silent costs that).
+HOLD_PERIODS = 4
 #: Sections whose rig/applied is remembered.
 REPORTED = 64
 #: Arrival latencies kept for the percentiles (/diagnostics, the exit summary).
@@ -130,16 +135,19 @@ class RigSide:
     def _waits(self, t: float) -> bool:
         """Whether a sample at model time t must wait for a rig/applied: the driver
         reports sections, t would make section k due (t + h + lead >= t_k, a sample
-        period early to be safe: holding one more is harmless) and section k - 1's has
-        not come. Up to the samples of one more period after t_k (then counted)."""
+        period early to be safe: holding one more is harmless), and neither section
+        k - 1's rig/applied nor a later section's (k - 1 was skipped) has come. For at
+        most the samples of HOLD_PERIODS periods after t_k (then counted)."""
         stream = self.node.stream
         k = stream.next_k
-        if not self.reported or k is None or k < 1 or (k - 1) in self.reported:
+        if not self.reported or k is None or k < 1:
             return False
         period, h = self.node.model.period, stream.sample_period
         if t + 2.0 * h + stream.lead < k * period:
             return False
-        if self.held[-1][0] > (k + 1) * period:
+        if (k - 1) in self.reported or max(self.reported) >= k:
+            return False
+        if self.held[-1][0] > (k + HOLD_PERIODS) * period:
             self.applied_waited_out += 1
             self.reported.append(k - 1)   # wait no longer for it
             return False
