@@ -225,7 +225,7 @@ def test_the_rig_file_sets_the_keys_the_replay_derives_again():
     assert set(controller_values(load_rig(RIG), C2)) == set(CONTROLLER_KEYS)
 
 
-def _fed(order_late: bool):
+def _fed(order_late: bool, never: bool = False):
     """The sections the estimator makes due and what it knows acted before each, with
     section 1's rig/applied (a prediction of 0.3 N acted) arriving right after its pulse
     or after section 2's last sample (a driver late by more than the estimate of
@@ -270,7 +270,10 @@ def _fed(order_late: bool):
             applied.remove(a)
         side._sample(s, 1e-3 * math.cos(s), math.nan)
         if late and s > 1000.0 + 2.0 / rig.frequency:     # after section 2's last sample
-            side.on_applied(late.pop()[1])
+            a = late.pop()
+            applied.remove(a)
+            if not never:
+                side.on_applied(a[1])
     return due, side
 
 
@@ -282,3 +285,7 @@ def test_the_estimate_integrates_what_acted_whatever_the_arrival_order():
     assert dv == pytest.approx(correction_of(load_rig(RIG), 0.3, 0.002), rel=1e-12)
     assert late[:3] == in_order[:3]                  # the same, though it came a period on
     assert side.applied_waited_out == side_late.applied_waited_out == 0
+    # never sent (a driver that skipped section 1): section 2's rig/applied ends the wait
+    skipped, side_skipped = _fed(order_late=True, never=True)
+    assert [k for k, _ in skipped][:3] == [1, 2, 3] and 1 not in skipped[1][1]
+    assert side_skipped.applied_waited_out == 0 and not side_skipped.held
