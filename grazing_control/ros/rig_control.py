@@ -80,6 +80,7 @@ class RigSide:
         self.applied_after_use = 0       # rig/applied after the estimate that needed it
         self.reported = deque(maxlen=REPORTED)   # sections whose rig/applied came
         self.held = deque()              # (t, x~, v~) held for a section's rig/applied
+        self.acts = deque()              # (k, dv): what acted, not yet told the estimator
         self.applied_waited_out = 0      # sections estimated without it (silent driver)
 
     # ---------------------------------------------------------------- driver -> us
@@ -154,9 +155,21 @@ class RigSide:
         return True
 
     def _release(self) -> None:
-        """Feed the held samples, in order, up to one that must wait."""
+        """Feed the held samples, in order, up to one that must wait; before each, what
+        acted at the sections already answered (:meth:`_flush_acts`)."""
         while self.held and not self._waits(self.held[0][0]):
+            self._flush_acts()
             self.node.add_stream_sample(*self.held.popleft())
+
+    def _flush_acts(self) -> None:
+        """Tell the estimator what acted at each section it has answered (k < next_k),
+        in section order: always after its own answer to that section, never one that
+        is still ahead (a rig/applied that came early, while the controller lagged,
+        would make the estimator forget older corrections before their last use)."""
+        stream = self.node.stream
+        while self.acts and stream.next_k is not None and self.acts[0][0] < stream.next_k:
+            k, dv = self.acts.popleft()
+            stream.acted(k, dv, self.node.actuation_delay)
 
     def on_applied(self, msg) -> None:
         """What acted at a section (rig/applied): where a prediction stood in (1) the
@@ -184,7 +197,7 @@ class RigSide:
         dv = 0.0
         if status == APPLIED_PREDICTED and msg.wrench.torque.x > 0.0:
             dv = correction_of(self.rig, msg.wrench.force.x, msg.wrench.torque.x)
-        self.node.stream.acted(k, dv, self.node.actuation_delay)
+        self.acts.append((k, dv))        # told the estimator in _flush_acts
 
     # ---------------------------------------------------------------- us -> driver
     def answered(self, t: float, dv: float, predicted: float) -> None:
