@@ -28,7 +28,8 @@ from collections import deque
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.rig import Rig
 
-__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "controller_values", "answer_lead", "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
+__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "controller_values", "answer_lead",
+           "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
            "force_of", "correction_of", "APPLIED_IN_TIME", "APPLIED_PREDICTED",
            "APPLIED_NOTHING", "APPLIED_SAFE", "RIG_TOPICS"]
 
