@@ -80,7 +80,7 @@ class RigSide:
         self.applied_after_use = 0       # rig/applied after the estimate that needed it
         self.reported = deque(maxlen=REPORTED)   # sections whose rig/applied came
         self.held = deque()              # (t, x~, v~) held for a section's rig/applied
-        self.acts = deque()              # (k, dv): what acted, not yet told the estimator
+        self.acts = deque(maxlen=REPORTED)   # (k, dv): what acted, not told the estimator yet
         self.applied_waited_out = 0      # sections estimated without it (silent driver)
 
     # ---------------------------------------------------------------- driver -> us
