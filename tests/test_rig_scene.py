@@ -289,3 +289,12 @@ def test_the_estimate_integrates_what_acted_whatever_the_arrival_order():
     skipped, side_skipped = _fed(order_late=True, never=True)
     assert [k for k, _ in skipped][:3] == [1, 2, 3] and 1 not in skipped[1][1]
     assert side_skipped.applied_waited_out == 0 and not side_skipped.held
+
+
+def test_grazing_replay_rig_refuses_a_bag_that_is_no_rig_scene_in_one_line():
+    bag = Path(__file__).resolve().parents[1] / "bags" / "scene_5e-6"
+    proc = subprocess.run([str(Path(sys.executable).with_name("grazing")), "replay-rig",
+                           str(bag)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "rig_file" in lines[0] and "bag=" in lines[0], proc.stderr
