@@ -335,7 +335,7 @@ def test_stream_mode_without_delta_d_exits_with_one_line():
 
 STREAM_TOPICS = {"controller/velocity_correction": __import__(
     "geometry_msgs.msg", fromlist=["TwistStamped"]).TwistStamped,
-    "controller/estimate": JointState}
+    "controller/estimate": JointState, "controller/model_watch": JointState}
 
 
 def _answer_of(col, n, timeout=10.0):
@@ -432,6 +432,97 @@ def test_stream_mode_estimates_each_section_as_the_core_does(stream_scene):
     assert proc.wait(10) == 0
     text = log.read_text()
     assert "Traceback" not in text and "phase_mismatch=0" in text, text
+
+
+def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
+    """Issue 29 through the node: a position-only rig at 50 samples per period with a
+    sensor bias of 1e-4 (sigma 1e-4, the exact flow, the node's corrections applied at
+    Pi2), the controller with estimate_bias, track_delta_d and a consistency window of
+    10: each section's controller/model_watch row (b^, se, Delta d^, se, verdict) is the
+    core's (AugmentedStreamEstimator in simulate_stream with the same draws, a
+    ConsistencyMonitor fed per section), and b^ ends within 3 se of the bias."""
+    from grazing_control.dynamics.augmented import AugmentedStreamEstimator
+    from grazing_control.dynamics.consistency import ConsistencyMonitor
+    from grazing_control.dynamics.estimation import trajectory
+    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.plant.sensor import SensorModel
+    from grazing_control.ros.model_watch import WATCH_FIELDS
+
+    col, start = stream_scene
+    p = OscillatorParams(delta_d=-5e-6)
+    g = Gains(degenerate_c1(p, -0.3), -0.3)
+    bias = 1e-4
+    proc, log, pub = start("oscillator/state", pi2_source="stream", estimator="model",
+                           delta_d=p.delta_d, sensor_noise=1e-4, enable_after=0,
+                           c1=g.c1, c2=g.c2, estimate_bias=True, track_delta_d=True,
+                           consistency_window=10)
+    rate, periods, T = 50, 40, p.period
+    h = T / rate
+    sensor = SensorModel(noise=1e-4, velocity=False, seed=5)
+
+    def measure(j0, x, v):
+        xm, vm = sensor.measure(j0, x, v)
+        return xm + bias, vm
+
+    z = orbit_11(p, g).pi2_deviation
+
+    def send(j0, x):
+        xm, _vm = measure(j0, x, x)
+        for j, xj in enumerate(xm):
+            t = (j0 + j) * h
+            tau = p.tau2 + p.omega * t
+            m = JointState(name=["mass"], position=[float(xj)], velocity=[],
+                           effort=[math.cos(tau), math.sin(tau)])
+            m.header.stamp = stamp_from_seconds(t)
+            pub.publish(m)
+
+    send(0, np.array([p.x_ref + z[0]]))
+    for k in range(periods):
+        a = _answer_of(col, k + 1)
+        s = np.arange(k * rate + 1, (k + 1) * rate + 1) * h - k * T
+        dev, _j, z, _m, _i = trajectory(p, z, s, a.twist.linear.x)
+        psi = p.tau2 + p.omega * s - p.lag
+        send(k * rate + 1, p.amplitude * np.cos(psi) + dev[:, 0])
+    col.wait_for(lambda: len(col.get("controller/model_watch")) >= periods, 5.0)
+    rows = col.get("controller/model_watch")[:periods]
+    assert all(tuple(m.name) == WATCH_FIELDS for m in rows)
+    node = np.array([m.position for m in rows])
+    est = AugmentedStreamEstimator(p, 1e-4, "stream", h, bias=True, wall=True)
+    monitor, core, verdict = ConsistencyMonitor(10), [], None
+
+    def observe(k, e):
+        nonlocal verdict
+        if e.innovation is not None:
+            verdict = monitor.add(*e.innovation) or verdict
+        core.append((e.bias, math.sqrt(e.params_cov[0, 0]), e.delta_d,
+                     math.sqrt(e.params_cov[1, 1]),
+                     math.nan if verdict is None else float(verdict.status == "mismatch")))
+
+    simulate_stream(p, g, measure, periods, rate, stream_estimator=est,
+                    deviation=orbit_11(p, g).pi2_deviation, observe=observe)
+    core = np.array(core)
+    col_of = {name: i for i, name in enumerate(WATCH_FIELDS)}
+    got = node[:, [col_of[n] for n in ("bias", "bias_se", "delta_d", "delta_d_se")]]
+    assert np.allclose(got, core[:, :4], rtol=1e-6, atol=1e-12), np.abs(got - core[:, :4]).max()
+    seen = ~np.isnan(core[:, 4])
+    assert np.array_equal(node[seen, col_of["mismatch"]], core[seen, 4])
+    assert abs(node[-1, col_of["bias"]] - bias) < 3.0 * node[-1, col_of["bias_se"]]
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    text = log.read_text()
+    assert "Traceback" not in text and "mismatch_sections=" in text, text
+
+
+def test_the_model_watch_is_refused_outside_the_model_filter():
+    """estimate_bias with pi2_source sample: one line naming it, exit status 2."""
+    cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER],
+                                {"estimate_bias": True, "delta_d": -5e-6})
+    res = subprocess.run(cmd, env=launcher.node_env(new_domain()), capture_output=True,
+                         text=True, timeout=30)
+    lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
+    assert res.returncode == 2 and len(lines) == 1, lines
+    assert "estimate_bias=True is invalid with pi2_source=sample" in lines[0]
 
 
 def test_the_predicted_correction_is_the_next_one_on_exact_samples(stream_scene):

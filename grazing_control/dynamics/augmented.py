@@ -188,7 +188,7 @@ class AugmentedStreamEstimator(StreamEstimator):
 
     def __init__(self, p: OscillatorParams, sigma: float = 1e-4, impact_source: str = "stream",
                  sample_period: float = 0.0, floor: float = 1e-2, after_section: bool = False,
-                 *, bias: bool = True, wall: bool = True, bias0: float = 0.0,
+                 lead: float = 0.0, *, bias: bool = True, wall: bool = True, bias0: float = 0.0,
                  bias_std: float = BIAS_STD, wall_std: float = WALL_STD,
                  wall_noise: float = WALL_NOISE):
         for name, value, ok, valid in (
@@ -205,7 +205,8 @@ class AugmentedStreamEstimator(StreamEstimator):
         self.params = (float(bias0), float(p.delta_d))
         self.params_cov = np.diag([bias_std ** 2 if bias else 0.0,
                                    wall_std ** 2 if wall else 0.0])
-        super().__init__(p, "model", sigma, impact_source, sample_period, floor, after_section)
+        super().__init__(p, "model", sigma, impact_source, sample_period, floor, after_section,
+                         lead)
 
     def reset(self) -> None:
         """Forget the stream (the filter restarts from the arc fit); the bias and Delta d

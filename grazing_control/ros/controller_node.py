@@ -107,13 +107,16 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
+from grazing_control.dynamics.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation import ESTIMATORS
 from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
-from .diagnostics import OK, WARN, Updater
+from .diagnostics import ERROR, OK, WARN, Updater
+from .model_watch import (WATCH_DEFAULTS, WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC,
+                          describe_verdict, watch_from_values, watch_row)
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
@@ -137,7 +140,7 @@ __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
-         "model_noise", "answer_after_section", "answer_lead")
+         "model_noise", "answer_after_section", "answer_lead") + WATCH_KEYS
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
@@ -290,7 +293,9 @@ def model_from_values(values: dict):
 
 def stream_from_values(values: dict, model):
     """The :class:`StreamEstimator` of ``pi2_source`` stream, None for ``sample``
-    (ParameterError naming the parameter and its valid values)."""
+    (ParameterError naming the parameter and its valid values); the augmented filter
+    (:class:`AugmentedStreamEstimator`) when the model watch is on
+    (:mod:`grazing_control.ros.model_watch`)."""
     source = values["pi2_source"]
     if source not in PI2_SOURCES:
         raise ParameterError(f"pi2_source={source!r} is invalid: valid values are "
@@ -310,11 +315,17 @@ def stream_from_values(values: dict, model):
         if not (math.isfinite(value) and value >= 0.0):
             raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
                                  f"{name} >= 0")
+    watch = watch_from_values({**WATCH_DEFAULTS, **values})    # refused in sample mode
     if source == "sample":
         return None
     if model is None:
         raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
                              "the plant's finite Delta d (the estimator's model needs the wall)")
+    if watch is not None:       # the augmented filter (ros/model_watch.py, issue 29)
+        return AugmentedStreamEstimator(
+            model, values["sensor_noise"], values["impact_source"], values["state_period"],
+            floor, bool(values["answer_after_section"]), values.get("answer_lead", 0.0),
+            **watch[0])
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
                            values["impact_source"], values["state_period"], floor,
                            bool(values["answer_after_section"]),
@@ -416,6 +427,28 @@ class ControllerNode(Node):
         d("model_noise", 1e-2, float_descriptor(
             "model filter's process noise per period, in units of sensor_noise", 0.0, FINITE,
             read_only=True))
+        d("estimate_bias", False, bool_descriptor(
+            "stream mode, estimator model: estimate a constant sensor position bias (the "
+            "augmented filter, issue 29; published on controller/model_watch)", True))
+        d("track_delta_d", False, bool_descriptor(
+            "stream mode, estimator model: track Delta d as a random walk of std "
+            "wall_noise per period (the augmented filter)", True))
+        d("bias_std", WATCH_DEFAULTS["bias_std"], float_descriptor(
+            "augmented filter: prior std of the sensor bias, > 0", ABOVE_0, FINITE,
+            read_only=True))
+        d("wall_std", WATCH_DEFAULTS["wall_std"], float_descriptor(
+            "augmented filter: prior std of Delta d about delta_d, > 0", ABOVE_0, FINITE,
+            read_only=True))
+        d("wall_noise", WATCH_DEFAULTS["wall_noise"], float_descriptor(
+            "augmented filter: Delta d's random walk std per period, >= 0", 0.0, FINITE,
+            read_only=True))
+        d("consistency_window", 0, int_descriptor(
+            "stream mode, estimator model: periods of the innovation consistency test's "
+            "window (docs/theory_estimation.md E9-E10; verdict on /diagnostics and "
+            "controller/model_watch); 0: no test", 0, read_only=True))
+        d("false_alarm", WATCH_DEFAULTS["false_alarm"], float_descriptor(
+            "consistency test: false-alarm rate per window, 0 < false_alarm < 0.5", ABOVE_0,
+            below(0.5), read_only=True))
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
         d("diagnostics_period", 1.0, float_descriptor(
@@ -482,6 +515,17 @@ class ControllerNode(Node):
         self.pub_estimate = Counted(self.create_publisher(
             JointState, "controller/estimate", REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
+        # the augmented filter's estimates and the consistency verdict (issue 29), made
+        # in every mode like controller/estimate (recorded by default)
+        self.pub_watch = Counted(self.create_publisher(
+            JointState, WATCH_TOPIC, REPLAY_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
+        self.watching = isinstance(self.stream, AugmentedStreamEstimator)
+        self.monitor = (watch_from_values(self._values())[1] if self.watching else None)
+        self.verdict = None             # the monitor's latest verdict
+        self.mismatches = 0             # sections whose verdict was a mismatch
+        self.first_mismatch = None      # the first section with a mismatch verdict
+        self._diag_mismatches = 0
         self.rig_side = None     # the driver contract's side (rig_file), or None
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
@@ -522,7 +566,8 @@ class ControllerNode(Node):
         self._next_check = 0.0
         self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
                                                          LATCHED_QOS))
-        self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled)
+        self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled,
+                                                self.pub_watch)
                                          + ((self.pub_force,) if self.rig_side else ()))
         self.recorder = RecorderConfirmation(self)
         self.create_service(SetBool, "~/enable", self._on_enable)
@@ -533,6 +578,7 @@ class ControllerNode(Node):
         self.stale = Throttled(log, "stale sample not answered")
         self.nonfinite = Throttled(log, "non-finite correction not published")
         self.phase_mismatch = Throttled(log, "stream phase reference off")
+        self.mismatch_log = Throttled(log, "consistency test failed")
         self.answered = 0
         self.prediction = math.nan       # the last answer's predicted next correction
         self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value)
@@ -765,10 +811,30 @@ class ControllerNode(Node):
             if not (math.isfinite(xh) and math.isfinite(vh)):
                 self.malformed(f"section {k}: no estimate (no sample before it)")
                 continue
+            if self.watching:
+                self._watch(k, key)
             dv = self._answer(key, xh, vh)
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if dv is not None and self.rig_side is not None:
                 self.rig_side.answered(tk, dv, self.prediction)
+
+    def _watch(self, k: int, key: tuple) -> None:
+        """Section k of the augmented filter: its innovation to the consistency monitor
+        (a mismatch logged, throttled, and counted for /diagnostics), and the row of
+        controller/model_watch (ros/model_watch.py)."""
+        innovation = self.stream.innovation
+        if self.monitor is not None and innovation is not None and innovation[0] == k:
+            verdict = self.monitor.add(*innovation)
+            if verdict is not None:
+                self.verdict = verdict
+                if verdict.status == "mismatch":
+                    self.mismatches += 1
+                    if self.first_mismatch is None:
+                        self.first_mismatch = k
+                    self.mismatch_log(describe_verdict(verdict))
+        msg = JointState(name=list(WATCH_FIELDS), position=watch_row(self.stream, self.verdict))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = key
+        self.pub_watch.publish(msg)
 
     def _check_phase(self, t: float, effort) -> None:
         """The shaker's phase reference (effort [cos tau, sin tau] or [cos tau]) against the
@@ -894,6 +960,8 @@ class ControllerNode(Node):
         stat.add("out_of_order", self.law.out_of_order)
         if self.rig_side is not None:
             self.rig_side.diagnose(stat)
+        if self.watching:
+            self._diagnose_watch(stat)
         if refused > last_refused:
             stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
                                      "(malformed, stale or non-finite)")
@@ -902,6 +970,33 @@ class ControllerNode(Node):
         elif last_answered and self.answered == last_answered:
             stat.merge_summary(WARN, "no sample answered in the last period")
         return stat
+
+    def _diagnose_watch(self, stat) -> None:
+        """The augmented filter's estimates and the consistency verdict: ERROR while the
+        latest verdict is a mismatch (naming the failing tests, statistic vs bound), WARN
+        when one came since the last message but the latest is consistent."""
+        row = dict(zip(WATCH_FIELDS, watch_row(self.stream, self.verdict)))
+        for name in ("bias", "bias_se", "delta_d", "delta_d_se"):
+            if math.isfinite(row[name]):
+                stat.add(name, f"{row[name]:.6g}")
+        if self.monitor is None:
+            return
+        stat.add("mismatch sections", self.mismatches)
+        if self.first_mismatch is not None:
+            stat.add("first mismatch", self.first_mismatch)
+        v = self.verdict
+        if v is not None:
+            stat.add("consistency", describe_verdict(v))
+            stat.add("nis", f"{v.statistic:.6g} (bound {v.bound:.6g}, {v.dof} dof)")
+            if v.mean_dof:
+                stat.add("mean", f"{v.mean_statistic:.6g} (bound {v.mean_bound:.6g}, "
+                                 f"{v.mean_dof} dof)")
+        new, self._diag_mismatches = self.mismatches - self._diag_mismatches, self.mismatches
+        if v is not None and v.status == "mismatch":
+            stat.merge_summary(ERROR, describe_verdict(v))
+        elif new:
+            stat.merge_summary(WARN, f"{new} sections with a model mismatch verdict since "
+                                     "the last message")
 
     def on_exit(self) -> None:
         """Say what was published (grazing/published) and log what was answered and
@@ -920,6 +1015,9 @@ class ControllerNode(Node):
             + ("" if self.stream is None else
                f" phase_mismatch={self.phase_mismatch.count} stream_ignored="
                f"{self.stream.ignored} model_resets={self.stream.resets}")
+            + ("" if not self.watching else
+               f" mismatch_sections={self.mismatches} first_mismatch={self.first_mismatch}"
+               f" bias={self.stream.bias!r} delta_d={self.stream.delta_d!r}")
             + ("" if self.rig_side is None else self.rig_side.summary()))
 
 

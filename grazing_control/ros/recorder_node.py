@@ -14,6 +14,10 @@ What it records by default (names relative to the node's namespace):
 ``controller/estimate`` (sensor_msgs/msg/JointState)
     stream mode: the controller's Pi2 estimate, position [x^], velocity [v^], effort
     [var x, cov xv, var v]; stamp = the section time.
+``controller/model_watch`` (sensor_msgs/msg/JointState)
+    stream mode with the model watch on (issue 29): per section the bias and Delta d
+    estimates with their standard errors and the consistency verdict, named values
+    (grazing_control.ros.model_watch.WATCH_FIELDS); stamp = the section time.
 ``/clock`` (rosgraph_msgs/msg/Clock)
     simulation time.
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
@@ -176,6 +180,7 @@ EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
                 PUBLISHED_TOPIC[0]: PUBLISHED_TOPIC[1],
                 "oscillator/latency": "std_msgs/msg/Float64",
                 "controller/estimate": "sensor_msgs/msg/JointState",
+                "controller/model_watch": "sensor_msgs/msg/JointState",
                 "controller/enabled": "std_msgs/msg/Bool"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
