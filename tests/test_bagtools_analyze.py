@@ -271,7 +271,7 @@ def test_a_delayed_design_is_analysed_with_its_delay(tmp_path):
     assert s["model_check"]["max_departure"] < 1e-12
 
 
-def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2):
+def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=()):
     """A bag of the core's closed loop on a position-only stream: the ground truth on
     oscillator/pi2, the corrections, the estimates with their covariance."""
     from bagtools_helpers import TYPESTORE, twist_stamped
@@ -298,6 +298,9 @@ def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2):
         msgs.append(("/controller/estimate", "sensor_msgs/msg/JointState", t + 1, e))
         msgs.append(("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped",
                      t + 2, twist_stamped(st, run.corrections[k])))
+    for k, row in extra:
+        msgs.append(("/controller/model_watch", "sensor_msgs/msg/JointState",
+                     1_000_000 + 10 * k + 3, row))
     return write_rosbags(tmp_path / estimator, msgs), p, g, run
 
 
@@ -325,6 +328,46 @@ def test_the_estimates_are_reported_against_the_ground_truth(tmp_path, estimator
         assert abs(n["predicted_spread"] / n["measured_spread"] - 1.0) < 0.2
     assert "estimate vs ground truth" in rep["markdown"]
     assert "Π2 spread about the exact controlled orbit" in rep["markdown"]
+
+
+def test_the_model_watch_is_reported(tmp_path):
+    """controller/model_watch rows (issue 29: a bias and Delta d estimate per section, a
+    verdict that turns to mismatch at section 37 with the nis test failing): the report
+    gives the last estimates with their standard errors, the 63 mismatch sections, the
+    first one's index and the last window's statistic against its bound."""
+    from bagtools_helpers import TYPESTORE
+    from grazing_control.recordings.analyze import analyze
+    from grazing_control.ros.model_watch import WATCH_FIELDS
+
+    JointState = TYPESTORE.types["sensor_msgs/msg/JointState"]
+    p = OscillatorParams(delta_d=-5e-6)
+    rows = []
+    for k in range(100):
+        bad = k >= 37
+        v = dict.fromkeys(WATCH_FIELDS, 0.0)
+        v.update(bias=1e-4 + 1e-7 * k, bias_se=2e-6, delta_d=-5e-6 - 1e-9 * k,
+                 delta_d_se=3e-8, nis=2500.0 if bad else 1900.0, nis_dof=1990,
+                 nis_bound=2230.25, mean=150.0, mean_dof=199, mean_bound=262.0, periods=10,
+                 mismatch=float(bad), fail_nis=float(bad))
+        st = int(round(k * p.period * 1e9))
+        e = joint_state(st, 0.0, 0.0)
+        rows.append((k, JointState(header=e.header, name=list(WATCH_FIELDS),
+                                   position=np.array([v[n] for n in WATCH_FIELDS]),
+                                   velocity=np.array([], dtype=float),
+                                   effort=np.array([], dtype=float))))
+    bag, p, g, _run = _stream_bag(tmp_path, "model", periods=100, extra=rows)
+    rep = analyze([bag], tmp_path / "out", figures=False,
+                  options={"delta_d": p.delta_d, "c1": g.c1, "c2": g.c2})
+    w = rep["bags"][0]["model_watch"]
+    assert w["sections"] == 100 and w["mismatch_sections"] == 63
+    assert w["first_mismatch_section"] == 37 and w["failing"] == {"nis": 63, "mean": 0,
+                                                                  "resets": 0}
+    assert w["bias"] == pytest.approx([1e-4 + 99e-7, 2e-6], rel=1e-12)
+    assert w["delta_d"] == pytest.approx([-5e-6 - 99e-9, 3e-8], rel=1e-12)
+    md = rep["markdown"]
+    assert "sensor bias estimate (last section): 0.0001099 ± 2e-06" in md
+    assert "63 of 100 sections with a model mismatch verdict (first: section 37)" in md
+    assert "last window: nis 2500 (bound 2230, 1990 dof)" in md
 
 
 def test_a_bag_without_estimates_reports_none(tmp_path):

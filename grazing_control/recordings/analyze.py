@@ -25,6 +25,8 @@ from .scenes import load, parse_topic_options
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
 ESTIMATE_TOPIC = "/controller/estimate"
+#: The controller's model watch (issue 29: bias, Delta d, consistency verdicts).
+WATCH_TOPIC = "/controller/model_watch"
 #: Samples at the end of a scene over which the spreads are measured.
 SPREAD_WINDOW = 500
 
@@ -254,6 +256,72 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     return out
 
 
+def read_watch(path, topic: str = WATCH_TOPIC) -> dict | None:
+    """The model watch's rows ({field: column} of :data:`WATCH_FIELDS` and ``stamp``, in
+    stamp order), or None when the bag has no such topic or no row."""
+    from grazing_control.ros.model_watch import WATCH_FIELDS
+
+    raw = reader.read_raw(Path(path), topics=[topic])
+    if topic not in raw.channels:
+        return None
+    cols = reader.decode_values(raw, topic, len(WATCH_FIELDS))
+    ok = cols["ok"]
+    if not np.any(ok):
+        return None
+    order = np.argsort(cols["stamp"][ok], kind="stable")
+    rows = {name: cols["values"][ok][order, i] for i, name in enumerate(WATCH_FIELDS)}
+    rows["stamp"] = cols["stamp"][ok][order]
+    return rows
+
+
+def watch_numbers(rows, period_s: float | None = None) -> dict | None:
+    """What the model watch said (issue 29): the last bias and Delta d estimates with
+    their standard errors, the sections with a mismatch verdict, the first one (its
+    section index when the period is known) and how often each test failed, and the
+    last verdict's statistics against their bounds."""
+    if rows is None:
+        return None
+    last = {k: float(v[-1]) for k, v in rows.items() if k != "stamp"}
+    mismatch = rows["mismatch"] == 1.0
+    out = {"sections": int(rows["stamp"].size), "mismatch_sections": int(mismatch.sum()),
+           "failing": {t: int(np.sum(rows[f"fail_{t}"] == 1.0))
+                       for t in ("nis", "mean", "resets")},
+           "last": last}
+    for name in ("bias", "delta_d"):
+        if math.isfinite(last[name]):
+            out[name] = [last[name], last[f"{name}_se"]]
+    if np.any(mismatch):
+        first = int(rows["stamp"][np.flatnonzero(mismatch)[0]])
+        out["first_mismatch_stamp_ns"] = first
+        if period_s:
+            out["first_mismatch_section"] = int(round(first * 1e-9 / period_s))
+    return out
+
+
+def _watch_lines(n) -> list:
+    """The report's lines on the model watch (:func:`watch_numbers`)."""
+    if not n:
+        return []
+    lines = []
+    for name, label in (("bias", "sensor bias"), ("delta_d", "Δd")):
+        if name in n:
+            lines.append(f"* {label} estimate (last section): {n[name][0]:.6g} ± "
+                         f"{n[name][1]:.3g} (standard error)")
+    last = n["last"]
+    if math.isfinite(last["nis"]) or n["mismatch_sections"]:
+        first = n.get("first_mismatch_section", n.get("first_mismatch_stamp_ns"))
+        lines.append(
+            f"* consistency test: {n['mismatch_sections']} of {n['sections']} sections with "
+            f"a model mismatch verdict" + ("" if first is None else f" (first: section {first}"
+                                          + ("" if "first_mismatch_section" in n else " ns")
+                                          + ")")
+            + "; failing: " + ", ".join(f"{t} {c}" for t, c in n["failing"].items())
+            + f"; last window: nis {last['nis']:.4g} (bound {last['nis_bound']:.4g}, "
+              f"{last['nis_dof']:.0f} dof), mean {last['mean']:.4g} (bound "
+              f"{last['mean_bound']:.4g}, {last['mean_dof']:.0f} dof)")
+    return lines
+
+
 def _estimate_lines(n) -> list:
     """The report's lines on the estimates (:func:`estimate_numbers`)."""
     if not n:
@@ -417,6 +485,8 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                 n["estimate"] = estimate_numbers(estimates, sd, setup)
             data.problems.extend(scene_problems(sd, setup, n))
             numbers.append(n)
+        watch = watch_numbers(read_watch(bag), None if setup.params is None
+                              else setup.params.period)     # stamps: simulation time
         rig, rig_notes = read_rig(bag)
         if rig is not None:
             rig_notes += [f"rig mismatch: {m} (the SI numbers use the rig's scales)"
@@ -431,6 +501,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                  "problems": data.problems,
                  "parameter_record": bool(data.parameters.get("nodes")),
                  "rig": None if rig is None else _rig_entry(rig),
+                 "model_watch": watch,
                  "setup": {"params": ({k: getattr(setup.params, k) for k in
                                        ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")}
                                       if setup.params else None),
@@ -455,6 +526,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
             lines.append(_rig_line(entry["rig"]))
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
+        lines += _watch_lines(watch)
         lines.append("")
         for sd, n in zip(data.scenes, numbers):
             slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"

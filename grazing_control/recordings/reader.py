@@ -607,6 +607,20 @@ def decode_strings(bag: RawBag, topic: str) -> list:
     return out
 
 
+def decode_values(bag: RawBag, topic: str, n: int) -> dict:
+    """JointState rows of ``n`` named values in ``position`` (the controller's
+    controller/model_watch, grazing_control.ros.model_watch.WATCH_FIELDS in order):
+    stamp_ns, values (N, n), times, ok (ok: exactly n positions)."""
+    b, stamp, pos = decode_stamped(bag, topic)
+    pos = _align(b.skip_strings(pos), 4)
+    count = np.where(b.ok, b.u32(pos), 0)
+    b.ok &= count == n
+    p8 = _align(pos + 4, 8)
+    values = np.column_stack([np.where(b.ok, b.f64(np.where(b.ok, p8 + 8 * j, 0)), np.nan)
+                              for j in range(n)])
+    return _columns(b, stamp=stamp, values=values)
+
+
 def _columns(b: _Body, **cols) -> dict:
     out = {"log_time": b.log_time, "publish_time": b.publish_time, "sequence": b.sequence,
            "ok": b.ok.copy()}
