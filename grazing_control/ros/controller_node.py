@@ -38,7 +38,11 @@ published on ``controller/estimate`` (JointState: position [x^], velocity [v^], 
 [var x, cov xv, var v] per the noise model; stamp t_k; transient local like the
 answers). The model needs the plant's ``delta_d`` and the sensor's ``sensor_noise``
 (the launcher passes the simulator's); ``model_noise`` is the model filter's process
-noise per period in units of ``sensor_noise``.
+noise per period in units of ``sensor_noise``. With ``estimate_bias``, ``track_delta_d``
+or ``consistency_window`` (issue 29, :mod:`grazing_control.ros.model_watch`) the
+augmented filter estimates a sensor bias and a drifting Delta d, a consistency monitor
+tests its innovations, and each section's row goes on ``controller/model_watch``; a
+mismatch verdict is an ERROR on /diagnostics naming the test, statistic and bound.
 
 Switching on
 ------------
