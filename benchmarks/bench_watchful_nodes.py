@@ -1,0 +1,156 @@
+"""Issue 29's acceptance through the real nodes: the model watch of controller_node
+(estimate_bias, track_delta_d, consistency_window; docs/nodes.md, "The model watch").
+
+Lockstep scenes of sim_node, controller_node and the recorder (`launcher.run`), as the
+issue measured them: position-only sensor at 200 samples per period (state_period
+T/200), sigma 1e-4, pulse width 0.1, actuation delay 3, Delta d = -5e-6, gains from
+`grazing design --optimize noise --delay 3`, control on after ``--control-after``
+periods. Each scene's bag is read back (`grazing analyze`'s loaders): the simulator's
+exact Pi2 samples are the truth. Parts (``--part``, repeatable):
+
+``bias``      sim_node's sensor_bias 1e-4; the controller with and without
+              estimate_bias (consistency window 10): the orbit offset (the mean Pi2 x of
+              the last ``--window`` periods less the exact orbit of the loop with the
+              pulse, the one `grazing analyze` measures spreads about), the spread about
+              it, the bias estimate and its standard error at the end (controller/
+              model_watch), impacts per period, the filter's resets (exit summary).
+``mismatch``  the controller's model with zeta +5 % and Delta d +10 % (the plant's
+              exact), consistency window 10, alpha 1e-3, with and without the
+              augmentation: the first mismatch section (the detection time, counted
+              from the first fitted section), the sections with a mismatch verdict, the
+              failing tests, the orbit offset and impacts per period.
+``right``     the right model, consistency window 10: the mismatch verdicts per
+              evaluated window (false alarms; the design rate is 1e-3).
+
+    .venv/bin/python benchmarks/bench_watchful_nodes.py --part bias --part mismatch \
+        --periods 600 --control-after 100
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml as _yaml
+
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.recordings.analyze import analyze, read_watch
+from grazing_control.recordings.scenes import load
+from grazing_control.ros import launcher
+
+GRAZING = str(Path(sys.executable).with_name("grazing"))
+DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
+
+
+def design(out: Path):
+    """The least-noise gains for the delay (the controller's parameter file)."""
+    yaml = out / "controller.yaml"
+    subprocess.run([GRAZING, "design", "--optimize", "noise", f"--delta-d={DD}", "--delay",
+                    str(DELAY), "--out", str(yaml)], check=True, capture_output=True)
+    values = _yaml.safe_load(yaml.read_text())["/**"]["ros__parameters"]
+    return yaml, Gains(values["c1"], values["c2"], DELAY)
+
+
+def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
+          sensor_bias=0.0, controller=None, seed=7) -> dict:
+    """One lockstep scene; its numbers (module docstring)."""
+    p = OscillatorParams(delta_d=DD)
+    over = {"pi2_source": "stream", "estimator": "model"}
+    over.update(controller or {})
+    t0 = time.time()
+    res = launcher.run(None, str(yaml), str(out / "bag"), periods, delta_d=DD,
+                       enable_after=control_after, mode="lockstep", timeout=590,
+                       sim_overrides={"state_period": p.period / RATE, "sensor_noise": SIGMA,
+                                      "sensor_velocity": False, "pulse_width": WIDTH,
+                                      "sensor_seed": seed, "sensor_bias": sensor_bias},
+                       controller_overrides=over, log_dir=str(out / "logs"))
+    wall = time.time() - t0
+    if not res.ok:
+        return {"failed": str(res)}
+    sd = load(out / "bag").scenes[0]
+    rep = analyze([out / "bag"], out / "report", figures=False)
+    est = rep["bags"][0]["scenes"][0]["estimate"]
+    orbit_x = est["spread_about"][0]
+    t, x = sd.scene.t, sd.scene.pi2[:, 0]
+    last = slice(-window, None)
+    edges = np.append(t, t[-1] + p.period)
+    counts = np.histogram(sd.scene.impacts[:, 0], edges)[0]
+    summary = (out / "logs" / "controller_node.log").read_text(errors="replace")
+    resets = re.search(r"model_resets=(\d+)", summary)
+    rows = read_watch(out / "bag")
+    watch = rep["bags"][0]["model_watch"]
+    num = {"wall_s": wall, "offset": float(np.mean(x[last]) - orbit_x),
+           "spread": float(np.sqrt(np.mean((x[last] - orbit_x) ** 2))),
+           "one_impact_after_control": float(np.mean(counts[control_after:] == 1)),
+           "impacts_per_period_after_control": np.bincount(counts[control_after:]).tolist(),
+           "resets": int(resets.group(1)) if resets else None, "watch": watch}
+    if rows is not None:
+        fitted = np.isfinite(rows["nis"])
+        num["first_verdict_section"] = (int(round(rows["stamp"][fitted][0] * 1e-9 / p.period))
+                                        if np.any(fitted) else None)
+        num["verdicts"] = int(fitted.sum())
+    return num
+
+
+def _line(name, n) -> str:
+    if "failed" in n:
+        return f"{name}: FAILED {n['failed']}"
+    w = n["watch"] or {}
+    parts = [f"{name}: offset {n['offset']:.3g}, spread {n['spread']:.3g}, one impact in "
+             f"{100 * n['one_impact_after_control']:.1f} % of the controlled periods "
+             f"(histogram {n['impacts_per_period_after_control']}), model_resets "
+             f"{n['resets']}, {n['wall_s']:.0f} s"]
+    if "bias" in w:
+        parts.append(f"bias^ {w['bias'][0]:.4g} +- {w['bias'][1]:.3g}")
+    if "delta_d" in w:
+        parts.append(f"Delta d^ {w['delta_d'][0]:.5g} +- {w['delta_d'][1]:.3g}")
+    if w:
+        parts.append(f"mismatch sections {w['mismatch_sections']} of {w['sections']} "
+                     f"(first {w.get('first_mismatch_section')}, first verdict "
+                     f"{n.get('first_verdict_section')}; failing {w['failing']})")
+    return "; ".join(parts)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--part", action="append", choices=("bias", "mismatch", "right"))
+    ap.add_argument("--periods", type=int, default=600)
+    ap.add_argument("--control-after", type=int, default=100)
+    ap.add_argument("--window", type=int, default=300)
+    ap.add_argument("--seed", type=int, default=7)
+    a = ap.parse_args(argv)
+    root = Path(tempfile.mkdtemp())
+    yaml, g = design(root)
+    print(f"gains c1 {g.c1:.6g} c2 {g.c2:.6g} delay {DELAY}; {a.periods} periods, control "
+          f"after {a.control_after}, numbers over the last {a.window}", flush=True)
+    p = OscillatorParams(delta_d=DD)
+    watch = {"consistency_window": 10}
+    cases = []
+    for part in a.part or ["bias"]:
+        if part == "bias":
+            cases += [("bias 1e-4, plain model filter", 1e-4, {}),
+                      ("bias 1e-4, estimate_bias", 1e-4, {"estimate_bias": True, **watch})]
+        elif part == "mismatch":
+            wrong = {"zeta": 1.05 * p.zeta, "delta_d": 1.1 * DD, **watch}
+            cases += [("zeta +5 %, Delta d +10 %, monitor", 0.0, wrong),
+                      ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
+                       {**wrong, "track_delta_d": True})]
+        else:
+            cases += [("right model, monitor", 0.0, watch)]
+    for i, (name, bias, over) in enumerate(cases):
+        out = root / f"case{i}"
+        out.mkdir()
+        n = scene(yaml, out, a.periods, a.control_after, a.window, sensor_bias=bias,
+                  controller=over, seed=a.seed)
+        print(_line(name, n), flush=True)
+
+
+if __name__ == "__main__":
+    main()
