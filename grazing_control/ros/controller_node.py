@@ -120,7 +120,7 @@ from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import ERROR, OK, WARN, Updater
 from .model_watch import (WATCH_DEFAULTS, WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC,
-                          describe_verdict, watch_from_values, watch_row)
+                          describe_verdict, watch_from_values, watch_row, watch_status)
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
@@ -996,11 +996,9 @@ class ControllerNode(Node):
                 stat.add("mean", f"{v.mean_statistic:.6g} (bound {v.mean_bound:.6g}, "
                                  f"{v.mean_dof} dof)")
         new, self._diag_mismatches = self.mismatches - self._diag_mismatches, self.mismatches
-        if v is not None and v.status == "mismatch":
-            stat.merge_summary(ERROR, describe_verdict(v))
-        elif new:
-            stat.merge_summary(WARN, f"{new} sections with a model mismatch verdict since "
-                                     "the last message")
+        level, message = watch_status(v, new)
+        if level is not None:
+            stat.merge_summary(ERROR if level == "error" else WARN, message)
 
     def on_exit(self) -> None:
         """Say what was published (grazing/published) and log what was answered and

@@ -36,7 +36,7 @@ from grazing_control.dynamics.consistency import FALSE_ALARM, ConsistencyMonitor
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["WATCH_KEYS", "WATCH_DEFAULTS", "WATCH_FIELDS", "WATCH_TOPIC", "watch_from_values",
-           "watch_row", "describe_verdict"]
+           "watch_row", "describe_verdict", "watch_status"]
 
 #: The topic of the rows (recorded by default).
 WATCH_TOPIC = "controller/model_watch"
@@ -118,3 +118,16 @@ def describe_verdict(verdict) -> str:
                          f"{verdict.failed + verdict.periods} periods")
     return (f"model mismatch at section {verdict.k}: " + "; ".join(parts)
             if parts else f"model consistent at section {verdict.k}")
+
+
+def watch_status(verdict, new_mismatches: int):
+    """The /diagnostics level of the watch and its message: ("error", the failing tests)
+    while the latest ``verdict`` is a mismatch; ("warn", how many) when
+    ``new_mismatches`` sections had one since the last message but the latest is
+    consistent; (None, "") otherwise."""
+    if verdict is not None and verdict.status == "mismatch":
+        return "error", describe_verdict(verdict)
+    if new_mismatches:
+        return "warn", (f"{new_mismatches} sections with a model mismatch verdict since the "
+                        "last message")
+    return None, ""
