@@ -21,6 +21,11 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               failing tests, the orbit offset and impacts per period.
 ``right``     the right model, consistency window 10: the mismatch verdicts per
               evaluated window (false alarms; the design rate is 1e-3).
+``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
+              = 1.1e-2) against switching on at once, from the uncontrolled motion at
+              ``--control-after``: the section the rule switched on (exit summary), the
+              capture time (dynamics.capture.capture_time: one impact per period and
+              within 1e-3 of the orbit to the end), the largest |Delta v|.
 
     .venv/bin/python benchmarks/bench_watchful_nodes.py --part bias --part mismatch \
         --periods 600 --control-after 100
@@ -39,6 +44,7 @@ from pathlib import Path
 import numpy as np
 import yaml as _yaml
 
+from grazing_control.dynamics.capture import capture_time
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.analyze import analyze, read_watch
@@ -84,13 +90,18 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
     counts = np.histogram(sd.scene.impacts[:, 0], edges)[0]
     summary = (out / "logs" / "controller_node.log").read_text(errors="replace")
     resets = re.search(r"model_resets=(\d+)", summary)
+    captured = re.search(r"captured_at=(\w+)", summary)
+    orbit = np.array(est["spread_about"])
+    ct = capture_time(sd.scene.pi2[control_after:], counts[control_after:], orbit, 1e-3)
     rows = read_watch(out / "bag")
     watch = rep["bags"][0]["model_watch"]
     num = {"wall_s": wall, "offset": float(np.mean(x[last]) - orbit_x),
            "spread": float(np.sqrt(np.mean((x[last] - orbit_x) ** 2))),
            "one_impact_after_control": float(np.mean(counts[control_after:] == 1)),
            "impacts_per_period_after_control": np.bincount(counts[control_after:]).tolist(),
-           "resets": int(resets.group(1)) if resets else None, "watch": watch}
+           "resets": int(resets.group(1)) if resets else None, "watch": watch,
+           "captured_at": captured.group(1) if captured else None,
+           "capture_time": ct, "max_dv": float(np.max(np.abs(sd.scene.correction)))}
     if rows is not None:
         fitted = np.isfinite(rows["nis"])
         num["first_verdict_section"] = (int(round(rows["stamp"][fitted][0] * 1e-9 / p.period))
@@ -106,7 +117,9 @@ def _line(name, n) -> str:
     parts = [f"{name}: offset {n['offset']:.3g}, spread {n['spread']:.3g}, one impact in "
              f"{100 * n['one_impact_after_control']:.1f} % of the controlled periods "
              f"(histogram {n['impacts_per_period_after_control']}), model_resets "
-             f"{n['resets']}, {n['wall_s']:.0f} s"]
+             f"{n['resets']}, capture time {n['capture_time']} periods after control on "
+             f"(rule on at section {n['captured_at']}), max |dv| {n['max_dv']:.3g}, "
+             f"{n['wall_s']:.0f} s"]
     if "bias" in w:
         parts.append(f"bias^ {w['bias'][0]:.4g} +- {w['bias'][1]:.3g}")
     if "delta_d" in w:
@@ -120,7 +133,8 @@ def _line(name, n) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", action="append", choices=("bias", "mismatch", "right"))
+    ap.add_argument("--part", action="append",
+                    choices=("bias", "mismatch", "right", "capture"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
@@ -142,6 +156,9 @@ def main(argv=None):
             cases += [("zeta +5 %, Delta d +10 %, monitor", 0.0, wrong),
                       ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
                        {**wrong, "track_delta_d": True})]
+        elif part == "capture":
+            cases += [("switch on at once", 0.0, {}),
+                      ("capture rule", 0.0, {"capture": True})]
         else:
             cases += [("right model, monitor", 0.0, watch)]
     for i, (name, bias, over) in enumerate(cases):

@@ -66,3 +66,35 @@ def test_a_row_names_its_values_and_a_mismatch_is_an_error():
     assert watch_status(good, 0) == (None, "")
     assert watch_status(None, 0) == (None, "")
     assert np.all(np.isnan(watch_row(est, None)[4:12]))
+
+
+def test_the_capture_rule_of_the_parameters():
+    """capture: the rule's radius is 5 sqrt(|Delta d|) by default (docs/theory_capture.md)
+    or capture_radius, its target the controlled orbit's Pi2 deviation; it holds the
+    correction back (factor 0) until an estimate is within the radius, then latches;
+    refused by name in sample mode and for a negative radius; off: None."""
+    from types import SimpleNamespace
+
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.ros.controller_node import capture_from_values
+
+    p = OscillatorParams(delta_d=-5e-6)
+    g = Gains(degenerate_c1(p, -1.0), -1.0)
+    values = {"capture": True, "capture_radius": 0.0, "pi2_source": "stream",
+              "c1": g.c1, "c2": g.c2}
+    rule = capture_from_values(values, p, 0.0)
+    z = np.array(orbit_11(p, g).pi2_deviation)
+    assert rule.radius == pytest.approx(5.0 * math.sqrt(5e-6), rel=1e-12)
+    assert np.allclose(rule.target, z, rtol=0, atol=1e-15)
+    cov = np.eye(2) * 1e-8
+    assert rule(0, SimpleNamespace(z=z + [0.02, 0.0], cov=cov)) == 0.0
+    assert rule(1, SimpleNamespace(z=z + [0.01, 0.0], cov=cov)) == 1.0 and rule.on_at == 1
+    assert rule(2, SimpleNamespace(z=z + [0.5, 0.0], cov=cov)) == 1.0
+    assert capture_from_values({**values, "capture_radius": 3e-3}, p, 0.0).radius == 3e-3
+    assert capture_from_values({**values, "capture": False}, p, 0.0) is None
+    with pytest.raises(ParameterError, match="capture=True is invalid with pi2_source=sample"):
+        capture_from_values({**values, "pi2_source": "sample"}, p, 0.0)
+    with pytest.raises(ParameterError, match="capture_radius=-1.0 is invalid"):
+        capture_from_values({**values, "capture_radius": -1.0}, p, 0.0)

@@ -112,6 +112,7 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.estimation import ESTIMATORS
 from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains, correction
@@ -144,7 +145,8 @@ __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
-         "model_noise", "answer_after_section", "answer_lead") + WATCH_KEYS
+         "model_noise", "answer_after_section", "answer_lead", "capture",
+         "capture_radius") + WATCH_KEYS
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
@@ -336,6 +338,34 @@ def stream_from_values(values: dict, model):
                            values.get("answer_lead", 0.0))
 
 
+def capture_from_values(values: dict, model, delay: float):
+    """The :class:`CaptureRule` of ``capture`` (None when off): no correction until the
+    estimate is within ``capture_radius`` of the controlled orbit's Pi2 state z**
+    (0: the documented CAPTURE_RADIUS sqrt(|Delta d|), docs/theory_capture.md), then
+    Eq. 28 (latched). Stream mode only (the estimate's covariance says it is one);
+    ParameterError naming the parameter, or the missing controlled orbit."""
+    radius = float(values["capture_radius"])
+    if not (math.isfinite(radius) and radius >= 0.0):
+        raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a finite "
+                             "capture_radius >= 0 (0: 5 sqrt(|delta_d|))")
+    if not values["capture"]:
+        return None
+    if values["pi2_source"] != "stream" or model is None:
+        raise ParameterError(f"capture=True is invalid with pi2_source={values['pi2_source']}: "
+                             "valid only with pi2_source=stream and a model (delta_d)")
+    from grazing_control.dynamics.orbits import orbit_11
+
+    gains = Gains(values["c1"], values["c2"], delay)
+    try:
+        target = orbit_11(model, gains).pi2_deviation
+    except (ValueError, ArithmeticError, RuntimeError) as exc:
+        raise ParameterError(f"capture=True is invalid here: no controlled 1/1 orbit of the "
+                             f"gains at delta_d={model.delta_d!r} ({exc})") from None
+    if radius == 0.0:
+        return CaptureRule.for_wall(target, model.delta_d, CAPTURE_RADIUS)
+    return CaptureRule(target, radius)
+
+
 def actuation_delay_from_values(values: dict) -> float:
     """The design's actuation delay, 0 <= delay < T = 2 pi / omega (ParameterError)."""
     delay = float(values.get("actuation_delay", 0.0))
@@ -453,6 +483,13 @@ class ControllerNode(Node):
         d("false_alarm", WATCH_DEFAULTS["false_alarm"], float_descriptor(
             "consistency test: false-alarm rate per window, 0 < false_alarm < 0.5", ABOVE_0,
             below(0.5), read_only=True))
+        d("capture", False, bool_descriptor(
+            "stream mode: the capture rule (issue 29, docs/theory_capture.md): once control "
+            "is on, no correction until the estimate is within capture_radius of the "
+            "controlled orbit's Pi2 state, then Eq. 28 (latched)", True))
+        d("capture_radius", 0.0, float_descriptor(
+            "capture rule: the distance (Euclidean in (x, v) on Pi2), >= 0; 0: "
+            f"{CAPTURE_RADIUS:g} sqrt(|delta_d|)", 0.0, FINITE, read_only=True))
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
         d("diagnostics_period", 1.0, float_descriptor(
@@ -500,12 +537,14 @@ class ControllerNode(Node):
                 self.law = self._ndof_law(self._values(), self._gains())
                 self.actuation_delay = actuation_delay_from_values(
                     {**self._values(), "omega": self.ndof.model.omega})
-                self.model = self.stream = None
+                self.model = self.stream = self.capture = None
             else:
                 self.law = law_from_values(self._values())
                 self.actuation_delay = actuation_delay_from_values(self._values())
                 self.model = model_from_values(self._values())
                 self.stream = stream_from_values(self._values(), self.model)
+                self.capture = capture_from_values(self._values(), self.model,
+                                                   self.actuation_delay)
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -737,11 +776,14 @@ class ControllerNode(Node):
                 return True
         return False
 
-    def _answer(self, key: tuple, x: float, v: float):
+    def _answer(self, key: tuple, x: float, v: float, factor: float = 1.0):
         """Answer the Pi2 state (x, v) stamped ``key``: the correction and, with a model,
-        the one predicted for the next sample (twist.linear.y, NaN: none). Returns the
+        the one predicted for the next sample (twist.linear.y, NaN: none); ``factor`` 0
+        (the capture rule holding back) answers 0 and predicts 0. Returns the
         correction published, or None."""
         dv = self.law.answer(key, x, v)
+        if factor != 1.0 and dv is not None:
+            dv = dv * factor if factor else 0.0
         if dv is None:
             self.stale(f"stamp {key} was already answered")
             self._check_isolation()
@@ -749,7 +791,7 @@ class ControllerNode(Node):
         if not math.isfinite(dv):
             self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
             return None
-        self.prediction = self._predict(x, v, dv)
+        self.prediction = self._predict(x, v, dv) if factor == 1.0 else 0.0
         self.pub.publish(cdr.twist_stamped(*key, dv, self.prediction))
         self.answered += 1
         return dv
@@ -817,10 +859,24 @@ class ControllerNode(Node):
                 continue
             if self.watching:
                 self._watch(k, key)
-            dv = self._answer(key, xh, vh)
+            dv = self._answer(key, xh, vh, self._capture_factor(k, est))
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if dv is not None and self.rig_side is not None:
                 self.rig_side.answered(tk, dv, self.prediction)
+
+    def _capture_factor(self, k: int, est) -> float:
+        """1, or 0 while the capture rule holds the correction back (only once the
+        control is on: the rule latches on the first controlled section within its
+        radius; logged)."""
+        if self.capture is None or not self.law.enabled:
+            return 1.0
+        captured = self.capture.on_at is not None
+        factor = self.capture(k, est)
+        if not captured and factor:
+            self.get_logger().info(
+                f"capture: the estimate is within {self.capture.radius:.4g} of the "
+                f"controlled orbit at section {k}: Eq. 28 from here on")
+        return factor
 
     def _watch(self, k: int, key: tuple) -> None:
         """Section k of the augmented filter: its innovation to the consistency monitor
@@ -966,6 +1022,9 @@ class ControllerNode(Node):
             self.rig_side.diagnose(stat)
         if self.watching:
             self._diagnose_watch(stat)
+        if self.capture is not None:
+            stat.add("captured at section", "not yet" if self.capture.on_at is None
+                     else self.capture.on_at)
         if refused > last_refused:
             stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
                                      "(malformed, stale or non-finite)")
@@ -1020,6 +1079,7 @@ class ControllerNode(Node):
             + ("" if not self.watching else
                f" mismatch_sections={self.mismatches} first_mismatch={self.first_mismatch}"
                f" bias={self.stream.bias!r} delta_d={self.stream.delta_d!r}")
+            + ("" if self.capture is None else f" captured_at={self.capture.on_at}")
             + ("" if self.rig_side is None else self.rig_side.summary()))
 
 
