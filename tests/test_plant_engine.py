@@ -80,6 +80,32 @@ def test_reset_returns_sample_zero_and_forgets_the_run():
     assert eng.k == 0 and eng.impacts == 0
 
 
+def test_a_drifting_wall_is_the_cores_plant_at_k_and_restarts_on_reset():
+    """delta_d_drift (issue 29): period k runs with Delta d + drift k, each period the
+    core's period_step with that model bit for bit (a correction, a delay of 3); the
+    drift's ramp starts again at a reset; drift 0 leaves the model untouched."""
+    drift = 5e-10
+    eng = Engine(settings(delta_d_drift=drift, x0=P.x_ref + 1e-3))
+    z = (eng.dx, eng.dv)
+    for k in range(6):
+        assert eng.p == P.with_(delta_d=P.delta_d + drift * k)
+        ref = period_step(P.with_(delta_d=P.delta_d + drift * k), *z, 1e-3 * k, delay=3.0)
+        eng.begin_period(1e-3 * k, 3.0)
+        assert (eng.seg.dx_end, eng.seg.dv_end) == (ref.dx, ref.dv)
+        eng.end_period()
+        z = (ref.dx, ref.dv)
+    eng.reset()
+    assert eng.p == P
+    eng.begin_period(0.0)
+    eng.end_period()
+    assert eng.p == P.with_(delta_d=P.delta_d + drift)
+    still = Engine(settings())
+    for _ in range(3):
+        still.begin_period(0.0)
+        still.end_period()
+    assert still.p is still.settings.params
+
+
 # ========================================================== the rig: pulse and sensor
 def test_pulse_periods_are_the_cores_pulse_step_bit_for_bit_on_both_paths():
     """A pulse of width w centred at the actuation delay: lockstep (begin_period with the

@@ -72,6 +72,10 @@ class Engine:
     def __init__(self, settings: SimSettings):
         self.settings = settings
         self.p = settings.params
+        # the drifting wall (delta_d_drift, issue 29): the model in force when the drift
+        # (re)started and that sample's index; self.p's Delta d moves from it
+        self.drift = getattr(settings, "delta_d_drift", 0.0)
+        self._drift_from = (self.p, 0)
         self.advance = kernel.exact_advance()   # the exact flow, compiled when available
         self.pending = None
         self.rng = np.random.default_rng(settings.seed)
@@ -84,6 +88,9 @@ class Engine:
         """Back to the initial state, sample 0 at t = 0 (pending parameters apply now)."""
         if self.pending is not None:
             self.p, self.pending = self.pending, None
+        elif self.drift:
+            self.p = self._drift_from[0]
+        self._drift_from = (self.p, 0)
         s = self.settings
         self.rng = np.random.default_rng(s.seed)
         self.k = 0
@@ -235,7 +242,19 @@ class Engine:
         warning = None
         if self.pending is not None:
             warning = self._apply_pending()
+            self._drift_from = (self.p, self.k)
+        elif self.drift:
+            self._drift_wall()
         return self._sample(), warning
+
+    def _drift_wall(self) -> None:
+        """The wall of sample k's period under the linear drift: Delta d in force at
+        sample k0 plus delta_d_drift * (k - k0), as ``plant_at(k)`` of
+        dynamics.stream.simulate_stream; X** (which does not depend on Delta d) and the
+        deviation stay (a state beyond the moved wall is left to the flow: the drift
+        per period is far below the distance to the wall on Pi2)."""
+        base, k0 = self._drift_from
+        self.p = base.with_(delta_d=base.delta_d + self.drift * (self.k - k0))
 
     def _apply_pending(self):
         old, new = self.p, self.pending

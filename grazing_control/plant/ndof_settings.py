@@ -46,6 +46,7 @@ UNSUPPORTED = {
     "sensor_bias": "the sensor model is not built for n-DOF (the stream is exact)",
     "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
     "fidelity": "only the exact flow is built for n-DOF",
+    "delta_d_drift": "the drifting wall is not built for n-DOF",
 }
 
 

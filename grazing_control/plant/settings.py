@@ -151,6 +151,10 @@ PARAMETERS = (
               ">= 0 (0: none)", 0.0, FINITE, read_only=True),
     Parameter("sensor_bias", "double", 0.0, "bias added to the measured position",
               -FINITE, FINITE, read_only=True),
+    Parameter("delta_d_drift", "double", 0.0, "linear drift of the plant's Delta d per "
+              "forcing period (a wearing stop, a warming rig; issue 29): sample k's period "
+              "runs with the Delta d in force plus delta_d_drift * (k - k0), k0 the sample "
+              "where it was set or reset; 0 = none", -FINITE, FINITE, read_only=True),
     Parameter("sensor_seed", "integer", 0, "seed of the sensor noise, >= 0 (draws a pure "
               "function of (sensor_seed, sample index))", 0, read_only=True),
     Parameter("pulse_width", "double", 0.0,
@@ -276,6 +280,7 @@ class SimSettings:
     force_limit: float = 0.0
     watchdog: WatchdogLimits = WatchdogLimits()
     feasibility: str = "refuse"
+    delta_d_drift: float = 0.0
 
     @property
     def scheduled(self) -> bool:
@@ -294,6 +299,8 @@ class SimSettings:
             sn = self.sensor
             text += (f" sensor noise={sn.noise!r} velocity={str(sn.velocity).lower()} "
                      f"quantum={sn.quantum!r} bias={sn.bias!r} seed={sn.seed}")
+        if self.delta_d_drift != 0.0:
+            text += f" delta_d_drift={self.delta_d_drift!r}"
         if self.pulse_width > 0.0:
             text += f" pulse_width={self.pulse_width!r} force_limit={self.force_limit!r}"
         if self.faults.active:
@@ -362,7 +369,9 @@ def settings_from_values(values: dict) -> SimSettings:
         max_periods=max_periods, fidelity=fidelity,
         noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
         seed=seed, sensor=_sensor(values), watchdog=_watchdog(values),
-        feasibility=_choice(values, "feasibility", FEASIBILITY), **actuation)
+        feasibility=_choice(values, "feasibility", FEASIBILITY),
+        delta_d_drift=_finite("delta_d_drift", values["delta_d_drift"], lambda v: True,
+                              "a finite delta_d_drift (per period)"), **actuation)
 
 
 def _choice(values: dict, name: str, choices: tuple) -> str:
