@@ -21,6 +21,13 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               failing tests, the orbit offset and impacts per period.
 ``right``     the right model, consistency window 10: the mismatch verdicts per
               evaluated window (false alarms; the design rate is 1e-3).
+``drift``     sim_node's delta_d_drift = 20 % of Delta d over 2000 periods (-5e-10 per
+              period, |Delta d| growing, as benchmarks/watchful_core.py --part drift),
+              against no drift, with the plain model filter and with track_delta_d: the
+              spread (RMS) and mean of the Pi2 x about the moving orbit of the pulse loop
+              (dynamics.actuation.pulse_orbit at 21 walls, interpolated) over the
+              controlled periods from ``--control-after`` + 100 on, one impact per period,
+              the Delta d estimate's error at the end. Use ``--periods 2000``.
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -64,8 +71,17 @@ def design(out: Path):
     return yaml, Gains(values["c1"], values["c2"], DELAY)
 
 
+def moving_orbit(g, periods: int, drift: float):
+    """The Pi2 x of the pulse loop's orbit per period under the drift (interpolated)."""
+    from grazing_control.dynamics.actuation import pulse_orbit
+
+    ks = np.linspace(0, periods, 21)
+    xs = [pulse_orbit(OscillatorParams(delta_d=DD + drift * k), g, WIDTH).pi2[0] for k in ks]
+    return np.interp(np.arange(periods + 1), ks, xs)
+
+
 def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
-          sensor_bias=0.0, controller=None, seed=7) -> dict:
+          sensor_bias=0.0, controller=None, seed=7, drift=0.0, gains=None) -> dict:
     """One lockstep scene; its numbers (module docstring)."""
     p = OscillatorParams(delta_d=DD)
     over = {"pi2_source": "stream", "estimator": "model"}
@@ -75,7 +91,8 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
                        enable_after=control_after, mode="lockstep", timeout=590,
                        sim_overrides={"state_period": p.period / RATE, "sensor_noise": SIGMA,
                                       "sensor_velocity": False, "pulse_width": WIDTH,
-                                      "sensor_seed": seed, "sensor_bias": sensor_bias},
+                                      "sensor_seed": seed, "sensor_bias": sensor_bias,
+                                      "delta_d_drift": drift},
                        controller_overrides=over, log_dir=str(out / "logs"))
     wall = time.time() - t0
     if not res.ok:
@@ -98,10 +115,20 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
     num = {"wall_s": wall, "offset": float(np.mean(x[last]) - orbit_x),
            "spread": float(np.sqrt(np.mean((x[last] - orbit_x) ** 2))),
            "one_impact_after_control": float(np.mean(counts[control_after:] == 1)),
+           "not_one_impact": np.flatnonzero(counts != 1).tolist()[-5:],
            "impacts_per_period_after_control": np.bincount(counts[control_after:]).tolist(),
            "resets": int(resets.group(1)) if resets else None, "watch": watch,
            "captured_at": captured.group(1) if captured else None,
            "capture_time": ct, "max_dv": float(np.max(np.abs(sd.scene.correction)))}
+    if gains is not None:               # the drift part: about the moving orbit
+        ox = moving_orbit(gains, periods, drift)[:x.size]
+        held = slice(control_after + 100, None)
+        err = x[held] - ox[held]
+        num["moving_rms"], num["moving_mean"] = (float(np.sqrt(np.mean(err ** 2))),
+                                                 float(np.mean(err)))
+        if rows is not None and np.isfinite(rows["delta_d"][-1]):
+            k_last = int(round(rows["stamp"][-1] * 1e-9 / p.period))
+            num["delta_d_error_end"] = float(rows["delta_d"][-1] - (DD + drift * k_last))
     if rows is not None:
         fitted = np.isfinite(rows["nis"])
         num["first_verdict_section"] = (int(round(rows["stamp"][fitted][0] * 1e-9 / p.period))
@@ -116,10 +143,17 @@ def _line(name, n) -> str:
     w = n["watch"] or {}
     parts = [f"{name}: offset {n['offset']:.3g}, spread {n['spread']:.3g}, one impact in "
              f"{100 * n['one_impact_after_control']:.1f} % of the controlled periods "
-             f"(histogram {n['impacts_per_period_after_control']}), model_resets "
-             f"{n['resets']}, capture time {n['capture_time']} periods after control on "
-             f"(rule on at section {n['captured_at']}), max |dv| {n['max_dv']:.3g}, "
-             f"{n['wall_s']:.0f} s"]
+             f"(histogram {n['impacts_per_period_after_control']}; the last periods without "
+             f"one: {n['not_one_impact']}), model_resets {n['resets']}, "
+             + ("" if "moving_rms" in n else
+                f"capture time {n['capture_time']} periods after control on (rule on at "
+                f"section {n['captured_at']}), ")
+             + f"max |dv| {n['max_dv']:.3g}, {n['wall_s']:.0f} s"]
+    if "moving_rms" in n:
+        parts.append(f"about the moving orbit: rms {n['moving_rms']:.3g}, mean "
+                     f"{n['moving_mean']:.3g}")
+    if "delta_d_error_end" in n:
+        parts.append(f"Delta d^ - Delta d at the end {n['delta_d_error_end']:.3g}")
     if "bias" in w:
         parts.append(f"bias^ {w['bias'][0]:.4g} +- {w['bias'][1]:.3g}")
     if "delta_d" in w:
@@ -134,7 +168,7 @@ def _line(name, n) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
-                    choices=("bias", "mismatch", "right", "capture"))
+                    choices=("bias", "mismatch", "right", "capture", "drift"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
@@ -156,16 +190,23 @@ def main(argv=None):
             cases += [("zeta +5 %, Delta d +10 %, monitor", 0.0, wrong),
                       ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
                        {**wrong, "track_delta_d": True})]
+        elif part == "drift":
+            ramp = DD * 0.2 / 2000
+            cases += [("no drift, plain", 0.0, {}, 0.0),
+                      ("drift 20 %/2000, plain", 0.0, {}, ramp),
+                      ("drift 20 %/2000, track_delta_d", 0.0,
+                       {"track_delta_d": True, **watch}, ramp)]
         elif part == "capture":
             cases += [("switch on at once", 0.0, {}),
                       ("capture rule", 0.0, {"capture": True})]
         else:
             cases += [("right model, monitor", 0.0, watch)]
-    for i, (name, bias, over) in enumerate(cases):
+    for i, (name, bias, over, *drift) in enumerate(cases):
         out = root / f"case{i}"
         out.mkdir()
         n = scene(yaml, out, a.periods, a.control_after, a.window, sensor_bias=bias,
-                  controller=over, seed=a.seed)
+                  controller=over, seed=a.seed, drift=drift[0] if drift else 0.0,
+                  gains=g if drift else None)
         print(_line(name, n), flush=True)
 
 
