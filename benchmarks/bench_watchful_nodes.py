@@ -155,7 +155,8 @@ def _line(name, n) -> str:
     if "delta_d_error_end" in n:
         parts.append(f"Delta d^ - Delta d at the end {n['delta_d_error_end']:.3g}")
     if "bias" in w:
-        parts.append(f"bias^ {w['bias'][0]:.4g} +- {w['bias'][1]:.3g}")
+        parts.append(f"bias^ {w['bias'][0]:.6g} +- {w['bias'][1]:.3g}, (bias^ - 1e-4) / se "
+                     f"{(w['bias'][0] - 1e-4) / w['bias'][1]:.2f}")
     if "delta_d" in w:
         parts.append(f"Delta d^ {w['delta_d'][0]:.5g} +- {w['delta_d'][1]:.3g}")
     if w:

@@ -344,6 +344,21 @@ def _answer_of(col, n, timeout=10.0):
     return col.get("controller/velocity_correction")[n - 1]
 
 
+def _position_stream(pub, p, h, measure):
+    """send(j0, x): publish the positions x of grid samples j0, j0 + 1, ... (time j h)
+    as ``measure`` reads them, position only, with the phase reference."""
+    def send(j0, x):
+        xm, _vm = measure(j0, x, x)
+        for j, xj in enumerate(xm):
+            t = (j0 + j) * h
+            tau = p.tau2 + p.omega * t
+            m = JointState(name=["mass"], position=[float(xj)], velocity=[],
+                           effort=[math.cos(tau), math.sin(tau)])
+            m.header.stamp = stamp_from_seconds(t)
+            pub.publish(m)
+    return send
+
+
 @pytest.fixture
 def stream_scene(tmp_path):
     """(collector, start): controller_node in a fresh domain with the test as the plant."""
@@ -394,16 +409,7 @@ def test_stream_mode_estimates_each_section_as_the_core_does(stream_scene):
     sensor = SensorModel(noise=1e-4, velocity=False, seed=4)
     z = orbit_11(p, g).pi2_deviation
 
-    def send(j0, x):
-        xm, _vm = sensor.measure(j0, x, x)
-        for j, xj in enumerate(xm):
-            t = (j0 + j) * h
-            tau = p.tau2 + p.omega * t
-            m = JointState(name=["mass"], position=[float(xj)], velocity=[],
-                           effort=[math.cos(tau), math.sin(tau)])
-            m.header.stamp = stamp_from_seconds(t)
-            pub.publish(m)
-
+    send = _position_stream(pub, p, h, sensor.measure)
     send(0, np.array([p.x_ref + z[0]]))
     node_dv, node_pred = [], []
     for k in range(periods):
@@ -467,16 +473,7 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
 
     z = orbit_11(p, g).pi2_deviation
 
-    def send(j0, x):
-        xm, _vm = measure(j0, x, x)
-        for j, xj in enumerate(xm):
-            t = (j0 + j) * h
-            tau = p.tau2 + p.omega * t
-            m = JointState(name=["mass"], position=[float(xj)], velocity=[],
-                           effort=[math.cos(tau), math.sin(tau)])
-            m.header.stamp = stamp_from_seconds(t)
-            pub.publish(m)
-
+    send = _position_stream(pub, p, h, measure)
     send(0, np.array([p.x_ref + z[0]]))
     for k in range(periods):
         a = _answer_of(col, k + 1)
