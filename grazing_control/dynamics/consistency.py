@@ -44,7 +44,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from grazing_control.oscillator.params import ParameterError
 
@@ -113,6 +112,10 @@ class ConsistencyMonitor:
     def bound(self, dof: int) -> float:
         """chi2.isf(alpha / 2, dof), cached (each of the two tests at alpha / 2)."""
         if dof not in self._bounds:
+            # imported here: scipy.stats loads scipy.optimize and scipy.integrate, which a
+            # node without the consistency test does not use (tests/test_node_common.py)
+            from scipy.stats import chi2
+
             self._bounds[dof] = float(chi2.isf(0.5 * self.false_alarm, dof))
         return self._bounds[dof]
 
