@@ -52,6 +52,8 @@ WALL_NOISE = 1e-8
 #: The prior std of the sensor bias when nothing is known (dimensionless position;
 #: 10 sigma of the issue's sensor).
 BIAS_STD = 1e-3
+#: Sections whose innovation :attr:`AugmentedStreamEstimator.innovations` keeps.
+RECENT_INNOVATIONS = 8
 #: The prior std of Delta d about the identified value.
 WALL_STD = 1e-6
 
@@ -177,7 +179,10 @@ class AugmentedStreamEstimator(StreamEstimator):
     (``monitor.add(*innovation)``); (k, None, 0, None) for a fit that failed (no
     convergence, or reset by the chi^2 test); None for a section the model filter did
     not fit, and for the first fit after a (re)start that passed (its prior is the arc
-    fit's: a bad one there is the arc fit's failure, not the model's).
+    fit's: a bad one there is the arc fit's failure, not the model's). The same tuples
+    of the last RECENT_INNOVATIONS sections are in :attr:`innovations` by k (a sample
+    after a lost one makes two sections due at once: ``monitor.add(*innovations.pop(k))``
+    for each).
 
     Per section, a controller does what :func:`grazing_control.dynamics.stream.simulate_stream`
     does with it: ``add_sample`` for each sample (the due sections come back), then
@@ -214,6 +219,7 @@ class AugmentedStreamEstimator(StreamEstimator):
         super().reset()
         self.state = None
         self.innovation = None
+        self.innovations = {}       # k -> innovation of the last few sections
 
     @property
     def bias(self) -> float:
@@ -234,6 +240,10 @@ class AugmentedStreamEstimator(StreamEstimator):
         est = super().estimate(k)
         if est.source == "arc":
             self.state = self._from_arc(k, est)
+        if self.innovation is not None:     # kept by section: one sample may make two due
+            self.innovations[k] = self.innovation
+            while len(self.innovations) > RECENT_INNOVATIONS:
+                self.innovations.pop(next(iter(self.innovations)))
         return est
 
     def _from_arc(self, k: int, est: Estimate) -> AugmentedState:

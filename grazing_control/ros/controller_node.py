@@ -882,8 +882,8 @@ class ControllerNode(Node):
         """Section k of the augmented filter: its innovation to the consistency monitor
         (a mismatch logged, throttled, and counted for /diagnostics), and the row of
         controller/model_watch (ros/model_watch.py)."""
-        innovation = self.stream.innovation
-        if self.monitor is not None and innovation is not None and innovation[0] == k:
+        innovation = self.stream.innovations.pop(k, None)
+        if self.monitor is not None and innovation is not None:
             verdict = self.monitor.add(*innovation)
             if verdict is not None:
                 self.verdict = verdict
