@@ -21,6 +21,8 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               failing tests, the orbit offset and impacts per period.
 ``right``     the right model, consistency window 10: the mismatch verdicts per
               evaluated window (false alarms; the design rate is 1e-3).
+``gross``     a grossly wrong controller model (zeta +20 %, Delta d +50 %), monitor: which
+              tests name it, and whether the loop holds one impact per period.
 ``drift``     sim_node's delta_d_drift = 20 % of Delta d over 2000 periods (-5e-10 per
               period, |Delta d| growing, as benchmarks/watchful_core.py --part drift),
               against no drift, with the plain model filter and with track_delta_d: the
@@ -169,7 +171,7 @@ def _line(name, n) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
-                    choices=("bias", "mismatch", "right", "capture", "drift"))
+                    choices=("bias", "mismatch", "right", "capture", "drift", "gross"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
@@ -191,6 +193,9 @@ def main(argv=None):
             cases += [("zeta +5 %, Delta d +10 %, monitor", 0.0, wrong),
                       ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
                        {**wrong, "track_delta_d": True})]
+        elif part == "gross":
+            cases += [("zeta +20 %, Delta d +50 %, monitor", 0.0,
+                       {"zeta": 1.2 * p.zeta, "delta_d": 1.5 * DD, **watch})]
         elif part == "drift":
             ramp = DD * 0.2 / 2000
             cases += [("no drift, plain", 0.0, {}, 0.0),
