@@ -126,6 +126,9 @@ def main(argv=None):
                          "to measure a scene that misses)")
     ap.add_argument("--stream-block", type=float, default=None, metavar="SECONDS",
                     help="sim_node's stream_block (default: its own, 0.5 ms)")
+    ap.add_argument("--thread-priority", type=int, default=None, metavar="P",
+                    help="sim_node's and controller_node's thread_priority (SCHED_FIFO 1..99; "
+                         "default: their own, 0 = off)")
     ap.add_argument("--recorder-batch-window", type=float, default=None, metavar="SECONDS",
                     help="recorder_node's batch_window (default: its own, 1 ms)")
     args = ap.parse_args(argv)
@@ -151,8 +154,11 @@ def main(argv=None):
     res = launcher.run(None, None, str(out / "bag"), args.periods, rig=args.rig,
                        enable_after=args.enable_after, timeout=args.periods * 0.1 * args.slow + 120,
                        controller_overrides=dict(
-                           {"rig_c2": g.c2}, **({} if args.answer_lead is None else
-                                                {"answer_lead": args.answer_lead * rig.omega_n})),
+                           {"rig_c2": g.c2},
+                           **({} if args.thread_priority is None else
+                              {"thread_priority": args.thread_priority}),
+                           **({} if args.answer_lead is None else
+                              {"answer_lead": args.answer_lead * rig.omega_n})),
                        log_dir=str(out / "logs"),
                        recorder_overrides=(None if args.recorder_batch_window is None else
                                            {"batch_window": args.recorder_batch_window}),
@@ -161,7 +167,9 @@ def main(argv=None):
                            **({} if args.watchdog_misses is None else
                               {"watchdog_misses": args.watchdog_misses}),
                            **({} if args.stream_block is None else
-                              {"stream_block": args.stream_block})))
+                              {"stream_block": args.stream_block}),
+                           **({} if args.thread_priority is None else
+                              {"thread_priority": args.thread_priority})))
     wall = time.time() - t0
     print(f"scene: {res} ({wall:.0f} s)")
     for name in ("sim_node", "controller_node", "recorder_node"):

@@ -99,6 +99,11 @@ def new_token() -> str:
 #: (docs/rig_scene.md, "Where the time went").
 RIG_STREAM_BLOCK = 2e-3
 RIG_BATCH_WINDOW = 0.02
+#: ... and the simulator and the controller under SCHED_FIFO (their thread_priority,
+#: ros/scheduling.py; where the process may not, a warning and the scene runs on): at
+#: load 11-15 on this 2-core machine 3 of 700 sections missed with it, 202-578 at load
+#: 7-10 without (docs/rig_scene.md, "Where the time went").
+RIG_THREAD_PRIORITY = 50
 
 
 def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
@@ -123,7 +128,8 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       contract, docs/driver_contract.md), the simulator in realtime (physical speed) and
       the recorder also recording the contract's topics (``rig_topics``); the
       simulator's stream in blocks of RIG_STREAM_BLOCK, the recorder's batch_window
-      RIG_BATCH_WINDOW (the CPU they save, docs/rig_scene.md "Where the time went").
+      RIG_BATCH_WINDOW (the CPU they save, docs/rig_scene.md "Where the time went"),
+      both nodes' thread_priority RIG_THREAD_PRIORITY (SCHED_FIFO where allowed).
     """
     sim = {"exit_when_done": True, "wait_for_controller": True,
            "wait_for_subscribers": 1 if bag is not None else 0,
@@ -141,6 +147,7 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
         sim["rig_file"] = controller["rig_file"] = os.path.abspath(os.fspath(rig))
         sim["mode"] = "realtime" if mode is None else str(mode)
         sim["stream_block"] = RIG_STREAM_BLOCK
+        sim["thread_priority"] = controller.setdefault("thread_priority", RIG_THREAD_PRIORITY)
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay
