@@ -402,3 +402,14 @@ def test_grazing_run_fails_naming_the_messages_its_recording_lost(tmp_path, monk
     problems = analyze([bag], None, figures=False)["bags"][0]["problems"]
     assert any("10 of the 50 messages controller_node published are not in the bag" in p
                for p in problems), problems
+
+
+def test_the_nodes_get_one_blas_thread_unless_one_is_given(monkeypatch):
+    """A node's matrices are small; OpenBLAS's thread pool spinning beside the other
+    processes of a scene cost more than the work on a loaded 2-core machine."""
+    for name in launcher.BLAS_THREADS:
+        monkeypatch.delenv(name, raising=False)
+    env = launcher.node_env()
+    assert all(env[name] == "1" for name in launcher.BLAS_THREADS)
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
+    assert launcher.node_env()["OPENBLAS_NUM_THREADS"] == "4"

@@ -183,7 +183,7 @@ def test_the_launch_file_runs_an_n_dof_scene_from_the_same_description(tmp_path,
 
     args = {"sim_params": str(ROOT / "config" / "study.yaml"), "controller_params": "",
             "delta_d": "", "model": str(CHAIN), "max_periods": "50", "enable_after": "10",
-            "bag": "", "use_sim_time": "false", "live": ""}
+            "bag": "", "use_sim_time": "false", "live": "", "rig": ""}
     gains = tmp_path / "gains.yaml"
     model = load_model(CHAIN)
     write_gain_yaml(gains, model, evaluate_design(model, MU), CHAIN)

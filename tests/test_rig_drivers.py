@@ -388,3 +388,14 @@ def test_rig_mock_refuses_a_bag_without_clock_pairs(tmp_path):
     assert res.returncode == 2
     lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
     assert len(lines) == 1 and "rig/clock pairs" in lines[0] and "bag=" in lines[0], lines
+
+
+def test_rig_mock_compare_refuses_a_bag_without_what_acted(tmp_path):
+    _sensor, _written, bag = write_rig_bag(tmp_path / "no_applied", seconds=0.2)
+    res = subprocess.run([exe("rig_mock"), "--ros-args", "-p", f"bag:={bag}",
+                          "-p", "compare:=rig/force_pulse"],
+                         capture_output=True, text=True, timeout=60,
+                         env=dict(os.environ, ROS_DOMAIN_ID=str(new_domain())))
+    assert res.returncode == 2
+    lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
+    assert len(lines) == 1 and "/rig/applied" in lines[0] and "compare" in lines[0], lines

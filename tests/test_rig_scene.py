@@ -3,6 +3,7 @@ a rig file is the rig's driver, controller_node with the same file speaks the dr
 contract (docs/driver_contract.md). One short scene, read from its bag and logs; the 45 s
 acceptance run is benchmarks/bench_rig_scene.py, not a test."""
 
+import math
 import re
 import subprocess
 import sys
@@ -176,3 +177,124 @@ def test_grazing_run_refuses_a_bad_rig_file_in_one_line(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "--rig" in lines[0] and "gap" in lines[0], proc.stderr
+
+
+# ------------------------------------------------- the scene again through mock hardware
+@pytest.fixture(scope="module")
+def replays(scene, tmp_path_factory):
+    """The scene's bag through rig_mock (its streams and what acted, in the recorded order)
+    and a controller_node with the recorded parameters; again with another c2."""
+    from grazing_control.recordings.rig_replay import replay_rig
+
+    _rig, res, _m = scene
+    out = tmp_path_factory.mktemp("rig_replay")
+    same = replay_rig(res.bag_dir, time_scale=2.0, log_dir=out / "same", timeout=120)
+    other = replay_rig(res.bag_dir, time_scale=2.0, log_dir=out / "other", timeout=120,
+                       controller_overrides={"rig_c2": C2 * 1.25})
+    return same, other
+
+
+def test_the_replay_through_mock_hardware_gives_the_same_commands_bit_for_bit(scene,
+                                                                              replays):
+    _rig, _res, m = scene
+    same, _other = replays
+    recorded = len({msg.wrench.torque.y for _, msg in m["/rig/force_pulse"]})
+    assert same["status"] == 0, same
+    assert (same["identical"], same["differing"], same["missing"], same["extra"]) == (
+        recorded, 0, 0, 0), same
+    assert same["first"] is None
+    # the estimator had what acted in time in the replay (the one order that matters)
+    assert same["controller"]["applied_after_use"] == "0", same["controller"]
+
+
+def test_the_comparison_names_the_first_difference_with_another_c2(scene, replays):
+    _rig, _res, m = scene
+    _same, other = replays
+    assert other["status"] == 1, other
+    # the sections before the switch-on agree (force 0, prediction 0), but the last of
+    # them predicts the first controlled force (force.y): the first difference
+    assert other["identical"] == ON - 1 and other["differing"] >= PERIODS - ON, other
+    t_before = m["/rig/force_pulse"][ON - 1][1].wrench.torque.y
+    assert other["first"].startswith(f"section t_k={t_before!r} s: force.y (predicted F, N)"
+                                      " recorded "), (other["first"], t_before)
+
+
+def test_the_rig_file_sets_the_keys_the_replay_derives_again():
+    from grazing_control.ros.rig_boundary import CONTROLLER_KEYS, controller_values
+
+    assert set(controller_values(load_rig(RIG), C2)) == set(CONTROLLER_KEYS)
+
+
+def _fed(order_late: bool, never: bool = False):
+    """The sections the estimator makes due and what it knows acted before each, with
+    section 1's rig/applied (a prediction of 0.3 N acted) arriving right after its pulse
+    or after section 2's last sample (a driver late by more than the estimate of
+    section 2 that needs it)."""
+    from types import SimpleNamespace
+
+    from geometry_msgs.msg import WrenchStamped
+
+    from grazing_control.dynamics.stream import StreamEstimator
+    from grazing_control.ros.rig_control import RigSide
+
+    rig = load_rig(RIG)
+    values = __import__("grazing_control.ros.rig_boundary", fromlist=["x"]).controller_values(
+        rig, C2)
+    p = rig.params()
+    stream = StreamEstimator(p, "arc", values["sensor_noise"], "stream",
+                             values["state_period"], 1e-2, False, values["answer_lead"])
+    due = []
+
+    def add(t, x, v):
+        for k, _tk, _est in stream.add_sample(t, x, v):
+            due.append((k, dict(stream.kicks)))
+    node = SimpleNamespace(stream=stream, model=p, actuation_delay=values["actuation_delay"],
+                           add_stream_sample=add)
+    side = RigSide.__new__(RigSide)
+    RigSide.__init__(side, SimpleNamespace(get_clock=None), rig, 10)
+    side.node = node
+    side.sections.origin = 1000.0
+    applied = []
+    for k, code in ((0, 2.0), (1, 1.0), (2, 0.0), (3, 0.0)):
+        msg = WrenchStamped()
+        msg.wrench.force.x, msg.wrench.force.z = 0.3, code
+        msg.wrench.torque.x, msg.wrench.torque.y = rig.actuator.pulse_width, 1000.0 + k * (
+            1.0 / rig.frequency)
+        applied.append((msg.wrench.torque.y + rig.budget, msg))
+    h = 1.0 / rig.sensor.rate
+    samples = [1000.0 + rig.budget + 0.5 * h + i * h for i in range(int(4 / rig.frequency / h))]
+    late = applied[1:2] if order_late else []
+    for s in samples:
+        for a in [a for a in applied if a[0] <= s and a not in late]:
+            side.on_applied(a[1])
+            applied.remove(a)
+        side._sample(s, 1e-3 * math.cos(s), math.nan)
+        if late and s > 1000.0 + 2.0 / rig.frequency:     # after section 2's last sample
+            a = late.pop()
+            applied.remove(a)
+            if not never:
+                side.on_applied(a[1])
+    return due, side
+
+
+def test_the_estimate_integrates_what_acted_whatever_the_arrival_order():
+    in_order, side = _fed(order_late=False)
+    late, side_late = _fed(order_late=True)
+    assert [k for k, _ in in_order][:3] == [1, 2, 3]
+    dv = in_order[1][1][1][1]                        # section 2 knew what acted at 1
+    assert dv == pytest.approx(correction_of(load_rig(RIG), 0.3, 0.002), rel=1e-12)
+    assert late[:3] == in_order[:3]                  # the same, though it came a period on
+    assert side.applied_waited_out == side_late.applied_waited_out == 0
+    # never sent (a driver that skipped section 1): section 2's rig/applied ends the wait
+    skipped, side_skipped = _fed(order_late=True, never=True)
+    assert [k for k, _ in skipped][:3] == [1, 2, 3] and 1 not in skipped[1][1]
+    assert side_skipped.applied_waited_out == 0 and not side_skipped.held
+
+
+def test_grazing_replay_rig_refuses_a_bag_that_is_no_rig_scene_in_one_line():
+    bag = Path(__file__).resolve().parents[1] / "bags" / "scene_5e-6"
+    proc = subprocess.run([str(Path(sys.executable).with_name("grazing")), "replay-rig",
+                           str(bag)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "rig_file" in lines[0] and "bag=" in lines[0], proc.stderr

@@ -35,3 +35,10 @@ def add_commands(sub) -> None:
                                       "(and its corrections through sim_node); compare")
     replay.add_arguments(s)
     s.set_defaults(func=replay.main)
+    from . import rig_replay
+
+    s = sub.add_parser("replay-rig", help="replay a rig scene's bag through rig_mock (mock "
+                                          "hardware) and a controller_node; compare its "
+                                          "commands bit for bit")
+    rig_replay.add_arguments(s)
+    s.set_defaults(func=rig_replay.main)

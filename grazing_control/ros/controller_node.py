@@ -125,7 +125,7 @@ from grazing_control.plant.settings import ABOVE_0, FINITE, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
-from .rig_control import RigSide
+from .rig_control import RIG_INPUT_QOS, RigSide
 from .rig_boundary import check_rig_values, controller_values
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
@@ -489,14 +489,14 @@ class ControllerNode(Node):
                 WrenchStamped, "rig/force_pulse", REPLAY_QOS,
                 event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
             self.sub_samples = self.create_subscription(
-                JointState, "rig/sensor", self.rig_side.on_sensor, DATA_QOS, raw=True,
+                JointState, "rig/sensor", self.rig_side.on_sensor, RIG_INPUT_QOS, raw=True,
                 event_callbacks=quiet)
             self.create_subscription(Vector3Stamped, "rig/phase", self.rig_side.on_phase,
                                      DATA_QOS, event_callbacks=quiet)
             self.create_subscription(TimeReference, "rig/clock", self.rig_side.on_clock,
                                      DATA_QOS, event_callbacks=quiet)
             self.create_subscription(WrenchStamped, "rig/applied", self.rig_side.on_applied,
-                                     DATA_QOS, event_callbacks=quiet)
+                                     RIG_INPUT_QOS, event_callbacks=quiet)
         elif self.stream is None:
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,

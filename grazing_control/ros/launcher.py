@@ -279,11 +279,21 @@ def node_command(module: str, params_files=(), overrides=None, python: str | Non
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds_profile.xml")
 
 
+#: A node computes on small matrices (2 x 2 to 200 x 2) one section at a time: a BLAS
+#: thread pool only adds wake-ups, and on a loaded 2-core machine its spinning threads cost
+#: more than the work (tests/test_identification.py: 21.4 s with OpenBLAS's default
+#: threads against 8.8 s with one, at load 5-8).
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 def node_env(domain_id: int | None = None) -> dict:
     """Environment of a node: ours, the source root on PYTHONPATH, the domain if given,
     :data:`FASTDDS_PROFILE` as Fast DDS's default profile unless ours names one
-    (FASTDDS_DEFAULT_PROFILES_FILE, or the older FASTRTPS_DEFAULT_PROFILES_FILE)."""
+    (FASTDDS_DEFAULT_PROFILES_FILE, or the older FASTRTPS_DEFAULT_PROFILES_FILE), and
+    one BLAS thread unless ours sets them (:data:`BLAS_THREADS`)."""
     env = dict(os.environ)
+    for name in BLAS_THREADS:
+        env.setdefault(name, "1")
     if not (env.get("FASTDDS_DEFAULT_PROFILES_FILE")
             or env.get("FASTRTPS_DEFAULT_PROFILES_FILE")) and FASTDDS_PROFILE.is_file():
         # Fast DDS 2 (ROS 2 Jazzy) reads the FASTRTPS_ name, Fast DDS 3 the FASTDDS_ one

@@ -28,7 +28,8 @@ from collections import deque
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.rig import Rig
 
-__all__ = ["SIM_KEYS", "sim_values", "controller_values", "answer_lead", "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
+__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "controller_values", "answer_lead",
+           "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
            "force_of", "correction_of", "APPLIED_IN_TIME", "APPLIED_PREDICTED",
            "APPLIED_NOTHING", "APPLIED_SAFE", "RIG_TOPICS"]
 
@@ -86,6 +87,12 @@ def check_rig_values(rig_file: str, rig_values: dict, values: dict, free=()) -> 
             raise ParameterError(f"{key}={values[key]!r} is invalid with rig_file={rig_file}: "
                                  f"valid is the rig's {value!r} (docs/rig.md; change the "
                                  "rig file, not the parameter)")
+
+
+#: The controller's parameters that a rig file sets (:func:`controller_values`).
+CONTROLLER_KEYS = ("zeta", "r", "omega", "pi2_offset", "delta_d", "actuation_delay", "c1",
+                   "c2", "x_ref", "v_ref", "pi2_source", "answer_after_section",
+                   "answer_lead", "sensor_noise", "state_period")
 
 
 def controller_values(rig: Rig, c2: float) -> dict:

@@ -11,7 +11,23 @@ force in force.y). ``rig/clock`` gives the clock relation (offset and drift of t
 clock against ROS time, :class:`grazing_control.dynamics.clock_relation.ClockRelation`);
 with it each sample's arrival latency (ROS time of its arrival less the ROS time of its
 stamp) is measured. ``rig/applied`` tells the estimator what acted where a prediction
-stood in or nothing acted (its model must integrate the kick that acted).
+stood in or nothing acted (its model must integrate the kick that acted). The commands
+are a function of the stamps and values of these inputs, never of their arrival time
+(the answer_lead is a stretch of stamps), so that a replay through mock hardware
+(:mod:`grazing_control.recordings.rig_replay`) gives them again bit for bit:
+
+* no sample is lost to a lagging controller (rig/sensor and rig/applied are read with
+  :data:`RIG_INPUT_QOS`, keep last 100000: 50 s at 2 kHz; with keep last 1000 a
+  controller half a second behind lost whole periods);
+* the estimate of section k + 1 integrates what acted at section k: once the driver has
+  sent a first rig/applied (it reports each section, docs/driver_contract.md), a sample
+  that would make section k + 1 due is held until section k's rig/applied has come
+  (:meth:`RigSide._sample`; it normally comes most of a period earlier, and nothing
+  waits; a later section's rig/applied ends the wait: that one was skipped); held
+  samples are fed in order. A driver that stays silent is waited for only up to the
+  samples of HOLD_PERIODS more periods (stamps, not a clock: ``applied_waited_out``
+  counts it), and a rig/applied after the estimate that needed it is counted
+  (``applied_after_use``).
 """
 
 from __future__ import annotations
@@ -25,15 +41,25 @@ from sensor_msgs.msg import JointState
 
 from grazing_control.dynamics.clock_relation import ClockRelation
 from . import cdr
-from .common import deserialize, seconds_from_stamp, stamp_from_seconds, stamp_key
+from .common import (PUBLISHER_QOS, deserialize, seconds_from_stamp, stamp_from_seconds,
+                     stamp_key)
 from .diagnostics import WARN
 from .rig_boundary import (APPLIED_IN_TIME, APPLIED_PREDICTED, Sections, correction_of,
                            force_of)
 
-__all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES"]
+__all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES", "RIG_INPUT_QOS"]
 
 #: Sensor samples kept until the first phase reference fixes the sections.
 PENDING_SAMPLES = 4096
+#: rig/sensor and rig/applied: reliable, keep last 100000 (a lagging controller loses
+#: nothing; module docstring).
+RIG_INPUT_QOS = PUBLISHER_QOS
+#: How long a sample waits for the previous section's rig/applied: until the samples of
+#: this many periods after its section have come (the simulated rig at load 10 sent one
+#: 2.2 periods after the samples it followed; a driver that stays silent costs that).
+HOLD_PERIODS = 4
+#: Sections whose rig/applied is remembered.
+REPORTED = 64
 #: Arrival latencies kept for the percentiles (/diagnostics, the exit summary).
 LATENCIES = 100_000
 
@@ -51,6 +77,11 @@ class RigSide:
         self.phase_mismatch = 0
         self.pulses = 0
         self.applied = [0, 0, 0, 0]
+        self.applied_after_use = 0       # rig/applied after the estimate that needed it
+        self.reported = deque(maxlen=REPORTED)   # sections whose rig/applied came
+        self.held = deque()              # (t, x~, v~) held for a section's rig/applied
+        self.acts = deque(maxlen=REPORTED)   # (k, dv): what acted, not told the estimator yet
+        self.applied_waited_out = 0      # sections estimated without it (silent driver)
 
     # ---------------------------------------------------------------- driver -> us
     def on_phase(self, msg) -> None:
@@ -97,8 +128,48 @@ class RigSide:
         self._sample(s, x, v)
 
     def _sample(self, s: float, x: float, v: float) -> None:
-        self.node.add_stream_sample(self.sections.model_time(s), x / self.length,
-                                    v / self.velocity)
+        """A sample to the estimator in the model's units, held while it would make a
+        section due before the previous section's rig/applied came (module docstring)."""
+        self.held.append((self.sections.model_time(s), x / self.length, v / self.velocity))
+        self._release()
+
+    def _waits(self, t: float) -> bool:
+        """Whether a sample at model time t must wait for a rig/applied: the driver
+        reports sections, t would make section k due (t + h + lead >= t_k, a sample
+        period early to be safe: holding one more is harmless), and neither section
+        k - 1's rig/applied nor a later section's (k - 1 was skipped) has come. For at
+        most the samples of HOLD_PERIODS periods after t_k (then counted)."""
+        stream = self.node.stream
+        k = stream.next_k
+        if not self.reported or k is None or k < 1:
+            return False
+        period, h = self.node.model.period, stream.sample_period
+        if t + 2.0 * h + stream.lead < k * period:
+            return False
+        if (k - 1) in self.reported or max(self.reported) >= k:
+            return False
+        if self.held[-1][0] > (k + HOLD_PERIODS) * period:
+            self.applied_waited_out += 1
+            self.reported.append(k - 1)   # wait no longer for it
+            return False
+        return True
+
+    def _release(self) -> None:
+        """Feed the held samples, in order, up to one that must wait; before each, what
+        acted at the sections already answered (:meth:`_flush_acts`)."""
+        while self.held and not self._waits(self.held[0][0]):
+            self._flush_acts()
+            self.node.add_stream_sample(*self.held.popleft())
+
+    def _flush_acts(self) -> None:
+        """Tell the estimator what acted at each section it has answered (k < next_k),
+        in section order: always after its own answer to that section, never one that
+        is still ahead (a rig/applied that came early, while the controller lagged,
+        would make the estimator forget older corrections before their last use)."""
+        stream = self.node.stream
+        while self.acts and stream.next_k is not None and self.acts[0][0] < stream.next_k:
+            k, dv = self.acts.popleft()
+            stream.acted(k, dv, self.node.actuation_delay)
 
     def on_applied(self, msg) -> None:
         """What acted at a section (rig/applied): where a prediction stood in (1) the
@@ -107,17 +178,26 @@ class RigSide:
         if status not in (0.0, 1.0, 2.0, 3.0) or self.sections.origin is None:
             return
         self.applied[int(status)] += 1
-        if status == APPLIED_IN_TIME:
-            return
         t = self.sections.model_time(msg.wrench.torque.y)
         period = self.node.model.period
         k = round(t / period)
         if k < 0 or abs(t - k * period) > 1e-6 * period:
             return
+        if status != APPLIED_IN_TIME:
+            self._acted(k, status, msg)
+        if k not in self.reported:
+            self.reported.append(k)
+        self._release()
+
+    def _acted(self, k: int, status: float, msg) -> None:
+        """What acted at section k where it was not our answer in time."""
+        stream = self.node.stream
+        if stream.next_k is not None and k + 1 < stream.next_k:
+            self.applied_after_use += 1  # section k + 1 was estimated with the answer
         dv = 0.0
         if status == APPLIED_PREDICTED and msg.wrench.torque.x > 0.0:
             dv = correction_of(self.rig, msg.wrench.force.x, msg.wrench.torque.x)
-        self.node.stream.acted(k, dv, self.node.actuation_delay)
+        self.acts.append((k, dv))        # told the estimator in _flush_acts
 
     # ---------------------------------------------------------------- us -> driver
     def answered(self, t: float, dv: float, predicted: float) -> None:
@@ -162,6 +242,8 @@ class RigSide:
     def summary(self) -> str:
         n = self.numbers()
         text = (f" force_pulses={self.pulses} rig_applied={','.join(map(str, self.applied))}"
+                f" applied_after_use={self.applied_after_use}"
+                f" applied_waited_out={self.applied_waited_out}"
                 f" clock_offset={n['clock_offset']:.9f} clock_drift={n['clock_drift']:.12g}"
                 f" clock_jitter={n['clock_jitter']:.3g} clock_pairs={n['clock_pairs']}")
         if "sensor_latency_p50" in n:

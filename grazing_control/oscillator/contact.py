@@ -1,0 +1,569 @@
+"""A compliant stop: the Kelvin-Voigt (linear spring-dashpot) contact law, exact.
+
+The rigid wall of :mod:`grazing_control.oscillator.impact` replaced by a massless stop that
+pushes on the mass with (nondimensional as study Eq. 1, force per m omega_n^2 l)
+
+    F_c = k_c (x - d) + c_c x'     while x > d and k_c (x - d) + c_c x' > 0,
+
+and 0 otherwise: the stop only pushes, so a contact ends when F_c returns to zero, which
+(with c_c > 0) is before x returns to d; the mass then flies free from x > d and the next
+contact starts when F_c becomes positive again or x crosses d upwards
+(docs/theory_contact.md, "The Kelvin-Voigt stop").
+
+Each region is a linear oscillator with constant coefficients, so the flow is closed form
+(the flow of :mod:`grazing_control.oscillator.flow` with other coefficients): with
+delta = x - d,
+
+    delta'' + 2 beta delta' + W^2 delta = cos tau - d,
+    free:    W^2 = 1,        beta = zeta,
+    contact: W^2 = 1 + k_c,  beta = zeta + c_c / 2.
+
+Switching times are certified (docs/theory_contact.md, "Certified switching"): the
+contact entry from below the stop is :func:`grazing_control.oscillator.impact._next_impact`
+(the wall's certified search, full relative precision near grazing); the contact force's
+zero in contact, and the return of the force or of the gap after a contact that ended
+with x > d, by a search that excludes an interval only with a rigorous bound on the
+second derivative of the event function and brackets a root only where that bound proves
+it monotone.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from .flow import matmul2, particular
+from .impact import (ImpactCapError, InitialStateError, NonFiniteStateError, _next_impact,
+                     _on_wall_at_rest)
+from .params import OscillatorParams, ParameterError, _check_real
+
+__all__ = [
+    "KelvinVoigt",
+    "Coulomb",
+    "Contact",
+    "CompliantSegment",
+    "kelvin_voigt_restitution",
+    "kelvin_voigt_damping",
+    "advance_compliant",
+    "compliant_period_step",
+    "grazing_jump",
+]
+
+TWO_PI = 2.0 * math.pi
+_EPS = 2.0 ** -52
+_MAX_DEPTH = 60
+
+
+def kelvin_voigt_restitution(contact_zeta: float) -> float:
+    """Restitution of a free mass on a Kelvin-Voigt stop with damping ratio zeta_c < 1.
+
+    delta'' + c delta' + k delta = 0, delta(0) = 0, delta'(0) = v > 0; the contact ends
+    when k delta + c delta' = 0, at omega_c t_c = theta = atan2(2 zeta_c sqrt(1 - zeta_c^2),
+    2 zeta_c^2 - 1), with delta'(t_c) = -v exp(-beta t_c) exactly, so (docs/theory_contact.md,
+    Eq. C3; Schwager and Poeschel, Phys. Rev. E 75 (2007))
+
+        r = exp(-zeta_c theta / sqrt(1 - zeta_c^2)),   zeta_c = c / (2 sqrt(k)).
+
+    r decreases from 1 (zeta_c = 0) to exp(-2) (zeta_c -> 1) and depends on zeta_c only.
+    """
+    z = float(contact_zeta)
+    if not 0.0 <= z < 1.0:
+        raise ParameterError(f"contact_zeta={z!r} is invalid: valid range is 0 <= zeta_c < 1")
+    s = math.sqrt(1.0 - z * z)
+    theta = math.atan2(2.0 * z * s, 2.0 * z * z - 1.0)
+    return math.exp(-z * theta / s)
+
+
+def kelvin_voigt_damping(r: float) -> float:
+    """The contact damping ratio zeta_c whose restitution is r (inverse of Eq. C3).
+
+    Bisection to the last ulp on the monotone r(zeta_c); valid for exp(-2) < r <= 1.
+    """
+    r = float(r)
+    if not math.exp(-2.0) < r <= 1.0:
+        raise ParameterError(f"r={r!r} is invalid: a Kelvin-Voigt stop reaches exp(-2) < r <= 1")
+    lo, hi = 0.0, 1.0
+    while True:
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            return lo
+        if kelvin_voigt_restitution(mid) > r:
+            lo = mid
+        else:
+            hi = mid
+
+
+@dataclass(frozen=True)
+class KelvinVoigt:
+    """A linear spring-dashpot stop: stiffness ratio k_c = K_c / k and damping c_c.
+
+    Parameters
+    ----------
+    stiffness : float
+        k_c > 0, the stop's stiffness over the oscillator's (finite).
+    damping : float
+        c_c >= 0, the stop's damping over m omega_n (finite), with the contact
+        underdamped: (2 zeta + c_c)^2 < 4 (1 + k_c) (checked with the oscillator).
+    """
+
+    stiffness: float
+    damping: float = 0.0
+
+    def __post_init__(self) -> None:
+        k = _check_real("stiffness", self.stiffness)
+        c = _check_real("damping", self.damping)
+        if not k > 0.0:
+            raise ParameterError(f"stiffness={k!r} is invalid: valid range is k_c > 0")
+        if not c >= 0.0:
+            raise ParameterError(f"damping={c!r} is invalid: valid range is c_c >= 0")
+        if not c < 2.0 * math.sqrt(k):
+            raise ParameterError(f"damping={c!r} is invalid: valid range is "
+                                 f"0 <= c_c < 2 sqrt(k_c) = {2.0 * math.sqrt(k)!r} (underdamped)")
+        object.__setattr__(self, "stiffness", k)
+        object.__setattr__(self, "damping", c)
+
+    @classmethod
+    def from_restitution(cls, stiffness: float, r: float) -> "KelvinVoigt":
+        """The stop of stiffness k_c whose free-mass restitution (Eq. C3) is r."""
+        k = _check_real("stiffness", stiffness)
+        if not k > 0.0:
+            raise ParameterError(f"stiffness={k!r} is invalid: valid range is k_c > 0")
+        return cls(k, 2.0 * kelvin_voigt_damping(r) * math.sqrt(k))
+
+    @property
+    def contact_zeta(self) -> float:
+        """zeta_c = c_c / (2 sqrt(k_c))."""
+        return self.damping / (2.0 * math.sqrt(self.stiffness))
+
+    @property
+    def restitution(self) -> float:
+        """r(k_c, c_c) of Eq. C3: the rigid law this stop tends to as k_c -> inf."""
+        return kelvin_voigt_restitution(self.contact_zeta)
+
+    def force(self, delta: float, velocity: float) -> float:
+        """k_c delta + c_c delta' (the stop pushes where this and delta are > 0)."""
+        return self.stiffness * delta + self.damping * velocity
+
+
+class Contact(NamedTuple):
+    """One contact: start time (since the segment's start), phase, velocities, duration.
+
+    ``v_minus``: x' at entry (>= 0); ``v_plus``: x' when the force returns to 0, or nan if
+    the contact lasts past the segment's end; ``duration``: the contact time (inf then);
+    ``exit_gap``: x - d at the exit (> 0 with damping: the mass leaves before x = d).
+    """
+
+    dt: float
+    phase: float
+    v_minus: float
+    v_plus: float
+    duration: float
+    exit_gap: float
+
+
+@dataclass(frozen=True)
+class Coulomb:
+    """Coulomb dry friction on the mass: -F_f sign(x') in slip, a stick at x' = 0 while
+    the force without friction |G| <= F_s (F_s >= F_f; default F_s = F_f)."""
+
+    kinetic: float
+    static: float | None = None
+
+    def __post_init__(self) -> None:
+        f = _check_real("kinetic", self.kinetic)
+        if not f >= 0.0:
+            raise ParameterError(f"kinetic={f!r} is invalid: valid range is F_f >= 0")
+        s = f if self.static is None else _check_real("static", self.static)
+        if not s >= f:
+            raise ParameterError(f"static={s!r} is invalid: valid range is F_s >= F_f = {f!r}")
+        object.__setattr__(self, "kinetic", f)
+        object.__setattr__(self, "static", s)
+
+
+class CompliantSegment(NamedTuple):
+    """Result of :func:`advance_compliant`: end state (x, v), the contacts, and the
+    sticks of the friction as (start, end) times (end inf: stuck at the segment's end)."""
+
+    x: float
+    v: float
+    contacts: list
+    sticks: tuple = ()
+    monodromy: tuple | None = None
+
+
+class _Region:
+    """Closed-form flow of delta'' + 2 beta delta' + w2 delta = cos(tau) - d from one state.
+
+    delta = A cos(tau - phi_c) - d / w2 + Re(C e^{lambda h}), lambda = -beta + i Omega,
+    |lambda| = W = sqrt(w2); every derivative of the homogeneous part is bounded by
+    |C| W^n e^{-beta h} and of the particular part by A omega^n (docs/theory_contact.md).
+    """
+
+    __slots__ = ("beta", "big_w", "big_om", "omega", "amp", "lag", "offset", "tau0",
+                 "c1", "c2", "cabs")
+
+    def __init__(self, w2: float, beta: float, p: OscillatorParams, tau0: float,
+                 delta0: float, v0: float, push: float = 0.0):
+        w = p.omega
+        self.beta = beta
+        self.big_w = math.sqrt(w2)
+        self.big_om = math.sqrt(w2 - beta * beta)
+        self.omega = w
+        self.amp = 1.0 / math.hypot(w2 - w * w, 2.0 * beta * w)
+        self.lag = math.atan2(2.0 * beta * w, w2 - w * w)
+        self.offset = -(p.d + push) / w2
+        self.tau0 = tau0
+        pd, pv = self._particular(0.0)
+        self.c1 = delta0 - pd
+        self.c2 = (v0 - pv + beta * self.c1) / self.big_om
+        self.cabs = math.hypot(self.c1, self.c2)
+
+    def _particular(self, h: float):
+        psi = self.tau0 + self.omega * h - self.lag
+        return (self.amp * math.cos(psi) + self.offset,
+                -self.amp * self.omega * math.sin(psi))
+
+    def __call__(self, h: float):
+        """(delta, delta', delta'') at time h."""
+        psi = self.tau0 + self.omega * h - self.lag
+        cp, sp = math.cos(psi), math.sin(psi)
+        e = math.exp(-self.beta * h)
+        c, s = math.cos(self.big_om * h), math.sin(self.big_om * h)
+        b, om, c1, c2 = self.beta, self.big_om, self.c1, self.c2
+        w = e * (c1 * c + c2 * s)
+        wv = e * ((om * c2 - b * c1) * c - (om * c1 + b * c2) * s)
+        d = self.amp * cp + self.offset + w
+        v = -self.amp * self.omega * sp + wv
+        # the equation itself gives delta'' (no cancellation beyond that of its terms)
+        acc = -self.amp * self.omega * self.omega * cp - 2.0 * b * wv - self.big_w ** 2 * w
+        return d, v, acc
+
+    def transition(self, h: float):
+        """Phi(h) of the homogeneous region flow, (Phi11, Phi12, Phi21, Phi22):
+        e^{-beta h} [[c + beta s / Omega, s / Omega], [-W^2 s / Omega, c - beta s / Omega]]."""
+        e = math.exp(-self.beta * h)
+        c = math.cos(self.big_om * h)
+        s = math.sin(self.big_om * h) / self.big_om
+        return (e * (c + self.beta * s), e * s, -e * self.big_w ** 2 * s, e * (c - self.beta * s))
+
+    def bound(self, n: int, h: float) -> float:
+        """max |delta^(n)| on [h, inf), n >= 1."""
+        return self.cabs * self.big_w ** n * math.exp(-self.beta * h) + self.amp * self.omega ** n
+
+
+def _first_crossing(event, bound2, horizon, sign, scale):
+    """First h in (0, horizon] at which sign * event(h) >= 0 after being < 0, or None.
+
+    ``event(h)`` returns (f, f'); ``bound2(h)`` bounds |f''| on [h, horizon]. f(0) may be
+    0 (the search starts on the previous switching surface, leaving it: sign * f'(0) < 0).
+    An interval [a, b] is excluded when the chord bound max(sf(a), sf(b)) + M (b - a)^2 / 8
+    is below -margin (``scale`` * 64 eps, the rounding of f), or when M proves f monotone
+    (|f'(a)| + |f'(b)| > M (b - a), equal signs) without a sign change; otherwise it is
+    bisected (docs/theory_contact.md, "Certified switching"). A root of a monotone
+    interval is bracketed to a few ulps.
+    """
+    margin = 64.0 * _EPS * scale
+    n = max(1, int(math.ceil(horizon / (0.25 * math.pi))))
+    a, fa = 0.0, event(0.0)
+    start = True
+    for k in range(1, n + 1):
+        b = horizon if k == n else k * horizon / n
+        fb = event(b)
+        root = _crossing_in(event, bound2, a, b, fa, fb, sign, margin, 0, start)
+        if root is not None:
+            return root
+        a, fa, start = b, fb, False
+    return None
+
+
+def _crossing_in(event, bound2, a, b, fa, fb, sign, margin, depth, start):
+    sa, sb = sign * fa[0], sign * fb[0]
+    da, db = sign * fa[1], sign * fb[1]
+    if start and sa >= -margin and da < 0.0:
+        sa = -0.0  # on the surface and leaving it: not a crossing
+    m = bound2(a) * (b - a) * (1.0 + 1e-12)
+    if sa >= 0.0 and not start:
+        return a
+    if (da > 0.0 and db > 0.0 or da < 0.0 and db < 0.0) and abs(da) + abs(db) > m:
+        # monotone: a crossing iff the ends straddle 0
+        if sb >= 0.0 and sa < 0.0:
+            return _bracket(event, a, b, sign, fa[0], fb[0])
+        return None
+    upper = max(sa, sb) + 0.125 * (b - a) * m
+    if upper < -margin:
+        return None
+    if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
+        return _bracket(event, a, b, sign, fa[0], fb[0]) if sa < 0.0 <= sb else None
+    mid = 0.5 * (a + b)
+    fm = event(mid)
+    found = _crossing_in(event, bound2, a, mid, fa, fm, sign, margin, depth + 1, start)
+    if found is not None:
+        return found
+    return _crossing_in(event, bound2, mid, b, fm, fb, sign, margin, depth + 1, False)
+
+
+def _bracket(event, lo, hi, sign, flo, fhi):
+    """Safeguarded secant/bisection to the first h with sign * f(h) >= 0 (a few ulps)."""
+    flo, fhi = sign * flo, sign * fhi
+    while hi - lo > 4.0 * math.ulp(hi):
+        x = lo + (hi - lo) * (flo / (flo - fhi)) if fhi != flo else 0.5 * (lo + hi)
+        if not lo < x < hi or (x - lo) < 0.01 * (hi - lo) or (hi - x) < 0.01 * (hi - lo):
+            x = 0.5 * (lo + hi)
+        fx = sign * event(x)[0]
+        if fx >= 0.0:
+            hi, fhi = x, fx
+        else:
+            lo, flo = x, fx
+    return hi
+
+
+def _check_law(p: OscillatorParams, law: KelvinVoigt) -> None:
+    beta = p.zeta + 0.5 * law.damping
+    if not beta * beta < 1.0 + law.stiffness:
+        raise ParameterError(
+            f"damping={law.damping!r} is invalid with zeta={p.zeta!r}: the contact must be "
+            f"underdamped, (2 zeta + c_c)^2 < 4 (1 + k_c) = {4.0 * (1.0 + law.stiffness)!r}")
+
+
+def _release_time(tau: float, omega: float, lo: float, hi: float) -> float:
+    """Time until cos(tau) leaves [lo, hi] (inf if never): the end of a stick.
+
+    cos leaves through hi where it increases through it, at tau = -acos(hi) mod 2 pi, and
+    through lo where it decreases through it, at tau = acos(lo) mod 2 pi
+    (docs/theory_contact.md, "Coulomb friction").
+    """
+    exits = []
+    if hi < 1.0:
+        exits.append(-math.acos(max(-1.0, hi)))
+    if lo > -1.0:
+        exits.append(math.acos(min(1.0, lo)))
+    if not exits:
+        return math.inf
+    gaps = []
+    for e in exits:
+        g = (e - tau) % TWO_PI
+        gaps.append(0.0 if g > TWO_PI - 1e-12 else g)
+    return min(gaps) / omega
+
+
+def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
+                      duration: float, *, friction: "Coulomb | None" = None,
+                      max_contacts: int = 10000, monodromy: bool = False) -> CompliantSegment:
+    """Exact flow with a Kelvin-Voigt stop (and Coulomb friction) for a fixed time.
+
+    Physical state (x, v) in and out. The regions (docs/theory_contact.md, "The
+    Kelvin-Voigt stop"):
+
+    * below: x <= d, free; contact starts at the first x = d with x' >= 0
+      (without friction the wall's certified search, full relative precision);
+    * contact: x > d and F_c > 0; ends at the first zero of F_c;
+    * above: x > d and F_c <= 0 (after a damped contact), free; ends at the first
+      F_c >= 0 (a new contact) or x = d (below again), whichever comes first.
+
+    With ``friction`` each region slips with the force -F_f sign(x') (a constant on the
+    right-hand side: the same closed form), ends a slip at the first zero of x', and
+    sticks there while |G| <= F_s, G = cos tau - x - k_c max(x - d, 0) the force without
+    friction at rest; the stick ends in closed form (:func:`_release_time`).
+
+    Never hangs: at most 3 ``max_contacts`` + 3 region changes and as many sticks, beyond
+    which :class:`ImpactCapError` is raised (docs/theory_contact.md, "Bounded switching").
+    """
+    _check_law(p, law)
+    for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
+        if not math.isfinite(value):
+            raise NonFiniteStateError(f"{name}={value!r} must be finite")
+    if monodromy and friction is not None:
+        raise ValueError("monodromy=True is invalid with friction: only the frictionless "
+                         "stop's Jacobian is built (docs/theory_contact.md, C8)")
+    mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
+    k, c = law.stiffness, law.damping
+    f_kin = friction.kinetic if friction is not None else 0.0
+    f_sta = friction.static if friction is not None else 0.0
+    t, tau = 0.0, tau0 % TWO_PI
+    delta, vel = x - p.d, v
+    contacts: list = []
+    sticks: list = []
+    switches = 0
+    free = (1.0, p.zeta)
+    touch = (1.0 + k, p.zeta + 0.5 * c)
+    scale_x = abs(p.d) + p.amplitude + abs(delta) + abs(vel) + 1.0
+    if delta > 0.0:
+        region = "contact" if law.force(delta, vel) > 0.0 else "above"
+    else:
+        region = "below"
+    entry = (0.0, tau, math.nan) if region == "contact" else None
+    forced = None
+
+    def at_rest_force(tau, delta):
+        return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0)
+
+    def slip_sign(tau, delta, vel):
+        """Direction of the friction's slip; 0 for a stick (x' = 0, |G| <= F_s)."""
+        if f_kin == 0.0 and f_sta == 0.0:
+            return 0.0 if vel == 0.0 else math.copysign(1.0, vel)
+        if vel != 0.0:
+            return math.copysign(1.0, vel)
+        g = at_rest_force(tau, delta)
+        return 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
+
+    while t < duration:
+        remaining = duration - t
+        switches += 1
+        if switches > 2 * (3 * max_contacts + 3):
+            raise ImpactCapError(
+                f"more than max_contacts={max_contacts} contacts in {duration:.6g} time "
+                f"units at phase {tau:.6f}: the motion is not resolvable at this cap")
+        s = forced if forced is not None else slip_sign(tau, delta, vel)
+        forced = None
+        if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s
+            rest = p.d + delta + k * max(delta, 0.0)
+            h = _release_time(tau, p.omega, rest - f_sta, rest + f_sta)
+            h = min(h, remaining)
+            sticks.append((t, t + h if t + h < duration else math.inf))
+            t += h
+            tau = (tau0 + p.omega * t) % TWO_PI
+            vel = 0.0
+            if t >= duration:
+                break
+            g = at_rest_force(tau, delta)
+            forced = math.copysign(1.0, g) if g != 0.0 else 1.0  # released: slips along G
+            continue
+        push = s * f_kin
+        geometry = free if region != "contact" else touch
+        reg = _Region(*geometry, p, tau, delta, vel, push)
+        h_stop = None
+        if friction is not None and s != 0.0:
+            h_stop = _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
+                                     lambda h: reg.bound(3, h), remaining, 1.0,
+                                     reg.cabs + reg.amp + abs(vel) + 1.0)
+        horizon = h_stop if h_stop is not None else remaining
+        kind, h = None, None
+        if region == "below":
+            if friction is None:
+                xp, vp = particular(p, tau)
+                dx, dv = (delta + p.d) - xp, vel - vp
+                if delta == 0.0:  # on the stop: its deviation without cancellation (impact.py)
+                    dx = _on_wall_at_rest(p, tau)[0]
+                h = _next_impact(p, tau, dx, dv, horizon)
+            else:
+                h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
+                                    1.0, reg.cabs + reg.amp + abs(reg.offset))
+            kind = "entry" if h is not None else None
+        elif region == "contact":
+            sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
+            h = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon,
+                                -1.0, sc)
+            kind = "exit" if h is not None else None
+        else:
+            sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
+            h_force = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c),
+                                      horizon, 1.0, sc)
+            h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
+                                    h_force if h_force is not None else horizon, -1.0,
+                                    reg.cabs + reg.amp + abs(reg.offset))
+            if h_gap is not None and (h_force is None or h_gap < h_force):
+                kind, h = "below", h_gap
+            elif h_force is not None:
+                kind, h = "entry", h_force
+        if kind is None:
+            if h_stop is None:
+                delta, vel, _ = reg(remaining)
+                if mono is not None:
+                    mono = matmul2(reg.transition(remaining), mono)
+                t = duration
+                break
+            delta, _, _ = reg(h_stop)
+            vel = 0.0  # the slip ends: stick or slip the other way (slip_sign)
+            t += h_stop
+            tau = (tau0 + p.omega * t) % TWO_PI
+            if region == "below":
+                delta = min(delta, 0.0)
+            continue
+        delta, vel, _ = reg(h)
+        if mono is not None:
+            mono = matmul2(reg.transition(h), mono)
+        t += h
+        tau = (tau0 + p.omega * t) % TWO_PI
+        if kind == "entry":
+            if region == "below":
+                delta = 0.0
+                if vel <= 8.0 * _EPS * scale_x and math.cos(tau) - p.d - push <= 0.0:
+                    vel = 0.0  # a tangency below rounding, pulled away: no contact (impact.py)
+                    continue
+                vel = max(vel, 0.0)
+                if mono is not None:  # the dashpot's force c_c v jumps on (C8)
+                    mono = matmul2((1.0, 0.0, -c, 1.0), mono)
+            entry = (t, tau, vel)
+            region = "contact"
+        elif kind == "exit":
+            contacts.append(Contact(entry[0], entry[1], entry[2], vel, t - entry[0], delta))
+            if len(contacts) > max_contacts:
+                raise ImpactCapError(
+                    f"more than max_contacts={max_contacts} contacts in {duration:.6g} time "
+                    f"units at phase {tau:.6f}: the motion is not resolvable at this cap")
+            entry = None
+            region = "above" if delta > 0.0 else "below"
+            if region == "below":
+                delta = min(delta, 0.0)
+        else:
+            delta = 0.0
+            region = "below"
+    if entry is not None:
+        contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
+    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), mono)
+
+
+def _force_event(reg: _Region, k: float, c: float):
+    def event(h):
+        d, v, a = reg(h)
+        return k * d + c * v, k * v + c * a
+    return event
+
+
+def _force_bound(reg: _Region, k: float, c: float):
+    return lambda h: k * reg.bound(2, h) + c * reg.bound(3, h)
+
+
+def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: float,
+                          dv_correction: float = 0.0, *, friction: Coulomb | None = None,
+                          monodromy: bool = False) -> CompliantSegment:
+    """One forcing period from a Pi2 sample with a Kelvin-Voigt stop.
+
+    The shape of :func:`grazing_control.dynamics.fidelity.period_step`: deviation (dx, dv)
+    from x_p at phase tau2 in, the correction dv_correction applied on Pi2 (Eq. 28), one
+    period of :func:`advance_compliant`, the deviation at the next Pi2 sample out (as the
+    segment's x, v) with the contacts (times from the sample).
+    """
+    xp, vp = particular(p, p.tau2)
+    x0, v0 = xp + dx, vp + dv + dv_correction
+    if x0 - p.d > 0.0 and law.force(x0 - p.d, v0) > 0.0 and x0 - p.d > 1e-3:
+        raise InitialStateError(f"state deep in the stop: x - d = {x0 - p.d:.3e}")
+    seg = advance_compliant(p, law, p.tau2, x0, v0, p.period, friction=friction,
+                            monodromy=monodromy)
+    tau = (p.tau2 + p.omega * p.period) % TWO_PI
+    xe, ve = particular(p, tau)
+    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks, seg.monodromy)
+
+
+def grazing_jump(law: KelvinVoigt, alpha: float, penetration: float):
+    """Leading order of the Kelvin-Voigt stop's grazing discontinuity map (Eq. C7).
+
+    A free flight whose virtual maximum is ``penetration`` H > 0 above the stop, with
+    deceleration ``alpha`` = d - cos tau* > 0 there, leaves the contact with its velocity
+    changed, relative to the free flow at the apex, by
+
+        dv = -c_c H                                    (c_c > 0: order 1),
+        dv = -(4/3) k_c sqrt(2 / alpha) H^{3/2}        (c_c = 0: order 3/2),
+
+    while k_c H / alpha << 1 (the contact is much shorter than the stop's own period);
+    the rigid map's -(1 + r) sqrt(2 alpha H) is the limit for k_c H / alpha >> 1
+    (docs/theory_contact.md, "The compliant discontinuity map").
+
+    Returns (order, coefficient, dv).
+    """
+    if law.damping > 0.0:
+        order, coef = 1.0, law.damping
+    else:
+        order, coef = 1.5, (4.0 / 3.0) * law.stiffness * math.sqrt(2.0 / alpha)
+    return order, coef, -coef * penetration ** order

@@ -1,0 +1,82 @@
+"""The compliant model on Pi2 (dynamics/compliant_model.py) as a PeriodMap: its Jacobian,
+the generic shooting and continuation over it, and the rigid limit of its multipliers."""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+import pytest
+
+from grazing_control.dynamics.compliant_model import CompliantOneDOF
+from grazing_control.dynamics.continuation import continue_orbit
+from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.model import OneDOF, PeriodMap
+from grazing_control.dynamics.shooting import find_periodic
+from grazing_control.oscillator.contact import KelvinVoigt
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams
+
+
+def _model(dd=-1e-3, k=1e6, c2=-1.0):
+    p = OscillatorParams(delta_d=dd)
+    return CompliantOneDOF(p, Gains(degenerate_c1(p, c2), c2),
+                           law=KelvinVoigt.from_restitution(k, p.r))
+
+
+def test_is_a_period_map_and_names_bad_parameters():
+    m = _model()
+    assert isinstance(m, PeriodMap)
+    assert m.with_parameter("log10_stiffness", 4.0).parameter("stiffness") == pytest.approx(1e4)
+    assert m.with_parameter("stiffness", 1e4).law.restitution == pytest.approx(0.68, rel=1e-12)
+    with pytest.raises(ValueError, match="bogus"):
+        m.parameter("bogus")
+    with pytest.raises(ValueError, match="delay"):
+        CompliantOneDOF(m.params, Gains(-1.0, -1.0, delay=0.1), law=m.law)
+    with pytest.raises(ValueError, match="law"):
+        CompliantOneDOF(m.params)
+
+
+def test_jacobian_matches_central_differences():
+    """Eq. C8 (flow matrices, the entry's saltation, the gain matrix) against central
+    differences of the map, over seeded states with a contact."""
+    rng = random.Random(7)
+    for _ in range(20):
+        m = _model(dd=-10 ** rng.uniform(-3, -1), k=10 ** rng.uniform(1, 7),
+                   c2=rng.uniform(-1.5, -0.5))
+        z = np.array([rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03)])
+        step = m.step(z, jacobian=True)
+        h = 1e-7
+        fd = np.column_stack([(m.step(z + e).state - m.step(z - e).state) / (2 * h)
+                              for e in (np.array([h, 0.0]), np.array([0.0, h]))])
+        assert np.abs(step.jacobian - fd).max() <= 1e-6 * max(1.0, np.abs(fd).max())
+
+
+def test_stiff_stop_tends_to_the_rigid_multipliers():
+    """At Delta d = -1e-3 (|Delta d| >> alpha / k_c) the controlled 1/1 orbit's largest
+    multiplier is within 0.005 of the rigid model's at k_c = 1e8 and further at 1e6:
+    the order-1/2 approach of docs/theory_contact.md section 8."""
+    p = OscillatorParams(delta_d=-1e-3)
+    gains = Gains(degenerate_c1(p, -1.0), -1.0)
+    rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
+    rho_rigid = np.abs(np.linalg.eigvals(rigid.monodromy)).max()
+    err = []
+    for k in (1e6, 1e8):
+        orbit = find_periodic(_model(k=k), rigid.state)
+        err.append(abs(np.abs(np.linalg.eigvals(orbit.monodromy)).max() - rho_rigid))
+    assert err[1] < 0.005 and err[1] < err[0]
+
+
+def test_continuation_in_the_stiffness_finds_no_crossing_for_the_rigid_design():
+    """The rigid design (c2 = -1, c1 of Eq. 38) continued from k_c = 1e8 down to 1e1 at
+    Delta d = -5e-6: no multiplier crosses the unit circle (continue_orbit's detection),
+    and the largest rises toward 0.917 for soft stops (docs/theory_contact.md section 13)."""
+    p = OscillatorParams(delta_d=-5e-6)
+    gains = Gains(degenerate_c1(p, -1.0), -1.0)
+    rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
+    branch = continue_orbit(_model(dd=-5e-6, k=1e8), "log10_stiffness",
+                            np.linspace(8.0, 1.0, 15), rigid.state)
+    assert branch.bifurcations == [] or len(branch.bifurcations) == 0
+    rhos = [np.abs(pt.multipliers).max() for pt in branch.points]
+    assert branch.points[-1].value == pytest.approx(1.0)
+    assert max(rhos) < 0.92 and rhos[-1] > 0.9
