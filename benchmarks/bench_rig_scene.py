@@ -124,6 +124,13 @@ def main(argv=None):
     ap.add_argument("--watchdog-misses", type=int, default=None,
                     help="sim_node's watchdog_misses (default: its own, 25 of 50; 0: off, "
                          "to measure a scene that misses)")
+    ap.add_argument("--stream-block", type=float, default=None, metavar="SECONDS",
+                    help="sim_node's stream_block (default: its own, 0.5 ms)")
+    ap.add_argument("--thread-priority", type=int, default=None, metavar="P",
+                    help="sim_node's and controller_node's thread_priority (SCHED_FIFO 1..99; "
+                         "default: their own, 0 = off)")
+    ap.add_argument("--recorder-batch-window", type=float, default=None, metavar="SECONDS",
+                    help="recorder_node's batch_window (default: its own, 1 ms)")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
     p, d = rig.params(), rig.dimensionless()
@@ -147,21 +154,33 @@ def main(argv=None):
     res = launcher.run(None, None, str(out / "bag"), args.periods, rig=args.rig,
                        enable_after=args.enable_after, timeout=args.periods * 0.1 * args.slow + 120,
                        controller_overrides=dict(
-                           {"rig_c2": g.c2}, **({} if args.answer_lead is None else
-                                                {"answer_lead": args.answer_lead * rig.omega_n})),
+                           {"rig_c2": g.c2},
+                           **({} if args.thread_priority is None else
+                              {"thread_priority": args.thread_priority}),
+                           **({} if args.answer_lead is None else
+                              {"answer_lead": args.answer_lead * rig.omega_n})),
                        log_dir=str(out / "logs"),
+                       recorder_overrides=(None if args.recorder_batch_window is None else
+                                           {"batch_window": args.recorder_batch_window}),
                        sim_overrides=dict(
                            {} if args.slow == 1.0 else {"time_scale": rig.omega_n / args.slow},
                            **({} if args.watchdog_misses is None else
-                              {"watchdog_misses": args.watchdog_misses})))
+                              {"watchdog_misses": args.watchdog_misses}),
+                           **({} if args.stream_block is None else
+                              {"stream_block": args.stream_block}),
+                           **({} if args.thread_priority is None else
+                              {"thread_priority": args.thread_priority})))
     wall = time.time() - t0
     print(f"scene: {res} ({wall:.0f} s)")
-    for name in ("sim_node", "controller_node"):
+    for name in ("sim_node", "controller_node", "recorder_node"):
         log = Path(res.logs.get(name, ""))
         if log.is_file():
-            lines = [ln for ln in log.read_text(errors="replace").splitlines() if "summary:" in ln]
+            text = log.read_text(errors="replace").splitlines()
+            lines = [ln for ln in text if "summary:" in ln]
             if lines:
                 print(f"{name}: {lines[-1].split('summary: ', 1)[1]}")
+            for ln in (ln for ln in text if "cpu_s=" in ln):   # GRAZING_GC_PAUSES=1
+                print(f"{name}: {ln.split(']: ', 1)[-1]}")
     try:
         sd = load(out / "bag").scenes[0]
     except (OSError, ValueError) as exc:

@@ -34,7 +34,6 @@ from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import String
 
-from grazing_control.plant.realtime import STREAM_TICK
 from grazing_control.plant.rig import rig_to_dict
 from grazing_control.ros import cdr
 from grazing_control.ros.common import LATCHED_QOS, stamp_from_seconds
@@ -133,12 +132,12 @@ class SimulatedRig:
                                                    float(v) * vs if self.velocity else None))
 
     def wake_in(self, now: float) -> float:
-        """Wall seconds until the next held sample is due (inf: none), no sooner than
-        STREAM_TICK, as the loop's own stream (a DAQ's block): each wake-up costs, and at
+        """Wall seconds until the next held sample is due (inf: none), no sooner than the
+        loop's ``stream_tick``, as its own stream (a DAQ's block): each wake-up costs, and at
         one per sample the simulator's events queued up under load (the answers of a
         recorded scene reached it seconds late, 792 of 900 ignored)."""
         due = (self.latency.next_time() - now) / self.node.settings.time_scale
-        return max(due, STREAM_TICK)
+        return max(due, self.node.loop.stream_tick)
 
     def publish_clock(self) -> None:
         """rig/clock: ROS time and the rig clock, read together (while the scene runs)."""

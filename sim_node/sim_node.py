@@ -54,7 +54,7 @@ from grazing_control.plant.loop import Loop
 from grazing_control.plant.ndof_engine import NdofEngine
 from grazing_control.plant.ndof_settings import (UNSUPPORTED, load_model_file,
                                                  ndof_settings_from_values)
-from grazing_control.plant.realtime import MIN_TICK, Realtime
+from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, STREAM_TICK, Realtime
 from grazing_control.plant.rig import load_rig
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, described_range,
@@ -69,6 +69,7 @@ from grazing_control.ros.common import (DATA_QOS, EVENT_QOS, EXECUTORS, LATCHED_
                                         LIVE_CHANGES_DOC, PUBLISHER_QOS, READY_TOPIC,
                                         StartupError, bool_descriptor, check_ranges,
                                         deserialize, executor_kind, float_descriptor,
+                                        freeze_heap,
                                         int_descriptor, log_parameter_changes,
                                         publish_parameter_record, refuse_out_of_range,
                                         refuse_while_running, run_node, spin, stamp_key,
@@ -130,6 +131,10 @@ NODE_PARAMETERS = (
     Parameter("executor", "string", "events", "rclpy executor: single_threaded "
               "(SingleThreadedExecutor) or events (rclpy.experimental EventsExecutor)",
               choices=EXECUTORS, read_only=True),
+    Parameter("stream_block", "double", STREAM_TICK, "realtime: wall seconds the stream's "
+              "samples (oscillator/state, rig/sensor) gather before one wake-up publishes "
+              "them, each with its own stamp: a DAQ's block (5e-5..5e-3)", MIN_TICK,
+              CLOCK_TICK, read_only=True),
     Parameter("exit_when_done", "bool", False, "exit (status 0) once max_periods have run",
               read_only=True),
     Parameter("wait_for_controller", "bool", True, "start only when a controller is matched "
@@ -515,6 +520,7 @@ class SimNode(Node):
         if not missing:
             self.get_logger().info(f"start conditions met after {waited:.1f} s: starting")
         self.destroy_timer(self._start_timer)
+        freeze_heap()       # what start-up made (the warmed kernel, the scene): out of reach
         self._wall_start = time.monotonic()
         if self.settings.mode == "lockstep":
             self.loop = Lockstep(self.engine, self.out)
@@ -523,6 +529,7 @@ class SimNode(Node):
             self._guard(self.loop.start)
         else:
             self.loop = Realtime(self.engine, self.out)
+            self.loop.stream_tick = self.get_parameter("stream_block").value
             self._tick_timer = self.create_timer(MIN_TICK, self._on_tick)
             self._guard(self.loop.start)
             if self.driver is not None:

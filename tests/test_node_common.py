@@ -229,3 +229,29 @@ def test_the_nodes_import_no_solver_they_do_not_use():
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_settle_heap_freezes_what_start_up_made_and_records_the_pauses(monkeypatch):
+    """The objects alive when a node starts to spin are out of the cyclic collector's
+    reach (a full collection walked them all while the scene ran: 31 ms in sim_node,
+    docs/rig_scene.md); GRAZING_GC=keep leaves the collector alone; GRAZING_GC_PAUSES
+    records each collection."""
+    import gc
+
+    from grazing_control.ros import common
+
+    gc.unfreeze()
+    monkeypatch.setenv(common.GC_ENV, "keep")
+    monkeypatch.delenv(common.GC_PAUSES_ENV, raising=False)
+    assert common.settle_heap() is None and gc.get_freeze_count() == 0
+    monkeypatch.delenv(common.GC_ENV)
+    monkeypatch.setenv(common.GC_PAUSES_ENV, "1")
+    try:
+        pauses = common.settle_heap()
+        assert gc.get_freeze_count() > 1000
+        gc.collect(0)
+        assert pauses.count[0] >= 1 and pauses.max[0] > 0.0
+        assert pauses.summary().startswith("cpu_s=") and "gen2 n=" in pauses.summary()
+    finally:
+        gc.callbacks.remove(pauses)
+        gc.unfreeze()

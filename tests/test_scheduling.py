@@ -35,15 +35,21 @@ def test_nothing_asked_nothing_done():
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs the privilege to be granted")
 def test_applied_in_a_process_that_may():
     """In a child process (this one must not become real-time): policy, affinity and
-    locked memory as the kernel reports them afterwards."""
-    code = ("import os; from grazing_control.ros.scheduling import apply_scheduling as a; "
+    locked memory as the kernel reports them afterwards; the policy for every thread,
+    those that existed before too (the middleware's receive threads, created with the
+    node), not only the calling one."""
+    code = ("import os, threading; from grazing_control.ros.scheduling import apply_scheduling as a; "
+            "ev = threading.Event(); t = threading.Thread(target=ev.wait); t.start(); "
             "r = a(5, (0,), True); print(r.applied, r.warnings); "
+            "tids = [int(x) for x in os.listdir('/proc/self/task')]; "
             "print(os.sched_getscheduler(0) == os.SCHED_FIFO, os.sched_getparam(0).sched_priority, "
             "sorted(os.sched_getaffinity(0)), "
-            "[l for l in open('/proc/self/status') if l.startswith('VmLck')][0].split()[1] != '0')")
+            "[l for l in open('/proc/self/status') if l.startswith('VmLck')][0].split()[1] != '0', "
+            "len(tids) >= 2 and all(os.sched_getscheduler(x) == os.SCHED_FIFO for x in tids)); "
+            "ev.set(); t.join()")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60, check=True).stdout.splitlines()
-    assert out[-1] == "True 5 [0] True", out
+    assert out[-1] == "True 5 [0] True True", out
 
 
 def test_refusals_are_warnings(monkeypatch):

@@ -22,6 +22,7 @@ topic with several writers (the parameter records) uses :data:`RECORDS_QOS` (dep
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import re
@@ -50,6 +51,9 @@ __all__ = [
     "EXECUTORS",
     "executor_kind",
     "make_executor",
+    "freeze_heap",
+    "settle_heap",
+    "GcPauses",
     "deserialize",
     "PUBLISHER_QOS",
     "READY_TOPIC",
@@ -587,6 +591,55 @@ def usage(factory, name: str) -> str:
             + doc.strip() + "\n")
 
 
+#: Environment switches of :func:`settle_heap`: ``GRAZING_GC=keep`` leaves Python's cyclic
+#: collector as it is (to measure against), ``GRAZING_GC_PAUSES=1`` logs the collector's
+#: pauses per generation at the node's exit (:class:`GcPauses`).
+GC_ENV, GC_PAUSES_ENV = "GRAZING_GC", "GRAZING_GC_PAUSES"
+
+
+class GcPauses:
+    """The cyclic collector's pauses in this process, per generation (gc.callbacks), and
+    the process's CPU time, from the node's start of spinning to its exit."""
+
+    def __init__(self):
+        self.count, self.total, self.max = [0, 0, 0], [0.0] * 3, [0.0] * 3
+        self._start = 0.0
+        self.cpu0 = time.process_time()
+        gc.callbacks.append(self)
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._start = time.perf_counter()
+            return
+        dt, g = time.perf_counter() - self._start, info["generation"]
+        self.count[g] += 1
+        self.total[g] += dt
+        self.max[g] = max(self.max[g], dt)
+
+    def summary(self) -> str:
+        return (f"cpu_s={time.process_time() - self.cpu0:.2f} gc pauses: " + " ".join(
+            f"gen{g} n={self.count[g]} total_ms={self.total[g] * 1e3:.1f} "
+            f"max_ms={self.max[g] * 1e3:.2f}" for g in range(3)))
+
+
+def freeze_heap() -> None:
+    """Collect, then freeze every object alive now out of the cyclic collector's reach
+    (gc.freeze): what start-up made (imports, rclpy, numpy, the scene's models: ~10^5
+    objects that live as long as the process) is no longer walked by each full
+    collection while the scene runs (docs/rig_scene.md, "Where the time went").
+    ``GRAZING_GC=keep`` leaves the collector as it is (to measure against)."""
+    if os.environ.get(GC_ENV) != "keep":
+        gc.collect()
+        gc.freeze()
+
+
+def settle_heap():
+    """Before a node spins: :func:`freeze_heap`; returns the :class:`GcPauses` recorder
+    when ``GRAZING_GC_PAUSES`` is set, else None."""
+    freeze_heap()
+    return GcPauses() if os.environ.get(GC_PAUSES_ENV) else None
+
+
 def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> int:
     """The main of every node: init, build, spin, and a clean exit.
 
@@ -609,7 +662,7 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
     args = list(sys.argv if args is None else args)
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
-    node = executor = None
+    node = executor = pauses = None
     code = 0
     try:
         arguments = init_ros(args, name)
@@ -630,6 +683,7 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
             raise
         executor = make_executor(getattr(node, "executor_kind", "single_threaded"))
         executor.add_node(node)
+        pauses = settle_heap()
         if hasattr(node, "spin_until"):
             node.spin_until(executor)
         else:
@@ -647,6 +701,8 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
             if hasattr(node, "on_exit"):
                 node.on_exit()
             code = code or int(getattr(node, "exit_code", 0))
+        if pauses is not None:
+            rclpy.logging.get_logger(name).info(pauses.summary())
     # Reached when nothing escaped. The summary is logged and every reliable reader has
     # acknowledged (the nodes' spin_until / on_exit): leave the graph, then end the
     # process without tearing the interpreter down (issue 21: that took up to 30 s under

@@ -141,6 +141,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
 from std_msgs.msg import Bool, String
 
 from .common import (LATCHED_QOS, READY_TOPIC, SIGNAL_POLL, StartupError, _startup_message,
+                     settle_heap,
                      check_overrides, fast_exit_process, float_descriptor, init_ros,
                      int_descriptor, string_descriptor, usage)
 from .diagnostics import OK, ERROR, WARN, Updater
@@ -778,7 +779,7 @@ def main(args=None):
     stop = SignalStop()
     _stop_on_signals(stop)
     status = 0
-    node = executor = None
+    node = executor = pauses = None
     try:
         arguments = init_ros(args, "recorder_node")
         if arguments is None:
@@ -789,6 +790,7 @@ def main(args=None):
         node = RecorderNode(arguments)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        pauses = settle_heap()
         window = node.get_parameter("batch_window").value
         while not stop.is_set() and rclpy.ok() and node.failed is None:
             executor.spin_once(timeout_sec=SIGNAL_POLL)     # an idle one notices a stop
@@ -809,6 +811,8 @@ def main(args=None):
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
             status = node.close() or status
+        if pauses is not None:
+            rclpy.logging.get_logger("recorder_node").info(pauses.summary())
     # The bag is closed and its summary logged: leave the graph and end the process.
     # Tearing the interpreter down (GC of every history) took up to 30 s under CPU
     # starvation, past the launcher's grace (issue 21: a complete bag, then SIGKILL).

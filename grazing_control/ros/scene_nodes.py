@@ -92,6 +92,20 @@ def new_token() -> str:
     return f"{os.getpid():x}-{random.getrandbits(48):012x}"
 
 
+#: A rig scene at physical speed (issue 28): the simulated DAQ delivers the 2 kHz stream
+#: in blocks of 2 ms (4 samples; sim_node's stream_block) and the recorder takes what
+#: gathered every 20 ms (its batch_window): one wake-up per sample in each cost the
+#: simulator 21 and the recorder 15 CPU seconds of a 52 s scene, 12.5 and 6.5 with these
+#: (docs/rig_scene.md, "Where the time went").
+RIG_STREAM_BLOCK = 2e-3
+RIG_BATCH_WINDOW = 0.02
+#: ... and the simulator and the controller under SCHED_FIFO (their thread_priority,
+#: ros/scheduling.py; where the process may not, a warning and the scene runs on): at
+#: load 11-15 on this 2-core machine 3 of 700 sections missed with it, 202-578 at load
+#: 7-10 without (docs/rig_scene.md, "Where the time went").
+RIG_THREAD_PRIORITY = 50
+
+
 def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
                     mode=None, bag=None, token=None, sim_overrides=None,
                     controller_overrides=None, recorder_overrides=None, model=None,
@@ -112,7 +126,10 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       file, issue 17) its path as ``model_file``; with ``rig`` (a rig file, issue 28) its
       path as ``rig_file`` (the simulated rig and the controller speak the driver
       contract, docs/driver_contract.md), the simulator in realtime (physical speed) and
-      the recorder also recording the contract's topics (``rig_topics``).
+      the recorder also recording the contract's topics (``rig_topics``); the
+      simulator's stream in blocks of RIG_STREAM_BLOCK, the recorder's batch_window
+      RIG_BATCH_WINDOW (the CPU they save, docs/rig_scene.md "Where the time went"),
+      both nodes' thread_priority RIG_THREAD_PRIORITY (SCHED_FIFO where allowed).
     """
     sim = {"exit_when_done": True, "wait_for_controller": True,
            "wait_for_subscribers": 1 if bag is not None else 0,
@@ -129,6 +146,8 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     if rig is not None:                 # a rig scene: both read the rig file
         sim["rig_file"] = controller["rig_file"] = os.path.abspath(os.fspath(rig))
         sim["mode"] = "realtime" if mode is None else str(mode)
+        sim["stream_block"] = RIG_STREAM_BLOCK
+        sim["thread_priority"] = controller.setdefault("thread_priority", RIG_THREAD_PRIORITY)
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay
@@ -147,6 +166,7 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
         recorder = {"output": os.fspath(bag), "require_complete": True}
         if rig is not None:
             recorder["rig_topics"] = True
+            recorder["batch_window"] = RIG_BATCH_WINDOW
         recorder.update(recorder_overrides or {})
     return {"sim_node": sim, "controller_node": controller, "recorder_node": recorder,
             "live_node": None if live is None else {"port": int(live)}}
