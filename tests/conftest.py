@@ -34,6 +34,19 @@ def compiled_kernel():
         kernel.warm_up()
 
 
+@pytest.fixture(autouse=True)
+def mpmath_precision_is_restored():
+    """mpmath's working precision is global: the reference modules set 50 digits at
+    import, and a test that set it to 20 without restoring it (tests/reference_hertz.py
+    before) made 118 tests that ran after it on the same worker fail against their
+    references. Each test gets back the precision it started with."""
+    import mpmath
+
+    prec = mpmath.mp.prec
+    yield
+    mpmath.mp.prec = prec
+
+
 # Processes a test leaves behind (a launcher and its scene after a failed assertion, a
 # node whose test timed out) are ended here, also when the test failed: no test may leak
 # a process into the next ones (issue 19: an unbounded scene ran on for 14 minutes).

@@ -21,8 +21,14 @@ H0 = mp.mpf("1e-5")
 
 
 def reference_contact(p, law, tau_e, v0, dps=20):
-    """(exit time after the entry, delta at the exit, delta' at the exit)."""
-    mp.mp.dps = dps
+    """(exit time after the entry, delta at the exit, delta' at the exit), at ``dps``
+    digits (mpmath's working precision is restored on return: the other references of the
+    suite set theirs at import)."""
+    with mp.workdps(dps):
+        return _reference_contact(p, law, tau_e, v0)
+
+
+def _reference_contact(p, law, tau_e, v0):
     zeta, w, d = mp.mpf(p.zeta), mp.mpf(p.omega), mp.mpf(p.d)
     k, a = mp.mpf(law.stiffness), mp.mpf(law.alpha)
     tau_e, v0 = mp.mpf(tau_e), mp.mpf(v0)

