@@ -463,10 +463,12 @@ class ControllerNode(Node):
             read_only=True))
         d("estimate_bias", False, bool_descriptor(
             "stream mode, estimator model: estimate a constant sensor position bias (the "
-            "augmented filter, issue 29; published on controller/model_watch)", True))
+            "augmented filter, issue 29; published on controller/model_watch)", True,
+            constraints="true only with pi2_source stream and estimator model"))
         d("track_delta_d", False, bool_descriptor(
             "stream mode, estimator model: track Delta d as a random walk of std "
-            "wall_noise per period (the augmented filter)", True))
+            "wall_noise per period (the augmented filter)", True,
+            constraints="true only with pi2_source stream and estimator model"))
         d("bias_std", WATCH_DEFAULTS["bias_std"], float_descriptor(
             "augmented filter: prior std of the sensor bias, > 0", ABOVE_0, FINITE,
             read_only=True))
@@ -476,17 +478,24 @@ class ControllerNode(Node):
         d("wall_noise", WATCH_DEFAULTS["wall_noise"], float_descriptor(
             "augmented filter: Delta d's random walk std per period, >= 0", 0.0, FINITE,
             read_only=True))
+        # the test's window is described as [0, 0] where no test can run (the sample
+        # source, or another estimator): a range end is always accepted (issue 27)
+        watched = (self.get_parameter("pi2_source").value == "stream"
+                   and self.get_parameter("estimator").value == "model")
         d("consistency_window", 0, int_descriptor(
             "stream mode, estimator model: periods of the innovation consistency test's "
             "window (docs/theory_estimation.md E9-E10; verdict on /diagnostics and "
-            "controller/model_watch); 0: no test", 0, read_only=True))
+            "controller/model_watch); 0: no test", 0, None if watched else 0,
+            read_only=True,
+            constraints="> 0 only with pi2_source stream and estimator model"))
         d("false_alarm", WATCH_DEFAULTS["false_alarm"], float_descriptor(
             "consistency test: false-alarm rate per window, 0 < false_alarm < 0.5", ABOVE_0,
             below(0.5), read_only=True))
         d("capture", False, bool_descriptor(
             "stream mode: the capture rule (issue 29, docs/theory_capture.md): once control "
             "is on, no correction until the estimate is within capture_radius of the "
-            "controlled orbit's Pi2 state, then Eq. 28 (latched)", True))
+            "controlled orbit's Pi2 state, then Eq. 28 (latched)", True,
+            constraints="true only with pi2_source stream and a model (delta_d)"))
         d("capture_radius", 0.0, float_descriptor(
             "capture rule: the distance (Euclidean in (x, v) on Pi2), >= 0; 0: "
             f"{CAPTURE_RADIUS:g} sqrt(|delta_d|)", 0.0, FINITE, read_only=True))
