@@ -561,3 +561,17 @@ def test_a_lost_correction_is_a_named_problem(tmp_path, capsys):
     code, out, _ = run_cli(["analyze", str(bag), "--no-figures", "--out",
                             str(tmp_path / "cli")], capsys)
     assert code == 0 and "no recorded correction" in out
+
+
+def test_a_controller_on_another_model_is_named():
+    """A model-error scene (the controller designed on another rig file) is noted; equal
+    models, a controller without a model (NaN) and n-DOF records say nothing."""
+    from grazing_control.recordings.analyze import model_differences
+
+    rec = {"nodes": {"controller_node": [{"zeta": 0.01, "r": 0.735, "delta_d": float("nan")}],
+                     "sim_node": [{"zeta": 0.01, "r": 0.7, "delta_d": -5e-6}]}}
+    assert model_differences(rec) == ["the controller's model differs from the simulator's: "
+                                      "r = 0.735 (controller) against 0.7 (simulator)"]
+    assert model_differences({"nodes": {"controller_node": [{"r": 0.7}],
+                                        "sim_node": [{"r": 0.7}]}}) == []
+    assert model_differences(None) == [] and model_differences({"nodes": {}}) == []

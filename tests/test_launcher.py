@@ -413,3 +413,17 @@ def test_the_nodes_get_one_blas_thread_unless_one_is_given(monkeypatch):
     assert all(env[name] == "1" for name in launcher.BLAS_THREADS)
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
     assert launcher.node_env()["OPENBLAS_NUM_THREADS"] == "4"
+
+
+def test_a_controller_given_its_own_rig_or_model_file_keeps_it():
+    """A model-error scene: `grazing run --rig PLANT --controller-param rig_file:=OTHER`
+    designs the controller on OTHER; the launcher overwrote it with PLANT without a word."""
+    from grazing_control.ros import scene_nodes
+
+    for key, kw in (("rig_file", "rig"), ("model_file", "model")):
+        over = scene_nodes.scene_overrides(None, controller_overrides={key: "/other.yaml"},
+                                           **{kw: "plant.yaml"})
+        assert over["sim_node"][key] == os.path.abspath("plant.yaml")
+        assert over["controller_node"][key] == "/other.yaml"
+        over = scene_nodes.scene_overrides(None, **{kw: "plant.yaml"})
+        assert over["controller_node"][key] == os.path.abspath("plant.yaml")

@@ -488,6 +488,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         watch = watch_numbers(read_watch(bag), None if setup.params is None
                               else setup.params.period)     # stamps: simulation time
         rig, rig_notes = read_rig(bag)
+        rig_notes += model_differences(data.parameters)
         if rig is not None:
             rig_notes += [f"rig mismatch: {m} (the SI numbers use the rig's scales)"
                           for m in check_against_model(rig, setup.params)]
@@ -556,6 +557,27 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
 
 
 _finite = finite
+
+
+#: The model parameters a controller and a simulator both hold (1-DOF).
+MODEL_KEYS = ("zeta", "r", "omega", "delta_d", "pi2_offset")
+
+
+def model_differences(parameters) -> list:
+    """Notes where the controller's model (its parameter record) is not the simulator's:
+    a model-error scene says so (issue 28: a controller designed on another rig file ran
+    against the plant and the analysis did not mention it)."""
+    nodes = (parameters or {}).get("nodes") or {}
+    ctl = (nodes.get("controller_node") or [{}])[0]
+    sim = (nodes.get("sim_node") or [{}])[0]
+    out = []
+    for key in MODEL_KEYS:
+        a, b = ctl.get(key), sim.get(key)
+        if (isinstance(a, float) and isinstance(b, float) and math.isfinite(a)
+                and math.isfinite(b) and a != b):
+            out.append(f"the controller's model differs from the simulator's: {key} = {a!r} "
+                       f"(controller) against {b!r} (simulator)")
+    return out
 
 
 def _rig_entry(rig) -> dict:

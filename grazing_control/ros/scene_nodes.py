@@ -141,10 +141,15 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     if mode is not None:
         sim["mode"] = str(mode)
     controller = dict(controller_overrides or {})
-    if model is not None:               # an n-DOF scene: both read the model file
-        sim["model_file"] = controller["model_file"] = os.path.abspath(os.fspath(model))
-    if rig is not None:                 # a rig scene: both read the rig file
-        sim["rig_file"] = controller["rig_file"] = os.path.abspath(os.fspath(rig))
+    # an n-DOF or rig scene: both read the file, unless the controller is given its own
+    # (a model-error scene: the controller designed on another model; it was overwritten
+    # without a word before)
+    if model is not None:
+        sim["model_file"] = os.path.abspath(os.fspath(model))
+        controller.setdefault("model_file", sim["model_file"])
+    if rig is not None:
+        sim["rig_file"] = os.path.abspath(os.fspath(rig))
+        controller.setdefault("rig_file", sim["rig_file"])
         sim["mode"] = "realtime" if mode is None else str(mode)
         sim["stream_block"] = RIG_STREAM_BLOCK
         sim["thread_priority"] = controller.setdefault("thread_priority", RIG_THREAD_PRIORITY)
