@@ -193,7 +193,7 @@ def test_a_second_simulator_on_the_samples_stops_the_controller_with_an_error(co
     answers(col, 1)
     assert proc.poll() is None
     col.node.create_publisher(JointState, "oscillator/pi2", DATA_QOS)   # a second simulator
-    assert proc.wait(10) == 1
+    assert proc.wait(30) == 1      # discovery of the second publisher: seconds at load
     text = log.read_text()
     assert "[ERROR]" in text and "2 publishers on /oscillator/pi2" in text, text
     assert "the scene is not isolated" in text and "Traceback" not in text, text
