@@ -16,6 +16,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from grazing_control.oscillator.flow import propagate, to_deviation, to_physical
+
 RTOL = 2.3e-14
 ATOL = 1e-15
 DEBUG = False
@@ -180,3 +182,26 @@ def refined(fun, *args, max_step=0.005, **kwargs):
         return fun(*args, **kwargs)
     finally:
         MAX_STEP[0] = old
+
+
+def apex_jump(p, advance, tau_m, height, kinetic=0.0):
+    """Velocity change of one near-grazing contact, pulled back to the free apex
+    (docs/theory_contact.md §12, §14): the flow ``advance(p, tau0, x, v, duration)``
+    through the contact minus the same flow with the stop far away, from 3 apex-times
+    before to 3 after the apex (d + height, 0) at phase tau_m, the difference mapped
+    back to the apex by Phi. With Coulomb friction of kinetic level ``kinetic`` the
+    flight before the apex is the slip with x' > 0 (x + F_f obeys the frictionless
+    equation) and the pull-back runs along the slip after it (the difference of two
+    slips in the same direction obeys the linear flow). Returns (dv, alpha)."""
+    alpha = p.d + height - math.cos(tau_m)
+    s = 3.0 * math.sqrt(2.0 * height / (alpha - kinetic))
+    dx, dv = to_deviation(p, tau_m, p.d + height + kinetic, 0.0)
+    bx, bv = propagate(p.zeta, dx, dv, -s)
+    tau0 = tau_m - p.omega * s
+    x, v = to_physical(p, tau0, bx, bv)
+    seg = advance(p, tau0, x - kinetic, v, 2.0 * s)
+    free = advance(p.with_(delta_d=1.0), tau0, x - kinetic, v, 2.0 * s)
+    tau1 = tau0 + 2.0 * p.omega * s
+    ex, ev = to_deviation(p, tau1, seg.x, seg.v)
+    fx, fv = to_deviation(p, tau1, free.x, free.v)
+    return propagate(p.zeta, ex - fx, ev - fv, -s)[1], alpha

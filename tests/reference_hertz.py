@@ -1,5 +1,6 @@
 """20-digit mpmath reference for one Hertz / Hunt-Crossley contact (docs/theory_contact.md,
-"Hertz accuracy").
+"Hertz accuracy"), and the full-flow reference of the seeded cases
+(:func:`reference_advance_hertz`, DOP853 at its floor).
 
 delta^{3/2} is not analytic at the entry, so mpmath's Taylor-series odefun starts at
 h0 = 1e-5 after it, from the free flight's closed form (in mpmath) plus the leading
@@ -15,7 +16,15 @@ solution and refined by mpmath's findroot.
 
 from __future__ import annotations
 
+import math
+
 import mpmath as mp
+from scipy.optimize import brentq
+
+# the Kelvin-Voigt reference's solver settings, one place (refined() there shrinks MAX_STEP)
+from reference_contact import _solve
+
+__all__ = ["reference_contact", "reference_advance_hertz"]
 
 H0 = mp.mpf("1e-5")
 
@@ -74,3 +83,103 @@ def _reference_contact(p, law, tau_e, v0):
     te = mp.findroot(lambda h: ends(h)[which], (lo, hi), solver="anderson")
     delta, vel = sol(te)
     return te, delta, vel
+
+
+# ---------------------------------------------------------------------------------------
+# Full flows for the seeded cases: scipy's DOP853 at its floor, physical coordinates.
+# ---------------------------------------------------------------------------------------
+
+
+def reference_advance_hertz(p, law, tau0, x, v, duration):
+    """(x, v, contacts) after ``duration`` with a Hertz / Hunt-Crossley stop; contacts as
+    (t_entry, t_exit or inf).
+
+    Independent of oscillator/hertz.py: the equation of motion written directly in
+    physical coordinates for every region (no closed form outside the contact), DOP853 at
+    rtol 2.3e-14 (its floor) with terminal events, restarted at every switch. An entry the
+    event location could miss (a penetration inside one step) is caught at the next
+    maximum of x and located by brentq on the dense output, as in
+    ``reference_contact.reference_advance``.
+    """
+    k, a, d, zeta, w = law.stiffness, law.alpha, p.d, p.zeta, p.omega
+
+    def free(t, y):
+        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]]
+
+    def touch(t, y):
+        pen = max(y[0] - d, 0.0)
+        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]
+                - k * pen ** 1.5 * (1.0 + 1.5 * a * y[1])]
+
+    def gap_up(t, y):
+        return y[0] - d
+    gap_up.terminal, gap_up.direction = True, 1.0
+
+    def top(t, y):
+        return y[1]
+    top.terminal, top.direction = False, -1.0
+
+    def factor_down(t, y):
+        return 1.0 + 1.5 * a * y[1]
+    factor_down.terminal, factor_down.direction = True, -1.0
+
+    def factor_up(t, y):
+        return 1.0 + 1.5 * a * y[1]
+    factor_up.terminal, factor_up.direction = True, 1.0
+
+    def gap_down(t, y):
+        return y[0] - d
+    gap_down.terminal, gap_down.direction = True, -1.0
+
+    t, y = 0.0, [x, v]
+    contacts = []
+    delta = x - d
+    region = "below" if delta <= 0.0 else ("contact" if 1.0 + 1.5 * a * v > 0.0 else "above")
+    entry = 0.0
+    guard = 0
+    while t < duration:
+        guard += 1
+        assert guard < 100000
+        if region == "below":
+            sol = _solve(free, t, y, duration, [gap_up, top])
+            hit = [s for s in sol.t_events[0] if s > t]
+            end = hit[0] if hit else sol.t[-1]
+            missed = [s for s in sol.t_events[1] if t < s <= end and sol.sol(s)[0] > d]
+            if missed:  # an entry inside one step: the root of x - d before that maximum
+                lo = max([t] + [s for s in sol.t_events[1] if s < missed[0]])
+                end = brentq(lambda s: sol.sol(s)[0] - d, lo, missed[0], xtol=1e-16)
+                hit = [end]
+            if hit:
+                t, y = end, [d, float(sol.sol(end)[1])]
+                if y[1] <= 0.0:  # a tangency: no contact
+                    continue
+                region, entry = "contact", t
+                continue
+            t, y = duration, list(sol.y[:, -1])
+        elif region == "contact":
+            sol = _solve(touch, t, y, duration, [factor_down, gap_down])
+            ev = [(e[0], i) for i, e in enumerate(sol.t_events) if len(e) and e[0] > t]
+            if ev:
+                t, i = min(ev)
+                y = list(sol.sol(t))
+                contacts.append((entry, t))
+                if i == 1:
+                    y[0] = d
+                region = "above" if i == 0 and y[0] > d else "below"
+                continue
+            t, y = duration, list(sol.y[:, -1])
+        else:  # above the stop, the factor 1 + 1.5 alpha x' <= 0: free until either returns
+            sol = _solve(free, t, y, duration, [factor_up, gap_down])
+            ev = [(e[0], i) for i, e in enumerate(sol.t_events) if len(e) and e[0] > t]
+            if ev:
+                t, i = min(ev)
+                y = list(sol.sol(t))
+                if i == 0:
+                    region, entry = "contact", t
+                else:
+                    y[0], region = d, "below"
+                continue
+            t, y = duration, list(sol.y[:, -1])
+    if region == "contact":
+        contacts.append((entry, math.inf))
+    return y[0], y[1], contacts

@@ -546,8 +546,9 @@ def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: 
     return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks, seg.monodromy)
 
 
-def grazing_jump(law: KelvinVoigt, alpha: float, penetration: float):
-    """Leading order of the Kelvin-Voigt stop's grazing discontinuity map (Eq. C7).
+def grazing_jump(law: KelvinVoigt, alpha: float, penetration: float, *,
+                 friction: Coulomb | None = None):
+    """Leading order of the Kelvin-Voigt stop's grazing discontinuity map (Eqs. C7, C10).
 
     A free flight whose virtual maximum is ``penetration`` H > 0 above the stop, with
     deceleration ``alpha`` = d - cos tau* > 0 there, leaves the contact with its velocity
@@ -560,10 +561,26 @@ def grazing_jump(law: KelvinVoigt, alpha: float, penetration: float):
     the rigid map's -(1 + r) sqrt(2 alpha H) is the limit for k_c H / alpha >> 1
     (docs/theory_contact.md, "The compliant discontinuity map").
 
+    With Coulomb ``friction`` (F_f < alpha - (F_s - F_f): the mass slips through the apex)
+    the flight decelerates at alpha + F_f before the apex and alpha - F_f after it, and
+    an impulse taken before the apex reaches the section after it scaled by
+    q = (alpha - F_f) / (alpha + F_f) (it moves the friction's switch, the apex); the
+    order is unchanged and (Eq. C10)
+
+        dv = -q c_c H,
+        dv = -(2/3) sqrt(2) k_c (q / sqrt(alpha + F_f) + 1 / sqrt(alpha - F_f)) H^{3/2}.
+
     Returns (order, coefficient, dv).
     """
+    f = 0.0 if friction is None else friction.kinetic
+    if friction is not None and not alpha > friction.static:
+        raise ParameterError(f"friction static={friction.static!r} is invalid here: the map "
+                             f"of Eq. C10 needs the mass to slip through the apex, "
+                             f"F_s < alpha = {alpha!r}")
+    q = (alpha - f) / (alpha + f)
     if law.damping > 0.0:
-        order, coef = 1.0, law.damping
+        order, coef = 1.0, q * law.damping
     else:
-        order, coef = 1.5, (4.0 / 3.0) * law.stiffness * math.sqrt(2.0 / alpha)
+        order, coef = 1.5, ((2.0 / 3.0) * math.sqrt(2.0) * law.stiffness
+                            * (q / math.sqrt(alpha + f) + 1.0 / math.sqrt(alpha - f)))
     return order, coef, -coef * penetration ** order

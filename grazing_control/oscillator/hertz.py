@@ -26,7 +26,7 @@ from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
 from .params import OscillatorParams, ParameterError, _check_real
 
-__all__ = ["HuntCrossley", "advance_hertz", "hertz_period_step", "RTOL"]
+__all__ = ["HuntCrossley", "advance_hertz", "hertz_period_step", "grazing_jump", "RTOL"]
 
 TWO_PI = 2.0 * math.pi
 #: Relative tolerance of DOP853 in contact (docs/theory_contact.md, "Hertz accuracy").
@@ -190,3 +190,24 @@ def hertz_period_step(p: OscillatorParams, law: HuntCrossley, dx: float, dv: flo
     seg = advance_hertz(p, law, p.tau2, xp + dx, vp + dv + dv_correction, p.period, rtol=rtol)
     xe, ve = particular(p, (p.tau2 + p.omega * p.period) % TWO_PI)
     return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, ())
+
+
+def grazing_jump(law: HuntCrossley, alpha: float, penetration: float):
+    """Leading order of the Hertz stop's grazing discontinuity map (Eq. C9).
+
+    A free flight whose virtual maximum is ``penetration`` H > 0 above the stop, with
+    deceleration ``alpha`` > 0 there (delta = H - alpha t^2 / 2 about the apex), takes the
+    impulse of the contact force along that parabola while k_c H^{1/2} / alpha << 1:
+
+        int k_c delta^{3/2} dt = k_c H^{3/2} sqrt(2 H / alpha) int_{-1}^{1} (1 - s^2)^{3/2} ds
+                               = (3 pi / 8) k_c sqrt(2 / alpha) H^2,
+
+    and the Hunt-Crossley term (3/2) alpha_h k_c int delta^{3/2} delta' dt vanishes at this
+    order (delta^{5/2} is 0 at both ends), so
+
+        dv = -(3 pi / 8) k_c sqrt(2 / alpha) H^2          (order 2, any damping)
+
+    (docs/theory_contact.md, "The Hertz discontinuity map"). Returns (order, coefficient, dv).
+    """
+    coef = 0.375 * math.pi * law.stiffness * math.sqrt(2.0 / alpha)
+    return 2.0, coef, -coef * penetration ** 2
