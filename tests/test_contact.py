@@ -227,6 +227,18 @@ def test_stick_slip_at_the_edge_of_sticking_never_hangs(static):
                           max_contacts=0)
 
 
+def test_zero_friction_is_the_frictionless_flow():
+    """Coulomb(0.0) is a valid law and means no friction: the period equals the
+    frictionless one (it stuck the mass at its first x' = 0, where |G| <= F_s = 0 was
+    read as a stick, and held it there until cos tau came back to G = 0)."""
+    p = OscillatorParams(delta_d=-1e-2)
+    law = KelvinVoigt.from_restitution(1e4, p.r)
+    bare = compliant_period_step(p, law, 0.01, 0.01)
+    zero = compliant_period_step(p, law, 0.01, 0.01, friction=Coulomb(0.0))
+    assert len(zero.contacts) == len(bare.contacts) == 1 and zero.sticks == ()
+    assert zero.x == pytest.approx(bare.x, abs=1e-15) and zero.v == pytest.approx(bare.v, abs=1e-15)
+
+
 def test_bad_friction_names_the_parameter():
     with pytest.raises(ParameterError, match="kinetic"):
         Coulomb(-0.1)

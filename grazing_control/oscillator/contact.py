@@ -373,9 +373,11 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
             raise NonFiniteStateError(f"{name}={value!r} must be finite")
-    if monodromy and friction is not None:
+    if monodromy and friction is not None and friction.static != 0.0:
         raise ValueError("monodromy=True is invalid with friction: only the frictionless "
                          "stop's Jacobian is built (docs/theory_contact.md, C8)")
+    if friction is not None and friction.static == 0.0:
+        friction = None  # Coulomb(0): no friction (else x' = 0 would read as a stick)
     mono = (1.0, 0.0, 0.0, 1.0) if monodromy else None
     k, c = law.stiffness, law.damping
     f_kin = friction.kinetic if friction is not None else 0.0
