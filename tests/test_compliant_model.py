@@ -7,13 +7,16 @@ import random
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 from grazing_control.dynamics.compliant_model import CompliantOneDOF
 from grazing_control.dynamics.continuation import continue_orbit
 from grazing_control.dynamics.design import degenerate_c1
 from grazing_control.dynamics.model import OneDOF, PeriodMap
 from grazing_control.dynamics.shooting import find_periodic
-from grazing_control.oscillator.contact import KelvinVoigt
+from grazing_control.dynamics.spectral_design import least_spectral_radius, spectral_radius
+from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
+from grazing_control.oscillator.hertz import HuntCrossley
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 
@@ -80,3 +83,74 @@ def test_continuation_in_the_stiffness_finds_no_crossing_for_the_rigid_design():
     rhos = [np.abs(pt.multipliers).max() for pt in branch.points]
     assert branch.points[-1].value == pytest.approx(1.0)
     assert max(rhos) < 0.92 and rhos[-1] > 0.9
+
+
+def _failing(k=1e8):
+    """The failing set of docs/theory_contact.md section 15: Delta d = -0.05, the rigid
+    design at c2 = -1.5 (its rigid multiplier 0.824), a Kelvin-Voigt stop of r = 0.68 and
+    Coulomb friction F_f = 0.01, F_s = 0.012 that the design ignores."""
+    p = OscillatorParams(delta_d=-0.05)
+    gains = Gains(degenerate_c1(p, -1.5), -1.5)
+    rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
+    model = CompliantOneDOF(p, gains, law=KelvinVoigt.from_restitution(k, p.r),
+                            friction=Coulomb(0.01, 0.012))
+    return model, rigid
+
+
+def test_hertz_and_friction_models_are_period_maps_with_difference_jacobians():
+    """Hertz and friction take the central-difference Jacobian (FD_STEP); on a frictionless
+    Kelvin-Voigt stop it agrees with the exact one (Eq. C8) to 1e-6, and the parameters
+    hunt_crossley and friction change the law (0 removes the friction)."""
+    exact = _model(dd=-1e-2, k=1e4)
+    z = np.array([0.01, -0.02])
+    diff = CompliantOneDOF(exact.params, exact.gains, law=exact.law,
+                           friction=Coulomb(0.0))
+    assert not diff.exact_jacobian and exact.exact_jacobian
+    j_exact = exact.step(z, jacobian=True).jacobian
+    j_diff = diff.step(z, jacobian=True).jacobian
+    assert np.abs(j_exact - j_diff).max() <= 1e-6 * np.abs(j_exact).max()
+    hertz = CompliantOneDOF(exact.params, exact.gains, law=HuntCrossley(1e4, 0.3))
+    assert isinstance(hertz, PeriodMap)
+    assert hertz.with_parameter("hunt_crossley", 0.5).law.alpha == 0.5
+    assert hertz.step(z, jacobian=True).jacobian.shape == (2, 2)
+    model, _ = _failing()
+    assert model.parameter("friction") == 0.01
+    assert model.with_parameter("friction", 0.02).friction.static == pytest.approx(0.024)
+    assert model.with_parameter("friction", 0.0).friction is None
+    with pytest.raises(ValueError, match="friction"):
+        CompliantOneDOF(hertz.params, law=hertz.law, friction=Coulomb(0.01))
+    with pytest.raises(ValueError, match="hunt_crossley"):
+        hertz.parameter("bogus")
+
+
+def test_the_rigid_design_fails_with_friction_and_continuation_locates_the_stiffness():
+    """The failing set: continue_orbit in log10 k_c from 8 to 1 finds a period doubling
+    (the rigid design fails for stiffer stops, holds for softer ones), and brentq on
+    max |lambda| = 1 with orbits shot directly puts it at the same stiffness to 1e-6
+    (docs/theory_contact.md section 15: log10 k_c = 1.2924, k_c = 19.6)."""
+    model, rigid = _failing()
+    branch = continue_orbit(model, "log10_stiffness", np.linspace(8.0, 1.0, 8), rigid.state)
+    rhos = {pt.value: np.abs(pt.multipliers).max() for pt in branch.points}
+    assert rhos[8.0] > 1.5 and rhos[1.0] < 1.0
+    assert [b.type for b in branch.bifurcations] == ["period-doubling"]
+    found = branch.bifurcations[0].value
+    lo = max(v for v in rhos if v < found)
+    hi = min(v for v in rhos if v > found)
+    states = {pt.value: pt.state for pt in branch.points}
+
+    def excess(lk):
+        return spectral_radius(model.with_parameter("log10_stiffness", lk), states[hi])[0] - 1.0
+    assert brentq(excess, lo, hi, xtol=1e-10) == pytest.approx(found, abs=1e-6)
+
+
+def test_design_on_the_compliant_model_restores_the_margin():
+    """Where the rigid gains fail (k_c = 1e4 with friction: rho 1.71), the gains minimising
+    the compliant orbit's spectral radius bring it below 0.1."""
+    model, rigid = _failing()
+    branch = continue_orbit(model, "log10_stiffness", [8.0, 6.0, 4.0], rigid.state)
+    soft = model.with_parameter("log10_stiffness", 4.0)
+    design = least_spectral_radius(soft, branch.points[-1].state, max_evaluations=60)
+    assert design.rho_start > 1.5 and design.rho < 0.1, design
+    again, _ = spectral_radius(soft.with_parameter("c1", design.c1).with_parameter(
+        "c2", design.c2), design.state)
+    assert again == pytest.approx(design.rho, abs=1e-6)  # difference Jacobian: ~1e-8
