@@ -19,8 +19,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from scipy.integrate import solve_ivp
-
 from .contact import CompliantSegment, Contact, _first_crossing, _Region
 from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
@@ -69,6 +67,9 @@ class HuntCrossley:
 def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t_end: float,
              rtol: float):
     """DOP853 through one contact from time t; returns (t_exit or None, state)."""
+    # imported here: a node that never meets a Hertz contact imports no solver
+    # (tests/test_node_common.py)
+    from scipy.integrate import solve_ivp
     k, a, zeta, w, d = law.stiffness, law.alpha, p.zeta, p.omega, p.d
 
     def rhs(s, u):

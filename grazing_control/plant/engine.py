@@ -9,6 +9,9 @@ correction delayed by s, the flow to t_k + s, the velocity jump, the flow to t_k
 between two samples (state, Pi1 crossing, impacts) is evaluated from the closed form by
 :func:`grazing_control.dynamics.simulate.states_between` without altering the trajectory,
 so a run of the engine reproduces ``simulate`` of the same scene sample for sample.
+With a compliant stop (settings.contact, :mod:`grazing_control.plant.contact_plant`) the
+period and the states between samples are that stop's flow instead, its contacts
+published as impacts (v- at entry, v+ at exit).
 
 No ROS: sim_node publishes the :class:`Event` values this returns.
 """
@@ -167,7 +170,10 @@ class Engine:
             events = self._events(Segment(t0, p.tau2, self.dx, self.dv, t0 + start,
                                           head.dx, head.dv), head.impacts)
             return events + self._actuate(head, dv_correction, start)
-        seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
+        if self.settings.contact is not None:   # a compliant stop (plant.contact_plant)
+            seg = self.settings.contact.period_step(p, self.dx, self.dv, dv_correction)
+        else:
+            seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         self.seg = Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
         return self._events(self.seg, seg.impacts)
@@ -312,7 +318,9 @@ class Engine:
             order = np.argsort(rel, kind="stable")
             rel = [rel[i] for i in order]
             kinds = [kinds[i] for i in order]
-            if s.force == 0.0:
+            if self.settings.contact is not None:
+                xv = self.settings.contact.states_between(p, s.tau, s.dx, s.dv, rel)
+            elif s.force == 0.0:
                 xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
             else:
                 shifted = p.with_(delta_d=p.delta_d - s.force)

@@ -25,6 +25,7 @@ import numpy as np
 
 from grazing_control.dynamics.fidelity import FIDELITIES
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.plant.contact_plant import CONTACTS, ContactPlant, contact_from_values
 from grazing_control.plant.faults import FaultModel
 from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
 from grazing_control.plant.watchdog import WatchdogLimits
@@ -188,6 +189,25 @@ PARAMETERS = (
               "time_scale) and the simulation rate this machine sustains against the "
               "requested one (plant.feasibility): refuse (exit status 2), warn, or off",
               choices=FEASIBILITY, read_only=True),
+    Parameter("contact", "string", "rigid", "the stop (issue 31, plant.contact_plant): rigid "
+              "(the wall, restitution r), kelvin_voigt (spring-dashpot) or hertz "
+              "(Hunt-Crossley); compliant stops in lockstep with the correction on Pi2 only",
+              choices=CONTACTS, read_only=True,
+              constraints="rigid unless mode lockstep, fidelity exact, actuation_delay 0, "
+              "pulse_width 0, delta_d_drift 0"),
+    Parameter("contact_stiffness", "double", 1e6, "compliant stop: stiffness k_c over the "
+              "oscillator's (hertz: force per penetration^1.5), > 0", ABOVE_0, FINITE,
+              read_only=True),
+    Parameter("contact_damping", "double", 0.0, "compliant stop: damping c_c over m omega_n "
+              "(kelvin_voigt, c_c < 2 sqrt(k_c)) or Hunt-Crossley alpha (hertz), >= 0",
+              0.0, FINITE, read_only=True,
+              constraints="kelvin_voigt: (2 zeta + c_c)^2 < 4 (1 + k_c) and c_c < 2 sqrt(k_c)"),
+    Parameter("friction", "double", 0.0, "Coulomb dry friction on the mass, kinetic level "
+              "F_f (force over k l), >= 0; 0 = none", 0.0, FINITE, read_only=True,
+              constraints="0 unless contact kelvin_voigt"),
+    Parameter("friction_static", "double", 0.0, "static friction level F_s >= friction; "
+              "0 = friction", 0.0, FINITE, read_only=True,
+              constraints="0 or >= friction"),
 )
 
 SETTING_KEYS = tuple(p.name for p in PARAMETERS)
@@ -204,12 +224,15 @@ def described_range(p: Parameter, declared: dict) -> tuple:
 
     The table's range, narrowed where another parameter bounds it, so that with the
     others at these values :func:`settings_from_values` accepts exactly [lo, hi]:
+    friction and friction_static 0 unless contact kelvin_voigt;
     actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter 0 without
     the exact flow or with actuation on_arrival in realtime; pulse_width <= 2
     actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where jitter is.
     Where the model declared is invalid, the table's range (the model is refused by
     name anyway).
     """
+    if p.name in ("friction", "friction_static"):   # Coulomb friction: Kelvin-Voigt only
+        return (p.lo, p.hi) if declared.get("contact") == "kelvin_voigt" else (p.lo, 0.0)
     if p.name not in ("actuation_delay", "jitter", "pulse_width"):
         return p.lo, p.hi
     try:
@@ -281,6 +304,7 @@ class SimSettings:
     watchdog: WatchdogLimits = WatchdogLimits()
     feasibility: str = "refuse"
     delta_d_drift: float = 0.0
+    contact: ContactPlant | None = None
 
     @property
     def scheduled(self) -> bool:
@@ -301,6 +325,8 @@ class SimSettings:
                      f"quantum={sn.quantum!r} bias={sn.bias!r} seed={sn.seed}")
         if self.delta_d_drift != 0.0:
             text += f" delta_d_drift={self.delta_d_drift!r}"
+        if self.contact is not None:
+            text += f" contact={self.contact.law!r} friction={self.contact.friction!r}"
         if self.pulse_width > 0.0:
             text += f" pulse_width={self.pulse_width!r} force_limit={self.force_limit!r}"
         if self.faults.active:
@@ -358,6 +384,7 @@ def settings_from_values(values: dict) -> SimSettings:
     if seed < 0:
         raise ParameterError(f"seed={seed} is invalid: valid range is seed >= 0")
     actuation = _actuation_values(values, p, mode, fidelity)
+    contact = _contact(values, p, mode, fidelity, actuation)
     return SimSettings(
         params=p, x0=x0, v0=v0, mode=mode,
         time_scale=_finite("time_scale", values["time_scale"], lambda v: v > 0.0,
@@ -371,7 +398,28 @@ def settings_from_values(values: dict) -> SimSettings:
         seed=seed, sensor=_sensor(values), watchdog=_watchdog(values),
         feasibility=_choice(values, "feasibility", FEASIBILITY),
         delta_d_drift=_finite("delta_d_drift", values["delta_d_drift"], lambda v: True,
-                              "a finite delta_d_drift (per period)"), **actuation)
+                              "a finite delta_d_drift (per period)"), contact=contact,
+        **actuation)
+
+
+def _contact(values: dict, p: OscillatorParams, mode: str, fidelity: str,
+             actuation: dict) -> ContactPlant | None:
+    """The compliant stop and friction (plant.contact_plant), where the engine can run it:
+    lockstep, the exact fidelity, the correction on Pi2 as a velocity jump, no drift."""
+    contact = contact_from_values(values, p)
+    if contact is None:
+        return None
+    needs = (("mode", mode, "lockstep"), ("fidelity", fidelity, "exact"),
+             ("actuation_delay", actuation["actuation_delay"], 0.0),
+             ("jitter", actuation["jitter"], 0.0),
+             ("pulse_width", actuation["pulse_width"], 0.0),
+             ("delta_d_drift", float(values["delta_d_drift"]), 0.0))
+    for name, value, valid in needs:
+        if value != valid:
+            raise ParameterError(f"{name}={value!r} is invalid with contact="
+                                 f"{values['contact']!r}: valid there is {valid!r} (a "
+                                 "compliant stop runs in lockstep with the correction on Pi2)")
+    return contact
 
 
 def _choice(values: dict, name: str, choices: tuple) -> str:

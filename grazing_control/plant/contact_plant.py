@@ -1,0 +1,135 @@
+"""The simulator's stop: the rigid wall, or a compliant stop with dry friction (issue 31).
+
+sim_node's ``contact`` parameters (docs/nodes.md) select the law the engine integrates
+each period with: ``rigid`` (the wall of the study, the engine's own exact flow: nothing
+here is used), ``kelvin_voigt`` (:mod:`grazing_control.oscillator.contact`, exact per
+region, optional Coulomb friction) or ``hertz`` (:mod:`grazing_control.oscillator.hertz`,
+DOP853 in contact). :class:`ContactPlant` gives the engine what it takes from the rigid
+core: one period from a Pi2 sample with the correction on Pi2 (the contacts as impacts:
+entry time, phase, v-, v+), and the states published between two samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, advance_compliant
+from grazing_control.oscillator.flow import to_deviation, to_physical
+from grazing_control.oscillator.hertz import HuntCrossley, advance_hertz
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+__all__ = ["CONTACTS", "ContactPlant", "contact_from_values"]
+
+#: the values of sim_node's ``contact`` parameter
+CONTACTS = ("rigid", "kelvin_voigt", "hertz")
+TWO_PI = 2.0 * math.pi
+
+
+class ContactImpact(NamedTuple):
+    """A contact as the engine publishes an impact: entry time from the segment's start,
+    forcing phase at entry, x' at entry (v-) and at exit (v+; nan if it lasts past the
+    segment)."""
+
+    dt: float
+    phase: float
+    v_minus: float
+    v_plus: float
+
+
+class ContactStep(NamedTuple):
+    """One period: the deviation at the next sample, and the contacts."""
+
+    dx: float
+    dv: float
+    impacts: tuple
+
+
+@dataclass(frozen=True)
+class ContactPlant:
+    """A compliant stop (and friction) for the engine: ``law`` is a KelvinVoigt or a
+    HuntCrossley stop, ``friction`` a Coulomb law (Kelvin-Voigt only) or None."""
+
+    law: KelvinVoigt | HuntCrossley
+    friction: Coulomb | None = None
+
+    def advance(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                duration: float) -> ContactStep:
+        """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``."""
+        x, v = to_physical(p, tau, dx, dv)
+        if isinstance(self.law, HuntCrossley):
+            seg = advance_hertz(p, self.law, tau, x, v, duration)
+        else:
+            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction)
+        tau1 = tau + p.omega * duration
+        ex, ev = to_deviation(p, tau1, seg.x, seg.v)
+        impacts = tuple(ContactImpact(c.dt, c.phase, c.v_minus, c.v_plus)
+                        for c in seg.contacts)
+        return ContactStep(ex, ev, impacts)
+
+    def period_step(self, p: OscillatorParams, dx: float, dv: float,
+                    dv_correction: float = 0.0) -> ContactStep:
+        """One period from the Pi2 deviation (dx, dv), the correction applied on Pi2
+        (Eq. 28): :func:`~grazing_control.oscillator.contact.compliant_period_step`'s
+        shape, with the deviation re-expressed at the next sample."""
+        return self.advance(p, p.tau2, dx, dv + dv_correction, p.period)
+
+    def states_between(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                       rel) -> np.ndarray:
+        """Physical (x, v) at the times ``rel`` (increasing, from the segment's start at
+        phase ``tau`` with deviation (dx, dv)): the flow advanced from one time to the
+        next (the published states never alter the trajectory: the period itself is
+        :meth:`period_step` in one call)."""
+        out = np.empty((len(rel), 2))
+        t, cx, cv = 0.0, dx, dv
+        for i, h in enumerate(rel):
+            step = self.advance(p, (tau + p.omega * t) % TWO_PI, cx, cv, h - t)
+            t, cx, cv = h, step.dx, step.dv
+            out[i] = to_physical(p, (tau + p.omega * h) % TWO_PI, cx, cv)
+        return out
+
+
+def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | None:
+    """The stop of sim_node's parameters ``contact``, ``contact_stiffness``,
+    ``contact_damping`` (Kelvin-Voigt c_c, or Hunt-Crossley alpha for hertz),
+    ``friction`` and ``friction_static`` (0 = friction); None for the rigid wall.
+    Every value is checked against its range whatever the law (as the node's
+    descriptors state it); raises ParameterError naming the parameter and its range."""
+    kind = str(values["contact"])
+    if kind not in CONTACTS:
+        raise ParameterError(f"contact={kind!r} is invalid: valid values are "
+                             f"{', '.join(CONTACTS)}")
+    stiffness, damping = float(values["contact_stiffness"]), float(values["contact_damping"])
+    kinetic, static = float(values["friction"]), float(values["friction_static"])
+    for name, value, ok, valid in (
+            ("contact_stiffness", stiffness, stiffness > 0.0, "a finite stiffness > 0"),
+            ("contact_damping", damping, damping >= 0.0, "a finite damping >= 0"),
+            ("friction", kinetic, kinetic >= 0.0, "a finite friction >= 0 (0 = none)"),
+            ("friction_static", static, static >= 0.0, "0 (= friction) or a finite F_s >= "
+                                                         "friction")):
+        if not (math.isfinite(value) and ok):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is {valid}")
+        if name.startswith("friction") and value != 0.0 and kind != "kelvin_voigt":
+            raise ParameterError(f"{name}={value!r} is invalid with contact={kind!r}: valid "
+                                 "there is 0 (friction is simulated with kelvin_voigt only)")
+    if static != 0.0 and static < kinetic:
+        raise ParameterError(f"friction_static={static!r} is invalid: valid range is 0 "
+                             f"(= friction) or F_s >= friction = {kinetic!r}")
+    if kind == "rigid":
+        return None
+    if kind == "hertz":
+        return ContactPlant(HuntCrossley(stiffness, damping))
+    if not (2.0 * p.zeta + damping) ** 2 < 4.0 * (1.0 + stiffness):
+        raise ParameterError(
+            f"contact_damping={damping!r} is invalid with contact_stiffness={stiffness!r}: "
+            "valid range is (2 zeta + c_c)^2 < 4 (1 + k_c) (an underdamped contact, "
+            "docs/theory_contact.md C2)")
+    if not damping < 2.0 * math.sqrt(stiffness):
+        raise ParameterError(f"contact_damping={damping!r} is invalid: valid range is "
+                             f"0 <= c_c < 2 sqrt(contact_stiffness) = "
+                             f"{2.0 * math.sqrt(stiffness)!r}")
+    friction = Coulomb(kinetic, static or kinetic) if kinetic > 0.0 or static > 0.0 else None
+    return ContactPlant(KelvinVoigt(stiffness, damping), friction)
