@@ -19,6 +19,8 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
 
+from test_closed_loop import CONTROLLER, STUDY, collector, domain, xv  # noqa: F401 (fixtures)
+
 #: the failing set of docs/theory_contact.md section 15 at a stiffness above the boundary
 SCENE = dict(delta_d=-0.05, contact="kelvin_voigt", friction=0.01, friction_static=0.012)
 
@@ -91,3 +93,64 @@ def test_hertz_and_rigid_values():
 def test_bad_contact_parameters_name_the_parameter(bad, name):
     with pytest.raises(ParameterError, match=name):
         _settings(1e3, **bad)
+
+
+# ======================================================================= nodes
+def _node_scene(tmp_path, domain, collector, log10_k, periods=40):
+    """The failing set through sim_node and controller_node in lockstep: the rigid design
+    (c2 = -1.5) from the first sample, the plant started 1e-4 off its controlled orbit
+    (found by continuation from the rigid one on CompliantOneDOF). Returns the Pi2
+    samples' deviations from X**, the orbit and the model."""
+    from grazing_control.dynamics.continuation import continue_orbit
+    from grazing_control.dynamics.model import OneDOF
+    from grazing_control.dynamics.shooting import find_periodic
+    from grazing_control.ros import launcher
+
+    s = _settings(10.0 ** log10_k)
+    p = s.params
+    gains = Gains(degenerate_c1(p, -1.5), -1.5)
+    rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
+    model = CompliantOneDOF(p, gains, law=KelvinVoigt.from_restitution(1e8, p.r),
+                            friction=s.contact.friction)
+    branch = continue_orbit(model, "log10_stiffness", np.linspace(8.0, log10_k, 12),
+                            rigid.state)
+    orbit = branch.points[-1]
+    assert orbit.value == pytest.approx(log10_k)
+    start = orbit.state + np.array([1e-4, 0.0])
+    sim = {"delta_d": p.delta_d, "x0": float(p.x_ref + start[0]),
+           "v0": float(p.v_ref + start[1]), "state_period": 0.0, "wait_for_subscribers": 1,
+           "wait_for_recorder": True, **SCENE, "contact_stiffness": s.contact.law.stiffness,
+           "contact_damping": s.contact.law.damping}
+    res = launcher.run(STUDY, CONTROLLER, None, periods, domain_id=domain, timeout=120,
+                       sim_overrides=sim, controller_overrides={
+                           "enable_after": 0, "c1": gains.c1, "c2": gains.c2},
+                       log_dir=tmp_path)
+    assert res.ok, (res, (tmp_path / "sim_node.log").read_text()
+                    if (tmp_path / "sim_node.log").exists() else "")
+    assert collector.wait_for(lambda: len(collector.get("oscillator/pi2")) == periods, 20.0)
+    got = xv(collector.get("oscillator/pi2")) - np.array([p.x_ref, p.v_ref])
+    contacts = len(collector.get("oscillator/impact"))
+    return got, orbit, model.with_parameter("log10_stiffness", log10_k), contacts
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("log10_k, holds", [(3.0, False), (0.5, True)])
+def test_a_node_scene_on_each_side_of_the_boundary(tmp_path, domain, collector, log10_k,
+                                                   holds):
+    """docs/theory_contact.md section 15: with friction F_f = 0.01 the rigid design
+    (c2 = -1.5) fails above k_c = 19.6 and holds below. Through the nodes, 40 controlled
+    periods from 1e-4 off the controlled orbit: at k_c = 1e3 (max |lambda| 1.51) the
+    motion leaves the orbit (> 0.1 away at the end), at k_c = 10^0.5 (0.918) it returns
+    (< 2e-5); sample for sample the scene is the core's map (CompliantOneDOF) with the
+    controller's corrections, to 1e-6 (the controller computes from the published
+    physical state: rounding, grown by at most 1.51^40 on the unstable side)."""
+    got, orbit, model, contacts = _node_scene(tmp_path, domain, collector, log10_k)
+    z, expected = got[0], 0
+    for k in range(1, len(got)):
+        z, _, impacts = iterate(model, z)
+        expected += len(impacts)
+        assert got[k] == pytest.approx(z, abs=1e-6 * max(1.0, np.abs(z).max())), k
+    away = np.linalg.norm(got[-1] - orbit.state)
+    assert (away < 2e-5) if holds else (away > 0.1), away
+    expected += len(iterate(model, z)[2])   # the 40th period runs after the last sample
+    assert contacts == expected   # every contact published as an impact
