@@ -7,7 +7,8 @@ arrays, cut into free-flight arcs), :mod:`.initial` (the robust initial guess: t
 ARX(2) recursion of the sampled flow, per-arc linear fits, impacts found from the
 motion), :mod:`.fit` (multiple-shooting nonlinear least squares with complex-step
 Jacobians, standard errors) and :mod:`.checks` (residual whiteness, re-simulation, the
-verdict).
+verdict); :mod:`.stop` (which stop the Pi2 data support: rigid, Kelvin-Voigt, with
+friction, by BIC; docs/theory_contact.md section 17).
 
 May import: :mod:`grazing_control.dynamics` and below. Never rclpy.
 """

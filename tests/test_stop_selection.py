@@ -1,0 +1,89 @@
+"""Which stop the data support (dynamics/identification/stop.py): on the Pi2 samples of
+scenes run by the simulator's engine (the same numbers sim_node publishes), a compliant
+stop's stiffness and damping (and friction) are recovered within 3 standard errors and
+that model is preferred by BIC; on a rigid scene the rigid wall is (issue 31 part 4,
+docs/theory_contact.md section 17)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from grazing_control.dynamics.identification.stop import STOPS, fit_stop, select_stop
+from grazing_control.oscillator.contact import KelvinVoigt
+from grazing_control.oscillator.params import ParameterError
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
+
+PERIODS = 60
+
+
+def _scene(contact, seed, stiffness=1e3, friction=0.0, noise=1e-4):
+    """PERIODS uncontrolled periods from (0.3, -0.2) off X** at Delta d = -0.05 (contacts
+    of every size), velocity noise ``noise`` at each sample: (p, samples, corrections,
+    the stop)."""
+    values = {"delta_d": -0.05, "noise": noise, "seed": seed, "state_period": 0.0}
+    if contact != "rigid":
+        law = KelvinVoigt.from_restitution(stiffness, 0.68)
+        values.update(contact=contact, contact_stiffness=law.stiffness,
+                      contact_damping=law.damping, friction=friction)
+    s = settings_from_values(values)
+    eng = Engine(s)
+    eng.dx, eng.dv = 0.3, -0.2
+    z = []
+    for _ in range(PERIODS):
+        z.append((eng.dx, eng.dv))
+        eng.begin_period(0.0)
+        eng.end_period()
+    return s.params, np.array(z), np.zeros(PERIODS), s.contact
+
+
+def _within(fit, name, true, n_se=3.0):
+    value, se = fit.values[name], fit.stderr[name]
+    assert math.isfinite(se) and se > 0.0 and abs(value - true) <= n_se * se, (
+        name, value, se, true)
+
+
+@pytest.mark.timeout(300)  # a hang guard
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_compliant_scene_is_recovered_and_preferred(seed):
+    p, z, dv, contact = _scene("kelvin_voigt", seed)
+    best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"))
+    assert best == "kelvin_voigt", fits
+    _within(fit, "stiffness", contact.law.stiffness)
+    _within(fit, "damping", contact.law.damping)
+    assert fit.stderr["stiffness"] < 0.01 * contact.law.stiffness
+
+
+@pytest.mark.timeout(300)
+def test_friction_is_recovered_and_preferred():
+    p, z, dv, contact = _scene("kelvin_voigt", 3, friction=0.01)
+    best, fit, fits = select_stop(p, z, dv)
+    assert best == "kelvin_voigt_friction", fits
+    _within(fit, "stiffness", contact.law.stiffness)
+    _within(fit, "damping", contact.law.damping)
+    _within(fit, "friction", 0.01)
+    # the frictionless stop fitted to the same data is biased well beyond its errors
+    kv = next(f for f in fits if f.stop == "kelvin_voigt")
+    assert abs(kv.values["stiffness"] - 1e3) > 3 * kv.stderr["stiffness"]
+
+
+@pytest.mark.timeout(300)
+def test_a_rigid_scene_prefers_the_rigid_wall():
+    p, z, dv, _ = _scene("rigid", 4)
+    best, fit, fits = select_stop(p, z, dv)
+    assert best == "rigid", fits
+    _within(fit, "r", p.r)
+    bics = {f.stop: f.bic for f in fits}
+    assert bics["kelvin_voigt"] - bics["rigid"] > 10.0, bics
+
+
+def test_bad_input_is_named():
+    p, z, dv, _ = _scene("rigid", 0)
+    with pytest.raises(ParameterError, match="stop="):
+        fit_stop(p, "rubber", z, dv)
+    with pytest.raises(ParameterError, match="samples"):
+        fit_stop(p, "rigid", z[:3], dv[:3])
+    assert STOPS[0] == "rigid"
