@@ -11,6 +11,10 @@ gives it, the model in SI as well (natural frequency, damping ratio, restitution
 standard errors propagated), and ``--out-rig FILE`` writes it as a rig file
 (docs/rig.md, "Recordings").
 
+``--stop``: which stop the bags' Pi2 samples support (rigid, Kelvin-Voigt, with
+friction; :mod:`grazing_control.recordings.stop`, docs/theory_contact.md section 17),
+each candidate with its parameters, standard errors and BIC; status 0.
+
 Exit status: 0 good fit; 1 poor fit (the motion is not this model's: the report says
 why; nothing is written); 2 bad input (unreadable bag, no state stream, too few samples,
 no impact), with one line ``grazing: error: ...``.
@@ -44,6 +48,8 @@ def cmd_identify(args) -> int:
     """Run ``grazing identify``; the exit status (module docstring)."""
     from grazing_control.recordings.identify import format_report, identify_bags, si_report
 
+    if args.stop:
+        return _cmd_stop(args)
     rig = None
     if args.rig is not None:
         from .rig import load
@@ -92,6 +98,21 @@ def cmd_identify(args) -> int:
     return 0 if good else 1
 
 
+def _cmd_stop(args) -> int:
+    """``--stop``: which stop each bag supports (recordings.stop); status 0."""
+    from grazing_control.recordings.stop import format_stop_report, select_bag_stop
+
+    reports = [select_bag_stop(bag, max_samples=args.max_samples) for bag in args.bags]
+    if args.json:
+        json.dump(_plain(reports if len(reports) > 1 else reports[0]), sys.stdout,
+                  allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print("\n".join(format_stop_report(r) for r in reports))
+    sys.stdout.flush()
+    return 0
+
+
 def _write_rig(path, rig, result) -> None:
     """The identified model as a rig file (docs/rig.md), written atomically."""
     from grazing_control.plant.rig import rig_to_dict
@@ -112,6 +133,14 @@ def add_identify_parser(sub) -> None:
     s.add_argument("bags", nargs="+", metavar="BAG", help="bag directories or .mcap files "
                    "(several: each fitted, their estimates combined)")
     s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.add_argument("--stop", action="store_true",
+                   help="instead of the free-flight fit: which stop the bag's Pi2 samples "
+                        "support (rigid, kelvin_voigt, kelvin_voigt_friction: fits with "
+                        "standard errors, the least BIC chosen; the oscillator from the "
+                        "bag's parameter record; docs/theory_contact.md section 17)")
+    s.add_argument("--max-samples", type=integer_at_least(8), default=200, metavar="N",
+                   help="--stop: fit the first N Pi2 samples of each bag (>= 8; default "
+                        "200)")
     s.add_argument("--out", type=non_empty_path, metavar="FILE",
                    help="write the identified model as a ROS 2 parameter file (only after a "
                         "good fit)")
