@@ -18,6 +18,7 @@ from scipy.optimize import brentq
 
 from grazing_control.oscillator.flow import propagate, to_deviation, to_physical
 
+TWO_PI = 2.0 * math.pi
 RTOL = 2.3e-14
 ATOL = 1e-15
 DEBUG = False
@@ -28,6 +29,44 @@ MAX_STEP = [0.05]
 def _solve(rhs, t0, y0, t1, events):
     return solve_ivp(rhs, (t0, t1), y0, method="DOP853", rtol=RTOL, atol=ATOL,
                      events=events, dense_output=True, max_step=MAX_STEP[0], first_step=1e-9)
+
+
+def gap_events(d):
+    """solve_ivp's terminal events x - d rising and falling, and the maxima of x (x' = 0
+    falling, not terminal: where an entry inside one step is looked for)."""
+    def gap_up(t, y):
+        return y[0] - d
+    gap_up.terminal, gap_up.direction = True, 1.0
+
+    def top(t, y):
+        return y[1]
+    top.terminal, top.direction = False, -1.0
+
+    def gap_down(t, y):
+        return y[0] - d
+    gap_down.terminal, gap_down.direction = True, -1.0
+    return gap_up, top, gap_down
+
+
+def seeded_start(rng, p, held="stick"):
+    """The start of a seeded case after its model and law are drawn (the draws of
+    tests/test_contact.py's cases, in that order): random states up to 1 below the stop,
+    grazing flights whose free maximum is 1e-9..1e-3 either side of it, and deep
+    clearances (``held``) where the forcing holds the mass in the stop.
+    Returns (kind, p, tau0, x, v)."""
+    kind = rng.choice(["random", "graze", held])
+    if kind == "random":
+        return kind, p, rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 1), rng.uniform(-1, 1)
+    if kind == held:
+        p = p.with_(delta_d=-rng.uniform(0.5, 1.5))
+        return kind, p, rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 0.1), rng.uniform(-0.2, 0.2)
+    eps = rng.choice([1, -1]) * 10 ** rng.uniform(-9, -3)
+    tau_m, back = rng.uniform(0, TWO_PI), rng.uniform(0.1, 3)
+    dx, dv = to_deviation(p, tau_m, p.d + eps, 0.0)  # a free maximum eps from the stop
+    dx, dv = propagate(p.zeta, dx, dv, -back)
+    tau0 = (tau_m - p.omega * back) % TWO_PI
+    x, v = to_physical(p, tau0, dx, dv)
+    return kind, p, tau0, min(x, p.d), v
 
 
 def reference_advance(p, law, tau0, x, v, duration, friction=None):
@@ -50,13 +89,7 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
         return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0] - sgn[0] * f_kin
                 - k * (y[0] - d) - c * y[1]]
 
-    def gap_up(t, y):
-        return y[0] - d
-    gap_up.terminal, gap_up.direction = True, 1.0
-
-    def top(t, y):
-        return y[1]
-    top.terminal, top.direction = False, -1.0
+    gap_up, top, gap_down = gap_events(d)
 
     def force_down(t, y):
         return k * (y[0] - d) + c * y[1]
@@ -65,10 +98,6 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
     def force_up(t, y):
         return k * (y[0] - d) + c * y[1]
     force_up.terminal, force_up.direction = True, 1.0
-
-    def gap_down(t, y):
-        return y[0] - d
-    gap_down.terminal, gap_down.direction = True, -1.0
 
     def stop(t, y):
         return y[1]
@@ -170,6 +199,29 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
     if friction is not None:
         return y[0], y[1], contacts, sticks
     return y[0], y[1], contacts
+
+
+def assert_matches(seg, reference, args, rel_tol, time_tol, label):
+    """A seeded case against ``reference(*args)`` -> (x, v, [(t_in, t_out)]): the end
+    state to ``rel_tol`` (1 + |x| + |v|) (a case beyond it compared once more with the
+    reference at a largest step of 0.005, :func:`refined`; the first comparison alone
+    cannot fail the test), contacts counted exactly, entry and exit times to
+    ``time_tol``. Returns the number of contacts lasting to the segment's end."""
+    xr, vr, ref = reference(*args)
+    tol = rel_tol * (1.0 + abs(xr) + abs(vr))
+    if not (abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol):
+        xr, vr, ref = refined(reference, *args)
+    assert abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol, (label, seg, xr, vr)
+    assert len(seg.contacts) == len(ref), (label, seg.contacts, ref)
+    lasting = 0
+    for c, (t_in, t_out) in zip(seg.contacts, ref):
+        assert abs(c.dt - t_in) <= time_tol, (label, c, t_in)
+        if math.isinf(t_out):
+            assert math.isinf(c.duration), (label, c)
+            lasting += 1
+        else:
+            assert abs(c.dt + c.duration - t_out) <= time_tol, (label, c, t_out)
+    return lasting
 
 
 def refined(fun, *args, max_step=0.005, **kwargs):

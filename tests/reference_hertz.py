@@ -22,7 +22,7 @@ import mpmath as mp
 from scipy.optimize import brentq
 
 # the Kelvin-Voigt reference's solver settings, one place (refined() there shrinks MAX_STEP)
-from reference_contact import _solve
+from reference_contact import _solve, gap_events
 
 __all__ = ["reference_contact", "reference_advance_hertz"]
 
@@ -111,13 +111,7 @@ def reference_advance_hertz(p, law, tau0, x, v, duration):
         return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]
                 - k * pen ** 1.5 * (1.0 + 1.5 * a * y[1])]
 
-    def gap_up(t, y):
-        return y[0] - d
-    gap_up.terminal, gap_up.direction = True, 1.0
-
-    def top(t, y):
-        return y[1]
-    top.terminal, top.direction = False, -1.0
+    gap_up, top, gap_down = gap_events(d)
 
     def factor_down(t, y):
         return 1.0 + 1.5 * a * y[1]
@@ -126,10 +120,6 @@ def reference_advance_hertz(p, law, tau0, x, v, duration):
     def factor_up(t, y):
         return 1.0 + 1.5 * a * y[1]
     factor_up.terminal, factor_up.direction = True, 1.0
-
-    def gap_down(t, y):
-        return y[0] - d
-    gap_down.terminal, gap_down.direction = True, -1.0
 
     t, y = 0.0, [x, v]
     contacts = []

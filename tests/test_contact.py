@@ -18,12 +18,12 @@ from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, advance_co
                                                 compliant_period_step,
                                                 kelvin_voigt_damping,
                                                 grazing_jump, kelvin_voigt_restitution)
-from grazing_control.oscillator.flow import propagate, to_deviation, to_physical
 from grazing_control.oscillator.impact import ImpactCapError, advance
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulate import core_period_step
 
-from reference_contact import apex_jump, reference_advance, refined
+from reference_contact import (apex_jump, assert_matches, reference_advance, refined,
+                               seeded_start)
 
 #: seeded cases per test run; CONTACT_CASES=6000 for the long run of docs/theory_contact.md
 CASES = int(os.environ.get("CONTACT_CASES", "600"))
@@ -74,20 +74,8 @@ def _case(rng):
     of the stop) and deep clearances where the forcing pushes the mass into the stop."""
     p = OscillatorParams(delta_d=-10 ** rng.uniform(-6, -0.5), zeta=rng.uniform(0.005, 0.2))
     law = KelvinVoigt.from_restitution(10 ** rng.uniform(0.5, 4), rng.uniform(0.2, 1.0))
-    kind = rng.choice(["random", "graze", "stick"])
-    if kind == "random":
-        return kind, p, law, rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 1), rng.uniform(-1, 1)
-    if kind == "stick":
-        p = p.with_(delta_d=-rng.uniform(0.5, 1.5))
-        return (kind, p, law, rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 0.1),
-                rng.uniform(-0.2, 0.2))
-    eps = rng.choice([1, -1]) * 10 ** rng.uniform(-9, -3)
-    tau_m, back = rng.uniform(0, TWO_PI), rng.uniform(0.1, 3)
-    dx, dv = to_deviation(p, tau_m, p.d + eps, 0.0)  # a free maximum eps from the stop
-    dx, dv = propagate(p.zeta, dx, dv, -back)
-    tau0 = (tau_m - p.omega * back) % TWO_PI
-    x, v = to_physical(p, tau0, dx, dv)
-    return kind, p, law, tau0, min(x, p.d), v
+    kind, p, tau0, x, v = seeded_start(rng, p)
+    return kind, p, law, tau0, x, v
 
 
 @pytest.mark.timeout(1800)  # a hang guard (CONTACT_CASES=4000 runs about 5 min here)
@@ -103,19 +91,8 @@ def test_kelvin_voigt_matches_the_reference_over_seeded_cases(seed):
     for _ in range(CASES // 4):
         kind, p, law, tau0, x, v = _case(rng)
         seg = advance_compliant(p, law, tau0, x, v, p.period)
-        xr, vr, ref = reference_advance(p, law, tau0, x, v, p.period)
-        tol = 1e-12 * (1.0 + abs(xr) + abs(vr))
-        if not (abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol):  # the reference again,
-            xr, vr, ref = refined(reference_advance, p, law, tau0, x, v, p.period)  # finer
-        assert abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol, (kind, seg, xr, vr)
-        assert len(seg.contacts) == len(ref), (kind, seg.contacts, ref)
-        for c, (t_in, t_out) in zip(seg.contacts, ref):
-            assert c.dt == pytest.approx(t_in, abs=1e-9)
-            if math.isinf(t_out):
-                assert math.isinf(c.duration)
-                long_contacts += 1
-            else:
-                assert c.dt + c.duration == pytest.approx(t_out, abs=1e-9)
+        long_contacts += assert_matches(seg, reference_advance, (p, law, tau0, x, v, p.period),
+                                        1e-12, 1e-9, kind)
         counted[kind] += len(seg.contacts)
     # the cases exercise what they are meant to: contacts of every kind, and contacts
     # that last to the period's end (the mass held in the stop by the forcing)

@@ -14,12 +14,11 @@ import numpy as np
 import pytest
 
 from grazing_control.dynamics.simulate import core_period_step
-from grazing_control.oscillator.flow import propagate, to_deviation, to_physical
 from grazing_control.oscillator.hertz import (HuntCrossley, advance_hertz, grazing_jump,
                                               hertz_period_step)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
-from reference_contact import apex_jump, refined
+from reference_contact import apex_jump, assert_matches, seeded_start
 from reference_hertz import reference_advance_hertz, reference_contact
 
 #: documented tolerance of the contact map at RTOL = 1e-12 (measured up to 2.1e-12 over 16)
@@ -92,23 +91,12 @@ def test_held_in_the_stop_is_bounded():
 def _case(rng):
     """A seeded Hertz case: random states, grazing flights (free maximum 1e-9..1e-3
     either side of the stop) and deep clearances where the forcing holds the mass in the
-    stop; k_c in 1e1..1e4, alpha 0 or 1e-2..10 (up to contacts that end above the stop)."""
+    stop (reference_contact.seeded_start); k_c in 1e1..1e4, alpha 0 or 1e-2..10 (up to
+    contacts that end above the stop)."""
     p = OscillatorParams(delta_d=-10 ** rng.uniform(-6, -0.5), zeta=rng.uniform(0.005, 0.2))
     law = HuntCrossley(10 ** rng.uniform(1, 4), rng.choice([0.0, 10 ** rng.uniform(-2, 1)]))
-    kind = rng.choice(["random", "graze", "held"])
-    if kind == "random":
-        return kind, p, law, rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 1), rng.uniform(-1, 1)
-    if kind == "held":
-        p = p.with_(delta_d=-rng.uniform(0.5, 1.5))
-        return (kind, p, law, rng.uniform(0, TWO_PI), p.d - rng.uniform(0, 0.1),
-                rng.uniform(-0.2, 0.2))
-    eps = rng.choice([1, -1]) * 10 ** rng.uniform(-9, -3)
-    tau_m, back = rng.uniform(0, TWO_PI), rng.uniform(0.1, 3)
-    dx, dv = to_deviation(p, tau_m, p.d + eps, 0.0)  # a free maximum eps from the stop
-    dx, dv = propagate(p.zeta, dx, dv, -back)
-    tau0 = (tau_m - p.omega * back) % TWO_PI
-    x, v = to_physical(p, tau0, dx, dv)
-    return kind, p, law, tau0, min(x, p.d), v
+    kind, p, tau0, x, v = seeded_start(rng, p, held="held")
+    return kind, p, law, tau0, x, v
 
 
 @pytest.mark.timeout(1800)  # a hang guard (HERTZ_CASES=4000 runs about 4 min here)
@@ -125,20 +113,9 @@ def test_hertz_matches_the_reference_over_seeded_cases(seed):
     for _ in range(CASES // 4):
         kind, p, law, tau0, x, v = _case(rng)
         seg = advance_hertz(p, law, tau0, x, v, p.period)
-        xr, vr, ref = reference_advance_hertz(p, law, tau0, x, v, p.period)
-        tol = TOL_FLOW * (1.0 + abs(xr) + abs(vr))
-        if not (abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol):  # the reference again,
-            xr, vr, ref = refined(reference_advance_hertz, p, law, tau0, x, v, p.period)
-        assert abs(seg.x - xr) <= tol and abs(seg.v - vr) <= tol, (kind, seg, xr, vr)
-        assert len(seg.contacts) == len(ref), (kind, seg.contacts, ref)
-        for c, (t_in, t_out) in zip(seg.contacts, ref):
-            assert c.dt == pytest.approx(t_in, abs=1e-8)
-            if math.isinf(t_out):
-                assert math.isinf(c.duration)
-                long_contacts += 1
-            else:
-                assert c.dt + c.duration == pytest.approx(t_out, abs=1e-8)
-                above += c.exit_gap > 0.0
+        long_contacts += assert_matches(seg, reference_advance_hertz,
+                                        (p, law, tau0, x, v, p.period), TOL_FLOW, 1e-8, kind)
+        above += sum(math.isfinite(c.duration) and c.exit_gap > 0.0 for c in seg.contacts)
         counted[kind] += len(seg.contacts)
     assert min(counted.values()) > 0 and long_contacts > 0 and above > 0, (counted, above)
 
