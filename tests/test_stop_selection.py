@@ -47,9 +47,8 @@ def _within(fit, name, true, n_se=3.0):
 
 
 @pytest.mark.timeout(300)  # a hang guard
-@pytest.mark.parametrize("seed", [1, 2])
-def test_a_compliant_scene_is_recovered_and_preferred(seed):
-    p, z, dv, contact = _scene("kelvin_voigt", seed)
+def test_a_compliant_scene_is_recovered_and_preferred():
+    p, z, dv, contact = _scene("kelvin_voigt", 1)
     best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"))
     assert best == "kelvin_voigt", fits
     _within(fit, "stiffness", contact.law.stiffness)
