@@ -47,6 +47,11 @@ UNSUPPORTED = {
     "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
     "fidelity": "only the exact flow is built for n-DOF",
     "delta_d_drift": "the drifting wall is not built for n-DOF",
+    "contact": "the compliant stop is not built for n-DOF (the rigid wall only)",
+    "contact_stiffness": "the compliant stop is not built for n-DOF (the rigid wall only)",
+    "contact_damping": "the compliant stop is not built for n-DOF (the rigid wall only)",
+    "friction": "dry friction is not built for n-DOF",
+    "friction_static": "dry friction is not built for n-DOF",
 }
 
 
