@@ -60,3 +60,23 @@ def test_bad_arguments_are_named():
         choose_stop_fidelity(P, KelvinVoigt(1e3), None, 0, 1e-3)
     with pytest.raises(ValueError, match="tol"):
         choose_stop_fidelity(P, KelvinVoigt(1e3), None, 10, 0.0)
+
+
+def test_grazing_stop_reports_the_choice_and_refuses_bad_values(capsys):
+    """``grazing stop``: the choice and its reason (status 0, --json standard JSON); a
+    stop given both ways, or overdamped, is one line naming it (status 2)."""
+    import json
+
+    from grazing_control.cli.commands import main
+
+    assert main(["stop", "--stiffness", "1e8", "--restitution", "0.68", "--c2", "-1",
+                 "--dx", "0.01", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["stop"] == "rigid" and out["estimates"]["rigid"]["bound"] <= 1e-3
+    assert main(["stop", "--stiffness", "1e3", "--restitution", "0.68", "--friction", "0.01",
+                 "--c2", "-1", "--dx", "0.01"]) == 0
+    assert "stop model = compliant_friction" in capsys.readouterr().out
+    assert main(["stop", "--stiffness", "1e3", "--damping", "1", "--restitution", "0.5"]) == 2
+    assert "--damping and --restitution" in capsys.readouterr().err
+    assert main(["stop", "--stiffness", "1e3", "--damping", "100"]) == 2
+    assert "damping=100.0 is invalid" in capsys.readouterr().err

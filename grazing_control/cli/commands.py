@@ -744,6 +744,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_rig_parser(sub)
     from .identify import add_identify_parser
     add_identify_parser(sub)
+    from .stop import add_stop_parser
+    add_stop_parser(sub)
     from grazing_control.studies.robustness.cli import add_robustness_parser
 
     add_robustness_parser(sub, _common, _finite)

@@ -1,0 +1,82 @@
+"""``grazing stop``: the cheapest adequate model of a scene's stop (issue 31 part 4).
+
+The scene's stop given in full (a Kelvin-Voigt stop: ``--stiffness`` and ``--damping``
+or ``--restitution``; optional Coulomb ``--friction``), the scene's start, horizon and
+controller (the rigid design for ``--c2``): which of rigid (the wall with the stop's
+restitution, Eq. C3), compliant (without the friction) or compliant with friction keeps
+the Pi2 error within ``--tol`` over the horizon, the cheapest chosen and the reason
+printed (:func:`grazing_control.dynamics.stop_fidelity.choose_stop_fidelity`; the
+criterion: docs/theory_contact.md section 18). Exit status 0; 2 for a bad value, in
+one line naming it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+from grazing_control.support.arguments import finite, integer_at_least, positive
+
+__all__ = ["add_stop_parser", "cmd_stop"]
+
+
+def cmd_stop(args) -> int:
+    """Run ``grazing stop``; the exit status (module docstring)."""
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.stop_fidelity import choose_stop_fidelity
+    from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+    p = OscillatorParams(delta_d=args.delta_d, zeta=args.zeta)
+    if (args.damping is None) == (args.restitution is None):
+        raise ParameterError("--damping and --restitution: give exactly one (the stop's "
+                             "damping c_c, or the restitution r it stands for, Eq. C3)")
+    law = (KelvinVoigt(args.stiffness, args.damping) if args.damping is not None
+           else KelvinVoigt.from_restitution(args.stiffness, args.restitution))
+    friction = Coulomb(args.friction, args.friction_static) if args.friction > 0.0 else None
+    gains = Gains(degenerate_c1(p, args.c2), args.c2) if args.c2 is not None else None
+    choice = choose_stop_fidelity(p, law, friction, args.periods, args.tol,
+                                  deviation=(args.dx, args.dv), gains=gains)
+    def plain(x):   # standard JSON: a refused candidate's inf as null
+        return x if math.isfinite(x) else None
+    out = {"stop": choice.stop, "reason": choice.reason,
+           "estimates": {k: {"one_period_error": plain(e), "bound": plain(b)}
+                         for k, (e, b) in choice.estimates.items()}}
+    if args.json:
+        json.dump(out, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(f"stop model = {choice.stop}\n  {choice.reason}")
+    return 0
+
+
+def add_stop_parser(sub) -> None:
+    """Register ``grazing stop`` on the subcommands of the ``grazing`` parser."""
+    s = sub.add_parser("stop", help="the cheapest adequate model of a scene's stop: rigid, "
+                                    "compliant, or compliant with friction")
+    s.add_argument("--stiffness", type=positive, required=True,
+                   help="the stop's stiffness k_c over the oscillator's (> 0)")
+    s.add_argument("--damping", type=finite, help="the stop's damping c_c (>= 0, "
+                   "underdamped); or give --restitution")
+    s.add_argument("--restitution", type=finite, help="the restitution r the stop stands "
+                   "for (Eq. C3, exp(-2) < r <= 1); or give --damping")
+    s.add_argument("--friction", type=finite, default=0.0,
+                   help="Coulomb friction on the mass, kinetic level F_f (>= 0; default 0)")
+    s.add_argument("--friction-static", type=finite, default=None,
+                   help="static level F_s >= F_f (default F_f)")
+    s.add_argument("--delta-d", type=finite, default=-0.05, help="the scene's Delta d "
+                   "(default -0.05)")
+    s.add_argument("--zeta", type=finite, default=0.01, help="damping ratio (default 0.01)")
+    s.add_argument("--c2", type=finite, default=None, help="the scene's controller: the "
+                   "rigid design for this c2 (c1 of Eq. 38) from the first sample; default "
+                   "none")
+    s.add_argument("--dx", type=finite, default=0.0, help="the start, x - x** on Pi2")
+    s.add_argument("--dv", type=finite, default=0.0, help="the start, v - v** on Pi2")
+    s.add_argument("--periods", type=integer_at_least(1), default=100,
+                   help="the scene's horizon N (default 100)")
+    s.add_argument("--tol", type=positive, default=1e-3,
+                   help="tolerance on the Pi2 error after N periods (default 1e-3)")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=cmd_stop)
