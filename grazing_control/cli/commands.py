@@ -20,7 +20,8 @@ import warnings
 
 import numpy as np
 
-from grazing_control.support.arguments import finite, integer_at_least, non_empty_path
+from grazing_control.support.arguments import (finite, integer_at_least, non_empty_path,
+                                               non_negative)
 from . import ndof
 from .parameter_file import add_params_option, apply_to_args
 from .rig import add_rig_option, apply_rig
@@ -321,13 +322,16 @@ def _noise_report(args, p, point):
     # sigma^2 of the chosen estimator at --sensor-rate samples per period (E7)
     try:
         g = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
-        r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator)
+        r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator,
+                                lead=args.sensor_lead, width=args.pulse_width)
         pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
     except (OrbitNotFound, ValueError, ArithmeticError):
         pos = math.inf
     out.update(noise_gain_position_only=pos if math.isfinite(pos) else None,
                position_only_sensor={"samples_per_period": args.sensor_rate,
-                                     "estimator": args.estimator})
+                                     "estimator": args.estimator,
+                                     "lead": args.sensor_lead,
+                                     "pulse_width": args.pulse_width})
     return out
 
 
@@ -650,6 +654,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 200)")
     s.add_argument("--estimator", choices=("model", "arc", "nearest"), default="model",
                    help="its Pi2 estimator (default model, docs/theory_estimation.md)")
+    s.add_argument("--sensor-lead", type=non_negative, default=0.0,
+                   help="its estimate made this long (model time) before the section's last "
+                        "sample, the later samples unused (a rig controller's answer_lead; "
+                        "default 0)")
+    s.add_argument("--pulse-width", type=non_negative, default=0.0,
+                   help="the correction acts as a force pulse of this width (model time) "
+                        "centred at the delay (default 0: the kick)")
     s.add_argument("--optimize", choices=("noise",),
                    help="choose c2 in the admissible set: noise = least noise gain at --delta-d "
                         "(default -5e-6, the study's first scene)")
