@@ -222,8 +222,8 @@ def main(argv=None):
 
     kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
     print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - orbit.pi2[0]:+.3g} from the "
-          f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the model "
-          "the controller's estimator and prediction integrate)")
+          f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the "
+          "controller's estimator and prediction integrate the pulse since 2026-11-28)")
     print(f"controlled: captured {captured - k0} periods after the switch; held {n} periods: "
           f"Pi2 spread RMS about the pulse orbit {rms:.4g}, std {std:.4g}, predicted "
           f"{predicted:.4g}: ratio {rms / predicted:.3f} (std {std / predicted:.3f}); one "
