@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from grazing_control.dynamics.actuation import pulse_orbit, pulse_start, pulse_step
 from grazing_control.dynamics.actuator import (Actuator, actuated_orbit, actuated_step,
@@ -24,6 +23,8 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.flow import to_physical
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
+from reference_actuator import lag_reference, pulse_pieces
+
 P = OscillatorParams(delta_d=-5e-6)
 W = 0.1
 
@@ -36,30 +37,11 @@ def least_noise():
 
 
 def _reference(p, x, v, f0, u, on, off, tau_a, duration):
-    """(x, v, f) with tau_a f' = u 1[on, off] - f, x'' + 2 zeta x' + x = cos(tau2 + omega t)
-    + f, impacts x = d: v -> -r v (DOP853, rtol 1e-13)."""
-    def rhs(t, y, cmd):
-        return [y[1], -2 * p.zeta * y[1] - y[0] + math.cos(p.tau2 + p.omega * t) + y[2],
-                (cmd - y[2]) / tau_a]
-
-    def wall(t, y, cmd):
-        return y[0] - p.d
-    wall.terminal, wall.direction = True, 1
-    y, impacts = [x, v, f0], []
-    for t0, t1, cmd in ((0.0, on, 0.0), (on, off, u), (off, duration, 0.0)):
-        t = t0
-        while t < t1:
-            sol = solve_ivp(rhs, (t, t1), y, method="DOP853", rtol=1e-13, atol=1e-15,
-                            events=wall, args=(cmd,), max_step=0.05)
-            if sol.status == 1:
-                t = float(sol.t_events[0][0])
-                xe, ve, fe = sol.y_events[0][0]
-                impacts.append((t, ve))
-                y = [p.d, -p.r * ve, fe]
-                t += 1e-12
-            else:
-                t, y = t1, list(sol.y[:, -1])
-    return np.array(y), impacts
+    """(x, v, f) at ``duration`` and the impacts through the actuator (DOP853,
+    tests/reference_actuator.py)."""
+    end, impacts, _ = lag_reference(p, x, v, f0, pulse_pieces(on, off - on, u, tau_a),
+                                    duration)
+    return end, impacts
 
 
 @pytest.mark.parametrize("tau_a, latency, f0", [(0.05, 0.0, 0.0), (0.5, 0.2, 0.0),
