@@ -30,6 +30,15 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               (dynamics.actuation.pulse_orbit at 21 walls, interpolated) over the
               controlled periods from ``--control-after`` + 100 on, one impact per period,
               the Delta d estimate's error at the end. Use ``--periods 2000``.
+``actuator``  sim_node's first-order actuator (actuator_bandwidth 10x and 3x the
+              forcing frequency omega, latency 0), the gains of `grazing design
+              --optimize noise --delay 3 --pulse-width 0.1 --actuator-bandwidth B` (c1 of
+              the exact condition (P1) for the force profile), against the ideal
+              actuator's gains in the same plant: one impact per period, the offset and
+              spread (RMS) of the Pi2 x about the loop's orbit through the actuator
+              (dynamics.actuator.actuated_design) over the last ``--window`` periods,
+              against the design's predicted spread (position only, model filter, 200
+              samples per period, times sigma).
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -43,6 +52,7 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import subprocess
 import sys
@@ -83,7 +93,8 @@ def moving_orbit(g, periods: int, drift: float):
 
 
 def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
-          sensor_bias=0.0, controller=None, seed=7, drift=0.0, gains=None) -> dict:
+          sensor_bias=0.0, controller=None, seed=7, drift=0.0, gains=None, sim=None,
+          orbit_x=None) -> dict:
     """One lockstep scene; its numbers (module docstring)."""
     p = OscillatorParams(delta_d=DD)
     over = {"pi2_source": "stream", "estimator": "model"}
@@ -94,7 +105,7 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
                        sim_overrides={"state_period": p.period / RATE, "sensor_noise": SIGMA,
                                       "sensor_velocity": False, "pulse_width": WIDTH,
                                       "sensor_seed": seed, "sensor_bias": sensor_bias,
-                                      "delta_d_drift": drift},
+                                      "delta_d_drift": drift, **(sim or {})},
                        controller_overrides=over, log_dir=str(out / "logs"))
     wall = time.time() - t0
     if not res.ok:
@@ -102,7 +113,7 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
     sd = load(out / "bag").scenes[0]
     rep = analyze([out / "bag"], out / "report", figures=False)
     est = rep["bags"][0]["scenes"][0]["estimate"]
-    orbit_x = est["spread_about"][0]
+    orbit_x = est["spread_about"][0] if orbit_x is None else orbit_x
     t, x = sd.scene.t, sd.scene.pi2[:, 0]
     last = slice(-window, None)
     edges = np.append(t, t[-1] + p.period)
@@ -116,6 +127,7 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
     watch = rep["bags"][0]["model_watch"]
     num = {"wall_s": wall, "offset": float(np.mean(x[last]) - orbit_x),
            "spread": float(np.sqrt(np.mean((x[last] - orbit_x) ** 2))),
+           "std": float(np.std(x[last])),
            "one_impact_after_control": float(np.mean(counts[control_after:] == 1)),
            "not_one_impact": np.flatnonzero(counts != 1).tolist()[-5:],
            "impacts_per_period_after_control": np.bincount(counts[control_after:]).tolist(),
@@ -171,7 +183,8 @@ def _line(name, n) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
-                    choices=("bias", "mismatch", "right", "capture", "drift", "gross"))
+                    choices=("bias", "mismatch", "right", "capture", "drift", "gross",
+                             "actuator"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
@@ -185,6 +198,11 @@ def main(argv=None):
     watch = {"consistency_window": 10}
     cases = []
     for part in a.part or ["bias"]:
+        if part == "actuator":
+            for ratio in (10.0, 3.0):
+                for designed in (True, False):
+                    _actuator_case(root, a, ratio, designed, g)
+            continue
         if part == "bias":
             cases += [("bias 1e-4, plain model filter", 1e-4, {}),
                       ("bias 1e-4, estimate_bias", 1e-4, {"estimate_bias": True, **watch})]
@@ -214,6 +232,41 @@ def main(argv=None):
                   controller=over, seed=a.seed, drift=drift[0] if drift else 0.0,
                   gains=g if drift else None)
         print(_line(name, n), flush=True)
+
+
+def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> None:
+    """The ``actuator`` part: one scene through the actuator (module docstring)."""
+    import json
+
+    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.estimation import estimate_covariance
+
+    p = OscillatorParams(delta_d=DD)
+    act = bandwidth_actuator(p, ratio)
+    bw = 1.0 / act.time_constant
+    out = root / f"actuator{ratio:g}{'d' if designed else 'n'}"
+    out.mkdir()
+    yaml = out / "controller.yaml"
+    cmd = [GRAZING, "design", "--optimize", "noise", f"--delta-d={DD}", "--delay", str(DELAY),
+           "--out", str(yaml), "--json"]
+    if designed:
+        cmd += ["--pulse-width", str(WIDTH), "--actuator-bandwidth", repr(bw)]
+    res = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+    gains = Gains(res["c1"], res["c2"], DELAY)
+    r = estimate_covariance(p, g, RATE)
+    _gains, orbit, spread = actuated_design(p, gains.c2, DELAY, WIDTH, act, r)
+    if not designed:               # the ideal design's gains through the same actuator
+        from grazing_control.dynamics.actuator import actuated_orbit
+        orbit = actuated_orbit(p, gains, WIDTH, act, guess=orbit.state)
+        spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
+    n = scene(yaml, out, a.periods, a.control_after, a.window, seed=a.seed,
+              sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0])
+    name = (f"bandwidth {ratio:g}x omega ({bw:.6g}), "
+            + ("design through the actuator" if designed else "ideal actuator's design"))
+    print(_line(name, n) + f"; std about the mean {n.get('std', math.nan):.3g}; c1 "
+          f"{gains.c1:.6g}; predicted: spectral radius "
+          f"{orbit.spectral_radius:.6f}, spread {spread[0] * SIGMA:.3g}, orbit x - x** "
+          f"{orbit.state[0]:.3g}", flush=True)
 
 
 if __name__ == "__main__":

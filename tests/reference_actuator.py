@@ -1,7 +1,7 @@
 """An independent reference for the motion through a first-order actuator: scipy's DOP853
 of (x, v, f) with the lag as an ODE, tau_a f' = u(t) - f (or f = u for tau_a = 0),
 x'' + 2 zeta x' + x = cos(tau2 + omega t) + f, event location at the wall x = d and the
-impact law v -> -r v there (rtol 1e-13, max_step 0.05). Shared by tests/test_actuator.py,
+impact law v -> -r v there (rtol 1e-13, max_step 0.05 by default). Shared by tests/test_actuator.py,
 tests/test_plant_actuator.py and benchmarks/bench_actuator_reference.py.
 """
 
@@ -11,12 +11,14 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 
-def lag_reference(p, x, v, f0, pieces, duration, times=()):
+def lag_reference(p, x, v, f0, pieces, duration, times=(), max_step=0.05):
     """(x, v, f) at ``duration``, the impacts [(t, v-)] and the physical (x, v) at
     ``times`` (sorted, in (0, duration]). ``pieces``: [(t_on, u, impulse)] switches of
     the command u (piecewise constant, 0 before the first) and impulses (an impulse J
     through the lag adds J / tau_a to f, without lag J to v), with the actuator's
-    ``tau_a`` = pieces' attribute (see :func:`pulse_pieces`)."""
+    ``tau_a`` = pieces' attribute (see :func:`pulse_pieces`). The event is located
+    where the sign of the gap changes between steps: a penetration shorter than
+    ``max_step`` (a shallow impact) can be missed; use a smaller one there."""
     tau_a = pieces.tau_a
     times = np.asarray(times, dtype=float)
     dense = np.full((times.size, 2), np.nan)
@@ -35,7 +37,7 @@ def lag_reference(p, x, v, f0, pieces, duration, times=()):
     for t1, u_next, impulse in bounds:
         while t < t1:
             sol = solve_ivp(rhs, (t, t1), y, method="DOP853", rtol=1e-13, atol=1e-15,
-                            events=wall, args=(cmd,), max_step=0.05, dense_output=True)
+                            events=wall, args=(cmd,), max_step=max_step, dense_output=True)
             t_end = float(sol.t_events[0][0]) if sol.status == 1 else t1
             inside = (times > t) & (times <= t_end)
             if inside.any():

@@ -48,7 +48,7 @@ def engine_for(case, state_period=0.0):
     return e
 
 
-def run_case(case, state_period):
+def run_case(case, state_period, max_step=0.05):
     """The engine's period and the reference's: (events, end deviation and force) and
     (end (x, v, f), impacts, dense states at the engine's state times)."""
     e = engine_for(case, state_period)
@@ -63,7 +63,7 @@ def run_case(case, state_period):
     x0, v0 = to_physical(P, P.tau2, dx, dv)
     ref = lag_reference(P, x0, v0, f0, pulse_pieces(on, case["width"], u,
                                                     s.actuator.time_constant),
-                        P.period, [ev.t for ev in states])
+                        P.period, [ev.t for ev in states], max_step)
     return e, events, states, ref
 
 

@@ -50,7 +50,7 @@ from .estimation import phi_rows
 
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
            "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator", "LagFlow",
-           "LagPiece", "lag_flow", "lag_states"]
+           "LagPiece", "lag_flow", "lag_states", "actuated_design"]
 
 TWO_PI = 2.0 * math.pi
 #: Below this impact velocity the motion chatters: not resolved here (ValueError).
@@ -440,3 +440,37 @@ def actuated_orbit(p: OscillatorParams, gains: Gains, width: float, actuator: Ac
     b = (step(z, h)[0] - step(z, -h)[0]) / (2.0 * h)
     return ActuatedOrbit(tuple(float(c) for c in z), float(gains.c1 * z[0] + gains.c2 * z[1]),
                          tuple(imps), jacobian(z), residual, b)
+
+
+def actuated_design(p: OscillatorParams, c2: float, delay: float, width: float,
+                    actuator: Actuator, measurement=None):
+    """The design through ``actuator`` (the `grazing design --actuator-bandwidth` route):
+    c1 of the exact condition (P1) (:func:`actuated_c1`) for the pulse of ``width``
+    centred at ``delay``, and at p.delta_d < 0 the loop's orbit (:func:`actuated_orbit`
+    from the ideal pulse's) with its predicted spread: the standard deviations of
+    (x, v, f) on Pi2 per unit sigma, :meth:`ActuatedOrbit.noise_covariance` with the
+    estimate's covariance ``measurement`` (default I: x and v each measured with sigma).
+    The orbit is continued in tau_a from a tenth of it (8 steps). Returns (gains, orbit, spread);
+    orbit None where no 1/1 orbit is found, spread None where it is not stable."""
+    from .orbits import OrbitNotFound
+
+    start = pulse_start(p.period, delay, width)
+    gains = Gains(actuated_c1(p, c2, actuator, start, width), c2, delay)
+    guess = None
+    # continued in tau_a from a tenth of it, each step with its own (P1) gains (a slow
+    # actuator moves the orbit far from the ideal pulse's, where Newton would start)
+    shares = np.geomspace(0.1, 1.0, 8) if actuator.time_constant > 0.0 else (1.0,)
+    for share in shares:
+        step = Actuator(actuator.time_constant * float(share), actuator.latency)
+        g = gains if share == shares[-1] else Gains(
+            actuated_c1(p, c2, step, start, width), c2, delay)
+        try:
+            orbit = actuated_orbit(p, g, width, step, guess=guess)
+        except (OrbitNotFound, ValueError, ArithmeticError):
+            return gains, None, None
+        guess = orbit.state
+    try:
+        spread = np.sqrt(np.diag(orbit.noise_covariance(gains, measurement)))
+    except ValueError:
+        return gains, orbit, None
+    return gains, orbit, spread
