@@ -191,3 +191,23 @@ def test_the_exact_design_needs_the_force_before_the_grazing_phase():
 
     with pytest.raises(ParameterError, match="before the grazing phase"):
         actuated_c1(P, -1.0, Actuator(0.1, 5.0), 3.0, W)
+
+
+def test_the_design_through_the_actuator_is_the_orbit_of_its_gains():
+    """actuated_design at 3x (Newton from the ideal pulse's orbit misses it there; the
+    continuation in tau_a reaches it): c1 is (P1)'s, the orbit a fixed point of the exact
+    map with those gains, stable, its spread the Lyapunov one."""
+    from grazing_control.dynamics.actuator import actuated_c1, actuated_design
+
+    g0 = optimize_noise(P, 3.0).gains()
+    act = bandwidth_actuator(P, 3.0)
+    start = pulse_start(P.period, 3.0, W)
+    gains, orbit, spread = actuated_design(P, g0.c2, 3.0, W, act)
+    assert gains == Gains(actuated_c1(P, g0.c2, act, start, W), g0.c2, 3.0)
+    with pytest.raises(OrbitNotFound):
+        actuated_orbit(P, gains, W, act)
+    x, v, f, imps = actuated_step(P, *orbit.state, orbit.correction, start=start, width=W,
+                                  actuator=act)
+    assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
+    assert orbit.spectral_radius < 1.0
+    assert np.allclose(spread ** 2, np.diag(orbit.noise_covariance(gains)), rtol=1e-12)
