@@ -38,7 +38,9 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               spread (RMS) of the Pi2 x about the loop's orbit through the actuator
               (dynamics.actuator.actuated_design) over the last ``--window`` periods,
               against the design's predicted spread (position only, model filter, 200
-              samples per period, times sigma).
+              samples per period, times sigma). ``--pi2-source sample``: the
+              controller on the exact Pi2 samples (no noise reaches the loop: the
+              orbit's offset alone).
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -47,6 +49,8 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
 
     .venv/bin/python benchmarks/bench_watchful_nodes.py --part bias --part mismatch \
         --periods 600 --control-after 100
+    .venv/bin/python benchmarks/bench_watchful_nodes.py --part actuator --periods 600 \
+        --control-after 100 --window 300 --measured benchmarks/out/actuator/nodes.json
 """
 
 from __future__ import annotations
@@ -112,7 +116,7 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
         return {"failed": str(res)}
     sd = load(out / "bag").scenes[0]
     rep = analyze([out / "bag"], out / "report", figures=False)
-    est = rep["bags"][0]["scenes"][0]["estimate"]
+    est = rep["bags"][0]["scenes"][0]["estimate"] or {}
     orbit_x = est["spread_about"][0] if orbit_x is None else orbit_x
     t, x = sd.scene.t, sd.scene.pi2[:, 0]
     last = slice(-window, None)
@@ -121,8 +125,10 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
     summary = (out / "logs" / "controller_node.log").read_text(errors="replace")
     resets = re.search(r"model_resets=(\d+)", summary)
     captured = re.search(r"captured_at=(\w+)", summary)
-    orbit = np.array(est["spread_about"])
-    ct = capture_time(sd.scene.pi2[control_after:], counts[control_after:], orbit, 1e-3)
+    ct = None
+    if "spread_about" in est:           # the stream estimator's scenes
+        ct = capture_time(sd.scene.pi2[control_after:], counts[control_after:],
+                          np.array(est["spread_about"]), 1e-3)
     rows = read_watch(out / "bag")
     watch = rep["bags"][0]["model_watch"]
     num = {"wall_s": wall, "offset": float(np.mean(x[last]) - orbit_x),
@@ -189,6 +195,11 @@ def main(argv=None):
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--pi2-source", choices=("stream", "sample"), default="stream",
+                    help="the actuator part's controller: the stream's model filter, or the "
+                         "simulator's exact Pi2 sample (no estimator: the orbit alone)")
+    ap.add_argument("--measured", type=Path, help="the actuator part: write its numbers "
+                    "here (JSON) for benchmarks/chart_actuator.py --measured")
     a = ap.parse_args(argv)
     root = Path(tempfile.mkdtemp())
     yaml, g = design(root)
@@ -199,9 +210,11 @@ def main(argv=None):
     cases = []
     for part in a.part or ["bias"]:
         if part == "actuator":
-            for ratio in (10.0, 3.0):
-                for designed in (True, False):
-                    _actuator_case(root, a, ratio, designed, g)
+            rows = [_actuator_case(root, a, ratio, designed, g)
+                    for ratio in (10.0, 3.0) for designed in (True, False)]
+            if a.measured:
+                import json
+                a.measured.write_text(json.dumps(rows, indent=1))
             continue
         if part == "bias":
             cases += [("bias 1e-4, plain model filter", 1e-4, {}),
@@ -234,8 +247,9 @@ def main(argv=None):
         print(_line(name, n), flush=True)
 
 
-def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> None:
-    """The ``actuator`` part: one scene through the actuator (module docstring)."""
+def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
+    """The ``actuator`` part: one scene through the actuator (module docstring); its
+    numbers for the chart (std and offset per sigma)."""
     import json
 
     from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
@@ -260,13 +274,19 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> None:
         orbit = actuated_orbit(p, gains, WIDTH, act, guess=orbit.state)
         spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
     n = scene(yaml, out, a.periods, a.control_after, a.window, seed=a.seed,
-              sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0])
+              sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0],
+              controller={"pi2_source": a.pi2_source})
     name = (f"bandwidth {ratio:g}x omega ({bw:.6g}), "
             + ("design through the actuator" if designed else "ideal actuator's design"))
     print(_line(name, n) + f"; std about the mean {n.get('std', math.nan):.3g}; c1 "
           f"{gains.c1:.6g}; predicted: spectral radius "
           f"{orbit.spectral_radius:.6f}, spread {spread[0] * SIGMA:.3g}, orbit x - x** "
           f"{orbit.state[0]:.3g}", flush=True)
+    return {"ratio": ratio, "design": "exact N_g" if designed else "naive",
+            "std_per_sigma": n.get("std", math.nan) / SIGMA,
+            "offset": n.get("offset", math.nan), "predicted_per_sigma": float(spread[0]),
+            "one_impact_after_control": n.get("one_impact_after_control"),
+            "pi2_source": a.pi2_source}
 
 
 if __name__ == "__main__":

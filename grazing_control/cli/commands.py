@@ -234,7 +234,8 @@ def cmd_design(args):
     if tuned is not None:
         out["optimize"] = tuned
     gains = point.gains()
-    if args.actuator_bandwidth or args.actuator_latency or args.pulse_width:
+    if any(getattr(args, k, 0.0) for k in ("actuator_bandwidth", "actuator_latency",
+                                           "pulse_width")):
         gains, out["actuator"] = _actuator_report(args, p, point)
         out["c1_ideal"], out["c1"] = out["c1"], gains.c1
     _require_finite(out, "design")

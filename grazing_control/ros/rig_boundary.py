@@ -50,7 +50,7 @@ RIG_TOPICS = {"rig/sensor": "sensor_msgs/msg/JointState",
 #: may be given (a faster scene), the others are the rig's.
 SIM_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset", "state_period",
             "sensor_noise", "sensor_quantum", "sensor_velocity", "pulse_width",
-            "force_limit", "actuation_delay", "time_scale")
+            "force_limit", "actuator_bandwidth", "actuation_delay", "time_scale")
 
 
 def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
@@ -73,7 +73,8 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
             "pi2_offset": p.pi2_offset, "state_period": d["state_period"],
             "sensor_noise": d["sensor_noise"], "sensor_quantum": d["sensor_quantum"],
             "sensor_velocity": bool(d["sensor_velocity"]), "pulse_width": d["pulse_width"],
-            "force_limit": d["force_limit"], "actuation_delay": d["actuation_delay"],
+            "force_limit": d["force_limit"], "actuator_bandwidth": d["actuator_bandwidth"],
+            "actuation_delay": d["actuation_delay"],
             "time_scale": rig.omega_n / (1.0 + clock_drift)}
 
 
