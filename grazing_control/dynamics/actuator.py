@@ -50,7 +50,8 @@ from .estimation import phi_rows
 
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
            "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator", "LagFlow",
-           "LagPiece", "lag_flow", "lag_states", "actuated_design"]
+           "LagPiece", "lag_flow", "lag_states", "actuated_design",
+           "actuated_orbit_for"]
 
 TWO_PI = 2.0 * math.pi
 #: Below this impact velocity the motion chatters: not resolved here (ValueError).
@@ -371,6 +372,28 @@ class ActuatedOrbit:
     monodromy: np.ndarray = field(repr=False)
     residual: float
     input: np.ndarray = field(repr=False, default=None)
+    reference: tuple = (0.0, 0.0)
+
+    @property
+    def pi2_deviation(self) -> tuple:
+        """(x - x**, v - v**) on Pi2 (the state less the force)."""
+        return self.state[0], self.state[1]
+
+    @property
+    def pi2(self) -> tuple:
+        """(x, v) on Pi2: X** (``reference``) plus the deviation."""
+        return self.reference[0] + self.state[0], self.reference[1] + self.state[1]
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        """Eigenvalues of the 3x3 monodromy, largest modulus first."""
+        mult = np.linalg.eigvals(self.monodromy)
+        return mult[np.argsort(-np.abs(mult))]
+
+    @property
+    def v_minus(self) -> float:
+        """The impact velocity of the period's impact."""
+        return self.impacts[0].v_minus
 
     @property
     def spectral_radius(self) -> float:
@@ -439,7 +462,31 @@ def actuated_orbit(p: OscillatorParams, gains: Gains, width: float, actuator: Ac
                             f"residual {residual:.1e}, {len(imps)} impacts per period")
     b = (step(z, h)[0] - step(z, -h)[0]) / (2.0 * h)
     return ActuatedOrbit(tuple(float(c) for c in z), float(gains.c1 * z[0] + gains.c2 * z[1]),
-                         tuple(imps), jacobian(z), residual, b)
+                         tuple(imps), jacobian(z), residual, b, (p.x_ref, p.v_ref))
+
+
+def actuated_orbit_for(p: OscillatorParams, gains: Gains, width: float,
+                       actuator: Actuator) -> ActuatedOrbit:
+    """The loop's orbit through ``actuator`` for any ``gains`` (a scene's, e.g. the ideal
+    actuator's design): :func:`actuated_orbit` from the ideal pulse's orbit, or, where
+    Newton misses it from there, continued in c1 (8 steps) from the orbit of the exact
+    design (P1) with the same c2 (:func:`actuated_design`). Raises OrbitNotFound."""
+    from .orbits import OrbitNotFound
+
+    try:
+        return actuated_orbit(p, gains, width, actuator)
+    except (OrbitNotFound, ValueError, ArithmeticError):
+        pass
+    exact, orbit, _spread = actuated_design(p, gains.c2, gains.delay, width, actuator)
+    if orbit is None:
+        raise OrbitNotFound(f"no 1/1 orbit through the actuator (tau_a "
+                            f"{actuator.time_constant!r}) for the exact design with c2 "
+                            f"{gains.c2!r}, where the continuation in c1 would start")
+    for share in np.linspace(0.0, 1.0, 9)[1:]:
+        c1 = exact.c1 + float(share) * (gains.c1 - exact.c1)
+        orbit = actuated_orbit(p, Gains(c1 if share < 1.0 else gains.c1, gains.c2, gains.delay),
+                               width, actuator, guess=orbit.state)
+    return orbit
 
 
 def actuated_design(p: OscillatorParams, c2: float, delay: float, width: float,
