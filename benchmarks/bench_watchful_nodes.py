@@ -270,8 +270,8 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
     r = estimate_covariance(p, g, RATE)
     _gains, orbit, spread = actuated_design(p, gains.c2, DELAY, WIDTH, act, r)
     if not designed:               # the ideal design's gains through the same actuator
-        from grazing_control.dynamics.actuator import actuated_orbit
-        orbit = actuated_orbit(p, gains, WIDTH, act, guess=orbit.state)
+        from grazing_control.dynamics.actuator import actuated_orbit_for
+        orbit = actuated_orbit_for(p, gains, WIDTH, act)
         spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
     n = scene(yaml, out, a.periods, a.control_after, a.window, seed=a.seed,
               sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0],

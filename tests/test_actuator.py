@@ -211,3 +211,23 @@ def test_the_design_through_the_actuator_is_the_orbit_of_its_gains():
     assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
     assert orbit.spectral_radius < 1.0
     assert np.allclose(spread ** 2, np.diag(orbit.noise_covariance(gains)), rtol=1e-12)
+
+
+def test_the_orbit_for_any_gains_is_found_where_newton_alone_misses_it():
+    """actuated_orbit_for at 3x: with the (P1) gains (Newton from the ideal pulse's orbit
+    misses it: the test above) it continues in c1 to the same orbit actuated_design
+    finds; with the ideal actuator's gains it is a fixed point of the exact map too."""
+    from grazing_control.dynamics.actuator import actuated_design, actuated_orbit_for
+
+    g0 = optimize_noise(P, 3.0).gains()
+    act = bandwidth_actuator(P, 3.0)
+    start = pulse_start(P.period, 3.0, W)
+    gains, designed, _ = actuated_design(P, g0.c2, 3.0, W, act)
+    for g, want in ((gains, designed.state), (g0, None)):
+        orbit = actuated_orbit_for(P, g, W, act)
+        if want is not None:
+            assert np.allclose(orbit.state, want, rtol=0, atol=1e-12)
+        x, v, f, imps = actuated_step(P, *orbit.state, orbit.correction, start=start,
+                                      width=W, actuator=act)
+        assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
+        assert np.allclose(orbit.pi2, (P.x_ref + x, P.v_ref + v), rtol=0, atol=1e-12)
