@@ -45,7 +45,8 @@ from scipy.optimize import brentq
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.impact import Impact
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from .actuation import newton_fixed_point, pulse_force, pulse_start, pulse_step
+from .actuation import (OrbitMultipliers, newton_fixed_point, pulse_force, pulse_start,
+                        pulse_step)
 from .estimation import phi_rows
 
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
@@ -359,7 +360,7 @@ def actuated_step(p: OscillatorParams, dx: float, dv: float, force: float,
 
 
 @dataclass(frozen=True)
-class ActuatedOrbit:
+class ActuatedOrbit(OrbitMultipliers):
     """The 1/1 orbit of the loop closed through an actuator (:func:`actuated_orbit`):
     ``state`` (dx, dv, f) on Pi2 before the correction, its ``correction``, ``impacts``
     of one period, the 3x3 ``monodromy`` (central differences of the exact map) and the
@@ -384,16 +385,6 @@ class ActuatedOrbit:
         """(x, v) on Pi2: X** (``reference``) plus the deviation."""
         return self.reference[0] + self.state[0], self.reference[1] + self.state[1]
 
-    @property
-    def multipliers(self) -> np.ndarray:
-        """Eigenvalues of the 3x3 monodromy, largest modulus first."""
-        mult = np.linalg.eigvals(self.monodromy)
-        return mult[np.argsort(-np.abs(mult))]
-
-    @property
-    def v_minus(self) -> float:
-        """The impact velocity of the period's impact."""
-        return self.impacts[0].v_minus
 
     @property
     def spectral_radius(self) -> float:
