@@ -52,15 +52,13 @@ ROOT = Path(__file__).resolve().parents[1]
 def design(rig, c2, lead=None):
     """(gains, predicted spread, samples per period) of the rig's design: the estimate
     as the rig's controller makes it (answering ``lead``, model time, before the
-    section's last sample: default its answer_lead; the pulse modelled), as
-    `grazing rig` predicts it."""
+    section's last sample: default its answer_lead), as `grazing rig` predicts it."""
     p, d = rig.params(), rig.dimensionless()
     values = controller_values(rig, c2)
     g = Gains(values["c1"], values["c2"], values["actuation_delay"])
     rate = round(p.period / d["state_period"])
     r = estimate_covariance(p, g, rate, estimator="model",
-                            lead=values["answer_lead"] if lead is None else lead,
-                            width=d["pulse_width"], force_limit=d["force_limit"] or math.inf)
+                            lead=values["answer_lead"] if lead is None else lead)
     gain = design_noise_gain(p, g.c2, g.delay, measurement=r)
     return g, gain * d["sensor_noise"], rate
 

@@ -122,11 +122,10 @@ def test_grazing_rig_designs_as_grazing_design_with_the_numbers_by_hand(lab_repo
     p = rig.params()
     delay = rig.dimensionless()["actuation_delay"]
     # the rig's controller answers answer_lead = budget - w/2 = 4 ms before the section's
-    # last sample and its corrections are 2 ms pulses: the estimate's covariance with both
-    lead, width = 4e-3 * 2 * math.pi * 20, 2e-3 * 2 * math.pi * 20
+    # last sample: the estimate's covariance without the samples of that stretch
+    lead = 4e-3 * 2 * math.pi * 20
     hand = _by_hand(rig) + ["--delay", repr(delay), "--delta-d", repr(p.delta_d),
-                            "--sensor-rate", "150", "--sensor-lead", repr(lead),
-                            "--pulse-width", repr(width), "--json"]
+                            "--sensor-rate", "150", "--sensor-lead", repr(lead), "--json"]
     opt = _json(*cli("design", *hand, "--optimize", "noise"))
     de = r["design"]
     assert "least noise gain" in de["c2_from"]
@@ -154,8 +153,7 @@ def test_grazing_rig_designs_as_grazing_design_with_the_numbers_by_hand(lab_repo
     assert sp["noise_gain_position_only"] == at_c2["noise_gain_position_only"]
     assert sp["spread_m"] == at_c2["noise_gain_position_only"] * rig.sensor.noise
     assert at_c2["position_only_sensor"] == {"samples_per_period": 150, "estimator": "model",
-                                             "lead": pytest.approx(lead, rel=1e-15),
-                                             "pulse_width": pytest.approx(width, rel=1e-15)}
+                                             "lead": pytest.approx(lead, rel=1e-15)}
     assert "nearest integer, 150" in sp["note"]
     # the timing budget with the given tail
     ti = r["timing"]
@@ -275,8 +273,7 @@ def test_rig_sets_what_the_numbers_by_hand_set(argv):
     command, c2 = argv[0], "--c2" in argv
     if command == "design":
         hand += ["--delta-d", repr(p.delta_d), "--delay", repr(delay), "--sensor-rate", "150",
-                 "--sensor-lead", repr(answer_lead(rig)),
-                 "--pulse-width", repr(rig.dimensionless()["pulse_width"])]
+                 "--sensor-lead", repr(answer_lead(rig))]
     elif command in ("orbit", "simulate", "basins"):
         hand += ["--delta-d", repr(p.delta_d)]
     elif command == "robustness" and argv[1] != "model":
@@ -302,8 +299,7 @@ def test_design_with_rig_prints_what_design_with_the_numbers_prints(cli):
     p = rig.params()
     hand = _by_hand(rig) + ["--delta-d", repr(p.delta_d), "--delay",
                             repr(rig.dimensionless()["actuation_delay"]), "--sensor-rate", "150",
-                            "--sensor-lead", repr(answer_lead(rig)),
-                            "--pulse-width", repr(rig.dimensionless()["pulse_width"])]
+                            "--sensor-lead", repr(answer_lead(rig))]
     for extra in (["--c2", "-1"], ["--c2", "0.1", "--estimator", "arc"]):
         a = _json(*cli("design", "--rig", LAB_FILE, "--json", *extra))
         b = _json(*cli("design", *hand, "--json", *extra))

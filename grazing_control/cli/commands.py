@@ -234,13 +234,18 @@ def cmd_design(args):
         out.update(noise)
     if tuned is not None:
         out["optimize"] = tuned
+    gains = point.gains()
+    if any(getattr(args, k, 0.0) for k in ("actuator_bandwidth", "actuator_latency",
+                                           "pulse_width")):
+        gains, out["actuator"] = _actuator_report(args, p, point)
+        out["c1_ideal"], out["c1"] = out["c1"], gains.c1
     _require_finite(out, "design")
     if args.out:
         if not point.admissible:
             raise ParameterError(
                 f"c2={args.c2!r} is not admissible: valid range is {_fmt_intervals(intervals)}; "
                 f"nothing written to {args.out}")
-        write_controller_yaml(args.out, p, point.gains())
+        write_controller_yaml(args.out, p, gains)
     if args.json:
         return out
     lam = ", ".join(f"{abs(z):.6g}" for z in point.multipliers_limit)
@@ -281,9 +286,65 @@ def cmd_design(args):
         lines.append(f"  exact route        : admissible c2 = "
                      f"{_fmt_intervals(other['exact']['admissible_c2'])} ({other['exact']['seconds']:.3g} s); "
                      f"end differences {other['difference_admissible_ends']}")
+    if "actuator" in out:
+        a = out["actuator"]
+        lines.append(f"  through the actuator: c1 = {gains.c1:.15g} (exact N_g,12 = 0 for the "
+                     f"force profile, (P1); tau_a {a['time_constant']:.6g}, latency "
+                     f"{a['latency']:.6g}, pulse {a['pulse_width']:.6g})")
+        if a["spectral_radius"] is None:
+            lines.append(f"    no 1/1 orbit through the actuator at Delta d = {a['delta_d']:.3g}")
+        else:
+            both, pos = (("none" if v is None else f"{v[0]:.4g}")
+                         for v in (a["spread"], a["spread_position_only"]))
+            offset = a["orbit_offset"]
+            lines.append(f"    at Delta d = {a['delta_d']:.3g}: spectral radius "
+                         f"{a['spectral_radius']:.6g}, orbit x - x** "
+                         f"{'?' if offset is None else f'{offset[0]:.3g}'}, spread (std x "
+                         f"per sigma) {both} (x, v measured), {pos} (position only)")
     if args.out:
         lines.append(f"  controller parameters written to {args.out}")
     return "\n".join(lines)
+
+
+def _actuator_report(args, p, point):
+    """--actuator-bandwidth/--actuator-latency/--pulse-width: the design through the
+    first-order actuator (dynamics.actuator.actuated_design, docs/theory_pulse.md (P1)
+    and section 7): its gains, and at --delta-d (default -5e-6) the loop's orbit, spectral
+    radius and predicted spread (x and v measured with sigma; a position-only sensor at
+    --sensor-rate with the chosen estimator)."""
+    from grazing_control.dynamics.actuator import Actuator, actuated_design
+    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.estimation import estimate_covariance
+    from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
+
+    bw, lat, w = args.actuator_bandwidth, args.actuator_latency, args.pulse_width
+    for name, value in (("actuator_bandwidth", bw), ("actuator_latency", lat),
+                        ("pulse_width", w)):
+        if not value >= 0.0:
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is {name} >= 0")
+    if not w > 0.0:
+        raise ParameterError(f"pulse_width={w!r} is invalid with an actuator: valid range is "
+                             "pulse_width > 0 (the design is for the pulse's force profile)")
+    actuator = Actuator(1.0 / bw if bw > 0.0 else 0.0, lat)
+    q = p.with_(delta_d=_noise_delta_d(args))
+    _gains_, orbit, spread = actuated_design(q, point.c2, point.delay, w, actuator)
+    report = {"time_constant": actuator.time_constant, "latency": lat, "pulse_width": w,
+              "bandwidth": bw, "bandwidth_over_omega": bw / p.omega, "delta_d": q.delta_d,
+              "spectral_radius": None, "spread": None, "spread_position_only": None,
+              "orbit_offset": None}
+    if orbit is not None:
+        report.update(spectral_radius=orbit.spectral_radius,
+                      spread=None if spread is None else [float(x) for x in spread])
+        try:
+            kick = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
+            x_star = orbit_11(q, kick).pi2_deviation
+            report["orbit_offset"] = [orbit.state[0] - x_star[0], orbit.state[1] - x_star[1]]
+            r = estimate_covariance(q, kick, args.sensor_rate, estimator=args.estimator)
+            report["spread_position_only"] = [float(x) for x in np.sqrt(np.diag(
+                orbit.noise_covariance(_gains_, r)))]
+        except (OrbitNotFound, ValueError, ArithmeticError):
+            pass
+    return _gains_, report
 
 
 def _noise_delta_d(args):
@@ -323,15 +384,14 @@ def _noise_report(args, p, point):
     try:
         g = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
         r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator,
-                                lead=args.sensor_lead, width=args.pulse_width)
+                                lead=args.sensor_lead)
         pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
     except (OrbitNotFound, ValueError, ArithmeticError):
         pos = math.inf
     out.update(noise_gain_position_only=pos if math.isfinite(pos) else None,
                position_only_sensor={"samples_per_period": args.sensor_rate,
                                      "estimator": args.estimator,
-                                     "lead": args.sensor_lead,
-                                     "pulse_width": args.pulse_width})
+                                     "lead": args.sensor_lead})
     return out
 
 
@@ -658,14 +718,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="its estimate made this long (model time) before the section's last "
                         "sample, the later samples unused (a rig controller's answer_lead; "
                         "default 0)")
-    s.add_argument("--pulse-width", type=non_negative, default=0.0,
-                   help="the correction acts as a force pulse of this width (model time) "
-                        "centred at the delay (default 0: the kick)")
     s.add_argument("--optimize", choices=("noise",),
                    help="choose c2 in the admissible set: noise = least noise gain at --delta-d "
                         "(default -5e-6, the study's first scene)")
     s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here "
                                              "(c1, c2, actuation_delay, X**, the model)")
+    s.add_argument("--pulse-width", type=_finite, default=0.0,
+                   help="the correction as a force pulse of this width centred at --delay "
+                        "(simulation time; sim_node's pulse_width); with it c1 is the exact "
+                        "design for the pulse's force profile (P1, docs/theory_pulse.md)")
+    s.add_argument("--actuator-bandwidth", type=_finite, default=0.0,
+                   help="a first-order actuator's bandwidth 1/tau_a (radians per simulation "
+                        "time unit, sim_node's actuator_bandwidth; 0: ideal): c1 for the "
+                        "force through it, the loop's margin and predicted spread at "
+                        "--delta-d (needs --pulse-width)")
+    s.add_argument("--actuator-latency", type=_finite, default=0.0,
+                   help="the actuator's latency (simulation time, sim_node's "
+                        "actuator_latency; needs --pulse-width)")
     _method_arg(s)
     ndof.add_model_option(s)
     ndof.add_design_options(s)
