@@ -3,7 +3,7 @@ into :class:`OscillatorParams` and :class:`Gains`, and the JSON helpers of every
 
 A leaf of the command line: cli/commands.py (the parser and the orbit, continue,
 simulate commands), cli/design.py, cli/basins.py and cli/continue2.py import it; it
-imports none of them (docs/architecture.md, "The command line").
+imports none of them (docs/architecture.md, the `cli` row; .importlinter, cli-no-circle).
 """
 
 from __future__ import annotations
