@@ -31,6 +31,7 @@ from mpmath import mp, mpf
 
 from grazing_control.cli.commands import main
 from reference_ndof import DPS, load_reference
+from test_cli_ndof import THREE_MASS
 
 #: 2-mass chain of issue 32: wall - outer mass 1.5 (x0) - spring - inner mass 0.8 (x1) -
 #: spring - ground; forced on the inner mass, wall and kick on the outer one. Its
@@ -47,16 +48,7 @@ i_a: 0
 pi2_offset: 0.3
 """
 #: The 3-mass chain of tests/test_cli_ndof.py: its uncontrolled orbit lies on Delta d > 0.
-THREE = """\
-M: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-C: [[0.05, -0.02, 0.0], [-0.02, 0.05, -0.02], [0.0, -0.02, 0.05]]
-K: [[2.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 2.0]]
-f: [0.0, 0.0, 1.0]
-omega: 0.85
-i_w: 0
-r: 0.7
-i_a: 2
-"""
+THREE = THREE_MASS
 
 
 @pytest.fixture(scope="module")

@@ -23,6 +23,8 @@ import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
+from .common import nulls
+
 __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
            "add_sweep_options", "check_options", "load", "gains_of", "dispatch",
            "add_figures_options", "cmd_design", "cmd_orbit", "cmd_continue", "cmd_simulate",
@@ -494,7 +496,7 @@ def cmd_continue(args):
         "seconds": seconds,
     })
     if args.json:
-        return _nulls(out)
+        return nulls(out)
     route = "in the impact phase (exact to rounding)" if explicit else "by shooting"
     lines = [f"1/1 branch {route}, {len(branch.points)} points from Delta d = "
              f"{args.start:g} towards {args.stop:g}"
@@ -522,16 +524,6 @@ def cmd_continue(args):
         lines.append(f"  predicted limit |lambda0| = "
                      f"{', '.join(f'{abs(z):.6g}' for z in limit)} (Delta d -> 0-)")
     return "\n".join(lines)
-
-
-def _nulls(obj):
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {key: _nulls(v) for key, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_nulls(v) for v in obj]
-    return obj
 
 
 # ---------------------------------------------------------------------------- simulate
@@ -688,7 +680,7 @@ def cmd_figures(args):
     numbers = make_ndof_figures(model, out, settings, model_file=args.model,
                                 workers=args.workers, log=log)
     if args.json:
-        return _nulls(numbers)
+        return nulls(numbers)
     m = numbers["multipliers"]
     lines = [f"n-DOF figures of {args.model} in {out}: ndof_diagram.png, ndof_multipliers.png, "
              "ndof_scene.png, ndof_figures.json",
