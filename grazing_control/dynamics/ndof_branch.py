@@ -312,7 +312,10 @@ def other_contacts(model: NdofModel, gains, point: BranchPoint) -> int:
     contact; this is the global check. From the state just after the impact the flow
     runs sigma to Pi2, takes the kick, and runs on until :data:`RETURN_MARGIN` T before
     the orbit's next impact; every impact found on the way counts, and a chattering or
-    sticking contact counts as one. A check of the orbit, not a shooting: the branch
+    sticking contact counts as one. On the last stretch x_w rises monotonically to the
+    impact where the wall coordinate decelerates there (regular grazing); where it
+    accelerates into the wall and v- is too small to rule out an earlier touch within
+    the stretch, the orbit is not certified (counted as one contact). A check of the orbit, not a shooting: the branch
     point is exact to rounding whatever v-, where the event search on the period map
     cannot resolve an impact of v-^2 below the gap's rounding (v- ~ 1e-8).
     """
@@ -322,8 +325,11 @@ def other_contacts(model: NdofModel, gains, point: BranchPoint) -> int:
     n, w = model.n, model.i_w
     sigma = _sigma(model, point.psi)
     z = np.array(point.state, dtype=float)
-    z[n + w] -= (1.0 + model.r) * point.v_minus
     tau = flow.tau_star + point.psi
+    push = flow.wall_acceleration(tau, z)
+    if push > 0.0 and point.v_minus < push * RETURN_MARGIN * model.period:
+        return 1     # accelerating into the wall: the last stretch is not a plain approach
+    z[n + w] -= (1.0 + model.r) * point.v_minus
     try:
         first = advance(flow, tau, z, sigma)
         z2 = np.array(first.z)
