@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
-from grazing_control.support.arguments import finite, integer_at_least
+from grazing_control.support.arguments import finite, integer_at_least, non_negative
 
 from . import ndof
 from .common import (add_common, add_delay, add_gains, add_method, complex_list, count,
@@ -53,7 +53,6 @@ class _Parser(argparse.ArgumentParser):
 _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
 
 
-# ---------------------------------------------------------------------------- design
 # ---------------------------------------------------------------------------- orbit
 def cmd_orbit(args):
     if args.model is not None:
@@ -356,6 +355,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 200)")
     s.add_argument("--estimator", choices=("model", "arc", "nearest"), default="model",
                    help="its Pi2 estimator (default model, docs/theory_estimation.md)")
+    s.add_argument("--sensor-lead", type=non_negative, default=0.0,
+                   help="its estimate made this long (model time) before the section's last "
+                        "sample, the later samples unused (a rig controller's answer_lead; "
+                        "default 0)")
+    s.add_argument("--pulse-width", type=non_negative, default=0.0,
+                   help="the correction acts as a force pulse of this width (model time) "
+                        "centred at the delay (default 0: the kick)")
     s.add_argument("--optimize", choices=("noise",),
                    help="choose c2 in the admissible set: noise = least noise gain at --delta-d "
                         "(default -5e-6, the study's first scene)")

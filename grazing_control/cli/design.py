@@ -182,13 +182,16 @@ def _noise_report(args, p, point):
     # sigma^2 of the chosen estimator at --sensor-rate samples per period (E7)
     try:
         g = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
-        r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator)
+        r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator,
+                                lead=args.sensor_lead, width=args.pulse_width)
         pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
     except (OrbitNotFound, ValueError, ArithmeticError):
         pos = math.inf
     out.update(noise_gain_position_only=pos if math.isfinite(pos) else None,
                position_only_sensor={"samples_per_period": args.sensor_rate,
-                                     "estimator": args.estimator})
+                                     "estimator": args.estimator,
+                                     "lead": args.sensor_lead,
+                                     "pulse_width": args.pulse_width})
     return out
 
 

@@ -67,6 +67,11 @@ def rig_options(rig, args) -> dict:
             out["--delta-d"] = ("delta_d", p.delta_d)
         out["--delay"] = ("delay", delay)
         out["--sensor-rate"] = ("sensor_rate", samples_per_period(rig))
+        # the rig controller's estimate (ros/rig_boundary.answer_lead) and pulse
+        from grazing_control.ros.rig_boundary import answer_lead
+
+        out["--sensor-lead"] = ("sensor_lead", answer_lead(rig))
+        out["--pulse-width"] = ("pulse_width", rig.dimensionless()["pulse_width"])
     elif command in ("orbit", "simulate", "basins"):
         out["--delta-d"] = ("delta_d", p.delta_d)
     elif command == "robustness" and hasattr(args, "delta_d"):
@@ -261,8 +266,13 @@ def rig_report(rig, path, args) -> dict:
 
 def _spread(rig, design, ns, n) -> dict:
     """The predicted Pi2 spread: the design's position-only noise gain at the rig's
-    samples per period (model estimator) x the sensor noise (docs/rig.md)."""
+    samples per period (model estimator as the rig's controller runs it: answering
+    answer_lead before the section's last sample, the pulse modelled) x the sensor noise
+    (docs/rig.md)."""
+    from grazing_control.ros.rig_boundary import answer_lead
+
     out = {"samples_per_period": n, "estimator": "model", "sensor_noise_m": rig.sensor.noise,
+           "lead_s": answer_lead(rig) / rig.omega_n, "pulse_width_s": rig.actuator.pulse_width,
            "sensor_noise": rig.dimensionless()["sensor_noise"],
            "reference": f"grazing design --rig FILE --c2 {design['c2']!r}: "
                         "noise_gain_position_only x sensor.noise"}
@@ -373,7 +383,9 @@ def format_report(r: dict) -> str:
         lines.append(f"  none: {sp['note']}")
     else:
         lines.append(f"  noise gain {sp['noise_gain_position_only']:.6g} (position only, "
-                     f"{sp['samples_per_period']} samples per period, model estimator) x "
+                     f"{sp['samples_per_period']} samples per period, model estimator "
+                     f"answering {sp['lead_s'] * 1e3:.4g} ms before the section's last "
+                     f"sample, {sp['pulse_width_s'] * 1e3:.4g} ms pulse) x "
                      f"sensor noise {sp['sensor_noise_m']:.4g} m = {sp['spread_m']:.6g} m "
                      f"(std of the Pi2 position)")
         if "note" in sp:

@@ -155,6 +155,12 @@ PARAMETERS = (
               "forcing period (a wearing stop, a warming rig; issue 29): sample k's period "
               "runs with the Delta d in force plus delta_d_drift * (k - k0), k0 the sample "
               "where it was set or reset; 0 = none", -FINITE, FINITE, read_only=True),
+    Parameter("pre_roll", "integer", 0, "realtime, scheduled: the stream's pre-roll, the "
+              "first pre_roll sections have no deadline: the stream runs, nothing acts there "
+              "and an answer to them is counted as unarmed, not late (a section's answer is "
+              "estimated from the period before it, which a stream starting at section 0 "
+              "does not have: docs/driver_contract.md, 'Pre-roll'); a rig_file's default 1, "
+              ">= 0", 0, read_only=True),
     Parameter("sensor_seed", "integer", 0, "seed of the sensor noise, >= 0 (draws a pure "
               "function of (sensor_seed, sample index))", 0, read_only=True),
     Parameter("pulse_width", "double", 0.0,
@@ -281,6 +287,7 @@ class SimSettings:
     watchdog: WatchdogLimits = WatchdogLimits()
     feasibility: str = "refuse"
     delta_d_drift: float = 0.0
+    pre_roll: int = 0
 
     @property
     def scheduled(self) -> bool:
@@ -301,6 +308,8 @@ class SimSettings:
                      f"quantum={sn.quantum!r} bias={sn.bias!r} seed={sn.seed}")
         if self.delta_d_drift != 0.0:
             text += f" delta_d_drift={self.delta_d_drift!r}"
+        if self.pre_roll and self.scheduled:
+            text += f" pre_roll={self.pre_roll}"
         if self.pulse_width > 0.0:
             text += f" pulse_width={self.pulse_width!r} force_limit={self.force_limit!r}"
         if self.faults.active:
@@ -357,6 +366,10 @@ def settings_from_values(values: dict) -> SimSettings:
     seed = int(values["seed"])
     if seed < 0:
         raise ParameterError(f"seed={seed} is invalid: valid range is seed >= 0")
+    pre_roll = int(values["pre_roll"])
+    if pre_roll < 0:
+        raise ParameterError(f"pre_roll={pre_roll} is invalid: valid range is pre_roll >= 0 "
+                             "(sections without a deadline at the stream's start)")
     actuation = _actuation_values(values, p, mode, fidelity)
     return SimSettings(
         params=p, x0=x0, v0=v0, mode=mode,
@@ -371,7 +384,8 @@ def settings_from_values(values: dict) -> SimSettings:
         seed=seed, sensor=_sensor(values), watchdog=_watchdog(values),
         feasibility=_choice(values, "feasibility", FEASIBILITY),
         delta_d_drift=_finite("delta_d_drift", values["delta_d_drift"], lambda v: True,
-                              "a finite delta_d_drift (per period)"), **actuation)
+                              "a finite delta_d_drift (per period)"),
+        pre_roll=pre_roll, **actuation)
 
 
 def _choice(values: dict, name: str, choices: tuple) -> str:
