@@ -22,6 +22,8 @@ import math
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.arguments import finite, integer_at_least
 
+from .common import add_rig_option
+
 __all__ = ["add_rig_option", "add_rig_parser", "apply_rig", "rig_options", "load",
            "cmd_rig", "RIG_COMMANDS", "POSITION_ERROR", "VELOCITY_ERROR"]
 
@@ -31,16 +33,6 @@ RIG_COMMANDS = ("design", "orbit", "continue", "continue2", "simulate", "sweep",
 #: The errors ``grazing rig`` shows as force pulses: 1 um of position, 1 mm/s of velocity.
 POSITION_ERROR = 1e-6
 VELOCITY_ERROR = 1e-3
-
-
-def add_rig_option(parser) -> None:
-    """``--rig FILE`` on a subcommand's parser or group."""
-    parser.add_argument("--rig", metavar="FILE", default=None,
-                        help="take the model from this rig file in SI units (docs/rig.md, "
-                             "e.g. config/rigs/lab_20hz.yaml): zeta, r, omega, pi2_offset and "
-                             "Delta d, and where the command has them the actuation delay "
-                             "(the budget) and the sensor's samples per period; those options "
-                             "are then refused")
 
 
 def load(path, option: str = "--rig"):
@@ -125,8 +117,8 @@ def apply_rig(args, argv) -> None:
 # ---------------------------------------------------------------------- grazing rig
 def _design(rig, args) -> tuple:
     """(``grazing design``'s JSON for this rig, which c2 and why): the design of
-    cli/commands.py on the rig's options, with --c2 or --optimize noise."""
-    from .commands import cmd_design
+    cli/design.py on the rig's options, with --c2 or --optimize noise."""
+    from .design import cmd_design
 
     ns = argparse.Namespace(command="design", model=None, json=True, c2=args.c2,
                             optimize=None, estimator="model", out=None, method="exact",
