@@ -89,6 +89,8 @@ def test_hertz_and_rigid_values():
     (dict(actuation_delay=0.5), "actuation_delay="),
     (dict(fidelity="zdm2"), "fidelity="),
     (dict(delta_d_drift=1e-6), "delta_d_drift="),
+    (dict(actuator_bandwidth=2.0), "actuator_bandwidth="),
+    (dict(actuator_latency=0.1), "actuator_latency="),
 ])
 def test_bad_contact_parameters_name_the_parameter(bad, name):
     with pytest.raises(ParameterError, match=name):
