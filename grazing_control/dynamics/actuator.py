@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.impact import Impact
@@ -195,6 +194,8 @@ def _first_impact(p, tau0, zp, f_inf, k, tau_a, duration):
         u, v, gu, gv = stack.pop()
         if v - u <= 1e-12:
             if gu < 0.0 <= gv:
+                from scipy.optimize import brentq   # here: the nodes import no solver
+
                 return brentq(g, u, v, xtol=1e-16)
             continue                   # a tangency below the resolution, or leaving the wall
         if max(gu, gv) + m_bound(u) * (v - u) ** 2 / 8.0 < 0.0:
