@@ -30,6 +30,13 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               (dynamics.actuation.pulse_orbit at 21 walls, interpolated) over the
               controlled periods from ``--control-after`` + 100 on, one impact per period,
               the Delta d estimate's error at the end. Use ``--periods 2000``.
+``reidentify`` the mismatch scene with re-identification in the loop (reidentify,
+              reidentify_periods 20, track_delta_d, consistency window 10): the first
+              mismatch section, each decision on controller/model_switch (the section,
+              the refitted zeta, r, Delta d with standard errors, the new gains), and
+              the orbit offset of the last ``--window`` periods about the pulse loop's
+              orbit of the plant with the gains in force then (the new ones after a
+              switch), impacts per period from control on. Use ``--periods 3000``.
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -56,7 +63,7 @@ import yaml as _yaml
 from grazing_control.dynamics.capture import capture_time
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.recordings.analyze import analyze, read_watch
+from grazing_control.recordings.analyze import analyze, read_switches, read_watch
 from grazing_control.recordings.scenes import load
 from grazing_control.ros import launcher
 
@@ -131,12 +138,29 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
         if rows is not None and np.isfinite(rows["delta_d"][-1]):
             k_last = int(round(rows["stamp"][-1] * 1e-9 / p.period))
             num["delta_d_error_end"] = float(rows["delta_d"][-1] - (DD + drift * k_last))
+    switches = read_switches(out / "bag", period_s=p.period)
+    if switches:
+        num["switches"] = switches
+        done = [s for s in switches if s["switched"]]
+        if done:
+            from grazing_control.dynamics.actuation import pulse_orbit
+
+            last = done[-1]
+            g2 = Gains(last["c1"], last["c2"], DELAY)
+            ox = pulse_orbit(p, g2, WIDTH).pi2[0]
+            num["offset_after_switch"] = float(np.mean(x[last_slice(x, window)]) - ox)
+            after = counts[last["section"]:]
+            num["one_impact_after_switch"] = float(np.mean(after == 1))
     if rows is not None:
         fitted = np.isfinite(rows["nis"])
         num["first_verdict_section"] = (int(round(rows["stamp"][fitted][0] * 1e-9 / p.period))
                                         if np.any(fitted) else None)
         num["verdicts"] = int(fitted.sum())
     return num
+
+
+def last_slice(x, window: int) -> slice:
+    return slice(max(0, x.size - window), None)
 
 
 def _line(name, n) -> str:
@@ -161,6 +185,19 @@ def _line(name, n) -> str:
                      f"{(w['bias'][0] - 1e-4) / w['bias'][1]:.2f}")
     if "delta_d" in w:
         parts.append(f"Delta d^ {w['delta_d'][0]:.5g} +- {w['delta_d'][1]:.3g}")
+    for sw in n.get("switches", []):
+        fit = ("" if sw["zeta"] is None else
+               f"zeta {sw['zeta']:.6g} +- {sw['zeta_se']:.2g}, r {sw['r']:.4g} +- "
+               f"{sw['r_se']:.2g}, Delta d {sw['delta_d']:.4g} +- {sw['delta_d_se']:.2g}, "
+               f"fit {sw['cpu_s']:.0f} s CPU")
+        parts.append((f"switched at section {sw['section']}" if sw["switched"] else
+                      f"refused at section {sw['section']} ({sw['reason']})")
+                     + f" (requested at {sw['requested_at']}): {fit}"
+                     + (f", c1 {sw['c1']:.6g} c2 {sw['c2']:.6g}" if sw["switched"] else ""))
+    if "offset_after_switch" in n:
+        parts.append(f"after the switch: orbit offset (last window, about the new gains' "
+                     f"pulse orbit) {n['offset_after_switch']:.3g}, one impact in "
+                     f"{100 * n['one_impact_after_switch']:.1f} % of the periods")
     if w:
         parts.append(f"mismatch sections {w['mismatch_sections']} of {w['sections']} "
                      f"(first {w.get('first_mismatch_section')}, first verdict "
@@ -171,7 +208,8 @@ def _line(name, n) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
-                    choices=("bias", "mismatch", "right", "capture", "drift", "gross"))
+                    choices=("bias", "mismatch", "right", "capture", "drift", "gross",
+                             "reidentify"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
@@ -193,6 +231,11 @@ def main(argv=None):
             cases += [("zeta +5 %, Delta d +10 %, monitor", 0.0, wrong),
                       ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
                        {**wrong, "track_delta_d": True})]
+        elif part == "reidentify":
+            wrong = {"zeta": 1.05 * p.zeta, "delta_d": 1.1 * DD, **watch}
+            cases += [("zeta +5 %, Delta d +10 %, reidentify", 0.0,
+                       {**wrong, "track_delta_d": True, "reidentify": True,
+                        "reidentify_periods": 20})]
         elif part == "gross":
             cases += [("zeta +20 %, Delta d +50 %, monitor", 0.0,
                        {"zeta": 1.2 * p.zeta, "delta_d": 1.5 * DD, **watch})]
