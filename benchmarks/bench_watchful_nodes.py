@@ -149,8 +149,12 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
             g2 = Gains(last["c1"], last["c2"], DELAY)
             ox = pulse_orbit(p, g2, WIDTH).pi2[0]
             num["offset_after_switch"] = float(np.mean(x[last_slice(x, window)]) - ox)
-            after = counts[last["section"]:]
+            after = counts[max(last["section"], control_after):]
             num["one_impact_after_switch"] = float(np.mean(after == 1))
+            if rows is not None:
+                k_rows = np.round(rows["stamp"] * 1e-9 / p.period).astype(int)
+                num["mismatch_after_switch"] = int(np.sum((rows["mismatch"] == 1.0)
+                                                          & (k_rows > last["section"])))
     if rows is not None:
         fitted = np.isfinite(rows["nis"])
         num["first_verdict_section"] = (int(round(rows["stamp"][fitted][0] * 1e-9 / p.period))
@@ -197,7 +201,8 @@ def _line(name, n) -> str:
     if "offset_after_switch" in n:
         parts.append(f"after the switch: orbit offset (last window, about the new gains' "
                      f"pulse orbit) {n['offset_after_switch']:.3g}, one impact in "
-                     f"{100 * n['one_impact_after_switch']:.1f} % of the periods")
+                     f"{100 * n['one_impact_after_switch']:.1f} % of the controlled periods, "
+                     f"{n.get('mismatch_after_switch')} mismatch sections after it")
     if w:
         parts.append(f"mismatch sections {w['mismatch_sections']} of {w['sections']} "
                      f"(first {w.get('first_mismatch_section')}, first verdict "

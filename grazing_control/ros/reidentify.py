@@ -78,10 +78,10 @@ def reid_from_values(values: dict, period: float):
 
 
 class AutoTrigger:
-    """When a mismatch verdict requests a refit: on the first mismatch section, and
-    again only once ``holdoff`` periods have passed since the last decision (a fresh
-    window of data), never while one runs. After a switch the monitor restarts (its
-    window held the old model's innovations)."""
+    """When a mismatch verdict requests a refit: on the first mismatch section once the
+    record holds a whole window, and again only once ``holdoff`` periods have passed
+    since the last decision (a fresh window of data), never while one runs. After a
+    switch the monitor restarts (its window held the old model's innovations)."""
 
     def __init__(self, holdoff: int):
         self.holdoff = int(holdoff)
@@ -202,10 +202,9 @@ class ReidentifySide:
             return
         v = self.node.verdict
         if (self.auto and v is not None and v.k == k and v.status == "mismatch"
-                and not self.worker.running and self.trigger.wants(k, True)):
-            ok, message = self.request(k)
-            if not ok:
-                self.node.get_logger().warning(message)
+                and not self.worker.running and self.trigger.wants(k, True)
+                and self.record.covered >= self.record.periods - 0.5):
+            self.request(k)
 
     def request(self, k: int | None = None) -> tuple:
         """Start a refit now: (True, what started) or (False, the refusal's line; a
