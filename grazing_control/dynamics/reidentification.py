@@ -61,6 +61,10 @@ REFIT_PERIODS = 20
 #: zeta and the wall (measured on 20 periods at T/200, sigma 1e-4: zeta 0.01051 +- 3.7e-4
 #: and the wall 1.1e-5 off with them free; docs/theory_reidentification.md).
 UNITS = {"natural_frequency": 1.0, "forcing_amplitude": 1.0}
+#: The largest relative standard error of zeta and r a refit may switch to: beyond it the
+#: window does not determine the parameter (a refit of a stream with an unmodelled sensor
+#: bias of 1e-4 gave r = 0.95 +- 0.22 and the wall on the wrong side).
+RELATIVE_SE = 0.1
 #: The solver's budget per continuation step (identify's default: 100 did not converge
 #: on 20 controlled periods through the nodes).
 MAX_NFEV = 400
@@ -260,7 +264,8 @@ def refit(record: Recording, running: OscillatorParams, *, max_nfev: int = MAX_N
 
     Raises ReidentificationError: ``no_impacts`` (none recorded or found), ``fit_failed``
     (the solver did not converge, no initial guess), ``not_identified`` (zeta, r or d
-    without a finite standard error: a singular fit; or outside the model's ranges).
+    without a finite standard error: a singular fit; zeta or r with a standard error
+    beyond :data:`RELATIVE_SE` of its value; or outside the model's ranges).
     """
     c0 = time.process_time()
     impacts = "recorded" if record.impact_t.size else "motion"
@@ -281,6 +286,12 @@ def refit(record: Recording, running: OscillatorParams, *, max_nfev: int = MAX_N
         raise ReidentificationError("not_identified", f"the refit does not identify "
                                     f"{', '.join(bad)} (no finite standard error: a "
                                     "singular fit)")
+    vague = [f"{n} = {getattr(ident.model, n):.4g} +- {se[n]:.2g}" for n in ("zeta", "r")
+             if not se[n] <= RELATIVE_SE * abs(getattr(ident.model, n))]
+    if vague:
+        raise ReidentificationError("not_identified", f"the refit does not determine "
+                                    f"{', '.join(vague)} (standard error beyond "
+                                    f"{RELATIVE_SE:.0%})")
     if not ident.converged:
         raise ReidentificationError("fit_failed", f"the refit did not converge: "
                                     f"{ident.message}")

@@ -178,8 +178,11 @@ class ReidentifySide:
 
     # ---------------------------------------------------------------- the stream
     def sample(self, t: float, x: float, v: float) -> None:
-        """A stream sample, with the phase reference omega t (the fit's forcing phase
-        theta takes the offset)."""
+        """A stream sample, less the augmented filter's bias estimate where it estimates
+        one (the fit's model has no sensor offset), with the phase reference omega t
+        (the fit's forcing phase theta takes the offset)."""
+        if getattr(self.node.stream, "use_bias", False):
+            x = x - self.node.stream.bias
         self.record.add_sample(t, x, v, math.cos(self.omega * t), math.sin(self.omega * t))
 
     def answered(self, k: int, dv: float) -> None:
