@@ -101,6 +101,17 @@ def test_refit_recovers_the_model_from_a_noise_free_motion():
     assert fit.units == (1.0, 1.0) and fit.impacts > 10
 
 
+def test_a_fit_that_does_not_explain_the_window_is_refused():
+    """The fit's residual noise against the sensor's: a window noisier than the sensor
+    says (1e-3 against 1e-4) is not explained by the refitted model: fit_failed; the
+    same window against its own noise passes."""
+    record = rig_recording(SCENE, periods=24, noise=1e-3, seed=3)
+    with pytest.raises(ReidentificationError, match="does not explain the window") as err:
+        refit(record, SCENE, sigma=1e-4)
+    assert err.value.reason == "fit_failed"
+    assert refit(record, SCENE, sigma=1e-3).sigma == pytest.approx(1e-3, rel=0.2)
+
+
 def test_a_stretch_without_impacts_is_named_and_nothing_is_planned():
     """Free flight (the wall far away) identifies neither r nor the wall: reason
     no_impacts, no gains in the plan."""

@@ -20,7 +20,7 @@ from grazing_control.ros.reidentify import (REID_DEFAULTS, SWITCH_FIELDS, Reiden
                                             reid_from_values, switch_row)
 
 STREAM = {**REID_DEFAULTS, "pi2_source": "stream", "estimator": "model",
-          "consistency_window": 10}
+          "consistency_window": 10, "sensor_noise": 1e-4}
 P = OscillatorParams(delta_d=-5e-6)
 WRONG = P.with_(zeta=1.05 * P.zeta, delta_d=1.1 * P.delta_d)
 

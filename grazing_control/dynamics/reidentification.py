@@ -65,6 +65,11 @@ UNITS = {"natural_frequency": 1.0, "forcing_amplitude": 1.0}
 #: window does not determine the parameter (a refit of a stream with an unmodelled sensor
 #: bias of 1e-4 gave r = 0.95 +- 0.22 and the wall on the wrong side).
 RELATIVE_SE = 0.1
+#: The largest ratio of the fit's residual noise to the sensor's a refit may switch to:
+#: beyond it the fitted model does not explain the window (a fit that ended in another
+#: minimum, seed 11 of the benchmark: zeta 0.018 +- 2e-4, residual 1.8e-3 against the
+#: sensor's 1e-4).
+RESIDUAL_RATIO = 1.5
 #: The solver's budget per continuation step (identify's default: 100 did not converge
 #: on 20 controlled periods through the nodes).
 MAX_NFEV = 400
@@ -256,14 +261,18 @@ def model_from_fit(ident, running: OscillatorParams) -> OscillatorParams:
 
 
 def refit(record: Recording, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
-          periods: float | None = None) -> Refit:
+          periods: float | None = None, sigma: float | None = None) -> Refit:
     """Fit the model to ``record`` (:func:`grazing_control.dynamics.identification.identify`
     with the recorded impact times where there are some, else found from the motion,
     started from the running model's zeta and Omega = 1) and map it to the controller's
     model (:func:`model_from_fit`).
 
+    ``sigma``: the sensor's noise std; the fit's residual noise must not exceed
+    :data:`RESIDUAL_RATIO` times it (None: not checked).
+
     Raises ReidentificationError: ``no_impacts`` (none recorded or found), ``fit_failed``
-    (the solver did not converge, no initial guess), ``not_identified`` (zeta, r or d
+    (the solver did not converge, no initial guess, a residual beyond RESIDUAL_RATIO
+    sigma), ``not_identified`` (zeta, r or d
     without a finite standard error: a singular fit; zeta or r with a standard error
     beyond :data:`RELATIVE_SE` of its value; or outside the model's ranges).
     """
@@ -295,6 +304,10 @@ def refit(record: Recording, running: OscillatorParams, *, max_nfev: int = MAX_N
     if not ident.converged:
         raise ReidentificationError("fit_failed", f"the refit did not converge: "
                                     f"{ident.message}")
+    if sigma is not None and not ident.sigma <= RESIDUAL_RATIO * sigma:
+        raise ReidentificationError("fit_failed", f"the refit does not explain the window: "
+                                    f"residual noise {ident.sigma:.3g}, "
+                                    f"{ident.sigma / sigma:.3g} x the sensor's {sigma:.3g}")
     new = model_from_fit(ident, running)
     m = ident.model
     phase = math.remainder(m.tau0 + m.forcing_phase - new.tau2, 2.0 * math.pi)
@@ -331,12 +344,12 @@ def redesign(p: OscillatorParams, gains: Gains, conditions: str = "combined") ->
 
 def plan_switch(window: StreamWindow, running: OscillatorParams, gains: Gains,
                 conditions: str = "combined", *, max_nfev: int = MAX_NFEV,
-                requested_at: int | None = None) -> SwitchPlan:
+                requested_at: int | None = None, sigma: float | None = None) -> SwitchPlan:
     """The window's Recording, refit and redesign (steps 1-3): a SwitchPlan with the new
     gains, or with the refusal (never raises a ReidentificationError)."""
     try:
         record = window.recording(running, gains.delay)
-        fit = refit(record, running, max_nfev=max_nfev)
+        fit = refit(record, running, max_nfev=max_nfev, sigma=sigma)
     except ReidentificationError as exc:
         return SwitchPlan(error=exc, requested_at=requested_at)
     except (RecordingError, ValueError) as exc:
@@ -392,11 +405,12 @@ class Reidentifier:
     section.
     """
 
-    def __init__(self, conditions: str = "combined", max_nfev: int = MAX_NFEV):
+    def __init__(self, conditions: str = "combined", max_nfev: int = MAX_NFEV,
+                 sigma: float | None = None):
         if conditions not in CONDITIONS:
             raise ParameterError(f"design_conditions={conditions!r} is invalid: valid values "
                                  f"are {', '.join(CONDITIONS)}")
-        self.conditions, self.max_nfev = conditions, max_nfev
+        self.conditions, self.max_nfev, self.sigma = conditions, max_nfev, sigma
         self._thread = None
         self._result = None
         self._lock = threading.Lock()
@@ -420,7 +434,7 @@ class Reidentifier:
 
         def work():
             plan = plan_switch(window, running, gains, self.conditions,
-                               max_nfev=self.max_nfev, requested_at=k)
+                               max_nfev=self.max_nfev, requested_at=k, sigma=self.sigma)
             with self._lock:
                 self._result = plan
 

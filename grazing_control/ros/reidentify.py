@@ -74,7 +74,8 @@ def reid_from_values(values: dict, period: float):
     if auto and not int(values["consistency_window"]) >= 1:
         raise ParameterError("reidentify=True is invalid with consistency_window=0: valid "
                              "only with a consistency test (consistency_window >= 1)")
-    return StreamRecord(period, int(periods)), Reidentifier(conditions), auto
+    return (StreamRecord(period, int(periods)),
+            Reidentifier(conditions, sigma=float(values["sensor_noise"])), auto)
 
 
 class AutoTrigger:
