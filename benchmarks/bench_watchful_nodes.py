@@ -33,10 +33,11 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
 ``reidentify`` the mismatch scene with re-identification in the loop (reidentify,
               reidentify_periods 20, track_delta_d, consistency window 10): the first
               mismatch section, each decision on controller/model_switch (the section,
-              the refitted zeta, r, Delta d with standard errors, the new gains), and
-              the orbit offset of the last ``--window`` periods about the pulse loop's
-              orbit of the plant with the gains in force then (the new ones after a
-              switch), impacts per period from control on. Use ``--periods 3000``.
+              the refitted zeta, r, Delta d with standard errors, the new gains), the
+              orbit offset after the last switch (the mean Pi2 x from SETTLE periods
+              after it to the end, less the pulse loop's orbit of the plant with its
+              gains), mismatch sections after it, impacts per period from control on.
+              Use ``--periods 3000``.
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -68,6 +69,8 @@ from grazing_control.recordings.scenes import load
 from grazing_control.ros import launcher
 
 GRAZING = str(Path(sys.executable).with_name("grazing"))
+#: Periods after a model switch before its orbit offset is measured.
+SETTLE = 100
 DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
 
 
@@ -148,7 +151,9 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
             last = done[-1]
             g2 = Gains(last["c1"], last["c2"], DELAY)
             ox = pulse_orbit(p, g2, WIDTH).pi2[0]
-            num["offset_after_switch"] = float(np.mean(x[last_slice(x, window)]) - ox)
+            held = x[last["section"] + SETTLE:]     # after the last switch, settled
+            num["offset_after_switch"] = float(np.mean(held) - ox) if held.size else None
+            num["held_periods"] = int(held.size)
             after = counts[max(last["section"], control_after):]
             num["one_impact_after_switch"] = float(np.mean(after == 1))
             if rows is not None:
@@ -161,10 +166,6 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
                                         if np.any(fitted) else None)
         num["verdicts"] = int(fitted.sum())
     return num
-
-
-def last_slice(x, window: int) -> slice:
-    return slice(max(0, x.size - window), None)
 
 
 def _line(name, n) -> str:
@@ -199,8 +200,9 @@ def _line(name, n) -> str:
                      + f" (requested at {sw['requested_at']}): {fit}"
                      + (f", c1 {sw['c1']:.6g} c2 {sw['c2']:.6g}" if sw["switched"] else ""))
     if "offset_after_switch" in n:
-        parts.append(f"after the switch: orbit offset (last window, about the new gains' "
-                     f"pulse orbit) {n['offset_after_switch']:.3g}, one impact in "
+        parts.append(f"after the last switch: orbit offset (mean Pi2 x of the "
+                     f"{n['held_periods']} periods from {SETTLE} after it, about the pulse "
+                     f"orbit of its gains) {n['offset_after_switch']:.3g}, one impact in "
                      f"{100 * n['one_impact_after_switch']:.1f} % of the controlled periods, "
                      f"{n.get('mismatch_after_switch')} mismatch sections after it")
     if w:

@@ -584,12 +584,10 @@ class ControllerNode(Node):
         self.mismatches = 0             # sections whose verdict was a mismatch
         self.first_mismatch = None      # the first section with a mismatch verdict
         self._diag_mismatches = 0
-        self.reid = None         # re-identification in the loop (ros/reidentify.py), or None
-        if self.stream is not None:
-            try:
-                self.reid = ReidentifySide.from_node(self, self._values())
-            except ParameterError as exc:
-                raise StartupError(str(exc)) from None
+        try:        # re-identification in the loop (ros/reidentify.py), or None
+            self.reid = ReidentifySide.from_node(self, self._values())
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
         self.rig_side = None     # the driver contract's side (rig_file), or None
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)

@@ -65,7 +65,8 @@ def reid_from_values(values: dict, period: float):
         raise ParameterError(f"design_conditions={conditions!r} is invalid: valid values are "
                              f"{', '.join(CONDITIONS)}")
     auto = bool(values["reidentify"])
-    if values["pi2_source"] != "stream" or values["estimator"] != "model":
+    if (values["pi2_source"] != "stream" or values["estimator"] != "model"
+            or not math.isfinite(period)):
         if auto:
             raise ParameterError(f"reidentify=True is invalid with pi2_source="
                                  f"{values['pi2_source']} estimator={values['estimator']}: "
@@ -174,8 +175,10 @@ class ReidentifySide:
 
     @classmethod
     def from_node(cls, node, values: dict):
-        made = reid_from_values(values, node.model.period)
-        return None if made is None else cls(node, *made)
+        """The side of a controller node, None outside the stream's model filter (its
+        parameters validated in every mode: ParameterError)."""
+        made = reid_from_values(values, math.nan if node.model is None else node.model.period)
+        return None if made is None or node.stream is None else cls(node, *made)
 
     # ---------------------------------------------------------------- the stream
     def sample(self, t: float, x: float, v: float) -> None:
