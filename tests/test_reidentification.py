@@ -85,6 +85,24 @@ def test_the_record_keeps_the_last_periods_and_restarts_at_a_reset():
     assert len(rec.samples) == 1
 
 
+def test_the_window_starts_after_the_model_filters_last_restart():
+    """Without an impact sensor the impacts are the model's predictions from the
+    filter's estimates: the window starts after the last section the model filter did
+    not estimate (an arc fit after a start or a reset), and is refused when too short."""
+    rec = StreamRecord(P.period, 20)
+    h = P.period / 20
+    for j in range(20 * 25 + 1):
+        rec.add_sample(j * h, 0.0, math.nan, 1.0, 0.0)
+    for k in range(26):
+        rec.add_section(k, (P.x_ref, P.v_ref), 0.0, k * P.period + 3.0, fitted=k not in (6, 8))
+    w = rec.snapshot()
+    assert w.samples[0, 0] == pytest.approx(9 * P.period) and min(w.sections) == 9
+    rec.add_section(26, (P.x_ref, P.v_ref), 0.0, 26 * P.period + 3.0, fitted=False)
+    rec.add_section(18, (P.x_ref, P.v_ref), 0.0, 18 * P.period + 3.0, fitted=False)
+    with pytest.raises(ReidentificationError, match="since the model filter's last restart"):
+        rec.snapshot()
+
+
 def test_refit_recovers_the_model_from_a_noise_free_motion():
     """Differential: the refit of the exact motion (impacts of every size, recorded
     times) started from a model with zeta +5 % and Delta d +10 % gives the truth's zeta,

@@ -101,7 +101,7 @@ class StreamRecord:
                                  f"an integer >= {MIN_PERIODS} periods")
         self.period, self.periods = float(period), int(periods)
         self.samples = deque()
-        self.sections = {}              # k -> (z, dv, instant of the kick)
+        self.sections = {}              # k -> (state, dv, instant of the kick, fitted)
         self.impacts = deque()
 
     def clear(self) -> None:
@@ -124,14 +124,18 @@ class StreamRecord:
         while self.impacts and self.impacts[0] < start:
             self.impacts.popleft()
 
-    def add_section(self, k: int, z, dv: float, at: float) -> None:
-        self.sections[int(k)] = ((float(z[0]), float(z[1])), float(dv), float(at))
+    def add_section(self, k: int, z, dv: float, at: float, fitted: bool = True) -> None:
+        """Section k's estimate (absolute), its kick and instant; ``fitted``: the model
+        filter made the estimate (not an arc fit after a start or a reset)."""
+        self.sections[int(k)] = ((float(z[0]), float(z[1])), float(dv), float(at),
+                                 bool(fitted))
         for old in [j for j in self.sections if j < k - self.periods - 2]:
             del self.sections[old]
 
     def acted(self, k: int, dv: float, at: float) -> None:
         if k in self.sections:
-            self.sections[k] = (self.sections[k][0], float(dv), float(at))
+            state, _dv, _at, fitted = self.sections[k]
+            self.sections[k] = (state, float(dv), float(at), fitted)
 
     def add_impact(self, t: float) -> None:
         if not self.impacts or t > self.impacts[-1]:
@@ -144,14 +148,31 @@ class StreamRecord:
             return 0.0
         return (self.samples[-1][0] - self.samples[0][0]) / self.period
 
+    def _usable_start(self) -> float:
+        """Where the window may start: without an impact sensor, after the last section
+        that the model filter did not estimate (its prediction of the impacts is not
+        trusted: two missed impacts after the start made a refit's residual 18 sigma,
+        docs/theory_reidentification.md), else the first sample."""
+        first = self.samples[0][0] if self.samples else 0.0
+        if self.impacts or not self.sections:
+            return first
+        unfitted = [k for k, sec in self.sections.items() if not sec[3]]
+        return max(first, (max(unfitted) + 1) * self.period - 1e-9 * self.period) \
+            if unfitted else first
+
     def snapshot(self) -> "StreamWindow":
-        """The window (copies). ReidentificationError ``too_few_periods`` when it covers
-        less than :data:`MIN_PERIODS` periods."""
-        if self.covered < MIN_PERIODS - 0.5:
+        """The window (copies), from :meth:`_usable_start`. ReidentificationError
+        ``too_few_periods`` when it covers less than :data:`MIN_PERIODS` periods."""
+        start = self._usable_start()
+        covered = (self.samples[-1][0] - start) / self.period if self.samples else 0.0
+        if covered < MIN_PERIODS - 0.5:
             raise ReidentificationError(
-                "too_few_periods", f"too few periods of stream to refit: {self.covered:.1f}"
-                f" received, need at least {MIN_PERIODS}")
-        return StreamWindow(np.array(self.samples), dict(self.sections),
+                "too_few_periods", f"too few periods of stream to refit: {covered:.1f} "
+                f"received since the model filter's last restart, need at least "
+                f"{MIN_PERIODS}")
+        rows = np.array([r for r in self.samples if r[0] >= start])
+        return StreamWindow(rows, {k: v for k, v in self.sections.items()
+                                   if k * self.period >= start - 1e-9 * self.period},
                             np.array(self.impacts), self.period)
 
 
@@ -168,7 +189,7 @@ class StreamWindow:
     def kicks(self) -> np.ndarray:
         """The instants of the non-zero kicks inside the samples' span."""
         t0, t1 = self.samples[0, 0], self.samples[-1, 0]
-        at = np.array(sorted(a for _z, dv, a in self.sections.values() if dv != 0.0))
+        at = np.array(sorted(sec[2] for sec in self.sections.values() if sec[1] != 0.0))
         return at[(at > t0) & (at < t1)] if at.size else at
 
     def predicted_impacts(self, p: OscillatorParams, delay: float) -> np.ndarray:
@@ -179,7 +200,7 @@ class StreamWindow:
         at a bound)."""
         out = []
         for k in sorted(self.sections):
-            state, dv, at = self.sections[k]
+            state, dv, at, _fitted = self.sections[k]
             z = (state[0] - p.x_ref, state[1] - p.v_ref)
             if not (math.isfinite(z[0]) and math.isfinite(z[1])):
                 continue

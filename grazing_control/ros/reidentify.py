@@ -191,8 +191,9 @@ class ReidentifySide:
 
     def answered(self, k: int, dv: float) -> None:
         if self._state is not None:
-            self.record.add_section(k, self._state, dv,
-                                    k * self.node.model.period + self.node.actuation_delay)
+            self.record.add_section(k, self._state[:2], dv,
+                                    k * self.node.model.period + self.node.actuation_delay,
+                                    self._state[2])
 
     def acted(self, k: int, dv: float) -> None:
         self.record.acted(k, dv, k * self.node.model.period + self.node.actuation_delay)
@@ -202,7 +203,7 @@ class ReidentifySide:
         """Section k's estimate is made, its answer not yet: apply a finished plan here,
         or start a refit on a mismatch verdict (``reidentify``)."""
         p = self.node.model
-        self._state = (p.x_ref + est.z[0], p.v_ref + est.z[1])
+        self._state = (p.x_ref + est.z[0], p.v_ref + est.z[1], est.source == "model")
         plan = self.worker.take()
         if plan is not None:
             self._apply(plan, k, key)
@@ -211,7 +212,9 @@ class ReidentifySide:
         if (self.auto and v is not None and v.k == k and v.status == "mismatch"
                 and not self.worker.running and self.trigger.wants(k, True)
                 and self.record.covered >= self.record.periods - 0.5):
-            self.request(k)
+            ok, _line = self.request(k)
+            if not ok:
+                self.trigger.decided(k)     # e.g. too_few_periods since a restart
 
     def request(self, k: int | None = None) -> tuple:
         """Start a refit now: (True, what started) or (False, the refusal's line; a
