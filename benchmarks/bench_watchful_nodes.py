@@ -35,8 +35,8 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               mismatch section, each decision on controller/model_switch (the section,
               the refitted zeta, r, Delta d with standard errors, the new gains), the
               orbit offset after the last switch (the mean Pi2 x from SETTLE periods
-              after it to the end, less the pulse loop's orbit of the plant with its
-              gains), mismatch sections after it, impacts per period from control on.
+              after it, and after control on, to the end, less the pulse loop's orbit
+              of the plant with its gains), mismatch sections after it, impacts per period from control on.
               Use ``--periods 3000``.
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
@@ -151,7 +151,7 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
             last = done[-1]
             g2 = Gains(last["c1"], last["c2"], DELAY)
             ox = pulse_orbit(p, g2, WIDTH).pi2[0]
-            held = x[last["section"] + SETTLE:]     # after the last switch, settled
+            held = x[max(last["section"], control_after) + SETTLE:]   # switched, controlled
             num["offset_after_switch"] = float(np.mean(held) - ox) if held.size else None
             num["held_periods"] = int(held.size)
             after = counts[max(last["section"], control_after):]
@@ -200,9 +200,10 @@ def _line(name, n) -> str:
                      + f" (requested at {sw['requested_at']}): {fit}"
                      + (f", c1 {sw['c1']:.6g} c2 {sw['c2']:.6g}" if sw["switched"] else ""))
     if "offset_after_switch" in n:
-        parts.append(f"after the last switch: orbit offset (mean Pi2 x of the "
-                     f"{n['held_periods']} periods from {SETTLE} after it, about the pulse "
-                     f"orbit of its gains) {n['offset_after_switch']:.3g}, one impact in "
+        parts.append(f"after the last switch: orbit offset (mean Pi2 x of the last "
+                     f"{n['held_periods']} periods, from {SETTLE} after it and after control "
+                     f"on, about the pulse orbit of its gains) "
+                     f"{n['offset_after_switch']:.3g}, one impact in "
                      f"{100 * n['one_impact_after_switch']:.1f} % of the controlled periods, "
                      f"{n.get('mismatch_after_switch')} mismatch sections after it")
     if w:

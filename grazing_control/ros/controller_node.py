@@ -43,6 +43,11 @@ or ``consistency_window`` (issue 29, :mod:`grazing_control.ros.model_watch`) the
 augmented filter estimates a sensor bias and a drifting Delta d, a consistency monitor
 tests its innovations, and each section's row goes on ``controller/model_watch``; a
 mismatch verdict is an ERROR on /diagnostics naming the test, statistic and bound.
+With ``reidentify`` (on a mismatch verdict) or on a call of ``~/reidentify``
+(std_srvs/Trigger) the model is refitted on the last ``reidentify_periods`` periods in a
+worker thread and, where the design is admissible for it (``design_conditions``), the
+estimator, Eq. 28 and X** switch to it at the next section
+(:mod:`grazing_control.ros.reidentify`); each decision goes on ``controller/model_switch``.
 
 Switching on
 ------------
