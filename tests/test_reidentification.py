@@ -37,6 +37,11 @@ GAINS = Gains(0.006031909726621269, -0.0060746847760492625, 3.0)
 WRONG = P.with_(zeta=1.05 * P.zeta, delta_d=1.1 * P.delta_d)
 
 
+def test_the_condition_sets_are_the_designs():
+    from grazing_control.dynamics import design, reidentification
+    assert reidentification.CONDITIONS == design.CONDITIONS
+
+
 def test_redesign_solves_the_degenerate_condition_of_the_new_model():
     """c2 and the delay are kept; c1 makes N_g,12 of the NEW model vanish (Eq. 38/(D5)),
     and differs from the old model's c1."""

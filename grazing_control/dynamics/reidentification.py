@@ -39,10 +39,14 @@ import numpy as np
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from .design import CONDITIONS, condition_values, degenerate_c1
 from .estimation import FilterState, trajectory
-from .identification import IdentificationError, Recording, identify
-from .identification.data import RecordingError
+
+# The solvers (scipy.optimize, through the identification's fit and the design's orbits)
+# are imported where they are used, in the worker: a node that never refits does not load
+# them at start (tests/test_node_common.py). So the design's condition sets are named here
+# too (tests/test_reidentification.py checks them against dynamics.design.CONDITIONS).
+#: The design's condition sets (dynamics.design.CONDITIONS).
+CONDITIONS = ("combined", "impacting", "non-impacting")
 
 __all__ = ["REASONS", "MIN_PERIODS", "REFIT_PERIODS", "ReidentificationError", "StreamRecord",
            "StreamWindow", "Refit", "SwitchPlan", "model_from_fit", "refit", "redesign", "plan_switch",
@@ -211,9 +215,11 @@ class StreamWindow:
             out += [k * self.period + i[0] for i in imps]
         return np.array(sorted(out))
 
-    def recording(self, p: OscillatorParams, delay: float) -> Recording:
+    def recording(self, p: OscillatorParams, delay: float):
         """The window as a Recording: the impact sensor's times, else the model's
         (:meth:`predicted_impacts`); the kicks' instants; no impact velocities."""
+        from .identification.data import Recording
+
         a = self.samples
         t0, t1 = a[0, 0], a[-1, 0]
         imp = self.impacts if self.impacts.size else self.predicted_impacts(p, delay)
@@ -281,7 +287,7 @@ def model_from_fit(ident, running: OscillatorParams) -> OscillatorParams:
                                     f"model's ranges: {exc}") from None
 
 
-def refit(record: Recording, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
+def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
           periods: float | None = None, sigma: float | None = None) -> Refit:
     """Fit the model to ``record`` (:func:`grazing_control.dynamics.identification.identify`
     with the recorded impact times where there are some, else found from the motion,
@@ -297,6 +303,10 @@ def refit(record: Recording, running: OscillatorParams, *, max_nfev: int = MAX_N
     without a finite standard error: a singular fit; zeta or r with a standard error
     beyond :data:`RELATIVE_SE` of its value; or outside the model's ranges).
     """
+    # the fit's solver (scipy.optimize) is imported here, in the worker: a node that
+    # never refits does not load it (tests/test_node_common.py)
+    from .identification import IdentificationError, identify
+
     c0 = time.process_time()
     impacts = "recorded" if record.impact_t.size else "motion"
     try:
@@ -346,6 +356,8 @@ def redesign(p: OscillatorParams, gains: Gains, conditions: str = "combined") ->
     (:func:`grazing_control.dynamics.design.condition_values`: the limit multipliers
     inside the unit circle, the 1/1 motion's existence, the non-impacting motion's
     stability). ReidentificationError ``no_admissible_design`` otherwise."""
+    from .design import condition_values, degenerate_c1
+
     if conditions not in CONDITIONS:
         raise ParameterError(f"design_conditions={conditions!r} is invalid: valid values are "
                              f"{', '.join(CONDITIONS)}")
@@ -368,6 +380,8 @@ def plan_switch(window: StreamWindow, running: OscillatorParams, gains: Gains,
                 requested_at: int | None = None, sigma: float | None = None) -> SwitchPlan:
     """The window's Recording, refit and redesign (steps 1-3): a SwitchPlan with the new
     gains, or with the refusal (never raises a ReidentificationError)."""
+    from .identification.data import RecordingError
+
     try:
         record = window.recording(running, gains.delay)
         fit = refit(record, running, max_nfev=max_nfev, sigma=sigma)

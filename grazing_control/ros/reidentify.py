@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import math
 
-from grazing_control.dynamics.design import CONDITIONS
-from grazing_control.dynamics.reidentification import (MIN_PERIODS, REASONS, REFIT_PERIODS,
+from grazing_control.dynamics.reidentification import (CONDITIONS, MIN_PERIODS, REASONS,
+                                                       REFIT_PERIODS,
                                                        ReidentificationError, Reidentifier,
                                                        StreamRecord, switch_estimator)
 from grazing_control.oscillator.control import Gains
