@@ -38,6 +38,8 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               after it, and after control on, to the end, less the pulse loop's orbit
               of the plant with its gains), mismatch sections after it, impacts per period from control on.
               Use ``--periods 3000``.
+``reidentify-right`` the same with the right model: what the test's false alarms
+              start (refits of the right model, switches to them or refusals).
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -217,7 +219,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
                     choices=("bias", "mismatch", "right", "capture", "drift", "gross",
-                             "reidentify"))
+                             "reidentify", "reidentify-right"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
@@ -243,6 +245,10 @@ def main(argv=None):
             wrong = {"zeta": 1.05 * p.zeta, "delta_d": 1.1 * DD, **watch}
             cases += [("zeta +5 %, Delta d +10 %, reidentify", 0.0,
                        {**wrong, "track_delta_d": True, "reidentify": True,
+                        "reidentify_periods": 20})]
+        elif part == "reidentify-right":
+            cases += [("right model, reidentify", 0.0,
+                       {**watch, "track_delta_d": True, "reidentify": True,
                         "reidentify_periods": 20})]
         elif part == "gross":
             cases += [("zeta +20 %, Delta d +50 %, monitor", 0.0,

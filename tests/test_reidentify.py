@@ -113,3 +113,21 @@ def test_rows_have_every_field():
     assert len(switch_row(error=err)) == len(SWITCH_FIELDS)
     plan = SwitchPlan(refit=_refit(P), gains=Gains(1.0, 2.0))
     assert len(switch_row(plan, law=SimpleNamespace(x_ref=0.0, v_ref=1.0))) == len(SWITCH_FIELDS)
+
+
+def test_diagnostics_count_switches_and_warn_on_a_new_refusal():
+    node, side, _sent = _node()
+    stat = SimpleNamespace(values={}, summaries=[])
+    stat.add = lambda k, v: stat.values.__setitem__(k, v)
+    stat.merge_summary = lambda level, message: stat.summaries.append(message)
+    side._apply(SwitchPlan(error=ReidentificationError("no_impacts", "why"),
+                           requested_at=3), 30, (1, 0))
+    side.diagnose(stat)
+    assert stat.values["refits refused"] == "no_impacts 1"
+    assert stat.values["model switches"] == 0 and stat.values["refit running"] == "false"
+    assert "no_impacts" in stat.values["re-identification"]
+    assert stat.summaries == ["1 re-identifications refused since the last message (model "
+                              "and gains kept)"]
+    stat.summaries.clear()
+    side.diagnose(stat)                 # nothing new: no WARN
+    assert stat.summaries == []
