@@ -209,3 +209,23 @@ def test_a_plan_that_fails_carries_its_reason_and_no_gains():
     plan = plan_switch(record.snapshot(), P, GAINS)
     assert plan.gains is None and not plan.admissible
     assert plan.error.reason in ("no_impacts", "fit_failed")
+
+
+def test_a_stretch_of_grazing_touches_is_a_singular_fit():
+    """The grazing orbit itself (Delta d = 0: the motion touches the wall with v- = 0 once a
+    period, the touches recorded): v+ = -r v- = 0 whatever r, so r has no column in the
+    fit's Jacobian and the fit is singular: not_identified, nothing planned."""
+    p = OscillatorParams(delta_d=0.0)
+    t = np.arange(16 * 24) * (p.period / 16) + 0.013
+    psi = p.tau2 + p.omega * t
+    x = p.amplitude * np.cos(psi - p.lag)
+    v = -p.amplitude * p.omega * np.sin(psi - p.lag)
+    touch = (2.0 * math.pi * np.arange(30) + p.lag - p.tau2) / p.omega
+    touch = touch[(touch > t[0]) & (touch < t[-1])]
+    nan = np.full(touch.size, np.nan)
+    from grazing_control.dynamics.identification import Recording
+
+    record = Recording(t, x, v, np.cos(psi), np.sin(psi), touch, nan, nan)
+    with pytest.raises(ReidentificationError, match="singular fit") as err:
+        refit(record, p)
+    assert err.value.reason == "not_identified"
