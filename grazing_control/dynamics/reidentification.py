@@ -7,15 +7,17 @@ estimator and gains to the new model when the design is admissible there. Three 
 steps, each with its named failure (:class:`ReidentificationError`, ``reason``):
 
 1. :class:`StreamRecord` keeps the last N periods as received (samples, the phase
-   reference, the corrections that acted, the impacts known) and gives them as a
-   :class:`grazing_control.dynamics.identification.Recording`
-   (``too_few_periods``: less than :data:`MIN_PERIODS` periods of samples).
+   reference, each section's estimate and the kick that acted, the impacts known);
+   :class:`StreamWindow` is its snapshot from the model filter's last restart, as a
+   :class:`grazing_control.dynamics.identification.Recording` with the impacts sensed or
+   predicted (``too_few_periods``: less than :data:`MIN_PERIODS` periods).
 2. :func:`refit`: :func:`grazing_control.dynamics.identification.identify` (the core of
-   ``grazing identify``) started from the running model's (zeta, Omega = 1), and the
-   controller's model from it (:func:`model_from_fit`): zeta and r as fitted, the wall
-   where the fit put it in the stream's units, the time base (omega, the section phase
-   offset) kept (``no_impacts``, ``fit_failed``, ``not_identified``: a parameter of the
-   model without a finite standard error, a singular fit).
+   ``grazing identify``) started from the running model's zeta with its units held
+   (:data:`UNITS`), and the controller's model from it (:func:`model_from_fit`): zeta
+   and r as fitted, the wall where the fit put it in the stream's units, the time base
+   (omega, the section phase offset) kept (``no_impacts``; ``fit_failed``: no
+   convergence, a residual beyond :data:`RESIDUAL_RATIO` sigma; ``not_identified``: a
+   singular fit, zeta or r beyond :data:`RELATIVE_SE`, outside the model's ranges).
 3. :func:`redesign`: the degenerate design c1(c2; delta) of the new model for the
    running c2 and delay (Eq. 38, docs/theory_delay.md (D5)), with the design's
    conditions re-checked there (:func:`grazing_control.dynamics.design.condition_values`;
@@ -33,7 +35,7 @@ import math
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -260,7 +262,6 @@ class SwitchPlan:
     gains: Gains | None = None
     error: ReidentificationError | None = None
     requested_at: int | None = None
-    extra: dict = field(default_factory=dict)
 
     @property
     def admissible(self) -> bool:
