@@ -170,7 +170,7 @@ class ReidentifySide:
         self.refused = {}               # reason -> count
         self.last = None                # the latest decision's line
         self._diag_refused = 0
-        self._state = None              # the current section's absolute state (x^, v^)
+        self._state = None              # this section's (x^, v^, by the model filter)
         self.omega = node.model.omega
 
     @classmethod
@@ -226,7 +226,9 @@ class ReidentifySide:
         try:
             self.worker.request(self.record, n.model, gains, k)
         except ReidentificationError as exc:
-            self._refused(exc, k, None)
+            from .cdr import stamp_parts
+
+            self._refused(exc, k, None if k is None else stamp_parts(k * n.model.period))
             return False, describe_plan(error=exc, k=k)
         line = (f"re-identification started at section {k}: a refit of the last "
                 f"{self.record.covered:.1f} periods")
