@@ -49,13 +49,16 @@ from grazing_control.ros.rig_boundary import controller_values
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def design(rig, c2):
-    """(gains, predicted spread, samples per period) of the rig's design."""
+def design(rig, c2, lead=None):
+    """(gains, predicted spread, samples per period) of the rig's design: the estimate
+    as the rig's controller makes it (answering ``lead``, model time, before the
+    section's last sample: default its answer_lead), as `grazing rig` predicts it."""
     p, d = rig.params(), rig.dimensionless()
     values = controller_values(rig, c2)
     g = Gains(values["c1"], values["c2"], values["actuation_delay"])
     rate = round(p.period / d["state_period"])
-    r = estimate_covariance(p, g, rate, estimator="model")
+    r = estimate_covariance(p, g, rate, estimator="model",
+                            lead=values["answer_lead"] if lead is None else lead)
     gain = design_noise_gain(p, g.c2, g.delay, measurement=r)
     return g, gain * d["sensor_noise"], rate
 
@@ -64,13 +67,15 @@ def core(rig, c2, forces, periods, enable_after, seed=7):
     """The acceptance in the core, for the rig with each force amplitude F0 (N) and the
     same Delta d: the closed loop on the sensor stream (dynamics.stream.simulate_stream:
     the exact plant, the rig's sensor at the nearest integer samples per period, the
-    model estimator, the kick at the budget's delay), uncontrolled for ``enable_after``
+    model estimator answering answer_lead before the section's last sample, the pulse
+    at the budget's delay in the plant and the model), uncontrolled for ``enable_after``
     periods, then controlled; the noise in model units is the sensor's 2 um / l, l = F0/k."""
     from dataclasses import replace
 
-    from grazing_control.dynamics.orbits import orbit_11
-    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
     from grazing_control.plant.sensor import SensorModel
+    from grazing_control.ros.rig_boundary import answer_lead
 
     dd = rig.params().delta_d
     for f0 in forces:
@@ -79,10 +84,14 @@ def core(rig, c2, forces, periods, enable_after, seed=7):
         p, d = r.params(), r.dimensionless()
         g, predicted, rate = design(r, c2)
         sigma = d["sensor_noise"]
+        w, limit = d["pulse_width"], d["force_limit"] or math.inf
+        est = StreamEstimator(p, "model", sigma, "stream", p.period / rate,
+                              lead=answer_lead(r), pulse_width=w, force_limit=limit)
         run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=seed).measure,
                               enable_after + periods, rate, sigma=sigma,
-                              control_after=enable_after)
-        z = orbit_11(p, g).pi2_deviation
+                              control_after=enable_after, stream_estimator=est,
+                              pulse_width=w, force_limit=limit)
+        z = pulse_orbit(p, g, w, force_limit=limit).pi2_deviation
         x = run.truth[:, 0]
         err = np.abs(x - z[0])
         cap = next((k for k in range(enable_after, len(x) - 50)
@@ -134,7 +143,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
     p, d = rig.params(), rig.dimensionless()
-    g, predicted, rate = design(rig, args.c2)
+    g, predicted, rate = design(rig, args.c2, None if args.answer_lead is None
+                                else args.answer_lead * rig.omega_n)
     lyap = lyapunov_exact(p, (0.0, 0.0), 20000, 1000, None, None)
     print(f"rig {args.rig}: Delta d = {p.delta_d:.3g}, omega = {p.omega:.8g}, l = "
           f"{rig.scales.length * 1e3:.4g} mm, sensor noise {d['sensor_noise']:.3g} (model "
@@ -210,8 +220,8 @@ def main(argv=None):
 
     kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
     print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - orbit.pi2[0]:+.3g} from the "
-          f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the model "
-          "the controller's estimator and prediction integrate)")
+          f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the "
+          "controller's estimator and prediction integrate the pulse since 2026-11-28)")
     print(f"controlled: captured {captured - k0} periods after the switch; held {n} periods: "
           f"Pi2 spread RMS about the pulse orbit {rms:.4g}, std {std:.4g}, predicted "
           f"{predicted:.4g}: ratio {rms / predicted:.3f} (std {std / predicted:.3f}); one "

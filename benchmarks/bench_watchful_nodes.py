@@ -36,10 +36,21 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               the refitted zeta, r, Delta d with standard errors, the new gains), the
               orbit offset after the last switch (the mean Pi2 x from SETTLE periods
               after it, and after control on, to the end, less the pulse loop's orbit
-              of the plant with its gains), mismatch sections after it, impacts per period from control on.
-              Use ``--periods 3000``.
+              of the plant with its gains), mismatch sections after it, impacts per
+              period from control on. Use ``--periods 3000``.
 ``reidentify-right`` the same with the right model: what the test's false alarms
               start (refits of the right model, switches to them or refusals).
+``actuator``  sim_node's first-order actuator (actuator_bandwidth 10x and 3x the
+              forcing frequency omega, latency 0), the gains of `grazing design
+              --optimize noise --delay 3 --pulse-width 0.1 --actuator-bandwidth B` (c1 of
+              the exact condition (P1) for the force profile), against the ideal
+              actuator's gains in the same plant: one impact per period, the offset and
+              spread (RMS) of the Pi2 x about the loop's orbit through the actuator
+              (dynamics.actuator.actuated_design) over the last ``--window`` periods,
+              against the design's predicted spread (position only, model filter, 200
+              samples per period, times sigma). ``--pi2-source sample``: the
+              controller on the exact Pi2 samples (no noise reaches the loop: the
+              orbit's offset alone).
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -48,11 +59,14 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
 
     .venv/bin/python benchmarks/bench_watchful_nodes.py --part bias --part mismatch \
         --periods 600 --control-after 100
+    .venv/bin/python benchmarks/bench_watchful_nodes.py --part actuator --periods 600 \
+        --control-after 100 --window 300 --measured benchmarks/out/actuator/nodes.json
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import subprocess
 import sys
@@ -95,7 +109,8 @@ def moving_orbit(g, periods: int, drift: float):
 
 
 def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
-          sensor_bias=0.0, controller=None, seed=7, drift=0.0, gains=None) -> dict:
+          sensor_bias=0.0, controller=None, seed=7, drift=0.0, gains=None, sim=None,
+          orbit_x=None) -> dict:
     """One lockstep scene; its numbers (module docstring)."""
     p = OscillatorParams(delta_d=DD)
     over = {"pi2_source": "stream", "estimator": "model"}
@@ -106,15 +121,15 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
                        sim_overrides={"state_period": p.period / RATE, "sensor_noise": SIGMA,
                                       "sensor_velocity": False, "pulse_width": WIDTH,
                                       "sensor_seed": seed, "sensor_bias": sensor_bias,
-                                      "delta_d_drift": drift},
+                                      "delta_d_drift": drift, **(sim or {})},
                        controller_overrides=over, log_dir=str(out / "logs"))
     wall = time.time() - t0
     if not res.ok:
         return {"failed": str(res)}
     sd = load(out / "bag").scenes[0]
     rep = analyze([out / "bag"], out / "report", figures=False)
-    est = rep["bags"][0]["scenes"][0]["estimate"]
-    orbit_x = est["spread_about"][0]
+    est = rep["bags"][0]["scenes"][0]["estimate"] or {}
+    orbit_x = est["spread_about"][0] if orbit_x is None else orbit_x
     t, x = sd.scene.t, sd.scene.pi2[:, 0]
     last = slice(-window, None)
     edges = np.append(t, t[-1] + p.period)
@@ -122,12 +137,15 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
     summary = (out / "logs" / "controller_node.log").read_text(errors="replace")
     resets = re.search(r"model_resets=(\d+)", summary)
     captured = re.search(r"captured_at=(\w+)", summary)
-    orbit = np.array(est["spread_about"])
-    ct = capture_time(sd.scene.pi2[control_after:], counts[control_after:], orbit, 1e-3)
+    ct = None
+    if "spread_about" in est:           # the stream estimator's scenes
+        ct = capture_time(sd.scene.pi2[control_after:], counts[control_after:],
+                          np.array(est["spread_about"]), 1e-3)
     rows = read_watch(out / "bag")
     watch = rep["bags"][0]["model_watch"]
     num = {"wall_s": wall, "offset": float(np.mean(x[last]) - orbit_x),
            "spread": float(np.sqrt(np.mean((x[last] - orbit_x) ** 2))),
+           "std": float(np.std(x[last])),
            "one_impact_after_control": float(np.mean(counts[control_after:] == 1)),
            "not_one_impact": np.flatnonzero(counts != 1).tolist()[-5:],
            "impacts_per_period_after_control": np.bincount(counts[control_after:]).tolist(),
@@ -219,11 +237,16 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
                     choices=("bias", "mismatch", "right", "capture", "drift", "gross",
-                             "reidentify", "reidentify-right"))
+                             "actuator", "reidentify", "reidentify-right"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--pi2-source", choices=("stream", "sample"), default="stream",
+                    help="the actuator part's controller: the stream's model filter, or the "
+                         "simulator's exact Pi2 sample (no estimator: the orbit alone)")
+    ap.add_argument("--measured", type=Path, help="the actuator part: write its numbers "
+                    "here (JSON) for benchmarks/chart_actuator.py --measured")
     a = ap.parse_args(argv)
     root = Path(tempfile.mkdtemp())
     yaml, g = design(root)
@@ -233,6 +256,13 @@ def main(argv=None):
     watch = {"consistency_window": 10}
     cases = []
     for part in a.part or ["bias"]:
+        if part == "actuator":
+            rows = [_actuator_case(root, a, ratio, designed, g)
+                    for ratio in (10.0, 3.0) for designed in (True, False)]
+            if a.measured:
+                import json
+                a.measured.write_text(json.dumps(rows, indent=1))
+            continue
         if part == "bias":
             cases += [("bias 1e-4, plain model filter", 1e-4, {}),
                       ("bias 1e-4, estimate_bias", 1e-4, {"estimate_bias": True, **watch})]
@@ -271,6 +301,48 @@ def main(argv=None):
                   controller=over, seed=a.seed, drift=drift[0] if drift else 0.0,
                   gains=g if drift else None)
         print(_line(name, n), flush=True)
+
+
+def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
+    """The ``actuator`` part: one scene through the actuator (module docstring); its
+    numbers for the chart (std and offset per sigma)."""
+    import json
+
+    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.estimation import estimate_covariance
+
+    p = OscillatorParams(delta_d=DD)
+    act = bandwidth_actuator(p, ratio)
+    bw = 1.0 / act.time_constant
+    out = root / f"actuator{ratio:g}{'d' if designed else 'n'}"
+    out.mkdir()
+    yaml = out / "controller.yaml"
+    cmd = [GRAZING, "design", "--optimize", "noise", f"--delta-d={DD}", "--delay", str(DELAY),
+           "--out", str(yaml), "--json"]
+    if designed:
+        cmd += ["--pulse-width", str(WIDTH), "--actuator-bandwidth", repr(bw)]
+    res = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+    gains = Gains(res["c1"], res["c2"], DELAY)
+    r = estimate_covariance(p, g, RATE)
+    _gains, orbit, spread = actuated_design(p, gains.c2, DELAY, WIDTH, act, r)
+    if not designed:               # the ideal design's gains through the same actuator
+        from grazing_control.dynamics.actuator import actuated_orbit_for
+        orbit = actuated_orbit_for(p, gains, WIDTH, act)
+        spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
+    n = scene(yaml, out, a.periods, a.control_after, a.window, seed=a.seed,
+              sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0],
+              controller={"pi2_source": a.pi2_source})
+    name = (f"bandwidth {ratio:g}x omega ({bw:.6g}), "
+            + ("design through the actuator" if designed else "ideal actuator's design"))
+    print(_line(name, n) + f"; std about the mean {n.get('std', math.nan):.3g}; c1 "
+          f"{gains.c1:.6g}; predicted: spectral radius "
+          f"{orbit.spectral_radius:.6f}, spread {spread[0] * SIGMA:.3g}, orbit x - x** "
+          f"{orbit.state[0]:.3g}", flush=True)
+    return {"ratio": ratio, "design": "exact N_g" if designed else "naive",
+            "std_per_sigma": n.get("std", math.nan) / SIGMA,
+            "offset": n.get("offset", math.nan), "predicted_per_sigma": float(spread[0]),
+            "one_impact_after_control": n.get("one_impact_after_control"),
+            "pi2_source": a.pi2_source}
 
 
 if __name__ == "__main__":

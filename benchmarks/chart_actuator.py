@@ -16,10 +16,13 @@ Plotted: the spectral radius of the controlled limit map (3x3 Jacobian; the marg
 minus it), the noise gain sqrt(Sigma_xx) per unit sigma with the model filter's
 position-only covariance at 200 samples per period (the design's predicted spread
 through the actuator), and the orbit's offset from X** (the kick design's controlled
-orbit, orbits.orbit_11); 10x and 3x marked.
+orbit, orbits.orbit_11); 10x and 3x marked. With ``--measured`` (the JSON of
+``bench_watchful_nodes.py --part actuator --measured``) the spreads measured through
+the real nodes (std of the Pi2 x about its mean per sigma) are marked on the noise gain.
 Writes out/actuator/margin.png and prints the table (docs/theory_pulse.md section 7).
 
-    .venv/bin/python benchmarks/chart_actuator.py --points 25 --latency 0
+    .venv/bin/python benchmarks/chart_actuator.py --points 25 --latency 0 \
+        [--measured benchmarks/out/actuator/nodes.json]
 """
 
 from __future__ import annotations
@@ -54,6 +57,8 @@ def main(argv=None):
     ap.add_argument("--width", type=float, default=0.1)
     ap.add_argument("--latency", type=float, default=0.0, help="actuator latency (model time)")
     ap.add_argument("--points", type=int, default=25)
+    ap.add_argument("--measured", type=Path, help="bench_watchful_nodes.py --part actuator "
+                    "--measured's JSON: the nodes' spreads, marked")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     p = OscillatorParams(delta_d=args.delta_d)
@@ -96,6 +101,7 @@ def main(argv=None):
 
 def _chart(rows, ideal_rho, args):
     import matplotlib
+    import matplotlib.ticker
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -105,6 +111,15 @@ def _chart(rows, ideal_rho, args):
         axes[0].semilogx(a[:, 0], a[:, 1], style, label=name)
         axes[1].semilogx(a[:, 0], a[:, 2], style, label=name)
         axes[2].semilogx(a[:, 0], np.abs(a[:, 3]), style, label=name)
+    if args.measured is not None:
+        import json
+        for row in json.loads(args.measured.read_text()):
+            style = "k*" if row["design"] == "exact N_g" else "kx"
+            axes[1].semilogx(row["ratio"], row["std_per_sigma"], style, ms=10,
+                             label=f"nodes, {row['design']}")
+        handles, labels = axes[1].get_legend_handles_labels()
+        keep = {lab: h for h, lab in zip(handles, labels)}
+        axes[1].legend(keep.values(), keep.keys())
     axes[0].axhline(ideal_rho, color="gray", lw=0.8, label="ideal pulse")
     axes[0].axhline(1.0, color="red", lw=0.8)
     axes[0].set_ylim(0.55, 1.5)
@@ -112,9 +127,11 @@ def _chart(rows, ideal_rho, args):
                                 "noise gain (std x per sigma)", "|x - x**| of the orbit")):
         for m in MARKS:
             ax.axvline(m, color="k", ls=":", lw=0.8)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("actuator bandwidth / forcing frequency")
         ax.set_ylabel(label)
-        ax.legend()
+        if ax is not axes[1] or args.measured is None:
+            ax.legend()
     axes[2].set_yscale("log")
     fig.suptitle(f"first-order actuator, latency {args.latency}, pulse {args.width} at "
                  f"delta {args.delay}, Delta d {args.delta_d}")

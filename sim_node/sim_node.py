@@ -186,11 +186,11 @@ SIM_TIME_REFUSED = ("use_sim_time=true is invalid for sim_node: valid is false o
 
 
 def check_rig_scene(rig_file: str, rig_values: dict, values: dict) -> None:
-    """A rig scene's parameters are the rig file's, time_scale excepted (a faster
-    scene: rig_boundary.check_rig_values); its mode is realtime (the rig's clock runs)."""
+    """A rig scene's parameters are the rig file's, time_scale (a faster scene) and
+    pre_roll excepted (rig_boundary.check_rig_values); its mode is realtime (the rig's clock runs)."""
     if not rig_values:
         return
-    check_rig_values(rig_file, rig_values, values, free=("time_scale",))
+    check_rig_values(rig_file, rig_values, values, free=("time_scale", "pre_roll"))
     if values["mode"] != "realtime":
         raise ParameterError(f"mode={values['mode']!r} is invalid with rig_file={rig_file}: "
                              "valid is realtime (a rig's clock runs)")

@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from grazing_control.dynamics.actuation import pulse_orbit, pulse_start, pulse_step
 from grazing_control.dynamics.actuator import (Actuator, actuated_orbit, actuated_step,
@@ -24,6 +23,8 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.flow import to_physical
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
+from reference_actuator import lag_reference, pulse_pieces
+
 P = OscillatorParams(delta_d=-5e-6)
 W = 0.1
 
@@ -36,30 +37,11 @@ def least_noise():
 
 
 def _reference(p, x, v, f0, u, on, off, tau_a, duration):
-    """(x, v, f) with tau_a f' = u 1[on, off] - f, x'' + 2 zeta x' + x = cos(tau2 + omega t)
-    + f, impacts x = d: v -> -r v (DOP853, rtol 1e-13)."""
-    def rhs(t, y, cmd):
-        return [y[1], -2 * p.zeta * y[1] - y[0] + math.cos(p.tau2 + p.omega * t) + y[2],
-                (cmd - y[2]) / tau_a]
-
-    def wall(t, y, cmd):
-        return y[0] - p.d
-    wall.terminal, wall.direction = True, 1
-    y, impacts = [x, v, f0], []
-    for t0, t1, cmd in ((0.0, on, 0.0), (on, off, u), (off, duration, 0.0)):
-        t = t0
-        while t < t1:
-            sol = solve_ivp(rhs, (t, t1), y, method="DOP853", rtol=1e-13, atol=1e-15,
-                            events=wall, args=(cmd,), max_step=0.05)
-            if sol.status == 1:
-                t = float(sol.t_events[0][0])
-                xe, ve, fe = sol.y_events[0][0]
-                impacts.append((t, ve))
-                y = [p.d, -p.r * ve, fe]
-                t += 1e-12
-            else:
-                t, y = t1, list(sol.y[:, -1])
-    return np.array(y), impacts
+    """(x, v, f) at ``duration`` and the impacts through the actuator (DOP853,
+    tests/reference_actuator.py)."""
+    end, impacts, _ = lag_reference(p, x, v, f0, pulse_pieces(on, off - on, u, tau_a),
+                                    duration)
+    return end, impacts
 
 
 @pytest.mark.parametrize("tau_a, latency, f0", [(0.05, 0.0, 0.0), (0.5, 0.2, 0.0),
@@ -209,3 +191,43 @@ def test_the_exact_design_needs_the_force_before_the_grazing_phase():
 
     with pytest.raises(ParameterError, match="before the grazing phase"):
         actuated_c1(P, -1.0, Actuator(0.1, 5.0), 3.0, W)
+
+
+def test_the_design_through_the_actuator_is_the_orbit_of_its_gains():
+    """actuated_design at 3x (Newton from the ideal pulse's orbit misses it there; the
+    continuation in tau_a reaches it): c1 is (P1)'s, the orbit a fixed point of the exact
+    map with those gains, stable, its spread the Lyapunov one."""
+    from grazing_control.dynamics.actuator import actuated_c1, actuated_design
+
+    g0 = optimize_noise(P, 3.0).gains()
+    act = bandwidth_actuator(P, 3.0)
+    start = pulse_start(P.period, 3.0, W)
+    gains, orbit, spread = actuated_design(P, g0.c2, 3.0, W, act)
+    assert gains == Gains(actuated_c1(P, g0.c2, act, start, W), g0.c2, 3.0)
+    with pytest.raises(OrbitNotFound):
+        actuated_orbit(P, gains, W, act)
+    x, v, f, imps = actuated_step(P, *orbit.state, orbit.correction, start=start, width=W,
+                                  actuator=act)
+    assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
+    assert orbit.spectral_radius < 1.0
+    assert np.allclose(spread ** 2, np.diag(orbit.noise_covariance(gains)), rtol=1e-12)
+
+
+def test_the_orbit_for_any_gains_is_found_where_newton_alone_misses_it():
+    """actuated_orbit_for at 3x: with the (P1) gains (Newton from the ideal pulse's orbit
+    misses it: the test above) it continues in c1 to the same orbit actuated_design
+    finds; with the ideal actuator's gains it is a fixed point of the exact map too."""
+    from grazing_control.dynamics.actuator import actuated_design, actuated_orbit_for
+
+    g0 = optimize_noise(P, 3.0).gains()
+    act = bandwidth_actuator(P, 3.0)
+    start = pulse_start(P.period, 3.0, W)
+    gains, designed, _ = actuated_design(P, g0.c2, 3.0, W, act)
+    for g, want in ((gains, designed.state), (g0, None)):
+        orbit = actuated_orbit_for(P, g, W, act)
+        if want is not None:
+            assert np.allclose(orbit.state, want, rtol=0, atol=1e-12)
+        x, v, f, imps = actuated_step(P, *orbit.state, orbit.correction, start=start,
+                                      width=W, actuator=act)
+        assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
+        assert np.allclose(orbit.pi2, (P.x_ref + x, P.v_ref + v), rtol=0, atol=1e-12)

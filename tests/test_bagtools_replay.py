@@ -144,6 +144,25 @@ def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     assert sim["first_sample_above_1e-12"] is not None and "arrival" in sim["why"]
 
 
+def test_a_pulse_scene_through_the_actuator_is_replayed_bit_for_bit(tmp_path):
+    """The simulator's replay takes how a correction acted from the record: the pulse,
+    its force limit and the actuator's lag (without them a pulse scene's replay departed
+    by 1.6e-3 at its first correction)."""
+    p, delay = OscillatorParams(delta_d=-5e-6), 3.0
+    write_controller_yaml(tmp_path / "ctl.yaml", p, Gains(degenerate_c1(p, -1.0, delay), -1.0,
+                                                          delay))
+    res = launcher.run(None, str(tmp_path / "ctl.yaml"), tmp_path / "bag", 40,
+                       domain_id=new_domain(), timeout=90,
+                       sim_overrides={"delta_d": -5e-6, "actuation_delay": delay,
+                                      "pulse_width": 0.1, "force_limit": 0.5,
+                                      "actuator_bandwidth": 2.0},
+                       controller_overrides={"enable_after": 10}, log_dir=tmp_path / "logs")
+    assert res.ok, res
+    sim = replay_simulator(tmp_path / "bag", tmp_path / "sim", domain_id=new_domain())
+    assert sim["samples_replayed"] == 40 and sim["stamps_equal"]
+    assert sim["bit_identical_samples"] == 40 and sim["max_departure"] == 0.0, sim
+
+
 def test_sigkilled_recorder_leaves_a_bag_the_analysis_reads(tmp_path):
     """kill -9 of the recorder: no summary, no metadata.yaml; the analysis reads every
     complete chunk, says so, and the samples equal the core's simulation bit for bit."""

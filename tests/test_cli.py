@@ -42,6 +42,8 @@ P = OscillatorParams()
 JSON_CASES = {
     "design": ["design", "--c2", "-1", "--json"],
     "design_outside": ["design", "--c2", "1.5", "--json"],
+    "design_actuator": ["design", "--optimize", "noise", "--delay", "3", "--pulse-width",
+                        "0.1", "--actuator-bandwidth", "2.0", "--json"],
     "orbit": ["orbit", "--delta-d", "-1e-6", "--json"],
     "orbit_ctrl": ["orbit", "--delta-d", "-1e-6", "--c2", "-1", "--json"],
     "orbit_gains": ["orbit", "--delta-d=-2e-5", "--c1", "0.1", "--c2", "-0.5", "--json"],
@@ -72,6 +74,8 @@ BAD_CASES = {
     "delta_d_abc": (["orbit", "--delta-d", "abc"], r"delta[-_]d"),
     "periods_negative": (["simulate", "--delta-d", "-5e-6", "--periods", "-3"], r"\bperiods\b"),
     "pi2_offset": (["design", "--c2", "-1", "--pi2-offset", "7"], r"pi2[-_]offset"),
+    "actuator_without_pulse": (["design", "--c2", "-1", "--actuator-bandwidth", "2"],
+                               r"pulse_width=0.0 is invalid with an actuator: valid range"),
     "c1_without_c2": (["orbit", "--delta-d", "-1e-6", "--c1", "0.3"], r"\bc1\b"),
     "orbit_positive_delta_d": (["orbit", "--delta-d", "1e-5"], r"delta[-_]d"),
     "continue_positive_start": (["continue", "--from", "1e-3", "--to", "-1e-6"], r"\bstart\b|--from"),
@@ -127,6 +131,28 @@ def _close(a, b, rel=1e-12, abs_=0.0):
 
 
 # ------------------------------------------------------------------ --json, design
+def test_design_through_an_actuator_gives_the_exact_c1_and_its_predicted_spread(runs):
+    """--actuator-bandwidth 2 (3x omega) with --pulse-width 0.1 at --delay 3: c1 is
+    (P1)'s for the force profile (dynamics.actuator.actuated_c1), the ideal design's kept
+    as c1_ideal; the loop's orbit through the actuator is stable and its predicted
+    spread is actuated_design's."""
+    from grazing_control.dynamics.actuation import pulse_start
+    from grazing_control.dynamics.actuator import Actuator, actuated_c1, actuated_design
+
+    d = _json(runs, "design_actuator")
+    q = P.with_(delta_d=-5e-6)
+    act = Actuator(0.5, 0.0)
+    assert d["c1"] == actuated_c1(q, d["c2"], act, pulse_start(q.period, 3.0, 0.1), 0.1)
+    assert d["c1_ideal"] == pytest.approx(degenerate_c1(q, d["c2"], 3.0), rel=1e-14)
+    a = d["actuator"]
+    assert a["time_constant"] == 0.5 and a["bandwidth_over_omega"] == 2.0 / P.omega
+    _, orbit, spread = actuated_design(q, d["c2"], 3.0, 0.1, act)
+    assert a["spectral_radius"] == pytest.approx(orbit.spectral_radius, rel=1e-9)
+    assert a["spectral_radius"] < 1.0
+    assert a["spread"] == pytest.approx(list(spread), rel=1e-9)
+    assert 0.0 < a["spread_position_only"][0] < a["spread"][0]
+
+
 def test_design_json_keys_and_values(runs):
     d = _json(runs, "design")
     required = {"c1", "c2", "x_ref", "v_ref", "admissible_c2", "multipliers_limit"}

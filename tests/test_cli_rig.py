@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grazing_control.ros.rig_boundary import answer_lead
+
 from grazing_control.cli import commands
 from grazing_control.cli.rig import rig_options
 from grazing_control.plant.rig import rig_from_dict
@@ -119,8 +121,11 @@ def test_grazing_rig_designs_as_grazing_design_with_the_numbers_by_hand(lab_repo
     rig = rig_from_dict(LAB)
     p = rig.params()
     delay = rig.dimensionless()["actuation_delay"]
+    # the rig's controller answers answer_lead = budget - w/2 = 4 ms before the section's
+    # last sample: the estimate's covariance without the samples of that stretch
+    lead = 4e-3 * 2 * math.pi * 20
     hand = _by_hand(rig) + ["--delay", repr(delay), "--delta-d", repr(p.delta_d),
-                            "--sensor-rate", "150", "--json"]
+                            "--sensor-rate", "150", "--sensor-lead", repr(lead), "--json"]
     opt = _json(*cli("design", *hand, "--optimize", "noise"))
     de = r["design"]
     assert "least noise gain" in de["c2_from"]
@@ -147,7 +152,8 @@ def test_grazing_rig_designs_as_grazing_design_with_the_numbers_by_hand(lab_repo
     sp = r["predicted_spread"]
     assert sp["noise_gain_position_only"] == at_c2["noise_gain_position_only"]
     assert sp["spread_m"] == at_c2["noise_gain_position_only"] * rig.sensor.noise
-    assert at_c2["position_only_sensor"] == {"samples_per_period": 150, "estimator": "model"}
+    assert at_c2["position_only_sensor"] == {"samples_per_period": 150, "estimator": "model",
+                                             "lead": pytest.approx(lead, rel=1e-15)}
     assert "nearest integer, 150" in sp["note"]
     # the timing budget with the given tail
     ti = r["timing"]
@@ -266,7 +272,8 @@ def test_rig_sets_what_the_numbers_by_hand_set(argv):
     hand = list(argv) + _by_hand(rig)
     command, c2 = argv[0], "--c2" in argv
     if command == "design":
-        hand += ["--delta-d", repr(p.delta_d), "--delay", repr(delay), "--sensor-rate", "150"]
+        hand += ["--delta-d", repr(p.delta_d), "--delay", repr(delay), "--sensor-rate", "150",
+                 "--sensor-lead", repr(answer_lead(rig))]
     elif command in ("orbit", "simulate", "basins"):
         hand += ["--delta-d", repr(p.delta_d)]
     elif command == "robustness" and argv[1] != "model":
@@ -291,7 +298,8 @@ def test_design_with_rig_prints_what_design_with_the_numbers_prints(cli):
     rig = rig_from_dict(LAB)
     p = rig.params()
     hand = _by_hand(rig) + ["--delta-d", repr(p.delta_d), "--delay",
-                            repr(rig.dimensionless()["actuation_delay"]), "--sensor-rate", "150"]
+                            repr(rig.dimensionless()["actuation_delay"]), "--sensor-rate", "150",
+                            "--sensor-lead", repr(answer_lead(rig))]
     for extra in (["--c2", "-1"], ["--c2", "0.1", "--estimator", "arc"]):
         a = _json(*cli("design", "--rig", LAB_FILE, "--json", *extra))
         b = _json(*cli("design", *hand, "--json", *extra))
@@ -406,25 +414,31 @@ def test_the_mutations_are_valid_but_for_the_mutation():
 
 def test_the_predicted_spread_is_what_the_closed_loop_gives(lab_report):
     """The reference of the rig scene: the design's position-only noise gain x sigma
-    against the exact closed loop on the stream (dynamics.stream.simulate_stream: the
-    model filter at 150 samples per period, the kick at the budget's delay), 1200
-    periods after 300 of transient. Measured 0.203 and 0.210 x sigma (seeds 1, 2)
-    against 0.218 predicted: the filter's errors are correlated from period to period,
-    which the prediction's white-noise premise leaves out (docs/rig.md)."""
+    against the exact closed loop on the stream as the rig's controller runs it
+    (dynamics.stream.simulate_stream: the model filter at 150 samples per period
+    answering answer_lead = 4 ms before the section's last sample, the 2 ms pulse in the
+    plant and in the model), 1200 periods after 300 of transient, about the pulse
+    loop's orbit. The prediction left out the lead until 2026-11-28 (0.218 x sigma, and
+    the loop with the lead gave 1.2x that); with it 0.252 (docs/rig.md)."""
+    from grazing_control.dynamics.actuation import pulse_orbit
     from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.orbits import orbit_11
-    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
     from grazing_control.oscillator.control import Gains
     from grazing_control.plant.sensor import SensorModel
 
     rig = rig_from_dict(LAB)
     p, dl = rig.params(), rig.dimensionless()
     c2, delay, sigma = lab_report["design"]["c2"], dl["actuation_delay"], dl["sensor_noise"]
+    w, limit = dl["pulse_width"], dl["force_limit"]
     g = Gains(degenerate_c1(p, c2, delay), c2, delay)
-    target = orbit_11(p, g).pi2_deviation
+    target = pulse_orbit(p, g, w, force_limit=limit).pi2_deviation
+    est = StreamEstimator(p, "model", sigma, "stream", p.period / 150, lead=answer_lead(rig),
+                          pulse_width=w, force_limit=limit)
     run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=1).measure,
-                          1500, 150, sigma=sigma, deviation=target)
+                          1500, 150, sigma=sigma, deviation=target, stream_estimator=est,
+                          pulse_width=w, force_limit=limit)
     assert run.resets == 0 and np.all(run.impacts_per_period == 1)
     measured = float(np.sqrt(np.mean((run.truth[300:, 0] - target[0]) ** 2))) * rig.scales.length
     predicted = lab_report["predicted_spread"]["spread_m"]
-    assert 0.85 < measured / predicted < 1.05
+    print(f"measured / predicted {measured / predicted:.4f}")
+    assert 0.85 < measured / predicted < 1.1

@@ -246,3 +246,20 @@ def test_correction_instants_are_fitted_and_moved_across_samples():
     assert max(_relative_errors(res).values()) <= 1e-8
     starts = res.problem.unpack(res.solution)[1][res.problem.arcs.kind == 2]
     assert np.max(np.abs(np.sort(starts) - rec.corrections)) < 1e-9
+
+
+def test_a_fit_beyond_the_jacobian_bound_is_refused_or_shrunk_to_what_fits(monkeypatch):
+    # a dense stream (300 samples per period: `grazing identify`'s default of 100 arcs
+    # needed 40 MiB, refused) - here the bound made small for a short recording
+    from grazing_control.dynamics.identification import fit
+
+    rec = rig_recording(periods=12, noise=1e-4, seed=3, samples_per_period=60)
+    whole = identify(rec)
+    monkeypatch.setattr(fit, "JACOBIAN_BYTES", 8 * whole.problem.m * whole.problem.n // 3)
+    with pytest.raises(fit.FitTooLarge, match=r"^max_arcs: the fit of the \d+ arcs used needs "
+                                              r"a dense Jacobian") as refused:
+        identify(rec)
+    shrunk = identify(rec, shrink=True)
+    assert 2 <= shrunk.arcs_used <= refused.value.fits < whole.arcs_used
+    assert 8 * shrunk.problem.m * shrunk.problem.n <= fit.JACOBIAN_BYTES
+    assert shrunk.converged and verdict(shrunk)["fit"] == "good"

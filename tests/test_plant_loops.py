@@ -24,6 +24,7 @@ from grazing_control.plant.lockstep import Lockstep
 from grazing_control.plant.loop import PREDICTION_HOLD
 from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, STREAM_TICK, Realtime
 from grazing_control.plant.settings import settings_from_values
+from grazing_control.oscillator.params import ParameterError
 
 P = OscillatorParams(delta_d=-5e-6)
 
@@ -269,6 +270,42 @@ def test_realtime_scheduled_answer_after_its_deadline_is_dropped_as_late():
     assert sink.counts["late"] == 1 and loop.stats["late"] == 1
     got = np.array([(e.x, e.v) for e in sink.samples()])
     np.testing.assert_array_equal(got, reference(20, 0.0, 0.0, 0, delay))  # 0.5 never acted
+
+
+@pytest.mark.parametrize("pre_roll", [1, 3])
+def test_the_pre_roll_sections_have_no_deadline_and_nothing_acts_there(pre_roll):
+    # a stream that starts at section 0 (a rig): sections < pre_roll are unarmed
+    n, delay, c2 = 40, 5.0, -1.0
+    c1 = degenerate_c1(P, c2, delay)
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay, max_periods=n,
+                 state_period=0.0, pre_roll=pre_roll)
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        k = round(ev.t / P.period)
+        if k == 0:
+            clock.now += 8e-3                         # after its deadline (5 ms)
+        elif k == 1:
+            return                                    # never answered
+        else:
+            clock.now += 1e-3
+        loop.answer(key(ev), law(c1, c2, ev))
+
+    loop = run_realtime(s, n, answer, clock, sink)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    # nothing acted before pre_roll, whatever came; from there on every answer acts, and
+    # the first armed section unanswered (pre_roll 1: section 1) is a miss as any other
+    skip = set(range(pre_roll)) | {1}
+    np.testing.assert_array_equal(got, reference(n, c1, c2, 0, delay, skip))
+    assert [m[0] for m in sink.misses] == ([1] if pre_roll == 1 else [])
+    assert loop.stats["unarmed"] == pre_roll and loop.stats["late"] == 0
+    assert loop.stats["applied"] == n - len(skip) and sink.counts["late"] == 0
+
+
+def test_the_pre_roll_is_refused_below_zero_in_one_line():
+    with pytest.raises(ParameterError, match=r"^pre_roll=-1 is invalid: valid range is "
+                                             r"pre_roll >= 0"):
+        settings(mode="realtime", actuation_delay=5.0, pre_roll=-1)
 
 
 def test_realtime_on_arrival_splits_the_period_where_the_answer_arrives():

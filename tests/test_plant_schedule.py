@@ -107,6 +107,27 @@ def test_a_late_answer_never_replaces_a_newer_prediction():
     assert p.stand_in(7 + PREDICTION_HOLD - 1) == 3.0 and p.stand_in(7 + PREDICTION_HOLD) is None
 
 
+def test_an_unarmed_section_acts_nothing_whatever_is_answered_and_is_no_miss():
+    # a stream's pre-roll (settings.pre_roll): no deadline at section 0
+    s = ActuationSchedule()
+    s.section(0, 0, 0.0, D, sent=0.0, early_until=2 * T, armed=False)
+    answer = s.command(0, 0.5, 0.25)                # in time or not: dropped
+    assert answer.outcome == "unarmed" and answer.section.k == 0
+    (act,) = s.due(D)
+    assert (act.value, act.outcome, act.substituted, act.code) == (0.0, "unarmed", False, 2)
+    assert s.prediction.last is None                # its prediction stands in for nothing
+    assert s.counts == dict.fromkeys(COUNTS, 0) | {"unarmed": 1}
+    # unanswered, it is no miss either; a late answer to it is neither late nor ignored
+    s.section(1, 1, T, T + D, sent=T, early_until=3 * T, armed=False)
+    (act,) = s.due(T + D)
+    assert act.outcome == "unarmed" and s.counts["missed"] == 0
+    assert s.command(1, 0.5).outcome == "unarmed"   # after its start: not late either
+    assert s.counts["late"] == 0 and s.counts["ignored"] == 0
+    # the first armed section misses as any other
+    announce(s, 2)
+    assert s.due(2 * T + D)[0].outcome == "missed" and s.counts["missed"] == 1
+
+
 def test_duplicates_foreign_and_stale_answers_are_ignored():
     s = ActuationSchedule()
     assert s.command(0, 0.1).outcome == "ignored"          # before any section
@@ -279,7 +300,7 @@ def test_a_driver_schedule_counts_late_duplicate_and_stale_commands():
     assert pulse(s, 2, now=100.1035).outcome == "late"    # expected, missed after lead
     assert s.due(100.11)[0].code == 2                      # nothing to stand in
     assert s.counts == {"applied": 1, "predicted": 0, "missed": 1, "late": 2, "lost": 0,
-                        "ignored": 2}
+                        "ignored": 2, "unarmed": 0}
 
 
 def test_a_driver_schedule_stops_expecting_after_the_hold():

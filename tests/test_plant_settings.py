@@ -25,8 +25,8 @@ def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     names = [p.name for p in PARAMETERS]
     assert len(set(names)) == len(names) and tuple(names) == SETTING_KEYS
     fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params", "sensor",
-                                                                 "watchdog"}
-    sensor = {n for n in names if n.startswith(("sensor_", "watchdog_"))}
+                                                                 "watchdog", "actuator"}
+    sensor = {n for n in names if n.startswith(("sensor_", "watchdog_", "actuator_"))}
     assert fields | set(MODEL_KEYS) | sensor == set(names)
     kinds = {"double": float, "integer": int, "string": str, "bool": bool}
     for p in PARAMETERS:

@@ -242,3 +242,23 @@ def test_replace_keeps_a_rig_immutable():
         rig.mass = 1.0
     assert replace(rig, mass=1.0).mass == 1.0 and rig.mass == 0.5
     assert isinstance(rig, Rig)
+
+
+def test_an_actuator_bandwidth_is_the_simulators_in_model_time():
+    """actuator.bandwidth in Hz (issue 29): 2 pi f / omega_n in the model's time,
+    sim_node's actuator_bandwidth; written back by rig_to_dict; a negative one refused
+    naming the field."""
+    from grazing_control.ros.rig_boundary import sim_values
+
+    doc = load(dump(LAB))
+    doc["actuator"]["bandwidth"] = "60 Hz"
+    rig = rig_from_dict(doc)
+    assert rig.actuator.bandwidth == 60.0
+    assert rig.dimensionless()["actuator_bandwidth"] == 2 * math.pi * 60.0 / rig.omega_n
+    assert sim_values(rig)["actuator_bandwidth"] == 2 * math.pi * 60.0 / rig.omega_n
+    assert rig_from_dict(rig_to_dict(rig)) == rig
+    assert sim_values(rig_from_dict(load(dump(LAB))))["actuator_bandwidth"] == 0.0
+    doc["actuator"]["bandwidth"] = "-1 Hz"
+    with pytest.raises(RigError, match=r"^actuator.bandwidth='-1 Hz' is invalid: valid "
+                                       r"range is actuator.bandwidth >= 0 Hz"):
+        rig_from_dict(doc)

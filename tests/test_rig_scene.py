@@ -139,10 +139,15 @@ def test_force_pulses_answer_each_section_and_act_in_time(scene):
             assert a.wrench.force.x == pytest.approx(msg.wrench.force.x, rel=1e-12, abs=1e-15)
             assert _seconds(a.header.stamp) == pytest.approx(
                 _seconds(msg.header.stamp), abs=2e-9)
-    # the first answer may miss (the controller's first estimate), hardly any other
+    # section 0 is the stream's pre-roll (sim_node pre_roll, the rig's default 1): no
+    # deadline, nothing acts there (the answer to it cannot have a period of samples)
+    first = applied[round(pulses[0].wrench.torque.y, 6)]
+    assert first.wrench.force.z == 2.0 and first.wrench.force.x == 0.0
     assert in_time >= 0.75 * (len(pulses) - 1), f"{in_time} of {len(pulses)} in time"
-    sim = _summary(res.logs["sim_node"], r"\b(in_time|predicted|nothing|safe)=(\d+)")
-    assert sim["in_time"] == in_time and sim["safe"] == 0
+    sim = _summary(res.logs["sim_node"], r"\b(in_time|predicted|nothing|safe|unarmed|missed)"
+                   r"=(\d+)")
+    assert sim["in_time"] == in_time and sim["safe"] == 0 and sim["unarmed"] == 1
+    assert sim["nothing"] == 1 + sim["missed"] - sim["predicted"]
     # the correction round trip through SI is exact to rounding
     assert correction_of(rig, force_of(rig, 1.3e-4), w) == pytest.approx(1.3e-4, rel=1e-15)
 

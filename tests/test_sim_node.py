@@ -481,6 +481,40 @@ def test_stream_controller_position_only_sensor_and_pulse_through_the_node(node_
     np.testing.assert_allclose(x, [s.x for s in true] + e, rtol=0, atol=1e-12)
 
 
+def test_a_pulse_through_the_first_order_actuator_is_the_cores_map_through_the_node(node_env):
+    """actuator_bandwidth 3x the forcing frequency and a latency (issue 29 section 4):
+    the samples on oscillator/pi2 are the core's 3-state map (dynamics.actuator.
+    actuated_step, the force carried from period to period) bit for bit, with the
+    node's answers acting through it."""
+    from grazing_control.dynamics.actuation import pulse_start
+    from grazing_control.dynamics.actuator import Actuator, actuated_step
+
+    domain, collector, start = node_env
+    p = OscillatorParams(delta_d=-5e-6)
+    T, n, delay, w = p.period, 10, 3.0, 0.1
+    act = Actuator(1.0 / (3.0 * p.omega), 0.2)
+    dvs = [2e-3 * ((k % 3) - 1) for k in range(n)]
+
+    class Fixed(Answerer):
+        def answer(self, msg, dv=0.0):
+            k = round((msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9) / T)
+            super().answer(msg, dvs[k] if k < n else 0.0)
+
+    ans = Fixed(collector)
+    proc, log = start(max_periods=n, exit_when_done=True, answer_timeout=30.0,
+                      actuation_delay=delay, pulse_width=w, actuator_bandwidth=3.0 * p.omega,
+                      actuator_latency=0.2)
+    assert proc.wait(60) == 0, log.read_text()
+    text = log.read_text()
+    assert summary(text)["timeouts"] == "0" and "actuator_bandwidth=" in text, text
+    z, ref = (0.0, 0.0, 0.0), []
+    for k in range(n):
+        ref.append((p.x_ref + z[0], p.v_ref + z[1]))
+        *z, _imps = actuated_step(p, *z, dvs[k], start=pulse_start(T, delay, w), width=w,
+                                  actuator=act)
+    np.testing.assert_array_equal(xv(ans.samples), ref)
+
+
 def test_stream_sample_writer_is_the_rclpy_layout():
     """rclpy decodes cdr.stream_sample's bytes to the stream's JointState (with and
     without velocity: the alignment of the effort differs)."""

@@ -50,12 +50,12 @@ def _scheduler(text):
 
 def add_basins_parser(sub):
     """Register ``grazing basins`` on the ``grazing`` subparsers."""
-    from .commands import _common, _count, _finite, _gain_args
+    from .common import add_common, add_gains, count, finite
 
     s = sub.add_parser("basins", help="basins of attraction: the attractor of each start "
                                       "of a grid on Pi2")
-    _common(s)
-    s.add_argument("--delta-d", type=_finite,
+    add_common(s)
+    s.add_argument("--delta-d", type=finite,
                    help="Delta d = d - d* (required, unless --params gives it)")
     s.add_argument("--dx", type=parse_range, metavar="LO:HI",
                    help="starts' x - x** on Pi2 (default: a square around X** of half-width "
@@ -67,17 +67,17 @@ def add_basins_parser(sub):
                    help="grid points along x (default 101)")
     s.add_argument("--nv", type=integer_at_least(1), default=101,
                    help="grid points along v (default 101)")
-    s.add_argument("--transient", type=_count, default=2000,
+    s.add_argument("--transient", type=count, default=2000,
                    help="periods run before the record (default 2000)")
     s.add_argument("--max-period", type=integer_at_least(1), default=64,
                    help="longest period detected; the record is twice it (default 64)")
-    s.add_argument("--period-tol", type=_finite, default=1e-10,
+    s.add_argument("--period-tol", type=finite, default=1e-10,
                    help="tolerance of the period detection on Pi2 (default 1e-10)")
-    s.add_argument("--match-tol", type=_finite,
+    s.add_argument("--match-tol", type=finite,
                    help="largest distance of two cycles of one attractor (default 1e-3 x the "
                         "1/1 orbit's distance from X** at -|Delta d|)")
-    _gain_args(s)
-    s.add_argument("--control-after", type=_count,
+    add_gains(s)
+    s.add_argument("--control-after", type=count,
                    help="controller on from this sample (default 0 with --c2)")
     s.add_argument("--workers", type=integer_at_least(1),
                    help="local processes (default: all cores)")
@@ -115,12 +115,12 @@ def cmd_basins(args):
     """Run the grid and write its files; returns the report (the summary with --json)."""
     from grazing_control.oscillator.params import ParameterError
     from grazing_control.studies.basins import basins, picture
-    from .commands import _gains, _params
+    from .common import gains_of, params_of
 
     if args.delta_d is None:
         raise ParameterError("--delta-d is required (or a --params FILE with delta_d)")
-    p = _params(args, args.delta_d)
-    gains = _gains(args, p)
+    p = params_of(args, args.delta_d)
+    gains = gains_of(args, p)
     if args.control_after is not None and gains is None:
         raise ParameterError("--control-after needs the gains: give --c2 (and optionally --c1)")
     stem = _stem(args.out)

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import os
 import re
 import sys
@@ -20,17 +19,17 @@ import warnings
 
 import numpy as np
 
-from grazing_control.support.arguments import finite, integer_at_least, non_empty_path
+from grazing_control.oscillator.params import ParameterError
+from grazing_control.support.arguments import finite, integer_at_least, non_negative
+
 from . import ndof
+from .common import (add_common, add_delay, add_gains, add_method, complex_list, count,
+                     file_path, gains_of, non_finite, nulls, params_of, require_finite)
+from .design import cmd_design
 from .parameter_file import add_params_option, apply_to_args
-from .rig import add_rig_option, apply_rig
-from grazing_control.oscillator.control import Gains
-from grazing_control.oscillator.params import (STUDY_R, STUDY_ZETA, OscillatorParams,
-                                               ParameterError, study_omega)
+from .rig import apply_rig
 
 __all__ = ["main", "build_parser"]
-
-TWO_PI = 2.0 * math.pi
 
 
 class _Parser(argparse.ArgumentParser):
@@ -54,308 +53,14 @@ class _Parser(argparse.ArgumentParser):
 _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
 
 
-def _complex_list(values):
-    return [[float(np.real(z)), float(np.imag(z))] for z in values]
-
-
-_finite = finite
-_count = integer_at_least(0)
-_path = non_empty_path
-
-
-def _non_finite(obj, where=""):
-    """Key paths of the non-finite floats in a result (nested dicts and lists)."""
-    if isinstance(obj, float):
-        return [] if math.isfinite(obj) else [f"{where}={obj!r}"]
-    if isinstance(obj, dict):
-        return [w for k, v in obj.items() for w in _non_finite(v, f"{where}.{k}" if where else k)]
-    if isinstance(obj, (list, tuple)):
-        return [w for i, v in enumerate(obj) for w in _non_finite(v, f"{where}[{i}]")]
-    return []
-
-
-def _require_finite(out, command):
-    """A result with nan/inf is an input outside the computable range: say so (status 2)."""
-    bad = _non_finite(out)
-    if bad:
-        raise ParameterError(
-            f"{command}: the result is not finite ({', '.join(bad[:3])}"
-            f"{', ...' if len(bad) > 3 else ''}): an input is outside the computable range")
-
-
-def _nulls(obj):
-    """nan/inf -> None (JSON null), recursively."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _nulls(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_nulls(v) for v in obj]
-    return obj
-
-
-def _common(parser):
-    g = parser.add_argument_group("model (defaults: the study's parameter set)")
-    g.add_argument("--zeta", type=_finite, default=STUDY_ZETA, help="damping ratio, 0 < zeta < 1")
-    g.add_argument("--r", type=_finite, default=STUDY_R, help="restitution, 0 < r < 1")
-    g.add_argument("--omega", type=_finite, default=study_omega(), help="forcing frequency > 0")
-    g.add_argument("--pi2-offset", type=_finite, default=math.pi / 2,
-                   help="phase of Pi2 after Pi1, in (0, 2 pi)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
-    add_params_option(g)
-    add_rig_option(g)
-
-
-def _method_arg(parser):
-    parser.add_argument("--method", choices=("exact", "perturbation"), default="exact",
-                        help="exact (shooting, the accurate route) or perturbation (series in "
-                             "delta2, the fast estimate); the cost is reported")
-
-
-def _gain_args(parser, required=False):
-    parser.add_argument("--c1", type=_finite, help="gain c1 (default: degenerate condition Eq. 38)")
-    parser.add_argument("--c2", type=_finite, required=required, help="gain c2")
-    _delay_arg(parser)
-
-
-def _delay_arg(parser):
-    parser.add_argument("--delay", type=_finite, default=0.0,
-                        help="actuation delay: the correction acts this long (simulation time) "
-                             "after the Pi2 sample, 0 <= delay < T - pi2_offset/omega "
-                             "(docs/theory_delay.md); default 0")
-
-
-#: Largest zeta T (forcing periods' decay exponent) the commands accept: e^{-2 zeta T}
-#: underflows near 700 and the period maps become 0.
-_MAX_DECAY = 300.0
-
-
-def _params(args, delta_d=0.0):
-    p = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, delta_d=delta_d,
-                         pi2_offset=args.pi2_offset)
-    if not 1e-100 < p.amplitude < 1e100:
-        raise ParameterError(
-            f"omega={p.omega!r} is invalid with zeta={p.zeta!r}: the non-impacting amplitude "
-            f"a(omega) = {p.amplitude:.3g} is outside the computable range (1e-100, 1e100)")
-    if not p.zeta * p.period <= _MAX_DECAY:
-        raise ParameterError(
-            f"omega={p.omega!r} is invalid with zeta={p.zeta!r}: valid range is "
-            f"omega >= 2 pi zeta / {_MAX_DECAY:g} = {TWO_PI * p.zeta / _MAX_DECAY:.3g} "
-            f"(the decay e^(-zeta T) over a forcing period underflows)")
-    return p
-
-
-def _gains(args, p):
-    delay = getattr(args, "delay", 0.0)
-    if args.c2 is None:
-        if args.c1 is not None:
-            raise ParameterError("c1 given without c2: give both, or c2 alone (c1 from Eq. 38)")
-        if delay != 0.0:
-            raise ParameterError("--delay needs the gains: give --c2 (and optionally --c1)")
-        return None
-    from grazing_control.dynamics.design import degenerate_c1
-
-    c1 = degenerate_c1(p, args.c2, delay) if args.c1 is None else args.c1
-    return Gains(c1, args.c2, delay)
-
-
-# ---------------------------------------------------------------------------- design
-def cmd_design(args):
-    if args.model is not None:
-        return ndof.cmd_design(args)
-    from grazing_control.dynamics.design import (C2_LIMIT, admissible_c2, evaluate_design,
-                                                 write_controller_yaml)
-
-    p = _params(args)
-    t0 = time.perf_counter()
-    tuned = None
-    if args.optimize is not None:
-        if args.c2 is not None:
-            raise ParameterError("c2 is given with --optimize: give one of --c2 and --optimize")
-        tuned = _optimize(args, p)
-        args.c2 = tuned["c2"]
-    elif args.c2 is None:
-        raise ParameterError("c2 is missing: give --c2 (the chosen gain) or --optimize noise")
-    point = evaluate_design(p, args.c2, args.delay)
-    sets = {c: admissible_c2(p, delay=args.delay, conditions=c)
-            for c in ("combined", "impacting", "non-impacting")}
-    cost = time.perf_counter() - t0
-    other = None
-    if args.method == "perturbation":
-        from grazing_control.dynamics.perturbation import (admissible_c2_perturbation,
-                                                           existence_coefficient_perturbation,
-                                                           limit_multipliers_perturbation)
-
-        t0 = time.perf_counter()
-        g = point.gains()
-        lam_p = limit_multipliers_perturbation(p, g)
-        gamma_p = existence_coefficient_perturbation(p, g)
-        sets_p = {c: admissible_c2_perturbation(p, delay=args.delay, conditions=c) for c in sets}
-        cost_p = time.perf_counter() - t0
-        other = {"exact": {"admissible_c2": [_json_interval(iv) for iv in sets["combined"]],
-                           "multipliers_limit": _complex_list(point.multipliers_limit),
-                           "gamma1": point.gamma1, "seconds": cost}}
-        exact_combined = sets["combined"]
-        point = type(point)(point.c1, point.c2, lam_p, gamma_p, point.multipliers_free, point.delay)
-        sets, cost = sets_p, cost_p
-        ends = [(a - b) for iv, jv in zip(sets["combined"], exact_combined) for a, b in zip(iv, jv)
-                if math.isfinite(a) and math.isfinite(b)]
-        other["difference_admissible_ends"] = ends
-    intervals = sets["combined"]
-    chosen = next((iv for iv in intervals if iv[0] <= args.c2 <= iv[1]), None)
-    shown = chosen or (max(intervals, key=lambda iv: iv[1] - iv[0]) if intervals else None)
-    rho_free = float(np.max(np.abs(point.multipliers_free)))
-    out = {
-        "c1": point.c1,
-        "c2": point.c2,
-        "actuation_delay": point.delay,
-        "x_ref": p.x_ref,
-        "v_ref": p.v_ref,
-        "admissible_c2": _json_interval(shown) if shown else None,
-        "admissible_c2_sets": {c: [_json_interval(iv) for iv in ivs] for c, ivs in sets.items()},
-        "c2_search_limit": C2_LIMIT,
-        "multipliers_limit": _complex_list(point.multipliers_limit),
-        "gamma1": point.gamma1,
-        "multipliers_free": _complex_list(point.multipliers_free),
-        "spectral_radius_free": rho_free,
-        "conditions": {"limit_stable": point.stable, "exists_impacting": point.gamma1 > 0.0,
-                       "free_stable": point.free_stable},
-        "admissible": point.admissible,
-        "admissible_impacting": point.admissible_impacting,
-        "method": args.method,
-        "seconds": cost,
-    }
-    if other is not None:
-        out["comparison"] = other
-    noise = None
-    if args.delta_d is not None or tuned is not None:
-        noise = _noise_report(args, p, point)
-        out.update(noise)
-    if tuned is not None:
-        out["optimize"] = tuned
-    _require_finite(out, "design")
-    if args.out:
-        if not point.admissible:
-            raise ParameterError(
-                f"c2={args.c2!r} is not admissible: valid range is {_fmt_intervals(intervals)}; "
-                f"nothing written to {args.out}")
-        write_controller_yaml(args.out, p, point.gains())
-    if args.json:
-        return out
-    lam = ", ".join(f"{abs(z):.6g}" for z in point.multipliers_limit)
-    ok = {True: "yes", False: "NO"}
-    delay = f", actuation delay {point.delay:.12g}" if point.delay else ""
-    lines = [
-        f"degenerate grazing design (N_g,12 = 0, Eq. 38) for c2 = {point.c2:.12g}{delay}",
-        f"  c1                 = {point.c1:.15g}",
-        f"  X** on Pi2         = ({p.x_ref:.15g}, {p.v_ref:.15g})",
-        f"  |lambda0|          = {lam}  (limit Delta d -> 0-: {ok[point.stable]} < 1)",
-        f"  gamma1             = {point.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*: "
-        f"{ok[point.gamma1 > 0.0]})",
-        f"  rho(N_g)           = {rho_free:.6g}  (non-impacting motion, d > d*: "
-        f"{ok[point.free_stable]} < 1)",
-        f"  admissible c2      = {_fmt_intervals(intervals)}  (all three conditions)",
-        f"    impacting side   = {_fmt_intervals(sets['impacting'])}  (|lambda0| < 1, gamma1 > 0)",
-        f"    non-impacting    = {_fmt_intervals(sets['non-impacting'])}  (rho(N_g) < 1)",
-        f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
-        f"  method             : {args.method} ({cost:.3g} s)",
-    ]
-    if noise is not None:
-        gain = noise["noise_gain"]
-        lines.append(f"  noise gain         = {'none (no stable controlled orbit)' if gain is None else f'{gain:.4g}'}"
-                     f"  (std of the Pi2 position per unit measurement noise on x and v, "
-                     f"Delta d = {noise['noise_gain_delta_d']:.3g})")
-        pos = noise["noise_gain_position_only"]
-        sensor = noise["position_only_sensor"]
-        lines.append(f"  position only      = {'none' if pos is None else f'{pos:.4g}'}"
-                     f"  (a position sensor at {sensor['samples_per_period']} samples per "
-                     f"period, {sensor['estimator']} estimator, per unit sigma)")
-    if tuned is not None:
-        study = tuned["study_noise_gain"]
-        lines.append(f"  optimised          : least noise gain in {_fmt_intervals([tuned['interval']])}"
-                     f" ({tuned['evaluations']} evaluations); the study's c2 = {tuned['study_c2']:g}: "
-                     + ("no stable controlled orbit with this delay" if study is None
-                        else f"{study:.4g} ({study / tuned['noise_gain']:.3g}x)"))
-    if other is not None:
-        lines.append(f"  exact route        : admissible c2 = "
-                     f"{_fmt_intervals(other['exact']['admissible_c2'])} ({other['exact']['seconds']:.3g} s); "
-                     f"end differences {other['difference_admissible_ends']}")
-    if args.out:
-        lines.append(f"  controller parameters written to {args.out}")
-    return "\n".join(lines)
-
-
-def _noise_delta_d(args):
-    """Delta d of the noise gain: --delta-d, or the study's first scene for --optimize."""
-    dd = -5e-6 if args.delta_d is None else args.delta_d
-    if not dd < 0.0:
-        raise ParameterError(f"delta_d={dd!r} is invalid: the noise gain is that of the "
-                             f"controlled 1/1 orbit, valid range is delta_d < 0")
-    return dd
-
-
-def _optimize(args, p):
-    """--optimize noise: the c2 of least noise gain (dynamics.tuning.optimize_noise)."""
-    from grazing_control.dynamics.tuning import STUDY_C2, optimize_noise
-
-    r = optimize_noise(p.with_(delta_d=_noise_delta_d(args)), args.delay)
-    study = r.study_noise_gain if math.isfinite(r.study_noise_gain) else None
-    return {"objective": args.optimize, "delta_d": r.delta_d, "c2": r.c2, "c1": r.c1,
-            "noise_gain": r.noise_gain, "interval": _json_interval(r.interval),
-            "study_c2": STUDY_C2, "study_noise_gain": study, "evaluations": r.evaluations}
-
-
-def _noise_report(args, p, point):
-    """noise_gain (null where no stable controlled orbit) at --delta-d, issue 15 section 3."""
-    from grazing_control.dynamics.tuning import design_noise_gain
-
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.estimation import estimate_covariance
-    from grazing_control.dynamics.orbits import OrbitNotFound
-
-    dd = _noise_delta_d(args)
-    q = p.with_(delta_d=dd)
-    gain = design_noise_gain(q, point.c2, point.delay)
-    out = {"noise_gain": gain if math.isfinite(gain) else None, "noise_gain_delta_d": dd}
-    # the position-only sensor (issue 15 section 3): the estimate's covariance per unit
-    # sigma^2 of the chosen estimator at --sensor-rate samples per period (E7)
-    try:
-        g = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
-        r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator)
-        pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
-    except (OrbitNotFound, ValueError, ArithmeticError):
-        pos = math.inf
-    out.update(noise_gain_position_only=pos if math.isfinite(pos) else None,
-               position_only_sensor={"samples_per_period": args.sensor_rate,
-                                     "estimator": args.estimator})
-    return out
-
-
-def _fmt_intervals(intervals):
-    """'(lo, hi) U ...'; an end open at the search limit reads 'beyond -1e+06' (design.C2_LIMIT)."""
-    from grazing_control.dynamics.design import C2_LIMIT
-
-    def end(x, sign):
-        if x is None or not math.isfinite(x):
-            return f"beyond {sign}{C2_LIMIT:.0e}"
-        return f"{x:.10g}"
-
-    return " U ".join(f"({end(lo, '-')}, {end(hi, '+')})" for lo, hi in intervals) or "empty"
-
-
-def _json_interval(iv):
-    """[lo, hi] with an end open at the search limit as null (the key c2_search_limit)."""
-    return [x if math.isfinite(x) else None for x in iv]
-
-
 # ---------------------------------------------------------------------------- orbit
 def cmd_orbit(args):
     if args.model is not None:
         return ndof.cmd_orbit(args)
     from grazing_control.dynamics.orbits import orbit_11
 
-    p = _params(args, args.delta_d)
-    gains = _gains(args, p)
+    p = params_of(args, args.delta_d)
+    gains = gains_of(args, p)
     t0 = time.perf_counter()
     o = orbit_11(p, gains)
     lam = o.multipliers
@@ -377,7 +82,7 @@ def cmd_orbit(args):
         "impact_phase": o.impact_phase,
         "v_minus": o.v_minus,
         "section_pi2": list(o.pi2),
-        "multipliers": _complex_list(lam),
+        "multipliers": complex_list(lam),
         "stable": bool(np.max(np.abs(lam)) < 1.0),
         "branch": o.branch,
         "method": args.method,
@@ -386,7 +91,7 @@ def cmd_orbit(args):
     if gains is not None and gains.delay:
         out.update(c1=gains.c1, c2=gains.c2, actuation_delay=gains.delay,
                    section_pi2_deviation=list(o.pi2_deviation))
-    _require_finite(out, "orbit")
+    require_finite(out, "orbit")
     if args.json:
         return out
     lam = ", ".join(f"{z:.6g}" for z in lam)
@@ -417,22 +122,22 @@ def cmd_continue(args):
         return ndof.cmd_continue(args)
     from grazing_control.dynamics.continuation import continue_11
 
-    p = _params(args)
-    gains = _gains(args, p)
+    p = params_of(args)
+    gains = gains_of(args, p)
     branch = continue_11(p, args.start, args.stop, gains, points=args.points, check=True)
     out = {
         "branch": [
             {"delta_d": b.delta_d, "v_minus": b.v_minus,
-             "multipliers": _complex_list(b.multipliers), "stable": b.stable}
+             "multipliers": complex_list(b.multipliers), "stable": b.stable}
             for b in branch.points
         ],
         "bifurcations": [
-            {"type": b.type, "delta_d": b.delta_d, "multipliers": _complex_list(b.multipliers)}
+            {"type": b.type, "delta_d": b.delta_d, "multipliers": complex_list(b.multipliers)}
             for b in branch.bifurcations
         ],
     }
     if args.json:
-        return _nulls(out)  # inf multipliers at the grazing point itself -> null
+        return nulls(out)  # inf multipliers at the grazing point itself -> null
     lines = [f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to {args.stop:g}",
              f"{'Delta d':>14} {'v-':>14} {'max|lambda|':>14} stable"]
     step = max(1, len(branch.points) // 20)
@@ -450,8 +155,8 @@ def cmd_simulate(args):
         return ndof.cmd_simulate(args)
     from grazing_control.dynamics.simulate import simulate
 
-    p = _params(args, args.delta_d)
-    gains = _gains(args, p)
+    p = params_of(args, args.delta_d)
+    gains = gains_of(args, p)
     if args.control_after is not None and gains is None:
         raise ParameterError("--control-after needs the gains: give --c2 (and optionally --c1)")
     control_after = args.control_after if args.control_after is not None else (0 if gains else None)
@@ -469,7 +174,7 @@ def cmd_simulate(args):
     out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist()}
     if args.fidelity != "exact":
         out.update(fidelity=res.fidelity, fidelity_reason=res.fidelity_reason)
-    _require_finite(out, "simulate")
+    require_finite(out, "simulate")
     spectrum = None
     if args.lyapunov:
         from grazing_control.dynamics.lyapunov import lyapunov_exact
@@ -598,7 +303,7 @@ def cmd_run(args):
         return result.exit_code
     with _stdout_to_stderr():  # stdout: the one JSON object only
         result = run(**kwargs)
-    summary = _nulls(dataclasses.asdict(result)) if dataclasses.is_dataclass(result) else {}
+    summary = nulls(dataclasses.asdict(result)) if dataclasses.is_dataclass(result) else {}
     summary.update(ok=bool(result.ok), exit_code=result.exit_code, summary=str(result))
     _print_json(summary)
     return result.exit_code
@@ -618,7 +323,7 @@ def cmd_demo(args):
                "numbers": str(report)}
     if report.is_file():
         summary.update(json.loads(report.read_text(encoding="utf-8")))
-    _print_json(_nulls(summary))
+    _print_json(nulls(summary))
     return status
 
 
@@ -639,10 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("design", help="gains (c1, c2) for degenerate grazing, admissible c2")
-    _common(s)
-    s.add_argument("--c2", type=_finite, help="chosen gain c2 (or --optimize)")
-    _delay_arg(s)
-    s.add_argument("--delta-d", type=_finite,
+    add_common(s)
+    s.add_argument("--c2", type=finite, help="chosen gain c2 (or --optimize)")
+    add_delay(s)
+    s.add_argument("--delta-d", type=finite,
                    help="report the noise gain (std of the Pi2 position per unit measurement "
                         "noise) of the controlled orbit at this Delta d < 0")
     s.add_argument("--sensor-rate", type=integer_at_least(2), default=200,
@@ -650,59 +355,75 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 200)")
     s.add_argument("--estimator", choices=("model", "arc", "nearest"), default="model",
                    help="its Pi2 estimator (default model, docs/theory_estimation.md)")
+    s.add_argument("--sensor-lead", type=non_negative, default=0.0,
+                   help="its estimate made this long (model time) before the section's last "
+                        "sample, the later samples unused (a rig controller's answer_lead; "
+                        "default 0)")
     s.add_argument("--optimize", choices=("noise",),
                    help="choose c2 in the admissible set: noise = least noise gain at --delta-d "
                         "(default -5e-6, the study's first scene)")
-    s.add_argument("--out", type=_path, help="write the controller's YAML parameter file here "
+    s.add_argument("--out", type=file_path, help="write the controller's YAML parameter file here "
                                              "(c1, c2, actuation_delay, X**, the model)")
-    _method_arg(s)
+    s.add_argument("--pulse-width", type=finite, default=0.0,
+                   help="the correction as a force pulse of this width centred at --delay "
+                        "(simulation time; sim_node's pulse_width); with it c1 is the exact "
+                        "design for the pulse's force profile (P1, docs/theory_pulse.md)")
+    s.add_argument("--actuator-bandwidth", type=finite, default=0.0,
+                   help="a first-order actuator's bandwidth 1/tau_a (radians per simulation "
+                        "time unit, sim_node's actuator_bandwidth; 0: ideal): c1 for the "
+                        "force through it, the loop's margin and predicted spread at "
+                        "--delta-d (needs --pulse-width)")
+    s.add_argument("--actuator-latency", type=finite, default=0.0,
+                   help="the actuator's latency (simulation time, sim_node's "
+                        "actuator_latency; needs --pulse-width)")
+    add_method(s)
     ndof.add_model_option(s)
     ndof.add_design_options(s)
     s.set_defaults(func=cmd_design)
 
     s = sub.add_parser("orbit", help="the 1/1 orbit and its Floquet multipliers")
-    _common(s)
-    s.add_argument("--delta-d", type=_finite, help="Delta d = d - d* (< 0); required unless "
+    add_common(s)
+    s.add_argument("--delta-d", type=finite, help="Delta d = d - d* (< 0); required unless "
                                                   "--rig or --params gives it")
-    _gain_args(s)
-    _method_arg(s)
+    add_gains(s)
+    add_method(s)
     ndof.add_model_option(s)
     ndof.add_gain_options(s, markov=True)
     s.set_defaults(func=cmd_orbit)
 
     s = sub.add_parser("continue", help="continue the 1/1 branch in Delta d, find bifurcations")
-    _common(s)
-    s.add_argument("--from", dest="start", type=_finite, required=True, help="start Delta d <= 0")
-    s.add_argument("--to", dest="stop", type=_finite, required=True, help="end Delta d <= 0")
-    s.add_argument("--points", type=_count, default=200, help="grid points (default 200)")
-    _gain_args(s)
+    add_common(s)
+    s.add_argument("--from", dest="start", type=finite, required=True, help="start Delta d <= 0")
+    s.add_argument("--to", dest="stop", type=finite, required=True, help="end Delta d <= 0")
+    s.add_argument("--points", type=count, default=200, help="grid points (default 200)")
+    add_gains(s)
     ndof.add_model_option(s)
     ndof.add_gain_options(s, markov=True)
     s.set_defaults(func=cmd_continue)
 
     from .continue2 import add_parser as add_continue2_parser
-    add_continue2_parser(sub, _common, _gain_args)
+    add_continue2_parser(sub, add_common, add_gains)
 
     s = sub.add_parser("simulate", help="simulate on Pi2, optionally switching control on")
-    _common(s)
-    s.add_argument("--delta-d", type=_finite, help="Delta d = d - d*; required unless --rig "
+    add_common(s)
+    s.add_argument("--delta-d", type=finite, help="Delta d = d - d*; required unless --rig "
                                                   "or --params gives it")
-    s.add_argument("--periods", type=_count, required=True, help="number of forcing periods")
-    s.add_argument("--control-after", type=_count, help="switch control on at this sample")
-    s.add_argument("--x0", type=_finite, help="initial x on Pi2 (default x**)")
-    s.add_argument("--v0", type=_finite, help="initial v on Pi2 (default v**)")
-    s.add_argument("--dx0", type=_finite,
+    s.add_argument("--periods", type=count, required=True, help="number of forcing periods")
+    s.add_argument("--control-after", type=count, help="switch control on at this sample")
+    s.add_argument("--x0", type=finite, help="initial x on Pi2 (default x**)")
+    s.add_argument("--v0", type=finite, help="initial v on Pi2 (default v**)")
+    s.add_argument("--dx0", type=finite,
                    help="initial x - x** on Pi2 (deviation; full precision near grazing)")
-    s.add_argument("--dv0", type=_finite, help="initial v - v** on Pi2 (deviation)")
+    s.add_argument("--dv0", type=finite, help="initial v - v** on Pi2 (deviation)")
     s.add_argument("--lyapunov", action="store_true",
                    help="also the Lyapunov exponents per period over the last half of the "
                         "periods, with the sum identity (docs/theory_lyapunov.md)")
     s.add_argument("--fidelity", choices=("exact", "zdm2", "zdm1", "ode", "auto"), default="exact",
                    help="model: exact flow (default), normal-form maps zdm2/zdm1, solve_ivp "
                         "(ode, comparison), or auto: the cheapest meeting --tol over the horizon")
-    s.add_argument("--tol", type=_finite, default=1e-9,
+    s.add_argument("--tol", type=finite, default=1e-9,
                    help="Pi2 error tolerance for --fidelity auto (default 1e-9)")
-    _gain_args(s)
+    add_gains(s)
     ndof.add_model_option(s)
     ndof.add_gain_options(s)
     ndof.add_start_option(s)
@@ -710,7 +431,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from grazing_control.studies.sweeps.cli import add_sweep_command
 
-    s = add_sweep_command(sub, _common, _finite, _count)
+    s = add_sweep_command(sub, add_common, finite, count)
     ndof.add_sweep_options(s)
     s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_sweep))
     from .basins import add_basins_parser
@@ -746,7 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_identify_parser(sub)
     from grazing_control.studies.robustness.cli import add_robustness_parser
 
-    add_robustness_parser(sub, _common, _finite)
+    add_robustness_parser(sub, add_common, finite)
     from grazing_control.studies.figures.command import add_parser as add_figures_parser
 
     s = add_figures_parser(sub)
@@ -754,7 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_figures))
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
-    s.add_argument("--out", type=_path, default="out/demo", help="report folder (default out/demo)")
+    s.add_argument("--out", type=file_path, default="out/demo", help="report folder (default out/demo)")
     s.add_argument("--offline", action="store_true", help="through the core only, no ROS nodes")
     s.add_argument("--json", action="store_true",
                    help="print one JSON summary object (progress goes to stderr)")
@@ -807,7 +528,7 @@ def main(argv=None) -> int:
         return 130
     if isinstance(result, int):
         return result
-    bad = _non_finite(result) if isinstance(result, dict) else []
+    bad = non_finite(result) if isinstance(result, dict) else []
     if bad:
         print(f"grazing: error: {args.command}: the result is not finite ({', '.join(bad[:3])}): "
               "an input is outside the computable range", file=sys.stderr)

@@ -77,13 +77,13 @@ def run(args):
     from grazing_control.dynamics.two_parameter import KINDS, Family, two_parameter_diagram
     from grazing_control.oscillator.params import ParameterError
     from grazing_control.studies.figures.two_parameter import write_diagram
-    from .commands import _gains, _params
+    from .common import gains_of, params_of
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out={args.out!r} is invalid: it exists and is not a folder")
-    p = _params(args)
-    gains = _gains(args, p)
+    p = params_of(args)
+    gains = gains_of(args, p)
     lo, hi = DEFAULT_RANGE[args.parameter]
     lo = lo if args.start is None else args.start
     hi = hi if args.stop is None else args.stop
@@ -91,7 +91,7 @@ def run(args):
         raise ParameterError(f"--from={lo!r}, --to={hi!r} are invalid: valid range is from < to")
     if args.parameter != "c2":
         for end in (lo, hi):   # each end a computable model, as the shared options are
-            _params(argparse.Namespace(**{**vars(args), args.parameter: end}))
+            params_of(argparse.Namespace(**{**vars(args), args.parameter: end}))
     if args.max_points > MAX_POINTS:
         raise ParameterError(f"--max-points={args.max_points!r} is invalid: valid range is "
                              f"2 <= max-points <= {MAX_POINTS}")

@@ -24,6 +24,9 @@ import sys
 
 from grazing_control.support.arguments import integer_at_least, non_empty_path
 
+#: --max-arcs by default: the first 100 arcs, fewer where the Jacobian's bound needs it.
+DEFAULT_ARCS = 100
+
 __all__ = ["add_identify_parser", "cmd_identify"]
 
 
@@ -50,7 +53,9 @@ def cmd_identify(args) -> int:
 
         rig = load(args.rig)
     result = identify_bags(args.bags, position_only=args.position_only,
-                           impacts=not args.no_impacts, max_arcs=args.max_arcs)
+                           impacts=not args.no_impacts,
+                           max_arcs=DEFAULT_ARCS if args.max_arcs is None else args.max_arcs,
+                           shrink=args.max_arcs is None)
     si_report(result, args.bags, rig)
     fitted_rig = result.pop("_rig", None)
     if args.out_rig and fitted_rig is None:
@@ -128,8 +133,10 @@ def add_identify_parser(sub) -> None:
                         "motion")
     s.add_argument("--position-only", action="store_true",
                    help="ignore the recorded velocity: fit the positions only")
-    s.add_argument("--max-arcs", type=integer_at_least(2), default=100,
-                   help="fit each bag up to its N-th impact or correction (default 100; "
-                        "the fit's time grows as N^3, 4 s for 100 on an idle machine; a fit whose dense "
-                        "Jacobian would exceed 32 MiB, about 300 arcs, is refused)")
+    s.add_argument("--max-arcs", type=integer_at_least(2), default=None,
+                   help="fit each bag up to its N-th impact or correction (the fit's time "
+                        "grows as N^3, 4 s for 100 on an idle machine; a fit whose dense "
+                        "Jacobian would exceed 32 MiB, about 300 arcs of the study's "
+                        "stream, is refused; default 100, or fewer where a dense stream "
+                        "needs it: the report says how many were used)")
     s.set_defaults(func=cmd_identify)

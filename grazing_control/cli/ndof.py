@@ -23,6 +23,8 @@ import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
+from .common import nulls
+
 __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
            "add_sweep_options", "check_options", "load", "gains_of", "dispatch",
            "add_figures_options", "cmd_design", "cmd_orbit", "cmd_continue", "cmd_simulate",
@@ -380,7 +382,7 @@ def _orbit_json(o):
 
 def cmd_orbit(args):
     """orbit --model FILE --delta-d DD [gains] (docs/ndof_commands.md)."""
-    from grazing_control.studies.ndof.branch import grazing_side, orbit_11, with_delta_d
+    from grazing_control.studies.ndof.branch import EXPLICIT, grazing_side, orbit_11, with_delta_d
 
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = gains_of(args, model)
@@ -403,23 +405,34 @@ def cmd_orbit(args):
         return out
     ctl = " (uncontrolled)" if k is None else f" with k = {_fmt_vec(k, 8)} ({how}" + \
         (f", mu = {mu:.8g})" if mu is not None else ")")
+    explicit = o.guess == EXPLICIT
+    route = "the factored monodromy" if explicit else "shooting"
+    born = "born at grazing (" + ("on the branch from psi = 0" if explicit else
+                                  "the local map's prediction")
+    born += (f", {o.prediction_offset:.2g} relative from the local map's prediction)"
+             if math.isfinite(o.prediction_offset) else ")")
     return "\n".join([
         f"1/1 orbit at Delta d = {model.delta_d:.6g}{ctl}",
         f"  impact phase  = {o.impact_phase:.15g}",
         f"  v-            = {o.v_minus:.10g}",
         f"  Pi2 point     = {_fmt_vec(o.physical, 15)}",
         f"  multipliers   = {', '.join(f'{z:.6g}' for z in o.multipliers)}  "
-        f"(|max| {np.max(np.abs(o.multipliers)):.6g}; shooting, {seconds:.3g} s)",
+        f"(|max| {np.max(np.abs(o.multipliers)):.6g}; {route}, {seconds:.3g} s)",
         f"  stable        = {o.stable}",
         f"  found from    : {o.guess}",
-        f"  branch        = " + ("born at grazing (the local map's prediction, "
-                                 f"{o.prediction_offset:.2g} relative away)" if o.near_grazing
+        f"  branch        = " + (born if o.near_grazing
                                  else "another 1/1 orbit, not the one born at grazing "
                                       "(docs/ndof_commands.md)"),
     ])
 
 
 # ---------------------------------------------------------------------------- continue
+#: Impact velocity, in units of d* omega, below which a point found by shooting is
+#: flagged: v-^2 / (2 |a|) then nears the gap's rounding (~1e-16 d*), and v- was found
+#: 1e-2 off at v- = 1.5e-7 (issue 32).
+UNRESOLVED_V = 1e-5
+
+
 def continuation_values(start: float, stop: float, points: int) -> np.ndarray:
     """Delta d from ``start`` to ``stop``: log-spaced in |Delta d| when both have one sign
     (points crowd towards grazing; ``stop`` = 0: down to 1e-12 |start|), else linear."""
@@ -437,17 +450,30 @@ def continuation_values(start: float, stop: float, points: int) -> np.ndarray:
 def cmd_continue(args):
     """continue --model FILE --from A --to B [gains] (docs/ndof_commands.md)."""
     from grazing_control.dynamics.continuation import continue_orbit
+    from grazing_control.dynamics.ndof_branch import continue_branch
     from grazing_control.dynamics.ndof_map import NdofMap
-    from grazing_control.studies.ndof.branch import fold_beyond, orbit_11, with_delta_d
+    from grazing_control.studies.ndof.branch import EXPLICIT, fold_beyond, orbit_11, with_delta_d
 
     values = continuation_values(args.start, args.stop, args.points)
     model = with_delta_d(load(args.model), float(values[0]))
     k, mu, how = gains_of(args, model)
     t0 = time.perf_counter()
     first = orbit_11(model, k)
-    branch = continue_orbit(NdofMap(model, k), "delta_d", values, first.state)
+    # the branch born at grazing: explicit in the impact phase, every point exact to
+    # rounding (issue 32: shooting returned points 1e-2 off near |Delta d| = 3e-8)
+    explicit = first.guess == EXPLICIT
+    branch = continue_branch(model, k, values) if explicit else \
+        continue_orbit(NdofMap(model, k), "delta_d", values, first.state)
     fold = fold_beyond(model, k, branch, float(values[-1]))
     seconds = time.perf_counter() - t0
+    # by shooting, an impact with v-^2 near the gap's rounding is resolved to a few
+    # digits only (docs/ndof_commands.md, "Near grazing"): say which points that is
+    floor = UNRESOLVED_V * model.omega * _header(model, args.model)["d_star"]
+    weak = [] if explicit else [p.value for p in branch.points if p.v_min < floor]
+    warning = None if not weak else (
+        f"{len(weak)} of {len(branch.points)} points have v- below {floor:.3g}, where "
+        f"shooting resolves the impact to a few digits only (Delta d {weak[0]:.6g} .. "
+        f"{weak[-1]:.6g})")
     limit = None
     if mu is not None:
         from grazing_control.dynamics.ndof_design import limit_multipliers
@@ -464,13 +490,15 @@ def cmd_continue(args):
                           "multipliers": _complex_list(b.multipliers)}
                          for b in branch.bifurcations],
         "stopped": branch.stopped, "fold": fold,
+        "route": "impact phase" if explicit else "shooting", "warning": warning,
         "start_branch": "grazing" if first.near_grazing else "other",
         "multipliers_limit": None if limit is None else _complex_list(limit),
         "seconds": seconds,
     })
     if args.json:
-        return _nulls(out)
-    lines = [f"1/1 branch by shooting, {len(branch.points)} points from Delta d = "
+        return nulls(out)
+    route = "in the impact phase (exact to rounding)" if explicit else "by shooting"
+    lines = [f"1/1 branch {route}, {len(branch.points)} points from Delta d = "
              f"{args.start:g} towards {args.stop:g}"
              + ("" if k is None else f" ({how}{'' if mu is None else f', mu = {mu:.8g}'})"),
              f"{'Delta d':>14} {'v-':>14} {'max|lambda|':>14} stable"]
@@ -482,6 +510,8 @@ def cmd_continue(args):
     for b in branch.bifurcations:
         lines.append(f"  {b.type:16s} at Delta d = {b.value:.15g}")
     lines.append(f"  stopped: {branch.stopped}")
+    if warning:
+        lines.append(f"  warning: {warning}")
     if fold is not None:
         lines.append(f"  fold at Delta d = {fold['delta_d']:.15g} (psi = {fold['psi']:.6g}, "
                      f"v- = {fold['v_minus']:.6g}): the branch turns back, a multiplier "
@@ -494,16 +524,6 @@ def cmd_continue(args):
         lines.append(f"  predicted limit |lambda0| = "
                      f"{', '.join(f'{abs(z):.6g}' for z in limit)} (Delta d -> 0-)")
     return "\n".join(lines)
-
-
-def _nulls(obj):
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {key: _nulls(v) for key, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_nulls(v) for v in obj]
-    return obj
 
 
 # ---------------------------------------------------------------------------- simulate
@@ -660,7 +680,7 @@ def cmd_figures(args):
     numbers = make_ndof_figures(model, out, settings, model_file=args.model,
                                 workers=args.workers, log=log)
     if args.json:
-        return _nulls(numbers)
+        return nulls(numbers)
     m = numbers["multipliers"]
     lines = [f"n-DOF figures of {args.model} in {out}: ndof_diagram.png, ndof_multipliers.png, "
              "ndof_scene.png, ndof_figures.json",

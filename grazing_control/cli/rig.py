@@ -22,6 +22,8 @@ import math
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.arguments import finite, integer_at_least
 
+from .common import add_rig_option
+
 __all__ = ["add_rig_option", "add_rig_parser", "apply_rig", "rig_options", "load",
            "cmd_rig", "RIG_COMMANDS", "POSITION_ERROR", "VELOCITY_ERROR"]
 
@@ -31,16 +33,6 @@ RIG_COMMANDS = ("design", "orbit", "continue", "continue2", "simulate", "sweep",
 #: The errors ``grazing rig`` shows as force pulses: 1 um of position, 1 mm/s of velocity.
 POSITION_ERROR = 1e-6
 VELOCITY_ERROR = 1e-3
-
-
-def add_rig_option(parser) -> None:
-    """``--rig FILE`` on a subcommand's parser or group."""
-    parser.add_argument("--rig", metavar="FILE", default=None,
-                        help="take the model from this rig file in SI units (docs/rig.md, "
-                             "e.g. config/rigs/lab_20hz.yaml): zeta, r, omega, pi2_offset and "
-                             "Delta d, and where the command has them the actuation delay "
-                             "(the budget) and the sensor's samples per period; those options "
-                             "are then refused")
 
 
 def load(path, option: str = "--rig"):
@@ -75,6 +67,10 @@ def rig_options(rig, args) -> dict:
             out["--delta-d"] = ("delta_d", p.delta_d)
         out["--delay"] = ("delay", delay)
         out["--sensor-rate"] = ("sensor_rate", samples_per_period(rig))
+        # the rig controller's estimate: answer_lead before the section's last sample
+        from grazing_control.ros.rig_boundary import answer_lead
+
+        out["--sensor-lead"] = ("sensor_lead", answer_lead(rig))
     elif command in ("orbit", "simulate", "basins"):
         out["--delta-d"] = ("delta_d", p.delta_d)
     elif command == "robustness" and hasattr(args, "delta_d"):
@@ -121,8 +117,8 @@ def apply_rig(args, argv) -> None:
 # ---------------------------------------------------------------------- grazing rig
 def _design(rig, args) -> tuple:
     """(``grazing design``'s JSON for this rig, which c2 and why): the design of
-    cli/commands.py on the rig's options, with --c2 or --optimize noise."""
-    from .commands import cmd_design
+    cli/design.py on the rig's options, with --c2 or --optimize noise."""
+    from .design import cmd_design
 
     ns = argparse.Namespace(command="design", model=None, json=True, c2=args.c2,
                             optimize=None, estimator="model", out=None, method="exact",
@@ -269,8 +265,13 @@ def rig_report(rig, path, args) -> dict:
 
 def _spread(rig, design, ns, n) -> dict:
     """The predicted Pi2 spread: the design's position-only noise gain at the rig's
-    samples per period (model estimator) x the sensor noise (docs/rig.md)."""
+    samples per period (model estimator as the rig's controller runs it: answering
+    answer_lead before the section's last sample) x the sensor noise (docs/rig.md; the
+    pulse's O(w^2) effect on the covariance is left out, as in the design's c1)."""
+    from grazing_control.ros.rig_boundary import answer_lead
+
     out = {"samples_per_period": n, "estimator": "model", "sensor_noise_m": rig.sensor.noise,
+           "lead_s": answer_lead(rig) / rig.omega_n,
            "sensor_noise": rig.dimensionless()["sensor_noise"],
            "reference": f"grazing design --rig FILE --c2 {design['c2']!r}: "
                         "noise_gain_position_only x sensor.noise"}
@@ -381,7 +382,9 @@ def format_report(r: dict) -> str:
         lines.append(f"  none: {sp['note']}")
     else:
         lines.append(f"  noise gain {sp['noise_gain_position_only']:.6g} (position only, "
-                     f"{sp['samples_per_period']} samples per period, model estimator) x "
+                     f"{sp['samples_per_period']} samples per period, model estimator "
+                     f"answering {sp['lead_s'] * 1e3:.4g} ms before the section's last "
+                     f"sample) x "
                      f"sensor noise {sp['sensor_noise_m']:.4g} m = {sp['spread_m']:.6g} m "
                      f"(std of the Pi2 position)")
         if "note" in sp:

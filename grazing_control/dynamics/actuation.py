@@ -44,7 +44,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .simulate import period_step
 
 __all__ = ["pulse_force", "pulse_start", "pulse_step", "flow_with_force", "PulseOrbit",
-           "pulse_orbit", "newton_fixed_point"]
+           "OrbitMultipliers", "pulse_orbit", "newton_fixed_point"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -152,8 +152,25 @@ def newton_fixed_point(step, z, h: float, max_iter: int = 30):
     return z, aux, residual, jacobian
 
 
+class OrbitMultipliers:
+    """What an orbit with a ``monodromy`` and the ``impacts`` of its period says: its
+    multipliers and impact velocity (shared by :class:`PulseOrbit` and
+    :class:`grazing_control.dynamics.actuator.ActuatedOrbit`)."""
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        """Eigenvalues of the monodromy, largest modulus first."""
+        mult = np.linalg.eigvals(self.monodromy)
+        return mult[np.argsort(-np.abs(mult))]
+
+    @property
+    def v_minus(self) -> float:
+        """Impact velocity of the orbit's impact."""
+        return self.impacts[0].v_minus
+
+
 @dataclass(frozen=True)
-class PulseOrbit:
+class PulseOrbit(OrbitMultipliers):
     """The 1/1 orbit of the loop closed with a force pulse (:func:`pulse_orbit`).
 
     ``pi2``: (x, v) on Pi2 before the correction; ``pi2_deviation``: (x - x**, v - v**);
@@ -172,16 +189,6 @@ class PulseOrbit:
     start: float
     width: float
 
-    @property
-    def multipliers(self) -> np.ndarray:
-        """Eigenvalues of the monodromy, largest modulus first."""
-        mult = np.linalg.eigvals(self.monodromy)
-        return mult[np.argsort(-np.abs(mult))]
-
-    @property
-    def v_minus(self) -> float:
-        """Impact velocity of the orbit's impact."""
-        return self.impacts[0].v_minus
 
 
 def pulse_orbit(p: OscillatorParams, gains: Gains, width: float, *,

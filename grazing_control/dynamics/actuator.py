@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import brentq
@@ -44,11 +45,14 @@ from scipy.optimize import brentq
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.impact import Impact
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from .actuation import newton_fixed_point, pulse_force, pulse_start, pulse_step
+from .actuation import (OrbitMultipliers, newton_fixed_point, pulse_force, pulse_start,
+                        pulse_step)
 from .estimation import phi_rows
 
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
-           "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator"]
+           "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator", "LagFlow",
+           "LagPiece", "lag_flow", "lag_states", "actuated_design",
+           "actuated_orbit_for"]
 
 TWO_PI = 2.0 * math.pi
 #: Below this impact velocity the motion chatters: not resolved here (ValueError).
@@ -180,7 +184,7 @@ def _first_impact(p, tau0, zp, f_inf, k, tau_a, duration):
     m_free = amp * (1.0 + p.zeta) ** 2 + p.amplitude * p.omega ** 2
 
     def m_bound(u):
-        return m_free + (abs(k) / tau_a ** 2 * math.exp(-u / tau_a) if tau_a > 0.0 else 0.0)
+        return m_free + (abs(k) * (1.0 / tau_a) ** 2 * math.exp(-u / tau_a) if tau_a > 0.0 else 0.0)
 
     cells = max(1, math.ceil(duration / 0.05))
     edges = [float(e) for e in np.linspace(0.0, duration, cells + 1)]
@@ -202,23 +206,57 @@ def _first_impact(p, tau0, zp, f_inf, k, tau_a, duration):
     return None
 
 
-def _piece(p: OscillatorParams, tau0: float, z, duration: float, f_inf: float, c: float,
-           tau_a: float, t_offset: float, impacts: list):
-    """The exact motion for ``duration`` from deviation z at phase tau0 under the force
-    F_inf + C e^{-h / tau_a} (module docstring), impacts appended (times + t_offset).
-    Returns the deviation at the end."""
-    z = np.array(z, dtype=float)
+class LagPiece(NamedTuple):
+    """One stretch of :func:`lag_flow` between impacts: from ``h0`` (since the flow's
+    start) at forcing phase ``tau``, the shifted deviation ``zp`` = z - (x_f, v_f) and
+    the particular solution's amplitude ``k`` there (module docstring)."""
+
+    h0: float
+    tau: float
+    zp: tuple
+    k: float
+
+
+class LagFlow(NamedTuple):
+    """The exact motion under the force F_inf + C e^{-h / tau_a} for a duration: the
+    deviation (dx, dv) and the force at the end, the ``impacts`` (``dt`` since the
+    start), and the ``pieces`` between them (:func:`lag_states` evaluates them)."""
+
+    dx: float
+    dv: float
+    force: float
+    impacts: tuple
+    pieces: tuple
+    f_inf: float
+    tau_a: float
+
+
+def lag_flow(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: float,
+             f_inf: float, c: float, tau_a: float) -> LagFlow:
+    """The exact motion for ``duration`` from deviation (dx, dv) at phase tau0 under the
+    force F_inf + C e^{-h / tau_a} (module docstring; tau_a = 0 only with C = 0, a
+    constant force): the free flow of the shifted deviation, impacts searched by
+    :func:`_first_impact` and restarted by the impact law, C scaled by e^{-h / tau_a}
+    at each. ValueError on a chattering or sticking motion."""
+    if tau_a == 0.0 and c != 0.0:
+        raise ValueError("a force transient needs tau_a > 0")
+    z = np.array((dx, dv), dtype=float)
     h_done = 0.0
+    impacts, pieces = [], []
     while True:
-        kk = c * tau_a ** 2 / (tau_a ** 2 - 2.0 * p.zeta * tau_a + 1.0) if tau_a > 0.0 else 0.0
+        # K = C tau_a^2 / (tau_a^2 - 2 zeta tau_a + 1), written to stay finite for any tau_a
+        kk = c / (1.0 + (1.0 / tau_a) * (1.0 / tau_a - 2.0 * p.zeta)) if tau_a > 0.0 else 0.0
         # shifted state z' = z - (x_f, v_f) at the piece's start
         zp = z - np.array([f_inf + kk, -kk / tau_a if tau_a > 0.0 else 0.0])
+        pieces.append(LagPiece(h_done, tau0, (float(zp[0]), float(zp[1])), kk))
         rest = duration - h_done
         hit = _first_impact(p, tau0, zp, f_inf, kk, tau_a, rest)
         if hit is None:
             e = math.exp(-rest / tau_a) if tau_a > 0.0 else 0.0
-            zf = phi_rows(p.zeta, np.array([rest]))[0] @ zp
-            return zf + np.array([f_inf + kk * e, -kk * e / tau_a if tau_a > 0.0 else 0.0])
+            zf = phi_rows(p.zeta, np.array([rest]))[0] @ zp \
+                + np.array([f_inf + kk * e, -kk * e / tau_a if tau_a > 0.0 else 0.0])
+            return LagFlow(float(zf[0]), float(zf[1]), f_inf + c * e, tuple(impacts),
+                           tuple(pieces), f_inf, tau_a)
         e = math.exp(-hit / tau_a) if tau_a > 0.0 else 0.0
         zh = phi_rows(p.zeta, np.array([hit]))[0] @ zp \
             + np.array([f_inf + kk * e, -kk * e / tau_a if tau_a > 0.0 else 0.0])
@@ -227,14 +265,47 @@ def _piece(p: OscillatorParams, tau0: float, z, duration: float, f_inf: float, c
         v_minus = zh[1] - p.amplitude * p.omega * math.sin(psi)
         if v_minus < MIN_IMPACT_VELOCITY:
             raise ValueError(f"impact velocity {v_minus:.3g} under the actuator's force: a "
-                             "chattering or sticking motion, not resolved by actuated_step")
+                             "chattering or sticking motion, not resolved by lag_flow")
         v_plus = -p.r * v_minus
-        impacts.append(Impact(t_offset + h_done + hit, phase, v_minus, v_plus))
+        impacts.append(Impact(h_done + hit, phase, v_minus, v_plus))
         z = np.array([p.d - p.amplitude * math.cos(psi),
                       v_plus + p.amplitude * p.omega * math.sin(psi)])
         c = c * e
         h_done += hit
         tau0 = phase
+
+
+def lag_states(p: OscillatorParams, flow: LagFlow, times) -> np.ndarray:
+    """Dense output of :func:`lag_flow`: physical (x, v) at ``times`` (since the flow's
+    start, sorted), the closed form of the piece each falls in (so, like
+    :func:`grazing_control.dynamics.simulate.states_between`, never altering the
+    trajectory)."""
+    times = np.asarray(times, dtype=float)
+    out = np.empty((times.size, 2))
+    starts = np.array([pc.h0 for pc in flow.pieces])
+    which = np.searchsorted(starts, times, side="right") - 1
+    for i, pc in enumerate(flow.pieces):
+        mask = which == i
+        if not mask.any():
+            continue
+        hh = times[mask] - pc.h0
+        z = phi_rows(p.zeta, hh) @ np.asarray(pc.zp)
+        e = np.exp(-hh / flow.tau_a) if flow.tau_a > 0.0 else np.zeros_like(hh)
+        psi = pc.tau + p.omega * hh - p.lag
+        a = p.amplitude
+        out[mask, 0] = a * np.cos(psi) + z[:, 0] + flow.f_inf + pc.k * e
+        out[mask, 1] = -a * p.omega * np.sin(psi) + z[:, 1] + (
+            -pc.k * e / flow.tau_a if flow.tau_a > 0.0 else 0.0)
+    return out
+
+
+def _piece(p: OscillatorParams, tau0: float, z, duration: float, f_inf: float, c: float,
+           tau_a: float, t_offset: float, impacts: list):
+    """:func:`lag_flow` with its impacts appended to ``impacts`` (times + t_offset).
+    Returns the deviation at the end."""
+    flow = lag_flow(p, tau0, float(z[0]), float(z[1]), duration, f_inf, c, tau_a)
+    impacts.extend(i._replace(dt=i.dt + t_offset) for i in flow.impacts)
+    return np.array([flow.dx, flow.dv])
 
 
 def actuated_step(p: OscillatorParams, dx: float, dv: float, force: float,
@@ -289,7 +360,7 @@ def actuated_step(p: OscillatorParams, dx: float, dv: float, force: float,
 
 
 @dataclass(frozen=True)
-class ActuatedOrbit:
+class ActuatedOrbit(OrbitMultipliers):
     """The 1/1 orbit of the loop closed through an actuator (:func:`actuated_orbit`):
     ``state`` (dx, dv, f) on Pi2 before the correction, its ``correction``, ``impacts``
     of one period, the 3x3 ``monodromy`` (central differences of the exact map) and the
@@ -302,6 +373,18 @@ class ActuatedOrbit:
     monodromy: np.ndarray = field(repr=False)
     residual: float
     input: np.ndarray = field(repr=False, default=None)
+    reference: tuple = (0.0, 0.0)
+
+    @property
+    def pi2_deviation(self) -> tuple:
+        """(x - x**, v - v**) on Pi2 (the state less the force)."""
+        return self.state[0], self.state[1]
+
+    @property
+    def pi2(self) -> tuple:
+        """(x, v) on Pi2: X** (``reference``) plus the deviation."""
+        return self.reference[0] + self.state[0], self.reference[1] + self.state[1]
+
 
     @property
     def spectral_radius(self) -> float:
@@ -370,4 +453,62 @@ def actuated_orbit(p: OscillatorParams, gains: Gains, width: float, actuator: Ac
                             f"residual {residual:.1e}, {len(imps)} impacts per period")
     b = (step(z, h)[0] - step(z, -h)[0]) / (2.0 * h)
     return ActuatedOrbit(tuple(float(c) for c in z), float(gains.c1 * z[0] + gains.c2 * z[1]),
-                         tuple(imps), jacobian(z), residual, b)
+                         tuple(imps), jacobian(z), residual, b, (p.x_ref, p.v_ref))
+
+
+def actuated_orbit_for(p: OscillatorParams, gains: Gains, width: float,
+                       actuator: Actuator) -> ActuatedOrbit:
+    """The loop's orbit through ``actuator`` for any ``gains`` (a scene's, e.g. the ideal
+    actuator's design): :func:`actuated_orbit` from the ideal pulse's orbit, or, where
+    Newton misses it from there, continued in c1 (8 steps) from the orbit of the exact
+    design (P1) with the same c2 (:func:`actuated_design`). Raises OrbitNotFound."""
+    from .orbits import OrbitNotFound
+
+    try:
+        return actuated_orbit(p, gains, width, actuator)
+    except (OrbitNotFound, ValueError, ArithmeticError):
+        pass
+    exact, orbit, _spread = actuated_design(p, gains.c2, gains.delay, width, actuator)
+    if orbit is None:
+        raise OrbitNotFound(f"no 1/1 orbit through the actuator (tau_a "
+                            f"{actuator.time_constant!r}) for the exact design with c2 "
+                            f"{gains.c2!r}, where the continuation in c1 would start")
+    for share in np.linspace(0.0, 1.0, 9)[1:]:
+        c1 = exact.c1 + float(share) * (gains.c1 - exact.c1)
+        orbit = actuated_orbit(p, Gains(c1 if share < 1.0 else gains.c1, gains.c2, gains.delay),
+                               width, actuator, guess=orbit.state)
+    return orbit
+
+
+def actuated_design(p: OscillatorParams, c2: float, delay: float, width: float,
+                    actuator: Actuator, measurement=None):
+    """The design through ``actuator`` (the `grazing design --actuator-bandwidth` route):
+    c1 of the exact condition (P1) (:func:`actuated_c1`) for the pulse of ``width``
+    centred at ``delay``, and at p.delta_d < 0 the loop's orbit (:func:`actuated_orbit`
+    from the ideal pulse's) with its predicted spread: the standard deviations of
+    (x, v, f) on Pi2 per unit sigma, :meth:`ActuatedOrbit.noise_covariance` with the
+    estimate's covariance ``measurement`` (default I: x and v each measured with sigma).
+    The orbit is continued in tau_a from a tenth of it (8 steps). Returns (gains, orbit, spread);
+    orbit None where no 1/1 orbit is found, spread None where it is not stable."""
+    from .orbits import OrbitNotFound
+
+    start = pulse_start(p.period, delay, width)
+    gains = Gains(actuated_c1(p, c2, actuator, start, width), c2, delay)
+    guess = None
+    # continued in tau_a from a tenth of it, each step with its own (P1) gains (a slow
+    # actuator moves the orbit far from the ideal pulse's, where Newton would start)
+    shares = np.geomspace(0.1, 1.0, 8) if actuator.time_constant > 0.0 else (1.0,)
+    for share in shares:
+        step = Actuator(actuator.time_constant * float(share), actuator.latency)
+        g = gains if share == shares[-1] else Gains(
+            actuated_c1(p, c2, step, start, width), c2, delay)
+        try:
+            orbit = actuated_orbit(p, g, width, step, guess=guess)
+        except (OrbitNotFound, ValueError, ArithmeticError):
+            return gains, None, None
+        guess = orbit.state
+    try:
+        spread = np.sqrt(np.diag(orbit.noise_covariance(gains, measurement)))
+    except ValueError:
+        return gains, orbit, None
+    return gains, orbit, spread

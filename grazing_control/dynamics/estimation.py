@@ -41,9 +41,11 @@ from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
+from .actuation import pulse_start
+
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
-           "nearest_estimate", "arc_fit", "detect_impact", "trajectory", "model_update", "estimate_covariance",
-           "CHI2_SIGMAS"]
+           "nearest_estimate", "arc_fit", "detect_impact", "correction_legs", "trajectory",
+           "model_update", "estimate_covariance", "CHI2_SIGMAS"]
 
 TWO_PI = 2.0 * math.pi
 #: The estimators by name (``estimator`` parameter of the controller).
@@ -231,8 +233,31 @@ def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
     return float(tt[above[0]]) if above.size else 0.5 * (lo + hi)
 
 
+def correction_legs(correction: float, delay: float, duration: float, width: float = 0.0,
+                    force_limit: float = math.inf) -> list:
+    """The period (0, ``duration``] as legs (start, end, kick, force): the correction as a
+    velocity kick at ``delay`` (``width`` 0, Eq. 28), or as the rig's force pulse of
+    ``width`` centred at ``delay``, force correction / width clipped to
+    +-``force_limit`` (:mod:`grazing_control.dynamics.actuation`, docs/theory_pulse.md;
+    it starts where the simulator's starts it:
+    :func:`grazing_control.dynamics.actuation.pulse_start`)."""
+    if width > 0.0 and correction != 0.0:
+        if not width < duration:
+            raise ParameterError(f"pulse_width={width!r} is invalid: valid range is "
+                                 f"0 <= pulse_width < T = {duration!r}")
+        start = pulse_start(duration, delay, width)
+        force = max(-force_limit, min(force_limit, correction / width))
+        legs = [(0.0, start, 0.0, 0.0), (start, start + width, 0.0, force),
+                (start + width, duration, 0.0, 0.0)]
+        return [leg for leg in legs if leg[1] > leg[0]]
+    if delay > 0.0:
+        return [(0.0, delay, 0.0, 0.0), (delay, duration, correction, 0.0)]
+    return [(0.0, duration, correction, 0.0)]
+
+
 def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
-               duration: float | None = None, *, wall: bool = False):
+               duration: float | None = None, *, wall: bool = False, width: float = 0.0,
+               force_limit: float = math.inf):
     """The exact motion from the section state ``z0`` (before the correction): the
     deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
     (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
@@ -240,6 +265,15 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     Between events z(s) = Phi(s - s_e) z_e; the Jacobian is Phi(s - s_e) M_e with M_e
     the product of Phi and the saltation matrices S of the impacts before s (spec
     section 5); the known kick shifts the state and leaves the Jacobian unchanged.
+
+    With ``width`` > 0 the correction is the rig's force pulse instead (a constant force
+    F = correction / width, clipped to ``force_limit``, centred at ``delay``:
+    :func:`correction_legs`): during it the deviation shifted by (F, 0) obeys the free
+    flow against the wall moved to Delta d - F (docs/theory_pulse.md, as
+    :func:`grazing_control.dynamics.actuation.pulse_step`), so z(s) = Phi(s - s_e)
+    (z_e - F e1) + F e1 and the saltation matrices are those of the shifted wall; the
+    Jacobian and the wall's sensitivity keep their form (F does not depend on z0).
+    Width 0 is the kick, bit for bit.
 
     Returns
     -------
@@ -262,18 +296,18 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     g = np.zeros(2)                     # d z / d Delta d (``wall``)
     t0 = 0.0
     impacts = []
-    legs = [(0.0, delay, 0.0), (delay, duration, correction)] if delay > 0.0 else \
-        [(0.0, duration, correction)]
-    for start, end, kick in legs:
+    legs = correction_legs(correction, delay, duration, width, force_limit)
+    for start, end, kick, force in legs:
         z = (z[0], z[1] + kick)
-        events.append((start, z, m, g))
-        seg = advance(p, (tau + p.omega * start) % TWO_PI, z[0], z[1], end - start)
+        events.append((start, z, m, g, force))
+        q = p if force == 0.0 else p.with_(delta_d=p.delta_d - force)   # the shifted wall
+        seg = advance(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
         for imp in seg.impacts:
             if imp.sticking:
                 raise ValueError("the model's motion sticks to the wall: no fit")
             ti = start + imp.dt
             f = np.array(transition_matrix(p.zeta, ti - t0)).reshape(2, 2)
-            sal = np.array(saltation_matrix(p, imp.phase, imp.v_minus)).reshape(2, 2)
+            sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
             m = sal @ f @ m
             if wall:
                 g = sal @ (f @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
@@ -281,13 +315,13 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
             z = (p.d - p.amplitude * math.cos(psi),
                  imp.v_plus + p.amplitude * p.omega * math.sin(psi))
             t0 = ti
-            events.append((ti, z, m, g))
+            events.append((ti, z, m, g, force))
             impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
         f = np.array(transition_matrix(p.zeta, end - t0)).reshape(2, 2)
         m = f @ m
         if wall:
             g = f @ g
-        z = (seg.dx, seg.dv)
+        z = (seg.dx + force if force else seg.dx, seg.dv)
         t0 = end
     times = np.array([e[0] for e in events])
     idx = np.searchsorted(times, s, side="left") - 1   # the last event strictly before s
@@ -295,7 +329,13 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     zs = np.array([e[1] for e in events])[idx]
     ms = np.array([e[2] for e in events])[idx]
     phi = phi_rows(p.zeta, s - times[idx])
-    out = np.einsum("nij,nj->ni", phi, zs)
+    forces = np.array([e[4] for e in events])
+    if forces.any():                    # in a pulse: Phi (z_e - F e1) + F e1
+        fs = forces[idx]
+        zs = zs - np.outer(fs, (1.0, 0.0))
+        out = np.einsum("nij,nj->ni", phi, zs) + np.outer(fs, (1.0, 0.0))
+    else:
+        out = np.einsum("nij,nj->ni", phi, zs)
     jac = np.einsum("nij,njk->nik", phi, ms)
     if wall:
         gs = np.array([e[3] for e in events])[idx]
@@ -305,7 +345,7 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
 
 def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                  correction: float, delay: float = 0.0, *, floor: float = 1e-2,
-                 iterations: int = 8):
+                 iterations: int = 8, width: float = 0.0, force_limit: float = math.inf):
     """One period of the model filter: from the prior of z_{k-1} and the samples at times
     ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
 
@@ -314,6 +354,9 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     P+ = (P^-1 + H^T H / sigma^2)^-1 is carried by the exact map's monodromy M:
     P_k = M P+ M^T + (floor sigma)^2 I (the floor keeps the filter from trusting a
     direction that the map contracts to zero; it stands for what the model omits).
+
+    The correction acts as a kick, or as a force pulse of ``width`` (clipped to
+    ``force_limit``) where the plant's actuator pushes for a finite time.
 
     Returns (FilterState at t_k, chi2 of the period's residuals, number of
     measurements); raises ValueError when the fit fails (no convergence, a sticking
@@ -327,7 +370,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     z = z_prior.copy()
     inv_var = 1.0 / (sigma * sigma)
     for _ in range(iterations):
-        pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay)
+        pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
+                                                force_limit=force_limit)
         h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
         r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
         info = info_prior + inv_var * (h.T @ h)
@@ -338,7 +382,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
             break
     else:
         raise ValueError("the model fit did not converge")
-    pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay)
+    pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
+                                             force_limit=force_limit)
     h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
     r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
     info = info_prior + inv_var * (h.T @ h)
@@ -351,7 +396,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
 
 def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str = "model",
                         velocity: bool = False, floor: float = 1e-2, target=None,
-                        periods: int = 400) -> np.ndarray:
+                        periods: int = 400, lead: float = 0.0, width: float = 0.0,
+                        force_limit: float = math.inf) -> np.ndarray:
     """The Pi2 estimate's error covariance per unit sigma^2 on the controlled 1/1 orbit
     (2x2), for a sensor at ``rate`` samples per period (position only unless
     ``velocity``): the design's measurement covariance R for
@@ -362,6 +408,11 @@ def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str
     ``model``: the fixed point of P = M (P^-1 + H^T H)^-1 M^T + floor^2 I along the
     orbit (E5), iterated from the arc fit's covariance for ``periods`` periods at most.
     ``target``: the orbit's Pi2 deviation (default ``orbit_11``).
+
+    ``lead``: the estimate is made ``lead`` before the section's last sample (the stream
+    estimator's ``lead``, a rig controller's answer_lead): the samples after the one
+    that makes the section due are never used (model, arc). ``width``: the corrections
+    act as force pulses of that width (:func:`trajectory`).
     """
     if estimator not in ESTIMATORS:
         raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
@@ -381,7 +432,11 @@ def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str
         target = orbit_11(p, gains).pi2_deviation
     dv = gains.c1 * target[0] + gains.c2 * target[1]
     s = np.arange(1, int(rate)) * h        # the samples strictly between the sections
-    _pred, jac, _end, mono, imps = trajectory(p, target, s, dv, gains.delay)
+    if lead > 0.0:      # up to the first sample s with s + h + lead >= T (StreamEstimator)
+        due = np.nonzero(s + h + lead >= T - 1e-3 * h)[0]
+        s = s[:due[0] + 1] if due.size else s
+    _pred, jac, _end, mono, imps = trajectory(p, target, s, dv, gains.delay, width=width,
+                                              force_limit=force_limit)
     if estimator == "arc":
         after = s > (imps[-1][0] if imps else -math.inf)
         phi = phi_rows(p.zeta, s[after] - T)

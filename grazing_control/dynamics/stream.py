@@ -27,7 +27,8 @@ from .estimation import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit
                          deviation_samples, detect_impact, model_update, nearest_estimate,
                          trajectory, unkick)
 
-__all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section"]
+__all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
+           "pulse_shape"]
 
 #: Where impacts come from: the rig's impact sensor, or detection in the stream.
 IMPACT_SOURCES = ("topic", "stream")
@@ -66,11 +67,19 @@ class StreamEstimator:
         while the last samples before t_k are on their way; this section's estimate has
         not got them, and the model filter, which fits each period's own samples, never
         uses them). 0: with the last sample (the default).
+    pulse_width, force_limit : float
+        How the corrections act in the plant: a velocity kick at the actuation delay
+        (``pulse_width`` 0, the default), or the rig's force pulse of that width centred
+        there, its force clipped to ``force_limit`` (> 0; inf: none). The model filter
+        and :func:`predict_section` integrate it exactly
+        (:func:`grazing_control.dynamics.estimation.trajectory`); a kick in the model of
+        a pulse in the plant put the rig scene's mean 5e-5 off its orbit.
     """
 
     def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
                  impact_source: str = "stream", sample_period: float = 0.0,
-                 floor: float = 1e-2, after_section: bool = False, lead: float = 0.0):
+                 floor: float = 1e-2, after_section: bool = False, lead: float = 0.0, *,
+                 pulse_width: float = 0.0, force_limit: float = math.inf):
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -94,6 +103,7 @@ class StreamEstimator:
             raise ParameterError(f"answer_lead={lead!r} is invalid: valid range is "
                                  f"0 <= answer_lead < T = {p.period!r}")
         self.lead = lead
+        self.pulse = pulse_shape(p, pulse_width, force_limit)
         self.reset()
 
     def reset(self) -> None:
@@ -270,7 +280,8 @@ class StreamEstimator:
         at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
         try:
             new, chi2, n = model_update(p, self.filter, s, y, w, self.sigma, dv,
-                                        at - (k - 1) * T, floor=self.floor)
+                                        at - (k - 1) * T, floor=self.floor,
+                                        width=self.pulse[0], force_limit=self.pulse[1])
         except (ValueError, np.linalg.LinAlgError, ArithmeticError):
             self.filter = None
             self.resets += 1
@@ -302,7 +313,8 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
                     impact_source: str = "stream", deviation=(0.0, 0.0),
                     control_after: int = 0, floor: float = 1e-2,
                     model: OscillatorParams | None = None, stream_estimator=None,
-                    plant_at=None, switch=None, observe=None) -> StreamRun:
+                    plant_at=None, switch=None, observe=None, pulse_width: float = 0.0,
+                    force_limit: float = math.inf) -> StreamRun:
     """The closed loop on a sensor stream: exact plant (:func:`trajectory`), samples at
     t_j = j T / ``rate`` measured by ``measure(j0, x, v) -> (x~, v~)`` (a
     :class:`grazing_control.plant.sensor.SensorModel`'s ``measure``), the estimator of
@@ -318,6 +330,11 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
     correction applied at section k (a capture rule or a gain ramp,
     :mod:`grazing_control.dynamics.capture`); ``observe(k, estimator)`` called after
     each section's estimate (to feed a consistency monitor).
+
+    ``pulse_width`` > 0: the plant's corrections are force pulses of that width centred
+    at ``gains.delay`` (force clipped to ``force_limit``), and the estimator built here
+    models them (pass ``stream_estimator`` built without them to see what a kick model
+    of a pulse plant costs).
     """
     if int(rate) != rate or rate < 2:
         raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
@@ -325,7 +342,8 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
     T = p.period
     h = T / rate
     est = stream_estimator if stream_estimator is not None else StreamEstimator(
-        p if model is None else model, estimator, sigma, impact_source, h, floor)
+        p if model is None else model, estimator, sigma, impact_source, h, floor,
+        pulse_width=pulse_width, force_limit=force_limit)
     z = (float(deviation[0]), float(deviation[1]))
     truth = np.empty((periods, 2))
     zhat = np.empty((periods, 2))
@@ -353,7 +371,8 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
         js = np.arange(j0, j1 + 1)
         s = js * h - k * T
         plant = p if plant_at is None else plant_at(k)
-        dev, _jac, z, _m, imps = trajectory(plant, z, s, dv, gains.delay)
+        dev, _jac, z, _m, imps = trajectory(plant, z, s, dv, gains.delay, width=pulse_width,
+                                            force_limit=force_limit)
         counts[k] = len(imps)
         psi = p.tau2 + p.omega * s - p.lag
         x = p.amplitude * np.cos(psi) + dev[:, 0]
@@ -370,9 +389,28 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
     return StreamRun(truth, zhat, cov, corr, counts, est.resets)
 
 
-def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0):
+def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0, *,
+                    width: float = 0.0, force_limit: float = math.inf):
     """The next section's state (deviation, before its correction) predicted from the
-    estimate ``z`` with ``correction`` applied ``delay`` after the section: one exact
-    period of the model (issue 16 section 3; :func:`trajectory`)."""
-    *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay)
+    estimate ``z`` with ``correction`` applied ``delay`` after the section (a kick, or
+    a force pulse of ``width``): one exact period of the model (issue 16 section 3;
+    :func:`trajectory`)."""
+    *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay, width=width,
+                                        force_limit=force_limit)
     return end
+
+
+def pulse_shape(p: OscillatorParams, pulse_width: float, force_limit: float) -> tuple:
+    """(width, force limit) of the plant's corrections, validated: ParameterError naming
+    ``pulse_width`` (0 <= w < T) or ``force_limit`` (> 0, inf: none; 0 is read as none,
+    as sim_node's force_limit)."""
+    w, f = float(pulse_width), float(force_limit)
+    if not (math.isfinite(w) and 0.0 <= w < p.period):
+        raise ParameterError(f"pulse_width={pulse_width!r} is invalid: valid range is "
+                             f"0 <= pulse_width < T = {p.period!r} (0: a velocity kick)")
+    if f == 0.0:
+        f = math.inf
+    if not f > 0.0:
+        raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is "
+                             "force_limit > 0 (0 or inf: no limit)")
+    return w, f

@@ -10,6 +10,12 @@ between two samples (state, Pi1 crossing, impacts) is evaluated from the closed 
 :func:`grazing_control.dynamics.simulate.states_between` without altering the trajectory,
 so a run of the engine reproduces ``simulate`` of the same scene sample for sample.
 
+With a first-order actuator (``actuator_bandwidth`` or ``actuator_latency`` > 0, issue
+29 section 4) the force on the mass is a third state carried from sample to sample
+(:attr:`Engine.force`): each period is the exact flow under a piecewise exponential
+force, :func:`grazing_control.dynamics.actuator.lag_flow` per piece between the
+command's switches (:meth:`Engine._lag_period`, docs/theory_pulse.md section 5).
+
 No ROS: sim_node publishes the :class:`Event` values this returns.
 """
 
@@ -21,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.dynamics.actuation import flow_with_force, pulse_force, pulse_start
+from grazing_control.dynamics.actuator import lag_flow, lag_states
 from grazing_control.dynamics.fidelity import period_step
 from grazing_control.dynamics.simulate import states_between
 from grazing_control.oscillator import kernel
@@ -81,6 +88,8 @@ class Engine:
         self.rng = np.random.default_rng(settings.seed)
         self.impacts = 0
         self._drawn = None
+        self.force = 0.0          # the actuator's force at the current sample
+        self._force_end = 0.0     # ... at the end of the period integrated
         self.reset()
 
     # ---------------------------------------------------------------- samples
@@ -98,6 +107,7 @@ class Engine:
         self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
         self.impacts = 0
         self.seg = None
+        self.force = self._force_end = 0.0
         return self._sample()
 
     @property
@@ -159,6 +169,8 @@ class Engine:
         ``dynamics.actuation.pulse_step``. Returns the events of (t_k, t_k+1] in time
         order (state, Pi1, impacts), the next sample excluded.
         """
+        if self.lagged:
+            return self._lag_period(dv_correction, self.actuation_start(delay))
         p = self.p
         t0 = self.t
         if delay > 0.0:
@@ -188,8 +200,57 @@ class Engine:
         to t_k+1.
         """
         start = self.actuation_start(delay)
+        if self.lagged:
+            t = self.t + start
+            return [ev for ev in self._lag_period(dv_correction, start) if ev.t >= t]
         head = self.advance(self.p, self.p.tau2, self.dx, self.dv, start)
         return self._actuate(head, dv_correction, start)
+
+    @property
+    def lagged(self) -> bool:
+        """Whether a first-order actuator (bandwidth or latency) stands between the
+        command and the force (settings.actuator not ideal)."""
+        return not self.settings.actuator.ideal
+
+    def _lag_period(self, dv_correction: float, start: float) -> list:
+        """The period from the current sample with the command of ``dv_correction`` at
+        ``start`` through the actuator (module docstring): a pulse F = Delta v / w on
+        [start, start + w] (w = 0: an impulse Delta v) reaches the lag L later; on each
+        piece between the switches the force is F_inf + C e^{-h / tau_a} and the motion
+        :func:`lag_flow`'s. The force at the next sample is kept for :meth:`end_period`.
+        Returns the period's events (state, Pi1, impacts) in time order."""
+        p, s = self.p, self.settings
+        tau_a, w = s.actuator.time_constant, s.pulse_width
+        on = start + s.actuator.latency
+        if w > 0.0:
+            switches = ((on, pulse_force(dv_correction, w, s.force_limit or math.inf), 0.0),
+                        (on + w, 0.0, 0.0))
+        else:
+            switches = ((on, 0.0, dv_correction),)
+        t0 = self.t
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        dx, dv, f, u, h = self.dx, self.dv, self.force, 0.0, 0.0
+        events = []
+        for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
+            if end > h:
+                tau = (p.tau2 + p.omega * h) % TWO_PI
+                flow = lag_flow(p, tau, dx, dv, end - h, u, f - u if tau_a > 0.0 else 0.0,
+                                tau_a)
+                te = t1 if end == p.period else t0 + end
+                events += self._events(Segment(t0 + h, tau, dx, dv, te, flow.dx, flow.dv),
+                                       flow.impacts,
+                                       lambda rel, flow=flow: lag_states(p, flow, rel))
+                dx, dv, f = flow.dx, flow.dv, flow.force
+            if impulse:                 # an impulse command: through the lag, or a jump
+                if tau_a > 0.0:
+                    f += impulse / tau_a
+                else:
+                    dv += impulse
+            h, u = max(h, end), u_next
+            f = f if tau_a > 0.0 else u
+        self.seg = Segment(t0, p.tau2, self.dx, self.dv, t1, dx, dv)
+        self._force_end = f
+        return events
 
     def _actuate(self, head, dv_correction: float, start: float) -> list:
         p = self.p
@@ -219,6 +280,9 @@ class Engine:
         the events already published), the velocity jumps there, and the flow continues
         to the next sample. Returns the events of (tc, t_k+1).
         """
+        if self.lagged:
+            raise RuntimeError("a correction on arrival through the actuator: refused by "
+                               "the settings (actuation on_arrival with an actuator)")
         s, p = self.seg, self.p
         tc = min(max(tc, s.ts), s.te)
         head = self.advance(p, s.tau, s.dx, s.dv, tc - s.ts)
@@ -237,6 +301,7 @@ class Engine:
         """
         s = self.seg
         self.dx, self.dv = s.dx_end, s.dv_end
+        self.force = self._force_end
         self.k += 1
         self.seg = None
         warning = None
@@ -283,12 +348,13 @@ class Engine:
         xm, vm = self.settings.sensor.measure(0, [p.x_ref + self.dx], [p.v_ref + self.dv])
         return [Event(0.0, "state", float(xm[0]), float(vm[0]), p.tau2)]
 
-    def _events(self, s: Segment, impacts) -> list:
+    def _events(self, s: Segment, impacts, states=None) -> list:
         """The events of segment ``s``: its impacts, the state stream's samples on the
         grid j * state_period in (ts, te] as the sensor measures them (plant.sensor,
         draws of sample j), and the Pi1 crossing; in time order. Under a pulse's force F
         the states are the flow of the oscillator with clearance Delta d - F shifted by
-        F (dynamics.actuation.flow_with_force)."""
+        F (dynamics.actuation.flow_with_force); through the actuator ``states`` (times
+        since the segment's start -> physical (x, v)) evaluates them."""
         p = self.p
         events = []
         for i in impacts:
@@ -312,7 +378,9 @@ class Engine:
             order = np.argsort(rel, kind="stable")
             rel = [rel[i] for i in order]
             kinds = [kinds[i] for i in order]
-            if s.force == 0.0:
+            if states is not None:
+                xv = states(rel)
+            elif s.force == 0.0:
                 xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
             else:
                 shifted = p.with_(delta_d=p.delta_d - s.force)

@@ -142,6 +142,7 @@ class Loop:
                 f"applied={stats['applied']} late={stats['late']} "
                 f"missed={counts['missed']} lost={stats['lost']} "
                 f"predicted={stats['predicted']} "
+                + (f"unarmed={stats['unarmed']} " if stats.get("unarmed") else "")
                 + "".join(f"{name}={counts[name]} " for name in
                           ("timeouts", "ignored", "malformed"))
                 + f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")

@@ -115,8 +115,10 @@ class Realtime(Loop):
             self.delay = engine.actuation_delay()
             start = ev.t + engine.actuation_start(self.delay)
         # an answer may come before its sample, for the next two periods at most
+        # the stream's pre-roll: the first sections have no deadline (settings.pre_roll)
         sec = schedule.section(engine.k, self.sample, ev.t, start, sent,
-                               early_until=ev.t + 2.0 * engine.p.period + 1e-6)
+                               early_until=ev.t + 2.0 * engine.p.period + 1e-6,
+                               armed=start is None or engine.k >= self.settings.pre_roll)
         # pace: how late the sample went out against its simulation time
         lag = sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale
         self.lags.append(lag)
@@ -209,7 +211,7 @@ class Realtime(Loop):
         if self.finished:
             return
         answer = self.schedule.command(key, dv, predicted, wall, key[0] + key[1] * 1e-9)
-        if answer.outcome == "early":
+        if answer.outcome in ("early", "unarmed"):
             return
         if answer.outcome == "ignored":
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
@@ -226,8 +228,9 @@ class Realtime(Loop):
         """Sample k's actuation instant: its answer at t_k + delay; at a deadline miss or
         a lost answer the previous answer's prediction (on_miss = predict) or none
         (ActuationSchedule.act); the watchdog sees the outcome first."""
-        self.trip(self.watchdog.outcome(sec.k, missed=sec.value is None,
-                                        acting=bool(sec.value)))
+        if sec.armed:                    # (a pre-roll section has no outcome to judge)
+            self.trip(self.watchdog.outcome(sec.k, missed=sec.value is None,
+                                            acting=bool(sec.value)))
         if self.finished:
             return                       # the safe state: nothing acts
         lost = sec.value is not None and self.engine.correction_lost()

@@ -94,12 +94,14 @@ class Sensor:
 @dataclass(frozen=True)
 class Actuator:
     """The actuator: force pulse width (s), force limit (N, 0: none), latency (s) from a
-    command's apply time to the force, force constant (N/A, 0: not given)."""
+    command's apply time to the force, force constant (N/A, 0: not given), bandwidth
+    (Hz, 0: ideal) of a first-order lag between the command and the force (issue 29)."""
 
     pulse_width: float
     force_limit: float
     latency: float
     force_constant: float = 0.0
+    bandwidth: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -181,7 +183,8 @@ class Rig:
         """The sensor, actuator and timing in the model's units: state_period (between
         two sensor samples), sensor_noise, sensor_quantum, sensor_velocity,
         sensor_velocity_noise, sensor_latency, pulse_width, force_limit (0: none),
-        actuator_latency, actuation_delay (the budget), time_scale (model time per second
+        actuator_latency, actuator_bandwidth (1 / tau_a in model time: 2 pi f / omega_n,
+        0: ideal), actuation_delay (the budget), time_scale (model time per second
         of wall time at physical speed: omega_n)."""
         s, sen, act = self.scales, self.sensor, self.actuator
         return {
@@ -194,6 +197,7 @@ class Rig:
             "pulse_width": act.pulse_width * self.omega_n,
             "force_limit": act.force_limit / s.force,
             "actuator_latency": act.latency * self.omega_n,
+            "actuator_bandwidth": TWO_PI * act.bandwidth / self.omega_n,
             "actuation_delay": self.budget * self.omega_n,
             "time_scale": self.omega_n,
         }
@@ -226,7 +230,7 @@ _TOP = {"mass", "natural_frequency", "stiffness", "damping_ratio", "damping", "r
         "gap", "forcing", "sensor", "actuator", "controller"}
 _FORCING = {"type", "amplitude", "frequency", "phase", "stop"}
 _SENSOR = {"rate", "noise", "resolution", "latency", "measures", "velocity_noise"}
-_ACTUATOR = {"pulse_width", "force_limit", "latency", "force_constant"}
+_ACTUATOR = {"pulse_width", "force_limit", "latency", "force_constant", "bandwidth"}
 _CONTROLLER = {"budget", "pi2_offset"}
 
 
@@ -381,7 +385,9 @@ def rig_from_dict(doc) -> Rig:
               default=0.0)
     kf = _q(a, "actuator.", "force_constant", "force_constant", ok=positive,
             valid="actuator.force_constant > 0", default=0.0)
-    actuator = Actuator(width, limit, alat, kf)
+    bandwidth = _q(a, "actuator.", "bandwidth", "frequency", ok=nonneg,
+                   valid="actuator.bandwidth >= 0 Hz (0: ideal)", default=0.0)
+    actuator = Actuator(width, limit, alat, kf, bandwidth)
 
     c = _section(doc, "controller", _CONTROLLER)
     budget = _q(c, "controller.", "budget", "time", ok=positive, valid="controller.budget > 0")
@@ -472,6 +478,8 @@ def rig_to_dict(rig: Rig) -> dict:
                 "force_limit": q(a.force_limit, "force"), "latency": q(a.latency, "time")}
     if a.force_constant > 0.0:
         actuator["force_constant"] = q(a.force_constant, "force_constant")
+    if a.bandwidth > 0.0:
+        actuator["bandwidth"] = q(a.bandwidth, "frequency")
     return {"mass": q(rig.mass, "mass"),
             "natural_frequency": q(rig.natural_frequency, "frequency"),
             "damping_ratio": rig.zeta, "restitution": rig.restitution,

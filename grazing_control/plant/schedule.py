@@ -51,7 +51,8 @@ PREDICTION_HOLD = 10
 #: What the schedule counts: sections that acted with their answer, with a prediction in
 #: its place, missed (no answer by the deadline), lost (dropped by the caller), answers
 #: late (after their deadline) and ignored (stale, duplicate, foreign).
-COUNTS = ("applied", "predicted", "missed", "late", "lost", "ignored")
+#: Sections without a deadline (``unarmed``: a stream's pre-roll) are counted apart.
+COUNTS = ("applied", "predicted", "missed", "late", "lost", "ignored", "unarmed")
 
 
 class Prediction:
@@ -93,12 +94,14 @@ class Section(NamedTuple):
     value: float | None = None    # the answer, None until it arrives
     predicted: float = math.nan   # the answer's prediction for section k + 1
     received: object = None       # the caller's record of the answer's arrival
+    armed: bool = True            # False: no deadline (a pre-roll section; nothing acts)
 
 
 class Answer(NamedTuple):
     """What :meth:`ActuationSchedule.command` did with an answer: ``outcome`` 'kept'
-    (for its section's deadline), 'early' (for a section not yet announced), 'late' or
-    'ignored'; ``section`` the section it answers (kept, late), else None."""
+    (for its section's deadline), 'early' (for a section not yet announced), 'late',
+    'unarmed' (its section has no deadline: dropped) or 'ignored'; ``section`` the section
+    it answers (kept, late, unarmed), else None."""
 
     outcome: str
     section: Section | None = None
@@ -106,7 +109,8 @@ class Answer(NamedTuple):
 
 class Act(NamedTuple):
     """What acts at a section's start: ``value`` (0.0: nothing), ``outcome`` 'applied',
-    'missed' or 'lost', and ``substituted``: a prediction acted in the answer's place."""
+    'missed', 'lost' or 'unarmed' (no deadline: nothing acts), and ``substituted``: a
+    prediction acted in the answer's place."""
 
     section: Section
     value: float
@@ -146,13 +150,15 @@ class ActuationSchedule:
 
     # --------------------------------------------------------------- sections
     def section(self, k: int, key: Hashable, t: float, start: float | None, sent=None,
-                early_until: float = math.inf, width: float = 0.0) -> Section:
+                early_until: float = math.inf, width: float = 0.0,
+                armed: bool = True) -> Section:
         """Announce section k; an answer kept early is attached (``value`` set).
 
         ``early_until``: the latest section time an answer arriving before its section
-        may quote (the realtime loop: two periods on).
+        may quote (the realtime loop: two periods on). ``armed=False``: no deadline
+        (module docstring): nothing acts at its start, whatever is answered.
         """
-        sec = Section(k, key, t, start, sent, width)
+        sec = Section(k, key, t, start, sent, width, armed=armed)
         self.unanswered[key] = sec
         if len(self.unanswered) > self.memory:
             del self.unanswered[next(iter(self.unanswered))]
@@ -200,6 +206,8 @@ class ActuationSchedule:
                 return Answer("early")
             self.counts["ignored"] += 1
             return Answer("ignored")
+        if not sec.armed:                 # no deadline there: dropped (counted at act)
+            return Answer("unarmed", sec)
         if key not in self.open:          # its section acted already
             self.counts["late"] += 1
             self.prediction.remember_late(sec.k, predicted)
@@ -226,7 +234,11 @@ class ActuationSchedule:
 
     def act(self, sec: Section, lost: bool = False, on_miss: str = "predict") -> Act:
         """What acts at section ``sec``'s start: its answer, or (missed, or ``lost``) the
-        prediction (``on_miss`` = predict) or nothing; counted."""
+        prediction (``on_miss`` = predict) or nothing; counted. An unarmed section:
+        nothing, whatever was answered (``unarmed``)."""
+        if not sec.armed:
+            self.counts["unarmed"] += 1
+            return Act(sec, 0.0, "unarmed")
         if sec.value is not None and not lost:
             self.counts["applied"] += 1
             self.prediction.remember(sec.k, sec.predicted)

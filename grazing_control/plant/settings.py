@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from grazing_control.dynamics.actuator import IDEAL_ACTUATOR, Actuator
 from grazing_control.dynamics.fidelity import FIDELITIES
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.faults import FaultModel
@@ -55,6 +56,8 @@ _WD = WatchdogLimits()
 #: where the node refuses inf).
 ABOVE_0 = math.nextafter(0.0, 1.0)
 FINITE = sys.float_info.max
+#: The largest actuator_bandwidth (tau_a >= 1e-12: faster is the ideal actuator).
+MAX_BANDWIDTH = 1e12
 
 
 def below(x: float) -> float:
@@ -155,6 +158,12 @@ PARAMETERS = (
               "forcing period (a wearing stop, a warming rig; issue 29): sample k's period "
               "runs with the Delta d in force plus delta_d_drift * (k - k0), k0 the sample "
               "where it was set or reset; 0 = none", -FINITE, FINITE, read_only=True),
+    Parameter("pre_roll", "integer", 0, "realtime, scheduled: the stream's pre-roll, the "
+              "first pre_roll sections have no deadline: the stream runs, nothing acts there "
+              "and an answer to them is counted as unarmed, not late (a section's answer is "
+              "estimated from the period before it, which a stream starting at section 0 "
+              "does not have: docs/driver_contract.md, 'Pre-roll'); a rig_file's default 1, "
+              ">= 0", 0, read_only=True),
     Parameter("sensor_seed", "integer", 0, "seed of the sensor noise, >= 0 (draws a pure "
               "function of (sensor_seed, sample index))", 0, read_only=True),
     Parameter("pulse_width", "double", 0.0,
@@ -167,6 +176,18 @@ PARAMETERS = (
     Parameter("force_limit", "double", 0.0, "largest |force| of a pulse, > 0; 0 = no limit "
               "(the impulse delivered is then smaller than commanded)", 0.0, FINITE,
               read_only=True),
+    Parameter("actuator_bandwidth", "double", 0.0, "a first-order actuator between the "
+              "commanded correction and the force (issue 29): its bandwidth 1 / tau_a, "
+              "radians per simulation time unit (N x the forcing frequency is N omega); 0 = "
+              "ideal (the force follows the command at once); <= 1e12", 0.0,
+              MAX_BANDWIDTH, read_only=True,
+              constraints="0 or >= 1 / the largest double (tau_a finite); 0 with a fidelity "
+              "other than exact, or with actuation on_arrival in realtime"),
+    Parameter("actuator_latency", "double", 0.0, "the actuator's latency L from the "
+              "command to the force, simulation time, >= 0 (0: none)", 0.0, FINITE,
+              read_only=True, constraints="the command ends within the period: "
+              "actuation_delay + pulse_width / 2 + actuator_latency < T; 0 with a fidelity "
+              "other than exact, or with actuation on_arrival in realtime"),
     Parameter("watchdog_window", "integer", _WD.window, "realtime watchdog "
               "(plant.watchdog): samples of its sliding window, 1..1000000", 1, 1_000_000,
               read_only=True),
@@ -204,13 +225,15 @@ def described_range(p: Parameter, declared: dict) -> tuple:
 
     The table's range, narrowed where another parameter bounds it, so that with the
     others at these values :func:`settings_from_values` accepts exactly [lo, hi]:
-    actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter 0 without
-    the exact flow or with actuation on_arrival in realtime; pulse_width <= 2
-    actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where jitter is.
+    actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter and the
+    actuator 0 without the exact flow or with actuation on_arrival in realtime;
+    pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where
+    jitter is; actuation_delay + pulse_width / 2 + actuator_latency < T.
     Where the model declared is invalid, the table's range (the model is refused by
     name anyway).
     """
-    if p.name not in ("actuation_delay", "jitter", "pulse_width"):
+    if p.name not in ("actuation_delay", "jitter", "pulse_width", "actuator_bandwidth",
+                      "actuator_latency"):
         return p.lo, p.hi
     try:
         period = OscillatorParams(**{k: declared[k] for k in MODEL_KEYS}).period
@@ -222,19 +245,27 @@ def described_range(p: Parameter, declared: dict) -> tuple:
     on_arrival = declared.get("mode") == "realtime" and declared.get("actuation") == "on_arrival"
     if not exact or on_arrival:
         return p.lo, 0.0
-    if p.name == "jitter":
+    if p.name in ("jitter", "actuator_bandwidth"):
         return p.lo, p.hi
     delay = declared.get("actuation_delay", 0.0)
+    if p.name == "actuator_latency":
+        return p.lo, _last_fitting(lambda latency: 0.0 <= delay + declared.get(
+            "pulse_width", 0.0) / 2.0 + latency < period, FINITE)
     if not 0.0 < delay < period:
         return p.lo, 0.0
 
-    # the last double that fits: bisection over the doubles in [0, 2 delay], whose bit
-    # patterns are ordered as their values (a width 0 fits, and fitting is monotone)
-    lo, hi = 0, _bits(min(2.0 * delay, FINITE))
+    return p.lo, _last_fitting(lambda w: _pulse_fits(w, delay, period), min(2.0 * delay,
+                                                                            FINITE))
+
+
+def _last_fitting(fits, top: float) -> float:
+    """The last double in [0, top] that ``fits`` (0 fits, and fitting is monotone):
+    bisection over the doubles, whose bit patterns are ordered as their values."""
+    lo, hi = 0, _bits(top)
     while lo < hi:
         mid = (lo + hi + 1) // 2
-        lo, hi = (mid, hi) if _pulse_fits(_double(mid), delay, period) else (lo, mid - 1)
-    return p.lo, _double(lo)
+        lo, hi = (mid, hi) if fits(_double(mid)) else (lo, mid - 1)
+    return _double(lo)
 
 
 def _pulse_fits(width: float, delay: float, period: float) -> bool:
@@ -281,6 +312,8 @@ class SimSettings:
     watchdog: WatchdogLimits = WatchdogLimits()
     feasibility: str = "refuse"
     delta_d_drift: float = 0.0
+    pre_roll: int = 0
+    actuator: Actuator = IDEAL_ACTUATOR
 
     @property
     def scheduled(self) -> bool:
@@ -301,8 +334,14 @@ class SimSettings:
                      f"quantum={sn.quantum!r} bias={sn.bias!r} seed={sn.seed}")
         if self.delta_d_drift != 0.0:
             text += f" delta_d_drift={self.delta_d_drift!r}"
+        if self.pre_roll and self.scheduled:
+            text += f" pre_roll={self.pre_roll}"
         if self.pulse_width > 0.0:
             text += f" pulse_width={self.pulse_width!r} force_limit={self.force_limit!r}"
+        if not self.actuator.ideal:
+            bw = self.actuator.time_constant
+            text += (f" actuator_bandwidth={1.0 / bw if bw else 0.0!r} "
+                     f"actuator_latency={self.actuator.latency!r}")
         if self.faults.active:
             text += (f" faults loss={self.loss!r} measurement_noise="
                      f"{self.measurement_noise!r} jitter={self.jitter!r} seed={self.seed}")
@@ -357,6 +396,10 @@ def settings_from_values(values: dict) -> SimSettings:
     seed = int(values["seed"])
     if seed < 0:
         raise ParameterError(f"seed={seed} is invalid: valid range is seed >= 0")
+    pre_roll = int(values["pre_roll"])
+    if pre_roll < 0:
+        raise ParameterError(f"pre_roll={pre_roll} is invalid: valid range is pre_roll >= 0 "
+                             "(sections without a deadline at the stream's start)")
     actuation = _actuation_values(values, p, mode, fidelity)
     return SimSettings(
         params=p, x0=x0, v0=v0, mode=mode,
@@ -371,7 +414,8 @@ def settings_from_values(values: dict) -> SimSettings:
         seed=seed, sensor=_sensor(values), watchdog=_watchdog(values),
         feasibility=_choice(values, "feasibility", FEASIBILITY),
         delta_d_drift=_finite("delta_d_drift", values["delta_d_drift"], lambda v: True,
-                              "a finite delta_d_drift (per period)"), **actuation)
+                              "a finite delta_d_drift (per period)"),
+        pre_roll=pre_roll, **actuation)
 
 
 def _choice(values: dict, name: str, choices: tuple) -> str:
@@ -458,6 +502,7 @@ def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: st
     if mode == "realtime" and actuation == "on_arrival" and w > 0.0:
         raise ParameterError(f"pulse_width={w!r} is invalid with actuation=on_arrival: valid "
                              "there is 0 (a pulse is centred at a scheduled actuation time)")
+    out["actuator"] = _actuator(values, p, mode, actuation, fidelity, delay, w)
     if mode == "realtime" and actuation == "on_arrival" and out["jitter"] > 0.0:
         raise ParameterError(f"jitter={out['jitter']!r} is invalid with actuation=on_arrival: "
                              "valid there is 0 (the actuation time is the arrival)")
@@ -467,6 +512,38 @@ def _actuation_values(values: dict, p: OscillatorParams, mode: str, fidelity: st
             f"range is 0 < actuation_delay < T = {p.period!r} (no answer can arrive at its "
             "own sample's instant); use actuation:=on_arrival to apply on arrival")
     return out
+
+
+def _actuator(values: dict, p: OscillatorParams, mode: str, actuation: str, fidelity: str,
+              delay: float, w: float) -> Actuator:
+    """The first-order actuator of actuator_bandwidth and actuator_latency (0, 0: the
+    ideal one): the exact flow only, a scheduled command that ends within the period."""
+    bandwidth = _finite("actuator_bandwidth", values["actuator_bandwidth"],
+                        lambda v: 0.0 <= v <= MAX_BANDWIDTH, "0 <= actuator_bandwidth <= "
+                        "1e12 (radians per simulation time unit; 0: ideal)")
+    latency = _finite("actuator_latency", values["actuator_latency"], lambda v: v >= 0.0,
+                      "a finite actuator_latency >= 0 (simulation time)")
+    if bandwidth == 0.0 and latency == 0.0:
+        return IDEAL_ACTUATOR
+    name, value = (("actuator_bandwidth", bandwidth) if bandwidth > 0.0
+                   else ("actuator_latency", latency))
+    if fidelity != "exact":
+        raise ParameterError(f"{name}={value!r} is invalid with fidelity={fidelity!r}: valid "
+                             "there is 0 (the actuator's flow is the exact one)")
+    if mode == "realtime" and actuation == "on_arrival":
+        raise ParameterError(f"{name}={value!r} is invalid with actuation=on_arrival: valid "
+                             "there is 0 (the actuator acts on a scheduled command)")
+    tau_a = 1.0 / bandwidth if bandwidth > 0.0 else 0.0
+    if not math.isfinite(tau_a):
+        raise ParameterError(f"actuator_bandwidth={bandwidth!r} is invalid: valid range is 0 "
+                             "or >= 1 / the largest double (tau_a = 1 / bandwidth finite)")
+    end = delay + w / 2.0 + latency
+    if not end < p.period:
+        raise ParameterError(f"actuator_latency={latency!r} is invalid with actuation_delay="
+                             f"{delay!r} and pulse_width={w!r}: valid range is "
+                             "actuation_delay + pulse_width / 2 + actuator_latency < "
+                             f"T = {p.period!r} (the command ends within the period)")
+    return Actuator(tau_a, latency)
 
 
 def initial_deviation(p: OscillatorParams, x0: float, v0: float) -> tuple:

@@ -251,7 +251,10 @@ def estimate_numbers(est, sd, setup) -> dict | None:
         x = sd.scene.pi2[-window:, 0]
         out["measured_spread"] = float(np.sqrt(np.mean((x - orbit.pi2[0]) ** 2)))
         out["spread_about"] = [float(orbit.pi2[0]), float(orbit.pi2[1])]
-        pred = noise_covariance(p, gains, cu.mean(axis=0))    # the kick's linearised loop
+        if setup.actuator is not None:       # the 3-state loop through the actuator
+            pred = orbit.noise_covariance(gains, cu.mean(axis=0))
+        else:
+            pred = noise_covariance(p, gains, cu.mean(axis=0))    # the kick's linearised loop
         out["predicted_spread"] = float(math.sqrt(max(pred[0, 0], 0.0)))
     except (ValueError, RuntimeError, ArithmeticError) as exc:
         out["spread_note"] = f"no predicted spread: {exc}"

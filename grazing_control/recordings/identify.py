@@ -159,7 +159,7 @@ def _parameters(ident) -> dict:
 
 
 def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
-                 max_arcs: int | None = 100) -> dict:
+                 max_arcs: int | None = 100, shrink: bool = False) -> dict:
     """The report of one bag: parameters (value, stderr), fit verdict, residuals,
     re-simulation, counts, the parameter record (when the bag has one).
 
@@ -168,7 +168,7 @@ def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
     rec, notes, sim = load_recording(bag, topics=topics, position_only=position_only,
                                      impacts=impacts)
     ident = identify(rec, impacts="recorded" if impacts and rec.impact_t.size else "motion",
-                     max_arcs=max_arcs)
+                     max_arcs=max_arcs, shrink=shrink)
     check = verdict(ident)
     report = {
         "bag": str(bag),

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -67,6 +68,7 @@ class Setup:
     notes: list = field(default_factory=list)
     pulse_width: float = 0.0      # the simulator's force pulse (0: the kick of Eq. 28)
     force_limit: float = 0.0      # 0: none
+    actuator: object = None       # the simulator's first-order actuator (None: ideal)
 
 
 def infer_delta_d(base: OscillatorParams, scene):
@@ -263,7 +265,24 @@ def resolve_setup(bag, options: dict) -> Setup:
     limit = _num(sim.get("force_limit"), 0.0)
     return Setup(params, gains, str(mode), ts, saturation, ea, delay, sources, notes,
                  width if width is not None and math.isfinite(width) and width > 0 else 0.0,
-                 limit if limit is not None and math.isfinite(limit) and limit > 0 else 0.0)
+                 limit if limit is not None and math.isfinite(limit) and limit > 0 else 0.0,
+                 _actuator(sim, notes))
+
+
+def _actuator(sim: dict, notes: list):
+    """The simulator's first-order actuator of its parameter record (actuator_bandwidth,
+    actuator_latency; docs/nodes.md), or None (ideal, or a record without them)."""
+    from grazing_control.dynamics.actuator import Actuator
+
+    bw = _num(sim.get("actuator_bandwidth"), 0.0)
+    lat = _num(sim.get("actuator_latency"), 0.0)
+    if bw is None or lat is None or not (bw > 0.0 or lat > 0.0):
+        return None
+    try:
+        return Actuator(1.0 / bw if bw > 0.0 else 0.0, lat)
+    except ValueError as exc:
+        notes.append(f"the simulator's actuator is not used: {exc}")
+        return None
 
 
 #: Largest |omega t mod 2 pi| of a Pi2 stamp accepted as "on the section" (rad): stamps are
@@ -377,14 +396,19 @@ def applied_corrections(sd) -> np.ndarray:
 
 
 def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000,
-                corrections=None, pulse_width: float = 0.0, force_limit: float = 0.0):
+                corrections=None, pulse_width: float = 0.0, force_limit: float = 0.0,
+                actuator=None):
     """Re-integrate each recorded period with the core; largest departure, per sample.
 
     Returns (max departure, array of departures |P(X_k, dv_k) - X_{k+1}|) over at most
     ``limit`` periods; the correction of sample k (``corrections``, default the recorded
     ones) is applied on Pi2 (``delay`` after it when the run had an actuation delay), as
     a force pulse of ``pulse_width`` centred there when the simulator had one
-    (:func:`grazing_control.dynamics.actuation.pulse_step`, docs/theory_pulse.md).
+    (:func:`grazing_control.dynamics.actuation.pulse_step`, docs/theory_pulse.md), through
+    the simulator's first-order ``actuator`` when it had one
+    (:func:`grazing_control.dynamics.actuator.actuated_step`; the force on the mass is
+    not recorded: it is carried from 0 at the first recorded sample, exact for a scene
+    recorded from its start, since the force follows the commands alone).
     """
     from grazing_control.dynamics.actuation import pulse_start, pulse_step
     from grazing_control.dynamics.simulate import period_step
@@ -392,7 +416,19 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
     dvs = scene.correction if corrections is None else corrections
     n = min(len(scene.t) - 1, limit)
     dep = np.zeros(max(n, 0))
-    if pulse_width > 0.0:       # the engine's rule: centred at the delay, within [0, T - w)
+    force = [0.0]
+    if actuator is not None:    # the force carried from period to period
+        from grazing_control.dynamics.actuator import actuated_step
+
+        start = pulse_start(p.period, delay, pulse_width)
+
+        def step(dx, dv, dvc):
+            x, v, f, imps = actuated_step(p, dx, dv, force[0], dvc, start=start,
+                                          width=pulse_width, actuator=actuator,
+                                          force_limit=force_limit or math.inf)
+            force[0] = f
+            return _Step(x, v, imps)
+    elif pulse_width > 0.0:     # the engine's rule: centred at the delay, within [0, T - w)
         start = pulse_start(p.period, delay, pulse_width)
 
         def step(dx, dv, dvc):
@@ -482,6 +518,14 @@ def _dist(a_ms):
             "max": float(a.max()), "mean": float(a.mean())}
 
 
+class _Step(NamedTuple):
+    """A period's end (dx, dv) and impacts, as the core's segments give them."""
+
+    dx: float
+    dv: float
+    impacts: tuple
+
+
 def controlled_orbit(setup: Setup):
     """The controlled 1/1 orbit the scene should settle on, and what it is.
 
@@ -499,6 +543,15 @@ def controlled_orbit(setup: Setup):
     p, g = setup.params, setup.gains
     if setup.actuation_delay:
         g = Gains(g.c1, g.c2, setup.actuation_delay)
+    if setup.actuator is not None:
+        from grazing_control.dynamics.actuator import actuated_orbit_for
+
+        a = setup.actuator
+        orbit = actuated_orbit_for(p, g, setup.pulse_width, a)
+        return orbit, (f"force pulse of width {setup.pulse_width:g} centred "
+                       f"{setup.actuation_delay:g} after Pi2 through a first-order actuator "
+                       f"(tau_a {a.time_constant:.6g}, latency {a.latency:g}; fixed point of "
+                       "the exact 3-state map (x, v, force))")
     if setup.pulse_width > 0.0:
         orbit = pulse_orbit(p, g, setup.pulse_width,
                             force_limit=setup.force_limit or math.inf,
@@ -597,7 +650,8 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
     if setup.params is not None:
         worst, dep = model_check(setup.params, scene, setup.actuation_delay,
                                  corrections=applied_corrections(sd),
-                                 pulse_width=setup.pulse_width, force_limit=setup.force_limit)
+                                 pulse_width=setup.pulse_width, force_limit=setup.force_limit,
+                                 actuator=setup.actuator)
         out["model_check"] = {"max_departure": worst,
                               "periods": int(dep.size),
                               "periods_in_scene": max(len(scene.t) - 1, 0),

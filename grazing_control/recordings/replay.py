@@ -49,8 +49,13 @@ __all__ = ["replay_controller", "replay_simulator", "add_arguments", "main"]
 _NS = 1_000_000_000
 #: Parameters of the record that are not the controller's or sim's own settings.
 _NOT_SETTINGS = ("use_sim_time", "start_type_description_service")
+#: The simulator's parameters of the record that its replay takes: the model, the start,
+#: the noise, and how a correction acts (a pulse, its force limit, the actuator's lag and
+#: latency) and the wall's drift: without the pulse a pulse scene's replay departed by
+#: 1.6e-3 at its first correction.
 SIM_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset", "x0", "v0", "noise", "seed",
-            "fidelity", "actuation_delay", "actuation")
+            "fidelity", "actuation_delay", "actuation", "pulse_width", "force_limit",
+            "actuator_bandwidth", "actuator_latency", "delta_d_drift")
 
 
 # ---------------------------------------------------------------------- parameters

@@ -303,11 +303,12 @@ def model_from_values(values: dict):
                             delta_d=delta_d, pi2_offset=values["pi2_offset"])
 
 
-def stream_from_values(values: dict, model):
+def stream_from_values(values: dict, model, pulse: tuple = (0.0, math.inf)):
     """The :class:`StreamEstimator` of ``pi2_source`` stream, None for ``sample``
     (ParameterError naming the parameter and its valid values); the augmented filter
     (:class:`AugmentedStreamEstimator`) when the model watch is on
-    (:mod:`grazing_control.ros.model_watch`)."""
+    (:mod:`grazing_control.ros.model_watch`). ``pulse``: (width, force limit) of the
+    plant's corrections in model units (a rig file's actuator; (0, inf): a kick)."""
     source = values["pi2_source"]
     if source not in PI2_SOURCES:
         raise ParameterError(f"pi2_source={source!r} is invalid: valid values are "
@@ -337,11 +338,12 @@ def stream_from_values(values: dict, model):
         return AugmentedStreamEstimator(
             model, values["sensor_noise"], values["impact_source"], values["state_period"],
             floor, bool(values["answer_after_section"]), values.get("answer_lead", 0.0),
-            **watch[0])
+            **watch[0], pulse_width=pulse[0], force_limit=pulse[1])
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
                            values["impact_source"], values["state_period"], floor,
                            bool(values["answer_after_section"]),
-                           values.get("answer_lead", 0.0))
+                           values.get("answer_lead", 0.0), pulse_width=pulse[0],
+                           force_limit=pulse[1])
 
 
 def capture_from_values(values: dict, model, delay: float):
@@ -548,6 +550,12 @@ class ControllerNode(Node):
         except (ValueError, ParameterError) as exc:
             raise StartupError(str(exc)) from None
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None
+        # how a correction acts in the plant: a rig's force pulse (its estimator and
+        # prediction integrate it, dynamics.estimation.trajectory), else the kick
+        self.pulse = (0.0, math.inf)
+        if self.rig is not None:
+            dims = self.rig.dimensionless()
+            self.pulse = (dims["pulse_width"], dims["force_limit"] or math.inf)
         try:
             if self.model_file:
                 self.law = self._ndof_law(self._values(), self._gains())
@@ -558,7 +566,7 @@ class ControllerNode(Node):
                 self.law = law_from_values(self._values())
                 self.actuation_delay = actuation_delay_from_values(self._values())
                 self.model = model_from_values(self._values())
-                self.stream = stream_from_values(self._values(), self.model)
+                self.stream = stream_from_values(self._values(), self.model, self.pulse)
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
         except ParameterError as exc:
@@ -836,7 +844,8 @@ class ControllerNode(Node):
             return math.nan
         p = self.model
         try:
-            zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay)
+            zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
+                                     width=self.pulse[0], force_limit=self.pulse[1])
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)

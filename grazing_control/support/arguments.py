@@ -31,6 +31,14 @@ def positive(text: str) -> float:
     return value
 
 
+def non_negative(text: str) -> float:
+    """A finite real number >= 0."""
+    value = finite(text)
+    if not value >= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a finite number >= 0")
+    return value
+
+
 def negative(text: str) -> float:
     """A finite real number < 0 (a wall offset Delta d on the impacting side)."""
     value = finite(text)

@@ -38,7 +38,7 @@ from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialSt
                                                NonFiniteStateError, Segment, check_state)
 
 __all__ = ["ENV", "available", "use_kernel", "warm_up", "next_impact", "advance",
-           "period_step", "simulate_exact", "run_point", "lyapunov_sums"]
+           "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple"]
 
 #: Environment variable that chooses the path: auto (default), python, numba.
 ENV = "GRAZING_KERNEL"
@@ -122,9 +122,24 @@ def _sigint_held():
             signal.raise_signal(signal.SIGINT)
 
 
+def params_tuple(p):
+    """(zeta, r, omega, omega_d, lag, amplitude, delta_d, d, period, tau2, 2, 1/3) of an
+    OscillatorParams: the tuple ``P`` of the compiled functions, in the order of the
+    indices ``_ZETA`` .. ``_THIRD`` of :mod:`.compiled`.
+
+    The last two are the exponents of the core's ``x ** 2`` and ``x ** (1 / 3)``: CPython
+    computes those with libm's pow, which is not always x * x to the last bit, while
+    LLVM turns a constant exponent 2 into a multiplication. Passed at run time, they
+    keep the kernel on pow, the same function, and so on the same floats
+    (``compiled.power``).
+    """
+    return (p.zeta, p.r, p.omega, p.omega_d, p.lag, p.amplitude, p.delta_d, p.d, p.period,
+            p.tau2, 2.0, 1.0 / 3.0)
+
+
 @functools.lru_cache(maxsize=1024)
 def _params(p):
-    return _compiled()[0].params_tuple(p)
+    return params_tuple(p)
 
 
 @functools.lru_cache(maxsize=64)
@@ -146,7 +161,8 @@ def _scratch():
     bufs = getattr(_local, "bufs", None)
     if bufs is None:
         ki, ks = _compiled()
-        bufs = _local.bufs = (ks.scratch_buffer(), ki.search_stack())
+        # one period's impact rows (run, period_step), and the search's stack
+        bufs = _local.bufs = (np.empty((2 * ks.MAX_IMPACTS, 6)), ki.search_stack())
     return bufs
 
 

@@ -1,50 +1,21 @@
 """Compiled mirror of :mod:`grazing_control.oscillator.impact` and of :func:`simulate.period_step`.
 
 Function by function the same algorithm as the pure-Python core, in the same floating
-point operations and the same order, so that a fix there ports here line by line.
+point operations and the same order, so that a fix there ports here line by line; the
+table of which function mirrors which is in docs/sweeps.md ("The compiled exact
+kernel"), as are the two values computed once instead of again (the window grid of a
+period from Pi2, e^{-zeta a} of the jerk bound), bit-identically.
 
 All compiled functions live in this one module on purpose: numba's on-disk cache
 (``cache=True``) keys each function on its own source file only, so a function that
 calls into another file would keep loading stale machine code after that file changed.
 In one file, any edit recompiles everything.
 
-=========================  =======================================================
-grazing_control.oscillator.impact     here
-=========================  =======================================================
-``_Eval(p, tau0, z)``      :func:`make_eval` -> a tuple ``ev``; ``ev(h)`` is
-                           :func:`evaluate`, ``ev.jerk_bound`` :func:`jerk_bound`
-``_bracket``               :func:`bracket`
-``_danger_halfwidth``,     :func:`danger_halfwidth` (None -> -1.0),
-``_far_from_wall``         :func:`far_from_wall`
-``_search`` (recursive)    :func:`search`: the same depth-first, left-first order
-                           with an explicit stack
-``check_state``            :func:`check_state` (NonFiniteStateError ->
-                           status STATUS_NONFINITE)
-``_wall_rounding``         :func:`wall_rounding`
-``next_impact``,           :func:`next_impact` (None -> -1.0; InitialStateError ->
-``_next_impact``           status STATUS_BEYOND_WALL), :func:`next_impact_unchecked`
-``_release_time``,         :func:`release_time`, :func:`resting_on_wall`,
-``_resting_on_wall``,      :func:`release_skip`, :func:`on_wall_at_rest`,
-``_release_skip``,         :func:`leave_wall`
-``_on_wall_at_rest``,
-``_leave_wall``
-``advance``                :func:`advance` (no monodromy: that stays in the core);
-                           impacts go to a caller's array, one row
-                           (dt, phase, v-, v+, sticking, release) each
-simulate.period_step       :func:`period_step`
-simulate.simulate's loop   :func:`run` (also the loop of a sweep point)
-=========================  =======================================================
-
-Model parameters travel as the tuple ``P`` of :func:`params_tuple` (derived quantities
+Model parameters travel as the tuple ``P`` of ``kernel.params_tuple`` (derived quantities
 computed once, by :class:`~grazing_control.oscillator.params.OscillatorParams` itself, so that
 both paths use the very same floats). Errors cannot be raised from compiled code with
 the core's messages, so they come back as a status code and one number, and the
 Python wrapper (:mod:`grazing_control.oscillator.kernel`) raises the core's exception.
-
-Two things are computed once instead of again, with bit-identical results: the window
-ends of a search from Pi2 over one period (:func:`window_grid`: every period starts at
-the same phase with the same horizon, so exp, sin and cos there are the same numbers),
-and e^{-zeta a} of the jerk bound, which :func:`evaluate` already computed at a.
 """
 
 from __future__ import annotations
@@ -54,12 +25,12 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["params_tuple", "check_state", "wall_rounding", "make_eval", "evaluate",
+__all__ = ["check_state", "wall_rounding", "make_eval", "evaluate",
            "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "bracket", "search",
            "search_stack", "danger_halfwidth", "far_from_wall", "next_impact", "next_impact_unchecked", "release_time",
            "resting_on_wall", "release_skip", "on_wall_at_rest", "leave_wall", "advance",
            "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
-           "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run", "scratch_buffer",
+           "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run",
            "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS", "period_jacobian",
            "lyapunov_run"]
 
@@ -78,23 +49,10 @@ STATUS_NONFINITE = 4  # NonFiniteStateError: (dx, dv) returned are the offending
 #: Columns of an impact row.
 IMPACT_FIELDS = ("dt", "phase", "v_minus", "v_plus", "sticking", "release")
 
-# P: the model parameters, see params_tuple
+# P: the model parameters, in this order (kernel.params_tuple builds it)
 _ZETA, _R, _OMEGA, _WD, _LAG, _AMP, _DD, _D, _PERIOD, _TAU2, _TWO, _THIRD = range(12)
 
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-
-
-def params_tuple(p):
-    """(zeta, r, omega, omega_d, lag, amplitude, delta_d, d, period, tau2, 2, 1/3) of an
-    OscillatorParams.
-
-    The last two are the exponents of the core's ``x ** 2`` and ``x ** (1 / 3)``: CPython
-    computes those with libm's pow, which is not always x * x to the last bit, while
-    LLVM turns a constant exponent 2 into a multiplication. Passed at run time, they
-    keep the kernel on pow, the same function, and so on the same floats (:func:`power`).
-    """
-    return (p.zeta, p.r, p.omega, p.omega_d, p.lag, p.amplitude, p.delta_d, p.d, p.period,
-            p.tau2, 2.0, 1.0 / 3.0)
 
 
 @jit
@@ -722,10 +680,8 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
     return periods, dx, dv, n_impacts, STATUS_OK, 0.0
 
 
-# --------------------------------------------------------------------------
-# Tangent propagation: the Lyapunov spectrum on Pi2 (docs/theory_lyapunov.md)
-# --------------------------------------------------------------------------
-
+# ------------------------------------------------------------------ tangent propagation
+# the Lyapunov spectrum on Pi2 (docs/theory_lyapunov.md)
 @jit
 def period_jacobian(P, rows, n, kick_time, c1, c2):
     """DP of one period from its impact rows: (m11, m12, m21, m22, stuck).
@@ -832,9 +788,3 @@ def lyapunov_run(P, periods, transient, dx, dv, controlled, c1, c2, control_afte
             l2 += math.log(r22) if r22 > 0.0 else -math.inf
         dx, dv = ndx, ndv
     return periods, dx, dv, STATUS_OK, 0.0, l1, l2, impacts, stuck_periods, lg
-
-
-def scratch_buffer():
-    """The per-period impact buffer :func:`run` and :func:`period_step` need."""
-    return np.empty((2 * MAX_IMPACTS, 6))
-

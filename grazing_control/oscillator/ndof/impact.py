@@ -51,7 +51,7 @@ from .flow import NdofFlow
 
 __all__ = ["NdofImpact", "NdofSegment", "ChatteringError", "ImpactCapError",
            "InitialStateError", "NonFiniteStateError", "check_state", "next_impact",
-           "saltation_matrix", "advance"]
+           "saltation_matrix", "saltation_parts", "advance"]
 
 TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
@@ -278,12 +278,29 @@ def saltation_matrix(flow: NdofFlow, phase: float, z_minus) -> np.ndarray:
 
     a_w-, v_w- the wall coordinate's acceleration and velocity before the impact; for
     n = 1 this is [[-r, 0], [(1 + r)(cos tau - d) / v-, -r]] (docs/theory.md, section 3).
-    det S = r^2.
+    det S = r^2. It is :func:`saltation_parts` with its singular entry added.
+    """
+    S, singular = saltation_parts(flow, phase, z_minus)
+    m = flow.model
+    S[m.n + m.i_w, m.i_w] += singular
+    return S
+
+
+def saltation_parts(flow: NdofFlow, phase: float, z_minus, v_minus: float | None = None):
+    """(S0, s): the saltation matrix as S = S0 + s e_{n+w} e_w^T, with S0 bounded and
+    s = (1 + r) a_w- / v_w- the entry that grows like 1/v- near grazing
+    (:func:`saltation_matrix`). Kept apart, the rank-one singular term lets the
+    multipliers of a near-grazing orbit be computed without the loss of digits of
+    an eigen-solver on a matrix with an entry ~1/v- (dynamics/ndof_branch.py,
+    ``structured_multipliers``). ``v_minus``: v_w- where it is known better than from
+    the phase (near grazing v_w- = -d* omega sin(phase - tau*) + z_{n+w} loses the
+    relative digits that the rounding of phase ~ tau* takes from a small phase - tau*;
+    the 1/1 branch has it free of that rounding).
     """
     m = flow.model
     n, w, r = m.n, m.i_w, m.r
     z = np.asarray(z_minus, dtype=float)
-    v = flow.wall_velocity(phase, z)
+    v = flow.wall_velocity(phase, z) if v_minus is None else float(v_minus)
     if not v > 0.0:
         raise ValueError(f"v_minus={v!r} is invalid: the saltation matrix needs v_w- > 0")
     a = flow.wall_acceleration(phase, z)
@@ -291,8 +308,7 @@ def saltation_matrix(flow: NdofFlow, phase: float, z_minus) -> np.ndarray:
     S[n + w, n + w] = -r
     S[w, w] -= 1.0 + r
     S[n:, w] -= (1.0 + r) * flow.A[n:, n + w]
-    S[n + w, w] += (1.0 + r) * a / v
-    return S
+    return S, (1.0 + r) * a / v
 
 
 def _jerk_at_rest(flow: NdofFlow, tau: float, z: np.ndarray) -> float:

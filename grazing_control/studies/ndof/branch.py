@@ -58,7 +58,9 @@ class NdofOrbit(NamedTuple):
     Floquet multipliers (decreasing modulus), impact time since the sample, phase and
     velocity v-, which starting guess converged, and the relative distance of the orbit
     to the local map's prediction (inf without one): the orbit is the one born at
-    grazing when it is small (:attr:`near_grazing`, below :data:`NEAR`)."""
+    grazing when it is small (:attr:`near_grazing`, below :data:`NEAR`), or when it was
+    found on the branch explicit in the impact phase, connected to psi = 0 (``guess``
+    :data:`EXPLICIT`: born at grazing by construction)."""
 
     delta_d: float
     state: np.ndarray
@@ -77,8 +79,8 @@ class NdofOrbit(NamedTuple):
 
     @property
     def near_grazing(self) -> bool:
-        """The orbit is the local map's (born at grazing), not another 1/1 orbit."""
-        return bool(self.prediction_offset < NEAR)
+        """The orbit is the one born at grazing, not another 1/1 orbit."""
+        return self.guess == EXPLICIT or bool(self.prediction_offset < NEAR)
 
 
 def with_delta_d(model, delta_d: float):
@@ -236,14 +238,60 @@ def _multipliers(pmap, model, gains, monodromy, impacts):
     return floquet_multipliers(monodromy, det)
 
 
+#: The name of the route in :attr:`NdofOrbit.guess` for an orbit of the explicit branch.
+EXPLICIT = "impact phase (the branch explicit in psi)"
+
+
+def _offset(state, pred) -> float:
+    """Relative distance of an orbit's Pi2 state to the local map's prediction."""
+    return math.inf if pred is None else float(
+        np.linalg.norm(state - pred) / max(np.linalg.norm(pred), 1e-300))
+
+
+def _on_branch(model, gains, pred):
+    """(the 1/1 orbit at the model's Delta d on the branch explicit in the impact phase,
+    None), or (None, why not) (dynamics/ndof_branch.py: ``orbit_at``, the global check
+    ``other_contacts``, the multipliers from ``pi2_factors``)."""
+    from grazing_control.dynamics.ndof_branch import (branch_multipliers, orbit_at,
+                                                      other_contacts, pi2_factors)
+
+    k = np.zeros(2 * model.n) if gains is None else _gains(model, gains)
+    try:
+        bp = orbit_at(model, k, model.delta_d)
+    except (ValueError, ParameterError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return None, " ".join(str(exc).split())[:120]
+    contacts = other_contacts(model, k, bp)
+    if contacts:
+        return None, (f"the orbit at psi={bp.psi:.6g} touches the wall {contacts} more "
+                      "time(s) per period")
+    B, p, q, s = pi2_factors(model, k, bp)
+    flow = NdofFlow.of(model)
+    sigma = (model.pi2_offset - bp.psi) / model.omega
+    state = np.array(bp.pi2_state)
+    orbit = NdofOrbit(model.delta_d, state, flow.to_physical(flow.tau2, state),
+                      branch_multipliers(model, k, bp), B + s * np.outer(p, q),
+                      float(model.period - sigma), float((flow.tau_star + bp.psi) % TWO_PI),
+                      float(bp.v_minus), EXPLICIT, _offset(state, pred))
+    return orbit, None
+
+
 def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e-14,
              extra_guesses=()) -> NdofOrbit:
-    """The 1/1 orbit at ``delta_d`` (default the model's), by Newton shooting.
+    """The 1/1 orbit at ``delta_d`` (default the model's): on the branch explicit in the
+    impact phase where it has one, else by Newton shooting.
 
-    Starting guesses, in order: the leading-order prediction (:func:`predicted_orbit`),
-    ``extra_guesses`` (name, state pairs), the grazing point z = 0, and the end of a
-    200-period simulation from the prediction. The first that converges to an orbit with
-    exactly one impact per period wins.
+    First the branch explicit in the impact phase psi (:func:`_on_branch`): the orbit
+    with Delta d(psi) = delta_d nearest grazing, exact to rounding whatever v-, checked
+    globally for other contacts with the exact flow, its multipliers from the
+    monodromy's factors. Shooting on the period map cannot take its place near
+    grazing: its event search resolves an impact only where v-^2 exceeds the gap's
+    rounding (v- ~ 1e-8), and there it stopped converging (issue 32: the 2-mass chain
+    failed for |Delta d| <= 1.28e-8, a 3-mass chain at +1e-10 converged to the
+    non-impacting orbit instead). Then Newton shooting from the starting guesses, in
+    order: the leading-order prediction (:func:`predicted_orbit`), ``extra_guesses``
+    (name, state pairs), the grazing point z = 0, and the end of a 200-period
+    simulation from the prediction. The first that converges to an orbit with exactly
+    one impact per period wins.
 
     Raises
     ------
@@ -254,10 +302,13 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
         model = with_delta_d(model, delta_d)
     pmap = NdofMap(model, _gains(model, gains))
     pred, _s = predicted_orbit(model, gains)
+    explicit, reason = _on_branch(model, gains, pred)
+    if explicit is not None:
+        return explicit
     guesses = [] if pred is None else [("discontinuity map", pred)]
     guesses += list(extra_guesses)
     guesses.append(("grazing point", np.zeros(pmap.dimension)))
-    why = []
+    why = [f"impact phase: {reason}"]
     tried_simulation = False
     i = 0
     while i < len(guesses):
@@ -272,11 +323,9 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
                 imp = o.impacts[0]
                 lam = _multipliers(pmap, model, gains, o.monodromy, o.impacts)
                 flow = NdofFlow.of(model)
-                offset = math.inf if pred is None else float(
-                    np.linalg.norm(o.state - pred) / max(np.linalg.norm(pred), 1e-300))
                 return NdofOrbit(model.delta_d, o.state, flow.to_physical(flow.tau2, o.state),
                                  lam, o.monodromy, float(imp.dt), float(imp.phase),
-                                 float(imp.v_minus), name, offset)
+                                 float(imp.v_minus), name, _offset(o.state, pred))
             why.append(f"{name}: converged to an orbit with {len(o.impacts)} impacts per period")
         if i == len(guesses) and not tried_simulation:
             tried_simulation = True
