@@ -242,6 +242,10 @@ def main(argv=None):
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--model-zeta", type=float, default=1.05,
+                    help="reidentify: the controller's zeta over the plant's (1.05)")
+    ap.add_argument("--model-delta-d", type=float, default=1.1,
+                    help="reidentify: the controller's Delta d over the plant's (1.1)")
     ap.add_argument("--pi2-source", choices=("stream", "sample"), default="stream",
                     help="the actuator part's controller: the stream's model filter, or the "
                          "simulator's exact Pi2 sample (no estimator: the orbit alone)")
@@ -272,8 +276,8 @@ def main(argv=None):
                       ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
                        {**wrong, "track_delta_d": True})]
         elif part == "reidentify":
-            wrong = {"zeta": 1.05 * p.zeta, "delta_d": 1.1 * DD, **watch}
-            cases += [("zeta +5 %, Delta d +10 %, reidentify", 0.0,
+            wrong = {"zeta": a.model_zeta * p.zeta, "delta_d": a.model_delta_d * DD, **watch}
+            cases += [(f"zeta x {a.model_zeta:g}, Delta d x {a.model_delta_d:g}, reidentify", 0.0,
                        {**wrong, "track_delta_d": True, "reidentify": True,
                         "reidentify_periods": 20})]
         elif part == "reidentify-right":
