@@ -976,8 +976,12 @@ class ControllerNode(Node):
                 self.reid.acted(k, answer[2])
 
     def _on_impact(self, msg) -> None:
-        """An impact from the rig's impact sensor (impact_source topic): its time."""
-        self.stream.add_impact(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        """An impact from the rig's impact sensor (impact_source topic): its time (also
+        to the re-identification's record: the refit's impact times)."""
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.stream.add_impact(t)
+        if self.reid is not None:
+            self.reid.record.add_impact(t)
 
     def _check_isolation(self) -> None:
         """Stop with status 1 when more than one simulator publishes the samples."""
