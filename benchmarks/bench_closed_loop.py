@@ -61,7 +61,7 @@ TICK = os.sysconf("SC_CLK_TCK")
 
 def summary(log: Path) -> dict:
     """The sim node's summary line: key=value pairs; latency/sample_lag as (p50, p99, max)."""
-    m = re.search(r"summary: (.*)", log.read_text())
+    m = re.search(r"\[sim_node\]: summary: (.*)", log.read_text())
     if not m:
         raise RuntimeError(f"no summary in {log}:\n{log.read_text()}")
     text = m.group(1)
@@ -205,7 +205,8 @@ def latency(samples, scale):
             with busy_cores(load):
                 s, _ = scene(samples, {"mode": "realtime", "time_scale": scale,
                                        "state_period": 0.0, "delta_d": -5e-6,
-                                       "actuation": "on_arrival", **sim},
+                                       "actuation": "on_arrival", "watchdog_excursion": 0.0,
+                                       **sim},
                              {"enable_after": 0, **ctl}, meter=False)
             rows.append((load, ex, s))
     print(f"\nrealtime latency, time_scale {scale:g} (a sample every {T / scale * 1e3:.2f} ms "
@@ -228,7 +229,8 @@ def pace(samples_wall, executor, scales):
         n = max(50, int(samples_wall * scale / T))
         sim, ctl = executors(executor)
         s, _ = scene(n, {"mode": "realtime", "time_scale": scale, "state_period": 1.0,
-                         "delta_d": -5e-6, "actuation": "on_arrival", **sim},
+                         "delta_d": -5e-6, "actuation": "on_arrival",
+                         "watchdog_excursion": 0.0, **sim},
                      {"enable_after": 0, **ctl}, bag=True, meter=False)
         budget = 0.1 * T / scale * 1e3
         rows.append((scale, n, s, budget))
