@@ -766,6 +766,21 @@ class RecorderNode(Node):
                         "publisher, lost, or published after the recording stopped)")
         return status
 
+def record_until(node, executor, stop) -> None:
+    """Record until ``stop`` (a threading.Event) is set, then take what the nodes' published
+    records still name (:meth:`RecorderNode.settle`): the recorder's loop, in its own
+    process (:func:`main`) or in a thread of a composed scene (ros/composed.py)."""
+    window = node.get_parameter("batch_window").value
+    while not stop.is_set() and rclpy.ok() and node.failed is None:
+        executor.spin_once(timeout_sec=SIGNAL_POLL)     # an idle one notices a stop
+        if window > 0.0:    # let a batch gather, then take all of it in one go
+            stop.wait(window)
+            node.drain()
+        if len(node._published) > len(node._confirmed):
+            node.confirm()
+    node.settle(executor, node.get_parameter("close_timeout").value)
+
+
 def _stop_on_signals(stop):
     """SIGINT and SIGTERM set `stop` (the spin loop then ends and the bag closes)."""
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -791,15 +806,7 @@ def main(args=None):
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         pauses = settle_heap()
-        window = node.get_parameter("batch_window").value
-        while not stop.is_set() and rclpy.ok() and node.failed is None:
-            executor.spin_once(timeout_sec=SIGNAL_POLL)     # an idle one notices a stop
-            if window > 0.0:    # let a batch gather, then take all of it in one go
-                stop.wait(window)
-                node.drain()
-            if len(node._published) > len(node._confirmed):
-                node.confirm()
-        node.settle(executor, node.get_parameter("close_timeout").value)
+        record_until(node, executor, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (StartupError, ParameterError, ParameterException, OSError) as exc:
