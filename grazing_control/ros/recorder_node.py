@@ -4,6 +4,9 @@ What it records by default (names relative to the node's namespace):
 
 ``oscillator/state`` (sensor_msgs/msg/JointState)
     position x, velocity v, effort cos(tau); stamp = simulation time.
+``oscillator/state_block`` (std_msgs/msg/Float64MultiArray)
+    the same stream in blocks (sim_node's ``stream_message:=block``): a row per sample,
+    (stamp sec, nanosec, x, v, cos tau, sin tau) (grazing_control.ros.stream_block).
 ``oscillator/impact`` (geometry_msgs/msg/Vector3Stamped)
     vector = (v-, v+, phase tau) at each impact; stamp = impact time.
 ``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
@@ -182,7 +185,8 @@ EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
                 "oscillator/latency": "std_msgs/msg/Float64",
                 "controller/estimate": "sensor_msgs/msg/JointState",
                 "controller/model_watch": "sensor_msgs/msg/JointState",
-                "controller/enabled": "std_msgs/msg/Bool"}
+                "controller/enabled": "std_msgs/msg/Bool",
+                "oscillator/state_block": "std_msgs/msg/Float64MultiArray"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
 #: nothing (used for a topic's metadata when it never had a publisher).
