@@ -13,6 +13,10 @@ environment (:func:`grazing_control.ros.launcher.node_env`: the Fast DDS profile
 ``grazing_control/ros/fastdds_profile.xml``, one BLAS thread). No controller law, no
 simulation, no recorder: what is left of the realtime scene's latency is the middleware's.
 
+With ``--composed`` the same scene also runs composed (``grazing run --compose``: both
+nodes in one process, the answer delivered in the process; the floor stays the two
+processes' round trip, what the middleware allows between processes).
+
 In the same run, alternating with it (both see the same load), the realtime scene of
 ``benchmarks/bench_closed_loop.py`` part 2: sim_node and controller_node through the
 launcher at ``--scale`` with ``actuation:=on_arrival`` (latency = a sample published ->
@@ -201,15 +205,16 @@ def floor(executor_kind: str, samples: int, interval: float) -> dict:
     return {"latency": quantiles_ms(trips), "lost": samples - len(trips)}
 
 
-def scene(executor_kind: str, samples: int, scale: float) -> dict:
-    """The realtime scene of bench_closed_loop part 2 (sim_node + controller_node)."""
+def scene(executor_kind: str, samples: int, scale: float, compose: bool = False) -> dict:
+    """The realtime scene of bench_closed_loop part 2 (sim_node + controller_node; with
+    ``compose`` in one process, grazing run --compose)."""
     import bench_closed_loop
 
     s, _ = bench_closed_loop.scene(
         samples, {"mode": "realtime", "time_scale": scale, "state_period": 0.0,
                   "delta_d": -5e-6, "actuation": "on_arrival", "executor": executor_kind,
                   "watchdog_excursion": 0.0, "watchdog_misses": 0},
-        {"enable_after": 0, "executor": executor_kind}, meter=False)
+        {"enable_after": 0, "executor": executor_kind}, meter=False, compose=compose)
     return {"latency": s["latency"], "late": s.get("late", "?"), "missed": s.get("missed", "?")}
 
 
@@ -223,6 +228,8 @@ def main(argv=None) -> int:
     ap.add_argument("--samples", type=int, default=2000, help="samples per run (default 2000)")
     ap.add_argument("--scale", type=float, default=1000.0, help="time_scale (default 1000)")
     ap.add_argument("--executor", choices=("single_threaded", "events"), default="events")
+    ap.add_argument("--composed", action="store_true",
+                    help="also the scene composed (grazing run --compose), in each rep")
     ap.add_argument("--role", choices=("ping", "pong"), help=argparse.SUPPRESS)
     ap.add_argument("--interval", type=float, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -241,18 +248,28 @@ def main(argv=None) -> int:
         before = load()
         f = floor(args.executor, args.samples, interval)
         s = scene(args.executor, args.samples, args.scale)
-        rows.append((f, s))
-        fl, sl = f["latency"], s["latency"]
-        print(f"rep {rep} (load {before}): floor p50/p99/max {fl[0]:.3f}/{fl[1]:.3f}/"
-              f"{fl[2]:.3f} ms (lost {f['lost']}); scene {sl[0]:.3f}/{sl[1]:.3f}/{sl[2]:.3f} ms "
-              f"(late {s['late']}); ratio {sl[0] / fl[0]:.2f}/{sl[1] / fl[1]:.2f}/"
-              f"{sl[2] / fl[2]:.2f}", flush=True)
+        c = scene(args.executor, args.samples, args.scale, True) if args.composed else None
+        rows.append((f, s) + ((c,) if c else ()))
+        fl = f["latency"]
+        for name, one in (("scene", s), ("composed", c)):
+            if one is None:
+                continue
+            sl = one["latency"]
+            print(f"rep {rep} (load {before}): floor p50/p99/max {fl[0]:.3f}/{fl[1]:.3f}/"
+                  f"{fl[2]:.3f} ms (lost {f['lost']}); {name} {sl[0]:.3f}/{sl[1]:.3f}/"
+                  f"{sl[2]:.3f} ms (late {one['late']}); ratio {sl[0] / fl[0]:.2f}/"
+                  f"{sl[1] / fl[1]:.2f}/{sl[2] / fl[2]:.2f}", flush=True)
     med = lambda i, which: statistics.median(r[which]["latency"][i] for r in rows)  # noqa
     print(f"\nmedians over {args.reps} pairs (ms)       p50     p99     max")
     print(f"bare rclpy round trip (floor)   {med(0, 0):7.3f} {med(1, 0):7.3f} {med(2, 0):7.3f}")
     print(f"realtime scene (sim+controller) {med(0, 1):7.3f} {med(1, 1):7.3f} {med(2, 1):7.3f}")
     print(f"scene / floor                   {med(0, 1) / med(0, 0):7.2f} "
           f"{med(1, 1) / med(1, 0):7.2f} {med(2, 1) / med(2, 0):7.2f}")
+    if args.composed:
+        print(f"composed scene (one process)    {med(0, 2):7.3f} {med(1, 2):7.3f} "
+              f"{med(2, 2):7.3f}")
+        print(f"composed / floor                {med(0, 2) / med(0, 0):7.2f} "
+              f"{med(1, 2) / med(1, 0):7.2f} {med(2, 2) / med(2, 0):7.2f}")
     print(f"acceptance: scene p99 <= 1.0 ms: {'ok' if med(1, 1) <= 1.0 else 'MISS'}; "
           f"<= 1.5x floor p99: {'ok' if med(1, 1) <= 1.5 * med(1, 0) else 'MISS'}")
     print(f"load at the end {load()}")

@@ -101,10 +101,14 @@ def main(argv=None) -> int:
     ap.add_argument("--composed", action="store_true",
                     help="also this checkout's scene composed (grazing run --compose: the "
                          "nodes in one process), side by side")
+    ap.add_argument("--only-composed", action="store_true",
+                    help="run every checkout's scene composed (this one's and the "
+                         "baseline's: a change to the composed scene against the old one)")
     args = ap.parse_args(argv)
-    runs = {"this": (ROOT, ())} | ({"composed": (ROOT, ("--compose",))} if args.composed
-                                   else {}) \
-        | ({"baseline": (args.baseline.resolve(), ())} if args.baseline else {})
+    both = ("--compose",) if args.only_composed else ()
+    runs = {"this": (ROOT, both)} | ({"composed": (ROOT, ("--compose",))}
+                                     if args.composed and not both else {}) \
+        | ({"baseline": (args.baseline.resolve(), both)} if args.baseline else {})
     for name, (root, extra) in runs.items():   # a fresh checkout compiles numba's cache once
         one_scene(root, 20, extra)
     rows = {name: [] for name in runs}

@@ -72,13 +72,24 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
                        "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING},
         controller_overrides={"pi2_source": "stream", "estimator": "model"},
         log_dir=tmp / "logs", compose=bool(composed))
-    if not res.ok:
+    try:
+        s = summary(Path(res.logs["sim_node"]))
+    except (RuntimeError, OSError):
         return {"failed": str(res)}
-    s = summary(Path(res.logs["sim_node"]))
+    nan3 = (float("nan"),) * 3          # no answer measured
     return {"rate": float(s["rate"]), "periods": int(s["periods"]),
             "missed": int(s["missed"]), "late": int(s["late"]),
-            "predicted": int(s.get("predicted", 0)), "latency": s["latency"],
-            "lag": s["sample_lag"]}
+            "predicted": int(s.get("predicted", 0)), "latency": s.get("latency", nan3),
+            "lag": s.get("sample_lag", nan3), "ok": res.ok,
+            "answered": _answered(Path(res.logs["controller_node"]))}
+
+
+def _answered(log: Path) -> int:
+    """The controller's answered= count (its summary), -1 when absent."""
+    import re
+
+    m = re.search(r"\[controller_node\]: summary: answered=(\d+)", log.read_text())
+    return int(m.group(1)) if m else -1
 
 
 def main(argv=None) -> int:
@@ -112,7 +123,9 @@ def main(argv=None) -> int:
                     print(f"{v:16s} rep {rep}: FAILED {r['failed']} (load {load})", flush=True)
                     continue
                 lat, lag = r["latency"], r["lag"]
-                print(f"{v:16s} rep {rep}: {r['rate']:.1f} periods/s, missed {r['missed']} "
+                print(f"{v:16s} rep {rep}: {r['periods']} periods"
+                      f"{'' if r['ok'] else ' (the scene failed: timed out)'} at "
+                      f"{r['rate']:.1f} periods/s, answered {r['answered']}, missed {r['missed']} "
                       f"late {r['late']} predicted {r['predicted']}, latency p50/p99/max "
                       f"{lat[0]:.2f}/{lat[1]:.2f}/{lat[2]:.2f} ms, sample lag p50/p99/max "
                       f"{lag[0]:.2f}/{lag[1]:.2f}/{lag[2]:.2f} ms (load {load})", flush=True)
