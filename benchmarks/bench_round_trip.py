@@ -4,7 +4,11 @@ Two processes and nothing else: *ping* publishes a Pi2-sized sample (packed
 sensor_msgs/JointState, the bytes sim_node sends on ``oscillator/pi2``) every T/scale of
 wall time from a timer, *pong* answers each in its subscription callback with the packed
 TwistStamped a controller sends (``controller/velocity_correction``, stamp = the sample's);
-ping takes the wall time from publishing a sample to its answer's callback. The same as
+ping takes the wall time from publishing a sample to its answer's callback. The floor's
+quantiles leave out, as the simulator's do, the answers that came after the next two
+samples went out (the simulator ignores such an answer: it answers none of the last two
+unanswered samples, and it is not in its latency); their count and the quantiles of all
+are printed beside. The same as
 the nodes: raw (serialized) publish and take, publishers keep last 100000 and
 subscriptions keep last 1000, reliable, volatile (:data:`grazing_control.ros.common.
 PUBLISHER_QOS`, ``DATA_QOS``), no QoS-event callbacks, the executor of the scene
@@ -202,7 +206,11 @@ def floor(executor_kind: str, samples: int, interval: float) -> dict:
     if "trips" not in res:
         raise RuntimeError(f"ping failed: {out.stdout[-500:]} {out.stderr[-1500:]}")
     trips = [t for t in res["trips"] if t is not None]
-    return {"latency": quantiles_ms(trips), "lost": samples - len(trips)}
+    # as the simulator counts: an answer that comes after the next two samples went out
+    # answers none of the last two unanswered samples; it is ignored, not in its latency
+    counted = [t for t in trips if t <= 2 * interval]
+    return {"latency": quantiles_ms(counted), "all": quantiles_ms(trips),
+            "beyond": len(trips) - len(counted), "lost": samples - len(trips)}
 
 
 def scene(executor_kind: str, samples: int, scale: float, compose: bool = False) -> dict:
@@ -215,7 +223,8 @@ def scene(executor_kind: str, samples: int, scale: float, compose: bool = False)
                   "delta_d": -5e-6, "actuation": "on_arrival", "executor": executor_kind,
                   "watchdog_excursion": 0.0, "watchdog_misses": 0},
         {"enable_after": 0, "executor": executor_kind}, meter=False, compose=compose)
-    return {"latency": s["latency"], "late": s.get("late", "?"), "missed": s.get("missed", "?")}
+    return {"latency": s["latency"], "late": s.get("late", "?"), "missed": s.get("missed", "?"),
+            "ignored": s.get("ignored", "?")}
 
 
 def load() -> str:
@@ -255,10 +264,13 @@ def main(argv=None) -> int:
             if one is None:
                 continue
             sl = one["latency"]
+            fa = f["all"]
             print(f"rep {rep} (load {before}): floor p50/p99/max {fl[0]:.3f}/{fl[1]:.3f}/"
-                  f"{fl[2]:.3f} ms (lost {f['lost']}); {name} {sl[0]:.3f}/{sl[1]:.3f}/"
-                  f"{sl[2]:.3f} ms (late {one['late']}); ratio {sl[0] / fl[0]:.2f}/"
-                  f"{sl[1] / fl[1]:.2f}/{sl[2] / fl[2]:.2f}", flush=True)
+                  f"{fl[2]:.3f} ms ({f['beyond']} beyond 2 intervals left out; all: "
+                  f"{fa[0]:.3f}/{fa[1]:.3f}/{fa[2]:.3f}; lost {f['lost']}); {name} "
+                  f"{sl[0]:.3f}/{sl[1]:.3f}/{sl[2]:.3f} ms (late {one['late']}, ignored "
+                  f"{one['ignored']}); ratio {sl[0] / fl[0]:.2f}/{sl[1] / fl[1]:.2f}/"
+                  f"{sl[2] / fl[2]:.2f}", flush=True)
     med = lambda i, which: statistics.median(r[which]["latency"][i] for r in rows)  # noqa
     print(f"\nmedians over {args.reps} pairs (ms)       p50     p99     max")
     print(f"bare rclpy round trip (floor)   {med(0, 0):7.3f} {med(1, 0):7.3f} {med(2, 0):7.3f}")

@@ -60,7 +60,7 @@ def design(out: Path) -> Path:
 
 
 def scene(variant: str, controller: Path, periods: int, enable_after: int, scale: float,
-          tmp: Path) -> dict:
+          tmp: Path, answer_lead: float = 0.0) -> dict:
     message, _, composed = variant.partition("+")
     p = OscillatorParams(delta_d=DD)
     res = launcher.run(
@@ -70,7 +70,8 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
         sim_overrides={"time_scale": scale, "state_period": p.period / RATE,
                        "sensor_noise": SIGMA, "sensor_velocity": False,
                        "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING},
-        controller_overrides={"pi2_source": "stream", "estimator": "model"},
+        controller_overrides={"pi2_source": "stream", "estimator": "model",
+                              "answer_lead": answer_lead},
         log_dir=tmp / "logs", compose=bool(composed))
     try:
         s = summary(Path(res.logs["sim_node"]))
@@ -98,6 +99,9 @@ def main(argv=None) -> int:
     ap.add_argument("--periods", type=int, default=3000)
     ap.add_argument("--enable-after", type=int, default=1000)
     ap.add_argument("--scale", type=float, default=1000.0)
+    ap.add_argument("--answer-lead", type=float, default=0.0,
+                    help="the controller's answer_lead (simulation time; default 0: answer "
+                         "with the section's last sample)")
     ap.add_argument("--variants", default="sample,block",
                     help=f"comma-separated, of {', '.join(VARIANTS)} (default sample,block)")
     args = ap.parse_args(argv)
@@ -108,6 +112,7 @@ def main(argv=None) -> int:
     p = OscillatorParams(delta_d=DD)
     print(f"realtime x{args.scale:g}, stream at T/{RATE} ({RATE * args.scale / p.period:.0f} "
           f"samples/s wall), {args.periods} periods, control from {args.enable_after}, "
+          f"answer_lead {args.answer_lead:g}, "
           f"recorder on; {os.cpu_count()} CPUs, load %.2f %.2f %.2f" % os.getloadavg())
     rows = {v: [] for v in variants}
     with tempfile.TemporaryDirectory(prefix="bench_stream_blocks_") as tmp:
@@ -117,7 +122,7 @@ def main(argv=None) -> int:
                 load = "%.2f %.2f %.2f" % os.getloadavg()
                 with tempfile.TemporaryDirectory(dir=tmp) as one:
                     r = scene(v, controller, args.periods, args.enable_after, args.scale,
-                              Path(one))
+                              Path(one), args.answer_lead)
                 rows[v].append(r)
                 if "failed" in r:
                     print(f"{v:16s} rep {rep}: FAILED {r['failed']} (load {load})", flush=True)

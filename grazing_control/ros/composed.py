@@ -43,7 +43,9 @@ __all__ = ["NODES", "main", "write_statuses"]
 
 #: The nodes a composed scene holds, in the order they are built (the recorder first, so
 #: that it has subscribed when the others' latched records go out, as the launcher starts
-#: its process first).
+#: its process first). The simulator first, so that its kernel would load in its thread
+#: while the others are built, was slower: overhead 1.67 s against 1.31 s, medians of 4
+#: side by side at load 3 (benchmarks/bench_scene_overhead.py --only-composed).
 NODES = ("recorder_node", "controller_node", "sim_node")
 #: Wall seconds between two of the controller's isolation checks (ControllerNode's).
 ISOLATION_CHECK = 0.25
