@@ -12,7 +12,8 @@ turns answers into loop calls and the loops' output into messages (packed CDR,
 scene sample for sample (docs/nodes.md).
 
 Topics (docs/nodes.md has every field, unit and QoS): publishes ``oscillator/state`` (the
-rig's sensor stream), ``oscillator/pi1``, ``/pi2`` (the ground truth), ``/impact``,
+rig's sensor stream; with ``stream_message`` block ``oscillator/state_block`` instead, a
+block per loop call: :mod:`grazing_control.ros.stream_block`), ``oscillator/pi1``, ``/pi2`` (the ground truth), ``/impact``,
 ``/latency``, ``/deadline_miss``, ``/substituted`` (the prediction that acted for a
 missing answer), ``/done``, ``/clock``; stamps are simulation time; ``grazing/parameters``
 carries its parameter record and its events (the watchdog's trip, the feasibility

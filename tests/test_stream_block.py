@@ -20,7 +20,7 @@ from test_closed_loop import Collector, new_domain
 pytestmark = pytest.mark.timeout(240)
 
 P = OscillatorParams(delta_d=-5e-6)
-RATE, PERIODS, ON = 200, 120, 40      # the rig stream at T/200, as issue 30's scene
+RATE, PERIODS, ON = 200, 80, 30      # the rig stream at T/200, as issue 30's scene
 
 
 def _message(flat, labels=("sample", "sec,nanosec,x,v,cos_tau,sin_tau")):

@@ -31,6 +31,8 @@ or empty for a position-only sensor, effort [cos tau, sin tau] or [cos tau]; the
 times are t_k = k T, the simulator's origin) with ``estimator`` nearest, arc or model
 (:mod:`grazing_control.dynamics.estimation`, docs/theory_estimation.md), the impacts
 taken from ``oscillator/impact`` (``impact_source`` topic) or detected in the stream.
+With ``stream_message`` block the same samples come in blocks on
+``oscillator/state_block`` (:mod:`grazing_control.ros.stream_block`), taken row by row.
 Section k is estimated and answered (stamped t_k) as soon as its last sample arrived:
 the newest sample's t + ``state_period`` > t_k (0: the gap between the last two stamps),
 or late, with the first sample after t_k when that one was lost. Each estimate is
