@@ -31,6 +31,8 @@ or empty for a position-only sensor, effort [cos tau, sin tau] or [cos tau]; the
 times are t_k = k T, the simulator's origin) with ``estimator`` nearest, arc or model
 (:mod:`grazing_control.dynamics.estimation`, docs/theory_estimation.md), the impacts
 taken from ``oscillator/impact`` (``impact_source`` topic) or detected in the stream.
+With ``stream_message`` block the same samples come in blocks on
+``oscillator/state_block`` (:mod:`grazing_control.ros.stream_block`), taken row by row.
 Section k is estimated and answered (stamped t_k) as soon as its last sample arrived:
 the newest sample's t + ``state_period`` > t_k (0: the gap between the last two stamps),
 or late, with the first sample after t_k when that one was lost. Each estimate is
@@ -113,7 +115,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
@@ -121,7 +123,7 @@ from grazing_control.dynamics.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.estimation import ESTIMATORS
 from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains, correction
-from . import cdr
+from . import cdr, stream_block
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import ERROR, OK, WARN, Updater
@@ -466,6 +468,13 @@ class ControllerNode(Node):
         d("state_period", 0.0, float_descriptor(
             "simulation time between stream samples; 0: from the stamps", 0.0, FINITE,
             read_only=True))
+        d("stream_message", "sample", string_descriptor(
+            "stream mode: the stream's messages, sample (oscillator/state) or block "
+            "(oscillator/state_block, ros/stream_block.py); the launcher passes the "
+            "simulator's", True, stream_block.MESSAGES))
+        why = stream_block.check_message(self.get_parameter("stream_message").value)
+        if why is not None:
+            raise StartupError(why)
         d("model_noise", 1e-2, float_descriptor(
             "model filter's process noise per period, in units of sensor_noise", 0.0, FINITE,
             read_only=True))
@@ -620,6 +629,10 @@ class ControllerNode(Node):
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
                 event_callbacks=quiet)
+        elif self.get_parameter("stream_message").value == "block":     # issue 30
+            self.sub_samples = self.create_subscription(
+                Float64MultiArray, stream_block.TOPIC, self._on_state_block, DATA_QOS,
+                raw=True, event_callbacks=quiet)
         else:       # stream mode never listens to the simulator's exact samples
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/state", self._on_state, DATA_QOS, raw=True,
@@ -864,6 +877,21 @@ class ControllerNode(Node):
                 return
             v = msg.velocity[0] if len(msg.velocity) else math.nan
             sample = stamp_key(msg.header.stamp) + (msg.position[0], v, tuple(msg.effort))
+        self._take_sample(sample)
+
+    def _on_state_block(self, data: bytes) -> None:
+        """A block of stream samples (``stream_message`` block, ros/stream_block.py): each
+        row taken as :meth:`_on_state` takes one sample, in order."""
+        flat = stream_block.read(data)
+        if flat is None:
+            self.malformed(f"a message on {self.sub_samples.topic_name} that is not a "
+                           "stream block (ros/stream_block.py)")
+            return
+        for sample in stream_block.rows_of(flat):
+            self._take_sample(sample)
+
+    def _take_sample(self, sample: tuple) -> None:
+        """(sec, nanosec, x, v, effort) of one stream sample: checked, then estimated."""
         sec, ns, x, v, effort = sample
         if not math.isfinite(x) or math.isinf(v):
             self.malformed(f"stamp {(sec, ns)}: x={x!r} v={v!r}")
