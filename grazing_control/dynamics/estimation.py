@@ -471,7 +471,8 @@ def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, for
 
 def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                  correction: float, delay: float = 0.0, *, floor: float = 1e-2,
-                 iterations: int = 8, width: float = 0.0, force_limit: float = math.inf):
+                 iterations: int = 8, width: float = 0.0, force_limit: float = math.inf,
+                 actuator=None, force0: float = 0.0):
     """One period of the model filter: from the prior of z_{k-1} and the samples at times
     ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
 
@@ -482,7 +483,9 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     direction that the map contracts to zero; it stands for what the model omits).
 
     The correction acts as a kick, or as a force pulse of ``width`` (clipped to
-    ``force_limit``) where the plant's actuator pushes for a finite time.
+    ``force_limit``) where the plant's actuator pushes for a finite time, through the
+    first-order ``actuator`` from the force ``force0`` at the section where it has a lag
+    (:func:`trajectory`).
 
     Returns (FilterState at t_k, chi2 of the period's residuals, number of
     measurements); raises ValueError when the fit fails (no convergence, a sticking
@@ -497,7 +500,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     inv_var = 1.0 / (sigma * sigma)
     for _ in range(iterations):
         pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                                force_limit=force_limit)
+                                                force_limit=force_limit, actuator=actuator,
+                                                force0=force0)
         h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
         r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
         info = info_prior + inv_var * (h.T @ h)
@@ -509,7 +513,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     else:
         raise ValueError("the model fit did not converge")
     pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                             force_limit=force_limit)
+                                             force_limit=force_limit, actuator=actuator,
+                                             force0=force0)
     h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
     r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
     info = info_prior + inv_var * (h.T @ h)
