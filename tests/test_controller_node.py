@@ -333,6 +333,31 @@ def test_stream_mode_without_delta_d_exits_with_one_line():
     assert "delta_d=nan is invalid with pi2_source=stream" in lines[0]
 
 
+def test_the_actuator_settings_are_validated_naming_the_parameter():
+    """pulse_from_values: the actuator reaches the stream estimator; each bad value is
+    one line naming its parameter and valid range."""
+    from grazing_control.ros.controller_node import (model_from_values, pulse_from_values,
+                                                     stream_from_values)
+    ok = dict(pulse_width=0.1, force_limit=0.0, actuator_bandwidth=2.0, actuator_latency=0.2)
+    width, limit, act = pulse_from_values(ok, P.omega, 3.0)
+    assert (width, limit, act.time_constant, act.latency) == (0.1, math.inf, 0.5, 0.2)
+    assert pulse_from_values(dict(ok, actuator_bandwidth=0.0, actuator_latency=0.0),
+                             P.omega, 3.0)[2] is None
+    base = dict(zeta=P.zeta, r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, delta_d=-5e-6,
+                pi2_source="stream", estimator="model", impact_source="stream",
+                sensor_noise=1e-4, state_period=0.0, model_noise=1e-2,
+                answer_after_section=False)
+    assert stream_from_values(base, model_from_values(base), (width, limit, act)).actuator is act
+    for kw, text in [({"pulse_width": 0.0}, "pulse_width=0.0 is invalid with actuator_"),
+                     ({"pulse_width": 20.0}, "pulse_width=20.0 is invalid"),
+                     ({"actuator_bandwidth": -1.0}, "actuator_bandwidth=-1.0 is invalid"),
+                     ({"actuator_latency": math.inf}, "actuator_latency=inf is invalid"),
+                     ({"actuator_latency": P.period - 3.0}, "actuator_latency=.* is invalid: "
+                      "valid range is pulse start")]:
+        with pytest.raises(ParameterError, match="^" + text):
+            pulse_from_values(dict(ok, **kw), P.omega, 3.0)
+
+
 STREAM_TOPICS = {"controller/velocity_correction": __import__(
     "geometry_msgs.msg", fromlist=["TwistStamped"]).TwistStamped,
     "controller/estimate": JointState, "controller/model_watch": JointState}
