@@ -394,8 +394,9 @@ def section_force(p: OscillatorParams, force0: float, correction: float, delay: 
 
 def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, force_limit,
                          actuator, force0):
-    """:func:`trajectory` through a first-order actuator (docs/theory_estimation.md,
-    (E9)): per leg of constant command u the exact flow of
+    """:func:`trajectory` through a first-order actuator (docs/theory_pulse.md sections
+    5-8, :mod:`grazing_control.dynamics.actuator`): per leg of constant command u the
+    exact flow of
     :func:`grazing_control.dynamics.actuator.lag_flow` (force u + (f - u) e^{-h/tau_a},
     impacts certified), in its pieces z(h) = Phi(h) z'_e + (x_f, v_f)(h). The force is
     a function of time alone (the command is known), so d z / d z0 is carried by Phi
