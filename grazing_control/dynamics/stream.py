@@ -124,6 +124,7 @@ class StreamEstimator:
         self.next_k = None              # the next section to estimate
         self.kicks = {}                 # section k -> (time of the kick, dv)
         self.final = set()              # sections whose kick the plant reported (acted)
+        self.force_at = (None, 0.0)     # (section, actuator force there) before self.kicks
         self.delay = 0.0
         self.impacts = deque(maxlen=64)  # impact times (topic or detected)
         self.filter = None              # FilterState at section filter_k
@@ -146,7 +147,9 @@ class StreamEstimator:
             return
         self.kicks[k] = (k * self.p.period + delay, float(dv))
         self.delay = delay
-        for old in [j for j in self.kicks if j < k - 3]:
+        for old in sorted(j for j in self.kicks if j < k - 3):
+            if self.actuator is not None:   # its force is carried on (section_force)
+                self.force_at = (old + 1, self.section_force(old + 1))
             del self.kicks[old]
         self.final = {j for j in self.final if j >= k - 3}
 
@@ -252,14 +255,18 @@ class StreamEstimator:
 
     def section_force(self, k: int) -> float:
         """The actuator's force at section k, left by the known corrections of the
-        periods before (:func:`grazing_control.dynamics.estimation.section_force` from
-        0 at the oldest one kept, k - 4: a share e^{-4 T / tau_a} of the force before it
-        is dropped, below 1e-14 for tau_a < T / 8); 0 without an actuator."""
-        if self.actuator is None or not self.kicks:
+        periods before: :func:`grazing_control.dynamics.estimation.section_force` period
+        by period from the force carried at the oldest section kept (``force_at``, moved
+        on as old corrections are dropped; 0 at the first correction since
+        :meth:`reset`), a period without a known correction with none; 0 without an
+        actuator."""
+        if self.actuator is None:
             return 0.0
         T = self.p.period
-        f = 0.0
-        for j in range(min(min(self.kicks), k), k):
+        base, f = self.force_at
+        if base is None or base > k:
+            base, f = min(self.kicks, default=k), 0.0
+        for j in range(base, k):
             at, dv = self.kicks.get(j, (j * T + self.delay, 0.0))
             f = section_force(self.p, f, dv, at - j * T, self.pulse[0], self.pulse[1],
                               self.actuator)
