@@ -358,6 +358,42 @@ def test_the_actuator_settings_are_validated_naming_the_parameter():
             pulse_from_values(dict(ok, **kw), P.omega, 3.0)
 
 
+def test_a_scene_through_an_actuator_the_controller_is_told(tmp_path):
+    """sim_node's actuator at 3x omega (lockstep, position only at T/200, sigma 1e-4,
+    pulse 0.1 at delta 3, the (P1) gains; 100 periods, control on at 30) with the
+    controller told pulse_width and actuator_bandwidth: its stream filter resets only at
+    its start (blind to the lag it reset 250 times in 500 periods, docs/benchmarks.md)
+    and the loop holds one impact per period, its last 40 periods within 2e-5 of the orbit through the
+    actuator (actuator.actuated_design)."""
+    import re
+
+    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.recordings.scenes import load
+
+    p = OscillatorParams(delta_d=-5e-6)
+    act = bandwidth_actuator(p, 3.0)
+    gains, orbit, _ = actuated_design(p, optimize_noise(p, 3.0).gains().c2, 3.0, 0.1, act)
+    bw = 1.0 / act.time_constant
+    ctrl = {"c1": gains.c1, "c2": gains.c2, "actuation_delay": 3.0, "delta_d": p.delta_d,
+            "zeta": p.zeta, "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset,
+            "pi2_source": "stream", "estimator": "model", "pulse_width": 0.1,
+            "actuator_bandwidth": bw}
+    res = launcher.run(None, ctrl, str(tmp_path / "bag"), 100, delta_d=p.delta_d,
+                       enable_after=30, mode="lockstep", timeout=120,
+                       sim_overrides={"state_period": p.period / 200, "sensor_noise": 1e-4,
+                                      "sensor_velocity": False, "pulse_width": 0.1,
+                                      "sensor_seed": 7, "actuator_bandwidth": bw},
+                       log_dir=str(tmp_path / "logs"))
+    summary = (tmp_path / "logs" / "controller_node.log").read_text(errors="replace")
+    assert res.ok, summary
+    assert int(re.search(r"model_resets=(\d+)", summary).group(1)) <= 1, summary
+    scene = load(tmp_path / "bag").scenes[0].scene
+    counts = np.histogram(scene.impacts[:, 0], np.append(scene.t, scene.t[-1] + p.period))[0]
+    assert np.all(counts[45:] == 1)
+    assert abs(scene.pi2[-40:, 0].mean() - p.x_ref - orbit.state[0]) < 2e-5
+
+
 STREAM_TOPICS = {"controller/velocity_correction": __import__(
     "geometry_msgs.msg", fromlist=["TwistStamped"]).TwistStamped,
     "controller/estimate": JointState, "controller/model_watch": JointState}
