@@ -363,8 +363,8 @@ def test_a_scene_through_an_actuator_the_controller_is_told(tmp_path):
     pulse 0.1 at delta 3, the (P1) gains; 100 periods, control on at 30) with the
     controller told pulse_width and actuator_bandwidth: its stream filter resets only at
     its start (blind to the lag it reset 250 times in 500 periods, docs/benchmarks.md)
-    and the loop holds one impact per period, its last 40 periods within 2e-5 of the orbit through the
-    actuator (actuator.actuated_design)."""
+    and the loop holds one impact per period, its last 40 periods within 2e-5 of the
+    orbit through the actuator (actuator.actuated_design)."""
     import re
 
     from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
