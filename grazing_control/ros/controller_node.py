@@ -43,6 +43,11 @@ or ``consistency_window`` (issue 29, :mod:`grazing_control.ros.model_watch`) the
 augmented filter estimates a sensor bias and a drifting Delta d, a consistency monitor
 tests its innovations, and each section's row goes on ``controller/model_watch``; a
 mismatch verdict is an ERROR on /diagnostics naming the test, statistic and bound.
+With ``reidentify`` (on a mismatch verdict) or on a call of ``~/reidentify``
+(std_srvs/Trigger) the model is refitted on the last ``reidentify_periods`` periods in a
+worker thread and, where the design is admissible for it (``design_conditions``), the
+estimator, Eq. 28 and X** switch to it at the next section
+(:mod:`grazing_control.ros.reidentify`); each decision goes on ``controller/model_switch``.
 
 Switching on
 ------------
@@ -109,7 +114,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Bool
-from std_srvs.srv import SetBool
+from std_srvs.srv import SetBool, Trigger
 
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.capture import CAPTURE_RADIUS, CaptureRule
@@ -124,6 +129,7 @@ from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import ERROR, OK, WARN, Updater
 from .model_watch import (WATCH_DEFAULTS, WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC,
                           describe_verdict, watch_from_values, watch_row, watch_status)
+from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide, declare_reidentify
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
@@ -149,7 +155,7 @@ _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", 
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section", "answer_lead", "capture",
-         "capture_radius") + WATCH_KEYS
+         "capture_radius") + WATCH_KEYS + REID_KEYS
 #: How a correction acts in the plant (:func:`pulse_from_values`), model units.
 PULSE_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
@@ -534,6 +540,7 @@ class ControllerNode(Node):
         d("capture_radius", 0.0, float_descriptor(
             "capture rule: the distance (Euclidean in (x, v) on Pi2), >= 0; 0: "
             f"{CAPTURE_RADIUS:g} sqrt(|delta_d|)", 0.0, FINITE, read_only=True))
+        declare_reidentify(d)
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
         d("diagnostics_period", 1.0, float_descriptor(
@@ -633,12 +640,20 @@ class ControllerNode(Node):
         self.pub_watch = Counted(self.create_publisher(
             JointState, WATCH_TOPIC, REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
+        # the re-identification's decisions (issue 29 section 3), made in every mode
+        self.pub_switch = Counted(self.create_publisher(
+            JointState, SWITCH_TOPIC, REPLAY_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
         self.watching = isinstance(self.stream, AugmentedStreamEstimator)
         self.monitor = (watch_from_values(self._values())[1] if self.watching else None)
         self.verdict = None             # the monitor's latest verdict
         self.mismatches = 0             # sections whose verdict was a mismatch
         self.first_mismatch = None      # the first section with a mismatch verdict
         self._diag_mismatches = 0
+        try:        # re-identification in the loop (ros/reidentify.py), or None
+            self.reid = ReidentifySide.from_node(self, self._values())
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
         self.rig_side = None     # the driver contract's side (rig_file), or None
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
@@ -680,10 +695,11 @@ class ControllerNode(Node):
         self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
                                                          LATCHED_QOS))
         self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled,
-                                                self.pub_watch)
+                                                self.pub_watch, self.pub_switch)
                                          + ((self.pub_force,) if self.rig_side else ()))
         self.recorder = RecorderConfirmation(self)
         self.create_service(SetBool, "~/enable", self._on_enable)
+        self.create_service(Trigger, "~/reidentify", self._on_reidentify)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
         log = self.get_logger()
@@ -918,13 +934,15 @@ class ControllerNode(Node):
         """A stream sample (model time and units): the sections it completes are
         estimated, published on controller/estimate and answered (with a rig file also
         as the force pulse, rig_control.RigSide.answered)."""
+        if self.reid is not None:
+            self.reid.sample(t, x, v)
         try:
             due = self.stream.add_sample(t, x, v)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.malformed(f"stamp {cdr.stamp_parts(t)}: the estimator failed: {exc}")
             return
-        p = self.model
         for k, tk, est in due:
+            p = self.model      # a switch at the section before moves it (ros/reidentify.py)
             key = cdr.stamp_parts(tk)
             xh, vh = p.x_ref + est.z[0], p.v_ref + est.z[1]
             c = est.cov
@@ -935,8 +953,12 @@ class ControllerNode(Node):
                 continue
             if self.watching:
                 self._watch(k, key)
+            if self.reid is not None:       # a finished refit is applied here, at Pi2
+                self.reid.at_section(k, key, est)
             dv = self._answer(key, xh, vh, self._capture_factor(k, est))
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
+            if self.reid is not None:
+                self.reid.answered(k, 0.0 if dv is None else dv)
             if dv is not None and self.rig_side is not None:
                 self.rig_side.answered(tk, dv, self.prediction)
 
@@ -997,6 +1019,8 @@ class ControllerNode(Node):
         k = self._section(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if k is not None:
             self.stream.acted(k, 0.0, self.actuation_delay)
+            if self.reid is not None:
+                self.reid.acted(k, 0.0)
 
     def _on_substituted(self, data: bytes) -> None:
         """The prediction that acted at section k in place of our late answer."""
@@ -1006,10 +1030,16 @@ class ControllerNode(Node):
         k = self._section(answer[0], answer[1])
         if k is not None:
             self.stream.acted(k, answer[2], self.actuation_delay)
+            if self.reid is not None:
+                self.reid.acted(k, answer[2])
 
     def _on_impact(self, msg) -> None:
-        """An impact from the rig's impact sensor (impact_source topic): its time."""
-        self.stream.add_impact(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        """An impact from the rig's impact sensor (impact_source topic): its time (also
+        to the re-identification's record: the refit's impact times)."""
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.stream.add_impact(t)
+        if self.reid is not None:
+            self.reid.record.add_impact(t)
 
     def _check_isolation(self) -> None:
         """Stop with status 1 when more than one simulator publishes the samples."""
@@ -1050,6 +1080,19 @@ class ControllerNode(Node):
                            f"{self.law.count}"
         self.get_logger().warning(f"~/enable: {response.message}")
         self.pub_enabled.publish(Bool(data=bool(request.data)))
+        return response
+
+    def _on_reidentify(self, request, response):
+        """~/reidentify (std_srvs/Trigger): start a refit of the last reidentify_periods
+        periods (ros/reidentify.py); refused (success false, the reason in the message)
+        without the stream's model estimator, while a fit runs, or on too short a
+        window. The result is applied at the next Pi2 section."""
+        if self.reid is None:
+            response.success = False
+            response.message = ("re-identification needs pi2_source=stream and "
+                                "estimator=model")
+            return response
+        response.success, response.message = self.reid.request()
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -1101,6 +1144,8 @@ class ControllerNode(Node):
         if self.capture is not None:
             stat.add("captured at section", "not yet" if self.capture.on_at is None
                      else self.capture.on_at)
+        if self.reid is not None:
+            self.reid.diagnose(stat)
         if refused > last_refused:
             stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
                                      "(malformed, stale or non-finite)")
@@ -1156,6 +1201,7 @@ class ControllerNode(Node):
                f" mismatch_sections={self.mismatches} first_mismatch={self.first_mismatch}"
                f" bias={self.stream.bias!r} delta_d={self.stream.delta_d!r}")
             + ("" if self.capture is None else f" captured_at={self.capture.on_at}")
+            + ("" if self.reid is None else self.reid.summary())
             + ("" if self.rig_side is None else self.rig_side.summary()))
 
 

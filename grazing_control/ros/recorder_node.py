@@ -18,6 +18,10 @@ What it records by default (names relative to the node's namespace):
     stream mode with the model watch on (issue 29): per section the bias and Delta d
     estimates with their standard errors and the consistency verdict, named values
     (grazing_control.ros.model_watch.WATCH_FIELDS); stamp = the section time.
+``controller/model_switch`` (sensor_msgs/msg/JointState)
+    re-identification in the loop (issue 29): one row per decision, a switch to a
+    refitted model or a refusal with its reason, named values
+    (grazing_control.ros.reidentify.SWITCH_FIELDS); stamp = the section it was decided at.
 ``/clock`` (rosgraph_msgs/msg/Clock)
     simulation time.
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
@@ -182,6 +186,7 @@ EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
                 "oscillator/latency": "std_msgs/msg/Float64",
                 "controller/estimate": "sensor_msgs/msg/JointState",
                 "controller/model_watch": "sensor_msgs/msg/JointState",
+                "controller/model_switch": "sensor_msgs/msg/JointState",
                 "controller/enabled": "std_msgs/msg/Bool"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
