@@ -50,7 +50,10 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               against the design's predicted spread (position only, model filter, 200
               samples per period, times sigma). ``--pi2-source sample``: the
               controller on the exact Pi2 samples (no noise reaches the loop: the
-              orbit's offset alone).
+              orbit's offset alone). ``--controller-actuator``: the controller is told
+              the pulse and the actuator (its pulse_width, actuator_bandwidth: the
+              stream estimator and the prediction integrate the lag exactly); without
+              it the estimator models each correction as a kick.
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -61,6 +64,8 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
         --periods 600 --control-after 100
     .venv/bin/python benchmarks/bench_watchful_nodes.py --part actuator --periods 600 \
         --control-after 100 --window 300 --measured benchmarks/out/actuator/nodes.json
+    .venv/bin/python benchmarks/bench_watchful_nodes.py --part actuator --periods 600 \
+        --control-after 100 --window 300 --controller-actuator
 """
 
 from __future__ import annotations
@@ -249,6 +254,11 @@ def main(argv=None):
     ap.add_argument("--pi2-source", choices=("stream", "sample"), default="stream",
                     help="the actuator part's controller: the stream's model filter, or the "
                          "simulator's exact Pi2 sample (no estimator: the orbit alone)")
+    ap.add_argument("--controller-actuator", action="store_true",
+                    help="the actuator part: give the controller pulse_width and "
+                         "actuator_bandwidth (its estimator models the actuator)")
+    ap.add_argument("--ratio", type=float, action="append",
+                    help="the actuator part: bandwidth / omega (repeatable; default 10, 3)")
     ap.add_argument("--measured", type=Path, help="the actuator part: write its numbers "
                     "here (JSON) for benchmarks/chart_actuator.py --measured")
     a = ap.parse_args(argv)
@@ -262,7 +272,7 @@ def main(argv=None):
     for part in a.part or ["bias"]:
         if part == "actuator":
             rows = [_actuator_case(root, a, ratio, designed, g)
-                    for ratio in (10.0, 3.0) for designed in (True, False)]
+                    for ratio in (a.ratio or (10.0, 3.0)) for designed in (True, False)]
             if a.measured:
                 import json
                 a.measured.write_text(json.dumps(rows, indent=1))
@@ -333,9 +343,11 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
         from grazing_control.dynamics.actuator import actuated_orbit_for
         orbit = actuated_orbit_for(p, gains, WIDTH, act)
         spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
+    told = ({"pulse_width": WIDTH, "actuator_bandwidth": bw} if a.controller_actuator
+            else {})
     n = scene(yaml, out, a.periods, a.control_after, a.window, seed=a.seed,
               sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0],
-              controller={"pi2_source": a.pi2_source})
+              controller={"pi2_source": a.pi2_source, **told})
     name = (f"bandwidth {ratio:g}x omega ({bw:.6g}), "
             + ("design through the actuator" if designed else "ideal actuator's design"))
     print(_line(name, n) + f"; std about the mean {n.get('std', math.nan):.3g}; c1 "
@@ -346,7 +358,8 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
             "std_per_sigma": n.get("std", math.nan) / SIGMA,
             "offset": n.get("offset", math.nan), "predicted_per_sigma": float(spread[0]),
             "one_impact_after_control": n.get("one_impact_after_control"),
-            "pi2_source": a.pi2_source}
+            "pi2_source": a.pi2_source, "controller_actuator": a.controller_actuator,
+            "resets": n.get("resets")}
 
 
 if __name__ == "__main__":

@@ -334,6 +334,67 @@ def test_stream_mode_without_delta_d_exits_with_one_line():
     assert "delta_d=nan is invalid with pi2_source=stream" in lines[0]
 
 
+def test_the_actuator_settings_are_validated_naming_the_parameter():
+    """pulse_from_values: the actuator reaches the stream estimator; each bad value is
+    one line naming its parameter and valid range."""
+    from grazing_control.ros.controller_node import (model_from_values, pulse_from_values,
+                                                     stream_from_values)
+    ok = dict(pulse_width=0.1, force_limit=0.0, actuator_bandwidth=2.0, actuator_latency=0.2)
+    width, limit, act = pulse_from_values(ok, P.omega, 3.0)
+    assert (width, limit, act.time_constant, act.latency) == (0.1, math.inf, 0.5, 0.2)
+    assert pulse_from_values(dict(ok, actuator_bandwidth=0.0, actuator_latency=0.0),
+                             P.omega, 3.0)[2] is None
+    base = dict(zeta=P.zeta, r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, delta_d=-5e-6,
+                pi2_source="stream", estimator="model", impact_source="stream",
+                sensor_noise=1e-4, state_period=0.0, model_noise=1e-2,
+                answer_after_section=False)
+    assert stream_from_values(base, model_from_values(base), (width, limit, act)).actuator is act
+    for kw, text in [({"pulse_width": 0.0}, "pulse_width=0.0 is invalid with actuator_"),
+                     ({"pulse_width": 20.0}, "pulse_width=20.0 is invalid"),
+                     ({"actuator_bandwidth": -1.0}, "actuator_bandwidth=-1.0 is invalid"),
+                     ({"actuator_latency": math.inf}, "actuator_latency=inf is invalid"),
+                     ({"actuator_latency": P.period - 3.0}, "actuator_latency=.* is invalid: "
+                      "valid range is pulse start")]:
+        with pytest.raises(ParameterError, match="^" + text):
+            pulse_from_values(dict(ok, **kw), P.omega, 3.0)
+
+
+def test_a_scene_through_an_actuator_the_controller_is_told(tmp_path):
+    """sim_node's actuator at 3x omega (lockstep, position only at T/200, sigma 1e-4,
+    pulse 0.1 at delta 3, the (P1) gains; 100 periods, control on at 30) with the
+    controller told pulse_width and actuator_bandwidth: its stream filter resets only at
+    its start (blind to the lag it reset 250 times in 500 periods, docs/benchmarks.md)
+    and the loop holds one impact per period, its last 40 periods within 2e-5 of the
+    orbit through the actuator (actuator.actuated_design)."""
+    import re
+
+    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.recordings.scenes import load
+
+    p = OscillatorParams(delta_d=-5e-6)
+    act = bandwidth_actuator(p, 3.0)
+    gains, orbit, _ = actuated_design(p, optimize_noise(p, 3.0).gains().c2, 3.0, 0.1, act)
+    bw = 1.0 / act.time_constant
+    ctrl = {"c1": gains.c1, "c2": gains.c2, "actuation_delay": 3.0, "delta_d": p.delta_d,
+            "zeta": p.zeta, "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset,
+            "pi2_source": "stream", "estimator": "model", "pulse_width": 0.1,
+            "actuator_bandwidth": bw}
+    res = launcher.run(None, ctrl, str(tmp_path / "bag"), 100, delta_d=p.delta_d,
+                       enable_after=30, mode="lockstep", timeout=120,
+                       sim_overrides={"state_period": p.period / 200, "sensor_noise": 1e-4,
+                                      "sensor_velocity": False, "pulse_width": 0.1,
+                                      "sensor_seed": 7, "actuator_bandwidth": bw},
+                       log_dir=str(tmp_path / "logs"))
+    summary = (tmp_path / "logs" / "controller_node.log").read_text(errors="replace")
+    assert res.ok, summary
+    assert int(re.search(r"model_resets=(\d+)", summary).group(1)) <= 1, summary
+    scene = load(tmp_path / "bag").scenes[0].scene
+    counts = np.histogram(scene.impacts[:, 0], np.append(scene.t, scene.t[-1] + p.period))[0]
+    assert np.all(counts[45:] == 1)
+    assert abs(scene.pi2[-40:, 0].mean() - p.x_ref - orbit.state[0]) < 2e-5
+
+
 STREAM_TOPICS = {"controller/velocity_correction": __import__(
     "geometry_msgs.msg", fromlist=["TwistStamped"]).TwistStamped,
     "controller/estimate": JointState, "controller/model_watch": JointState,

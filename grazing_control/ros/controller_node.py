@@ -120,8 +120,10 @@ from std_srvs.srv import SetBool, Trigger
 
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.capture import CAPTURE_RADIUS, CaptureRule
-from grazing_control.dynamics.estimation import ESTIMATORS
-from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
+from grazing_control.dynamics.actuator import Actuator
+from grazing_control.dynamics.estimation import ESTIMATORS, actuator_legs
+from grazing_control.dynamics.stream import (IMPACT_SOURCES, StreamEstimator, predict_section,
+                                             pulse_shape)
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr, stream_block
 from .scene import SCENE_PARAMETER_DOC
@@ -137,7 +139,7 @@ from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_
                      executor_kind, float_descriptor, int_descriptor, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key, string_descriptor)
-from grazing_control.plant.settings import ABOVE_0, FINITE, below
+from grazing_control.plant.settings import ABOVE_0, FINITE, MAX_BANDWIDTH, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
@@ -148,6 +150,7 @@ from .rig_boundary import check_rig_values, controller_values
 ISOLATION_CHECK = 0.25
 
 __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values", "stream_from_values",
+           "pulse_from_values",
            "ControllerNode", "main", "PI2_SOURCES"]
 
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
@@ -155,6 +158,8 @@ _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", 
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section", "answer_lead", "capture",
          "capture_radius") + WATCH_KEYS + REID_KEYS
+#: How a correction acts in the plant (:func:`pulse_from_values`), model units.
+PULSE_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
@@ -336,16 +341,44 @@ def stream_from_values(values: dict, model, pulse: tuple = (0.0, math.inf)):
     if model is None:
         raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
                              "the plant's finite Delta d (the estimator's model needs the wall)")
+    act = pulse[2] if len(pulse) > 2 else None
     if watch is not None:       # the augmented filter (ros/model_watch.py, issue 29)
         return AugmentedStreamEstimator(
             model, values["sensor_noise"], values["impact_source"], values["state_period"],
             floor, bool(values["answer_after_section"]), values.get("answer_lead", 0.0),
-            **watch[0], pulse_width=pulse[0], force_limit=pulse[1])
+            **watch[0], pulse_width=pulse[0], force_limit=pulse[1], actuator=act)
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
                            values["impact_source"], values["state_period"], floor,
                            bool(values["answer_after_section"]),
                            values.get("answer_lead", 0.0), pulse_width=pulse[0],
-                           force_limit=pulse[1])
+                           force_limit=pulse[1], actuator=act)
+
+
+def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
+    """(width, force limit, actuator or None) of the plant's corrections from the
+    :data:`PULSE_KEYS` (model units, as sim_node's): the pulse (``pulse_width`` 0: a
+    kick) and the first-order actuator between its command and the force
+    (``actuator_bandwidth`` 1 / tau_a, 0: ideal; ``actuator_latency``), which the stream
+    estimator and the prediction integrate (dynamics.estimation.trajectory).
+    ParameterError, one line naming the parameter and its valid range."""
+    period = 2.0 * math.pi / omega
+    width, limit = pulse_shape(OscillatorParams(omega=omega), values["pulse_width"],
+                               values["force_limit"])
+    bw, lat = float(values["actuator_bandwidth"]), float(values["actuator_latency"])
+    if not (bw == 0.0 or 1.0 / MAX_BANDWIDTH <= bw <= MAX_BANDWIDTH):
+        raise ParameterError(f"actuator_bandwidth={bw!r} is invalid: valid range is 0 (ideal) "
+                             f"or 1e-12 <= actuator_bandwidth <= {MAX_BANDWIDTH:g}")
+    if not (math.isfinite(lat) and lat >= 0.0):
+        raise ParameterError(f"actuator_latency={lat!r} is invalid: valid range is a finite "
+                             "actuator_latency >= 0")
+    act = Actuator(1.0 / bw if bw else 0.0, lat)
+    if act.ideal:
+        return width, limit, None
+    if width == 0.0:
+        raise ParameterError("pulse_width=0.0 is invalid with actuator_bandwidth or "
+                             f"actuator_latency: valid range is 0 < pulse_width < T = {period!r}")
+    actuator_legs(None, 0.0, delay, period, width, limit, act)     # the latency: named
+    return width, limit, act
 
 
 def capture_from_values(values: dict, model, delay: float):
@@ -530,6 +563,23 @@ class ControllerNode(Node):
             "stream mode: answer a section this much simulation time before its last "
             "sample (those samples are not used); 0: with its last sample", 0.0, FINITE,
             read_only=True, constraints="answer_lead < T = 2 pi / omega"))
+        d("pulse_width", 0.0, float_descriptor(
+            "how sim_node acts (its pulse_width): a force pulse of this width centred at the "
+            "actuation time, modelled by the estimator and the prediction; 0: a velocity "
+            "kick", 0.0, FINITE, read_only=True, constraints="pulse_width < T; with "
+            "rig_file the rig's"))
+        d("force_limit", 0.0, float_descriptor(
+            "sim_node's force_limit on the pulse's force, modelled; 0: none", 0.0, FINITE,
+            read_only=True, constraints="with rig_file the rig's"))
+        d("actuator_bandwidth", 0.0, float_descriptor(
+            "sim_node's first-order actuator (issue 29): bandwidth 1 / tau_a in radians per "
+            "simulation time unit, integrated exactly by the estimator and the prediction; "
+            "0: ideal", 0.0, MAX_BANDWIDTH, read_only=True,
+            constraints="> 0 only with pulse_width > 0; with rig_file the rig's"))
+        d("actuator_latency", 0.0, float_descriptor(
+            "the actuator's latency from the command to the force, simulation time; 0: none",
+            0.0, FINITE, read_only=True, constraints="> 0 only with pulse_width > 0; "
+            "actuation_delay + pulse_width / 2 + actuator_latency < T"))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
@@ -561,10 +611,11 @@ class ControllerNode(Node):
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None
         # how a correction acts in the plant: a rig's force pulse (its estimator and
         # prediction integrate it, dynamics.estimation.trajectory), else the kick
-        self.pulse = (0.0, math.inf)
-        if self.rig is not None:
+        self.pulse = (0.0, math.inf, None)
+        pulse = {k: self.get_parameter(k).value for k in PULSE_KEYS}
+        if self.rig is not None:        # the rig's (its latency is in the budget)
             dims = self.rig.dimensionless()
-            self.pulse = (dims["pulse_width"], dims["force_limit"] or math.inf)
+            pulse = {**pulse, **{k: dims[k] for k in PULSE_KEYS[:3]}}
         try:
             if self.model_file:
                 self.law = self._ndof_law(self._values(), self._gains())
@@ -574,6 +625,8 @@ class ControllerNode(Node):
             else:
                 self.law = law_from_values(self._values())
                 self.actuation_delay = actuation_delay_from_values(self._values())
+                self.pulse = pulse_from_values(pulse, self._values()["omega"],
+                                               self.actuation_delay)
                 self.model = model_from_values(self._values())
                 self.stream = stream_from_values(self._values(), self.model, self.pulse)
                 self.capture = capture_from_values(self._values(), self.model,
@@ -857,8 +910,13 @@ class ControllerNode(Node):
             return math.nan
         p = self.model
         try:
+            # the force the earlier corrections left at this section (stream mode: the
+            # estimator knows them; else 0, a share e^{-T / tau_a} of one pulse's force)
+            force0 = (self.stream.section_force(self.stream.next_k - 1)
+                      if self.stream is not None and self.stream.next_k else 0.0)
             zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
-                                     width=self.pulse[0], force_limit=self.pulse[1])
+                                     width=self.pulse[0], force_limit=self.pulse[1],
+                                     actuator=self.pulse[2], force0=force0)
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)
