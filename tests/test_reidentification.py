@@ -124,6 +124,18 @@ def test_refit_recovers_the_model_from_a_noise_free_motion():
     assert fit.units == (1.0, 1.0) and fit.impacts > 10
 
 
+def test_a_refit_beyond_its_time_budget_is_not_identified_and_ends():
+    """A window that takes longer to fit than the budget (here a zero budget; through the
+    nodes a controlled-only window had not ended after 124 s): the solver stops at the
+    deadline, the plan is refused as not_identified, naming the budget."""
+    record = rig_recording(SCENE, periods=24)
+    running = SCENE.with_(zeta=1.05 * SCENE.zeta, delta_d=1.1 * SCENE.delta_d)
+    with pytest.raises(ReidentificationError, match=r"did not end within 0 s") as err:
+        refit(record, running, seconds=0.0)
+    assert err.value.reason == "not_identified"
+    assert refit(record, running).model.zeta == pytest.approx(SCENE.zeta, rel=1e-8)
+
+
 def test_a_fit_that_does_not_explain_the_window_is_refused():
     """The fit's residual noise against the sensor's: a window noisier than the sensor
     says (1e-3 against 1e-4) is not explained by the refitted model: fit_failed; the

@@ -79,6 +79,11 @@ RESIDUAL_RATIO = 1.5
 #: The solver's budget per continuation step (identify's default: 100 did not converge
 #: on 20 controlled periods through the nodes).
 MAX_NFEV = 400
+#: The refit's wall-clock budget (s): beyond it the fit stops and the plan is refused as
+#: ``not_identified`` (a window of controlled periods only, control on from section 0,
+#: hardly determines zeta: its refit had not ended 124 s later and the loop waited on it,
+#: ``busy``, for the rest of the scene).
+REFIT_SECONDS = 60.0
 
 
 class ReidentificationError(ValueError):
@@ -289,14 +294,16 @@ def model_from_fit(ident, running: OscillatorParams) -> OscillatorParams:
 
 
 def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
-          periods: float | None = None, sigma: float | None = None) -> Refit:
+          periods: float | None = None, sigma: float | None = None,
+          seconds: float = REFIT_SECONDS) -> Refit:
     """Fit the model to ``record`` (:func:`grazing_control.dynamics.identification.identify`
     with the recorded impact times where there are some, else found from the motion,
     started from the running model's zeta and Omega = 1) and map it to the controller's
     model (:func:`model_from_fit`).
 
     ``sigma``: the sensor's noise std; the fit's residual noise must not exceed
-    :data:`RESIDUAL_RATIO` times it (None: not checked).
+    :data:`RESIDUAL_RATIO` times it (None: not checked). ``seconds``: the fit's
+    wall-clock budget (:data:`REFIT_SECONDS`; beyond it ``not_identified``).
 
     Raises ReidentificationError: ``no_impacts`` (none recorded or found), ``fit_failed``
     (the solver did not converge, no initial guess, a residual beyond RESIDUAL_RATIO
@@ -307,12 +314,17 @@ def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
     # the fit's solver (scipy.optimize) is imported here, in the worker: a node that
     # never refits does not load it (tests/test_node_common.py)
     from .identification import IdentificationError, identify
+    from .identification.fit import FitTimedOut
 
     c0 = time.process_time()
     impacts = "recorded" if record.impact_t.size else "motion"
     try:
         ident = identify(record, impacts=impacts, max_arcs=None, max_nfev=max_nfev,
-                         prior=(running.zeta, 1.0), fixed=UNITS)
+                         prior=(running.zeta, 1.0), fixed=UNITS,
+                         deadline=time.monotonic() + seconds)
+    except FitTimedOut as exc:
+        raise ReidentificationError("not_identified", f"the refit did not end within "
+                                    f"{seconds:g} s: {exc}") from None
     except IdentificationError as exc:
         reason = "no_impacts" if "no impact" in str(exc) else "fit_failed"
         raise ReidentificationError(reason, f"the refit failed: {exc}") from None

@@ -37,6 +37,7 @@ the study's nondimensional parameters by the delta method (their complex-step gr
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,6 +71,10 @@ _H = 1e-30
 
 class IdentificationError(ValueError):
     """The recording cannot be fitted (bad input: too short, no impacts, no reference)."""
+
+
+class FitTimedOut(IdentificationError):
+    """The fit did not finish by its ``deadline`` (a caller's wall-clock budget)."""
 
 
 class FitTooLarge(IdentificationError):
@@ -293,7 +298,7 @@ def _covariance(J, sigma2, k=6):
 
 
 def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correction_times,
-           max_nfev, prior=None, fixed=None):
+           max_nfev, prior=None, fixed=None, deadline=None):
     """Arcs, initial guess and the penalty continuation: (Problem, last solution);
     ``fixed`` {index in GLOBAL_NAMES: value} held out of the solve (sol.x is the whole
     vector)."""
@@ -335,12 +340,21 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
 
     # penalty continuation: the initial guess violates the constraints; raising their
     # weight in steps keeps each solve near the last one (docs: "Constraints")
+    def in_time(intermediate_result=None):
+        if deadline is not None and time.monotonic() > deadline:
+            raise StopIteration
+
     for weight in CONTINUATION:
         prob.weight = weight
         sol = least_squares(lambda q: prob.residual(full(q)), p[free],
                             jac=lambda q: prob.jacobian(full(q))[:, free],
                             bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
-                            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_nfev)
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_nfev,
+                            callback=None if deadline is None else in_time)
+        if deadline is not None and time.monotonic() > deadline:
+            raise FitTimedOut(f"the fit did not finish in its time budget ({sol.nfev} "
+                              f"evaluations at weight {weight:g}): the data do not pin the "
+                              "model down fast enough")
         p = full(sol.x)
     sol.x = p
     return prob, sol
@@ -370,7 +384,8 @@ def _shift_from_bounds(prob, p):
 def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
              max_arcs: int | None = 100, max_nfev: int = 400,
              coincidence: float = 1.5e-9, correction_times: bool = True,
-             shrink: bool = False, prior=None, fixed: dict | None = None) -> Identification:
+             shrink: bool = False, prior=None, fixed: dict | None = None,
+             deadline: float | None = None) -> Identification:
     """Fit the model to a recording (module docstring).
 
     ``shrink``: where ``max_arcs`` arcs would exceed the Jacobian's memory bound (a dense
@@ -398,6 +413,9 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     fixed : {name: value} of :data:`.model.GLOBAL_NAMES` held at the value, not fitted
         (a controller's re-identification holds its units: natural_frequency and
         forcing_amplitude 1); their standard errors are 0.
+    deadline : a ``time.monotonic()`` instant by which the fit must end (None: none):
+        beyond it the solver stops and FitTimedOut is raised (a controller's worker must
+        not fit for minutes on data that hardly determine the model).
 
     Raises
     ------
@@ -409,7 +427,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     while True:
         try:
             return _identify(rec, impacts, impact_velocities, max_arcs, max_nfev,
-                             coincidence, correction_times, prior, fixed)
+                             coincidence, correction_times, prior, fixed, deadline)
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -417,7 +435,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
 
 
 def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
-              correction_times, prior, fixed) -> Identification:
+              correction_times, prior, fixed, deadline=None) -> Identification:
     if impacts not in ("recorded", "motion"):
         raise IdentificationError(f"impacts={impacts!r} is invalid: valid values are "
                                   "recorded, motion")
@@ -453,7 +471,8 @@ def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
         shifts, best = 0, None
         for _round in range(MAX_SHIFTS + 1):
             prob, sol = _solve(rec, phase, rec_events, vm, vp, corr_t, free,
-                               impact_velocities, correction_times, max_nfev, prior, fixed)
+                               impact_velocities, correction_times, max_nfev, prior, fixed,
+                               deadline)
             if best is None or sol.cost < best[2].cost:   # an event on a sample may cycle
                 best = (shifts, prob, sol)
             moved = _shift_from_bounds(prob, sol.x)
