@@ -233,3 +233,16 @@ def test_grazing_rig_prints_the_stop_in_si_and_dimensionless(lab_doc):
         in lines[1]
     assert _stop_lines({"stop": _stop_si(rig_from_dict(LAB_RIGID))}, {}) == [
         "  stop               = rigid wall (restitution r)"]
+
+
+def test_grazing_run_refuses_a_rig_with_a_compliant_stop_in_one_line(lab_doc, tmp_path, capsys):
+    """Before any node starts (cli/commands._check_run_files: what sim_node refuses)."""
+    from grazing_control.cli.commands import main
+
+    lab_doc["stop"] = {"type": "kelvin_voigt", "stiffness": "2e5 N/m", "damping": "5 N*s/m"}
+    path = tmp_path / "soft.yaml"
+    path.write_text(dump(lab_doc))
+    assert main(["run", "--rig", str(path), "--periods", "3"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("grazing: error: --rig stop.type='kelvin_voigt' "
+                                               "is not simulated in a rig scene"), err
