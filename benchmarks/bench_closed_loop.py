@@ -12,7 +12,10 @@ scene on its own ROS_DOMAIN_ID, and side by side in one run of this script:
    count (periods / wall seconds from its first sample to its last period); the baseline
    is the in-process core ``simulate(p, N, gains, control_after=0)``, timed in this
    process next to each run. The CPU seconds each process spent per period (user +
-   system, from /proc, sampled while the scene runs) say where the time goes.
+   system, from /proc, sampled while the scene runs) say where the time goes. With
+   ``--composed`` each row runs again right after as a composed scene (the three nodes
+   in one process, ``grazing run --compose``: grazing_control/ros/composed.py), its rate
+   over the row above printed as ``x sep``.
 2. **Latency**: realtime at ``--scale`` with apply-on-arrival (``actuation:=on_arrival``,
    so the correction is applied when it arrives), state off, every sample answered;
    latency = wall time from publishing a sample to applying its correction; p50/p99/max
@@ -55,13 +58,13 @@ STUDY = ROOT / "config" / "study.yaml"
 CONTROLLER = ROOT / "config" / "controller.yaml"
 EXECUTORS = ("single_threaded", "events")
 NODES = {launcher.SIM_MODULE: "sim", launcher.CONTROLLER_MODULE: "controller",
-         launcher.RECORDER_MODULE: "recorder"}
+         launcher.RECORDER_MODULE: "recorder", launcher.COMPOSED_MODULE: "composed"}
 TICK = os.sysconf("SC_CLK_TCK")
 
 
 def summary(log: Path) -> dict:
     """The sim node's summary line: key=value pairs; latency/sample_lag as (p50, p99, max)."""
-    m = re.search(r"summary: (.*)", log.read_text())
+    m = re.search(r"\[sim_node\]: summary: (.*)", log.read_text())
     if not m:
         raise RuntimeError(f"no summary in {log}:\n{log.read_text()}")
     text = m.group(1)
@@ -120,7 +123,7 @@ class CpuMeter:
 
 
 def scene(periods, sim_overrides, controller_overrides, bag=False, recorder_overrides=None,
-          meter=True):
+          meter=True, compose=False):
     """One launcher run; returns (the sim node's summary, CPU seconds per node, or {}
     without ``meter``: the meter's thread wakes every 20 ms to read /proc, and on two
     cores that shows in a realtime run's latency tail, so the realtime rows run without)."""
@@ -130,7 +133,8 @@ def scene(periods, sim_overrides, controller_overrides, bag=False, recorder_over
                            periods, domain_id=random.SystemRandom().randrange(101, 232),
                            timeout=600, sim_overrides=sim_overrides,
                            controller_overrides=controller_overrides,
-                           recorder_overrides=recorder_overrides, log_dir=tmp)
+                           recorder_overrides=recorder_overrides, log_dir=tmp,
+                           compose=compose)
         if not res.ok:
             raise RuntimeError(f"run failed: {res}\n{Path(res.logs['sim_node']).read_text()}")
         log = Path(res.logs["sim_node"]).read_text()
@@ -164,7 +168,9 @@ def executors(ex):
     return {"executor": ex}, {"executor": ex}
 
 
-def lockstep(periods, repeat):
+def lockstep(periods, repeat, composed=False):
+    """The lockstep rows; with ``composed`` each row also as a composed scene (the nodes
+    in one process, ``grazing run --compose``), right after it, and the ratio."""
     configs = [("no state", {"state_period": 0.0}, False, None),
                ("state every 1.0", {"state_period": 1.0}, False, None),
                ("state 1.0 + recorder", {"state_period": 1.0}, True, None),
@@ -172,27 +178,34 @@ def lockstep(periods, repeat):
     rows = []
     for name, over, bag, rec in configs:
         for ex in EXECUTORS:
-            rates, base, cpus = [], [], []
-            for _ in range(repeat):
-                base.append(core_rate(min(periods, 2000)))
-                sim, ctl = executors(ex)
-                s, cpu = scene(periods, {"delta_d": -5e-6, **over, **sim},
-                               {"enable_after": 0, **ctl}, bag, rec)
-                assert int(s["periods"]) == periods and s["timeouts"] == "0", s
-                rates.append(float(s["rate"]))
-                cpus.append(cpu)
-            cpu = {k: statistics.median(c.get(k, 0.0) for c in cpus) * 1e3 / periods
-                   for k in ("sim", "controller", "recorder")}
-            rows.append((name, ex, statistics.median(rates), max(rates),
-                         statistics.median(base), cpu))
+            for compose in ((False, True) if composed else (False,)):
+                rates, base, cpus = [], [], []
+                for _ in range(repeat):
+                    base.append(core_rate(min(periods, 2000)))
+                    sim, ctl = executors(ex)
+                    s, cpu = scene(periods, {"delta_d": -5e-6, **over, **sim},
+                                   {"enable_after": 0, **ctl}, bag, rec, compose=compose)
+                    assert int(s["periods"]) == periods and s["timeouts"] == "0", s
+                    rates.append(float(s["rate"]))
+                    cpus.append(cpu)
+                cpu = {k: statistics.median(c.get(k, 0.0) for c in cpus) * 1e3 / periods
+                       for k in ("sim", "controller", "recorder", "composed")}
+                rows.append((name, ex, compose, statistics.median(rates), max(rates),
+                             statistics.median(base), cpu))
     print(f"\nlockstep closed loop, {periods} controlled periods per run, median and best "
-          f"of {repeat}; CPU ms per period of each process (median)")
-    print(f"{'configuration':22s} {'executor':16s} {'periods/s':>9s} {'best':>6s} "
-          f"{'core/s':>7s} {'ratio':>6s} {'sim':>6s} {'ctl':>6s} {'rec':>6s}")
-    print("-" * 94)
-    for name, ex, med, best, base, cpu in rows:
-        print(f"{name:22s} {ex:16s} {med:9.0f} {best:6.0f} {base:7.0f} {med / base:6.3f} "
-              f"{cpu['sim']:6.3f} {cpu['controller']:6.3f} {cpu['recorder']:6.3f}")
+          f"of {repeat}; CPU ms per period of each process (median); 'x sep': the composed "
+          "scene's rate over the separate processes' of the row above")
+    print(f"{'configuration':22s} {'executor':16s} {'nodes':9s} {'periods/s':>9s} {'best':>6s} "
+          f"{'core/s':>7s} {'ratio':>6s} {'sim':>6s} {'ctl':>6s} {'rec':>6s} {'1 proc':>6s} "
+          f"{'x sep':>6s}")
+    print("-" * 118)
+    last = None
+    for name, ex, compose, med, best, base, cpu in rows:
+        vs = f"{med / last:6.2f}" if compose and last else ""
+        print(f"{name:22s} {ex:16s} {'composed' if compose else 'processes':9s} {med:9.0f} "
+              f"{best:6.0f} {base:7.0f} {med / base:6.3f} {cpu['sim']:6.3f} "
+              f"{cpu['controller']:6.3f} {cpu['recorder']:6.3f} {cpu['composed']:6.3f} {vs}")
+        last = med if not compose else last
     return rows
 
 
@@ -205,7 +218,9 @@ def latency(samples, scale):
             with busy_cores(load):
                 s, _ = scene(samples, {"mode": "realtime", "time_scale": scale,
                                        "state_period": 0.0, "delta_d": -5e-6,
-                                       "actuation": "on_arrival", **sim},
+                                       "actuation": "on_arrival", "watchdog_excursion": 0.0,
+                                       "watchdog_misses": 0,
+                                       **sim},
                              {"enable_after": 0, **ctl}, meter=False)
             rows.append((load, ex, s))
     print(f"\nrealtime latency, time_scale {scale:g} (a sample every {T / scale * 1e3:.2f} ms "
@@ -228,7 +243,8 @@ def pace(samples_wall, executor, scales):
         n = max(50, int(samples_wall * scale / T))
         sim, ctl = executors(executor)
         s, _ = scene(n, {"mode": "realtime", "time_scale": scale, "state_period": 1.0,
-                         "delta_d": -5e-6, "actuation": "on_arrival", **sim},
+                         "delta_d": -5e-6, "actuation": "on_arrival",
+                         "watchdog_excursion": 0.0, "watchdog_misses": 0, **sim},
                      {"enable_after": 0, **ctl}, bag=True, meter=False)
         budget = 0.1 * T / scale * 1e3
         rows.append((scale, n, s, budget))
@@ -262,6 +278,8 @@ def main(argv=None):
                     help="pace: the executor of both nodes")
     ap.add_argument("--quick", action="store_true",
                     help="1000 periods, 1 run, 500 samples, 2 s per scale")
+    ap.add_argument("--composed", action="store_true",
+                    help="lockstep: each row also composed (grazing run --compose), side by side")
     ap.add_argument("--only", choices=("lockstep", "latency", "pace"), action="append",
                     help="run only these parts (repeatable)")
     args = ap.parse_args(argv)
@@ -275,7 +293,7 @@ def main(argv=None):
           f"{os.cpu_count()} CPUs, load average {' '.join(load)} at the start; QoS reliable, "
           "volatile, publishers keep last 100000, subscriptions keep last 1000")
     if "lockstep" in parts:
-        lockstep(args.periods, args.repeat)
+        lockstep(args.periods, args.repeat, args.composed)
     if "latency" in parts:
         latency(args.samples, args.scale)
     if "pace" in parts:

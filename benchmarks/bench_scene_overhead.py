@@ -18,6 +18,9 @@ log lines (ROS's epoch time stamps):
 - ``exit``: -> the command returned (process exits, the launcher's own end);
 - ``overhead`` = wall - simulating (issue 30's acceptance: <= 1.5 s).
 
+With ``--composed`` the same scene composed (``grazing run --compose``: the three nodes in
+one process, grazing_control/ros/composed.py) runs too, alternating with the others.
+
 Run: ``.venv/bin/python benchmarks/bench_scene_overhead.py --reps 3 --baseline /tmp/base``
 (about 15 s a scene on an idle machine). Results in docs/benchmarks.md.
 """
@@ -95,15 +98,24 @@ def main(argv=None) -> int:
     ap.add_argument("--periods", type=int, default=1300)
     ap.add_argument("--baseline", type=Path, default=None,
                     help="a checkout of the old code to run side by side (default: none)")
+    ap.add_argument("--composed", action="store_true",
+                    help="also this checkout's scene composed (grazing run --compose: the "
+                         "nodes in one process), side by side")
+    ap.add_argument("--only-composed", action="store_true",
+                    help="run every checkout's scene composed (this one's and the "
+                         "baseline's: a change to the composed scene against the old one)")
     args = ap.parse_args(argv)
-    runs = {"this": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
-    for name, root in runs.items():       # a fresh checkout compiles numba's cache once
-        one_scene(root, 20)
+    both = ("--compose",) if args.only_composed else ()
+    runs = {"this": (ROOT, both)} | ({"composed": (ROOT, ("--compose",))}
+                                     if args.composed and not both else {}) \
+        | ({"baseline": (args.baseline.resolve(), both)} if args.baseline else {})
+    for name, (root, extra) in runs.items():   # a fresh checkout compiles numba's cache once
+        one_scene(root, 20, extra)
     rows = {name: [] for name in runs}
     for rep in range(args.reps):
-        for name, root in runs.items():
+        for name, (root, extra) in runs.items():
             before = load()
-            r = one_scene(root, args.periods)
+            r = one_scene(root, args.periods, extra)
             rows[name].append(r)
             print(f"{name:8s} rep {rep}: " + " ".join(f"{k}={r[k]:.2f}" for k in PHASES)
                   + f"  ({before})", flush=True)
@@ -112,6 +124,12 @@ def main(argv=None) -> int:
     for name, rs in rows.items():
         print(f"{name:10s}" + "".join(f"{statistics.median(r[k] for r in rs):11.2f}"
                                       for k in PHASES))
+    med = {name: {k: statistics.median(r[k] for r in rs) for k in PHASES}
+           for name, rs in rows.items()}
+    for name in med:
+        if name != "this":
+            print(f"{name} / this: wall {med[name]['wall'] / med['this']['wall']:.2f}, "
+                  f"overhead {med[name]['overhead'] / med['this']['overhead']:.2f}")
     print(load())
     return 0
 

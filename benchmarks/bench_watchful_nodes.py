@@ -30,6 +30,16 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               (dynamics.actuation.pulse_orbit at 21 walls, interpolated) over the
               controlled periods from ``--control-after`` + 100 on, one impact per period,
               the Delta d estimate's error at the end. Use ``--periods 2000``.
+``reidentify`` the mismatch scene with re-identification in the loop (reidentify,
+              reidentify_periods 20, track_delta_d, consistency window 10): the first
+              mismatch section, each decision on controller/model_switch (the section,
+              the refitted zeta, r, Delta d with standard errors, the new gains), the
+              orbit offset after the last switch (the mean Pi2 x from SETTLE periods
+              after it, and after control on, to the end, less the pulse loop's orbit
+              of the plant with its gains), mismatch sections after it, impacts per
+              period from control on. Use ``--periods 3000``.
+``reidentify-right`` the same with the right model: what the test's false alarms
+              start (refits of the right model, switches to them or refusals).
 ``actuator``  sim_node's first-order actuator (actuator_bandwidth 10x and 3x the
               forcing frequency omega, latency 0), the gains of `grazing design
               --optimize noise --delay 3 --pulse-width 0.1 --actuator-bandwidth B` (c1 of
@@ -40,7 +50,10 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               against the design's predicted spread (position only, model filter, 200
               samples per period, times sigma). ``--pi2-source sample``: the
               controller on the exact Pi2 samples (no noise reaches the loop: the
-              orbit's offset alone).
+              orbit's offset alone). ``--controller-actuator``: the controller is told
+              the pulse and the actuator (its pulse_width, actuator_bandwidth: the
+              stream estimator and the prediction integrate the lag exactly); without
+              it the estimator models each correction as a kick.
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
@@ -51,6 +64,8 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
         --periods 600 --control-after 100
     .venv/bin/python benchmarks/bench_watchful_nodes.py --part actuator --periods 600 \
         --control-after 100 --window 300 --measured benchmarks/out/actuator/nodes.json
+    .venv/bin/python benchmarks/bench_watchful_nodes.py --part actuator --periods 600 \
+        --control-after 100 --window 300 --controller-actuator
 """
 
 from __future__ import annotations
@@ -70,11 +85,13 @@ import yaml as _yaml
 from grazing_control.dynamics.capture import capture_time
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.recordings.analyze import analyze, read_watch
+from grazing_control.recordings.analyze import analyze, read_switches, read_watch
 from grazing_control.recordings.scenes import load
 from grazing_control.ros import launcher
 
 GRAZING = str(Path(sys.executable).with_name("grazing"))
+#: Periods after a model switch before its orbit offset is measured.
+SETTLE = 100
 DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
 
 
@@ -149,6 +166,25 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
         if rows is not None and np.isfinite(rows["delta_d"][-1]):
             k_last = int(round(rows["stamp"][-1] * 1e-9 / p.period))
             num["delta_d_error_end"] = float(rows["delta_d"][-1] - (DD + drift * k_last))
+    switches = read_switches(out / "bag", period_s=p.period)
+    if switches:
+        num["switches"] = switches
+        done = [s for s in switches if s["switched"]]
+        if done:
+            from grazing_control.dynamics.actuation import pulse_orbit
+
+            last = done[-1]
+            g2 = Gains(last["c1"], last["c2"], DELAY)
+            ox = pulse_orbit(p, g2, WIDTH).pi2[0]
+            held = x[max(last["section"], control_after) + SETTLE:]   # switched, controlled
+            num["offset_after_switch"] = float(np.mean(held) - ox) if held.size else None
+            num["held_periods"] = int(held.size)
+            after = counts[max(last["section"], control_after):]
+            num["one_impact_after_switch"] = float(np.mean(after == 1))
+            if rows is not None:
+                k_rows = np.round(rows["stamp"] * 1e-9 / p.period).astype(int)
+                num["mismatch_after_switch"] = int(np.sum((rows["mismatch"] == 1.0)
+                                                          & (k_rows > last["section"])))
     if rows is not None:
         fitted = np.isfinite(rows["nis"])
         num["first_verdict_section"] = (int(round(rows["stamp"][fitted][0] * 1e-9 / p.period))
@@ -179,6 +215,22 @@ def _line(name, n) -> str:
                      f"{(w['bias'][0] - 1e-4) / w['bias'][1]:.2f}")
     if "delta_d" in w:
         parts.append(f"Delta d^ {w['delta_d'][0]:.5g} +- {w['delta_d'][1]:.3g}")
+    for sw in n.get("switches", []):
+        fit = ("" if sw["zeta"] is None else
+               f"zeta {sw['zeta']:.6g} +- {sw['zeta_se']:.2g}, r {sw['r']:.4g} +- "
+               f"{sw['r_se']:.2g}, Delta d {sw['delta_d']:.4g} +- {sw['delta_d_se']:.2g}, "
+               f"fit {sw['cpu_s']:.0f} s CPU")
+        parts.append((f"switched at section {sw['section']}" if sw["switched"] else
+                      f"refused at section {sw['section']} ({sw['reason']})")
+                     + f" (requested at {sw['requested_at']}): {fit}"
+                     + (f", c1 {sw['c1']:.6g} c2 {sw['c2']:.6g}" if sw["switched"] else ""))
+    if "offset_after_switch" in n:
+        parts.append(f"after the last switch: orbit offset (mean Pi2 x of the last "
+                     f"{n['held_periods']} periods, from {SETTLE} after it and after control "
+                     f"on, about the pulse orbit of its gains) "
+                     f"{n['offset_after_switch']:.3g}, one impact in "
+                     f"{100 * n['one_impact_after_switch']:.1f} % of the controlled periods, "
+                     f"{n.get('mismatch_after_switch')} mismatch sections after it")
     if w:
         parts.append(f"mismatch sections {w['mismatch_sections']} of {w['sections']} "
                      f"(first {w.get('first_mismatch_section')}, first verdict "
@@ -190,14 +242,23 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", action="append",
                     choices=("bias", "mismatch", "right", "capture", "drift", "gross",
-                             "actuator"))
+                             "actuator", "reidentify", "reidentify-right"))
     ap.add_argument("--periods", type=int, default=600)
     ap.add_argument("--control-after", type=int, default=100)
     ap.add_argument("--window", type=int, default=300)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--model-zeta", type=float, default=1.05,
+                    help="reidentify: the controller's zeta over the plant's (1.05)")
+    ap.add_argument("--model-delta-d", type=float, default=1.1,
+                    help="reidentify: the controller's Delta d over the plant's (1.1)")
     ap.add_argument("--pi2-source", choices=("stream", "sample"), default="stream",
                     help="the actuator part's controller: the stream's model filter, or the "
                          "simulator's exact Pi2 sample (no estimator: the orbit alone)")
+    ap.add_argument("--controller-actuator", action="store_true",
+                    help="the actuator part: give the controller pulse_width and "
+                         "actuator_bandwidth (its estimator models the actuator)")
+    ap.add_argument("--ratio", type=float, action="append",
+                    help="the actuator part: bandwidth / omega (repeatable; default 10, 3)")
     ap.add_argument("--measured", type=Path, help="the actuator part: write its numbers "
                     "here (JSON) for benchmarks/chart_actuator.py --measured")
     a = ap.parse_args(argv)
@@ -211,7 +272,7 @@ def main(argv=None):
     for part in a.part or ["bias"]:
         if part == "actuator":
             rows = [_actuator_case(root, a, ratio, designed, g)
-                    for ratio in (10.0, 3.0) for designed in (True, False)]
+                    for ratio in (a.ratio or (10.0, 3.0)) for designed in (True, False)]
             if a.measured:
                 import json
                 a.measured.write_text(json.dumps(rows, indent=1))
@@ -224,6 +285,15 @@ def main(argv=None):
             cases += [("zeta +5 %, Delta d +10 %, monitor", 0.0, wrong),
                       ("zeta +5 %, Delta d +10 %, track_delta_d", 0.0,
                        {**wrong, "track_delta_d": True})]
+        elif part == "reidentify":
+            wrong = {"zeta": a.model_zeta * p.zeta, "delta_d": a.model_delta_d * DD, **watch}
+            cases += [(f"zeta x {a.model_zeta:g}, Delta d x {a.model_delta_d:g}, reidentify", 0.0,
+                       {**wrong, "track_delta_d": True, "reidentify": True,
+                        "reidentify_periods": 20})]
+        elif part == "reidentify-right":
+            cases += [("right model, reidentify", 0.0,
+                       {**watch, "track_delta_d": True, "reidentify": True,
+                        "reidentify_periods": 20})]
         elif part == "gross":
             cases += [("zeta +20 %, Delta d +50 %, monitor", 0.0,
                        {"zeta": 1.2 * p.zeta, "delta_d": 1.5 * DD, **watch})]
@@ -273,9 +343,11 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
         from grazing_control.dynamics.actuator import actuated_orbit_for
         orbit = actuated_orbit_for(p, gains, WIDTH, act)
         spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
+    told = ({"pulse_width": WIDTH, "actuator_bandwidth": bw} if a.controller_actuator
+            else {})
     n = scene(yaml, out, a.periods, a.control_after, a.window, seed=a.seed,
               sim={"actuator_bandwidth": bw}, orbit_x=p.x_ref + orbit.state[0],
-              controller={"pi2_source": a.pi2_source})
+              controller={"pi2_source": a.pi2_source, **told})
     name = (f"bandwidth {ratio:g}x omega ({bw:.6g}), "
             + ("design through the actuator" if designed else "ideal actuator's design"))
     print(_line(name, n) + f"; std about the mean {n.get('std', math.nan):.3g}; c1 "
@@ -286,7 +358,8 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
             "std_per_sigma": n.get("std", math.nan) / SIGMA,
             "offset": n.get("offset", math.nan), "predicted_per_sigma": float(spread[0]),
             "one_impact_after_control": n.get("one_impact_after_control"),
-            "pi2_source": a.pi2_source}
+            "pi2_source": a.pi2_source, "controller_actuator": a.controller_actuator,
+            "resets": n.get("resets")}
 
 
 if __name__ == "__main__":

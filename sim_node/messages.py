@@ -15,7 +15,7 @@ import math
 
 from grazing_control.plant.engine import Event
 from grazing_control.plant.ndof_engine import NdofEvent
-from grazing_control.ros import cdr
+from grazing_control.ros import cdr, stream_block
 from grazing_control.ros.common import Throttled
 
 __all__ = ["Outputs", "read_answer", "joint_names", "ndof_joint_state"]
@@ -66,6 +66,9 @@ class Outputs:
         self.late = Throttled(log, "answer after its deadline dropped")
         self.warn = log.warning
         self._names = None         # joint names of n-DOF messages (mass0 ..)
+        # stream_message block: the wake-up's stream samples, one message at its end
+        self.block = (stream_block.Block()
+                      if node.get_parameter("stream_message").value == "block" else None)
 
     def publish(self, ev: Event) -> tuple:
         """Publish an event as packed CDR; its stamp as (sec, nanosec)."""
@@ -80,6 +83,9 @@ class Outputs:
             return stamp
         if ev.kind == "state":                 # the rig's sensor stream
             v = ev.v if n.settings.sensor.velocity else None
+            if self.block is not None:         # out at the wake-up's end
+                self.block.add(sec, ns, ev.x, v, math.cos(ev.phase), math.sin(ev.phase))
+                return stamp
             n.pub_state.publish(cdr.stream_sample(sec, ns, ev.x, v, math.cos(ev.phase),
                                                   math.sin(ev.phase)))
             return stamp
@@ -107,6 +113,12 @@ class Outputs:
                 n.pub_clock.publish(cdr.clock(*stamp))
             n.pub_pi2.publish(msg)
         return stamp
+
+    def end_of_wake_up(self) -> None:
+        """After each loop call (sim_node's _guard): the stream samples it made, as one
+        block on oscillator/state_block (stream_message block; none gathered: nothing)."""
+        if self.block is not None and len(self.block):
+            self.node.pub_state_block.publish(self.block.take())
 
     def latency(self, seconds: float) -> None:
         self.node.pub_latency.publish(cdr.float64(seconds))

@@ -12,7 +12,8 @@ turns answers into loop calls and the loops' output into messages (packed CDR,
 scene sample for sample (docs/nodes.md).
 
 Topics (docs/nodes.md has every field, unit and QoS): publishes ``oscillator/state`` (the
-rig's sensor stream), ``oscillator/pi1``, ``/pi2`` (the ground truth), ``/impact``,
+rig's sensor stream; with ``stream_message`` block ``oscillator/state_block`` instead, a
+block per loop call: :mod:`grazing_control.ros.stream_block`), ``oscillator/pi1``, ``/pi2`` (the ground truth), ``/impact``,
 ``/latency``, ``/deadline_miss``, ``/substituted`` (the prediction that acted for a
 missing answer), ``/done``, ``/clock``; stamps are simulation time; ``grazing/parameters``
 carries its parameter record and its events (the watchdog's trip, the feasibility
@@ -42,7 +43,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, String
+from std_msgs.msg import Bool, Float64, Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from grazing_control.oscillator import kernel
@@ -59,7 +60,7 @@ from grazing_control.plant.rig import load_rig
 from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
                                             check_live_change, described_range,
                                             settings_from_values)
-from grazing_control.ros import cdr
+from grazing_control.ros import cdr, stream_block
 from grazing_control.ros.diagnostics import ERROR, WARN, SceneWindow, Updater
 from grazing_control.ros.published import (ACK_TIMEOUT, Counted, PublishedRecord,
                                           close_publishers)
@@ -135,6 +136,11 @@ NODE_PARAMETERS = (
               "samples (oscillator/state, rig/sensor) gather before one wake-up publishes "
               "them, each with its own stamp: a DAQ's block (5e-5..5e-3)", MIN_TICK,
               CLOCK_TICK, read_only=True),
+    Parameter("stream_message", "string", "sample", "the state stream's messages: sample (one "
+              "JointState per sample on oscillator/state) or block (the samples of a wake-up "
+              "in one Float64MultiArray on oscillator/state_block, as a DAQ driver "
+              "publishes; ros/stream_block.py; 1-DOF only)", choices=stream_block.MESSAGES,
+              read_only=True),
     Parameter("exit_when_done", "bool", False, "exit (status 0) once max_periods have run",
               read_only=True),
     Parameter("wait_for_controller", "bool", True, "start only when a controller is matched "
@@ -240,6 +246,13 @@ class SimNode(Node):
         if self.get_parameter("use_sim_time").value:
             raise StartupError(SIM_TIME_REFUSED)
         check_ranges(self)
+        why = stream_block.check_message(self.get_parameter("stream_message").value)
+        if why is not None:
+            raise StartupError(why)
+        if self.model is not None and self.get_parameter("stream_message").value == "block":
+            raise StartupError(f"stream_message='block' is invalid with model_file="
+                               f"{self.model_file!r}: valid value there is 'sample' (the "
+                               "stream's blocks carry a 1-DOF state)")
         try:
             check_rig_scene(self.rig_file, rig_values, self._values())
             self.settings = self._validate(self._values())
@@ -265,6 +278,8 @@ class SimNode(Node):
              (JointState, "oscillator/pi1"), (JointState, "oscillator/pi2"), (Clock, "/clock"),
              (Float64, "oscillator/latency"), (Vector3Stamped, "oscillator/deadline_miss")))
         self.pub_substituted = publisher(TwistStamped, "oscillator/substituted")
+        # the stream in blocks (issue 30): created in both modes, as the recorder records it
+        self.pub_state_block = publisher(Float64MultiArray, stream_block.TOPIC)
         self.pub_done = self.create_publisher(Bool, "oscillator/done", LATCHED_QOS)
         self.driver = None            # the simulated rig's side of the contract (rig_file)
         if self.rig is not None:
@@ -273,7 +288,7 @@ class SimNode(Node):
                                     self.get_parameter("clock_rate").value)
         self.published = PublishedRecord(self, (
             self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
-            self.pub_latency, self.pub_miss, self.pub_substituted)
+            self.pub_latency, self.pub_miss, self.pub_substituted, self.pub_state_block)
             + (self.driver.publishers if self.driver else ()))
         if self.driver is None:
             self.sub_correction = self.create_subscription(
@@ -463,7 +478,8 @@ class SimNode(Node):
         n = self.get_parameter("wait_for_subscribers").value
         if self.get_parameter("wait_for_controller").value:
             samples = max(self.pub_pi2.get_subscription_count(),    # a controller reads
-                          self.pub_state.get_subscription_count())  # Pi2 or the stream
+                          self.pub_state.get_subscription_count(),  # Pi2 or the stream
+                          self.pub_state_block.get_subscription_count())
             if self.driver is not None:         # a rig's controller: the SI stream, phase
                 samples = min(self.driver.pub_sensor.get_subscription_count(),
                               self.driver.pub_phase.get_subscription_count())
@@ -482,7 +498,7 @@ class SimNode(Node):
         if n > 0:
             pubs = [self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock]
             if self.settings.state_period > 0.0:
-                pubs.append(self.pub_state)
+                pubs.append(self.pub_state if self.out.block is None else self.pub_state_block)
             if self.settings.mode == "realtime":     # the latency of every sample is recorded
                 pubs.append(self.pub_latency)
             if self.driver is not None:
@@ -666,6 +682,8 @@ class SimNode(Node):
         except Exception as exc:
             self._fail(exc)
             return None
+        finally:
+            self.out.end_of_wake_up()     # the stream's block, with stream_message block
 
     # ------------------------------------------------------------ end, failure
     def finish(self) -> None:

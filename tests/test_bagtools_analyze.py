@@ -271,7 +271,8 @@ def test_a_delayed_design_is_analysed_with_its_delay(tmp_path):
     assert s["model_check"]["max_departure"] < 1e-12
 
 
-def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=()):
+def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=(),
+                extra_topic="/controller/model_watch"):
     """A bag of the core's closed loop on a position-only stream: the ground truth on
     oscillator/pi2, the corrections, the estimates with their covariance."""
     from bagtools_helpers import TYPESTORE, twist_stamped
@@ -299,8 +300,7 @@ def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=())
         msgs.append(("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped",
                      t + 2, twist_stamped(st, run.corrections[k])))
     for k, row in extra:
-        msgs.append(("/controller/model_watch", "sensor_msgs/msg/JointState",
-                     1_000_000 + 10 * k + 3, row))
+        msgs.append((extra_topic, "sensor_msgs/msg/JointState", 1_000_000 + 10 * k + 3, row))
     return write_rosbags(tmp_path / estimator, msgs), p, g, run
 
 
@@ -368,6 +368,48 @@ def test_the_model_watch_is_reported(tmp_path):
     assert "sensor bias estimate (last section): 0.0001099 ± 2e-06" in md
     assert "63 of 100 sections with a model mismatch verdict (first: section 37)" in md
     assert "last window: nis 2500 (bound 2230, 1990 dof)" in md
+
+
+def test_the_model_switches_are_reported(tmp_path):
+    """controller/model_switch rows (issue 29 section 3): a refusal at section 20
+    (no_impacts) and a switch at section 60 with its refit and gains; the report lists
+    both in order with their sections, the reason, the model with standard errors and
+    the new gains."""
+    from bagtools_helpers import TYPESTORE
+    from grazing_control.dynamics.reidentification import REASONS
+    from grazing_control.recordings.analyze import analyze
+    from grazing_control.ros.reidentify import SWITCH_FIELDS
+
+    JointState = TYPESTORE.types["sensor_msgs/msg/JointState"]
+    p = OscillatorParams(delta_d=-5e-6)
+    nan = math.nan
+    refused = dict.fromkeys(SWITCH_FIELDS, nan)
+    refused.update(switched=0.0, reason=1.0 + REASONS.index("no_impacts"), requested_at=12)
+    switched = dict(switched=1.0, reason=0.0, requested_at=40, zeta=0.01002, zeta_se=2e-5,
+                    r=0.6801, r_se=3e-4, delta_d=-5.02e-6, delta_d_se=2e-6, c1=0.00603,
+                    c2=-0.00607, x_ref=1e-16, v_ref=-1.2018, periods=20, impacts=16,
+                    sigma=1e-4, phase_error=1e-6, cpu_s=1.5)
+    rows = []
+    for k, v in ((20, refused), (60, switched)):
+        e = joint_state(int(round(k * p.period * 1e9)), 0.0, 0.0)
+        rows.append((k, JointState(header=e.header, name=list(SWITCH_FIELDS),
+                                   position=np.array([v[n] for n in SWITCH_FIELDS], float),
+                                   velocity=np.array([], dtype=float),
+                                   effort=np.array([], dtype=float))))
+    bag, p, g, _run = _stream_bag(tmp_path, "model", periods=100, extra=rows,
+                                  extra_topic="/controller/model_switch")
+    rep = analyze([bag], tmp_path / "out", figures=False,
+                  options={"delta_d": p.delta_d, "c1": g.c1, "c2": g.c2})
+    got = rep["bags"][0]["model_switches"]
+    assert [(r["section"], r["switched"], r["reason"]) for r in got] == [
+        (20, False, "no_impacts"), (60, True, None)]
+    assert got[1]["zeta"] == 0.01002 and got[1]["c1"] == 0.00603 and got[0]["c1"] is None
+    md = rep["markdown"]
+    assert ("re-identification refused at section 20, requested at section 12 (no_impacts);"
+            " model and gains kept") in md
+    assert ("model switched at section 60, requested at section 40: refit zeta 0.01002 ± "
+            "2e-05, r 0.6801 ± 0.0003, Δd -5.02e-06 ± 2e-06 (20 periods, 16 impacts); "
+            "gains c1 0.00603, c2 -0.00607") in md
 
 
 def test_a_bag_without_estimates_reports_none(tmp_path):

@@ -7,6 +7,7 @@ test process and read the answers on controller/velocity_correction.
 from __future__ import annotations
 
 import math
+import time
 import subprocess
 
 import numpy as np
@@ -333,9 +334,71 @@ def test_stream_mode_without_delta_d_exits_with_one_line():
     assert "delta_d=nan is invalid with pi2_source=stream" in lines[0]
 
 
+def test_the_actuator_settings_are_validated_naming_the_parameter():
+    """pulse_from_values: the actuator reaches the stream estimator; each bad value is
+    one line naming its parameter and valid range."""
+    from grazing_control.ros.controller_node import (model_from_values, pulse_from_values,
+                                                     stream_from_values)
+    ok = dict(pulse_width=0.1, force_limit=0.0, actuator_bandwidth=2.0, actuator_latency=0.2)
+    width, limit, act = pulse_from_values(ok, P.omega, 3.0)
+    assert (width, limit, act.time_constant, act.latency) == (0.1, math.inf, 0.5, 0.2)
+    assert pulse_from_values(dict(ok, actuator_bandwidth=0.0, actuator_latency=0.0),
+                             P.omega, 3.0)[2] is None
+    base = dict(zeta=P.zeta, r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, delta_d=-5e-6,
+                pi2_source="stream", estimator="model", impact_source="stream",
+                sensor_noise=1e-4, state_period=0.0, model_noise=1e-2,
+                answer_after_section=False)
+    assert stream_from_values(base, model_from_values(base), (width, limit, act)).actuator is act
+    for kw, text in [({"pulse_width": 0.0}, "pulse_width=0.0 is invalid with actuator_"),
+                     ({"pulse_width": 20.0}, "pulse_width=20.0 is invalid"),
+                     ({"actuator_bandwidth": -1.0}, "actuator_bandwidth=-1.0 is invalid"),
+                     ({"actuator_latency": math.inf}, "actuator_latency=inf is invalid"),
+                     ({"actuator_latency": P.period - 3.0}, "actuator_latency=.* is invalid: "
+                      "valid range is pulse start")]:
+        with pytest.raises(ParameterError, match="^" + text):
+            pulse_from_values(dict(ok, **kw), P.omega, 3.0)
+
+
+def test_a_scene_through_an_actuator_the_controller_is_told(tmp_path):
+    """sim_node's actuator at 3x omega (lockstep, position only at T/200, sigma 1e-4,
+    pulse 0.1 at delta 3, the (P1) gains; 100 periods, control on at 30) with the
+    controller told pulse_width and actuator_bandwidth: its stream filter resets only at
+    its start (blind to the lag it reset 250 times in 500 periods, docs/benchmarks.md)
+    and the loop holds one impact per period, its last 40 periods within 2e-5 of the
+    orbit through the actuator (actuator.actuated_design)."""
+    import re
+
+    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.recordings.scenes import load
+
+    p = OscillatorParams(delta_d=-5e-6)
+    act = bandwidth_actuator(p, 3.0)
+    gains, orbit, _ = actuated_design(p, optimize_noise(p, 3.0).gains().c2, 3.0, 0.1, act)
+    bw = 1.0 / act.time_constant
+    ctrl = {"c1": gains.c1, "c2": gains.c2, "actuation_delay": 3.0, "delta_d": p.delta_d,
+            "zeta": p.zeta, "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset,
+            "pi2_source": "stream", "estimator": "model", "pulse_width": 0.1,
+            "actuator_bandwidth": bw}
+    res = launcher.run(None, ctrl, str(tmp_path / "bag"), 100, delta_d=p.delta_d,
+                       enable_after=30, mode="lockstep", timeout=120,
+                       sim_overrides={"state_period": p.period / 200, "sensor_noise": 1e-4,
+                                      "sensor_velocity": False, "pulse_width": 0.1,
+                                      "sensor_seed": 7, "actuator_bandwidth": bw},
+                       log_dir=str(tmp_path / "logs"))
+    summary = (tmp_path / "logs" / "controller_node.log").read_text(errors="replace")
+    assert res.ok, summary
+    assert int(re.search(r"model_resets=(\d+)", summary).group(1)) <= 1, summary
+    scene = load(tmp_path / "bag").scenes[0].scene
+    counts = np.histogram(scene.impacts[:, 0], np.append(scene.t, scene.t[-1] + p.period))[0]
+    assert np.all(counts[45:] == 1)
+    assert abs(scene.pi2[-40:, 0].mean() - p.x_ref - orbit.state[0]) < 2e-5
+
+
 STREAM_TOPICS = {"controller/velocity_correction": __import__(
     "geometry_msgs.msg", fromlist=["TwistStamped"]).TwistStamped,
-    "controller/estimate": JointState, "controller/model_watch": JointState}
+    "controller/estimate": JointState, "controller/model_watch": JointState,
+    "controller/model_switch": JointState}
 
 
 def _answer_of(col, n, timeout=10.0):
@@ -462,7 +525,7 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
     proc, log, pub = start("oscillator/state", pi2_source="stream", estimator="model",
                            delta_d=p.delta_d, sensor_noise=1e-4, enable_after=0,
                            c1=g.c1, c2=g.c2, estimate_bias=True, track_delta_d=True,
-                           consistency_window=10)
+                           consistency_window=10, reidentify_periods=10)
     rate, periods, T = 50, 40, p.period
     h = T / rate
     sensor = SensorModel(noise=1e-4, velocity=False, seed=5)
@@ -505,10 +568,64 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
     seen = ~np.isnan(core[:, 4])
     assert np.array_equal(node[seen, col_of["mismatch"]], core[seen, 4])
     assert abs(node[-1, col_of["bias"]] - bias) < 3.0 * node[-1, col_of["bias_se"]]
+
+    # ~/reidentify on the same scene (issue 29 section 3, ros/reidentify.py): a refit of
+    # the last 10 periods in the worker (the stream less the bias estimate); a second request before the first's plan is
+    # applied (no sample comes meanwhile) is refused as busy with a row; the plan is
+    # decided at a later section: a switch answers that section with the new gains and
+    # X** on the section's own estimate, a refusal keeps the gains
+    from std_srvs.srv import Trigger
+    from grazing_control.dynamics.reidentification import REASONS
+    from grazing_control.ros.reidentify import SWITCH_FIELDS
+
+    client = col.node.create_client(Trigger, "controller_node/reidentify")
+    assert client.wait_for_service(10.0)
+    calls = [client.call_async(Trigger.Request()) for _ in range(2)]
+    assert col.wait_for(lambda: all(c.done() for c in calls), 10.0)
+    assert calls[0].result().success, calls[0].result().message
+    assert not calls[1].result().success and "(busy)" in calls[1].result().message
+
+    def decisions():
+        return [m for m in col.get("controller/model_switch")
+                if m.position[1] != 1 + REASONS.index("busy")]
+
+    k, end = periods, time.monotonic() + 120.0     # the fit's time: a few s, loaded more
+    while not decisions() and time.monotonic() < end:
+        a = _answer_of(col, k + 1, 60.0)
+        col.wait_for(lambda: False, 0.02)       # the worker's share of the GIL
+        s = np.arange(k * rate + 1, (k + 1) * rate + 1) * h - k * T
+        dev, _j, z, _m, _i = trajectory(p, z, s, a.twist.linear.x)
+        psi = p.tau2 + p.omega * s - p.lag
+        send(k * rate + 1, p.amplitude * np.cos(psi) + dev[:, 0])
+        k += 1
+    assert decisions(), f"no decision within 120 s ({k - periods} periods)"
+    msg = decisions()[0]
+    assert tuple(msg.name) == SWITCH_FIELDS
+    row = dict(zip(SWITCH_FIELDS, msg.position))
+    assert row["requested_at"] in (periods - 1, periods)   # section 40 may be answered
+    key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+    def answered():
+        return [m for m in col.get("controller/velocity_correction")
+                if (m.header.stamp.sec, m.header.stamp.nanosec) == key]
+
+    assert col.wait_for(lambda: bool(answered()), 10.0)
+    answer = answered()[0]
+    estimate = next(m for m in col.get("controller/estimate")
+                    if (m.header.stamp.sec, m.header.stamp.nanosec) == key)
+    x, v = estimate.position[0], estimate.velocity[0]
+    if row["switched"] == 1.0:
+        assert row["c2"] == g.c2 and row["c1"] != g.c1
+        want = row["c1"] * (x - row["x_ref"]) + row["c2"] * (v - row["v_ref"])
+    else:
+        assert 1 <= row["reason"] <= len(REASONS) and math.isnan(row["c1"])
+        want = g.c1 * (x - p.x_ref) + g.c2 * (v - p.v_ref)
+    assert answer.twist.linear.x == pytest.approx(want, rel=1e-12, abs=1e-18)
     proc.send_signal(2)
     assert proc.wait(10) == 0
     text = log.read_text()
     assert "Traceback" not in text and "mismatch_sections=" in text, text
+    assert f"model_switches={int(row['switched'])}" in text, text
 
 
 def test_the_model_watch_is_refused_outside_the_model_filter():

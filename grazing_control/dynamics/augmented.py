@@ -88,7 +88,8 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
                      correction: float, delay: float = 0.0, *, bias: bool = True,
                      wall: bool = True, wall_noise: float = WALL_NOISE,
                      floor: float = 1e-2, iterations: int = 8, innovation: bool = False,
-                     width: float = 0.0, force_limit: float = math.inf):
+                     width: float = 0.0, force_limit: float = math.inf, actuator=None,
+                     force0: float = 0.0):
     """One period of the augmented filter, from the prior at t_{k-1} and the samples at
     times ``s`` in (0, T] after it to the state at t_k (module docstring; (E8, E9)).
 
@@ -101,7 +102,8 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
 
     Returns (AugmentedState at t_k, J at the minimum: the period's normalised
     innovation squared, the number of measurements); raises ValueError when the fit
-    fails (no convergence, a sticking motion).
+    fails (no convergence, a sticking motion). ``width``, ``force_limit``,
+    ``actuator``, ``force0``: how the correction acts (:func:`trajectory`).
     """
     s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
     has_v = np.isfinite(w)
@@ -115,7 +117,8 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
         pm = p.with_(delta_d=float(theta[3]))
         pred, jac, end, mono, imps, gw, gend = trajectory(pm, theta[:2], s, correction, delay,
                                                           wall=True, width=width,
-                                                          force_limit=force_limit)
+                                                          force_limit=force_limit,
+                                                          actuator=actuator, force0=force0)
         hx = np.column_stack([jac[:, 0, :], np.ones(s.size), gw[:, 0]])
         hv = np.column_stack([jac[has_v, 1, :], np.zeros(has_v.sum()), gw[has_v, 1]])
         h = np.vstack([hx, hv])[:, act]
@@ -198,7 +201,7 @@ class AugmentedStreamEstimator(StreamEstimator):
                  lead: float = 0.0, *, bias: bool = True, wall: bool = True, bias0: float = 0.0,
                  bias_std: float = BIAS_STD, wall_std: float = WALL_STD,
                  wall_noise: float = WALL_NOISE, pulse_width: float = 0.0,
-                 force_limit: float = math.inf):
+                 force_limit: float = math.inf, actuator=None):
         for name, value, ok, valid in (
                 ("bias0", bias0, True, "finite"),
                 ("bias_std", bias_std, bias_std > 0.0, "finite and > 0"),
@@ -214,7 +217,8 @@ class AugmentedStreamEstimator(StreamEstimator):
         self.params_cov = np.diag([bias_std ** 2 if bias else 0.0,
                                    wall_std ** 2 if wall else 0.0])
         super().__init__(p, "model", sigma, impact_source, sample_period, floor, after_section,
-                         lead, pulse_width=pulse_width, force_limit=force_limit)
+                         lead, pulse_width=pulse_width, force_limit=force_limit,
+                         actuator=actuator)
 
     def reset(self) -> None:
         """Forget the stream (the filter restarts from the arc fit); the bias and Delta d
@@ -287,7 +291,7 @@ class AugmentedStreamEstimator(StreamEstimator):
             new, cost, n, white = augmented_update(
                 p, self.state, s, y, w, self.sigma, dv, at - (k - 1) * T, bias=self.use_bias,
                 wall=self.use_wall, wall_noise=self.wall_noise, floor=self.floor,
-                innovation=True, width=self.pulse[0], force_limit=self.pulse[1])
+                innovation=True, **self.correction_shape(k - 1))
         except (ValueError, np.linalg.LinAlgError, ArithmeticError):
             self.filter = self.state = None
             self.resets += 1

@@ -45,7 +45,7 @@ from .actuation import pulse_start
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
            "nearest_estimate", "arc_fit", "detect_impact", "correction_legs", "trajectory",
-           "model_update", "estimate_covariance", "CHI2_SIGMAS"]
+           "model_update", "estimate_covariance", "CHI2_SIGMAS", "actuator_legs", "section_force"]
 
 TWO_PI = 2.0 * math.pi
 #: The estimators by name (``estimator`` parameter of the controller).
@@ -257,7 +257,7 @@ def correction_legs(correction: float, delay: float, duration: float, width: flo
 
 def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
                duration: float | None = None, *, wall: bool = False, width: float = 0.0,
-               force_limit: float = math.inf):
+               force_limit: float = math.inf, actuator=None, force0: float = 0.0):
     """The exact motion from the section state ``z0`` (before the correction): the
     deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
     (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
@@ -275,6 +275,13 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     Jacobian and the wall's sensitivity keep their form (F does not depend on z0).
     Width 0 is the kick, bit for bit.
 
+    With an ``actuator`` (:class:`grazing_control.dynamics.actuator.Actuator`, not
+    ideal; ``width`` > 0) the pulse is the command, and the force on the mass follows it
+    through the first-order lag after the latency, from ``force0`` (the force at the
+    section, left by the earlier corrections: :func:`section_force`): the exact flow of
+    :func:`_actuated_trajectory`. None or the ideal actuator (with ``force0`` 0): the
+    constant pulse above, bit for bit.
+
     Returns
     -------
     z : (n, 2) deviations, jac : (n, 2, 2), end : (dx, dv) at ``duration`` (default T),
@@ -288,6 +295,9 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
+    if actuator is not None and not (actuator.ideal and force0 == 0.0):
+        return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
+                                    force_limit, actuator, force0)
     # events: (time, state after, jacobian after); start, kick, impacts
     events = []
     tau = p.tau2
@@ -343,9 +353,127 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     return out, jac, z, m, impacts
 
 
+def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration: float,
+                  width: float, force_limit: float, actuator) -> list:
+    """The period (0, ``duration``] through ``actuator`` as legs (start, end, command):
+    the command F (:func:`grazing_control.dynamics.actuation.pulse_force`) on the pulse
+    centred at ``delay`` (:func:`grazing_control.dynamics.actuation.pulse_start`)
+    reaches the lag ``actuator.latency`` later, and must end within the period, as in
+    the plant's :func:`grazing_control.dynamics.actuator.actuated_step` (its legs,
+    empty ones included). ParameterError naming pulse_width or actuator_latency."""
+    from .actuation import pulse_force
+
+    if not (math.isfinite(width) and 0.0 < width < duration):
+        raise ParameterError(f"pulse_width={width!r} is invalid with an actuator: valid range "
+                             f"is 0 < pulse_width < T = {duration!r}")
+    on = pulse_start(duration, delay, width) + actuator.latency
+    off = on + width
+    if not off < duration:
+        raise ParameterError(f"actuator_latency={actuator.latency!r} is invalid: valid range "
+                             f"is pulse start + actuator_latency + pulse_width < T = "
+                             f"{duration!r} (the force within the period)")
+    return [(0.0, on, 0.0), (on, off, pulse_force(correction, width, force_limit)),
+            (off, duration, 0.0)]
+
+
+def section_force(p: OscillatorParams, force0: float, correction: float, delay: float,
+                  width: float, force_limit: float, actuator,
+                  duration: float | None = None) -> float:
+    """The actuator's force at the end of the period (the next section's ``force0`` of
+    :func:`trajectory`): the lag's closed form over :func:`actuator_legs`,
+    f = u + (f - u) e^{-h / tau_a} per leg (u = f at once without lag)."""
+    duration = p.period if duration is None else float(duration)
+    f = float(force0)
+    tau_a = actuator.time_constant
+    for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
+                                       actuator):
+        if end > start:
+            f = u + (f - u) * math.exp(-(end - start) / tau_a) if tau_a > 0.0 else u
+    return f
+
+
+def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, force_limit,
+                         actuator, force0):
+    """:func:`trajectory` through a first-order actuator (docs/theory_pulse.md sections
+    5-8, :mod:`grazing_control.dynamics.actuator`): per leg of constant command u the
+    exact flow of
+    :func:`grazing_control.dynamics.actuator.lag_flow` (force u + (f - u) e^{-h/tau_a},
+    impacts certified), in its pieces z(h) = Phi(h) z'_e + (x_f, v_f)(h). The force is
+    a function of time alone (the command is known), so d z / d z0 is carried by Phi
+    between impacts and at each impact by the saltation matrix with the acceleration
+    under the force there (the wall shifted by it, as the constant pulse's); the wall's
+    sensitivity as (E8)."""
+    from .actuator import lag_flow
+
+    tau_a = actuator.time_constant
+    if tau_a == 0.0 and force0 != 0.0:
+        raise ParameterError(f"force0={force0!r} is invalid: an actuator without lag leaves "
+                             "no force at the section, valid value is 0")
+    z = np.array((float(z0[0]), float(z0[1])))
+    m = np.eye(2)
+    g = np.zeros(2)
+    f = float(force0)
+    t0 = 0.0                            # the last event of the Jacobian (start or impact)
+    events = []                         # (time, z', k, F_inf, M, g) of each piece
+    impacts = []
+    for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
+                                       actuator):
+        length = end - start
+        if length <= 0.0:
+            continue
+        c = f - u if tau_a > 0.0 else 0.0
+        flow = lag_flow(p, (p.tau2 + p.omega * start) % TWO_PI, float(z[0]), float(z[1]),
+                        length, u, c, tau_a)
+        pieces = list(flow.pieces)
+        for i, piece in enumerate(pieces):
+            if i > 0:                   # the impact that started this piece
+                imp = flow.impacts[i - 1]
+                ti = start + imp.dt
+                force = u + (c * math.exp(-imp.dt / tau_a) if tau_a > 0.0 else 0.0)
+                q = p.with_(delta_d=p.delta_d - force)
+                phi = np.array(transition_matrix(p.zeta, ti - t0)).reshape(2, 2)
+                sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
+                m = sal @ phi @ m
+                if wall:
+                    g = sal @ (phi @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
+                t0 = ti
+                impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
+            else:
+                phi = np.array(transition_matrix(p.zeta, start - t0)).reshape(2, 2)
+                m = phi @ m
+                if wall:
+                    g = phi @ g
+                t0 = start
+            events.append((start + piece.h0, piece.zp, piece.k, u, m, g))
+        z = np.array((flow.dx, flow.dv))
+        f = flow.force if tau_a > 0.0 else u
+    phi = np.array(transition_matrix(p.zeta, duration - t0)).reshape(2, 2)
+    m_end = phi @ m
+    g_end = phi @ g
+    times = np.array([e[0] for e in events])
+    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
+    hh = s - times[idx]
+    phis = phi_rows(p.zeta, hh)
+    zp = np.array([e[1] for e in events])[idx]
+    kk = np.array([e[2] for e in events])[idx]
+    f_inf = np.array([e[3] for e in events])[idx]
+    decay = np.exp(-hh / tau_a) if tau_a > 0.0 else np.zeros_like(hh)
+    out = np.einsum("nij,nj->ni", phis, zp)
+    out[:, 0] += f_inf + kk * decay
+    if tau_a > 0.0:
+        out[:, 1] -= kk * decay / tau_a
+    jac = np.einsum("nij,njk->nik", phis, np.array([e[4] for e in events])[idx])
+    end = (float(z[0]), float(z[1]))
+    if wall:
+        gs = np.einsum("nij,nj->ni", phis, np.array([e[5] for e in events])[idx])
+        return out, jac, end, m_end, impacts, gs, g_end
+    return out, jac, end, m_end, impacts
+
+
 def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                  correction: float, delay: float = 0.0, *, floor: float = 1e-2,
-                 iterations: int = 8, width: float = 0.0, force_limit: float = math.inf):
+                 iterations: int = 8, width: float = 0.0, force_limit: float = math.inf,
+                 actuator=None, force0: float = 0.0):
     """One period of the model filter: from the prior of z_{k-1} and the samples at times
     ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
 
@@ -356,7 +484,9 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     direction that the map contracts to zero; it stands for what the model omits).
 
     The correction acts as a kick, or as a force pulse of ``width`` (clipped to
-    ``force_limit``) where the plant's actuator pushes for a finite time.
+    ``force_limit``) where the plant's actuator pushes for a finite time, through the
+    first-order ``actuator`` from the force ``force0`` at the section where it has a lag
+    (:func:`trajectory`).
 
     Returns (FilterState at t_k, chi2 of the period's residuals, number of
     measurements); raises ValueError when the fit fails (no convergence, a sticking
@@ -371,7 +501,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     inv_var = 1.0 / (sigma * sigma)
     for _ in range(iterations):
         pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                                force_limit=force_limit)
+                                                force_limit=force_limit, actuator=actuator,
+                                                force0=force0)
         h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
         r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
         info = info_prior + inv_var * (h.T @ h)
@@ -383,7 +514,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     else:
         raise ValueError("the model fit did not converge")
     pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                             force_limit=force_limit)
+                                             force_limit=force_limit, actuator=actuator,
+                                             force0=force0)
     h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
     r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
     info = info_prior + inv_var * (h.T @ h)

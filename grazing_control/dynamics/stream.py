@@ -25,7 +25,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from .estimation import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
                          deviation_samples, detect_impact, model_update, nearest_estimate,
-                         trajectory, unkick)
+                         section_force, trajectory, unkick)
 
 __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
            "pulse_shape"]
@@ -74,12 +74,18 @@ class StreamEstimator:
         and :func:`predict_section` integrate it exactly
         (:func:`grazing_control.dynamics.estimation.trajectory`); a kick in the model of
         a pulse in the plant put the rig scene's mean 5e-5 off its orbit.
+    actuator : Actuator or None
+        The plant's first-order actuator between the commanded pulse and the force
+        (:class:`grazing_control.dynamics.actuator.Actuator`; needs ``pulse_width`` > 0):
+        the model filter and :func:`predict_section` integrate the lag exactly, from the
+        force left at each section by the known earlier corrections
+        (:meth:`section_force`). None: the force is the command.
     """
 
     def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
                  impact_source: str = "stream", sample_period: float = 0.0,
                  floor: float = 1e-2, after_section: bool = False, lead: float = 0.0, *,
-                 pulse_width: float = 0.0, force_limit: float = math.inf):
+                 pulse_width: float = 0.0, force_limit: float = math.inf, actuator=None):
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -104,6 +110,12 @@ class StreamEstimator:
                                  f"0 <= answer_lead < T = {p.period!r}")
         self.lead = lead
         self.pulse = pulse_shape(p, pulse_width, force_limit)
+        if actuator is not None and actuator.ideal:
+            actuator = None
+        if actuator is not None and self.pulse[0] == 0.0:
+            raise ParameterError("pulse_width=0.0 is invalid with an actuator: valid range is "
+                                 f"0 < pulse_width < T = {p.period!r} (the command's width)")
+        self.actuator = actuator
         self.reset()
 
     def reset(self) -> None:
@@ -112,6 +124,7 @@ class StreamEstimator:
         self.next_k = None              # the next section to estimate
         self.kicks = {}                 # section k -> (time of the kick, dv)
         self.final = set()              # sections whose kick the plant reported (acted)
+        self.force_at = (None, 0.0)     # (section, actuator force there) before self.kicks
         self.delay = 0.0
         self.impacts = deque(maxlen=64)  # impact times (topic or detected)
         self.filter = None              # FilterState at section filter_k
@@ -134,7 +147,9 @@ class StreamEstimator:
             return
         self.kicks[k] = (k * self.p.period + delay, float(dv))
         self.delay = delay
-        for old in [j for j in self.kicks if j < k - 3]:
+        for old in sorted(j for j in self.kicks if j < k - 3):
+            if self.actuator is not None:   # its force is carried on (section_force)
+                self.force_at = (old + 1, self.section_force(old + 1))
             del self.kicks[old]
         self.final = {j for j in self.final if j >= k - 3}
 
@@ -238,6 +253,34 @@ class StreamEstimator:
         keep = s > last if (s > last).sum() >= 2 else np.ones(s.size, bool)
         return nearest_estimate(s[keep], y[keep], w[keep], self.sigma)
 
+    def section_force(self, k: int) -> float:
+        """The actuator's force at section k, left by the known corrections of the
+        periods before: :func:`grazing_control.dynamics.estimation.section_force` period
+        by period from the force carried at the oldest section kept (``force_at``, moved
+        on as old corrections are dropped; 0 at the first correction since
+        :meth:`reset`), a period without a known correction with none; 0 without an
+        actuator."""
+        if self.actuator is None:
+            return 0.0
+        T = self.p.period
+        base, f = self.force_at
+        if base is None or base > k:
+            base, f = min(self.kicks, default=k), 0.0
+        for j in range(base, k):
+            at, dv = self.kicks.get(j, (j * T + self.delay, 0.0))
+            f = section_force(self.p, f, dv, at - j * T, self.pulse[0], self.pulse[1],
+                              self.actuator)
+        return f
+
+    def correction_shape(self, k: int) -> dict:
+        """How the correction of period k acts, as keywords of
+        :func:`grazing_control.dynamics.estimation.trajectory`: the pulse, the actuator
+        and its force at section k."""
+        shape = dict(width=self.pulse[0], force_limit=self.pulse[1])
+        if self.actuator is not None:
+            shape.update(actuator=self.actuator, force0=self.section_force(k))
+        return shape
+
     def _kicks(self, k: int):
         """The known corrections before t_k as (time relative to t_k, dv)."""
         tk = k * self.p.period
@@ -281,7 +324,7 @@ class StreamEstimator:
         try:
             new, chi2, n = model_update(p, self.filter, s, y, w, self.sigma, dv,
                                         at - (k - 1) * T, floor=self.floor,
-                                        width=self.pulse[0], force_limit=self.pulse[1])
+                                        **self.correction_shape(k - 1))
         except (ValueError, np.linalg.LinAlgError, ArithmeticError):
             self.filter = None
             self.resets += 1
@@ -314,7 +357,7 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
                     control_after: int = 0, floor: float = 1e-2,
                     model: OscillatorParams | None = None, stream_estimator=None,
                     plant_at=None, switch=None, observe=None, pulse_width: float = 0.0,
-                    force_limit: float = math.inf) -> StreamRun:
+                    force_limit: float = math.inf, actuator=None) -> StreamRun:
     """The closed loop on a sensor stream: exact plant (:func:`trajectory`), samples at
     t_j = j T / ``rate`` measured by ``measure(j0, x, v) -> (x~, v~)`` (a
     :class:`grazing_control.plant.sensor.SensorModel`'s ``measure``), the estimator of
@@ -334,7 +377,8 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
     ``pulse_width`` > 0: the plant's corrections are force pulses of that width centred
     at ``gains.delay`` (force clipped to ``force_limit``), and the estimator built here
     models them (pass ``stream_estimator`` built without them to see what a kick model
-    of a pulse plant costs).
+    of a pulse plant costs). ``actuator``: the pulse is the command of the plant's
+    first-order actuator (the force carried from period to period), modelled likewise.
     """
     if int(rate) != rate or rate < 2:
         raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
@@ -343,8 +387,9 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
     h = T / rate
     est = stream_estimator if stream_estimator is not None else StreamEstimator(
         p if model is None else model, estimator, sigma, impact_source, h, floor,
-        pulse_width=pulse_width, force_limit=force_limit)
+        pulse_width=pulse_width, force_limit=force_limit, actuator=actuator)
     z = (float(deviation[0]), float(deviation[1]))
+    force = 0.0                 # the actuator's force at the section
     truth = np.empty((periods, 2))
     zhat = np.empty((periods, 2))
     cov = np.empty((periods, 2, 2))
@@ -371,8 +416,12 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
         js = np.arange(j0, j1 + 1)
         s = js * h - k * T
         plant = p if plant_at is None else plant_at(k)
+        lag = {} if actuator is None else dict(actuator=actuator, force0=force)
         dev, _jac, z, _m, imps = trajectory(plant, z, s, dv, gains.delay, width=pulse_width,
-                                            force_limit=force_limit)
+                                            force_limit=force_limit, **lag)
+        if lag:
+            force = section_force(plant, force, dv, gains.delay, pulse_width, force_limit,
+                                  actuator)
         counts[k] = len(imps)
         psi = p.tau2 + p.omega * s - p.lag
         x = p.amplitude * np.cos(psi) + dev[:, 0]
@@ -390,13 +439,15 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
 
 
 def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0, *,
-                    width: float = 0.0, force_limit: float = math.inf):
+                    width: float = 0.0, force_limit: float = math.inf, actuator=None,
+                    force0: float = 0.0):
     """The next section's state (deviation, before its correction) predicted from the
     estimate ``z`` with ``correction`` applied ``delay`` after the section (a kick, or
-    a force pulse of ``width``): one exact period of the model (issue 16 section 3;
-    :func:`trajectory`)."""
+    a force pulse of ``width``, through ``actuator`` from the force ``force0`` at the
+    section): one exact period of the model (issue 16 section 3; :func:`trajectory`)."""
     *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay, width=width,
-                                        force_limit=force_limit)
+                                        force_limit=force_limit, actuator=actuator,
+                                        force0=force0)
     return end
 
 

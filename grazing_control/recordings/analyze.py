@@ -27,6 +27,8 @@ from .scenes import load, parse_topic_options
 ESTIMATE_TOPIC = "/controller/estimate"
 #: The controller's model watch (issue 29: bias, Delta d, consistency verdicts).
 WATCH_TOPIC = "/controller/model_watch"
+#: The controller's re-identification decisions (issue 29 section 3: switches, refusals).
+SWITCH_TOPIC = "/controller/model_switch"
 #: Samples at the end of a scene over which the spreads are measured.
 SPREAD_WINDOW = 500
 
@@ -301,6 +303,54 @@ def watch_numbers(rows, period_s: float | None = None) -> dict | None:
     return out
 
 
+def read_switches(path, topic: str = SWITCH_TOPIC, period_s: float | None = None) -> list:
+    """The re-identification's decisions in stamp order: one dict per row of
+    :data:`grazing_control.ros.reidentify.SWITCH_FIELDS` (NaN as None), ``switched`` a
+    bool, ``reason`` its name (None: switched), ``stamp_ns`` and, with the period, the
+    ``section``; [] when the bag has none."""
+    from grazing_control.dynamics.reidentification import REASONS
+    from grazing_control.ros.reidentify import SWITCH_FIELDS
+
+    raw = reader.read_raw(Path(path), topics=[topic])
+    if topic not in raw.channels:
+        return []
+    cols = reader.decode_values(raw, topic, len(SWITCH_FIELDS))
+    ok = cols["ok"]
+    out = []
+    for i in np.flatnonzero(ok)[np.argsort(cols["stamp"][ok], kind="stable")]:
+        row = {n: (float(v) if math.isfinite(v) else None)
+               for n, v in zip(SWITCH_FIELDS, cols["values"][i])}
+        row["switched"] = row["switched"] == 1.0
+        code = row["reason"]
+        row["reason"] = None if not code else (REASONS[int(code) - 1]
+                                               if 1 <= code <= len(REASONS) else str(code))
+        row["stamp_ns"] = int(cols["stamp"][i])
+        if period_s:
+            row["section"] = int(round(row["stamp_ns"] * 1e-9 / period_s))
+        out.append(row)
+    return out
+
+
+def _switch_lines(rows) -> list:
+    """The report's lines on the re-identification (:func:`read_switches`)."""
+    lines = []
+    for r in rows:
+        at = r.get("section", f"{r['stamp_ns']} ns")
+        req = "" if r["requested_at"] is None else f", requested at section {r['requested_at']:.0f}"
+        fit = ("" if r["zeta"] is None else
+               f"refit zeta {r['zeta']:.6g} ± {r['zeta_se']:.2g}, r {r['r']:.6g} ± "
+               f"{r['r_se']:.2g}, Δd {r['delta_d']:.6g} ± {r['delta_d_se']:.2g} "
+               f"({r['periods']:.0f} periods, {r['impacts']:.0f} impacts)")
+        if r["switched"]:
+            lines.append(f"* model switched at section {at}{req}: {fit}; gains c1 "
+                         f"{r['c1']:.6g}, c2 {r['c2']:.6g}; X** ({r['x_ref']:.6g}, "
+                         f"{r['v_ref']:.6g})")
+        else:
+            lines.append(f"* re-identification refused at section {at}{req} "
+                         f"({r['reason']}){': ' + fit if fit else ''}; model and gains kept")
+    return lines
+
+
 def _watch_lines(n) -> list:
     """The report's lines on the model watch (:func:`watch_numbers`)."""
     if not n:
@@ -488,8 +538,9 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                 n["estimate"] = estimate_numbers(estimates, sd, setup)
             data.problems.extend(scene_problems(sd, setup, n))
             numbers.append(n)
-        watch = watch_numbers(read_watch(bag), None if setup.params is None
-                              else setup.params.period)     # stamps: simulation time
+        period_s = None if setup.params is None else setup.params.period
+        watch = watch_numbers(read_watch(bag), period_s)     # stamps: simulation time
+        switches = read_switches(bag, period_s=period_s)
         rig, rig_notes = read_rig(bag)
         rig_notes += model_differences(data.parameters)
         if rig is not None:
@@ -506,6 +557,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                  "parameter_record": bool(data.parameters.get("nodes")),
                  "rig": None if rig is None else _rig_entry(rig),
                  "model_watch": watch,
+                 "model_switches": switches,
                  "setup": {"params": ({k: getattr(setup.params, k) for k in
                                        ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset")}
                                       if setup.params else None),
@@ -531,6 +583,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
         lines += _watch_lines(watch)
+        lines += _switch_lines(switches)
         lines.append("")
         for sd, n in zip(data.scenes, numbers):
             slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"

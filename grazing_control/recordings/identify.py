@@ -30,6 +30,7 @@ __all__ = ["TOPICS", "load_recording", "identify_bag", "identify_bags", "combine
 #: Role -> default topic (the simulator's names in the root namespace).
 TOPICS = {
     "state": "/oscillator/state",
+    "state_block": "/oscillator/state_block",     # the stream in blocks (issue 30)
     "impact": "/oscillator/impact",
     "correction": "/controller/velocity_correction",
     "parameters": "/grazing/parameters",
@@ -89,14 +90,20 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
     topics = dict(TOPICS, **(topics or {}))
     raw = reader.read_raw(bag, topics=list(topics.values()))
     notes = list(raw.problems)
-    if raw.count(topics["state"]) == 0:
-        raise RecordingError(f"{bag}: no messages on {topics['state']} (the state stream; "
-                             "sim_node publishes it every state_period > 0)")
-    s = reader.decode_joint_stream(raw, topics["state"])
+    stream = topics["state"]
+    if raw.count(stream) == 0 and raw.count(topics["state_block"]):
+        stream = topics["state_block"]           # sim_node's stream_message block
+        s = reader.decode_state_blocks(raw, stream)
+    elif raw.count(stream) == 0:
+        raise RecordingError(f"{bag}: no messages on {topics['state']} nor "
+                             f"{topics['state_block']} (the state stream; sim_node "
+                             "publishes it every state_period > 0)")
+    else:
+        s = reader.decode_joint_stream(raw, stream)
     ok = s["ok"]
     if not np.any(ok):
-        raise RecordingError(f"{bag}: no decodable JointState with a position on "
-                             f"{topics['state']}")
+        raise RecordingError(f"{bag}: no decodable stream sample with a position on "
+                             f"{stream}")
     if np.count_nonzero(~ok):
         notes.append(f"{np.count_nonzero(~ok)} state messages not decodable: skipped")
     stamp = s["stamp"][ok]

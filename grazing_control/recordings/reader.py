@@ -21,7 +21,9 @@ is counted, never decoded from beyond its end).
 Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]; as a
 state stream also effort[0], effort[1], velocity possibly empty),
 ``geometry_msgs/msg/TwistStamped`` (stamp, linear.x), ``geometry_msgs/msg/Vector3Stamped``
-(stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``.
+(stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``, and the stream in
+blocks (``std_msgs/msg/Float64MultiArray`` of grazing_control.ros.stream_block, one message
+at a time: a block's length varies).
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from grazing_control.ros.recording.bounded import (  # noqa: F401  (re-exported)
     read_zstd as _read_zstd, regular_file as _regular_file)
 
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
-           "decode_joint_state", "decode_joint_states", "joint_count", "decode_estimate", "decode_joint_stream", "decode_twist_stamped",
+           "decode_joint_state", "decode_joint_states", "joint_count", "decode_estimate", "decode_joint_stream", "decode_state_blocks", "decode_twist_stamped",
            "decode_vector3_stamped", "decode_time_reference",
            "decode_float64", "decode_strings"]
 
@@ -561,6 +563,37 @@ def decode_joint_stream(bag: RawBag, topic: str) -> dict:
     e1 = np.where(has2, b.f64(np.where(has2, p8 + 8, 0)), np.nan)
     b.ok &= nx > 0
     return _columns(b, stamp=stamp, x=x, v=np.where(nv > 0, v, np.nan), e0=e0, e1=e1)
+
+
+def decode_state_blocks(bag: RawBag, topic: str) -> dict:
+    """The state stream in blocks (``oscillator/state_block``, sim_node's
+    ``stream_message:=block``; grazing_control.ros.stream_block), expanded into one row
+    per sample with :func:`decode_joint_stream`'s columns: stamp_ns, x, v (NaN: a
+    position-only sensor), e0, e1 (cos tau, sin tau), times (its block's), ok. A message
+    that is not a block is one row, not ok."""
+    from grazing_control.ros.stream_block import read as read_block
+
+    b = _Body(bag.pool, bag.offsets(topic))
+    rows, owner, good = [], [], []
+    for i in range(b.body.size):
+        flat = None
+        if b.ok[i]:
+            flat = read_block(bag.pool[int(b.body[i]) - 4:int(b.end[i])].tobytes())
+        if flat is None:
+            rows.append((0.0,) * 6)
+            owner.append(i)
+            good.append(False)
+            continue
+        n = len(flat) // 6
+        rows.extend(flat[j:j + 6] for j in range(0, 6 * n, 6))
+        owner.extend([i] * n)
+        good.extend([True] * n)
+    a = np.array(rows, dtype=float).reshape(-1, 6)
+    owner = np.array(owner, dtype=np.int64)
+    return {"log_time": b.log_time[owner], "publish_time": b.publish_time[owner],
+            "sequence": b.sequence[owner], "ok": np.array(good, dtype=bool),
+            "stamp": a[:, 0].astype(np.int64) * 1_000_000_000 + a[:, 1].astype(np.int64),
+            "x": a[:, 2], "v": a[:, 3], "e0": a[:, 4], "e1": a[:, 5]}
 
 
 def decode_twist_stamped(bag: RawBag, topic: str) -> dict:

@@ -30,6 +30,7 @@ DEFAULT_TOPICS = {
     "impact": "/oscillator/impact",
     "pi1": "/oscillator/pi1",
     "state": "/oscillator/state",
+    "state_block": "/oscillator/state_block",
     "latency": "/oscillator/latency",
     "deadline_miss": "/oscillator/deadline_miss",
     "substituted": "/oscillator/substituted",
@@ -45,6 +46,7 @@ EXPECTED_TYPES = {
     "impact": "geometry_msgs/msg/Vector3Stamped",
     "pi1": "sensor_msgs/msg/JointState",
     "state": "sensor_msgs/msg/JointState",
+    "state_block": "std_msgs/msg/Float64MultiArray",
     "latency": "std_msgs/msg/Float64",
     "deadline_miss": None,
     "substituted": "geometry_msgs/msg/TwistStamped",
@@ -54,7 +56,7 @@ EXPECTED_TYPES = {
 }
 
 #: Roles not needed by the analysis: listed as present or absent, not decoded.
-_COUNTED_ONLY = ("pi1", "state")
+_COUNTED_ONLY = ("pi1", "state", "state_block")
 
 _NS = 1_000_000_000
 
@@ -242,7 +244,8 @@ def load(bag, topics: dict | None = None) -> BagData:
     if extra:
         notes.append(f"other topics not used by the analysis: {', '.join(extra)}")
     missing = [f"{topics[r]} ({r})" for r in topics if r not in present
-               and r not in ("deadline_miss", "substituted", "enabled", "published")]
+               and r not in ("deadline_miss", "substituted", "enabled", "published",
+                             "state_block")]
     if missing:
         notes.append(f"absent: {', '.join(missing)}")
     if "pi2" not in present:

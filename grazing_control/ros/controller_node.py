@@ -31,6 +31,8 @@ or empty for a position-only sensor, effort [cos tau, sin tau] or [cos tau]; the
 times are t_k = k T, the simulator's origin) with ``estimator`` nearest, arc or model
 (:mod:`grazing_control.dynamics.estimation`, docs/theory_estimation.md), the impacts
 taken from ``oscillator/impact`` (``impact_source`` topic) or detected in the stream.
+With ``stream_message`` block the same samples come in blocks on
+``oscillator/state_block`` (:mod:`grazing_control.ros.stream_block`), taken row by row.
 Section k is estimated and answered (stamped t_k) as soon as its last sample arrived:
 the newest sample's t + ``state_period`` > t_k (0: the gap between the last two stamps),
 or late, with the first sample after t_k when that one was lost. Each estimate is
@@ -43,6 +45,11 @@ or ``consistency_window`` (issue 29, :mod:`grazing_control.ros.model_watch`) the
 augmented filter estimates a sensor bias and a drifting Delta d, a consistency monitor
 tests its innovations, and each section's row goes on ``controller/model_watch``; a
 mismatch verdict is an ERROR on /diagnostics naming the test, statistic and bound.
+With ``reidentify`` (on a mismatch verdict) or on a call of ``~/reidentify``
+(std_srvs/Trigger) the model is refitted on the last ``reidentify_periods`` periods in a
+worker thread and, where the design is admissible for it (``design_conditions``), the
+estimator, Eq. 28 and X** switch to it at the next section
+(:mod:`grazing_control.ros.reidentify`); each decision goes on ``controller/model_switch``.
 
 Switching on
 ------------
@@ -108,20 +115,23 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
-from std_msgs.msg import Bool
-from std_srvs.srv import SetBool
+from std_msgs.msg import Bool, Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
 
 from grazing_control.dynamics.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.capture import CAPTURE_RADIUS, CaptureRule
-from grazing_control.dynamics.estimation import ESTIMATORS
-from grazing_control.dynamics.stream import IMPACT_SOURCES, StreamEstimator, predict_section
+from grazing_control.dynamics.actuator import Actuator
+from grazing_control.dynamics.estimation import ESTIMATORS, actuator_legs
+from grazing_control.dynamics.stream import (IMPACT_SOURCES, StreamEstimator, predict_section,
+                                             pulse_shape)
 from grazing_control.oscillator.control import Gains, correction
-from . import cdr
+from . import cdr, stream_block
 from .scene import SCENE_PARAMETER_DOC
 from .scheduling import apply_node_scheduling, declare_scheduling
 from .diagnostics import ERROR, OK, WARN, Updater
 from .model_watch import (WATCH_DEFAULTS, WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC,
                           describe_verdict, watch_from_values, watch_row, watch_status)
+from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide, declare_reidentify
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
@@ -129,7 +139,7 @@ from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_
                      executor_kind, float_descriptor, int_descriptor, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key, string_descriptor)
-from grazing_control.plant.settings import ABOVE_0, FINITE, below
+from grazing_control.plant.settings import ABOVE_0, FINITE, MAX_BANDWIDTH, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 from .ndof_control import NdofLaw, ndof_controller_from_values
@@ -140,13 +150,16 @@ from .rig_boundary import check_rig_values, controller_values
 ISOLATION_CHECK = 0.25
 
 __all__ = ["ControlLaw", "NdofControlLaw", "law_from_values", "model_from_values", "stream_from_values",
+           "pulse_from_values",
            "ControllerNode", "main", "PI2_SOURCES"]
 
 _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", "i_a",
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section", "answer_lead", "capture",
-         "capture_radius") + WATCH_KEYS
+         "capture_radius") + WATCH_KEYS + REID_KEYS
+#: How a correction acts in the plant (:func:`pulse_from_values`), model units.
+PULSE_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
@@ -328,16 +341,44 @@ def stream_from_values(values: dict, model, pulse: tuple = (0.0, math.inf)):
     if model is None:
         raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
                              "the plant's finite Delta d (the estimator's model needs the wall)")
+    act = pulse[2] if len(pulse) > 2 else None
     if watch is not None:       # the augmented filter (ros/model_watch.py, issue 29)
         return AugmentedStreamEstimator(
             model, values["sensor_noise"], values["impact_source"], values["state_period"],
             floor, bool(values["answer_after_section"]), values.get("answer_lead", 0.0),
-            **watch[0], pulse_width=pulse[0], force_limit=pulse[1])
+            **watch[0], pulse_width=pulse[0], force_limit=pulse[1], actuator=act)
     return StreamEstimator(model, values["estimator"], values["sensor_noise"],
                            values["impact_source"], values["state_period"], floor,
                            bool(values["answer_after_section"]),
                            values.get("answer_lead", 0.0), pulse_width=pulse[0],
-                           force_limit=pulse[1])
+                           force_limit=pulse[1], actuator=act)
+
+
+def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
+    """(width, force limit, actuator or None) of the plant's corrections from the
+    :data:`PULSE_KEYS` (model units, as sim_node's): the pulse (``pulse_width`` 0: a
+    kick) and the first-order actuator between its command and the force
+    (``actuator_bandwidth`` 1 / tau_a, 0: ideal; ``actuator_latency``), which the stream
+    estimator and the prediction integrate (dynamics.estimation.trajectory).
+    ParameterError, one line naming the parameter and its valid range."""
+    period = 2.0 * math.pi / omega
+    width, limit = pulse_shape(OscillatorParams(omega=omega), values["pulse_width"],
+                               values["force_limit"])
+    bw, lat = float(values["actuator_bandwidth"]), float(values["actuator_latency"])
+    if not (bw == 0.0 or 1.0 / MAX_BANDWIDTH <= bw <= MAX_BANDWIDTH):
+        raise ParameterError(f"actuator_bandwidth={bw!r} is invalid: valid range is 0 (ideal) "
+                             f"or 1e-12 <= actuator_bandwidth <= {MAX_BANDWIDTH:g}")
+    if not (math.isfinite(lat) and lat >= 0.0):
+        raise ParameterError(f"actuator_latency={lat!r} is invalid: valid range is a finite "
+                             "actuator_latency >= 0")
+    act = Actuator(1.0 / bw if bw else 0.0, lat)
+    if act.ideal:
+        return width, limit, None
+    if width == 0.0:
+        raise ParameterError("pulse_width=0.0 is invalid with actuator_bandwidth or "
+                             f"actuator_latency: valid range is 0 < pulse_width < T = {period!r}")
+    actuator_legs(None, 0.0, delay, period, width, limit, act)     # the latency: named
+    return width, limit, act
 
 
 def capture_from_values(values: dict, model, delay: float):
@@ -460,6 +501,13 @@ class ControllerNode(Node):
         d("state_period", 0.0, float_descriptor(
             "simulation time between stream samples; 0: from the stamps", 0.0, FINITE,
             read_only=True))
+        d("stream_message", "sample", string_descriptor(
+            "stream mode: the stream's messages, sample (oscillator/state) or block "
+            "(oscillator/state_block, ros/stream_block.py); the launcher passes the "
+            "simulator's", True, stream_block.MESSAGES))
+        why = stream_block.check_message(self.get_parameter("stream_message").value)
+        if why is not None:
+            raise StartupError(why)
         d("model_noise", 1e-2, float_descriptor(
             "model filter's process noise per period, in units of sensor_noise", 0.0, FINITE,
             read_only=True))
@@ -501,6 +549,7 @@ class ControllerNode(Node):
         d("capture_radius", 0.0, float_descriptor(
             "capture rule: the distance (Euclidean in (x, v) on Pi2), >= 0; 0: "
             f"{CAPTURE_RADIUS:g} sqrt(|delta_d|)", 0.0, FINITE, read_only=True))
+        declare_reidentify(d)
         d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
         d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
         d("diagnostics_period", 1.0, float_descriptor(
@@ -514,6 +563,23 @@ class ControllerNode(Node):
             "stream mode: answer a section this much simulation time before its last "
             "sample (those samples are not used); 0: with its last sample", 0.0, FINITE,
             read_only=True, constraints="answer_lead < T = 2 pi / omega"))
+        d("pulse_width", 0.0, float_descriptor(
+            "how sim_node acts (its pulse_width): a force pulse of this width centred at the "
+            "actuation time, modelled by the estimator and the prediction; 0: a velocity "
+            "kick", 0.0, FINITE, read_only=True, constraints="pulse_width < T; with "
+            "rig_file the rig's"))
+        d("force_limit", 0.0, float_descriptor(
+            "sim_node's force_limit on the pulse's force, modelled; 0: none", 0.0, FINITE,
+            read_only=True, constraints="with rig_file the rig's"))
+        d("actuator_bandwidth", 0.0, float_descriptor(
+            "sim_node's first-order actuator (issue 29): bandwidth 1 / tau_a in radians per "
+            "simulation time unit, integrated exactly by the estimator and the prediction; "
+            "0: ideal", 0.0, MAX_BANDWIDTH, read_only=True,
+            constraints="> 0 only with pulse_width > 0; with rig_file the rig's"))
+        d("actuator_latency", 0.0, float_descriptor(
+            "the actuator's latency from the command to the force, simulation time; 0: none",
+            0.0, FINITE, read_only=True, constraints="> 0 only with pulse_width > 0; "
+            "actuation_delay + pulse_width / 2 + actuator_latency < T"))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
             True, EXECUTORS))
@@ -545,10 +611,11 @@ class ControllerNode(Node):
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None
         # how a correction acts in the plant: a rig's force pulse (its estimator and
         # prediction integrate it, dynamics.estimation.trajectory), else the kick
-        self.pulse = (0.0, math.inf)
-        if self.rig is not None:
+        self.pulse = (0.0, math.inf, None)
+        pulse = {k: self.get_parameter(k).value for k in PULSE_KEYS}
+        if self.rig is not None:        # the rig's (its latency is in the budget)
             dims = self.rig.dimensionless()
-            self.pulse = (dims["pulse_width"], dims["force_limit"] or math.inf)
+            pulse = {**pulse, **{k: dims[k] for k in PULSE_KEYS[:3]}}
         try:
             if self.model_file:
                 self.law = self._ndof_law(self._values(), self._gains())
@@ -558,6 +625,8 @@ class ControllerNode(Node):
             else:
                 self.law = law_from_values(self._values())
                 self.actuation_delay = actuation_delay_from_values(self._values())
+                self.pulse = pulse_from_values(pulse, self._values()["omega"],
+                                               self.actuation_delay)
                 self.model = model_from_values(self._values())
                 self.stream = stream_from_values(self._values(), self.model, self.pulse)
                 self.capture = capture_from_values(self._values(), self.model,
@@ -580,12 +649,20 @@ class ControllerNode(Node):
         self.pub_watch = Counted(self.create_publisher(
             JointState, WATCH_TOPIC, REPLAY_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
+        # the re-identification's decisions (issue 29 section 3), made in every mode
+        self.pub_switch = Counted(self.create_publisher(
+            JointState, SWITCH_TOPIC, REPLAY_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
         self.watching = isinstance(self.stream, AugmentedStreamEstimator)
         self.monitor = (watch_from_values(self._values())[1] if self.watching else None)
         self.verdict = None             # the monitor's latest verdict
         self.mismatches = 0             # sections whose verdict was a mismatch
         self.first_mismatch = None      # the first section with a mismatch verdict
         self._diag_mismatches = 0
+        try:        # re-identification in the loop (ros/reidentify.py), or None
+            self.reid = ReidentifySide.from_node(self, self._values())
+        except ParameterError as exc:
+            raise StartupError(str(exc)) from None
         self.rig_side = None     # the driver contract's side (rig_file), or None
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
@@ -605,6 +682,10 @@ class ControllerNode(Node):
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
                 event_callbacks=quiet)
+        elif self.get_parameter("stream_message").value == "block":     # issue 30
+            self.sub_samples = self.create_subscription(
+                Float64MultiArray, stream_block.TOPIC, self._on_state_block, DATA_QOS,
+                raw=True, event_callbacks=quiet)
         else:       # stream mode never listens to the simulator's exact samples
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/state", self._on_state, DATA_QOS, raw=True,
@@ -627,10 +708,11 @@ class ControllerNode(Node):
         self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
                                                          LATCHED_QOS))
         self.published = PublishedRecord(self, (self.pub, self.pub_estimate, self.pub_enabled,
-                                                self.pub_watch)
+                                                self.pub_watch, self.pub_switch)
                                          + ((self.pub_force,) if self.rig_side else ()))
         self.recorder = RecorderConfirmation(self)
         self.create_service(SetBool, "~/enable", self._on_enable)
+        self.create_service(Trigger, "~/reidentify", self._on_reidentify)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pub_parameters = publish_parameter_record(self)   # grazing/parameters
         log = self.get_logger()
@@ -828,8 +910,13 @@ class ControllerNode(Node):
             return math.nan
         p = self.model
         try:
+            # the force the earlier corrections left at this section (stream mode: the
+            # estimator knows them; else 0, a share e^{-T / tau_a} of one pulse's force)
+            force0 = (self.stream.section_force(self.stream.next_k - 1)
+                      if self.stream is not None and self.stream.next_k else 0.0)
             zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
-                                     width=self.pulse[0], force_limit=self.pulse[1])
+                                     width=self.pulse[0], force_limit=self.pulse[1],
+                                     actuator=self.pulse[2], force0=force0)
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)
@@ -848,6 +935,21 @@ class ControllerNode(Node):
                 return
             v = msg.velocity[0] if len(msg.velocity) else math.nan
             sample = stamp_key(msg.header.stamp) + (msg.position[0], v, tuple(msg.effort))
+        self._take_sample(sample)
+
+    def _on_state_block(self, data: bytes) -> None:
+        """A block of stream samples (``stream_message`` block, ros/stream_block.py): each
+        row taken as :meth:`_on_state` takes one sample, in order."""
+        flat = stream_block.read(data)
+        if flat is None:
+            self.malformed(f"a message on {self.sub_samples.topic_name} that is not a "
+                           "stream block (ros/stream_block.py)")
+            return
+        for sample in stream_block.rows_of(flat):
+            self._take_sample(sample)
+
+    def _take_sample(self, sample: tuple) -> None:
+        """(sec, nanosec, x, v, effort) of one stream sample: checked, then estimated."""
         sec, ns, x, v, effort = sample
         if not math.isfinite(x) or math.isinf(v):
             self.malformed(f"stamp {(sec, ns)}: x={x!r} v={v!r}")
@@ -860,13 +962,15 @@ class ControllerNode(Node):
         """A stream sample (model time and units): the sections it completes are
         estimated, published on controller/estimate and answered (with a rig file also
         as the force pulse, rig_control.RigSide.answered)."""
+        if self.reid is not None:
+            self.reid.sample(t, x, v)
         try:
             due = self.stream.add_sample(t, x, v)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.malformed(f"stamp {cdr.stamp_parts(t)}: the estimator failed: {exc}")
             return
-        p = self.model
         for k, tk, est in due:
+            p = self.model      # a switch at the section before moves it (ros/reidentify.py)
             key = cdr.stamp_parts(tk)
             xh, vh = p.x_ref + est.z[0], p.v_ref + est.z[1]
             c = est.cov
@@ -877,8 +981,12 @@ class ControllerNode(Node):
                 continue
             if self.watching:
                 self._watch(k, key)
+            if self.reid is not None:       # a finished refit is applied here, at Pi2
+                self.reid.at_section(k, key, est)
             dv = self._answer(key, xh, vh, self._capture_factor(k, est))
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
+            if self.reid is not None:
+                self.reid.answered(k, 0.0 if dv is None else dv)
             if dv is not None and self.rig_side is not None:
                 self.rig_side.answered(tk, dv, self.prediction)
 
@@ -939,6 +1047,8 @@ class ControllerNode(Node):
         k = self._section(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if k is not None:
             self.stream.acted(k, 0.0, self.actuation_delay)
+            if self.reid is not None:
+                self.reid.acted(k, 0.0)
 
     def _on_substituted(self, data: bytes) -> None:
         """The prediction that acted at section k in place of our late answer."""
@@ -948,10 +1058,16 @@ class ControllerNode(Node):
         k = self._section(answer[0], answer[1])
         if k is not None:
             self.stream.acted(k, answer[2], self.actuation_delay)
+            if self.reid is not None:
+                self.reid.acted(k, answer[2])
 
     def _on_impact(self, msg) -> None:
-        """An impact from the rig's impact sensor (impact_source topic): its time."""
-        self.stream.add_impact(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        """An impact from the rig's impact sensor (impact_source topic): its time (also
+        to the re-identification's record: the refit's impact times)."""
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.stream.add_impact(t)
+        if self.reid is not None:
+            self.reid.record.add_impact(t)
 
     def _check_isolation(self) -> None:
         """Stop with status 1 when more than one simulator publishes the samples."""
@@ -992,6 +1108,19 @@ class ControllerNode(Node):
                            f"{self.law.count}"
         self.get_logger().warning(f"~/enable: {response.message}")
         self.pub_enabled.publish(Bool(data=bool(request.data)))
+        return response
+
+    def _on_reidentify(self, request, response):
+        """~/reidentify (std_srvs/Trigger): start a refit of the last reidentify_periods
+        periods (ros/reidentify.py); refused (success false, the reason in the message)
+        without the stream's model estimator, while a fit runs, or on too short a
+        window. The result is applied at the next Pi2 section."""
+        if self.reid is None:
+            response.success = False
+            response.message = ("re-identification needs pi2_source=stream and "
+                                "estimator=model")
+            return response
+        response.success, response.message = self.reid.request()
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -1043,6 +1172,8 @@ class ControllerNode(Node):
         if self.capture is not None:
             stat.add("captured at section", "not yet" if self.capture.on_at is None
                      else self.capture.on_at)
+        if self.reid is not None:
+            self.reid.diagnose(stat)
         if refused > last_refused:
             stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
                                      "(malformed, stale or non-finite)")
@@ -1098,6 +1229,7 @@ class ControllerNode(Node):
                f" mismatch_sections={self.mismatches} first_mismatch={self.first_mismatch}"
                f" bias={self.stream.bias!r} delta_d={self.stream.delta_d!r}")
             + ("" if self.capture is None else f" captured_at={self.capture.on_at}")
+            + ("" if self.reid is None else self.reid.summary())
             + ("" if self.rig_side is None else self.rig_side.summary()))
 
 

@@ -49,6 +49,7 @@ import argparse
 import errno
 import fcntl
 import importlib.util
+import json
 import math
 import os
 import random
@@ -308,17 +309,19 @@ def node_env(domain_id: int | None = None) -> dict:
 
 
 def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, log=None,
-               python=None) -> subprocess.Popen:
+               python=None, command=None) -> subprocess.Popen:
     """Start one node process; its output goes to ``log`` (a path) or is inherited.
 
     The node gets a process group of its own, so that the terminal's Ctrl-C reaches only
     the launcher, which stops the nodes with SIGTERM (:func:`stop_nodes`): a SIGINT
     while a node's Python is still starting would print a traceback, a SIGTERM ends it
     quietly. The node is sent SIGTERM if the launcher dies (killed with SIGKILL).
+    ``command``: this command line instead of the node's (the composed scene).
     """
     out = open(log, "wb") if log is not None else None
     try:
-        return subprocess.Popen(node_command(module, params_files, overrides, python),
+        return subprocess.Popen(command or node_command(module, params_files, overrides,
+                                                        python),
                                 env=dict(node_env(domain_id),
                                          GRAZING_LAUNCHER_PID=str(os.getpid())),
                                 stdin=subprocess.DEVNULL,
@@ -398,7 +401,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         sim_overrides: dict | None = None, controller_overrides: dict | None = None,
         recorder_overrides: dict | None = None, log_dir=None,
         python: str | None = None, live: int | None = None, model=None,
-        rig=None) -> RunResult:
+        rig=None, compose: bool = False) -> RunResult:
     """Run one scene through the three node processes and wait for it to finish.
 
     Parameters
@@ -454,6 +457,12 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         noise gain); the recorder also records the contract's topics. The simulator's
         parameter file is used without what the rig sets, and no controller file is
         needed (default: none).
+    compose : bool, optional
+        Run the simulator, the controller and the recorder in one process on one
+        executor (:mod:`.composed`; docs/nodes.md, "Composed scene"): one interpreter's
+        start-up instead of three, the messages between them delivered in the process.
+        Their logs are one file (``<log_dir>/composed.log``, each line names its node);
+        ``live_node`` stays a process of its own. Default False: a process per node.
 
     Returns
     -------
@@ -498,6 +507,9 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
         names += ("live_node",) if live is not None else ()
         logs = {n: str(Path(log_dir) / f"{n}.log") for n in names}
+        if compose:
+            logs.update({n: str(Path(log_dir) / "composed.log") for n in names
+                         if n != "live_node"})
     over = scene_overrides(controller_params, periods=periods, delta_d=delta_d,
                            enable_after=enable_after, mode=mode,
                            bag=bag_dir if record else None, sim_overrides=sim_overrides,
@@ -510,6 +522,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     timed_out = interrupted = False
     early = []
     verdict = None
+    statuses = None         # the composed process's {node: status}
 
     def on_term(signum, frame):
         raise KeyboardInterrupt
@@ -526,7 +539,18 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
         if "verdict_file" not in sim_over:
             sim_over = {**sim_over, "verdict_file": str(verdict_file)}
         try:
-            if record:
+            if compose:
+                statuses_file = tmp / "composed.statuses.json"
+                spec = {"sim_node": _ros_args(SIM_MODULE, sim_params, sim_over, tmp,
+                                              "sim_node"),
+                        "controller_node": _ros_args(CONTROLLER_MODULE, controller_params,
+                                                     controller_overrides, tmp,
+                                                     "controller_node"),
+                        "recorder_node": (_ros_args(RECORDER_MODULE, None,
+                                                    over["recorder_node"], tmp, None)
+                                          if record else None)}
+                (tmp / "composed.json").write_text(json.dumps(spec), encoding="utf-8")
+            if record and not compose:
                 procs["recorder_node"] = start_node(
                     RECORDER_MODULE, (), over["recorder_node"], domain_id=domain_id,
                     log=logs.get("recorder_node"), python=python)
@@ -534,13 +558,21 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                 procs["live_node"] = start_node(LIVE_MODULE, (), over["live_node"],
                                                 domain_id=domain_id, log=logs.get("live_node"),
                                                 python=python)
-            procs["controller_node"] = start_node(
-                CONTROLLER_MODULE, [_params_file(controller_params, "controller_node", tmp)],
-                controller_overrides, domain_id=domain_id, log=logs.get("controller_node"),
-                python=python)
-            procs["sim_node"] = start_node(
-                SIM_MODULE, [_params_file(sim_params, "sim_node", tmp)], sim_over,
-                domain_id=domain_id, log=logs.get("sim_node"), python=python)
+            if compose:
+                procs["sim_node"] = start_node(
+                    COMPOSED_MODULE, domain_id=domain_id, log=logs.get("sim_node"),
+                    command=[python or sys.executable, "-c", BOOTSTRAP, COMPOSED_MODULE,
+                             "--spec", str(tmp / "composed.json"),
+                             "--statuses", str(statuses_file)])
+            else:
+                procs["controller_node"] = start_node(
+                    CONTROLLER_MODULE,
+                    [_params_file(controller_params, "controller_node", tmp)],
+                    controller_overrides, domain_id=domain_id,
+                    log=logs.get("controller_node"), python=python)
+                procs["sim_node"] = start_node(
+                    SIM_MODULE, [_params_file(sim_params, "sim_node", tmp)], sim_over,
+                    domain_id=domain_id, log=logs.get("sim_node"), python=python)
             sim = procs["sim_node"]
             end = None if timeout is None else t0 + timeout
             while sim.poll() is None:
@@ -575,8 +607,12 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
             if lock is not None:
                 lock.close()
             verdict = read_verdict(Path(sim_over["verdict_file"]))
+            if compose:
+                statuses = _composed_statuses(statuses_file, procs["sim_node"], record)
 
     def code(name):
+        if statuses is not None and name in statuses:
+            return statuses[name]
         p = procs[name]
         return None if p is None else p.returncode
 
@@ -600,6 +636,31 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                     sim_verdict=verdict, lost=lost)
     res.reason = None if res.ok else failure_reason(res, early, timeout)
     return res
+
+
+#: The module that runs a scene's nodes in one process (``run(..., compose=True)``).
+COMPOSED_MODULE = "grazing_control.ros.composed"
+
+
+def _ros_args(module: str, params, overrides, tmp: Path, node: str | None) -> list:
+    """A node's ``--ros-args ...`` as its process would get them (:func:`node_command`),
+    for the composed process (:mod:`.composed`)."""
+    files = [] if params is None else [_params_file(params, node, tmp)]
+    return node_command(module, files, overrides)[4:]
+
+
+def _composed_statuses(path: Path, proc, record: bool) -> dict:
+    """{node: exit status} of a composed scene: what its process wrote, else (it was
+    killed, or never got that far) the process's own status for each node."""
+    try:
+        statuses = json.loads(path.read_text(encoding="utf-8"))
+        if isinstance(statuses, dict):
+            return statuses
+    except (OSError, ValueError):
+        pass
+    code = None if proc is None else proc.returncode
+    names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
+    return {name: code for name in names}
 
 
 def read_verdict(path: Path):
@@ -753,6 +814,10 @@ def add_run_arguments(parser) -> None:
                         help="wall seconds before the scene is stopped (default: none)")
     parser.add_argument("--log-dir", dest="log_dir", default=None,
                         help="write each node's output to LOG_DIR/<node>.log")
+    parser.add_argument("--compose", action="store_true",
+                        help="run the simulator, the controller and the recorder in one "
+                             "process on one executor (docs/nodes.md, \"Composed scene\"; "
+                             "default: a process per node)")
     parser.add_argument("--sim-param", dest="sim_overrides", type=_key_value, action=_Pairs,
                         metavar="KEY:=VALUE", help="any sim_node parameter (repeatable)")
     parser.add_argument("--controller-param", dest="controller_overrides", type=_key_value,

@@ -4,6 +4,9 @@ What it records by default (names relative to the node's namespace):
 
 ``oscillator/state`` (sensor_msgs/msg/JointState)
     position x, velocity v, effort cos(tau); stamp = simulation time.
+``oscillator/state_block`` (std_msgs/msg/Float64MultiArray)
+    the same stream in blocks (sim_node's ``stream_message:=block``): a row per sample,
+    (stamp sec, nanosec, x, v, cos tau, sin tau) (grazing_control.ros.stream_block).
 ``oscillator/impact`` (geometry_msgs/msg/Vector3Stamped)
     vector = (v-, v+, phase tau) at each impact; stamp = impact time.
 ``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
@@ -18,6 +21,10 @@ What it records by default (names relative to the node's namespace):
     stream mode with the model watch on (issue 29): per section the bias and Delta d
     estimates with their standard errors and the consistency verdict, named values
     (grazing_control.ros.model_watch.WATCH_FIELDS); stamp = the section time.
+``controller/model_switch`` (sensor_msgs/msg/JointState)
+    re-identification in the loop (issue 29): one row per decision, a switch to a
+    refitted model or a refusal with its reason, named values
+    (grazing_control.ros.reidentify.SWITCH_FIELDS); stamp = the section it was decided at.
 ``/clock`` (rosgraph_msgs/msg/Clock)
     simulation time.
 ``oscillator/deadline_miss`` (geometry_msgs/msg/Vector3Stamped)
@@ -182,7 +189,9 @@ EXTRA_TOPICS = {PARAMETER_TOPIC[0]: PARAMETER_TOPIC[1],
                 "oscillator/latency": "std_msgs/msg/Float64",
                 "controller/estimate": "sensor_msgs/msg/JointState",
                 "controller/model_watch": "sensor_msgs/msg/JointState",
-                "controller/enabled": "std_msgs/msg/Bool"}
+                "controller/model_switch": "sensor_msgs/msg/JointState",
+                "controller/enabled": "std_msgs/msg/Bool",
+                "oscillator/state_block": "std_msgs/msg/Float64MultiArray"}
 
 #: Subscription QoS before adaptation: reliable and keep-all, so a lockstep run loses
 #: nothing (used for a topic's metadata when it never had a publisher).
@@ -766,6 +775,21 @@ class RecorderNode(Node):
                         "publisher, lost, or published after the recording stopped)")
         return status
 
+def record_until(node, executor, stop) -> None:
+    """Record until ``stop`` (a threading.Event) is set, then take what the nodes' published
+    records still name (:meth:`RecorderNode.settle`): the recorder's loop, in its own
+    process (:func:`main`) or in a thread of a composed scene (ros/composed.py)."""
+    window = node.get_parameter("batch_window").value
+    while not stop.is_set() and rclpy.ok() and node.failed is None:
+        executor.spin_once(timeout_sec=SIGNAL_POLL)     # an idle one notices a stop
+        if window > 0.0:    # let a batch gather, then take all of it in one go
+            stop.wait(window)
+            node.drain()
+        if len(node._published) > len(node._confirmed):
+            node.confirm()
+    node.settle(executor, node.get_parameter("close_timeout").value)
+
+
 def _stop_on_signals(stop):
     """SIGINT and SIGTERM set `stop` (the spin loop then ends and the bag closes)."""
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -791,15 +815,7 @@ def main(args=None):
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         pauses = settle_heap()
-        window = node.get_parameter("batch_window").value
-        while not stop.is_set() and rclpy.ok() and node.failed is None:
-            executor.spin_once(timeout_sec=SIGNAL_POLL)     # an idle one notices a stop
-            if window > 0.0:    # let a batch gather, then take all of it in one go
-                stop.wait(window)
-                node.drain()
-            if len(node._published) > len(node._confirmed):
-                node.confirm()
-        node.settle(executor, node.get_parameter("close_timeout").value)
+        record_until(node, executor, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (StartupError, ParameterError, ParameterException, OSError) as exc:

@@ -117,8 +117,9 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       recorder's ``recorder/ready`` and one subscriber per topic), ``max_periods``,
       ``delta_d``, ``mode``, and the design's ``actuation_delay`` from the controller's
       parameters (a simulator applying another delay refuses to start);
-    - controller_node: ``enable_after``; the plant's ``delta_d``, ``sensor_noise`` and
-      ``state_period`` when the simulator's are set (its estimator's model); answers
+    - controller_node: ``enable_after``; the plant's ``delta_d``, ``sensor_noise``,
+      ``state_period`` and ``stream_message`` when the simulator's are set (its
+      estimator's model, the stream's messages); answers
       after the section in realtime;
     - recorder_node: ``output`` = bag, ``require_complete``;
     - live_node (docs/live.md): ``port`` = live (0..65535; 0: any free port, logged);
@@ -157,8 +158,9 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay
     sim.update(sim_overrides or {})
-    for key in ("delta_d", "sensor_noise", "state_period"):  # the controller's model of
-        if key in sim:                                        # the plant and its sensor
+    for key in ("delta_d", "sensor_noise", "state_period",   # the controller's model of
+                "stream_message"):                           # the plant and its sensor
+        if key in sim:
             controller.setdefault(key, sim[key])
     if sim.get("mode") == "realtime" and rig is None:   # a stream controller answers after t_k
         controller.setdefault("answer_after_section", True)

@@ -293,8 +293,10 @@ def _covariance(J, sigma2, k=6):
 
 
 def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correction_times,
-           max_nfev):
-    """Arcs, initial guess and the penalty continuation: (Problem, last solution)."""
+           max_nfev, prior=None, fixed=None):
+    """Arcs, initial guess and the penalty continuation: (Problem, last solution);
+    ``fixed`` {index in GLOBAL_NAMES: value} held out of the solve (sol.x is the whole
+    vector)."""
     arcs = cut_arcs(rec.t, impact_t, corr_t, impact_v_minus=vm, impact_v_plus=vp,
                     free_times=free, free_corrections=correction_times)
     if np.count_nonzero(arcs.kind == 1) == 0:
@@ -310,7 +312,7 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
             f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
             f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
             "(--max-arcs)", fits)
-    g0, start0, X0, V0 = initial_guess(rec, arcs, phase)
+    g0, start0, X0, V0 = initial_guess(rec, arcs, phase, prior)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
     f = np.isfinite(lo)
@@ -321,14 +323,26 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
     if prob.m_data - (prob.n - prob.n_constraints) <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
+    fixed = fixed or {}
+    for j, value in fixed.items():
+        p[j] = value
+    free = np.setdiff1d(np.arange(prob.n), list(fixed))
+
+    def full(q):
+        out = p.astype(np.result_type(p, q))
+        out[free] = q
+        return out
+
     # penalty continuation: the initial guess violates the constraints; raising their
     # weight in steps keeps each solve near the last one (docs: "Constraints")
     for weight in CONTINUATION:
         prob.weight = weight
-        sol = least_squares(prob.residual, p, jac=prob.jacobian, bounds=(lo, hi),
-                            method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
-                            max_nfev=max_nfev)
-        p = sol.x
+        sol = least_squares(lambda q: prob.residual(full(q)), p[free],
+                            jac=lambda q: prob.jacobian(full(q))[:, free],
+                            bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_nfev)
+        p = full(sol.x)
+    sol.x = p
     return prob, sol
 
 
@@ -356,7 +370,7 @@ def _shift_from_bounds(prob, p):
 def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bool = True,
              max_arcs: int | None = 100, max_nfev: int = 400,
              coincidence: float = 1.5e-9, correction_times: bool = True,
-             shrink: bool = False) -> Identification:
+             shrink: bool = False, prior=None, fixed: dict | None = None) -> Identification:
     """Fit the model to a recording (module docstring).
 
     ``shrink``: where ``max_arcs`` arcs would exceed the Jacobian's memory bound (a dense
@@ -379,16 +393,23 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     correction_times : fit the corrections' instants too (bounded by the samples around
         the given ones): a correction applied on arrival, or with a jitter, acts at an
         instant the recording does not carry exactly.
+    prior : (zeta, Omega) known beforehand, in place of the ARX step of the initial
+        guess (:func:`.initial.initial_guess`); None: from the data.
+    fixed : {name: value} of :data:`.model.GLOBAL_NAMES` held at the value, not fitted
+        (a controller's re-identification holds its units: natural_frequency and
+        forcing_amplitude 1); their standard errors are 0.
 
     Raises
     ------
     IdentificationError
         Bad input: no phase reference, too few samples, no impact, no initial guess.
     """
+    fixed = {GLOBAL_NAMES.index(n): float(v) for n, v in (fixed or {}).items()
+             if n in GLOBAL_NAMES}
     while True:
         try:
             return _identify(rec, impacts, impact_velocities, max_arcs, max_nfev,
-                             coincidence, correction_times)
+                             coincidence, correction_times, prior, fixed)
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -396,7 +417,7 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
 
 
 def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
-              correction_times) -> Identification:
+              correction_times, prior, fixed) -> Identification:
     if impacts not in ("recorded", "motion"):
         raise IdentificationError(f"impacts={impacts!r} is invalid: valid values are "
                                   "recorded, motion")
@@ -432,7 +453,7 @@ def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
         shifts, best = 0, None
         for _round in range(MAX_SHIFTS + 1):
             prob, sol = _solve(rec, phase, rec_events, vm, vp, corr_t, free,
-                               impact_velocities, correction_times, max_nfev)
+                               impact_velocities, correction_times, max_nfev, prior, fixed)
             if best is None or sol.cost < best[2].cost:   # an event on a sample may cycle
                 best = (shifts, prob, sol)
             moved = _shift_from_bounds(prob, sol.x)
@@ -446,7 +467,7 @@ def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
     except (PhaseError, RecordingError, InitialGuessError) as exc:
         raise IdentificationError(str(exc)) from None
     p = sol.x
-    dof = prob.m_data - (prob.n - prob.n_constraints)
+    dof = prob.m_data - (prob.n - len(fixed) - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
@@ -454,7 +475,10 @@ def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
     J = prob.jacobian(p)
     data = res[:prob.m_data]
     sigma2 = float(data @ data) / dof
-    cov = _covariance(J, sigma2)
+    g_free = [j for j in range(6) if j not in fixed]
+    cov = np.zeros((6, 6))
+    cov[np.ix_(g_free, g_free)] = _covariance(
+        J[:, np.setdiff1d(np.arange(prob.n), list(fixed))], sigma2, len(g_free))
     se = np.sqrt(np.diag(cov))
     model = RigModel.from_vector(p, phase.omega, phase.tau0)
     # the study's parameters by the delta method (complex-step gradient)

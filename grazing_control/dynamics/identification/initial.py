@@ -227,13 +227,22 @@ def refine_impact_times(g, omega, tau0, start, X, V, lower, upper, which):
     return out
 
 
-def initial_guess(rec, arcs, phase):
+def initial_guess(rec, arcs, phase, prior=None):
     """Initial vector g = (zeta, Omega, A, theta, d, r) and the arcs' start states
-    (X, V), the arcs' start times (free impact times refined); module docstring."""
+    (X, V), the arcs' start times (free impact times refined); module docstring.
+
+    ``prior``: (zeta, Omega) known beforehand (a controller re-identifying the model it
+    runs, :mod:`grazing_control.dynamics.reidentification`), used in place of step 1:
+    the ARX regression is ill-conditioned on densely sampled noisy data (200 samples a
+    period at sigma 1e-4: "no underdamped oscillation"); steps 2-3 are unchanged.
+    """
     t, x, v = rec.t, rec.x, rec.v
     tau = phase.phase(t)
-    coef, h, _j, _e = arx(t, x, tau, arcs.sample_arc)
-    zeta, Omega = modal(coef[0], coef[1], h)
+    if prior is None:
+        coef, h, _j, _e = arx(t, x, tau, arcs.sample_arc)
+        zeta, Omega = modal(coef[0], coef[1], h)
+    else:
+        zeta, Omega = (float(a) for a in prior)
     start = arcs.start.copy()
     A, theta, X, V = _states(t, x, v, tau, start, arcs, zeta, Omega, phase)
     g = np.array([zeta, Omega, A, theta, 0.0, 0.5])
