@@ -4,6 +4,7 @@ and what a design on the compliant model buys there (docs/theory_contact.md sect
 and 15).
 
     PYTHONPATH=. python benchmarks/chart_contact.py          # about 3 min here
+    PYTHONPATH=. python benchmarks/chart_contact.py --hertz  # the Hertz stop only
 
 For each Delta d, c2, stop restitution r and friction level, the gains are the rigid
 design at that r (c1 from Eq. 38 for that c2, dynamics/design.py: the designer knows the
@@ -14,6 +15,10 @@ dynamics/continuation.continue_orbit, whose bifurcation detection reports and lo
 (Brent in the parameter) any multiplier crossing the unit circle. Then the failing set
 of section 15: the crossing located by the continuation, checked by bisection on
 max |lambda| = 1, and the gains of dynamics/spectral_design at three stiffnesses.
+The Hertz stop (section 19; ``--hertz``): the same continuation in log10 k_c (Hertz
+stiffness, at fixed Hunt-Crossley alpha) with alpha = (1 - r) / v- (Eq. C5: restitution r
+at the rigid controlled orbit's own impact velocity v-, the designer's r where the orbit
+hits), frictionless (friction is the Kelvin-Voigt stop's only).
 Writes benchmarks/out/contact/rho.png (git-ignored) and prints the tables.
 """
 
@@ -32,6 +37,7 @@ from grazing_control.dynamics.model import OneDOF
 from grazing_control.dynamics.shooting import find_periodic
 from grazing_control.dynamics.spectral_design import least_spectral_radius, spectral_radius
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
+from grazing_control.oscillator.hertz import HuntCrossley
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 
@@ -59,6 +65,29 @@ def plant(delta_d, c2, r, friction, k=1e8):
                             friction=Coulomb(friction, STATIC_RATIO * friction) if friction
                             else None)
     return model, rigid
+
+
+def hertz_plant(delta_d, c2, r, k=1e8):
+    """(rigid-designed model with a Hertz stop at stiffness k, alpha = (1 - r) / v- of the
+    rigid controlled orbit's impact; the rigid controlled orbit)."""
+    p = OscillatorParams(delta_d=delta_d, r=r)
+    gains = Gains(degenerate_c1(p, c2), c2)
+    rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
+    v_minus = rigid.impacts[0].v_minus
+    return CompliantOneDOF(p, gains, law=HuntCrossley.from_restitution(k, r, v_minus)), rigid
+
+
+def hertz_rows():
+    """The rigid design on the Hertz stop: largest |multiplier| against log10 k_c."""
+    rows = []
+    for dd in DELTAS:
+        for c2 in C2S:
+            model, rigid = hertz_plant(dd, c2, 0.68)
+            branch = continue_orbit(model, "log10_stiffness", DECADES, rigid.state)
+            rows.append((dd, c2, 0.68, f"H a={model.law.alpha:.4g}", rho(rigid.monodromy),
+                         branch))
+            print_row(rows[-1])
+    return rows
 
 
 def crossing_by_bisection(model, lo, hi, states):
@@ -93,7 +122,8 @@ def print_row(row):
     line = " ".join(f"{vals.get(float(d), math.nan):.3f}" for d in range(8, 0, -1))
     cross = ", ".join(f"{b.type} at 10^{b.value:.4f}" for b in br.bifurcations) or "none"
     contacts = f"{br.points[0].impacts}..{br.points[-1].impacts}"
-    print(f"{dd:8.0e} {c2:5.1f} {r:5.2f} {fr:6.3f} {r0:6.3f} | {line} | {cross} "
+    fr = f"{fr:6.3f}" if isinstance(fr, float) else fr
+    print(f"{dd:8.0e} {c2:5.1f} {r:5.2f} {fr} {r0:6.3f} | {line} | {cross} "
           f"(to 10^{br.points[-1].value:.2f}; contacts a period {contacts})", flush=True)
 
 
@@ -151,4 +181,9 @@ def figure(rows):
 if __name__ == "__main__":
     print(f"{'Delta d':>8} {'c2':>5} {'r':>5} {'F_f':>6} {'rigid':>6} | largest |multiplier| "
           "at log10 k_c = 8 7 6 5 4 3 2 1 | crossings (contacts a period at 1e8..1e1)")
-    main()
+    import sys
+
+    if "--hertz" in sys.argv[1:]:
+        hertz_rows()
+    else:
+        main()

@@ -351,9 +351,12 @@ class SimNode(Node):
                                "file describes a 1-DOF rig; give one of them")
         try:
             rig = load_rig(self.rig_file)
-            return rig, sim_values(rig, self.get_parameter("clock_drift").value)
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
+        try:
+            return rig, sim_values(rig, self.get_parameter("clock_drift").value)
+        except ParameterError as exc:
+            raise StartupError(f"{self.rig_file}: {exc}") from None
 
     def _descriptor(self, p: Parameter, declared: dict):
         """:func:`descriptor`; in an n-DOF scene with the model's forcing frequency (its

@@ -98,7 +98,8 @@ def test_bad_contact_parameters_name_the_parameter(bad, name):
 
 
 # ======================================================================= nodes
-def _node_scene(tmp_path, domain, collector, log10_k, periods=40):
+def _node_scene(tmp_path, domain, collector, log10_k, periods=40, offset=(1e-4, 0.0),
+                enable_after=0):
     """The failing set through sim_node and controller_node in lockstep: the rigid design
     (c2 = -1.5) from the first sample, the plant started 1e-4 off its controlled orbit
     (found by continuation from the rigid one on CompliantOneDOF). Returns the Pi2
@@ -118,14 +119,14 @@ def _node_scene(tmp_path, domain, collector, log10_k, periods=40):
                             rigid.state)
     orbit = branch.points[-1]
     assert orbit.value == pytest.approx(log10_k)
-    start = orbit.state + np.array([1e-4, 0.0])
+    start = orbit.state + np.array(offset)
     sim = {"delta_d": p.delta_d, "x0": float(p.x_ref + start[0]),
            "v0": float(p.v_ref + start[1]), "state_period": 0.0, "wait_for_subscribers": 1,
            "wait_for_recorder": True, **SCENE, "contact_stiffness": s.contact.law.stiffness,
            "contact_damping": s.contact.law.damping}
     res = launcher.run(STUDY, CONTROLLER, None, periods, domain_id=domain, timeout=120,
                        sim_overrides=sim, controller_overrides={
-                           "enable_after": 0, "c1": gains.c1, "c2": gains.c2},
+                           "enable_after": enable_after, "c1": gains.c1, "c2": gains.c2},
                        log_dir=tmp_path)
     assert res.ok, (res, (tmp_path / "sim_node.log").read_text()
                     if (tmp_path / "sim_node.log").exists() else "")
@@ -156,3 +157,24 @@ def test_a_node_scene_on_each_side_of_the_boundary(tmp_path, domain, collector, 
     assert (away < 2e-5) if holds else (away > 0.1), away
     expected += len(iterate(model, z)[2])   # the 40th period runs after the last sample
     assert contacts == expected   # every contact published as an impact
+
+
+@pytest.mark.timeout(300)
+def test_capture_through_the_nodes_below_the_boundary(tmp_path, domain, collector):
+    """docs/theory_contact.md section 15, "Capture": the control switched on far from the
+    orbit. At k_c = 10^0.5 (below the boundary 19.61) the plant runs uncontrolled for 10
+    periods from 0.3 off the controlled orbit (friction's own attractor, 19 contacts in 20
+    periods), then the rigid design (c2 = -1.5) captures it: each sample is the core's
+    map, free then controlled, to 1e-6, and the motion comes from 0.054 off the orbit at
+    the switch-on to 0.0051 in 30 controlled periods (the multiplier 0.918: 0.918^30 =
+    0.077; measured 0.094)."""
+    got, orbit, model, _ = _node_scene(tmp_path, domain, collector, 0.5, periods=40,
+                                       offset=(0.3, -0.2), enable_after=10)
+    free = CompliantOneDOF(model.params, Gains(0.0, 0.0), law=model.law, friction=model.friction)
+    z = got[0]
+    for k in range(1, len(got)):
+        z = iterate(free if k <= 10 else model, z)[0]
+        assert got[k] == pytest.approx(z, abs=1e-6), k
+    switch_on = np.linalg.norm(got[10] - orbit.state)
+    away = np.linalg.norm(got[-1] - orbit.state)
+    assert switch_on > 0.03 and away < 0.01 and away < switch_on / 5, (switch_on, away)

@@ -279,8 +279,10 @@ def _check_run_files(args) -> None:
     if getattr(args, "rig", None) is not None:     # the rig file, validated once here
         from grazing_control.plant.rig import load_rig
 
+        from grazing_control.ros.rig_boundary import sim_values
+
         try:
-            load_rig(args.rig)
+            sim_values(load_rig(args.rig))   # what sim_node refuses (a compliant stop)
         except (ParameterError, YamlFileError) as exc:
             raise ParameterError(f"--rig {exc}") from None
 

@@ -221,14 +221,16 @@ def rig_report(rig, path, args) -> dict:
                "actuator": {"pulse_width_s": rig.actuator.pulse_width,
                             "force_limit_N": rig.actuator.force_limit,
                             "latency_s": rig.actuator.latency},
-               "budget_s": rig.budget, "section_time_s": rig.section_time()},
+               "budget_s": rig.budget, "section_time_s": rig.section_time(),
+               "stop": _stop_si(rig)},
         "scales": {"time_s": s.time, "length_m": s.length, "velocity_m_per_s": s.velocity,
                    "force_N": s.force},
         "dimensionless": {"zeta": p.zeta, "r": p.r, "omega": p.omega, "delta_d": p.delta_d,
                           "d_star": p.d_star, "d": p.d, "tau2": p.tau2,
                           "pi2_offset": p.pi2_offset, "period": p.period,
                           "samples_per_period": n,
-                          **{k: v for k, v in dl.items() if k != "sensor_velocity"}},
+                          **{k: v for k, v in dl.items() if k != "sensor_velocity"},
+                          "stop": rig.contact_values()},
         "grazing": {"d_star": p.d_star, "gap_at_grazing_m": p.d_star * s.length,
                     "gap_m": rig.gap, "gap_minus_grazing_m": p.delta_d * s.length},
         "design": {"c2_from": how, "c1": c1, "c2": c2,
@@ -305,6 +307,41 @@ def _g(v, spec=".6g") -> str:
     return "none" if v is None else format(v, spec)
 
 
+def _stop_si(rig) -> dict:
+    """The rig's stop in SI (docs/rig.md, "The stop")."""
+    st = rig.stop
+    if st.type == "rigid":
+        return {"type": "rigid"}
+    if st.type == "hertz":
+        return {"type": "hertz", "stiffness_N_per_m1_5": st.stiffness,
+                "damping_s_per_m": st.damping}
+    return {"type": "kelvin_voigt", "stiffness_N_per_m": st.stiffness,
+            "damping_N_s_per_m": st.damping, "friction_N": st.friction,
+            "friction_static_N": st.friction_static}
+
+
+def _stop_lines(si: dict, dl: dict) -> list:
+    """The stop's lines of the text report: SI, then the dimensionless contact."""
+    st = si["stop"]
+    if st["type"] == "rigid":
+        return ["  stop               = rigid wall (restitution r)"]
+    if st["type"] == "hertz":
+        law = (f"hertz K_H = {st['stiffness_N_per_m1_5']:.6g} N/m^1.5, Hunt-Crossley "
+               f"A = {st['damping_s_per_m']:.6g} s/m")
+        model = (f"k_c = K_H sqrt(l)/k = {dl['contact_stiffness']:.6g}, alpha = A omega_n l = "
+                 f"{dl['contact_damping']:.6g}")
+    else:
+        law = (f"kelvin_voigt K = {st['stiffness_N_per_m']:.6g} N/m, C = "
+               f"{st['damping_N_s_per_m']:.6g} N*s/m, friction {st['friction_N']:.6g} N "
+               f"(static {st['friction_static_N']:.6g} N)")
+        model = (f"k_c = K/k = {dl['contact_stiffness']:.6g}, c_c = C/(m omega_n) = "
+                 f"{dl['contact_damping']:.6g}, friction F/(k l) = {dl['friction']:.6g} "
+                 f"(static {dl['friction_static']:.6g})")
+    return [f"  stop               = {law}",
+            f"                       dimensionless: {model}; not simulated in a rig scene "
+            "(realtime)"]
+
+
 def format_report(r: dict) -> str:
     """The text of ``grazing rig`` (docs/rig.md explains each line)."""
     si, sc, dl, gz = r["si"], r["scales"], r["dimensionless"], r["grazing"]
@@ -332,6 +369,7 @@ def format_report(r: dict) -> str:
         f"{_g(act['force_limit_N'] or None, '.4g')} N, latency {act['latency_s'] * 1e3:.4g} ms",
         f"  controller budget  = {si['budget_s'] * 1e3:.4g} ms (section to pulse centre); first "
         f"Pi2 section at rig time {si['section_time_s'] * 1e3:.6g} ms",
+        *_stop_lines(si, dl["stop"]),
         "scales",
         f"  time 1/omega_n     = {sc['time_s']:.6g} s",
         f"  length l = F0/k    = {sc['length_m']:.6g} m",

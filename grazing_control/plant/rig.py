@@ -23,6 +23,24 @@ naming the field); :class:`Rig` is the immutable rig, with :attr:`Rig.scales`,
 :meth:`Rig.params` (the :class:`OscillatorParams`), :meth:`Rig.dimensionless` (the
 sensor, actuator and timing in the model's units), and :func:`rig_with_model`, the
 inverse used by ``grazing identify`` (a fitted model written back as a rig file).
+
+The stop (the optional ``stop`` section, :class:`Stop`; issue 31) is the rigid wall of
+the equation above by default, or a compliant stop pushing on the mass with a force F_c
+while x > g, with Coulomb friction F_f on the guides (Kelvin-Voigt only):
+
+    kelvin_voigt:  F_c = K (x - g) + C x',
+    hertz:         F_c = K_H (x - g)^{3/2} (1 + (3/2) A x')      (Hunt-Crossley),
+
+K in N/m, C in N s/m, K_H in N/m^{3/2}, A in s/m, F_f in N. Divided by k l (the force
+scale) with x = l x~, x' = omega_n l x~' they are the dimensionless laws of
+docs/theory_contact.md (C1, C6) with
+
+    k_c = K / k,   c_c = C omega_n / k = C / (m omega_n) = C / sqrt(k m),
+    k_c = K_H sqrt(l) / k  (Hertz: K_H l^{3/2} / (k l)),   alpha = A omega_n l,
+    F_f~ = F_f / (k l),
+
+(:meth:`Rig.contact_values`, derived in docs/rig.md, "The stop"). ``restitution`` stays
+the rigid model's r, the one the design is made for; the stop is the plant's.
 """
 
 from __future__ import annotations
@@ -31,9 +49,10 @@ import math
 from dataclasses import dataclass, replace
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.plant.contact_plant import CONTACTS
 from grazing_control.support.units import SI_UNIT, UnitError, format_quantity, quantity
 
-__all__ = ["RigError", "Scales", "Sensor", "Actuator", "Rig", "load_rig", "rig_from_dict",
+__all__ = ["RigError", "Scales", "Sensor", "Actuator", "Stop", "Rig", "load_rig", "rig_from_dict",
            "rig_to_dict", "rig_with_model", "MIN_SAMPLES_PER_PERIOD", "MAX_SAMPLES_PER_PERIOD",
            "MAGNITUDE"]
 
@@ -105,6 +124,20 @@ class Actuator:
 
 
 @dataclass(frozen=True)
+class Stop:
+    """The stop (module docstring): ``type`` one of plant.contact_plant.CONTACTS;
+    ``stiffness`` K (N/m; Hertz K_H in N/m^1.5), ``damping`` C (N s/m; Hertz A in s/m),
+    ``friction`` F_f and ``friction_static`` F_s >= F_f (N; Kelvin-Voigt only, 0: none).
+    The rigid wall has none of them (0)."""
+
+    type: str = "rigid"
+    stiffness: float = 0.0
+    damping: float = 0.0
+    friction: float = 0.0
+    friction_static: float = 0.0
+
+
+@dataclass(frozen=True)
 class Rig:
     """A rig in SI units (module docstring). ``forcing`` 'force' (amplitude in N) or
     'base' (amplitude in m, the stop on the frame); ``phase`` the forcing phase at the
@@ -124,6 +157,7 @@ class Rig:
     actuator: Actuator
     budget: float
     pi2_offset: float = math.pi / 2
+    stop: Stop = Stop()
 
     @property
     def stiffness(self) -> float:
@@ -202,6 +236,23 @@ class Rig:
             "time_scale": self.omega_n,
         }
 
+    def contact_values(self) -> dict:
+        """The stop as sim_node's dimensionless parameters (docs/nodes.md; module
+        docstring for the scaling): contact, contact_stiffness k_c, contact_damping
+        (c_c, or Hunt-Crossley alpha for hertz), friction and friction_static (F / k l).
+        The rigid wall gives contact 'rigid' only."""
+        st = self.stop
+        if st.type == "rigid":
+            return {"contact": "rigid"}
+        k, s = self.stiffness, self.scales
+        if st.type == "hertz":
+            return {"contact": "hertz", "contact_stiffness": st.stiffness * math.sqrt(s.length) / k,
+                    "contact_damping": st.damping * s.velocity,
+                    "friction": 0.0, "friction_static": 0.0}
+        return {"contact": "kelvin_voigt", "contact_stiffness": st.stiffness / k,
+                "contact_damping": st.damping / (self.mass * self.omega_n),
+                "friction": st.friction / s.force, "friction_static": st.friction_static / s.force}
+
     # ------------------------------------------------------------------ SI of results
     def gains_si(self, c1: float, c2: float) -> dict:
         """The law Delta v~ = c1 Delta x~ + c2 Delta v~ in SI: Delta v = c1_si Delta x +
@@ -227,11 +278,12 @@ class Rig:
 
 # ---------------------------------------------------------------------- reading
 _TOP = {"mass", "natural_frequency", "stiffness", "damping_ratio", "damping", "restitution",
-        "gap", "forcing", "sensor", "actuator", "controller"}
+        "gap", "forcing", "sensor", "actuator", "controller", "stop"}
 _FORCING = {"type", "amplitude", "frequency", "phase", "stop"}
 _SENSOR = {"rate", "noise", "resolution", "latency", "measures", "velocity_noise"}
 _ACTUATOR = {"pulse_width", "force_limit", "latency", "force_constant", "bandwidth"}
 _CONTROLLER = {"budget", "pi2_offset"}
+_STOP = {"type", "stiffness", "damping", "friction", "friction_static"}
 
 
 def load_rig(path) -> Rig:
@@ -396,9 +448,56 @@ def rig_from_dict(doc) -> Rig:
                     default=math.pi / 2)
 
     rig = Rig(mass, omega_n, zeta, r, gap, kind, amplitude, frequency, phase, sensor,
-              actuator, budget, pi2_offset)
+              actuator, budget, pi2_offset, _stop(doc))
     _check_model(rig, doc)
+    _check_stop(rig, doc)
     return rig
+
+
+def _stop(doc) -> Stop:
+    """The ``stop`` section (default: the rigid wall); each field with its unit."""
+    st = _section(doc, "stop", _STOP, required=False)
+    kind = st.get("type", "rigid")
+    if kind not in CONTACTS:
+        raise RigError(f"stop.type={kind!r} is invalid: valid values are {', '.join(CONTACTS)}")
+    if kind == "rigid":
+        given = sorted(k for k in _STOP - {"type"} if st.get(k) is not None)
+        if given:
+            raise RigError(f"stop.{given[0]} is a compliant stop's field: remove it for "
+                           "stop.type rigid (the wall's law is restitution)")
+        return Stop()
+    hertz = kind == "hertz"
+    stiffness = _q(st, "stop.", "stiffness", "hertz_stiffness" if hertz else "stiffness",
+                   ok=lambda v: v > 0.0, valid="stop.stiffness > 0")
+    damping = _q(st, "stop.", "damping", "hertz_damping" if hertz else "damping",
+                 ok=lambda v: v >= 0.0, valid="stop.damping >= 0", default=0.0)
+    if hertz:
+        for key in ("friction", "friction_static"):
+            if st.get(key) is not None:
+                raise RigError(f"stop.{key} is invalid with stop.type hertz: friction is "
+                               "simulated with kelvin_voigt only")
+        return Stop(kind, stiffness, damping)
+    friction = _q(st, "stop.", "friction", "force", ok=lambda v: v >= 0.0,
+                  valid="stop.friction >= 0 N (0: none)", default=0.0)
+    static = _q(st, "stop.", "friction_static", "force", ok=lambda v: v >= friction,
+                valid=f"stop.friction_static >= stop.friction = {friction!r} N",
+                default=friction)
+    return Stop(kind, stiffness, damping, friction, static)
+
+
+def _check_stop(rig: Rig, doc) -> None:
+    """A Kelvin-Voigt stop is an underdamped contact (docs/theory_contact.md C2):
+    (2 zeta + c_c)^2 < 4 (1 + k_c) and c_c < 2 sqrt(k_c), in the rig's units."""
+    if rig.stop.type != "kelvin_voigt":
+        return
+    v = rig.contact_values()
+    kc, cc = v["contact_stiffness"], v["contact_damping"]
+    # the largest C of both conditions, in N s/m (C = c_c m omega_n)
+    limit = min(2.0 * math.sqrt(1.0 + kc) - 2.0 * rig.zeta, 2.0 * math.sqrt(kc))
+    if not cc < limit:
+        raise RigError(f"stop.damping={doc['stop']['damping']!r} is invalid: the contact must "
+                       "be underdamped (docs/theory_contact.md C2): valid range is "
+                       f"stop.damping < {limit * rig.mass * rig.omega_n:.6g} N*s/m")
 
 
 def _velocity(s):
@@ -480,13 +579,23 @@ def rig_to_dict(rig: Rig) -> dict:
         actuator["force_constant"] = q(a.force_constant, "force_constant")
     if a.bandwidth > 0.0:
         actuator["bandwidth"] = q(a.bandwidth, "frequency")
-    return {"mass": q(rig.mass, "mass"),
-            "natural_frequency": q(rig.natural_frequency, "frequency"),
-            "damping_ratio": rig.zeta, "restitution": rig.restitution,
-            "gap": q(rig.gap, "length"), "forcing": forcing, "sensor": sensor,
-            "actuator": actuator,
-            "controller": {"budget": q(rig.budget, "time"),
-                           "pi2_offset": q(rig.pi2_offset, "angle")}}
+    out = {"mass": q(rig.mass, "mass"),
+           "natural_frequency": q(rig.natural_frequency, "frequency"),
+           "damping_ratio": rig.zeta, "restitution": rig.restitution,
+           "gap": q(rig.gap, "length"), "forcing": forcing, "sensor": sensor,
+           "actuator": actuator,
+           "controller": {"budget": q(rig.budget, "time"),
+                          "pi2_offset": q(rig.pi2_offset, "angle")}}
+    st = rig.stop
+    if st.type == "hertz":
+        out["stop"] = {"type": "hertz", "stiffness": q(st.stiffness, "hertz_stiffness"),
+                       "damping": q(st.damping, "hertz_damping")}
+    elif st.type == "kelvin_voigt":
+        out["stop"] = {"type": "kelvin_voigt", "stiffness": q(st.stiffness, "stiffness"),
+                       "damping": q(st.damping, "damping"),
+                       "friction": q(st.friction, "force"),
+                       "friction_static": q(st.friction_static, "force")}
+    return out
 
 
 def rig_with_model(rig: Rig, p: OscillatorParams) -> Rig:

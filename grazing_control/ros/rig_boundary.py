@@ -63,7 +63,17 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
     is time_scale = omega_n, here omega_n / (1 + clock_drift) so that the simulated rig
     clock drifts by ``clock_drift`` against ROS time (:class:`SimulatedClock`).
     ParameterError (one line naming the rig field) for what the simulator does not
-    model: a velocity noise other than the position noise, an actuator latency."""
+    model: a velocity noise other than the position noise, an actuator latency, a
+    compliant stop. A rig scene runs in realtime with the correction as a force pulse
+    after the budget; the compliant plant (plant.contact_plant) gives one period with the
+    correction as a velocity jump on Pi2 in lockstep only (docs/theory_contact.md §16),
+    so a rig whose ``stop`` is not rigid is refused here, when sim_node loads it; its
+    stop is read and converted (Rig.contact_values) for the core's tools."""
+    if rig.stop.type != "rigid":
+        raise ParameterError(
+            f"stop.type={rig.stop.type!r} is not simulated in a rig scene: valid there is "
+            "rigid (a compliant stop runs in lockstep with the correction on Pi2 only; the "
+            "rig scene is realtime with force pulses: docs/rig.md, 'The stop')")
     p, d = rig.params(), rig.dimensionless()
     if d["sensor_velocity"] and d["sensor_velocity_noise"] != d["sensor_noise"]:
         raise ParameterError(

@@ -44,12 +44,15 @@ DIMENSIONS = {
     "stiffness": {"N/m": 1.0, "kN/m": 1e3, "N/mm": 1e3},
     "damping": {"N*s/m": 1.0, "N s/m": 1.0, "Ns/m": 1.0, "kg/s": 1.0},
     "force_constant": {"N/A": 1.0},
+    "hertz_stiffness": {"N/m^1.5": 1.0, "N/m^(3/2)": 1.0, "N/m**1.5": 1.0},
+    "hertz_damping": {"s/m": 1.0},
     "angle": {"rad": 1.0, "deg": math.pi / 180.0},
 }
 
 #: The SI unit each dimension is returned in (frequency: Hz).
 SI_UNIT = {"mass": "kg", "length": "m", "time": "s", "frequency": "Hz", "force": "N",
-           "stiffness": "N/m", "damping": "N*s/m", "force_constant": "N/A", "angle": "rad"}
+           "stiffness": "N/m", "damping": "N*s/m", "force_constant": "N/A", "angle": "rad",
+           "hertz_stiffness": "N/m^1.5", "hertz_damping": "s/m"}
 
 _NUMBER = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*$")
 
