@@ -101,14 +101,15 @@ def no_process_outlives_its_test(request):
 #: launcher, replay, colcon) or DDS participants: one xdist group, one scene at a time.
 SCENE_MODULES = frozenset({
     "test_actuation", "test_bagtools_analyze", "test_bagtools_replay", "test_cli",
-    "test_cli_hostile", "test_closed_loop", "test_controller_node", "test_deadline_misses",
+    "test_cli_hostile", "test_closed_loop", "test_composed", "test_contact_plant",
+    "test_controller_node", "test_deadline_misses",
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
     "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_parameter_files_hostile",
-    "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_scene",
+    "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_scene", "test_rig_stop",
     "test_scheduling",
     "test_signals",
-    "test_sim_node", "test_test_cleanup",
+    "test_sim_node", "test_stop_selection", "test_stream_block", "test_test_cleanup",
 })
 
 def pytest_configure(config):

@@ -91,9 +91,11 @@ def _run(argv, cwd):
                           capture_output=True, text=True, timeout=120)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
-    """Run every command of this module once, a few at a time."""
+    """Run every command of this module once, a few at a time. Session-scoped: under xdist
+    the module's fixture was set up twice in one run (40 s each; the worker tore it down
+    after the module's first test), and nothing in it depends on the module's lifetime."""
     tmp = tmp_path_factory.mktemp("cli")
     out_ok = tmp / "ok" / "controller.yaml"
     out_ok.parent.mkdir()

@@ -125,6 +125,7 @@ def test_design_reports_the_position_only_noise_gain_of_the_chosen_estimator(cap
         r = estimate_covariance(p, g, 200, estimator=estimator)
         assert doc["noise_gain_position_only"] == pytest.approx(
             design_noise_gain(p, -0.3, 0.0, measurement=r), rel=1e-12)
-        assert doc["position_only_sensor"] == {"samples_per_period": 200, "estimator": estimator}
+        assert doc["position_only_sensor"] == {"samples_per_period": 200, "estimator": estimator,
+                                               "lead": 0.0}
         gains[estimator] = doc["noise_gain_position_only"]
     assert gains["model"] < gains["arc"] < gains["nearest"] / 50
