@@ -563,22 +563,28 @@ class ControllerNode(Node):
             "stream mode: answer a section this much simulation time before its last "
             "sample (those samples are not used); 0: with its last sample", 0.0, FINITE,
             read_only=True, constraints="answer_lead < T = 2 pi / omega"))
-        d("pulse_width", 0.0, float_descriptor(
+        width = d("pulse_width", 0.0, float_descriptor(
             "how sim_node acts (its pulse_width): a force pulse of this width centred at the "
             "actuation time, modelled by the estimator and the prediction; 0: a velocity "
-            "kick", 0.0, FINITE, read_only=True, constraints="pulse_width < T; with "
-            "rig_file the rig's"))
+            "kick", 0.0, below(2.0 * math.pi / omega), read_only=True,
+            constraints="pulse_width < T = 2 pi / omega; with "
+            "rig_file the rig's")).value
         d("force_limit", 0.0, float_descriptor(
             "sim_node's force_limit on the pulse's force, modelled; 0: none", 0.0, FINITE,
             read_only=True, constraints="with rig_file the rig's"))
+        # the actuator acts on a pulse: without one (pulse_width 0) its parameters are
+        # described as [0, 0], as consistency_window without a test (a range end is
+        # always accepted, tests/test_node_parameters.py)
+        pulsed = width > 0.0
         d("actuator_bandwidth", 0.0, float_descriptor(
             "sim_node's first-order actuator (issue 29): bandwidth 1 / tau_a in radians per "
             "simulation time unit, integrated exactly by the estimator and the prediction; "
-            "0: ideal", 0.0, MAX_BANDWIDTH, read_only=True,
+            "0: ideal", 0.0, MAX_BANDWIDTH if pulsed else 0.0, read_only=True,
             constraints="> 0 only with pulse_width > 0; with rig_file the rig's"))
         d("actuator_latency", 0.0, float_descriptor(
             "the actuator's latency from the command to the force, simulation time; 0: none",
-            0.0, FINITE, read_only=True, constraints="> 0 only with pulse_width > 0; "
+            0.0, FINITE if pulsed else 0.0, read_only=True,
+            constraints="> 0 only with pulse_width > 0; "
             "actuation_delay + pulse_width / 2 + actuator_latency < T"))
         d("executor", "events", string_descriptor(
             "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
