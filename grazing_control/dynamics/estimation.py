@@ -41,7 +41,7 @@ from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
-from .actuation import pulse_start
+from .actuation import pulse_force, pulse_start
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
            "nearest_estimate", "arc_fit", "detect_impact", "correction_legs", "trajectory",
@@ -246,13 +246,26 @@ def correction_legs(correction: float, delay: float, duration: float, width: flo
             raise ParameterError(f"pulse_width={width!r} is invalid: valid range is "
                                  f"0 <= pulse_width < T = {duration!r}")
         start = pulse_start(duration, delay, width)
-        force = max(-force_limit, min(force_limit, correction / width))
+        force = pulse_force(correction, width, force_limit)
         legs = [(0.0, start, 0.0, 0.0), (start, start + width, 0.0, force),
                 (start + width, duration, 0.0, 0.0)]
         return [leg for leg in legs if leg[1] > leg[0]]
     if delay > 0.0:
         return [(0.0, delay, 0.0, 0.0), (delay, duration, correction, 0.0)]
     return [(0.0, duration, correction, 0.0)]
+
+
+def _through_impact(p: OscillatorParams, q: OscillatorParams, m, g, h: float, imp,
+                    wall: bool):
+    """The Jacobian ``m`` and the wall's sensitivity ``g`` carried by the free flow over
+    ``h`` and through the impact ``imp`` of the oscillator ``q`` (the wall where a force
+    shifts it): M <- S Phi(h) M, g <- S Phi(h) g + (I - S) e1 ((E3), (E8))."""
+    phi = np.array(transition_matrix(p.zeta, h)).reshape(2, 2)
+    sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
+    m = sal @ phi @ m
+    if wall:
+        g = sal @ (phi @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
+    return m, g
 
 
 def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
@@ -316,11 +329,7 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
             if imp.sticking:
                 raise ValueError("the model's motion sticks to the wall: no fit")
             ti = start + imp.dt
-            f = np.array(transition_matrix(p.zeta, ti - t0)).reshape(2, 2)
-            sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
-            m = sal @ f @ m
-            if wall:
-                g = sal @ (f @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
+            m, g = _through_impact(p, q, m, g, ti - t0, imp, wall)
             psi = imp.phase - p.lag
             z = (p.d - p.amplitude * math.cos(psi),
                  imp.v_plus + p.amplitude * p.omega * math.sin(psi))
@@ -361,8 +370,6 @@ def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration
     reaches the lag ``actuator.latency`` later, and must end within the period, as in
     the plant's :func:`grazing_control.dynamics.actuator.actuated_step` (its legs,
     empty ones included). ParameterError naming pulse_width or actuator_latency."""
-    from .actuation import pulse_force
-
     if not (math.isfinite(width) and 0.0 < width < duration):
         raise ParameterError(f"pulse_width={width!r} is invalid with an actuator: valid range "
                              f"is 0 < pulse_width < T = {duration!r}")
@@ -430,12 +437,8 @@ def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, for
                 imp = flow.impacts[i - 1]
                 ti = start + imp.dt
                 force = u + (c * math.exp(-imp.dt / tau_a) if tau_a > 0.0 else 0.0)
-                q = p.with_(delta_d=p.delta_d - force)
-                phi = np.array(transition_matrix(p.zeta, ti - t0)).reshape(2, 2)
-                sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
-                m = sal @ phi @ m
-                if wall:
-                    g = sal @ (phi @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
+                m, g = _through_impact(p, p.with_(delta_d=p.delta_d - force), m, g, ti - t0,
+                                       imp, wall)
                 t0 = ti
                 impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
             else:

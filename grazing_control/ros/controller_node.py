@@ -618,10 +618,9 @@ class ControllerNode(Node):
         # how a correction acts in the plant: a rig's force pulse (its estimator and
         # prediction integrate it, dynamics.estimation.trajectory), else the kick
         self.pulse = (0.0, math.inf, None)
+        # (a rig file's are the defaults: rig_boundary.controller_values; its actuator's
+        # latency is in the budget)
         pulse = {k: self.get_parameter(k).value for k in PULSE_KEYS}
-        if self.rig is not None:        # the rig's (its latency is in the budget)
-            dims = self.rig.dimensionless()
-            pulse = {**pulse, **{k: dims[k] for k in PULSE_KEYS[:3]}}
         try:
             if self.model_file:
                 self.law = self._ndof_law(self._values(), self._gains())

@@ -108,11 +108,13 @@ def check_rig_values(rig_file: str, rig_values: dict, values: dict, free=()) -> 
 #: The controller's parameters that a rig file sets (:func:`controller_values`).
 CONTROLLER_KEYS = ("zeta", "r", "omega", "pi2_offset", "delta_d", "actuation_delay", "c1",
                    "c2", "x_ref", "v_ref", "pi2_source", "answer_after_section",
-                   "answer_lead", "sensor_noise", "state_period")
+                   "answer_lead", "sensor_noise", "state_period", "pulse_width", "force_limit",
+                   "actuator_bandwidth")
 
 
 def controller_values(rig: Rig, c2: float) -> dict:
-    """The controller's parameters of ``rig``: its model and sensor in the model's units,
+    """The controller's parameters of ``rig``: its model, sensor and actuator (the pulse,
+    its force limit and bandwidth, which the estimator integrates) in the model's units,
     the stream estimator answering each section with its last sample (the simulated rig
     keeps an answer that comes before its section), and the design for the budget's
     delay: c1 from the degenerate condition (Eq. 38 / (D5)) for ``c2``, or with ``c2``
@@ -129,8 +131,9 @@ def controller_values(rig: Rig, c2: float) -> dict:
             "delta_d": p.delta_d, "actuation_delay": delay, "c1": degenerate_c1(p, c2, delay),
             "c2": float(c2), "x_ref": math.nan, "v_ref": math.nan, "pi2_source": "stream",
             "answer_after_section": False, "answer_lead": answer_lead(rig),
-            "sensor_noise": d["sensor_noise"],
-            "state_period": d["state_period"]}
+            "sensor_noise": d["sensor_noise"], "state_period": d["state_period"],
+            "pulse_width": d["pulse_width"], "force_limit": d["force_limit"],
+            "actuator_bandwidth": d["actuator_bandwidth"]}
 
 
 def answer_lead(rig: Rig) -> float:
