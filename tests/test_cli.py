@@ -76,6 +76,8 @@ BAD_CASES = {
     "pi2_offset": (["design", "--c2", "-1", "--pi2-offset", "7"], r"pi2[-_]offset"),
     "actuator_without_pulse": (["design", "--c2", "-1", "--actuator-bandwidth", "2"],
                                r"pulse_width=0.0 is invalid with an actuator: valid range"),
+    "sensor_lead_beyond_T": (["design", "--c2", "-1", "--delta-d", "-5e-6", "--sensor-lead",
+                              "1e308"], r"sensor_lead=1e\+308 is invalid: valid range is"),
     "c1_without_c2": (["orbit", "--delta-d", "-1e-6", "--c1", "0.3"], r"\bc1\b"),
     "orbit_positive_delta_d": (["orbit", "--delta-d", "1e-5"], r"delta[-_]d"),
     "continue_positive_start": (["continue", "--from", "1e-3", "--to", "-1e-6"], r"\bstart\b|--from"),

@@ -427,3 +427,19 @@ def test_a_controller_given_its_own_rig_or_model_file_keeps_it():
         assert over["controller_node"][key] == "/other.yaml"
         over = scene_nodes.scene_overrides(None, **{kw: "plant.yaml"})
         assert over["controller_node"][key] == os.path.abspath("plant.yaml")
+
+
+def test_grazing_run_refuses_a_non_empty_bag_folder_before_any_node_starts(tmp_path):
+    """The recorder refuses a folder that is not empty (status 2), but only after every
+    node had started (the scene failed with status 1 half a second later): the command
+    line now says so at once, in one line naming --bag, and starts nothing."""
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "old.mcap").write_bytes(b"")
+    done = subprocess.run([sys.executable, "-m", "grazing_control.cli", "run", "--periods",
+                           "5", "--bag", str(bag)], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and done.stdout == "", done.stderr
+    assert done.stderr.count("\n") == 1
+    assert f"--bag {bag} is invalid: the folder is not empty" in done.stderr
+    assert [p.name for p in bag.iterdir()] == ["old.mcap"]

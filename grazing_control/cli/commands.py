@@ -285,6 +285,11 @@ def _check_run_files(args) -> None:
             sim_values(load_rig(args.rig))   # what sim_node refuses (a compliant stop)
         except (ParameterError, YamlFileError) as exc:
             raise ParameterError(f"--rig {exc}") from None
+    bag = getattr(args, "bag_dir", None)
+    if bag is not None and os.path.isdir(bag) and os.listdir(bag):
+        # the recorder refuses it (its status 2), but only after every node has started
+        raise ParameterError(f"--bag {bag} is invalid: the folder is not empty (a bag is "
+                             "written into a new or empty folder; nothing is overwritten)")
 
 
 def cmd_run(args):

@@ -237,6 +237,9 @@ def _noise_report(args, p, point):
 
     dd = _noise_delta_d(args)
     q = p.with_(delta_d=dd)
+    if not args.sensor_lead < q.period:     # (the stream estimator's answer_lead range)
+        raise ParameterError(f"sensor_lead={args.sensor_lead!r} is invalid: valid range is "
+                             f"0 <= sensor_lead < T = {q.period!r}")
     gain = design_noise_gain(q, point.c2, point.delay)
     out = {"noise_gain": gain if math.isfinite(gain) else None, "noise_gain_delta_d": dd}
     # the position-only sensor (issue 15 section 3): the estimate's covariance per unit
