@@ -8,7 +8,6 @@ A realtime bag and a bag whose recorder was SIGKILLed are recorded in the tests.
 """
 
 import os
-import random
 import signal
 import time
 
@@ -28,11 +27,11 @@ from grazing_control.oscillator.params import OscillatorParams             # noq
 from grazing_control.dynamics.simulate import simulate                   # noqa: E402
 
 from bagtools_helpers import BAGS                               # noqa: E402
-from test_closed_loop import NO_WATCHDOG                          # noqa: E402
+# a claimed domain (launcher.claim_domain): a random one collided with a scene on
+# the other worker (2 reruns of the replays in a fresh clone)
+from test_closed_loop import NO_WATCHDOG, new_domain              # noqa: E402
 
 
-def new_domain():
-    return random.SystemRandom().randrange(101, 232)
 
 
 def test_replay_with_the_recorded_gains_is_bit_identical_through_both_nodes(tmp_path):

@@ -158,8 +158,7 @@ def test_sim_node_runs_a_map_fidelity_in_lockstep(tmp_path):
 
     write_controller_yaml(yaml, p, G)
     bag = tmp_path / "bag"
-    run_scene(p, yaml, bag, periods=60, enable_after=30, timeout=120,
-              domain_id=random.SystemRandom().randrange(101, 232),
+    run_scene(p, yaml, bag, periods=60, enable_after=30, timeout=120,   # a claimed domain
               sim_overrides={"fidelity": "zdm2"})
     scene = scene_from_bag(bag)
     core = simulate(p, 60, gains=G, control_after=30, fidelity="zdm2")
