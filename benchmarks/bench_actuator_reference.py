@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from grazing_control.dynamics.actuation import pulse_start  # noqa: E402
+from grazing_control.dynamics.simulation.actuation import pulse_start  # noqa: E402
 from grazing_control.oscillator.flow import to_physical  # noqa: E402
 from test_plant_actuator import P, run_case, seeded_case  # noqa: E402
 

@@ -43,10 +43,10 @@ sys.path.insert(0, str(REPO))
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.ros.recording import BagWriter  # noqa: E402
-from grazing_control.dynamics.simulate import simulate  # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 T = TS.types

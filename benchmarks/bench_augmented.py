@@ -8,10 +8,10 @@ augmented one (issue 29), 3 x 300 periods each, the minimum (docs/benchmarks.md,
 import os
 import time
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import simulate_stream
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import simulate_stream
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel
 

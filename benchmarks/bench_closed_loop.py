@@ -50,9 +50,9 @@ sys.path.insert(0, str(ROOT))
 
 from grazing_control.ros import launcher  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
-from grazing_control.dynamics.simulate import simulate  # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 
 STUDY = ROOT / "config" / "study.yaml"
 CONTROLLER = ROOT / "config" / "controller.yaml"

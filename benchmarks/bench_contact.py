@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from grazing_control.dynamics.simulate import core_period_step
+from grazing_control.dynamics.simulation.simulate import core_period_step
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, compliant_period_step
 from grazing_control.oscillator.hertz import HuntCrossley, hertz_period_step
 from grazing_control.oscillator.params import OscillatorParams

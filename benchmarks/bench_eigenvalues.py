@@ -37,10 +37,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
-from grazing_control.dynamics.orbits import find_branch_phase, multipliers, orbit_11  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.orbits.orbits import find_branch_phase, multipliers, orbit_11  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
-from grazing_control.dynamics.perturbation import (characteristic_roots, delta2_from_delta_d,
+from grazing_control.dynamics.maps.perturbation import (characteristic_roots, delta2_from_delta_d,
                                                    normal_form_fixed_point,
                                                    perturbation_multipliers,
                                                    series_coefficients)

@@ -2,7 +2,7 @@
 
 One position-only stream (sigma = 1e-4, the controlled 1/1 orbit at Delta d = -5e-6,
 c2 = -0.3) at 50 and 200 samples per period is fed to a StreamEstimator per estimator
-(grazing_control.dynamics.stream), sample by sample as the controller node does; the
+(grazing_control.dynamics.estimation.stream), sample by sample as the controller node does; the
 CPU time of the whole feed divided by the number of sections is the cost of one Pi2
 estimate, including the per-sample bookkeeping. All in one process, the nearest
 estimator as the baseline of the ratio, best of --repeat runs. Also the prediction of
@@ -19,10 +19,10 @@ import time
 
 import numpy as np
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import trajectory
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import StreamEstimator, predict_section
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import trajectory
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel

@@ -3,7 +3,7 @@
 Side by side in one process, on the same scenes (study parameters, start at X** on
 Pi2, ``--periods`` forcing periods):
 
-* ``exact``       grazing_control.dynamics.simulate.simulate: closed-form flow between impacts,
+* ``exact``       grazing_control.dynamics.simulation.simulate.simulate: closed-form flow between impacts,
                   certified impact detection (the project's engine);
 * ``DOP853 / RK45 at rtol 1e-6, 1e-9, 1e-12`` (atol = 1e-3 rtol): solve_ivp on
   x'' + 2 zeta x' + x = cos(omega t + tau2) in physical coordinates with a terminal
@@ -51,7 +51,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
-from grazing_control.dynamics.simulate import simulate  # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 from reference import RefModel  # noqa: E402
 
 METHODS = [(m, rtol) for m in ("DOP853", "RK45") for rtol in (1e-6, 1e-9, 1e-12)]

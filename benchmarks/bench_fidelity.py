@@ -28,11 +28,11 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
-from grazing_control.dynamics.fidelity import period_step  # noqa: E402
-from grazing_control.dynamics.orbits import orbit_11  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.simulation.fidelity import period_step  # noqa: E402
+from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
-from grazing_control.dynamics.simulate import simulate  # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 from reference import RefModel  # noqa: E402
 
 SCENES = (-1e-4, -1e-6, -1e-8)

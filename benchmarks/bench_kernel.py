@@ -3,7 +3,7 @@
 Side by side in one process, on the study's scenes (parameters of the study, start at
 X** on Pi2):
 
-* ``reference``  grazing_control.dynamics.simulate.simulate with GRAZING_KERNEL=python: the
+* ``reference``  grazing_control.dynamics.simulation.simulate.simulate with GRAZING_KERNEL=python: the
                  pure-Python core (impact.advance period by period);
 * ``kernel``     grazing_control.oscillator.kernel.simulate_exact: the same loop compiled by numba
                  (the default path of simulate);
@@ -51,9 +51,9 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from grazing_control.oscillator import kernel  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
-from grazing_control.dynamics.simulate import simulate  # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 
 STUDY = OscillatorParams()
 SCENES = [  # name, delta_d, controlled, chaotic (compare fewer periods with mpmath)

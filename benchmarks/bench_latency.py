@@ -39,9 +39,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml  # noqa: E402
-from grazing_control.dynamics.orbits import orbit_11  # noqa: E402
-from grazing_control.dynamics.tuning import optimize_noise  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml  # noqa: E402
+from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
+from grazing_control.dynamics.design.tuning import optimize_noise  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.recordings import reader  # noqa: E402

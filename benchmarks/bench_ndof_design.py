@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from grazing_control.dynamics import ndof_branch as nb, ndof_design as nd
-from grazing_control.dynamics.ndof_map import NdofMap
-from grazing_control.dynamics.shooting import find_periodic, floquet_multipliers
+from grazing_control.dynamics.orbits import ndof_branch as nb
+from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
 

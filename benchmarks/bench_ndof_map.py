@@ -27,7 +27,7 @@ from scipy.integrate import solve_ivp
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from grazing_control.dynamics.ndof_map import NdofMap  # noqa: E402
+from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
 from reference_ndof import load_reference  # noqa: E402
 

@@ -8,14 +8,14 @@ answers with rig/force_pulse (2 ms pulses, 5 ms budget), the gains designed for 
 budget's delay. The first ``--enable-after`` periods are uncontrolled (chaotic near
 grazing), then the control is switched on.
 
-Printed, against the design (the core: dynamics/noise.py, dynamics/estimation.py):
+Printed, against the design (the core: dynamics/design/noise.py, dynamics/estimation/section_state.py):
 
 * uncontrolled: the largest Lyapunov exponent of the rig's model at its Delta d (exact
   core, 20000 periods), and in the scene the Pi2 position's range and the share of
   periods with one impact;
 * controlled: the periods to capture (|x - x*| below 5 predicted spreads for 50 periods
   in a row), then over the held periods (at least 600): the Pi2 spread (RMS about the
-  exact orbit of the pulse loop, dynamics.actuation.pulse_orbit, and the std), the
+  exact orbit of the pulse loop, dynamics.simulation.actuation.pulse_orbit, and the std), the
   design's predicted spread (the noise gain, position only, model estimator at the
   sensor's samples per period, times the sensor noise in model units: what `grazing
   design --delta-d D --delay B --sensor-rate N --c2 C2` prints) and their ratio, the
@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.actuation import pulse_orbit
-from grazing_control.dynamics.estimation import estimate_covariance
-from grazing_control.dynamics.lyapunov import lyapunov_exact
-from grazing_control.dynamics.tuning import design_noise_gain
+from grazing_control.dynamics.simulation.actuation import pulse_orbit
+from grazing_control.dynamics.estimation.section_state import estimate_covariance
+from grazing_control.dynamics.simulation.lyapunov import lyapunov_exact
+from grazing_control.dynamics.design.tuning import design_noise_gain
 from grazing_control.oscillator.control import Gains
 from grazing_control.plant.rig import load_rig
 from grazing_control.recordings.scenes import load
@@ -65,15 +65,15 @@ def design(rig, c2, lead=None):
 
 def core(rig, c2, forces, periods, enable_after, seed=7):
     """The acceptance in the core, for the rig with each force amplitude F0 (N) and the
-    same Delta d: the closed loop on the sensor stream (dynamics.stream.simulate_stream:
+    same Delta d: the closed loop on the sensor stream (dynamics.estimation.stream.simulate_stream:
     the exact plant, the rig's sensor at the nearest integer samples per period, the
     model estimator answering answer_lead before the section's last sample, the pulse
     at the budget's delay in the plant and the model), uncontrolled for ``enable_after``
     periods, then controlled; the noise in model units is the sensor's 2 um / l, l = F0/k."""
     from dataclasses import replace
 
-    from grazing_control.dynamics.actuation import pulse_orbit
-    from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
+    from grazing_control.dynamics.estimation.stream import StreamEstimator, simulate_stream
     from grazing_control.plant.sensor import SensorModel
     from grazing_control.ros.rig_boundary import answer_lead
 
@@ -216,7 +216,7 @@ def main(argv=None):
     n = len(x) - captured
     rms = float(np.sqrt(np.mean((x[held] - orbit.pi2[0]) ** 2)))
     std = float(np.std(x[held]))
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
     print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - orbit.pi2[0]:+.3g} from the "

@@ -35,9 +35,9 @@ os.environ["GRAZING_KERNEL"] = "python"
 
 from grazing_control.oscillator import impact  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
-from grazing_control.dynamics.simulate import simulate  # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 
 SCENES = [("-1e-3", -1e-3, False), ("-9e-6", -9e-6, False), ("-5e-6", -5e-6, False),
           ("-9e-6 controlled", -9e-6, True), ("-5e-6 controlled", -5e-6, True)]

@@ -27,7 +27,7 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               period, |Delta d| growing, as benchmarks/watchful_core.py --part drift),
               against no drift, with the plain model filter and with track_delta_d: the
               spread (RMS) and mean of the Pi2 x about the moving orbit of the pulse loop
-              (dynamics.actuation.pulse_orbit at 21 walls, interpolated) over the
+              (dynamics.simulation.actuation.pulse_orbit at 21 walls, interpolated) over the
               controlled periods from ``--control-after`` + 100 on, one impact per period,
               the Delta d estimate's error at the end. Use ``--periods 2000``.
 ``reidentify`` the mismatch scene with re-identification in the loop (reidentify,
@@ -46,7 +46,7 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
               the exact condition (P1) for the force profile), against the ideal
               actuator's gains in the same plant: one impact per period, the offset and
               spread (RMS) of the Pi2 x about the loop's orbit through the actuator
-              (dynamics.actuator.actuated_design) over the last ``--window`` periods,
+              (dynamics.simulation.actuator.actuated_design) over the last ``--window`` periods,
               against the design's predicted spread (position only, model filter, 200
               samples per period, times sigma). ``--pi2-source sample``: the
               controller on the exact Pi2 samples (no noise reaches the loop: the
@@ -57,7 +57,7 @@ exact Pi2 samples are the truth. Parts (``--part``, repeatable):
 ``capture``   the controller's capture rule (capture, default radius 5 sqrt(|Delta d|)
               = 1.1e-2) against switching on at once, from the uncontrolled motion at
               ``--control-after``: the section the rule switched on (exit summary), the
-              capture time (dynamics.capture.capture_time: one impact per period and
+              capture time (dynamics.design.capture.capture_time: one impact per period and
               within 1e-3 of the orbit to the end), the largest |Delta v|.
 
     .venv/bin/python benchmarks/bench_watchful_nodes.py --part bias --part mismatch \
@@ -82,7 +82,7 @@ from pathlib import Path
 import numpy as np
 import yaml as _yaml
 
-from grazing_control.dynamics.capture import capture_time
+from grazing_control.dynamics.design.capture import capture_time
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.analyze import analyze, read_switches, read_watch
@@ -106,7 +106,7 @@ def design(out: Path):
 
 def moving_orbit(g, periods: int, drift: float):
     """The Pi2 x of the pulse loop's orbit per period under the drift (interpolated)."""
-    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
 
     ks = np.linspace(0, periods, 21)
     xs = [pulse_orbit(OscillatorParams(delta_d=DD + drift * k), g, WIDTH).pi2[0] for k in ks]
@@ -171,7 +171,7 @@ def scene(yaml, out: Path, periods: int, control_after: int, window: int, *,
         num["switches"] = switches
         done = [s for s in switches if s["switched"]]
         if done:
-            from grazing_control.dynamics.actuation import pulse_orbit
+            from grazing_control.dynamics.simulation.actuation import pulse_orbit
 
             last = done[-1]
             g2 = Gains(last["c1"], last["c2"], DELAY)
@@ -322,8 +322,8 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
     numbers for the chart (std and offset per sigma)."""
     import json
 
-    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
-    from grazing_control.dynamics.estimation import estimate_covariance
+    from grazing_control.dynamics.simulation.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.estimation.section_state import estimate_covariance
 
     p = OscillatorParams(delta_d=DD)
     act = bandwidth_actuator(p, ratio)
@@ -340,7 +340,7 @@ def _actuator_case(root: Path, a, ratio: float, designed: bool, g) -> dict:
     r = estimate_covariance(p, g, RATE)
     _gains, orbit, spread = actuated_design(p, gains.c2, DELAY, WIDTH, act, r)
     if not designed:               # the ideal design's gains through the same actuator
-        from grazing_control.dynamics.actuator import actuated_orbit_for
+        from grazing_control.dynamics.simulation.actuator import actuated_orbit_for
         orbit = actuated_orbit_for(p, gains, WIDTH, act)
         spread = np.sqrt(np.diag(orbit.noise_covariance(gains, r)))
     told = ({"pulse_width": WIDTH, "actuator_bandwidth": bw} if a.controller_actuator

@@ -1,7 +1,7 @@
 """Chart: the loop's margin against the actuator's bandwidth (issue 29 section 4).
 
 The controlled 1/1 orbit of the loop closed through a first-order actuator
-(grazing_control.dynamics.actuator: exact 3-state period map (dx, dv, f), fixed point by
+(grazing_control.dynamics.simulation.actuator: exact 3-state period map (dx, dv, f), fixed point by
 Newton, continued from 30x down to 1x the forcing frequency) at Delta d = -5e-6, pulse
 width 0.1 centred at delta = 3, the least-noise gains of ``grazing design --optimize
 noise --delay 3``; for each bandwidth ratio N (tau_a = 1 / (N omega)):
@@ -34,15 +34,15 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.actuation import pulse_orbit
-from grazing_control.dynamics.actuation import pulse_start
-from grazing_control.dynamics.actuator import (actuated_c1, actuated_orbit,
+from grazing_control.dynamics.simulation.actuation import pulse_orbit
+from grazing_control.dynamics.simulation.actuation import pulse_start
+from grazing_control.dynamics.simulation.actuator import (actuated_c1, actuated_orbit,
                                                bandwidth_actuator, equivalent_delay)
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import estimate_covariance
-from grazing_control.dynamics.noise import noise_gain
-from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import estimate_covariance
+from grazing_control.dynamics.design.noise import noise_gain
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 

@@ -7,7 +7,7 @@ and 15).
     PYTHONPATH=. python benchmarks/chart_contact.py --hertz  # the Hertz stop only
 
 For each Delta d, c2, stop restitution r and friction level, the gains are the rigid
-design at that r (c1 from Eq. 38 for that c2, dynamics/design.py: the designer knows the
+design at that r (c1 from Eq. 38 for that c2, dynamics/design/gains.py: the designer knows the
 stop's restitution and ignores its compliance and the friction); the controlled 1/1
 orbit of the compliant model (CompliantOneDOF, a PeriodMap) is continued in log10 k_c
 from 8 down to 1 at fixed contact damping ratio (fixed r, Eq. C3) by
@@ -30,12 +30,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
-from grazing_control.dynamics.compliant_model import CompliantOneDOF
-from grazing_control.dynamics.continuation import continue_orbit
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.model import OneDOF
-from grazing_control.dynamics.shooting import find_periodic
-from grazing_control.dynamics.spectral_design import least_spectral_radius, spectral_radius
+from grazing_control.dynamics.maps.compliant_model import CompliantOneDOF
+from grazing_control.dynamics.orbits.continuation import continue_orbit
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.model import OneDOF
+from grazing_control.dynamics.orbits.shooting import find_periodic
+from grazing_control.dynamics.design.spectral_design import least_spectral_radius, spectral_radius
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
 from grazing_control.oscillator.hertz import HuntCrossley
 from grazing_control.oscillator.control import Gains

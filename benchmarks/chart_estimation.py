@@ -1,6 +1,6 @@
 """Chart: the Pi2 spread against the sensor noise and rate, per estimator and gain.
 
-The closed loop of the core (grazing_control.dynamics.stream.simulate_stream: exact
+The closed loop of the core (grazing_control.dynamics.estimation.stream.simulate_stream: exact
 plant, position-only SensorModel stream, the estimator, Eq. 28) at Delta d = -5e-6,
 started on the controlled 1/1 orbit, for sigma in 1e-6 .. 1e-3, 50 and 200 samples per
 period, the estimators nearest / arc / model and c2 = -1 (the study), -0.3 and 0.007
@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import simulate_stream
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import simulate_stream
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.analyze import analyze

@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 
-from grazing_control.dynamics.design import degenerate_c1  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.ros import launcher  # noqa: E402
 from test_closed_loop import STUDY, TOPICS, Collector, new_domain, xv  # noqa: E402

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from grazing_control.oscillator.control import Gains  # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml  # noqa: E402
 from grazing_control.ros.common import stamp_key  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.ros.recording import read_messages  # noqa: E402

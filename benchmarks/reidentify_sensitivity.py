@@ -2,7 +2,7 @@
 (issue 29 section 3: the precision a re-identification needs; docs/theory_reidentification.md
 section 5).
 
-The core loop (`dynamics.stream.simulate_stream`, no nodes): the benchmarks' scene
+The core loop (`dynamics.estimation.stream.simulate_stream`, no nodes): the benchmarks' scene
 (Delta d = -5e-6, position only, T/200, sigma 1e-4, delay 3, c2 of `grazing design
 --optimize noise --delay 3`), the controller's model with zeta + dz and the wall where the
 plant's is (Delta d = d - a(omega; zeta + dz)), c1 of that model's degenerate design, the
@@ -16,7 +16,7 @@ the plain model filter, control from period 20) for 60 + N periods, and `identif
 last N periods (the samples, the plant's impact times, the kicks; position only) three
 ways: from the data alone (the ARX initial guess), from the running zeta with the units
 free, and with the units held (what the controller's refit does,
-dynamics.reidentification.UNITS): zeta and the wall's error with standard errors.
+dynamics.identification.reidentification.UNITS): zeta and the wall's error with standard errors.
 
     .venv/bin/python benchmarks/reidentify_sensitivity.py --refit 20
 """
@@ -25,10 +25,10 @@ import argparse
 
 import numpy as np
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import StreamEstimator, simulate_stream
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel
@@ -55,7 +55,7 @@ def refits(n: int, seed: int) -> None:
     import math
 
     from grazing_control.dynamics.identification import Recording, identify
-    from grazing_control.dynamics.reidentification import UNITS
+    from grazing_control.dynamics.identification.reidentification import UNITS
 
     p = OscillatorParams(delta_d=-5e-6)
     wrong = p.with_(zeta=1.05 * p.zeta, delta_d=1.1 * p.delta_d)

@@ -1,5 +1,5 @@
 """Issue 29 in the core: bias, drift, mismatch detection and capture, measured by seeded
-Monte Carlo on the closed loop of grazing_control.dynamics.stream.simulate_stream.
+Monte Carlo on the closed loop of grazing_control.dynamics.estimation.stream.simulate_stream.
 
 Issue 29's measurement: position-only SensorModel stream, sigma 1e-4, 200 samples per
 period, Delta d = -5e-6, the least-noise gains with delay 3 (``grazing design --optimize
@@ -32,15 +32,15 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.capture import CaptureRule, GainRamp, capture_time
-from grazing_control.dynamics.consistency import ConsistencyMonitor
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import estimate_covariance
-from grazing_control.dynamics.noise import noise_covariance
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import simulate_stream
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.design.capture import CaptureRule, GainRamp, capture_time
+from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import estimate_covariance
+from grazing_control.dynamics.design.noise import noise_covariance
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import simulate_stream
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel

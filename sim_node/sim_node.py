@@ -2,7 +2,7 @@
 
 The simulation is :mod:`grazing_control.plant` (no ROS): :mod:`~grazing_control.plant.settings`
 (the parameter table and its validation), :mod:`~grazing_control.plant.engine` (samples and
-periods of the exact flow, as :func:`grazing_control.dynamics.simulate.simulate`),
+periods of the exact flow, as :func:`grazing_control.dynamics.simulation.simulate.simulate`),
 :mod:`~grazing_control.plant.lockstep` and :mod:`~grazing_control.plant.realtime` (the
 two loops: one period per answer, or paced to the wall clock with deadlines), and
 :mod:`~grazing_control.plant.faults` (injected loss, measurement noise, jitter). This

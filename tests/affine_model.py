@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.model import Step
+from grazing_control.dynamics.maps.model import Step
 
 
 @dataclass(frozen=True)

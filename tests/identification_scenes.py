@@ -8,7 +8,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from grazing_control.dynamics.identification import Recording
-from grazing_control.dynamics.simulate import period_step, states_between
+from grazing_control.dynamics.simulation.simulate import period_step, states_between
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.sensor import SensorModel
 

@@ -20,12 +20,12 @@ import pytest
 from geometry_msgs.msg import Vector3Stamped
 
 from grazing_control.ros import launcher
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.plant.faults import FaultModel
 from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.ros.common import seconds_from_stamp, stamp_key
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.simulate import period_step
+from grazing_control.dynamics.simulation.simulate import period_step
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
 from test_closed_loop import TOPICS as CLOSED_LOOP_TOPICS

@@ -1,4 +1,4 @@
-"""A correction as a force pulse (grazing_control.dynamics.actuation), checked against an
+"""A correction as a force pulse (grazing_control.dynamics.simulation.actuation), checked against an
 independent integration (scipy's DOP853 with event location at the wall, the impact law
 applied at each event) and by its convergence to the kick as the width goes to 0:
 first order for a pulse that starts at the kick's time, second order for one centred on it.
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from grazing_control.dynamics.actuation import flow_with_force, pulse_force, pulse_step
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.simulate import period_step
+from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force, pulse_step
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.simulation.simulate import period_step
 from grazing_control.oscillator.flow import to_deviation, to_physical
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -126,7 +126,7 @@ def test_the_pulse_orbit_is_the_fixed_point_of_the_integrated_pulse_loop():
     of pulse bags compared with before)."""
     from scipy.optimize import fsolve
 
-    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
     from grazing_control.oscillator.control import Gains
 
     p = OscillatorParams(delta_d=-3e-6)
@@ -158,7 +158,7 @@ def test_the_pulse_orbit_is_the_fixed_point_of_the_integrated_pulse_loop():
 
 
 def test_a_pulse_orbit_of_width_zero_is_the_kick_orbit():
-    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
     from grazing_control.oscillator.control import Gains
 
     p = OscillatorParams(delta_d=-5e-6)

@@ -1,4 +1,4 @@
-"""A first-order actuator with latency (grazing_control.dynamics.actuator), checked against
+"""A first-order actuator with latency (grazing_control.dynamics.simulation.actuator), checked against
 an independent integration (scipy's DOP853 of (x, v, f) with the lag as an ODE, event
 location at the wall, the impact law at each event) and by its convergence to the ideal
 pulse as tau_a -> 0: first order with the command at the ideal pulse's time, second
@@ -11,14 +11,14 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.actuation import pulse_orbit, pulse_start, pulse_step
-from grazing_control.dynamics.actuator import (Actuator, actuated_orbit, actuated_step,
+from grazing_control.dynamics.simulation.actuation import pulse_orbit, pulse_start, pulse_step
+from grazing_control.dynamics.simulation.actuator import (Actuator, actuated_orbit, actuated_step,
                                                bandwidth_actuator, equivalent_delay)
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import estimate_covariance
-from grazing_control.dynamics.noise import noise_gain
-from grazing_control.dynamics.orbits import OrbitNotFound
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import estimate_covariance
+from grazing_control.dynamics.design.noise import noise_gain
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.flow import to_physical
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -166,8 +166,8 @@ def test_the_exact_design_puts_the_orbit_back_on_x_star_star(least_noise):
     ideal actuator the pulse loop's orbit lands 5.3e-8 from the kick design's X** (the
     kick's c1: 1.5e-5); through the lag at 10x and 3x within 2.4e-5 and 1.04e-4 of it
     (naive 3.5e-3, 6.6e-3), with the spectral radius below 0.623."""
-    from grazing_control.dynamics.actuator import IDEAL_ACTUATOR, actuated_c1
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, actuated_c1
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     g, orbit = least_noise
     target = orbit_11(P, g).pi2_deviation[0]
@@ -187,7 +187,7 @@ def test_the_exact_design_puts_the_orbit_back_on_x_star_star(least_noise):
 
 
 def test_the_exact_design_needs_the_force_before_the_grazing_phase():
-    from grazing_control.dynamics.actuator import actuated_c1
+    from grazing_control.dynamics.simulation.actuator import actuated_c1
 
     with pytest.raises(ParameterError, match="before the grazing phase"):
         actuated_c1(P, -1.0, Actuator(0.1, 5.0), 3.0, W)
@@ -197,7 +197,7 @@ def test_the_design_through_the_actuator_is_the_orbit_of_its_gains():
     """actuated_design at 3x (Newton from the ideal pulse's orbit misses it there; the
     continuation in tau_a reaches it): c1 is (P1)'s, the orbit a fixed point of the exact
     map with those gains, stable, its spread the Lyapunov one."""
-    from grazing_control.dynamics.actuator import actuated_c1, actuated_design
+    from grazing_control.dynamics.simulation.actuator import actuated_c1, actuated_design
 
     g0 = optimize_noise(P, 3.0).gains()
     act = bandwidth_actuator(P, 3.0)
@@ -217,7 +217,7 @@ def test_the_orbit_for_any_gains_is_found_where_newton_alone_misses_it():
     """actuated_orbit_for at 3x: with the (P1) gains (Newton from the ideal pulse's orbit
     misses it: the test above) it continues in c1 to the same orbit actuated_design
     finds; with the ideal actuator's gains it is a fixed point of the exact map too."""
-    from grazing_control.dynamics.actuator import actuated_design, actuated_orbit_for
+    from grazing_control.dynamics.simulation.actuator import actuated_design, actuated_orbit_for
 
     g0 = optimize_noise(P, 3.0).gains()
     act = bandwidth_actuator(P, 3.0)

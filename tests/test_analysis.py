@@ -8,10 +8,10 @@ import numpy as np
 from grazing_control.recordings.analysis import scene_from_simulation, summarize
 from grazing_control.oscillator.control import Gains
 from grazing_control.studies.demo import main as demo_main
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 
 def test_summary_of_a_controlled_scene_matches_the_exact_orbit():

@@ -1,5 +1,5 @@
 """The (omega, Delta d) atlas (issue 18 section 4): `grazing sweep` over two grid axes with
-the Lyapunov column (studies.sweeps, dynamics.lyapunov), identical on the kernel and the
+the Lyapunov column (studies.sweeps, dynamics.simulation.lyapunov), identical on the kernel and the
 pure-Python core, locally and on a Dask LocalCluster, each point equal to a direct
 lyapunov_exact run over the same orbit."""
 
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.lyapunov import lyapunov_exact
+from grazing_control.dynamics.simulation.lyapunov import lyapunov_exact
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.studies.sweeps import SweepResult, sweep

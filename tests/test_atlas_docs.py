@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from grazing_control.cli.commands import build_parser, main
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.maps import period_matrix, transition_matrix
-from grazing_control.dynamics.two_parameter import KINDS, Family, continue_curve
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.maps import period_matrix, transition_matrix
+from grazing_control.dynamics.orbits.two_parameter import KINDS, Family, continue_curve
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 

@@ -1,4 +1,4 @@
-"""The model filter with a sensor bias and a drifting wall (grazing_control.dynamics.augmented).
+"""The model filter with a sensor bias and a drifting wall (grazing_control.dynamics.estimation.augmented).
 
 The wall's sensitivity of the exact trajectory against finite differences; the filter
 without augmentation against the plain model filter; then issue 29's closed loops in
@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation import trajectory
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import simulate_stream
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.estimation.section_state import trajectory
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import simulate_stream
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.sensor import SensorModel
 
@@ -155,8 +155,8 @@ def test_the_designs_covariance_with_the_augmented_states(design):
     predicted spread 1.8436e-5 -> 1.8444e-5), the bias's variance keeps falling (no
     process noise) and Delta d's settles where its walk and the data balance (7.1e-8);
     a 10x larger walk costs more (the block grows by 0.5 %)."""
-    from grazing_control.dynamics.augmented import augmented_covariance
-    from grazing_control.dynamics.estimation import estimate_covariance
+    from grazing_control.dynamics.estimation.augmented import augmented_covariance
+    from grazing_control.dynamics.estimation.section_state import estimate_covariance
 
     g, _z = design
     plain = estimate_covariance(P, g, RATE) * SIGMA ** 2
@@ -173,7 +173,7 @@ def test_the_designs_covariance_with_the_augmented_states(design):
 def test_the_whitening_is_the_symmetric_inverse_square_root():
     """_whiten(nu) = S^{-1/2} nu (S = sigma^2 I + H P H^T, eigendecomposition reference)
     to 1e-9 of its size, so |eps|^2 = nu^T S^-1 nu (E9, E10)."""
-    from grazing_control.dynamics.augmented import _whiten
+    from grazing_control.dynamics.estimation.augmented import _whiten
 
     rng = np.random.default_rng(1)
     h = rng.standard_normal((199, 4))
@@ -194,7 +194,7 @@ def test_the_augmented_filter_models_the_plants_actuator():
     predicted one and the bias and Delta d estimates within 3 of their standard errors
     (measured 0.4 and 0.2); blind to it, Delta d^ absorbs the lag's misfit, 6.3e-6
     (88 standard errors) off."""
-    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.simulation.actuator import actuated_design, bandwidth_actuator
 
     act = bandwidth_actuator(P, 10.0)
     gains, orbit, _ = actuated_design(P, optimize_noise(P, 3.0).gains().c2, 3.0, 0.1, act)

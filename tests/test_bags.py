@@ -13,11 +13,11 @@ import pytest
 from grazing_control.recordings.analysis import scene_from_bag, summarize
 from grazing_control.oscillator.control import Gains
 from grazing_control.studies.demo import CONTROL_AFTER, SCENES
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.ros.recording import read_messages, read_messages_rosbags, read_metadata
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"
 

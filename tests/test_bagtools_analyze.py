@@ -17,8 +17,8 @@ from grazing_control import cli
 from grazing_control.ros.recording import record
 from grazing_control.recordings.scenes import DuplicateStampsError, load
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
 
 from bagtools_helpers import (BAGS, joint_state, scene_messages, string, twist_stamped,
@@ -252,7 +252,7 @@ def test_a_delayed_design_is_analysed_with_its_delay(tmp_path):
     1/1 orbit (the kick along b_delta): the final sample equals it to rounding."""
     from grazing_control.ros import launcher
     from grazing_control.recordings.analyze import analyze
-    from grazing_control.dynamics.design import write_controller_yaml
+    from grazing_control.dynamics.design.gains import write_controller_yaml
 
     p = OscillatorParams(delta_d=-9e-6)
     delay = 6.0
@@ -276,7 +276,7 @@ def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=(),
     """A bag of the core's closed loop on a position-only stream: the ground truth on
     oscillator/pi2, the corrections, the estimates with their covariance."""
     from bagtools_helpers import TYPESTORE, twist_stamped
-    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.dynamics.estimation.stream import simulate_stream
     from grazing_control.plant.sensor import SensorModel
 
     p = OscillatorParams(delta_d=-5e-6)
@@ -376,7 +376,7 @@ def test_the_model_switches_are_reported(tmp_path):
     both in order with their sections, the reason, the model with standard errors and
     the new gains."""
     from bagtools_helpers import TYPESTORE
-    from grazing_control.dynamics.reidentification import REASONS
+    from grazing_control.dynamics.identification.reidentification import REASONS
     from grazing_control.recordings.analyze import analyze
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 
@@ -505,13 +505,13 @@ def _pulse_bag(path, sigma, periods, seed=5, actuator=None):
     """A bag of the core's loop closed with a force pulse (the rig scene of issue 27:
     Delta d = -3e-6, delay 3, pulse 0.1, the least-noise gains): the correction of each
     sample from a measurement with Gaussian noise sigma on x and v, acting as a pulse
-    centred 3 after it (dynamics.actuation.pulse_step); the ground truth on
+    centred 3 after it (dynamics.simulation.actuation.pulse_step); the ground truth on
     oscillator/pi2, the measurements as the controller's estimates, the parameter record.
-    With ``actuator`` (dynamics.actuator.Actuator) the pulse acts through it
+    With ``actuator`` (dynamics.simulation.actuator.Actuator) the pulse acts through it
     (actuated_step, the force carried), recorded as sim_node's actuator_bandwidth and
     actuator_latency. Returns the bag, the parameters, the gains and the true Pi2 states."""
     from bagtools_helpers import TYPESTORE
-    from grazing_control.dynamics.actuation import pulse_step
+    from grazing_control.dynamics.simulation.actuation import pulse_step
 
     p = OscillatorParams(delta_d=-3e-6)
     c2, delay, width = -0.006074716135226413, 3.0, 0.1
@@ -523,7 +523,7 @@ def _pulse_bag(path, sigma, periods, seed=5, actuator=None):
            "pulse_width": width, "force_limit": 0.0}
     force = 0.0
     if actuator is not None:
-        from grazing_control.dynamics.actuator import actuated_step
+        from grazing_control.dynamics.simulation.actuator import actuated_step
         sim.update(actuator_bandwidth=1.0 / actuator.time_constant,
                    actuator_latency=actuator.latency)
     ctl = {"c1": g.c1, "c2": g.c2, "actuation_delay": delay, "enable_after": 0,
@@ -565,10 +565,10 @@ def test_a_scene_through_the_actuator_is_compared_with_the_actuated_orbit(tmp_pa
     actuator (the force carried from 0 at the first sample) and finds no departure, and
     the loop settles on the orbit of the 3-state map (2.7e-3 from the ideal pulse's, which
     the analysis took before); the ideal pulse's model check departs."""
-    from grazing_control.dynamics.actuator import Actuator
+    from grazing_control.dynamics.simulation.actuator import Actuator
     from grazing_control.recordings.analyze import analyze
 
-    from grazing_control.dynamics.actuation import pulse_orbit
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
     from grazing_control.recordings.numbers import model_check
     from grazing_control.recordings.scenes import load
 

@@ -22,9 +22,9 @@ from grazing_control.recordings.analyze import analyze            # noqa: E402
 from grazing_control.recordings.replay import replay_controller, replay_simulator  # noqa: E402
 from grazing_control.recordings.scenes import load                # noqa: E402
 from grazing_control.oscillator.control import Gains, correction          # noqa: E402
-from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml  # noqa: E402
+from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams             # noqa: E402
-from grazing_control.dynamics.simulate import simulate                   # noqa: E402
+from grazing_control.dynamics.simulation.simulate import simulate                   # noqa: E402
 
 from bagtools_helpers import BAGS                               # noqa: E402
 # a claimed domain (launcher.claim_domain): a random one collided with a scene on

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11, shoot
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11, shoot
+from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.studies.basins import (basins, canonical_cycle, cycle_distance,

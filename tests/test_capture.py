@@ -1,4 +1,4 @@
-"""Switching the correction on (grazing_control.dynamics.capture): the rules as pure
+"""Switching the correction on (grazing_control.dynamics.design.capture): the rules as pure
 callables, the capture time on arrays with a known answer, and the closed loop from a
 distance of 4.5e-2 (issue 29) with the study's gains (c2 = -1, delay 0): at once, the
 first correction is 4.3e-2; with the capture rule it never exceeds 1e-3, and both
@@ -11,12 +11,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.capture import CaptureRule, GainRamp, capture_time
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import estimate_covariance
-from grazing_control.dynamics.noise import noise_covariance
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import simulate_stream
+from grazing_control.dynamics.design.capture import CaptureRule, GainRamp, capture_time
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import estimate_covariance
+from grazing_control.dynamics.design.noise import noise_covariance
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import simulate_stream
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.sensor import SensorModel

@@ -27,13 +27,13 @@ import numpy as np
 import pytest
 import yaml
 
-from grazing_control.dynamics.continuation import continue_11
+from grazing_control.dynamics.orbits.continuation import continue_11
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import (admissible_c2, degenerate_c1, evaluate_design,
+from grazing_control.dynamics.design.gains import (admissible_c2, degenerate_c1, evaluate_design,
                                              write_controller_yaml)
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 from test_closed_loop import new_domain
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -137,11 +137,11 @@ def _close(a, b, rel=1e-12, abs_=0.0):
 # ------------------------------------------------------------------ --json, design
 def test_design_through_an_actuator_gives_the_exact_c1_and_its_predicted_spread(runs):
     """--actuator-bandwidth 2 (3x omega) with --pulse-width 0.1 at --delay 3: c1 is
-    (P1)'s for the force profile (dynamics.actuator.actuated_c1), the ideal design's kept
+    (P1)'s for the force profile (dynamics.simulation.actuator.actuated_c1), the ideal design's kept
     as c1_ideal; the loop's orbit through the actuator is stable and its predicted
     spread is actuated_design's."""
-    from grazing_control.dynamics.actuation import pulse_start
-    from grazing_control.dynamics.actuator import Actuator, actuated_c1, actuated_design
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+    from grazing_control.dynamics.simulation.actuator import Actuator, actuated_c1, actuated_design
 
     d = _json(runs, "design_actuator")
     q = P.with_(delta_d=-5e-6)
@@ -633,7 +633,7 @@ def test_design_prints_the_true_ends_of_the_admissible_set(capsys):
 def test_design_says_beyond_the_search_limit_and_gives_null(capsys, monkeypatch):
     import math
 
-    from grazing_control.dynamics import design
+    from grazing_control.dynamics.design import gains as design
 
     monkeypatch.setattr(design, "admissible_c2",
                         lambda p, *a, **k: [(-math.inf, -0.5), (0.25, math.inf)])
@@ -649,10 +649,10 @@ def test_design_says_beyond_the_search_limit_and_gives_null(capsys, monkeypatch)
 
 # ------------------------------------------------------------------ issue 15 section 3
 def test_design_reports_the_noise_gain_of_the_core(capsys):
-    """noise_gain in the JSON is dynamics.noise.noise_gain about the controlled orbit at
+    """noise_gain in the JSON is dynamics.design.noise.noise_gain about the controlled orbit at
     --delta-d (itself checked against seeded simulations of the exact closed loop in
     tests/test_noise.py and tests/test_tuning.py)."""
-    from grazing_control.dynamics.noise import noise_gain
+    from grazing_control.dynamics.design.noise import noise_gain
 
     status, out, err = _main(["design", "--c2", "-0.3", "--delta-d", "-9e-6", "--json"], capsys)
     assert status == 0, err
@@ -669,7 +669,7 @@ def test_design_reports_the_noise_gain_of_the_core(capsys):
 
 
 def test_design_optimize_noise(capsys, tmp_path):
-    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.dynamics.design.tuning import optimize_noise
 
     path = tmp_path / "c.yaml"
     status, out, err = _main(["design", "--optimize", "noise", "--delay", "0.5", "--delta-d",

@@ -27,9 +27,9 @@ import numpy as np
 import pytest
 
 from grazing_control.cli.commands import main
-from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof import load_model
-from grazing_control.dynamics.ndof_design import gain_family
+from grazing_control.dynamics.design.ndof_design import gain_family
 from grazing_control.studies.ndof.branch import grazing_side, smooth_map, with_delta_d
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -415,14 +415,14 @@ def test_the_mutations_are_valid_but_for_the_mutation():
 def test_the_predicted_spread_is_what_the_closed_loop_gives(lab_report):
     """The reference of the rig scene: the design's position-only noise gain x sigma
     against the exact closed loop on the stream as the rig's controller runs it
-    (dynamics.stream.simulate_stream: the model filter at 150 samples per period
+    (dynamics.estimation.stream.simulate_stream: the model filter at 150 samples per period
     answering answer_lead = 4 ms before the section's last sample, the 2 ms pulse in the
     plant and in the model), 1200 periods after 300 of transient, about the pulse
     loop's orbit. The prediction left out the lead until 2026-11-28 (0.218 x sigma, and
     the loop with the lead gave 1.2x that); with it 0.252 (docs/rig.md)."""
-    from grazing_control.dynamics.actuation import pulse_orbit
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.estimation.stream import StreamEstimator, simulate_stream
     from grazing_control.oscillator.control import Gains
     from grazing_control.plant.sensor import SensorModel
 

@@ -1,4 +1,4 @@
-"""dynamics/clock_relation.py: ROS time = offset + (1 + drift) rig time, by least squares.
+"""dynamics/estimation/clock_relation.py: ROS time = offset + (1 + drift) rig time, by least squares.
 
 Differential test against mpmath at 60 digits (the textbook normal equations, no
 shifting needed at that precision; the floats themselves are the data) over hundreds of seeded cases with offsets up to
@@ -13,7 +13,7 @@ import mpmath
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.clock_relation import ClockRelation, fit_clock
+from grazing_control.dynamics.estimation.clock_relation import ClockRelation, fit_clock
 
 
 def _truth(s, t):

@@ -31,12 +31,12 @@ from std_msgs.msg import Bool, Float64, String
 
 from grazing_control.ros import launcher
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.ros.common import (LATCHED_QOS, READY_TOPIC, RECORDS_QOS,
                                         seconds_from_stamp)
 from grazing_control.ros.recording.record import PUBLISHED_TOPIC, decode_published
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "config" / "study.yaml"

@@ -1,4 +1,4 @@
-"""The compliant model on Pi2 (dynamics/compliant_model.py) as a PeriodMap: its Jacobian,
+"""The compliant model on Pi2 (dynamics/maps/compliant_model.py) as a PeriodMap: its Jacobian,
 the generic shooting and continuation over it, and the rigid limit of its multipliers."""
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from grazing_control.dynamics.compliant_model import CompliantOneDOF
-from grazing_control.dynamics.continuation import continue_orbit
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.model import OneDOF, PeriodMap
-from grazing_control.dynamics.shooting import find_periodic
-from grazing_control.dynamics.spectral_design import least_spectral_radius, spectral_radius
+from grazing_control.dynamics.maps.compliant_model import CompliantOneDOF
+from grazing_control.dynamics.orbits.continuation import continue_orbit
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.model import OneDOF, PeriodMap
+from grazing_control.dynamics.orbits.shooting import find_periodic
+from grazing_control.dynamics.design.spectral_design import least_spectral_radius, spectral_radius
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
 from grazing_control.oscillator.hertz import HuntCrossley
 from grazing_control.oscillator.control import Gains

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.ros import launcher

@@ -1,4 +1,4 @@
-"""The windowed innovation test (grazing_control.dynamics.consistency).
+"""The windowed innovation test (grazing_control.dynamics.estimation.consistency).
 
 The monitor's arithmetic against scipy's chi^2; then its calibration on the closed loop
 of the core (issue 29's measurement: position only, sigma 1e-4, 200 samples per period,
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.consistency import ConsistencyMonitor
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import simulate_stream
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import simulate_stream
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.sensor import SensorModel
 

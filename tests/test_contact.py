@@ -20,7 +20,7 @@ from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, advance_co
                                                 grazing_jump, kelvin_voigt_restitution)
 from grazing_control.oscillator.impact import ImpactCapError, advance
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.simulate import core_period_step
+from grazing_control.dynamics.simulation.simulate import core_period_step
 
 from reference_contact import (apex_jump, assert_matches, reference_advance, refined,
                                seeded_start)

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.compliant_model import CompliantOneDOF
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.shooting import iterate
+from grazing_control.dynamics.maps.compliant_model import CompliantOneDOF
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.shooting import iterate
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, advance_compliant
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.hertz import HuntCrossley
@@ -104,9 +104,9 @@ def _node_scene(tmp_path, domain, collector, log10_k, periods=40, offset=(1e-4, 
     (c2 = -1.5) from the first sample, the plant started 1e-4 off its controlled orbit
     (found by continuation from the rigid one on CompliantOneDOF). Returns the Pi2
     samples' deviations from X**, the orbit and the model."""
-    from grazing_control.dynamics.continuation import continue_orbit
-    from grazing_control.dynamics.model import OneDOF
-    from grazing_control.dynamics.shooting import find_periodic
+    from grazing_control.dynamics.orbits.continuation import continue_orbit
+    from grazing_control.dynamics.maps.model import OneDOF
+    from grazing_control.dynamics.orbits.shooting import find_periodic
     from grazing_control.ros import launcher
 
     s = _settings(10.0 ** log10_k)

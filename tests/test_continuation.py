@@ -1,4 +1,4 @@
-"""Specification tests of grazing_control.dynamics.continuation (spec sections 5-6, Fig. 1c-d, 2c-e).
+"""Specification tests of grazing_control.dynamics.orbits.continuation (spec sections 5-6, Fig. 1c-d, 2c-e).
 
 Independent routes used to earn the numbers:
 
@@ -40,13 +40,13 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.continuation import Branch, branch_monodromy, continue_11
+from grazing_control.dynamics.orbits.continuation import Branch, branch_monodromy, continue_11
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1, limit_multipliers
-from grazing_control.dynamics.maps import pi2_map
-from grazing_control.dynamics.orbits import _orbit_from_phase, orbit_11, shoot
+from grazing_control.dynamics.design.gains import degenerate_c1, limit_multipliers
+from grazing_control.dynamics.maps.maps import pi2_map
+from grazing_control.dynamics.orbits.orbits import _orbit_from_phase, orbit_11, shoot
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 P = OscillatorParams()
 PD_STUDY = -1.005268252976113e-05
@@ -381,8 +381,8 @@ def test_return_type():
 
 # ------------------------------------------- continue_orbit: any model, by shooting
 from affine_model import Affine  # noqa: E402
-from grazing_control.dynamics.continuation import continue_orbit  # noqa: E402
-from grazing_control.dynamics.model import OneDOF  # noqa: E402
+from grazing_control.dynamics.orbits.continuation import continue_orbit  # noqa: E402
+from grazing_control.dynamics.maps.model import OneDOF  # noqa: E402
 
 
 def test_generic_continuation_locates_period_doubling_and_neimark_sacker_exactly():

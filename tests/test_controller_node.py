@@ -20,7 +20,7 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from grazing_control.ros import launcher
 from grazing_control.oscillator.control import Gains, correction
-from grazing_control.dynamics.design import degenerate_c1, write_controller_yaml
+from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml
 from grazing_control.ros import cdr
 from grazing_control.ros.common import DATA_QOS, stamp_from_seconds
 from grazing_control.ros.controller_node import ControlLaw, law_from_values
@@ -368,8 +368,8 @@ def test_a_scene_through_an_actuator_the_controller_is_told(tmp_path):
     orbit through the actuator (actuator.actuated_design)."""
     import re
 
-    from grazing_control.dynamics.actuator import actuated_design, bandwidth_actuator
-    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.dynamics.simulation.actuator import actuated_design, bandwidth_actuator
+    from grazing_control.dynamics.design.tuning import optimize_noise
     from grazing_control.recordings.scenes import load
 
     p = OscillatorParams(delta_d=-5e-6)
@@ -451,12 +451,12 @@ def test_stream_mode_estimates_each_section_as_the_core_does(stream_scene):
     """The test plays a position-only rig at 50 samples per period (sigma = 1e-4, the
     exact flow, the node's corrections applied at Pi2): the node answers every section
     t_k = k T, publishes an estimate with its covariance that is the core's
-    (dynamics.stream.simulate_stream with the same sensor draws) to 1e-7, never listens
+    (dynamics.estimation.stream.simulate_stream with the same sensor draws) to 1e-7, never listens
     to oscillator/pi2, and its predicted next correction is within 5 sigma of its
     covariance of the next one."""
-    from grazing_control.dynamics.estimation import trajectory
-    from grazing_control.dynamics.orbits import orbit_11
-    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.dynamics.estimation.section_state import trajectory
+    from grazing_control.dynamics.orbits.orbits import orbit_11
+    from grazing_control.dynamics.estimation.stream import simulate_stream
     from grazing_control.plant.sensor import SensorModel
 
     col, start = stream_scene
@@ -510,11 +510,11 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
     10: each section's controller/model_watch row (b^, se, Delta d^, se, verdict) is the
     core's (AugmentedStreamEstimator in simulate_stream with the same draws, a
     ConsistencyMonitor fed per section), and b^ ends within 3 se of the bias."""
-    from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-    from grazing_control.dynamics.consistency import ConsistencyMonitor
-    from grazing_control.dynamics.estimation import trajectory
-    from grazing_control.dynamics.orbits import orbit_11
-    from grazing_control.dynamics.stream import simulate_stream
+    from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+    from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
+    from grazing_control.dynamics.estimation.section_state import trajectory
+    from grazing_control.dynamics.orbits.orbits import orbit_11
+    from grazing_control.dynamics.estimation.stream import simulate_stream
     from grazing_control.plant.sensor import SensorModel
     from grazing_control.ros.model_watch import WATCH_FIELDS
 
@@ -575,7 +575,7 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
     # decided at a later section: a switch answers that section with the new gains and
     # X** on the section's own estimate, a refusal keeps the gains
     from std_srvs.srv import Trigger
-    from grazing_control.dynamics.reidentification import REASONS
+    from grazing_control.dynamics.identification.reidentification import REASONS
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 
     client = col.node.create_client(Trigger, "controller_node/reidentify")
@@ -644,7 +644,7 @@ def test_the_predicted_correction_is_the_next_one_on_exact_samples(stream_scene)
     the node's corrections, Delta d = -9e-6, c2 = -1, a delay of 1.0); every answer's
     twist.linear.y equals the next answer's twist.linear.x to 1e-9 once control is on,
     and 0 is predicted for a sample before enable_after; without delta_d it is NaN."""
-    from grazing_control.dynamics.simulate import period_step
+    from grazing_control.dynamics.simulation.simulate import period_step
 
     col, start = stream_scene
     p = OscillatorParams(delta_d=-9e-6)

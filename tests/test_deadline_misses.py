@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.simulate import period_step
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.simulation.simulate import period_step
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.analyze import analyze

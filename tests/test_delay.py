@@ -7,12 +7,12 @@ N_g,12(delta) = 0) removes the singular multiplier of the delayed 1/1 orbit.
 
 References that share no code with what they check:
 
-* the exact trajectory of :func:`grazing_control.dynamics.simulate.period_step` with ``delay``
+* the exact trajectory of :func:`grazing_control.dynamics.simulation.simulate.period_step` with ``delay``
   and central finite differences of it (the Pi2 map's Jacobian);
 * ``scipy.linalg.expm`` for Phi, and mpmath's ``expm`` at 50 digits for N_g,12(delta) = 0
   and for the 1/1 branch near grazing (lambda0, gamma1 by symmetric quotients at
   psi = 1e-12, where their O(psi^2) error is 1e-24);
-* the perturbation route (:mod:`grazing_control.dynamics.perturbation`, theory_zdm.md), which
+* the perturbation route (:mod:`grazing_control.dynamics.maps.perturbation`, theory_zdm.md), which
   reaches lambda0 and gamma1 through the normal-form map, not the exact branch.
 """
 
@@ -27,16 +27,16 @@ from scipy.linalg import expm
 from grazing_control.cli import main
 from grazing_control.oscillator.control import (Gains, gain_determinant, gain_matrix,
                                                 kick_direction)
-from grazing_control.dynamics.design import (admissible_c2, degenerate_c1, evaluate_design,
+from grazing_control.dynamics.design.gains import (admissible_c2, degenerate_c1, evaluate_design,
                                              existence_coefficient, limit_multipliers,
                                              max_design_delay)
 from grazing_control.oscillator.flow import transition_matrix
-from grazing_control.dynamics.maps import period_matrix, pi1_map, pi2_map
-from grazing_control.dynamics.orbits import orbit_11, shoot
+from grazing_control.dynamics.maps.maps import period_matrix, pi1_map, pi2_map
+from grazing_control.dynamics.orbits.orbits import orbit_11, shoot
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.perturbation import (existence_coefficient_perturbation,
+from grazing_control.dynamics.maps.perturbation import (existence_coefficient_perturbation,
                                                    limit_multipliers_perturbation)
-from grazing_control.dynamics.simulate import period_step, simulate
+from grazing_control.dynamics.simulation.simulate import period_step, simulate
 
 P = OscillatorParams()
 A = np.array([[0.0, 1.0], [-1.0, -2.0 * P.zeta]])

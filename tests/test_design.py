@@ -1,4 +1,4 @@
-"""Specification tests of grazing_control.dynamics.design (spec section 6, study Eqs. 33-38).
+"""Specification tests of grazing_control.dynamics.design.gains (spec section 6, study Eqs. 33-38).
 
 Every number is checked against a route that does not share the code under test:
 
@@ -27,12 +27,12 @@ import yaml
 from scipy.linalg import expm
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import (admissible_c2, controller_parameters,
+from grazing_control.dynamics.design.gains import (admissible_c2, controller_parameters,
                                              degenerate_c1, evaluate_design,
                                              existence_coefficient, limit_multipliers,
                                              write_controller_yaml)
-from grazing_control.dynamics.maps import pi2_map, smooth_return_matrix
-from grazing_control.dynamics.orbits import _orbit_from_phase, branch_point, orbit_11, shoot
+from grazing_control.dynamics.maps.maps import pi2_map, smooth_return_matrix
+from grazing_control.dynamics.orbits.orbits import _orbit_from_phase, branch_point, orbit_11, shoot
 from grazing_control.oscillator.params import OscillatorParams
 
 P = OscillatorParams()
@@ -314,7 +314,7 @@ def test_non_impacting_controlled_motion_flips_at_the_upper_end(c2, grows):
     """On the non-impacting side (Delta d = +1e-3, wall out of reach of a 1e-9 deviation)
     the exact controlled Pi2 map contracts below the end and grows above it, at the rate
     rho(N_g) per period (a flip: the eigenvalue N11 of the degenerate N_g passes -1)."""
-    from grazing_control.dynamics.simulate import simulate
+    from grazing_control.dynamics.simulation.simulate import simulate
 
     q = P.with_(delta_d=1e-3)
     g = _gains(c2)

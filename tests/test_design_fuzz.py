@@ -27,13 +27,13 @@ from scipy.optimize import brentq
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics import design
-from grazing_control.dynamics.design import (C2_LIMIT, admissible_c2, admissible_intervals,
+from grazing_control.dynamics.design import gains as design
+from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, admissible_intervals,
                                              condition_values,
                                              degenerate_c1, degenerate_n22, evaluate_design,
                                              max_design_delay)
-from grazing_control.dynamics.orbits import branch_point
-from grazing_control.dynamics.perturbation import admissible_c2_perturbation
+from grazing_control.dynamics.orbits.orbits import branch_point
+from grazing_control.dynamics.maps.perturbation import admissible_c2_perturbation
 
 SETS = ("combined", "impacting", "non-impacting")
 
@@ -196,7 +196,7 @@ def test_an_interval_open_at_the_search_limit_has_an_infinite_end():
 
 # ------------------------------------------------------------------ the degenerate family
 def test_n22_of_the_degenerate_design_does_not_depend_on_c2():
-    from grazing_control.dynamics.maps import period_matrix
+    from grazing_control.dynamics.maps.maps import period_matrix
 
     for p, _c2, d in random_cases(50, seed=3):
         try:

@@ -1,4 +1,4 @@
-"""The Pi2 state from sampled, noisy positions (grazing_control.dynamics.estimation).
+"""The Pi2 state from sampled, noisy positions (grazing_control.dynamics.estimation.section_state).
 
 The exact trajectory the model fits is checked against the simulator's own dense output
 and period map and its Jacobian against finite differences; each estimator's covariance
@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import (arc_fit, detect_impact, deviation_samples,
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import (arc_fit, detect_impact, deviation_samples,
                                                  estimate_covariance, nearest_estimate,
                                                  phi_rows, trajectory, unkick)
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.simulate import period_step, states_between
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.simulation.simulate import period_step, states_between
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.flow import to_deviation
 from grazing_control.oscillator.impact import advance

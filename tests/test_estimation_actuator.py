@@ -11,9 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.actuation import pulse_force, pulse_start
-from grazing_control.dynamics.actuator import Actuator, actuated_step, lag_flow, lag_states
-from grazing_control.dynamics.estimation import section_force, trajectory
+from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
+from grazing_control.dynamics.simulation.actuator import Actuator, actuated_step, lag_flow, lag_states
+from grazing_control.dynamics.estimation.section_state import section_force, trajectory
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
 TWO_PI = 2.0 * math.pi

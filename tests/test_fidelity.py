@@ -7,15 +7,15 @@ import random
 import numpy as np
 import pytest
 
-from grazing_control.dynamics import simulate as simulate_module
+from grazing_control.dynamics.simulation import simulate as simulate_module
 from grazing_control.recordings.analysis import scene_from_bag
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.fidelity import (FIDELITIES, ZDM_WINDOW, ModelValidityError,
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.simulation.fidelity import (FIDELITIES, ZDM_WINDOW, ModelValidityError,
                                                choose_fidelity, period_step)
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 P = OscillatorParams()
 G = Gains(degenerate_c1(P, -1.0), -1.0)
@@ -154,7 +154,7 @@ def test_sim_node_runs_a_map_fidelity_in_lockstep(tmp_path):
 
     p = P.with_(delta_d=-1e-6)
     yaml = tmp_path / "controller.yaml"
-    from grazing_control.dynamics.design import write_controller_yaml
+    from grazing_control.dynamics.design.gains import write_controller_yaml
 
     write_controller_yaml(yaml, p, G)
     bag = tmp_path / "bag"

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from grazing_control.cli import main
-from grazing_control.dynamics.continuation import continue_11
-from grazing_control.dynamics.design import admissible_c2, degenerate_c1, evaluate_design
+from grazing_control.dynamics.orbits.continuation import continue_11
+from grazing_control.dynamics.design.gains import admissible_c2, degenerate_c1, evaluate_design
 from grazing_control.support.plotting import stability_segments
 from grazing_control.studies.figures.branches import loglog_slope
 from grazing_control.oscillator.params import OscillatorParams
@@ -243,7 +243,7 @@ def test_a_scene_panel_reads_a_recording_when_given_one(tmp_path):
     from grazing_control.oscillator.control import Gains
     from grazing_control.studies.demo import CONTROL_AFTER, PERIODS
     from grazing_control.studies.figures.scenes import panel_scene
-    from grazing_control.dynamics.simulate import simulate
+    from grazing_control.dynamics.simulation.simulate import simulate
 
     p = OscillatorParams()
     gains = Gains(degenerate_c1(p, -1.0), -1.0)

@@ -13,7 +13,7 @@ import random
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.simulate import core_period_step
+from grazing_control.dynamics.simulation.simulate import core_period_step
 from grazing_control.oscillator.hertz import (HuntCrossley, advance_hertz, grazing_jump,
                                               hertz_period_step)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError

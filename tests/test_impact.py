@@ -712,7 +712,7 @@ def test_no_trajectory_passes_through_the_wall():
     """Brute force over 150 random scenes of 8 periods (random Pi2 starts, all
     parameters random, controller off): x <= d at 400 points per period of the
     simulated trajectory (dense output from the impact list), to 1e-12."""
-    from grazing_control.dynamics.simulate import period_step, states_between
+    from grazing_control.dynamics.simulation.simulate import period_step, states_between
 
     rng = np.random.default_rng(77)
     worst = -math.inf
@@ -742,7 +742,7 @@ def test_sticking_carries_over_a_period_boundary_issue_7():
     dx, dv = -1.1435760702391229, -0.08635059486302293  # the Pi2 sample of the report
     assert 0 < gap(p, p.tau2, dx) < 1e-15 and -1e-15 < dv + p.v_ref < 0  # off by rounding
     assert math.cos(p.tau2) - p.d > 1.0  # pushed into the wall
-    from grazing_control.dynamics.simulate import period_step, states_between
+    from grazing_control.dynamics.simulation.simulate import period_step, states_between
 
     times = np.linspace(0.0, p.period, 2001)
     for _ in range(5):
@@ -759,7 +759,7 @@ def test_sticking_spanning_samples_in_a_long_run():
     """Random scenes near the report's parameters: 12 periods each from random starts,
     many of them stuck across samples; no trajectory enters the wall (the pre-fix core
     failed 23 of 100 such scenes)."""
-    from grazing_control.dynamics.simulate import period_step, states_between
+    from grazing_control.dynamics.simulation.simulate import period_step, states_between
 
     rng = np.random.default_rng(1)
     spans = 0
@@ -784,7 +784,7 @@ def test_tangency_below_rounding_is_not_an_impact_issue_7():
     below the rounding of the velocity; it was reported as two impacts with
     v- = -2.4e-16 and +1.6e-16. Now it is no impact (docs/theory.md, "Tangency below
     rounding") and every reported impact has v- > 0."""
-    from grazing_control.dynamics.simulate import simulate
+    from grazing_control.dynamics.simulation.simulate import simulate
 
     p = STUDY.with_(delta_d=0.0)
     res = simulate(p, 20, deviation=(7.55e-31, 0.0))
@@ -798,7 +798,7 @@ def test_every_reported_impact_has_positive_velocity():
     with sticking, and 200 at grazing (issue 7's tangencies below rounding): every non-sticking impact has v- > 0 and v+ = -r v-; every sticking
     event has v- >= 0 (0: the mass came to rest on the wall without a bounce, or was
     at rest there at the start of the segment)."""
-    from grazing_control.dynamics.simulate import period_step
+    from grazing_control.dynamics.simulation.simulate import period_step
 
     rng = np.random.default_rng(3)
     n_imp = n_zero_stick = 0
@@ -900,7 +900,7 @@ def test_phase_exclusion_changes_no_result(monkeypatch):
     3000 random cases and the study's scenes every result is bit-identical with the
     exclusion switched off, and it saves evaluations."""
     import grazing_control.oscillator.impact as impact
-    from grazing_control.dynamics.simulate import simulate
+    from grazing_control.dynamics.simulation.simulate import simulate
 
     calls = [0]
     evaluate = impact._Eval.__call__

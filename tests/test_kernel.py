@@ -18,12 +18,12 @@ import pytest
 
 import test_impact
 from grazing_control.oscillator import impact, kernel
-from grazing_control.dynamics import simulate as simulate_module
+from grazing_control.dynamics.simulation import simulate as simulate_module
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.flow import to_deviation
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 STUDY = OscillatorParams()
 WALL = OscillatorParams.from_d(0.5, r=0.5)  # d < 1: chattering and sticking
@@ -222,7 +222,7 @@ def test_fallback_without_numba_runs_the_core(tmp_path):
         "sys.modules['numba'] = None  # import numba now fails, as if not installed\n"
         "from grazing_control.oscillator import kernel\n"
         "from grazing_control.oscillator.params import OscillatorParams\n"
-        "from grazing_control.dynamics.simulate import simulate\n"
+        "from grazing_control.dynamics.simulation.simulate import simulate\n"
         "assert not kernel.available() and not kernel.use_kernel()\n"
         "r = simulate(OscillatorParams(delta_d=-1e-3), 5)\n"
         "print(int(r.impacts_per_period.sum()))\n"

@@ -18,10 +18,10 @@ import pytest
 
 from grazing_control.ros import launcher
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.ros.recording import read_messages
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 from test_closed_loop import CONTROLLER, ROOT, STUDY, new_domain
 
 GRAZING = [sys.executable, "-c", "import sys; from grazing_control.cli import main; "

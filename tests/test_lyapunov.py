@@ -1,4 +1,4 @@
-"""dynamics.lyapunov: the Lyapunov spectrum on Pi2 by tangent propagation through the exact
+"""dynamics.simulation.lyapunov: the Lyapunov spectrum on Pi2 by tangent propagation through the exact
 flow, the saltation matrices and the controller's kick (docs/theory_lyapunov.md).
 
 Checked against: the determinant identity (L3) lambda1 + lambda2 = -2 zeta T + 2 nu ln r
@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.lyapunov import (determinant_sum, lyapunov_exact,
+from grazing_control.dynamics.simulation.lyapunov import (determinant_sum, lyapunov_exact,
                                                lyapunov_spectrum)
-from grazing_control.dynamics.model import OneDOF
-from grazing_control.dynamics.shooting import find_periodic, floquet_multipliers
-from grazing_control.dynamics.simulate import core_period_step
+from grazing_control.dynamics.maps.model import OneDOF
+from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
+from grazing_control.dynamics.simulation.simulate import core_period_step
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 

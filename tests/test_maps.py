@@ -1,4 +1,4 @@
-"""Tests of grazing_control.dynamics.maps: the Poincare maps on Pi1 and Pi2 and their Jacobians.
+"""Tests of grazing_control.dynamics.maps.maps: the Poincare maps on Pi1 and Pi2 and their Jacobians.
 
 References: central finite differences of the exact maps, scipy.linalg.expm for the
 smooth return matrix N_g (Eqs. 29-32), and the controller law of Eq. 28.
@@ -11,9 +11,9 @@ import pytest
 from scipy.linalg import expm
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.impact import advance
-from grazing_control.dynamics.maps import pi1_map, pi2_map, section_phase, smooth_return_matrix
+from grazing_control.dynamics.maps.maps import pi1_map, pi2_map, section_phase, smooth_return_matrix
 from grazing_control.oscillator.params import OscillatorParams
 
 STUDY = OscillatorParams()

@@ -1,4 +1,4 @@
-"""Model error (grazing_control.dynamics.mismatch, issue 16 section 2).
+"""Model error (grazing_control.dynamics.design.mismatch, issue 16 section 2).
 
 Gains designed on the study's model act on a plant with one parameter off by a relative
 error e. Checked: the issue's measured multipliers; the band's ends against `grazing
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from grazing_control.cli import main
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.mismatch import (instability_band, largest_multiplier, mismatched,
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.design.mismatch import (instability_band, largest_multiplier, mismatched,
                                                predicted_band)
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -121,7 +121,7 @@ def test_a_forcing_amplitude_error_opens_no_band(amplitude):
     linearisation (N_g,12 stays 0). Checked by simulation: the loop settles on a period-one
     motion (each step of the last 200 samples below 1e-12) down to Delta d = -1e-10, where
     a 5 % error in zeta is unstable from about -1e-7 on."""
-    from grazing_control.dynamics.simulate import period_step
+    from grazing_control.dynamics.simulation.simulate import period_step
 
     nom = OscillatorParams()
     g = Gains(degenerate_c1(nom, -1.0), -1.0)

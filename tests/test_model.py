@@ -1,4 +1,4 @@
-"""The model protocol (grazing_control.dynamics.model) and its 1-DOF implementation.
+"""The model protocol (grazing_control.dynamics.maps.model) and its 1-DOF implementation.
 
 OneDOF is the study's oscillator on Pi2: its step is the exact Pi2 map, its Jacobian
 the monodromy, checked here against central finite differences of the step itself; its
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from affine_model import Affine
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.maps import pi2_map
-from grazing_control.dynamics.model import OneDOF, PeriodMap
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.maps import pi2_map
+from grazing_control.dynamics.maps.model import OneDOF, PeriodMap
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.consistency import ConsistencyMonitor
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.ros.model_watch import (WATCH_DEFAULTS, WATCH_FIELDS, watch_from_values,
                                              watch_row, watch_status)
@@ -75,8 +75,8 @@ def test_the_capture_rule_of_the_parameters():
     refused by name in sample mode and for a negative radius; off: None."""
     from types import SimpleNamespace
 
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.orbits.orbits import orbit_11
     from grazing_control.oscillator.control import Gains
     from grazing_control.ros.controller_node import capture_from_values
 

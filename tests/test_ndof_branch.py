@@ -8,8 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics import ndof_branch as nb, ndof_design as nd, orbits
-from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.dynamics.orbits import ndof_branch as nb
+
+from grazing_control.dynamics.design import ndof_design as nd
+
+from grazing_control.dynamics.orbits import orbits
+from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -96,7 +100,7 @@ def test_for_n_1_the_fold_is_the_turning_point_of_the_1dof_closed_form_branch():
     """n = 1: the turning point of Delta d(psi) found by branch_fold equals the extremum
     of the 1-DOF core's explicit branch (orbits.branch_point, an independent closed form)
     located on a dense grid and refined by a parabola, to 1e-9 relative."""
-    from grazing_control.dynamics import orbits
+    from grazing_control.dynamics.orbits import orbits
 
     m = load_model(MODELS / "study_1dof.yaml")
     fold = nb.branch_fold(m, None)

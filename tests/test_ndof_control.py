@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.ndof_design import evaluate_design, gain_family, write_gain_yaml
-from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.dynamics.design.ndof_design import evaluate_design, gain_family, write_gain_yaml
+from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof.flow import periodic_response
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.oscillator.params import ParameterError

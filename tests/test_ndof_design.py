@@ -11,9 +11,13 @@ import pytest
 import yaml
 from scipy.optimize import brentq, linear_sum_assignment
 
-from grazing_control.dynamics import design, ndof_branch, ndof_design as nd
-from grazing_control.dynamics.ndof_map import NdofMap
-from grazing_control.dynamics.shooting import find_periodic, floquet_multipliers
+from grazing_control.dynamics.design import gains as design
+
+from grazing_control.dynamics.orbits import ndof_branch
+
+from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import NdofModel, load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -136,7 +140,7 @@ def test_transmission_zeros_against_the_characteristic_polynomial(seed):
 # ------------------------------------------------- limit multipliers, existence (§6, §7)
 def test_n1_limit_multipliers_existence_and_admissible_sets_are_the_1dof_design():
     """n = 1: lambda0 (Eq. 23, design.limit_multipliers), gamma1 (Eq. 36) and the three
-    admissible sets (mapped c2 -> mu = N_g,11) agree with dynamics/design.py to 1e-10."""
+    admissible sets (mapped c2 -> mu = N_g,11) agree with dynamics/design/gains.py to 1e-10."""
     m, p = _study()
     u0, sigma = design._c2_of_n11(p, 0.0)
     for c2 in (-1.7, -1.0, -0.5, 0.0, 0.2):

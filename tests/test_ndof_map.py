@@ -1,4 +1,4 @@
-"""Tests of grazing_control.dynamics.ndof_map: the n-DOF Pi2 map as a PeriodMap.
+"""Tests of grazing_control.dynamics.maps.ndof_map: the n-DOF Pi2 map as a PeriodMap.
 
 Yardsticks: the 1-DOF core (the n = 1 model file against OneDOF and orbit_11), the
 50-digit reference of tests/reference_ndof.py (states, impacts, central-difference
@@ -15,11 +15,11 @@ import pytest
 from mpmath import mp, mpf
 from scipy.optimize import brentq
 
-from grazing_control.dynamics.continuation import continue_orbit
-from grazing_control.dynamics.model import OneDOF, PeriodMap
-from grazing_control.dynamics.ndof_map import NdofMap
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.shooting import (bifurcation_tests, find_periodic,
+from grazing_control.dynamics.orbits.continuation import continue_orbit
+from grazing_control.dynamics.maps.model import OneDOF, PeriodMap
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits.shooting import (bifurcation_tests, find_periodic,
                                                floquet_multipliers, iterate)
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model

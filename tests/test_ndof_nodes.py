@@ -5,7 +5,7 @@ analysed from the bag alone.
 The scene is the shipped config/models/two_mass_chain.yaml at Delta d = -1e-5: uncontrolled
 its Pi2 samples are chaotic near grazing (no period up to 30; largest Lyapunov exponent
 about 0.20 per period, docs/nodes.md); the controller with the design's k(mu = -0.22)
-(dynamics.ndof_design, written by write_gain_yaml) switched on at sample 300 takes them
+(dynamics.design.ndof_design, written by write_gain_yaml) switched on at sample 300 takes them
 to the controlled 1/1 orbit that Newton shooting finds on NdofMap with the same gains.
 The references are the core's: the engine replayed with the recorded corrections
 (bit for bit: the node is the engine) and find_periodic.
@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.ndof_design import evaluate_design, write_gain_yaml
-from grazing_control.dynamics.ndof_map import NdofMap
-from grazing_control.dynamics.shooting import find_periodic
+from grazing_control.dynamics.design.ndof_design import evaluate_design, write_gain_yaml
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.plant.ndof_engine import NdofEngine
 from grazing_control.plant.ndof_settings import ndof_settings_from_values

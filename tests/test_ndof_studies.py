@@ -3,7 +3,7 @@
 * branch: the leading-order prediction converges to the exact orbit at its order
   (relative error O(s), s = sqrt(H) the impact's square root); on the n = 1 file the
   orbit and its multipliers are the 1-DOF closed-form route's (impact-phase shooting,
-  dynamics/orbits.py), and the uncontrolled largest multiplier grows like |Delta d|^-1
+  dynamics/orbits/orbits.py), and the uncontrolled largest multiplier grows like |Delta d|^-1
   (spec section 2: v- linear in Delta d); the fit recovers a known power law;
 * diagram: on the n = 1 file the brute-force samples are the 1-DOF sweep's; the result
   does not depend on how the points are split between processes;
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.ndof_design import gain_family, limit_multipliers
-from grazing_control.dynamics.orbits import orbit_11 as orbit_11_1dof
+from grazing_control.dynamics.design.ndof_design import gain_family, limit_multipliers
+from grazing_control.dynamics.orbits.orbits import orbit_11 as orbit_11_1dof
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import OscillatorParams
@@ -180,7 +180,7 @@ def two_mu():
 
 
 def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit(two_mu):
-    from grazing_control.dynamics.ndof_design import transmission_zeros
+    from grazing_control.dynamics.design.ndof_design import transmission_zeros
 
     assert np.max(np.abs(transmission_zeros(TWO))) < 1.0   # the premise
     mu, why = two_mu

@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from grazing_control.dynamics import ndof_branch, ndof_design as nd, ndof_zdm as nz, zdm
+from grazing_control.dynamics.orbits import ndof_branch
+
+from grazing_control.dynamics.design import ndof_design as nd
+
+from grazing_control.dynamics.maps import ndof_zdm as nz
+
+from grazing_control.dynamics.maps import zdm
 from grazing_control.oscillator.ndof import NdofModel, load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
@@ -82,7 +88,7 @@ def test_truncations_converge_at_their_orders_against_the_core(make):
 
 
 def test_n1_is_the_1dof_zdm():
-    """n = 1: the exact ZDM equals dynamics/zdm.py's to rounding; the two second-order
+    """n = 1: the exact ZDM equals dynamics/maps/zdm.py's to rounding; the two second-order
     maps (different O(delta^3) terms) differ by O(delta^3), the two leading-order ones
     (zdm.py's alpha includes Delta d) by O(delta^2)."""
     base = load_model(MODELS / "study_1dof.yaml")

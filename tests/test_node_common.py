@@ -217,7 +217,7 @@ def test_security_enforced_without_the_plugins_is_refused(tmp_path):
 
 def test_the_nodes_import_no_solver_they_do_not_use():
     """Issue 30: every node imported scipy.optimize (0.25 s of a scene's start) through
-    plant.settings -> dynamics.fidelity -> dynamics.zdm, for a root finder that only the
+    plant.settings -> dynamics.simulation.fidelity -> dynamics.maps.zdm, for a root finder that only the
     zdm analysis calls; it is imported where it is used. Imports only: no node starts."""
     import sys
 

@@ -1,4 +1,4 @@
-"""Measurement noise through the closed loop (grazing_control.dynamics.noise).
+"""Measurement noise through the closed loop (grazing_control.dynamics.design.noise).
 
 The noise gain (std of the Pi2 position per unit measurement noise, from the discrete
 Lyapunov equation of the loop linearised about the controlled orbit) against the
@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.noise import loop_linearisation, noise_covariance, noise_gain
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.design.noise import loop_linearisation, noise_covariance, noise_gain
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.faults import FaultModel
@@ -59,7 +59,7 @@ def test_covariance_scales_with_the_measurement_covariance():
 
 def test_linearisation_is_the_jacobian_of_the_closed_loop():
     """J from loop_linearisation against central differences of the exact closed loop."""
-    from grazing_control.dynamics.maps import pi2_map
+    from grazing_control.dynamics.maps.maps import pi2_map
 
     p = OscillatorParams(delta_d=-1e-4)
     for g in (_gains(p, -1.0), _gains(p, 0.5, 2.0)):

@@ -5,9 +5,9 @@ complex (the fitted linear map; the slope of the log distance is biased there)."
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.numbers import measured_contraction

@@ -1,4 +1,4 @@
-"""Tests of grazing_control.dynamics.orbits: periodic orbits and their Floquet multipliers.
+"""Tests of grazing_control.dynamics.orbits.orbits: periodic orbits and their Floquet multipliers.
 
 Three independent routes must agree: the explicit impact-phase shooting of
 orbit_11, Newton shooting on the Pi2 map (shoot), and a 50-digit Newton iteration on
@@ -22,13 +22,13 @@ import pytest
 from mpmath import mp, mpf
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.maps import pi2_map
-from grazing_control.dynamics.orbits import (OrbitNotFound, branch_brackets, branch_point,
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.maps import pi2_map
+from grazing_control.dynamics.orbits.orbits import (OrbitNotFound, branch_brackets, branch_point,
                                              find_branch_phase, monodromy_det, multipliers,
                                              orbit_11, shoot)
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 from reference import RefModel
 
@@ -302,7 +302,7 @@ def test_orbit_on_another_branch_is_found_and_labelled_issue_7():
     Delta d (the old search said "no 1/1 orbit born at grazing") but a physical one
     exists on an arc separated from grazing by v- <= 0: returned, labelled 'other',
     and checked by the exact flow (one impact, back to the same Pi2 point)."""
-    from grazing_control.dynamics.maps import pi2_map
+    from grazing_control.dynamics.maps.maps import pi2_map
 
     p = OscillatorParams(zeta=0.006638694214357835, r=0.6869943793584391,
                          omega=1.069458758465759, delta_d=-0.0009979230443342096,
@@ -339,8 +339,8 @@ def test_delta_d_rounding_bounds_the_wobble_and_is_not_vacuous(c2, delay):
     """Against Delta d = -gamma1 psi^2 (D9; the psi^3 term is below 1e-33 here): the error
     of branch_point's Delta d stays inside the bound for |psi| <= 6e-12 on both sides,
     and reaches at least a tenth of it (measured 0.55 ... 0.72 of the bound at most)."""
-    from grazing_control.dynamics.design import existence_coefficient
-    from grazing_control.dynamics.orbits import _delta_d_rounding, _psi_grid
+    from grazing_control.dynamics.design.gains import existence_coefficient
+    from grazing_control.dynamics.orbits.orbits import _delta_d_rounding, _psi_grid
 
     p = OscillatorParams()
     g = Gains(degenerate_c1(p, c2, delay), c2, delay)

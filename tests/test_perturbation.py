@@ -1,8 +1,8 @@
 """Perturbation route for the near-grazing 1/1 motion against the exact shooting route.
 
-Exact: grazing_control.dynamics.orbits (impact-phase shooting), continuation.continue_11
+Exact: grazing_control.dynamics.orbits.orbits (impact-phase shooting), continuation.continue_11
 (period-doubling point), design.limit_multipliers / existence_coefficient /
-admissible_c2. Perturbation: grazing_control.dynamics.perturbation (docs/theory_zdm.md,
+admissible_c2. Perturbation: grazing_control.dynamics.maps.perturbation (docs/theory_zdm.md,
 sections 5-9). Bounds asserted here were measured (study parameters) and are
 quoted in the docstrings.
 """
@@ -12,14 +12,14 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.continuation import continue_11
+from grazing_control.dynamics.orbits.continuation import continue_11
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import (admissible_c2, degenerate_c1,
+from grazing_control.dynamics.design.gains import (admissible_c2, degenerate_c1,
                                              existence_coefficient, limit_multipliers)
 from grazing_control.oscillator.flow import transition_matrix
-from grazing_control.dynamics.orbits import branch_point, multipliers, orbit_11
+from grazing_control.dynamics.orbits.orbits import branch_point, multipliers, orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.perturbation import (admissible_c2_perturbation,
+from grazing_control.dynamics.maps.perturbation import (admissible_c2_perturbation,
                                                    characteristic_roots, delta2_from_delta_d,
                                                    existence_coefficient_perturbation,
                                                    fixed_point_series,

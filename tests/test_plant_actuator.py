@@ -2,7 +2,7 @@
 ``actuator_bandwidth`` / ``actuator_latency``; issue 29 section 4): each period against
 an independent integration (DOP853 of (x, v, f), tests/reference_actuator.py) over
 seeded cases, impacts while the force's transient decays among them; the period map of
-dynamics.actuator bit for bit; the parameters' errors.
+dynamics.simulation.actuator bit for bit; the parameters' errors.
 """
 
 import math
@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.actuation import pulse_force, pulse_start
-from grazing_control.dynamics.actuator import actuated_step
+from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
+from grazing_control.dynamics.simulation.actuator import actuated_step
 from grazing_control.oscillator.flow import to_physical
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.engine import Engine
@@ -93,7 +93,7 @@ def test_a_period_through_the_actuator_matches_an_ode_solver_over_seeded_cases()
 
 
 def test_the_plant_runs_the_actuated_period_map_bit_for_bit():
-    """Ten periods of the engine are ``dynamics.actuator.actuated_step``'s, state and
+    """Ten periods of the engine are ``dynamics.simulation.actuator.actuated_step``'s, state and
     force carried from period to period, exactly."""
     case = seeded_case(3) | {"width": W, "delay": DELAY, "latency": 0.2,
                              "bandwidth": 3.0 * P.omega, "force": 0.0}

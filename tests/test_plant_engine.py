@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.simulate import period_step
+from grazing_control.dynamics.simulation.simulate import period_step
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
@@ -110,8 +110,8 @@ def test_a_drifting_wall_is_the_cores_plant_at_k_and_restarts_on_reset():
 def test_pulse_periods_are_the_cores_pulse_step_bit_for_bit_on_both_paths():
     """A pulse of width w centred at the actuation delay: lockstep (begin_period with the
     delay) and realtime (begin_period(0), then actuate at the deadline) both equal
-    dynamics.actuation.pulse_step(start = delay - w/2) bit for bit, force limit too."""
-    from grazing_control.dynamics.actuation import pulse_step
+    dynamics.simulation.actuation.pulse_step(start = delay - w/2) bit for bit, force limit too."""
+    from grazing_control.dynamics.simulation.actuation import pulse_step
 
     rng = np.random.default_rng(21)
     for _ in range(40):
@@ -154,8 +154,8 @@ def test_pulse_width_zero_is_the_kick_and_the_pulse_converges_to_it():
 
 def test_states_during_a_pulse_follow_the_flow_under_its_force():
     """The stream's samples inside the pulse are the exact flow under the constant force
-    (dynamics.actuation.flow_with_force from the pulse's start), not the free flow."""
-    from grazing_control.dynamics.actuation import flow_with_force
+    (dynamics.simulation.actuation.flow_with_force from the pulse's start), not the free flow."""
+    from grazing_control.dynamics.simulation.actuation import flow_with_force
     from grazing_control.oscillator import kernel
     from grazing_control.oscillator.flow import to_physical
 

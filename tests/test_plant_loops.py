@@ -1,8 +1,8 @@
 """The plant's two loops without ROS: lockstep and realtime over a recording sink and a
 fake wall clock (grazing_control.plant.lockstep, .realtime, .loop).
 
-The references are the core's: :func:`grazing_control.dynamics.simulate.simulate` and a
-loop of :func:`grazing_control.dynamics.simulate.period_step` written here, one call per
+The references are the core's: :func:`grazing_control.dynamics.simulation.simulate.simulate` and a
+loop of :func:`grazing_control.dynamics.simulation.simulate.period_step` written here, one call per
 sample with the delay of docs/theory_delay.md. The realtime loop is driven by a clock the
 test advances, so deadlines, misses, late answers and splits happen exactly where the
 test puts them.
@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.simulate import period_step, simulate
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.simulation.simulate import period_step, simulate
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.engine import Engine

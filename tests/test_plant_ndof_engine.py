@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.ndof_design import gain_family
-from grazing_control.dynamics.ndof_map import NdofMap
-from grazing_control.dynamics.shooting import find_periodic
+from grazing_control.dynamics.design.ndof_design import gain_family
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.plant.engine import Event
 from grazing_control.plant.lockstep import Lockstep

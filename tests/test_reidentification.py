@@ -1,11 +1,11 @@
-"""grazing_control.dynamics.reidentification: the refit of the model from the stream, the
+"""grazing_control.dynamics.identification.reidentification: the refit of the model from the stream, the
 redesign with the admissibility re-checked, the switch of the estimator, and each named
 failure (issue 29 section 3; docs/theory_reidentification.md).
 
 The refit is checked against the truth of the package's exact simulation
 (tests/identification_scenes.py), the redesign against the degenerate condition it
-solves (N_g,12 = 0 of the new model, dynamics.maps.period_matrix) and the design's
-admissible set (dynamics.design.admissible_c2), the switch against the absolute state
+solves (N_g,12 = 0 of the new model, dynamics.maps.maps.period_matrix) and the design's
+admissible set (dynamics.design.gains.admissible_c2), the switch against the absolute state
 it must keep.
 """
 
@@ -15,16 +15,16 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.design import admissible_c2, degenerate_c1
-from grazing_control.dynamics.estimation import FilterState
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.design.gains import admissible_c2, degenerate_c1
+from grazing_control.dynamics.estimation.section_state import FilterState
 from grazing_control.dynamics.identification.model import RigModel
-from grazing_control.dynamics.maps import period_matrix
-from grazing_control.dynamics.reidentification import (MIN_PERIODS, ReidentificationError,
+from grazing_control.dynamics.maps.maps import period_matrix
+from grazing_control.dynamics.identification.reidentification import (MIN_PERIODS, ReidentificationError,
                                                        Reidentifier, StreamRecord,
                                                        model_from_fit, plan_switch, redesign,
                                                        refit, switch_estimator)
-from grazing_control.dynamics.stream import StreamEstimator
+from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -38,7 +38,8 @@ WRONG = P.with_(zeta=1.05 * P.zeta, delta_d=1.1 * P.delta_d)
 
 
 def test_the_condition_sets_are_the_designs():
-    from grazing_control.dynamics import design, reidentification
+    from grazing_control.dynamics.design import gains as design
+    from grazing_control.dynamics.identification import reidentification
     assert reidentification.CONDITIONS == design.CONDITIONS
 
 

@@ -8,11 +8,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.consistency import ConsistencyMonitor
-from grazing_control.dynamics.estimation import FilterState
-from grazing_control.dynamics.reidentification import (REASONS, ReidentificationError,
+from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
+from grazing_control.dynamics.estimation.section_state import FilterState
+from grazing_control.dynamics.identification.reidentification import (REASONS, ReidentificationError,
                                                        Refit, SwitchPlan)
-from grazing_control.dynamics.stream import StreamEstimator
+from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.ros.controller_node import ControlLaw

@@ -216,7 +216,7 @@ def test_an_infeasible_budget_names_the_budget_and_a_slow_sensor_the_rate():
 
 
 def test_the_estimate_is_timed_on_the_controlled_orbit():
-    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.oscillator.control import Gains
 
     rig = rig_from_dict(LAB)

@@ -102,7 +102,7 @@ def test_the_sensor_latency_holds_each_sample_until_its_time_plus_the_latency():
 
 
 def test_the_controller_designs_for_the_budget_and_refuses_other_values(rig):
-    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.design.gains import degenerate_c1
 
     values = controller_values(rig, 0.03)
     p = rig.params()

@@ -31,7 +31,7 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Float64MultiArray
 
 from bagtools_helpers import TYPESTORE, joint_state, vector3_stamped, write_rosbags
-from grazing_control.dynamics.clock_relation import fit_clock
+from grazing_control.dynamics.estimation.clock_relation import fit_clock
 from grazing_control.plant.schedule import PREDICTION_HOLD
 from grazing_control.ros.common import seconds_from_stamp, stamp_from_seconds
 from test_closed_loop import Collector, new_domain

@@ -241,7 +241,7 @@ def _fed(order_late: bool, never: bool = False):
 
     from geometry_msgs.msg import WrenchStamped
 
-    from grazing_control.dynamics.stream import StreamEstimator
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
     from grazing_control.ros.rig_control import RigSide
 
     rig = load_rig(RIG)

@@ -17,17 +17,17 @@ import pytest
 
 from grazing_control.cli import main
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import evaluate_design
+from grazing_control.dynamics.design.gains import evaluate_design
 from grazing_control.plant.faults import NO_FAULTS, FaultModel
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.perturbation import perturbation_multipliers
+from grazing_control.dynamics.maps.perturbation import perturbation_multipliers
 from grazing_control.studies.robustness.delay import (design_gains, largest_multiplier,
                                                       stability_interval, stability_map)
 from grazing_control.studies.robustness.faults import (attractor_states, capture_statistics,
                                                        capture_time, predicted_spread,
                                                        simulate_with_faults)
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 P = OscillatorParams()
 Q = P.with_(delta_d=-9e-6)
@@ -230,8 +230,8 @@ def test_stability_chart_keeps_to_its_c2_grid(tmp_path, monkeypatch):
 
 def test_grazing_robustness_noise_chart_and_numbers(tmp_path, capsys):
     """`grazing robustness noise`: the noise gain over the admissible c2 per Delta d, the
-    least gain and the study's, equal to the core's (dynamics.tuning)."""
-    from grazing_control.dynamics.tuning import design_noise_gain, optimize_noise
+    least gain and the study's, equal to the core's (dynamics.design.tuning)."""
+    from grazing_control.dynamics.design.tuning import design_noise_gain, optimize_noise
 
     out = tmp_path / "n"
     assert main(["robustness", "noise", "--points", "21", "--out", str(out), "--json"]) == 0
@@ -254,9 +254,9 @@ def test_grazing_robustness_noise_chart_and_numbers(tmp_path, capsys):
 
 def test_grazing_robustness_model_chart_and_numbers(tmp_path, capsys, monkeypatch):
     """`grazing robustness model`: the band per design and error, equal to the core's
-    (dynamics.mismatch.instability_band); here on a reduced error list."""
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.mismatch import instability_band
+    (dynamics.design.mismatch.instability_band); here on a reduced error list."""
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.design.mismatch import instability_band
     from grazing_control.studies.robustness import model
 
     monkeypatch.setattr(model, "ERRORS", {"zeta": (0.05,), "r": (0.1,)})

@@ -1,5 +1,5 @@
 """Newton shooting, Floquet multipliers and test functions over the model protocol
-(grazing_control.dynamics.shooting), on two models: an n-dimensional affine map whose
+(grazing_control.dynamics.orbits.shooting), on two models: an n-dimensional affine map whose
 fixed point and multipliers are known in closed form, and the 1-DOF oscillator, where
 the explicit impact-phase route (orbit_11) is the independent reference.
 """
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from affine_model import Affine
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.model import OneDOF
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.shooting import (ShootingFailed, bifurcation_tests,
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.model import OneDOF
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits.shooting import (ShootingFailed, bifurcation_tests,
                                                find_periodic, floquet_multipliers, iterate)
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams

@@ -26,7 +26,7 @@ from grazing_control.ros import launcher
 from grazing_control.ros import cdr
 from grazing_control.ros.common import DATA_QOS, seconds_from_stamp, stamp_key
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
 from test_closed_loop import STUDY, Collector, new_domain, stamps, xv
@@ -424,7 +424,7 @@ def test_stream_controller_position_only_sensor_and_pulse_through_the_node(node_
     for it (wait_for_controller), sends the stream's sample at t = 0 with sample 0, and
     the stream is the sensor's (position only: velocity empty; effort [cos tau, sin tau]);
     the run with a force pulse is the core's pulse_step loop bit for bit."""
-    from grazing_control.dynamics.actuation import pulse_step
+    from grazing_control.dynamics.simulation.actuation import pulse_step
     from grazing_control.plant.sensor import SensorModel
 
     domain, collector, start = node_env
@@ -483,11 +483,11 @@ def test_stream_controller_position_only_sensor_and_pulse_through_the_node(node_
 
 def test_a_pulse_through_the_first_order_actuator_is_the_cores_map_through_the_node(node_env):
     """actuator_bandwidth 3x the forcing frequency and a latency (issue 29 section 4):
-    the samples on oscillator/pi2 are the core's 3-state map (dynamics.actuator.
+    the samples on oscillator/pi2 are the core's 3-state map (dynamics.simulation.actuator.
     actuated_step, the force carried from period to period) bit for bit, with the
     node's answers acting through it."""
-    from grazing_control.dynamics.actuation import pulse_start
-    from grazing_control.dynamics.actuator import Actuator, actuated_step
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+    from grazing_control.dynamics.simulation.actuator import Actuator, actuated_step
 
     domain, collector, start = node_env
     p = OscillatorParams(delta_d=-5e-6)
@@ -551,7 +551,7 @@ def test_lost_answers_are_replaced_by_their_predictions_through_the_node(node_en
     are the engine's lockstep loop with the same answers bit for bit (its spread about
     the orbit <= 1e-10, tests/test_plant_loops.py), every loss after the first
     controlled answer is counted as predicted."""
-    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.design.gains import degenerate_c1
     from test_plant_loops import lossy_lockstep, predicting_controller
 
     domain, collector, start = node_env

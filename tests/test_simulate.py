@@ -1,4 +1,4 @@
-"""Tests of grazing_control.dynamics.simulate: runs on Pi2, the controller switch, batches,
+"""Tests of grazing_control.dynamics.simulation.simulate: runs on Pi2, the controller switch, batches,
 dense output, and the two controlled scenes of the study (spec section 8, Fig. 2 f, g).
 """
 
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.flow import to_deviation, to_physical
 from grazing_control.oscillator.impact import NonFiniteStateError, advance
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import (MAX_PERIODS, SimulationResult, period_step,
+from grazing_control.dynamics.simulation.simulate import (MAX_PERIODS, SimulationResult, period_step,
                                                simulate, simulate_batch, states_between)
 
 STUDY = OscillatorParams()

@@ -1,4 +1,4 @@
-"""The cheapest adequate stop for a scene (dynamics/stop_fidelity.py; issue 31 part 4,
+"""The cheapest adequate stop for a scene (dynamics/simulation/stop_fidelity.py; issue 31 part 4,
 docs/theory_contact.md section 18): rigid where the stop is stiff enough for the
 tolerance, compliant where it is not, friction only where it matters; the chosen model
 run over the scene stays within the tolerance of the full one."""
@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.compliant_model import CompliantOneDOF
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.model import OneDOF
-from grazing_control.dynamics.shooting import iterate
-from grazing_control.dynamics.stop_fidelity import choose_stop_fidelity
+from grazing_control.dynamics.maps.compliant_model import CompliantOneDOF
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.model import OneDOF
+from grazing_control.dynamics.orbits.shooting import iterate
+from grazing_control.dynamics.simulation.stop_fidelity import choose_stop_fidelity
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams

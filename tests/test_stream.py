@@ -1,4 +1,4 @@
-"""Sampling Pi2 from a sensor stream (grazing_control.dynamics.stream).
+"""Sampling Pi2 from a sensor stream (grazing_control.dynamics.estimation.stream).
 
 The bookkeeping (which samples make which section, when an estimate is due, lost
 samples, a reset), then the closed loop on a position-only stream at 200 samples per
@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.estimation import estimate_covariance
-from grazing_control.dynamics.noise import noise_gain
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.estimation.section_state import estimate_covariance
+from grazing_control.dynamics.design.noise import noise_gain
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.estimation.stream import StreamEstimator, simulate_stream
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.sensor import SensorModel
@@ -31,7 +31,7 @@ def _gains(p, c2, delay=0.0):
 
 def _xv(p, t, z=(0.0, 0.0)):
     """A physical state of the free motion (no impact) with deviation z at t = 0."""
-    from grazing_control.dynamics.estimation import phi_rows
+    from grazing_control.dynamics.estimation.section_state import phi_rows
     dev = phi_rows(p.zeta, np.atleast_1d(t)) @ np.array(z)
     psi = p.tau2 + p.omega * np.atleast_1d(t) - p.lag
     return (p.amplitude * np.cos(psi) + dev[:, 0], -p.amplitude * p.omega * np.sin(psi)
@@ -217,7 +217,7 @@ def test_a_lead_makes_a_section_due_earlier_without_its_last_samples():
 def test_what_the_plant_reports_as_acted_replaces_the_answer():
     """A deadline miss (0) or a substituted prediction reported by the plant is the kick
     the filter integrates, before or after the controller's own late answer."""
-    from grazing_control.dynamics.stream import StreamEstimator
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
     from grazing_control.oscillator.params import OscillatorParams
 
     s = StreamEstimator(OscillatorParams(delta_d=-5e-6), "model", 1e-4)

@@ -8,9 +8,9 @@ its model the filter put the orbit 1.35e-4 off (10x) and reset 59 times in 120 p
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.actuator import Actuator, actuated_design, bandwidth_actuator
-from grazing_control.dynamics.stream import StreamEstimator, simulate_stream
-from grazing_control.dynamics.tuning import optimize_noise
+from grazing_control.dynamics.simulation.actuator import Actuator, actuated_design, bandwidth_actuator
+from grazing_control.dynamics.estimation.stream import StreamEstimator, simulate_stream
+from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.sensor import SensorModel
 
@@ -46,7 +46,7 @@ def test_the_force_the_filter_carries_over_is_the_plants():
     """section_force from the known corrections, through predict_section: the plant's
     next section from the true state, to 1e-13 (0.5 T / tau_a = 3 pi at 1x: the force
     carried over is 1.9e-3 of the pulse's, no rounding-level share)."""
-    from grazing_control.dynamics.stream import predict_section
+    from grazing_control.dynamics.estimation.stream import predict_section
 
     act = bandwidth_actuator(P, 1.0)
     gains = optimize_noise(P, 3.0).gains()

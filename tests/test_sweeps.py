@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.studies.sweeps import SweepResult, detect_period, sweep
 from grazing_control.studies.sweeps import run as sweep_run
 

@@ -1,4 +1,4 @@
-"""Choosing c2 in the admissible set (grazing_control.dynamics.tuning, issue 15 section 3).
+"""Choosing c2 in the admissible set (grazing_control.dynamics.design.tuning, issue 15 section 3).
 
 * the least noise gain is no larger than the gain at any c2 of a fine grid over the
   admissible set (brute force), with and without a delay;
@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import admissible_c2, degenerate_c1
-from grazing_control.dynamics.noise import noise_gain
-from grazing_control.dynamics.orbits import orbit_11
-from grazing_control.dynamics.tuning import STUDY_C2, design_noise_gain, optimize_noise
+from grazing_control.dynamics.design.gains import admissible_c2, degenerate_c1
+from grazing_control.dynamics.design.noise import noise_gain
+from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.design.tuning import STUDY_C2, design_noise_gain, optimize_noise
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.faults import NO_FAULTS, FaultModel
@@ -84,7 +84,7 @@ def test_optimize_refuses_the_non_impacting_side_and_an_empty_set():
     # a delay where N22 = 1 just past the singular delay: the impacting set is empty
     from scipy.optimize import brentq
 
-    from grazing_control.dynamics.design import degenerate_n22
+    from grazing_control.dynamics.design.gains import degenerate_n22
 
     delay = brentq(lambda d: degenerate_n22(p, d) - 1.0, 0.7802, 0.79, xtol=1e-15)
     with pytest.raises(ParameterError, match="empty"):
@@ -109,9 +109,9 @@ def test_design_reports_the_position_only_noise_gain_of_the_chosen_estimator(cap
     import json
 
     from grazing_control import cli
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.estimation import estimate_covariance
-    from grazing_control.dynamics.tuning import design_noise_gain
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.estimation.section_state import estimate_covariance
+    from grazing_control.dynamics.design.tuning import design_noise_gain
     from grazing_control.oscillator.control import Gains
     from grazing_control.oscillator.params import OscillatorParams
 

@@ -1,4 +1,4 @@
-"""Tests of grazing_control.dynamics.two_parameter and `grazing continue2` (issue 18 s1).
+"""Tests of grazing_control.dynamics.orbits.two_parameter and `grazing continue2` (issue 18 s1).
 
 Independent references:
 
@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 from grazing_control.cli.commands import main
-from grazing_control.dynamics.continuation import continue_11
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.maps import pi2_map
-from grazing_control.dynamics.orbits import branch_point, shoot, _orbit_from_phase
-from grazing_control.dynamics.two_parameter import (KINDS, Family, asymptotic_coefficient,
+from grazing_control.dynamics.orbits.continuation import continue_11
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.maps.maps import pi2_map
+from grazing_control.dynamics.orbits.orbits import branch_point, shoot, _orbit_from_phase
+from grazing_control.dynamics.orbits.two_parameter import (KINDS, Family, asymptotic_coefficient,
                                                     codim2_points, continue_curve, curve_point,
                                                     fitted_exponent, local_shape,
                                                     regular_tests, two_parameter_diagram)
@@ -148,7 +148,7 @@ def test_study_pd_point_lies_on_the_pd_curve(omega_diagram):
 
 
 def test_regularised_tests_equal_v_times_det_of_j_plus_minus_i():
-    from grazing_control.dynamics.continuation import branch_monodromy
+    from grazing_control.dynamics.orbits.continuation import branch_monodromy
 
     for gains in (None, G_STUDY, Gains(0.3, 0.2)):
         for psi in (-0.3, -1e-3, 2e-2, 0.7):
@@ -176,7 +176,7 @@ def test_kappa_from_the_zdm_series_equals_the_closed_form(m):
 
 def test_fold_from_the_multiplier_is_the_turning_point_of_the_series():
     # c_F of (T4) from the multiplier +1 against the turning point of (P3), -kappa1'/(2 kappa2)
-    from grazing_control.dynamics.perturbation import series_coefficients
+    from grazing_control.dynamics.maps.perturbation import series_coefficients
 
     for fam, star in ((Family(P, None, "omega"), 2.0 * P.omega_d / 3.0),
                       (Family(P, None, "zeta"), math.sqrt(1.0 - P.omega ** 2)),
@@ -296,8 +296,8 @@ def test_uncontrolled_branch_closed_form_of_the_derivation():
 
 def test_controlled_pd_curve_is_the_end_of_the_mistuning_band():
     # the controlled orbit (study design) on a plant with omega (1 + e): the exact band
-    # end of dynamics.mismatch (orbit_11 scanned and bisected in log|Delta d| to 1e-3)
-    from grazing_control.dynamics.mismatch import instability_band
+    # end of dynamics.design.mismatch (orbit_11 scanned and bisected in log|Delta d| to 1e-3)
+    from grazing_control.dynamics.design.mismatch import instability_band
 
     e = 1e-4
     band = instability_band(P, G_STUDY, "omega", e)
@@ -319,7 +319,7 @@ DESIGN = Family(P, G_STUDY, "c2", design=True)
 
 
 def test_design_family_curves_meet_grazing_at_the_ends_of_the_admissible_set():
-    from grazing_control.dynamics.design import admissible_c2, limit_multipliers
+    from grazing_control.dynamics.design.gains import admissible_c2, limit_multipliers
 
     ((lo, hi),) = admissible_c2(P, conditions="impacting")     # the design module's own ends
     (pd,) = codim2_points(DESIGN, -4.0, 2.0, kind=PD)
@@ -333,7 +333,7 @@ def test_design_family_curves_meet_grazing_at_the_ends_of_the_admissible_set():
 
 
 def test_design_family_local_shapes_quadratic_pd_cubic_fold():
-    from grazing_control.dynamics.perturbation import series_coefficients
+    from grazing_control.dynamics.maps.perturbation import series_coefficients
 
     (pd,) = codim2_points(DESIGN, -4.0, 2.0, kind=PD)
     (fold,) = codim2_points(DESIGN, -4.0, 2.0, kind=FOLD)
@@ -378,7 +378,7 @@ def test_command_design_family(tmp_path, capsys):
     assert doc["design"] is True
     ends = sorted((c["value"], tuple(c["curves"])) for c in doc["codim2"])
     assert [k for _v, k in ends] == [(PD,), (FOLD,)]
-    from grazing_control.dynamics.design import admissible_c2
+    from grazing_control.dynamics.design.gains import admissible_c2
 
     ((lo, hi),) = admissible_c2(P, conditions="impacting")
     assert abs(ends[0][0] - lo) < 1e-10 and abs(ends[1][0] - hi) < 1e-10

@@ -142,7 +142,7 @@ def test_the_default_bound_holds_the_controlled_orbits_and_not_the_chaotic_motio
     """The module docstring's numbers: the rig's least-noise design (delay 3) holds its
     orbit within the bound at Delta d = -5e-6 and -1e-7 once past the window; the
     uncontrolled motion at -5e-6 goes beyond it."""
-    from grazing_control.dynamics.simulate import simulate
+    from grazing_control.dynamics.simulation.simulate import simulate
     from grazing_control.oscillator.control import Gains
 
     lim = WatchdogLimits()

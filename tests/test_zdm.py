@@ -1,6 +1,6 @@
 """Zero-time discontinuity mapping at Pi1: closed forms, order of accuracy, normal-form maps.
 
-The reference is the exact flow with impacts of the core (grazing_control.dynamics.maps.pi1_map,
+The reference is the exact flow with impacts of the core (grazing_control.dynamics.maps.maps.pi1_map,
 through zdm.exact_return for states whose trajectory has already hit the wall at
 Pi1) and, for the ZDM alone, the exact ZDM evaluated in mpmath at 40 digits.
 Predicted orders (docs/theory_zdm.md, section 3): with H_max = eps and the state
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.flow import propagate
-from grazing_control.dynamics.maps import pi1_map
+from grazing_control.dynamics.maps.maps import pi1_map
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.zdm import (crossing, exact_return, h_max, local_grazing,
+from grazing_control.dynamics.maps.zdm import (crossing, exact_return, h_max, local_grazing,
                                           normal_form_jacobian, normal_form_map, zdm,
                                           zdm_exact, zdm_jacobian, zdm_leading, zdm_second)
 
@@ -197,7 +197,7 @@ def test_jacobians_match_finite_differences(order):
     if order == 1:  # 1 - (1 + r) e2 / V: not r^2, the defect behind section 9
         assert abs(det - p.r ** 2) > 0.5
     full = np.array(normal_form_jacobian(p, z, GAINS["controlled"], order)).reshape(2, 2)
-    from grazing_control.dynamics.zdm import smooth_map
+    from grazing_control.dynamics.maps.zdm import smooth_map
     assert np.allclose(full, np.array(smooth_map(p, GAINS["controlled"])).reshape(2, 2) @ jac)
 
 

@@ -57,7 +57,7 @@ _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$
 def cmd_orbit(args):
     if args.model is not None:
         return ndof.cmd_orbit(args)
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     p = params_of(args, args.delta_d)
     gains = gains_of(args, p)
@@ -66,7 +66,7 @@ def cmd_orbit(args):
     lam = o.multipliers
     cost = time.perf_counter() - t0
     if args.method == "perturbation":
-        from grazing_control.dynamics.perturbation import perturbation_multipliers
+        from grazing_control.dynamics.maps.perturbation import perturbation_multipliers
 
         if o.branch != "grazing":
             raise ParameterError(
@@ -120,7 +120,7 @@ _BRANCH_TEXT = {
 def cmd_continue(args):
     if args.model is not None:
         return ndof.cmd_continue(args)
-    from grazing_control.dynamics.continuation import continue_11
+    from grazing_control.dynamics.orbits.continuation import continue_11
 
     p = params_of(args)
     gains = gains_of(args, p)
@@ -153,7 +153,7 @@ def cmd_continue(args):
 def cmd_simulate(args):
     if args.model is not None:
         return ndof.cmd_simulate(args)
-    from grazing_control.dynamics.simulate import simulate
+    from grazing_control.dynamics.simulation.simulate import simulate
 
     p = params_of(args, args.delta_d)
     gains = gains_of(args, p)
@@ -177,7 +177,7 @@ def cmd_simulate(args):
     require_finite(out, "simulate")
     spectrum = None
     if args.lyapunov:
-        from grazing_control.dynamics.lyapunov import lyapunov_exact
+        from grazing_control.dynamics.simulation.lyapunov import lyapunov_exact
 
         if args.fidelity != "exact" or args.periods < 2:
             raise ParameterError("--lyapunov needs --fidelity exact and --periods >= 2 (the "

@@ -124,7 +124,7 @@ def gains_of(args, p):
         if delay != 0.0:
             raise ParameterError("--delay needs the gains: give --c2 (and optionally --c1)")
         return None
-    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.design.gains import degenerate_c1
 
     c1 = degenerate_c1(p, args.c2, delay) if args.c1 is None else args.c1
     return Gains(c1, args.c2, delay)

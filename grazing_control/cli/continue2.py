@@ -1,7 +1,7 @@
 """`grazing continue2`: the 1/1 orbit's PD and fold curves in two parameters (issue 18 s1).
 
 The plane is (mu, Delta d), mu = --parameter (omega, zeta, r, or the gain c2 with c1
-held); the algorithms are :mod:`grazing_control.dynamics.two_parameter`, the panels and
+held); the algorithms are :mod:`grazing_control.dynamics.orbits.two_parameter`, the panels and
 data files :mod:`grazing_control.studies.figures.two_parameter`
 (docs/theory_two_parameter.md).
 """
@@ -74,7 +74,7 @@ def run(args):
     import argparse
     from pathlib import Path
 
-    from grazing_control.dynamics.two_parameter import KINDS, Family, two_parameter_diagram
+    from grazing_control.dynamics.orbits.two_parameter import KINDS, Family, two_parameter_diagram
     from grazing_control.oscillator.params import ParameterError
     from grazing_control.studies.figures.two_parameter import write_diagram
     from .common import gains_of, params_of

@@ -24,7 +24,7 @@ __all__ = ["cmd_design"]
 def cmd_design(args):
     if args.model is not None:
         return ndof.cmd_design(args)
-    from grazing_control.dynamics.design import (C2_LIMIT, admissible_c2, evaluate_design,
+    from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, evaluate_design,
                                                  write_controller_yaml)
 
     p = params_of(args)
@@ -43,7 +43,7 @@ def cmd_design(args):
     cost = time.perf_counter() - t0
     other = None
     if args.method == "perturbation":
-        from grazing_control.dynamics.perturbation import (admissible_c2_perturbation,
+        from grazing_control.dynamics.maps.perturbation import (admissible_c2_perturbation,
                                                            existence_coefficient_perturbation,
                                                            limit_multipliers_perturbation)
 
@@ -168,14 +168,14 @@ def cmd_design(args):
 
 def _actuator_report(args, p, point):
     """--actuator-bandwidth/--actuator-latency/--pulse-width: the design through the
-    first-order actuator (dynamics.actuator.actuated_design, docs/theory_pulse.md (P1)
+    first-order actuator (dynamics.simulation.actuator.actuated_design, docs/theory_pulse.md (P1)
     and section 7): its gains, and at --delta-d (default -5e-6) the loop's orbit, spectral
     radius and predicted spread (x and v measured with sigma; a position-only sensor at
     --sensor-rate with the chosen estimator)."""
-    from grazing_control.dynamics.actuator import Actuator, actuated_design
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.estimation import estimate_covariance
-    from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
+    from grazing_control.dynamics.simulation.actuator import Actuator, actuated_design
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.estimation.section_state import estimate_covariance
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
 
     bw, lat, w = args.actuator_bandwidth, args.actuator_latency, args.pulse_width
     for name, value in (("actuator_bandwidth", bw), ("actuator_latency", lat),
@@ -217,8 +217,8 @@ def _noise_delta_d(args):
 
 
 def _optimize(args, p):
-    """--optimize noise: the c2 of least noise gain (dynamics.tuning.optimize_noise)."""
-    from grazing_control.dynamics.tuning import STUDY_C2, optimize_noise
+    """--optimize noise: the c2 of least noise gain (dynamics.design.tuning.optimize_noise)."""
+    from grazing_control.dynamics.design.tuning import STUDY_C2, optimize_noise
 
     r = optimize_noise(p.with_(delta_d=_noise_delta_d(args)), args.delay)
     study = r.study_noise_gain if math.isfinite(r.study_noise_gain) else None
@@ -229,11 +229,11 @@ def _optimize(args, p):
 
 def _noise_report(args, p, point):
     """noise_gain (null where no stable controlled orbit) at --delta-d, issue 15 section 3."""
-    from grazing_control.dynamics.tuning import design_noise_gain
+    from grazing_control.dynamics.design.tuning import design_noise_gain
 
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.estimation import estimate_covariance
-    from grazing_control.dynamics.orbits import OrbitNotFound
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.estimation.section_state import estimate_covariance
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 
     dd = _noise_delta_d(args)
     q = p.with_(delta_d=dd)
@@ -260,7 +260,7 @@ def _noise_report(args, p, point):
 
 def _fmt_intervals(intervals):
     """'(lo, hi) U ...'; an end open at the search limit reads 'beyond -1e+06' (design.C2_LIMIT)."""
-    from grazing_control.dynamics.design import C2_LIMIT
+    from grazing_control.dynamics.design.gains import C2_LIMIT
 
     def end(x, sign):
         if x is None or not math.isfinite(x):

@@ -168,7 +168,7 @@ def coordinates(model) -> tuple:
 def family_member(model, name: str, value: float) -> float:
     """mu of the family member whose gain on ``name`` is ``value`` (the family is affine
     in mu, docs/theory_ndof.md, "Kick design")."""
-    from grazing_control.dynamics.ndof_design import gain_family
+    from grazing_control.dynamics.design.ndof_design import gain_family
 
     names = coordinates(model)
     if name not in names:
@@ -182,7 +182,7 @@ def family_member(model, name: str, value: float) -> float:
                              f"the same ({k0[j]:.12g}) for every member of the family; choose "
                              "another coordinate, or --mu")
     mu = float((value - k0[j]) / k1[j])
-    from grazing_control.dynamics.ndof_design import MU_LIMIT
+    from grazing_control.dynamics.design.ndof_design import MU_LIMIT
 
     if not abs(mu) <= MU_LIMIT:
         raise ParameterError(f"--free-gain {name}={value!r} is invalid: it is the member "
@@ -204,7 +204,7 @@ def gains_of(args, model):
         if given != ["--mu"]:
             raise ParameterError("--cancel-first-markov OFFSET needs --mu MU (the family member "
                                  "it moves off by OFFSET), and neither --gains nor --free-gain")
-        from grazing_control.dynamics.ndof_design import cancel_first_markov
+        from grazing_control.dynamics.design.ndof_design import cancel_first_markov
 
         only = bool(getattr(args, "markov_only", False))
         k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only),
@@ -224,7 +224,7 @@ def gains_of(args, model):
             raise ParameterError(f"--gains has {k.size} values: the model has n = {model.n}, "
                                  f"give 2n = {2 * model.n} ({', '.join(coordinates(model))})")
         return k, None, "given"
-    from grazing_control.dynamics.ndof_design import gain_family
+    from grazing_control.dynamics.design.ndof_design import gain_family
 
     mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain)
     return np.asarray(gain_family(model, mu), dtype=float), mu, "design family"
@@ -275,7 +275,7 @@ def _header(model, path):
 # ---------------------------------------------------------------------------- design
 def cmd_design(args):
     """design --model FILE [--mu MU | --free-gain NAME=V] [--out FILE] (docs/ndof_commands.md)."""
-    from grazing_control.dynamics import ndof_design as nd
+    from grazing_control.dynamics.design import ndof_design as nd
 
     model = load(args.model)
     t0 = time.perf_counter()
@@ -449,9 +449,9 @@ def continuation_values(start: float, stop: float, points: int) -> np.ndarray:
 
 def cmd_continue(args):
     """continue --model FILE --from A --to B [gains] (docs/ndof_commands.md)."""
-    from grazing_control.dynamics.continuation import continue_orbit
-    from grazing_control.dynamics.ndof_branch import continue_branch
-    from grazing_control.dynamics.ndof_map import NdofMap
+    from grazing_control.dynamics.orbits.continuation import continue_orbit
+    from grazing_control.dynamics.orbits.ndof_branch import continue_branch
+    from grazing_control.dynamics.maps.ndof_map import NdofMap
     from grazing_control.studies.ndof.branch import EXPLICIT, fold_beyond, orbit_11, with_delta_d
 
     values = continuation_values(args.start, args.stop, args.points)
@@ -476,7 +476,7 @@ def cmd_continue(args):
         f"{weak[-1]:.6g})")
     limit = None
     if mu is not None:
-        from grazing_control.dynamics.ndof_design import limit_multipliers
+        from grazing_control.dynamics.design.ndof_design import limit_multipliers
 
         limit = np.asarray(limit_multipliers(model, mu), dtype=complex)
     out = _header(model, args.model)

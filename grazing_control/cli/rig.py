@@ -249,7 +249,7 @@ def rig_report(rig, path, args) -> dict:
         report["design"]["optimize"] = design["optimize"]
     target = None
     if p.delta_d < 0.0:
-        from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
+        from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
 
         try:
             z = target = orbit_11(p, gains).pi2_deviation

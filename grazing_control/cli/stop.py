@@ -5,7 +5,7 @@ or ``--restitution``; optional Coulomb ``--friction``), the scene's start, horiz
 controller (the rigid design for ``--c2``): which of rigid (the wall with the stop's
 restitution, Eq. C3), compliant (without the friction) or compliant with friction keeps
 the Pi2 error within ``--tol`` over the horizon, the cheapest chosen and the reason
-printed (:func:`grazing_control.dynamics.stop_fidelity.choose_stop_fidelity`; the
+printed (:func:`grazing_control.dynamics.simulation.stop_fidelity.choose_stop_fidelity`; the
 criterion: docs/theory_contact.md section 18). Exit status 0; 2 for a bad value, in
 one line naming it.
 """
@@ -23,8 +23,8 @@ __all__ = ["add_stop_parser", "cmd_stop"]
 
 def cmd_stop(args) -> int:
     """Run ``grazing stop``; the exit status (module docstring)."""
-    from grazing_control.dynamics.design import degenerate_c1
-    from grazing_control.dynamics.stop_fidelity import choose_stop_fidelity
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.simulation.stop_fidelity import choose_stop_fidelity
     from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
     from grazing_control.oscillator.control import Gains
     from grazing_control.oscillator.params import OscillatorParams, ParameterError

@@ -1,21 +1,21 @@
-"""The dynamics over the oscillator: maps, orbits, continuation, design, simulation.
+"""The dynamics over the oscillator, in six folders.
 
-Layer 2 of 7 (docs/architecture.md). :mod:`.model` is the small protocol (a period map
-from a section state with its Jacobian and impact events, the section geometry, the
-grazing point) over which :mod:`.shooting` and :mod:`.continuation` are written once;
-:mod:`.maps` (the Pi1/Pi2 return maps of the 1-DOF closed form), :mod:`.zdm` (Nordmark's
-discontinuity map), :mod:`.orbits` (the 1/1 branch explicit in the impact phase),
-:mod:`.perturbation`, :mod:`.design` (c1(c2; delay), lambda0, the admissible set),
-:mod:`.fidelity` (the model fidelities), :mod:`.simulate` (event-driven simulation
-on Pi2), :mod:`.estimation` (the Pi2 state from a sampled sensor stream: nearest sample,
-arc fit, model filter), :mod:`.stream` (which samples make which section; the closed
-loop on a stream), :mod:`.noise` (the loop's stationary covariance per unit measurement
-noise), :mod:`.tuning` (the least-noise design), :mod:`.mismatch` (model-error bands),
-:mod:`.actuation` (a correction as a force pulse), :mod:`.actuator` (a first-order
-actuator with latency, exactly), :mod:`.augmented` (the model filter with a sensor bias
-and a drifting Delta d), :mod:`.consistency` (the windowed innovation test),
-:mod:`.capture` (switching the correction on) and :mod:`.identification` (the model's
-parameters from a recorded motion).
+Layer 2 of 7 (docs/architecture.md, where each module is listed).
+
+* :mod:`.maps`: maps and local theory: the Pi1/Pi2 return maps of the 1-DOF closed form,
+  the small model protocol (:class:`.maps.model.PeriodMap`: a period map from a section
+  state with its Jacobian and impact events, the section geometry, the grazing point),
+  Nordmark's discontinuity map, perturbation estimates, the compliant and n-DOF models.
+* :mod:`.orbits`: orbits, shooting and continuation (written once over the protocol), the
+  1/1 branch explicit in the impact phase, two-parameter continuation.
+* :mod:`.design`: design and tuning: c1(c2; delay), the admissible set, the least-noise c2,
+  model-error bands, the least spectral radius, switching on; the n-DOF design.
+* :mod:`.estimation`: the Pi2 state from a sampled sensor stream, the stream's sections,
+  the watchful filter (bias, drift) and its consistency test, the rig's clock.
+* :mod:`.identification`: the model's parameters from a recorded motion, the stop the data
+  support, the refit in the loop.
+* :mod:`.simulation`: event-driven simulation on Pi2, pulses and actuators, fidelities,
+  Lyapunov exponents.
 
 May import: :mod:`grazing_control.oscillator`, :mod:`grazing_control.support`. Never rclpy.
 """

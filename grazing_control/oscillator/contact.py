@@ -532,7 +532,7 @@ def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: 
                           monodromy: bool = False) -> CompliantSegment:
     """One forcing period from a Pi2 sample with a Kelvin-Voigt stop.
 
-    The shape of :func:`grazing_control.dynamics.fidelity.period_step`: deviation (dx, dv)
+    The shape of :func:`grazing_control.dynamics.simulation.fidelity.period_step`: deviation (dx, dv)
     from x_p at phase tau2 in, the correction dv_correction applied on Pi2 (Eq. 28), one
     period of :func:`advance_compliant`, the deviation at the next Pi2 sample out (as the
     segment's x, v) with the contacts (times from the sample).

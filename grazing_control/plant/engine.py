@@ -2,12 +2,12 @@
 
 :class:`Engine` carries the state as the deviation (dx, dv) from the non-impacting motion
 at the current Pi2 sample k (t_k = k T, spec section 3) and integrates each period with
-the core's exact flow: one :func:`grazing_control.dynamics.fidelity.period_step` call per
-period (as :func:`grazing_control.dynamics.simulate.simulate` makes them), or, with a
+the core's exact flow: one :func:`grazing_control.dynamics.simulation.fidelity.period_step` call per
+period (as :func:`grazing_control.dynamics.simulation.simulate.simulate` makes them), or, with a
 correction delayed by s, the flow to t_k + s, the velocity jump, the flow to t_k+1 (as
 ``simulate.period_step(..., delay=s)``, docs/theory_delay.md). Everything published
 between two samples (state, Pi1 crossing, impacts) is evaluated from the closed form by
-:func:`grazing_control.dynamics.simulate.states_between` without altering the trajectory,
+:func:`grazing_control.dynamics.simulation.simulate.states_between` without altering the trajectory,
 so a run of the engine reproduces ``simulate`` of the same scene sample for sample.
 With a compliant stop (settings.contact, :mod:`grazing_control.plant.contact_plant`) the
 period and the states between samples are that stop's flow instead, its contacts
@@ -16,7 +16,7 @@ published as impacts (v- at entry, v+ at exit).
 With a first-order actuator (``actuator_bandwidth`` or ``actuator_latency`` > 0, issue
 29 section 4) the force on the mass is a third state carried from sample to sample
 (:attr:`Engine.force`): each period is the exact flow under a piecewise exponential
-force, :func:`grazing_control.dynamics.actuator.lag_flow` per piece between the
+force, :func:`grazing_control.dynamics.simulation.actuator.lag_flow` per piece between the
 command's switches (:meth:`Engine._lag_period`, docs/theory_pulse.md section 5).
 
 No ROS: sim_node publishes the :class:`Event` values this returns.
@@ -29,10 +29,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.actuation import flow_with_force, pulse_force, pulse_start
-from grazing_control.dynamics.actuator import lag_flow, lag_states
-from grazing_control.dynamics.fidelity import period_step
-from grazing_control.dynamics.simulate import states_between
+from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force, pulse_start
+from grazing_control.dynamics.simulation.actuator import lag_flow, lag_states
+from grazing_control.dynamics.simulation.fidelity import period_step
+from grazing_control.dynamics.simulation.simulate import states_between
 from grazing_control.oscillator import kernel
 from grazing_control.plant.settings import SimSettings, initial_deviation
 
@@ -169,7 +169,7 @@ class Engine:
         the flow to t_k + delay, the correction there, the flow to t_k+1 (:meth:`actuate`),
         the same two calls as ``simulate.period_step(..., delay=delay)``; with a pulse
         width w > 0 the flow to its start, the pulse, the flow on, as
-        ``dynamics.actuation.pulse_step``. Returns the events of (t_k, t_k+1] in time
+        ``dynamics.simulation.actuation.pulse_step``. Returns the events of (t_k, t_k+1] in time
         order (state, Pi1, impacts), the next sample excluded.
         """
         if self.lagged:
@@ -321,7 +321,7 @@ class Engine:
     def _drift_wall(self) -> None:
         """The wall of sample k's period under the linear drift: Delta d in force at
         sample k0 plus delta_d_drift * (k - k0), as ``plant_at(k)`` of
-        dynamics.stream.simulate_stream; X** (which does not depend on Delta d) and the
+        dynamics.estimation.stream.simulate_stream; X** (which does not depend on Delta d) and the
         deviation stay (a state beyond the moved wall is left to the flow: the drift
         per period is far below the distance to the wall on Pi2)."""
         base, k0 = self._drift_from
@@ -359,7 +359,7 @@ class Engine:
         grid j * state_period in (ts, te] as the sensor measures them (plant.sensor,
         draws of sample j), and the Pi1 crossing; in time order. Under a pulse's force F
         the states are the flow of the oscillator with clearance Delta d - F shifted by
-        F (dynamics.actuation.flow_with_force); through the actuator ``states`` (times
+        F (dynamics.simulation.actuation.flow_with_force); through the actuator ``states`` (times
         since the segment's start -> physical (x, v)) evaluates them."""
         p = self.p
         events = []

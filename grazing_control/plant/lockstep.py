@@ -6,7 +6,7 @@ jitter) after the sample, as ``simulate.period_step(..., delay=)`` (docs/theory_
 and integrates the period; after ``answer_timeout`` wall seconds without it, or when the
 injected loss drops it, the last answer's prediction acts instead (``on_miss`` = predict)
 or nothing (drop), counted. Deterministic: a lockstep run reproduces
-:func:`grazing_control.dynamics.simulate.simulate` sample for sample, however long the
+:func:`grazing_control.dynamics.simulation.simulate.simulate` sample for sample, however long the
 round trips take.
 """
 

@@ -9,7 +9,7 @@ correction on the actuated velocity,
 
     z+ = z + e_{n + i_a} Delta v,    z_{k+1} = advance(flow, tau2, z+, T).z,
 
-the calls :class:`grazing_control.dynamics.ndof_map.NdofMap` makes with Delta v = k^T z,
+the calls :class:`grazing_control.dynamics.maps.ndof_map.NdofMap` makes with Delta v = k^T z,
 so a lockstep run with that controller repeats NdofMap's iterates bit for bit. A
 correction delayed by s is the flow to t_k + s, the jump there, the flow to t_k+1 (as
 the 1-DOF engine, docs/theory_delay.md); realtime on-arrival corrections split the

@@ -12,7 +12,7 @@ sample after t_k has come (docs/driver_contract.md, "Sections"; the stream estim
 ``after_section``); the sensor latency is that sample's way to the controller; the
 actuator latency is the command's way from its apply time to the force. The compute
 time is measured, not assumed: :func:`time_estimate` times the stream estimator the
-controller uses (:class:`grazing_control.dynamics.stream.StreamEstimator`, the model
+controller uses (:class:`grazing_control.dynamics.estimation.stream.StreamEstimator`, the model
 filter by default) on this machine, on the rig's controlled 1/1 orbit at the rig's
 samples per period with its sensor noise, and reports the tail (p99) of a few hundred
 estimates. :func:`timing_budget` adds the terms, :func:`check_budget` refuses an
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.stream import StreamEstimator
+from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.params import OscillatorParams
 from .rig import Rig, RigError
 
@@ -87,12 +87,12 @@ def time_estimate(p: OscillatorParams, gains, rate: int, sigma: float, *,
     a controller makes when the first sample after t_k arrives, is timed with
     ``time.perf_counter``.
     """
-    from grazing_control.dynamics.estimation import trajectory
+    from grazing_control.dynamics.estimation.section_state import trajectory
 
     if target is None:
         target = (0.0, 0.0)
         if p.delta_d < 0.0:
-            from grazing_control.dynamics.orbits import orbit_11
+            from grazing_control.dynamics.orbits.orbits import orbit_11
 
             target = orbit_11(p, gains).pi2_deviation
     sigma = float(sigma) if sigma > 0.0 else _EXACT_SIGMA

@@ -9,7 +9,7 @@ time unit its caller uses (rig seconds for a driver, model time for the simulato
   identity ``key`` (the sample's stamp for the simulator, the section index for a
   driver), its time t_k and the instant its command starts to act, t_k + delay (for a
   pulse of width w centred at the delay: t_k + delay - w/2, the simulator's
-  :func:`grazing_control.dynamics.actuation.pulse_start`); ``start=None`` announces a
+  :func:`grazing_control.dynamics.simulation.actuation.pulse_start`); ``start=None`` announces a
   section whose answer acts on arrival (the caller applies it; only the bookkeeping
   below is kept);
 * **answers** (``command(key, value, predicted, ...)``): one that arrives before its

@@ -23,8 +23,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.actuator import IDEAL_ACTUATOR, Actuator
-from grazing_control.dynamics.fidelity import FIDELITIES
+from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, Actuator
+from grazing_control.dynamics.simulation.fidelity import FIDELITIES
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.contact_plant import CONTACTS, ContactPlant, contact_from_values
 from grazing_control.plant.faults import FaultModel

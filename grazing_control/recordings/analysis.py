@@ -4,7 +4,7 @@ A scene is what the nodes publish: the Pi2 samples (before correction), the
 corrections that answered them, and the impacts. :class:`Scene` holds those arrays;
 :func:`scene_from_bag` reads them from a recording (topics ``/oscillator/pi2``,
 ``/controller/velocity_correction``, ``/oscillator/impact``), and
-:func:`scene_from_simulation` from a :class:`grazing_control.dynamics.simulate.SimulationResult`,
+:func:`scene_from_simulation` from a :class:`grazing_control.dynamics.simulation.simulate.SimulationResult`,
 so the same numbers can be compared between the node run and the core.
 
 Numbers (:func:`summarize`):

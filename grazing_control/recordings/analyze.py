@@ -195,7 +195,7 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     measured Pi2 spread (rms of x about the exact controlled orbit of the scene's
     actuation, :func:`.numbers.controlled_orbit`: the pulse's for a pulse scene, O(w^2) away
     from the kick's) and the spread predicted from the reported covariance by the kick's
-    loop linearised about its orbit (:func:`grazing_control.dynamics.noise.noise_covariance`
+    loop linearised about its orbit (:func:`grazing_control.dynamics.design.noise.noise_covariance`
     with the mean reported covariance as the measurement covariance; a pulse changes the
     multipliers by O(w^2), docs/theory_pulse.md; errors correlated from period to period,
     as the model filter's are, break its white-noise premise).
@@ -242,7 +242,7 @@ def estimate_numbers(est, sd, setup) -> dict | None:
     p, g = setup.params, setup.gains
     if p is None or g is None:
         return out
-    from grazing_control.dynamics.noise import noise_covariance
+    from grazing_control.dynamics.design.noise import noise_covariance
     from grazing_control.oscillator.control import Gains
 
     try:
@@ -308,7 +308,7 @@ def read_switches(path, topic: str = SWITCH_TOPIC, period_s: float | None = None
     :data:`grazing_control.ros.reidentify.SWITCH_FIELDS` (NaN as None), ``switched`` a
     bool, ``reason`` its name (None: switched), ``stamp_ns`` and, with the period, the
     ``section``; [] when the bag has none."""
-    from grazing_control.dynamics.reidentification import REASONS
+    from grazing_control.dynamics.identification.reidentification import REASONS
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 
     raw = reader.read_raw(Path(path), topics=[topic])

@@ -16,8 +16,8 @@ over the whole state, then):
 * the measured contraction per sample after the switch-on
   (:func:`~grazing_control.recordings.numbers.measured_contraction`) against the largest
   Floquet multiplier |lambda|max of the controlled 1/1 orbit, found by Newton shooting
-  (:func:`grazing_control.dynamics.shooting.find_periodic`) on
-  :class:`grazing_control.dynamics.ndof_map.NdofMap` with the recorded gains from the
+  (:func:`grazing_control.dynamics.orbits.shooting.find_periodic`) on
+  :class:`grazing_control.dynamics.maps.ndof_map.NdofMap` with the recorded gains from the
   last sample; the final sample's distance to that orbit, per coordinate;
 * the model check: every recorded period re-integrated by the core from the recorded
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
@@ -149,8 +149,8 @@ def model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None:
 
 def controlled_orbit(setup: NdofSetup, final) -> dict:
     """The exact controlled 1/1 orbit near the final sample, its multipliers and impacts."""
-    from grazing_control.dynamics.ndof_map import NdofMap
-    from grazing_control.dynamics.shooting import ShootingFailed, find_periodic
+    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.orbits.shooting import ShootingFailed, find_periodic
 
     if setup.model is None or setup.gains is None:
         return {"note": "no model or gains: no predicted orbit"}

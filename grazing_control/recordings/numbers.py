@@ -20,12 +20,12 @@ gives (uncontrolled attractor, switch-on, convergence, final point) and:
 * the measured contraction per sample after the switch-on, exp of the least-squares slope
   of log |X_k - X_final| over the samples above the rounding floor, against the modulus of
   the largest Floquet multiplier of the controlled 1/1 orbit that the core predicts
-  (:func:`grazing_control.dynamics.orbits.orbit_11`) for the same parameters and gains, or,
+  (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) for the same parameters and gains, or,
   when the simulator acted with a force pulse, of the pulse's orbit
   (:func:`controlled_orbit`);
 * the final sample against the exact controlled orbit (the kick's, or the pulse's);
 * the model check: every recorded period re-integrated with the core
-  (:func:`grazing_control.dynamics.simulate.period_step`) from the recorded sample and correction,
+  (:func:`grazing_control.dynamics.simulation.simulate.period_step`) from the recorded sample and correction,
   the largest departure from the next recorded sample (rounding level for a lockstep run;
   for a realtime run the corrections act at their arrival, not on Pi2, and it departs);
 * corrections: largest |Delta v|, saturation hits;
@@ -105,7 +105,7 @@ def infer_delta_d(base: OscillatorParams, scene):
 def _refine_delta_d(base, scene, dd):
     """Secant steps on the recorded one-period step with the first impact (stamp rounding
     limits the impact estimate; the Pi2 map is ~1/v- sensitive to Delta d near grazing)."""
-    from grazing_control.dynamics.simulate import period_step
+    from grazing_control.dynamics.simulation.simulate import period_step
 
     t, pi2, dv, imp = scene.t, scene.pi2, scene.correction, scene.impacts
     k = int(np.searchsorted(t, imp[0, 0], side="right") - 1)
@@ -220,7 +220,7 @@ def resolve_setup(bag, options: dict) -> Setup:
     gains = None
     c1o, c2o = options.get("c1"), options.get("c2")
     if c2o is not None:
-        from grazing_control.dynamics.design import degenerate_c1
+        from grazing_control.dynamics.design.gains import degenerate_c1
         c1 = c1o if c1o is not None else degenerate_c1(params or base, c2o)
         gains = Gains(c1, c2o)
         sources["gains"] = "option" + (" (c1 from the degenerate condition, Eq. 38)"
@@ -272,7 +272,7 @@ def resolve_setup(bag, options: dict) -> Setup:
 def _actuator(sim: dict, notes: list):
     """The simulator's first-order actuator of its parameter record (actuator_bandwidth,
     actuator_latency; docs/nodes.md), or None (ideal, or a record without them)."""
-    from grazing_control.dynamics.actuator import Actuator
+    from grazing_control.dynamics.simulation.actuator import Actuator
 
     bw = _num(sim.get("actuator_bandwidth"), 0.0)
     lat = _num(sim.get("actuator_latency"), 0.0)
@@ -404,21 +404,21 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
     ``limit`` periods; the correction of sample k (``corrections``, default the recorded
     ones) is applied on Pi2 (``delay`` after it when the run had an actuation delay), as
     a force pulse of ``pulse_width`` centred there when the simulator had one
-    (:func:`grazing_control.dynamics.actuation.pulse_step`, docs/theory_pulse.md), through
+    (:func:`grazing_control.dynamics.simulation.actuation.pulse_step`, docs/theory_pulse.md), through
     the simulator's first-order ``actuator`` when it had one
-    (:func:`grazing_control.dynamics.actuator.actuated_step`; the force on the mass is
+    (:func:`grazing_control.dynamics.simulation.actuator.actuated_step`; the force on the mass is
     not recorded: it is carried from 0 at the first recorded sample, exact for a scene
     recorded from its start, since the force follows the commands alone).
     """
-    from grazing_control.dynamics.actuation import pulse_start, pulse_step
-    from grazing_control.dynamics.simulate import period_step
+    from grazing_control.dynamics.simulation.actuation import pulse_start, pulse_step
+    from grazing_control.dynamics.simulation.simulate import period_step
 
     dvs = scene.correction if corrections is None else corrections
     n = min(len(scene.t) - 1, limit)
     dep = np.zeros(max(n, 0))
     force = [0.0]
     if actuator is not None:    # the force carried from period to period
-        from grazing_control.dynamics.actuator import actuated_step
+        from grazing_control.dynamics.simulation.actuator import actuated_step
 
         start = pulse_start(p.period, delay, pulse_width)
 
@@ -530,21 +530,21 @@ def controlled_orbit(setup: Setup):
     """The controlled 1/1 orbit the scene should settle on, and what it is.
 
     The kick of Eq. 28 (acting the actuation delay after Pi2, docs/theory_delay.md):
-    :func:`grazing_control.dynamics.orbits.orbit_11`; a simulator with a force pulse
+    :func:`grazing_control.dynamics.orbits.orbits.orbit_11`; a simulator with a force pulse
     (``pulse_width`` > 0) closes the loop with the pulse centred the delay after Pi2, whose
-    orbit is O(w^2) away (docs/theory_pulse.md): :func:`grazing_control.dynamics.actuation.
+    orbit is O(w^2) away (docs/theory_pulse.md): :func:`grazing_control.dynamics.simulation.actuation.
     pulse_orbit`, with the force limit and the controller's saturation. Returns
     ``(orbit, description)``; the orbit has ``pi2``, ``pi2_deviation``, ``multipliers``
     and ``v_minus``. Raises what the orbit search raises.
     """
-    from grazing_control.dynamics.actuation import pulse_orbit
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     p, g = setup.params, setup.gains
     if setup.actuation_delay:
         g = Gains(g.c1, g.c2, setup.actuation_delay)
     if setup.actuator is not None:
-        from grazing_control.dynamics.actuator import actuated_orbit_for
+        from grazing_control.dynamics.simulation.actuator import actuated_orbit_for
 
         a = setup.actuator
         orbit = actuated_orbit_for(p, g, setup.pulse_width, a)
@@ -567,7 +567,7 @@ def controlled_orbit(setup: Setup):
 def _predicted(setup: Setup):
     """Multipliers of the controlled 1/1 orbit (and the uncontrolled one) from the core
     (:func:`controlled_orbit`: the kick's, or the pulse's for a pulse scene)."""
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     out = {}
     p, g = setup.params, setup.gains
@@ -716,7 +716,7 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     """
     from scipy.optimize import minimize_scalar
 
-    from grazing_control.dynamics.simulate import period_step
+    from grazing_control.dynamics.simulation.simulate import period_step
 
     if (setup.actuation_delay or 0.0) > 0.0:
         return None       # scheduled actuation: a correction acts at t_k + delay, not on arrival

@@ -427,7 +427,7 @@ def compare_corrections(orig, new, setup) -> dict:
     g = rec.get("c1"), rec.get("c2")
     if setup.params is not None and None not in g:
         from grazing_control.oscillator.control import Gains
-        from grazing_control.dynamics.orbits import orbit_11
+        from grazing_control.dynamics.orbits.orbits import orbit_11
         try:
             delay = float(rec.get("actuation_delay") or setup.actuation_delay or 0.0)
             orb = orbit_11(setup.params, Gains(float(g[0]), float(g[1]), delay),

@@ -51,7 +51,7 @@ from rclpy.duration import Duration
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import TimeReference
 
-from grazing_control.dynamics.clock_relation import fit_clock
+from grazing_control.dynamics.estimation.clock_relation import fit_clock
 from grazing_control.ros.common import (PUBLISHER_QOS, StartupError, float_descriptor,
                                         int_descriptor, run_node, spin, string_descriptor)
 from grazing_control.ros.rig_driver import RigDriver
@@ -88,7 +88,7 @@ def load_replay(bag, namespace: str = "", applied: bool = False) -> tuple:
     value) in the recorded order (kind 'sensor' | 'phase' | 'clock', with ``applied``
     also 'applied': the recorded rig/applied, what the hardware did; value: the phase's
     frequency in Hz, the clock pair's rig time in ns); relation the
-    :class:`~grazing_control.dynamics.clock_relation.ClockFit` of the recorded pairs.
+    :class:`~grazing_control.dynamics.estimation.clock_relation.ClockFit` of the recorded pairs.
     StartupError (one line) when the bag cannot be replayed."""
     kinds = dict(REPLAYED, **({"applied": "rig/applied"} if applied else {}))
     topics = {kind: _topic(namespace, name) for kind, name in kinds.items()}

@@ -29,7 +29,7 @@ The controller does not subscribe ``oscillator/pi2``: it estimates each section'
 from ``oscillator/state`` (JointState, stamp = sample time, position [x~], velocity [v~]
 or empty for a position-only sensor, effort [cos tau, sin tau] or [cos tau]; the section
 times are t_k = k T, the simulator's origin) with ``estimator`` nearest, arc or model
-(:mod:`grazing_control.dynamics.estimation`, docs/theory_estimation.md), the impacts
+(:mod:`grazing_control.dynamics.estimation.section_state`, docs/theory_estimation.md), the impacts
 taken from ``oscillator/impact`` (``impact_source`` topic) or detected in the stream.
 With ``stream_message`` block the same samples come in blocks on
 ``oscillator/state_block`` (:mod:`grazing_control.ros.stream_block`), taken row by row.
@@ -118,11 +118,11 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from grazing_control.dynamics.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.capture import CAPTURE_RADIUS, CaptureRule
-from grazing_control.dynamics.actuator import Actuator
-from grazing_control.dynamics.estimation import ESTIMATORS, actuator_legs
-from grazing_control.dynamics.stream import (IMPACT_SOURCES, StreamEstimator, predict_section,
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
+from grazing_control.dynamics.simulation.actuator import Actuator
+from grazing_control.dynamics.estimation.section_state import ESTIMATORS, actuator_legs
+from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator, predict_section,
                                              pulse_shape)
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr, stream_block
@@ -256,7 +256,7 @@ class NdofControlLaw(NdofLaw, ControlLaw):
     positions and velocities (arrays)."""
 
 
-#: Largest |c1|, |c2| accepted (the design's search limit, dynamics.design.C2_LIMIT).
+#: Largest |c1|, |c2| accepted (the design's search limit, dynamics.design.gains.C2_LIMIT).
 GAIN_LIMIT = 1e6
 
 
@@ -265,7 +265,7 @@ def law_from_values(values: dict) -> ControlLaw:
 
     |c1|, |c2| <= GAIN_LIMIT: a gain of 1e308 passed the finiteness check and the next
     correction (inf) stopped the simulator (issue 21); the design's admissible sets end
-    within 1e6 (dynamics.design.C2_LIMIT).
+    within 1e6 (dynamics.design.gains.C2_LIMIT).
     """
     for name in ("c1", "c2"):
         if not abs(float(values[name])) <= GAIN_LIMIT:
@@ -359,7 +359,7 @@ def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
     :data:`PULSE_KEYS` (model units, as sim_node's): the pulse (``pulse_width`` 0: a
     kick) and the first-order actuator between its command and the force
     (``actuator_bandwidth`` 1 / tau_a, 0: ideal; ``actuator_latency``), which the stream
-    estimator and the prediction integrate (dynamics.estimation.trajectory).
+    estimator and the prediction integrate (dynamics.estimation.section_state.trajectory).
     ParameterError, one line naming the parameter and its valid range."""
     period = 2.0 * math.pi / omega
     width, limit = pulse_shape(OscillatorParams(omega=omega), values["pulse_width"],
@@ -396,7 +396,7 @@ def capture_from_values(values: dict, model, delay: float):
     if values["pi2_source"] != "stream" or model is None:
         raise ParameterError(f"capture=True is invalid with pi2_source={values['pi2_source']}: "
                              "valid only with pi2_source=stream and a model (delta_d)")
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     gains = Gains(values["c1"], values["c2"], delay)
     try:
@@ -616,7 +616,7 @@ class ControllerNode(Node):
             raise StartupError(str(exc)) from None
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None
         # how a correction acts in the plant: a rig's force pulse (its estimator and
-        # prediction integrate it, dynamics.estimation.trajectory), else the kick
+        # prediction integrate it, dynamics.estimation.section_state.trajectory), else the kick
         self.pulse = (0.0, math.inf, None)
         # (a rig file's are the defaults: rig_boundary.controller_values; its actuator's
         # latency is in the budget)

@@ -11,7 +11,7 @@ and 0 otherwise.
 The pulses are timed in the rig clock; the stream in ROS time (the system clock). The
 node relates the two through ``rig/clock`` (sensor_msgs/TimeReference pairs: a least
 squares line over the last ``clock_window`` pairs, offset and drift estimated,
-:class:`grazing_control.dynamics.clock_relation.ClockRelation`): at each tick the ROS time
+:class:`grazing_control.dynamics.estimation.clock_relation.ClockRelation`): at each tick the ROS time
 now is mapped to rig time, and the actuation engine
 (:class:`grazing_control.plant.schedule.RigSchedule`, the one every driver uses) decides
 what acts: the command at its apply time, the prediction in place of a missing one
@@ -44,7 +44,7 @@ from .common import (DATA_QOS, PUBLISHER_QOS, StartupError, Throttled, check_ran
                      deserialize, float_descriptor, int_descriptor, run_node, seconds_from_stamp,
                      string_descriptor)
 from .rig_driver import ON_MISS, read_pulse
-from grazing_control.dynamics.clock_relation import ClockRelation
+from grazing_control.dynamics.estimation.clock_relation import ClockRelation
 from grazing_control.plant.schedule import COUNTS, PulseTrain, RigSchedule
 
 __all__ = ["EffortBridge", "main", "COMMANDS_TOPIC"]

@@ -1,10 +1,10 @@
 """The controller's watch on its own model (issue 29 sections 1-2), without ROS.
 
 In stream mode with ``estimator`` model, the controller may run the augmented filter
-(:class:`grazing_control.dynamics.augmented.AugmentedStreamEstimator`: a sensor bias b
+(:class:`grazing_control.dynamics.estimation.augmented.AugmentedStreamEstimator`: a sensor bias b
 and a random-walk Delta d in the filter's state, docs/theory_estimation.md E8-E10) and
 feed each fitted period's innovation to a
-:class:`grazing_control.dynamics.consistency.ConsistencyMonitor` (the windowed nis and
+:class:`grazing_control.dynamics.estimation.consistency.ConsistencyMonitor` (the windowed nis and
 mean tests, E9-E10). Parameters (all off by default: the plain model filter, the same
 answers as before to the bit):
 
@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import math
 
-from grazing_control.dynamics.augmented import BIAS_STD, WALL_NOISE, WALL_STD
-from grazing_control.dynamics.consistency import FALSE_ALARM, ConsistencyMonitor
+from grazing_control.dynamics.estimation.augmented import BIAS_STD, WALL_NOISE, WALL_STD
+from grazing_control.dynamics.estimation.consistency import FALSE_ALARM, ConsistencyMonitor
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["WATCH_KEYS", "WATCH_DEFAULTS", "WATCH_FIELDS", "WATCH_TOPIC", "watch_from_values",

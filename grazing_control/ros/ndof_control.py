@@ -8,13 +8,13 @@ actuated coordinate's velocity
 
 X** the grazing orbit's state on Pi2: the periodic response at the section phase,
 ``NdofFlow.particular(tau2)`` (docs/theory_ndof.md, "Kick design"; the kick of
-:class:`grazing_control.dynamics.ndof_map.NdofMap`). The switch-on (``enable_after``,
+:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`). The switch-on (``enable_after``,
 ``~/enable``), the saturation and the stale-sample rules are the 1-DOF controller's
 (:class:`grazing_control.ros.controller_node.ControlLaw`); the 1-DOF law's parameters
 (c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults and the stream mode is not
 built for n-DOF: either is refused with the reason. The section data the design's
 parameter file carries with the gains (``n``, ``i_a``, ``omega``, ``pi2_offset``:
-:func:`grazing_control.dynamics.ndof_design.write_gain_yaml`) must be the model file's:
+:func:`grazing_control.dynamics.design.ndof_design.write_gain_yaml`) must be the model file's:
 gains designed for another model are refused, naming both values. No rclpy.
 """
 

@@ -118,13 +118,13 @@ def controller_values(rig: Rig, c2: float) -> dict:
     the stream estimator answering each section with its last sample (the simulated rig
     keeps an answer that comes before its section), and the design for the budget's
     delay: c1 from the degenerate condition (Eq. 38 / (D5)) for ``c2``, or with ``c2``
-    NaN for the c2 of least noise gain (dynamics.tuning.optimize_noise)."""
-    from grazing_control.dynamics.design import degenerate_c1
+    NaN for the c2 of least noise gain (dynamics.design.tuning.optimize_noise)."""
+    from grazing_control.dynamics.design.gains import degenerate_c1
 
     p, d = rig.params(), rig.dimensionless()
     delay = d["actuation_delay"]
     if math.isnan(c2):
-        from grazing_control.dynamics.tuning import optimize_noise
+        from grazing_control.dynamics.design.tuning import optimize_noise
 
         c2 = optimize_noise(p, delay).c2
     return {"zeta": p.zeta, "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset,

@@ -8,7 +8,7 @@ answer goes out as the dimensionless ``controller/velocity_correction`` (analyze
 replay read it) and as the scheduled ``rig/force_pulse`` (force F = m Delta v / w in N,
 apply time t_k + budget - w / 2 and section time t_k in the rig clock, the predicted next
 force in force.y). ``rig/clock`` gives the clock relation (offset and drift of the rig
-clock against ROS time, :class:`grazing_control.dynamics.clock_relation.ClockRelation`);
+clock against ROS time, :class:`grazing_control.dynamics.estimation.clock_relation.ClockRelation`);
 with it each sample's arrival latency (ROS time of its arrival less the ROS time of its
 stamp) is measured. ``rig/applied`` tells the estimator what acted where a prediction
 stood in or nothing acted (its model must integrate the kick that acted). The commands
@@ -39,7 +39,7 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
-from grazing_control.dynamics.clock_relation import ClockRelation
+from grazing_control.dynamics.estimation.clock_relation import ClockRelation
 from . import cdr
 from .common import (PUBLISHER_QOS, deserialize, seconds_from_stamp, stamp_from_seconds,
                      stamp_key)

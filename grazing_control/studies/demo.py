@@ -23,11 +23,11 @@ import numpy as np
 from grazing_control.recordings.analysis import (plot_scene, scene_from_bag,
                                                  scene_from_simulation, summarize)
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import (degenerate_c1, evaluate_design,
+from grazing_control.dynamics.design.gains import (degenerate_c1, evaluate_design,
                                              write_controller_yaml)
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 
 __all__ = ["SCENES", "main"]
 

@@ -13,8 +13,8 @@ friction, by BIC; docs/theory_contact.md section 17).
 May import: :mod:`grazing_control.dynamics` and below. Never rclpy.
 """
 
-from .data import Recording
-from .fit import IdentificationError, Identification, identify
-from .model import RigModel
+from grazing_control.dynamics.identification.data import Recording
+from grazing_control.dynamics.identification.fit import IdentificationError, Identification, identify
+from grazing_control.dynamics.identification.model import RigModel
 
 __all__ = ["Recording", "RigModel", "Identification", "IdentificationError", "identify"]

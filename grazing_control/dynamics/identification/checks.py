@@ -24,12 +24,12 @@ import math
 
 import numpy as np
 
-from grazing_control.dynamics.simulate import states_between
+from grazing_control.dynamics.simulation.simulate import states_between
 from grazing_control.oscillator.flow import to_deviation
 from grazing_control.oscillator.impact import advance
 from grazing_control.oscillator.params import ParameterError
 
-from .model import free_flight
+from grazing_control.dynamics.identification.model import free_flight
 
 __all__ = ["WHITENESS_LIMIT", "RESIMULATION_LIMIT", "whiteness", "resimulate", "verdict"]
 

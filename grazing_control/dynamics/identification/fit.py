@@ -43,11 +43,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from .data import Arcs, Recording, RecordingError, cut_arcs
-from .initial import InitialGuessError, find_impacts, initial_guess
-from .model import (GLOBAL_NAMES, NONDIMENSIONAL_NAMES, RigModel, free_flight,
+from grazing_control.dynamics.identification.data import Arcs, Recording, RecordingError, cut_arcs
+from grazing_control.dynamics.identification.initial import InitialGuessError, find_impacts, initial_guess
+from grazing_control.dynamics.identification.model import (GLOBAL_NAMES, NONDIMENSIONAL_NAMES, RigModel, free_flight,
                     nondimensional_vector)
-from .phase import PhaseError, PhaseReference, fit_phase
+from grazing_control.dynamics.identification.phase import PhaseError, PhaseReference, fit_phase
 
 __all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem", "Identification",
            "identify"]

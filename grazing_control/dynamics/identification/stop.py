@@ -17,7 +17,7 @@ one of least BIC = N log(RSS / N) + p log N (Schwarz 1978): a parameter more mus
 -2 log L by more than log N; friction, nested in Kelvin-Voigt at F_f = 0, must also pass
 the likelihood-ratio test at 0.1 % (:func:`select_stop`). The candidates:
 
-* ``rigid``: the study's wall, theta = (r,) (the exact flow of dynamics.fidelity);
+* ``rigid``: the study's wall, theta = (r,) (the exact flow of dynamics.simulation.fidelity);
 * ``kelvin_voigt``: theta = (k_c, c_c), :func:`~grazing_control.oscillator.contact.compliant_period_step`;
 * ``kelvin_voigt_friction``: theta = (k_c, c_c, F_f), with F_s = F_f.
 
@@ -37,7 +37,7 @@ import numpy as np
 from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, compliant_period_step,
                                                 kelvin_voigt_damping)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from ..fidelity import period_step
+from grazing_control.dynamics.simulation.fidelity import period_step
 
 __all__ = ["STOPS", "StopFit", "fit_stop", "select_stop"]
 

@@ -1,7 +1,7 @@
 """The compiled exact kernel: the core's flow with impacts, compiled by numba.
 
 The same algorithm as :mod:`grazing_control.oscillator.impact` and
-:func:`grazing_control.dynamics.simulate.period_step` (closed-form flow in deviation coordinates,
+:func:`grazing_control.dynamics.simulation.simulate.period_step` (closed-form flow in deviation coordinates,
 certified impact detection, chattering summation and sticking, the controller's kick with
 an optional delay), mirrored function by function in :mod:`.compiled` so that a fix in
 the core ports line by line. The pure-Python core stays the readable
@@ -258,7 +258,7 @@ def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) 
 
 
 def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
-    """:func:`grazing_control.dynamics.simulate.period_step`, compiled (0 <= delay < T checked there)."""
+    """:func:`grazing_control.dynamics.simulation.simulate.period_step`, compiled (0 <= delay < T checked there)."""
     ki, ks = _compiled()
     scratch, stack = _scratch()
     dx, dv, n, status, info = ks.period_step(_params(p), float(dx), float(dv),
@@ -328,7 +328,7 @@ _BLOCK = 50_000  # periods per kernel call (a progress bar moves once per block)
 
 def simulate_exact(p, periods, dx, dv, gains=None, control_after=None, *, delay=0.0,
                    progress=False):
-    """The exact loop of :func:`grazing_control.dynamics.simulate.simulate`, compiled (with its
+    """The exact loop of :func:`grazing_control.dynamics.simulation.simulate.simulate`, compiled (with its
     checks and messages; ``progress``: a tqdm bar on stderr).
 
     Returns (deviation (N, 2), corrections (N,), impacts per period (N,),
@@ -354,7 +354,7 @@ def lyapunov_sums(p, periods, transient, dx, dv, c1=math.nan, c2=math.nan, contr
 
     Returns (sum log R11, sum log R22, impacts, stuck periods, sum log|1 + c2|, final
     deviation) over periods transient..periods-1
-    (:func:`grazing_control.dynamics.lyapunov.lyapunov_exact` makes exponents of them);
+    (:func:`grazing_control.dynamics.simulation.lyapunov.lyapunov_exact` makes exponents of them);
     errors as :func:`simulate_exact`.
     """
     ki, ks = _compiled()

@@ -589,7 +589,7 @@ def advance(P, tau0, dx, dv, duration, max_impacts, chatter_time, out, n0, stack
 # :func:`period_step` is one forcing period from a Pi2 sample with the correction applied
 # ``delay`` after it, exactly as the core's; :func:`run` chains periods with the
 # controller of Eq. 28 (dv_correction = c1 dx + c2 dv at samples k >= control_after), as
-# :func:`grazing_control.dynamics.simulate.simulate` does: the whole inner loop of a sweep point
+# :func:`grazing_control.dynamics.simulation.simulate.simulate` does: the whole inner loop of a sweep point
 # or of an exact simulation.
 
 #: The impact buffer of :func:`run` is full: resume at the returned period with more room.
@@ -690,7 +690,7 @@ def period_jacobian(P, rows, n, kick_time, c1, c2):
     matrix S = [[-r, 0], [(1 + r)(cos tau - d) / v-, -r]] of every impact and, at
     ``kick_time`` after the sample (the actuation delay; 0: at the sample), the kick
     M <- M + e2 (c1, c2) (c1 = c2 = 0: no kick): M2 (M1 + e2 k^T), as
-    :func:`grazing_control.dynamics.maps.pi2_map`'s monodromy (docs/theory_delay.md, D3).
+    :func:`grazing_control.dynamics.maps.maps.pi2_map`'s monodromy (docs/theory_delay.md, D3).
     A sticking impact makes the map singular (every nearby state leaves the wall at the
     same release): M = 0 and stuck = 1.
     """

@@ -43,11 +43,11 @@ MATCH_SCALE = 1e-3
 
 def orbit_scale(params: OscillatorParams) -> float:
     """max(|x - x**|, |v - v**|) of the uncontrolled 1/1 orbit born at grazing
-    (:func:`grazing_control.dynamics.orbits.orbit_11`) at -|Delta d|: the scale of the
+    (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) at -|Delta d|: the scale of the
     near-grazing motions on Pi2, which grows like |Delta d| (spec section 2); on the
     non-impacting side the orbit at the mirrored Delta d gives it. ParameterError where
     there is none (Delta d = 0: the orbit is X** itself)."""
-    from grazing_control.dynamics.orbits import OrbitNotFound, orbit_11
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
 
     if params.delta_d == 0.0:
         raise ParameterError("delta_d=0.0 has no default box of starts (the 1/1 orbit is X** "

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.studies.sweeps import sweep
 from grazing_control.support.plotting import (COLORS, PANEL_SIZE, pyplot, save,
@@ -44,7 +44,7 @@ class DiagramData:
     """A brute-force diagram: delta_d (n,), starts (s, 2), x (n, s, m) physical Pi2
     samples after the transient, last (n, s, 2) the last sample as a deviation from X**,
     period (n, s), impacts (n, s, m), lyapunov (n, s, 2) the Lyapunov exponents per
-    period of the kept orbit (dynamics.lyapunov), and how it was run."""
+    period of the kept orbit (dynamics.simulation.lyapunov), and how it was run."""
 
     delta_d: np.ndarray
     starts: np.ndarray

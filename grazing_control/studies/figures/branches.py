@@ -1,8 +1,8 @@
 """The 1/1 branch by continuation, uncontrolled and controlled: Figs. 1(c) and 2(c).
 
-The branch is the exact impact-phase shooting of :mod:`grazing_control.dynamics.orbits`
+The branch is the exact impact-phase shooting of :mod:`grazing_control.dynamics.orbits.orbits`
 (docs/theory.md §5), continued in the impact phase by
-:func:`grazing_control.dynamics.continuation.continue_11` (§7) with every point verified by
+:func:`grazing_control.dynamics.orbits.continuation.continue_11` (§7) with every point verified by
 the exact flow (one impact per period, periodic). Each point is drawn at its Pi2
 sample x (the section of the brute-force diagram, Fig. 1(a)), stable solid and
 unstable dashed. On the non-impacting side Delta d > 0 the attractor is the 0/1
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.continuation import continue_11
+from grazing_control.dynamics.orbits.continuation import continue_11
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.maps import smooth_return_matrix
-from grazing_control.dynamics.orbits import _orbit_from_phase, multipliers, orbit_11
+from grazing_control.dynamics.maps.maps import smooth_return_matrix
+from grazing_control.dynamics.orbits.orbits import _orbit_from_phase, multipliers, orbit_11
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.support.plotting import (COLORS, PANEL_SIZE, pyplot, save,
                                               stability_segments)
@@ -59,7 +59,7 @@ def branch_data(p: OscillatorParams, gains: Gains | None = None, start: float = 
 
     The continuation's grid is logarithmic in the impact phase (dense near grazing);
     ``uniform`` > 0 adds that many orbits equally spaced in Delta d over the range
-    (:func:`grazing_control.dynamics.orbits.orbit_11`), for panels with a linear Delta d axis.
+    (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`), for panels with a linear Delta d axis.
     The located bifurcation points are part of the curve, so that stability changes
     exactly there.
     """

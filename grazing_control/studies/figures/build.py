@@ -16,7 +16,7 @@ import numpy as np
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.studies.demo import SCENES
-from grazing_control.dynamics.design import degenerate_c1
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.params import OscillatorParams
 from .bifurcation import diagram_data, panel_1a, panel_1b
 from .branches import branch_data, panel_1c, panel_2c

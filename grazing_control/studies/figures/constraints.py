@@ -11,9 +11,9 @@ For each c2, c1 follows from the degenerate condition N_g,12 = 0 (Eq. 38); then
   (Delta d > 0), the eigenvalues of N_g (Eqs. 29-32): the controller acts on that
   motion too, and it stays stable only where max|eig N_g| < 1.
 
-Lines are the exact route (:func:`grazing_control.dynamics.design.evaluate_design`), circles the
-perturbation formulas (:mod:`grazing_control.dynamics.perturbation`); the shaded set is
-:func:`grazing_control.dynamics.design.admissible_c2`, the design tool's own answer.
+Lines are the exact route (:func:`grazing_control.dynamics.design.gains.evaluate_design`), circles the
+perturbation formulas (:mod:`grazing_control.dynamics.maps.perturbation`); the shaded set is
+:func:`grazing_control.dynamics.design.gains.admissible_c2`, the design tool's own answer.
 """
 
 from __future__ import annotations
@@ -25,11 +25,11 @@ import numpy as np
 from grazing_control.oscillator.control import Gains
 from scipy.optimize import brentq
 
-from grazing_control.dynamics.design import admissible_c2, degenerate_c1, evaluate_design
-from grazing_control.dynamics.maps import smooth_return_matrix
-from grazing_control.dynamics.orbits import multipliers
+from grazing_control.dynamics.design.gains import admissible_c2, degenerate_c1, evaluate_design
+from grazing_control.dynamics.maps.maps import smooth_return_matrix
+from grazing_control.dynamics.orbits.orbits import multipliers
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.perturbation import (admissible_c2_perturbation,
+from grazing_control.dynamics.maps.perturbation import (admissible_c2_perturbation,
                                                    existence_coefficient_perturbation,
                                                    limit_multipliers_perturbation)
 from grazing_control.support.plotting import COLORS, PANEL_SIZE, pyplot, save

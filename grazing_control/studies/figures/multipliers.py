@@ -2,9 +2,9 @@
 
 Lines: the exact multipliers along the continued branch (impact-phase shooting,
 :mod:`grazing_control.studies.figures.branches`). Circles: the perturbation estimates of
-:mod:`grazing_control.dynamics.perturbation` (series in the impact velocity delta2, spec
+:mod:`grazing_control.dynamics.maps.perturbation` (series in the impact velocity delta2, spec
 section 7), at a few Delta d where the exact multipliers are also computed directly
-(:func:`grazing_control.dynamics.orbits.orbit_11`) for the numbers. |Delta d| is on a
+(:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) for the numbers. |Delta d| is on a
 logarithmic axis: the uncontrolled large multiplier grows like 1/|Delta d| (the
 square-root singularity of the discontinuity map, docs/theory.md §5); the controlled
 ones tend to lambda0 (Eq. 23) with an error O(delta2) = O(|Delta d|^(1/2)).
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.dynamics.design import limit_multipliers
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.design.gains import limit_multipliers
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.perturbation import (limit_multipliers_perturbation,
+from grazing_control.dynamics.maps.perturbation import (limit_multipliers_perturbation,
                                                    perturbation_multipliers,
                                                    period_doubling_perturbation)
 from grazing_control.support.plotting import COLORS, PANEL_SIZE, pyplot, save

@@ -5,7 +5,7 @@ Pi2 samples, then switches the controller of Eq. 28 on (c2 = -1, c1 from Eq. 38)
 The scene is read with :mod:`grazing_control.recordings.analysis` (the demo's reader and
 numbers): from a core simulation by default, or from a recording made by
 ``grazing demo`` when its bag folder is given. The exact controlled 1/1 orbit
-(:func:`grazing_control.dynamics.orbits.orbit_11`) is drawn as the target.
+(:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) is drawn as the target.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from grazing_control.recordings.analysis import (scene_from_bag, scene_from_simu
                                                  summarize)
 from grazing_control.oscillator.control import Gains
 from grazing_control.studies.demo import CONTROL_AFTER, PERIODS, SCENES
-from grazing_control.dynamics.orbits import orbit_11
+from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulate import simulate
+from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.support.plotting import COLORS, PANEL_SIZE, pyplot, save
 from .report import Number, Panel
 

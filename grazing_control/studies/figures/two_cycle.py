@@ -4,7 +4,7 @@ An independent check of the brute-force diagram past the doubling: the 2/2 orbit
 is found by Newton shooting on the twice-iterated Pi2 map (exact flow, monodromy from
 Phi and S), started from a brute-force period-2 sample and continued in Delta d by the
 generic continuation over the model protocol
-(:func:`grazing_control.dynamics.continuation.continue_orbit`). Its own period
+(:func:`grazing_control.dynamics.orbits.continuation.continue_orbit`). Its own period
 doubling (the start of the period-4 window) is located by Brent's method on the test
 function det(J + I) of its monodromy, as for the 1/1 branch (docs/theory.md §7).
 """
@@ -14,9 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from grazing_control.dynamics.continuation import continue_orbit
-from grazing_control.dynamics.maps import pi2_map
-from grazing_control.dynamics.model import OneDOF
+from grazing_control.dynamics.orbits.continuation import continue_orbit
+from grazing_control.dynamics.maps.maps import pi2_map
+from grazing_control.dynamics.maps.model import OneDOF
 from grazing_control.oscillator.params import OscillatorParams
 
 __all__ = ["TwoCycle", "two_cycle"]
@@ -37,7 +37,7 @@ class TwoCycle:
 def two_cycle(p: OscillatorParams, delta_d, guess) -> TwoCycle:
     """Continue the 2/2 orbit along the values ``delta_d`` (in order) from ``guess``, a
     Pi2 deviation near it at the first value; stops early where shooting fails or the
-    orbit is no longer 2/2 (:func:`grazing_control.dynamics.continuation.continue_orbit`
+    orbit is no longer 2/2 (:func:`grazing_control.dynamics.orbits.continuation.continue_orbit`
     on the 1-DOF model)."""
     values = np.asarray(delta_d, dtype=float)
     rows = []

@@ -2,7 +2,7 @@
 
 Three panels, each PNG + SVG (:func:`grazing_control.support.plotting.save`), and the
 numbers as one JSON file and the curves as one CSV, all from the same
-:class:`grazing_control.dynamics.two_parameter.Diagram`:
+:class:`grazing_control.dynamics.orbits.two_parameter.Diagram`:
 
 * ``two_parameter``: the PD and fold curves in (mu, Delta d), Delta d on a symmetric
   log scale; the grazing curve is Delta d = 0; degenerate grazing points marked;
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.two_parameter import KINDS, Diagram
+from grazing_control.dynamics.orbits.two_parameter import KINDS, Diagram
 from grazing_control.support.plotting import COLORS, PANEL_SIZE, pyplot, save
 
 __all__ = ["diagram_dict", "write_diagram", "LABELS"]

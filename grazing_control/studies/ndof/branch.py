@@ -20,7 +20,7 @@ s^2 (1 - c) = G(1) s - Delta d, G(1) = w^T (I - N)^-1 N u, c = (e_v^T (I - N)^-1
 matter on the design family, where G == 0 makes w^T y of order H: without the velocity
 term the guess was 40 % off on the n = 1 file at c2 = -1, without the position term
 80 % off on a 3-mass chain at mu = 0.3 (both independent of Delta d). Newton shooting
-(:func:`grazing_control.dynamics.shooting.find_periodic`) on the exact map then gives the
+(:func:`grazing_control.dynamics.orbits.shooting.find_periodic`) on the exact map then gives the
 orbit and its monodromy; the prediction is only its starting guess.
 """
 
@@ -32,8 +32,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.ndof_map import NdofMap
-from grazing_control.dynamics.shooting import (ShootingFailed, find_periodic,
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits.shooting import (ShootingFailed, find_periodic,
                                                floquet_multipliers, iterate)
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
@@ -218,7 +218,7 @@ def monodromy_det(model, gains, impacts: int) -> float:
     """det of DP over one period with ``impacts`` impacts: det Phi(T) = e^{T tr A} =
     e^{-T tr(M^-1 C)}, det S = r^2 per impact (the saltation matrix, docs/theory_ndof_flow.md)
     and det K = 1 + k_{v_i_a} (matrix determinant lemma); the n-DOF counterpart of
-    OneDOF.jacobian_det (dynamics/model.py)."""
+    OneDOF.jacobian_det (dynamics/maps/model.py)."""
     k = _gains(model, gains)
     det_k = 1.0 if k is None else 1.0 + float(k[model.n + model.i_a])
     trace = float(np.trace(np.linalg.solve(model.M, model.C)))
@@ -250,9 +250,9 @@ def _offset(state, pred) -> float:
 
 def _on_branch(model, gains, pred):
     """(the 1/1 orbit at the model's Delta d on the branch explicit in the impact phase,
-    None), or (None, why not) (dynamics/ndof_branch.py: ``orbit_at``, the global check
+    None), or (None, why not) (dynamics/orbits/ndof_branch.py: ``orbit_at``, the global check
     ``other_contacts``, the multipliers from ``pi2_factors``)."""
-    from grazing_control.dynamics.ndof_branch import (branch_multipliers, orbit_at,
+    from grazing_control.dynamics.orbits.ndof_branch import (branch_multipliers, orbit_at,
                                                       other_contacts, pi2_factors)
 
     k = np.zeros(2 * model.n) if gains is None else _gains(model, gains)
@@ -398,14 +398,14 @@ def fold_beyond(model, gains, branch, stop: float):
     """The fold where a continuation in Delta d stopped short of ``stop``, or None.
 
     A continuation in Delta d cannot pass a turning point of the branch; the branch
-    explicit in the impact phase can (``dynamics.ndof_branch.branch_fold``). The fold is
+    explicit in the impact phase can (``dynamics.orbits.ndof_branch.branch_fold``). The fold is
     reported only if it lies beyond the last point reached, towards ``stop``, and its
     orbit is an orbit of the exact map (one period of ``NdofMap`` from its Pi2 state
     returns there to 1e-8 with one impact: the explicit branch assumes that impact is the
     period's only contact). Returns a dict: delta_d, psi, v_minus, the multiplier nearest
     1 and the exact map's residual.
     """
-    from grazing_control.dynamics.ndof_branch import branch_fold
+    from grazing_control.dynamics.orbits.ndof_branch import branch_fold
 
     if not branch.points or branch.stopped == "end":
         return None

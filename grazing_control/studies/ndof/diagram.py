@@ -1,7 +1,7 @@
 """Brute-force bifurcation diagram of an n-DOF model on Pi2 (issue 17, figure (a)).
 
 For each value of one model parameter (``delta_d`` by default) the period map of
-:class:`~grazing_control.dynamics.ndof_map.NdofMap` is iterated ``periods`` times from a
+:class:`~grazing_control.dynamics.maps.ndof_map.NdofMap` is iterated ``periods`` times from a
 start on Pi2 and the last ``periods - transient`` samples are kept (deviations from the
 grazing orbit, before the kick), with the impacts of each period and the detected
 period on Pi2 (:func:`grazing_control.studies.sweeps.period.detect_period`, any
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.studies.sweeps.period import detect_period

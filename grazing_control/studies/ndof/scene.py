@@ -1,6 +1,6 @@
 """A control scene of an n-DOF model on Pi2 (issue 17, figure (c); the study's Figs. 2(f, g)).
 
-The period map (:class:`~grazing_control.dynamics.ndof_map.NdofMap`) is iterated without
+The period map (:class:`~grazing_control.dynamics.maps.ndof_map.NdofMap`) is iterated without
 control for ``control_after`` periods, then with the kick v[i_a] += k^T z at every Pi2
 sample. The distance of each sample to the controlled 1/1 orbit
 (:func:`.branch.orbit_11`, shooting) says whether, and how fast, the controller captures
@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.ndof_map import NdofMap
+from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.params import ParameterError
 
 from .branch import OrbitNotFound, orbit_11, with_delta_d

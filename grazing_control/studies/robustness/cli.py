@@ -39,9 +39,9 @@ def _out_dir(path):
 
 
 def cmd_delay(args):
-    from grazing_control.dynamics.design import admissible_c2, max_design_delay
+    from grazing_control.dynamics.design.gains import admissible_c2, max_design_delay
     from grazing_control.oscillator.params import OscillatorParams
-    from grazing_control.dynamics.perturbation import perturbation_multipliers
+    from grazing_control.dynamics.maps.perturbation import perturbation_multipliers
     from grazing_control.oscillator.control import Gains
     from .charts import plot_delay_curves, plot_stability_maps
     from .delay import design_gains, multiplier_curve, stability_interval, stability_map
@@ -178,7 +178,7 @@ def cmd_noise(args):
 
 
 def cmd_model(args):
-    from grazing_control.dynamics.tuning import optimize_noise
+    from grazing_control.dynamics.design.tuning import optimize_noise
     from grazing_control.oscillator.params import OscillatorParams
     from .charts import plot_model_bands
     from .model import model_error_bands

@@ -1,7 +1,7 @@
 """The closed loop through the exact core with faults: loss, noise, delay jitter.
 
 Issue 8 section 3, docs/robustness.md. :func:`simulate_with_faults` runs the Pi2 loop of
-:mod:`grazing_control.dynamics.simulate` with the faults of :class:`grazing_control.plant.faults.FaultModel`
+:mod:`grazing_control.dynamics.simulation.simulate` with the faults of :class:`grazing_control.plant.faults.FaultModel`
 drawn per sample (the nodes draw the same ones, so a node run can be compared with it
 sample for sample):
 
@@ -9,10 +9,10 @@ sample for sample):
   later) is measured as (x + sigma e_x, v + sigma e_v);
 * its correction c1 (x~ - x**) + c2 (v~ - v**) is dropped with probability ``loss``;
 * otherwise it acts at delay + jitter e_d after the sample (clipped to [0, T)), through
-  :func:`grazing_control.dynamics.simulate.period_step` with that delay.
+  :func:`grazing_control.dynamics.simulation.simulate.period_step` with that delay.
 
 **Capture** (:func:`capture_statistics`): the loop has captured the controlled 1/1 orbit
-z* (the exact orbit of :func:`grazing_control.dynamics.orbits.orbit_11` for the designed gains and
+z* (the exact orbit of :func:`grazing_control.dynamics.orbits.orbits.orbit_11` for the designed gains and
 delay) at sample n if the distance |z_k - z*| (Euclidean, on the Pi2 deviation) is
 <= ``threshold`` for the ``hold`` consecutive samples k = n, ..., n + hold - 1, all inside
 the first N = ``horizon`` controlled samples. The **stationary spread** is the RMS of that
@@ -36,8 +36,8 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.plant.faults import FaultModel
 from grazing_control.oscillator.impact import ImpactCapError, InitialStateError
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.noise import loop_linearisation
-from grazing_control.dynamics.simulate import period_step, simulate
+from grazing_control.dynamics.design.noise import loop_linearisation
+from grazing_control.dynamics.simulation.simulate import period_step, simulate
 
 __all__ = ["simulate_with_faults", "attractor_states", "CaptureResult", "capture_time",
            "capture_statistics", "LEVELS", "fault_sweep", "predicted_spread"]
@@ -94,7 +94,7 @@ def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float,
     """
     from scipy.linalg import solve_discrete_lyapunov
 
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     if target is None:
         target = orbit_11(p, gains).pi2_deviation
@@ -219,7 +219,7 @@ def fault_sweep(p: OscillatorParams, gains: Gains, delta_d: float, kind: str, le
     samples ``transient`` + j (control switched on at sample ``transient``, as in the
     study's scenes). Returns a JSON-ready dict with per-level statistics.
     """
-    from grazing_control.dynamics.orbits import orbit_11
+    from grazing_control.dynamics.orbits.orbits import orbit_11
 
     if kind not in LEVELS:
         raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(LEVELS)}")

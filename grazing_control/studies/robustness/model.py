@@ -1,15 +1,15 @@
 """Model-error margins: the band of Delta d next to grazing where control fails, against
 the error size, per parameter and design (issue 16 section 2; docs/robustness.md s4).
 
-Plain data from :func:`grazing_control.dynamics.mismatch.instability_band` (exact route)
-and :func:`grazing_control.dynamics.mismatch.predicted_band` (series), for
+Plain data from :func:`grazing_control.dynamics.design.mismatch.instability_band` (exact route)
+and :func:`grazing_control.dynamics.design.mismatch.predicted_band` (series), for
 :func:`.charts.plot_model_bands` and the JSON record.
 """
 
 from __future__ import annotations
 
-from grazing_control.dynamics.design import degenerate_c1
-from grazing_control.dynamics.mismatch import instability_band
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.design.mismatch import instability_band
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 

@@ -2,10 +2,10 @@
 
 For each Delta d, the noise gain of the degenerate design (c1 from Eq. 38 / (D5)) on a
 grid of c2 strictly inside each admissible interval
-(:func:`grazing_control.dynamics.tuning.design_noise_gain`: the stationary std of the
+(:func:`grazing_control.dynamics.design.tuning.design_noise_gain`: the stationary std of the
 Pi2 position per unit measurement noise, discrete Lyapunov equation of the loop
 linearised about the controlled orbit, docs/robustness.md section 3), and the least
-gain (:func:`grazing_control.dynamics.tuning.optimize_noise`). Plain data for
+gain (:func:`grazing_control.dynamics.design.tuning.optimize_noise`). Plain data for
 :func:`.charts.plot_noise_gain` and the JSON record.
 """
 
@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from grazing_control.dynamics.design import C2_LIMIT, admissible_c2
-from grazing_control.dynamics.tuning import STUDY_C2, design_noise_gain, optimize_noise
+from grazing_control.dynamics.design.gains import C2_LIMIT, admissible_c2
+from grazing_control.dynamics.design.tuning import STUDY_C2, design_noise_gain, optimize_noise
 from grazing_control.oscillator.params import OscillatorParams
 
 __all__ = ["noise_gain_curves"]

@@ -132,7 +132,7 @@ def add_sweep_command(sub, common, finite, count):
 def cmd_sweep(args):
     """Run the sweep and write its files; returns the summary (dict with --json)."""
     from grazing_control.oscillator.control import Gains
-    from grazing_control.dynamics.design import degenerate_c1
+    from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.oscillator.params import OscillatorParams
     from .plot import atlas, diagram
     from .run import sweep

@@ -1,7 +1,7 @@
 """Running a sweep: the grid of points, their split into chunks, local processes or Dask.
 
 Each point is one run of ``periods`` forcing periods on Pi2 from its own start
-(:func:`grazing_control.dynamics.simulate.period_step`'s exact flow with impacts, through the
+(:func:`grazing_control.dynamics.simulation.simulate.period_step`'s exact flow with impacts, through the
 compiled kernel or the pure-Python core), of which the last ``periods - transient``
 samples are kept. Points are independent, so a chunk of points is the unit of work for
 a process pool or a Dask worker, and the result is the same however they are split.
@@ -81,7 +81,7 @@ def _points(params, grid, starts, gains, control_after):
             if "c1" in values:
                 c1 = values["c1"]
             elif "c2" in values:  # c1 from the degenerate condition for each c2 (Eq. 38)
-                from grazing_control.dynamics.design import degenerate_c1
+                from grazing_control.dynamics.design.gains import degenerate_c1
 
                 c1 = degenerate_c1(p, c2)
             else:
@@ -99,7 +99,7 @@ def _run_point_python(p, start, c1, c2, periods, transient, control_after, delay
     core (simulate.core_period_step), whichever path period_step would take; the kick
     acts ``delay`` after the sample while the controller is on, as in simulate.
     """
-    from grazing_control.dynamics.simulate import core_period_step
+    from grazing_control.dynamics.simulation.simulate import core_period_step
     from grazing_control.oscillator.impact import NonFiniteStateError
 
     m = periods - transient
@@ -134,7 +134,7 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
     """Run a list of points; returns (indices, deviation, counts, period, errors, spectrum).
 
     ``spectrum`` (n, 2): with ``lyapunov``, the Lyapunov exponents per period of the kept
-    samples' orbit (dynamics.lyapunov.lyapunov_exact from the first kept sample over the
+    samples' orbit (dynamics.simulation.lyapunov.lyapunov_exact from the first kept sample over the
     same periods, the controller switched on at the same sample: the same orbit, the same
     floats); nan otherwise and for a failed point.
 
@@ -177,7 +177,7 @@ def run_chunk(chunk, periods, transient, control_after, engine, period_tol, max_
 
 def _spectrum(p, first, c1, c2, m, control_after, transient, delay, engine):
     """The kept samples' Lyapunov exponents (largest first), by the sweep's engine."""
-    from grazing_control.dynamics.lyapunov import lyapunov_exact
+    from grazing_control.dynamics.simulation.lyapunov import lyapunov_exact
 
     gains = None if math.isnan(c1) or control_after < 0 else Gains(c1, c2, delay=delay)
     after = None if gains is None else max(0, control_after - transient)

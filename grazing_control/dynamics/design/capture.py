@@ -1,0 +1,89 @@
+"""Switching the correction on safely: a capture rule and a gain ramp (issue 29 section 5).
+
+Eq. 28 switched on at once from far away answers a large correction: with the least-noise
+gains (|k| ~ 1e-2) it is small and the loop captures from 4.5e-2 in one step (issue 29),
+but with the study's c2 = -1 the first pulse carries |k| |z - z**| ~ 5e-2, which a rig's
+force limit may clip and which lands the state where the linear design says nothing
+(docs/theory_capture.md). Two rules, each a pure callable ``switch(k, estimate) ->
+factor`` in [0, 1] that scales the section's correction (the controller multiplies
+Eq. 28 by it; :func:`grazing_control.dynamics.estimation.stream.simulate_stream` takes it as
+``switch``):
+
+:class:`CaptureRule`
+    No correction until the estimate is within ``radius`` of the controlled orbit's
+    Pi2 state z** (Euclidean in (dx, dv)) with a finite covariance; from then on the
+    full correction (latched: a noisy excursion after capture does not switch it off).
+    The default radius is CAPTURE_RADIUS sqrt(|Delta d|), inside the watchdog's
+    excursion bound 15 sqrt(|Delta d|) (plant/watchdog.py).
+:class:`GainRamp`
+    The factor rises linearly from 1 / N to 1 over the first N sections after
+    ``start`` (N = 1: at once).
+
+:func:`capture_time` measures a run: the first section from which the plant keeps one
+impact per period and stays within ``band`` of z** to the end of the run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grazing_control.oscillator.params import ParameterError
+
+__all__ = ["CAPTURE_RADIUS", "CaptureRule", "GainRamp", "capture_time"]
+
+#: The capture rule's radius in units of sqrt(|Delta d|) (docs/theory_capture.md).
+CAPTURE_RADIUS = 5.0
+
+
+class CaptureRule:
+    """Switch on (factor 1, latched) once |z^ - z**| <= ``radius`` (module docstring)."""
+
+    def __init__(self, target, radius: float):
+        radius = float(radius)
+        if not (math.isfinite(radius) and radius > 0.0):
+            raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a "
+                                 "finite capture_radius > 0")
+        self.target = np.array(target, dtype=float)
+        self.radius = radius
+        self.on_at = None
+
+    @classmethod
+    def for_wall(cls, target, delta_d: float, scale: float = CAPTURE_RADIUS) -> "CaptureRule":
+        """The rule with radius ``scale`` sqrt(|Delta d|)."""
+        return cls(target, scale * math.sqrt(abs(delta_d)))
+
+    def __call__(self, k: int, estimate) -> float:
+        if self.on_at is None:
+            z = np.asarray(estimate.z, dtype=float)
+            if np.all(np.isfinite(z)) and np.all(np.isfinite(estimate.cov)) \
+                    and float(np.hypot(*(z - self.target))) <= self.radius:
+                self.on_at = int(k)
+        return 1.0 if self.on_at is not None else 0.0
+
+
+class GainRamp:
+    """The factor min(1, (k - start + 1) / sections) from section ``start`` on."""
+
+    def __init__(self, sections: int, start: int = 0):
+        if isinstance(sections, bool) or int(sections) != sections or sections < 1:
+            raise ParameterError(f"ramp_sections={sections!r} is invalid: valid range is an "
+                                 "integer >= 1")
+        self.sections, self.start = int(sections), int(start)
+
+    def __call__(self, k: int, estimate=None) -> float:
+        if k < self.start:
+            return 0.0
+        return min(1.0, (k - self.start + 1) / self.sections)
+
+
+def capture_time(truth, impacts_per_period, target, band: float) -> int | None:
+    """The first section k from which every later period has one impact and
+    |z_j - z**| <= ``band`` (Euclidean) for all j >= k; None if the run ends outside."""
+    truth = np.asarray(truth, dtype=float)
+    dist = np.hypot(*(truth - np.asarray(target, dtype=float)).T)
+    good = (dist <= band) & (np.asarray(impacts_per_period) == 1)
+    bad = np.nonzero(~good)[0]
+    k = 0 if bad.size == 0 else int(bad[-1]) + 1
+    return k if k < truth.shape[0] else None

@@ -1,0 +1,127 @@
+"""Model error: gains designed on a nominal model acting on a mismatched plant (issue 16 s2).
+
+The plant is the nominal model with one parameter off by a relative error e (zeta,
+omega or r: ``p.with_(name=value (1 + e))``); the controller keeps the gains
+(c1, c2) designed on the nominal model (Eq. 38 / (D5)) and samples at the plant's Pi2
+with the plant's X** (the reference is exact: only the gains carry the error; as
+``grazing orbit --zeta ... --c1 ... --c2 ...``). Derivation in docs/theory_mismatch.md:
+
+* N_g does not involve r, so an error in r leaves N_g,12 = 0: no singular multiplier
+  (lambda0 moves, bounded). Errors in zeta or omega give N_g,12 = e n' + O(e^2) != 0,
+  and with it the singular term chi_m1 / delta2 of the trace (theory_zdm.md (P6)),
+  chi_m1 = -(1 + r) alpha* N_g,12.
+* The near-grazing orbit loses stability where tr J reaches +-(1 + psi0), at
+  delta2* = |chi_m1| / (1 + psi0 -+ chi0) = O(e), i.e. at
+  Delta d* = kappa1 delta2* + kappa2 delta2*^2 = O(e^2) (kappa1 ~ N_g,12 too): the
+  **band** (Delta d*, 0) of Delta d next to grazing where control fails has a width
+  proportional to e^2 (:func:`predicted_band`), on the side of d < d* for one sign of
+  the error only.
+
+:func:`instability_band` measures the band by the exact route: the largest Floquet
+multiplier of the controlled 1/1 orbit (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`
+of the mismatched plant with the nominal gains) on a logarithmic grid of Delta d from
+``ceiling`` towards grazing, the band's outer end bisected in log |Delta d|.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.impact import ImpactCapError, InitialStateError
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
+from grazing_control.dynamics.maps.perturbation import series_coefficients
+
+__all__ = ["PARAMETERS", "mismatched", "largest_multiplier", "Band", "instability_band",
+           "predicted_band"]
+
+#: The parameters an error is put on.
+PARAMETERS = ("zeta", "omega", "r")
+
+
+def mismatched(p: OscillatorParams, name: str, error: float) -> OscillatorParams:
+    """The plant: ``p`` with parameter ``name`` multiplied by (1 + error)."""
+    if name not in PARAMETERS:
+        raise ParameterError(f"name={name!r} is invalid: valid values are {', '.join(PARAMETERS)}")
+    if not (math.isfinite(error) and error > -1.0):
+        raise ParameterError(f"error={error!r} is invalid: valid range is a relative error > -1")
+    return p.with_(**{name: getattr(p, name) * (1.0 + error)})
+
+
+def largest_multiplier(p: OscillatorParams, gains: Gains) -> float:
+    """max |lambda| of the controlled 1/1 orbit at ``p.delta_d``; +inf where there is none."""
+    try:
+        return float(np.max(np.abs(orbit_11(p, gains).multipliers)))
+    except (OrbitNotFound, ImpactCapError, InitialStateError, ValueError, ArithmeticError):
+        return math.inf
+
+
+@dataclass(frozen=True)
+class Band:
+    """The band (end, 0) of Delta d next to grazing where control fails.
+
+    end : its outer end (< 0), 0.0 where the orbit is stable down to -floor (no band),
+        -ceiling where it fails over the whole range. predicted : :func:`predicted_band`.
+    multipliers : (Delta d, max |lambda|) of the scan, nearest to grazing last.
+    """
+
+    parameter: str
+    error: float
+    end: float
+    predicted: float
+    floor: float
+    ceiling: float
+    multipliers: tuple
+
+
+def predicted_band(plant: OscillatorParams, gains: Gains) -> float:
+    """Delta d* of the series (limit truncation, theory_zdm.md (P3), (P6)): where a root
+    of lambda^2 - (chi_m1 / delta2 + chi0) lambda + psi0 crosses -1 or +1, the outer one
+    with Delta d < 0; 0.0 where none (docs/theory_mismatch.md)."""
+    c = series_coefficients(plant, gains)
+    ends = []
+    for s in (1.0, -1.0):  # s = 1: root -1 (tr = -(1 + psi0)); s = -1: root +1
+        den = 1.0 + c.psi0 + s * c.chi0
+        d2 = -s * c.chi_m1 / den if den != 0.0 else math.nan
+        if d2 > 0.0:
+            dd = c.kappa1 * d2 + c.kappa2 * d2 * d2
+            if dd < 0.0:
+                ends.append(dd)
+    return min(ends) if ends else 0.0
+
+
+def instability_band(nominal: OscillatorParams, gains: Gains, name: str, error: float, *,
+                     floor: float = 1e-14, ceiling: float = 1e-2, per_decade: int = 4,
+                     rtol: float = 1e-3) -> Band:
+    """The band of Delta d next to grazing where the mismatched plant's controlled orbit
+    fails (max |lambda| >= 1, or no 1/1 orbit), exact route (module docstring).
+
+    The scan runs from -ceiling to -floor; the band is the run of failing points that
+    reaches the floor, its outer end bisected in log |Delta d| to ``rtol`` relative.
+    """
+    plant = mismatched(nominal, name, error)
+    n = int(round(per_decade * math.log10(ceiling / floor))) + 1
+    dds = -np.logspace(math.log10(ceiling), math.log10(floor), n)
+    rhos = [largest_multiplier(plant.with_(delta_d=float(d)), gains) for d in dds]
+    fails = [not r < 1.0 for r in rhos]
+    scan = tuple((float(d), float(r)) for d, r in zip(dds, rhos))
+    pred = predicted_band(plant, gains)
+    if not fails[-1]:
+        return Band(name, error, 0.0, pred, floor, ceiling, scan)
+    k = len(fails) - 1
+    while k > 0 and fails[k - 1]:
+        k -= 1
+    if k == 0:
+        return Band(name, error, float(dds[0]), pred, floor, ceiling, scan)
+    stable, failing = math.log10(-dds[k - 1]), math.log10(-dds[k])
+    while stable - failing > rtol / math.log(10.0):
+        mid = 0.5 * (stable + failing)
+        if largest_multiplier(plant.with_(delta_d=-10.0 ** mid), gains) < 1.0:
+            stable = mid
+        else:
+            failing = mid
+    return Band(name, error, -10.0 ** failing, pred, floor, ceiling, scan)

@@ -1,0 +1,590 @@
+"""The Pi2 state from a sampled, noisy sensor stream: nearest sample, arc fit, model fit.
+
+A rig does not sample its motion on Pi2; it streams position (and maybe velocity)
+samples x~_j = x(t_j) + sigma e_j at a fixed rate. The controller needs the state
+z_k = (x, v)(t_k) - y_p(tau2) on Pi2 (deviation coordinates,
+:mod:`grazing_control.oscillator.flow`) at the section times t_k = k T, before the
+correction of period k. docs/theory_estimation.md derives the three estimators:
+
+``nearest``
+    The last sample at or before t_k; where velocity is not measured, the backward
+    difference of the last two samples (never across a known impact). Error
+    covariance sigma^2 diag(1, 2 / h^2) (position only), sigma^2 I with velocity,
+    plus the bias of the time offset (docs/theory_estimation.md, (E1)).
+``arc``
+    Linear least squares of the exact free flow over the samples since the last
+    impact: between impacts y_j = e1^T Phi(t_j - t_k) z_k + sigma e_j (E2), so
+    z^ = (H^T H)^-1 H^T y with covariance sigma^2 (H^T H)^-1.
+``model``
+    An iterated extended Kalman filter without process noise beyond a small floor,
+    over whole periods, with the exact flow, the impact law and the known correction
+    (E3-E5): the prior N(z^_{k-1}, P_{k-1}) and the samples of (t_{k-1}, t_k] give
+    the posterior of z_{k-1} by Gauss-Newton on the exact trajectory (Jacobians: Phi,
+    the saltation matrix S at each impact), which the exact map carries to t_k with
+    P_k = M P+ M^T + Q. The information of every earlier period is kept through the
+    map; a residual test (chi^2) falls back to the arc fit when the prior and the data
+    disagree (an unexpected or missed impact).
+
+Every estimate comes with its covariance per the noise model (tests/test_estimation.py
+checks it against seeded Monte Carlo). Impacts are detected from the stream where the
+rig has no impact sensor by a split test on the arc fit (:func:`detect_impact`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from grazing_control.oscillator.flow import transition_matrix
+from grazing_control.oscillator.impact import advance, saltation_matrix
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
+
+__all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
+           "nearest_estimate", "arc_fit", "detect_impact", "correction_legs", "trajectory",
+           "model_update", "estimate_covariance", "CHI2_SIGMAS", "actuator_legs", "section_force"]
+
+TWO_PI = 2.0 * math.pi
+#: The estimators by name (``estimator`` parameter of the controller).
+ESTIMATORS = ("nearest", "arc", "model")
+#: The residual test of the model fit: reset when the sum of squared normalised
+#: residuals of a period exceeds n + CHI2_SIGMAS sqrt(2 n) (chi^2_n's mean + 8 std).
+CHI2_SIGMAS = 8.0
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The Pi2 deviation estimate ``z`` = (dx, dv) and its covariance ``cov`` (2x2) at
+    the section time; ``source`` names what produced it."""
+
+    z: tuple
+    cov: np.ndarray
+    source: str
+
+
+@dataclass(frozen=True)
+class FilterState:
+    """The model filter's state at a section time: the estimate ``z`` (before the
+    correction) and its covariance ``cov``; ``periods`` counts the periods fitted
+    since the last reset."""
+
+    z: tuple
+    cov: np.ndarray
+    periods: int = 0
+
+
+def _check_sigma(sigma: float) -> float:
+    sigma = float(sigma)
+    if not (math.isfinite(sigma) and sigma > 0.0):
+        raise ParameterError(f"sensor_noise={sigma!r} is invalid: valid range is a finite "
+                             "sensor_noise > 0 for the fitted estimators")
+    return sigma
+
+
+def deviation_samples(p: OscillatorParams, s, x, v=None, tau_start: float | None = None):
+    """Measured deviations y_j = x~_j - x_p(tau_j), w_j = v~_j - v_p(tau_j) at times s
+    after a section (phase tau2, or ``tau_start``): tau_j = tau + omega s_j (spec
+    section 1). ``w`` is NaN where v is not measured."""
+    tau = p.tau2 if tau_start is None else tau_start
+    s = np.asarray(s, dtype=float)
+    psi = tau + p.omega * s - p.lag
+    y = np.asarray(x, dtype=float) - p.amplitude * np.cos(psi)
+    if v is None:
+        w = np.full_like(y, math.nan)
+    else:
+        w = np.asarray(v, dtype=float) + p.amplitude * p.omega * np.sin(psi)
+    return y, w
+
+
+def phi_rows(zeta: float, h):
+    """Phi(h) = exp(A h) for an array of h: (n, 2, 2) (the closed form of
+    :func:`grazing_control.oscillator.flow.transition_matrix`, vectorised)."""
+    h = np.asarray(h, dtype=float)
+    wd = math.sqrt(1.0 - zeta * zeta)
+    e = np.exp(-zeta * h)
+    c = np.cos(wd * h)
+    s = np.sin(wd * h) / wd
+    out = np.empty(h.shape + (2, 2))
+    out[..., 0, 0] = e * (c + zeta * s)
+    out[..., 0, 1] = e * s
+    out[..., 1, 0] = -e * s
+    out[..., 1, 1] = e * (c - zeta * s)
+    return out
+
+
+def nearest_estimate(s, y, w, sigma: float) -> Estimate:
+    """The last sample (times ``s`` <= 0 relative to the section, sorted) as the Pi2
+    state; without velocity the backward difference (y_n - y_{n-1}) / h (E1).
+
+    The covariance is that of the noise alone: sigma^2 I with velocity, else
+    sigma^2 [[1, 1/h], [1/h, 2/h^2]] (the difference shares the last sample's noise).
+    The time offset of the sample is not corrected: it is a bias, not in the covariance.
+    """
+    s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
+    if s.size == 0:
+        raise ValueError("no sample before the section: the nearest estimator needs one")
+    var = sigma * sigma
+    if math.isfinite(w[-1]):
+        return Estimate((float(y[-1]), float(w[-1])), var * np.eye(2), "nearest")
+    if s.size < 2:
+        return Estimate((float(y[-1]), 0.0), np.diag([var, math.inf]), "nearest")
+    h = float(s[-1] - s[-2])
+    dv = (y[-1] - y[-2]) / h
+    cov = var * np.array([[1.0, 1.0 / h], [1.0 / h, 2.0 / (h * h)]])
+    return Estimate((float(y[-1]), float(dv)), cov, "nearest")
+
+
+def unkick(p: OscillatorParams, s, y, w, kicks=()):
+    """Samples with the known corrections taken out: a sample before a kick dv at time
+    s_c is moved to the free flow through the kick's end state,
+    y_j + dv Phi12(s_j - s_c), w_j + dv Phi22(s_j - s_c) (E2'), so that an arc through
+    corrections is one free flow."""
+    s = np.asarray(s, dtype=float)
+    y = np.array(y, dtype=float)
+    w = np.array(w, dtype=float)
+    for at, dv in kicks:
+        if dv == 0.0:
+            continue
+        before = s <= at
+        phi = phi_rows(p.zeta, s[before] - at)
+        y[before] += dv * phi[:, 0, 1]
+        w[before] += dv * phi[:, 1, 1]
+    return y, w
+
+
+def arc_fit(p: OscillatorParams, s, y, w, sigma: float, at: float = 0.0,
+            kicks=()) -> Estimate:
+    """Least squares of the free flow over one arc (no impact among the samples):
+    the deviation z at time ``at`` from y_j = e1^T Phi(s_j - at) z + noise and, where
+    measured, w_j = e2^T Phi(s_j - at) z + noise (E2), through the known corrections
+    ``kicks`` ((time, dv) pairs, :func:`unkick`). Covariance sigma^2 (H^T H)^-1.
+    Fewer than two measured components: ValueError."""
+    sigma = _check_sigma(sigma)
+    s = np.asarray(s, dtype=float)
+    y, w = unkick(p, s, y, w, kicks)
+    phi = phi_rows(p.zeta, s - at)
+    rows = [phi[:, 0, :]]
+    obs = [y]
+    has_v = np.isfinite(w)
+    if has_v.any():
+        rows.append(phi[has_v, 1, :])
+        obs.append(w[has_v])
+    h = np.vstack(rows)
+    b = np.concatenate(obs)
+    if b.size < 2:
+        raise ValueError(f"{b.size} measurement(s) since the last impact: the arc fit needs 2")
+    info = h.T @ h
+    z = np.linalg.solve(info, h.T @ b)
+    return Estimate((float(z[0]), float(z[1])), sigma * sigma * np.linalg.inv(info), "arc")
+
+
+def _rss_line(phi_x, y):
+    """Residual sum of squares of the LS fit y ~ phi_x z (2 unknowns)."""
+    z, *_ = np.linalg.lstsq(phi_x, y, rcond=None)
+    r = y - phi_x @ z
+    return float(r @ r)
+
+
+def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
+                  threshold: float = 25.0):
+    """The time of an impact among position samples (times ``s`` after a section), or None.
+
+    A split test on the free flow (E6): one arc through all samples against two arcs
+    split between samples m-1 and m; the split with the smallest residual sum wins if
+    it lowers the sum by more than ``threshold`` sigma^2 (a kink of the velocity that
+    noise alone explains with probability ~ e^{-threshold/2}). Impacts can only be where
+    the mass is at the wall, so only splits next to samples within 6 sigma + one sample
+    step of motion of the wall are tried. The impact time is where the arc before the
+    split reaches the wall (x = d), else the midpoint of the split.
+    """
+    s, y = np.asarray(s, dtype=float), np.asarray(y, dtype=float)
+    n = s.size
+    if n < 2 * min_side + 1:
+        return None
+    # the gap of each sample: g = x - d = y - Delta d - 2 a sin^2(psi / 2)
+    psi = p.tau2 + p.omega * s - p.lag
+    gap = y - p.delta_d - 2.0 * p.amplitude * np.sin(0.5 * psi) ** 2
+    hstep = float(np.max(np.diff(s))) if n > 1 else 0.0
+    near = gap > -(6.0 * sigma + 2.0 * hstep + hstep * hstep)
+    cands = [m for m in range(min_side, n - min_side + 1)
+             if near[max(m - 2, 0):m + 2].any()]
+    if not cands:
+        return None
+    phi_x = phi_rows(p.zeta, s)[:, 0, :]
+    whole = _rss_line(phi_x, y)
+    best, best_m = whole, None
+    for m in cands:
+        rss = _rss_line(phi_x[:m], y[:m]) + _rss_line(phi_x[m:], y[m:])
+        if rss < best:
+            best, best_m = rss, m
+    if best_m is None or whole - best <= threshold * sigma * sigma:
+        return None
+    # refine: the pre-impact arc meets the wall between s[m-1] and s[m + 1)
+    m = best_m
+    fit = arc_fit(p, s[:m], y[:m], np.full(m, math.nan), sigma, at=float(s[m - 1]))
+    lo, hi = float(s[m - 1]), float(s[m])
+    tt = np.linspace(lo, hi, 65)
+    ph = phi_rows(p.zeta, tt - lo)[:, 0, :] @ np.array(fit.z)
+    g = ph - p.delta_d - 2.0 * p.amplitude * np.sin(0.5 * (p.tau2 + p.omega * tt - p.lag)) ** 2
+    above = np.nonzero(g >= 0.0)[0]
+    return float(tt[above[0]]) if above.size else 0.5 * (lo + hi)
+
+
+def correction_legs(correction: float, delay: float, duration: float, width: float = 0.0,
+                    force_limit: float = math.inf) -> list:
+    """The period (0, ``duration``] as legs (start, end, kick, force): the correction as a
+    velocity kick at ``delay`` (``width`` 0, Eq. 28), or as the rig's force pulse of
+    ``width`` centred at ``delay``, force correction / width clipped to
+    +-``force_limit`` (:mod:`grazing_control.dynamics.simulation.actuation`, docs/theory_pulse.md;
+    it starts where the simulator's starts it:
+    :func:`grazing_control.dynamics.simulation.actuation.pulse_start`)."""
+    if width > 0.0 and correction != 0.0:
+        if not width < duration:
+            raise ParameterError(f"pulse_width={width!r} is invalid: valid range is "
+                                 f"0 <= pulse_width < T = {duration!r}")
+        start = pulse_start(duration, delay, width)
+        force = pulse_force(correction, width, force_limit)
+        legs = [(0.0, start, 0.0, 0.0), (start, start + width, 0.0, force),
+                (start + width, duration, 0.0, 0.0)]
+        return [leg for leg in legs if leg[1] > leg[0]]
+    if delay > 0.0:
+        return [(0.0, delay, 0.0, 0.0), (delay, duration, correction, 0.0)]
+    return [(0.0, duration, correction, 0.0)]
+
+
+def _through_impact(p: OscillatorParams, q: OscillatorParams, m, g, h: float, imp,
+                    wall: bool):
+    """The Jacobian ``m`` and the wall's sensitivity ``g`` carried by the free flow over
+    ``h`` and through the impact ``imp`` of the oscillator ``q`` (the wall where a force
+    shifts it): M <- S Phi(h) M, g <- S Phi(h) g + (I - S) e1 ((E3), (E8))."""
+    phi = np.array(transition_matrix(p.zeta, h)).reshape(2, 2)
+    sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
+    m = sal @ phi @ m
+    if wall:
+        g = sal @ (phi @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
+    return m, g
+
+
+def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
+               duration: float | None = None, *, wall: bool = False, width: float = 0.0,
+               force_limit: float = math.inf, actuator=None, force0: float = 0.0):
+    """The exact motion from the section state ``z0`` (before the correction): the
+    deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
+    (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
+
+    Between events z(s) = Phi(s - s_e) z_e; the Jacobian is Phi(s - s_e) M_e with M_e
+    the product of Phi and the saltation matrices S of the impacts before s (spec
+    section 5); the known kick shifts the state and leaves the Jacobian unchanged.
+
+    With ``width`` > 0 the correction is the rig's force pulse instead (a constant force
+    F = correction / width, clipped to ``force_limit``, centred at ``delay``:
+    :func:`correction_legs`): during it the deviation shifted by (F, 0) obeys the free
+    flow against the wall moved to Delta d - F (docs/theory_pulse.md, as
+    :func:`grazing_control.dynamics.simulation.actuation.pulse_step`), so z(s) = Phi(s - s_e)
+    (z_e - F e1) + F e1 and the saltation matrices are those of the shifted wall; the
+    Jacobian and the wall's sensitivity keep their form (F does not depend on z0).
+    Width 0 is the kick, bit for bit.
+
+    With an ``actuator`` (:class:`grazing_control.dynamics.simulation.actuator.Actuator`, not
+    ideal; ``width`` > 0) the pulse is the command, and the force on the mass follows it
+    through the first-order lag after the latency, from ``force0`` (the force at the
+    section, left by the earlier corrections: :func:`section_force`): the exact flow of
+    :func:`_actuated_trajectory`. None or the ideal actuator (with ``force0`` 0): the
+    constant pulse above, bit for bit.
+
+    Returns
+    -------
+    z : (n, 2) deviations, jac : (n, 2, 2), end : (dx, dv) at ``duration`` (default T),
+    monodromy : (2, 2) d end / d z0, impacts : list of (time, phase, v-, v+).
+
+    With ``wall`` also the sensitivities to the wall, d z(s_j) / d Delta d (n, 2) and
+    d end / d Delta d (2,): zero before the first impact; an impact adds
+    (I - S) e1 to the perturbation carried up to it, d z+ = S d z- + (I - S) e1 d(Delta d)
+    (docs/theory_estimation.md, (E8)); the flow carries it on by Phi and S. The other
+    outputs are the same as without it, bit for bit.
+    """
+    duration = p.period if duration is None else float(duration)
+    s = np.asarray(s, dtype=float)
+    if actuator is not None and not (actuator.ideal and force0 == 0.0):
+        return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
+                                    force_limit, actuator, force0)
+    # events: (time, state after, jacobian after); start, kick, impacts
+    events = []
+    tau = p.tau2
+    z = (float(z0[0]), float(z0[1]))
+    m = np.eye(2)
+    g = np.zeros(2)                     # d z / d Delta d (``wall``)
+    t0 = 0.0
+    impacts = []
+    legs = correction_legs(correction, delay, duration, width, force_limit)
+    for start, end, kick, force in legs:
+        z = (z[0], z[1] + kick)
+        events.append((start, z, m, g, force))
+        q = p if force == 0.0 else p.with_(delta_d=p.delta_d - force)   # the shifted wall
+        seg = advance(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
+        for imp in seg.impacts:
+            if imp.sticking:
+                raise ValueError("the model's motion sticks to the wall: no fit")
+            ti = start + imp.dt
+            m, g = _through_impact(p, q, m, g, ti - t0, imp, wall)
+            psi = imp.phase - p.lag
+            z = (p.d - p.amplitude * math.cos(psi),
+                 imp.v_plus + p.amplitude * p.omega * math.sin(psi))
+            t0 = ti
+            events.append((ti, z, m, g, force))
+            impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
+        f = np.array(transition_matrix(p.zeta, end - t0)).reshape(2, 2)
+        m = f @ m
+        if wall:
+            g = f @ g
+        z = (seg.dx + force if force else seg.dx, seg.dv)
+        t0 = end
+    times = np.array([e[0] for e in events])
+    idx = np.searchsorted(times, s, side="left") - 1   # the last event strictly before s
+    idx = np.clip(idx, 0, len(events) - 1)
+    zs = np.array([e[1] for e in events])[idx]
+    ms = np.array([e[2] for e in events])[idx]
+    phi = phi_rows(p.zeta, s - times[idx])
+    forces = np.array([e[4] for e in events])
+    if forces.any():                    # in a pulse: Phi (z_e - F e1) + F e1
+        fs = forces[idx]
+        zs = zs - np.outer(fs, (1.0, 0.0))
+        out = np.einsum("nij,nj->ni", phi, zs) + np.outer(fs, (1.0, 0.0))
+    else:
+        out = np.einsum("nij,nj->ni", phi, zs)
+    jac = np.einsum("nij,njk->nik", phi, ms)
+    if wall:
+        gs = np.array([e[3] for e in events])[idx]
+        return out, jac, z, m, impacts, np.einsum("nij,nj->ni", phi, gs), g
+    return out, jac, z, m, impacts
+
+
+def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration: float,
+                  width: float, force_limit: float, actuator) -> list:
+    """The period (0, ``duration``] through ``actuator`` as legs (start, end, command):
+    the command F (:func:`grazing_control.dynamics.simulation.actuation.pulse_force`) on the pulse
+    centred at ``delay`` (:func:`grazing_control.dynamics.simulation.actuation.pulse_start`)
+    reaches the lag ``actuator.latency`` later, and must end within the period, as in
+    the plant's :func:`grazing_control.dynamics.simulation.actuator.actuated_step` (its legs,
+    empty ones included). ParameterError naming pulse_width or actuator_latency."""
+    if not (math.isfinite(width) and 0.0 < width < duration):
+        raise ParameterError(f"pulse_width={width!r} is invalid with an actuator: valid range "
+                             f"is 0 < pulse_width < T = {duration!r}")
+    on = pulse_start(duration, delay, width) + actuator.latency
+    off = on + width
+    if not off < duration:
+        raise ParameterError(f"actuator_latency={actuator.latency!r} is invalid: valid range "
+                             f"is pulse start + actuator_latency + pulse_width < T = "
+                             f"{duration!r} (the force within the period)")
+    return [(0.0, on, 0.0), (on, off, pulse_force(correction, width, force_limit)),
+            (off, duration, 0.0)]
+
+
+def section_force(p: OscillatorParams, force0: float, correction: float, delay: float,
+                  width: float, force_limit: float, actuator,
+                  duration: float | None = None) -> float:
+    """The actuator's force at the end of the period (the next section's ``force0`` of
+    :func:`trajectory`): the lag's closed form over :func:`actuator_legs`,
+    f = u + (f - u) e^{-h / tau_a} per leg (u = f at once without lag)."""
+    duration = p.period if duration is None else float(duration)
+    f = float(force0)
+    tau_a = actuator.time_constant
+    for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
+                                       actuator):
+        if end > start:
+            f = u + (f - u) * math.exp(-(end - start) / tau_a) if tau_a > 0.0 else u
+    return f
+
+
+def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, force_limit,
+                         actuator, force0):
+    """:func:`trajectory` through a first-order actuator (docs/theory_pulse.md sections
+    5-8, :mod:`grazing_control.dynamics.simulation.actuator`): per leg of constant command u the
+    exact flow of
+    :func:`grazing_control.dynamics.simulation.actuator.lag_flow` (force u + (f - u) e^{-h/tau_a},
+    impacts certified), in its pieces z(h) = Phi(h) z'_e + (x_f, v_f)(h). The force is
+    a function of time alone (the command is known), so d z / d z0 is carried by Phi
+    between impacts and at each impact by the saltation matrix with the acceleration
+    under the force there (the wall shifted by it, as the constant pulse's); the wall's
+    sensitivity as (E8)."""
+    from grazing_control.dynamics.simulation.actuator import lag_flow
+
+    tau_a = actuator.time_constant
+    if tau_a == 0.0 and force0 != 0.0:
+        raise ParameterError(f"force0={force0!r} is invalid: an actuator without lag leaves "
+                             "no force at the section, valid value is 0")
+    z = np.array((float(z0[0]), float(z0[1])))
+    m = np.eye(2)
+    g = np.zeros(2)
+    f = float(force0)
+    t0 = 0.0                            # the last event of the Jacobian (start or impact)
+    events = []                         # (time, z', k, F_inf, M, g) of each piece
+    impacts = []
+    for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
+                                       actuator):
+        length = end - start
+        if length <= 0.0:
+            continue
+        c = f - u if tau_a > 0.0 else 0.0
+        flow = lag_flow(p, (p.tau2 + p.omega * start) % TWO_PI, float(z[0]), float(z[1]),
+                        length, u, c, tau_a)
+        pieces = list(flow.pieces)
+        for i, piece in enumerate(pieces):
+            if i > 0:                   # the impact that started this piece
+                imp = flow.impacts[i - 1]
+                ti = start + imp.dt
+                force = u + (c * math.exp(-imp.dt / tau_a) if tau_a > 0.0 else 0.0)
+                m, g = _through_impact(p, p.with_(delta_d=p.delta_d - force), m, g, ti - t0,
+                                       imp, wall)
+                t0 = ti
+                impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
+            else:
+                phi = np.array(transition_matrix(p.zeta, start - t0)).reshape(2, 2)
+                m = phi @ m
+                if wall:
+                    g = phi @ g
+                t0 = start
+            events.append((start + piece.h0, piece.zp, piece.k, u, m, g))
+        z = np.array((flow.dx, flow.dv))
+        f = flow.force if tau_a > 0.0 else u
+    phi = np.array(transition_matrix(p.zeta, duration - t0)).reshape(2, 2)
+    m_end = phi @ m
+    g_end = phi @ g
+    times = np.array([e[0] for e in events])
+    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
+    hh = s - times[idx]
+    phis = phi_rows(p.zeta, hh)
+    zp = np.array([e[1] for e in events])[idx]
+    kk = np.array([e[2] for e in events])[idx]
+    f_inf = np.array([e[3] for e in events])[idx]
+    decay = np.exp(-hh / tau_a) if tau_a > 0.0 else np.zeros_like(hh)
+    out = np.einsum("nij,nj->ni", phis, zp)
+    out[:, 0] += f_inf + kk * decay
+    if tau_a > 0.0:
+        out[:, 1] -= kk * decay / tau_a
+    jac = np.einsum("nij,njk->nik", phis, np.array([e[4] for e in events])[idx])
+    end = (float(z[0]), float(z[1]))
+    if wall:
+        gs = np.einsum("nij,nj->ni", phis, np.array([e[5] for e in events])[idx])
+        return out, jac, end, m_end, impacts, gs, g_end
+    return out, jac, end, m_end, impacts
+
+
+def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
+                 correction: float, delay: float = 0.0, *, floor: float = 1e-2,
+                 iterations: int = 8, width: float = 0.0, force_limit: float = math.inf,
+                 actuator=None, force0: float = 0.0):
+    """One period of the model filter: from the prior of z_{k-1} and the samples at times
+    ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
+
+    Gauss-Newton on the exact trajectory (:func:`trajectory`) minimises
+    (z - z^)^T P^-1 (z - z^) + |y - h(z)|^2 / sigma^2; the posterior covariance
+    P+ = (P^-1 + H^T H / sigma^2)^-1 is carried by the exact map's monodromy M:
+    P_k = M P+ M^T + (floor sigma)^2 I (the floor keeps the filter from trusting a
+    direction that the map contracts to zero; it stands for what the model omits).
+
+    The correction acts as a kick, or as a force pulse of ``width`` (clipped to
+    ``force_limit``) where the plant's actuator pushes for a finite time, through the
+    first-order ``actuator`` from the force ``force0`` at the section where it has a lag
+    (:func:`trajectory`).
+
+    Returns (FilterState at t_k, chi2 of the period's residuals, number of
+    measurements); raises ValueError when the fit fails (no convergence, a sticking
+    motion), for the caller to reset.
+    """
+    sigma = _check_sigma(sigma)
+    s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
+    has_v = np.isfinite(w)
+    z_prior = np.array(prior.z, dtype=float)
+    info_prior = np.linalg.inv(prior.cov)
+    z = z_prior.copy()
+    inv_var = 1.0 / (sigma * sigma)
+    for _ in range(iterations):
+        pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
+                                                force_limit=force_limit, actuator=actuator,
+                                                force0=force0)
+        h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
+        r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
+        info = info_prior + inv_var * (h.T @ h)
+        grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
+        step = np.linalg.solve(info, grad)
+        z = z + step
+        if np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(z)):
+            break
+    else:
+        raise ValueError("the model fit did not converge")
+    pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
+                                             force_limit=force_limit, actuator=actuator,
+                                             force0=force0)
+    h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
+    r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
+    info = info_prior + inv_var * (h.T @ h)
+    post = np.linalg.inv(info)
+    cov = mono @ post @ mono.T + (floor * sigma) ** 2 * np.eye(2)
+    chi2 = float(r @ r) * inv_var
+    return FilterState((float(end[0]), float(end[1])), 0.5 * (cov + cov.T),
+                       prior.periods + 1), chi2, r.size
+
+
+def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str = "model",
+                        velocity: bool = False, floor: float = 1e-2, target=None,
+                        periods: int = 400, lead: float = 0.0, width: float = 0.0,
+                        force_limit: float = math.inf) -> np.ndarray:
+    """The Pi2 estimate's error covariance per unit sigma^2 on the controlled 1/1 orbit
+    (2x2), for a sensor at ``rate`` samples per period (position only unless
+    ``velocity``): the design's measurement covariance R for
+    :func:`grazing_control.dynamics.design.noise.noise_covariance` (E7).
+
+    ``nearest``: diag(1, 1) with velocity, [[1, 1/h], [1/h, 2/h^2]] without (E1).
+    ``arc``: (H^T H)^-1 over the orbit's samples after its impact (E2).
+    ``model``: the fixed point of P = M (P^-1 + H^T H)^-1 M^T + floor^2 I along the
+    orbit (E5), iterated from the arc fit's covariance for ``periods`` periods at most.
+    ``target``: the orbit's Pi2 deviation (default ``orbit_11``).
+
+    ``lead``: the estimate is made ``lead`` before the section's last sample (the stream
+    estimator's ``lead``, a rig controller's answer_lead): the samples after the one
+    that makes the section due are never used (model, arc). ``width``: the corrections
+    act as force pulses of that width (:func:`trajectory`).
+    """
+    if estimator not in ESTIMATORS:
+        raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
+                             f"{', '.join(ESTIMATORS)}")
+    if int(rate) != rate or rate < 2:
+        raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
+                             "samples per period")
+    T = p.period
+    h = T / rate
+    if estimator == "nearest":
+        if velocity:
+            return np.eye(2)
+        return np.array([[1.0, 1.0 / h], [1.0 / h, 2.0 / (h * h)]])
+    if target is None:
+        from grazing_control.dynamics.orbits.orbits import orbit_11
+
+        target = orbit_11(p, gains).pi2_deviation
+    dv = gains.c1 * target[0] + gains.c2 * target[1]
+    s = np.arange(1, int(rate)) * h        # the samples strictly between the sections
+    if lead > 0.0:      # up to the first sample s with s + h + lead >= T (StreamEstimator)
+        due = np.nonzero(s + h + lead >= T - 1e-3 * h)[0]
+        s = s[:due[0] + 1] if due.size else s
+    _pred, jac, _end, mono, imps = trajectory(p, target, s, dv, gains.delay, width=width,
+                                              force_limit=force_limit)
+    if estimator == "arc":
+        after = s > (imps[-1][0] if imps else -math.inf)
+        phi = phi_rows(p.zeta, s[after] - T)
+        h_arc = phi[:, 0, :] if not velocity else np.vstack([phi[:, 0, :], phi[:, 1, :]])
+        return np.linalg.inv(h_arc.T @ h_arc)
+    hm = jac[:, 0, :] if not velocity else np.vstack([jac[:, 0, :], jac[:, 1, :]])
+    info_data = hm.T @ hm
+    cov = np.linalg.inv(info_data)
+    for _ in range(periods):
+        new = mono @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ mono.T \
+            + floor * floor * np.eye(2)
+        done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
+        cov = 0.5 * (new + new.T)
+        if done:
+            break
+    return cov

@@ -1,0 +1,467 @@
+"""Sampling Pi2 from a sensor stream: which samples belong to which section, when a
+section's estimate is due, and the closed loop of plant, sensor, estimator and Eq. 28.
+
+The stream's samples arrive in time order (stamp t, simulation time; the section times
+are t_k = k T, the simulator's origin: docs/nodes.md, "The sensor stream"). The
+estimate of section k uses the samples with t_{k-1} < t <= t_k (a sample at t_k is
+before that section's correction) and is due as soon as no further sample before t_k can
+come: when t + h >= t_k for the newest sample (h the sample period; a sample at t_k
+itself is not waited for), or when a sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
+over the estimators of :mod:`grazing_control.dynamics.estimation.section_state`; the controller node
+feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
+through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
+the plant layer lies above this one, so the caller passes it in).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
+                         deviation_samples, detect_impact, model_update, nearest_estimate,
+                         section_force, trajectory, unkick)
+
+__all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
+           "pulse_shape"]
+
+#: Where impacts come from: the rig's impact sensor, or detection in the stream.
+IMPACT_SOURCES = ("topic", "stream")
+#: Tolerance on times, relative to T: a sample within it of t_k is at t_k.
+_TOL = 1e-9
+#: A sample more than this many periods after the newest is a stray unless the next
+#: sample follows it (then the stream jumped: a restart from there).
+MAX_GAP = 4
+
+
+class StreamEstimator:
+    """Estimates of the Pi2 states from a stream of samples (no ROS).
+
+    Parameters
+    ----------
+    p : OscillatorParams
+        The model (Delta d included: the impacts of the model need the wall).
+    estimator : str
+        ``nearest``, ``arc`` or ``model`` (:mod:`grazing_control.dynamics.estimation.section_state`).
+    sigma : float
+        The sensor's noise std (> 0 for ``arc`` and ``model``; the covariances scale
+        with it).
+    impact_source : str
+        ``topic`` (impacts given by :meth:`add_impact`) or ``stream`` (detected).
+    sample_period : float
+        The stream's sample period h; 0: the gap between the last two samples.
+    floor : float
+        The model filter's floor (:func:`grazing_control.dynamics.estimation.section_state.model_update`).
+    after_section : bool
+        Make a section due only with the first sample after t_k (a realtime simulator
+        takes an answer only once it has published its Pi2 sample), not with the last
+        sample before it (lockstep: the simulator waits for the answer before it goes on).
+    lead : float
+        Make a section due ``lead`` (time, >= 0) before its last sample: with the newest
+        sample t at t + h + lead >= t_k (a realtime rig, issue 28: the answer is computed
+        while the last samples before t_k are on their way; this section's estimate has
+        not got them, and the model filter, which fits each period's own samples, never
+        uses them). 0: with the last sample (the default).
+    pulse_width, force_limit : float
+        How the corrections act in the plant: a velocity kick at the actuation delay
+        (``pulse_width`` 0, the default), or the rig's force pulse of that width centred
+        there, its force clipped to ``force_limit`` (> 0; inf: none). The model filter
+        and :func:`predict_section` integrate it exactly
+        (:func:`grazing_control.dynamics.estimation.section_state.trajectory`); a kick in the model of
+        a pulse in the plant put the rig scene's mean 5e-5 off its orbit.
+    actuator : Actuator or None
+        The plant's first-order actuator between the commanded pulse and the force
+        (:class:`grazing_control.dynamics.simulation.actuator.Actuator`; needs ``pulse_width`` > 0):
+        the model filter and :func:`predict_section` integrate the lag exactly, from the
+        force left at each section by the known earlier corrections
+        (:meth:`section_force`). None: the force is the command.
+    """
+
+    def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
+                 impact_source: str = "stream", sample_period: float = 0.0,
+                 floor: float = 1e-2, after_section: bool = False, lead: float = 0.0, *,
+                 pulse_width: float = 0.0, force_limit: float = math.inf, actuator=None):
+        if estimator not in ESTIMATORS:
+            raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
+                                 f"{', '.join(ESTIMATORS)}")
+        if impact_source not in IMPACT_SOURCES:
+            raise ParameterError(f"impact_source={impact_source!r} is invalid: valid values "
+                                 f"are {', '.join(IMPACT_SOURCES)}")
+        sigma = float(sigma)
+        if not (math.isfinite(sigma) and (sigma > 0.0 or estimator == "nearest"
+                                          and sigma >= 0.0)):
+            raise ParameterError(f"sensor_noise={sigma!r} is invalid: valid range is a finite "
+                                 "sensor_noise > 0 (>= 0 for the nearest estimator)")
+        sample_period = float(sample_period)
+        if not (math.isfinite(sample_period) and 0.0 <= sample_period < p.period):
+            raise ParameterError(f"state_period={sample_period!r} is invalid: valid range is "
+                                 f"0 <= state_period < T = {p.period!r} (0: from the stamps)")
+        self.p, self.estimator, self.sigma = p, estimator, sigma
+        self.impact_source, self.sample_period, self.floor = impact_source, sample_period, floor
+        self.after_section = bool(after_section)
+        lead = float(lead)
+        if not (math.isfinite(lead) and 0.0 <= lead < p.period):
+            raise ParameterError(f"answer_lead={lead!r} is invalid: valid range is "
+                                 f"0 <= answer_lead < T = {p.period!r}")
+        self.lead = lead
+        self.pulse = pulse_shape(p, pulse_width, force_limit)
+        if actuator is not None and actuator.ideal:
+            actuator = None
+        if actuator is not None and self.pulse[0] == 0.0:
+            raise ParameterError("pulse_width=0.0 is invalid with an actuator: valid range is "
+                                 f"0 < pulse_width < T = {p.period!r} (the command's width)")
+        self.actuator = actuator
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (the simulator was reset)."""
+        self.samples = deque()          # (t, x, v) of the last two periods
+        self.next_k = None              # the next section to estimate
+        self.kicks = {}                 # section k -> (time of the kick, dv)
+        self.final = set()              # sections whose kick the plant reported (acted)
+        self.force_at = (None, 0.0)     # (section, actuator force there) before self.kicks
+        self.delay = 0.0
+        self.impacts = deque(maxlen=64)  # impact times (topic or detected)
+        self.filter = None              # FilterState at section filter_k
+        self.filter_k = None
+        self.resets = 0                 # model fits that fell back to the arc fit
+        self.last_t = None
+        self.ignored = 0                # samples not used: duplicates, older, strays
+        self._jump = None               # a sample far ahead, kept until confirmed
+
+    # ----------------------------------------------------------------- input
+    def add_impact(self, t: float) -> None:
+        """An impact at time t from the rig's impact sensor (``impact_source`` topic)."""
+        if self.impact_source == "topic":
+            self.impacts.append(float(t))
+
+    def set_correction(self, k: int, dv: float, delay: float = 0.0) -> None:
+        """The correction answered to section k, applied ``delay`` after t_k (unless the
+        plant already said what acted there: :meth:`acted`)."""
+        if k in self.final:
+            return
+        self.kicks[k] = (k * self.p.period + delay, float(dv))
+        self.delay = delay
+        for old in sorted(j for j in self.kicks if j < k - 3):
+            if self.actuator is not None:   # its force is carried on (section_force)
+                self.force_at = (old + 1, self.section_force(old + 1))
+            del self.kicks[old]
+        self.final = {j for j in self.final if j >= k - 3}
+
+    def acted(self, k: int, dv: float, delay: float = 0.0) -> None:
+        """What acted at section k according to the plant (a deadline miss: 0, or the
+        prediction substituted for a late answer): it replaces the answered correction,
+        also one answered after this call."""
+        self.final.discard(k)
+        self.set_correction(k, dv, delay)
+        self.final.add(k)
+
+    def add_sample(self, t: float, x: float, v: float = math.nan) -> list:
+        """A sample (x~, v~; v NaN if not measured) at time t; returns the sections
+        [(k, t_k, Estimate)] now due (normally none or one)."""
+        T = self.p.period
+        tol = _TOL * T
+        if not math.isfinite(t):
+            self.ignored += 1
+            return []
+        if self.last_t is not None and t < self.last_t - T:
+            ignored, resets = self.ignored, self.resets
+            self.reset()                # back to the start: the simulator was reset
+            self.ignored, self.resets = ignored, resets
+        elif self.last_t is not None and t <= self.last_t:
+            self.ignored += 1           # a duplicate or an older sample: not used
+            return []
+        elif self.last_t is not None and t > self.last_t + MAX_GAP * T:
+            jump, self._jump = self._jump, (t, x, v)
+            if jump is None or not 0.0 < t - jump[0] <= 2.0 * T:
+                self.ignored += 1       # a stray far ahead, unless the next one follows
+                return []
+            ignored, resets = self.ignored, self.resets
+            self.reset()                # the stream jumped ahead: start again there
+            self.ignored, self.resets = ignored - 1, resets
+            return self.add_sample(*jump) + self.add_sample(t, x, v)
+        self._jump = None
+        due = []
+        if self.next_k is None:
+            self.next_k = max(0, math.ceil((t - tol) / T))
+        while t > self.next_k * T + tol:
+            due.append(self._due(self.next_k))     # late: a sample was lost
+        h = self.sample_period
+        if h == 0.0 and self.samples:
+            h = t - self.samples[-1][0]
+        self.samples.append((float(t), float(x), float(v)))
+        while self.samples and self.samples[0][0] < t - 2.0 * T - tol:
+            self.samples.popleft()
+        self.last_t = t if self.last_t is None else max(self.last_t, t)
+        # due when the next sample would be at t_k or after it: a sample at t_k itself
+        # (up to rounding, 1e-3 h) is not waited for (a simulator publishes the samples
+        # before t_k, then waits for the answer)
+        if not self.after_section and (h <= 0.0 or
+                                       t + h + self.lead >= self.next_k * T - 1e-3 * h):
+            due.append(self._due(self.next_k))
+        return due
+
+    def flush(self, k: int) -> list:
+        """The sections up to k not yet estimated (the stream stopped short of t_k)."""
+        due = []
+        if self.next_k is None:
+            self.next_k = k
+        while self.next_k <= k:
+            due.append(self._due(self.next_k))
+        return due
+
+    # ----------------------------------------------------------------- estimates
+    def _due(self, k: int):
+        self.next_k = k + 1
+        return k, k * self.p.period, self.estimate(k)
+
+    def _window(self, k: int, since: float):
+        """Samples with since < t <= t_k + tol as arrays (s relative to t_k)."""
+        tk = k * self.p.period
+        tol = _TOL * self.p.period
+        rows = [r for r in self.samples if since < r[0] <= tk + tol]
+        if not rows:
+            return np.empty(0), np.empty(0), np.empty(0)
+        a = np.array(rows)
+        return a[:, 0] - tk, a[:, 1], a[:, 2]
+
+    def estimate(self, k: int) -> Estimate:
+        """The estimate of section k from the samples received (model, else arc, else
+        nearest, else the last position with an unknown velocity)."""
+        p, T = self.p, self.p.period
+        tk = k * T
+        if self.estimator == "model":
+            est = self._model(k)
+            if est is not None:
+                return est
+        if self.estimator in ("model", "arc"):
+            est = self._arc(k)
+            if est is not None:
+                if self.estimator == "model":
+                    self.filter, self.filter_k = FilterState(est.z, est.cov, 0), k
+                return est
+        s, x, v = self._window(k, tk - 2.0 * T)
+        if s.size == 0:
+            return Estimate((math.nan, math.nan), np.full((2, 2), math.inf), "none")
+        y, w = deviation_samples(p, s, x, v, tau_start=p.tau2)
+        last = self.impacts[-1] - tk if self.impacts else -math.inf
+        keep = s > last if (s > last).sum() >= 2 else np.ones(s.size, bool)
+        return nearest_estimate(s[keep], y[keep], w[keep], self.sigma)
+
+    def section_force(self, k: int) -> float:
+        """The actuator's force at section k, left by the known corrections of the
+        periods before: :func:`grazing_control.dynamics.estimation.section_state.section_force` period
+        by period from the force carried at the oldest section kept (``force_at``, moved
+        on as old corrections are dropped; 0 at the first correction since
+        :meth:`reset`), a period without a known correction with none; 0 without an
+        actuator."""
+        if self.actuator is None:
+            return 0.0
+        T = self.p.period
+        base, f = self.force_at
+        if base is None or base > k:
+            base, f = min(self.kicks, default=k), 0.0
+        for j in range(base, k):
+            at, dv = self.kicks.get(j, (j * T + self.delay, 0.0))
+            f = section_force(self.p, f, dv, at - j * T, self.pulse[0], self.pulse[1],
+                              self.actuator)
+        return f
+
+    def correction_shape(self, k: int) -> dict:
+        """How the correction of period k acts, as keywords of
+        :func:`grazing_control.dynamics.estimation.section_state.trajectory`: the pulse, the actuator
+        and its force at section k."""
+        shape = dict(width=self.pulse[0], force_limit=self.pulse[1])
+        if self.actuator is not None:
+            shape.update(actuator=self.actuator, force0=self.section_force(k))
+        return shape
+
+    def _kicks(self, k: int):
+        """The known corrections before t_k as (time relative to t_k, dv)."""
+        tk = k * self.p.period
+        return [(at - tk, dv) for j, (at, dv) in self.kicks.items() if j < k]
+
+    def _arc(self, k: int):
+        """The arc fit over the samples since the last impact (topic or detected)."""
+        p, T = self.p, self.p.period
+        tk = k * T
+        s, x, v = self._window(k, tk - 2.0 * T)
+        if s.size < 2:
+            return None
+        y, w = deviation_samples(p, s, x, v, tau_start=p.tau2)
+        kicks = self._kicks(k)
+        if self.impact_source == "stream":
+            ya, _wa = unkick(p, s, y, w, kicks)
+            recent = s > -T - _TOL * T
+            hit = detect_impact(p, s[recent] + T, ya[recent], self.sigma)
+            if hit is not None:
+                t_hit = hit - T + tk
+                if not self.impacts or abs(self.impacts[-1] - t_hit) > 0.25 * T:
+                    self.impacts.append(t_hit)
+        last = max((i for i in self.impacts if i <= tk), default=-math.inf) - tk
+        keep = s > last
+        measured = keep.sum() + np.isfinite(w[keep]).sum()
+        if measured < 2:
+            return None
+        return arc_fit(p, s[keep], y[keep], w[keep], self.sigma, 0.0, kicks)
+
+    def _model(self, k: int):
+        """One period of the model filter from section k - 1 (None: start or reset)."""
+        p, T = self.p, self.p.period
+        if self.filter is None or self.filter_k != k - 1:
+            return None
+        s, x, v = self._window(k, (k - 1) * T + _TOL * T)
+        if s.size == 0:
+            return None
+        s = s + T
+        y, w = deviation_samples(p, s, x, v, tau_start=p.tau2)
+        at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
+        try:
+            new, chi2, n = model_update(p, self.filter, s, y, w, self.sigma, dv,
+                                        at - (k - 1) * T, floor=self.floor,
+                                        **self.correction_shape(k - 1))
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+            self.filter = None
+            self.resets += 1
+            return None
+        if chi2 > n + CHI2_SIGMAS * math.sqrt(2.0 * n):
+            self.filter = None
+            self.resets += 1
+            return None
+        self.filter, self.filter_k = new, k
+        return Estimate(new.z, new.cov, "model")
+
+
+@dataclass
+class StreamRun:
+    """A closed-loop run on the stream, one row per section k: the true deviation
+    ``truth`` (before the correction), the ``estimate`` and its ``cov`` (k, 2, 2), the
+    ``corrections``, the ``impacts_per_period`` and the estimator's ``resets``."""
+
+    truth: np.ndarray
+    estimate: np.ndarray
+    cov: np.ndarray
+    corrections: np.ndarray
+    impacts_per_period: np.ndarray
+    resets: int
+
+
+def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, rate: int, *,
+                    estimator: str = "model", sigma: float = 1e-4,
+                    impact_source: str = "stream", deviation=(0.0, 0.0),
+                    control_after: int = 0, floor: float = 1e-2,
+                    model: OscillatorParams | None = None, stream_estimator=None,
+                    plant_at=None, switch=None, observe=None, pulse_width: float = 0.0,
+                    force_limit: float = math.inf, actuator=None) -> StreamRun:
+    """The closed loop on a sensor stream: exact plant (:func:`trajectory`), samples at
+    t_j = j T / ``rate`` measured by ``measure(j0, x, v) -> (x~, v~)`` (a
+    :class:`grazing_control.plant.sensor.SensorModel`'s ``measure``), the estimator of
+    :class:`StreamEstimator`, and Eq. 28 on the estimate from section ``control_after``
+    on, applied ``gains.delay`` after the section. ``model``: the estimator's model of
+    the plant when it is not ``p`` (a model error); default ``p``.
+
+    Hooks for the watchful loop (issue 29; none changes the run when left out):
+    ``stream_estimator`` an estimator object to use instead of building one (e.g.
+    :class:`grazing_control.dynamics.estimation.augmented.AugmentedStreamEstimator`);
+    ``plant_at(k)`` the plant's parameters in period k (a drifting wall; same period
+    and forcing as ``p``); ``switch(k, estimate) -> factor`` the share of Eq. 28's
+    correction applied at section k (a capture rule or a gain ramp,
+    :mod:`grazing_control.dynamics.design.capture`); ``observe(k, estimator)`` called after
+    each section's estimate (to feed a consistency monitor).
+
+    ``pulse_width`` > 0: the plant's corrections are force pulses of that width centred
+    at ``gains.delay`` (force clipped to ``force_limit``), and the estimator built here
+    models them (pass ``stream_estimator`` built without them to see what a kick model
+    of a pulse plant costs). ``actuator``: the pulse is the command of the plant's
+    first-order actuator (the force carried from period to period), modelled likewise.
+    """
+    if int(rate) != rate or rate < 2:
+        raise ParameterError(f"rate={rate!r} is invalid: valid range is an integer >= 2 "
+                             "samples per period")
+    T = p.period
+    h = T / rate
+    est = stream_estimator if stream_estimator is not None else StreamEstimator(
+        p if model is None else model, estimator, sigma, impact_source, h, floor,
+        pulse_width=pulse_width, force_limit=force_limit, actuator=actuator)
+    z = (float(deviation[0]), float(deviation[1]))
+    force = 0.0                 # the actuator's force at the section
+    truth = np.empty((periods, 2))
+    zhat = np.empty((periods, 2))
+    cov = np.empty((periods, 2, 2))
+    corr = np.zeros(periods)
+    counts = np.zeros(periods, dtype=int)
+    xm, vm = measure(0, np.array([p.x_ref + z[0]]), np.array([p.v_ref + z[1]]))
+    pending = est.add_sample(0.0, float(xm[0]), float(vm[0]))
+    for k in range(periods):
+        truth[k] = z
+        pending += est.flush(k)
+        (_, _, e), = [d for d in pending if d[0] == k]
+        zhat[k], cov[k] = e.z, e.cov
+        if observe is not None:
+            observe(k, est)
+        dv = 0.0
+        if k >= control_after and np.all(np.isfinite(e.z)):
+            dv = gains.c1 * e.z[0] + gains.c2 * e.z[1]
+            if switch is not None:
+                dv *= switch(k, e)
+        corr[k] = dv
+        est.set_correction(k, dv, gains.delay)
+        j0 = math.floor((k * T + _TOL * T) / h) + 1
+        j1 = math.floor(((k + 1) * T + _TOL * T) / h)
+        js = np.arange(j0, j1 + 1)
+        s = js * h - k * T
+        plant = p if plant_at is None else plant_at(k)
+        lag = {} if actuator is None else dict(actuator=actuator, force0=force)
+        dev, _jac, z, _m, imps = trajectory(plant, z, s, dv, gains.delay, width=pulse_width,
+                                            force_limit=force_limit, **lag)
+        if lag:
+            force = section_force(plant, force, dv, gains.delay, pulse_width, force_limit,
+                                  actuator)
+        counts[k] = len(imps)
+        psi = p.tau2 + p.omega * s - p.lag
+        x = p.amplitude * np.cos(psi) + dev[:, 0]
+        v = -p.amplitude * p.omega * np.sin(psi) + dev[:, 1]
+        xm, vm = measure(int(j0), x, v)
+        pending = []
+        imp_times = [k * T + i[0] for i in imps]
+        for j, t in enumerate(js * h):
+            while imp_times and imp_times[0] <= t:
+                est.add_impact(imp_times.pop(0))
+            pending += est.add_sample(float(t), float(xm[j]), float(vm[j]))
+        for ti in imp_times:
+            est.add_impact(ti)
+    return StreamRun(truth, zhat, cov, corr, counts, est.resets)
+
+
+def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0, *,
+                    width: float = 0.0, force_limit: float = math.inf, actuator=None,
+                    force0: float = 0.0):
+    """The next section's state (deviation, before its correction) predicted from the
+    estimate ``z`` with ``correction`` applied ``delay`` after the section (a kick, or
+    a force pulse of ``width``, through ``actuator`` from the force ``force0`` at the
+    section): one exact period of the model (issue 16 section 3; :func:`trajectory`)."""
+    *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay, width=width,
+                                        force_limit=force_limit, actuator=actuator,
+                                        force0=force0)
+    return end
+
+
+def pulse_shape(p: OscillatorParams, pulse_width: float, force_limit: float) -> tuple:
+    """(width, force limit) of the plant's corrections, validated: ParameterError naming
+    ``pulse_width`` (0 <= w < T) or ``force_limit`` (> 0, inf: none; 0 is read as none,
+    as sim_node's force_limit)."""
+    w, f = float(pulse_width), float(force_limit)
+    if not (math.isfinite(w) and 0.0 <= w < p.period):
+        raise ParameterError(f"pulse_width={pulse_width!r} is invalid: valid range is "
+                             f"0 <= pulse_width < T = {p.period!r} (0: a velocity kick)")
+    if f == 0.0:
+        f = math.inf
+    if not f > 0.0:
+        raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is "
+                             "force_limit > 0 (0 or inf: no limit)")
+    return w, f

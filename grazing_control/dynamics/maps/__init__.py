@@ -1,0 +1,1 @@
+"""Maps and local theory: the Poincare maps, the model protocol, the discontinuity maps, perturbation estimates."""

@@ -1,0 +1,1 @@
+"""Orbits, shooting and continuation: periodic orbits, Floquet multipliers, branches and their bifurcations."""

@@ -1,0 +1,451 @@
+"""The controlled 1/1 branch of the n-DOF oscillator, explicit in the impact phase.
+
+docs/theory_ndof.md §5 (the n-DOF form of docs/theory.md §5). Take the wall as the
+section: an impact at forcing phase tau* + psi, just before it the deviation
+z- = X- - X_p has wall position Delta d + 2 d* sin^2(psi/2) and wall velocity
+v- + d* omega sin psi; after it z+ = z- - (1 + r) v- e_v. Over one period
+z- = M(psi) z+, M(psi) = Phi(T - sigma)(I + b k^T) Phi(sigma), sigma = s - psi/omega
+the time from the impact to Pi2. Periodicity (M - I) z- = (1 + r) v- M e_v gives, for a
+given psi, z- = (1 + r) v- (I + R) e_v with R = (M - I)^-1; its wall velocity and position
+components fix v- and Delta d:
+
+    v- = d* omega sin(psi) / (r + (1 + r) e_v^T R e_v),
+    Delta d = (1 + r) v- w^T R e_v - 2 d* sin^2(psi/2),
+
+so the branch is an explicit curve psi -> (Delta d, v-, z-), exact up to rounding. Its
+monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impact.py).
+This is the exact reference for the limit multipliers and the existence coefficient of
+ndof_design (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
+statement: the orbit near grazing; shooting on the exact period map is the global check).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import brentq
+
+from grazing_control.oscillator.ndof.impact import (ChatteringError, ImpactCapError, advance,
+                                                    saltation_matrix, saltation_parts)
+from grazing_control.oscillator.ndof.model import NdofModel
+from grazing_control.oscillator.params import ParameterError
+
+from grazing_control.dynamics.orbits.continuation import OrbitBifurcation, OrbitBranch, OrbitPoint
+from grazing_control.dynamics.design.ndof_design import _flow, _gains, _transition, _vectors, smooth_map
+from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
+
+__all__ = ["BranchPoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold",
+           "pi2_factors", "structured_multipliers", "branch_multipliers", "other_contacts",
+           "continue_branch", "RETURN_MARGIN"]
+
+
+class BranchPoint(NamedTuple):
+    """One 1/1 orbit on the branch: impact phase psi (after tau*), wall offset Delta d,
+    impact velocity v-, the deviation z- just before the impact, its monodromy J there
+    (None where v- <= 0: not a physical orbit), and the Pi2 state (before the kick) of
+    the same orbit."""
+
+    psi: float
+    delta_d: float
+    v_minus: float
+    state: np.ndarray
+    monodromy: np.ndarray
+    pi2_state: np.ndarray
+
+
+def _impact_map(model: NdofModel, k: np.ndarray, psi: float):
+    """(M(psi), Phi(sigma)): the period map from an impact at tau* + psi to the next,
+    M = Phi(T - sigma)(I + b k^T) Phi(sigma), sigma = s - psi/omega (module docstring)."""
+    om = model.omega
+    s = model.pi2_offset / om
+    sigma = s - psi / om
+    if not (0.0 < sigma < model.period) or not math.isfinite(psi):
+        raise ParameterError(f"psi={psi!r} is invalid: valid range is "
+                             f"{-om * (model.period - s)!r} < psi < {om * s!r} "
+                             f"(impact between kicks)")
+    _w, _ev, b = _vectors(model)
+    pm = _transition(model, sigma)
+    eye = np.eye(2 * model.n)
+    return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
+
+
+def branch_point(model: NdofModel, gains, psi: float) -> BranchPoint:
+    """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)).
+
+    Periodicity (M - I) z- = (1 + r) v- M e_v gives z- = (1 + r) v- (e_v + R e_v),
+    R = (M - I)^-1, whose wall velocity and position components are
+
+        v- = d* omega sin(psi) / (r + (1 + r) e_v^T R e_v),
+        Delta d = (1 + r) v- w^T R e_v - 2 d* sin^2(psi/2).
+
+    psi must put the impact between the Pi2 kicks: -omega (T - s) < psi < omega s.
+    """
+    k = _gains(model, gains)
+    psi = float(psi)
+    m, pm = _impact_map(model, k, psi)
+    w, ev, _b = _vectors(model)
+    dstar, om, r = _flow(model).d_star, model.omega, model.r
+    try:
+        rev = np.linalg.solve(m - np.eye(2 * model.n), ev)
+    except np.linalg.LinAlgError:
+        raise ParameterError(f"psi={psi!r} is invalid: the period map M(psi) has the "
+                             f"eigenvalue 1 there (no isolated 1/1 orbit)") from None
+    v = dstar * om * math.sin(psi) / (r + (1.0 + r) * float(ev @ rev))
+    dd = (1.0 + r) * v * float(w @ rev) - 2.0 * dstar * math.sin(0.5 * psi) ** 2
+    z = (1.0 + r) * v * (ev + rev)
+    flow = _flow(model)
+    jac = m @ saltation_matrix(flow, flow.tau_star + psi, z) if v > 0.0 else None
+    z2 = pm @ (z - (1.0 + r) * v * ev)
+    return BranchPoint(psi, dd, v, z, jac, z2)
+
+
+def branch_coefficients(model: NdofModel, gains):
+    """(d1, gamma1, v1): Delta d = d1 psi - gamma1 psi^2 + O(psi^3), v- = v1 psi + O(psi^2)
+    on the 1/1 branch born at grazing, for any gains (§7, Eq. (N7')).
+
+    With N = N(k), R = (N - I)^-1, M' = [A, N]/omega, q0 = r + (1 + r) e_v^T R e_v:
+    v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (proportional to G(1) of §2: zero iff
+    the branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
+    b1 = -w^T R M' R e_v, v2 = -(1 + r) v1 a1' / q0, a1' = -e_v^T R M' R e_v.
+    On the family (w^T N = mu w^T) gamma1 is ndof_design.existence_coefficient.
+    """
+    k = _gains(model, gains)
+    n_mat = smooth_map(model, k)
+    w, ev, _b = _vectors(model)
+    a = _flow(model).A
+    dstar, om, r = _flow(model).d_star, model.omega, model.r
+    res = np.linalg.inv(n_mat - np.eye(2 * model.n))
+    mp = (a @ n_mat - n_mat @ a) / om
+    q0 = r + (1.0 + r) * float(ev @ res @ ev)
+    v1 = dstar * om / q0
+    b0 = float(w @ res @ ev)
+    b1 = -float(w @ res @ mp @ res @ ev)
+    a1p = -float(ev @ res @ mp @ res @ ev)
+    v2 = -(1.0 + r) * v1 * a1p / q0
+    return (1.0 + r) * v1 * b0, 0.5 * dstar - (1.0 + r) * (v1 * b1 + v2 * b0), v1
+
+
+def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3) -> BranchPoint:
+    """The 1/1 orbit born at grazing at the wall offset ``delta_d`` (< 0), v- > 0.
+
+    Walks |psi| outwards on both sides of grazing (1e-12 .. psi_max, logarithmic) and
+    solves Delta d(psi) = delta_d by Brent's method on the first bracket with v- > 0 on
+    the side nearer grazing. Raises ValueError when no such orbit is found.
+    """
+    k = _gains(model, gains)
+    mags = np.geomspace(1e-12, psi_max, 400)
+    best = None
+    for sign in (1.0, -1.0):
+        prev = None
+        for a in mags:
+            bp = branch_point(model, k, sign * a)
+            if bp.v_minus <= 0.0:
+                break
+            val = bp.delta_d - delta_d
+            if prev is not None and (val > 0.0) != (prev[1] > 0.0):
+                if best is None or a < best[2]:
+                    best = (prev[0], sign * a, a)
+                break
+            prev = (sign * a, val)
+    if best is None:
+        raise ValueError(f"delta_d={delta_d!r}: no 1/1 orbit born at grazing with v- > 0 "
+                         f"for |psi| <= {psi_max!r}")
+    psi = brentq(lambda x: branch_point(model, k, x).delta_d - delta_d, best[0], best[1],
+                 xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
+    return branch_point(model, k, psi)
+
+
+def branch_fold(model: NdofModel, gains, steps: int = 2000):
+    """The first fold of the branch born at grazing (``gains`` None: uncontrolled),
+    walking away from grazing in the impact phase, or None if there is none before v-
+    or the window of psi ends.
+
+    A fold is a turning point of Delta d(psi) (§5): there d(Delta d)/dpsi = 0 and the
+    orbit is not isolated in Delta d, so its monodromy has the multiplier 1. Where a
+    continuation in Delta d stops (it cannot pass a turning point), this names it.
+    The side of grazing is that of v- ~ v1 psi > 0 (``branch_coefficients``); the fold
+    is bracketed on a grid of ``steps`` phases up to the end of the window
+    -omega (T - s) < psi < omega s and located by Brent's method on a central-difference
+    slope.
+    """
+    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    sgn = math.copysign(1.0, branch_coefficients(model, k)[2])
+    s = model.pi2_offset / model.omega
+    bound = model.omega * s if sgn > 0 else model.omega * (model.period - s)
+    grid = sgn * np.linspace(1e-6 * bound, 0.999 * bound, steps)
+
+    def slope(psi):
+        h = 1e-7 * max(1e-3, abs(psi))
+        return (branch_point(model, k, psi + h).delta_d
+                - branch_point(model, k, psi - h).delta_d) / (2.0 * h)
+
+    first = slope(grid[0]) > 0.0
+    prev = grid[0]
+    for psi in grid[1:]:
+        try:
+            if branch_point(model, k, psi).v_minus <= 0.0:
+                return None
+            turned = (slope(psi) > 0.0) != first
+        except ParameterError:
+            return None
+        if turned:
+            return branch_point(model, k, brentq(slope, prev, psi, xtol=1e-13))
+        prev = psi
+    return None
+
+
+# ------------------------------------------------- the orbit on Pi2, its multipliers
+#: The global check of a branch orbit (:func:`other_contacts`) searches the period up to
+#: this fraction of T before the orbit's own impact; on that last stretch the approach
+#: is the parabola of a regular grazing (v_w > 0, decelerating) and has no other root.
+RETURN_MARGIN = 1e-4
+
+
+def _sigma(model: NdofModel, psi: float) -> float:
+    """Time from the impact at tau* + psi to Pi2: sigma = pi2_offset / omega - psi / omega."""
+    return (model.pi2_offset - psi) / model.omega
+
+
+def pi2_factors(model: NdofModel, gains, point: BranchPoint):
+    """(B, p, q, s): the Pi2 monodromy of the branch orbit as DP = B + s p q^T.
+
+    From Pi2 (before the kick) one period is: the kick G = I + b k^T, the flow
+    Phi(T - sigma) to the impact, its saltation S = S0 + s e_v e_w^T
+    (``oscillator.ndof.impact.saltation_parts``: s = (1 + r) a_w- / v- grows like 1/v-),
+    the flow Phi(sigma) back to Pi2. So DP = Phi(sigma) S Phi(T - sigma) G with
+    B = Phi(sigma) S0 Phi(T - sigma) G, p = Phi(sigma) e_v, q^T = e_w^T Phi(T - sigma) G:
+    bounded factors and one scalar that carries the singularity of grazing.
+    """
+    k = _gains(model, gains)
+    flow = _flow(model)
+    sigma = _sigma(model, point.psi)
+    _w, _ev, b = _vectors(model)
+    n, w = model.n, model.i_w
+    after = _transition(model, sigma)
+    before = _transition(model, model.period - sigma) @ (np.eye(2 * n) + np.outer(b, k))
+    s0, s = saltation_parts(flow, flow.tau_star + point.psi, point.state, point.v_minus)
+    return after @ s0 @ before, after[:, n + w].copy(), before[w].copy(), s
+
+
+def structured_multipliers(B, p, q, s, det: float) -> np.ndarray:
+    """Eigenvalues of J = B + s p q^T (decreasing modulus) without the loss of digits that
+    an eigen-solver on J itself suffers when s is large (near grazing s ~ 1/v-).
+
+    LAPACK on J has a backward error eps ||J|| ~ eps s: a multiplier of modulus ~1 gets
+    an error ~eps s, and the multiplier that goes to 0 like v- (the product of all is
+    det J, fixed, and one grows like s) loses every digit once v-^2 ~ eps (issue 32:
+    4x off at v- = 3e-8). Here
+
+    * (J - lambda) x = 0 is the pencil [[B, p], [q^T, -1/s]] - lambda diag(I, 0) on
+      (x, eta = s q^T x), whose entries are bounded: QZ (scipy.linalg.eig) gives its 2n
+      finite eigenvalues with an error ~eps, and one infinite one (dropped);
+    * the large multiplier ~ s q^T p comes from the trace, tr J = tr B + s q^T p, minus
+      the others (no cancellation: it dominates);
+    * a real multiplier much smaller than every other (modulus below 1e-3 of the next)
+      comes from the determinant, lambda_min = det J / prod(others), ``det`` exact
+      (e^{tr(A) T} r^2 (1 + k_{n+i_a})), so it keeps its relative digits.
+    """
+    import scipy.linalg
+
+    B = np.asarray(B, dtype=float)
+    m = B.shape[0]
+    pencil = np.zeros((m + 1, m + 1))
+    pencil[:m, :m] = B
+    pencil[:m, m] = p
+    pencil[m, :m] = q
+    pencil[m, m] = -1.0 / s if s != 0.0 else -math.inf
+    if not math.isfinite(pencil[m, m]):
+        lam = np.linalg.eigvals(B).astype(complex)
+    else:
+        ident = np.eye(m + 1)
+        ident[m, m] = 0.0
+        alpha, beta = scipy.linalg.eig(pencil, ident, right=False, homogeneous_eigvals=True)
+        ratio = np.abs(beta) / np.maximum(np.abs(alpha), 1e-300)
+        keep = np.ones(m + 1, dtype=bool)
+        keep[int(np.argmin(ratio))] = False          # the infinite eigenvalue
+        lam = _conjugate_pairs((alpha[keep] / beta[keep]).astype(complex))
+        big = int(np.argmax(np.abs(lam)))
+        rest = np.delete(lam, big)
+        if abs(lam[big]) > 1e3 * max(1.0, float(np.max(np.abs(rest), initial=0.0))):
+            lam[big] = (np.trace(B) + s * float(q @ p) - rest.sum()).real
+    order = np.argsort(-np.abs(lam), kind="stable")
+    lam = lam[order]
+    if m >= 2 and lam[-1].imag == 0.0 and abs(lam[-1]) < 1e-3 * abs(lam[-2]) and det != 0.0:
+        lam[-1] = det / np.prod(lam[:-1]).real
+    return lam
+
+
+def _conjugate_pairs(lam: np.ndarray) -> np.ndarray:
+    """The eigenvalues of a real matrix as exact conjugate pairs (each pair's mean) and
+    exactly real values: the division alpha / beta of QZ leaves them a rounding apart."""
+    pos = lam[lam.imag > 0.0]
+    neg = list(lam[lam.imag < 0.0])
+    if len(pos) != len(neg):
+        return lam
+    pairs = []
+    for z in pos:
+        j = int(np.argmin([abs(z - np.conj(x)) for x in neg]))
+        pairs.append(0.5 * (z + np.conj(neg.pop(j))))
+    real = lam[lam.imag == 0.0].real.astype(complex)
+    return np.concatenate([real, pairs, np.conj(pairs)]).astype(complex)
+
+
+def branch_multipliers(model: NdofModel, gains, point: BranchPoint) -> np.ndarray:
+    """The Floquet multipliers of the branch orbit (:func:`structured_multipliers` on
+    :func:`pi2_factors`, det J = e^{tr(A) T} r^2 (1 + k_{n+i_a}), the exact determinant
+    of one period with one impact)."""
+    k = _gains(model, gains)
+    flow = _flow(model)
+    det = (math.exp(float(np.trace(flow.A)) * model.period) * model.r ** 2
+           * (1.0 + float(k[model.n + model.i_a])))
+    return structured_multipliers(*pi2_factors(model, k, point), det)
+
+
+def other_contacts(model: NdofModel, gains, point: BranchPoint) -> int:
+    """How many contacts the branch orbit makes besides its one impact (0 for a true
+    1/1 orbit), by the certified search of the exact flow (``oscillator.ndof.impact``).
+
+    The explicit branch assumes that the impact at tau* + psi is the period's only
+    contact; this is the global check. From the state just after the impact the flow
+    runs sigma to Pi2, takes the kick, and runs on until :data:`RETURN_MARGIN` T before
+    the orbit's next impact; every impact found on the way counts, and a chattering or
+    sticking contact counts as one. On the last stretch x_w rises monotonically to the
+    impact where the wall coordinate decelerates there (regular grazing); where it
+    accelerates into the wall and v- is too small to rule out an earlier touch within
+    the stretch, the orbit is not certified (counted as one contact). A check of the orbit, not a shooting: the branch
+    point is exact to rounding whatever v-, where the event search on the period map
+    cannot resolve an impact of v-^2 below the gap's rounding (v- ~ 1e-8).
+    """
+    k = _gains(model, gains)
+    model = dataclasses.replace(model, delta_d=float(point.delta_d))
+    flow = _flow(model)
+    n, w = model.n, model.i_w
+    sigma = _sigma(model, point.psi)
+    z = np.array(point.state, dtype=float)
+    tau = flow.tau_star + point.psi
+    push = flow.wall_acceleration(tau, z)
+    if push > 0.0 and point.v_minus < push * RETURN_MARGIN * model.period:
+        return 1     # accelerating into the wall: the last stretch is not a plain approach
+    z[n + w] -= (1.0 + model.r) * point.v_minus
+    try:
+        first = advance(flow, tau, z, sigma)
+        z2 = np.array(first.z)
+        z2[n + model.i_a] += float(k @ z2)
+        rest = model.period - sigma - RETURN_MARGIN * model.period
+        second = advance(flow, flow.tau2, z2, rest) if rest > 0.0 else None
+    except (ChatteringError, ImpactCapError):
+        return 1
+    return len(first.impacts) + (0 if second is None else len(second.impacts))
+
+
+# ------------------------------------------------- continuation along the branch
+def _orbit_point(model: NdofModel, k, point: BranchPoint) -> OrbitPoint:
+    return OrbitPoint(point.delta_d, np.array(point.pi2_state),
+                      branch_multipliers(model, k, point), 1, point.v_minus)
+
+
+def continue_branch(model: NdofModel, gains, values, *, growth: float = 10 ** (1 / 16),
+                    psi_max: float = 0.3) -> OrbitBranch:
+    """The 1/1 branch born at grazing at each Delta d of ``values`` (in order), each
+    point exact to rounding, with its multipliers and the bifurcations between them.
+
+    The branch is explicit in the impact phase (module docstring), so the
+    continuation steps in psi, not in Delta d: from the last point's psi it walks |psi|
+    geometrically (factor ``growth``; towards grazing when the next value is nearer it)
+    until Delta d(psi) passes the next value, and solves Delta d(psi) = value there by
+    Brent's method to a few ulps of psi. Every point is a converged orbit whatever its
+    distance to grazing (the error of issue 32 - points 1e-2 off near |Delta d| = 3e-8
+    by shooting - has nowhere to come from), and every point is checked globally
+    (:func:`other_contacts`). The continuation stops, saying why in ``stopped``, where
+    Delta d(psi) turns back before the next value (a fold), the orbit gains another
+    contact, v- falls to 0 (grazing: the next value lies beyond psi = 0) or the window
+    of psi ends. Bifurcations: sign changes of the test functions
+    (``shooting.bifurcation_tests``) of consecutive points, refined by Brent in psi.
+    """
+    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    values = [float(v) for v in values]
+    if len(values) < 2 or not all(math.isfinite(v) for v in values):
+        raise ValueError("values are invalid: expected at least two finite Delta d values")
+    start = orbit_at(model, k, values[0], psi_max)
+    points, psis, stopped = [], [], "end"
+    if other_contacts(model, k, start):
+        return OrbitBranch("delta_d", 1, [], [], f"the orbit at delta_d={values[0]!r} touches "
+                           "the wall again within the period: not a 1/1 orbit")
+    points.append(_orbit_point(model, k, start))
+    psis.append(start.psi)
+    for value in values[1:]:
+        psi, dd = psis[-1], points[-1].value
+        found, why = _walk(model, k, psi, dd, value, growth, psi_max)
+        if found is None:
+            stopped = why
+            break
+        if other_contacts(model, k, found):
+            stopped = (f"at delta_d={value!r} the orbit of the branch touches the wall again "
+                       "within the period: not a 1/1 orbit beyond "
+                       f"delta_d={points[-1].value!r}")
+            break
+        points.append(_orbit_point(model, k, found))
+        psis.append(found.psi)
+    return OrbitBranch("delta_d", 1, points, _bifurcations(model, k, points, psis), stopped)
+
+
+def _walk(model, k, psi, dd, target, growth, psi_max):
+    """(the branch point at Delta d = target beyond psi, None) or (None, why): walk |psi|
+    by the factor ``growth`` from psi in the direction in which Delta d moves towards
+    the target, bracket the crossing and solve it by Brent."""
+    def delta(x):
+        return branch_point(model, k, x).delta_d
+
+    if target == dd:
+        return branch_point(model, k, psi), None
+    h = 1e-6 * abs(psi)
+    slope = (delta(psi + h) - delta(psi - h)) / (2.0 * h)
+    outward = (slope * psi > 0.0) == (target > dd)      # |psi| grows towards the target
+    factor = growth if outward else 1.0 / growth
+    prev, f_prev = psi, dd - target
+    while True:
+        nxt = prev * factor
+        if abs(nxt) > psi_max:
+            return None, f"the window |psi| <= {psi_max!r} of the branch ends before delta_d={target!r}"
+        if abs(nxt) < 1e-300:
+            return None, f"grazing (v- -> 0) before delta_d={target!r}"
+        try:
+            bp = branch_point(model, k, nxt)
+        except ParameterError as exc:
+            return None, str(exc)
+        if not bp.v_minus > 0.0:
+            return None, f"v- <= 0 at psi={nxt!r}: the branch ends before delta_d={target!r}"
+        f_nxt = bp.delta_d - target
+        if (f_nxt > 0.0) != (f_prev > 0.0) or f_nxt == 0.0:
+            x = brentq(lambda t: delta(t) - target, prev, nxt, xtol=1e-300,
+                       rtol=4.0 * 2.0 ** -52, maxiter=400)
+            return branch_point(model, k, x), None
+        if abs(f_nxt) > abs(f_prev):
+            return None, (f"a fold: Delta d turns back at {bp.delta_d!r} (psi={nxt!r}) before "
+                          f"delta_d={target!r}")
+        prev, f_prev = nxt, f_nxt
+
+
+def _bifurcations(model, k, points, psis):
+    """Sign changes of the test functions between consecutive points, refined in psi."""
+    out = []
+    for (a, pa), (b, pb) in zip(zip(points[:-1], psis[:-1]), zip(points[1:], psis[1:])):
+        ta, tb = bifurcation_tests(a.multipliers), bifurcation_tests(b.multipliers)
+        for kind in TEST_FUNCTIONS:
+            fa, fb = ta[kind], tb[kind]
+            if not (math.isfinite(fa) and math.isfinite(fb)) or fa * fb > 0.0 or fa == fb:
+                continue
+
+            def f(x, kind=kind):
+                return bifurcation_tests(branch_multipliers(model, k, branch_point(model, k, x)))[kind]
+
+            try:
+                at = brentq(f, pa, pb, xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=200)
+            except ValueError:
+                continue
+            bp = branch_point(model, k, at)
+            out.append(OrbitBifurcation(kind, float(bp.delta_d), branch_multipliers(model, k, bp)))
+    return out
