@@ -123,7 +123,7 @@ from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.simulation.actuator import Actuator
 from grazing_control.dynamics.estimation.section_state import ESTIMATORS, actuator_legs
 from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator, predict_section,
-                                             pulse_shape)
+                                             pulse_shape, warm_up as warm_stream_kernel)
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr, stream_block
 from .scene import SCENE_PARAMETER_DOC
@@ -636,6 +636,8 @@ class ControllerNode(Node):
                 self.stream = stream_from_values(self._values(), self.model, self.pulse)
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
+            if self.stream is not None and self.stream.kernel:
+                warm_stream_kernel()     # compiled model filter loaded now, not at section 0
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -921,7 +923,8 @@ class ControllerNode(Node):
                       if self.stream is not None and self.stream.next_k else 0.0)
             zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
                                      width=self.pulse[0], force_limit=self.pulse[1],
-                                     actuator=self.pulse[2], force0=force0)
+                                     actuator=self.pulse[2], force0=force0,
+                                     kernel=self.stream is not None and self.stream.kernel)
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)

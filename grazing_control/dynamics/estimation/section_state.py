@@ -32,11 +32,13 @@ rig has no impact sensor by a split test on the arc fit (:func:`detect_impact`).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -268,9 +270,17 @@ def _through_impact(p: OscillatorParams, q: OscillatorParams, m, g, h: float, im
     return m, g
 
 
+@functools.lru_cache(maxsize=16)
+def _shifted_wall(p: OscillatorParams, force: float) -> OscillatorParams:
+    """The oscillator against the wall moved to Delta d - ``force`` (a pulse's, below),
+    kept for the calls of one model fit (the same pulse in each of its iterations)."""
+    return p.with_(delta_d=p.delta_d - force)
+
+
 def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
                duration: float | None = None, *, wall: bool = False, width: float = 0.0,
-               force_limit: float = math.inf, actuator=None, force0: float = 0.0):
+               force_limit: float = math.inf, actuator=None, force0: float = 0.0,
+               kernel: bool = False):
     """The exact motion from the section state ``z0`` (before the correction): the
     deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
     (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
@@ -287,6 +297,14 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     (z_e - F e1) + F e1 and the saltation matrices are those of the shifted wall; the
     Jacobian and the wall's sensitivity keep their form (F does not depend on z0).
     Width 0 is the kick, bit for bit.
+
+    ``kernel``: compiled (numba; issue 30, the controller's estimate at each section):
+    the exact flow with impacts of :func:`grazing_control.oscillator.kernel.advance`
+    instead of the core's :func:`grazing_control.oscillator.impact.advance` (the same
+    segments bit for bit, tests/test_kernel.py), and the evaluation at the samples of
+    :mod:`.compiled_flow` (the same floating point operations as the NumPy code here);
+    every output the same bit for bit (tests/test_estimation_compiled.py), several times faster
+    (benchmarks/bench_stream_estimator.py). The actuator's flow is the core's in both.
 
     With an ``actuator`` (:class:`grazing_control.dynamics.simulation.actuator.Actuator`, not
     ideal; ``width`` > 0) the pulse is the command, and the force on the mass follows it
@@ -311,6 +329,7 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     if actuator is not None and not (actuator.ideal and force0 == 0.0):
         return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
                                     force_limit, actuator, force0)
+    flow = _kernel.advance if kernel else advance
     # events: (time, state after, jacobian after); start, kick, impacts
     events = []
     tau = p.tau2
@@ -323,8 +342,8 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     for start, end, kick, force in legs:
         z = (z[0], z[1] + kick)
         events.append((start, z, m, g, force))
-        q = p if force == 0.0 else p.with_(delta_d=p.delta_d - force)   # the shifted wall
-        seg = advance(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
+        q = p if force == 0.0 else _shifted_wall(p, force)
+        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
         for imp in seg.impacts:
             if imp.sticking:
                 raise ValueError("the model's motion sticks to the wall: no fit")
@@ -343,6 +362,8 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
         z = (seg.dx + force if force else seg.dx, seg.dv)
         t0 = end
     times = np.array([e[0] for e in events])
+    if kernel:
+        return _compiled_samples(p, events, times, s, z, m, g, impacts, wall)
     idx = np.searchsorted(times, s, side="left") - 1   # the last event strictly before s
     idx = np.clip(idx, 0, len(events) - 1)
     zs = np.array([e[1] for e in events])[idx]
@@ -360,6 +381,24 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
         gs = np.array([e[3] for e in events])[idx]
         return out, jac, z, m, impacts, np.einsum("nij,nj->ni", phi, gs), g
     return out, jac, z, m, impacts
+
+
+def _compiled_samples(p, events, times, s, end, m, g, impacts, wall):
+    """The end of :func:`trajectory` (the deviation, Jacobian and wall sensitivity at the
+    samples from their events) by :mod:`.compiled_flow`, bit for bit."""
+    from grazing_control.dynamics.estimation.compiled_flow import (event_offsets,
+                                                                   flow_at_samples)
+
+    idx, hh = event_offsets(times, s)
+    forces = np.array([e[4] for e in events])
+    out, jac, gs = flow_at_samples(phi_rows(p.zeta, hh), idx,
+                                   np.array([e[1] for e in events]).reshape(-1, 2),
+                                   np.array([e[2] for e in events]), forces,
+                                   np.array([e[3] for e in events]), bool(forces.any()),
+                                   wall)
+    if wall:
+        return out, jac, end, m, impacts, gs, g
+    return out, jac, end, m, impacts
 
 
 def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration: float,
@@ -476,7 +515,7 @@ def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, for
 def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                  correction: float, delay: float = 0.0, *, floor: float = 1e-2,
                  iterations: int = 8, width: float = 0.0, force_limit: float = math.inf,
-                 actuator=None, force0: float = 0.0):
+                 actuator=None, force0: float = 0.0, kernel: bool = False):
     """One period of the model filter: from the prior of z_{k-1} and the samples at times
     ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
 
@@ -489,7 +528,7 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     The correction acts as a kick, or as a force pulse of ``width`` (clipped to
     ``force_limit``) where the plant's actuator pushes for a finite time, through the
     first-order ``actuator`` from the force ``force0`` at the section where it has a lag
-    (:func:`trajectory`).
+    (:func:`trajectory`), compiled with ``kernel`` (:func:`trajectory`).
 
     Returns (FilterState at t_k, chi2 of the period's residuals, number of
     measurements); raises ValueError when the fit fails (no convergence, a sticking
@@ -505,7 +544,7 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     for _ in range(iterations):
         pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
                                                 force_limit=force_limit, actuator=actuator,
-                                                force0=force0)
+                                                force0=force0, kernel=kernel)
         h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
         r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
         info = info_prior + inv_var * (h.T @ h)
@@ -518,7 +557,7 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
         raise ValueError("the model fit did not converge")
     pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
                                              force_limit=force_limit, actuator=actuator,
-                                             force0=force0)
+                                             force0=force0, kernel=kernel)
     h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
     r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
     info = info_prior + inv_var * (h.T @ h)

@@ -246,7 +246,10 @@ def _impacts(rows):
 def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) -> Segment:
     """:func:`grazing_control.oscillator.impact.advance` without the monodromy, compiled."""
     ki = _compiled()[0]
-    out = np.empty((max(int(max_impacts), 1), 6))
+    rows = max(int(max_impacts), 1)
+    out = _scratch()[0]                 # this thread's rows (copied out below), if they fit
+    if rows > out.shape[0]:
+        out = np.empty((rows, 6))
     ndx, ndv, n, status, info = ki.advance(
         _params(p), float(tau0), float(dx), float(dv), float(duration), int(max_impacts),
         -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1], _NO_GRID)
