@@ -383,6 +383,9 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     return out, jac, z, m, impacts
 
 
+_NO_ROWS = np.zeros((0, 2))
+
+
 def _compiled_samples(p, events, times, s, end, m, g, impacts, wall):
     """The end of :func:`trajectory` (the deviation, Jacobian and wall sensitivity at the
     samples from their events) by :mod:`.compiled_flow`, bit for bit."""
@@ -390,12 +393,14 @@ def _compiled_samples(p, events, times, s, end, m, g, impacts, wall):
                                                                    flow_at_samples)
 
     idx, hh = event_offsets(times, s)
+    zeta = p.zeta
+    wd = math.sqrt(1.0 - zeta * zeta)           # as phi_rows, whose NumPy functions these are
     forces = np.array([e[4] for e in events])
-    out, jac, gs = flow_at_samples(phi_rows(p.zeta, hh), idx,
-                                   np.array([e[1] for e in events]).reshape(-1, 2),
+    out, jac, gs = flow_at_samples(np.exp(-zeta * hh), np.cos(wd * hh), np.sin(wd * hh), zeta,
+                                   wd, idx, np.array([e[1] for e in events]),
                                    np.array([e[2] for e in events]), forces,
-                                   np.array([e[3] for e in events]), bool(forces.any()),
-                                   wall)
+                                   np.array([e[3] for e in events]) if wall else _NO_ROWS,
+                                   bool(forces.any()), wall)
     if wall:
         return out, jac, end, m, impacts, gs, g
     return out, jac, end, m, impacts
