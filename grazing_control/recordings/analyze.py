@@ -308,7 +308,7 @@ def read_switches(path, topic: str = SWITCH_TOPIC, period_s: float | None = None
     :data:`grazing_control.ros.reidentify.SWITCH_FIELDS` (NaN as None), ``switched`` a
     bool, ``reason`` its name (None: switched), ``stamp_ns`` and, with the period, the
     ``section``; [] when the bag has none."""
-    from grazing_control.dynamics.identification.reidentification import REASONS
+    from grazing_control.dynamics.estimation.reidentification import REASONS
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 
     raw = reader.read_raw(Path(path), topics=[topic])
