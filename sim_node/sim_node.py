@@ -79,6 +79,7 @@ from grazing_control.ros.rig_boundary import check_rig_values, sim_values
 from grazing_control.ros.scene import SCENE_PARAMETER_DOC, SceneGuard
 from grazing_control.ros.scheduling import apply_node_scheduling
 
+from sim_node.answer_port import AnswerPort
 from sim_node.messages import Outputs, read_answer
 from sim_node.probe import RoundTrips, controller_name
 from sim_node.rig_io import SimulatedRig
@@ -290,15 +291,18 @@ class SimNode(Node):
             self.pub_state, self.pub_impact, self.pub_pi1, self.pub_pi2, self.pub_clock,
             self.pub_latency, self.pub_miss, self.pub_substituted, self.pub_state_block)
             + (self.driver.publishers if self.driver else ()))
-        if self.driver is None:
-            self.sub_correction = self.create_subscription(
-                TwistStamped, "controller/velocity_correction", self._on_correction,
-                DATA_QOS, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
-        else:   # a rig's answer: the scheduled force pulse (docs/driver_contract.md)
-            self.sub_correction = self.create_subscription(
-                WrenchStamped, "rig/force_pulse", self._on_force_pulse, DATA_QOS, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        # the answers: the correction, or a rig's scheduled force pulse (docs/driver_contract.md);
+        # scheduled realtime takes them at each wake-up, judged by their arrival (answer_port)
+        kind, topic, callback = ((TwistStamped, "controller/velocity_correction",
+                                  self._on_correction) if self.driver is None else
+                                 (WrenchStamped, "rig/force_pulse", self._on_force_pulse))
+        events = SubscriptionEventCallbacks(use_default_callbacks=False)
+        self.port = None
+        if self.settings.mode == "realtime" and self.settings.scheduled:
+            self.port = self.sub_correction = AnswerPort(self, kind, topic, DATA_QOS, events)
+        else:
+            self.sub_correction = self.create_subscription(kind, topic, callback, DATA_QOS,
+                                                           raw=True, event_callbacks=events)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._recorder_ready = False
@@ -620,9 +624,10 @@ class SimNode(Node):
         self.diagnostics.force_update()
 
     # ---------------------------------------------------------------- answers, time
-    def _on_correction(self, data: bytes) -> None:
+    def _on_correction(self, data: bytes, arrived: float | None = None) -> None:
         """A correction as received (serialized): the controller's layout is read directly
-        (:func:`read_answer`), any other TwistStamped through rclpy."""
+        (:func:`read_answer`), any other TwistStamped through rclpy; ``arrived``: when the
+        middleware received it (scheduled realtime, :mod:`sim_node.answer_port`)."""
         answer = read_answer(data)
         if answer is None:
             msg = deserialize(data, TwistStamped, self.out.malformed)
@@ -636,10 +641,11 @@ class SimNode(Node):
         if not self.running:
             self.out.ignored(f"stamp {key}: the scene is not running")
             return
-        if self._guard(self.loop.answer, key, dv, predicted) and self._tick_timer is not None:
+        if (self._guard(self.loop.answer, key, dv, predicted, arrived)
+                and self._tick_timer is not None):
             self._arm(self.loop.now())       # a split may have brought an event forward
 
-    def _on_force_pulse(self, data: bytes) -> None:
+    def _on_force_pulse(self, data: bytes, arrived: float | None = None) -> None:
         """A rig/force_pulse (rig_file): the answer of its section, as a correction."""
         answer = self.driver.answer(data)
         if answer is None:
@@ -647,15 +653,35 @@ class SimNode(Node):
         if not self.running:
             self.out.ignored(f"stamp {answer[0]}: the scene is not running")
             return
-        rearm = self._guard(self.loop.answer, *answer)
+        rearm = self._guard(self.loop.answer, *answer, arrived)
         if rearm and self._tick_timer is not None:
             self._arm(self.loop.now())
 
+    def take_answers(self) -> None:
+        """Scheduled realtime: the answers waiting at the port, each judged at its arrival."""
+        take = self._on_correction if self.driver is None else self._on_force_pulse
+        for data, arrived in self.port.take():
+            take(data, arrived)
+
+    def stop_answers(self) -> None:
+        """No more answers taken (the scene is over): the subscription's end announced."""
+        if self.port is not None:
+            self.port.destroy()
+        else:
+            self.destroy_subscription(self.sub_correction)
+
     def _on_tick(self) -> None:
-        """Realtime wake-up: publish what is due, /clock, and sleep until the next event."""
+        """Realtime wake-up: the answers that arrived, then what is due, /clock, and sleep
+        until the next event."""
         if not self.running:
             return
-        now = self._guard(self.loop.tick)
+        wall = None
+        if self.port is not None:       # what arrived by now, then what is due by now
+            wall = self.loop.clock()
+            self.take_answers()
+            if not self.running:
+                return
+        now = self._guard(self.loop.tick, wall)
         if self.driver is not None and now is not None:
             self.driver.flush(now)
         if now is not None and self.running:
@@ -745,7 +771,7 @@ class SimNode(Node):
         """
         spin(executor, lambda: self.exit_now)
         if self.exit_now:
-            self.destroy_subscription(self.sub_correction)
+            self.stop_answers()
             close_publishers(self.published, ACK_TIMEOUT, also=(self.pub_done,))
 
     def on_exit(self) -> None:
