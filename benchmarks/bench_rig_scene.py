@@ -44,7 +44,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.plant.rig import load_rig
 from grazing_control.recordings.scenes import load
 from grazing_control.ros import launcher
-from grazing_control.ros.rig_boundary import controller_values
+from grazing_control.ros.rig_boundary import answer_lead, controller_values
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -191,6 +191,13 @@ def main(argv=None):
                 print(f"{name}: {lines[-1].split('summary: ', 1)[1]}")
             for ln in (ln for ln in text if "cpu_s=" in ln):   # GRAZING_GC_PAUSES=1
                 print(f"{name}: {ln.split(']: ', 1)[-1]}")
+    from rig_timing import report, section_timing     # benchmarks/rig_timing.py
+
+    lead = (answer_lead(rig) / rig.omega_n if args.answer_lead is None else args.answer_lead)
+    try:
+        print("\n".join(report(section_timing(out / "bag", lead, 1.0 / rig.sensor.rate))))
+    except (OSError, StopIteration, ValueError) as exc:
+        print(f"no timing from the bag: {exc}")
     try:
         sd = load(out / "bag").scenes[0]
     except (OSError, ValueError) as exc:
