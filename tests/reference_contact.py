@@ -69,8 +69,11 @@ def seeded_start(rng, p, held="stick"):
     return kind, p, tau0, min(x, p.d), v
 
 
-def reference_advance(p, law, tau0, x, v, duration, friction=None):
+def reference_advance(p, law, tau0, x, v, duration, friction=None, force=0.0):
     """(x, v, contacts[, sticks]) after ``duration``; contacts as (t_entry, t_exit or inf).
+
+    ``force``: a constant force on the mass (a force pulse), written into every right-hand
+    side and the force at rest (not the shift of the stop the plant uses for it).
 
     With ``friction`` (kinetic F_f, static F_s) the slip direction enters the right-hand
     side, a slip ends at the event x' = 0, and a stick (|G| <= F_s, G = cos tau - x -
@@ -83,11 +86,12 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
     sgn = [0.0]
 
     def free(t, y):
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0] - sgn[0] * f_kin]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+                - sgn[0] * f_kin]
 
     def touch(t, y):
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0] - sgn[0] * f_kin
-                - k * (y[0] - d) - c * y[1]]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+                - sgn[0] * f_kin - k * (y[0] - d) - c * y[1]]
 
     gap_up, top, gap_down = gap_events(d)
 
@@ -104,7 +108,7 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
     stop.terminal = True
 
     def at_rest(t, xx):
-        return math.cos(w * t + tau0) - xx - k * max(xx - d, 0.0)
+        return math.cos(w * t + tau0) + force - xx - k * max(xx - d, 0.0)
 
     t, y = 0.0, [x, v]
     contacts, sticks = [], []

@@ -90,9 +90,10 @@ def _reference_contact(p, law, tau_e, v0):
 # ---------------------------------------------------------------------------------------
 
 
-def reference_advance_hertz(p, law, tau0, x, v, duration):
+def reference_advance_hertz(p, law, tau0, x, v, duration, force=0.0):
     """(x, v, contacts) after ``duration`` with a Hertz / Hunt-Crossley stop; contacts as
-    (t_entry, t_exit or inf).
+    (t_entry, t_exit or inf); ``force`` a constant force on the mass written into the
+    right-hand sides.
 
     Independent of oscillator/hertz.py: the equation of motion written directly in
     physical coordinates for every region (no closed form outside the contact), DOP853 at
@@ -104,11 +105,11 @@ def reference_advance_hertz(p, law, tau0, x, v, duration):
     k, a, d, zeta, w = law.stiffness, law.alpha, p.d, p.zeta, p.omega
 
     def free(t, y):
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]]
 
     def touch(t, y):
         pen = max(y[0] - d, 0.0)
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
                 - k * pen ** 1.5 * (1.0 + 1.5 * a * y[1])]
 
     gap_up, top, gap_down = gap_events(d)
