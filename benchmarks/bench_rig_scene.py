@@ -63,6 +63,31 @@ def design(rig, c2, lead=None):
     return g, gain * d["sensor_noise"], rate
 
 
+def compliant_orbit(rig, g, z, periods=3000):
+    """The controlled 1/1 orbit of the pulse loop on the rig's compliant stop (issue 31):
+    the stop's pulse map (plant.contact_plant.ContactPlant.pulse_step, the simulator's
+    flow) with Eq. 28's correction iterated from the rigid pulse orbit's deviation ``z``
+    until a step moves it by less than 1e-14 (its multiplier is below 1 where the design
+    holds). Returns (Pi2 x, last step, contacts in its last period), or None (no
+    convergence in ``periods``)."""
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    s = settings_from_values({**sim_values(rig), "mode": "realtime"})
+    p, w = s.params, s.pulse_width
+    start = pulse_start(p.period, g.delay, w)
+    dx, dv = z
+    for _ in range(periods):
+        nx, nv, contacts = s.contact.pulse_step(p, dx, dv, g.c1 * dx + g.c2 * dv, start, w,
+                                                s.force_limit or math.inf)
+        step = math.hypot(nx - dx, nv - dv)
+        dx, dv = nx, nv
+        if step < 1e-14:
+            return p.x_ref + dx, step, len(contacts)
+    return None
+
+
 def core(rig, c2, forces, periods, enable_after, seed=7):
     """The acceptance in the core, for the rig with each force amplitude F0 (N) and the
     same Delta d: the closed loop on the sensor stream (dynamics.estimation.stream.simulate_stream:
@@ -152,7 +177,7 @@ def main(argv=None):
           f"{g.delay:.4g}, pulse {d['pulse_width']:.4g}")
     print(f"design: c2 = {g.c2:.6g}, c1 = {g.c1:.6g}; predicted Pi2 spread {predicted:.4g} "
           f"(noise gain, position only, model estimator at {rate} samples per period)")
-    print(f"uncontrolled model: largest Lyapunov exponent {lyap.exponents[0]:.3f} per period "
+    print(f"uncontrolled rigid model: largest Lyapunov exponent {lyap.exponents[0]:.3f} per period "
           f"({'chaotic' if lyap.exponents[0] > 0 else 'not chaotic'}), "
           f"{lyap.impacts_per_period:.3f} impacts per period")
     if args.core is not None:
@@ -206,7 +231,18 @@ def main(argv=None):
           f"(impacts per period {np.bincount(counts[unc]).tolist()})")
     orbit = pulse_orbit(p, g, d["pulse_width"],
                         force_limit=d["force_limit"] if d["force_limit"] > 0 else math.inf)
-    err = np.abs(x - orbit.pi2[0])
+    x_orbit = orbit.pi2[0]
+    if rig.stop.type != "rigid":      # the orbit on the rig's own stop, not the wall's
+        found = compliant_orbit(rig, g, orbit.pi2_deviation)
+        if found is None:
+            print(f"stop {rig.stop.type}: no controlled 1/1 orbit of the pulse loop (3000 "
+                  "periods)")
+            return 1
+        x_orbit = found[0]
+        print(f"stop {rig.stop.type} {rig.contact_values()}: the pulse loop's orbit Pi2 x "
+              f"{x_orbit:.9g} ({x_orbit - orbit.pi2[0]:+.3g} from the rigid one, "
+              f"{found[2]} contact(s) a period)")
+    err = np.abs(x - x_orbit)
     band = 5.0 * predicted
     captured = next((k for k in range(k0, len(x) - 50) if np.all(err[k:k + 50] < band)), None)
     if captured is None:
@@ -214,12 +250,12 @@ def main(argv=None):
         return 1
     held = slice(captured, len(x))
     n = len(x) - captured
-    rms = float(np.sqrt(np.mean((x[held] - orbit.pi2[0]) ** 2)))
+    rms = float(np.sqrt(np.mean((x[held] - x_orbit) ** 2)))
     std = float(np.std(x[held]))
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
-    print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - orbit.pi2[0]:+.3g} from the "
+    print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - x_orbit:+.3g} from the "
           f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the "
           "controller's estimator and prediction integrate the pulse since 2026-11-28)")
     print(f"controlled: captured {captured - k0} periods after the switch; held {n} periods: "

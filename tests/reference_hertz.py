@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 # the Kelvin-Voigt reference's solver settings, one place (refined() there shrinks MAX_STEP)
-from reference_contact import _solve, gap_events
+from reference_contact import _solve, gap_events, slip_or_stick
 
 __all__ = ["reference_contact", "reference_advance_hertz"]
 
@@ -149,27 +149,12 @@ def reference_advance_hertz(p, law, tau0, x, v, duration, force=0.0, friction=No
         guard += 1
         assert guard < 100000
         if friction is not None:
-            if forced is not None:
-                sgn[0], forced = forced, None
-            elif y[1] != 0.0:
-                sgn[0] = math.copysign(1.0, y[1])
-            else:
-                g = at_rest(t, y[0])
-                sgn[0] = 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
-            if sgn[0] == 0.0:  # stuck
-                xs = y[0]
-                ts = np.linspace(t, duration, max(3, int(4000 * (duration - t) / p.period)))
-                gs = np.array([abs(at_rest(u, xs)) - f_sta for u in ts])
-                out = np.flatnonzero(gs[1:] > 0.0)
-                if len(out) == 0:
-                    sticks.append((t, math.inf))
-                    t, y = duration, [xs, 0.0]
+            stuck = slip_or_stick(p, at_rest, t, y, duration, f_sta, forced, sgn, sticks)
+            forced = None
+            if stuck is not None:
+                t, y, forced = stuck
+                if t >= duration:
                     break
-                j = out[0]
-                tr = brentq(lambda u: abs(at_rest(u, xs)) - f_sta, ts[j], ts[j + 1],
-                            xtol=1e-16) if gs[j] < 0.0 else ts[j]
-                sticks.append((t, tr))
-                t, y, forced = tr, [xs, 0.0], math.copysign(1.0, at_rest(tr, xs))
                 continue
             stop.direction = -sgn[0]
         extra = [stop] if friction is not None else []

@@ -347,6 +347,20 @@ def _release_time(tau: float, omega: float, lo: float, hi: float) -> float:
     return min(gaps) / omega
 
 
+def _stuck(tau: float, tau0: float, omega: float, t: float, duration: float, rest: float,
+           f_sta: float, at_rest):
+    """A stick from time t (phase tau) with x fixed: the force at rest is cos tau - rest
+    (``rest`` = x + the stop's force at rest, Eq. C4) until it leaves [-F_s, F_s]
+    (:func:`_release_time`). Returns the stick (start, end; end inf past ``duration``),
+    the time it ends (at most ``duration``) and the direction of the slip after it
+    (along G = ``at_rest(phase)``; None at ``duration``)."""
+    end = t + min(_release_time(tau, omega, rest - f_sta, rest + f_sta), duration - t)
+    if end >= duration:
+        return (t, math.inf), end, None
+    g = at_rest((tau0 + omega * end) % TWO_PI)
+    return (t, end), end, math.copysign(1.0, g) if g != 0.0 else 1.0  # slips along G
+
+
 def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
                       duration: float, *, friction: "Coulomb | None" = None,
                       max_contacts: int = 10000, monodromy: bool = False) -> CompliantSegment:
@@ -419,17 +433,14 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         s = forced if forced is not None else slip_sign(tau, delta, vel)
         forced = None
         if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s
-            rest = p.d + delta + k * max(delta, 0.0)
-            h = _release_time(tau, p.omega, rest - f_sta, rest + f_sta)
-            h = min(h, remaining)
-            sticks.append((t, t + h if t + h < duration else math.inf))
-            t += h
+            stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
+                                      p.d + delta + k * max(delta, 0.0), f_sta,
+                                      lambda u: at_rest_force(u, delta))
+            sticks.append(stick)
             tau = (tau0 + p.omega * t) % TWO_PI
             vel = 0.0
-            if t >= duration:
+            if forced is None:
                 break
-            g = at_rest_force(tau, delta)
-            forced = math.copysign(1.0, g) if g != 0.0 else 1.0  # released: slips along G
             continue
         push = s * f_kin
         geometry = free if region != "contact" else touch
@@ -459,15 +470,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             kind = "exit" if h is not None else None
         else:
             sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
-            h_force = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c),
-                                      horizon, 1.0, sc)
-            h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
-                                    h_force if h_force is not None else horizon, -1.0,
-                                    reg.cabs + reg.amp + abs(reg.offset))
-            if h_gap is not None and (h_force is None or h_gap < h_force):
-                kind, h = "below", h_gap
-            elif h_force is not None:
-                kind, h = "entry", h_force
+            kind, h = _above_switch(reg, _force_event(reg, k, c), _force_bound(reg, k, c),
+                                    horizon, sc)
         if kind is None:
             if h_stop is None:
                 delta, vel, _ = reg(remaining)
@@ -514,6 +518,22 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
     if entry is not None:
         contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
     return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), mono)
+
+
+def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale: float):
+    """Above the stop after an exit (free, delta > 0, the force <= 0): the first of the
+    force's return to 0 (``force_event``: a new contact, 'entry') and of the gap's
+    (delta = 0: 'below') within ``horizon``, certified (:func:`_first_crossing`);
+    (None, None) if neither."""
+    h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale)
+    h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
+                            h_force if h_force is not None else horizon, -1.0,
+                            reg.cabs + reg.amp + abs(reg.offset))
+    if h_gap is not None and (h_force is None or h_gap < h_force):
+        return "below", h_gap
+    if h_force is not None:
+        return "entry", h_force
+    return None, None
 
 
 def _force_event(reg: _Region, k: float, c: float):

@@ -19,7 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .contact import CompliantSegment, Contact, Coulomb, _first_crossing, _Region, _release_time
+from .contact import (CompliantSegment, Contact, Coulomb, _above_switch, _first_crossing,
+                      _Region, _stuck)
 from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
 from .params import OscillatorParams, ParameterError, _check_real
@@ -164,17 +165,15 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
                 f"units at phase {tau:.6f}: the motion is not resolvable at this cap")
         s = forced if forced is not None else slip_sign(tau, delta, vel)
         forced = None
-        if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s
-            rest = p.d + delta + k * max(delta, 0.0) ** 1.5
-            h = min(_release_time(tau, p.omega, rest - f_sta, rest + f_sta), remaining)
-            sticks.append((t, t + h if t + h < duration else math.inf))
-            t += h
+        if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s (C4)
+            stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
+                                      p.d + delta + k * max(delta, 0.0) ** 1.5, f_sta,
+                                      lambda u: at_rest_force(u, delta))
+            sticks.append(stick)
             tau = (tau0 + p.omega * t) % TWO_PI
             vel = 0.0
-            if t >= duration:
+            if forced is None:
                 break
-            g = at_rest_force(tau, delta)
-            forced = math.copysign(1.0, g) if g != 0.0 else 1.0  # released: slips along G
             continue
         push = s * f_kin
         if region == "contact":
@@ -213,16 +212,10 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
                                     1.0, reg.cabs + reg.amp + abs(reg.offset))
             kind = "entry" if h is not None else None
         else:   # above: delta > 0 and 1 + 1.5 alpha delta' <= 0
-            scale = 1.0 + 1.5 * a * (reg.cabs + reg.amp * p.omega)
-            h_force = _first_crossing(lambda u: (1.0 + 1.5 * a * reg(u)[1], 1.5 * a * reg(u)[2]),
-                                      lambda u: 1.5 * a * reg.bound(3, u), horizon, 1.0, scale)
-            h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
-                                    h_force if h_force is not None else horizon, -1.0,
-                                    reg.cabs + reg.amp + abs(reg.offset))
-            if h_gap is not None and (h_force is None or h_gap < h_force):
-                kind, h = "below", h_gap
-            elif h_force is not None:
-                kind, h = "entry", h_force
+            kind, h = _above_switch(
+                reg, lambda u: (1.0 + 1.5 * a * reg(u)[1], 1.5 * a * reg(u)[2]),
+                lambda u: 1.5 * a * reg.bound(3, u), horizon,
+                1.0 + 1.5 * a * (reg.cabs + reg.amp * p.omega))
         if kind is None:
             if h_stop is None:
                 delta, vel, _ = reg(remaining)

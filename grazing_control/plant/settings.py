@@ -225,7 +225,7 @@ PARAMETERS = (
               constraints="kelvin_voigt: (2 zeta + c_c)^2 < 4 (1 + k_c) and c_c < 2 sqrt(k_c)"),
     Parameter("friction", "double", 0.0, "Coulomb dry friction on the mass, kinetic level "
               "F_f (force over k l), >= 0; 0 = none", 0.0, FINITE, read_only=True,
-              constraints="0 unless contact kelvin_voigt"),
+              constraints="0 with contact rigid"),
     Parameter("friction_static", "double", 0.0, "static friction level F_s >= friction; "
               "0 = friction", 0.0, FINITE, read_only=True,
               constraints="0 or >= friction"),
@@ -245,7 +245,7 @@ def described_range(p: Parameter, declared: dict) -> tuple:
 
     The table's range, narrowed where another parameter bounds it, so that with the
     others at these values :func:`settings_from_values` accepts exactly [lo, hi]:
-    friction and friction_static 0 unless contact kelvin_voigt;
+    friction and friction_static 0 with contact rigid;
     actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter and the
     actuator 0 without the exact flow or with actuation on_arrival in realtime;
     pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where
@@ -253,8 +253,8 @@ def described_range(p: Parameter, declared: dict) -> tuple:
     Where the model declared is invalid, the table's range (the model is refused by
     name anyway).
     """
-    if p.name in ("friction", "friction_static"):   # Coulomb friction: Kelvin-Voigt only
-        return (p.lo, p.hi) if declared.get("contact") == "kelvin_voigt" else (p.lo, 0.0)
+    if p.name in ("friction", "friction_static"):   # Coulomb friction: a compliant stop's
+        return (p.lo, p.hi) if declared.get("contact", "rigid") != "rigid" else (p.lo, 0.0)
     if p.name not in ("actuation_delay", "jitter", "pulse_width", "actuator_bandwidth",
                       "actuator_latency"):
         return p.lo, p.hi
