@@ -19,8 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .contact import (CompliantSegment, Contact, Coulomb, _above_switch, _first_crossing,
-                      _Region, _stuck)
+from .contact import (CompliantSegment, Contact, Coulomb, _above_switch, _Dense,
+                      _first_crossing, _Region, _stuck)
 from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
 from .params import OscillatorParams, ParameterError, _check_real
@@ -66,7 +66,7 @@ class HuntCrossley:
 
 
 def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t_end: float,
-             rtol: float, push: float = 0.0, slip: float = 0.0):
+             rtol: float, push: float = 0.0, slip: float = 0.0, dense=None):
     """DOP853 through one contact from time t (``push`` = s F_f, the friction of a slip in
     direction ``slip`` = s, Eq. C4; slip 0: no friction); returns (t_exit or None, state, what ended it: 'leave' (the
     factor 1 + 1.5 alpha delta' reaches 0), 'back' (delta = 0) or 'stop' (x' = 0 in a
@@ -96,8 +96,11 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
     events = [leave, back] + ([stop] if slip else [])
     # the first step is short: delta^{3/2} is not smooth at the entry
     sol = solve_ivp(rhs, (t, t_end), list(y), method="DOP853", rtol=rtol, atol=rtol * 1e-3,
-                    events=events, first_step=1e-8, max_step=0.1)
+                    events=events, first_step=1e-8, max_step=0.1,
+                    dense_output=dense is not None)
     hits = [(e[0], i) for i, e in enumerate(sol.t_events) if len(e) and e[0] > t]
+    if dense is not None:   # the stream's states in the contact: DOP853's interpolant
+        dense.piece(t, min(hits)[0] if hits else t_end, lambda u: sol.sol(t + u))
     if not hits:
         return None, (sol.y[0, -1], sol.y[1, -1]), None
     te, i = min(hits)
@@ -109,7 +112,7 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
 
 def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float, v: float,
                   duration: float, *, rtol: float = RTOL, friction: Coulomb | None = None,
-                  max_contacts: int = 10000) -> CompliantSegment:
+                  max_contacts: int = 10000, times=None) -> CompliantSegment:
     """Flow with a Hertz / Hunt-Crossley stop (and Coulomb friction) for a fixed time
     (physical x, v).
 
@@ -124,7 +127,9 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
     while |G| <= F_s, released in closed form
     (:func:`~grazing_control.oscillator.contact._release_time`). At most
     2 (3 ``max_contacts`` + 3) region changes, slips' ends and sticks
-    (:class:`ImpactCapError` beyond).
+    (:class:`ImpactCapError` beyond). ``times``: the states there as the segment's
+    ``states`` (dense output, :class:`~grazing_control.oscillator.contact._Dense`; in
+    contact DOP853's interpolant).
     """
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
@@ -145,6 +150,7 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
     entry = (0.0, tau, math.nan) if region == "contact" else None
     switches = 0
     forced = None
+    dense = _Dense(times if times is not None else (), p.d)
 
     def at_rest_force(tau, delta):
         return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0) ** 1.5
@@ -166,9 +172,11 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
         s = forced if forced is not None else slip_sign(tau, delta, vel)
         forced = None
         if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s (C4)
+            t_stick = t
             stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
                                       p.d + delta + k * max(delta, 0.0) ** 1.5, f_sta,
                                       lambda u: at_rest_force(u, delta))
+            dense.piece(t_stick, t, lambda u: (delta, 0.0))
             sticks.append(stick)
             tau = (tau0 + p.omega * t) % TWO_PI
             vel = 0.0
@@ -178,7 +186,8 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
         push = s * f_kin
         if region == "contact":
             te, (delta, vel), why = _contact(p, law, tau0, t, (delta, vel), duration, rtol,
-                                             push, s if friction is not None else 0.0)
+                                             push, s if friction is not None else 0.0,
+                                             dense if times is not None else None)
             if te is None:
                 t = duration
                 break
@@ -218,9 +227,11 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
                 1.0 + 1.5 * a * (reg.cabs + reg.amp * p.omega))
         if kind is None:
             if h_stop is None:
+                dense.piece(t, duration, reg)
                 delta, vel, _ = reg(remaining)
                 t = duration
                 break
+            dense.piece(t, t + h_stop, reg)
             delta, _, _ = reg(h_stop)
             vel = 0.0  # the slip ends: stick or slip the other way (slip_sign)
             t += h_stop
@@ -228,6 +239,7 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
             if region == "below":
                 delta = min(delta, 0.0)
             continue
+        dense.piece(t, t + h, reg)
         delta, vel, _ = reg(h)
         t += h
         tau = (tau0 + p.omega * t) % TWO_PI
@@ -243,7 +255,8 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
         region = "contact"
     if entry is not None:
         contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
-    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks))
+    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), None,
+                            dense.end(delta, vel) if times is not None else None)
 
 
 def hertz_period_step(p: OscillatorParams, law: HuntCrossley, dx: float, dv: float,

@@ -101,17 +101,23 @@ class ContactPlant:
 
     def states_between(self, p: OscillatorParams, tau: float, dx: float, dv: float,
                        rel) -> np.ndarray:
-        """Physical (x, v) at the times ``rel`` (increasing, from the segment's start at
-        phase ``tau`` with deviation (dx, dv)): the flow advanced from one time to the
-        next (the published states never alter the trajectory: the period itself is
-        :meth:`period_step` in one call)."""
-        out = np.empty((len(rel), 2))
-        t, cx, cv = 0.0, dx, dv
-        for i, h in enumerate(rel):
-            step = self.advance(p, (tau + p.omega * t) % TWO_PI, cx, cv, h - t)
-            t, cx, cv = h, step.dx, step.dv
-            out[i] = to_physical(p, (tau + p.omega * h) % TWO_PI, cx, cv)
-        return out
+        """Physical (x, v) at the times ``rel`` (increasing, in (0, the segment's length]
+        from its start at phase ``tau`` with deviation (dx, dv)): the stop's flow from the
+        start once, each time evaluated on the piece that holds it (the dense output of
+        ``advance_compliant`` / ``advance_hertz``: the closed form of its region, a stick,
+        DOP853's interpolant in a Hertz contact). The published states never alter the
+        trajectory: the period itself is :meth:`period_step` in one call."""
+        if len(rel) == 0:
+            return np.empty((0, 2))
+        x, v = to_physical(p, tau, dx, dv)
+        duration = float(rel[-1])
+        if isinstance(self.law, HuntCrossley):
+            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
+                                times=rel)
+        else:
+            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
+                                    times=rel)
+        return np.array(seg.states, dtype=float).reshape(len(rel), 2)
 
 
 def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | None:
