@@ -23,7 +23,10 @@ Printed, against the design (the core: dynamics/design/noise.py, dynamics/estima
   controller's clock relation and sensor latency (its summary line).
 
     .venv/bin/python benchmarks/bench_rig_scene.py [--rig config/rigs/acceptance.yaml]
-        [--periods 900] [--enable-after 200] [--c2 C2]
+        [--periods 900] [--enable-after 200] [--c2 C2] [--engine-cost]
+
+``--engine-cost``: the simulator's CPU for one period and for its stream's states on
+the rig file's stop, no nodes (a compliant stop's cost, docs/rig_scene.md).
 """
 
 from __future__ import annotations
@@ -88,6 +91,36 @@ def compliant_orbit(rig, g, z, periods=3000):
     return None
 
 
+def engine_cost(rig, periods=20):
+    """The simulator's CPU per period for the rig file (no nodes): one period of the
+    plant from X** (the wall's exact flow or the stop's, plant.contact_plant) and the
+    stream's states of one period at the sensor's rate, as sim_node's engine makes them
+    (ms of process time, mean over ``periods``)."""
+    from grazing_control.dynamics.simulation.simulate import states_between
+    from grazing_control.oscillator import kernel
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    s = settings_from_values({**sim_values(rig), "mode": "realtime"})
+    p = s.params
+    rel = np.arange(1, round(p.period / s.state_period)) * s.state_period
+    advance = kernel.exact_advance() if s.contact is None else s.contact.advance
+    advance(p, p.tau2, 0.0, 0.0, p.period)       # compiled at its first call (the wall)
+    t0 = time.process_time()
+    for _ in range(periods):
+        seg = advance(p, p.tau2, 0.0, 0.0, p.period)
+    t1 = time.process_time()
+    for _ in range(periods):
+        if s.contact is None:
+            states_between(p, p.tau2, 0.0, 0.0, seg.impacts, rel)
+        else:
+            s.contact.states_between(p, p.tau2, 0.0, 0.0, rel)
+    t2 = time.process_time()
+    print(f"engine ({rig.stop.type}): one period {1e3 * (t1 - t0) / periods:.2f} ms, "
+          f"{len(rel)} stream states {1e3 * (t2 - t1) / periods:.2f} ms of CPU "
+          f"(the period is {1e3 * p.period / rig.omega_n:.1f} ms at physical speed)")
+
+
 def core(rig, c2, forces, periods, enable_after, seed=7):
     """The acceptance in the core, for the rig with each force amplitude F0 (N) and the
     same Delta d: the closed loop on the sensor stream (dynamics.estimation.stream.simulate_stream:
@@ -140,6 +173,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", default=str(ROOT / "config" / "rigs" / "acceptance.yaml"))
     ap.add_argument("--periods", type=int, default=900)
+    ap.add_argument("--engine-cost", action="store_true",
+                    help="only the simulator's CPU per period and per stream (no nodes)")
     ap.add_argument("--enable-after", type=int, default=200)
     ap.add_argument("--c2", type=float, default=math.nan,
                     help="the design's c2 (default: the c2 of least noise gain)")
@@ -167,6 +202,9 @@ def main(argv=None):
                     help="recorder_node's batch_window (default: its own, 1 ms)")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
+    if args.engine_cost:
+        engine_cost(rig)
+        return 0
     p, d = rig.params(), rig.dimensionless()
     g, predicted, rate = design(rig, args.c2, None if args.answer_lead is None
                                 else args.answer_lead * rig.omega_n)
