@@ -112,7 +112,8 @@ def _stop(kind: str, k: float) -> dict:
 
 def _core_pulse_loop(s, n, gains, on, delay, skip):
     """The core, one period per sample (as test_plant_loops.reference for the wall):
-    ContactPlant.pulse_step with the pulse at pulse_start; the Pi2 samples, physical."""
+    ContactPlant.pulse_step with the pulse at pulse_start (the delay of sample k drawn by
+    the fault model where there is jitter); the Pi2 samples, physical."""
     from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.plant.settings import initial_deviation
 
@@ -122,19 +123,22 @@ def _core_pulse_loop(s, n, gains, on, delay, skip):
     for k in range(n):
         out.append((p.x_ref + dx, p.v_ref + dv))
         dvc = gains.c1 * dx + gains.c2 * dv if k >= on and k not in skip else 0.0
-        dx, dv, _ = s.contact.pulse_step(p, dx, dv, dvc, pulse_start(p.period, delay, w), w,
+        delay_k = s.faults.actuation_delay(delay, k, p.period) if s.jitter else delay
+        dx, dv, _ = s.contact.pulse_step(p, dx, dv, dvc, pulse_start(p.period, delay_k, w), w,
                                          s.force_limit or math.inf)
     return np.array(out)
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("kind, n, w", [("friction", 40, 0.6), ("plain", 30, 0.0),
-                                        ("hertz", 12, 0.6)])
-def test_a_realtime_pulse_scene_is_the_core_loop_sample_for_sample(kind, n, w):
-    """Realtime with the correction as a force pulse (or the kick, w = 0) after a scheduled
-    delay, two deadline misses: the Pi2 samples equal the core's loop bit for bit (the
-    engine's pieces are the stop's flow, the pulse the same shift of the stop as of the
-    wall), and the stop's contacts are published as impacts."""
+@pytest.mark.parametrize("kind, n, w, jitter", [("friction", 40, 0.6, 0.0),
+                                                ("plain", 30, 0.0, 0.5),
+                                                ("hertz", 12, 0.6, 0.0)])
+def test_a_realtime_pulse_scene_is_the_core_loop_sample_for_sample(kind, n, w, jitter):
+    """Realtime with the correction as a force pulse (or the kick, w = 0, with jitter on
+    its delay) after a scheduled delay, two deadline misses: the Pi2 samples equal the
+    core's loop bit for bit (the engine's pieces are the stop's flow, the pulse the same
+    shift of the stop as of the wall), and the stop's contacts are published as
+    impacts."""
     from test_plant_loops import Clock, Recorder, key, run_realtime
 
     delay, on, c2 = 3.0, 5, -1.0
@@ -142,6 +146,7 @@ def test_a_realtime_pulse_scene_is_the_core_loop_sample_for_sample(kind, n, w):
     gains = Gains(degenerate_c1(p, c2), c2)
     s = settings_from_values({"delta_d": -0.05, "mode": "realtime", "time_scale": 1000.0,
                               "actuation_delay": delay, "pulse_width": w, "max_periods": n,
+                              "jitter": jitter,
                               "state_period": 0.5, "x0": p.x_ref + 0.05, **_stop(kind, 1e3)})
     skip = {8, 9}
     clock, sink = Clock(), Recorder()
