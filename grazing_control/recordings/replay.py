@@ -55,7 +55,8 @@ _NOT_SETTINGS = ("use_sim_time", "start_type_description_service")
 #: 1.6e-3 at its first correction.
 SIM_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset", "x0", "v0", "noise", "seed",
             "fidelity", "actuation_delay", "actuation", "pulse_width", "force_limit",
-            "actuator_bandwidth", "actuator_latency", "delta_d_drift")
+            "actuator_bandwidth", "actuator_latency", "delta_d_drift", "contact",
+            "contact_stiffness", "contact_damping", "friction", "friction_static")
 
 
 # ---------------------------------------------------------------------- parameters
