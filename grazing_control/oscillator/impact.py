@@ -124,6 +124,13 @@ def check_state(dx: float, dv: float, zeta: float, where: str = "the state") -> 
             f"{MAX_AMPLITUDE:.0e} (dx, dv) = ({dx!r}, {dv!r}); an input overflowed")
 
 
+def check_times(tau0: float, name: str, value: float) -> None:
+    """Raise :class:`NonFiniteStateError` unless the start phase ``tau0`` and the length
+    ``name`` = ``value`` of the window are finite."""
+    if not (math.isfinite(tau0) and math.isfinite(value)):
+        raise NonFiniteStateError(f"tau0={tau0!r} and {name}={value!r} must be finite")
+
+
 def _wall_rounding(p: OscillatorParams, tau: float, dx: float, dv: float):
     """Rounding (gap, velocity) of a state at phase tau in deviation coordinates.
 
@@ -328,8 +335,7 @@ def next_impact(p: OscillatorParams, tau0: float, dx0: float, dv0: float, horizo
         Time since the start of the first impact.
     """
     check_state(dx0, dv0, p.zeta, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(horizon)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+    check_times(tau0, "horizon", horizon)
     return _next_impact(p, tau0, dx0, dv0, horizon, max_step)
 
 
@@ -343,23 +349,33 @@ def _next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     f = _Eval(p, tau0, dx0, dv0)
     step = max_step or p.period / 8.0
     n = max(1, int(math.ceil(horizon / step)))
+    return _scan_window(f, horizon, n, lambda fa: _wall_rounding(p, tau0, dx0, dv0)[0], "x")
+
+
+def _scan_window(f, horizon: float, count: int, start_rounding, coordinate: str):
+    """The first root of the gap in (0, horizon], or None: the window cut into ``count``
+    pieces, each searched by :func:`_search` unless its phases are far from the wall.
+
+    ``f`` is an evaluator with the interface of :class:`_Eval` (the n-DOF one is
+    oscillator/ndof/impact.py's), ``start_rounding(f(0))`` the gap's rounding at the
+    start, ``coordinate`` the name of the wall coordinate in the error message.
+    """
     a = 0.0
     fa = f(0.0)
     # on the wall up to rounding: a start above it, or below it while leaving (v < 0),
     # whose flight must not find its own start as a root (docs/theory.md, "A start on
     # the wall")
-    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and \
-            abs(fa[0]) <= _wall_rounding(p, tau0, dx0, dv0)[0]:
+    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and abs(fa[0]) <= start_rounding(fa):
         fa = (0.0,) + fa[1:]
     if fa[0] > 0.0:
         raise InitialStateError(
-            f"state beyond the wall: x - d = {fa[0]:.3e} > 0 (valid: x <= d)"
+            f"state beyond the wall: {coordinate} - d = {fa[0]:.3e} > 0 (valid: {coordinate} <= d)"
         )
     if fa[0] == 0.0 and fa[1] > 0.0:
         return 0.0  # on the wall, moving into it
     w = _danger_halfwidth(f, horizon)
-    for k in range(1, n + 1):
-        b = horizon if k == n else k * (horizon / n)
+    for k in range(1, count + 1):
+        b = horizon if k == count else k * (horizon / count)
         if k > 1 and w is not None and _far_from_wall(f.psi(a), f.psi(b), w):
             a, fa = b, None  # g < 0 on all of [a, b]: the search would find nothing
             continue
@@ -506,8 +522,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         large (see :func:`check_state`).
     """
     check_state(dx, dv, p.zeta, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(duration)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
+    check_times(tau0, "duration", duration)
     zeta, r, omega = p.zeta, p.r, p.omega
     aw, lag_abs, wd = p.amplitude * omega, abs(p.lag), p.omega_d
     chatter = chatter_time if chatter_time is not None else 1e-6 * p.period

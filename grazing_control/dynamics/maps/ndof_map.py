@@ -33,7 +33,7 @@ from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
-from grazing_control.dynamics.maps.model import Step
+from grazing_control.dynamics.maps.model import SectionMap, Step
 
 __all__ = ["NdofMap", "MODEL_PARAMETERS"]
 
@@ -56,7 +56,7 @@ def _gain_vector(gains, n: int):
 
 
 @dataclass(frozen=True, eq=False)
-class NdofMap:
+class NdofMap(SectionMap):
     """The n-DOF oscillator on Pi2, optionally with the kick controller (module docstring).
 
     Parameters
@@ -87,12 +87,9 @@ class NdofMap:
 
     # ------------------------------------------------------------- the protocol
     @property
-    def period(self) -> float:
-        return self.model.period
-
-    @property
-    def section_phase(self) -> float:
-        return self.flow.tau2
+    def section(self) -> NdofFlow:
+        """The flow: T and tau2 (:class:`~grazing_control.dynamics.maps.model.SectionMap`)."""
+        return self.flow
 
     @property
     def coordinates(self) -> tuple:
@@ -117,9 +114,6 @@ class NdofMap:
         seg = advance(self.flow, self.flow.tau2, z, self.model.period, monodromy=jacobian)
         jac = seg.monodromy @ self.gain_matrix() if jacobian else None
         return Step(seg.z, jac, tuple(seg.impacts))
-
-    def grazing_state(self) -> np.ndarray:
-        return np.zeros(self.dimension)
 
     def _names(self) -> tuple:
         return MODEL_PARAMETERS + tuple(f"k{j}" for j in range(self.dimension))

@@ -42,9 +42,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.oscillator.impact import (MAX_AMPLITUDE, ImpactCapError, InitialStateError,
-                                               NonFiniteStateError, _danger_halfwidth,
-                                               _far_from_wall, _search)
+from grazing_control.oscillator.impact import (MAX_AMPLITUDE, Impact, ImpactCapError,
+                                               InitialStateError, NonFiniteStateError,
+                                               _scan_window, check_times)
 from grazing_control.oscillator.params import ParameterError
 
 from .flow import NdofFlow
@@ -57,20 +57,10 @@ TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
 
 
-class NdofImpact(NamedTuple):
-    """One impact: time since the segment start, phase, wall-coordinate velocities.
-
-    The field names are those of :class:`grazing_control.oscillator.impact.Impact`, so
-    generic code treats both alike. ``sticking`` is always False here (sticking raises
-    :class:`ChatteringError`); ``release`` is nan.
-    """
-
-    dt: float
-    phase: float
-    v_minus: float
-    v_plus: float
-    sticking: bool = False
-    release: float = math.nan
+#: One impact (:class:`grazing_control.oscillator.impact.Impact`, the same for every n):
+#: ``sticking`` is always False here (sticking raises :class:`ChatteringError`),
+#: ``release`` nan.
+NdofImpact = Impact
 
 
 class NdofSegment(NamedTuple):
@@ -227,8 +217,7 @@ def next_impact(flow: NdofFlow, tau0: float, z0, horizon: float,
         Time since the start of the first impact.
     """
     z = check_state(flow, z0, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(horizon)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+    check_times(tau0, "horizon", horizon)
     return _next_impact(flow, tau0, z, horizon, max_step)
 
 
@@ -242,29 +231,7 @@ def _next_impact(flow, tau0, z0, horizon, max_step=None):
         return None
     step = max_step or min(flow.model.period / 8.0, 0.25 * math.pi / f.rho)
     count = max(1, int(math.ceil(horizon / step)))
-    a = 0.0
-    fa = f(0.0)
-    # on the wall up to rounding (docs/theory.md, "A start on the wall")
-    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and abs(fa[0]) <= f.gap_rounding(0.0, fa):
-        fa = (0.0,) + fa[1:]
-    if fa[0] > 0.0:
-        raise InitialStateError(f"state beyond the wall: x_w - d = {fa[0]:.3e} > 0 (valid: x_w <= d)")
-    if fa[0] == 0.0 and fa[1] > 0.0:
-        return 0.0  # on the wall, moving into it
-    w = _danger_halfwidth(f, horizon)
-    for k in range(1, count + 1):
-        b = horizon if k == count else k * (horizon / count)
-        if k > 1 and w is not None and _far_from_wall(f.psi(a), f.psi(b), w):
-            a, fa = b, None
-            continue
-        if fa is None:
-            fa = f(a)
-        fb = f(b)
-        r = _search(f, a, b, fa, fb, 0)
-        if r is not None:
-            return r
-        a, fa = b, fb
-    return None
+    return _scan_window(f, horizon, count, lambda fa: f.gap_rounding(0.0, fa), "x_w")
 
 
 def saltation_matrix(flow: NdofFlow, phase: float, z_minus) -> np.ndarray:
@@ -395,8 +362,7 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
         See above.
     """
     z = check_state(flow, z0, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(duration)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
+    check_times(tau0, "duration", duration)
     m = flow.model
     n, w, r, omega = m.n, m.i_w, m.r, m.omega
     chatter = chatter_time if chatter_time is not None else 1e-6 * m.period
