@@ -5,12 +5,10 @@ on the two-mass chain."""
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from scipy.optimize import linear_sum_assignment
 
 from grazing_control.dynamics.design import gains as design
 from grazing_control.dynamics.design import ndof_design as nd
@@ -20,18 +18,9 @@ from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
-from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.oscillator.params import ParameterError
 
-MODELS = Path(__file__).resolve().parents[1] / "config" / "models"
-CHAIN = MODELS / "two_mass_chain.yaml"
-STUDY = MODELS / "study_1dof.yaml"
-
-
-def _match(a, b) -> float:
-    """Largest distance between two multisets of eigenvalues, optimally paired."""
-    cost = np.abs(np.subtract.outer(np.asarray(a), np.asarray(b)))
-    i, j = linear_sum_assignment(cost)
-    return float(cost[i, j].max())
+from test_ndof_design import CHAIN, _match, _study
 
 
 def _fd_jacobian(P, z, h):
@@ -54,9 +43,7 @@ def test_n1_delayed_family_is_the_1dof_delayed_design(delay):
     """The n = 1 model file: k(mu; delay) = (c1, c2) with c1 = design.degenerate_c1(c2;
     delay) ((D5) of docs/theory_delay.md) to 1e-12, and the limit multipliers and gamma1
     of the delayed design equal the 1-DOF closed forms (D8), (D9) with G_delay."""
-    m = load_model(STUDY)
-    p = OscillatorParams(zeta=0.01, r=m.r, omega=m.omega, delta_d=m.delta_d,
-                         pi2_offset=m.pi2_offset)
+    m, p = _study()
     for mu in (-0.5, 0.0, 0.3):
         k = nd.gain_family(m, mu, delay)
         c1 = design.degenerate_c1(p, float(k[1]), delay)
