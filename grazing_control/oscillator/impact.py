@@ -147,20 +147,39 @@ def _wall_rounding(p: OscillatorParams, tau: float, dx: float, dv: float):
     return eg, ev
 
 
-class _Eval:
+class GapEvaluator:
+    """What every model's gap evaluator shares (this module's :class:`_Eval`, the n-DOF
+    one of oscillator/ndof/impact.py): the forcing's frequency ``omega``, the periodic
+    response's lag and amplitude (``lag`` = tau*, ``amp`` = d*), the wall offset ``dd`` =
+    Delta d and the start phase ``tau0``, so the gap's harmonic part is
+    -Delta d - 2 d* sin^2(psi / 2) with psi = tau0 + omega h - tau*. The search
+    (:func:`_scan_window`, :func:`_search`) needs of an evaluator this, ``__call__``
+    (g, v, acc, ...) at h, ``jerk_bound``, ``gap_rounding``, ``cabs``, ``acc_err``,
+    ``m0``, ``m1``."""
+
+    __slots__ = ("omega", "lag", "amp", "dd", "tau0")
+
+    def __init__(self, omega: float, lag: float, amp: float, dd: float, tau0: float):
+        self.omega = omega
+        self.lag = lag
+        self.amp = amp
+        self.dd = dd
+        self.tau0 = tau0
+
+    def psi(self, h: float) -> float:
+        """Phase psi = tau0 + omega h - tau* of the forcing, as in the gap."""
+        return self.tau0 + self.omega * h - self.lag
+
+
+class _Eval(GapEvaluator):
     """Gap, velocity and acceleration along the flow from one start state."""
 
-    __slots__ = ("zeta", "wd", "omega", "lag", "amp", "dd", "tau0", "dx0", "c2", "aw2", "aw3",
-                 "cabs", "acc_err", "m0", "m1")
+    __slots__ = ("zeta", "wd", "dx0", "c2", "aw2", "aw3", "cabs", "acc_err", "m0", "m1")
 
     def __init__(self, p: OscillatorParams, tau0: float, dx0: float, dv0: float):
         self.zeta = p.zeta
         self.wd = p.omega_d
-        self.omega = p.omega
-        self.lag = p.lag
-        self.amp = p.amplitude
-        self.dd = p.delta_d
-        self.tau0 = tau0
+        super().__init__(p.omega, p.lag, p.amplitude, p.delta_d, tau0)
         self.dx0 = dx0
         self.c2 = (dv0 + p.zeta * dx0) / self.wd
         self.aw2 = self.amp * p.omega * p.omega
@@ -190,10 +209,6 @@ class _Eval:
         v = -self.amp * self.omega * math.sin(psi) + dv
         acc = -self.aw2 * math.cos(psi) - 2.0 * self.zeta * dv - dx
         return g, v, acc, dx, dv
-
-    def psi(self, h: float) -> float:
-        """Phase psi = tau0 + omega h - phi of the forcing, as in the gap."""
-        return self.tau0 + self.omega * h - self.lag
 
     def jerk_bound(self, h: float) -> float:
         """J >= max |g'''| on [h, inf)."""

@@ -42,9 +42,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.oscillator.impact import (MAX_AMPLITUDE, Impact, ImpactCapError,
-                                               InitialStateError, NonFiniteStateError,
-                                               _scan_window, check_times)
+from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impact,
+                                               ImpactCapError, InitialStateError,
+                                               NonFiniteStateError, _scan_window, check_times)
 from grazing_control.oscillator.params import ParameterError
 
 from .flow import NdofFlow
@@ -114,13 +114,13 @@ def _mode_sizes(flow: NdofFlow, z: np.ndarray) -> np.ndarray:
     return np.array([per.sum(), (per * lam).sum(), (per * lam * lam).sum()])
 
 
-class _Eval:
+class _Eval(GapEvaluator):
     """Gap, velocity and acceleration of the wall coordinate along the free flow from one
     start (docs/theory_ndof_flow.md, section 4); the interface of the 1-DOF evaluator that
     oscillator.impact._search and _bracket use."""
 
-    __slots__ = ("terms", "omega", "lag", "amp", "dd", "tau0", "cabs", "jerk_terms", "aw3",
-                 "acc_err", "m0", "m1", "zmag", "rho", "drift", "n", "horizon")
+    __slots__ = ("terms", "cabs", "jerk_terms", "aw3", "acc_err", "m0", "m1", "zmag", "rho",
+                 "drift", "n", "horizon")
 
     def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float):
         m = flow.model
@@ -129,11 +129,7 @@ class _Eval:
         lam = flow.eigenvalues
         self.terms = [(complex(l), complex(ck), complex(ck * l), complex(ck * l * l))
                       for l, ck in zip(lam, c)]
-        self.omega = m.omega
-        self.lag = flow.tau_star
-        self.amp = flow.d_star
-        self.dd = m.delta_d
-        self.tau0 = tau0
+        super().__init__(m.omega, flow.tau_star, flow.d_star, m.delta_d, tau0)
         self.horizon = horizon
         self.n = m.n
         grow = np.exp(np.maximum(lam.real, 0.0) * horizon)  # 1 unless rounding made Re > 0
@@ -169,10 +165,6 @@ class _Eval:
         vel = -self.amp * self.omega * math.sin(psi) + v
         acc = -self.amp * self.omega * self.omega * math.cos(psi) + a
         return g, vel, acc, zx
-
-    def psi(self, h: float) -> float:
-        """Phase psi = tau0 + omega h - tau* of the forcing, as in the gap."""
-        return self.tau0 + self.omega * h - self.lag
 
     def jerk_bound(self, h: float) -> float:
         """J >= max |g'''| on [h, horizon]: d* omega^3 + sum |c_k| |lambda_k|^3 e^{Re lambda_k h}."""
