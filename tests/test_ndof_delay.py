@@ -170,3 +170,24 @@ def test_the_gain_file_carries_the_delay(tmp_path):
     with pytest.raises(ParameterError, match="not on the family"):
         nd.write_gain_yaml(tmp_path / "x.yaml", m, dataclasses.replace(undelayed, delay=4.0),
                            CHAIN)
+
+
+def test_sections_with_stable_zeros_for_a_delayed_kick():
+    """With delay 4 on the chain: at the middle of every interval found the delayed
+    kick's zeros are inside and the delay is below T - s; at the middle of every gap
+    they are not (or the delay is too long there)."""
+    m = load_model(CHAIN)
+    found = nd.sections_with_stable_zeros(m, points=60, delay=4.0)
+    assert found
+    edges = [0.0] + [x for iv in found for x in iv] + [2 * math.pi]
+    for j in range(len(edges) - 1):
+        mid = 0.5 * (edges[j] + edges[j + 1])
+        inside = j % 2 == 1
+        try:
+            radius = float(np.max(np.abs(nd.transmission_zeros(
+                dataclasses.replace(m, pi2_offset=mid), 4.0))))
+        except ParameterError:
+            radius = math.inf
+        assert (radius < 1.0) == inside, (mid, radius)
+        if inside:
+            assert 4.0 < m.period - mid / m.omega

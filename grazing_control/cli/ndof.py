@@ -314,7 +314,7 @@ def cmd_design(args):
                   "free_stable": bool(design.free_stable)}
     admissible = bool(design.admissible)
     # no design anywhere on the family: say where the section could go (a scan, §4)
-    sections = None if intervals else nd.sections_with_stable_zeros(model)
+    sections = None if intervals else nd.sections_with_stable_zeros(model, delay=delay)
     seconds = time.perf_counter() - t0
     out = _header(model, args.model)
     out.update({

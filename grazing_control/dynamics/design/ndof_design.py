@@ -229,36 +229,38 @@ def transmission_zeros(model: NdofModel, delay: float = 0.0) -> np.ndarray:
     return z[np.argsort(-np.abs(z), kind="stable")]
 
 
-def _zeros_radius_at(model: NdofModel, offset: float) -> float:
+def _zeros_radius_at(model: NdofModel, offset: float, delay: float = 0.0) -> float:
     """max |zero| with Pi2 at ``offset`` after Pi1 (inf where the kick cannot reach the
-    wall coordinate by the grazing section, w^T Phi(T - s) b = 0)."""
+    wall coordinate by the grazing section, w^T Phi(T - s - delay) b = 0, or acts after
+    it, delay >= T - s)."""
     import dataclasses
 
     try:
-        z = transmission_zeros(dataclasses.replace(model, pi2_offset=offset))
+        z = transmission_zeros(dataclasses.replace(model, pi2_offset=offset), delay)
     except ParameterError:
         return math.inf
     return float(np.max(np.abs(z))) if z.size else 0.0
 
 
 def sections_with_stable_zeros(model: NdofModel, points: int = 720,
-                               tol: float = 1e-9) -> list:
+                               tol: float = 1e-9, delay: float = 0.0) -> list:
     """The intervals of ``pi2_offset`` in (0, 2 pi) where every transmission zero lies
     inside the unit circle (§4): where the section Pi2 may be placed for a design to
     exist (the zeros are fixed by the plant, the actuated coordinate and the section,
     whatever the gain). A scan of ``points`` offsets with each switch bisected to
     ``tol``: a design aid, not a certified set (an interval narrower than the scan's
-    step, 2 pi / points, can be missed).
+    step, 2 pi / points, can be missed). With an actuation ``delay`` the zeros are the
+    delayed kick's (§14), and offsets with delay >= T - s have none inside.
     """
     if isinstance(points, bool) or not isinstance(points, int) or points < 2:
         raise ParameterError(f"points={points!r} is invalid: valid range is an integer >= 2")
     grid = np.linspace(0.0, 2.0 * math.pi, points + 1)[1:-1]
-    inside = [_zeros_radius_at(model, float(s)) < 1.0 for s in grid]
+    inside = [_zeros_radius_at(model, float(s), delay) < 1.0 for s in grid]
 
     def switch(a, b, a_in):
         while b - a > tol:
             m = 0.5 * (a + b)
-            if (_zeros_radius_at(model, m) < 1.0) == a_in:
+            if (_zeros_radius_at(model, m, delay) < 1.0) == a_in:
                 a = m
             else:
                 b = m
