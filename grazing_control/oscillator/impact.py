@@ -132,18 +132,27 @@ def check_times(tau0: float, name: str, value: float) -> None:
 
 
 def _wall_rounding(p: OscillatorParams, tau: float, dx: float, dv: float):
-    """Rounding (gap, velocity) of a state at phase tau in deviation coordinates.
+    """Rounding (gap, velocity) of a state at phase tau in deviation coordinates
+    (:func:`wall_rounding` of the 1-DOF oscillator)."""
+    return wall_rounding(tau, p.lag, p.amplitude, p.omega, p.delta_d, dx, dv)
 
-    The gap g = dx - Delta d - 2 a sin^2(psi / 2) and the velocity v = v_p + dv carry
-    the rounding of their terms and of the phase psi = tau - phi, which is known to
-    ~eps (|tau| + |phi| + 2 pi) (phases are reduced modulo 2 pi after each step).
+
+def wall_rounding(tau: float, lag: float, amp: float, omega: float, delta_d: float,
+                  dx: float, dv: float):
+    """Rounding (gap, velocity) of the wall coordinate at phase tau, for any model: its
+    deviation position ``dx`` and velocity ``dv``, the periodic response's lag tau* and
+    amplitude d* (``lag``, ``amp``), the forcing's ``omega``, the wall offset ``delta_d``.
+
+    The gap g = dx - Delta d - 2 d* sin^2(psi / 2) and the velocity v = v_p + dv carry
+    the rounding of their terms and of the phase psi = tau - tau*, which is known to
+    ~eps (|tau| + |tau*| + 2 pi) (phases are reduced modulo 2 pi after each step).
     """
-    psi = tau - p.lag
-    s2 = 2.0 * p.amplitude * math.sin(0.5 * psi) ** 2
-    vp = -p.amplitude * p.omega * math.sin(psi)
-    phase = abs(tau) + abs(p.lag) + TWO_PI + 1.0
-    eg = 8.0 * _EPS * (abs(dx) + abs(p.delta_d) + s2 + math.sqrt(2.0 * p.amplitude * s2) * phase)
-    ev = 8.0 * _EPS * (abs(vp) + abs(dv) + p.amplitude * p.omega * phase)
+    psi = tau - lag
+    s2 = 2.0 * amp * math.sin(0.5 * psi) ** 2
+    vp = -amp * omega * math.sin(psi)
+    phase = abs(tau) + abs(lag) + TWO_PI + 1.0
+    eg = 8.0 * _EPS * (abs(dx) + abs(delta_d) + s2 + math.sqrt(2.0 * amp * s2) * phase)
+    ev = 8.0 * _EPS * (abs(vp) + abs(dv) + amp * omega * phase)
     return eg, ev
 
 

@@ -600,28 +600,23 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     inv_var = 1.0 / (sigma * sigma)
 
     def linearised(z):
-        pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                                force_limit=force_limit, actuator=actuator,
-                                                force0=force0)
+        """(H, r, end, monodromy): the measurement rows and residuals of the samples at z."""
+        pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
+                                                 force_limit=force_limit, actuator=actuator,
+                                                 force0=force0)
         h = np.vstack([jac[:, ix, :], jac[has_v, iv, :]])
         r = np.concatenate([y - pred[:, ix], w[has_v] - pred[has_v, iv]])
-        return h, r
+        return h, r, end, mono
 
     for _ in range(iterations):
-        h, r = linearised(z)
-        info = info_prior + inv_var * (h.T @ h)
-        grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
-        step = np.linalg.solve(info, grad)
+        h, r, _end, _mono = linearised(z)
+        step = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
         z = z + step
         if np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(z)):
             break
     else:
         z = _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations)
-    pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                             force_limit=force_limit, actuator=actuator,
-                                             force0=force0)
-    h = np.vstack([jac[:, ix, :], jac[has_v, iv, :]])
-    r = np.concatenate([y - pred[:, ix], w[has_v] - pred[has_v, iv]])
+    h, r, end, mono = linearised(z)
     info = info_prior + inv_var * (h.T @ h)
     post = np.linalg.inv(info)
     cov = mono @ post @ mono.T + (floor * sigma) ** 2 * np.eye(len(z))
@@ -630,8 +625,16 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                        prior.periods + 1), chi2, r.size
 
 
+def _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r):
+    """The Gauss-Newton step of (E4) at z: (P^-1 + H^T H / sigma^2)^-1 (P^-1 (z^ - z) +
+    H^T r / sigma^2)."""
+    info = info_prior + inv_var * (h.T @ h)
+    grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
+    return np.linalg.solve(info, grad)
+
+
 def _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations: int):
-    """Gauss-Newton with step halving, where :func:`model_update`'s plain iteration has
+    """Gauss-Newton with step halving (``linearised(z)`` gives H and r first), where :func:`model_update`'s plain iteration has
     not converged (docs/theory_estimation.md, (E11)): with noise on a trajectory strongly
     curved by a low-velocity impact the full Gauss-Newton step can overshoot for ever (a
     large-residual problem: linear rate >= 1), but its direction descends the cost
@@ -644,15 +647,14 @@ def _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations: int):
         d = z - z_prior
         return float(d @ info_prior @ d) + inv_var * float(r @ r)
 
-    h, r = linearised(z)
+    h, r = linearised(z)[:2]
     c = cost(z, r)
     for _ in range(4 * iterations):
-        info = info_prior + inv_var * (h.T @ h)
-        step = np.linalg.solve(info, info_prior @ (z_prior - z) + inv_var * (h.T @ r))
+        step = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
         t = 1.0
         while True:
             zt = z + t * step
-            ht, rt = linearised(zt)
+            ht, rt = linearised(zt)[:2]
             ct = cost(zt, rt)
             if ct < c or t < 1e-6:
                 break

@@ -44,7 +44,8 @@ import numpy as np
 
 from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impact,
                                                ImpactCapError, InitialStateError,
-                                               NonFiniteStateError, _scan_window, check_times)
+                                               NonFiniteStateError, _scan_window, check_times,
+                                               wall_rounding)
 from grazing_control.oscillator.params import ParameterError
 
 from .flow import NdofFlow
@@ -291,16 +292,11 @@ def _release_skip(flow: NdofFlow, tau: float, z: np.ndarray) -> float:
 
 
 def _roundings(flow: NdofFlow, tau: float, z: np.ndarray):
-    """(gap, velocity) rounding of a state at phase tau (docs/theory_ndof_flow.md, section 5)."""
+    """(gap, velocity) rounding of a state at phase tau (docs/theory_ndof_flow.md, section 5):
+    :func:`grazing_control.oscillator.impact.wall_rounding` of the wall coordinate."""
     m = flow.model
-    n, w = m.n, m.i_w
-    psi = tau - flow.tau_star
-    s2 = 2.0 * flow.d_star * math.sin(0.5 * psi) ** 2
-    vp = -flow.d_star * m.omega * math.sin(psi)
-    phase = abs(tau) + abs(flow.tau_star) + TWO_PI + 1.0
-    eg = 8.0 * _EPS * (abs(z[w]) + abs(m.delta_d) + s2 + math.sqrt(2.0 * flow.d_star * s2) * phase)
-    ev = 8.0 * _EPS * (abs(vp) + abs(z[n + w]) + flow.d_star * m.omega * phase)
-    return eg, ev
+    return wall_rounding(tau, flow.tau_star, flow.d_star, m.omega, m.delta_d,
+                         z[m.i_w], z[m.n + m.i_w])
 
 
 def _resting_on_wall(flow: NdofFlow, tau: float, z: np.ndarray) -> bool:
