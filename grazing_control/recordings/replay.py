@@ -36,7 +36,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .analyze import _fmt, _jsonable, add_model_options, options_from_args
+from .analysis import fmt as _fmt
+from .analyze import _jsonable, add_model_options, options_from_args
 from .numbers import resolve_setup
 from grazing_control.support.files import YamlFileError, read_yaml_file
 
