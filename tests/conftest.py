@@ -37,11 +37,14 @@ from grazing_control.oscillator import kernel
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernel():
-    """Compile the numba kernel (or load its on-disk cache) once, before any test: in a
-    fresh checkout the first compilation takes 5-20 s, which a node test's startup
-    timeouts must not absorb."""
+    """Compile the numba kernel and the stream estimator's compiled model filter (or load
+    their on-disk cache) once, before any test: in a fresh checkout the first compilation
+    takes 5-20 s, which a node test's startup timeouts must not absorb."""
     if kernel.use_kernel():
         kernel.warm_up()
+        from grazing_control.dynamics.estimation.stream import warm_up
+
+        warm_up()       # the compiled model filter (compiled_flow), 1-2 s the first time
 
 
 @pytest.fixture(autouse=True)
