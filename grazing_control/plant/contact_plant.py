@@ -18,7 +18,8 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force
-from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, advance_compliant
+from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, LagForce,
+                                                advance_compliant)
 from grazing_control.oscillator.flow import to_deviation, to_physical
 from grazing_control.oscillator.hertz import HuntCrossley, advance_hertz
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -41,6 +42,18 @@ class ContactImpact(NamedTuple):
     v_plus: float
 
 
+class ContactLagFlow(NamedTuple):
+    """The stop's flow under the actuator's force F_inf + C e^{-h / tau_a} for a
+    duration (:meth:`ContactPlant.lag_flow`, the fields the engine reads of
+    :class:`~grazing_control.dynamics.simulation.actuator.LagFlow`): the deviation and the
+    force at the end, and the contacts as impacts."""
+
+    dx: float
+    dv: float
+    force: float
+    impacts: tuple
+
+
 class ContactStep(NamedTuple):
     """One period: the deviation at the next sample, and the contacts."""
 
@@ -58,13 +71,16 @@ class ContactPlant:
     friction: Coulomb | None = None
 
     def advance(self, p: OscillatorParams, tau: float, dx: float, dv: float,
-                duration: float) -> ContactStep:
-        """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``."""
+                duration: float, force: LagForce | None = None) -> ContactStep:
+        """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``
+        (``force``: an external force on the mass, the actuator's)."""
         x, v = to_physical(p, tau, dx, dv)
         if isinstance(self.law, HuntCrossley):
-            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction)
+            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
+                                force=force)
         else:
-            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction)
+            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
+                                    force=force)
         tau1 = tau + p.omega * duration
         ex, ev = to_deviation(p, tau1, seg.x, seg.v)
         impacts = tuple(ContactImpact(c.dt, c.phase, c.v_minus, c.v_plus)
@@ -99,8 +115,60 @@ class ContactPlant:
             dv += kick
         return ContactStep(dx, dv, tuple(impacts))
 
+    def lag_flow(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                 duration: float, f_inf: float, c: float, tau_a: float) -> ContactLagFlow:
+        """The stop's flow for ``duration`` under the first-order actuator's force
+        F_inf + C e^{-h / tau_a} (tau_a = 0 only with C = 0): what
+        :func:`~grazing_control.dynamics.simulation.actuator.lag_flow` is for the wall
+        (docs/theory_contact.md §21)."""
+        force = _lag_force(f_inf, c, tau_a)
+        seg = self.advance(p, tau, dx, dv, duration, force)
+        return ContactLagFlow(seg.dx, seg.dv, force.at(duration), seg.impacts)
+
+    def actuated_step(self, p: OscillatorParams, dx: float, dv: float, force: float,
+                      dv_correction: float, start: float, width: float, actuator,
+                      force_limit: float = math.inf):
+        """One period from the Pi2 deviation (dx, dv) with the actuator's force ``force``
+        there and the correction commanded on [start, start + width] (width 0: an
+        impulse) through ``actuator`` (tau_a, latency L): on each piece between the
+        command's switches (L later) the force is F_inf + C e^{-h / tau_a} and the motion
+        :meth:`lag_flow`'s; an impulse command adds Delta v / tau_a to the force (or,
+        tau_a = 0, jumps the velocity). What
+        :func:`~grazing_control.dynamics.simulation.actuator.actuated_step` is for the
+        wall, with the engine's pieces (Engine._lag_period). Returns (dx, dv, force at
+        the next section, impacts: times from the sample)."""
+        tau_a = actuator.time_constant
+        on = start + actuator.latency
+        if width > 0.0:
+            switches = ((on, pulse_force(dv_correction, width, force_limit), 0.0),
+                        (on + width, 0.0, 0.0))
+        else:
+            switches = ((on, 0.0, dv_correction),)
+        f, u, h, impacts = force, 0.0, 0.0, []
+        for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
+            if end > h:
+                tau = (p.tau2 + p.omega * h) % TWO_PI
+                flow = self.lag_flow(p, tau, dx, dv, end - h, u,
+                                     f - u if tau_a > 0.0 else 0.0, tau_a)
+                impacts += [i._replace(dt=i.dt + h) for i in flow.impacts]
+                dx, dv, f = flow.dx, flow.dv, flow.force
+            if impulse:
+                if tau_a > 0.0:
+                    f += impulse / tau_a
+                else:
+                    dv += impulse
+            h, u = max(h, end), u_next
+            f = f if tau_a > 0.0 else u
+        return dx, dv, f, impacts
+
+    def lag_states(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                   f_inf: float, c: float, tau_a: float, rel) -> np.ndarray:
+        """Physical (x, v) at the times ``rel`` of a :meth:`lag_flow` piece (dense output,
+        as :meth:`states_between`)."""
+        return self.states_between(p, tau, dx, dv, rel, _lag_force(f_inf, c, tau_a))
+
     def states_between(self, p: OscillatorParams, tau: float, dx: float, dv: float,
-                       rel) -> np.ndarray:
+                       rel, force: LagForce | None = None) -> np.ndarray:
         """Physical (x, v) at the times ``rel`` (increasing, in (0, the segment's length]
         from its start at phase ``tau`` with deviation (dx, dv)): the stop's flow from the
         start once, each time evaluated on the piece that holds it (the dense output of
@@ -113,11 +181,17 @@ class ContactPlant:
         duration = float(rel[-1])
         if isinstance(self.law, HuntCrossley):
             seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
-                                times=rel)
+                                times=rel, force=force)
         else:
             seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
-                                    times=rel)
+                                    times=rel, force=force)
         return np.array(seg.states, dtype=float).reshape(len(rel), 2)
+
+
+def _lag_force(f_inf: float, c: float, tau_a: float) -> LagForce:
+    if tau_a == 0.0 and c != 0.0:
+        raise ValueError("a force transient needs tau_a > 0")
+    return LagForce(f_inf, c, 1.0 / tau_a if tau_a > 0.0 else 0.0)
 
 
 def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | None:

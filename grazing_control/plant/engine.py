@@ -20,7 +20,10 @@ With a first-order actuator (``actuator_bandwidth`` or ``actuator_latency`` > 0,
 29 section 4) the force on the mass is a third state carried from sample to sample
 (:attr:`Engine.force`): each period is the exact flow under a piecewise exponential
 force, :func:`grazing_control.dynamics.simulation.actuator.lag_flow` per piece between the
-command's switches (:meth:`Engine._lag_period`, docs/theory_pulse.md section 5).
+command's switches (:meth:`Engine._lag_period`, docs/theory_pulse.md section 5); with a
+compliant stop the stop's flow under that force
+(:meth:`~grazing_control.plant.contact_plant.ContactPlant.lag_flow`, docs/theory_contact.md
+§21).
 
 No ROS: sim_node publishes the :class:`Event` values this returns.
 """
@@ -242,16 +245,22 @@ class Engine:
         t0 = self.t
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         dx, dv, f, u, h = self.dx, self.dv, self.force, 0.0, 0.0
+        contact = getattr(s, "contact", None)
         events = []
         for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
             if end > h:
                 tau = (p.tau2 + p.omega * h) % TWO_PI
-                flow = lag_flow(p, tau, dx, dv, end - h, u, f - u if tau_a > 0.0 else 0.0,
-                                tau_a)
+                c = f - u if tau_a > 0.0 else 0.0
+                if contact is None:
+                    flow = lag_flow(p, tau, dx, dv, end - h, u, c, tau_a)
+                    states = (lambda rel, flow=flow: lag_states(p, flow, rel))
+                else:   # the compliant stop's flow under the force (contact_plant)
+                    flow = contact.lag_flow(p, tau, dx, dv, end - h, u, c, tau_a)
+                    states = (lambda rel, a=(tau, dx, dv, u, c, tau_a):
+                              contact.lag_states(p, *a, rel))
                 te = t1 if end == p.period else t0 + end
                 events += self._events(Segment(t0 + h, tau, dx, dv, te, flow.dx, flow.dv),
-                                       flow.impacts,
-                                       lambda rel, flow=flow: lag_states(p, flow, rel))
+                                       flow.impacts, states)
                 dx, dv, f = flow.dx, flow.dv, flow.force
             if impulse:                 # an impulse command: through the lag, or a jump
                 if tau_a > 0.0:
