@@ -74,18 +74,23 @@ class ContactPlant:
                 duration: float, force: LagForce | None = None) -> ContactStep:
         """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``
         (``force``: an external force on the mass, the actuator's)."""
+        return self._flow(p, tau, dx, dv, duration, force, None)[0]
+
+    def _flow(self, p, tau, dx, dv, duration, force, times):
+        """(ContactStep, the stop's segment) of the flow, with the dense output at
+        ``times`` (None: none)."""
         x, v = to_physical(p, tau, dx, dv)
         if isinstance(self.law, HuntCrossley):
             seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
-                                force=force)
+                                force=force, times=times)
         else:
             seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
-                                    force=force)
+                                    force=force, times=times)
         tau1 = tau + p.omega * duration
         ex, ev = to_deviation(p, tau1, seg.x, seg.v)
         impacts = tuple(ContactImpact(c.dt, c.phase, c.v_minus, c.v_plus)
                         for c in seg.contacts)
-        return ContactStep(ex, ev, impacts)
+        return ContactStep(ex, ev, impacts), seg
 
     def period_step(self, p: OscillatorParams, dx: float, dv: float,
                     dv_correction: float = 0.0) -> ContactStep:
@@ -114,6 +119,17 @@ class ContactPlant:
                 dx, dv, t = seg.dx, seg.dv, t + duration
             dv += kick
         return ContactStep(dx, dv, tuple(impacts))
+
+    def advance_with_states(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                            duration: float, rel):
+        """:meth:`advance` and the physical (x, v) at the times ``rel`` (increasing, in
+        (0, duration]) in the same integration: the flow's dense output as it passes
+        (:class:`~grazing_control.oscillator.contact._Dense`, DOP853's interpolant in a
+        Hertz contact), so a piece and its published states cost one integration, not
+        two (the end state is :meth:`advance`'s bit for bit: the dense output never
+        alters the steps). Returns (ContactStep, array (len(rel), 2))."""
+        step, seg = self._flow(p, tau, dx, dv, duration, None, list(rel) if len(rel) else None)
+        return step, np.array(seg.states or [], dtype=float).reshape(len(rel), 2)
 
     def lag_flow(self, p: OscillatorParams, tau: float, dx: float, dv: float,
                  duration: float, f_inf: float, c: float, tau_a: float) -> ContactLagFlow:
@@ -177,14 +193,7 @@ class ContactPlant:
         trajectory: the period itself is :meth:`period_step` in one call."""
         if len(rel) == 0:
             return np.empty((0, 2))
-        x, v = to_physical(p, tau, dx, dv)
-        duration = float(rel[-1])
-        if isinstance(self.law, HuntCrossley):
-            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
-                                times=rel, force=force)
-        else:
-            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
-                                    times=rel, force=force)
+        seg = self._flow(p, tau, dx, dv, float(rel[-1]), force, rel)[1]
         return np.array(seg.states, dtype=float).reshape(len(rel), 2)
 
 
