@@ -18,6 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force
+from grazing_control.dynamics.simulation.actuator import command_period
 from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, LagForce,
                                                 advance_compliant)
 from grazing_control.oscillator.flow import to_deviation, to_physical
@@ -146,36 +147,12 @@ class ContactPlant:
                       force_limit: float = math.inf):
         """One period from the Pi2 deviation (dx, dv) with the actuator's force ``force``
         there and the correction commanded on [start, start + width] (width 0: an
-        impulse) through ``actuator`` (tau_a, latency L): on each piece between the
-        command's switches (L later) the force is F_inf + C e^{-h / tau_a} and the motion
-        :meth:`lag_flow`'s; an impulse command adds Delta v / tau_a to the force (or,
-        tau_a = 0, jumps the velocity). What
-        :func:`~grazing_control.dynamics.simulation.actuator.actuated_step` is for the
-        wall, with the engine's pieces (Engine._lag_period). Returns (dx, dv, force at
-        the next section, impacts: times from the sample)."""
-        tau_a = actuator.time_constant
-        on = start + actuator.latency
-        if width > 0.0:
-            switches = ((on, pulse_force(dv_correction, width, force_limit), 0.0),
-                        (on + width, 0.0, 0.0))
-        else:
-            switches = ((on, 0.0, dv_correction),)
-        f, u, h, impacts = force, 0.0, 0.0, []
-        for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
-            if end > h:
-                tau = (p.tau2 + p.omega * h) % TWO_PI
-                flow = self.lag_flow(p, tau, dx, dv, end - h, u,
-                                     f - u if tau_a > 0.0 else 0.0, tau_a)
-                impacts += [i._replace(dt=i.dt + h) for i in flow.impacts]
-                dx, dv, f = flow.dx, flow.dv, flow.force
-            if impulse:
-                if tau_a > 0.0:
-                    f += impulse / tau_a
-                else:
-                    dv += impulse
-            h, u = max(h, end), u_next
-            f = f if tau_a > 0.0 else u
-        return dx, dv, f, impacts
+        impulse) through ``actuator``: the engine's pieces
+        (:func:`~grazing_control.dynamics.simulation.actuator.command_period`) with this
+        stop's :meth:`lag_flow`. Returns (dx, dv, force at the next section, impacts:
+        times from the sample)."""
+        return command_period(p, dx, dv, force, dv_correction, start, width, actuator,
+                              force_limit, lambda *a: self.lag_flow(p, *a))
 
     def lag_states(self, p: OscillatorParams, tau: float, dx: float, dv: float,
                    f_inf: float, c: float, tau_a: float, rel) -> np.ndarray:

@@ -36,7 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force, pulse_start
-from grazing_control.dynamics.simulation.actuator import lag_flow, lag_states
+from grazing_control.dynamics.simulation.actuator import command_period, lag_flow, lag_states
 from grazing_control.dynamics.simulation.fidelity import period_step
 from grazing_control.dynamics.simulation.simulate import states_between
 from grazing_control.oscillator import kernel
@@ -262,40 +262,30 @@ class Engine:
         :func:`lag_flow`'s. The force at the next sample is kept for :meth:`end_period`.
         Returns the period's events (state, Pi1, impacts) in time order."""
         p, s = self.p, self.settings
-        tau_a, w = s.actuator.time_constant, s.pulse_width
-        on = start + s.actuator.latency
-        if w > 0.0:
-            switches = ((on, pulse_force(dv_correction, w, s.force_limit or math.inf), 0.0),
-                        (on + w, 0.0, 0.0))
-        else:
-            switches = ((on, 0.0, dv_correction),)
         t0 = self.t
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
-        dx, dv, f, u, h = self.dx, self.dv, self.force, 0.0, 0.0
         contact = getattr(s, "contact", None)
         events = []
-        for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
-            if end > h:
-                tau = (p.tau2 + p.omega * h) % TWO_PI
-                c = f - u if tau_a > 0.0 else 0.0
-                if contact is None:
-                    flow = lag_flow(p, tau, dx, dv, end - h, u, c, tau_a)
-                    states = (lambda rel, flow=flow: lag_states(p, flow, rel))
-                else:   # the compliant stop's flow under the force (contact_plant)
-                    flow = contact.lag_flow(p, tau, dx, dv, end - h, u, c, tau_a)
-                    states = (lambda rel, a=(tau, dx, dv, u, c, tau_a):
-                              contact.lag_states(p, *a, rel))
-                te = t1 if end == p.period else t0 + end
-                events += self._events(Segment(t0 + h, tau, dx, dv, te, flow.dx, flow.dv),
-                                       flow.impacts, states)
-                dx, dv, f = flow.dx, flow.dv, flow.force
-            if impulse:                 # an impulse command: through the lag, or a jump
-                if tau_a > 0.0:
-                    f += impulse / tau_a
-                else:
-                    dv += impulse
-            h, u = max(h, end), u_next
-            f = f if tau_a > 0.0 else u
+        if contact is None:
+            def flow(*a):
+                return lag_flow(p, *a)
+        else:   # the compliant stop's flow under the force (contact_plant)
+            def flow(*a):
+                return contact.lag_flow(p, *a)
+
+        def publish(h, end, tau, dx, dv, u, c, piece):
+            if contact is None:
+                states = (lambda rel: lag_states(p, piece, rel))
+            else:
+                states = (lambda rel: contact.lag_states(p, tau, dx, dv, u, c,
+                                                         s.actuator.time_constant, rel))
+            te = t1 if end == p.period else t0 + end
+            events.extend(self._events(Segment(t0 + h, tau, dx, dv, te, piece.dx, piece.dv),
+                                       piece.impacts, states))
+
+        dx, dv, f, _ = command_period(p, self.dx, self.dv, self.force, dv_correction, start,
+                                      s.pulse_width, s.actuator, s.force_limit or math.inf,
+                                      flow, publish)
         self.seg = Segment(t0, p.tau2, self.dx, self.dv, t1, dx, dv)
         self._force_end = f
         return events
