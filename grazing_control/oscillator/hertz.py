@@ -69,9 +69,10 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
              rtol: float, push: float = 0.0, slip: float = 0.0, dense=None,
              force: LagForce | None = None):
     """DOP853 through one contact from time t (``push`` = s F_f, the friction of a slip in
-    direction ``slip`` = s, Eq. C4; slip 0: no friction; ``force``: an external force F(s) in the right-hand side); returns (t_exit or None, state, what ended it: 'leave' (the
-    factor 1 + 1.5 alpha delta' reaches 0), 'back' (delta = 0) or 'stop' (x' = 0 in a
-    slip))."""
+    direction ``slip`` = s, Eq. C4; slip 0: no friction; ``force``: an external force
+    F(s) in the right-hand side); returns (t_exit or None, state, what ended it: 'leave'
+    (the factor 1 + 1.5 alpha delta' reaches 0), 'back' (delta = 0) or 'stop' (x' = 0 in
+    a slip))."""
     # imported here: a node that never meets a Hertz contact imports no solver
     # (tests/test_node_common.py)
     from scipy.integrate import solve_ivp
