@@ -83,7 +83,9 @@ def _compare(law_kind, seed, friction, tol, time_tol):
                 assert abs(a - ar) <= time_tol, (label, seg.sticks, ref_sticks)
                 assert (abs(b - br) <= time_tol if math.isfinite(br) else math.isinf(b)), (
                     label, seg.sticks, ref_sticks)
-                released += math.isfinite(b) and abs(lag.transient(b)) > 0.1 * abs(lag.c) > 0.0
+                # released while the transient is a fifth of the static level: its share
+                # of G at the release moves the release time
+                released += math.isfinite(b) and abs(lag.transient(b)) > 0.2 * fr.static
             sticks += len(seg.sticks)
         contacts += len(seg.contacts)
     return contacts, transient_contacts, sticks, released
@@ -95,12 +97,12 @@ def _compare(law_kind, seed, friction, tol, time_tol):
 def test_kelvin_voigt_under_the_actuator_matches_the_reference(seed, friction):
     """States to 1e-10 (times 1 + |x| + |v|; a case beyond it compared again with the
     reference at a step of 0.005), contacts and sticks counted exactly, switching times
-    to 1e-9; contacts entered inside the transient and (with friction) sticks released
-    while it lasts both occur."""
+    to 1e-9; contacts entered while the transient is above a tenth of its start and (with
+    friction) sticks released while it is above a fifth of F_s both occur."""
     contacts, inside, sticks, released = _compare("kv", seed, friction, 1e-10, 1e-9)
     assert contacts > 20 and inside > 5, (contacts, inside)
     if friction:
-        assert sticks > 10 and released > 2, (sticks, released)
+        assert sticks > 10 and released >= 3, (sticks, released)
 
 
 @pytest.mark.timeout(1800)  # a hang guard
@@ -111,4 +113,4 @@ def test_hertz_under_the_actuator_matches_the_reference(friction):
     contacts, inside, sticks, released = _compare("hertz", 0, friction, TOL_HERTZ, 1e-8)
     assert contacts > 20 and inside > 5, (contacts, inside)
     if friction:
-        assert sticks > 10 and released > 2, (sticks, released)
+        assert sticks > 10 and released >= 3, (sticks, released)
