@@ -26,7 +26,8 @@ Printed, against the design (the core: dynamics/design/noise.py, dynamics/estima
         [--periods 900] [--enable-after 200] [--c2 C2] [--engine-cost]
 
 ``--engine-cost``: the simulator's CPU for one period and for its stream's states on
-the rig file's stop, no nodes (a compliant stop's cost, docs/rig_scene.md).
+the rig file's stop, and for the scheduled realtime loop's engine calls of a period
+(stream included), no nodes (a compliant stop's cost, docs/rig_scene.md).
 """
 
 from __future__ import annotations
@@ -119,6 +120,26 @@ def engine_cost(rig, periods=20):
     print(f"engine ({rig.stop.type}): one period {1e3 * (t1 - t0) / periods:.2f} ms, "
           f"{len(rel)} stream states {1e3 * (t2 - t1) / periods:.2f} ms of CPU "
           f"(the period is {1e3 * p.period / rig.omega_n:.1f} ms at physical speed)")
+    # the scheduled realtime loop's engine calls of one period, stream included: the
+    # period to the actuation start at the sample (Engine.begin_head; an engine without
+    # it, before 2026-11-28: the whole uncorrected period), the rest at the actuation
+    from grazing_control.plant.engine import Engine
+
+    eng = Engine(s)
+    head = getattr(eng, "begin_head", None)
+    t0 = time.process_time()
+    for _ in range(periods):
+        delay = eng.actuation_delay()
+        if head is not None:
+            head(delay)
+        else:
+            eng.begin_period(0.0)
+        eng.actuate(0.0, delay)
+        eng.end_period()
+    t1 = time.process_time()
+    print(f"scheduled realtime loop, one period with its stream ("
+          f"{'begin_head' if head else 'begin_period'} + actuate): "
+          f"{1e3 * (t1 - t0) / periods:.2f} ms of CPU")
 
 
 def core(rig, c2, forces, periods, enable_after, seed=7):

@@ -113,13 +113,14 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None, force=0.0):
     f_kin = friction.kinetic if friction is not None else 0.0
     f_sta = friction.static if friction is not None else 0.0
     sgn = [0.0]
+    fo = force if callable(force) else (lambda t, f=float(force): f)
 
     def free(t, y):
-        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+        return [y[1], math.cos(w * t + tau0) + fo(t) - 2.0 * zeta * y[1] - y[0]
                 - sgn[0] * f_kin]
 
     def touch(t, y):
-        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+        return [y[1], math.cos(w * t + tau0) + fo(t) - 2.0 * zeta * y[1] - y[0]
                 - sgn[0] * f_kin - k * (y[0] - d) - c * y[1]]
 
     gap_up, top, gap_down = gap_events(d)
@@ -137,7 +138,7 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None, force=0.0):
     stop.terminal = True
 
     def at_rest(t, xx):
-        return math.cos(w * t + tau0) + force - xx - k * max(xx - d, 0.0)
+        return math.cos(w * t + tau0) + fo(t) - xx - k * max(xx - d, 0.0)
 
     t, y = 0.0, [x, v]
     contacts, sticks = [], []

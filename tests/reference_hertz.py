@@ -111,14 +111,15 @@ def reference_advance_hertz(p, law, tau0, x, v, duration, force=0.0, friction=No
     f_kin = friction.kinetic if friction is not None else 0.0
     f_sta = friction.static if friction is not None else 0.0
     sgn = [0.0]
+    fo = force if callable(force) else (lambda t, f=float(force): f)
 
     def free(t, y):
-        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+        return [y[1], math.cos(w * t + tau0) + fo(t) - 2.0 * zeta * y[1] - y[0]
                 - sgn[0] * f_kin]
 
     def touch(t, y):
         pen = max(y[0] - d, 0.0)
-        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+        return [y[1], math.cos(w * t + tau0) + fo(t) - 2.0 * zeta * y[1] - y[0]
                 - sgn[0] * f_kin - k * pen ** 1.5 * (1.0 + 1.5 * a * y[1])]
 
     gap_up, top, gap_down = gap_events(d)
@@ -136,7 +137,7 @@ def reference_advance_hertz(p, law, tau0, x, v, duration, force=0.0, friction=No
     stop.terminal = True
 
     def at_rest(t, xx):
-        return math.cos(w * t + tau0) + force - xx - k * max(xx - d, 0.0) ** 1.5
+        return math.cos(w * t + tau0) + fo(t) - xx - k * max(xx - d, 0.0) ** 1.5
 
     t, y = 0.0, [x, v]
     contacts, sticks = [], []

@@ -88,8 +88,7 @@ def test_hertz_and_rigid_values():
     (dict(friction_static=0.005), "friction_static="),
     (dict(contact="rigid"), "friction="),
     (dict(fidelity="zdm2"), "fidelity="),
-    (dict(actuator_bandwidth=2.0), "actuator_bandwidth="),
-    (dict(actuator_latency=0.1), "actuator_latency="),
+    (dict(actuator_bandwidth=2.0, fidelity="zdm2"), "actuator_bandwidth="),
 ])
 def test_bad_contact_parameters_name_the_parameter(bad, name):
     with pytest.raises(ParameterError, match=name):
@@ -129,6 +128,38 @@ def _core_pulse_loop(s, n, gains, on, delay, skip):
     return np.array(out)
 
 
+#: the realtime scenes' controller: the rigid design (c2 = -1.0) from sample 5, sample 8
+#: and 9 unanswered (deadline misses), the correction scheduled 3 after its sample
+DELAY, ON, SKIP = 3.0, 5, {8, 9}
+
+
+def _realtime_scene(kind: str, n: int, **values):
+    """A realtime scene of ``n`` periods on the stop ``kind`` (time_scale 1000, stream
+    every 0.5) under the controller above, in process (test_plant_loops.run_realtime):
+    (settings, gains, recorder)."""
+    from test_plant_loops import Clock, Recorder, key, run_realtime
+
+    p = OscillatorParams(delta_d=-0.05)
+    gains = Gains(degenerate_c1(p, -1.0), -1.0)
+    s = settings_from_values({"delta_d": -0.05, "mode": "realtime", "time_scale": 1000.0,
+                              "actuation_delay": DELAY, "max_periods": n, "state_period": 0.5,
+                              "x0": p.x_ref + 0.05, **values, **_stop(kind, 1e3)})
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        k = round(ev.t / p.period)
+        if k in SKIP:
+            return
+        clock.now += 1e-4
+        dvc = gains.c1 * (ev.x - p.x_ref) + gains.c2 * (ev.v - p.v_ref)
+        loop.answer(key(ev), dvc if k >= ON else 0.0)
+
+    run_realtime(s, n, answer, clock, sink)
+    assert [m[0] for m in sink.misses] == sorted(SKIP)
+    assert sum(e.kind == "state" for e in sink.events) >= n * 15
+    return s, gains, sink
+
+
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize("kind, n, w, jitter", [("friction", 40, 0.6, 0.0),
                                                 ("plain", 30, 0.0, 0.5),
@@ -139,32 +170,43 @@ def test_a_realtime_pulse_scene_is_the_core_loop_sample_for_sample(kind, n, w, j
     core's loop bit for bit (the engine's pieces are the stop's flow, the pulse the same
     shift of the stop as of the wall), and the stop's contacts are published as
     impacts."""
-    from test_plant_loops import Clock, Recorder, key, run_realtime
-
-    delay, on, c2 = 3.0, 5, -1.0
-    p = OscillatorParams(delta_d=-0.05)
-    gains = Gains(degenerate_c1(p, c2), c2)
-    s = settings_from_values({"delta_d": -0.05, "mode": "realtime", "time_scale": 1000.0,
-                              "actuation_delay": delay, "pulse_width": w, "max_periods": n,
-                              "jitter": jitter,
-                              "state_period": 0.5, "x0": p.x_ref + 0.05, **_stop(kind, 1e3)})
-    skip = {8, 9}
-    clock, sink = Clock(), Recorder()
-
-    def answer(loop, ev):
-        k = round(ev.t / p.period)
-        if k in skip:
-            return
-        clock.now += 1e-4
-        dvc = gains.c1 * (ev.x - p.x_ref) + gains.c2 * (ev.v - p.v_ref)
-        loop.answer(key(ev), dvc if k >= on else 0.0)
-
-    run_realtime(s, n, answer, clock, sink)
+    s, gains, sink = _realtime_scene(kind, n, pulse_width=w, jitter=jitter)
     got = np.array([(e.x, e.v) for e in sink.samples()])
-    np.testing.assert_array_equal(got, _core_pulse_loop(s, n, gains, on, delay, skip))
-    assert [m[0] for m in sink.misses] == sorted(skip)
+    np.testing.assert_array_equal(got, _core_pulse_loop(s, n, gains, ON, DELAY, SKIP))
     assert sum(e.kind == "impact" for e in sink.events) >= n // 2
-    assert sum(e.kind == "state" for e in sink.events) >= n * 15
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("kind, n, w, bandwidth, latency", [("friction", 30, 0.6, 1.0, 0.2),
+                                                            ("plain", 20, 0.0, 3.0, 0.0),
+                                                            ("hertz", 10, 0.6, 2.0, 0.1)])
+def test_a_realtime_scene_through_the_actuator_is_the_core_loop_sample_for_sample(
+        kind, n, w, bandwidth, latency):
+    """Realtime through the first-order actuator (bandwidth x omega, latency; a pulse or,
+    w = 0, an impulse command) on a compliant stop, two deadline misses: the Pi2 samples
+    equal the core's loop (ContactPlant.actuated_step, the force carried from period to
+    period) bit for bit, and the stop's contacts are published as impacts
+    (docs/theory_contact.md §21)."""
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+    from grazing_control.plant.settings import initial_deviation
+
+    p = OscillatorParams(delta_d=-0.05)
+    s, gains, sink = _realtime_scene(kind, n, pulse_width=w,
+                                     actuator_bandwidth=bandwidth * p.omega,
+                                     actuator_latency=latency)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    dx, dv = initial_deviation(p, s.x0, s.v0)
+    f, core, contacts = 0.0, [], 0
+    for k in range(n):
+        core.append((p.x_ref + dx, p.v_ref + dv))
+        dvc = gains.c1 * dx + gains.c2 * dv if k >= ON and k not in SKIP else 0.0
+        dx, dv, f, imps = s.contact.actuated_step(p, dx, dv, f, dvc,
+                                                  pulse_start(p.period, DELAY, w), w,
+                                                  s.actuator)
+        contacts += len(imps)
+    np.testing.assert_array_equal(got, np.array(core))
+    impacts = sum(e.kind == "impact" for e in sink.events)
+    assert impacts >= n // 2 and impacts == contacts
 
 
 @pytest.mark.parametrize("kind", ["friction", "hertz"])

@@ -41,6 +41,7 @@ from .params import OscillatorParams, ParameterError, _check_real
 __all__ = [
     "KelvinVoigt",
     "Coulomb",
+    "LagForce",
     "Contact",
     "CompliantSegment",
     "kelvin_voigt_restitution",
@@ -181,6 +182,29 @@ class Coulomb:
         object.__setattr__(self, "static", s)
 
 
+class LagForce(NamedTuple):
+    """An external force on the mass, F(t) = F_inf + C e^{-rate t} (t from the segment's
+    start): the first-order actuator's force on a piece where its command is constant
+    (grazing_control.dynamics.simulation.actuator, docs/theory_pulse.md section 5;
+    rate = 1 / tau_a, C = 0 for a constant force)."""
+
+    f_inf: float
+    c: float = 0.0
+    rate: float = 0.0
+
+    def at(self, t: float) -> float:
+        """F(t)."""
+        return self.f_inf + (self.c * math.exp(-self.rate * t) if self.c else 0.0)
+
+    def transient(self, t: float) -> float:
+        """C e^{-rate t}: the decaying part at time t."""
+        return self.c * math.exp(-self.rate * t) if self.c else 0.0
+
+
+def _force_at(force: "LagForce | None", t: float) -> float:
+    return 0.0 if force is None else force.at(t)
+
+
 class CompliantSegment(NamedTuple):
     """Result of :func:`advance_compliant`: end state (x, v), the contacts, and the
     sticks of the friction as (start, end) times (end inf: stuck at the segment's end);
@@ -223,13 +247,20 @@ class _Region:
     delta = A cos(tau - phi_c) - d / w2 + Re(C e^{lambda h}), lambda = -beta + i Omega,
     |lambda| = W = sqrt(w2); every derivative of the homogeneous part is bounded by
     |C| W^n e^{-beta h} and of the particular part by A omega^n (docs/theory_contact.md).
+
+    An external ``force`` F_inf + C_0 e^{-rate t} (:class:`LagForce`, t from the segment's
+    start; the region starts at ``t0``) adds F_inf / w2 to the offset and the particular
+    solution K e^{-rate h}, K = C_0 e^{-rate t0} / (w2 - 2 beta rate + rate^2) (the
+    denominator is (rate - beta)^2 + Omega^2 > 0 in an underdamped region), whose n-th
+    derivative is bounded by |K| rate^n e^{-rate h} (docs/theory_contact.md §21).
     """
 
     __slots__ = ("beta", "big_w", "big_om", "omega", "amp", "lag", "offset", "tau0",
-                 "c1", "c2", "cabs")
+                 "c1", "c2", "cabs", "kk", "rate")
 
     def __init__(self, w2: float, beta: float, p: OscillatorParams, tau0: float,
-                 delta0: float, v0: float, push: float = 0.0):
+                 delta0: float, v0: float, push: float = 0.0,
+                 force: "LagForce | None" = None, t0: float = 0.0):
         w = p.omega
         self.beta = beta
         self.big_w = math.sqrt(w2)
@@ -238,6 +269,11 @@ class _Region:
         self.amp = 1.0 / math.hypot(w2 - w * w, 2.0 * beta * w)
         self.lag = math.atan2(2.0 * beta * w, w2 - w * w)
         self.offset = -(p.d + push) / w2
+        self.kk, self.rate = 0.0, 0.0
+        if force is not None:
+            self.offset = -(p.d + push - force.f_inf) / w2
+            self.rate = force.rate
+            self.kk = force.transient(t0) / (w2 - 2.0 * beta * self.rate + self.rate ** 2)
         self.tau0 = tau0
         pd, pv = self._particular(0.0)
         self.c1 = delta0 - pd
@@ -246,8 +282,11 @@ class _Region:
 
     def _particular(self, h: float):
         psi = self.tau0 + self.omega * h - self.lag
-        return (self.amp * math.cos(psi) + self.offset,
-                -self.amp * self.omega * math.sin(psi))
+        d, v = self.amp * math.cos(psi) + self.offset, -self.amp * self.omega * math.sin(psi)
+        if self.kk:
+            e = self.kk * math.exp(-self.rate * h)
+            d, v = d + e, v - self.rate * e
+        return d, v
 
     def __call__(self, h: float):
         """(delta, delta', delta'') at time h."""
@@ -262,6 +301,9 @@ class _Region:
         v = -self.amp * self.omega * sp + wv
         # the equation itself gives delta'' (no cancellation beyond that of its terms)
         acc = -self.amp * self.omega * self.omega * cp - 2.0 * b * wv - self.big_w ** 2 * w
+        if self.kk:   # the actuator's transient K e^{-rate h}
+            ek = self.kk * math.exp(-self.rate * h)
+            d, v, acc = d + ek, v - self.rate * ek, acc + self.rate * self.rate * ek
         return d, v, acc
 
     def transition(self, h: float):
@@ -274,7 +316,10 @@ class _Region:
 
     def bound(self, n: int, h: float) -> float:
         """max |delta^(n)| on [h, inf), n >= 1."""
-        return self.cabs * self.big_w ** n * math.exp(-self.beta * h) + self.amp * self.omega ** n
+        out = self.cabs * self.big_w ** n * math.exp(-self.beta * h) + self.amp * self.omega ** n
+        if self.kk:
+            out += abs(self.kk) * self.rate ** n * math.exp(-self.rate * h)
+        return out
 
 
 def _first_crossing(event, bound2, horizon, sign, scale):
@@ -373,23 +418,60 @@ def _release_time(tau: float, omega: float, lo: float, hi: float) -> float:
 
 
 def _stuck(tau: float, tau0: float, omega: float, t: float, duration: float, rest: float,
-           f_sta: float, at_rest):
+           f_sta: float, at_rest, force: "LagForce | None" = None):
     """A stick from time t (phase tau) with x fixed: the force at rest is cos tau - rest
-    (``rest`` = x + the stop's force at rest, Eq. C4) until it leaves [-F_s, F_s]
-    (:func:`_release_time`). Returns the stick (start, end; end inf past ``duration``),
+    (``rest`` = x + the stop's force at rest, Eq. C4; plus an external ``force``) until it
+    leaves [-F_s, F_s] (:func:`_release_time`; with the actuator's decaying transient
+    :func:`_forced_release`). Returns the stick (start, end; end inf past ``duration``),
     the time it ends (at most ``duration``) and the direction of the slip after it
-    (along G = ``at_rest(phase)``; None at ``duration``)."""
-    end = t + min(_release_time(tau, omega, rest - f_sta, rest + f_sta), duration - t)
+    (along G = ``at_rest(time)``; None at ``duration``)."""
+    if force is not None:
+        rest -= force.f_inf
+    if force is None or not force.transient(t):
+        release = _release_time(tau, omega, rest - f_sta, rest + f_sta)
+    else:
+        release = _forced_release(tau, omega, force.transient(t), force.rate, rest, f_sta,
+                                  duration - t)
+    end = t + min(release, duration - t)
     if end >= duration:
         return (t, math.inf), end, None
-    g = at_rest((tau0 + omega * end) % TWO_PI)
+    g = at_rest(end)
     return (t, end), end, math.copysign(1.0, g) if g != 0.0 else 1.0  # slips along G
+
+
+def _forced_release(tau: float, omega: float, c: float, rate: float, rest: float,
+                    f_sta: float, horizon: float) -> float:
+    """Time until G(h) = cos(tau + omega h) + c e^{-rate h} - rest leaves [-F_s, F_s]
+    (inf if not within ``horizon``): the end of a stick under the actuator's decaying
+    force, no closed form; the first crossing of G - F_s upwards or of G + F_s downwards,
+    each certified by :func:`_first_crossing` with |G''| <= omega^2 + |c| rate^2
+    e^{-rate h} (docs/theory_contact.md §21)."""
+    def event(level):
+        def f(h):
+            e = c * math.exp(-rate * h)
+            return (math.cos(tau + omega * h) + e - rest - level,
+                    -omega * math.sin(tau + omega * h) - rate * e)
+        return f
+
+    def bound2(h):
+        return omega * omega + abs(c) * rate * rate * math.exp(-rate * h)
+
+    scale = 1.0 + abs(rest) + f_sta + abs(c)
+    hits = []
+    for level, sign in ((f_sta, 1.0), (-f_sta, -1.0)):
+        g0, dg0 = event(level)(0.0)
+        if sign * g0 >= 0.0 and sign * dg0 > 0.0:
+            return 0.0          # on the edge of the stick and leaving it
+        h = _first_crossing(event(level), bound2, horizon, sign, scale)
+        if h is not None:
+            hits.append(h)
+    return min(hits) if hits else math.inf
 
 
 def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
                       duration: float, *, friction: "Coulomb | None" = None,
                       max_contacts: int = 10000, monodromy: bool = False,
-                      times=None) -> CompliantSegment:
+                      times=None, force: LagForce | None = None) -> CompliantSegment:
     """Exact flow with a Kelvin-Voigt stop (and Coulomb friction) for a fixed time.
 
     Physical state (x, v) in and out. The regions (docs/theory_contact.md, "The
@@ -410,11 +492,20 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
     which :class:`ImpactCapError` is raised (docs/theory_contact.md, "Bounded switching").
     ``times`` (sorted, in [0, duration]): the states there as the segment's ``states``
     (:class:`_Dense`).
+
+    ``force``: an external force F_inf + C e^{-rate t} on the mass (:class:`LagForce`,
+    the first-order actuator's, docs/theory_contact.md §21): in every region a constant
+    and an exponential particular solution (:class:`_Region`), the entry from below by the
+    certified search on the region's gap (:func:`_first_crossing`, the bound with the
+    exponential's), the force in G, and a stick released by the certified search of
+    :func:`_forced_release`.
     """
     _check_law(p, law)
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
             raise NonFiniteStateError(f"{name}={value!r} must be finite")
+    if monodromy and force is not None:
+        raise ValueError("monodromy=True is invalid with an external force")
     if monodromy and friction is not None and friction.static != 0.0:
         raise ValueError("monodromy=True is invalid with friction: only the frictionless "
                          "stop's Jacobian is built (docs/theory_contact.md, C8)")
@@ -440,8 +531,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
     forced = None
     dense = _Dense(times if times is not None else (), p.d)
 
-    def at_rest_force(tau, delta):
-        return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0)
+    def at_rest_force(tau, delta, t):
+        return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0) + _force_at(force, t)
 
     def slip_sign(tau, delta, vel):
         """Direction of the friction's slip; 0 for a stick (x' = 0, |G| <= F_s)."""
@@ -449,7 +540,7 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             return 0.0 if vel == 0.0 else math.copysign(1.0, vel)
         if vel != 0.0:
             return math.copysign(1.0, vel)
-        g = at_rest_force(tau, delta)
+        g = at_rest_force(tau, delta, t)
         return 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
 
     while t < duration:
@@ -463,9 +554,9 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         forced = None
         if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s
             t_stick = t
-            stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
-                                      p.d + delta + k * max(delta, 0.0), f_sta,
-                                      lambda u: at_rest_force(u, delta))
+            stick, t, forced = _stuck(
+                tau, tau0, p.omega, t, duration, p.d + delta + k * max(delta, 0.0), f_sta,
+                lambda u: at_rest_force((tau0 + p.omega * u) % TWO_PI, delta, u), force)
             dense.piece(t_stick, t, lambda u: (delta, 0.0))
             sticks.append(stick)
             tau = (tau0 + p.omega * t) % TWO_PI
@@ -475,16 +566,16 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             continue
         push = s * f_kin
         geometry = free if region != "contact" else touch
-        reg = _Region(*geometry, p, tau, delta, vel, push)
+        reg = _Region(*geometry, p, tau, delta, vel, push, force, t)
         h_stop = None
         if friction is not None and s != 0.0:
             h_stop = _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
                                      lambda h: reg.bound(3, h), remaining, 1.0,
-                                     reg.cabs + reg.amp + abs(vel) + 1.0)
+                                     reg.cabs + reg.amp + abs(reg.kk) + abs(vel) + 1.0)
         horizon = h_stop if h_stop is not None else remaining
         kind, h = None, None
         if region == "below":
-            if friction is None:
+            if friction is None and force is None:
                 xp, vp = particular(p, tau)
                 dx, dv = (delta + p.d) - xp, vel - vp
                 if delta == 0.0:  # on the stop: its deviation without cancellation (impact.py)
@@ -492,15 +583,15 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                 h = _next_impact(p, tau, dx, dv, horizon)
             else:
                 h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
-                                    1.0, reg.cabs + reg.amp + abs(reg.offset))
+                                    1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
             kind = "entry" if h is not None else None
         elif region == "contact":
-            sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
+            sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
             h = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon,
                                 -1.0, sc)
             kind = "exit" if h is not None else None
         else:
-            sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
+            sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
             kind, h = _above_switch(reg, _force_event(reg, k, c), _force_bound(reg, k, c),
                                     horizon, sc)
         if kind is None:
@@ -528,7 +619,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         if kind == "entry":
             if region == "below":
                 delta = 0.0
-                if vel <= 8.0 * _EPS * scale_x and math.cos(tau) - p.d - push <= 0.0:
+                if (vel <= 8.0 * _EPS * scale_x
+                        and math.cos(tau) - p.d - push + _force_at(force, t) <= 0.0):
                     vel = 0.0  # a tangency below rounding, pulled away: no contact (impact.py)
                     continue
                 vel = max(vel, 0.0)
@@ -563,7 +655,7 @@ def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale:
     h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale)
     h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
                             h_force if h_force is not None else horizon, -1.0,
-                            reg.cabs + reg.amp + abs(reg.offset))
+                            reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
     if h_gap is not None and (h_force is None or h_gap < h_force):
         return "below", h_gap
     if h_force is not None:

@@ -19,8 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .contact import (CompliantSegment, Contact, Coulomb, _above_switch, _Dense,
-                      _first_crossing, _Region, _stuck)
+from .contact import (CompliantSegment, Contact, Coulomb, LagForce, _above_switch, _Dense,
+                      _first_crossing, _force_at, _Region, _stuck)
 from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
 from .params import OscillatorParams, ParameterError, _check_real
@@ -66,11 +66,13 @@ class HuntCrossley:
 
 
 def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t_end: float,
-             rtol: float, push: float = 0.0, slip: float = 0.0, dense=None):
+             rtol: float, push: float = 0.0, slip: float = 0.0, dense=None,
+             force: LagForce | None = None):
     """DOP853 through one contact from time t (``push`` = s F_f, the friction of a slip in
-    direction ``slip`` = s, Eq. C4; slip 0: no friction); returns (t_exit or None, state, what ended it: 'leave' (the
-    factor 1 + 1.5 alpha delta' reaches 0), 'back' (delta = 0) or 'stop' (x' = 0 in a
-    slip))."""
+    direction ``slip`` = s, Eq. C4; slip 0: no friction; ``force``: an external force
+    F(s) in the right-hand side); returns (t_exit or None, state, what ended it: 'leave'
+    (the factor 1 + 1.5 alpha delta' reaches 0), 'back' (delta = 0) or 'stop' (x' = 0 in
+    a slip))."""
     # imported here: a node that never meets a Hertz contact imports no solver
     # (tests/test_node_common.py)
     from scipy.integrate import solve_ivp
@@ -80,6 +82,13 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
         delta = u[0]
         f = k * max(delta, 0.0) ** 1.5 * (1.0 + 1.5 * a * u[1])
         return [u[1], math.cos(w * s + tau0) - 2.0 * zeta * u[1] - (delta + d) - f - push]
+
+    if force is not None:
+        plain = rhs
+
+        def rhs(s, u):   # noqa: F811 - the actuator's force on top of the stop's equation
+            du, acc = plain(s, u)
+            return [du, acc + force.at(s)]
 
     def leave(s, u):
         return 1.0 + 1.5 * a * u[1]
@@ -112,7 +121,8 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
 
 def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float, v: float,
                   duration: float, *, rtol: float = RTOL, friction: Coulomb | None = None,
-                  max_contacts: int = 10000, times=None) -> CompliantSegment:
+                  max_contacts: int = 10000, times=None,
+                  force: LagForce | None = None) -> CompliantSegment:
     """Flow with a Hertz / Hunt-Crossley stop (and Coulomb friction) for a fixed time
     (physical x, v).
 
@@ -129,7 +139,11 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
     2 (3 ``max_contacts`` + 3) region changes, slips' ends and sticks
     (:class:`ImpactCapError` beyond). ``times``: the states there as the segment's
     ``states`` (dense output, :class:`~grazing_control.oscillator.contact._Dense`; in
-    contact DOP853's interpolant).
+    contact DOP853's interpolant). ``force``: an external force F_inf + C e^{-rate t}
+    (:class:`~grazing_control.oscillator.contact.LagForce`, the first-order actuator's):
+    outside the contact the closed form's constant and exponential particular solutions,
+    in contact a term of DOP853's right-hand side, in G, and a stick released by the
+    certified search (docs/theory_contact.md §21).
     """
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
@@ -152,14 +166,15 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
     forced = None
     dense = _Dense(times if times is not None else (), p.d)
 
-    def at_rest_force(tau, delta):
-        return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0) ** 1.5
+    def at_rest_force(tau, delta, t):
+        return (math.cos(tau) - (delta + p.d) - k * max(delta, 0.0) ** 1.5
+                + _force_at(force, t))
 
     def slip_sign(tau, delta, vel):
         """Direction of the friction's slip; 0 for a stick (x' = 0, |G| <= F_s)."""
         if vel != 0.0 or friction is None:
             return math.copysign(1.0, vel)
-        g = at_rest_force(tau, delta)
+        g = at_rest_force(tau, delta, t)
         return 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
 
     while t < duration:
@@ -173,9 +188,10 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
         forced = None
         if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s (C4)
             t_stick = t
-            stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
-                                      p.d + delta + k * max(delta, 0.0) ** 1.5, f_sta,
-                                      lambda u: at_rest_force(u, delta))
+            stick, t, forced = _stuck(
+                tau, tau0, p.omega, t, duration, p.d + delta + k * max(delta, 0.0) ** 1.5,
+                f_sta, lambda u: at_rest_force((tau0 + p.omega * u) % TWO_PI, delta, u),
+                force)
             dense.piece(t_stick, t, lambda u: (delta, 0.0))
             sticks.append(stick)
             tau = (tau0 + p.omega * t) % TWO_PI
@@ -187,7 +203,7 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
         if region == "contact":
             te, (delta, vel), why = _contact(p, law, tau0, t, (delta, vel), duration, rtol,
                                              push, s if friction is not None else 0.0,
-                                             dense if times is not None else None)
+                                             dense if times is not None else None, force)
             if te is None:
                 t = duration
                 break
@@ -203,7 +219,7 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
             entry = None
             region = "above" if delta > 0.0 else "below"
             continue
-        reg = _Region(1.0, p.zeta, p, tau, delta, vel, push)
+        reg = _Region(1.0, p.zeta, p, tau, delta, vel, push, force, t)
         h_stop = None
         if friction is not None:
             h_stop = _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
@@ -212,13 +228,13 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
         horizon = h_stop if h_stop is not None else remaining
         kind, h = None, None
         if region == "below":
-            if friction is None:
+            if friction is None and force is None:
                 xp, vp = particular(p, tau)
                 dx = _on_wall_at_rest(p, tau)[0] if delta == 0.0 else (delta + p.d) - xp
                 h = _next_impact(p, tau, dx, vel - vp, horizon)
             else:
                 h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
-                                    1.0, reg.cabs + reg.amp + abs(reg.offset))
+                                    1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
             kind = "entry" if h is not None else None
         else:   # above: delta > 0 and 1 + 1.5 alpha delta' <= 0
             kind, h = _above_switch(

@@ -18,7 +18,9 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force
-from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, advance_compliant
+from grazing_control.dynamics.simulation.actuator import command_period
+from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, LagForce,
+                                                advance_compliant)
 from grazing_control.oscillator.flow import to_deviation, to_physical
 from grazing_control.oscillator.hertz import HuntCrossley, advance_hertz
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -41,6 +43,18 @@ class ContactImpact(NamedTuple):
     v_plus: float
 
 
+class ContactLagFlow(NamedTuple):
+    """The stop's flow under the actuator's force F_inf + C e^{-h / tau_a} for a
+    duration (:meth:`ContactPlant.lag_flow`, the fields the engine reads of
+    :class:`~grazing_control.dynamics.simulation.actuator.LagFlow`): the deviation and the
+    force at the end, and the contacts as impacts."""
+
+    dx: float
+    dv: float
+    force: float
+    impacts: tuple
+
+
 class ContactStep(NamedTuple):
     """One period: the deviation at the next sample, and the contacts."""
 
@@ -58,18 +72,26 @@ class ContactPlant:
     friction: Coulomb | None = None
 
     def advance(self, p: OscillatorParams, tau: float, dx: float, dv: float,
-                duration: float) -> ContactStep:
-        """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``."""
+                duration: float, force: LagForce | None = None) -> ContactStep:
+        """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``
+        (``force``: an external force on the mass, the actuator's)."""
+        return self._flow(p, tau, dx, dv, duration, force, None)[0]
+
+    def _flow(self, p, tau, dx, dv, duration, force, times):
+        """(ContactStep, the stop's segment) of the flow, with the dense output at
+        ``times`` (None: none)."""
         x, v = to_physical(p, tau, dx, dv)
         if isinstance(self.law, HuntCrossley):
-            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction)
+            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
+                                force=force, times=times)
         else:
-            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction)
+            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
+                                    force=force, times=times)
         tau1 = tau + p.omega * duration
         ex, ev = to_deviation(p, tau1, seg.x, seg.v)
         impacts = tuple(ContactImpact(c.dt, c.phase, c.v_minus, c.v_plus)
                         for c in seg.contacts)
-        return ContactStep(ex, ev, impacts)
+        return ContactStep(ex, ev, impacts), seg
 
     def period_step(self, p: OscillatorParams, dx: float, dv: float,
                     dv_correction: float = 0.0) -> ContactStep:
@@ -99,8 +121,47 @@ class ContactPlant:
             dv += kick
         return ContactStep(dx, dv, tuple(impacts))
 
+    def advance_with_states(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                            duration: float, rel):
+        """:meth:`advance` and the physical (x, v) at the times ``rel`` (increasing, in
+        (0, duration]) in the same integration: the flow's dense output as it passes
+        (:class:`~grazing_control.oscillator.contact._Dense`, DOP853's interpolant in a
+        Hertz contact), so a piece and its published states cost one integration, not
+        two (the end state is :meth:`advance`'s bit for bit: the dense output never
+        alters the steps). Returns (ContactStep, array (len(rel), 2))."""
+        step, seg = self._flow(p, tau, dx, dv, duration, None, list(rel) if len(rel) else None)
+        return step, np.array(seg.states or [], dtype=float).reshape(len(rel), 2)
+
+    def lag_flow(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                 duration: float, f_inf: float, c: float, tau_a: float) -> ContactLagFlow:
+        """The stop's flow for ``duration`` under the first-order actuator's force
+        F_inf + C e^{-h / tau_a} (tau_a = 0 only with C = 0): what
+        :func:`~grazing_control.dynamics.simulation.actuator.lag_flow` is for the wall
+        (docs/theory_contact.md §21)."""
+        force = _lag_force(f_inf, c, tau_a)
+        seg = self.advance(p, tau, dx, dv, duration, force)
+        return ContactLagFlow(seg.dx, seg.dv, force.at(duration), seg.impacts)
+
+    def actuated_step(self, p: OscillatorParams, dx: float, dv: float, force: float,
+                      dv_correction: float, start: float, width: float, actuator,
+                      force_limit: float = math.inf):
+        """One period from the Pi2 deviation (dx, dv) with the actuator's force ``force``
+        there and the correction commanded on [start, start + width] (width 0: an
+        impulse) through ``actuator``: the engine's pieces
+        (:func:`~grazing_control.dynamics.simulation.actuator.command_period`) with this
+        stop's :meth:`lag_flow`. Returns (dx, dv, force at the next section, impacts:
+        times from the sample)."""
+        return command_period(p, dx, dv, force, dv_correction, start, width, actuator,
+                              force_limit, lambda *a: self.lag_flow(p, *a))
+
+    def lag_states(self, p: OscillatorParams, tau: float, dx: float, dv: float,
+                   f_inf: float, c: float, tau_a: float, rel) -> np.ndarray:
+        """Physical (x, v) at the times ``rel`` of a :meth:`lag_flow` piece (dense output,
+        as :meth:`states_between`)."""
+        return self.states_between(p, tau, dx, dv, rel, _lag_force(f_inf, c, tau_a))
+
     def states_between(self, p: OscillatorParams, tau: float, dx: float, dv: float,
-                       rel) -> np.ndarray:
+                       rel, force: LagForce | None = None) -> np.ndarray:
         """Physical (x, v) at the times ``rel`` (increasing, in (0, the segment's length]
         from its start at phase ``tau`` with deviation (dx, dv)): the stop's flow from the
         start once, each time evaluated on the piece that holds it (the dense output of
@@ -109,15 +170,14 @@ class ContactPlant:
         trajectory: the period itself is :meth:`period_step` in one call."""
         if len(rel) == 0:
             return np.empty((0, 2))
-        x, v = to_physical(p, tau, dx, dv)
-        duration = float(rel[-1])
-        if isinstance(self.law, HuntCrossley):
-            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
-                                times=rel)
-        else:
-            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
-                                    times=rel)
+        seg = self._flow(p, tau, dx, dv, float(rel[-1]), force, rel)[1]
         return np.array(seg.states, dtype=float).reshape(len(rel), 2)
+
+
+def _lag_force(f_inf: float, c: float, tau_a: float) -> LagForce:
+    if tau_a == 0.0 and c != 0.0:
+        raise ValueError("a force transient needs tau_a > 0")
+    return LagForce(f_inf, c, 1.0 / tau_a if tau_a > 0.0 else 0.0)
 
 
 def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | None:

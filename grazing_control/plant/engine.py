@@ -20,7 +20,10 @@ With a first-order actuator (``actuator_bandwidth`` or ``actuator_latency`` > 0,
 29 section 4) the force on the mass is a third state carried from sample to sample
 (:attr:`Engine.force`): each period is the exact flow under a piecewise exponential
 force, :func:`grazing_control.dynamics.simulation.actuator.lag_flow` per piece between the
-command's switches (:meth:`Engine._lag_period`, docs/theory_pulse.md section 5).
+command's switches (:meth:`Engine._lag_period`, docs/theory_pulse.md section 5); with a
+compliant stop the stop's flow under that force
+(:meth:`~grazing_control.plant.contact_plant.ContactPlant.lag_flow`, docs/theory_contact.md
+§21).
 
 No ROS: sim_node publishes the :class:`Event` values this returns.
 """
@@ -33,7 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force, pulse_start
-from grazing_control.dynamics.simulation.actuator import lag_flow, lag_states
+from grazing_control.dynamics.simulation.actuator import command_period, lag_flow, lag_states
 from grazing_control.dynamics.simulation.fidelity import period_step
 from grazing_control.dynamics.simulation.simulate import states_between
 from grazing_control.oscillator import kernel
@@ -99,6 +102,7 @@ class Engine:
         self._drawn = None
         self.force = 0.0          # the actuator's force at the current sample
         self._force_end = 0.0     # ... at the end of the period integrated
+        self._head = None         # begin_head's flow to the actuation start
         self.reset()
 
     # ---------------------------------------------------------------- samples
@@ -116,6 +120,7 @@ class Engine:
         self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
         self.impacts = 0
         self.seg = None
+        self._head = None
         self.force = self._force_end = 0.0
         return self._sample()
 
@@ -184,17 +189,38 @@ class Engine:
         t0 = self.t
         if delay > 0.0:
             start = self.actuation_start(delay)
-            head = self.advance(p, p.tau2, self.dx, self.dv, start)
-            events = self._events(Segment(t0, p.tau2, self.dx, self.dv, t0 + start,
-                                          head.dx, head.dv), head.impacts)
-            return events + self._actuate(head, dv_correction, start)
+            events = self.begin_head(delay)
+            return events + self._actuate(self._head[4], dv_correction, start)
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        states = None
         if self.settings.contact is not None:   # a compliant stop (plant.contact_plant)
-            seg = self.settings.contact.period_step(p, self.dx, self.dv, dv_correction)
+            # ContactPlant.period_step's flow, its states in the same integration
+            seg, states = self._free_piece(p.tau2, self.dx, self.dv + dv_correction,
+                                           p.period, t0, t1)
         else:
             seg = period_step(p, self.dx, self.dv, dv_correction, self.settings.fidelity)
-        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         self.seg = Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
-        return self._events(self.seg, seg.impacts)
+        return self._events(self.seg, seg.impacts, states)
+
+    def begin_head(self, delay: float) -> list:
+        """Sample k's period up to the start of its correction ``delay`` after it
+        (scheduled realtime: the correction is not known yet, and what follows its start
+        is integrated by :meth:`actuate` once it is). The head is kept for
+        :meth:`actuate` (the flow is never integrated twice: with a Hertz stop a period
+        costs ms, docs/rig_scene.md); returns the events of (t_k, t_k + start]. Through
+        the first-order actuator the whole uncorrected period (:meth:`actuate`
+        re-integrates it with the command)."""
+        if self.lagged:
+            return self.begin_period(0.0)
+        p = self.p
+        t0, start = self.t, self.actuation_start(delay)
+        head, states = self._free_piece(p.tau2, self.dx, self.dv, start, t0, t0 + start)
+        self._head = (self.k, start, self.dx, self.dv, head)
+        t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
+        # the period runs to t1; its end is known once actuate() has run
+        self.seg = Segment(t0, p.tau2, self.dx, self.dv, t1, math.nan, math.nan)
+        return self._events(Segment(t0, p.tau2, self.dx, self.dv, t0 + start, head.dx,
+                                    head.dv), head.impacts, states)
 
     def actuation_start(self, delay: float) -> float:
         """When the correction of a sample acting ``delay`` after it starts to act: at
@@ -215,7 +241,11 @@ class Engine:
         if self.lagged:
             t = self.t + start
             return [ev for ev in self._lag_period(dv_correction, start) if ev.t >= t]
-        head = self.advance(self.p, self.p.tau2, self.dx, self.dv, start)
+        kept = self._head
+        if kept is not None and kept[:4] == (self.k, start, self.dx, self.dv):
+            head = kept[4]                  # begin_head's flow to the start
+        else:
+            head = self.advance(self.p, self.p.tau2, self.dx, self.dv, start)
         return self._actuate(head, dv_correction, start)
 
     @property
@@ -232,34 +262,30 @@ class Engine:
         :func:`lag_flow`'s. The force at the next sample is kept for :meth:`end_period`.
         Returns the period's events (state, Pi1, impacts) in time order."""
         p, s = self.p, self.settings
-        tau_a, w = s.actuator.time_constant, s.pulse_width
-        on = start + s.actuator.latency
-        if w > 0.0:
-            switches = ((on, pulse_force(dv_correction, w, s.force_limit or math.inf), 0.0),
-                        (on + w, 0.0, 0.0))
-        else:
-            switches = ((on, 0.0, dv_correction),)
         t0 = self.t
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
-        dx, dv, f, u, h = self.dx, self.dv, self.force, 0.0, 0.0
+        contact = getattr(s, "contact", None)
         events = []
-        for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
-            if end > h:
-                tau = (p.tau2 + p.omega * h) % TWO_PI
-                flow = lag_flow(p, tau, dx, dv, end - h, u, f - u if tau_a > 0.0 else 0.0,
-                                tau_a)
-                te = t1 if end == p.period else t0 + end
-                events += self._events(Segment(t0 + h, tau, dx, dv, te, flow.dx, flow.dv),
-                                       flow.impacts,
-                                       lambda rel, flow=flow: lag_states(p, flow, rel))
-                dx, dv, f = flow.dx, flow.dv, flow.force
-            if impulse:                 # an impulse command: through the lag, or a jump
-                if tau_a > 0.0:
-                    f += impulse / tau_a
-                else:
-                    dv += impulse
-            h, u = max(h, end), u_next
-            f = f if tau_a > 0.0 else u
+        if contact is None:
+            def flow(*a):
+                return lag_flow(p, *a)
+        else:   # the compliant stop's flow under the force (contact_plant)
+            def flow(*a):
+                return contact.lag_flow(p, *a)
+
+        def publish(h, end, tau, dx, dv, u, c, piece):
+            if contact is None:
+                states = (lambda rel: lag_states(p, piece, rel))
+            else:
+                states = (lambda rel: contact.lag_states(p, tau, dx, dv, u, c,
+                                                         s.actuator.time_constant, rel))
+            te = t1 if end == p.period else t0 + end
+            events.extend(self._events(Segment(t0 + h, tau, dx, dv, te, piece.dx, piece.dv),
+                                       piece.impacts, states))
+
+        dx, dv, f, _ = command_period(p, self.dx, self.dv, self.force, dv_correction, start,
+                                      s.pulse_width, s.actuator, s.force_limit or math.inf,
+                                      flow, publish)
         self.seg = Segment(t0, p.tau2, self.dx, self.dv, t1, dx, dv)
         self._force_end = f
         return events
@@ -269,11 +295,12 @@ class Engine:
         t, w = self.t, self.settings.pulse_width
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
         tau = (p.tau2 + p.omega * start) % TWO_PI
+        self._head = None
         if w == 0.0:                                    # the kick of Eq. 28
             dv = head.dv + dv_correction
-            tail = self.advance(p, tau, head.dx, dv, p.period - start)
+            tail, states = self._free_piece(tau, head.dx, dv, p.period - start, t + start, t1)
             self.seg = Segment(t + start, tau, head.dx, dv, t1, tail.dx, tail.dv)
-            return self._events(self.seg, tail.impacts)
+            return self._events(self.seg, tail.impacts, states)
         # a force pulse on [start, start + w]: the exact flow under a constant force
         limit = self.settings.force_limit or math.inf
         force = pulse_force(dv_correction, w, limit)
@@ -281,9 +308,10 @@ class Engine:
         events = self._events(Segment(t + start, tau, head.dx, head.dv, t + start + w,
                                       mid.dx, mid.dv, force), mid.impacts)
         tau = (p.tau2 + p.omega * (start + w)) % TWO_PI
-        tail = self.advance(p, tau, mid.dx, mid.dv, p.period - start - w)
+        tail, states = self._free_piece(tau, mid.dx, mid.dv, p.period - start - w,
+                                        t + start + w, t1)
         self.seg = Segment(t + start + w, tau, mid.dx, mid.dv, t1, tail.dx, tail.dv)
-        return events + self._events(self.seg, tail.impacts)
+        return events + self._events(self.seg, tail.impacts, states)
 
     def split(self, tc: float, dv_correction: float) -> list:
         """Apply ``dv_correction`` at time tc inside the current period (realtime).
@@ -300,9 +328,9 @@ class Engine:
         head = self.advance(p, s.tau, s.dx, s.dv, tc - s.ts)
         tau_c = (s.tau + p.omega * (tc - s.ts)) % TWO_PI
         dv_c = head.dv + dv_correction
-        tail = self.advance(p, tau_c, head.dx, dv_c, s.te - tc)
+        tail, states = self._free_piece(tau_c, head.dx, dv_c, s.te - tc, tc, s.te)
         self.seg = Segment(tc, tau_c, head.dx, dv_c, s.te, tail.dx, tail.dv)
-        return self._events(self.seg, tail.impacts)
+        return self._events(self.seg, tail.impacts, states)
 
     def end_period(self) -> tuple:
         """Move to the next sample: returns (sample event, warning or None).
@@ -360,6 +388,46 @@ class Engine:
         xm, vm = self.settings.sensor.measure(0, [p.x_ref + self.dx], [p.v_ref + self.dv])
         return [Event(0.0, "state", float(xm[0]), float(vm[0]), p.tau2)]
 
+    def _published_times(self, ts: float, te: float, tau: float):
+        """The times (from ts, sorted) at which a segment [ts, te] starting at phase
+        ``tau`` publishes a state: the stream's grid j * state_period in (ts, te] and the
+        Pi1 crossing; (rel, kinds, the first grid index j0)."""
+        p = self.p
+        rel, kinds = [], []
+        sp = self.settings.state_period
+        j0 = None
+        if sp > 0.0:
+            j = math.floor(ts / sp)
+            while j * sp <= te:
+                if j * sp > ts:
+                    j0 = j if j0 is None else j0
+                    rel.append(j * sp - ts)
+                    kinds.append("state")
+                j += 1
+        d1 = ((p.tau_star - tau) % TWO_PI) / p.omega
+        if 0.0 < d1 < te - ts:
+            rel.append(d1)
+            kinds.append("pi1")
+        if rel:
+            order = np.argsort(rel, kind="stable")
+            rel = [rel[i] for i in order]
+            kinds = [kinds[i] for i in order]
+        return rel, kinds, j0
+
+    def _free_piece(self, tau: float, dx: float, dv: float, duration: float, ts: float,
+                    te: float):
+        """The exact flow of a piece without force (from (dx, dv) at phase ``tau`` for
+        ``duration``, published over [ts, te]): (segment, states for :meth:`_events`).
+        With a compliant stop its published states come from the same integration
+        (ContactPlant.advance_with_states: a Hertz contact is integrated once, not again
+        for the stream, docs/rig_scene.md); the wall's are its closed form (None)."""
+        contact = self.settings.contact
+        if contact is None:
+            return self.advance(self.p, tau, dx, dv, duration), None
+        rel = self._published_times(ts, te, tau)[0]
+        seg, xv = contact.advance_with_states(self.p, tau, dx, dv, duration, rel)
+        return seg, (lambda _rel: xv)
+
     def _events(self, s: Segment, impacts, states=None) -> list:
         """The events of segment ``s``: its impacts, the state stream's samples on the
         grid j * state_period in (ts, te] as the sensor measures them (plant.sensor,
@@ -371,25 +439,8 @@ class Engine:
         events = []
         for i in impacts:
             events.append(Event(s.ts + i.dt, "impact", i.v_minus, i.v_plus, i.phase % TWO_PI))
-        rel, kinds = [], []
-        sp = self.settings.state_period
-        j0 = None
-        if sp > 0.0:
-            j = math.floor(s.ts / sp)
-            while j * sp <= s.te:
-                if j * sp > s.ts:
-                    j0 = j if j0 is None else j0
-                    rel.append(j * sp - s.ts)
-                    kinds.append("state")
-                j += 1
-        d1 = ((p.tau_star - s.tau) % TWO_PI) / p.omega
-        if 0.0 < d1 < s.te - s.ts:
-            rel.append(d1)
-            kinds.append("pi1")
+        rel, kinds, j0 = self._published_times(s.ts, s.te, s.tau)
         if rel:
-            order = np.argsort(rel, kind="stable")
-            rel = [rel[i] for i in order]
-            kinds = [kinds[i] for i in order]
             if states is not None:
                 xv = states(rel)
             else:   # under a pulse's force F: the stop moved by -F, x shifted by F

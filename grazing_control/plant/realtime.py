@@ -99,7 +99,9 @@ class Realtime(Loop):
     def publish_sample(self, ev: Event) -> None:
         """Sample k goes out (as measured), then its uncorrected period is integrated (the
         period's events, 0.6-0.7 ms of CPU at the rig's 150 stream samples: integrated
-        first, they made every sample that much late, docs/rig_scene.md)."""
+        first, they made every sample that much late, docs/rig_scene.md); scheduled, only
+        up to its actuation instant (Engine.begin_head: the rest is integrated once, with
+        the answer, by Engine.actuate; a Hertz period costs ms)."""
         engine = self.engine
         schedule = self.schedule
         if not self.settings.scheduled and schedule.waiting(self.sample):
@@ -109,11 +111,18 @@ class Realtime(Loop):
                 return
         sent = self.clock()
         self.sample = self.emit(engine.measured(ev))
-        self.queue = engine.begin_period(0.0)
         start = None                                     # on arrival: no deadline
-        if self.settings.scheduled:                      # sample k's actuation instant
+        if self.settings.scheduled and hasattr(engine, "begin_head"):
+            # sample k's actuation instant: its period up to there now, the rest with
+            # the answer (Engine.begin_head: each piece integrated once)
             self.delay = engine.actuation_delay()
             start = ev.t + engine.actuation_start(self.delay)
+            self.queue = engine.begin_head(self.delay)
+        else:
+            self.queue = engine.begin_period(0.0)
+            if self.settings.scheduled:
+                self.delay = engine.actuation_delay()
+                start = ev.t + engine.actuation_start(self.delay)
         # an answer may come before its sample, for the next two periods at most
         # the stream's pre-roll: the first sections have no deadline (settings.pre_roll)
         sec = schedule.section(engine.k, self.sample, ev.t, start, sent,

@@ -212,10 +212,10 @@ PARAMETERS = (
               choices=FEASIBILITY, read_only=True),
     Parameter("contact", "string", "rigid", "the stop (issue 31, plant.contact_plant): rigid "
               "(the wall, restitution r), kelvin_voigt (spring-dashpot) or hertz "
-              "(Hunt-Crossley); compliant stops with the exact fidelity and the ideal actuator",
+              "(Hunt-Crossley); compliant stops with the exact fidelity (and any actuator: "
+              "the first-order one's force is in the stop's flow)",
               choices=CONTACTS, read_only=True,
-              constraints="rigid unless fidelity exact and actuator_bandwidth, "
-              "actuator_latency 0"),
+              constraints="rigid unless fidelity exact"),
     Parameter("contact_stiffness", "double", 1e6, "compliant stop: stiffness k_c over the "
               "oscillator's (hertz: force per penetration^1.5), > 0", ABOVE_0, FINITE,
               read_only=True),
@@ -450,10 +450,10 @@ def _contact(values: dict, p: OscillatorParams, mode: str, fidelity: str,
     """The compliant stop and friction (plant.contact_plant). The engine runs it wherever
     it runs the wall's exact flow (lockstep and realtime, a delayed, jittered or split
     correction, a force pulse, the drifting wall, the sensor stream: its pieces are the
-    stop's flow, docs/theory_contact.md §16). Refused in one line: a fidelity other than
-    exact (the cheaper fidelities are approximations of the rigid wall's impact map, which
-    a compliant stop has not), and the first-order actuator (its exponential force in the
-    stop's closed form is not built)."""
+    stop's flow, docs/theory_contact.md §16), the first-order actuator included (its force
+    F_inf + C e^{-h / tau_a} in the stop's flow, §21). Refused in one line: a fidelity
+    other than exact (the cheaper fidelities are approximations of the rigid wall's impact
+    map, which a compliant stop has not)."""
     contact = contact_from_values(values, p)
     if contact is None:
         return None
@@ -461,12 +461,6 @@ def _contact(values: dict, p: OscillatorParams, mode: str, fidelity: str,
         raise ParameterError(f"fidelity={fidelity!r} is invalid with contact="
                              f"{values['contact']!r}: valid there is 'exact' (the other "
                              "fidelities approximate the rigid wall's impact map)")
-    for name in ("actuator_bandwidth", "actuator_latency"):
-        value = float(values[name])
-        if value != 0.0:
-            raise ParameterError(f"{name}={value!r} is invalid with contact="
-                                 f"{values['contact']!r}: valid there is 0.0 (the actuator's "
-                                 "force in the compliant stop's flow is not built)")
     return contact
 
 

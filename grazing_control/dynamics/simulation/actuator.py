@@ -51,7 +51,7 @@ from grazing_control.dynamics.estimation.section_state import phi_rows
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
            "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator", "LagFlow",
            "LagPiece", "lag_flow", "lag_states", "actuated_design",
-           "actuated_orbit_for"]
+           "actuated_orbit_for", "command_period"]
 
 TWO_PI = 2.0 * math.pi
 #: Below this impact velocity the motion chatters: not resolved here (ValueError).
@@ -307,6 +307,46 @@ def _piece(p: OscillatorParams, tau0: float, z, duration: float, f_inf: float, c
     flow = lag_flow(p, tau0, float(z[0]), float(z[1]), duration, f_inf, c, tau_a)
     impacts.extend(i._replace(dt=i.dt + t_offset) for i in flow.impacts)
     return np.array([flow.dx, flow.dv])
+
+
+def command_period(p: OscillatorParams, dx: float, dv: float, force: float,
+                   dv_correction: float, start: float, width: float, actuator: Actuator,
+                   force_limit: float, flow, on_piece=None):
+    """One period from the Pi2 deviation (dx, dv), the actuator's force ``force`` there,
+    with the correction commanded at ``start`` through ``actuator``, piece by piece: a
+    pulse F = Delta v / w on [start, start + w] (w = 0: an impulse Delta v, adding
+    Delta v / tau_a to the force, or with tau_a = 0 a velocity jump) reaching the lag L
+    later; on each piece between the switches the force is F_inf + C e^{-h / tau_a}
+    and the motion ``flow(tau, dx, dv, duration, F_inf, C, tau_a)``'s (:func:`lag_flow`
+    for the wall, a compliant stop's ``lag_flow``; it returns dx, dv, force, impacts).
+    ``on_piece(h, end, tau, dx, dv, u, c, result)`` sees each piece (sim_node's engine
+    publishes its events). Returns (dx, dv, force at the next section, impacts: times
+    from the sample)."""
+    tau_a = actuator.time_constant
+    on = start + actuator.latency
+    if width > 0.0:
+        switches = ((on, pulse_force(dv_correction, width, force_limit), 0.0),
+                    (on + width, 0.0, 0.0))
+    else:
+        switches = ((on, 0.0, dv_correction),)
+    f, u, h, impacts = force, 0.0, 0.0, []
+    for end, u_next, impulse in switches + ((p.period, 0.0, 0.0),):
+        if end > h:
+            tau = (p.tau2 + p.omega * h) % TWO_PI
+            c = f - u if tau_a > 0.0 else 0.0
+            piece = flow(tau, dx, dv, end - h, u, c, tau_a)
+            if on_piece is not None:
+                on_piece(h, end, tau, dx, dv, u, c, piece)
+            impacts += [i._replace(dt=i.dt + h) for i in piece.impacts]
+            dx, dv, f = piece.dx, piece.dv, piece.force
+        if impulse:                 # an impulse command: through the lag, or a jump
+            if tau_a > 0.0:
+                f += impulse / tau_a
+            else:
+                dv += impulse
+        h, u = max(h, end), u_next
+        f = f if tau_a > 0.0 else u
+    return dx, dv, f, impacts
 
 
 def actuated_step(p: OscillatorParams, dx: float, dv: float, force: float,
