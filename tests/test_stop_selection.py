@@ -2,16 +2,19 @@
 scenes run by the simulator's engine (the same numbers sim_node publishes), a compliant
 stop's stiffness and damping (and friction) are recovered within 3 standard errors and
 that model is preferred by BIC; on a rigid scene the rigid wall is (issue 31 part 4,
-docs/theory_contact.md section 17)."""
+docs/theory_contact.md section 17) - with the oscillator's parameters (zeta, omega, the
+forcing's amplitude and phase, Delta d) fitted jointly, from a start well off them."""
 
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.identification.stop import STOPS, fit_stop, select_stop
+from grazing_control.dynamics.identification.stop import (OSCILLATOR_NAMES, STOPS, fit_stop,
+                                                          select_stop)
 from grazing_control.oscillator.contact import KelvinVoigt
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.engine import Engine
@@ -20,24 +23,25 @@ from grazing_control.plant.settings import settings_from_values
 PERIODS = 60
 
 
-def _scene(contact, seed, stiffness=1e3, friction=0.0, noise=1e-4):
-    """PERIODS uncontrolled periods from (0.3, -0.2) off X** at Delta d = -0.05 (contacts
-    of every size), velocity noise ``noise`` at each sample: (p, samples, corrections,
-    the stop)."""
-    values = {"delta_d": -0.05, "noise": noise, "seed": seed, "state_period": 0.0}
+def _scene(contact, seed, stiffness=1e3, friction=0.0, noise=1e-4, periods=PERIODS,
+           restitution=0.68, **model):
+    """``periods`` uncontrolled periods from (0.3, -0.2) off X** at Delta d = -0.05
+    (contacts of every size; ``model``: other model values), velocity noise ``noise`` at
+    each sample: (p, samples, corrections, the stop)."""
+    values = {"delta_d": -0.05, "noise": noise, "seed": seed, "state_period": 0.0, **model}
     if contact != "rigid":
-        law = KelvinVoigt.from_restitution(stiffness, 0.68)
+        law = KelvinVoigt.from_restitution(stiffness, restitution)
         values.update(contact=contact, contact_stiffness=law.stiffness,
                       contact_damping=law.damping, friction=friction)
     s = settings_from_values(values)
     eng = Engine(s)
     eng.dx, eng.dv = 0.3, -0.2
     z = []
-    for _ in range(PERIODS):
+    for _ in range(periods):
         z.append((eng.dx, eng.dv))
         eng.begin_period(0.0)
         eng.end_period()
-    return s.params, np.array(z), np.zeros(PERIODS), s.contact
+    return s.params, np.array(z), np.zeros(periods), s.contact
 
 
 def _within(fit, name, true, n_se=3.0):
@@ -46,24 +50,49 @@ def _within(fit, name, true, n_se=3.0):
         name, value, se, true)
 
 
+def _off(p, rng=None):
+    """A start for the oscillator's fit well off ``p`` (OSCILLATOR_NAMES order): zeta
+    x1.5, omega +1 %, the forcing's amplitude +3 % and phase +0.02 rad, Delta d x1.2;
+    with ``rng`` a random start within those bounds."""
+    u = np.ones(5) if rng is None else rng.uniform(-1.0, 1.0, 5)
+    return [p.zeta * (1.0 + 0.5 * u[0]), p.omega * (1.0 + 0.01 * u[1]), 1.0 + 0.03 * u[2],
+            0.02 * u[3], p.delta_d * (1.0 + 0.2 * u[4])]
+
+
+def _oscillator_within(fit, p, n_se=3.0):
+    """The jointly fitted oscillator within n_se standard errors of the truth."""
+    for name, true in zip(OSCILLATOR_NAMES, (p.zeta, p.omega, 1.0, 0.0, p.delta_d)):
+        _within(fit, name, true, n_se)
+
+
 @pytest.mark.timeout(300)  # a hang guard
 def test_a_compliant_scene_is_recovered_and_preferred():
+    """Jointly with the oscillator from a start off it (module docstring); the stop alone
+    at the known oscillator agrees, with smaller errors (the oscillator's uncertainty is
+    not in them)."""
     p, z, dv, contact = _scene("kelvin_voigt", 1)
-    best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"))
+    best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"),
+                                  start_oscillator=_off(p))
     assert best == "kelvin_voigt", fits
     _within(fit, "stiffness", contact.law.stiffness)
     _within(fit, "damping", contact.law.damping)
+    _oscillator_within(fit, p)
     assert fit.stderr["stiffness"] < 0.01 * contact.law.stiffness
+    known = fit_stop(p, "kelvin_voigt", z, dv, oscillator="known")
+    assert set(known.values) == {"stiffness", "damping"}
+    _within(known, "stiffness", contact.law.stiffness)
+    assert known.stderr["stiffness"] < fit.stderr["stiffness"]
 
 
 @pytest.mark.timeout(300)
 def test_friction_is_recovered_and_preferred():
     p, z, dv, contact = _scene("kelvin_voigt", 3, friction=0.01)
-    best, fit, fits = select_stop(p, z, dv)
+    best, fit, fits = select_stop(p, z, dv, start_oscillator=_off(p))
     assert best == "kelvin_voigt_friction", fits
     _within(fit, "stiffness", contact.law.stiffness)
     _within(fit, "damping", contact.law.damping)
     _within(fit, "friction", 0.01)
+    _oscillator_within(fit, p)
     # the frictionless stop fitted to the same data is biased well beyond its errors
     kv = next(f for f in fits if f.stop == "kelvin_voigt")
     assert abs(kv.values["stiffness"] - 1e3) > 3 * kv.stderr["stiffness"]
@@ -72,11 +101,15 @@ def test_friction_is_recovered_and_preferred():
 @pytest.mark.timeout(300)
 def test_a_rigid_scene_prefers_the_rigid_wall():
     p, z, dv, _ = _scene("rigid", 4)
-    best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"))
+    best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"),
+                                  start_oscillator=_off(p))
     assert best == "rigid", fits
     _within(fit, "r", p.r)
+    _oscillator_within(fit, p)
     bics = {f.stop: f.bic for f in fits}
-    assert bics["kelvin_voigt"] - bics["rigid"] > 10.0, bics
+    # measured 7.2 (the oscillator fitted with each stop; 10.5 with it known): the
+    # compliant stop at its stiffest does not pay for its extra parameter (log N = 4.8)
+    assert bics["kelvin_voigt"] - bics["rigid"] > 5.0, bics
 
 
 def test_bad_input_is_named():
@@ -85,6 +118,8 @@ def test_bad_input_is_named():
         fit_stop(p, "rubber", z, dv)
     with pytest.raises(ParameterError, match="samples"):
         fit_stop(p, "rigid", z[:3], dv[:3])
+    with pytest.raises(ParameterError, match="oscillator="):
+        fit_stop(p, "rigid", z, dv, oscillator="guessed")
     assert STOPS[0] == "rigid"
 
 
@@ -135,3 +170,50 @@ def test_grazing_identify_stop_on_a_compliant_bag_and_on_a_rigid_bag(tmp_path, c
         Writer(f).finish()
     assert main(["identify", "--stop", str(empty)]) == 2
     assert "parameter record" in capsys.readouterr().err
+
+
+# ======================================================================= differential
+#: seeded synthetic records for the differential check below (0: skipped); a case costs
+#: about 20-60 s on the loaded 2-core machine, so the suite runs the three scenes above
+STOP_CASES = int(os.environ.get("GRAZING_STOP_CASES", "0"))
+
+
+def _case(seed):
+    """A seeded record of the core (the engine's exact flow: the truth is known exactly):
+    even seeds a Kelvin-Voigt stop (k_c log-uniform in 1e2 .. 1e4, r in 0.5 .. 0.85), odd
+    seeds the rigid wall; zeta in 0.005 .. 0.03, Delta d in -0.08 .. -0.03; the fit's
+    start for the oscillator drawn within the bounds of :func:`_off`."""
+    rng = np.random.default_rng(seed)
+    model = {"zeta": rng.uniform(0.005, 0.03), "delta_d": rng.uniform(-0.08, -0.03)}
+    k, r = 10.0 ** rng.uniform(2.0, 4.0), rng.uniform(0.5, 0.85)
+    contact = "kelvin_voigt" if seed % 2 == 0 else "rigid"
+    if contact == "rigid":
+        model["r"] = r
+    p, z, dv, stop = _scene(contact, seed, stiffness=k, restitution=r, **model)
+    return p, z, dv, stop, _off(p, rng)
+
+
+@pytest.mark.skipif(STOP_CASES == 0, reason="GRAZING_STOP_CASES=N runs N seeded cases")
+@pytest.mark.timeout(0)
+def test_the_joint_fit_over_seeded_records():
+    """Every case prefers its own stop; the compliant cases give k_c and c_c within 3
+    standard errors (each a 99.7 % interval where the errors are right: at most 5 % of
+    the cases may miss, about 0.5 % are expected to)."""
+    wrong, missed, compliant = [], [], 0
+    for seed in range(STOP_CASES):
+        p, z, dv, stop, start = _case(seed)
+        best, fit, fits = select_stop(p, z, dv, stops=("rigid", "kelvin_voigt"),
+                                      start_oscillator=start)
+        truth = "rigid" if stop is None else "kelvin_voigt"
+        if best != truth:
+            wrong.append((seed, best, [(f.stop, f.bic) for f in fits]))
+            continue
+        if stop is not None:
+            compliant += 1
+            for name, true in (("stiffness", stop.law.stiffness), ("damping", stop.law.damping)):
+                if not abs(fit.values[name] - true) <= 3.0 * fit.stderr[name]:
+                    missed.append((seed, name, fit.values[name], fit.stderr[name], true))
+    print(f"{STOP_CASES} cases: {len(wrong)} chose the wrong stop, {len(missed)} of "
+          f"{compliant} compliant fits missed by more than 3 standard errors")
+    assert not wrong, wrong
+    assert len(missed) <= 0.05 * max(compliant, 1), missed

@@ -18,7 +18,39 @@ import sys
 
 from grazing_control.support.arguments import finite, integer_at_least, positive
 
-__all__ = ["add_stop_parser", "cmd_stop"]
+#: the stop models (dynamics.simulation.stop_fidelity.STOP_FIDELITIES, not imported at
+#: the parser's start-up)
+_FIDELITIES = ("rigid", "compliant", "compliant_friction")
+
+__all__ = ["add_stop_parser", "add_stop_options", "cmd_stop"]
+
+
+def add_stop_options(s) -> None:
+    """The scene's stop and its model choice, for ``grazing simulate`` (sim_node's names,
+    docs/nodes.md): the cheapest adequate model run, or the one named, checked."""
+    s.add_argument("--contact", choices=("rigid", "kelvin_voigt"), default="rigid",
+                   help="the stop: rigid (the wall, --r; default) or kelvin_voigt "
+                        "(spring-dashpot, docs/theory_contact.md)")
+    s.add_argument("--contact-stiffness", type=positive, default=None,
+                   help="kelvin_voigt: the stop's stiffness k_c over the oscillator's (> 0)")
+    s.add_argument("--contact-damping", type=finite, default=None,
+                   help="kelvin_voigt: the stop's damping c_c (>= 0, underdamped; default: "
+                        "the c_c whose restitution is --r, Eq. C3)")
+    s.add_argument("--friction", type=finite, default=None,
+                   help="kelvin_voigt: Coulomb friction on the mass, kinetic level F_f "
+                        "(>= 0; default 0)")
+    s.add_argument("--friction-static", type=finite, default=None,
+                   help="static friction level F_s >= F_f (default F_f)")
+    s.add_argument("--stop", choices=("auto",) + _FIDELITIES, default=None,
+                   help="kelvin_voigt: the model the scene runs on: auto (default) the "
+                        "cheapest adequate of rigid (the wall with the stop's restitution), "
+                        "compliant (without friction), compliant_friction, by the estimated "
+                        "Pi2 error over the horizon against --stop-tol (docs/theory_contact.md "
+                        "section 18); a model named is run and checked (a warning where "
+                        "its bound exceeds the tolerance)")
+    s.add_argument("--stop-tol", type=positive, default=None,
+                   help="tolerance on the Pi2 error after the horizon for --stop (default "
+                        "1e-3)")
 
 
 def cmd_stop(args) -> int:
