@@ -124,38 +124,49 @@ def test_bad_input_is_named():
 
 
 # ======================================================================= bags
-@pytest.mark.timeout(600)  # a hang guard: a node scene, then three fits
+@pytest.mark.timeout(900)  # a hang guard: a node scene, then five joint fits
 def test_grazing_identify_stop_on_a_compliant_bag_and_on_a_rigid_bag(tmp_path, capsys):
-    """``grazing identify --stop``: a scene recorded through the nodes with a Kelvin-Voigt
-    stop (k_c = 1e3, r = 0.68 by C3; 60 uncontrolled periods from (0.3, -0.2) off X**,
-    velocity noise 1e-4) gives back k_c and c_c within 3 standard errors and prefers
-    kelvin_voigt; the repository's rigid bag (bags/scene_5e-6, its first 40 samples)
-    prefers rigid; a bag without a parameter record is bad input (status 2)."""
+    """``grazing run --stop auto`` then ``grazing identify --stop``: a scene run through
+    the nodes with a Kelvin-Voigt stop (k_c = 1e3, r = 0.68 by C3; 60 uncontrolled
+    periods from (0.3, -0.2) off X**, velocity noise 1e-4) runs on the compliant model
+    (the rigid one's bound is far over the tolerance), says so in its summary and its
+    bag, and the bag gives back k_c and c_c within 3 standard errors with the
+    oscillator fitted jointly (its zeta, omega, Delta d within 3 standard errors too),
+    preferring kelvin_voigt; the repository's rigid bag (bags/scene_5e-6, its first 40
+    samples) prefers rigid; a bag without a parameter record is bad input (status 2)."""
     import json
 
     pytest.importorskip("grazing_control.ros.recorder_node")
     from grazing_control.cli.commands import main
-    from grazing_control.ros import launcher
     from test_closed_loop import CONTROLLER, STUDY, new_domain
 
     p = OscillatorParams(delta_d=-0.05)
     law = KelvinVoigt.from_restitution(1e3, p.r)
     x0, v0 = p.x_ref + 0.3, p.v_ref - 0.2
     bag = tmp_path / "bag"
-    res = launcher.run(STUDY, CONTROLLER, bag, PERIODS, domain_id=new_domain(), timeout=120,
-                       sim_overrides={"delta_d": p.delta_d, "x0": x0, "v0": v0,
-                                      "noise": 1e-4, "seed": 5, "state_period": 0.0,
-                                      "contact": "kelvin_voigt",
-                                      "contact_stiffness": law.stiffness,
-                                      "contact_damping": law.damping},
-                       controller_overrides={"enable_after": 10 * PERIODS},
-                       log_dir=tmp_path / "logs")
-    assert res.ok, res
+    sim = {"x0": x0, "v0": v0, "noise": 1e-4, "seed": 5, "state_period": 0.0,
+           "contact": "kelvin_voigt", "contact_stiffness": law.stiffness,
+           "contact_damping": law.damping}
+    argv = ["run", "--sim-params", str(STUDY), "--controller-params", str(CONTROLLER),
+            "--bag", str(bag), "--periods", str(PERIODS), "--delta-d", repr(p.delta_d),
+            "--domain-id", str(new_domain()), "--timeout", "120",
+            "--enable-after", str(10 * PERIODS), "--log-dir", str(tmp_path / "logs"),
+            "--stop", "auto", "--json"]
+    for key, value in sim.items():
+        argv += ["--sim-param", f"{key}:={value!r}" if isinstance(value, float)
+                 else f"{key}:={value}"]
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["ok"] and summary["stop_model"]["stop"] == "compliant", summary
+    assert summary["stop_model"]["estimates"]["rigid"]["bound"] > 1e-3
+    assert json.loads((bag / "stop_model.json").read_text()) == summary["stop_model"]
     assert main(["identify", "--stop", "--json", str(bag)]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["chosen"] == "kelvin_voigt" and report["samples"] == PERIODS, report
+    assert report["oscillator"] == "fit"
     fit = next(c for c in report["candidates"] if c["stop"] == "kelvin_voigt")["parameters"]
-    for name, true in (("stiffness", law.stiffness), ("damping", law.damping)):
+    for name, true in (("stiffness", law.stiffness), ("damping", law.damping),
+                       ("zeta", p.zeta), ("omega", p.omega), ("delta_d", p.delta_d)):
         assert abs(fit[name]["value"] - true) <= 3 * fit[name]["stderr"], (name, fit, true)
     assert report["recorded"]["contact"] == "kelvin_voigt"
 

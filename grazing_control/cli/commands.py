@@ -28,7 +28,7 @@ from .common import (add_common, add_delay, add_gains, add_method, complex_list,
 from .design import cmd_design
 from .parameter_file import add_params_option, apply_to_args
 from .rig import apply_rig
-from .stop import add_stop_options
+from .stop import add_run_stop_options, add_stop_options, apply_run_stop
 
 __all__ = ["main", "build_parser"]
 
@@ -376,8 +376,12 @@ def cmd_run(args):
 
     from grazing_control.ros.launcher import run
 
-    kwargs = {k: v for k, v in vars(args).items() if k not in ("func", "command", "json")}
     _check_run_files(args)
+    stop = apply_run_stop(args)     # --stop: the stop model (cli/stop.py), into sim_overrides
+    if stop is not None and stop["warning"]:
+        print(f"grazing: warning: {stop['warning']}", file=sys.stderr)
+    kwargs = {k: v for k, v in vars(args).items()
+              if k not in ("func", "command", "json", "stop", "stop_tol")}
     if getattr(args, "live", None):
         busy = _port_in_use(args.live)
         if busy:
@@ -385,14 +389,29 @@ def cmd_run(args):
             return 2
     if not args.json:
         result = run(**kwargs)
+        _record_stop(result, stop)
         print(result)
+        if stop is not None:
+            print(f"stop model = {stop['reason']}")
         return result.exit_code
     with _stdout_to_stderr():  # stdout: the one JSON object only
         result = run(**kwargs)
+    _record_stop(result, stop)
     summary = nulls(dataclasses.asdict(result)) if dataclasses.is_dataclass(result) else {}
     summary.update(ok=bool(result.ok), exit_code=result.exit_code, summary=str(result))
+    if stop is not None:
+        summary["stop_model"] = stop
     _print_json(summary)
     return result.exit_code
+
+
+def _record_stop(result, stop) -> None:
+    """The stop model a scene ran on (``--stop``) next to its bag: ``stop_model.json``
+    (the bag's readers take its .mcap alone; docs/recording.md)."""
+    bag = getattr(result, "bag_dir", None)
+    if stop is not None and bag and os.path.isdir(bag):
+        with open(os.path.join(bag, "stop_model.json"), "w", encoding="utf-8") as fh:
+            json.dump(stop, fh, allow_nan=False, indent=1)
 
 
 def cmd_demo(args):
@@ -543,6 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "failed; docs/nodes.md), sim_verdict (the simulator's summary, "
                             "watchdog trip and feasibility verdict); node output goes to "
                             "stderr")
+        add_run_stop_options(s)
         add_params_option(s)
         s.set_defaults(func=cmd_run)
 

@@ -34,7 +34,7 @@ from grazing_control.dynamics.maps.model import OneDOF
 from grazing_control.dynamics.simulation.simulate import SimulationResult, simulate
 
 __all__ = ["STOP_FIDELITIES", "StopFidelity", "choose_stop_fidelity", "rigid_stand_in",
-           "simulate_stop"]
+           "simulate_stop", "simulate_stop_choice"]
 
 STOP_FIDELITIES = ("rigid", "compliant", "compliant_friction")
 
@@ -113,35 +113,14 @@ def simulate_stop(p, law: KelvinVoigt, friction: Coulomb | None, periods: int, *
     correction on Pi2 (Eq. 28) from sample ``control_after`` on. The bound's probe has
     the scene's controller where it acts from the first sample, else none (a probe of
     20 periods; the controller's later start is not in it)."""
-    if stop != "auto" and stop not in STOP_FIDELITIES:
-        raise ValueError(f"stop={stop!r} is invalid: valid values are auto, "
-                         f"{', '.join(STOP_FIDELITIES)}")
-    if stop == "compliant_friction" and friction is None:
-        raise ValueError("stop='compliant_friction' is invalid without friction: give a "
-                         "friction > 0 or choose compliant")
     active = gains is not None and control_after is not None
     if active and gains.delay != 0.0:
         raise ValueError(f"delay={gains.delay!r} is invalid with a compliant stop: the "
                          "compliant map takes the correction on Pi2 only (delay 0)")
-    choice = choose_stop_fidelity(p, law, friction, max(periods, 1), tol,
-                                  deviation=deviation,
-                                  gains=gains if active and control_after == 0 else None)
-    warning = None
-    if stop == "auto":
-        stop = choice.stop
-    else:
-        bound = choice.estimates[stop][1]
-        reason = (f"{stop}: requested; its estimated Pi2 error {bound:.3g} over {periods} "
-                  f"periods against the full stop")
-        if not bound <= tol:
-            warning = (f"stop model {stop} is not adequate for this scene: its estimated Pi2 "
-                       f"error {bound:.3g} exceeds tol {tol:.3g} over {periods} periods "
-                       f"(one-period error {choice.estimates[stop][0]:.3g}); the cheapest "
-                       f"adequate is {choice.stop}")
-            reason += f" exceeds tol {tol:.3g} (the cheapest adequate: {choice.stop})"
-        else:
-            reason += f" <= tol {tol:.3g}"
-        choice = choice._replace(stop=stop, reason=reason)
+    choice, warning = simulate_stop_choice(
+        p, law, friction, periods, deviation=deviation,
+        gains=gains if active and control_after == 0 else None, stop=stop, tol=tol)
+    stop = choice.stop
     if stop == "rigid":
         res = simulate(rigid_stand_in(p, law), periods, deviation=deviation, gains=gains,
                        control_after=control_after)
@@ -150,6 +129,39 @@ def simulate_stop(p, law: KelvinVoigt, friction: Coulomb | None, periods: int, *
     return (_compliant_scene(p, law, friction if stop == "compliant_friction" else None,
                              periods, deviation, gains if active else None, control_after,
                              f"stop {choice.reason}"), choice, warning)
+
+
+def simulate_stop_choice(p, law: KelvinVoigt, friction: Coulomb | None, periods: int, *,
+                         deviation=(0.0, 0.0), gains=None, stop: str = "auto",
+                         tol: float = 1e-3) -> tuple:
+    """(StopFidelity, warning or None): ``auto`` the cheapest adequate stop model for the
+    scene (:func:`choose_stop_fidelity`), or the model ``stop`` names with its bound
+    checked against ``tol`` (the warning says by how much it exceeds it, and which model
+    is adequate); ``gains``: the controller from the first sample (None: the probe runs
+    uncontrolled)."""
+    if stop != "auto" and stop not in STOP_FIDELITIES:
+        raise ValueError(f"stop={stop!r} is invalid: valid values are auto, "
+                         f"{', '.join(STOP_FIDELITIES)}")
+    if stop == "compliant_friction" and friction is None:
+        raise ValueError("stop='compliant_friction' is invalid without friction: give a "
+                         "friction > 0 or choose compliant")
+    choice = choose_stop_fidelity(p, law, friction, max(periods, 1), tol,
+                                  deviation=deviation, gains=gains)
+    if stop == "auto":
+        return choice, None
+    bound = choice.estimates[stop][1]
+    reason = (f"{stop}: requested; its estimated Pi2 error {bound:.3g} over {periods} "
+              f"periods against the full stop")
+    warning = None
+    if not bound <= tol:
+        warning = (f"stop model {stop} is not adequate for this scene: its estimated Pi2 "
+                   f"error {bound:.3g} exceeds tol {tol:.3g} over {periods} periods "
+                   f"(one-period error {choice.estimates[stop][0]:.3g}); the cheapest "
+                   f"adequate is {choice.stop}")
+        reason += f" exceeds tol {tol:.3g} (the cheapest adequate: {choice.stop})"
+    else:
+        reason += f" <= tol {tol:.3g}"
+    return choice._replace(stop=stop, reason=reason), warning
 
 
 def _compliant_scene(p, law, friction, periods, deviation, gains, control_after,
