@@ -153,6 +153,9 @@ def cmd_continue(args):
 # ---------------------------------------------------------------------------- simulate
 def cmd_simulate(args):
     if args.model is not None:
+        if args.contact != "rigid" or _stop_options(args):
+            raise ParameterError("--contact and its options are 1-DOF options: an n-DOF "
+                                 "model file's stop is rigid (docs/ndof_model.md)")
         return ndof.cmd_simulate(args)
     from grazing_control.dynamics.simulation.simulate import simulate
 

@@ -30,15 +30,18 @@ __all__ = ["add_stop_parser", "add_stop_options", "add_run_stop_options", "apply
 def add_run_stop_options(s) -> None:
     """``grazing run --stop``: the scene's Kelvin-Voigt stop run on its cheapest adequate
     model, or the one named, checked (:func:`apply_run_stop`)."""
-    s.add_argument("--stop", choices=("auto",) + _FIDELITIES, default=None,
-                   help="a scene with a kelvin_voigt stop (--sim-param contact:=kelvin_voigt): "
-                        "run it on auto, the cheapest adequate model (rigid: the wall with "
-                        "the stop's restitution; compliant: without the friction; "
-                        "compliant_friction) by the estimated Pi2 error over --periods "
-                        "against --stop-tol, or on the model named, checked (a warning "
-                        "where its bound exceeds the tolerance); the choice and its bound "
-                        "in the summary and the bag's stop_model.json "
-                        "(docs/theory_contact.md section 18; default: the stop as given)")
+    _add_choice(s, "a scene with a kelvin_voigt stop (--sim-param contact:=kelvin_voigt): run "
+                   "it on auto, the cheapest adequate model (rigid: the wall with the "
+                   "stop's restitution; compliant: without the friction; compliant_friction) "
+                   "by the estimated Pi2 error over --periods against --stop-tol, or on the "
+                   "model named, checked (a warning where its bound exceeds the tolerance); "
+                   "the choice and its bound in the summary and the bag's stop_model.json "
+                   "(docs/theory_contact.md section 18; default: the stop as given)")
+
+
+def _add_choice(s, stop_help: str) -> None:
+    """--stop (the model, or auto) and --stop-tol (its tolerance)."""
+    s.add_argument("--stop", choices=("auto",) + _FIDELITIES, default=None, help=stop_help)
     s.add_argument("--stop-tol", type=positive, default=None,
                    help="tolerance on the Pi2 error after the horizon for --stop (default "
                         "1e-3)")
@@ -128,16 +131,12 @@ def add_stop_options(s) -> None:
                         "(>= 0; default 0)")
     s.add_argument("--friction-static", type=finite, default=None,
                    help="static friction level F_s >= F_f (default F_f)")
-    s.add_argument("--stop", choices=("auto",) + _FIDELITIES, default=None,
-                   help="kelvin_voigt: the model the scene runs on: auto (default) the "
-                        "cheapest adequate of rigid (the wall with the stop's restitution), "
-                        "compliant (without friction), compliant_friction, by the estimated "
-                        "Pi2 error over the horizon against --stop-tol (docs/theory_contact.md "
-                        "section 18); a model named is run and checked (a warning where "
-                        "its bound exceeds the tolerance)")
-    s.add_argument("--stop-tol", type=positive, default=None,
-                   help="tolerance on the Pi2 error after the horizon for --stop (default "
-                        "1e-3)")
+    _add_choice(s, "kelvin_voigt: the model the scene runs on: auto (default) the cheapest "
+                   "adequate of rigid (the wall with the stop's restitution), compliant "
+                   "(without friction), compliant_friction, by the estimated Pi2 error over "
+                   "the horizon against --stop-tol (docs/theory_contact.md section 18); a "
+                   "model named is run and checked (a warning where its bound exceeds the "
+                   "tolerance)")
 
 
 def cmd_stop(args) -> int:
