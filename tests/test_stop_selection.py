@@ -50,11 +50,11 @@ def _within(fit, name, true, n_se=3.0):
         name, value, se, true)
 
 
-def _off(p, rng=None):
+def _off(p, rng=None, scale=1.0):
     """A start for the oscillator's fit well off ``p`` (OSCILLATOR_NAMES order): zeta
     x1.5, omega +1 %, the forcing's amplitude +3 % and phase +0.02 rad, Delta d x1.2;
-    with ``rng`` a random start within those bounds."""
-    u = np.ones(5) if rng is None else rng.uniform(-1.0, 1.0, 5)
+    with ``rng`` a random start within ``scale`` times those bounds."""
+    u = np.ones(5) if rng is None else scale * rng.uniform(-1.0, 1.0, 5)
     return [p.zeta * (1.0 + 0.5 * u[0]), p.omega * (1.0 + 0.01 * u[1]), 1.0 + 0.03 * u[2],
             0.02 * u[3], p.delta_d * (1.0 + 0.2 * u[4])]
 
@@ -107,8 +107,10 @@ def test_a_rigid_scene_prefers_the_rigid_wall():
     _within(fit, "r", p.r)
     _oscillator_within(fit, p)
     bics = {f.stop: f.bic for f in fits}
-    # measured 7.2 (the oscillator fitted with each stop; 10.5 with it known): the
-    # compliant stop at its stiffest does not pay for its extra parameter (log N = 4.8)
+    # measured 7.2 with the oscillator fitted with each stop (270.5 with it known: at
+    # the bound k_c = 1e8 the compliant period is ~1e-4 off the rigid one, which the
+    # fitted oscillator absorbs): the stiffest compliant stop does not pay for its
+    # extra parameter (log N = 4.8)
     assert bics["kelvin_voigt"] - bics["rigid"] > 5.0, bics
 
 
@@ -132,7 +134,7 @@ def test_grazing_identify_stop_on_a_compliant_bag_and_on_a_rigid_bag(tmp_path, c
     (the rigid one's bound is far over the tolerance), says so in its summary and its
     bag, and the bag gives back k_c and c_c within 3 standard errors with the
     oscillator fitted jointly (its zeta, omega, Delta d within 3 standard errors too),
-    preferring kelvin_voigt; the repository's rigid bag (bags/scene_5e-6, its first 40
+    preferring kelvin_voigt; the repository's rigid bag (bags/scene_5e-6, its first 24
     samples) prefers rigid; a bag without a parameter record is bad input (status 2)."""
     import json
 
@@ -170,10 +172,10 @@ def test_grazing_identify_stop_on_a_compliant_bag_and_on_a_rigid_bag(tmp_path, c
         assert abs(fit[name]["value"] - true) <= 3 * fit[name]["stderr"], (name, fit, true)
     assert report["recorded"]["contact"] == "kelvin_voigt"
 
-    assert main(["identify", "--stop", "--json", "--max-samples", "40",
+    assert main(["identify", "--stop", "--json", "--max-samples", "24",
                  "bags/scene_5e-6"]) == 0
     rigid = json.loads(capsys.readouterr().out)
-    assert rigid["chosen"] == "rigid" and rigid["samples"] == 40, rigid
+    assert rigid["chosen"] == "rigid" and rigid["samples"] == 24, rigid
 
     empty = tmp_path / "empty.mcap"
     from mcap_ros2.writer import Writer
@@ -187,6 +189,8 @@ def test_grazing_identify_stop_on_a_compliant_bag_and_on_a_rigid_bag(tmp_path, c
 #: seeded synthetic records for the differential check below (0: skipped); a case costs
 #: about 20-60 s on the loaded 2-core machine, so the suite runs the three scenes above
 STOP_CASES = int(os.environ.get("GRAZING_STOP_CASES", "0"))
+#: the seeded starts' distance from the truth, in units of :func:`_off`'s
+START_SCALE = float(os.environ.get("GRAZING_STOP_START", "0.2"))
 
 
 def _case(seed):
@@ -201,7 +205,7 @@ def _case(seed):
     if contact == "rigid":
         model["r"] = r
     p, z, dv, stop = _scene(contact, seed, stiffness=k, restitution=r, **model)
-    return p, z, dv, stop, _off(p, rng)
+    return p, z, dv, stop, _off(p, rng, START_SCALE)
 
 
 @pytest.mark.skipif(STOP_CASES == 0, reason="GRAZING_STOP_CASES=N runs N seeded cases")

@@ -66,7 +66,7 @@ LR_FRICTION = 9.5495
 #: motion drives k_c there, where the compliant period is within ~1e-4 of the rigid one
 K_MAX = 1e8
 #: evaluations of each start of a joint compliant fit (:func:`_start`): enough to tell
-#: the start that converges from the one that does not, at a fraction of a fit's cost
+#: a start that converges from one that does not, at a fraction of a fit's cost
 START_NFEV = 12
 
 
@@ -236,24 +236,26 @@ def _start(p, stop, z, dv, osc0, joint, known=None):
     s = z + (p.x_ref, p.v_ref)
     zeta_c = kelvin_voigt_damping(min(max(prev.values["r"], 0.14), 1.0))
 
+    thetas = [[10.0 ** lk, 2.0 * zeta_c * 10.0 ** (lk / 2)] for lk in range(1, 9)]
+
     def grid(osc):          # the best k_c of the grid at this oscillator
-        best = None
-        for lk in range(1, 9):
-            k = 10.0 ** lk
-            theta = [k, 2.0 * zeta_c * math.sqrt(k)]
-            res = _residuals(p, stop, theta, osc, s, dv)
-            rss = float(res @ res)
-            if best is None or rss < best[0]:
-                best = (rss, theta)
-        return best[1]
+        res = [_residuals(p, stop, theta, osc, s, dv) for theta in thetas]
+        return thetas[int(np.argmin([float(r @ r) for r in res]))]
 
     if not joint:
         return grid(osc0), osc0
-    # the rigid fit's oscillator is biased where the stop is compliant (its grid can
-    # point at a rigid-like k_c): a joint fit from the grid at each oscillator, the
-    # better kept (returned as the start of a fit that then converges at once)
-    fits = [fit_stop(p, stop, z, dv, grid(osc), start_oscillator=osc, max_nfev=START_NFEV)
-            for osc in (osc0, start_osc)]
+    # the rigid fit's oscillator is biased where the stop is compliant, and its grid
+    # points at a rigid-like k_c (K_MAX, flat), from where a joint fit does not come
+    # back; a grid at an oscillator that is off can point anywhere (docs section 17).
+    # Three starts, each run jointly for START_NFEV evaluations, the best continued:
+    # the stop alone fitted at the given oscillator (where that is close), and the grid
+    # at the given and at the rigid fit's oscillator
+    alone = fit_stop(p, stop, z, dv, grid(start_osc), oscillator="known",
+                     start_oscillator=start_osc)
+    starts = [([alone.values[n] for n in _NAMES[stop]], start_osc),
+              (grid(start_osc), start_osc), (grid(osc0), osc0)]
+    fits = [fit_stop(p, stop, z, dv, theta, start_oscillator=osc, max_nfev=START_NFEV)
+            for theta, osc in starts]
     best = min(fits, key=lambda f: f.rss)
     return [best.values[n] for n in _NAMES[stop]], [best.values[n] for n in OSCILLATOR_NAMES]
 
