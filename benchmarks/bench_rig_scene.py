@@ -23,7 +23,10 @@ Printed, against the design (the core: dynamics/design/noise.py, dynamics/estima
   controller's clock relation and sensor latency (its summary line).
 
     .venv/bin/python benchmarks/bench_rig_scene.py [--rig config/rigs/acceptance.yaml]
-        [--periods 900] [--enable-after 200] [--c2 C2]
+        [--periods 900] [--enable-after 200] [--c2 C2] [--engine-cost]
+
+``--engine-cost``: the simulator's CPU for one period and for its stream's states on
+the rig file's stop, no nodes (a compliant stop's cost, docs/rig_scene.md).
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.plant.rig import load_rig
 from grazing_control.recordings.scenes import load
 from grazing_control.ros import launcher
-from grazing_control.ros.rig_boundary import controller_values
+from grazing_control.ros.rig_boundary import answer_lead, controller_values
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -61,6 +64,61 @@ def design(rig, c2, lead=None):
                             lead=values["answer_lead"] if lead is None else lead)
     gain = design_noise_gain(p, g.c2, g.delay, measurement=r)
     return g, gain * d["sensor_noise"], rate
+
+
+def compliant_orbit(rig, g, z, periods=3000):
+    """The controlled 1/1 orbit of the pulse loop on the rig's compliant stop (issue 31):
+    the stop's pulse map (plant.contact_plant.ContactPlant.pulse_step, the simulator's
+    flow) with Eq. 28's correction iterated from the rigid pulse orbit's deviation ``z``
+    until a step moves it by less than 1e-14 (its multiplier is below 1 where the design
+    holds). Returns (Pi2 x, last step, contacts in its last period), or None (no
+    convergence in ``periods``)."""
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    s = settings_from_values({**sim_values(rig), "mode": "realtime"})
+    p, w = s.params, s.pulse_width
+    start = pulse_start(p.period, g.delay, w)
+    dx, dv = z
+    for _ in range(periods):
+        nx, nv, contacts = s.contact.pulse_step(p, dx, dv, g.c1 * dx + g.c2 * dv, start, w,
+                                                s.force_limit or math.inf)
+        step = math.hypot(nx - dx, nv - dv)
+        dx, dv = nx, nv
+        if step < 1e-14:
+            return p.x_ref + dx, step, len(contacts)
+    return None
+
+
+def engine_cost(rig, periods=20):
+    """The simulator's CPU per period for the rig file (no nodes): one period of the
+    plant from X** (the wall's exact flow or the stop's, plant.contact_plant) and the
+    stream's states of one period at the sensor's rate, as sim_node's engine makes them
+    (ms of process time, mean over ``periods``)."""
+    from grazing_control.dynamics.simulation.simulate import states_between
+    from grazing_control.oscillator import kernel
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    s = settings_from_values({**sim_values(rig), "mode": "realtime"})
+    p = s.params
+    rel = np.arange(1, round(p.period / s.state_period)) * s.state_period
+    advance = kernel.exact_advance() if s.contact is None else s.contact.advance
+    advance(p, p.tau2, 0.0, 0.0, p.period)       # compiled at its first call (the wall)
+    t0 = time.process_time()
+    for _ in range(periods):
+        seg = advance(p, p.tau2, 0.0, 0.0, p.period)
+    t1 = time.process_time()
+    for _ in range(periods):
+        if s.contact is None:
+            states_between(p, p.tau2, 0.0, 0.0, seg.impacts, rel)
+        else:
+            s.contact.states_between(p, p.tau2, 0.0, 0.0, rel)
+    t2 = time.process_time()
+    print(f"engine ({rig.stop.type}): one period {1e3 * (t1 - t0) / periods:.2f} ms, "
+          f"{len(rel)} stream states {1e3 * (t2 - t1) / periods:.2f} ms of CPU "
+          f"(the period is {1e3 * p.period / rig.omega_n:.1f} ms at physical speed)")
 
 
 def core(rig, c2, forces, periods, enable_after, seed=7):
@@ -115,6 +173,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", default=str(ROOT / "config" / "rigs" / "acceptance.yaml"))
     ap.add_argument("--periods", type=int, default=900)
+    ap.add_argument("--engine-cost", action="store_true",
+                    help="only the simulator's CPU per period and per stream (no nodes)")
     ap.add_argument("--enable-after", type=int, default=200)
     ap.add_argument("--c2", type=float, default=math.nan,
                     help="the design's c2 (default: the c2 of least noise gain)")
@@ -142,6 +202,9 @@ def main(argv=None):
                     help="recorder_node's batch_window (default: its own, 1 ms)")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
+    if args.engine_cost:
+        engine_cost(rig)
+        return 0
     p, d = rig.params(), rig.dimensionless()
     g, predicted, rate = design(rig, args.c2, None if args.answer_lead is None
                                 else args.answer_lead * rig.omega_n)
@@ -152,7 +215,7 @@ def main(argv=None):
           f"{g.delay:.4g}, pulse {d['pulse_width']:.4g}")
     print(f"design: c2 = {g.c2:.6g}, c1 = {g.c1:.6g}; predicted Pi2 spread {predicted:.4g} "
           f"(noise gain, position only, model estimator at {rate} samples per period)")
-    print(f"uncontrolled model: largest Lyapunov exponent {lyap.exponents[0]:.3f} per period "
+    print(f"uncontrolled rigid model: largest Lyapunov exponent {lyap.exponents[0]:.3f} per period "
           f"({'chaotic' if lyap.exponents[0] > 0 else 'not chaotic'}), "
           f"{lyap.impacts_per_period:.3f} impacts per period")
     if args.core is not None:
@@ -191,6 +254,13 @@ def main(argv=None):
                 print(f"{name}: {lines[-1].split('summary: ', 1)[1]}")
             for ln in (ln for ln in text if "cpu_s=" in ln):   # GRAZING_GC_PAUSES=1
                 print(f"{name}: {ln.split(']: ', 1)[-1]}")
+    from rig_timing import report, section_timing     # benchmarks/rig_timing.py
+
+    lead = (answer_lead(rig) / rig.omega_n if args.answer_lead is None else args.answer_lead)
+    try:
+        print("\n".join(report(section_timing(out / "bag", lead, 1.0 / rig.sensor.rate))))
+    except (OSError, StopIteration, ValueError) as exc:
+        print(f"no timing from the bag: {exc}")
     try:
         sd = load(out / "bag").scenes[0]
     except (OSError, ValueError) as exc:
@@ -206,7 +276,18 @@ def main(argv=None):
           f"(impacts per period {np.bincount(counts[unc]).tolist()})")
     orbit = pulse_orbit(p, g, d["pulse_width"],
                         force_limit=d["force_limit"] if d["force_limit"] > 0 else math.inf)
-    err = np.abs(x - orbit.pi2[0])
+    x_orbit = orbit.pi2[0]
+    if rig.stop.type != "rigid":      # the orbit on the rig's own stop, not the wall's
+        found = compliant_orbit(rig, g, orbit.pi2_deviation)
+        if found is None:
+            print(f"stop {rig.stop.type}: no controlled 1/1 orbit of the pulse loop (3000 "
+                  "periods)")
+            return 1
+        x_orbit = found[0]
+        print(f"stop {rig.stop.type} {rig.contact_values()}: the pulse loop's orbit Pi2 x "
+              f"{x_orbit:.9g} ({x_orbit - orbit.pi2[0]:+.3g} from the rigid one, "
+              f"{found[2]} contact(s) a period)")
+    err = np.abs(x - x_orbit)
     band = 5.0 * predicted
     captured = next((k for k in range(k0, len(x) - 50) if np.all(err[k:k + 50] < band)), None)
     if captured is None:
@@ -214,12 +295,12 @@ def main(argv=None):
         return 1
     held = slice(captured, len(x))
     n = len(x) - captured
-    rms = float(np.sqrt(np.mean((x[held] - orbit.pi2[0]) ** 2)))
+    rms = float(np.sqrt(np.mean((x[held] - x_orbit) ** 2)))
     std = float(np.std(x[held]))
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
-    print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - orbit.pi2[0]:+.3g} from the "
+    print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - x_orbit:+.3g} from the "
           f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the "
           "controller's estimator and prediction integrate the pulse since 2026-11-28)")
     print(f"controlled: captured {captured - k0} periods after the switch; held {n} periods: "

@@ -16,7 +16,7 @@ the plain model filter, control from period 20) for 60 + N periods, and `identif
 last N periods (the samples, the plant's impact times, the kicks; position only) three
 ways: from the data alone (the ARX initial guess), from the running zeta with the units
 free, and with the units held (what the controller's refit does,
-dynamics.identification.reidentification.UNITS): zeta and the wall's error with standard errors.
+dynamics.estimation.reidentification.UNITS): zeta and the wall's error with standard errors.
 
     .venv/bin/python benchmarks/reidentify_sensitivity.py --refit 20
 """
@@ -55,7 +55,7 @@ def refits(n: int, seed: int) -> None:
     import math
 
     from grazing_control.dynamics.identification import Recording, identify
-    from grazing_control.dynamics.identification.reidentification import UNITS
+    from grazing_control.dynamics.estimation.reidentification import UNITS
 
     p = OscillatorParams(delta_d=-5e-6)
     wrong = p.with_(zeta=1.05 * p.zeta, delta_d=1.1 * p.delta_d)

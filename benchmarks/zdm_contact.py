@@ -1,6 +1,6 @@
 """The compliant grazing discontinuity maps against the exact flow: fitted order and
-coefficient (docs/theory_contact.md section 14, Eqs. C9 and C10; the tests assert the
-same cases).
+coefficient (docs/theory_contact.md sections 14 and 20, Eqs. C9, C10 and C12; the tests
+assert the same cases).
 
     PYTHONPATH=.:tests python benchmarks/zdm_contact.py
 
@@ -42,6 +42,13 @@ def main():
         slope, dv, alpha = fit(p, lambda q, *a: advance_hertz(q, law, *a), hs)
         order, coef, _ = hertz.grazing_jump(law, alpha, hs[0])
         print(f"{str(law):<46} {slope:8.5f} {order:5.2f} {dv / hs[0] ** order:10.6g} {coef:10.6g}")
+    for law, hs in HERTZ:
+        slope, dv, alpha = fit(p, lambda q, *a: advance_hertz(q, law, *a, friction=FRICTION),
+                               hs, FRICTION.kinetic)
+        order, coef, _ = hertz.grazing_jump(law, alpha, hs[0], friction=FRICTION)
+        bare = hertz.grazing_jump(law, alpha, hs[0])[1]
+        print(f"{str(law) + ' F 0.2/0.25':<46} {slope:8.5f} {order:5.2f} "
+              f"{dv / hs[0] ** order:10.6g} {coef:10.6g} {bare:11.6g}")
     for law, hs in KELVIN_VOIGT:
         slope, dv, alpha = fit(p, lambda q, *a: advance_compliant(q, law, *a, friction=FRICTION),
                                hs, FRICTION.kinetic)

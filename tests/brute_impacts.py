@@ -17,6 +17,18 @@ whose g is negative at every grid point is still seen. Roots are refined by 80
 bisections. Assumption (true for cells much shorter than the shortest period,
 2 pi / max(1, omega)): the acceleration changes sign at most once per cell.
 
+The n-DOF model's cases (:class:`NdofCases`, the yardstick of
+:func:`grazing_control.oscillator.ndof.impact.next_impact`) write its periodic response and
+modal flow again the same way (docs/ndof_model.md, docs/theory_ndof_flow.md)::
+
+    (K - omega^2 M + i omega C) X = f,  d* = |X_w|,  tau* = -arg X_w,
+    z(t) = V e^{Lambda t} V^-1 z0  (A = V Lambda V^-1, A = [[0, I], [-M^-1 K, -M^-1 C]]),
+    g(t) = Re sum_k c_k e^{lambda_k t} - Delta d - 2 d* sin^2(psi / 2),
+    c_k = V_wk (V^-1 z0)_k,  psi = tau0 + omega t - tau*,
+
+and go through the same search (cells much shorter than the fastest mode's and the
+forcing's periods; cases of different n padded with zero modes).
+
 Each maximum of g found is returned with the case, so that the test can tell the
 ambiguous cases (a maximum within the rounding of the gap of 0) from real
 disagreements.
@@ -26,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Cases", "first_impacts"]
+__all__ = ["Cases", "NdofCases", "first_impacts"]
 
 
 class Cases:
@@ -71,6 +83,56 @@ class Cases:
         return g, v, acc
 
 
+class NdofCases:
+    """Per case: the wall coordinate's modal coefficients c_k, eigenvalues lambda_k (padded
+    to a common count), d*, tau*, omega, Delta d, tau0 and the horizon."""
+
+    def __init__(self, lam, c, d_star, tau_star, omega, delta_d, tau0, horizon):
+        self.lam, self.c = np.asarray(lam, complex), np.asarray(c, complex)
+        self.d_star, self.tau_star = np.asarray(d_star, float), np.asarray(tau_star, float)
+        self.omega, self.delta_d = np.asarray(omega, float), np.asarray(delta_d, float)
+        self.tau0, self.horizon = np.asarray(tau0, float), np.asarray(horizon, float)
+
+    @classmethod
+    def build(cls, cases, modes: int = 6):
+        """From (M, C, K, f, omega, i_w, delta_d, tau0, z0, horizon) tuples."""
+        rows = []
+        for M, C, K, f, omega, i_w, dd, tau0, z0, horizon in cases:
+            n = len(M)
+            X = np.linalg.solve(K - omega ** 2 * M + 1j * omega * C, np.asarray(f, complex))
+            A = np.block([[np.zeros((n, n)), np.eye(n)],
+                          [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]])
+            lam, V = np.linalg.eig(A)
+            c = V[i_w] * np.linalg.solve(V, np.asarray(z0, complex))
+            pad = modes - 2 * n
+            rows.append((np.concatenate([lam, np.zeros(pad)]), np.concatenate([c, np.zeros(pad)]),
+                         abs(X[i_w]), (-np.angle(X[i_w])) % (2 * np.pi), omega, dd, tau0, horizon))
+        cols = list(zip(*rows))
+        return cls(np.array(cols[0]), np.array(cols[1]), *cols[2:])
+
+    def take(self, idx):
+        return NdofCases(self.lam[idx], self.c[idx], self.d_star[idx], self.tau_star[idx],
+                         self.omega[idx], self.delta_d[idx], self.tau0[idx], self.horizon[idx])
+
+    def eval(self, t, idx=slice(None)):
+        """(g, v, acc) at times t (shape (m,) or (m, s)) of the cases idx."""
+        t = np.asarray(t, float)
+        shape = (-1,) + (1,) * (t.ndim - 1)
+        lam, c = self.lam[idx], self.c[idx]
+        d, w = self.d_star[idx].reshape(shape), self.omega[idx].reshape(shape)
+        psi = self.tau0[idx].reshape(shape) + w * t - self.tau_star[idx].reshape(shape)
+        e = c.reshape(lam.shape + (1,) * (t.ndim - 1)) * np.exp(
+            lam.reshape(lam.shape + (1,) * (t.ndim - 1)) * t[:, None, ...])
+        lam_b = lam.reshape(lam.shape + (1,) * (t.ndim - 1))
+        zx = e.sum(axis=1).real
+        zv = (lam_b * e).sum(axis=1).real
+        za = (lam_b * lam_b * e).sum(axis=1).real
+        g = zx - self.delta_d[idx].reshape(shape) - 2.0 * d * np.sin(0.5 * psi) ** 2
+        v = -d * w * np.sin(psi) + zv
+        acc = -d * w * w * np.cos(psi) + za
+        return g, v, acc
+
+
 def _bisect(cases, idx, lo, hi, which, up, iters=80):
     """Bisection on component ``which`` (0: g, 1: v, 2: acc) of each case idx in [lo, hi];
     the component goes from < 0 to >= 0 (up) or from > 0 to <= 0 (not up)."""
@@ -93,7 +155,7 @@ def first_impacts(cases: Cases, samples: int = 4096):
     maxima : list of (case, time, g) of every interior maximum of g found before the
         first impact (all of them when there is none).
     """
-    n = cases.zeta.size
+    n = cases.horizon.size
     frac = np.linspace(0.0, 1.0, samples + 1)
     t = cases.horizon[:, None] * frac[None, :]
     g, v, acc = cases.eval(t)

@@ -1,30 +1,29 @@
 """Session set-up shared by every test module, and how the suite uses both cores.
 
-`make test` runs pytest on two workers (pytest-xdist, ``-n 2 --dist loadgroup``). The
-modules that start node processes or DDS participants (:data:`SCENE_MODULES`) form one
-xdist group, run by one worker in collection order, one scene at a time as before; every
-other test (the numerical core, bags written in-process, the command line without nodes)
-is shared out to whichever worker is free, beside the scenes and after them. The tests
-marked ``realtime`` (their assertions hold only if the scene's answers meet wall-clock
-deadlines) form a second group, last in the queue, and each waits until the other worker
-has been idle for IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a
-machine that runs one scene and nothing else of the suite, as before the suite ran on two
-workers (a CPU-bound test beside a realtime scene made its answers miss: 12 of 40 where 4
-is the bound). A realtime scene whose assertions do not depend on meeting deadlines (one
-that misses by design, a refused start, a signal) is not marked: it runs in the scene
-group. A module whose module-scoped scene is realtime marks the whole module
-(``pytestmark``), so that the scene is set up once.
+`make test` runs pytest on two workers (pytest-xdist, ``-n 2 --dist loadgroup``). Each
+module that starts node processes or DDS participants (:data:`SCENE_MODULES`) is an
+xdist group of its own (``scene:<module>``): one worker runs all of it, in collection
+order, so that its module-scoped scene (or tests/test_cli.py's session-scoped commands)
+is set up once; two such modules may run at once, one on each worker. Every other test
+(the numerical core, bags written in-process, the command line without nodes) is shared
+out to whichever worker is free. The tests marked ``realtime`` (their assertions hold
+only if the scene's answers meet wall-clock deadlines) form one more group, last in the
+queue, and each waits until the other worker has been idle for IDLE_SECONDS (at most
+REALTIME_WAIT): such a deadline is measured on a machine that runs one scene and nothing
+else of the suite (a CPU-bound test beside a realtime scene made its answers miss: 12 of
+40 where 4 is the bound). A realtime scene whose assertions do not depend on meeting
+deadlines (one that misses by design, a refused start, a signal) is not marked. A module
+whose module-scoped scene is realtime marks the whole module (``pytestmark``), so that
+the scene is set up once.
 
-Found on 2026-11-28: with the pinned pytest 9.2 and pytest-xdist 3.8 the ``xdist_group``
-marks are inert. xdist's worker turns them into a node-id suffix by setting
-``item._nodeid``, which pytest 9 no longer reads (its node id is ``item._id``), so
-``--dist loadgroup`` schedules like ``--dist load``: both workers run scene modules, two
-scenes at once, and a module's tests may be split over the workers (tests/test_cli.py's
-commands fixture ran on each). The realtime tests' wait for an idle other worker (the flag
-files below) does not depend on the groups and holds. Measured on fresh clones of the
-same tree: as it runs, 486 s; ``--dist loadscope`` (each module on one worker) 544 s, so
-the suite stays as it is until the grouping is mended (pytest 8, or the suffix set on
-``_id``) and measured.
+The groups are made here (:class:`GroupMender`). Found on 2026-11-28: with the pinned
+pytest 9.2 and pytest-xdist 3.8 the ``xdist_group`` marks were inert: xdist's worker
+turns them into a node-id suffix (``<nodeid>@<group>``) by setting ``item._nodeid``,
+which pytest 9 no longer reads (its node id is ``item._id``), and it did so before this
+conftest had marked anything; so ``--dist loadgroup`` scheduled like ``--dist load``: a
+module's tests were split over both workers and its scene (tests/test_cli.py's
+commands: 40-87 s) set up on each. tests/test_suite_layout.py
+checks that a grouped test's node id carries its group.
 """
 
 import tempfile
@@ -38,11 +37,14 @@ from grazing_control.oscillator import kernel
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernel():
-    """Compile the numba kernel (or load its on-disk cache) once, before any test: in a
-    fresh checkout the first compilation takes 5-20 s, which a node test's startup
-    timeouts must not absorb."""
+    """Compile the numba kernel and the stream estimator's compiled model filter (or load
+    their on-disk cache) once, before any test: in a fresh checkout the first compilation
+    takes 5-20 s, which a node test's startup timeouts must not absorb."""
     if kernel.use_kernel():
         kernel.warm_up()
+        from grazing_control.dynamics.estimation.stream import warm_up
+
+        warm_up()       # the compiled model filter (compiled_flow), 1-2 s the first time
 
 
 @pytest.fixture(autouse=True)
@@ -111,7 +113,7 @@ def no_process_outlives_its_test(request):
 #: Test modules that start node processes (simulator, controller, recorder, live view,
 #: launcher, replay, colcon) or DDS participants: one xdist group, one scene at a time.
 SCENE_MODULES = frozenset({
-    "test_actuation", "test_bagtools_analyze", "test_bagtools_replay", "test_cli",
+    "test_actuation", "test_answer_port", "test_bagtools_analyze", "test_bagtools_replay", "test_cli",
     "test_cli_hostile", "test_closed_loop", "test_composed", "test_contact_plant",
     "test_controller_node", "test_deadline_misses",
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
@@ -124,6 +126,7 @@ SCENE_MODULES = frozenset({
 })
 
 def pytest_configure(config):
+    config.pluginmanager.register(GroupMender(), "grazing-group-mender")
     config.addinivalue_line(
         "markers", "realtime: a realtime scene whose assertions need its answers to meet "
                    "wall-clock deadlines: run last, with the other worker idle (conftest.py)")
@@ -133,17 +136,42 @@ def is_realtime(item) -> bool:
     return item.get_closest_marker("realtime") is not None
 
 
+def xdist_group(item) -> str | None:
+    """The xdist group of a test: ``realtime``, ``scene:<module>`` or none."""
+    if is_realtime(item):
+        return "realtime"
+    if item.path.stem in SCENE_MODULES:
+        return f"scene:{item.path.stem}"
+    return None
+
+
 def pytest_collection_modifyitems(config, items):
-    """Put the scene modules' tests in one xdist group and the realtime tests in
-    another, last (collection order kept within each, so that module-scoped scenes are
-    set up once)."""
-    scenes, realtime = pytest.mark.xdist_group("scenes"), pytest.mark.xdist_group("realtime")
+    """Mark each test with its xdist group (:func:`xdist_group`); the realtime tests last
+    (collection order kept within each, so that module-scoped scenes are set up once)."""
     for item in items:
-        if is_realtime(item):
-            item.add_marker(realtime)
-        elif item.path.stem in SCENE_MODULES:
-            item.add_marker(scenes)
+        group = xdist_group(item)
+        if group is not None:
+            item.add_marker(pytest.mark.xdist_group(group))
     items.sort(key=is_realtime)        # stable: collection order within each rank
+
+
+class GroupMender:
+    """On an xdist worker with ``--dist loadgroup``: suffix each grouped test's node id
+    with ``@<group>`` (``_id``, what pytest 9 reads), as xdist 3.8 means to and pytest 8
+    let it: the controller's ``loadgroup`` scheduling reads the group from the suffix.
+    (xdist's own suffix, ``item._nodeid``, is lost, and came before this conftest's marks
+    anyway: this hook runs last.)"""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, config, items):
+        from _pytest.nodeid import coerce_node_id
+
+        if getattr(config, "workerinput", None) is None or not config.getvalue("loadgroup"):
+            return
+        for item in items:
+            group = xdist_group(item)
+            if group is not None and not item.nodeid.endswith("@" + group):
+                item._id = coerce_node_id(f"{item.nodeid}@{group}")
 
 
 #: Seconds the other worker must have been idle before a realtime test starts, and the

@@ -121,38 +121,7 @@ class RefModel:
         horizon = _f(horizon)
         n = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / n for k in range(n + 1)]
-        g0, v0, a0 = arc(hs[0])
-        if abs(g0) <= ROOT_TOL * 1e-3:  # on the wall (up to 50-digit rounding)
-            if v0 > 0:
-                return mpf(0)
-            if v0 == 0:
-                raise RuntimeError("reference: at rest on the wall (sticking) is not modelled")
-            g0 = -ROOT_TOL  # leaving the wall: g < 0 just after the start
-        prev = (hs[0], (g0, v0, a0))
-        for h in hs[1:]:
-            cur = (h, arc(h))
-            found = self._search_cell(arc, prev, cur)
-            if found is not None:
-                return found
-            prev = cur
-        return None
-
-    def _search_cell(self, arc, lo, hi):
-        # split where the acceleration changes sign, so that v is monotone on pieces
-        (a, fa), (b, fb) = lo, hi
-        pieces = [(lo, hi)]
-        if fa[2] * fb[2] < 0:
-            tm = _refine(arc, a, b, 2, fa[2] < 0)
-            mid = (tm, arc(tm))
-            pieces = [(lo, mid), (mid, hi)]
-        for (a, fa), (b, fb) in pieces:
-            if fa[0] < 0 <= fb[0]:
-                return _refine(arc, a, b, 0, True)
-            if fa[0] < 0 and fb[0] < 0 and fa[1] > 0 and fb[1] <= 0:
-                tm = _refine(arc, a, b, 1, False)  # maximum of g
-                if arc(tm)[0] >= 0:
-                    return _refine(arc, a, tm, 0, True)
-        return None
+        return first_root(arc, hs, ROOT_TOL * 1e-3, _refine)
 
     def bounces(self, tau, v, duration, stop=None, max_impacts=2000):
         """The exact impacts of the motion that leaves the wall x = d with velocity v.
@@ -310,6 +279,51 @@ class Arc:
             return g, vel, acc
         y3 = -2 * m.zeta * y2 - y1
         return g, vel, acc, self.aw3 * sp + y3
+
+
+def first_root(arc, hs, wall_tol, refine):
+    """First impact time on the grid ``hs`` of an ``arc`` (h -> (g, v, acc)), or None; the
+    search of this module and of tests/reference_ndof.py.
+
+    A start within ``wall_tol`` of the wall is an impact at 0 if v > 0, sticking
+    (RuntimeError) if v = 0, else leaving. A cell whose acceleration changes sign is split
+    at its zero, so v is monotone on each piece; a piece with g < 0 <= g at its ends
+    brackets a root, and one where v goes from + to - holds a maximum of g, tested.
+    ``refine(arc, lo, hi, which, increasing)`` finds the root of component ``which``.
+    """
+    g0, v0, a0 = arc(hs[0])
+    if abs(g0) <= wall_tol:  # on the wall (up to 50-digit rounding)
+        if v0 > 0:
+            return mpf(0)
+        if v0 == 0:
+            raise RuntimeError("reference: at rest on the wall (sticking) is not modelled")
+        g0 = -ROOT_TOL  # leaving the wall: g < 0 just after the start
+    lo = (hs[0], (g0, v0, a0))
+    for h in hs[1:]:
+        hi = (h, arc(h))
+        found = _search_cell(arc, lo, hi, refine)
+        if found is not None:
+            return found
+        lo = hi
+    return None
+
+
+def _search_cell(arc, lo, hi, refine):
+    # split where the acceleration changes sign, so that v is monotone on pieces
+    (a, fa), (b, fb) = lo, hi
+    pieces = [(lo, hi)]
+    if fa[2] * fb[2] < 0:
+        tm = refine(arc, a, b, 2, fa[2] < 0)
+        mid = (tm, arc(tm))
+        pieces = [(lo, mid), (mid, hi)]
+    for (a, fa), (b, fb) in pieces:
+        if fa[0] < 0 <= fb[0]:
+            return refine(arc, a, b, 0, True)
+        if fa[0] < 0 and fb[0] < 0 and fa[1] > 0 and fb[1] <= 0:
+            tm = refine(arc, a, b, 1, False)  # maximum of g
+            if arc(tm)[0] >= 0:
+                return refine(arc, a, tm, 0, True)
+    return None
 
 
 def _refine(arc, lo, hi, which, increasing):

@@ -69,8 +69,40 @@ def seeded_start(rng, p, held="stick"):
     return kind, p, tau0, min(x, p.d), v
 
 
-def reference_advance(p, law, tau0, x, v, duration, friction=None):
+def slip_or_stick(p, at_rest, t, y, duration, f_sta, forced, sgn, sticks):
+    """The friction's step of the references: the slip's sign into ``sgn[0]`` (the forced
+    one after a release, else x''s sign, else along G at rest), or a stick at x = y[0]
+    while |G| <= F_s, G = ``at_rest(t, x)``, ended at the first sign change of |G| - F_s
+    on a grid of 4000 points per period refined by brentq (appended to ``sticks``).
+    Returns (t, y, forced) after a stick (t = ``duration`` if it lasts), else None."""
+    if forced is not None:
+        sgn[0] = forced
+    elif y[1] != 0.0:
+        sgn[0] = math.copysign(1.0, y[1])
+    else:
+        g = at_rest(t, y[0])
+        sgn[0] = 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
+    if sgn[0] != 0.0:
+        return None
+    xs = y[0]
+    ts = np.linspace(t, duration, max(3, int(4000 * (duration - t) / p.period)))
+    gs = np.array([abs(at_rest(u, xs)) - f_sta for u in ts])
+    out = np.flatnonzero(gs[1:] > 0.0)
+    if len(out) == 0:
+        sticks.append((t, math.inf))
+        return duration, [xs, 0.0], None
+    j = out[0]
+    tr = brentq(lambda u: abs(at_rest(u, xs)) - f_sta, ts[j], ts[j + 1],
+                xtol=1e-16) if gs[j] < 0.0 else ts[j]
+    sticks.append((t, tr))
+    return tr, [xs, 0.0], math.copysign(1.0, at_rest(tr, xs))
+
+
+def reference_advance(p, law, tau0, x, v, duration, friction=None, force=0.0):
     """(x, v, contacts[, sticks]) after ``duration``; contacts as (t_entry, t_exit or inf).
+
+    ``force``: a constant force on the mass (a force pulse), written into every right-hand
+    side and the force at rest (not the shift of the stop the plant uses for it).
 
     With ``friction`` (kinetic F_f, static F_s) the slip direction enters the right-hand
     side, a slip ends at the event x' = 0, and a stick (|G| <= F_s, G = cos tau - x -
@@ -83,11 +115,12 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
     sgn = [0.0]
 
     def free(t, y):
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0] - sgn[0] * f_kin]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+                - sgn[0] * f_kin]
 
     def touch(t, y):
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0] - sgn[0] * f_kin
-                - k * (y[0] - d) - c * y[1]]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+                - sgn[0] * f_kin - k * (y[0] - d) - c * y[1]]
 
     gap_up, top, gap_down = gap_events(d)
 
@@ -104,7 +137,7 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
     stop.terminal = True
 
     def at_rest(t, xx):
-        return math.cos(w * t + tau0) - xx - k * max(xx - d, 0.0)
+        return math.cos(w * t + tau0) + force - xx - k * max(xx - d, 0.0)
 
     t, y = 0.0, [x, v]
     contacts, sticks = [], []
@@ -119,28 +152,12 @@ def reference_advance(p, law, tau0, x, v, duration, friction=None):
         if DEBUG:
             print(region, t, y)
         if friction is not None:
-            if forced is not None:
-                sgn[0], forced = forced, None
-            elif y[1] != 0.0:
-                sgn[0] = math.copysign(1.0, y[1])
-            else:
-                g = at_rest(t, y[0])
-                sgn[0] = 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
-            if sgn[0] == 0.0:  # stuck
-                xs = y[0]
-                ts = np.linspace(t, duration, max(3, int(4000 * (duration - t) / p.period)))
-                gs = np.array([abs(at_rest(u, xs)) - f_sta for u in ts])
-                out = np.flatnonzero(gs[1:] > 0.0)
-                if len(out) == 0:
-                    sticks.append((t, math.inf))
-                    t, y = duration, [xs, 0.0]
+            stuck = slip_or_stick(p, at_rest, t, y, duration, f_sta, forced, sgn, sticks)
+            forced = None
+            if stuck is not None:
+                t, y, forced = stuck
+                if t >= duration:
                     break
-                j = out[0]
-                tr = brentq(lambda u: abs(at_rest(u, xs)) - f_sta, ts[j], ts[j + 1],
-                            xtol=1e-16) if gs[j] < 0.0 else ts[j]
-                sticks.append((t, tr))
-                g = at_rest(tr, xs)
-                t, y, forced = tr, [xs, 0.0], math.copysign(1.0, g)
                 continue
             stop.direction = -sgn[0]
         extra = [stop] if friction is not None else []

@@ -19,10 +19,11 @@ from __future__ import annotations
 import math
 
 import mpmath as mp
+import numpy as np
 from scipy.optimize import brentq
 
 # the Kelvin-Voigt reference's solver settings, one place (refined() there shrinks MAX_STEP)
-from reference_contact import _solve, gap_events
+from reference_contact import _solve, gap_events, slip_or_stick
 
 __all__ = ["reference_contact", "reference_advance_hertz"]
 
@@ -90,26 +91,35 @@ def _reference_contact(p, law, tau_e, v0):
 # ---------------------------------------------------------------------------------------
 
 
-def reference_advance_hertz(p, law, tau0, x, v, duration):
-    """(x, v, contacts) after ``duration`` with a Hertz / Hunt-Crossley stop; contacts as
-    (t_entry, t_exit or inf).
+def reference_advance_hertz(p, law, tau0, x, v, duration, force=0.0, friction=None):
+    """(x, v, contacts[, sticks]) after ``duration`` with a Hertz / Hunt-Crossley stop;
+    contacts as (t_entry, t_exit or inf); ``force`` a constant force on the mass written
+    into the right-hand sides.
 
     Independent of oscillator/hertz.py: the equation of motion written directly in
     physical coordinates for every region (no closed form outside the contact), DOP853 at
     rtol 2.3e-14 (its floor) with terminal events, restarted at every switch. An entry the
     event location could miss (a penetration inside one step) is caught at the next
     maximum of x and located by brentq on the dense output, as in
-    ``reference_contact.reference_advance``.
+    ``reference_contact.reference_advance``. With ``friction`` (kinetic F_f, static F_s),
+    as there: the slip's direction in the right-hand side, a slip ends at the event
+    x' = 0, a stick (|G| <= F_s, G = cos tau - x - k_c max(x - d, 0)^{3/2}) ends at the
+    first sign change of |G| - F_s on a grid of 4000 points per period refined by brentq
+    (not the closed form); the sticks are returned as a fourth element.
     """
     k, a, d, zeta, w = law.stiffness, law.alpha, p.d, p.zeta, p.omega
+    f_kin = friction.kinetic if friction is not None else 0.0
+    f_sta = friction.static if friction is not None else 0.0
+    sgn = [0.0]
 
     def free(t, y):
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+                - sgn[0] * f_kin]
 
     def touch(t, y):
         pen = max(y[0] - d, 0.0)
-        return [y[1], math.cos(w * t + tau0) - 2.0 * zeta * y[1] - y[0]
-                - k * pen ** 1.5 * (1.0 + 1.5 * a * y[1])]
+        return [y[1], math.cos(w * t + tau0) + force - 2.0 * zeta * y[1] - y[0]
+                - sgn[0] * f_kin - k * pen ** 1.5 * (1.0 + 1.5 * a * y[1])]
 
     gap_up, top, gap_down = gap_events(d)
 
@@ -121,37 +131,62 @@ def reference_advance_hertz(p, law, tau0, x, v, duration):
         return 1.0 + 1.5 * a * y[1]
     factor_up.terminal, factor_up.direction = True, 1.0
 
+    def stop(t, y):
+        return y[1]
+    stop.terminal = True
+
+    def at_rest(t, xx):
+        return math.cos(w * t + tau0) + force - xx - k * max(xx - d, 0.0) ** 1.5
+
     t, y = 0.0, [x, v]
-    contacts = []
+    contacts, sticks = [], []
     delta = x - d
     region = "below" if delta <= 0.0 else ("contact" if 1.0 + 1.5 * a * v > 0.0 else "above")
     entry = 0.0
     guard = 0
+    forced = None
     while t < duration:
         guard += 1
         assert guard < 100000
+        if friction is not None:
+            stuck = slip_or_stick(p, at_rest, t, y, duration, f_sta, forced, sgn, sticks)
+            forced = None
+            if stuck is not None:
+                t, y, forced = stuck
+                if t >= duration:
+                    break
+                continue
+            stop.direction = -sgn[0]
+        extra = [stop] if friction is not None else []
         if region == "below":
-            sol = _solve(free, t, y, duration, [gap_up, top])
+            sol = _solve(free, t, y, duration, [gap_up, top] + extra)
             hit = [s for s in sol.t_events[0] if s > t]
-            end = hit[0] if hit else sol.t[-1]
+            halted = [s for s in (sol.t_events[2] if extra else []) if s > t]
+            end = hit[0] if hit else (halted[0] if halted else sol.t[-1])
             missed = [s for s in sol.t_events[1] if t < s <= end and sol.sol(s)[0] > d]
             if missed:  # an entry inside one step: the root of x - d before that maximum
                 lo = max([t] + [s for s in sol.t_events[1] if s < missed[0]])
                 end = brentq(lambda s: sol.sol(s)[0] - d, lo, missed[0], xtol=1e-16)
-                hit = [end]
-            if hit:
+                hit, halted = [end], []
+            if hit and not (halted and halted[0] < end):
                 t, y = end, [d, float(sol.sol(end)[1])]
                 if y[1] <= 0.0:  # a tangency: no contact
                     continue
                 region, entry = "contact", t
                 continue
+            if halted:
+                t, y = halted[0], [min(sol.sol(halted[0])[0], d), 0.0]
+                continue
             t, y = duration, list(sol.y[:, -1])
         elif region == "contact":
-            sol = _solve(touch, t, y, duration, [factor_down, gap_down])
+            sol = _solve(touch, t, y, duration, [factor_down, gap_down] + extra)
             ev = [(e[0], i) for i, e in enumerate(sol.t_events) if len(e) and e[0] > t]
             if ev:
                 t, i = min(ev)
                 y = list(sol.sol(t))
+                if i == 2:      # the slip ends in contact
+                    y[1] = 0.0
+                    continue
                 contacts.append((entry, t))
                 if i == 1:
                     y[0] = d
@@ -159,17 +194,21 @@ def reference_advance_hertz(p, law, tau0, x, v, duration):
                 continue
             t, y = duration, list(sol.y[:, -1])
         else:  # above the stop, the factor 1 + 1.5 alpha x' <= 0: free until either returns
-            sol = _solve(free, t, y, duration, [factor_up, gap_down])
+            sol = _solve(free, t, y, duration, [factor_up, gap_down] + extra)
             ev = [(e[0], i) for i, e in enumerate(sol.t_events) if len(e) and e[0] > t]
             if ev:
                 t, i = min(ev)
                 y = list(sol.sol(t))
                 if i == 0:
                     region, entry = "contact", t
-                else:
+                elif i == 1:
                     y[0], region = d, "below"
+                else:
+                    y[1] = 0.0
                 continue
             t, y = duration, list(sol.y[:, -1])
     if region == "contact":
         contacts.append((entry, math.inf))
+    if friction is not None:
+        return y[0], y[1], contacts, sticks
     return y[0], y[1], contacts

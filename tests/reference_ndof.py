@@ -20,7 +20,7 @@ Impacts: the first h > 0 with x_w(h) = d, v_w >= 0. Each forcing period is cut i
 by mp.findroot), so v_w is monotone on each piece; a piece with g < 0 <= g at its ends
 brackets a root, and a piece where v_w goes from + to - holds a maximum of g (located by
 mp.findroot on v_w) that is tested, so a grazing hump negative at every grid point is
-still found. Roots are refined by mp.findroot (Anderson's bracketing method) to
+still found (the search is tests/reference.py's ``first_root``). Roots are refined by mp.findroot (Anderson's bracketing method) to
 ``ROOT_TOL``. Assumption (true for the example models: cells of T/128 against the
 fastest mode's period): no cell holds two zeros of the acceleration. Sticking is not
 modelled (more than ``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
@@ -32,6 +32,8 @@ k^T (X - X**), X** = X_p(tau2) the grazing orbit's point.
 from __future__ import annotations
 
 from mpmath import mp, mpc, mpf
+
+from reference import first_root
 
 __all__ = ["DPS", "NdofRef", "load_reference"]
 
@@ -135,35 +137,7 @@ class NdofRef:
         horizon = _f(horizon)
         cells = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / cells for k in range(cells + 1)]
-        g0, v0, a0 = arc(hs[0])
-        if abs(g0) <= ROOT_TOL:
-            if v0 > 0:
-                return mpf(0)
-            g0 = -ROOT_TOL  # leaving the wall
-        prev = (hs[0], (g0, v0, a0))
-        for h in hs[1:]:
-            cur = (h, arc(h))
-            found = self._search_cell(arc, prev, cur)
-            if found is not None:
-                return found
-            prev = cur
-        return None
-
-    def _search_cell(self, arc, lo, hi):
-        (a, fa), (b, fb) = lo, hi
-        pieces = [(lo, hi)]
-        if fa[2] * fb[2] < 0:
-            tm = _root(arc, 2, a, b)
-            mid = (tm, arc(tm))
-            pieces = [(lo, mid), (mid, hi)]
-        for (a, fa), (b, fb) in pieces:
-            if fa[0] < 0 <= fb[0]:
-                return _root(arc, 0, a, b)
-            if fa[0] < 0 and fb[0] < 0 and fa[1] > 0 and fb[1] <= 0:
-                tm = _root(arc, 1, a, b)  # the maximum of g
-                if arc(tm)[0] >= 0:
-                    return _root(arc, 0, a, tm)
-        return None
+        return first_root(arc, hs, ROOT_TOL, lambda arc, a, b, which, _up: _root(arc, which, a, b))
 
     # -------------------------------------------------------------- the map
     def pi2_map(self, z, gains=None):

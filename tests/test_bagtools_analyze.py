@@ -376,7 +376,7 @@ def test_the_model_switches_are_reported(tmp_path):
     both in order with their sections, the reason, the model with standard errors and
     the new gains."""
     from bagtools_helpers import TYPESTORE
-    from grazing_control.dynamics.identification.reidentification import REASONS
+    from grazing_control.dynamics.estimation.reidentification import REASONS
     from grazing_control.recordings.analyze import analyze
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 

@@ -143,18 +143,22 @@ def test_realtime_bag_recorded_here_analysed_and_replayed(tmp_path):
     assert sim["first_sample_above_1e-12"] is not None and "arrival" in sim["why"]
 
 
-def test_a_pulse_scene_through_the_actuator_is_replayed_bit_for_bit(tmp_path):
-    """The simulator's replay takes how a correction acted from the record: the pulse,
-    its force limit and the actuator's lag (without them a pulse scene's replay departed
-    by 1.6e-3 at its first correction)."""
+@pytest.mark.parametrize("plant", [
+    {"force_limit": 0.5, "actuator_bandwidth": 2.0},
+    {"contact": "kelvin_voigt", "contact_stiffness": 1e3, "contact_damping": 0.5,
+     "friction": 1e-4}], ids=["actuator", "compliant_stop"])
+def test_a_pulse_scene_through_the_actuator_is_replayed_bit_for_bit(tmp_path, plant):
+    """The simulator's replay takes how a correction acted and what the stop is from the
+    record: the pulse, its force limit and the actuator's lag (without them a pulse
+    scene's replay departed by 1.6e-3 at its first correction), the compliant stop and
+    the friction (without them the replay ran the rigid wall)."""
     p, delay = OscillatorParams(delta_d=-5e-6), 3.0
     write_controller_yaml(tmp_path / "ctl.yaml", p, Gains(degenerate_c1(p, -1.0, delay), -1.0,
                                                           delay))
     res = launcher.run(None, str(tmp_path / "ctl.yaml"), tmp_path / "bag", 40,
                        domain_id=new_domain(), timeout=90,
                        sim_overrides={"delta_d": -5e-6, "actuation_delay": delay,
-                                      "pulse_width": 0.1, "force_limit": 0.5,
-                                      "actuator_bandwidth": 2.0},
+                                      "pulse_width": 0.1, **plant},
                        controller_overrides={"enable_after": 10}, log_dir=tmp_path / "logs")
     assert res.ok, res
     sim = replay_simulator(tmp_path / "bag", tmp_path / "sim", domain_id=new_domain())

@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 from builtin_interfaces.msg import Time  # noqa: E402
-from geometry_msgs.msg import TwistStamped, Vector3Stamped  # noqa: E402
+from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -36,6 +36,7 @@ PAD = {
     "joint_state": _padding((13, 16), (29, 32), (36, 40), (52, 56), (68, 72)),
     "vector3_stamped": _padding((13, 16)),
     "twist_stamped": _padding((13, 16)),
+    "wrench_stamped": _padding((17, 24)),
     "clock": set(),
     "float64": set(),
 }
@@ -86,7 +87,7 @@ def test_joint_state_bytes_are_rclpys():
         assert got[:2] == (sec, ns) and _equal(got[2], x) and _equal(got[3], v)
 
 
-def test_vector3_twist_clock_and_float64_bytes_are_rclpys():
+def test_vector3_twist_wrench_clock_and_float64_bytes_are_rclpys():
     rng = np.random.default_rng(2)
     vals = _values(rng, N)
     for (sec, ns), a, b, c in zip(_stamps(rng, N), vals, vals[1:] + vals[:1], vals[::-1]):
@@ -104,6 +105,13 @@ def test_vector3_twist_clock_and_float64_bytes_are_rclpys():
                                 PAD["twist_stamped"])
         got = cdr.read_twist_stamped(serialize_message(t))
         assert got[:2] == (sec, ns) and _equal(got[2], a) and _equal(got[3], b)
+        w = WrenchStamped()
+        w.header.stamp = stamp
+        w.header.frame_id = "mass"
+        w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = a, b, c
+        w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = c, a, b
+        _same_bytes_but_padding(cdr.wrench_stamped(sec, ns, (a, b, c), (c, a, b)),
+                                serialize_message(w), PAD["wrench_stamped"])
         assert cdr.clock(sec, ns) == serialize_message(Clock(clock=stamp))
         assert cdr.float64(a) == serialize_message(Float64(data=a)) or math.isnan(a)
 

@@ -236,10 +236,33 @@ def test_sweep_with_model_writes_npz_and_png(capsys, tmp_path, three):
     assert got["points"] == 3 and got["failed"] == 0
 
 
+def test_design_with_delay_is_the_delayed_family_and_the_1dof_delayed_c1(capsys, tmp_path):
+    """`design --model M --delay D` prints the delayed design (docs/theory_ndof.md §14):
+    n = 1, --free-gain v0=0.5 at delay 2 gives the 1-DOF `design --c2 0.5 --delay 2`'s c1
+    to 1e-12; the chain's gains are ndof_design.gain_family(m, mu, 4) and the written
+    file carries actuation_delay."""
+    one = run_json(capsys, "design", "--model", ONE, "--delay", "2", "--free-gain", "v0=0.5")
+    m1 = load_model(ONE)
+    ref = run_json(capsys, "design", "--c2", "0.5", "--delay", "2", "--omega", repr(m1.omega),
+                   "--r", repr(m1.r), "--zeta", "0.01", "--delta-d", repr(m1.delta_d))
+    assert one["delay"] == 2.0
+    assert abs(one["gains"][0] - ref["c1"]) <= 1e-12 * abs(ref["c1"])
+    out = tmp_path / "k.yaml"
+    two = run_json(capsys, "design", "--model", TWO, "--delay", "4", "--mu", "0", "--out", str(out))
+    assert two["gains"] == gain_family(load_model(TWO), 0.0, 4.0).tolist()
+    assert two["admissible"] and max(abs(complex(*z)) for z in two["multipliers_limit"]) < 1
+    assert "actuation_delay: 4.0" in out.read_text()
+    code, text, _err = run(capsys, "design", "--model", TWO, "--delay", "4", "--mu", "0")
+    assert code in (0, None) and "actuation delay    = 4" in text
+
+
 # ------------------------------------------------------------------ errors
 @pytest.mark.parametrize("argv, needle", [
     (["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"], "--c2 is a 1-DOF option"),
     (["design", "--model", ONE, "--zeta", "0.02"], "--zeta is a 1-DOF option"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--mu", "0", "--delay", "1"],
+     "--delay is a 1-DOF option"),
+    (["design", "--model", TWO, "--delay", "12"], "delay=12.0 is invalid: valid range is 0 <= delay"),
     (["orbit", "--delta-d", "-1e-6", "--mu", "0"], "--mu needs --model"),
     (["orbit", "--model", "/nonexistent/m.yaml", "--delta-d", "-1e-6"], "no such file"),
     (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--gains", "1,2,3"], "give 2n = 4"),

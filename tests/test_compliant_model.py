@@ -117,8 +117,15 @@ def test_hertz_and_friction_models_are_period_maps_with_difference_jacobians():
     assert model.parameter("friction") == 0.01
     assert model.with_parameter("friction", 0.02).friction.static == pytest.approx(0.024)
     assert model.with_parameter("friction", 0.0).friction is None
-    with pytest.raises(ValueError, match="friction"):
-        CompliantOneDOF(hertz.params, law=hertz.law, friction=Coulomb(0.01))
+    # Hertz with friction (issue 31 part 3): the map is hertz_period_step with it
+    from grazing_control.oscillator.hertz import hertz_period_step
+
+    rough = CompliantOneDOF(hertz.params, hertz.gains, law=hertz.law, friction=Coulomb(0.01))
+    g = hertz.gains
+    seg = hertz_period_step(hertz.params, hertz.law, *z, g.c1 * z[0] + g.c2 * z[1],
+                            friction=Coulomb(0.01))
+    assert tuple(rough.step(z).state) == (seg.x, seg.v)
+    assert tuple(rough.step(z).state) != tuple(hertz.step(z).state)
     with pytest.raises(ValueError, match="hunt_crossley"):
         hertz.parameter("bogus")
 

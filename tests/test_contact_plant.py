@@ -73,6 +73,9 @@ def test_hertz_and_rigid_values():
     assert settings_from_values({"delta_d": -0.01}).contact is None
     kv = _settings(1e3, friction_static=0.0)
     assert kv.contact.friction == Coulomb(0.01, 0.01)
+    hertz = settings_from_values({"delta_d": -0.01, "contact": "hertz", "friction": 0.01,
+                                  "contact_stiffness": 1e4, "friction_static": 0.012})
+    assert hertz.contact.friction == Coulomb(0.01, 0.012)
 
 
 @pytest.mark.parametrize("bad, name", [
@@ -84,17 +87,149 @@ def test_hertz_and_rigid_values():
     (dict(friction=-0.1), "friction="),
     (dict(friction_static=0.005), "friction_static="),
     (dict(contact="rigid"), "friction="),
-    (dict(contact="hertz"), "friction="),
-    (dict(mode="realtime"), "mode="),
-    (dict(actuation_delay=0.5), "actuation_delay="),
     (dict(fidelity="zdm2"), "fidelity="),
-    (dict(delta_d_drift=1e-6), "delta_d_drift="),
     (dict(actuator_bandwidth=2.0), "actuator_bandwidth="),
     (dict(actuator_latency=0.1), "actuator_latency="),
 ])
 def test_bad_contact_parameters_name_the_parameter(bad, name):
     with pytest.raises(ParameterError, match=name):
         _settings(1e3, **bad)
+
+
+# ============================================= every scene the wall runs in (issue 31)
+def _stop(kind: str, k: float) -> dict:
+    """sim_node's stop parameters: Kelvin-Voigt at the study's r (C3), with the friction of
+    SCENE or without, or Hertz with alpha = (1 - r) / 0.3 (C5 at v- = 0.3)."""
+    p = OscillatorParams(delta_d=-0.05)
+    if kind == "hertz":
+        return dict(contact="hertz", contact_stiffness=k, contact_damping=(1.0 - p.r) / 0.3)
+    law = KelvinVoigt.from_restitution(k, p.r)
+    out = dict(contact="kelvin_voigt", contact_stiffness=law.stiffness,
+               contact_damping=law.damping)
+    return {**out, **({"friction": 0.01, "friction_static": 0.012} if kind == "friction"
+                      else {})}
+
+
+def _core_pulse_loop(s, n, gains, on, delay, skip):
+    """The core, one period per sample (as test_plant_loops.reference for the wall):
+    ContactPlant.pulse_step with the pulse at pulse_start (the delay of sample k drawn by
+    the fault model where there is jitter); the Pi2 samples, physical."""
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+    from grazing_control.plant.settings import initial_deviation
+
+    p, w = s.params, s.pulse_width
+    dx, dv = initial_deviation(p, s.x0, s.v0)
+    out = []
+    for k in range(n):
+        out.append((p.x_ref + dx, p.v_ref + dv))
+        dvc = gains.c1 * dx + gains.c2 * dv if k >= on and k not in skip else 0.0
+        delay_k = s.faults.actuation_delay(delay, k, p.period) if s.jitter else delay
+        dx, dv, _ = s.contact.pulse_step(p, dx, dv, dvc, pulse_start(p.period, delay_k, w), w,
+                                         s.force_limit or math.inf)
+    return np.array(out)
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("kind, n, w, jitter", [("friction", 40, 0.6, 0.0),
+                                                ("plain", 30, 0.0, 0.5),
+                                                ("hertz", 12, 0.6, 0.0)])
+def test_a_realtime_pulse_scene_is_the_core_loop_sample_for_sample(kind, n, w, jitter):
+    """Realtime with the correction as a force pulse (or the kick, w = 0, with jitter on
+    its delay) after a scheduled delay, two deadline misses: the Pi2 samples equal the
+    core's loop bit for bit (the engine's pieces are the stop's flow, the pulse the same
+    shift of the stop as of the wall), and the stop's contacts are published as
+    impacts."""
+    from test_plant_loops import Clock, Recorder, key, run_realtime
+
+    delay, on, c2 = 3.0, 5, -1.0
+    p = OscillatorParams(delta_d=-0.05)
+    gains = Gains(degenerate_c1(p, c2), c2)
+    s = settings_from_values({"delta_d": -0.05, "mode": "realtime", "time_scale": 1000.0,
+                              "actuation_delay": delay, "pulse_width": w, "max_periods": n,
+                              "jitter": jitter,
+                              "state_period": 0.5, "x0": p.x_ref + 0.05, **_stop(kind, 1e3)})
+    skip = {8, 9}
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        k = round(ev.t / p.period)
+        if k in skip:
+            return
+        clock.now += 1e-4
+        dvc = gains.c1 * (ev.x - p.x_ref) + gains.c2 * (ev.v - p.v_ref)
+        loop.answer(key(ev), dvc if k >= on else 0.0)
+
+    run_realtime(s, n, answer, clock, sink)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    np.testing.assert_array_equal(got, _core_pulse_loop(s, n, gains, on, delay, skip))
+    assert [m[0] for m in sink.misses] == sorted(skip)
+    assert sum(e.kind == "impact" for e in sink.events) >= n // 2
+    assert sum(e.kind == "state" for e in sink.events) >= n * 15
+
+
+@pytest.mark.parametrize("kind", ["friction", "hertz"])
+def test_a_pulse_into_the_stop_matches_the_reference_with_the_force_written_in(kind):
+    """A pulse that pushes the mass into the stop (delays 6 and 7: a contact inside the
+    pulse): the engine's period and the stream's states during the pulse equal the
+    DOP853 reference with the constant force in its equation of motion (not the shifted
+    stop of the plant), to 1e-11."""
+    from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
+    from reference_contact import reference_advance
+    from reference_hertz import reference_advance_hertz
+
+    p, w, dvc = OscillatorParams(delta_d=-0.05), 1.5, 0.3
+    inside = 0
+    for delay in (6.0, 7.0):
+        s = settings_from_values({"delta_d": -0.05, "pulse_width": w, "actuation_delay": delay,
+                                  "state_period": 0.25, "x0": p.x_ref + 0.02,
+                                  **_stop(kind, 1e2)})
+        law, friction = s.contact.law, s.contact.friction
+
+        def ref(tau, x, v, h, force=0.0):
+            if kind == "hertz":
+                return reference_advance_hertz(p, law, tau, x, v, h, force=force)
+            return reference_advance(p, law, tau, x, v, h, friction=friction, force=force)
+
+        eng = Engine(s)
+        x0, v0 = p.x_ref + eng.dx, p.v_ref + eng.dv
+        eng.begin_period(0.0)
+        events = eng.actuate(dvc, delay)
+        start = pulse_start(p.period, delay, w)
+        force = pulse_force(dvc, w, math.inf)
+        a = ref(p.tau2, x0, v0, start)
+        for e in [e for e in events if e.kind == "state" and e.t < start + w]:
+            b = ref(p.tau2 + p.omega * start, a[0], a[1], e.t - start, force)
+            assert (e.x, e.v) == pytest.approx((b[0], b[1]), abs=1e-11)
+        b = ref(p.tau2 + p.omega * start, a[0], a[1], w, force)
+        inside += len(b[2])
+        c = ref(p.tau2 + p.omega * (start + w), b[0], b[1], p.period - start - w)
+        assert (p.x_ref + eng.seg.dx_end, p.v_ref + eng.seg.dv_end) == pytest.approx(
+            (c[0], c[1]), abs=1e-11)
+    assert inside >= 2
+
+
+def test_a_drifting_wall_and_a_split_period_on_the_compliant_stop():
+    """delta_d_drift: period k runs the stop's period map with Delta d + drift k (as for the
+    wall, test_plant_engine); a correction on arrival (split) is the stop's flow to its
+    time, the jump, the flow on."""
+    drift = 1e-4
+    s = _settings(1e3, delta_d_drift=drift, x0=OscillatorParams(delta_d=-0.05).x_ref + 0.02)
+    eng, p = Engine(s), s.params
+    z = (eng.dx, eng.dv)
+    for k in range(6):
+        assert eng.p == p.with_(delta_d=p.delta_d + drift * k)
+        eng.begin_period(1e-3 * k)
+        eng.end_period()
+        z = s.contact.period_step(p.with_(delta_d=p.delta_d + drift * k), *z, 1e-3 * k)[:2]
+        assert (eng.dx, eng.dv) == z
+    eng.begin_period(0.0)
+    q, seg = eng.p, eng.seg
+    tc = seg.ts + 4.0
+    eng.split(tc, 0.05)
+    head = s.contact.advance(q, q.tau2, seg.dx, seg.dv, tc - seg.ts)
+    tail = s.contact.advance(q, (q.tau2 + (tc - seg.ts) * q.omega) % (2.0 * math.pi),
+                             head.dx, head.dv + 0.05, seg.te - tc)
+    assert (eng.seg.dx_end, eng.seg.dv_end) == (tail.dx, tail.dv)
 
 
 # ======================================================================= nodes

@@ -575,7 +575,7 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
     # decided at a later section: a switch answers that section with the new gains and
     # X** on the section's own estimate, a refusal keeps the gains
     from std_srvs.srv import Trigger
-    from grazing_control.dynamics.identification.reidentification import REASONS
+    from grazing_control.dynamics.estimation.reidentification import REASONS
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 
     client = col.node.create_client(Trigger, "controller_node/reidentify")

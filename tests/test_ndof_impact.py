@@ -1,7 +1,7 @@
 """Tests of grazing_control.oscillator.ndof.impact: certified impact search, impact law,
 saltation, chattering refused, no pass through the wall.
 
-Yardsticks: the vectorised dense-grid brute force of tests/brute_ndof.py (differential test
+Yardsticks: the vectorised dense-grid brute force of tests/brute_impacts.py (differential test
 over thousands of random models and starts) and the 50-digit reference of
 tests/reference_ndof.py (impact times and velocities, near-grazing constructions).
 """
@@ -23,7 +23,7 @@ from grazing_control.oscillator.ndof.impact import (ChatteringError, ImpactCapEr
                                                     saltation_matrix)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
-from brute_ndof import NdofCases, first_impacts
+from brute_impacts import NdofCases, first_impacts
 from reference_ndof import load_reference
 
 MODELS = Path(__file__).resolve().parents[1] / "config" / "models"
@@ -88,12 +88,12 @@ def _random_cases(seed, count):
 def test_certified_search_agrees_with_dense_grid_brute_force(seed):
     """Differential test: over 1000 random models (n = 1..3, non-proportional damping)
     and starts each, the first impact in one period from next_impact equals the
-    brute-force one of tests/brute_ndof.py (T/4096 cells, maxima inside cells tested, 80
+    brute-force one of tests/brute_impacts.py (T/4096 cells, maxima inside cells tested, 80
     bisections): 0 missed and 0 spurious impacts, times equal to 1e-7."""
     cases = _random_cases(seed, 1000)
     brute = NdofCases.build([(m.M, m.C, m.K, m.f, m.omega, m.i_w, m.delta_d, tau0, z, m.period)
                              for m, _, tau0, z in cases])
-    truth = np.concatenate([first_impacts(brute.take(np.arange(k, min(k + 100, len(cases)))))
+    truth = np.concatenate([first_impacts(brute.take(np.arange(k, min(k + 100, len(cases)))))[0]
                             for k in range(0, len(cases), 100)])
     missed, spurious = [], []
     for (m, flow, tau0, z), t_true in zip(cases, truth):

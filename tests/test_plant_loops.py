@@ -272,6 +272,35 @@ def test_realtime_scheduled_answer_after_its_deadline_is_dropped_as_late():
     np.testing.assert_array_equal(got, reference(20, 0.0, 0.0, 0, delay))  # 0.5 never acted
 
 
+def test_a_scheduled_answer_is_judged_by_its_arrival_not_by_when_the_loop_takes_it():
+    """The simulator held off its core past a deadline takes the answer that had arrived
+    before it (sim_node.answer_port): it acts there, bit for bit the answer in time; one
+    that arrived after the deadline is late, however early the loop took it."""
+    n, on, delay, c2 = 60, 10, 5.0, -1.0
+    c1 = degenerate_c1(P, c2, delay)
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=delay,
+                 max_periods=n, state_period=0.0)
+    held, after = {20, 33}, {40}
+    clock, sink = Clock(), Recorder()
+
+    def answer(loop, ev):
+        k = round(ev.t / P.period)
+        arrived = clock.now + 1e-3                   # 1 ms after the sample (5 ms of delay)
+        if k in after:
+            arrived = clock.now + (delay + 0.5) / 1000.0   # 0.5 ms after its deadline
+        if k in held or k in after:
+            clock.now += 8e-3      # off its core for 8 ms: wakes past the deadline, takes
+        wall = clock.now           # the answers that arrived by then, then what is due
+        loop.answer(key(ev), law(c1, c2, ev) if k >= on else 0.0, arrived=arrived)
+        loop.tick(wall)
+
+    loop = run_realtime(s, n, answer, clock, sink)
+    got = np.array([(e.x, e.v) for e in sink.samples()])
+    np.testing.assert_array_equal(got, reference(n, c1, c2, on, delay, after))
+    assert [m[0] for m in sink.misses] == sorted(after)
+    assert loop.stats["late"] == 1 and loop.stats["applied"] == n - 1
+
+
 @pytest.mark.parametrize("pre_roll", [1, 3])
 def test_the_pre_roll_sections_have_no_deadline_and_nothing_acts_there(pre_roll):
     # a stream that starts at section 0 (a rig): sections < pre_roll are unarmed

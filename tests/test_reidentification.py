@@ -1,4 +1,4 @@
-"""grazing_control.dynamics.identification.reidentification: the refit of the model from the stream, the
+"""grazing_control.dynamics.estimation.reidentification: the refit of the model from the stream, the
 redesign with the admissibility re-checked, the switch of the estimator, and each named
 failure (issue 29 section 3; docs/theory_reidentification.md).
 
@@ -20,7 +20,7 @@ from grazing_control.dynamics.design.gains import admissible_c2, degenerate_c1
 from grazing_control.dynamics.estimation.section_state import FilterState
 from grazing_control.dynamics.identification.model import RigModel
 from grazing_control.dynamics.maps.maps import period_matrix
-from grazing_control.dynamics.identification.reidentification import (MIN_PERIODS, ReidentificationError,
+from grazing_control.dynamics.estimation.reidentification import (MIN_PERIODS, ReidentificationError,
                                                        Reidentifier, StreamRecord,
                                                        model_from_fit, plan_switch, redesign,
                                                        refit, switch_estimator)
@@ -39,7 +39,7 @@ WRONG = P.with_(zeta=1.05 * P.zeta, delta_d=1.1 * P.delta_d)
 
 def test_the_condition_sets_are_the_designs():
     from grazing_control.dynamics.design import gains as design
-    from grazing_control.dynamics.identification import reidentification
+    from grazing_control.dynamics.estimation import reidentification
     assert reidentification.CONDITIONS == design.CONDITIONS
 
 

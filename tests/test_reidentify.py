@@ -10,7 +10,7 @@ import pytest
 
 from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
 from grazing_control.dynamics.estimation.section_state import FilterState
-from grazing_control.dynamics.identification.reidentification import (REASONS, ReidentificationError,
+from grazing_control.dynamics.estimation.reidentification import (REASONS, ReidentificationError,
                                                        Refit, SwitchPlan)
 from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.control import Gains

@@ -1,5 +1,6 @@
 """How `make test` shares the suite between two workers (tests/conftest.py) names real
-modules, and every module that starts a node process is in the scene group."""
+modules, every module that starts a node process is a scene module, and the groups take
+effect."""
 
 import re
 from pathlib import Path
@@ -22,7 +23,7 @@ def test_the_scene_group_names_existing_modules():
 
 def test_the_realtime_tests_are_scene_tests():
     """A test marked realtime waits for the other worker to be idle: it must be a scene
-    module's (the scene group runs one scene at a time), and the marker must be in use."""
+    module's, and the marker must be in use."""
     marked = {p.stem for p in HERE.glob("test_*.py")
               if p.stem != "test_suite_layout" and "pytest.mark.realtime" in p.read_text()}
     assert marked, "no test is marked realtime: the marker no longer matches the tests"
@@ -30,9 +31,24 @@ def test_the_realtime_tests_are_scene_tests():
 
 
 def test_every_module_that_starts_nodes_is_in_the_scene_group():
-    """Two scenes at once on two cores would make the realtime checks meaningless: a
-    module that starts nodes and is not in the group would run beside the scenes."""
+    """A module that starts nodes and is not a scene module would have its tests split
+    over both workers, its module-scoped scene set up on each."""
     starts = {p.stem for p in HERE.glob("test_*.py")
               if p.stem != "test_suite_layout" and STARTS_NODES.search(p.read_text())}
     assert starts, "the pattern finds no module: it no longer matches the tests"
     assert starts <= conftest.SCENE_MODULES, starts - conftest.SCENE_MODULES
+
+
+def test_a_grouped_test_carries_its_group_in_its_node_id(request):
+    """Under xdist (``make test``) a scene module's test id ends with ``@scene:<module>``:
+    the controller schedules the group as one unit (conftest.GroupMender; with pytest 9.2
+    and xdist 3.8 the suffix was lost and the groups were inert). Without xdist no
+    suffix is made; this module is no scene module, so it checks a sibling's item."""
+    assert conftest.xdist_group(request.node) is None
+    items = [i for i in request.session.items if conftest.xdist_group(i) is not None]
+    if getattr(request.config, "workerinput", None) is None:
+        assert all("@" not in i.nodeid for i in items)
+        return
+    assert items, "no grouped test was collected beside this one"
+    for item in items:
+        assert item.nodeid.endswith("@" + conftest.xdist_group(item)), item.nodeid

@@ -364,7 +364,7 @@ def _check_run_files(args) -> None:
         from grazing_control.ros.rig_boundary import sim_values
 
         try:
-            sim_values(load_rig(args.rig))   # what sim_node refuses (a compliant stop)
+            sim_values(load_rig(args.rig))   # what sim_node refuses (the rig file)
         except (ParameterError, YamlFileError) as exc:
             raise ParameterError(f"--rig {exc}") from None
     bag = getattr(args, "bag_dir", None)

@@ -134,7 +134,8 @@ def check_options(args, argv) -> None:
         return
     model = getattr(args, "model", None)
     if model is not None:
-        bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)]
+        bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
+               and not (f == "--delay" and args.command == "design")]   # the delayed design
         if bad:
             raise ParameterError(f"{', '.join(bad)} {'is a 1-DOF option' if len(bad) == 1 else 'are 1-DOF options'}"
                                  f": with --model the model file gives the model "
@@ -165,9 +166,9 @@ def coordinates(model) -> tuple:
     return tuple(f"x{i}" for i in range(model.n)) + tuple(f"v{i}" for i in range(model.n))
 
 
-def family_member(model, name: str, value: float) -> float:
+def family_member(model, name: str, value: float, delay: float = 0.0) -> float:
     """mu of the family member whose gain on ``name`` is ``value`` (the family is affine
-    in mu, docs/theory_ndof.md, "Kick design")."""
+    in mu, docs/theory_ndof.md, "Kick design"; for a kick ``delay`` after Pi2, §14)."""
     from grazing_control.dynamics.design.ndof_design import gain_family
 
     names = coordinates(model)
@@ -175,8 +176,8 @@ def family_member(model, name: str, value: float) -> float:
         raise ParameterError(f"--free-gain {name}={value!r} is invalid: valid names are "
                              f"{', '.join(names)}")
     j = names.index(name)
-    k0 = np.asarray(gain_family(model, 0.0), dtype=float)
-    k1 = np.asarray(gain_family(model, 1.0), dtype=float) - k0
+    k0 = np.asarray(gain_family(model, 0.0, delay), dtype=float)
+    k1 = np.asarray(gain_family(model, 1.0, delay), dtype=float) - k0
     if not abs(k1[j]) > 1e-12 * max(1.0, float(np.max(np.abs(k1)))):
         raise ParameterError(f"--free-gain {name}={value!r} is invalid: the gain on {name} is "
                              f"the same ({k0[j]:.12g}) for every member of the family; choose "
@@ -274,15 +275,18 @@ def _header(model, path):
 
 # ---------------------------------------------------------------------------- design
 def cmd_design(args):
-    """design --model FILE [--mu MU | --free-gain NAME=V] [--out FILE] (docs/ndof_commands.md)."""
+    """design --model FILE [--mu MU | --free-gain NAME=V] [--delay D] [--out FILE]
+    (docs/ndof_commands.md; the delayed design is docs/theory_ndof.md §14)."""
     from grazing_control.dynamics.design import ndof_design as nd
 
     model = load(args.model)
+    delay = float(getattr(args, "delay", 0.0) or 0.0)
     t0 = time.perf_counter()
-    k0 = np.asarray(nd.gain_family(model, 0.0), dtype=float)
-    k1 = np.asarray(nd.gain_family(model, 1.0), dtype=float) - k0
-    zeros = np.asarray(nd.transmission_zeros(model), dtype=complex)
-    sets = {c: _intervals(nd.admissible_mu(model, c)) for c in ("impacting", "non-impacting")}
+    k0 = np.asarray(nd.gain_family(model, 0.0, delay), dtype=float)
+    k1 = np.asarray(nd.gain_family(model, 1.0, delay), dtype=float) - k0
+    zeros = np.asarray(nd.transmission_zeros(model, delay), dtype=complex)
+    sets = {c: _intervals(nd.admissible_mu(model, c, delay))
+            for c in ("impacting", "non-impacting")}
     intervals = _intersection(sets["impacting"], sets["non-impacting"])   # "combined"
     given = [f for f, v in (("--mu", args.mu), ("--free-gain", args.free_gain)) if v is not None]
     if len(given) > 1:
@@ -290,7 +294,8 @@ def cmd_design(args):
     if args.mu is not None:
         mu, chosen = float(args.mu), "given (--mu)"
     elif args.free_gain is not None:
-        mu, chosen = family_member(model, *args.free_gain), f"from --free-gain {args.free_gain[0]}"
+        mu, chosen = family_member(model, *args.free_gain, delay), \
+            f"from --free-gain {args.free_gain[0]}"
     elif intervals:
         # the middle of the widest interval; an unbounded one: 1 inside its finite end
         lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
@@ -300,16 +305,16 @@ def cmd_design(args):
     else:
         mu, chosen = 0.0, "mu = 0 (no admissible mu; no --mu given)"
     mu += 0.0   # no "-0" in the report
-    design = nd.evaluate_design(model, mu)
+    design = nd.evaluate_design(model, mu, delay)
     k = np.asarray(design.gains, dtype=float)
     lam0 = np.asarray(design.limit_multipliers, dtype=complex)
     gamma = float(design.gamma1)
-    rho_free = float(np.max(np.abs(nd.free_multipliers(model, mu))))
+    rho_free = float(np.max(np.abs(nd.free_multipliers(model, mu, delay))))
     conditions = {"limit_stable": bool(design.stable), "exists_impacting": bool(design.exists),
                   "free_stable": bool(design.free_stable)}
     admissible = bool(design.admissible)
     # no design anywhere on the family: say where the section could go (a scan, §4)
-    sections = None if intervals else nd.sections_with_stable_zeros(model)
+    sections = None if intervals else nd.sections_with_stable_zeros(model, delay=delay)
     seconds = time.perf_counter() - t0
     out = _header(model, args.model)
     out.update({
@@ -320,7 +325,7 @@ def cmd_design(args):
         "admissible_mu_sets": {"combined": [_json_interval(iv) for iv in intervals],
                                **{c: [_json_interval(iv) for iv in ivs]
                                   for c, ivs in sets.items()}},
-        "mu": mu, "mu_chosen": chosen, "gains": k.tolist(),
+        "delay": delay, "mu": mu, "mu_chosen": chosen, "gains": k.tolist(),
         "multipliers_limit": _complex_list(lam0), "gamma1": gamma,
         "spectral_radius_free": rho_free, "conditions": conditions, "admissible": admissible,
         "pi2_offsets_with_stable_zeros": None if sections is None else
@@ -341,6 +346,9 @@ def cmd_design(args):
         f"n-DOF degenerate grazing design (w^T N = mu w^T) for {args.model} (n = {model.n}, "
         f"wall on x{model.i_w}, kick on v{model.i_a})",
         f"  d*, tau*           = {out['d_star']:.15g}, {out['tau_star']:.15g}",
+        *([f"  actuation delay    = {delay:.15g}  (the kick acts this long after the Pi2 "
+           f"sample; the family, zeros and limits are those of the delayed kick)"]
+          if delay else []),
         f"  family k(mu)       = k0 + mu dk, over ({', '.join(names)})",
         f"    k0               = {_fmt_vec(k0, 12)}",
         f"    dk               = {_fmt_vec(k1, 12)}",

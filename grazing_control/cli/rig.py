@@ -314,7 +314,8 @@ def _stop_si(rig) -> dict:
         return {"type": "rigid"}
     if st.type == "hertz":
         return {"type": "hertz", "stiffness_N_per_m1_5": st.stiffness,
-                "damping_s_per_m": st.damping}
+                "damping_s_per_m": st.damping, "friction_N": st.friction,
+                "friction_static_N": st.friction_static}
     return {"type": "kelvin_voigt", "stiffness_N_per_m": st.stiffness,
             "damping_N_s_per_m": st.damping, "friction_N": st.friction,
             "friction_static_N": st.friction_static}
@@ -330,6 +331,11 @@ def _stop_lines(si: dict, dl: dict) -> list:
                f"A = {st['damping_s_per_m']:.6g} s/m")
         model = (f"k_c = K_H sqrt(l)/k = {dl['contact_stiffness']:.6g}, alpha = A omega_n l = "
                  f"{dl['contact_damping']:.6g}")
+        if st["friction_static_N"] > 0.0:
+            law += (f", friction {st['friction_N']:.6g} N (static "
+                    f"{st['friction_static_N']:.6g} N)")
+            model += (f", friction F/(k l) = {dl['friction']:.6g} (static "
+                      f"{dl['friction_static']:.6g})")
     else:
         law = (f"kelvin_voigt K = {st['stiffness_N_per_m']:.6g} N/m, C = "
                f"{st['damping_N_s_per_m']:.6g} N*s/m, friction {st['friction_N']:.6g} N "
@@ -338,8 +344,7 @@ def _stop_lines(si: dict, dl: dict) -> list:
                  f"{dl['contact_damping']:.6g}, friction F/(k l) = {dl['friction']:.6g} "
                  f"(static {dl['friction_static']:.6g})")
     return [f"  stop               = {law}",
-            f"                       dimensionless: {model}; not simulated in a rig scene "
-            "(realtime)"]
+            f"                       dimensionless: {model}"]
 
 
 def format_report(r: dict) -> str:

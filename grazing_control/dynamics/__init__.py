@@ -11,9 +11,10 @@ Layer 2 of 7 (docs/architecture.md, where each module is listed).
 * :mod:`.design`: design and tuning: c1(c2; delay), the admissible set, the least-noise c2,
   model-error bands, the least spectral radius, switching on; the n-DOF design.
 * :mod:`.estimation`: the Pi2 state from a sampled sensor stream, the stream's sections,
-  the watchful filter (bias, drift) and its consistency test, the rig's clock.
+  the watchful filter (bias, drift), its consistency test and the refit in the loop (its
+  fit imported where it runs: a node does not load the solver), the rig's clock.
 * :mod:`.identification`: the model's parameters from a recorded motion, the stop the data
-  support, the refit in the loop.
+  support.
 * :mod:`.simulation`: event-driven simulation on Pi2, pulses and actuators, fidelities,
   Lyapunov exponents.
 

@@ -183,13 +183,38 @@ class Coulomb:
 
 class CompliantSegment(NamedTuple):
     """Result of :func:`advance_compliant`: end state (x, v), the contacts, and the
-    sticks of the friction as (start, end) times (end inf: stuck at the segment's end)."""
+    sticks of the friction as (start, end) times (end inf: stuck at the segment's end);
+    ``states``: the physical (x, v) at the ``times`` asked for (dense output), or None."""
 
     x: float
     v: float
     contacts: list
     sticks: tuple = ()
     monodromy: tuple | None = None
+    states: list | None = None
+
+
+class _Dense:
+    """Dense output as the flow passes: physical (x, v) at the sorted ``times`` (from the
+    segment's start), each from the piece of the flow that holds it (a region's closed
+    form, a stick, DOP853's interpolant in a Hertz contact). Never alters the
+    trajectory: the pieces are the ones the flow takes anyway."""
+
+    def __init__(self, times, d: float):
+        self.times, self.d, self.j, self.out = list(times), d, 0, []
+
+    def piece(self, t0: float, t1: float, state) -> None:
+        """The times in [.., t1] on the piece that starts at t0: ``state(u)`` is
+        (delta, delta') at u = time - t0."""
+        while self.j < len(self.times) and self.times[self.j] <= t1:
+            delta, vel = state(self.times[self.j] - t0)[:2]
+            self.out.append((delta + self.d, vel))
+            self.j += 1
+
+    def end(self, delta: float, vel: float) -> list:
+        """The times at or past the segment's end: its end state."""
+        self.out += [(delta + self.d, vel)] * (len(self.times) - self.j)
+        return self.out
 
 
 class _Region:
@@ -347,9 +372,24 @@ def _release_time(tau: float, omega: float, lo: float, hi: float) -> float:
     return min(gaps) / omega
 
 
+def _stuck(tau: float, tau0: float, omega: float, t: float, duration: float, rest: float,
+           f_sta: float, at_rest):
+    """A stick from time t (phase tau) with x fixed: the force at rest is cos tau - rest
+    (``rest`` = x + the stop's force at rest, Eq. C4) until it leaves [-F_s, F_s]
+    (:func:`_release_time`). Returns the stick (start, end; end inf past ``duration``),
+    the time it ends (at most ``duration``) and the direction of the slip after it
+    (along G = ``at_rest(phase)``; None at ``duration``)."""
+    end = t + min(_release_time(tau, omega, rest - f_sta, rest + f_sta), duration - t)
+    if end >= duration:
+        return (t, math.inf), end, None
+    g = at_rest((tau0 + omega * end) % TWO_PI)
+    return (t, end), end, math.copysign(1.0, g) if g != 0.0 else 1.0  # slips along G
+
+
 def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: float, v: float,
                       duration: float, *, friction: "Coulomb | None" = None,
-                      max_contacts: int = 10000, monodromy: bool = False) -> CompliantSegment:
+                      max_contacts: int = 10000, monodromy: bool = False,
+                      times=None) -> CompliantSegment:
     """Exact flow with a Kelvin-Voigt stop (and Coulomb friction) for a fixed time.
 
     Physical state (x, v) in and out. The regions (docs/theory_contact.md, "The
@@ -368,6 +408,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
 
     Never hangs: at most 3 ``max_contacts`` + 3 region changes and as many sticks, beyond
     which :class:`ImpactCapError` is raised (docs/theory_contact.md, "Bounded switching").
+    ``times`` (sorted, in [0, duration]): the states there as the segment's ``states``
+    (:class:`_Dense`).
     """
     _check_law(p, law)
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
@@ -396,6 +438,7 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         region = "below"
     entry = (0.0, tau, math.nan) if region == "contact" else None
     forced = None
+    dense = _Dense(times if times is not None else (), p.d)
 
     def at_rest_force(tau, delta):
         return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0)
@@ -419,17 +462,16 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         s = forced if forced is not None else slip_sign(tau, delta, vel)
         forced = None
         if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s
-            rest = p.d + delta + k * max(delta, 0.0)
-            h = _release_time(tau, p.omega, rest - f_sta, rest + f_sta)
-            h = min(h, remaining)
-            sticks.append((t, t + h if t + h < duration else math.inf))
-            t += h
+            t_stick = t
+            stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
+                                      p.d + delta + k * max(delta, 0.0), f_sta,
+                                      lambda u: at_rest_force(u, delta))
+            dense.piece(t_stick, t, lambda u: (delta, 0.0))
+            sticks.append(stick)
             tau = (tau0 + p.omega * t) % TWO_PI
             vel = 0.0
-            if t >= duration:
+            if forced is None:
                 break
-            g = at_rest_force(tau, delta)
-            forced = math.copysign(1.0, g) if g != 0.0 else 1.0  # released: slips along G
             continue
         push = s * f_kin
         geometry = free if region != "contact" else touch
@@ -459,22 +501,17 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             kind = "exit" if h is not None else None
         else:
             sc = k * (reg.cabs + reg.amp + abs(reg.offset)) + c * scale_x
-            h_force = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c),
-                                      horizon, 1.0, sc)
-            h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
-                                    h_force if h_force is not None else horizon, -1.0,
-                                    reg.cabs + reg.amp + abs(reg.offset))
-            if h_gap is not None and (h_force is None or h_gap < h_force):
-                kind, h = "below", h_gap
-            elif h_force is not None:
-                kind, h = "entry", h_force
+            kind, h = _above_switch(reg, _force_event(reg, k, c), _force_bound(reg, k, c),
+                                    horizon, sc)
         if kind is None:
             if h_stop is None:
+                dense.piece(t, duration, reg)
                 delta, vel, _ = reg(remaining)
                 if mono is not None:
                     mono = matmul2(reg.transition(remaining), mono)
                 t = duration
                 break
+            dense.piece(t, t + h_stop, reg)
             delta, _, _ = reg(h_stop)
             vel = 0.0  # the slip ends: stick or slip the other way (slip_sign)
             t += h_stop
@@ -482,6 +519,7 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             if region == "below":
                 delta = min(delta, 0.0)
             continue
+        dense.piece(t, t + h, reg)
         delta, vel, _ = reg(h)
         if mono is not None:
             mono = matmul2(reg.transition(h), mono)
@@ -513,7 +551,24 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             region = "below"
     if entry is not None:
         contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
-    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), mono)
+    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), mono,
+                            dense.end(delta, vel) if times is not None else None)
+
+
+def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale: float):
+    """Above the stop after an exit (free, delta > 0, the force <= 0): the first of the
+    force's return to 0 (``force_event``: a new contact, 'entry') and of the gap's
+    (delta = 0: 'below') within ``horizon``, certified (:func:`_first_crossing`);
+    (None, None) if neither."""
+    h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale)
+    h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
+                            h_force if h_force is not None else horizon, -1.0,
+                            reg.cabs + reg.amp + abs(reg.offset))
+    if h_gap is not None and (h_force is None or h_gap < h_force):
+        return "below", h_gap
+    if h_force is not None:
+        return "entry", h_force
+    return None, None
 
 
 def _force_event(reg: _Region, k: float, c: float):

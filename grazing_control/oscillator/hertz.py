@@ -19,7 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .contact import CompliantSegment, Contact, _first_crossing, _Region
+from .contact import (CompliantSegment, Contact, Coulomb, _above_switch, _Dense,
+                      _first_crossing, _Region, _stuck)
 from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
 from .params import OscillatorParams, ParameterError, _check_real
@@ -65,8 +66,11 @@ class HuntCrossley:
 
 
 def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t_end: float,
-             rtol: float):
-    """DOP853 through one contact from time t; returns (t_exit or None, state)."""
+             rtol: float, push: float = 0.0, slip: float = 0.0, dense=None):
+    """DOP853 through one contact from time t (``push`` = s F_f, the friction of a slip in
+    direction ``slip`` = s, Eq. C4; slip 0: no friction); returns (t_exit or None, state, what ended it: 'leave' (the
+    factor 1 + 1.5 alpha delta' reaches 0), 'back' (delta = 0) or 'stop' (x' = 0 in a
+    slip))."""
     # imported here: a node that never meets a Hertz contact imports no solver
     # (tests/test_node_common.py)
     from scipy.integrate import solve_ivp
@@ -75,7 +79,7 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
     def rhs(s, u):
         delta = u[0]
         f = k * max(delta, 0.0) ** 1.5 * (1.0 + 1.5 * a * u[1])
-        return [u[1], math.cos(w * s + tau0) - 2.0 * zeta * u[1] - (delta + d) - f]
+        return [u[1], math.cos(w * s + tau0) - 2.0 * zeta * u[1] - (delta + d) - f - push]
 
     def leave(s, u):
         return 1.0 + 1.5 * a * u[1]
@@ -85,116 +89,191 @@ def _contact(p: OscillatorParams, law: HuntCrossley, tau0: float, t: float, y, t
         return u[0]
     back.terminal, back.direction = True, -1.0
 
+    def stop(s, u):
+        return u[1]
+    stop.terminal, stop.direction = True, -slip
+
+    events = [leave, back] + ([stop] if slip else [])
     # the first step is short: delta^{3/2} is not smooth at the entry
     sol = solve_ivp(rhs, (t, t_end), list(y), method="DOP853", rtol=rtol, atol=rtol * 1e-3,
-                    events=[leave, back], first_step=1e-8, max_step=0.1)
+                    events=events, first_step=1e-8, max_step=0.1,
+                    dense_output=dense is not None)
     hits = [(e[0], i) for i, e in enumerate(sol.t_events) if len(e) and e[0] > t]
+    if dense is not None:   # the stream's states in the contact: DOP853's interpolant
+        dense.piece(t, min(hits)[0] if hits else t_end, lambda u: sol.sol(t + u))
     if not hits:
-        return None, (sol.y[0, -1], sol.y[1, -1])
+        return None, (sol.y[0, -1], sol.y[1, -1]), None
     te, i = min(hits)
     state = sol.y_events[i][0]
-    return te, (0.0 if i == 1 else state[0], state[1])
+    if i == 2:
+        return te, (state[0], 0.0), "stop"
+    return te, (0.0 if i == 1 else state[0], state[1]), ("leave", "back")[i]
 
 
 def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float, v: float,
-                  duration: float, *, rtol: float = RTOL,
-                  max_contacts: int = 10000) -> CompliantSegment:
-    """Flow with a Hertz / Hunt-Crossley stop for a fixed time (physical x, v).
+                  duration: float, *, rtol: float = RTOL, friction: Coulomb | None = None,
+                  max_contacts: int = 10000, times=None) -> CompliantSegment:
+    """Flow with a Hertz / Hunt-Crossley stop (and Coulomb friction) for a fixed time
+    (physical x, v).
 
     Regions as for :func:`grazing_control.oscillator.contact.advance_compliant`: below
     (closed form, certified entry), contact (DOP853 at ``rtol``), above after an exit with
     delta > 0 (closed form; a new contact where 1 + 1.5 alpha delta' returns to 0, or
-    below again at delta = 0). At most 3 ``max_contacts`` + 3 region changes
-    (:class:`ImpactCapError` beyond).
+    below again at delta = 0). With ``friction`` (Eq. C4 with the Hertz force at rest,
+    G = cos tau - x - k_c max(delta, 0)^{3/2}; docs/theory_contact.md §20) each region
+    slips with the force -F_f sign(x') (outside the contact the closed form's offset,
+    in contact a term of DOP853's right-hand side), a slip ends at the first zero of x'
+    (certified outside the contact, DOP853's event in it), and the mass sticks there
+    while |G| <= F_s, released in closed form
+    (:func:`~grazing_control.oscillator.contact._release_time`). At most
+    2 (3 ``max_contacts`` + 3) region changes, slips' ends and sticks
+    (:class:`ImpactCapError` beyond). ``times``: the states there as the segment's
+    ``states`` (dense output, :class:`~grazing_control.oscillator.contact._Dense`; in
+    contact DOP853's interpolant).
     """
     for name, value in (("x", x), ("v", v), ("tau0", tau0), ("duration", duration)):
         if not math.isfinite(value):
             raise NonFiniteStateError(f"{name}={value!r} must be finite")
-    a = law.alpha
+    if friction is not None and friction.static == 0.0:
+        friction = None  # Coulomb(0): no friction (else x' = 0 would read as a stick)
+    a, k = law.alpha, law.stiffness
+    f_kin = friction.kinetic if friction is not None else 0.0
+    f_sta = friction.static if friction is not None else 0.0
     t, tau = 0.0, tau0 % TWO_PI
     delta, vel = x - p.d, v
     contacts: list = []
+    sticks: list = []
     if delta > 0.0:
         region = "contact" if 1.0 + 1.5 * a * vel > 0.0 else "above"
     else:
         region = "below"
     entry = (0.0, tau, math.nan) if region == "contact" else None
     switches = 0
+    forced = None
+    dense = _Dense(times if times is not None else (), p.d)
+
+    def at_rest_force(tau, delta):
+        return math.cos(tau) - (delta + p.d) - k * max(delta, 0.0) ** 1.5
+
+    def slip_sign(tau, delta, vel):
+        """Direction of the friction's slip; 0 for a stick (x' = 0, |G| <= F_s)."""
+        if vel != 0.0 or friction is None:
+            return math.copysign(1.0, vel)
+        g = at_rest_force(tau, delta)
+        return 0.0 if abs(g) <= f_sta else math.copysign(1.0, g)
+
     while t < duration:
         remaining = duration - t
         switches += 1
-        if switches > 3 * max_contacts + 3:
+        if switches > 2 * (3 * max_contacts + 3):
             raise ImpactCapError(
                 f"more than max_contacts={max_contacts} contacts in {duration:.6g} time "
                 f"units at phase {tau:.6f}: the motion is not resolvable at this cap")
+        s = forced if forced is not None else slip_sign(tau, delta, vel)
+        forced = None
+        if friction is not None and s == 0.0:  # stuck: x fixed until |G| = F_s (C4)
+            t_stick = t
+            stick, t, forced = _stuck(tau, tau0, p.omega, t, duration,
+                                      p.d + delta + k * max(delta, 0.0) ** 1.5, f_sta,
+                                      lambda u: at_rest_force(u, delta))
+            dense.piece(t_stick, t, lambda u: (delta, 0.0))
+            sticks.append(stick)
+            tau = (tau0 + p.omega * t) % TWO_PI
+            vel = 0.0
+            if forced is None:
+                break
+            continue
+        push = s * f_kin
         if region == "contact":
-            te, (delta, vel) = _contact(p, law, tau0, t, (delta, vel), duration, rtol)
+            te, (delta, vel), why = _contact(p, law, tau0, t, (delta, vel), duration, rtol,
+                                             push, s if friction is not None else 0.0,
+                                             dense if times is not None else None)
             if te is None:
                 t = duration
                 break
             t = te
             tau = (tau0 + p.omega * t) % TWO_PI
+            if why == "stop":
+                continue      # the slip ends in contact: stick, or slip the other way
             contacts.append(Contact(entry[0], entry[1], entry[2], vel, t - entry[0], delta))
+            if len(contacts) > max_contacts:
+                raise ImpactCapError(
+                    f"more than max_contacts={max_contacts} contacts in {duration:.6g} time "
+                    f"units at phase {tau:.6f}: the motion is not resolvable at this cap")
             entry = None
             region = "above" if delta > 0.0 else "below"
             continue
-        reg = _Region(1.0, p.zeta, p, tau, delta, vel)
+        reg = _Region(1.0, p.zeta, p, tau, delta, vel, push)
+        h_stop = None
+        if friction is not None:
+            h_stop = _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
+                                     lambda h: reg.bound(3, h), remaining, 1.0,
+                                     reg.cabs + reg.amp + abs(vel) + 1.0)
+        horizon = h_stop if h_stop is not None else remaining
+        kind, h = None, None
         if region == "below":
-            xp, vp = particular(p, tau)
-            dx = _on_wall_at_rest(p, tau)[0] if delta == 0.0 else (delta + p.d) - xp
-            h = _next_impact(p, tau, dx, vel - vp, remaining)
-            if h is None:
+            if friction is None:
+                xp, vp = particular(p, tau)
+                dx = _on_wall_at_rest(p, tau)[0] if delta == 0.0 else (delta + p.d) - xp
+                h = _next_impact(p, tau, dx, vel - vp, horizon)
+            else:
+                h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
+                                    1.0, reg.cabs + reg.amp + abs(reg.offset))
+            kind = "entry" if h is not None else None
+        else:   # above: delta > 0 and 1 + 1.5 alpha delta' <= 0
+            kind, h = _above_switch(
+                reg, lambda u: (1.0 + 1.5 * a * reg(u)[1], 1.5 * a * reg(u)[2]),
+                lambda u: 1.5 * a * reg.bound(3, u), horizon,
+                1.0 + 1.5 * a * (reg.cabs + reg.amp * p.omega))
+        if kind is None:
+            if h_stop is None:
+                dense.piece(t, duration, reg)
                 delta, vel, _ = reg(remaining)
                 t = duration
                 break
-            _, vel, _ = reg(h)
-            delta = 0.0
-            t += h
+            dense.piece(t, t + h_stop, reg)
+            delta, _, _ = reg(h_stop)
+            vel = 0.0  # the slip ends: stick or slip the other way (slip_sign)
+            t += h_stop
             tau = (tau0 + p.omega * t) % TWO_PI
+            if region == "below":
+                delta = min(delta, 0.0)
+            continue
+        dense.piece(t, t + h, reg)
+        delta, vel, _ = reg(h)
+        t += h
+        tau = (tau0 + p.omega * t) % TWO_PI
+        if kind == "below":
+            delta, region = 0.0, "below"
+            continue
+        if region == "below":
+            delta = 0.0
             if vel <= 0.0:
                 vel = 0.0  # a tangency: no contact (impact.py)
                 continue
-            entry = (t, tau, vel)
-            region = "contact"
-            continue
-        # above: delta > 0 and 1 + 1.5 alpha delta' <= 0
-        scale = 1.0 + 1.5 * a * (reg.cabs + reg.amp * p.omega)
-        h_force = _first_crossing(lambda s: (1.0 + 1.5 * a * reg(s)[1], 1.5 * a * reg(s)[2]),
-                                  lambda s: 1.5 * a * reg.bound(3, s), remaining, 1.0, scale)
-        h_gap = _first_crossing(lambda s: reg(s)[:2], lambda s: reg.bound(2, s),
-                                h_force if h_force is not None else remaining, -1.0,
-                                reg.cabs + reg.amp + abs(reg.offset))
-        if h_gap is not None and (h_force is None or h_gap < h_force):
-            _, vel, _ = reg(h_gap)
-            delta, region = 0.0, "below"
-            t += h_gap
-        elif h_force is not None:
-            delta, vel, _ = reg(h_force)
-            t += h_force
-            region = "contact"
-            entry = (t, (tau0 + p.omega * t) % TWO_PI, vel)
-        else:
-            delta, vel, _ = reg(remaining)
-            t = duration
-            break
-        tau = (tau0 + p.omega * t) % TWO_PI
+        entry = (t, tau, vel)
+        region = "contact"
     if entry is not None:
         contacts.append(Contact(entry[0], entry[1], entry[2], math.nan, math.inf, math.nan))
-    return CompliantSegment(delta + p.d, vel, contacts, ())
+    return CompliantSegment(delta + p.d, vel, contacts, tuple(sticks), None,
+                            dense.end(delta, vel) if times is not None else None)
 
 
 def hertz_period_step(p: OscillatorParams, law: HuntCrossley, dx: float, dv: float,
-                      dv_correction: float = 0.0, *, rtol: float = RTOL) -> CompliantSegment:
-    """One period from a Pi2 sample with a Hertz stop: the shape of
+                      dv_correction: float = 0.0, *, rtol: float = RTOL,
+                      friction: Coulomb | None = None) -> CompliantSegment:
+    """One period from a Pi2 sample with a Hertz stop (and friction): the shape of
     :func:`grazing_control.oscillator.contact.compliant_period_step`."""
     xp, vp = particular(p, p.tau2)
-    seg = advance_hertz(p, law, p.tau2, xp + dx, vp + dv + dv_correction, p.period, rtol=rtol)
+    seg = advance_hertz(p, law, p.tau2, xp + dx, vp + dv + dv_correction, p.period, rtol=rtol,
+                        friction=friction)
     xe, ve = particular(p, (p.tau2 + p.omega * p.period) % TWO_PI)
-    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, ())
+    return CompliantSegment(seg.x - xe, seg.v - ve, seg.contacts, seg.sticks)
 
 
-def grazing_jump(law: HuntCrossley, alpha: float, penetration: float):
-    """Leading order of the Hertz stop's grazing discontinuity map (Eq. C9).
+def grazing_jump(law: HuntCrossley, alpha: float, penetration: float, *,
+                 friction: Coulomb | None = None):
+    """Leading order of the Hertz stop's grazing discontinuity map (Eqs. C9, C12).
 
     A free flight whose virtual maximum is ``penetration`` H > 0 above the stop, with
     deceleration ``alpha`` > 0 there (delta = H - alpha t^2 / 2 about the apex), takes the
@@ -208,7 +287,26 @@ def grazing_jump(law: HuntCrossley, alpha: float, penetration: float):
 
         dv = -(3 pi / 8) k_c sqrt(2 / alpha) H^2          (order 2, any damping)
 
-    (docs/theory_contact.md, "The Hertz discontinuity map"). Returns (order, coefficient, dv).
+    (docs/theory_contact.md, "The Hertz discontinuity map").
+
+    With Coulomb ``friction`` (F_s < alpha: the mass slips through the apex) the flight
+    decelerates at alpha + F_f before the apex and alpha - F_f after it; each half of
+    the parabola takes (3 pi / 16) k_c sqrt(2 / a) H^2 (a its deceleration), and the
+    half before the apex reaches the section after it scaled by q = (alpha - F_f) /
+    (alpha + F_f) (an impulse before the apex moves the friction's switch, as for the
+    Kelvin-Voigt stop, Eq. C10); the Hunt-Crossley term is (q - 1) (3/5) alpha_h k_c
+    H^{5/2}, of higher order. So (Eq. C12, docs/theory_contact.md §20)
+
+        dv = -(3 pi / 16) sqrt(2) k_c (q / sqrt(alpha + F_f) + 1 / sqrt(alpha - F_f)) H^2,
+
+    order 2 unchanged (F_f = 0 gives C9). Returns (order, coefficient, dv).
     """
-    coef = 0.375 * math.pi * law.stiffness * math.sqrt(2.0 / alpha)
+    f = 0.0 if friction is None else friction.kinetic
+    if friction is not None and not alpha > friction.static:
+        raise ParameterError(f"friction static={friction.static!r} is invalid here: the map "
+                             f"of Eq. C12 needs the mass to slip through the apex, "
+                             f"F_s < alpha = {alpha!r}")
+    q = (alpha - f) / (alpha + f)
+    coef = (0.1875 * math.pi * math.sqrt(2.0) * law.stiffness
+            * (q / math.sqrt(alpha + f) + 1.0 / math.sqrt(alpha - f)))
     return 2.0, coef, -coef * penetration ** 2

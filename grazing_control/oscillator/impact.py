@@ -124,36 +124,71 @@ def check_state(dx: float, dv: float, zeta: float, where: str = "the state") -> 
             f"{MAX_AMPLITUDE:.0e} (dx, dv) = ({dx!r}, {dv!r}); an input overflowed")
 
 
-def _wall_rounding(p: OscillatorParams, tau: float, dx: float, dv: float):
-    """Rounding (gap, velocity) of a state at phase tau in deviation coordinates.
+def check_times(tau0: float, name: str, value: float) -> None:
+    """Raise :class:`NonFiniteStateError` unless the start phase ``tau0`` and the length
+    ``name`` = ``value`` of the window are finite."""
+    if not (math.isfinite(tau0) and math.isfinite(value)):
+        raise NonFiniteStateError(f"tau0={tau0!r} and {name}={value!r} must be finite")
 
-    The gap g = dx - Delta d - 2 a sin^2(psi / 2) and the velocity v = v_p + dv carry
-    the rounding of their terms and of the phase psi = tau - phi, which is known to
-    ~eps (|tau| + |phi| + 2 pi) (phases are reduced modulo 2 pi after each step).
+
+def _wall_rounding(p: OscillatorParams, tau: float, dx: float, dv: float):
+    """Rounding (gap, velocity) of a state at phase tau in deviation coordinates
+    (:func:`wall_rounding` of the 1-DOF oscillator)."""
+    return wall_rounding(tau, p.lag, p.amplitude, p.omega, p.delta_d, dx, dv)
+
+
+def wall_rounding(tau: float, lag: float, amp: float, omega: float, delta_d: float,
+                  dx: float, dv: float):
+    """Rounding (gap, velocity) of the wall coordinate at phase tau, for any model: its
+    deviation position ``dx`` and velocity ``dv``, the periodic response's lag tau* and
+    amplitude d* (``lag``, ``amp``), the forcing's ``omega``, the wall offset ``delta_d``.
+
+    The gap g = dx - Delta d - 2 d* sin^2(psi / 2) and the velocity v = v_p + dv carry
+    the rounding of their terms and of the phase psi = tau - tau*, which is known to
+    ~eps (|tau| + |tau*| + 2 pi) (phases are reduced modulo 2 pi after each step).
     """
-    psi = tau - p.lag
-    s2 = 2.0 * p.amplitude * math.sin(0.5 * psi) ** 2
-    vp = -p.amplitude * p.omega * math.sin(psi)
-    phase = abs(tau) + abs(p.lag) + TWO_PI + 1.0
-    eg = 8.0 * _EPS * (abs(dx) + abs(p.delta_d) + s2 + math.sqrt(2.0 * p.amplitude * s2) * phase)
-    ev = 8.0 * _EPS * (abs(vp) + abs(dv) + p.amplitude * p.omega * phase)
+    psi = tau - lag
+    s2 = 2.0 * amp * math.sin(0.5 * psi) ** 2
+    vp = -amp * omega * math.sin(psi)
+    phase = abs(tau) + abs(lag) + TWO_PI + 1.0
+    eg = 8.0 * _EPS * (abs(dx) + abs(delta_d) + s2 + math.sqrt(2.0 * amp * s2) * phase)
+    ev = 8.0 * _EPS * (abs(vp) + abs(dv) + amp * omega * phase)
     return eg, ev
 
 
-class _Eval:
+class GapEvaluator:
+    """What every model's gap evaluator shares (this module's :class:`_Eval`, the n-DOF
+    one of oscillator/ndof/impact.py): the forcing's frequency ``omega``, the periodic
+    response's lag and amplitude (``lag`` = tau*, ``amp`` = d*), the wall offset ``dd`` =
+    Delta d and the start phase ``tau0``, so the gap's harmonic part is
+    -Delta d - 2 d* sin^2(psi / 2) with psi = tau0 + omega h - tau*. The search
+    (:func:`_scan_window`, :func:`_search`) needs of an evaluator this, ``__call__``
+    (g, v, acc, ...) at h, ``jerk_bound``, ``gap_rounding``, ``cabs``, ``acc_err``,
+    ``m0``, ``m1``."""
+
+    __slots__ = ("omega", "lag", "amp", "dd", "tau0")
+
+    def __init__(self, omega: float, lag: float, amp: float, dd: float, tau0: float):
+        self.omega = omega
+        self.lag = lag
+        self.amp = amp
+        self.dd = dd
+        self.tau0 = tau0
+
+    def psi(self, h: float) -> float:
+        """Phase psi = tau0 + omega h - tau* of the forcing, as in the gap."""
+        return self.tau0 + self.omega * h - self.lag
+
+
+class _Eval(GapEvaluator):
     """Gap, velocity and acceleration along the flow from one start state."""
 
-    __slots__ = ("zeta", "wd", "omega", "lag", "amp", "dd", "tau0", "dx0", "c2", "aw2", "aw3",
-                 "cabs", "acc_err", "m0", "m1")
+    __slots__ = ("zeta", "wd", "dx0", "c2", "aw2", "aw3", "cabs", "acc_err", "m0", "m1")
 
     def __init__(self, p: OscillatorParams, tau0: float, dx0: float, dv0: float):
         self.zeta = p.zeta
         self.wd = p.omega_d
-        self.omega = p.omega
-        self.lag = p.lag
-        self.amp = p.amplitude
-        self.dd = p.delta_d
-        self.tau0 = tau0
+        super().__init__(p.omega, p.lag, p.amplitude, p.delta_d, tau0)
         self.dx0 = dx0
         self.c2 = (dv0 + p.zeta * dx0) / self.wd
         self.aw2 = self.amp * p.omega * p.omega
@@ -183,10 +218,6 @@ class _Eval:
         v = -self.amp * self.omega * math.sin(psi) + dv
         acc = -self.aw2 * math.cos(psi) - 2.0 * self.zeta * dv - dx
         return g, v, acc, dx, dv
-
-    def psi(self, h: float) -> float:
-        """Phase psi = tau0 + omega h - phi of the forcing, as in the gap."""
-        return self.tau0 + self.omega * h - self.lag
 
     def jerk_bound(self, h: float) -> float:
         """J >= max |g'''| on [h, inf)."""
@@ -328,8 +359,7 @@ def next_impact(p: OscillatorParams, tau0: float, dx0: float, dv0: float, horizo
         Time since the start of the first impact.
     """
     check_state(dx0, dv0, p.zeta, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(horizon)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+    check_times(tau0, "horizon", horizon)
     return _next_impact(p, tau0, dx0, dv0, horizon, max_step)
 
 
@@ -343,23 +373,33 @@ def _next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
     f = _Eval(p, tau0, dx0, dv0)
     step = max_step or p.period / 8.0
     n = max(1, int(math.ceil(horizon / step)))
+    return _scan_window(f, horizon, n, lambda fa: _wall_rounding(p, tau0, dx0, dv0)[0], "x")
+
+
+def _scan_window(f, horizon: float, count: int, start_rounding, coordinate: str):
+    """The first root of the gap in (0, horizon], or None: the window cut into ``count``
+    pieces, each searched by :func:`_search` unless its phases are far from the wall.
+
+    ``f`` is an evaluator with the interface of :class:`_Eval` (the n-DOF one is
+    oscillator/ndof/impact.py's), ``start_rounding(f(0))`` the gap's rounding at the
+    start, ``coordinate`` the name of the wall coordinate in the error message.
+    """
     a = 0.0
     fa = f(0.0)
     # on the wall up to rounding: a start above it, or below it while leaving (v < 0),
     # whose flight must not find its own start as a root (docs/theory.md, "A start on
     # the wall")
-    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and \
-            abs(fa[0]) <= _wall_rounding(p, tau0, dx0, dv0)[0]:
+    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and abs(fa[0]) <= start_rounding(fa):
         fa = (0.0,) + fa[1:]
     if fa[0] > 0.0:
         raise InitialStateError(
-            f"state beyond the wall: x - d = {fa[0]:.3e} > 0 (valid: x <= d)"
+            f"state beyond the wall: {coordinate} - d = {fa[0]:.3e} > 0 (valid: {coordinate} <= d)"
         )
     if fa[0] == 0.0 and fa[1] > 0.0:
         return 0.0  # on the wall, moving into it
     w = _danger_halfwidth(f, horizon)
-    for k in range(1, n + 1):
-        b = horizon if k == n else k * (horizon / n)
+    for k in range(1, count + 1):
+        b = horizon if k == count else k * (horizon / count)
         if k > 1 and w is not None and _far_from_wall(f.psi(a), f.psi(b), w):
             a, fa = b, None  # g < 0 on all of [a, b]: the search would find nothing
             continue
@@ -506,8 +546,7 @@ def advance(p: OscillatorParams, tau0: float, dx: float, dv: float, duration: fl
         large (see :func:`check_state`).
     """
     check_state(dx, dv, p.zeta, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(duration)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
+    check_times(tau0, "duration", duration)
     zeta, r, omega = p.zeta, p.r, p.omega
     aw, lag_abs, wd = p.amplitude * omega, abs(p.lag), p.omega_d
     chatter = chatter_time if chatter_time is not None else 1e-6 * p.period

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force
 from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, advance_compliant
 from grazing_control.oscillator.flow import to_deviation, to_physical
 from grazing_control.oscillator.hertz import HuntCrossley, advance_hertz
@@ -51,7 +52,7 @@ class ContactStep(NamedTuple):
 @dataclass(frozen=True)
 class ContactPlant:
     """A compliant stop (and friction) for the engine: ``law`` is a KelvinVoigt or a
-    HuntCrossley stop, ``friction`` a Coulomb law (Kelvin-Voigt only) or None."""
+    HuntCrossley stop, ``friction`` a Coulomb law or None."""
 
     law: KelvinVoigt | HuntCrossley
     friction: Coulomb | None = None
@@ -61,7 +62,7 @@ class ContactPlant:
         """The flow for ``duration`` from the deviation (dx, dv) at phase ``tau``."""
         x, v = to_physical(p, tau, dx, dv)
         if isinstance(self.law, HuntCrossley):
-            seg = advance_hertz(p, self.law, tau, x, v, duration)
+            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction)
         else:
             seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction)
         tau1 = tau + p.omega * duration
@@ -77,19 +78,46 @@ class ContactPlant:
         shape, with the deviation re-expressed at the next sample."""
         return self.advance(p, p.tau2, dx, dv + dv_correction, p.period)
 
+    def pulse_step(self, p: OscillatorParams, dx: float, dv: float, dv_correction: float,
+                   start: float, width: float, force_limit: float = math.inf) -> ContactStep:
+        """One period from the Pi2 deviation with the correction as a force pulse on
+        [start, start + width] (width 0: the kick at ``start``): the stop's flow to the
+        pulse, under its constant force (the stop shifted as the wall is,
+        :func:`~grazing_control.dynamics.simulation.actuation.flow_with_force`), on to the
+        next sample, as ``actuation.pulse_step`` for the wall. Contacts count from the
+        sample."""
+        force = pulse_force(dv_correction, width, force_limit) if width > 0.0 else 0.0
+        pieces = ((start, 0.0, 0.0), (width, force, 0.0 if width > 0.0 else dv_correction),
+                  (p.period - start - width, 0.0, 0.0))
+        t, impacts = 0.0, []
+        for duration, f, kick in pieces:
+            if duration > 0.0:
+                seg = flow_with_force(p, (p.tau2 + p.omega * t) % TWO_PI, dx, dv, duration,
+                                      f, self.advance)
+                impacts += [i._replace(dt=i.dt + t) for i in seg.impacts]
+                dx, dv, t = seg.dx, seg.dv, t + duration
+            dv += kick
+        return ContactStep(dx, dv, tuple(impacts))
+
     def states_between(self, p: OscillatorParams, tau: float, dx: float, dv: float,
                        rel) -> np.ndarray:
-        """Physical (x, v) at the times ``rel`` (increasing, from the segment's start at
-        phase ``tau`` with deviation (dx, dv)): the flow advanced from one time to the
-        next (the published states never alter the trajectory: the period itself is
-        :meth:`period_step` in one call)."""
-        out = np.empty((len(rel), 2))
-        t, cx, cv = 0.0, dx, dv
-        for i, h in enumerate(rel):
-            step = self.advance(p, (tau + p.omega * t) % TWO_PI, cx, cv, h - t)
-            t, cx, cv = h, step.dx, step.dv
-            out[i] = to_physical(p, (tau + p.omega * h) % TWO_PI, cx, cv)
-        return out
+        """Physical (x, v) at the times ``rel`` (increasing, in (0, the segment's length]
+        from its start at phase ``tau`` with deviation (dx, dv)): the stop's flow from the
+        start once, each time evaluated on the piece that holds it (the dense output of
+        ``advance_compliant`` / ``advance_hertz``: the closed form of its region, a stick,
+        DOP853's interpolant in a Hertz contact). The published states never alter the
+        trajectory: the period itself is :meth:`period_step` in one call."""
+        if len(rel) == 0:
+            return np.empty((0, 2))
+        x, v = to_physical(p, tau, dx, dv)
+        duration = float(rel[-1])
+        if isinstance(self.law, HuntCrossley):
+            seg = advance_hertz(p, self.law, tau, x, v, duration, friction=self.friction,
+                                times=rel)
+        else:
+            seg = advance_compliant(p, self.law, tau, x, v, duration, friction=self.friction,
+                                    times=rel)
+        return np.array(seg.states, dtype=float).reshape(len(rel), 2)
 
 
 def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | None:
@@ -112,16 +140,17 @@ def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | Non
                                                          "friction")):
         if not (math.isfinite(value) and ok):
             raise ParameterError(f"{name}={value!r} is invalid: valid range is {valid}")
-        if name.startswith("friction") and value != 0.0 and kind != "kelvin_voigt":
+        if name.startswith("friction") and value != 0.0 and kind == "rigid":
             raise ParameterError(f"{name}={value!r} is invalid with contact={kind!r}: valid "
-                                 "there is 0 (friction is simulated with kelvin_voigt only)")
+                                 "there is 0 (friction is simulated with a compliant stop)")
     if static != 0.0 and static < kinetic:
         raise ParameterError(f"friction_static={static!r} is invalid: valid range is 0 "
                              f"(= friction) or F_s >= friction = {kinetic!r}")
     if kind == "rigid":
         return None
+    friction = Coulomb(kinetic, static or kinetic) if kinetic > 0.0 or static > 0.0 else None
     if kind == "hertz":
-        return ContactPlant(HuntCrossley(stiffness, damping))
+        return ContactPlant(HuntCrossley(stiffness, damping), friction)
     if not (2.0 * p.zeta + damping) ** 2 < 4.0 * (1.0 + stiffness):
         raise ParameterError(
             f"contact_damping={damping!r} is invalid with contact_stiffness={stiffness!r}: "
@@ -131,5 +160,4 @@ def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | Non
         raise ParameterError(f"contact_damping={damping!r} is invalid: valid range is "
                              f"0 <= c_c < 2 sqrt(contact_stiffness) = "
                              f"{2.0 * math.sqrt(stiffness)!r}")
-    friction = Coulomb(kinetic, static or kinetic) if kinetic > 0.0 or static > 0.0 else None
     return ContactPlant(KelvinVoigt(stiffness, damping), friction)

@@ -10,8 +10,11 @@ between two samples (state, Pi1 crossing, impacts) is evaluated from the closed 
 :func:`grazing_control.dynamics.simulation.simulate.states_between` without altering the trajectory,
 so a run of the engine reproduces ``simulate`` of the same scene sample for sample.
 With a compliant stop (settings.contact, :mod:`grazing_control.plant.contact_plant`) the
-period and the states between samples are that stop's flow instead, its contacts
-published as impacts (v- at entry, v+ at exit).
+flow of every piece (a period, the pieces of a delayed or split period, a force pulse)
+and the states between samples are that stop's flow instead
+(:meth:`~grazing_control.plant.contact_plant.ContactPlant.advance`, the exact flow's
+signature), its contacts published as impacts (v- at entry, v+ at exit); a pulse's
+constant force is the same shift of the stop as of the wall (docs/theory_contact.md §16).
 
 With a first-order actuator (``actuator_bandwidth`` or ``actuator_latency`` > 0, issue
 29 section 4) the force on the mass is a third state carried from sample to sample
@@ -86,7 +89,10 @@ class Engine:
         # (re)started and that sample's index; self.p's Delta d moves from it
         self.drift = getattr(settings, "delta_d_drift", 0.0)
         self._drift_from = (self.p, 0)
-        self.advance = kernel.exact_advance()   # the exact flow, compiled when available
+        # the exact flow of each piece: the wall's (compiled when available) or the
+        # compliant stop's, with the same signature (plant.contact_plant)
+        contact = getattr(settings, "contact", None)
+        self.advance = kernel.exact_advance() if contact is None else contact.advance
         self.pending = None
         self.rng = np.random.default_rng(settings.seed)
         self.impacts = 0
@@ -386,13 +392,12 @@ class Engine:
             kinds = [kinds[i] for i in order]
             if states is not None:
                 xv = states(rel)
-            elif self.settings.contact is not None:
-                xv = self.settings.contact.states_between(p, s.tau, s.dx, s.dv, rel)
-            elif s.force == 0.0:
-                xv = states_between(p, s.tau, s.dx, s.dv, impacts, rel)
-            else:
-                shifted = p.with_(delta_d=p.delta_d - s.force)
-                xv = states_between(shifted, s.tau, s.dx - s.force, s.dv, impacts, rel)
+            else:   # under a pulse's force F: the stop moved by -F, x shifted by F
+                q = p if s.force == 0.0 else p.with_(delta_d=p.delta_d - s.force)
+                contact = self.settings.contact
+                xv = (states_between(q, s.tau, s.dx - s.force, s.dv, impacts, rel)
+                      if contact is None else
+                      contact.states_between(q, s.tau, s.dx - s.force, s.dv, rel))
                 xv[:, 0] += s.force
             states = [i for i, kind in enumerate(kinds) if kind == "state"]
             if states:

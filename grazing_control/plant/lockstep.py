@@ -43,9 +43,11 @@ class Lockstep(Loop):
         self.waiting = self.emit(self.engine.measured(ev))
         self.sent = self.clock()
 
-    def answer(self, key: tuple, dv: float, predicted: float = math.nan) -> None:
+    def answer(self, key: tuple, dv: float, predicted: float = math.nan,
+               arrived: float | None = None) -> None:
         """The correction ``dv`` answering the sample stamped ``key``, with the
-        correction ``predicted`` for the next sample (NaN: none)."""
+        correction ``predicted`` for the next sample (NaN: none); its arrival is not
+        read (the period waits for it: no deadline)."""
         if self.finished or key != self.waiting:
             self.sink.ignored(f"stamp {key} does not answer the waiting sample {self.waiting}")
             return

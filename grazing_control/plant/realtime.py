@@ -144,11 +144,14 @@ class Realtime(Loop):
                 self.queue = engine.split(ev.t, dv)
                 self.stats["applied"] += 1
 
-    def tick(self):
-        """A wake-up: publish what is due; the simulation time now, or None when over."""
+    def tick(self, wall: float | None = None):
+        """A wake-up at wall time ``wall`` (default: now; the node reads it before it takes
+        the answers that arrived, so that one arriving in between waits for the next
+        wake-up instead of finding its deadline acted): publish what is due; the
+        simulation time then, or None when over."""
         if self.finished:
             return None
-        now = self.now()
+        now = self.now(wall)
         self.advance(now)
         return None if self.finished else now
 
@@ -187,27 +190,36 @@ class Realtime(Loop):
                 return
             self.publish_sample(ev)
 
-    def answer(self, key: tuple, dv: float, predicted: float = math.nan) -> bool:
+    def answer(self, key: tuple, dv: float, predicted: float = math.nan,
+               arrived: float | None = None) -> bool:
         """The correction ``dv`` answering the sample stamped ``key`` (with its
-        prediction for the next sample, NaN: none); True when the wake-up must be
-        re-armed (an on-arrival split may bring an event forward)."""
+        prediction for the next sample, NaN: none), which arrived at wall time
+        ``arrived`` (None: now); True when the wake-up must be re-armed (an on-arrival
+        split may bring an event forward)."""
         if self.settings.scheduled:
-            self._answer_scheduled(key, dv, predicted)
+            self._answer_scheduled(key, dv, predicted, arrived)
             return False
         return self._on_arrival(key, dv)
 
-    def _answer_scheduled(self, key: tuple, dv: float, predicted: float) -> None:
+    def _answer_scheduled(self, key: tuple, dv: float, predicted: float,
+                          arrived: float | None = None) -> None:
         """Scheduled actuation: keep the answer of the current sample for its deadline.
 
-        The answer must arrive (this runs) before the sample's actuation instant
-        t_k + delay in simulation time; one that comes later is dropped and counted (its
-        deadline was already reported as missed).
+        The answer must arrive before the sample's actuation instant t_k + delay in
+        simulation time; one that comes later is dropped and counted (its deadline was
+        already reported as missed). Its arrival is ``arrived`` (the middleware's
+        reception, sim_node.answer_port: the answers are taken at each wake-up, before
+        what is due) or, without it, now (this runs); the loop advances to the arrival
+        first, so that a deadline due before it is handled first and one due after it
+        acts this answer, however late the loop took it. Its latency runs to its arrival.
         """
         if self.finished:
             self.sink.ignored(f"stamp {key}: the scene is not running")
             return
         wall = self.clock()
-        self.advance(self.now(wall))     # a deadline already due is handled first
+        if arrived is not None:
+            wall = min(arrived, wall)
+        self.advance(self.now(wall))     # a deadline due before its arrival is handled first
         if self.finished:
             return
         answer = self.schedule.command(key, dv, predicted, wall, key[0] + key[1] * 1e-9)

@@ -26,7 +26,7 @@ inverse used by ``grazing identify`` (a fitted model written back as a rig file)
 
 The stop (the optional ``stop`` section, :class:`Stop`; issue 31) is the rigid wall of
 the equation above by default, or a compliant stop pushing on the mass with a force F_c
-while x > g, with Coulomb friction F_f on the guides (Kelvin-Voigt only):
+while x > g, with Coulomb friction F_f on the guides (with either stop):
 
     kelvin_voigt:  F_c = K (x - g) + C x',
     hertz:         F_c = K_H (x - g)^{3/2} (1 + (3/2) A x')      (Hunt-Crossley),
@@ -127,7 +127,7 @@ class Actuator:
 class Stop:
     """The stop (module docstring): ``type`` one of plant.contact_plant.CONTACTS;
     ``stiffness`` K (N/m; Hertz K_H in N/m^1.5), ``damping`` C (N s/m; Hertz A in s/m),
-    ``friction`` F_f and ``friction_static`` F_s >= F_f (N; Kelvin-Voigt only, 0: none).
+    ``friction`` F_f and ``friction_static`` F_s >= F_f (N; 0: none).
     The rigid wall has none of them (0)."""
 
     type: str = "rigid"
@@ -245,13 +245,13 @@ class Rig:
         if st.type == "rigid":
             return {"contact": "rigid"}
         k, s = self.stiffness, self.scales
+        friction = {"friction": st.friction / s.force,
+                    "friction_static": st.friction_static / s.force}
         if st.type == "hertz":
             return {"contact": "hertz", "contact_stiffness": st.stiffness * math.sqrt(s.length) / k,
-                    "contact_damping": st.damping * s.velocity,
-                    "friction": 0.0, "friction_static": 0.0}
+                    "contact_damping": st.damping * s.velocity, **friction}
         return {"contact": "kelvin_voigt", "contact_stiffness": st.stiffness / k,
-                "contact_damping": st.damping / (self.mass * self.omega_n),
-                "friction": st.friction / s.force, "friction_static": st.friction_static / s.force}
+                "contact_damping": st.damping / (self.mass * self.omega_n), **friction}
 
     # ------------------------------------------------------------------ SI of results
     def gains_si(self, c1: float, c2: float) -> dict:
@@ -471,12 +471,6 @@ def _stop(doc) -> Stop:
                    ok=lambda v: v > 0.0, valid="stop.stiffness > 0")
     damping = _q(st, "stop.", "damping", "hertz_damping" if hertz else "damping",
                  ok=lambda v: v >= 0.0, valid="stop.damping >= 0", default=0.0)
-    if hertz:
-        for key in ("friction", "friction_static"):
-            if st.get(key) is not None:
-                raise RigError(f"stop.{key} is invalid with stop.type hertz: friction is "
-                               "simulated with kelvin_voigt only")
-        return Stop(kind, stiffness, damping)
     friction = _q(st, "stop.", "friction", "force", ok=lambda v: v >= 0.0,
                   valid="stop.friction >= 0 N (0: none)", default=0.0)
     static = _q(st, "stop.", "friction_static", "force", ok=lambda v: v >= friction,
@@ -587,12 +581,11 @@ def rig_to_dict(rig: Rig) -> dict:
            "controller": {"budget": q(rig.budget, "time"),
                           "pi2_offset": q(rig.pi2_offset, "angle")}}
     st = rig.stop
-    if st.type == "hertz":
-        out["stop"] = {"type": "hertz", "stiffness": q(st.stiffness, "hertz_stiffness"),
-                       "damping": q(st.damping, "hertz_damping")}
-    elif st.type == "kelvin_voigt":
-        out["stop"] = {"type": "kelvin_voigt", "stiffness": q(st.stiffness, "stiffness"),
-                       "damping": q(st.damping, "damping"),
+    if st.type != "rigid":
+        hertz = st.type == "hertz"
+        out["stop"] = {"type": st.type,
+                       "stiffness": q(st.stiffness, "hertz_stiffness" if hertz else "stiffness"),
+                       "damping": q(st.damping, "hertz_damping" if hertz else "damping"),
                        "friction": q(st.friction, "force"),
                        "friction_static": q(st.friction_static, "force")}
     return out

@@ -212,10 +212,10 @@ PARAMETERS = (
               choices=FEASIBILITY, read_only=True),
     Parameter("contact", "string", "rigid", "the stop (issue 31, plant.contact_plant): rigid "
               "(the wall, restitution r), kelvin_voigt (spring-dashpot) or hertz "
-              "(Hunt-Crossley); compliant stops in lockstep with the correction on Pi2 only",
+              "(Hunt-Crossley); compliant stops with the exact fidelity and the ideal actuator",
               choices=CONTACTS, read_only=True,
-              constraints="rigid unless mode lockstep, fidelity exact, actuation_delay, jitter, "
-              "pulse_width, actuator_bandwidth, actuator_latency and delta_d_drift 0"),
+              constraints="rigid unless fidelity exact and actuator_bandwidth, "
+              "actuator_latency 0"),
     Parameter("contact_stiffness", "double", 1e6, "compliant stop: stiffness k_c over the "
               "oscillator's (hertz: force per penetration^1.5), > 0", ABOVE_0, FINITE,
               read_only=True),
@@ -225,7 +225,7 @@ PARAMETERS = (
               constraints="kelvin_voigt: (2 zeta + c_c)^2 < 4 (1 + k_c) and c_c < 2 sqrt(k_c)"),
     Parameter("friction", "double", 0.0, "Coulomb dry friction on the mass, kinetic level "
               "F_f (force over k l), >= 0; 0 = none", 0.0, FINITE, read_only=True,
-              constraints="0 unless contact kelvin_voigt"),
+              constraints="0 with contact rigid"),
     Parameter("friction_static", "double", 0.0, "static friction level F_s >= friction; "
               "0 = friction", 0.0, FINITE, read_only=True,
               constraints="0 or >= friction"),
@@ -245,7 +245,7 @@ def described_range(p: Parameter, declared: dict) -> tuple:
 
     The table's range, narrowed where another parameter bounds it, so that with the
     others at these values :func:`settings_from_values` accepts exactly [lo, hi]:
-    friction and friction_static 0 unless contact kelvin_voigt;
+    friction and friction_static 0 with contact rigid;
     actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter and the
     actuator 0 without the exact flow or with actuation on_arrival in realtime;
     pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where
@@ -253,8 +253,8 @@ def described_range(p: Parameter, declared: dict) -> tuple:
     Where the model declared is invalid, the table's range (the model is refused by
     name anyway).
     """
-    if p.name in ("friction", "friction_static"):   # Coulomb friction: Kelvin-Voigt only
-        return (p.lo, p.hi) if declared.get("contact") == "kelvin_voigt" else (p.lo, 0.0)
+    if p.name in ("friction", "friction_static"):   # Coulomb friction: a compliant stop's
+        return (p.lo, p.hi) if declared.get("contact", "rigid") != "rigid" else (p.lo, 0.0)
     if p.name not in ("actuation_delay", "jitter", "pulse_width", "actuator_bandwidth",
                       "actuator_latency"):
         return p.lo, p.hi
@@ -447,24 +447,26 @@ def settings_from_values(values: dict) -> SimSettings:
 
 def _contact(values: dict, p: OscillatorParams, mode: str, fidelity: str,
              actuation: dict) -> ContactPlant | None:
-    """The compliant stop and friction (plant.contact_plant), where the engine can run it:
-    lockstep, the exact fidelity, the correction on Pi2 as a velocity jump through the
-    ideal actuator, no drift."""
+    """The compliant stop and friction (plant.contact_plant). The engine runs it wherever
+    it runs the wall's exact flow (lockstep and realtime, a delayed, jittered or split
+    correction, a force pulse, the drifting wall, the sensor stream: its pieces are the
+    stop's flow, docs/theory_contact.md §16). Refused in one line: a fidelity other than
+    exact (the cheaper fidelities are approximations of the rigid wall's impact map, which
+    a compliant stop has not), and the first-order actuator (its exponential force in the
+    stop's closed form is not built)."""
     contact = contact_from_values(values, p)
     if contact is None:
         return None
-    needs = (("mode", mode, "lockstep"), ("fidelity", fidelity, "exact"),
-             ("actuation_delay", actuation["actuation_delay"], 0.0),
-             ("jitter", actuation["jitter"], 0.0),
-             ("pulse_width", actuation["pulse_width"], 0.0),
-             ("actuator_bandwidth", float(values["actuator_bandwidth"]), 0.0),
-             ("actuator_latency", float(values["actuator_latency"]), 0.0),
-             ("delta_d_drift", float(values["delta_d_drift"]), 0.0))
-    for name, value, valid in needs:
-        if value != valid:
+    if fidelity != "exact":
+        raise ParameterError(f"fidelity={fidelity!r} is invalid with contact="
+                             f"{values['contact']!r}: valid there is 'exact' (the other "
+                             "fidelities approximate the rigid wall's impact map)")
+    for name in ("actuator_bandwidth", "actuator_latency"):
+        value = float(values[name])
+        if value != 0.0:
             raise ParameterError(f"{name}={value!r} is invalid with contact="
-                                 f"{values['contact']!r}: valid there is {valid!r} (a "
-                                 "compliant stop runs in lockstep with the correction on Pi2)")
+                                 f"{values['contact']!r}: valid there is 0.0 (the actuator's "
+                                 "force in the compliant stop's flow is not built)")
     return contact
 
 

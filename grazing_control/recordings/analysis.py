@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Scene", "scene_from_bag", "scene_from_simulation", "summarize", "plot_scene"]
+__all__ = ["Scene", "scene_from_bag", "scene_from_simulation", "summarize", "plot_scene",
+           "fmt", "complex_text", "control_lines"]
 
 TOPIC_PI2 = "/oscillator/pi2"
 TOPIC_CORRECTION = "/controller/velocity_correction"
@@ -182,3 +183,51 @@ def _histogram(counts):
     """Impacts per period 0, 1, 2, ... as counts of periods (None for no period)."""
     counts = np.asarray(counts, dtype=np.int64)
     return np.bincount(counts).tolist() if counts.size else None
+
+
+# ------------------------------------------------- report lines of every model (any n)
+def fmt(v, spec=".4g") -> str:
+    """A number of a report: "—" for None, ``spec`` for a float, str otherwise."""
+    if v is None:
+        return "—"
+    if isinstance(v, float):
+        return format(v, spec)
+    return str(v)
+
+
+def complex_text(z) -> str:
+    """A multiplier, (re, im) or complex, as "re" or "re+imi" (6 digits)."""
+    z = complex(*z) if isinstance(z, (list, tuple)) else complex(z)
+    return f"{z.real:.6g}" if z.imag == 0 else f"{z.real:.6g}{z.imag:+.6g}i"
+
+
+def control_lines(numbers: dict) -> list:
+    """The report's lines on the control of a scene, the same for the 1-DOF and the n-DOF
+    scenes: the switch-on (sample, time) and the samples to converge; the contraction per
+    sample after it, measured
+    (:func:`grazing_control.recordings.numbers.measured_contraction`) against the
+    predicted orbit's |lambda|max and multipliers; the prediction's notes. ``numbers``:
+    the scene's numbers (keys ``control_on_sample``, ``control_on_time_s``,
+    ``samples_to_converge``, ``measured_contraction``, ``predicted``,
+    ``contraction_relative_error``)."""
+    n = numbers
+    if n["control_on_sample"] is None:
+        lines = ["* control never switched on (no non-zero correction)"]
+    else:
+        lines = [f"* control on at sample {n['control_on_sample']} (t = "
+                 f"{n['control_on_time_s']:.6g} s); converged to 1e-8 after "
+                 f"{fmt(n['samples_to_converge'])} samples"]
+    meas, pred, relative_error = (n["measured_contraction"], n["predicted"],
+                                  n.get("contraction_relative_error"))
+    if meas and meas.get("rho"):
+        lines.append(f"* contraction per sample: measured ρ = {meas['rho']:.6f} (median ratio "
+                     f"{meas['median_ratio']:.6f}, samples {meas['first']}–{meas['last']}); "
+                     f"predicted |λ|max = {fmt(pred.get('rho'), '.6f')} "
+                     f"(multipliers {', '.join(complex_text(z) for z in pred.get('multipliers', []))}); "
+                     f"relative difference {fmt(relative_error, '.1e')}")
+    elif meas:
+        lines.append(f"* contraction: not measured ({meas.get('reason')})")
+    for key in ("controlled_orbit_error", "uncontrolled_orbit_error", "note", "error"):
+        if key in pred:
+            lines.append(f"* prediction: {pred[key]}")
+    return lines

@@ -17,6 +17,7 @@ import numpy as np
 
 from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
+from .analysis import control_lines, fmt
 from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
 from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
                       section_phase_problems)
@@ -51,26 +52,13 @@ def _jsonable(obj):
     return obj
 
 
-def _fmt(v, spec=".4g"):
-    if v is None:
-        return "—"
-    if isinstance(v, float):
-        return format(v, spec)
-    return str(v)
-
-
-def _complex(z) -> str:
-    z = complex(*z) if isinstance(z, (list, tuple)) else complex(z)
-    return f"{z.real:.6g}" if z.imag == 0 else f"{z.real:.6g}{z.imag:+.6g}i"
-
-
 def _setup_value(setup, key):
     if key == "gains":
         g = setup.gains
         return "unknown" if g is None else f"c1 {g.c1!r}, c2 {g.c2!r}"
     if setup.params is not None and hasattr(setup.params, key):
         return repr(getattr(setup.params, key))
-    return _fmt(getattr(setup, key, None))
+    return fmt(getattr(setup, key, None))
 
 
 def _label(path: Path, used: set) -> str:
@@ -135,7 +123,7 @@ def plot_scene(sd, numbers: dict, setup, title: str, path) -> None:
         if meas.get("rho"):
             for rho, style, lab in ((meas["rho"], "-", f"measured ρ = {meas['rho']:.5f}"),
                                     (pred.get("rho"), "--", f"predicted |λ|max = "
-                                     f"{_fmt(pred.get('rho'), '.5f')}")):
+                                     f"{fmt(pred.get('rho'), '.5f')}")):
                 if rho:
                     ks = np.arange(meas["first"], meas["last"] + 1)
                     a.semilogy(ks, np.exp(meas["intercept"]) * rho ** (ks - on), style, lw=1,
@@ -308,7 +296,7 @@ def read_switches(path, topic: str = SWITCH_TOPIC, period_s: float | None = None
     :data:`grazing_control.ros.reidentify.SWITCH_FIELDS` (NaN as None), ``switched`` a
     bool, ``reason`` its name (None: switched), ``stamp_ns`` and, with the period, the
     ``section``; [] when the bag has none."""
-    from grazing_control.dynamics.identification.reidentification import REASONS
+    from grazing_control.dynamics.estimation.reidentification import REASONS
     from grazing_control.ros.reidentify import SWITCH_FIELDS
 
     raw = reader.read_raw(Path(path), topics=[topic])
@@ -400,39 +388,23 @@ def _estimate_lines(n) -> list:
 def _scene_lines(label, numbers, fig_name):
     n = numbers
     u = n["uncontrolled"]
-    pred, meas = n["predicted"], n["measured_contraction"]
+    pred = n["predicted"]
     c = n["corrections"]
     lines = [f"### {label}", "", f"![{label}]({fig_name})", "",
              f"* samples: {n['samples']} over {n['duration_s']:.6g} s of simulation time",
              f"* uncontrolled attractor: {('period ' + str(u['period'])) if u['period'] else u['kind']}; "
              f"impacts per period before control (histogram 0, 1, 2, …): "
              f"{u['impacts_per_period_histogram']}"]
-    if n["control_on_sample"] is None:
-        lines.append("* control never switched on (no non-zero correction)")
-    else:
-        lines.append(f"* control on at sample {n['control_on_sample']} (t = "
-                     f"{n['control_on_time_s']:.6g} s); converged to 1e-8 after "
-                     f"{_fmt(n['samples_to_converge'])} samples")
-    if meas and meas.get("rho"):
-        lines.append(f"* contraction per sample: measured ρ = {meas['rho']:.6f} (median ratio "
-                     f"{meas['median_ratio']:.6f}, samples {meas['first']}–{meas['last']}); "
-                     f"predicted |λ|max = {_fmt(pred.get('rho'), '.6f')} "
-                     f"(multipliers {', '.join(_complex(z) for z in pred.get('multipliers', []))}); "
-                     f"relative difference {_fmt(n.get('contraction_relative_error'), '.1e')}")
-    elif meas:
-        lines.append(f"* contraction: not measured ({meas.get('reason')})")
-    for key in ("controlled_orbit_error", "uncontrolled_orbit_error", "note", "error"):
-        if key in pred:
-            lines.append(f"* prediction: {pred[key]}")
+    lines += control_lines(n)
     if "final_vs_exact_orbit" in n:
         lines.append(f"* final Π2 sample ({n['final_pi2'][0]:.12g}, {n['final_pi2'][1]:.12g}) vs "
                      f"the exact controlled 1/1 orbit ({pred['orbit_pi2'][0]:.12g}, "
                      f"{pred['orbit_pi2'][1]:.12g}): {n['final_vs_exact_orbit']:.2e}; impacts "
-                     f"per period at the end: {_fmt(n['final_impacts_per_period'])}; v⁻ "
-                     f"{_fmt(n['final_v_minus'], '.8g')} (exact {pred['orbit_v_minus']:.8g})")
+                     f"per period at the end: {fmt(n['final_impacts_per_period'])}; v⁻ "
+                     f"{fmt(n['final_v_minus'], '.8g')} (exact {pred['orbit_v_minus']:.8g})")
     lines.append(f"* corrections: {c['answered']} answers, {c['missing']} samples without one, "
                  f"{c['nonzero']} non-zero, max |Δv| = {c['max_abs']:.3g}, saturation "
-                 f"{_fmt(c['saturation'])} hit {c['saturation_hits']} times"
+                 f"{fmt(c['saturation'])} hit {c['saturation_hits']} times"
                  + (f"; {c['duplicate_answers']} duplicate answers ({c['conflicting_answers']} "
                     "with different values: two controllers?)" if c["duplicate_answers"] else "")
                  + (f"; {c['answers_matching_no_sample']} answers match no sample"
@@ -442,7 +414,7 @@ def _scene_lines(label, numbers, fig_name):
     if mc:
         lines.append(f"* model check: each recorded period re-integrated by the core from the "
                      f"recorded sample and correction departs from the next recorded sample by "
-                     f"at most {_fmt(mc['max_departure'], '.2e')} ({mc['periods_above_1e-12']} "
+                     f"at most {fmt(mc['max_departure'], '.2e')} ({mc['periods_above_1e-12']} "
                      f"of {mc['periods']} periods above 1e-12"
                      + (f"; the {mc['dropped_at_deadline_misses']} answers missed at "
                         "deadline misses re-integrated as what acted instead ("
@@ -460,8 +432,8 @@ def _scene_lines(label, numbers, fig_name):
                   f"* answer time (controller, source timestamps): {d(rt.get('answer_time_ms'))}",
                   f"* late answers (sent after the next sample): {rt['late_answers']}; samples "
                   f"without an answer: {rt['missing_answers']}; deadline misses: "
-                  f"{_fmt(rt['deadline_misses']) if rt['deadline_misses'] is not None else 'topic not recorded'}",
-                  f"* sample lag (published vs due, time scale {_fmt(rt.get('time_scale'))}"
+                  f"{fmt(rt['deadline_misses']) if rt['deadline_misses'] is not None else 'topic not recorded'}",
+                  f"* sample lag (published vs due, time scale {fmt(rt.get('time_scale'))}"
                   f"{', ' + rt['time_scale_source'] if 'time_scale_source' in rt else ''}): "
                   f"{d(rt.get('sample_lag_ms'))}"]
         dc = rt.get("delay_check")
@@ -473,8 +445,8 @@ def _scene_lines(label, numbers, fig_name):
                 f"not recorded, fitted: {dc['fitted_first_sample_lag_ms']:.3g} ms) leaves a "
                 f"departure of median {dc['median_departure']:.2e}, max "
                 f"{dc['max_departure']:.2e} over {dc['periods']} periods, against median "
-                f"{_fmt(dc.get('median_departure_kicks_on_pi2'), '.2e')}, max "
-                f"{_fmt((n.get('model_check') or {}).get('max_departure'), '.2e')} with the "
+                f"{fmt(dc.get('median_departure_kicks_on_pi2'), '.2e')}, max "
+                f"{fmt((n.get('model_check') or {}).get('max_departure'), '.2e')} with the "
                 "kicks on Π2; the rest is the microsecond resolution of the recorded wall-clock "
                 "timestamps, times the time scale")
     lines.append("")
@@ -501,7 +473,7 @@ def _row(label, setup, n):
             (n.get("model_check") or {}).get("max_departure"),
             f"{lat['p50']:.3g}/{lat['p99']:.3g}" if lat else None,
             rt.get("late_answers"), rt.get("deadline_misses")]
-    return "| " + " | ".join(_fmt(v, spec) if spec else _fmt(v)
+    return "| " + " | ".join(fmt(v, spec) if spec else fmt(v)
                              for v, (_, spec) in zip(vals, _COLUMNS)) + " |"
 
 
@@ -589,7 +561,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
             slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
             fig_name = f"{slabel.replace(' ', '_')}.png"
             if out is not None and figures:
-                title = (f"{slabel}: {setup.mode}, Δd = {_fmt(setup.params.delta_d if setup.params else None, '.3g')}")
+                title = (f"{slabel}: {setup.mode}, Δd = {fmt(setup.params.delta_d if setup.params else None, '.3g')}")
                 plot_scene(sd, n, setup, title, out / fig_name)
                 n["figure"] = fig_name
             lines += _scene_lines(slabel, n, fig_name)
@@ -716,7 +688,7 @@ def _ndof_bag(bag, data, label, out, tol, figures):
         if out is not None and figures:
             dd = setup.model.delta_d if setup.model is not None else None
             plot_ndof_scene(sd, n, f"{slabel}: {setup.mode}, n = {setup.n}, Δd = "
-                                   f"{_fmt(dd, '.3g')}", out / fig_name)
+                                   f"{fmt(dd, '.3g')}", out / fig_name)
             n["figure"] = fig_name
         else:
             fig_name = None
@@ -788,9 +760,9 @@ def main(args):
             spread = (s.get("si") or {}).get("pi2_spread_m_and_m_per_s")
             print(f"{where}: "
                   f"{b['setup']['mode']}, control on at {s['control_on_sample']}, converged after "
-                  f"{s['samples_to_converge']}, contraction measured {_fmt(m.get('rho'), '.5f')} vs "
-                  f"predicted {_fmt(s['predicted'].get('rho'), '.5f')}, |final - exact| "
-                  f"{_fmt(s.get('final_vs_exact_orbit'), '.1e')}"
+                  f"{s['samples_to_converge']}, contraction measured {fmt(m.get('rho'), '.5f')} vs "
+                  f"predicted {fmt(s['predicted'].get('rho'), '.5f')}, |final - exact| "
+                  f"{fmt(s.get('final_vs_exact_orbit'), '.1e')}"
                   + (f", Π2 spread {spread[0]:.3g} m (rig units)" if spread else ""))
         for p_ in b["problems"]:
             print(f"  cannot use: {p_}")

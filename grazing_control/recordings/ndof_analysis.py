@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis import summarize
+from .analysis import control_lines, fmt as _fmt, summarize
 from .numbers import measured_contraction
 
 __all__ = ["NdofSetup", "is_ndof", "ndof_setup", "ndof_scene_numbers", "ndof_lines",
@@ -181,6 +181,7 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
     out = {"samples": base["samples"], "duration_s": float(scene.t[-1] - scene.t[0])
            if len(scene.t) else 0.0, "n": setup.n, "coordinates": names,
            "impacts": base["impacts"], "control_on_sample": on,
+           "control_on_time_s": float(scene.t[on]) if on is not None else None,
            "uncontrolled": {"period": base["uncontrolled_period"],
                             "impacts_per_period_histogram":
                                 base["uncontrolled_impacts_per_period"],
@@ -209,14 +210,9 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
     return out
 
 
-def _fmt(v, spec=".4g"):
-    return "—" if v is None else format(v, spec) if isinstance(v, float) else str(v)
-
-
 def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> list:
     """The markdown lines of one n-DOF scene."""
     u, pred = n["uncontrolled"], n["predicted"]
-    meas = n["measured_contraction"] or {}
     lines = [f"### {label}", ""] + ([f"![{label}]({fig_name})", ""] if fig_name else [])
     m = setup.model
     lines += [f"* n-DOF scene: model file `{setup.model_file}`"
@@ -232,20 +228,9 @@ def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> l
         lines.append("* uncontrolled range per coordinate (last 200 samples before the "
                      "switch-on): " + "; ".join(f"{c} ∈ [{a:.6g}, {b:.6g}]"
                                                 for c, (a, b) in u["range"].items()))
-    if n["control_on_sample"] is None:
-        lines.append("* control never switched on")
-    else:
-        lines.append(f"* control on at sample {n['control_on_sample']}; converged to 1e-8 "
-                     f"after {_fmt(n['samples_to_converge'])} samples; impacts per period at "
-                     f"the end: {_fmt(n['final_impacts_per_period'])}")
-    if meas.get("rho"):
-        lines.append(f"* contraction per sample: measured ρ = {meas['rho']:.6f}; predicted "
-                     f"|λ|max = {_fmt(pred.get('rho'), '.6f')} (multipliers "
-                     + ", ".join(f"{a:.6g}{b:+.6g}i" for a, b in pred.get("multipliers", []))
-                     + f"); relative difference {_fmt(n.get('contraction_relative_error'), '.1e')}")
-    for key in ("note", "error"):
-        if key in pred:
-            lines.append(f"* prediction: {pred[key]}")
+    lines += control_lines(n)
+    if n["control_on_sample"] is not None:
+        lines.append(f"* impacts per period at the end: {_fmt(n['final_impacts_per_period'])}")
     if "final_vs_exact_orbit" in n:
         lines.append("* final Π2 sample vs the exact controlled 1/1 orbit: max "
                      f"{n['final_vs_exact_orbit']:.2e}; per coordinate " + "; ".join(

@@ -36,7 +36,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .analyze import _fmt, _jsonable, add_model_options, options_from_args
+from .analysis import fmt as _fmt
+from .analyze import _jsonable, add_model_options, options_from_args
 from .numbers import resolve_setup
 from grazing_control.support.files import YamlFileError, read_yaml_file
 
@@ -55,7 +56,8 @@ _NOT_SETTINGS = ("use_sim_time", "start_type_description_service")
 #: 1.6e-3 at its first correction.
 SIM_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset", "x0", "v0", "noise", "seed",
             "fidelity", "actuation_delay", "actuation", "pulse_width", "force_limit",
-            "actuator_bandwidth", "actuator_latency", "delta_d_drift")
+            "actuator_bandwidth", "actuator_latency", "delta_d_drift", "contact",
+            "contact_stiffness", "contact_damping", "friction", "friction_static")
 
 
 # ---------------------------------------------------------------------- parameters

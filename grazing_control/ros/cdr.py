@@ -26,7 +26,8 @@ from __future__ import annotations
 import math
 import struct
 
-__all__ = ["NAME", "joint_state", "vector3_stamped", "twist_stamped", "clock", "float64",
+__all__ = ["NAME", "joint_state", "vector3_stamped", "twist_stamped", "wrench_stamped", "clock",
+           "float64",
            "estimate_state", "read_sample", "read_state", "read_twist_stamped", "stamp_parts"]
 
 _HEADER = b"\x00\x01\x00\x00"
@@ -49,6 +50,10 @@ _ESTIMATE = struct.Struct("<4siII4sII8sI4xdI4xdI4xddd")
 _VECTOR3_STAMPED = struct.Struct("<4siII4sddd")
 # geometry_msgs/TwistStamped: stamp, frame_id "", linear x y z, angular x y z.
 _TWIST_STAMPED = struct.Struct("<4siII4sdddddd")
+# geometry_msgs/WrenchStamped: stamp, frame_id "mass" (length 5, NUL, 7 padding bytes to
+# the doubles at payload offset 24), force x y z, torque x y z.
+_WRENCH_STAMPED = struct.Struct("<4siII12sdddddd")
+_MASS_FRAME = b"mass\x00" + bytes(7)
 # rosgraph_msgs/Clock: one builtin_interfaces/Time.
 _CLOCK = struct.Struct("<4siI")
 # std_msgs/Float64.
@@ -117,6 +122,13 @@ def twist_stamped(sec: int, nanosec: int, linear_x: float,
     none), every other component 0."""
     return _TWIST_STAMPED.pack(_HEADER, sec, nanosec, 1, _FRAME, linear_x, linear_y, 0.0,
                                0.0, 0.0, 0.0)
+
+
+def wrench_stamped(sec: int, nanosec: int, force: tuple, torque: tuple) -> bytes:
+    """geometry_msgs/WrenchStamped in frame ``mass`` (the rig's rig/force_pulse: a
+    serialized publish, 0.1 ms sooner out than building the rclpy message in the rig
+    scene, docs/benchmarks.md)."""
+    return _WRENCH_STAMPED.pack(_HEADER, sec, nanosec, 5, _MASS_FRAME, *force, *torque)
 
 
 def clock(sec: int, nanosec: int) -> bytes:

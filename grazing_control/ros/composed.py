@@ -172,7 +172,7 @@ def run(spec: dict, statuses_path: str | None) -> int:
             # the simulator's end (its spin_until after the spin): no more answers taken,
             # its published record, the readers' acknowledgements
             if sim.exit_now:
-                sim.destroy_subscription(sim.sub_correction)
+                sim.stop_answers()
                 close_publishers(sim.published, ACK_TIMEOUT, also=(sim.pub_done,))
     except KeyboardInterrupt:
         pass

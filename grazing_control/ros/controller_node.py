@@ -123,7 +123,7 @@ from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.simulation.actuator import Actuator
 from grazing_control.dynamics.estimation.section_state import ESTIMATORS, actuator_legs
 from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator, predict_section,
-                                             pulse_shape)
+                                             pulse_shape, warm_up as warm_stream_kernel)
 from grazing_control.oscillator.control import Gains, correction
 from . import cdr, stream_block
 from .scene import SCENE_PARAMETER_DOC
@@ -636,6 +636,8 @@ class ControllerNode(Node):
                 self.stream = stream_from_values(self._values(), self.model, self.pulse)
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
+            if self.stream is not None and self.stream.kernel:
+                warm_stream_kernel()     # compiled model filter loaded now, not at section 0
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -880,11 +882,14 @@ class ControllerNode(Node):
                 return True
         return False
 
-    def _answer(self, key: tuple, x: float, v: float, factor: float = 1.0):
+    def _answer(self, key: tuple, x: float, v: float, factor: float = 1.0,
+                rig_time: float | None = None):
         """Answer the Pi2 state (x, v) stamped ``key``: the correction and, with a model,
         the one predicted for the next sample (twist.linear.y, NaN: none); ``factor`` 0
-        (the capture rule holding back) answers 0 and predicts 0. Returns the
-        correction published, or None."""
+        (the capture rule holding back) answers 0 and predicts 0. ``rig_time``: the
+        section's model time with a rig file, whose force pulse goes out first (it has
+        the deadline; rig_control.RigSide.answered). Returns the correction published,
+        or None."""
         dv = self.law.answer(key, x, v)
         if factor != 1.0 and dv is not None:
             dv = dv * factor if factor else 0.0
@@ -896,6 +901,8 @@ class ControllerNode(Node):
             self.nonfinite(f"stamp {key}: x={x!r} v={v!r} gives Delta v={dv!r}: not published")
             return None
         self.prediction = self._predict(x, v, dv) if factor == 1.0 else 0.0
+        if rig_time is not None:
+            self.rig_side.answered(rig_time, dv, self.prediction)
         self.pub.publish(cdr.twist_stamped(*key, dv, self.prediction))
         self.answered += 1
         return dv
@@ -921,7 +928,8 @@ class ControllerNode(Node):
                       if self.stream is not None and self.stream.next_k else 0.0)
             zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
                                      width=self.pulse[0], force_limit=self.pulse[1],
-                                     actuator=self.pulse[2], force0=force0)
+                                     actuator=self.pulse[2], force0=force0,
+                                     kernel=self.stream is not None and self.stream.kernel)
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)
@@ -965,8 +973,8 @@ class ControllerNode(Node):
 
     def add_stream_sample(self, t: float, x: float, v: float) -> None:
         """A stream sample (model time and units): the sections it completes are
-        estimated, published on controller/estimate and answered (with a rig file also
-        as the force pulse, rig_control.RigSide.answered)."""
+        estimated, answered (with a rig file first as the force pulse,
+        rig_control.RigSide.answered) and published on controller/estimate."""
         if self.reid is not None:
             self.reid.sample(t, x, v)
         try:
@@ -979,21 +987,24 @@ class ControllerNode(Node):
             key = cdr.stamp_parts(tk)
             xh, vh = p.x_ref + est.z[0], p.v_ref + est.z[1]
             c = est.cov
-            self.pub_estimate.publish(cdr.estimate_state(*key, xh, vh, float(c[0, 0]),
-                                                         float(c[0, 1]), float(c[1, 1])))
+            estimate = cdr.estimate_state(*key, xh, vh, float(c[0, 0]), float(c[0, 1]),
+                                          float(c[1, 1]))
             if not (math.isfinite(xh) and math.isfinite(vh)):
+                self.pub_estimate.publish(estimate)
                 self.malformed(f"section {k}: no estimate (no sample before it)")
                 continue
             if self.watching:
                 self._watch(k, key)
             if self.reid is not None:       # a finished refit is applied here, at Pi2
                 self.reid.at_section(k, key, est)
-            dv = self._answer(key, xh, vh, self._capture_factor(k, est))
+            # the answer before the estimate's message (issue 30: in the rig scene publishing
+            # the estimate first put the force pulse 0.37 ms later, docs/benchmarks.md)
+            dv = self._answer(key, xh, vh, self._capture_factor(k, est),
+                              tk if self.rig_side is not None else None)
+            self.pub_estimate.publish(estimate)
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if self.reid is not None:
                 self.reid.answered(k, 0.0 if dv is None else dv)
-            if dv is not None and self.rig_side is not None:
-                self.rig_side.answered(tk, dv, self.prediction)
 
     def _capture_factor(self, k: int, est) -> float:
         """1, or 0 while the capture rule holds the correction back (only once the

@@ -1,6 +1,6 @@
 """The controller's re-identification in the loop (issue 29 section 3), without ROS.
 
-The node side of :mod:`grazing_control.dynamics.identification.reidentification`: its parameters, the
+The node side of :mod:`grazing_control.dynamics.estimation.reidentification`: its parameters, the
 trigger rule, and the record of each decision. In stream mode with ``estimator`` model
 the controller keeps the last ``reidentify_periods`` periods of the stream it received
 (samples, the phase reference, the kicks that acted, the impacts known); a refit is
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 
-from grazing_control.dynamics.identification.reidentification import (CONDITIONS, MIN_PERIODS, REASONS,
+from grazing_control.dynamics.estimation.reidentification import (CONDITIONS, MIN_PERIODS, REASONS,
                                                        REFIT_PERIODS,
                                                        ReidentificationError, Reidentifier,
                                                        StreamRecord, switch_estimator)
@@ -44,7 +44,7 @@ REID_DEFAULTS = {"reidentify": False, "reidentify_periods": REFIT_PERIODS,
                  "design_conditions": "combined"}
 REID_KEYS = tuple(REID_DEFAULTS)
 #: The names of a decision row's values, in order: ``switched`` 1 (0: refused),
-#: ``reason`` 0 (switched) or 1 + the index of dynamics.identification.reidentification.REASONS,
+#: ``reason`` 0 (switched) or 1 + the index of dynamics.estimation.reidentification.REASONS,
 #: ``requested_at`` the section of the request, then the new model with standard
 #: errors, its gains and X**, and the fit's numbers.
 SWITCH_FIELDS = ("switched", "reason", "requested_at", "zeta", "zeta_se", "r", "r_se",

@@ -27,6 +27,7 @@ from collections import deque
 
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.rig import Rig
+from grazing_control.plant.settings import default_values
 
 __all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "controller_values", "answer_lead",
            "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
@@ -48,9 +49,12 @@ RIG_TOPICS = {"rig/sensor": "sensor_msgs/msg/JointState",
 
 #: The simulator's parameters set by a rig file (:func:`sim_values`); ``time_scale``
 #: (a faster scene) and ``pre_roll`` may be given, the others are the rig's.
+CONTACT_KEYS = ("contact", "contact_stiffness", "contact_damping", "friction",
+                "friction_static")
 SIM_KEYS = ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset", "state_period",
             "sensor_noise", "sensor_quantum", "sensor_velocity", "pulse_width",
-            "force_limit", "actuator_bandwidth", "actuation_delay", "time_scale", "pre_roll")
+            "force_limit", "actuator_bandwidth", "actuation_delay", "time_scale", "pre_roll",
+            *CONTACT_KEYS)
 #: A simulated rig's pre-roll (sim_node's ``pre_roll``): its stream starts at section 0,
 #: whose answer cannot be estimated from the period before it (no samples): at physical
 #: speed it came 6.3 ms after section 0 against a 5 ms budget, a deadline miss in every
@@ -63,17 +67,11 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
     is time_scale = omega_n, here omega_n / (1 + clock_drift) so that the simulated rig
     clock drifts by ``clock_drift`` against ROS time (:class:`SimulatedClock`).
     ParameterError (one line naming the rig field) for what the simulator does not
-    model: a velocity noise other than the position noise, an actuator latency, a
-    compliant stop. A rig scene runs in realtime with the correction as a force pulse
-    after the budget; the compliant plant (plant.contact_plant) gives one period with the
-    correction as a velocity jump on Pi2 in lockstep only (docs/theory_contact.md §16),
-    so a rig whose ``stop`` is not rigid is refused here, when sim_node loads it; its
-    stop is read and converted (Rig.contact_values) for the core's tools."""
-    if rig.stop.type != "rigid":
-        raise ParameterError(
-            f"stop.type={rig.stop.type!r} is not simulated in a rig scene: valid there is "
-            "rigid (a compliant stop runs in lockstep with the correction on Pi2 only; the "
-            "rig scene is realtime with force pulses: docs/rig.md, 'The stop')")
+    model: a velocity noise other than the position noise, an actuator latency. The stop
+    (the rig file's ``stop`` section) is sim_node's contact parameters
+    (Rig.contact_values; the rigid wall's with sim_node's defaults for the rest): a
+    compliant stop runs in the rig scene as the wall does, realtime with the correction
+    as a force pulse (docs/theory_contact.md §16)."""
     p, d = rig.params(), rig.dimensionless()
     if d["sensor_velocity"] and d["sensor_velocity_noise"] != d["sensor_noise"]:
         raise ParameterError(
@@ -90,7 +88,8 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
             "sensor_velocity": bool(d["sensor_velocity"]), "pulse_width": d["pulse_width"],
             "force_limit": d["force_limit"], "actuator_bandwidth": d["actuator_bandwidth"],
             "actuation_delay": d["actuation_delay"],
-            "time_scale": rig.omega_n / (1.0 + clock_drift), "pre_roll": PRE_ROLL}
+            "time_scale": rig.omega_n / (1.0 + clock_drift), "pre_roll": PRE_ROLL,
+            **{k: default_values()[k] for k in CONTACT_KEYS}, **rig.contact_values()}
 
 
 def check_rig_values(rig_file: str, rig_values: dict, values: dict, free=()) -> None:

@@ -36,7 +36,6 @@ import math
 from collections import deque
 
 import numpy as np
-from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grazing_control.dynamics.estimation.clock_relation import ClockRelation
@@ -204,15 +203,12 @@ class RigSide:
         """Section k at model time ``t`` answered with ``dv`` (its ``predicted`` next):
         rig/force_pulse."""
         t_k = self.sections.rig_time(t)
-        msg = WrenchStamped()
-        msg.header.stamp = stamp_from_seconds(self.sections.apply_time(t_k))
-        msg.header.frame_id = "mass"
-        msg.wrench.force.x = float(force_of(self.rig, dv))
-        msg.wrench.force.y = (float(force_of(self.rig, predicted)) if math.isfinite(predicted)
-                              else math.nan)
-        msg.wrench.torque.x = float(self.rig.actuator.pulse_width)
-        msg.wrench.torque.y = float(t_k)
-        self.node.pub_force.publish(msg)
+        stamp = stamp_from_seconds(self.sections.apply_time(t_k))
+        force = (float(force_of(self.rig, dv)),
+                 float(force_of(self.rig, predicted)) if math.isfinite(predicted) else math.nan,
+                 0.0)
+        torque = (float(self.rig.actuator.pulse_width), float(t_k), 0.0)
+        self.node.pub_force.publish(cdr.wrench_stamped(stamp.sec, stamp.nanosec, force, torque))
         self.pulses += 1
 
     # ---------------------------------------------------------------- reporting

@@ -21,6 +21,10 @@ grazing on Pi1 is (§2)
   grazing, gamma1 > 0 the n-DOF Eq. 36 (for n = 1, (D9)).
 * Admissible mu (§8): where the limit spectrum is inside the unit circle, gamma1 > 0
   ('impacting') and spec N(k(mu)) inside ('non-impacting'); ends from roots.
+* A known actuation delay (§14): the kick computed from the sample on Pi2 acts
+  ``delay`` later; for 0 <= delay < T - s (before the grazing phase) everything above
+  holds with b replaced by b_delay = Phi(-delay) e_{n + i_a} (every function takes
+  ``delay``, default 0: today's design, the same floats).
 """
 
 from __future__ import annotations
@@ -83,11 +87,27 @@ def _transition(model: NdofModel, t: float) -> np.ndarray:
     return _flow(model).transition(t)
 
 
-def _vectors(model: NdofModel):
-    """(w, e_v, b): the wall coordinate's position and velocity rows, the kick direction."""
+def _vectors(model: NdofModel, delay: float = 0.0):
+    """(w, e_v, b): the wall coordinate's position and velocity rows, the kick direction
+    seen on Pi2, b = Phi(-delay) e_{n + i_a} (§14; e_{n + i_a} itself without delay)."""
     n = model.n
     eye = np.eye(2 * n)
-    return eye[model.i_w], eye[n + model.i_w], eye[n + model.i_a]
+    b = eye[n + model.i_a]
+    if delay != 0.0:
+        b = _transition(model, -_delay(model, delay)) @ b
+    return eye[model.i_w], eye[n + model.i_w], b
+
+
+def _delay(model: NdofModel, delay) -> float:
+    """The actuation delay, checked: 0 <= delay < T - s (§14: a kick after the grazing
+    phase cannot remove the singular multiplier)."""
+    reach = model.period - model.pi2_offset / model.omega
+    if isinstance(delay, bool) or not isinstance(delay, (int, float, np.floating, np.integer)) \
+            or not 0.0 <= float(delay) < reach:
+        raise ParameterError(
+            f"delay={delay!r} is invalid: valid range is 0 <= delay < T - s = {reach:.10g} "
+            f"(the kick must act before the grazing phase, docs/theory_ndof.md §14)")
+    return float(delay)
 
 
 def _sections(model: NdofModel):
@@ -96,14 +116,14 @@ def _sections(model: NdofModel):
     return _transition(model, s), _transition(model, model.period - s), _transition(model, -s)
 
 
-def smooth_map(model: NdofModel, gains=None) -> np.ndarray:
-    """N(k) = Phi(T - s)(I + b k^T) Phi(s), the Pi1 map through grazing (§2); Phi(T)
-    without gains."""
+def smooth_map(model: NdofModel, gains=None, delay: float = 0.0) -> np.ndarray:
+    """N(k) = Phi(T - s)(I + b k^T) Phi(s), the Pi1 map through grazing (§2; with a delay
+    b = Phi(-delay) e_{n + i_a}, §14); Phi(T) without gains."""
     p, q, _ = _sections(model)
     if gains is None:
         return q @ p
     k = _gains(model, gains)
-    _w, _ev, b = _vectors(model)
+    _w, _ev, b = _vectors(model, delay)
     return q @ (np.eye(2 * model.n) + np.outer(b, k)) @ p
 
 
@@ -118,10 +138,10 @@ def _gains(model: NdofModel, gains) -> np.ndarray:
     return k
 
 
-def markov_parameters(model: NdofModel, gains=None) -> np.ndarray:
+def markov_parameters(model: NdofModel, gains=None, delay: float = 0.0) -> np.ndarray:
     """w^T N^j e_v for j = 1 .. 2n (§2): the singular term of the near-grazing
     characteristic polynomial vanishes identically iff all are 0."""
-    n_mat = smooth_map(model, gains)
+    n_mat = smooth_map(model, gains, delay)
     w, ev, _b = _vectors(model)
     out, row = [], w
     for _ in range(2 * model.n):
@@ -132,16 +152,22 @@ def markov_parameters(model: NdofModel, gains=None) -> np.ndarray:
 
 # -- the family and its zeros (§3, §4) ---------------------------------------------------
 
-def _reach_value(model: NdofModel) -> float:
-    """c = w^T Phi(T - s) b: how a kick on Pi2 moves the wall coordinate at tau* (§3)."""
-    w, _ev, b = _vectors(model)
+def _reach_value(model: NdofModel, delay: float = 0.0) -> float:
+    """c = w^T Phi(T - s) b: how a kick on Pi2 moves the wall coordinate at tau* (§3);
+    with a delay c = w^T Phi(T - s - delay) e_{n + i_a} (§14)."""
+    w, _ev, b = _vectors(model, delay)
     return float(w @ _sections(model)[1] @ b)
 
 
-def _reach(model: NdofModel) -> float:
+def _reach(model: NdofModel, delay: float = 0.0) -> float:
     """c = w^T Phi(T - s) b, refused when the kick cannot reach the wall coordinate."""
-    c = _reach_value(model)
+    c = _reach_value(model, delay)
     if not abs(c) > 1e-12 * max(1.0, float(np.abs(_sections(model)[1]).max())):
+        if delay != 0.0:
+            raise ParameterError(
+                f"delay={delay!r} is invalid with this model: w^T Phi(T - s - delay) b = {c!r}, "
+                f"a kick acting then does not reach the wall coordinate's position at the "
+                f"grazing phase (a singular delay, docs/theory_ndof.md §14); choose another")
         raise ParameterError(
             f"pi2_offset={model.pi2_offset!r} is invalid with i_a={model.i_a}, i_w={model.i_w}: "
             f"w^T Phi(T - s) b = {c!r}, a kick on Pi2 does not reach the wall coordinate's "
@@ -150,22 +176,24 @@ def _reach(model: NdofModel) -> float:
     return c
 
 
-def gain_family(model: NdofModel, mu: float) -> np.ndarray:
-    """k(mu) = (mu Phi(-s)^T w - Phi(T - s)^T w) / c: the gains with w^T N = mu w^T (§3).
+def gain_family(model: NdofModel, mu: float, delay: float = 0.0) -> np.ndarray:
+    """k(mu) = (mu Phi(-s)^T w - Phi(T - s)^T w) / c: the gains with w^T N = mu w^T (§3);
+    with an actuation delay c = w^T Phi(T - s - delay) e_{n + i_a} (§14, Eq. (N9)).
 
-    Raises ParameterError where c = w^T Phi(T - s) b = 0 (no family) or mu is not finite.
+    Raises ParameterError where c = 0 (no family), mu is not finite or the delay is
+    outside 0 <= delay < T - s.
     """
     mu = _mu(mu)
-    c = _reach(model)
+    c = _reach(model, delay)
     _p, q, pinv = _sections(model)
     w, _ev, _b = _vectors(model)
     return (mu * (pinv.T @ w) - q.T @ w) / c
 
 
-def family_mu(model: NdofModel, gains) -> float:
+def family_mu(model: NdofModel, gains, delay: float = 0.0) -> float:
     """mu = N(k)_{i_w, i_w}: the family's parameter of a gain on it (for n = 1 the 1-DOF
     N_g,11 = u0 + sigma c2, §3)."""
-    return float(smooth_map(model, gains)[model.i_w, model.i_w])
+    return float(smooth_map(model, gains, delay)[model.i_w, model.i_w])
 
 
 def _mu(mu) -> float:
@@ -176,16 +204,17 @@ def _mu(mu) -> float:
     return float(mu)
 
 
-def transmission_zeros(model: NdofModel) -> np.ndarray:
-    """The 2n - 1 transmission zeros of (Phi(T), Phi(T - s) b, w^T) (§4).
+def transmission_zeros(model: NdofModel, delay: float = 0.0) -> np.ndarray:
+    """The 2n - 1 transmission zeros of (Phi(T), Phi(T - s) b, w^T) (§4; with a delay
+    b = Phi(-delay) e_{n + i_a}, so they move with the delay, §14).
 
     Finite generalized eigenvalues of the Rosenbrock pencil
     [[Phi(T), g], [w^T, 0]] - lambda [[I, 0], [0, 0]] (the pencil has two infinite ones,
     relative degree 1 since c = w^T g != 0), sorted by decreasing modulus.
     """
-    _reach(model)
+    _reach(model, delay)
     p, q, _ = _sections(model)
-    w, _ev, b = _vectors(model)
+    w, _ev, b = _vectors(model, delay)
     d = 2 * model.n
     a = np.zeros((d + 1, d + 1))
     a[:d, :d] = q @ p
@@ -200,36 +229,38 @@ def transmission_zeros(model: NdofModel) -> np.ndarray:
     return z[np.argsort(-np.abs(z), kind="stable")]
 
 
-def _zeros_radius_at(model: NdofModel, offset: float) -> float:
+def _zeros_radius_at(model: NdofModel, offset: float, delay: float = 0.0) -> float:
     """max |zero| with Pi2 at ``offset`` after Pi1 (inf where the kick cannot reach the
-    wall coordinate by the grazing section, w^T Phi(T - s) b = 0)."""
+    wall coordinate by the grazing section, w^T Phi(T - s - delay) b = 0, or acts after
+    it, delay >= T - s)."""
     import dataclasses
 
     try:
-        z = transmission_zeros(dataclasses.replace(model, pi2_offset=offset))
+        z = transmission_zeros(dataclasses.replace(model, pi2_offset=offset), delay)
     except ParameterError:
         return math.inf
     return float(np.max(np.abs(z))) if z.size else 0.0
 
 
 def sections_with_stable_zeros(model: NdofModel, points: int = 720,
-                               tol: float = 1e-9) -> list:
+                               tol: float = 1e-9, delay: float = 0.0) -> list:
     """The intervals of ``pi2_offset`` in (0, 2 pi) where every transmission zero lies
     inside the unit circle (§4): where the section Pi2 may be placed for a design to
     exist (the zeros are fixed by the plant, the actuated coordinate and the section,
     whatever the gain). A scan of ``points`` offsets with each switch bisected to
     ``tol``: a design aid, not a certified set (an interval narrower than the scan's
-    step, 2 pi / points, can be missed).
+    step, 2 pi / points, can be missed). With an actuation ``delay`` the zeros are the
+    delayed kick's (§14), and offsets with delay >= T - s have none inside.
     """
     if isinstance(points, bool) or not isinstance(points, int) or points < 2:
         raise ParameterError(f"points={points!r} is invalid: valid range is an integer >= 2")
     grid = np.linspace(0.0, 2.0 * math.pi, points + 1)[1:-1]
-    inside = [_zeros_radius_at(model, float(s)) < 1.0 for s in grid]
+    inside = [_zeros_radius_at(model, float(s), delay) < 1.0 for s in grid]
 
     def switch(a, b, a_in):
         while b - a > tol:
             m = 0.5 * (a + b)
-            if (_zeros_radius_at(model, m) < 1.0) == a_in:
+            if (_zeros_radius_at(model, m, delay) < 1.0) == a_in:
                 a = m
             else:
                 b = m
@@ -251,11 +282,11 @@ def sections_with_stable_zeros(model: NdofModel, points: int = 720,
 
 # -- the limit of the controlled 1/1 orbit (§5-§7) ----------------------------------------
 
-def _reduced(model: NdofModel):
+def _reduced(model: NdofModel, delay: float = 0.0):
     """(N~, iv, a1, q): N restricted to W = ker w^T (rows and columns other than i_w,
     the same for every mu), the index of e_v in it, a1 = e_v^T (N~ - I)^-1 e_v and
     q = r + (1 + r) a1 = e_v^T (N~ - I)^-1 (r N~ + I) e_v (§5)."""
-    n_mat = smooth_map(model, gain_family(model, 0.0))
+    n_mat = smooth_map(model, gain_family(model, 0.0, delay), delay)
     keep = [j for j in range(2 * model.n) if j != model.i_w]
     nt = n_mat[np.ix_(keep, keep)]
     iv = keep.index(model.n + model.i_w)
@@ -271,7 +302,7 @@ def _reduced(model: NdofModel):
     return nt, iv, a1, model.r + (1.0 + model.r) * a1
 
 
-def limit_monodromy(model: NdofModel, mu: float) -> np.ndarray:
+def limit_monodromy(model: NdofModel, mu: float, delay: float = 0.0) -> np.ndarray:
     """J0(mu): the monodromy of the controlled 1/1 orbit at its impact, in the limit
     Delta d -> 0-, up to similarity (the wall coordinate's row scaled by 1/psi) (§6, Eq. (N6)).
 
@@ -282,10 +313,11 @@ def limit_monodromy(model: NdofModel, mu: float) -> np.ndarray:
         J0[w, W] = (e_v^T N~ - mu e_v^T) R / omega,
         J0[W, w] = gamma N~ e_v,        J0[W, W] = N~ R;
 
-    det J0 = r^2 det N. For n = 1 its trace and determinant are (D8).
+    det J0 = r^2 det N. For n = 1 its trace and determinant are (D8). With an actuation
+    delay N is N(k; delay) (§14).
     """
     mu = _mu(mu)
-    nt, iv, _a1, q = _reduced(model)
+    nt, iv, _a1, q = _reduced(model, delay)
     r, om = model.r, model.omega
     d = 2 * model.n
     gam = -(1.0 + r) * om * q
@@ -300,18 +332,18 @@ def limit_monodromy(model: NdofModel, mu: float) -> np.ndarray:
     return j0
 
 
-def limit_multipliers(model: NdofModel, mu: float) -> np.ndarray:
+def limit_multipliers(model: NdofModel, mu: float, delay: float = 0.0) -> np.ndarray:
     """The predicted limit spectrum of the controlled 1/1 orbit as Delta d -> 0- on the
     family (§6): the 2n eigenvalues of :func:`limit_monodromy`, by decreasing modulus.
 
     It is not {mu(1 + w^T q)} U zeros (docs/theory_ndof.md §6 says why); for n = 1 it is
     the study's lambda0 (Eq. 23).
     """
-    lam = np.linalg.eigvals(limit_monodromy(model, mu)).astype(complex)
+    lam = np.linalg.eigvals(limit_monodromy(model, mu, delay)).astype(complex)
     return lam[np.argsort(-np.abs(lam), kind="stable")]
 
 
-def existence_coefficient(model: NdofModel, mu: float) -> float:
+def existence_coefficient(model: NdofModel, mu: float, delay: float = 0.0) -> float:
     """gamma1(mu): Delta d = -gamma1 psi^2 + O(psi^3) on the 1/1 branch born at grazing
     (§7, Eq. (N7); psi the impact phase after tau*). The controlled 1/1 orbit exists for
     d < d* iff gamma1 > 0 (the n-DOF Eq. 36)::
@@ -321,7 +353,7 @@ def existence_coefficient(model: NdofModel, mu: float) -> float:
     For n = 1 (a1 = 1/(N22 - 1)) this is (D9). inf/nan at its poles mu = 1, q = 0.
     """
     mu = _mu(mu)
-    _nt, _iv, a1, q = _reduced(model)
+    _nt, _iv, a1, q = _reduced(model, delay)
     dstar, r = _flow(model).d_star, model.r
     num, den = (1.0 + r) * dstar * (1.0 + a1 - mu * a1), q * (mu - 1.0)
     if den == 0.0:
@@ -335,10 +367,10 @@ def _existence_value(mu: float, a1: float, q: float, r: float) -> float:
     return e * (0.5 * e + (1.0 + r) * (1.0 + a1 - mu * a1))
 
 
-def free_multipliers(model: NdofModel, mu: float) -> np.ndarray:
+def free_multipliers(model: NdofModel, mu: float, delay: float = 0.0) -> np.ndarray:
     """Eigenvalues of N(k(mu)): the non-impacting controlled motion (Delta d > 0), which
     on the family are {mu} U transmission zeros (§4)."""
-    lam = np.concatenate([[complex(_mu(mu))], transmission_zeros(model)])
+    lam = np.concatenate([[complex(_mu(mu))], transmission_zeros(model, delay)])
     return lam[np.argsort(-np.abs(lam), kind="stable")]
 
 
@@ -351,6 +383,7 @@ class NdofDesign:
     zeros : the 2n - 1 transmission zeros (the other eigenvalues of N, any mu).
     limit_multipliers : the 2n multipliers of the controlled 1/1 orbit as Delta d -> 0-.
     gamma1 : existence coefficient, > 0: the 1/1 orbit exists for d < d*.
+    delay : the actuation delay the gains are designed for (§14; 0: the kick on Pi2).
     """
 
     mu: float
@@ -358,6 +391,7 @@ class NdofDesign:
     zeros: np.ndarray
     limit_multipliers: np.ndarray
     gamma1: float
+    delay: float = 0.0
 
     @property
     def lambda0(self) -> np.ndarray:
@@ -398,30 +432,32 @@ class NdofDesign:
         return self.admissible_impacting and self.free_stable
 
 
-def evaluate_design(model: NdofModel, mu: float) -> NdofDesign:
-    """gains, zeros, limit multipliers and gamma1 at mu."""
-    k = gain_family(model, mu)
-    return NdofDesign(float(mu), k, transmission_zeros(model), limit_multipliers(model, mu),
-                      existence_coefficient(model, mu))
+def evaluate_design(model: NdofModel, mu: float, delay: float = 0.0) -> NdofDesign:
+    """gains, zeros, limit multipliers and gamma1 at mu (for a kick acting ``delay`` after
+    the sample, §14)."""
+    k = gain_family(model, mu, delay)
+    return NdofDesign(float(mu), k, transmission_zeros(model, delay),
+                      limit_multipliers(model, mu, delay),
+                      existence_coefficient(model, mu, delay), float(delay))
 
 
 # -- the admissible set (§8) ------------------------------------------------------------
 
-def _char_affine(model: NdofModel):
+def _char_affine(model: NdofModel, delay: float = 0.0):
     """(p0, p1): det(lambda I - J0(mu)) = p0(lambda) + mu p1(lambda), coefficient arrays
     of length 2n + 1 (J0 is affine in mu through one row, §8)."""
-    j_0 = limit_monodromy(model, 0.0)
-    j_1 = limit_monodromy(model, 1.0)
+    j_0 = limit_monodromy(model, 0.0, delay)
+    j_1 = limit_monodromy(model, 1.0, delay)
     p0 = np.real(np.poly(j_0))
     p1 = np.real(np.poly(j_1)) - p0
     return p0, p1
 
 
-def _limit_breakpoints(model: NdofModel) -> list:
+def _limit_breakpoints(model: NdofModel, delay: float = 0.0) -> list:
     """mu where a root of p0 + mu p1 may lie on the unit circle: lambda = e^{i theta}
     with p0(z) conj(p1(z)) real, i.e. roots on |z| = 1 of
     p0(z) z^{2n} p1(1/z) - p1(z) z^{2n} p0(1/z) (§8)."""
-    p0, p1 = _char_affine(model)
+    p0, p1 = _char_affine(model, delay)
     qz = np.polysub(np.polymul(p0, p1[::-1]), np.polymul(p0[::-1], p1))
     scale = float(np.abs(qz).max()) or 1.0
     qz = np.trim_zeros(np.where(np.abs(qz) <= 1e-14 * scale, 0.0, qz), "f")
@@ -440,7 +476,7 @@ def _limit_breakpoints(model: NdofModel) -> list:
     return out
 
 
-def admissible_mu(model: NdofModel, conditions: str = "combined"):
+def admissible_mu(model: NdofModel, conditions: str = "combined", delay: float = 0.0):
     """Intervals of mu where the design conditions hold (§8), as [(lo, hi), ...].
 
     ``conditions``: 'impacting' (limit spectrum inside the unit circle and gamma1 > 0),
@@ -453,8 +489,8 @@ def admissible_mu(model: NdofModel, conditions: str = "combined"):
     if conditions not in CONDITIONS:
         raise ValueError(f"conditions={conditions!r} is invalid: valid values are "
                          f"{', '.join(CONDITIONS)}")
-    zeros_in = bool(np.max(np.abs(transmission_zeros(model))) < 1.0)
-    _nt, _iv, a1, q = _reduced(model)
+    zeros_in = bool(np.max(np.abs(transmission_zeros(model, delay))) < 1.0)
+    _nt, _iv, a1, q = _reduced(model, delay)
     r = model.r
     impact = conditions in ("combined", "impacting")
     free = conditions in ("combined", "non-impacting")
@@ -462,7 +498,7 @@ def admissible_mu(model: NdofModel, conditions: str = "combined"):
         return []
     cands = [1.0, -1.0]
     if impact:
-        cands += _limit_breakpoints(model)
+        cands += _limit_breakpoints(model, delay)
         den = 0.5 * q - (1.0 + r) * a1
         if den != 0.0:
             cands.append((0.5 * q - (1.0 + r) * (1.0 + a1)) / den)
@@ -473,7 +509,7 @@ def admissible_mu(model: NdofModel, conditions: str = "combined"):
         if impact:
             if not _existence_value(mu, a1, q, r) > 0.0:
                 return False
-            lam = np.linalg.eigvals(limit_monodromy(model, mu))
+            lam = np.linalg.eigvals(limit_monodromy(model, mu, delay))
             if not np.max(np.abs(lam)) < 1.0:
                 return False
         return True
@@ -484,7 +520,7 @@ def admissible_mu(model: NdofModel, conditions: str = "combined"):
 # -- the bad gain (§9) --------------------------------------------------------------------
 
 def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
-                        smooth_branch: bool = True) -> np.ndarray:
+                        smooth_branch: bool = True, delay: float = 0.0) -> np.ndarray:
     """A gain that kills the first Markov parameter w^T N e_v but not the others (§9):
     k = k(mu) + offset d, d a unit vector off the family.
 
@@ -497,13 +533,13 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
     is the design k(mu). Whether the 1/1 orbit exists for d < d* depends on the sign of
     offset (ndof_branch.branch_coefficients).
     """
-    k0 = gain_family(model, mu)
+    k0 = gain_family(model, mu, delay)
     offset = float(offset)
     if not math.isfinite(offset):
         raise ParameterError(f"offset={offset!r} is invalid: valid range is a finite real number")
-    c = _reach(model)
+    c = _reach(model, delay)
     p, q, pinv = _sections(model)
-    w, ev, b = _vectors(model)
+    w, ev, b = _vectors(model, delay)
     m, g = q @ p, q @ b
     try:
         res = np.linalg.inv(np.eye(2 * model.n) - m)
@@ -514,7 +550,7 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
     te, tg = w @ res @ ev, w @ res @ g
     g1_row = p @ (tg * (res @ ev) - te * (res @ g))     # G(1) = 0 <=> g1_row . k = -te
     family = pinv.T @ w                                 # dk/dmu (times c)
-    n_k = smooth_map(model, k0)
+    n_k = smooth_map(model, k0, delay)
     if smooth_branch:
         fixed, target = [markov1, g1_row, family], p @ n_k @ ev   # d(w^T N^2 e_v) = c d.P N e_v
     else:
@@ -542,6 +578,7 @@ def controller_parameters(model: NdofModel, design: NdofDesign, model_file) -> d
         "omega": float(model.omega),
         "pi2_offset": float(model.pi2_offset),
         "mu": float(design.mu),
+        **({"actuation_delay": float(design.delay)} if design.delay != 0.0 else {}),
     }
 
 
@@ -558,7 +595,7 @@ def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
 
     k = _gains(model, design.gains)
     w, _ev, _b = _vectors(model)
-    row = w @ smooth_map(model, k)
+    row = w @ smooth_map(model, k, design.delay)
     if not np.allclose(row, design.mu * w, atol=1e-9 * (1.0 + np.abs(row).max())):
         raise ParameterError(f"design is invalid for this model: its gains are not on the "
                              f"family w^T N = mu w^T (row {row.tolist()}, mu {design.mu!r})")

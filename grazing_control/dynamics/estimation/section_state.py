@@ -25,6 +25,14 @@ correction of period k. docs/theory_estimation.md derives the three estimators:
     map; a residual test (chi^2) falls back to the arc fit when the prior and the data
     disagree (an unexpected or missed impact).
 
+The model filter is one algorithm over any model (docs/theory_estimation.md, (E11)): for
+the n-DOF oscillator (an :class:`~grazing_control.oscillator.ndof.model.NdofModel` in
+place of the parameters) :func:`trajectory` is the exact n-DOF motion
+(oscillator/ndof/: the modal flow, the impact law, the saltation matrices), the state
+has 2n coordinates and the sensor reads the position (and maybe the velocity) of any
+one coordinate (``coordinate``); the 1-DOF closed form is the special case n = 1,
+coordinate 0, bit for bit.
+
 Every estimate comes with its covariance per the noise model (tests/test_estimation.py
 checks it against seeded Monte Carlo). Impacts are detected from the stream where the
 rig has no impact sensor by a split test on the arc fit (:func:`detect_impact`).
@@ -32,13 +40,18 @@ rig has no impact sensor by a split test on the arc fit (:func:`detect_impact`).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
+from grazing_control.oscillator.ndof import impact as ndof_impact
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
 from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
@@ -268,9 +281,17 @@ def _through_impact(p: OscillatorParams, q: OscillatorParams, m, g, h: float, im
     return m, g
 
 
+@functools.lru_cache(maxsize=16)
+def _shifted_wall(p: OscillatorParams, force: float) -> OscillatorParams:
+    """The oscillator against the wall moved to Delta d - ``force`` (a pulse's, below),
+    kept for the calls of one model fit (the same pulse in each of its iterations)."""
+    return p.with_(delta_d=p.delta_d - force)
+
+
 def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
                duration: float | None = None, *, wall: bool = False, width: float = 0.0,
-               force_limit: float = math.inf, actuator=None, force0: float = 0.0):
+               force_limit: float = math.inf, actuator=None, force0: float = 0.0,
+               kernel: bool = False):
     """The exact motion from the section state ``z0`` (before the correction): the
     deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
     (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
@@ -287,6 +308,15 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     (z_e - F e1) + F e1 and the saltation matrices are those of the shifted wall; the
     Jacobian and the wall's sensitivity keep their form (F does not depend on z0).
     Width 0 is the kick, bit for bit.
+
+    ``kernel``: compiled (numba; issue 30, the controller's estimate at each section):
+    the exact flow with impacts of :func:`grazing_control.oscillator.kernel.advance`
+    instead of the core's :func:`grazing_control.oscillator.impact.advance` (the same
+    segments bit for bit, tests/test_kernel.py), and the evaluation at the samples of
+    :mod:`.compiled_flow` (the same floating point operations as the NumPy code here);
+    every output the same bit for bit (tests/test_estimation_compiled.py), several times faster
+    (benchmarks/bench_stream_estimator.py). The actuator's flow and the n-DOF motion are
+    the core's in both.
 
     With an ``actuator`` (:class:`grazing_control.dynamics.simulation.actuator.Actuator`, not
     ideal; ``width`` > 0) the pulse is the command, and the force on the mass follows it
@@ -305,12 +335,23 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     (I - S) e1 to the perturbation carried up to it, d z+ = S d z- + (I - S) e1 d(Delta d)
     (docs/theory_estimation.md, (E8)); the flow carries it on by Phi and S. The other
     outputs are the same as without it, bit for bit.
+
+    With an n-DOF model for ``p`` (:class:`~grazing_control.oscillator.ndof.model.NdofModel`)
+    it is the exact n-DOF motion (:func:`_ndof_trajectory`): z (m, 2n), jac (m, 2n, 2n),
+    end (2n,), monodromy (2n, 2n), the same impacts; the kick only (no pulse, actuator
+    or wall sensitivity).
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
+    if isinstance(p, NdofModel):
+        if width != 0.0 or wall or actuator is not None:
+            raise ParameterError("width, wall and actuator are invalid for an n-DOF model: "
+                                 "its correction is the velocity kick (width 0, no actuator)")
+        return _ndof_trajectory(p, z0, s, correction, delay, duration)
     if actuator is not None and not (actuator.ideal and force0 == 0.0):
         return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
                                     force_limit, actuator, force0)
+    flow = _kernel.advance if kernel else advance
     # events: (time, state after, jacobian after); start, kick, impacts
     events = []
     tau = p.tau2
@@ -323,8 +364,8 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     for start, end, kick, force in legs:
         z = (z[0], z[1] + kick)
         events.append((start, z, m, g, force))
-        q = p if force == 0.0 else p.with_(delta_d=p.delta_d - force)   # the shifted wall
-        seg = advance(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
+        q = p if force == 0.0 else _shifted_wall(p, force)
+        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
         for imp in seg.impacts:
             if imp.sticking:
                 raise ValueError("the model's motion sticks to the wall: no fit")
@@ -343,6 +384,8 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
         z = (seg.dx + force if force else seg.dx, seg.dv)
         t0 = end
     times = np.array([e[0] for e in events])
+    if kernel:
+        return _compiled_samples(p, events, times, s, z, m, g, impacts, wall)
     idx = np.searchsorted(times, s, side="left") - 1   # the last event strictly before s
     idx = np.clip(idx, 0, len(events) - 1)
     zs = np.array([e[1] for e in events])[idx]
@@ -359,6 +402,92 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     if wall:
         gs = np.array([e[3] for e in events])[idx]
         return out, jac, z, m, impacts, np.einsum("nij,nj->ni", phi, gs), g
+    return out, jac, z, m, impacts
+
+
+_NO_ROWS = np.zeros((0, 2))
+
+
+def _compiled_samples(p, events, times, s, end, m, g, impacts, wall):
+    """The end of :func:`trajectory` (the deviation, Jacobian and wall sensitivity at the
+    samples from their events) by :mod:`.compiled_flow`, bit for bit."""
+    from grazing_control.dynamics.estimation.compiled_flow import (event_offsets,
+                                                                   flow_at_samples)
+
+    idx, hh = event_offsets(times, s)
+    zeta = p.zeta
+    wd = math.sqrt(1.0 - zeta * zeta)           # as phi_rows, whose NumPy functions these are
+    forces = np.array([e[4] for e in events])
+    out, jac, gs = flow_at_samples(np.exp(-zeta * hh), np.cos(wd * hh), np.sin(wd * hh), zeta,
+                                   wd, idx, np.array([e[1] for e in events]),
+                                   np.array([e[2] for e in events]), forces,
+                                   np.array([e[3] for e in events]) if wall else _NO_ROWS,
+                                   bool(forces.any()), wall)
+    if wall:
+        return out, jac, end, m, impacts, gs, g
+    return out, jac, end, m, impacts
+
+
+@functools.lru_cache(maxsize=8)
+def _ndof_flow(model: NdofModel) -> NdofFlow:
+    """The model's exact flow, built once per model."""
+    return NdofFlow.of(model)
+
+
+def _ndof_transitions(flow: NdofFlow, h) -> np.ndarray:
+    """Phi(h_j) = Re(V e^{Lambda h_j} U) for an array of times: (m, 2n, 2n)
+    (:meth:`NdofFlow.transition`, vectorised)."""
+    e = np.exp(np.multiply.outer(np.asarray(h, dtype=float), flow.eigenvalues))
+    return np.einsum("ik,mk,kj->mij", flow.modes, e, flow.inverse).real
+
+
+def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
+                     duration: float):
+    """:func:`trajectory` of the n-DOF oscillator (docs/theory_estimation.md, (E11)): from
+    the Pi2 deviation z0 (2n) before the correction, the kick v_{i_a} += correction at
+    ``delay``; between events z(s) = Phi(s - s_e) z_e, d z(s) / d z0 = Phi(s - s_e) M_e,
+    and an impact at t_i (from :func:`grazing_control.oscillator.ndof.impact.advance`)
+    puts z- = Phi(t_i - s_e) z_e on the wall with its v-, z+ with v+ (the other
+    velocities unchanged) and M <- S Phi(t_i - s_e) M (S the saltation matrix).
+    A motion that chatters or sticks (refused by the n-DOF core) raises ValueError."""
+    flow = _ndof_flow(model)
+    n, w = model.n, model.i_w
+    z = np.array(z0, dtype=float).reshape(-1)
+    if z.shape != (2 * n,):
+        raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
+    m = np.eye(2 * n)
+    events, impacts = [], []
+    legs = [(0.0, delay, 0.0), (delay, duration, correction)] if delay > 0.0 else \
+        [(0.0, duration, correction)]
+    for start, end, kick in legs:
+        z = z.copy()
+        z[n + model.i_a] += kick
+        events.append((start, z, m))
+        try:
+            seg = ndof_impact.advance(flow, (flow.tau2 + model.omega * start) % TWO_PI, z,
+                                      end - start)
+        except ndof_impact.ChatteringError as exc:
+            raise ValueError(f"the model's motion chatters or sticks: no fit ({exc})") from None
+        t_e, z_e = start, z
+        for imp in seg.impacts:
+            ti = start + imp.dt
+            phi = flow.transition(ti - t_e)
+            wall_x, rest_v = flow.on_wall(imp.phase)
+            z_minus = phi @ z_e
+            z_minus[w], z_minus[n + w] = wall_x, imp.v_minus + rest_v
+            m = ndof_impact.saltation_matrix(flow, imp.phase, z_minus) @ phi @ m
+            z_e = z_minus.copy()
+            z_e[n + w] = imp.v_plus + rest_v
+            t_e = ti
+            events.append((ti, z_e, m))
+            impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
+        m = flow.transition(end - t_e) @ m
+        z = np.array(seg.z, dtype=float)
+    times = np.array([e[0] for e in events])
+    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
+    phi = _ndof_transitions(flow, s - times[idx])
+    out = np.einsum("mij,mj->mi", phi, np.array([e[1] for e in events])[idx])
+    jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
     return out, jac, z, m, impacts
 
 
@@ -476,9 +605,15 @@ def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, for
 def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                  correction: float, delay: float = 0.0, *, floor: float = 1e-2,
                  iterations: int = 8, width: float = 0.0, force_limit: float = math.inf,
-                 actuator=None, force0: float = 0.0):
+                 actuator=None, force0: float = 0.0, coordinate: int = 0,
+                 kernel: bool = False):
     """One period of the model filter: from the prior of z_{k-1} and the samples at times
     ``s`` in (0, T] after t_{k-1} to the estimate of z_k (E4, E5).
+
+    ``p`` is the 1-DOF parameters or an n-DOF model (module docstring): the samples
+    ``y`` (and ``w``, NaN where not measured) are the deviations of the position (and
+    velocity) of coordinate ``coordinate`` (0 <= coordinate < n; 0 for 1-DOF), the
+    correction a kick on v_{i_a}, the state and its covariance 2n-dimensional.
 
     Gauss-Newton on the exact trajectory (:func:`trajectory`) minimises
     (z - z^)^T P^-1 (z - z^) + |y - h(z)|^2 / sigma^2; the posterior covariance
@@ -489,7 +624,7 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     The correction acts as a kick, or as a force pulse of ``width`` (clipped to
     ``force_limit``) where the plant's actuator pushes for a finite time, through the
     first-order ``actuator`` from the force ``force0`` at the section where it has a lag
-    (:func:`trajectory`).
+    (:func:`trajectory`), compiled with ``kernel`` (:func:`trajectory`).
 
     Returns (FilterState at t_k, chi2 of the period's residuals, number of
     measurements); raises ValueError when the fit fails (no convergence, a sticking
@@ -499,34 +634,82 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
     s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
     has_v = np.isfinite(w)
     z_prior = np.array(prior.z, dtype=float)
+    dof = p.n if isinstance(p, NdofModel) else 1
+    if isinstance(coordinate, bool) or not isinstance(coordinate, int) \
+            or not 0 <= coordinate < dof:
+        raise ParameterError(f"coordinate={coordinate!r} is invalid: valid range is "
+                             f"0 <= coordinate < n = {dof}")
+    ix, iv = coordinate, dof + coordinate          # the measured position and velocity
     info_prior = np.linalg.inv(prior.cov)
     z = z_prior.copy()
     inv_var = 1.0 / (sigma * sigma)
+
+    def linearised(z):
+        """(H, r, end, monodromy): the measurement rows and residuals of the samples at z."""
+        pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
+                                                 force_limit=force_limit, actuator=actuator,
+                                                 force0=force0, kernel=kernel)
+        h = np.vstack([jac[:, ix, :], jac[has_v, iv, :]])
+        r = np.concatenate([y - pred[:, ix], w[has_v] - pred[has_v, iv]])
+        return h, r, end, mono
+
     for _ in range(iterations):
-        pred, jac, _end, _m, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                                force_limit=force_limit, actuator=actuator,
-                                                force0=force0)
-        h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
-        r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
-        info = info_prior + inv_var * (h.T @ h)
-        grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
-        step = np.linalg.solve(info, grad)
+        h, r, _end, _mono = linearised(z)
+        step = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
         z = z + step
         if np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(z)):
             break
     else:
-        raise ValueError("the model fit did not converge")
-    pred, jac, end, mono, _imps = trajectory(p, z, s, correction, delay, width=width,
-                                             force_limit=force_limit, actuator=actuator,
-                                             force0=force0)
-    h = np.vstack([jac[:, 0, :], jac[has_v, 1, :]])
-    r = np.concatenate([y - pred[:, 0], w[has_v] - pred[has_v, 1]])
+        z = _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations)
+    h, r, end, mono = linearised(z)
     info = info_prior + inv_var * (h.T @ h)
     post = np.linalg.inv(info)
-    cov = mono @ post @ mono.T + (floor * sigma) ** 2 * np.eye(2)
+    cov = mono @ post @ mono.T + (floor * sigma) ** 2 * np.eye(len(z))
     chi2 = float(r @ r) * inv_var
-    return FilterState((float(end[0]), float(end[1])), 0.5 * (cov + cov.T),
+    return FilterState(tuple(float(x) for x in end), 0.5 * (cov + cov.T),
                        prior.periods + 1), chi2, r.size
+
+
+def _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r):
+    """The Gauss-Newton step of (E4) at z: (P^-1 + H^T H / sigma^2)^-1 (P^-1 (z^ - z) +
+    H^T r / sigma^2)."""
+    info = info_prior + inv_var * (h.T @ h)
+    grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
+    return np.linalg.solve(info, grad)
+
+
+def _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations: int):
+    """Gauss-Newton with step halving (``linearised(z)`` gives H and r first), where :func:`model_update`'s plain iteration has
+    not converged (docs/theory_estimation.md, (E11)): with noise on a trajectory strongly
+    curved by a low-velocity impact the full Gauss-Newton step can overshoot for ever (a
+    large-residual problem: linear rate >= 1), but its direction descends the cost
+    (z - z^)^T P^-1 (z - z^) + |r|^2 / sigma^2. The first of step, step / 2, ... that
+    lowers the cost is taken; converged when the step taken meets the plain criterion,
+    lowers the cost by less than 1e-12 of it, or none lowers it (the minimum, to
+    rounding). A fit that converged without it is untouched (bit for bit)."""
+
+    def cost(z, r):
+        d = z - z_prior
+        return float(d @ info_prior @ d) + inv_var * float(r @ r)
+
+    h, r = linearised(z)[:2]
+    c = cost(z, r)
+    for _ in range(4 * iterations):
+        step = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
+        t = 1.0
+        while True:
+            zt = z + t * step
+            ht, rt = linearised(zt)[:2]
+            ct = cost(zt, rt)
+            if ct < c or t < 1e-6:
+                break
+            t *= 0.5
+        if not ct < c:
+            return z
+        decrease, z, h, r, c = c - ct, zt, ht, rt, ct
+        if np.all(np.abs(t * step) <= 1e-12 + 1e-9 * np.abs(z)) or decrease <= 1e-12 * c:
+            return z
+    raise ValueError("the model fit did not converge")
 
 
 def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str = "model",

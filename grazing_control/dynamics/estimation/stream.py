@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
@@ -28,7 +29,7 @@ from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTI
                          section_force, trajectory, unkick)
 
 __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
-           "pulse_shape"]
+           "pulse_shape", "warm_up"]
 
 #: Where impacts come from: the rig's impact sensor, or detection in the stream.
 IMPACT_SOURCES = ("topic", "stream")
@@ -80,12 +81,20 @@ class StreamEstimator:
         the model filter and :func:`predict_section` integrate the lag exactly, from the
         force left at each section by the known earlier corrections
         (:meth:`section_force`). None: the force is the command.
+    kernel : bool or None
+        Run the model filter compiled
+        (:func:`grazing_control.dynamics.estimation.section_state.trajectory`'s ``kernel``:
+        the same estimates bit for bit, tests/test_estimation_compiled.py); None: where the
+        compiled kernel is in use (:func:`grazing_control.oscillator.kernel.use_kernel`,
+        ``GRAZING_KERNEL``). Kept as the ``kernel`` attribute, for
+        :func:`predict_section`.
     """
 
     def __init__(self, p: OscillatorParams, estimator: str = "model", sigma: float = 1e-4,
                  impact_source: str = "stream", sample_period: float = 0.0,
                  floor: float = 1e-2, after_section: bool = False, lead: float = 0.0, *,
-                 pulse_width: float = 0.0, force_limit: float = math.inf, actuator=None):
+                 pulse_width: float = 0.0, force_limit: float = math.inf, actuator=None,
+                 kernel: bool | None = None):
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -116,6 +125,7 @@ class StreamEstimator:
             raise ParameterError("pulse_width=0.0 is invalid with an actuator: valid range is "
                                  f"0 < pulse_width < T = {p.period!r} (the command's width)")
         self.actuator = actuator
+        self.kernel = _kernel.use_kernel() if kernel is None else bool(kernel)
         self.reset()
 
     def reset(self) -> None:
@@ -324,7 +334,7 @@ class StreamEstimator:
         try:
             new, chi2, n = model_update(p, self.filter, s, y, w, self.sigma, dv,
                                         at - (k - 1) * T, floor=self.floor,
-                                        **self.correction_shape(k - 1))
+                                        kernel=self.kernel, **self.correction_shape(k - 1))
         except (ValueError, np.linalg.LinAlgError, ArithmeticError):
             self.filter = None
             self.resets += 1
@@ -440,15 +450,27 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
 
 def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.0, *,
                     width: float = 0.0, force_limit: float = math.inf, actuator=None,
-                    force0: float = 0.0):
+                    force0: float = 0.0, kernel: bool = False):
     """The next section's state (deviation, before its correction) predicted from the
     estimate ``z`` with ``correction`` applied ``delay`` after the section (a kick, or
     a force pulse of ``width``, through ``actuator`` from the force ``force0`` at the
-    section): one exact period of the model (issue 16 section 3; :func:`trajectory`)."""
+    section): one exact period of the model (issue 16 section 3; :func:`trajectory`,
+    compiled with ``kernel``: a stream estimator's ``kernel``)."""
     *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay, width=width,
                                         force_limit=force_limit, actuator=actuator,
-                                        force0=force0)
+                                        force0=force0, kernel=kernel)
     return end
+
+
+def warm_up() -> None:
+    """Load the compiled model filter where the kernel is in use (the kernel and
+    :mod:`grazing_control.dynamics.estimation.compiled_flow`: compiled on a machine's first
+    call, then loaded from numba's cache, ~1 s) so that the first section does not wait
+    for it: controller_node calls it at start in stream mode."""
+    if _kernel.use_kernel():
+        _kernel.warm_up()
+        trajectory(OscillatorParams(delta_d=-1e-3), (0.0, 0.0), np.array([1.0]), 0.1, 1.0,
+                   width=0.1, kernel=True)
 
 
 def pulse_shape(p: OscillatorParams, pulse_width: float, force_limit: float) -> tuple:

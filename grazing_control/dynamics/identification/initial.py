@@ -232,7 +232,7 @@ def initial_guess(rec, arcs, phase, prior=None):
     (X, V), the arcs' start times (free impact times refined); module docstring.
 
     ``prior``: (zeta, Omega) known beforehand (a controller re-identifying the model it
-    runs, :mod:`grazing_control.dynamics.identification.reidentification`), used in place of step 1:
+    runs, :mod:`grazing_control.dynamics.estimation.reidentification`), used in place of step 1:
     the ARX regression is ill-conditioned on densely sampled noisy data (200 samples a
     period at sigma 1e-4: "no underdamped oscillation"); steps 2-3 are unchanged.
     """

@@ -47,7 +47,7 @@ class CompliantOneDOF(OneDOF):
 
     :class:`~.model.OneDOF`'s section, coordinates and grazing point, with the stop
     ``law`` (keyword, required: :class:`KelvinVoigt` or :class:`HuntCrossley`) in place of
-    the rigid wall, and Coulomb ``friction`` on the mass (Kelvin-Voigt only).
+    the rigid wall, and Coulomb ``friction`` on the mass (with either stop).
     """
 
     law: KelvinVoigt | HuntCrossley | None = None
@@ -57,9 +57,6 @@ class CompliantOneDOF(OneDOF):
         if not isinstance(self.law, (KelvinVoigt, HuntCrossley)):
             raise ValueError(f"law={self.law!r} is invalid: a KelvinVoigt or HuntCrossley "
                              f"stop is required")
-        if self.friction is not None and not isinstance(self.law, KelvinVoigt):
-            raise ValueError("friction is invalid with a Hertz stop: only the Kelvin-Voigt "
-                             "stop takes Coulomb friction (oscillator/contact.py)")
         if self.gains is not None and self.gains.delay != 0.0:
             raise ValueError(f"delay={self.gains.delay!r} is invalid: the compliant map takes "
                              f"the correction on Pi2 only (delay 0)")
@@ -72,7 +69,8 @@ class CompliantOneDOF(OneDOF):
     def _segment(self, dx: float, dv: float, monodromy: bool = False):
         dvc = self.gains.c1 * dx + self.gains.c2 * dv if self.gains is not None else 0.0
         if isinstance(self.law, HuntCrossley):
-            return hertz_period_step(self.params, self.law, dx, dv, dvc)
+            return hertz_period_step(self.params, self.law, dx, dv, dvc,
+                                     friction=self.friction)
         return compliant_period_step(self.params, self.law, dx, dv, dvc,
                                      friction=self.friction, monodromy=monodromy)
 

@@ -37,7 +37,7 @@ from grazing_control.oscillator.params import OscillatorParams
 
 from grazing_control.dynamics.maps.maps import pi2_map
 
-__all__ = ["Step", "PeriodMap", "OneDOF"]
+__all__ = ["Step", "PeriodMap", "SectionMap", "OneDOF"]
 
 
 class Step(NamedTuple):
@@ -91,12 +91,30 @@ class PeriodMap(Protocol):
         model knows it exactly (else None: computed from the matrix)."""
 
 
+class SectionMap:
+    """The members of :class:`PeriodMap` that follow from the model alone, written once for
+    every implementation: the period T and the section's phase come from its ``section``
+    (an object with ``period`` and ``tau2``: the 1-DOF parameters, the n-DOF flow), and the
+    grazing orbit is the origin z = 0 of the deviation coordinates."""
+
+    @property
+    def period(self) -> float:
+        return self.section.period
+
+    @property
+    def section_phase(self) -> float:
+        return self.section.tau2
+
+    def grazing_state(self) -> np.ndarray:
+        return np.zeros(self.dimension)
+
+
 _GAIN_NAMES = ("c1", "c2", "delay")
 _PARAM_NAMES = tuple(f.name for f in dataclasses.fields(OscillatorParams))
 
 
 @dataclass(frozen=True)
-class OneDOF:
+class OneDOF(SectionMap):
     """The study's 1-DOF impact oscillator on Pi2, optionally with the controller.
 
     State: (x - x**, v - v**) sampled on Pi2 before the correction; the grazing point
@@ -109,12 +127,9 @@ class OneDOF:
     dimension: int = 2
 
     @property
-    def period(self) -> float:
-        return self.params.period
-
-    @property
-    def section_phase(self) -> float:
-        return self.params.tau2
+    def section(self) -> OscillatorParams:
+        """The parameters: T and tau2 (:class:`SectionMap`)."""
+        return self.params
 
     @property
     def coordinates(self) -> tuple:
@@ -126,9 +141,6 @@ class OneDOF:
                       monodromy=jacobian)
         jac = np.array(seg.monodromy).reshape(2, 2) if jacobian else None
         return Step(np.array([seg.dx, seg.dv]), jac, tuple(seg.impacts))
-
-    def grazing_state(self) -> np.ndarray:
-        return np.zeros(2)
 
     def parameter(self, name: str) -> float:
         if name in _GAIN_NAMES:

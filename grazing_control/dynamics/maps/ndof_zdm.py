@@ -38,11 +38,11 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from grazing_control.oscillator.ndof.impact import saltation_matrix
 from grazing_control.oscillator.ndof.model import NdofModel
 
+from grazing_control.dynamics.maps.zdm import local_crossing
 from grazing_control.dynamics.design.ndof_design import _flow, _transition, _vectors, smooth_map
 
 __all__ = [
@@ -137,27 +137,8 @@ def crossing(model: NdofModel, z):
     """
     z = _state(model, z)
     f = _Gap(model, z)
-    t = f.loc.ev @ z / f.loc.alpha
-    for _ in range(60):
-        _g, gd, gdd = f(t)
-        step = -gd / gdd
-        t += step
-        if abs(step) <= 4.0 * math.ulp(max(abs(t), 1e-300)):
-            break
-    else:
-        t = math.nan
-    if not (abs(t) < 0.25 * model.period and f(t)[2] < 0.0):
-        raise ValueError(f"no local maximum of the gap near Pi1 for z={z.tolist()}: "
-                         "not a near-grazing state")
-    hm = f(t)[0]
-    if not hm > 0.0:
-        return t, hm, None, None
-    width = math.sqrt(2.0 * hm / f.loc.alpha)
-    lo = t - 2.0 * width
-    while f(lo)[0] >= 0.0:
-        lo = t - 2.0 * (t - lo)
-    t1 = brentq(lambda x: f(x)[0], lo, t, xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
-    return t, hm, t1, f(t1)[1]
+    return local_crossing(f, f.loc.ev @ z / f.loc.alpha, f.loc.alpha, model.period,
+                          f"z={z.tolist()}")
 
 
 def _event(model, z, order):

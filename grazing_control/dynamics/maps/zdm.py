@@ -53,6 +53,7 @@ __all__ = [
     "zdm_leading",
     "zdm_second",
     "zdm_exact",
+    "local_crossing",
     "zdm",
     "zdm_jacobian",
     "smooth_map",
@@ -195,9 +196,22 @@ def crossing(p: OscillatorParams, dx: float, dv: float):
     ValueError
         If Newton's method finds no maximum of the gap within a quarter period of Pi1.
     """
-    f = _LocalGap(p, dx, dv)
     alpha = local_grazing(p).alpha
-    t = dv / alpha
+    return local_crossing(_LocalGap(p, dx, dv), dv / alpha, alpha, p.period,
+                          f"z=({dx!r}, {dv!r})")
+
+
+def local_crossing(gap, t: float, alpha: float, period: float, state: str):
+    """(t_max, H_max, t1, v-) of a smooth gap near Pi1, for any model (:func:`crossing`;
+    the n-DOF model's is docs/theory_ndof.md section 10).
+
+    ``gap(t)`` returns (g, g', g'') at local time t; ``t`` starts Newton on g' (e2 / alpha);
+    ``alpha`` (minus the grazing acceleration) sets the first bracket's width
+    sqrt(2 H_max / alpha); ``state`` names the state in the error message. Newton finds the
+    maximum (within a quarter ``period`` of Pi1, else ValueError), Brent the crossing
+    before it to a few ulps.
+    """
+    f = gap
     for _ in range(60):  # Newton on the rate (concave gap near grazing)
         _g, gd, gdd = f(t)
         step = -gd / gdd
@@ -206,8 +220,8 @@ def crossing(p: OscillatorParams, dx: float, dv: float):
             break
     else:
         t = math.nan
-    if not (abs(t) < 0.25 * p.period and f(t)[2] < 0.0):
-        raise ValueError(f"no local maximum of the gap near Pi1 for z=({dx!r}, {dv!r}): "
+    if not (abs(t) < 0.25 * period and f(t)[2] < 0.0):
+        raise ValueError(f"no local maximum of the gap near Pi1 for {state}: "
                          "not a near-grazing state")
     t_max = t
     hm = f(t_max)[0]

@@ -56,23 +56,25 @@ class BranchPoint(NamedTuple):
     pi2_state: np.ndarray
 
 
-def _impact_map(model: NdofModel, k: np.ndarray, psi: float):
+def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0):
     """(M(psi), Phi(sigma)): the period map from an impact at tau* + psi to the next,
-    M = Phi(T - sigma)(I + b k^T) Phi(sigma), sigma = s - psi/omega (module docstring)."""
+    M = Phi(T - sigma)(I + b k^T) Phi(sigma), sigma = s - psi/omega (module docstring);
+    with an actuation delay b = Phi(-delay) e_{n + i_a}, valid while the kick acts before
+    the next impact, sigma + delay < T (docs/theory_ndof.md §14)."""
     om = model.omega
     s = model.pi2_offset / om
     sigma = s - psi / om
-    if not (0.0 < sigma < model.period) or not math.isfinite(psi):
+    if not (0.0 < sigma < model.period - delay) or not math.isfinite(psi):
         raise ParameterError(f"psi={psi!r} is invalid: valid range is "
-                             f"{-om * (model.period - s)!r} < psi < {om * s!r} "
-                             f"(impact between kicks)")
-    _w, _ev, b = _vectors(model)
+                             f"{-om * (model.period - s - delay)!r} < psi < {om * s!r} "
+                             f"(impact between the kicks)")
+    _w, _ev, b = _vectors(model, delay)
     pm = _transition(model, sigma)
     eye = np.eye(2 * model.n)
     return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
 
 
-def branch_point(model: NdofModel, gains, psi: float) -> BranchPoint:
+def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> BranchPoint:
     """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)).
 
     Periodicity (M - I) z- = (1 + r) v- M e_v gives z- = (1 + r) v- (e_v + R e_v),
@@ -81,11 +83,13 @@ def branch_point(model: NdofModel, gains, psi: float) -> BranchPoint:
         v- = d* omega sin(psi) / (r + (1 + r) e_v^T R e_v),
         Delta d = (1 + r) v- w^T R e_v - 2 d* sin^2(psi/2).
 
-    psi must put the impact between the Pi2 kicks: -omega (T - s) < psi < omega s.
+    psi must put the impact between the Pi2 kicks: -omega (T - s) < psi < omega s. With an
+    actuation ``delay`` the kick acts delay after Pi2 (before the next impact:
+    -omega (T - s - delay) < psi, §14); the Pi2 state is the sample, before the kick.
     """
     k = _gains(model, gains)
     psi = float(psi)
-    m, pm = _impact_map(model, k, psi)
+    m, pm = _impact_map(model, k, psi, delay)
     w, ev, _b = _vectors(model)
     dstar, om, r = _flow(model).d_star, model.omega, model.r
     try:
@@ -128,7 +132,8 @@ def branch_coefficients(model: NdofModel, gains):
     return (1.0 + r) * v1 * b0, 0.5 * dstar - (1.0 + r) * (v1 * b1 + v2 * b0), v1
 
 
-def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3) -> BranchPoint:
+def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
+             delay: float = 0.0) -> BranchPoint:
     """The 1/1 orbit born at grazing at the wall offset ``delta_d`` (< 0), v- > 0.
 
     Walks |psi| outwards on both sides of grazing (1e-12 .. psi_max, logarithmic) and
@@ -141,7 +146,7 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3) -> B
     for sign in (1.0, -1.0):
         prev = None
         for a in mags:
-            bp = branch_point(model, k, sign * a)
+            bp = branch_point(model, k, sign * a, delay)
             if bp.v_minus <= 0.0:
                 break
             val = bp.delta_d - delta_d
@@ -153,9 +158,9 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3) -> B
     if best is None:
         raise ValueError(f"delta_d={delta_d!r}: no 1/1 orbit born at grazing with v- > 0 "
                          f"for |psi| <= {psi_max!r}")
-    psi = brentq(lambda x: branch_point(model, k, x).delta_d - delta_d, best[0], best[1],
+    psi = brentq(lambda x: branch_point(model, k, x, delay).delta_d - delta_d, best[0], best[1],
                  xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
-    return branch_point(model, k, psi)
+    return branch_point(model, k, psi, delay)
 
 
 def branch_fold(model: NdofModel, gains, steps: int = 2000):

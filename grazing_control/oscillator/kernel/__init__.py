@@ -246,15 +246,17 @@ def _impacts(rows):
 def advance(p, tau0, dx, dv, duration, *, max_impacts=10000, chatter_time=None) -> Segment:
     """:func:`grazing_control.oscillator.impact.advance` without the monodromy, compiled."""
     ki = _compiled()[0]
-    out = np.empty((max(int(max_impacts), 1), 6))
+    rows = max(int(max_impacts), 1)
+    out, stack = _scratch()             # this thread's rows (copied out below), if they fit
+    if rows > out.shape[0]:
+        out = np.empty((rows, 6))
     ndx, ndv, n, status, info = ki.advance(
         _params(p), float(tau0), float(dx), float(dv), float(duration), int(max_impacts),
-        -1.0 if chatter_time is None else float(chatter_time), out, 0, _scratch()[1], _NO_GRID)
+        -1.0 if chatter_time is None else float(chatter_time), out, 0, stack, _NO_GRID)
     if status != ki.STATUS_OK:
         _raise(status, info, max_impacts=max_impacts, duration=duration, p=p, state=(ndx, ndv),
                times=(tau0, duration))
-    dx, dv = ndx, ndv
-    return Segment(dx, dv, _impacts(out[:n]), None)
+    return Segment(ndx, ndv, _impacts(out[:n]) if n else [], None)
 
 
 def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:

@@ -146,6 +146,11 @@ class NdofFlow:
         """Degrees of freedom."""
         return self.model.n
 
+    @property
+    def period(self) -> float:
+        """Forcing period T = 2 pi / omega (the model's)."""
+        return self.model.period
+
     def transition(self, h: float) -> np.ndarray:
         """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n)."""
         e = np.exp(self.eigenvalues * float(h))

@@ -42,9 +42,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.oscillator.impact import (MAX_AMPLITUDE, ImpactCapError, InitialStateError,
-                                               NonFiniteStateError, _danger_halfwidth,
-                                               _far_from_wall, _search)
+from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impact,
+                                               ImpactCapError, InitialStateError,
+                                               NonFiniteStateError, _scan_window, check_times,
+                                               wall_rounding)
 from grazing_control.oscillator.params import ParameterError
 
 from .flow import NdofFlow
@@ -57,20 +58,10 @@ TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
 
 
-class NdofImpact(NamedTuple):
-    """One impact: time since the segment start, phase, wall-coordinate velocities.
-
-    The field names are those of :class:`grazing_control.oscillator.impact.Impact`, so
-    generic code treats both alike. ``sticking`` is always False here (sticking raises
-    :class:`ChatteringError`); ``release`` is nan.
-    """
-
-    dt: float
-    phase: float
-    v_minus: float
-    v_plus: float
-    sticking: bool = False
-    release: float = math.nan
+#: One impact (:class:`grazing_control.oscillator.impact.Impact`, the same for every n):
+#: ``sticking`` is always False here (sticking raises :class:`ChatteringError`),
+#: ``release`` nan.
+NdofImpact = Impact
 
 
 class NdofSegment(NamedTuple):
@@ -124,13 +115,13 @@ def _mode_sizes(flow: NdofFlow, z: np.ndarray) -> np.ndarray:
     return np.array([per.sum(), (per * lam).sum(), (per * lam * lam).sum()])
 
 
-class _Eval:
+class _Eval(GapEvaluator):
     """Gap, velocity and acceleration of the wall coordinate along the free flow from one
     start (docs/theory_ndof_flow.md, section 4); the interface of the 1-DOF evaluator that
     oscillator.impact._search and _bracket use."""
 
-    __slots__ = ("terms", "omega", "lag", "amp", "dd", "tau0", "cabs", "jerk_terms", "aw3",
-                 "acc_err", "m0", "m1", "zmag", "rho", "drift", "n", "horizon")
+    __slots__ = ("terms", "cabs", "jerk_terms", "aw3", "acc_err", "m0", "m1", "zmag", "rho",
+                 "drift", "n", "horizon")
 
     def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float):
         m = flow.model
@@ -139,11 +130,7 @@ class _Eval:
         lam = flow.eigenvalues
         self.terms = [(complex(l), complex(ck), complex(ck * l), complex(ck * l * l))
                       for l, ck in zip(lam, c)]
-        self.omega = m.omega
-        self.lag = flow.tau_star
-        self.amp = flow.d_star
-        self.dd = m.delta_d
-        self.tau0 = tau0
+        super().__init__(m.omega, flow.tau_star, flow.d_star, m.delta_d, tau0)
         self.horizon = horizon
         self.n = m.n
         grow = np.exp(np.maximum(lam.real, 0.0) * horizon)  # 1 unless rounding made Re > 0
@@ -179,10 +166,6 @@ class _Eval:
         vel = -self.amp * self.omega * math.sin(psi) + v
         acc = -self.amp * self.omega * self.omega * math.cos(psi) + a
         return g, vel, acc, zx
-
-    def psi(self, h: float) -> float:
-        """Phase psi = tau0 + omega h - tau* of the forcing, as in the gap."""
-        return self.tau0 + self.omega * h - self.lag
 
     def jerk_bound(self, h: float) -> float:
         """J >= max |g'''| on [h, horizon]: d* omega^3 + sum |c_k| |lambda_k|^3 e^{Re lambda_k h}."""
@@ -227,8 +210,7 @@ def next_impact(flow: NdofFlow, tau0: float, z0, horizon: float,
         Time since the start of the first impact.
     """
     z = check_state(flow, z0, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(horizon)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+    check_times(tau0, "horizon", horizon)
     return _next_impact(flow, tau0, z, horizon, max_step)
 
 
@@ -242,29 +224,7 @@ def _next_impact(flow, tau0, z0, horizon, max_step=None):
         return None
     step = max_step or min(flow.model.period / 8.0, 0.25 * math.pi / f.rho)
     count = max(1, int(math.ceil(horizon / step)))
-    a = 0.0
-    fa = f(0.0)
-    # on the wall up to rounding (docs/theory.md, "A start on the wall")
-    if (fa[0] > 0.0 or fa[0] < 0.0 and fa[1] < 0.0) and abs(fa[0]) <= f.gap_rounding(0.0, fa):
-        fa = (0.0,) + fa[1:]
-    if fa[0] > 0.0:
-        raise InitialStateError(f"state beyond the wall: x_w - d = {fa[0]:.3e} > 0 (valid: x_w <= d)")
-    if fa[0] == 0.0 and fa[1] > 0.0:
-        return 0.0  # on the wall, moving into it
-    w = _danger_halfwidth(f, horizon)
-    for k in range(1, count + 1):
-        b = horizon if k == count else k * (horizon / count)
-        if k > 1 and w is not None and _far_from_wall(f.psi(a), f.psi(b), w):
-            a, fa = b, None
-            continue
-        if fa is None:
-            fa = f(a)
-        fb = f(b)
-        r = _search(f, a, b, fa, fb, 0)
-        if r is not None:
-            return r
-        a, fa = b, fb
-    return None
+    return _scan_window(f, horizon, count, lambda fa: f.gap_rounding(0.0, fa), "x_w")
 
 
 def saltation_matrix(flow: NdofFlow, phase: float, z_minus) -> np.ndarray:
@@ -332,16 +292,11 @@ def _release_skip(flow: NdofFlow, tau: float, z: np.ndarray) -> float:
 
 
 def _roundings(flow: NdofFlow, tau: float, z: np.ndarray):
-    """(gap, velocity) rounding of a state at phase tau (docs/theory_ndof_flow.md, section 5)."""
+    """(gap, velocity) rounding of a state at phase tau (docs/theory_ndof_flow.md, section 5):
+    :func:`grazing_control.oscillator.impact.wall_rounding` of the wall coordinate."""
     m = flow.model
-    n, w = m.n, m.i_w
-    psi = tau - flow.tau_star
-    s2 = 2.0 * flow.d_star * math.sin(0.5 * psi) ** 2
-    vp = -flow.d_star * m.omega * math.sin(psi)
-    phase = abs(tau) + abs(flow.tau_star) + TWO_PI + 1.0
-    eg = 8.0 * _EPS * (abs(z[w]) + abs(m.delta_d) + s2 + math.sqrt(2.0 * flow.d_star * s2) * phase)
-    ev = 8.0 * _EPS * (abs(vp) + abs(z[n + w]) + flow.d_star * m.omega * phase)
-    return eg, ev
+    return wall_rounding(tau, flow.tau_star, flow.d_star, m.omega, m.delta_d,
+                         z[m.i_w], z[m.n + m.i_w])
 
 
 def _resting_on_wall(flow: NdofFlow, tau: float, z: np.ndarray) -> bool:
@@ -395,8 +350,7 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
         See above.
     """
     z = check_state(flow, z0, "the start state")
-    if not (math.isfinite(tau0) and math.isfinite(duration)):
-        raise NonFiniteStateError(f"tau0={tau0!r} and duration={duration!r} must be finite")
+    check_times(tau0, "duration", duration)
     m = flow.model
     n, w, r, omega = m.n, m.i_w, m.r, m.omega
     chatter = chatter_time if chatter_time is not None else 1e-6 * m.period

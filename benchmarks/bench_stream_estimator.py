@@ -1,0 +1,180 @@
+"""The controller's compute per section on a sensor stream, in-process (issue 30).
+
+What controller_node does with each stream sample (``add_stream_sample``, no middleware):
+:meth:`StreamEstimator.add_sample`, and for each section it makes due Eq. 28 on the
+estimate, the prediction of the next correction (:func:`predict_section`, with the force
+the earlier corrections left, as ``_predict``) and :meth:`StreamEstimator.set_correction`.
+The stream is a scene's, recorded once by the closed loop of the core
+(:func:`simulate_stream`: the exact plant with the pulse, the sensor's seeded noise),
+then replayed sample by sample into a fresh estimator per path, the paths interleaved in
+one process (``--rounds`` alternations, the percentiles over all of them):
+
+* ``core``: the model filter and the prediction in the pure-Python core and NumPy
+  (``kernel=False``: the code of main before issue 30's change);
+* ``kernel``: compiled (``kernel=True``, what a StreamEstimator uses by default where
+  numba is installed: the kernel's exact flow and the evaluation at the samples of
+  dynamics/estimation/compiled_flow.py).
+
+Scenes (``--scene``): ``rig``, the acceptance rig of issue 28 (config/rigs/acceptance.yaml:
+150 samples a period, position only, 2 ms pulse, the answer 4 ms before the section's
+last sample, the controller's gains at c2 = 0.03276); ``t200``, the realtime stream of
+bench_stream_blocks.py (T/200, sigma 1e-4, pulse 0.1 at delay 3, the least-noise gains for
+delay 3). Printed per path: the time of a section's answer (the add_sample that makes it
+due through the prediction), the time of a sample that makes none due (p50/p99/max, µs),
+their ratio core/kernel, and whether the two paths gave the same estimates, covariances,
+corrections and predictions bit for bit (they must: the kernel's flow is the core's,
+tests/test_kernel.py and tests/test_estimation_compiled.py).
+
+    .venv/bin/python benchmarks/bench_stream_estimator.py [--scene rig|t200]
+        [--periods 400] [--enable-after 100] [--rounds 3]
+
+Results in docs/benchmarks.md ("The controller's compute per section").
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+from grazing_control.dynamics.estimation.stream import (StreamEstimator,  # noqa: E402
+                                                        predict_section, simulate_stream,
+                                                        warm_up)
+from grazing_control.oscillator import kernel  # noqa: E402
+from grazing_control.oscillator.control import Gains  # noqa: E402
+from grazing_control.plant.sensor import SensorModel  # noqa: E402
+
+RIG_C2 = 0.03276358910091768
+
+
+def rig_scene():
+    """(p, gains, rate, estimator keywords) of the acceptance rig's controller."""
+    from grazing_control.plant.rig import load_rig
+    from grazing_control.ros.rig_boundary import controller_values
+
+    rig = load_rig(ROOT / "config" / "rigs" / "acceptance.yaml")
+    p, d = rig.params(), rig.dimensionless()
+    v = controller_values(rig, RIG_C2)
+    rate = round(p.period / d["state_period"])
+    kw = dict(estimator="model", sigma=d["sensor_noise"], impact_source="stream",
+              sample_period=p.period / rate, lead=v["answer_lead"],
+              pulse_width=d["pulse_width"], force_limit=d["force_limit"] or math.inf)
+    return p, Gains(v["c1"], v["c2"], v["actuation_delay"]), rate, kw
+
+
+def t200_scene():
+    """(p, gains, rate, estimator keywords) of bench_stream_blocks.py's stream."""
+    from grazing_control.dynamics.design.tuning import optimize_noise
+    from grazing_control.oscillator.params import OscillatorParams
+
+    p = OscillatorParams(delta_d=-5e-6)
+    rate = 200
+    g = optimize_noise(p, 3.0)
+    kw = dict(estimator="model", sigma=1e-4, impact_source="stream",
+              sample_period=p.period / rate, pulse_width=0.1)
+    return p, Gains(g.c1, g.c2, 3.0), rate, kw
+
+
+def record(p, gains, rate, kw, periods, enable_after, seed=7):
+    """The stream's samples [(t, x~, v~)] of the closed loop in the core."""
+    samples = []
+
+    class Recording(StreamEstimator):
+        def add_sample(self, t, x, v=math.nan):
+            samples.append((t, x, v))
+            return super().add_sample(t, x, v)
+
+    est = Recording(p, **kw)
+    simulate_stream(p, gains, SensorModel(noise=kw["sigma"], velocity=False, seed=seed).measure,
+                    periods, rate, sigma=kw["sigma"], control_after=enable_after,
+                    stream_estimator=est, pulse_width=kw["pulse_width"],
+                    force_limit=kw.get("force_limit", math.inf))
+    return samples
+
+
+def replay(p, gains, kw, samples, enable_after, compiled):
+    """The controller's work on each sample (module docstring): (section times s,
+    the sections' CPU times s, other samples' times s, answers [(k, z, cov, dv,
+    predicted)]). The CPU time (this thread's) leaves out the time the thread waited
+    for a core: on a loaded machine the wall time's tail is mostly that."""
+    est = StreamEstimator(p, kernel=compiled, **kw)
+    clock, cpu = time.perf_counter, time.thread_time
+    section_t, section_cpu, sample_t, answers = [], [], [], []
+    for t, x, v in samples:
+        c0 = cpu()
+        t0 = clock()
+        due = est.add_sample(t, x, v)
+        for k, _tk, e in due:
+            dv = gains.c1 * e.z[0] + gains.c2 * e.z[1] if k >= enable_after else 0.0
+            force0 = est.section_force(est.next_k - 1)
+            pred = predict_section(p, e.z, dv, gains.delay, width=est.pulse[0],
+                                   force_limit=est.pulse[1], actuator=est.actuator,
+                                   force0=force0, kernel=est.kernel)
+            est.set_correction(k, dv, gains.delay)
+            answers.append((k, e.z, e.cov.tobytes(), dv, pred))
+        (section_t if due else sample_t).append(clock() - t0)
+        if due:
+            section_cpu.append(cpu() - c0)
+    return np.array(section_t), np.array(section_cpu), np.array(sample_t), answers
+
+
+def _q(a, scale=1e6):
+    a = np.asarray(a) * scale
+    return f"p50 {np.percentile(a, 50):7.1f} p99 {np.percentile(a, 99):7.1f} max {a.max():7.1f}"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", choices=("rig", "t200"), default="rig")
+    ap.add_argument("--periods", type=int, default=400)
+    ap.add_argument("--enable-after", type=int, default=100)
+    ap.add_argument("--rounds", type=int, default=3, help="alternations of the paths")
+    args = ap.parse_args(argv)
+    p, gains, rate, kw = (rig_scene if args.scene == "rig" else t200_scene)()
+    t0 = time.perf_counter()
+    kernel.warm_up()
+    warm_up()
+    warm = time.perf_counter() - t0
+    samples = record(p, gains, rate, kw, args.periods, args.enable_after)
+    print(f"scene {args.scene}: {rate} samples a period, {args.periods} periods "
+          f"({len(samples)} samples), control from {args.enable_after}; kernel loaded in "
+          f"{warm:.2f} s; {os.cpu_count()} CPUs, load %.2f %.2f %.2f" % os.getloadavg())
+    paths = {"core": False, "kernel": True}
+    times = {name: ([], [], []) for name in paths}
+    answers = {}
+    for _ in range(args.rounds):
+        for name, compiled in paths.items():
+            sec, sec_cpu, smp, ans = replay(p, gains, kw, samples, args.enable_after,
+                                            compiled)
+            times[name][0].append(sec)
+            times[name][1].append(sec_cpu)
+            times[name][2].append(smp)
+            answers.setdefault(name, ans)
+            if ans != answers[name]:
+                print(f"{name}: a replay differs from the first: not deterministic")
+                return 1
+    med = {}
+    for name, (sec, sec_cpu, smp) in times.items():
+        sec, sec_cpu, smp = (np.concatenate(a) for a in (sec, sec_cpu, smp))
+        med[name] = np.percentile(sec, 50), np.percentile(sec_cpu, 50)
+        print(f"{name:6s} section answer ({sec.size} = {args.rounds} x {sec.size // args.rounds}) "
+              f"µs wall {_q(sec)}, CPU {_q(sec_cpu)}; other sample µs wall {_q(smp)}")
+    print(f"ratio core/kernel at the section's p50: wall "
+          f"{med['core'][0] / med['kernel'][0]:.1f}x, CPU {med['core'][1] / med['kernel'][1]:.1f}x")
+    same = answers["core"] == answers["kernel"]
+    n = len(answers["core"])
+    print(f"answers ({n} sections: estimate, covariance, correction, prediction) "
+          f"bit-identical: {same}")
+    print("load at the end %.2f %.2f %.2f" % os.getloadavg())
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,123 @@
+"""The compiled model filter (issue 30) against the core's: the same numbers bit for bit.
+
+``trajectory(..., kernel=True)`` runs the kernel's exact flow and the evaluation at the
+samples of dynamics/estimation/compiled_flow.py; a StreamEstimator uses it by default
+where numba is installed. Nothing may change but the time: here every output of
+:func:`trajectory` over seeded cases with impacts, pulses (impacts inside them too) and
+the wall's sensitivity, and every answer of a controller replaying a recorded scene's
+whole stream (estimate, covariance, correction, prediction), compared with ``==``.
+(Speed is measured in benchmarks/bench_stream_estimator.py, not here.)
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+from grazing_control.dynamics.estimation.compiled_flow import event_offsets  # noqa: E402
+from grazing_control.dynamics.estimation.section_state import trajectory  # noqa: E402
+from grazing_control.dynamics.estimation.stream import (StreamEstimator,  # noqa: E402
+                                                        predict_section, simulate_stream)
+from grazing_control.dynamics.design.tuning import optimize_noise  # noqa: E402
+from grazing_control.oscillator.control import Gains  # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
+from grazing_control.plant.sensor import SensorModel  # noqa: E402
+
+P = OscillatorParams(delta_d=-5e-6)
+
+
+def _same(a, b):
+    """Equal bit for bit (NaN where NaN), through nested tuples, lists and arrays."""
+    if isinstance(a, (tuple, list)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_event_offsets_is_numpys_search():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        times = np.sort(rng.uniform(0.0, 9.0, rng.integers(1, 6)))
+        times[0] = 0.0
+        s = np.concatenate([rng.uniform(-1.0, 10.0, 50), times, [math.nan]])
+        idx, hh = event_offsets(times, s)
+        ref = np.clip(np.searchsorted(times, s, side="left") - 1, 0, times.size - 1)
+        assert np.array_equal(idx, ref)
+        assert _same(hh, s - times[ref])
+
+
+@pytest.mark.parametrize("width", [0.0, 0.1, 0.5])
+def test_trajectory_compiled_is_the_core_bit_for_bit(width):
+    rng = np.random.default_rng(11)
+    s = np.arange(1, 200) * P.period / 200
+    impacts = 0
+    for _ in range(150):
+        z = tuple(rng.normal(0.0, 3e-2, 2))
+        dv = float(rng.normal(0.0, 5e-3))
+        delay = float(rng.uniform(0.0, 6.0))
+        for wall in (False, True):
+            kw = dict(width=width, force_limit=0.05 if width == 0.5 else math.inf, wall=wall)
+            try:
+                ref = trajectory(P, z, s, dv, delay, **kw)
+            except ValueError:          # sticking: raised alike
+                with pytest.raises(ValueError):
+                    trajectory(P, z, s, dv, delay, kernel=True, **kw)
+                continue
+            new = trajectory(P, z, s, dv, delay, kernel=True, **kw)
+            assert _same(new[:4], ref[:4]) and _same(new[5:], ref[5:])
+            assert new[4] == ref[4]
+            impacts += len(ref[4])
+    assert impacts > 100                # the cases cross the wall
+
+
+@pytest.mark.parametrize("scene", ["rig", "t200"])
+def test_replayed_stream_same_answers(scene):
+    """A controller's answers over a recorded closed-loop stream (the rig scene's 2 ms
+    pulse and answer lead, or the T/200 stream's pulse 0.1; uncontrolled, then
+    controlled), the core's and the compiled filter's, equal bit for bit."""
+    if scene == "rig":
+        from grazing_control.plant.rig import load_rig
+        from grazing_control.ros.rig_boundary import controller_values
+
+        rig = load_rig("config/rigs/acceptance.yaml")
+        p, d = rig.params(), rig.dimensionless()
+        v = controller_values(rig, 0.03276358910091768)
+        g, rate = Gains(v["c1"], v["c2"], v["actuation_delay"]), 150
+        kw = dict(sigma=d["sensor_noise"], sample_period=p.period / rate,
+                  lead=v["answer_lead"], pulse_width=d["pulse_width"],
+                  force_limit=d["force_limit"])
+    else:
+        p, rate = P, 200
+        n = optimize_noise(p, 3.0)
+        g = Gains(n.c1, n.c2, 3.0)
+        kw = dict(sigma=1e-4, sample_period=p.period / rate, pulse_width=0.1)
+    samples = []
+
+    class Recording(StreamEstimator):
+        def add_sample(self, t, x, v=math.nan):
+            samples.append((t, x, v))
+            return super().add_sample(t, x, v)
+
+    simulate_stream(p, g, SensorModel(noise=kw["sigma"], velocity=False, seed=5).measure,
+                    120, rate, sigma=kw["sigma"], control_after=40,
+                    stream_estimator=Recording(p, kernel=False, **kw),
+                    pulse_width=kw["pulse_width"], force_limit=kw.get("force_limit", math.inf))
+
+    def answers(compiled):
+        est = StreamEstimator(p, kernel=compiled, **kw)
+        out = []
+        for t, x, v in samples:
+            for k, _tk, e in est.add_sample(t, x, v):
+                dv = g.c1 * e.z[0] + g.c2 * e.z[1] if k >= 40 else 0.0
+                pred = predict_section(p, e.z, dv, g.delay, width=est.pulse[0],
+                                       force_limit=est.pulse[1], kernel=compiled)
+                est.set_correction(k, dv, g.delay)
+                out.append((k, e.source, e.z, e.cov, dv, pred))
+        return out, est.resets
+
+    core, new = answers(False), answers(True)
+    assert len(core[0]) == 121 and sum(a[1] == "model" for a in core[0]) > 100
+    assert _same([a[2:] for a in new[0]], [a[2:] for a in core[0]])
+    assert [a[:2] for a in new[0]] == [a[:2] for a in core[0]] and new[1] == core[1]

@@ -1,0 +1,193 @@
+"""The delay-aware n-DOF design (docs/theory_ndof.md §14): the gain family for a kick
+acting a known delay after Pi2, checked against the 1-DOF delayed design on the n = 1
+model file and against finite differences of the exact n-DOF map with the delayed kick
+on the two-mass chain."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from grazing_control.dynamics.design import gains as design
+from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.orbits.shooting import find_periodic
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.ndof import load_model
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.params import ParameterError
+
+from test_ndof_design import CHAIN, _match, _study
+
+
+def _fd_jacobian(P, z, h):
+    """Fourth-order central differences of P.step at z, step h."""
+    d = len(z)
+    jac = np.zeros((d, d))
+    for j in range(d):
+        e = np.zeros(d)
+        e[j] = h
+
+        def f(t):
+            return P.step(z + t * e).state
+
+        jac[:, j] = (8.0 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12.0 * h)
+    return jac
+
+
+@pytest.mark.parametrize("delay", [0.3, 2.0, 4.5, 6.0, 7.0])
+def test_n1_delayed_family_is_the_1dof_delayed_design(delay):
+    """The n = 1 model file: k(mu; delay) = (c1, c2) with c1 = design.degenerate_c1(c2;
+    delay) ((D5) of docs/theory_delay.md) to 1e-12, and the limit multipliers and gamma1
+    of the delayed design equal the 1-DOF closed forms (D8), (D9) with G_delay."""
+    m, p = _study()
+    for mu in (-0.5, 0.0, 0.3):
+        k = nd.gain_family(m, mu, delay)
+        c1 = design.degenerate_c1(p, float(k[1]), delay)
+        assert abs(k[0] - c1) <= 1e-12 * max(1.0, abs(c1))
+        g = Gains(c1, float(k[1]), delay)
+        lam = nd.limit_multipliers(m, mu, delay)
+        assert _match(lam, design.limit_multipliers(p, g)) <= 1e-12
+        g1 = design.existence_coefficient(p, g)
+        assert abs(nd.existence_coefficient(m, mu, delay) - g1) <= 1e-12 * max(1.0, abs(g1))
+
+
+def test_zero_delay_is_todays_design_bit_for_bit():
+    m = load_model(CHAIN)
+    for mu in (-0.3, 0.2):
+        assert np.array_equal(nd.gain_family(m, mu, 0.0), nd.gain_family(m, mu))
+        assert np.array_equal(nd.limit_multipliers(m, mu, 0.0), nd.limit_multipliers(m, mu))
+    assert nd.admissible_mu(m, delay=0.0) == nd.admissible_mu(m)
+
+
+def test_the_delayed_family_makes_w_a_left_eigenvector_of_the_delayed_smooth_map():
+    """w^T N(k(mu; delay); delay) = mu w^T, with N(k; delay) = Phi(T) + Phi(T - s - delay)
+    b k^T Phi(s) built here from the flow alone (§14, (N8))."""
+    m = load_model(CHAIN)
+    flow = NdofFlow.of(m)
+    s = m.pi2_offset / m.omega
+    b = np.eye(2 * m.n)[m.n + m.i_a]
+    for delay in (0.5, 4.0, 9.0):
+        for mu in (-0.4, 0.1):
+            k = nd.gain_family(m, mu, delay)
+            n_mat = flow.transition(m.period) + np.outer(
+                flow.transition(m.period - s - delay) @ b, k @ flow.transition(s))
+            w = np.eye(2 * m.n)[m.i_w]
+            assert np.max(np.abs(w @ n_mat - mu * w)) <= 1e-12 * np.abs(n_mat).max()
+
+
+def test_the_delayed_map_is_the_smooth_delayed_kick_far_from_the_wall_and_its_jacobian_is_d3():
+    """Without impacts (the wall far away) one delayed step is Phi(T) z + Phi(T - delay) b
+    k^T z to 1e-12; with impacts in the period the Jacobian M2 (M1 + b k^T) equals
+    fourth-order finite differences of the map."""
+    m = load_model(CHAIN)
+    far = dataclasses.replace(m, delta_d=50.0)
+    flow = NdofFlow.of(far)
+    k = nd.gain_family(m, 0.0, 4.0)
+    b = np.eye(4)[far.n + far.i_a]
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        z = rng.normal(scale=0.3, size=4)
+        st = NdofMap(far, k, 4.0).step(z)
+        want = flow.transition(far.period) @ z + flow.transition(far.period - 4.0) @ b * (k @ z)
+        assert not st.impacts
+        assert np.max(np.abs(st.state - want)) <= 1e-12 * max(1.0, np.abs(want).max())
+    near = dataclasses.replace(m, delta_d=-0.1)
+    z = np.array([-0.05, -0.02, 0.03, 0.01])
+    for delay, kicked_first in ((4.0, True), (11.9, False)):   # the impact at t = 11.50
+        P = NdofMap(near, k, delay)
+        st = P.step(z, jacobian=True)
+        assert len(st.impacts) == 1 and (st.impacts[0].dt > delay) == kicked_first
+        fd = _fd_jacobian(P, z, 1e-5)
+        assert np.max(np.abs(fd - st.jacobian)) <= 1e-7 * np.abs(st.jacobian).max()
+        assert P.jacobian_det(1, 1) is None
+
+
+@pytest.mark.parametrize("delay, mu", [(0.5, 0.2), (4.0, 0.0)])
+def test_delayed_design_limit_multipliers_against_finite_differences_of_the_exact_map(delay, mu):
+    """Chain, the design k(mu; delay) acting delay after the sample: the delayed 1/1 branch
+    is a fixed point of the exact delayed NdofMap (1e-13), and the multipliers of the
+    finite-difference Jacobian of that map at the orbit converge to the design's limit
+    spectrum like |Delta d|^(1/2) (as the undelayed ones, §12): error/sqrt|Delta d| in
+    (0.05, 20) and below 1e-3 at Delta d = -1e-8."""
+    m0 = load_model(CHAIN)
+    k = nd.gain_family(m0, mu, delay)
+    limit = nd.limit_multipliers(m0, mu, delay)
+    assert np.max(np.abs(limit)) < 1.0
+    errors = []
+    for dd in (-1e-4, -1e-6, -1e-8):
+        m = dataclasses.replace(m0, delta_d=dd)
+        bp = ndof_branch.orbit_at(m, k, dd, delay=delay)
+        P = NdofMap(m, k, delay)
+        st = P.step(bp.pi2_state)
+        assert len(st.impacts) == 1
+        assert abs(st.impacts[0].v_minus - bp.v_minus) <= 1e-9 * bp.v_minus
+        assert np.max(np.abs(st.state - bp.pi2_state)) <= 1e-13
+        orbit = find_periodic(P, bp.pi2_state)
+        jac = _fd_jacobian(P, orbit.state, 1e-2 * bp.v_minus ** 2)
+        err = _match(np.linalg.eigvals(jac), limit)
+        assert 0.05 < err / math.sqrt(-dd) < 20.0, (dd, err)
+        errors.append(err)
+    assert errors[-1] < 1e-3
+
+
+def test_the_undelayed_design_acting_late_grows_like_one_over_delta_d():
+    """What the delay-aware design removes: k(mu; 0) acting 4.0 after the sample leaves
+    the singular multiplier (max|lambda| x >= 50 per two decades of Delta d)."""
+    m0 = load_model(CHAIN)
+    k = nd.gain_family(m0, 0.0)
+    rho = []
+    for dd in (-1e-4, -1e-6):
+        m = dataclasses.replace(m0, delta_d=dd)
+        bp = ndof_branch.orbit_at(m, k, dd, delay=4.0)
+        orbit = find_periodic(NdofMap(m, k, 4.0), bp.pi2_state)
+        assert len(orbit.impacts) == 1
+        rho.append(float(np.max(np.abs(np.linalg.eigvals(orbit.monodromy)))))
+    assert rho[1] > 50.0 * rho[0] > 50.0
+
+
+def test_delays_outside_the_window_are_refused_naming_the_delay():
+    m = load_model(CHAIN)
+    reach = m.period - m.pi2_offset / m.omega
+    for bad in (-0.1, reach, 1e308, math.nan, True):
+        with pytest.raises(ParameterError, match="delay=.*valid range is 0 <= delay < T - s"):
+            nd.gain_family(m, 0.2, bad)
+    with pytest.raises(ParameterError, match="delay=.*valid range is 0 <= delay < T"):
+        NdofMap(m, nd.gain_family(m, 0.2), m.period)
+
+
+def test_the_gain_file_carries_the_delay(tmp_path):
+    m = load_model(CHAIN)
+    d = nd.evaluate_design(m, 0.0, 4.0)
+    nd.write_gain_yaml(tmp_path / "k.yaml", m, d, CHAIN)
+    par = yaml.safe_load((tmp_path / "k.yaml").read_text())["/**"]["ros__parameters"]
+    assert par["actuation_delay"] == 4.0
+    assert np.allclose(par["gains"], nd.gain_family(m, 0.0, 4.0), rtol=0, atol=0)
+    undelayed = nd.evaluate_design(m, 0.0)
+    with pytest.raises(ParameterError, match="not on the family"):
+        nd.write_gain_yaml(tmp_path / "x.yaml", m, dataclasses.replace(undelayed, delay=4.0),
+                           CHAIN)
+
+
+def test_sections_with_stable_zeros_for_a_delayed_kick():
+    """With delay 4 on the chain: at the middle of every interval found the delayed
+    kick's zeros are inside and the delay is below T - s; at the middle of every gap
+    they are not (or the delay is too long there)."""
+    m = load_model(CHAIN)
+    found = nd.sections_with_stable_zeros(m, points=60, delay=4.0)
+    assert found
+    edges = [0.0] + [x for iv in found for x in iv] + [2 * math.pi]
+    for j in range(len(edges) - 1):
+        mid = 0.5 * (edges[j] + edges[j + 1])
+        inside = j % 2 == 1
+        try:
+            radius = float(np.max(np.abs(nd.transmission_zeros(
+                dataclasses.replace(m, pi2_offset=mid), 4.0))))
+        except ParameterError:
+            radius = math.inf
+        assert (radius < 1.0) == inside, (mid, radius)
+        if inside:
+            assert 4.0 < m.period - mid / m.omega
