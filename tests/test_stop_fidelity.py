@@ -157,3 +157,49 @@ def test_grazing_simulate_reports_the_stop_model_and_equals_it_run_directly(caps
     assert main(["simulate", "--delta-d", "-0.05", "--periods", "3", "--friction",
                  "0.01"]) == 2
     assert "--friction: valid only with --contact kelvin_voigt" in capsys.readouterr().err
+
+
+def test_grazing_run_stop_applies_the_choice_to_the_simulator_before_any_node_starts():
+    """``grazing run --stop`` (cli/stop.apply_run_stop, no node started here): a stiff
+    stop is run as the rigid wall with its restitution, a soft one keeps the compliant
+    stop and drops a friction below the tolerance's notice only where the bound says so;
+    a model forced over its bound is kept with the warning; --stop without a Kelvin-Voigt
+    stop, or --stop-tol without --stop, is one ParameterError line."""
+    from grazing_control.cli.commands import build_parser
+    from grazing_control.cli.stop import apply_run_stop
+    from grazing_control.oscillator.params import ParameterError
+
+    def args(*extra, stiffness=1e8, friction=None):
+        law = KelvinVoigt.from_restitution(stiffness, P.r)
+        argv = ["run", "--periods", "100", "--delta-d", "-0.05", "--enable-after", "0",
+                "--sim-param", "contact:=kelvin_voigt",
+                "--sim-param", f"contact_stiffness:={law.stiffness!r}",
+                "--sim-param", f"contact_damping:={law.damping!r}",
+                "--sim-param", f"x0:={P.x_ref + START[0]!r}"]
+        if friction is not None:
+            argv += ["--sim-param", f"friction:={friction!r}"]
+        return build_parser().parse_args(argv + list(extra))
+
+    a = args("--stop", "auto")
+    report = apply_run_stop(a)
+    over = dict(a.sim_overrides)
+    assert report["stop"] == "rigid" and report["warning"] is None, report
+    assert over["contact"] == "rigid" and over["r"] == pytest.approx(P.r, abs=1e-12)
+    assert report["estimates"]["rigid"]["bound"] == pytest.approx(
+        _choose(1e8, None, 1e-3).estimates["rigid"][1], rel=1e-9)   # the same scene
+    a = args("--stop", "auto", "--stop-tol", "1e-5")
+    assert apply_run_stop(a)["stop"] == "compliant"
+    assert dict(a.sim_overrides)["contact"] == "kelvin_voigt"
+    a = args("--stop", "auto", stiffness=1e3, friction=0.01)
+    assert apply_run_stop(a)["stop"] == "compliant_friction"
+    assert dict(a.sim_overrides)["friction"] == "0.01"       # as given (text)
+    a = args("--stop", "rigid", stiffness=1e3, friction=0.01)
+    report = apply_run_stop(a)
+    assert report["stop"] == "rigid" and "not adequate" in report["warning"]
+    assert dict(a.sim_overrides)["friction"] == 0.0
+    assert apply_run_stop(args()) is None
+    with pytest.raises(ParameterError, match="--stop-tol needs --stop"):
+        apply_run_stop(args("--stop-tol", "1e-3"))
+    with pytest.raises(ParameterError, match="kelvin_voigt stop"):
+        apply_run_stop(build_parser().parse_args(["run", "--periods", "10", "--stop",
+                                                  "auto"]))
