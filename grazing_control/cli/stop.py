@@ -77,7 +77,8 @@ def apply_run_stop(args) -> dict | None:
         values["max_periods"] = args.periods
     s = settings_from_values(values)
     if s.contact is None or not isinstance(s.contact.law, KelvinVoigt):
-        raise ParameterError(f"--stop needs a kelvin_voigt stop (contact={values.get('contact', 'rigid')!r}: "
+        kind = values.get("contact", "rigid")
+        raise ParameterError(f"--stop needs a kelvin_voigt stop (contact={kind!r}: "
                              "give --sim-param contact:=kelvin_voigt and its stiffness and "
                              "damping)")
     if s.max_periods == 0:

@@ -30,10 +30,13 @@ the oscillator's uncertainty). This is multiple shooting with the Pi2 samples as
 nodes: one shooting interval per period, the contact phases (the stop's regions, stick
 phases) inside the exact period map, the samples in the recording's units (x = A x~,
 x~ the model's). ``oscillator="known"`` holds them at the given parameters and fits the
-stop alone. The fits start from ``start`` (an OscillatorParams; A = 1, theta = 0): the
-rigid one there, the compliant ones from a grid in log10 k_c (1 ... 8) at the contact
-damping ratio of the rigid fit's r (Eq. C3) with the rigid fit's oscillator, the best
-start refined, k_c at most K_MAX (docs/theory_contact.md section 17).
+stop alone. The fits start from ``start_oscillator`` (default ``p``'s; A = 1, theta =
+0): the rigid one there; Kelvin-Voigt from the best of three starts run jointly for
+:data:`START_NFEV` evaluations (the stop alone fitted at the given oscillator, and a grid
+in log10 k_c = 1 ... 8 at the contact damping ratio of the rigid fit's r, Eq. C3, at
+the given and at the rigid fit's oscillator); friction from the Kelvin-Voigt fit; k_c
+at most K_MAX. The fit is local: checked from starts off the truth, not proved global
+(docs/theory_contact.md section 17).
 """
 
 from __future__ import annotations
