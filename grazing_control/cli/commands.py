@@ -28,6 +28,7 @@ from .common import (add_common, add_delay, add_gains, add_method, complex_list,
 from .design import cmd_design
 from .parameter_file import add_params_option, apply_to_args
 from .rig import apply_rig
+from .stop import add_run_stop_options, add_stop_options, apply_run_stop
 
 __all__ = ["main", "build_parser"]
 
@@ -152,6 +153,9 @@ def cmd_continue(args):
 # ---------------------------------------------------------------------------- simulate
 def cmd_simulate(args):
     if args.model is not None:
+        if args.contact != "rigid" or _stop_options(args):
+            raise ParameterError("--contact and its options are 1-DOF options: an n-DOF "
+                                 "model file's stop is rigid (docs/ndof_model.md)")
         return ndof.cmd_simulate(args)
     from grazing_control.dynamics.simulation.simulate import simulate
 
@@ -167,6 +171,8 @@ def cmd_simulate(args):
             raise ParameterError("--x0/--v0 and --dx0/--dv0 both given: give the initial state "
                                  "in one form (physical, or deviation from X**)")
         deviation = (args.dx0 or 0.0, args.dv0 or 0.0)
+    if args.contact != "rigid" or _stop_options(args):
+        return _simulate_stop(args, p, gains, control_after, physical, deviation)
     progress = (not args.json and args.periods >= 2000 and sys.stderr.isatty())
     res = simulate(p, args.periods, x0=args.x0, v0=args.v0, deviation=deviation, gains=gains,
                    control_after=control_after, fidelity=args.fidelity, tol=args.tol,
@@ -212,6 +218,82 @@ def cmd_simulate(args):
         f"{spectrum.sum_residual:.2e}"
         + (f"; {spectrum.stuck_periods} periods stuck (singular map)"
            if spectrum.stuck_periods else "")]))
+
+
+_STOP_OPTIONS = (("contact_stiffness", "--contact-stiffness"),
+                 ("contact_damping", "--contact-damping"), ("friction", "--friction"),
+                 ("friction_static", "--friction-static"), ("stop", "--stop"),
+                 ("stop_tol", "--stop-tol"))
+
+
+def _stop_options(args) -> list:
+    """The compliant stop's options given (``grazing simulate``)."""
+    return [flag for name, flag in _STOP_OPTIONS if getattr(args, name) is not None]
+
+
+def _simulate_stop(args, p, gains, control_after, physical, deviation):
+    """``grazing simulate --contact kelvin_voigt``: the scene on the cheapest adequate stop
+    model, or the one ``--stop`` names, checked (:func:`grazing_control.dynamics.
+    simulation.stop_fidelity.simulate_stop`; docs/theory_contact.md section 18)."""
+    from grazing_control.dynamics.simulation.stop_fidelity import simulate_stop
+    from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
+
+    if args.contact == "rigid":
+        raise ParameterError(f"{', '.join(_stop_options(args))}: valid only with --contact "
+                             "kelvin_voigt (the compliant stop they describe)")
+    for flag, bad in (("--fidelity", args.fidelity != "exact"), ("--lyapunov", args.lyapunov)):
+        if bad:
+            raise ParameterError(f"{flag} is invalid with --contact kelvin_voigt: the stop "
+                                 "model is chosen by --stop (the exact flow of each)")
+    if args.contact_stiffness is None:
+        raise ParameterError("--contact kelvin_voigt needs --contact-stiffness (k_c over the "
+                             "oscillator's, > 0)")
+    law = (KelvinVoigt.from_restitution(args.contact_stiffness, p.r)
+           if args.contact_damping is None
+           else KelvinVoigt(args.contact_stiffness, args.contact_damping))
+    friction = None
+    if args.friction:
+        friction = Coulomb(args.friction, args.friction_static)
+    elif args.friction_static:
+        raise ParameterError("--friction-static needs --friction > 0 (the kinetic level)")
+    if physical:
+        deviation = ((p.x_ref if args.x0 is None else args.x0) - p.x_ref,
+                     (p.v_ref if args.v0 is None else args.v0) - p.v_ref)
+    tol = 1e-3 if args.stop_tol is None else args.stop_tol
+    res, choice, warning = simulate_stop(
+        p, law, friction, args.periods, deviation=deviation or (0.0, 0.0), gains=gains,
+        control_after=control_after, stop=args.stop or "auto", tol=tol)
+    if warning:
+        print(f"grazing: warning: {warning}", file=sys.stderr)
+    out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist(),
+           "stop": choice.stop, "stop_reason": choice.reason,
+           "stop_estimates": {k: {"one_period_error": e, "bound": b}
+                              for k, (e, b) in choice.estimates.items()},
+           "contact": {"stiffness": law.stiffness, "damping": law.damping,
+                       "restitution": law.restitution,
+                       "friction": 0.0 if friction is None else friction.kinetic,
+                       "friction_static": 0.0 if friction is None else friction.static}}
+    if warning:
+        out["stop_warning"] = warning
+    out = nulls(out)          # a refused candidate's bound: inf -> null
+    require_finite({k: out[k] for k in ("pi2", "impacts_per_period")}, "simulate")
+    if args.json:
+        return out
+    n = args.periods
+    last = (f"({res.pi2[-1][0]:.15g}, {res.pi2[-1][1]:.15g})" if n else "none (0 periods)")
+    tail = res.impacts_per_period[-min(n, 20):].tolist()
+    return "\n".join([
+        f"simulated {n} periods at Delta d = {p.delta_d:.6g} with a Kelvin-Voigt stop "
+        f"(k_c = {law.stiffness:.6g}, c_c = {law.damping:.6g}, r = {law.restitution:.6g}"
+        + (f", friction {friction.kinetic:.6g}" if friction else "") + ")"
+        + (f", control on from sample {control_after}" if gains is not None else
+           ", uncontrolled"),
+        f"  stop model         = {choice.stop}",
+        f"  contacts in all    = {int(res.impacts_per_period.sum())}",
+        f"  contacts per period, last {len(tail)}: {tail}",
+        f"  last Pi2 sample    = {last}",
+        f"  model              = {res.fidelity_reason}",
+    ])
 
 
 # ---------------------------------------------------------------------------- run / demo
@@ -297,8 +379,12 @@ def cmd_run(args):
 
     from grazing_control.ros.launcher import run
 
-    kwargs = {k: v for k, v in vars(args).items() if k not in ("func", "command", "json")}
     _check_run_files(args)
+    stop = apply_run_stop(args)     # --stop: the stop model (cli/stop.py), into sim_overrides
+    if stop is not None and stop["warning"]:
+        print(f"grazing: warning: {stop['warning']}", file=sys.stderr)
+    kwargs = {k: v for k, v in vars(args).items()
+              if k not in ("func", "command", "json", "stop", "stop_tol")}
     if getattr(args, "live", None):
         busy = _port_in_use(args.live)
         if busy:
@@ -306,14 +392,29 @@ def cmd_run(args):
             return 2
     if not args.json:
         result = run(**kwargs)
+        _record_stop(result, stop)
         print(result)
+        if stop is not None:
+            print(f"stop model = {stop['reason']}")
         return result.exit_code
     with _stdout_to_stderr():  # stdout: the one JSON object only
         result = run(**kwargs)
+    _record_stop(result, stop)
     summary = nulls(dataclasses.asdict(result)) if dataclasses.is_dataclass(result) else {}
     summary.update(ok=bool(result.ok), exit_code=result.exit_code, summary=str(result))
+    if stop is not None:
+        summary["stop_model"] = stop
     _print_json(summary)
     return result.exit_code
+
+
+def _record_stop(result, stop) -> None:
+    """The stop model a scene ran on (``--stop``) next to its bag: ``stop_model.json``
+    (the bag's readers take its .mcap alone; docs/recording.md)."""
+    bag = getattr(result, "bag_dir", None)
+    if stop is not None and bag and os.path.isdir(bag):
+        with open(os.path.join(bag, "stop_model.json"), "w", encoding="utf-8") as fh:
+            json.dump(stop, fh, allow_nan=False, indent=1)
 
 
 def cmd_demo(args):
@@ -430,6 +531,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(ode, comparison), or auto: the cheapest meeting --tol over the horizon")
     s.add_argument("--tol", type=finite, default=1e-9,
                    help="Pi2 error tolerance for --fidelity auto (default 1e-9)")
+    add_stop_options(s)
     add_gains(s)
     ndof.add_model_option(s)
     ndof.add_gain_options(s)
@@ -463,6 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "failed; docs/nodes.md), sim_verdict (the simulator's summary, "
                             "watchdog trip and feasibility verdict); node output goes to "
                             "stderr")
+        add_run_stop_options(s)
         add_params_option(s)
         s.set_defaults(func=cmd_run)
 

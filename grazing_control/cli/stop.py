@@ -16,9 +16,128 @@ import json
 import math
 import sys
 
+from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.arguments import finite, integer_at_least, positive
 
-__all__ = ["add_stop_parser", "cmd_stop"]
+#: the stop models (dynamics.simulation.stop_fidelity.STOP_FIDELITIES, not imported at
+#: the parser's start-up)
+_FIDELITIES = ("rigid", "compliant", "compliant_friction")
+
+__all__ = ["add_stop_parser", "add_stop_options", "add_run_stop_options", "apply_run_stop",
+           "cmd_stop"]
+
+
+def add_run_stop_options(s) -> None:
+    """``grazing run --stop``: the scene's Kelvin-Voigt stop run on its cheapest adequate
+    model, or the one named, checked (:func:`apply_run_stop`)."""
+    _add_choice(s, "a scene with a kelvin_voigt stop (--sim-param contact:=kelvin_voigt): run "
+                   "it on auto, the cheapest adequate model (rigid: the wall with the "
+                   "stop's restitution; compliant: without the friction; compliant_friction) "
+                   "by the estimated Pi2 error over --periods against --stop-tol, or on the "
+                   "model named, checked (a warning where its bound exceeds the tolerance); "
+                   "the choice and its bound in the summary and the bag's stop_model.json "
+                   "(docs/theory_contact.md section 18; default: the stop as given)")
+
+
+def _add_choice(s, stop_help: str) -> None:
+    """--stop (the model, or auto) and --stop-tol (its tolerance)."""
+    s.add_argument("--stop", choices=("auto",) + _FIDELITIES, default=None, help=stop_help)
+    s.add_argument("--stop-tol", type=positive, default=None,
+                   help="tolerance on the Pi2 error after the horizon for --stop (default "
+                        "1e-3)")
+
+
+def apply_run_stop(args) -> dict | None:
+    """``grazing run --stop``: the choice for the scene's stop, applied to the simulator's
+    overrides (rigid: ``contact:=rigid`` with ``r`` the stop's restitution, Eq. C3;
+    compliant: friction 0), and its report {stop, reason, estimates, warning}; None
+    without --stop. The scene as sim_node will take it (its file, --sim-param,
+    --delta-d, --periods) and the controller's gains where they act from the first
+    sample (--enable-after 0; else the probe runs uncontrolled)."""
+    if args.stop is None:
+        if args.stop_tol is not None:
+            raise ParameterError("--stop-tol needs --stop (auto or a model)")
+        return None
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.simulation.stop_fidelity import simulate_stop_choice
+    from grazing_control.oscillator.contact import KelvinVoigt
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.launcher import CONFIG_DIR
+    from grazing_control.ros.scene_nodes import parameter_values
+
+    if args.model is not None or args.rig is not None:
+        raise ParameterError("--stop is invalid with --model or --rig: it chooses the model "
+                             "of the 1-DOF scene's kelvin_voigt stop")
+    values = {**parameter_values(args.sim_params or CONFIG_DIR / "study.yaml"),
+              **dict(args.sim_overrides or {})}
+    if args.delta_d is not None:
+        values["delta_d"] = args.delta_d
+    if args.periods is not None:
+        values["max_periods"] = args.periods
+    s = settings_from_values(values)
+    if s.contact is None or not isinstance(s.contact.law, KelvinVoigt):
+        kind = values.get("contact", "rigid")
+        raise ParameterError(f"--stop needs a kelvin_voigt stop (contact={kind!r}: "
+                             "give --sim-param contact:=kelvin_voigt and its stiffness and "
+                             "damping)")
+    if s.max_periods == 0:
+        raise ParameterError("--stop needs the scene's horizon: give --periods (max_periods "
+                             "is 0, unbounded)")
+    p = s.params
+    x = p.x_ref if math.isnan(s.x0) else s.x0
+    v = p.v_ref if math.isnan(s.v0) else s.v0
+    ctl = {**parameter_values(args.controller_params or CONFIG_DIR / "controller.yaml"),
+           **dict(args.controller_overrides or {})}
+    enable = args.enable_after if args.enable_after is not None else \
+        int(ctl.get("enable_after", 1000))
+    gains = None
+    if enable == 0 and ctl.get("c2") is not None:
+        c2 = float(ctl["c2"])
+        c1 = float(ctl["c1"]) if ctl.get("c1") is not None else degenerate_c1(p, c2)
+        gains = Gains(c1, c2) if math.isfinite(c1) else Gains(degenerate_c1(p, c2), c2)
+    law, friction = s.contact.law, s.contact.friction
+    tol = 1e-3 if args.stop_tol is None else args.stop_tol
+    choice, warning = simulate_stop_choice(p, law, friction, s.max_periods,
+                                           deviation=(x - p.x_ref, v - p.v_ref),
+                                           gains=gains, stop=args.stop, tol=tol)
+    over = dict(args.sim_overrides or {})
+    if choice.stop != "compliant_friction":
+        over.update(friction=0.0, friction_static=0.0)
+    if choice.stop == "rigid":
+        over.update(contact="rigid", r=float(law.restitution))
+    args.sim_overrides = over
+    return {"stop": choice.stop, "reason": choice.reason, "warning": warning, "tol": tol,
+            "estimates": {k: {"one_period_error": e if math.isfinite(e) else None,
+                              "bound": b if math.isfinite(b) else None}
+                          for k, (e, b) in choice.estimates.items()},
+            "scene_stop": {"stiffness": law.stiffness, "damping": law.damping,
+                           "restitution": law.restitution,
+                           "friction": 0.0 if friction is None else friction.kinetic}}
+
+
+def add_stop_options(s) -> None:
+    """The scene's stop and its model choice, for ``grazing simulate`` (sim_node's names,
+    docs/nodes.md): the cheapest adequate model run, or the one named, checked."""
+    s.add_argument("--contact", choices=("rigid", "kelvin_voigt"), default="rigid",
+                   help="the stop: rigid (the wall, --r; default) or kelvin_voigt "
+                        "(spring-dashpot, docs/theory_contact.md)")
+    s.add_argument("--contact-stiffness", type=positive, default=None,
+                   help="kelvin_voigt: the stop's stiffness k_c over the oscillator's (> 0)")
+    s.add_argument("--contact-damping", type=finite, default=None,
+                   help="kelvin_voigt: the stop's damping c_c (>= 0, underdamped; default: "
+                        "the c_c whose restitution is --r, Eq. C3)")
+    s.add_argument("--friction", type=finite, default=None,
+                   help="kelvin_voigt: Coulomb friction on the mass, kinetic level F_f "
+                        "(>= 0; default 0)")
+    s.add_argument("--friction-static", type=finite, default=None,
+                   help="static friction level F_s >= F_f (default F_f)")
+    _add_choice(s, "kelvin_voigt: the model the scene runs on: auto (default) the cheapest "
+                   "adequate of rigid (the wall with the stop's restitution), compliant "
+                   "(without friction), compliant_friction, by the estimated Pi2 error over "
+                   "the horizon against --stop-tol (docs/theory_contact.md section 18); a "
+                   "model named is run and checked (a warning where its bound exceeds the "
+                   "tolerance)")
 
 
 def cmd_stop(args) -> int:

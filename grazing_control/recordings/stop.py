@@ -3,10 +3,11 @@
 bag -> Pi2 samples and corrections -> :func:`grazing_control.dynamics.identification.stop.select_stop`
 -> report. The data: ``oscillator/pi2`` (position [x], velocity [v]: the sample before the
 correction), ``controller/velocity_correction`` (twist.linear.x, stamped with its
-sample's stamp), and the model (zeta, r, omega, delta_d, tau0, pi2_offset) from the bag's
-parameter record (the simulator's parameters at start): the stop is selected with the
-oscillator taken as known. The method and its measured accuracy: docs/theory_contact.md
-section 17.
+sample's stamp), and the samples' frame (the phase tau2 of Pi2 and X**) from the bag's
+parameter record (the simulator's parameters at start). The oscillator's parameters
+(zeta, omega, the forcing's amplitude and phase, Delta d) are fitted with each candidate
+stop, starting from the record's (``oscillator="known"``: held there, the stop alone
+fitted). The method and its measured accuracy: docs/theory_contact.md section 17.
 """
 
 from __future__ import annotations
@@ -55,22 +56,29 @@ def stop_data(bag) -> tuple:
     return p, z, dv, recorded
 
 
-def select_bag_stop(bag, stops=STOPS, max_samples: int = 200) -> dict:
-    """The report of one bag: each candidate's parameters with standard errors, -2 log L,
-    BIC, and the one of least BIC, over the first ``max_samples`` Pi2 samples (a fit
-    costs about 2-10 s per 60 samples, docs/theory_contact.md section 17)."""
+def select_bag_stop(bag, stops=STOPS, max_samples: int = 200,
+                    oscillator: str = "fit") -> dict:
+    """The report of one bag: each candidate's parameters with standard errors (the
+    oscillator's with them, ``oscillator="fit"``), -2 log L, BIC, and the one the data
+    support, over the first ``max_samples`` Pi2 samples (a joint fit of the three
+    candidates costs about 20-60 s per 60 samples on a loaded machine, the stop alone
+    2-10 s; docs/theory_contact.md section 17)."""
     p, z, dv, recorded = stop_data(bag)
     z, dv = z[:max_samples], dv[:max_samples]
-    best, _, fits = select_stop(p, z, dv, stops)
+    best, _, fits = select_stop(p, z, dv, stops, oscillator=oscillator)
+    recorded.update({k: getattr(p, k) for k in ("zeta", "omega", "delta_d")})
     return {"bag": str(bag), "samples": int(len(z)), "chosen": best, "recorded": recorded,
+            "oscillator": oscillator,
             "candidates": [{"stop": f.stop, "bic": f.bic, "minus_2_log_l": f.minus_2_log_l,
                             "parameters": {n: {"value": f.values[n], "stderr": f.stderr[n]}
                                            for n in f.values}} for f in fits]}
 
 
 def format_stop_report(report: dict) -> str:
+    how = ("the oscillator fitted with each stop" if report.get("oscillator") == "fit"
+           else "the oscillator from the record")
     lines = [f"{report['bag']}: {report['samples']} Pi2 samples; the data support: "
-             f"{report['chosen']} (least BIC)"]
+             f"{report['chosen']} (least BIC; {how})"]
     for c in report["candidates"]:
         pars = ", ".join(f"{n} = {v['value']:.6g} +- {v['stderr']:.2g}"
                          for n, v in c["parameters"].items())

@@ -14,7 +14,7 @@ import os
 import random
 
 __all__ = ["NODES", "scene_overrides", "design_delay", "design_model", "new_token",
-           "sim_values_for_model", "sim_values_for_rig"]
+           "parameter_values", "sim_values_for_model", "sim_values_for_rig"]
 
 #: The scene's nodes in start order (the recorder first, so that it matches every topic
 #: before the simulator starts; the live view, which nothing waits for; the simulator
@@ -37,6 +37,12 @@ def design_model(controller_params):
     gains were designed for, the scene's model when none is given (issue 17)."""
     path = _controller_values(controller_params).get("model_file")
     return path if isinstance(path, str) and path else None
+
+
+def parameter_values(params) -> dict:
+    """A node's parameters: a file's ``ros__parameters`` (any node key) or a dict; {} if
+    the file cannot be read (the node then reports the file itself)."""
+    return _controller_values(params)
 
 
 def _controller_values(controller_params) -> dict:

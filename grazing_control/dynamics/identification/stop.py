@@ -21,10 +21,22 @@ the likelihood-ratio test at 0.1 % (:func:`select_stop`). The candidates:
 * ``kelvin_voigt``: theta = (k_c, c_c), :func:`~grazing_control.oscillator.contact.compliant_period_step`;
 * ``kelvin_voigt_friction``: theta = (k_c, c_c, F_f), with F_s = F_f.
 
-The oscillator's own parameters (zeta, omega, Delta d, ...) are taken as known (from
-``grazing identify``'s fit of the free flight, or the scene's file): what is selected is
-the stop. The compliant fits start from a grid in log10 k_c (1 ... 7) at the contact
-damping ratio of the rigid fit's r (Eq. C3), the best start refined, k_c at most K_MAX.
+The oscillator's own parameters are fitted with the stop (``oscillator="fit"``, the
+default): zeta, omega (the forcing frequency over the natural one), the forcing
+amplitude A and phase theta (behind the phase at which the samples are taken), and
+Delta d (:data:`OSCILLATOR_NAMES`), every candidate's parameter vector being these five
+and its stop's, the standard errors from the joint Jacobian (so a stop's error carries
+the oscillator's uncertainty). This is multiple shooting with the Pi2 samples as the
+nodes: one shooting interval per period, the contact phases (the stop's regions, stick
+phases) inside the exact period map, the samples in the recording's units (x = A x~,
+x~ the model's). ``oscillator="known"`` holds them at the given parameters and fits the
+stop alone. The fits start from ``start_oscillator`` (default ``p``'s; A = 1, theta =
+0): the rigid one there; Kelvin-Voigt from the best of three starts run jointly for
+:data:`START_NFEV` evaluations (the stop alone fitted at the given oscillator, and a grid
+in log10 k_c = 1 ... 8 at the contact damping ratio of the rigid fit's r, Eq. C3, at
+the given and at the rigid fit's oscillator); friction from the Kelvin-Voigt fit; k_c
+at most K_MAX. The fit is local: checked from starts off the truth, not proved global
+(docs/theory_contact.md section 17).
 """
 
 from __future__ import annotations
@@ -36,13 +48,16 @@ import numpy as np
 
 from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, compliant_period_step,
                                                 kelvin_voigt_damping)
+from grazing_control.oscillator.flow import particular
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulation.fidelity import period_step
 
-__all__ = ["STOPS", "StopFit", "fit_stop", "select_stop"]
+__all__ = ["STOPS", "OSCILLATOR_NAMES", "StopFit", "fit_stop", "select_stop"]
 
 #: the candidate stops, cheapest first
 STOPS = ("rigid", "kelvin_voigt", "kelvin_voigt_friction")
+#: the oscillator's parameters fitted with the stop (``oscillator="fit"``)
+OSCILLATOR_NAMES = ("zeta", "omega", "forcing_amplitude", "forcing_phase", "delta_d")
 _NAMES = {"rigid": ("r",), "kelvin_voigt": ("stiffness", "damping"),
           "kelvin_voigt_friction": ("stiffness", "damping", "friction")}
 #: a residual where the candidate's map refuses the state (a state deep in the stop)
@@ -53,11 +68,15 @@ LR_FRICTION = 9.5495
 #: the stiffest stop fitted (the chart's end, docs/theory_contact.md section 15): a rigid
 #: motion drives k_c there, where the compliant period is within ~1e-4 of the rigid one
 K_MAX = 1e8
+#: evaluations of each start of a joint compliant fit (:func:`_start`): enough to tell
+#: a start that converges from one that does not, at a fraction of a fit's cost
+START_NFEV = 12
 
 
 class StopFit(NamedTuple):
-    """One candidate's fit: its parameters and standard errors by name, the residual sum
-    of squares, the number of residuals N, -2 log L (concentrated) and BIC."""
+    """One candidate's fit: its parameters and standard errors by name (the oscillator's
+    too where fitted), the residual sum of squares, the number of residuals N, -2 log L
+    (concentrated) and BIC."""
 
     stop: str
     values: dict
@@ -68,35 +87,51 @@ class StopFit(NamedTuple):
     bic: float
 
 
-def _predict(p: OscillatorParams, stop: str, theta, z0, dv) -> np.ndarray:
+def _oscillator(frame: OscillatorParams, osc, r: float) -> OscillatorParams:
+    """The model of the oscillator's parameters ``osc`` (:data:`OSCILLATOR_NAMES`) with
+    its Pi2 at the samples' phase: the forcing phase there is frame.tau2 + theta."""
+    zeta, omega, _a, theta, delta_d = osc
+    p = OscillatorParams(zeta=zeta, r=r, omega=omega, delta_d=delta_d)
+    offset = (frame.tau2 + theta - p.tau_star) % (2.0 * math.pi)
+    return p.with_(pi2_offset=offset if offset > 0.0 else 2.0 * math.pi)
+
+
+def _predict(frame: OscillatorParams, stop: str, theta, osc, s, dv) -> np.ndarray:
+    """The next sample of each sample ``s`` (n x 2, the recording's units) and correction
+    ``dv``: x = A x~ (module docstring)."""
     out = np.empty((len(dv), 2))
     law = friction = None
     if stop != "rigid":
         law = KelvinVoigt(theta[0], theta[1])
         if stop == "kelvin_voigt_friction" and theta[2] > 0.0:
             friction = Coulomb(theta[2])
-    else:
-        p = p.with_(r=theta[0])
-    for k, ((dx, dvk), c) in enumerate(zip(z0, dv)):
+    try:
+        p = _oscillator(frame, osc, theta[0] if stop == "rigid" else frame.r)
+    except ParameterError:
+        return np.full((len(dv), 2), np.nan)
+    a = osc[2]
+    xp, vp = particular(p, p.tau2)
+    for k, ((x, v), c) in enumerate(zip(s, dv)):
+        dx, dvk = x / a - xp, v / a - vp
         try:
             if law is None:
-                seg = period_step(p, dx, dvk, c)
+                seg = period_step(p, dx, dvk, c / a)
                 out[k] = seg.dx, seg.dv
             else:
-                seg = compliant_period_step(p, law, dx, dvk, c, friction=friction)
+                seg = compliant_period_step(p, law, dx, dvk, c / a, friction=friction)
                 out[k] = seg.x, seg.v
         except (ValueError, ArithmeticError):
             out[k] = np.nan
-    return out
+    return a * (out + (xp, vp))
 
 
-def _residuals(p, stop, theta, z, dv) -> np.ndarray:
-    pred = _predict(p, stop, theta, z[:-1], dv[:-1])
-    res = (z[1:] - pred).ravel()
+def _residuals(frame, stop, theta, osc, s, dv) -> np.ndarray:
+    pred = _predict(frame, stop, theta, osc, s[:-1], dv[:-1])
+    res = (s[1:] - pred).ravel()
     return np.where(np.isfinite(res), res, _REFUSED)
 
 
-def _bounds(stop: str, zeta: float):
+def _bounds(stop: str):
     if stop == "rigid":
         return [1e-6], [1.0 - 1e-9]
     lo, hi = [1e-3, 0.0], [K_MAX, np.inf]
@@ -106,34 +141,71 @@ def _bounds(stop: str, zeta: float):
     return lo, hi
 
 
+#: bounds of the oscillator's parameters (:data:`OSCILLATOR_NAMES`)
+_OSC_LO = [1e-6, 1e-3, 1e-12, -math.pi, -np.inf]
+_OSC_HI = [1.0 - 1e-6, np.inf, np.inf, math.pi, np.inf]
+
+
 def _valid(theta, zeta: float) -> bool:
     k, c = theta[0], theta[1]
     return c < 2.0 * math.sqrt(k) and (2.0 * zeta + c) ** 2 < 4.0 * (1.0 + k)
 
 
-def fit_stop(p: OscillatorParams, stop: str, z, dv, start=None) -> StopFit:
+def _start_oscillator(start: OscillatorParams, frame: OscillatorParams) -> list:
+    """The oscillator's start (:data:`OSCILLATOR_NAMES`): ``start``'s, A = 1, and the
+    forcing phase theta that puts ``start``'s Pi2 at the samples' phase."""
+    theta = math.remainder(start.tau2 - frame.tau2, 2.0 * math.pi)
+    return [start.zeta, start.omega, 1.0, theta, start.delta_d]
+
+
+def fit_stop(p: OscillatorParams, stop: str, z, dv, start=None, *,
+             oscillator: str = "fit", start_oscillator=None, known=None,
+             max_nfev: int | None = None) -> StopFit:
     """The least-squares (maximum-likelihood) fit of one candidate stop to the Pi2
-    samples ``z`` (n x 2, deviations before the correction) and corrections ``dv`` (n)."""
+    samples ``z`` (n x 2, deviations from ``p``'s X** before the correction) and
+    corrections ``dv`` (n), with the oscillator's parameters (``oscillator="fit"``) or
+    at ``p``'s (``"known"``). ``p`` also gives the samples' frame (their phase tau2 and
+    X**); ``start``: the stop's start, ``start_oscillator``: the oscillator's (a list
+    in :data:`OSCILLATOR_NAMES` order, default ``p``'s); ``known``: fits made already
+    {stop: StopFit}, the cheaper candidates' that start this one (:func:`_start`)."""
     from scipy.optimize import least_squares
 
     if stop not in STOPS:
         raise ParameterError(f"stop={stop!r} is invalid: valid values are {', '.join(STOPS)}")
+    if oscillator not in ("fit", "known"):
+        raise ParameterError(f"oscillator={oscillator!r} is invalid: valid values are fit, "
+                             "known")
     z = np.asarray(z, dtype=float)
     dv = np.asarray(dv, dtype=float)
     if z.ndim != 2 or z.shape[1] != 2 or len(z) < 8 or dv.shape != (len(z),):
         raise ParameterError("samples are invalid: expected at least 8 Pi2 samples (n x 2) "
                              "and as many corrections")
+    s = z + (p.x_ref, p.v_ref)          # the recorded states
+    osc0 = list(start_oscillator) if start_oscillator is not None else \
+        _start_oscillator(p, p)
+    joint = oscillator == "fit"
     if start is None:
-        start = _start(p, stop, z, dv)
-    lo, hi = _bounds(stop, p.zeta)
+        start, osc0 = _start(p, stop, z, dv, osc0, joint, known)
+    lo, hi = _bounds(stop)
+    q_osc = len(OSCILLATOR_NAMES) if joint else 0
+    if joint:
+        lo, hi = _OSC_LO + lo, _OSC_HI + hi
+        x0 = list(osc0) + list(start)
+    else:
+        x0 = list(start)
 
-    def fun(theta):
-        if stop != "rigid" and not _valid(theta, p.zeta):
+    def split(x):
+        return (x[:q_osc], x[q_osc:]) if joint else (osc0, x)
+
+    def fun(x):
+        osc, theta = split(x)
+        if stop != "rigid" and not _valid(theta, osc[0]):
             return np.full(2 * (len(z) - 1), _REFUSED)
-        return _residuals(p, stop, theta, z, dv)
+        return _residuals(p, stop, theta, osc, s, dv)
 
-    sol = least_squares(fun, np.clip(start, lo, hi), bounds=(lo, hi), x_scale="jac",
-                        method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=100)
+    sol = least_squares(fun, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale="jac",
+                        method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                        max_nfev=max_nfev or (200 if joint else 100))
     res = sol.fun
     n, q = res.size, len(sol.x)
     rss = float(res @ res)
@@ -144,32 +216,57 @@ def fit_stop(p: OscillatorParams, stop: str, z, dv, start=None) -> StopFit:
     except np.linalg.LinAlgError:
         se = np.full(q, math.inf)
     m2ll = n * math.log(max(rss, 1e-300) / n)
-    names = _NAMES[stop]
+    names = (OSCILLATOR_NAMES if joint else ()) + _NAMES[stop]
     return StopFit(stop, dict(zip(names, map(float, sol.x))), dict(zip(names, map(float, se))),
                    rss, n, m2ll, m2ll + q * math.log(n))
 
 
-def _start(p, stop, z, dv):
+def _start(p, stop, z, dv, osc0, joint, known=None):
+    """(the stop's start, the oscillator's) of a candidate (module docstring);
+    ``known``: the fits made already {stop: StopFit} (select_stop's, not made again)."""
+    mode = "fit" if joint else "known"
+    known = {} if known is None else known
     if stop == "rigid":
-        return [p.r]
-    r = fit_stop(p, "rigid", z, dv).values["r"]
-    zeta_c = kelvin_voigt_damping(min(max(r, 0.14), 1.0))
-    best = None
-    for lk in range(1, 9):
-        k = 10.0 ** lk
-        theta = [k, 2.0 * zeta_c * math.sqrt(k)] + ([0.0] if stop.endswith("friction") else [])
-        res = _residuals(p, stop, theta, z, dv)
-        rss = float(res @ res)
-        if best is None or rss < best[0]:
-            best = (rss, theta)
+        return [p.r], osc0
+    base = "kelvin_voigt" if stop.endswith("friction") else "rigid"
+    prev = known.get(base) or fit_stop(p, base, z, dv, oscillator=mode,
+                                        start_oscillator=osc0, known=known)
+    start_osc = osc0
+    if joint:
+        osc0 = [prev.values[n] for n in OSCILLATOR_NAMES]
     if stop.endswith("friction"):
-        base = fit_stop(p, "kelvin_voigt", z, dv)
-        best = (0.0, [base.values["stiffness"], base.values["damping"], 1e-3])
-    return best[1]
+        return [prev.values["stiffness"], prev.values["damping"], 1e-3], osc0
+    s = z + (p.x_ref, p.v_ref)
+    zeta_c = kelvin_voigt_damping(min(max(prev.values["r"], 0.14), 1.0))
+
+    thetas = [[10.0 ** lk, 2.0 * zeta_c * 10.0 ** (lk / 2)] for lk in range(1, 9)]
+
+    def grid(osc):          # the best k_c of the grid at this oscillator
+        res = [_residuals(p, stop, theta, osc, s, dv) for theta in thetas]
+        return thetas[int(np.argmin([float(r @ r) for r in res]))]
+
+    if not joint:
+        return grid(osc0), osc0
+    # the rigid fit's oscillator is biased where the stop is compliant, and its grid
+    # points at a rigid-like k_c (K_MAX, flat), from where a joint fit does not come
+    # back; a grid at an oscillator that is off can point anywhere (docs section 17).
+    # Three starts, each run jointly for START_NFEV evaluations, the best continued:
+    # the stop alone fitted at the given oscillator (where that is close), and the grid
+    # at the given and at the rigid fit's oscillator
+    alone = fit_stop(p, stop, z, dv, grid(start_osc), oscillator="known",
+                     start_oscillator=start_osc)
+    starts = [([alone.values[n] for n in _NAMES[stop]], start_osc),
+              (grid(start_osc), start_osc), (grid(osc0), osc0)]
+    fits = [fit_stop(p, stop, z, dv, theta, start_oscillator=osc, max_nfev=START_NFEV)
+            for theta, osc in starts]
+    best = min(fits, key=lambda f: f.rss)
+    return [best.values[n] for n in _NAMES[stop]], [best.values[n] for n in OSCILLATOR_NAMES]
 
 
-def select_stop(p: OscillatorParams, z, dv, stops=STOPS) -> tuple:
-    """(the stop the data support, its fit, every candidate's fit) for the Pi2 samples.
+def select_stop(p: OscillatorParams, z, dv, stops=STOPS, *, oscillator: str = "fit",
+                start_oscillator=None) -> tuple:
+    """(the stop the data support, its fit, every candidate's fit) for the Pi2 samples
+    (``oscillator``, ``start_oscillator``: :func:`fit_stop`).
 
     Rigid against Kelvin-Voigt by least BIC (not nested: the rigid wall is the limit
     k_c -> inf); friction only where the likelihood-ratio statistic of Kelvin-Voigt
@@ -179,7 +276,11 @@ def select_stop(p: OscillatorParams, z, dv, stops=STOPS) -> tuple:
     friction's BIC is also the least: BIC alone admits a friction that is not there
     about 1.4 % of the time at 60 periods (seen once on a recorded bag, F_f = 2e-5 at
     2.3 standard errors, docs/theory_contact.md section 17)."""
-    fits = {s: fit_stop(p, s, z, dv) for s in stops}
+    fits = {}
+    for s in STOPS:                   # cheapest first: each starts the next (_start)
+        if s in stops:
+            fits[s] = fit_stop(p, s, z, dv, oscillator=oscillator,
+                               start_oscillator=start_oscillator, known=fits)
     base = min((f for s, f in fits.items() if s != "kelvin_voigt_friction"),
                key=lambda f: f.bic, default=None)
     best = base

@@ -13,6 +13,10 @@ differences of the full map, :class:`.compliant_model.CompliantOneDOF`; the geom
 mean of their spectral norms), and the error after N periods bounded by
 eps (1 + L + ... + L^(N-1)); the cheapest candidate whose bound is within ``tol`` is
 chosen, with the reason. An estimate calibrated on the scene, not a proof.
+
+:func:`simulate_stop` runs a scene on the chosen model (``grazing simulate --contact``):
+``auto`` the cheapest adequate one, or the user's choice, checked against the same
+bound (a warning with the numbers where it exceeds the tolerance).
 """
 
 from __future__ import annotations
@@ -23,11 +27,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
+from grazing_control.oscillator.contact import Coulomb, KelvinVoigt, compliant_period_step
+from grazing_control.oscillator.impact import check_state
 from grazing_control.dynamics.maps.compliant_model import CompliantOneDOF
 from grazing_control.dynamics.maps.model import OneDOF
+from grazing_control.dynamics.simulation.simulate import SimulationResult, simulate
 
-__all__ = ["STOP_FIDELITIES", "StopFidelity", "choose_stop_fidelity"]
+__all__ = ["STOP_FIDELITIES", "StopFidelity", "choose_stop_fidelity", "rigid_stand_in",
+           "simulate_stop", "simulate_stop_choice"]
 
 STOP_FIDELITIES = ("rigid", "compliant", "compliant_friction")
 
@@ -40,6 +47,12 @@ class StopFidelity(NamedTuple):
     estimates: dict
 
 
+def rigid_stand_in(p, law: KelvinVoigt):
+    """The rigid wall a Kelvin-Voigt stop stands for: ``p`` with the stop's restitution
+    r (Eq. C3)."""
+    return p.with_(r=min(law.restitution, 1.0 - 1e-12))
+
+
 def choose_stop_fidelity(p, law: KelvinVoigt, friction: Coulomb | None, periods: int,
                          tol: float, *, deviation=(0.0, 0.0), gains=None,
                          probe: int = 20) -> StopFidelity:
@@ -50,7 +63,7 @@ def choose_stop_fidelity(p, law: KelvinVoigt, friction: Coulomb | None, periods:
     if not (math.isfinite(tol) and tol > 0.0):
         raise ValueError(f"tol={tol!r} is invalid: valid range is a finite tol > 0")
     full = CompliantOneDOF(p, gains, law=law, friction=friction)
-    candidates = {"rigid": OneDOF(p.with_(r=min(law.restitution, 1.0 - 1e-12)), gains),
+    candidates = {"rigid": OneDOF(rigid_stand_in(p, law), gains),
                   "compliant": dataclasses.replace(full, friction=None)}
     z = np.array(deviation, dtype=float)
     samples, log_norms = [], []
@@ -85,3 +98,91 @@ def choose_stop_fidelity(p, law: KelvinVoigt, friction: Coulomb | None, periods:
     if cheaper:
         reason += "; " + ", ".join(f"{n} refused ({estimates[n][1]:.3g})" for n in cheaper)
     return StopFidelity(name, reason, estimates)
+
+
+def simulate_stop(p, law: KelvinVoigt, friction: Coulomb | None, periods: int, *,
+                  deviation=(0.0, 0.0), gains=None, control_after: int | None = 0,
+                  stop: str = "auto", tol: float = 1e-3) -> tuple:
+    """(SimulationResult, StopFidelity, warning or None): the scene of ``periods``
+    periods from the Pi2 ``deviation`` on the stop model ``stop`` (``auto``: the cheapest
+    adequate for ``tol``, :func:`choose_stop_fidelity`; else one of
+    :data:`STOP_FIDELITIES`, checked against the same bound: the warning gives the
+    numbers where it exceeds ``tol``). ``rigid`` is :func:`.simulate.simulate` on
+    :func:`rigid_stand_in` (the exact flow), the compliant ones
+    :func:`~grazing_control.oscillator.contact.compliant_period_step` with the
+    correction on Pi2 (Eq. 28) from sample ``control_after`` on. The bound's probe has
+    the scene's controller where it acts from the first sample, else none (a probe of
+    20 periods; the controller's later start is not in it)."""
+    active = gains is not None and control_after is not None
+    if active and gains.delay != 0.0:
+        raise ValueError(f"delay={gains.delay!r} is invalid with a compliant stop: the "
+                         "compliant map takes the correction on Pi2 only (delay 0)")
+    choice, warning = simulate_stop_choice(
+        p, law, friction, periods, deviation=deviation,
+        gains=gains if active and control_after == 0 else None, stop=stop, tol=tol)
+    stop = choice.stop
+    if stop == "rigid":
+        res = simulate(rigid_stand_in(p, law), periods, deviation=deviation, gains=gains,
+                       control_after=control_after)
+        res.fidelity_reason = f"stop {choice.reason}; the exact flow of the rigid wall"
+        return res, choice, warning
+    return (_compliant_scene(p, law, friction if stop == "compliant_friction" else None,
+                             periods, deviation, gains if active else None, control_after,
+                             f"stop {choice.reason}"), choice, warning)
+
+
+def simulate_stop_choice(p, law: KelvinVoigt, friction: Coulomb | None, periods: int, *,
+                         deviation=(0.0, 0.0), gains=None, stop: str = "auto",
+                         tol: float = 1e-3) -> tuple:
+    """(StopFidelity, warning or None): ``auto`` the cheapest adequate stop model for the
+    scene (:func:`choose_stop_fidelity`), or the model ``stop`` names with its bound
+    checked against ``tol`` (the warning says by how much it exceeds it, and which model
+    is adequate); ``gains``: the controller from the first sample (None: the probe runs
+    uncontrolled)."""
+    if stop != "auto" and stop not in STOP_FIDELITIES:
+        raise ValueError(f"stop={stop!r} is invalid: valid values are auto, "
+                         f"{', '.join(STOP_FIDELITIES)}")
+    if stop == "compliant_friction" and friction is None:
+        raise ValueError("stop='compliant_friction' is invalid without friction: give a "
+                         "friction > 0 or choose compliant")
+    choice = choose_stop_fidelity(p, law, friction, max(periods, 1), tol,
+                                  deviation=deviation, gains=gains)
+    if stop == "auto":
+        return choice, None
+    bound = choice.estimates[stop][1]
+    reason = (f"{stop}: requested; its estimated Pi2 error {bound:.3g} over {periods} "
+              f"periods against the full stop")
+    warning = None
+    if not bound <= tol:
+        warning = (f"stop model {stop} is not adequate for this scene: its estimated Pi2 "
+                   f"error {bound:.3g} exceeds tol {tol:.3g} over {periods} periods "
+                   f"(one-period error {choice.estimates[stop][0]:.3g}); the cheapest "
+                   f"adequate is {choice.stop}")
+        reason += f" exceeds tol {tol:.3g} (the cheapest adequate: {choice.stop})"
+    else:
+        reason += f" <= tol {tol:.3g}"
+    return choice._replace(stop=stop, reason=reason), warning
+
+
+def _compliant_scene(p, law, friction, periods, deviation, gains, control_after,
+                     reason) -> SimulationResult:
+    """The Pi2 loop of :func:`.simulate.simulate` on the compliant period map."""
+    dx, dv = float(deviation[0]), float(deviation[1])
+    check_state(dx, dv, p.zeta, "the initial state")
+    dev = np.empty((periods, 2))
+    corr = np.zeros(periods)
+    counts = np.zeros(periods, dtype=int)
+    imps = []
+    for k in range(periods):
+        dev[k] = dx, dv
+        if gains is not None and k >= control_after:
+            corr[k] = gains.c1 * dx + gains.c2 * dv
+        seg = compliant_period_step(p, law, dx, dv, corr[k], friction=friction)
+        counts[k] = len(seg.contacts)
+        imps.extend((k, k * p.period + c.dt, c.phase, c.v_minus, c.v_plus)
+                    for c in seg.contacts)
+        dx, dv = seg.x, seg.v
+    return SimulationResult(p, gains, control_after if gains is not None else None,
+                            dev + np.array([p.x_ref, p.v_ref]), dev, corr, counts,
+                            np.array(imps, dtype=float).reshape(-1, 5), (dx, dv),
+                            "exact", reason)
