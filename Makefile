@@ -42,11 +42,12 @@ venv: $(VENV)/.stamp
 
 # --reruns: a test that fails is run again (up to twice) and reported as rerun; the node
 # tests run real processes over Fast DDS on a 2-core machine, where scheduling can make a
-# timing assertion miss. A deterministic failure still fails.
+# timing assertion miss. A deterministic failure still fails. --rerun-show-tracebacks: each
+# failed attempt's traceback is printed (a rerun is a race to find, not a pass).
 # One BLAS thread per process: the two workers use the two cores, and OpenBLAS's own
 # threads spinning beside them made tests/test_identification.py 2.4x slower at load 5-8.
 test: $(VENV)/.stamp
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -r fER -n 2 --dist loadgroup --reruns 2 --reruns-delay 1 tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -r fER -n 2 --dist loadgroup --reruns 2 --reruns-delay 1 --rerun-show-tracebacks tests
 
 demo: $(VENV)/.stamp
 	$(VENV)/bin/grazing demo --out out/demo
