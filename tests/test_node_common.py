@@ -14,8 +14,9 @@ import time
 import pytest
 
 from grazing_control.ros import launcher
-from grazing_control.ros.common import (NodeArguments, StartupError, node_key_matches,
-                                        parse_node_arguments)
+from grazing_control.ros.common import StartupError
+from grazing_control.ros.node_arguments import (NodeArguments, node_key_matches,
+                                                parse_node_arguments)
 from test_closed_loop import CONTROLLER, STUDY, new_domain
 
 

@@ -15,7 +15,8 @@ import pytest
 import yaml
 
 from grazing_control.cli.commands import main
-from grazing_control.ros.common import StartupError, parse_node_arguments
+from grazing_control.ros.common import StartupError
+from grazing_control.ros.node_arguments import parse_node_arguments
 from grazing_control.support import files
 from grazing_control.support.files import YamlFileError, read_yaml_file
 

@@ -76,7 +76,8 @@ def _build(spec: dict, statuses: dict, log):
     from rclpy.exceptions import ParameterException
 
     from grazing_control.oscillator.params import ParameterError
-    from .common import StartupError, _startup_message, check_overrides, parse_node_arguments
+    from .common import StartupError, _startup_message
+    from .node_arguments import check_overrides, parse_node_arguments
 
     nodes = {}
     for name in NODES:

@@ -148,9 +148,9 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
 from std_msgs.msg import Bool, String
 
 from .common import (LATCHED_QOS, READY_TOPIC, SIGNAL_POLL, StartupError, _startup_message,
-                     settle_heap,
-                     check_overrides, fast_exit_process, float_descriptor, init_ros,
-                     int_descriptor, string_descriptor, usage)
+                     fast_exit_process, float_descriptor, init_ros, int_descriptor,
+                     settle_heap, string_descriptor)
+from .node_arguments import check_overrides, usage
 from .diagnostics import OK, ERROR, WARN, Updater
 from .published import COMPLETE_TOPIC
 from .rig_boundary import RIG_TOPICS
