@@ -39,7 +39,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from grazing_control.ros.recorder_node import DEFAULT_TOPICS  # noqa: E402
+from grazing_control.ros.recording.topics import DEFAULT_TOPICS  # noqa: E402
 from grazing_control.ros.recording import BagWriter, message_definition, read_messages
 
 CLASSES = {

@@ -272,7 +272,7 @@ def test_the_shipped_layout_plots_fields_that_exist_on_the_channels_the_node_ser
     message path names a forwarded topic and a numeric field of its message type."""
     import json
 
-    from grazing_control.ros.recorder_node import _message_class
+    from grazing_control.ros.recording.topics import message_class
 
     layout = json.loads((ROOT / "config" / "live_layout.json").read_text())
     panels = set()
@@ -293,7 +293,7 @@ def test_the_shipped_layout_plots_fields_that_exist_on_the_channels_the_node_ser
     for path in paths:
         topic, _, field = path.partition(".")
         assert topic.lstrip("/") in LIVE_TOPICS, path
-        value = _message_class(LIVE_TOPICS[topic.lstrip("/")])()
+        value = message_class(LIVE_TOPICS[topic.lstrip("/")])()
         for part in field.split("."):
             name, _, index = part.partition("[")
             value = getattr(value, name)

@@ -31,7 +31,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from grazing_control.ros.common import LATCHED_QOS, READY_TOPIC
-from grazing_control.ros.recorder_node import DEFAULT_TOPICS, adapted_qos, parse_topics
+from grazing_control.ros.recording.topics import DEFAULT_TOPICS, adapted_qos, parse_topics
 from test_closed_loop import new_domain
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.ros.recording import (message_to_dict, read_messages,

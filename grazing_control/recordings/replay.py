@@ -284,7 +284,7 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
             def offered(topic):
                 """The QoS its publishers offer, as the recorder stores it (rosbag2's
                 offered_qos_profiles): the replay's own pi2 publisher, the controller's."""
-                from grazing_control.ros.recorder_node import qos_to_dict
+                from grazing_control.ros.recording.topics import qos_to_dict
 
                 return [qos_to_dict(i.qos_profile)
                         for i in node.get_publishers_info_by_topic(topic)]
@@ -496,7 +496,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
             pub = node.create_publisher(TwistStamped, "controller/velocity_correction", _qos())
             answer = TwistStamped()
             from grazing_control.ros.common import PUBLISHER_QOS
-            from grazing_control.ros.recorder_node import qos_to_dict
+            from grazing_control.ros.recording.topics import qos_to_dict
 
             # offered_qos_profiles as the recorder stores them: the simulator's data
             # publisher (PUBLISHER_QOS) and this replay's correction publisher

@@ -53,7 +53,7 @@ Parameters (all read-only)
     Address to listen on; ``0.0.0.0`` serves other machines too.
 ``topics`` (string array)
     Entries ``"name"`` for the topics above (and the recorder's, e.g. ``/clock``) or
-    ``"name pkg/msg/Type"`` (:func:`grazing_control.ros.recorder_node.parse_topics`).
+    ``"name pkg/msg/Type"`` (:func:`grazing_control.ros.recording.topics.parse_topics`).
 ``depth`` (integer, 10; range 1..10000)
     Keep-last depth of each subscription.
 ``backlog`` (integer, 1024; range 1..1000000)
@@ -78,7 +78,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .common import StartupError, int_descriptor, run_node, string_descriptor
-from .recorder_node import _message_class, parse_topics
+from .recording.topics import message_class, parse_topics
 from .recording import message_definition
 from grazing_control.oscillator.params import ParameterError
 
@@ -200,7 +200,7 @@ class LiveNode(Node):
                 message_encoding="cdr", context=self._context)
             self.forwarded[topic] = 0
             self._subs[topic] = self.create_subscription(
-                _message_class(kind), name,
+                message_class(kind), name,
                 lambda data, info, topic=topic: self._on_message(topic, data, info),
                 qos, raw=True)
         self.get_logger().info(
@@ -249,7 +249,7 @@ class LiveNode(Node):
         topics = parse_topics(entries)
         for kind in topics.values():
             try:
-                _message_class(kind)
+                message_class(kind)
                 message_definition(kind)
             except (ImportError, AttributeError, LookupError, ValueError):
                 raise ParameterError(f"topics: message type {kind!r} is not installed "
