@@ -548,7 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_basins_parser(sub)
 
     try:
-        from grazing_control.ros.launcher import add_run_arguments
+        from .run_arguments import add_run_arguments
     except ImportError:  # pragma: no cover - the launcher lands with the ROS issue
         add_run_arguments = None
     if add_run_arguments is not None:
