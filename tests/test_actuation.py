@@ -122,7 +122,7 @@ def test_new_parameters_refused_with_a_reason():
 
 def test_controller_validates_the_design_delay_and_the_launcher_passes_it_on(tmp_path):
     from grazing_control.ros.launcher import design_delay as _design_delay
-    from grazing_control.ros.controller_node import actuation_delay_from_values
+    from grazing_control.ros.controller_values import actuation_delay_from_values
 
     omega = OscillatorParams().omega
     assert actuation_delay_from_values({"actuation_delay": 6.0, "omega": omega}) == 6.0

@@ -23,7 +23,7 @@ from grazing_control.oscillator.control import Gains, correction
 from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml
 from grazing_control.ros import cdr
 from grazing_control.ros.common import DATA_QOS, stamp_from_seconds
-from grazing_control.ros.controller_node import ControlLaw, law_from_values
+from grazing_control.ros.controller_values import ControlLaw, law_from_values
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from test_closed_loop import CONTROLLER, Collector, new_domain
 
@@ -304,7 +304,7 @@ def test_a_recorder_started_late_still_gets_every_answer(controller, tmp_path):
 
 # ================================================= stream mode and the prediction
 def test_stream_settings_are_validated_naming_the_parameter():
-    from grazing_control.ros.controller_node import model_from_values, stream_from_values
+    from grazing_control.ros.controller_values import model_from_values, stream_from_values
     base = dict(zeta=P.zeta, r=P.r, omega=P.omega, pi2_offset=P.pi2_offset, delta_d=-5e-6,
                 pi2_source="stream", estimator="model", impact_source="stream",
                 sensor_noise=1e-4, state_period=0.0, model_noise=1e-2,
@@ -337,8 +337,8 @@ def test_stream_mode_without_delta_d_exits_with_one_line():
 def test_the_actuator_settings_are_validated_naming_the_parameter():
     """pulse_from_values: the actuator reaches the stream estimator; each bad value is
     one line naming its parameter and valid range."""
-    from grazing_control.ros.controller_node import (model_from_values, pulse_from_values,
-                                                     stream_from_values)
+    from grazing_control.ros.controller_values import (model_from_values, pulse_from_values,
+                                                       stream_from_values)
     ok = dict(pulse_width=0.1, force_limit=0.0, actuator_bandwidth=2.0, actuator_latency=0.2)
     width, limit, act = pulse_from_values(ok, P.omega, 3.0)
     assert (width, limit, act.time_constant, act.latency) == (0.1, math.inf, 0.5, 0.2)

@@ -78,7 +78,7 @@ def test_the_capture_rule_of_the_parameters():
     from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.dynamics.orbits.orbits import orbit_11
     from grazing_control.oscillator.control import Gains
-    from grazing_control.ros.controller_node import capture_from_values
+    from grazing_control.ros.controller_values import capture_from_values
 
     p = OscillatorParams(delta_d=-5e-6)
     g = Gains(degenerate_c1(p, -1.0), -1.0)

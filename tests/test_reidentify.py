@@ -15,7 +15,7 @@ from grazing_control.dynamics.estimation.reidentification import (REASONS, Reide
 from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.ros.controller_node import ControlLaw
+from grazing_control.ros.controller_values import ControlLaw
 from grazing_control.ros.reidentify import (REID_DEFAULTS, SWITCH_FIELDS, ReidentifySide,
                                             reid_from_values, switch_row)
 

@@ -67,7 +67,7 @@ from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
                           scene_overrides, sim_values_for_model, sim_values_for_rig)
 
-__all__ = ["RunResult", "run", "run_scene", "add_run_arguments", "claim_domain", "node_command",
+__all__ = ["RunResult", "run", "run_scene", "claim_domain", "node_command",
            "recorded_losses",
            "node_env", "MAX_DOMAIN_ID", "BOOTSTRAP",
            "start_node", "stop_nodes", "format_value", "SIM_MODULE", "CONTROLLER_MODULE",

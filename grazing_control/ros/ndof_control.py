@@ -10,7 +10,7 @@ X** the grazing orbit's state on Pi2: the periodic response at the section phase
 ``NdofFlow.particular(tau2)`` (docs/theory_ndof.md, "Kick design"; the kick of
 :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`). The switch-on (``enable_after``,
 ``~/enable``), the saturation and the stale-sample rules are the 1-DOF controller's
-(:class:`grazing_control.ros.controller_node.ControlLaw`); the 1-DOF law's parameters
+(:class:`grazing_control.ros.controller_values.ControlLaw`); the 1-DOF law's parameters
 (c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults and the stream mode is not
 built for n-DOF: either is refused with the reason. The section data the design's
 parameter file carries with the gains (``n``, ``i_a``, ``omega``, ``pi2_offset``:
@@ -50,7 +50,7 @@ SECTION_DATA = {"n": -1, "i_a": -1, "omega": study_omega(),
 class NdofLaw:
     """Delta v = k^T (X - X**) for a sample (x, v) of n positions and n velocities.
 
-    The mixin of :class:`grazing_control.ros.controller_node.ControlLaw`'s ``_law``:
+    The mixin of :class:`grazing_control.ros.controller_values.ControlLaw`'s ``_law``:
     ``gains`` is k (2n,), ``x_ref``, ``v_ref`` are X**'s halves.
     """
 

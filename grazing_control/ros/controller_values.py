@@ -1,0 +1,304 @@
+"""The controller's law and its scene, read from the node's parameter values (no ROS): Eq. 28
+with its switch, saturation and sample bookkeeping (:class:`ControlLaw`, the n-DOF law
+k^T (X - X**) beside it), the model the controller predicts with, the stream estimator,
+the pulse the plant acts, the capture rule and the actuation delay; each ``*_from_values``
+validates its values with one line naming the parameter (ParameterError)."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
+from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+from grazing_control.dynamics.estimation.section_state import ESTIMATORS, actuator_legs
+from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator,
+                                                        pulse_shape)
+from grazing_control.dynamics.simulation.actuator import Actuator
+from grazing_control.oscillator.control import Gains, correction
+from grazing_control.oscillator.params import OscillatorParams, ParameterError
+from grazing_control.plant.ndof_settings import load_model_file
+from grazing_control.plant.settings import MAX_BANDWIDTH, below
+
+from .model_watch import WATCH_DEFAULTS, watch_from_values
+from .ndof_control import NdofLaw
+
+__all__ = ["ControlLaw", "NdofControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
+           "model_from_values", "stream_from_values", "pulse_from_values",
+           "capture_from_values", "actuation_delay_from_values", "below_period", "model_omega"]
+
+#: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
+PI2_SOURCES = ("sample", "stream")
+
+
+class ControlLaw:
+    """Eq. 28 with a switch, a saturation and the sample bookkeeping (no ROS).
+
+    Parameters
+    ----------
+    gains : Gains
+    x_ref, v_ref : float
+        X** on Pi2.
+    enable_after : int
+        First sample index (from 0) that is controlled; -1: only by :meth:`enable`.
+    saturation : float
+        Limit on |Delta v|, > 0 (inf: none).
+    """
+
+    #: Answered stamps remembered to recognise duplicates.
+    RECENT = 64
+
+    def __init__(self, gains: Gains, x_ref: float, v_ref: float, enable_after: int,
+                 saturation: float):
+        self.configure(gains, x_ref, v_ref, enable_after, saturation)
+        self.count = 0          # samples answered since the start or the last reset
+        self.newest = None      # stamp key of the newest sample answered
+        self.recent = deque(maxlen=self.RECENT)   # stamp keys of the last answers
+        self.out_of_order = 0   # samples answered though older than the newest
+        self._before_reset = None   # (count, newest, recent) before a t = 0 sample
+        self.forced = None      # None: follow enable_after; True/False: set by ~/enable
+
+    def configure(self, gains, x_ref, v_ref, enable_after, saturation) -> None:
+        self.gains, self.x_ref, self.v_ref = gains, x_ref, v_ref
+        self.enable_after, self.saturation = enable_after, saturation
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the next sample is controlled."""
+        if self.forced is not None:
+            return self.forced
+        return 0 <= self.enable_after <= self.count
+
+    def answer(self, key: tuple, x: float, v: float):
+        """Delta v for the sample with stamp ``key``; None when it must not be answered.
+
+        None for a duplicate (a stamp among the last :attr:`RECENT` answered). The
+        result may be non-finite (overflow): the caller must not publish it.
+        """
+        if self._before_reset is not None:
+            count, newest, recent = self._before_reset
+            self._before_reset = None
+            if key > newest:        # the stream went on: that t = 0 sample was a stray
+                self.count, self.newest = count + self.count, newest
+                self.recent = recent
+                self.recent.append((0, 0))
+        if key == (0, 0) and self.newest is not None:
+            # back to t = 0: the simulator was reset (confirmed by the next sample)
+            self._before_reset = (self.count, self.newest, self.recent)
+            self.count = 0
+            self.newest = None
+            self.recent = deque(maxlen=self.RECENT)
+        if key in self.recent:
+            return None
+        if self.newest is not None and key < self.newest:
+            self.out_of_order += 1
+        dv = 0.0
+        if self.enabled:
+            dv = self._law(x, v)
+            if abs(dv) > self.saturation:
+                dv = math.copysign(self.saturation, dv)
+        self.newest = key if self.newest is None else max(self.newest, key)
+        self.recent.append(key)
+        self.count += 1
+        return dv
+
+    def preview(self, x: float, v: float) -> float:
+        """The correction the next sample would get if it were (x, v): Eq. 28 with the
+        saturation when the next sample is controlled, else 0 (issue 16 section 3)."""
+        if not self.enabled:
+            return 0.0
+        dv = self._law(x, v)
+        if abs(dv) > self.saturation:
+            dv = math.copysign(self.saturation, dv)
+        return dv
+
+    def _law(self, x: float, v: float) -> float:
+        """Eq. 28 before the saturation."""
+        return correction(self.gains, x, v, self.x_ref, self.v_ref)
+
+
+class NdofControlLaw(NdofLaw, ControlLaw):
+    """:class:`ControlLaw` with the n-DOF law Delta v = k^T (X - X**) (issue 17,
+    :mod:`grazing_control.ros.ndof_control`): ``gains`` k, ``x_ref``/``v_ref`` X**'s
+    positions and velocities (arrays)."""
+
+
+#: Largest |c1|, |c2| accepted (the design's search limit, dynamics.design.gains.C2_LIMIT).
+GAIN_LIMIT = 1e6
+
+
+def law_from_values(values: dict) -> ControlLaw:
+    """Validate the controller's parameters into a :class:`ControlLaw` (ParameterError).
+
+    |c1|, |c2| <= GAIN_LIMIT: a gain of 1e308 passed the finiteness check and the next
+    correction (inf) stopped the simulator (issue 21); the design's admissible sets end
+    within 1e6 (dynamics.design.gains.C2_LIMIT).
+    """
+    for name in ("c1", "c2"):
+        if not abs(float(values[name])) <= GAIN_LIMIT:
+            raise ParameterError(f"{name}={values[name]!r} is invalid: valid range is "
+                                 f"|{name}| <= {GAIN_LIMIT:g}")
+    gains = Gains(values["c1"], values["c2"])
+    x_ref, v_ref = float(values["x_ref"]), float(values["v_ref"])
+    if math.isnan(x_ref) or math.isnan(v_ref):
+        p = OscillatorParams(zeta=values["zeta"], r=values["r"], omega=values["omega"],
+                             pi2_offset=values["pi2_offset"])
+        x_ref = p.x_ref if math.isnan(x_ref) else x_ref
+        v_ref = p.v_ref if math.isnan(v_ref) else v_ref
+    for name, value in (("x_ref", x_ref), ("v_ref", v_ref)):
+        if not math.isfinite(value):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite real "
+                                 "number, or NaN to compute X** from the model parameters")
+    enable_after = int(values["enable_after"])
+    if enable_after < -1:
+        raise ParameterError(f"enable_after={enable_after} is invalid: valid range is >= 0, "
+                             "or -1 for only through ~/enable")
+    saturation = float(values["saturation"])
+    if not saturation > 0.0:
+        raise ParameterError(f"saturation={saturation!r} is invalid: valid range is "
+                             "saturation > 0 (inf: no limit)")
+    stale_after = float(values["stale_after"])
+    if not stale_after > 0.0:
+        raise ParameterError(f"stale_after={stale_after!r} is invalid: valid range is "
+                             "stale_after > 0 (inf: no age limit)")
+    return ControlLaw(gains, x_ref, v_ref, enable_after, saturation)
+
+
+def model_from_values(values: dict):
+    """The plant model (with Delta d) for the estimator and the prediction, or None when
+    ``delta_d`` is NaN (no model: no prediction, and no stream mode)."""
+    delta_d = float(values["delta_d"])
+    if math.isnan(delta_d):
+        return None
+    if not math.isfinite(delta_d):
+        raise ParameterError(f"delta_d={delta_d!r} is invalid: valid range is a finite real "
+                             "number (the plant's Delta d), or NaN for no model")
+    return OscillatorParams(zeta=values["zeta"], r=values["r"], omega=values["omega"],
+                            delta_d=delta_d, pi2_offset=values["pi2_offset"])
+
+
+def stream_from_values(values: dict, model, pulse: tuple = (0.0, math.inf)):
+    """The :class:`StreamEstimator` of ``pi2_source`` stream, None for ``sample``
+    (ParameterError naming the parameter and its valid values); the augmented filter
+    (:class:`AugmentedStreamEstimator`) when the model watch is on
+    (:mod:`grazing_control.ros.model_watch`). ``pulse``: (width, force limit) of the
+    plant's corrections in model units (a rig file's actuator; (0, inf): a kick)."""
+    source = values["pi2_source"]
+    if source not in PI2_SOURCES:
+        raise ParameterError(f"pi2_source={source!r} is invalid: valid values are "
+                             f"{', '.join(PI2_SOURCES)}")
+    if values["estimator"] not in ESTIMATORS:
+        raise ParameterError(f"estimator={values['estimator']!r} is invalid: valid values "
+                             f"are {', '.join(ESTIMATORS)}")
+    if values["impact_source"] not in IMPACT_SOURCES:
+        raise ParameterError(f"impact_source={values['impact_source']!r} is invalid: valid "
+                             f"values are {', '.join(IMPACT_SOURCES)}")
+    floor = float(values["model_noise"])
+    if not (math.isfinite(floor) and floor >= 0.0):
+        raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "
+                             "model_noise >= 0 (process noise per period, in sensor_noise)")
+    for name in ("sensor_noise", "state_period"):
+        value = float(values[name])
+        if not (math.isfinite(value) and value >= 0.0):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
+                                 f"{name} >= 0")
+    watch = watch_from_values({**WATCH_DEFAULTS, **values})    # refused in sample mode
+    if source == "sample":
+        return None
+    if model is None:
+        raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
+                             "the plant's finite Delta d (the estimator's model needs the wall)")
+    act = pulse[2] if len(pulse) > 2 else None
+    if watch is not None:       # the augmented filter (ros/model_watch.py, issue 29)
+        return AugmentedStreamEstimator(
+            model, values["sensor_noise"], values["impact_source"], values["state_period"],
+            floor, bool(values["answer_after_section"]), values.get("answer_lead", 0.0),
+            **watch[0], pulse_width=pulse[0], force_limit=pulse[1], actuator=act)
+    return StreamEstimator(model, values["estimator"], values["sensor_noise"],
+                           values["impact_source"], values["state_period"], floor,
+                           bool(values["answer_after_section"]),
+                           values.get("answer_lead", 0.0), pulse_width=pulse[0],
+                           force_limit=pulse[1], actuator=act)
+
+
+def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
+    """(width, force limit, actuator or None) of the plant's corrections from the
+    :data:`PULSE_KEYS` (model units, as sim_node's): the pulse (``pulse_width`` 0: a
+    kick) and the first-order actuator between its command and the force
+    (``actuator_bandwidth`` 1 / tau_a, 0: ideal; ``actuator_latency``), which the stream
+    estimator and the prediction integrate (dynamics.estimation.section_state.trajectory).
+    ParameterError, one line naming the parameter and its valid range."""
+    period = 2.0 * math.pi / omega
+    width, limit = pulse_shape(OscillatorParams(omega=omega), values["pulse_width"],
+                               values["force_limit"])
+    bw, lat = float(values["actuator_bandwidth"]), float(values["actuator_latency"])
+    if not (bw == 0.0 or 1.0 / MAX_BANDWIDTH <= bw <= MAX_BANDWIDTH):
+        raise ParameterError(f"actuator_bandwidth={bw!r} is invalid: valid range is 0 (ideal) "
+                             f"or 1e-12 <= actuator_bandwidth <= {MAX_BANDWIDTH:g}")
+    if not (math.isfinite(lat) and lat >= 0.0):
+        raise ParameterError(f"actuator_latency={lat!r} is invalid: valid range is a finite "
+                             "actuator_latency >= 0")
+    act = Actuator(1.0 / bw if bw else 0.0, lat)
+    if act.ideal:
+        return width, limit, None
+    if width == 0.0:
+        raise ParameterError("pulse_width=0.0 is invalid with actuator_bandwidth or "
+                             f"actuator_latency: valid range is 0 < pulse_width < T = {period!r}")
+    actuator_legs(None, 0.0, delay, period, width, limit, act)     # the latency: named
+    return width, limit, act
+
+
+def capture_from_values(values: dict, model, delay: float):
+    """The :class:`CaptureRule` of ``capture`` (None when off): no correction until the
+    estimate is within ``capture_radius`` of the controlled orbit's Pi2 state z**
+    (0: the documented CAPTURE_RADIUS sqrt(|Delta d|), docs/theory_capture.md), then
+    Eq. 28 (latched). Stream mode only (the estimate's covariance says it is one);
+    ParameterError naming the parameter, or the missing controlled orbit."""
+    radius = float(values["capture_radius"])
+    if not (math.isfinite(radius) and radius >= 0.0):
+        raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a finite "
+                             "capture_radius >= 0 (0: 5 sqrt(|delta_d|))")
+    if not values["capture"]:
+        return None
+    if values["pi2_source"] != "stream" or model is None:
+        raise ParameterError(f"capture=True is invalid with pi2_source={values['pi2_source']}: "
+                             "valid only with pi2_source=stream and a model (delta_d)")
+    from grazing_control.dynamics.orbits.orbits import orbit_11
+
+    gains = Gains(values["c1"], values["c2"], delay)
+    try:
+        target = orbit_11(model, gains).pi2_deviation
+    except (ValueError, ArithmeticError, RuntimeError) as exc:
+        raise ParameterError(f"capture=True is invalid here: no controlled 1/1 orbit of the "
+                             f"gains at delta_d={model.delta_d!r} ({exc})") from None
+    if radius == 0.0:
+        return CaptureRule.for_wall(target, model.delta_d, CAPTURE_RADIUS)
+    return CaptureRule(target, radius)
+
+
+def actuation_delay_from_values(values: dict) -> float:
+    """The design's actuation delay, 0 <= delay < T = 2 pi / omega (ParameterError)."""
+    delay = float(values.get("actuation_delay", 0.0))
+    period = 2.0 * math.pi / float(values["omega"])
+    if not (math.isfinite(delay) and 0.0 <= delay < period):
+        raise ParameterError(f"actuation_delay={delay!r} is invalid: valid range is "
+                             f"0 <= actuation_delay < T = {period!r} (simulation time)")
+    return delay
+
+
+def below_period(omega: float) -> float:
+    """The largest actuation delay below T = 2 pi / omega, the same expression as
+    :func:`actuation_delay_from_values` (the described range's end; inf where omega is
+    not > 0: refused by name at start)."""
+    return below(2.0 * math.pi / float(omega)) if omega > 0.0 else math.inf
+
+
+def model_omega(model_file: str, omega: float) -> float:
+    """The forcing frequency of the scene: the n-DOF model file's, else ``omega``
+    (also where the file cannot be read: refused by name when the law is built)."""
+    if not model_file:
+        return omega
+    try:
+        return load_model_file(model_file).omega
+    except ParameterError:
+        return omega
