@@ -11,6 +11,14 @@ over the estimators of :mod:`grazing_control.dynamics.estimation.section_state`;
 feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
 through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
 the plant layer lies above this one, so the caller passes it in).
+
+With an n-DOF model (:class:`~grazing_control.oscillator.ndof.model.NdofModel`) the
+samples are the position (and maybe velocity) of one coordinate ``coordinate`` and the
+estimator is the model filter over the exact n-DOF map alone
+(docs/theory_estimation.md, (E11)): the estimate is 2n-dimensional; where the filter
+has no state at the section before (the start, or a fit that failed) it starts there
+from the uninformative prior z = 0, (``NDOF_PRIOR``)^2 I, and where that fails too the
+section's estimate is that prior (source ``prior``: the answer k^T z is then 0).
 """
 
 from __future__ import annotations
@@ -23,6 +31,8 @@ import numpy as np
 
 from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
                          deviation_samples, detect_impact, model_update, nearest_estimate,
@@ -33,6 +43,9 @@ __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", 
 
 #: Where impacts come from: the rig's impact sensor, or detection in the stream.
 IMPACT_SOURCES = ("topic", "stream")
+#: The n-DOF filter's prior std at a (re)start: far wider than any Pi2 deviation near
+#: grazing, so that the first period's samples alone decide (E11).
+NDOF_PRIOR = 1.0
 #: Tolerance on times, relative to T: a sample within it of t_k is at t_k.
 _TOL = 1e-9
 #: A sample more than this many periods after the newest is a stray unless the next
@@ -94,7 +107,17 @@ class StreamEstimator:
                  impact_source: str = "stream", sample_period: float = 0.0,
                  floor: float = 1e-2, after_section: bool = False, lead: float = 0.0, *,
                  pulse_width: float = 0.0, force_limit: float = math.inf, actuator=None,
-                 kernel: bool | None = None):
+                 kernel: bool | None = None, coordinate: int = 0):
+        if isinstance(p, NdofModel):
+            if estimator != "model":
+                raise ParameterError(f"estimator={estimator!r} is invalid with an n-DOF "
+                                     "model: valid is model (E11)")
+            if isinstance(coordinate, bool) or not isinstance(coordinate, int) \
+                    or not 0 <= coordinate < p.n:
+                raise ParameterError(f"sensor_coordinate={coordinate!r} is invalid: valid "
+                                     f"range is 0 <= sensor_coordinate < n = {p.n}")
+        self.coordinate = coordinate
+        self.flow = NdofFlow.of(p) if isinstance(p, NdofModel) else None
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -244,6 +267,8 @@ class StreamEstimator:
         """The estimate of section k from the samples received (model, else arc, else
         nearest, else the last position with an unknown velocity)."""
         p, T = self.p, self.p.period
+        if isinstance(p, NdofModel):
+            return self._ndof_model(k)
         tk = k * T
         if self.estimator == "model":
             est = self._model(k)
@@ -345,6 +370,34 @@ class StreamEstimator:
             return None
         self.filter, self.filter_k = new, k
         return Estimate(new.z, new.cov, "model")
+
+
+    def _ndof_model(self, k: int) -> Estimate:
+        """Section k of the model filter over the n-DOF map (module docstring)."""
+        p, T = self.p, self.p.period
+        start = FilterState(tuple(0.0 for _ in range(2 * p.n)),
+                            NDOF_PRIOR ** 2 * np.eye(2 * p.n), 0)
+        prior = self.filter if self.filter is not None and self.filter_k == k - 1 else start
+        s, x, v = self._window(k, (k - 1) * T + _TOL * T)
+        if k > 0 and s.size:
+            s = s + T
+            # the deviations of the measured coordinate from X_p(tau2 + omega s)
+            e = self.flow.amplitudes[self.coordinate] * np.exp(
+                1j * (self.flow.tau2 + p.omega * s))
+            y, w = x - e.real, v - (1j * p.omega * e).real
+            at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
+            try:
+                new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
+                                            at - (k - 1) * T, floor=self.floor,
+                                            coordinate=self.coordinate)
+                if chi2 <= n + CHI2_SIGMAS * math.sqrt(2.0 * n):
+                    self.filter, self.filter_k = new, k
+                    return Estimate(new.z, new.cov, "model")
+            except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+                pass
+            self.resets += 1
+        self.filter, self.filter_k = start, k
+        return Estimate(start.z, start.cov, "prior")
 
 
 @dataclass
