@@ -96,7 +96,9 @@ simulator applies it, the controller validates and reports it: docs/nodes.md,
 model, NaN: none), pi2_source, estimator, impact_source, sensor_noise, state_period,
 model_noise (stream mode, above); model_file and gains (an n-DOF scene, issue 17:
 Delta v = k^T (X - X**) on samples with n joints, :mod:`grazing_control.ros.ndof_control`;
-n, i_a, mu: the design file's section data, checked against the model). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+n, i_a, mu: the design file's section data, checked against the model; with
+pi2_source stream the model filter over the n-DOF map reads coordinate
+sensor_coordinate of the stream, issue 32). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
 """
 
