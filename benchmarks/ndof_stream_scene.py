@@ -36,7 +36,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design, write_gain_yaml  # noqa: E402
+from grazing_control.dynamics.design.ndof_design import (evaluate_design,  # noqa: E402
+                                                       write_gain_yaml)
 from grazing_control.dynamics.design.noise import (ndof_filter_covariance,  # noqa: E402
                                                    ndof_noise_covariance)
 from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402

@@ -16,9 +16,11 @@ With an n-DOF model (:class:`~grazing_control.oscillator.ndof.model.NdofModel`) 
 samples are the position (and maybe velocity) of one coordinate ``coordinate`` and the
 estimator is the model filter over the exact n-DOF map alone
 (docs/theory_estimation.md, (E11)): the estimate is 2n-dimensional; where the filter
-has no state at the section before (the start, or a fit that failed) it starts there
-from the uninformative prior z = 0, (``NDOF_PRIOR``)^2 I, and where that fails too the
-section's estimate is that prior (source ``prior``: the answer k^T z is then 0).
+has no state at the section before (the start) or its fit fails (a kick that acted
+otherwise than known, a jump), the period's samples are fitted from the uninformative
+prior (``NDOF_PRIOR``)^2 I about the filter's state (z = 0 at the start); where that
+fails too the estimate is the filter's state carried one period through the model
+(source ``predicted``), or z = 0 at the start (source ``prior``: the answer is 0).
 """
 
 from __future__ import annotations
@@ -373,31 +375,45 @@ class StreamEstimator:
 
 
     def _ndof_model(self, k: int) -> Estimate:
-        """Section k of the model filter over the n-DOF map (module docstring)."""
+        """Section k of the model filter over the n-DOF map (module docstring): the fit of
+        the period's samples from the filter's state at k - 1, else from the
+        uninformative prior; where neither fits, the filter's state carried one period
+        through the model (with the known kick) with the uninformative covariance, or
+        the prior itself at the start."""
         p, T = self.p, self.p.period
-        start = FilterState(tuple(0.0 for _ in range(2 * p.n)),
-                            NDOF_PRIOR ** 2 * np.eye(2 * p.n), 0)
-        prior = self.filter if self.filter is not None and self.filter_k == k - 1 else start
+        wide = NDOF_PRIOR ** 2 * np.eye(2 * p.n)
+        start = FilterState(tuple(0.0 for _ in range(2 * p.n)), wide, 0)
+        held = self.filter if self.filter is not None and self.filter_k == k - 1 else None
         s, x, v = self._window(k, (k - 1) * T + _TOL * T)
+        at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
         if k > 0 and s.size:
             s = s + T
             # the deviations of the measured coordinate from X_p(tau2 + omega s)
             e = self.flow.amplitudes[self.coordinate] * np.exp(
                 1j * (self.flow.tau2 + p.omega * s))
             y, w = x - e.real, v - (1j * p.omega * e).real
-            at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
-            try:
-                new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
-                                            at - (k - 1) * T, floor=self.floor,
-                                            coordinate=self.coordinate)
+            for prior in (held, FilterState(start.z if held is None else held.z, wide, 0)):
+                if prior is None:
+                    continue
+                try:
+                    new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
+                                                at - (k - 1) * T, floor=self.floor,
+                                                coordinate=self.coordinate)
+                except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+                    continue
                 if chi2 <= n + CHI2_SIGMAS * math.sqrt(2.0 * n):
                     self.filter, self.filter_k = new, k
                     return Estimate(new.z, new.cov, "model")
-            except (ValueError, np.linalg.LinAlgError, ArithmeticError):
-                pass
             self.resets += 1
-        self.filter, self.filter_k = start, k
-        return Estimate(start.z, start.cov, "prior")
+        z, source = start.z, "prior"
+        if held is not None:
+            try:
+                z = tuple(float(a) for a in predict_section(p, held.z, dv, at - (k - 1) * T))
+                source = "predicted"
+            except (ValueError, ArithmeticError):
+                pass
+        self.filter, self.filter_k = FilterState(z, wide, 0), k
+        return Estimate(z, wide, source)
 
 
 @dataclass
