@@ -1037,18 +1037,18 @@ class ControllerNode(Node):
                 self.reid.answered(k, 0.0 if dv is None else dv)
 
     def _answer_ndof_estimate(self, k: int, key: tuple, est) -> None:
-        """Section k of an n-DOF stream: the estimate X^ = X** + z^ on controller/estimate
-        (JointState, n joints: positions, velocities, effort the 2n variances) and the
-        answer k^T (X^ - X**)."""
+        """Section k of an n-DOF stream: the answer k^T (X^ - X**), then (as in 1-DOF)
+        the estimate X^ = X** + z^ on controller/estimate (JointState, n joints:
+        positions, velocities, effort the 2n variances)."""
         ndof = self.ndof
         X = np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z, dtype=float)
         n = ndof.model.n
+        dv = self._answer(key, X[:n], X[n:])
         msg = JointState(name=[f"mass{i}" for i in range(n)],
                          position=X[:n].tolist(), velocity=X[n:].tolist(),
                          effort=np.diag(est.cov).tolist())
         msg.header.stamp.sec, msg.header.stamp.nanosec = key
         self.pub_estimate.publish(msg)
-        dv = self._answer(key, X[:n], X[n:])
         self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
 
     def _capture_factor(self, k: int, est) -> float:

@@ -180,4 +180,5 @@ def ndof_stream_from_values(values: dict, ndof: NdofController):
                            float(values.get("state_period", 0.0)), floor,
                            bool(values.get("answer_after_section", False)),
                            float(values.get("answer_lead", 0.0)),
+                           kernel=False,     # the n-DOF motion is the core's (E11)
                            coordinate=int(values.get("sensor_coordinate", 0)))
