@@ -48,13 +48,14 @@ from grazing_control.studies.ndof.scene import stream_loop  # noqa: E402
 
 def core_loop(model_file, model, gains, a, seed: int):
     """The seeded closed loop in one process (studies.ndof.scene.stream_loop): (Pi2
-    deviations z_k, impacts per period, estimator resets, seconds per period)."""
+    deviations z_k, impacts per period, estimator resets, seconds per period, the
+    estimates' errors)."""
     t0 = time.perf_counter()
     run = stream_loop(model_file, gains, delta_d=model.delta_d, delay=a.delay,
                       sigma=a.sigma, rate=a.rate, coordinate=a.coordinate,
                       periods=a.periods, control_after=a.on, seed=seed)
     return (run.truth, run.impacts_per_period, run.resets,
-            (time.perf_counter() - t0) / a.periods)
+            (time.perf_counter() - t0) / a.periods, run.estimate - run.truth)
 
 
 def node_scene(model_file, model, design, a, tmp: Path):
@@ -133,14 +134,16 @@ def main(argv=None):
     print(f"predicted std     {np.array2string(predicted, precision=4)}")
     ratios, secs = [], []
     for seed in range(a.seeds):
-        z, counts, resets, per = core_loop(a.model, model, design.gains, a, seed)
+        z, counts, resets, per, errors = core_loop(a.model, model, design.gains, a, seed)
         std, mean = spread(z, orbit, a)
+        filt = errors[a.on + a.settle:].std(axis=0)
         ratios.append(std / predicted)
         secs.append(per)
         print(f"core seed {seed}: std {np.array2string(std, precision=4)} ratio "
               f"{np.array2string(std / predicted, precision=3)} impacts/period (last "
               f"{a.periods - a.on - a.settle}) {sorted(set(counts[a.on + a.settle:].tolist()))}"
-              f" resets {resets}")
+              f" resets {resets}; filter error std {np.array2string(filt, precision=3)} "
+              f"(predicted {np.array2string(a.sigma * np.sqrt(np.diag(R)), precision=3)})")
     ratios = np.array(ratios)
     out["core"] = {"ratio_mean": ratios.mean(axis=0).tolist(), "ratio_min": ratios.min().item(),
                    "ratio_max": ratios.max().item(), "seconds_per_period": float(np.mean(secs))}
