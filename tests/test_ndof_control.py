@@ -69,6 +69,12 @@ def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
     # and NdofMap with the gains (its kick is k^T z of the same state)
     step = NdofMap(c.model, K).step(z)
     np.testing.assert_allclose(eng.z, step.state, rtol=0, atol=1e-14)
+    # with the kick 1.0 after the sample (what a realtime simulator substitutes at a
+    # missed deadline of a delayed scene, issue 32): NdofMap's delayed step
+    xn, vn = c.predict(X[:2], X[2:], dv, 1.0)
+    delayed = NdofMap(c.model, K, 1.0).step(z).state
+    np.testing.assert_allclose(np.concatenate([xn, vn]) - np.concatenate([c.x_ref, c.v_ref]),
+                               delayed, rtol=0, atol=1e-14)
 
 
 def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
