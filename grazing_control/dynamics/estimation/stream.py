@@ -373,7 +373,6 @@ class StreamEstimator:
         self.filter, self.filter_k = new, k
         return Estimate(new.z, new.cov, "model")
 
-
     def _ndof_model(self, k: int) -> Estimate:
         """Section k of the model filter over the n-DOF map (module docstring): the fit of
         the period's samples from the filter's state at k - 1, else from the
