@@ -29,14 +29,17 @@ def joint_names(n: int) -> list:
 def ndof_joint_state(ev: NdofEvent, names: list):
     """sensor_msgs/JointState of an n-DOF state (issue 17): stamp = ev.t, one joint per
     coordinate (``names``), position [x_0 .. x_{n-1}], velocity [v_0 .. v_{n-1}], effort
-    [cos tau] (Pi1, Pi2) or [cos tau, sin tau] (the state stream), as the 1-DOF messages."""
+    [cos tau] (Pi1, Pi2) or [cos tau, sin tau] (the state stream), as the 1-DOF messages;
+    a position-only sensor's stream sample has no velocity."""
     from sensor_msgs.msg import JointState
 
     msg = JointState()
     msg.header.stamp.sec, msg.header.stamp.nanosec = cdr.stamp_parts(ev.t)
     msg.name = names
     msg.position = [float(x) for x in ev.x]
-    msg.velocity = [float(v) for v in ev.v]
+    # a position-only sensor's stream (NaN velocities): no velocity, as the 1-DOF stream
+    msg.velocity = ([] if ev.kind == "state" and all(math.isnan(v) for v in ev.v)
+                    else [float(v) for v in ev.v])
     msg.effort = ([math.cos(ev.phase), math.sin(ev.phase)] if ev.kind == "state"
                   else [math.cos(ev.phase)])
     return msg

@@ -69,6 +69,12 @@ def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
     # and NdofMap with the gains (its kick is k^T z of the same state)
     step = NdofMap(c.model, K).step(z)
     np.testing.assert_allclose(eng.z, step.state, rtol=0, atol=1e-14)
+    # with the kick 1.0 after the sample (what a realtime simulator substitutes at a
+    # missed deadline of a delayed scene, issue 32): NdofMap's delayed step
+    xn, vn = c.predict(X[:2], X[2:], dv, 1.0)
+    delayed = NdofMap(c.model, K, 1.0).step(z).state
+    np.testing.assert_allclose(np.concatenate([xn, vn]) - np.concatenate([c.x_ref, c.v_ref]),
+                               delayed, rtol=0, atol=1e-14)
 
 
 def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
@@ -87,7 +93,6 @@ def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
     ({"c1": -1.0}, "c1=-1.0 is invalid with model_file"),
     ({"x_ref": 0.5}, "x_ref=0.5 is invalid with model_file"),
     ({"zeta": 0.05}, "zeta=0.05 is invalid with model_file"),
-    ({"pi2_source": "stream"}, "pi2_source='stream' is invalid with model_file"),
     ({"n": 3}, "n=3 is invalid with model_file=.*valid is the model's 2"),
     ({"i_a": 0}, "i_a=0 is invalid .* valid is the model's 1"),
     ({"omega": 0.8}, "omega=0.8 is invalid .* valid is the model's 0.275"),
@@ -95,6 +100,31 @@ def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
 def test_one_dof_parameters_and_another_models_design_are_refused(values, text):
     with pytest.raises(ParameterError, match=text):
         ndof_controller_from_values(values, SCENE, K.tolist())
+
+
+@pytest.mark.parametrize("values, text", [
+    ({"delta_d": math.nan}, "delta_d=nan is invalid with pi2_source=stream"),
+    ({"estimator": "arc"}, "estimator='arc' is invalid with an n-DOF model: valid is model"),
+    ({"impact_source": "topic"}, "impact_source='topic' is invalid with model_file"),
+    ({"sensor_coordinate": 2}, "sensor_coordinate=2 is invalid: valid range is 0 <= "
+                               "sensor_coordinate < n = 2"),
+    ({"capture": True}, "capture=True is invalid with model_file"),
+    ({"sensor_noise": 0.0}, "sensor_noise=0.0 is invalid")])
+def test_the_n_dof_stream_estimator_refuses_what_it_does_not_do(values, text):
+    """pi2_source stream with model_file (issue 32): the model filter over the n-DOF map
+    of one coordinate; what it needs or does not do is refused with the reason."""
+    from grazing_control.ros.ndof_control import ndof_stream_from_values
+
+    base = {"pi2_source": "stream", "estimator": "model", "sensor_noise": 1e-4,
+            "delta_d": -1e-3, "state_period": 0.1}
+    c = ndof_controller_from_values({"delta_d": values.get("delta_d", -1e-3)}, SCENE,
+                                    K.tolist())
+    with pytest.raises(ParameterError, match=text):
+        ndof_stream_from_values({**base, **values}, c)
+    c = ndof_controller_from_values({"delta_d": -1e-3}, SCENE, K.tolist())
+    est = ndof_stream_from_values({**base, "sensor_coordinate": 1}, c)
+    assert est.coordinate == 1 and est.p is c.model
+    assert ndof_stream_from_values({"pi2_source": "sample"}, c) is None
 
 
 def test_the_designs_parameter_file_is_accepted(tmp_path):

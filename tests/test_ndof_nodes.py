@@ -14,6 +14,7 @@ The references are the core's: the engine replayed with the recorded corrections
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import subprocess
 from pathlib import Path
@@ -287,3 +288,97 @@ def test_an_uncontrolled_n_dof_scene_is_analysed_in_one_report_line(tmp_path, ca
     assert cli.main(["analyze", str(bag), "--out", str(tmp_path / "report")]) in (0, None)
     out = capsys.readouterr().out
     assert "uncontrolled (the controller never acted), 40 samples" in out, out
+
+
+STREAM_DD, STREAM_MU, STREAM_DELAY, SIGMA, RATE = -1e-3, -0.22, 1.0, 1e-4, 200
+
+
+def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int = 7,
+                 coordinate: int = 0, timeout: float = 200, **sim):
+    """A 2-DOF chain scene through the nodes with the stream estimator (issue 32):
+    position-only sensor of every coordinate (sigma 1e-4, T/200, seeded), the controller's
+    model filter over the exact n-DOF map reading ``coordinate``, the delay-aware design
+    k(mu = -0.22, delay 1.0) from its gains file (actuation_delay in it). Returns
+    (RunResult, bag, model, design)."""
+    model = dataclasses.replace(load_model(CHAIN), delta_d=STREAM_DD)
+    design = evaluate_design(model, STREAM_MU, STREAM_DELAY)
+    assert design.admissible
+    gains = tmp / "gains.yaml"
+    write_gain_yaml(gains, model, design, CHAIN)
+    bag = tmp / "bag"
+    res = launcher.run(None, gains, bag, periods, delta_d=STREAM_DD, enable_after=on,
+                       mode=mode, domain_id=new_domain(), timeout=timeout,
+                       log_dir=tmp / "logs",
+                       sim_overrides={"state_period": model.period / RATE,
+                                      "sensor_noise": SIGMA, "sensor_velocity": False,
+                                      "sensor_seed": seed, **sim},
+                       controller_overrides={"pi2_source": "stream", "estimator": "model",
+                                             "sensor_coordinate": coordinate})
+    return res, bag, model, design
+
+
+def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tmp_path):
+    """Lockstep, 2-DOF chain at Delta d = -1e-3, position-only sensor of x0 (sigma 1e-4,
+    T/200), the controller's stream estimator (model filter over the exact n-DOF map) and
+    the delay-aware design (delay 1.0 from the gains file): the recorded corrections are
+    the core's closed loop on the recorded samples (StreamEstimator with the model, then
+    k^T z^) to 1e-15; the Pi2 samples are the engine's with the recorded corrections
+    acting 1.0 after their samples, bit for bit; the stream is the engine's sensor's;
+    captured on the controlled orbit with one impact per period."""
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
+    from grazing_control.ros.recording import read_messages
+
+    n, on = 40, 8
+    res, bag, model, design = stream_scene(tmp_path, n, on)
+    logs = {k: Path(v).read_text() for k, v in res.logs.items()}
+    assert res.ok, (res, logs)
+    assert "sensor noise=0.0001 velocity=false" in logs["sim_node"]
+    assert "actuation_delay=1.0" in logs["sim_node"]
+    assert "pi2_source=stream estimator=model sensor_coordinate=0" in logs["controller_node"]
+    msgs = {}
+    for m in read_messages(bag):
+        msgs.setdefault(m.topic, []).append(m.message)
+    stamp = lambda m: m.header.stamp.sec + m.header.stamp.nanosec * 1e-9   # noqa: E731
+    stream = sorted(msgs["/oscillator/state"], key=stamp)
+    answers = sorted(msgs["/controller/velocity_correction"], key=stamp)
+    corr = np.array([a.twist.linear.x for a in answers])
+    assert len(corr) >= n and all(len(s.velocity) == 0 for s in stream)   # + sample n
+
+    # the core on the same samples: the model filter, then k^T z^ from section `on` on
+    est = StreamEstimator(model, "model", SIGMA, "stream", model.period / RATE, coordinate=0)
+    due, worst = [], 0.0
+    for s in stream:
+        due += est.add_sample(stamp(s), s.position[0], math.nan)
+        while due and due[0][0] < n:
+            k, _tk, e = due.pop(0)
+            dv = float(design.gains @ np.array(e.z)) if k >= on else 0.0
+            assert corr[k] == pytest.approx(dv, abs=1e-15, rel=1e-12), k
+            worst = max(worst, abs(corr[k] - dv))
+            est.set_correction(k, corr[k], STREAM_DELAY)
+    assert est.next_k >= n - 1 and est.resets == 0
+    print(f"2-DOF stream scene: |node - core| corrections <= {worst:.1e}")
+
+    # the node is the engine: the recorded corrections acting 1.0 after their samples
+    eng = NdofEngine(ndof_settings_from_values(
+        {"delta_d": STREAM_DD, "actuation_delay": STREAM_DELAY, "sensor_noise": SIGMA,
+         "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE},
+        str(CHAIN)))
+    pi2 = sorted(msgs["/oscillator/pi2"], key=stamp)
+    states, counts = eng.initial_states(), []
+    for k in range(n):
+        ev = eng.sample()
+        assert np.array_equal(np.array(ev.x + ev.v),
+                              np.array(tuple(pi2[k].position) + tuple(pi2[k].velocity))), k
+        events = eng.begin_period(float(corr[k]), STREAM_DELAY)
+        states += [e for e in events if e.kind == "state"]
+        counts.append(sum(e.kind == "impact" for e in events))
+        eng.end_period()
+    m = min(len(states), len(stream))
+    assert m >= n * RATE - 1
+    np.testing.assert_array_equal(np.array([s.x for s in states[:m]]),
+                                  np.array([tuple(s.position) for s in stream[:m]]))
+    # captured: one impact per period on the controlled orbit, the estimate within 5 sigma
+    assert counts[-15:] == [1] * 15, counts
+    P = NdofMap(model, design.gains, STREAM_DELAY)
+    orbit = find_periodic(P, eng.z)
+    assert np.max(np.abs(eng.z - orbit.state)) < 1e-2

@@ -236,3 +236,73 @@ def test_injected_loss_and_jitter_are_the_fault_models_draws():
         zk[m.n + m.i_a] += 0.0 if lost[k] else 1e-4
         z = advance(f, (f.tau2 + m.omega * delay) % (2 * math.pi), zk, m.period - delay).z
     np.testing.assert_array_equal(loop.engine.z, z)      # after the last period
+
+
+def test_a_delay_aware_design_run_is_the_delayed_ndofmap_sample_for_sample():
+    """Issue 32: the lockstep engine with the kick k^T z_k acting ``delay`` after each
+    sample (k the delay-aware design, ndof_design.gain_family(..., delay)) is the core's
+    NdofMap(model, k, delay) iteration, bit for bit, impacts included."""
+    from grazing_control.dynamics.design.ndof_design import evaluate_design
+
+    delay = 1.0
+    s = settings(CHAIN, delta_d=-1e-3, actuation_delay=delay)
+    design = evaluate_design(s.model, -0.22, delay)
+    assert design.admissible
+    eng, P = NdofEngine(s), NdofMap(s.model, design.gains, delay)
+    z, impacts = np.full(4, 1e-3), 0
+    eng.z = z.copy()
+    for k in range(60):
+        assert np.array_equal(eng.z, z), k
+        events = eng.begin_period(float(P.gains @ eng.z), eng.actuation_delay())
+        step = P.step(z)
+        imp = [e for e in events if e.kind == "impact"]
+        assert [(e.x, e.v) for e in imp] == [(i.v_minus, i.v_plus) for i in step.impacts]
+        impacts += len(imp)
+        eng.end_period()
+        z = step.state
+    assert impacts >= 50                    # the controlled orbit impacts once a period
+
+
+@pytest.mark.parametrize("velocity", [True, False])
+def test_the_stream_is_the_exact_flow_plus_the_sensors_seeded_noise(velocity):
+    """Issue 32: an n-DOF scene's sensor (sensor_noise, sensor_velocity, sensor_seed)
+    measures every coordinate: stream sample j's coordinate i is the exact flow at t_j
+    (the core's advance from the period's start, an independent route) plus sigma times
+    the sensor's draw j n + i (SensorModel.draws; velocity NaN for a position-only
+    sensor), however the period is cut by a delayed kick."""
+    sigma, h = 1e-4, 4.0 * math.pi / 200
+    s = settings(CHAIN, delta_d=-1e-3, state_period=h, sensor_noise=sigma,
+                 sensor_velocity=velocity, sensor_seed=7, actuation_delay=1.0)
+    assert "sensor noise=0.0001" in s.describe()
+    eng = NdofEngine(s)
+    f, m = eng.flow, s.model
+    draws = s.sensor.draws(0, 2 * 6 * 200 + 2).reshape(-1, 2, 2)   # (j, coordinate, x/v)
+    states = eng.initial_states()
+    for k in range(5):
+        z0 = eng.z.copy()
+        evs = eng.begin_period(2e-3 * (-1) ** k, 1.0)
+        for e in [e for e in evs if e.kind == "state"]:
+            rel = e.t - k * m.period
+            if rel <= 1.0:
+                ref = advance(f, f.tau2, z0, rel)
+            else:
+                head = advance(f, f.tau2, z0, 1.0)
+                zk = head.z.copy()
+                zk[m.n + m.i_a] += 2e-3 * (-1) ** k
+                ref = advance(f, (f.tau2 + m.omega) % (2 * math.pi), zk, rel - 1.0)
+            X = f.to_physical(ref.tau, ref.z)
+            j = round(e.t / h)
+            np.testing.assert_allclose(e.x, X[:2] + sigma * draws[j, :, 0], rtol=0,
+                                       atol=1e-12)
+            if velocity:
+                np.testing.assert_allclose(e.v, X[2:] + sigma * draws[j, :, 1], rtol=0,
+                                           atol=1e-12)
+            else:
+                assert all(math.isnan(v) for v in e.v)
+            states.append(e)
+        eng.end_period()
+    # samples 0 .. 999 (the one at 5 T, j h = 20 pi up to rounding, may fall in period 5)
+    assert len(states) >= 5 * 200 and states[0].t == 0.0
+    # the sample at t = 0 too, and the draws are the 1-DOF sensor's for coordinate 0
+    assert states[0].x[0] == pytest.approx(f.particular(f.tau2)[0] + sigma * draws[0, 0, 0],
+                                           abs=1e-15)

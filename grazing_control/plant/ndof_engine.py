@@ -22,6 +22,13 @@ absorbs the forcing; docs/ndof_model.md), and an impact changes only the wall
 coordinate's velocity, by v+ - v-, which adds (v+ - v-) e_{n + i_w} to z. A period with
 a sticking impact is evaluated by ``advance`` from its start instead.
 
+The state stream is what the scene's sensor (``settings.sensor``, a
+:class:`grazing_control.plant.sensor.SensorModel`: noise, bias, quantum, position only)
+measures of every coordinate: sample j's coordinate i is the sensor's draw number
+j n + i (:func:`measure_coordinates`), a pure function of (seed, j) as in 1-DOF, and
+for n = 1 the 1-DOF sensor's draws bit for bit. A position-only sensor's velocities
+are NaN (published as an empty velocity list).
+
 The events are :class:`NdofEvent` (x, v: tuples of the n coordinates) for the state
 stream, Pi1 and Pi2, and the 1-DOF :class:`~grazing_control.plant.engine.Event` for an
 impact (x = v-, v = v+ of the wall coordinate). No ROS.
@@ -38,9 +45,21 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.plant.engine import Event
 
-__all__ = ["NdofEvent", "Span", "NdofEngine"]
+__all__ = ["NdofEvent", "Span", "NdofEngine", "measure_coordinates"]
 
 TWO_PI = 2.0 * math.pi
+
+
+def measure_coordinates(sensor, j0: int, x, v):
+    """What ``sensor`` (a :class:`~grazing_control.plant.sensor.SensorModel`) measures of
+    the stream samples j0, j0 + 1, ... with true positions ``x`` and velocities ``v``
+    (m, n): coordinate i of sample j is the sensor's sample j n + i (its draws, bias,
+    quantum), velocities NaN for a position-only sensor. Returns (x~, v~), (m, n)."""
+    x = np.asarray(x, dtype=float)
+    v = np.asarray(v, dtype=float)
+    m, n = x.shape
+    xm, vm = sensor.measure(j0 * n, x.reshape(-1), v.reshape(-1))
+    return xm.reshape(m, n), vm.reshape(m, n)
 
 
 class NdofEvent(NamedTuple):
@@ -194,7 +213,18 @@ class NdofEngine:
         with sample 0."""
         if self.settings.state_period <= 0.0 or self.t != 0.0:
             return []
-        return [self._state(0.0, "state", self.flow.tau2, self.z)]
+        return self._measured(0, [self._state(0.0, "state", self.flow.tau2, self.z)])
+
+    def _measured(self, j0: int, states: list) -> list:
+        """The stream's samples j0, j0 + 1, ... (``states``, exact) as the sensor
+        measures them (:func:`measure_coordinates`)."""
+        sensor = self.settings.sensor
+        if sensor.exact and sensor.velocity or not states:
+            return states
+        xm, vm = measure_coordinates(sensor, j0, [e.x for e in states],
+                                     [e.v for e in states])
+        return [e._replace(x=tuple(float(a) for a in x), v=tuple(float(a) for a in v))
+                for e, x, v in zip(states, xm, vm)]
 
     # ---------------------------------------------------------------- events
     def deviations_between(self, s: Span, times) -> np.ndarray:
@@ -227,10 +257,12 @@ class NdofEngine:
                         float(i.phase) % TWO_PI) for i in s.impacts]
         rel, kinds = [], []
         sp = self.settings.state_period
+        j0 = None
         if sp > 0.0:
             j = math.floor(s.ts / sp)
             while j * sp <= s.te:
                 if j * sp > s.ts:
+                    j0 = j if j0 is None else j0
                     rel.append(j * sp - s.ts)
                     kinds.append("state")
                 j += 1
@@ -243,8 +275,11 @@ class NdofEngine:
             rel = [rel[i] for i in order]
             kinds = [kinds[i] for i in order]
             zs = self.deviations_between(s, rel)
+            states = []
             for h, kind, z in zip(rel, kinds, zs):
                 tau = self.flow.tau_star if kind == "pi1" else (s.tau + m.omega * h) % TWO_PI
-                events.append(self._state(s.ts + h, kind, tau, z))
+                (states if kind == "state" else events).append(
+                    self._state(s.ts + h, kind, tau, z))
+            events += self._measured(j0, states)
         events.sort(key=lambda e: e.t)
         return events

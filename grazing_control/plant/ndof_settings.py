@@ -13,7 +13,9 @@ What the n-DOF scene does not do (yet) is refused with one line naming the param
 and why (ParameterError), never half-applied: the 1-DOF model parameters (zeta, r,
 omega, tau0, pi2_offset: the file gives them), an initial state other than the grazing
 point (x0, v0), the velocity noise at Pi2 (``noise``), the injected measurement noise,
-a sensor other than the exact one, the force pulse, and fidelities other than exact.
+the force pulse, and fidelities other than exact. The sensor of the state stream
+(``sensor_noise``, ``sensor_velocity``, ``sensor_quantum``, ``sensor_bias``,
+``sensor_seed``) measures every coordinate (plant.ndof_engine.measure_coordinates).
 """
 
 from __future__ import annotations
@@ -40,10 +42,6 @@ UNSUPPORTED = {
     "v0": "an n-DOF scene starts at the grazing point X** (NaN)",
     "noise": "the velocity noise at Pi2 is not built for n-DOF",
     "measurement_noise": "the injected measurement noise is not built for n-DOF",
-    "sensor_noise": "the sensor model is not built for n-DOF (the stream is exact)",
-    "sensor_velocity": "the sensor model is not built for n-DOF (the stream is exact)",
-    "sensor_quantum": "the sensor model is not built for n-DOF (the stream is exact)",
-    "sensor_bias": "the sensor model is not built for n-DOF (the stream is exact)",
     "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
     "fidelity": "only the exact flow is built for n-DOF",
     "delta_d_drift": "the drifting wall is not built for n-DOF",
@@ -72,6 +70,10 @@ class NdofSettings(SimSettings):
                 f"state_period={self.state_period} "
                 f"actuation={'scheduled' if self.scheduled else 'on_arrival'} "
                 f"actuation_delay={self.actuation_delay!r}")
+        if not self.sensor.exact or not self.sensor.velocity:
+            sn = self.sensor
+            text += (f" sensor noise={sn.noise!r} velocity={str(sn.velocity).lower()} "
+                     f"quantum={sn.quantum!r} bias={sn.bias!r} seed={sn.seed}")
         if self.faults.active:
             text += f" faults loss={self.loss!r} jitter={self.jitter!r} seed={self.seed}"
         return text

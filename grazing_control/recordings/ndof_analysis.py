@@ -17,7 +17,7 @@ over the whole state, then):
   (:func:`~grazing_control.recordings.numbers.measured_contraction`) against the largest
   Floquet multiplier |lambda|max of the controlled 1/1 orbit, found by Newton shooting
   (:func:`grazing_control.dynamics.orbits.shooting.find_periodic`) on
-  :class:`grazing_control.dynamics.maps.ndof_map.NdofMap` with the recorded gains from the
+  :class:`grazing_control.dynamics.maps.ndof_map.NdofMap` with the recorded gains and delay from the
   last sample; the final sample's distance to that orbit, per coordinate;
 * the model check: every recorded period re-integrated by the core from the recorded
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
@@ -154,7 +154,7 @@ def controlled_orbit(setup: NdofSetup, final) -> dict:
 
     if setup.model is None or setup.gains is None:
         return {"note": "no model or gains: no predicted orbit"}
-    P = NdofMap(setup.model, setup.gains)
+    P = NdofMap(setup.model, setup.gains, setup.actuation_delay)   # the kick at the delay
     xref = P.flow.particular(P.flow.tau2)
     try:
         orbit = find_periodic(P, np.asarray(final, float) - xref)

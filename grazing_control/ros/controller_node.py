@@ -96,7 +96,9 @@ simulator applies it, the controller validates and reports it: docs/nodes.md,
 model, NaN: none), pi2_source, estimator, impact_source, sensor_noise, state_period,
 model_noise (stream mode, above); model_file and gains (an n-DOF scene, issue 17:
 Delta v = k^T (X - X**) on samples with n joints, :mod:`grazing_control.ros.ndof_control`;
-n, i_a, mu: the design file's section data, checked against the model). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+n, i_a, mu: the design file's section data, checked against the model; with
+pi2_source stream the model filter over the n-DOF map reads coordinate
+sensor_coordinate of the stream, issue 32). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
 """
 
@@ -138,7 +140,7 @@ from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_
                      run_node, spin, stamp_key, string_descriptor)
 from grazing_control.plant.settings import ABOVE_0, FINITE, MAX_BANDWIDTH, below
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
-from .ndof_control import ndof_controller_from_values
+from .ndof_control import ndof_controller_from_values, ndof_stream_from_values
 from .rig_control import RIG_INPUT_QOS, RigSide
 from .rig_boundary import check_rig_values, controller_values
 from .controller_values import (GAIN_LIMIT, PI2_SOURCES, NdofControlLaw,
@@ -155,7 +157,7 @@ _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", 
          "enable_after", "saturation", "stale_after", "actuation_delay", "delta_d",
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section", "answer_lead", "capture",
-         "capture_radius") + WATCH_KEYS + REID_KEYS
+         "capture_radius", "sensor_coordinate") + WATCH_KEYS + REID_KEYS
 #: How a correction acts in the plant (:func:`pulse_from_values`), model units.
 PULSE_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
 
@@ -328,6 +330,10 @@ class ControllerNode(Node):
                                     read_only=True))
         d("mu", math.nan, float_descriptor("with model_file: the design's mu (w^T N = mu w^T; "
                                            "recorded, not used)", read_only=True))
+        d("sensor_coordinate", 0, int_descriptor(
+            "with model_file and pi2_source stream: the coordinate whose position (and "
+            "velocity where carried) the model filter reads, 0 <= sensor_coordinate < n",
+            0, read_only=True))
         declare_scheduling(self)
         check_ranges(self)
         self.executor_kind = executor_kind(self)
@@ -349,7 +355,10 @@ class ControllerNode(Node):
                 self.law = self._ndof_law(self._values(), self._gains())
                 self.actuation_delay = actuation_delay_from_values(
                     {**self._values(), "omega": self.ndof.model.omega})
-                self.model = self.stream = self.capture = None
+                self.model = self.capture = None
+                self.stream = ndof_stream_from_values(self._values(), self.ndof)
+                if self.stream is not None:     # the section times and the phase check
+                    self.model = self.ndof.model
             else:
                 self.law = law_from_values(self._values())
                 self.actuation_delay = actuation_delay_from_values(self._values())
@@ -466,7 +475,10 @@ class ControllerNode(Node):
                      f"X**={self.law.x_ref.tolist() + self.law.v_ref.tolist()!r} "
                      f"enable_after={self.law.enable_after} "
                      f"actuation_delay={self.actuation_delay!r} "
-                     f"predicts={str(self.ndof.predicts).lower()} executor={self.executor_kind}")
+                     f"predicts={str(self.ndof.predicts).lower()} executor={self.executor_kind}"
+                     + ("" if self.stream is None else
+                        f" pi2_source=stream estimator=model sensor_coordinate="
+                        f"{self.stream.coordinate} sensor_noise={self.stream.sigma!r}"))
             return
         source = "sample" if self.stream is None else (
             f"stream estimator={self.stream.estimator} impact_source="
@@ -660,7 +672,22 @@ class ControllerNode(Node):
     def _on_state(self, data: bytes) -> None:
         """A stream sample as received: read directly (:func:`cdr.read_state`), else
         through rclpy; the sections it completes are estimated, published on
-        controller/estimate and answered."""
+        controller/estimate and answered. An n-DOF stream sample (n joints) through
+        rclpy: coordinate ``sensor_coordinate``'s position and velocity (NaN: none)."""
+        if self.ndof is not None:
+            msg = deserialize(data, JointState, self.malformed)
+            if msg is None:
+                return
+            n, c = self.ndof.model.n, self.stream.coordinate
+            if len(msg.position) != n or len(msg.velocity) not in (0, n):
+                self.malformed(f"stamp {stamp_key(msg.header.stamp)}: {len(msg.position)} "
+                               f"positions and {len(msg.velocity)} velocities, expected {n} "
+                               f"(and {n} or no velocities)")
+                return
+            v = msg.velocity[c] if len(msg.velocity) else math.nan
+            self._take_sample(stamp_key(msg.header.stamp) + (msg.position[c], v,
+                                                             tuple(msg.effort)))
+            return
         sample = cdr.read_state(data)
         if sample is None:
             msg = deserialize(data, JointState, self.malformed)
@@ -706,8 +733,11 @@ class ControllerNode(Node):
             self.malformed(f"stamp {cdr.stamp_parts(t)}: the estimator failed: {exc}")
             return
         for k, tk, est in due:
-            p = self.model      # a switch at the section before moves it (ros/reidentify.py)
             key = cdr.stamp_parts(tk)
+            if self.ndof is not None:
+                self._answer_ndof_estimate(k, key, est)
+                continue
+            p = self.model      # a switch at the section before moves it (ros/reidentify.py)
             xh, vh = p.x_ref + est.z[0], p.v_ref + est.z[1]
             c = est.cov
             estimate = cdr.estimate_state(*key, xh, vh, float(c[0, 0]), float(c[0, 1]),
@@ -728,6 +758,21 @@ class ControllerNode(Node):
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if self.reid is not None:
                 self.reid.answered(k, 0.0 if dv is None else dv)
+
+    def _answer_ndof_estimate(self, k: int, key: tuple, est) -> None:
+        """Section k of an n-DOF stream: the answer k^T (X^ - X**), then (as in 1-DOF)
+        the estimate X^ = X** + z^ on controller/estimate (JointState, n joints:
+        positions, velocities, effort the 2n variances)."""
+        ndof = self.ndof
+        X = np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z, dtype=float)
+        n = ndof.model.n
+        dv = self._answer(key, X[:n], X[n:])
+        msg = JointState(name=[f"mass{i}" for i in range(n)],
+                         position=X[:n].tolist(), velocity=X[n:].tolist(),
+                         effort=np.diag(est.cov).tolist())
+        msg.header.stamp.sec, msg.header.stamp.nanosec = key
+        self.pub_estimate.publish(msg)
+        self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
 
     def _capture_factor(self, k: int, est) -> float:
         """1, or 0 while the capture rule holds the correction back (only once the
@@ -767,7 +812,8 @@ class ControllerNode(Node):
         than 1e-6 is counted and logged (``phase_mismatch``); the estimate goes on."""
         if not effort:
             return
-        tau = self.model.tau2 + self.model.omega * t
+        tau2 = self.model.tau2 if self.ndof is None else self.ndof.flow.tau2
+        tau = tau2 + self.model.omega * t
         want = (math.cos(tau), math.sin(tau))
         err = max(abs(e - w) for e, w in zip(effort[:2], want))
         if not err <= 1e-6:

@@ -11,8 +11,10 @@ X** the grazing orbit's state on Pi2: the periodic response at the section phase
 :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`). The switch-on (``enable_after``,
 ``~/enable``), the saturation and the stale-sample rules are the 1-DOF controller's
 (:class:`grazing_control.ros.controller_values.ControlLaw`); the 1-DOF law's parameters
-(c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults and the stream mode is not
-built for n-DOF: either is refused with the reason. The section data the design's
+(c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults (else refused with the
+reason). With ``pi2_source`` stream the Pi2 state is estimated from the sensor stream by
+the model filter over the exact n-DOF map (:func:`ndof_stream_from_values`; issue 32:
+the position, and velocity where carried, of coordinate ``sensor_coordinate``). The section data the design's
 parameter file carries with the gains (``n``, ``i_a``, ``omega``, ``pi2_offset``:
 :func:`grazing_control.dynamics.design.ndof_design.write_gain_yaml`) must be the model file's:
 gains designed for another model are refused, naming both values. No rclpy.
@@ -30,8 +32,8 @@ from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.plant.ndof_settings import load_model_file
 
-__all__ = ["NdofLaw", "NdofController", "ndof_controller_from_values", "GAIN_LIMIT",
-           "ONE_DOF_DEFAULTS"]
+__all__ = ["NdofLaw", "NdofController", "ndof_controller_from_values",
+           "ndof_stream_from_values", "GAIN_LIMIT", "ONE_DOF_DEFAULTS"]
 
 #: Largest |k_i| accepted (as the 1-DOF controller's |c1|, |c2|).
 GAIN_LIMIT = 1e6
@@ -114,10 +116,6 @@ def ndof_controller_from_values(values: dict, model_file: str, gains) -> NdofCon
             raise ParameterError(f"{name}={value!r} is invalid with model_file={model_file!r}: "
                                  f"valid is the model's {want!r} (the gains were designed "
                                  "for another model)")
-    if values.get("pi2_source", "sample") != "sample":
-        raise ParameterError(f"pi2_source={values['pi2_source']!r} is invalid with "
-                             "model_file: valid is sample (the stream estimator is not "
-                             "built for n-DOF)")
     want = 2 * model.n
     if gains is None:
         raise ParameterError(f"gains is not given: with model_file it is required, {want} "
@@ -142,3 +140,45 @@ def ndof_controller_from_values(values: dict, model_file: str, gains) -> NdofCon
     k.setflags(write=False)
     return NdofController(model, flow, k, X[:n].copy(), X[n:].copy(),
                           predicts=not math.isnan(delta_d))
+
+
+def ndof_stream_from_values(values: dict, ndof: NdofController):
+    """The n-DOF scene's stream estimator for ``pi2_source`` stream, None for ``sample``
+    (ParameterError naming the parameter): the model filter over the exact n-DOF map
+    (:class:`grazing_control.dynamics.estimation.stream.StreamEstimator` with the
+    controller's model, docs/theory_estimation.md (E11)) reading coordinate
+    ``sensor_coordinate``; it needs the plant's ``delta_d`` (``ndof.predicts``), the
+    estimator ``model``, ``sensor_noise`` > 0 and impacts detected in the stream."""
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
+
+    source = values.get("pi2_source", "sample")
+    if source == "sample":
+        return None
+    if source != "stream":
+        raise ParameterError(f"pi2_source={source!r} is invalid: valid values are sample, "
+                             "stream")
+    if not ndof.predicts:
+        raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
+                             "the plant's finite Delta d (the estimator's model needs the wall)")
+    if values.get("impact_source", "stream") != "stream":
+        raise ParameterError(f"impact_source={values['impact_source']!r} is invalid with "
+                             "model_file: valid is stream (the n-DOF model filter finds the "
+                             "impacts in its exact motion)")
+    for name in ("estimate_bias", "track_delta_d", "capture", "reidentify"):
+        if values.get(name):
+            raise ParameterError(f"{name}=True is invalid with model_file: valid is false "
+                                 "(not built for n-DOF)")
+    if int(values.get("consistency_window", 0) or 0) > 0:
+        raise ParameterError(f"consistency_window={values['consistency_window']!r} is invalid "
+                             "with model_file: valid is 0 (not built for n-DOF)")
+    floor = float(values.get("model_noise", 1e-2))
+    if not (math.isfinite(floor) and floor >= 0.0):
+        raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "
+                             "model_noise >= 0 (process noise per period, in sensor_noise)")
+    return StreamEstimator(ndof.model, values.get("estimator", "model"),
+                           float(values.get("sensor_noise", 0.0)), "stream",
+                           float(values.get("state_period", 0.0)), floor,
+                           bool(values.get("answer_after_section", False)),
+                           float(values.get("answer_lead", 0.0)),
+                           kernel=False,     # the n-DOF motion is the core's (E11)
+                           coordinate=int(values.get("sensor_coordinate", 0)))

@@ -19,6 +19,20 @@ and the **noise gain** is sqrt(Sigma_xx) / sigma: the standard deviation of the 
 position per unit measurement noise. Near grazing M2 carries the saltation term
 (1 + r)(cos tau_i - d) / v-, so the gain grows like 1/v- unless k^T R k is small: the
 choice of c2 along the admissible set matters (the study's c2 = -1 is not the best).
+
+**n DOF** (docs/ndof_scene.md): the same loop over the exact n-DOF map
+(:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`, gains k in R^{2n}, the kick on
+v_{i_a} ``delay`` after the sample), linearised about its controlled orbit z*:
+
+    e_{k+1} = J e_k + g k^T n_k,    J = M2 (M1 + b k^T),    g = M2 b,   b = e_{n + i_a},
+
+and Sigma = J Sigma J^T + sigma^2 g g^T (k^T R k) (:func:`ndof_noise_covariance`). R is
+the model filter's error covariance on the orbit per unit sigma^2, for a sensor of one
+coordinate's position at ``rate`` samples per period: the fixed point of (E5),
+P = M (P^-1 + H^T H)^-1 M^T + floor^2 I, H the rows of that position in the exact
+trajectory's Jacobian (:func:`ndof_filter_covariance`). Treating the estimate's errors
+as independent from section to section is the approximation (the filter carries them
+on); docs/ndof_scene.md checks the prediction against a seeded closed loop.
 """
 
 from __future__ import annotations
@@ -31,7 +45,8 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.impact import advance
 from grazing_control.oscillator.params import OscillatorParams
 
-__all__ = ["loop_linearisation", "noise_covariance", "noise_gain"]
+__all__ = ["loop_linearisation", "noise_covariance", "noise_gain", "ndof_loop_linearisation",
+           "ndof_filter_covariance", "ndof_noise_covariance"]
 
 
 def loop_linearisation(p: OscillatorParams, gains: Gains, target):
@@ -85,3 +100,66 @@ def noise_gain(p: OscillatorParams, gains: Gains, measurement=None, target=None)
     """sqrt(Sigma_xx) / sigma: the std of the Pi2 position per unit measurement noise
     (module docstring; :func:`noise_covariance` for the arguments)."""
     return float(math.sqrt(max(noise_covariance(p, gains, measurement, target)[0, 0], 0.0)))
+
+
+def ndof_loop_linearisation(model, gains, target, delay: float = 0.0):
+    """(J, g) of the n-DOF loop at the orbit z* = ``target`` (module docstring): J the
+    closed-loop map's Jacobian, g = M2 e_{n + i_a} the next sample's sensitivity to the
+    kick. Exact (the core's monodromies, :class:`NdofMap`'s step)."""
+    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.oscillator.ndof.impact import advance as ndof_advance
+
+    P = NdofMap(model, gains, delay)
+    z = np.array(target, dtype=float)
+    J = P.step(z, jacobian=True).jacobian
+    flow, n = P.flow, model.n
+    kick = float(P.gains @ z)
+    first = ndof_advance(flow, flow.tau2, z, delay) if delay > 0.0 else None
+    mid = np.array(z if first is None else first.z, dtype=float)
+    mid[n + model.i_a] += kick
+    second = ndof_advance(flow, (flow.tau2 + model.omega * delay) % (2.0 * math.pi), mid,
+                          model.period - delay, monodromy=True)
+    return J, np.array(second.monodromy)[:, n + model.i_a]
+
+
+def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
+                           delay: float = 0.0, floor: float = 1e-2,
+                           periods: int = 400) -> np.ndarray:
+    """The model filter's error covariance on the n-DOF orbit z* per unit sigma^2 (2n x 2n):
+    the fixed point of (E5) for samples of coordinate ``coordinate``'s position at
+    s_j = j T / rate, j = 1 .. rate (module docstring), iterated from 1e4 I for
+    ``periods`` periods at most."""
+    from grazing_control.dynamics.estimation.section_state import trajectory
+
+    z = np.array(target, dtype=float)
+    s = model.period * np.arange(1, int(rate) + 1) / rate
+    kick = float(np.asarray(gains, dtype=float) @ z)
+    _out, jac, _end, mono, _imps = trajectory(model, z, s, kick, delay)
+    h = jac[:, coordinate, :]
+    eye = np.eye(len(z))
+    cov = 1e4 * eye
+    for _ in range(periods):
+        post = np.linalg.inv(np.linalg.inv(cov) + h.T @ h)
+        new = mono @ post @ mono.T + floor ** 2 * eye
+        new = 0.5 * (new + new.T)
+        done = np.max(np.abs(new - cov)) <= 1e-12 * np.max(np.abs(new))
+        cov = new
+        if done:
+            break
+    return cov
+
+
+def ndof_noise_covariance(model, gains, target, measurement, delay: float = 0.0):
+    """Stationary covariance of the n-DOF Pi2 deviation per unit sigma^2 (2n x 2n):
+    Sigma = J Sigma J^T + g g^T (k^T R k), R = ``measurement`` (module docstring).
+    Raises ValueError when the loop is not stable."""
+    from scipy.linalg import solve_discrete_lyapunov
+
+    J, g = ndof_loop_linearisation(model, gains, target, delay)
+    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
+    if not rho < 1.0:
+        raise ValueError(f"the controlled orbit at delta_d={model.delta_d!r} is not stable "
+                         f"(largest multiplier {rho:.6g}): no stationary spread")
+    k = np.asarray(gains, dtype=float)
+    r = np.asarray(measurement, dtype=float)
+    return solve_discrete_lyapunov(J, float(k @ r @ k) * np.outer(g, g))

@@ -11,6 +11,16 @@ over the estimators of :mod:`grazing_control.dynamics.estimation.section_state`;
 feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
 through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
 the plant layer lies above this one, so the caller passes it in).
+
+With an n-DOF model (:class:`~grazing_control.oscillator.ndof.model.NdofModel`) the
+samples are the position (and maybe velocity) of one coordinate ``coordinate`` and the
+estimator is the model filter over the exact n-DOF map alone
+(docs/theory_estimation.md, (E11)): the estimate is 2n-dimensional; where the filter
+has no state at the section before (the start) or its fit fails (a kick that acted
+otherwise than known, a jump), the period's samples are fitted from the uninformative
+prior (``NDOF_PRIOR``)^2 I about the filter's state (z = 0 at the start); where that
+fails too the estimate is the filter's state carried one period through the model
+(source ``predicted``), or z = 0 at the start (source ``prior``: the answer is 0).
 """
 
 from __future__ import annotations
@@ -23,6 +33,8 @@ import numpy as np
 
 from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
                          deviation_samples, detect_impact, model_update, nearest_estimate,
@@ -33,6 +45,9 @@ __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", 
 
 #: Where impacts come from: the rig's impact sensor, or detection in the stream.
 IMPACT_SOURCES = ("topic", "stream")
+#: The n-DOF filter's prior std at a (re)start: far wider than any Pi2 deviation near
+#: grazing, so that the first period's samples alone decide (E11).
+NDOF_PRIOR = 1.0
 #: Tolerance on times, relative to T: a sample within it of t_k is at t_k.
 _TOL = 1e-9
 #: A sample more than this many periods after the newest is a stray unless the next
@@ -94,7 +109,17 @@ class StreamEstimator:
                  impact_source: str = "stream", sample_period: float = 0.0,
                  floor: float = 1e-2, after_section: bool = False, lead: float = 0.0, *,
                  pulse_width: float = 0.0, force_limit: float = math.inf, actuator=None,
-                 kernel: bool | None = None):
+                 kernel: bool | None = None, coordinate: int = 0):
+        if isinstance(p, NdofModel):
+            if estimator != "model":
+                raise ParameterError(f"estimator={estimator!r} is invalid with an n-DOF "
+                                     "model: valid is model (E11)")
+            if isinstance(coordinate, bool) or not isinstance(coordinate, int) \
+                    or not 0 <= coordinate < p.n:
+                raise ParameterError(f"sensor_coordinate={coordinate!r} is invalid: valid "
+                                     f"range is 0 <= sensor_coordinate < n = {p.n}")
+        self.coordinate = coordinate
+        self.flow = NdofFlow.of(p) if isinstance(p, NdofModel) else None
         if estimator not in ESTIMATORS:
             raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
                                  f"{', '.join(ESTIMATORS)}")
@@ -244,6 +269,8 @@ class StreamEstimator:
         """The estimate of section k from the samples received (model, else arc, else
         nearest, else the last position with an unknown velocity)."""
         p, T = self.p, self.p.period
+        if isinstance(p, NdofModel):
+            return self._ndof_model(k)
         tk = k * T
         if self.estimator == "model":
             est = self._model(k)
@@ -345,6 +372,47 @@ class StreamEstimator:
             return None
         self.filter, self.filter_k = new, k
         return Estimate(new.z, new.cov, "model")
+
+    def _ndof_model(self, k: int) -> Estimate:
+        """Section k of the model filter over the n-DOF map (module docstring): the fit of
+        the period's samples from the filter's state at k - 1, else from the
+        uninformative prior; where neither fits, the filter's state carried one period
+        through the model (with the known kick) with the uninformative covariance, or
+        the prior itself at the start."""
+        p, T = self.p, self.p.period
+        wide = NDOF_PRIOR ** 2 * np.eye(2 * p.n)
+        start = FilterState(tuple(0.0 for _ in range(2 * p.n)), wide, 0)
+        held = self.filter if self.filter is not None and self.filter_k == k - 1 else None
+        s, x, v = self._window(k, (k - 1) * T + _TOL * T)
+        at, dv = self.kicks.get(k - 1, ((k - 1) * T, 0.0))
+        if k > 0 and s.size:
+            s = s + T
+            # the deviations of the measured coordinate from X_p(tau2 + omega s)
+            e = self.flow.amplitudes[self.coordinate] * np.exp(
+                1j * (self.flow.tau2 + p.omega * s))
+            y, w = x - e.real, v - (1j * p.omega * e).real
+            for prior in (held, FilterState(start.z if held is None else held.z, wide, 0)):
+                if prior is None:
+                    continue
+                try:
+                    new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
+                                                at - (k - 1) * T, floor=self.floor,
+                                                coordinate=self.coordinate)
+                except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+                    continue
+                if chi2 <= n + CHI2_SIGMAS * math.sqrt(2.0 * n):
+                    self.filter, self.filter_k = new, k
+                    return Estimate(new.z, new.cov, "model")
+            self.resets += 1
+        z, source = start.z, "prior"
+        if held is not None:
+            try:
+                z = tuple(float(a) for a in predict_section(p, held.z, dv, at - (k - 1) * T))
+                source = "predicted"
+            except (ValueError, ArithmeticError):
+                pass
+        self.filter, self.filter_k = FilterState(z, wide, 0), k
+        return Estimate(z, wide, source)
 
 
 @dataclass

@@ -18,7 +18,7 @@ from grazing_control.oscillator.params import ParameterError
 
 from .branch import OrbitNotFound, orbit_11, with_delta_d
 
-__all__ = ["Scene", "simulate_pi2", "control_scene"]
+__all__ = ["Scene", "StreamLoop", "simulate_pi2", "control_scene", "stream_loop"]
 
 
 class Scene(NamedTuple):
@@ -79,3 +79,61 @@ def control_scene(model, gains, *, delta_d: float | None = None, control_after: 
             error = str(exc)
     after = -1 if gains is None else int(control_after)
     return Scene(model.delta_d, samples, counts, after, orbit, distance, error)
+
+
+class StreamLoop(NamedTuple):
+    """A closed loop on the sensor stream (:func:`stream_loop`): the true Pi2 deviations
+    z_k (before the kick), the estimates, the corrections, the impacts per period and
+    the estimator's resets."""
+
+    truth: np.ndarray
+    estimate: np.ndarray
+    corrections: np.ndarray
+    impacts_per_period: np.ndarray
+    resets: int
+
+
+def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float,
+                rate: int, coordinate: int, periods: int, control_after: int,
+                seed: int) -> StreamLoop:
+    """The n-DOF closed loop on a position-only sensor stream in one process (issue 32,
+    docs/ndof_scene.md): the simulator's engine (:class:`grazing_control.plant.ndof_engine.
+    NdofEngine`, its sensor of ``sigma`` at T / ``rate``, seeded by ``seed``), the
+    controller's estimator (:class:`grazing_control.dynamics.estimation.stream.
+    StreamEstimator` over the model, reading ``coordinate``) and the kick k^T z^ acting
+    ``delay`` after each section from ``control_after`` on: the calls the nodes make in
+    lockstep, without the middleware."""
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
+    from grazing_control.plant.ndof_engine import NdofEngine
+    from grazing_control.plant.ndof_settings import load_model_file, ndof_settings_from_values
+
+    model = load_model_file(str(model_file))
+    st = ndof_settings_from_values(
+        {"delta_d": delta_d, "actuation_delay": delay, "sensor_noise": sigma,
+         "sensor_velocity": False, "sensor_seed": seed,
+         "state_period": model.period / rate}, str(model_file), model)
+    model, k = st.model, np.asarray(gains, dtype=float)
+    eng = NdofEngine(st)
+    est = StreamEstimator(model, "model", sigma, "stream", model.period / rate,
+                          coordinate=coordinate)
+    due = []
+    for ev in eng.initial_states():
+        due += est.add_sample(ev.t, ev.x[coordinate], ev.v[coordinate])
+    n2 = 2 * model.n
+    truth, estimate = np.empty((periods, n2)), np.empty((periods, n2))
+    corrections, counts = np.zeros(periods), np.zeros(periods, dtype=np.int32)
+    for j in range(periods):
+        due += est.flush(j)
+        (e,) = [d[2] for d in due if d[0] == j]
+        truth[j], estimate[j] = eng.z, e.z
+        dv = float(k @ np.asarray(e.z)) if j >= control_after else 0.0
+        corrections[j] = dv
+        est.set_correction(j, dv, delay)
+        events = eng.begin_period(dv, delay)
+        counts[j] = sum(ev.kind == "impact" for ev in events)
+        due = []
+        for ev in events:
+            if ev.kind == "state":
+                due += est.add_sample(ev.t, ev.x[coordinate], ev.v[coordinate])
+        eng.end_period()
+    return StreamLoop(truth, estimate, corrections, counts, est.resets)

@@ -1,0 +1,175 @@
+"""The issue-32 acceptance scene, measured: a 2-DOF chain through the nodes with a
+position-only sensor, the stream estimator and a delay-aware design, against the design's
+predicted spread (docs/ndof_scene.md).
+
+Three numbers per coordinate of the Pi2 deviation about the controlled orbit z*:
+
+* **predicted**: sigma sqrt(diag Sigma), Sigma the stationary covariance of the loop
+  linearised about z* on the exact n-DOF map, driven by the model filter's error
+  covariance on the orbit (dynamics/design/noise.py: ndof_filter_covariance,
+  ndof_noise_covariance);
+* **core**: the seeded closed loop in one process (studies.ndof.scene.stream_loop: the
+  engine with the sensor, the StreamEstimator over the model, k^T z^ acting ``delay``
+  after each section), over ``--seeds`` seeds;
+* **nodes**: sim_node + controller_node (+ recorder) through ``grazing run``'s launcher,
+  lockstep or realtime, analysed from the bag (recordings.scenes.load): captured, impacts
+  per period, spread, deadline misses.
+
+The spreads are taken over the periods from ``--on`` + ``--settle`` to the end.
+
+    .venv/bin/python benchmarks/ndof_stream_scene.py --periods 400
+    .venv/bin/python benchmarks/ndof_stream_scene.py --mode realtime --time-scale 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+
+from grazing_control.dynamics.design.ndof_design import (evaluate_design,  # noqa: E402
+                                                       write_gain_yaml)
+from grazing_control.dynamics.design.noise import (ndof_filter_covariance,  # noqa: E402
+                                                   ndof_noise_covariance)
+from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
+from grazing_control.dynamics.orbits.shooting import find_periodic  # noqa: E402
+from grazing_control.oscillator.ndof import load_model  # noqa: E402
+from grazing_control.studies.ndof.scene import stream_loop  # noqa: E402
+
+
+def core_loop(model_file, model, gains, a, seed: int):
+    """The seeded closed loop in one process (studies.ndof.scene.stream_loop): (Pi2
+    deviations z_k, impacts per period, estimator resets, seconds per period, the
+    estimates' errors)."""
+    t0 = time.perf_counter()
+    run = stream_loop(model_file, gains, delta_d=model.delta_d, delay=a.delay,
+                      sigma=a.sigma, rate=a.rate, coordinate=a.coordinate,
+                      periods=a.periods, control_after=a.on, seed=seed)
+    return (run.truth, run.impacts_per_period, run.resets,
+            (time.perf_counter() - t0) / a.periods, run.estimate - run.truth)
+
+
+def node_scene(model_file, model, design, a, tmp: Path):
+    """The scene through the nodes: (Pi2 deviations, impacts per period, deadline misses,
+    answered, wall seconds)."""
+    from grazing_control.recordings.scenes import load
+    from grazing_control.ros import launcher
+    from test_closed_loop import NO_WATCHDOG, new_domain
+
+    gains = tmp / "gains.yaml"
+    write_gain_yaml(gains, model, design, model_file)
+    sim = {"state_period": model.period / a.rate, "sensor_noise": a.sigma,
+           "sensor_velocity": False, "sensor_seed": a.seed}
+    if a.mode == "realtime":
+        sim.update(time_scale=a.time_scale, **NO_WATCHDOG)
+    t0 = time.perf_counter()
+    res = launcher.run(None, gains, tmp / "bag", a.periods, delta_d=model.delta_d,
+                       enable_after=a.on, mode=a.mode, domain_id=new_domain(),
+                       timeout=a.timeout, log_dir=tmp / "logs", sim_overrides=sim,
+                       controller_overrides={"pi2_source": "stream", "estimator": "model",
+                                             "sensor_coordinate": a.coordinate})
+    wall = time.perf_counter() - t0
+    if not res.ok:
+        raise SystemExit(f"the scene failed: {res}\n"
+                         + Path(res.logs["sim_node"]).read_text()[-3000:])
+    sd = load(tmp / "bag").scenes[0]
+    flow = NdofMap(model).flow
+    z = sd.scene.pi2 - flow.particular(flow.tau2)
+    return (z, np.asarray(sd.scene.impacts_per_period), sd.deadline_misses,
+            int(np.sum(sd.answered)), wall)
+
+
+def spread(z, orbit, a):
+    """std and mean of z_k - z* per coordinate over [on + settle, end)."""
+    d = z[a.on + a.settle:] - orbit
+    return d.std(axis=0), d.mean(axis=0)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", default=str(ROOT / "config" / "models" / "two_mass_chain.yaml"))
+    ap.add_argument("--delta-d", type=float, default=-1e-3)
+    ap.add_argument("--mu", type=float, default=-0.22)
+    ap.add_argument("--delay", type=float, default=1.0)
+    ap.add_argument("--sigma", type=float, default=1e-4)
+    ap.add_argument("--rate", type=int, default=200)
+    ap.add_argument("--coordinate", type=int, default=0)
+    ap.add_argument("--periods", type=int, default=400)
+    ap.add_argument("--on", type=int, default=10)
+    ap.add_argument("--settle", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=7, help="the node scene's sensor seed")
+    ap.add_argument("--seeds", type=int, default=4, help="seeds of the core loop")
+    ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    ap.add_argument("--time-scale", type=float, default=20.0)
+    ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--core-only", action="store_true")
+    ap.add_argument("--out", default="")
+    a = ap.parse_args(argv)
+
+    model = dataclasses.replace(load_model(a.model), delta_d=a.delta_d)
+    design = evaluate_design(model, a.mu, a.delay)
+    P = NdofMap(model, design.gains, a.delay)
+    # the controlled orbit from a point near it (the core loop's last state, seed 0)
+    z0, *_ = core_loop(a.model, model, design.gains, a, 1000)
+    orbit = np.asarray(find_periodic(P, z0[-1]).state)
+    R = ndof_filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay)
+    S = ndof_noise_covariance(model, design.gains, orbit, R, a.delay)
+    predicted = a.sigma * np.sqrt(np.diag(S))
+    out = {"model": a.model, "delta_d": a.delta_d, "mu": a.mu, "delay": a.delay,
+           "admissible": bool(design.admissible), "gains": design.gains.tolist(),
+           "orbit": orbit.tolist(), "predicted_std": predicted.tolist(),
+           "filter_std_predicted": (a.sigma * np.sqrt(np.diag(R))).tolist()}
+    print(f"design mu={a.mu} delay={a.delay} admissible={design.admissible} "
+          f"k={np.round(design.gains, 6).tolist()}")
+    print(f"controlled orbit z* = {np.round(orbit, 9).tolist()}")
+    print(f"predicted std     {np.array2string(predicted, precision=4)}")
+    ratios, secs = [], []
+    for seed in range(a.seeds):
+        z, counts, resets, per, errors = core_loop(a.model, model, design.gains, a, seed)
+        std, mean = spread(z, orbit, a)
+        filt = errors[a.on + a.settle:].std(axis=0)
+        ratios.append(std / predicted)
+        secs.append(per)
+        print(f"core seed {seed}: std {np.array2string(std, precision=4)} ratio "
+              f"{np.array2string(std / predicted, precision=3)} impacts/period (last "
+              f"{a.periods - a.on - a.settle}) {sorted(set(counts[a.on + a.settle:].tolist()))}"
+              f" resets {resets}; filter error std {np.array2string(filt, precision=3)} "
+              f"(predicted {np.array2string(a.sigma * np.sqrt(np.diag(R)), precision=3)})")
+    ratios = np.array(ratios)
+    out["core"] = {"ratio_mean": ratios.mean(axis=0).tolist(), "ratio_min": ratios.min().item(),
+                   "ratio_max": ratios.max().item(), "seconds_per_period": float(np.mean(secs))}
+    print(f"core: spread/predicted mean {np.array2string(ratios.mean(axis=0), precision=3)} "
+          f"(all seeds {ratios.min():.3f} .. {ratios.max():.3f}); "
+          f"{np.mean(secs) * 1e3:.1f} ms per period")
+    if not a.core_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            z, counts, misses, answered, wall = node_scene(a.model, model, design, a,
+                                                           Path(tmp))
+        std, mean = spread(z, orbit, a)
+        tail = counts[a.on + a.settle:]
+        last = float(np.max(np.abs(z[-1] - orbit)))
+        out["nodes"] = {"mode": a.mode, "time_scale": a.time_scale if a.mode == "realtime"
+                        else None, "std": std.tolist(), "ratio": (std / predicted).tolist(),
+                        "mean": mean.tolist(), "impacts_per_period": sorted(set(
+                            tail.tolist())), "deadline_misses": misses, "answered": answered,
+                        "final_distance": last, "wall_s": wall}
+        print(f"nodes ({a.mode}{'' if a.mode == 'lockstep' else f', time scale {a.time_scale}'}"
+              f"): std {np.array2string(std, precision=4)} ratio "
+              f"{np.array2string(std / predicted, precision=3)}; impacts per period "
+              f"{sorted(set(tail.tolist()))}; |z_final - z*| {last:.2e}; deadline misses "
+              f"{misses}; answered {answered}; {wall:.0f} s wall")
+    if a.out:
+        Path(a.out).write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
