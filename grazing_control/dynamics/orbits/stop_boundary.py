@@ -105,12 +105,27 @@ class StopBoundary:
         """The report, one line per crossing, or the 'none' line; then the branch's end
         where it did not reach the range's (``lo``, ``hi``: the range of k_c)."""
         rng = f"[{_k(min(lo, hi))}, {_k(max(lo, hi))}]"
+        if not self.branch.points:
+            return [f"no controlled 1/1 orbit of the compliant model near the rigid one at "
+                    f"k_c = {_k(max(lo, hi))}: {self.stopped}"]
         out = [c.sentence() for c in self.crossings]
+        touch = {0: "it does not touch the stop (0 contacts a period)",
+                 1: "1 contact a period"}.get(self.contacts[0],
+                                              f"{self.contacts[0]} contacts a period")
+        rhos = [_rho(q.multipliers) for q in self.branch.points]
+        if not out and min(rhos) > 1.0:
+            out.append(f"no crossing in {rng}: the rigid design fails over the whole branch "
+                       f"(the largest multiplier >= {min(rhos):.3f}); the controlled orbit: "
+                       f"{touch}")
+        elif not out and max(rhos) >= 1.0:
+            out.append(f"the largest multiplier passes 1 on {rng} (between {min(rhos):.3f} and "
+                       f"{max(rhos):.3f}) where the continuation located no crossing")
         if not out:
             out.append(f"none in {rng}: the largest multiplier stays <= {self.rho_max:.3f} "
-                       f"(at k_c = {10.0 ** self.rho_max_at:.4g})"
+                       f"(at k_c = {_k(10.0 ** self.rho_max_at)})"
                        + ("" if self.complete else
-                          f" down to k_c = {10.0 ** self.end:.4g}, where the branch ends"))
+                          f" down to k_c = {_k(10.0 ** self.end)}, where the branch ends")
+                       + f"; the controlled orbit: {touch}")
         if not self.complete:
             why = (f"it grazes at k_c = {10.0 ** self.grazing:.4g}" if self.grazing is not None
                    else self.stopped)
@@ -128,8 +143,9 @@ class StopBoundary:
                            "multipliers": [[float(z.real), float(z.imag)]
                                            for z in np.asarray(c.multipliers, complex)]}
                           for c in self.crossings],
-            "rho_max": self.rho_max, "rho_max_log10_stiffness": self.rho_max_at,
-            "branch": {"start_log10_stiffness": self.start, "end_log10_stiffness": self.end,
+            "rho_max": _plain(self.rho_max), "rho_max_log10_stiffness": _plain(self.rho_max_at),
+            "branch": {"start_log10_stiffness": _plain(self.start),
+                       "end_log10_stiffness": _plain(self.end),
                        "contacts_start": self.contacts[0], "contacts_end": self.contacts[1],
                        "complete": self.complete, "stopped": self.stopped,
                        "grazing_log10_stiffness": self.grazing,
@@ -141,16 +157,19 @@ class StopBoundary:
 
 def rigid_design_plant(p: OscillatorParams, c2: float, law: str = "kelvin_voigt", *,
                        friction: float = 0.0, friction_static: float | None = None,
-                       alpha: float | None = None, stiffness: float = STIFF):
+                       alpha: float | None = None, restitution: float | None = None,
+                       stiffness: float = STIFF):
     """(the compliant model with the rigid design's gains at k_c = ``stiffness``, the
-    rigid model's controlled 1/1 orbit). Kelvin-Voigt at restitution ``p.r`` (Eq. C3);
-    Hertz at Hunt-Crossley ``alpha``, default (1 - r) / v- at the rigid orbit's impact
-    (Eq. C5, section 19). ``friction``: Coulomb F_f (0: none), static level
+    rigid model's controlled 1/1 orbit). The design is made for ``p.r``; the stop's
+    ``restitution`` is r_c (default ``p.r``: the designer knows it): Kelvin-Voigt at
+    restitution r_c (Eq. C3, fixed contact damping ratio); Hertz at Hunt-Crossley
+    ``alpha``, default (1 - r_c) / v- at the rigid orbit's impact (Eq. C5, section 19). ``friction``: Coulomb F_f (0: none), static level
     ``friction_static`` (default :data:`STATIC_RATIO` F_f). A ParameterError names a
     bad value."""
     from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.dynamics.maps.compliant_model import CompliantOneDOF
     from grazing_control.dynamics.maps.model import OneDOF
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
     from grazing_control.dynamics.orbits.shooting import ShootingFailed, find_periodic
     from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
     from grazing_control.oscillator.control import Gains
@@ -167,22 +186,28 @@ def rigid_design_plant(p: OscillatorParams, c2: float, law: str = "kelvin_voigt"
     if not math.isfinite(c1):
         raise ParameterError(f"c2={c2!r} is invalid: no degenerate design c1 (Eq. 38) for it")
     gains = Gains(c1, c2)
-    try:
-        rigid = find_periodic(OneDOF(p, gains), np.zeros(2))
-    except (ShootingFailed, ValueError, ArithmeticError) as exc:
+    try:      # shot from the explicit 1/1 orbit (orbits.orbit_11), exact to rounding
+        rigid = find_periodic(OneDOF(p, gains), np.asarray(orbit_11(p, gains).pi2_deviation))
+    except (OrbitNotFound, ShootingFailed, ValueError, ArithmeticError) as exc:
         raise ParameterError(f"c2={c2!r}: the rigid design has no controlled 1/1 orbit at "
                              f"delta_d={p.delta_d!r} ({exc})") from None
     fr = None
     if friction > 0.0:
         static = STATIC_RATIO * friction if friction_static is None else friction_static
         fr = Coulomb(friction, static)
+    rc = p.r if restitution is None else restitution
     if law == "kelvin_voigt":
-        stop = KelvinVoigt.from_restitution(stiffness, p.r)
+        stop = KelvinVoigt.from_restitution(stiffness, rc)
     elif alpha is None:
-        stop = HuntCrossley.from_restitution(stiffness, p.r, rigid.impacts[0].v_minus)
+        stop = HuntCrossley.from_restitution(stiffness, rc, rigid.impacts[0].v_minus)
     else:
         stop = HuntCrossley(stiffness, alpha)
     return CompliantOneDOF(p, gains, law=stop, friction=fr), rigid
+
+
+def _plain(x: float) -> float | None:
+    """Standard JSON: nan (no orbit) as null."""
+    return x if math.isfinite(x) else None
 
 
 def _k(k: float) -> str:
@@ -197,15 +222,19 @@ def _rho(multipliers) -> float:
 
 def stop_boundary(p: OscillatorParams, c2: float, law: str = "kelvin_voigt", *,
                   friction: float = 0.0, friction_static: float | None = None,
-                  alpha: float | None = None, stiffness_range=(STIFF, SOFT),
+                  alpha: float | None = None, restitution: float | None = None,
+                  stiffness_range=(STIFF, SOFT),
                   per_decade: int = 2) -> StopBoundary:
     """Where the rigid design (gains for ``c2`` at ``p``'s restitution) stops working on
     the compliant stop ``law``, over k_c in ``stiffness_range`` (stiff end first; the
     default 1e8 down to 1e1).
 
-    The model: :func:`rigid_design_plant`. The controlled 1/1 orbit is continued in
+    The model: :func:`rigid_design_plant` (its keywords ``friction``, ``friction_static``,
+    ``alpha``, ``restitution``). The controlled 1/1 orbit is continued in
     log10 k_c from the first end to the second on ``per_decade`` points a decade (plus
-    the points the continuation adds where it halves a step), from the rigid orbit;
+    the points the continuation adds where it halves a step), from the rigid orbit (or,
+    where the compliant model has no orbit near it at the stiff end, from the grazing
+    point X**; none there either: a StopBoundary without points, its lines say so);
     the crossings are the continuation's located bifurcations (Brent in log10 k_c to
     rtol 1e-13 on its test functions). The grid between points is where a pair of
     crossings closer than 1/per_decade decades would be missed.
@@ -227,13 +256,19 @@ def stop_boundary(p: OscillatorParams, c2: float, law: str = "kelvin_voigt", *,
     a, b = (math.log10(k) for k in ends)
     model, rigid = rigid_design_plant(p, c2, law, friction=friction,
                                       friction_static=friction_static, alpha=alpha,
-                                      stiffness=ends[0])
+                                      restitution=restitution, stiffness=ends[0])
     n = max(2, int(math.ceil(abs(a - b) * per_decade)) + 1)
-    branch = continue_orbit(model, "log10_stiffness", np.linspace(a, b, n), rigid.state)
+    grid = np.linspace(a, b, n)
+    branch = continue_orbit(model, "log10_stiffness", grid, rigid.state)
+    if not branch.points:     # friction near grazing: the orbit may be off the rigid one's
+        again = continue_orbit(model, "log10_stiffness", grid, np.zeros(2))   # from X**
+        branch = again if again.points else branch
     pts = branch.points
-    if not pts:
-        raise ParameterError(f"stiffness_range={stiffness_range!r}: no controlled 1/1 orbit "
-                             f"of the compliant model at k_c = {ends[0]:.4g} ({branch.stopped})")
+    if not pts:       # no orbit at the stiff end: an answer, not a bad value
+        law_info = {"type": law}
+        return StopBoundary((), math.nan, math.nan, math.nan, math.nan, (None, None),
+                            branch.stopped, None, (model.gains.c1, model.gains.c2), law_info,
+                            branch)
     crossings = []
     for bif in branch.bifurcations:
         if bif.type == "grazing":
@@ -248,9 +283,9 @@ def stop_boundary(p: OscillatorParams, c2: float, law: str = "kelvin_voigt", *,
     crossings.sort(key=lambda c: -c.log10_stiffness if a > b else c.log10_stiffness)
     top = max(pts, key=lambda q: _rho(q.multipliers))
     grazing = next((g.value for g in branch.bifurcations if g.type == "grazing"), None)
-    law_info = {"type": law, "restitution": p.r}
+    law_info = {"type": law}
     if law == "kelvin_voigt":
-        law_info["contact_zeta"] = model.law.contact_zeta
+        law_info.update(restitution=model.law.restitution, contact_zeta=model.law.contact_zeta)
     else:
         law_info["alpha"] = model.law.alpha
     if model.friction is not None:
