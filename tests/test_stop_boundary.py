@@ -86,6 +86,9 @@ def test_the_failing_set_gives_the_documented_boundary_and_a_bisection_agrees():
     assert sb.lines(1e8, 1e1) == ["the rigid design fails for k_c > 19.61 (log10 k_c = "
                                   "1.292396): a multiplier crosses -1 (period doubling)"]
     assert sb.rho_max == pytest.approx(1.833, abs=1e-3) and sb.rho_max_at == 8.0
+    # a stiffness placed on the branch takes the point on its own side of the crossing
+    assert np.abs(sb.at(19.0).multipliers).max() < 1.0 < np.abs(sb.at(19.7).multipliers).max()
+    assert sb.at(5.0) is None
     # the independent bisection: march the orbit down to 10^1.5, then halve [1, 2], each
     # orbit shot from the last one
     grid = _grid(-0.05, -1.5, 0.68, 0.01, [8.0, 6.0, 4.0, 3.0, 2.0, 1.5])

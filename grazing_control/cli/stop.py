@@ -258,24 +258,11 @@ def _cmd_boundary(args) -> int:
 
 
 def _side(sb, k) -> str:
-    """Where k_c = k lies on the continued branch: 'the rigid design holds there' or
-    'fails there' (the largest multiplier of the nearest branch point on the same side of
-    every crossing), or 'outside the range continued'."""
-    import numpy as np
-
-    lk = math.log10(k)
-    pts = sb.branch.points
-    vals = [q.value for q in pts]
-    if not min(vals) <= lk <= max(vals):
+    """Where k_c = k lies on the continued branch (:meth:`StopBoundary.at`), in words."""
+    near = sb.at(k)
+    if near is None:
         return "outside the range continued"
-    near = min(pts, key=lambda q: abs(q.value - lk))
-    between = [c for c in sb.crossings
-               if min(near.value, lk) < c.log10_stiffness < max(near.value, lk)]
-    if between:        # the nearest point is across a crossing: take its other neighbour
-        near = min((q for q in pts if (q.value - between[0].log10_stiffness)
-                    * (lk - between[0].log10_stiffness) > 0.0),
-                   key=lambda q: abs(q.value - lk))
-    rho = float(np.max(np.abs(near.multipliers)))
+    rho = float(max(abs(near.multipliers)))
     return (f"the rigid design {'fails' if rho > 1.0 else 'holds'} there (largest multiplier "
             f"{rho:.3f} at the branch's nearest point, k_c = {10.0 ** near.value:.4g})")
 

@@ -101,6 +101,18 @@ class StopBoundary:
         """The branch spans the whole range requested."""
         return self.stopped == "end"
 
+    def at(self, stiffness: float):
+        """The branch's point nearest to k_c = ``stiffness`` on the same side of every
+        crossing (its multipliers stand for that k_c's), or None outside the branch."""
+        lk = math.log10(stiffness)
+        pts = self.branch.points
+        if not pts or not min(q.value for q in pts) <= lk <= max(q.value for q in pts):
+            return None
+        same = [q for q in pts
+                if all((q.value - c.log10_stiffness) * (lk - c.log10_stiffness) > 0.0
+                       for c in self.crossings)]
+        return min(same or pts, key=lambda q: abs(q.value - lk))
+
     def lines(self, lo: float, hi: float) -> list:
         """The report, one line per crossing, or the 'none' line; then the branch's end
         where it did not reach the range's (``lo``, ``hi``: the range of k_c)."""
