@@ -168,12 +168,15 @@ def figure(rows):
 
 
 def parser() -> argparse.ArgumentParser:
+    from grazing_control.cli.commands import _NEGATIVE_NUMBER
+
     a = argparse.ArgumentParser(
         description="The rigid design on the compliant plant: for each Delta d, c2, r and "
                     "friction, the largest multiplier of the controlled 1/1 orbit continued "
                     "in log10 k_c from 8 to 1 and its crossings (dynamics/orbits/"
                     "stop_boundary.py; docs/theory_contact.md sections 15 and 19). Friction "
                     "is run at the first --restitution only; F_s = 1.2 F_f.")
+    a._negative_number_matcher = _NEGATIVE_NUMBER   # -5e-6 is a value (grazing's parser)
     a.add_argument("--delta-d", type=float, nargs="+", default=list(DELTAS),
                    help=f"Delta d values (default {' '.join(map(str, DELTAS))})")
     a.add_argument("--c2", type=float, nargs="+", default=list(C2S),
