@@ -212,6 +212,8 @@ def test_the_command_takes_a_rig_with_a_stop(capsys):
     (["--periods", "5"], "--periods"),
     (["--rig", "config/rigs/acceptance_stop_soft.yaml", "--delta-d", "-0.01"], "--delta-d"),
     (["--rig", "config/rigs/no_such_rig.yaml"], "--rig"),
+    (["--delta-d", "-0.022481557169788523", "--c2", "0.10189314866706134", "--restitution",
+      "0.918"], "--c2=0.10189314866706134: the rigid design has no controlled 1/1 orbit"),
 ])
 def test_bad_input_is_one_line_naming_the_option(capsys, argv, names):
     code, out, err = _cli(capsys, *argv)

@@ -241,7 +241,12 @@ def _cmd_boundary(args) -> int:
     if not (hi > 0.0 and lo > 0.0 and hi != lo):
         raise ParameterError(f"--stiffness-range={hi!r} {lo!r} is invalid: two different "
                              "k_c > 0, the stiff end first")
-    sb = stop_boundary(p, c2, stiffness_range=(hi, lo), per_decade=args.per_decade or 2, **kw)
+    try:
+        sb = stop_boundary(p, c2, stiffness_range=(hi, lo), per_decade=args.per_decade or 2,
+                           **kw)
+    except ParameterError as exc:     # the library's names as the options'
+        text = str(exc)
+        raise ParameterError(f"--{text}" if text.startswith("c2=") else text) from None
     lines = sb.lines(hi, lo)
     out = {"delta_d": p.delta_d, "zeta": p.zeta, "r": p.r,
            "stiffness_range": [hi, lo], **sb.as_dict(), "lines": lines}
