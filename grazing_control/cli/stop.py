@@ -8,6 +8,15 @@ the Pi2 error within ``--tol`` over the horizon, the cheapest chosen and the rea
 printed (:func:`grazing_control.dynamics.simulation.stop_fidelity.choose_stop_fidelity`; the
 criterion: docs/theory_contact.md section 18). Exit status 0; 2 for a bad value, in
 one line naming it.
+
+``grazing stop --boundary``: where the rigid design stops working for the user's
+oscillator and stop: the rigid design for ``--c2`` at the stop's restitution, the
+controlled 1/1 orbit of the compliant model continued in log10 k_c over
+``--stiffness-range`` (default 1e8 down to 1e1), one line per crossing of the unit circle,
+or the 'none' line with the largest multiplier
+(:func:`grazing_control.dynamics.orbits.stop_boundary.stop_boundary`;
+docs/theory_contact.md section 22). ``--rig FILE``: the oscillator, the design's r and the
+stop (its type, restitution or alpha, friction) from a rig file's ``stop:`` section.
 """
 
 from __future__ import annotations
@@ -140,13 +149,148 @@ def add_stop_options(s) -> None:
                    "tolerance)")
 
 
+#: the options of the model choice only, and of the boundary only (None: not given)
+_CHOICE_ONLY = (("stiffness", "--stiffness"), ("damping", "--damping"), ("dx", "--dx"),
+                ("dv", "--dv"), ("periods", "--periods"), ("tol", "--tol"))
+_BOUNDARY_ONLY = (("law", "--law"), ("alpha", "--alpha"), ("stiffness_range", "--stiffness-range"),
+                  ("per_decade", "--per-decade"), ("rig", "--rig"))
+#: what --rig sets for --boundary (refused if given too)
+_RIG_SETS = (("delta_d", "--delta-d"), ("zeta", "--zeta"), ("law", "--law"),
+             ("restitution", "--restitution"), ("alpha", "--alpha"), ("friction", "--friction"),
+             ("friction_static", "--friction-static"))
+
+
+def _given(args, pairs) -> list:
+    return [flag for attr, flag in pairs if getattr(args, attr, None) is not None]
+
+
+def _boundary_inputs(args):
+    """(OscillatorParams, stop_boundary's keywords, the rig's own k_c or None) from the
+    options or ``--rig``; a ParameterError line naming the option otherwise."""
+    from grazing_control.oscillator.contact import KelvinVoigt
+    from grazing_control.oscillator.params import OscillatorParams
+
+    if args.rig is not None:
+        both = _given(args, _RIG_SETS)
+        if both:
+            raise ParameterError(f"--rig FILE and {', '.join(both)} are both given: the rig's "
+                                 "stop section and model set them (docs/rig.md); give one")
+        from .rig import load
+
+        rig = load(args.rig)
+        st = rig.contact_values()
+        if st["contact"] == "rigid":
+            raise ParameterError(f"--rig {args.rig}: stop.type is rigid: --boundary needs a "
+                                 "compliant stop (stop.type kelvin_voigt or hertz)")
+        p = rig.params()
+        kw = {"law": st["contact"], "friction": st["friction"],
+              "friction_static": st["friction_static"] if st["friction"] > 0.0 else None}
+        if st["contact"] == "hertz":
+            kw["alpha"] = st["contact_damping"]
+        else:
+            kw["restitution"] = KelvinVoigt(st["contact_stiffness"],
+                                            st["contact_damping"]).restitution
+        if not p.delta_d < 0.0:
+            raise ParameterError(f"--rig {args.rig}: its Delta d = {p.delta_d!r} >= 0 (the gap "
+                                 "at or beyond grazing): --boundary needs the controlled 1/1 "
+                                 "orbit, Delta d < 0")
+        return p, kw, st["contact_stiffness"]
+    law = args.law or "kelvin_voigt"
+    r = 0.68 if args.restitution is None else args.restitution
+    if law == "kelvin_voigt" and args.alpha is not None:
+        raise ParameterError("--alpha is Hertz's (--law hertz): a Kelvin-Voigt stop is given "
+                             "by --restitution")
+    if law == "kelvin_voigt" and not math.exp(-2.0) < r <= 1.0:
+        raise ParameterError(f"--restitution={r!r} is invalid: a Kelvin-Voigt stop reaches "
+                             "exp(-2) < r <= 1 (Eq. C3)")
+    if not 0.0 < r <= 1.0:
+        raise ParameterError(f"--restitution={r!r} is invalid: valid range is 0 < r <= 1")
+    if args.alpha is not None and not args.alpha >= 0.0:
+        raise ParameterError(f"--alpha={args.alpha!r} is invalid: valid range is alpha >= 0")
+    dd = -0.05 if args.delta_d is None else args.delta_d
+    if not dd < 0.0:
+        raise ParameterError(f"--delta-d={dd!r} is invalid: --boundary needs Delta d < 0 (the "
+                             "controlled 1/1 orbit impacts)")
+    fr = 0.0 if args.friction is None else args.friction
+    if not fr >= 0.0:
+        raise ParameterError(f"--friction={fr!r} is invalid: valid range is F_f >= 0")
+    if args.friction_static is not None and not (fr > 0.0 and args.friction_static >= fr):
+        raise ParameterError(f"--friction-static={args.friction_static!r} is invalid: valid "
+                             f"range is F_s >= --friction = {fr!r} > 0")
+    try:
+        p = OscillatorParams(delta_d=dd, r=r, zeta=0.01 if args.zeta is None else args.zeta)
+    except ParameterError as exc:
+        name = str(exc).split("=", 1)[0]
+        raise ParameterError(f"--{name.replace('_', '-')}={str(exc).split('=', 1)[1]}") \
+            from None
+    return p, {"law": law, "friction": fr, "friction_static": args.friction_static,
+               "alpha": args.alpha}, None
+
+
+def _cmd_boundary(args) -> int:
+    """``grazing stop --boundary`` (module docstring)."""
+    from grazing_control.dynamics.orbits.stop_boundary import SOFT, STIFF, stop_boundary
+
+    given = _given(args, _CHOICE_ONLY)
+    if given:
+        raise ParameterError(f"{', '.join(given)}: the model choice's, invalid with "
+                             "--boundary (it continues over --stiffness-range)")
+    p, kw, rig_k = _boundary_inputs(args)
+    c2 = -1.0 if args.c2 is None else args.c2
+    hi, lo = args.stiffness_range or (STIFF, SOFT)
+    if not (hi > 0.0 and lo > 0.0 and hi != lo):
+        raise ParameterError(f"--stiffness-range={hi!r} {lo!r} is invalid: two different "
+                             "k_c > 0, the stiff end first")
+    try:
+        sb = stop_boundary(p, c2, stiffness_range=(hi, lo), per_decade=args.per_decade or 2,
+                           **kw)
+    except ParameterError as exc:     # the library's names as the options'
+        text = str(exc)
+        raise ParameterError(f"--{text}" if text.startswith("c2=") else text) from None
+    lines = sb.lines(hi, lo)
+    out = {"delta_d": p.delta_d, "zeta": p.zeta, "r": p.r,
+           "stiffness_range": [hi, lo], **sb.as_dict(), "lines": lines}
+    if rig_k is not None:
+        side = _side(sb, rig_k)
+        out["rig_stiffness"] = {"stiffness": rig_k, "side": side}
+        lines.append(f"the rig's stop: k_c = {rig_k:.6g}, {side}")
+    if args.json:
+        json.dump(out, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print("\n".join(lines))
+    return 0
+
+
+def _side(sb, k) -> str:
+    """Where k_c = k lies on the continued branch (:meth:`StopBoundary.at`), in words."""
+    near = sb.at(k)
+    if near is None:
+        return "outside the range continued"
+    rho = float(max(abs(near.multipliers)))
+    return (f"the rigid design {'fails' if rho > 1.0 else 'holds'} there (largest multiplier "
+            f"{rho:.3f} at the branch's nearest point, k_c = {10.0 ** near.value:.4g})")
+
+
 def cmd_stop(args) -> int:
     """Run ``grazing stop``; the exit status (module docstring)."""
+    if args.boundary:
+        return _cmd_boundary(args)
+    given = _given(args, _BOUNDARY_ONLY)
+    if given:
+        raise ParameterError(f"{', '.join(given)}: valid only with --boundary")
+    if args.stiffness is None:
+        raise ParameterError("--stiffness is missing: the stop's stiffness k_c over the "
+                             "oscillator's (> 0); or give --boundary")
+    for attr, default in (("dx", 0.0), ("dv", 0.0), ("periods", 100), ("tol", 1e-3),
+                          ("friction", 0.0), ("delta_d", -0.05), ("zeta", 0.01)):
+        if getattr(args, attr) is None:
+            setattr(args, attr, default)
     from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.dynamics.simulation.stop_fidelity import choose_stop_fidelity
     from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
     from grazing_control.oscillator.control import Gains
-    from grazing_control.oscillator.params import OscillatorParams, ParameterError
+    from grazing_control.oscillator.params import OscillatorParams
 
     p = OscillatorParams(delta_d=args.delta_d, zeta=args.zeta)
     if (args.damping is None) == (args.restitution is None):
@@ -175,27 +319,55 @@ def add_stop_parser(sub) -> None:
     """Register ``grazing stop`` on the subcommands of the ``grazing`` parser."""
     s = sub.add_parser("stop", help="the cheapest adequate model of a scene's stop: rigid, "
                                     "compliant, or compliant with friction")
-    s.add_argument("--stiffness", type=positive, required=True,
-                   help="the stop's stiffness k_c over the oscillator's (> 0)")
+    s.add_argument("--stiffness", type=positive, default=None,
+                   help="the stop's stiffness k_c over the oscillator's (> 0; required "
+                        "without --boundary)")
     s.add_argument("--damping", type=finite, help="the stop's damping c_c (>= 0, "
                    "underdamped); or give --restitution")
     s.add_argument("--restitution", type=finite, help="the restitution r the stop stands "
-                   "for (Eq. C3, exp(-2) < r <= 1); or give --damping")
-    s.add_argument("--friction", type=finite, default=0.0,
+                   "for (Eq. C3, exp(-2) < r <= 1); or give --damping. --boundary: the "
+                   "stop's and the design's r (default 0.68)")
+    s.add_argument("--friction", type=finite, default=None,
                    help="Coulomb friction on the mass, kinetic level F_f (>= 0; default 0)")
     s.add_argument("--friction-static", type=finite, default=None,
-                   help="static level F_s >= F_f (default F_f)")
-    s.add_argument("--delta-d", type=finite, default=-0.05, help="the scene's Delta d "
+                   help="static level F_s >= F_f (default F_f; --boundary: 1.2 F_f, the "
+                        "chart's)")
+    s.add_argument("--delta-d", type=finite, default=None, help="the scene's Delta d "
                    "(default -0.05)")
-    s.add_argument("--zeta", type=finite, default=0.01, help="damping ratio (default 0.01)")
+    s.add_argument("--zeta", type=finite, default=None, help="damping ratio (default 0.01)")
     s.add_argument("--c2", type=finite, default=None, help="the scene's controller: the "
                    "rigid design for this c2 (c1 of Eq. 38) from the first sample; default "
-                   "none")
-    s.add_argument("--dx", type=finite, default=0.0, help="the start, x - x** on Pi2")
-    s.add_argument("--dv", type=finite, default=0.0, help="the start, v - v** on Pi2")
-    s.add_argument("--periods", type=integer_at_least(1), default=100,
+                   "none (--boundary: the design's c2, default -1)")
+    s.add_argument("--dx", type=finite, default=None, help="the start, x - x** on Pi2 "
+                   "(default 0)")
+    s.add_argument("--dv", type=finite, default=None, help="the start, v - v** on Pi2 "
+                   "(default 0)")
+    s.add_argument("--periods", type=integer_at_least(1), default=None,
                    help="the scene's horizon N (default 100)")
-    s.add_argument("--tol", type=positive, default=1e-3,
+    s.add_argument("--tol", type=positive, default=None,
                    help="tolerance on the Pi2 error after N periods (default 1e-3)")
+    b = s.add_argument_group(
+        "the boundary of the rigid design (--boundary; docs/theory_contact.md section 22)")
+    b.add_argument("--boundary", action="store_true",
+                   help="where the rigid design for --c2 stops working on this stop: the "
+                        "controlled 1/1 orbit continued in log10 k_c over --stiffness-range, "
+                        "one line per crossing of the unit circle (or none, with the "
+                        "largest multiplier)")
+    b.add_argument("--law", choices=("kelvin_voigt", "hertz"), default=None,
+                   help="the stop law: kelvin_voigt (default; at fixed --restitution) or "
+                        "hertz (Hunt-Crossley, at fixed --alpha)")
+    b.add_argument("--alpha", type=finite, default=None,
+                   help="hertz: Hunt-Crossley alpha >= 0 (default (1 - r) / v- at the rigid "
+                        "orbit's impact, Eq. C5)")
+    b.add_argument("--stiffness-range", type=positive, nargs=2, default=None,
+                   metavar=("STIFF", "SOFT"),
+                   help="k_c from STIFF down to SOFT (default 1e8 1e1)")
+    b.add_argument("--per-decade", type=integer_at_least(1), default=None,
+                   help="continuation points a decade (default 2; crossings are located "
+                        "between them to 1e-13)")
+    b.add_argument("--rig", metavar="FILE", default=None,
+                   help="the oscillator, the design's r and the stop (its stop: section: "
+                        "type, damping as restitution or alpha, friction) from a rig file "
+                        "(docs/rig.md); the rig's own k_c placed on the chart")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=cmd_stop)
