@@ -40,6 +40,9 @@ $(VENV)/.stamp: $(VENV)/.deps setup.py setup.cfg package.xml $(PKG_INITS)
 
 venv: $(VENV)/.stamp
 
+# --no-loadscope-reorder: the groups in collection order, the realtime group last (xdist's
+# default runs the largest groups first: the realtime one, whose tests wait for an idle
+# other worker, came first and waited while the other worker ran the rest).
 # --reruns: a test that fails is run again (up to twice) and reported as rerun; the node
 # tests run real processes over Fast DDS on a 2-core machine, where scheduling can make a
 # timing assertion miss. A deterministic failure still fails. --rerun-show-tracebacks: each
@@ -47,7 +50,7 @@ venv: $(VENV)/.stamp
 # One BLAS thread per process: the two workers use the two cores, and OpenBLAS's own
 # threads spinning beside them made tests/test_identification.py 2.4x slower at load 5-8.
 test: $(VENV)/.stamp
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -r fER -n 2 --dist loadgroup --reruns 2 --reruns-delay 1 --rerun-show-tracebacks tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -r fER -n 2 --dist loadgroup --no-loadscope-reorder --reruns 2 --reruns-delay 1 --rerun-show-tracebacks tests
 
 demo: $(VENV)/.stamp
 	$(VENV)/bin/grazing demo --out out/demo

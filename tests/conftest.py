@@ -6,7 +6,9 @@ xdist group of its own (``scene:<module>``): one worker runs all of it, in colle
 order, so that its module-scoped scene (or tests/test_cli.py's session-scoped commands)
 is set up once; two such modules may run at once, one on each worker. Every other test
 (the numerical core, bags written in-process, the command line without nodes) is shared
-out to whichever worker is free. The tests marked ``realtime`` (their assertions hold
+out to whichever worker is free (``--no-loadscope-reorder``: in collection order; xdist's
+default puts the largest groups first, and the realtime group then came first). The tests
+marked ``realtime`` (their assertions hold
 only if the scene's answers meet wall-clock deadlines) form one more group, last in the
 queue, and each waits until the other worker has been idle for IDLE_SECONDS (at most
 REALTIME_WAIT): such a deadline is measured on a machine that runs one scene and nothing
