@@ -124,7 +124,8 @@ SCENE_MODULES = frozenset({
     "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_scene", "test_rig_stop",
     "test_scheduling",
     "test_signals",
-    "test_sim_node", "test_stop_selection", "test_stream_block", "test_test_cleanup",
+    "test_sim_node", "test_stop_fidelity", "test_stop_selection", "test_stream_block",
+    "test_test_cleanup",
 })
 
 def pytest_configure(config):
