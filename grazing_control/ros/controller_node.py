@@ -88,17 +88,7 @@ Stale, duplicate and malformed samples
   duplicate. (Each simulator checks for another simulator or controller too, but sees
   only what its own participant has discovered; the controller hears both.)
 
-Parameters: c1, c2 (gains, from the YAML of ``grazing design --out``), x_ref, v_ref
-(NaN: X** computed from zeta, r, omega, pi2_offset), enable_after, saturation,
-stale_after, actuation_delay (the delay the gains were designed for, 0 <= delay < T; the
-simulator applies it, the controller validates and reports it: docs/nodes.md,
-"Scheduled actuation"), executor (single_threaded or events); delta_d (the plant's
-model, NaN: none), pi2_source, estimator, impact_source, sensor_noise, state_period,
-model_noise (stream mode, above); model_file and gains (an n-DOF scene, issue 17:
-Delta v = k^T (X - X**) on samples with n joints, :mod:`grazing_control.ros.ndof_control`;
-n, i_a, mu: the design file's section data, checked against the model; with
-pi2_source stream the model filter over the n-DOF map reads coordinate
-sensor_coordinate of the stream, issue 32). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
+Parameters: :mod:`grazing_control.ros.controller_parameters` (the table is in docs/nodes.md). Run: ``ros2 run grazing_control controller_node --ros-args --params-file
 config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...``.
 """
 
@@ -110,43 +100,38 @@ import time
 import numpy as np
 
 from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from grazing_control.dynamics.design.capture import CAPTURE_RADIUS
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation.section_state import ESTIMATORS
-from grazing_control.dynamics.estimation.stream import IMPACT_SOURCES, predict_section
+from grazing_control.dynamics.estimation.stream import predict_section
 from grazing_control.dynamics.estimation.stream import warm_up as warm_stream_kernel
+from grazing_control.oscillator.params import ParameterError
+
 from . import cdr, stream_block
-from .scene import SCENE_PARAMETER_DOC
-from .scheduling import apply_node_scheduling, declare_scheduling
-from .diagnostics import ERROR, OK, WARN, Updater
-from .model_watch import (WATCH_DEFAULTS, WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC,
-                          describe_verdict, watch_from_values, watch_row, watch_status)
-from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide, declare_reidentify
+from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, StartupError, Throttled,
+                     check_ranges, deserialize, executor_kind, log_parameter_changes,
+                     publish_parameter_record, refuse_out_of_range, refuse_while_running,
+                     run_node, spin, stamp_key)
+from .controller_parameters import declare_parameters, gains_of
+from .controller_values import (NdofControlLaw, actuation_delay_from_values,
+                                capture_from_values, law_from_values, model_from_values,
+                                pulse_from_values, stream_from_values)
+from .controller_status import diagnose
+from .diagnostics import Updater
+from .model_watch import (WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC, describe_verdict,
+                          watch_from_values, watch_row)
+from .ndof_control import ndof_controller_from_values, ndof_stream_from_values
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
-from .common import (DATA_QOS, EXECUTORS, LATCHED_QOS, LIVE_CHANGES_DOC, REPLAY_QOS,
-                     deserialize, StartupError, Throttled, bool_descriptor, check_ranges,
-                     executor_kind, float_descriptor, int_descriptor, log_parameter_changes,
-                     publish_parameter_record, refuse_out_of_range, refuse_while_running,
-                     run_node, spin, stamp_key, string_descriptor)
-from grazing_control.plant.settings import ABOVE_0, FINITE, MAX_BANDWIDTH, below
-from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
-from .ndof_control import ndof_controller_from_values, ndof_stream_from_values
+from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide
+from .rig_boundary import check_rig_values
 from .rig_control import RIG_INPUT_QOS, RigSide
-from .rig_boundary import check_rig_values, controller_values
-from .controller_values import (GAIN_LIMIT, PI2_SOURCES, NdofControlLaw,
-                                actuation_delay_from_values, below_period,
-                                capture_from_values, law_from_values, model_from_values,
-                                model_omega, pulse_from_values, stream_from_values)
+from .scheduling import apply_node_scheduling, declare_scheduling
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
 ISOLATION_CHECK = 0.25
@@ -167,173 +152,7 @@ class ControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("controller_node", **kwargs)
-        ref = OscillatorParams()
-        self.rig, self.rig_values = self._declare_rig()
-
-        def d(name, default, desc):     # with a rig file, the rig's values are the defaults
-            return self.declare_parameter(name, self.rig_values.get(name, default), desc)
-
-        self.model_file = d("model_file", "", string_descriptor(
-            "path of an n-DOF model YAML file (docs/ndof_model.md): answer its Pi2 samples "
-            "(JointState with n joints) with Delta v = k^T (X - X**), k = gains; '' = the "
-            "1-DOF law", True)).value
-        # each range is exactly what law_from_values & co. accept (issue 27): open bounds
-        # as the next double (plant.settings.ABOVE_0, below), "finite" as FINITE
-        d("c1", 0.0, float_descriptor("gain c1 on x - x** (Eq. 28)", -GAIN_LIMIT, GAIN_LIMIT))
-        d("c2", 0.0, float_descriptor("gain c2 on v - v** (Eq. 28)", -GAIN_LIMIT, GAIN_LIMIT))
-        d("x_ref", math.nan, float_descriptor("x** on Pi2; NaN: from the model parameters",
-                                              constraints="finite, or NaN"))
-        d("v_ref", math.nan, float_descriptor("v** on Pi2; NaN: from the model parameters",
-                                              constraints="finite, or NaN"))
-        d("zeta", ref.zeta, float_descriptor("damping ratio (for X**), 0 < zeta < 1", ABOVE_0,
-                                             below(1.0)))
-        d("r", ref.r, float_descriptor("coefficient of restitution (recorded with the gains), "
-                                       "0 < r < 1", ABOVE_0, below(1.0)))
-        omega = d("omega", study_omega(), float_descriptor(
-            "forcing frequency (for X**), > 0", ABOVE_0, FINITE,
-            constraints="actuation_delay < T = 2 pi / omega")).value
-        d("pi2_offset", ref.pi2_offset, float_descriptor(
-            "phase of Pi2 after Pi1 (for X**), 0 < pi2_offset < 2 pi", ABOVE_0,
-            below(2.0 * math.pi)))
-        d("enable_after", 1000, int_descriptor(
-            "first controlled sample (from 0); -1: only through ~/enable", -1))
-        d("saturation", math.inf, float_descriptor("limit on |Delta v|, > 0 (inf: none)",
-                                                   ABOVE_0, math.inf))
-        d("stale_after", math.inf, float_descriptor(
-            "max age of a sample in simulation seconds (with use_sim_time), > 0 (inf: none)",
-            ABOVE_0, math.inf))
-        d("actuation_delay", 0.0, float_descriptor(
-            "simulation time from a sample to its correction that the gains were designed "
-            "for (applied by sim_node), 0 <= actuation_delay < T", 0.0,
-            below_period(model_omega(self.model_file, omega)), read_only=True,
-            constraints="actuation_delay < T = 2 pi / omega (with model_file: the model's "
-            "omega)"))
-        d("delta_d", math.nan, float_descriptor(
-            "the plant's Delta d (the model of the estimator and of the predicted next "
-            "correction); NaN: no model", read_only=True, constraints="finite, or NaN"))
-        d("pi2_source", "sample", string_descriptor(
-            "sample: the simulator's Pi2 samples (oscillator/pi2); stream: estimated from "
-            "the sensor stream (oscillator/state)", True, PI2_SOURCES))
-        d("estimator", "model", string_descriptor(
-            "stream mode: nearest (last sample), arc (free-flow fit since the last impact),"
-            " model (exact-map filter across periods)", True, ESTIMATORS))
-        d("impact_source", "stream", string_descriptor(
-            "stream mode: impacts from oscillator/impact (topic) or detected in the stream",
-            True, IMPACT_SOURCES))
-        d("sensor_noise", 1e-4, float_descriptor(
-            "std of the stream's noise (> 0 for arc and model)", 0.0, FINITE,
-            read_only=True))
-        d("state_period", 0.0, float_descriptor(
-            "simulation time between stream samples; 0: from the stamps", 0.0, FINITE,
-            read_only=True))
-        d("stream_message", "sample", string_descriptor(
-            "stream mode: the stream's messages, sample (oscillator/state) or block "
-            "(oscillator/state_block, ros/stream_block.py); the launcher passes the "
-            "simulator's", True, stream_block.MESSAGES))
-        why = stream_block.check_message(self.get_parameter("stream_message").value)
-        if why is not None:
-            raise StartupError(why)
-        d("model_noise", 1e-2, float_descriptor(
-            "model filter's process noise per period, in units of sensor_noise", 0.0, FINITE,
-            read_only=True))
-        d("estimate_bias", False, bool_descriptor(
-            "stream mode, estimator model: estimate a constant sensor position bias (the "
-            "augmented filter, issue 29; published on controller/model_watch)", True,
-            constraints="true only with pi2_source stream and estimator model"))
-        d("track_delta_d", False, bool_descriptor(
-            "stream mode, estimator model: track Delta d as a random walk of std "
-            "wall_noise per period (the augmented filter)", True,
-            constraints="true only with pi2_source stream and estimator model"))
-        d("bias_std", WATCH_DEFAULTS["bias_std"], float_descriptor(
-            "augmented filter: prior std of the sensor bias, > 0", ABOVE_0, FINITE,
-            read_only=True))
-        d("wall_std", WATCH_DEFAULTS["wall_std"], float_descriptor(
-            "augmented filter: prior std of Delta d about delta_d, > 0", ABOVE_0, FINITE,
-            read_only=True))
-        d("wall_noise", WATCH_DEFAULTS["wall_noise"], float_descriptor(
-            "augmented filter: Delta d's random walk std per period, >= 0", 0.0, FINITE,
-            read_only=True))
-        # the test's window is described as [0, 0] where no test can run (the sample
-        # source, or another estimator): a range end is always accepted (issue 27)
-        watched = (self.get_parameter("pi2_source").value == "stream"
-                   and self.get_parameter("estimator").value == "model")
-        d("consistency_window", 0, int_descriptor(
-            "stream mode, estimator model: periods of the innovation consistency test's "
-            "window (docs/theory_estimation.md E9-E10; verdict on /diagnostics and "
-            "controller/model_watch); 0: no test", 0, None if watched else 0,
-            read_only=True,
-            constraints="> 0 only with pi2_source stream and estimator model"))
-        d("false_alarm", WATCH_DEFAULTS["false_alarm"], float_descriptor(
-            "consistency test: false-alarm rate per window, 0 < false_alarm < 0.5", ABOVE_0,
-            below(0.5), read_only=True))
-        d("capture", False, bool_descriptor(
-            "stream mode: the capture rule (issue 29, docs/theory_capture.md): once control "
-            "is on, no correction until the estimate is within capture_radius of the "
-            "controlled orbit's Pi2 state, then Eq. 28 (latched)", True,
-            constraints="true only with pi2_source stream and a model (delta_d)"))
-        d("capture_radius", 0.0, float_descriptor(
-            "capture rule: the distance (Euclidean in (x, v) on Pi2), >= 0; 0: "
-            f"{CAPTURE_RADIUS:g} sqrt(|delta_d|)", 0.0, FINITE, read_only=True))
-        declare_reidentify(d)
-        d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
-        d("live_changes", False, bool_descriptor(LIVE_CHANGES_DOC, True))
-        d("diagnostics_period", 1.0, float_descriptor(
-            "wall seconds between /diagnostics messages (grazing_control.ros.diagnostics); "
-            "0 = none", 0.0, 3600.0, read_only=True))
-        d("answer_after_section", False, bool_descriptor(
-            "stream mode: answer section k with the first sample after t_k (realtime: the "
-            "simulator takes an answer only after its Pi2 sample), not with the last "
-            "before it (lockstep)", read_only=True))
-        d("answer_lead", 0.0, float_descriptor(
-            "stream mode: answer a section this much simulation time before its last "
-            "sample (those samples are not used); 0: with its last sample", 0.0, FINITE,
-            read_only=True, constraints="answer_lead < T = 2 pi / omega"))
-        width = d("pulse_width", 0.0, float_descriptor(
-            "how sim_node acts (its pulse_width): a force pulse of this width centred at the "
-            "actuation time, modelled by the estimator and the prediction; 0: a velocity "
-            "kick", 0.0, below(2.0 * math.pi / omega), read_only=True,
-            constraints="pulse_width < T = 2 pi / omega; with "
-            "rig_file the rig's")).value
-        d("force_limit", 0.0, float_descriptor(
-            "sim_node's force_limit on the pulse's force, modelled; 0: none", 0.0, FINITE,
-            read_only=True, constraints="with rig_file the rig's"))
-        # the actuator acts on a pulse: without one (pulse_width 0) its parameters are
-        # described as [0, 0], as consistency_window without a test (a range end is
-        # always accepted, tests/test_node_parameters.py)
-        pulsed = width > 0.0
-        d("actuator_bandwidth", 0.0, float_descriptor(
-            "sim_node's first-order actuator (issue 29): bandwidth 1 / tau_a in radians per "
-            "simulation time unit, integrated exactly by the estimator and the prediction; "
-            "0: ideal", 0.0, MAX_BANDWIDTH if pulsed else 0.0, read_only=True,
-            constraints="> 0 only with pulse_width > 0; with rig_file the rig's"))
-        d("actuator_latency", 0.0, float_descriptor(
-            "the actuator's latency from the command to the force, simulation time; 0: none",
-            0.0, FINITE if pulsed else 0.0, read_only=True,
-            constraints="> 0 only with pulse_width > 0; "
-            "actuation_delay + pulse_width / 2 + actuator_latency < T"))
-        d("executor", "events", string_descriptor(
-            "rclpy executor: single_threaded or events (rclpy.experimental EventsExecutor)",
-            True, EXECUTORS))
-        d("gains", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
-            type=ParameterType.PARAMETER_DOUBLE_ARRAY, description=(
-                "with model_file: the 2n gains k on (x_0..x_{n-1}, v_0..v_{n-1}) - X** "
-                "(grazing design --model FILE --out); unused without (empty)")))
-        if not self.model_file and self._gains() is None:
-            # a value, so that a get over every name answers (ros2 param dump, get): an
-            # unset parameter made rclpy's GetParameters return nothing at all (issue 27)
-            self.set_parameters([Parameter("gains", Parameter.Type.DOUBLE_ARRAY, [])])
-        d("n", -1, int_descriptor("with model_file: the degrees of freedom the gains were "
-                                  "designed for (checked against the model; -1: not given)",
-                                  -1, read_only=True))
-        d("i_a", -1, int_descriptor("with model_file: the actuated coordinate the gains were "
-                                    "designed for (checked; -1: not given)", -1,
-                                    read_only=True))
-        d("mu", math.nan, float_descriptor("with model_file: the design's mu (w^T N = mu w^T; "
-                                           "recorded, not used)", read_only=True))
-        d("sensor_coordinate", 0, int_descriptor(
-            "with model_file and pi2_source stream: the coordinate whose position (and "
-            "velocity where carried) the model filter reads, 0 <= sensor_coordinate < n",
-            0, read_only=True))
+        declare_parameters(self)   # ros/controller_parameters.py: rig, model file, every parameter
         declare_scheduling(self)
         check_ranges(self)
         self.executor_kind = executor_kind(self)
@@ -352,7 +171,7 @@ class ControllerNode(Node):
         pulse = {k: self.get_parameter(k).value for k in PULSE_KEYS}
         try:
             if self.model_file:
-                self.law = self._ndof_law(self._values(), self._gains())
+                self.law = self._ndof_law(self._values(), gains_of(self))
                 self.actuation_delay = actuation_delay_from_values(
                     {**self._values(), "omega": self.ndof.model.omega})
                 self.model = self.capture = None
@@ -397,7 +216,7 @@ class ControllerNode(Node):
         self.verdict = None             # the monitor's latest verdict
         self.mismatches = 0             # sections whose verdict was a mismatch
         self.first_mismatch = None      # the first section with a mismatch verdict
-        self._diag_mismatches = 0
+        self.diag_mismatches = 0
         try:        # re-identification in the loop (ros/reidentify.py), or None
             self.reid = ReidentifySide.from_node(self, self._values())
         except ParameterError as exc:
@@ -464,7 +283,7 @@ class ControllerNode(Node):
         self.prediction = math.nan       # the last answer's predicted next correction
         self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value)
         self.diagnostics.add("controller", self._diagnose)
-        self._diag_last = (0, 0, None)   # answered, refused, ROS time (sim time)
+        self.diag_last = (0, 0, None)   # answered, refused, ROS time (sim time)
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
@@ -488,35 +307,6 @@ class ControllerNode(Node):
                  f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind} "
                  f"pi2_source={source}")
 
-    def _declare_rig(self):
-        """Declare rig_file, rig_c2 and clock_window; (the Rig or None, the parameters
-        its file sets: rig_boundary.controller_values, the design for its budget)."""
-        from grazing_control.plant.rig import load_rig
-
-        path = self.declare_parameter("rig_file", "", string_descriptor(
-            "path of a rig file (docs/rig.md): speak the driver contract in SI "
-            "(docs/driver_contract.md: reads rig/sensor, rig/phase, rig/clock, rig/applied;"
-            " answers on rig/force_pulse and, dimensionless, on "
-            "controller/velocity_correction), the model, sensor and gains from the rig; "
-            "'' = the dimensionless scene", True)).value
-        c2 = self.declare_parameter("rig_c2", math.nan, float_descriptor(
-            "rig_file: the design's c2 (c1 from the degenerate condition for the budget's "
-            "delay); NaN: the c2 of least noise gain", read_only=True,
-            constraints=f"|rig_c2| <= {GAIN_LIMIT:g}, or NaN")).value
-        if not (math.isnan(c2) or abs(c2) <= GAIN_LIMIT):
-            raise StartupError(f"rig_c2={c2!r} is invalid: valid range is |rig_c2| <= "
-                               f"{GAIN_LIMIT:g}, or NaN for the c2 of least noise gain")
-        self.declare_parameter("clock_window", 200, int_descriptor(
-            "rig_file: rig/clock pairs of the clock relation's sliding window", 2, 100_000,
-            read_only=True))
-        if not path:
-            return None, {}
-        try:
-            rig = load_rig(path)
-            return rig, controller_values(rig, c2)
-        except (ParameterError, ValueError, ArithmeticError) as exc:
-            raise StartupError(f"rig_file={path}: {exc}") from None
-
     def _warn_gains(self) -> None:
         """Warn when the gains were not given or are both zero (the controller then
         answers every sample with Delta v = 0): typically a parameter file keyed for
@@ -539,13 +329,6 @@ class ControllerNode(Node):
 
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in _KEYS}
-
-    def _gains(self):
-        """The ``gains`` parameter, None when not given."""
-        try:
-            return self.get_parameter("gains").value
-        except ParameterUninitializedException:
-            return None
 
     def _ndof_law(self, values: dict, gains) -> "NdofControlLaw":
         """The n-DOF law of ``values`` and ``gains`` (ros/ndof_control.py); sets
@@ -920,7 +703,7 @@ class ControllerNode(Node):
                 new = law_from_values(values)
                 actuation_delay_from_values(values)     # omega: T must stay > the delay
             else:
-                gains = next((p.value for p in params if p.name == "gains"), self._gains())
+                gains = next((p.value for p in params if p.name == "gains"), gains_of(self))
                 new = self._ndof_law(values, gains)     # sets self.ndof when valid
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
@@ -930,68 +713,8 @@ class ControllerNode(Node):
         return SetParametersResult(successful=True)
 
     def _diagnose(self, stat):
-        """The controller's /diagnostics task: answers, whether the control is on, and
-        what it refused; WARN when a sample went unanswered (stale, malformed, non-finite)
-        since the last message, or when it has not answered for a whole period while
-        it had before (the simulator gone, or the controller starved). Under
-        use_sim_time a period in which the simulation time stood (the scene over, or
-        not started) expected no sample: no WARN for it (issue 27 §2)."""
-        refused = self.malformed.count + self.stale.count + self.nonfinite.count
-        last_answered, last_refused, last_clock = self._diag_last
-        clock = self.get_clock()
-        now = clock.now().nanoseconds if clock.ros_time_is_active else None
-        self._diag_last = (self.answered, refused, now)
-        standing = now is not None and now == last_clock
-        stat.summary(OK, "controlling" if self.law.enabled else "answering (control off)")
-        stat.add("answered", self.answered)
-        stat.add("control on", str(self.law.enabled).lower())
-        stat.add("enable_after", self.law.enable_after)
-        stat.add("malformed", self.malformed.count)
-        stat.add("stale", self.stale.count)
-        stat.add("nonfinite", self.nonfinite.count)
-        stat.add("out_of_order", self.law.out_of_order)
-        if self.rig_side is not None:
-            self.rig_side.diagnose(stat)
-        if self.watching:
-            self._diagnose_watch(stat)
-        if self.capture is not None:
-            stat.add("captured at section", "not yet" if self.capture.on_at is None
-                     else self.capture.on_at)
-        if self.reid is not None:
-            self.reid.diagnose(stat)
-        if refused > last_refused:
-            stat.merge_summary(WARN, f"{refused - last_refused} samples not answered "
-                                     "(malformed, stale or non-finite)")
-        if standing:
-            stat.add("simulation time", "standing")
-        elif last_answered and self.answered == last_answered:
-            stat.merge_summary(WARN, "no sample answered in the last period")
-        return stat
-
-    def _diagnose_watch(self, stat) -> None:
-        """The augmented filter's estimates and the consistency verdict: ERROR while the
-        latest verdict is a mismatch (naming the failing tests, statistic vs bound), WARN
-        when one came since the last message but the latest is consistent."""
-        row = dict(zip(WATCH_FIELDS, watch_row(self.stream, self.verdict)))
-        for name in ("bias", "bias_se", "delta_d", "delta_d_se"):
-            if math.isfinite(row[name]):
-                stat.add(name, f"{row[name]:.6g}")
-        if self.monitor is None:
-            return
-        stat.add("mismatch sections", self.mismatches)
-        if self.first_mismatch is not None:
-            stat.add("first mismatch", self.first_mismatch)
-        v = self.verdict
-        if v is not None:
-            stat.add("consistency", describe_verdict(v))
-            stat.add("nis", f"{v.statistic:.6g} (bound {v.bound:.6g}, {v.dof} dof)")
-            if v.mean_dof:
-                stat.add("mean", f"{v.mean_statistic:.6g} (bound {v.mean_bound:.6g}, "
-                                 f"{v.mean_dof} dof)")
-        new, self._diag_mismatches = self.mismatches - self._diag_mismatches, self.mismatches
-        level, message = watch_status(v, new)
-        if level is not None:
-            stat.merge_summary(ERROR if level == "error" else WARN, message)
+        """The controller's /diagnostics task (:func:`controller_status.diagnose`)."""
+        return diagnose(self, stat)
 
     def on_exit(self) -> None:
         """Say what was published (grazing/published) and log what was answered and
