@@ -253,8 +253,11 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
     assert (N - 1) * T <= clock[-1] <= N * T
 
 
+@pytest.mark.realtime
 def test_realtime_keeps_pace_and_measures_latency(tmp_path, domain, collector):
-    """time_scale 200: a Pi2 sample every T/200 = 47 ms of wall time; corrections on arrival."""
+    """time_scale 200: a Pi2 sample every T/200 = 47 ms of wall time; corrections on arrival.
+    Its pace is read on the test process's wall clock: marked realtime (a fresh clone's
+    rerun measured 193.6 against 200 +- 3 %, a CPU-bound test on the other worker)."""
     scale, n = 200.0, 40
     res = launcher.run(STUDY, CONTROLLER, None, n, domain_id=domain, timeout=60,
                        sim_overrides={"mode": "realtime", "time_scale": scale,
