@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, advance_compliant,
+from grazing_control.oscillator.contact import (MAX_FRICTION, MAX_STIFFNESS, Coulomb,
+                                                KelvinVoigt, advance_compliant,
                                                 compliant_period_step,
                                                 kelvin_voigt_damping,
                                                 grazing_jump, kelvin_voigt_restitution)
@@ -221,6 +222,31 @@ def test_bad_friction_names_the_parameter():
         Coulomb(-0.1)
     with pytest.raises(ParameterError, match="static"):
         Coulomb(0.2, 0.1)
+
+
+@pytest.mark.timeout(60)
+def test_a_stop_or_a_friction_beyond_its_range_is_refused_and_the_range_ends_run():
+    """Friction 1e308 poisoned the certified search with non-finite values and
+    `grazing simulate --friction 1e308` never returned (found by hand); stiffness 1e308
+    overflowed. Both are one ParameterError naming the value and its range; the range
+    ends themselves run a period (friction: sticks, stiffness: one contact)."""
+    from grazing_control.oscillator.hertz import HuntCrossley
+
+    for make, text in ((lambda: KelvinVoigt(1e308), "stiffness"),
+                       (lambda: KelvinVoigt.from_restitution(MAX_STIFFNESS * 10, 0.68),
+                        "stiffness"),
+                       (lambda: HuntCrossley(1e308), "stiffness"),
+                       (lambda: Coulomb(1e308), "kinetic"),
+                       (lambda: Coulomb(0.1, 1e308), "static")):
+        with pytest.raises(ParameterError, match=text + r".*valid range is.*1e\+(18|06)"):
+            make()
+    p = OscillatorParams(delta_d=-0.05)
+    seg = advance_compliant(p, KelvinVoigt(1e3, 1.0), 0.0, 0.0, 0.1, p.period,
+                            friction=Coulomb(MAX_FRICTION))
+    assert len(seg.sticks) == 1 and seg.v == 0.0
+    stiff = compliant_period_step(p, KelvinVoigt.from_restitution(MAX_STIFFNESS, p.r),
+                                  0.01, 0.01)
+    assert math.isfinite(stiff.x) and math.isfinite(stiff.v)
 
 
 def test_friction_above_the_forcing_sticks_for_ever():

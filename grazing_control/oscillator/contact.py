@@ -95,6 +95,16 @@ def kelvin_voigt_damping(r: float) -> float:
             hi = mid
 
 
+#: The largest stiffness ratio k_c of a compliant stop: the contact lasts about pi /
+#: sqrt(k_c), 3e-9 of a time unit here, far below any tolerance the rigid map misses by;
+#: beyond it the closed form's arithmetic overflows (1e308 gave an OverflowError).
+MAX_STIFFNESS = 1e18
+#: The largest friction level F_f, F_s (over k l): a thousand times beyond any that lets
+#: the forced mass slip; 1e308 poisoned the certified search with non-finite values and
+#: it never returned (grazing simulate ... --friction 1e308, found by hand).
+MAX_FRICTION = 1e6
+
+
 @dataclass(frozen=True)
 class KelvinVoigt:
     """A linear spring-dashpot stop: stiffness ratio k_c = K_c / k and damping c_c.
@@ -114,8 +124,9 @@ class KelvinVoigt:
     def __post_init__(self) -> None:
         k = _check_real("stiffness", self.stiffness)
         c = _check_real("damping", self.damping)
-        if not k > 0.0:
-            raise ParameterError(f"stiffness={k!r} is invalid: valid range is k_c > 0")
+        if not 0.0 < k <= MAX_STIFFNESS:
+            raise ParameterError(f"stiffness={k!r} is invalid: valid range is "
+                                 f"0 < k_c <= {MAX_STIFFNESS:g}")
         if not c >= 0.0:
             raise ParameterError(f"damping={c!r} is invalid: valid range is c_c >= 0")
         if not c < 2.0 * math.sqrt(k):
@@ -128,8 +139,9 @@ class KelvinVoigt:
     def from_restitution(cls, stiffness: float, r: float) -> "KelvinVoigt":
         """The stop of stiffness k_c whose free-mass restitution (Eq. C3) is r."""
         k = _check_real("stiffness", stiffness)
-        if not k > 0.0:
-            raise ParameterError(f"stiffness={k!r} is invalid: valid range is k_c > 0")
+        if not 0.0 < k <= MAX_STIFFNESS:
+            raise ParameterError(f"stiffness={k!r} is invalid: valid range is "
+                                 f"0 < k_c <= {MAX_STIFFNESS:g}")
         return cls(k, 2.0 * kelvin_voigt_damping(r) * math.sqrt(k))
 
     @property
@@ -173,11 +185,13 @@ class Coulomb:
 
     def __post_init__(self) -> None:
         f = _check_real("kinetic", self.kinetic)
-        if not f >= 0.0:
-            raise ParameterError(f"kinetic={f!r} is invalid: valid range is F_f >= 0")
+        if not 0.0 <= f <= MAX_FRICTION:
+            raise ParameterError(f"kinetic={f!r} is invalid: valid range is "
+                                 f"0 <= F_f <= {MAX_FRICTION:g}")
         s = f if self.static is None else _check_real("static", self.static)
-        if not s >= f:
-            raise ParameterError(f"static={s!r} is invalid: valid range is F_s >= F_f = {f!r}")
+        if not f <= s <= MAX_FRICTION:
+            raise ParameterError(f"static={s!r} is invalid: valid range is "
+                                 f"F_f = {f!r} <= F_s <= {MAX_FRICTION:g}")
         object.__setattr__(self, "kinetic", f)
         object.__setattr__(self, "static", s)
 

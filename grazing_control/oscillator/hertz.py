@@ -19,8 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .contact import (CompliantSegment, Contact, Coulomb, LagForce, _above_switch, _Dense,
-                      _first_crossing, _force_at, _Region, _stuck)
+from .contact import (MAX_STIFFNESS, CompliantSegment, Contact, Coulomb, LagForce,
+                      _above_switch, _Dense, _first_crossing, _force_at, _Region, _stuck)
 from .flow import particular
 from .impact import ImpactCapError, NonFiniteStateError, _next_impact, _on_wall_at_rest
 from .params import OscillatorParams, ParameterError, _check_real
@@ -42,8 +42,9 @@ class HuntCrossley:
     def __post_init__(self) -> None:
         k = _check_real("stiffness", self.stiffness)
         a = _check_real("alpha", self.alpha)
-        if not k > 0.0:
-            raise ParameterError(f"stiffness={k!r} is invalid: valid range is k_c > 0")
+        if not 0.0 < k <= MAX_STIFFNESS:
+            raise ParameterError(f"stiffness={k!r} is invalid: valid range is "
+                                 f"0 < k_c <= {MAX_STIFFNESS:g}")
         if not a >= 0.0:
             raise ParameterError(f"alpha={a!r} is invalid: valid range is alpha >= 0")
         object.__setattr__(self, "stiffness", k)

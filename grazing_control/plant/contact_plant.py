@@ -19,8 +19,8 @@ import numpy as np
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_force
 from grazing_control.dynamics.simulation.actuator import command_period
-from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, LagForce,
-                                                advance_compliant)
+from grazing_control.oscillator.contact import (MAX_FRICTION, MAX_STIFFNESS, Coulomb,
+                                                KelvinVoigt, LagForce, advance_compliant)
 from grazing_control.oscillator.flow import to_deviation, to_physical
 from grazing_control.oscillator.hertz import HuntCrossley, advance_hertz
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -193,11 +193,13 @@ def contact_from_values(values: dict, p: OscillatorParams) -> ContactPlant | Non
     stiffness, damping = float(values["contact_stiffness"]), float(values["contact_damping"])
     kinetic, static = float(values["friction"]), float(values["friction_static"])
     for name, value, ok, valid in (
-            ("contact_stiffness", stiffness, stiffness > 0.0, "a finite stiffness > 0"),
+            ("contact_stiffness", stiffness, 0.0 < stiffness <= MAX_STIFFNESS,
+             f"0 < contact_stiffness <= {MAX_STIFFNESS:g}"),
             ("contact_damping", damping, damping >= 0.0, "a finite damping >= 0"),
-            ("friction", kinetic, kinetic >= 0.0, "a finite friction >= 0 (0 = none)"),
-            ("friction_static", static, static >= 0.0, "0 (= friction) or a finite F_s >= "
-                                                         "friction")):
+            ("friction", kinetic, 0.0 <= kinetic <= MAX_FRICTION,
+             f"0 <= friction <= {MAX_FRICTION:g} (0 = none)"),
+            ("friction_static", static, 0.0 <= static <= MAX_FRICTION,
+             f"0 (= friction) or friction <= F_s <= {MAX_FRICTION:g}")):
         if not (math.isfinite(value) and ok):
             raise ParameterError(f"{name}={value!r} is invalid: valid range is {valid}")
         if name.startswith("friction") and value != 0.0 and kind == "rigid":

@@ -26,6 +26,7 @@ import numpy as np
 from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, Actuator
 from grazing_control.dynamics.simulation.fidelity import FIDELITIES
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.oscillator.contact import MAX_FRICTION, MAX_STIFFNESS
 from grazing_control.plant.contact_plant import CONTACTS, ContactPlant, contact_from_values
 from grazing_control.plant.faults import FaultModel
 from grazing_control.plant.sensor import EXACT_SENSOR, SensorModel
@@ -217,17 +218,18 @@ PARAMETERS = (
               choices=CONTACTS, read_only=True,
               constraints="rigid unless fidelity exact"),
     Parameter("contact_stiffness", "double", 1e6, "compliant stop: stiffness k_c over the "
-              "oscillator's (hertz: force per penetration^1.5), > 0", ABOVE_0, FINITE,
+              "oscillator's (hertz: force per penetration^1.5), 0 < k_c <= 1e18", ABOVE_0,
+              MAX_STIFFNESS,
               read_only=True),
     Parameter("contact_damping", "double", 0.0, "compliant stop: damping c_c over m omega_n "
               "(kelvin_voigt, c_c < 2 sqrt(k_c)) or Hunt-Crossley alpha (hertz), >= 0",
               0.0, FINITE, read_only=True,
               constraints="kelvin_voigt: (2 zeta + c_c)^2 < 4 (1 + k_c) and c_c < 2 sqrt(k_c)"),
     Parameter("friction", "double", 0.0, "Coulomb dry friction on the mass, kinetic level "
-              "F_f (force over k l), >= 0; 0 = none", 0.0, FINITE, read_only=True,
+              "F_f (force over k l), 0..1e6; 0 = none", 0.0, MAX_FRICTION, read_only=True,
               constraints="0 with contact rigid"),
     Parameter("friction_static", "double", 0.0, "static friction level F_s >= friction; "
-              "0 = friction", 0.0, FINITE, read_only=True,
+              "0 = friction", 0.0, MAX_FRICTION, read_only=True,
               constraints="0 or >= friction"),
 )
 
