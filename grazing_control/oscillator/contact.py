@@ -184,13 +184,14 @@ class Coulomb:
     static: float | None = None
 
     def __post_init__(self) -> None:
-        f = _check_real("kinetic", self.kinetic)
+        # named as sim_node's parameters and the commands' options name them
+        f = _check_real("friction", self.kinetic)
         if not 0.0 <= f <= MAX_FRICTION:
-            raise ParameterError(f"kinetic={f!r} is invalid: valid range is "
+            raise ParameterError(f"friction={f!r} is invalid: valid range is "
                                  f"0 <= F_f <= {MAX_FRICTION:g}")
-        s = f if self.static is None else _check_real("static", self.static)
+        s = f if self.static is None else _check_real("friction_static", self.static)
         if not f <= s <= MAX_FRICTION:
-            raise ParameterError(f"static={s!r} is invalid: valid range is "
+            raise ParameterError(f"friction_static={s!r} is invalid: valid range is "
                                  f"F_f = {f!r} <= F_s <= {MAX_FRICTION:g}")
         object.__setattr__(self, "kinetic", f)
         object.__setattr__(self, "static", s)
