@@ -9,7 +9,17 @@ cover the stream and its sensor, velocity and measurement noise, loss and jitter
 delay, the force pulse, the first-order actuator, the compliant stop with friction, the
 drifting wall, a pending model change and corrections on arrival.
 
-    .venv/bin/python benchmarks/fold_hashes.py
+    .venv/bin/python benchmarks/fold_hashes.py          # the engine's scenes
+    .venv/bin/python benchmarks/fold_hashes.py --bag    # and a lockstep bag's payloads
+
+Recorded on main 5b8ea17 (before the fold) and kept in tests/test_plant_engine.py
+(:data:`MAIN_HASHES`), which runs the engine's scenes against them.
+
+With ``--bag`` it also runs a lockstep 1-DOF scene through the nodes (``grazing run
+--compose``, 80 periods, the stream at 0.1, control from sample 30) into a bag and hashes
+the payloads of the simulator's and controller's data topics in their order of arrival
+(the wall-clock topics -- latency, diagnostics, the parameter and published records,
+/clock -- left out).
 """
 
 from __future__ import annotations
@@ -79,9 +89,97 @@ def run(name: str, values: dict) -> str:
     return h.hexdigest()
 
 
+#: The topics of a lockstep scene that carry simulation results only.
+BAG_TOPICS = ("/oscillator/pi2", "/oscillator/pi1", "/oscillator/state", "/oscillator/impact",
+              "/controller/velocity_correction", "/controller/enabled")
+
+
+def bag_hashes() -> dict:
+    """{topic: sha256 of its payloads in order} of a lockstep scene run by ``grazing run``."""
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from mcap.reader import make_reader
+
+    from grazing_control.recordings.reader import bag_path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / "bag"
+        subprocess.run([str(Path(sys.executable).with_name("grazing")), "run", "--compose",
+                        "--bag", str(bag), "--periods", "80", "--delta-d", "-5e-6",
+                        "--enable-after", "30", "--sim-param", "state_period:=0.1"],
+                       check=True, capture_output=True)
+        hashes = {t: hashlib.sha256() for t in BAG_TOPICS}
+        counts = dict.fromkeys(BAG_TOPICS, 0)
+        with open(bag_path(bag), "rb") as fh:
+            for _schema, channel, message in make_reader(fh).iter_messages(
+                    topics=list(BAG_TOPICS), log_time_order=False):
+                hashes[channel.topic].update(message.data)
+                counts[channel.topic] += 1
+    return {t: f"{counts[t]} {h.hexdigest()}" for t, h in hashes.items()}
+
+
+#: An n-DOF scene (config/models/two_mass_scene.yaml): stream, sensor, loss, jitter, delay.
+NDOF_SCENE = dict(delta_d=-1e-5, state_period=0.1, sensor_noise=1e-4, sensor_seed=2,
+                  loss=0.1, jitter=0.2, seed=5, actuation_delay=0.3, max_periods=60)
+NDOF_GAINS = (-0.3, 0.1, -0.05, 0.02)
+
+
+def ndof_engine(values: dict):
+    """The engine of the n-DOF scene: before the fold plant.ndof_engine's, after it the
+    one Engine with settings_from_values(..., model_file=...)."""
+    path = "config/models/two_mass_scene.yaml"
+    try:
+        from grazing_control.plant.ndof_engine import NdofEngine
+        from grazing_control.plant.ndof_settings import ndof_settings_from_values
+        return NdofEngine(ndof_settings_from_values(values, path))
+    except ImportError:
+        return Engine(settings_from_values(values, model_file=path))
+
+
+def run_ndof(values: dict) -> str:
+    import numpy as np
+
+    eng = ndof_engine(values)
+    h = hashlib.sha256()
+
+    def put(ev):
+        h.update(f"{ev.kind} {ev.t.hex()} {ev.x} {ev.v} {ev.phase.hex()}".encode())
+
+    put(eng.sample())
+    for ev in eng.initial_states():
+        put(ev)
+    k = np.array(NDOF_GAINS)
+    ref = None
+    while not eng.done:
+        ev = eng.sample()
+        X = np.array(ev.x + ev.v)
+        ref = X if ref is None else ref
+        dv = 0.0 if eng.correction_lost() else float(k @ (X - ref))
+        delay = eng.actuation_delay()
+        if eng.k % 3 == 1:
+            events = eng.begin_period(0.0) + eng.split(eng.t + 0.41 * eng.p.period, dv)
+        elif eng.k % 3 == 2 and delay > 0.0:
+            events = eng.actuate(dv, delay)
+        else:
+            events = eng.begin_period(dv, delay)
+        for e in events:
+            put(e)
+        put(eng.end_period()[0])
+    return h.hexdigest()
+
+
 def main() -> None:
+    import sys
+
     for name, values in SCENES.items():
         print(f"{name} {run(name, values)}")
+    print(f"ndof_two_mass {run_ndof(NDOF_SCENE)}")
+    if "--bag" in sys.argv[1:]:
+        for topic, h in bag_hashes().items():
+            print(f"bag {topic} {h}")
 
 
 if __name__ == "__main__":
