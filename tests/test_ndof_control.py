@@ -15,8 +15,8 @@ from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof.flow import periodic_response
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.oscillator.params import ParameterError
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import ndof_settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 from grazing_control.ros.ndof_control import NdofLaw, ndof_controller_from_values
 
 SCENE = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml")
@@ -58,9 +58,9 @@ def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
     law = Law(c)
     assert law._law(X[:2], X[2:]) == pytest.approx(float(K @ z), rel=1e-12)
     # the predicted next sample is the engine's next sample from that state and kick
-    s = ndof_settings_from_values({"delta_d": -2e-5}, SCENE)
-    eng = NdofEngine(s)
-    eng.z = eng.flow.to_deviation(eng.flow.tau2, X)
+    s = settings_from_values({"delta_d": -2e-5}, SCENE)
+    eng = Engine(s)
+    eng.z = eng.section.flow.to_deviation(eng.section.flow.tau2, X)
     dv = law._law(X[:2], X[2:])
     eng.begin_period(dv)
     ev, _ = eng.end_period()

@@ -26,8 +26,8 @@ from grazing_control.dynamics.design.ndof_design import evaluate_design, write_g
 from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.model import load_model
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import ndof_settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 from grazing_control.recordings import reader
 from grazing_control.recordings.analyze import analyze
 from grazing_control.recordings.scenes import load
@@ -79,7 +79,7 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
         assert len(msg.position) == len(msg.velocity) == 2 and len(msg.effort) == efforts
 
     # the node is the engine: replayed with the recorded corrections, bit for bit
-    eng = NdofEngine(ndof_settings_from_values({"delta_d": DELTA_D}, str(CHAIN)))
+    eng = Engine(settings_from_values({"delta_d": DELTA_D}, str(CHAIN)))
     for k in range(n):
         ev = eng.sample()
         assert np.array_equal(np.array(ev.x + ev.v), X[k]), k
@@ -259,7 +259,7 @@ def test_a_realtime_n_dof_scene_with_scheduled_kicks_is_the_engines_period_loop(
     assert sd.deadline_misses <= 4, log            # a few on a loaded 2-core machine
     missed = set(sd.missed_stamp_ns.tolist())
     scene = sd.scene
-    eng = NdofEngine(ndof_settings_from_values({"delta_d": DELTA_D, "actuation_delay": delay},
+    eng = Engine(settings_from_values({"delta_d": DELTA_D, "actuation_delay": delay},
                                                str(CHAIN)))
     for k in range(n):
         ev = eng.sample()
@@ -359,7 +359,7 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     print(f"2-DOF stream scene: |node - core| corrections <= {worst:.1e}")
 
     # the node is the engine: the recorded corrections acting 1.0 after their samples
-    eng = NdofEngine(ndof_settings_from_values(
+    eng = Engine(settings_from_values(
         {"delta_d": STREAM_DD, "actuation_delay": STREAM_DELAY, "sensor_noise": SIGMA,
          "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE},
         str(CHAIN)))

@@ -17,8 +17,7 @@ from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEs
 from grazing_control.dynamics.simulation.actuator import Actuator
 from grazing_control.oscillator.control import Gains, correction
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.plant.ndof_settings import load_model_file
-from grazing_control.plant.settings import MAX_BANDWIDTH, below
+from grazing_control.plant.settings import MAX_BANDWIDTH, below, load_model_file
 
 from .model_watch import WATCH_DEFAULTS, watch_from_values
 from .ndof_control import NdofLaw

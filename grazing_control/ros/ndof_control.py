@@ -30,7 +30,7 @@ import numpy as np
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
-from grazing_control.plant.ndof_settings import load_model_file
+from grazing_control.plant.settings import load_model_file
 
 __all__ = ["NdofLaw", "NdofController", "ndof_controller_from_values",
            "ndof_stream_from_values", "GAIN_LIMIT", "ONE_DOF_DEFAULTS"]
