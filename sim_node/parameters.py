@@ -250,11 +250,6 @@ def on_set_parameters(node, params) -> SetParametersResult:
         new = validate(node, values)
         if node.loop is not None:        # running: the change's consequences too
             check_live_change(node.settings, new, node.engine.k)
-            if node.model is not None and new.model.delta_d != node.settings.model.delta_d:
-                raise ParameterError(
-                    f"delta_d={new.model.delta_d!r} is invalid while an n-DOF scene runs: "
-                    "a live change of the n-DOF model is not built (valid: "
-                    f"{node.settings.model.delta_d!r}; set it before the start)")
     except ParameterError as exc:
         node.get_logger().warning(f"parameter change refused: {exc}")
         return SetParametersResult(successful=False, reason=str(exc))

@@ -20,7 +20,7 @@ import pytest
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, NOT_WITH_MODEL_FILE,
-                                            ON_MISS, PARAMETERS,
+                                            ON_MISS, PARAMETERS, check_live_change,
                                             SETTING_KEYS, SimSettings, default_values, described_range,
                                             initial_deviation, settings_from_values)
 
@@ -185,3 +185,30 @@ def test_a_bad_model_file_is_one_line_naming_model_file(tmp_path):
             settings_from_values({}, str(err))
         except ParameterError as exc:
             assert "\n" not in str(exc)
+
+
+def test_live_changes_of_an_n_dof_scene_are_checked_on_its_model():
+    """While an n-DOF scene runs (sim_node/parameters.py calls check_live_change): the
+    stream's period, the sensor's noise and max_periods change as in 1-DOF, bounded by
+    the model's scales (the wall coordinate's amplitude d*, the model's period T); a
+    change of delta_d (the model) is refused in one line naming it and why."""
+    from grazing_control.oscillator.ndof.flow import grazing_clearance
+
+    old = settings_from_values({"max_periods": 100}, SCENE)
+    d_star, T = grazing_clearance(old.model), old.model.period
+    ok = settings_from_values({"max_periods": 200, "state_period": T / 100,
+                               "sensor_noise": 0.5 * d_star}, SCENE)
+    check_live_change(old, ok, 50)
+    with pytest.raises(ParameterError) as exc:
+        check_live_change(old, settings_from_values({"max_periods": 100, "delta_d": -2e-5},
+                                                    SCENE), 50)
+    text = str(exc.value)
+    assert text.startswith("delta_d=-2e-05 is invalid while an n-DOF scene runs") and \
+        "not built" in text and "\n" not in text
+    with pytest.raises(ParameterError, match=r"^sensor_noise=.* valid range is \[0, "
+                                             + re.escape(f"{d_star:.6g}")):
+        check_live_change(old, settings_from_values({"max_periods": 100,
+                                                     "sensor_noise": 2.0 * d_star}, SCENE), 50)
+    with pytest.raises(ParameterError, match=re.escape(f"T/1e4 = {T * 1e-4:.6g}")):
+        check_live_change(old, settings_from_values({"max_periods": 100,
+                                                     "state_period": T * 1e-5}, SCENE), 50)

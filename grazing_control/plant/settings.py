@@ -40,6 +40,7 @@ import numpy as np
 
 from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, Actuator
 from grazing_control.dynamics.simulation.fidelity import FIDELITIES
+from grazing_control.oscillator.ndof.flow import grazing_clearance
 from grazing_control.oscillator.ndof.model import NdofModel, load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.oscillator.contact import MAX_FRICTION, MAX_STIFFNESS
@@ -731,9 +732,21 @@ def check_live_change(old: SimSettings, new: SimSettings, periods_done: int) -> 
     * ``state_period`` in (0, T/10^4) (over 10^4 state messages per period);
     * ``max_periods`` 0 (unbounded) where it was bounded, or at most ``periods_done``.
 
+    In an n-DOF scene (``old.model``) the scale a is the wall coordinate's amplitude d*
+    of the model's periodic response, and a change of the model (its ``delta_d``) is
+    refused: a live change of the n-DOF model is not built (the engine would have to
+    re-express z on the new model's section, as the 1-DOF engine's pending parameters).
     Static settings (the mode, the actuation, seeds) are read-only while running anyway.
     """
-    a = old.params.amplitude
+    if old.model is not None:
+        if new.delta_d != old.delta_d:   # the file is read-only: its delta_d is the change
+            raise ParameterError(
+                f"delta_d={new.delta_d!r} is invalid while an n-DOF scene runs: a live change "
+                f"of the n-DOF model is not built (valid: {old.delta_d!r}; set it before the "
+                "start)")
+        a = grazing_clearance(old.model)
+    else:
+        a = old.params.amplitude
     dd = new.params.delta_d
     if new.params.delta_d != old.params.delta_d and not -a <= dd <= a:
         raise ParameterError(f"delta_d={dd!r} is invalid while the scene runs: valid range is "
@@ -754,9 +767,10 @@ def check_live_change(old: SimSettings, new: SimSettings, periods_done: int) -> 
             raise ParameterError(f"{name}={n!r} is invalid while the scene runs: valid range "
                                  f"is [0, {a:.6g}] (at most the motion's amplitude a)")
     sp = new.state_period
-    if sp != old.state_period and 0.0 < sp < old.params.period * 1e-4:
+    period = old.params.period          # an n-DOF scene's: the model's omega (module doc)
+    if sp != old.state_period and 0.0 < sp < period * 1e-4:
         raise ParameterError(f"state_period={sp!r} is invalid while the scene runs: valid "
-                             f"range is 0 (off) or >= T/1e4 = {old.params.period * 1e-4:.6g}")
+                             f"range is 0 (off) or >= T/1e4 = {period * 1e-4:.6g}")
     mp = new.max_periods
     if mp != old.max_periods and (mp == 0 and old.max_periods != 0 or 0 < mp <= periods_done):
         raise ParameterError(
