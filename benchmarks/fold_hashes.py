@@ -94,6 +94,18 @@ BAG_TOPICS = ("/oscillator/pi2", "/oscillator/pi1", "/oscillator/state", "/oscil
               "/controller/velocity_correction", "/controller/enabled")
 
 
+#: ``--bag`` on main 5b8ea17 before the fold: (messages, sha256 of the payloads) per topic.
+MAIN_BAG_HASHES = {
+    "/oscillator/pi2": "80 afd90c81ebb91b751f8d7a0c56dcbb02828a61ca316d32fc3b9322097a7cd780",
+    "/oscillator/pi1": "80 c1b3d54ad9a264666e90861b7286ad78d38a8b5b6d3bc97446f63a4612ca55dd",
+    "/oscillator/state": "7535 693ec8e68b7831ea743631738ffacd84dacaf04f71d15cbcb3087f5dead2ebb2",
+    "/oscillator/impact": "75 545490a7fda66665dbe6372166d12a0653407f4db329fe545fae9ed89a6418ab",
+    "/controller/velocity_correction":
+        "80 542c975b55ca28111ff7ce92440287623ab30c4ab49cfec875cadb73b992a682",
+    "/controller/enabled": "0 e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855",
+}
+
+
 def bag_hashes() -> dict:
     """{topic: sha256 of its payloads in order} of a lockstep scene run by ``grazing run``."""
     import subprocess
@@ -179,7 +191,8 @@ def main() -> None:
     print(f"ndof_two_mass {run_ndof(NDOF_SCENE)}")
     if "--bag" in sys.argv[1:]:
         for topic, h in bag_hashes().items():
-            print(f"bag {topic} {h}")
+            same = "as on main" if MAIN_BAG_HASHES.get(topic) == h else "DIFFERS from main"
+            print(f"bag {topic} {h} {same}")
 
 
 if __name__ == "__main__":
