@@ -617,7 +617,8 @@ def add_arguments(parser) -> None:
                       help="publish at the recorded timing scaled by R (2: twice as fast)")
     pace.add_argument("--as-fast-as-possible", action="store_true",
                       help="each sample waits for its answer (the default)")
-    parser.add_argument("--no-sim", action="store_true", help="skip the simulator replay")
+    parser.add_argument("--no-sim", action="store_true", help="skip the simulator replay "
+                        "(required for an n-DOF bag: its simulator replay is not built)")
     parser.add_argument("--no-controller", action="store_true",
                         help="skip the controller replay (OUT is then unused)")
     parser.add_argument("--domain-id", type=int, default=None,
