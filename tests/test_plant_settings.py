@@ -143,6 +143,17 @@ def test_times_are_bounded_by_the_n_dof_period():
         settings_from_values({"actuation_delay": 23.0}, SCENE)
 
 
+@pytest.mark.parametrize("name,value", [("actuator_bandwidth", 20.0),
+                                        ("actuator_latency", 0.05)])
+def test_the_first_order_actuator_is_refused_with_a_model_file(name, value):
+    """Reproduction (issue 32's fold): plant.ndof_settings accepted the actuator's values
+    and plant.ndof_engine ignored them (the kick acted unlagged); now one line naming the
+    parameter and why."""
+    with pytest.raises(ParameterError, match=rf"^{name}={value!r} is invalid with model_file="
+                                             r".*the first-order actuator is not built"):
+        settings_from_values({name: value, "actuation_delay": 0.3}, SCENE)
+
+
 @pytest.mark.parametrize("name", sorted(NOT_WITH_MODEL_FILE))
 def test_options_not_built_for_n_dof_are_refused_by_name(name):
     default = default_values()[name]
