@@ -57,7 +57,7 @@ from .impact import (NdofImpact, NdofSegment, _Eval, advance, check_state,
                      saltation_matrix)
 
 __all__ = ["actuated_mass", "force_input", "static_deflection", "forced_flow",
-           "advance_with_force", "pulse_input", "lag_particular", "lag_advance", "LagSegment"]
+           "advance_with_force", "pulse_input", "actuated_input", "lag_particular", "lag_advance", "LagSegment"]
 
 TWO_PI = 2.0 * math.pi
 #: Below this impact velocity a lag piece refuses the motion (chattering or sticking under
@@ -168,6 +168,35 @@ def pulse_input(flow: NdofFlow, start: float, width: float) -> np.ndarray:
     if width == 0.0:
         return flow.transition(-start) @ force_input(flow) * ma
     return (flow.transition(-(start + width)) - flow.transition(-start)) @ sigma * (ma / width)
+
+
+def actuated_input(flow: NdofFlow, start: float, width: float, time_constant: float,
+                   until: float) -> np.ndarray:
+    """b_f: the effective input vector on Pi2 of a pulse commanded on [start, start + w]
+    (latency included in ``start``) through the lag tau_a, counting the force up to
+    ``until`` (the grazing phase T - s; the force left after it acts after the impact and
+    is not in the design, as the 1-DOF (P1): docs/theory_pulse.md section 7):
+
+        b_f = Phi(-until) z(until) m_a,
+
+    z(until) the deviation from rest under the force of a unit-impulse command, by the
+    lag's closed form (module docstring: sigma u + q e^{-h / tau_a} + Phi(h)(z0 - sigma u
+    - q) on each piece). tau_a = 0 is :func:`pulse_input` at ``start``.
+    """
+    if time_constant == 0.0:
+        return pulse_input(flow, start, width)
+    sigma = static_deflection(flow)
+    z, force, t = np.zeros(2 * flow.n), 0.0, start
+    for end, u in ((start + width, 1.0 / width), (until, 0.0)):
+        h = end - t
+        if h <= 0.0:
+            continue
+        q = lag_particular(flow, force - u, time_constant)
+        e = math.exp(-h / time_constant)
+        z = flow.transition(h) @ (z - sigma * u - q) + sigma * u + q * e
+        force = u + (force - u) * e
+        t = end
+    return flow.transition(-until) @ z * actuated_mass(flow)
 
 
 # ----------------------------------------------------------------- the first-order lag
