@@ -25,6 +25,10 @@ still found (the search is tests/reference.py's ``first_root``). Roots are refin
 fastest mode's period): no cell holds two zeros of the acceleration. Sticking is not
 modelled (more than ``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
 
+A force pulse (:meth:`NdofRef.pulse_map`): under a constant force F on x[i_a] the flight
+is X_p + S + e^{A h}(X - X_p - S) with S = (K^-1 e_a F ; 0), and the gap has x_w = the
+harmonic + S_w + the modes; F = m_a dv / w, m_a = 1 / (M^-1)_aa.
+
 The controller: on Pi2 (phase tau* + pi2_offset) the velocity of coordinate i_a gets
 k^T (X - X**), X** = X_p(tau2) the grazing orbit's point.
 """
@@ -119,21 +123,36 @@ class NdofRef:
         vs = [mp.re(mpc(0, 1) * self.omega * x * e) for x in self.X]
         return xs + vs
 
-    def state(self, tau, X, h):
-        """Physical state after free flight h from X at phase tau (a list of 2n mpf)."""
+    def static(self, force):
+        """(K^-1 e_a F ; 0): the state at rest under the constant force F on x[i_a]."""
+        if force == 0:
+            return [mpf(0)] * (2 * self.n)
+        e = mp.matrix([1 if i == self.i_a else 0 for i in range(self.n)])
+        xs = mp.lu_solve(self.K, e)
+        return [xs[i] * _f(force) for i in range(self.n)] + [mpf(0)] * self.n
+
+    def actuated_mass(self):
+        """m_a = 1 / (M^-1)_aa (the impulse m_a dv moves v[i_a] by dv)."""
+        return 1 / mp.inverse(self.M)[self.i_a, self.i_a]
+
+    def state(self, tau, X, h, force=0):
+        """Physical state after flight h from X at phase tau under the constant force F on
+        x[i_a] (a list of 2n mpf): X_p + S + e^{A h}(X - X_p - S), S the static state."""
         p0 = self.particular(tau)
-        dev = mp.matrix([_f(X[i]) - p0[i] for i in range(2 * self.n)])
+        S = self.static(force)
+        dev = mp.matrix([_f(X[i]) - p0[i] - S[i] for i in range(2 * self.n)])
         z = self.transition(h) * dev
         p1 = self.particular(_f(tau) + self.omega * _f(h))
-        return [p1[i] + z[i] for i in range(2 * self.n)]
+        return [p1[i] + S[i] + z[i] for i in range(2 * self.n)]
 
-    def arc(self, tau, X):
-        return _Arc(self, _f(tau), [_f(x) for x in X])
+    def arc(self, tau, X, force=0):
+        return _Arc(self, _f(tau), [_f(x) for x in X], self.static(force))
 
     # --------------------------------------------------------------- impacts
-    def next_impact(self, tau, X, horizon, samples=SAMPLES):
-        """First impact time in (0, horizon] from physical X at phase tau, or None."""
-        arc = self.arc(tau, X)
+    def next_impact(self, tau, X, horizon, samples=SAMPLES, force=0):
+        """First impact time in (0, horizon] from physical X at phase tau (under the
+        constant force F on x[i_a]), or None."""
+        arc = self.arc(tau, X, force)
         horizon = _f(horizon)
         cells = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / cells for k in range(cells + 1)]
@@ -165,6 +184,40 @@ class NdofRef:
             X[self.i_w] = self.d
             X[n + self.i_w] = -self.r * vm
             impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
+        pe = self.particular(tau)
+        return [X[i] - pe[i] for i in range(2 * n)], impacts
+
+    def pulse_map(self, z, correction, start, width):
+        """One period of the Pi2 map from deviation z with the correction dv as a force
+        pulse F = m_a dv / width on x[i_a] over [start, start + width] after the sample
+        (width 0: the kick at start); returns (z_next, impacts) as :meth:`pi2_map`."""
+        n = self.n
+        p2 = self.particular(self.tau2)
+        X = [p2[i] + _f(z[i]) for i in range(2 * n)]
+        start, width = _f(start), _f(width)
+        force = self.actuated_mass() * _f(correction) / width if width > 0 else mpf(0)
+        legs = [(mpf(0), start, 0), (start, start + width, force),
+                (start + width, self.period, 0)]
+        tau, impacts = self.tau2, []
+        for j, (t0, t1, F) in enumerate(legs):
+            if width == 0 and j == 1:
+                X[n + self.i_a] += _f(correction)
+            t_in = t0
+            while t1 > t_in:
+                h = self.next_impact(tau, X, t1 - t_in, force=F)
+                if h is None:
+                    X = self.state(tau, X, t1 - t_in, F)
+                    tau = tau + self.omega * (t1 - t_in)
+                    break
+                if len(impacts) >= MAX_IMPACTS_PER_PERIOD:
+                    raise RuntimeError("reference: chattering/sticking is not modelled")
+                X = self.state(tau, X, h, F)
+                t_in += h
+                tau = tau + self.omega * h
+                vm = X[n + self.i_w]
+                X[self.i_w] = self.d
+                X[n + self.i_w] = -self.r * vm
+                impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
         pe = self.particular(tau)
         return [X[i] - pe[i] for i in range(2 * n)], impacts
 
@@ -216,11 +269,13 @@ class _Arc:
     """Gap g = x_w - d, velocity and acceleration of the wall coordinate along one free
     flight: the harmonic of X_w plus the modes of the homogeneous part."""
 
-    def __init__(self, ref: NdofRef, tau, X):
+    def __init__(self, ref: NdofRef, tau, X, static=None):
         self.ref = ref
         p0 = ref.particular(tau)
         m = 2 * ref.n
-        dev = [X[i] - p0[i] for i in range(m)]
+        static = static or [mpf(0)] * m
+        self.xs = static[ref.i_w]
+        dev = [X[i] - p0[i] - static[i] for i in range(m)]
         w = ref.i_w
         self.c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
                   for k in range(m)]
@@ -236,7 +291,7 @@ class _Arc:
             y += e
             v += l * e
             a += l * l * e
-        g = mp.re(eh) + mp.re(y) - ref.d
+        g = mp.re(eh) + mp.re(y) + self.xs - ref.d
         return g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a)
 
 
