@@ -68,6 +68,7 @@ __all__ = [
     "write_gain_yaml",
     "Actuation",
     "pulse_design",
+    "design_actuation",
 ]
 
 #: Condition sets of :func:`admissible_mu` (as dynamics/design/gains.py): 'impacting' = the
@@ -654,6 +655,28 @@ def _actuation_parameters(delay) -> dict:
                 "actuator_time_constant": delay.time_constant,
                 "actuator_latency": delay.latency}
     return {"actuation_delay": float(delay)} if delay != 0.0 else {}
+
+
+def design_actuation(delay: float = 0.0, pulse_width: float = 0.0,
+                     actuator_bandwidth: float = 0.0, actuator_latency: float = 0.0):
+    """The ``delay`` argument of this module for `grazing design --model M --delay D
+    --pulse-width W [--actuator-bandwidth B] [--actuator-latency L]`: D itself without a
+    pulse (the delayed kick, §14), else the :class:`Actuation` with tau_a = 1 / B (B = 0:
+    the ideal pulse) (§15). ParameterError naming an option that is negative or not
+    finite, or an actuator option given without a pulse width."""
+    for name, value in (("pulse_width", pulse_width), ("actuator_bandwidth", actuator_bandwidth),
+                        ("actuator_latency", actuator_latency)):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
+                                 f"{name} >= 0")
+    if pulse_width == 0.0:
+        if actuator_bandwidth or actuator_latency:
+            raise ParameterError("pulse_width=0.0 is invalid with an actuator: valid range is "
+                                 "pulse_width > 0 (the design is for the pulse's force "
+                                 "profile)")
+        return delay
+    tau_a = 1.0 / actuator_bandwidth if actuator_bandwidth > 0.0 else 0.0
+    return Actuation(delay, pulse_width, tau_a, actuator_latency)
 
 
 def pulse_design(model: NdofModel, mu: float, delay: float = 0.0, width: float = 0.0,
