@@ -167,25 +167,32 @@ class NdofRef:
         X = [p2[i] + _f(z[i]) for i in range(2 * n)]
         if gains is not None:
             X[n + self.i_a] += mp.fsum(_f(k) * _f(zi) for k, zi in zip(gains, z))
-        tau, t_in, T = self.tau2, mpf(0), self.period
         impacts = []
-        while True:
-            h = self.next_impact(tau, X, T - t_in)
+        X, tau = self._fly(self.tau2, X, mpf(0), self.period, 0, impacts)
+        pe = self.particular(tau)
+        return [X[i] - pe[i] for i in range(2 * n)], impacts
+
+    def _fly(self, tau, X, t_in, t1, force, impacts):
+        """Flight with impacts from time t_in to t1 (phase tau there) under the constant
+        force on x[i_a], the impacts appended (time, phase mod 2 pi, v-, v+); returns
+        (X, tau) at t1."""
+        n = self.n
+        while t1 > t_in:
+            h = self.next_impact(tau, X, t1 - t_in, force=force)
             if h is None:
-                X = self.state(tau, X, T - t_in)
-                tau = tau + self.omega * (T - t_in)
+                X = self.state(tau, X, t1 - t_in, force)
+                tau = tau + self.omega * (t1 - t_in)
                 break
             if len(impacts) >= MAX_IMPACTS_PER_PERIOD:
                 raise RuntimeError("reference: chattering/sticking is not modelled")
-            X = self.state(tau, X, h)
+            X = self.state(tau, X, h, force)
             t_in += h
             tau = tau + self.omega * h
             vm = X[n + self.i_w]
             X[self.i_w] = self.d
             X[n + self.i_w] = -self.r * vm
             impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
-        pe = self.particular(tau)
-        return [X[i] - pe[i] for i in range(2 * n)], impacts
+        return X, tau
 
     def pulse_map(self, z, correction, start, width):
         """One period of the Pi2 map from deviation z with the correction dv as a force
@@ -202,22 +209,7 @@ class NdofRef:
         for j, (t0, t1, F) in enumerate(legs):
             if width == 0 and j == 1:
                 X[n + self.i_a] += _f(correction)
-            t_in = t0
-            while t1 > t_in:
-                h = self.next_impact(tau, X, t1 - t_in, force=F)
-                if h is None:
-                    X = self.state(tau, X, t1 - t_in, F)
-                    tau = tau + self.omega * (t1 - t_in)
-                    break
-                if len(impacts) >= MAX_IMPACTS_PER_PERIOD:
-                    raise RuntimeError("reference: chattering/sticking is not modelled")
-                X = self.state(tau, X, h, F)
-                t_in += h
-                tau = tau + self.omega * h
-                vm = X[n + self.i_w]
-                X[self.i_w] = self.d
-                X[n + self.i_w] = -self.r * vm
-                impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
+            X, tau = self._fly(tau, X, t0, t1, F, impacts)
         pe = self.particular(tau)
         return [X[i] - pe[i] for i in range(2 * n)], impacts
 

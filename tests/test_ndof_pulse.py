@@ -22,7 +22,7 @@ from grazing_control.oscillator.ndof.forced import actuated_mass, pulse_input
 from grazing_control.oscillator.params import ParameterError
 
 from reference_ndof import load_reference
-from test_ndof_delay import _fd_jacobian
+from test_ndof_delay import _fd_jacobian, check_limit_against_the_exact_map
 from test_ndof_design import CHAIN, _match, _random_model, _study
 
 #: (z, Delta v, start, width): a pulse before the impact, one holding it (the study's
@@ -195,25 +195,7 @@ def test_pulse_design_limit_multipliers_against_finite_differences_of_the_exact_
     (1e-13), and the multipliers of the finite-difference Jacobian of that map at the
     orbit approach the design's limit spectrum like |Delta d|^(1/2) (measured ratio
     err / sqrt|Delta d| 0.48 ... 0.68)."""
-    m0 = load_model(CHAIN)
-    pulse = nd.Actuation(delay, width)
-    k = nd.gain_family(m0, mu, pulse)
-    limit = nd.limit_multipliers(m0, mu, pulse)
-    assert np.max(np.abs(limit)) < 1.0
-    errors = []
-    for dd in (-1e-4, -1e-6, -1e-8):
-        m = dataclasses.replace(m0, delta_d=dd)
-        bp = ndof_branch.orbit_at(m, k, dd, delay=pulse)
-        P = NdofMap(m, k, delay, width)
-        st = P.step(bp.pi2_state)
-        assert len(st.impacts) == 1
-        assert np.max(np.abs(st.state - bp.pi2_state)) <= 1e-13
-        orbit = find_periodic(P, bp.pi2_state)
-        jac = _fd_jacobian(P, orbit.state, 1e-2 * bp.v_minus ** 2)
-        err = _match(np.linalg.eigvals(jac), limit)
-        assert 0.05 < err / math.sqrt(-dd) < 20.0, (dd, err)
-        errors.append(err)
-    assert errors[-1] < 1e-3
+    check_limit_against_the_exact_map(nd.Actuation(delay, width), mu, delay, width)
 
 
 def test_pulse_design_entry_point_and_gain_file(tmp_path):
@@ -278,21 +260,15 @@ def pulsed_chain():
     """The chain at Delta d = -1e-3 under the pulse design mu = 0.2 (the pulse of
     FILTER_PULSE), 6 periods from near its 1/1 orbit: the true Pi2 states, the known
     corrections and the exact deviations at T/200 (one impact per period)."""
-    from test_ndof_estimation import RATE
+    from test_ndof_estimation import closed_loop_chain
 
-    m = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
-    k = nd.gain_family(m, 0.2, nd.Actuation(*FILTER_PULSE))
-    s = np.linspace(0.0, m.period, RATE + 1)[1:]
-    z = np.array([2e-3, -1e-3, 1e-3, 2e-3])
-    states, corrections, samples = [], [], []
-    for _ in range(6):
-        states.append(z)
-        corrections.append(float(k @ z))
-        zs, z, count = _exact_pulse_samples(m, z, s, corrections[-1], *FILTER_PULSE)
+    def exact(m, z, s, dv):
+        zs, end, count = _exact_pulse_samples(m, z, s, dv, *FILTER_PULSE)
         assert count == 1
-        samples.append(zs)
-    states.append(z)
-    return m, s, np.array(states), corrections, samples
+        return zs, end
+
+    return closed_loop_chain(lambda m: nd.gain_family(m, 0.2, nd.Actuation(*FILTER_PULSE)),
+                             exact)
 
 
 def test_pulsed_motion_against_the_core_and_finite_differences(pulsed_chain):
