@@ -36,7 +36,7 @@ F(h) = u + c e^{-h / tau_a}, and z_f(h) = sigma u + q e^{-h / tau_a} with
 (A + I / tau_a) q = -B c is a particular solution (the augmented linear flow of (z, F),
 whose extra eigenvalue is -1 / tau_a), so z - z_f obeys the free flow and the gap holds
 one more decaying real mode, q_w e^{-h / tau_a}: the certified search of
-oscillator/ndof/impact.py with that term added (:class:`_LagEval`). At an impact the
+oscillator/ndof/impact.py with that term added (its evaluator's ``transient``). At an impact the
 impact law restarts the piece with c scaled by e^{-h / tau_a} (:func:`lag_advance`, as
 the 1-DOF :func:`grazing_control.dynamics.simulation.actuator.lag_flow`).
 """
@@ -208,23 +208,6 @@ def lag_particular(flow: NdofFlow, transient: float, tau_a: float) -> np.ndarray
     return -np.linalg.solve(a, force_input(flow) * transient)
 
 
-class _LagEval(_Eval):
-    """The gap evaluator of oscillator/ndof/impact.py with one more real mode: the
-    transient q_w e^{-h / tau_a} of the lag's particular solution (module docstring). Its
-    bounds (jerk, sizes for the rounding) take the term like any damped mode's."""
-
-    __slots__ = ()
-
-    def __init__(self, flow, tau0, z0, horizon, rate: float, coef: float):
-        super().__init__(flow, tau0, z0, horizon)
-        lam, c = complex(-rate), complex(coef)
-        self.terms = list(self.terms) + [(lam, c, c * lam, c * lam * lam)]
-        self.jerk_terms = list(self.jerk_terms) + [(-rate, abs(coef) * rate ** 3, 1.0)]
-        self.cabs += abs(coef)
-        self.zmag += abs(coef)
-        self.rho = max(self.rho, rate)
-
-
 class LagSegment(NamedTuple):
     """Result of :func:`lag_advance`: deviation z (2n,) and force at the end, the end
     phase, the impacts (times from the start)."""
@@ -262,7 +245,7 @@ def lag_advance(flow: NdofFlow, tau0: float, z0, duration: float, command: float
         rest = duration - h_done
         hit = None
         if rest > 0.0:
-            f = _LagEval(shifted, tau, zp, rest, rate, float(q[w]))
+            f = _Eval(shifted, tau, zp, rest, transient=(rate, float(q[w])))
             step = min(m.period / 8.0, 0.25 * math.pi / f.rho)
             hit = _scan_window(f, rest, max(1, int(math.ceil(rest / step))),
                                lambda fa: f.gap_rounding(0.0, fa), f"x{w}")

@@ -123,11 +123,15 @@ class _Eval(GapEvaluator):
     __slots__ = ("terms", "cabs", "jerk_terms", "aw3", "acc_err", "m0", "m1", "zmag", "rho",
                  "drift", "n", "horizon")
 
-    def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float):
+    def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float,
+                 transient: tuple | None = None):
         m = flow.model
         beta = flow.inverse @ z0
         c = flow.modes[m.i_w] * beta
         lam = flow.eigenvalues
+        if transient is not None:     # one more decaying real mode of the gap, coef e^{-rate h}
+            rate, coef = transient    # (an actuator's lag, oscillator/ndof/forced.py)
+            lam, c = np.append(lam, -rate), np.append(c, coef)
         self.terms = [(complex(l), complex(ck), complex(ck * l), complex(ck * l * l))
                       for l, ck in zip(lam, c)]
         super().__init__(m.omega, flow.tau_star, flow.d_star, m.delta_d, tau0)
@@ -141,7 +145,8 @@ class _Eval(GapEvaluator):
         self.aw3 = self.amp * self.omega ** 3
         # rounding (docs/theory_ndof_flow.md, section 5): terms of size zmag, and the
         # decomposition's defect, which moves z by <= t defect cond(V)^2 |z0| after time t
-        self.zmag = float(_mode_sizes(flow, z0)[0] * grow.max())
+        self.zmag = float(_mode_sizes(flow, z0)[0] * grow.max()) + (
+            abs(transient[1]) if transient is not None else 0.0)
         self.rho = float(np.abs(lam).max())
         self.drift = flow.defect * flow.condition ** 2 * float(np.linalg.norm(z0))
         k = 2.0 * self.n + 2.0
