@@ -27,7 +27,10 @@ modelled (more than ``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
 
 A force pulse (:meth:`NdofRef.pulse_map`): under a constant force F on x[i_a] the flight
 is X_p + S + e^{A h}(X - X_p - S) with S = (K^-1 e_a F ; 0), and the gap has x_w = the
-harmonic + S_w + the modes; F = m_a dv / w, m_a = 1 / (M^-1)_aa.
+harmonic + S_w + the modes; F = m_a dv / w, m_a = 1 / (M^-1)_aa. Through a first-order
+actuator (:meth:`NdofRef.actuated_map`) the force is F + c e^{-h / tau_a} on a piece,
+and Q e^{-h / tau_a} with (A + I / tau_a) Q = -B c joins the particular solution (one
+more exponential in the arc).
 
 The controller: on Pi2 (phase tau* + pi2_offset) the velocity of coordinate i_a gets
 k^T (X - X**), X** = X_p(tau2) the grazing orbit's point.
@@ -135,24 +138,39 @@ class NdofRef:
         """m_a = 1 / (M^-1)_aa (the impulse m_a dv moves v[i_a] by dv)."""
         return 1 / mp.inverse(self.M)[self.i_a, self.i_a]
 
-    def state(self, tau, X, h, force=0):
-        """Physical state after flight h from X at phase tau under the constant force F on
-        x[i_a] (a list of 2n mpf): X_p + S + e^{A h}(X - X_p - S), S the static state."""
+    def lag_state(self, c, tau_a):
+        """Q with (A + I / tau_a) Q = -B c, B = (0 ; M^-1 e_a): the particular solution
+        Q e^{-h / tau_a} under the force transient c e^{-h / tau_a} (an actuator's lag)."""
+        m = 2 * self.n
+        if c == 0:
+            return [mpf(0)] * m
+        minv_e = mp.inverse(self.M)[:, self.i_a]
+        rhs = mp.matrix([0] * self.n + [-_f(c) * minv_e[i] for i in range(self.n)])
+        return list(mp.lu_solve(self.A + mp.eye(m) / _f(tau_a), rhs))
+
+    def state(self, tau, X, h, force=0, lag=None):
+        """Physical state after flight h from X at phase tau under the force F +
+        c e^{-h / tau_a} on x[i_a] (``lag`` = (c, tau_a), default none; a list of 2n mpf):
+        X_p + S + Q e^{-h / tau_a} + e^{A h}(X - X_p - S - Q), S the static state, Q
+        :meth:`lag_state`."""
         p0 = self.particular(tau)
         S = self.static(force)
-        dev = mp.matrix([_f(X[i]) - p0[i] - S[i] for i in range(2 * self.n)])
+        Q, e = (self.lag_state(*lag), mp.exp(-_f(h) / _f(lag[1]))) if lag else \
+            ([mpf(0)] * (2 * self.n), mpf(0))
+        dev = mp.matrix([_f(X[i]) - p0[i] - S[i] - Q[i] for i in range(2 * self.n)])
         z = self.transition(h) * dev
         p1 = self.particular(_f(tau) + self.omega * _f(h))
-        return [p1[i] + S[i] + z[i] for i in range(2 * self.n)]
+        return [p1[i] + S[i] + Q[i] * e + z[i] for i in range(2 * self.n)]
 
-    def arc(self, tau, X, force=0):
-        return _Arc(self, _f(tau), [_f(x) for x in X], self.static(force))
+    def arc(self, tau, X, force=0, lag=None):
+        return _Arc(self, _f(tau), [_f(x) for x in X], self.static(force),
+                    (self.lag_state(*lag), _f(lag[1])) if lag else None)
 
     # --------------------------------------------------------------- impacts
-    def next_impact(self, tau, X, horizon, samples=SAMPLES, force=0):
+    def next_impact(self, tau, X, horizon, samples=SAMPLES, force=0, lag=None):
         """First impact time in (0, horizon] from physical X at phase tau (under the
-        constant force F on x[i_a]), or None."""
-        arc = self.arc(tau, X, force)
+        force F + c e^{-h / tau_a} on x[i_a], ``lag`` = (c, tau_a)), or None."""
+        arc = self.arc(tau, X, force, lag)
         horizon = _f(horizon)
         cells = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / cells for k in range(cells + 1)]
@@ -172,27 +190,52 @@ class NdofRef:
         pe = self.particular(tau)
         return [X[i] - pe[i] for i in range(2 * n)], impacts
 
-    def _fly(self, tau, X, t_in, t1, force, impacts):
-        """Flight with impacts from time t_in to t1 (phase tau there) under the constant
-        force on x[i_a], the impacts appended (time, phase mod 2 pi, v-, v+); returns
-        (X, tau) at t1."""
+    def _fly(self, tau, X, t_in, t1, force, impacts, lag=None):
+        """Flight with impacts from time t_in to t1 (phase tau there) under the force
+        F + c e^{-(t - t_in) / tau_a} on x[i_a] (``lag`` = (c, tau_a), default none), the
+        impacts appended (time, phase mod 2 pi, v-, v+); returns (X, tau) at t1 (and the
+        transient c there, with ``lag``)."""
         n = self.n
         while t1 > t_in:
-            h = self.next_impact(tau, X, t1 - t_in, force=force)
+            h = self.next_impact(tau, X, t1 - t_in, force=force, lag=lag)
             if h is None:
-                X = self.state(tau, X, t1 - t_in, force)
+                X = self.state(tau, X, t1 - t_in, force, lag)
                 tau = tau + self.omega * (t1 - t_in)
+                if lag:
+                    lag = (lag[0] * mp.exp(-(t1 - t_in) / _f(lag[1])), lag[1])
                 break
             if len(impacts) >= MAX_IMPACTS_PER_PERIOD:
                 raise RuntimeError("reference: chattering/sticking is not modelled")
-            X = self.state(tau, X, h, force)
+            X = self.state(tau, X, h, force, lag)
+            if lag:
+                lag = (lag[0] * mp.exp(-h / _f(lag[1])), lag[1])
             t_in += h
             tau = tau + self.omega * h
             vm = X[n + self.i_w]
             X[self.i_w] = self.d
             X[n + self.i_w] = -self.r * vm
             impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
-        return X, tau
+        return (X, tau, lag[0]) if lag else (X, tau)
+
+    def actuated_map(self, z, force, correction, start, width, tau_a, latency):
+        """One period through a first-order actuator tau_a F' = u(t - L) - F, u = m_a dv /
+        width on the commanded pulse [start, start + width], from deviation z and the
+        force ``force`` at the sample; returns (z_next, force at the next sample,
+        impacts)."""
+        n = self.n
+        p2 = self.particular(self.tau2)
+        X = [p2[i] + _f(z[i]) for i in range(2 * n)]
+        on = _f(start) + _f(latency)
+        off = on + _f(width)
+        u_on = self.actuated_mass() * _f(correction) / _f(width)
+        tau, t, f, impacts = self.tau2, mpf(0), _f(force), []
+        for end, u in ((on, 0), (off, u_on), (self.period, 0)):
+            if end > t:
+                X, tau, c = self._fly(tau, X, t, end, u, impacts, lag=(f - u, tau_a))
+                f = u + c
+            t = end
+        pe = self.particular(tau)
+        return [X[i] - pe[i] for i in range(2 * n)], f, impacts
 
     def pulse_map(self, z, correction, start, width):
         """One period of the Pi2 map from deviation z with the correction dv as a force
@@ -261,13 +304,15 @@ class _Arc:
     """Gap g = x_w - d, velocity and acceleration of the wall coordinate along one free
     flight: the harmonic of X_w plus the modes of the homogeneous part."""
 
-    def __init__(self, ref: NdofRef, tau, X, static=None):
+    def __init__(self, ref: NdofRef, tau, X, static=None, lag=None):
         self.ref = ref
         p0 = ref.particular(tau)
         m = 2 * ref.n
         static = static or [mpf(0)] * m
         self.xs = static[ref.i_w]
-        dev = [X[i] - p0[i] - static[i] for i in range(m)]
+        q, self.tau_a = lag if lag else ([mpf(0)] * m, None)
+        self.qw = q[ref.i_w]
+        dev = [X[i] - p0[i] - static[i] - q[i] for i in range(m)]
         w = ref.i_w
         self.c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
                   for k in range(m)]
@@ -283,6 +328,9 @@ class _Arc:
             y += e
             v += l * e
             a += l * l * e
+        if self.tau_a is not None:     # the lag's transient q_w e^{-h / tau_a}
+            e = self.qw * mp.exp(-h / self.tau_a)
+            y, v, a = y + e, v - e / self.tau_a, a + e / self.tau_a ** 2
         g = mp.re(eh) + mp.re(y) + self.xs - ref.d
         return g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a)
 

@@ -141,14 +141,21 @@ def _dop853_actuated(model, z, force, dv, start, width, tau_a, lat):
     return flow.to_deviation(tau, y[:2 * n]), y[2 * n], impacts
 
 
-def test_chain_actuated_step_against_dop853():
-    """Chain, Delta d = -0.1, the lag tau_a = 0.8 and latency 0.3, the pulse on
-    [10.8 + 0.3, 12.1] holding the impact: actuated_step against DOP853 (1e-9)."""
+def test_chain_actuated_step_against_the_reference_and_dop853():
+    """Chain, Delta d = -0.1, the lag tau_a = 0.8 and latency 0.3, the pulse commanded at
+    3 (the impact in the force's decay) and at 10.8 (on [11.1, 12.1], holding the impact):
+    actuated_step against the 50-digit reference (1e-13; measured 4e-15) and DOP853
+    (1e-9)."""
     m = dataclasses.replace(load_model(CHAIN), delta_d=-0.1)
+    ref = load_reference(CHAIN, delta_d=-0.1)
     z = np.array([-0.05, -0.02, 0.03, 0.01])
     for start in (3.0, 10.8):
         za, fa, ia = actuated_step(NdofFlow.of(m), z, 0.02, 0.05, start=start, width=1.0,
                                    time_constant=0.8, latency=0.3)
+        zr, fr, ir = ref.actuated_map(list(z), 0.02, 0.05, start, 1.0, 0.8, 0.3)
+        assert np.max(np.abs(za - np.array([float(x) for x in zr]))) <= 1e-13
+        assert abs(fa - float(fr)) <= 1e-15
+        assert [i.dt for i in ia] == pytest.approx([float(i[0]) for i in ir], abs=1e-12)
         zd, fd, idd = _dop853_actuated(m, z, 0.02, 0.05, start, 1.0, 0.8, 0.3)
         assert len(ia) == len(idd) == 1
         assert abs(ia[0].dt - idd[0]) <= 1e-9
