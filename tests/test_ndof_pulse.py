@@ -12,8 +12,6 @@ from scipy.integrate import solve_ivp
 
 from grazing_control.dynamics.design import ndof_design as nd
 from grazing_control.dynamics.maps.ndof_map import NdofMap, actuated_step, pulse_step
-from grazing_control.dynamics.orbits import ndof_branch
-from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.dynamics.simulation import actuation
 from grazing_control.dynamics.simulation import actuator as act
 from grazing_control.oscillator.ndof import load_model
@@ -23,7 +21,7 @@ from grazing_control.oscillator.params import ParameterError
 
 from reference_ndof import load_reference
 from test_ndof_delay import _fd_jacobian, check_limit_against_the_exact_map
-from test_ndof_design import CHAIN, _match, _random_model, _study
+from test_ndof_design import CHAIN, _random_model, _study
 
 #: (z, Delta v, start, width): a pulse before the impact, one holding it (the study's
 #: impact comes ~7 after Pi2), the kick

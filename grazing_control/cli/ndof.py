@@ -284,7 +284,7 @@ def cmd_design(args):
     delay = nd.design_actuation(float(getattr(args, "delay", 0.0) or 0.0),
                                 *(float(getattr(args, a, 0.0) or 0.0) for a in
                                   ("pulse_width", "actuator_bandwidth", "actuator_latency")))
-    pulse = nd._actuation_parameters(delay) if isinstance(delay, nd.Actuation) else None
+    pulse = nd.actuation_parameters(delay) if isinstance(delay, nd.Actuation) else None
     t0 = time.perf_counter()
     k0 = np.asarray(nd.gain_family(model, 0.0, delay), dtype=float)
     k1 = np.asarray(nd.gain_family(model, 1.0, delay), dtype=float) - k0

@@ -69,6 +69,7 @@ __all__ = [
     "Actuation",
     "pulse_design",
     "design_actuation",
+    "actuation_parameters",
 ]
 
 #: Condition sets of :func:`admissible_mu` (as dynamics/design/gains.py): 'impacting' = the
@@ -643,11 +644,11 @@ def controller_parameters(model: NdofModel, design: NdofDesign, model_file) -> d
         "omega": float(model.omega),
         "pi2_offset": float(model.pi2_offset),
         "mu": float(design.mu),
-        **_actuation_parameters(design.delay),
+        **actuation_parameters(design.delay),
     }
 
 
-def _actuation_parameters(delay) -> dict:
+def actuation_parameters(delay) -> dict:
     """The gain file's actuation entries: ``actuation_delay`` (when not 0), and for a
     pulse ``pulse_width``, ``actuator_time_constant``, ``actuator_latency`` (§15)."""
     if isinstance(delay, Actuation):
