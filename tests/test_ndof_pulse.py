@@ -12,6 +12,7 @@ from scipy.integrate import solve_ivp
 
 from grazing_control.dynamics.design import ndof_design as nd
 from grazing_control.dynamics.maps.ndof_map import NdofMap, actuated_step, pulse_step
+from grazing_control.dynamics.orbits import ndof_branch
 from grazing_control.dynamics.simulation import actuation
 from grazing_control.dynamics.simulation import actuator as act
 from grazing_control.oscillator.ndof import load_model
@@ -21,7 +22,7 @@ from grazing_control.oscillator.params import ParameterError
 
 from reference_ndof import load_reference
 from test_ndof_delay import _fd_jacobian, check_limit_against_the_exact_map
-from test_ndof_design import CHAIN, _random_model, _study
+from test_ndof_design import CHAIN, _match, _random_model, _study
 
 #: (z, Delta v, start, width): a pulse before the impact, one holding it (the study's
 #: impact comes ~7 after Pi2), the kick
@@ -201,6 +202,55 @@ def test_pulse_design_limit_multipliers_against_finite_differences_of_the_exact_
     orbit approach the design's limit spectrum like |Delta d|^(1/2) (measured ratio
     err / sqrt|Delta d| 0.48 ... 0.68)."""
     check_limit_against_the_exact_map(nd.Actuation(delay, width), mu, delay, width)
+
+
+def test_actuator_design_limit_multipliers_against_finite_differences_of_the_actuated_map():
+    """Chain, the design k(0; pulse of width 1 centred at 4 through tau_a = 0.2, L = 0.1):
+    the (2n + 1)-state actuated map's 1/1 orbit (Newton from the ideal pulse's branch,
+    one impact), the multipliers of its fourth-order finite-difference Jacobian: the 2n
+    largest approach the design's limit spectrum like |Delta d|^(1/2) (measured 5.8e-3,
+    5.8e-4, 5.7e-5 at Delta d = -1e-4, -1e-6, -1e-8), the force's own is ~0. The force
+    left after the grazing phase (a share e^{-(T - s - 4.6) / 0.2} ~ 1e-16 here) is not in
+    the design (§15): for a slow actuator it limits the approach (tau_a = 0.5: error
+    6.5e-3 at -1e-8; tau_a = 1: 0.54 at -1e-6)."""
+    from grazing_control.dynamics.simulation.actuation import newton_fixed_point
+
+    m0 = load_model(CHAIN)
+    pulse = nd.Actuation(4.0, 1.0, 0.2, 0.1)
+    k = nd.gain_family(m0, 0.0, pulse)
+    limit = nd.limit_multipliers(m0, 0.0, pulse)
+    ideal = nd.Actuation(4.0, 1.0)
+    for dd in (-1e-4, -1e-6, -1e-8):
+        m = dataclasses.replace(m0, delta_d=dd)
+        flow = NdofFlow.of(m)
+        bp = ndof_branch.orbit_at(m, nd.gain_family(m0, 0.0, ideal), dd, delay=ideal)
+
+        def step(y):
+            z, f, imps = actuated_step(flow, y[:4], y[4], float(k @ y[:4]),
+                                       start=pulse.start(m), width=1.0, time_constant=0.2,
+                                       latency=0.1)
+            return np.append(z, f), imps
+
+        y, imps, _res, _jac = newton_fixed_point(step, np.append(bp.pi2_state, 0.0),
+                                                 1e-2 * bp.v_minus ** 2)
+        h = 1e-2 * imps[0].v_minus ** 2
+        y, imps, res, _jac = newton_fixed_point(step, y, h)
+        assert res <= 1e-13 and len(imps) == 1
+        jac = np.zeros((5, 5))
+        for j in range(5):
+            e = np.zeros(5)
+            e[j] = h
+
+            def f(t):
+                return step(y + t * e)[0]
+
+            jac[:, j] = (8.0 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12.0 * h)
+        lam = np.linalg.eigvals(jac)
+        lam = lam[np.argsort(-np.abs(lam))]
+        err = _match(lam[:4], limit)
+        assert 0.05 < err / math.sqrt(-dd) < 20.0, (dd, err)
+        assert abs(lam[4]) < 1e-6
+    assert err < 1e-4
 
 
 def test_pulse_design_entry_point_and_gain_file(tmp_path):
