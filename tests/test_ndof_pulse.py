@@ -277,8 +277,10 @@ def test_pulses_that_do_not_fit_are_refused_naming_the_width():
             nd.Actuation(1.0, bad)
         with pytest.raises(ParameterError, match="width="):
             NdofMap(m, nd.gain_family(m, 0.0), 1.0, bad)
-    with pytest.raises(ParameterError, match="width=.*< T"):
-        NdofMap(m, nd.gain_family(m, 0.0), 1.0, m.period)
+    for bad in (m.period, 1e308, "x", None, True):
+        with pytest.raises(ParameterError, match="width=.* is invalid: valid range is a finite "
+                                                 "width, 0 <= width < T"):
+            NdofMap(m, nd.gain_family(m, 0.0), 1.0, bad)
     rigid = dataclasses.replace(m, K=[[1.0, -1.0], [-1.0, 1.0]])
     with pytest.raises(ParameterError, match="K is invalid for a force pulse"):
         pulse_step(NdofFlow.of(rigid), np.zeros(4), 0.1, start=1.0, width=1.0)

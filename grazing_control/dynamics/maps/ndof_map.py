@@ -116,9 +116,9 @@ class NdofMap(SectionMap):
                                  f"T = {self.model.period:.10g}")
         object.__setattr__(self, "delay", float(delay))
         object.__setattr__(self, "flow", NdofFlow.of(self.model))
+        object.__setattr__(self, "width", _pulse_width(self.model, self.width))
         if self.width != 0.0:
-            object.__setattr__(self, "width", check_pulse(self.model, self.pulse_start,
-                                                          self.width))
+            check_pulse(self.model, self.pulse_start, self.width)
             static_deflection(self.flow)       # K invertible, else ParameterError
         object.__setattr__(self, "dimension", 2 * self.model.n)
 
@@ -239,13 +239,21 @@ class NdofMap(SectionMap):
 
 # -------------------------------------------------------------------- the force pulse
 
+def _pulse_width(model: NdofModel, width) -> float:
+    """``width`` as a float: a finite real number, 0 <= width < T."""
+    ok = (not isinstance(width, bool) and isinstance(width, (int, float, np.floating, np.integer))
+          and math.isfinite(width) and 0.0 <= width < model.period)
+    if not ok:
+        raise ParameterError(f"width={width!r} is invalid: valid range is a finite width, "
+                             f"0 <= width < T = {model.period:.10g}")
+    return float(width)
+
+
 def check_pulse(model: NdofModel, start: float, width: float, latency: float = 0.0) -> float:
     """``width``, checked with its ``start`` (and the actuator's ``latency``): finite,
-    width >= 0, start >= 0 and start + latency + width < T. Returns width as a float."""
-    ok = (not isinstance(width, bool) and isinstance(width, (int, float, np.floating))
-          and math.isfinite(width) and width >= 0.0)
-    if not ok:
-        raise ParameterError(f"width={width!r} is invalid: valid range is a finite width >= 0")
+    0 <= width < T, start >= 0 and start + latency + width < T. Returns width as a
+    float."""
+    width = _pulse_width(model, width)
     if not (math.isfinite(start) and start >= 0.0 and start + latency + width < model.period):
         raise ParameterError(f"width={width!r} is invalid with start={start!r} and latency="
                              f"{latency!r}: valid range is 0 <= start and start + latency + "
