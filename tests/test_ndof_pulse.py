@@ -34,7 +34,8 @@ N1_CASES = [((1e-3, 2e-3), 0.01, 0.5, 1.0), ((-0.01, 0.003), -0.02, 2.0, 0.7),
 @pytest.mark.parametrize("z, dv, start, width", N1_CASES)
 def test_n1_pulse_and_actuator_maps_are_the_1dof_ones(z, dv, start, width):
     """n = 1 (config/models/study_1dof.yaml): pulse_step = the 1-DOF pulse_step and
-    actuated_step = the 1-DOF actuated_step (two actuators) to 1e-12, same impacts."""
+    actuated_step = the 1-DOF actuated_step (two actuators; a force limit 0.005 that clips
+    |Delta v| / w >= 0.01) to 1e-12, same impacts."""
     m, p = _study()
     flow = NdofFlow.of(m)
     a = pulse_step(flow, z, dv, start=start, width=width)
@@ -43,13 +44,17 @@ def test_n1_pulse_and_actuator_maps_are_the_1dof_ones(z, dv, start, width):
     assert [i.dt for i in a.impacts] == pytest.approx([i.dt for i in b.impacts], abs=1e-12)
     if width == 0.0:
         return
-    for tau_a, lat in ((0.3, 0.0), (0.5, 0.2)):
+    for tau_a, lat, limit in ((0.3, 0.0, math.inf), (0.5, 0.2, math.inf), (0.3, 0.1, 0.005)):
         za, fa, ia = actuated_step(flow, z, 0.01, dv, start=start, width=width,
-                                   time_constant=tau_a, latency=lat)
+                                   time_constant=tau_a, latency=lat, force_limit=limit)
         xb, vb, fb, ib = act.actuated_step(p, z[0], z[1], 0.01, dv, start=start, width=width,
-                                           actuator=act.Actuator(tau_a, lat))
+                                           actuator=act.Actuator(tau_a, lat),
+                                           force_limit=limit)
         assert np.max(np.abs(za - (xb, vb))) <= 1e-12 and abs(fa - fb) <= 1e-12
         assert [i.dt for i in ia] == pytest.approx([i.dt for i in ib], abs=1e-10)
+    a = pulse_step(flow, z, dv, start=start, width=width, force_limit=0.005)
+    b = actuation.pulse_step(p, z[0], z[1], dv, start=start, width=width, force_limit=0.005)
+    assert np.max(np.abs(a.state - (b.dx, b.dv))) <= 1e-12
 
 
 @pytest.mark.parametrize("start, width", [(11.0, 1.0), (3.0, 2.0), (0.0, 0.0)])

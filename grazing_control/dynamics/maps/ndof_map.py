@@ -273,12 +273,13 @@ class PulseStep(NamedTuple):
 
 
 def pulse_step(flow: NdofFlow, z, correction: float, *, start: float, width: float,
-               jacobian: bool = False) -> PulseStep:
+               jacobian: bool = False, force_limit: float = math.inf) -> PulseStep:
     """One forcing period from the Pi2 deviation z with the correction Delta v as a force
     pulse on the actuated coordinate: F = m_a Delta v / w on [start, start + w]
     (docs/theory_ndof.md section 15; m_a = 1 / (M^-1)_aa, so the impulse moves the
     actuated velocity by Delta v), flowed exactly with impacts before, in and after the
-    pulse. Width 0 is the kick at ``start``. For n = 1 this is the 1-DOF
+    pulse. Width 0 is the kick at ``start``. The force is clipped to +-``force_limit``
+    (then it does not depend on Delta v). For n = 1 this is the 1-DOF
     :func:`grazing_control.dynamics.simulation.actuation.pulse_step`.
 
     With ``jacobian``: d state / d z = M3 M_p M1 (the monodromies of the three pieces,
@@ -291,12 +292,16 @@ def pulse_step(flow: NdofFlow, z, correction: float, *, start: float, width: flo
     width = check_pulse(m, start, width)
     z = np.array(z, dtype=float).reshape(-1)
     eye = np.eye(2 * n)
+    if not force_limit > 0.0:
+        raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is > 0")
     ma = actuated_mass(flow)
+    force = max(-force_limit, min(force_limit, ma * correction / width)) if width else 0.0
+    gain = ma / width if width and abs(ma * correction / width) < force_limit else 0.0
     # legs (from, to, force, kick): before, in and after the pulse (or the kick at start)
     if width == 0.0:
         legs = ((0.0, start, 0.0, False), (start, m.period, 0.0, True))
     else:
-        legs = ((0.0, start, 0.0, False), (start, start + width, ma * correction / width, None),
+        legs = ((0.0, start, 0.0, False), (start, start + width, force, None),
                 (start + width, m.period, 0.0, False))
     jac, inp, impacts = eye.copy(), np.zeros(2 * n), []
     for t0, t1, force, kick in legs:
@@ -310,7 +315,7 @@ def pulse_step(flow: NdofFlow, z, correction: float, *, start: float, width: flo
             seg, g = advance_with_force(flow, tau, z, t1 - t0, force, monodromy=True, wall=True)
             sigma = static_deflection(flow)
             mp = seg.monodromy
-            inp = mp @ inp + ((eye - mp) @ sigma - g * sigma[m.i_w]) * (ma / width)
+            inp = mp @ inp + ((eye - mp) @ sigma - g * sigma[m.i_w]) * gain
             jac = mp @ jac
         else:
             seg = advance_with_force(flow, tau, z, t1 - t0, force, monodromy=jacobian)
@@ -322,11 +327,13 @@ def pulse_step(flow: NdofFlow, z, correction: float, *, start: float, width: flo
 
 
 def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: float,
-                  width: float, time_constant: float = 0.0, latency: float = 0.0):
+                  width: float, time_constant: float = 0.0, latency: float = 0.0,
+                  force_limit: float = math.inf):
     """One forcing period from the Pi2 deviation z and the actuator's force ``force``
     there, the correction commanded as a pulse of ``width`` > 0 on [start, start + w]
     through a first-order actuator (time constant tau_a, ``latency`` L): the force on the
     actuated coordinate obeys tau_a F' = u(t - L) - F, u = m_a Delta v / w on the pulse
+    clipped to +-``force_limit``
     (oscillator/ndof/forced.py, :func:`~grazing_control.oscillator.ndof.forced.lag_advance`;
     docs/theory_ndof.md section 15). Returns (z, force at the next section, impacts: times
     from the sample). tau_a = 0 is :func:`pulse_step` at start + L (force must be 0).
@@ -351,9 +358,12 @@ def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: 
         if force != 0.0:
             raise ParameterError(f"force={force!r} is invalid: an actuator without lag leaves "
                                  "no force at the section, valid value is 0")
-        out = pulse_step(flow, z, correction, start=start + latency, width=width)
+        out = pulse_step(flow, z, correction, start=start + latency, width=width,
+                         force_limit=force_limit)
         return out.state, 0.0, list(out.impacts)
-    command = actuated_mass(flow) * correction / width
+    if not force_limit > 0.0:
+        raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is > 0")
+    command = max(-force_limit, min(force_limit, actuated_mass(flow) * correction / width))
     on, off = start + latency, start + latency + width
     t, f, impacts = 0.0, float(force), []
     for end, u in ((on, 0.0), (off, command), (m.period, 0.0)):
