@@ -1,7 +1,8 @@
 """The linear n-DOF impact oscillator (issue 17): the model file and its loader
 (``model``, docs/ndof_model.md), the exact flow and periodic response (``flow``), and
-certified impacts, saltation and the refusal of chattering (``impact``)
-(docs/theory_ndof_flow.md). Imports only ``oscillator.params`` and ``support``."""
+certified impacts, saltation, chattering (``impact``) and sticking (``sticking``)
+(docs/theory_ndof_flow.md; sticking: docs/theory_ndof.md section 15). Imports only
+``oscillator.params`` and ``support``."""
 
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import ChatteringError, NdofImpact, NdofSegment
