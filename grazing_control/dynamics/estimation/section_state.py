@@ -449,7 +449,7 @@ def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     and an impact at t_i (from :func:`grazing_control.oscillator.ndof.impact.advance`)
     puts z- = Phi(t_i - s_e) z_e on the wall with its v-, z+ with v+ (the other
     velocities unchanged) and M <- S Phi(t_i - s_e) M (S the saltation matrix).
-    A motion that chatters or sticks (refused by the n-DOF core) raises ValueError."""
+    A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError."""
     flow = _ndof_flow(model)
     n, w = model.n, model.i_w
     z = np.array(z0, dtype=float).reshape(-1)
@@ -470,6 +470,8 @@ def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
             raise ValueError(f"the model's motion chatters or sticks: no fit ({exc})") from None
         t_e, z_e = start, z
         for imp in seg.impacts:
+            if imp.sticking:   # issue 32: advance sticks instead of raising
+                raise ValueError(f"the model's motion sticks at t={start + imp.dt:.9g}: no fit")
             ti = start + imp.dt
             phi = flow.transition(ti - t_e)
             wall_x, rest_v = flow.on_wall(imp.phase)
