@@ -131,3 +131,44 @@ def test_mismatched_model_changes_one_parameter_and_refuses_bad_names():
         mismatched_model(m0, "zeta", 0.1)
     with pytest.raises(ParameterError, match="error=-1.0 is invalid"):
         mismatched_model(m0, "M", -1.0)
+
+
+def test_grazing_robustness_model_of_a_model_file(tmp_path, capsys, monkeypatch):
+    """`grazing robustness model --model FILE --mu MU --parameter ...`: the bands equal the
+    core's (instability_band over the exact n-DOF branch), with k = end/e^2 and the error
+    tolerated at the file's delta_d by the e^2 law; chart and JSON written. Reduced error
+    sizes; bad input: one line, exit status 2."""
+    import json
+
+    import yaml
+
+    from grazing_control.cli import main
+    from grazing_control.studies.robustness import model as study
+
+    monkeypatch.setattr(study, "NDOF_ERRORS", {"C": (0.01,), "r": (0.1,), "M": (1e-3,)})
+    data = yaml.safe_load((MODELS / "two_mass_chain.yaml").read_text())
+    data["delta_d"] = -1e-6
+    path = tmp_path / "chain.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "m"
+    assert main(["robustness", "model", "--model", str(path), "--mu", "0.2", "--parameter", "C",
+                 "--parameter", "r", "--out", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert (out / "model_error_bands.png").stat().st_size > 0
+    (design,) = d["designs"]
+    rows = {(r["parameter"], r["error"]): r for r in design["bands"]}
+    assert set(rows) == {("C", 0.01), ("C", -0.01), ("r", 0.1), ("r", -0.1)}
+    m0 = load_model(path)
+    k = nd.gain_family(m0, 0.2)
+    end = instability_band(m0, k, "C", -0.01).end
+    assert design["gains"] == pytest.approx(list(k), rel=1e-15)
+    assert rows[("C", -0.01)]["end"] == end < 0.0
+    assert rows[("C", 0.01)]["end"] == 0.0 and rows[("r", 0.1)]["end"] == rows[("r", -0.1)]["end"] == 0.0
+    assert rows[("C", -0.01)]["tolerated"] == pytest.approx(0.01 * math.sqrt(1e-6 / -end))
+    assert rows[("C", 0.01)]["tolerated"] is None
+    for argv, message in [(["--mu", "0.2", "--parameter", "K[3,0]"], "name='K[3,0]' is invalid"),
+                          ([], "--model needs --mu MU"),
+                          (["--mu", "0.2", "--c2", "-1"], "--c2 is a 1-DOF design")]:
+        assert main(["robustness", "model", "--model", str(path), "--out", str(out)] + argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0]

@@ -161,12 +161,13 @@ def predicted_band(plant: OscillatorParams, gains: Gains) -> float:
 
 def instability_band(nominal, gains, name: str, error: float, *,
                      floor: float = 1e-14, ceiling: float = 1e-2, per_decade: int = 4,
-                     rtol: float = 1e-3) -> Band:
+                     rtol: float = 1e-3, delay: float = 0.0) -> Band:
     """The band of Delta d next to grazing where the mismatched plant's controlled orbit
     fails (max |lambda| >= 1, or no 1/1 orbit), exact route (module docstring).
 
     ``nominal`` is OscillatorParams with :class:`Gains`, or an n-DOF model with its gain
-    vector k (2n). The scan runs from -ceiling to -floor; the band is the run of failing
+    vector k (2n) acting ``delay`` after Pi2 (docs/theory_ndof.md section 14; n-DOF
+    only: a 1-DOF delay is part of its Gains). The scan runs from -ceiling to -floor; the band is the run of failing
     points that reaches the floor, its outer end bisected in log |Delta d| to ``rtol``
     relative.
     """
@@ -182,7 +183,7 @@ def instability_band(nominal, gains, name: str, error: float, *,
         plant = mismatched_model(nominal, name, error)
 
         def rho(dd):
-            return model_largest_multiplier(dataclasses.replace(plant, delta_d=dd), gains)
+            return model_largest_multiplier(dataclasses.replace(plant, delta_d=dd), gains, delay)
         pred = math.nan
     end, scan = _band_end(rho, floor, ceiling, per_decade, rtol)
     return Band(name, error, end, pred, floor, ceiling, scan)
