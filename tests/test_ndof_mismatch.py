@@ -31,11 +31,12 @@ MODELS = Path(__file__).resolve().parents[1] / "config" / "models"
 SCAN = dict(floor=1e-10, ceiling=1e-3, per_decade=2)
 
 
-def _fd_multiplier(plant, k, dd):
-    """max |lambda| of the fourth-order finite-difference Jacobian of the exact map at the
-    plant's 1/1 orbit (step 1e-2 v-^2), and the orbit's impacts per period."""
-    bp = ndof_branch.orbit_at(plant, k, dd)
-    P = NdofMap(plant, k)
+def _fd_multiplier(plant, k, dd, delay=0.0):
+    """max |lambda| of the fourth-order finite-difference Jacobian of the exact map (the
+    kick ``delay`` after Pi2) at the plant's 1/1 orbit (step 1e-2 v-^2), and the orbit's
+    impacts per period."""
+    bp = ndof_branch.orbit_at(plant, k, dd, delay=delay)
+    P = NdofMap(plant, k, delay)
     z = bp.pi2_state
     h = 1e-2 * bp.v_minus ** 2
     jac = np.zeros((z.size, z.size))
@@ -100,6 +101,22 @@ def test_chain_multipliers_against_brute_force():
     assert worst < 1e-5
 
 
+def test_delayed_design_multipliers_against_brute_force():
+    """The delay-aware design k(mu = 0; delay 4) (docs/theory_ndof.md section 14) on the
+    chain, plant with M[0,0] +0.5 % and K -0.3 % at Delta d = -1e-5: the band's multiplier
+    equals the finite-difference Jacobian of the exact delayed map to 1e-5 (measured
+    3.9e-9: 5.828 and 1.147; the same gains taken as undelayed give 4.3e5)."""
+    m0 = load_model(MODELS / "two_mass_chain.yaml")
+    k = nd.gain_family(m0, 0.0, 4.0)
+    for name, e in (("M[0,0]", 0.005), ("K", -0.003)):
+        plant = dataclasses.replace(mismatched_model(m0, name, e), delta_d=-1e-5)
+        rho = model_largest_multiplier(plant, k, 4.0)
+        fd, impacts = _fd_multiplier(plant, k, -1e-5, 4.0)
+        assert impacts == 1 and math.isfinite(rho)
+        assert abs(fd - rho) < 1e-5 * rho
+        assert model_largest_multiplier(plant, k) != pytest.approx(rho, rel=1e-3)
+
+
 def test_chain_band_end_against_brute_force_and_the_square_law():
     """Chain, mu = 0.2, C off by -1 %: a band opens (end -6.22e-6); the brute-force
     multiplier is >= 1 just inside it (0.97 end) and < 1 just outside (1.03 end); halving
@@ -131,6 +148,10 @@ def test_mismatched_model_changes_one_parameter_and_refuses_bad_names():
         mismatched_model(m0, "zeta", 0.1)
     with pytest.raises(ParameterError, match="error=-1.0 is invalid"):
         mismatched_model(m0, "M", -1.0)
+    with pytest.raises(ParameterError, match="gains=.* is invalid"):
+        instability_band(m0, [1.0, 2.0], "M", 0.01)     # not every point a failure
+    with pytest.raises(ParameterError, match="delay=.* is invalid"):
+        instability_band(m0, np.zeros(4), "M", 0.01, delay=-1.0)
 
 
 def test_grazing_robustness_model_of_a_model_file(tmp_path, capsys, monkeypatch):

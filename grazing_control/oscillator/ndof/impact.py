@@ -428,7 +428,9 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
                 # chattering: the geometric sequence is summed and x_w sticks (docs/theory.md
                 # "Chattering and sticking"; docs/theory_ndof.md section 15)
                 t_hit = t - delta
-                t, tau, z, mono, release = _stick(flow, tau0, t, t_inf, duration, z, mono)
+                # r = 1 never accumulates (t_inf = inf): bounces below resolution stick now
+                t, tau, z, mono, release = _stick(flow, tau0, t, t_inf if t_inf < math.inf else 0.0,
+                                                  duration, z, mono)
                 impacts.append(NdofImpact(t_hit, tau_i, v_minus, v_plus, True, release))
                 h = _next_impact(flow, tau, z, duration - t) if t < duration else None
                 continue
