@@ -156,7 +156,7 @@ def _penalty_run(m: NdofModel, d: float, tau0: float, X0, t_end: float, k_c: flo
     leave.direction = -1.0
 
     sol = solve_ivp(rhs, (0.0, t_end), X0, method="DOP853", rtol=1e-12, atol=1e-14,
-                    events=leave, max_step=0.5 / math.sqrt(k_c))
+                    events=leave)
     release = float(sol.t_events[0][-1]) if len(sol.t_events[0]) else math.inf
     return sol.y[:, -1], release
 
