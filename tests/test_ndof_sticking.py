@@ -19,7 +19,7 @@ from scipy.integrate import solve_ivp
 from grazing_control.oscillator import impact as impact1
 from grazing_control.oscillator.ndof import NdofModel, load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
-from grazing_control.oscillator.ndof.impact import advance
+from grazing_control.oscillator.ndof.impact import ChatteringError, advance
 from grazing_control.oscillator.ndof.sticking import stuck_flow
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -246,3 +246,6 @@ def test_a_stuck_motion_that_cannot_be_modelled_is_refused_by_name():
     flow = NdofFlow.of(m)
     with pytest.raises(ParameterError, match="K is invalid for sticking"):
         stuck_flow(flow)
+    tau, z = _pushed_into_wall(flow)
+    with pytest.raises(ChatteringError, match=r"x0 sticks at t=0: K is invalid for sticking"):
+        advance(flow, tau, z, m.period)
