@@ -294,6 +294,106 @@ class NdofRef:
         fz, imp = self.pi2_map(zs, gains)
         return zs, self.jacobian(zs, gains), imp
 
+    # ------------------------------------------------------------- sticking
+    def _stuck_generator(self):
+        """Augmented generator G of (y, y', cos tau, sin tau, 1) while x_w = d, v_w = 0:
+        y'' = M_yy^-1 (f_y cos tau - K_yw d - C_yy y' - K_yy y)."""
+        n, w = self.n, self.i_w
+        o = [i for i in range(n) if i != w]
+        p = len(o)
+        Myy = mp.matrix([[self.M[i, j] for j in o] for i in o]) if p else None
+        G = mp.zeros(2 * p + 3, 2 * p + 3)
+        if p:
+            Minv = mp.inverse(Myy)
+            for a in range(p):
+                G[a, p + a] = 1
+            for a in range(p):
+                for b in range(p):
+                    G[p + a, b] = -mp.fsum(Minv[a, c] * self.K[o[c], o[b]] for c in range(p))
+                    G[p + a, p + b] = -mp.fsum(Minv[a, c] * self.C[o[c], o[b]] for c in range(p))
+                G[p + a, 2 * p] = mp.fsum(Minv[a, c] * self.f[o[c]] for c in range(p))
+                G[p + a, 2 * p + 2] = -mp.fsum(Minv[a, c] * self.K[o[c], w] * self.d for c in range(p))
+        G[2 * p, 2 * p + 1] = -self.omega      # (cos tau)' = -omega sin tau
+        G[2 * p + 1, 2 * p] = self.omega       # (sin tau)' = omega cos tau
+        return o, G
+
+    def contact_force(self, tau, X):
+        """lambda at physical X (x_w = d, v_w = 0): the n x n solve of M (x'') + lambda e_w
+        = f cos tau - C x' - K x for the unknowns (y'', lambda) with x_w'' = 0."""
+        n, w = self.n, self.i_w
+        rhs = mp.matrix([self.f[i] * mp.cos(tau)
+                         - mp.fsum(self.C[i, j] * X[n + j] + self.K[i, j] * X[j] for j in range(n))
+                         for i in range(n)])
+        Bm = mp.zeros(n, n)
+        for i in range(n):
+            for j in range(n):
+                Bm[i, j] = (1 if i == w else 0) if j == w else self.M[i, j]
+        sol = mp.lu_solve(Bm, rhs)
+        return sol[w]
+
+    def stuck_state(self, tau, X, h):
+        """Physical state after time h stuck on the wall from X at phase tau."""
+        n, w = self.n, self.i_w
+        o, G = self._stuck_generator()
+        p = len(o)
+        s = [X[i] for i in o] + [X[n + i] for i in o] + [mp.cos(tau), mp.sin(tau), mpf(1)]
+        E = mp.expm(G * _f(h))
+        u = E * mp.matrix(s)
+        out = [mpf(0)] * (2 * n)
+        for a, i in enumerate(o):
+            out[i], out[n + i] = u[a], u[p + a]
+        out[w], out[n + w] = self.d, mpf(0)
+        return out
+
+    def run(self, tau, X, duration, samples=SAMPLES):
+        """Physical state after ``duration`` from X at phase tau, with impacts and sticking
+        (a start at rest on the wall pushed into it sticks); returns (X, events), events
+        ('impact', t, v-) and ('stick', t, release or None)."""
+        n, w = self.n, self.i_w
+        X = [_f(x) for x in X]
+        tau, t, T = _f(tau), mpf(0), _f(duration)
+        events = []
+        while t < T:
+            # at rest on the wall to the rounding of a float start state (1e-13)
+            rest = abs(X[w] - self.d) < mpf(10) ** -13 and abs(X[n + w]) < mpf(10) ** -13
+            if rest and self.contact_force(tau, X) > 0:
+                X[w], X[n + w] = self.d, mpf(0)
+                X0, tau0 = list(X), tau
+
+                def lam(h):
+                    return self.contact_force(tau0 + self.omega * h, self.stuck_state(tau0, X0, h))
+
+                cells = max(4, int(mp.ceil(samples * (T - t) / self.period)))
+                hs = [(T - t) * k / cells for k in range(cells + 1)]
+                hr = None
+                for a, b in zip(hs, hs[1:]):
+                    if lam(b) <= 0:
+                        hr = mp.findroot(lam, (a, b), solver="anderson", tol=ROOT_TOL ** 2,
+                                         verify=False)
+                        break
+                h = (T - t) if hr is None else hr
+                events.append(("stick", t, None if hr is None else t + hr))
+                X = self.stuck_state(tau0, X0, h)
+                t, tau = t + h, tau0 + self.omega * h
+                if hr is None:
+                    break
+                # leave the wall: a first step without search (g ~ lambda' h^3 / 6 < 0)
+                eps = self.period * mpf(10) ** -18
+                X, t, tau = self.state(tau, X, eps), t + eps, tau + self.omega * eps
+                continue
+            h = self.next_impact(tau, X, T - t, samples)
+            if h is None:
+                X = self.state(tau, X, T - t)
+                break
+            X = self.state(tau, X, h)
+            t, tau = t + h, tau + self.omega * h
+            vm = X[n + w]
+            if len(events) >= MAX_IMPACTS_PER_PERIOD:
+                raise RuntimeError("reference: chattering is not modelled")
+            X[w], X[n + w] = self.d, -self.r * vm
+            events.append(("impact", t, vm))
+        return X, events
+
     def multipliers(self, J):
         """Eigenvalues of J at DPS digits, by decreasing modulus."""
         ev, _ = mp.eig(J)

@@ -459,7 +459,7 @@ def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     Delta d - sigma_w F (oscillator/ndof/forced.py), so z(s) = Phi(s - s_e)(z_e - sigma F)
     + sigma F and the saltation matrices are the shifted flow's; F does not depend on z0
     (the correction is known), so the Jacobian keeps its form.
-    A motion that chatters or sticks (refused by the n-DOF core) raises ValueError."""
+    A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError."""
     flow = _ndof_flow(model)
     n, w = model.n, model.i_w
     z = np.array(z0, dtype=float).reshape(-1)
@@ -483,6 +483,8 @@ def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
             raise ValueError(f"the model's motion chatters or sticks: no fit ({exc})") from None
         t_e, z_e = start, z - shift
         for imp in seg.impacts:
+            if imp.sticking:   # issue 32: advance sticks instead of raising
+                raise ValueError(f"the model's motion sticks at t={start + imp.dt:.9g}: no fit")
             ti = start + imp.dt
             phi = flow.transition(ti - t_e)
             wall_x, rest_v = fl.on_wall(imp.phase)
