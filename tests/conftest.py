@@ -149,9 +149,15 @@ def _shares_a_module_fixture(item) -> bool:
     sweep, a figure computed once for the module's tests): split over both workers, that
     fixture would be computed on each (tests/test_figures.py's two scopes: 10-12 s each,
     twice)."""
-    module = item.nodeid.split("::", 1)[0]
-    return any(d.scope in ("module", "class") and (d.baseid or "").startswith(module)
-               for defs in item._fixtureinfo.name2fixturedefs.values() for d in defs)
+    module = item.getparent(pytest.Module).nodeid
+    for defs in item._fixtureinfo.name2fixturedefs.values():
+        for d in defs:
+            # where the fixture is defined: its node (pytest 9; baseid, the node id as
+            # a string, is deprecated)
+            where = d.node.nodeid if getattr(d, "node", None) is not None else d.baseid
+            if d.scope in ("module", "class") and (where or "").startswith(module):
+                return True
+    return False
 
 
 def xdist_group(item) -> str | None:
