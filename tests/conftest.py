@@ -12,8 +12,8 @@ without nodes) is shared out to whichever worker is free. The controller hands o
 work in the order of the items (``--no-loadscope-reorder``; xdist's default puts the
 groups with most tests first, and the realtime group then came first): the groups first,
 then the single tests, which fill both workers up to about the same end, the realtime
-group last (:func:`_rank`; before, a 60-100 s group handed out late kept one worker busy
-while the other waited with the realtime group). The tests marked ``realtime`` (their
+group last (:func:`_rank`; a 60-100 s group handed out late can keep one worker busy
+while the other waits with the realtime group). The tests marked ``realtime`` (their
 assertions hold only if the scene's answers meet wall-clock deadlines) form one more
 group, last in the queue, and each waits until the other worker has been idle for
 IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a machine that runs
@@ -146,9 +146,9 @@ def is_realtime(item) -> bool:
 
 def _shares_a_module_fixture(item) -> bool:
     """The test uses a module- or class-scoped fixture of its own module (a fit, a
-    sweep, a figure computed once for the module's tests): split over both workers, that
-    fixture would be computed on each (tests/test_figures.py's two scopes: 10-12 s each,
-    twice)."""
+    sweep, figures computed once for the module's tests): split over both workers, that
+    fixture was computed on each (tests/test_actuator.py's: 83.9 s and 83.7 s of setup,
+    one on each worker, at load 13; docs/benchmarks.md, "The suite")."""
     module = item.getparent(pytest.Module).nodeid
     for defs in item._fixtureinfo.name2fixturedefs.values():
         for d in defs:
@@ -174,9 +174,10 @@ def xdist_group(item) -> str | None:
 
 def _rank(item) -> int:
     """The order in which the controller hands out the work: the groups first (a group
-    is one unit, up to 100 s: handed out last, it kept one worker busy while the other,
-    done, held the realtime group waiting for it), then the single tests (they fill
-    both workers up to the same end), the realtime group last."""
+    is one unit, up to ~100 s: handed out late, as test_stop_selection's was in
+    collection order, it can keep one worker busy while the other, done, holds the
+    realtime group waiting for it), then the single tests (they fill both workers up to
+    about the same end), the realtime group last."""
     if is_realtime(item):
         return 2
     return 0 if xdist_group(item) is not None else 1
