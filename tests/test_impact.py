@@ -568,13 +568,14 @@ def test_chattering_sequences_match_the_exact_continuation():
     contact at rest) 251 of 500 such sequences stuck early and 3464 of 8244 bounces
     were dropped (seed 1).
 
-    The compiled kernel's advance (where it runs) is compared with the same exact
-    sequences here, as tests/test_kernel.py re-ran this test for it before: the 50-digit
-    continuation, 9.5 s of the test's CPU, is computed once for both paths."""
+    The compiled kernel's advance (wherever numba is installed, whatever GRAZING_KERNEL
+    says) is compared with the same exact sequences here, as tests/test_kernel.py re-ran
+    this test for it before: the 50-digit continuation, 9.5 s of the test's CPU, is
+    computed once for both paths."""
     from grazing_control.oscillator import kernel
 
     paths = {"core": advance}
-    if kernel.use_kernel():
+    if kernel.available():
         paths["kernel"] = kernel.advance
     rows = {name: [] for name in paths}
     for case in _chatter_cases(20, 600):
