@@ -238,15 +238,22 @@ def test_ctrl_c_while_the_kernel_compiles_is_delivered_once_it_is_loaded(tmp_pat
     back and delivered as a KeyboardInterrupt once the kernel is loaded: neither lost in
     llvmlite's callbacks nor a crash at exit."""
     import signal
-    import time
 
+    # The child says when it is compiling (inside the hold, before the first calls); a
+    # fixed sleep raced the child's start-up on a loaded machine (the signal came before
+    # the hold, or after the compile).
     code = ("from grazing_control.oscillator import kernel\n"
+            "first_calls = kernel._first_calls\n"
+            "def compiling():\n"
+            "    print('compiling', flush=True)\n"
+            "    first_calls()\n"
+            "kernel._first_calls = compiling\n"
             "kernel.warm_up()\n"
             "print('not interrupted', flush=True)\n")
     env = {**os.environ, "PYTHONPATH": os.getcwd(), "NUMBA_CACHE_DIR": str(tmp_path)}
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
-    time.sleep(1.5)  # numba imported, compiling
+    assert proc.stdout.readline() == "compiling\n"  # numba imported, compiling
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode in (1, -signal.SIGINT), err
