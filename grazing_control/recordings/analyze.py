@@ -17,8 +17,8 @@ import numpy as np
 
 from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
-from .analysis import control_lines, fmt
-from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
+from .analysis import (control_lines, fmt, is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup,
+                       plot_ndof_scene)
 from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
                       section_phase_problems)
 from .rig_record import check_against_model, read_rig, si_numbers
@@ -659,7 +659,7 @@ def _si_lines(si) -> list:
 
 
 def _ndof_bag(bag, data, label, out, tol, figures):
-    """The report entry and markdown lines of an n-DOF bag (.ndof_analysis): the model
+    """The report entry and markdown lines of an n-DOF bag (.analysis, a model file's scene): the model
     and gains from its parameter record; options for the 1-DOF model do not apply."""
     setup = ndof_setup(data)
     entry = {"bag": str(bag), "file": str(data.file), "label": label,

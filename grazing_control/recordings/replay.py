@@ -235,8 +235,8 @@ def _bag_writer(out: Path):
 
 def _refuse_ndof(bag, data) -> None:
     """An n-DOF scene's bag (issue 17) is not replayed: ValueError saying so (its
-    numbers: grazing analyze, recordings/ndof_analysis.py)."""
-    from .ndof_analysis import is_ndof
+    numbers: grazing analyze, recordings/analysis.py)."""
+    from .analysis import is_ndof
 
     if is_ndof(data):
         raise ValueError(f"{bag}: an n-DOF scene (model_file in its parameter record, or "
