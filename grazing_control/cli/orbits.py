@@ -69,9 +69,14 @@ def impact_lines(counts, periods: int, word: str = "impacts") -> list:
 # ---------------------------------------------------------------------------- orbit
 def cmd_orbit(args):
     """orbit --delta-d DD [--c2 ..] or --model FILE [gains]: the 1/1 orbit and its
-    multipliers."""
-    if args.model is not None:
-        return _orbit_file(args)
+    multipliers, found by the model's route (:func:`_study_orbit`, :func:`_file_orbit`)."""
+    out, report = (_file_orbit if args.model is not None else _study_orbit)(args)
+    return out if args.json else orbit_lines(**report)
+
+
+def _study_orbit(args):
+    """The 1-DOF study's orbit (impact-phase shooting, ``dynamics.orbits.orbits``; or the
+    perturbation series' multipliers): its JSON and its report's fields."""
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     p = params_of(args, args.delta_d)
@@ -107,16 +112,14 @@ def cmd_orbit(args):
         out.update(c1=gains.c1, c2=gains.c2, actuation_delay=gains.delay,
                    section_pi2_deviation=list(o.pi2_deviation))
     require_finite(out, "orbit")
-    if args.json:
-        return out
-    lam = ", ".join(f"{z:.6g}" for z in lam)
     ctl = f" with c1={gains.c1:.6g}, c2={gains.c2:.6g}" if gains else " (uncontrolled)"
     if gains is not None and gains.delay:
         ctl += f", actuation delay {gains.delay:.6g}"
-    return orbit_lines(o.params.delta_d, ctl, o.impact_phase, o.v_minus,
-                       f"({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
-                       f"{lam}  ({args.method}, {cost:.3g} s)", out["stable"],
-                       _BRANCH_TEXT.get(o.branch, o.branch))
+    return out, dict(delta_d=o.params.delta_d, control=ctl, impact_phase=o.impact_phase,
+                     v_minus=o.v_minus, pi2=f"({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
+                     multipliers=f"{', '.join(f'{z:.6g}' for z in lam)}  "
+                                 f"({args.method}, {cost:.3g} s)",
+                     stable=out["stable"], branch=_BRANCH_TEXT.get(o.branch, o.branch))
 
 
 _BRANCH_TEXT = {
@@ -137,8 +140,9 @@ def _orbit_json(o):
             else None}
 
 
-def _orbit_file(args):
-    """orbit --model FILE --delta-d DD [gains] (docs/ndof_commands.md)."""
+def _file_orbit(args):
+    """A model file's orbit (docs/ndof_commands.md): on the branch in the impact phase, or
+    by shooting from the local map's prediction; its JSON and its report's fields."""
     from grazing_control.studies.near_grazing.branch import EXPLICIT, grazing_side, orbit_11, with_delta_d
 
     model = with_delta_d(load(args.model), args.delta_d)
@@ -158,8 +162,6 @@ def _orbit_file(args):
     out.update(_orbit_json(o))
     out["grazing_side"] = side
     out.update(gains=None if k is None else k.tolist(), mu=mu, control=how, seconds=seconds)
-    if args.json:
-        return out
     ctl = " (uncontrolled)" if k is None else f" with k = {fmt_vec(k, 8)} ({how}" + \
         (f", mu = {mu:.8g})" if mu is not None else ")")
     explicit = o.guess == EXPLICIT
@@ -168,19 +170,31 @@ def _orbit_file(args):
                                   "the local map's prediction")
     born += (f", {o.prediction_offset:.2g} relative from the local map's prediction)"
              if math.isfinite(o.prediction_offset) else ")")
-    return orbit_lines(model.delta_d, ctl, o.impact_phase, o.v_minus, fmt_vec(o.physical, 15),
-                       f"{', '.join(f'{z:.6g}' for z in o.multipliers)}  "
-                       f"(|max| {np.max(np.abs(o.multipliers)):.6g}; {route}, {seconds:.3g} s)",
-                       o.stable,
-                       born if o.near_grazing else "another 1/1 orbit, not the one born at "
-                       "grazing (docs/ndof_commands.md)", found=o.guess)
+    return out, dict(delta_d=model.delta_d, control=ctl, impact_phase=o.impact_phase,
+                     v_minus=o.v_minus, pi2=fmt_vec(o.physical, 15),
+                     multipliers=f"{', '.join(f'{z:.6g}' for z in o.multipliers)}  "
+                                 f"(|max| {np.max(np.abs(o.multipliers)):.6g}; {route}, "
+                                 f"{seconds:.3g} s)",
+                     stable=o.stable,
+                     branch=born if o.near_grazing else "another 1/1 orbit, not the one born "
+                     "at grazing (docs/ndof_commands.md)", found=o.guess)
 
 
 # ---------------------------------------------------------------------------- continue
 def cmd_continue(args):
-    """continue --from A --to B [--c2 ..] or --model FILE [gains]: the 1/1 branch."""
-    if args.model is not None:
-        return _continue_file(args)
+    """continue --from A --to B [--c2 ..] or --model FILE [gains]: the 1/1 branch, found
+    by the model's route (:func:`_study_branch`, :func:`_file_branch`)."""
+    out, title, points, bifurcations, notes = \
+        (_file_branch if args.model is not None else _study_branch)(args)
+    if args.json:
+        return nulls(out)  # inf multipliers at the grazing point itself -> null
+    return "\n".join(branch_lines(title, points, bifurcations) + notes)
+
+
+def _study_branch(args):
+    """The 1-DOF study's branch (``continuation.continue_11``, in the impact phase): its
+    JSON, the report's title, points (Delta d, v-, multipliers, stable), bifurcations
+    (type, Delta d) and notes."""
     from grazing_control.dynamics.orbits.continuation import continue_11
 
     p = params_of(args)
@@ -197,12 +211,11 @@ def cmd_continue(args):
             for b in branch.bifurcations
         ],
     }
-    if args.json:
-        return nulls(out)  # inf multipliers at the grazing point itself -> null
-    return "\n".join(branch_lines(
-        f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to {args.stop:g}",
-        [(b.delta_d, b.v_minus, b.multipliers, b.stable) for b in branch.points],
-        [(b.type, b.delta_d) for b in branch.bifurcations]))
+    return (out,
+            f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to "
+            f"{args.stop:g}",
+            [(b.delta_d, b.v_minus, b.multipliers, b.stable) for b in branch.points],
+            [(b.type, b.delta_d) for b in branch.bifurcations], [])
 
 
 #: Impact velocity, in units of d* omega, below which a point found by shooting is
@@ -225,8 +238,9 @@ def continuation_values(start: float, stop: float, points: int) -> np.ndarray:
     return np.linspace(start, stop, points)
 
 
-def _continue_file(args):
-    """continue --model FILE --from A --to B [gains] (docs/ndof_commands.md)."""
+def _file_branch(args):
+    """A model file's branch (docs/ndof_commands.md): in the impact phase when the start is
+    on the branch born at grazing, else by shooting; as :func:`_study_branch`."""
     from grazing_control.dynamics.orbits.continuation import continue_orbit
     from grazing_control.dynamics.orbits.ndof_branch import continue_branch
     from grazing_control.dynamics.maps.ndof_map import NdofMap
@@ -273,16 +287,11 @@ def _continue_file(args):
         "multipliers_limit": None if limit is None else complex_list(limit),
         "seconds": seconds,
     })
-    if args.json:
-        return nulls(out)
     route = "in the impact phase (exact to rounding)" if explicit else "by shooting"
-    lines = branch_lines(
-        f"1/1 branch {route}, {len(branch.points)} points from Delta d = "
-        f"{args.start:g} towards {args.stop:g}"
-        + ("" if k is None else f" ({how}{'' if mu is None else f', mu = {mu:.8g}'})"),
-        [(p.value, p.v_min, p.multipliers, p.stable) for p in branch.points],
-        [(b.type, b.value) for b in branch.bifurcations])
-    lines.append(f"  stopped: {branch.stopped}")
+    title = (f"1/1 branch {route}, {len(branch.points)} points from Delta d = "
+             f"{args.start:g} towards {args.stop:g}"
+             + ("" if k is None else f" ({how}{'' if mu is None else f', mu = {mu:.8g}'})"))
+    lines = [f"  stopped: {branch.stopped}"]
     if warning:
         lines.append(f"  warning: {warning}")
     if fold is not None:
@@ -296,17 +305,21 @@ def _continue_file(args):
     if limit is not None:
         lines.append(f"  predicted limit |lambda0| = "
                      f"{', '.join(f'{abs(z):.6g}' for z in limit)} (Delta d -> 0-)")
-    return "\n".join(lines)
+    return (out, title, [(p.value, p.v_min, p.multipliers, p.stable) for p in branch.points],
+            [(b.type, b.value) for b in branch.bifurcations], lines)
 
 
 # ---------------------------------------------------------------------------- simulate
 def cmd_simulate(args):
-    """simulate --delta-d DD --periods N [--c2 ..] or --model FILE [gains]: Pi2 samples."""
-    if args.model is not None:
-        if args.contact != "rigid" or _stop_options(args):
-            raise ParameterError("--contact and its options are 1-DOF options: an n-DOF "
-                                 "model file's stop is rigid (docs/ndof_model.md)")
-        return _simulate_file(args)
+    """simulate --delta-d DD --periods N [--c2 ..] or --model FILE [gains]: the Pi2 samples,
+    by the model's route (:func:`_study_simulation`, :func:`_file_simulation`)."""
+    out, lines = (_file_simulation if args.model is not None else _study_simulation)(args)
+    return out if args.json else "\n".join(lines)
+
+
+def _study_simulation(args):
+    """The 1-DOF study's simulation (the exact flow or a fidelity, or a compliant stop,
+    :func:`_simulate_stop`): its JSON and its report's lines."""
     from grazing_control.dynamics.simulation.simulate import simulate
 
     p = params_of(args, args.delta_d)
@@ -347,9 +360,7 @@ def cmd_simulate(args):
                            "stuck_periods": spectrum.stuck_periods,
                            "expected_sum": spectrum.expected_sum,
                            "sum_residual": spectrum.sum_residual}
-    if args.json:
-        return out
-    return "\n".join(_pi2_lines(
+    return out, (_pi2_lines(
         f"simulated {args.periods} periods at Delta d = {p.delta_d:.6g}"
         + (f", control on from sample {control_after}" if gains is not None else ", uncontrolled"),
         res, args.periods) + ([] if spectrum is None else [
@@ -420,15 +431,13 @@ def _simulate_stop(args, p, gains, control_after, physical, deviation):
         out["stop_warning"] = warning
     out = nulls(out)          # a refused candidate's bound: inf -> null
     require_finite({k: out[k] for k in ("pi2", "impacts_per_period")}, "simulate")
-    if args.json:
-        return out
-    return "\n".join(_pi2_lines(
+    return out, _pi2_lines(
         f"simulated {args.periods} periods at Delta d = {p.delta_d:.6g} with a Kelvin-Voigt stop "
         f"(k_c = {law.stiffness:.6g}, c_c = {law.damping:.6g}, r = {law.restitution:.6g}"
         + (f", friction {friction.kinetic:.6g}" if friction else "") + ")"
         + (f", control on from sample {control_after}" if gains is not None else
            ", uncontrolled"),
-        res, args.periods, "contacts", [f"  stop model         = {choice.stop}"]))
+        res, args.periods, "contacts", [f"  stop model         = {choice.stop}"])
 
 
 def _pi2_lines(title, res, periods: int, word: str = "impacts", first=()) -> list:
@@ -440,12 +449,16 @@ def _pi2_lines(title, res, periods: int, word: str = "impacts", first=()) -> lis
             f"  last Pi2 sample    = {last}", f"  model              = {res.fidelity_reason}"]
 
 
-def _simulate_file(args):
-    """simulate --model FILE --delta-d DD --periods N [--control-after K] [gains] [--z0]."""
+def _file_simulation(args):
+    """A model file's simulation on Pi2 (docs/ndof_commands.md; its stop is rigid): its
+    JSON and its report's lines."""
     from grazing_control.oscillator.ndof.flow import NdofFlow
     from grazing_control.studies.near_grazing.branch import OrbitNotFound, orbit_11, with_delta_d
     from grazing_control.studies.near_grazing.scene import simulate_pi2
 
+    if args.contact != "rigid" or _stop_options(args):
+        raise ParameterError("--contact and its options are 1-DOF options: an n-DOF "
+                             "model file's stop is rigid (docs/ndof_model.md)")
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = control_of(args, model)
     after = None if k is None else (0 if args.control_after is None else args.control_after)
@@ -467,8 +480,6 @@ def _simulate_file(args):
         except OrbitNotFound as exc:
             out.update(distance_to_orbit=None, orbit_error=str(exc))
             orbit_note = f"none ({' '.join(str(exc).split())[:160]})"
-    if args.json:
-        return out
     n = args.periods
     lines = [
         f"simulated {n} periods of {args.model} at Delta d = {model.delta_d:.6g}"
@@ -478,5 +489,5 @@ def _simulate_file(args):
     ]
     if k is not None:
         lines.append(f"  distance to the controlled 1/1 orbit = {orbit_note}")
-    return "\n".join(lines)
+    return out, lines
 

@@ -24,7 +24,7 @@ from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 from .period import detect_period
-from .run import local_workers
+from .run import _count, local_workers
 
 __all__ = ["MODEL_GRID_NAMES", "NdofDiagram", "diagram", "run_points"]
 
@@ -131,9 +131,8 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
     if vals.ndim != 1 or vals.size == 0 or not np.all(np.isfinite(vals)):
         raise ParameterError(f"values of {name} are invalid: expected a non-empty list of "
                              "finite numbers")
-    for label, v, low in (("periods", periods, 1), ("transient", transient, 0)):
-        if isinstance(v, bool) or int(v) != v or v < low:
-            raise ParameterError(f"{label}={v!r} is invalid: valid range is an integer >= {low}")
+    _count("periods", periods, 1)        # the 1-DOF sweep's checks (run.py)
+    _count("transient", transient, 0)
     if not transient < periods:
         raise ParameterError(f"transient={transient!r} is invalid: valid range is 0 <= "
                              f"transient < periods={periods}")
