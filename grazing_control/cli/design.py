@@ -120,9 +120,7 @@ def cmd_design(args):
         f"{ok[point.gamma1 > 0.0]})",
         f"  rho(N_g)           = {rho_free:.6g}  (non-impacting motion, d > d*: "
         f"{ok[point.free_stable]} < 1)",
-        f"  admissible c2      = {_fmt_intervals(intervals)}  (all three conditions)",
-        f"    impacting side   = {_fmt_intervals(sets['impacting'])}  (|lambda0| < 1, gamma1 > 0)",
-        f"    non-impacting    = {_fmt_intervals(sets['non-impacting'])}  (rho(N_g) < 1)",
+        *_admissible_lines("c2", intervals, sets, "N_g"),
         f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
         f"  method             : {args.method} ({cost:.3g} s)",
     ]
@@ -271,6 +269,16 @@ def _fmt_intervals(intervals, unbounded: bool = False):
     return " U ".join(f"({end(lo, '-')}, {end(hi, '+')})" for lo, hi in intervals) or "empty"
 
 
+def _admissible_lines(name, combined, sets, free_map, unbounded=False) -> list:
+    """The admissible set of the free design parameter (c2 of the 1-DOF design, mu of the
+    n-DOF family): all three conditions, then each side of grazing."""
+    return [f"  admissible {name:8s}= {_fmt_intervals(combined, unbounded)}  (all three conditions)",
+            f"    impacting side   = {_fmt_intervals(sets['impacting'], unbounded)}  "
+            "(|lambda0| < 1, gamma1 > 0)",
+            f"    non-impacting    = {_fmt_intervals(sets['non-impacting'], unbounded)}  "
+            f"(rho({free_map}) < 1)"]
+
+
 def _json_interval(iv):
     """[lo, hi] with an end open at the search limit as null (the key c2_search_limit)."""
     return [x if math.isfinite(x) else None for x in iv]
@@ -374,9 +382,7 @@ def _family_design(args):
         f"  transmission zeros = {', '.join(f'{z:.6g}' for z in zeros)}",
         f"    max |zero|       = {out['transmission_zeros_max_modulus']:.6g}  (< 1 needed: "
         f"{ok[out['transmission_zeros_max_modulus'] < 1.0]})",
-        f"  admissible mu      = {_fmt_intervals(intervals, True)}  (all three conditions)",
-        f"    impacting side   = {_fmt_intervals(sets['impacting'], True)}  (|lambda0| < 1, gamma1 > 0)",
-        f"    non-impacting    = {_fmt_intervals(sets['non-impacting'], True)}  (rho(N) < 1)",
+        *_admissible_lines("mu", intervals, sets, "N", unbounded=True),
         f"  mu                 = {mu:.15g}  ({chosen})",
         f"  gains k            = {fmt_vec(k, 15)}",
         f"  |lambda0|          = {', '.join(f'{abs(z):.6g}' for z in lam0)}  (limit Delta d -> "
