@@ -37,7 +37,7 @@ Per scene (:func:`summarize` over the whole state, then):
   last sample; the final sample's distance to that orbit, per coordinate;
 * the model check: every recorded period re-integrated by the core from the recorded
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
-  :mod:`grazing_control.plant.ndof_engine`), the largest departure from the next
+  :mod:`grazing_control.plant.engine`), the largest departure from the next
   recorded sample (rounding level for a lockstep run).
 """
 
