@@ -206,3 +206,75 @@ def modal_of(model) -> ModalModel:
     X = flow.amplitudes[model.i_w]
     return ModalModel(Om, zeta, c, s, float(X.real), float(-X.imag),
                       flow.d_star + model.delta_d, model.r, model.omega, kc, ks)
+
+
+def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0):
+    """A model file's model (symmetric M, C, K, real f) whose wall coordinate shows the
+    ``fitted`` modal parameters: least squares over M, C, K (upper triangles; M's wall
+    entry held: the common scale) and f from ``nominal`` (the model the recording was made with: its n, i_w, i_a, pi2_offset),
+    each residual the modal parameter's misfit over ``scale`` (its standard error), plus
+    1e-6 x the departure from ``nominal`` relative to its size (the data leave M, C, K, f
+    determined only up to a change of the hidden coordinates and a common scale; this
+    picks the realisation nearest the nominal one). r, omega, the phase tau0 and
+    delta_d = d - d* (d* of the realised model) are the fitted ones.
+
+    Returns (model, misfit): the largest |realised - fitted| / scale over the modal
+    parameters (module docstring: the data need not lie exactly on a symmetric model;
+    a good realisation misfits by less than a few standard errors).
+    """
+    import dataclasses
+
+    from scipy.optimize import least_squares
+
+    from grazing_control.oscillator.ndof.model import NdofModel
+
+    n = nominal.n
+    if n != fitted.n:
+        raise ParameterError(f"model: n={n} of the nominal model, the fit has {fitted.n} modes")
+    layout = ModalLayout(n, actuator=nominal.i_a != nominal.i_w)
+    if layout.actuator and fitted.kick_c is None:
+        raise ParameterError(
+            f"i_a={nominal.i_a}: the kick's response on the wall coordinate i_w="
+            f"{nominal.i_w} is not identified (the recording has no corrections): no model "
+            "for a design can be written; record a controlled scene")
+    target = np.delete(fitted.vector(layout), [layout.index_d, layout.index_d + 1])
+    scale = np.delete(np.asarray(scale, float), [layout.index_d, layout.index_d + 1])
+    iu = np.triu_indices(n)
+    base = dataclasses.replace(nominal, omega=fitted.omega, r=fitted.r)
+
+    # the wall coordinate's mass is held at the nominal one: it fixes the common scale of
+    # M, C, K and f, which no motion shows
+    pin = int(np.flatnonzero((iu[0] == nominal.i_w) & (iu[1] == nominal.i_w))[0])
+    m_ww = float(nominal.M[nominal.i_w, nominal.i_w])
+
+    def build(theta):
+        k = iu[0].size
+        theta = np.insert(theta, pin, m_ww)
+        mats = []
+        for j in range(3):
+            a = np.zeros((n, n))
+            a[iu] = theta[j * k:(j + 1) * k]
+            mats.append(a + np.triu(a, 1).T)
+        return dataclasses.replace(base, M=mats[0], C=mats[1], K=mats[2], f=theta[3 * k:])
+
+    theta0 = np.delete(np.concatenate([nominal.M[iu], nominal.C[iu], nominal.K[iu],
+                                       nominal.f]), pin)
+    size = np.maximum(np.abs(theta0), 1e-3 * np.max(np.abs(theta0)))
+
+    def residual(theta):
+        try:
+            got = np.delete(modal_of(build(theta)).vector(layout),
+                            [layout.index_d, layout.index_d + 1])
+        except (ParameterError, np.linalg.LinAlgError):
+            return np.full(target.size + theta.size, 1e6)
+        return np.concatenate([(got - target) / scale, 1e-6 * (theta - theta0) / size])
+
+    sol = least_squares(residual, theta0, x_scale=size, xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                        max_nfev=2000)
+    model = build(sol.x)
+    real = modal_of(model)
+    misfit = float(np.max(np.abs(residual(sol.x)[:target.size])))
+    model = NdofModel(model.M, model.C, model.K, model.f, fitted.omega, nominal.i_w,
+                      delta_d=fitted.d - real.d_star, r=fitted.r, i_a=nominal.i_a,
+                      phase=tau0, pi2_offset=nominal.pi2_offset)
+    return model, misfit

@@ -492,3 +492,29 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
         phase=phase, problem=prob, solution=p, arcs_used=arcs.count, impacts_used=impacts,
         samples_used=int(rec.t.size), dof=int(dof), converged=bool(sol.status > 0),
         message=str(sol.message))
+
+
+def modal_verdict(ident: ModalIdentification) -> dict:
+    """The checks of docs/theory_identification.md section 8 that apply to the modal fit:
+    convergence, r and every zeta_k in (0, 1), white position residuals (unless at
+    rounding: an exact fit). (The 1-DOF re-simulation is not run for n > 1.)"""
+    from grazing_control.dynamics.identification.checks import (ROUNDING, WHITENESS_LIMIT,
+                                                                 whiteness)
+
+    m = ident.model
+    white = whiteness(ident)
+    rounding = ident.rms_x <= ROUNDING * max(m.d_star, abs(m.d), 1e-300)
+    reasons = []
+    if not ident.converged:
+        reasons.append(f"the least-squares solver did not converge ({ident.message})")
+    if not 0.0 < m.r < 1.0:
+        reasons.append(f"the fitted restitution r = {m.r:.6g} is outside (0, 1)")
+    for k, z in enumerate(m.damping_ratio):
+        if not 0.0 < z < 1.0:
+            reasons.append(f"the fitted damping ratio of mode {k}, {z:.6g}, is outside (0, 1)")
+    if not rounding and abs(white["z"]) > WHITENESS_LIMIT:
+        reasons.append(f"the residuals are not white: lag-1 autocorrelation "
+                       f"{white['lag1_autocorrelation']:.3f} over {white['pairs']} pairs "
+                       f"({abs(white['z']):.1f} sigma > {WHITENESS_LIMIT:g}): the motion is not "
+                       "this model's (another n? soft wall? sensor bias?)")
+    return {"fit": "poor" if reasons else "good", "reasons": reasons, "whiteness": white}
