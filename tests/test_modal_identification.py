@@ -210,3 +210,26 @@ def test_too_few_impacts_and_a_bad_n_are_one_line_naming_them():
         identify_modal(rec, 0)
     with pytest.raises(IdentificationError, match="correction_dv has 2 values for 0"):
         identify_modal(rec, 2, correction_dv=[1.0, 2.0])
+
+
+def test_the_realisation_shows_the_fitted_modes_and_needs_the_kicks_response():
+    """realise: from a nominal model 10 % off (K x 1.1, C x 0.8) the symmetric M, C, K, f
+    whose wall coordinate shows the chain's modal parameters (misfit below 1e-6 of the
+    scale given), M's wall entry held; without the kick's response on x_w (a recording
+    without corrections) no model for a design: one line naming i_a."""
+    from grazing_control.dynamics.identification.modal import realise
+    from grazing_control.oscillator.params import ParameterError
+
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    target = modal_of(model)
+    layout = ModalLayout(2, actuator=True)
+    scale = 1e-6 * np.maximum(np.abs(target.vector(layout)), 1e-3)
+    nominal = dataclasses.replace(model, K=model.K * 1.1, C=model.C * 0.8)
+    got, misfit = realise(target, nominal, scale, 0.25)
+    assert misfit < 1e-6 and got.M[0, 0] == 1.0 and got.phase == 0.25
+    assert np.allclose(modal_of(got).vector(layout), target.vector(layout), rtol=1e-11,
+                       atol=1e-14)
+    assert got.delta_d == pytest.approx(-1e-3, abs=1e-12)
+    with pytest.raises(ParameterError, match=r"^i_a=1: the kick's response on the wall "
+                                             r"coordinate i_w=0 is not identified"):
+        realise(dataclasses.replace(target, kick_c=None, kick_s=None), nominal, scale)
