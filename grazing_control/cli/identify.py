@@ -53,7 +53,7 @@ def _plain(obj):
 
 def cmd_identify(args) -> int:
     """Run ``grazing identify``; the exit status (module docstring)."""
-    from grazing_control.recordings.identify import format_report, identify_bags, si_report
+    from grazing_control.recordings.identify import identify_bags, si_report
 
     if args.stop:
         return _cmd_stop(args)
@@ -99,19 +99,27 @@ def cmd_identify(args) -> int:
             result["out"] = args.out
         else:
             result["out"] = None
+    tail = []
+    if args.out:
+        tail.append(f"  parameter file written to {args.out}" if good else
+                    f"  poor fit: nothing written to {args.out}")
+    if args.out_rig:
+        tail.append(f"  rig file written to {args.out_rig}" if good else
+                    f"  poor fit: nothing written to {args.out_rig}")
+    _emit(args, result, tail)
+    return 0 if good else 1
+
+
+def _emit(args, result, tail) -> None:
+    """Print the result: one JSON object (--json), else the text report and ``tail``."""
+    from grazing_control.recordings.identify import format_report
+
     if args.json:
         json.dump(_plain(result), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(format_report(result))
-        if args.out:
-            print(f"  parameter file written to {args.out}" if good else
-                  f"  poor fit: nothing written to {args.out}")
-        if args.out_rig:
-            print(f"  rig file written to {args.out_rig}" if good else
-                  f"  poor fit: nothing written to {args.out_rig}")
+        print("\n".join([format_report(result)] + tail))
     sys.stdout.flush()
-    return 0 if good else 1
 
 
 def _ndof_result(args, result) -> int:
@@ -120,7 +128,6 @@ def _ndof_result(args, result) -> int:
     more than REALISATION_LIMIT standard errors; the exit status (module docstring)."""
     from grazing_control.dynamics.identification.modal import realise
     from grazing_control.oscillator.params import ParameterError
-    from grazing_control.recordings.identify import format_report
 
     ident, nominal = result.pop("_ident"), result.pop("_model")
     for flag, value in (("--out", args.out), ("--out-rig", args.out_rig), ("--rig", args.rig)):
@@ -144,16 +151,12 @@ def _ndof_result(args, result) -> int:
         if good:
             _write_model(args.out_model, model, result)
         result["out_model"] = args.out_model if good else None
-    if args.json:
-        json.dump(_plain(result), sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(format_report(result))
-        if args.out_model:
-            print(f"  model file written to {args.out_model} (realisation misses the fitted "
-                  f"modal parameters by {result['realisation_misfit']:.2g} standard errors at "
-                  "most)" if good else f"  poor fit: nothing written to {args.out_model}")
-    sys.stdout.flush()
+    tail = []
+    if args.out_model:
+        tail.append(f"  model file written to {args.out_model} (realisation misses the fitted "
+                    f"modal parameters by {result['realisation_misfit']:.2g} standard errors "
+                    "at most)" if good else f"  poor fit: nothing written to {args.out_model}")
+    _emit(args, result, tail)
     return 0 if good else 1
 
 

@@ -37,7 +37,9 @@ from scipy.optimize import least_squares
 
 from grazing_control.dynamics.identification.data import Recording, RecordingError, cut_arcs
 from grazing_control.dynamics.identification.fit import (CONTINUATION, JACOBIAN_BYTES,
-                                                         IdentificationError, _covariance)
+                                                         IdentificationError, ShootingFit,
+                                                         _covariance,
+                                                         coloured_jacobian, interior)
 from grazing_control.dynamics.identification.modal import (ModalLayout, ModalModel,
                                                            kick_coefficients, modal_flow,
                                                            particular, propagate, rates)
@@ -45,7 +47,6 @@ from grazing_control.dynamics.identification.phase import PhaseError, PhaseRefer
 
 __all__ = ["ModalProblem", "ModalIdentification", "identify_modal", "initial_modal"]
 
-_H = 1e-30
 
 
 class ModalProblem:
@@ -174,26 +175,8 @@ class ModalProblem:
 
     def jacobian(self, p) -> np.ndarray:
         """Complex-step Jacobian, dense (m, n) (module docstring)."""
-        p = np.asarray(p, float)
-        J = np.zeros((self.m, self.n))
-        for j in range(self.ng):
-            q = p.astype(complex)
-            q[j] += 1j * _H
-            J[:, j] = self.residual(q).imag / _H
-        K = self.arcs.count
         columns = [self.iA[:, i] for i in range(self.iA.shape[1])] + [self.iT]
-        for index in columns:
-            for colour in (0, 1):
-                ks = [k for k in range(colour, K, 2) if index[k] >= 0]
-                if not ks:
-                    continue
-                q = p.astype(complex)
-                q[index[ks]] += 1j * _H
-                im = self.residual(q).imag / _H
-                for k in ks:
-                    rows = self.rows_of_arc[k]
-                    J[rows, index[k]] = im[rows]
-        return J
+        return coloured_jacobian(self.residual, p, self.m, self.ng, columns, self.rows_of_arc)
 
 
 # ---------------------------------------------------------------------- initial guess
@@ -357,13 +340,13 @@ def _sorted_modes(prob, p):
 
 
 @dataclass
-class ModalIdentification:
+class ModalIdentification(ShootingFit):
     """The result of :func:`identify_modal`.
 
     model : ModalModel; names, values, stderr: the global vector g with its standard
     errors (:class:`.modal.ModalLayout` names) plus ``delta_d`` and ``d_star``;
-    covariance of g; sigma, rms_x, constraint_rms; problem, solution (for
-    :func:`.checks.whiteness`); counts; converged, message."""
+    covariance of g; sigma, rms_x, constraint_rms; problem (for
+    :func:`.checks.whiteness`); and the :class:`.fit.ShootingFit` fields."""
 
     model: ModalModel
     names: tuple
@@ -373,15 +356,7 @@ class ModalIdentification:
     sigma: float
     rms_x: float
     constraint_rms: float
-    phase: PhaseReference
     problem: ModalProblem
-    solution: np.ndarray
-    arcs_used: int
-    impacts_used: int
-    samples_used: int
-    dof: int
-    converged: bool
-    message: str
     checks: dict = field(default_factory=dict)
 
     def value(self, name: str) -> float:
@@ -448,11 +423,7 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
                                   f"{prob.n - prob.n_constraints} free parameters")
     g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall)
     lo, hi = prob.bounds()
-    inner_lo, inner_hi = lo.copy(), hi.copy()
-    f = np.isfinite(lo)
-    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
-    f = np.isfinite(hi)
-    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    inner_lo, inner_hi = interior(lo, hi)
     p = np.clip(prob.pack(g0, S0, a0), inner_lo, inner_hi)
     for weight in CONTINUATION:
         prob.weight = weight
