@@ -120,7 +120,7 @@ def test_a_noise_free_controlled_chain_gives_its_modal_parameters_to_1e_8():
     on x1 among them, and delta_d, to 1e-8 relative (measured: 1e-14)."""
     model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
     design = evaluate_design(model, -0.22, 1.0)
-    rec, dv = simulate(model, 12, 200, 0.0, 7, design.gains, 1.0, on=3)
+    rec, dv = simulate(model, 8, 200, 0.0, 7, design.gains, 1.0, on=3)
     ident = identify_modal(rec, 2, correction_dv=dv, kick_on_wall=False)
     assert ident.problem.layout.actuator and ident.converged
     true = modal_of(model).vector(ident.problem.layout)
