@@ -210,6 +210,13 @@ def test_too_few_impacts_and_a_bad_n_are_one_line_naming_them():
         identify_modal(rec, 0)
     with pytest.raises(IdentificationError, match="correction_dv has 2 values for 0"):
         identify_modal(rec, 2, correction_dv=[1.0, 2.0])
+    # 100 arcs of 200 samples per period: a Jacobian beyond JACOBIAN_BYTES, refused
+    # before it exists (the command line's default shrinks to what fits: 90 arcs)
+    design = evaluate_design(model, -0.22, 1.0)
+    rec, dv = simulate(model, 60, 200, 0.0, 7, design.gains, 1.0, on=3)
+    with pytest.raises(IdentificationError, match=r"^max_arcs: the fit of the 100 arcs used "
+                                                  r"needs a dense Jacobian of 10962 x 462"):
+        identify_modal(rec, 2, correction_dv=dv)
 
 
 def test_the_realisation_shows_the_fitted_modes_and_needs_the_kicks_response():

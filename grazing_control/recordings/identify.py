@@ -188,7 +188,7 @@ def _bag_model(sim, model):
 
 
 def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
-                  max_arcs: int | None = 100) -> dict:
+                  max_arcs: int | None = 100, shrink: bool = False) -> dict:
     """The report of an n-DOF bag (n > 1): the wall coordinate's modal parameters
     (:func:`grazing_control.dynamics.identification.modal_fit.identify_modal`) with
     standard errors, the verdict, residuals, counts; ``_ident``, ``_model`` (the fit and
@@ -205,7 +205,8 @@ def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
             + ("" if impacts else " (--no-impacts)") + ": the n-DOF fit starts from them "
             "(finding them in the motion is built for n = 1 only)")
     ident = identify_modal(rec, model.n, correction_dv=kicks,
-                           kick_on_wall=model.i_a == model.i_w, max_arcs=max_arcs)
+                           kick_on_wall=model.i_a == model.i_w, max_arcs=max_arcs,
+                           shrink=shrink)
     check = modal_verdict(ident)
     names = ident.names + ("delta_d", "d_star")
     params = {k: {"value": ident.value(k), "stderr": ident.stderr[k]} for k in names}
@@ -244,7 +245,7 @@ def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
     nominal, path = _bag_model(sim, model)
     if nominal is not None and nominal.n > 1:
         return identify_ndof(bag, rec, notes, sim, kicks, nominal, path, impacts=impacts,
-                             max_arcs=max_arcs)
+                             max_arcs=max_arcs, shrink=shrink)
     ident = identify(rec, impacts="recorded" if impacts and rec.impact_t.size else "motion",
                      max_arcs=max_arcs, shrink=shrink)
     check = verdict(ident)

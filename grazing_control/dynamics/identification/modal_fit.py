@@ -37,7 +37,8 @@ from scipy.optimize import least_squares
 
 from grazing_control.dynamics.identification.data import Recording, RecordingError, cut_arcs
 from grazing_control.dynamics.identification.fit import (CONTINUATION, JACOBIAN_BYTES,
-                                                         IdentificationError, ShootingFit,
+                                                         FitTooLarge, IdentificationError,
+                                                         ShootingFit,
                                                          _covariance,
                                                          coloured_jacobian, interior)
 from grazing_control.dynamics.identification.modal import (ModalLayout, ModalModel,
@@ -369,15 +370,30 @@ class ModalIdentification(ShootingFit):
 
 def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=False,
                    impact_velocities: bool = True, max_arcs: int | None = 100,
-                   max_nfev: int = 200, coincidence: float = 1.5e-9) -> ModalIdentification:
+                   max_nfev: int = 200, coincidence: float = 1.5e-9,
+                   shrink: bool = False) -> ModalIdentification:
     """Fit the modal parameters of an n-DOF model to a recording of its wall coordinate
     (module docstring). ``rec``'s impacts must be recorded (their times start the fit);
     ``correction_dv``: the kick of each of ``rec.corrections`` (on the wall coordinate if
-    ``kick_on_wall``, else on another: its response is fitted too).
+    ``kick_on_wall``, else on another: its response is fitted too). ``shrink``: where
+    ``max_arcs`` arcs would exceed JACOBIAN_BYTES, fit as many as it allows (as
+    :func:`.fit.identify`).
 
     Raises IdentificationError on bad input (no phase reference, no or too few impacts,
     too few samples, no initial guess, a Jacobian beyond JACOBIAN_BYTES).
     """
+    while True:
+        try:
+            return _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities,
+                                   max_arcs, max_nfev, coincidence)
+        except FitTooLarge as exc:
+            if not shrink or max_arcs is not None and exc.fits >= max_arcs:
+                raise
+            max_arcs = exc.fits
+
+
+def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_arcs,
+                    max_nfev, coincidence) -> ModalIdentification:
     if not (isinstance(n, (int, np.integer)) and n >= 1):
         raise IdentificationError(f"n={n!r} is invalid: valid is an integer >= 1")
     dv = np.zeros(rec.corrections.size) if correction_dv is None else \
@@ -413,10 +429,12 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
     prob = ModalProblem(rec, arcs, phase, n, rec_dv, kick_on_wall, impact_velocities)
     need = 8 * prob.m * prob.n
     if need > JACOBIAN_BYTES:
-        raise IdentificationError(
+        fits = max(2, int(arcs.count * math.sqrt(JACOBIAN_BYTES / need)))
+        raise FitTooLarge(
             f"max_arcs: the fit of the {arcs.count} arcs used needs a dense Jacobian of "
             f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
-            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit (--max-arcs)")
+            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
+            "(--max-arcs)", fits)
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
