@@ -92,7 +92,7 @@ def test_the_written_model_file_shows_the_fitted_modes_and_designs(identified):
 @pytest.mark.parametrize("argv, line", [
     (["--max-arcs", "2"], "impacts: the recording has 1 impact(s) inside its state stream"),
     (["--no-impacts"], "impacts: "),
-    (["--out", "x.yaml"], "--out x.yaml: the bag is an n-DOF scene (n = 2)"),
+    (["--max-arcs", "6", "--out", "x.yaml"], "--out x.yaml: the bag is an n-DOF scene (n = 2)"),
 ])
 def test_bad_input_is_one_line_naming_it(identified, argv, line, tmp_path):
     bag = identified[0]
