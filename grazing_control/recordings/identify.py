@@ -8,8 +8,11 @@ at the sample's stamp + the simulator's ``actuation_delay`` from the parameter r
 into a :class:`grazing_control.dynamics.identification.Recording`;
 :func:`identify_bags` fits each bag (:func:`grazing_control.dynamics.identification.identify`),
 checks the fit (:mod:`grazing_control.dynamics.identification.checks`) and combines the
-bags' estimates (inverse-variance weighted means). The method is in
-docs/theory_identification.md.
+bags' estimates (inverse-variance weighted means). A bag of an n-DOF scene (its
+parameter record's ``model_file`` of n > 1, or ``model``) is fitted by
+:func:`identify_ndof`: the wall coordinate's modal parameters
+(:mod:`grazing_control.dynamics.identification.modal_fit`), the corrections' sizes as the
+kicks. The method is in docs/theory_identification.md (section 11 for n > 1).
 """
 
 from __future__ import annotations

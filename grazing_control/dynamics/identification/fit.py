@@ -49,8 +49,8 @@ from grazing_control.dynamics.identification.model import (GLOBAL_NAMES, NONDIME
                     nondimensional_vector)
 from grazing_control.dynamics.identification.phase import PhaseError, PhaseReference, fit_phase
 
-__all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem", "Identification",
-           "ShootingFit", "identify", "coloured_jacobian", "interior"]
+__all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem",
+           "Identification", "ShootingFit", "identify", "coloured_jacobian", "interior"]
 
 #: Weight of the impact and continuity constraints against the data residuals.
 CONSTRAINT_WEIGHT = 1e4

@@ -211,7 +211,8 @@ def modal_of(model) -> ModalModel:
 def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0):
     """A model file's model (symmetric M, C, K, real f) whose wall coordinate shows the
     ``fitted`` modal parameters: least squares over M, C, K (upper triangles; M's wall
-    entry held: the common scale) and f from ``nominal`` (the model the recording was made with: its n, i_w, i_a, pi2_offset),
+    entry held: the common scale) and f from ``nominal`` (the model the recording was
+    made with: its n, i_w, i_a, pi2_offset),
     each residual the modal parameter's misfit over ``scale`` (its standard error), plus
     1e-6 x the departure from ``nominal`` relative to its size (the data leave M, C, K, f
     determined only up to a change of the hidden coordinates and a common scale; this

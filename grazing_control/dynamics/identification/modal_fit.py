@@ -471,7 +471,8 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
         cd = G @ np.where(np.isfinite(cov), cov, 0.0) @ G.T
     inf = ~np.isfinite(np.diag(cov))
     for row, name in enumerate(("delta_d", "d_star")):
-        stderr[name] = math.inf if np.any(inf[G[row] != 0]) else float(math.sqrt(max(cd[row, row], 0.0)))
+        stderr[name] = (math.inf if np.any(inf[G[row] != 0])
+                        else float(math.sqrt(max(cd[row, row], 0.0))))
     cons = res[prob.m_data:] / prob.weight
     xres = data[:rec.t.size]
     return ModalIdentification(
