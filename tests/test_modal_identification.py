@@ -25,8 +25,8 @@ from grazing_control.dynamics.identification.modal import ModalLayout, modal_of
 from grazing_control.dynamics.identification.modal_fit import identify_modal
 from grazing_control.oscillator.ndof.flow import harmonic_amplitudes
 from grazing_control.oscillator.ndof.model import NdofModel, load_model
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import ndof_settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 
 ROOT = Path(__file__).resolve().parents[1]
 CHAIN = ROOT / "config" / "models" / "two_mass_chain.yaml"
@@ -34,13 +34,13 @@ CHAIN = ROOT / "config" / "models" / "two_mass_chain.yaml"
 
 def simulate(model, periods, rate, sigma=0.0, seed=1, gains=None, delay=0.0, on=0,
              kicks=None):
-    """(Recording of x_w, position only, the recorded kicks): the n-DOF engine (the
-    core's exact flow and impacts, the seeded sensor of sim_node) for ``periods`` with
+    """(Recording of x_w, position only, the recorded kicks): the engine with a model (the
+    core's exact n-DOF flow and impacts, the seeded sensor of sim_node) for ``periods`` with
     the kick k^T z (or ``kicks[k]``) acting ``delay`` after each Pi2 sample from sample
     ``on``."""
     vals = {"delta_d": model.delta_d, "state_period": model.period / rate,
             "sensor_noise": sigma, "sensor_velocity": False, "sensor_seed": seed}
-    eng = NdofEngine(ndof_settings_from_values(vals, "model.yaml", model))
+    eng = Engine(settings_from_values(vals, "model.yaml", model))
     states = list(eng.initial_states())
     imp, corr, dvs = [], [], []
     for k in range(periods):
