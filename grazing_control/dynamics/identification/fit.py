@@ -50,7 +50,8 @@ from grazing_control.dynamics.identification.model import (GLOBAL_NAMES, NONDIME
 from grazing_control.dynamics.identification.phase import PhaseError, PhaseReference, fit_phase
 
 __all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem",
-           "Identification", "ShootingFit", "identify", "coloured_jacobian", "interior"]
+           "Identification", "ShootingFit", "identify", "coloured_jacobian", "interior",
+           "check_size"]
 
 #: Weight of the impact and continuity constraints against the data residuals.
 CONSTRAINT_WEIGHT = 1e4
@@ -243,6 +244,21 @@ def coloured_jacobian(residual, p, m: int, globals_: int, indices, rows_of_arc) 
     return J
 
 
+def check_size(prob) -> None:
+    """FitTooLarge (naming --max-arcs and about how many arcs fit) when the problem's
+    dense (m, n) Jacobian would exceed :data:`JACOBIAN_BYTES`; before anything of its
+    size is allocated."""
+    need = 8 * prob.m * prob.n
+    if need > JACOBIAN_BYTES:
+        count = prob.arcs.count
+        fits = max(2, int(count * math.sqrt(JACOBIAN_BYTES / need)))
+        raise FitTooLarge(
+            f"max_arcs: the fit of the {count} arcs used needs a dense Jacobian of "
+            f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
+            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
+            "(--max-arcs)", fits)
+
+
 def interior(lo, hi):
     """Bounds moved 1e-12 (relative) inside: least_squares starts strictly inside."""
     inner_lo, inner_hi = lo.copy(), hi.copy()
@@ -336,14 +352,7 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
             "the recording has no impact: r and d (so delta_d) are not identifiable "
             "from free flight alone (record a scene with impacts)")
     prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
-    need = 8 * prob.m * prob.n
-    if need > JACOBIAN_BYTES:
-        fits = max(2, int(arcs.count * math.sqrt(JACOBIAN_BYTES / need)))
-        raise FitTooLarge(
-            f"max_arcs: the fit of the {arcs.count} arcs used needs a dense Jacobian of "
-            f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
-            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
-            "(--max-arcs)", fits)
+    check_size(prob)
     g0, start0, X0, V0 = initial_guess(rec, arcs, phase, prior)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = interior(lo, hi)

@@ -36,8 +36,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from grazing_control.dynamics.identification.data import Recording, RecordingError, cut_arcs
-from grazing_control.dynamics.identification.fit import (CONTINUATION, JACOBIAN_BYTES,
-                                                         FitTooLarge, IdentificationError,
+from grazing_control.dynamics.identification.fit import (CONTINUATION, FitTooLarge,
+                                                         IdentificationError, check_size,
                                                          ShootingFit,
                                                          _covariance,
                                                          coloured_jacobian, interior)
@@ -427,14 +427,7 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
             f"n-DOF fit needs at least {need_impacts} recorded impacts (oscillator/impact) "
             "to identify d, r and the impact's modal response")
     prob = ModalProblem(rec, arcs, phase, n, rec_dv, kick_on_wall, impact_velocities)
-    need = 8 * prob.m * prob.n
-    if need > JACOBIAN_BYTES:
-        fits = max(2, int(arcs.count * math.sqrt(JACOBIAN_BYTES / need)))
-        raise FitTooLarge(
-            f"max_arcs: the fit of the {arcs.count} arcs used needs a dense Jacobian of "
-            f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
-            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
-            "(--max-arcs)", fits)
+    check_size(prob)
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
