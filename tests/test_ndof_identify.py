@@ -70,7 +70,7 @@ def test_the_written_model_file_shows_the_fitted_modes_and_designs(identified):
     """--out-model: a model file of docs/ndof_model.md whose wall coordinate shows the
     fitted modal parameters (within 1e-6 standard errors: the realisation is exact for
     these data), which `grazing design --model` takes; its delay-aware gains for mu =
-    -0.22 are the true chain's to the identification's accuracy."""
+    -0.22 are the true chain's to 1e-3 (relative to the largest)."""
     _bag, status, report, out, model = identified
     assert report["out_model"] == str(out) and report["realisation_misfit"] < 1e-6
     written = load_model(out)
@@ -86,7 +86,9 @@ def test_the_written_model_file_shows_the_fitted_modes_and_designs(identified):
     true = evaluate_design(dataclasses.replace(model, delta_d=written.delta_d), -0.22, 1.0)
     fitted = evaluate_design(written, -0.22, 1.0)
     assert fitted.admissible
-    assert np.max(np.abs(fitted.gains - true.gains)) < 0.02 * np.max(np.abs(true.gains))
+    error = np.max(np.abs(fitted.gains - true.gains)) / np.max(np.abs(true.gains))
+    assert error < 1e-3, error          # measured 7.5e-5 (5.2e-5 on 30 periods)
+    print(f"gains of the identified model's design: {error:.1e} relative")
 
 
 @pytest.mark.parametrize("argv, line", [

@@ -408,7 +408,7 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
         if max_arcs is not None:
             ev = np.sort(events[events > rec.t[0]])
             if ev.size >= max_arcs:
-                keep_c = rec.corrections < ev[max_arcs - 1]
+                keep_c = (rec.corrections >= rec.t[0]) & (rec.corrections < ev[max_arcs - 1])
                 dv = dv[keep_c]
                 rec = rec.window(rec.t[0], ev[max_arcs - 1])
         arcs = cut_arcs(rec.t, rec.impact_t, rec.corrections, impact_v_minus=rec.impact_v_minus,
