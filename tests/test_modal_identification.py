@@ -273,3 +273,31 @@ def test_the_realisation_shows_the_fitted_modes_and_needs_the_kicks_response():
     with pytest.raises(ParameterError, match=r"^i_a=1: the kick's response on the wall "
                                              r"coordinate i_w=0 is not identified"):
         realise(dataclasses.replace(target, kick_c=None, kick_s=None), nominal, scale)
+
+
+def test_the_complex_step_jacobian_is_the_finite_difference_one():
+    """ModalProblem.jacobian (complex step, arcs in two colours) against central finite
+    differences of the residual at a perturbed point of a kicked chain's fit (every
+    column, step 1e-6 of the parameter's size): agreement 1e-5 relative to the column."""
+    from grazing_control.dynamics.identification.modal_fit import ModalProblem
+    from grazing_control.dynamics.identification.data import cut_arcs
+    from grazing_control.dynamics.identification.phase import fit_phase
+
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    rec, dv = simulate(model, 4, 40, 1e-4, 2, kicks=0.02 * np.ones(4), delay=1.0, on=1)
+    arcs = cut_arcs(rec.t, rec.impact_t, rec.corrections, impact_v_minus=rec.impact_v_minus,
+                    impact_v_plus=rec.impact_v_plus, free_times=True)
+    prob = ModalProblem(rec, arcs, fit_phase(rec.t, rec.cos_tau, rec.sin_tau), 2, dv, False)
+    prob.weight = 10.0
+    rng = np.random.default_rng(0)
+    g = modal_of(model).vector(prob.layout) * (1 + 1e-3 * rng.standard_normal(prob.ng))
+    p = prob.pack(g, arcs.start + 1e-3 * np.diff(np.r_[arcs.start, rec.t[-1]]),
+                  0.1 * rng.standard_normal((arcs.count, 4)))
+    J = prob.jacobian(p)
+    for j in range(prob.n):
+        h = 1e-6 * max(abs(p[j]), 1e-3)
+        q1, q2 = p.copy(), p.copy()
+        q1[j] += h
+        q2[j] -= h
+        fd = (prob.residual(q1) - prob.residual(q2)) / (2 * h)
+        assert np.max(np.abs(J[:, j] - fd)) <= 1e-5 * max(np.max(np.abs(fd)), 1e-12), j
