@@ -124,7 +124,7 @@ SCENE_MODULES = frozenset({
     "test_cli_hostile", "test_closed_loop", "test_composed", "test_contact_plant",
     "test_controller_node", "test_deadline_misses",
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
-    "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
+    "test_live_node", "test_ndof_identify", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_parameter_files_hostile",
     "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_scene", "test_rig_stop",
     "test_scheduling",
