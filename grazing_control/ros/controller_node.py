@@ -110,6 +110,7 @@ from std_srvs.srv import SetBool, Trigger
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation.stream import predict_section
 from grazing_control.dynamics.estimation.stream import warm_up as warm_stream_kernel
+from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
@@ -448,7 +449,8 @@ class ControllerNode(Node):
             zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
                                      width=self.pulse[0], force_limit=self.pulse[1],
                                      actuator=self.pulse[2], force0=force0,
-                                     kernel=self.stream is not None and self.stream.kernel)
+                                     kernel=(self.stream.kernel if self.stream is not None
+                                             else _kernel.loaded()))
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)

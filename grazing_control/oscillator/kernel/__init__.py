@@ -37,7 +37,7 @@ import numpy as np
 from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialStateError,
                                                NonFiniteStateError, Segment, check_state)
 
-__all__ = ["ENV", "available", "use_kernel", "warm_up", "next_impact", "advance",
+__all__ = ["ENV", "available", "use_kernel", "loaded", "warm_up", "next_impact", "advance",
            "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple"]
 
 #: Environment variable that chooses the path: auto (default), python, numba.
@@ -67,6 +67,13 @@ def use_kernel() -> bool:
 
 _module = None
 _load_seconds = {}
+
+
+def loaded() -> bool:
+    """Whether this process has loaded the kernel (:func:`warm_up` or a first call done):
+    a caller with a choice (the controller's prediction, issue 30) takes it then, and
+    the Python flow, bit for bit the same, before; never waits for the load."""
+    return bool(_load_seconds)
 
 
 def _compiled():
