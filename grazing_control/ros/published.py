@@ -34,6 +34,11 @@ COMPLETE_TOPIC = "recorder/complete"
 #: Wall seconds a node waits at exit for every reliable reader to acknowledge every
 #: message (a recorder that lags behind gets the rest from the node's history).
 ACK_TIMEOUT = 10.0
+#: Wall seconds a node stays after the recorder's confirmation: its reader acknowledges the
+#: confirmation at the writer's next heartbeat (fastdds_profile.xml: every 50 ms), and the
+#: recorder's close waits for that acknowledgement (recorder_node.CONFIRM_ACK_TIMEOUT, 1 s)
+#: from a reader that stays matched there after its process has exited (issue 30).
+ACK_LINGER = 0.06
 
 
 class Counted:
@@ -101,6 +106,8 @@ class RecorderConfirmation:
         executor = self.node.executor
         while not self.confirmed and time.monotonic() < end and executor is not None:
             executor.spin_once(timeout_sec=0.05)
+        if self.confirmed:
+            time.sleep(ACK_LINGER)
         return self.confirmed
 
 
