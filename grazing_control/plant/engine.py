@@ -482,7 +482,7 @@ class Engine:
             rel.append(d1)
             kinds.append("pi1")
         if rel:
-            order = np.argsort(rel, kind="stable")
+            order = sorted(range(len(rel)), key=rel.__getitem__)    # stable, as argsort's
             rel = [rel[i] for i in order]
             kinds = [kinds[i] for i in order]
         return rel, kinds, j0
@@ -527,9 +527,9 @@ class Engine:
             if states:
                 xm, vm = self.settings.sensor.measure(j0, xv[states, 0], xv[states, 1])
                 xv[states, 0], xv[states, 1] = xm, vm
-            for h, kind, (x, v) in zip(rel, kinds, xv):
+            for h, kind, (x, v) in zip(rel, kinds, xv.tolist()):    # Python floats, exact
                 phase = p.tau_star if kind == "pi1" else (s.tau + p.omega * h) % TWO_PI
-                events.append(Event(s.ts + h, kind, float(x), float(v), phase))
+                events.append(Event(s.ts + h, kind, x, v, phase))
         events.sort(key=lambda e: e.t)
         return events
 
