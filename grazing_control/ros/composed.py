@@ -161,6 +161,9 @@ def run(spec: dict, statuses_path: str | None) -> int:
         if rec is not None:
             recording = _start_recorder(rec)
         sim, ctl = nodes.get("sim_node"), nodes.get("controller_node")
+        if ctl is not None and rec is not None:
+            # its reader stays in the graph until the recorder has closed: no linger
+            ctl.recorder.linger = 0.0
         # the simulator's executor kind; one also when a node refused to start, for the
         # others' ends (the controller spins it while it waits for the recorder)
         executor = make_executor(getattr(sim, "executor_kind", "single_threaded"))

@@ -88,6 +88,7 @@ class RecorderConfirmation:
 
         self.node = node
         self.confirmed = False
+        self.linger = ACK_LINGER      # 0: the recorder is in this process (composed.py)
         node.create_subscription(String, COMPLETE_TOPIC, self._on_complete, LATCHED_QOS)
 
     def _on_complete(self, msg) -> None:
@@ -101,13 +102,14 @@ class RecorderConfirmation:
             self.confirmed = True
 
     def wait(self, timeout: float) -> bool:
-        """Spin the node's executor until confirmed, ``timeout`` wall seconds at most."""
+        """Spin the node's executor until confirmed, ``timeout`` wall seconds at most;
+        confirmed, stay ``linger`` s (:data:`ACK_LINGER`) for the acknowledgement."""
         end = time.monotonic() + timeout
         executor = self.node.executor
         while not self.confirmed and time.monotonic() < end and executor is not None:
             executor.spin_once(timeout_sec=0.05)
-        if self.confirmed:
-            time.sleep(ACK_LINGER)
+        if self.confirmed and self.linger > 0.0:
+            time.sleep(self.linger)
         return self.confirmed
 
 
