@@ -50,7 +50,9 @@ print(json.dumps({"rate": float(re.search(r"rate=([\d.]+)", line).group(1)), "su
 
 def scene(root: Path, periods: int, compose: bool) -> float:
     out = subprocess.run([sys.executable, "-c", SCENE, str(periods), "1" if compose else "0"],
-                         cwd=root, capture_output=True, text=True, check=True)
+                         cwd=root, capture_output=True, text=True)
+    if out.returncode:
+        raise RuntimeError(f"scene in {root} failed:\n{out.stdout[-3000:]}{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])["rate"]
 
 

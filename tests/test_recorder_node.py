@@ -695,3 +695,51 @@ def test_a_recorder_names_the_tail_it_never_received(tmp_path, isolation, ros):
     assert rc == 1, output
     assert f"missed: {topic} 10 " in output, output
     assert read_metadata(bag)["custom_data"]["recorder_missed"] == f"{topic} 10"
+
+
+#: One process (as ``grazing run --compose``): a publisher and the recorder's keep-all
+#: subscription (RECORDER_QOS); 6000 messages published before any is taken, then 100 more.
+_BACKLOG = r"""
+import sys, time
+import rclpy
+from rclpy.duration import Duration
+from std_msgs.msg import Float64
+from grazing_control.ros.common import PUBLISHER_QOS
+from grazing_control.ros.recording.topics import RECORDER_QOS
+rclpy.init()
+node = rclpy.create_node("backlog")
+pub = node.create_publisher(Float64, "backlog", PUBLISHER_QOS)
+sub = node.create_subscription(Float64, "backlog", lambda m: None, RECORDER_QOS, raw=True)
+end = time.monotonic() + 10.0
+while pub.get_subscription_count() == 0 and time.monotonic() < end:
+    time.sleep(0.01)
+def take():
+    n = 0
+    while True:
+        with sub.handle:
+            if sub.handle.take_message(sub.msg_type, True) is None:
+                return n
+        n += 1
+for batch in (6000, 100):
+    for i in range(batch):
+        pub.publish(Float64(data=float(i)))
+    pub.wait_for_all_acked(Duration(seconds=5.0))
+    print(take())
+"""
+
+
+@pytest.mark.timeout(60)
+def test_a_recorder_6000_messages_behind_in_one_process_still_receives_them_all():
+    """Issue 30: a keep-all reader holds 5000 samples by Fast DDS's default; in one process
+    a recorder that fell 5000 messages behind (a composed scene at 2000-3500 periods/s,
+    the GIL shared with the simulator) took 5000 and then nothing more on that topic (the
+    tail of oscillator/state lost, 2794 messages). The nodes' profile
+    (fastdds_profile.xml) raises the cap: all 6000, then the next 100."""
+    from grazing_control.ros.launcher import FASTDDS_PROFILE, node_env
+
+    env = {**node_env(new_domain()), "FASTDDS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
+           "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE)}
+    out = subprocess.run([sys.executable, "-c", _BACKLOG], env=env, capture_output=True,
+                         text=True, timeout=50)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["6000", "100"], out.stdout + out.stderr
