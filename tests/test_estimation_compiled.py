@@ -72,6 +72,30 @@ def test_trajectory_compiled_is_the_core_bit_for_bit(width):
     assert impacts > 100                # the cases cross the wall
 
 
+@pytest.mark.parametrize("kernel", [False, True])
+def test_the_prediction_is_the_trajectorys_end_bit_for_bit(kernel):
+    """predict_section takes the end alone (trajectory_end, issue 30: the controller's
+    prediction on the realtime answer's path): the same numbers as trajectory's ``end``,
+    and the same refusal where the motion sticks, kick and pulse, clipped or not."""
+    rng = np.random.default_rng(5)
+    impacts = 0
+    for _ in range(150):
+        z = tuple(rng.normal(0.0, 3e-2, 2))
+        dv = float(rng.normal(0.0, 5e-3))
+        delay = float(rng.uniform(0.0, 6.0))
+        for width, limit in ((0.0, math.inf), (0.1, math.inf), (0.5, 0.05)):
+            kw = dict(width=width, force_limit=limit, kernel=kernel)
+            try:
+                ref = trajectory(P, z, np.empty(0), dv, delay, **kw)
+            except ValueError:          # sticking: raised alike
+                with pytest.raises(ValueError):
+                    predict_section(P, z, dv, delay, **kw)
+                continue
+            assert _same(predict_section(P, z, dv, delay, **kw), ref[2])
+            impacts += len(ref[4])
+    assert impacts > 100                # the cases cross the wall
+
+
 @pytest.mark.parametrize("scene", ["rig", "t200"])
 def test_replayed_stream_same_answers(scene):
     """A controller's answers over a recorded closed-loop stream (the rig scene's 2 ms

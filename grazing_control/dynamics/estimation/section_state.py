@@ -58,6 +58,7 @@ from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_sta
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
            "nearest_estimate", "arc_fit", "detect_impact", "correction_legs", "trajectory",
+           "trajectory_end",
            "model_update", "estimate_covariance", "CHI2_SIGMAS", "actuator_legs", "section_force"]
 
 TWO_PI = 2.0 * math.pi
@@ -403,6 +404,30 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
         gs = np.array([e[3] for e in events])[idx]
         return out, jac, z, m, impacts, np.einsum("nij,nj->ni", phi, gs), g
     return out, jac, z, m, impacts
+
+
+def trajectory_end(p: OscillatorParams, z0, correction: float = 0.0, delay: float = 0.0,
+                   duration: float | None = None, *, width: float = 0.0,
+                   force_limit: float = math.inf, kernel: bool = False) -> tuple:
+    """``end`` of :func:`trajectory` alone, bit for bit (the same legs and the same
+    exact flow, the same ValueError where the motion sticks), without the Jacobian and
+    the samples: the controller's prediction of the next section on the realtime
+    answer's path (issue 30: a third of the compiled :func:`trajectory`'s time went to
+    evaluating its zero samples and carrying a Jacobian nobody reads). The kick or the
+    constant pulse only (no actuator, a 1-DOF model)."""
+    duration = p.period if duration is None else float(duration)
+    flow = _kernel.advance if kernel else advance
+    tau = p.tau2
+    z = (float(z0[0]), float(z0[1]))
+    for start, end, kick, force in correction_legs(correction, delay, duration, width,
+                                                   force_limit):
+        q = p if force == 0.0 else _shifted_wall(p, force)
+        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1] + kick,
+                   end - start)
+        if any(imp.sticking for imp in seg.impacts):
+            raise ValueError("the model's motion sticks to the wall: no fit")
+        z = (seg.dx + force if force else seg.dx, seg.dv)
+    return z
 
 
 _NO_ROWS = np.zeros((0, 2))

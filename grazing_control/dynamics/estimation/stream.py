@@ -38,7 +38,7 @@ from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
                          deviation_samples, detect_impact, model_update, nearest_estimate,
-                         section_force, trajectory, unkick)
+                         section_force, trajectory, trajectory_end, unkick)
 
 __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
            "pulse_shape", "warm_up"]
@@ -523,7 +523,12 @@ def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.
     estimate ``z`` with ``correction`` applied ``delay`` after the section (a kick, or
     a force pulse of ``width``, through ``actuator`` from the force ``force0`` at the
     section): one exact period of the model (issue 16 section 3; :func:`trajectory`,
-    compiled with ``kernel``: a stream estimator's ``kernel``)."""
+    compiled with ``kernel``: a stream estimator's ``kernel``); the end alone where
+    no actuator's lag is in it (:func:`trajectory_end`, the same numbers)."""
+    if not isinstance(p, NdofModel) and (actuator is None or (actuator.ideal
+                                                               and force0 == 0.0)):
+        return trajectory_end(p, z, correction, delay, width=width, force_limit=force_limit,
+                              kernel=kernel)
     *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay, width=width,
                                         force_limit=force_limit, actuator=actuator,
                                         force0=force0, kernel=kernel)
