@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import math
 
-from grazing_control.plant.engine import Event
-from grazing_control.plant.ndof_engine import NdofEvent
+from grazing_control.plant.engine import Event, NdofEvent
 from grazing_control.ros import cdr, stream_block
 from grazing_control.ros.common import Throttled
 

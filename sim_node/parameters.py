@@ -7,14 +7,12 @@ from __future__ import annotations
 from rcl_interfaces.msg import SetParametersResult
 
 from grazing_control.oscillator.params import ParameterError
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import (UNSUPPORTED, load_model_file,
-                                                 ndof_settings_from_values)
+from grazing_control.plant.engine import Engine
 from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, STREAM_TICK, Realtime
 from grazing_control.plant.rig import load_rig
-from grazing_control.plant.settings import (PARAMETERS, SETTING_KEYS, Parameter,
-                                            check_live_change, described_range,
-                                            settings_from_values)
+from grazing_control.plant.settings import (NOT_WITH_MODEL_FILE, PARAMETERS, SETTING_KEYS,
+                                            Parameter, check_live_change, described_range,
+                                            load_model_file, settings_from_values)
 from grazing_control.ros import stream_block
 from grazing_control.ros.common import (EXECUTORS, LIVE_CHANGES_DOC, READY_TOPIC,
                                         StartupError, bool_descriptor, check_ranges,
@@ -166,14 +164,14 @@ def declare_rig(node):
 def node_descriptor(node, p: Parameter, declared: dict):
     """:func:`descriptor`; in an n-DOF scene with the model's forcing frequency (its
     times are bounded by its period), and a parameter it does not build states that
-    only its default is valid (plant.ndof_settings.UNSUPPORTED; the range stays, so
+    only its default is valid (plant.settings.NOT_WITH_MODEL_FILE; the range stays, so
     that a refusal says why: "zeta=0.02 is invalid with model_file=...")."""
     if node.model is None:
         return descriptor(p, declared)
     d = descriptor(p, {**declared, "omega": node.model.omega})
-    if p.name in UNSUPPORTED:
+    if p.name in NOT_WITH_MODEL_FILE:
         d.additional_constraints = (f"only its default {p.default!r} with model_file "
-                                    f"({UNSUPPORTED[p.name]})")
+                                    f"({NOT_WITH_MODEL_FILE[p.name]})")
     return d
 
 def values_of(node) -> dict:
@@ -181,11 +179,9 @@ def values_of(node) -> dict:
     return {k: node.get_parameter(k).value for k in SETTING_KEYS}
 
 def validate(node, values: dict):
-    """The settings of ``values``: the 1-DOF scene's, or with ``model_file`` the
-    n-DOF scene's (plant.ndof_settings); ParameterError naming a bad value."""
-    if node.model is None:
-        return settings_from_values(values)
-    return ndof_settings_from_values(values, node.model_file, node.model)
+    """The settings of ``values`` (plant.settings.settings_from_values): the 1-DOF
+    scene's, or with ``model_file`` the n-DOF scene's; ParameterError naming a bad value."""
+    return settings_from_values(values, node.model_file, node.model)
 
 
 def declare(node) -> None:
@@ -254,18 +250,13 @@ def on_set_parameters(node, params) -> SetParametersResult:
         new = validate(node, values)
         if node.loop is not None:        # running: the change's consequences too
             check_live_change(node.settings, new, node.engine.k)
-            if node.model is not None and new.model.delta_d != node.settings.model.delta_d:
-                raise ParameterError(
-                    f"delta_d={new.model.delta_d!r} is invalid while an n-DOF scene runs: "
-                    "a live change of the n-DOF model is not built (valid: "
-                    f"{node.settings.model.delta_d!r}; set it before the start)")
     except ParameterError as exc:
         node.get_logger().warning(f"parameter change refused: {exc}")
         return SetParametersResult(successful=False, reason=str(exc))
     old = node.settings
     if node.model is not None:
         if node.loop is None and new.model.delta_d != old.model.delta_d:
-            node.engine = NdofEngine(new)    # not started yet: the new wall from t = 0
+            node.engine = Engine(new)    # not started yet: the new wall from t = 0
     elif new.params != old.params:
         node.engine.pending = new.params     # whole, at the next Pi2 sample
     if isinstance(node.loop, Realtime) and new.time_scale != old.time_scale:

@@ -26,7 +26,8 @@ verdict: :mod:`grazing_control.ros.recording.record`). Subscribes
 one, stamp = the Pi2 sample answered). Service ``~/reset``: back to t = 0.
 
 With ``model_file`` (an n-DOF model YAML, docs/ndof_model.md; issue 17) the node simulates
-that oscillator (:mod:`grazing_control.plant.ndof_engine`) and publishes every coordinate:
+that oscillator (the same :mod:`grazing_control.plant.engine` over the model, issue 32)
+and publishes every coordinate:
 ``oscillator/state``, ``/pi1``, ``/pi2`` as JointState with n joints ``mass0`` ..
 (docs/nodes.md, "n-DOF scenes").
 
@@ -52,7 +53,6 @@ from std_srvs.srv import Trigger
 from grazing_control.oscillator import kernel
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.lockstep import Lockstep
-from grazing_control.plant.ndof_engine import NdofEngine
 from grazing_control.plant.realtime import MIN_TICK, Realtime
 from grazing_control.ros import cdr, stream_block
 from grazing_control.ros.common import (DATA_QOS, EVENT_QOS, LATCHED_QOS, PUBLISHER_QOS,
@@ -93,7 +93,7 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
         declare(self)      # the parameters (sim_node/parameters.py): model, rig, settings
-        self.engine = (Engine if self.model is None else NdofEngine)(self.settings)
+        self.engine = Engine(self.settings)
         self.exit_when_done = self.get_parameter("exit_when_done").value
         self.strays = set()          # (topic, node) of bystander publishers, logged once
         self.exit_code = 0

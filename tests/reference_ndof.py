@@ -25,6 +25,13 @@ still found (the search is tests/reference.py's ``first_root``). Roots are refin
 fastest mode's period): no cell holds two zeros of the acceleration. Sticking is not
 modelled (more than ``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
 
+A force pulse (:meth:`NdofRef.pulse_map`): under a constant force F on x[i_a] the flight
+is X_p + S + e^{A h}(X - X_p - S) with S = (K^-1 e_a F ; 0), and the gap has x_w = the
+harmonic + S_w + the modes; F = m_a dv / w, m_a = 1 / (M^-1)_aa. Through a first-order
+actuator (:meth:`NdofRef.actuated_map`) the force is F + c e^{-h / tau_a} on a piece,
+and Q e^{-h / tau_a} with (A + I / tau_a) Q = -B c joins the particular solution (one
+more exponential in the arc).
+
 The controller: on Pi2 (phase tau* + pi2_offset) the velocity of coordinate i_a gets
 k^T (X - X**), X** = X_p(tau2) the grazing orbit's point.
 """
@@ -119,21 +126,51 @@ class NdofRef:
         vs = [mp.re(mpc(0, 1) * self.omega * x * e) for x in self.X]
         return xs + vs
 
-    def state(self, tau, X, h):
-        """Physical state after free flight h from X at phase tau (a list of 2n mpf)."""
+    def static(self, force):
+        """(K^-1 e_a F ; 0): the state at rest under the constant force F on x[i_a]."""
+        if force == 0:
+            return [mpf(0)] * (2 * self.n)
+        e = mp.matrix([1 if i == self.i_a else 0 for i in range(self.n)])
+        xs = mp.lu_solve(self.K, e)
+        return [xs[i] * _f(force) for i in range(self.n)] + [mpf(0)] * self.n
+
+    def actuated_mass(self):
+        """m_a = 1 / (M^-1)_aa (the impulse m_a dv moves v[i_a] by dv)."""
+        return 1 / mp.inverse(self.M)[self.i_a, self.i_a]
+
+    def lag_state(self, c, tau_a):
+        """Q with (A + I / tau_a) Q = -B c, B = (0 ; M^-1 e_a): the particular solution
+        Q e^{-h / tau_a} under the force transient c e^{-h / tau_a} (an actuator's lag)."""
+        m = 2 * self.n
+        if c == 0:
+            return [mpf(0)] * m
+        minv_e = mp.inverse(self.M)[:, self.i_a]
+        rhs = mp.matrix([0] * self.n + [-_f(c) * minv_e[i] for i in range(self.n)])
+        return list(mp.lu_solve(self.A + mp.eye(m) / _f(tau_a), rhs))
+
+    def state(self, tau, X, h, force=0, lag=None):
+        """Physical state after flight h from X at phase tau under the force F +
+        c e^{-h / tau_a} on x[i_a] (``lag`` = (c, tau_a), default none; a list of 2n mpf):
+        X_p + S + Q e^{-h / tau_a} + e^{A h}(X - X_p - S - Q), S the static state, Q
+        :meth:`lag_state`."""
         p0 = self.particular(tau)
-        dev = mp.matrix([_f(X[i]) - p0[i] for i in range(2 * self.n)])
+        S = self.static(force)
+        Q, e = (self.lag_state(*lag), mp.exp(-_f(h) / _f(lag[1]))) if lag else \
+            ([mpf(0)] * (2 * self.n), mpf(0))
+        dev = mp.matrix([_f(X[i]) - p0[i] - S[i] - Q[i] for i in range(2 * self.n)])
         z = self.transition(h) * dev
         p1 = self.particular(_f(tau) + self.omega * _f(h))
-        return [p1[i] + z[i] for i in range(2 * self.n)]
+        return [p1[i] + S[i] + Q[i] * e + z[i] for i in range(2 * self.n)]
 
-    def arc(self, tau, X):
-        return _Arc(self, _f(tau), [_f(x) for x in X])
+    def arc(self, tau, X, force=0, lag=None):
+        return _Arc(self, _f(tau), [_f(x) for x in X], self.static(force),
+                    (self.lag_state(*lag), _f(lag[1])) if lag else None)
 
     # --------------------------------------------------------------- impacts
-    def next_impact(self, tau, X, horizon, samples=SAMPLES):
-        """First impact time in (0, horizon] from physical X at phase tau, or None."""
-        arc = self.arc(tau, X)
+    def next_impact(self, tau, X, horizon, samples=SAMPLES, force=0, lag=None):
+        """First impact time in (0, horizon] from physical X at phase tau (under the
+        force F + c e^{-h / tau_a} on x[i_a], ``lag`` = (c, tau_a)), or None."""
+        arc = self.arc(tau, X, force, lag)
         horizon = _f(horizon)
         cells = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / cells for k in range(cells + 1)]
@@ -148,23 +185,74 @@ class NdofRef:
         X = [p2[i] + _f(z[i]) for i in range(2 * n)]
         if gains is not None:
             X[n + self.i_a] += mp.fsum(_f(k) * _f(zi) for k, zi in zip(gains, z))
-        tau, t_in, T = self.tau2, mpf(0), self.period
         impacts = []
-        while True:
-            h = self.next_impact(tau, X, T - t_in)
+        X, tau = self._fly(self.tau2, X, mpf(0), self.period, 0, impacts)
+        pe = self.particular(tau)
+        return [X[i] - pe[i] for i in range(2 * n)], impacts
+
+    def _fly(self, tau, X, t_in, t1, force, impacts, lag=None):
+        """Flight with impacts from time t_in to t1 (phase tau there) under the force
+        F + c e^{-(t - t_in) / tau_a} on x[i_a] (``lag`` = (c, tau_a), default none), the
+        impacts appended (time, phase mod 2 pi, v-, v+); returns (X, tau) at t1 (and the
+        transient c there, with ``lag``)."""
+        n = self.n
+        while t1 > t_in:
+            h = self.next_impact(tau, X, t1 - t_in, force=force, lag=lag)
             if h is None:
-                X = self.state(tau, X, T - t_in)
-                tau = tau + self.omega * (T - t_in)
+                X = self.state(tau, X, t1 - t_in, force, lag)
+                tau = tau + self.omega * (t1 - t_in)
+                if lag:
+                    lag = (lag[0] * mp.exp(-(t1 - t_in) / _f(lag[1])), lag[1])
                 break
             if len(impacts) >= MAX_IMPACTS_PER_PERIOD:
                 raise RuntimeError("reference: chattering/sticking is not modelled")
-            X = self.state(tau, X, h)
+            X = self.state(tau, X, h, force, lag)
+            if lag:
+                lag = (lag[0] * mp.exp(-h / _f(lag[1])), lag[1])
             t_in += h
             tau = tau + self.omega * h
             vm = X[n + self.i_w]
             X[self.i_w] = self.d
             X[n + self.i_w] = -self.r * vm
             impacts.append((t_in, tau % (2 * mp.pi), vm, -self.r * vm))
+        return (X, tau, lag[0]) if lag else (X, tau)
+
+    def actuated_map(self, z, force, correction, start, width, tau_a, latency):
+        """One period through a first-order actuator tau_a F' = u(t - L) - F, u = m_a dv /
+        width on the commanded pulse [start, start + width], from deviation z and the
+        force ``force`` at the sample; returns (z_next, force at the next sample,
+        impacts)."""
+        n = self.n
+        p2 = self.particular(self.tau2)
+        X = [p2[i] + _f(z[i]) for i in range(2 * n)]
+        on = _f(start) + _f(latency)
+        off = on + _f(width)
+        u_on = self.actuated_mass() * _f(correction) / _f(width)
+        tau, t, f, impacts = self.tau2, mpf(0), _f(force), []
+        for end, u in ((on, 0), (off, u_on), (self.period, 0)):
+            if end > t:
+                X, tau, c = self._fly(tau, X, t, end, u, impacts, lag=(f - u, tau_a))
+                f = u + c
+            t = end
+        pe = self.particular(tau)
+        return [X[i] - pe[i] for i in range(2 * n)], f, impacts
+
+    def pulse_map(self, z, correction, start, width):
+        """One period of the Pi2 map from deviation z with the correction dv as a force
+        pulse F = m_a dv / width on x[i_a] over [start, start + width] after the sample
+        (width 0: the kick at start); returns (z_next, impacts) as :meth:`pi2_map`."""
+        n = self.n
+        p2 = self.particular(self.tau2)
+        X = [p2[i] + _f(z[i]) for i in range(2 * n)]
+        start, width = _f(start), _f(width)
+        force = self.actuated_mass() * _f(correction) / width if width > 0 else mpf(0)
+        legs = [(mpf(0), start, 0), (start, start + width, force),
+                (start + width, self.period, 0)]
+        tau, impacts = self.tau2, []
+        for j, (t0, t1, F) in enumerate(legs):
+            if width == 0 and j == 1:
+                X[n + self.i_a] += _f(correction)
+            X, tau = self._fly(tau, X, t0, t1, F, impacts)
         pe = self.particular(tau)
         return [X[i] - pe[i] for i in range(2 * n)], impacts
 
@@ -206,6 +294,106 @@ class NdofRef:
         fz, imp = self.pi2_map(zs, gains)
         return zs, self.jacobian(zs, gains), imp
 
+    # ------------------------------------------------------------- sticking
+    def _stuck_generator(self):
+        """Augmented generator G of (y, y', cos tau, sin tau, 1) while x_w = d, v_w = 0:
+        y'' = M_yy^-1 (f_y cos tau - K_yw d - C_yy y' - K_yy y)."""
+        n, w = self.n, self.i_w
+        o = [i for i in range(n) if i != w]
+        p = len(o)
+        Myy = mp.matrix([[self.M[i, j] for j in o] for i in o]) if p else None
+        G = mp.zeros(2 * p + 3, 2 * p + 3)
+        if p:
+            Minv = mp.inverse(Myy)
+            for a in range(p):
+                G[a, p + a] = 1
+            for a in range(p):
+                for b in range(p):
+                    G[p + a, b] = -mp.fsum(Minv[a, c] * self.K[o[c], o[b]] for c in range(p))
+                    G[p + a, p + b] = -mp.fsum(Minv[a, c] * self.C[o[c], o[b]] for c in range(p))
+                G[p + a, 2 * p] = mp.fsum(Minv[a, c] * self.f[o[c]] for c in range(p))
+                G[p + a, 2 * p + 2] = -mp.fsum(Minv[a, c] * self.K[o[c], w] * self.d for c in range(p))
+        G[2 * p, 2 * p + 1] = -self.omega      # (cos tau)' = -omega sin tau
+        G[2 * p + 1, 2 * p] = self.omega       # (sin tau)' = omega cos tau
+        return o, G
+
+    def contact_force(self, tau, X):
+        """lambda at physical X (x_w = d, v_w = 0): the n x n solve of M (x'') + lambda e_w
+        = f cos tau - C x' - K x for the unknowns (y'', lambda) with x_w'' = 0."""
+        n, w = self.n, self.i_w
+        rhs = mp.matrix([self.f[i] * mp.cos(tau)
+                         - mp.fsum(self.C[i, j] * X[n + j] + self.K[i, j] * X[j] for j in range(n))
+                         for i in range(n)])
+        Bm = mp.zeros(n, n)
+        for i in range(n):
+            for j in range(n):
+                Bm[i, j] = (1 if i == w else 0) if j == w else self.M[i, j]
+        sol = mp.lu_solve(Bm, rhs)
+        return sol[w]
+
+    def stuck_state(self, tau, X, h):
+        """Physical state after time h stuck on the wall from X at phase tau."""
+        n, w = self.n, self.i_w
+        o, G = self._stuck_generator()
+        p = len(o)
+        s = [X[i] for i in o] + [X[n + i] for i in o] + [mp.cos(tau), mp.sin(tau), mpf(1)]
+        E = mp.expm(G * _f(h))
+        u = E * mp.matrix(s)
+        out = [mpf(0)] * (2 * n)
+        for a, i in enumerate(o):
+            out[i], out[n + i] = u[a], u[p + a]
+        out[w], out[n + w] = self.d, mpf(0)
+        return out
+
+    def run(self, tau, X, duration, samples=SAMPLES):
+        """Physical state after ``duration`` from X at phase tau, with impacts and sticking
+        (a start at rest on the wall pushed into it sticks); returns (X, events), events
+        ('impact', t, v-) and ('stick', t, release or None)."""
+        n, w = self.n, self.i_w
+        X = [_f(x) for x in X]
+        tau, t, T = _f(tau), mpf(0), _f(duration)
+        events = []
+        while t < T:
+            # at rest on the wall to the rounding of a float start state (1e-13)
+            rest = abs(X[w] - self.d) < mpf(10) ** -13 and abs(X[n + w]) < mpf(10) ** -13
+            if rest and self.contact_force(tau, X) > 0:
+                X[w], X[n + w] = self.d, mpf(0)
+                X0, tau0 = list(X), tau
+
+                def lam(h):
+                    return self.contact_force(tau0 + self.omega * h, self.stuck_state(tau0, X0, h))
+
+                cells = max(4, int(mp.ceil(samples * (T - t) / self.period)))
+                hs = [(T - t) * k / cells for k in range(cells + 1)]
+                hr = None
+                for a, b in zip(hs, hs[1:]):
+                    if lam(b) <= 0:
+                        hr = mp.findroot(lam, (a, b), solver="anderson", tol=ROOT_TOL ** 2,
+                                         verify=False)
+                        break
+                h = (T - t) if hr is None else hr
+                events.append(("stick", t, None if hr is None else t + hr))
+                X = self.stuck_state(tau0, X0, h)
+                t, tau = t + h, tau0 + self.omega * h
+                if hr is None:
+                    break
+                # leave the wall: a first step without search (g ~ lambda' h^3 / 6 < 0)
+                eps = self.period * mpf(10) ** -18
+                X, t, tau = self.state(tau, X, eps), t + eps, tau + self.omega * eps
+                continue
+            h = self.next_impact(tau, X, T - t, samples)
+            if h is None:
+                X = self.state(tau, X, T - t)
+                break
+            X = self.state(tau, X, h)
+            t, tau = t + h, tau + self.omega * h
+            vm = X[n + w]
+            if len(events) >= MAX_IMPACTS_PER_PERIOD:
+                raise RuntimeError("reference: chattering is not modelled")
+            X[w], X[n + w] = self.d, -self.r * vm
+            events.append(("impact", t, vm))
+        return X, events
+
     def multipliers(self, J):
         """Eigenvalues of J at DPS digits, by decreasing modulus."""
         ev, _ = mp.eig(J)
@@ -216,11 +404,15 @@ class _Arc:
     """Gap g = x_w - d, velocity and acceleration of the wall coordinate along one free
     flight: the harmonic of X_w plus the modes of the homogeneous part."""
 
-    def __init__(self, ref: NdofRef, tau, X):
+    def __init__(self, ref: NdofRef, tau, X, static=None, lag=None):
         self.ref = ref
         p0 = ref.particular(tau)
         m = 2 * ref.n
-        dev = [X[i] - p0[i] for i in range(m)]
+        static = static or [mpf(0)] * m
+        self.xs = static[ref.i_w]
+        q, self.tau_a = lag if lag else ([mpf(0)] * m, None)
+        self.qw = q[ref.i_w]
+        dev = [X[i] - p0[i] - static[i] - q[i] for i in range(m)]
         w = ref.i_w
         self.c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
                   for k in range(m)]
@@ -236,7 +428,10 @@ class _Arc:
             y += e
             v += l * e
             a += l * l * e
-        g = mp.re(eh) + mp.re(y) - ref.d
+        if self.tau_a is not None:     # the lag's transient q_w e^{-h / tau_a}
+            e = self.qw * mp.exp(-h / self.tau_a)
+            y, v, a = y + e, v - e / self.tau_a, a + e / self.tau_a ** 2
+        g = mp.re(eh) + mp.re(y) + self.xs - ref.d
         return g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a)
 
 

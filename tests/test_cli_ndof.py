@@ -256,6 +256,34 @@ def test_design_with_delay_is_the_delayed_family_and_the_1dof_delayed_c1(capsys,
     assert code in (0, None) and "actuation delay    = 4" in text
 
 
+def test_design_with_a_pulse_is_the_pulse_family_and_the_1dof_p1_c1(capsys, tmp_path):
+    """`design --model M --delay D --pulse-width W [--actuator-bandwidth B
+    --actuator-latency L]` (docs/theory_ndof.md §15): n = 1 gives the 1-DOF `design
+    --c2 0.5 --delay 2 --pulse-width 1`'s c1 (P1) to 1e-12; the chain's gains are
+    ndof_design.gain_family with the Actuation, written with the pulse's entries; an
+    actuator without a pulse width is refused naming pulse_width."""
+    from grazing_control.dynamics.design.ndof_design import Actuation
+
+    one = run_json(capsys, "design", "--model", ONE, "--delay", "2", "--pulse-width", "1",
+                   "--free-gain", "v0=0.5")
+    m1 = load_model(ONE)
+    ref = run_json(capsys, "design", "--c2", "0.5", "--delay", "2", "--pulse-width", "1",
+                   "--omega", repr(m1.omega), "--r", repr(m1.r), "--zeta", "0.01",
+                   "--delta-d", repr(m1.delta_d))
+    assert one["delay"] == 2.0 and one["pulse"]["pulse_width"] == 1.0
+    assert abs(one["gains"][0] - ref["c1"]) <= 1e-12 * abs(ref["c1"])
+    out = tmp_path / "k.yaml"
+    two = run_json(capsys, "design", "--model", TWO, "--delay", "4", "--mu", "0",
+                   "--pulse-width", "1", "--actuator-bandwidth", "5", "--actuator-latency",
+                   "0.1", "--out", str(out))
+    assert two["gains"] == gain_family(load_model(TWO), 0.0,
+                                       Actuation(4.0, 1.0, 0.2, 0.1)).tolist()
+    assert "pulse_width: 1.0" in out.read_text()
+    code, _text, err = run(capsys, "design", "--model", TWO, "--delay", "4",
+                           "--actuator-bandwidth", "5")
+    assert code == 2 and "pulse_width=0.0 is invalid with an actuator" in err
+
+
 # ------------------------------------------------------------------ errors
 @pytest.mark.parametrize("argv, needle", [
     (["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"], "--c2 is a 1-DOF option"),

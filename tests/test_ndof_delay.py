@@ -113,15 +113,24 @@ def test_delayed_design_limit_multipliers_against_finite_differences_of_the_exac
     finite-difference Jacobian of that map at the orbit converge to the design's limit
     spectrum like |Delta d|^(1/2) (as the undelayed ones, §12): error/sqrt|Delta d| in
     (0.05, 20) and below 1e-3 at Delta d = -1e-8."""
+    check_limit_against_the_exact_map(delay, mu, delay)
+
+
+def check_limit_against_the_exact_map(actuation, mu, delay, width=0.0):
+    """On the chain: the design k(mu; actuation)'s branch is a fixed point of the exact
+    NdofMap(delay, width) (1e-13, the same v-), and the multipliers of that map's
+    finite-difference Jacobian at the shot orbit approach the limit spectrum like
+    |Delta d|^(1/2): error / sqrt|Delta d| in (0.05, 20), below 1e-3 at Delta d = -1e-8.
+    Returns the errors at Delta d = -1e-4, -1e-6, -1e-8."""
     m0 = load_model(CHAIN)
-    k = nd.gain_family(m0, mu, delay)
-    limit = nd.limit_multipliers(m0, mu, delay)
+    k = nd.gain_family(m0, mu, actuation)
+    limit = nd.limit_multipliers(m0, mu, actuation)
     assert np.max(np.abs(limit)) < 1.0
     errors = []
     for dd in (-1e-4, -1e-6, -1e-8):
         m = dataclasses.replace(m0, delta_d=dd)
-        bp = ndof_branch.orbit_at(m, k, dd, delay=delay)
-        P = NdofMap(m, k, delay)
+        bp = ndof_branch.orbit_at(m, k, dd, delay=actuation)
+        P = NdofMap(m, k, delay, width)
         st = P.step(bp.pi2_state)
         assert len(st.impacts) == 1
         assert abs(st.impacts[0].v_minus - bp.v_minus) <= 1e-9 * bp.v_minus
@@ -132,6 +141,7 @@ def test_delayed_design_limit_multipliers_against_finite_differences_of_the_exac
         assert 0.05 < err / math.sqrt(-dd) < 20.0, (dd, err)
         errors.append(err)
     assert errors[-1] < 1e-3
+    return errors
 
 
 def test_the_undelayed_design_acting_late_grows_like_one_over_delta_d():

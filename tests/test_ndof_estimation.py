@@ -75,8 +75,8 @@ def test_n_dof_motion_against_the_core_and_finite_differences():
         fd = (ss.trajectory(m, z0 + e, s, corr, delay)[0]
               - ss.trajectory(m, z0 - e, s, corr, delay)[0]) / (2 * h)
         assert np.max(np.abs(fd - jac[:, :, j])) <= 1e-9
-    with pytest.raises(ParameterError, match="width, wall and actuator are invalid"):
-        ss.trajectory(m, z0, s, corr, delay, width=0.5)
+    with pytest.raises(ParameterError, match="wall and actuator are invalid"):
+        ss.trajectory(m, z0, s, corr, delay, wall=True)
 
 
 @pytest.fixture(scope="module")
@@ -84,15 +84,23 @@ def controlled_chain():
     """The chain at Delta d = -1e-3 under the design mu = 0.2 (one impact per period,
     v- ~ 0.03), from a start near its 1/1 orbit: the true Pi2 states z_k, the known
     corrections k^T z_k and the exact deviations of every coordinate at T/200."""
+    return closed_loop_chain(lambda m: nd.gain_family(m, 0.2),
+                             lambda m, z, s, dv: _exact_samples(m, z, s, dv, 0.0))
+
+
+def closed_loop_chain(gains, exact):
+    """6 periods of the chain at Delta d = -1e-3 under the gains ``gains(m)`` from near
+    its 1/1 orbit, each period by ``exact(m, z, s, correction) -> (samples, end)``:
+    (m, s, the true Pi2 states, the corrections, the samples at T/200)."""
     m = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
-    k = nd.gain_family(m, 0.2)
+    k = gains(m)
     s = np.linspace(0.0, m.period, RATE + 1)[1:]
     z = np.array([2e-3, -1e-3, 1e-3, 2e-3])
     states, corrections, samples = [], [], []
     for _ in range(6):
         states.append(z)
         corrections.append(float(k @ z))
-        zs, z = _exact_samples(m, z, s, corrections[-1], 0.0)
+        zs, z = exact(m, z, s, corrections[-1])
         samples.append(zs)
     states.append(z)
     return m, s, np.array(states), corrections, samples

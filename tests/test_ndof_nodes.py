@@ -26,8 +26,8 @@ from grazing_control.dynamics.design.ndof_design import evaluate_design, write_g
 from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.model import load_model
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import ndof_settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 from grazing_control.recordings import reader
 from grazing_control.recordings.analyze import analyze
 from grazing_control.recordings.scenes import load
@@ -79,7 +79,7 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
         assert len(msg.position) == len(msg.velocity) == 2 and len(msg.effort) == efforts
 
     # the node is the engine: replayed with the recorded corrections, bit for bit
-    eng = NdofEngine(ndof_settings_from_values({"delta_d": DELTA_D}, str(CHAIN)))
+    eng = Engine(settings_from_values({"delta_d": DELTA_D}, str(CHAIN)))
     for k in range(n):
         ev = eng.sample()
         assert np.array_equal(np.array(ev.x + ev.v), X[k]), k
@@ -113,13 +113,21 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert set(s["final_vs_exact_orbit_per_coordinate"]) == {"x0", "x1", "v0", "v1"}
     text = (tmp_path / "report" / "report.md").read_text()
     assert "n-DOF scene" in text and "v1" in text and (tmp_path / "report" / "bag.png").is_file()
-    # grazing replay is built for 1-DOF bags: it says so instead of waiting for answers
+    # grazing replay of the 2-DOF lockstep bag (issue 32): the recorded Pi2 messages through
+    # a new controller_node with the record's model file and gains give the recorded
+    # corrections bit for bit; the simulator replay is refused in one line, nothing started
     from grazing_control.recordings.replay import replay_controller, replay_simulator
 
-    for replay in (replay_controller, replay_simulator):
-        with pytest.raises(ValueError, match="an n-DOF scene .* grazing replay is built"):
-            replay(bag, tmp_path / "replay")
-        assert not (tmp_path / "replay").exists()
+    with pytest.raises(ValueError, match="an n-DOF scene .* the simulator replay is not "
+                                         "built for n > 1 .* --no-sim"):
+        replay_simulator(bag, tmp_path / "replay_sim")
+    assert not (tmp_path / "replay_sim").exists()
+    out = replay_controller(bag, tmp_path / "replay", domain_id=new_domain())
+    cmp_ = out["comparison"]
+    assert out["samples_published"] == out["answers"] == n, out
+    assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == n, cmp_
+    assert cmp_["original_control_on"] == cmp_["new_control_on"] == on
+    assert cmp_["new_gains"] == {"gains": list(design.gains)}, cmp_["new_gains"]
 
 
 def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
@@ -259,7 +267,7 @@ def test_a_realtime_n_dof_scene_with_scheduled_kicks_is_the_engines_period_loop(
     assert sd.deadline_misses <= 4, log            # a few on a loaded 2-core machine
     missed = set(sd.missed_stamp_ns.tolist())
     scene = sd.scene
-    eng = NdofEngine(ndof_settings_from_values({"delta_d": DELTA_D, "actuation_delay": delay},
+    eng = Engine(settings_from_values({"delta_d": DELTA_D, "actuation_delay": delay},
                                                str(CHAIN)))
     for k in range(n):
         ev = eng.sample()
@@ -359,7 +367,7 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     print(f"2-DOF stream scene: |node - core| corrections <= {worst:.1e}")
 
     # the node is the engine: the recorded corrections acting 1.0 after their samples
-    eng = NdofEngine(ndof_settings_from_values(
+    eng = Engine(settings_from_values(
         {"delta_d": STREAM_DD, "actuation_delay": STREAM_DELAY, "sensor_noise": SIGMA,
          "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE},
         str(CHAIN)))
@@ -382,3 +390,70 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     P = NdofMap(model, design.gains, STREAM_DELAY)
     orbit = find_periodic(P, eng.z)
     assert np.max(np.abs(eng.z - orbit.state)) < 1e-2
+
+
+def test_a_live_gain_change_is_applied_on_a_two_dof_controller():
+    """A 2-DOF controller_node (in-process, no scene) started with live_changes:=true
+    answers a sample with k0^T (X - X**), takes a new gain vector k1 while running and
+    answers the next sample with k1^T (X - X**) (the one law of every n, issue 32); a
+    gain vector of the wrong length is refused in one line naming gains, the law kept;
+    without live_changes the change is refused naming live_changes."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from grazing_control.ros.controller_node import ControllerNode
+    from test_closed_loop import new_domain as domain
+
+    model = dataclasses.replace(load_model(CHAIN), delta_d=DELTA_D)
+    k0 = evaluate_design(model, MU).gains
+    k1 = 0.5 * k0
+    P = NdofMap(model)
+    xref = P.flow.particular(P.flow.tau2)
+    z = np.array([2e-4, -1e-4, 3e-4, 5e-4])
+    X = xref + z
+
+    def sample(sec):
+        msg = JointState(name=["mass0", "mass1"], position=list(X[:2]), velocity=list(X[2:]))
+        msg.header.stamp.sec = sec
+        return serialize_message(msg)
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain())
+    try:
+        for live in (True, False):
+            node = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter("model_file", Parameter.Type.STRING, str(CHAIN)),
+                Parameter("gains", Parameter.Type.DOUBLE_ARRAY, k0.tolist()),
+                Parameter("enable_after", Parameter.Type.INTEGER, 0),
+                Parameter("live_changes", Parameter.Type.BOOL, live)])
+            answers = []       # the corrections published (ControllerNode._answer's)
+            answer = node._answer
+
+            def keep(*args, answer=answer, **kw):
+                answers.append(answer(*args, **kw))
+                return answers[-1]
+            node._answer = keep
+            node._on_sample(sample(1))
+            assert node.answered == 1 and answers[-1] == pytest.approx(float(k0 @ z),
+                                                                       rel=1e-12)
+            res = node.set_parameters([Parameter("gains", Parameter.Type.DOUBLE_ARRAY,
+                                                 k1.tolist())])[0]
+            if not live:
+                assert not res.successful and "live_changes" in res.reason
+                assert np.array_equal(node.law.gains, k0)
+                node.destroy_node()
+                continue
+            assert res.successful, res.reason
+            assert np.array_equal(node.law.gains, k1)
+            node._on_sample(sample(2))
+            assert answers[-1] == pytest.approx(float(k1 @ z), rel=1e-12)
+            bad = node.set_parameters([Parameter("gains", Parameter.Type.DOUBLE_ARRAY,
+                                                 [1.0, 2.0, 3.0])])[0]
+            assert not bad.successful and bad.reason.startswith("gains has 3 values")
+            assert "\n" not in bad.reason and np.array_equal(node.law.gains, k1)
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)

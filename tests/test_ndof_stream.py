@@ -1,6 +1,6 @@
 """The stream estimator over an n-DOF model (issue 32, dynamics/estimation/stream.py):
 the controller's bookkeeping of sections around the model filter over the exact n-DOF
-map, fed by the n-DOF engine's sensor (plant/ndof_engine.py)."""
+map, fed by the n-DOF engine's sensor (plant/engine.py over the model file)."""
 
 import dataclasses
 from pathlib import Path
@@ -12,8 +12,8 @@ from grazing_control.dynamics.design.ndof_design import evaluate_design
 from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import ParameterError
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import ndof_settings_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
 
 CHAIN = Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_chain.yaml"
 SIGMA, RATE, DELAY = 1e-4, 200, 1.0
@@ -30,7 +30,7 @@ def test_a_kick_known_wrong_gives_the_carried_state_then_the_filter_again():
     model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
     k = evaluate_design(model, -0.22, DELAY).gains
     T = model.period
-    eng = NdofEngine(ndof_settings_from_values(
+    eng = Engine(settings_from_values(
         {"delta_d": -1e-3, "actuation_delay": DELAY, "state_period": T / RATE,
          "sensor_noise": SIGMA, "sensor_velocity": False, "sensor_seed": 1}, str(CHAIN)))
     est = StreamEstimator(model, "model", SIGMA, "stream", T / RATE, coordinate=1)

@@ -231,7 +231,7 @@ def test_a_node_refuses_a_bomb_in_its_parameter_file(tmp_path):
 
 def test_a_node_refuses_a_bomb_as_its_model_file(tmp_path):
     from grazing_control.oscillator.params import ParameterError
-    from grazing_control.plant.ndof_settings import load_model_file
+    from grazing_control.plant.settings import load_model_file
 
     bomb = write(tmp_path, "bomb.yaml", model_bomb("M"))
     with pytest.raises(ParameterError, match=r"model_file=.*bomb.yaml' is invalid: cannot "

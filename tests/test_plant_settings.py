@@ -3,7 +3,9 @@
 sim_node declares its simulation parameters from PARAMETERS and validates them with
 settings_from_values: the table must be complete (every field of SimSettings, every key
 the validation reads), its defaults valid, and every bad value refused with the
-parameter's name and its valid range.
+parameter's name and its valid range. An n-DOF scene's settings (a model file, issue
+32) are the same object: the model file, delta_d, the table's other values validated as
+before, and every option not built for n-DOF refused by name, never half-applied.
 """
 
 from __future__ import annotations
@@ -11,12 +13,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from pathlib import Path
 
 import pytest
 
+from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, ON_MISS,
-                                            PARAMETERS,
+from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, NOT_WITH_MODEL_FILE,
+                                            ON_MISS, PARAMETERS, check_live_change,
                                             SETTING_KEYS, SimSettings, default_values, described_range,
                                             initial_deviation, settings_from_values)
 
@@ -24,8 +28,9 @@ from grazing_control.plant.settings import (ACTUATIONS, MODEL_KEYS, MODES, ON_MI
 def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     names = [p.name for p in PARAMETERS]
     assert len(set(names)) == len(names) and tuple(names) == SETTING_KEYS
-    fields = {f.name for f in dataclasses.fields(SimSettings)} - {"params", "sensor",
-                                                                 "watchdog", "actuator"}
+    # the model file is sim_node's own (read-only) parameter, the argument of the validation
+    fields = {f.name for f in dataclasses.fields(SimSettings)} - {
+        "params", "sensor", "watchdog", "actuator", "model", "model_file"}
     sensor = {n for n in names if n.startswith(("sensor_", "watchdog_", "actuator_", "contact_",
                                                 "friction"))}
     assert fields | set(MODEL_KEYS) | sensor == set(names)
@@ -110,3 +115,111 @@ def test_the_sensor_is_plant_sensors_model_and_the_pulse_is_carried():
     assert (s.pulse_width, s.force_limit) == (0.1, 3.0)
     assert "sensor noise=0.0001 velocity=false" in s.describe()
     assert settings_from_values({}).sensor.exact
+
+
+# ------------------------------------------------------------------- an n-DOF scene
+SCENE = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml")
+
+
+
+def test_the_model_comes_from_the_file_and_delta_d_replaces_its_wall():
+    s = settings_from_values({}, SCENE)
+    file_model = load_model(SCENE)
+    assert isinstance(s, SimSettings) and s.model.delta_d == file_model.delta_d == -1e-5
+    assert s.params.period == file_model.period        # the bounds on times read T
+    s2 = settings_from_values({"delta_d": -3e-6, "max_periods": 7}, SCENE)
+    assert s2.model.delta_d == -3e-6 and s2.max_periods == 7
+    assert (s2.model.K == file_model.K).all() and s2.model.omega == file_model.omega
+    # the node passes every value of the table: defaults are accepted
+    s3 = settings_from_values({**default_values(), "delta_d": -1e-5}, SCENE)
+    assert s3.model.delta_d == -1e-5 and s3.mode == "lockstep"
+    assert "n=2" in s3.describe() and "delta_d=-1e-05" in s3.describe()
+
+
+def test_times_are_bounded_by_the_n_dof_period():
+    T = load_model(SCENE).period                        # 22.8, the study's is 9.4
+    assert settings_from_values({"actuation_delay": 20.0}, SCENE).actuation_delay == 20.0
+    with pytest.raises(ParameterError, match=rf"actuation_delay=23.0 is invalid.*T = {T!r}"):
+        settings_from_values({"actuation_delay": 23.0}, SCENE)
+
+
+@pytest.mark.parametrize("name,value", [("actuator_bandwidth", 20.0),
+                                        ("actuator_latency", 0.05)])
+def test_the_first_order_actuator_is_refused_with_a_model_file(name, value):
+    """Reproduction (issue 32's fold): plant.ndof_settings accepted the actuator's values
+    and plant.ndof_engine ignored them (the kick acted unlagged); now one line naming the
+    parameter and why."""
+    with pytest.raises(ParameterError, match=rf"^{name}={value!r} is invalid with model_file="
+                                             r".*the first-order actuator is not built"):
+        settings_from_values({name: value, "actuation_delay": 0.3}, SCENE)
+
+
+@pytest.mark.parametrize("name", sorted(NOT_WITH_MODEL_FILE))
+def test_options_not_built_for_n_dof_are_refused_by_name(name):
+    default = default_values()[name]
+    bad = {float: 0.5, bool: (not default) if isinstance(default, bool) else None,
+           str: "zdm2"}[type(default)]
+    if name in ("r", "zeta"):
+        bad = 0.3
+    with pytest.raises(ParameterError, match=rf"^{name}=.* is invalid with model_file=.*"
+                                             r"valid is its default"):
+        settings_from_values({name: bad}, SCENE)
+
+
+def test_bad_values_keep_the_one_dof_messages():
+    for values, text in [({"mode": "fast"}, "mode='fast' is invalid"),
+                         ({"time_scale": 0.0}, "time_scale"),
+                         ({"max_periods": -1}, "max_periods=-1"),
+                         ({"delta_d": math.inf}, "delta_d=inf is invalid"),
+                         ({"loss": 2.0}, "loss=2.0")]:
+        with pytest.raises(ParameterError, match=re.escape(text)):
+            settings_from_values(values, SCENE)
+
+
+def test_a_bad_model_file_is_one_line_naming_model_file(tmp_path):
+    missing = tmp_path / "none.yaml"
+    with pytest.raises(ParameterError, match=r"^model_file='.*none.yaml' is invalid: cannot "
+                                             r"read it .*no such file"):
+        settings_from_values({}, str(missing))
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("M: [[1.0, 0.0], [0.0\n")
+    with pytest.raises(ParameterError, match=r"^model_file=.*broken.yaml' is invalid: cannot "
+                                             r"read it as a model YAML file"):
+        settings_from_values({}, str(broken))
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(Path(SCENE).read_text().replace("r: 0.68", "r: 1.5"))
+    with pytest.raises(ParameterError, match=r"^model_file=.*wrong.yaml' is invalid: r=1.5 "
+                                             r"is invalid: valid range is 0 < r <= 1"):
+        settings_from_values({}, str(wrong))
+    for err in (missing, broken, wrong):
+        try:
+            settings_from_values({}, str(err))
+        except ParameterError as exc:
+            assert "\n" not in str(exc)
+
+
+def test_live_changes_of_an_n_dof_scene_are_checked_on_its_model():
+    """While an n-DOF scene runs (sim_node/parameters.py calls check_live_change): the
+    stream's period, the sensor's noise and max_periods change as in 1-DOF, bounded by
+    the model's scales (the wall coordinate's amplitude d*, the model's period T); a
+    change of delta_d (the model) is refused in one line naming it and why."""
+    from grazing_control.oscillator.ndof.flow import grazing_clearance
+
+    old = settings_from_values({"max_periods": 100}, SCENE)
+    d_star, T = grazing_clearance(old.model), old.model.period
+    ok = settings_from_values({"max_periods": 200, "state_period": T / 100,
+                               "sensor_noise": 0.5 * d_star}, SCENE)
+    check_live_change(old, ok, 50)
+    with pytest.raises(ParameterError) as exc:
+        check_live_change(old, settings_from_values({"max_periods": 100, "delta_d": -2e-5},
+                                                    SCENE), 50)
+    text = str(exc.value)
+    assert text.startswith("delta_d=-2e-05 is invalid while an n-DOF scene runs") and \
+        "not built" in text and "\n" not in text
+    with pytest.raises(ParameterError, match=r"^sensor_noise=.* valid range is \[0, "
+                                             + re.escape(f"{d_star:.6g}")):
+        check_live_change(old, settings_from_values({"max_periods": 100,
+                                                     "sensor_noise": 2.0 * d_star}, SCENE), 50)
+    with pytest.raises(ParameterError, match=re.escape(f"T/1e4 = {T * 1e-4:.6g}")):
+        check_live_change(old, settings_from_values({"max_periods": 100,
+                                                     "state_period": T * 1e-5}, SCENE), 50)

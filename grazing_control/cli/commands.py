@@ -475,7 +475,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pulse-width", type=finite, default=0.0,
                    help="the correction as a force pulse of this width centred at --delay "
                         "(simulation time; sim_node's pulse_width); with it c1 is the exact "
-                        "design for the pulse's force profile (P1, docs/theory_pulse.md)")
+                        "design for the pulse's force profile (P1, docs/theory_pulse.md); with "
+                        "--model the n-DOF pulse design (docs/theory_ndof.md section 15)")
     s.add_argument("--actuator-bandwidth", type=finite, default=0.0,
                    help="a first-order actuator's bandwidth 1/tau_a (radians per simulation "
                         "time unit, sim_node's actuator_bandwidth; 0: ideal): c1 for the "

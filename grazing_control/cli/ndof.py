@@ -275,12 +275,16 @@ def _header(model, path):
 
 # ---------------------------------------------------------------------------- design
 def cmd_design(args):
-    """design --model FILE [--mu MU | --free-gain NAME=V] [--delay D] [--out FILE]
-    (docs/ndof_commands.md; the delayed design is docs/theory_ndof.md §14)."""
+    """design --model FILE [--mu MU | --free-gain NAME=V] [--delay D] [--pulse-width W
+    [--actuator-bandwidth B] [--actuator-latency L]] [--out FILE] (docs/ndof_commands.md;
+    the delayed design is docs/theory_ndof.md §14, the pulse's §15)."""
     from grazing_control.dynamics.design import ndof_design as nd
 
     model = load(args.model)
-    delay = float(getattr(args, "delay", 0.0) or 0.0)
+    delay = nd.design_actuation(float(getattr(args, "delay", 0.0) or 0.0),
+                                *(float(getattr(args, a, 0.0) or 0.0) for a in
+                                  ("pulse_width", "actuator_bandwidth", "actuator_latency")))
+    pulse = nd.actuation_parameters(delay) if isinstance(delay, nd.Actuation) else None
     t0 = time.perf_counter()
     k0 = np.asarray(nd.gain_family(model, 0.0, delay), dtype=float)
     k1 = np.asarray(nd.gain_family(model, 1.0, delay), dtype=float) - k0
@@ -325,7 +329,8 @@ def cmd_design(args):
         "admissible_mu_sets": {"combined": [_json_interval(iv) for iv in intervals],
                                **{c: [_json_interval(iv) for iv in ivs]
                                   for c, ivs in sets.items()}},
-        "delay": delay, "mu": mu, "mu_chosen": chosen, "gains": k.tolist(),
+        "delay": delay.delay if pulse else delay, **({"pulse": pulse} if pulse else {}),
+        "mu": mu, "mu_chosen": chosen, "gains": k.tolist(),
         "multipliers_limit": _complex_list(lam0), "gamma1": gamma,
         "spectral_radius_free": rho_free, "conditions": conditions, "admissible": admissible,
         "pi2_offsets_with_stable_zeros": None if sections is None else
@@ -348,7 +353,10 @@ def cmd_design(args):
         f"  d*, tau*           = {out['d_star']:.15g}, {out['tau_star']:.15g}",
         *([f"  actuation delay    = {delay:.15g}  (the kick acts this long after the Pi2 "
            f"sample; the family, zeros and limits are those of the delayed kick)"]
-          if delay else []),
+          if delay and not pulse else []),
+        *([f"  pulse              = {', '.join(f'{a} {b:.10g}' for a, b in pulse.items())}  "
+           f"(the correction as a force pulse; family, zeros and limits are the pulse's, "
+           f"docs/theory_ndof.md §15)"] if pulse else []),
         f"  family k(mu)       = k0 + mu dk, over ({', '.join(names)})",
         f"    k0               = {_fmt_vec(k0, 12)}",
         f"    dk               = {_fmt_vec(k1, 12)}",

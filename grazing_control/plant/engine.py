@@ -25,6 +25,19 @@ compliant stop the stop's flow under that force
 (:meth:`~grazing_control.plant.contact_plant.ContactPlant.lag_flow`, docs/theory_contact.md
 §21).
 
+An n-DOF scene (``settings.model``, a model file of docs/ndof_model.md; issues 17, 32)
+runs on the same engine: the sample bookkeeping, the faults, the delay and the split on
+arrival, the stream's grid and the Pi1 crossing are the ones above, and what differs --
+the state z in R^{2n} (the deviation from the periodic response at Pi2), the flow of a
+piece, the kick on the actuated velocity, the physical state of the n coordinates, the
+states between samples and the sensor's draws per coordinate -- is the model's
+(:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`).
+Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
+Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
+A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s
+iterates bit for bit; the 1-DOF path is the kernel's closed form, unchanged
+(benchmarks/fold_hashes.py).
+
 No ROS: sim_node publishes the :class:`Event` values this returns.
 """
 
@@ -40,9 +53,10 @@ from grazing_control.dynamics.simulation.actuator import command_period, lag_flo
 from grazing_control.dynamics.simulation.fidelity import period_step
 from grazing_control.dynamics.simulation.simulate import states_between
 from grazing_control.oscillator import kernel
+from grazing_control.oscillator.ndof.section import NdofSection, measure_coordinates
 from grazing_control.plant.settings import SimSettings, initial_deviation
 
-__all__ = ["Event", "Segment", "Engine"]
+__all__ = ["Event", "NdofEvent", "Segment", "Span", "Engine"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -59,6 +73,29 @@ class Event(NamedTuple):
     x: float
     v: float
     phase: float
+
+
+class NdofEvent(NamedTuple):
+    """A state of an n-DOF scene to publish at simulation time t: kind 'state', 'pi1' or
+    'pi2' (the sample before its correction); ``x``, ``v`` the physical positions and
+    velocities of the n coordinates; ``phase`` the forcing phase."""
+
+    t: float
+    kind: str
+    x: tuple
+    v: tuple
+    phase: float
+
+
+class Span(NamedTuple):
+    """One stretch of an n-DOF period after its last correction: from (ts, tau, z) to te."""
+
+    ts: float          # start time
+    tau: float         # forcing phase at the start
+    z: np.ndarray      # deviation at the start, after any correction
+    te: float          # end time (the next Pi2 sample)
+    z_end: np.ndarray  # deviation at te
+    impacts: tuple     # the model's impacts of the stretch (dt from ts)
 
 
 class Segment(NamedTuple):
@@ -82,12 +119,16 @@ class Engine:
     correction by one :func:`period_step` call; :meth:`split` (realtime) re-evaluates the
     current period from its start to a time inside it and applies a correction there;
     :meth:`end_period` moves to the next sample, where pending model parameters take
-    effect and the velocity noise is added.
+    effect and the velocity noise is added. In an n-DOF scene (module docstring) the
+    state is ``z`` and the model's pieces are :attr:`section`'s.
     """
 
     def __init__(self, settings: SimSettings):
         self.settings = settings
-        self.p = settings.params
+        # the n-DOF model's pieces (oscillator.ndof.section), None for the 1-DOF closed form
+        model = getattr(settings, "model", None)
+        self.section = None if model is None else NdofSection(model)
+        self.p = settings.params if self.section is None else self.section
         # the drifting wall (delta_d_drift, issue 29): the model in force when the drift
         # (re)started and that sample's index; self.p's Delta d moves from it
         self.drift = getattr(settings, "delta_d_drift", 0.0)
@@ -117,6 +158,11 @@ class Engine:
         self.rng = np.random.default_rng(s.seed)
         self.k = 0
         self.k_base, self.t_base = 0, 0.0
+        if self.section is not None:
+            self.z = self.section.start()
+            self.impacts = 0
+            self.seg = None
+            return self.sample()
         self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
         self.impacts = 0
         self.seg = None
@@ -142,6 +188,8 @@ class Engine:
 
     def sample(self) -> Event:
         """The current sample (without drawing noise again)."""
+        if self.section is not None:
+            return self._state(self.t, "pi2", self.p.tau2, self.z)
         p = self.p
         return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
 
@@ -183,6 +231,8 @@ class Engine:
         ``dynamics.simulation.actuation.pulse_step``. Returns the events of (t_k, t_k+1] in time
         order (state, Pi1, impacts), the next sample excluded.
         """
+        if self.section is not None:
+            return self._model_period(dv_correction, delay)
         if self.lagged:
             return self._lag_period(dv_correction, self.actuation_start(delay))
         p = self.p
@@ -214,6 +264,12 @@ class Engine:
             return self.begin_period(0.0)
         p = self.p
         t0, start = self.t, self.actuation_start(delay)
+        if self.section is not None:
+            head = self.section.advance(p.tau2, self.z, start)
+            self._head = (self.k, start, self.z, head)
+            self.seg = Span(t0, p.tau2, self.z, (self.k + 1) * p.period, None, ())
+            return self._model_events(Span(t0, p.tau2, self.z, t0 + start, head.z,
+                                           head.impacts))
         head, states = self._free_piece(p.tau2, self.dx, self.dv, start, t0, t0 + start)
         self._head = (self.k, start, self.dx, self.dv, head)
         t1 = self.t_base + (self.k + 1 - self.k_base) * p.period
@@ -238,6 +294,14 @@ class Engine:
         to t_k+1.
         """
         start = self.actuation_start(delay)
+        if self.section is not None:
+            kept = self._head
+            if kept is not None and kept[:2] == (self.k, start) and kept[2] is self.z:
+                head = kept[3]                  # begin_head's flow to the start
+            else:
+                head = self.section.advance(self.p.tau2, self.z, start)
+            self._head = None
+            return self._model_actuate(head.z, dv_correction, start)
         if self.lagged:
             t = self.t + start
             return [ev for ev in self._lag_period(dv_correction, start) if ev.t >= t]
@@ -323,6 +387,8 @@ class Engine:
         if self.lagged:
             raise RuntimeError("a correction on arrival through the actuator: refused by "
                                "the settings (actuation on_arrival with an actuator)")
+        if self.section is not None:
+            return self._model_split(tc, dv_correction)
         s, p = self.seg, self.p
         tc = min(max(tc, s.ts), s.te)
         head = self.advance(p, s.tau, s.dx, s.dv, tc - s.ts)
@@ -340,6 +406,11 @@ class Engine:
         model on its own Pi2 (if it lies beyond the new wall it is put on the wall).
         """
         s = self.seg
+        if self.section is not None:
+            self.z = s.z_end
+            self.k += 1
+            self.seg = None
+            return self.sample(), None
         self.dx, self.dv = s.dx_end, s.dv_end
         self.force = self._force_end
         self.k += 1
@@ -385,6 +456,8 @@ class Engine:
         if self.settings.state_period <= 0.0 or self.t != 0.0:
             return []
         p = self.p
+        if self.section is not None:
+            return self._measured(0, [self._state(0.0, "state", p.tau2, self.z)])
         xm, vm = self.settings.sensor.measure(0, [p.x_ref + self.dx], [p.v_ref + self.dv])
         return [Event(0.0, "state", float(xm[0]), float(vm[0]), p.tau2)]
 
@@ -457,5 +530,75 @@ class Engine:
             for h, kind, (x, v) in zip(rel, kinds, xv):
                 phase = p.tau_star if kind == "pi1" else (s.tau + p.omega * h) % TWO_PI
                 events.append(Event(s.ts + h, kind, float(x), float(v), phase))
+        events.sort(key=lambda e: e.t)
+        return events
+
+    # ------------------------------------------------- the n-DOF model's pieces
+    def _state(self, t: float, kind: str, tau: float, z) -> NdofEvent:
+        x, v = self.section.physical(tau, z)
+        return NdofEvent(t, kind, x, v, tau)
+
+    def _model_period(self, dv_correction: float, delay: float) -> list:
+        """:meth:`begin_period` of an n-DOF scene: the kick and one piece, or the flow to
+        t_k + delay, the kick there, the flow to t_k+1 (module docstring)."""
+        sec, t0 = self.section, self.t
+        if delay > 0.0:
+            head = sec.advance(sec.tau2, self.z, delay)
+            events = self._model_events(Span(t0, sec.tau2, self.z, t0 + delay, head.z,
+                                             head.impacts))
+            return events + self._model_actuate(head.z, dv_correction, delay)
+        z = sec.kicked(self.z, dv_correction)
+        piece = sec.advance(sec.tau2, z, sec.period)
+        self.seg = Span(t0, sec.tau2, z, (self.k + 1) * sec.period, piece.z, piece.impacts)
+        return self._model_events(self.seg)
+
+    def _model_actuate(self, z_head, dv_correction: float, start: float) -> list:
+        """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF)."""
+        sec = self.section
+        tau = (sec.tau2 + sec.omega * start) % TWO_PI
+        z = sec.kicked(z_head, dv_correction)
+        tail = sec.advance(tau, z, sec.period - start)
+        self.seg = Span(self.t + start, tau, z, (self.k + 1) * sec.period, tail.z,
+                        tail.impacts)
+        return self._model_events(self.seg)
+
+    def _model_split(self, tc: float, dv_correction: float) -> list:
+        """:meth:`split` of an n-DOF scene: the flow from the stretch's start to tc, the
+        kick, the flow to the next sample."""
+        s, sec = self.seg, self.section
+        tc = min(max(tc, s.ts), s.te)
+        head = sec.advance(s.tau, s.z, tc - s.ts)
+        tau_c = (s.tau + sec.omega * (tc - s.ts)) % TWO_PI
+        z = sec.kicked(head.z, dv_correction)
+        tail = sec.advance(tau_c, z, s.te - tc)
+        self.seg = Span(tc, tau_c, z, s.te, tail.z, tail.impacts)
+        return self._model_events(self.seg)
+
+    def _measured(self, j0: int, states: list) -> list:
+        """The n-DOF stream's samples j0, j0 + 1, ... (``states``, exact) as the sensor
+        measures them (:func:`~grazing_control.oscillator.ndof.section.measure_coordinates`)."""
+        sensor = self.settings.sensor
+        if sensor.exact and sensor.velocity or not states:
+            return states
+        xm, vm = measure_coordinates(sensor, j0, [e.x for e in states],
+                                     [e.v for e in states])
+        return [e._replace(x=tuple(float(a) for a in x), v=tuple(float(a) for a in v))
+                for e, x, v in zip(states, xm, vm)]
+
+    def _model_events(self, s: Span) -> list:
+        """The events of an n-DOF stretch (as :meth:`_events`): its impacts, the stream's
+        samples on the grid in (ts, te] as the sensor measures them, the Pi1 crossing."""
+        sec = self.section
+        events = [Event(s.ts + i.dt, "impact", float(i.v_minus), float(i.v_plus),
+                        float(i.phase) % TWO_PI) for i in s.impacts]
+        rel, kinds, j0 = self._published_times(s.ts, s.te, s.tau)
+        if rel:
+            zs = sec.deviations_between(s.tau, s.z, s.impacts, rel)
+            states = []
+            for h, kind, z in zip(rel, kinds, zs):
+                tau = sec.tau_star if kind == "pi1" else (s.tau + sec.omega * h) % TWO_PI
+                (states if kind == "state" else events).append(
+                    self._state(s.ts + h, kind, tau, z))
+            events += self._measured(j0, states)
         events.sort(key=lambda e: e.t)
         return events

@@ -67,7 +67,8 @@ class Realtime(Loop):
         # its answers, early ones included, and (scheduled) its deadline
         self.schedule = ActuationSchedule(prediction=self.prediction, counts=self.stats)
         self.queue = []        # the current period's events not yet published, in time order
-        self._deviation = type(self.engine) is Engine   # the excursion check reads (dx, dv)
+        # the excursion check reads the 1-DOF (dx, dv): not an n-DOF model's z
+        self._deviation = type(self.engine) is Engine and self.engine.section is None
         self._scaled = None     # the model the watchdog's excursion scale is for
         self.watchdog = Watchdog(self.settings.watchdog)
 

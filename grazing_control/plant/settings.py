@@ -10,10 +10,25 @@ The model parameters (zeta, r, omega, delta_d, tau0, pi2_offset) are validated b
 :class:`grazing_control.oscillator.params.OscillatorParams` (spec section 1); the
 actuation delay is the one of docs/theory_delay.md (0 <= delay < T); the injected faults
 are :class:`grazing_control.plant.faults.FaultModel`'s (issue 8 section 3).
+
+With ``model_file`` (a YAML model of docs/ndof_model.md; issues 17, 32) the same table
+and the same :class:`SimSettings` describe an n-DOF scene: :func:`settings_from_values`
+loads the model (``delta_d``, when given, replaces the file's: ``grazing run
+--delta-d``) into :attr:`SimSettings.model`, and validates everything that is not the
+model -- mode, time scale, state stream period, timeouts, max periods, actuation delay,
+loss, jitter, seeds, the sensor -- with the model's forcing frequency, so that every
+bound on a time reads the n-DOF period T = 2 pi / omega. What an n-DOF scene does not
+build (yet) is refused with one line naming the parameter and why, never half-applied
+(:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives them), an
+initial state other than the grazing point, the velocity noise at Pi2, the injected
+measurement noise, the force pulse, the actuator, the compliant stop and friction, the
+drifting wall and fidelities other than exact. The engine runs either over one
+interface (:mod:`grazing_control.plant.engine`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 import sys
@@ -25,6 +40,8 @@ import numpy as np
 
 from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, Actuator
 from grazing_control.dynamics.simulation.fidelity import FIDELITIES
+from grazing_control.oscillator.ndof.flow import grazing_clearance
+from grazing_control.oscillator.ndof.model import NdofModel, load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.oscillator.contact import MAX_FRICTION, MAX_STIFFNESS
 from grazing_control.plant.contact_plant import CONTACTS, ContactPlant, contact_from_values
@@ -35,7 +52,7 @@ from grazing_control.plant.watchdog import WatchdogLimits
 __all__ = ["Parameter", "PARAMETERS", "SETTING_KEYS", "MODES", "ACTUATIONS", "ON_MISS",
            "MODEL_KEYS", "ABOVE_0", "FINITE", "below", "described_range", "FEASIBILITY",
            "SimSettings", "settings_from_values", "default_values", "initial_deviation",
-           "check_live_change", "LIVE_FACTOR"]
+           "check_live_change", "LIVE_FACTOR", "NOT_WITH_MODEL_FILE", "load_model_file"]
 
 TWO_PI = 2.0 * math.pi
 MODES = ("lockstep", "realtime")
@@ -340,6 +357,16 @@ class SimSettings:
     pre_roll: int = 0
     actuator: Actuator = IDEAL_ACTUATOR
     contact: ContactPlant | None = None
+    #: an n-DOF scene's model (with the scene's delta_d) and its file; None: the study's
+    #: 1-DOF oscillator of ``params`` (in an n-DOF scene ``params`` is the 1-DOF default
+    #: with the model's forcing frequency: only its period is read)
+    model: NdofModel | None = None
+    model_file: str = ""
+
+    @property
+    def delta_d(self) -> float:
+        """The plant's Delta d: the n-DOF model's, else the 1-DOF parameters'."""
+        return self.params.delta_d if self.model is None else self.model.delta_d
 
     @property
     def scheduled(self) -> bool:
@@ -349,8 +376,12 @@ class SimSettings:
         return self.actuation == "scheduled"
 
     def describe(self) -> str:
-        """One line for the node's start-up log: mode, scene, actuation, faults."""
-        text = (f"mode={self.mode} delta_d={self.params.delta_d!r} "
+        """One line for the node's start-up log: the model file (n-DOF), mode, scene,
+        actuation, faults."""
+        m = self.model
+        text = "" if m is None else (f"model_file={self.model_file} n={m.n} i_w={m.i_w} "
+                                     f"i_a={m.i_a} ")
+        text += (f"mode={self.mode} delta_d={self.delta_d!r} "
                 f"max_periods={self.max_periods} state_period={self.state_period} "
                 f"actuation={'scheduled' if self.scheduled else 'on_arrival'} "
                 f"actuation_delay={self.actuation_delay!r}")
@@ -388,14 +419,19 @@ def _finite(name, value, ok, valid):
     return value
 
 
-def settings_from_values(values: dict) -> SimSettings:
+def settings_from_values(values: dict, model_file: str = "",
+                         model: NdofModel | None = None) -> SimSettings:
     """Validate the sim node's parameter values; raise ParameterError naming the bad one.
 
     ``values`` maps names of :data:`PARAMETERS` to values; a name left out takes its
     default. The model parameters go through :class:`OscillatorParams` (its message names
     the parameter and its range, spec section 1); the initial state must be finite or NaN
-    (= X**) and not beyond the wall (x0 <= d).
+    (= X**) and not beyond the wall (x0 <= d). With ``model_file`` an n-DOF scene
+    (module docstring; ``model``: the file's model when already loaded, ``delta_d`` left
+    out: the file's).
     """
+    if model_file:
+        return _model_file_settings(values, model_file, model)
     values = {**default_values(), **values}
     p = OscillatorParams(**{k: values[k] for k in MODEL_KEYS})
     mode = str(values["mode"])
@@ -445,6 +481,81 @@ def settings_from_values(values: dict) -> SimSettings:
         delta_d_drift=_finite("delta_d_drift", values["delta_d_drift"], lambda v: True,
                               "a finite delta_d_drift (per period)"),
         pre_roll=pre_roll, contact=contact, **actuation)
+
+
+#: The table's values an n-DOF scene refuses unless left at their defaults, and why.
+NOT_WITH_MODEL_FILE = {
+    "zeta": "the model file gives the n-DOF model (M, C, K, f, omega, r, phase, pi2_offset)",
+    "r": "the model file gives the coefficient of restitution",
+    "omega": "the model file gives the forcing frequency",
+    "tau0": "the model file gives the forcing phase",
+    "pi2_offset": "the model file gives pi2_offset",
+    "x0": "an n-DOF scene starts at the grazing point X** (NaN)",
+    "v0": "an n-DOF scene starts at the grazing point X** (NaN)",
+    "noise": "the velocity noise at Pi2 is not built for n-DOF",
+    "measurement_noise": "the injected measurement noise is not built for n-DOF",
+    "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
+    "fidelity": "only the exact flow is built for n-DOF",
+    "delta_d_drift": "the drifting wall is not built for n-DOF",
+    "contact": "the compliant stop is not built for n-DOF (the rigid wall only)",
+    "contact_stiffness": "the compliant stop is not built for n-DOF (the rigid wall only)",
+    "contact_damping": "the compliant stop is not built for n-DOF (the rigid wall only)",
+    "friction": "dry friction is not built for n-DOF",
+    "friction_static": "dry friction is not built for n-DOF",
+    "actuator_bandwidth": "the first-order actuator is not built for n-DOF",
+    "actuator_latency": "the first-order actuator is not built for n-DOF",
+}
+
+
+def load_model_file(path: str) -> NdofModel:
+    """The model of a YAML file (docs/ndof_model.md); ParameterError naming ``model_file``
+    and the reason for a file that is missing, unreadable or invalid."""
+    from grazing_control.support.files import YamlFileError
+
+    try:
+        return load_model(path)
+    except ParameterError as exc:
+        raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
+    except YamlFileError as exc:       # "PATH: why" (support/files.read_yaml_file)
+        why = str(exc).removeprefix(f"{path}: ")
+        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
+                             f"YAML file ({why})") from None
+    except (OSError, TypeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
+                             f"YAML file ({reason.splitlines()[0] if reason else type(exc).__name__})"
+                             ) from None
+
+
+def _model_file_settings(values: dict, model_file: str, model: NdofModel | None) -> SimSettings:
+    """The settings of an n-DOF scene (module docstring): the file's model with the scene's
+    delta_d, the rest validated as the 1-DOF table's with the model's omega."""
+    model = load_model_file(model_file) if model is None else model
+    defaults = default_values()
+    for name, why in NOT_WITH_MODEL_FILE.items():
+        if name in values and not _same(values[name], defaults[name]):
+            raise ParameterError(f"{name}={values[name]!r} is invalid with model_file="
+                                 f"{model_file!r}: valid is its default "
+                                 f"{defaults[name]!r} ({why})")
+    if "delta_d" in values:
+        delta_d = float(values["delta_d"])
+        if not math.isfinite(delta_d):
+            raise ParameterError(f"delta_d={delta_d!r} is invalid: valid range is a finite "
+                                 "real number (d - d* of the model file's wall coordinate)")
+        model = dataclasses.replace(model, delta_d=delta_d)
+    rest = {k: v for k, v in values.items()
+            if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE}
+    # the 1-DOF validation with the n-DOF forcing frequency: its bounds on times read T
+    base = settings_from_values({**rest, "omega": model.omega})
+    return dataclasses.replace(base, model=model, model_file=str(model_file))
+
+
+def _same(value, default) -> bool:
+    """Whether a parameter value is its default (NaN equals NaN)."""
+    if isinstance(default, float) and isinstance(value, (int, float)) and not isinstance(
+            value, bool):
+        return float(value) == default or (math.isnan(default) and math.isnan(float(value)))
+    return value == default
 
 
 def _contact(values: dict, p: OscillatorParams, mode: str, fidelity: str,
@@ -621,9 +732,21 @@ def check_live_change(old: SimSettings, new: SimSettings, periods_done: int) -> 
     * ``state_period`` in (0, T/10^4) (over 10^4 state messages per period);
     * ``max_periods`` 0 (unbounded) where it was bounded, or at most ``periods_done``.
 
+    In an n-DOF scene (``old.model``) the scale a is the wall coordinate's amplitude d*
+    of the model's periodic response, and a change of the model (its ``delta_d``) is
+    refused: a live change of the n-DOF model is not built (the engine would have to
+    re-express z on the new model's section, as the 1-DOF engine's pending parameters).
     Static settings (the mode, the actuation, seeds) are read-only while running anyway.
     """
-    a = old.params.amplitude
+    if old.model is not None:
+        if new.delta_d != old.delta_d:   # the file is read-only: its delta_d is the change
+            raise ParameterError(
+                f"delta_d={new.delta_d!r} is invalid while an n-DOF scene runs: a live change "
+                f"of the n-DOF model is not built (valid: {old.delta_d!r}; set it before the "
+                "start)")
+        a = grazing_clearance(old.model)
+    else:
+        a = old.params.amplitude
     dd = new.params.delta_d
     if new.params.delta_d != old.params.delta_d and not -a <= dd <= a:
         raise ParameterError(f"delta_d={dd!r} is invalid while the scene runs: valid range is "
@@ -644,9 +767,10 @@ def check_live_change(old: SimSettings, new: SimSettings, periods_done: int) -> 
             raise ParameterError(f"{name}={n!r} is invalid while the scene runs: valid range "
                                  f"is [0, {a:.6g}] (at most the motion's amplitude a)")
     sp = new.state_period
-    if sp != old.state_period and 0.0 < sp < old.params.period * 1e-4:
+    period = old.params.period          # an n-DOF scene's: the model's omega (module doc)
+    if sp != old.state_period and 0.0 < sp < period * 1e-4:
         raise ParameterError(f"state_period={sp!r} is invalid while the scene runs: valid "
-                             f"range is 0 (off) or >= T/1e4 = {old.params.period * 1e-4:.6g}")
+                             f"range is 0 (off) or >= T/1e4 = {period * 1e-4:.6g}")
     mp = new.max_periods
     if mp != old.max_periods and (mp == 0 and old.max_periods != 0 or 0 < mp <= periods_done):
         raise ParameterError(

@@ -11,6 +11,10 @@ Controller replay (the regression test of a controller change)
     parameter record) and compared with the bag's own corrections: with the same gains
     they must be bit-identical; with others, a table of the differences and what the new
     gains would have commanded (open loop: the samples stay those of the recording).
+    An n-DOF scene's bag (issues 17, 32) is replayed the same way: its recorded Pi2
+    messages (every coordinate) are published as recorded to a controller_node with the
+    record's ``model_file`` and ``gains`` (or ``--controller-params``), the one law
+    k^T (X - X**) of every n.
 
 Simulator replay (open loop)
     ``sim_node`` runs in lockstep with the bag's model parameters and initial state; this
@@ -18,7 +22,10 @@ Simulator replay (open loop)
     A lockstep bag is reproduced sample for sample (<= 1e-12; bit-identical when the
     parameters are the recorded ones); a realtime run, whose corrections acted at their
     arrival and not on Pi2, departs, and the report says from which sample and how fast.
-    Recorded to ``OUT_sim``.
+    Recorded to ``OUT_sim``. Not built for an n-DOF scene: refused in one line before
+    anything starts (sim_node's initial state x0, v0 is a 1-DOF state, and an n-DOF scene
+    starts at X**; the engine replayed with the recorded corrections is the n-DOF check,
+    tests/test_ndof_nodes.py); ``--no-sim`` replays its controller.
 
 Both need rclpy (the PyPI wheels or a sourced ROS 2); the nodes are started as processes
 by :mod:`grazing_control.ros.launcher`, on a ROS domain of their own (``--domain-id``, default
@@ -84,6 +91,9 @@ def _controller_values(data, setup, controller_params, notes):
     if rec is not None:
         values = {k: v for k, v in rec.items() if k not in _NOT_SETTINGS}
         return values, "the bag's parameter record (controller_node)"
+    if setup is None:       # an n-DOF scene: its model file and gains are not inferred
+        raise ValueError(f"{data.path}: an n-DOF scene without the controller's parameter "
+                         "record: give --controller-params (its model_file and gains)")
     # no record: the package default if it is what the recording shows, else inferred
     default = CONFIG_DIR / "controller.yaml"
     doc = yaml.safe_load(default.read_text())
@@ -233,15 +243,21 @@ def _bag_writer(out: Path):
                                        "written_by": "grazing replay"}).open()
 
 
-def _refuse_ndof(bag, data) -> None:
-    """An n-DOF scene's bag (issue 17) is not replayed: ValueError saying so (its
-    numbers: grazing analyze, recordings/ndof_analysis.py)."""
+def _is_ndof(data) -> bool:
+    """Whether a loaded bag is an n-DOF scene's (recordings/ndof_analysis.is_ndof)."""
     from .ndof_analysis import is_ndof
 
-    if is_ndof(data):
-        raise ValueError(f"{bag}: an n-DOF scene (model_file in its parameter record, or "
-                         f"{data.joints} joints per Pi2 sample): grazing replay is built for "
-                         "the 1-DOF scenes only; grazing analyze reports its numbers")
+    return is_ndof(data)
+
+
+def _refuse_ndof_simulator(bag, data) -> None:
+    """The simulator replay of an n-DOF scene's bag is not built: ValueError, one line
+    saying what and why (module docstring)."""
+    if _is_ndof(data):
+        raise ValueError(f"{bag}: an n-DOF scene ({data.joints} joints per Pi2 sample): the "
+                         "simulator replay is not built for n > 1 (sim_node starts an n-DOF "
+                         "scene at X**, its x0, v0 are 1-DOF); give --no-sim to replay the "
+                         "controller")
 
 
 def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=None,
@@ -261,8 +277,8 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
     from grazing_control.ros.launcher import CONTROLLER_MODULE
 
     data = load(bag, topics)
-    _refuse_ndof(bag, data)
-    setup = resolve_setup(data, options or {})
+    ndof = _is_ndof(data)         # its model and gains: the record's (or the file's)
+    setup = None if ndof else resolve_setup(data, options or {})
     notes = []
     values, source = _controller_values(data, setup, controller_params, notes)
     samples = _pi2_samples(data)
@@ -329,9 +345,12 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
                     while time.monotonic() < due:
                         session.spin(max(0.0, min(due - time.monotonic(), 0.01)))
                 sec, nsec = divmod(int(stamp), _NS)
-                msg.header.stamp = Time(sec=sec, nanosec=nsec)
-                msg.position, msg.velocity = [x], [v]
-                pub.publish(msg)
+                if ndof:          # every coordinate, as recorded
+                    pub.publish(order[i])
+                else:
+                    msg.header.stamp = Time(sec=sec, nanosec=nsec)
+                    msg.position, msg.velocity = [x], [v]
+                    pub.publish(msg)
                 writer.write("/oscillator/pi2", order[i], time.time_ns())
                 if rate is None:
                     end = time.monotonic() + answer_timeout
@@ -411,7 +430,8 @@ def compare_corrections(orig, new, setup) -> dict:
            "first_differing_sample": int(np.flatnonzero(differ)[0]) if np.any(differ) else None,
            "original_control_on": on if on < n else None,
            "new_control_on": (int(np.flatnonzero(d1 != 0)[0]) if np.any(d1 != 0) else None),
-           "new_gains": {"c1": rec.get("c1"), "c2": rec.get("c2")} if rec else None}
+           "new_gains": ({"gains": rec.get("gains")} if rec.get("model_file") else
+                         {"c1": rec.get("c1"), "c2": rec.get("c2")}) if rec else None}
     phases = []
     for name, sl in (("before the original switch-on", slice(0, on)),
                      ("after the original switch-on", slice(on, n))):
@@ -427,7 +447,7 @@ def compare_corrections(orig, new, setup) -> dict:
     out["phases"] = phases
     # what the new gains would do in closed loop, from the core
     g = rec.get("c1"), rec.get("c2")
-    if setup.params is not None and None not in g:
+    if setup is not None and setup.params is not None and None not in g:
         from grazing_control.oscillator.control import Gains
         from grazing_control.dynamics.orbits.orbits import orbit_11
         try:
@@ -452,7 +472,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
     from grazing_control.ros.launcher import SIM_MODULE
 
     data = load(bag, topics)
-    _refuse_ndof(bag, data)
+    _refuse_ndof_simulator(bag, data)
     setup = resolve_setup(data, options or {})
     if setup.params is None:
         raise ValueError(f"{bag}: Delta d unknown: give --delta-d for the simulator replay")
@@ -597,7 +617,8 @@ def add_arguments(parser) -> None:
                       help="publish at the recorded timing scaled by R (2: twice as fast)")
     pace.add_argument("--as-fast-as-possible", action="store_true",
                       help="each sample waits for its answer (the default)")
-    parser.add_argument("--no-sim", action="store_true", help="skip the simulator replay")
+    parser.add_argument("--no-sim", action="store_true", help="skip the simulator replay "
+                        "(required for an n-DOF bag: its simulator replay is not built)")
     parser.add_argument("--no-controller", action="store_true",
                         help="skip the controller replay (OUT is then unused)")
     parser.add_argument("--domain-id", type=int, default=None,
@@ -618,7 +639,9 @@ def main(args):
         raise ValueError(f"--domain-id={args.domain_id} is invalid: valid range is 0..232")
     topics = parse_topic_option(args.topic)
     options = options_from_args(args)
-    load(args.bag, topics)      # refuse a bad bag or output before starting anything
+    data = load(args.bag, topics)   # refuse a bad bag or output before starting anything
+    if not args.no_sim:
+        _refuse_ndof_simulator(args.bag, data)
     out = Path(args.out)
     for path, used in ((out, not args.no_controller),
                        (out.with_name(out.name + "_sim"), not args.no_sim)):

@@ -121,14 +121,15 @@ from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, StartupError, Throttled,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key)
 from .controller_parameters import declare_parameters, gains_of
-from .controller_values import (NdofControlLaw, actuation_delay_from_values,
-                                capture_from_values, law_from_values, model_from_values,
-                                pulse_from_values, stream_from_values)
+from .controller_values import (ControlLaw, actuation_delay_from_values,
+                                capture_from_values, law_from_values,
+                                model_controller_from_values, model_from_values,
+                                model_stream_from_values, pulse_from_values,
+                                stream_from_values)
 from .controller_status import diagnose
 from .diagnostics import Updater
 from .model_watch import (WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC, describe_verdict,
                           watch_from_values, watch_row)
-from .ndof_control import ndof_controller_from_values, ndof_stream_from_values
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide
@@ -178,7 +179,7 @@ class ControllerNode(Node):
                 self.actuation_delay = actuation_delay_from_values(
                     {**self._values(), "omega": self.ndof.model.omega})
                 self.model = self.capture = None
-                self.stream = ndof_stream_from_values(self._values(), self.ndof)
+                self.stream = model_stream_from_values(self._values(), self.ndof)
                 if self.stream is not None:     # the section times and the phase check
                     self.model = self.ndof.model
             else:
@@ -360,15 +361,15 @@ class ControllerNode(Node):
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in _KEYS}
 
-    def _ndof_law(self, values: dict, gains) -> "NdofControlLaw":
-        """The n-DOF law of ``values`` and ``gains`` (ros/ndof_control.py); sets
-        :attr:`ndof`. The switches (enable_after, saturation, stale_after) are validated
-        as the 1-DOF law's."""
-        ndof = ndof_controller_from_values(values, self.model_file, gains)
+    def _ndof_law(self, values: dict, gains) -> ControlLaw:
+        """The law k^T (X - X**) of a model file's ``values`` and ``gains``
+        (controller_values.model_controller_from_values); sets :attr:`ndof`. The switches
+        (enable_after, saturation, stale_after) are validated as the 1-DOF law's."""
+        ndof = model_controller_from_values(values, self.model_file, gains)
         base = law_from_values({**values, "c1": 0.0, "c2": 0.0, "x_ref": 0.0, "v_ref": 0.0})
         self.ndof = ndof
-        return NdofControlLaw(ndof.gains, ndof.x_ref, ndof.v_ref, base.enable_after,
-                              base.saturation)
+        return ControlLaw(ndof.gains, ndof.x_ref, ndof.v_ref, base.enable_after,
+                          base.saturation)
 
     def _ndof_sample(self, data: bytes):
         """(key, x, v) of an n-DOF Pi2 sample (a JointState with n positions and n

@@ -9,7 +9,7 @@ from zeta, r, omega, pi2_offset), enable_after, saturation, stale_after, actuati
 controller validates and reports it: docs/nodes.md, "Scheduled actuation"), executor;
 delta_d (the plant's model, NaN: none), pi2_source, estimator, impact_source,
 sensor_noise, state_period, model_noise (stream mode); model_file and gains (an n-DOF
-scene, issue 17: Delta v = k^T (X - X**), :mod:`grazing_control.ros.ndof_control`; n, i_a,
+scene, issue 17: Delta v = k^T (X - X**), :mod:`grazing_control.ros.controller_values`; n, i_a,
 mu: the design file's section data, checked against the model; with pi2_source stream the
 model filter over the n-DOF map reads coordinate sensor_coordinate, issue 32); the model
 watch, re-identification, pulse, actuator, capture, rig and scheduling parameters.

@@ -1,13 +1,33 @@
-"""The controller's law and its scene, read from the node's parameter values (no ROS): Eq. 28
-with its switch, saturation and sample bookkeeping (:class:`ControlLaw`, the n-DOF law
-k^T (X - X**) beside it), the model the controller predicts with, the stream estimator,
-the pulse the plant acts, the capture rule and the actuation delay; each ``*_from_values``
-validates its values with one line naming the parameter (ParameterError)."""
+"""The controller's law and its scene, read from the node's parameter values (no ROS): the
+law Delta v = k^T (X - X**) on the Pi2 state with its switch, saturation and sample
+bookkeeping (:class:`ControlLaw`: for the study's 1-DOF oscillator k = (c1, c2), Eq. 28;
+for an n-DOF model file k = ``gains``, 2n values, :func:`model_controller_from_values`),
+the model the controller predicts with, the stream estimator, the pulse the plant acts,
+the capture rule and the actuation delay; each ``*_from_values`` validates its values with
+one line naming the parameter (ParameterError).
+
+An n-DOF scene (``model_file``, docs/ndof_model.md; issues 17, 32) answers each Pi2
+sample X = (x_0 .. x_{n-1}, v_0 .. v_{n-1}) with the kick on the actuated coordinate's
+velocity, X** the grazing orbit's state on Pi2, ``NdofFlow.particular(tau2)``
+(docs/theory_ndof.md, "Kick design"; the kick of
+:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`). The switch-on, the saturation
+and the stale-sample rules are the same :class:`ControlLaw`'s; the 1-DOF law's
+parameters (c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults (else refused
+with the reason). With ``pi2_source`` stream the Pi2 state is estimated from the sensor
+stream by the model filter over the exact n-DOF map (:func:`model_stream_from_values`:
+the position, and velocity where carried, of coordinate ``sensor_coordinate``). The
+section data the design's parameter file carries with the gains (``n``, ``i_a``,
+``omega``, ``pi2_offset``: :func:`grazing_control.dynamics.design.ndof_design.write_gain_yaml`)
+must be the model file's: gains designed for another model are refused, naming both
+values."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
+
+import numpy as np
 
 from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
@@ -16,28 +36,38 @@ from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEs
                                                         pulse_shape)
 from grazing_control.dynamics.simulation.actuator import Actuator
 from grazing_control.oscillator.control import Gains, correction
-from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.plant.ndof_settings import load_model_file
-from grazing_control.plant.settings import MAX_BANDWIDTH, below
+from grazing_control.oscillator.ndof.section import NdofSection
+from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
+from grazing_control.plant.settings import MAX_BANDWIDTH, below, load_model_file
 
 from .model_watch import WATCH_DEFAULTS, watch_from_values
-from .ndof_control import NdofLaw
 
-__all__ = ["ControlLaw", "NdofControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
+__all__ = ["ControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
            "model_from_values", "stream_from_values", "pulse_from_values",
-           "capture_from_values", "actuation_delay_from_values", "below_period", "model_omega"]
+           "capture_from_values", "actuation_delay_from_values", "below_period", "model_omega",
+           "ModelController", "model_controller_from_values", "model_stream_from_values",
+           "gain_vector_correction", "ONE_DOF_DEFAULTS"]
 
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
 
 
+def gain_vector_correction(k, x, v, x_ref, v_ref) -> float:
+    """Delta v = k^T (X - X**) for a sample (x, v) of n positions and n velocities
+    (docs/theory_ndof.md, "Kick design"); k (2n,), X**'s halves ``x_ref``, ``v_ref``."""
+    n = x_ref.size
+    return float(k[:n] @ (np.asarray(x, float) - x_ref) + k[n:] @ (np.asarray(v, float) - v_ref))
+
+
 class ControlLaw:
-    """Eq. 28 with a switch, a saturation and the sample bookkeeping (no ROS).
+    """Delta v = k^T (X - X**) with a switch, a saturation and the sample bookkeeping (no
+    ROS), for any n: the 1-DOF gains (c1, c2) are the n = 1 member, evaluated by the closed
+    form's expression (Eq. 28, :func:`grazing_control.oscillator.control.correction`).
 
     Parameters
     ----------
-    gains : Gains
-    x_ref, v_ref : float
+    gains : Gains, or the gain vector k (2n,) of an n-DOF model
+    x_ref, v_ref : float, or (n,) arrays
         X** on Pi2.
     enable_after : int
         First sample index (from 0) that is controlled; -1: only by :meth:`enable`.
@@ -61,6 +91,8 @@ class ControlLaw:
     def configure(self, gains, x_ref, v_ref, enable_after, saturation) -> None:
         self.gains, self.x_ref, self.v_ref = gains, x_ref, v_ref
         self.enable_after, self.saturation = enable_after, saturation
+        # the law's expression: Eq. 28's for (c1, c2), k^T (X - X**) for a gain vector
+        self._correction = correction if isinstance(gains, Gains) else gain_vector_correction
 
     @property
     def enabled(self) -> bool:
@@ -112,18 +144,13 @@ class ControlLaw:
             dv = math.copysign(self.saturation, dv)
         return dv
 
-    def _law(self, x: float, v: float) -> float:
-        """Eq. 28 before the saturation."""
-        return correction(self.gains, x, v, self.x_ref, self.v_ref)
+    def _law(self, x, v) -> float:
+        """k^T (X - X**) before the saturation (Eq. 28 for n = 1)."""
+        return self._correction(self.gains, x, v, self.x_ref, self.v_ref)
 
 
-class NdofControlLaw(NdofLaw, ControlLaw):
-    """:class:`ControlLaw` with the n-DOF law Delta v = k^T (X - X**) (issue 17,
-    :mod:`grazing_control.ros.ndof_control`): ``gains`` k, ``x_ref``/``v_ref`` X**'s
-    positions and velocities (arrays)."""
-
-
-#: Largest |c1|, |c2| accepted (the design's search limit, dynamics.design.gains.C2_LIMIT).
+#: Largest |c1|, |c2| (and |k_i| of an n-DOF gain vector) accepted (the design's search
+#: limit, dynamics.design.gains.C2_LIMIT).
 GAIN_LIMIT = 1e6
 
 
@@ -302,3 +329,137 @@ def model_omega(model_file: str, omega: float) -> float:
         return load_model_file(model_file).omega
     except ParameterError:
         return omega
+
+#: The 1-DOF law's parameters and their defaults: an n-DOF controller refuses any other
+#: value (the model file and ``gains`` give the n-DOF law). The 1-DOF model's defaults
+#: are filled in by :func:`model_controller_from_values`.
+ONE_DOF_DEFAULTS = {"c1": 0.0, "c2": 0.0, "x_ref": math.nan, "v_ref": math.nan,
+                    "zeta": OscillatorParams().zeta, "r": OscillatorParams().r}
+#: The section data of the design's parameter file and the value meaning "not given":
+#: given, each must be the model's.
+SECTION_DATA = {"n": -1, "i_a": -1, "omega": study_omega(),
+                "pi2_offset": OscillatorParams().pi2_offset}
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelController:
+    """What an n-DOF controller needs besides the law's switches: the model (with the
+    plant's delta_d), its pieces (:class:`NdofSection`: the flow, the kick), X** on Pi2,
+    the gains, and whether it predicts."""
+
+    model: object
+    section: NdofSection
+    gains: np.ndarray
+    x_ref: np.ndarray
+    v_ref: np.ndarray
+    predicts: bool
+
+    @property
+    def flow(self):
+        """The model's exact flow (``NdofFlow``)."""
+        return self.section.flow
+
+    def predict(self, x, v, dv: float, delay: float):
+        """The Pi2 sample after (x, v) with ``dv`` acting ``delay`` after it: one exact
+        period of the model (the plant engine's calls, plant.engine). Returns (x', v')."""
+        sec, f = self.section, self.section.flow
+        n = sec.n
+        z = f.to_deviation(f.tau2, np.concatenate([np.asarray(x, float), np.asarray(v, float)]))
+        tau = f.tau2
+        if delay > 0.0:
+            z = sec.advance(tau, z, delay).z
+            tau = (tau + sec.omega * delay) % (2.0 * math.pi)
+        z = sec.advance(tau, sec.kicked(z, dv), sec.period - delay).z
+        X = f.to_physical(f.tau2, z)
+        return X[:n], X[n:]
+
+
+def model_controller_from_values(values: dict, model_file: str, gains) -> ModelController:
+    """Validate an n-DOF controller's values (ParameterError naming the parameter).
+
+    ``gains``: the ``gains`` parameter (None when not given); ``values``: the 1-DOF
+    controller's parameters, of which c1, c2, x_ref, v_ref must stay at their defaults
+    and ``pi2_source`` at ``sample``; ``delta_d`` (finite) replaces the file's Delta d and
+    switches the prediction of the next correction on (NaN: the file's, no prediction).
+    """
+    model = load_model_file(model_file)
+    for name, default in ONE_DOF_DEFAULTS.items():
+        value = float(values.get(name, default))
+        if not (value == default or (math.isnan(value) and math.isnan(default))):
+            raise ParameterError(f"{name}={value!r} is invalid with model_file={model_file!r}:"
+                                 f" valid is its default {default!r} (the n-DOF law is "
+                                 "Delta v = k^T (X - X**) with k = gains and X** from the "
+                                 "model)")
+    for name, unset in SECTION_DATA.items():
+        value = values.get(name, unset)
+        want = getattr(model, name)
+        if value != unset and value != want:
+            raise ParameterError(f"{name}={value!r} is invalid with model_file={model_file!r}: "
+                                 f"valid is the model's {want!r} (the gains were designed "
+                                 "for another model)")
+    want = 2 * model.n
+    if gains is None:
+        raise ParameterError(f"gains is not given: with model_file it is required, {want} "
+                             f"values k (on x_0..x_{model.n - 1}, v_0..v_{model.n - 1})")
+    k = np.array(gains, dtype=float).reshape(-1)
+    if k.size != want:
+        raise ParameterError(f"gains has {k.size} values: valid is 2n = {want} for the "
+                             f"{model.n}-DOF model of {model_file!r} (k on x_0..x_"
+                             f"{model.n - 1}, v_0..v_{model.n - 1})")
+    if not np.all(np.abs(k) <= GAIN_LIMIT):
+        raise ParameterError(f"gains={k.tolist()!r} is invalid: valid range is |k_i| <= "
+                             f"{GAIN_LIMIT:g}, finite")
+    delta_d = float(values.get("delta_d", math.nan))
+    if math.isinf(delta_d):
+        raise ParameterError(f"delta_d={delta_d!r} is invalid: valid range is a finite real "
+                             "number (the plant's Delta d), or NaN for the file's")
+    if not math.isnan(delta_d):
+        model = dataclasses.replace(model, delta_d=delta_d)
+    section = NdofSection(model)
+    X = np.asarray(section.flow.particular(section.tau2), dtype=float)
+    n = model.n
+    k.setflags(write=False)
+    return ModelController(model, section, k, X[:n].copy(), X[n:].copy(),
+                           predicts=not math.isnan(delta_d))
+
+
+def model_stream_from_values(values: dict, ndof: ModelController):
+    """The n-DOF scene's stream estimator for ``pi2_source`` stream, None for ``sample``
+    (ParameterError naming the parameter): the model filter over the exact n-DOF map
+    (:class:`grazing_control.dynamics.estimation.stream.StreamEstimator` with the
+    controller's model, docs/theory_estimation.md (E11)) reading coordinate
+    ``sensor_coordinate``; it needs the plant's ``delta_d`` (``ndof.predicts``), the
+    estimator ``model``, ``sensor_noise`` > 0 and impacts detected in the stream."""
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
+
+    source = values.get("pi2_source", "sample")
+    if source == "sample":
+        return None
+    if source != "stream":
+        raise ParameterError(f"pi2_source={source!r} is invalid: valid values are sample, "
+                             "stream")
+    if not ndof.predicts:
+        raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
+                             "the plant's finite Delta d (the estimator's model needs the wall)")
+    if values.get("impact_source", "stream") != "stream":
+        raise ParameterError(f"impact_source={values['impact_source']!r} is invalid with "
+                             "model_file: valid is stream (the n-DOF model filter finds the "
+                             "impacts in its exact motion)")
+    for name in ("estimate_bias", "track_delta_d", "capture", "reidentify"):
+        if values.get(name):
+            raise ParameterError(f"{name}=True is invalid with model_file: valid is false "
+                                 "(not built for n-DOF)")
+    if int(values.get("consistency_window", 0) or 0) > 0:
+        raise ParameterError(f"consistency_window={values['consistency_window']!r} is invalid "
+                             "with model_file: valid is 0 (not built for n-DOF)")
+    floor = float(values.get("model_noise", 1e-2))
+    if not (math.isfinite(floor) and floor >= 0.0):
+        raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "
+                             "model_noise >= 0 (process noise per period, in sensor_noise)")
+    return StreamEstimator(ndof.model, values.get("estimator", "model"),
+                           float(values.get("sensor_noise", 0.0)), "stream",
+                           float(values.get("state_period", 0.0)), floor,
+                           bool(values.get("answer_after_section", False)),
+                           float(values.get("answer_lead", 0.0)),
+                           kernel=False,     # the n-DOF motion is the core's (E11)
+                           coordinate=int(values.get("sensor_coordinate", 0)))

@@ -21,6 +21,16 @@ with the plant's X** (the reference is exact: only the gains carry the error; as
 multiplier of the controlled 1/1 orbit (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`
 of the mismatched plant with the nominal gains) on a logarithmic grid of Delta d from
 ``ceiling`` towards grazing, the band's outer end bisected in log |Delta d|.
+
+For n > 1 (issue 32; docs/theory_mismatch.md section 5) the same band is measured over
+the exact n-DOF map: the nominal model is an :class:`~grazing_control.oscillator.ndof.NdofModel`,
+the plant has a whole matrix (``M``, ``C``, ``K``), one symmetric pair of entries
+(``M[i,j]``, ``C[i,j]``, ``K[i,j]``, 0-based), ``r`` or ``omega`` off by (1 + e)
+(:func:`mismatched_model`), the gains are the nominal design's k (the kick k^T z on
+Pi2), and the multipliers are those of the controlled 1/1 orbit of the plant
+(dynamics/orbits/ndof_branch.py: the exact branch, its structured multipliers, and the
+certified check that the period has no other contact). There is no series for n > 1:
+``predicted`` is nan.
 """
 
 from __future__ import annotations
@@ -36,11 +46,14 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
 from grazing_control.dynamics.maps.perturbation import series_coefficients
 
-__all__ = ["PARAMETERS", "mismatched", "largest_multiplier", "Band", "instability_band",
-           "predicted_band"]
+__all__ = ["PARAMETERS", "MODEL_PARAMETERS", "mismatched", "mismatched_model",
+           "largest_multiplier", "model_largest_multiplier", "Band", "instability_band",
+           "predicted_band", "tolerated_error"]
 
 #: The parameters an error is put on.
 PARAMETERS = ("zeta", "omega", "r")
+#: The n-DOF parameters (besides entries ``M[i,j]``, ``C[i,j]``, ``K[i,j]``).
+MODEL_PARAMETERS = ("M", "C", "K", "r", "omega")
 
 
 def mismatched(p: OscillatorParams, name: str, error: float) -> OscillatorParams:
@@ -50,6 +63,70 @@ def mismatched(p: OscillatorParams, name: str, error: float) -> OscillatorParams
     if not (math.isfinite(error) and error > -1.0):
         raise ParameterError(f"error={error!r} is invalid: valid range is a relative error > -1")
     return p.with_(**{name: getattr(p, name) * (1.0 + error)})
+
+
+def _relative_error(error: float) -> float:
+    if isinstance(error, bool) or not isinstance(error, (int, float, np.floating)) or \
+            not (math.isfinite(error) and error > -1.0):
+        raise ParameterError(f"error={error!r} is invalid: valid range is a relative error > -1")
+    return float(error)
+
+
+def mismatched_model(model, name: str, error: float):
+    """The n-DOF plant: ``model`` with ``name`` multiplied by (1 + error): a whole matrix
+    ``M``, ``C``, ``K``; the symmetric pair of entries ``X[i,j]`` and ``X[j,i]`` of one
+    (0-based); ``r``; ``omega``. Delta d stays relative to the plant's own d*, as in
+    :func:`mismatched`. Raises ParameterError naming ``name`` or ``error``, or the
+    model field that the change makes invalid (e.g. K no longer semi-definite)."""
+    import dataclasses
+    import re
+
+    error = _relative_error(error)
+    if name in ("r", "omega"):
+        return dataclasses.replace(model, **{name: getattr(model, name) * (1.0 + error)})
+    m = re.fullmatch(r"([MCK])(?:\[(\d+),(\d+)\])?", name) if isinstance(name, str) else None
+    if m is None or (m.group(2) is not None and
+                     not (int(m.group(2)) < model.n and int(m.group(3)) < model.n)):
+        raise ParameterError(
+            f"name={name!r} is invalid: valid values are {', '.join(MODEL_PARAMETERS)} and "
+            f"M[i,j], C[i,j], K[i,j] with 0 <= i, j < {model.n}")
+    field = m.group(1)
+    a = np.array(getattr(model, field), dtype=float)
+    if m.group(2) is None:
+        a = a * (1.0 + error)
+    else:
+        i, j = int(m.group(2)), int(m.group(3))
+        a[i, j] *= 1.0 + error
+        if i != j:
+            a[j, i] *= 1.0 + error
+    return dataclasses.replace(model, **{field: a})
+
+
+def model_largest_multiplier(model, gains, delay: float = 0.0) -> float:
+    """max |lambda| of the controlled 1/1 orbit of the n-DOF ``model`` at its delta_d
+    (dynamics/orbits/ndof_branch.py: ``orbit_at``); +inf where there is none, or where the
+    period has another contact. Without a delay the branch's structured multipliers
+    (``branch_multipliers``) and the certified ``other_contacts``; with one (the kick
+    ``delay`` after Pi2, docs/theory_ndof.md section 14) one step of the exact delayed
+    map from the orbit's Pi2 state (dynamics/maps/ndof_map.py): exactly one impact, back
+    to the start within 1e-9 of the state's scale, and the eigenvalues of its Jacobian
+    (D3)."""
+    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.orbits import ndof_branch
+
+    try:
+        point = ndof_branch.orbit_at(model, gains, model.delta_d, delay=delay)
+        if delay == 0.0:
+            if ndof_branch.other_contacts(model, gains, point) != 0:
+                return math.inf
+            return float(np.max(np.abs(ndof_branch.branch_multipliers(model, gains, point))))
+        step = NdofMap(model, gains, delay).step(point.pi2_state, jacobian=True)
+        scale = 1.0 + float(np.max(np.abs(point.pi2_state)))
+        if len(step.impacts) != 1 or not np.max(np.abs(step.state - point.pi2_state)) <= 1e-9 * scale:
+            return math.inf
+        return float(np.max(np.abs(np.linalg.eigvals(step.jacobian))))
+    except (ImpactCapError, InitialStateError, ValueError, ArithmeticError, RuntimeError):
+        return math.inf
 
 
 def largest_multiplier(p: OscillatorParams, gains: Gains) -> float:
@@ -94,34 +171,67 @@ def predicted_band(plant: OscillatorParams, gains: Gains) -> float:
     return min(ends) if ends else 0.0
 
 
-def instability_band(nominal: OscillatorParams, gains: Gains, name: str, error: float, *,
+def instability_band(nominal, gains, name: str, error: float, *,
                      floor: float = 1e-14, ceiling: float = 1e-2, per_decade: int = 4,
-                     rtol: float = 1e-3) -> Band:
+                     rtol: float = 1e-3, delay: float = 0.0) -> Band:
     """The band of Delta d next to grazing where the mismatched plant's controlled orbit
     fails (max |lambda| >= 1, or no 1/1 orbit), exact route (module docstring).
 
-    The scan runs from -ceiling to -floor; the band is the run of failing points that
-    reaches the floor, its outer end bisected in log |Delta d| to ``rtol`` relative.
+    ``nominal`` is OscillatorParams with :class:`Gains`, or an n-DOF model with its gain
+    vector k (2n) acting ``delay`` after Pi2 (docs/theory_ndof.md section 14; n-DOF
+    only: a 1-DOF delay is part of its Gains). The scan runs from -ceiling to -floor; the band is the run of failing
+    points that reaches the floor, its outer end bisected in log |Delta d| to ``rtol``
+    relative.
     """
-    plant = mismatched(nominal, name, error)
+    if isinstance(nominal, OscillatorParams):
+        plant = mismatched(nominal, name, error)
+
+        def rho(dd):
+            return largest_multiplier(plant.with_(delta_d=dd), gains)
+        pred = predicted_band(plant, gains)
+    else:
+        import dataclasses
+
+        from grazing_control.dynamics.maps.ndof_map import NdofMap
+
+        plant = mismatched_model(nominal, name, error)
+        NdofMap(plant, gains, delay)   # refuses bad gains or delay by name, before the scan
+
+        def rho(dd):
+            return model_largest_multiplier(dataclasses.replace(plant, delta_d=dd), gains, delay)
+        pred = math.nan
+    end, scan = _band_end(rho, floor, ceiling, per_decade, rtol)
+    return Band(name, error, end, pred, floor, ceiling, scan)
+
+
+def _band_end(rho, floor: float, ceiling: float, per_decade: int, rtol: float):
+    """(end, scan) of :func:`instability_band` for the largest multiplier ``rho(Delta d)``."""
     n = int(round(per_decade * math.log10(ceiling / floor))) + 1
     dds = -np.logspace(math.log10(ceiling), math.log10(floor), n)
-    rhos = [largest_multiplier(plant.with_(delta_d=float(d)), gains) for d in dds]
+    rhos = [rho(float(d)) for d in dds]
     fails = [not r < 1.0 for r in rhos]
     scan = tuple((float(d), float(r)) for d, r in zip(dds, rhos))
-    pred = predicted_band(plant, gains)
     if not fails[-1]:
-        return Band(name, error, 0.0, pred, floor, ceiling, scan)
+        return 0.0, scan
     k = len(fails) - 1
     while k > 0 and fails[k - 1]:
         k -= 1
     if k == 0:
-        return Band(name, error, float(dds[0]), pred, floor, ceiling, scan)
+        return float(dds[0]), scan
     stable, failing = math.log10(-dds[k - 1]), math.log10(-dds[k])
     while stable - failing > rtol / math.log(10.0):
         mid = 0.5 * (stable + failing)
-        if largest_multiplier(plant.with_(delta_d=-10.0 ** mid), gains) < 1.0:
+        if rho(-10.0 ** mid) < 1.0:
             stable = mid
         else:
             failing = mid
-    return Band(name, error, -10.0 ** failing, pred, floor, ceiling, scan)
+    return -10.0 ** failing, scan
+
+
+def tolerated_error(band_end: float, error: float, delta_d: float) -> float:
+    """The relative error that the design tolerates at ``delta_d`` (< 0), from one band
+    end by the e^2 law (docs/theory_mismatch.md (M1)): |e| sqrt(delta_d / end); inf where
+    the error opens no band."""
+    if band_end == 0.0:
+        return math.inf
+    return abs(error) * math.sqrt(delta_d / band_end)

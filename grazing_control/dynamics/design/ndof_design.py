@@ -25,6 +25,10 @@ grazing on Pi1 is (§2)
   ``delay`` later; for 0 <= delay < T - s (before the grazing phase) everything above
   holds with b replaced by b_delay = Phi(-delay) e_{n + i_a} (every function takes
   ``delay``, default 0: today's design, the same floats).
+* A force pulse, maybe through a first-order actuator (§15): ``delay`` may be an
+  :class:`Actuation` (the pulse of ``width`` centred ``delay`` after the sample, the
+  actuator's time constant and latency); b is then the pulse's effective input vector
+  b_w (Eq. (N10)), everything else unchanged; :func:`pulse_design` is the entry point.
 """
 
 from __future__ import annotations
@@ -62,6 +66,10 @@ __all__ = [
     "cancel_first_markov",
     "controller_parameters",
     "write_gain_yaml",
+    "Actuation",
+    "pulse_design",
+    "design_actuation",
+    "actuation_parameters",
 ]
 
 #: Condition sets of :func:`admissible_mu` (as dynamics/design/gains.py): 'impacting' = the
@@ -87,15 +95,72 @@ def _transition(model: NdofModel, t: float) -> np.ndarray:
     return _flow(model).transition(t)
 
 
+@dataclass(frozen=True)
+class Actuation:
+    """How the correction k^T z acts (§15): a force pulse of ``width`` w > 0 on the
+    actuated coordinate centred ``delay`` after the sample (it starts at
+    :func:`grazing_control.dynamics.simulation.actuation.pulse_start`), carrying the
+    impulse m_a k^T z, through a first-order actuator of ``time_constant`` tau_a >= 0 and
+    ``latency`` L >= 0 (0, 0: the ideal pulse). Passed as ``delay`` to every function of
+    this module."""
+
+    delay: float = 0.0
+    width: float = 0.0
+    time_constant: float = 0.0
+    latency: float = 0.0
+
+    def __post_init__(self):
+        for name in ("delay", "width", "time_constant", "latency"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating,
+                                                                 np.integer)) \
+                    or not (math.isfinite(value) and value >= 0.0):
+                raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
+                                     f"{name} >= 0")
+            object.__setattr__(self, name, float(value))
+        if not self.width > 0.0:
+            raise ParameterError(f"width={self.width!r} is invalid: valid range is a pulse "
+                                 f"width > 0 (width 0 is the kick: pass the delay itself)")
+
+    def start(self, model: NdofModel) -> float:
+        """When the commanded pulse starts after the sample (centred at ``delay``)."""
+        from grazing_control.dynamics.simulation.actuation import pulse_start
+
+        return pulse_start(model.period, self.delay, self.width)
+
+    def end(self, model: NdofModel) -> float:
+        """When the commanded pulse reaches its end at the mass: start + L + w."""
+        return self.start(model) + self.latency + self.width
+
+
 def _vectors(model: NdofModel, delay: float = 0.0):
     """(w, e_v, b): the wall coordinate's position and velocity rows, the kick direction
-    seen on Pi2, b = Phi(-delay) e_{n + i_a} (§14; e_{n + i_a} itself without delay)."""
+    seen on Pi2, b = Phi(-delay) e_{n + i_a} (§14; e_{n + i_a} itself without delay); for
+    an :class:`Actuation` the pulse's effective input vector b_w (§15, (N10))."""
     n = model.n
     eye = np.eye(2 * n)
     b = eye[n + model.i_a]
-    if delay != 0.0:
+    if isinstance(delay, Actuation):
+        b = _pulse_vector(model, delay)
+    elif delay != 0.0:
         b = _transition(model, -_delay(model, delay)) @ b
     return eye[model.i_w], eye[n + model.i_w], b
+
+
+def _pulse_vector(model: NdofModel, act: Actuation) -> np.ndarray:
+    """b_w of the pulse (and actuator) ``act``, checked to end before the grazing phase:
+    start + L + w < T - s (§15)."""
+    from grazing_control.oscillator.ndof.forced import actuated_input
+
+    reach = model.period - model.pi2_offset / model.omega
+    start = act.start(model)
+    if not act.end(model) < reach:
+        raise ParameterError(
+            f"width={act.width!r} is invalid with delay={act.delay!r} and latency="
+            f"{act.latency!r}: valid range is start + latency + width < T - s = {reach:.10g} "
+            f"(the pulse must act before the grazing phase, docs/theory_ndof.md §15)")
+    return actuated_input(_flow(model), start + act.latency, act.width, act.time_constant,
+                          reach)
 
 
 def _delay(model: NdofModel, delay) -> float:
@@ -438,7 +503,8 @@ def evaluate_design(model: NdofModel, mu: float, delay: float = 0.0) -> NdofDesi
     k = gain_family(model, mu, delay)
     return NdofDesign(float(mu), k, transmission_zeros(model, delay),
                       limit_multipliers(model, mu, delay),
-                      existence_coefficient(model, mu, delay), float(delay))
+                      existence_coefficient(model, mu, delay),
+                      delay if isinstance(delay, Actuation) else float(delay))
 
 
 # -- the admissible set (§8) ------------------------------------------------------------
@@ -578,8 +644,51 @@ def controller_parameters(model: NdofModel, design: NdofDesign, model_file) -> d
         "omega": float(model.omega),
         "pi2_offset": float(model.pi2_offset),
         "mu": float(design.mu),
-        **({"actuation_delay": float(design.delay)} if design.delay != 0.0 else {}),
+        **actuation_parameters(design.delay),
     }
+
+
+def actuation_parameters(delay) -> dict:
+    """The gain file's actuation entries: ``actuation_delay`` (when not 0), and for a
+    pulse ``pulse_width``, ``actuator_time_constant``, ``actuator_latency`` (§15)."""
+    if isinstance(delay, Actuation):
+        return {"actuation_delay": delay.delay, "pulse_width": delay.width,
+                "actuator_time_constant": delay.time_constant,
+                "actuator_latency": delay.latency}
+    return {"actuation_delay": float(delay)} if delay != 0.0 else {}
+
+
+def design_actuation(delay: float = 0.0, pulse_width: float = 0.0,
+                     actuator_bandwidth: float = 0.0, actuator_latency: float = 0.0):
+    """The ``delay`` argument of this module for `grazing design --model M --delay D
+    --pulse-width W [--actuator-bandwidth B] [--actuator-latency L]`: D itself without a
+    pulse (the delayed kick, §14), else the :class:`Actuation` with tau_a = 1 / B (B = 0:
+    the ideal pulse) (§15). ParameterError naming an option that is negative or not
+    finite, or an actuator option given without a pulse width."""
+    for name, value in (("pulse_width", pulse_width), ("actuator_bandwidth", actuator_bandwidth),
+                        ("actuator_latency", actuator_latency)):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
+                                 f"{name} >= 0")
+    if pulse_width == 0.0:
+        if actuator_bandwidth or actuator_latency:
+            raise ParameterError("pulse_width=0.0 is invalid with an actuator: valid range is "
+                                 "pulse_width > 0 (the design is for the pulse's force "
+                                 "profile)")
+        return delay
+    tau_a = 1.0 / actuator_bandwidth if actuator_bandwidth > 0.0 else 0.0
+    return Actuation(delay, pulse_width, tau_a, actuator_latency)
+
+
+def pulse_design(model: NdofModel, mu: float, delay: float = 0.0, width: float = 0.0,
+                 time_constant: float = 0.0, latency: float = 0.0) -> NdofDesign:
+    """The design for a correction acting as a force pulse of ``width`` centred ``delay``
+    after the sample, through a first-order actuator (``time_constant``, ``latency``)
+    (§15; the `grazing design --model M --pulse-width W` route). Width 0 without an
+    actuator: the delayed kick's design (§14), the same floats."""
+    if width == 0.0 and time_constant == 0.0 and latency == 0.0:
+        return evaluate_design(model, mu, delay)
+    return evaluate_design(model, mu, Actuation(delay, width, time_constant, latency))
 
 
 def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,

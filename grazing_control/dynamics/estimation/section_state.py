@@ -51,6 +51,8 @@ from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.ndof import impact as ndof_impact
 from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_flow,
+                                                    static_deflection)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -339,16 +341,16 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
 
     With an n-DOF model for ``p`` (:class:`~grazing_control.oscillator.ndof.model.NdofModel`)
     it is the exact n-DOF motion (:func:`_ndof_trajectory`): z (m, 2n), jac (m, 2n, 2n),
-    end (2n,), monodromy (2n, 2n), the same impacts; the kick only (no pulse, actuator
-    or wall sensitivity).
+    end (2n,), monodromy (2n, 2n), the same impacts; the kick or the ideal force pulse
+    of ``width`` (no actuator or wall sensitivity).
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
     if isinstance(p, NdofModel):
-        if width != 0.0 or wall or actuator is not None:
-            raise ParameterError("width, wall and actuator are invalid for an n-DOF model: "
-                                 "its correction is the velocity kick (width 0, no actuator)")
-        return _ndof_trajectory(p, z0, s, correction, delay, duration)
+        if wall or actuator is not None:
+            raise ParameterError("wall and actuator are invalid for an n-DOF model: its "
+                                 "correction is the velocity kick or the ideal force pulse")
+        return _ndof_trajectory(p, z0, s, correction, delay, duration, width, force_limit)
     if actuator is not None and not (actuator.ideal and force0 == 0.0):
         return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
                                     force_limit, actuator, force0)
@@ -467,14 +469,22 @@ def _ndof_transitions(flow: NdofFlow, h) -> np.ndarray:
 
 
 def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
-                     duration: float):
+                     duration: float, width: float = 0.0, force_limit: float = math.inf):
     """:func:`trajectory` of the n-DOF oscillator (docs/theory_estimation.md, (E11)): from
     the Pi2 deviation z0 (2n) before the correction, the kick v_{i_a} += correction at
     ``delay``; between events z(s) = Phi(s - s_e) z_e, d z(s) / d z0 = Phi(s - s_e) M_e,
     and an impact at t_i (from :func:`grazing_control.oscillator.ndof.impact.advance`)
     puts z- = Phi(t_i - s_e) z_e on the wall with its v-, z+ with v+ (the other
     velocities unchanged) and M <- S Phi(t_i - s_e) M (S the saltation matrix).
-    A motion that chatters or sticks (refused by the n-DOF core) raises ValueError."""
+
+    With ``width`` > 0 the correction is the force pulse F = m_a correction / width
+    (clipped to +-``force_limit``) on the actuated coordinate, centred at ``delay``
+    (:func:`correction_legs`; docs/theory_ndof.md section 15): during it the deviation
+    less the static deflection sigma F obeys the free flow against the wall at
+    Delta d - sigma_w F (oscillator/ndof/forced.py), so z(s) = Phi(s - s_e)(z_e - sigma F)
+    + sigma F and the saltation matrices are the shifted flow's; F does not depend on z0
+    (the correction is known), so the Jacobian keeps its form.
+    A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError."""
     flow = _ndof_flow(model)
     n, w = model.n, model.i_w
     z = np.array(z0, dtype=float).reshape(-1)
@@ -482,36 +492,43 @@ def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
         raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
     m = np.eye(2 * n)
     events, impacts = [], []
-    legs = [(0.0, delay, 0.0), (delay, duration, correction)] if delay > 0.0 else \
-        [(0.0, duration, correction)]
-    for start, end, kick in legs:
+    ma = actuated_mass(flow) if width > 0.0 else 1.0
+    legs = correction_legs(correction, delay, duration, width, force_limit / ma)
+    for start, end, kick, force in legs:
+        force *= ma
         z = z.copy()
         z[n + model.i_a] += kick
-        events.append((start, z, m))
+        fl = forced_flow(flow, force)
+        shift = static_deflection(flow) * force if force else np.zeros(2 * n)
+        events.append((start, z - shift, m, shift))
         try:
-            seg = ndof_impact.advance(flow, (flow.tau2 + model.omega * start) % TWO_PI, z,
-                                      end - start)
+            seg = ndof_impact.advance(fl, (flow.tau2 + model.omega * start) % TWO_PI,
+                                      z - shift, end - start)
         except ndof_impact.ChatteringError as exc:
             raise ValueError(f"the model's motion chatters or sticks: no fit ({exc})") from None
-        t_e, z_e = start, z
+        t_e, z_e = start, z - shift
         for imp in seg.impacts:
+            if imp.sticking:   # issue 32: advance sticks instead of raising
+                raise ValueError(f"the model's motion sticks at t={start + imp.dt:.9g}: no fit")
             ti = start + imp.dt
             phi = flow.transition(ti - t_e)
-            wall_x, rest_v = flow.on_wall(imp.phase)
+            wall_x, rest_v = fl.on_wall(imp.phase)
             z_minus = phi @ z_e
             z_minus[w], z_minus[n + w] = wall_x, imp.v_minus + rest_v
-            m = ndof_impact.saltation_matrix(flow, imp.phase, z_minus) @ phi @ m
+            m = ndof_impact.saltation_matrix(fl, imp.phase, z_minus) @ phi @ m
             z_e = z_minus.copy()
             z_e[n + w] = imp.v_plus + rest_v
             t_e = ti
-            events.append((ti, z_e, m))
+            events.append((ti, z_e, m, shift))
             impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
         m = flow.transition(end - t_e) @ m
-        z = np.array(seg.z, dtype=float)
+        z = np.array(seg.z, dtype=float) + shift
     times = np.array([e[0] for e in events])
     idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
     phi = _ndof_transitions(flow, s - times[idx])
     out = np.einsum("mij,mj->mi", phi, np.array([e[1] for e in events])[idx])
+    if width > 0.0:
+        out = out + np.array([e[3] for e in events])[idx]
     jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
     return out, jac, z, m, impacts
 

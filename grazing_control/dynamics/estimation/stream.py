@@ -397,7 +397,9 @@ class StreamEstimator:
                 try:
                     new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
                                                 at - (k - 1) * T, floor=self.floor,
-                                                coordinate=self.coordinate)
+                                                coordinate=self.coordinate,
+                                                width=self.pulse[0],
+                                                force_limit=self.pulse[1])
                 except (ValueError, np.linalg.LinAlgError, ArithmeticError):
                     continue
                 if chi2 <= n + CHI2_SIGMAS * math.sqrt(2.0 * n):
@@ -407,7 +409,9 @@ class StreamEstimator:
         z, source = start.z, "prior"
         if held is not None:
             try:
-                z = tuple(float(a) for a in predict_section(p, held.z, dv, at - (k - 1) * T))
+                z = tuple(float(a) for a in predict_section(
+                    p, held.z, dv, at - (k - 1) * T, width=self.pulse[0],
+                    force_limit=self.pulse[1]))
                 source = "predicted"
             except (ValueError, ArithmeticError):
                 pass

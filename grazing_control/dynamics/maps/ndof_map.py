@@ -16,6 +16,13 @@ M2 (M1 + b k^T) (M1, M2 the monodromies of the two pieces; docs/theory_delay.md 
 the same for every n), and det DP has no product formula (an impact inside the delay
 window breaks it): :meth:`NdofMap.jacobian_det` returns None.
 
+With a pulse ``width`` w > 0 the correction k^T z is a force pulse on the actuated
+coordinate instead of the kick: F = m_a k^T z / w on [start, start + w], centred
+``delay`` after the sample (start = :func:`grazing_control.dynamics.simulation.actuation.pulse_start`,
+the 1-DOF rule), flowed exactly with impacts (:func:`pulse_step`,
+oscillator/ndof/forced.py; docs/theory_ndof.md section 15); through a first-order
+actuator the force is a third kind of state (:func:`actuated_step`).
+
 Its Jacobian is the product in time order of the transition matrices Phi over the smooth
 pieces, the saltation matrices S at the impacts and G:
 DP = Phi(T - t_m) S_m ... S_1 Phi(t_1) G, with
@@ -31,17 +38,22 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.forced import (actuated_mass, advance_with_force,
+                                                    lag_advance, static_deflection)
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.maps.model import SectionMap, Step
 
-__all__ = ["NdofMap", "MODEL_PARAMETERS"]
+__all__ = ["NdofMap", "MODEL_PARAMETERS", "pulse_step", "actuated_step", "check_pulse"]
+
+TWO_PI = 2.0 * math.pi
 
 #: Model fields :meth:`NdofMap.with_parameter` may change (besides the gains k0 .. k{2n-1}
 #: and the actuation ``delay``).
@@ -74,6 +86,9 @@ class NdofMap(SectionMap):
     delay : float
         Actuation delay: the kick acts this long after the sample, 0 <= delay < T
         (module docstring).
+    width : float
+        Pulse width w >= 0: the correction is a force pulse of this width centred
+        ``delay`` after the sample (0: the kick; module docstring).
 
     Attributes
     ----------
@@ -86,6 +101,7 @@ class NdofMap(SectionMap):
     model: NdofModel
     gains: np.ndarray | None = None
     delay: float = 0.0
+    width: float = 0.0
     flow: NdofFlow = field(init=False, repr=False)
     dimension: int = field(init=False)
 
@@ -100,6 +116,10 @@ class NdofMap(SectionMap):
                                  f"T = {self.model.period:.10g}")
         object.__setattr__(self, "delay", float(delay))
         object.__setattr__(self, "flow", NdofFlow.of(self.model))
+        object.__setattr__(self, "width", _pulse_width(self.model, self.width))
+        if self.width != 0.0:
+            check_pulse(self.model, self.pulse_start, self.width)
+            static_deflection(self.flow)       # K invertible, else ParameterError
         object.__setattr__(self, "dimension", 2 * self.model.n)
 
     # ------------------------------------------------------------- the protocol
@@ -126,6 +146,8 @@ class NdofMap(SectionMap):
         z = np.array(state, dtype=float).reshape(-1)
         if z.shape != (self.dimension,):
             raise ParameterError(f"state has {z.size} entries: valid is 2n = {self.dimension}")
+        if self.width != 0.0 and self.gains is not None:
+            return self._pulse_step(z, jacobian)
         if self.delay != 0.0 and self.gains is not None:
             return self._delayed_step(z, jacobian)
         if self.gains is not None:
@@ -152,14 +174,33 @@ class NdofMap(SectionMap):
         shifted = [i._replace(dt=i.dt + self.delay) for i in second.impacts]
         return Step(second.z, jac, tuple(first.impacts) + tuple(shifted))
 
+    @property
+    def pulse_start(self) -> float:
+        """When the pulse starts after the sample: centred at ``delay``, within [0, T - w)
+        (:func:`grazing_control.dynamics.simulation.actuation.pulse_start`)."""
+        from grazing_control.dynamics.simulation.actuation import pulse_start
+
+        return pulse_start(self.model.period, self.delay, float(self.width))
+
+    def _pulse_step(self, z: np.ndarray, jacobian: bool) -> Step:
+        """The correction k^T z as a pulse: :func:`pulse_step`, Jacobian with the force's
+        dependence on z (F = m_a k^T z / w)."""
+        out = pulse_step(self.flow, z, float(self.gains @ z), start=self.pulse_start,
+                         width=self.width, jacobian=jacobian)
+        jac = None
+        if jacobian:
+            jac = out.jacobian + np.outer(out.input, self.gains)
+        return Step(out.state, jac, out.impacts)
+
     def _names(self) -> tuple:
-        return MODEL_PARAMETERS + tuple(f"k{j}" for j in range(self.dimension)) + ("delay",)
+        return MODEL_PARAMETERS + tuple(f"k{j}" for j in range(self.dimension)) + \
+            ("delay", "width")
 
     def parameter(self, name: str) -> float:
         """A model field of :data:`MODEL_PARAMETERS`, a gain entry ``k0`` .. ``k{2n-1}`` or
         the actuation ``delay``."""
-        if name == "delay":
-            return self.delay
+        if name in ("delay", "width"):
+            return float(getattr(self, name))
         if isinstance(name, str) and name.startswith("k") and name[1:].isdigit() \
                 and int(name[1:]) < self.dimension:
             if self.gains is None:
@@ -175,21 +216,161 @@ class NdofMap(SectionMap):
         """The same map with one parameter changed (validated again: a bad value raises
         ParameterError naming it)."""
         self.parameter(name)
-        if name == "delay":
-            return NdofMap(self.model, self.gains, value)
+        if name in ("delay", "width"):
+            return dataclasses.replace(self, **{name: value})
         if name in MODEL_PARAMETERS:
-            return NdofMap(dataclasses.replace(self.model, **{name: value}), self.gains,
-                           self.delay)
+            return dataclasses.replace(self, model=dataclasses.replace(self.model,
+                                                                       **{name: value}))
         k = np.array(self.gains, dtype=float)
         k[int(name[1:])] = value
-        return NdofMap(self.model, k, self.delay)
+        return dataclasses.replace(self, gains=k)
 
     def jacobian_det(self, periods: int, impacts: int) -> float | None:
         """det D(P^periods) with ``impacts`` impacts: e^{tr(A) periods T} r^(2 m)
-        (1 + k_{n + i_a})^periods (module docstring); None with an actuation delay."""
-        if self.delay != 0.0 and self.gains is not None:
+        (1 + k_{n + i_a})^periods (module docstring); None with an actuation delay or a
+        pulse."""
+        if (self.delay != 0.0 or self.width != 0.0) and self.gains is not None:
             return None
         m = self.model
         g = 1.0 if self.gains is None else 1.0 + float(self.gains[m.n + m.i_a])
         return math.exp(float(np.trace(self.flow.A)) * periods * m.period) * m.r ** (2 * impacts) \
             * g ** periods
+
+
+# -------------------------------------------------------------------- the force pulse
+
+def _pulse_width(model: NdofModel, width) -> float:
+    """``width`` as a float: a finite real number, 0 <= width < T."""
+    ok = (not isinstance(width, bool) and isinstance(width, (int, float, np.floating, np.integer))
+          and math.isfinite(width) and 0.0 <= width < model.period)
+    if not ok:
+        raise ParameterError(f"width={width!r} is invalid: valid range is a finite width, "
+                             f"0 <= width < T = {model.period:.10g}")
+    return float(width)
+
+
+def check_pulse(model: NdofModel, start: float, width: float, latency: float = 0.0) -> float:
+    """``width``, checked with its ``start`` (and the actuator's ``latency``): finite,
+    0 <= width < T, start >= 0 and start + latency + width < T. Returns width as a
+    float."""
+    width = _pulse_width(model, width)
+    if not (math.isfinite(start) and start >= 0.0 and start + latency + width < model.period):
+        raise ParameterError(f"width={width!r} is invalid with start={start!r} and latency="
+                             f"{latency!r}: valid range is 0 <= start and start + latency + "
+                             f"width < T = {model.period:.10g}")
+    return float(width)
+
+
+class PulseStep(NamedTuple):
+    """Result of :func:`pulse_step`: the deviation at the next section (2n,), the impacts
+    (times from the sample), and with ``jacobian`` d state / d z0 at a fixed correction
+    and ``input`` = d state / d(Delta v) (the pulse's input vector through the period)."""
+
+    state: np.ndarray
+    impacts: tuple
+    jacobian: np.ndarray | None = None
+    input: np.ndarray | None = None
+
+
+def pulse_step(flow: NdofFlow, z, correction: float, *, start: float, width: float,
+               jacobian: bool = False, force_limit: float = math.inf) -> PulseStep:
+    """One forcing period from the Pi2 deviation z with the correction Delta v as a force
+    pulse on the actuated coordinate: F = m_a Delta v / w on [start, start + w]
+    (docs/theory_ndof.md section 15; m_a = 1 / (M^-1)_aa, so the impulse moves the
+    actuated velocity by Delta v), flowed exactly with impacts before, in and after the
+    pulse. Width 0 is the kick at ``start``. The force is clipped to +-``force_limit``
+    (then it does not depend on Delta v). For n = 1 this is the 1-DOF
+    :func:`grazing_control.dynamics.simulation.actuation.pulse_step`.
+
+    With ``jacobian``: d state / d z = M3 M_p M1 (the monodromies of the three pieces,
+    the correction held) and d state / d(Delta v) = M3 ((I - M_p) sigma - g sigma_w)
+    m_a / w, g the pulse piece's sensitivity to its clearance Delta d - sigma_w F
+    (oscillator/ndof/forced.py, :func:`advance_with_force`).
+    """
+    m = flow.model
+    n = m.n
+    width = check_pulse(m, start, width)
+    z = np.array(z, dtype=float).reshape(-1)
+    eye = np.eye(2 * n)
+    if not force_limit > 0.0:
+        raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is > 0")
+    ma = actuated_mass(flow)
+    force = max(-force_limit, min(force_limit, ma * correction / width)) if width else 0.0
+    gain = ma / width if width and abs(ma * correction / width) < force_limit else 0.0
+    # legs (from, to, force, kick): before, in and after the pulse (or the kick at start)
+    if width == 0.0:
+        legs = ((0.0, start, 0.0, False), (start, m.period, 0.0, True))
+    else:
+        legs = ((0.0, start, 0.0, False), (start, start + width, force, None),
+                (start + width, m.period, 0.0, False))
+    jac, inp, impacts = eye.copy(), np.zeros(2 * n), []
+    for t0, t1, force, kick in legs:
+        if kick:
+            z[n + m.i_a] += correction
+            inp = inp + eye[n + m.i_a]
+        if t1 <= t0:
+            continue
+        tau = (flow.tau2 + m.omega * t0) % TWO_PI
+        if kick is None and jacobian:          # the pulse: its force depends on Delta v
+            seg, g = advance_with_force(flow, tau, z, t1 - t0, force, monodromy=True, wall=True)
+            sigma = static_deflection(flow)
+            mp = seg.monodromy
+            inp = mp @ inp + ((eye - mp) @ sigma - g * sigma[m.i_w]) * gain
+            jac = mp @ jac
+        else:
+            seg = advance_with_force(flow, tau, z, t1 - t0, force, monodromy=jacobian)
+            if jacobian:
+                jac, inp = seg.monodromy @ jac, seg.monodromy @ inp
+        impacts += [i._replace(dt=i.dt + t0) for i in seg.impacts]
+        z = np.array(seg.z, dtype=float)
+    return PulseStep(z, tuple(impacts), jac if jacobian else None, inp if jacobian else None)
+
+
+def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: float,
+                  width: float, time_constant: float = 0.0, latency: float = 0.0,
+                  force_limit: float = math.inf):
+    """One forcing period from the Pi2 deviation z and the actuator's force ``force``
+    there, the correction commanded as a pulse of ``width`` > 0 on [start, start + w]
+    through a first-order actuator (time constant tau_a, ``latency`` L): the force on the
+    actuated coordinate obeys tau_a F' = u(t - L) - F, u = m_a Delta v / w on the pulse
+    clipped to +-``force_limit``
+    (oscillator/ndof/forced.py, :func:`~grazing_control.oscillator.ndof.forced.lag_advance`;
+    docs/theory_ndof.md section 15). Returns (z, force at the next section, impacts: times
+    from the sample). tau_a = 0 is :func:`pulse_step` at start + L (force must be 0).
+    For n = 1 this is the 1-DOF
+    :func:`grazing_control.dynamics.simulation.actuator.actuated_step`.
+
+    Raises ParameterError for a pulse that does not fit in the period or a bad actuator,
+    ValueError on a chattering or sticking motion under the actuator's force.
+    """
+    m = flow.model
+    for name, value in (("actuator_time_constant", time_constant), ("actuator_latency", latency)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) \
+                or not (math.isfinite(value) and value >= 0.0):
+            raise ParameterError(f"{name}={value!r} is invalid: valid range is a finite "
+                                 f"{name} >= 0")
+    if not (isinstance(width, (int, float, np.floating)) and width > 0.0):
+        raise ParameterError(f"width={width!r} is invalid: valid range is a finite width > 0 "
+                             "through an actuator")
+    check_pulse(m, start, width, latency)
+    z = np.array(z, dtype=float).reshape(-1)
+    if time_constant == 0.0:
+        if force != 0.0:
+            raise ParameterError(f"force={force!r} is invalid: an actuator without lag leaves "
+                                 "no force at the section, valid value is 0")
+        out = pulse_step(flow, z, correction, start=start + latency, width=width,
+                         force_limit=force_limit)
+        return out.state, 0.0, list(out.impacts)
+    if not force_limit > 0.0:
+        raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is > 0")
+    command = max(-force_limit, min(force_limit, actuated_mass(flow) * correction / width))
+    on, off = start + latency, start + latency + width
+    t, f, impacts = 0.0, float(force), []
+    for end, u in ((on, 0.0), (off, command), (m.period, 0.0)):
+        if end > t:
+            tau = (flow.tau2 + m.omega * t) % TWO_PI
+            seg = lag_advance(flow, tau, z, end - t, u, f - u, time_constant)
+            impacts += [i._replace(dt=i.dt + t) for i in seg.impacts]
+            z, f = np.array(seg.z, dtype=float), float(seg.force)
+        t = end
+    return z, f, impacts

@@ -34,7 +34,8 @@ from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.orbits.continuation import OrbitBifurcation, OrbitBranch, OrbitPoint
-from grazing_control.dynamics.design.ndof_design import _flow, _gains, _transition, _vectors, smooth_map
+from grazing_control.dynamics.design.ndof_design import (Actuation, _flow, _gains, _transition,
+                                                     _vectors, smooth_map)
 from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
 
 __all__ = ["BranchPoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold",
@@ -60,13 +61,16 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     """(M(psi), Phi(sigma)): the period map from an impact at tau* + psi to the next,
     M = Phi(T - sigma)(I + b k^T) Phi(sigma), sigma = s - psi/omega (module docstring);
     with an actuation delay b = Phi(-delay) e_{n + i_a}, valid while the kick acts before
-    the next impact, sigma + delay < T (docs/theory_ndof.md §14)."""
+    the next impact, sigma + delay < T (docs/theory_ndof.md §14); for a pulse
+    (:class:`~grazing_control.dynamics.design.ndof_design.Actuation`) b = b_w, valid
+    while the pulse ends before it, sigma + end < T (§15)."""
     om = model.omega
     s = model.pi2_offset / om
     sigma = s - psi / om
-    if not (0.0 < sigma < model.period - delay) or not math.isfinite(psi):
+    reach = delay.end(model) if isinstance(delay, Actuation) else delay
+    if not (0.0 < sigma < model.period - reach) or not math.isfinite(psi):
         raise ParameterError(f"psi={psi!r} is invalid: valid range is "
-                             f"{-om * (model.period - s - delay)!r} < psi < {om * s!r} "
+                             f"{-om * (model.period - s - reach)!r} < psi < {om * s!r} "
                              f"(impact between the kicks)")
     _w, _ev, b = _vectors(model, delay)
     pm = _transition(model, sigma)

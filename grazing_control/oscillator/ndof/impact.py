@@ -24,14 +24,18 @@ there; only the evaluator, its bounds and its rounding margins are n-DOF.
 The impact law v_w+ = -r v_w- (other velocities unchanged) at x_w = d is applied in
 deviation coordinates; :func:`saltation_matrix` is its (2n x 2n) saltation matrix.
 
-Chattering and sticking are refused
------------------------------------
-In n-DOF a stuck wall coordinate is a constrained, reduced (n - 1)-DOF motion; it is not
-modelled here. A contact at rest pushed into the wall, or a chattering sequence that
-would accumulate (t_inf = 2 r v- / ((1 - r) F) below ``chatter_time``, or a next bounce
-below resolution), raises :class:`ChatteringError` naming the time and phase; any other
-accumulation of contacts hits the cap ``max_impacts`` (:class:`ImpactCapError`). The
-trajectory never passes through the wall and the search never hangs.
+Chattering and sticking (issue 32; docs/theory_ndof.md, section 16)
+-------------------------------------------------------------------
+As in 1-DOF (oscillator/impact.py): a contact at rest pushed into the wall, or a
+chattering sequence that would accumulate (t_inf = 2 r v- / ((1 - r) F) below
+``chatter_time``, or a next bounce below resolution; F the free acceleration of x_w at
+rest on the wall), is summed and the wall coordinate sticks: x_w = d, v_w = 0 while the
+other coordinates move by the constrained flow of :mod:`.sticking`, until the contact
+force changes sign (a certified root search); it is reported as a sticking impact with
+its release. Only a stuck motion that cannot be modelled (:class:`.sticking.StuckFlow`'s
+refusals) raises :class:`ChatteringError`; any other accumulation of contacts hits the
+cap ``max_impacts`` (:class:`ImpactCapError`). The trajectory never passes through the
+wall and the search never hangs.
 """
 
 from __future__ import annotations
@@ -49,6 +53,7 @@ from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impa
 from grazing_control.oscillator.params import ParameterError
 
 from .flow import NdofFlow
+from .sticking import stuck_flow
 
 __all__ = ["NdofImpact", "NdofSegment", "ChatteringError", "ImpactCapError",
            "InitialStateError", "NonFiniteStateError", "check_state", "next_impact",
@@ -59,8 +64,9 @@ _EPS = 2.0 ** -52
 
 
 #: One impact (:class:`grazing_control.oscillator.impact.Impact`, the same for every n):
-#: ``sticking`` is always False here (sticking raises :class:`ChatteringError`),
-#: ``release`` nan.
+#: ``sticking`` marks a stick (the end of a summed chattering sequence, or a contact at
+#: rest pushed into the wall), ``release`` its end (time since the segment's start; inf
+#: if still stuck at the segment's end; nan for other impacts).
 NdofImpact = Impact
 
 
@@ -75,8 +81,9 @@ class NdofSegment(NamedTuple):
 
 
 class ChatteringError(RuntimeError):
-    """The wall coordinate would chatter to rest or stick on the wall: not modelled in
-    n-DOF (module docstring). The message names the time and phase."""
+    """The wall coordinate sticks but its constrained motion cannot be modelled (the
+    refusals of :class:`.sticking.StuckFlow`: the others without a static equilibrium,
+    a resonance or a defective reduced flow). The message names the time."""
 
 
 def check_state(flow: NdofFlow, z, where: str = "the state") -> np.ndarray:
@@ -123,11 +130,15 @@ class _Eval(GapEvaluator):
     __slots__ = ("terms", "cabs", "jerk_terms", "aw3", "acc_err", "m0", "m1", "zmag", "rho",
                  "drift", "n", "horizon")
 
-    def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float):
+    def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float,
+                 transient: tuple | None = None):
         m = flow.model
         beta = flow.inverse @ z0
         c = flow.modes[m.i_w] * beta
         lam = flow.eigenvalues
+        if transient is not None:     # one more decaying real mode of the gap, coef e^{-rate h}
+            rate, coef = transient    # (an actuator's lag, oscillator/ndof/forced.py)
+            lam, c = np.append(lam, -rate), np.append(c, coef)
         self.terms = [(complex(l), complex(ck), complex(ck * l), complex(ck * l * l))
                       for l, ck in zip(lam, c)]
         super().__init__(m.omega, flow.tau_star, flow.d_star, m.delta_d, tau0)
@@ -141,7 +152,8 @@ class _Eval(GapEvaluator):
         self.aw3 = self.amp * self.omega ** 3
         # rounding (docs/theory_ndof_flow.md, section 5): terms of size zmag, and the
         # decomposition's defect, which moves z by <= t defect cond(V)^2 |z0| after time t
-        self.zmag = float(_mode_sizes(flow, z0)[0] * grow.max())
+        self.zmag = float(_mode_sizes(flow, z0)[0] * grow.max()) + (
+            abs(transient[1]) if transient is not None else 0.0)
         self.rho = float(np.abs(lam).max())
         self.drift = flow.defect * flow.condition ** 2 * float(np.linalg.norm(z0))
         k = 2.0 * self.n + 2.0
@@ -326,8 +338,8 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
     chatter_time : float, optional
         A chattering sequence whose accumulation time 2 r v- / ((1 - r) F) is below this
         (default 1e-6 T), or whose next bounce v+^2 / (2 F) is below ~1e3 ulps of the gap,
-        raises :class:`ChatteringError` (F > 0: the free acceleration of x_w at rest on
-        the wall pushes into it).
+        is summed and x_w sticks (F > 0: the free acceleration of x_w at rest on the wall
+        pushes into it), as in 1-DOF.
 
     Returns
     -------
@@ -337,8 +349,11 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
     -----
     A contact whose approach velocity is within the velocity's rounding of 0 is a
     contact at rest (docs/theory.md, "Tangency below rounding"): with F <= 0 a tangency,
-    not an impact (nothing reported, the flow goes on); with F > 0 sticking, refused
-    with :class:`ChatteringError`. Every reported impact has v- > 0.
+    not an impact (nothing reported, the flow goes on); with F > 0 it sticks. A stick is
+    reported as an impact with ``sticking`` True (v- = v+ = 0 for a contact at rest) and
+    its ``release``; meanwhile the others move by the constrained flow
+    (docs/theory_ndof.md, section 16) and the monodromy is that flow's on the others (the
+    wall coordinate's perturbations die). Every other reported impact has v- > 0.
 
     Raises
     ------
@@ -346,8 +361,10 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
         Bad start state, tau0 or duration.
     InitialStateError
         The start lies beyond the wall.
-    ImpactCapError, ChatteringError
+    ImpactCapError
         See above.
+    ChatteringError
+        A stick whose constrained motion cannot be modelled (:class:`ChatteringError`).
     """
     z = check_state(flow, z0, "the start state")
     check_times(tau0, "duration", duration)
@@ -394,10 +411,12 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
         if v_minus <= v_tol:  # contact at rest, below the velocity's rounding
             z[w] = wall_x
             z[n + w] = rest_v
-            if flow.wall_acceleration(tau, z) > 0.0:
-                raise ChatteringError(
-                    f"the wall coordinate x{w} comes to rest on the wall, pushed into it, at "
-                    f"t={t:.9g} (phase {tau:.6f}): sticking is not modelled in n-DOF")
+            if flow.wall_acceleration(tau, z) > 0.0:  # pushed into the wall: sticks
+                t_hit, tau_hit = t, tau
+                t, tau, z, mono, release = _stick(flow, tau0, t, 0.0, duration, z, mono)
+                impacts.append(NdofImpact(t_hit, tau_hit, 0.0, 0.0, True, release))
+                h = _next_impact(flow, tau, z, duration - t) if t < duration else None
+                continue
             t, tau, z, mono = _leave_wall(flow, tau0, t, duration, z, mono)
             h = _next_impact(flow, tau, z, duration - t) if t < duration else None
             continue
@@ -411,10 +430,15 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
             t_inf = 2.0 * r * v_minus / ((1.0 - r) * force) if r < 1.0 else math.inf
             height = (r * v_minus) ** 2 / (2.0 * force)
             if t_inf < chatter or height < 1e3 * math.ulp(abs(z[w]) + abs(m.delta_d) + flow.d_star):
-                raise ChatteringError(
-                    f"the wall coordinate x{w} chatters at t={t:.9g} (phase {tau:.6f}, "
-                    f"v-={v_minus:.3e}, accumulating in {t_inf:.3e}): sticking is not "
-                    f"modelled in n-DOF")
+                # chattering: the geometric sequence is summed and x_w sticks (docs/theory.md
+                # "Chattering and sticking"; docs/theory_ndof.md section 16)
+                t_hit = t - delta
+                # r = 1 never accumulates (t_inf = inf): bounces below resolution stick now
+                t, tau, z, mono, release = _stick(flow, tau0, t, t_inf if t_inf < math.inf else 0.0,
+                                                  duration, z, mono)
+                impacts.append(NdofImpact(t_hit, tau_i, v_minus, v_plus, True, release))
+                h = _next_impact(flow, tau, z, duration - t) if t < duration else None
+                continue
         impacts.append(NdofImpact(t - delta, tau_i, v_minus, v_plus, False))
         if monodromy:
             mono = saltation_matrix(flow, tau_i, z_minus) @ mono
@@ -454,6 +478,47 @@ def _impact_law(flow: NdofFlow, tau: float, z: np.ndarray, wall_x: float, v: flo
     else:
         z_plus[w] = wall_x
     return z_minus, z_plus, v_minus, delta
+
+
+def _stick(flow: NdofFlow, tau0: float, t: float, t_inf: float, duration: float,
+           z: np.ndarray, mono):
+    """x_w sticks from time t (docs/theory_ndof.md, section 16): the other coordinates
+    move by the constrained flow (oscillator/ndof/sticking.py) until the contact force
+    turns non-positive, searched from t + t_inf (the summed chattering sequence ends
+    there), or to the end of the segment. As in 1-DOF (oscillator/impact.py) the wall
+    coordinate leaves from rest and flows without a search while its gap is below the
+    rounding. The monodromy through the stick is the constrained flow's on the others
+    (the wall coordinate's perturbations die).
+
+    Returns (t, tau, z, mono, release), release the time of the release since the
+    segment's start, inf if still stuck at its end.
+
+    Raises
+    ------
+    ChatteringError
+        The constrained motion cannot be modelled (:class:`StuckFlow`'s refusals).
+    """
+    try:
+        stuck = stuck_flow(flow)
+    except ParameterError as exc:
+        raise ChatteringError(f"the wall coordinate x{flow.model.i_w} sticks at t={t:.9g}: "
+                              f"{exc}") from None
+    omega = flow.model.omega
+    tau = (tau0 + omega * t) % TWO_PI
+    Y0 = stuck.reduce(tau, z)
+    remaining = duration - t
+    h = stuck.release(tau, Y0, min(t_inf, remaining), remaining)
+    release = math.inf if h is None else t + h
+    h = remaining if h is None else h
+    Y = stuck.state(tau, Y0, h)
+    if mono is not None:
+        mono = stuck.embedded(h) @ mono
+    t = t + h if h < remaining else duration
+    tau = (tau0 + omega * t) % TWO_PI
+    z = stuck.expand(tau, Y)
+    if release <= duration and t < duration:
+        t, tau, z, mono = _leave_wall(flow, tau0, t, duration, z, mono)
+    return t, tau, z, mono, release
 
 
 def _leave_wall(flow: NdofFlow, tau0: float, t: float, duration: float, z: np.ndarray, mono):

@@ -97,23 +97,23 @@ def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float
                 rate: int, coordinate: int, periods: int, control_after: int,
                 seed: int) -> StreamLoop:
     """The n-DOF closed loop on a position-only sensor stream in one process (issue 32,
-    docs/ndof_scene.md): the simulator's engine (:class:`grazing_control.plant.ndof_engine.
-    NdofEngine`, its sensor of ``sigma`` at T / ``rate``, seeded by ``seed``), the
+    docs/ndof_scene.md): the simulator's engine (:class:`grazing_control.plant.engine.Engine`
+    over the model file, its sensor of ``sigma`` at T / ``rate``, seeded by ``seed``), the
     controller's estimator (:class:`grazing_control.dynamics.estimation.stream.
     StreamEstimator` over the model, reading ``coordinate``) and the kick k^T z^ acting
     ``delay`` after each section from ``control_after`` on: the calls the nodes make in
     lockstep, without the middleware."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
-    from grazing_control.plant.ndof_engine import NdofEngine
-    from grazing_control.plant.ndof_settings import load_model_file, ndof_settings_from_values
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import load_model_file, settings_from_values
 
     model = load_model_file(str(model_file))
-    st = ndof_settings_from_values(
+    st = settings_from_values(
         {"delta_d": delta_d, "actuation_delay": delay, "sensor_noise": sigma,
          "sensor_velocity": False, "sensor_seed": seed,
          "state_period": model.period / rate}, str(model_file), model)
     model, k = st.model, np.asarray(gains, dtype=float)
-    eng = NdofEngine(st)
+    eng = Engine(st)
     est = StreamEstimator(model, "model", sigma, "stream", model.period / rate,
                           coordinate=coordinate)
     due = []

@@ -149,24 +149,39 @@ def plot_noise_gain(record, path, dpi=80):
 
 def plot_model_bands(record, path, dpi=80):
     """|band end| (log) against the relative error (log), one panel per parameter with a
-    band, one line per design (positive errors; negative ones have none on d < d*), the
-    series' prediction dashed. ``record``: :func:`.model.model_error_bands`."""
+    band, one line per design (positive errors; for n-DOF records negative ones too,
+    hollow), the series' prediction dashed where there is one. ``record``:
+    :func:`.model.model_error_bands` or :func:`.model.ndof_model_error_bands`."""
     plt = _plt()
-    params = [n for n in ("zeta", "omega")
-              if any(r["parameter"] == n for d in record["designs"] for r in d["bands"])]
+    names = list(dict.fromkeys(r["parameter"] for d in record["designs"] for r in d["bands"]))
+    params = [n for n in names
+              if any(r["parameter"] == n and r["end"] < 0 for d in record["designs"] for r in d["bands"])]
+    params = params or names[:1]
     fig, axes = plt.subplots(1, len(params), figsize=(4.6 * len(params), 3.8), squeeze=False)
+    symbols = {"zeta": "ζ", "omega": "ω"}
     for ax, name in zip(axes[0], params):
+        series = False
         for d in record["designs"]:
-            rows = [r for r in d["bands"] if r["parameter"] == name and r["error"] > 0 and r["end"] < 0]
-            if not rows:
-                continue
-            e = np.array([r["error"] for r in rows])
-            (line,) = ax.loglog(e, [-r["end"] for r in rows], "o-", ms=3,
-                                label=f"{d['label']} (c2 = {d['c2']:.4g})")
-            ax.loglog(e, [-r["predicted"] for r in rows], "--", color=line.get_color(), lw=0.8)
-        ax.set_xlabel(f"relative error in {'ζ' if name == 'zeta' else 'ω'} (> 0)")
+            label = d["label"] + (f" (c2 = {d['c2']:.4g})" if "c2" in d else "")
+            for sign, fill in ((1.0, "o-"), (-1.0, "o--")):
+                if sign < 0 and "c2" in d:
+                    continue   # 1-DOF: negative errors open no band on d < d*
+                rows = [r for r in d["bands"]
+                        if r["parameter"] == name and sign * r["error"] > 0 and r["end"] < 0]
+                if not rows:
+                    continue
+                e = np.array([abs(r["error"]) for r in rows])
+                (line,) = ax.loglog(e, [-r["end"] for r in rows], fill, ms=3,
+                                    mfc=None if sign > 0 else "none",
+                                    label=label + ("" if sign > 0 else " (e < 0)"))
+                pred = [r["predicted"] for r in rows]
+                if all(p is not None and np.isfinite(p) for p in pred):
+                    ax.loglog(e, [-p for p in pred], "--", color=line.get_color(), lw=0.8)
+                    series = True
+        ax.set_xlabel(f"relative error in {symbols.get(name, name)}")
         if ax is axes[0][0]:
             ax.set_ylabel("band |Δd| where control fails")
         ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=7, title="dashed: series, ∝ e²", title_fontsize=7)
+        ax.legend(fontsize=7, title="dashed: series, ∝ e²" if series else "hollow: e < 0",
+                  title_fontsize=7)
     save_png(fig, path, dpi=dpi)

@@ -183,6 +183,12 @@ def cmd_model(args):
     from .charts import plot_model_bands
     from .model import model_error_bands
 
+    if getattr(args, "model", None) is not None:
+        return _cmd_model_ndof(args)
+    if args.mu or args.parameter:
+        from grazing_control.oscillator.params import ParameterError
+        raise ParameterError("--mu and --parameter go with --model FILE (an n-DOF design); "
+                             "the 1-DOF study takes --c2")
     base = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
     out = _out_dir(args.out)
     t0 = time.perf_counter()
@@ -207,6 +213,54 @@ def cmd_model(args):
             end = "none" if r["end"] == 0.0 else f"{r['end']:.4g}"
             lines.append(f"{d['label']:>22} {r['parameter']:>6} {r['error']:+9.2g} {end:>11} "
                          f"{r['predicted']:11.4g} {r['k']:10.4g}")
+    lines.append(f"chart and numbers in {out} ({record['seconds']:.1f} s)")
+    return "\n".join(lines)
+
+
+def _cmd_model_ndof(args):
+    """``robustness model --model FILE --mu MU [--delay D] [--parameter NAME ...]``: the
+    bands of an n-DOF design (docs/robustness.md section 4, "n > 1")."""
+    from grazing_control.oscillator.ndof import load_model
+    from grazing_control.oscillator.params import ParameterError
+    from .charts import plot_model_bands
+    from .model import NDOF_ERRORS, ndof_model_error_bands
+
+    if args.c2:
+        raise ParameterError("--c2 is a 1-DOF design: with --model give --mu MU (the family "
+                             "member w^T N = mu w^T, docs/theory_ndof.md)")
+    if not args.mu:
+        raise ParameterError("--model needs --mu MU (repeatable): the design family's member "
+                             "(see grazing design --model FILE for the admissible mu)")
+    model = load_model(args.model)
+    errors = None
+    if args.parameter:
+        from grazing_control.dynamics.design.mismatch import mismatched_model
+
+        errors = {}
+        for name in args.parameter:
+            mismatched_model(model, name, 0.0)      # refuses a bad name, naming it
+            errors[name] = NDOF_ERRORS.get(name[:1] if name[1:2] == "[" else name, NDOF_ERRORS["M"])
+    out = _out_dir(args.out)
+    t0 = time.perf_counter()
+    record = ndof_model_error_bands(model, args.mu, args.delay, errors)
+    png = os.path.join(out, "model_error_bands.png")
+    plot_model_bands(record, png)
+    record.update(model=str(args.model), delta_d=model.delta_d, delay=args.delay,
+                  seconds=time.perf_counter() - t0, files=[png])
+    with open(os.path.join(out, "model_error_bands.json"), "w") as fh:
+        json.dump(record, fh)
+    if args.json:
+        return record
+    lines = [f"band of Delta d next to grazing where the controlled orbit fails ({args.model}, "
+             f"gains k(mu) designed on the nominal model, plant off by a relative error e; "
+             f"tolerated: the error the design tolerates at delta_d = {model.delta_d:g})",
+             f"{'design':>12} {'param':>8} {'error':>9} {'band end':>11} {'end/e^2':>10} {'tolerated':>10}"]
+    for d in record["designs"]:
+        for r in d["bands"]:
+            end = "none" if r["end"] == 0.0 else f"{r['end']:.4g}"
+            tol = "-" if r["tolerated"] is None else f"{r['tolerated']:.3g}"
+            lines.append(f"{d['label']:>12} {r['parameter']:>8} {r['error']:+9.2g} {end:>11} "
+                         f"{r['k']:10.4g} {tol:>10}")
     lines.append(f"chart and numbers in {out} ({record['seconds']:.1f} s)")
     return "\n".join(lines)
 
@@ -263,5 +317,17 @@ def add_robustness_parser(sub, common, finite):
     m.add_argument("--c2", type=finite, action="append",
                    help="c2 of a design on the nominal model (repeatable; default the study's -1 "
                         "and the least-noise c2 at Delta d = -5e-6)")
+    m.add_argument("--model", metavar="FILE",
+                   help="an n-DOF model file (docs/ndof_model.md): the bands of its design "
+                        "k(mu) (give --mu) over the exact n-DOF map, errors in M, C, K, the "
+                        "masses M[i,i], r and omega")
+    m.add_argument("--mu", type=finite, action="append",
+                   help="with --model: the design family's member w^T N = mu w^T (repeatable)")
+    m.add_argument("--delay", type=finite, default=0.0,
+                   help="with --model: the kick's delay after Pi2 of the design (0)")
+    m.add_argument("--parameter", action="append", metavar="NAME",
+                   help="with --model: the parameters to put an error on (repeatable; M, C, K, "
+                        "r, omega, or an entry M[i,j], C[i,j], K[i,j]; default M, C, K, r, omega "
+                        "and every mass M[i,i])")
     m.add_argument("--out", default="out/robustness", help="folder for the chart and JSON")
     m.set_defaults(func=cmd_model)

@@ -1,6 +1,7 @@
-"""The n-DOF controller's law and its validation (grazing_control.ros.ndof_control), without
-middleware: X** is the grazing orbit's Pi2 state, the answer is k^T (X - X**), the
-prediction is one exact period of the engine, and wrong gains are refused with a reason."""
+"""The controller's law and its validation (grazing_control.ros.controller_values), without
+middleware, for any n: X** is the grazing orbit's Pi2 state, the answer is k^T (X - X**)
+(the 1-DOF (c1, c2) its n = 1 member, bit for bit), the prediction is one exact period
+of the engine, and wrong gains are refused with a reason."""
 
 from __future__ import annotations
 
@@ -15,9 +16,12 @@ from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof.flow import periodic_response
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.oscillator.params import ParameterError
-from grazing_control.plant.ndof_engine import NdofEngine
-from grazing_control.plant.ndof_settings import ndof_settings_from_values
-from grazing_control.ros.ndof_control import NdofLaw, ndof_controller_from_values
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.settings import settings_from_values
+from grazing_control.oscillator.control import Gains
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.ros.controller_values import (ControlLaw, gain_vector_correction,
+                                                   model_controller_from_values)
 
 SCENE = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml")
 MODEL = load_model(SCENE)
@@ -25,7 +29,7 @@ K = gain_family(MODEL, 0.0)
 
 
 def test_x_ref_is_the_grazing_orbit_on_pi2():
-    c = ndof_controller_from_values({}, SCENE, K.tolist())
+    c = model_controller_from_values({}, SCENE, K.tolist())
     m = MODEL
     # independent: the periodic response at the time of Pi2, pi2_offset / omega after the
     # grazing maximum of the wall coordinate (a grid maximum, then the root of its
@@ -44,13 +48,29 @@ def test_x_ref_is_the_grazing_orbit_on_pi2():
     assert not c.predicts and c.model.delta_d == m.delta_d
 
 
-class Law(NdofLaw):
-    def __init__(self, c):
-        self.gains, self.x_ref, self.v_ref = c.gains, c.x_ref, c.v_ref
+def Law(c):
+    """The controller's law of a model file's controller, always on, no saturation."""
+    return ControlLaw(c.gains, c.x_ref, c.v_ref, 0, math.inf)
+
+
+def test_the_one_dof_gains_are_the_n_equals_1_member_of_the_gain_vector_law():
+    """(c1, c2) on (x, v) and k = (c1, c2) on X = (x, v): the same correction to the bit
+    (a one-term dot product is one product), on many random samples; and the law picks
+    Eq. 28's expression for Gains, the vector's for an array."""
+    p = OscillatorParams()
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        c1, c2 = rng.normal(scale=3.0, size=2)
+        x, v = p.x_ref + rng.normal(scale=1e-3), p.v_ref + rng.normal(scale=1e-3)
+        one = ControlLaw(Gains(c1, c2), p.x_ref, p.v_ref, 0, math.inf)
+        vec = ControlLaw(np.array([c1, c2]), np.array([p.x_ref]), np.array([p.v_ref]), 0,
+                         math.inf)
+        assert one._law(x, v) == vec._law(np.array([x]), np.array([v]))
+    assert vec._correction is gain_vector_correction and one._correction is not vec._correction
 
 
 def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
-    c = ndof_controller_from_values({"delta_d": -2e-5}, SCENE, K.tolist())
+    c = model_controller_from_values({"delta_d": -2e-5}, SCENE, K.tolist())
     assert c.predicts and c.model.delta_d == -2e-5
     rng = np.random.default_rng(3)
     z = rng.normal(scale=1e-3, size=4)
@@ -58,9 +78,9 @@ def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
     law = Law(c)
     assert law._law(X[:2], X[2:]) == pytest.approx(float(K @ z), rel=1e-12)
     # the predicted next sample is the engine's next sample from that state and kick
-    s = ndof_settings_from_values({"delta_d": -2e-5}, SCENE)
-    eng = NdofEngine(s)
-    eng.z = eng.flow.to_deviation(eng.flow.tau2, X)
+    s = settings_from_values({"delta_d": -2e-5}, SCENE)
+    eng = Engine(s)
+    eng.z = eng.section.flow.to_deviation(eng.section.flow.tau2, X)
     dv = law._law(X[:2], X[2:])
     eng.begin_period(dv)
     ev, _ = eng.end_period()
@@ -79,14 +99,14 @@ def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
 
 def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
     with pytest.raises(ParameterError, match=r"gains has 3 values: valid is 2n = 4"):
-        ndof_controller_from_values({}, SCENE, [1.0, 2.0, 3.0])
+        model_controller_from_values({}, SCENE, [1.0, 2.0, 3.0])
     with pytest.raises(ParameterError, match=r"gains is not given: with model_file it is "
                                              r"required, 4 values"):
-        ndof_controller_from_values({}, SCENE, None)
+        model_controller_from_values({}, SCENE, None)
     with pytest.raises(ParameterError, match=r"gains=.* is invalid: valid range is \|k_i\|"):
-        ndof_controller_from_values({}, SCENE, [1e300, 0.0, 0.0, 0.0])
+        model_controller_from_values({}, SCENE, [1e300, 0.0, 0.0, 0.0])
     with pytest.raises(ParameterError, match=r"gains=.* is invalid"):
-        ndof_controller_from_values({}, SCENE, [math.nan, 0.0, 0.0, 0.0])
+        model_controller_from_values({}, SCENE, [math.nan, 0.0, 0.0, 0.0])
 
 
 @pytest.mark.parametrize("values, text", [
@@ -99,7 +119,7 @@ def test_gains_of_the_wrong_length_or_size_are_refused_with_the_reason():
     ({"delta_d": math.inf}, "delta_d=inf is invalid")])
 def test_one_dof_parameters_and_another_models_design_are_refused(values, text):
     with pytest.raises(ParameterError, match=text):
-        ndof_controller_from_values(values, SCENE, K.tolist())
+        model_controller_from_values(values, SCENE, K.tolist())
 
 
 @pytest.mark.parametrize("values, text", [
@@ -113,18 +133,18 @@ def test_one_dof_parameters_and_another_models_design_are_refused(values, text):
 def test_the_n_dof_stream_estimator_refuses_what_it_does_not_do(values, text):
     """pi2_source stream with model_file (issue 32): the model filter over the n-DOF map
     of one coordinate; what it needs or does not do is refused with the reason."""
-    from grazing_control.ros.ndof_control import ndof_stream_from_values
+    from grazing_control.ros.controller_values import model_stream_from_values
 
     base = {"pi2_source": "stream", "estimator": "model", "sensor_noise": 1e-4,
             "delta_d": -1e-3, "state_period": 0.1}
-    c = ndof_controller_from_values({"delta_d": values.get("delta_d", -1e-3)}, SCENE,
+    c = model_controller_from_values({"delta_d": values.get("delta_d", -1e-3)}, SCENE,
                                     K.tolist())
     with pytest.raises(ParameterError, match=text):
-        ndof_stream_from_values({**base, **values}, c)
-    c = ndof_controller_from_values({"delta_d": -1e-3}, SCENE, K.tolist())
-    est = ndof_stream_from_values({**base, "sensor_coordinate": 1}, c)
+        model_stream_from_values({**base, **values}, c)
+    c = model_controller_from_values({"delta_d": -1e-3}, SCENE, K.tolist())
+    est = model_stream_from_values({**base, "sensor_coordinate": 1}, c)
     assert est.coordinate == 1 and est.p is c.model
-    assert ndof_stream_from_values({"pi2_source": "sample"}, c) is None
+    assert model_stream_from_values({"pi2_source": "sample"}, c) is None
 
 
 def test_the_designs_parameter_file_is_accepted(tmp_path):
@@ -133,5 +153,5 @@ def test_the_designs_parameter_file_is_accepted(tmp_path):
     path = tmp_path / "gains.yaml"
     write_gain_yaml(path, MODEL, evaluate_design(MODEL, 0.2), SCENE)
     values = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
-    c = ndof_controller_from_values(values, values["model_file"], values["gains"])
+    c = model_controller_from_values(values, values["model_file"], values["gains"])
     np.testing.assert_array_equal(c.gains, gain_family(MODEL, 0.2))

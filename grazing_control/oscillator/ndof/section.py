@@ -1,0 +1,111 @@
+"""The n-DOF oscillator as the plant engine's model: what differs from the 1-DOF closed form.
+
+The simulator's engine (:class:`grazing_control.plant.engine.Engine`) keeps the sample
+bookkeeping, the faults, the stream's grid and the loops' interface once for every n; of
+a model it needs only the pieces below, which the 1-DOF closed form provides through the
+kernel (``kernel.exact_advance``, ``simulate.states_between``) and an n-DOF model file
+through :class:`NdofSection` (issue 32):
+
+* the state at sample 0: the deviation z = 0 in R^{2n} from the periodic response at
+  Pi2 (the grazing point X**);
+* the flow of a piece: :func:`grazing_control.oscillator.ndof.impact.advance` from phase
+  tau for a time h, with its impacts;
+* the kick: z + e_{n + i_a} Delta v, on the actuated coordinate's velocity;
+* the physical state X = X_p(tau) + z of the n coordinates;
+* the states between samples, from a piece's impact list without changing the
+  trajectory: between impacts the deviation flows linearly, z(t + h) = Phi(h) z(t) (the
+  periodic response absorbs the forcing; docs/ndof_model.md), and an impact changes only
+  the wall coordinate's velocity, by v+ - v-, which adds (v+ - v-) e_{n + i_w} to z. A
+  piece with a sticking impact is evaluated by ``advance`` from its start instead;
+* the sensor's measurement of the n coordinates: sample j's coordinate i is the sensor's
+  draw number j n + i (:func:`measure_coordinates`), a pure function of (seed, j) as in
+  1-DOF, and for n = 1 the 1-DOF sensor's draws bit for bit.
+
+A lockstep run with the law Delta v = k^T z therefore repeats
+:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s iterates bit for bit (the same
+calls). No ROS, no plant: this is the model layer.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.impact import advance
+from grazing_control.oscillator.ndof.model import NdofModel
+
+__all__ = ["NdofSection", "measure_coordinates"]
+
+TWO_PI = 2.0 * math.pi
+
+
+def measure_coordinates(sensor, j0: int, x, v):
+    """What ``sensor`` (a :class:`~grazing_control.plant.sensor.SensorModel`) measures of
+    the stream samples j0, j0 + 1, ... with true positions ``x`` and velocities ``v``
+    (m, n): coordinate i of sample j is the sensor's sample j n + i (its draws, bias,
+    quantum), velocities NaN for a position-only sensor. Returns (x~, v~), (m, n)."""
+    x = np.asarray(x, dtype=float)
+    v = np.asarray(v, dtype=float)
+    m, n = x.shape
+    xm, vm = sensor.measure(j0 * n, x.reshape(-1), v.reshape(-1))
+    return xm.reshape(m, n), vm.reshape(m, n)
+
+
+class NdofSection:
+    """An n-DOF model file's oscillator as the engine's model (module docstring).
+
+    ``period``, ``omega``, ``tau2``, ``tau_star`` are what the engine and its loops read
+    of a model (as of :class:`~grazing_control.oscillator.params.OscillatorParams`);
+    ``model`` the :class:`NdofModel`, ``flow`` its :class:`NdofFlow`.
+    """
+
+    def __init__(self, model: NdofModel):
+        self.model = model
+        self.flow = NdofFlow.of(model)
+        self.n = model.n
+        self.period = model.period
+        self.omega = model.omega
+        self.tau2 = self.flow.tau2
+        self.tau_star = self.flow.tau_star
+
+    def start(self) -> np.ndarray:
+        """The deviation at sample 0: the grazing point X** (z = 0)."""
+        return np.zeros(2 * self.n)
+
+    def advance(self, tau: float, z, duration: float):
+        """The exact flow with impacts from (tau, z) for ``duration``: ``.z``, ``.impacts``."""
+        return advance(self.flow, tau, z, duration)
+
+    def kicked(self, z, dv: float) -> np.ndarray:
+        """z + e_{n + i_a} Delta v (the kick on the actuated velocity)."""
+        z = np.array(z, dtype=float)
+        z[self.n + self.model.i_a] += dv
+        return z
+
+    def physical(self, tau: float, z) -> tuple:
+        """(x, v): tuples of the n physical positions and velocities at phase tau."""
+        X = self.flow.to_physical(tau, z)
+        n = self.n
+        return tuple(float(a) for a in X[:n]), tuple(float(a) for a in X[n:])
+
+    def deviations_between(self, tau: float, z, impacts, times) -> np.ndarray:
+        """z at ``times`` (sorted, since the piece's start at phase ``tau`` with deviation
+        ``z``) from the piece's ``impacts`` (module docstring); (len(times), 2n)."""
+        out = np.empty((len(times), 2 * self.n))
+        if any(i.sticking for i in impacts):
+            for j, h in enumerate(times):
+                out[j] = advance(self.flow, tau, z, h).z
+            return out
+        jump = self.n + self.model.i_w
+        t0, z, k = 0.0, np.asarray(z, dtype=float), 0
+        for j, h in enumerate(times):
+            while k < len(impacts) and impacts[k].dt <= h:
+                imp = impacts[k]
+                z = self.flow.transition(imp.dt - t0) @ z
+                z[jump] += imp.v_plus - imp.v_minus
+                t0 = imp.dt
+                k += 1
+            out[j] = self.flow.transition(h - t0) @ z
+        return out
