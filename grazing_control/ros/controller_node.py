@@ -194,9 +194,9 @@ class ControllerNode(Node):
             if self.stream is not None and self.stream.kernel:
                 warm_stream_kernel()     # compiled model filter loaded now, not at section 0
             self.predict_compiled = False   # the prediction on the compiled flow (_predict)
-            if self.stream is None and self.model is not None and exact_kernel.use_kernel():
+            if self.stream is None and self.model is not None:
                 self._load_compiled_prediction()
-        except (ParameterError, ValueError, RuntimeError) as exc:   # GRAZING_KERNEL
+        except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
         # no default QoS-event handlers: each is one more entity in every executor wait
@@ -320,7 +320,15 @@ class ControllerNode(Node):
         flow was 80 us at p50 idle, 240 us under load, of the answer's path before it is
         published; compiled 24 us, docs/benchmarks.md "The realtime answer's path").
         Bit for bit the same prediction either way (tests/test_estimation_compiled.py), so
-        the samples answered before the load ends lose nothing but time."""
+        the samples answered before the load ends lose nothing but time. Nothing to load
+        with ``GRAZING_KERNEL=python`` or without numba; a malformed ``GRAZING_KERNEL`` is
+        the node's startup error (one line, exit status 2)."""
+        try:
+            if not exact_kernel.use_kernel():
+                return
+        except (ValueError, RuntimeError) as exc:
+            raise StartupError(str(exc)) from None
+
         def load() -> None:
             t0 = time.monotonic()
             try:
