@@ -639,17 +639,6 @@ def test_the_model_watch_is_refused_outside_the_model_filter():
     assert "estimate_bias=True is invalid with pi2_source=sample" in lines[0]
 
 
-def test_a_malformed_kernel_choice_is_refused_in_sample_mode():
-    """The sample's prediction runs on the compiled flow where numba is installed (issue
-    30): GRAZING_KERNEL=bogus is one line naming it, exit status 2 (it was ignored)."""
-    cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER], {"delta_d": -5e-6})
-    env = dict(launcher.node_env(new_domain()), GRAZING_KERNEL="bogus")
-    res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=30)
-    lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
-    assert res.returncode == 2 and len(lines) == 1, lines
-    assert "GRAZING_KERNEL='bogus' is invalid: valid values are auto, python, numba" in lines[0]
-
-
 def test_the_predicted_correction_is_the_next_one_on_exact_samples(stream_scene):
     """Sample mode with delta_d: the test plays the exact plant on Pi2 (period_step with
     the node's corrections, Delta d = -9e-6, c2 = -1, a delay of 1.0); every answer's

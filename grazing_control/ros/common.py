@@ -417,17 +417,14 @@ class GcPauses:
             f"max_ms={self.max[g] * 1e3:.2f}" for g in range(3)))
 
 
-def freeze_heap(collect: bool = True) -> None:
+def freeze_heap() -> None:
     """Collect, then freeze every object alive now out of the cyclic collector's reach
     (gc.freeze): what start-up made (imports, rclpy, numpy, the scene's models: ~10^5
     objects that live as long as the process) is no longer walked by each full
     collection while the scene runs (docs/rig_scene.md, "Where the time went").
-    ``collect`` False: freeze only (what a thread loaded while the node spins: a full
-    collection then would hold the answers up). ``GRAZING_GC=keep`` leaves the collector
-    as it is (to measure against)."""
+    ``GRAZING_GC=keep`` leaves the collector as it is (to measure against)."""
     if os.environ.get(GC_ENV) != "keep":
-        if collect:
-            gc.collect()
+        gc.collect()
         gc.freeze()
 
 

@@ -95,7 +95,6 @@ config/controller.yaml`` or ``python -m grazing_control.ros.controller_node ...`
 from __future__ import annotations
 
 import math
-import threading
 import time
 
 import numpy as np
@@ -111,13 +110,11 @@ from std_srvs.srv import SetBool, Trigger
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation.stream import predict_section
 from grazing_control.dynamics.estimation.stream import warm_up as warm_stream_kernel
-from grazing_control.oscillator import kernel as exact_kernel
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
 from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, StartupError, Throttled,
-                     check_ranges, deserialize, executor_kind, freeze_heap,
-                     log_parameter_changes,
+                     check_ranges, deserialize, executor_kind, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key)
 from .controller_parameters import declare_parameters, gains_of
@@ -193,9 +190,6 @@ class ControllerNode(Node):
                                                    self.actuation_delay)
             if self.stream is not None and self.stream.kernel:
                 warm_stream_kernel()     # compiled model filter loaded now, not at section 0
-            self.predict_compiled = False   # the prediction on the compiled flow (_predict)
-            if self.stream is None and self.model is not None:
-                self._load_compiled_prediction()
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -313,38 +307,6 @@ class ControllerNode(Node):
                  f"v_ref={self.law.v_ref!r} enable_after={self.law.enable_after} "
                  f"actuation_delay={self.actuation_delay!r} executor={self.executor_kind} "
                  f"pi2_source={source}")
-
-    def _load_compiled_prediction(self) -> None:
-        """Sample mode: load the compiled flow (numba's cache, ~0.5-1 s) in a thread while
-        the scene starts, then predict on it (issue 30: the prediction on the pure-Python
-        flow was 80 us at p50 idle, 240 us under load, of the answer's path before it is
-        published; compiled 24 us, docs/benchmarks.md "The realtime answer's path").
-        Bit for bit the same prediction either way (tests/test_estimation_compiled.py), so
-        the samples answered before the load ends lose nothing but time. Nothing to load
-        with ``GRAZING_KERNEL=python`` or without numba; a malformed ``GRAZING_KERNEL`` is
-        the node's startup error (one line, exit status 2)."""
-        try:
-            if not exact_kernel.use_kernel():
-                return
-        except (ValueError, RuntimeError) as exc:
-            raise StartupError(str(exc)) from None
-
-        def load() -> None:
-            t0 = time.monotonic()
-            try:
-                warm_stream_kernel()
-            except Exception as exc:    # noqa: BLE001 - the pure-Python flow stays
-                self.get_logger().warning(f"compiled prediction not loaded ({exc}): the "
-                                          "prediction runs on the pure-Python flow")
-                return
-            # numba's ~10^5 objects, made after the node froze its heap: out of the
-            # collector's reach too (each full collection walked them: 97 ms, load 10)
-            freeze_heap(collect=False)
-            self.predict_compiled = True
-            self.get_logger().info(f"compiled prediction loaded in "
-                                   f"{time.monotonic() - t0:.2f} s")
-
-        threading.Thread(target=load, name="prediction_warm_up", daemon=True).start()
 
     def _warn_gains(self) -> None:
         """Warn when the gains were not given or are both zero (the controller then
@@ -486,8 +448,7 @@ class ControllerNode(Node):
             zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
                                      width=self.pulse[0], force_limit=self.pulse[1],
                                      actuator=self.pulse[2], force0=force0,
-                                     kernel=(self.predict_compiled if self.stream is None
-                                             else self.stream.kernel))
+                                     kernel=self.stream is not None and self.stream.kernel)
         except (ValueError, ArithmeticError, RuntimeError):
             return math.nan
         return self.law.preview(p.x_ref + zx, p.v_ref + zv)
