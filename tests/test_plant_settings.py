@@ -34,7 +34,8 @@ def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     sensor = {n for n in names if n.startswith(("sensor_", "watchdog_", "actuator_", "contact_",
                                                 "friction"))}
     assert fields | set(MODEL_KEYS) | sensor == set(names)
-    kinds = {"double": float, "integer": int, "string": str, "bool": bool}
+    kinds = {"double": float, "integer": int, "string": str, "bool": bool,
+             "double_array": tuple}
     for p in PARAMETERS:
         assert isinstance(p.default, kinds[p.kind]), p
         assert p.doc and (p.kind == "string") == bool(p.choices), p
