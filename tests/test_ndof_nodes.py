@@ -113,15 +113,22 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert set(s["final_vs_exact_orbit_per_coordinate"]) == {"x0", "x1", "v0", "v1"}
     text = (tmp_path / "report" / "report.md").read_text()
     assert "n-DOF scene" in text and "v1" in text and (tmp_path / "report" / "bag.png").is_file()
-    # grazing replay of the 2-DOF lockstep bag (issue 32): the recorded Pi2 messages through
-    # a new controller_node with the record's model file and gains give the recorded
-    # corrections bit for bit; the simulator replay is refused in one line, nothing started
+    # grazing replay of the 2-DOF lockstep bag (issue 32): the simulator, started at the
+    # bag's first recorded state (state0) and answered with the recorded corrections,
+    # gives the recorded Pi2 samples bit for bit (before issue 32's replay: refused)
     from grazing_control.recordings.replay import replay_controller, replay_simulator
 
-    with pytest.raises(ValueError, match="an n-DOF scene .* the simulator replay is not "
-                                         "built for n > 1 .* --no-sim"):
-        replay_simulator(bag, tmp_path / "replay_sim")
-    assert not (tmp_path / "replay_sim").exists()
+    sim = replay_simulator(bag, tmp_path / "replay_sim", domain_id=new_domain(),
+                           log_dir=tmp_path / "logs")
+    assert sim["sim_parameters"]["state0"] == [float(v) for v in X[0]], sim
+    assert sim["sim_parameters"]["model_file"] == str(CHAIN)
+    assert sim["samples_replayed"] == sim["samples_recorded"] == n, sim
+    assert sim["stamps_equal"] and sim["bit_identical_samples"] == n, sim
+    assert sim["max_departure"] == 0.0 and sim["samples_without_recorded_correction"] == 0
+    replayed = load(tmp_path / "replay_sim").scenes[0].scene.pi2
+    assert np.array_equal(replayed, X)
+    # ... and its controller: the recorded Pi2 messages through a new controller_node
+    # with the record's model file and gains give the recorded corrections bit for bit
     out = replay_controller(bag, tmp_path / "replay", domain_id=new_domain())
     cmp_ = out["comparison"]
     assert out["samples_published"] == out["answers"] == n, out
