@@ -90,6 +90,8 @@ def start_state(value, model: NdofModel) -> tuple:
 
 def _listed(value) -> str:
     """A parameter's list value as written: [a, b, ...]."""
+    if isinstance(value, str):
+        return repr(value)
     try:
         return repr([float(v) if not isinstance(v, str) else v for v in value])
     except (TypeError, ValueError):
