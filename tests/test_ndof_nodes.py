@@ -137,6 +137,26 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert cmp_["new_gains"] == {"gains": list(design.gains)}, cmp_["new_gains"]
 
 
+def test_the_simulator_replay_of_an_n_dof_bag_without_its_record_is_one_line():
+    """An n-DOF bag (n joints per Pi2 sample) without the simulator's parameter record:
+    its model file is unknown; refused in one line before anything starts (grazing
+    replay's main checks it first), --no-sim named."""
+    from types import SimpleNamespace
+
+    from grazing_control.recordings.replay import _ndof_sim_record
+
+    bag = SimpleNamespace(parameters={}, joints=2)
+    with pytest.raises(ValueError, match=r"^b: an n-DOF scene \(2 joints per Pi2 sample\) "
+                                         r"without the simulator's parameter record: its "
+                                         r"model_file is unknown.*give --no-sim"):
+        _ndof_sim_record("b", bag)
+    one = SimpleNamespace(parameters={"nodes": {"sim_node": [{"model_file": ""}]}}, joints=1)
+    assert _ndof_sim_record("b", one) is None              # a 1-DOF bag: its own replay
+    rec = {"model_file": str(CHAIN), "delta_d": DELTA_D}
+    ndof = SimpleNamespace(parameters={"nodes": {"sim_node": [rec]}}, joints=2)
+    assert _ndof_sim_record("b", ndof) is rec
+
+
 def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
     broken = tmp_path / "broken.yaml"
     broken.write_text("M: [[1.0, 0.0], [0.0\n")

@@ -275,8 +275,8 @@ def _ndof_sim_values(rec: dict, sd, notes: list) -> dict:
     plant.settings.NOT_WITH_MODEL_FILE, are at their defaults there), the injected
     measurement noise (it is in the published samples compared), and the start
     ``state0``: the first recorded Pi2 state X_0 (2n values), or the record's
-    ``state0`` where X_0 is it to rounding (X_0 = X_p + (state0 - X_p) differs from it
-    in the last bits: the record's is the recorded scene's start bit for bit). With
+    ``state0`` where X_0 is it to within 1e-12 (X_0 = X_p + (state0 - X_p) is state0 to
+    rounding only; the record's is the recorded scene's start bit for bit). With
     velocity or measurement noise the first sample is not the state: the record's."""
     from grazing_control.plant.settings import NOT_WITH_MODEL_FILE
 
