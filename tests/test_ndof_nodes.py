@@ -113,21 +113,48 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert set(s["final_vs_exact_orbit_per_coordinate"]) == {"x0", "x1", "v0", "v1"}
     text = (tmp_path / "report" / "report.md").read_text()
     assert "n-DOF scene" in text and "v1" in text and (tmp_path / "report" / "bag.png").is_file()
-    # grazing replay of the 2-DOF lockstep bag (issue 32): the recorded Pi2 messages through
-    # a new controller_node with the record's model file and gains give the recorded
-    # corrections bit for bit; the simulator replay is refused in one line, nothing started
+    # grazing replay of the 2-DOF lockstep bag (issue 32): the simulator, started at the
+    # bag's first recorded state (state0) and answered with the recorded corrections,
+    # gives the recorded Pi2 samples bit for bit (before issue 32's replay: refused)
     from grazing_control.recordings.replay import replay_controller, replay_simulator
 
-    with pytest.raises(ValueError, match="an n-DOF scene .* the simulator replay is not "
-                                         "built for n > 1 .* --no-sim"):
-        replay_simulator(bag, tmp_path / "replay_sim")
-    assert not (tmp_path / "replay_sim").exists()
+    sim = replay_simulator(bag, tmp_path / "replay_sim", domain_id=new_domain(),
+                           log_dir=tmp_path / "logs")
+    assert sim["sim_parameters"]["state0"] == [float(v) for v in X[0]], sim
+    assert sim["sim_parameters"]["model_file"] == str(CHAIN)
+    assert sim["samples_replayed"] == sim["samples_recorded"] == n, sim
+    assert sim["stamps_equal"] and sim["bit_identical_samples"] == n, sim
+    assert sim["max_departure"] == 0.0 and sim["samples_without_recorded_correction"] == 0
+    replayed = load(tmp_path / "replay_sim").scenes[0].scene.pi2
+    assert np.array_equal(replayed, X)
+    # ... and its controller: the recorded Pi2 messages through a new controller_node
+    # with the record's model file and gains give the recorded corrections bit for bit
     out = replay_controller(bag, tmp_path / "replay", domain_id=new_domain())
     cmp_ = out["comparison"]
     assert out["samples_published"] == out["answers"] == n, out
     assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == n, cmp_
     assert cmp_["original_control_on"] == cmp_["new_control_on"] == on
     assert cmp_["new_gains"] == {"gains": list(design.gains)}, cmp_["new_gains"]
+
+
+def test_the_simulator_replay_of_an_n_dof_bag_without_its_record_is_one_line():
+    """An n-DOF bag (n joints per Pi2 sample) without the simulator's parameter record:
+    its model file is unknown; refused in one line before anything starts (grazing
+    replay's main checks it first), --no-sim named."""
+    from types import SimpleNamespace
+
+    from grazing_control.recordings.replay import _ndof_sim_record
+
+    bag = SimpleNamespace(parameters={}, joints=2)
+    with pytest.raises(ValueError, match=r"^b: an n-DOF scene \(2 joints per Pi2 sample\) "
+                                         r"without the simulator's parameter record: its "
+                                         r"model_file is unknown.*give --no-sim"):
+        _ndof_sim_record("b", bag)
+    one = SimpleNamespace(parameters={"nodes": {"sim_node": [{"model_file": ""}]}}, joints=1)
+    assert _ndof_sim_record("b", one) is None              # a 1-DOF bag: its own replay
+    rec = {"model_file": str(CHAIN), "delta_d": DELTA_D}
+    ndof = SimpleNamespace(parameters={"nodes": {"sim_node": [rec]}}, joints=2)
+    assert _ndof_sim_record("b", ndof) is rec
 
 
 def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
@@ -140,6 +167,9 @@ def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
         "broken file": (sim, {"model_file": str(broken)}, "model_file="),
         "1-DOF option": (sim, {"model_file": str(SCENE), "zeta": 0.02},
                          "zeta=0.02 is invalid with model_file"),
+        "start beyond the wall": (sim, {"model_file": str(SCENE),
+                                        "state0": [1e3, 0.0, 0.0, 0.0]},
+                                  "state0=[1000.0, 0.0, 0.0, 0.0] is invalid: x_"),
         "gains length": (ctl, {"model_file": str(SCENE), "gains": [1.0, 2.0, 3.0]},
                          "gains has 3 values: valid is 2n = 4"),
         "no gains": (ctl, {"model_file": str(SCENE)}, "gains is not given"),

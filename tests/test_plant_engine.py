@@ -41,6 +41,7 @@ from test_plant_loops import Clock, Recorder
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = str(ROOT / "config" / "models" / "two_mass_scene.yaml")
 CHAIN = str(ROOT / "config" / "models" / "two_mass_chain.yaml")
+STUDY_1DOF = str(ROOT / "config" / "models" / "study_1dof.yaml")
 
 P = OscillatorParams(delta_d=-5e-6)
 
@@ -304,6 +305,112 @@ def test_controlled_samples_are_ndofmap_with_gains_bit_for_bit():
         eng.end_period()
         z = P.step(z).state
         assert np.array_equal(eng.z, z)
+
+
+def test_a_start_state_starts_ndofmap_iterates_bit_for_bit():
+    """Issue 32: an n-DOF scene from a physical start X0 (state0, 2n values) starts at
+    z = X0 - X_p(tau2) and repeats NdofMap's iterates from there, controlled, bit for
+    bit; a reset goes back to it."""
+    f = NdofMap(model_settings(CHAIN, delta_d=-1e-3).model).flow
+    X0 = f.particular(f.tau2) + np.array([-0.05, 0.02, 0.01, -0.03])
+    s = model_settings(CHAIN, delta_d=-1e-3, state0=X0.tolist())
+    assert s.state0 == tuple(X0.tolist())
+    k = gain_family(s.model, 0.1)
+    eng, P = Engine(s), NdofMap(s.model, k)
+    z = f.to_deviation(f.tau2, X0)
+    assert np.array_equal(eng.z, z) and abs(np.max(np.abs(z)) - 0.05) < 1e-15
+    np.testing.assert_allclose(xv(eng.sample()), X0, rtol=0, atol=1e-15)
+    impacts = 0
+    for _ in range(40):
+        eng.begin_period(float(P.gains @ eng.z))   # NdofMap's kick, k^T z
+        eng.end_period()
+        step = P.step(z)
+        z = step.state
+        impacts += len(step.impacts)
+        assert np.array_equal(eng.z, z)
+    assert impacts > 10
+    eng.reset()
+    assert eng.k == 0 and np.array_equal(eng.z, f.to_deviation(f.tau2, X0))
+
+
+def test_the_velocity_noise_at_pi2_is_the_one_dof_draws_on_the_actuated_velocity():
+    """Issue 32: ``noise`` in an n-DOF scene is the 1-DOF definition (a Gaussian velocity
+    kick at every Pi2 sample, one draw of the generator seeded with ``seed``), on the
+    actuated coordinate's velocity: NdofMap's iterates with that kick, bit for bit; for
+    n = 1 through the model file the 1-DOF scene's draws, bit for bit."""
+    sigma, seed = 1e-3, 5
+    s = model_settings(CHAIN, delta_d=-1e-3, noise=sigma, seed=seed)
+    eng, P = Engine(s), NdofMap(s.model)
+    rng = np.random.default_rng(seed)
+    z = eng.section.kicked(np.zeros(4), rng.normal(0.0, sigma))
+    assert np.array_equal(eng.z, z) and z[3] != 0.0 and not z[:3].any()   # i_a = 1
+    for _ in range(30):
+        eng.begin_period(0.0)
+        eng.end_period()
+        z = eng.section.kicked(P.step(z).state, rng.normal(0.0, sigma))
+        assert np.array_equal(eng.z, z)
+    eng.reset()                                 # the generator is seeded again
+    assert np.array_equal(eng.z, eng.section.kicked(np.zeros(4),
+                                                     np.random.default_rng(seed).normal(
+                                                         0.0, sigma)))
+    # n = 1: the model file's draws are the 1-DOF scene's (the states differ: two flows)
+    one = Engine(model_settings(STUDY_1DOF, noise=sigma, seed=seed))
+    study = Engine(settings_from_values({"noise": sigma, "seed": seed, "delta_d": -5e-6}))
+    rng = np.random.default_rng(seed)
+    w = rng.normal(0.0, sigma)
+    assert one.z[1] == study.dv == w and one.z[0] == study.dx == 0.0
+    for _ in range(20):
+        one.begin_period(0.0)
+        study.begin_period(0.0)
+        z_end, dv_end = one.seg.z_end, study.seg.dv_end
+        one.end_period()
+        study.end_period()
+        w = rng.normal(0.0, sigma)
+        assert one.z[1] == z_end[1] + w and study.dv == dv_end + w
+
+
+def test_the_measurement_noise_is_a_seeded_draw_per_coordinate():
+    """Issue 32: ``measurement_noise`` on every coordinate of the published n-DOF sample k,
+    a pure function of (seed, k) (FaultModel.coordinate_noise): coordinate 0's draws are
+    the 1-DOF FaultModel.draw(k)'s, so n = 1 through the model file is the 1-DOF scene's
+    bit for bit; the others are further draws, independent, of std sigma."""
+    sigma, seed = 2e-4, 9
+    s = model_settings(CHAIN, delta_d=-1e-3, measurement_noise=sigma, seed=seed)
+    eng = Engine(s)
+    noise = []
+    for k in range(300):
+        ev = eng.sample()
+        m = eng.measured(ev)
+        nx, nv = s.faults.coordinate_noise(k, 2)
+        assert m.x == tuple(float(a) for a in np.array(ev.x) + nx), k
+        assert m.v == tuple(float(a) for a in np.array(ev.v) + nv), k
+        d = s.faults.draw(k)
+        assert (nx[0], nv[0]) == (d.noise_x, d.noise_v)
+        assert eng.sample() == ev           # the true state is untouched
+        noise.append(np.concatenate([nx, nv]))
+        eng.begin_period(0.0)
+        eng.end_period()
+    noise = np.array(noise)
+    std = noise.std(axis=0) / sigma
+    assert np.all((0.85 < std) & (std < 1.15)), std
+    corr = np.corrcoef(noise.T) - np.eye(4)
+    assert np.max(np.abs(corr)) < 0.2, corr
+    # the same (seed, k): the same draws, from another engine, after a reset
+    again = Engine(s)
+    assert again.measured(again.sample()) == Engine(s).measured(Engine(s).sample())
+    # n = 1: the 1-DOF scene's measured sample's offsets
+    one = Engine(model_settings(STUDY_1DOF, measurement_noise=sigma, seed=seed))
+    study = Engine(settings_from_values({"measurement_noise": sigma, "seed": seed,
+                                         "delta_d": -5e-6}))
+    for k in range(5):
+        a, b = one.sample(), study.sample()
+        ma, mb = one.measured(a), study.measured(b)
+        d = s.faults.draw(k)
+        assert (ma.x[0], ma.v[0]) == (a.x[0] + d.noise_x, a.v[0] + d.noise_v)
+        assert (mb.x, mb.v) == (b.x + d.noise_x, b.v + d.noise_v)
+        for e in (one, study):
+            e.begin_period(0.0)
+            e.end_period()
 
 
 def test_states_between_samples_are_the_cores_trajectory():

@@ -34,7 +34,8 @@ def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     sensor = {n for n in names if n.startswith(("sensor_", "watchdog_", "actuator_", "contact_",
                                                 "friction"))}
     assert fields | set(MODEL_KEYS) | sensor == set(names)
-    kinds = {"double": float, "integer": int, "string": str, "bool": bool}
+    kinds = {"double": float, "integer": int, "string": str, "bool": bool,
+             "double_array": tuple}
     for p in PARAMETERS:
         assert isinstance(p.default, kinds[p.kind]), p
         assert p.doc and (p.kind == "string") == bool(p.choices), p
@@ -119,6 +120,7 @@ def test_the_sensor_is_plant_sensors_model_and_the_pulse_is_carried():
 
 # ------------------------------------------------------------------- an n-DOF scene
 SCENE = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml")
+CHAIN = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_chain.yaml")
 
 
 
@@ -164,6 +166,43 @@ def test_options_not_built_for_n_dof_are_refused_by_name(name):
     with pytest.raises(ParameterError, match=rf"^{name}=.* is invalid with model_file=.*"
                                              r"valid is its default"):
         settings_from_values({name: bad}, SCENE)
+
+
+@pytest.mark.parametrize("value,text", [
+    ([0.0, 0.0, 0.0], r"state0=\[0.0, 0.0, 0.0\] is invalid: valid is 2n = 4 finite values "
+                      r"\[x_0, x_1, v_0, v_1\] \(the physical state on Pi2\), or empty"),
+    ([0.0, 0.0, math.inf, 0.0], r"state0=.* is invalid: v_0=inf is not finite; valid is 2n"),
+    ([0.0, math.nan, 0.0, 0.0], r"state0=.* is invalid: x_1=nan is not finite"),
+    ([50.0, 0.0, 0.0, 0.0], r"state0=\[50.0, 0.0, 0.0, 0.0\] is invalid: x_0=50.0 lies "
+                            r"beyond the wall; valid range is x_0 <= d = d\* \+ delta_d = "),
+    ("abcd", r"state0='abcd' is invalid: valid is 2n = 4"),
+])
+def test_a_bad_n_dof_start_state_is_one_line_naming_state0(value, text):
+    """Issue 32: the start of an n-DOF scene (state0, 2n values) refused in one line with
+    its valid range: wrong length, not finite, beyond the wall (x_{i_w} <= d)."""
+    with pytest.raises(ParameterError, match="^" + text) as err:
+        settings_from_values({"state0": value, "delta_d": -1e-3}, CHAIN)
+    assert "\n" not in str(err.value)
+
+
+def test_the_start_state_is_the_wall_coordinates_and_one_dof_refuses_it():
+    """The wall's bound is the gap at Pi2 (NdofFlow.gap): a start on the wall is valid,
+    a start beyond it by 1e-9 refused; a 1-DOF scene starts at x0, v0 (state0 empty)."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+
+    model = settings_from_values({"delta_d": -1e-3}, CHAIN).model
+    f = NdofFlow.of(model)
+    on = f.particular(f.tau2)
+    on[model.i_w] += f.on_wall(f.tau2)[0]       # z_w at the wall: gap 0
+    assert f.gap(f.tau2, f.to_deviation(f.tau2, on)) <= 0.0
+    assert settings_from_values({"state0": on.tolist(), "delta_d": -1e-3}, CHAIN).state0
+    on[model.i_w] += 1e-9
+    with pytest.raises(ParameterError, match=r"^state0=.* lies beyond the wall"):
+        settings_from_values({"state0": on.tolist(), "delta_d": -1e-3}, CHAIN)
+    assert settings_from_values({"state0": []}, CHAIN).state0 == ()
+    with pytest.raises(ParameterError, match=r"^state0=\[1.0, 2.0\] is invalid without "
+                                             r"model_file: valid is empty"):
+        settings_from_values({"state0": [1.0, 2.0]})
 
 
 def test_bad_values_keep_the_one_dof_messages():

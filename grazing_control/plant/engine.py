@@ -31,7 +31,10 @@ arrival, the stream's grid and the Pi1 crossing are the ones above, and what dif
 the state z in R^{2n} (the deviation from the periodic response at Pi2), the flow of a
 piece, the kick on the actuated velocity, the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
-(:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`).
+(:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`):
+its start is ``state0`` (X** when empty), its velocity noise at Pi2 the kick of one
+draw per sample on the actuated velocity, its measurement noise a draw per coordinate
+(:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
 Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
 A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s
@@ -159,10 +162,10 @@ class Engine:
         self.k = 0
         self.k_base, self.t_base = 0, 0.0
         if self.section is not None:
-            self.z = self.section.start()
+            self.z = self.section.start(s.state0)
             self.impacts = 0
             self.seg = None
-            return self.sample()
+            return self._model_sample()
         self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
         self.impacts = 0
         self.seg = None
@@ -186,6 +189,15 @@ class Engine:
         p = self.p
         return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
 
+    def _model_sample(self) -> NdofEvent:
+        """:meth:`_sample` of an n-DOF scene: the velocity noise at Pi2 is a kick on the
+        actuated velocity (NdofSection.kicked), one draw of the seeded generator per
+        sample as the 1-DOF scene's dv (n = 1: the same draws)."""
+        if self.settings.noise > 0.0:
+            self.z = self.section.kicked(self.z, float(self.rng.normal(0.0,
+                                                                       self.settings.noise)))
+        return self.sample()
+
     def sample(self) -> Event:
         """The current sample (without drawing noise again)."""
         if self.section is not None:
@@ -205,6 +217,10 @@ class Engine:
         """Sample k as the controller sees it: (x, v) + the measurement noise of draw(k)."""
         if self.settings.measurement_noise == 0.0:
             return ev
+        if self.section is not None:    # every coordinate (FaultModel.coordinate_noise)
+            nx, nv = self.settings.faults.coordinate_noise(self.k, self.section.n)
+            return ev._replace(x=tuple(float(a + b) for a, b in zip(ev.x, nx)),
+                               v=tuple(float(a + b) for a, b in zip(ev.v, nv)))
         f = self._draw()
         return ev._replace(x=ev.x + f.noise_x, v=ev.v + f.noise_v)
 
@@ -410,7 +426,7 @@ class Engine:
             self.z = s.z_end
             self.k += 1
             self.seg = None
-            return self.sample(), None
+            return self._model_sample(), None
         self.dx, self.dv = s.dx_end, s.dv_end
         self.force = self._force_end
         self.k += 1

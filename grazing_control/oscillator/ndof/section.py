@@ -7,10 +7,13 @@ kernel (``kernel.exact_advance``, ``simulate.states_between``) and an n-DOF mode
 through :class:`NdofSection` (issue 32):
 
 * the state at sample 0: the deviation z = 0 in R^{2n} from the periodic response at
-  Pi2 (the grazing point X**);
+  Pi2 (the grazing point X**), or z = X0 - X_p(tau2) from a physical start X0
+  (``state0``, validated by :func:`start_state`);
 * the flow of a piece: :func:`grazing_control.oscillator.ndof.impact.advance` from phase
   tau for a time h, with its impacts;
-* the kick: z + e_{n + i_a} Delta v, on the actuated coordinate's velocity;
+* the kick: z + e_{n + i_a} Delta v, on the actuated coordinate's velocity; the
+  velocity noise at Pi2 (``noise``) is such a kick, one draw per sample, as the 1-DOF
+  scene's on its one velocity (for n = 1 the same draws);
 * the physical state X = X_p(tau) + z of the n coordinates;
 * the states between samples, from a piece's impact list without changing the
   trajectory: between impacts the deviation flows linearly, z(t + h) = Phi(h) z(t) (the
@@ -35,8 +38,9 @@ import numpy as np
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.ndof.model import NdofModel
+from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["NdofSection", "measure_coordinates"]
+__all__ = ["NdofSection", "measure_coordinates", "start_state"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -51,6 +55,47 @@ def measure_coordinates(sensor, j0: int, x, v):
     m, n = x.shape
     xm, vm = sensor.measure(j0 * n, x.reshape(-1), v.reshape(-1))
     return xm.reshape(m, n), vm.reshape(m, n)
+
+
+def start_state(value, model: NdofModel) -> tuple:
+    """An n-DOF scene's ``state0`` validated against its model: () (None or empty: the
+    grazing point X**), or the 2n finite values of the physical state
+    [x_0..x_{n-1}, v_0..v_{n-1}] on Pi2 with the wall coordinate not beyond the wall
+    (gap x_{i_w} - d <= 0 at Pi2's phase, :meth:`NdofFlow.gap`, as the flow requires);
+    ParameterError naming state0 and its valid range."""
+    if value is None or len(value) == 0:
+        return ()
+    n = model.n
+    names = ([f"x_{i}" for i in range(n)] + [f"v_{i}" for i in range(n)])
+    valid = f"2n = {2 * n} finite values [{', '.join(names)}] (the physical state on Pi2), " \
+            "or empty for X**"
+    if isinstance(value, str) or len(value) != 2 * n:
+        raise ParameterError(f"state0={_listed(value)} is invalid: valid is {valid}")
+    try:
+        state = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"state0={_listed(value)} is invalid: valid is {valid}") from None
+    for name, v in zip(names, state):
+        if not math.isfinite(v):
+            raise ParameterError(f"state0={_listed(value)} is invalid: {name}={v!r} is not "
+                                 f"finite; valid is {valid}")
+    flow = NdofFlow.of(model)
+    if flow.gap(flow.tau2, flow.to_deviation(flow.tau2, state)) > 0.0:
+        i = model.i_w
+        raise ParameterError(f"state0={_listed(value)} is invalid: x_{i}={state[i]!r} lies "
+                             f"beyond the wall; valid range is x_{i} <= d = d* + delta_d = "
+                             f"{flow.d_star + model.delta_d!r} (the wall coordinate i_w={i})")
+    return state
+
+
+def _listed(value) -> str:
+    """A parameter's list value as written: [a, b, ...]."""
+    if isinstance(value, str):
+        return repr(value)
+    try:
+        return repr([float(v) if not isinstance(v, str) else v for v in value])
+    except (TypeError, ValueError):
+        return repr(value)
 
 
 class NdofSection:
@@ -70,9 +115,12 @@ class NdofSection:
         self.tau2 = self.flow.tau2
         self.tau_star = self.flow.tau_star
 
-    def start(self) -> np.ndarray:
-        """The deviation at sample 0: the grazing point X** (z = 0)."""
-        return np.zeros(2 * self.n)
+    def start(self, state0: tuple = ()) -> np.ndarray:
+        """The deviation at sample 0: z = X0 - X_p(tau2) of the physical start ``state0``
+        (:func:`start_state`), or the grazing point X** (z = 0) where it is empty."""
+        if len(state0) == 0:
+            return np.zeros(2 * self.n)
+        return self.flow.to_deviation(self.tau2, state0)
 
     def advance(self, tau: float, z, duration: float):
         """The exact flow with impacts from (tau, z) for ``duration``: ``.z``, ``.impacts``."""
