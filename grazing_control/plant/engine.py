@@ -29,13 +29,18 @@ An n-DOF scene (``settings.model``, a model file of docs/ndof_model.md; issues 1
 runs on the same engine: the sample bookkeeping, the faults, the delay and the split on
 arrival, the stream's grid and the Pi1 crossing are the ones above, and what differs --
 the state z in R^{2n} (the deviation from the periodic response at Pi2), the flow of a
-piece, the kick on the actuated velocity, the physical state of the n coordinates, the
+piece, the kick on the actuated velocity or the force pulse carrying it (``pulse_width``:
+F = m_a Delta v / w on the actuated coordinate, centred ``actuation_delay`` after the
+sample as in 1-DOF; docs/theory_ndof.md section 15), the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
 (:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
 Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
 A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s
-iterates bit for bit; the 1-DOF path is the kernel's closed form, unchanged
+iterates bit for bit (with a pulse, ``NdofMap(width=)``'s: the calls of
+:func:`~grazing_control.dynamics.maps.ndof_map.pulse_step`); a sticking motion of the
+wall coordinate is the core's (``advance`` returns its sticking impacts; the states
+between samples while stuck are ``advance`` from the piece's start); the 1-DOF path is the kernel's closed form, unchanged
 (benchmarks/fold_hashes.py).
 
 No ROS: sim_node publishes the :class:`Event` values this returns.
@@ -96,6 +101,14 @@ class Span(NamedTuple):
     te: float          # end time (the next Pi2 sample)
     z_end: np.ndarray  # deviation at te
     impacts: tuple     # the model's impacts of the stretch (dt from ts)
+    force: float = 0.0  # a pulse's constant force on the stretch (0: free flight)
+
+
+class _Rest(NamedTuple):
+    """An n-DOF head of length 0 (a pulse starting at the sample): z, no impacts."""
+
+    z: np.ndarray
+    impacts: tuple
 
 
 class Segment(NamedTuple):
@@ -265,7 +278,8 @@ class Engine:
         p = self.p
         t0, start = self.t, self.actuation_start(delay)
         if self.section is not None:
-            head = self.section.advance(p.tau2, self.z, start)
+            head = (self.section.advance(p.tau2, self.z, start) if start > 0.0 else
+                    _Rest(self.z, ()))
             self._head = (self.k, start, self.z, head)
             self.seg = Span(t0, p.tau2, self.z, (self.k + 1) * p.period, None, ())
             return self._model_events(Span(t0, p.tau2, self.z, t0 + start, head.z,
@@ -299,7 +313,8 @@ class Engine:
             if kept is not None and kept[:2] == (self.k, start) and kept[2] is self.z:
                 head = kept[3]                  # begin_head's flow to the start
             else:
-                head = self.section.advance(self.p.tau2, self.z, start)
+                head = (self.section.advance(self.p.tau2, self.z, start) if start > 0.0
+                        else _Rest(self.z, ()))
             self._head = None
             return self._model_actuate(head.z, dv_correction, start)
         if self.lagged:
@@ -543,19 +558,36 @@ class Engine:
         t_k + delay, the kick there, the flow to t_k+1 (module docstring)."""
         sec, t0 = self.section, self.t
         if delay > 0.0:
-            head = sec.advance(sec.tau2, self.z, delay)
-            events = self._model_events(Span(t0, sec.tau2, self.z, t0 + delay, head.z,
-                                             head.impacts))
-            return events + self._model_actuate(head.z, dv_correction, delay)
+            start = self.actuation_start(delay)
+            if start > 0.0:
+                head = sec.advance(sec.tau2, self.z, start)
+                events = self._model_events(Span(t0, sec.tau2, self.z, t0 + start, head.z,
+                                                 head.impacts))
+                return events + self._model_actuate(head.z, dv_correction, start)
+            return self._model_actuate(self.z, dv_correction, start)   # a pulse from t_k
         z = sec.kicked(self.z, dv_correction)
         piece = sec.advance(sec.tau2, z, sec.period)
         self.seg = Span(t0, sec.tau2, z, (self.k + 1) * sec.period, piece.z, piece.impacts)
         return self._model_events(self.seg)
 
     def _model_actuate(self, z_head, dv_correction: float, start: float) -> list:
-        """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF)."""
-        sec = self.section
+        """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF); with a
+        pulse width w > 0 the pulse on [start, start + w] and the flow on (the legs of
+        :func:`grazing_control.dynamics.maps.ndof_map.pulse_step`)."""
+        sec, w = self.section, self.settings.pulse_width
         tau = (sec.tau2 + sec.omega * start) % TWO_PI
+        if w > 0.0:
+            force = sec.pulse_force(dv_correction, w, self.settings.force_limit or math.inf)
+            # the durations as pulse_step's legs (t1 - t0), so lockstep is its calls
+            mid = sec.pushed(tau, np.array(z_head, dtype=float), (start + w) - start, force)
+            events = self._model_events(Span(self.t + start, tau, z_head, self.t + start + w,
+                                             mid.z, mid.impacts, force))
+            end = start + w
+            tau = (sec.tau2 + sec.omega * end) % TWO_PI
+            tail = sec.advance(tau, np.array(mid.z, dtype=float), sec.period - end)
+            self.seg = Span(self.t + end, tau, mid.z, (self.k + 1) * sec.period, tail.z,
+                            tail.impacts)
+            return events + self._model_events(self.seg)
         z = sec.kicked(z_head, dv_correction)
         tail = sec.advance(tau, z, sec.period - start)
         self.seg = Span(self.t + start, tau, z, (self.k + 1) * sec.period, tail.z,
@@ -593,7 +625,7 @@ class Engine:
                         float(i.phase) % TWO_PI) for i in s.impacts]
         rel, kinds, j0 = self._published_times(s.ts, s.te, s.tau)
         if rel:
-            zs = sec.deviations_between(s.tau, s.z, s.impacts, rel)
+            zs = sec.deviations_between(s.tau, s.z, s.impacts, rel, s.force)
             states = []
             for h, kind, z in zip(rel, kinds, zs):
                 tau = sec.tau_star if kind == "pi1" else (s.tau + sec.omega * h) % TWO_PI

@@ -21,7 +21,7 @@ bound on a time reads the n-DOF period T = 2 pi / omega. What an n-DOF scene doe
 build (yet) is refused with one line naming the parameter and why, never half-applied
 (:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives them), an
 initial state other than the grazing point, the velocity noise at Pi2, the injected
-measurement noise, the force pulse, the actuator, the compliant stop and friction, the
+measurement noise, the actuator, the compliant stop and friction, the
 drifting wall and fidelities other than exact. The engine runs either over one
 interface (:mod:`grazing_control.plant.engine`).
 """
@@ -494,7 +494,6 @@ NOT_WITH_MODEL_FILE = {
     "v0": "an n-DOF scene starts at the grazing point X** (NaN)",
     "noise": "the velocity noise at Pi2 is not built for n-DOF",
     "measurement_noise": "the injected measurement noise is not built for n-DOF",
-    "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
     "fidelity": "only the exact flow is built for n-DOF",
     "delta_d_drift": "the drifting wall is not built for n-DOF",
     "contact": "the compliant stop is not built for n-DOF (the rigid wall only)",
@@ -547,6 +546,15 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
             if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE}
     # the 1-DOF validation with the n-DOF forcing frequency: its bounds on times read T
     base = settings_from_values({**rest, "omega": model.omega})
+    if base.pulse_width > 0.0:     # a force pulse needs the static deflection K^-1 e_a
+        from grazing_control.oscillator.ndof.flow import NdofFlow
+        from grazing_control.oscillator.ndof.forced import static_deflection
+
+        try:
+            static_deflection(NdofFlow.of(model))
+        except ParameterError as exc:
+            raise ParameterError(f"pulse_width={base.pulse_width!r} is invalid with model_file="
+                                 f"{model_file!r}: valid is 0 ({exc})") from None
     return dataclasses.replace(base, model=model, model_file=str(model_file))
 
 

@@ -16,7 +16,9 @@ through :class:`NdofSection` (issue 32):
   trajectory: between impacts the deviation flows linearly, z(t + h) = Phi(h) z(t) (the
   periodic response absorbs the forcing; docs/ndof_model.md), and an impact changes only
   the wall coordinate's velocity, by v+ - v-, which adds (v+ - v-) e_{n + i_w} to z. A
-  piece with a sticking impact is evaluated by ``advance`` from its start instead;
+  piece with a sticking impact is evaluated by ``advance`` from its start instead.
+  Under a pulse's force F the same holds for z - sigma F against the clearance
+  Delta d - sigma_w F (sigma the static deflection, oscillator/ndof/forced.py);
 * the sensor's measurement of the n coordinates: sample j's coordinate i is the sensor's
   draw number j n + i (:func:`measure_coordinates`), a pure function of (seed, j) as in
   1-DOF, and for n = 1 the 1-DOF sensor's draws bit for bit.
@@ -33,6 +35,8 @@ import math
 import numpy as np
 
 from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.forced import (actuated_mass, advance_with_force,
+                                                    forced_flow, static_deflection)
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.ndof.model import NdofModel
 
@@ -78,6 +82,16 @@ class NdofSection:
         """The exact flow with impacts from (tau, z) for ``duration``: ``.z``, ``.impacts``."""
         return advance(self.flow, tau, z, duration)
 
+    def pulse_force(self, dv: float, width: float, limit: float = math.inf) -> float:
+        """F = m_a Delta v / w clipped to +-``limit``: the pulse carrying Delta v
+        (as :func:`grazing_control.dynamics.maps.ndof_map.pulse_step`)."""
+        return max(-limit, min(limit, actuated_mass(self.flow) * dv / width))
+
+    def pushed(self, tau: float, z, duration: float, force: float):
+        """The exact flow with impacts under the constant ``force`` on the actuated
+        coordinate (:func:`~grazing_control.oscillator.ndof.forced.advance_with_force`)."""
+        return advance_with_force(self.flow, tau, z, duration, force)
+
     def kicked(self, z, dv: float) -> np.ndarray:
         """z + e_{n + i_a} Delta v (the kick on the actuated velocity)."""
         z = np.array(z, dtype=float)
@@ -90,22 +104,31 @@ class NdofSection:
         n = self.n
         return tuple(float(a) for a in X[:n]), tuple(float(a) for a in X[n:])
 
-    def deviations_between(self, tau: float, z, impacts, times) -> np.ndarray:
+    def deviations_between(self, tau: float, z, impacts, times,
+                           force: float = 0.0) -> np.ndarray:
         """z at ``times`` (sorted, since the piece's start at phase ``tau`` with deviation
-        ``z``) from the piece's ``impacts`` (module docstring); (len(times), 2n)."""
+        ``z``) from the piece's ``impacts`` (module docstring), under a pulse's constant
+        ``force``; (len(times), 2n)."""
+        if force != 0.0:    # z - sigma F flows freely against the moved wall (section 15)
+            shift = static_deflection(self.flow) * force
+            return self._between(forced_flow(self.flow, force), tau,
+                                 np.asarray(z, dtype=float) - shift, impacts, times) + shift
+        return self._between(self.flow, tau, z, impacts, times)
+
+    def _between(self, flow: NdofFlow, tau: float, z, impacts, times) -> np.ndarray:
         out = np.empty((len(times), 2 * self.n))
         if any(i.sticking for i in impacts):
             for j, h in enumerate(times):
-                out[j] = advance(self.flow, tau, z, h).z
+                out[j] = advance(flow, tau, z, h).z
             return out
         jump = self.n + self.model.i_w
         t0, z, k = 0.0, np.asarray(z, dtype=float), 0
         for j, h in enumerate(times):
             while k < len(impacts) and impacts[k].dt <= h:
                 imp = impacts[k]
-                z = self.flow.transition(imp.dt - t0) @ z
+                z = flow.transition(imp.dt - t0) @ z
                 z[jump] += imp.v_plus - imp.v_minus
                 t0 = imp.dt
                 k += 1
-            out[j] = self.flow.transition(h - t0) @ z
+            out[j] = flow.transition(h - t0) @ z
         return out
