@@ -162,12 +162,14 @@ def main(argv=None):
               f"{a.periods - a.on - a.settle}) {sorted(set(counts[a.on + a.settle:].tolist()))}"
               f" resets {resets}; filter error std {np.array2string(filt, precision=3)} "
               f"(predicted {np.array2string(a.sigma * np.sqrt(np.diag(R)), precision=3)})")
-    ratios = np.array(ratios)
-    out["core"] = {"ratio_mean": ratios.mean(axis=0).tolist(), "ratio_min": ratios.min().item(),
-                   "ratio_max": ratios.max().item(), "seconds_per_period": float(np.mean(secs))}
-    print(f"core: spread/predicted mean {np.array2string(ratios.mean(axis=0), precision=3)} "
-          f"(all seeds {ratios.min():.3f} .. {ratios.max():.3f}); "
-          f"{np.mean(secs) * 1e3:.1f} ms per period")
+    if a.seeds:
+        ratios = np.array(ratios)
+        out["core"] = {"ratio_mean": ratios.mean(axis=0).tolist(),
+                       "ratio_min": ratios.min().item(), "ratio_max": ratios.max().item(),
+                       "seconds_per_period": float(np.mean(secs))}
+        print(f"core: spread/predicted mean {np.array2string(ratios.mean(axis=0), precision=3)}"
+              f" (all seeds {ratios.min():.3f} .. {ratios.max():.3f}); "
+              f"{np.mean(secs) * 1e3:.1f} ms per period")
     if not a.core_only:
         out["nodes"] = []
         for seed in range(a.seed, a.seed + a.node_seeds):
