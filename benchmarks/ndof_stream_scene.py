@@ -8,7 +8,7 @@ Three numbers per coordinate of the Pi2 deviation about the controlled orbit z*:
   linearised about z* on the exact n-DOF map, driven by the model filter's error
   covariance on the orbit (dynamics/design/noise.py: ndof_filter_covariance,
   ndof_noise_covariance);
-* **core**: the seeded closed loop in one process (studies.ndof.scene.stream_loop: the
+* **core**: the seeded closed loop in one process (studies.near_grazing.scene.stream_loop: the
   engine with the sensor, the StreamEstimator over the model, k^T z^ acting ``delay``
   after each section), over ``--seeds`` seeds;
 * **nodes**: sim_node + controller_node (+ recorder) through ``grazing run``'s launcher,
@@ -47,11 +47,11 @@ from grazing_control.dynamics.design.noise import (ndof_filter_covariance,  # no
 from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
 from grazing_control.dynamics.orbits.shooting import find_periodic  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
-from grazing_control.studies.ndof.scene import stream_loop  # noqa: E402
+from grazing_control.studies.near_grazing.scene import stream_loop  # noqa: E402
 
 
 def core_loop(model_file, model, gains, a, seed: int):
-    """The seeded closed loop in one process (studies.ndof.scene.stream_loop): (Pi2
+    """The seeded closed loop in one process (studies.near_grazing.scene.stream_loop): (Pi2
     deviations z_k, impacts per period, estimator resets, seconds per period, the
     estimates' errors)."""
     t0 = time.perf_counter()

@@ -4,19 +4,24 @@
 module that starts node processes or DDS participants (:data:`SCENE_MODULES`) is an
 xdist group of its own (``scene:<module>``): one worker runs all of it, in collection
 order, so that its module-scoped scene (or tests/test_cli.py's session-scoped commands)
-is set up once; two such modules may run at once, one on each worker. Every other test
-(the numerical core, bags written in-process, the command line without nodes) is shared
-out to whichever worker is free (``--no-loadscope-reorder``: in collection order; xdist's
-default puts the largest groups first, and the realtime group then came first). The tests
-marked ``realtime`` (their assertions hold
-only if the scene's answers meet wall-clock deadlines) form one more group, last in the
-queue, and each waits until the other worker has been idle for IDLE_SECONDS (at most
-REALTIME_WAIT): such a deadline is measured on a machine that runs one scene and nothing
-else of the suite (a CPU-bound test beside a realtime scene made its answers miss: 12 of
-40 where 4 is the bound). A realtime scene whose assertions do not depend on meeting
-deadlines (one that misses by design, a refused start, a signal) is not marked. A module
-whose module-scoped scene is realtime marks the whole module (``pytestmark``), so that
-the scene is set up once.
+is set up once; two such modules may run at once, one on each worker. The tests of a
+module that share a module- or class-scoped fixture of that module (a fit, a sweep,
+figures) are a group too (``shared:<module>``): split, the fixture was computed on both
+workers. Every other test (the numerical core, bags written in-process, the command line
+without nodes) is shared out to whichever worker is free. The controller hands out the
+work in the order of the items (``--no-loadscope-reorder``; xdist's default puts the
+groups with most tests first, and the realtime group then came first): the groups first,
+then the single tests, which fill both workers up to about the same end, the realtime
+group last (:func:`_rank`; a 60-100 s group handed out late can keep one worker busy
+while the other waits with the realtime group). The tests marked ``realtime`` (their
+assertions hold only if the scene's answers meet wall-clock deadlines) form one more
+group, last in the queue, and each waits until the other worker has been idle for
+IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a machine that runs
+one scene and nothing else of the suite (a CPU-bound test beside a realtime scene made
+its answers miss: 12 of 40 where 4 is the bound). A realtime scene whose assertions do
+not depend on meeting deadlines (one that misses by design, a refused start, a signal)
+is not marked. A module whose module-scoped scene is realtime marks the whole module
+(``pytestmark``), so that the scene is set up once.
 
 The groups are made here (:class:`GroupMender`). Found on 2026-11-28: with the pinned
 pytest 9.2 and pytest-xdist 3.8 the ``xdist_group`` marks were inert: xdist's worker
@@ -119,7 +124,7 @@ SCENE_MODULES = frozenset({
     "test_cli_hostile", "test_closed_loop", "test_composed", "test_contact_plant",
     "test_controller_node", "test_deadline_misses",
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
-    "test_live_node", "test_ndof_nodes", "test_node_common", "test_packaging",
+    "test_live_node", "test_ndof_identify", "test_ndof_nodes", "test_node_common", "test_packaging",
     "test_parameter_files_hostile",
     "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_scene", "test_rig_stop",
     "test_scheduling",
@@ -139,23 +144,54 @@ def is_realtime(item) -> bool:
     return item.get_closest_marker("realtime") is not None
 
 
+def _shares_a_module_fixture(item) -> bool:
+    """The test uses a module- or class-scoped fixture of its own module (a fit, a
+    sweep, figures computed once for the module's tests): split over both workers, that
+    fixture was computed on each (tests/test_actuator.py's: 83.9 s and 83.7 s of setup,
+    one on each worker, at load 13; docs/benchmarks.md, "The suite")."""
+    module = item.getparent(pytest.Module).nodeid
+    for defs in item._fixtureinfo.name2fixturedefs.values():
+        for d in defs:
+            # where the fixture is defined: its node (pytest 9; baseid, the node id as
+            # a string, is deprecated)
+            where = d.node.nodeid if getattr(d, "node", None) is not None else d.baseid
+            if d.scope in ("module", "class") and (where or "").startswith(module):
+                return True
+    return False
+
+
 def xdist_group(item) -> str | None:
-    """The xdist group of a test: ``realtime``, ``scene:<module>`` or none."""
+    """The xdist group of a test: ``realtime``, ``scene:<module>``, ``shared:<module>``
+    (:func:`_shares_a_module_fixture`) or none."""
     if is_realtime(item):
         return "realtime"
     if item.path.stem in SCENE_MODULES:
         return f"scene:{item.path.stem}"
+    if _shares_a_module_fixture(item):
+        return f"shared:{item.path.stem}"
     return None
 
 
+def _rank(item) -> int:
+    """The order in which the controller hands out the work: the groups first (a group
+    is one unit, up to ~100 s: handed out late, as test_stop_selection's was in
+    collection order, it can keep one worker busy while the other, done, holds the
+    realtime group waiting for it), then the single tests (they fill both workers up to
+    about the same end), the realtime group last."""
+    if is_realtime(item):
+        return 2
+    return 0 if xdist_group(item) is not None else 1
+
+
 def pytest_collection_modifyitems(config, items):
-    """Mark each test with its xdist group (:func:`xdist_group`); the realtime tests last
-    (collection order kept within each, so that module-scoped scenes are set up once)."""
+    """Mark each test with its xdist group (:func:`xdist_group`); the grouped tests
+    first, the realtime ones last (:func:`_rank`; collection order kept within each, so
+    that module-scoped scenes are set up once)."""
     for item in items:
         group = xdist_group(item)
         if group is not None:
             item.add_marker(pytest.mark.xdist_group(group))
-    items.sort(key=is_realtime)        # stable: collection order within each rank
+    items.sort(key=_rank)              # stable: collection order within each rank
 
 
 class GroupMender:

@@ -487,7 +487,17 @@ def _chatter_cases(seed, n):
     return out
 
 
-def _chatter_comparison(p, tau, v, duration):
+def _chatter_exact(p, tau, v, duration):
+    """The exact continuation of one chattering segment (tests/reference.py,
+    RefModel.bounces at 50 digits) up to where advance's rule sums it: (bounces,
+    whether the rule was reached before the duration)."""
+    ref = RefModel.from_params(p)
+    return ref.bounces(
+        tau, v, duration, stop=lambda ph, vm: _summed_margin(p, float(ph), float(vm))
+        < 1.0 + _BORDERLINE)
+
+
+def _chatter_comparison(p, tau, v, duration, exact=None, step=None):
     """The package's impacts of one chattering segment against the exact continuation
     (tests/reference.py, RefModel.bounces: every bounce located at 50 digits, the impact
     law applied exactly), up to where the exact sequence is summed by advance's rule.
@@ -507,12 +517,12 @@ def _chatter_comparison(p, tau, v, duration):
     the flight before the impact and 1.4e-3 relative in v-. A dropped or premature
     bounce shifts the next impact by a whole flight (at least r >= 0.3 of the one
     before) and v- by the factor r.
+
+    ``exact``: :func:`_chatter_exact`'s result, computed once for several paths;
+    ``step``: the path's advance (default this module's, the core's).
     """
-    ref = RefModel.from_params(p)
-    exact, stopped = ref.bounces(
-        tau, v, duration, stop=lambda ph, vm: _summed_margin(p, float(ph), float(vm))
-        < 1.0 + _BORDERLINE)
-    seg = advance(p, tau, *to_deviation(p, tau, p.d, v), duration)
+    exact, stopped = _chatter_exact(p, tau, v, duration) if exact is None else exact
+    seg = (step or advance)(p, tau, *to_deviation(p, tau, p.d, v), duration)
     pkg = []
     for imp in seg.impacts:
         pkg.append(imp)
@@ -556,12 +566,29 @@ def test_chattering_sequences_match_the_exact_continuation():
     exact time (to the rounding's drift, see _chatter_comparison). Before the fix of
     issue 20 (a flight leaving the wall took its own start, 1 ulp below the wall, for a
     contact at rest) 251 of 500 such sequences stuck early and 3464 of 8244 bounces
-    were dropped (seed 1)."""
-    rows = [_chatter_comparison(*case) for case in _chatter_cases(20, 600)]
-    assert sum(r["exact"] for r in rows) > 6000  # long sequences: ~17 bounces on average
-    assert [r for r in rows if r["dropped"] or r["premature"] or not r["count_ok"]] == []
-    # most sequences end where the rule sums them (the others at the duration)
-    assert sum(r["summed"] for r in rows) > 400
+    were dropped (seed 1).
+
+    The compiled kernel's advance (wherever numba is installed, whatever GRAZING_KERNEL
+    says) is compared with the same exact sequences here, as tests/test_kernel.py re-ran
+    this test for it before: the 50-digit continuation, 9.5 s of the test's CPU, is
+    computed once for both paths."""
+    from grazing_control.oscillator import kernel
+
+    paths = {"core": advance}
+    if kernel.available():
+        paths["kernel"] = kernel.advance
+    rows = {name: [] for name in paths}
+    for case in _chatter_cases(20, 600):
+        exact = _chatter_exact(*case)
+        for name, step in paths.items():
+            rows[name].append(_chatter_comparison(*case, exact=exact, step=step))
+    for name, path_rows in rows.items():
+        # long sequences: ~17 bounces on average
+        assert sum(r["exact"] for r in path_rows) > 6000, name
+        assert [r for r in path_rows
+                if r["dropped"] or r["premature"] or not r["count_ok"]] == [], name
+        # most sequences end where the rule sums them (the others at the duration)
+        assert sum(r["summed"] for r in path_rows) > 400, name
 
 
 #: Issue 20's reproduction: a bounce with v+ = -1.35e-3 at phase 1.0526, then a

@@ -31,7 +31,7 @@ from mpmath import mp, mpf
 
 from grazing_control.cli.commands import main
 from reference_ndof import DPS, load_reference
-from test_cli_ndof import THREE_MASS
+from test_cli_model_file import THREE_MASS
 
 #: 2-mass chain of issue 32: wall - outer mass 1.5 (x0) - spring - inner mass 0.8 (x1) -
 #: spring - ground; forced on the inner mass, wall and kick on the outer one. Its
@@ -47,7 +47,7 @@ r: 0.68
 i_a: 0
 pi2_offset: 0.3
 """
-#: The 3-mass chain of tests/test_cli_ndof.py: its uncontrolled orbit lies on Delta d > 0
+#: The 3-mass chain of tests/test_cli_model_file.py: its uncontrolled orbit lies on Delta d > 0
 #: (at omega 0.7 instead of 0.85 on Delta d < 0: the fixture's "three07").
 THREE = THREE_MASS
 
@@ -172,7 +172,7 @@ def test_continue_by_shooting_names_its_unresolved_points(files, monkeypatch):
     """Where the branch in the impact phase is not taken (here: switched off), shooting
     continues as before, and the points whose v- its event search cannot resolve are
     named in a warning instead of passing silently."""
-    import grazing_control.studies.ndof.branch as branch
+    import grazing_control.studies.near_grazing.branch as branch
 
     monkeypatch.setattr(branch, "_on_branch", lambda *args: (None, "switched off"))
     code, got, err = grazing("continue", "--model", files["two"], "--from", "-1e-3",

@@ -1,7 +1,7 @@
 """The loop's noise gain over the n-DOF map (issue 32, dynamics/design/noise.py,
 docs/ndof_scene.md): the n = 1 model file gives the 1-DOF linearised loop, and the
 predicted spread of a 2-DOF chain under a delay-aware design and a position-only sensor
-is the seeded closed loop's (studies.ndof.scene.stream_loop: the engine, its sensor,
+is the seeded closed loop's (studies.near_grazing.scene.stream_loop: the engine, its sensor,
 the stream estimator)."""
 
 import dataclasses
@@ -17,7 +17,7 @@ from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
-from grazing_control.studies.ndof.scene import stream_loop
+from grazing_control.studies.near_grazing.scene import stream_loop
 
 from test_ndof_design import _study
 

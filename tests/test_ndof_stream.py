@@ -69,7 +69,7 @@ def test_the_analysis_of_a_delayed_scene_finds_the_delayed_controlled_orbit():
     captured delay-1.0 stream scene of docs/ndof_scene.md)."""
     from grazing_control.dynamics.maps.ndof_map import NdofMap
     from grazing_control.dynamics.orbits.shooting import find_periodic
-    from grazing_control.recordings.ndof_analysis import NdofSetup, controlled_orbit
+    from grazing_control.recordings.analysis import NdofSetup, ndof_controlled_orbit
 
     model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
     k = evaluate_design(model, -0.22, DELAY).gains
@@ -77,6 +77,6 @@ def test_the_analysis_of_a_delayed_scene_finds_the_delayed_controlled_orbit():
     xref = P.flow.particular(P.flow.tau2)
     z = find_periodic(P, np.array([-0.04, 0.03, -0.05, 0.03])).state
     setup = NdofSetup(str(CHAIN), model, 2, k, 10, np.inf, DELAY, "lockstep")
-    got = controlled_orbit(setup, xref + z + 1e-6)
+    got = ndof_controlled_orbit(setup, xref + z + 1e-6)
     assert np.max(np.abs(np.array(got["orbit_pi2"]) - (xref + z))) < 1e-12
     assert got["rho"] < 1.0 and got["orbit_impacts"] == 1

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import conftest
+import pytest
 
 HERE = Path(__file__).parent
 
@@ -52,3 +53,20 @@ def test_a_grouped_test_carries_its_group_in_its_node_id(request):
     assert items, "no grouped test was collected beside this one"
     for item in items:
         assert item.nodeid.endswith("@" + conftest.xdist_group(item)), item.nodeid
+
+
+@pytest.fixture(scope="module")
+def computed_once():
+    """A module-scoped fixture of this module, as a fit or a sweep is elsewhere."""
+    return object()
+
+
+def test_the_tests_sharing_a_module_fixture_are_one_group_and_the_groups_come_first(
+        request, computed_once):
+    """A test that uses a module-scoped fixture of its module is grouped with the
+    module's other such tests (``shared:<module>``: the fixture computed on one worker,
+    not on both); the items are in the order the controller hands them out: the groups,
+    then the single tests, the realtime ones last (conftest._rank)."""
+    assert conftest.xdist_group(request.node) == "shared:test_suite_layout"
+    ranks = [conftest._rank(i) for i in request.session.items]
+    assert ranks == sorted(ranks), ranks

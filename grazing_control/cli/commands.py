@@ -1,5 +1,9 @@
 """The `grazing` command line: design, orbit, continue, simulate, run, demo, robustness.
 
+The model commands (design, orbit, continue, simulate, sweep, figures) each run on the
+1-DOF study's model or, with ``--model FILE``, on a model file's (:mod:`.model_file`):
+cli/design.py, cli/orbits.py, cli/diagrams.py.
+
 Every subcommand shares --zeta --r --omega --pi2-offset (defaults: the study's set).
 Output is human-readable by default; with --json exactly one JSON object goes to
 stdout and nothing else. User errors (bad parameters, no orbit) print one line
@@ -14,7 +18,6 @@ import json
 import os
 import re
 import sys
-import time
 import warnings
 
 import numpy as np
@@ -22,10 +25,11 @@ import numpy as np
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.arguments import finite, integer_at_least, non_negative
 
-from . import ndof
-from .common import (add_common, add_delay, add_gains, add_method, complex_list, count,
-                     file_path, gains_of, non_finite, nulls, params_of, require_finite)
+from . import model_file
+from .common import add_common, add_delay, add_gains, add_method, count, file_path, non_finite, nulls
 from .design import cmd_design
+from .diagrams import cmd_figures, cmd_sweep
+from .orbits import cmd_continue, cmd_orbit, cmd_simulate
 from .parameter_file import add_params_option, apply_to_args
 from .rig import apply_rig
 from .stop import add_run_stop_options, add_stop_options, apply_run_stop
@@ -53,247 +57,6 @@ class _Parser(argparse.ArgumentParser):
 
 _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$", re.IGNORECASE)
 
-
-# ---------------------------------------------------------------------------- orbit
-def cmd_orbit(args):
-    if args.model is not None:
-        return ndof.cmd_orbit(args)
-    from grazing_control.dynamics.orbits.orbits import orbit_11
-
-    p = params_of(args, args.delta_d)
-    gains = gains_of(args, p)
-    t0 = time.perf_counter()
-    o = orbit_11(p, gains)
-    lam = o.multipliers
-    cost = time.perf_counter() - t0
-    if args.method == "perturbation":
-        from grazing_control.dynamics.maps.perturbation import perturbation_multipliers
-
-        if o.branch != "grazing":
-            raise ParameterError(
-                f"--method perturbation is a series about grazing on the branch born there; "
-                f"the 1/1 orbit at delta_d={p.delta_d!r} is not near grazing (branch: "
-                f"{_BRANCH_TEXT.get(o.branch, o.branch)}; v- = {o.v_minus:.3g}): use --method exact")
-
-        t0 = time.perf_counter()
-        lam = perturbation_multipliers(p, gains)
-        cost = time.perf_counter() - t0
-    out = {
-        "delta_d": o.params.delta_d,
-        "impact_phase": o.impact_phase,
-        "v_minus": o.v_minus,
-        "section_pi2": list(o.pi2),
-        "multipliers": complex_list(lam),
-        "stable": bool(np.max(np.abs(lam)) < 1.0),
-        "branch": o.branch,
-        "method": args.method,
-        "seconds": cost,
-    }
-    if gains is not None and gains.delay:
-        out.update(c1=gains.c1, c2=gains.c2, actuation_delay=gains.delay,
-                   section_pi2_deviation=list(o.pi2_deviation))
-    require_finite(out, "orbit")
-    if args.json:
-        return out
-    lam = ", ".join(f"{z:.6g}" for z in lam)
-    ctl = f" with c1={gains.c1:.6g}, c2={gains.c2:.6g}" if gains else " (uncontrolled)"
-    if gains is not None and gains.delay:
-        ctl += f", actuation delay {gains.delay:.6g}"
-    return "\n".join([
-        f"1/1 orbit at Delta d = {o.params.delta_d:.6g}{ctl}",
-        f"  impact phase  = {o.impact_phase:.15g}",
-        f"  v-            = {o.v_minus:.10g}",
-        f"  Pi2 point     = ({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
-        f"  multipliers   = {lam}  ({args.method}, {cost:.3g} s)",
-        f"  stable        = {out['stable']}",
-        f"  branch        = {_BRANCH_TEXT.get(o.branch, o.branch)}",
-    ])
-
-
-_BRANCH_TEXT = {
-    "grazing": "born at grazing (v- -> 0 as Delta d -> 0)",
-    "grazing past a fold": "born at grazing, past a fold (saddle-node): far from grazing",
-    "other": "another 1/1 branch, not connected to grazing",
-}
-
-
-# ---------------------------------------------------------------------------- continue
-def cmd_continue(args):
-    if args.model is not None:
-        return ndof.cmd_continue(args)
-    from grazing_control.dynamics.orbits.continuation import continue_11
-
-    p = params_of(args)
-    gains = gains_of(args, p)
-    branch = continue_11(p, args.start, args.stop, gains, points=args.points, check=True)
-    out = {
-        "branch": [
-            {"delta_d": b.delta_d, "v_minus": b.v_minus,
-             "multipliers": complex_list(b.multipliers), "stable": b.stable}
-            for b in branch.points
-        ],
-        "bifurcations": [
-            {"type": b.type, "delta_d": b.delta_d, "multipliers": complex_list(b.multipliers)}
-            for b in branch.bifurcations
-        ],
-    }
-    if args.json:
-        return nulls(out)  # inf multipliers at the grazing point itself -> null
-    lines = [f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to {args.stop:g}",
-             f"{'Delta d':>14} {'v-':>14} {'max|lambda|':>14} stable"]
-    step = max(1, len(branch.points) // 20)
-    for b in branch.points[::step]:
-        lines.append(f"{b.delta_d:14.6e} {b.v_minus:14.6e} {np.max(np.abs(b.multipliers)):14.6e} {b.stable}")
-    lines.append("bifurcations:" if branch.bifurcations else "bifurcations: none in range")
-    for b in branch.bifurcations:
-        lines.append(f"  {b.type:16s} at Delta d = {b.delta_d:.15g}")
-    return "\n".join(lines)
-
-
-# ---------------------------------------------------------------------------- simulate
-def cmd_simulate(args):
-    if args.model is not None:
-        if args.contact != "rigid" or _stop_options(args):
-            raise ParameterError("--contact and its options are 1-DOF options: an n-DOF "
-                                 "model file's stop is rigid (docs/ndof_model.md)")
-        return ndof.cmd_simulate(args)
-    from grazing_control.dynamics.simulation.simulate import simulate
-
-    p = params_of(args, args.delta_d)
-    gains = gains_of(args, p)
-    if args.control_after is not None and gains is None:
-        raise ParameterError("--control-after needs the gains: give --c2 (and optionally --c1)")
-    control_after = args.control_after if args.control_after is not None else (0 if gains else None)
-    physical = args.x0 is not None or args.v0 is not None
-    deviation = None
-    if args.dx0 is not None or args.dv0 is not None:
-        if physical:
-            raise ParameterError("--x0/--v0 and --dx0/--dv0 both given: give the initial state "
-                                 "in one form (physical, or deviation from X**)")
-        deviation = (args.dx0 or 0.0, args.dv0 or 0.0)
-    if args.contact != "rigid" or _stop_options(args):
-        return _simulate_stop(args, p, gains, control_after, physical, deviation)
-    progress = (not args.json and args.periods >= 2000 and sys.stderr.isatty())
-    res = simulate(p, args.periods, x0=args.x0, v0=args.v0, deviation=deviation, gains=gains,
-                   control_after=control_after, fidelity=args.fidelity, tol=args.tol,
-                   progress=progress)
-    out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist()}
-    if args.fidelity != "exact":
-        out.update(fidelity=res.fidelity, fidelity_reason=res.fidelity_reason)
-    require_finite(out, "simulate")
-    spectrum = None
-    if args.lyapunov:
-        from grazing_control.dynamics.simulation.lyapunov import lyapunov_exact
-
-        if args.fidelity != "exact" or args.periods < 2:
-            raise ParameterError("--lyapunov needs --fidelity exact and --periods >= 2 (the "
-                                 "exponents average the last half of the periods)")
-        start = (res.pi2[0][0] - p.x_ref, res.pi2[0][1] - p.v_ref)
-        spectrum = lyapunov_exact(p, start, args.periods, args.periods // 2, gains,
-                                  control_after)
-        out["lyapunov"] = {"exponents": list(spectrum.exponents),
-                           "periods": spectrum.periods,
-                           "impacts_per_period": spectrum.impacts_per_period,
-                           "stuck_periods": spectrum.stuck_periods,
-                           "expected_sum": spectrum.expected_sum,
-                           "sum_residual": spectrum.sum_residual}
-    if args.json:
-        return out
-    n = args.periods
-    tail = res.impacts_per_period[-min(n, 20):].tolist()
-    last = (f"({res.pi2[-1][0]:.15g}, {res.pi2[-1][1]:.15g})" if n else "none (0 periods)")
-    return "\n".join([
-        f"simulated {n} periods at Delta d = {p.delta_d:.6g}"
-        + (f", control on from sample {control_after}" if gains is not None else ", uncontrolled"),
-        f"  impacts in all     = {int(res.impacts_per_period.sum())}",
-        f"  impacts per period, last {len(tail)}: {tail}",
-        f"  last Pi2 sample    = {last}",
-        f"  model              = {res.fidelity_reason}",
-    ] + ([] if spectrum is None else [
-        f"  Lyapunov exponents = {spectrum.exponents[0]:.10g}, {spectrum.exponents[1]:.10g} "
-        f"per period (last {spectrum.periods} periods, {spectrum.impacts_per_period:.4g} "
-        "impacts per period)",
-        f"  sum identity       = {spectrum.expected_sum:.15g} (-2 zeta T + 2 nu ln r"
-        f"{' + ln|1 + c2| share' if gains is not None else ''}), residual "
-        f"{spectrum.sum_residual:.2e}"
-        + (f"; {spectrum.stuck_periods} periods stuck (singular map)"
-           if spectrum.stuck_periods else "")]))
-
-
-_STOP_OPTIONS = (("contact_stiffness", "--contact-stiffness"),
-                 ("contact_damping", "--contact-damping"), ("friction", "--friction"),
-                 ("friction_static", "--friction-static"), ("stop", "--stop"),
-                 ("stop_tol", "--stop-tol"))
-
-
-def _stop_options(args) -> list:
-    """The compliant stop's options given (``grazing simulate``)."""
-    return [flag for name, flag in _STOP_OPTIONS if getattr(args, name) is not None]
-
-
-def _simulate_stop(args, p, gains, control_after, physical, deviation):
-    """``grazing simulate --contact kelvin_voigt``: the scene on the cheapest adequate stop
-    model, or the one ``--stop`` names, checked (:func:`grazing_control.dynamics.
-    simulation.stop_fidelity.simulate_stop`; docs/theory_contact.md section 18)."""
-    from grazing_control.dynamics.simulation.stop_fidelity import simulate_stop
-    from grazing_control.oscillator.contact import Coulomb, KelvinVoigt
-
-    if args.contact == "rigid":
-        raise ParameterError(f"{', '.join(_stop_options(args))}: valid only with --contact "
-                             "kelvin_voigt (the compliant stop they describe)")
-    for flag, bad in (("--fidelity", args.fidelity != "exact"), ("--lyapunov", args.lyapunov)):
-        if bad:
-            raise ParameterError(f"{flag} is invalid with --contact kelvin_voigt: the stop "
-                                 "model is chosen by --stop (the exact flow of each)")
-    if args.contact_stiffness is None:
-        raise ParameterError("--contact kelvin_voigt needs --contact-stiffness (k_c over the "
-                             "oscillator's, > 0)")
-    law = (KelvinVoigt.from_restitution(args.contact_stiffness, p.r)
-           if args.contact_damping is None
-           else KelvinVoigt(args.contact_stiffness, args.contact_damping))
-    friction = None
-    if args.friction:
-        friction = Coulomb(args.friction, args.friction_static)
-    elif args.friction_static:
-        raise ParameterError("--friction-static needs --friction > 0 (the kinetic level)")
-    if physical:
-        deviation = ((p.x_ref if args.x0 is None else args.x0) - p.x_ref,
-                     (p.v_ref if args.v0 is None else args.v0) - p.v_ref)
-    tol = 1e-3 if args.stop_tol is None else args.stop_tol
-    res, choice, warning = simulate_stop(
-        p, law, friction, args.periods, deviation=deviation or (0.0, 0.0), gains=gains,
-        control_after=control_after, stop=args.stop or "auto", tol=tol)
-    if warning:
-        print(f"grazing: warning: {warning}", file=sys.stderr)
-    out = {"pi2": res.pi2.tolist(), "impacts_per_period": res.impacts_per_period.tolist(),
-           "stop": choice.stop, "stop_reason": choice.reason,
-           "stop_estimates": {k: {"one_period_error": e, "bound": b}
-                              for k, (e, b) in choice.estimates.items()},
-           "contact": {"stiffness": law.stiffness, "damping": law.damping,
-                       "restitution": law.restitution,
-                       "friction": 0.0 if friction is None else friction.kinetic,
-                       "friction_static": 0.0 if friction is None else friction.static}}
-    if warning:
-        out["stop_warning"] = warning
-    out = nulls(out)          # a refused candidate's bound: inf -> null
-    require_finite({k: out[k] for k in ("pi2", "impacts_per_period")}, "simulate")
-    if args.json:
-        return out
-    n = args.periods
-    last = (f"({res.pi2[-1][0]:.15g}, {res.pi2[-1][1]:.15g})" if n else "none (0 periods)")
-    tail = res.impacts_per_period[-min(n, 20):].tolist()
-    return "\n".join([
-        f"simulated {n} periods at Delta d = {p.delta_d:.6g} with a Kelvin-Voigt stop "
-        f"(k_c = {law.stiffness:.6g}, c_c = {law.damping:.6g}, r = {law.restitution:.6g}"
-        + (f", friction {friction.kinetic:.6g}" if friction else "") + ")"
-        + (f", control on from sample {control_after}" if gains is not None else
-           ", uncontrolled"),
-        f"  stop model         = {choice.stop}",
-        f"  contacts in all    = {int(res.impacts_per_period.sum())}",
-        f"  contacts per period, last {len(tail)}: {tail}",
-        f"  last Pi2 sample    = {last}",
-        f"  model              = {res.fidelity_reason}",
-    ])
 
 
 # ---------------------------------------------------------------------------- run / demo
@@ -486,8 +249,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the actuator's latency (simulation time, sim_node's "
                         "actuator_latency; needs --pulse-width)")
     add_method(s)
-    ndof.add_model_option(s)
-    ndof.add_design_options(s)
+    model_file.add_model_option(s)
+    model_file.add_design_options(s)
     s.set_defaults(func=cmd_design)
 
     s = sub.add_parser("orbit", help="the 1/1 orbit and its Floquet multipliers")
@@ -496,8 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                   "--rig or --params gives it")
     add_gains(s)
     add_method(s)
-    ndof.add_model_option(s)
-    ndof.add_gain_options(s, markov=True)
+    model_file.add_model_option(s)
+    model_file.add_gain_options(s, markov=True)
     s.set_defaults(func=cmd_orbit)
 
     s = sub.add_parser("continue", help="continue the 1/1 branch in Delta d, find bifurcations")
@@ -506,8 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--to", dest="stop", type=finite, required=True, help="end Delta d <= 0")
     s.add_argument("--points", type=count, default=200, help="grid points (default 200)")
     add_gains(s)
-    ndof.add_model_option(s)
-    ndof.add_gain_options(s, markov=True)
+    model_file.add_model_option(s)
+    model_file.add_gain_options(s, markov=True)
     s.set_defaults(func=cmd_continue)
 
     from .continue2 import add_parser as add_continue2_parser
@@ -534,16 +297,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Pi2 error tolerance for --fidelity auto (default 1e-9)")
     add_stop_options(s)
     add_gains(s)
-    ndof.add_model_option(s)
-    ndof.add_gain_options(s)
-    ndof.add_start_option(s)
+    model_file.add_model_option(s)
+    model_file.add_gain_options(s)
+    model_file.add_start_option(s)
     s.set_defaults(func=cmd_simulate)
 
     from grazing_control.studies.sweeps.cli import add_sweep_command
 
     s = add_sweep_command(sub, add_common, finite, count)
-    ndof.add_sweep_options(s)
-    s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_sweep))
+    model_file.add_sweep_options(s)
+    s.set_defaults(func=model_file.dispatch(s.get_default("func"), cmd_sweep))
     from .basins import add_basins_parser
 
     add_basins_parser(sub)
@@ -584,8 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     from grazing_control.studies.figures.command import add_parser as add_figures_parser
 
     s = add_figures_parser(sub)
-    ndof.add_figures_options(s)
-    s.set_defaults(func=ndof.dispatch(s.get_default("func"), ndof.cmd_figures))
+    model_file.add_figures_options(s)
+    s.set_defaults(func=model_file.dispatch(s.get_default("func"), cmd_figures))
 
     s = sub.add_parser("demo", help="the main job: the study's two control scenes and a report")
     s.add_argument("--out", type=file_path, default="out/demo", help="report folder (default out/demo)")
@@ -621,7 +384,7 @@ def main(argv=None) -> int:
         # below with one line; numpy's warnings would add lines of their own
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            ndof.check_options(args, argv)   # --model and the 1-DOF options (cli/ndof.py)
+            model_file.check_options(args, argv)   # --model and the 1-DOF options
             apply_rig(args, argv)         # --rig FILE (cli/rig.py)
             apply_to_args(args, argv)     # --params FILE (cli/parameter_file.py)
             _require_delta_d(args)

@@ -15,15 +15,15 @@ import numpy as np
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import ParameterError
 
-from . import ndof
 from .common import complex_list, params_of, require_finite
+from .model_file import coordinates, family_member, fmt_vec, header, load
 
 __all__ = ["cmd_design"]
 
 
 def cmd_design(args):
     if args.model is not None:
-        return ndof.cmd_design(args)
+        return _family_design(args)
     from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, evaluate_design,
                                                  write_controller_yaml)
 
@@ -120,9 +120,7 @@ def cmd_design(args):
         f"{ok[point.gamma1 > 0.0]})",
         f"  rho(N_g)           = {rho_free:.6g}  (non-impacting motion, d > d*: "
         f"{ok[point.free_stable]} < 1)",
-        f"  admissible c2      = {_fmt_intervals(intervals)}  (all three conditions)",
-        f"    impacting side   = {_fmt_intervals(sets['impacting'])}  (|lambda0| < 1, gamma1 > 0)",
-        f"    non-impacting    = {_fmt_intervals(sets['non-impacting'])}  (rho(N_g) < 1)",
+        *_admissible_lines("c2", intervals, sets, "N_g"),
         f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
         f"  method             : {args.method} ({cost:.3g} s)",
     ]
@@ -258,18 +256,156 @@ def _noise_report(args, p, point):
     return out
 
 
-def _fmt_intervals(intervals):
-    """'(lo, hi) U ...'; an end open at the search limit reads 'beyond -1e+06' (design.C2_LIMIT)."""
+def _fmt_intervals(intervals, unbounded: bool = False):
+    """'(lo, hi) U ...'; an end open at the search limit reads 'beyond -1e+06' (design.C2_LIMIT),
+    or 'inf' for the n-DOF family's mu (``unbounded``)."""
     from grazing_control.dynamics.design.gains import C2_LIMIT
 
     def end(x, sign):
         if x is None or not math.isfinite(x):
-            return f"beyond {sign}{C2_LIMIT:.0e}"
+            return "inf" if unbounded else f"beyond {sign}{C2_LIMIT:.0e}"
         return f"{x:.10g}"
 
     return " U ".join(f"({end(lo, '-')}, {end(hi, '+')})" for lo, hi in intervals) or "empty"
 
 
+def _admissible_lines(name, combined, sets, free_map, unbounded=False) -> list:
+    """The admissible set of the free design parameter (c2 of the 1-DOF design, mu of the
+    n-DOF family): all three conditions, then each side of grazing."""
+    return [f"  admissible {name:8s}= {_fmt_intervals(combined, unbounded)}  (all three conditions)",
+            f"    impacting side   = {_fmt_intervals(sets['impacting'], unbounded)}  "
+            "(|lambda0| < 1, gamma1 > 0)",
+            f"    non-impacting    = {_fmt_intervals(sets['non-impacting'], unbounded)}  "
+            f"(rho({free_map}) < 1)"]
+
+
 def _json_interval(iv):
     """[lo, hi] with an end open at the search limit as null (the key c2_search_limit)."""
     return [x if math.isfinite(x) else None for x in iv]
+
+
+# ---------------------------------------------------------------------------- the n-DOF family
+def _intervals(raw):
+    """The admissible sets as (lo, hi) float pairs."""
+    return [(float(lo), float(hi)) for lo, hi in raw]
+
+
+def _intersection(a, b):
+    """The intervals common to two unions of disjoint open intervals."""
+    out = []
+    for lo1, hi1 in a:
+        for lo2, hi2 in b:
+            lo, hi = max(lo1, lo2), min(hi1, hi2)
+            if lo < hi:
+                out.append((lo, hi))
+    return sorted(out)
+
+
+def _family_design(args):
+    """design --model FILE [--mu MU | --free-gain NAME=V] [--delay D] [--pulse-width W
+    [--actuator-bandwidth B] [--actuator-latency L]] [--out FILE] (docs/ndof_commands.md;
+    the delayed design is docs/theory_ndof.md §14, the pulse's §15)."""
+    from grazing_control.dynamics.design import ndof_design as nd
+
+    model = load(args.model)
+    delay = nd.design_actuation(float(getattr(args, "delay", 0.0) or 0.0),
+                                *(float(getattr(args, a, 0.0) or 0.0) for a in
+                                  ("pulse_width", "actuator_bandwidth", "actuator_latency")))
+    pulse = nd.actuation_parameters(delay) if isinstance(delay, nd.Actuation) else None
+    t0 = time.perf_counter()
+    k0 = np.asarray(nd.gain_family(model, 0.0, delay), dtype=float)
+    k1 = np.asarray(nd.gain_family(model, 1.0, delay), dtype=float) - k0
+    zeros = np.asarray(nd.transmission_zeros(model, delay), dtype=complex)
+    sets = {c: _intervals(nd.admissible_mu(model, c, delay))
+            for c in ("impacting", "non-impacting")}
+    intervals = _intersection(sets["impacting"], sets["non-impacting"])   # "combined"
+    given = [f for f, v in (("--mu", args.mu), ("--free-gain", args.free_gain)) if v is not None]
+    if len(given) > 1:
+        raise ParameterError("--mu and --free-gain are given: give one of them")
+    if args.mu is not None:
+        mu, chosen = float(args.mu), "given (--mu)"
+    elif args.free_gain is not None:
+        mu, chosen = family_member(model, *args.free_gain, delay), \
+            f"from --free-gain {args.free_gain[0]}"
+    elif intervals:
+        # the middle of the widest interval; an unbounded one: 1 inside its finite end
+        lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
+        mu = 0.5 * (lo + hi) if math.isfinite(lo) and math.isfinite(hi) else \
+            (hi - 1.0 if math.isfinite(hi) else lo + 1.0)
+        chosen = "the middle of the widest admissible interval (no --mu given)"
+    else:
+        mu, chosen = 0.0, "mu = 0 (no admissible mu; no --mu given)"
+    mu += 0.0   # no "-0" in the report
+    design = nd.evaluate_design(model, mu, delay)
+    k = np.asarray(design.gains, dtype=float)
+    lam0 = np.asarray(design.limit_multipliers, dtype=complex)
+    gamma = float(design.gamma1)
+    rho_free = float(np.max(np.abs(nd.free_multipliers(model, mu, delay))))
+    conditions = {"limit_stable": bool(design.stable), "exists_impacting": bool(design.exists),
+                  "free_stable": bool(design.free_stable)}
+    admissible = bool(design.admissible)
+    # no design anywhere on the family: say where the section could go (a scan, §4)
+    sections = None if intervals else nd.sections_with_stable_zeros(model, delay=delay)
+    seconds = time.perf_counter() - t0
+    out = header(model, args.model)
+    out.update({
+        "family": {"k_at_mu_0": k0.tolist(), "dk_dmu": k1.tolist()},
+        "transmission_zeros": complex_list(zeros),
+        "transmission_zeros_max_modulus": float(np.max(np.abs(zeros))) if zeros.size else 0.0,
+        "admissible_mu": [_json_interval(iv) for iv in intervals],
+        "admissible_mu_sets": {"combined": [_json_interval(iv) for iv in intervals],
+                               **{c: [_json_interval(iv) for iv in ivs]
+                                  for c, ivs in sets.items()}},
+        "delay": delay.delay if pulse else delay, **({"pulse": pulse} if pulse else {}),
+        "mu": mu, "mu_chosen": chosen, "gains": k.tolist(),
+        "multipliers_limit": complex_list(lam0), "gamma1": gamma,
+        "spectral_radius_free": rho_free, "conditions": conditions, "admissible": admissible,
+        "pi2_offsets_with_stable_zeros": None if sections is None else
+        [list(iv) for iv in sections],
+        "seconds": seconds,
+    })
+    if args.out:
+        if not admissible:
+            raise ParameterError(f"mu={mu!r} is not admissible: valid range is "
+                                 f"{_fmt_intervals(intervals, True)}; nothing written to {args.out}")
+        nd.write_gain_yaml(args.out, model, design, args.model)
+        out["written"] = args.out
+    if args.json:
+        return out
+    ok = {True: "yes", False: "NO"}
+    names = coordinates(model)
+    lines = [
+        f"n-DOF degenerate grazing design (w^T N = mu w^T) for {args.model} (n = {model.n}, "
+        f"wall on x{model.i_w}, kick on v{model.i_a})",
+        f"  d*, tau*           = {out['d_star']:.15g}, {out['tau_star']:.15g}",
+        *([f"  actuation delay    = {delay:.15g}  (the kick acts this long after the Pi2 "
+           f"sample; the family, zeros and limits are those of the delayed kick)"]
+          if delay and not pulse else []),
+        *([f"  pulse              = {', '.join(f'{a} {b:.10g}' for a, b in pulse.items())}  "
+           f"(the correction as a force pulse; family, zeros and limits are the pulse's, "
+           f"docs/theory_ndof.md §15)"] if pulse else []),
+        f"  family k(mu)       = k0 + mu dk, over ({', '.join(names)})",
+        f"    k0               = {fmt_vec(k0, 12)}",
+        f"    dk               = {fmt_vec(k1, 12)}",
+        f"  transmission zeros = {', '.join(f'{z:.6g}' for z in zeros)}",
+        f"    max |zero|       = {out['transmission_zeros_max_modulus']:.6g}  (< 1 needed: "
+        f"{ok[out['transmission_zeros_max_modulus'] < 1.0]})",
+        *_admissible_lines("mu", intervals, sets, "N", unbounded=True),
+        f"  mu                 = {mu:.15g}  ({chosen})",
+        f"  gains k            = {fmt_vec(k, 15)}",
+        f"  |lambda0|          = {', '.join(f'{abs(z):.6g}' for z in lam0)}  (limit Delta d -> "
+        f"0-: {ok[conditions['limit_stable']]} < 1)",
+        f"  gamma1             = {gamma:.6g}  (> 0: 1/1 motion exists for d < d*: "
+        f"{ok[conditions['exists_impacting']]})",
+        f"  rho(N)             = {rho_free:.6g}  (non-impacting motion, d > d*: "
+        f"{ok[conditions['free_stable']]} < 1)",
+        f"  this mu            : {'admissible' if admissible else 'NOT admissible'}",
+    ]
+    if sections is not None:
+        where = " U ".join(f"({a:.4f}, {b:.4f})" for a, b in sections) or "none"
+        lines.append(f"  no admissible mu: pi2_offset values whose zeros all lie inside the "
+                     f"unit circle (scan): {where} (this file: {model.pi2_offset:.4g})")
+    if args.out:
+        lines.append(f"  gains written to {args.out}")
+    return "\n".join(lines)
+

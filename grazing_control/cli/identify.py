@@ -9,7 +9,10 @@ design --params``, ``grazing run --params`` / ``--sim-params`` and the nodes
 (``--params-file``) take. Where a bag carries its rig (``grazing/rig``) or ``--rig FILE``
 gives it, the model in SI as well (natural frequency, damping ratio, restitution, gap,
 standard errors propagated), and ``--out-rig FILE`` writes it as a rig file
-(docs/rig.md, "Recordings").
+(docs/rig.md, "Recordings"). A bag of an n-DOF scene (recorded with a ``model_file`` of
+n > 1, or ``--model FILE``) gets the n-DOF fit: the wall coordinate's modal parameters
+(docs/theory_identification.md section 11), and ``--out-model FILE`` writes them as a
+model file (docs/ndof_model.md) that ``grazing design --model`` reads.
 
 ``--stop``: which stop the bags' Pi2 samples support (rigid, Kelvin-Voigt, with
 friction; :mod:`grazing_control.recordings.stop`, docs/theory_contact.md section 17),
@@ -50,7 +53,7 @@ def _plain(obj):
 
 def cmd_identify(args) -> int:
     """Run ``grazing identify``; the exit status (module docstring)."""
-    from grazing_control.recordings.identify import format_report, identify_bags, si_report
+    from grazing_control.recordings.identify import identify_bags, si_report
 
     if args.stop:
         return _cmd_stop(args)
@@ -62,7 +65,14 @@ def cmd_identify(args) -> int:
     result = identify_bags(args.bags, position_only=args.position_only,
                            impacts=not args.no_impacts,
                            max_arcs=DEFAULT_ARCS if args.max_arcs is None else args.max_arcs,
-                           shrink=args.max_arcs is None)
+                           shrink=args.max_arcs is None, model=args.model)
+    if result.get("n", 1) > 1:
+        return _ndof_result(args, result)
+    if args.out_model:
+        from grazing_control.oscillator.params import ParameterError
+
+        raise ParameterError(f"--out-model {args.out_model}: the bag is a 1-DOF scene (no "
+                             "model_file of n > 1): its model is written by --out")
     si_report(result, args.bags, rig)
     fitted_rig = result.pop("_rig", None)
     if args.out_rig and fitted_rig is None:
@@ -89,19 +99,85 @@ def cmd_identify(args) -> int:
             result["out"] = args.out
         else:
             result["out"] = None
+    tail = []
+    if args.out:
+        tail.append(f"  parameter file written to {args.out}" if good else
+                    f"  poor fit: nothing written to {args.out}")
+    if args.out_rig:
+        tail.append(f"  rig file written to {args.out_rig}" if good else
+                    f"  poor fit: nothing written to {args.out_rig}")
+    _emit(args, result, tail)
+    return 0 if good else 1
+
+
+def _emit(args, result, tail) -> None:
+    """Print the result: one JSON object (--json), else the text report and ``tail``."""
+    from grazing_control.recordings.identify import format_report
+
     if args.json:
         json.dump(_plain(result), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(format_report(result))
-        if args.out:
-            print(f"  parameter file written to {args.out}" if good else
-                  f"  poor fit: nothing written to {args.out}")
-        if args.out_rig:
-            print(f"  rig file written to {args.out_rig}" if good else
-                  f"  poor fit: nothing written to {args.out_rig}")
+        print("\n".join([format_report(result)] + tail))
     sys.stdout.flush()
+
+
+def _ndof_result(args, result) -> int:
+    """An n-DOF bag's report; ``--out-model``: the identified model as a model file
+    (docs/ndof_model.md) after a good fit whose realisation misses no modal parameter by
+    more than REALISATION_LIMIT standard errors; the exit status (module docstring)."""
+    from grazing_control.dynamics.identification.modal import realise
+    from grazing_control.oscillator.params import ParameterError
+
+    ident, nominal = result.pop("_ident"), result.pop("_model")
+    for flag, value in (("--out", args.out), ("--out-rig", args.out_rig), ("--rig", args.rig)):
+        if value:
+            raise ParameterError(f"{flag} {value}: the bag is an n-DOF scene (n = "
+                                 f"{result['n']}): its model is written by --out-model")
+    good = result["fit"] == "good"
+    if args.out_model:
+        model = None
+        if good:
+            se = [ident.stderr[k] for k in ident.names]
+            model, misfit = realise(ident.model, nominal, se, ident.phase.tau0)
+            result["realisation_misfit"] = misfit
+            if not misfit <= REALISATION_LIMIT:
+                good = False
+                result["fit"] = "poor"
+                result["reasons"].append(
+                    f"no symmetric M, C, K near the bag's model file shows the fitted modes: "
+                    f"the nearest misses them by {misfit:.3g} standard errors (limit "
+                    f"{REALISATION_LIMIT:g})")
+        if good:
+            _write_model(args.out_model, model, result)
+        result["out_model"] = args.out_model if good else None
+    tail = []
+    if args.out_model:
+        tail.append(f"  model file written to {args.out_model} (realisation misses the fitted "
+                    f"modal parameters by {result['realisation_misfit']:.2g} standard errors "
+                    "at most)" if good else f"  poor fit: nothing written to {args.out_model}")
+    _emit(args, result, tail)
     return 0 if good else 1
+
+
+#: Largest misfit (in standard errors) of a written model's modal parameters.
+REALISATION_LIMIT = 3.0
+
+
+def _write_model(path, model, result) -> None:
+    """The identified n-DOF model as a model file (docs/ndof_model.md), atomically."""
+    from grazing_control.support.files import write_yaml_atomic
+
+    doc = {"M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
+           "f": model.f.tolist(), "omega": float(model.omega), "i_w": int(model.i_w),
+           "delta_d": float(model.delta_d), "r": float(model.r), "i_a": int(model.i_a),
+           "phase": float(model.phase), "pi2_offset": float(model.pi2_offset)}
+    par = result["parameters"]
+    write_yaml_atomic(path, doc, [
+        f"n-DOF model identified by `grazing identify` from {result['bag']} (the wall "
+        f"coordinate's modal parameters, realised as symmetric M, C, K nearest the bag's "
+        f"model file {result['model_file']}: docs/theory_identification.md section 11)"]
+        + [f"{k} = {v['value']!r} +- {v['stderr']:.3g}" for k, v in par.items()])
 
 
 def _cmd_stop(args) -> int:
@@ -157,6 +233,16 @@ def add_identify_parser(sub) -> None:
     s.add_argument("--out", type=non_empty_path, metavar="FILE",
                    help="write the identified model as a ROS 2 parameter file (only after a "
                         "good fit)")
+    s.add_argument("--model", metavar="FILE",
+                   help="an n-DOF bag's model file (docs/ndof_model.md: its n, i_w, i_a; "
+                        "default: the bag's parameter record's model_file). n > 1: the wall "
+                        "coordinate's modal parameters are fitted (natural frequencies, "
+                        "damping ratios, its kick and forcing responses, d, r, delta_d; "
+                        "docs/theory_identification.md section 11)")
+    s.add_argument("--out-model", type=non_empty_path, metavar="FILE",
+                   help="an n-DOF bag: write the identified model as a model file "
+                        "(docs/ndof_model.md) that grazing design --model reads (only after "
+                        "a good fit)")
     s.add_argument("--rig", metavar="FILE",
                    help="the rig file the bags were recorded on, for the model in SI "
                         "(natural frequency, damping ratio, restitution, gap) when the bags "

@@ -15,16 +15,44 @@ Numbers (:func:`summarize`):
 * ``samples_to_converge``: samples after ``control_on`` until every later sample stays
   within ``tol`` of the final one;
 * ``final_pi2`` and ``final_impacts_per_period`` (1 for a 1/1 motion).
+
+A model file's scene (any n; :func:`is_ndof`, :func:`ndof_scene_numbers`, issue 17), per
+coordinate, from the bag alone. An n-DOF scene (sim_node with ``model_file``; docs/nodes.md,
+"n-DOF scenes") records its Pi2 samples as JointState with n joints: :func:`grazing_control.recordings.scenes.load`
+reads them as (N, 2n) arrays X_k = (x_0 .. x_{n-1}, v_0 .. v_{n-1}). The model and the
+gains come from the bag's parameter record (the simulator's ``model_file`` and
+``delta_d``, the controller's ``gains``, ``enable_after``, ``saturation``,
+``actuation_delay``); the model file must still be readable at its recorded path (else
+only the measured numbers are given, and the report says why).
+
+Per scene (:func:`summarize` over the whole state, then):
+
+* per coordinate: the range of each x_i, v_i over the uncontrolled samples before the
+  switch-on (the attractor's extent) and the final sample;
+* the measured contraction per sample after the switch-on
+  (:func:`~grazing_control.recordings.numbers.measured_contraction`) against the largest
+  Floquet multiplier |lambda|max of the controlled 1/1 orbit, found by Newton shooting
+  (:func:`grazing_control.dynamics.orbits.shooting.find_periodic`) on
+  :class:`grazing_control.dynamics.maps.ndof_map.NdofMap` with the recorded gains and delay from the
+  last sample; the final sample's distance to that orbit, per coordinate;
+* the model check: every recorded period re-integrated by the core from the recorded
+  sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
+  :mod:`grazing_control.plant.engine`), the largest departure from the next
+  recorded sample (rounding level for a lockstep run).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 __all__ = ["Scene", "scene_from_bag", "scene_from_simulation", "summarize", "plot_scene",
-           "fmt", "complex_text", "control_lines"]
+           "fmt", "complex_text", "control_lines", "NdofSetup", "is_ndof", "ndof_setup",
+           "ndof_scene_numbers", "ndof_lines", "plot_ndof_scene", "coordinate_names"]
 
 TOPIC_PI2 = "/oscillator/pi2"
 TOPIC_CORRECTION = "/controller/velocity_correction"
@@ -231,3 +259,247 @@ def control_lines(numbers: dict) -> list:
         if key in pred:
             lines.append(f"* prediction: {pred[key]}")
     return lines
+
+
+# ------------------------------------------------- a model file's scene (any n)
+@dataclass
+class NdofSetup:
+    """What an n-DOF run was: the model file and its model (None if unreadable), the
+    gains, the controller's switches, the mode, and notes."""
+
+    model_file: str
+    model: object | None
+    n: int
+    gains: np.ndarray | None
+    enable_after: int | None
+    saturation: float
+    actuation_delay: float
+    mode: str
+    notes: list = field(default_factory=list)
+
+
+def is_ndof(data) -> bool:
+    """Whether a loaded bag is an n-DOF scene: a simulator record with ``model_file``, or
+    Pi2 samples with more than one joint."""
+    sim = (data.parameters.get("nodes", {}).get("sim_node") or [{}])[0]
+    return bool(sim.get("model_file")) or getattr(data, "joints", 1) > 1
+
+
+def coordinate_names(n: int) -> list:
+    """x0 .. x{n-1}, v0 .. v{n-1}: the columns of an n-DOF scene's Pi2 array."""
+    return [f"x{i}" for i in range(n)] + [f"v{i}" for i in range(n)]
+
+
+def _number(value, default):
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) \
+        else default
+
+
+def ndof_setup(data) -> NdofSetup:
+    """The run's model and controller from the bag's parameter record (module docstring)."""
+    from grazing_control.oscillator.ndof.model import load_model
+
+    nodes = data.parameters.get("nodes", {})
+    sim = (nodes.get("sim_node") or [{}])[0]
+    ctl = (nodes.get("controller_node") or [{}])[0]
+    notes = []
+    path = str(sim.get("model_file") or ctl.get("model_file") or "")
+    model = None
+    if not path:
+        notes.append("no model_file in the parameter record: measured numbers only")
+    else:
+        try:
+            model = load_model(path)
+        except (OSError, ValueError) as exc:
+            notes.append(f"the model file {path!r} cannot be read now ({exc}): measured "
+                         "numbers only")
+    if model is not None and _number(sim.get("delta_d"), None) is not None:
+        model = dataclasses.replace(model, delta_d=float(sim["delta_d"]))
+    n = model.n if model is not None else max(getattr(data, "joints", 1), 1)
+    gains = ctl.get("gains")
+    gains = np.asarray(gains, float) if isinstance(gains, list) and len(gains) == 2 * n \
+        else None
+    if gains is None and ctl:
+        notes.append("no gains of length 2n in the controller's record: no predicted orbit")
+    enable_after = ctl.get("enable_after")
+    enable_after = int(enable_after) if isinstance(enable_after, int) else None
+    for name, seq in nodes.items():
+        if len(seq) > 1:
+            notes.append(f"{name} parameters changed during the run; the analysis uses the "
+                         "values at start")
+    return NdofSetup(path, model, n, gains, enable_after,
+                     _number(ctl.get("saturation"), math.inf),
+                     _number(ctl.get("actuation_delay"), 0.0),
+                     str(sim.get("mode") or "lockstep"), notes)
+
+
+def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None:
+    """Each recorded period re-integrated from its recorded sample and correction: the
+    largest departure from the next recorded sample (module docstring)."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+    from grazing_control.oscillator.ndof.impact import advance
+
+    m = setup.model
+    if m is None or len(scene.t) < 2:
+        return None
+    flow = NdofFlow.of(m)
+    n, T, delay = m.n, m.period, setup.actuation_delay
+    periods = min(len(scene.t) - 1, limit)
+    worst, above, failed = 0.0, 0, 0
+    for k in range(periods):
+        if not math.isclose(scene.t[k + 1] - scene.t[k], T, rel_tol=0.0, abs_tol=1e-6):
+            continue        # a gap in the recording: no next sample of this period
+        z = flow.to_deviation(flow.tau2, scene.pi2[k])
+        try:
+            tau = flow.tau2
+            if delay > 0.0:
+                z = advance(flow, tau, z, delay).z
+                tau = (tau + m.omega * delay) % (2.0 * math.pi)
+            z = np.array(z, dtype=float)
+            z[n + m.i_a] += scene.correction[k]
+            z = advance(flow, tau, z, T - delay).z
+        except (ValueError, ArithmeticError, RuntimeError):
+            failed += 1
+            continue
+        d = float(np.max(np.abs(flow.to_physical(flow.tau2, z) - scene.pi2[k + 1])))
+        worst = max(worst, d)
+        above += d > 1e-12
+    return {"max_departure": worst, "periods": periods, "periods_above_1e-12": int(above),
+            "periods_in_scene": len(scene.t) - 1, "failed": failed}
+
+
+def ndof_controlled_orbit(setup: NdofSetup, final) -> dict:
+    """The exact controlled 1/1 orbit near the final sample, its multipliers and impacts."""
+    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.orbits.shooting import ShootingFailed, find_periodic
+
+    if setup.model is None or setup.gains is None:
+        return {"note": "no model or gains: no predicted orbit"}
+    P = NdofMap(setup.model, setup.gains, setup.actuation_delay)   # the kick at the delay
+    xref = P.flow.particular(P.flow.tau2)
+    try:
+        orbit = find_periodic(P, np.asarray(final, float) - xref)
+    except (ShootingFailed, ValueError, ArithmeticError, RuntimeError) as exc:
+        return {"error": f"no controlled 1/1 orbit found from the final sample ({exc})"}
+    mult = np.linalg.eigvals(orbit.monodromy)
+    mult = mult[np.argsort(-np.abs(mult))]
+    return {"orbit_pi2": (xref + orbit.state).tolist(), "rho": float(np.abs(mult).max()),
+            "multipliers": [[float(z.real), float(z.imag)] for z in mult],
+            "orbit_impacts": len(orbit.impacts),
+            "orbit_v_minus": [float(i.v_minus) for i in orbit.impacts]}
+
+
+def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
+    """The numbers of one n-DOF scene (the section "A model file's scene" of the module
+    docstring); JSON-serialisable."""
+    from .numbers import measured_contraction
+
+    scene = sd.scene
+    base = summarize(scene, tol)
+    on = base["control_on"]
+    if setup.enable_after is not None and 0 <= setup.enable_after < len(scene.t):
+        on = setup.enable_after if on is None or on > setup.enable_after else on
+    names = coordinate_names(setup.n)
+    before = scene.pi2[:on] if on is not None else scene.pi2
+    tail = before[-200:]
+    out = {"samples": base["samples"], "duration_s": float(scene.t[-1] - scene.t[0])
+           if len(scene.t) else 0.0, "n": setup.n, "coordinates": names,
+           "impacts": base["impacts"], "control_on_sample": on,
+           "control_on_time_s": float(scene.t[on]) if on is not None else None,
+           "uncontrolled": {"period": base["uncontrolled_period"],
+                            "impacts_per_period_histogram":
+                                base["uncontrolled_impacts_per_period"],
+                            "range": {c: [float(tail[:, j].min()), float(tail[:, j].max())]
+                                      for j, c in enumerate(names)} if len(tail) else {}},
+           "samples_to_converge": base["samples_to_converge"],
+           "final_pi2": dict(zip(names, base["final_pi2"] or [])),
+           "final_impacts_per_period": base["final_impacts_per_period"],
+           "corrections": {"answered": int(np.count_nonzero(sd.answered)),
+                           "missing": int(np.count_nonzero(~sd.answered)),
+                           "max_abs": base["max_abs_correction"],
+                           "saturation": setup.saturation,
+                           "saturation_hits": int(np.count_nonzero(
+                               np.abs(scene.correction) >= setup.saturation))}}
+    out["measured_contraction"] = measured_contraction(scene.pi2, on)
+    pred = ndof_controlled_orbit(setup, scene.pi2[-1]) if on is not None and len(scene.t) else {}
+    out["predicted"] = pred
+    if "orbit_pi2" in pred:
+        d = np.abs(scene.pi2[-1] - np.asarray(pred["orbit_pi2"]))
+        out["final_vs_exact_orbit"] = float(d.max())
+        out["final_vs_exact_orbit_per_coordinate"] = dict(zip(names, d.tolist()))
+        rho = (out["measured_contraction"] or {}).get("rho")
+        if rho:
+            out["contraction_relative_error"] = abs(rho - pred["rho"]) / pred["rho"]
+    out["model_check"] = ndof_model_check(setup, scene)
+    return out
+
+
+def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> list:
+    """The markdown lines of one n-DOF scene."""
+    u, pred = n["uncontrolled"], n["predicted"]
+    lines = [f"### {label}", ""] + ([f"![{label}]({fig_name})", ""] if fig_name else [])
+    m = setup.model
+    lines += [f"* n-DOF scene: model file `{setup.model_file}`"
+              + (f" (n = {m.n}, wall coordinate x{m.i_w}, kick on v{m.i_a}, Δd = "
+                 f"{m.delta_d:.6g}, T = {m.period:.6g})" if m is not None else ""),
+              f"* gains k = {setup.gains.tolist() if setup.gains is not None else '—'}",
+              f"* samples: {n['samples']} over {n['duration_s']:.6g} s of simulation time; "
+              f"impacts: {n['impacts']}",
+              f"* uncontrolled: {'period ' + str(u['period']) if u['period'] else 'not periodic to 1e-8 (chaotic, quasi-periodic or transient)'}"
+              f"; impacts per period (histogram 0, 1, 2, …): "
+              f"{u['impacts_per_period_histogram']}"]
+    if u["range"]:
+        lines.append("* uncontrolled range per coordinate (last 200 samples before the "
+                     "switch-on): " + "; ".join(f"{c} ∈ [{a:.6g}, {b:.6g}]"
+                                                for c, (a, b) in u["range"].items()))
+    lines += control_lines(n)
+    if n["control_on_sample"] is not None:
+        lines.append(f"* impacts per period at the end: {fmt(n['final_impacts_per_period'])}")
+    if "final_vs_exact_orbit" in n:
+        lines.append("* final Π2 sample vs the exact controlled 1/1 orbit: max "
+                     f"{n['final_vs_exact_orbit']:.2e}; per coordinate " + "; ".join(
+                         f"{c} {n['final_pi2'][c]:.12g} (orbit {o:.12g}, |Δ| {d:.1e})"
+                         for (c, d), o in zip(n["final_vs_exact_orbit_per_coordinate"].items(),
+                                              pred["orbit_pi2"])))
+    c = n["corrections"]
+    lines.append(f"* corrections: {c['answered']} answers, {c['missing']} samples without one, "
+                 f"max |Δv| = {c['max_abs']:.3g}, saturation {fmt(c['saturation'])} hit "
+                 f"{c['saturation_hits']} times")
+    mc = n.get("model_check")
+    if mc:
+        lines.append(f"* model check: each recorded period re-integrated by the n-DOF core "
+                     f"from the recorded sample and correction departs from the next "
+                     f"recorded sample by at most {mc['max_departure']:.2e} "
+                     f"({mc['periods_above_1e-12']} of {mc['periods']} periods above 1e-12"
+                     + (f", {mc['failed']} could not be re-integrated" if mc["failed"] else "")
+                     + ")")
+    lines.append("")
+    return lines
+
+
+def plot_ndof_scene(sd, numbers: dict, title: str, path) -> None:
+    """Panels: each coordinate's Pi2 samples, the distance to the final sample (log), the
+    corrections."""
+    from grazing_control.support.plotting import pyplot, save_png
+
+    plt = pyplot()
+    scene = sd.scene
+    names = numbers["coordinates"]
+    k = np.arange(len(scene.t))
+    on = numbers["control_on_sample"]
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4), constrained_layout=True)
+    for j, c in enumerate(names):
+        ax[0].plot(k, scene.pi2[:, j], ".", ms=2, label=c)
+    ax[0].set(xlabel="sample k", ylabel="Π2 sample", title="every coordinate on Π2")
+    ax[0].legend(fontsize=8)
+    dist = np.max(np.abs(scene.pi2 - scene.pi2[-1]), axis=1)
+    ax[1].semilogy(k[:-1], np.maximum(dist[:-1], 1e-17), ".", ms=2)
+    ax[1].set(xlabel="sample k", ylabel="max |X_k − X_final|", title="convergence")
+    ax[2].plot(k, scene.correction, ".", ms=2)
+    ax[2].set(xlabel="sample k", ylabel="Δv", title="corrections")
+    for a in ax:
+        if on is not None:
+            a.axvline(on, color="k", lw=0.5)
+    fig.suptitle(title)
+    save_png(fig, Path(path))
+    plt.close(fig)

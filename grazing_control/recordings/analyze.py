@@ -17,8 +17,8 @@ import numpy as np
 
 from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
-from .analysis import control_lines, fmt
-from .ndof_analysis import is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup, plot_ndof_scene
+from .analysis import (control_lines, fmt, is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup,
+                       plot_ndof_scene)
 from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
                       section_phase_problems)
 from .rig_record import check_against_model, read_rig, si_numbers
@@ -521,12 +521,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
             for sd, n in zip(data.scenes, numbers):
                 n["si"] = si_numbers(rig, n, sd.scene)
         label = _label(Path(bag), used)
-        entry = {"bag": str(bag), "file": str(data.file), "label": label,
-                 "closed_cleanly": data.complete, "messages": data.message_count,
-                 "messages_read": data.messages_read,
-                 "topics_used": data.present, "notes": data.notes + setup.notes + rig_notes,
-                 "problems": data.problems,
-                 "parameter_record": bool(data.parameters.get("nodes")),
+        entry = {**_bag_entry(bag, data, label, setup.notes + rig_notes),
                  "rig": None if rig is None else _rig_entry(rig),
                  "model_watch": watch,
                  "model_switches": switches,
@@ -540,9 +535,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                            "actuation_delay": setup.actuation_delay,
                            "sources": setup.sources},
                  "scenes": []}
-        lines += [f"## {label}", "", f"* file: `{data.file}` ({data.message_count} messages, "
-                  f"{data.messages_read} of them on the topics analysed"
-                  f"{'' if data.complete else ', not closed cleanly'})",
+        lines += [f"## {label}", "", _file_line(data),
                   "* parameter record: " + ("yes" if entry["parameter_record"] else
                                             "none in this bag (it predates the record, or the "
                                             "nodes did not publish one): options, defaults and "
@@ -558,8 +551,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         lines += _switch_lines(switches)
         lines.append("")
         for sd, n in zip(data.scenes, numbers):
-            slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
-            fig_name = f"{slabel.replace(' ', '_')}.png"
+            slabel, fig_name = _scene_label(label, data, sd)
             if out is not None and figures:
                 title = (f"{slabel}: {setup.mode}, Δd = {fmt(setup.params.delta_d if setup.params else None, '.3g')}")
                 plot_scene(sd, n, setup, title, out / fig_name)
@@ -658,15 +650,34 @@ def _si_lines(si) -> list:
     return lines
 
 
+def _bag_entry(bag, data, label, notes) -> dict:
+    """The report entry's head of a bag of any model: the file, its messages, the topics,
+    the notes (the bag's, then ``notes``), the problems, whether it has a parameter record."""
+    return {"bag": str(bag), "file": str(data.file), "label": label,
+            "closed_cleanly": data.complete, "messages": data.message_count,
+            "messages_read": data.messages_read, "topics_used": data.present,
+            "notes": data.notes + notes, "problems": data.problems,
+            "parameter_record": bool(data.parameters.get("nodes"))}
+
+
+def _file_line(data) -> str:
+    """The report's line on the bag's file: messages, those analysed, a clean close."""
+    return (f"* file: `{data.file}` ({data.message_count} messages, {data.messages_read} of "
+            f"them on the topics analysed{'' if data.complete else ', not closed cleanly'})")
+
+
+def _scene_label(label, data, sd):
+    """(the scene's label, its figure's file name): the bag's label, with the scene's
+    index when the bag holds more than one."""
+    slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
+    return slabel, f"{slabel.replace(' ', '_')}.png"
+
+
 def _ndof_bag(bag, data, label, out, tol, figures):
-    """The report entry and markdown lines of an n-DOF bag (.ndof_analysis): the model
+    """The report entry and markdown lines of an n-DOF bag (.analysis, a model file's scene): the model
     and gains from its parameter record; options for the 1-DOF model do not apply."""
     setup = ndof_setup(data)
-    entry = {"bag": str(bag), "file": str(data.file), "label": label,
-             "closed_cleanly": data.complete, "messages": data.message_count,
-             "messages_read": data.messages_read, "topics_used": data.present,
-             "notes": data.notes + setup.notes, "problems": data.problems,
-             "parameter_record": bool(data.parameters.get("nodes")),
+    entry = {**_bag_entry(bag, data, label, setup.notes),
              "setup": {"model_file": setup.model_file, "n": setup.n,
                        "delta_d": setup.model.delta_d if setup.model is not None else None,
                        "gains": setup.gains.tolist() if setup.gains is not None else None,
@@ -674,17 +685,14 @@ def _ndof_bag(bag, data, label, out, tol, figures):
                        "saturation": setup.saturation,
                        "actuation_delay": setup.actuation_delay},
              "scenes": []}
-    lines = [f"## {label}", "", f"* file: `{data.file}` ({data.message_count} messages, "
-             f"{data.messages_read} of them on the topics analysed"
-             f"{'' if data.complete else ', not closed cleanly'})",
+    lines = [f"## {label}", "", _file_line(data),
              "* topics used: " + ", ".join(f"{r} = {t}" for r, t in data.present.items())]
     lines += [f"* note: {s}" for s in entry["notes"]]
     lines += [f"* **cannot use**: {s}" for s in data.problems]
     lines.append("")
     for sd in data.scenes:
         n = ndof_scene_numbers(sd, setup, tol)
-        slabel = label if len(data.scenes) == 1 else f"{label} scene {sd.index}"
-        fig_name = f"{slabel.replace(' ', '_')}.png"
+        slabel, fig_name = _scene_label(label, data, sd)
         if out is not None and figures:
             dd = setup.model.delta_d if setup.model is not None else None
             plot_ndof_scene(sd, n, f"{slabel}: {setup.mode}, n = {setup.n}, Δd = "

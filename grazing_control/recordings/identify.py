@@ -8,8 +8,11 @@ at the sample's stamp + the simulator's ``actuation_delay`` from the parameter r
 into a :class:`grazing_control.dynamics.identification.Recording`;
 :func:`identify_bags` fits each bag (:func:`grazing_control.dynamics.identification.identify`),
 checks the fit (:mod:`grazing_control.dynamics.identification.checks`) and combines the
-bags' estimates (inverse-variance weighted means). The method is in
-docs/theory_identification.md.
+bags' estimates (inverse-variance weighted means). A bag of an n-DOF scene (its
+parameter record's ``model_file`` of n > 1, or ``model``) is fitted by
+:func:`identify_ndof`: the wall coordinate's modal parameters
+(:mod:`grazing_control.dynamics.identification.modal_fit`), the corrections' sizes as the
+kicks. The method is in docs/theory_identification.md (section 11 for n > 1).
 """
 
 from __future__ import annotations
@@ -87,6 +90,12 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
 
     Raises RecordingError (or reader.BagReadError) when the bag has no usable state stream.
     """
+    return _load(bag, topics, position_only, impacts)[:3]
+
+
+def _load(bag, topics, position_only, impacts):
+    """:func:`load_recording`'s (Recording, notes, record) and the size of each of the
+    recording's corrections (the kicks, for the n-DOF fit)."""
     topics = dict(TOPICS, **(topics or {}))
     raw = reader.read_raw(bag, topics=list(topics.values()))
     notes = list(raw.problems)
@@ -139,7 +148,7 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
         it, vm, vp = it[keep], vm[keep], vp[keep]
     elif impacts:
         notes.append(f"no impacts recorded on {topics['impact']}: found in the motion")
-    corr = np.zeros(0)
+    corr = corr_dv = np.zeros(0)
     if raw.count(topics["correction"]):
         c = reader.decode_twist_stamped(raw, topics["correction"])
         delay = float(sim.get("actuation_delay", 0.0) or 0.0)
@@ -148,9 +157,10 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
             when = _arrival_instants(raw, topics, c, when, float(sim.get("time_scale", 1.0)),
                                      notes)
         k = c["ok"] & (c["dv"] != 0.0)
-        corr = np.unique(when[k])
+        corr, first = np.unique(when[k], return_index=True)
+        corr_dv = c["dv"][k][first]
     rec = Recording(t, x, v, e0, e1, it, vm, vp, corr)
-    return rec, notes, sim
+    return rec, notes, sim, corr_dv
 
 
 def _parameters(ident) -> dict:
@@ -165,15 +175,80 @@ def _parameters(ident) -> dict:
     return {k: out[k] for k in PARAMETER_ORDER}
 
 
+def _bag_model(sim, model):
+    """(NdofModel, path) of an n-DOF bag: ``model`` (--model) or the parameter record's
+    model_file; (None, None) for a 1-DOF bag."""
+    path = str(model or sim.get("model_file", "") or "")
+    if not path:
+        return None, None
+    from grazing_control.oscillator.ndof.model import load_model
+
+    try:
+        return load_model(path), path
+    except (OSError, ValueError) as exc:
+        raise RecordingError(f"model_file {path}: {exc} (the n-DOF bag's model: give "
+                             "--model FILE, the model file it was recorded with)") from None
+
+
+def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
+                  max_arcs: int | None = 100, shrink: bool = False) -> dict:
+    """The report of an n-DOF bag (n > 1): the wall coordinate's modal parameters
+    (:func:`grazing_control.dynamics.identification.modal_fit.identify_modal`) with
+    standard errors, the verdict, residuals, counts; ``_ident``, ``_model`` (the fit and
+    the bag's model file, for ``--out-model``) are removed before printing."""
+    from grazing_control.dynamics.identification.modal_fit import identify_modal, modal_verdict
+
+    if model.i_w != 0:
+        raise RecordingError(f"model_file {path}: i_w={model.i_w}: the state stream's "
+                             "wall coordinate is read as position[0]; valid for "
+                             "identification is i_w=0")
+    if not impacts or rec.impact_t.size == 0:
+        raise IdentificationError(
+            f"impacts: {bag} has no recorded impacts on oscillator/impact"
+            + ("" if impacts else " (--no-impacts)") + ": the n-DOF fit starts from them "
+            "(finding them in the motion is built for n = 1 only)")
+    ident = identify_modal(rec, model.n, correction_dv=kicks,
+                           kick_on_wall=model.i_a == model.i_w, max_arcs=max_arcs,
+                           shrink=shrink)
+    check = modal_verdict(ident)
+    names = ident.names + ("delta_d", "d_star")
+    params = {k: {"value": ident.value(k), "stderr": ident.stderr[k]} for k in names}
+    report = {
+        "bag": str(bag), "n": model.n, "model_file": path, "parameters": params,
+        "fit": check["fit"], "reasons": check["reasons"],
+        "residuals": {"sigma": ident.sigma, "rms_x": ident.rms_x, "rms_v": None,
+                      "constraint_rms": ident.constraint_rms, "dof": ident.dof,
+                      **check["whiteness"]},
+        "phase_reference": {"omega": ident.phase.omega, "omega_stderr": ident.phase.omega_stderr,
+                            "tau0": ident.phase.tau0, "rms": ident.phase.rms},
+        "samples": ident.samples_used, "samples_in_bag": int(rec.t.size),
+        "arcs": ident.arcs_used, "impacts": ident.impacts_used, "impacts_from": "recording",
+        "velocity": bool(rec.has_velocity), "converged": ident.converged,
+        "kick_response": "fitted" if ident.problem.layout.actuator else (
+            "the impact's (i_a = i_w)" if model.i_a == model.i_w else "not identified "
+            "(no corrections)"),
+        "notes": notes, "_ident": ident, "_model": model,
+    }
+    record = {k: sim[k] for k in ("r", "delta_d") if k in sim}
+    if record:
+        report["parameter_record"] = record
+    return report
+
+
 def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
-                 max_arcs: int | None = 100, shrink: bool = False) -> dict:
+                 max_arcs: int | None = 100, shrink: bool = False, model=None) -> dict:
     """The report of one bag: parameters (value, stderr), fit verdict, residuals,
-    re-simulation, counts, the parameter record (when the bag has one).
+    re-simulation, counts, the parameter record (when the bag has one). A bag recorded
+    with a model file of n > 1 (its parameter record's model_file, or ``model``) gets the
+    n-DOF fit (:func:`identify_ndof`); n = 1 the 1-DOF fit.
 
     Raises IdentificationError / RecordingError / reader.BagReadError (bad input).
     """
-    rec, notes, sim = load_recording(bag, topics=topics, position_only=position_only,
-                                     impacts=impacts)
+    rec, notes, sim, kicks = _load(bag, topics, position_only, impacts)
+    nominal, path = _bag_model(sim, model)
+    if nominal is not None and nominal.n > 1:
+        return identify_ndof(bag, rec, notes, sim, kicks, nominal, path, impacts=impacts,
+                             max_arcs=max_arcs, shrink=shrink)
     ident = identify(rec, impacts="recorded" if impacts and rec.impact_t.size else "motion",
                      max_arcs=max_arcs, shrink=shrink)
     check = verdict(ident)
@@ -272,6 +347,9 @@ def identify_bags(bags, **kwargs) -> dict:
     """Every bag's report, their combination and the overall verdict (the JSON of
     ``grazing identify``)."""
     reports = [identify_bag(b, **kwargs) for b in bags]
+    if len(reports) > 1 and any(r.get("n", 1) > 1 for r in reports):
+        raise IdentificationError("bags: several n-DOF bags are not combined: identify "
+                                  "them one at a time")
     fit = "good" if all(r["fit"] == "good" for r in reports) else "poor"
     if len(reports) == 1:
         return dict(reports[0], bags=[reports[0]["bag"]])
@@ -287,8 +365,33 @@ def _fmt(name, entry):
     return f"  {name:18s} = {v:.12g}  {s_text}"
 
 
+def _format_ndof(result: dict) -> str:
+    """The text report of an n-DOF bag (:func:`identify_ndof`)."""
+    lines = [f"identification of {result['bag']} (n = {result['n']}, model file "
+             f"{result['model_file']}): fit {result['fit'].upper()}"]
+    lines += [_fmt(n, e) for n, e in result["parameters"].items()]
+    lines.append("  (the wall coordinate's modal parameters in the recording's units: "
+                 "natural frequencies, damping ratios, its response (c, s) to a unit kick "
+                 "on its own velocity (impacts) and on the actuated one (corrections), its "
+                 "periodic response P_c cos tau + P_s sin tau; docs/theory_identification.md "
+                 "section 11)")
+    res = result["residuals"]
+    lines.append(f"  {result['samples']} samples, {result['arcs']} arcs, {result['impacts']} "
+                 f"impacts; noise sigma {res['sigma']:.3g}, residual lag-1 autocorrelation "
+                 f"{res['lag1_autocorrelation']:.3f} ({res['z']:.1f} sigma); kick response "
+                 f"{result['kick_response']}")
+    if "parameter_record" in result:
+        lines.append("    its parameter record: " + ", ".join(
+            f"{k} = {v:.12g}" for k, v in result["parameter_record"].items()))
+    lines += [f"    note: {n}" for n in result["notes"]]
+    lines += [f"  poor fit: {why}" for why in result["reasons"]]
+    return "\n".join(lines)
+
+
 def format_report(result: dict) -> str:
     """The human-readable report."""
+    if result.get("n", 1) > 1:
+        return _format_ndof(result)
     lines = [f"identification of {', '.join(result['bags'])}: fit {result['fit'].upper()}"]
     lines += [_fmt(n, result["parameters"][n]) for n in PARAMETER_ORDER]
     lines.append("  (zeta, r, omega, delta_d, d: the study's nondimensional model; "

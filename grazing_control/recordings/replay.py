@@ -244,8 +244,8 @@ def _bag_writer(out: Path):
 
 
 def _is_ndof(data) -> bool:
-    """Whether a loaded bag is an n-DOF scene's (recordings/ndof_analysis.is_ndof)."""
-    from .ndof_analysis import is_ndof
+    """Whether a loaded bag is an n-DOF scene's (recordings/analysis.is_ndof)."""
+    from .analysis import is_ndof
 
     return is_ndof(data)
 

@@ -8,7 +8,9 @@ ARX(2) recursion of the sampled flow, per-arc linear fits, impacts found from th
 motion), :mod:`.fit` (multiple-shooting nonlinear least squares with complex-step
 Jacobians, standard errors) and :mod:`.checks` (residual whiteness, re-simulation, the
 verdict); :mod:`.stop` (which stop the Pi2 data support: rigid, Kelvin-Voigt, with
-friction, by BIC; docs/theory_contact.md section 17).
+friction, by BIC; docs/theory_contact.md section 17); :mod:`.modal` and :mod:`.modal_fit`
+(n > 1: the modal parameters the wall coordinate shows, their multiple-shooting fit and
+a model file's realisation; docs/theory_identification.md section 11).
 
 May import: :mod:`grazing_control.dynamics` and below. Never rclpy.
 """

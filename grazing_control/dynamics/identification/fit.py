@@ -49,8 +49,9 @@ from grazing_control.dynamics.identification.model import (GLOBAL_NAMES, NONDIME
                     nondimensional_vector)
 from grazing_control.dynamics.identification.phase import PhaseError, PhaseReference, fit_phase
 
-__all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem", "Identification",
-           "identify"]
+__all__ = ["CONSTRAINT_WEIGHT", "JACOBIAN_BYTES", "IdentificationError", "Problem",
+           "Identification", "ShootingFit", "identify", "coloured_jacobian", "interior",
+           "check_size"]
 
 #: Weight of the impact and continuity constraints against the data residuals.
 CONSTRAINT_WEIGHT = 1e4
@@ -213,29 +214,79 @@ class Problem:
 
     def jacobian(self, p) -> np.ndarray:
         """Complex-step Jacobian (module docstring), dense (m, n)."""
-        p = np.asarray(p, float)
-        J = np.zeros((self.m, self.n))
-        for j in range(6):
+        return coloured_jacobian(self.residual, p, self.m, 6, (self.iX, self.iV, self.iT),
+                                 self.rows_of_arc)
+
+
+def coloured_jacobian(residual, p, m: int, globals_: int, indices, rows_of_arc) -> np.ndarray:
+    """The dense (m, len(p)) complex-step Jacobian of a multiple-shooting residual
+    (module docstring): the first ``globals_`` parameters one by one, then each arc
+    parameter kind (``indices``: per arc its column, -1 where none) in two colours, even
+    and odd arcs together, arc k's column read on its rows ``rows_of_arc[k]`` only."""
+    p = np.asarray(p, float)
+    J = np.zeros((m, p.size))
+    for j in range(globals_):
+        q = p.astype(complex)
+        q[j] += 1j * _H
+        J[:, j] = residual(q).imag / _H
+    K = len(rows_of_arc)
+    for index in indices:
+        for colour in (0, 1):
+            ks = [k for k in range(colour, K, 2) if index[k] >= 0]
+            if not ks:
+                continue
             q = p.astype(complex)
-            q[j] += 1j * _H
-            J[:, j] = self.residual(q).imag / _H
-        K = self.arcs.count
-        for index in (self.iX, self.iV, self.iT):
-            for colour in (0, 1):
-                ks = [k for k in range(colour, K, 2) if index[k] >= 0]
-                if not ks:
-                    continue
-                q = p.astype(complex)
-                q[index[ks]] += 1j * _H
-                im = self.residual(q).imag / _H
-                for k in ks:
-                    rows = self.rows_of_arc[k]
-                    J[rows, index[k]] = im[rows]
-        return J
+            q[index[ks]] += 1j * _H
+            im = residual(q).imag / _H
+            for k in ks:
+                rows = rows_of_arc[k]
+                J[rows, index[k]] = im[rows]
+    return J
+
+
+def check_size(prob) -> None:
+    """FitTooLarge (naming --max-arcs and about how many arcs fit) when the problem's
+    dense (m, n) Jacobian would exceed :data:`JACOBIAN_BYTES`; before anything of its
+    size is allocated."""
+    need = 8 * prob.m * prob.n
+    if need > JACOBIAN_BYTES:
+        count = prob.arcs.count
+        fits = max(2, int(count * math.sqrt(JACOBIAN_BYTES / need)))
+        raise FitTooLarge(
+            f"max_arcs: the fit of the {count} arcs used needs a dense Jacobian of "
+            f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
+            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
+            "(--max-arcs)", fits)
+
+
+def interior(lo, hi):
+    """Bounds moved 1e-12 (relative) inside: least_squares starts strictly inside."""
+    inner_lo, inner_hi = lo.copy(), hi.copy()
+    f = np.isfinite(lo)
+    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
+    f = np.isfinite(hi)
+    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    return inner_lo, inner_hi
 
 
 @dataclass
-class Identification:
+class ShootingFit:
+    """What a multiple-shooting fit reports beside its parameters (this module's and
+    :mod:`.modal_fit`'s): the phase reference, the solution vector, the counts of arcs,
+    impacts, samples and degrees of freedom, the solver's convergence and message."""
+
+    phase: PhaseReference
+    solution: np.ndarray
+    arcs_used: int
+    impacts_used: int
+    samples_used: int
+    dof: int
+    converged: bool
+    message: str
+
+
+@dataclass
+class Identification(ShootingFit):
     """The result of :func:`identify`.
 
     Attributes
@@ -266,15 +317,7 @@ class Identification:
     rms_x: float
     rms_v: float
     constraint_rms: float
-    phase: PhaseReference
     problem: Problem
-    solution: np.ndarray
-    arcs_used: int
-    impacts_used: int
-    samples_used: int
-    dof: int
-    converged: bool
-    message: str
     events_moved: int = 0
     checks: dict = field(default_factory=dict)
     nondimensional_covariance: np.ndarray | None = None
@@ -309,21 +352,10 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
             "the recording has no impact: r and d (so delta_d) are not identifiable "
             "from free flight alone (record a scene with impacts)")
     prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
-    need = 8 * prob.m * prob.n
-    if need > JACOBIAN_BYTES:
-        fits = max(2, int(arcs.count * math.sqrt(JACOBIAN_BYTES / need)))
-        raise FitTooLarge(
-            f"max_arcs: the fit of the {arcs.count} arcs used needs a dense Jacobian of "
-            f"{prob.m} x {prob.n} ({need / 2 ** 20:.0f} MiB), beyond the "
-            f"{JACOBIAN_BYTES >> 20} MiB bound of a fit: fit at most about {fits} arcs "
-            "(--max-arcs)", fits)
+    check_size(prob)
     g0, start0, X0, V0 = initial_guess(rec, arcs, phase, prior)
     lo, hi = prob.bounds()
-    inner_lo, inner_hi = lo.copy(), hi.copy()     # least_squares starts strictly inside
-    f = np.isfinite(lo)
-    inner_lo[f] += 1e-12 * np.maximum(1.0, np.abs(lo[f]))
-    f = np.isfinite(hi)
-    inner_hi[f] -= 1e-12 * np.maximum(1.0, np.abs(hi[f]))
+    inner_lo, inner_hi = interior(lo, hi)
     p = np.clip(prob.pack(g0, start0, X0, V0), inner_lo, inner_hi)
     if prob.m_data - (prob.n - prob.n_constraints) <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "

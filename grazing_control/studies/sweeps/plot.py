@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["LABELS", "diagram", "atlas"]
+__all__ = ["LABELS", "diagram", "atlas", "coordinate_index", "diagram_png"]
 
 LABELS = {"delta_d": r"$\Delta d$", "zeta": r"$\zeta$", "r": "r", "omega": r"$\omega$",
-          "tau0": r"$\tau_0$", "pi2_offset": "Pi2 offset", "c1": "$c_1$", "c2": "$c_2$"}
+          "tau0": r"$\tau_0$", "pi2_offset": "Pi2 offset", "c1": "$c_1$", "c2": "$c_2$",
+          "phase": "phase"}
 
 
 def diagram(result, path, *, component: str = "x", title: str | None = None, dpi: int = 150):
@@ -94,3 +95,37 @@ def atlas(result, path, *, dpi: int = 150):
         ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 3), useOffset=False)
     save_png(fig, path, dpi=dpi)
     return path
+
+
+def coordinate_index(coordinates, name: str) -> int:
+    """Index of a coordinate name (x0.., v0..) in the state; ValueError naming the valid."""
+    if name not in coordinates:
+        raise ValueError(f"coordinate {name!r} is invalid: valid names are "
+                         f"{', '.join(coordinates)}")
+    return list(coordinates).index(name)
+
+
+def diagram_png(result, path, *, coordinate: str, deviation: bool = False,
+                title: str | None = None, dpi: int = 150):
+    """Every kept Pi2 sample of ``coordinate`` (physical, or the deviation from the
+    grazing orbit) against the swept value: a brute-force bifurcation diagram of a model
+    file's sweep (:mod:`.model_file`, ``grazing sweep --model``)."""
+    from grazing_control.support.plotting import COLORS, pyplot, save_png
+
+    plt = pyplot()
+    j = coordinate_index(result.coordinates, coordinate)
+    m = result.samples.shape[1]
+    xs = np.repeat(result.values, m)
+    ys = result.samples[:, :, j] + (0.0 if deviation else result.reference[:, j][:, None])
+    ys = ys.ravel()
+    ok = np.isfinite(ys)
+    fig, ax = plt.subplots(figsize=(7.0, 4.5), constrained_layout=True)
+    ax.plot(xs[ok], ys[ok], ".", color=COLORS["brute"], markersize=1.5, markeredgewidth=0,
+            rasterized=True)
+    ax.set_xlabel(LABELS.get(result.name, result.name))
+    ax.set_ylabel(f"{coordinate}{' - grazing' if deviation else ''} on $\\Pi_2$")
+    ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 3), useOffset=False)
+    ax.set_title(title or f"{result.values.size} points x {m} periods "
+                          f"(after {result.transient} transient)", fontsize=9)
+    save_png(fig, path, dpi=dpi)
+    return str(path)

@@ -186,7 +186,9 @@ def _spectrum(p, first, c1, c2, m, control_after, transient, delay, engine):
     return res.exponents
 
 
-def _local_workers(workers):
+def local_workers(workers) -> int:
+    """Local processes of a sweep: ``workers``, or all cores (None); the 1-DOF sweep's and a
+    model file's (:mod:`.model_file`)."""
     if workers is None:
         try:
             return max(1, len(os.sched_getaffinity(0)))
@@ -279,7 +281,7 @@ def sweep(params: OscillatorParams, grid: dict, *, periods: int, transient: int,
         if scheduler is not None:
             _run_dask(scheduler, indexed, args, store)
         else:
-            nw = min(_local_workers(workers), n)
+            nw = min(local_workers(workers), n)
             if nw == 1:
                 for chunk in _chunks(indexed, max(1, min(n, 100))):
                     store(run_chunk(chunk, *args))

@@ -1,19 +1,20 @@
-"""The n-DOF figure set (issue 17): diagram, multipliers against |Delta d|, control scene.
+"""The figure set of a model file near grazing (issue 17): diagram, multipliers against
+|Delta d|, control scene; the 1-DOF study's figures are :mod:`.build`.
 
 ``grazing figures --model FILE`` draws, for any model file:
 
 * (a) ``ndof_diagram.png``: the brute-force bifurcation diagram on Pi2 against Delta d
-  near grazing, uncontrolled (:func:`grazing_control.studies.ndof.diagram.diagram`);
+  near grazing, uncontrolled (:func:`grazing_control.studies.sweeps.model_file.diagram`);
 * (b) ``ndof_multipliers.png``: max |lambda| of the 1/1 orbit born at grazing against
   |Delta d| on log-log axes, on the side of grazing where it exists
-  (:func:`grazing_control.studies.ndof.branch.grazing_side`) (:func:`grazing_control.studies.ndof.branch.multiplier_scaling`):
+  (:func:`grazing_control.studies.near_grazing.branch.grazing_side`) (:func:`grazing_control.studies.near_grazing.branch.multiplier_scaling`):
   uncontrolled, with a gain of the design family (bounded, the predicted limit
   :func:`grazing_control.dynamics.design.ndof_design.limit_multipliers` dashed) and with the gain
   that cancels only w^T N u and one that cancels w^T N u and G(1)
   (``cancel_first_markov``), each with its fitted
   exponent over |Delta d| <= ``fit_below``;
 * (c) ``ndof_scene.png``: uncontrolled iterations, then the controller on, and the
-  distance to the controlled 1/1 orbit (:func:`grazing_control.studies.ndof.scene.control_scene`),
+  distance to the controlled 1/1 orbit (:func:`grazing_control.studies.near_grazing.scene.control_scene`),
   like the study's Figs. 2(f, g).
 
 The numbers read off the panels go to ``ndof_figures.json``. The default settings keep
@@ -30,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
+from grazing_control.support.plotting import COLORS, pyplot, save_png
 
 __all__ = ["NdofFigureSettings", "DEFAULT", "QUICK", "choose_mu", "markov_gain", "scaling_curves",
            "make_ndof_figures"]
@@ -106,7 +108,7 @@ def markov_gain(model, mu: float, settings, smooth_branch: bool = True) -> np.nd
     sign for which the local map has a 1/1 orbit born at grazing (whether it exists for
     d < d* depends on that sign; ndof_design's docstring)."""
     from grazing_control.dynamics.design.ndof_design import cancel_first_markov, gain_family
-    from grazing_control.studies.ndof.branch import predicted_orbit
+    from grazing_control.studies.near_grazing.branch import predicted_orbit
 
     size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu))), 1.0)
     candidates = [np.asarray(cancel_first_markov(model, mu, sign * size,
@@ -122,7 +124,7 @@ def markov_gain(model, mu: float, settings, smooth_branch: bool = True) -> np.nd
 def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     """The three curves of (b) with their fitted exponents and the predicted limit."""
     from grazing_control.dynamics.design.ndof_design import gain_family, limit_multipliers
-    from grazing_control.studies.ndof.branch import (fit_exponent, grazing_side,
+    from grazing_control.studies.near_grazing.branch import (fit_exponent, grazing_side,
                                                      multiplier_scaling)
 
     sizes = np.geomspace(settings.scaling_from, settings.scaling_to, settings.scaling_points)
@@ -175,9 +177,9 @@ def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
     """Compute and draw (a), (b), (c) of the module docstring into ``out``; returns the
     numbers (also written to ``out/ndof_figures.json``)."""
     from grazing_control.dynamics.design.ndof_design import gain_family
-    from grazing_control.studies.ndof.diagram import diagram
-    from grazing_control.studies.ndof.plot import diagram_png, scaling_png, scene_png
-    from grazing_control.studies.ndof.scene import control_scene
+    from grazing_control.studies.sweeps.model_file import diagram
+    from grazing_control.studies.sweeps.plot import diagram_png
+    from grazing_control.studies.near_grazing.scene import control_scene
 
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -230,3 +232,62 @@ def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
     (out / "ndof_figures.json").write_text(json.dumps(numbers, indent=1, allow_nan=False)
                                            + "\n", encoding="utf-8")
     return numbers
+
+
+# ---------------------------------------------------------------------------- pictures
+# (the diagram panel is studies/sweeps/plot.py's diagram_png, as ``grazing sweep --model``'s)
+def scaling_png(curves, path, *, title: str = "", dpi: int = 150):
+    """max |lambda| against |Delta d| on log-log axes.
+
+    ``curves``: list of dicts with ``delta_d``, ``largest``, ``label``, ``color`` and
+    optionally ``limit`` (a predicted limit, dashed) and ``slope`` (shown in the legend).
+    """
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
+    for c in curves:
+        x = np.abs(np.asarray(c["delta_d"], dtype=float))
+        y = np.asarray(c["largest"], dtype=float)
+        ok = np.isfinite(x) & np.isfinite(y) & (y > 0)
+        label = c["label"]
+        if c.get("slope") is not None and np.isfinite(c["slope"]):
+            label += f" (slope {c['slope']:.3f})"
+        ax.loglog(x[ok], y[ok], "o-", color=c["color"], markersize=3, linewidth=1,
+                  label=label)
+        if c.get("limit") is not None:
+            ax.axhline(c["limit"], color=c["color"], linestyle="--", linewidth=0.8,
+                       label=f"predicted limit {c['limit']:.4g}")
+    ax.axhline(1.0, color="0.6", linewidth=0.6)
+    ax.set_xlabel(r"$|\Delta d|$")
+    ax.set_ylabel(r"$\max |\lambda|$ of the 1/1 orbit")
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title, fontsize=9)
+    save_png(fig, path, dpi=dpi)
+    return str(path)
+
+
+def scene_png(scene, path, *, coordinate_index_: int, coordinate: str, dpi: int = 150):
+    """The scene's Pi2 samples of one coordinate (deviation) against the sample index,
+    the moment control goes on, and the distance to the controlled orbit (log scale)."""
+    plt = pyplot()
+    k = np.arange(scene.samples.shape[0])
+    rows = 2 if scene.distance is not None else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(7.0, 2.4 * rows + 1.0), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    ax = axes[0, 0]
+    ax.plot(k, scene.samples[:, coordinate_index_], ".", color=COLORS["brute"],
+            markersize=1.5, markeredgewidth=0, rasterized=True)
+    ax.set_ylabel(f"{coordinate} - grazing on $\\Pi_2$")
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 3), useOffset=False)
+    ax.set_title(f"$\\Delta d$ = {scene.delta_d:.3g}", fontsize=9)
+    for a in axes[:, 0]:
+        if scene.control_after >= 0:
+            a.axvline(scene.control_after, color=COLORS["controlled"], linewidth=0.8)
+    if scene.distance is not None:
+        ad = axes[1, 0]
+        d = np.where(scene.distance > 0, scene.distance, np.nan)
+        ad.semilogy(k, d, color=COLORS["controlled"], linewidth=0.8)
+        ad.set_ylabel("distance to the\ncontrolled 1/1 orbit")
+    axes[-1, 0].set_xlabel("sample on $\\Pi_2$")
+    save_png(fig, path, dpi=dpi)
+    return str(path)

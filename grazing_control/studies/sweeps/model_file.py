@@ -1,4 +1,5 @@
-"""Brute-force bifurcation diagram of an n-DOF model on Pi2 (issue 17, figure (a)).
+"""A sweep of a model file's model (``grazing sweep --model``): the brute-force bifurcation
+diagram of one parameter on Pi2 for any n (issue 17, figure (a)).
 
 For each value of one model parameter (``delta_d`` by default) the period map of
 :class:`~grazing_control.dynamics.maps.ndof_map.NdofMap` is iterated ``periods`` times from a
@@ -14,8 +15,6 @@ address is given (optional: ``distributed`` is imported only then).
 from __future__ import annotations
 
 import dataclasses
-import math
-import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
@@ -24,12 +23,13 @@ import numpy as np
 from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
-from grazing_control.studies.sweeps.period import detect_period
+from .period import detect_period
+from .run import _count, local_workers
 
-__all__ = ["GRID_NAMES", "NdofDiagram", "diagram", "run_points"]
+__all__ = ["MODEL_GRID_NAMES", "NdofDiagram", "diagram", "run_points"]
 
 #: Model parameters a diagram may vary (scalar fields of NdofModel).
-GRID_NAMES = ("delta_d", "omega", "r", "phase", "pi2_offset")
+MODEL_GRID_NAMES = ("delta_d", "omega", "r", "phase", "pi2_offset")
 
 
 @dataclass(frozen=True)
@@ -100,17 +100,6 @@ def run_points(model, name, values, start, gains, periods, transient, control_af
     return samples, counts, period, errors
 
 
-def _workers(workers):
-    if workers is None:
-        try:
-            return max(1, len(os.sched_getaffinity(0)))
-        except AttributeError:  # pragma: no cover - not Linux
-            return max(1, os.cpu_count() or 1)
-    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
-        raise ParameterError(f"workers={workers!r} is invalid: valid range is an integer >= 1")
-    return int(workers)
-
-
 def diagram(model, values, *, name: str = "delta_d", periods: int, transient: int,
             start=None, gains=None, control_after: int | None = None,
             workers: int | None = None, scheduler=None, period_tol: float = 1e-10,
@@ -122,7 +111,7 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
     model : NdofModel
         The other parameters.
     values : array_like
-        Values of ``name`` (one of :data:`GRID_NAMES`), finite.
+        Values of ``name`` (one of :data:`MODEL_GRID_NAMES`), finite.
     periods, transient : int
         Periods run per point (>= 1) and dropped first (0 <= transient < periods).
     start : array_like, optional
@@ -135,16 +124,15 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
     scheduler : str or distributed.Client, optional
         A Dask scheduler address (tcp://HOST:PORT) or client: run the chunks there.
     """
-    if name not in GRID_NAMES:
+    if name not in MODEL_GRID_NAMES:
         raise ParameterError(f"grid name {name!r} is invalid with --model: valid names are "
-                             f"{', '.join(GRID_NAMES)}")
+                             f"{', '.join(MODEL_GRID_NAMES)}")
     vals = np.atleast_1d(np.asarray(values, dtype=float))
     if vals.ndim != 1 or vals.size == 0 or not np.all(np.isfinite(vals)):
         raise ParameterError(f"values of {name} are invalid: expected a non-empty list of "
                              "finite numbers")
-    for label, v, low in (("periods", periods, 1), ("transient", transient, 0)):
-        if isinstance(v, bool) or int(v) != v or v < low:
-            raise ParameterError(f"{label}={v!r} is invalid: valid range is an integer >= {low}")
+    _count("periods", periods, 1)        # the 1-DOF sweep's checks (run.py)
+    _count("transient", transient, 0)
     if not transient < periods:
         raise ParameterError(f"transient={transient!r} is invalid: valid range is 0 <= "
                              f"transient < periods={periods}")
@@ -188,7 +176,7 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
         if scheduler is not None:
             _run_dask(scheduler, index, vals, args, rest, store)
         else:
-            nw = min(_workers(workers), vals.size)
+            nw = min(local_workers(workers), vals.size)
             chunks = [index[i::max(1, 4 * nw)] for i in range(min(vals.size, max(1, 4 * nw)))]
             if nw == 1:
                 for idx in chunks:

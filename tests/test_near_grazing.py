@@ -1,4 +1,5 @@
-"""The n-DOF studies (studies/ndof/, studies/figures/ndof.py) as specifications.
+"""The studies of a model file (studies/near_grazing/, studies/sweeps/model_file.py,
+studies/figures/near_grazing.py) as specifications.
 
 * branch: the leading-order prediction converges to the exact orbit at its order
   (relative error O(s), s = sqrt(H) the impact's square root); on the n = 1 file the
@@ -23,10 +24,10 @@ from grazing_control.dynamics.orbits.orbits import orbit_11 as orbit_11_1dof
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.studies.ndof.branch import (fit_exponent, grazing_side,
+from grazing_control.studies.near_grazing.branch import (fit_exponent, grazing_side,
                                                  multiplier_scaling, orbit_11, predicted_orbit)
-from grazing_control.studies.ndof.diagram import diagram
-from grazing_control.studies.ndof.scene import control_scene
+from grazing_control.studies.sweeps.model_file import diagram
+from grazing_control.studies.near_grazing.scene import control_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 ONE = load_model(ROOT / "config" / "models" / "study_1dof.yaml")
@@ -138,7 +139,7 @@ def test_scene_converges_to_the_controlled_orbit():
 def test_quick_figure_set(tmp_path):
     from dataclasses import replace
 
-    from grazing_control.studies.figures.ndof import QUICK, make_ndof_figures
+    from grazing_control.studies.figures.near_grazing import QUICK, make_ndof_figures
 
     s = replace(QUICK, diagram_points=3, diagram_periods=12, diagram_transient=6,
                 scaling_from=1e-6, scaling_to=1e-8, scaling_points=3, scene_before=10,
@@ -174,7 +175,7 @@ def test_two_mass_uncontrolled_grows_like_one_over_delta_d_on_its_side():
 @pytest.fixture(scope="module")
 def two_mu():
     """The family member the figure set draws for the 2-mass chain (its design's choice)."""
-    from grazing_control.studies.figures.ndof import choose_mu
+    from grazing_control.studies.figures.near_grazing import choose_mu
 
     return choose_mu(TWO)
 
@@ -203,7 +204,7 @@ def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter_or_hal
         two_mu, smooth_branch, exponent):
     """w^T N u = 0 and G(1) = 0: |Delta d|^-1/4; w^T N u = 0 alone: |Delta d|^-1/2
     (docs/theory_ndof.md section 9)."""
-    from grazing_control.studies.figures.ndof import DEFAULT, markov_gain
+    from grazing_control.studies.figures.near_grazing import DEFAULT, markov_gain
 
     k = markov_gain(TWO, two_mu[0], DEFAULT, smooth_branch)
     side = grazing_side(TWO, k)

@@ -1,0 +1,294 @@
+"""``--model FILE``: a command's model from a model file (docs/ndof_model.md) instead of the
+1-DOF parameters, and the gains over it (docs/ndof_commands.md).
+
+Every model command (design, orbit, continue, simulate, sweep, figures) is one command:
+its model is the 1-DOF study's (the options of :mod:`.common`) or, with ``--model``, the
+file's model of any n (``oscillator.ndof.NdofModel``; the n = 1 file gives the 1-DOF
+numbers, tests/test_cli_model.py). This module reads the model side: the option, the file,
+the refusal of the other side's options, and the gains as a vector k of 2n numbers (the
+kick v[i_a] += k^T (X - X**) at Pi2, coordinates x0..x{n-1}, v0..v{n-1}), given as
+
+* ``--gains k0,k1,...``: the vector itself;
+* ``--mu MU``: the member of the design family whose free eigenvalue is mu
+  (w^T N = mu w^T, docs/theory_ndof.md, "Kick design");
+* ``--free-gain NAME=VALUE``: the member of the family whose gain on coordinate NAME
+  is VALUE (for n = 1, ``--free-gain v0=C2`` is the 1-DOF ``--c2 C2``).
+
+A leaf of the command line like :mod:`.common`. Errors are one line and status 2, as for
+every command (cli/commands.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grazing_control.oscillator.params import ParameterError
+
+__all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
+           "add_sweep_options", "add_figures_options", "check_options", "load", "coordinates",
+           "family_member", "gains_of", "control_of", "dispatch", "fmt_vec", "header"]
+
+#: Options of the 1-DOF commands that a model file replaces (refused with --model).
+ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--rig", "--c1", "--c2",
+                   "--delay", "--method", "--optimize", "--sensor-rate", "--estimator",
+                   "--x0", "--v0", "--dx0", "--dv0", "--lyapunov", "--fidelity", "--tol",
+                   "--engine", "--component", "--start", "--bags", "--docs")
+#: Options that need --model.
+MODEL_OPTIONS = ("--mu", "--gains", "--free-gain", "--z0", "--coordinate",
+                 "--cancel-first-markov", "--markov-only")
+
+
+def add_model_option(parser) -> None:
+    """``--model FILE`` on a subcommand's parser."""
+    parser.add_argument("--model", metavar="FILE",
+                        help="an n-DOF model file (docs/ndof_model.md, e.g. "
+                             "config/models/two_mass_chain.yaml): run this command on it "
+                             "(docs/ndof_commands.md); the 1-DOF model options are then refused")
+
+
+def _vector(text):
+    import argparse
+
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if not values or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected comma-separated "
+                                         "finite numbers, e.g. 0.1,-0.2,0,0.5")
+    return values
+
+
+def _named(text):
+    import argparse
+
+    name, sep, value = text.partition("=")
+    try:
+        v = float(value)
+    except ValueError:
+        v = math.nan
+    if not sep or not name.strip() or not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected NAME=VALUE, e.g. v1=-1")
+    return name.strip(), v
+
+
+def add_gain_options(parser, *, markov: bool = False) -> None:
+    """--gains / --mu / --free-gain (module docstring), and --cancel-first-markov."""
+    g = parser.add_argument_group("n-DOF gains (with --model; at most one)")
+    g.add_argument("--gains", type=_vector, metavar="K0,K1,...",
+                   help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**)")
+    g.add_argument("--mu", type=_finite, help="the design family's member with w^T N = mu w^T")
+    g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
+                   help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
+    if markov:
+        g.add_argument("--cancel-first-markov", type=_finite, metavar="OFFSET",
+                       help="with --mu: the gain k(mu) + OFFSET d that cancels w^T N u "
+                            "and G(1), d a unit vector off the family (the singular eigenvalue "
+                            "then grows like |Delta d|^(-1/4) instead of staying bounded; "
+                            "docs/ndof_commands.md)")
+        parser.add_argument("--markov-only", action="store_true",
+                            help="with --cancel-first-markov: cancel w^T N u only, G(1) left "
+                                 "free (the branch is linear in the impact phase and the "
+                                 "singular eigenvalue grows like |Delta d|^(-1/2))")
+
+
+def add_design_options(parser) -> None:
+    """--mu / --free-gain of ``design --model`` (the chosen member of the family)."""
+    g = parser.add_argument_group("n-DOF design (with --model)")
+    g.add_argument("--mu", type=_finite,
+                   help="the chosen member of the family, w^T N = mu w^T (default: the middle "
+                        "of the widest admissible interval)")
+    g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
+                   help="the member whose gain on NAME (x0.., v0..) is VALUE (n = 1: "
+                        "--free-gain v0=C2 is the 1-DOF --c2 C2)")
+
+
+def add_start_option(parser) -> None:
+    """--z0 of ``simulate --model``: the start on Pi2 as a deviation from X**."""
+    parser.add_argument("--z0", type=_vector, metavar="Z0,Z1,...",
+                        help="with --model: the start on Pi2, 2n deviations from the grazing "
+                             "orbit (x0.., v0..); default 0 (write --z0=-1e-4,0,0,0 for a "
+                             "negative first value)")
+
+
+def _finite(text):
+    from grazing_control.support.arguments import finite
+
+    return finite(text)
+
+
+def _given(argv, flag):
+    return any(a == flag or a.startswith(flag + "=") for a in argv)
+
+
+#: The commands of this module (``run --model`` is the launcher's: ros/launcher.py).
+COMMANDS = ("design", "orbit", "continue", "simulate", "sweep", "figures")
+
+
+def check_options(args, argv) -> None:
+    """Refuse 1-DOF model options with --model, and n-DOF options without it (the
+    commands of :data:`COMMANDS`)."""
+    if getattr(args, "command", None) not in COMMANDS:
+        return
+    model = getattr(args, "model", None)
+    if model is not None:
+        bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
+               and not (f == "--delay" and args.command == "design")]   # the delayed design
+        if bad:
+            raise ParameterError(f"{', '.join(bad)} {'is a 1-DOF option' if len(bad) == 1 else 'are 1-DOF options'}"
+                                 f": with --model the model file gives the model "
+                                 "(docs/ndof_model.md); give the gains as --gains, --mu or "
+                                 "--free-gain")
+    else:
+        bad = [f for f in MODEL_OPTIONS if _given(argv, f)]
+        if bad:
+            raise ParameterError(f"{', '.join(bad)} {'needs' if len(bad) == 1 else 'need'} "
+                                 "--model FILE (an n-DOF model file, docs/ndof_model.md)")
+
+
+def load(path):
+    """The model of ``--model FILE``; one-line ParameterError for an unreadable file."""
+    from grazing_control.oscillator.ndof import load_model
+    from grazing_control.support.files import YamlFileError
+
+    try:
+        return load_model(path)
+    except YamlFileError as exc:
+        raise ParameterError(f"--model {exc}") from None
+    except ParameterError as exc:
+        raise ParameterError(f"--model {path}: {exc}") from None
+
+
+def coordinates(model) -> tuple:
+    """x0..x{n-1}, v0..v{n-1}: the names of the state's (and the gains') components."""
+    return tuple(f"x{i}" for i in range(model.n)) + tuple(f"v{i}" for i in range(model.n))
+
+
+def family_member(model, name: str, value: float, delay: float = 0.0) -> float:
+    """mu of the family member whose gain on ``name`` is ``value`` (the family is affine
+    in mu, docs/theory_ndof.md, "Kick design"; for a kick ``delay`` after Pi2, §14)."""
+    from grazing_control.dynamics.design.ndof_design import gain_family
+
+    names = coordinates(model)
+    if name not in names:
+        raise ParameterError(f"--free-gain {name}={value!r} is invalid: valid names are "
+                             f"{', '.join(names)}")
+    j = names.index(name)
+    k0 = np.asarray(gain_family(model, 0.0, delay), dtype=float)
+    k1 = np.asarray(gain_family(model, 1.0, delay), dtype=float) - k0
+    if not abs(k1[j]) > 1e-12 * max(1.0, float(np.max(np.abs(k1)))):
+        raise ParameterError(f"--free-gain {name}={value!r} is invalid: the gain on {name} is "
+                             f"the same ({k0[j]:.12g}) for every member of the family; choose "
+                             "another coordinate, or --mu")
+    mu = float((value - k0[j]) / k1[j])
+    from grazing_control.dynamics.design.ndof_design import MU_LIMIT
+
+    if not abs(mu) <= MU_LIMIT:
+        raise ParameterError(f"--free-gain {name}={value!r} is invalid: it is the member "
+                             f"mu = {mu:g} of the family; valid are the gains of |mu| <= "
+                             f"{MU_LIMIT:g}, i.e. {name} between "
+                             f"{k0[j] - MU_LIMIT * abs(k1[j]):.6g} and "
+                             f"{k0[j] + MU_LIMIT * abs(k1[j]):.6g}")
+    return mu
+
+
+def gains_of(args, model):
+    """(gains or None, mu or None, how): the gains of --gains / --mu / --free-gain (at most
+    one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled."""
+    offset = getattr(args, "cancel_first_markov", None)
+    given = [f for f, v in (("--gains", getattr(args, "gains", None)),
+                            ("--mu", getattr(args, "mu", None)),
+                            ("--free-gain", getattr(args, "free_gain", None))) if v is not None]
+    if offset is not None:
+        if given != ["--mu"]:
+            raise ParameterError("--cancel-first-markov OFFSET needs --mu MU (the family member "
+                                 "it moves off by OFFSET), and neither --gains nor --free-gain")
+        from grazing_control.dynamics.design.ndof_design import cancel_first_markov
+
+        only = bool(getattr(args, "markov_only", False))
+        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only),
+                       dtype=float)
+        what = "only w^T N u" if only else "w^T N u and G(1)"
+        return k, None, f"cancels {what}: k(mu = {args.mu:g}) + {offset:g} d"
+    if getattr(args, "markov_only", False):
+        raise ParameterError("--markov-only goes with --cancel-first-markov OFFSET --mu MU")
+    if len(given) > 1:
+        raise ParameterError(f"{' and '.join(given)} are given: give one of --gains, --mu, "
+                             "--free-gain")
+    if not given:
+        return None, None, "uncontrolled"
+    if given[0] == "--gains":
+        k = np.asarray(args.gains, dtype=float)
+        if k.size != 2 * model.n:
+            raise ParameterError(f"--gains has {k.size} values: the model has n = {model.n}, "
+                                 f"give 2n = {2 * model.n} ({', '.join(coordinates(model))})")
+        return k, None, "given"
+    from grazing_control.dynamics.design.ndof_design import gain_family
+
+    mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain)
+    return np.asarray(gain_family(model, mu), dtype=float), mu, "design family"
+
+
+
+
+def control_of(args, model):
+    """(gains or None, mu or None, how) of a command that runs the model from a start
+    (simulate, sweep): the gains of :func:`gains_of`, with ``--control-after`` refused
+    without them and ``--z0`` checked to have 2n values."""
+    k, mu, how = gains_of(args, model)
+    if args.control_after is not None and k is None:
+        raise ParameterError("--control-after needs the gains: give --gains, --mu or --free-gain")
+    if args.z0 is not None and len(args.z0) != 2 * model.n:
+        raise ParameterError(f"--z0 has {len(args.z0)} values: give 2n = {2 * model.n} "
+                             f"({', '.join(coordinates(model))}, deviation from X** on Pi2)")
+    return k, mu, how
+
+
+def fmt_vec(v, digits=10):
+    """``[a, b, ...]`` of a vector, each to ``digits`` significant digits."""
+    return "[" + ", ".join(f"{x:.{digits}g}" for x in np.asarray(v, dtype=float)) + "]"
+
+
+def header(model, path) -> dict:
+    """The model file's header of every report: the file, n, i_w, i_a, d*, tau*, the
+    coordinates."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+
+    flow = NdofFlow.of(model)
+    return {"model": str(path), "n": model.n, "i_w": model.i_w, "i_a": model.i_a,
+            "d_star": float(flow.d_star), "tau_star": float(flow.tau_star),
+            "coordinates": list(coordinates(model))}
+
+
+def dispatch(one_dof, model_file):
+    """A subcommand's function: ``model_file`` with --model, else the 1-DOF ``one_dof``
+    (sweep and figures, whose 1-DOF commands live in the studies they run)."""
+    def run(args):
+        return model_file(args) if getattr(args, "model", None) is not None else one_dof(args)
+
+    run.__name__ = getattr(one_dof, "__name__", "run")
+    return run
+
+
+def add_sweep_options(parser) -> None:
+    """--model, the gains, --z0 and --coordinate of ``sweep --model``."""
+    add_model_option(parser)
+    add_gain_options(parser)
+    add_start_option(parser)
+    parser.add_argument("--coordinate", metavar="NAME",
+                        help="with --model: the Pi2 coordinate drawn in the PNG, x0.. or v0.. "
+                             "(default: the wall coordinate x{i_w})")
+
+
+
+
+def add_figures_options(parser) -> None:
+    """--model and --mu of ``figures --model``."""
+    add_model_option(parser)
+    parser.add_argument("--mu", type=_finite,
+                        help="with --model: the design family's member drawn (default: the "
+                             "middle of the widest admissible interval)")
+
+
