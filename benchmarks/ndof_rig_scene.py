@@ -92,7 +92,7 @@ def main(argv=None):
                 worst = max(abs(v) for v in got["z"].values())
                 print(f"identify seed {row['seed']}: fit {got['fit']}, sigma "
                       f"{got['sigma']:.3g}, {got['impacts']} impacts, (fit - true) / se "
-                      f"{ {k: round(v, 2) for k, v in got['z'].items()} }, max |z| "
+                      f"{ {k: round(float(v), 2) for k, v in got['z'].items()} }, max |z| "
                       f"{worst:.2f}")
     if own.out:
         Path(own.out).write_text(json.dumps(out, indent=1))
