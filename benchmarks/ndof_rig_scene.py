@@ -85,18 +85,21 @@ def main(argv=None):
 
             model = dataclasses.replace(load_model(out["model"]), delta_d=out["delta_d"])
             for row in out.get("nodes", []):
-                row["identify"] = got = identify_z(bags / f"bag_{row['seed']}", model)
-                if got["status"]:
-                    print(f"identify seed {row['seed']}: status {got['status']}: {got['error']}")
-                    continue
-                worst = max(abs(v) for v in got["z"].values())
-                print(f"identify seed {row['seed']}: fit {got['fit']}, sigma "
-                      f"{got['sigma']:.3g}, {got['impacts']} impacts, (fit - true) / se "
-                      f"{ {k: round(float(v), 2) for k, v in got['z'].items()} }, max |z| "
-                      f"{worst:.2f}")
+                row["identify"] = identify_z(bags / f"bag_{row['seed']}", model)
+                print(f"identify seed {row['seed']}: {summary(row['identify'])}")
     if own.out:
-        Path(own.out).write_text(json.dumps(out, indent=1))
+        with open(own.out, "w") as fh:
+            json.dump(out, fh, indent=1)
     return out
+
+
+def summary(got: dict) -> str:
+    """One line of :func:`identify_z`'s result."""
+    if got["status"]:
+        return f"status {got['status']}: {got['error']}"
+    z = {k: round(float(v), 2) for k, v in got["z"].items()}
+    return (f"fit {got['fit']}, sigma {got['sigma']:.3g}, {got['impacts']} impacts, "
+            f"(fit - true) / se {z}, max |z| {max(abs(v) for v in z.values()):.2f}")
 
 
 if __name__ == "__main__":
