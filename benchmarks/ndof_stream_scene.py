@@ -136,8 +136,11 @@ def main(argv=None):
     # the controlled orbit from a point near it (the core loop's last state, seed 0)
     z0, *_ = core_loop(a.model, model, design.gains, a, 1000)
     orbit = np.asarray(find_periodic(P, z0[-1]).state)
+    # the samples the controller fits: before t_k in lockstep, up to t_k in realtime
+    # (answer_after_section; ndof_filter_covariance's section_sample)
     R = ndof_filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay,
-                               width=a.pulse_width)
+                               width=a.pulse_width, section_sample=a.mode == "realtime"
+                               and not a.core_only)
     S = ndof_noise_covariance(model, design.gains, orbit, R, a.delay, a.pulse_width)
     predicted = a.sigma * np.sqrt(np.diag(S))
     out = {"model": a.model, "delta_d": a.delta_d, "mu": a.mu, "delay": a.delay,
