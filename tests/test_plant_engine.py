@@ -629,3 +629,55 @@ def test_a_sticking_period_of_the_wall_coordinate_is_the_cores():
         impacts += sum(e.kind == "impact" for e in eng.begin_period(0.0))
         eng.end_period()
     assert impacts >= 6
+
+
+@pytest.mark.parametrize("tau_a, latency", [(1.5, 0.2), (0.0, 0.2)])
+def test_through_the_actuator_a_run_is_actuated_steps_iterates_bit_for_bit(tau_a, latency):
+    """Issue 32 (docs/theory_ndof.md section 15): with ``actuator_bandwidth`` 1 / tau_a
+    and ``actuator_latency`` L the command m_a k^T z / w on [start + L, start + L + w]
+    reaches x1 through the lag, the force a state carried from sample to sample: the
+    lockstep periods and the realtime ones (begin_head, actuate) are
+    ndof_map.actuated_step's iterates bit for bit, force included (tau_a = 0: the pulse
+    L later); the stream's states are lag_advance from each piece's start (1e-12)."""
+    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.oscillator.ndof.forced import lag_advance
+
+    delay, width = 1.0, 1.0
+    bw = 0.0 if tau_a == 0.0 else 1.0 / tau_a
+    s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay, pulse_width=width,
+                       actuator_bandwidth=bw, actuator_latency=latency, state_period=0.1)
+    k = pulse_design(s.model, -0.22, delay, width).gains
+    a, b = Engine(s), Engine(s)
+    f = a.section.flow
+    z, force, impacts, checked = np.full(4, 1e-3), 0.0, 0, 0
+    a.z, b.z = z.copy(), z.copy()
+    start = a.actuation_start(delay)
+    for n in range(25):
+        dv = float(k @ z)
+        events = a.begin_period(dv, delay)
+        b.begin_head(delay)
+        b.actuate(dv, delay)
+        z1, force1, imps = actuated_step(f, z, force, dv, start=start, width=width,
+                                         time_constant=tau_a, latency=latency)
+        got = [(e.x, e.v) for e in events if e.kind == "impact"]
+        assert got == [(i.v_minus, i.v_plus) for i in imps], n
+        impacts += len(got)
+        if tau_a:                   # the states of the piece under the commanded force
+            on, off, t0 = start + latency, start + latency + width, a.t
+            first = lag_advance(f, f.tau2, z, on, 0.0, force, tau_a)
+            u = a.section.pulse_force(dv, width)
+            tau_on = (f.tau2 + s.model.omega * on) % (2 * math.pi)
+            for e in events:
+                if e.kind == "state" and t0 + on < e.t <= t0 + off:
+                    ref = lag_advance(f, tau_on, first.z, e.t - t0 - on, u,
+                                      first.force - u, tau_a)
+                    np.testing.assert_allclose(xv(e), f.to_physical(ref.tau, ref.z),
+                                               rtol=0, atol=1e-12)
+                    checked += 1
+        a.end_period(), b.end_period()
+        z, force = z1, force1
+        assert np.array_equal(a.z, z) and np.array_equal(b.z, z), n
+        assert a.force == force == b.force
+    assert impacts >= 20 and (checked >= 25 * 9 or not tau_a)
+    assert tau_a == 0.0 or abs(force) > 1e-8        # the force carries over the sample

@@ -102,6 +102,7 @@ class Span(NamedTuple):
     z_end: np.ndarray  # deviation at te
     impacts: tuple     # the model's impacts of the stretch (dt from ts)
     force: float = 0.0  # a pulse's constant force on the stretch (0: free flight)
+    lag: tuple | None = None  # through the actuator: (command, transient, tau_a)
 
 
 class _Rest(NamedTuple):
@@ -175,6 +176,8 @@ class Engine:
             self.z = self.section.start()
             self.impacts = 0
             self.seg = None
+            self._head = None
+            self.force = self._force_end = 0.0
             return self.sample()
         self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
         self.impacts = 0
@@ -245,6 +248,8 @@ class Engine:
         order (state, Pi1, impacts), the next sample excluded.
         """
         if self.section is not None:
+            if self.lagged:
+                return self._model_lag_period(dv_correction, self.actuation_start(delay))
             return self._model_period(dv_correction, delay)
         if self.lagged:
             return self._lag_period(dv_correction, self.actuation_start(delay))
@@ -308,6 +313,9 @@ class Engine:
         to t_k+1.
         """
         start = self.actuation_start(delay)
+        if self.section is not None and self.lagged:
+            t = self.t + start
+            return [ev for ev in self._model_lag_period(dv_correction, start) if ev.t >= t]
         if self.section is not None:
             kept = self._head
             if kept is not None and kept[:2] == (self.k, start) and kept[2] is self.z:
@@ -423,6 +431,7 @@ class Engine:
         s = self.seg
         if self.section is not None:
             self.z = s.z_end
+            self.force = self._force_end
             self.k += 1
             self.seg = None
             return self.sample(), None
@@ -570,6 +579,45 @@ class Engine:
         self.seg = Span(t0, sec.tau2, z, (self.k + 1) * sec.period, piece.z, piece.impacts)
         return self._model_events(self.seg)
 
+    def _model_lag_period(self, dv_correction: float, start: float) -> list:
+        """The n-DOF period through the first-order actuator (module docstring): the
+        command m_a Delta v / w (clipped) on [start + L, start + L + w], the force from
+        :attr:`force` at the sample, the legs of
+        :func:`grazing_control.dynamics.maps.ndof_map.actuated_step` (its calls, so a
+        lockstep run is its iterates bit for bit); tau_a = 0 (latency only) is the pulse
+        at start + L. The force at the next sample is kept for :meth:`end_period`."""
+        sec, s = self.section, self.settings
+        act, w = s.actuator, s.pulse_width
+        if act.time_constant == 0.0:
+            self._force_end = 0.0
+            head_events, z_head = self._model_head(start + act.latency)
+            return head_events + self._model_actuate(z_head, dv_correction,
+                                                     start + act.latency)
+        command = sec.pulse_force(dv_correction, w, s.force_limit or math.inf)
+        on, off = start + act.latency, start + act.latency + w
+        t0, end_t = self.t, (self.k + 1) * sec.period
+        z, f, t, events = self.z, float(self.force), 0.0, []
+        for end, u in ((on, 0.0), (off, command), (sec.period, 0.0)):
+            if end > t:
+                tau = (sec.tau2 + sec.omega * t) % TWO_PI
+                piece = sec.lagged(tau, z, end - t, u, f - u, act.time_constant)
+                self.seg = Span(t0 + t, tau, z, end_t if end == sec.period else t0 + end,
+                                piece.z, piece.impacts, 0.0, (u, f - u, act.time_constant))
+                events += self._model_events(self.seg)
+                z, f = np.array(piece.z, dtype=float), float(piece.force)
+            t = end
+        self._force_end = f
+        return events
+
+    def _model_head(self, start: float):
+        """(events up to ``start``, the deviation there) of the free flow from the sample."""
+        sec = self.section
+        if start <= 0.0:
+            return [], self.z
+        head = sec.advance(sec.tau2, self.z, start)
+        return self._model_events(Span(self.t, sec.tau2, self.z, self.t + start, head.z,
+                                       head.impacts)), head.z
+
     def _model_actuate(self, z_head, dv_correction: float, start: float) -> list:
         """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF); with a
         pulse width w > 0 the pulse on [start, start + w] and the flow on (the legs of
@@ -625,7 +673,9 @@ class Engine:
                         float(i.phase) % TWO_PI) for i in s.impacts]
         rel, kinds, j0 = self._published_times(s.ts, s.te, s.tau)
         if rel:
-            zs = sec.deviations_between(s.tau, s.z, s.impacts, rel, s.force)
+            zs = (sec.deviations_between(s.tau, s.z, s.impacts, rel, s.force)
+                  if s.lag is None else
+                  sec.lag_deviations_between(s.tau, s.z, s.impacts, rel, *s.lag))
             states = []
             for h, kind, z in zip(rel, kinds, zs):
                 tau = sec.tau_star if kind == "pi1" else (s.tau + sec.omega * h) % TWO_PI

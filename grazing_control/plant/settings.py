@@ -21,7 +21,7 @@ bound on a time reads the n-DOF period T = 2 pi / omega. What an n-DOF scene doe
 build (yet) is refused with one line naming the parameter and why, never half-applied
 (:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives them), an
 initial state other than the grazing point, the velocity noise at Pi2, the injected
-measurement noise, the actuator, the compliant stop and friction, the
+measurement noise, the compliant stop and friction, the
 drifting wall and fidelities other than exact. The engine runs either over one
 interface (:mod:`grazing_control.plant.engine`).
 """
@@ -501,8 +501,6 @@ NOT_WITH_MODEL_FILE = {
     "contact_damping": "the compliant stop is not built for n-DOF (the rigid wall only)",
     "friction": "dry friction is not built for n-DOF",
     "friction_static": "dry friction is not built for n-DOF",
-    "actuator_bandwidth": "the first-order actuator is not built for n-DOF",
-    "actuator_latency": "the first-order actuator is not built for n-DOF",
 }
 
 
@@ -546,6 +544,11 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
             if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE}
     # the 1-DOF validation with the n-DOF forcing frequency: its bounds on times read T
     base = settings_from_values({**rest, "omega": model.omega})
+    if not base.actuator.ideal and base.pulse_width == 0.0:
+        raise ParameterError("pulse_width=0.0 is invalid with model_file and the first-order "
+                             "actuator (actuator_bandwidth, actuator_latency): valid range is "
+                             "pulse_width > 0 (the n-DOF actuator's command is a pulse: "
+                             "ndof_map.actuated_step)")
     if base.pulse_width > 0.0:     # a force pulse needs the static deflection K^-1 e_a
         from grazing_control.oscillator.ndof.flow import NdofFlow
         from grazing_control.oscillator.ndof.forced import static_deflection
