@@ -31,7 +31,9 @@ arrival, the stream's grid and the Pi1 crossing are the ones above, and what dif
 the state z in R^{2n} (the deviation from the periodic response at Pi2), the flow of a
 piece, the kick on the actuated velocity or the force pulse carrying it (``pulse_width``:
 F = m_a Delta v / w on the actuated coordinate, centred ``actuation_delay`` after the
-sample as in 1-DOF; docs/theory_ndof.md section 15), the physical state of the n coordinates, the
+sample as in 1-DOF; docs/theory_ndof.md section 15; through the first-order actuator
+the legs of :func:`~grazing_control.dynamics.maps.ndof_map.actuated_step`, the force
+carried in :attr:`Engine.force`), the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
 (:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
