@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design, write_gain_yaml
+from grazing_control.dynamics.design.ndof_design import (evaluate_design, pulse_design,
+                                                       write_gain_yaml)
 from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.model import load_model
@@ -332,14 +333,16 @@ STREAM_DD, STREAM_MU, STREAM_DELAY, SIGMA, RATE = -1e-3, -0.22, 1.0, 1e-4, 200
 
 
 def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int = 7,
-                 coordinate: int = 0, timeout: float = 200, **sim):
+                 coordinate: int = 0, timeout: float = 200, width: float = 0.0, **sim):
     """A 2-DOF chain scene through the nodes with the stream estimator (issue 32):
     position-only sensor of every coordinate (sigma 1e-4, T/200, seeded), the controller's
     model filter over the exact n-DOF map reading ``coordinate``, the delay-aware design
-    k(mu = -0.22, delay 1.0) from its gains file (actuation_delay in it). Returns
-    (RunResult, bag, model, design)."""
+    k(mu = -0.22, delay 1.0) from its gains file (actuation_delay in it); with ``width``
+    > 0 the correction is the force pulse of that width centred 1.0 after the sample and
+    the design the pulse's (pulse_design; pulse_width in the gains file, which the
+    launcher gives the simulator). Returns (RunResult, bag, model, design)."""
     model = dataclasses.replace(load_model(CHAIN), delta_d=STREAM_DD)
-    design = evaluate_design(model, STREAM_MU, STREAM_DELAY)
+    design = pulse_design(model, STREAM_MU, STREAM_DELAY, width)
     assert design.admissible
     gains = tmp / "gains.yaml"
     write_gain_yaml(gains, model, design, CHAIN)
@@ -355,23 +358,27 @@ def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int =
     return res, bag, model, design
 
 
-def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tmp_path):
+def test_a_two_mass_pulsed_stream_scene_is_the_cores_closed_loop_on_the_same_samples(
+        tmp_path):
     """Lockstep, 2-DOF chain at Delta d = -1e-3, position-only sensor of x0 (sigma 1e-4,
     T/200), the controller's stream estimator (model filter over the exact n-DOF map) and
-    the delay-aware design (delay 1.0 from the gains file): the recorded corrections are
-    the core's closed loop on the recorded samples (StreamEstimator with the model, then
-    k^T z^) to 1e-15; the Pi2 samples are the engine's with the recorded corrections
-    acting 1.0 after their samples, bit for bit; the stream is the engine's sensor's;
-    captured on the controlled orbit with one impact per period."""
+    the delay-and-pulse-aware design (a force pulse of width 1 on x1 centred 1.0 after
+    each sample, from the gains file: issue 32's rig scene, docs/ndof_scene.md): the
+    recorded corrections are the core's closed loop on the recorded samples
+    (StreamEstimator with the model and the pulse, then k^T z^) to 1e-15; the Pi2
+    samples are the engine's with the recorded corrections as pulses centred 1.0 after
+    their samples, bit for bit; the stream is the engine's sensor's; captured on the
+    controlled orbit of NdofMap(width=1) with one impact per period."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
     from grazing_control.ros.recording import read_messages
 
-    n, on = 40, 8
-    res, bag, model, design = stream_scene(tmp_path, n, on)
+    n, on, width = 40, 8, 1.0
+    res, bag, model, design = stream_scene(tmp_path, n, on, width=width)
     logs = {k: Path(v).read_text() for k, v in res.logs.items()}
     assert res.ok, (res, logs)
     assert "sensor noise=0.0001 velocity=false" in logs["sim_node"]
     assert "actuation_delay=1.0" in logs["sim_node"]
+    assert "pulse_width=1.0" in logs["sim_node"]
     assert "pi2_source=stream estimator=model sensor_coordinate=0" in logs["controller_node"]
     msgs = {}
     for m in read_messages(bag):
@@ -383,7 +390,8 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     assert len(corr) >= n and all(len(s.velocity) == 0 for s in stream)   # + sample n
 
     # the core on the same samples: the model filter, then k^T z^ from section `on` on
-    est = StreamEstimator(model, "model", SIGMA, "stream", model.period / RATE, coordinate=0)
+    est = StreamEstimator(model, "model", SIGMA, "stream", model.period / RATE, coordinate=0,
+                          pulse_width=width)
     due, worst = [], 0.0
     for s in stream:
         due += est.add_sample(stamp(s), s.position[0], math.nan)
@@ -399,8 +407,8 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     # the node is the engine: the recorded corrections acting 1.0 after their samples
     eng = Engine(settings_from_values(
         {"delta_d": STREAM_DD, "actuation_delay": STREAM_DELAY, "sensor_noise": SIGMA,
-         "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE},
-        str(CHAIN)))
+         "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE,
+         "pulse_width": width}, str(CHAIN)))
     pi2 = sorted(msgs["/oscillator/pi2"], key=stamp)
     states, counts = eng.initial_states(), []
     for k in range(n):
@@ -417,7 +425,7 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
                                   np.array([tuple(s.position) for s in stream[:m]]))
     # captured: one impact per period on the controlled orbit, the estimate within 5 sigma
     assert counts[-15:] == [1] * 15, counts
-    P = NdofMap(model, design.gains, STREAM_DELAY)
+    P = NdofMap(model, design.gains, STREAM_DELAY, width)
     orbit = find_periodic(P, eng.z)
     assert np.max(np.abs(eng.z - orbit.state)) < 1e-2
 

@@ -644,3 +644,147 @@ def test_the_stream_is_the_exact_flow_plus_the_sensors_seeded_noise(velocity):
     # the sample at t = 0 too, and the draws are the 1-DOF sensor's for coordinate 0
     assert states[0].x[0] == pytest.approx(f.particular(f.tau2)[0] + sigma * draws[0, 0, 0],
                                            abs=1e-15)
+
+
+def test_a_pulsed_run_is_ndofmap_with_the_width_bit_for_bit_on_both_paths():
+    """Issue 32: with ``pulse_width`` the correction k^T z_k is the force pulse
+    F = m_a k^T z_k / w centred ``actuation_delay`` after the sample
+    (docs/theory_ndof.md section 15): the lockstep period (begin_period) and the realtime
+    one (begin_head, then actuate at the deadline) are NdofMap(model, k, delay, width)'s
+    iterates bit for bit, impacts included; the stream's states during the pulse are the
+    flow under its force (advance_with_force from the pulse's start, independent of the
+    engine's evaluation from the impact list)."""
+    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.oscillator.ndof.forced import advance_with_force
+
+    delay, width = 1.0, 1.0
+    s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay, pulse_width=width,
+                       state_period=0.05)
+    design = pulse_design(s.model, -0.22, delay, width)
+    assert design.admissible
+    a, b = Engine(s), Engine(s)
+    P = NdofMap(s.model, design.gains, delay, width)
+    f = a.section.flow
+    z, impacts, during = np.full(4, 1e-3), 0, 0
+    a.z, b.z = z.copy(), z.copy()
+    for k in range(40):
+        dv = float(P.gains @ z)
+        events = a.begin_period(dv, a.actuation_delay())
+        b.begin_head(delay)
+        b.actuate(dv, delay)
+        step = P.step(z)
+        imp = [e for e in events if e.kind == "impact"]
+        assert [(e.x, e.v) for e in imp] == [(i.v_minus, i.v_plus) for i in step.impacts]
+        impacts += len(imp)
+        start = a.actuation_start(delay)
+        t0 = a.t
+        force = a.section.pulse_force(dv, width)
+        head = advance(f, f.tau2, z, start)
+        for e in events:
+            if e.kind == "state" and t0 + start < e.t <= t0 + start + width:
+                ref = advance_with_force(f, (f.tau2 + s.model.omega * start) % (2 * math.pi),
+                                         head.z, e.t - t0 - start, force)
+                X = f.to_physical(ref.tau, ref.z)
+                np.testing.assert_allclose(xv(e), X, rtol=0, atol=1e-12)
+                during += 1
+        a.end_period(), b.end_period()
+        z = step.state
+        assert np.array_equal(a.z, z) and np.array_equal(b.z, z), k
+    assert impacts >= 35 and during >= 40 * 19     # impacts once a period; 20 states a pulse
+    assert abs(force) > 1e-6                       # the pulse pushes: not vacuous
+
+
+def test_a_sticking_period_of_the_wall_coordinate_is_the_cores():
+    """Issue 32 (docs/theory_ndof.md section 16): a 2-DOF scene whose wall coordinate
+    sits at rest on the wall pushed into it (tests/models/two_mass_chain_w08.yaml at
+    Delta d = -3): the engine's period is the core's advance (a sticking impact with its
+    release, then flights and impacts), the stream's states while stuck hold x_w = d at
+    rest and equal advance from the period's start, and the run goes on after it (the
+    scene refused this motion before issue 32's section 16)."""
+    s = model_settings(str(ROOT / "tests" / "models" / "two_mass_chain_w08.yaml"),
+                       delta_d=-3.0, state_period=0.3)
+    eng = Engine(s)
+    f, m = eng.section.flow, s.model
+    n, w = m.n, m.i_w
+    z = np.zeros(2 * n)
+    z[w], z[n + w] = f.on_wall(f.tau2)
+    assert f.wall_acceleration(f.tau2, z) > 0.5         # pushed into the wall
+    eng.z = z.copy()
+    ref = advance(f, f.tau2, z, m.period)
+    events = eng.begin_period(0.0)
+    (stick,) = eng.seg.impacts
+    assert stick.sticking and 1.0 < stick.release < m.period
+    assert [(e.x, e.v) for e in events if e.kind == "impact"] == [
+        (i.v_minus, i.v_plus) for i in ref.impacts]
+    stuck = free = 0
+    for e in events:
+        if e.kind == "impact":
+            continue
+        h = e.t - eng.seg.ts
+        X = f.to_physical(*(lambda r: (r.tau, r.z))(advance(f, f.tau2, z, h)))
+        np.testing.assert_allclose(xv(e), X, rtol=0, atol=1e-12)
+        if h < stick.release:
+            assert e.x[w] == pytest.approx(f.d_star + m.delta_d, abs=1e-12) and abs(e.v[w]) < 1e-12
+            stuck += 1
+        else:
+            free += e.x[w] < f.d_star + m.delta_d - 1e-6      # released: off the wall
+    assert stuck >= 10 and free >= 5
+    eng.end_period()
+    np.testing.assert_array_equal(eng.z, ref.z)
+    impacts = 0
+    for _ in range(3):                                   # and the scene goes on, impacting
+        impacts += sum(e.kind == "impact" for e in eng.begin_period(0.0))
+        eng.end_period()
+    assert impacts >= 6
+
+
+@pytest.mark.parametrize("tau_a, latency", [(1.5, 0.2), (0.0, 0.2)])
+def test_through_the_actuator_a_run_is_actuated_steps_iterates_bit_for_bit(tau_a, latency):
+    """Issue 32 (docs/theory_ndof.md section 15): with ``actuator_bandwidth`` 1 / tau_a
+    and ``actuator_latency`` L the command m_a k^T z / w on [start + L, start + L + w]
+    reaches x1 through the lag, the force a state carried from sample to sample: the
+    lockstep periods and the realtime ones (begin_head, actuate) are
+    ndof_map.actuated_step's iterates bit for bit, force included (tau_a = 0: the pulse
+    L later); the stream's states are lag_advance from each piece's start (1e-12)."""
+    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.oscillator.ndof.forced import lag_advance
+
+    delay, width = 1.0, 1.0
+    bw = 0.0 if tau_a == 0.0 else 1.0 / tau_a
+    s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay, pulse_width=width,
+                       actuator_bandwidth=bw, actuator_latency=latency, state_period=0.1)
+    k = pulse_design(s.model, -0.22, delay, width).gains
+    a, b = Engine(s), Engine(s)
+    f = a.section.flow
+    z, force, impacts, checked = np.full(4, 1e-3), 0.0, 0, 0
+    a.z, b.z = z.copy(), z.copy()
+    start = a.actuation_start(delay)
+    for n in range(25):
+        dv = float(k @ z)
+        events = a.begin_period(dv, delay)
+        b.begin_head(delay)
+        b.actuate(dv, delay)
+        z1, force1, imps = actuated_step(f, z, force, dv, start=start, width=width,
+                                         time_constant=tau_a, latency=latency)
+        got = [(e.x, e.v) for e in events if e.kind == "impact"]
+        assert got == [(i.v_minus, i.v_plus) for i in imps], n
+        impacts += len(got)
+        if tau_a:                   # the states of the piece under the commanded force
+            on, off, t0 = start + latency, start + latency + width, a.t
+            first = lag_advance(f, f.tau2, z, on, 0.0, force, tau_a)
+            u = a.section.pulse_force(dv, width)
+            tau_on = (f.tau2 + s.model.omega * on) % (2 * math.pi)
+            for e in events:
+                if e.kind == "state" and t0 + on < e.t <= t0 + off:
+                    ref = lag_advance(f, tau_on, first.z, e.t - t0 - on, u,
+                                      first.force - u, tau_a)
+                    np.testing.assert_allclose(xv(e), f.to_physical(ref.tau, ref.z),
+                                               rtol=0, atol=1e-12)
+                    checked += 1
+        a.end_period(), b.end_period()
+        z, force = z1, force1
+        assert np.array_equal(a.z, z) and np.array_equal(b.z, z), n
+        assert a.force == force == b.force
+    assert impacts >= 20 and (checked >= 25 * 9 or not tau_a)
+    assert tau_a == 0.0 or abs(force) > 1e-8        # the force carries over the sample

@@ -145,15 +145,37 @@ def test_times_are_bounded_by_the_n_dof_period():
         settings_from_values({"actuation_delay": 23.0}, SCENE)
 
 
-@pytest.mark.parametrize("name,value", [("actuator_bandwidth", 20.0),
-                                        ("actuator_latency", 0.05)])
-def test_the_first_order_actuator_is_refused_with_a_model_file(name, value):
-    """Reproduction (issue 32's fold): plant.ndof_settings accepted the actuator's values
-    and plant.ndof_engine ignored them (the kick acted unlagged); now one line naming the
-    parameter and why."""
-    with pytest.raises(ParameterError, match=rf"^{name}={value!r} is invalid with model_file="
-                                             r".*the first-order actuator is not built"):
-        settings_from_values({name: value, "actuation_delay": 0.3}, SCENE)
+def test_the_first_order_actuator_is_taken_with_a_model_file_and_a_pulse():
+    """Issue 32: the actuator reaches the n-DOF engine (refused on main, ignored before
+    the fold; tests/test_plant_engine.py runs it); it needs a pulse width, as in 1-DOF."""
+    s = settings_from_values({"actuator_bandwidth": 20.0, "actuator_latency": 0.05,
+                              "pulse_width": 0.4, "actuation_delay": 0.3}, SCENE)
+    assert (s.actuator.time_constant, s.actuator.latency) == (0.05, 0.05)
+    with pytest.raises(ParameterError, match=r"pulse_width"):
+        settings_from_values({"actuator_bandwidth": 20.0, "actuation_delay": 0.3}, SCENE)
+
+
+def test_a_force_pulse_is_taken_with_a_model_file_with_its_bounds_on_the_models_T(tmp_path):
+    """Issue 32: pulse_width (and force_limit) reach the n-DOF engine (on main it was
+    refused naming the kick); its bounds read the model's T, and a model without a
+    static deflection (K singular: a rigid-body mode, docs/theory_ndof.md section 15)
+    is refused in one line naming pulse_width and K."""
+    s = settings_from_values({"pulse_width": 1.0, "actuation_delay": 1.0,
+                              "force_limit": 2.0}, SCENE)
+    assert (s.pulse_width, s.force_limit, s.actuation_delay) == (1.0, 2.0, 1.0)
+    T = load_model(SCENE).period
+    with pytest.raises(ParameterError, match=r"pulse_width <= 2 actuation_delay"):
+        settings_from_values({"pulse_width": 1.0, "actuation_delay": 0.4}, SCENE)
+    with pytest.raises(ParameterError, match=rf"actuation_delay \+ pulse_width / 2 < T.*{T:.6g}"):
+        settings_from_values({"pulse_width": 2.0, "actuation_delay": T - 0.5}, SCENE)
+    free = tmp_path / "free.yaml"
+    free.write_text("M: [[1.0, 0.0], [0.0, 1.0]]\nC: [[0.04, -0.02], [-0.02, 0.04]]\n"
+                    "K: [[1.0, -1.0], [-1.0, 1.0]]\nf: [0.0, 1.0]\nomega: 0.5\n"
+                    "i_w: 0\ni_a: 1\nr: 0.7\n")
+    assert settings_from_values({}, str(free)).model.n == 2       # the kick is fine
+    with pytest.raises(ParameterError, match=r"^pulse_width=1.0 is invalid with model_file="
+                                             r".*free.yaml'.*K is invalid.*singular"):
+        settings_from_values({"pulse_width": 1.0, "actuation_delay": 1.0}, str(free))
 
 
 @pytest.mark.parametrize("name", sorted(NOT_WITH_MODEL_FILE))

@@ -16,14 +16,14 @@ and the same :class:`SimSettings` describe an n-DOF scene: :func:`settings_from_
 loads the model (``delta_d``, when given, replaces the file's: ``grazing run
 --delta-d``) into :attr:`SimSettings.model`, and validates everything that is not the
 model -- mode, time scale, state stream period, timeouts, max periods, actuation delay,
-loss, jitter, the velocity and measurement noise, seeds, the sensor -- with the model's
-forcing frequency, so that every bound on a time reads the n-DOF period T = 2 pi /
-omega; its start is ``state0``, the 2n coordinates
+loss, jitter, the velocity and measurement noise, seeds, the sensor, the force pulse and
+the first-order actuator -- with the model's forcing frequency, so that every bound on a
+time reads the n-DOF period T = 2 pi / omega; its start is ``state0``, the 2n coordinates
 (:func:`grazing_control.oscillator.ndof.section.start_state`). What an n-DOF scene does
 not build (yet) is refused with one line naming the parameter and why, never
 half-applied (:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives
-them), the 1-DOF start x0, v0, the force pulse, the actuator, the compliant stop and
-friction, the drifting wall and fidelities other than exact. The engine runs either over one
+them), the 1-DOF start x0, v0, the compliant stop and friction, the drifting wall and
+fidelities other than exact. The engine runs either over one
 interface (:mod:`grazing_control.plant.engine`).
 """
 
@@ -42,7 +42,7 @@ import numpy as np
 from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, Actuator
 from grazing_control.dynamics.simulation.fidelity import FIDELITIES
 from grazing_control.oscillator.ndof.flow import grazing_clearance
-from grazing_control.oscillator.ndof.model import NdofModel, load_model
+from grazing_control.oscillator.ndof.model import NdofModel, load_model_file
 from grazing_control.oscillator.ndof.section import start_state
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.oscillator.contact import MAX_FRICTION, MAX_STIFFNESS
@@ -506,7 +506,6 @@ NOT_WITH_MODEL_FILE = {
     "pi2_offset": "the model file gives pi2_offset",
     "x0": "an n-DOF scene's start is state0, its 2n coordinates (empty: X**)",
     "v0": "an n-DOF scene's start is state0, its 2n coordinates (empty: X**)",
-    "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
     "fidelity": "only the exact flow is built for n-DOF",
     "delta_d_drift": "the drifting wall is not built for n-DOF",
     "contact": "the compliant stop is not built for n-DOF (the rigid wall only)",
@@ -514,29 +513,7 @@ NOT_WITH_MODEL_FILE = {
     "contact_damping": "the compliant stop is not built for n-DOF (the rigid wall only)",
     "friction": "dry friction is not built for n-DOF",
     "friction_static": "dry friction is not built for n-DOF",
-    "actuator_bandwidth": "the first-order actuator is not built for n-DOF",
-    "actuator_latency": "the first-order actuator is not built for n-DOF",
 }
-
-
-def load_model_file(path: str) -> NdofModel:
-    """The model of a YAML file (docs/ndof_model.md); ParameterError naming ``model_file``
-    and the reason for a file that is missing, unreadable or invalid."""
-    from grazing_control.support.files import YamlFileError
-
-    try:
-        return load_model(path)
-    except ParameterError as exc:
-        raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
-    except YamlFileError as exc:       # "PATH: why" (support/files.read_yaml_file)
-        why = str(exc).removeprefix(f"{path}: ")
-        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
-                             f"YAML file ({why})") from None
-    except (OSError, TypeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
-                             f"YAML file ({reason.splitlines()[0] if reason else type(exc).__name__})"
-                             ) from None
 
 
 def _model_file_settings(values: dict, model_file: str, model: NdofModel | None) -> SimSettings:
@@ -560,6 +537,20 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
             if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE and k != "state0"}
     # the 1-DOF validation with the n-DOF forcing frequency: its bounds on times read T
     base = settings_from_values({**rest, "omega": model.omega})
+    if not base.actuator.ideal and base.pulse_width == 0.0:
+        raise ParameterError("pulse_width=0.0 is invalid with model_file and the first-order "
+                             "actuator (actuator_bandwidth, actuator_latency): valid range is "
+                             "pulse_width > 0 (the n-DOF actuator's command is a pulse: "
+                             "ndof_map.actuated_step)")
+    if base.pulse_width > 0.0:     # a force pulse needs the static deflection K^-1 e_a
+        from grazing_control.oscillator.ndof.flow import NdofFlow
+        from grazing_control.oscillator.ndof.forced import static_deflection
+
+        try:
+            static_deflection(NdofFlow.of(model))
+        except ParameterError as exc:
+            raise ParameterError(f"pulse_width={base.pulse_width!r} is invalid with model_file="
+                                 f"{model_file!r}: valid is 0 ({exc})") from None
     return dataclasses.replace(base, model=model, model_file=str(model_file), state0=state0)
 
 

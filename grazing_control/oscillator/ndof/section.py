@@ -19,7 +19,13 @@ through :class:`NdofSection` (issue 32):
   trajectory: between impacts the deviation flows linearly, z(t + h) = Phi(h) z(t) (the
   periodic response absorbs the forcing; docs/ndof_model.md), and an impact changes only
   the wall coordinate's velocity, by v+ - v-, which adds (v+ - v-) e_{n + i_w} to z. A
-  piece with a sticking impact is evaluated by ``advance`` from its start instead;
+  piece with a sticking impact is evaluated by ``advance`` from its start instead.
+  Under a pulse's force F the same holds for z - sigma F against the clearance
+  Delta d - sigma_w F (sigma the static deflection, oscillator/ndof/forced.py); under
+  a first-order actuator's force u + c e^{-h / tau_a} the deviation is
+  Phi(h) (z - sigma u - q) + sigma u + q e^{-h / tau_a} between impacts, each impact
+  putting x_w on the wall with v_w+ = -r v_w- and scaling c by e^{-h / tau_a}
+  (:func:`~grazing_control.oscillator.ndof.forced.lag_advance`'s closed form);
 * the sensor's measurement of the n coordinates: sample j's coordinate i is the sensor's
   draw number j n + i (:func:`measure_coordinates`), a pure function of (seed, j) as in
   1-DOF, and for n = 1 the 1-DOF sensor's draws bit for bit.
@@ -36,6 +42,9 @@ import math
 import numpy as np
 
 from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.forced import (actuated_mass, advance_with_force,
+                                                    forced_flow, lag_advance, lag_particular,
+                                                    static_deflection)
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
@@ -126,6 +135,49 @@ class NdofSection:
         """The exact flow with impacts from (tau, z) for ``duration``: ``.z``, ``.impacts``."""
         return advance(self.flow, tau, z, duration)
 
+    def pulse_force(self, dv: float, width: float, limit: float = math.inf) -> float:
+        """F = m_a Delta v / w clipped to +-``limit``: the pulse carrying Delta v
+        (as :func:`grazing_control.dynamics.maps.ndof_map.pulse_step`)."""
+        return max(-limit, min(limit, actuated_mass(self.flow) * dv / width))
+
+    def pushed(self, tau: float, z, duration: float, force: float):
+        """The exact flow with impacts under the constant ``force`` on the actuated
+        coordinate (:func:`~grazing_control.oscillator.ndof.forced.advance_with_force`)."""
+        return advance_with_force(self.flow, tau, z, duration, force)
+
+    def lagged(self, tau: float, z, duration: float, command: float, transient: float,
+               tau_a: float):
+        """The exact flow under the actuator's force command + transient e^{-h / tau_a}
+        (:func:`~grazing_control.oscillator.ndof.forced.lag_advance`): ``.z``, ``.force``,
+        ``.impacts``."""
+        return lag_advance(self.flow, tau, z, duration, command, transient, tau_a)
+
+    def lag_deviations_between(self, tau: float, z, impacts, times, command: float,
+                               transient: float, tau_a: float) -> np.ndarray:
+        """z at ``times`` (sorted, since the piece's start) of a :meth:`lagged` piece from
+        its ``impacts`` (module docstring); (len(times), 2n)."""
+        flow, m = self.flow, self.model
+        n, w = self.n, m.i_w
+        sigma_u = static_deflection(flow) * command if command != 0.0 else np.zeros(2 * n)
+        out = np.empty((len(times), 2 * n))
+        z, c, t0, k = np.array(z, dtype=float), float(transient), 0.0, 0
+
+        def at(h):
+            q = lag_particular(flow, c, tau_a)
+            return flow.transition(h) @ (z - sigma_u - q) + sigma_u + q * math.exp(-h / tau_a)
+
+        for j, h in enumerate(times):
+            while k < len(impacts) and impacts[k].dt <= h:
+                imp = impacts[k]
+                z = at(imp.dt - t0)
+                wall_x, rest_v = flow.on_wall(imp.phase)
+                z[w], z[n + w] = wall_x, rest_v + imp.v_plus
+                c *= math.exp(-(imp.dt - t0) / tau_a)
+                t0 = imp.dt
+                k += 1
+            out[j] = at(h - t0)
+        return out
+
     def kicked(self, z, dv: float) -> np.ndarray:
         """z + e_{n + i_a} Delta v (the kick on the actuated velocity)."""
         z = np.array(z, dtype=float)
@@ -138,22 +190,31 @@ class NdofSection:
         n = self.n
         return tuple(float(a) for a in X[:n]), tuple(float(a) for a in X[n:])
 
-    def deviations_between(self, tau: float, z, impacts, times) -> np.ndarray:
+    def deviations_between(self, tau: float, z, impacts, times,
+                           force: float = 0.0) -> np.ndarray:
         """z at ``times`` (sorted, since the piece's start at phase ``tau`` with deviation
-        ``z``) from the piece's ``impacts`` (module docstring); (len(times), 2n)."""
+        ``z``) from the piece's ``impacts`` (module docstring), under a pulse's constant
+        ``force``; (len(times), 2n)."""
+        if force != 0.0:    # z - sigma F flows freely against the moved wall (section 15)
+            shift = static_deflection(self.flow) * force
+            return self._between(forced_flow(self.flow, force), tau,
+                                 np.asarray(z, dtype=float) - shift, impacts, times) + shift
+        return self._between(self.flow, tau, z, impacts, times)
+
+    def _between(self, flow: NdofFlow, tau: float, z, impacts, times) -> np.ndarray:
         out = np.empty((len(times), 2 * self.n))
         if any(i.sticking for i in impacts):
             for j, h in enumerate(times):
-                out[j] = advance(self.flow, tau, z, h).z
+                out[j] = advance(flow, tau, z, h).z
             return out
         jump = self.n + self.model.i_w
         t0, z, k = 0.0, np.asarray(z, dtype=float), 0
         for j, h in enumerate(times):
             while k < len(impacts) and impacts[k].dt <= h:
                 imp = impacts[k]
-                z = self.flow.transition(imp.dt - t0) @ z
+                z = flow.transition(imp.dt - t0) @ z
                 z[jump] += imp.v_plus - imp.v_minus
                 t0 = imp.dt
                 k += 1
-            out[j] = self.flow.transition(h - t0) @ z
+            out[j] = flow.transition(h - t0) @ z
         return out
