@@ -19,6 +19,10 @@ The spreads are taken over the periods from ``--on`` + ``--settle`` to the end.
 
     .venv/bin/python benchmarks/ndof_stream_scene.py --periods 400
     .venv/bin/python benchmarks/ndof_stream_scene.py --mode realtime --time-scale 20
+
+With ``--pulse-width W`` the correction is the force pulse of that width centred at the
+delay, in the design, the plant, the filter and the prediction (the rig scene,
+benchmarks/ndof_rig_scene.py).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
-from grazing_control.dynamics.design.ndof_design import (evaluate_design,  # noqa: E402
+from grazing_control.dynamics.design.ndof_design import (pulse_design,  # noqa: E402
                                                        write_gain_yaml)
 from grazing_control.dynamics.design.noise import (ndof_filter_covariance,  # noqa: E402
                                                    ndof_noise_covariance)
@@ -53,14 +57,17 @@ def core_loop(model_file, model, gains, a, seed: int):
     t0 = time.perf_counter()
     run = stream_loop(model_file, gains, delta_d=model.delta_d, delay=a.delay,
                       sigma=a.sigma, rate=a.rate, coordinate=a.coordinate,
-                      periods=a.periods, control_after=a.on, seed=seed)
+                      periods=a.periods, control_after=a.on, seed=seed,
+                      width=a.pulse_width)
     return (run.truth, run.impacts_per_period, run.resets,
             (time.perf_counter() - t0) / a.periods, run.estimate - run.truth)
 
 
-def node_scene(model_file, model, design, a, tmp: Path):
-    """The scene through the nodes: (Pi2 deviations, impacts per period, deadline misses,
-    answered, wall seconds)."""
+def node_scene(model_file, model, design, a, tmp: Path, seed: int | None = None):
+    """The scene through the nodes, its sensor seeded by ``seed`` (default ``--seed``):
+    (Pi2 deviations, impacts per period, deadline misses, answered, wall seconds); the
+    bag in ``tmp / "bag"``. The gain file carries the design's actuation (delay, pulse
+    width), which the launcher gives the simulator too."""
     from grazing_control.recordings.scenes import load
     from grazing_control.ros import launcher
     from test_closed_loop import NO_WATCHDOG, new_domain
@@ -68,7 +75,7 @@ def node_scene(model_file, model, design, a, tmp: Path):
     gains = tmp / "gains.yaml"
     write_gain_yaml(gains, model, design, model_file)
     sim = {"state_period": model.period / a.rate, "sensor_noise": a.sigma,
-           "sensor_velocity": False, "sensor_seed": a.seed}
+           "sensor_velocity": False, "sensor_seed": a.seed if seed is None else seed}
     if a.mode == "realtime":
         sim.update(time_scale=a.time_scale, **NO_WATCHDOG)
     t0 = time.perf_counter()
@@ -95,11 +102,15 @@ def spread(z, orbit, a):
 
 
 def main(argv=None):
+    """Run the measurement; returns its numbers (the dict ``--out`` writes)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default=str(ROOT / "config" / "models" / "two_mass_chain.yaml"))
     ap.add_argument("--delta-d", type=float, default=-1e-3)
     ap.add_argument("--mu", type=float, default=-0.22)
     ap.add_argument("--delay", type=float, default=1.0)
+    ap.add_argument("--pulse-width", type=float, default=0.0,
+                    help="the correction as a force pulse of this width centred --delay "
+                    "after the sample (0: the kick; docs/theory_ndof.md section 15)")
     ap.add_argument("--sigma", type=float, default=1e-4)
     ap.add_argument("--rate", type=int, default=200)
     ap.add_argument("--coordinate", type=int, default=0)
@@ -107,6 +118,10 @@ def main(argv=None):
     ap.add_argument("--on", type=int, default=10)
     ap.add_argument("--settle", type=int, default=60)
     ap.add_argument("--seed", type=int, default=7, help="the node scene's sensor seed")
+    ap.add_argument("--node-seeds", type=int, default=1,
+                    help="node scenes, sensor seeds --seed, --seed + 1, ...")
+    ap.add_argument("--keep-bags", default="", help="keep each node scene's bag under "
+                    "this directory (bag_<seed>)")
     ap.add_argument("--seeds", type=int, default=4, help="seeds of the core loop")
     ap.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     ap.add_argument("--time-scale", type=float, default=20.0)
@@ -116,19 +131,25 @@ def main(argv=None):
     a = ap.parse_args(argv)
 
     model = dataclasses.replace(load_model(a.model), delta_d=a.delta_d)
-    design = evaluate_design(model, a.mu, a.delay)
-    P = NdofMap(model, design.gains, a.delay)
+    design = pulse_design(model, a.mu, a.delay, a.pulse_width)
+    P = NdofMap(model, design.gains, a.delay, a.pulse_width)
     # the controlled orbit from a point near it (the core loop's last state, seed 0)
     z0, *_ = core_loop(a.model, model, design.gains, a, 1000)
     orbit = np.asarray(find_periodic(P, z0[-1]).state)
-    R = ndof_filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay)
-    S = ndof_noise_covariance(model, design.gains, orbit, R, a.delay)
+    # the samples the controller fits: before t_k in lockstep, up to t_k in realtime
+    # (answer_after_section; ndof_filter_covariance's section_sample)
+    R = ndof_filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay,
+                               width=a.pulse_width, section_sample=a.mode == "realtime"
+                               and not a.core_only)
+    S = ndof_noise_covariance(model, design.gains, orbit, R, a.delay, a.pulse_width)
     predicted = a.sigma * np.sqrt(np.diag(S))
     out = {"model": a.model, "delta_d": a.delta_d, "mu": a.mu, "delay": a.delay,
+           "pulse_width": a.pulse_width,
            "admissible": bool(design.admissible), "gains": design.gains.tolist(),
            "orbit": orbit.tolist(), "predicted_std": predicted.tolist(),
            "filter_std_predicted": (a.sigma * np.sqrt(np.diag(R))).tolist()}
-    print(f"design mu={a.mu} delay={a.delay} admissible={design.admissible} "
+    print(f"design mu={a.mu} delay={a.delay} pulse_width={a.pulse_width} "
+          f"admissible={design.admissible} "
           f"k={np.round(design.gains, 6).tolist()}")
     print(f"controlled orbit z* = {np.round(orbit, 9).tolist()}")
     print(f"predicted std     {np.array2string(predicted, precision=4)}")
@@ -144,31 +165,43 @@ def main(argv=None):
               f"{a.periods - a.on - a.settle}) {sorted(set(counts[a.on + a.settle:].tolist()))}"
               f" resets {resets}; filter error std {np.array2string(filt, precision=3)} "
               f"(predicted {np.array2string(a.sigma * np.sqrt(np.diag(R)), precision=3)})")
-    ratios = np.array(ratios)
-    out["core"] = {"ratio_mean": ratios.mean(axis=0).tolist(), "ratio_min": ratios.min().item(),
-                   "ratio_max": ratios.max().item(), "seconds_per_period": float(np.mean(secs))}
-    print(f"core: spread/predicted mean {np.array2string(ratios.mean(axis=0), precision=3)} "
-          f"(all seeds {ratios.min():.3f} .. {ratios.max():.3f}); "
-          f"{np.mean(secs) * 1e3:.1f} ms per period")
+    if a.seeds:
+        ratios = np.array(ratios)
+        out["core"] = {"ratio_mean": ratios.mean(axis=0).tolist(),
+                       "ratio_min": ratios.min().item(), "ratio_max": ratios.max().item(),
+                       "seconds_per_period": float(np.mean(secs))}
+        print(f"core: spread/predicted mean {np.array2string(ratios.mean(axis=0), precision=3)}"
+              f" (all seeds {ratios.min():.3f} .. {ratios.max():.3f}); "
+              f"{np.mean(secs) * 1e3:.1f} ms per period")
     if not a.core_only:
-        with tempfile.TemporaryDirectory() as tmp:
-            z, counts, misses, answered, wall = node_scene(a.model, model, design, a,
-                                                           Path(tmp))
-        std, mean = spread(z, orbit, a)
-        tail = counts[a.on + a.settle:]
-        last = float(np.max(np.abs(z[-1] - orbit)))
-        out["nodes"] = {"mode": a.mode, "time_scale": a.time_scale if a.mode == "realtime"
-                        else None, "std": std.tolist(), "ratio": (std / predicted).tolist(),
-                        "mean": mean.tolist(), "impacts_per_period": sorted(set(
-                            tail.tolist())), "deadline_misses": misses, "answered": answered,
-                        "final_distance": last, "wall_s": wall}
-        print(f"nodes ({a.mode}{'' if a.mode == 'lockstep' else f', time scale {a.time_scale}'}"
-              f"): std {np.array2string(std, precision=4)} ratio "
-              f"{np.array2string(std / predicted, precision=3)}; impacts per period "
-              f"{sorted(set(tail.tolist()))}; |z_final - z*| {last:.2e}; deadline misses "
-              f"{misses}; answered {answered}; {wall:.0f} s wall")
+        out["nodes"] = []
+        for seed in range(a.seed, a.seed + a.node_seeds):
+            with tempfile.TemporaryDirectory() as tmp:
+                z, counts, misses, answered, wall = node_scene(a.model, model, design, a,
+                                                               Path(tmp), seed)
+                if a.keep_bags:
+                    import shutil
+                    Path(a.keep_bags).mkdir(parents=True, exist_ok=True)
+                    shutil.copytree(Path(tmp) / "bag", Path(a.keep_bags) / f"bag_{seed}",
+                                    dirs_exist_ok=True)
+            std, mean = spread(z, orbit, a)
+            tail = counts[a.on + a.settle:]
+            last = float(np.max(np.abs(z[-1] - orbit)))
+            out["nodes"].append({
+                "seed": seed, "mode": a.mode, "time_scale": a.time_scale
+                if a.mode == "realtime" else None, "std": std.tolist(),
+                "ratio": (std / predicted).tolist(), "mean": mean.tolist(),
+                "impacts_per_period": sorted(set(tail.tolist())), "deadline_misses": misses,
+                "answered": answered, "final_distance": last, "wall_s": wall})
+            print(f"nodes seed {seed} ({a.mode}"
+                  f"{'' if a.mode == 'lockstep' else f', time scale {a.time_scale}'}"
+                  f"): std {np.array2string(std, precision=4)} ratio "
+                  f"{np.array2string(std / predicted, precision=3)}; impacts per period "
+                  f"{sorted(set(tail.tolist()))}; |z_final - z*| {last:.2e}; deadline misses "
+                  f"{misses}; answered {answered}; {wall:.0f} s wall")
     if a.out:
         Path(a.out).write_text(json.dumps(out, indent=1))
+    return out
 
 
 if __name__ == "__main__":

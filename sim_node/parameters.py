@@ -4,7 +4,8 @@ declaration with a model file (issue 17) or a rig file (issue 28) setting defaul
 
 from __future__ import annotations
 
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
+from rclpy.parameter import Parameter as RosParameter
 
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.engine import Engine
@@ -137,6 +138,10 @@ def descriptor(p: Parameter, declared: dict | None = None):
         return int_descriptor(p.doc, p.lo, p.hi, p.read_only, p.constraints)
     if p.kind == "string":
         return string_descriptor(p.doc, p.read_only, p.choices)
+    if p.kind == "double_array":
+        return ParameterDescriptor(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
+                                   description=p.doc, read_only=p.read_only,
+                                   additional_constraints=p.constraints)
     return bool_descriptor(p.doc, p.read_only)
 
 
@@ -205,6 +210,9 @@ def declare(node) -> None:
         if p.name == "delta_d" and node.model is not None:
             default = node.model.delta_d
         default = rig_values.get(p.name, default)     # with a rig file, the rig's
+        if p.kind == "double_array":      # declared by type: an empty list has none
+            declared[p.name] = _declare_array(node, p, node_descriptor(node, p, declared))
+            continue
         declared[p.name] = node.declare_parameter(
             p.name, default, node_descriptor(node, p, declared)).value
     node.set_descriptor("use_sim_time", bool_descriptor(
@@ -226,6 +234,17 @@ def declare(node) -> None:
         apply_node_scheduling(node)
     except (ParameterError, ValueError) as exc:
         raise StartupError(str(exc)) from None
+
+
+def _declare_array(node, p: Parameter, d) -> list:
+    """Declare a double-array parameter of the table (``state0``): by type, then, where
+    no override gave it a value, the empty list (so that a get over every name answers,
+    as controller_node's ``gains``)."""
+    value = node.declare_parameter(p.name, RosParameter.Type.DOUBLE_ARRAY, d).value
+    if value is None:
+        node.set_parameters([RosParameter(p.name, RosParameter.Type.DOUBLE_ARRAY, [])])
+        value = []
+    return list(value)
 
 
 def on_set_parameters(node, params) -> SetParametersResult:

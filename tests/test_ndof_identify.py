@@ -1,7 +1,9 @@
 """`grazing identify` on a 2-DOF scene's bag (issue 32): the acceptance scene of
 docs/ndof_scene.md (the shipped chain at Delta d = -1e-3, x0 position only at sigma
-1e-4 and T/200, the controller's stream estimator, the delay-aware design's kicks 1.0
-after each sample on x1), through sim_node, controller_node and the recorder, lockstep;
+1e-4 and T/200, the controller's stream estimator, the delay-and-pulse-aware design's
+corrections as force pulses of width 1 centred 1.0 after each sample on x1: the rig
+scene of issue 32's acceptance), through sim_node, controller_node and the recorder,
+lockstep;
 identified from the bag alone (its parameter record's model_file says n = 2) against
 the chain's true modal parameters (modal_of), and the written model file through
 `grazing design --model`. One scene, module-scoped.
@@ -42,7 +44,7 @@ def identified(tmp_path_factory):
     """The scene's bag, its `grazing identify --json --out-model` (status, report) and
     the written model file."""
     tmp = tmp_path_factory.mktemp("ndof_identify")
-    res, bag, model, _design = stream_scene(tmp, PERIODS, ON)
+    res, bag, model, _design = stream_scene(tmp, PERIODS, ON, width=1.0)
     assert res.ok, res
     out = tmp / "identified.yaml"
     status, text, err = run_cli(["identify", str(bag), "--json", "--out-model", str(out)])

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mpmath import mp, mpf
+from mpmath import mpf
 
 from grazing_control.oscillator import impact as impact1
 from grazing_control.oscillator.ndof import NdofModel, load_model

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design, write_gain_yaml
+from grazing_control.dynamics.design.ndof_design import (evaluate_design, pulse_design,
+                                                       write_gain_yaml)
 from grazing_control.dynamics.maps.ndof_map import NdofMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.model import load_model
@@ -113,21 +114,48 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert set(s["final_vs_exact_orbit_per_coordinate"]) == {"x0", "x1", "v0", "v1"}
     text = (tmp_path / "report" / "report.md").read_text()
     assert "n-DOF scene" in text and "v1" in text and (tmp_path / "report" / "bag.png").is_file()
-    # grazing replay of the 2-DOF lockstep bag (issue 32): the recorded Pi2 messages through
-    # a new controller_node with the record's model file and gains give the recorded
-    # corrections bit for bit; the simulator replay is refused in one line, nothing started
+    # grazing replay of the 2-DOF lockstep bag (issue 32): the simulator, started at the
+    # bag's first recorded state (state0) and answered with the recorded corrections,
+    # gives the recorded Pi2 samples bit for bit (before issue 32's replay: refused)
     from grazing_control.recordings.replay import replay_controller, replay_simulator
 
-    with pytest.raises(ValueError, match="an n-DOF scene .* the simulator replay is not "
-                                         "built for n > 1 .* --no-sim"):
-        replay_simulator(bag, tmp_path / "replay_sim")
-    assert not (tmp_path / "replay_sim").exists()
+    sim = replay_simulator(bag, tmp_path / "replay_sim", domain_id=new_domain(),
+                           log_dir=tmp_path / "logs")
+    assert sim["sim_parameters"]["state0"] == [float(v) for v in X[0]], sim
+    assert sim["sim_parameters"]["model_file"] == str(CHAIN)
+    assert sim["samples_replayed"] == sim["samples_recorded"] == n, sim
+    assert sim["stamps_equal"] and sim["bit_identical_samples"] == n, sim
+    assert sim["max_departure"] == 0.0 and sim["samples_without_recorded_correction"] == 0
+    replayed = load(tmp_path / "replay_sim").scenes[0].scene.pi2
+    assert np.array_equal(replayed, X)
+    # ... and its controller: the recorded Pi2 messages through a new controller_node
+    # with the record's model file and gains give the recorded corrections bit for bit
     out = replay_controller(bag, tmp_path / "replay", domain_id=new_domain())
     cmp_ = out["comparison"]
     assert out["samples_published"] == out["answers"] == n, out
     assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == n, cmp_
     assert cmp_["original_control_on"] == cmp_["new_control_on"] == on
     assert cmp_["new_gains"] == {"gains": list(design.gains)}, cmp_["new_gains"]
+
+
+def test_the_simulator_replay_of_an_n_dof_bag_without_its_record_is_one_line():
+    """An n-DOF bag (n joints per Pi2 sample) without the simulator's parameter record:
+    its model file is unknown; refused in one line before anything starts (grazing
+    replay's main checks it first), --no-sim named."""
+    from types import SimpleNamespace
+
+    from grazing_control.recordings.replay import _ndof_sim_record
+
+    bag = SimpleNamespace(parameters={}, joints=2)
+    with pytest.raises(ValueError, match=r"^b: an n-DOF scene \(2 joints per Pi2 sample\) "
+                                         r"without the simulator's parameter record: its "
+                                         r"model_file is unknown.*give --no-sim"):
+        _ndof_sim_record("b", bag)
+    one = SimpleNamespace(parameters={"nodes": {"sim_node": [{"model_file": ""}]}}, joints=1)
+    assert _ndof_sim_record("b", one) is None              # a 1-DOF bag: its own replay
+    rec = {"model_file": str(CHAIN), "delta_d": DELTA_D}
+    ndof = SimpleNamespace(parameters={"nodes": {"sim_node": [rec]}}, joints=2)
+    assert _ndof_sim_record("b", ndof) is rec
 
 
 def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
@@ -140,6 +168,9 @@ def test_bad_model_files_and_gains_stop_the_nodes_with_one_line(tmp_path):
         "broken file": (sim, {"model_file": str(broken)}, "model_file="),
         "1-DOF option": (sim, {"model_file": str(SCENE), "zeta": 0.02},
                          "zeta=0.02 is invalid with model_file"),
+        "start beyond the wall": (sim, {"model_file": str(SCENE),
+                                        "state0": [1e3, 0.0, 0.0, 0.0]},
+                                  "state0=[1000.0, 0.0, 0.0, 0.0] is invalid: x_"),
         "gains length": (ctl, {"model_file": str(SCENE), "gains": [1.0, 2.0, 3.0]},
                          "gains has 3 values: valid is 2n = 4"),
         "no gains": (ctl, {"model_file": str(SCENE)}, "gains is not given"),
@@ -302,14 +333,16 @@ STREAM_DD, STREAM_MU, STREAM_DELAY, SIGMA, RATE = -1e-3, -0.22, 1.0, 1e-4, 200
 
 
 def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int = 7,
-                 coordinate: int = 0, timeout: float = 200, **sim):
+                 coordinate: int = 0, timeout: float = 200, width: float = 0.0, **sim):
     """A 2-DOF chain scene through the nodes with the stream estimator (issue 32):
     position-only sensor of every coordinate (sigma 1e-4, T/200, seeded), the controller's
     model filter over the exact n-DOF map reading ``coordinate``, the delay-aware design
-    k(mu = -0.22, delay 1.0) from its gains file (actuation_delay in it). Returns
-    (RunResult, bag, model, design)."""
+    k(mu = -0.22, delay 1.0) from its gains file (actuation_delay in it); with ``width``
+    > 0 the correction is the force pulse of that width centred 1.0 after the sample and
+    the design the pulse's (pulse_design; pulse_width in the gains file, which the
+    launcher gives the simulator). Returns (RunResult, bag, model, design)."""
     model = dataclasses.replace(load_model(CHAIN), delta_d=STREAM_DD)
-    design = evaluate_design(model, STREAM_MU, STREAM_DELAY)
+    design = pulse_design(model, STREAM_MU, STREAM_DELAY, width)
     assert design.admissible
     gains = tmp / "gains.yaml"
     write_gain_yaml(gains, model, design, CHAIN)
@@ -325,23 +358,27 @@ def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int =
     return res, bag, model, design
 
 
-def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tmp_path):
+def test_a_two_mass_pulsed_stream_scene_is_the_cores_closed_loop_on_the_same_samples(
+        tmp_path):
     """Lockstep, 2-DOF chain at Delta d = -1e-3, position-only sensor of x0 (sigma 1e-4,
     T/200), the controller's stream estimator (model filter over the exact n-DOF map) and
-    the delay-aware design (delay 1.0 from the gains file): the recorded corrections are
-    the core's closed loop on the recorded samples (StreamEstimator with the model, then
-    k^T z^) to 1e-15; the Pi2 samples are the engine's with the recorded corrections
-    acting 1.0 after their samples, bit for bit; the stream is the engine's sensor's;
-    captured on the controlled orbit with one impact per period."""
+    the delay-and-pulse-aware design (a force pulse of width 1 on x1 centred 1.0 after
+    each sample, from the gains file: issue 32's rig scene, docs/ndof_scene.md): the
+    recorded corrections are the core's closed loop on the recorded samples
+    (StreamEstimator with the model and the pulse, then k^T z^) to 1e-15; the Pi2
+    samples are the engine's with the recorded corrections as pulses centred 1.0 after
+    their samples, bit for bit; the stream is the engine's sensor's; captured on the
+    controlled orbit of NdofMap(width=1) with one impact per period."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
     from grazing_control.ros.recording import read_messages
 
-    n, on = 40, 8
-    res, bag, model, design = stream_scene(tmp_path, n, on)
+    n, on, width = 40, 8, 1.0
+    res, bag, model, design = stream_scene(tmp_path, n, on, width=width)
     logs = {k: Path(v).read_text() for k, v in res.logs.items()}
     assert res.ok, (res, logs)
     assert "sensor noise=0.0001 velocity=false" in logs["sim_node"]
     assert "actuation_delay=1.0" in logs["sim_node"]
+    assert "pulse_width=1.0" in logs["sim_node"]
     assert "pi2_source=stream estimator=model sensor_coordinate=0" in logs["controller_node"]
     msgs = {}
     for m in read_messages(bag):
@@ -353,7 +390,8 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     assert len(corr) >= n and all(len(s.velocity) == 0 for s in stream)   # + sample n
 
     # the core on the same samples: the model filter, then k^T z^ from section `on` on
-    est = StreamEstimator(model, "model", SIGMA, "stream", model.period / RATE, coordinate=0)
+    est = StreamEstimator(model, "model", SIGMA, "stream", model.period / RATE, coordinate=0,
+                          pulse_width=width)
     due, worst = [], 0.0
     for s in stream:
         due += est.add_sample(stamp(s), s.position[0], math.nan)
@@ -369,8 +407,8 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
     # the node is the engine: the recorded corrections acting 1.0 after their samples
     eng = Engine(settings_from_values(
         {"delta_d": STREAM_DD, "actuation_delay": STREAM_DELAY, "sensor_noise": SIGMA,
-         "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE},
-        str(CHAIN)))
+         "sensor_velocity": False, "sensor_seed": 7, "state_period": model.period / RATE,
+         "pulse_width": width}, str(CHAIN)))
     pi2 = sorted(msgs["/oscillator/pi2"], key=stamp)
     states, counts = eng.initial_states(), []
     for k in range(n):
@@ -387,7 +425,7 @@ def test_a_two_mass_stream_scene_is_the_cores_closed_loop_on_the_same_samples(tm
                                   np.array([tuple(s.position) for s in stream[:m]]))
     # captured: one impact per period on the controlled orbit, the estimate within 5 sigma
     assert counts[-15:] == [1] * 15, counts
-    P = NdofMap(model, design.gains, STREAM_DELAY)
+    P = NdofMap(model, design.gains, STREAM_DELAY, width)
     orbit = find_periodic(P, eng.z)
     assert np.max(np.abs(eng.z - orbit.state)) < 1e-2
 

@@ -41,23 +41,34 @@ def test_the_n1_model_gives_the_1dof_noise_covariance():
 def test_the_predicted_spread_is_the_seeded_closed_loops():
     """Chain at Delta d = -1e-3, k(mu = -0.22, delay 1.0), x0's position only at T/200,
     sigma 1e-4: the seeded closed loop on the stream (300 periods, the spread over the
-    last 230) has one impact per period and a spread per coordinate within [1, 1.2] of
-    the prediction (measured 1.076 .. 1.121; docs/ndof_scene.md: the
-    prediction, which treats the filter's errors as independent from section to section,
-    is 5-15 % low)."""
+    last 230) has one impact per period and a spread per coordinate within 15 % of the
+    prediction over the samples the lockstep controller fits (before t_k:
+    section_sample=False), and the filter's errors within 10 % of its predicted
+    covariance, both within 5 % on average over the coordinates. Reproduction (issue 32's rig scene): the prediction over j = 1 .. rate
+    (the sample at t_k, which the controller answers before, counted) was 1.10-1.13 low
+    in the filter's std, so the spread came out 1.076 .. 1.121 times the prediction and
+    the filter's errors up to 12 % above it (docs/ndof_scene.md)."""
     model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
     design = evaluate_design(model, -0.22, 1.0)
     run = stream_loop(CHAIN, design.gains, delta_d=-1e-3, delay=1.0, sigma=1e-4, rate=200,
                       coordinate=0, periods=300, control_after=10, seed=0)
     assert run.resets == 0 and np.all(run.impacts_per_period[70:] == 1)
     orbit = find_periodic(NdofMap(model, design.gains, 1.0), run.truth[-1]).state
-    R = noise.ndof_filter_covariance(model, design.gains, orbit, 200, 0, 1.0)
+    R = noise.ndof_filter_covariance(model, design.gains, orbit, 200, 0, 1.0,
+                                     section_sample=False)
     S = noise.ndof_noise_covariance(model, design.gains, orbit, R, 1.0)
     predicted = 1e-4 * np.sqrt(np.diag(S))
     measured = (run.truth[70:] - orbit).std(axis=0)
     ratio = measured / predicted
-    print(f"spread / predicted per coordinate: {np.round(ratio, 3).tolist()}")
-    assert np.all((ratio > 1.0) & (ratio < 1.2)), ratio
-    # the filter's own errors: within 20 % of its predicted covariance on the orbit
     err = (run.estimate[70:] - run.truth[70:]).std(axis=0)
-    assert np.all(np.abs(err / (1e-4 * np.sqrt(np.diag(R))) - 1.0) < 0.2)
+    filt = err / (1e-4 * np.sqrt(np.diag(R)))
+    print(f"spread / predicted per coordinate: {np.round(ratio, 3).tolist()}; filter "
+          f"error / predicted: {np.round(filt, 3).tolist()}")
+    assert np.all(np.abs(ratio - 1.0) < 0.15), ratio
+    assert np.all(np.abs(filt - 1.0) < 0.1), filt
+    # on average over the coordinates within 5 % (measured 0.969 and 0.978; counting the
+    # sample at t_k: 1.089 and 1.095)
+    assert abs(np.mean(ratio) - 1.0) < 0.05 and abs(np.mean(filt) - 1.0) < 0.05
+    # with the sample at t_k counted the filter's predicted std is 10-13 % smaller
+    full = noise.ndof_filter_covariance(model, design.gains, orbit, 200, 0, 1.0)
+    assert np.all(np.sqrt(np.diag(R) / np.diag(full)) > 1.08)

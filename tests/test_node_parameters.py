@@ -289,26 +289,33 @@ def test_an_n_dof_simulator_describes_its_model_s_period_and_what_it_does_not_bu
         context):
     """With model_file, sim_node's times are bounded by the model's period (4 pi for
     two_mass_chain): the ends of actuation_delay's and pulse_width's ranges are
-    accepted, the next doubles refused; what it does not build (the velocity noise at
-    Pi2) states that only its default is valid, and a refusal says why; the sensor of
-    the stream is built (issue 32): sensor_noise accepted."""
+    accepted, the next doubles refused; what it does not build (the drifting wall)
+    states that only its default is valid, and a refusal says why; the sensor of the
+    stream, the velocity and measurement noise at Pi2 and the start state0 are built
+    (issue 32): accepted, state0 declared as a double array (empty: X**)."""
     chain = str(Path(__file__).resolve().parents[1] / "config" / "models"
                 / "two_mass_chain.yaml")
     kind = NodeKind(SimNode, base={"model_file": chain})
     node = kind.build(context)
     ranges = {n: node.describe_parameter(n).floating_point_range[0]
               for n in ("actuation_delay", "pulse_width")}
-    noise = node.describe_parameter("noise").additional_constraints
+    noise = node.describe_parameter("delta_d_drift").additional_constraints
+    start = node.get_parameter("state0").value
     node.destroy_node()
+    assert list(start) == []
     assert ranges["actuation_delay"].to_value == math.nextafter(4 * math.pi, 0.0)
     assert ranges["pulse_width"].to_value == 0.0
     for name, r in ranges.items():
         assert kind.accepts(context, {name: r.to_value})[0], name
         assert not kind.accepts(context, {name: math.nextafter(r.to_value, math.inf)})[0]
     assert noise.startswith("only its default 0.0 with model_file")
-    ok, why = kind.accepts(context, {"noise": 1e-4})
-    assert not ok and "noise=0.0001 is invalid with model_file" in why
+    ok, why = kind.accepts(context, {"delta_d_drift": 1e-4})
+    assert not ok and "delta_d_drift=0.0001 is invalid with model_file" in why
     assert kind.accepts(context, {"sensor_noise": 1e-4, "sensor_velocity": False})[0]
+    assert kind.accepts(context, {"noise": 1e-4, "measurement_noise": 1e-4})[0]
+    assert kind.accepts(context, {"state0": [0.0, 0.0, 0.0, 0.0]})[0]
+    ok, why = kind.accepts(context, {"state0": [0.0, 0.0]})
+    assert not ok and "state0=[0.0, 0.0] is invalid: valid is 2n = 4" in why
 
 
 # ------------------------------------------------------------- dump and its round trip

@@ -41,6 +41,7 @@ from test_plant_loops import Clock, Recorder
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = str(ROOT / "config" / "models" / "two_mass_scene.yaml")
 CHAIN = str(ROOT / "config" / "models" / "two_mass_chain.yaml")
+STUDY_1DOF = str(ROOT / "config" / "models" / "study_1dof.yaml")
 
 P = OscillatorParams(delta_d=-5e-6)
 
@@ -306,6 +307,112 @@ def test_controlled_samples_are_ndofmap_with_gains_bit_for_bit():
         assert np.array_equal(eng.z, z)
 
 
+def test_a_start_state_starts_ndofmap_iterates_bit_for_bit():
+    """Issue 32: an n-DOF scene from a physical start X0 (state0, 2n values) starts at
+    z = X0 - X_p(tau2) and repeats NdofMap's iterates from there, controlled, bit for
+    bit; a reset goes back to it."""
+    f = NdofMap(model_settings(CHAIN, delta_d=-1e-3).model).flow
+    X0 = f.particular(f.tau2) + np.array([-0.05, 0.02, 0.01, -0.03])
+    s = model_settings(CHAIN, delta_d=-1e-3, state0=X0.tolist())
+    assert s.state0 == tuple(X0.tolist())
+    k = gain_family(s.model, 0.1)
+    eng, P = Engine(s), NdofMap(s.model, k)
+    z = f.to_deviation(f.tau2, X0)
+    assert np.array_equal(eng.z, z) and abs(np.max(np.abs(z)) - 0.05) < 1e-15
+    np.testing.assert_allclose(xv(eng.sample()), X0, rtol=0, atol=1e-15)
+    impacts = 0
+    for _ in range(40):
+        eng.begin_period(float(P.gains @ eng.z))   # NdofMap's kick, k^T z
+        eng.end_period()
+        step = P.step(z)
+        z = step.state
+        impacts += len(step.impacts)
+        assert np.array_equal(eng.z, z)
+    assert impacts > 10
+    eng.reset()
+    assert eng.k == 0 and np.array_equal(eng.z, f.to_deviation(f.tau2, X0))
+
+
+def test_the_velocity_noise_at_pi2_is_the_one_dof_draws_on_the_actuated_velocity():
+    """Issue 32: ``noise`` in an n-DOF scene is the 1-DOF definition (a Gaussian velocity
+    kick at every Pi2 sample, one draw of the generator seeded with ``seed``), on the
+    actuated coordinate's velocity: NdofMap's iterates with that kick, bit for bit; for
+    n = 1 through the model file the 1-DOF scene's draws, bit for bit."""
+    sigma, seed = 1e-3, 5
+    s = model_settings(CHAIN, delta_d=-1e-3, noise=sigma, seed=seed)
+    eng, P = Engine(s), NdofMap(s.model)
+    rng = np.random.default_rng(seed)
+    z = eng.section.kicked(np.zeros(4), rng.normal(0.0, sigma))
+    assert np.array_equal(eng.z, z) and z[3] != 0.0 and not z[:3].any()   # i_a = 1
+    for _ in range(30):
+        eng.begin_period(0.0)
+        eng.end_period()
+        z = eng.section.kicked(P.step(z).state, rng.normal(0.0, sigma))
+        assert np.array_equal(eng.z, z)
+    eng.reset()                                 # the generator is seeded again
+    assert np.array_equal(eng.z, eng.section.kicked(np.zeros(4),
+                                                     np.random.default_rng(seed).normal(
+                                                         0.0, sigma)))
+    # n = 1: the model file's draws are the 1-DOF scene's (the states differ: two flows)
+    one = Engine(model_settings(STUDY_1DOF, noise=sigma, seed=seed))
+    study = Engine(settings_from_values({"noise": sigma, "seed": seed, "delta_d": -5e-6}))
+    rng = np.random.default_rng(seed)
+    w = rng.normal(0.0, sigma)
+    assert one.z[1] == study.dv == w and one.z[0] == study.dx == 0.0
+    for _ in range(20):
+        one.begin_period(0.0)
+        study.begin_period(0.0)
+        z_end, dv_end = one.seg.z_end, study.seg.dv_end
+        one.end_period()
+        study.end_period()
+        w = rng.normal(0.0, sigma)
+        assert one.z[1] == z_end[1] + w and study.dv == dv_end + w
+
+
+def test_the_measurement_noise_is_a_seeded_draw_per_coordinate():
+    """Issue 32: ``measurement_noise`` on every coordinate of the published n-DOF sample k,
+    a pure function of (seed, k) (FaultModel.coordinate_noise): coordinate 0's draws are
+    the 1-DOF FaultModel.draw(k)'s, so n = 1 through the model file is the 1-DOF scene's
+    bit for bit; the others are further draws, independent, of std sigma."""
+    sigma, seed = 2e-4, 9
+    s = model_settings(CHAIN, delta_d=-1e-3, measurement_noise=sigma, seed=seed)
+    eng = Engine(s)
+    noise = []
+    for k in range(300):
+        ev = eng.sample()
+        m = eng.measured(ev)
+        nx, nv = s.faults.coordinate_noise(k, 2)
+        assert m.x == tuple(float(a) for a in np.array(ev.x) + nx), k
+        assert m.v == tuple(float(a) for a in np.array(ev.v) + nv), k
+        d = s.faults.draw(k)
+        assert (nx[0], nv[0]) == (d.noise_x, d.noise_v)
+        assert eng.sample() == ev           # the true state is untouched
+        noise.append(np.concatenate([nx, nv]))
+        eng.begin_period(0.0)
+        eng.end_period()
+    noise = np.array(noise)
+    std = noise.std(axis=0) / sigma
+    assert np.all((0.85 < std) & (std < 1.15)), std
+    corr = np.corrcoef(noise.T) - np.eye(4)
+    assert np.max(np.abs(corr)) < 0.2, corr
+    # the same (seed, k): the same draws, from another engine, after a reset
+    again = Engine(s)
+    assert again.measured(again.sample()) == Engine(s).measured(Engine(s).sample())
+    # n = 1: the 1-DOF scene's measured sample's offsets
+    one = Engine(model_settings(STUDY_1DOF, measurement_noise=sigma, seed=seed))
+    study = Engine(settings_from_values({"measurement_noise": sigma, "seed": seed,
+                                         "delta_d": -5e-6}))
+    for k in range(5):
+        a, b = one.sample(), study.sample()
+        ma, mb = one.measured(a), study.measured(b)
+        d = s.faults.draw(k)
+        assert (ma.x[0], ma.v[0]) == (a.x[0] + d.noise_x, a.v[0] + d.noise_v)
+        assert (mb.x, mb.v) == (b.x + d.noise_x, b.v + d.noise_v)
+        for e in (one, study):
+            e.begin_period(0.0)
+            e.end_period()
+
+
 def test_states_between_samples_are_the_cores_trajectory():
     """The stream and Pi1 come from the impact list (free flow + velocity jumps): each
     equals advance from the period's start to its time (an independent evaluation)."""
@@ -537,3 +644,147 @@ def test_the_stream_is_the_exact_flow_plus_the_sensors_seeded_noise(velocity):
     # the sample at t = 0 too, and the draws are the 1-DOF sensor's for coordinate 0
     assert states[0].x[0] == pytest.approx(f.particular(f.tau2)[0] + sigma * draws[0, 0, 0],
                                            abs=1e-15)
+
+
+def test_a_pulsed_run_is_ndofmap_with_the_width_bit_for_bit_on_both_paths():
+    """Issue 32: with ``pulse_width`` the correction k^T z_k is the force pulse
+    F = m_a k^T z_k / w centred ``actuation_delay`` after the sample
+    (docs/theory_ndof.md section 15): the lockstep period (begin_period) and the realtime
+    one (begin_head, then actuate at the deadline) are NdofMap(model, k, delay, width)'s
+    iterates bit for bit, impacts included; the stream's states during the pulse are the
+    flow under its force (advance_with_force from the pulse's start, independent of the
+    engine's evaluation from the impact list)."""
+    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.oscillator.ndof.forced import advance_with_force
+
+    delay, width = 1.0, 1.0
+    s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay, pulse_width=width,
+                       state_period=0.05)
+    design = pulse_design(s.model, -0.22, delay, width)
+    assert design.admissible
+    a, b = Engine(s), Engine(s)
+    P = NdofMap(s.model, design.gains, delay, width)
+    f = a.section.flow
+    z, impacts, during = np.full(4, 1e-3), 0, 0
+    a.z, b.z = z.copy(), z.copy()
+    for k in range(40):
+        dv = float(P.gains @ z)
+        events = a.begin_period(dv, a.actuation_delay())
+        b.begin_head(delay)
+        b.actuate(dv, delay)
+        step = P.step(z)
+        imp = [e for e in events if e.kind == "impact"]
+        assert [(e.x, e.v) for e in imp] == [(i.v_minus, i.v_plus) for i in step.impacts]
+        impacts += len(imp)
+        start = a.actuation_start(delay)
+        t0 = a.t
+        force = a.section.pulse_force(dv, width)
+        head = advance(f, f.tau2, z, start)
+        for e in events:
+            if e.kind == "state" and t0 + start < e.t <= t0 + start + width:
+                ref = advance_with_force(f, (f.tau2 + s.model.omega * start) % (2 * math.pi),
+                                         head.z, e.t - t0 - start, force)
+                X = f.to_physical(ref.tau, ref.z)
+                np.testing.assert_allclose(xv(e), X, rtol=0, atol=1e-12)
+                during += 1
+        a.end_period(), b.end_period()
+        z = step.state
+        assert np.array_equal(a.z, z) and np.array_equal(b.z, z), k
+    assert impacts >= 35 and during >= 40 * 19     # impacts once a period; 20 states a pulse
+    assert abs(force) > 1e-6                       # the pulse pushes: not vacuous
+
+
+def test_a_sticking_period_of_the_wall_coordinate_is_the_cores():
+    """Issue 32 (docs/theory_ndof.md section 16): a 2-DOF scene whose wall coordinate
+    sits at rest on the wall pushed into it (tests/models/two_mass_chain_w08.yaml at
+    Delta d = -3): the engine's period is the core's advance (a sticking impact with its
+    release, then flights and impacts), the stream's states while stuck hold x_w = d at
+    rest and equal advance from the period's start, and the run goes on after it (the
+    scene refused this motion before issue 32's section 16)."""
+    s = model_settings(str(ROOT / "tests" / "models" / "two_mass_chain_w08.yaml"),
+                       delta_d=-3.0, state_period=0.3)
+    eng = Engine(s)
+    f, m = eng.section.flow, s.model
+    n, w = m.n, m.i_w
+    z = np.zeros(2 * n)
+    z[w], z[n + w] = f.on_wall(f.tau2)
+    assert f.wall_acceleration(f.tau2, z) > 0.5         # pushed into the wall
+    eng.z = z.copy()
+    ref = advance(f, f.tau2, z, m.period)
+    events = eng.begin_period(0.0)
+    (stick,) = eng.seg.impacts
+    assert stick.sticking and 1.0 < stick.release < m.period
+    assert [(e.x, e.v) for e in events if e.kind == "impact"] == [
+        (i.v_minus, i.v_plus) for i in ref.impacts]
+    stuck = free = 0
+    for e in events:
+        if e.kind == "impact":
+            continue
+        h = e.t - eng.seg.ts
+        X = f.to_physical(*(lambda r: (r.tau, r.z))(advance(f, f.tau2, z, h)))
+        np.testing.assert_allclose(xv(e), X, rtol=0, atol=1e-12)
+        if h < stick.release:
+            assert e.x[w] == pytest.approx(f.d_star + m.delta_d, abs=1e-12) and abs(e.v[w]) < 1e-12
+            stuck += 1
+        else:
+            free += e.x[w] < f.d_star + m.delta_d - 1e-6      # released: off the wall
+    assert stuck >= 10 and free >= 5
+    eng.end_period()
+    np.testing.assert_array_equal(eng.z, ref.z)
+    impacts = 0
+    for _ in range(3):                                   # and the scene goes on, impacting
+        impacts += sum(e.kind == "impact" for e in eng.begin_period(0.0))
+        eng.end_period()
+    assert impacts >= 6
+
+
+@pytest.mark.parametrize("tau_a, latency", [(1.5, 0.2), (0.0, 0.2)])
+def test_through_the_actuator_a_run_is_actuated_steps_iterates_bit_for_bit(tau_a, latency):
+    """Issue 32 (docs/theory_ndof.md section 15): with ``actuator_bandwidth`` 1 / tau_a
+    and ``actuator_latency`` L the command m_a k^T z / w on [start + L, start + L + w]
+    reaches x1 through the lag, the force a state carried from sample to sample: the
+    lockstep periods and the realtime ones (begin_head, actuate) are
+    ndof_map.actuated_step's iterates bit for bit, force included (tau_a = 0: the pulse
+    L later); the stream's states are lag_advance from each piece's start (1e-12)."""
+    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.oscillator.ndof.forced import lag_advance
+
+    delay, width = 1.0, 1.0
+    bw = 0.0 if tau_a == 0.0 else 1.0 / tau_a
+    s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay, pulse_width=width,
+                       actuator_bandwidth=bw, actuator_latency=latency, state_period=0.1)
+    k = pulse_design(s.model, -0.22, delay, width).gains
+    a, b = Engine(s), Engine(s)
+    f = a.section.flow
+    z, force, impacts, checked = np.full(4, 1e-3), 0.0, 0, 0
+    a.z, b.z = z.copy(), z.copy()
+    start = a.actuation_start(delay)
+    for n in range(25):
+        dv = float(k @ z)
+        events = a.begin_period(dv, delay)
+        b.begin_head(delay)
+        b.actuate(dv, delay)
+        z1, force1, imps = actuated_step(f, z, force, dv, start=start, width=width,
+                                         time_constant=tau_a, latency=latency)
+        got = [(e.x, e.v) for e in events if e.kind == "impact"]
+        assert got == [(i.v_minus, i.v_plus) for i in imps], n
+        impacts += len(got)
+        if tau_a:                   # the states of the piece under the commanded force
+            on, off, t0 = start + latency, start + latency + width, a.t
+            first = lag_advance(f, f.tau2, z, on, 0.0, force, tau_a)
+            u = a.section.pulse_force(dv, width)
+            tau_on = (f.tau2 + s.model.omega * on) % (2 * math.pi)
+            for e in events:
+                if e.kind == "state" and t0 + on < e.t <= t0 + off:
+                    ref = lag_advance(f, tau_on, first.z, e.t - t0 - on, u,
+                                      first.force - u, tau_a)
+                    np.testing.assert_allclose(xv(e), f.to_physical(ref.tau, ref.z),
+                                               rtol=0, atol=1e-12)
+                    checked += 1
+        a.end_period(), b.end_period()
+        z, force = z1, force1
+        assert np.array_equal(a.z, z) and np.array_equal(b.z, z), n
+        assert a.force == force == b.force
+    assert impacts >= 20 and (checked >= 25 * 9 or not tau_a)
+    assert tau_a == 0.0 or abs(force) > 1e-8        # the force carries over the sample

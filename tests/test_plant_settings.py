@@ -34,7 +34,8 @@ def test_the_table_names_every_setting_once_with_a_type_and_a_doc():
     sensor = {n for n in names if n.startswith(("sensor_", "watchdog_", "actuator_", "contact_",
                                                 "friction"))}
     assert fields | set(MODEL_KEYS) | sensor == set(names)
-    kinds = {"double": float, "integer": int, "string": str, "bool": bool}
+    kinds = {"double": float, "integer": int, "string": str, "bool": bool,
+             "double_array": tuple}
     for p in PARAMETERS:
         assert isinstance(p.default, kinds[p.kind]), p
         assert p.doc and (p.kind == "string") == bool(p.choices), p
@@ -119,6 +120,7 @@ def test_the_sensor_is_plant_sensors_model_and_the_pulse_is_carried():
 
 # ------------------------------------------------------------------- an n-DOF scene
 SCENE = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml")
+CHAIN = str(Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_chain.yaml")
 
 
 
@@ -143,15 +145,37 @@ def test_times_are_bounded_by_the_n_dof_period():
         settings_from_values({"actuation_delay": 23.0}, SCENE)
 
 
-@pytest.mark.parametrize("name,value", [("actuator_bandwidth", 20.0),
-                                        ("actuator_latency", 0.05)])
-def test_the_first_order_actuator_is_refused_with_a_model_file(name, value):
-    """Reproduction (issue 32's fold): plant.ndof_settings accepted the actuator's values
-    and plant.ndof_engine ignored them (the kick acted unlagged); now one line naming the
-    parameter and why."""
-    with pytest.raises(ParameterError, match=rf"^{name}={value!r} is invalid with model_file="
-                                             r".*the first-order actuator is not built"):
-        settings_from_values({name: value, "actuation_delay": 0.3}, SCENE)
+def test_the_first_order_actuator_is_taken_with_a_model_file_and_a_pulse():
+    """Issue 32: the actuator reaches the n-DOF engine (refused on main, ignored before
+    the fold; tests/test_plant_engine.py runs it); it needs a pulse width, as in 1-DOF."""
+    s = settings_from_values({"actuator_bandwidth": 20.0, "actuator_latency": 0.05,
+                              "pulse_width": 0.4, "actuation_delay": 0.3}, SCENE)
+    assert (s.actuator.time_constant, s.actuator.latency) == (0.05, 0.05)
+    with pytest.raises(ParameterError, match=r"pulse_width"):
+        settings_from_values({"actuator_bandwidth": 20.0, "actuation_delay": 0.3}, SCENE)
+
+
+def test_a_force_pulse_is_taken_with_a_model_file_with_its_bounds_on_the_models_T(tmp_path):
+    """Issue 32: pulse_width (and force_limit) reach the n-DOF engine (on main it was
+    refused naming the kick); its bounds read the model's T, and a model without a
+    static deflection (K singular: a rigid-body mode, docs/theory_ndof.md section 15)
+    is refused in one line naming pulse_width and K."""
+    s = settings_from_values({"pulse_width": 1.0, "actuation_delay": 1.0,
+                              "force_limit": 2.0}, SCENE)
+    assert (s.pulse_width, s.force_limit, s.actuation_delay) == (1.0, 2.0, 1.0)
+    T = load_model(SCENE).period
+    with pytest.raises(ParameterError, match=r"pulse_width <= 2 actuation_delay"):
+        settings_from_values({"pulse_width": 1.0, "actuation_delay": 0.4}, SCENE)
+    with pytest.raises(ParameterError, match=rf"actuation_delay \+ pulse_width / 2 < T.*{T:.6g}"):
+        settings_from_values({"pulse_width": 2.0, "actuation_delay": T - 0.5}, SCENE)
+    free = tmp_path / "free.yaml"
+    free.write_text("M: [[1.0, 0.0], [0.0, 1.0]]\nC: [[0.04, -0.02], [-0.02, 0.04]]\n"
+                    "K: [[1.0, -1.0], [-1.0, 1.0]]\nf: [0.0, 1.0]\nomega: 0.5\n"
+                    "i_w: 0\ni_a: 1\nr: 0.7\n")
+    assert settings_from_values({}, str(free)).model.n == 2       # the kick is fine
+    with pytest.raises(ParameterError, match=r"^pulse_width=1.0 is invalid with model_file="
+                                             r".*free.yaml'.*K is invalid.*singular"):
+        settings_from_values({"pulse_width": 1.0, "actuation_delay": 1.0}, str(free))
 
 
 @pytest.mark.parametrize("name", sorted(NOT_WITH_MODEL_FILE))
@@ -164,6 +188,43 @@ def test_options_not_built_for_n_dof_are_refused_by_name(name):
     with pytest.raises(ParameterError, match=rf"^{name}=.* is invalid with model_file=.*"
                                              r"valid is its default"):
         settings_from_values({name: bad}, SCENE)
+
+
+@pytest.mark.parametrize("value,text", [
+    ([0.0, 0.0, 0.0], r"state0=\[0.0, 0.0, 0.0\] is invalid: valid is 2n = 4 finite values "
+                      r"\[x_0, x_1, v_0, v_1\] \(the physical state on Pi2\), or empty"),
+    ([0.0, 0.0, math.inf, 0.0], r"state0=.* is invalid: v_0=inf is not finite; valid is 2n"),
+    ([0.0, math.nan, 0.0, 0.0], r"state0=.* is invalid: x_1=nan is not finite"),
+    ([50.0, 0.0, 0.0, 0.0], r"state0=\[50.0, 0.0, 0.0, 0.0\] is invalid: x_0=50.0 lies "
+                            r"beyond the wall; valid range is x_0 <= d = d\* \+ delta_d = "),
+    ("abcd", r"state0='abcd' is invalid: valid is 2n = 4"),
+])
+def test_a_bad_n_dof_start_state_is_one_line_naming_state0(value, text):
+    """Issue 32: the start of an n-DOF scene (state0, 2n values) refused in one line with
+    its valid range: wrong length, not finite, beyond the wall (x_{i_w} <= d)."""
+    with pytest.raises(ParameterError, match="^" + text) as err:
+        settings_from_values({"state0": value, "delta_d": -1e-3}, CHAIN)
+    assert "\n" not in str(err.value)
+
+
+def test_the_start_state_is_the_wall_coordinates_and_one_dof_refuses_it():
+    """The wall's bound is the gap at Pi2 (NdofFlow.gap): a start on the wall is valid,
+    a start beyond it by 1e-9 refused; a 1-DOF scene starts at x0, v0 (state0 empty)."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+
+    model = settings_from_values({"delta_d": -1e-3}, CHAIN).model
+    f = NdofFlow.of(model)
+    on = f.particular(f.tau2)
+    on[model.i_w] += f.on_wall(f.tau2)[0]       # z_w at the wall: gap 0
+    assert f.gap(f.tau2, f.to_deviation(f.tau2, on)) <= 0.0
+    assert settings_from_values({"state0": on.tolist(), "delta_d": -1e-3}, CHAIN).state0
+    on[model.i_w] += 1e-9
+    with pytest.raises(ParameterError, match=r"^state0=.* lies beyond the wall"):
+        settings_from_values({"state0": on.tolist(), "delta_d": -1e-3}, CHAIN)
+    assert settings_from_values({"state0": []}, CHAIN).state0 == ()
+    with pytest.raises(ParameterError, match=r"^state0=\[1.0, 2.0\] is invalid without "
+                                             r"model_file: valid is empty"):
+        settings_from_values({"state0": [1.0, 2.0]})
 
 
 def test_bad_values_keep_the_one_dof_messages():

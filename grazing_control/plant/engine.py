@@ -29,13 +29,23 @@ An n-DOF scene (``settings.model``, a model file of docs/ndof_model.md; issues 1
 runs on the same engine: the sample bookkeeping, the faults, the delay and the split on
 arrival, the stream's grid and the Pi1 crossing are the ones above, and what differs --
 the state z in R^{2n} (the deviation from the periodic response at Pi2), the flow of a
-piece, the kick on the actuated velocity, the physical state of the n coordinates, the
+piece, the kick on the actuated velocity or the force pulse carrying it (``pulse_width``:
+F = m_a Delta v / w on the actuated coordinate, centred ``actuation_delay`` after the
+sample as in 1-DOF; docs/theory_ndof.md section 15; through the first-order actuator
+the legs of :func:`~grazing_control.dynamics.maps.ndof_map.actuated_step`, the force
+carried in :attr:`Engine.force`), the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
-(:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`).
+(:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`):
+its start is ``state0`` (X** when empty), its velocity noise at Pi2 the kick of one
+draw per sample on the actuated velocity, its measurement noise a draw per coordinate
+(:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
 Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
 A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s
-iterates bit for bit; the 1-DOF path is the kernel's closed form, unchanged
+iterates bit for bit (with a pulse, ``NdofMap(width=)``'s: the calls of
+:func:`~grazing_control.dynamics.maps.ndof_map.pulse_step`); a sticking motion of the
+wall coordinate is the core's (``advance`` returns its sticking impacts; the states
+between samples while stuck are ``advance`` from the piece's start); the 1-DOF path is the kernel's closed form, unchanged
 (benchmarks/fold_hashes.py).
 
 No ROS: sim_node publishes the :class:`Event` values this returns.
@@ -96,6 +106,15 @@ class Span(NamedTuple):
     te: float          # end time (the next Pi2 sample)
     z_end: np.ndarray  # deviation at te
     impacts: tuple     # the model's impacts of the stretch (dt from ts)
+    force: float = 0.0  # a pulse's constant force on the stretch (0: free flight)
+    lag: tuple | None = None  # through the actuator: (command, transient, tau_a)
+
+
+class _Rest(NamedTuple):
+    """An n-DOF head of length 0 (a pulse starting at the sample): z, no impacts."""
+
+    z: np.ndarray
+    impacts: tuple
 
 
 class Segment(NamedTuple):
@@ -159,10 +178,12 @@ class Engine:
         self.k = 0
         self.k_base, self.t_base = 0, 0.0
         if self.section is not None:
-            self.z = self.section.start()
+            self.z = self.section.start(s.state0)
             self.impacts = 0
             self.seg = None
-            return self.sample()
+            self._head = None
+            self.force = self._force_end = 0.0
+            return self._model_sample()
         self.dx, self.dv = initial_deviation(self.p, s.x0, s.v0)
         self.impacts = 0
         self.seg = None
@@ -186,6 +207,15 @@ class Engine:
         p = self.p
         return Event(self.t, "pi2", p.x_ref + self.dx, p.v_ref + self.dv, p.tau2)
 
+    def _model_sample(self) -> NdofEvent:
+        """:meth:`_sample` of an n-DOF scene: the velocity noise at Pi2 is a kick on the
+        actuated velocity (NdofSection.kicked), one draw of the seeded generator per
+        sample as the 1-DOF scene's dv (n = 1: the same draws)."""
+        if self.settings.noise > 0.0:
+            self.z = self.section.kicked(self.z, float(self.rng.normal(0.0,
+                                                                       self.settings.noise)))
+        return self.sample()
+
     def sample(self) -> Event:
         """The current sample (without drawing noise again)."""
         if self.section is not None:
@@ -205,6 +235,10 @@ class Engine:
         """Sample k as the controller sees it: (x, v) + the measurement noise of draw(k)."""
         if self.settings.measurement_noise == 0.0:
             return ev
+        if self.section is not None:    # every coordinate (FaultModel.coordinate_noise)
+            nx, nv = self.settings.faults.coordinate_noise(self.k, self.section.n)
+            return ev._replace(x=tuple(float(a + b) for a, b in zip(ev.x, nx)),
+                               v=tuple(float(a + b) for a, b in zip(ev.v, nv)))
         f = self._draw()
         return ev._replace(x=ev.x + f.noise_x, v=ev.v + f.noise_v)
 
@@ -232,6 +266,8 @@ class Engine:
         order (state, Pi1, impacts), the next sample excluded.
         """
         if self.section is not None:
+            if self.lagged:
+                return self._model_lag_period(dv_correction, self.actuation_start(delay))
             return self._model_period(dv_correction, delay)
         if self.lagged:
             return self._lag_period(dv_correction, self.actuation_start(delay))
@@ -265,7 +301,8 @@ class Engine:
         p = self.p
         t0, start = self.t, self.actuation_start(delay)
         if self.section is not None:
-            head = self.section.advance(p.tau2, self.z, start)
+            head = (self.section.advance(p.tau2, self.z, start) if start > 0.0 else
+                    _Rest(self.z, ()))
             self._head = (self.k, start, self.z, head)
             self.seg = Span(t0, p.tau2, self.z, (self.k + 1) * p.period, None, ())
             return self._model_events(Span(t0, p.tau2, self.z, t0 + start, head.z,
@@ -294,12 +331,16 @@ class Engine:
         to t_k+1.
         """
         start = self.actuation_start(delay)
+        if self.section is not None and self.lagged:
+            t = self.t + start
+            return [ev for ev in self._model_lag_period(dv_correction, start) if ev.t >= t]
         if self.section is not None:
             kept = self._head
             if kept is not None and kept[:2] == (self.k, start) and kept[2] is self.z:
                 head = kept[3]                  # begin_head's flow to the start
             else:
-                head = self.section.advance(self.p.tau2, self.z, start)
+                head = (self.section.advance(self.p.tau2, self.z, start) if start > 0.0
+                        else _Rest(self.z, ()))
             self._head = None
             return self._model_actuate(head.z, dv_correction, start)
         if self.lagged:
@@ -408,9 +449,10 @@ class Engine:
         s = self.seg
         if self.section is not None:
             self.z = s.z_end
+            self.force = self._force_end
             self.k += 1
             self.seg = None
-            return self.sample(), None
+            return self._model_sample(), None
         self.dx, self.dv = s.dx_end, s.dv_end
         self.force = self._force_end
         self.k += 1
@@ -543,19 +585,75 @@ class Engine:
         t_k + delay, the kick there, the flow to t_k+1 (module docstring)."""
         sec, t0 = self.section, self.t
         if delay > 0.0:
-            head = sec.advance(sec.tau2, self.z, delay)
-            events = self._model_events(Span(t0, sec.tau2, self.z, t0 + delay, head.z,
-                                             head.impacts))
-            return events + self._model_actuate(head.z, dv_correction, delay)
+            start = self.actuation_start(delay)
+            if start > 0.0:
+                head = sec.advance(sec.tau2, self.z, start)
+                events = self._model_events(Span(t0, sec.tau2, self.z, t0 + start, head.z,
+                                                 head.impacts))
+                return events + self._model_actuate(head.z, dv_correction, start)
+            return self._model_actuate(self.z, dv_correction, start)   # a pulse from t_k
         z = sec.kicked(self.z, dv_correction)
         piece = sec.advance(sec.tau2, z, sec.period)
         self.seg = Span(t0, sec.tau2, z, (self.k + 1) * sec.period, piece.z, piece.impacts)
         return self._model_events(self.seg)
 
-    def _model_actuate(self, z_head, dv_correction: float, start: float) -> list:
-        """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF)."""
+    def _model_lag_period(self, dv_correction: float, start: float) -> list:
+        """The n-DOF period through the first-order actuator (module docstring): the
+        command m_a Delta v / w (clipped) on [start + L, start + L + w], the force from
+        :attr:`force` at the sample, the legs of
+        :func:`grazing_control.dynamics.maps.ndof_map.actuated_step` (its calls, so a
+        lockstep run is its iterates bit for bit); tau_a = 0 (latency only) is the pulse
+        at start + L. The force at the next sample is kept for :meth:`end_period`."""
+        sec, s = self.section, self.settings
+        act, w = s.actuator, s.pulse_width
+        if act.time_constant == 0.0:
+            self._force_end = 0.0
+            head_events, z_head = self._model_head(start + act.latency)
+            return head_events + self._model_actuate(z_head, dv_correction,
+                                                     start + act.latency)
+        command = sec.pulse_force(dv_correction, w, s.force_limit or math.inf)
+        on, off = start + act.latency, start + act.latency + w
+        t0, end_t = self.t, (self.k + 1) * sec.period
+        z, f, t, events = self.z, float(self.force), 0.0, []
+        for end, u in ((on, 0.0), (off, command), (sec.period, 0.0)):
+            if end > t:
+                tau = (sec.tau2 + sec.omega * t) % TWO_PI
+                piece = sec.lagged(tau, z, end - t, u, f - u, act.time_constant)
+                self.seg = Span(t0 + t, tau, z, end_t if end == sec.period else t0 + end,
+                                piece.z, piece.impacts, 0.0, (u, f - u, act.time_constant))
+                events += self._model_events(self.seg)
+                z, f = np.array(piece.z, dtype=float), float(piece.force)
+            t = end
+        self._force_end = f
+        return events
+
+    def _model_head(self, start: float):
+        """(events up to ``start``, the deviation there) of the free flow from the sample."""
         sec = self.section
+        if start <= 0.0:
+            return [], self.z
+        head = sec.advance(sec.tau2, self.z, start)
+        return self._model_events(Span(self.t, sec.tau2, self.z, self.t + start, head.z,
+                                       head.impacts)), head.z
+
+    def _model_actuate(self, z_head, dv_correction: float, start: float) -> list:
+        """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF); with a
+        pulse width w > 0 the pulse on [start, start + w] and the flow on (the legs of
+        :func:`grazing_control.dynamics.maps.ndof_map.pulse_step`)."""
+        sec, w = self.section, self.settings.pulse_width
         tau = (sec.tau2 + sec.omega * start) % TWO_PI
+        if w > 0.0:
+            force = sec.pulse_force(dv_correction, w, self.settings.force_limit or math.inf)
+            # the durations as pulse_step's legs (t1 - t0), so lockstep is its calls
+            mid = sec.pushed(tau, np.array(z_head, dtype=float), (start + w) - start, force)
+            events = self._model_events(Span(self.t + start, tau, z_head, self.t + start + w,
+                                             mid.z, mid.impacts, force))
+            end = start + w
+            tau = (sec.tau2 + sec.omega * end) % TWO_PI
+            tail = sec.advance(tau, np.array(mid.z, dtype=float), sec.period - end)
+            self.seg = Span(self.t + end, tau, mid.z, (self.k + 1) * sec.period, tail.z,
+                            tail.impacts)
+            return events + self._model_events(self.seg)
         z = sec.kicked(z_head, dv_correction)
         tail = sec.advance(tau, z, sec.period - start)
         self.seg = Span(self.t + start, tau, z, (self.k + 1) * sec.period, tail.z,
@@ -593,7 +691,9 @@ class Engine:
                         float(i.phase) % TWO_PI) for i in s.impacts]
         rel, kinds, j0 = self._published_times(s.ts, s.te, s.tau)
         if rel:
-            zs = sec.deviations_between(s.tau, s.z, s.impacts, rel)
+            zs = (sec.deviations_between(s.tau, s.z, s.impacts, rel, s.force)
+                  if s.lag is None else
+                  sec.lag_deviations_between(s.tau, s.z, s.impacts, rel, *s.lag))
             states = []
             for h, kind, z in zip(rel, kinds, zs):
                 tau = sec.tau_star if kind == "pi1" else (s.tau + sec.omega * h) % TWO_PI

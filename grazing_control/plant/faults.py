@@ -8,6 +8,7 @@ sample.
 
 * loss: the correction of a sample is dropped with probability ``loss``;
 * noise: the sample the controller sees is (x + sigma e_x, v + sigma e_v), e ~ N(0, 1);
+  an n-DOF sample's n positions and velocities (:meth:`FaultModel.coordinate_noise`);
 * jitter: the correction acts at delay + jitter e_d after the sample, clipped to
   [0, T) (it cannot act before the sample, nor after the next one).
 """
@@ -87,6 +88,19 @@ class FaultModel:
         dropped = bool(0.5 * math.erfc(-u[2] / math.sqrt(2.0)) < self.loss)  # Phi(u) < loss
         return SampleFaults(self.noise * float(u[0]), self.noise * float(u[1]), dropped,
                             self.jitter * float(u[3]))
+
+    def coordinate_noise(self, k: int, n: int) -> tuple:
+        """The measurement noise of an n-DOF sample k: (noise on x_0..x_{n-1}, noise on
+        v_0..v_{n-1}), arrays of n. Coordinate 0's are :meth:`draw`'s ``noise_x``,
+        ``noise_v`` (so n = 1 is the 1-DOF scene's bit for bit); coordinate i >= 1 takes
+        the normal draws 4 + 2 (i - 1) and 5 + 2 (i - 1) of the same generator seeded with
+        (seed, k) (its first four draws are :meth:`draw`'s: loss and jitter unchanged)."""
+        if self.noise == 0.0:
+            return np.zeros(n), np.zeros(n)
+        u = np.random.default_rng((self.seed, int(k))).standard_normal(2 + 2 * n)
+        x = np.concatenate([u[:1], u[4::2]])
+        v = np.concatenate([u[1:2], u[5::2]])
+        return self.noise * x, self.noise * v
 
     def actuation_delay(self, delay: float, k: int, period: float) -> float:
         """Actual delay of sample k's correction: delay + jitter e_k clipped to [0, T)."""

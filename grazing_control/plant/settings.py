@@ -16,13 +16,14 @@ and the same :class:`SimSettings` describe an n-DOF scene: :func:`settings_from_
 loads the model (``delta_d``, when given, replaces the file's: ``grazing run
 --delta-d``) into :attr:`SimSettings.model`, and validates everything that is not the
 model -- mode, time scale, state stream period, timeouts, max periods, actuation delay,
-loss, jitter, seeds, the sensor -- with the model's forcing frequency, so that every
-bound on a time reads the n-DOF period T = 2 pi / omega. What an n-DOF scene does not
-build (yet) is refused with one line naming the parameter and why, never half-applied
-(:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives them), an
-initial state other than the grazing point, the velocity noise at Pi2, the injected
-measurement noise, the force pulse, the actuator, the compliant stop and friction, the
-drifting wall and fidelities other than exact. The engine runs either over one
+loss, jitter, the velocity and measurement noise, seeds, the sensor, the force pulse and
+the first-order actuator -- with the model's forcing frequency, so that every bound on a
+time reads the n-DOF period T = 2 pi / omega; its start is ``state0``, the 2n coordinates
+(:func:`grazing_control.oscillator.ndof.section.start_state`). What an n-DOF scene does
+not build (yet) is refused with one line naming the parameter and why, never
+half-applied (:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives
+them), the 1-DOF start x0, v0, the compliant stop and friction, the drifting wall and
+fidelities other than exact. The engine runs either over one
 interface (:mod:`grazing_control.plant.engine`).
 """
 
@@ -41,7 +42,8 @@ import numpy as np
 from grazing_control.dynamics.simulation.actuator import IDEAL_ACTUATOR, Actuator
 from grazing_control.dynamics.simulation.fidelity import FIDELITIES
 from grazing_control.oscillator.ndof.flow import grazing_clearance
-from grazing_control.oscillator.ndof.model import NdofModel, load_model
+from grazing_control.oscillator.ndof.model import NdofModel, load_model_file
+from grazing_control.oscillator.ndof.section import start_state
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
 from grazing_control.oscillator.contact import MAX_FRICTION, MAX_STIFFNESS
 from grazing_control.plant.contact_plant import CONTACTS, ContactPlant, contact_from_values
@@ -124,6 +126,11 @@ PARAMETERS = (
               constraints="finite and x0 <= d (not beyond the wall), or NaN"),
     Parameter("v0", "double", math.nan, "initial velocity on Pi2; NaN = v** (grazing point)",
               constraints="finite, or NaN"),
+    Parameter("state0", "double_array", (), "with model_file: the initial physical state on "
+              "Pi2 of the n coordinates, [x_0..x_{n-1}, v_0..v_{n-1}] (2n values); empty = "
+              "X** (the grazing point); a 1-DOF scene starts at x0, v0 (empty)",
+              constraints="empty, or 2n finite values with the wall coordinate's position "
+              "x_{i_w} <= d (not beyond the wall)"),
     Parameter("mode", "string", "lockstep", "lockstep (wait for each correction) or realtime "
               "(paced to the wall clock)", choices=MODES, read_only=True),
     Parameter("time_scale", "double", 1.0,
@@ -362,6 +369,8 @@ class SimSettings:
     #: with the model's forcing frequency: only its period is read)
     model: NdofModel | None = None
     model_file: str = ""
+    #: an n-DOF scene's initial physical state on Pi2 (2n values; () = X**)
+    state0: tuple = ()
 
     @property
     def delta_d(self) -> float:
@@ -381,6 +390,8 @@ class SimSettings:
         m = self.model
         text = "" if m is None else (f"model_file={self.model_file} n={m.n} i_w={m.i_w} "
                                      f"i_a={m.i_a} ")
+        if self.state0:
+            text += f"state0={list(self.state0)!r} "
         text += (f"mode={self.mode} delta_d={self.delta_d!r} "
                 f"max_periods={self.max_periods} state_period={self.state_period} "
                 f"actuation={'scheduled' if self.scheduled else 'on_arrival'} "
@@ -453,6 +464,9 @@ def settings_from_values(values: dict, model_file: str = "",
     if not math.isnan(x0) and x0 > p.d:
         raise ParameterError(f"x0={x0!r} is invalid: valid range is x0 <= d = {p.d!r} "
                              "(the state must not be beyond the wall)")
+    if values["state0"] is not None and len(values["state0"]) > 0:
+        raise ParameterError(f"state0={list(values['state0'])!r} is invalid without "
+                             "model_file: valid is empty (a 1-DOF scene starts at x0, v0)")
     max_periods = int(values["max_periods"])
     if max_periods < 0:
         raise ParameterError(f"max_periods={max_periods} is invalid: valid range is >= 0 "
@@ -490,11 +504,8 @@ NOT_WITH_MODEL_FILE = {
     "omega": "the model file gives the forcing frequency",
     "tau0": "the model file gives the forcing phase",
     "pi2_offset": "the model file gives pi2_offset",
-    "x0": "an n-DOF scene starts at the grazing point X** (NaN)",
-    "v0": "an n-DOF scene starts at the grazing point X** (NaN)",
-    "noise": "the velocity noise at Pi2 is not built for n-DOF",
-    "measurement_noise": "the injected measurement noise is not built for n-DOF",
-    "pulse_width": "the force pulse is not built for n-DOF (the kick is a velocity jump)",
+    "x0": "an n-DOF scene's start is state0, its 2n coordinates (empty: X**)",
+    "v0": "an n-DOF scene's start is state0, its 2n coordinates (empty: X**)",
     "fidelity": "only the exact flow is built for n-DOF",
     "delta_d_drift": "the drifting wall is not built for n-DOF",
     "contact": "the compliant stop is not built for n-DOF (the rigid wall only)",
@@ -502,29 +513,7 @@ NOT_WITH_MODEL_FILE = {
     "contact_damping": "the compliant stop is not built for n-DOF (the rigid wall only)",
     "friction": "dry friction is not built for n-DOF",
     "friction_static": "dry friction is not built for n-DOF",
-    "actuator_bandwidth": "the first-order actuator is not built for n-DOF",
-    "actuator_latency": "the first-order actuator is not built for n-DOF",
 }
-
-
-def load_model_file(path: str) -> NdofModel:
-    """The model of a YAML file (docs/ndof_model.md); ParameterError naming ``model_file``
-    and the reason for a file that is missing, unreadable or invalid."""
-    from grazing_control.support.files import YamlFileError
-
-    try:
-        return load_model(path)
-    except ParameterError as exc:
-        raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
-    except YamlFileError as exc:       # "PATH: why" (support/files.read_yaml_file)
-        why = str(exc).removeprefix(f"{path}: ")
-        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
-                             f"YAML file ({why})") from None
-    except (OSError, TypeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
-                             f"YAML file ({reason.splitlines()[0] if reason else type(exc).__name__})"
-                             ) from None
 
 
 def _model_file_settings(values: dict, model_file: str, model: NdofModel | None) -> SimSettings:
@@ -543,11 +532,26 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
             raise ParameterError(f"delta_d={delta_d!r} is invalid: valid range is a finite "
                                  "real number (d - d* of the model file's wall coordinate)")
         model = dataclasses.replace(model, delta_d=delta_d)
+    state0 = start_state(values.get("state0"), model)
     rest = {k: v for k, v in values.items()
-            if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE}
+            if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE and k != "state0"}
     # the 1-DOF validation with the n-DOF forcing frequency: its bounds on times read T
     base = settings_from_values({**rest, "omega": model.omega})
-    return dataclasses.replace(base, model=model, model_file=str(model_file))
+    if not base.actuator.ideal and base.pulse_width == 0.0:
+        raise ParameterError("pulse_width=0.0 is invalid with model_file and the first-order "
+                             "actuator (actuator_bandwidth, actuator_latency): valid range is "
+                             "pulse_width > 0 (the n-DOF actuator's command is a pulse: "
+                             "ndof_map.actuated_step)")
+    if base.pulse_width > 0.0:     # a force pulse needs the static deflection K^-1 e_a
+        from grazing_control.oscillator.ndof.flow import NdofFlow
+        from grazing_control.oscillator.ndof.forced import static_deflection
+
+        try:
+            static_deflection(NdofFlow.of(model))
+        except ParameterError as exc:
+            raise ParameterError(f"pulse_width={base.pulse_width!r} is invalid with model_file="
+                                 f"{model_file!r}: valid is 0 ({exc})") from None
+    return dataclasses.replace(base, model=model, model_file=str(model_file), state0=state0)
 
 
 def _same(value, default) -> bool:

@@ -207,9 +207,10 @@ def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
             f"impacts: {bag} has no recorded impacts on oscillator/impact"
             + ("" if impacts else " (--no-impacts)") + ": the n-DOF fit starts from them "
             "(finding them in the motion is built for n = 1 only)")
+    width = float(sim.get("pulse_width", 0.0) or 0.0)     # the plant's force pulse (§15)
     ident = identify_modal(rec, model.n, correction_dv=kicks,
                            kick_on_wall=model.i_a == model.i_w, max_arcs=max_arcs,
-                           shrink=shrink)
+                           shrink=shrink, width=width)
     check = modal_verdict(ident)
     names = ident.names + ("delta_d", "d_star")
     params = {k: {"value": ident.value(k), "stderr": ident.stderr[k]} for k in names}

@@ -22,10 +22,14 @@ Simulator replay (open loop)
     A lockstep bag is reproduced sample for sample (<= 1e-12; bit-identical when the
     parameters are the recorded ones); a realtime run, whose corrections acted at their
     arrival and not on Pi2, departs, and the report says from which sample and how fast.
-    Recorded to ``OUT_sim``. Not built for an n-DOF scene: refused in one line before
-    anything starts (sim_node's initial state x0, v0 is a 1-DOF state, and an n-DOF scene
-    starts at X**; the engine replayed with the recorded corrections is the n-DOF check,
-    tests/test_ndof_nodes.py); ``--no-sim`` replays its controller.
+    Recorded to ``OUT_sim``. An n-DOF scene's bag (issue 32) the same way: sim_node with
+    the record's ``model_file``, ``delta_d``, noise, seeds and actuation, started at the
+    bag's first recorded Pi2 state (``state0``, the 2n coordinates; the record's own
+    ``state0`` where the first sample is it to rounding, so that the start is the
+    recorded scene's bit for bit), answered with the recorded corrections; a lockstep
+    bag's Pi2 samples are reproduced bit for bit (tests/test_ndof_nodes.py). A bag
+    without the simulator's record (its model file) is refused in one line before
+    anything starts.
 
 Both need rclpy (the PyPI wheels or a sourced ROS 2); the nodes are started as processes
 by :mod:`grazing_control.ros.launcher`, on a ROS domain of their own (``--domain-id``, default
@@ -250,14 +254,48 @@ def _is_ndof(data) -> bool:
     return is_ndof(data)
 
 
-def _refuse_ndof_simulator(bag, data) -> None:
-    """The simulator replay of an n-DOF scene's bag is not built: ValueError, one line
-    saying what and why (module docstring)."""
-    if _is_ndof(data):
-        raise ValueError(f"{bag}: an n-DOF scene ({data.joints} joints per Pi2 sample): the "
-                         "simulator replay is not built for n > 1 (sim_node starts an n-DOF "
-                         "scene at X**, its x0, v0 are 1-DOF); give --no-sim to replay the "
-                         "controller")
+def _ndof_sim_record(bag, data) -> dict | None:
+    """An n-DOF bag's simulator record (its ``model_file``), None for a 1-DOF bag;
+    ValueError, one line, where the record or its model file is missing (the simulator
+    replay cannot know the model)."""
+    if not _is_ndof(data):
+        return None
+    rec = (data.parameters.get("nodes", {}).get("sim_node") or [None])[0]
+    if rec is None or not rec.get("model_file"):
+        raise ValueError(f"{bag}: an n-DOF scene ({data.joints} joints per Pi2 sample) "
+                         "without the simulator's parameter record: its model_file is "
+                         "unknown, so the simulator cannot be replayed; give --no-sim to "
+                         "replay the controller")
+    return rec
+
+
+def _ndof_sim_values(rec: dict, sd, notes: list) -> dict:
+    """sim_node's parameters for the replay of an n-DOF bag (module docstring): the
+    record's model file and :data:`SIM_KEYS` that an n-DOF scene takes (those it refuses,
+    plant.settings.NOT_WITH_MODEL_FILE, are at their defaults there), the injected
+    measurement noise (it is in the published samples compared), and the start
+    ``state0``: the first recorded Pi2 state X_0 (2n values), or the record's
+    ``state0`` where X_0 is it to within 1e-12 (X_0 = X_p + (state0 - X_p) is state0 to
+    rounding only; the record's is the recorded scene's start bit for bit). With
+    velocity or measurement noise the first sample is not the state: the record's."""
+    from grazing_control.plant.settings import NOT_WITH_MODEL_FILE
+
+    values = {k: rec[k] for k in SIM_KEYS + ("measurement_noise",)
+              if k in rec and k not in NOT_WITH_MODEL_FILE}
+    values["model_file"] = str(rec["model_file"])
+    first = [float(v) for v in sd.scene.pi2[0]]
+    start = [float(v) for v in (rec.get("state0") or ())]
+    noisy = float(rec.get("noise", 0.0) or 0.0) > 0.0 or float(
+        rec.get("measurement_noise", 0.0) or 0.0) > 0.0
+    if noisy:
+        values["state0"] = start
+        notes.append("velocity or measurement noise in the recorded scene: started at the "
+                     "record's state0 (its first sample is not the state)")
+    elif len(start) == len(first) and np.allclose(start, first, rtol=1e-12, atol=1e-12):
+        values["state0"] = start
+    else:
+        values["state0"] = first
+    return values
 
 
 def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=None,
@@ -472,22 +510,30 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
     from grazing_control.ros.launcher import SIM_MODULE
 
     data = load(bag, topics)
-    _refuse_ndof_simulator(bag, data)
-    setup = resolve_setup(data, options or {})
-    if setup.params is None:
-        raise ValueError(f"{bag}: Delta d unknown: give --delta-d for the simulator replay")
+    ndof = _ndof_sim_record(bag, data)
     sd = data.scenes[0]
     notes = []
     if len(data.scenes) > 1:
         notes.append(f"only scene 0 of {len(data.scenes)} is replayed through the simulator")
-    rec = (data.parameters.get("nodes", {}).get("sim_node") or [None])[0]
-    values = {}
-    if rec is not None:
-        values = {k: rec[k] for k in SIM_KEYS if k in rec}
-    for k in ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset"):
-        values[k] = float(getattr(setup.params, k))
-    if float(values.get("noise", 0.0) or 0.0) == 0.0:
-        values["x0"], values["v0"] = float(sd.scene.pi2[0, 0]), float(sd.scene.pi2[0, 1])
+    if ndof is not None:          # an n-DOF scene: the record's model file, its start
+        values = _ndof_sim_values(ndof, sd, notes)
+        mode = str(ndof.get("mode", "lockstep"))
+        delay = float(ndof.get("actuation_delay", 0.0) or 0.0)
+        time_scale = float(ndof.get("time_scale", 1.0) or 1.0)
+    else:
+        setup = resolve_setup(data, options or {})
+        if setup.params is None:
+            raise ValueError(f"{bag}: Delta d unknown: give --delta-d for the simulator "
+                             "replay")
+        rec = (data.parameters.get("nodes", {}).get("sim_node") or [None])[0]
+        values = {}
+        if rec is not None:
+            values = {k: rec[k] for k in SIM_KEYS if k in rec}
+        for k in ("zeta", "r", "omega", "delta_d", "tau0", "pi2_offset"):
+            values[k] = float(getattr(setup.params, k))
+        if float(values.get("noise", 0.0) or 0.0) == 0.0:
+            values["x0"], values["v0"] = float(sd.scene.pi2[0, 0]), float(sd.scene.pi2[0, 1])
+        mode, delay, time_scale = setup.mode, setup.actuation_delay, setup.time_scale
     n = len(sd.stamp_ns)
     values.update(mode="lockstep", max_periods=n, state_period=0.0, exit_when_done=True,
                   wait_for_controller=True, wait_for_subscribers=0,
@@ -565,23 +611,23 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                np.all(new.scene.pi2[:m].view(np.int64) == sd.scene.pi2[:m].view(np.int64), axis=1))),
            "first_sample_above_1e-12": int(above[0]) if above.size else None,
            "samples_without_recorded_correction": unknown[0], "notes": notes,
-           "mode": setup.mode, "sim_parameters": values}
+           "mode": mode, "sim_parameters": values}
     if above.size:
         k0 = int(above[0])
         res["departure_at"] = {str(k): float(dep[k]) for k in
                                sorted({k0, min(k0 + 10, m - 1), min(k0 + 50, m - 1), m - 1})}
-        if setup.mode == "realtime" and (setup.actuation_delay or 0.0) > 0.0:
+        if mode == "realtime" and (delay or 0.0) > 0.0:
             why = ("scheduled actuation: the simulator applied each correction "
-                   f"{setup.actuation_delay:g} after its sample, as this replay does, and the "
+                   f"{delay:g} after its sample, as this replay does, and the "
                    f"{len(dropped)} missed answers are replayed as what acted; a departure "
                    "here is not explained by the timing of the corrections: check the model "
                    "parameters and the simulator's fidelity")
-        elif setup.mode == "realtime":
+        elif mode == "realtime":
             lat = sd.latency_s
             nz = np.flatnonzero(sd.scene.correction != 0)
             first_on = int(nz[0]) if nz.size else None
             why = ("in realtime the corrections acted at their arrival (latency "
-                   + (f"p50 {np.median(lat) * 1e3:.3g} ms wall = {np.median(lat) * (setup.time_scale or 1):.3g}"
+                   + (f"p50 {np.median(lat) * 1e3:.3g} ms wall = {np.median(lat) * (time_scale or 1):.3g}"
                       " simulation time after Π2" if lat.size else "not recorded")
                    + "), the lockstep replay applies them on Π2 itself")
             if first_on is None or k0 < first_on:
@@ -618,7 +664,8 @@ def add_arguments(parser) -> None:
     pace.add_argument("--as-fast-as-possible", action="store_true",
                       help="each sample waits for its answer (the default)")
     parser.add_argument("--no-sim", action="store_true", help="skip the simulator replay "
-                        "(required for an n-DOF bag: its simulator replay is not built)")
+                        "(required for an n-DOF bag without the simulator's parameter "
+                        "record: its model file is unknown)")
     parser.add_argument("--no-controller", action="store_true",
                         help="skip the controller replay (OUT is then unused)")
     parser.add_argument("--domain-id", type=int, default=None,
@@ -641,7 +688,7 @@ def main(args):
     options = options_from_args(args)
     data = load(args.bag, topics)   # refuse a bad bag or output before starting anything
     if not args.no_sim:
-        _refuse_ndof_simulator(args.bag, data)
+        _ndof_sim_record(args.bag, data)      # an n-DOF bag needs its model file
     out = Path(args.out)
     for path, used in ((out, not args.no_controller),
                        (out.with_name(out.name + "_sim"), not args.no_sim)):

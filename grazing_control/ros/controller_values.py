@@ -359,13 +359,25 @@ class ModelController:
         """The model's exact flow (``NdofFlow``)."""
         return self.section.flow
 
-    def predict(self, x, v, dv: float, delay: float):
+    def predict(self, x, v, dv: float, delay: float, pulse: tuple = (0.0, math.inf)):
         """The Pi2 sample after (x, v) with ``dv`` acting ``delay`` after it: one exact
-        period of the model (the plant engine's calls, plant.engine). Returns (x', v')."""
+        period of the model (the plant engine's calls, plant.engine); ``pulse`` (width,
+        force limit): the correction as the force pulse of that width centred ``delay``
+        after the sample (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`,
+        docs/theory_ndof.md section 15). Returns (x', v')."""
+        from grazing_control.dynamics.maps.ndof_map import pulse_step
+        from grazing_control.dynamics.simulation.actuation import pulse_start
+
         sec, f = self.section, self.section.flow
         n = sec.n
         z = f.to_deviation(f.tau2, np.concatenate([np.asarray(x, float), np.asarray(v, float)]))
         tau = f.tau2
+        width, limit = pulse[0], pulse[1]
+        if width > 0.0:
+            z = pulse_step(f, z, dv, start=pulse_start(sec.period, delay, width), width=width,
+                           force_limit=limit).state
+            X = f.to_physical(f.tau2, z)
+            return X[:n], X[n:]
         if delay > 0.0:
             z = sec.advance(tau, z, delay).z
             tau = (tau + sec.omega * delay) % (2.0 * math.pi)
@@ -423,13 +435,16 @@ def model_controller_from_values(values: dict, model_file: str, gains) -> ModelC
                            predicts=not math.isnan(delta_d))
 
 
-def model_stream_from_values(values: dict, ndof: ModelController):
+def model_stream_from_values(values: dict, ndof: ModelController,
+                             pulse: tuple = (0.0, math.inf)):
     """The n-DOF scene's stream estimator for ``pi2_source`` stream, None for ``sample``
     (ParameterError naming the parameter): the model filter over the exact n-DOF map
     (:class:`grazing_control.dynamics.estimation.stream.StreamEstimator` with the
     controller's model, docs/theory_estimation.md (E11)) reading coordinate
     ``sensor_coordinate``; it needs the plant's ``delta_d`` (``ndof.predicts``), the
-    estimator ``model``, ``sensor_noise`` > 0 and impacts detected in the stream."""
+    estimator ``model``, ``sensor_noise`` > 0 and impacts detected in the stream.
+    ``pulse``: (width, force limit) of the plant's force pulse (:func:`pulse_from_values`;
+    its trajectory is the filter's, docs/theory_ndof.md section 15), (0, inf): the kick."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
 
     source = values.get("pi2_source", "sample")
@@ -462,4 +477,5 @@ def model_stream_from_values(values: dict, ndof: ModelController):
                            bool(values.get("answer_after_section", False)),
                            float(values.get("answer_lead", 0.0)),
                            kernel=False,     # the n-DOF motion is the core's (E11)
-                           coordinate=int(values.get("sensor_coordinate", 0)))
+                           coordinate=int(values.get("sensor_coordinate", 0)),
+                           pulse_width=pulse[0], force_limit=pulse[1])

@@ -4,7 +4,8 @@ One message per sample costs the middleware its per-message work for each of the
 200 samples per period and time_scale 1000, 21,000 messages a second through the
 simulator, the controller and the recorder. With ``stream_message: block`` the
 simulator publishes the samples that one wake-up of its loop makes (a lockstep period,
-or ``stream_block`` of wall time in realtime) as one message on
+or ``stream_block`` of wall time in realtime; a Pi2 sample ends the block, which goes
+out before it) as one message on
 ``oscillator/state_block`` instead of one message each on ``oscillator/state``; the
 controller's stream estimator and the recorder take them, and the bag readers expand
 them back into samples (docs/nodes.md, "The stream in blocks").

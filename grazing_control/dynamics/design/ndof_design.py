@@ -361,9 +361,9 @@ def _reduced(model: NdofModel, delay: float = 0.0):
     except np.linalg.LinAlgError:
         a1 = math.inf
     if not math.isfinite(a1):
-        raise ParameterError(f"model is invalid for the design: 1 is a transmission zero "
-                             f"(N - I singular on ker w^T), the 1/1 branch born at grazing is "
-                             f"not a graph over psi")
+        raise ParameterError("model is invalid for the design: 1 is a transmission zero "
+                             "(N - I singular on ker w^T), the 1/1 branch born at grazing is "
+                             "not a graph over psi")
     return nt, iv, a1, model.r + (1.0 + model.r) * a1
 
 

@@ -26,7 +26,11 @@ v_{i_a} ``delay`` after the sample), linearised about its controlled orbit z*:
 
     e_{k+1} = J e_k + g k^T n_k,    J = M2 (M1 + b k^T),    g = M2 b,   b = e_{n + i_a},
 
-and Sigma = J Sigma J^T + sigma^2 g g^T (k^T R k) (:func:`ndof_noise_covariance`). R is
+and Sigma = J Sigma J^T + sigma^2 g g^T (k^T R k) (:func:`ndof_noise_covariance`). With
+a force pulse of ``width`` w centred ``delay`` after the sample (docs/theory_ndof.md
+section 15) J is NdofMap(model, k, delay, w)'s Jacobian and g the period's input
+d z_{k+1} / d(Delta v) (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`'s
+``input``: M3 ((I - M_p) sigma - g_w sigma_w) m_a / w). R is
 the model filter's error covariance on the orbit per unit sigma^2, for a sensor of one
 coordinate's position at ``rate`` samples per period: the fixed point of (E5),
 P = M (P^-1 + H^T H)^-1 M^T + floor^2 I, H the rows of that position in the exact
@@ -102,18 +106,22 @@ def noise_gain(p: OscillatorParams, gains: Gains, measurement=None, target=None)
     return float(math.sqrt(max(noise_covariance(p, gains, measurement, target)[0, 0], 0.0)))
 
 
-def ndof_loop_linearisation(model, gains, target, delay: float = 0.0):
+def ndof_loop_linearisation(model, gains, target, delay: float = 0.0, width: float = 0.0):
     """(J, g) of the n-DOF loop at the orbit z* = ``target`` (module docstring): J the
     closed-loop map's Jacobian, g = M2 e_{n + i_a} the next sample's sensitivity to the
-    kick. Exact (the core's monodromies, :class:`NdofMap`'s step)."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    kick (with a pulse ``width`` > 0: to the pulse's Delta v). Exact (the core's
+    monodromies, :class:`NdofMap`'s step)."""
+    from grazing_control.dynamics.maps.ndof_map import NdofMap, pulse_step
     from grazing_control.oscillator.ndof.impact import advance as ndof_advance
 
-    P = NdofMap(model, gains, delay)
+    P = NdofMap(model, gains, delay, width)
     z = np.array(target, dtype=float)
     J = P.step(z, jacobian=True).jacobian
     flow, n = P.flow, model.n
     kick = float(P.gains @ z)
+    if P.width != 0.0:
+        out = pulse_step(flow, z, kick, start=P.pulse_start, width=P.width, jacobian=True)
+        return J, np.array(out.input)
     first = ndof_advance(flow, flow.tau2, z, delay) if delay > 0.0 else None
     mid = np.array(z if first is None else first.z, dtype=float)
     mid[n + model.i_a] += kick
@@ -124,17 +132,25 @@ def ndof_loop_linearisation(model, gains, target, delay: float = 0.0):
 
 def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
                            delay: float = 0.0, floor: float = 1e-2,
-                           periods: int = 400) -> np.ndarray:
+                           periods: int = 400, width: float = 0.0,
+                           section_sample: bool = True) -> np.ndarray:
     """The model filter's error covariance on the n-DOF orbit z* per unit sigma^2 (2n x 2n):
     the fixed point of (E5) for samples of coordinate ``coordinate``'s position at
     s_j = j T / rate, j = 1 .. rate (module docstring), iterated from 1e4 I for
-    ``periods`` periods at most."""
+    ``periods`` periods at most; the correction a pulse of ``width`` (0: the kick).
+    ``section_sample`` False: the sample at the section itself (j = rate) is not fitted,
+    as a controller that answers before t_k does (lockstep: the stream estimator does
+    not wait for it, ``StreamEstimator.add_sample``; realtime with
+    ``answer_after_section`` does). On the chain at T/200 that sample carries a tenth of
+    the information: without it the covariance's std is 1.10-1.13 times larger
+    (docs/ndof_scene.md)."""
     from grazing_control.dynamics.estimation.section_state import trajectory
 
     z = np.array(target, dtype=float)
-    s = model.period * np.arange(1, int(rate) + 1) / rate
+    last = int(rate) + (1 if section_sample else 0)
+    s = model.period * np.arange(1, last) / rate
     kick = float(np.asarray(gains, dtype=float) @ z)
-    _out, jac, _end, mono, _imps = trajectory(model, z, s, kick, delay)
+    _out, jac, _end, mono, _imps = trajectory(model, z, s, kick, delay, width=width)
     h = jac[:, coordinate, :]
     eye = np.eye(len(z))
     cov = 1e4 * eye
@@ -149,13 +165,15 @@ def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
     return cov
 
 
-def ndof_noise_covariance(model, gains, target, measurement, delay: float = 0.0):
+def ndof_noise_covariance(model, gains, target, measurement, delay: float = 0.0,
+                          width: float = 0.0):
     """Stationary covariance of the n-DOF Pi2 deviation per unit sigma^2 (2n x 2n):
-    Sigma = J Sigma J^T + g g^T (k^T R k), R = ``measurement`` (module docstring).
-    Raises ValueError when the loop is not stable."""
+    Sigma = J Sigma J^T + g g^T (k^T R k), R = ``measurement`` (module docstring), the
+    correction a pulse of ``width`` (0: the kick). Raises ValueError when the loop is
+    not stable."""
     from scipy.linalg import solve_discrete_lyapunov
 
-    J, g = ndof_loop_linearisation(model, gains, target, delay)
+    J, g = ndof_loop_linearisation(model, gains, target, delay, width)
     rho = float(np.max(np.abs(np.linalg.eigvals(J))))
     if not rho < 1.0:
         raise ValueError(f"the controlled orbit at delta_d={model.delta_d!r} is not stable "

@@ -410,27 +410,24 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
 
 def trajectory_end(p: OscillatorParams, z0, correction: float = 0.0, delay: float = 0.0,
                    duration: float | None = None, *, width: float = 0.0,
-                   force_limit: float = math.inf, kernel: bool = False):
-    """The end (dx, dv) at ``duration`` (default T) of :func:`trajectory` from ``z0``
-    with the kick or the ideal force pulse, without its Jacobians and samples: the same
-    legs (:func:`correction_legs`) and the same flow calls, so the same end bit for bit,
-    and the same refusals (a sticking motion: ValueError; an impact at v- = 0: the
-    saltation matrix's ZeroDivisionError). What the controller's prediction of the next
-    correction needs, once per period (issue 30: 0.2 ms of Python per lockstep period
-    went to the Jacobian and the empty sample grid of the full trajectory)."""
+                   force_limit: float = math.inf, kernel: bool = False) -> tuple:
+    """``end`` of :func:`trajectory` alone, bit for bit (the same legs and the same
+    exact flow, the same ValueError where the motion sticks), without the Jacobian and
+    the samples: the controller's prediction of the next section on the realtime
+    answer's path (issue 30: a third of the compiled :func:`trajectory`'s time went to
+    evaluating its zero samples and carrying a Jacobian nobody reads). The kick or the
+    constant pulse only (no actuator, a 1-DOF model)."""
     duration = p.period if duration is None else float(duration)
     flow = _kernel.advance if kernel else advance
     tau = p.tau2
     z = (float(z0[0]), float(z0[1]))
     for start, end, kick, force in correction_legs(correction, delay, duration, width,
                                                    force_limit):
-        z = (z[0], z[1] + kick)
         q = p if force == 0.0 else _shifted_wall(p, force)
-        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
-        for imp in seg.impacts:
-            if imp.sticking:
-                raise ValueError("the model's motion sticks to the wall: no fit")
-            saltation_matrix(q, imp.phase, imp.v_minus)
+        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1] + kick,
+                   end - start)
+        if any(imp.sticking for imp in seg.impacts):
+            raise ValueError("the model's motion sticks to the wall: no fit")
         z = (seg.dx + force if force else seg.dx, seg.dv)
     return z
 

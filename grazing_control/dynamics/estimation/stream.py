@@ -527,12 +527,12 @@ def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.
     estimate ``z`` with ``correction`` applied ``delay`` after the section (a kick, or
     a force pulse of ``width``, through ``actuator`` from the force ``force0`` at the
     section): one exact period of the model (issue 16 section 3; :func:`trajectory`,
-    compiled with ``kernel``: a stream estimator's ``kernel``)."""
-    if not isinstance(p, NdofModel) and (actuator is None
-                                         or (actuator.ideal and force0 == 0.0)):
-        # only the end: trajectory's own, bit for bit, without its Jacobians
-        return trajectory_end(p, z, correction, delay, width=width,
-                              force_limit=force_limit, kernel=kernel)
+    compiled with ``kernel``: a stream estimator's ``kernel``); the end alone where
+    no actuator's lag is in it (:func:`trajectory_end`, the same numbers)."""
+    if not isinstance(p, NdofModel) and (actuator is None or (actuator.ideal
+                                                               and force0 == 0.0)):
+        return trajectory_end(p, z, correction, delay, width=width, force_limit=force_limit,
+                              kernel=kernel)
     *_rest, end, _m, _imps = trajectory(p, z, np.empty(0), correction, delay, width=width,
                                         force_limit=force_limit, actuator=actuator,
                                         force0=force0, kernel=kernel)

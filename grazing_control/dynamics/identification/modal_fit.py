@@ -43,6 +43,7 @@ from grazing_control.dynamics.identification.fit import (CONTINUATION, FitTooLar
                                                          coloured_jacobian, interior)
 from grazing_control.dynamics.identification.modal import (ModalLayout, ModalModel,
                                                            kick_coefficients, modal_flow,
+                                                           pulse_coefficients,
                                                            particular, propagate, rates)
 from grazing_control.dynamics.identification.phase import PhaseError, PhaseReference, fit_phase
 
@@ -53,11 +54,15 @@ __all__ = ["ModalProblem", "ModalIdentification", "identify_modal", "initial_mod
 class ModalProblem:
     """The residual vector and its Jacobian (module docstring) of one recording of the
     wall coordinate cut into arcs. ``correction_dv``: the recorded kicks (one per
-    correction time of ``rec``); ``kick_on_wall``: they act on the wall coordinate."""
+    correction time of ``rec``); ``kick_on_wall``: they act on the wall coordinate;
+    ``width`` > 0: each acts as a force pulse of that width centred at its time
+    (:func:`.modal.pulse_coefficients`; the samples inside the pulses are not in ``rec``)."""
 
     def __init__(self, rec: Recording, arcs, phase: PhaseReference, n: int,
-                 correction_dv, kick_on_wall: bool, impact_velocities: bool = True):
+                 correction_dv, kick_on_wall: bool, impact_velocities: bool = True,
+                 width: float = 0.0):
         self.rec, self.arcs, self.phase, self.n_modes = rec, arcs, phase, n
+        self.width = float(width)
         K = arcs.count
         self.kick_on_wall = bool(kick_on_wall)
         self.b_imp = np.flatnonzero(arcs.kind == 1)
@@ -168,6 +173,8 @@ class ModalProblem:
                 kc, ks = c, s
             else:
                 kc, ks = kick_coefficients(Om, ze, ka, 0.0)
+            if self.width:
+                kc, ks = pulse_coefficients(sig, w, kc, ks, self.width)
             pa, pb = propagate(sig, w, al[bc - 1], be[bc - 1], (S[bc] - S[bc - 1])[:, None])
             dv = self.dv[:, None]
             out.append(W * np.concatenate([al[bc] - pa - dv * kc, be[bc] - pb - dv * ks],
@@ -221,8 +228,9 @@ def _arx_eigenvalues(rec, arcs, phase, n):
     return Om, zeta
 
 
-def initial_modal(rec, arcs, phase, n, dv, kick_on_wall):
-    """(g, start times, modal states (K, 2n)) to start the fit from (module docstring)."""
+def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, width: float = 0.0):
+    """(g, start times, modal states (K, 2n)) to start the fit from (module docstring);
+    ``width``: the corrections are pulses (:class:`ModalProblem`)."""
     Om, zeta = _arx_eigenvalues(rec, arcs, phase, n)
     sig, w = rates(Om, zeta)
     om, tau0 = phase.omega, phase.tau0
@@ -298,6 +306,11 @@ def initial_modal(rec, arcs, phase, n, dv, kick_on_wall):
                 cd.append(dv[i])
         cd = np.array(cd)
         ka_cs = (cd @ np.array(cj)) / (cd @ cd) if cd.size else np.zeros(2 * n)
+        if width:       # the pulse's coefficients back to the kick's (C / F, F complex)
+            one_c, one_s = pulse_coefficients(sig, w, np.ones(n), np.zeros(n), width)
+            f = one_c - 1j * one_s
+            kick = (ka_cs[:n] - 1j * ka_cs[n:]) / f
+            ka_cs = np.concatenate([kick.real, -kick.imag])
         g_free.append(np.column_stack([ka_cs[:n], ka_cs[n:]])[:n - 1].ravel())
     g = np.concatenate([np.asarray(v, float).ravel() for v in g_free])
     # short arcs: carried on from the arc before, through its event
@@ -305,6 +318,8 @@ def initial_modal(rec, arcs, phase, n, dv, kick_on_wall):
     _Om, _ze, ci, *_rest, ka = layout.split(g)
     c, s = kick_coefficients(Om, zeta, ci, 1.0)
     kc, ks = (c, s) if ka is None else kick_coefficients(Om, zeta, ka, 0.0)
+    if width:
+        kc, ks = pulse_coefficients(sig, w, kc, ks, width)
     bc_list = np.flatnonzero(arcs.kind == 2).tolist()
     for k in range(1, K):
         if good[k]:
@@ -371,13 +386,16 @@ class ModalIdentification(ShootingFit):
 def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=False,
                    impact_velocities: bool = True, max_arcs: int | None = 100,
                    max_nfev: int = 200, coincidence: float = 1.5e-9,
-                   shrink: bool = False) -> ModalIdentification:
+                   shrink: bool = False, width: float = 0.0) -> ModalIdentification:
     """Fit the modal parameters of an n-DOF model to a recording of its wall coordinate
     (module docstring). ``rec``'s impacts must be recorded (their times start the fit);
     ``correction_dv``: the kick of each of ``rec.corrections`` (on the wall coordinate if
     ``kick_on_wall``, else on another: its response is fitted too). ``shrink``: where
     ``max_arcs`` arcs would exceed JACOBIAN_BYTES, fit as many as it allows (as
-    :func:`.fit.identify`).
+    :func:`.fit.identify`). ``width`` > 0: the corrections are force pulses of that width
+    centred at their times (the plant's ``pulse_width``): the samples inside them are
+    left out and the motion after each is the kick's averaged over the pulse
+    (:func:`.modal.pulse_coefficients`).
 
     Raises IdentificationError on bad input (no phase reference, no or too few impacts,
     too few samples, no initial guess, a Jacobian beyond JACOBIAN_BYTES).
@@ -385,7 +403,7 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
     while True:
         try:
             return _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities,
-                                   max_arcs, max_nfev, coincidence)
+                                   max_arcs, max_nfev, coincidence, width)
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -393,7 +411,7 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
 
 
 def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_arcs,
-                    max_nfev, coincidence) -> ModalIdentification:
+                    max_nfev, coincidence, width=0.0) -> ModalIdentification:
     if not (isinstance(n, (int, np.integer)) and n >= 1):
         raise IdentificationError(f"n={n!r} is invalid: valid is an integer >= 1")
     dv = np.zeros(rec.corrections.size) if correction_dv is None else \
@@ -404,6 +422,8 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
     try:
         events = np.concatenate([rec.corrections, rec.impact_t])
         rec = rec.without_samples(rec.near(events, coincidence))
+        if width:           # inside a pulse the force acts: not the free flight's data
+            rec = rec.without_samples(rec.near(rec.corrections[dv != 0.0], 0.5 * width))
         phase = fit_phase(rec.t, rec.cos_tau, rec.sin_tau)
         if max_arcs is not None:
             ev = np.sort(events[events > rec.t[0]])
@@ -426,13 +446,13 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
             f"impacts: the recording has {impacts} impact(s) inside its state stream: the "
             f"n-DOF fit needs at least {need_impacts} recorded impacts (oscillator/impact) "
             "to identify d, r and the impact's modal response")
-    prob = ModalProblem(rec, arcs, phase, n, rec_dv, kick_on_wall, impact_velocities)
+    prob = ModalProblem(rec, arcs, phase, n, rec_dv, kick_on_wall, impact_velocities, width)
     check_size(prob)
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
-    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall)
+    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, width)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = interior(lo, hi)
     p = np.clip(prob.pack(g0, S0, a0), inner_lo, inner_hi)

@@ -167,3 +167,23 @@ def load_model(path) -> NdofModel:
     from grazing_control.support.files import read_yaml_file
 
     return model_from_mapping(read_yaml_file(Path(path)))
+
+
+def load_model_file(path: str) -> NdofModel:
+    """The model of a YAML file (docs/ndof_model.md); ParameterError naming ``model_file``
+    and the reason for a file that is missing, unreadable or invalid."""
+    from grazing_control.support.files import YamlFileError
+
+    try:
+        return load_model(path)
+    except ParameterError as exc:
+        raise ParameterError(f"model_file={path!r} is invalid: {exc}") from None
+    except YamlFileError as exc:       # "PATH: why" (support/files.read_yaml_file)
+        why = str(exc).removeprefix(f"{path}: ")
+        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
+                             f"YAML file ({why})") from None
+    except (OSError, TypeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ParameterError(f"model_file={path!r} is invalid: cannot read it as a model "
+                             f"YAML file ({reason.splitlines()[0] if reason else type(exc).__name__})"
+                             ) from None

@@ -128,7 +128,7 @@ def local_map(model, y, delta_d: float, jacobian: bool = False):
     dv-/dy = |a| g / v-, dD/dy = I - (1 + r) e_v dv-^T
     + ((1 + r) / |a|) e_w ((v_w - 2 v-) dv-^T + v- e_v^T)."""
     flow = NdofFlow.of(model)
-    n, w, v = model.n, model.i_w, model.n + model.i_w
+    w, v = model.i_w, model.n + model.i_w
     acc = model.omega ** 2 * flow.d_star
     h = y[w] + y[v] ** 2 / (2.0 * acc) - delta_d
     out = np.array(y, dtype=float)

@@ -95,14 +95,15 @@ class StreamLoop(NamedTuple):
 
 def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float,
                 rate: int, coordinate: int, periods: int, control_after: int,
-                seed: int) -> StreamLoop:
+                seed: int, width: float = 0.0) -> StreamLoop:
     """The n-DOF closed loop on a position-only sensor stream in one process (issue 32,
     docs/ndof_scene.md): the simulator's engine (:class:`grazing_control.plant.engine.Engine`
     over the model file, its sensor of ``sigma`` at T / ``rate``, seeded by ``seed``), the
     controller's estimator (:class:`grazing_control.dynamics.estimation.stream.
     StreamEstimator` over the model, reading ``coordinate``) and the kick k^T z^ acting
-    ``delay`` after each section from ``control_after`` on: the calls the nodes make in
-    lockstep, without the middleware."""
+    ``delay`` after each section from ``control_after`` on (with ``width`` > 0 the force
+    pulse carrying it, centred at ``delay``: docs/theory_ndof.md section 15): the calls
+    the nodes make in lockstep, without the middleware."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
     from grazing_control.plant.engine import Engine
     from grazing_control.plant.settings import load_model_file, settings_from_values
@@ -110,12 +111,12 @@ def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float
     model = load_model_file(str(model_file))
     st = settings_from_values(
         {"delta_d": delta_d, "actuation_delay": delay, "sensor_noise": sigma,
-         "sensor_velocity": False, "sensor_seed": seed,
+         "sensor_velocity": False, "sensor_seed": seed, "pulse_width": width,
          "state_period": model.period / rate}, str(model_file), model)
     model, k = st.model, np.asarray(gains, dtype=float)
     eng = Engine(st)
     est = StreamEstimator(model, "model", sigma, "stream", model.period / rate,
-                          coordinate=coordinate)
+                          coordinate=coordinate, pulse_width=width)
     due = []
     for ev in eng.initial_states():
         due += est.add_sample(ev.t, ev.x[coordinate], ev.v[coordinate])
