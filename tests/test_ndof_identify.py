@@ -105,10 +105,16 @@ def test_bad_input_is_one_line_naming_it(identified, argv, line, tmp_path):
     assert status == 2 and len(lines) == 1 and line in lines[0], (status, lines)
 
 
-def test_a_model_whose_wall_coordinate_is_not_the_streamed_one_is_refused(identified,
+def test_a_model_whose_wall_coordinate_is_not_streamed_is_one_line_naming_it(identified,
                                                                            tmp_path):
+    """The stream carries x0 and x1 (sim_node: every coordinate's position); a model
+    whose wall coordinate is x2 is refused in one line naming what is carried."""
     bag = identified[0]
-    bad = tmp_path / "iw1.yaml"
-    bad.write_text(CHAIN.read_text().replace("i_w: 0", "i_w: 1"))
+    bad = tmp_path / "iw2.yaml"
+    bad.write_text("M: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nC: [[0.02, 0, 0], [0, 0.02, 0], "
+                   "[0, 0, 0.02]]\nK: [[2, -1, 0], [-1, 2, -1], [0, -1, 1]]\nf: [0, 0, 1]\n"
+                   "omega: 0.5\ni_w: 2\ni_a: 2\nr: 0.7\n")
     status, text, err = run_cli(["identify", str(bag), "--model", str(bad)])
-    assert status == 2 and "i_w=1" in err and len(err.strip().splitlines()) == 1, err
+    lines = [ln for ln in (text + err).splitlines() if ln.strip()]
+    assert status == 2 and len(lines) == 1, (status, lines)
+    assert "carries the position of coordinates 0..1 only" in lines[0] and "i_w=2" in lines[0]
