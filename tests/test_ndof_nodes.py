@@ -333,19 +333,21 @@ STREAM_DD, STREAM_MU, STREAM_DELAY, SIGMA, RATE = -1e-3, -0.22, 1.0, 1e-4, 200
 
 
 def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int = 7,
-                 coordinate: int = 0, timeout: float = 200, width: float = 0.0, **sim):
+                 coordinate: int = 0, timeout: float = 200, width: float = 0.0,
+                 chain=CHAIN, mu: float = STREAM_MU, **sim):
     """A 2-DOF chain scene through the nodes with the stream estimator (issue 32):
     position-only sensor of every coordinate (sigma 1e-4, T/200, seeded), the controller's
     model filter over the exact n-DOF map reading ``coordinate``, the delay-aware design
     k(mu = -0.22, delay 1.0) from its gains file (actuation_delay in it); with ``width``
     > 0 the correction is the force pulse of that width centred 1.0 after the sample and
     the design the pulse's (pulse_design; pulse_width in the gains file, which the
-    launcher gives the simulator). Returns (RunResult, bag, model, design)."""
-    model = dataclasses.replace(load_model(CHAIN), delta_d=STREAM_DD)
-    design = pulse_design(model, STREAM_MU, STREAM_DELAY, width)
+    launcher gives the simulator); ``chain`` another model file, ``mu`` its design's.
+    Returns (RunResult, bag, model, design)."""
+    model = dataclasses.replace(load_model(chain), delta_d=STREAM_DD)
+    design = pulse_design(model, mu, STREAM_DELAY, width)
     assert design.admissible
     gains = tmp / "gains.yaml"
-    write_gain_yaml(gains, model, design, CHAIN)
+    write_gain_yaml(gains, model, design, chain)
     bag = tmp / "bag"
     res = launcher.run(None, gains, bag, periods, delta_d=STREAM_DD, enable_after=on,
                        mode=mode, domain_id=new_domain(), timeout=timeout,
