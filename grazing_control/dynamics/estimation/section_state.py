@@ -51,8 +51,8 @@ from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.ndof import impact as ndof_impact
 from grazing_control.oscillator.ndof.flow import NdofFlow
-from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_flow,
-                                                    static_deflection)
+from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_flow, lag_advance,
+                                                    lag_particular, static_deflection)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -341,15 +341,19 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
 
     With an n-DOF model for ``p`` (:class:`~grazing_control.oscillator.ndof.model.NdofModel`)
     it is the exact n-DOF motion (:func:`_ndof_trajectory`): z (m, 2n), jac (m, 2n, 2n),
-    end (2n,), monodromy (2n, 2n), the same impacts; the kick or the ideal force pulse
-    of ``width`` (no actuator or wall sensitivity).
+    end (2n,), monodromy (2n, 2n), the same impacts; the kick or the force pulse of
+    ``width``, through the first-order ``actuator`` from ``force0``
+    (:func:`_ndof_actuated_trajectory`); no wall sensitivity.
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
     if isinstance(p, NdofModel):
-        if wall or actuator is not None:
-            raise ParameterError("wall and actuator are invalid for an n-DOF model: its "
-                                 "correction is the velocity kick or the ideal force pulse")
+        if wall:
+            raise ParameterError("wall=True is invalid for an n-DOF model: valid is False "
+                                 "(no wall sensitivity for n > 1)")
+        if actuator is not None and not (actuator.ideal and force0 == 0.0):
+            return _ndof_actuated_trajectory(p, z0, s, correction, delay, duration, width,
+                                             force_limit, actuator, force0)
         return _ndof_trajectory(p, z0, s, correction, delay, duration, width, force_limit)
     if actuator is not None and not (actuator.ideal and force0 == 0.0):
         return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
@@ -533,6 +537,88 @@ def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     return out, jac, z, m, impacts
 
 
+def _ndof_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
+                              duration: float, width: float, force_limit: float, actuator,
+                              force0: float):
+    """:func:`trajectory` of the n-DOF oscillator through a first-order actuator
+    (docs/theory_ndof.md section 15, the plant's
+    :func:`grazing_control.dynamics.maps.ndof_map.actuated_step`): the command
+    u = m_a correction / width (clipped to +-``force_limit``) on :func:`actuator_legs`, the
+    force F(h) = u + c e^{-h / tau_a} on each leg from ``force0``, the motion
+    :func:`grazing_control.oscillator.ndof.forced.lag_advance`'s. Between events
+    z(s) = Phi(s - s_e)(z_e - sigma u - q) + sigma u + q e^{-(s - s_e) / tau_a}, q the
+    transient's particular solution (:func:`lag_particular`); F does not depend on z0, so
+    d z / d z0 = Phi(s - s_e) M_e, and an impact puts M <- S Phi M with S the saltation
+    matrix under the force there (the flow forced by F(t_i)). tau_a = 0 (a latency only):
+    the constant pulse starting ``actuator.latency`` later (force0 must be 0)."""
+    flow = _ndof_flow(model)
+    n, w = model.n, model.i_w
+    tau_a = actuator.time_constant
+    if tau_a == 0.0:
+        if force0 != 0.0:
+            raise ParameterError(f"force0={force0!r} is invalid: an actuator without lag leaves "
+                                 "no force at the section, valid value is 0")
+        actuator_legs(model, correction, delay, duration, width, force_limit, actuator)
+        start = pulse_start(duration, delay, width) + actuator.latency
+        return _ndof_trajectory(model, z0, s, correction, start + 0.5 * width, duration,
+                                width, force_limit)
+    z = np.array(z0, dtype=float).reshape(-1)
+    if z.shape != (2 * n,):
+        raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
+    ma = actuated_mass(flow)
+    sigma = static_deflection(flow)
+    m = np.eye(2 * n)
+    f = float(force0)
+    events, impacts = [], []           # (time, z - sigma u - q, M, sigma u, q)
+    rate = 1.0 / tau_a
+    for start, end, u in actuator_legs(model, ma * correction, delay, duration, width,
+                                       force_limit, actuator):
+        if end <= start:
+            continue
+        tau = (flow.tau2 + model.omega * start) % TWO_PI
+        try:
+            seg = lag_advance(flow, tau, z, end - start, u, f - u, tau_a)
+        except ValueError as exc:
+            raise ValueError(f"the model's motion chatters or sticks under the actuator's "
+                             f"force: no fit ({exc})") from None
+        sig_u = sigma * u if u != 0.0 else np.zeros(2 * n)
+        c, t_e = f - u, start
+        q = lag_particular(flow, c, tau_a)
+        events.append((start, z - sig_u - q, m, sig_u, q))
+        for imp in seg.impacts:
+            ti = start + imp.dt
+            h = ti - t_e
+            decay = math.exp(-h * rate)
+            phi = flow.transition(h)
+            z_minus = phi @ events[-1][1] + sig_u + q * decay
+            force = u + c * decay
+            fl = forced_flow(flow, force)
+            shift = sigma * force
+            wall_x, rest_v = fl.on_wall(imp.phase)
+            zs = z_minus - shift
+            zs[w], zs[n + w] = wall_x, imp.v_minus + rest_v
+            m = ndof_impact.saltation_matrix(fl, imp.phase, zs) @ phi @ m
+            z_plus = z_minus.copy()
+            z_plus[w] = zs[w] + shift[w]
+            z_plus[n + w] = imp.v_plus + rest_v + shift[n + w]
+            c *= decay
+            q = lag_particular(flow, c, tau_a)
+            t_e = ti
+            events.append((ti, z_plus - sig_u - q, m, sig_u, q))
+            impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
+        m = flow.transition(end - t_e) @ m
+        z, f = np.array(seg.z, dtype=float), float(seg.force)
+    times = np.array([e[0] for e in events])
+    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
+    h = s - times[idx]
+    phi = _ndof_transitions(flow, h)
+    out = np.einsum("mij,mj->mi", phi, np.array([e[1] for e in events])[idx])
+    out += np.array([e[3] for e in events])[idx]
+    out += np.array([e[4] for e in events])[idx] * np.exp(-h * rate)[:, None]
+    jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
+    return out, jac, z, m, impacts
+
+
 def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration: float,
                   width: float, force_limit: float, actuator) -> list:
     """The period (0, ``duration``] through ``actuator`` as legs (start, end, command):
@@ -563,6 +649,8 @@ def section_force(p: OscillatorParams, force0: float, correction: float, delay: 
     duration = p.period if duration is None else float(duration)
     f = float(force0)
     tau_a = actuator.time_constant
+    if isinstance(p, NdofModel):        # the command is the force m_a Delta v / w
+        correction = actuated_mass(_ndof_flow(p)) * correction
     for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
                                        actuator):
         if end > start:
