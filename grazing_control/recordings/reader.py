@@ -19,7 +19,8 @@ lengths read out of the pool. A message too short for its layout is marked inval
 is counted, never decoded from beyond its end).
 
 Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]; as a
-state stream also effort[0], effort[1], velocity possibly empty),
+state stream position[i], velocity[i] of any coordinate i, effort[0], effort[1], velocity
+possibly empty),
 ``geometry_msgs/msg/TwistStamped`` (stamp, linear.x), ``geometry_msgs/msg/Vector3Stamped``
 (stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``, and the stream in
 blocks (``std_msgs/msg/Float64MultiArray`` of grazing_control.ros.stream_block, one message
