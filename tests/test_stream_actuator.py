@@ -82,7 +82,7 @@ def test_an_actuator_without_a_pulse_width_is_refused_naming_it():
 def test_n1_model_filter_through_the_actuator_gives_the_1dof_corrections():
     """The n = 1 model file (config/models/study_1dof.yaml) as the model filter's model
     through the actuator (section_state.model_update over the n-DOF trajectory through the
-    lag, _ndof_actuated_trajectory) on the same samples as the 1-DOF filter: the plant of
+    lag, ndof_motion.ndof_actuated_trajectory) on the same samples as the 1-DOF filter: the plant of
     the 1-DOF core through the actuator (3x bandwidth, pulse 0.1 at delay 3) in 12 periods
     of the loop on the 1-DOF filter's estimate, x only at sigma 1e-4, T/200, seeded, each
     filter from the same prior; every estimate, covariance and correction k^T z^ of the
