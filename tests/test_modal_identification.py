@@ -190,6 +190,43 @@ def test_seeded_random_chains_are_recovered_within_three_standard_errors():
     print(f"random chains: {beyond} of {z.size} beyond 2 se, std of z {np.std(z):.2f}")
 
 
+def outer_wall_chain() -> NdofModel:
+    """Issue 32's reproduction chain: ground -- spring -- mass 1.5 (x0) -- spring -- mass
+    0.8 (x1, outer), the wall, the forcing and the kick on the outer mass (i_w = i_a = 1),
+    non-proportional dashpots, forced at 0.75 of its first mode, the wall 5 % of d* into
+    the motion."""
+    M, K = np.diag([1.5, 0.8]), np.array([[2.0, -1.0], [-1.0, 1.0]])
+    C = np.array([[0.045, -0.015], [-0.015, 0.015]])
+    w1 = math.sqrt(np.min(np.linalg.eigvals(np.linalg.solve(M, K)).real))
+    model = NdofModel(M, C, K, [0.0, 1.0], 0.75 * w1, 1, r=0.7, i_a=1)
+    return dataclasses.replace(model, delta_d=-0.05 * modal_of(model).d_star)
+
+
+def test_a_chain_with_the_wall_and_the_kick_on_the_outer_mass_is_identified():
+    """i_w = i_a = 1 (the recording is x1's position; the kick's response on x_w is the
+    impact's): random kicks 0.02 N(0, 1) on x1 1.0 after each sample from the second,
+    T/200, 10 periods. Noise-free every parameter and delta_d to 1e-8 relative (measured
+    5.7e-13); sigma 1e-4, seeds 0-3: every one within 3 standard errors (measured
+    largest |z| 1.99)."""
+    model = outer_wall_chain()
+    for seed, sigma in ((0, 0.0), (0, 1e-4), (1, 1e-4), (2, 1e-4), (3, 1e-4)):
+        rng = np.random.default_rng(seed)
+        kicks = 0.02 * rng.standard_normal(10)
+        rec, dv = simulate(model, 10, 200, sigma, seed, kicks=kicks, delay=1.0, on=2)
+        ident = identify_modal(rec, 2, correction_dv=dv, kick_on_wall=True)
+        assert ident.converged and not ident.problem.layout.actuator, seed
+        if sigma == 0.0:
+            true = modal_of(model).vector(ident.problem.layout)
+            err = np.abs(ident.values - true) / np.abs(true)
+            assert np.max(err) < 1e-8, dict(zip(ident.names, err))
+            assert ident.model.delta_d == pytest.approx(model.delta_d, rel=1e-8)
+            print(f"outer-wall chain, noise-free: largest relative error {np.max(err):.1e}")
+            continue
+        assert ident.sigma == pytest.approx(sigma, rel=0.12), seed
+        zs = z_scores(ident, model)
+        assert np.all(np.abs(zs) < 3.0), (seed, dict(zip(ident.names + ("delta_d",), zs)))
+
+
 def test_a_three_mass_model_is_identified_too():
     """n = 3 (a 3-mass chain, forcing on x0 and x2, kicks on x2, the wall 5 % of d* into
     the motion, T/200, 10 periods, random kicks from the third sample): noise-free every

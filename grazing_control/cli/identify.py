@@ -238,6 +238,7 @@ def add_identify_parser(sub) -> None:
                         "default: the bag's parameter record's model_file). n > 1: the wall "
                         "coordinate's modal parameters are fitted (natural frequencies, "
                         "damping ratios, its kick and forcing responses, d, r, delta_d; "
+                        "the stream's position i_w read, any i_w; "
                         "docs/theory_identification.md section 11)")
     s.add_argument("--out-model", type=non_empty_path, metavar="FILE",
                    help="an n-DOF bag: write the identified model as a model file "

@@ -93,22 +93,27 @@ def load_recording(bag, *, topics: dict | None = None, position_only: bool = Fal
     return _load(bag, topics, position_only, impacts)[:3]
 
 
-def _load(bag, topics, position_only, impacts):
+def _load(bag, topics, position_only, impacts, coordinate=None):
     """:func:`load_recording`'s (Recording, notes, record) and the size of each of the
-    recording's corrections (the kicks, for the n-DOF fit)."""
+    recording's corrections (the kicks, for the n-DOF fit). The stream's position is
+    coordinate ``coordinate(record)`` (an n-DOF bag's wall coordinate i_w), 0 when None."""
     topics = dict(TOPICS, **(topics or {}))
     raw = reader.read_raw(bag, topics=list(topics.values()))
     notes = list(raw.problems)
     stream = topics["state"]
+    sim = _sim_parameters(raw, topics["parameters"])
+    c = 0 if coordinate is None else coordinate(sim)
     if raw.count(stream) == 0 and raw.count(topics["state_block"]):
         stream = topics["state_block"]           # sim_node's stream_message block
+        _streamed(bag, stream, 1, c)
         s = reader.decode_state_blocks(raw, stream)
     elif raw.count(stream) == 0:
         raise RecordingError(f"{bag}: no messages on {topics['state']} nor "
                              f"{topics['state_block']} (the state stream; sim_node "
                              "publishes it every state_period > 0)")
     else:
-        s = reader.decode_joint_stream(raw, stream)
+        _streamed(bag, stream, reader.joint_count(raw, stream), c)
+        s = reader.decode_joint_stream(raw, stream, c)
     ok = s["ok"]
     if not np.any(ok):
         raise RecordingError(f"{bag}: no decodable stream sample with a position on "
@@ -133,7 +138,6 @@ def _load(bag, topics, position_only, impacts):
     if not np.all(np.isfinite(e0)):
         raise RecordingError(f"{bag}: the state stream carries no phase reference in "
                              "effort ([cos tau] or [cos tau, sin tau]) on every sample")
-    sim = _sim_parameters(raw, topics["parameters"])
     it = vm = vp = np.zeros(0)
     if impacts and raw.count(topics["impact"]):
         im = reader.decode_vector3_stamped(raw, topics["impact"])
@@ -161,6 +165,17 @@ def _load(bag, topics, position_only, impacts):
         corr_dv = c["dv"][k][first]
     rec = Recording(t, x, v, e0, e1, it, vm, vp, corr)
     return rec, notes, sim, corr_dv
+
+
+def _streamed(bag, stream, count: int, coordinate: int) -> None:
+    """Raise RecordingError (one line naming the coordinates) when the stream's messages
+    carry ``count`` positions, too few for coordinate ``coordinate`` (a sensor of other
+    coordinates than the fitted one: an n-DOF model's wall coordinate i_w)."""
+    if coordinate >= max(count, 1):
+        carried = "coordinate 0" if count <= 1 else f"coordinates 0..{count - 1}"
+        raise RecordingError(f"{bag}: the state stream {stream} carries the position of "
+                             f"{carried} only; the model's wall coordinate i_w={coordinate} "
+                             "is fitted (identification reads the wall coordinate's position)")
 
 
 def _parameters(ident) -> dict:
@@ -198,10 +213,6 @@ def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
     the bag's model file, for ``--out-model``) are removed before printing."""
     from grazing_control.dynamics.identification.modal_fit import identify_modal, modal_verdict
 
-    if model.i_w != 0:
-        raise RecordingError(f"model_file {path}: i_w={model.i_w}: the state stream's "
-                             "wall coordinate is read as position[0]; valid for "
-                             "identification is i_w=0")
     if not impacts or rec.impact_t.size == 0:
         raise IdentificationError(
             f"impacts: {bag} has no recorded impacts on oscillator/impact"
@@ -245,8 +256,15 @@ def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
 
     Raises IdentificationError / RecordingError / reader.BagReadError (bad input).
     """
-    rec, notes, sim, kicks = _load(bag, topics, position_only, impacts)
-    nominal, path = _bag_model(sim, model)
+    found = {}
+
+    def wall(sim):                 # an n-DOF bag's stream is read at its wall coordinate
+        found["model"] = _bag_model(sim, model)
+        nominal = found["model"][0]
+        return nominal.i_w if nominal is not None and nominal.n > 1 else 0
+
+    rec, notes, sim, kicks = _load(bag, topics, position_only, impacts, wall)
+    nominal, path = found["model"]
     if nominal is not None and nominal.n > 1:
         return identify_ndof(bag, rec, notes, sim, kicks, nominal, path, impacts=impacts,
                              max_arcs=max_arcs, shrink=shrink)

@@ -19,7 +19,8 @@ lengths read out of the pool. A message too short for its layout is marked inval
 is counted, never decoded from beyond its end).
 
 Supported decodes: ``sensor_msgs/msg/JointState`` (stamp, position[0], velocity[0]; as a
-state stream also effort[0], effort[1], velocity possibly empty),
+state stream position[i], velocity[i] of any coordinate i, effort[0], effort[1], velocity
+possibly empty),
 ``geometry_msgs/msg/TwistStamped`` (stamp, linear.x), ``geometry_msgs/msg/Vector3Stamped``
 (stamp, vector), ``std_msgs/msg/Float64``, ``std_msgs/msg/String``, and the stream in
 blocks (``std_msgs/msg/Float64MultiArray`` of grazing_control.ros.stream_block, one message
@@ -475,14 +476,18 @@ class _Body:
 
     def first_double(self, pos):
         """(seq[0] or NaN, count, position after) of a sequence<double> at ``pos``."""
+        return self.nth_double(pos, 0)
+
+    def nth_double(self, pos, j: int):
+        """(seq[j] or NaN, count, position after) of a sequence<double> at ``pos``."""
         pos = _align(pos, 4)
         n = np.where(self.ok, self.u32(pos), 0)
         self.ok &= n <= self.end - self.body
         pos = pos + 4
         p8 = _align(pos, 8)
-        has = n > 0
-        val = np.where(has, self.f64(np.where(has, p8, 0)), np.nan)
-        return val, n, np.where(has, p8 + 8 * n, pos)
+        has = n > j
+        val = np.where(has, self.f64(np.where(has, p8 + 8 * j, 0)), np.nan)
+        return val, n, np.where(n > 0, p8 + 8 * n, pos)
 
 
 def decode_stamped(bag: RawBag, topic: str):
@@ -545,15 +550,16 @@ def decode_estimate(bag: RawBag, topic: str) -> dict:
     return _columns(b, stamp=stamp, x=x, v=v, var_x=var_x, cov_xv=cov_xv, var_v=var_v)
 
 
-def decode_joint_stream(bag: RawBag, topic: str) -> dict:
+def decode_joint_stream(bag: RawBag, topic: str, coordinate: int = 0) -> dict:
     """A sensor's state stream (docs/nodes.md, "The sensor stream"): stamp_ns,
-    x = position[0], v = velocity[0] (NaN where the velocity is empty: a position-only
-    sensor), e0, e1 = effort[0], effort[1] (the phase reference cos tau, sin tau; NaN
-    where absent), times, ok (a message without a position is not ok)."""
+    x = position[coordinate], v = velocity[coordinate] (NaN where the velocity is empty:
+    a position-only sensor), e0, e1 = effort[0], effort[1] (the phase reference cos tau,
+    sin tau; NaN where absent), times, ok (a message without that position is not ok).
+    ``coordinate`` > 0: an n-DOF scene's stream, one position per coordinate (issue 32)."""
     b, stamp, pos = decode_stamped(bag, topic)
     pos = b.skip_strings(pos)
-    x, nx, pos = b.first_double(pos)
-    v, nv, pos = b.first_double(pos)
+    x, nx, pos = b.nth_double(pos, coordinate)
+    v, nv, pos = b.nth_double(pos, coordinate)
     pe = _align(pos, 4)
     ne = np.where(b.ok, b.u32(pe), 0)
     b.ok &= ne <= b.end - b.body
@@ -561,8 +567,8 @@ def decode_joint_stream(bag: RawBag, topic: str) -> dict:
     has1, has2 = ne > 0, ne > 1
     e0 = np.where(has1, b.f64(np.where(has1, p8, 0)), np.nan)
     e1 = np.where(has2, b.f64(np.where(has2, p8 + 8, 0)), np.nan)
-    b.ok &= nx > 0
-    return _columns(b, stamp=stamp, x=x, v=np.where(nv > 0, v, np.nan), e0=e0, e1=e1)
+    b.ok &= nx > coordinate
+    return _columns(b, stamp=stamp, x=x, v=np.where(nv > coordinate, v, np.nan), e0=e0, e1=e1)
 
 
 def decode_state_blocks(bag: RawBag, topic: str) -> dict:

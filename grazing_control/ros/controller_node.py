@@ -178,10 +178,6 @@ class ControllerNode(Node):
                     {**self._values(), "omega": self.ndof.model.omega})
                 self.pulse = pulse_from_values(pulse, self.ndof.model.omega,
                                                self.actuation_delay)
-                if self.pulse[2] is not None:
-                    raise ParameterError("actuator_bandwidth and actuator_latency are invalid "
-                                         "with model_file: valid is 0 (the first-order "
-                                         "actuator is not built for n-DOF)")
                 self.model = self.capture = None
                 self.stream = model_stream_from_values(self._values(), self.ndof, self.pulse)
                 if self.stream is not None:     # the section times and the phase check
@@ -440,7 +436,9 @@ class ControllerNode(Node):
             if not self.ndof.predicts:
                 return math.nan
             try:
-                xn, vn = self.ndof.predict(x, v, dv, self.actuation_delay, self.pulse)
+                force0 = (self.stream.section_force(self.stream.next_k - 1)
+                          if self.stream is not None and self.stream.next_k else 0.0)
+                xn, vn = self.ndof.predict(x, v, dv, self.actuation_delay, self.pulse, force0)
             except (ValueError, ArithmeticError, RuntimeError):
                 return math.nan
             return self.law.preview(xn, vn)

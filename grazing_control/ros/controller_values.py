@@ -359,13 +359,15 @@ class ModelController:
         """The model's exact flow (``NdofFlow``)."""
         return self.section.flow
 
-    def predict(self, x, v, dv: float, delay: float, pulse: tuple = (0.0, math.inf)):
+    def predict(self, x, v, dv: float, delay: float, pulse: tuple = (0.0, math.inf),
+                force0: float = 0.0):
         """The Pi2 sample after (x, v) with ``dv`` acting ``delay`` after it: one exact
         period of the model (the plant engine's calls, plant.engine); ``pulse`` (width,
-        force limit): the correction as the force pulse of that width centred ``delay``
-        after the sample (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`,
-        docs/theory_ndof.md section 15). Returns (x', v')."""
-        from grazing_control.dynamics.maps.ndof_map import pulse_step
+        force limit[, actuator]): the correction as the force pulse of that width centred
+        ``delay`` after the sample (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`,
+        docs/theory_ndof.md section 15), through the first-order actuator from the force
+        ``force0`` at the section where one is given (``actuated_step``). Returns (x', v')."""
+        from grazing_control.dynamics.maps.ndof_map import actuated_step, pulse_step
         from grazing_control.dynamics.simulation.actuation import pulse_start
 
         sec, f = self.section, self.section.flow
@@ -373,6 +375,13 @@ class ModelController:
         z = f.to_deviation(f.tau2, np.concatenate([np.asarray(x, float), np.asarray(v, float)]))
         tau = f.tau2
         width, limit = pulse[0], pulse[1]
+        act = pulse[2] if len(pulse) > 2 else None
+        if act is not None:
+            z = actuated_step(f, z, force0, dv, start=pulse_start(sec.period, delay, width),
+                              width=width, time_constant=act.time_constant,
+                              latency=act.latency, force_limit=limit)[0]
+            X = f.to_physical(f.tau2, z)
+            return X[:n], X[n:]
         if width > 0.0:
             z = pulse_step(f, z, dv, start=pulse_start(sec.period, delay, width), width=width,
                            force_limit=limit).state
@@ -443,8 +452,9 @@ def model_stream_from_values(values: dict, ndof: ModelController,
     controller's model, docs/theory_estimation.md (E11)) reading coordinate
     ``sensor_coordinate``; it needs the plant's ``delta_d`` (``ndof.predicts``), the
     estimator ``model``, ``sensor_noise`` > 0 and impacts detected in the stream.
-    ``pulse``: (width, force limit) of the plant's force pulse (:func:`pulse_from_values`;
-    its trajectory is the filter's, docs/theory_ndof.md section 15), (0, inf): the kick."""
+    ``pulse``: (width, force limit[, actuator]) of the plant's force pulse
+    (:func:`pulse_from_values`; its trajectory, through the first-order actuator where one
+    is given, is the filter's, docs/theory_ndof.md section 15), (0, inf): the kick."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
 
     source = values.get("pi2_source", "sample")
@@ -478,4 +488,5 @@ def model_stream_from_values(values: dict, ndof: ModelController,
                            float(values.get("answer_lead", 0.0)),
                            kernel=False,     # the n-DOF motion is the core's (E11)
                            coordinate=int(values.get("sensor_coordinate", 0)),
-                           pulse_width=pulse[0], force_limit=pulse[1])
+                           pulse_width=pulse[0], force_limit=pulse[1],
+                           actuator=pulse[2] if len(pulse) > 2 else None)

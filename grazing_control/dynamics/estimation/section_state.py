@@ -49,10 +49,6 @@ import numpy as np
 from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
-from grazing_control.oscillator.ndof import impact as ndof_impact
-from grazing_control.oscillator.ndof.flow import NdofFlow
-from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_flow,
-                                                    static_deflection)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -340,17 +336,24 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     outputs are the same as without it, bit for bit.
 
     With an n-DOF model for ``p`` (:class:`~grazing_control.oscillator.ndof.model.NdofModel`)
-    it is the exact n-DOF motion (:func:`_ndof_trajectory`): z (m, 2n), jac (m, 2n, 2n),
-    end (2n,), monodromy (2n, 2n), the same impacts; the kick or the ideal force pulse
-    of ``width`` (no actuator or wall sensitivity).
+    it is the exact n-DOF motion (:mod:`.ndof_motion`, :func:`ndof_trajectory`): z (m, 2n),
+    jac (m, 2n, 2n),
+    end (2n,), monodromy (2n, 2n), the same impacts; the kick or the force pulse of
+    ``width``, through the first-order ``actuator`` from ``force0``
+    (:func:`ndof_actuated_trajectory`); no wall sensitivity.
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
     if isinstance(p, NdofModel):
-        if wall or actuator is not None:
-            raise ParameterError("wall and actuator are invalid for an n-DOF model: its "
-                                 "correction is the velocity kick or the ideal force pulse")
-        return _ndof_trajectory(p, z0, s, correction, delay, duration, width, force_limit)
+        from .ndof_motion import ndof_actuated_trajectory, ndof_trajectory
+
+        if wall:
+            raise ParameterError("wall=True is invalid for an n-DOF model: valid is False "
+                                 "(no wall sensitivity for n > 1)")
+        if actuator is not None and not (actuator.ideal and force0 == 0.0):
+            return ndof_actuated_trajectory(p, z0, s, correction, delay, duration, width,
+                                            force_limit, actuator, force0)
+        return ndof_trajectory(p, z0, s, correction, delay, duration, width, force_limit)
     if actuator is not None and not (actuator.ideal and force0 == 0.0):
         return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
                                     force_limit, actuator, force0)
@@ -455,84 +458,6 @@ def _compiled_samples(p, events, times, s, end, m, g, impacts, wall):
     return out, jac, end, m, impacts
 
 
-@functools.lru_cache(maxsize=8)
-def _ndof_flow(model: NdofModel) -> NdofFlow:
-    """The model's exact flow, built once per model."""
-    return NdofFlow.of(model)
-
-
-def _ndof_transitions(flow: NdofFlow, h) -> np.ndarray:
-    """Phi(h_j) = Re(V e^{Lambda h_j} U) for an array of times: (m, 2n, 2n)
-    (:meth:`NdofFlow.transition`, vectorised)."""
-    e = np.exp(np.multiply.outer(np.asarray(h, dtype=float), flow.eigenvalues))
-    return np.einsum("ik,mk,kj->mij", flow.modes, e, flow.inverse).real
-
-
-def _ndof_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
-                     duration: float, width: float = 0.0, force_limit: float = math.inf):
-    """:func:`trajectory` of the n-DOF oscillator (docs/theory_estimation.md, (E11)): from
-    the Pi2 deviation z0 (2n) before the correction, the kick v_{i_a} += correction at
-    ``delay``; between events z(s) = Phi(s - s_e) z_e, d z(s) / d z0 = Phi(s - s_e) M_e,
-    and an impact at t_i (from :func:`grazing_control.oscillator.ndof.impact.advance`)
-    puts z- = Phi(t_i - s_e) z_e on the wall with its v-, z+ with v+ (the other
-    velocities unchanged) and M <- S Phi(t_i - s_e) M (S the saltation matrix).
-
-    With ``width`` > 0 the correction is the force pulse F = m_a correction / width
-    (clipped to +-``force_limit``) on the actuated coordinate, centred at ``delay``
-    (:func:`correction_legs`; docs/theory_ndof.md section 15): during it the deviation
-    less the static deflection sigma F obeys the free flow against the wall at
-    Delta d - sigma_w F (oscillator/ndof/forced.py), so z(s) = Phi(s - s_e)(z_e - sigma F)
-    + sigma F and the saltation matrices are the shifted flow's; F does not depend on z0
-    (the correction is known), so the Jacobian keeps its form.
-    A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError."""
-    flow = _ndof_flow(model)
-    n, w = model.n, model.i_w
-    z = np.array(z0, dtype=float).reshape(-1)
-    if z.shape != (2 * n,):
-        raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
-    m = np.eye(2 * n)
-    events, impacts = [], []
-    ma = actuated_mass(flow) if width > 0.0 else 1.0
-    legs = correction_legs(correction, delay, duration, width, force_limit / ma)
-    for start, end, kick, force in legs:
-        force *= ma
-        z = z.copy()
-        z[n + model.i_a] += kick
-        fl = forced_flow(flow, force)
-        shift = static_deflection(flow) * force if force else np.zeros(2 * n)
-        events.append((start, z - shift, m, shift))
-        try:
-            seg = ndof_impact.advance(fl, (flow.tau2 + model.omega * start) % TWO_PI,
-                                      z - shift, end - start)
-        except ndof_impact.ChatteringError as exc:
-            raise ValueError(f"the model's motion chatters or sticks: no fit ({exc})") from None
-        t_e, z_e = start, z - shift
-        for imp in seg.impacts:
-            if imp.sticking:   # issue 32: advance sticks instead of raising
-                raise ValueError(f"the model's motion sticks at t={start + imp.dt:.9g}: no fit")
-            ti = start + imp.dt
-            phi = flow.transition(ti - t_e)
-            wall_x, rest_v = fl.on_wall(imp.phase)
-            z_minus = phi @ z_e
-            z_minus[w], z_minus[n + w] = wall_x, imp.v_minus + rest_v
-            m = ndof_impact.saltation_matrix(fl, imp.phase, z_minus) @ phi @ m
-            z_e = z_minus.copy()
-            z_e[n + w] = imp.v_plus + rest_v
-            t_e = ti
-            events.append((ti, z_e, m, shift))
-            impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
-        m = flow.transition(end - t_e) @ m
-        z = np.array(seg.z, dtype=float) + shift
-    times = np.array([e[0] for e in events])
-    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
-    phi = _ndof_transitions(flow, s - times[idx])
-    out = np.einsum("mij,mj->mi", phi, np.array([e[1] for e in events])[idx])
-    if width > 0.0:
-        out = out + np.array([e[3] for e in events])[idx]
-    jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
-    return out, jac, z, m, impacts
-
-
 def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration: float,
                   width: float, force_limit: float, actuator) -> list:
     """The period (0, ``duration``] through ``actuator`` as legs (start, end, command):
@@ -563,6 +488,11 @@ def section_force(p: OscillatorParams, force0: float, correction: float, delay: 
     duration = p.period if duration is None else float(duration)
     f = float(force0)
     tau_a = actuator.time_constant
+    if isinstance(p, NdofModel):        # the command is the force m_a Delta v / w
+        from .ndof_motion import ndof_flow
+        from grazing_control.oscillator.ndof.forced import actuated_mass
+
+        correction = actuated_mass(ndof_flow(p)) * correction
     for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
                                        actuator):
         if end > start:

@@ -398,8 +398,7 @@ class StreamEstimator:
                     new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
                                                 at - (k - 1) * T, floor=self.floor,
                                                 coordinate=self.coordinate,
-                                                width=self.pulse[0],
-                                                force_limit=self.pulse[1])
+                                                **self.correction_shape(k - 1))
                 except (ValueError, np.linalg.LinAlgError, ArithmeticError):
                     continue
                 if chi2 <= n + CHI2_SIGMAS * math.sqrt(2.0 * n):
