@@ -201,6 +201,30 @@ def test_grazing_run_with_a_model_gives_both_nodes_the_file(tmp_path):
     assert "zeta" not in values and "delta_d" not in values and values["max_periods"] == 1200
 
 
+def test_an_actuated_designs_gain_file_gives_both_nodes_its_actuator(tmp_path):
+    """`grazing design --model M --pulse-width W --actuator-bandwidth B --actuator-latency
+    L --out F` writes the nodes' own parameter names, and the launcher gives the simulator
+    the design's actuator with its pulse: the file once said ``actuator_time_constant``,
+    which no node declares, and the simulator got the pulse alone, so the scene ran the
+    ideal pulse with the actuator's gains (203 impacts in 400 periods, the controller's
+    filter reset 390 times; with this, 394 impacts, 1 per period at the end, 0 resets)."""
+    import yaml
+
+    from grazing_control.dynamics.design.ndof_design import pulse_design
+
+    gains = tmp_path / "gains.yaml"
+    write_gain_yaml(gains, MODEL, pulse_design(MODEL, -0.22, 1.0, 1.0, 0.1, 0.05), SCENE)
+    par = yaml.safe_load(gains.read_text())["/**"]["ros__parameters"]
+    assert "actuator_time_constant" not in par
+    assert (par["actuator_bandwidth"], par["actuator_latency"]) == (1.0 / 0.1, 0.05)
+    over = scene_nodes.scene_overrides(gains, model=SCENE)
+    assert (over["sim_node"]["pulse_width"], over["sim_node"]["actuator_bandwidth"],
+            over["sim_node"]["actuator_latency"]) == (1.0, 1.0 / 0.1, 0.05)
+    mine = scene_nodes.scene_overrides(gains, model=SCENE,
+                                       sim_overrides={"actuator_latency": 0.0})
+    assert mine["sim_node"]["actuator_latency"] == 0.0           # the user's word wins
+
+
 def test_the_launch_file_runs_an_n_dof_scene_from_the_same_description(tmp_path,
                                                                           monkeypatch):
     """launch/grazing_control.launch.py's scene with ``model`` (launch and launch_ros are

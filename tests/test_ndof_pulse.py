@@ -267,8 +267,8 @@ def test_pulse_design_entry_point_and_gain_file(tmp_path):
     assert np.array_equal(nd.pulse_design(m, 0.1, 4.0).gains, nd.gain_family(m, 0.1, 4.0))
     nd.write_gain_yaml(tmp_path / "k.yaml", m, d, CHAIN)
     par = yaml.safe_load((tmp_path / "k.yaml").read_text())["/**"]["ros__parameters"]
-    assert (par["actuation_delay"], par["pulse_width"], par["actuator_time_constant"],
-            par["actuator_latency"]) == (4.0, 1.0, 0.2, 0.1)
+    assert (par["actuation_delay"], par["pulse_width"], par["actuator_bandwidth"],
+            par["actuator_latency"]) == (4.0, 1.0, 1.0 / 0.2, 0.1)
 
 
 def test_pulses_that_do_not_fit_are_refused_naming_the_width():

@@ -122,7 +122,8 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     - sim_node: exits when done, waits for its controller (and, recording, for the
       recorder's ``recorder/ready`` and one subscriber per topic), ``max_periods``,
       ``delta_d``, ``mode``, and the design's ``actuation_delay`` (and ``pulse_width``,
-      a pulsed n-DOF design's: ``grazing design --model M --pulse-width W``) from the
+      a pulsed n-DOF design's: ``grazing design --model M --pulse-width W``, with a model
+      file also its ``actuator_bandwidth`` and ``actuator_latency``) from the
       controller's parameters (a simulator applying another delay refuses to start);
     - controller_node: ``enable_after``; the plant's ``delta_d``, ``sensor_noise``,
       ``state_period`` and ``stream_message`` when the simulator's are set (its
@@ -167,6 +168,13 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     width = controller.get("pulse_width", _controller_values(controller_params).get("pulse_width"))
     if isinstance(width, (int, float)) and not isinstance(width, bool) and width > 0.0:
         sim["pulse_width"] = float(width)   # and a pulsed design's pulse (n-DOF, §15)
+        if model is not None:               # and its actuator (the n-DOF gain file's)
+            values = _controller_values(controller_params)
+            for key in ("actuator_bandwidth", "actuator_latency"):
+                value = controller.get(key, values.get(key))
+                if isinstance(value, (int, float)) and not isinstance(value, bool) \
+                        and value > 0.0:
+                    sim[key] = float(value)
     sim.update(sim_overrides or {})
     for key in ("delta_d", "sensor_noise", "state_period",   # the controller's model of
                 "stream_message"):                           # the plant and its sensor

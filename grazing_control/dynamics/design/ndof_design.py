@@ -650,10 +650,15 @@ def controller_parameters(model: NdofModel, design: NdofDesign, model_file) -> d
 
 def actuation_parameters(delay) -> dict:
     """The gain file's actuation entries: ``actuation_delay`` (when not 0), and for a
-    pulse ``pulse_width``, ``actuator_time_constant``, ``actuator_latency`` (§15)."""
+    pulse ``pulse_width``, ``actuator_bandwidth`` (1 / tau_a, 0 for the ideal pulse) and
+    ``actuator_latency`` (§15): the nodes' own parameter names, so that controller_node
+    reads them from the file and the launcher gives them to the simulator (the file once
+    said ``actuator_time_constant``, which no node declares: the scene ran the ideal
+    pulse with the actuator's gains, 203 impacts in 400 periods)."""
     if isinstance(delay, Actuation):
+        tau = delay.time_constant
         return {"actuation_delay": delay.delay, "pulse_width": delay.width,
-                "actuator_time_constant": delay.time_constant,
+                "actuator_bandwidth": 1.0 / tau if tau > 0.0 else 0.0,
                 "actuator_latency": delay.latency}
     return {"actuation_delay": float(delay)} if delay != 0.0 else {}
 
