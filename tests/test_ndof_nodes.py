@@ -468,6 +468,22 @@ def test_a_two_mass_pulsed_stream_scene_is_the_cores_closed_loop_on_the_same_sam
                                   np.array([tuple(s.position) for s in stream[:m]]))
     # captured: one impact per period on the controlled orbit, the estimate within 5 sigma
     assert counts[-15:] == [1] * 15, counts
+    # grazing analyze of the bag (issue 32): each period re-integrated as the plant ran it
+    # (the pulse; the actuator with its force carried) at rounding, and the controlled
+    # orbit of that map found (it was "3.65e-01" and "no controlled 1/1 orbit found")
+    report = analyze([bag], tmp_path / "report")
+    s = report["bags"][0]["scenes"][0]
+    mc, pred = s["model_check"], s["predicted"]
+    assert mc["periods"] >= n - 1 and mc["failed"] == 0
+    assert mc["max_departure"] <= 1e-10, mc
+    assert "orbit_pi2" in pred, pred
+    assert pred["orbit_impacts"] == 1 and pred["rho"] < 1.0, pred
+    assert len(pred["multipliers"]) == 2 * model.n + (actuator is not None)
+    assert s["final_vs_exact_orbit"] < 5e-2, s["final_vs_exact_orbit"]
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "force pulse of width 1" in text and "no controlled 1/1 orbit" not in text
+    print(f"analyze: model check {mc['max_departure']:.1e}, orbit rho {pred['rho']:.4f}, "
+          f"final vs orbit {s['final_vs_exact_orbit']:.1e}")
     if actuator is not None:       # the lag's controlled orbit: the last Pi2 states agree
         last = np.array([tuple(q.position) + tuple(q.velocity) for q in pi2[n - 10:n]])
         assert np.max(np.abs(last - last.mean(axis=0))) < 5e-2   # measured 1.3e-2

@@ -276,6 +276,9 @@ class NdofSetup:
     actuation_delay: float
     mode: str
     notes: list = field(default_factory=list)
+    pulse_width: float = 0.0      # the simulator's force pulse (0: the kick)
+    force_limit: float = 0.0      # 0: none
+    actuator: object | None = None  # the simulator's first-order actuator (None: ideal)
 
 
 def is_ndof(data) -> bool:
@@ -327,66 +330,197 @@ def ndof_setup(data) -> NdofSetup:
         if len(seq) > 1:
             notes.append(f"{name} parameters changed during the run; the analysis uses the "
                          "values at start")
+    from .numbers import _actuator
+
+    width = _number(sim.get("pulse_width"), 0.0)
+    limit = _number(sim.get("force_limit"), 0.0)
     return NdofSetup(path, model, n, gains, enable_after,
                      _number(ctl.get("saturation"), math.inf),
                      _number(ctl.get("actuation_delay"), 0.0),
-                     str(sim.get("mode") or "lockstep"), notes)
+                     str(sim.get("mode") or "lockstep"), notes,
+                     width if math.isfinite(width) and width > 0.0 else 0.0,
+                     limit if math.isfinite(limit) and limit > 0.0 else 0.0,
+                     _actuator(sim, notes) if width > 0.0 else None)
 
 
-def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None:
-    """Each recorded period re-integrated from its recorded sample and correction: the
-    largest departure from the next recorded sample (module docstring)."""
+def ndof_period(setup: NdofSetup):
+    """The plant's period as the simulator ran it (:mod:`grazing_control.plant.engine`):
+    ``step(z, force, correction) -> (z', force', impacts)`` on Pi2 deviations, the
+    correction the kick ``actuation_delay`` after the sample, or with ``pulse_width`` > 0
+    the force pulse centred there
+    (:func:`~grazing_control.dynamics.maps.ndof_map.pulse_step`), through the simulator's
+    first-order actuator when it had one
+    (:func:`~grazing_control.dynamics.maps.ndof_map.actuated_step`, the force on the
+    actuated coordinate at the section carried from period to period; docs/theory_ndof.md
+    section 15). ``force`` is 0 except through an actuator with a lag."""
+    from grazing_control.dynamics.maps.ndof_map import actuated_step, pulse_step
+    from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.oscillator.ndof.flow import NdofFlow
     from grazing_control.oscillator.ndof.impact import advance
 
     m = setup.model
-    if m is None or len(scene.t) < 2:
-        return None
     flow = NdofFlow.of(m)
-    n, T, delay = m.n, m.period, setup.actuation_delay
-    periods = min(len(scene.t) - 1, limit)
-    worst, above, failed = 0.0, 0, 0
-    for k in range(periods):
-        if not math.isclose(scene.t[k + 1] - scene.t[k], T, rel_tol=0.0, abs_tol=1e-6):
-            continue        # a gap in the recording: no next sample of this period
-        z = flow.to_deviation(flow.tau2, scene.pi2[k])
-        try:
-            tau = flow.tau2
+    n, T, delay, w = m.n, m.period, setup.actuation_delay, setup.pulse_width
+    limit = setup.force_limit or math.inf
+    start = pulse_start(T, delay, w)
+    act = setup.actuator
+    if w > 0.0 and act is not None:
+        def step(z, force, dv):
+            return actuated_step(flow, z, force, dv, start=start, width=w,
+                                 time_constant=act.time_constant, latency=act.latency,
+                                 force_limit=limit)
+    elif w > 0.0:
+        def step(z, force, dv):
+            out = pulse_step(flow, z, dv, start=start, width=w, force_limit=limit)
+            return out.state, 0.0, list(out.impacts)
+    else:
+        def step(z, force, dv):
+            tau, impacts = flow.tau2, []
             if delay > 0.0:
-                z = advance(flow, tau, z, delay).z
+                head = advance(flow, tau, z, delay)
+                z, impacts = head.z, list(head.impacts)
                 tau = (tau + m.omega * delay) % (2.0 * math.pi)
             z = np.array(z, dtype=float)
-            z[n + m.i_a] += scene.correction[k]
-            z = advance(flow, tau, z, T - delay).z
+            z[n + m.i_a] += dv
+            tail = advance(flow, tau, z, T - delay)
+            return tail.z, 0.0, impacts + list(tail.impacts)
+    return flow, step
+
+
+def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None:
+    """Each recorded period re-integrated from its recorded sample and correction by the
+    plant's period (:func:`ndof_period`): the largest departure from the next recorded
+    sample (module docstring). Through an actuator with a lag the force at the section is
+    not recorded: it is carried from 0 at the first sample (exact for a scene recorded
+    from its start: the force follows the commands alone), and after a gap in the
+    recording the later periods are not checked (``unchecked``)."""
+    m = setup.model
+    if m is None or len(scene.t) < 2:
+        return None
+    flow, step = ndof_period(setup)
+    T = m.period
+    periods = min(len(scene.t) - 1, limit)
+    worst, above, failed, unchecked, force = 0.0, 0, 0, 0, 0.0
+    for k in range(periods):
+        if force is None:
+            unchecked += 1
+            continue
+        if not math.isclose(scene.t[k + 1] - scene.t[k], T, rel_tol=0.0, abs_tol=1e-6):
+            # a gap in the recording: no next sample of this period, the force lost
+            force = 0.0 if setup.actuator is None else None
+            continue
+        z = flow.to_deviation(flow.tau2, scene.pi2[k])
+        try:
+            z, force, _ = step(z, force, float(scene.correction[k]))
         except (ValueError, ArithmeticError, RuntimeError):
             failed += 1
+            force = 0.0 if setup.actuator is None else None
             continue
         d = float(np.max(np.abs(flow.to_physical(flow.tau2, z) - scene.pi2[k + 1])))
         worst = max(worst, d)
         above += d > 1e-12
-    return {"max_departure": worst, "periods": periods, "periods_above_1e-12": int(above),
-            "periods_in_scene": len(scene.t) - 1, "failed": failed}
+    out = {"max_departure": worst, "periods": periods, "periods_above_1e-12": int(above),
+           "periods_in_scene": len(scene.t) - 1, "failed": failed,
+           "correction": _actuation_text(setup)}
+    if setup.actuator is not None:
+        out["unchecked"] = unchecked
+        out["final_force"] = force
+    return out
 
 
-def ndof_controlled_orbit(setup: NdofSetup, final) -> dict:
-    """The exact controlled 1/1 orbit near the final sample, its multipliers and impacts."""
+def _actuation_text(setup: NdofSetup) -> str:
+    """How the correction acted (for the report): the kick, the pulse, the actuator."""
+    d, w, a = setup.actuation_delay, setup.pulse_width, setup.actuator
+    if w <= 0.0:
+        return f"the kick {d:g} after the sample"
+    text = f"a force pulse of width {w:g} centred {d:g} after the sample"
+    if setup.force_limit:
+        text += f", clipped to ±{setup.force_limit:g}"
+    if a is not None:
+        text += (f", through the first-order actuator (tau_a {a.time_constant:.6g}, latency "
+                 f"{a.latency:g}; the force carried from period to period)")
+    return text
+
+
+def _actuated_orbit(setup: NdofSetup, z0, force0: float | None, tol: float = 1e-13,
+                    max_iter: int = 40):
+    """The fixed point of the closed loop z -> step(z, k^T z) of :func:`ndof_period`,
+    through an actuator with a lag on (z, F) (the force at the section a state of the
+    loop, dimension 2n + 1; ``force0`` its guess, None without a lag), by Newton with a
+    central-difference Jacobian (actuated_step, and pulse_step with a force limit, have
+    none). Returns (y, that Jacobian at y, impacts)."""
+    _, step = ndof_period(setup)
+    g, n2 = setup.gains, len(z0)
+    carry = force0 is not None
+    dim = n2 + carry
+
+    def loop(y):
+        z, f, imps = step(y[:n2], float(y[n2]) if carry else 0.0, float(g @ y[:n2]))
+        z = np.asarray(z, float)
+        return (np.append(z, f) if carry else z), imps
+
+    def jac(y):
+        J = np.empty((dim, dim))
+        for j in range(dim):
+            h = 1e-7 * max(1.0, abs(y[j]))
+            e = np.zeros(dim)
+            e[j] = h
+            J[:, j] = (loop(y + e)[0] - loop(y - e)[0]) / (2.0 * h)
+        return J
+
+    y = np.asarray(z0, float) if not carry else np.append(np.asarray(z0, float),
+                                                           float(force0))
+    for _ in range(max_iter):
+        fy, _ = loop(y)
+        J = jac(y)
+        dy = np.linalg.solve(J - np.eye(dim), -(fy - y))
+        y = y + dy
+        if np.max(np.abs(dy)) <= tol * max(1.0, float(np.max(np.abs(y)))):
+            fy, imps = loop(y)
+            if np.max(np.abs(fy - y)) > 1e-10:
+                break
+            return y, jac(y), imps
+    raise RuntimeError(f"Newton on the actuated loop did not converge in {max_iter} steps")
+
+
+def ndof_controlled_orbit(setup: NdofSetup, final, force: float | None = None) -> dict:
+    """The exact controlled 1/1 orbit near the final sample, its multipliers and impacts:
+    the fixed point of the plant's period (:func:`ndof_period`) with the recorded gains,
+    the kick or the pulse by Newton shooting on
+    :class:`~grazing_control.dynamics.maps.ndof_map.NdofMap` (``width``), through an
+    actuator with a lag on (z, F) (:func:`_actuated_orbit`, ``force`` the guess of F)."""
     from grazing_control.dynamics.maps.ndof_map import NdofMap
     from grazing_control.dynamics.orbits.shooting import ShootingFailed, find_periodic
 
     if setup.model is None or setup.gains is None:
         return {"note": "no model or gains: no predicted orbit"}
-    P = NdofMap(setup.model, setup.gains, setup.actuation_delay)   # the kick at the delay
+    a = setup.actuator
+    lag = a is not None and a.time_constant > 0.0
+    # NdofMap has neither a force limit nor a latency: those loops through ndof_period
+    newton = lag or (setup.pulse_width > 0.0 and (setup.force_limit or a is not None))
+    P = NdofMap(setup.model, setup.gains, setup.actuation_delay)   # its section
     xref = P.flow.particular(P.flow.tau2)
+    z0 = np.asarray(final, float) - xref
     try:
-        orbit = find_periodic(P, np.asarray(final, float) - xref)
-    except (ShootingFailed, ValueError, ArithmeticError, RuntimeError) as exc:
+        if newton:
+            y, J, imps = _actuated_orbit(setup, z0, (force or 0.0) if lag else None)
+            state, mult = y[:len(z0)], np.linalg.eigvals(J)
+        else:
+            P = NdofMap(setup.model, setup.gains, setup.actuation_delay, setup.pulse_width)
+            orbit = find_periodic(P, z0)
+            state, imps, mult = orbit.state, orbit.impacts, np.linalg.eigvals(orbit.monodromy)
+    except (ShootingFailed, ValueError, ArithmeticError, RuntimeError,
+            np.linalg.LinAlgError) as exc:
         return {"error": f"no controlled 1/1 orbit found from the final sample ({exc})"}
-    mult = np.linalg.eigvals(orbit.monodromy)
     mult = mult[np.argsort(-np.abs(mult))]
-    return {"orbit_pi2": (xref + orbit.state).tolist(), "rho": float(np.abs(mult).max()),
-            "multipliers": [[float(z.real), float(z.imag)] for z in mult],
-            "orbit_impacts": len(orbit.impacts),
-            "orbit_v_minus": [float(i.v_minus) for i in orbit.impacts]}
+    out = {"orbit_pi2": (xref + state).tolist(), "rho": float(np.abs(mult).max()),
+           "multipliers": [[float(z.real), float(z.imag)] for z in mult],
+           "orbit_impacts": len(imps),
+           "orbit_v_minus": [float(i.v_minus) for i in imps],
+           "correction": _actuation_text(setup)}
+    if lag:
+        out["orbit_force"] = float(y[-1])
+    return out
 
 
 def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
@@ -421,7 +555,9 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
                            "saturation_hits": int(np.count_nonzero(
                                np.abs(scene.correction) >= setup.saturation))}}
     out["measured_contraction"] = measured_contraction(scene.pi2, on)
-    pred = ndof_controlled_orbit(setup, scene.pi2[-1]) if on is not None and len(scene.t) else {}
+    check = ndof_model_check(setup, scene)
+    pred = ndof_controlled_orbit(setup, scene.pi2[-1], (check or {}).get("final_force")) \
+        if on is not None and len(scene.t) else {}
     out["predicted"] = pred
     if "orbit_pi2" in pred:
         d = np.abs(scene.pi2[-1] - np.asarray(pred["orbit_pi2"]))
@@ -430,7 +566,7 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
         rho = (out["measured_contraction"] or {}).get("rho")
         if rho:
             out["contraction_relative_error"] = abs(rho - pred["rho"]) / pred["rho"]
-    out["model_check"] = ndof_model_check(setup, scene)
+    out["model_check"] = check
     return out
 
 
@@ -456,7 +592,10 @@ def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> l
     if n["control_on_sample"] is not None:
         lines.append(f"* impacts per period at the end: {fmt(n['final_impacts_per_period'])}")
     if "final_vs_exact_orbit" in n:
-        lines.append("* final Π2 sample vs the exact controlled 1/1 orbit: max "
+        lines.append("* final Π2 sample vs the exact controlled 1/1 orbit (the correction "
+                     f"as {pred.get('correction', 'the kick')}"
+                     + (f"; the actuator's force there {pred['orbit_force']:.6g}"
+                        if "orbit_force" in pred else "") + "): max "
                      f"{n['final_vs_exact_orbit']:.2e}; per coordinate " + "; ".join(
                          f"{c} {n['final_pi2'][c]:.12g} (orbit {o:.12g}, |Δ| {d:.1e})"
                          for (c, d), o in zip(n["final_vs_exact_orbit_per_coordinate"].items(),
@@ -468,10 +607,13 @@ def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> l
     mc = n.get("model_check")
     if mc:
         lines.append(f"* model check: each recorded period re-integrated by the n-DOF core "
-                     f"from the recorded sample and correction departs from the next "
+                     f"from the recorded sample and correction (as "
+                     f"{mc.get('correction', 'the kick')}) departs from the next "
                      f"recorded sample by at most {mc['max_departure']:.2e} "
                      f"({mc['periods_above_1e-12']} of {mc['periods']} periods above 1e-12"
                      + (f", {mc['failed']} could not be re-integrated" if mc["failed"] else "")
+                     + (f", {mc['unchecked']} not checked after a gap (the actuator's force "
+                        "unknown)" if mc.get("unchecked") else "")
                      + ")")
     lines.append("")
     return lines
