@@ -39,6 +39,12 @@ Per scene (:func:`summarize` over the whole state, then):
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
   :mod:`grazing_control.plant.engine`), the largest departure from the next
   recorded sample (rounding level for a lockstep run).
+
+The correction acts as the plant acted it (:func:`ndof_period`, from the simulator's
+record: ``pulse_width``, ``force_limit``, ``actuator_bandwidth``, ``actuator_latency``;
+issue 32): the kick, the force pulse, or the pulse through the first-order actuator with
+the force carried from period to period; the controlled orbit is that map's fixed point
+(through a lag on (z, F), :func:`_actuated_orbit`).
 """
 
 from __future__ import annotations
