@@ -129,6 +129,14 @@ def publish_all(node, recorder, n, topics=tuple(DEFAULT_TOPICS), matches=None):
     return sent
 
 
+def _size(path) -> int:
+    """The file's size, 0 while it does not exist."""
+    try:
+        return path.stat().st_size
+    except FileNotFoundError:
+        return 0
+
+
 def stop(recorder, signum):
     recorder.send_signal(signum)
     try:
@@ -514,6 +522,13 @@ def test_sigkilled_recording_opens_in_every_reader_after_reindex(tmp_path, isola
                               "compression:=none", "chunk_size:=4096")
     try:
         sent = publish_all(ros, recorder, 400, topics=["oscillator/pi2"])
+        # acknowledged is received by the recorder's reader, not yet written: the kill
+        # waits for complete chunks on disk (a fresh clone once killed it before the
+        # recorder had taken any: 0 messages after the reindex)
+        deadline = time.monotonic() + 15.0
+        while _size(bag / "killed_0.mcap") < 3 * 4096:
+            assert time.monotonic() < deadline, "no complete chunk written in 15 s"
+            time.sleep(0.05)
     finally:
         recorder.send_signal(signal.SIGKILL)
         recorder.communicate(timeout=15)
