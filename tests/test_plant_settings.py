@@ -198,6 +198,9 @@ def test_options_not_built_for_n_dof_are_refused_by_name(name):
     ([50.0, 0.0, 0.0, 0.0], r"state0=\[50.0, 0.0, 0.0, 0.0\] is invalid: x_0=50.0 lies "
                             r"beyond the wall; valid range is x_0 <= d = d\* \+ delta_d = "),
     ("abcd", r"state0='abcd' is invalid: valid is 2n = 4"),
+    ([3.0, 1e308, 0.0, 0.0], r"state0=\[3.0, 1e\+308, 0.0, 0.0\] is invalid: its deviation "
+                             r"from X\*\* is absurdly large .*; valid range is cond\(V\) "
+                             r"max\|z\| <= 1e\+150"),     # was refused by the core at t = 0
 ])
 def test_a_bad_n_dof_start_state_is_one_line_naming_state0(value, text):
     """Issue 32: the start of an n-DOF scene (state0, 2n values) refused in one line with

@@ -45,8 +45,9 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.forced import (actuated_mass, advance_with_force,
                                                     forced_flow, lag_advance, lag_particular,
                                                     static_deflection)
-from grazing_control.oscillator.ndof.impact import advance
+from grazing_control.oscillator.ndof.impact import advance, check_state
 from grazing_control.oscillator.ndof.model import NdofModel
+from grazing_control.oscillator.impact import MAX_AMPLITUDE, NonFiniteStateError
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["NdofSection", "measure_coordinates", "start_state"]
@@ -89,7 +90,15 @@ def start_state(value, model: NdofModel) -> tuple:
             raise ParameterError(f"state0={_listed(value)} is invalid: {name}={v!r} is not "
                                  f"finite; valid is {valid}")
     flow = NdofFlow.of(model)
-    if flow.gap(flow.tau2, flow.to_deviation(flow.tau2, state)) > 0.0:
+    z = flow.to_deviation(flow.tau2, state)
+    try:                    # the core's own bound, so that the start is refused by name
+        check_state(flow, z, "state0")          # and not at t = 0 (issue 32, found by hand)
+    except NonFiniteStateError:
+        size = flow.condition * float(np.max(np.abs(z)))
+        raise ParameterError(f"state0={_listed(value)} is invalid: its deviation from X** is "
+                             f"absurdly large (cond(V) max|z| = {size:.3e}); valid range is "
+                             f"cond(V) max|z| <= {MAX_AMPLITUDE:.0e}") from None
+    if flow.gap(flow.tau2, z) > 0.0:
         i = model.i_w
         raise ParameterError(f"state0={_listed(value)} is invalid: x_{i}={state[i]!r} lies "
                              f"beyond the wall; valid range is x_{i} <= d = d* + delta_d = "
