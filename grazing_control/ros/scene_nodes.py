@@ -45,6 +45,11 @@ def parameter_values(params) -> dict:
     return _controller_values(params)
 
 
+def _positive(value) -> bool:
+    """Whether a parameter's value is a number > 0 (a bool is not a number here)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0.0
+
+
 def _controller_values(controller_params) -> dict:
     """The controller's parameters: a file's ``ros__parameters`` (any node key) or a
     dict; {} if the file cannot be read."""
@@ -165,16 +170,14 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay
-    width = controller.get("pulse_width", _controller_values(controller_params).get("pulse_width"))
-    if isinstance(width, (int, float)) and not isinstance(width, bool) and width > 0.0:
+    design = _controller_values(controller_params)
+    width = controller.get("pulse_width", design.get("pulse_width"))
+    if _positive(width):
         sim["pulse_width"] = float(width)   # and a pulsed design's pulse (n-DOF, §15)
-        if model is not None:               # and its actuator (the n-DOF gain file's)
-            values = _controller_values(controller_params)
-            for key in ("actuator_bandwidth", "actuator_latency"):
-                value = controller.get(key, values.get(key))
-                if isinstance(value, (int, float)) and not isinstance(value, bool) \
-                        and value > 0.0:
-                    sim[key] = float(value)
+        for key in ("actuator_bandwidth", "actuator_latency") if model is not None else ():
+            value = controller.get(key, design.get(key))   # and its actuator (the n-DOF
+            if _positive(value):                          # gain file's)
+                sim[key] = float(value)
     sim.update(sim_overrides or {})
     for key in ("delta_d", "sensor_noise", "state_period",   # the controller's model of
                 "stream_message"):                           # the plant and its sensor
