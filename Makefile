@@ -45,6 +45,14 @@ $(VENV)/.stamp: $(VENV)/.deps setup.py setup.cfg package.xml $(PKG_INITS)
 
 venv: $(VENV)/.stamp
 
+# BYTECODE: Python writes its bytecode cache (__pycache__) even where the environment
+# sets PYTHONDONTWRITEBYTECODE (this machine's shell does). With it set, and the
+# venv installed --no-compile, every process the tests start (each node, each `grazing`
+# command: hundreds) compiled numba, scipy, rclpy and matplotlib from source again: a
+# one-test node scene took 4.3 s on a fresh clone against 2.5 s with the cache, and the
+# suite on a fresh clone 682 s against 532 s (docs/benchmarks.md, "The suite").
+BYTECODE = PYTHONDONTWRITEBYTECODE=
+
 # --no-loadscope-reorder: the groups in collection order, the realtime group last (xdist's
 # default runs the largest groups first: the realtime one, whose tests wait for an idle
 # other worker, came first and waited while the other worker ran the rest).
@@ -55,10 +63,10 @@ venv: $(VENV)/.stamp
 # One BLAS thread per process: the two workers use the two cores, and OpenBLAS's own
 # threads spinning beside them made tests/test_identification.py 2.4x slower at load 5-8.
 test: $(VENV)/.stamp
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -r fER -n 2 --dist loadgroup --no-loadscope-reorder --reruns 2 --reruns-delay 1 --rerun-show-tracebacks tests
+	$(BYTECODE) OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -r fER -n 2 --dist loadgroup --no-loadscope-reorder --reruns 2 --reruns-delay 1 --rerun-show-tracebacks tests
 
 demo: $(VENV)/.stamp
-	$(VENV)/bin/grazing demo --out out/demo
+	$(BYTECODE) $(VENV)/bin/grazing demo --out out/demo
 
 figures: $(VENV)/.stamp
 	$(VENV)/bin/grazing figures --out out/figures
