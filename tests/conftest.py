@@ -1,21 +1,22 @@
 """Session set-up shared by every test module, and how the suite uses both cores.
 
-`make test` runs pytest on two workers (pytest-xdist, ``-n 2 --dist loadgroup``). Each
+`make test` runs pytest on three workers over the two cores (pytest-xdist, ``-n 3 --dist
+loadgroup``: the scenes' waits leave cores idle that a third worker fills, Makefile). Each
 module that starts node processes or DDS participants (:data:`SCENE_MODULES`) is an
 xdist group of its own (``scene:<module>``): one worker runs all of it, in collection
 order, so that its module-scoped scene (or tests/test_cli.py's session-scoped commands)
-is set up once; two such modules may run at once, one on each worker. The tests of a
+is set up once; several such modules may run at once, one on each worker. The tests of a
 module that share a module- or class-scoped fixture of that module (a fit, a sweep,
 figures) are a group too (``shared:<module>``): split, the fixture was computed on both
 workers. Every other test (the numerical core, bags written in-process, the command line
 without nodes) is shared out to whichever worker is free. The controller hands out the
 work in the order of the items (``--no-loadscope-reorder``; xdist's default puts the
 groups with most tests first, and the realtime group then came first): the groups first,
-then the single tests, which fill both workers up to about the same end, the realtime
+then the single tests, which fill the workers up to about the same end, the realtime
 group last (:func:`_rank`; a 60-100 s group handed out late can keep one worker busy
 while the other waits with the realtime group). The tests marked ``realtime`` (their
 assertions hold only if the scene's answers meet wall-clock deadlines) form one more
-group, last in the queue, and each waits until the other worker has been idle for
+group, last in the queue, and each waits until every other worker has been idle for
 IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a machine that runs
 one scene and nothing else of the suite (a CPU-bound test beside a realtime scene made
 its answers miss: 12 of 40 where 4 is the bound). A realtime scene whose assertions do

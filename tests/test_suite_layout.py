@@ -1,4 +1,4 @@
-"""How `make test` shares the suite between two workers (tests/conftest.py) names real
+"""How `make test` shares the suite between its workers (tests/conftest.py) names real
 modules, every module that starts a node process is a scene module, and the groups take
 effect."""
 
