@@ -93,7 +93,19 @@ def _endpoints(node):
     return (JointState, TwistStamped, PUBLISHER_QOS, DATA_QOS, no_pub_events, no_sub_events)
 
 
-def pong(executor_kind: str) -> int:
+def _prioritise(priority: int) -> None:
+    """SCHED_FIFO at ``priority`` for this process and every thread it has (the
+    middleware's too), as the nodes' ``thread_priority`` does (ros/scheduling.py); 0: off.
+    The floor gets what the scene gets, so that their ratio stays a fair one."""
+    if priority:
+        from grazing_control.ros.scheduling import apply_scheduling
+
+        done = apply_scheduling(priority)
+        if done.warnings:
+            raise SystemExit("; ".join(done.warnings))
+
+
+def pong(executor_kind: str, priority: int = 0) -> int:
     """Answer every sample on ``oscillator/pi2`` with a TwistStamped of its stamp (read
     as the controller reads it, :func:`cdr.read_sample`), until the ping's last sample
     (stamp sec :data:`DONE_SEC`)."""
@@ -114,6 +126,7 @@ def pong(executor_kind: str) -> int:
 
     node.create_subscription(js, "oscillator/pi2", on_sample, sub_qos, raw=True,
                              event_callbacks=no_sub)
+    _prioritise(priority)
     freeze_heap()
     t_end = time.monotonic() + MATCH_TIMEOUT * 10
     while not state["done"] and time.monotonic() < t_end:
@@ -126,7 +139,7 @@ def pong(executor_kind: str) -> int:
 DONE_SEC = 2**31 - 1
 
 
-def ping(executor_kind: str, samples: int, interval: float) -> int:
+def ping(executor_kind: str, samples: int, interval: float, priority: int = 0) -> int:
     """Publish ``samples`` samples, one every ``interval`` wall s; print the round trips
     (wall seconds, in sample order) as one JSON line."""
     from grazing_control.ros import cdr
@@ -152,6 +165,7 @@ def ping(executor_kind: str, samples: int, interval: float) -> int:
     if pub.get_subscription_count() < 1:
         print(json.dumps({"error": "no pong matched"}))
         os._exit(1)
+    _prioritise(priority)
     t_settle = time.monotonic() + SETTLE
     while time.monotonic() < t_settle:
         executor.spin_once(timeout_sec=0.02)
@@ -183,13 +197,14 @@ def ping(executor_kind: str, samples: int, interval: float) -> int:
     os._exit(0)
 
 
-def floor(executor_kind: str, samples: int, interval: float) -> dict:
+def floor(executor_kind: str, samples: int, interval: float, priority: int = 0) -> dict:
     """One bare round trip run (two processes, a domain of their own): p50/p99/max ms and
     the answers lost."""
     from grazing_control.ros import launcher
 
     env = launcher.node_env(random.SystemRandom().randrange(101, 232))
-    me = [sys.executable, str(Path(__file__).resolve()), "--executor", executor_kind]
+    me = [sys.executable, str(Path(__file__).resolve()), "--executor", executor_kind,
+          "--priority", str(priority)]
     pong_proc = subprocess.Popen(me + ["--role", "pong"], env=env, stdout=subprocess.DEVNULL)
     try:
         out = subprocess.run(me + ["--role", "ping", "--samples", str(samples),
@@ -213,7 +228,8 @@ def floor(executor_kind: str, samples: int, interval: float) -> dict:
             "beyond": len(trips) - len(counted), "lost": samples - len(trips)}
 
 
-def scene(executor_kind: str, samples: int, scale: float, compose: bool = False) -> dict:
+def scene(executor_kind: str, samples: int, scale: float, compose: bool = False,
+          priority: int = 0) -> dict:
     """The realtime scene of bench_closed_loop part 2 (sim_node + controller_node; with
     ``compose`` in one process, grazing run --compose)."""
     import bench_closed_loop
@@ -221,8 +237,9 @@ def scene(executor_kind: str, samples: int, scale: float, compose: bool = False)
     s, _ = bench_closed_loop.scene(
         samples, {"mode": "realtime", "time_scale": scale, "state_period": 0.0,
                   "delta_d": -5e-6, "actuation": "on_arrival", "executor": executor_kind,
-                  "watchdog_excursion": 0.0, "watchdog_misses": 0},
-        {"enable_after": 0, "executor": executor_kind}, meter=False, compose=compose)
+                  "watchdog_excursion": 0.0, "watchdog_misses": 0, "thread_priority": priority},
+        {"enable_after": 0, "executor": executor_kind, "thread_priority": priority},
+        meter=False, compose=compose)
     return {"latency": s["latency"], "late": s.get("late", "?"), "missed": s.get("missed", "?"),
             "ignored": s.get("ignored", "?")}
 
@@ -239,25 +256,30 @@ def main(argv=None) -> int:
     ap.add_argument("--executor", choices=("single_threaded", "events"), default="events")
     ap.add_argument("--composed", action="store_true",
                     help="also the scene composed (grazing run --compose), in each rep")
+    ap.add_argument("--priority", type=int, default=0,
+                    help="SCHED_FIFO priority 1..99 of the floor's two processes and of both "
+                         "nodes (their thread_priority); 0: off (default)")
     ap.add_argument("--role", choices=("ping", "pong"), help=argparse.SUPPRESS)
     ap.add_argument("--interval", type=float, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.role == "pong":
-        return pong(args.executor)
+        return pong(args.executor, args.priority)
     from grazing_control.oscillator.params import OscillatorParams
 
     interval = OscillatorParams().period / args.scale
     if args.role == "ping":
-        return ping(args.executor, args.samples, args.interval or interval)
+        return ping(args.executor, args.samples, args.interval or interval, args.priority)
     print(f"round trip floor vs realtime x{args.scale:g}: a sample every {interval * 1e3:.3f} "
-          f"ms wall, {args.samples} samples, executor {args.executor}, {os.cpu_count()} CPUs, "
+          f"ms wall, {args.samples} samples, executor {args.executor}, priority "
+          f"{args.priority or 'off'}, {os.cpu_count()} CPUs, "
           f"load {load()}")
     rows = []
     for rep in range(args.reps):
         before = load()
-        f = floor(args.executor, args.samples, interval)
-        s = scene(args.executor, args.samples, args.scale)
-        c = scene(args.executor, args.samples, args.scale, True) if args.composed else None
+        f = floor(args.executor, args.samples, interval, args.priority)
+        s = scene(args.executor, args.samples, args.scale, priority=args.priority)
+        c = scene(args.executor, args.samples, args.scale, True, args.priority) \
+            if args.composed else None
         rows.append((f, s) + ((c,) if c else ()))
         fl = f["latency"]
         for name, one in (("scene", s), ("composed", c)):

@@ -15,7 +15,8 @@ Variants, alternating in one run so that each sees the same load (``--variants``
 ``sample`` (a JointState per sample on oscillator/state, the baseline), ``block``
 (``stream_message:=block``: a Float64MultiArray per wake-up on oscillator/state_block),
 and either of them composed (``+composed``: ``grazing run --compose``, the three nodes in
-one process). From the simulator's summary: periods per second against the requested
+one process), or under SCHED_FIFO (``+fifo``: the simulator's and the controller's
+thread_priority 50, as a rig scene runs them). From the simulator's summary: periods per second against the requested
 (106.2 at x1000), deadline misses and late answers (sections whose correction was not
 there at t_k + 3), the answer latency (a section's last sample published -> its answer
 received) and the sample lag (how late a sample went out), p50/p99/max.
@@ -47,7 +48,11 @@ DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
 #: Every watchdog check off and the feasibility check a warning: the scene runs to its end.
 FREE_RUNNING = {"watchdog_misses": 0, "watchdog_pace": 0.0, "watchdog_lag": 0.0,
                 "watchdog_excursion": 0.0, "feasibility": "warn"}
-VARIANTS = ("sample", "block", "sample+composed", "block+composed")
+VARIANTS = ("sample", "block", "sample+composed", "block+composed", "sample+fifo",
+            "block+fifo")
+#: ``+fifo``: the simulator and the controller under SCHED_FIFO at this priority (their
+#: thread_priority, ros/scheduling.py; what a rig scene runs them with, scene_nodes.py)
+FIFO_PRIORITY = 50
 
 
 def design(out: Path) -> Path:
@@ -61,7 +66,9 @@ def design(out: Path) -> Path:
 
 def scene(variant: str, controller: Path, periods: int, enable_after: int, scale: float,
           tmp: Path, answer_lead: float = 0.0) -> dict:
-    message, _, composed = variant.partition("+")
+    message, *mods = variant.split("+")
+    composed = "composed" in mods
+    priority = FIFO_PRIORITY if "fifo" in mods else 0
     p = OscillatorParams(delta_d=DD)
     res = launcher.run(
         None, str(controller), tmp / "bag", periods, delta_d=DD, enable_after=enable_after,
@@ -69,9 +76,10 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
         timeout=max(120.0, 4 * periods * p.period / scale),
         sim_overrides={"time_scale": scale, "state_period": p.period / RATE,
                        "sensor_noise": SIGMA, "sensor_velocity": False,
-                       "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING},
+                       "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING,
+                       "thread_priority": priority},
         controller_overrides={"pi2_source": "stream", "estimator": "model",
-                              "answer_lead": answer_lead},
+                              "answer_lead": answer_lead, "thread_priority": priority},
         log_dir=tmp / "logs", compose=bool(composed))
     try:
         s = summary(Path(res.logs["sim_node"]))
