@@ -16,6 +16,7 @@ issue 32): its n-DOF model, the inverse, the file's round trip and its refusals.
 """
 
 import copy
+import json
 import math
 
 import numpy as np
@@ -209,3 +210,66 @@ def test_a_full_stiffness_matrix_must_be_symmetric_positive_definite():
     doc["stiffness"] = [["1000 N/m", "-20 N/m"], ["-10 N/m", "1000 N/m"]]
     with pytest.raises(RigError, match="^stiffness is invalid: .*symmetric"):
         rig_from_dict(doc)
+
+
+# ---------------------------------------------------------------------- the commands
+@pytest.fixture
+def cli(capsys):
+    """main(argv) -> (status, stdout, stderr)."""
+    from grazing_control.cli import commands
+
+    def run(*argv):
+        code = commands.main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return code, out.out, out.err
+    return run
+
+
+def test_design_with_a_rig_of_two_masses_is_the_model_files_design_with_its_pulse(cli, tmp_path):
+    model_file = tmp_path / "model.yaml"
+    code, out, err = cli("rig", TWO_MASS, "--model-out", model_file, "--json")
+    assert code == 0, err
+    report = json.loads(out)
+    rig = load_rig(TWO_MASS)
+    from grazing_control.oscillator.ndof.model import load_model
+
+    written = load_model(model_file)
+    for name in ("M", "C", "K", "f"):
+        assert np.array_equal(getattr(written, name), getattr(rig.model(), name)), name
+    assert written.delta_d == rig.model().delta_d and written.omega == rig.model().omega
+    # the rig's pulse in model time: budget and width times omega_n
+    w, delay = rig.actuator.pulse_width, rig.budget
+    code, out, err = cli("design", "--model", model_file, "--delay", repr(delay * rig.omega_n),
+                         "--pulse-width", repr(w * rig.omega_n), "--mu", "0.1", "--json")
+    assert code == 0, err
+    by_model = json.loads(out)
+    code, out, err = cli("design", "--rig", TWO_MASS, "--mu", "0.1", "--json")
+    assert code == 0, err
+    by_rig = json.loads(out)
+    assert by_rig["gains"] == by_model["gains"] and by_rig["pulse"] == by_model["pulse"]
+    k, si = by_rig["gains"], by_rig["si"]
+    m_a = rig.structure.masses[rig.structure.actuated]     # lumped: 1 / (M^-1)_aa = M_aa
+    assert si["effective_mass_kg"] == m_a
+    # Delta v_a [m/s] = omega_n l k^T (x / l, v / (omega_n l)), force = m_a Delta v_a / w
+    x, v = np.array([1e-6, -2e-6]), np.array([3e-3, 1e-3])
+    dv_model = np.dot(k, np.r_[x / rig.scales.length, v / rig.scales.velocity])
+    dv_si = np.dot(si["position_gains_per_s"], x) + np.dot(si["velocity_gains"], v)
+    assert dv_si == pytest.approx(dv_model * rig.scales.velocity, rel=1e-12)
+    force = np.dot(si["force_gains_position_N_per_m"], x) + \
+        np.dot(si["force_gains_velocity_N_s_per_m"], v)
+    assert force == pytest.approx(m_a * dv_si / w, rel=1e-12)
+    assert report["design"]["admissible"] and report["model"]["delta_d"] == written.delta_d
+
+
+@pytest.mark.parametrize("argv, first", [
+    (("orbit", "--rig", TWO_MASS), "--rig"),
+    (("design", "--rig", TWO_MASS, "--c2", "0.1"), "--c2"),
+    (("design", "--rig", TWO_MASS, "--delay", "0.1"), "--rig FILE and --delay"),
+    (("design", "--rig", TWO_MASS, "--out", "/tmp/never_written.yaml"), "--out"),
+    (("design", "--rig", "config/rigs/lab_20hz.yaml", "--mu", "0.1"), "--mu"),
+    (("rig", TWO_MASS, "--c2", "0.1"), "--c2"),
+])
+def test_the_commands_refuse_what_a_rig_of_two_masses_cannot_take(cli, argv, first):
+    code, out, err = cli(*argv)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith(f"grazing: error: {first}"), err
