@@ -273,3 +273,34 @@ def test_the_commands_refuse_what_a_rig_of_two_masses_cannot_take(cli, argv, fir
     code, out, err = cli(*argv)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and err.startswith(f"grazing: error: {first}"), err
+
+
+# ---------------------------------------------------------------------- the driver contract
+def test_the_force_pulse_carries_the_effective_mass_and_the_sensor_the_length_scale():
+    from grazing_control.oscillator.params import ParameterError
+    from grazing_control.ros.rig_boundary import (correction_of, force_of, joint_names,
+                                                  model_positions, sensor_positions,
+                                                  sim_values)
+
+    rig = load_rig(TWO_MASS)
+    st, s, w = rig.structure, rig.scales, rig.actuator.pulse_width
+    dv = -0.0123
+    force = force_of(rig, dv)
+    # the impulse F w on the actuated mass changes its velocity by (M^-1)_aa F w
+    dvel = np.linalg.solve(st.M, np.eye(st.n)[st.actuated] * force * w)
+    assert dvel[st.actuated] == pytest.approx(dv * s.velocity, rel=1e-14)
+    assert correction_of(rig, force, w) == pytest.approx(dv, rel=1e-15)
+    one = rig_from_dict(LAB)          # one mass: today's m omega_n l dv / w, bit for bit
+    assert force_of(one, dv) == one.mass * one.scales.velocity * dv / one.actuator.pulse_width
+    assert joint_names(one) == ["mass"] and sensor_positions(one, [0.5]) == [0.5 * one.scales.length]
+    # rig/sensor: the measured masses (sensor.masses [1, 0]) in metres, and back
+    x = np.array([0.25, -1.5])
+    assert joint_names(rig) == ["mass1", "mass0"]
+    assert sensor_positions(rig, x) == [x[1] * s.length, x[0] * s.length]
+    back = model_positions(rig, joint_names(rig), sensor_positions(rig, x))
+    assert back == {1: pytest.approx(x[1], rel=1e-15), 0: pytest.approx(x[0], rel=1e-15)}
+    with pytest.raises(ValueError, match="^rig/sensor names"):
+        model_positions(rig, ["mass"], [0.0])
+    # the simulated rig runs one mass: a rig of two is refused naming masses
+    with pytest.raises(ParameterError, match="^masses: the rig has 2 masses"):
+        sim_values(rig)
