@@ -79,11 +79,11 @@ def _one_of(doc, prefix, a, b):
 
 
 def _list(doc, key, n=None) -> list:
+    """The list ``doc[key]``: non-empty, of ``n`` entries (one per mass) if n is given."""
     value = doc.get(key)
-    size = "a list" if n is None else f"a list of {n}"
+    size = "a non-empty list" if n is None else f"a list of {n} entries (one per mass)"
     if not isinstance(value, list) or not value or (n is not None and len(value) != n):
-        raise RigError(f"{key}={value!r} is invalid: expected {size} entries"
-                       + ("" if n is None else " (one per mass)"))
+        raise RigError(f"{key}={value!r} is invalid: expected {size}")
     return value
 
 

@@ -154,10 +154,11 @@ def read_masses(doc) -> tuple:
     if given:
         raise RigError(f"{given[0]} is a field of the one-mass form: with masses give "
                        "springs or stiffness, damping_ratios and impacting")
-    items = _list(doc, "masses")
+    items = doc.get("masses")
+    if not isinstance(items, list) or not 1 <= len(items) <= MAX_MASSES:
+        raise RigError(f"masses={items!r} is invalid: valid is a list of 1 to {MAX_MASSES} "
+                       "masses with their unit (e.g. ['0.8 kg', '0.5 kg'])")
     n = len(items)
-    if n > MAX_MASSES:
-        raise RigError(f"masses has {n} entries: valid range is 1 to {MAX_MASSES} masses")
     masses = [_q({f"masses[{i}]": v}, "", f"masses[{i}]", "mass", ok=lambda v: v > 0.0,
                  valid=f"masses[{i}] > 0") for i, v in enumerate(items)]
     if _one_of(doc, "", "springs", "stiffness") == "springs":
