@@ -155,8 +155,8 @@ def declare_rig(node):
     if not node.rig_file:
         return None, {}
     if node.model is not None:
-        raise StartupError(f"rig_file={node.rig_file} is invalid with model_file: a rig "
-                           "file describes a 1-DOF rig; give one of them")
+        raise StartupError(f"rig_file={node.rig_file} is invalid with model_file: each "
+                           "gives the model; give one of them")
     try:
         rig = load_rig(node.rig_file)
     except ParameterError as exc:

@@ -307,7 +307,8 @@ def _family_design(args):
     the delayed design is docs/theory_ndof.md §14, the pulse's §15)."""
     from grazing_control.dynamics.design import ndof_design as nd
 
-    model = load(args.model)
+    rig = getattr(args, "rig_model", None)          # --rig FILE of n masses (cli/rig.py)
+    model = load(args.model) if rig is None else rig.model()
     delay = nd.design_actuation(float(getattr(args, "delay", 0.0) or 0.0),
                                 *(float(getattr(args, a, 0.0) or 0.0) for a in
                                   ("pulse_width", "actuator_bandwidth", "actuator_latency")))
@@ -364,6 +365,10 @@ def _family_design(args):
         [list(iv) for iv in sections],
         "seconds": seconds,
     })
+    if rig is not None:
+        out["rig"] = args.model
+        out["si"] = {"effective_mass_kg": rig.effective_mass,
+                     "actuated_mass": rig.structure.actuated, **rig.state_gains_si(k)}
     if args.out:
         if not admissible:
             raise ParameterError(f"mu={mu!r} is not admissible: valid range is "
@@ -405,7 +410,23 @@ def _family_design(args):
         where = " U ".join(f"({a:.4f}, {b:.4f})" for a, b in sections) or "none"
         lines.append(f"  no admissible mu: pi2_offset values whose zeros all lie inside the "
                      f"unit circle (scan): {where} (this file: {model.pi2_offset:.4g})")
+    if rig is not None:
+        lines += _si_lines(out["si"], names)
     if args.out:
         lines.append(f"  gains written to {args.out}")
     return "\n".join(lines)
+
+
+def _si_lines(si: dict, names) -> list:
+    """The text of the gains in SI of a rig of n masses (cli/rig.py, masses_design_si)."""
+    n = len(names) // 2
+    out = [f"  in SI: Delta v_{si['actuated_mass']} = sum (k_x omega_n) x + sum k_v v, "
+           f"k_x omega_n = {fmt_vec(si['position_gains_per_s'], 6)} 1/s, k_v = "
+           f"{fmt_vec(si['velocity_gains'], 6)}"]
+    if "force_gains_position_N_per_m" in si:
+        out.append(f"  as the pulse's force (m_a = {si['effective_mass_kg']:.6g} kg): "
+                   f"{fmt_vec(si['force_gains_position_N_per_m'], 6)} N/m on "
+                   f"({', '.join(names[:n])}), {fmt_vec(si['force_gains_velocity_N_s_per_m'], 6)}"
+                   f" N*s/m on ({', '.join(names[n:])})")
+    return out
 

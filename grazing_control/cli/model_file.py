@@ -141,7 +141,7 @@ def check_options(args, argv) -> None:
                                  f": with --model the model file gives the model "
                                  "(docs/ndof_model.md); give the gains as --gains, --mu or "
                                  "--free-gain")
-    else:
+    elif getattr(args, "rig", None) is None:   # a rig of n masses takes them (cli/rig.py)
         bad = [f for f in MODEL_OPTIONS if _given(argv, f)]
         if bad:
             raise ParameterError(f"{', '.join(bad)} {'needs' if len(bad) == 1 else 'need'} "

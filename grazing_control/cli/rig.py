@@ -9,6 +9,10 @@ orbit and whether the timing budget is feasible
 (:mod:`grazing_control.plant.rig_budget`). An infeasible budget or too slow a sensor is
 status 2 with one line naming ``controller.budget`` or ``sensor.rate`` and the numbers.
 
+A rig of n >= 2 masses (plant/rig_structure.py) gets :func:`masses_report` and, on
+``grazing design --rig FILE``, the n-DOF pulse design on its model
+(:func:`_apply_masses_rig`); ``--model-out PATH`` writes the model file of any rig.
+
 ``--rig FILE`` on design, orbit, continue, continue2, simulate, sweep, basins and
 robustness sets the model's options from the file (:func:`apply_rig`, the table
 :func:`rig_options`); an option the rig sets given as well is refused, naming both.
@@ -22,7 +26,7 @@ import math
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.support.arguments import finite, integer_at_least
 
-from .common import add_rig_option
+from .common import add_rig_option, file_path
 
 __all__ = ["add_rig_option", "add_rig_parser", "apply_rig", "rig_options", "load",
            "cmd_rig", "RIG_COMMANDS", "POSITION_ERROR", "VELOCITY_ERROR"]
@@ -100,6 +104,16 @@ def apply_rig(args, argv) -> None:
         raise ParameterError("--rig FILE and --params FILE are both given: each gives the "
                              "model; give one of them")
     rig = load(path)
+    if rig.n > 1:
+        _apply_masses_rig(rig, path, args, argv)
+        return
+    from .model_file import MODEL_OPTIONS
+
+    bad = [f for f in MODEL_OPTIONS if _given(argv, f)]
+    if bad:
+        raise ParameterError(f"{', '.join(bad)} {'needs' if len(bad) == 1 else 'need'} an "
+                             f"n-DOF model: --model FILE, or --rig FILE of n >= 2 masses "
+                             f"({path} has one mass)")
     table = rig_options(rig, args)
     both = [f for f in table if _given(argv, f)]
     if both:
@@ -112,6 +126,50 @@ def apply_rig(args, argv) -> None:
         import numpy as np
 
         args.grid.append(("delta_d", np.array([rig.params().delta_d])))
+
+
+#: The n-DOF design's actuation options a rig of n masses sets (rig.dimensionless()).
+MASSES_OPTIONS = {"--delay": ("delay", "actuation_delay"),
+                  "--pulse-width": ("pulse_width", "pulse_width"),
+                  "--actuator-bandwidth": ("actuator_bandwidth", "actuator_bandwidth"),
+                  "--actuator-latency": ("actuator_latency", "actuator_latency")}
+
+
+def _apply_masses_rig(rig, path, args, argv) -> None:
+    """``--rig FILE`` of n >= 2 masses: ``grazing design``'s n-DOF design (cli/design.py,
+    docs/theory_ndof.md section 15) on the rig's model (``args.rig_model``), for the
+    budget's delay and the pulse of the rig's width, latency and bandwidth in model
+    time (the options of :data:`MASSES_OPTIONS`, refused when given as well); the 1-DOF
+    options are refused, and every other command (its n-DOF form takes --model FILE)."""
+    from .model_file import ONE_DOF_OPTIONS
+
+    if args.command != "design":
+        raise ParameterError(f"--rig {path} has {rig.n} masses: grazing {args.command} takes "
+                             "an n-DOF model as --model FILE (write it with grazing rig "
+                             f"{path} --model-out FILE); --rig of n masses is for grazing rig "
+                             "and grazing design")
+    if getattr(args, "model", None) is not None:
+        raise ParameterError("--rig FILE and --model FILE are both given: each gives the "
+                             "model; give one of them")
+    both = [f for f in MASSES_OPTIONS if _given(argv, f)]
+    if both:
+        raise ParameterError(f"--rig FILE and {', '.join(both)} are both given: the rig file "
+                             "sets the actuation (controller.budget, actuator.pulse_width, "
+                             "latency, bandwidth; docs/rig.md); give one of them")
+    bad = [f for f in ONE_DOF_OPTIONS if f != "--rig" and _given(argv, f)]
+    if bad:
+        raise ParameterError(f"{', '.join(bad)} {'is a 1-DOF option' if len(bad) == 1 else 'are 1-DOF options'}"
+                             f": the rig {path} has {rig.n} masses, its design is the n-DOF "
+                             "one; give the gains as --mu or --free-gain")
+    if getattr(args, "out", None) is not None:
+        raise ParameterError(f"--out with --rig of {rig.n} masses: the controller reads an "
+                             f"n-DOF model file; write it with grazing rig {path} --model-out "
+                             "M and run grazing design --model M with the rig's --delay and "
+                             "--pulse-width (grazing rig prints them)")
+    d = rig.dimensionless()
+    for attr, key in MASSES_OPTIONS.values():
+        setattr(args, attr, d[key])
+    args.model, args.rig_model = str(path), rig
 
 
 # ---------------------------------------------------------------------- grazing rig
@@ -448,13 +506,158 @@ def format_report(r: dict) -> str:
     return "\n".join(lines)
 
 
+def model_to_dict(model) -> dict:
+    """The model file's mapping of an NdofModel (docs/ndof_model.md; repr floats: the
+    file read back is the same model)."""
+    return {"M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
+            "f": model.f.tolist(), "omega": model.omega, "i_w": model.i_w,
+            "delta_d": model.delta_d, "r": model.r, "i_a": model.i_a, "phase": model.phase,
+            "pi2_offset": model.pi2_offset}
+
+
+def masses_report(rig, path, args) -> dict:
+    """The JSON of ``grazing rig`` for a rig of n >= 2 masses (docs/rig.md, "A rig with n
+    masses"): the rig in SI (M, K, the modal damping C, the modes), the scales, the
+    n-DOF model, the gap at grazing, the n-DOF design for the budget's pulse with its
+    gains in SI (grazing design --rig FILE), a 1 um error of the impacting mass as the
+    pulse's force, and the timing budget with --compute-tail (the n-DOF estimate is not
+    timed here)."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+    from grazing_control.plant.rig_budget import check_budget, timing_budget
+    from grazing_control.plant.rig_structure import modes
+
+    from .design import cmd_design
+
+    if args.c2 is not None or args.optimize is not None:
+        raise ParameterError(f"{'--c2' if args.c2 is not None else '--optimize'} is a 1-DOF "
+                             f"option: the rig {path} has {rig.n} masses (its design is the "
+                             "n-DOF one: grazing design --rig FILE --mu MU)")
+    st, s, model = rig.structure, rig.scales, rig.model()
+    flow = NdofFlow.of(model)
+    omega, _phi = modes(st.M, st.K)
+    ns = argparse.Namespace(command="design", json=True, mu=None, free_gain=None, out=None,
+                            model=str(path), rig_model=rig)
+    d = rig.dimensionless()
+    for attr, key in MASSES_OPTIONS.values():
+        setattr(ns, attr, d[key])
+    design = cmd_design(ns)
+    k = design["gains"]
+    pos = k[st.impacting] * POSITION_ERROR / s.length
+    report = {
+        "rig": str(path), "n": rig.n,
+        "si": {"masses_kg": list(st.masses), "stiffness_N_per_m": st.K.tolist(),
+               "damping_N_s_per_m": st.C.tolist(), "damping_ratios": list(st.damping_ratios),
+               "mode_frequencies_Hz": (omega / (2 * math.pi)).tolist(),
+               "impacting": st.impacting, "actuated": st.actuated, "measured": list(st.measured),
+               "forced": st.forced if rig.forcing == "force" else None,
+               "effective_mass_kg": rig.effective_mass, "restitution": rig.restitution,
+               "gap_m": rig.gap, "forcing": rig.forcing, "forcing_amplitude": rig.amplitude,
+               "force_amplitude_N": rig.force_amplitude, "forcing_frequency_Hz": rig.frequency,
+               "sensor_rate_Hz": rig.sensor.rate, "sensor_noise_m": rig.sensor.noise,
+               "pulse_width_s": rig.actuator.pulse_width, "budget_s": rig.budget,
+               "section_time_s": rig.section_time()},
+        "scales": {"reference": f"mass {st.impacting} on its own springs (m_ref = M_ww, "
+                                "k_ref = K_ww)",
+                   "mass_kg": s.mass, "stiffness_N_per_m": rig.stiffness,
+                   "omega_n_rad_per_s": rig.omega_n, "time_s": s.time, "length_m": s.length,
+                   "velocity_m_per_s": s.velocity, "force_N": s.force},
+        "model": model_to_dict(model),
+        "dimensionless": {"d_star": float(flow.d_star), "tau_star": float(flow.tau_star),
+                          "tau2": float(flow.tau2), "period": model.period,
+                          **{key: v for key, v in d.items() if key != "sensor_velocity"}},
+        "grazing": {"d_star": float(flow.d_star), "gap_at_grazing_m": flow.d_star * s.length,
+                    "gap_minus_grazing_m": model.delta_d * s.length},
+        "design": {key: design[key] for key in ("mu", "mu_chosen", "gains", "admissible",
+                                                "admissible_mu", "transmission_zeros_max_modulus",
+                                                "multipliers_limit", "delay", "pulse")},
+        "corrections": {"position_error_m": POSITION_ERROR,
+                        "for_position_error_of_the_impacting_mass": _pulse(rig, pos)},
+    }
+    report["design"]["si"] = design["si"]
+    if args.compute_tail is not None:
+        b = timing_budget(rig, args.compute_tail)
+        check_budget(b, rig.sensor.rate, "given by --compute-tail")
+        report["timing"] = {"needed_s": b.needed, "available_s": b.available,
+                            "slack_s": b.slack, "feasible": b.feasible}
+    else:
+        report["timing"] = {"note": "the n-DOF estimate is not timed here: give "
+                                    "--compute-tail SECONDS to check the budget"}
+    if args.model_out:
+        from grazing_control.support.files import write_yaml_atomic
+
+        write_yaml_atomic(args.model_out, model_to_dict(model),
+                          [f"The n-DOF model of the rig {path} (grazing rig --model-out; "
+                           "docs/rig.md, docs/ndof_model.md)"])
+        report["model_written"] = args.model_out
+    return report
+
+
+def format_masses_report(r: dict) -> str:
+    """The text of ``grazing rig`` for a rig of n masses."""
+    si, sc, m, dl, de = r["si"], r["scales"], r["model"], r["dimensionless"], r["design"]
+    c = r["corrections"]["for_position_error_of_the_impacting_mass"]
+    names = [f"x{i}" for i in range(r["n"])] + [f"v{i}" for i in range(r["n"])]
+    from .model_file import fmt_vec
+
+    from .design import _si_lines
+
+    lines = [
+        f"rig {r['rig']} (SI, as understood): {r['n']} masses",
+        f"  masses             = {fmt_vec(si['masses_kg'], 6)} kg; mass {si['impacting']} "
+        f"meets the stop, the actuator pushes mass {si['actuated']} (m_a = "
+        f"{si['effective_mass_kg']:.6g} kg), the sensor measures {si['measured']}",
+        f"  stiffness K        = {si['stiffness_N_per_m']} N/m",
+        f"  modes              = {fmt_vec(si['mode_frequencies_Hz'], 6)} Hz, damping ratios "
+        f"{fmt_vec(si['damping_ratios'], 6)}",
+        f"  gap g              = {si['gap_m']:.9g} m; forcing {si['forcing']} "
+        f"F0 = {si['force_amplitude_N']:.6g} N at {si['forcing_frequency_Hz']:.9g} Hz",
+        f"scales (reference: {sc['reference']})",
+        f"  omega_n = {sc['omega_n_rad_per_s']:.6g} rad/s, l = F0/k_ref = {sc['length_m']:.6g} m, "
+        f"omega_n l = {sc['velocity_m_per_s']:.6g} m/s, k_ref l = {sc['force_N']:.6g} N",
+        "dimensionless n-DOF model (docs/ndof_model.md)",
+        f"  M = {m['M']}, C = {m['C']}, K = {m['K']}, f = {m['f']}",
+        f"  omega = {m['omega']!r}, i_w = {m['i_w']}, i_a = {m['i_a']}, r = {m['r']!r}, "
+        f"pi2_offset = {m['pi2_offset']:.6g}",
+        f"  Delta d = {m['delta_d']:.12g}, d* = {dl['d_star']:.15g}; delay "
+        f"{dl['actuation_delay']:.6g}, pulse_width {dl['pulse_width']:.6g}, sensor_noise "
+        f"{dl['sensor_noise']:.6g}",
+        f"grazing: d* l = {r['grazing']['gap_at_grazing_m']:.9g} m; the gap is "
+        f"{r['grazing']['gap_minus_grazing_m']:.4g} m from it",
+        f"design (grazing design --rig FILE): mu = {de['mu']:.12g} ({de['mu_chosen']}), "
+        f"{'admissible' if de['admissible'] else 'NOT admissible'}",
+        f"  gains k            = {fmt_vec(de['gains'], 12)} over ({', '.join(names)})",
+        *_si_lines(de["si"], names),
+        f"  {r['corrections']['position_error_m'] * 1e6:g} um error of mass {si['impacting']}: "
+        f"Delta v = {c['velocity_m_per_s']:.6g} m/s, impulse {c['impulse_N_s']:.6g} N s"
+        + (f", force {c['force_N']:.6g} N" if "force_N" in c else ""),
+        "timing: " + (r["timing"]["note"] if "note" in r["timing"] else
+                      f"needed {r['timing']['needed_s'] * 1e3:.4g} ms <= available "
+                      f"{r['timing']['available_s'] * 1e3:.4g} ms: feasible"),
+    ]
+    if "model_written" in r:
+        lines.append(f"model written to {r['model_written']}")
+    return "\n".join(lines)
+
+
 def cmd_rig(args):
     """``grazing rig``: the report (dict with --json, text otherwise)."""
     if args.c2 is not None and args.optimize is not None:
         raise ParameterError("--c2 and --optimize are both given: give one of them")
     rig = load(args.file, option="")
+    if rig.n > 1:
+        report = masses_report(rig, args.file, args)
+        return report if args.json else format_masses_report(report)
+    if args.model_out:
+        from grazing_control.support.files import write_yaml_atomic
+
+        write_yaml_atomic(args.model_out, model_to_dict(rig.model()),
+                          [f"The n-DOF model (n = 1) of the rig {args.file} (grazing rig "
+                           "--model-out; docs/rig.md, docs/ndof_model.md)"])
     report = rig_report(rig, args.file, args)
-    return report if args.json else format_report(report)
+    if args.model_out:
+        report["model_written"] = args.model_out
+    return report if args.json else format_report(report) + (
+        f"\nmodel written to {args.model_out}" if args.model_out else "")
 
 
 def _seconds(text):
@@ -473,7 +676,10 @@ DESCRIPTION = (
     "spread (the design's position-only noise gain x the sensor noise) and the timing budget: "
     "sensor latency + one sample interval + the Pi2 estimate's measured p99 + actuator latency "
     "<= budget - pulse_width / 2. An infeasible budget or too slow a sensor: status 2, one "
-    "line naming controller.budget or sensor.rate with the numbers.")
+    "line naming controller.budget or sensor.rate with the numbers. A rig of n masses "
+    "(masses: [...], docs/rig.md 'A rig with n masses'): its n-DOF model, the n-DOF pulse "
+    "design at the budget with the gains in SI, the budget with --compute-tail; "
+    "--model-out PATH writes the model file (any n).")
 
 
 def add_rig_parser(sub) -> None:
@@ -496,5 +702,8 @@ def add_rig_parser(sub) -> None:
                         "cost it too); both are reported")
     s.add_argument("--runs", type=integer_at_least(10), default=300,
                    help="estimates timed for the compute tail (default 300; its p99 is used)")
+    s.add_argument("--model-out", type=file_path, metavar="PATH",
+                   help="write the rig's dimensionless n-DOF model file here (docs/ndof_model.md; "
+                        "for --model FILE of design, orbit, continue, simulate, sweep)")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=cmd_rig)

@@ -41,6 +41,15 @@ docs/theory_contact.md (C1, C6) with
 
 (:meth:`Rig.contact_values`, derived in docs/rig.md, "The stop"). ``restitution`` stays
 the rigid model's r, the one the design is made for; the stop is the plant's.
+
+A rig of n >= 2 masses (the ``masses`` form of the file, plant/rig_structure.py; issue
+32) is the same object with a :class:`~grazing_control.plant.rig_structure.Structure`:
+``mass``, ``omega_n`` and ``zeta`` are then those of the reference oscillator (the
+impacting mass on its own springs, M_ww, sqrt(K_ww / M_ww), C_ww / (2 sqrt(K_ww M_ww))),
+so that :attr:`Rig.scales` and :meth:`Rig.dimensionless` are one rule for every n, and
+:meth:`Rig.model` is the dimensionless n-DOF model (for n = 1 the study's Eq. 1 as
+M = K = f = 1, C = 2 zeta). The correction's impulse is m_a Delta v with the effective
+mass m_a = 1 / (M^-1)_aa of the actuated mass (:attr:`Rig.effective_mass`).
 """
 
 from __future__ import annotations
@@ -48,9 +57,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
+from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.plant.contact_plant import CONTACTS
-from grazing_control.support.units import SI_UNIT, UnitError, format_quantity, quantity
+from grazing_control.plant.rig_fields import (MAGNITUDE, RigError, _number, _one_of, _q,
+                                              _section)
+from grazing_control.plant.rig_structure import (N_MASSES, Structure, read_indices,
+                                                 read_masses, rig_with_ndof_model,
+                                                 write_structure)
+from grazing_control.support.units import format_quantity
 
 __all__ = ["RigError", "Scales", "Sensor", "Actuator", "Stop", "Rig", "load_rig", "rig_from_dict",
            "rig_to_dict", "rig_with_model", "MIN_SAMPLES_PER_PERIOD", "MAX_SAMPLES_PER_PERIOD",
@@ -64,15 +81,6 @@ MIN_SAMPLES_PER_PERIOD = 20
 #: Most sensor samples per forcing period: the estimator handles every sample of a
 #: period at each section (its work grows with their number); decimate a faster stream.
 MAX_SAMPLES_PER_PERIOD = 10000
-#: Every dimensional value other than an angle is 0 (where the field allows it) or of
-#: magnitude in [1e-12, 1e12] in SI units: beyond, the model's scales under- or overflow.
-MAGNITUDE = (1e-12, 1e12)
-
-
-class RigError(ParameterError):
-    """A rig file that cannot be used; one line naming the field and its valid range."""
-
-
 @dataclass(frozen=True)
 class Scales:
     """The rig's units of the dimensionless model: tau = omega_n t, x~ = x / length."""
@@ -158,6 +166,23 @@ class Rig:
     budget: float
     pi2_offset: float = math.pi / 2
     stop: Stop = Stop()
+    structure: Structure | None = None
+
+    @property
+    def n(self) -> int:
+        """The number of masses."""
+        return 1 if self.structure is None else self.structure.n
+
+    @property
+    def effective_mass(self) -> float:
+        """m_a = 1 / (M^-1)_aa of the actuated mass (kg; ``mass`` for n = 1): the
+        impulse of a correction Delta v_a is m_a Delta v_a (plant/rig_structure.py)."""
+        return self.mass if self.structure is None else self.structure.effective_mass
+
+    @property
+    def measured(self) -> tuple:
+        """The indices of the masses the sensor measures ((0,) for n = 1)."""
+        return (0,) if self.structure is None else self.structure.measured
 
     @property
     def stiffness(self) -> float:
@@ -192,16 +217,54 @@ class Rig:
 
     def params(self) -> OscillatorParams:
         """The study's model of this rig: zeta, r, omega = f / f_n, Delta d = g / l - d*,
-        tau0 = 0 (the simulator's time origin is a Pi2 sample: :meth:`rig_time`)."""
+        tau0 = 0 (the simulator's time origin is a Pi2 sample: :meth:`rig_time`).
+        A rig of n >= 2 masses has no 1-DOF model: RigError (use :meth:`model`)."""
+        if self.structure is not None:
+            raise RigError(f"masses: this rig has {self.n} masses: its model is the n-DOF "
+                           "model (grazing rig FILE, grazing design --rig FILE), not the "
+                           "1-DOF study's")
         s = self.scales
         base = OscillatorParams(zeta=self.zeta, r=self.restitution,
                                 omega=TWO_PI * self.frequency / self.omega_n,
                                 pi2_offset=self.pi2_offset)
         return base.with_(delta_d=self.gap / s.length - base.d_star)
 
+    def model(self) -> NdofModel:
+        """The dimensionless n-DOF model of this rig (docs/ndof_model.md; the scaling in
+        plant/rig_structure.py): M / m_ref, C / sqrt(k_ref m_ref), K / k_ref, f / F0,
+        omega = Omega / omega_n, i_w the impacting mass, i_a the actuated one,
+        Delta d = g / l - d*, phase 0 (as :meth:`params`' tau0: the model's t = 0 is a Pi2
+        section, :meth:`rig_time`). For n = 1: M = K = f = 1, C = 2 zeta and the
+        omega, Delta d of :meth:`params`."""
+        if self.structure is None:
+            p = self.params()
+            return NdofModel(M=[[1.0]], C=[[2.0 * p.zeta]], K=[[1.0]], f=[1.0], omega=p.omega,
+                             i_w=0, delta_d=p.delta_d, r=p.r, i_a=0, phase=0.0,
+                             pi2_offset=p.pi2_offset)
+        from grazing_control.oscillator.ndof.flow import grazing_clearance
+
+        st, s = self.structure, self.scales
+        k_ref = self.stiffness
+        if self.forcing == "force":
+            f = np.zeros(st.n)
+            f[st.forced] = 1.0
+        else:            # f = Omega^2 Y M 1, F0 = m_ref Omega^2 Y
+            f = np.array(st.masses, dtype=float) / self.mass
+        model = NdofModel(M=st.M / self.mass, C=st.C / math.sqrt(k_ref * self.mass),
+                          K=st.K / k_ref, f=f, omega=TWO_PI * self.frequency / self.omega_n,
+                          i_w=st.impacting, r=self.restitution, i_a=st.actuated, phase=0.0,
+                          pi2_offset=self.pi2_offset)
+        return replace(model, delta_d=self.gap / s.length - grazing_clearance(model))
+
     def section_time(self) -> float:
         """The rig-clock time (s) of the first Pi2 section at or after t = 0: where the
         forcing phase Omega t + phi equals tau2 (mod 2 pi). The model's t = 0 is there."""
+        if self.structure is not None:
+            from grazing_control.oscillator.ndof.flow import grazing_phase
+
+            m = self.model()
+            tau2 = (grazing_phase(m) + m.pi2_offset) % TWO_PI
+            return ((tau2 - self.phase) % TWO_PI) / (TWO_PI * self.frequency)
         p = self.params()
         return ((p.tau2 - self.phase) % TWO_PI) / (TWO_PI * self.frequency)
 
@@ -265,23 +328,41 @@ class Rig:
             out["force_gain_velocity_N_s_per_m"] = self.mass * c2 / w
         return out
 
+    def state_gains_si(self, k) -> dict:
+        """The n-DOF law Delta v~_a = k^T z~ over z~ = (x~_0 .. x~_{n-1}, v~_0 .. v~_{n-1})
+        in SI: Delta v_a = sum_i (k_i omega_n) x_i + sum_i k_{n+i} v_i (x~ = x / l,
+        v~ = v / (omega_n l), Delta v_a = omega_n l Delta v~_a), and as the pulse's force
+        F = m_a Delta v_a / w (N/m and N s/m; m_a :attr:`effective_mass`)."""
+        k = [float(v) for v in k]
+        n, w = len(k) // 2, self.actuator.pulse_width
+        out = {"position_gains_per_s": [v * self.omega_n for v in k[:n]],
+               "velocity_gains": k[n:]}
+        if w > 0.0:
+            m = self.effective_mass
+            out["force_gains_position_N_per_m"] = [m * v * self.omega_n / w for v in k[:n]]
+            out["force_gains_velocity_N_s_per_m"] = [m * v / w for v in k[n:]]
+        return out
+
     def correction_si(self, dv: float) -> dict:
-        """A dimensionless correction Delta v~ as a velocity change (m/s), an impulse
-        (N s) and, with a pulse width w, the pulse's force (N) over w."""
+        """A dimensionless correction Delta v~ as a velocity change (m/s) of the actuated
+        mass, an impulse (N s, m_a Delta v) and, with a pulse width w, the pulse's force
+        (N) over w."""
         v = dv * self.scales.velocity
-        out = {"velocity_m_per_s": v, "impulse_N_s": self.mass * v}
+        m = self.effective_mass
+        out = {"velocity_m_per_s": v, "impulse_N_s": m * v}
         if self.actuator.pulse_width > 0.0:
-            out["force_N"] = self.mass * v / self.actuator.pulse_width
+            out["force_N"] = m * v / self.actuator.pulse_width
             out["pulse_width_s"] = self.actuator.pulse_width
         return out
 
 
 # ---------------------------------------------------------------------- reading
 _TOP = {"mass", "natural_frequency", "stiffness", "damping_ratio", "damping", "restitution",
-        "gap", "forcing", "sensor", "actuator", "controller", "stop"}
-_FORCING = {"type", "amplitude", "frequency", "phase", "stop"}
-_SENSOR = {"rate", "noise", "resolution", "latency", "measures", "velocity_noise"}
-_ACTUATOR = {"pulse_width", "force_limit", "latency", "force_constant", "bandwidth"}
+        "gap", "forcing", "sensor", "actuator", "controller", "stop", "masses", "springs",
+        "damping_ratios", "impacting"}
+_FORCING = {"type", "amplitude", "frequency", "phase", "stop", "mass"}
+_SENSOR = {"rate", "noise", "resolution", "latency", "measures", "velocity_noise", "masses"}
+_ACTUATOR = {"pulse_width", "force_limit", "latency", "force_constant", "bandwidth", "mass"}
 _CONTROLLER = {"budget", "pi2_offset"}
 _STOP = {"type", "stiffness", "damping", "friction", "friction_static"}
 
@@ -297,65 +378,6 @@ def load_rig(path) -> Rig:
         raise RigError(f"{path}: {exc}") from None
 
 
-def _section(doc, name, keys, required=True):
-    value = doc.get(name)
-    if value is None:
-        if required:
-            raise RigError(f"{name} is missing: a mapping of {', '.join(sorted(keys))}")
-        return {}
-    if not isinstance(value, dict):
-        raise RigError(f"{name}={value!r} is invalid: expected a mapping of "
-                       f"{', '.join(sorted(keys))}")
-    unknown = sorted(set(map(str, value)) - keys)
-    if unknown:
-        raise RigError(f"{name}.{unknown[0]} is not a rig field: valid fields of {name} are "
-                       f"{', '.join(sorted(keys))}")
-    return value
-
-
-def _q(doc, prefix, key, dimension, *, ok=None, valid="", default=None):
-    field = f"{prefix}{key}"
-    if key not in doc or doc[key] is None:
-        if default is not None:
-            return default
-        raise RigError(f"{field} is missing: give it with a unit ({dimension.replace('_', ' ')})")
-    try:
-        value = quantity(field, doc[key], dimension)
-    except UnitError as exc:
-        raise RigError(str(exc)) from None
-    if ok is not None and not ok(value):
-        raise RigError(f"{field}={doc[key]!r} is invalid: valid range is {valid}")
-    lo, hi = MAGNITUDE
-    if dimension != "angle" and value != 0.0 and not lo <= abs(value) <= hi:
-        raise RigError(f"{field}={doc[key]!r} is invalid: valid range is {lo:g} to {hi:g} "
-                       f"{SI_UNIT[dimension]} in magnitude (the model's scales under- or "
-                       "overflow beyond)")
-    return value
-
-
-def _number(doc, key, ok, valid, default=None):
-    if key not in doc or doc[key] is None:
-        if default is not None:
-            return default
-        raise RigError(f"{key} is missing: a number, {valid}")
-    value = doc[key]
-    if isinstance(value, str):
-        raise RigError(f"{key}={value!r} is invalid: a dimensionless number, {valid} "
-                       "(no unit)")
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or not ok(value):
-        raise RigError(f"{key}={value!r} is invalid: valid range is {valid}")
-    return float(value)
-
-
-def _one_of(doc, prefix, a, b):
-    have = [k for k in (a, b) if doc.get(k) is not None]
-    if len(have) != 1:
-        raise RigError(f"{prefix}{a} / {prefix}{b}: give exactly one of them "
-                       f"({'both' if have else 'neither'} given)")
-    return have[0]
-
-
 def rig_from_dict(doc) -> Rig:
     """A :class:`Rig` from a rig file's mapping (module docstring; docs/rig.md)."""
     if not isinstance(doc, dict):
@@ -364,6 +386,26 @@ def rig_from_dict(doc) -> Rig:
     if unknown:
         raise RigError(f"{unknown[0]} is not a rig field: valid fields are "
                        f"{', '.join(sorted(_TOP))}")
+    positive = (lambda v: v > 0.0)
+    if doc.get("masses") is not None:
+        mass, omega_n, zeta, chain = read_masses(doc)
+    else:
+        given = [k for k in N_MASSES if doc.get(k) is not None]
+        if given:
+            raise RigError(f"{given[0]} is a field of the n-mass form: give masses (a list "
+                           "of masses with their unit) with it, or remove it")
+        mass, omega_n, zeta = _one_mass(doc)
+        chain = None
+    r = _number(doc, "restitution", lambda v: 0.0 < v < 1.0, "0 < restitution < 1")
+    gap = _q(doc, "", "gap", "length", ok=positive,
+             valid="gap > 0 (the stop on the +x side of the rest position: the mass "
+                   "moves towards it by a positive distance)")
+    return _rest(doc, mass, omega_n, zeta, r, gap, chain)
+
+
+def _one_mass(doc) -> tuple:
+    """(mass, omega_n, zeta) of the one-mass form: mass, natural_frequency or stiffness,
+    damping_ratio or damping."""
     positive = (lambda v: v > 0.0)
     mass = _q(doc, "", "mass", "mass", ok=positive, valid="mass > 0")
     if _one_of(doc, "", "natural_frequency", "stiffness") == "natural_frequency":
@@ -381,11 +423,12 @@ def rig_from_dict(doc) -> Rig:
             raise RigError(f"damping={doc['damping']!r} is invalid: the damping ratio "
                            f"c / (2 sqrt(k m)) = {zeta:.6g} must be < 1 (an underdamped "
                            f"oscillator): valid range is damping < {2 * mass * omega_n:.6g} N*s/m")
-    r = _number(doc, "restitution", lambda v: 0.0 < v < 1.0, "0 < restitution < 1")
-    gap = _q(doc, "", "gap", "length", ok=positive,
-             valid="gap > 0 (the stop on the +x side of the rest position: the mass "
-                   "moves towards it by a positive distance)")
+    return mass, omega_n, zeta
 
+
+def _rest(doc, mass, omega_n, zeta, r, gap, chain) -> Rig:
+    """The forcing, sensor, actuator, controller and stop sections, for every n."""
+    positive = (lambda v: v > 0.0)
     f = _section(doc, "forcing", _FORCING)
     kind = f.get("type", "force")
     if kind not in ("force", "base"):
@@ -447,8 +490,14 @@ def rig_from_dict(doc) -> Rig:
                     ok=lambda v: 0.0 < v < TWO_PI, valid="0 < pi2_offset < 2 pi",
                     default=math.pi / 2)
 
+    structure = read_indices(doc, f, s, a, chain)
+    stop = _stop(doc)
+    if structure is not None and stop.type != "rigid":
+        raise RigError(f"stop.type={stop.type!r} is invalid for a rig of {structure.n} "
+                       "masses: valid value is rigid (the compliant stops are the one-mass "
+                       "plant's)")
     rig = Rig(mass, omega_n, zeta, r, gap, kind, amplitude, frequency, phase, sensor,
-              actuator, budget, pi2_offset, _stop(doc))
+              actuator, budget, pi2_offset, stop, structure)
     _check_model(rig, doc)
     _check_stop(rig, doc)
     return rig
@@ -517,7 +566,7 @@ def _velocity(s):
 def _check_model(rig: Rig, doc) -> None:
     """The derived model exists: omega away from resonance, the pulse inside the period."""
     try:
-        p = rig.params()
+        p = rig.params() if rig.structure is None else rig.model()
     except ParameterError as exc:
         raise RigError(f"the model of this rig is invalid: {exc}") from None
     period = rig.forcing_period
@@ -537,7 +586,8 @@ def _check_model(rig: Rig, doc) -> None:
                        f"forcing.frequency <= sensor.rate <= {MAX_SAMPLES_PER_PERIOD} x "
                        f"forcing.frequency, {MIN_SAMPLES_PER_PERIOD * rig.frequency:.6g} to "
                        f"{MAX_SAMPLES_PER_PERIOD * rig.frequency:.6g} Hz")
-    if not 1e-100 < p.amplitude < 1e100 or p.zeta * p.period > 300.0:
+    if rig.structure is None and (not 1e-100 < p.amplitude < 1e100
+                                  or p.zeta * p.period > 300.0):
         raise RigError(f"forcing.frequency={doc['forcing']['frequency']!r} is invalid: the "
                        f"model's omega = {p.omega:.6g} is outside the computable range")
     # the design's delay limit (docs/theory_delay.md, 2): the pulse acts before the
@@ -588,14 +638,19 @@ def rig_to_dict(rig: Rig) -> dict:
                        "damping": q(st.damping, "hertz_damping" if hertz else "damping"),
                        "friction": q(st.friction, "force"),
                        "friction_static": q(st.friction_static, "force")}
+    if rig.structure is not None:
+        write_structure(rig.structure, out)
     return out
 
 
-def rig_with_model(rig: Rig, p: OscillatorParams) -> Rig:
+def rig_with_model(rig: Rig, p) -> Rig:
     """``rig`` with its model replaced by ``p`` (fitted by ``grazing identify``): the
     forcing frequency, amplitude and phase, the mass, sensor and actuator are what the
     lab set and stay; the natural frequency is f / omega, the damping ratio zeta, the
-    restitution r, and the gap (Delta d + d*) l with the new length scale l = F0 / k."""
+    restitution r, and the gap (Delta d + d*) l with the new length scale l = F0 / k.
+    For a rig of n masses ``p`` is an NdofModel (:func:`~grazing_control.plant.rig_structure.rig_with_ndof_model`)."""
+    if isinstance(p, NdofModel):
+        return rig_with_ndof_model(rig, p)
     omega_n = TWO_PI * rig.frequency / p.omega
     new = replace(rig, omega_n=omega_n, zeta=p.zeta, restitution=p.r,
                   pi2_offset=p.pi2_offset)

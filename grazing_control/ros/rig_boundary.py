@@ -17,7 +17,12 @@ it (the nodes build the messages):
   time + latency);
 * :class:`Sections`: the controller's side: the section times from ``rig/phase`` (where
   the forcing phase equals tau2), rig time <-> model time, and the pulse's force of a
-  correction and back (F = m Delta v / w, Delta v = omega_n l Delta v~).
+  correction and back (F = m_a Delta v / w, Delta v = omega_n l Delta v~, m_a the
+  actuated mass's effective mass 1 / (M^-1)_aa: the rig's mass for one mass);
+* :func:`joint_names`, :func:`sensor_positions`, :func:`model_positions`: the
+  ``rig/sensor`` JointState of a rig of n masses (the measured masses' positions in
+  metres, named ``mass<i>`` in the rig file's ``sensor.masses`` order; ``mass`` for one
+  mass) and back to the model's coordinates.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.rig import Rig
 from grazing_control.plant.settings import default_values
 
-__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "controller_values", "answer_lead",
+__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "joint_names", "sensor_positions",
+           "model_positions", "controller_values", "answer_lead",
            "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
            "force_of", "correction_of", "APPLIED_IN_TIME", "APPLIED_PREDICTED",
            "APPLIED_NOTHING", "APPLIED_SAFE", "RIG_TOPICS"]
@@ -72,6 +78,11 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
     (Rig.contact_values; the rigid wall's with sim_node's defaults for the rest): a
     compliant stop runs in the rig scene as the wall does, realtime with the correction
     as a force pulse (docs/theory_contact.md §16)."""
+    if rig.n > 1:
+        raise ParameterError(f"masses: the rig has {rig.n} masses: the simulated rig runs a "
+                             "rig of one mass (the n-DOF plant behind the driver contract is "
+                             "not built yet; grazing rig FILE --model-out M gives its model "
+                             "for grazing run --model M)")
     p, d = rig.params(), rig.dimensionless()
     if d["sensor_velocity"] and d["sensor_velocity_noise"] != d["sensor_noise"]:
         raise ParameterError(
@@ -205,15 +216,42 @@ class DelayLine:
 
 
 def force_of(rig: Rig, dv: float) -> float:
-    """The pulse's force (N) of a correction Delta v~: F = m omega_n l Delta v~ / w
-    (an impulse m Delta v spread over the width w)."""
-    return rig.mass * rig.scales.velocity * dv / rig.actuator.pulse_width
+    """The pulse's force (N) of a correction Delta v~ of the actuated mass:
+    F = m_a omega_n l Delta v~ / w (an impulse m_a Delta v spread over the width w;
+    m_a = 1 / (M^-1)_aa, Rig.effective_mass: an impulse J on mass a changes v_a by
+    (M^-1)_aa J; m for one mass)."""
+    return rig.effective_mass * rig.scales.velocity * dv / rig.actuator.pulse_width
 
 
 def correction_of(rig: Rig, force: float, width: float) -> float:
     """The correction Delta v~ of a pulse of ``force`` N over ``width`` s:
-    Delta v~ = F w / (m omega_n l)."""
-    return force * width / (rig.mass * rig.scales.velocity)
+    Delta v~ = F w / (m_a omega_n l)."""
+    return force * width / (rig.effective_mass * rig.scales.velocity)
+
+
+def joint_names(rig: Rig) -> list:
+    """``rig/sensor``'s ``name`` (docs/driver_contract.md): ``["mass"]`` for one mass,
+    ``mass<i>`` of each measured mass (the rig file's ``sensor.masses`` order) for n."""
+    return ["mass"] if rig.n == 1 else [f"mass{i}" for i in rig.measured]
+
+
+def sensor_positions(rig: Rig, x) -> list:
+    """The measured masses' positions (m) of the model's positions x~ (all n
+    coordinates): x_i = l x~_i, in :func:`joint_names`' order."""
+    length = rig.scales.length
+    return [float(x[i]) * length for i in rig.measured]
+
+
+def model_positions(rig: Rig, names, positions) -> dict:
+    """The model coordinates {i: x~_i} of a ``rig/sensor`` message's ``names`` and
+    ``positions`` (m): x~_i = x_i / l. ValueError (one line) for a name that is not a
+    measured mass of this rig or a count that differs."""
+    want = joint_names(rig)
+    if list(names) != want or len(positions) != len(want):
+        raise ValueError(f"rig/sensor names {list(names)!r} with {len(positions)} positions: "
+                         f"valid is {want!r} with one position each")
+    length = rig.scales.length
+    return {i: float(x) / length for i, x in zip(rig.measured, positions)}
 
 
 class Sections:

@@ -16,7 +16,10 @@ overrides the hooks:
     the rig clock now, in seconds (the DAQ's sample clock, the microcontroller's timer);
 ``read_sensor()``
     the samples measured since the last call: (t, x, v) with t in the rig clock, x in
-    metres (+ towards the stop), v in m/s or None for a position-only sensor;
+    metres (+ towards the stop), v in m/s or None for a position-only sensor; for a rig
+    of n masses x (and v) a sequence over the measured masses, in the order of
+    ``joint_names`` (set it to rig_boundary.joint_names(rig): ``mass<i>``, the rig
+    file's ``sensor.masses``; ``["mass"]`` by default);
 ``phase_reference()``
     (t_ref, f, phi): the forcing's phase phi (rad) at rig time t_ref and its frequency
     f (Hz) (a signal generator's sync output);
@@ -142,6 +145,7 @@ class RigDriver(Node):
         self.next_phase = -math.inf      # rig time of the next phase reference
         self.next_clock = -math.inf      # rig time of the next clock pair
         self.safe_state = False          # a subclass's watchdog: nothing acts any more
+        self.joint_names = ["mass"]      # rig/sensor's names (rig_boundary.joint_names)
         self.timer = None
 
     def start(self) -> None:
@@ -183,12 +187,15 @@ class RigDriver(Node):
             self.next_clock = now + 1.0 / self.clock_rate
         self.act(now)
 
-    def publish_sample(self, t: float, x: float, v: float | None) -> None:
+    def publish_sample(self, t: float, x, v) -> None:
+        """One measurement: x (m) and v (m/s or None) a number for one measured mass, a
+        sequence over ``joint_names`` for several."""
         msg = JointState()
         msg.header.stamp = stamp_from_seconds(t)
-        msg.name = ["mass"]
-        msg.position = [float(x)]
-        msg.velocity = [] if v is None else [float(v)]
+        msg.name = list(self.joint_names)
+        msg.position = [float(a) for a in x] if hasattr(x, "__len__") else [float(x)]
+        msg.velocity = [] if v is None else \
+            [float(a) for a in v] if hasattr(v, "__len__") else [float(v)]
         self.sensor_pub.publish(msg)
         self.published["sensor"] += 1
 
