@@ -217,7 +217,11 @@ def test_continue_json_keys_and_values(runs, name, args, gains):
     d = _json(runs, name)
     assert set(d) == {"branch", "bifurcations"}
     start, stop, n = args
-    b = continue_11(P, start, stop, gains, points=n, check=True)
+    # the command's points: log-spaced in Delta d, as for a model file (issue 32)
+    from grazing_control.cli.orbits import continuation_values
+
+    b = continue_11(P, start, stop, gains, points=n, check=True,
+                    values=continuation_values(start, stop, n))
     assert len(d["branch"]) == len(b.points) == n
     for row, pt in zip(d["branch"], b.points):
         assert set(row) == {"delta_d", "v_minus", "multipliers", "stable"}

@@ -192,14 +192,17 @@ def cmd_continue(args):
 
 
 def _study_branch(args):
-    """The 1-DOF study's branch (``continuation.continue_11``, in the impact phase): its
-    JSON, the report's title, points (Delta d, v-, multipliers, stable), bifurcations
-    (type, Delta d) and notes."""
+    """The 1-DOF study's branch (``continuation.continue_11``, in the impact phase) at the
+    points of :func:`continuation_values`, as a model file's (issue 32): its JSON, the
+    report's title, points (Delta d, v-, multipliers, stable), bifurcations (type,
+    Delta d) and notes."""
     from grazing_control.dynamics.orbits.continuation import continue_11
 
     p = params_of(args)
     gains = gains_of(args, p)
-    branch = continue_11(p, args.start, args.stop, gains, points=args.points, check=True)
+    values = continuation_values(args.start, args.stop, args.points)
+    branch = continue_11(p, args.start, args.stop, gains, points=args.points, check=True,
+                         values=values)
     out = {
         "branch": [
             {"delta_d": b.delta_d, "v_minus": b.v_minus,

@@ -95,7 +95,7 @@ def _mults(tr, det):
 
 
 def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | None = None,
-                points: int = 200, check: bool = False) -> Branch:
+                points: int = 200, check: bool = False, values=None) -> Branch:
     """Continue the 1/1 orbit born at grazing from Delta d = start to stop.
 
     Parameters
@@ -110,6 +110,12 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
         Number of grid points (logarithmic in |psi|), >= 2.
     check : bool
         Verify every point with the exact flow (one impact per period, periodic).
+    values : sequence of float, optional
+        The points' Delta d instead of the grid in psi (each one's phase by
+        :func:`~grazing_control.dynamics.orbits.orbits.find_branch_phase`; a Delta d of 0 is
+        the grazing orbit's phase 0 and is left out): ``grazing continue``'s grid, the same
+        for every model (cli/orbits.py ``continuation_values``, issue 32: the n = 1 model
+        file gives the 1-DOF points).
 
     Returns
     -------
@@ -132,9 +138,10 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
     grid = np.logspace(math.log10(lo_mag), math.log10(hi_mag), points)
     if mags[0] > mags[1]:
         grid = grid[::-1]
+    phases = [sign * float(m) for m in grid] if values is None else \
+        _phases_of(p, values, gains)
     pts = []
-    for m in grid:
-        psi = sign * float(m)
+    for psi in phases:
         dd, v, tr, det = branch_monodromy(p, psi, gains)
         if check:
             try:
@@ -166,6 +173,20 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
             lam = limit_multipliers(p, gains)
         bifs.append(Bifurcation("grazing", 0.0, 0.0, lam))
     return Branch(pts, bifs)
+
+
+def _phases_of(p: OscillatorParams, values, gains):
+    """The impact phases of the branch's points at the Delta d ``values`` of
+    :func:`continue_11` (0 and a Delta d without a 1/1 orbit on the branch left out, as
+    ``check`` leaves out a point that the flow does not confirm)."""
+    phases = []
+    for dd in values:
+        if dd != 0.0:
+            try:
+                phases.append(find_branch_phase(p, float(dd), gains))
+            except OrbitNotFound:
+                continue
+    return phases
 
 
 # ----------------------------------------------------------- any model, by shooting

@@ -1,0 +1,265 @@
+"""Issue 32's acceptance line, differentially: "the n = 1 model file gives the 1-DOF numbers
+to 1e-12 through every command".
+
+Each command that takes ``--model`` runs twice, in-process (``main(argv)``): with the
+n = 1 model file (config/models/study_1dof.yaml: M = 1, C = 2 zeta, K = 1, f = 1, the
+study's omega, r, pi2_offset) and with the 1-DOF options that say the same (the study's
+defaults; the same Delta d, delay, pulse, actuator, gains). Both outputs are parsed (the
+JSON, or the sweep's npz) and every number the two have in common is compared with
+relative tolerance 1e-12, absolute 1e-12 near zero (:func:`differences`); where the two
+commands name a quantity differently, :data:`the mapping of each case <CASES>` says which
+is which (the 1-DOF c1, c2 are the family's gains k = (k_x0, k_v0); an interval of mu is
+an interval of c2 through the family's k_v0(mu); the 1-DOF ``multipliers_free`` are the
+transmission zero and mu, the eigenvalues of N). Quantities that only one side reports
+(the n-DOF d*, tau*, the family; the 1-DOF x_ref, the noise gains) have nothing to be
+compared with and are left out, by name.
+
+Measured (the largest relative difference per case; ``pytest -s`` prints them) in the
+commit that added this file. Where 1e-12 is not reachable the reason is stated and
+measured in the case's docstring, not hidden in a tolerance:
+
+* the uncontrolled simulation is irregular: both routes start a few ulps apart and
+  separate like the motion (kept: the first 10 periods, as tests/test_cli_model_file.py);
+* ``robustness model``: the command's numbers (band ends, end/e^2) are the same floats;
+  the scan's multipliers behind them (not in the output) are ill-conditioned in the data
+  (docs/robustness.md section 4, "n = 1").
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grazing_control.cli.commands import main
+
+ROOT = Path(__file__).resolve().parents[1]
+ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
+RTOL = ATOL = 1e-12
+#: Keys that are not numbers of the model: wall times, labels, file names.
+NOT_NUMBERS = {"seconds", "periods_per_second", "method", "model", "files", "npz", "png",
+               "route", "guess", "mu_chosen", "control", "label"}
+
+
+def run_json(*argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([*argv, "--json"])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue())
+
+
+def differences(a, b, path=""):
+    """[(path, a, b, relative difference)] of every number that ``a`` and ``b`` (parsed
+    JSON: dicts, lists, numbers, [re, im] pairs) have in common, over the keys of both
+    dicts; lists must have the same length and booleans, strings, None must be equal
+    (a mismatch is one row with difference inf)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        rows = []
+        for key in sorted(set(a) & set(b) - NOT_NUMBERS):
+            rows += differences(a[key], b[key], f"{path}.{key}")
+        return rows
+    if isinstance(a, (list, tuple, np.ndarray)) and isinstance(b, (list, tuple, np.ndarray)):
+        if len(a) != len(b):
+            return [(path, f"{len(a)} items", f"{len(b)} items", math.inf)]
+        rows = []
+        for i, (x, y) in enumerate(zip(a, b)):
+            rows += differences(x, y, f"{path}[{i}]")
+        return rows
+    numeric = (int, float, np.integer, np.floating)
+    if isinstance(a, numeric) and isinstance(b, numeric) and \
+            not isinstance(a, bool) and not isinstance(b, bool):
+        a, b = float(a), float(b)
+        if a == b:
+            return [(path, a, b, 0.0)]
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return [(path, a, b, math.inf)]
+        return [(path, a, b, abs(a - b) / max(abs(a), abs(b)))]
+    return [(path, a, b, 0.0 if a == b else math.inf)]
+
+
+def _within(row) -> bool:
+    _path, a, b, rel = row
+    return rel <= RTOL or (isinstance(a, float) and math.isfinite(rel) and abs(a - b) <= ATOL)
+
+
+def check(rows, label):
+    """Every row within 1e-12 (relative, or absolute near zero); prints the largest
+    relative difference of the numbers above 1e-12 and the largest absolute one."""
+    assert rows, f"{label}: nothing compared"
+    numbers = [r for r in rows if isinstance(r[1], float) and isinstance(r[2], float)
+               and math.isfinite(r[3])]
+    big = [r for r in numbers if max(abs(r[1]), abs(r[2])) > ATOL]
+    worst = max(big, key=lambda r: r[3], default=(None, 0.0, 0.0, 0.0))
+    absolute = max((abs(r[1] - r[2]) for r in numbers), default=0.0)
+    print(f"\n{label}: {len(rows)} numbers, largest relative difference {worst[3]:.2g} "
+          f"(at {worst[0]}), largest absolute {absolute:.2g}")
+    bad = [r for r in rows if not _within(r)]
+    assert not bad, f"{label}: {len(bad)} of {len(rows)} beyond 1e-12, e.g. {bad[:5]}"
+
+
+# ------------------------------------------------------------------ design
+def _family_as_1dof(got):
+    """The n = 1 design's output in the 1-DOF design's names (module docstring)."""
+    k0, dk = got["family"]["k_at_mu_0"], got["family"]["dk_dmu"]
+
+    def c2_interval(iv):
+        a, b = (k0[1] + dk[1] * mu for mu in iv)
+        return [min(a, b), max(a, b)]
+
+    free = sorted([complex(*z) for z in got["transmission_zeros"]] + [complex(got["mu"])],
+                  key=lambda z: -abs(z))
+    out = {"c1": got["gains"][0], "c2": got["gains"][1],
+           "multipliers_free": [[z.real, z.imag] for z in free],
+           "admissible_c2_sets": {c: sorted(c2_interval(iv) for iv in ivs)
+                                  for c, ivs in got["admissible_mu_sets"].items()}}
+    out.update({k: got[k] for k in ("multipliers_limit", "gamma1", "spectral_radius_free",
+                                    "conditions", "admissible")})
+    return out
+
+
+#: (1-DOF options, the same on the n = 1 file) of design; the pulse and actuator cases
+#: compare c1 only: the 1-DOF design keeps the ideal kick's limit multipliers, gamma1 and
+#: admissible c2 beside the pulse's c1, the n-DOF design reports the pulse's family.
+DESIGNS = {
+    "plain": ((), ()),
+    "delay": (("--delay", "2"), ("--delay", "2")),
+    "pulse": (("--pulse-width", "0.3"), ("--pulse-width", "0.3")),
+    "actuator": (("--pulse-width", "0.3", "--actuator-bandwidth", "20",
+                  "--actuator-latency", "0.05"),
+                 ("--pulse-width", "0.3", "--actuator-bandwidth", "20",
+                  "--actuator-latency", "0.05")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DESIGNS))
+def test_design(case):
+    one, model = DESIGNS[case]
+    ref = run_json("design", "--c2", "-0.5", *one)
+    got = _family_as_1dof(run_json("design", "--model", ONE, "--free-gain", "v0=-0.5", *model))
+    if case in ("pulse", "actuator"):
+        got = {"c1": got["c1"], "c2": got["c2"]}
+    else:
+        ref["admissible_c2_sets"] = {c: sorted(ivs) for c, ivs in ref["admissible_c2_sets"].items()}
+    check(differences(ref, got), f"design {case}")
+
+
+# ------------------------------------------------------------------ orbit, continue
+@pytest.fixture(scope="module")
+def c1():
+    """The 1-DOF design's c1 for c2 = -1 (the study's), given to both routes as it is."""
+    return run_json("design", "--c2", "-1")["c1"]
+
+
+def _gains(c1, controlled):
+    """(1-DOF options, n = 1 options) of the same gains, or none."""
+    if not controlled:
+        return (), ()
+    return ("--c1", repr(c1), "--c2", "-1"), (f"--gains={c1!r},-1",)
+
+
+#: The unit roundoff.
+UNIT = 2.0 ** -53
+
+
+def omega_condition(delta_d, one, step=1e-8):
+    """kappa_omega = |d lambda / d ln omega| / |lambda| of the largest multiplier of the 1-DOF
+    orbit at ``delta_d`` with the gain options ``one`` (a central difference of
+    ``grazing orbit --omega``, relative step 1e-8: the change is 1e-2 of lambda at most
+    here, the rounding 1e-2 of kappa)."""
+    from grazing_control.oscillator.params import OscillatorParams
+
+    omega = OscillatorParams().omega
+    a, b = (complex(*run_json("orbit", "--delta-d", repr(delta_d), "--omega",
+                              repr(omega * (1.0 + h)), *one)["multipliers"][0])
+            for h in (step, -step))
+    # a complex pair: the member of the other side's pair nearer to a
+    return min(abs(a - b), abs(a - b.conjugate())) / abs(a) / (2.0 * step)
+
+
+def check_multipliers(rows, label, kappa):
+    """The multipliers of one orbit (``rows``) within 1e-12, or where the largest
+    multiplier is ill-conditioned within 4 kappa_omega u (module docstring)."""
+    bound = max(RTOL, 4.0 * kappa * UNIT)
+    worst = max((r[3] for r in rows), default=0.0)
+    print(f"{label}: largest relative difference {worst:.2g}, kappa_omega u = "
+          f"{kappa * UNIT:.2g}")
+    bad = [r for r in rows if not (_within(r) or r[3] <= bound)]
+    assert not bad, f"{label}: beyond max(1e-12, 4 kappa_omega u) = {bound:.2g}: {bad}"
+
+
+def check_orbits(rows, points, one, label):
+    """Every number of ``rows`` within 1e-12 but the multipliers of the orbits
+    ``points`` ({path prefix: Delta d}), which get :func:`check_multipliers`."""
+    lam = {prefix: [r for r in rows if r[0].startswith(prefix + ".multipliers")]
+           for prefix in points}
+    others = [r for r in rows if not any(r in group for group in lam.values())]
+    check(others, f"{label} (but the multipliers)")
+    for prefix, group in lam.items():
+        check_multipliers(group, f"{label}{prefix} multipliers",
+                          omega_condition(points[prefix], one))
+
+
+#: Delta d of the orbit cases: the study's scene, near grazing (1e-8: v- = 3.4e-6, the
+#: uncontrolled large multiplier -2562) and nearer (1e-10).
+ORBITS = ("-5e-6", "-1e-7", "-1e-8", "-1e-10")
+
+
+@pytest.mark.parametrize("controlled", [False, True], ids=["free", "controlled"])
+@pytest.mark.parametrize("delta_d", ORBITS)
+def test_orbit(c1, delta_d, controlled):
+    one, model = _gains(c1, controlled)
+    ref = run_json("orbit", "--delta-d", delta_d, *one)
+    got = run_json("orbit", "--model", ONE, "--delta-d", delta_d, *model)
+    check_orbits(differences(ref, got), {"": float(delta_d)}, one,
+                 f"orbit {delta_d} {'controlled' if controlled else 'free'}")
+
+
+@pytest.mark.parametrize("controlled", [False, True], ids=["free", "controlled"])
+def test_continue(c1, controlled):
+    """The whole output: the same points (Delta d, v-, multipliers, stable: both on
+    ``continuation_values``' grid, log-spaced in Delta d) and the bifurcations located
+    between them (the period doubling at -1.005e-5 uncontrolled)."""
+    one, model = _gains(c1, controlled)
+    span = ("--from", "-1e-3", "--to", "-1e-7", "--points", "12")
+    ref = run_json("continue", *span, *one)
+    got = run_json("continue", "--model", ONE, *span, *model)
+    points = {f".branch[{i}]": p["delta_d"] for i, p in enumerate(ref["branch"])}
+    check_orbits(differences(ref, got), points, one,
+                 f"continue {'controlled' if controlled else 'free'}")
+
+
+@pytest.mark.parametrize("controlled", [False, True], ids=["free", "controlled"])
+def test_simulate(c1, controlled):
+    """The Pi2 samples and impacts per period; uncontrolled the motion is irregular and
+    the two routes, a few ulps apart at the start (X** from the closed form and from
+    the model's complex amplitude), separate as the motion does: 30 periods compared
+    with control, the first 10 without (as tests/test_cli_model_file.py)."""
+    one, model = _gains(c1, controlled)
+    ref = run_json("simulate", "--delta-d", "-5e-6", "--periods", "30", *one)
+    got = run_json("simulate", "--model", ONE, "--delta-d", "-5e-6", "--periods", "30", *model)
+    kept = 30 if controlled else 10
+    for out in (ref, got):
+        out["pi2"] = out["pi2"][:kept]
+    check(differences(ref, got), f"simulate {'controlled' if controlled else 'free'}")
+
+
+def test_sweep(tmp_path):
+    """The sweep's npz: the same grid, the Pi2 samples after the transient, X** and the
+    detected period at each point (the n = 1 file names them values, samples)."""
+    grid = ("--grid", "delta_d=-1e-4:-1e-5:3", "--periods", "10", "--workers", "1", "--no-png")
+    ref = run_json("sweep", *grid, "--out", str(tmp_path / "one"))
+    got = run_json("sweep", "--model", ONE, *grid, "--out", str(tmp_path / "model"))
+    check(differences(ref, got), "sweep summary")
+    a, b = np.load(ref["npz"]), np.load(got["npz"])
+    rows = differences({"delta_d": a["axis_delta_d"], "pi2": a["pi2_deviation"],
+                        "reference": a["reference"], "period": a["period"],
+                        "impacts_per_period": a["impacts_per_period"]},
+                       {"delta_d": b["values"], "pi2": b["samples"], "reference": b["reference"],
+                        "period": b["period"], "impacts_per_period": b["impacts_per_period"]})
+    check(rows, "sweep npz")
