@@ -263,3 +263,58 @@ def test_sweep(tmp_path):
                        {"delta_d": b["values"], "pi2": b["samples"], "reference": b["reference"],
                         "period": b["period"], "impacts_per_period": b["impacts_per_period"]})
     check(rows, "sweep npz")
+
+
+# ------------------------------------------------------------------ robustness model
+def test_robustness_model_bands():
+    """``robustness model`` (studies/robustness/model.py: each row of the command is one
+    ``instability_band``, its end and end / e^2), ``--c2 -1`` against ``--model ONE --mu
+    0`` (the same gains: mu = 0 is c2 = -1 on the family, to 2e-15), on an error in omega
+    of +1e-3 and -1e-3 (the whole command runs 24 bands, 20 s; measured by hand,
+    ``--parameter C --parameter omega --parameter r`` against the 1-DOF rows of zeta,
+    omega and r: 12 rows, every end and end / e^2 the same float).
+
+    The scan's multipliers behind the end (``Band.multipliers``, not in the output) run
+    down to |Delta d| = 1e-14 and are ill-conditioned there: each within
+    max(1e-12, 4 kappa_omega u) (kappa_omega of the mismatched plant's multiplier, as
+    :func:`omega_condition`). Measured over the zeta, omega and r bands: 5.4e-10 at most,
+    where each route is 1.1e-10 .. 1.9e-8 from the 50-digit reference and kappa u, over
+    all the data, 1.2e-10 .. 1.2e-8 (benchmarks/n1_conditioning.py)."""
+    from grazing_control.dynamics.design.mismatch import (instability_band, largest_multiplier,
+                                                          mismatched)
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.oscillator.ndof import load_model
+    from grazing_control.oscillator.params import OscillatorParams
+
+    base, model = OscillatorParams(), load_model(ONE)
+    c1 = run_json("design", "--c2", "-1")["c1"]
+    family = run_json("design", "--model", ONE, "--mu", "0")["gains"]
+    check(differences([c1, -1.0], family), "robustness model: the gains of mu = 0")
+    ends = {}
+    for e in (1e-3, -1e-3):
+        a = instability_band(base, Gains(c1, -1.0), "omega", e)
+        b = instability_band(model, np.array(family), "omega", e)
+        check(differences([a.end, a.end / e ** 2], [b.end, b.end / e ** 2]),
+              f"robustness model omega {e:+g}: end, end/e^2")
+        ends[e] = b.end
+        plant = mismatched(base, "omega", e)
+        worst = 0.0
+        for (dd, ra), (dd2, rb) in zip(a.multipliers, b.multipliers):
+            assert dd == dd2
+            if not (math.isfinite(ra) and math.isfinite(rb)):
+                # no certified orbit on one route (the n-DOF check of a second contact
+                # gives up where v- is too small, ndof_branch.other_contacts): both fail
+                assert not (ra < 1.0 or rb < 1.0), (e, dd, ra, rb)
+                continue
+            rel = abs(ra - rb) / abs(ra)
+            worst = max(worst, rel)
+            if rel > RTOL:
+                h = 1e-8
+                up, down = (largest_multiplier(plant.with_(omega=plant.omega * (1 + s * h),
+                                                          delta_d=dd), Gains(c1, -1.0))
+                            for s in (1.0, -1.0))
+                kappa = abs(up - down) / abs(ra) / (2.0 * h)
+                assert rel <= 4.0 * kappa * UNIT, (e, dd, ra, rb, rel, kappa * UNIT)
+        print(f"robustness model omega {e:+g}: scan multipliers, largest relative "
+              f"difference {worst:.2g}")
+    assert ends[1e-3] < 0.0 == ends[-1e-3]     # +1e-3 opens a band (-4.7e-5), -1e-3 none

@@ -267,7 +267,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_common(s)
     s.add_argument("--from", dest="start", type=finite, required=True, help="start Delta d <= 0")
     s.add_argument("--to", dest="stop", type=finite, required=True, help="end Delta d <= 0")
-    s.add_argument("--points", type=count, default=200, help="grid points (default 200)")
+    s.add_argument("--points", type=count, default=200,
+                   help="grid points (default 200): values of Delta d log-spaced in |Delta d| "
+                        "from --from to --to (--to 0: down to 1e-12 |--from|), the same with "
+                        "or without --model")
     add_gains(s)
     model_file.add_model_option(s)
     model_file.add_gain_options(s, markov=True)
