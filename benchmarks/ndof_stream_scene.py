@@ -8,7 +8,7 @@ Three numbers per coordinate of the Pi2 deviation about the controlled orbit z*:
   linearised about z* on the exact n-DOF map (with the pulse, and through the
   actuator's lag the map of (z, F)), driven by the model filter's error covariance on
   the orbit (dynamics/design/noise.py: ndof_filter_covariance;
-  dynamics/design/ndof_spread.py: predicted_spread, docs/theory_ndof.md section 16):
+  dynamics/design/ndof_spread.py: predicted_spread, docs/theory_ndof.md section 17):
   the prediction `grazing design --model M ... --delta-d D` prints;
 * **core**: the seeded closed loop in one process (studies.near_grazing.scene.stream_loop: the
   engine with the sensor, the StreamEstimator over the model, k^T z^ acting ``delay``

@@ -332,7 +332,7 @@ def test_sections_with_stable_zeros_are_where_every_zero_is_inside(seed):
         nd.sections_with_stable_zeros(chain, points=1)
 
 
-# ------------------------------------------------- the predicted spread (§16, ndof_spread)
+# ------------------------------------------------- the predicted spread (§17, ndof_spread)
 def _differences(f, y, h):
     """Fourth-order central differences of f at y, step h per column."""
     cols = []
@@ -347,7 +347,7 @@ def _differences(f, y, h):
                                                   (2.0, 3.0, 0.1)])
 def test_actuated_step_jacobian_is_the_exact_maps_derivative(start, tau_a, force0):
     """Chain at Delta d = -1e-3: d (z, F)_{k+1} / d (z, F, Delta v) of actuated_step
-    (§16) against fourth-order differences of the map itself (measured 1.3e-9, 7e-10,
+    (§17) against fourth-order differences of the map itself (measured 1.3e-9, 7e-10,
     3e-11 of entries up to 15): the rig scene's pulse (start 0.5, tau_a 0.1, the impact
     at 11.93), the impact under the decaying force (start 8, tau_a 0.5: the force there
     ~ e^-5 of its peak) and a slow actuator without impact, each from a force carried
@@ -446,10 +446,10 @@ def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
     tau_a 0.1, latency 0.05): the simulator's engine (plant.engine.Engine: its force
     carried from period to period, its seeded noises) in a closed loop of 1200 periods
     from the orbit, every coordinate measured with sigma 1e-5 and a velocity noise of
-    1e-5 at each sample (the nonlinear loop against its linearisation and (N14)): one
+    1e-5 at each sample (the nonlinear loop against its linearisation and (N11)): one
     impact per period, and the std of every coordinate and of the force within 4 sampling standard errors of the prediction (the errors from the linear
     loop's correlations, 2.2-4.5 % here; measured ratios 0.980-1.015), the corrections'
-    within 15 % (N15; measured with 2000 periods for each noise alone 0.975-0.999)."""
+    within 15 % (N12; measured with 2000 periods for each noise alone 0.975-0.999)."""
     from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
     from grazing_control.plant.engine import Engine
     from grazing_control.plant.settings import load_model_file, settings_from_values
@@ -484,3 +484,44 @@ def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
             assert abs(r - 1.0) < 4.0 * _std_error(J, pred.covariance, i, periods), (i, ratio)
     dv_ratio = np.std(dvs) / (1e-5 * pred.correction_std)
     assert abs(dv_ratio - 1.0) < 0.15, dv_ratio
+
+
+def test_design_prints_the_predicted_spread_through_the_lag(capsys):
+    """`grazing design --model CHAIN --delta-d -1e-3 --mu -0.22 --delay 1 --pulse-width 1
+    --actuator-bandwidth 10 --actuator-latency 0.05 --json`: its ``spread`` is
+    predicted_spread's (every coordinate measured; x0 only at --sensor-rate 50 through
+    the filter over the samples before t_k; the velocity noise), the orbit (z*, F*) with
+    spectral radius 0.8964 (docs/ndof_scene.md: the actuated orbit's |lambda|max); a
+    --delta-d >= 0 is one line naming delta_d, status 2."""
+    import json
+
+    from grazing_control import cli
+    from grazing_control.dynamics.design.ndof_spread import predicted_spread
+    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.simulation.actuator import Actuator
+
+    argv = ["design", "--model", str(CHAIN), "--mu", "-0.22", "--delay", "1.0",
+            "--pulse-width", "1.0", "--actuator-bandwidth", "10", "--actuator-latency",
+            "0.05", "--sensor-rate", "50"]
+    assert cli.main(argv + ["--delta-d", "-1e-3", "--json"]) in (0, None)
+    got = json.loads(capsys.readouterr().out)["spread"]
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    act = nd.Actuation(1.0, 1.0, 0.1, 0.05)
+    k = nd.evaluate_design(model, -0.22, act).gains
+    want = predicted_spread(model, k, act)
+    assert got["spectral_radius"] == pytest.approx(0.8964, abs=5e-5)
+    np.testing.assert_allclose(got["orbit"], want.orbit, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got["measured"]["std"], want.std, rtol=1e-12)
+    r = ndof_filter_covariance(model, k, want.orbit[:4], 50, 0, 1.0, width=1.0,
+                               section_sample=False, actuator=Actuator(0.1, 0.05),
+                               force0=float(want.orbit[4]))
+    pos = predicted_spread(model, k, act, measurement=r, orbit=want.orbit)
+    np.testing.assert_allclose(got["position_only"]["std"], pos.std, rtol=1e-12)
+    assert got["position_only"]["correction_std"] == pytest.approx(pos.correction_std,
+                                                                   rel=1e-12)
+    vel = predicted_spread(model, k, act, measurement=np.zeros((4, 4)), velocity=1.0,
+                           orbit=want.orbit)
+    np.testing.assert_allclose(got["velocity_noise"]["std"], vel.std, rtol=1e-12)
+    assert cli.main(argv + ["--delta-d", "1e-3"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "delta_d=0.001 is invalid" in err[0]

@@ -440,7 +440,7 @@ def _family_spread(args, model, design, delay):
     lag) and of the corrections, every coordinate measured with sigma (R = I), the
     position of the wall coordinate only (the model filter's covariance at --sensor-rate
     over the samples a lockstep controller fits), and the velocity noise at Pi2
-    (dynamics/design/ndof_spread.py, docs/theory_ndof.md section 16). Null entries
+    (dynamics/design/ndof_spread.py, docs/theory_ndof.md section 17). Null entries
     where the loop has no stable 1/1 orbit there."""
     import dataclasses
 

@@ -1,5 +1,5 @@
 """The predicted spread of the controlled n-DOF loop with the pulse and through the
-actuator's lag (issue 32; docs/theory_ndof.md section 16).
+actuator's lag (issue 32; docs/theory_ndof.md section 17).
 
 The loop's state on Pi2 is y = z (2n) for the kick and the ideal pulse, y = (z, F)
 (2n + 1) through a first-order actuator (F the actuator's force at the section, carried
@@ -14,9 +14,9 @@ f one period of the exact map (:func:`~grazing_control.dynamics.maps.ndof_map.ac
 e_v = e_{n + i_a}, both exact (no finite differences). For independent n_k and xi_k the
 stationary covariance solves the discrete Lyapunov equation
 
-    Sigma = J Sigma J^T + sigma^2 (k^T R k) g g^T + sigma_v^2 e_v e_v^T,      (N14)
+    Sigma = J Sigma J^T + sigma^2 (k^T R k) g g^T + sigma_v^2 e_v e_v^T,      (N11)
 
-and the corrections' variance is k^T Sigma_zz k + sigma^2 k^T R k (N15). For n = 1
+and the corrections' variance is k^T Sigma_zz k + sigma^2 k^T R k (N12). For n = 1
 with the kick this is grazing_control.dynamics.design.noise.noise_covariance.
 """
 
@@ -148,8 +148,8 @@ class LoopSpread:
     """The loop's stationary spread per unit sigma (module docstring).
 
     orbit : y* on Pi2 (z*, and F* through the lag).
-    covariance : Sigma of y per unit sigma^2, (N14).
-    correction_variance : of Delta v per unit sigma^2, (N15).
+    covariance : Sigma of y per unit sigma^2, (N11).
+    correction_variance : of Delta v per unit sigma^2, (N12).
     spectral_radius : max |eig J|.
     """
 
@@ -170,7 +170,7 @@ class LoopSpread:
 
 def predicted_spread(model: NdofModel, gains, delay=0.0, *, measurement=None,
                      velocity: float = 0.0, orbit=None) -> LoopSpread:
-    """The stationary spread of the controlled n-DOF loop per unit sigma (N14, N15):
+    """The stationary spread of the controlled n-DOF loop per unit sigma (N11, N12):
     ``measurement`` R the estimate's error covariance per unit sigma^2 (2n x 2n; default
     I: every coordinate measured with sigma; 0: an exact state), ``velocity``
     sigma_v / sigma of the velocity noise at Pi2, ``delay`` the kick's delay or an

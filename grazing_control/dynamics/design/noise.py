@@ -148,7 +148,7 @@ def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
     :class:`~grazing_control.dynamics.simulation.actuator.Actuator`) and ``force0``: the
     pulse through the first-order lag from the force on the orbit at the section (the
     filter knows the force: the controller carries it from its own commands,
-    docs/theory_ndof.md section 16)."""
+    docs/theory_ndof.md section 17)."""
     from grazing_control.dynamics.estimation.section_state import trajectory
 
     z = np.array(target, dtype=float)

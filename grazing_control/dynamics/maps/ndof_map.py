@@ -344,7 +344,7 @@ def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: 
     With ``jacobian`` it returns (z, force, impacts, jac, input) with the exact
     derivatives of y = (z, force) at the next section (2n + 1): ``jac`` = d y / d (z, force)
     at a fixed correction, ``input`` = d y / d(Delta v) (:func:`_lag_sensitivity`,
-    docs/theory_ndof.md section 16); for tau_a = 0 they are :func:`pulse_step`'s with
+    docs/theory_ndof.md section 17); for tau_a = 0 they are :func:`pulse_step`'s with
     the force's row and column 0.
 
     Raises ParameterError for a pulse that does not fit in the period or a bad actuator,
@@ -398,7 +398,7 @@ def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: 
 
 class _LagSensitivity:
     """The exact derivatives of one period of :func:`actuated_step` through the lag
-    (docs/theory_ndof.md section 16): the variation V of z (2n x (2n + 2), the columns
+    (docs/theory_ndof.md section 17): the variation V of z (2n x (2n + 2), the columns
     d / d(z0, F0, Delta v)) and dF of the force (2n + 2), carried leg by leg.
 
     On a leg with command u (du = d u / d(Delta v)) and force F = u + c e^{-h / tau_a}
