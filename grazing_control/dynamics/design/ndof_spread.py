@@ -65,12 +65,10 @@ def loop_step(model: NdofModel, gains, delay, y, jacobian: bool = False):
         if not jacobian:
             return nxt, list(out[2])
         return nxt, list(out[2]), out[3][:keep, :keep], out[4][:keep]
-    P = NdofMap(model, None, float(delay))
-    if float(delay) == 0.0:
-        # the kick on Pi2: g = M b (the period's monodromy from the kicked state)
-        out = pulse_step(flow, y, dv, start=0.0, width=0.0, jacobian=jacobian)
-    else:
-        out = pulse_step(flow, y, dv, start=P.delay, width=0.0, jacobian=jacobian)
+    # the kick ``delay`` after the sample (width 0; NdofMap checks 0 <= delay < T):
+    # D_y f = M2 M1, g = M2 e_{n + i_a}
+    out = pulse_step(flow, y, dv, start=NdofMap(model, None, delay).delay, width=0.0,
+                     jacobian=jacobian)
     if not jacobian:
         return out.state, list(out.impacts)
     return out.state, list(out.impacts), out.jacobian, out.input
