@@ -449,14 +449,15 @@ def _family_spread(args, model, design, delay):
     from grazing_control.dynamics.design.noise import ndof_filter_covariance
     from grazing_control.dynamics.simulation.actuator import Actuator
 
-    dd = args.delta_d if args.delta_d is not None else model.delta_d
+    given = getattr(args, "delta_d", None)      # (grazing rig's design has none)
+    dd = given if given is not None else model.delta_d
     if not dd < 0.0:
-        if args.delta_d is not None:
+        if given is not None:
             raise ParameterError(f"delta_d={dd!r} is invalid: the predicted spread is that of "
                                  f"the controlled 1/1 orbit, valid range is delta_d < 0")
         return None
     q = dataclasses.replace(model, delta_d=float(dd))
-    rate = int(args.sensor_rate)
+    rate = int(getattr(args, "sensor_rate", 200))
     out = {"delta_d": float(dd), "sensor_rate": rate, "sensor_coordinate": int(model.i_w),
            "spectral_radius": None, "orbit": None, "measured": None, "position_only": None,
            "velocity_noise": None}
