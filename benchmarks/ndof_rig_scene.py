@@ -10,11 +10,17 @@ on x1 centred ``--delay`` (1.0) after each sample, the delay-and-pulse-aware des
 in the plant, the filter and the prediction (docs/theory_ndof.md section 15). It runs
 ``--node-seeds`` sensor seeds (7, 8, ...) in ``--mode`` (lockstep or realtime at
 ``--time-scale``) and prints, per seed, captured / impacts per period / spread over the
-predicted spread (the loop's noise gain over the n-DOF map with the pulse). With
+predicted spread (the design's: the loop's noise gain over the n-DOF map with the pulse,
+dynamics/design/ndof_spread.py, what `grazing design --model M ... --delta-d D` prints;
+docs/theory_ndof.md section 17). With ``--actuator-bandwidth B --actuator-latency L``
+the pulse goes through the first-order actuator in the design, the plant, the filter
+and the prediction (the loop's state (z, F)). With
 ``--identify`` each bag is identified (`grazing identify BAG --json`) and the fit's
 (value - true) / stderr printed for every modal parameter and Delta d.
 
     .venv/bin/python benchmarks/ndof_rig_scene.py --node-seeds 3 --identify
+    .venv/bin/python benchmarks/ndof_rig_scene.py --node-seeds 3 --seeds 2 --periods 400 \
+        --identify --actuator-bandwidth 10 --actuator-latency 0.05
     .venv/bin/python benchmarks/ndof_rig_scene.py --node-seeds 2 --mode realtime --time-scale 10 \
         --periods 160 --settle 40 --seeds 0
 """

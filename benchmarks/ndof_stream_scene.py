@@ -5,9 +5,11 @@ predicted spread (docs/ndof_scene.md).
 Three numbers per coordinate of the Pi2 deviation about the controlled orbit z*:
 
 * **predicted**: sigma sqrt(diag Sigma), Sigma the stationary covariance of the loop
-  linearised about z* on the exact n-DOF map, driven by the model filter's error
-  covariance on the orbit (dynamics/design/noise.py: ndof_filter_covariance,
-  ndof_noise_covariance);
+  linearised about z* on the exact n-DOF map (with the pulse, and through the
+  actuator's lag the map of (z, F)), driven by the model filter's error covariance on
+  the orbit (dynamics/design/noise.py: ndof_filter_covariance;
+  dynamics/design/ndof_spread.py: predicted_spread, docs/theory_ndof.md section 17):
+  the prediction `grazing design --model M ... --delta-d D` prints;
 * **core**: the seeded closed loop in one process (studies.near_grazing.scene.stream_loop: the
   engine with the sensor, the StreamEstimator over the model, k^T z^ acting ``delay``
   after each section), over ``--seeds`` seeds;
@@ -22,7 +24,8 @@ The spreads are taken over the periods from ``--on`` + ``--settle`` to the end.
 
 With ``--pulse-width W`` the correction is the force pulse of that width centred at the
 delay, in the design, the plant, the filter and the prediction (the rig scene,
-benchmarks/ndof_rig_scene.py).
+benchmarks/ndof_rig_scene.py); with ``--actuator-bandwidth B`` (1 / tau_a) and
+``--actuator-latency L`` that pulse through the first-order actuator, everywhere.
 """
 
 from __future__ import annotations
@@ -42,10 +45,11 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from grazing_control.dynamics.design.ndof_design import (pulse_design,  # noqa: E402
                                                        write_gain_yaml)
-from grazing_control.dynamics.design.noise import (ndof_filter_covariance,  # noqa: E402
-                                                   ndof_noise_covariance)
+from grazing_control.dynamics.design.ndof_spread import (controlled_orbit,  # noqa: E402
+                                                         predicted_spread)
+from grazing_control.dynamics.design.noise import ndof_filter_covariance  # noqa: E402
 from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
-from grazing_control.dynamics.orbits.shooting import find_periodic  # noqa: E402
+from grazing_control.dynamics.simulation.actuator import Actuator  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
 from grazing_control.studies.near_grazing.scene import stream_loop  # noqa: E402
 
@@ -53,14 +57,24 @@ from grazing_control.studies.near_grazing.scene import stream_loop  # noqa: E402
 def core_loop(model_file, model, gains, a, seed: int):
     """The seeded closed loop in one process (studies.near_grazing.scene.stream_loop): (Pi2
     deviations z_k, impacts per period, estimator resets, seconds per period, the
-    estimates' errors)."""
+    estimates' errors, the corrections)."""
     t0 = time.perf_counter()
     run = stream_loop(model_file, gains, delta_d=model.delta_d, delay=a.delay,
                       sigma=a.sigma, rate=a.rate, coordinate=a.coordinate,
                       periods=a.periods, control_after=a.on, seed=seed,
-                      width=a.pulse_width)
+                      width=a.pulse_width, actuator=_actuator(a))
     return (run.truth, run.impacts_per_period, run.resets,
-            (time.perf_counter() - t0) / a.periods, run.estimate - run.truth)
+            (time.perf_counter() - t0) / a.periods, run.estimate - run.truth,
+            run.corrections)
+
+
+def _actuator(a):
+    """The first-order actuator of --actuator-bandwidth / --actuator-latency (None: the
+    ideal pulse)."""
+    if not (a.actuator_bandwidth or a.actuator_latency):
+        return None
+    return Actuator(1.0 / a.actuator_bandwidth if a.actuator_bandwidth else 0.0,
+                    a.actuator_latency)
 
 
 def node_scene(model_file, model, design, a, tmp: Path, seed: int | None = None):
@@ -111,6 +125,11 @@ def main(argv=None):
     ap.add_argument("--pulse-width", type=float, default=0.0,
                     help="the correction as a force pulse of this width centred --delay "
                     "after the sample (0: the kick; docs/theory_ndof.md section 15)")
+    ap.add_argument("--actuator-bandwidth", type=float, default=0.0,
+                    help="the pulse through a first-order actuator of bandwidth 1 / tau_a "
+                    "(0: ideal; needs --pulse-width)")
+    ap.add_argument("--actuator-latency", type=float, default=0.0,
+                    help="the actuator's latency (needs --pulse-width)")
     ap.add_argument("--sigma", type=float, default=1e-4)
     ap.add_argument("--rate", type=int, default=200)
     ap.add_argument("--coordinate", type=int, default=0)
@@ -131,31 +150,39 @@ def main(argv=None):
     a = ap.parse_args(argv)
 
     model = dataclasses.replace(load_model(a.model), delta_d=a.delta_d)
-    design = pulse_design(model, a.mu, a.delay, a.pulse_width)
-    P = NdofMap(model, design.gains, a.delay, a.pulse_width)
-    # the controlled orbit from a point near it (the core loop's last state, seed 0)
-    z0, *_ = core_loop(a.model, model, design.gains, a, 1000)
-    orbit = np.asarray(find_periodic(P, z0[-1]).state)
+    act = _actuator(a)
+    design = pulse_design(model, a.mu, a.delay, a.pulse_width,
+                          *((act.time_constant, act.latency) if act else ()))
+    n2 = 2 * model.n
+    # the controlled orbit (z*, and F* through the lag) by Newton on the exact loop
+    # (ndof_spread.controlled_orbit, from the 1/1 branch of the ideal pulse or the kick)
+    full = controlled_orbit(model, design.gains, design.delay)
+    orbit = full[:n2]
     # the samples the controller fits: before t_k in lockstep, up to t_k in realtime
     # (answer_after_section; ndof_filter_covariance's section_sample)
     R = ndof_filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay,
                                width=a.pulse_width, section_sample=a.mode == "realtime"
-                               and not a.core_only)
-    S = ndof_noise_covariance(model, design.gains, orbit, R, a.delay, a.pulse_width)
-    predicted = a.sigma * np.sqrt(np.diag(S))
+                               and not a.core_only, actuator=act,
+                               force0=float(full[n2]) if full.size > n2 else 0.0)
+    spread_ = predicted_spread(model, design.gains, design.delay, measurement=R, orbit=full)
+    predicted = a.sigma * spread_.std[:n2]
     out = {"model": a.model, "delta_d": a.delta_d, "mu": a.mu, "delay": a.delay,
-           "pulse_width": a.pulse_width,
+           "pulse_width": a.pulse_width, "actuator_bandwidth": a.actuator_bandwidth,
+           "actuator_latency": a.actuator_latency,
+           "correction_std_predicted": a.sigma * spread_.correction_std,
            "admissible": bool(design.admissible), "gains": design.gains.tolist(),
            "orbit": orbit.tolist(), "predicted_std": predicted.tolist(),
            "filter_std_predicted": (a.sigma * np.sqrt(np.diag(R))).tolist()}
     print(f"design mu={a.mu} delay={a.delay} pulse_width={a.pulse_width} "
+          f"actuator bandwidth={a.actuator_bandwidth} latency={a.actuator_latency} "
           f"admissible={design.admissible} "
           f"k={np.round(design.gains, 6).tolist()}")
     print(f"controlled orbit z* = {np.round(orbit, 9).tolist()}")
     print(f"predicted std     {np.array2string(predicted, precision=4)}")
     ratios, secs = [], []
     for seed in range(a.seeds):
-        z, counts, resets, per, errors = core_loop(a.model, model, design.gains, a, seed)
+        z, counts, resets, per, errors, dvs = core_loop(a.model, model, design.gains, a, seed)
+        dv_ratio = dvs[a.on + a.settle:].std() / (a.sigma * spread_.correction_std)
         std, mean = spread(z, orbit, a)
         filt = errors[a.on + a.settle:].std(axis=0)
         ratios.append(std / predicted)
@@ -163,7 +190,7 @@ def main(argv=None):
         print(f"core seed {seed}: std {np.array2string(std, precision=4)} ratio "
               f"{np.array2string(std / predicted, precision=3)} impacts/period (last "
               f"{a.periods - a.on - a.settle}) {sorted(set(counts[a.on + a.settle:].tolist()))}"
-              f" resets {resets}; filter error std {np.array2string(filt, precision=3)} "
+              f" resets {resets}; corrections' std / predicted {dv_ratio:.3f}; filter error std {np.array2string(filt, precision=3)} "
               f"(predicted {np.array2string(a.sigma * np.sqrt(np.diag(R)), precision=3)})")
     if a.seeds:
         ratios = np.array(ratios)

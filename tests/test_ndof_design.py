@@ -330,3 +330,198 @@ def test_sections_with_stable_zeros_are_where_every_zero_is_inside(seed):
     assert any(a < chain.pi2_offset < b for a, b in nd.sections_with_stable_zeros(chain))
     with pytest.raises(ParameterError, match="points=1 is invalid"):
         nd.sections_with_stable_zeros(chain, points=1)
+
+
+# ------------------------------------------------- the predicted spread (§17, ndof_spread)
+def _differences(f, y, h):
+    """Fourth-order central differences of f at y, step h per column."""
+    cols = []
+    for j in range(y.size):
+        e = np.zeros(y.size)
+        e[j] = h
+        cols.append((8.0 * (f(y + e) - f(y - e)) - (f(y + 2 * e) - f(y - 2 * e))) / (12.0 * h))
+    return np.array(cols).T
+
+
+@pytest.mark.parametrize("start, tau_a, force0", [(0.5, 0.1, 0.003), (8.0, 0.5, -0.02),
+                                                  (2.0, 3.0, 0.1)])
+def test_actuated_step_jacobian_is_the_exact_maps_derivative(start, tau_a, force0):
+    """Chain at Delta d = -1e-3: d (z, F)_{k+1} / d (z, F, Delta v) of actuated_step
+    (§17) against fourth-order differences of the map itself (measured 1.3e-9, 7e-10,
+    3e-11 of entries up to 15): the rig scene's pulse (start 0.5, tau_a 0.1, the impact
+    at 11.93), the impact under the decaying force (start 8, tau_a 0.5: the force there
+    ~ e^-5 of its peak) and a slow actuator without impact, each from a force carried
+    from the previous period."""
+    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+
+    flow = NdofFlow.of(dataclasses.replace(load_model(CHAIN), delta_d=-1e-3))
+    y0 = np.array([-0.042, 0.026, -0.05, 0.025, force0, 0.1429])
+
+    def f(y):
+        z, force, _imps = actuated_step(flow, y[:4], y[4], y[5], start=start, width=1.0,
+                                        time_constant=tau_a, latency=0.05)
+        return np.append(z, force)
+
+    _z, _f, imps, jac, inp = actuated_step(flow, y0[:4], y0[4], y0[5], start=start,
+                                           width=1.0, time_constant=tau_a, latency=0.05,
+                                           jacobian=True)
+    assert len(imps) == (0 if start == 2.0 else 1)
+    got = np.hstack([jac, inp[:, None]])
+    assert np.max(np.abs(got - _differences(f, y0, 1e-6))) < 1e-8 * max(1.0, np.abs(got).max())
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.3, 3.0])
+def test_n1_predicted_spread_is_the_1dof_noise_covariance(delay):
+    """n = 1 (the study's model file) with the kick: the loop's orbit and Sigma of
+    ndof_spread are the 1-DOF closed form's (noise.noise_covariance, exact saltation)
+    to 1e-12 (measured 7e-15, 1e-13, 2.9e-13)."""
+    from grazing_control.dynamics.design import noise
+    from grazing_control.dynamics.design.ndof_spread import predicted_spread
+    from grazing_control.dynamics.orbits.orbits import orbit_11
+
+    m, p = _study()
+    m, p = dataclasses.replace(m, delta_d=-1e-3), p.with_(delta_d=-1e-3)
+    g = Gains(design.degenerate_c1(p, -0.3, delay), -0.3, delay)
+    target = orbit_11(p, g).pi2_deviation
+    want = noise.noise_covariance(p, g, np.eye(2), target)
+    got = predicted_spread(m, [g.c1, g.c2], delay)
+    np.testing.assert_allclose(got.orbit, target, rtol=1e-12, atol=1e-16)
+    np.testing.assert_allclose(got.covariance, want, rtol=1e-12, atol=0)
+    k = np.array([g.c1, g.c2])
+    assert got.correction_variance == pytest.approx(k @ want @ k + k @ k, rel=1e-12)
+
+
+@pytest.mark.parametrize("tau_a, latency", [(0.5, 0.0), (0.3, 0.1)])
+def test_n1_through_the_lag_is_the_1dof_actuated_loop(tau_a, latency):
+    """n = 1 through the first-order actuator (pulse 0.1 at delay 3, Delta d = -1e-3):
+    the (z, F) orbit is the 1-DOF actuated_orbit's (measured 8e-15); the exact closed-loop
+    Jacobian is the fourth-order differences of the 1-DOF map
+    (dynamics.simulation.actuator.actuated_step, its own flow) to 1e-8; the 1-DOF
+    prediction, whose monodromy is central differences (error ~1e-6 of it, measured
+    1.1e-6), agrees to 5e-6 (measured 7e-7)."""
+    from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
+    from grazing_control.dynamics.simulation import actuator as one
+
+    m, p = _study()
+    m, p = dataclasses.replace(m, delta_d=-1e-3), p.with_(delta_d=-1e-3)
+    g = Gains(design.degenerate_c1(p, 0.03, 3.0), 0.03, 3.0)
+    orb = one.actuated_orbit(p, g, 0.1, one.Actuator(tau_a, latency))
+    act = nd.Actuation(3.0, 0.1, tau_a, latency)
+    got = predicted_spread(m, [g.c1, g.c2], act)
+    np.testing.assert_allclose(got.orbit, orb.state, rtol=0, atol=1e-13)
+    start = act.start(m)
+
+    def f(y):
+        x, v, force, _ = one.actuated_step(p, y[0], y[1], y[2], g.c1 * y[0] + g.c2 * y[1],
+                                           start=start, width=0.1,
+                                           actuator=one.Actuator(tau_a, latency))
+        return np.array([x, v, force])
+
+    jac = loop_linearisation(m, [g.c1, g.c2], got.orbit, act)[0]
+    ref = _differences(f, np.asarray(got.orbit), 1e-6)
+    assert np.max(np.abs(jac - ref)) < 1e-8 * np.abs(jac).max()
+    want = orb.noise_covariance(g)
+    np.testing.assert_allclose(got.covariance[:2, :2], want[:2, :2], rtol=5e-6)
+
+
+def _std_error(J, S, i, periods):
+    """The relative standard error of a sample std of coordinate i over ``periods``
+    samples of the stationary linear loop (J, S): sqrt(sum_tau rho(tau)^2 / (2 N)),
+    rho(tau) = (J^|tau| S)_ii / S_ii (Gaussian; Bartlett)."""
+    total, a = 1.0, S.copy()
+    for _ in range(2000):
+        a = J @ a
+        rho = a[i, i] / S[i, i]
+        total += 2.0 * rho ** 2
+        if abs(rho) < 1e-8:
+            break
+    return math.sqrt(total / (2.0 * periods))
+
+
+@pytest.mark.parametrize("pulse", [nd.Actuation(1.0, 1.0), nd.Actuation(1.0, 1.0, 0.1, 0.05)],
+                         ids=["pulse", "pulse+actuator"])
+def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
+    """Chain at Delta d = -1e-3, k(mu = -0.22) for the pulse (width 1 at delay 1; through
+    tau_a 0.1, latency 0.05): the simulator's engine (plant.engine.Engine: its force
+    carried from period to period, its seeded noises) in a closed loop of 1200 periods
+    from the orbit, every coordinate measured with sigma 1e-5 and a velocity noise of
+    1e-5 at each sample (the nonlinear loop against its linearisation and (N11)): one
+    impact per period, and the std of every coordinate and of the force within 4 sampling standard errors of the prediction (the errors from the linear
+    loop's correlations, 2.2-4.5 % here; measured ratios 0.980-1.015), the corrections'
+    within 15 % (N12; measured with 2000 periods for each noise alone 0.975-0.999)."""
+    from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import load_model_file, settings_from_values
+
+    model = dataclasses.replace(load_model_file(str(CHAIN)), delta_d=-1e-3)
+    k = nd.evaluate_design(model, -0.22, pulse).gains
+    pred = predicted_spread(model, k, pulse, velocity=1.0)
+    values = {"delta_d": -1e-3, "actuation_delay": 1.0, "pulse_width": 1.0,
+              "measurement_noise": 1e-5, "noise": 1e-5, "seed": 3}
+    if pulse.time_constant:
+        values.update(actuator_bandwidth=1.0 / pulse.time_constant,
+                      actuator_latency=pulse.latency)
+    eng = Engine(settings_from_values(values, str(CHAIN), model))
+    eng.reset()
+    eng.z = np.array(pred.orbit[:4])
+    if pred.orbit.size > 4:
+        eng.force = float(pred.orbit[4])
+    ev = eng.sample()
+    periods, rows, dvs = 1200, [], []
+    for _ in range(periods):
+        seen = eng.measured(ev)
+        dv = float(k @ (np.append(seen.x, seen.v) - np.append(ev.x, ev.v) + eng.z))
+        events = eng.begin_period(dv, 1.0)
+        assert sum(e.kind == "impact" for e in events) == 1
+        rows.append(np.append(eng.z, eng.force)[:pred.orbit.size])
+        dvs.append(dv)
+        ev, _ = eng.end_period()
+    ratio = np.array(rows).std(axis=0) / (1e-5 * pred.std)
+    J, _g, _ev = loop_linearisation(model, k, pred.orbit, pulse)
+    for i, r in enumerate(ratio):
+        if pred.std[i] > 1e-30:     # (the force at the section: e^-40 of the pulse's)
+            assert abs(r - 1.0) < 4.0 * _std_error(J, pred.covariance, i, periods), (i, ratio)
+    dv_ratio = np.std(dvs) / (1e-5 * pred.correction_std)
+    assert abs(dv_ratio - 1.0) < 0.15, dv_ratio
+
+
+def test_design_prints_the_predicted_spread_through_the_lag(capsys):
+    """`grazing design --model CHAIN --delta-d -1e-3 --mu -0.22 --delay 1 --pulse-width 1
+    --actuator-bandwidth 10 --actuator-latency 0.05 --json`: its ``spread`` is
+    predicted_spread's (every coordinate measured; x0 only at --sensor-rate 50 through
+    the filter over the samples before t_k; the velocity noise), the orbit (z*, F*) with
+    spectral radius 0.8964 (docs/ndof_scene.md: the actuated orbit's |lambda|max); a
+    --delta-d >= 0 is one line naming delta_d, status 2."""
+    import json
+
+    from grazing_control import cli
+    from grazing_control.dynamics.design.ndof_spread import predicted_spread
+    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.simulation.actuator import Actuator
+
+    argv = ["design", "--model", str(CHAIN), "--mu", "-0.22", "--delay", "1.0",
+            "--pulse-width", "1.0", "--actuator-bandwidth", "10", "--actuator-latency",
+            "0.05", "--sensor-rate", "50"]
+    assert cli.main(argv + ["--delta-d", "-1e-3", "--json"]) in (0, None)
+    got = json.loads(capsys.readouterr().out)["spread"]
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    act = nd.Actuation(1.0, 1.0, 0.1, 0.05)
+    k = nd.evaluate_design(model, -0.22, act).gains
+    want = predicted_spread(model, k, act)
+    assert got["spectral_radius"] == pytest.approx(0.8964, abs=5e-5)
+    np.testing.assert_allclose(got["orbit"], want.orbit, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got["measured"]["std"], want.std, rtol=1e-12)
+    r = ndof_filter_covariance(model, k, want.orbit[:4], 50, 0, 1.0, width=1.0,
+                               section_sample=False, actuator=Actuator(0.1, 0.05),
+                               force0=float(want.orbit[4]))
+    pos = predicted_spread(model, k, act, measurement=r, orbit=want.orbit)
+    np.testing.assert_allclose(got["position_only"]["std"], pos.std, rtol=1e-12)
+    assert got["position_only"]["correction_std"] == pytest.approx(pos.correction_std,
+                                                                   rel=1e-12)
+    vel = predicted_spread(model, k, act, measurement=np.zeros((4, 4)), velocity=1.0,
+                           orbit=want.orbit)
+    np.testing.assert_allclose(got["velocity_noise"]["std"], vel.std, rtol=1e-12)
+    assert cli.main(argv + ["--delta-d", "1e-3"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "delta_d=0.001 is invalid" in err[0]

@@ -220,10 +220,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_delay(s)
     s.add_argument("--delta-d", type=finite,
                    help="report the noise gain (std of the Pi2 position per unit measurement "
-                        "noise) of the controlled orbit at this Delta d < 0")
+                        "noise) of the controlled orbit at this Delta d < 0; with --model the "
+                        "predicted spread of every coordinate and of the corrections, with the "
+                        "pulse and through the actuator (default the model file's Delta d "
+                        "where < 0; docs/theory_ndof.md section 17)")
     s.add_argument("--sensor-rate", type=integer_at_least(2), default=200,
                    help="position-only sensor for the noise gain: samples per period "
-                        "(default 200)")
+                        "(default 200; with --model the wall coordinate's position)")
     s.add_argument("--estimator", choices=("model", "arc", "nearest"), default="model",
                    help="its Pi2 estimator (default model, docs/theory_estimation.md)")
     s.add_argument("--sensor-lead", type=non_negative, default=0.0,

@@ -365,6 +365,7 @@ def _family_design(args):
         [list(iv) for iv in sections],
         "seconds": seconds,
     })
+    out["spread"] = _family_spread(args, model, design, delay)
     if rig is not None:
         out["rig"] = args.model
         out["si"] = {"effective_mass_kg": rig.effective_mass,
@@ -406,6 +407,7 @@ def _family_design(args):
         f"{ok[conditions['free_stable']]} < 1)",
         f"  this mu            : {'admissible' if admissible else 'NOT admissible'}",
     ]
+    lines += _spread_lines(out["spread"], names)
     if sections is not None:
         where = " U ".join(f"({a:.4f}, {b:.4f})" for a, b in sections) or "none"
         lines.append(f"  no admissible mu: pi2_offset values whose zeros all lie inside the "
@@ -430,3 +432,73 @@ def _si_lines(si: dict, names) -> list:
                    f" N*s/m on ({', '.join(names[n:])})")
     return out
 
+
+def _family_spread(args, model, design, delay):
+    """The design's predicted spread at --delta-d (default: the model file's Delta d where
+    it is < 0; none where it is >= 0 and no --delta-d is given): the loop's stationary
+    std per unit sigma of each coordinate on Pi2 (and the actuator's force through the
+    lag) and of the corrections, every coordinate measured with sigma (R = I), the
+    position of the wall coordinate only (the model filter's covariance at --sensor-rate
+    over the samples a lockstep controller fits), and the velocity noise at Pi2
+    (dynamics/design/ndof_spread.py, docs/theory_ndof.md section 17). Null entries
+    where the loop has no stable 1/1 orbit there."""
+    import dataclasses
+
+    from grazing_control.dynamics.design.ndof_design import Actuation
+    from grazing_control.dynamics.design.ndof_spread import predicted_spread
+    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.simulation.actuator import Actuator
+
+    given = getattr(args, "delta_d", None)      # (grazing rig's design has none)
+    dd = given if given is not None else model.delta_d
+    if not dd < 0.0:
+        if given is not None:
+            raise ParameterError(f"delta_d={dd!r} is invalid: the predicted spread is that of "
+                                 f"the controlled 1/1 orbit, valid range is delta_d < 0")
+        return None
+    q = dataclasses.replace(model, delta_d=float(dd))
+    rate = int(getattr(args, "sensor_rate", 200))
+    out = {"delta_d": float(dd), "sensor_rate": rate, "sensor_coordinate": int(model.i_w),
+           "spectral_radius": None, "orbit": None, "measured": None, "position_only": None,
+           "velocity_noise": None}
+    d = 2 * model.n
+    try:
+        first = predicted_spread(q, design.gains, delay)
+        orbit = first.orbit
+        out.update(spectral_radius=first.spectral_radius, orbit=orbit.tolist())
+        lag = isinstance(delay, Actuation) and delay.time_constant > 0.0
+        act = None if not isinstance(delay, Actuation) else \
+            Actuator(delay.time_constant, delay.latency)
+        kick_delay = delay.delay if isinstance(delay, Actuation) else delay
+        r = ndof_filter_covariance(q, design.gains, orbit[:d], rate, model.i_w, kick_delay,
+                                   width=delay.width if act else 0.0, section_sample=False,
+                                   actuator=act, force0=float(orbit[d]) if lag else 0.0)
+        cases = {"measured": {}, "position_only": {"measurement": r},
+                 "velocity_noise": {"measurement": np.zeros((d, d)), "velocity": 1.0}}
+        for key, kw in cases.items():
+            s = first if key == "measured" else predicted_spread(q, design.gains, delay,
+                                                                 orbit=orbit, **kw)
+            out[key] = {"std": s.std.tolist(), "correction_std": s.correction_std}
+    except (ValueError, ArithmeticError):
+        pass
+    return out
+
+
+def _spread_lines(spread, names) -> list:
+    """The predicted spread's lines of `design --model` (:func:`_family_spread`)."""
+    if spread is None:
+        return ["  predicted spread   : give --delta-d < 0 (the model file's Delta d is >= 0)"]
+    head = f"  predicted spread at Delta d = {spread['delta_d']:.6g}"
+    if spread["measured"] is None:
+        return [head + ": none (no stable controlled 1/1 orbit found)"]
+    cols = list(names) + (["F"] if len(spread["orbit"]) > len(names) else [])
+    lines = [head + f" (std per unit sigma of {', '.join(cols)} on Pi2 | of the corrections; "
+             f"spectral radius {spread['spectral_radius']:.6g})"]
+    for key, text in (("measured", "every coordinate measured"),
+                      ("position_only", f"x{spread['sensor_coordinate']} only, "
+                                        f"{spread['sensor_rate']} samples per period"),
+                      ("velocity_noise", "velocity noise at Pi2 (sigma_v)")):
+        row = spread[key]
+        lines.append(f"    {text:34s}= {fmt_vec(row['std'], 4)} | "
+                     f"{row['correction_std']:.4g}")
+    return lines

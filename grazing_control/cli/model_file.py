@@ -135,7 +135,8 @@ def check_options(args, argv) -> None:
     model = getattr(args, "model", None)
     if model is not None:
         bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
-               and not (f == "--delay" and args.command == "design")]   # the delayed design
+               and not (f in ("--delay", "--sensor-rate") and args.command == "design")]
+        # (the delayed design; the predicted spread's position-only sensor)
         if bad:
             raise ParameterError(f"{', '.join(bad)} {'is a 1-DOF option' if len(bad) == 1 else 'are 1-DOF options'}"
                                  f": with --model the model file gives the model "

@@ -133,7 +133,8 @@ def ndof_loop_linearisation(model, gains, target, delay: float = 0.0, width: flo
 def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
                            delay: float = 0.0, floor: float = 1e-2,
                            periods: int = 400, width: float = 0.0,
-                           section_sample: bool = True) -> np.ndarray:
+                           section_sample: bool = True, actuator=None,
+                           force0: float = 0.0) -> np.ndarray:
     """The model filter's error covariance on the n-DOF orbit z* per unit sigma^2 (2n x 2n):
     the fixed point of (E5) for samples of coordinate ``coordinate``'s position at
     s_j = j T / rate, j = 1 .. rate (module docstring), iterated from 1e4 I for
@@ -143,14 +144,19 @@ def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
     not wait for it, ``StreamEstimator.add_sample``; realtime with
     ``answer_after_section`` does). On the chain at T/200 that sample carries a tenth of
     the information: without it the covariance's std is 1.10-1.13 times larger
-    (docs/ndof_scene.md)."""
+    (docs/ndof_scene.md). ``actuator`` (an
+    :class:`~grazing_control.dynamics.simulation.actuator.Actuator`) and ``force0``: the
+    pulse through the first-order lag from the force on the orbit at the section (the
+    filter knows the force: the controller carries it from its own commands,
+    docs/theory_ndof.md section 17)."""
     from grazing_control.dynamics.estimation.section_state import trajectory
 
     z = np.array(target, dtype=float)
     last = int(rate) + (1 if section_sample else 0)
     s = model.period * np.arange(1, last) / rate
     kick = float(np.asarray(gains, dtype=float) @ z)
-    _out, jac, _end, mono, _imps = trajectory(model, z, s, kick, delay, width=width)
+    _out, jac, _end, mono, _imps = trajectory(model, z, s, kick, delay, width=width,
+                                               actuator=actuator, force0=force0)
     h = jac[:, coordinate, :]
     eye = np.eye(len(z))
     cov = 1e4 * eye

@@ -44,8 +44,9 @@ import numpy as np
 
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.forced import (actuated_mass, advance_with_force,
-                                                    lag_advance, static_deflection)
-from grazing_control.oscillator.ndof.impact import advance
+                                                    forced_flow, lag_advance, lag_particular,
+                                                    static_deflection)
+from grazing_control.oscillator.ndof.impact import advance, saltation_matrix
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
@@ -328,7 +329,7 @@ def pulse_step(flow: NdofFlow, z, correction: float, *, start: float, width: flo
 
 def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: float,
                   width: float, time_constant: float = 0.0, latency: float = 0.0,
-                  force_limit: float = math.inf):
+                  force_limit: float = math.inf, jacobian: bool = False):
     """One forcing period from the Pi2 deviation z and the actuator's force ``force``
     there, the correction commanded as a pulse of ``width`` > 0 on [start, start + w]
     through a first-order actuator (time constant tau_a, ``latency`` L): the force on the
@@ -339,6 +340,12 @@ def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: 
     from the sample). tau_a = 0 is :func:`pulse_step` at start + L (force must be 0).
     For n = 1 this is the 1-DOF
     :func:`grazing_control.dynamics.simulation.actuator.actuated_step`.
+
+    With ``jacobian`` it returns (z, force, impacts, jac, input) with the exact
+    derivatives of y = (z, force) at the next section (2n + 1): ``jac`` = d y / d (z, force)
+    at a fixed correction, ``input`` = d y / d(Delta v) (:func:`_lag_sensitivity`,
+    docs/theory_ndof.md section 17); for tau_a = 0 they are :func:`pulse_step`'s with
+    the force's row and column 0.
 
     Raises ParameterError for a pulse that does not fit in the period or a bad actuator,
     ValueError on a chattering or sticking motion under the actuator's force.
@@ -359,18 +366,103 @@ def actuated_step(flow: NdofFlow, z, force: float, correction: float, *, start: 
             raise ParameterError(f"force={force!r} is invalid: an actuator without lag leaves "
                                  "no force at the section, valid value is 0")
         out = pulse_step(flow, z, correction, start=start + latency, width=width,
-                         force_limit=force_limit)
-        return out.state, 0.0, list(out.impacts)
+                         force_limit=force_limit, jacobian=jacobian)
+        if not jacobian:
+            return out.state, 0.0, list(out.impacts)
+        d = 2 * m.n
+        jac, inp = np.zeros((d + 1, d + 1)), np.zeros(d + 1)
+        jac[:d, :d], inp[:d] = out.jacobian, out.input
+        return out.state, 0.0, list(out.impacts), jac, inp
     if not force_limit > 0.0:
         raise ParameterError(f"force_limit={force_limit!r} is invalid: valid range is > 0")
-    command = max(-force_limit, min(force_limit, actuated_mass(flow) * correction / width))
+    raw = actuated_mass(flow) * correction / width
+    command = max(-force_limit, min(force_limit, raw))
+    # d u / d(Delta v) on the pulse's leg (0 where the command is clipped)
+    slope = actuated_mass(flow) / width if abs(raw) < force_limit else 0.0
     on, off = start + latency, start + latency + width
     t, f, impacts = 0.0, float(force), []
-    for end, u in ((on, 0.0), (off, command), (m.period, 0.0)):
+    sens = _LagSensitivity(flow, time_constant) if jacobian else None
+    for end, u, du in ((on, 0.0, 0.0), (off, command, slope), (m.period, 0.0, 0.0)):
         if end > t:
             tau = (flow.tau2 + m.omega * t) % TWO_PI
             seg = lag_advance(flow, tau, z, end - t, u, f - u, time_constant)
+            if sens is not None:
+                sens.leg(z, f, u, du, seg.impacts, end - t)
             impacts += [i._replace(dt=i.dt + t) for i in seg.impacts]
             z, f = np.array(seg.z, dtype=float), float(seg.force)
         t = end
-    return z, f, impacts
+    if sens is None:
+        return z, f, impacts
+    return z, f, impacts, sens.jacobian, sens.input
+
+
+class _LagSensitivity:
+    """The exact derivatives of one period of :func:`actuated_step` through the lag
+    (docs/theory_ndof.md section 17): the variation V of z (2n x (2n + 2), the columns
+    d / d(z0, F0, Delta v)) and dF of the force (2n + 2), carried leg by leg.
+
+    On a leg with command u (du = d u / d(Delta v)) and force F = u + c e^{-h / tau_a}
+    the motion is z(h) = Phi(h)(z_e - sigma u - q1 c) + sigma u + q1 c e^{-h / tau_a}
+    (q1 = :func:`lag_particular` of a unit transient), linear in (z_e, u, c), so
+
+        V(h) = Phi(h)(V_e - sigma du - q1 dc) + sigma du + q1 dc e^{-h / tau_a},
+        dc = dF_e - du;
+
+    at an impact V <- S V (S the saltation matrix under the force there: the wall and
+    the impact law do not depend on F, so the variations of the force pass through it
+    as those of the state), and dc <- dc e^{-h_i / tau_a} with c."""
+
+    def __init__(self, flow: NdofFlow, tau_a: float):
+        self.flow, self.tau_a = flow, tau_a
+        d = 2 * flow.n
+        self.v = np.hstack([np.eye(d), np.zeros((d, 2))])
+        self.df = np.zeros(d + 2)
+        self.df[d] = 1.0
+        self.sigma = static_deflection(flow)
+        self.q1 = lag_particular(flow, 1.0, tau_a)
+
+    def leg(self, z, f, u, du, impacts, duration):
+        """Carry (V, dF) over one leg from the state z and force f (the leg's impacts
+        from :func:`lag_advance`)."""
+        flow, m = self.flow, self.flow.model
+        n, w = m.n, m.i_w
+        d = 2 * n
+        rate = 1.0 / self.tau_a
+        dvec = np.zeros(d + 2)
+        dvec[d + 1] = du
+        sig_u = self.sigma * u
+        c, dc = f - u, self.df - dvec
+        ze, ve, t_e = np.array(z, dtype=float), self.v, 0.0
+        for imp in impacts:
+            h = imp.dt - t_e
+            decay = math.exp(-h * rate)
+            phi = flow.transition(h)
+            z_minus = phi @ (ze - sig_u - self.q1 * c) + sig_u + self.q1 * c * decay
+            v_minus = phi @ (ve - np.outer(self.sigma, dvec) - np.outer(self.q1, dc)) \
+                + np.outer(self.sigma, dvec) + np.outer(self.q1, dc) * decay
+            force = u + c * decay
+            fl = forced_flow(flow, force)
+            zs = z_minus - self.sigma * force
+            wall_x, rest_v = fl.on_wall(imp.phase)
+            zs[w], zs[n + w] = wall_x, imp.v_minus + rest_v
+            ve = saltation_matrix(fl, imp.phase, zs) @ v_minus
+            ze = zs + self.sigma * force
+            ze[n + w] = imp.v_plus + rest_v + self.sigma[n + w] * force
+            c, dc, t_e = c * decay, dc * decay, imp.dt
+        h = duration - t_e
+        decay = math.exp(-h * rate)
+        self.v = flow.transition(h) @ (ve - np.outer(self.sigma, dvec)
+                                       - np.outer(self.q1, dc)) \
+            + np.outer(self.sigma, dvec) + np.outer(self.q1, dc) * decay
+        self.df = dvec + dc * decay
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        """d (z, F)_{k+1} / d (z, F)_k at a fixed correction, (2n + 1) x (2n + 1)."""
+        d = self.v.shape[0]
+        return np.vstack([self.v[:, :d + 1], self.df[:d + 1]])
+
+    @property
+    def input(self) -> np.ndarray:
+        """d (z, F)_{k+1} / d(Delta v), (2n + 1)."""
+        return np.append(self.v[:, -1], self.df[-1])

@@ -95,15 +95,17 @@ class StreamLoop(NamedTuple):
 
 def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float,
                 rate: int, coordinate: int, periods: int, control_after: int,
-                seed: int, width: float = 0.0) -> StreamLoop:
+                seed: int, width: float = 0.0, actuator=None) -> StreamLoop:
     """The n-DOF closed loop on a position-only sensor stream in one process (issue 32,
     docs/ndof_scene.md): the simulator's engine (:class:`grazing_control.plant.engine.Engine`
     over the model file, its sensor of ``sigma`` at T / ``rate``, seeded by ``seed``), the
     controller's estimator (:class:`grazing_control.dynamics.estimation.stream.
     StreamEstimator` over the model, reading ``coordinate``) and the kick k^T z^ acting
     ``delay`` after each section from ``control_after`` on (with ``width`` > 0 the force
-    pulse carrying it, centred at ``delay``: docs/theory_ndof.md section 15): the calls
-    the nodes make in lockstep, without the middleware."""
+    pulse carrying it, centred at ``delay``: docs/theory_ndof.md section 15; with an
+    ``actuator`` (:class:`grazing_control.dynamics.simulation.actuator.Actuator`) the pulse
+    through its first-order lag, in the plant and the filter): the calls the nodes make
+    in lockstep, without the middleware."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
     from grazing_control.plant.engine import Engine
     from grazing_control.plant.settings import load_model_file, settings_from_values
@@ -112,11 +114,15 @@ def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float
     st = settings_from_values(
         {"delta_d": delta_d, "actuation_delay": delay, "sensor_noise": sigma,
          "sensor_velocity": False, "sensor_seed": seed, "pulse_width": width,
-         "state_period": model.period / rate}, str(model_file), model)
+         "state_period": model.period / rate,
+         **({} if actuator is None else
+            {"actuator_bandwidth": 1.0 / actuator.time_constant
+             if actuator.time_constant > 0.0 else 0.0,
+             "actuator_latency": actuator.latency})}, str(model_file), model)
     model, k = st.model, np.asarray(gains, dtype=float)
     eng = Engine(st)
     est = StreamEstimator(model, "model", sigma, "stream", model.period / rate,
-                          coordinate=coordinate, pulse_width=width)
+                          coordinate=coordinate, pulse_width=width, actuator=actuator)
     due = []
     for ev in eng.initial_states():
         due += est.add_sample(ev.t, ev.x[coordinate], ev.v[coordinate])
