@@ -17,7 +17,9 @@ import hashlib
 import math
 
 import numpy as np
+import pytest
 
+from grazing_control.oscillator import contact, kernel
 from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, LagForce,
                                                 advance_compliant, compliant_period_step)
 from grazing_control.oscillator.impact import ImpactCapError
@@ -121,6 +123,21 @@ def test_the_flow_gives_the_same_bits():
 
 def test_the_period_map_gives_the_same_bits():
     assert _digest(run_flow(compliant_period_step, period_cases())) == PERIOD_DIGEST
+
+
+def test_the_compiled_bracketing_gives_the_same_bits(monkeypatch):
+    """contact.load_compiled's path (kernel/compiled_contact.py) against the same digests;
+    the Python path above runs in this process before (and, GRAZING_KERNEL=python, after)."""
+    if not kernel.available():
+        pytest.skip("numba is not installed")
+    monkeypatch.delenv(kernel.ENV, raising=False)
+    monkeypatch.setattr(contact, "_compiled", None)
+    assert contact.load_compiled()
+    assert _digest(run_flow(advance_compliant, flow_cases())) == FLOW_DIGEST
+    assert _digest(run_flow(compliant_period_step, period_cases())) == PERIOD_DIGEST
+    monkeypatch.setattr(contact, "_compiled", None)
+    monkeypatch.setenv(kernel.ENV, "python")
+    assert not contact.load_compiled()      # the choice of the core's kernel is followed
 
 
 if __name__ == "__main__":

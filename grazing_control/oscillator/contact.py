@@ -31,8 +31,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple
 
+from . import kernel
 from .flow import matmul2, particular
 from .impact import (ImpactCapError, InitialStateError, NonFiniteStateError, _next_impact,
                      _on_wall_at_rest)
@@ -49,6 +51,7 @@ __all__ = [
     "advance_compliant",
     "compliant_period_step",
     "grazing_jump",
+    "load_compiled",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -315,9 +318,11 @@ class _Region:
         self._w2 = self.big_w ** 2
         self._r2 = self.rate * self.rate
         # bound(n, h) = _bn[n] e^{-beta h} + _an[n] (+ _kn[n] e^{-rate h}), n = 1 ... 3
-        self._bn = (None,) + tuple(self.cabs * self.big_w ** n for n in (1, 2, 3))
-        self._an = (None,) + tuple(self.amp * self.omega ** n for n in (1, 2, 3))
-        self._kn = (None,) + tuple(abs(self.kk) * self.rate ** n for n in (1, 2, 3))
+        cabs, bw, amp, w, kk, rate = self.cabs, self.big_w, self.amp, self.omega, abs(self.kk), \
+            self.rate
+        self._bn = (None, cabs * bw ** 1, cabs * bw ** 2, cabs * bw ** 3)
+        self._an = (None, amp * w ** 1, amp * w ** 2, amp * w ** 3)
+        self._kn = (None, kk * rate ** 1, kk * rate ** 2, kk * rate ** 3)
 
     def _particular(self, h: float):
         psi = self.tau0 + self.omega * h - self.lag
@@ -355,7 +360,7 @@ class _Region:
         kk = self.kk
         return d + kk * math.exp(-self.rate * h) if kk else d
 
-    def force_value(self, h: float, k: float, c: float) -> float:
+    def force_value(self, k: float, c: float, h: float) -> float:
         """k delta + c delta' at time h (:func:`_force_event`'s value, the same float)."""
         psi = self.tau0 + self.omega * h - self.lag
         e = math.exp(-self.beta * h)
@@ -384,7 +389,7 @@ class _Region:
             out += self._kn[n] * math.exp(-self.rate * h)
         return out
 
-    def force_bound(self, h: float, k: float, c: float) -> float:
+    def force_bound(self, k: float, c: float, h: float) -> float:
         """k bound(2, h) + c bound(3, h) (:func:`_force_bound`), the exponentials once."""
         e = math.exp(-self.beta * h)
         b2 = self._bn[2] * e + self._an[2]
@@ -453,11 +458,15 @@ def _crossing_in(event, value, bound2, a, b, fa, fb, sign, margin, depth, start)
 
 def _bracket(value, lo, hi, sign, flo, fhi):
     """Safeguarded secant/bisection to the first h with sign * f(h) >= 0 (a few ulps);
-    ``value(h)`` is f(h)."""
+    ``value(h)`` is f(h). A region's gap or force (:class:`_RegionValue`) is bracketed
+    by the compiled mirror once :func:`load_compiled` has loaded it (the same floats)."""
+    if _compiled is not None and isinstance(value, _RegionValue):
+        return value.bracket(lo, hi, sign, flo, fhi)
     flo, fhi = sign * flo, sign * fhi
-    while hi - lo > 4.0 * math.ulp(hi):
-        x = lo + (hi - lo) * (flo / (flo - fhi)) if fhi != flo else 0.5 * (lo + hi)
-        if not lo < x < hi or (x - lo) < 0.01 * (hi - lo) or (hi - x) < 0.01 * (hi - lo):
+    ulp = math.ulp
+    while (width := hi - lo) > 4.0 * ulp(hi):
+        x = lo + width * (flo / (flo - fhi)) if fhi != flo else 0.5 * (lo + hi)
+        if not lo < x < hi or (x - lo) < 0.01 * width or (hi - x) < 0.01 * width:
             x = 0.5 * (lo + hi)
         fx = sign * value(x)
         if fx >= 0.0:
@@ -465,6 +474,51 @@ def _bracket(value, lo, hi, sign, flo, fhi):
         else:
             lo, flo = x, fx
     return hi
+
+
+#: kernel.compiled_contact once :func:`load_compiled` has loaded it
+_compiled = None
+_GAP, _FORCE = 0, 1     # kernel.compiled_contact.GAP, FORCE
+
+
+def load_compiled() -> bool:
+    """Bracket the regions' switching times with the compiled mirror from now on in this
+    process (:mod:`grazing_control.oscillator.kernel.compiled_contact`: the same floats,
+    about half of the flow's time saved; docs/benchmarks.md "The compliant stop's hot
+    path"), where numba runs (``GRAZING_KERNEL``, :func:`kernel.use_kernel`). Compiles
+    or loads from numba's cache on the first call (seconds on a fresh clone), so it is
+    asked for by the offline callers that evaluate the flow many times (the stop's fit),
+    never on a node's first period. Returns whether the compiled path is on."""
+    global _compiled
+    if _compiled is None and kernel.use_kernel():
+        from .kernel import compiled_contact as cc
+        cc.bracket_region(0.0, 1.0, 1.0, -1.0, 1.0, _GAP, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0,
+                          0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)  # compile now
+        _compiled = cc
+    return _compiled is not None
+
+
+class _RegionValue:
+    """A region's gap (``kind`` _GAP, :meth:`_Region.gap`) or contact force k delta +
+    c delta' (_FORCE, :meth:`_Region.force_value`) as a function of h, with its
+    bracketing by the compiled mirror (:func:`load_compiled`)."""
+
+    __slots__ = ("reg", "kind", "k", "c", "_f")
+
+    def __init__(self, reg: _Region, kind: int, k: float = 0.0, c: float = 0.0):
+        self.reg, self.kind, self.k, self.c = reg, kind, k, c
+        self._f = reg.gap if kind == _GAP else partial(reg.force_value, k, c)
+
+    def __call__(self, h: float) -> float:
+        return self._f(h)
+
+    def bracket(self, lo, hi, sign, flo, fhi) -> float:
+        """:func:`_bracket` of this value, compiled."""
+        r = self.reg
+        return _compiled.bracket_region(lo, hi, sign, flo, fhi, self.kind, self.k, self.c,
+                                        r.tau0, r.omega, r.lag, r.amp, r.offset, r.beta,
+                                        r.big_om, r.c1, r.c2, r._av, r._wa, r._wb, r.kk,
+                                        r.rate)
 
 
 def _check_law(p: OscillatorParams, law: KelvinVoigt) -> None:
@@ -663,7 +717,7 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
             else:
                 h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
                                     1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk),
-                                    reg.gap)
+                                    _RegionValue(reg, _GAP))
             kind = "entry" if h is not None else None
         elif region == "contact":
             sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
@@ -736,7 +790,8 @@ def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale:
     h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale, force_value)
     h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
                             h_force if h_force is not None else horizon, -1.0,
-                            reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk), reg.gap)
+                            reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk),
+                            _RegionValue(reg, _GAP))
     if h_gap is not None and (h_force is None or h_gap < h_force):
         return "below", h_gap
     if h_force is not None:
@@ -753,16 +808,12 @@ def _force_event(reg: _Region, k: float, c: float):
 
 def _force_value(reg: _Region, k: float, c: float):
     """The force's value alone, k delta + c delta' (:meth:`_Region.force_value`)."""
-    def value(h):
-        return reg.force_value(h, k, c)
-    return value
+    return _RegionValue(reg, _FORCE, k, c)
 
 
 def _force_bound(reg: _Region, k: float, c: float):
     """A bound on |F''|: k bound(2) + c bound(3) (:meth:`_Region.force_bound`)."""
-    def bound(h):
-        return reg.force_bound(h, k, c)
-    return bound
+    return partial(reg.force_bound, k, c)
 
 
 def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: float,
