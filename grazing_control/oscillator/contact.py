@@ -460,8 +460,10 @@ def _bracket(value, lo, hi, sign, flo, fhi):
     """Safeguarded secant/bisection to the first h with sign * f(h) >= 0 (a few ulps);
     ``value(h)`` is f(h). A region's gap or force (:class:`_RegionValue`) is bracketed
     by the compiled mirror once :func:`load_compiled` has loaded it (the same floats)."""
-    if _compiled is not None and isinstance(value, _RegionValue):
-        return value.bracket(lo, hi, sign, flo, fhi)
+    if isinstance(value, _RegionValue):
+        if _compiled is not None:
+            return value.bracket(lo, hi, sign, flo, fhi)
+        value = value._f                 # the bound method itself: a call less an evaluation
     flo, fhi = sign * flo, sign * fhi
     ulp = math.ulp
     while (width := hi - lo) > 4.0 * ulp(hi):
