@@ -413,9 +413,6 @@ def _first_crossing(event, bound2, horizon, sign, scale, value=None):
     interval is bracketed to a few ulps; ``value(h)``, where given, is f(h) alone (the
     same float as event(h)[0], cheaper: the bracketing needs no f').
     """
-    if value is None:
-        def value(h):
-            return event(h)[0]
     margin = 64.0 * _EPS * scale
     n = max(1, int(math.ceil(horizon / (0.25 * math.pi))))
     a, fa = 0.0, event(0.0)
@@ -441,13 +438,13 @@ def _crossing_in(event, value, bound2, a, b, fa, fb, sign, margin, depth, start)
     if (da > 0.0 and db > 0.0 or da < 0.0 and db < 0.0) and abs(da) + abs(db) > m:
         # monotone: a crossing iff the ends straddle 0
         if sb >= 0.0 and sa < 0.0:
-            return _bracket(value, a, b, sign, fa[0], fb[0])
+            return _bracket(value, a, b, sign, fa[0], fb[0], event)
         return None
     upper = max(sa, sb) + 0.125 * (b - a) * m
     if upper < -margin:
         return None
     if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
-        return _bracket(value, a, b, sign, fa[0], fb[0]) if sa < 0.0 <= sb else None
+        return _bracket(value, a, b, sign, fa[0], fb[0], event) if sa < 0.0 <= sb else None
     mid = 0.5 * (a + b)
     fm = event(mid)
     found = _crossing_in(event, value, bound2, a, mid, fa, fm, sign, margin, depth + 1, start)
@@ -456,9 +453,9 @@ def _crossing_in(event, value, bound2, a, b, fa, fb, sign, margin, depth, start)
     return _crossing_in(event, value, bound2, mid, b, fm, fb, sign, margin, depth + 1, False)
 
 
-def _bracket(value, lo, hi, sign, flo, fhi):
+def _bracket(value, lo, hi, sign, flo, fhi, event=None):
     """Safeguarded secant/bisection to the first h with sign * f(h) >= 0 (a few ulps);
-    ``value(h)`` is f(h). A region's gap or force (:class:`_RegionValue`) is bracketed
+    ``value(h)`` is f(h) (None: ``event(h)[0]``). A region's gap or force (:class:`_RegionValue`) is bracketed
     by the compiled mirror once :func:`load_compiled` has loaded it (the same floats)."""
     if isinstance(value, _RegionValue):
         if _compiled is not None:
@@ -470,7 +467,7 @@ def _bracket(value, lo, hi, sign, flo, fhi):
         x = lo + width * (flo / (flo - fhi)) if fhi != flo else 0.5 * (lo + hi)
         if not lo < x < hi or (x - lo) < 0.01 * width or (hi - x) < 0.01 * width:
             x = 0.5 * (lo + hi)
-        fx = sign * value(x)
+        fx = sign * (value(x) if value is not None else event(x)[0])
         if fx >= 0.0:
             hi, fhi = x, fx
         else:
