@@ -31,8 +31,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple
 
+from . import kernel
 from .flow import matmul2, particular
 from .impact import (ImpactCapError, InitialStateError, NonFiniteStateError, _next_impact,
                      _on_wall_at_rest)
@@ -49,6 +51,7 @@ __all__ = [
     "advance_compliant",
     "compliant_period_step",
     "grazing_jump",
+    "load_compiled",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -268,10 +271,17 @@ class _Region:
     solution K e^{-rate h}, K = C_0 e^{-rate t0} / (w2 - 2 beta rate + rate^2) (the
     denominator is (rate - beta)^2 + Omega^2 > 0 in an underdamped region), whose n-th
     derivative is bounded by |K| rate^n e^{-rate h} (docs/theory_contact.md §21).
+
+    The hot path (the certified searches evaluate a region some 60 times a switch): the
+    products that do not depend on h are formed once (:meth:`_invariants`), each exactly
+    as the formula rounds it, so every value is bit for bit the formula's
+    (tests/test_compliant_flow_bits.py); :meth:`gap` and :meth:`force_value` give the
+    leading values alone, for the bracketing that needs no derivative.
     """
 
     __slots__ = ("beta", "big_w", "big_om", "omega", "amp", "lag", "offset", "tau0",
-                 "c1", "c2", "cabs", "kk", "rate")
+                 "c1", "c2", "cabs", "kk", "rate",
+                 "_wa", "_wb", "_av", "_aa", "_b2", "_w2", "_r2", "_bn", "_an", "_kn")
 
     def __init__(self, w2: float, beta: float, p: OscillatorParams, tau0: float,
                  delta0: float, v0: float, push: float = 0.0,
@@ -294,6 +304,25 @@ class _Region:
         self.c1 = delta0 - pd
         self.c2 = (v0 - pv + beta * self.c1) / self.big_om
         self.cabs = math.hypot(self.c1, self.c2)
+        self._invariants()
+
+    def _invariants(self) -> None:
+        """The h-independent factors of :meth:`__call__` and :meth:`bound`, grouped as
+        Python evaluates those formulas (left to right), so the floats are the same."""
+        b, om, c1, c2 = self.beta, self.big_om, self.c1, self.c2
+        self._wa = om * c2 - b * c1             # (Omega c2 - beta c1): wv's cos factor
+        self._wb = om * c1 + b * c2             # (Omega c1 + beta c2): its sin factor
+        self._av = -self.amp * self.omega       # the particular part's velocity amplitude
+        self._aa = -self.amp * self.omega * self.omega
+        self._b2 = 2.0 * b
+        self._w2 = self.big_w ** 2
+        self._r2 = self.rate * self.rate
+        # bound(n, h) = _bn[n] e^{-beta h} + _an[n] (+ _kn[n] e^{-rate h}), n = 1 ... 3
+        cabs, bw, amp, w, kk, rate = self.cabs, self.big_w, self.amp, self.omega, abs(self.kk), \
+            self.rate
+        self._bn = (None, cabs * bw ** 1, cabs * bw ** 2, cabs * bw ** 3)
+        self._an = (None, amp * w ** 1, amp * w ** 2, amp * w ** 3)
+        self._kn = (None, kk * rate ** 1, kk * rate ** 2, kk * rate ** 3)
 
     def _particular(self, h: float):
         psi = self.tau0 + self.omega * h - self.lag
@@ -306,20 +335,44 @@ class _Region:
     def __call__(self, h: float):
         """(delta, delta', delta'') at time h."""
         psi = self.tau0 + self.omega * h - self.lag
-        cp, sp = math.cos(psi), math.sin(psi)
+        cp = math.cos(psi)
         e = math.exp(-self.beta * h)
-        c, s = math.cos(self.big_om * h), math.sin(self.big_om * h)
-        b, om, c1, c2 = self.beta, self.big_om, self.c1, self.c2
-        w = e * (c1 * c + c2 * s)
-        wv = e * ((om * c2 - b * c1) * c - (om * c1 + b * c2) * s)
+        oh = self.big_om * h
+        c, s = math.cos(oh), math.sin(oh)
+        w = e * (self.c1 * c + self.c2 * s)
+        wv = e * (self._wa * c - self._wb * s)
         d = self.amp * cp + self.offset + w
-        v = -self.amp * self.omega * sp + wv
+        v = self._av * math.sin(psi) + wv
         # the equation itself gives delta'' (no cancellation beyond that of its terms)
-        acc = -self.amp * self.omega * self.omega * cp - 2.0 * b * wv - self.big_w ** 2 * w
-        if self.kk:   # the actuator's transient K e^{-rate h}
-            ek = self.kk * math.exp(-self.rate * h)
-            d, v, acc = d + ek, v - self.rate * ek, acc + self.rate * self.rate * ek
+        acc = self._aa * cp - self._b2 * wv - self._w2 * w
+        kk = self.kk
+        if kk:   # the actuator's transient K e^{-rate h}
+            ek = kk * math.exp(-self.rate * h)
+            return d + ek, v - self.rate * ek, acc + self._r2 * ek
         return d, v, acc
+
+    def gap(self, h: float) -> float:
+        """delta at time h: :meth:`__call__`'s first value, the same float."""
+        e = math.exp(-self.beta * h)
+        oh = self.big_om * h
+        d = (self.amp * math.cos(self.tau0 + self.omega * h - self.lag) + self.offset
+             + e * (self.c1 * math.cos(oh) + self.c2 * math.sin(oh)))
+        kk = self.kk
+        return d + kk * math.exp(-self.rate * h) if kk else d
+
+    def force_value(self, k: float, c: float, h: float) -> float:
+        """k delta + c delta' at time h (:func:`_force_event`'s value, the same float)."""
+        psi = self.tau0 + self.omega * h - self.lag
+        e = math.exp(-self.beta * h)
+        oh = self.big_om * h
+        cs, sn = math.cos(oh), math.sin(oh)
+        d = self.amp * math.cos(psi) + self.offset + e * (self.c1 * cs + self.c2 * sn)
+        v = self._av * math.sin(psi) + e * (self._wa * cs - self._wb * sn)
+        kk = self.kk
+        if kk:
+            ek = kk * math.exp(-self.rate * h)
+            d, v = d + ek, v - self.rate * ek
+        return k * d + c * v
 
     def transition(self, h: float):
         """Phi(h) of the homogeneous region flow, (Phi11, Phi12, Phi21, Phi22):
@@ -330,14 +383,25 @@ class _Region:
         return (e * (c + self.beta * s), e * s, -e * self.big_w ** 2 * s, e * (c - self.beta * s))
 
     def bound(self, n: int, h: float) -> float:
-        """max |delta^(n)| on [h, inf), n >= 1."""
-        out = self.cabs * self.big_w ** n * math.exp(-self.beta * h) + self.amp * self.omega ** n
+        """max |delta^(n)| on [h, inf), n = 1 ... 3."""
+        out = self._bn[n] * math.exp(-self.beta * h) + self._an[n]
         if self.kk:
-            out += abs(self.kk) * self.rate ** n * math.exp(-self.rate * h)
+            out += self._kn[n] * math.exp(-self.rate * h)
         return out
 
+    def force_bound(self, k: float, c: float, h: float) -> float:
+        """k bound(2, h) + c bound(3, h) (:func:`_force_bound`), the exponentials once."""
+        e = math.exp(-self.beta * h)
+        b2 = self._bn[2] * e + self._an[2]
+        b3 = self._bn[3] * e + self._an[3]
+        if self.kk:
+            ek = math.exp(-self.rate * h)
+            b2 += self._kn[2] * ek
+            b3 += self._kn[3] * ek
+        return k * b2 + c * b3
 
-def _first_crossing(event, bound2, horizon, sign, scale):
+
+def _first_crossing(event, bound2, horizon, sign, scale, value=None):
     """First h in (0, horizon] at which sign * event(h) >= 0 after being < 0, or None.
 
     ``event(h)`` returns (f, f'); ``bound2(h)`` bounds |f''| on [h, horizon]. f(0) may be
@@ -346,7 +410,8 @@ def _first_crossing(event, bound2, horizon, sign, scale):
     is below -margin (``scale`` * 64 eps, the rounding of f), or when M proves f monotone
     (|f'(a)| + |f'(b)| > M (b - a), equal signs) without a sign change; otherwise it is
     bisected (docs/theory_contact.md, "Certified switching"). A root of a monotone
-    interval is bracketed to a few ulps.
+    interval is bracketed to a few ulps; ``value(h)``, where given, is f(h) alone (the
+    same float as event(h)[0], cheaper: the bracketing needs no f').
     """
     margin = 64.0 * _EPS * scale
     n = max(1, int(math.ceil(horizon / (0.25 * math.pi))))
@@ -355,14 +420,14 @@ def _first_crossing(event, bound2, horizon, sign, scale):
     for k in range(1, n + 1):
         b = horizon if k == n else k * horizon / n
         fb = event(b)
-        root = _crossing_in(event, bound2, a, b, fa, fb, sign, margin, 0, start)
+        root = _crossing_in(event, value, bound2, a, b, fa, fb, sign, margin, 0, start)
         if root is not None:
             return root
         a, fa, start = b, fb, False
     return None
 
 
-def _crossing_in(event, bound2, a, b, fa, fb, sign, margin, depth, start):
+def _crossing_in(event, value, bound2, a, b, fa, fb, sign, margin, depth, start):
     sa, sb = sign * fa[0], sign * fb[0]
     da, db = sign * fa[1], sign * fb[1]
     if start and sa >= -margin and da < 0.0:
@@ -373,34 +438,86 @@ def _crossing_in(event, bound2, a, b, fa, fb, sign, margin, depth, start):
     if (da > 0.0 and db > 0.0 or da < 0.0 and db < 0.0) and abs(da) + abs(db) > m:
         # monotone: a crossing iff the ends straddle 0
         if sb >= 0.0 and sa < 0.0:
-            return _bracket(event, a, b, sign, fa[0], fb[0])
+            return _bracket(value, a, b, sign, fa[0], fb[0], event)
         return None
     upper = max(sa, sb) + 0.125 * (b - a) * m
     if upper < -margin:
         return None
     if depth >= _MAX_DEPTH or b - a <= 4.0 * math.ulp(b):
-        return _bracket(event, a, b, sign, fa[0], fb[0]) if sa < 0.0 <= sb else None
+        return _bracket(value, a, b, sign, fa[0], fb[0], event) if sa < 0.0 <= sb else None
     mid = 0.5 * (a + b)
     fm = event(mid)
-    found = _crossing_in(event, bound2, a, mid, fa, fm, sign, margin, depth + 1, start)
+    found = _crossing_in(event, value, bound2, a, mid, fa, fm, sign, margin, depth + 1, start)
     if found is not None:
         return found
-    return _crossing_in(event, bound2, mid, b, fm, fb, sign, margin, depth + 1, False)
+    return _crossing_in(event, value, bound2, mid, b, fm, fb, sign, margin, depth + 1, False)
 
 
-def _bracket(event, lo, hi, sign, flo, fhi):
-    """Safeguarded secant/bisection to the first h with sign * f(h) >= 0 (a few ulps)."""
+def _bracket(value, lo, hi, sign, flo, fhi, event=None):
+    """Safeguarded secant/bisection to the first h with sign * f(h) >= 0 (a few ulps);
+    ``value(h)`` is f(h) (None: ``event(h)[0]``). A region's gap or force (:class:`_RegionValue`) is bracketed
+    by the compiled mirror once :func:`load_compiled` has loaded it (the same floats)."""
+    if isinstance(value, _RegionValue):
+        if _compiled is not None:
+            return value.bracket(lo, hi, sign, flo, fhi)
+        value = value._f                 # the bound method itself: a call less an evaluation
     flo, fhi = sign * flo, sign * fhi
-    while hi - lo > 4.0 * math.ulp(hi):
-        x = lo + (hi - lo) * (flo / (flo - fhi)) if fhi != flo else 0.5 * (lo + hi)
-        if not lo < x < hi or (x - lo) < 0.01 * (hi - lo) or (hi - x) < 0.01 * (hi - lo):
+    ulp = math.ulp
+    while (width := hi - lo) > 4.0 * ulp(hi):
+        x = lo + width * (flo / (flo - fhi)) if fhi != flo else 0.5 * (lo + hi)
+        if not lo < x < hi or (x - lo) < 0.01 * width or (hi - x) < 0.01 * width:
             x = 0.5 * (lo + hi)
-        fx = sign * event(x)[0]
+        fx = sign * (value(x) if value is not None else event(x)[0])
         if fx >= 0.0:
             hi, fhi = x, fx
         else:
             lo, flo = x, fx
     return hi
+
+
+#: kernel.compiled_contact once :func:`load_compiled` has loaded it
+_compiled = None
+_GAP, _FORCE = 0, 1     # kernel.compiled_contact.GAP, FORCE
+
+
+def load_compiled() -> bool:
+    """Bracket the regions' switching times with the compiled mirror from now on in this
+    process (:mod:`grazing_control.oscillator.kernel.compiled_contact`: the same floats,
+    about half of the flow's time saved; docs/benchmarks.md "The compliant stop's hot
+    path"), where numba runs (``GRAZING_KERNEL``, :func:`kernel.use_kernel`). Compiles
+    or loads from numba's cache on the first call (seconds on a fresh clone), so it is
+    asked for by the offline callers that evaluate the flow many times (the stop's fit),
+    never on a node's first period. Returns whether the compiled path is on."""
+    global _compiled
+    if _compiled is None and kernel.use_kernel():
+        from .kernel import compiled_contact as cc
+        cc.bracket_region(0.0, 1.0, 1.0, -1.0, 1.0, _GAP, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0,
+                          0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)  # compile now
+        _compiled = cc
+    return _compiled is not None
+
+
+class _RegionValue:
+    """A region's gap (``kind`` _GAP, :meth:`_Region.gap`) or contact force k delta +
+    c delta' (_FORCE, :meth:`_Region.force_value`) as a function of h, with its
+    bracketing by the compiled mirror (:func:`load_compiled`)."""
+
+    __slots__ = ("reg", "kind", "k", "c", "_f")
+
+    def __init__(self, reg: _Region, kind: int, k: float = 0.0, c: float = 0.0):
+        self.reg, self.kind, self.k, self.c = reg, kind, k, c
+        self._f = reg.gap if kind == _GAP else partial(reg.force_value, k, c)
+
+    def __call__(self, h: float) -> float:
+        return self._f(h)
+
+    def bracket(self, lo, hi, sign, flo, fhi) -> float:
+        """:func:`_bracket` of this value, compiled."""
+        r = self.reg
+        return _compiled.bracket_region(lo, hi, sign, flo, fhi, self.kind, self.k, self.c,
+                                        r.tau0, r.omega, r.lag, r.amp, r.offset, r.beta,
+                                        r.big_om, r.c1, r.c2, r._av, r._wa, r._wb, r.kk,
+                                        r.rate)
 
 
 def _check_law(p: OscillatorParams, law: KelvinVoigt) -> None:
@@ -598,17 +715,18 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                 h = _next_impact(p, tau, dx, dv, horizon)
             else:
                 h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
-                                    1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
+                                    1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk),
+                                    _RegionValue(reg, _GAP))
             kind = "entry" if h is not None else None
         elif region == "contact":
             sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
             h = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon,
-                                -1.0, sc)
+                                -1.0, sc, _force_value(reg, k, c))
             kind = "exit" if h is not None else None
         else:
             sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
             kind, h = _above_switch(reg, _force_event(reg, k, c), _force_bound(reg, k, c),
-                                    horizon, sc)
+                                    horizon, sc, _force_value(reg, k, c))
         if kind is None:
             if h_stop is None:
                 dense.piece(t, duration, reg)
@@ -662,15 +780,17 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                             dense.end(delta, vel) if times is not None else None)
 
 
-def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale: float):
+def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale: float,
+                  force_value=None):
     """Above the stop after an exit (free, delta > 0, the force <= 0): the first of the
     force's return to 0 (``force_event``: a new contact, 'entry') and of the gap's
     (delta = 0: 'below') within ``horizon``, certified (:func:`_first_crossing`);
     (None, None) if neither."""
-    h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale)
+    h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale, force_value)
     h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
                             h_force if h_force is not None else horizon, -1.0,
-                            reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
+                            reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk),
+                            _RegionValue(reg, _GAP))
     if h_gap is not None and (h_force is None or h_gap < h_force):
         return "below", h_gap
     if h_force is not None:
@@ -685,8 +805,14 @@ def _force_event(reg: _Region, k: float, c: float):
     return event
 
 
+def _force_value(reg: _Region, k: float, c: float):
+    """The force's value alone, k delta + c delta' (:meth:`_Region.force_value`)."""
+    return _RegionValue(reg, _FORCE, k, c)
+
+
 def _force_bound(reg: _Region, k: float, c: float):
-    return lambda h: k * reg.bound(2, h) + c * reg.bound(3, h)
+    """A bound on |F''|: k bound(2) + c bound(3) (:meth:`_Region.force_bound`)."""
+    return partial(reg.force_bound, k, c)
 
 
 def compliant_period_step(p: OscillatorParams, law: KelvinVoigt, dx: float, dv: float,

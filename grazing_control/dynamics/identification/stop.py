@@ -47,7 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from grazing_control.oscillator.contact import (Coulomb, KelvinVoigt, compliant_period_step,
-                                                kelvin_voigt_damping)
+                                                kelvin_voigt_damping, load_compiled)
 from grazing_control.oscillator.flow import particular
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulation.fidelity import period_step
@@ -181,6 +181,8 @@ def fit_stop(p: OscillatorParams, stop: str, z, dv, start=None, *,
         raise ParameterError("samples are invalid: expected at least 8 Pi2 samples (n x 2) "
                              "and as many corrections")
     s = z + (p.x_ref, p.v_ref)          # the recorded states
+    if stop != "rigid":
+        load_compiled()   # thousands of flows: the compiled bracketing, the same floats
     osc0 = list(start_oscillator) if start_oscillator is not None else \
         _start_oscillator(p, p)
     joint = oscillator == "fit"
@@ -247,16 +249,16 @@ def _start(p, stop, z, dv, osc0, joint, known=None):
 
     if not joint:
         return grid(osc0), osc0
+    given = grid(start_osc)  # once: it starts the stop alone and is a start itself
     # the rigid fit's oscillator is biased where the stop is compliant, and its grid
     # points at a rigid-like k_c (K_MAX, flat), from where a joint fit does not come
     # back; a grid at an oscillator that is off can point anywhere (docs section 17).
     # Three starts, each run jointly for START_NFEV evaluations, the best continued:
     # the stop alone fitted at the given oscillator (where that is close), and the grid
     # at the given and at the rigid fit's oscillator
-    alone = fit_stop(p, stop, z, dv, grid(start_osc), oscillator="known",
-                     start_oscillator=start_osc)
+    alone = fit_stop(p, stop, z, dv, given, oscillator="known", start_oscillator=start_osc)
     starts = [([alone.values[n] for n in _NAMES[stop]], start_osc),
-              (grid(start_osc), start_osc), (grid(osc0), osc0)]
+              (given, start_osc), (grid(osc0), osc0)]
     fits = [fit_stop(p, stop, z, dv, theta, start_oscillator=osc, max_nfev=START_NFEV)
             for theta, osc in starts]
     best = min(fits, key=lambda f: f.rss)
