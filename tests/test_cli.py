@@ -56,6 +56,9 @@ JSON_CASES = {
                "--c2", "-1", "--json"],
     "scene9": ["simulate", "--delta-d", "-9e-6", "--periods", "1100", "--control-after", "1000",
                "--c2", "-1", "--json"],
+    "orbit_near": ["orbit", "--delta-d", "-1e-7", "--json"],
+    "orbit_near_perturbation": ["orbit", "--delta-d", "-1e-7", "--json", "--method",
+                                "perturbation"],
 }
 
 HUMAN_CASES = {
@@ -357,10 +360,9 @@ def test_human_readable_output(runs, name):
     assert len(r.stdout.splitlines()) >= 3
 
 
-def test_orbit_perturbation_method_agrees_with_exact_near_grazing(tmp_path):
+def test_orbit_perturbation_method_agrees_with_exact_near_grazing(runs):
     """--method perturbation answers with the series estimate and reports its cost."""
-    exact, fast = (json.loads(_run(["orbit", "--delta-d", "-1e-7", "--json", *extra], tmp_path).stdout)
-                   for extra in ([], ["--method", "perturbation"]))
+    exact, fast = _json(runs, "orbit_near"), _json(runs, "orbit_near_perturbation")
     assert fast["method"] == "perturbation" and fast["seconds"] > 0
     lam_e = complex(*exact["multipliers"][0])
     lam_p = complex(*fast["multipliers"][0])
