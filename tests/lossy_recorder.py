@@ -30,7 +30,9 @@ _settle = recorder_node.RecorderNode.settle
 
 def _lossy_record(self, topic, data, info):
     taken = self.__dict__.setdefault("_taken_seq", {})
-    taken[topic] = info.get("publication_sequence_number") or 0
+    sequence = info.get("publication_sequence_number") or 0
+    if sequence < 2**63:
+        taken[topic] = max(taken.get(topic, 0), sequence)
     if topic.endswith("/controller/velocity_correction"):
         self._kept = getattr(self, "_kept", 0) + 1
         if self._kept > KEEP:
