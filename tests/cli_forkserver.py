@@ -2,22 +2,23 @@
 already imported the command line's libraries (tests/test_cli.py's ``runs``).
 
 ``python cli_forkserver.py WORKERS`` reads one JSON job per line on stdin until it is
-closed, ``{"argv":
-[...], "cwd": DIR, "stdout": FILE, "stderr": FILE}``, and answers one line per finished
-job on stdout, ``{"job": INDEX, "returncode": N}`` (-N: killed by signal N), then exits
-once stdin is closed and every job has ended. At most WORKERS jobs run at once.
+closed, ``{"argv": [...], "cwd": DIR, "stdout": FILE, "stderr": FILE}``, answers one line
+per finished job on stdout, ``{"job": INDEX, "returncode": N}`` (-N: killed by signal N;
+-14, SIGALRM: ran past JOB_TIMEOUT), and exits once every job has ended. At most WORKERS
+jobs run at once.
 
 Each job is a fresh process as far as the command can tell: forked before it runs, it
 changes to its directory, writes its fds 1 and 2 into its own files and runs the module
 as ``python -m`` does (runpy, ``__main__``); its exit status is ``sys.exit``'s or 1 after
 an uncaught exception (its traceback on stderr), as the interpreter's. What the fork
 shares is the modules imported here (numpy, scipy, numba, the package): each of the ~30
-processes paid ~1.5 s of CPU importing them (issue 30), 27 at a time on two cores.
+processes paid ~1.5 s of CPU importing them (issue 30), two at a time on two cores.
 """
 
 import json
 import os
 import runpy
+import signal
 import sys
 import traceback
 
@@ -31,8 +32,12 @@ from grazing_control.oscillator import kernel
 if kernel.available():
     import grazing_control.oscillator.kernel.compiled  # noqa: F401  (numba, ~1.3 s)
 
+#: Wall seconds a job may run (subprocess.run's timeout in test_cli._run).
+JOB_TIMEOUT = 120
+
 
 def _child(job) -> int:
+    signal.alarm(JOB_TIMEOUT)               # a hung command ends with -SIGALRM, named
     os.chdir(job["cwd"])
     for fd, path in ((1, job["stdout"]), (2, job["stderr"])):
         f = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
