@@ -9,8 +9,10 @@ Contract (grazing_control/cli/commands.py module docstring and the issue):
 * without --json every subcommand prints a human-readable report (design: the
   ``--out`` run below).
 
-All commands run once, concurrently, in a module fixture (each process pays the
-numpy/scipy import); the tests then read their results.
+All commands run once, concurrently, in a module fixture, each a process forked from one
+that has imported numpy, scipy and numba once (tests/cli_forkserver.py; the tests that
+start a scene or read a signal run the command itself); the tests then read their
+results.
 
 Observed extra keys of ``design --json`` (allowed by the spec): "gamma1", "admissible".
 """
@@ -20,7 +22,6 @@ import os
 import re
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,9 @@ JSON_CASES = {
                "--c2", "-1", "--json"],
     "scene9": ["simulate", "--delta-d", "-9e-6", "--periods", "1100", "--control-after", "1000",
                "--c2", "-1", "--json"],
+    "orbit_near": ["orbit", "--delta-d", "-1e-7", "--json"],
+    "orbit_near_perturbation": ["orbit", "--delta-d", "-1e-7", "--json", "--method",
+                                "perturbation"],
 }
 
 HUMAN_CASES = {
@@ -108,11 +112,36 @@ def runs(tmp_path_factory):
     jobs.update({("bad", k): v[0] for k, v in BAD_CASES.items()})
     jobs[("out", "ok")] = ["design", "--c2", "-1", "--out", str(out_ok)]
     jobs[("out", "bad")] = ["design", "--c2", "1.5", "--out", str(out_bad)]
-    with ThreadPoolExecutor(max_workers=max(2, min(6, os.cpu_count() or 2))) as ex:
-        futures = {k: ex.submit(_run, argv, tmp) for k, argv in jobs.items()}
-        results = {k: f.result() for k, f in futures.items()}
+    results = _run_forked(jobs, tmp, max(2, min(6, os.cpu_count() or 2)))
     results["paths"] = (out_ok, out_bad)
     return results
+
+
+def _run_forked(jobs, cwd, workers):
+    """{key: CompletedProcess} of ``python -m grazing_control.cli ARGV`` for each job, each
+    a process forked from one that has imported the libraries once
+    (tests/cli_forkserver.py: ~1.5 s of imports per process, 29 processes; the other
+    tests here run the command itself, ``_run``)."""
+    keys = list(jobs)
+    lines = []
+    for i, key in enumerate(keys):
+        lines.append(json.dumps({"argv": jobs[key], "cwd": str(cwd),
+                                 "stdout": str(cwd / f"job{i}.out"),
+                                 "stderr": str(cwd / f"job{i}.err")}))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    server = subprocess.run([sys.executable, str(Path(__file__).with_name("cli_forkserver.py")),
+                             str(workers)], input="\n".join(lines) + "\n", env=env,
+                            capture_output=True, text=True, timeout=120 * len(keys) / workers)
+    assert server.returncode == 0, server.stderr
+    codes = {}
+    for line in server.stdout.splitlines():
+        answer = json.loads(line)
+        codes[answer["job"]] = answer["returncode"]
+    assert sorted(codes) == list(range(len(keys))), server.stdout
+    return {key: subprocess.CompletedProcess(
+        ["grazing_control.cli", *jobs[key]], codes[i], (cwd / f"job{i}.out").read_text(),
+        (cwd / f"job{i}.err").read_text()) for i, key in enumerate(keys)}
 
 
 def _json(runs, name):
@@ -331,10 +360,9 @@ def test_human_readable_output(runs, name):
     assert len(r.stdout.splitlines()) >= 3
 
 
-def test_orbit_perturbation_method_agrees_with_exact_near_grazing(tmp_path):
+def test_orbit_perturbation_method_agrees_with_exact_near_grazing(runs):
     """--method perturbation answers with the series estimate and reports its cost."""
-    exact, fast = (json.loads(_run(["orbit", "--delta-d", "-1e-7", "--json", *extra], tmp_path).stdout)
-                   for extra in ([], ["--method", "perturbation"]))
+    exact, fast = _json(runs, "orbit_near"), _json(runs, "orbit_near_perturbation")
     assert fast["method"] == "perturbation" and fast["seconds"] > 0
     lam_e = complex(*exact["multipliers"][0])
     lam_p = complex(*fast["multipliers"][0])

@@ -62,6 +62,8 @@ __all__ = [
 BRANCHES = ("grazing", "grazing past a fold", "other")
 
 TWO_PI = 2.0 * math.pi
+#: Machine epsilon of float64 (the rounding bounds).
+_EPS = float(np.finfo(float).eps)
 
 
 class OrbitNotFound(RuntimeError):
@@ -180,7 +182,8 @@ def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
     return delta_d, v, (m11, m12, m21, m22)
 
 
-def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = None) -> float:
+def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = None,
+                      point=None) -> float:
     """A bound on the rounding error of Delta d(psi) from :func:`branch_point`.
 
     Delta d = N / det with N = -rhs1 w2 + w1 rhs2, det = -b11 w2 + w1 b21 (the
@@ -191,17 +194,24 @@ def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = Non
     products themselves. Near grazing (|psi| ~ 1e-15) M12 is itself at the rounding
     level and Delta d(psi) ~ psi^2 wobbles by tens of percent: a change of direction
     smaller than this bound is not a fold (issue 20, item 4).
+
+    ``point``: :func:`branch_point`'s result at psi when the caller has it (the scan of
+    :func:`branch_brackets`), so that it is not solved twice. The 2x2 products of
+    absolute values are written out (a scan makes ~500 of these bounds per orbit).
     """
     theta = (p.tau_star + psi) % TWO_PI
     s = ((p.tau2 - theta) % TWO_PI) / p.omega
-    dd, _v, (m11, m12, m21, m22) = branch_point(p, psi, gains)
+    dd, _v, (m11, m12, m21, m22) = branch_point(p, psi, gains) if point is None else point
     if not math.isfinite(dd):
         return math.inf
-    q = np.abs(np.array(transition_matrix(p.zeta, p.period - s)).reshape(2, 2))
-    g = np.abs(np.array(gain_matrix(gains, p.zeta)).reshape(2, 2))
-    pm = np.abs(np.array(transition_matrix(p.zeta, s)).reshape(2, 2))
-    eps = np.finfo(float).eps
-    e_m = 8.0 * eps * float(np.max(q @ g @ pm))
+    q11, q12, q21, q22 = (abs(e) for e in transition_matrix(p.zeta, p.period - s))
+    g11, g12, g21, g22 = (abs(e) for e in gain_matrix(gains, p.zeta))
+    p11, p12, p21, p22 = (abs(e) for e in transition_matrix(p.zeta, s))
+    h11, h12 = q11 * g11 + q12 * g21, q11 * g12 + q12 * g22          # |Q| |G|
+    h21, h22 = q21 * g11 + q22 * g21, q21 * g12 + q22 * g22
+    eps = _EPS
+    e_m = 8.0 * eps * max(h11 * p11 + h12 * p21, h11 * p12 + h12 * p22,
+                          h21 * p11 + h22 * p21, h21 * p12 + h22 * p22)
     a, w, r = p.amplitude, p.omega, p.r
     sh = math.sin(0.5 * psi)
     u1, u2 = 2.0 * a * sh * sh, a * w * math.sin(psi)
@@ -227,9 +237,10 @@ def _branch_values(p, gains, sign, mags, rounding=False):
     """(psi, Delta d, v-) along the grid, with Delta d's rounding bound if ``rounding``."""
     out = []
     for m in mags:
-        dd, v, _ = branch_point(p, sign * m, gains)
+        point = branch_point(p, sign * m, gains)
+        dd, v, _ = point
         if rounding:
-            out.append((sign * m, dd, v, _delta_d_rounding(p, sign * m, gains)))
+            out.append((sign * m, dd, v, _delta_d_rounding(p, sign * m, gains, point)))
         else:
             out.append((sign * m, dd, v))
     return out
