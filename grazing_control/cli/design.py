@@ -328,14 +328,8 @@ def _family_design(args):
     elif args.free_gain is not None:
         mu, chosen = family_member(model, *args.free_gain, delay), \
             f"from --free-gain {args.free_gain[0]}"
-    elif intervals:
-        # the middle of the widest interval; an unbounded one: 1 inside its finite end
-        lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
-        mu = 0.5 * (lo + hi) if math.isfinite(lo) and math.isfinite(hi) else \
-            (hi - 1.0 if math.isfinite(hi) else lo + 1.0)
-        chosen = "the middle of the widest admissible interval (no --mu given)"
     else:
-        mu, chosen = 0.0, "mu = 0 (no admissible mu; no --mu given)"
+        mu, chosen = nd.default_mu(intervals)
     mu += 0.0   # no "-0" in the report
     design = nd.evaluate_design(model, mu, delay)
     k = np.asarray(design.gains, dtype=float)

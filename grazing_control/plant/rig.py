@@ -256,17 +256,20 @@ class Rig:
                           pi2_offset=self.pi2_offset)
         return replace(model, delta_d=self.gap / s.length - grazing_clearance(model))
 
-    def section_time(self) -> float:
-        """The rig-clock time (s) of the first Pi2 section at or after t = 0: where the
-        forcing phase Omega t + phi equals tau2 (mod 2 pi). The model's t = 0 is there."""
+    def section_phase(self) -> float:
+        """tau2: the forcing phase of the Pi2 section (rad, in [0, 2 pi)), the grazing
+        phase + pi2_offset: the 1-DOF study's for one mass, the n-DOF model's for n."""
         if self.structure is not None:
             from grazing_control.oscillator.ndof.flow import grazing_phase
 
             m = self.model()
-            tau2 = (grazing_phase(m) + m.pi2_offset) % TWO_PI
-            return ((tau2 - self.phase) % TWO_PI) / (TWO_PI * self.frequency)
-        p = self.params()
-        return ((p.tau2 - self.phase) % TWO_PI) / (TWO_PI * self.frequency)
+            return (grazing_phase(m) + m.pi2_offset) % TWO_PI
+        return self.params().tau2
+
+    def section_time(self) -> float:
+        """The rig-clock time (s) of the first Pi2 section at or after t = 0: where the
+        forcing phase Omega t + phi equals tau2 (mod 2 pi). The model's t = 0 is there."""
+        return ((self.section_phase() - self.phase) % TWO_PI) / (TWO_PI * self.frequency)
 
     def rig_time(self, tau: float) -> float:
         """Rig-clock seconds of dimensionless model time tau."""

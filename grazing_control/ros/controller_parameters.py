@@ -231,6 +231,13 @@ def declare_rig(node):
     if not (math.isnan(c2) or abs(c2) <= GAIN_LIMIT):
         raise StartupError(f"rig_c2={c2!r} is invalid: valid range is |rig_c2| <= "
                            f"{GAIN_LIMIT:g}, or NaN for the c2 of least noise gain")
+    mu = node.declare_parameter("rig_mu", math.nan, float_descriptor(
+        "rig_file of n >= 2 masses: the n-DOF design's mu (grazing design --rig FILE --mu); "
+        "NaN: the middle of the widest admissible interval", read_only=True,
+        constraints="finite, or NaN")).value
+    if math.isinf(mu):
+        raise StartupError(f"rig_mu={mu!r} is invalid: valid range is a finite mu, or NaN "
+                           "for the middle of the widest admissible interval")
     node.declare_parameter("clock_window", 200, int_descriptor(
         "rig_file: rig/clock pairs of the clock relation's sliding window", 2, 100_000,
         read_only=True))
@@ -238,7 +245,7 @@ def declare_rig(node):
         return None, {}
     try:
         rig = load_rig(path)
-        return rig, controller_values(rig, c2)
+        return rig, controller_values(rig, c2, mu)
     except (ParameterError, ValueError, ArithmeticError) as exc:
         raise StartupError(f"rig_file={path}: {exc}") from None
 

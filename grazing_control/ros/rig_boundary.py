@@ -34,7 +34,8 @@ from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.rig import Rig
 from grazing_control.plant.settings import default_values
 
-__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "sim_values", "joint_names", "sensor_positions",
+__all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "MASSES_CONTROLLER_KEYS", "sim_values",
+           "masses_controller_values", "joint_names", "sensor_positions",
            "model_positions", "controller_values", "answer_lead",
            "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
            "force_of", "correction_of", "APPLIED_IN_TIME", "APPLIED_PREDICTED",
@@ -78,12 +79,7 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
     (Rig.contact_values; the rigid wall's with sim_node's defaults for the rest): a
     compliant stop runs in the rig scene as the wall does, realtime with the correction
     as a force pulse (docs/theory_contact.md §16)."""
-    if rig.n > 1:
-        raise ParameterError(f"masses: the rig has {rig.n} masses: the simulated rig runs a "
-                             "rig of one mass (the n-DOF plant behind the driver contract is "
-                             "not built yet; grazing rig FILE --model-out M gives its model "
-                             "for grazing run --model M)")
-    p, d = rig.params(), rig.dimensionless()
+    d = rig.dimensionless()
     if d["sensor_velocity"] and d["sensor_velocity_noise"] != d["sensor_noise"]:
         raise ParameterError(
             f"sensor.velocity_noise={rig.sensor.velocity_noise!r} m/s is not simulated: "
@@ -93,13 +89,21 @@ def sim_values(rig: Rig, clock_drift: float = 0.0) -> dict:
     if rig.actuator.latency != 0.0:
         raise ParameterError(f"actuator.latency={rig.actuator.latency!r} s is not simulated: "
                              "valid in a simulated rig is 0 s")
+    common = {"state_period": d["state_period"],
+              "sensor_noise": d["sensor_noise"], "sensor_quantum": d["sensor_quantum"],
+              "sensor_velocity": bool(d["sensor_velocity"]), "pulse_width": d["pulse_width"],
+              "force_limit": d["force_limit"], "actuator_bandwidth": d["actuator_bandwidth"],
+              "actuation_delay": d["actuation_delay"],
+              "time_scale": rig.omega_n / (1.0 + clock_drift), "pre_roll": PRE_ROLL}
+    if rig.n > 1:        # the n-DOF scene of Rig.model(): the model gives the rest
+        if rig.stop.type != "rigid":
+            raise ParameterError(f"stop.type={rig.stop.type!r} is not simulated for a rig of "
+                                 f"{rig.n} masses: valid there is rigid (the n-DOF plant's "
+                                 "stop is the rigid wall)")
+        return {"delta_d": rig.model().delta_d, **common}
+    p = rig.params()
     return {"zeta": p.zeta, "r": p.r, "omega": p.omega, "delta_d": p.delta_d, "tau0": 0.0,
-            "pi2_offset": p.pi2_offset, "state_period": d["state_period"],
-            "sensor_noise": d["sensor_noise"], "sensor_quantum": d["sensor_quantum"],
-            "sensor_velocity": bool(d["sensor_velocity"]), "pulse_width": d["pulse_width"],
-            "force_limit": d["force_limit"], "actuator_bandwidth": d["actuator_bandwidth"],
-            "actuation_delay": d["actuation_delay"],
-            "time_scale": rig.omega_n / (1.0 + clock_drift), "pre_roll": PRE_ROLL,
+            "pi2_offset": p.pi2_offset, **common,
             **{k: default_values()[k] for k in CONTACT_KEYS}, **rig.contact_values()}
 
 
@@ -122,15 +126,21 @@ CONTROLLER_KEYS = ("zeta", "r", "omega", "pi2_offset", "delta_d", "actuation_del
                    "actuator_bandwidth")
 
 
-def controller_values(rig: Rig, c2: float) -> dict:
+def controller_values(rig: Rig, c2: float, mu: float = math.nan) -> dict:
     """The controller's parameters of ``rig``: its model, sensor and actuator (the pulse,
     its force limit and bandwidth, which the estimator integrates) in the model's units,
     the stream estimator answering each section with its last sample (the simulated rig
     keeps an answer that comes before its section), and the design for the budget's
     delay: c1 from the degenerate condition (Eq. 38 / (D5)) for ``c2``, or with ``c2``
-    NaN for the c2 of least noise gain (dynamics.design.tuning.optimize_noise)."""
+    NaN for the c2 of least noise gain (dynamics.design.tuning.optimize_noise). A rig of
+    n >= 2 masses: :func:`masses_controller_values` at ``mu`` (``c2`` must be NaN)."""
     from grazing_control.dynamics.design.gains import degenerate_c1
 
+    if rig.n > 1:
+        if not math.isnan(c2):
+            raise ParameterError(f"rig_c2={c2!r} is invalid for a rig of {rig.n} masses: "
+                                 "valid is NaN (its n-DOF design's free parameter is rig_mu)")
+        return masses_controller_values(rig, mu)
     p, d = rig.params(), rig.dimensionless()
     delay = d["actuation_delay"]
     if math.isnan(c2):
@@ -144,6 +154,40 @@ def controller_values(rig: Rig, c2: float) -> dict:
             "sensor_noise": d["sensor_noise"], "state_period": d["state_period"],
             "pulse_width": d["pulse_width"], "force_limit": d["force_limit"],
             "actuator_bandwidth": d["actuator_bandwidth"]}
+
+
+#: The controller's parameters that a rig file of n >= 2 masses sets
+#: (:func:`masses_controller_values`).
+MASSES_CONTROLLER_KEYS = ("omega", "pi2_offset", "delta_d", "actuation_delay", "gains", "n",
+                          "i_a", "mu", "sensor_coordinate", "pi2_source",
+                          "answer_after_section", "answer_lead", "sensor_noise",
+                          "state_period", "pulse_width", "force_limit", "actuator_bandwidth")
+
+
+def masses_controller_values(rig: Rig, mu: float) -> dict:
+    """The controller's parameters of a rig of n >= 2 masses: the n-DOF model controller
+    (controller_values.model_controller_from_values) on :meth:`Rig.model`, its stream
+    estimator reading the first measured mass (``sensor.masses[0]``: the impacting mass
+    where the sensor sees it; the others are published on rig/sensor and not read), and
+    the gains of the n-DOF pulse design for the budget's delay and the pulse's width
+    (grazing design --rig FILE, dynamics.design.ndof_design.pulse_design) at ``mu``, or
+    with ``mu`` NaN at its default (ndof_design.default_mu of the admissible set)."""
+    from grazing_control.dynamics.design import ndof_design as nd
+
+    model, d = rig.model(), rig.dimensionless()
+    delay = nd.design_actuation(d["actuation_delay"], d["pulse_width"],
+                                d["actuator_bandwidth"], d["actuator_latency"])
+    if math.isnan(mu):
+        mu = nd.default_mu([(float(lo), float(hi))
+                            for lo, hi in nd.admissible_mu(model, "combined", delay)])[0]
+    gains = [float(k) for k in nd.evaluate_design(model, mu, delay).gains]
+    return {"omega": model.omega, "pi2_offset": model.pi2_offset, "delta_d": model.delta_d,
+            "actuation_delay": d["actuation_delay"], "gains": gains, "n": model.n,
+            "i_a": model.i_a, "mu": float(mu), "sensor_coordinate": int(rig.measured[0]),
+            "pi2_source": "stream", "answer_after_section": False,
+            "answer_lead": answer_lead(rig), "sensor_noise": d["sensor_noise"],
+            "state_period": d["state_period"], "pulse_width": d["pulse_width"],
+            "force_limit": d["force_limit"], "actuator_bandwidth": d["actuator_bandwidth"]}
 
 
 def answer_lead(rig: Rig) -> float:
@@ -161,7 +205,7 @@ def answer_lead(rig: Rig) -> float:
 def first_section(rig: Rig, t: float) -> float:
     """The rig time of the first Pi2 section at or after rig time ``t``: where the
     forcing phase Omega t + phi equals tau2 (mod 2 pi)."""
-    tau2 = rig.params().tau2
+    tau2 = rig.section_phase()
     phase = TWO_PI * rig.frequency * t + rig.phase
     return t + ((tau2 - phase) % TWO_PI) / (TWO_PI * rig.frequency)
 
@@ -269,7 +313,7 @@ class Sections:
 
     def __init__(self, rig: Rig):
         self.rig = rig
-        self.p = rig.params()
+        self.tau2 = rig.section_phase()
         self.origin = None
 
     def reference(self, t_ref: float, frequency: float, phase: float) -> bool:
@@ -279,13 +323,13 @@ class Sections:
                 and math.isfinite(phase)):
             return False
         if self.origin is None:
-            ahead = (self.p.tau2 - phase) % TWO_PI
+            ahead = (self.tau2 - phase) % TWO_PI
             if ahead > TWO_PI - self.PHASE_TOLERANCE:     # the reference is on a section
                 ahead = 0.0
             self.origin = t_ref + ahead / (TWO_PI * frequency)
         if abs(frequency - self.rig.frequency) > 1e-9 * self.rig.frequency:
             return False
-        want = self.p.tau2 + TWO_PI * self.rig.frequency * (t_ref - self.origin)
+        want = self.tau2 + TWO_PI * self.rig.frequency * (t_ref - self.origin)
         err = abs(math.remainder(phase - want, TWO_PI))
         return err <= self.PHASE_TOLERANCE
 

@@ -54,6 +54,7 @@ __all__ = [
     "markov_parameters",
     "gain_family",
     "family_mu",
+    "default_mu",
     "transmission_zeros",
     "sections_with_stable_zeros",
     "limit_monodromy",
@@ -581,6 +582,19 @@ def admissible_mu(model: NdofModel, conditions: str = "combined", delay: float =
         return True
 
     return admissible_intervals(ok, [c for c in cands if math.isfinite(c)], MU_LIMIT)
+
+
+def default_mu(intervals) -> tuple:
+    """(mu, why) where no mu is given (grazing design --model/--rig, a rig's controller):
+    the middle of the widest admissible interval of ``intervals`` ((lo, hi) pairs, e.g.
+    :func:`admissible_mu`'s combined set); an unbounded one: 1 inside its finite end;
+    none: mu = 0."""
+    if not intervals:
+        return 0.0, "mu = 0 (no admissible mu; no --mu given)"
+    lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
+    mu = 0.5 * (lo + hi) if math.isfinite(lo) and math.isfinite(hi) else \
+        (hi - 1.0 if math.isfinite(hi) else lo + 1.0)
+    return mu, "the middle of the widest admissible interval (no --mu given)"
 
 
 # -- the bad gain (§9) --------------------------------------------------------------------
