@@ -107,6 +107,8 @@ class Outputs:
     def _publish_ndof(self, ev: NdofEvent, stamp: tuple) -> tuple:
         """An n-DOF state (state stream, Pi1, Pi2) as a JointState with n joints."""
         n = self.node
+        if n.driver is not None:              # a simulated rig of n masses: rig/sensor ..
+            n.driver.event(ev)
         if self._names is None or len(self._names) != len(ev.x):
             self._names = joint_names(len(ev.x))
         msg = ndof_joint_state(ev, self._names)

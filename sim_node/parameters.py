@@ -186,7 +186,9 @@ def values_of(node) -> dict:
 def validate(node, values: dict):
     """The settings of ``values`` (plant.settings.settings_from_values): the 1-DOF
     scene's, or with ``model_file`` the n-DOF scene's; ParameterError naming a bad value."""
-    return settings_from_values(values, node.model_file, node.model)
+    # a rig of n masses is the n-DOF scene of its model (rig_boundary.sim_values)
+    source = node.model_file or (node.rig_file if node.model is not None else "")
+    return settings_from_values(values, source, node.model)
 
 
 def declare(node) -> None:
@@ -202,6 +204,8 @@ def declare(node) -> None:
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
     node.rig, rig_values = declare_rig(node)
+    if node.rig is not None and node.rig.n > 1:
+        node.model = node.rig.model()      # the n-DOF scene of the rig's model
     declared = {}
     for p in PARAMETERS + NODE_PARAMETERS:
         if p is MODEL_FILE or p is RIG_FILE or p in RIG_CLOCK:

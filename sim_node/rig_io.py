@@ -39,7 +39,8 @@ from grazing_control.ros import cdr
 from grazing_control.ros.common import LATCHED_QOS, stamp_from_seconds
 from grazing_control.ros.rig_driver import applied_message, read_pulse
 from grazing_control.ros.rig_boundary import (APPLIED_SAFE, DelayLine, SimulatedClock,
-                                              correction_of, force_of)
+                                              correction_of, force_of, joint_names,
+                                              sensor_positions)
 
 __all__ = ["SimulatedRig", "CLOCK_READ"]
 
@@ -126,10 +127,28 @@ class SimulatedRig:
     def flush(self, now: float) -> None:
         """Publish the stream samples whose latency has passed at model time ``now``."""
         l, vs = self.rig.scales.length, self.rig.scales.velocity
+        if self.rig.n > 1:
+            self._flush_masses(now)
+            return
         for t, x, v in self.latency.due(now):
             sec, ns = cdr.stamp_parts(self.clock.rig_time(t))
             self.pub_sensor.publish(cdr.rig_sample(sec, ns, float(x) * l,
                                                    float(v) * vs if self.velocity else None))
+
+    def _flush_masses(self, now: float) -> None:
+        """:meth:`flush` of a rig of n masses: one JointState per sample with the measured
+        masses (rig_boundary.joint_names: mass<i> in sensor.masses order), positions in
+        metres (rig_boundary.sensor_positions), velocities in m/s where the sensor
+        measures them (rclpy's message: the packed layout is one joint's)."""
+        names, vs = joint_names(self.rig), self.rig.scales.velocity
+        for t, x, v in self.latency.due(now):
+            msg = JointState()
+            msg.header.stamp = stamp_from_seconds(self.clock.rig_time(t))
+            msg.name = names
+            msg.position = sensor_positions(self.rig, x)
+            if self.velocity:
+                msg.velocity = [float(v[i]) * vs for i in self.rig.measured]
+            self.pub_sensor.publish(msg)
 
     def wake_in(self, now: float) -> float:
         """Wall seconds until the next held sample is due (inf: none), no sooner than the

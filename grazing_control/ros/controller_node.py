@@ -160,11 +160,15 @@ class ControllerNode(Node):
         self.executor_kind = executor_kind(self)
         try:
             apply_node_scheduling(self)
-            check_rig_values(self.get_parameter("rig_file").value, self.rig_values,
-                             self._values(), free=("answer_lead",))
+            check_rig_values(self.rig_file, self.rig_values,
+                             {**self._values(), "gains": list(gains_of(self) or []),
+                              "mu": self.get_parameter("mu").value}, free=("answer_lead",))
         except (ValueError, ParameterError) as exc:
             raise StartupError(str(exc)) from None
         self.ndof = None         # an n-DOF scene's controller (issue 17), or None
+        # a rig of n masses is the n-DOF scene of its model (rig_boundary.controller_values)
+        self.rig_model = (self.rig.model() if self.rig is not None and self.rig.n > 1
+                          else None)
         # how a correction acts in the plant: a rig's force pulse (its estimator and
         # prediction integrate it, dynamics.estimation.section_state.trajectory), else the kick
         self.pulse = (0.0, math.inf, None)
@@ -172,7 +176,7 @@ class ControllerNode(Node):
         # latency is in the budget)
         pulse = {k: self.get_parameter(k).value for k in PULSE_KEYS}
         try:
-            if self.model_file:
+            if self.model_file or self.rig_model is not None:
                 self.law = self._ndof_law(self._values(), gains_of(self))
                 self.actuation_delay = actuation_delay_from_values(
                     {**self._values(), "omega": self.ndof.model.omega})
@@ -293,7 +297,7 @@ class ControllerNode(Node):
                         "time)")
         self._warn_gains()
         if self.ndof is not None:
-            log.info(f"model_file={self.model_file} n={self.ndof.model.n} "
+            log.info(f"model_file={self.model_file or self.rig_file} n={self.ndof.model.n} "
                      f"i_a={self.ndof.model.i_a} gains={self.ndof.gains.tolist()!r} "
                      f"X**={self.law.x_ref.tolist() + self.law.v_ref.tolist()!r} "
                      f"enable_after={self.law.enable_after} "
@@ -338,7 +342,8 @@ class ControllerNode(Node):
         """The law k^T (X - X**) of a model file's ``values`` and ``gains``
         (controller_values.model_controller_from_values); sets :attr:`ndof`. The switches
         (enable_after, saturation, stale_after) are validated as the 1-DOF law's."""
-        ndof = model_controller_from_values(values, self.model_file, gains)
+        ndof = model_controller_from_values(values, self.model_file or self.rig_file, gains,
+                                            self.rig_model)
         base = law_from_values({**values, "c1": 0.0, "c2": 0.0, "x_ref": 0.0, "v_ref": 0.0})
         self.ndof = ndof
         return ControlLaw(ndof.gains, ndof.x_ref, ndof.v_ref, base.enable_after,
@@ -525,7 +530,7 @@ class ControllerNode(Node):
         for k, tk, est in due:
             key = cdr.stamp_parts(tk)
             if self.ndof is not None:
-                self._answer_ndof_estimate(k, key, est)
+                self._answer_ndof_estimate(k, tk, key, est)
                 continue
             p = self.model      # a switch at the section before moves it (ros/reidentify.py)
             xh, vh = p.x_ref + est.z[0], p.v_ref + est.z[1]
@@ -549,14 +554,16 @@ class ControllerNode(Node):
             if self.reid is not None:
                 self.reid.answered(k, 0.0 if dv is None else dv)
 
-    def _answer_ndof_estimate(self, k: int, key: tuple, est) -> None:
-        """Section k of an n-DOF stream: the answer k^T (X^ - X**), then (as in 1-DOF)
+    def _answer_ndof_estimate(self, k: int, tk: float, key: tuple, est) -> None:
+        """Section k (model time ``tk``) of an n-DOF stream: the answer k^T (X^ - X**)
+        (with a rig file of n masses first as the force pulse), then (as in 1-DOF)
         the estimate X^ = X** + z^ on controller/estimate (JointState, n joints:
         positions, velocities, effort the 2n variances)."""
         ndof = self.ndof
         X = np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z, dtype=float)
         n = ndof.model.n
-        dv = self._answer(key, X[:n], X[n:])
+        dv = self._answer(key, X[:n], X[n:],
+                          rig_time=tk if self.rig_side is not None else None)
         msg = JointState(name=[f"mass{i}" for i in range(n)],
                          position=X[:n].tolist(), velocity=X[n:].tolist(),
                          effort=np.diag(est.cov).tolist())

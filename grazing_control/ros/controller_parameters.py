@@ -241,6 +241,7 @@ def declare_rig(node):
     node.declare_parameter("clock_window", 200, int_descriptor(
         "rig_file: rig/clock pairs of the clock relation's sliding window", 2, 100_000,
         read_only=True))
+    node.rig_file = path
     if not path:
         return None, {}
     try:

@@ -395,15 +395,18 @@ class ModelController:
         return X[:n], X[n:]
 
 
-def model_controller_from_values(values: dict, model_file: str, gains) -> ModelController:
+def model_controller_from_values(values: dict, model_file: str, gains,
+                                 model=None) -> ModelController:
     """Validate an n-DOF controller's values (ParameterError naming the parameter).
 
     ``gains``: the ``gains`` parameter (None when not given); ``values``: the 1-DOF
     controller's parameters, of which c1, c2, x_ref, v_ref must stay at their defaults
     and ``pi2_source`` at ``sample``; ``delta_d`` (finite) replaces the file's Delta d and
     switches the prediction of the next correction on (NaN: the file's, no prediction).
+    ``model``: the model when already built (a rig of n masses: Rig.model(), ``model_file``
+    then the rig file's path, for the messages).
     """
-    model = load_model_file(model_file)
+    model = load_model_file(model_file) if model is None else model
     for name, default in ONE_DOF_DEFAULTS.items():
         value = float(values.get(name, default))
         if not (value == default or (math.isnan(value) and math.isnan(default))):

@@ -44,7 +44,7 @@ from .common import (PUBLISHER_QOS, deserialize, seconds_from_stamp, stamp_from_
                      stamp_key)
 from .diagnostics import WARN
 from .rig_boundary import (APPLIED_IN_TIME, APPLIED_PREDICTED, Sections, correction_of,
-                           force_of)
+                           force_of, model_positions)
 
 __all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES", "RIG_INPUT_QOS"]
 
@@ -103,7 +103,9 @@ class RigSide:
         else through rclpy; SI, rig clock): its arrival latency, then to the estimator in
         the model's units (held until the first phase reference)."""
         arrival = self.node.get_clock().now().nanoseconds * 1e-9
-        sample = cdr.read_state(data)
+        sample = self._masses_sample(data) if self.rig.n > 1 else cdr.read_state(data)
+        if sample is None and self.rig.n > 1:
+            return
         if sample is None:
             msg = deserialize(data, JointState, self.node.malformed)
             if msg is None:
@@ -125,6 +127,24 @@ class RigSide:
             self.pending.append((s, x, v))
             return
         self._sample(s, x, v)
+
+    def _masses_sample(self, data: bytes):
+        """(sec, nanosec, x, v, ()) of a rig/sensor message of a rig of n masses: the
+        position (m) and velocity (m/s, NaN: none) of the mass the stream estimator reads
+        (its ``sensor_coordinate``, a measured mass); None (counted as malformed) for a
+        message whose names are not the rig's measured masses (rig_boundary.model_positions)."""
+        msg = deserialize(data, JointState, self.node.malformed)
+        if msg is None:
+            return None
+        key = stamp_key(msg.header.stamp)
+        try:
+            model_positions(self.rig, msg.name, msg.position)
+        except ValueError as exc:
+            self.node.malformed(f"rig/sensor at {key}: {exc}")
+            return None
+        j = self.rig.measured.index(self.node.stream.coordinate)
+        v = msg.velocity[j] if len(msg.velocity) == len(msg.name) else math.nan
+        return key + (msg.position[j], v, ())
 
     def _sample(self, s: float, x: float, v: float) -> None:
         """A sample to the estimator in the model's units, held while it would make a
