@@ -301,6 +301,37 @@ def test_the_force_pulse_carries_the_effective_mass_and_the_sensor_the_length_sc
     assert back == {1: pytest.approx(x[1], rel=1e-15), 0: pytest.approx(x[0], rel=1e-15)}
     with pytest.raises(ValueError, match="^rig/sensor names"):
         model_positions(rig, ["mass"], [0.0])
-    # the simulated rig runs one mass: a rig of two is refused naming masses
-    with pytest.raises(ParameterError, match="^masses: the rig has 2 masses"):
-        sim_values(rig)
+    # the simulated rig of two masses is the n-DOF scene of its model (the model gives
+    # zeta, r, omega, pi2_offset); a compliant stop is refused naming stop.type
+    values = sim_values(rig)
+    assert values["delta_d"] == rig.model().delta_d and "zeta" not in values
+    assert values["state_period"] == rig.omega_n / rig.sensor.rate
+    import dataclasses
+
+    from grazing_control.plant.rig import Stop
+
+    soft = dataclasses.replace(rig, stop=Stop("kelvin_voigt", 1e5, 1.0))
+    with pytest.raises(ParameterError, match="^stop.type='kelvin_voigt' is not simulated "
+                                             "for a rig of 2 masses: valid there is rigid"):
+        sim_values(soft)
+
+
+def test_the_controller_of_a_rig_of_two_masses_is_grazing_design_rigs(cli):
+    """controller_node's values of a rig of two masses (rig_boundary.controller_values):
+    the n-DOF law with the gains `grazing design --rig FILE` prints (its default mu, or
+    rig_mu), the stream estimator on the first measured mass; rig_c2 refused."""
+    from grazing_control.oscillator.params import ParameterError
+    from grazing_control.ros.rig_boundary import MASSES_CONTROLLER_KEYS, controller_values
+
+    rig = load_rig(TWO_MASS)
+    values = controller_values(rig, math.nan)
+    assert set(values) == set(MASSES_CONTROLLER_KEYS)
+    design = json.loads(cli("design", "--rig", TWO_MASS, "--json")[1])
+    assert values["mu"] == design["mu"] and values["gains"] == design["gains"]
+    assert values["sensor_coordinate"] == rig.structure.measured[0] == 1
+    assert (values["n"], values["i_a"]) == (2, rig.structure.actuated)
+    given = controller_values(rig, math.nan, 0.1)
+    mine = json.loads(cli("design", "--rig", TWO_MASS, "--mu", "0.1", "--json")[1])
+    assert given["gains"] == pytest.approx(mine["gains"], rel=1e-15, abs=0.0)
+    with pytest.raises(ParameterError, match="^rig_c2=0.03 is invalid for a rig of 2 masses"):
+        controller_values(rig, 0.03)
