@@ -47,7 +47,8 @@ def scene(tmp_path_factory):
                                       "feasibility": "warn"})
     assert res.ok, res
     topics = ("/rig/sensor", "/rig/phase", "/rig/force_pulse", "/rig/applied",
-              "/oscillator/state", "/oscillator/impact", "/controller/velocity_correction")
+              "/oscillator/state", "/oscillator/impact", "/oscillator/pi2",
+              "/controller/velocity_correction")
     return rig, res, _messages(out / "bag", topics)
 
 
@@ -105,3 +106,29 @@ def test_the_scene_is_captured_one_impact_per_held_period(scene):
     for _, msg in m["/oscillator/impact"]:
         counts[int(_seconds(msg.header.stamp) // period)] += 1
     assert counts[-HELD:] == [1] * HELD, counts
+
+
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
+def test_each_section_is_the_n_dof_pulse_map_of_the_force_that_acted(scene):
+    """The plant behind the contract is the rig's model: each Pi2 sample is the exact
+    n-DOF pulse map (ModelController.predict: ndof_map.pulse_step) of the one before with
+    the correction of the force rig/applied says acted (F w / (m_a omega_n l))."""
+    from grazing_control.ros.controller_values import model_controller_from_values
+    from grazing_control.ros.rig_boundary import controller_values, correction_of
+
+    rig, res, m = scene
+    values = controller_values(rig, math.nan)
+    ndof = model_controller_from_values(values, str(RIG), values["gains"], rig.model())
+    start = _seconds(m["/rig/phase"][0][1].header.stamp)
+    acted = {round((msg.wrench.torque.y - start) * rig.omega_n * 1e6):
+             correction_of(rig, msg.wrench.force.x, rig.actuator.pulse_width)
+             for _, msg in m["/rig/applied"]}
+    pi2 = [(round(_seconds(msg.header.stamp) * 1e6), np.array(msg.position),
+            np.array(msg.velocity)) for _, msg in m["/oscillator/pi2"]]
+    assert len(pi2) == PERIODS
+    worst = 0.0
+    for (key, x, v), (_, x1, v1) in zip(pi2, pi2[1:]):
+        xn, vn = ndof.predict(x, v, acted[key], values["actuation_delay"],
+                              (values["pulse_width"], values["force_limit"]))
+        worst = max(worst, float(np.max(np.abs(np.concatenate([xn - x1, vn - v1])))))
+    assert worst < 1e-11, worst

@@ -487,7 +487,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
     if rig is not None:
         if model is not None:
             raise ValueError(f"rig={os.fspath(rig)!r} is invalid with model: a rig file "
-                             "describes a 1-DOF rig; give one of them")
+                             "gives the model (Rig.model() for n masses); give one of them")
         sim_params = sim_values_for_rig(CONFIG_DIR / "study.yaml" if sim_params is None
                                         else sim_params)
         controller_params = {} if controller_params is None else controller_params
