@@ -16,20 +16,14 @@ import numpy as np
 import pytest
 import yaml
 
-from grazing_control.plant.rig import load_rig
-from grazing_control.ros import launcher
-
-from test_rig_scene import _messages, _seconds
+from test_rig_scene import _seconds, run_rig_scene
 
 pytestmark = pytest.mark.timeout(240)
 
 RIG = Path(__file__).resolve().parents[1] / "config" / "rigs" / "two_mass_beam.yaml"
-#: An eighth of physical speed: the controller's n-DOF estimate (500 samples a period
-#: through the exact n-DOF flow) answers in time on a loaded machine.
-SLOW = 8.0
 PERIODS, ON = 10, 1
-#: The held periods: one impact each (the control acts from section 1, the orbit is held
-#: from the fourth period on; measured 3 with 16 periods).
+#: The held periods, one impact each (the control acts from section 1 at 1/8 of physical
+#: speed, test_rig_scene.SLOW; over 16 periods one impact in each from the fifth on).
 HELD = 5
 
 
@@ -40,16 +34,10 @@ def scene(tmp_path_factory):
     doc["sensor"]["noise"] = "0.2 um"
     path = out / "two_mass_quiet.yaml"
     path.write_text(yaml.safe_dump(doc))
-    rig = load_rig(path)
-    res = launcher.run(None, None, str(out / "bag"), PERIODS, rig=str(path), enable_after=ON,
-                       timeout=180, log_dir=str(out / "logs"),
-                       sim_overrides={"time_scale": rig.omega_n / SLOW,
-                                      "feasibility": "warn"})
-    assert res.ok, res
     topics = ("/rig/sensor", "/rig/phase", "/rig/force_pulse", "/rig/applied",
               "/oscillator/state", "/oscillator/impact", "/oscillator/pi2",
               "/controller/velocity_correction")
-    return rig, res, _messages(out / "bag", topics)
+    return run_rig_scene(out, path, PERIODS, ON, topics)
 
 
 @pytest.mark.realtime      # one scene, its answers in time: with the other worker idle

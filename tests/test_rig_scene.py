@@ -54,20 +54,27 @@ def _summary(log, pattern):
     return {k: float(v) for k, v in re.findall(pattern, line)}
 
 
-@pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    rig = load_rig(RIG)
-    out = tmp_path_factory.mktemp("rig_scene")
-    res = launcher.run(None, None, str(out / "bag"), PERIODS, rig=str(RIG), enable_after=ON,
-                       timeout=180, log_dir=str(out / "logs"),
+def run_rig_scene(out, path, periods: int, enable_after: int, topics,
+                  controller_overrides=None):
+    """(rig, the launcher's result, the bag's messages of ``topics``) of a rig scene of
+    the rig file ``path`` at 1/SLOW of physical speed, recorded in ``out``."""
+    rig = load_rig(path)
+    res = launcher.run(None, None, str(out / "bag"), periods, rig=str(path),
+                       enable_after=enable_after, timeout=180, log_dir=str(out / "logs"),
                        sim_overrides={"time_scale": rig.omega_n / SLOW,
                                       "feasibility": "warn"},
-                       controller_overrides={"rig_c2": C2})
+                       controller_overrides=controller_overrides)
     assert res.ok, res
+    return rig, res, _messages(out / "bag", topics)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
     topics = ("/rig/sensor", "/rig/phase", "/rig/clock", "/rig/force_pulse", "/rig/applied",
               "/grazing/rig", "/oscillator/state", "/oscillator/pi2",
               "/controller/velocity_correction")
-    return rig, res, _messages(out / "bag", topics)
+    return run_rig_scene(tmp_path_factory.mktemp("rig_scene"), RIG, PERIODS, ON, topics,
+                         {"rig_c2": C2})
 
 
 @pytest.mark.realtime      # one scene, its answers in time: with the other worker idle

@@ -68,7 +68,9 @@ def add_run_arguments(parser) -> None:
                              "physical speed, both nodes speaking the driver contract "
                              "(docs/rig_scene.md); realtime, the gains designed for the "
                              "rig's budget (--controller-param rig_c2:=C2, default the c2 "
-                             "of least noise gain)")
+                             "of least noise gain; a rig of n masses: its n-DOF model and "
+                             "pulse design, --controller-param rig_mu:=MU, default "
+                             "grazing design --rig's mu)")
     parser.add_argument("--sim-params", dest="sim_params", default=None,
                         help="sim_node parameter file (default: config/study.yaml)")
     parser.add_argument("--controller-params", dest="controller_params", default=None,
