@@ -335,3 +335,33 @@ def test_the_controller_of_a_rig_of_two_masses_is_grazing_design_rigs(cli):
     assert given["gains"] == pytest.approx(mine["gains"], rel=1e-15, abs=0.0)
     with pytest.raises(ParameterError, match="^rig_c2=0.03 is invalid for a rig of 2 masses"):
         controller_values(rig, 0.03)
+
+
+def test_the_rig_controller_reads_the_first_measured_mass_and_never_fails_on_a_message():
+    """RigSide's rig/sensor of a rig of two masses (ros/rig_control.py): the position of
+    the mass the estimator reads (sensor_coordinate = sensor.masses[0] = 1, the first
+    entry of the message); a message with other names, another count, or bytes that are
+    no JointState is counted as malformed and dropped (None), never raised."""
+    from types import SimpleNamespace
+
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from grazing_control.ros.rig_control import RigSide
+
+    bad = []
+    node = SimpleNamespace(malformed=bad.append, stream=SimpleNamespace(coordinate=1))
+    side = RigSide(node, load_rig(TWO_MASS), 200)
+
+    def data(names, positions, velocities=()):
+        msg = JointState(name=names, position=positions, velocity=list(velocities))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1000, 5
+        return serialize_message(msg)
+
+    assert side._masses_sample(data(["mass1", "mass0"], [2.5e-3, 2.1e-3])) == (
+        1000, 5, 2.5e-3, pytest.approx(math.nan, nan_ok=True), ())
+    assert side._masses_sample(data(["mass1", "mass0"], [2.5e-3, 2.1e-3], [0.1, 0.2]))[3] == 0.1
+    for wrong in (data(["mass0", "mass1"], [2.1e-3, 2.5e-3]), data(["mass"], [2.5e-3]),
+                  data(["mass1", "mass0"], [2.5e-3]), b"\x00\x01\x00\x00garbage"):
+        assert side._masses_sample(wrong) is None
+    assert len(bad) == 4 and bad[0].startswith("rig/sensor at (1000, 5): rig/sensor names")
