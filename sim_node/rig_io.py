@@ -139,16 +139,13 @@ class SimulatedRig:
         """:meth:`flush` of a rig of n masses: one JointState per sample with the measured
         masses (rig_boundary.joint_names: mass<i> in sensor.masses order), positions in
         metres (rig_boundary.sensor_positions), velocities in m/s where the sensor
-        measures them (rclpy's message: the packed layout is one joint's)."""
+        measures them (packed: cdr.rig_sample_masses)."""
         names, vs = joint_names(self.rig), self.rig.scales.velocity
         for t, x, v in self.latency.due(now):
-            msg = JointState()
-            msg.header.stamp = stamp_from_seconds(self.clock.rig_time(t))
-            msg.name = names
-            msg.position = sensor_positions(self.rig, x)
-            if self.velocity:
-                msg.velocity = [float(v[i]) * vs for i in self.rig.measured]
-            self.pub_sensor.publish(msg)
+            sec, ns = cdr.stamp_parts(self.clock.rig_time(t))
+            self.pub_sensor.publish(cdr.rig_sample_masses(
+                sec, ns, names, sensor_positions(self.rig, x),
+                [float(v[i]) * vs for i in self.rig.measured] if self.velocity else None))
 
     def wake_in(self, now: float) -> float:
         """Wall seconds until the next held sample is due (inf: none), no sooner than the

@@ -28,7 +28,8 @@ import struct
 
 __all__ = ["NAME", "joint_state", "vector3_stamped", "twist_stamped", "wrench_stamped", "clock",
            "float64",
-           "estimate_state", "read_sample", "read_state", "read_twist_stamped", "stamp_parts"]
+           "estimate_state", "read_sample", "read_state", "read_twist_stamped", "stamp_parts",
+           "rig_sample_masses", "read_joints"]
 
 _HEADER = b"\x00\x01\x00\x00"
 _NS = 1_000_000_000
@@ -100,6 +101,80 @@ def rig_sample(sec: int, nanosec: int, x: float, v: float | None) -> bytes:
     if v is None:
         return _RIG_X.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 0, 0)
     return _RIG_XV.pack(_HEADER, sec, nanosec, 1, _FRAME, 1, 5, _MASS, 1, x, 1, v, 0)
+
+
+def _align(body: bytearray, n: int) -> None:
+    """Pad ``body`` (the bytes after the encapsulation header) to a multiple of n."""
+    body.extend(bytes(-len(body) % n))
+
+
+def rig_sample_masses(sec: int, nanosec: int, names, positions, velocities=None) -> bytes:
+    """sensor_msgs/JointState of ``rig/sensor`` of a rig of n masses (docs/driver_contract.md,
+    "A rig of n masses"): empty frame_id, joints ``names`` (``mass<i>``), positions (m),
+    velocities (m/s) or empty (None: a position-only sensor), effort empty; read back by
+    :func:`read_joints`."""
+    body = bytearray(struct.pack("<iII", sec, nanosec, 1))
+    body.extend(b"\x00")
+    _align(body, 4)
+    body.extend(struct.pack("<I", len(names)))
+    for name in names:
+        _align(body, 4)
+        raw = name.encode() + b"\x00"
+        body.extend(struct.pack("<I", len(raw)))
+        body.extend(raw)
+    for values in (positions, () if velocities is None else velocities, ()):
+        _align(body, 4)
+        body.extend(struct.pack("<I", len(values)))
+        if values:
+            _align(body, 8)
+            body.extend(struct.pack(f"<{len(values)}d", *values))
+    return _HEADER + bytes(body)
+
+
+def read_joints(data: bytes):
+    """(sec, nanosec, names, positions, velocities) of a JointState with an empty frame_id
+    and no effort (:func:`rig_sample_masses`' layout; names a tuple of str, positions and
+    velocities tuples of floats, velocities empty where none); None for anything else
+    (the caller then uses rclpy's deserializer). Never raises."""
+    n = len(data)
+    if n < 24 or data[:4] != _HEADER:
+        return None
+    try:
+        sec, nanosec, flen = struct.unpack_from("<iII", data, 4)
+        if flen != 1 or data[16] != 0:
+            return None
+        pos = 20                                   # body offset 16: the name count
+        (count,) = struct.unpack_from("<I", data, pos)
+        pos += 4
+        if count > (n - pos) // 5:
+            return None
+        names = []
+        for _ in range(count):
+            pos = 4 + ((pos - 4 + 3) & ~3)
+            (length,) = struct.unpack_from("<I", data, pos)
+            pos += 4
+            if length < 1 or pos + length > n or data[pos + length - 1] != 0:
+                return None
+            names.append(data[pos:pos + length - 1].decode())
+            pos += length
+        values = []
+        for _ in range(3):                         # position, velocity, effort
+            pos = 4 + ((pos - 4 + 3) & ~3)
+            (k,) = struct.unpack_from("<I", data, pos)
+            pos += 4
+            if k:
+                pos = 4 + ((pos - 4 + 7) & ~7)
+                if k > (n - pos) // 8:
+                    return None
+                values.append(struct.unpack_from(f"<{k}d", data, pos))
+                pos += 8 * k
+            else:
+                values.append(())
+    except (struct.error, UnicodeDecodeError):
+        return None
+    if not pos <= n <= pos + 8 or values[2]:
+        return None
+    return sec, nanosec, tuple(names), values[0], values[1]
 
 
 def vector3_stamped(sec: int, nanosec: int, x: float, y: float, z: float) -> bytes:

@@ -132,19 +132,23 @@ class RigSide:
         """(sec, nanosec, x, v, ()) of a rig/sensor message of a rig of n masses: the
         position (m) and velocity (m/s, NaN: none) of the mass the stream estimator reads
         (its ``sensor_coordinate``, a measured mass); None (counted as malformed) for a
-        message whose names are not the rig's measured masses (rig_boundary.model_positions)."""
-        msg = deserialize(data, JointState, self.node.malformed)
-        if msg is None:
-            return None
-        key = stamp_key(msg.header.stamp)
+        message whose names are not the rig's measured masses (rig_boundary.model_positions).
+        Read directly (:func:`cdr.read_joints`), else through rclpy."""
+        fields = cdr.read_joints(data)
+        if fields is None:
+            msg = deserialize(data, JointState, self.node.malformed)
+            if msg is None:
+                return None
+            fields = stamp_key(msg.header.stamp) + (msg.name, msg.position, msg.velocity)
+        sec, ns, names, positions, velocities = fields
         try:
-            model_positions(self.rig, msg.name, msg.position)
+            model_positions(self.rig, names, positions)
         except ValueError as exc:
-            self.node.malformed(f"rig/sensor at {key}: {exc}")
+            self.node.malformed(f"rig/sensor at {(sec, ns)}: {exc}")
             return None
         j = self.rig.measured.index(self.node.stream.coordinate)
-        v = msg.velocity[j] if len(msg.velocity) == len(msg.name) else math.nan
-        return key + (msg.position[j], v, ())
+        v = velocities[j] if len(velocities) == len(names) else math.nan
+        return sec, ns, positions[j], v, ()
 
     def _sample(self, s: float, x: float, v: float) -> None:
         """A sample to the estimator in the model's units, held while it would make a
