@@ -335,6 +335,8 @@ def test_the_controller_of_a_rig_of_two_masses_is_grazing_design_rigs(cli):
     assert given["gains"] == pytest.approx(mine["gains"], rel=1e-15, abs=0.0)
     with pytest.raises(ParameterError, match="^rig_c2=0.03 is invalid for a rig of 2 masses"):
         controller_values(rig, 0.03)
+    with pytest.raises(ParameterError, match="^rig_mu=0.1 is invalid for a rig of one mass"):
+        controller_values(rig_from_dict(LAB), math.nan, 0.1)
 
 
 def test_the_rig_controller_reads_the_first_measured_mass_and_never_fails_on_a_message():

@@ -141,6 +141,9 @@ def controller_values(rig: Rig, c2: float, mu: float = math.nan) -> dict:
             raise ParameterError(f"rig_c2={c2!r} is invalid for a rig of {rig.n} masses: "
                                  "valid is NaN (its n-DOF design's free parameter is rig_mu)")
         return masses_controller_values(rig, mu)
+    if not math.isnan(mu):
+        raise ParameterError(f"rig_mu={mu!r} is invalid for a rig of one mass: valid is NaN "
+                             "(its design's free parameter is rig_c2)")
     p, d = rig.params(), rig.dimensionless()
     delay = d["actuation_delay"]
     if math.isnan(c2):
