@@ -131,6 +131,29 @@ def rig_sample_masses(sec: int, nanosec: int, names, positions, velocities=None)
     return _HEADER + bytes(body)
 
 
+def _double_sequences(data: bytes, pos: int):
+    """(the three float64 sequences position, velocity, effort from ``pos`` on, the
+    offset after them), or (None, pos) where the bytes end first. Each count is aligned
+    to 4 and its doubles to 8, counted from the body start (after the header)."""
+    n = len(data)
+    values = []
+    for _ in range(3):
+        pos = 4 + ((pos - 4 + 3) & ~3)
+        if pos + 4 > n:
+            return None, pos
+        (count,) = struct.unpack_from("<I", data, pos)
+        pos += 4
+        if count:
+            pos = 4 + ((pos - 4 + 7) & ~7)
+            if count > (n - pos) // 8:
+                return None, pos
+            values.append(struct.unpack_from(f"<{count}d", data, pos))
+            pos += 8 * count
+        else:
+            values.append(())
+    return values, pos
+
+
 def read_joints(data: bytes):
     """(sec, nanosec, names, positions, velocities) of a JointState with an empty frame_id
     and no effort (:func:`rig_sample_masses`' layout; names a tuple of str, positions and
@@ -157,22 +180,10 @@ def read_joints(data: bytes):
                 return None
             names.append(data[pos:pos + length - 1].decode())
             pos += length
-        values = []
-        for _ in range(3):                         # position, velocity, effort
-            pos = 4 + ((pos - 4 + 3) & ~3)
-            (k,) = struct.unpack_from("<I", data, pos)
-            pos += 4
-            if k:
-                pos = 4 + ((pos - 4 + 7) & ~7)
-                if k > (n - pos) // 8:
-                    return None
-                values.append(struct.unpack_from(f"<{k}d", data, pos))
-                pos += 8 * k
-            else:
-                values.append(())
+        values, pos = _double_sequences(data, pos)
     except (struct.error, UnicodeDecodeError):
         return None
-    if not pos <= n <= pos + 8 or values[2]:
+    if values is None or not pos <= n <= pos + 8 or values[2]:
         return None
     return sec, nanosec, tuple(names), values[0], values[1]
 
@@ -244,21 +255,9 @@ def read_state(data: bytes):
     sec, nanosec, flen = struct.unpack_from("<iII", data, 4)
     if flen != 1 or data[16] != 0 or data[20:33] != _ONE_MASS:
         return None
-    pos = 36                                   # body offset 32: the position count
-    values = []
-    for _ in range(3):                          # position, velocity, effort
-        if pos + 4 > n:
-            return None
-        (count,) = struct.unpack_from("<I", data, pos)
-        pos += 4
-        if count:
-            pos = 4 + ((pos - 4 + 7) & ~7)     # doubles align to 8 from the body start
-            if count > (n - pos) // 8:
-                return None
-            values.append(struct.unpack_from(f"<{count}d", data, pos))
-            pos += 8 * count
-        else:
-            values.append(())
+    values, pos = _double_sequences(data, 36)  # body offset 32: the position count
+    if values is None:
+        return None
     # rclpy's serializer may leave up to 8 bytes of padding after the last field
     if not pos <= n <= pos + 8 or len(values[0]) != 1 or len(values[1]) > 1:
         return None
