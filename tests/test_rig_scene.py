@@ -55,13 +55,13 @@ def _summary(log, pattern):
 
 
 def run_rig_scene(out, path, periods: int, enable_after: int, topics,
-                  controller_overrides=None):
+                  controller_overrides=None, slow: float = SLOW):
     """(rig, the launcher's result, the bag's messages of ``topics``) of a rig scene of
-    the rig file ``path`` at 1/SLOW of physical speed, recorded in ``out``."""
+    the rig file ``path`` at 1/``slow`` of physical speed, recorded in ``out``."""
     rig = load_rig(path)
     res = launcher.run(None, None, str(out / "bag"), periods, rig=str(path),
                        enable_after=enable_after, timeout=180, log_dir=str(out / "logs"),
-                       sim_overrides={"time_scale": rig.omega_n / SLOW,
+                       sim_overrides={"time_scale": rig.omega_n / slow,
                                       "feasibility": "warn"},
                        controller_overrides=controller_overrides)
     assert res.ok, res

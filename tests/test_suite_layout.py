@@ -12,7 +12,7 @@ HERE = Path(__file__).parent
 
 #: What a module calls when it starts node processes or a scene (launcher, console
 #: scripts, `grazing run`, ros2 launch, colcon).
-STARTS_NODES = re.compile(r"launcher\.run\(|start_node\(|run_scene\(|node_command\(|"
+STARTS_NODES = re.compile(r"launcher\.run\(|start_node\(|run_(rig_)?scene\(|node_command\(|"
                           r"script\(\"(sim|controller|recorder|live)_node\"\)|"
                           r"\[\"run\"|colcon")
 
@@ -38,6 +38,15 @@ def test_every_module_that_starts_nodes_is_in_the_scene_group():
               if p.stem != "test_suite_layout" and STARTS_NODES.search(p.read_text())}
     assert starts, "the pattern finds no module: it no longer matches the tests"
     assert starts <= conftest.SCENE_MODULES, starts - conftest.SCENE_MODULES
+
+
+def test_the_rig_scenes_share_one_worker():
+    """A rig scene runs its simulator and controller under SCHED_FIFO: every module that
+    launches one (``rig=``) is in conftest.FIFO_SCENE_MODULES, one group, one worker."""
+    rig = {p.stem for p in HERE.glob("test_*.py")
+           if re.search(r"run_rig_scene\(|\brig=str\(", p.read_text())}
+    assert rig, "the pattern finds no module: it no longer matches the tests"
+    assert rig <= conftest.FIFO_SCENE_MODULES <= conftest.SCENE_MODULES, rig
 
 
 def test_a_grouped_test_carries_its_group_in_its_node_id(request):
