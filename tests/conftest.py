@@ -47,12 +47,19 @@ from grazing_control.oscillator import kernel
 def compiled_kernel():
     """Compile the numba kernel and the stream estimator's compiled model filter (or load
     their on-disk cache) once, before any test: in a fresh checkout the first compilation
-    takes 5-20 s, which a node test's startup timeouts must not absorb."""
+    takes 5-20 s, which a node test's startup timeouts must not absorb. One worker at a
+    time (a file lock): the first compiles and writes numba's cache, the others then load
+    it (on a fresh clone the three workers compiled at once, 12.7-13.4 s each on the two
+    cores, 2026-11-28)."""
     if kernel.use_kernel():
-        kernel.warm_up()
-        from grazing_control.dynamics.estimation.stream import warm_up
+        import fcntl
 
-        warm_up()       # the compiled model filter (compiled_flow), 1-2 s the first time
+        with open(Path(tempfile.gettempdir()) / "grazing-kernel-compile.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            kernel.warm_up()
+            from grazing_control.dynamics.estimation.stream import warm_up
+
+            warm_up()   # the compiled model filter (compiled_flow), 1-2 s the first time
 
 
 @pytest.fixture(autouse=True)
@@ -140,7 +147,11 @@ SCENE_MODULES = frozenset({
 #: once on the two cores (a FIFO process waits only for FIFO ones: with a helper's rig
 #: scene beside test_rig_stop's, its simulator's sample 3 went out 4.2 s late, the
 #: watchdog ended the scene, 2026-11-28).
-FIFO_SCENE_MODULES = frozenset({"test_rig_masses_scene", "test_rig_scene", "test_rig_stop"})
+#: test_scheduling and test_sim_node start nodes under SCHED_FIFO with locked memory
+#: (their scheduling options' tests): a rig scene beside them on a fresh clone had its
+#: simulator's sample 7 go out 3.1 s late (rerun once, 2026-11-28).
+FIFO_SCENE_MODULES = frozenset({"test_rig_masses_scene", "test_rig_scene", "test_rig_stop",
+                                "test_scheduling", "test_sim_node"})
 
 
 def pytest_configure(config):

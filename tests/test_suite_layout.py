@@ -41,10 +41,11 @@ def test_every_module_that_starts_nodes_is_in_the_scene_group():
 
 
 def test_the_rig_scenes_share_one_worker():
-    """A rig scene runs its simulator and controller under SCHED_FIFO: every module that
-    launches one (``rig=``) is in conftest.FIFO_SCENE_MODULES, one group, one worker."""
-    rig = {p.stem for p in HERE.glob("test_*.py")
-           if re.search(r"run_rig_scene\(|\brig=str\(", p.read_text())}
+    """A rig scene runs its simulator and controller under SCHED_FIFO, and so do the
+    scheduling options' tests: every module that launches one (``rig=``) or sets a
+    thread_priority is in conftest.FIFO_SCENE_MODULES, one group, one worker."""
+    rig = {p.stem for p in HERE.glob("test_*.py") if p.stem != "test_suite_layout"
+           and re.search(r"run_rig_scene\(|\brig=str\(|thread_priority", p.read_text())}
     assert rig, "the pattern finds no module: it no longer matches the tests"
     assert rig <= conftest.FIFO_SCENE_MODULES <= conftest.SCENE_MODULES, rig
 
