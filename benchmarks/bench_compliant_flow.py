@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import math
 import subprocess
 import sys
 import time
@@ -30,7 +29,6 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from grazing_control.oscillator import contact  # noqa: E402
 from grazing_control.oscillator.contact import KelvinVoigt  # noqa: E402
-from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.plant.engine import Engine  # noqa: E402
 from grazing_control.plant.settings import settings_from_values  # noqa: E402
 from test_compliant_flow_bits import (_canonical, flow_cases, period_cases,  # noqa: E402
