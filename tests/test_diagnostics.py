@@ -216,20 +216,13 @@ def test_a_realtime_scene_reports_its_state_and_the_latency_threshold(tmp_path, 
     domain = new_domain()
     probe = Probe(domain)
     try:
-        # 80 periods at x250 (3 s) with a status every 0.25 s from each node (200 periods
-        # at 1 Hz took 10 s of the suite's realtime group)
-        res = launcher.run(STUDY, CONTROLLER, None, 80, domain_id=domain,
+        res = launcher.run(STUDY, CONTROLLER, None, 200, domain_id=domain,
                            sim_overrides={"mode": "realtime", "time_scale": 250.0,
                                           "diag_latency_warn": latency_warn,
-                                          "diag_latency_error": 0.0,
-                                          "diagnostics_period": 0.25},
-                           controller_overrides={"diagnostics_period": 0.25},
+                                          "diag_latency_error": 0.0},
                            log_dir=tmp_path / "logs")
         assert res.ok, res
-        end = time.monotonic() + 1.5           # statuses still on their way to the probe
-        while time.monotonic() < end and min(len(probe.statuses("sim_node: scene")), len(
-                probe.statuses("controller_node: controller"))) < 3:
-            time.sleep(0.05)
+        time.sleep(1.5)
         sim = probe.statuses("sim_node: scene")
         ctl = probe.statuses("controller_node: controller")
         assert len(sim) >= 3 and len(ctl) >= 3, (len(sim), len(ctl))
