@@ -40,6 +40,27 @@ def test_a_hostile_argument_is_one_line_naming_its_range(argv, message, tmp_path
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("argv", [
+    ["design", "--c2", "-1", "--out", "taken"],
+    ["rig", "config/rigs/two_mass_beam.yaml", "--model-out", "taken"]], ids=["design", "rig"])
+def test_a_file_output_onto_an_existing_folder_is_one_line_and_leaves_nothing(argv, tmp_path):
+    """A gain or model file asked for where a folder is: the error names the path, not
+    the temporary file the rename failed from (found by hand, 2026-11-28), and no
+    temporary file is left beside it."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "taken").mkdir()
+    argv = [str(root / a) if a.startswith("config/") else a for a in argv]
+    out = subprocess.run([sys.executable, "-m", "grazing_control.cli", *argv], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, (out.stdout, out.stderr)
+    assert "'taken' is invalid: it is a folder; expected a file path" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and ".tmp" not in out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+    assert not any((tmp_path / "taken").iterdir())
+
+
 def test_a_sweep_into_a_folder_writes_inside_it(tmp_path):
     (tmp_path / "here").mkdir()
     out = subprocess.run([sys.executable, "-m", "grazing_control.cli", "sweep", "--grid",
