@@ -197,8 +197,9 @@ def write_yaml_atomic(path, doc: dict, comments=()) -> None:
     """Write ``doc`` as YAML to ``path`` with ``comments`` as ``#`` lines on top,
     atomically (temporary file, then rename), with the usual 0666 & ~umask mode.
 
-    Raises ValueError for an empty path or an existing folder (the rename would fail
-    with the temporary file's name in its message), OSError as the file system does.
+    Raises ValueError for an empty path, IsADirectoryError (an OSError, as the rename's
+    own would be) naming ``path`` for an existing folder (the rename's names the
+    temporary file), OSError as the file system does.
     """
     import yaml
 
@@ -206,7 +207,8 @@ def write_yaml_atomic(path, doc: dict, comments=()) -> None:
     if not path.strip():
         raise ValueError(f"path={path!r} is invalid: expected a non-empty file path")
     if os.path.isdir(path):
-        raise ValueError(f"path={path!r} is invalid: it is a folder; expected a file path")
+        raise IsADirectoryError(f"path={path!r} is invalid: it is a folder; expected a file "
+                                "path")
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".yaml.tmp")
     try:
