@@ -14,7 +14,7 @@ from rclpy.executors import SingleThreadedExecutor
 from grazing_control.ros import launcher
 from grazing_control.ros.diagnostics import (ERROR, OK, WARN, DiagnosticStatusWrapper,
                                              SceneWindow, Updater, level_of)
-from test_closed_loop import CONTROLLER, STUDY, new_domain
+from test_closed_loop import CONTROLLER, NO_WATCHDOG, STUDY, new_domain
 
 
 def test_levels_and_the_merged_summary():
@@ -116,7 +116,7 @@ def test_the_period_is_wall_time_under_use_sim_time():
 def test_the_simulators_status_carries_predicted():
     from types import SimpleNamespace
 
-    loop = SimpleNamespace(engine=SimpleNamespace(k=10, t=94.2), finished=False,
+    loop = SimpleNamespace(engine=SimpleNamespace(k=10, t=94.2), progress=94.2, finished=False,
                            stats={"applied": 7, "late": 1, "lost": 0, "predicted": 2},
                            latencies=[1e-3] * 7, lags=[0.0] * 10)
     counts = {"missed": 3, "timeouts": 0, "ignored": 0, "malformed": 0}
@@ -125,6 +125,46 @@ def test_the_simulators_status_carries_predicted():
     stat = SceneWindow().status(DiagnosticStatusWrapper("s", "h"), loop, counts, 1.0, th,
                                 True, 1000.0)
     assert ("predicted", "2") in [(kv.key, kv.value) for kv in stat.to_msg().values]
+
+
+def test_a_realtime_loop_on_pace_reads_its_pace_in_every_window():
+    """A window's pace is the loop's progress over the window's wall time, not the last
+    sample's time: a realtime loop that keeps pace exactly (a test clock moved to each
+    wake-up) at time_scale 250, a period 37.7 ms of wall time, read in windows of 0.26 s
+    (a timer's period is never a whole number of periods): each window reads 250 within
+    a wake-up's CLOCK_TICK, OK with pace_warn 0.9. The last sample's time read 6 periods
+    in most windows, a pace of 217 and a WARN, 7 in some, 253 (a 0.25 s window of a
+    scene at load read 151 on a fresh clone, 2026-11-28; docs/benchmarks.md)."""
+    from test_plant_loops import Clock, Recorder, settings
+
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.realtime import CLOCK_TICK, Realtime
+
+    scale, window = 250.0, 0.26
+    clock = Clock()
+    loop = Realtime(Engine(settings(mode="realtime", time_scale=scale, max_periods=400,
+                                    **NO_WATCHDOG)), Recorder(), clock)    # no answers
+    loop.start()
+    diag = SceneWindow()
+    th = {"misses_warn": 0, "misses_error": 0, "latency_warn": 0.0, "latency_error": 0.0,
+          "pace_warn": 0.9}
+    counts = {"missed": 0, "timeouts": 0, "ignored": 0, "malformed": 0}
+    paces, levels = [], set()
+    next_status = clock.now
+    while len(paces) < 20 and not loop.finished:
+        if clock.now >= next_status:
+            stat = diag.status(DiagnosticStatusWrapper("s", "h"), loop, counts, clock.now, th,
+                               True, scale)
+            values = {kv.key: kv.value for kv in stat.to_msg().values}
+            if "pace (sim s per wall s)" in values:
+                paces.append(float(values["pace (sim s per wall s)"]))
+                levels.add(stat.level)
+            next_status += window
+        clock.now = min(clock.now + loop.wake_in(loop.now()), next_status)
+        loop.tick()
+    assert len(paces) == 20, paces
+    assert max(abs(pace / scale - 1.0) for pace in paces) <= CLOCK_TICK / window, paces
+    assert levels == {OK}
 
 
 def test_the_controller_warns_of_no_answer_only_while_simulation_time_runs():

@@ -82,6 +82,13 @@ class Loop:
         """The engine's current settings (a runtime parameter change replaces them)."""
         return self.engine.settings
 
+    @property
+    def progress(self) -> float:
+        """The simulation time up to which the run has been published: the last sample's
+        (lockstep: the next waits for its answer). The realtime loop refines it to its
+        last wake-up (:attr:`Realtime.progress`)."""
+        return self.engine.t
+
     def remember(self, k: int, predicted: float) -> None:
         """Sample k's answer was applied: keep its prediction for sample k + 1 (NaN:
         none; issue 16 §3)."""

@@ -124,8 +124,8 @@ class SceneWindow:
     """The simulator's state over the last diagnostics period, from the loop's counters.
 
     ``status(stat, loop, counts, wall, thresholds)`` fills ``stat``: periods and simulated
-    time, the pace (simulated seconds per wall second over the window, against
-    ``time_scale`` in realtime), corrections applied / late / lost / predicted (a
+    time, the pace (simulated seconds per wall second over the window, from the loop's
+    ``progress``, against ``time_scale`` in realtime), corrections applied / late / lost / predicted (a
     prediction acted for a missing answer, as the node's summary), deadline misses and
     answer timeouts in the window, the latency and sample-lag p50/p99 of the window.
     Levels (thresholds, 0 = off): misses + timeouts + lost in the window >=
@@ -145,7 +145,9 @@ class SceneWindow:
             return stat
         eng, stats = loop.engine, loop.stats
         bad = counts["missed"] + counts["timeouts"] + stats["lost"]
-        now = (wall, eng.k, eng.t, bad, len(loop.latencies), len(loop.lags))
+        # the pace from the loop's progress (realtime: its last wake-up), not from the last
+        # sample's time, which moves a forcing period at a time (plant.loop.Loop.progress)
+        now = (wall, eng.k, loop.progress, bad, len(loop.latencies), len(loop.lags))
         # the first status of a running scene sets the window's start: the pace of the
         # time before it (start-up, waiting for the controller) would read as a crawl
         first = self.last is None
