@@ -4,6 +4,7 @@ realtime scene read by a subscriber in another process's domain."""
 
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import rclpy
@@ -210,7 +211,7 @@ class Probe:
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=domain)
         self.node = rclpy.create_node("diag_probe", context=self.ctx)
-        self.msgs, self.lock = [], threading.Lock()
+        self.msgs, self.stamps, self.lock = [], [], threading.Lock()
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._keep, 100)
         if peer:
             from geometry_msgs.msg import TwistStamped, Vector3Stamped
@@ -230,8 +231,10 @@ class Probe:
         self.thread.start()
 
     def _keep(self, m):
+        stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
         with self.lock:
             self.msgs.extend(m.status)
+            self.stamps.extend([stamp] * len(m.status))
 
     def _spin(self):
         while rclpy.ok(context=self.ctx):
@@ -244,38 +247,89 @@ class Probe:
         with self.lock:
             return [s for s in self.msgs if s.name == name]
 
+    def stamped(self, name):
+        """(header stamp, status) of each status of ``name``, in arrival order."""
+        with self.lock:
+            return [(t, s) for t, s in zip(self.stamps, self.msgs) if s.name == name]
+
     def close(self):
         rclpy.shutdown(context=self.ctx)
         self.thread.join(5)
 
 
+def _raise_the_latency_warning_once_running(probe, done):
+    """Once two statuses of the running scene carried a latency (OK: the warning off),
+    set the simulator's diag_latency_warn to 1e-9 (every latency reaches it: WARN from
+    the next status on). Returns (wall time the request went, wall time its answer came,
+    whether it was taken), or None if the scene ended first."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    while not done.is_set():
+        running = [s for s in probe.statuses("sim_node: scene")
+                   if any(kv.key == "latency p99 ms" for kv in s.values)]
+        if len(running) >= 2:
+            break
+        time.sleep(0.05)
+    else:
+        return None
+    client = AsyncParameterClient(probe.node, "sim_node")
+    sent = time.time()
+    fut = client.set_parameters([Parameter("diag_latency_warn", value=1e-9)])
+    while not fut.done() and not done.is_set():
+        time.sleep(0.01)
+    ok = fut.done() and fut.result().results[0].successful
+    return sent, time.time(), ok
+
+
 @pytest.mark.realtime
-@pytest.mark.parametrize("latency_warn, expect", [(0.0, OK), (1e-9, WARN)])
-def test_a_realtime_scene_reports_its_state_and_the_latency_threshold(tmp_path, latency_warn,
-                                                                        expect):
+def test_a_realtime_scene_reports_its_state_and_follows_a_live_latency_threshold(tmp_path):
+    """One realtime scene (200 periods at x250, 7.5 s of wall time, a status a second):
+    the simulator's and the controller's statuses, their keys; with diag_latency_warn 0
+    (off) every running status is OK; diag_latency_warn changed to 1e-9 while the scene
+    runs (the thresholds may change at any time, docs/nodes.md), every status after the
+    change was answered is a WARN naming the latency p99. (Two scenes before, one per
+    threshold: 10.7 s each in the realtime group.) Statuses are told apart by their
+    stamps (the node's ROS time, the wall clock): before the request went, after its
+    answer came; one computed in between may be either."""
     domain = new_domain()
     probe = Probe(domain)
+    done = threading.Event()
+    change = []
+    switcher = threading.Thread(
+        target=lambda: change.append(_raise_the_latency_warning_once_running(probe, done)),
+        daemon=True)
+    switcher.start()
     try:
         res = launcher.run(STUDY, CONTROLLER, None, 200, domain_id=domain,
                            sim_overrides={"mode": "realtime", "time_scale": 250.0,
-                                          "diag_latency_warn": latency_warn,
+                                          "diag_latency_warn": 0.0,
                                           "diag_latency_error": 0.0},
                            log_dir=tmp_path / "logs")
-        assert res.ok, res
-        time.sleep(1.5)
+        done.set()
+        switcher.join(10)
+        assert res.ok, (res, Path(res.logs["sim_node"]).read_text()[-1500:])
+        assert change and change[0] is not None and change[0][2], change
+        sent, answered_at = change[0][:2]
         sim = probe.statuses("sim_node: scene")
         ctl = probe.statuses("controller_node: controller")
         assert len(sim) >= 3 and len(ctl) >= 3, (len(sim), len(ctl))
-        running = [s for s in sim if s.message != "waiting to start" and
-                   any(kv.key == "latency p99 ms" for kv in s.values)]
-        assert running, [s.message for s in sim]
-        assert {s.level for s in running} == {expect}, [(s.level, s.message) for s in running]
-        if expect == WARN:
-            assert all("latency p99" in s.message for s in running)
-        keys = {kv.key for kv in running[-1].values}
-        assert {"periods", "deadline misses", "pace (sim s per wall s)", "time_scale",
-                "latency p50 ms", "sample lag p99 ms"} <= keys
+        running = [s for s in probe.stamped("sim_node: scene") if s[1].message
+                   != "waiting to start" and any(kv.key == "latency p99 ms" for kv in s[1].values)]
+        before = [s for t, s in running if t < sent]
+        after = [s for t, s in running if t > answered_at]
+        assert len(before) >= 2 and after, ([(t - sent, s.level) for t, s in running])
+        assert {s.level for s in before} == {OK}, [(s.level, s.message) for s in before]
+        assert {s.level for s in after} == {WARN}, [(s.level, s.message) for s in after]
+        assert all("latency p99" in s.message for s in after)
+        for s in (before[-1], after[-1]):
+            keys = {kv.key for kv in s.values}
+            assert {"periods", "deadline misses", "pace (sim s per wall s)", "time_scale",
+                    "latency p50 ms", "sample lag p99 ms"} <= keys
         answered = [int(dict((kv.key, kv.value) for kv in s.values)["answered"]) for s in ctl]
         assert answered == sorted(answered) and answered[-1] > 0
+        log = Path(res.logs["sim_node"]).read_text()
+        assert "parameter changed: diag_latency_warn 0.0 -> 1e-09" in log   # logged
     finally:
+        done.set()
         probe.close()
