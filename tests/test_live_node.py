@@ -374,7 +374,12 @@ def live_scene(tmp_path_factory):
     result = {}
     # realtime at 300x: the 200 periods last ~6 s of wall time, time for the clients to
     # connect and subscribe (a lockstep scene can end in ~1 s, before they have: the live
-    # view is a best-effort reader the scene never waits for; a rerun in the full suite)
+    # view is a best-effort reader the scene never waits for; a rerun in the full suite).
+    # Not in the realtime group (tests/conftest.py): no assertion needs a deadline met
+    # (the watchdog is off, every check compares what the clients got with the bag); the
+    # clients connected and both tests passed at load 7.6-8.4 (other sessions' tests and
+    # benchmarks), twice more with two busy-looping processes beside them as the suite's
+    # other workers (2026-11-28); 12 s less of the suite's serial tail.
     scene = threading.Thread(target=lambda: result.update(res=launcher.run(
         None, None, bag, 200, domain_id=new_domain(), live=port, timeout=240,
         sim_overrides={"mode": "realtime", "time_scale": 300.0, **NO_WATCHDOG},
@@ -404,7 +409,6 @@ def live_scene(tmp_path_factory):
                            js_skip=js_skip)
 
 
-@pytest.mark.realtime
 def test_grazing_run_live_streams_the_scene_that_the_bag_records(live_scene):
     """The client, connected while the scene starts, receives Π2 samples, corrections,
     impacts and state; every payload is one the recorder stored (the same bytes) and
@@ -439,7 +443,6 @@ def _plain(msg):
     return msg
 
 
-@pytest.mark.realtime
 def test_the_protocol_authors_client_subscribes_and_decodes_the_scene(live_scene):
     """@foxglove/ws-protocol's FoxgloveClient (over ws) reads the same scene: it
     negotiates the protocol, sees the four channels as cdr / ros2msg, subscribes, and
