@@ -6,7 +6,8 @@ are t_k = k T, the simulator's origin: docs/nodes.md, "The sensor stream"). The
 estimate of section k uses the samples with t_{k-1} < t <= t_k (a sample at t_k is
 before that section's correction) and is due as soon as no further sample before t_k can
 come: when t + h >= t_k for the newest sample (h the sample period; a sample at t_k
-itself is not waited for), or when a sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
+itself is not waited for; realtime, ``after_section``: with the sample at t_k), or when a
+sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
 over the estimators of :mod:`grazing_control.dynamics.estimation.section_state`; the controller node
 feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
 through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
@@ -74,12 +75,16 @@ class StreamEstimator:
     floor : float
         The model filter's floor (:func:`grazing_control.dynamics.estimation.section_state.model_update`).
     after_section : bool
-        Make a section due only with the first sample after t_k (a realtime simulator
-        takes an answer only once it has published its Pi2 sample), not with the last
-        sample before it (lockstep: the simulator waits for the answer before it goes on).
+        Make a section due with its last sample, the one at t_k included (realtime: the
+        simulator publishes it before its Pi2 sample; with the newest sample t at
+        t + h / 2 + lead > t_k, or a sample after t_k when that one is lost; the
+        estimate is the one the first sample after t_k made due before, bit for bit), not
+        with the last sample before t_k (lockstep: the simulator waits for the answer; a
+        sample at t_k itself is not waited for).
     lead : float
         Make a section due ``lead`` (time, >= 0) before its last sample: with the newest
-        sample t at t + h + lead >= t_k (a realtime rig, issue 28: the answer is computed
+        sample t at t + h + lead >= t_k, or with ``after_section`` t + h / 2 + lead >
+        t_k (a realtime rig, issue 28: the answer is computed
         while the last samples before t_k are on their way; this section's estimate has
         not got them, and the model filter, which fits each period's own samples, never
         uses them). 0: with the last sample (the default).
@@ -233,11 +238,17 @@ class StreamEstimator:
         while self.samples and self.samples[0][0] < t - 2.0 * T - tol:
             self.samples.popleft()
         self.last_t = t if self.last_t is None else max(self.last_t, t)
+        if self.after_section:
+            # realtime: due with the section's last sample, the one at t_k included (the
+            # next would be after t_k; half a sample period of margin for the stamps'
+            # rounding). Waiting for the first sample after t_k, which the estimate does
+            # not use, cost a simulator's wake-up, 0.5 ms at T/200 x1000 (issue 30)
+            if h > 0.0 and t + 0.5 * h + self.lead > self.next_k * T + tol:
+                due.append(self._due(self.next_k))
         # due when the next sample would be at t_k or after it: a sample at t_k itself
         # (up to rounding, 1e-3 h) is not waited for (a simulator publishes the samples
         # before t_k, then waits for the answer)
-        if not self.after_section and (h <= 0.0 or
-                                       t + h + self.lead >= self.next_k * T - 1e-3 * h):
+        elif h <= 0.0 or t + h + self.lead >= self.next_k * T - 1e-3 * h:
             due.append(self._due(self.next_k))
         return due
 
