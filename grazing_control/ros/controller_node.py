@@ -114,7 +114,7 @@ from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
-from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, StartupError, Throttled,
+from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, SafePoints, StartupError, Throttled,
                      check_ranges, deserialize, executor_kind, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key)
@@ -197,6 +197,9 @@ class ControllerNode(Node):
                                                    self.actuation_delay)
             if self.stream is not None and self.stream.kernel:
                 warm_stream_kernel()     # compiled model filter loaded now, not at section 0
+            # stream mode: the cyclic collector runs after a section's answer, not inside
+            # its estimate (issue 30; common.SafePoints)
+            self.collect = SafePoints() if self.stream is not None else None
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -553,6 +556,8 @@ class ControllerNode(Node):
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if self.reid is not None:
                 self.reid.answered(k, 0.0 if dv is None else dv)
+        if due:
+            self.collect()          # the answers are out: a safe point for the collector
 
     def _answer_ndof_estimate(self, k: int, tk: float, key: tuple, est) -> None:
         """Section k (model time ``tk``) of an n-DOF stream: the answer k^T (X^ - X**)
