@@ -16,10 +16,12 @@ Variants, alternating in one run so that each sees the same load (``--variants``
 (``stream_message:=block``: a Float64MultiArray per wake-up on oscillator/state_block),
 and either of them composed (``+composed``: ``grazing run --compose``, the three nodes in
 one process), or under SCHED_FIFO (``+fifo``: the simulator's and the controller's
-thread_priority 50, as a rig scene runs them). From the simulator's summary: periods per second against the requested
-(106.2 at x1000), deadline misses and late answers (sections whose correction was not
-there at t_k + 3), the answer latency (a section's last sample published -> its answer
-received) and the sample lag (how late a sample went out), p50/p99/max.
+thread_priority 50, as a rig scene runs them; ``+fifo+pinned``: and the simulator on CPU
+0, the controller on CPU 1, their cpu_affinity). From the simulator's summary: periods
+per second against the requested (106.2 at x1000), deadline misses and late answers
+(sections whose correction was not there at t_k + 3), the answer latency (a section's
+last sample published -> its answer received) and the sample lag (how late a sample went
+out), p50/p99/max.
 
 With ``--baseline DIR`` (a git worktree of an older commit) each variant also runs on
 that checkout (its own bench_stream_blocks.scene in a fresh interpreter, the launcher
@@ -54,7 +56,7 @@ DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
 FREE_RUNNING = {"watchdog_misses": 0, "watchdog_pace": 0.0, "watchdog_lag": 0.0,
                 "watchdog_excursion": 0.0, "feasibility": "warn"}
 VARIANTS = ("sample", "block", "sample+composed", "block+composed", "sample+fifo",
-            "block+fifo")
+            "block+fifo", "block+fifo+pinned")
 #: ``+fifo``: the simulator and the controller under SCHED_FIFO at this priority (their
 #: thread_priority, ros/scheduling.py; what a rig scene runs them with, scene_nodes.py)
 FIFO_PRIORITY = 50
@@ -74,6 +76,8 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
     message, *mods = variant.split("+")
     composed = "composed" in mods
     priority = FIFO_PRIORITY if "fifo" in mods else 0
+    # +pinned: the simulator on CPU 0, the controller on CPU 1 (their cpu_affinity)
+    sim_cpus, controller_cpus = ("0", "1") if "pinned" in mods else ("", "")
     p = OscillatorParams(delta_d=DD)
     res = launcher.run(
         None, str(controller), tmp / "bag", periods, delta_d=DD, enable_after=enable_after,
@@ -82,9 +86,10 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
         sim_overrides={"time_scale": scale, "state_period": p.period / RATE,
                        "sensor_noise": SIGMA, "sensor_velocity": False,
                        "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING,
-                       "thread_priority": priority},
+                       "thread_priority": priority, "cpu_affinity": sim_cpus},
         controller_overrides={"pi2_source": "stream", "estimator": "model",
-                              "answer_lead": answer_lead, "thread_priority": priority},
+                              "answer_lead": answer_lead, "thread_priority": priority,
+                              "cpu_affinity": controller_cpus},
         log_dir=tmp / "logs", compose=bool(composed))
     try:
         s = summary(Path(res.logs["sim_node"]))

@@ -250,7 +250,7 @@ def test_a_lead_makes_a_section_due_earlier_without_its_last_samples():
         with pytest.raises(ParameterError, match="answer_lead"):
             StreamEstimator(p, "arc", 1e-6, "stream", h, lead=lead)
     # realtime (answer_after_section): lead 2.5 h before the sample at t_k, the sample
-    # at t_k - 2 h (the lead was ignored there before issue 30's h-t200-path)
+    # at t_k - 2 h (the lead was ignored there before issue 30)
     after = StreamEstimator(p, "arc", 1e-6, "stream", h, after_section=True, lead=2.5 * h)
     a = [(j, d[0]) for j, (ti, xi) in enumerate(zip(t, x)) for d in after.add_sample(ti, xi)]
     assert a == [(0, 0), (8, 1), (18, 2)]
