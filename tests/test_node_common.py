@@ -304,6 +304,8 @@ def test_safe_points_run_the_collections_there_and_not_in_between(monkeypatch):
         # gen 1 ran more than 10 times
         assert gens.index(1) == 11 and gens[12:24].count(1) == 1
         assert gens.index(2) == 12 * 11 and gens.count(2) == 1
+        collect.close()                 # the node destroyed: the thresholds as they were
+        assert gc.get_threshold() == thresholds
     finally:
         gc.callbacks.remove(record)
         gc.set_threshold(*thresholds)

@@ -447,7 +447,7 @@ class SafePoints:
     without its long-lived-objects ratio: after :func:`freeze_heap` it walks only what
     the scene made). Nothing collected is kept longer than a safe point's spacing.
     ``GRAZING_GC=keep`` leaves the collector as it is (to measure against): then a call
-    does nothing."""
+    does nothing. :meth:`close` puts the thresholds back."""
 
     def __init__(self):
         self.active = os.environ.get(GC_ENV) != "keep"
@@ -463,6 +463,13 @@ class SafePoints:
         if c0 <= t0:
             return
         gc.collect(2 if c2 > t2 else 1 if c1 > t1 else 0)      # CPython's choice
+
+    def close(self) -> None:
+        """The automatic trigger as it was (a node destroyed in a process that goes on:
+        the collector's thresholds are the process's)."""
+        if self.active:
+            gc.set_threshold(*self.thresholds)
+            self.active = False
 
 
 def settle_heap():

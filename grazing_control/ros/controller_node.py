@@ -735,6 +735,12 @@ class ControllerNode(Node):
         """The controller's /diagnostics task (:func:`controller_status.diagnose`)."""
         return diagnose(self, stat)
 
+    def destroy_node(self) -> None:
+        """The collector's thresholds back (common.SafePoints), then rclpy's teardown."""
+        if getattr(self, "collect", None) is not None:
+            self.collect.close()
+        super().destroy_node()
+
     def on_exit(self) -> None:
         """Say what was published (grazing/published) and log what was answered and
         ignored, once a recorder has confirmed that it holds every message (ACK_TIMEOUT s
