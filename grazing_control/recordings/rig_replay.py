@@ -135,7 +135,7 @@ def main(args) -> int:
     identical, 1 naming the first difference, 2 for bad input."""
     import math
 
-    import yaml
+    from grazing_control.support.files import parse_yaml_bytes
 
     if not (math.isfinite(args.time_scale) and 1e-3 <= args.time_scale <= 1e6):
         raise ValueError(f"--time-scale={args.time_scale!r} is invalid: valid range is "
@@ -145,7 +145,7 @@ def main(args) -> int:
         name, sep, value = item.partition(":=")
         if not sep or not name:
             raise ValueError(f"--controller-param {item!r} is invalid: valid is NAME:=VALUE")
-        overrides[name] = yaml.safe_load(value)
+        overrides[name] = parse_yaml_bytes(value.encode(), f"--controller-param {name}")
     recorded_controller(args.bag)          # refuse a bag that is no rig scene first
     res = replay_rig(args.bag, time_scale=args.time_scale, controller_overrides=overrides,
                      log_dir=args.log_dir, timeout=args.timeout)
