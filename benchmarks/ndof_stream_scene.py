@@ -48,7 +48,7 @@ from grazing_control.dynamics.design.ndof_design import (pulse_design,  # noqa: 
 from grazing_control.dynamics.design.ndof_spread import (controlled_orbit,  # noqa: E402
                                                          predicted_spread)
 from grazing_control.dynamics.design.noise import ndof_filter_covariance  # noqa: E402
-from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
+from grazing_control.dynamics.maps.modal_map import ModalMap  # noqa: E402
 from grazing_control.dynamics.simulation.actuator import Actuator  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
 from grazing_control.studies.near_grazing.scene import stream_loop  # noqa: E402
@@ -103,7 +103,7 @@ def node_scene(model_file, model, design, a, tmp: Path, seed: int | None = None)
         raise SystemExit(f"the scene failed: {res}\n"
                          + Path(res.logs["sim_node"]).read_text()[-3000:])
     sd = load(tmp / "bag").scenes[0]
-    flow = NdofMap(model).flow
+    flow = ModalMap(model).flow
     z = sd.scene.pi2 - flow.particular(flow.tau2)
     return (z, np.asarray(sd.scene.impacts_per_period), sd.deadline_misses,
             int(np.sum(sd.answered)), wall)

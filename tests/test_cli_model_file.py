@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from grazing_control.cli.commands import main
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.dynamics.design.ndof_design import gain_family
 from grazing_control.studies.near_grazing.branch import grazing_side, smooth_map, with_delta_d
@@ -226,7 +226,7 @@ def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, thre
         got = run_json(capsys, "orbit", "--model", three, "--delta-d", dd, *extra)
         assert got["branch"] == "grazing" and got["grazing_side"] == side
         model = with_delta_d(model3, float(dd))
-        pmap = NdofMap(model, k)
+        pmap = ModalMap(model, k)
         z = np.array(got["section_pi2_deviation"])
         step = pmap.step(z)
         assert len(step.impacts) == 1

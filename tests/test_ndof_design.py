@@ -1,6 +1,6 @@
 """The n-DOF design (docs/theory_ndof.md §3-§9): gain family, transmission zeros, limit
 multipliers, existence, admissible mu, the bad gains, and the acceptance of issue 17 on
-the shipped two-mass chain against exact shooting on NdofMap."""
+the shipped two-mass chain against exact shooting on ModalMap."""
 
 import dataclasses
 import math
@@ -16,7 +16,7 @@ from grazing_control.dynamics.design import gains as design
 from grazing_control.dynamics.orbits import ndof_branch
 
 from grazing_control.dynamics.design import ndof_design as nd
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import NdofModel, load_model
@@ -242,13 +242,13 @@ def test_two_mass_chain_has_a_design():
 def _exact_multipliers(model, gains, delta_d):
     m = dataclasses.replace(model, delta_d=delta_d)
     guess = ndof_branch.orbit_at(m, gains, delta_d).pi2_state
-    orbit = find_periodic(NdofMap(m, gains), guess)
+    orbit = find_periodic(ModalMap(m, gains), guess)
     assert len(orbit.impacts) == 1 and orbit.impacts[0].v_minus > 0
     return floquet_multipliers(orbit.monodromy)
 
 
 def test_controlled_multipliers_stay_bounded_and_converge_to_the_limit():
-    """mu = 0.2 on the chain: exact multipliers (Newton shooting on NdofMap) bounded down
+    """mu = 0.2 on the chain: exact multipliers (Newton shooting on ModalMap) bounded down
     to Delta d = -1e-10 and within ~1.1 |Delta d|^(1/2) of the predicted limit spectrum
     (measured 1.04e-2, 1.06e-4, 1.07e-5 at -1e-4, -1e-8, -1e-10: order 0.50)."""
     m = load_model(CHAIN)
@@ -352,7 +352,7 @@ def test_actuated_step_jacobian_is_the_exact_maps_derivative(start, tau_a, force
     at 11.93), the impact under the decaying force (start 8, tau_a 0.5: the force there
     ~ e^-5 of its peak) and a slow actuator without impact, each from a force carried
     from the previous period."""
-    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.dynamics.maps.modal_map import actuated_step
     from grazing_control.oscillator.ndof.flow import NdofFlow
 
     flow = NdofFlow.of(dataclasses.replace(load_model(CHAIN), delta_d=-1e-3))

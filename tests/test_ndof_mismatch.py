@@ -4,7 +4,7 @@ dynamics/design/mismatch.py): the band of Delta d next to grazing where the cont
 
 Yardsticks: the 1-DOF bands (the study's shooting route, dynamics/orbits/orbits.py) for
 n = 1; for n = 2 brute force: the plant perturbed, its orbit's multipliers recomputed
-from the fourth-order finite-difference Jacobian of the exact map (NdofMap, the certified
+from the fourth-order finite-difference Jacobian of the exact map (ModalMap, the certified
 event-driven core), over seeded random parameters, errors and Delta d, and on both sides
 of a band's end.
 """
@@ -20,7 +20,7 @@ from grazing_control.dynamics.design import ndof_design as nd
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.design.mismatch import (instability_band, mismatched_model,
                                                       model_largest_multiplier)
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits import ndof_branch
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
@@ -38,7 +38,7 @@ def _fd_multiplier(plant, k, dd, delay=0.0):
     estimates agree to 1e-7, else the most consistent pair is taken (a multiplier ~1e6
     needs ~1e-5 v-^2: the map's curvature grows with it; below, rounding takes over)."""
     bp = ndof_branch.orbit_at(plant, k, dd, delay=delay)
-    P = NdofMap(plant, k, delay)
+    P = ModalMap(plant, k, delay)
     z = bp.pi2_state
 
     def estimate(h):

@@ -12,7 +12,7 @@ import numpy as np
 from grazing_control.dynamics.design import noise
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.design.ndof_design import evaluate_design
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.control import Gains
@@ -27,7 +27,7 @@ CHAIN = Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_ch
 def test_the_n1_model_gives_the_1dof_noise_covariance():
     """n = 1 (the study's model file) with R = I: the n-DOF loop's Sigma is
     noise.noise_covariance of the 1-DOF closed form, with and without delay, 1e-9
-    relative (two routes: NdofMap's monodromies, the 1-DOF advance)."""
+    relative (two routes: ModalMap's monodromies, the 1-DOF advance)."""
     m, p = _study()
     m, p = dataclasses.replace(m, delta_d=-1e-3), p.with_(delta_d=-1e-3)
     for delay in (0.0, 0.3):
@@ -53,7 +53,7 @@ def test_the_predicted_spread_is_the_seeded_closed_loops():
     run = stream_loop(CHAIN, design.gains, delta_d=-1e-3, delay=1.0, sigma=1e-4, rate=200,
                       coordinate=0, periods=300, control_after=10, seed=0)
     assert run.resets == 0 and np.all(run.impacts_per_period[70:] == 1)
-    orbit = find_periodic(NdofMap(model, design.gains, 1.0), run.truth[-1]).state
+    orbit = find_periodic(ModalMap(model, design.gains, 1.0), run.truth[-1]).state
     R = noise.ndof_filter_covariance(model, design.gains, orbit, 200, 0, 1.0,
                                      section_sample=False)
     S = noise.ndof_noise_covariance(model, design.gains, orbit, R, 1.0)

@@ -11,7 +11,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from grazing_control.dynamics.design import ndof_design as nd
-from grazing_control.dynamics.maps.ndof_map import NdofMap, actuated_step, pulse_step
+from grazing_control.dynamics.maps.modal_map import ModalMap, actuated_step, pulse_step
 from grazing_control.dynamics.orbits import ndof_branch
 from grazing_control.dynamics.simulation import actuation
 from grazing_control.dynamics.simulation import actuator as act
@@ -167,14 +167,14 @@ def test_chain_actuated_step_against_the_reference_and_dop853():
 
 
 def test_pulsed_map_jacobian_against_finite_differences():
-    """NdofMap(width): its Jacobian (the pieces' monodromies, the force's dependence on z
+    """ModalMap(width): its Jacobian (the pieces' monodromies, the force's dependence on z
     through the pulse's input and its clearance) equals fourth-order differences to 1e-7,
     with the impact after the pulse and inside it."""
     m = dataclasses.replace(load_model(CHAIN), delta_d=-0.1)
     k = nd.gain_family(load_model(CHAIN), 0.0, 4.0)
     z = np.array([-0.05, -0.02, 0.03, 0.01])
     for delay, width in ((4.0, 1.0), (11.5, 1.0), (1.0, 0.5)):
-        P = NdofMap(m, k, delay, width)
+        P = ModalMap(m, k, delay, width)
         st = P.step(z, jacobian=True)
         assert len(st.impacts) == 1
         fd = _fd_jacobian(P, z, 1e-5)
@@ -202,7 +202,7 @@ def test_n1_pulse_family_is_the_1dof_p1_design(delay, width, tau_a, lat):
 def test_pulse_design_limit_multipliers_against_finite_differences_of_the_exact_map(
         delay, width, mu):
     """Chain, the design k(mu; pulse) carried by the pulse of ``width`` centred ``delay``
-    after the sample: the pulsed 1/1 branch is a fixed point of the exact pulsed NdofMap
+    after the sample: the pulsed 1/1 branch is a fixed point of the exact pulsed ModalMap
     (1e-13), and the multipliers of the finite-difference Jacobian of that map at the
     orbit approach the design's limit spectrum like |Delta d|^(1/2) (measured ratio
     err / sqrt|Delta d| 0.48 ... 0.68)."""
@@ -281,11 +281,11 @@ def test_pulses_that_do_not_fit_are_refused_naming_the_width():
         with pytest.raises(ParameterError, match="width="):
             nd.Actuation(1.0, bad)
         with pytest.raises(ParameterError, match="width="):
-            NdofMap(m, nd.gain_family(m, 0.0), 1.0, bad)
+            ModalMap(m, nd.gain_family(m, 0.0), 1.0, bad)
     for bad in (m.period, 1e308, "x", None, True):
         with pytest.raises(ParameterError, match="width=.* is invalid: valid range is a finite "
                                                  "width, 0 <= width < T"):
-            NdofMap(m, nd.gain_family(m, 0.0), 1.0, bad)
+            ModalMap(m, nd.gain_family(m, 0.0), 1.0, bad)
     rigid = dataclasses.replace(m, K=[[1.0, -1.0], [-1.0, 1.0]])
     with pytest.raises(ParameterError, match="K is invalid for a force pulse"):
         pulse_step(NdofFlow.of(rigid), np.zeros(4), 0.1, start=1.0, width=1.0)

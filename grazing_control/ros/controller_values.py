@@ -10,7 +10,7 @@ An n-DOF scene (``model_file``, docs/ndof_model.md; issues 17, 32) answers each 
 sample X = (x_0 .. x_{n-1}, v_0 .. v_{n-1}) with the kick on the actuated coordinate's
 velocity, X** the grazing orbit's state on Pi2, ``NdofFlow.particular(tau2)``
 (docs/theory_ndof.md, "Kick design"; the kick of
-:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`). The switch-on, the saturation
+:class:`grazing_control.dynamics.maps.modal_map.ModalMap`). The switch-on, the saturation
 and the stale-sample rules are the same :class:`ControlLaw`'s; the 1-DOF law's
 parameters (c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults (else refused
 with the reason). With ``pi2_source`` stream the Pi2 state is estimated from the sensor
@@ -364,10 +364,10 @@ class ModelController:
         """The Pi2 sample after (x, v) with ``dv`` acting ``delay`` after it: one exact
         period of the model (the plant engine's calls, plant.engine); ``pulse`` (width,
         force limit[, actuator]): the correction as the force pulse of that width centred
-        ``delay`` after the sample (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`,
+        ``delay`` after the sample (:func:`grazing_control.dynamics.maps.modal_map.pulse_step`,
         docs/theory_ndof.md section 15), through the first-order actuator from the force
         ``force0`` at the section where one is given (``actuated_step``). Returns (x', v')."""
-        from grazing_control.dynamics.maps.ndof_map import actuated_step, pulse_step
+        from grazing_control.dynamics.maps.modal_map import actuated_step, pulse_step
         from grazing_control.dynamics.simulation.actuation import pulse_start
 
         sec, f = self.section, self.section.flow

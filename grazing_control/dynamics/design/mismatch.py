@@ -108,10 +108,10 @@ def model_largest_multiplier(model, gains, delay: float = 0.0) -> float:
     period has another contact. Without a delay the branch's structured multipliers
     (``branch_multipliers``) and the certified ``other_contacts``; with one (the kick
     ``delay`` after Pi2, docs/theory_ndof.md section 14) one step of the exact delayed
-    map from the orbit's Pi2 state (dynamics/maps/ndof_map.py): exactly one impact, back
+    map from the orbit's Pi2 state (dynamics/maps/modal_map.py): exactly one impact, back
     to the start within 1e-9 of the state's scale, and the eigenvalues of its Jacobian
     (D3)."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.maps.modal_map import ModalMap
     from grazing_control.dynamics.orbits import ndof_branch
 
     try:
@@ -120,7 +120,7 @@ def model_largest_multiplier(model, gains, delay: float = 0.0) -> float:
             if ndof_branch.other_contacts(model, gains, point) != 0:
                 return math.inf
             return float(np.max(np.abs(ndof_branch.branch_multipliers(model, gains, point))))
-        step = NdofMap(model, gains, delay).step(point.pi2_state, jacobian=True)
+        step = ModalMap(model, gains, delay).step(point.pi2_state, jacobian=True)
         scale = 1.0 + float(np.max(np.abs(point.pi2_state)))
         if len(step.impacts) != 1 or not np.max(np.abs(step.state - point.pi2_state)) <= 1e-9 * scale:
             return math.inf
@@ -192,10 +192,10 @@ def instability_band(nominal, gains, name: str, error: float, *,
     else:
         import dataclasses
 
-        from grazing_control.dynamics.maps.ndof_map import NdofMap
+        from grazing_control.dynamics.maps.modal_map import ModalMap
 
         plant = mismatched_model(nominal, name, error)
-        NdofMap(plant, gains, delay)   # refuses bad gains or delay by name, before the scan
+        ModalMap(plant, gains, delay)   # refuses bad gains or delay by name, before the scan
 
         def rho(dd):
             return model_largest_multiplier(dataclasses.replace(plant, delta_d=dd), gains, delay)

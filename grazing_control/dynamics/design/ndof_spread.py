@@ -9,8 +9,8 @@ and a velocity noise xi_k on v_{i_a} at each sample (variance sigma_v^2):
 
     e_{k+1} = J e_k + g k^T n_k + e_v xi_k,    J = D_y f + g [k^T, 0],
 
-f one period of the exact map (:func:`~grazing_control.dynamics.maps.ndof_map.actuated_step`,
-:class:`~grazing_control.dynamics.maps.ndof_map.NdofMap`), g = d y_{k+1} / d(Delta v) and
+f one period of the exact map (:func:`~grazing_control.dynamics.maps.modal_map.actuated_step`,
+:class:`~grazing_control.dynamics.maps.modal_map.ModalMap`), g = d y_{k+1} / d(Delta v) and
 e_v = e_{n + i_a}, both exact (no finite differences). For independent n_k and xi_k the
 stationary covariance solves the discrete Lyapunov equation
 
@@ -47,7 +47,7 @@ def loop_step(model: NdofModel, gains, delay, y, jacobian: bool = False):
     correction k^T z: (y_next, impacts) and with ``jacobian`` (D_y f at a fixed
     correction, g = d y_next / d(Delta v)). ``delay``: the kick's delay (a float) or
     an :class:`Actuation`."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap, actuated_step, pulse_step
+    from grazing_control.dynamics.maps.modal_map import ModalMap, actuated_step, pulse_step
 
     k = np.asarray(gains, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -65,9 +65,9 @@ def loop_step(model: NdofModel, gains, delay, y, jacobian: bool = False):
         if not jacobian:
             return nxt, list(out[2])
         return nxt, list(out[2]), out[3][:keep, :keep], out[4][:keep]
-    # the kick ``delay`` after the sample (width 0; NdofMap checks 0 <= delay < T):
+    # the kick ``delay`` after the sample (width 0; ModalMap checks 0 <= delay < T):
     # D_y f = M2 M1, g = M2 e_{n + i_a}
-    out = pulse_step(flow, y, dv, start=NdofMap(model, None, delay).delay, width=0.0,
+    out = pulse_step(flow, y, dv, start=ModalMap(model, None, delay).delay, width=0.0,
                      jacobian=jacobian)
     if not jacobian:
         return out.state, list(out.impacts)

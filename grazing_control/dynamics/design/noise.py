@@ -21,15 +21,15 @@ position per unit measurement noise. Near grazing M2 carries the saltation term
 choice of c2 along the admissible set matters (the study's c2 = -1 is not the best).
 
 **n DOF** (docs/ndof_scene.md): the same loop over the exact n-DOF map
-(:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`, gains k in R^{2n}, the kick on
+(:class:`grazing_control.dynamics.maps.modal_map.ModalMap`, gains k in R^{2n}, the kick on
 v_{i_a} ``delay`` after the sample), linearised about its controlled orbit z*:
 
     e_{k+1} = J e_k + g k^T n_k,    J = M2 (M1 + b k^T),    g = M2 b,   b = e_{n + i_a},
 
 and Sigma = J Sigma J^T + sigma^2 g g^T (k^T R k) (:func:`ndof_noise_covariance`). With
 a force pulse of ``width`` w centred ``delay`` after the sample (docs/theory_ndof.md
-section 15) J is NdofMap(model, k, delay, w)'s Jacobian and g the period's input
-d z_{k+1} / d(Delta v) (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`'s
+section 15) J is ModalMap(model, k, delay, w)'s Jacobian and g the period's input
+d z_{k+1} / d(Delta v) (:func:`grazing_control.dynamics.maps.modal_map.pulse_step`'s
 ``input``: M3 ((I - M_p) sigma - g_w sigma_w) m_a / w). R is
 the model filter's error covariance on the orbit per unit sigma^2, for a sensor of one
 coordinate's position at ``rate`` samples per period: the fixed point of (E5),
@@ -110,11 +110,11 @@ def ndof_loop_linearisation(model, gains, target, delay: float = 0.0, width: flo
     """(J, g) of the n-DOF loop at the orbit z* = ``target`` (module docstring): J the
     closed-loop map's Jacobian, g = M2 e_{n + i_a} the next sample's sensitivity to the
     kick (with a pulse ``width`` > 0: to the pulse's Delta v). Exact (the core's
-    monodromies, :class:`NdofMap`'s step)."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap, pulse_step
+    monodromies, :class:`ModalMap`'s step)."""
+    from grazing_control.dynamics.maps.modal_map import ModalMap, pulse_step
     from grazing_control.oscillator.ndof.impact import advance as ndof_advance
 
-    P = NdofMap(model, gains, delay, width)
+    P = ModalMap(model, gains, delay, width)
     z = np.array(target, dtype=float)
     J = P.step(z, jacobian=True).jacobian
     flow, n = P.flow, model.n

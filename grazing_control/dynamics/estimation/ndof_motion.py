@@ -109,7 +109,7 @@ def ndof_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay: 
                               force0: float):
     """:func:`.section_state.trajectory` of the n-DOF oscillator through a first-order actuator
     (docs/theory_ndof.md section 15, the plant's
-    :func:`grazing_control.dynamics.maps.ndof_map.actuated_step`): the command
+    :func:`grazing_control.dynamics.maps.modal_map.actuated_step`): the command
     u = m_a correction / width (clipped to +-``force_limit``) on :func:`actuator_legs`, the
     force F(h) = u + c e^{-h / tau_a} on each leg from ``force0``, the motion
     :func:`grazing_control.oscillator.ndof.forced.lag_advance`'s. Between events
