@@ -31,7 +31,8 @@ import numpy as np
 
 from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation.section_state import ESTIMATORS, actuator_legs
+from grazing_control.dynamics.estimation.section_state import ESTIMATORS
+from grazing_control.dynamics.estimation.motion import actuator_legs
 from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator,
                                                         pulse_shape)
 from grazing_control.dynamics.simulation.actuator import Actuator
@@ -253,7 +254,7 @@ def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
     :data:`PULSE_KEYS` (model units, as sim_node's): the pulse (``pulse_width`` 0: a
     kick) and the first-order actuator between its command and the force
     (``actuator_bandwidth`` 1 / tau_a, 0: ideal; ``actuator_latency``), which the stream
-    estimator and the prediction integrate (dynamics.estimation.section_state.trajectory).
+    estimator and the prediction integrate (dynamics.estimation.motion.trajectory).
     ParameterError, one line naming the parameter and its valid range."""
     period = 2.0 * math.pi / omega
     width, limit = pulse_shape(OscillatorParams(omega=omega), values["pulse_width"],

@@ -149,7 +149,7 @@ def ndof_filter_covariance(model, gains, target, rate: int, coordinate: int,
     pulse through the first-order lag from the force on the orbit at the section (the
     filter knows the force: the controller carries it from its own commands,
     docs/theory_ndof.md section 17)."""
-    from grazing_control.dynamics.estimation.section_state import trajectory
+    from grazing_control.dynamics.estimation.motion import trajectory
 
     z = np.array(target, dtype=float)
     last = int(rate) + (1 if section_sample else 0)
