@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from grazing_control.dynamics.orbits import ndof_branch as nb
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.orbits import modal_branch as nb
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.ndof import load_model

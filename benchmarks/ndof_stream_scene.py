@@ -43,7 +43,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
-from grazing_control.dynamics.design.ndof_design import (pulse_design,  # noqa: E402
+from grazing_control.dynamics.design.family import (pulse_design,  # noqa: E402
                                                        write_gain_yaml)
 from grazing_control.dynamics.design.ndof_spread import (controlled_orbit,  # noqa: E402
                                                          predicted_spread)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design, gain_family, write_gain_yaml
+from grazing_control.dynamics.design.family import evaluate_design, gain_family, write_gain_yaml
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof.flow import periodic_response
 from grazing_control.oscillator.ndof.model import load_model

@@ -11,16 +11,16 @@ import pytest
 import yaml
 
 from grazing_control.dynamics.design import gains as design
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.maps.modal_map import ModalMap
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.orbits import modal_branch
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
-from test_ndof_design import CHAIN, _match, _study
+from test_family import CHAIN, _match, _study
 
 
 def _fd_jacobian(P, z, h):
@@ -129,7 +129,7 @@ def check_limit_against_the_exact_map(actuation, mu, delay, width=0.0):
     errors = []
     for dd in (-1e-4, -1e-6, -1e-8):
         m = dataclasses.replace(m0, delta_d=dd)
-        bp = ndof_branch.orbit_at(m, k, dd, delay=actuation)
+        bp = modal_branch.orbit_at(m, k, dd, delay=actuation)
         P = ModalMap(m, k, delay, width)
         st = P.step(bp.pi2_state)
         assert len(st.impacts) == 1
@@ -152,7 +152,7 @@ def test_the_undelayed_design_acting_late_grows_like_one_over_delta_d():
     rho = []
     for dd in (-1e-4, -1e-6):
         m = dataclasses.replace(m0, delta_d=dd)
-        bp = ndof_branch.orbit_at(m, k, dd, delay=4.0)
+        bp = modal_branch.orbit_at(m, k, dd, delay=4.0)
         orbit = find_periodic(ModalMap(m, k, 4.0), bp.pi2_state)
         assert len(orbit.impacts) == 1
         rho.append(float(np.max(np.abs(np.linalg.eigvals(orbit.monodromy)))))

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.estimation import motion as mo
 from grazing_control.dynamics.estimation import section_state as ss
 from grazing_control.oscillator.ndof import load_model
@@ -16,7 +16,7 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.params import ParameterError
 
-from test_ndof_design import CHAIN, _study
+from test_family import CHAIN, _study
 
 RATE = 200                      # samples per period (T/200, the sensor)
 

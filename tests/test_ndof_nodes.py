@@ -5,7 +5,7 @@ analysed from the bag alone.
 The scene is the shipped config/models/two_mass_chain.yaml at Delta d = -1e-5: uncontrolled
 its Pi2 samples are chaotic near grazing (no period up to 30; largest Lyapunov exponent
 about 0.20 per period, docs/nodes.md); the controller with the design's k(mu = -0.22)
-(dynamics.design.ndof_design, written by write_gain_yaml) switched on at sample 300 takes them
+(dynamics.design.family, written by write_gain_yaml) switched on at sample 300 takes them
 to the controlled 1/1 orbit that Newton shooting finds on ModalMap with the same gains.
 The references are the core's: the engine replayed with the recorded corrections
 (bit for bit: the node is the engine) and find_periodic.
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import (evaluate_design, pulse_design,
+from grazing_control.dynamics.design.family import (evaluate_design, pulse_design,
                                                        write_gain_yaml)
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
@@ -210,7 +210,7 @@ def test_an_actuated_designs_gain_file_gives_both_nodes_its_actuator(tmp_path):
     filter reset 390 times; with this, 394 impacts, 1 per period at the end, 0 resets)."""
     import yaml
 
-    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.design.family import pulse_design
 
     gains = tmp_path / "gains.yaml"
     write_gain_yaml(gains, MODEL, pulse_design(MODEL, -0.22, 1.0, 1.0, 0.1, 0.05), SCENE)

@@ -11,7 +11,7 @@ import numpy as np
 
 from grazing_control.dynamics.design import noise
 from grazing_control.dynamics.design.gains import degenerate_c1
-from grazing_control.dynamics.design.ndof_design import evaluate_design
+from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.orbits.shooting import find_periodic
@@ -19,7 +19,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.studies.near_grazing.scene import stream_loop
 
-from test_ndof_design import _study
+from test_family import _study
 
 CHAIN = Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_chain.yaml"
 

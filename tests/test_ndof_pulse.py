@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.maps.modal_map import ModalMap, actuated_step, pulse_step
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.orbits import modal_branch
 from grazing_control.dynamics.simulation import actuation
 from grazing_control.dynamics.simulation import actuator as act
 from grazing_control.oscillator.ndof import load_model
@@ -22,7 +22,7 @@ from grazing_control.oscillator.params import ParameterError
 
 from reference_ndof import load_reference
 from test_ndof_delay import _fd_jacobian, check_limit_against_the_exact_map
-from test_ndof_design import CHAIN, _match, _random_model, _study
+from test_family import CHAIN, _match, _random_model, _study
 
 #: (z, Delta v, start, width): a pulse before the impact, one holding it (the study's
 #: impact comes ~7 after Pi2), the kick
@@ -228,7 +228,7 @@ def test_actuator_design_limit_multipliers_against_finite_differences_of_the_act
     for dd in (-1e-4, -1e-6, -1e-8):
         m = dataclasses.replace(m0, delta_d=dd)
         flow = NdofFlow.of(m)
-        bp = ndof_branch.orbit_at(m, nd.gain_family(m0, 0.0, ideal), dd, delay=ideal)
+        bp = modal_branch.orbit_at(m, nd.gain_family(m0, 0.0, ideal), dd, delay=ideal)
 
         def step(y):
             z, f, imps = actuated_step(flow, y[:4], y[4], float(k @ y[:4]),

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design
+from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import ParameterError

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import gain_family
+from grazing_control.dynamics.design.family import gain_family
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.dynamics.simulation.simulate import period_step
@@ -578,9 +578,9 @@ def test_injected_loss_and_jitter_are_the_fault_models_draws():
 
 def test_a_delay_aware_design_run_is_the_delayed_ndofmap_sample_for_sample():
     """Issue 32: the lockstep engine with the kick k^T z_k acting ``delay`` after each
-    sample (k the delay-aware design, ndof_design.gain_family(..., delay)) is the core's
+    sample (k the delay-aware design, family.gain_family(..., delay)) is the core's
     ModalMap(model, k, delay) iteration, bit for bit, impacts included."""
-    from grazing_control.dynamics.design.ndof_design import evaluate_design
+    from grazing_control.dynamics.design.family import evaluate_design
 
     delay = 1.0
     s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay)
@@ -654,7 +654,7 @@ def test_a_pulsed_run_is_ndofmap_with_the_width_bit_for_bit_on_both_paths():
     iterates bit for bit, impacts included; the stream's states during the pulse are the
     flow under its force (advance_with_force from the pulse's start, independent of the
     engine's evaluation from the impact list)."""
-    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.design.family import pulse_design
     from grazing_control.oscillator.ndof.forced import advance_with_force
 
     delay, width = 1.0, 1.0
@@ -746,7 +746,7 @@ def test_through_the_actuator_a_run_is_actuated_steps_iterates_bit_for_bit(tau_a
     lockstep periods and the realtime ones (begin_head, actuate) are
     modal_map.actuated_step's iterates bit for bit, force included (tau_a = 0: the pulse
     L later); the stream's states are lag_advance from each piece's start (1e-12)."""
-    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.design.family import pulse_design
     from grazing_control.dynamics.maps.modal_map import actuated_step
     from grazing_control.oscillator.ndof.forced import lag_advance
 

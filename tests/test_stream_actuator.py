@@ -92,7 +92,7 @@ def test_n1_model_filter_through_the_actuator_gives_the_1dof_corrections():
 
     from grazing_control.dynamics.estimation import motion as mo
     from grazing_control.dynamics.estimation import section_state as ss
-    from test_ndof_design import _study
+    from test_family import _study
 
     m, p = _study()
     m, p = dataclasses.replace(m, delta_d=-5e-6), p.with_(delta_d=-5e-6)

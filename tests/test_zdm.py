@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.maps import zdm as zd
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.orbits import modal_branch
 from grazing_control.oscillator.ndof import NdofModel, load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
@@ -348,7 +348,7 @@ def _fixed_point(m, k, order, guess):
 
 def test_second_order_map_gives_the_limit_multipliers_and_the_leading_order_does_not():
     """Fixed points of N o D on Pi1 near the exact branch: with D2 the multipliers
-    approach the limit spectrum of ndof_design as O(|Delta d|^1/2); with D1 they are
+    approach the limit spectrum of family as O(|Delta d|^1/2); with D1 they are
     {mu} U spec(N~ (I - (1 + r) p1 e_v e_v^T)) at every Delta d (§10), not the limit; the
     {-(1 + 2 r) mu} U zeros of docs/ndof.md is not the limit either."""
     base = load_model(CHAIN)
@@ -366,7 +366,7 @@ def test_second_order_map_gives_the_limit_multipliers_and_the_leading_order_does
     errs = {1: [], 2: [], "exact": []}
     for dd in (1e-6, 1e-8):
         m = dataclasses.replace(base, delta_d=-dd)
-        bp = ndof_branch.orbit_at(m, k, -dd)
+        bp = modal_branch.orbit_at(m, k, -dd)
         virtual = nd._transition(m, -bp.psi / m.omega) @ bp.state
         for order in errs:
             z, lam = _fixed_point(m, k, order, virtual)

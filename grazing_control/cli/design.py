@@ -305,7 +305,7 @@ def _family_design(args):
     """design --model FILE [--mu MU | --free-gain NAME=V] [--delay D] [--pulse-width W
     [--actuator-bandwidth B] [--actuator-latency L]] [--out FILE] (docs/ndof_commands.md;
     the delayed design is docs/theory_ndof.md §14, the pulse's §15)."""
-    from grazing_control.dynamics.design import ndof_design as nd
+    from grazing_control.dynamics.design import family as nd
 
     rig = getattr(args, "rig_model", None)          # --rig FILE of n masses (cli/rig.py)
     model = load(args.model) if rig is None else rig.model()
@@ -438,7 +438,7 @@ def _family_spread(args, model, design, delay):
     where the loop has no stable 1/1 orbit there."""
     import dataclasses
 
-    from grazing_control.dynamics.design.ndof_design import Actuation
+    from grazing_control.dynamics.design.family import Actuation
     from grazing_control.dynamics.design.ndof_spread import predicted_spread
     from grazing_control.dynamics.design.noise import ndof_filter_covariance
     from grazing_control.dynamics.simulation.actuator import Actuator

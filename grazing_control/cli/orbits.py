@@ -245,7 +245,7 @@ def _file_branch(args):
     """A model file's branch (docs/ndof_commands.md): in the impact phase when the start is
     on the branch born at grazing, else by shooting; as :func:`_study_branch`."""
     from grazing_control.dynamics.orbits.continuation import continue_orbit
-    from grazing_control.dynamics.orbits.ndof_branch import continue_branch
+    from grazing_control.dynamics.orbits.modal_branch import continue_branch
     from grazing_control.dynamics.maps.modal_map import ModalMap
     from grazing_control.studies.near_grazing.branch import EXPLICIT, fold_beyond, orbit_11, with_delta_d
 
@@ -272,7 +272,7 @@ def _file_branch(args):
         f"{weak[-1]:.6g})")
     limit = None
     if mu is not None:
-        from grazing_control.dynamics.design.ndof_design import limit_multipliers
+        from grazing_control.dynamics.design.family import limit_multipliers
 
         limit = np.asarray(limit_multipliers(model, mu), dtype=complex)
     out.update({

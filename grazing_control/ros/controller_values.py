@@ -17,7 +17,7 @@ with the reason). With ``pi2_source`` stream the Pi2 state is estimated from the
 stream by the model filter over the exact n-DOF map (:func:`model_stream_from_values`:
 the position, and velocity where carried, of coordinate ``sensor_coordinate``). The
 section data the design's parameter file carries with the gains (``n``, ``i_a``,
-``omega``, ``pi2_offset``: :func:`grazing_control.dynamics.design.ndof_design.write_gain_yaml`)
+``omega``, ``pi2_offset``: :func:`grazing_control.dynamics.design.family.write_gain_yaml`)
 must be the model file's: gains designed for another model are refused, naming both
 values."""
 

@@ -31,7 +31,7 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
-from grazing_control.dynamics.design.ndof_design import Actuation
+from grazing_control.dynamics.design.family import Actuation
 
 __all__ = ["LoopSpread", "loop_step", "controlled_orbit", "loop_linearisation",
            "predicted_spread"]
@@ -78,7 +78,7 @@ def controlled_orbit(model: NdofModel, gains, delay=0.0, guess=None, tol: float 
                      max_iter: int = 40) -> np.ndarray:
     """The closed loop's 1/1 orbit y* (z*, and F* through the lag) by Newton with the
     exact Jacobian from ``guess`` (default: the orbit of the ideal pulse / the kick on
-    the 1/1 branch, :func:`grazing_control.dynamics.orbits.ndof_branch.orbit_at`, the
+    the 1/1 branch, :func:`grazing_control.dynamics.orbits.modal_branch.orbit_at`, the
     force 0); through a lag continued in tau_a from a tenth of it (8 steps), as the
     1-DOF :func:`grazing_control.dynamics.simulation.actuator.actuated_design`.
 
@@ -86,14 +86,14 @@ def controlled_orbit(model: NdofModel, gains, delay=0.0, guess=None, tol: float 
     per period."""
     import dataclasses
 
-    from grazing_control.dynamics.orbits import ndof_branch
+    from grazing_control.dynamics.orbits import modal_branch
 
     k = np.asarray(gains, dtype=float)
     if guess is None:
         ideal = delay
         if isinstance(delay, Actuation):
             ideal = Actuation(delay.delay + delay.latency, delay.width)
-        guess = ndof_branch.orbit_at(model, k, model.delta_d, delay=ideal).pi2_state
+        guess = modal_branch.orbit_at(model, k, model.delta_d, delay=ideal).pi2_state
     y = np.array(guess, dtype=float)
     if _lagged(delay):
         if y.size == 2 * model.n:

@@ -114,13 +114,13 @@ def _is_model_file(model) -> bool:
 
 
 def _design():
-    """The model file's flow, rows and smooth map (dynamics/design/ndof_design.py), imported
+    """The model file's flow, rows and smooth map (dynamics/design/family.py), imported
     when a model file is first asked: that module's scipy imports (1.4 s) are nothing the
     nodes need, which import this one through plant.settings -> simulation.fidelity
     (tests/test_node_common.py)."""
-    from grazing_control.dynamics.design import ndof_design
+    from grazing_control.dynamics.design import family
 
-    return ndof_design
+    return family
 
 
 def _flow(model: NdofModel):

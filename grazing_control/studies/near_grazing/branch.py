@@ -250,9 +250,9 @@ def _offset(state, pred) -> float:
 
 def _on_branch(model, gains, pred):
     """(the 1/1 orbit at the model's Delta d on the branch explicit in the impact phase,
-    None), or (None, why not) (dynamics/orbits/ndof_branch.py: ``orbit_at``, the global check
+    None), or (None, why not) (dynamics/orbits/modal_branch.py: ``orbit_at``, the global check
     ``other_contacts``, the multipliers from ``pi2_factors``)."""
-    from grazing_control.dynamics.orbits.ndof_branch import (branch_multipliers, orbit_at,
+    from grazing_control.dynamics.orbits.modal_branch import (branch_multipliers, orbit_at,
                                                       other_contacts, pi2_factors)
 
     k = np.zeros(2 * model.n) if gains is None else _gains(model, gains)
@@ -398,14 +398,14 @@ def fold_beyond(model, gains, branch, stop: float):
     """The fold where a continuation in Delta d stopped short of ``stop``, or None.
 
     A continuation in Delta d cannot pass a turning point of the branch; the branch
-    explicit in the impact phase can (``dynamics.orbits.ndof_branch.branch_fold``). The fold is
+    explicit in the impact phase can (``dynamics.orbits.modal_branch.branch_fold``). The fold is
     reported only if it lies beyond the last point reached, towards ``stop``, and its
     orbit is an orbit of the exact map (one period of ``ModalMap`` from its Pi2 state
     returns there to 1e-8 with one impact: the explicit branch assumes that impact is the
     period's only contact). Returns a dict: delta_d, psi, v_minus, the multiplier nearest
     1 and the exact map's residual.
     """
-    from grazing_control.dynamics.orbits.ndof_branch import branch_fold
+    from grazing_control.dynamics.orbits.modal_branch import branch_fold
 
     if not branch.points or branch.stopped == "end":
         return None

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.orbits import ndof_branch as nb
+from grazing_control.dynamics.orbits import modal_branch as nb
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 
 from grazing_control.dynamics.orbits import orbits
 from grazing_control.dynamics.maps.modal_map import ModalMap

@@ -13,9 +13,9 @@ from scipy.optimize import brentq, linear_sum_assignment
 
 from grazing_control.dynamics.design import gains as design
 
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.orbits import modal_branch
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.control import Gains
@@ -162,7 +162,7 @@ def test_n1_limit_multipliers_existence_and_admissible_sets_are_the_1dof_design(
 
 @pytest.mark.parametrize("seed", [0, 3, 5])
 def test_limit_multipliers_are_the_exact_branch_limit(seed):
-    """The exact 1/1 branch (ndof_branch, no expansion) at impact phase psi has
+    """The exact 1/1 branch (modal_branch, no expansion) at impact phase psi has
     multipliers within O(psi) of the limit spectrum, det J = r^2 det N exactly."""
     m = _random_model(seed, 3)
     mu = 0.25
@@ -172,7 +172,7 @@ def test_limit_multipliers_are_the_exact_branch_limit(seed):
                                               rel=1e-9)
     errs = []
     for psi in (1e-3, 1e-4, 1e-5):
-        bp = ndof_branch.branch_point(m, k, math.copysign(psi, ndof_branch.branch_coefficients(m, k)[2]))
+        bp = modal_branch.branch_point(m, k, math.copysign(psi, modal_branch.branch_coefficients(m, k)[2]))
         errs.append(_match(np.linalg.eigvals(bp.monodromy), lim))
     assert 7 < errs[0] / errs[1] < 14 and 7 < errs[1] / errs[2] < 14
 
@@ -185,11 +185,11 @@ def test_existence_coefficient_is_the_branch_curvature(seed):
     for mu in (-0.3, 0.5):
         k = nd.gain_family(m, mu)
         g1 = nd.existence_coefficient(m, mu)
-        d1, g1_general, _v1 = ndof_branch.branch_coefficients(m, k)
+        d1, g1_general, _v1 = modal_branch.branch_coefficients(m, k)
         assert abs(d1) < 1e-10 * abs(g1) and g1_general == pytest.approx(g1, rel=1e-10)
         errs = []
         for psi in (1e-3, 1e-4):   # symmetric quotient: error O(psi^2)
-            dd = [ndof_branch.branch_point(m, k, x).delta_d for x in (psi, -psi)]
+            dd = [modal_branch.branch_point(m, k, x).delta_d for x in (psi, -psi)]
             errs.append(abs(-0.5 * (dd[0] + dd[1]) / psi ** 2 - g1))
         assert errs[1] < 1e-5 * abs(g1) and 70 < errs[0] / errs[1] < 130
 
@@ -231,9 +231,9 @@ def test_two_mass_chain_has_a_design():
     assert best.admissible and best.limit_radius < 0.8
     assert best.lambda0 is best.limit_multipliers and best.zeros_radius < 0.65
     free = np.zeros(2 * m.n)
-    d1, _g1, v1 = ndof_branch.branch_coefficients(m, free)
+    d1, _g1, v1 = modal_branch.branch_coefficients(m, free)
     assert d1 / v1 < 0          # Delta d < 0 where v- > 0
-    lam = [np.abs(np.linalg.eigvals(ndof_branch.orbit_at(m, free, -dd).monodromy)).max()
+    lam = [np.abs(np.linalg.eigvals(modal_branch.orbit_at(m, free, -dd).monodromy)).max()
            for dd in (1e-4, 1e-6)]
     assert lam[0] > 10 and lam[1] / lam[0] == pytest.approx(100, rel=0.01)
 
@@ -241,7 +241,7 @@ def test_two_mass_chain_has_a_design():
 # ------------------------------------------------------------- acceptance (issue 17)
 def _exact_multipliers(model, gains, delta_d):
     m = dataclasses.replace(model, delta_d=delta_d)
-    guess = ndof_branch.orbit_at(m, gains, delta_d).pi2_state
+    guess = modal_branch.orbit_at(m, gains, delta_d).pi2_state
     orbit = find_periodic(ModalMap(m, gains), guess)
     assert len(orbit.impacts) == 1 and orbit.impacts[0].v_minus > 0
     return floquet_multipliers(orbit.monodromy)
@@ -273,7 +273,7 @@ def test_cancelling_only_the_first_markov_parameter_is_not_enough(smooth, expone
     k = nd.cancel_first_markov(m, 0.2, 0.5, smooth_branch=smooth)
     markov = nd.markov_parameters(m, k)
     assert abs(markov[0]) < 1e-14 and abs(markov[1]) > 1e-2
-    d1, g1, _v1 = ndof_branch.branch_coefficients(m, k)
+    d1, g1, _v1 = modal_branch.branch_coefficients(m, k)
     assert (abs(d1) < 1e-12) == smooth
     dds = np.array([1e-5, 1e-7, 1e-9])
     big = [np.abs(_exact_multipliers(m, k, -dd)).max() for dd in dds]
