@@ -332,7 +332,7 @@ def test_sections_with_stable_zeros_are_where_every_zero_is_inside(seed):
         nd.sections_with_stable_zeros(chain, points=1)
 
 
-# ------------------------------------------------- the predicted spread (§17, ndof_spread)
+# ------------------------------------------------- the predicted spread (§17, noise)
 def _differences(f, y, h):
     """Fourth-order central differences of f at y, step h per column."""
     cols = []
@@ -374,10 +374,10 @@ def test_actuated_step_jacobian_is_the_exact_maps_derivative(start, tau_a, force
 @pytest.mark.parametrize("delay", [0.0, 0.3, 3.0])
 def test_n1_predicted_spread_is_the_1dof_noise_covariance(delay):
     """n = 1 (the study's model file) with the kick: the loop's orbit and Sigma of
-    ndof_spread are the 1-DOF closed form's (noise.noise_covariance, exact saltation)
+    noise are the 1-DOF closed form's (noise.noise_covariance, exact saltation)
     to 1e-12 (measured 7e-15, 1e-13, 2.9e-13)."""
     from grazing_control.dynamics.design import noise
-    from grazing_control.dynamics.design.ndof_spread import predicted_spread
+    from grazing_control.dynamics.design.noise import predicted_spread
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     m, p = _study()
@@ -400,7 +400,7 @@ def test_n1_through_the_lag_is_the_1dof_actuated_loop(tau_a, latency):
     (dynamics.simulation.actuator.actuated_step, its own flow) to 1e-8; the 1-DOF
     prediction, whose monodromy is central differences (error ~1e-6 of it, measured
     1.1e-6), agrees to 5e-6 (measured 7e-7)."""
-    from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
+    from grazing_control.dynamics.design.noise import predicted_spread, spread_linearisation
     from grazing_control.dynamics.simulation import actuator as one
 
     m, p = _study()
@@ -418,7 +418,7 @@ def test_n1_through_the_lag_is_the_1dof_actuated_loop(tau_a, latency):
                                            actuator=one.Actuator(tau_a, latency))
         return np.array([x, v, force])
 
-    jac = loop_linearisation(m, [g.c1, g.c2], got.orbit, act)[0]
+    jac = spread_linearisation(m, [g.c1, g.c2], got.orbit, act)[0]
     ref = _differences(f, np.asarray(got.orbit), 1e-6)
     assert np.max(np.abs(jac - ref)) < 1e-8 * np.abs(jac).max()
     want = orb.noise_covariance(g)
@@ -450,7 +450,7 @@ def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
     impact per period, and the std of every coordinate and of the force within 4 sampling standard errors of the prediction (the errors from the linear
     loop's correlations, 2.2-4.5 % here; measured ratios 0.980-1.015), the corrections'
     within 15 % (N12; measured with 2000 periods for each noise alone 0.975-0.999)."""
-    from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
+    from grazing_control.dynamics.design.noise import predicted_spread, spread_linearisation
     from grazing_control.plant.engine import Engine
     from grazing_control.plant.settings import load_model_file, settings_from_values
 
@@ -478,7 +478,7 @@ def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
         dvs.append(dv)
         ev, _ = eng.end_period()
     ratio = np.array(rows).std(axis=0) / (1e-5 * pred.std)
-    J, _g, _ev = loop_linearisation(model, k, pred.orbit, pulse)
+    J, _g, _ev = spread_linearisation(model, k, pred.orbit, pulse)
     for i, r in enumerate(ratio):
         if pred.std[i] > 1e-30:     # (the force at the section: e^-40 of the pulse's)
             assert abs(r - 1.0) < 4.0 * _std_error(J, pred.covariance, i, periods), (i, ratio)
@@ -496,8 +496,8 @@ def test_design_prints_the_predicted_spread_through_the_lag(capsys):
     import json
 
     from grazing_control import cli
-    from grazing_control.dynamics.design.ndof_spread import predicted_spread
-    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.design.noise import predicted_spread
+    from grazing_control.dynamics.design.noise import filter_covariance
     from grazing_control.dynamics.simulation.actuator import Actuator
 
     argv = ["design", "--model", str(CHAIN), "--mu", "-0.22", "--delay", "1.0",
@@ -512,7 +512,7 @@ def test_design_prints_the_predicted_spread_through_the_lag(capsys):
     assert got["spectral_radius"] == pytest.approx(0.8964, abs=5e-5)
     np.testing.assert_allclose(got["orbit"], want.orbit, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(got["measured"]["std"], want.std, rtol=1e-12)
-    r = ndof_filter_covariance(model, k, want.orbit[:4], 50, 0, 1.0, width=1.0,
+    r = filter_covariance(model, k, want.orbit[:4], 50, 0, 1.0, width=1.0,
                                section_sample=False, actuator=Actuator(0.1, 0.05),
                                force0=float(want.orbit[4]))
     pos = predicted_spread(model, k, act, measurement=r, orbit=want.orbit)

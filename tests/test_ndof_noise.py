@@ -34,7 +34,7 @@ def test_the_n1_model_gives_the_1dof_noise_covariance():
         g = Gains(degenerate_c1(p, -0.3, delay), -0.3, delay)
         target = orbit_11(p, g).pi2_deviation
         want = noise.noise_covariance(p, g, np.eye(2), target)
-        got = noise.ndof_noise_covariance(m, [g.c1, g.c2], target, np.eye(2), delay)
+        got = noise.noise_covariance(m, [g.c1, g.c2], np.eye(2), target, delay)
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=0)
 
 
@@ -54,9 +54,9 @@ def test_the_predicted_spread_is_the_seeded_closed_loops():
                       coordinate=0, periods=300, control_after=10, seed=0)
     assert run.resets == 0 and np.all(run.impacts_per_period[70:] == 1)
     orbit = find_periodic(ModalMap(model, design.gains, 1.0), run.truth[-1]).state
-    R = noise.ndof_filter_covariance(model, design.gains, orbit, 200, 0, 1.0,
+    R = noise.filter_covariance(model, design.gains, orbit, 200, 0, 1.0,
                                      section_sample=False)
-    S = noise.ndof_noise_covariance(model, design.gains, orbit, R, 1.0)
+    S = noise.noise_covariance(model, design.gains, R, orbit, 1.0)
     predicted = 1e-4 * np.sqrt(np.diag(S))
     measured = (run.truth[70:] - orbit).std(axis=0)
     ratio = measured / predicted
@@ -70,5 +70,5 @@ def test_the_predicted_spread_is_the_seeded_closed_loops():
     # sample at t_k: 1.089 and 1.095)
     assert abs(np.mean(ratio) - 1.0) < 0.05 and abs(np.mean(filt) - 1.0) < 0.05
     # with the sample at t_k counted the filter's predicted std is 10-13 % smaller
-    full = noise.ndof_filter_covariance(model, design.gains, orbit, 200, 0, 1.0)
+    full = noise.filter_covariance(model, design.gains, orbit, 200, 0, 1.0)
     assert np.all(np.sqrt(np.diag(R) / np.diag(full)) > 1.08)

@@ -434,13 +434,12 @@ def _family_spread(args, model, design, delay):
     lag) and of the corrections, every coordinate measured with sigma (R = I), the
     position of the wall coordinate only (the model filter's covariance at --sensor-rate
     over the samples a lockstep controller fits), and the velocity noise at Pi2
-    (dynamics/design/ndof_spread.py, docs/theory_ndof.md section 17). Null entries
+    (dynamics/design/noise.py, docs/theory_ndof.md section 17). Null entries
     where the loop has no stable 1/1 orbit there."""
     import dataclasses
 
     from grazing_control.dynamics.design.family import Actuation
-    from grazing_control.dynamics.design.ndof_spread import predicted_spread
-    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.design.noise import filter_covariance, predicted_spread
     from grazing_control.dynamics.simulation.actuator import Actuator
 
     given = getattr(args, "delta_d", None)      # (grazing rig's design has none)
@@ -464,7 +463,7 @@ def _family_spread(args, model, design, delay):
         act = None if not isinstance(delay, Actuation) else \
             Actuator(delay.time_constant, delay.latency)
         kick_delay = delay.delay if isinstance(delay, Actuation) else delay
-        r = ndof_filter_covariance(q, design.gains, orbit[:d], rate, model.i_w, kick_delay,
+        r = filter_covariance(q, design.gains, orbit[:d], rate, model.i_w, kick_delay,
                                    width=delay.width if act else 0.0, section_sample=False,
                                    actuator=act, force0=float(orbit[d]) if lag else 0.0)
         cases = {"measured": {}, "position_only": {"measurement": r},
