@@ -24,8 +24,8 @@ __all__ = ["cmd_design"]
 def cmd_design(args):
     if args.model is not None:
         return _family_design(args)
-    from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, evaluate_design,
-                                                 write_controller_yaml)
+    from grazing_control.dynamics.design.gains import C2_LIMIT, write_controller_yaml
+    from grazing_control.dynamics.design.model_design import admissible_set, evaluate_design
 
     p = params_of(args)
     t0 = time.perf_counter()
@@ -38,7 +38,7 @@ def cmd_design(args):
     elif args.c2 is None:
         raise ParameterError("c2 is missing: give --c2 (the chosen gain) or --optimize noise")
     point = evaluate_design(p, args.c2, args.delay)
-    sets = {c: admissible_c2(p, delay=args.delay, conditions=c)
+    sets = {c: admissible_set(p, c, args.delay)
             for c in ("combined", "impacting", "non-impacting")}
     cost = time.perf_counter() - t0
     other = None
@@ -306,6 +306,8 @@ def _family_design(args):
     [--actuator-bandwidth B] [--actuator-latency L]] [--out FILE] (docs/ndof_commands.md;
     the delayed design is docs/theory_ndof.md §14, the pulse's §15)."""
     from grazing_control.dynamics.design import family as nd
+    from grazing_control.dynamics.design.model_design import (admissible_set, evaluate_design,
+                                                              free_multipliers)
 
     rig = getattr(args, "rig_model", None)          # --rig FILE of n masses (cli/rig.py)
     model = load(args.model) if rig is None else rig.model()
@@ -317,7 +319,7 @@ def _family_design(args):
     k0 = np.asarray(nd.gain_family(model, 0.0, delay), dtype=float)
     k1 = np.asarray(nd.gain_family(model, 1.0, delay), dtype=float) - k0
     zeros = np.asarray(nd.transmission_zeros(model, delay), dtype=complex)
-    sets = {c: _intervals(nd.admissible_mu(model, c, delay))
+    sets = {c: _intervals(admissible_set(model, c, delay))
             for c in ("impacting", "non-impacting")}
     intervals = _intersection(sets["impacting"], sets["non-impacting"])   # "combined"
     given = [f for f, v in (("--mu", args.mu), ("--free-gain", args.free_gain)) if v is not None]
@@ -331,11 +333,11 @@ def _family_design(args):
     else:
         mu, chosen = nd.default_mu(intervals)
     mu += 0.0   # no "-0" in the report
-    design = nd.evaluate_design(model, mu, delay)
+    design = evaluate_design(model, mu, delay)
     k = np.asarray(design.gains, dtype=float)
     lam0 = np.asarray(design.limit_multipliers, dtype=complex)
     gamma = float(design.gamma1)
-    rho_free = float(np.max(np.abs(nd.free_multipliers(model, mu, delay))))
+    rho_free = float(np.max(np.abs(free_multipliers(model, mu, delay))))
     conditions = {"limit_stable": bool(design.stable), "exists_impacting": bool(design.exists),
                   "free_stable": bool(design.free_stable)}
     admissible = bool(design.admissible)

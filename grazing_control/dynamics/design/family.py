@@ -2,7 +2,8 @@
 
 The family w^T N(k) = mu w^T is the design of every model file, n = 1 included, where it
 is the 1-DOF (c1, c2) family of :mod:`.gains` (the closed form, parametrised by c2;
-tests/test_n1_model_file.py: the same multipliers to 1e-12).
+tests/test_n1_model_file.py: the same multipliers to 1e-12); :mod:`.model_design` is the
+one entry over both that callers use.
 
 Derived in docs/theory_ndof.md (sections cited as §N). State z in R^{2n}: the deviation
 (positions, velocities) from the non-impacting periodic response; on
