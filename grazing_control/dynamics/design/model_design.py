@@ -23,10 +23,10 @@ from __future__ import annotations
 import numpy as np
 
 from grazing_control.oscillator.control import Gains
-from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams
 
 from grazing_control.dynamics.design import family, gains
+from grazing_control.dynamics.maps.model import is_model_file
 
 __all__ = ["PARAMETERS", "parameter_name", "evaluate_design", "limit_multipliers",
            "existence_coefficient", "free_multipliers", "admissible_set"]
@@ -35,18 +35,9 @@ __all__ = ["PARAMETERS", "parameter_name", "evaluate_design", "limit_multipliers
 PARAMETERS = {"1-DOF": "c2", "model file": "mu"}
 
 
-def _is_model_file(model) -> bool:
-    if isinstance(model, NdofModel):
-        return True
-    if isinstance(model, OscillatorParams):
-        return False
-    raise TypeError(f"model={model!r} is invalid: expected OscillatorParams (the 1-DOF "
-                    "oscillator) or NdofModel (a model file)")
-
-
 def parameter_name(model) -> str:
     """'c2' (the 1-DOF closed form) or 'mu' (a model file's family)."""
-    return PARAMETERS["model file" if _is_model_file(model) else "1-DOF"]
+    return PARAMETERS["model file" if is_model_file(model) else "1-DOF"]
 
 
 def _closed_form_gains(p: OscillatorParams, c2: float, delay) -> Gains:
@@ -59,21 +50,21 @@ def evaluate_design(model, value: float, delay=0.0):
     :class:`.gains.DesignPoint` for the 1-DOF oscillator, a :class:`.family.FamilyDesign`
     for a model file; both say ``stable``, ``free_stable``, ``admissible_impacting`` and
     ``admissible`` and carry ``gamma1``."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return family.evaluate_design(model, value, delay)
     return gains.evaluate_design(model, value, delay)
 
 
 def limit_multipliers(model, value: float, delay=0.0) -> np.ndarray:
     """The multipliers of the controlled 1/1 orbit as Delta d -> 0- (Eq. 23; §6)."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return family.limit_multipliers(model, value, delay)
     return gains.limit_multipliers(model, _closed_form_gains(model, value, delay))
 
 
 def existence_coefficient(model, value: float, delay=0.0) -> float:
     """gamma1 of Delta d = -gamma1 psi^2 + O(psi^3) on the 1/1 branch (Eq. 36; §7)."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return family.existence_coefficient(model, value, delay)
     return gains.existence_coefficient(model, _closed_form_gains(model, value, delay))
 
@@ -81,7 +72,7 @@ def existence_coefficient(model, value: float, delay=0.0) -> float:
 def free_multipliers(model, value: float, delay=0.0) -> np.ndarray:
     """The eigenvalues of the smooth map N through grazing: the non-impacting motion's
     multipliers (d > d*; for a model file mu and the transmission zeros, §4)."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return family.free_multipliers(model, value, delay)
     return gains.free_multipliers(model, _closed_form_gains(model, value, delay))
 
@@ -90,6 +81,6 @@ def admissible_set(model, conditions: str = "combined", delay=0.0) -> list:
     """The intervals of the family's parameter where the design's ``conditions`` hold
     ('combined', 'impacting', 'non-impacting'): :func:`.gains.admissible_c2` (c2) or
     :func:`.family.admissible_mu` (mu), an unbounded end reported as infinite."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return family.admissible_mu(model, conditions, delay)
     return gains.admissible_c2(model, delay=delay, conditions=conditions)

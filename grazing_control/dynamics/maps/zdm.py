@@ -75,6 +75,7 @@ from grazing_control.oscillator.impact import Segment
 from grazing_control.oscillator.ndof.impact import saltation_matrix
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.dynamics.maps.maps import flow_through_pi2, period_matrix, pi1_map
+from grazing_control.dynamics.maps.model import is_model_file
 from grazing_control.oscillator.params import OscillatorParams
 
 __all__ = [
@@ -100,17 +101,6 @@ __all__ = [
 
 #: Truncations accepted by :func:`zdm` and :func:`normal_form_map`.
 ORDERS = (1, 2, "exact")
-
-
-def _is_model_file(model) -> bool:
-    """True for a model file of any n (the modal formulas), False for the 1-DOF
-    oscillator's parameters (the closed forms); anything else is refused."""
-    if isinstance(model, NdofModel):
-        return True
-    if isinstance(model, OscillatorParams):
-        return False
-    raise TypeError(f"model={model!r} is invalid: expected OscillatorParams (the 1-DOF "
-                    "oscillator) or NdofModel (a model file)")
 
 
 def _design():
@@ -164,7 +154,7 @@ def local_grazing(model):
     """The model's local data at grazing: :class:`LocalGrazing` (alpha, beta, c3, k of the
     wall d = d* + Delta d at tau*) for the 1-DOF oscillator, :class:`ModalGrazing`
     (alpha*, kappa, c, w, e_v, d*) for a model file."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return _modal_grazing(model)
     p = model
     alpha = -p.a_star + p.delta_d
@@ -196,7 +186,7 @@ def _modal_state(model: NdofModel, z) -> np.ndarray:
 def gap_on_pi1(model, z):
     """(e1, e2) = (gap, gap rate) of the virtual deviation z on Pi1: (z_x - Delta d, z_v)
     for the 1-DOF oscillator, (w^T z - Delta d, e_v^T z) for a model file (§10)."""
-    if _is_model_file(model):
+    if is_model_file(model):
         z = _modal_state(model, z)
         return float(z[model.i_w]) - model.delta_d, float(z[model.n + model.i_w])
     return z[0] - model.delta_d, z[1]
@@ -211,7 +201,7 @@ def h_max(model, z, order: int = 2) -> float:
     """
     g = local_grazing(model)
     e1, e2 = gap_on_pi1(model, z)
-    if _is_model_file(model):
+    if is_model_file(model):
         if order == 1:
             alpha = g.alpha
         elif order == 2:
@@ -382,7 +372,7 @@ def crossing(model, z):
     ValueError
         If Newton's method finds no maximum of the gap within a quarter period of Pi1.
     """
-    if _is_model_file(model):
+    if is_model_file(model):
         z = _modal_state(model, z)
         f = _ModalGap(model, z)
         return local_crossing(f, f.loc.ev @ z / f.loc.alpha, f.loc.alpha, model.period,
@@ -454,7 +444,7 @@ def zdm(model, z, order=2):
     ((Z2) with (t1, v-) from :func:`crossing`). The identity where the smooth flow does
     not reach the wall. 1-DOF: the closed forms (:func:`zdm_leading`, :func:`zdm_second`,
     :func:`zdm_exact`), a pair; a model file: the module docstring's, an array."""
-    if not _is_model_file(model):
+    if not is_model_file(model):
         if order == 1:
             return zdm_leading(model, z)
         if order == 2:
@@ -485,7 +475,7 @@ def zdm_jacobian(model, z, order=2):
 
     The identity where H <= 0 (no impact).
     """
-    if not _is_model_file(model):
+    if not is_model_file(model):
         return _closed_form_jacobian(model, z, order)
     z = _modal_state(model, z)
     d = 2 * model.n
@@ -523,7 +513,7 @@ def smooth_map(model, gains=None):
     uncontrolled); a model file: N(k) = Phi(T - s)(I + b k^T) Phi(s), a matrix
     (docs/theory_ndof.md §2; ``gains`` the vector k).
     """
-    if _is_model_file(model):
+    if is_model_file(model):
         return _design().smooth_map(model, gains)
     return period_matrix(model, gains)
 
@@ -556,7 +546,7 @@ def normal_form_map(model, z, gains=None, order=2):
     >>> normal_form_map(p, (1e-3, 0.0), order=1) == normal_form_map(p, (1e-3, 0.0), order=2)
     True
     """
-    if _is_model_file(model):
+    if is_model_file(model):
         return smooth_map(model, gains) @ zdm(model, z, order)
     n11, n12, n21, n22 = smooth_map(model, gains)
     wx, wv = zdm(model, z, order)
@@ -565,7 +555,7 @@ def normal_form_map(model, z, gains=None, order=2):
 
 def normal_form_jacobian(model, z, gains=None, order=2):
     """Jacobian of :func:`normal_form_map`: N_g dD/dz (1-DOF as (J11, J12, J21, J22))."""
-    if _is_model_file(model):
+    if is_model_file(model):
         return smooth_map(model, gains) @ zdm_jacobian(model, z, order)
     return matmul2(smooth_map(model, gains), zdm_jacobian(model, z, order))
 
