@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip("numba")
 
 from grazing_control.dynamics.estimation.compiled_flow import event_offsets  # noqa: E402
-from grazing_control.dynamics.estimation.section_state import trajectory  # noqa: E402
+from grazing_control.dynamics.estimation.motion import trajectory  # noqa: E402
 from grazing_control.dynamics.estimation.stream import (StreamEstimator,  # noqa: E402
                                                         predict_section, simulate_stream)
 from grazing_control.dynamics.design.tuning import optimize_noise  # noqa: E402

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from grazing_control import cli
-from grazing_control.dynamics.design.ndof_design import evaluate_design
+from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.identification.modal import ModalLayout, modal_of
 from grazing_control.oscillator.ndof.model import load_model
 from test_ndof_nodes import CHAIN, STREAM_DD, stream_scene

@@ -106,7 +106,7 @@ def test_the_scene_is_captured_one_impact_per_held_period(scene):
 @pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
 def test_each_section_is_the_n_dof_pulse_map_of_the_force_that_acted(scene):
     """The plant behind the contract is the rig's model: each Pi2 sample is the exact
-    n-DOF pulse map (ModelController.predict: ndof_map.pulse_step) of the one before with
+    n-DOF pulse map (ModelController.predict: modal_map.pulse_step) of the one before with
     the correction of the force rig/applied says acted (F w / (m_a omega_n l))."""
     from grazing_control.ros.controller_values import model_controller_from_values
     from grazing_control.ros.rig_boundary import controller_values, correction_of

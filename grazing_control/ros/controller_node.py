@@ -170,7 +170,7 @@ class ControllerNode(Node):
         self.rig_model = (self.rig.model() if self.rig is not None and self.rig.n > 1
                           else None)
         # how a correction acts in the plant: a rig's force pulse (its estimator and
-        # prediction integrate it, dynamics.estimation.section_state.trajectory), else the kick
+        # prediction integrate it, dynamics.estimation.motion.trajectory), else the kick
         self.pulse = (0.0, math.inf, None)
         # (a rig file's are the defaults: rig_boundary.controller_values; its actuator's
         # latency is in the budget)

@@ -22,7 +22,7 @@ the limit (the callers prefix the option and exit with status 2).
   (:data:`YAML12_FLOAT`; tests/test_parameter_files_hostile.py compares both readings).
 
 The controller's gain files (``dynamics.design.gains.write_controller_yaml``,
-``dynamics.design.ndof_design.write_gain_yaml``) and the model files of ``grazing identify``
+``dynamics.design.family.write_gain_yaml``) and the model files of ``grazing identify``
 (``cli.parameter_file.write_parameter_file``) are written to a temporary file in the
 target's folder and renamed onto it: a failure (a full disk, a read-only folder, a
 signal) leaves the old file or none, never a half-written one.

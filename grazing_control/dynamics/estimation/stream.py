@@ -36,9 +36,10 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
-                         deviation_samples, detect_impact, model_update, nearest_estimate,
-                         section_force, trajectory, trajectory_end, unkick)
+from grazing_control.dynamics.estimation.section_state import (
+    CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit, deviation_samples,
+    detect_impact, model_update, nearest_estimate, unkick)
+from grazing_control.dynamics.estimation.motion import section_force, trajectory, trajectory_end
 
 __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
            "pulse_shape", "warm_up"]
@@ -88,7 +89,7 @@ class StreamEstimator:
         (``pulse_width`` 0, the default), or the rig's force pulse of that width centred
         there, its force clipped to ``force_limit`` (> 0; inf: none). The model filter
         and :func:`predict_section` integrate it exactly
-        (:func:`grazing_control.dynamics.estimation.section_state.trajectory`); a kick in the model of
+        (:func:`grazing_control.dynamics.estimation.motion.trajectory`); a kick in the model of
         a pulse in the plant put the rig scene's mean 5e-5 off its orbit.
     actuator : Actuator or None
         The plant's first-order actuator between the commanded pulse and the force
@@ -98,7 +99,7 @@ class StreamEstimator:
         (:meth:`section_force`). None: the force is the command.
     kernel : bool or None
         Run the model filter compiled
-        (:func:`grazing_control.dynamics.estimation.section_state.trajectory`'s ``kernel``:
+        (:func:`grazing_control.dynamics.estimation.motion.trajectory`'s ``kernel``:
         the same estimates bit for bit, tests/test_estimation_compiled.py); None: where the
         compiled kernel is in use (:func:`grazing_control.oscillator.kernel.use_kernel`,
         ``GRAZING_KERNEL``). Kept as the ``kernel`` attribute, for
@@ -292,7 +293,7 @@ class StreamEstimator:
 
     def section_force(self, k: int) -> float:
         """The actuator's force at section k, left by the known corrections of the
-        periods before: :func:`grazing_control.dynamics.estimation.section_state.section_force` period
+        periods before: :func:`grazing_control.dynamics.estimation.motion.section_force` period
         by period from the force carried at the oldest section kept (``force_at``, moved
         on as old corrections are dropped; 0 at the first correction since
         :meth:`reset`), a period without a known correction with none; 0 without an
@@ -311,7 +312,7 @@ class StreamEstimator:
 
     def correction_shape(self, k: int) -> dict:
         """How the correction of period k acts, as keywords of
-        :func:`grazing_control.dynamics.estimation.section_state.trajectory`: the pulse, the actuator
+        :func:`grazing_control.dynamics.estimation.motion.trajectory`: the pulse, the actuator
         and its force at section k."""
         shape = dict(width=self.pulse[0], force_limit=self.pulse[1])
         if self.actuator is not None:

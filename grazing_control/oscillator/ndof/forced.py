@@ -114,7 +114,7 @@ def advance_with_force(flow: NdofFlow, tau0: float, z0, duration: float, force: 
     With ``wall`` it returns (segment, g), g = d z(end) / d Delta d' the sensitivity to the
     clearance (zero before the first impact; an impact adds (I - S) e_w, the flow carries it
     on: docs/theory_estimation.md (E8)), which the pulse map's Jacobian needs
-    (:meth:`grazing_control.dynamics.maps.ndof_map.NdofMap.step`).
+    (:meth:`grazing_control.dynamics.maps.modal_map.ModalMap.step`).
     """
     z0 = check_state(flow, z0, "the start state")
     shifted = forced_flow(flow, force)
