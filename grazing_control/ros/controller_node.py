@@ -196,7 +196,7 @@ class ControllerNode(Node):
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
             if self.stream is not None and self.stream.kernel:
-                warm_stream_kernel()     # compiled model filter loaded now, not at section 0
+                warm_stream_kernel(self.model)   # compiled model filter loaded now, not at section 0
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)

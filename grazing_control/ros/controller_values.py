@@ -490,7 +490,7 @@ def model_stream_from_values(values: dict, ndof: ModelController,
                            float(values.get("state_period", 0.0)), floor,
                            bool(values.get("answer_after_section", False)),
                            float(values.get("answer_lead", 0.0)),
-                           kernel=False,     # the n-DOF motion is the core's (E11)
+                           kernel=None,      # compiled where numba is: bit for bit (E11)
                            coordinate=int(values.get("sensor_coordinate", 0)),
                            pulse_width=pulse[0], force_limit=pulse[1],
                            actuator=pulse[2] if len(pulse) > 2 else None)

@@ -123,8 +123,9 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     segments bit for bit, tests/test_kernel.py), and the evaluation at the samples of
     :mod:`.compiled_flow` (the same floating point operations as the NumPy code here);
     every output the same bit for bit (tests/test_estimation_compiled.py), several times faster
-    (benchmarks/bench_stream_estimator.py). The actuator's flow and the n-DOF motion are
-    the core's in both.
+    (benchmarks/bench_stream_estimator.py). The actuator's flow is the core's in both; for
+    a model file the events are the core's and the evaluation at the samples is
+    :mod:`.compiled_modal_flow`'s (issue 32, bit for bit as well).
 
     With an ``actuator`` (:class:`grazing_control.dynamics.simulation.actuator.Actuator`, not
     ideal; ``width`` > 0) the pulse is the command, and the force on the mass follows it
@@ -159,7 +160,8 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
         return actuated_trajectory(p, z0, s, correction, delay, duration, width, force_limit,
                                    actuator, force0, wall=wall)
     if isinstance(p, NdofModel):
-        return modal_trajectory(p, z0, s, correction, delay, duration, width, force_limit)
+        return modal_trajectory(p, z0, s, correction, delay, duration, width, force_limit,
+                                kernel)
     flow = _kernel.advance if kernel else advance
     # events: (time, state after, jacobian after); start, kick, impacts
     events = []
@@ -403,7 +405,8 @@ def modal_transitions(flow: NdofFlow, h) -> np.ndarray:
 
 
 def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
-                     duration: float, width: float = 0.0, force_limit: float = math.inf):
+                     duration: float, width: float = 0.0, force_limit: float = math.inf,
+                     kernel: bool = False):
     """:func:`trajectory` of a model file (docs/theory_estimation.md, (E11)): from
     the Pi2 deviation z0 (2n) before the correction, the kick v_{i_a} += correction at
     ``delay``; between events z(s) = Phi(s - s_e) z_e, d z(s) / d z0 = Phi(s - s_e) M_e,
@@ -418,7 +421,9 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     Delta d - sigma_w F (oscillator/ndof/forced.py), so z(s) = Phi(s - s_e)(z_e - sigma F)
     + sigma F and the saltation matrices are the shifted flow's; F does not depend on z0
     (the correction is known), so the Jacobian keeps its form.
-    A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError."""
+    A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError.
+    ``kernel``: the evaluation at the samples compiled (:mod:`.compiled_modal_flow`, the
+    same numbers bit for bit; the events are the core's in both)."""
     flow = modal_flow(model)
     n, w = model.n, model.i_w
     z = np.array(z0, dtype=float).reshape(-1)
@@ -458,6 +463,8 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
         m = flow.transition(end - t_e) @ m
         z = np.array(seg.z, dtype=float) + shift
     times = np.array([e[0] for e in events])
+    if kernel:
+        return _compiled_modal_samples(flow, events, times, s, width > 0.0) + (z, m, impacts)
     idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
     phi = modal_transitions(flow, s - times[idx])
     out = np.einsum("mij,mj->mi", phi, np.array([e[1] for e in events])[idx])
@@ -465,6 +472,20 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
         out = out + np.array([e[3] for e in events])[idx]
     jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
     return out, jac, z, m, impacts
+
+
+def _compiled_modal_samples(flow: NdofFlow, events, times, s, shifted: bool):
+    """(z, jac) at the samples of :func:`modal_trajectory` from its ``events`` by
+    :mod:`.compiled_modal_flow`, bit for bit."""
+    from .compiled_flow import event_offsets
+    from .compiled_modal_flow import modal_flow_at_samples
+
+    idx, h = event_offsets(times, s)
+    e = np.exp(np.multiply.outer(h, flow.eigenvalues))     # as modal_transitions
+    return modal_flow_at_samples(flow.modes, e, flow.inverse, idx,
+                                 np.array([ev[1] for ev in events]),
+                                 np.array([ev[2] for ev in events]),
+                                 np.array([ev[3] for ev in events]), shifted)
 
 
 def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay: float,

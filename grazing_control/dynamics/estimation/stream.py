@@ -399,6 +399,7 @@ class StreamEstimator:
                     new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
                                                 at - (k - 1) * T, floor=self.floor,
                                                 coordinate=self.coordinate,
+                                                kernel=self.kernel,
                                                 **self.correction_shape(k - 1))
                 except (ValueError, np.linalg.LinAlgError, ArithmeticError):
                     continue
@@ -539,15 +540,25 @@ def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.
     return end
 
 
-def warm_up() -> None:
+def warm_up(p: OscillatorParams | None = None) -> None:
     """Load the compiled model filter where the kernel is in use (the kernel and
     :mod:`grazing_control.dynamics.estimation.compiled_flow`: compiled on a machine's first
     call, then loaded from numba's cache, ~1 s) so that the first section does not wait
-    for it: controller_node calls it at start in stream mode."""
+    for it: controller_node calls it at start in stream mode. With an n-DOF model ``p``
+    also :mod:`grazing_control.dynamics.estimation.compiled_modal_flow` (its model filter's
+    evaluation at the samples; a 1-DOF controller never loads it)."""
     if _kernel.use_kernel():
         _kernel.warm_up()
         trajectory(OscillatorParams(delta_d=-1e-3), (0.0, 0.0), np.array([1.0]), 0.1, 1.0,
                    width=0.1, kernel=True)
+        if isinstance(p, NdofModel):
+            from .compiled_modal_flow import modal_flow_at_samples
+
+            flow = NdofFlow.of(p)
+            e = np.exp(np.multiply.outer(np.zeros(1), flow.eigenvalues))
+            rows = np.zeros((1, 2 * p.n))
+            modal_flow_at_samples(flow.modes, e, flow.inverse, np.zeros(1, np.int64), rows,
+                                  np.zeros((1, 2 * p.n, 2 * p.n)), rows, True)
 
 
 def pulse_shape(p: OscillatorParams, pulse_width: float, force_limit: float) -> tuple:
