@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -51,6 +52,7 @@ from grazing_control.ros import launcher
 from grazing_control.ros.rig_boundary import answer_lead, controller_values
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
 
 
 def design(rig, c2, lead=None):
@@ -190,6 +192,75 @@ def core(rig, c2, forces, periods, enable_after, seed=7):
               f"{run.resets}")
 
 
+def masses_scene(args, rig) -> int:
+    """A rig of n masses through the nodes (docs/rig_scene.md, "A rig of n masses"): the
+    scene at 1/``--slow`` of physical speed with the file's sensor (its noise
+    ``--noise-um`` where given), the controller's summary, who was late section by section
+    (rig_timing), and over the controlled periods: the deadline misses (rig/applied: in
+    time, prediction, nothing, safe) and the impacts per period of the impacting mass."""
+    import yaml
+
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_rig_"))
+    out.mkdir(parents=True, exist_ok=True)
+    path = Path(args.rig)
+    if args.noise_um is not None:
+        doc = yaml.safe_load(path.read_text())
+        doc["sensor"]["noise"] = f"{args.noise_um!r} um"
+        path = out / "rig.yaml"
+        path.write_text(yaml.safe_dump(doc))
+        rig = load_rig(path)
+    print(f"rig {args.rig}: {rig.n} masses, sensor {rig.sensor.rate:g} Hz, noise "
+          f"{rig.sensor.noise * 1e6:g} um, {args.periods} periods at 1/{args.slow:g} of "
+          f"physical speed, control from {args.enable_after}; load %.2f %.2f %.2f"
+          % __import__("os").getloadavg())
+    t0 = time.time()
+    res = launcher.run(None, None, str(out / "bag"), args.periods, rig=str(path),
+                       enable_after=args.enable_after,
+                       timeout=args.periods * 0.3 * args.slow + 120, log_dir=str(out / "logs"),
+                       sim_overrides=dict(
+                           {} if args.slow == 1.0 else {"time_scale": rig.omega_n / args.slow},
+                           **({} if args.watchdog_misses is None else
+                              {"watchdog_misses": args.watchdog_misses})))
+    print(f"scene: {res} ({time.time() - t0:.0f} s); load at the end %.2f %.2f %.2f"
+          % __import__("os").getloadavg())
+    for name in ("sim_node", "controller_node"):
+        log = Path(res.logs.get(name, ""))
+        if log.is_file():
+            lines = [ln for ln in log.read_text(errors="replace").splitlines()
+                     if "summary:" in ln]
+            if lines:
+                print(f"{name}: {lines[-1].split('summary: ', 1)[1]}")
+    from rig_timing import report, section_timing     # benchmarks/rig_timing.py
+
+    try:
+        print("\n".join(report(section_timing(out / "bag", answer_lead(rig) / rig.omega_n,
+                                               1.0 / rig.sensor.rate))))
+    except (OSError, StopIteration, ValueError) as exc:
+        print(f"no timing from the bag: {exc}")
+    from test_rig_scene import _messages, _seconds   # tests/: the bag's messages
+
+    m = _messages(out / "bag", ("/rig/applied", "/rig/phase", "/oscillator/impact"))
+    start = _seconds(m["/rig/phase"][0][1].header.stamp)
+    period = 1.0 / rig.frequency
+    status = {round((msg.wrench.torque.y - start) / period): int(msg.wrench.force.z)
+              for _, msg in m["/rig/applied"]}
+    counts = np.zeros(args.periods, dtype=int)
+    for _, msg in m["/oscillator/impact"]:
+        k = int(_seconds(msg.header.stamp) // (2.0 * math.pi / rig.model().omega))
+        if 0 <= k < args.periods:
+            counts[k] += 1
+    ctrl = [k for k in sorted(status) if args.enable_after <= k < args.periods]
+    late = [k for k in ctrl if status[k] != 0]
+    held = counts[args.enable_after:]
+    print(f"controlled sections {len(ctrl)}: deadline misses {len(late)} "
+          f"(rig/applied in time, predicted, nothing, safe: "
+          f"{[sum(status[k] == c for k in ctrl) for c in range(4)]}); sections missed "
+          f"{late[:20]}")
+    print(f"impacts per controlled period: one in {int(np.sum(held == 1))} of {held.size}, "
+          f"counts {np.bincount(held).tolist()}")
+    return 0 if res.ok else 1
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", default=str(ROOT / "config" / "rigs" / "acceptance.yaml"))
@@ -221,8 +292,12 @@ def main(argv=None):
                          "default: their own, 0 = off)")
     ap.add_argument("--recorder-batch-window", type=float, default=None, metavar="SECONDS",
                     help="recorder_node's batch_window (default: its own, 1 ms)")
+    ap.add_argument("--noise-um", type=float, default=None,
+                    help="a rig of n masses: the sensor's noise in µm (default the file's)")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
+    if rig.n > 1:
+        return masses_scene(args, rig)
     if args.engine_cost:
         engine_cost(rig)
         return 0

@@ -127,3 +127,29 @@ def test_each_section_is_the_n_dof_pulse_map_of_the_force_that_acted(scene):
                               (values["pulse_width"], values["force_limit"]))
         worst = max(worst, float(np.max(np.abs(np.concatenate([xn - x1, vn - v1])))))
     assert worst < 1e-11, worst
+
+
+@pytest.mark.realtime      # the scene's bag replayed: a controller at the recorded pace x 2
+def test_the_replay_through_mock_hardware_gives_the_same_pulses_bit_for_bit(scene, tmp_path):
+    """The scene's bag through rig_mock (rig/sensor of both masses, rig/phase, rig/clock
+    and rig/applied in their recorded order) and a controller_node with the recorded
+    parameters (recordings/rig_replay.py): every rig/force_pulse again, float64 bytes
+    equal field by field. With another rig_mu the comparison fails naming the first
+    section: the n-DOF controller's gains are derived again from rig_file and rig_mu
+    (before, the recorded gains were passed on as given and the controller refused to
+    start beside the new rig_mu: every command "missing", nothing compared)."""
+    from grazing_control.recordings.rig_replay import replay_rig
+
+    _rig, res, m = scene
+    same = replay_rig(res.bag_dir, time_scale=2.0, log_dir=tmp_path / "same", timeout=120)
+    recorded = len({msg.wrench.torque.y for _, msg in m["/rig/force_pulse"]})
+    assert same["status"] == 0, same
+    assert (same["identical"], same["differing"], same["missing"], same["extra"]) == (
+        recorded, 0, 0, 0), same
+    assert same["controller"]["applied_after_use"] == "0", same["controller"]
+    other = replay_rig(res.bag_dir, time_scale=2.0, log_dir=tmp_path / "other", timeout=120,
+                       controller_overrides={"rig_mu": 0.1})
+    assert other["status"] == 1 and other["missing"] == 0 and other["differing"] >= 1, other
+    first = m["/rig/force_pulse"][0][1].wrench.torque.y       # section 0 predicts section 1
+    assert other["first"].startswith(f"section t_k={first!r} s: force.y (predicted F, N) "
+                                     "recorded "), (other["first"], first)
