@@ -25,6 +25,12 @@ Printed, against the design (the core: dynamics/design/noise.py, dynamics/estima
     .venv/bin/python benchmarks/bench_rig_scene.py [--rig config/rigs/acceptance.yaml]
         [--periods 900] [--enable-after 200] [--c2 C2] [--engine-cost]
 
+A rig file of n masses (config/rigs/two_mass_beam.yaml, issue 32) runs that rig's scene
+instead (``--slow``, ``--watchdog-misses``, ``--noise-um``): the controller's summary, who
+was late (rig_timing), the deadline misses and impacts per controlled period; with
+``--core-noise UM ...`` only its closed loop in one process at each sensor noise (the
+noise it tolerates, docs/rig.md).
+
 ``--engine-cost``: the simulator's CPU for one period and for its stream's states on
 the rig file's stop, and for the scheduled realtime loop's engine calls of a period
 (stream included), no nodes (a compliant stop's cost, docs/rig_scene.md).
@@ -192,6 +198,60 @@ def core(rig, c2, forces, periods, enable_after, seed=7):
               f"{run.resets}")
 
 
+def masses_core(rig, path, noises_um, periods: int, enable_after: int, settle: int = 5,
+                seeds=(7, 8, 9)) -> None:
+    """A rig of n masses in one process (no nodes, no deadlines: the calls the nodes make,
+    as studies.near_grazing.scene.stream_loop): sim_node's engine on the rig's model with
+    its sensor (rate, noise ``noises_um`` in µm) and 2 ms pulse, the controller's stream
+    estimator on sensor.masses[0] (its answer lead) and its gains k^T z^ from
+    ``enable_after``. Per noise: sigma / |Delta d| (model units), the share of the held
+    periods (from enable_after + settle) with one impact, the Pi2 position of the
+    impacting mass (its deviation z_w from X_p: mean and std, model units), the filter's resets."""
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    model = rig.model()
+    v = controller_values(rig, math.nan)
+    k, delay, c = np.asarray(v["gains"]), v["actuation_delay"], v["sensor_coordinate"]
+    w = model.i_w
+    for um in noises_um:
+        sigma = um * 1e-6 / rig.scales.length
+        ones, held, xs, resets = 0, 0, [], 0
+        for seed in seeds:
+            sv = {key: val for key, val in sim_values(rig).items()
+                  if key not in ("time_scale", "pre_roll")}
+            sv.update(sensor_noise=sigma, sensor_seed=seed)
+            eng = Engine(settings_from_values(sv, str(path), model))
+            est = StreamEstimator(model, "model", sigma, "stream", v["state_period"],
+                                  lead=v["answer_lead"], pulse_width=v["pulse_width"],
+                                  force_limit=v["force_limit"], coordinate=c)
+            due = []
+            for ev in eng.initial_states():
+                due += est.add_sample(ev.t, ev.x[c])
+            for j in range(periods):
+                due += est.flush(j)
+                (e,) = [d[2] for d in due if d[0] == j]
+                if j >= enable_after + settle:
+                    xs.append(float(eng.z[w]))
+                dv = float(k @ np.asarray(e.z)) if j >= enable_after else 0.0
+                est.set_correction(j, dv, delay)
+                events = eng.begin_period(dv, delay)
+                if j >= enable_after + settle:
+                    held += 1
+                    ones += sum(ev.kind == "impact" for ev in events) == 1
+                due = [d for ev in events if ev.kind == "state"
+                       for d in est.add_sample(ev.t, ev.x[c])]
+                eng.end_period()
+            resets += est.resets
+        x = np.asarray(xs)
+        print(f"noise {um:g} um: sigma {sigma:.3g} = {sigma / abs(model.delta_d):.3g} |Delta d|;"
+              f" one impact in {ones} of {held} held periods ({100 * ones / held:.1f} %); "
+              f"Pi2 deviation of x_{w} mean {x.mean():+.3g} std {x.std():.3g}; resets {resets} "
+              f"({len(seeds)} seeds x {periods} periods, control from {enable_after})")
+
+
 def masses_scene(args, rig) -> int:
     """A rig of n masses through the nodes (docs/rig_scene.md, "A rig of n masses"): the
     scene at 1/``--slow`` of physical speed with the file's sensor (its noise
@@ -294,8 +354,17 @@ def main(argv=None):
                     help="recorder_node's batch_window (default: its own, 1 ms)")
     ap.add_argument("--noise-um", type=float, default=None,
                     help="a rig of n masses: the sensor's noise in µm (default the file's)")
+    ap.add_argument("--core-noise", type=float, nargs="*", default=None, metavar="UM",
+                    help="a rig of n masses: only the closed loop in one process (no nodes) "
+                         "at each sensor noise in µm (default 0.2 0.5 1 2)")
+    ap.add_argument("--settle", type=int, default=5,
+                    help="--core-noise: periods after the switch-on left out (default 5)")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
+    if rig.n > 1 and args.core_noise is not None:
+        masses_core(rig, args.rig, args.core_noise or (0.2, 0.5, 1.0, 2.0), args.periods,
+                    args.enable_after, args.settle)
+        return 0
     if rig.n > 1:
         return masses_scene(args, rig)
     if args.engine_cost:

@@ -19,7 +19,12 @@ Scenes (``--scene``): ``rig``, the acceptance rig of issue 28 (config/rigs/accep
 150 samples a period, position only, 2 ms pulse, the answer 4 ms before the section's
 last sample, the controller's gains at c2 = 0.03276); ``t200``, the realtime stream of
 bench_stream_blocks.py (T/200, sigma 1e-4, pulse 0.1 at delay 3, the least-noise gains for
-delay 3). Printed per path: the time of a section's answer (the add_sample that makes it
+delay 3); ``masses``, the two-mass rig of issue 32 (config/rigs/two_mass_beam.yaml: the
+n-DOF model filter on mass 1 at 500 samples a period with the 4 ms answer lead, its
+gains, ``ModelController.predict`` with the 2 ms pulse; ``--noise-um`` another sensor
+noise; the compiled path there is the evaluation at the samples of
+dynamics/estimation/compiled_modal_flow.py, the events stay the core's). ``--paths core``
+runs one path alone (with ``PYTHONPATH=/work/main``: main's). Printed per path: the time of a section's answer (the add_sample that makes it
 due through the prediction), the time of a sample that makes none due (p50/p99/max, µs),
 their ratio core/kernel, and whether the two paths gave the same estimates, covariances,
 corrections and predictions bit for bit (they must: the kernel's flow is the core's,

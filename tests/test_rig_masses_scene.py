@@ -4,6 +4,9 @@ contract with the measured masses; controller_node with the same file reads the 
 measured mass from rig/sensor and answers with force pulses. One short scene, read from
 its bag and logs.
 
+The bag is replayed through rig_mock (grazing replay-rig: the same pulses bit for bit,
+and with another rig_mu not).
+
 The rig is config/rigs/two_mass_beam.yaml with the sensor's noise at 0.2 um (10x less):
 the orbit the design holds meets the stop at v- 0.005-0.009 (model units; 0.8-1.4 mm/s),
 and at the file's 2 um (sigma / |Delta d| = 8) 4 of 16 held periods had no impact
@@ -13,7 +16,9 @@ physical speed (SLOW): the n-DOF model filter is plain Python, and at the file's
 answered 5.2 ms (p50) after a section at physical speed, against a pulse that starts
 4 ms after it; at 1/8 speed with 2 kHz the scene took 20 s of the suite's realtime group,
 5 s now. What the tests read (the SI boundary, the pulse map, capture) does not depend on
-the rate."""
+the rate. With the compiled n-DOF filter (compiled_modal_flow.py) the scene at physical
+speed still missed about a third of its deadlines through the nodes (docs/benchmarks.md,
+"The n-DOF filter compiled, and the two-mass rig at physical speed"): half speed stays."""
 
 import math
 from pathlib import Path
