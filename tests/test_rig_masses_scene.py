@@ -4,8 +4,7 @@ contract with the measured masses; controller_node with the same file reads the 
 measured mass from rig/sensor and answers with force pulses. One short scene, read from
 its bag and logs.
 
-The bag is replayed through rig_mock (grazing replay-rig: the same pulses bit for bit,
-and with another rig_mu not).
+The bag is replayed through rig_mock (grazing replay-rig: the same pulses bit for bit).
 
 The rig is config/rigs/two_mass_beam.yaml with the sensor's noise at 0.2 um (10x less):
 the orbit the design holds meets the stop at v- 0.005-0.009 (model units; 0.8-1.4 mm/s),
@@ -139,22 +138,25 @@ def test_the_replay_through_mock_hardware_gives_the_same_pulses_bit_for_bit(scen
     """The scene's bag through rig_mock (rig/sensor of both masses, rig/phase, rig/clock
     and rig/applied in their recorded order) and a controller_node with the recorded
     parameters (recordings/rig_replay.py): every rig/force_pulse again, float64 bytes
-    equal field by field. With another rig_mu the comparison fails naming the first
-    section: the n-DOF controller's gains are derived again from rig_file and rig_mu
-    (before, the recorded gains were passed on as given and the controller refused to
-    start beside the new rig_mu: every command "missing", nothing compared)."""
-    from grazing_control.recordings.rig_replay import replay_rig
+    equal field by field.
+
+    The recorded parameters passed on are the controller's settings less what the rig
+    file derives (for n masses MASSES_CONTROLLER_KEYS: the gains, mu, n, ...), so that a
+    changed rig_mu takes effect: before, the recorded gains were passed on as given and
+    with `--controller-param rig_mu:=0.1` the controller refused to start beside them
+    (every command "missing", nothing compared; measured, docs/benchmarks.md). The
+    comparison failing on another parameter is test_rig_scene's (one replay here: each
+    costs a controller's start, ~10 s of the suite)."""
+    from grazing_control.recordings.rig_replay import recorded_controller, replay_rig
+    from grazing_control.ros.rig_boundary import MASSES_CONTROLLER_KEYS
 
     _rig, res, m = scene
+    values = recorded_controller(res.bag_dir)
+    assert values["rig_file"].endswith("two_mass_quiet.yaml") and "rig_mu" in values
+    assert set(values) & set(MASSES_CONTROLLER_KEYS) <= {"answer_lead"}, values
     same = replay_rig(res.bag_dir, time_scale=2.0, log_dir=tmp_path / "same", timeout=120)
     recorded = len({msg.wrench.torque.y for _, msg in m["/rig/force_pulse"]})
     assert same["status"] == 0, same
     assert (same["identical"], same["differing"], same["missing"], same["extra"]) == (
         recorded, 0, 0, 0), same
     assert same["controller"]["applied_after_use"] == "0", same["controller"]
-    other = replay_rig(res.bag_dir, time_scale=2.0, log_dir=tmp_path / "other", timeout=120,
-                       controller_overrides={"rig_mu": 0.1})
-    assert other["status"] == 1 and other["missing"] == 0 and other["differing"] >= 1, other
-    first = m["/rig/force_pulse"][0][1].wrench.torque.y       # section 0 predicts section 1
-    assert other["first"].startswith(f"section t_k={first!r} s: force.y (predicted F, N) "
-                                     "recorded "), (other["first"], first)
