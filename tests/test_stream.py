@@ -31,7 +31,7 @@ def _gains(p, c2, delay=0.0):
 
 def _xv(p, t, z=(0.0, 0.0)):
     """A physical state of the free motion (no impact) with deviation z at t = 0."""
-    from grazing_control.dynamics.estimation.section_state import phi_rows
+    from grazing_control.dynamics.estimation.motion import phi_rows
     dev = phi_rows(p.zeta, np.atleast_1d(t)) @ np.array(z)
     psi = p.tau2 + p.omega * np.atleast_1d(t) - p.lag
     return (p.amplitude * np.cos(psi) + dev[:, 0], -p.amplitude * p.omega * np.sin(psi)

@@ -170,7 +170,7 @@ class ControllerNode(Node):
         self.rig_model = (self.rig.model() if self.rig is not None and self.rig.n > 1
                           else None)
         # how a correction acts in the plant: a rig's force pulse (its estimator and
-        # prediction integrate it, dynamics.estimation.section_state.trajectory), else the kick
+        # prediction integrate it, dynamics.estimation.motion.trajectory), else the kick
         self.pulse = (0.0, math.inf, None)
         # (a rig file's are the defaults: rig_boundary.controller_values; its actuator's
         # latency is in the budget)
@@ -196,7 +196,7 @@ class ControllerNode(Node):
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
             if self.stream is not None and self.stream.kernel:
-                warm_stream_kernel()     # compiled model filter loaded now, not at section 0
+                warm_stream_kernel(self.model)   # compiled model filter loaded now, not at section 0
             # stream mode: the cyclic collector runs after a section's answer, not inside
             # its estimate (issue 30; common.SafePoints)
             self.collect = SafePoints() if self.stream is not None else None
