@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from grazing_control.dynamics.design.gains import degenerate_c1
-from grazing_control.dynamics.estimation.section_state import trajectory
+from grazing_control.dynamics.estimation.motion import trajectory
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.estimation.stream import StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains

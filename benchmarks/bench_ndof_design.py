@@ -2,7 +2,7 @@
 
 Prints the design data (d*, zeros, admissible mu, the design at ``--mu`` and at the
 smallest limit radius), then the exact multipliers of the 1/1 orbit born at grazing
-(Newton shooting on NdofMap from the explicit branch's Pi2 state) at Delta d = -1e-4 ..
+(Newton shooting on ModalMap from the explicit branch's Pi2 state) at Delta d = -1e-4 ..
 -1e-10 for the design, the two cancel-first-Markov gains and the uncontrolled model, with
 the fitted orders / exponents.
 
@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from grazing_control.dynamics.orbits import ndof_branch as nb
-from grazing_control.dynamics.design import ndof_design as nd
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.orbits import modal_branch as nb
+from grazing_control.dynamics.design import family as nd
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
@@ -38,7 +38,7 @@ def match(a, b) -> float:
 def exact(model, gains, dd):
     m = dataclasses.replace(model, delta_d=-dd)
     bp = nb.orbit_at(m, gains, -dd)
-    orbit = find_periodic(NdofMap(m, None if not np.any(gains) else gains), bp.pi2_state)
+    orbit = find_periodic(ModalMap(m, None if not np.any(gains) else gains), bp.pi2_state)
     return orbit, floquet_multipliers(orbit.monodromy), bp
 
 

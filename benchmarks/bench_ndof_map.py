@@ -1,4 +1,4 @@
-"""The n-DOF Pi2 map: the exact core (NdofMap) against an ODE solver, speed and accuracy.
+"""The n-DOF Pi2 map: the exact core (ModalMap) against an ODE solver, speed and accuracy.
 
 Both run the same periods from the same states of the two-mass chain near grazing
 (config/models/two_mass_chain.yaml, the uncontrolled motion at Delta d = -5e-6 after a
@@ -27,14 +27,14 @@ from scipy.integrate import solve_ivp
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
+from grazing_control.dynamics.maps.modal_map import ModalMap  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
 from reference_ndof import load_reference  # noqa: E402
 
 CHAIN = ROOT / "config" / "models" / "two_mass_chain.yaml"
 
 
-def ode_step(m: NdofMap, z, rtol):
+def ode_step(m: ModalMap, z, rtol):
     """One Pi2 period by solve_ivp on the physical state, impacts by event location."""
     model, flow = m.model, m.flow
     n, iw = model.n, model.i_w
@@ -71,7 +71,7 @@ def main(argv=None):
     ap.add_argument("--periods", type=int, default=40)
     args = ap.parse_args(argv)
     model = dataclasses.replace(load_model(CHAIN), delta_d=-5e-6)
-    m = NdofMap(model)
+    m = ModalMap(model)
     z = np.zeros(2 * model.n)
     for _ in range(300):                      # onto the attractor
         z = m.step(z).state
@@ -93,7 +93,7 @@ def main(argv=None):
     print(f"n-DOF Pi2 map, two-mass chain, Delta d = -5e-6, {len(starts)} periods "
           f"({sum(len(m.step(s).impacts) for s in starts)} impacts)")
     print(f"{'method':<24}{'time/period':>14}{'ratio':>10}{'max error':>12}")
-    print(f"{'exact core (NdofMap)':<24}{core[0] * 1e3:>11.3f} ms{1.0:>10.1f}{core[1]:>12.2e}")
+    print(f"{'exact core (ModalMap)':<24}{core[0] * 1e3:>11.3f} ms{1.0:>10.1f}{core[1]:>12.2e}")
     for rtol in (1e-6, 1e-9, 1e-12):
         per, err = run(lambda s, r=rtol: ode_step(m, s, r))
         print(f"{'solve_ivp DOP853 ' + format(rtol, '.0e'):<24}{per * 1e3:>11.3f} ms"

@@ -25,6 +25,12 @@ Printed, against the design (the core: dynamics/design/noise.py, dynamics/estima
     .venv/bin/python benchmarks/bench_rig_scene.py [--rig config/rigs/acceptance.yaml]
         [--periods 900] [--enable-after 200] [--c2 C2] [--engine-cost]
 
+A rig file of n masses (config/rigs/two_mass_beam.yaml, issue 32) runs that rig's scene
+instead (``--slow``, ``--watchdog-misses``, ``--noise-um``): the controller's summary, who
+was late (rig_timing), the deadline misses and impacts per controlled period; with
+``--core-noise UM ...`` only its closed loop in one process at each sensor noise (the
+noise it tolerates, docs/rig.md).
+
 ``--engine-cost``: the simulator's CPU for one period and for its stream's states on
 the rig file's stop, and for the scheduled realtime loop's engine calls of a period
 (stream included), no nodes (a compliant stop's cost, docs/rig_scene.md).
@@ -34,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -51,6 +58,7 @@ from grazing_control.ros import launcher
 from grazing_control.ros.rig_boundary import answer_lead, controller_values
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
 
 
 def design(rig, c2, lead=None):
@@ -190,6 +198,129 @@ def core(rig, c2, forces, periods, enable_after, seed=7):
               f"{run.resets}")
 
 
+def masses_core(rig, path, noises_um, periods: int, enable_after: int, settle: int = 5,
+                seeds=(7, 8, 9)) -> None:
+    """A rig of n masses in one process (no nodes, no deadlines: the calls the nodes make,
+    as studies.near_grazing.scene.stream_loop): sim_node's engine on the rig's model with
+    its sensor (rate, noise ``noises_um`` in µm) and 2 ms pulse, the controller's stream
+    estimator on sensor.masses[0] (its answer lead) and its gains k^T z^ from
+    ``enable_after``. Per noise: sigma / |Delta d| (model units), the share of the held
+    periods (from enable_after + settle) with one impact, the Pi2 position of the
+    impacting mass (its deviation z_w from X_p: mean and std, model units), the filter's resets."""
+    from grazing_control.dynamics.estimation.stream import StreamEstimator
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    model = rig.model()
+    v = controller_values(rig, math.nan)
+    k, delay, c = np.asarray(v["gains"]), v["actuation_delay"], v["sensor_coordinate"]
+    w = model.i_w
+    for um in noises_um:
+        sigma = um * 1e-6 / rig.scales.length
+        ones, held, xs, resets = 0, 0, [], 0
+        for seed in seeds:
+            sv = {key: val for key, val in sim_values(rig).items()
+                  if key not in ("time_scale", "pre_roll")}
+            sv.update(sensor_noise=sigma, sensor_seed=seed)
+            eng = Engine(settings_from_values(sv, str(path), model))
+            est = StreamEstimator(model, "model", sigma, "stream", v["state_period"],
+                                  lead=v["answer_lead"], pulse_width=v["pulse_width"],
+                                  force_limit=v["force_limit"], coordinate=c)
+            due = []
+            for ev in eng.initial_states():
+                due += est.add_sample(ev.t, ev.x[c])
+            for j in range(periods):
+                due += est.flush(j)
+                (e,) = [d[2] for d in due if d[0] == j]
+                if j >= enable_after + settle:
+                    xs.append(float(eng.z[w]))
+                dv = float(k @ np.asarray(e.z)) if j >= enable_after else 0.0
+                est.set_correction(j, dv, delay)
+                events = eng.begin_period(dv, delay)
+                if j >= enable_after + settle:
+                    held += 1
+                    ones += sum(ev.kind == "impact" for ev in events) == 1
+                due = [d for ev in events if ev.kind == "state"
+                       for d in est.add_sample(ev.t, ev.x[c])]
+                eng.end_period()
+            resets += est.resets
+        x = np.asarray(xs)
+        print(f"noise {um:g} um: sigma {sigma:.3g} = {sigma / abs(model.delta_d):.3g} |Delta d|;"
+              f" one impact in {ones} of {held} held periods ({100 * ones / held:.1f} %); "
+              f"Pi2 deviation of x_{w} mean {x.mean():+.3g} std {x.std():.3g}; resets {resets} "
+              f"({len(seeds)} seeds x {periods} periods, control from {enable_after})")
+
+
+def masses_scene(args, rig) -> int:
+    """A rig of n masses through the nodes (docs/rig_scene.md, "A rig of n masses"): the
+    scene at 1/``--slow`` of physical speed with the file's sensor (its noise
+    ``--noise-um`` where given), the controller's summary, who was late section by section
+    (rig_timing), and over the controlled periods: the deadline misses (rig/applied: in
+    time, prediction, nothing, safe) and the impacts per period of the impacting mass."""
+    import yaml
+
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_rig_"))
+    out.mkdir(parents=True, exist_ok=True)
+    path = Path(args.rig)
+    if args.noise_um is not None:
+        doc = yaml.safe_load(path.read_text())
+        doc["sensor"]["noise"] = f"{args.noise_um!r} um"
+        path = out / "rig.yaml"
+        path.write_text(yaml.safe_dump(doc))
+        rig = load_rig(path)
+    print(f"rig {args.rig}: {rig.n} masses, sensor {rig.sensor.rate:g} Hz, noise "
+          f"{rig.sensor.noise * 1e6:g} um, {args.periods} periods at 1/{args.slow:g} of "
+          f"physical speed, control from {args.enable_after}; load %.2f %.2f %.2f"
+          % __import__("os").getloadavg())
+    t0 = time.time()
+    res = launcher.run(None, None, str(out / "bag"), args.periods, rig=str(path),
+                       enable_after=args.enable_after,
+                       timeout=args.periods * 0.3 * args.slow + 120, log_dir=str(out / "logs"),
+                       sim_overrides=dict(
+                           {} if args.slow == 1.0 else {"time_scale": rig.omega_n / args.slow},
+                           **({} if args.watchdog_misses is None else
+                              {"watchdog_misses": args.watchdog_misses})))
+    print(f"scene: {res} ({time.time() - t0:.0f} s); load at the end %.2f %.2f %.2f"
+          % __import__("os").getloadavg())
+    for name in ("sim_node", "controller_node"):
+        log = Path(res.logs.get(name, ""))
+        if log.is_file():
+            lines = [ln for ln in log.read_text(errors="replace").splitlines()
+                     if "summary:" in ln]
+            if lines:
+                print(f"{name}: {lines[-1].split('summary: ', 1)[1]}")
+    from rig_timing import report, section_timing     # benchmarks/rig_timing.py
+
+    try:
+        print("\n".join(report(section_timing(out / "bag", answer_lead(rig) / rig.omega_n,
+                                               1.0 / rig.sensor.rate))))
+    except (OSError, StopIteration, ValueError) as exc:
+        print(f"no timing from the bag: {exc}")
+    from test_rig_scene import _messages, _seconds   # tests/: the bag's messages
+
+    m = _messages(out / "bag", ("/rig/applied", "/rig/phase", "/oscillator/impact"))
+    start = _seconds(m["/rig/phase"][0][1].header.stamp)
+    period = 1.0 / rig.frequency
+    status = {round((msg.wrench.torque.y - start) / period): int(msg.wrench.force.z)
+              for _, msg in m["/rig/applied"]}
+    counts = np.zeros(args.periods, dtype=int)
+    for _, msg in m["/oscillator/impact"]:
+        k = int(_seconds(msg.header.stamp) // (2.0 * math.pi / rig.model().omega))
+        if 0 <= k < args.periods:
+            counts[k] += 1
+    ctrl = [k for k in sorted(status) if args.enable_after <= k < args.periods]
+    late = [k for k in ctrl if status[k] != 0]
+    held = counts[args.enable_after:]
+    print(f"controlled sections {len(ctrl)}: deadline misses {len(late)} "
+          f"(rig/applied in time, predicted, nothing, safe: "
+          f"{[sum(status[k] == c for k in ctrl) for c in range(4)]}); sections missed "
+          f"{late[:20]}")
+    print(f"impacts per controlled period: one in {int(np.sum(held == 1))} of {held.size}, "
+          f"counts {np.bincount(held).tolist()}")
+    return 0 if res.ok else 1
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", default=str(ROOT / "config" / "rigs" / "acceptance.yaml"))
@@ -221,8 +352,21 @@ def main(argv=None):
                          "default: their own, 0 = off)")
     ap.add_argument("--recorder-batch-window", type=float, default=None, metavar="SECONDS",
                     help="recorder_node's batch_window (default: its own, 1 ms)")
+    ap.add_argument("--noise-um", type=float, default=None,
+                    help="a rig of n masses: the sensor's noise in µm (default the file's)")
+    ap.add_argument("--core-noise", type=float, nargs="*", default=None, metavar="UM",
+                    help="a rig of n masses: only the closed loop in one process (no nodes) "
+                         "at each sensor noise in µm (default 0.2 0.5 1 2)")
+    ap.add_argument("--settle", type=int, default=5,
+                    help="--core-noise: periods after the switch-on left out (default 5)")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
+    if rig.n > 1 and args.core_noise is not None:
+        masses_core(rig, args.rig, args.core_noise or (0.2, 0.5, 1.0, 2.0), args.periods,
+                    args.enable_after, args.settle)
+        return 0
+    if rig.n > 1:
+        return masses_scene(args, rig)
     if args.engine_cost:
         engine_cost(rig)
         return 0

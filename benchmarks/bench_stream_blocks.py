@@ -16,10 +16,17 @@ Variants, alternating in one run so that each sees the same load (``--variants``
 (``stream_message:=block``: a Float64MultiArray per wake-up on oscillator/state_block),
 and either of them composed (``+composed``: ``grazing run --compose``, the three nodes in
 one process), or under SCHED_FIFO (``+fifo``: the simulator's and the controller's
-thread_priority 50, as a rig scene runs them). From the simulator's summary: periods per second against the requested
-(106.2 at x1000), deadline misses and late answers (sections whose correction was not
-there at t_k + 3), the answer latency (a section's last sample published -> its answer
-received) and the sample lag (how late a sample went out), p50/p99/max.
+thread_priority 50, as a rig scene runs them; ``+fifo+pinned``: and the simulator on CPU
+0, the controller on CPU 1, their cpu_affinity). From the simulator's summary: periods
+per second against the requested (106.2 at x1000), deadline misses and late answers
+(sections whose correction was not there at t_k + 3), the answer latency (a section's
+last sample published -> its answer received) and the sample lag (how late a sample went
+out), p50/p99/max.
+
+With ``--baseline DIR`` (a git worktree of an older commit) each variant also runs on
+that checkout (its own bench_stream_blocks.scene in a fresh interpreter, the launcher
+putting that checkout on the nodes' PYTHONPATH), the two alternating scene by scene
+(rows ``base:<variant>``).
 
 Run: ``.venv/bin/python benchmarks/bench_stream_blocks.py --reps 2`` (about 40 s a scene).
 Results in docs/benchmarks.md ("The stream in blocks").
@@ -49,7 +56,7 @@ DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
 FREE_RUNNING = {"watchdog_misses": 0, "watchdog_pace": 0.0, "watchdog_lag": 0.0,
                 "watchdog_excursion": 0.0, "feasibility": "warn"}
 VARIANTS = ("sample", "block", "sample+composed", "block+composed", "sample+fifo",
-            "block+fifo")
+            "block+fifo", "block+fifo+pinned")
 #: ``+fifo``: the simulator and the controller under SCHED_FIFO at this priority (their
 #: thread_priority, ros/scheduling.py; what a rig scene runs them with, scene_nodes.py)
 FIFO_PRIORITY = 50
@@ -69,6 +76,8 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
     message, *mods = variant.split("+")
     composed = "composed" in mods
     priority = FIFO_PRIORITY if "fifo" in mods else 0
+    # +pinned: the simulator on CPU 0, the controller on CPU 1 (their cpu_affinity)
+    sim_cpus, controller_cpus = ("0", "1") if "pinned" in mods else ("", "")
     p = OscillatorParams(delta_d=DD)
     res = launcher.run(
         None, str(controller), tmp / "bag", periods, delta_d=DD, enable_after=enable_after,
@@ -77,9 +86,10 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
         sim_overrides={"time_scale": scale, "state_period": p.period / RATE,
                        "sensor_noise": SIGMA, "sensor_velocity": False,
                        "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING,
-                       "thread_priority": priority},
+                       "thread_priority": priority, "cpu_affinity": sim_cpus},
         controller_overrides={"pi2_source": "stream", "estimator": "model",
-                              "answer_lead": answer_lead, "thread_priority": priority},
+                              "answer_lead": answer_lead, "thread_priority": priority,
+                              "cpu_affinity": controller_cpus},
         log_dir=tmp / "logs", compose=bool(composed))
     try:
         s = summary(Path(res.logs["sim_node"]))
@@ -91,6 +101,38 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
             "predicted": int(s.get("predicted", 0)), "latency": s.get("latency", nan3),
             "lag": s.get("sample_lag", nan3), "ok": res.ok,
             "answered": _answered(Path(res.logs["controller_node"]))}
+
+
+#: One scene of a baseline checkout (run with it as the working directory): prints the
+#: scene's row as JSON.
+BASELINE_SCENE = r"""
+import json, sys
+from pathlib import Path
+sys.path[:0] = [".", "benchmarks"]
+import bench_stream_blocks as b
+a = json.loads(sys.argv[1])
+r = b.scene(a["variant"], Path(a["controller"]), a["periods"], a["enable_after"], a["scale"],
+            Path(a["tmp"]), a["answer_lead"])
+print(json.dumps(r))
+"""
+
+
+def baseline_scene(root: Path, variant: str, controller: Path, periods: int,
+                   enable_after: int, scale: float, tmp: Path, answer_lead: float) -> dict:
+    """:func:`scene` of the checkout ``root``, in a fresh interpreter there."""
+    import json
+
+    arg = json.dumps({"variant": variant, "controller": str(controller), "periods": periods,
+                      "enable_after": enable_after, "scale": scale, "tmp": str(tmp),
+                      "answer_lead": answer_lead})
+    out = subprocess.run([sys.executable, "-c", BASELINE_SCENE, arg], cwd=root,
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        return {"failed": f"baseline exit {out.returncode}: {out.stderr.strip()[-300:]}"}
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    if "failed" not in r:
+        r["latency"], r["lag"] = tuple(r["latency"]), tuple(r["lag"])
+    return r
 
 
 def _answered(log: Path) -> int:
@@ -112,11 +154,18 @@ def main(argv=None) -> int:
                          "with the section's last sample)")
     ap.add_argument("--variants", default="sample,block",
                     help=f"comma-separated, of {', '.join(VARIANTS)} (default sample,block)")
+    ap.add_argument("--baseline", type=Path, default=None,
+                    help="an older checkout (git worktree) run beside this one, alternating")
     args = ap.parse_args(argv)
     variants = args.variants.split(",")
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         ap.error(f"--variants {','.join(bad)}: valid are {', '.join(VARIANTS)}")
+    if args.baseline is not None:
+        if not (args.baseline / "benchmarks" / "bench_stream_blocks.py").is_file():
+            ap.error(f"--baseline {args.baseline}: not a checkout with "
+                     "benchmarks/bench_stream_blocks.py")
+        variants = [w for v in variants for w in (f"base:{v}", v)]
     p = OscillatorParams(delta_d=DD)
     print(f"realtime x{args.scale:g}, stream at T/{RATE} ({RATE * args.scale / p.period:.0f} "
           f"samples/s wall), {args.periods} periods, control from {args.enable_after}, "
@@ -129,34 +178,39 @@ def main(argv=None) -> int:
             for v in variants:
                 load = "%.2f %.2f %.2f" % os.getloadavg()
                 with tempfile.TemporaryDirectory(dir=tmp) as one:
-                    r = scene(v, controller, args.periods, args.enable_after, args.scale,
-                              Path(one), args.answer_lead)
+                    if v.startswith("base:"):
+                        r = baseline_scene(args.baseline.resolve(), v[5:], controller,
+                                           args.periods, args.enable_after, args.scale,
+                                           Path(one), args.answer_lead)
+                    else:
+                        r = scene(v, controller, args.periods, args.enable_after,
+                                  args.scale, Path(one), args.answer_lead)
                 rows[v].append(r)
                 if "failed" in r:
-                    print(f"{v:16s} rep {rep}: FAILED {r['failed']} (load {load})", flush=True)
+                    print(f"{v:21s} rep {rep}: FAILED {r['failed']} (load {load})", flush=True)
                     continue
                 lat, lag = r["latency"], r["lag"]
-                print(f"{v:16s} rep {rep}: {r['periods']} periods"
+                print(f"{v:21s} rep {rep}: {r['periods']} periods"
                       f"{'' if r['ok'] else ' (the scene failed: timed out)'} at "
                       f"{r['rate']:.1f} periods/s, answered {r['answered']}, missed {r['missed']} "
                       f"late {r['late']} predicted {r['predicted']}, latency p50/p99/max "
                       f"{lat[0]:.2f}/{lat[1]:.2f}/{lat[2]:.2f} ms, sample lag p50/p99/max "
                       f"{lag[0]:.2f}/{lag[1]:.2f}/{lag[2]:.2f} ms (load {load})", flush=True)
     print(f"\nmedians over {args.reps} scenes (requested {args.scale / p.period:.1f} periods/s)")
-    print(f"{'variant':16s} {'periods/s':>9s} {'missed':>7s} {'late':>5s} {'lat p50':>8s} "
+    print(f"{'variant':21s} {'periods/s':>9s} {'missed':>7s} {'late':>5s} {'lat p50':>8s} "
           f"{'lat p99':>8s} {'lag p99':>8s}  {'missed/base':>11s}")
     base = None
     for v, rs in rows.items():
         ok = [r for r in rs if "failed" not in r]
         if not ok:
-            print(f"{v:16s} every scene failed")
+            print(f"{v:21s} every scene failed")
             continue
         med = {k: statistics.median(r[k] for r in ok) for k in ("rate", "missed", "late")}
         lat = [statistics.median(r["latency"][i] for r in ok) for i in range(3)]
         lag = statistics.median(r["lag"][1] for r in ok)
         base = med["missed"] if base is None else base
         ratio = f"{med['missed'] / base:11.2f}" if base else f"{'-':>11s}"
-        print(f"{v:16s} {med['rate']:9.1f} {med['missed']:7.0f} {med['late']:5.0f} "
+        print(f"{v:21s} {med['rate']:9.1f} {med['missed']:7.0f} {med['late']:5.0f} "
               f"{lat[0]:8.2f} {lat[1]:8.2f} {lag:8.2f}  {ratio}")
     print("load at the end %.2f %.2f %.2f" % os.getloadavg())
     return 0

@@ -19,7 +19,12 @@ Scenes (``--scene``): ``rig``, the acceptance rig of issue 28 (config/rigs/accep
 150 samples a period, position only, 2 ms pulse, the answer 4 ms before the section's
 last sample, the controller's gains at c2 = 0.03276); ``t200``, the realtime stream of
 bench_stream_blocks.py (T/200, sigma 1e-4, pulse 0.1 at delay 3, the least-noise gains for
-delay 3). Printed per path: the time of a section's answer (the add_sample that makes it
+delay 3); ``masses``, the two-mass rig of issue 32 (config/rigs/two_mass_beam.yaml: the
+n-DOF model filter on mass 1 at 500 samples a period with the 4 ms answer lead, its
+gains, ``ModelController.predict`` with the 2 ms pulse; ``--noise-um`` another sensor
+noise; the compiled path there is the evaluation at the samples of
+dynamics/estimation/compiled_modal_flow.py, the events stay the core's). ``--paths core``
+runs one path alone (with ``PYTHONPATH=/work/main``: main's). Printed per path: the time of a section's answer (the add_sample that makes it
 due through the prediction), the time of a sample that makes none due (p50/p99/max, µs),
 their ratio core/kernel, and whether the two paths gave the same estimates, covariances,
 corrections and predictions bit for bit (they must: the kernel's flow is the core's,
@@ -82,6 +87,93 @@ def t200_scene():
     return p, Gains(g.c1, g.c2, 3.0), rate, kw
 
 
+def masses_scene(noise=None):
+    """(model, ModelController, pulse, rate, estimator keywords) of the two-mass rig's
+    controller (config/rigs/two_mass_beam.yaml, issue 32): controller_node's own
+    construction (rig_boundary.controller_values, model_controller_from_values,
+    pulse_from_values, model_stream_from_values), the sensor noise ``noise`` (m) where
+    given."""
+    from grazing_control.plant.rig import load_rig
+    from grazing_control.ros.controller_values import (model_controller_from_values,
+                                                       pulse_from_values)
+    from grazing_control.ros.rig_boundary import controller_values
+
+    rig = load_rig(ROOT / "config" / "rigs" / "two_mass_beam.yaml")
+    v = controller_values(rig, math.nan)
+    if noise is not None:
+        v["sensor_noise"] = noise / rig.scales.length
+    ndof = model_controller_from_values(v, "two_mass_beam.yaml", v["gains"], rig.model())
+    pulse = pulse_from_values({**v, "actuator_latency": 0.0}, ndof.model.omega,
+                              v["actuation_delay"])
+    rate = round(ndof.model.period / v["state_period"])
+    kw = dict(estimator="model", sigma=v["sensor_noise"], impact_source="stream",
+              sample_period=v["state_period"], lead=v["answer_lead"], pulse_width=pulse[0],
+              force_limit=pulse[1], coordinate=v["sensor_coordinate"])
+    return rig, ndof, pulse, rate, v, kw
+
+
+def record_masses(rig, ndof, v, kw, periods, enable_after, seed=7):
+    """The two-mass rig's stream [(t, x~, v~)] of its measured coordinate in the closed
+    loop in one process (studies.near_grazing.scene.stream_loop's calls: sim_node's
+    engine with the rig's sensor and pulse, the estimator, k^T z^ from
+    ``enable_after``)."""
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros.rig_boundary import sim_values
+
+    sv = {key: val for key, val in sim_values(rig).items()
+          if key not in ("time_scale", "pre_roll")}
+    sv.update(sensor_noise=kw["sigma"], sensor_seed=seed)
+    eng = Engine(settings_from_values(sv, "two_mass_beam.yaml", ndof.model))
+    est = StreamEstimator(ndof.model, **kw)
+    c, k, delay = kw["coordinate"], np.asarray(ndof.gains), v["actuation_delay"]
+    samples, due = [], []
+
+    def add(ev):
+        samples.append((ev.t, ev.x[c], math.nan))
+        return est.add_sample(ev.t, ev.x[c])
+
+    for ev in eng.initial_states():
+        due += add(ev)
+    for j in range(periods):
+        due += est.flush(j)
+        (e,) = [d[2] for d in due if d[0] == j]
+        dv = float(k @ np.asarray(e.z)) if j >= enable_after else 0.0
+        est.set_correction(j, dv, delay)
+        due = []
+        for ev in eng.begin_period(dv, delay):
+            if ev.kind == "state":
+                due += add(ev)
+        eng.end_period()
+    return samples
+
+
+def replay_masses(ndof, pulse, v, kw, samples, enable_after, compiled):
+    """:func:`replay` of the n-DOF controller: controller_node's work on each sample with
+    a rig of n masses (the estimate, k^T z^, the prediction ``ModelController.predict``
+    with the pulse and the force left at the section, set_correction)."""
+    est = StreamEstimator(ndof.model, kernel=compiled, **kw)
+    n, k, delay = ndof.model.n, np.asarray(ndof.gains), v["actuation_delay"]
+    clock, cpu = time.perf_counter, time.thread_time
+    section_t, section_cpu, sample_t, answers = [], [], [], []
+    for t, x, vv in samples:
+        c0 = cpu()
+        t0 = clock()
+        due = est.add_sample(t, x, vv)
+        for j, _tk, e in due:
+            z = np.asarray(e.z)
+            dv = float(k @ z) if j >= enable_after else 0.0
+            force0 = est.section_force(est.next_k - 1)
+            xn, vn = ndof.predict(ndof.x_ref + z[:n], ndof.v_ref + z[n:], dv, delay, pulse,
+                                  force0)
+            est.set_correction(j, dv, delay)
+            answers.append((j, e.z, e.cov.tobytes(), dv, xn.tobytes(), vn.tobytes()))
+        (section_t if due else sample_t).append(clock() - t0)
+        if due:
+            section_cpu.append(cpu() - c0)
+    return np.array(section_t), np.array(section_cpu), np.array(sample_t), answers
+
+
 def record(p, gains, rate, kw, periods, enable_after, seed=7):
     """The stream's samples [(t, x~, v~)] of the closed loop in the core."""
     samples = []
@@ -132,27 +224,42 @@ def _q(a, scale=1e6):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", choices=("rig", "t200"), default="rig")
+    ap.add_argument("--scene", choices=("rig", "t200", "masses"), default="rig")
+    ap.add_argument("--noise-um", type=float, default=None,
+                    help="masses: the sensor's noise (µm; default the rig file's 2 µm)")
+    ap.add_argument("--paths", default="core,kernel",
+                    help="the paths to run, of core,kernel (one alone: no comparison)")
     ap.add_argument("--periods", type=int, default=400)
     ap.add_argument("--enable-after", type=int, default=100)
     ap.add_argument("--rounds", type=int, default=3, help="alternations of the paths")
     args = ap.parse_args(argv)
-    p, gains, rate, kw = (rig_scene if args.scene == "rig" else t200_scene)()
     t0 = time.perf_counter()
     kernel.warm_up()
     warm_up()
     warm = time.perf_counter() - t0
-    samples = record(p, gains, rate, kw, args.periods, args.enable_after)
+    if args.scene == "masses":
+        noise = None if args.noise_um is None else args.noise_um * 1e-6
+        rig, ndof, pulse, rate, v, kw = masses_scene(noise)
+        samples = record_masses(rig, ndof, v, kw, args.periods, args.enable_after)
+
+        def run(compiled):
+            return replay_masses(ndof, pulse, v, kw, samples, args.enable_after, compiled)
+    else:
+        p, gains, rate, kw = (rig_scene if args.scene == "rig" else t200_scene)()
+        samples = record(p, gains, rate, kw, args.periods, args.enable_after)
+
+        def run(compiled):
+            return replay(p, gains, kw, samples, args.enable_after, compiled)
     print(f"scene {args.scene}: {rate} samples a period, {args.periods} periods "
           f"({len(samples)} samples), control from {args.enable_after}; kernel loaded in "
           f"{warm:.2f} s; {os.cpu_count()} CPUs, load %.2f %.2f %.2f" % os.getloadavg())
-    paths = {"core": False, "kernel": True}
+    paths = {name: compiled for name, compiled in (("core", False), ("kernel", True))
+             if name in args.paths.split(",")}
     times = {name: ([], [], []) for name in paths}
     answers = {}
     for _ in range(args.rounds):
         for name, compiled in paths.items():
-            sec, sec_cpu, smp, ans = replay(p, gains, kw, samples, args.enable_after,
-                                            compiled)
+            sec, sec_cpu, smp, ans = run(compiled)
             times[name][0].append(sec)
             times[name][1].append(sec_cpu)
             times[name][2].append(smp)
@@ -166,6 +273,9 @@ def main(argv=None) -> int:
         med[name] = np.percentile(sec, 50), np.percentile(sec_cpu, 50)
         print(f"{name:6s} section answer ({sec.size} = {args.rounds} x {sec.size // args.rounds}) "
               f"µs wall {_q(sec)}, CPU {_q(sec_cpu)}; other sample µs wall {_q(smp)}")
+    if len(paths) < 2:
+        print("load at the end %.2f %.2f %.2f" % os.getloadavg())
+        return 0
     print(f"ratio core/kernel at the section's p50: wall "
           f"{med['core'][0] / med['kernel'][0]:.1f}x, CPU {med['core'][1] / med['kernel'][1]:.1f}x")
     same = answers["core"] == answers["kernel"]

@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml  # noqa: E402
-from grazing_control.dynamics.estimation.section_state import trajectory  # noqa: E402
+from grazing_control.dynamics.estimation.motion import trajectory  # noqa: E402
 from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
 from grazing_control.dynamics.estimation.stream import simulate_stream  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402

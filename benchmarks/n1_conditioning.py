@@ -8,7 +8,7 @@ For each case (the study's 1-DOF model as the n = 1 file, c2 = -1 or no control,
 parameter of the plant off by a relative error as ``robustness model`` does, Delta d):
 lambda on the reference (Newton at 50 digits from the n-DOF orbit), the relative error
 of the 1-DOF route (``orbits.orbit_11``) and of the n-DOF route
-(``ndof_branch.branch_multipliers``) against it, and kappa = sum over the data p
+(``modal_branch.branch_multipliers``) against it, and kappa = sum over the data p
 (omega, r, C = 2 zeta, Delta d, pi2_offset, the gains) of |d lambda / d ln p| / |lambda|
 by a relative step of 1e-24 on the reference. kappa u (u = 2^-53) is the error that
 rounding the data alone gives; measured on the commit that added this file:
@@ -44,7 +44,7 @@ from reference_ndof import NdofRef  # noqa: E402
 
 from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.dynamics.design.mismatch import mismatched, mismatched_model  # noqa: E402
-from grazing_control.dynamics.orbits import ndof_branch  # noqa: E402
+from grazing_control.dynamics.orbits import modal_branch  # noqa: E402
 from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
@@ -70,8 +70,8 @@ def case(controlled, name, model_name, error, delta_d):
     if name is not None:
         p, model = mismatched(p, name, error), mismatched_model(model, model_name, error)
     model = dataclasses.replace(model, delta_d=delta_d)
-    point = ndof_branch.orbit_at(model, np.array(k), delta_d)
-    ndof = ndof_branch.branch_multipliers(model, np.array(k), point)[0]
+    point = modal_branch.orbit_at(model, np.array(k), delta_d)
+    ndof = modal_branch.branch_multipliers(model, np.array(k), point)[0]
     one = orbit_11(p.with_(delta_d=delta_d), gains).multipliers[0]
     data = dict(M=model.M.tolist(), C=model.C.tolist(), K=model.K.tolist(),
                 f=model.f.tolist(), omega=model.omega, i_w=0, delta_d=delta_d, r=model.r,

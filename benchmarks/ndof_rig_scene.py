@@ -11,7 +11,7 @@ in the plant, the filter and the prediction (docs/theory_ndof.md section 15). It
 ``--node-seeds`` sensor seeds (7, 8, ...) in ``--mode`` (lockstep or realtime at
 ``--time-scale``) and prints, per seed, captured / impacts per period / spread over the
 predicted spread (the design's: the loop's noise gain over the n-DOF map with the pulse,
-dynamics/design/ndof_spread.py, what `grazing design --model M ... --delta-d D` prints;
+dynamics/design/noise.py, what `grazing design --model M ... --delta-d D` prints;
 docs/theory_ndof.md section 17). With ``--actuator-bandwidth B --actuator-latency L``
 the pulse goes through the first-order actuator in the design, the plant, the filter
 and the prediction (the loop's state (z, F)). With

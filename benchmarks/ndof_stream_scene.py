@@ -7,8 +7,8 @@ Three numbers per coordinate of the Pi2 deviation about the controlled orbit z*:
 * **predicted**: sigma sqrt(diag Sigma), Sigma the stationary covariance of the loop
   linearised about z* on the exact n-DOF map (with the pulse, and through the
   actuator's lag the map of (z, F)), driven by the model filter's error covariance on
-  the orbit (dynamics/design/noise.py: ndof_filter_covariance;
-  dynamics/design/ndof_spread.py: predicted_spread, docs/theory_ndof.md section 17):
+  the orbit (dynamics/design/noise.py: filter_covariance;
+  dynamics/design/noise.py: predicted_spread, docs/theory_ndof.md section 17):
   the prediction `grazing design --model M ... --delta-d D` prints;
 * **core**: the seeded closed loop in one process (studies.near_grazing.scene.stream_loop: the
   engine with the sensor, the StreamEstimator over the model, k^T z^ acting ``delay``
@@ -43,12 +43,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
-from grazing_control.dynamics.design.ndof_design import (pulse_design,  # noqa: E402
+from grazing_control.dynamics.design.family import (pulse_design,  # noqa: E402
                                                        write_gain_yaml)
-from grazing_control.dynamics.design.ndof_spread import (controlled_orbit,  # noqa: E402
-                                                         predicted_spread)
-from grazing_control.dynamics.design.noise import ndof_filter_covariance  # noqa: E402
-from grazing_control.dynamics.maps.ndof_map import NdofMap  # noqa: E402
+from grazing_control.dynamics.design.noise import (controlled_orbit,  # noqa: E402
+                                                   filter_covariance, predicted_spread)
+from grazing_control.dynamics.maps.modal_map import ModalMap  # noqa: E402
 from grazing_control.dynamics.simulation.actuator import Actuator  # noqa: E402
 from grazing_control.oscillator.ndof import load_model  # noqa: E402
 from grazing_control.studies.near_grazing.scene import stream_loop  # noqa: E402
@@ -103,7 +102,7 @@ def node_scene(model_file, model, design, a, tmp: Path, seed: int | None = None)
         raise SystemExit(f"the scene failed: {res}\n"
                          + Path(res.logs["sim_node"]).read_text()[-3000:])
     sd = load(tmp / "bag").scenes[0]
-    flow = NdofMap(model).flow
+    flow = ModalMap(model).flow
     z = sd.scene.pi2 - flow.particular(flow.tau2)
     return (z, np.asarray(sd.scene.impacts_per_period), sd.deadline_misses,
             int(np.sum(sd.answered)), wall)
@@ -155,12 +154,12 @@ def main(argv=None):
                           *((act.time_constant, act.latency) if act else ()))
     n2 = 2 * model.n
     # the controlled orbit (z*, and F* through the lag) by Newton on the exact loop
-    # (ndof_spread.controlled_orbit, from the 1/1 branch of the ideal pulse or the kick)
+    # (noise.controlled_orbit, from the 1/1 branch of the ideal pulse or the kick)
     full = controlled_orbit(model, design.gains, design.delay)
     orbit = full[:n2]
     # the samples the controller fits: before t_k in lockstep, up to t_k in realtime
-    # (answer_after_section; ndof_filter_covariance's section_sample)
-    R = ndof_filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay,
+    # (answer_after_section; filter_covariance's section_sample)
+    R = filter_covariance(model, design.gains, orbit, a.rate, a.coordinate, a.delay,
                                width=a.pulse_width, section_sample=a.mode == "realtime"
                                and not a.core_only, actuator=act,
                                force0=float(full[n2]) if full.size > n2 else 0.0)

@@ -45,7 +45,7 @@ from grazing_control.oscillator import kernel
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernel():
-    """Compile the numba kernel and the stream estimator's compiled model filter (or load
+    """Compile the numba kernel and the stream estimator's compiled model filters (or load
     their on-disk cache) once, before any test: in a fresh checkout the first compilation
     takes 5-20 s, which a node test's startup timeouts must not absorb. One worker at a
     time (a file lock): the first compiles and writes numba's cache, the others then load
@@ -59,7 +59,12 @@ def compiled_kernel():
             kernel.warm_up()
             from grazing_control.dynamics.estimation.stream import warm_up
 
-            warm_up()   # the compiled model filter (compiled_flow), 1-2 s the first time
+            from grazing_control.oscillator.ndof.model import load_model
+
+            # the compiled model filters, 1-2 s each the first time: compiled_flow, and
+            # with a model file compiled_modal_flow (an n-DOF controller loads it at start)
+            warm_up(load_model(Path(__file__).parents[1] / "config" / "models"
+                               / "two_mass_chain.yaml"))
 
 
 @pytest.fixture(autouse=True)

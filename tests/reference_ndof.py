@@ -1,7 +1,7 @@
 """Independent high-precision reference of the n-DOF impact oscillator (mpmath, physical
 coordinates).
 
-The yardstick of tests/test_ndof_impact.py and tests/test_ndof_map.py; it shares no code
+The yardstick of tests/test_ndof_impact.py and tests/test_modal_map.py; it shares no code
 with :mod:`grazing_control`: every formula is written again from the model
 (docs/ndof_model.md)::
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation.section_state import trajectory
+from grazing_control.dynamics.estimation.motion import trajectory
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.estimation.stream import simulate_stream
 from grazing_control.dynamics.design.tuning import optimize_noise

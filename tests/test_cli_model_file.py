@@ -30,9 +30,9 @@ import numpy as np
 import pytest
 
 from grazing_control.cli.commands import main
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof import load_model
-from grazing_control.dynamics.design.ndof_design import gain_family
+from grazing_control.dynamics.design.family import gain_family
 from grazing_control.studies.near_grazing.branch import grazing_side, smooth_map, with_delta_d
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -226,7 +226,7 @@ def test_orbit_on_three_masses_is_a_fixed_point_with_fd_multipliers(capsys, thre
         got = run_json(capsys, "orbit", "--model", three, "--delta-d", dd, *extra)
         assert got["branch"] == "grazing" and got["grazing_side"] == side
         model = with_delta_d(model3, float(dd))
-        pmap = NdofMap(model, k)
+        pmap = ModalMap(model, k)
         z = np.array(got["section_pi2_deviation"])
         step = pmap.step(z)
         assert len(step.impacts) == 1
@@ -284,7 +284,7 @@ def test_sweep_with_model_writes_npz_and_png(capsys, tmp_path, three):
 def test_design_with_delay_is_the_delayed_family_and_the_1dof_delayed_c1(capsys, tmp_path):
     """`design --model M --delay D` prints the delayed design (docs/theory_ndof.md §14):
     n = 1, --free-gain v0=0.5 at delay 2 gives the 1-DOF `design --c2 0.5 --delay 2`'s c1
-    to 1e-12; the chain's gains are ndof_design.gain_family(m, mu, 4) and the written
+    to 1e-12; the chain's gains are family.gain_family(m, mu, 4) and the written
     file carries actuation_delay."""
     one = run_json(capsys, "design", "--model", ONE, "--delay", "2", "--free-gain", "v0=0.5")
     m1 = load_model(ONE)
@@ -305,9 +305,9 @@ def test_design_with_a_pulse_is_the_pulse_family_and_the_1dof_p1_c1(capsys, tmp_
     """`design --model M --delay D --pulse-width W [--actuator-bandwidth B
     --actuator-latency L]` (docs/theory_ndof.md §15): n = 1 gives the 1-DOF `design
     --c2 0.5 --delay 2 --pulse-width 1`'s c1 (P1) to 1e-12; the chain's gains are
-    ndof_design.gain_family with the Actuation, written with the pulse's entries; an
+    family.gain_family with the Actuation, written with the pulse's entries; an
     actuator without a pulse width is refused naming pulse_width."""
-    from grazing_control.dynamics.design.ndof_design import Actuation
+    from grazing_control.dynamics.design.family import Actuation
 
     one = run_json(capsys, "design", "--model", ONE, "--delay", "2", "--pulse-width", "1",
                    "--free-gain", "v0=0.5")

@@ -463,7 +463,7 @@ def test_stream_mode_estimates_each_section_as_the_core_does(stream_scene):
     (dynamics.estimation.stream.simulate_stream with the same sensor draws) to 1e-7, never listens
     to oscillator/pi2, and its predicted next correction is within 5 sigma of its
     covariance of the next one."""
-    from grazing_control.dynamics.estimation.section_state import trajectory
+    from grazing_control.dynamics.estimation.motion import trajectory
     from grazing_control.dynamics.orbits.orbits import orbit_11
     from grazing_control.dynamics.estimation.stream import simulate_stream
     from grazing_control.plant.sensor import SensorModel
@@ -521,7 +521,7 @@ def test_the_model_watch_estimates_a_sensor_bias_as_the_core_does(stream_scene):
     ConsistencyMonitor fed per section), and b^ ends within 3 se of the bias."""
     from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
     from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
-    from grazing_control.dynamics.estimation.section_state import trajectory
+    from grazing_control.dynamics.estimation.motion import trajectory
     from grazing_control.dynamics.orbits.orbits import orbit_11
     from grazing_control.dynamics.estimation.stream import simulate_stream
     from grazing_control.plant.sensor import SensorModel

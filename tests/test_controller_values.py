@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design, gain_family, write_gain_yaml
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.design.family import evaluate_design, gain_family, write_gain_yaml
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof.flow import periodic_response
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.oscillator.params import ParameterError
@@ -86,19 +86,19 @@ def test_the_answer_is_k_dot_the_deviation_and_the_prediction_the_next_sample():
     ev, _ = eng.end_period()
     xn, vn = c.predict(X[:2], X[2:], dv, 0.0)
     np.testing.assert_allclose(np.concatenate([xn, vn]), ev.x + ev.v, rtol=0, atol=1e-14)
-    # and NdofMap with the gains (its kick is k^T z of the same state)
-    step = NdofMap(c.model, K).step(z)
+    # and ModalMap with the gains (its kick is k^T z of the same state)
+    step = ModalMap(c.model, K).step(z)
     np.testing.assert_allclose(eng.z, step.state, rtol=0, atol=1e-14)
     # with the kick 1.0 after the sample (what a realtime simulator substitutes at a
-    # missed deadline of a delayed scene, issue 32): NdofMap's delayed step
+    # missed deadline of a delayed scene, issue 32): ModalMap's delayed step
     xn, vn = c.predict(X[:2], X[2:], dv, 1.0)
-    delayed = NdofMap(c.model, K, 1.0).step(z).state
+    delayed = ModalMap(c.model, K, 1.0).step(z).state
     np.testing.assert_allclose(np.concatenate([xn, vn]) - np.concatenate([c.x_ref, c.v_ref]),
                                delayed, rtol=0, atol=1e-14)
     # with the force pulse of width 1 centred 1.0 after it (issue 32, section 15):
-    # NdofMap(width=)'s step, which the pulsed engine repeats bit for bit; it is not the kick
+    # ModalMap(width=)'s step, which the pulsed engine repeats bit for bit; it is not the kick
     xn, vn = c.predict(X[:2], X[2:], dv, 1.0, (1.0, math.inf))
-    pulsed = NdofMap(c.model, K, 1.0, 1.0).step(z).state
+    pulsed = ModalMap(c.model, K, 1.0, 1.0).step(z).state
     got = np.concatenate([xn, vn]) - np.concatenate([c.x_ref, c.v_ref])
     np.testing.assert_allclose(got, pulsed, rtol=0, atol=1e-14)
     assert np.max(np.abs(got - delayed)) > 1e-6

@@ -14,9 +14,10 @@ import pytest
 from scipy.linalg import expm
 
 from grazing_control.dynamics.design.gains import degenerate_c1
-from grazing_control.dynamics.estimation.section_state import (arc_fit, detect_impact, deviation_samples,
-                                                 estimate_covariance, nearest_estimate,
-                                                 phi_rows, trajectory, unkick)
+from grazing_control.dynamics.estimation.section_state import (
+    arc_fit, detect_impact, deviation_samples, estimate_covariance, nearest_estimate,
+    unkick)
+from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.simulation.simulate import period_step, states_between
 from grazing_control.oscillator.control import Gains

@@ -13,7 +13,7 @@ import pytest
 
 from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
 from grazing_control.dynamics.simulation.actuator import Actuator, actuated_step, lag_flow, lag_states
-from grazing_control.dynamics.estimation.section_state import section_force, trajectory
+from grazing_control.dynamics.estimation.motion import section_force, trajectory
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
 TWO_PI = 2.0 * math.pi

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from grazing_control.dynamics.simulation.actuation import flow_with_force, pulse_start, pulse_step
-from grazing_control.dynamics.estimation.section_state import correction_legs, trajectory
+from grazing_control.dynamics.estimation.motion import correction_legs, trajectory
 from grazing_control.oscillator import kernel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design
+from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.identification import identify
 from grazing_control.dynamics.identification.data import Recording
 from grazing_control.dynamics.identification.fit import IdentificationError
@@ -144,7 +144,7 @@ def test_a_pulsed_chain_gives_its_modal_parameters_to_1e_8():
     the pulse (the samples inside it left out, the motion after it the kick's averaged
     over it: modal.pulse_coefficients) the noise-free fit gives every parameter to 1e-8
     relative; read as kicks at the pulses' centres it does not (the reproduction)."""
-    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.design.family import pulse_design
 
     model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
     design = pulse_design(model, -0.22, 1.0, 1.0)

@@ -306,7 +306,7 @@ def test_robustness_model_bands():
             assert dd == dd2
             if not (math.isfinite(ra) and math.isfinite(rb)):
                 # no certified orbit on one route (the n-DOF check of a second contact
-                # gives up where v- is too small, ndof_branch.other_contacts): both fail
+                # gives up where v- is too small, modal_branch.other_contacts): both fail
                 assert not (ra < 1.0 or rb < 1.0), (e, dd, ra, rb)
                 continue
             rel = abs(ra - rb) / abs(ra)

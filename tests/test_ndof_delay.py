@@ -11,16 +11,16 @@ import pytest
 import yaml
 
 from grazing_control.dynamics.design import gains as design
-from grazing_control.dynamics.design import ndof_design as nd
-from grazing_control.dynamics.maps.ndof_map import NdofMap
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.design import family as nd
+from grazing_control.dynamics.maps.modal_map import ModalMap
+from grazing_control.dynamics.orbits import modal_branch
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
-from test_ndof_design import CHAIN, _match, _study
+from test_family import CHAIN, _match, _study
 
 
 def _fd_jacobian(P, z, h):
@@ -91,14 +91,14 @@ def test_the_delayed_map_is_the_smooth_delayed_kick_far_from_the_wall_and_its_ja
     rng = np.random.default_rng(5)
     for _ in range(5):
         z = rng.normal(scale=0.3, size=4)
-        st = NdofMap(far, k, 4.0).step(z)
+        st = ModalMap(far, k, 4.0).step(z)
         want = flow.transition(far.period) @ z + flow.transition(far.period - 4.0) @ b * (k @ z)
         assert not st.impacts
         assert np.max(np.abs(st.state - want)) <= 1e-12 * max(1.0, np.abs(want).max())
     near = dataclasses.replace(m, delta_d=-0.1)
     z = np.array([-0.05, -0.02, 0.03, 0.01])
     for delay, kicked_first in ((4.0, True), (11.9, False)):   # the impact at t = 11.50
-        P = NdofMap(near, k, delay)
+        P = ModalMap(near, k, delay)
         st = P.step(z, jacobian=True)
         assert len(st.impacts) == 1 and (st.impacts[0].dt > delay) == kicked_first
         fd = _fd_jacobian(P, z, 1e-5)
@@ -109,7 +109,7 @@ def test_the_delayed_map_is_the_smooth_delayed_kick_far_from_the_wall_and_its_ja
 @pytest.mark.parametrize("delay, mu", [(0.5, 0.2), (4.0, 0.0)])
 def test_delayed_design_limit_multipliers_against_finite_differences_of_the_exact_map(delay, mu):
     """Chain, the design k(mu; delay) acting delay after the sample: the delayed 1/1 branch
-    is a fixed point of the exact delayed NdofMap (1e-13), and the multipliers of the
+    is a fixed point of the exact delayed ModalMap (1e-13), and the multipliers of the
     finite-difference Jacobian of that map at the orbit converge to the design's limit
     spectrum like |Delta d|^(1/2) (as the undelayed ones, §12): error/sqrt|Delta d| in
     (0.05, 20) and below 1e-3 at Delta d = -1e-8."""
@@ -118,7 +118,7 @@ def test_delayed_design_limit_multipliers_against_finite_differences_of_the_exac
 
 def check_limit_against_the_exact_map(actuation, mu, delay, width=0.0):
     """On the chain: the design k(mu; actuation)'s branch is a fixed point of the exact
-    NdofMap(delay, width) (1e-13, the same v-), and the multipliers of that map's
+    ModalMap(delay, width) (1e-13, the same v-), and the multipliers of that map's
     finite-difference Jacobian at the shot orbit approach the limit spectrum like
     |Delta d|^(1/2): error / sqrt|Delta d| in (0.05, 20), below 1e-3 at Delta d = -1e-8.
     Returns the errors at Delta d = -1e-4, -1e-6, -1e-8."""
@@ -129,8 +129,8 @@ def check_limit_against_the_exact_map(actuation, mu, delay, width=0.0):
     errors = []
     for dd in (-1e-4, -1e-6, -1e-8):
         m = dataclasses.replace(m0, delta_d=dd)
-        bp = ndof_branch.orbit_at(m, k, dd, delay=actuation)
-        P = NdofMap(m, k, delay, width)
+        bp = modal_branch.orbit_at(m, k, dd, delay=actuation)
+        P = ModalMap(m, k, delay, width)
         st = P.step(bp.pi2_state)
         assert len(st.impacts) == 1
         assert abs(st.impacts[0].v_minus - bp.v_minus) <= 1e-9 * bp.v_minus
@@ -152,8 +152,8 @@ def test_the_undelayed_design_acting_late_grows_like_one_over_delta_d():
     rho = []
     for dd in (-1e-4, -1e-6):
         m = dataclasses.replace(m0, delta_d=dd)
-        bp = ndof_branch.orbit_at(m, k, dd, delay=4.0)
-        orbit = find_periodic(NdofMap(m, k, 4.0), bp.pi2_state)
+        bp = modal_branch.orbit_at(m, k, dd, delay=4.0)
+        orbit = find_periodic(ModalMap(m, k, 4.0), bp.pi2_state)
         assert len(orbit.impacts) == 1
         rho.append(float(np.max(np.abs(np.linalg.eigvals(orbit.monodromy)))))
     assert rho[1] > 50.0 * rho[0] > 50.0
@@ -166,7 +166,7 @@ def test_delays_outside_the_window_are_refused_naming_the_delay():
         with pytest.raises(ParameterError, match="delay=.*valid range is 0 <= delay < T - s"):
             nd.gain_family(m, 0.2, bad)
     with pytest.raises(ParameterError, match="delay=.*valid range is 0 <= delay < T"):
-        NdofMap(m, nd.gain_family(m, 0.2), m.period)
+        ModalMap(m, nd.gain_family(m, 0.2), m.period)
 
 
 def test_the_gain_file_carries_the_delay(tmp_path):

@@ -1,5 +1,5 @@
 """The model filter over the exact n-DOF map (docs/theory_estimation.md, (E11)): the n-DOF
-motion of section_state.trajectory against the exact core and the 1-DOF closed form, and
+motion of motion.trajectory against the exact core and the 1-DOF closed form, and
 model_update on a stream of one coordinate's position against the exact n-DOF flow."""
 
 import dataclasses
@@ -8,14 +8,15 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
+from grazing_control.dynamics.estimation import motion as mo
 from grazing_control.dynamics.estimation import section_state as ss
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.impact import advance
 from grazing_control.oscillator.params import ParameterError
 
-from test_ndof_design import CHAIN, _study
+from test_family import CHAIN, _study
 
 RATE = 200                      # samples per period (T/200, the issue's sensor)
 
@@ -48,8 +49,8 @@ def test_n1_model_motion_is_the_1dof_closed_form():
     m, p = dataclasses.replace(m, delta_d=-0.05), p.with_(delta_d=-0.05)
     s = np.linspace(0.0, p.period, RATE + 1)[1:]
     for z0, corr, delay in (((0.01, -0.02), 0.03, 2.0), ((0.0, 0.0), -0.01, 0.0)):
-        a = ss.trajectory(p, z0, s, corr, delay)
-        b = ss.trajectory(m, z0, s, corr, delay)
+        a = mo.trajectory(p, z0, s, corr, delay)
+        b = mo.trajectory(m, z0, s, corr, delay)
         assert len(a[4]) == len(b[4]) == 1
         assert np.max(np.abs(a[0] - b[0])) <= 1e-13
         assert np.max(np.abs(np.array(a[2]) - b[2])) <= 1e-13
@@ -63,7 +64,7 @@ def test_n_dof_motion_against_the_core_and_finite_differences():
     m = dataclasses.replace(load_model(CHAIN), delta_d=-0.05)
     s = np.linspace(0.0, m.period, RATE + 1)[1:]
     z0, corr, delay = np.array([0.01, -0.02, 0.005, 0.01]), 0.03, 2.0
-    out, jac, end, mono, impacts = ss.trajectory(m, z0, s, corr, delay)
+    out, jac, end, mono, impacts = mo.trajectory(m, z0, s, corr, delay)
     truth, end_truth = _exact_samples(m, z0, s, corr, delay)
     assert len(impacts) == 1 and impacts[0][0] > delay
     assert np.max(np.abs(out - truth)) <= 1e-14
@@ -72,11 +73,11 @@ def test_n_dof_motion_against_the_core_and_finite_differences():
     for j in range(4):
         e = np.zeros(4)
         e[j] = h
-        fd = (ss.trajectory(m, z0 + e, s, corr, delay)[0]
-              - ss.trajectory(m, z0 - e, s, corr, delay)[0]) / (2 * h)
+        fd = (mo.trajectory(m, z0 + e, s, corr, delay)[0]
+              - mo.trajectory(m, z0 - e, s, corr, delay)[0]) / (2 * h)
         assert np.max(np.abs(fd - jac[:, :, j])) <= 1e-9
     with pytest.raises(ParameterError, match=r"^wall=True is invalid for an n-DOF model"):
-        ss.trajectory(m, z0, s, corr, delay, wall=True)
+        mo.trajectory(m, z0, s, corr, delay, wall=True)
 
 
 @pytest.fixture(scope="module")

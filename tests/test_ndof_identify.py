@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from grazing_control import cli
-from grazing_control.dynamics.design.ndof_design import evaluate_design
+from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.identification.modal import ModalLayout, modal_of
 from grazing_control.oscillator.ndof.model import load_model
 from test_ndof_nodes import CHAIN, STREAM_DD, stream_scene
@@ -166,3 +166,15 @@ def test_a_model_whose_wall_coordinate_is_not_streamed_is_one_line_naming_it(ide
     lines = [ln for ln in (text + err).splitlines() if ln.strip()]
     assert status == 2 and len(lines) == 1, (status, lines)
     assert "carries the position of coordinates 0..1 only" in lines[0] and "i_w=2" in lines[0]
+
+
+def test_the_record_beside_the_fit_is_the_model_files_r_not_the_simulators_unused_one():
+    """Found by hand: `grazing identify` of a 3-DOF bag whose model file has r = 0.7 fitted
+    r = 0.7 and printed "its parameter record: r = 0.68", sim_node's 1-DOF ``r`` (left at
+    its default: a model file's scene refuses any other and does not use it)."""
+    from grazing_control.recordings.identify import model_file_record
+
+    model = dataclasses.replace(load_model(CHAIN), r=0.7)
+    sim = {"r": 0.68, "delta_d": -1e-4, "zeta": 0.05}
+    assert model_file_record(sim, model) == {"r": 0.7, "delta_d": -1e-4}
+    assert model_file_record({"r": 0.68}, model) == {"r": 0.7}

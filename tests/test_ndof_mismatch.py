@@ -4,7 +4,7 @@ dynamics/design/mismatch.py): the band of Delta d next to grazing where the cont
 
 Yardsticks: the 1-DOF bands (the study's shooting route, dynamics/orbits/orbits.py) for
 n = 1; for n = 2 brute force: the plant perturbed, its orbit's multipliers recomputed
-from the fourth-order finite-difference Jacobian of the exact map (NdofMap, the certified
+from the fourth-order finite-difference Jacobian of the exact map (ModalMap, the certified
 event-driven core), over seeded random parameters, errors and Delta d, and on both sides
 of a band's end.
 """
@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.design.mismatch import (instability_band, mismatched_model,
                                                       model_largest_multiplier)
-from grazing_control.dynamics.maps.ndof_map import NdofMap
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.maps.modal_map import ModalMap
+from grazing_control.dynamics.orbits import modal_branch
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -37,8 +37,8 @@ def _fd_multiplier(plant, k, dd, delay=0.0):
     period. The step starts at 1e-2 v-^2 and shrinks tenfold until two successive
     estimates agree to 1e-7, else the most consistent pair is taken (a multiplier ~1e6
     needs ~1e-5 v-^2: the map's curvature grows with it; below, rounding takes over)."""
-    bp = ndof_branch.orbit_at(plant, k, dd, delay=delay)
-    P = NdofMap(plant, k, delay)
+    bp = modal_branch.orbit_at(plant, k, dd, delay=delay)
+    P = ModalMap(plant, k, delay)
     z = bp.pi2_state
 
     def estimate(h):
@@ -125,12 +125,12 @@ def test_chain_multipliers_against_brute_force():
 
 
 def test_random_3dof_multipliers_against_brute_force():
-    """Seeded random 3-DOF models (full M, C, K; tests/test_ndof_design.py's generator),
+    """Seeded random 3-DOF models (full M, C, K; tests/test_family.py's generator),
     their family gain k(mu = 0), a random parameter (a whole matrix, an entry pair, r,
     omega) off by +-1e-3 .. 1e-2 at Delta d in -1e-6 .. -1e-4: the band's multiplier
     equals the finite-difference Jacobian of the exact map to 1e-5 (measured <= 6.2e-8
     over the 9 cases with an orbit)."""
-    from test_ndof_design import _random_model
+    from test_family import _random_model
 
     rng = np.random.default_rng(3204)
     checked, worst = 0, 0.0

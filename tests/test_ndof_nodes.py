@@ -5,8 +5,8 @@ analysed from the bag alone.
 The scene is the shipped config/models/two_mass_chain.yaml at Delta d = -1e-5: uncontrolled
 its Pi2 samples are chaotic near grazing (no period up to 30; largest Lyapunov exponent
 about 0.20 per period, docs/nodes.md); the controller with the design's k(mu = -0.22)
-(dynamics.design.ndof_design, written by write_gain_yaml) switched on at sample 300 takes them
-to the controlled 1/1 orbit that Newton shooting finds on NdofMap with the same gains.
+(dynamics.design.family, written by write_gain_yaml) switched on at sample 300 takes them
+to the controlled 1/1 orbit that Newton shooting finds on ModalMap with the same gains.
 The references are the core's: the engine replayed with the recorded corrections
 (bit for bit: the node is the engine) and find_periodic.
 """
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import (evaluate_design, pulse_design,
+from grazing_control.dynamics.design.family import (evaluate_design, pulse_design,
                                                        write_gain_yaml)
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.plant.engine import Engine
@@ -96,7 +96,7 @@ def test_a_two_mass_scene_through_the_nodes_converges_to_the_controlled_orbit(tm
     assert 0 < counts[on - 60:on].sum() < 60
     # controlled: the exact controlled 1/1 orbit, one impact per period
     assert np.all(counts[-20:-1] == 1)
-    P = NdofMap(model, design.gains)
+    P = ModalMap(model, design.gains)
     xref = P.flow.particular(P.flow.tau2)
     orbit = find_periodic(P, X[-1] - xref)
     distance = float(np.max(np.abs(X[-1] - (xref + orbit.state))))
@@ -210,7 +210,7 @@ def test_an_actuated_designs_gain_file_gives_both_nodes_its_actuator(tmp_path):
     filter reset 390 times; with this, 394 impacts, 1 per period at the end, 0 resets)."""
     import yaml
 
-    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.design.family import pulse_design
 
     gains = tmp_path / "gains.yaml"
     write_gain_yaml(gains, MODEL, pulse_design(MODEL, -0.22, 1.0, 1.0, 0.1, 0.05), SCENE)
@@ -405,7 +405,7 @@ def test_a_two_mass_pulsed_stream_scene_is_the_cores_closed_loop_on_the_same_sam
     (StreamEstimator with the model and the pulse, then k^T z^) to 1e-15; the Pi2
     samples are the engine's with the recorded corrections as pulses centred 1.0 after
     their samples, bit for bit; the stream is the engine's sensor's; captured on the
-    controlled orbit of NdofMap(width=1) with one impact per period. With the actuator
+    controlled orbit of ModalMap(width=1) with one impact per period. With the actuator
     (LAG: the pulse the command of a first-order lag, the force carried from period to
     period) the same, the core's filter through the actuator (issue 32), captured with
     one impact per period on the Pi2 state the last periods repeat."""
@@ -488,7 +488,7 @@ def test_a_two_mass_pulsed_stream_scene_is_the_cores_closed_loop_on_the_same_sam
         last = np.array([tuple(q.position) + tuple(q.velocity) for q in pi2[n - 10:n]])
         assert np.max(np.abs(last - last.mean(axis=0))) < 5e-2   # measured 1.3e-2
         return
-    P = NdofMap(model, design.gains, STREAM_DELAY, width)
+    P = ModalMap(model, design.gains, STREAM_DELAY, width)
     orbit = find_periodic(P, eng.z)
     assert np.max(np.abs(eng.z - orbit.state)) < 1e-2
 
@@ -511,7 +511,7 @@ def test_a_live_gain_change_is_applied_on_a_two_dof_controller():
     model = dataclasses.replace(load_model(CHAIN), delta_d=DELTA_D)
     k0 = evaluate_design(model, MU).gains
     k1 = 0.5 * k0
-    P = NdofMap(model)
+    P = ModalMap(model)
     xref = P.flow.particular(P.flow.tau2)
     z = np.array([2e-4, -1e-4, 3e-4, 5e-4])
     X = xref + z

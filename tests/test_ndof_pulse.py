@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from grazing_control.dynamics.design import ndof_design as nd
-from grazing_control.dynamics.maps.ndof_map import NdofMap, actuated_step, pulse_step
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.design import family as nd
+from grazing_control.dynamics.maps.modal_map import ModalMap, actuated_step, pulse_step
+from grazing_control.dynamics.orbits import modal_branch
 from grazing_control.dynamics.simulation import actuation
 from grazing_control.dynamics.simulation import actuator as act
 from grazing_control.oscillator.ndof import load_model
@@ -22,7 +22,7 @@ from grazing_control.oscillator.params import ParameterError
 
 from reference_ndof import load_reference
 from test_ndof_delay import _fd_jacobian, check_limit_against_the_exact_map
-from test_ndof_design import CHAIN, _match, _random_model, _study
+from test_family import CHAIN, _match, _random_model, _study
 
 #: (z, Delta v, start, width): a pulse before the impact, one holding it (the study's
 #: impact comes ~7 after Pi2), the kick
@@ -167,14 +167,14 @@ def test_chain_actuated_step_against_the_reference_and_dop853():
 
 
 def test_pulsed_map_jacobian_against_finite_differences():
-    """NdofMap(width): its Jacobian (the pieces' monodromies, the force's dependence on z
+    """ModalMap(width): its Jacobian (the pieces' monodromies, the force's dependence on z
     through the pulse's input and its clearance) equals fourth-order differences to 1e-7,
     with the impact after the pulse and inside it."""
     m = dataclasses.replace(load_model(CHAIN), delta_d=-0.1)
     k = nd.gain_family(load_model(CHAIN), 0.0, 4.0)
     z = np.array([-0.05, -0.02, 0.03, 0.01])
     for delay, width in ((4.0, 1.0), (11.5, 1.0), (1.0, 0.5)):
-        P = NdofMap(m, k, delay, width)
+        P = ModalMap(m, k, delay, width)
         st = P.step(z, jacobian=True)
         assert len(st.impacts) == 1
         fd = _fd_jacobian(P, z, 1e-5)
@@ -202,7 +202,7 @@ def test_n1_pulse_family_is_the_1dof_p1_design(delay, width, tau_a, lat):
 def test_pulse_design_limit_multipliers_against_finite_differences_of_the_exact_map(
         delay, width, mu):
     """Chain, the design k(mu; pulse) carried by the pulse of ``width`` centred ``delay``
-    after the sample: the pulsed 1/1 branch is a fixed point of the exact pulsed NdofMap
+    after the sample: the pulsed 1/1 branch is a fixed point of the exact pulsed ModalMap
     (1e-13), and the multipliers of the finite-difference Jacobian of that map at the
     orbit approach the design's limit spectrum like |Delta d|^(1/2) (measured ratio
     err / sqrt|Delta d| 0.48 ... 0.68)."""
@@ -228,7 +228,7 @@ def test_actuator_design_limit_multipliers_against_finite_differences_of_the_act
     for dd in (-1e-4, -1e-6, -1e-8):
         m = dataclasses.replace(m0, delta_d=dd)
         flow = NdofFlow.of(m)
-        bp = ndof_branch.orbit_at(m, nd.gain_family(m0, 0.0, ideal), dd, delay=ideal)
+        bp = modal_branch.orbit_at(m, nd.gain_family(m0, 0.0, ideal), dd, delay=ideal)
 
         def step(y):
             z, f, imps = actuated_step(flow, y[:4], y[4], float(k @ y[:4]),
@@ -281,11 +281,11 @@ def test_pulses_that_do_not_fit_are_refused_naming_the_width():
         with pytest.raises(ParameterError, match="width="):
             nd.Actuation(1.0, bad)
         with pytest.raises(ParameterError, match="width="):
-            NdofMap(m, nd.gain_family(m, 0.0), 1.0, bad)
+            ModalMap(m, nd.gain_family(m, 0.0), 1.0, bad)
     for bad in (m.period, 1e308, "x", None, True):
         with pytest.raises(ParameterError, match="width=.* is invalid: valid range is a finite "
                                                  "width, 0 <= width < T"):
-            NdofMap(m, nd.gain_family(m, 0.0), 1.0, bad)
+            ModalMap(m, nd.gain_family(m, 0.0), 1.0, bad)
     rigid = dataclasses.replace(m, K=[[1.0, -1.0], [-1.0, 1.0]])
     with pytest.raises(ParameterError, match="K is invalid for a force pulse"):
         pulse_step(NdofFlow.of(rigid), np.zeros(4), 0.1, start=1.0, width=1.0)
@@ -334,14 +334,15 @@ def pulsed_chain():
 
 
 def test_pulsed_motion_against_the_core_and_finite_differences(pulsed_chain):
-    """section_state.trajectory with the pulse: the states at T/200 equal the core's
+    """motion.trajectory with the pulse: the states at T/200 equal the core's
     sample-to-sample flow to 1e-14, the Jacobians fourth-order differences to 1e-10
     relative (measured 4e-12; |d z / d z0| reaches 30 after the impact, v- ~ 0.03); n = 1
     equals the 1-DOF pulsed trajectory (1e-13)."""
+    from grazing_control.dynamics.estimation import motion as mo
     from grazing_control.dynamics.estimation import section_state as ss
 
     m, s, states, corrections, samples = pulsed_chain
-    out, jac, end, _mono, imps = ss.trajectory(m, states[0], s, corrections[0],
+    out, jac, end, _mono, imps = mo.trajectory(m, states[0], s, corrections[0],
                                                FILTER_PULSE[0], width=FILTER_PULSE[1])
     assert len(imps) == 1
     assert np.max(np.abs(out - samples[0])) <= 1e-14
@@ -352,7 +353,7 @@ def test_pulsed_motion_against_the_core_and_finite_differences(pulsed_chain):
         e[j] = h
 
         def f(t):
-            return ss.trajectory(m, states[0] + t * e, s, corrections[0], FILTER_PULSE[0],
+            return mo.trajectory(m, states[0] + t * e, s, corrections[0], FILTER_PULSE[0],
                                  width=FILTER_PULSE[1])[0]
 
         fd = (8.0 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12.0 * h)
@@ -360,8 +361,8 @@ def test_pulsed_motion_against_the_core_and_finite_differences(pulsed_chain):
     m1, p = _study()
     m1, p = dataclasses.replace(m1, delta_d=-0.05), p.with_(delta_d=-0.05)
     s1 = np.linspace(0.0, p.period, 201)[1:]
-    a = ss.trajectory(p, (0.01, -0.02), s1, 0.03, 2.0, width=1.0)
-    b = ss.trajectory(m1, (0.01, -0.02), s1, 0.03, 2.0, width=1.0)
+    a = mo.trajectory(p, (0.01, -0.02), s1, 0.03, 2.0, width=1.0)
+    b = mo.trajectory(m1, (0.01, -0.02), s1, 0.03, 2.0, width=1.0)
     assert len(a[4]) == len(b[4]) == 1
     assert np.max(np.abs(a[0] - b[0])) <= 1e-13
     assert np.max(np.abs(a[1] - b[1])) <= 1e-12 * np.max(np.abs(a[1]))
@@ -415,13 +416,14 @@ def test_noisy_pulsed_filter_error_spread_matches_its_covariance(pulsed_chain):
 
 
 def test_actuated_motion_against_the_plant_and_finite_differences():
-    """section_state.trajectory through the first-order actuator on the chain (tau_a 0.4,
+    """motion.trajectory through the first-order actuator on the chain (tau_a 0.4,
     latency 0.2, width 1 centred 2.0 after the sample, force0 0.003 at the section, one
     impact): the end state is the plant's actuated_step bit for bit (measured 0.0), the
     force at the next section section_force = actuated_step's to 1e-20, the samples every
     7th of T/200 lag_advance's to 1e-14 (measured 6.7e-16), the Jacobians fourth-order
     differences (h 1e-5) to 1e-9 relative (measured 3.4e-11); n = 1 equals the 1-DOF
     actuated trajectory (states 2.5e-16, Jacobians 8e-15)."""
+    from grazing_control.dynamics.estimation import motion as mo
     from grazing_control.dynamics.estimation import section_state as ss
     from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.oscillator.ndof.forced import lag_advance
@@ -432,13 +434,13 @@ def test_actuated_motion_against_the_plant_and_finite_differences():
     z0, dv, delay, width, f0 = np.array([0.01, -0.02, 0.03, 0.0]), 0.05, 2.0, 1.0, 0.003
     start = pulse_start(period, delay, width)
     s = np.linspace(0.0, period, 201)[1:]
-    out, jac, end, _mono, imps = ss.trajectory(m, z0, s, dv, delay, width=width,
+    out, jac, end, _mono, imps = mo.trajectory(m, z0, s, dv, delay, width=width,
                                                actuator=lag, force0=f0)
     z_end, f_end, i_end = actuated_step(flow, z0, f0, dv, start=start, width=width,
                                         time_constant=0.4, latency=0.2)
     assert len(imps) == len(i_end) == 1
     assert np.array_equal(end, z_end)
-    assert abs(ss.section_force(m, f0, dv, delay, width, math.inf, lag) - f_end) <= 1e-20
+    assert abs(mo.section_force(m, f0, dv, delay, width, math.inf, lag) - f_end) <= 1e-20
     u = actuated_mass(flow) * dv / width
     legs = ((0.0, start + 0.2, 0.0), (start + 0.2, start + 1.2, u), (start + 1.2, period, 0.0))
     for j in range(0, s.size, 7):
@@ -455,7 +457,7 @@ def test_actuated_motion_against_the_plant_and_finite_differences():
         e[j] = h
 
         def g(t):
-            return ss.trajectory(m, z0 + t * e, s, dv, delay, width=width, actuator=lag,
+            return mo.trajectory(m, z0 + t * e, s, dv, delay, width=width, actuator=lag,
                                  force0=f0)[0]
 
         fd = (8.0 * (g(1) - g(-1)) - (g(2) - g(-2))) / (12.0 * h)
@@ -463,8 +465,8 @@ def test_actuated_motion_against_the_plant_and_finite_differences():
     m1, p = _study()
     m1, p = dataclasses.replace(m1, delta_d=-0.05), p.with_(delta_d=-0.05)
     s1 = np.linspace(0.0, p.period, 201)[1:]
-    a = ss.trajectory(p, (0.01, -0.02), s1, 0.03, 2.0, width=1.0, actuator=lag, force0=0.002)
-    b = ss.trajectory(m1, (0.01, -0.02), s1, 0.03, 2.0, width=1.0, actuator=lag, force0=0.002)
+    a = mo.trajectory(p, (0.01, -0.02), s1, 0.03, 2.0, width=1.0, actuator=lag, force0=0.002)
+    b = mo.trajectory(m1, (0.01, -0.02), s1, 0.03, 2.0, width=1.0, actuator=lag, force0=0.002)
     assert len(a[4]) == len(b[4]) == 1
     assert np.max(np.abs(a[0] - b[0])) <= 1e-13
     assert np.max(np.abs(a[1] - b[1])) <= 1e-12 * np.max(np.abs(a[1]))

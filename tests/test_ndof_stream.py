@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import evaluate_design
+from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import ParameterError
@@ -64,16 +64,16 @@ def test_an_n_dof_stream_estimator_takes_only_the_model_filter_of_a_coordinate()
 
 def test_the_analysis_of_a_delayed_scene_finds_the_delayed_controlled_orbit():
     """grazing analyze's controlled orbit of an n-DOF bag whose controller acted
-    ``actuation_delay`` after each sample is NdofMap's with that delay (it took the
+    ``actuation_delay`` after each sample is ModalMap's with that delay (it took the
     undelayed map: |final - exact| 6.6e-2 and a 'predicted' contraction 1.40 for the
     captured delay-1.0 stream scene of docs/ndof_scene.md)."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.maps.modal_map import ModalMap
     from grazing_control.dynamics.orbits.shooting import find_periodic
     from grazing_control.recordings.analysis import NdofSetup, ndof_controlled_orbit
 
     model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
     k = evaluate_design(model, -0.22, DELAY).gains
-    P = NdofMap(model, k, DELAY)
+    P = ModalMap(model, k, DELAY)
     xref = P.flow.particular(P.flow.tau2)
     z = find_periodic(P, np.array([-0.04, 0.03, -0.05, 0.03])).state
     setup = NdofSetup(str(CHAIN), model, 2, k, 10, np.inf, DELAY, "lockstep")

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import gain_family, limit_multipliers
+from grazing_control.dynamics.design.family import gain_family, limit_multipliers
 from grazing_control.dynamics.orbits.orbits import orbit_11 as orbit_11_1dof
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
@@ -181,7 +181,7 @@ def two_mu():
 
 
 def test_two_mass_family_gain_is_bounded_to_1e_10_and_converges_to_the_limit(two_mu):
-    from grazing_control.dynamics.design.ndof_design import transmission_zeros
+    from grazing_control.dynamics.design.family import transmission_zeros
 
     assert np.max(np.abs(transmission_zeros(TWO))) < 1.0   # the premise
     mu, why = two_mu

@@ -256,3 +256,56 @@ def test_settle_heap_freezes_what_start_up_made_and_records_the_pauses(monkeypat
     finally:
         gc.callbacks.remove(pauses)
         gc.unfreeze()
+
+
+def test_safe_points_run_the_collections_there_and_not_in_between(monkeypatch):
+    """Issue 30: the stream controller's young collections fell inside its section
+    estimates (23 of 1000 at T/200 x1000, ~0.1-1.2 ms each). With SafePoints the
+    allocations between two safe points trigger none (up to the fallback); the call runs
+    the one the default thresholds ask for (gen 0; gen 1 every twelfth; gen 2 after
+    eleven of those), and the cycles are freed there. GRAZING_GC=keep: nothing changes."""
+    import gc
+
+    from grazing_control.ros import common
+
+    class Cycle:
+        def __init__(self):
+            self.me = self
+
+    thresholds = gc.get_threshold()
+    runs = []
+
+    def record(phase, info):
+        if phase == "stop":
+            runs.append((info["generation"], info["collected"]))
+
+    monkeypatch.setenv(common.GC_ENV, "keep")
+    common.SafePoints()()
+    assert gc.get_threshold() == thresholds
+    monkeypatch.delenv(common.GC_ENV)
+    gc.collect()
+    gc.callbacks.append(record)
+    try:
+        collect = common.SafePoints()
+        assert gc.get_threshold() == (common.SAFE_POINT_FALLBACK, *thresholds[1:])
+        collect()                       # nothing allocated: nothing due
+        assert runs == []
+        gens = []
+        for _ in range(140):
+            for _ in range(thresholds[0] + 50):
+                Cycle()
+            assert runs == []           # the allocations trigger none
+            collect()
+            (gen, collected), = runs
+            assert collected >= thresholds[0] // 2   # the cycles freed here
+            gens.append(gen)
+            runs.clear()
+        # as CPython's own: gen 1 once gen 0 ran more than 10 times since, gen 2 once
+        # gen 1 ran more than 10 times
+        assert gens.index(1) == 11 and gens[12:24].count(1) == 1
+        assert gens.index(2) == 12 * 11 and gens.count(2) == 1
+        collect.close()                 # the node destroyed: the thresholds as they were
+        assert gc.get_threshold() == thresholds
+    finally:
+        gc.callbacks.remove(record)
+        gc.set_threshold(*thresholds)

@@ -237,3 +237,67 @@ def test_a_node_refuses_a_bomb_as_its_model_file(tmp_path):
     with pytest.raises(ParameterError, match=r"model_file=.*bomb.yaml' is invalid: cannot "
                                              r"read it as a model YAML file \(more than 50000"):
         load_model_file(str(bomb))
+
+
+# ------------------------------------------------- numbers read as rcl reads them
+def _numeric_spelling(rng):
+    """A random spelling of a number: sign, digits, a dot, digits, an exponent (each part
+    optional, some of them malformed: ``1e``, ``-.``, ``+E5``)."""
+    digits = lambda lo, hi: "".join(rng.choice("0123456789") for _ in range(rng.randint(lo, hi)))
+    s = rng.choice(["", "-", "+"])
+    if rng.random() < 0.85:
+        s += digits(1, 3)
+    if rng.random() < 0.5:
+        s += "." + digits(0, 2)
+    if rng.random() < 0.7:
+        s += rng.choice("eE") + rng.choice(["", "-", "+"]) + digits(0, 2)
+    return s or "1"
+
+
+def test_a_number_in_a_parameter_file_is_read_as_rcl_reads_it(tmp_path):
+    """``delta_d: -1e-4`` is a double to rcl's parameter-file parser (and to YAML 1.2) but
+    was the string '-1e-4' to PyYAML's YAML 1.1 resolver, so `grazing design --model`
+    refused a model file that `ros2 run --params-file` read (84 of these 294 spellings
+    differed). Differential, over seeded random spellings: the type and value that
+    read_yaml_file gives is the one a node's parameter gets from rcl (or both refuse)."""
+    import rclpy
+    from rclpy.context import Context
+
+    rng = random.Random(32)
+    spellings = sorted({_numeric_spelling(rng) for _ in range(300)})
+    kinds = {float: "DOUBLE", int: "INTEGER", str: "STRING"}
+    seen = set()
+    for text in spellings:
+        path = write(tmp_path, "n.yaml", f"/**:\n  ros__parameters:\n    k: {text}\n")
+        try:
+            ours = read_yaml_file(path)["/**"]["ros__parameters"]["k"]
+            ours = (kinds[type(ours)], ours)
+        except YamlFileError:
+            ours = "refused"
+        ctx = Context()
+        try:
+            rclpy.init(context=ctx, args=["--ros-args", "--params-file", str(path)])
+        except Exception:
+            rcl = "refused"
+        else:
+            try:
+                node = rclpy.create_node("numbers", context=ctx,
+                                         automatically_declare_parameters_from_overrides=True)
+                p = node.get_parameter("k")
+                rcl = (p.type_.name, p.value)
+                node.destroy_node()
+            finally:
+                rclpy.shutdown(context=ctx)
+        assert ours == rcl, (text, ours, rcl)
+        seen.add(ours if ours == "refused" else ours[0])
+    assert {"DOUBLE", "INTEGER", "STRING"} <= seen, seen
+
+
+def test_a_model_file_takes_an_exponent_without_a_dot(tmp_path):
+    from grazing_control.oscillator.ndof.model import load_model
+
+    text = open(os.path.join(os.path.dirname(__file__), "..", "config", "models",
+                             "two_mass_chain.yaml"), encoding="utf-8").read()
+    lines = [ln for ln in text.splitlines() if not ln.startswith("delta_d:")]
+    path = write(tmp_path, "m.yaml", "\n".join(lines + ["delta_d: -1e-4", ""]))
+    assert load_model(path).delta_d == -1e-4

@@ -9,12 +9,12 @@ against the hashes recorded on main before the fold of issue 32 (:data:`MAIN_HAS
 keep every 1-DOF scene bit for bit.
 
 The n-DOF scene runs on the same engine (a model file in the settings, issue 32). Its
-references are the core's NdofMap (the period map the design and shooting use) and its
-advance: the engine must repeat NdofMap's iterates bit for bit where it makes the same
+references are the core's ModalMap (the period map the design and shooting use) and its
+advance: the engine must repeat ModalMap's iterates bit for bit where it makes the same
 calls, publish states between samples that are the core's trajectory, and, driven by the
 lockstep and realtime loops with the n-DOF law, take the period-doubled motion near
 grazing of config/models/two_mass_scene.yaml to the controlled 1/1 orbit that Newton
-shooting finds on NdofMap with the same gains.
+shooting finds on ModalMap with the same gains.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.ndof_design import gain_family
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.design.family import gain_family
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic
 from grazing_control.dynamics.simulation.simulate import period_step
 from grazing_control.oscillator.ndof.impact import advance
@@ -274,7 +274,7 @@ def xv(ev):
 
 def test_uncontrolled_samples_are_ndofmap_iterates_bit_for_bit():
     s = model_settings(CHAIN, delta_d=-1e-3, state_period=0.7)
-    eng, P = Engine(s), NdofMap(s.model)
+    eng, P = Engine(s), ModalMap(s.model)
     z = np.zeros(4)
     impacts = 0
     for k in range(60):
@@ -298,10 +298,10 @@ def test_uncontrolled_samples_are_ndofmap_iterates_bit_for_bit():
 def test_controlled_samples_are_ndofmap_with_gains_bit_for_bit():
     s = model_settings(delta_d=-1e-4)
     k = gain_family(s.model, 0.1)
-    eng, P = Engine(s), NdofMap(s.model, k)
+    eng, P = Engine(s), ModalMap(s.model, k)
     z = np.zeros(4)
     for _ in range(40):
-        eng.begin_period(float(P.gains @ eng.z))   # NdofMap's kick, k^T z
+        eng.begin_period(float(P.gains @ eng.z))   # ModalMap's kick, k^T z
         eng.end_period()
         z = P.step(z).state
         assert np.array_equal(eng.z, z)
@@ -309,20 +309,20 @@ def test_controlled_samples_are_ndofmap_with_gains_bit_for_bit():
 
 def test_a_start_state_starts_ndofmap_iterates_bit_for_bit():
     """Issue 32: an n-DOF scene from a physical start X0 (state0, 2n values) starts at
-    z = X0 - X_p(tau2) and repeats NdofMap's iterates from there, controlled, bit for
+    z = X0 - X_p(tau2) and repeats ModalMap's iterates from there, controlled, bit for
     bit; a reset goes back to it."""
-    f = NdofMap(model_settings(CHAIN, delta_d=-1e-3).model).flow
+    f = ModalMap(model_settings(CHAIN, delta_d=-1e-3).model).flow
     X0 = f.particular(f.tau2) + np.array([-0.05, 0.02, 0.01, -0.03])
     s = model_settings(CHAIN, delta_d=-1e-3, state0=X0.tolist())
     assert s.state0 == tuple(X0.tolist())
     k = gain_family(s.model, 0.1)
-    eng, P = Engine(s), NdofMap(s.model, k)
+    eng, P = Engine(s), ModalMap(s.model, k)
     z = f.to_deviation(f.tau2, X0)
     assert np.array_equal(eng.z, z) and abs(np.max(np.abs(z)) - 0.05) < 1e-15
     np.testing.assert_allclose(xv(eng.sample()), X0, rtol=0, atol=1e-15)
     impacts = 0
     for _ in range(40):
-        eng.begin_period(float(P.gains @ eng.z))   # NdofMap's kick, k^T z
+        eng.begin_period(float(P.gains @ eng.z))   # ModalMap's kick, k^T z
         eng.end_period()
         step = P.step(z)
         z = step.state
@@ -336,11 +336,11 @@ def test_a_start_state_starts_ndofmap_iterates_bit_for_bit():
 def test_the_velocity_noise_at_pi2_is_the_one_dof_draws_on_the_actuated_velocity():
     """Issue 32: ``noise`` in an n-DOF scene is the 1-DOF definition (a Gaussian velocity
     kick at every Pi2 sample, one draw of the generator seeded with ``seed``), on the
-    actuated coordinate's velocity: NdofMap's iterates with that kick, bit for bit; for
+    actuated coordinate's velocity: ModalMap's iterates with that kick, bit for bit; for
     n = 1 through the model file the 1-DOF scene's draws, bit for bit."""
     sigma, seed = 1e-3, 5
     s = model_settings(CHAIN, delta_d=-1e-3, noise=sigma, seed=seed)
-    eng, P = Engine(s), NdofMap(s.model)
+    eng, P = Engine(s), ModalMap(s.model)
     rng = np.random.default_rng(seed)
     z = eng.section.kicked(np.zeros(4), rng.normal(0.0, sigma))
     assert np.array_equal(eng.z, z) and z[3] != 0.0 and not z[:3].any()   # i_a = 1
@@ -478,7 +478,7 @@ class NdofLaw:
     """Delta v = k^T (X - X**) on the published sample, as controller_node computes it."""
 
     def __init__(self, s, k, on):
-        f = NdofMap(s.model).flow
+        f = ModalMap(s.model).flow
         self.ref, self.k, self.on = f.particular(f.tau2), k, on
 
     def __call__(self, ev, count):
@@ -486,8 +486,8 @@ class NdofLaw:
 
 
 def scene_orbit(s, k, z_last):
-    """The controlled 1/1 orbit by Newton shooting on NdofMap (the acceptance reference)."""
-    P = NdofMap(s.model, k)
+    """The controlled 1/1 orbit by Newton shooting on ModalMap (the acceptance reference)."""
+    P = ModalMap(s.model, k)
     orbit = find_periodic(P, z_last)
     return P.flow.particular(P.flow.tau2) + orbit.state, orbit
 
@@ -578,15 +578,15 @@ def test_injected_loss_and_jitter_are_the_fault_models_draws():
 
 def test_a_delay_aware_design_run_is_the_delayed_ndofmap_sample_for_sample():
     """Issue 32: the lockstep engine with the kick k^T z_k acting ``delay`` after each
-    sample (k the delay-aware design, ndof_design.gain_family(..., delay)) is the core's
-    NdofMap(model, k, delay) iteration, bit for bit, impacts included."""
-    from grazing_control.dynamics.design.ndof_design import evaluate_design
+    sample (k the delay-aware design, family.gain_family(..., delay)) is the core's
+    ModalMap(model, k, delay) iteration, bit for bit, impacts included."""
+    from grazing_control.dynamics.design.family import evaluate_design
 
     delay = 1.0
     s = model_settings(CHAIN, delta_d=-1e-3, actuation_delay=delay)
     design = evaluate_design(s.model, -0.22, delay)
     assert design.admissible
-    eng, P = Engine(s), NdofMap(s.model, design.gains, delay)
+    eng, P = Engine(s), ModalMap(s.model, design.gains, delay)
     z, impacts = np.full(4, 1e-3), 0
     eng.z = z.copy()
     for k in range(60):
@@ -650,11 +650,11 @@ def test_a_pulsed_run_is_ndofmap_with_the_width_bit_for_bit_on_both_paths():
     """Issue 32: with ``pulse_width`` the correction k^T z_k is the force pulse
     F = m_a k^T z_k / w centred ``actuation_delay`` after the sample
     (docs/theory_ndof.md section 15): the lockstep period (begin_period) and the realtime
-    one (begin_head, then actuate at the deadline) are NdofMap(model, k, delay, width)'s
+    one (begin_head, then actuate at the deadline) are ModalMap(model, k, delay, width)'s
     iterates bit for bit, impacts included; the stream's states during the pulse are the
     flow under its force (advance_with_force from the pulse's start, independent of the
     engine's evaluation from the impact list)."""
-    from grazing_control.dynamics.design.ndof_design import pulse_design
+    from grazing_control.dynamics.design.family import pulse_design
     from grazing_control.oscillator.ndof.forced import advance_with_force
 
     delay, width = 1.0, 1.0
@@ -663,7 +663,7 @@ def test_a_pulsed_run_is_ndofmap_with_the_width_bit_for_bit_on_both_paths():
     design = pulse_design(s.model, -0.22, delay, width)
     assert design.admissible
     a, b = Engine(s), Engine(s)
-    P = NdofMap(s.model, design.gains, delay, width)
+    P = ModalMap(s.model, design.gains, delay, width)
     f = a.section.flow
     z, impacts, during = np.full(4, 1e-3), 0, 0
     a.z, b.z = z.copy(), z.copy()
@@ -744,10 +744,10 @@ def test_through_the_actuator_a_run_is_actuated_steps_iterates_bit_for_bit(tau_a
     and ``actuator_latency`` L the command m_a k^T z / w on [start + L, start + L + w]
     reaches x1 through the lag, the force a state carried from sample to sample: the
     lockstep periods and the realtime ones (begin_head, actuate) are
-    ndof_map.actuated_step's iterates bit for bit, force included (tau_a = 0: the pulse
+    modal_map.actuated_step's iterates bit for bit, force included (tau_a = 0: the pulse
     L later); the stream's states are lag_advance from each piece's start (1e-12)."""
-    from grazing_control.dynamics.design.ndof_design import pulse_design
-    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.dynamics.design.family import pulse_design
+    from grazing_control.dynamics.maps.modal_map import actuated_step
     from grazing_control.oscillator.ndof.forced import lag_advance
 
     delay, width = 1.0, 1.0

@@ -31,7 +31,7 @@ def _gains(p, c2, delay=0.0):
 
 def _xv(p, t, z=(0.0, 0.0)):
     """A physical state of the free motion (no impact) with deviation z at t = 0."""
-    from grazing_control.dynamics.estimation.section_state import phi_rows
+    from grazing_control.dynamics.estimation.motion import phi_rows
     dev = phi_rows(p.zeta, np.atleast_1d(t)) @ np.array(z)
     psi = p.tau2 + p.omega * np.atleast_1d(t) - p.lag
     return (p.amplitude * np.cos(psi) + dev[:, 0], -p.amplitude * p.omega * np.sin(psi)
@@ -177,9 +177,9 @@ def test_a_model_error_costs_the_model_filter_spread_but_not_the_orbit():
         assert spread < bound and np.all(run.impacts_per_period[200:] == 1)
 
 
-def test_after_section_makes_a_section_due_with_the_first_sample_after_it():
-    """Realtime: the estimate of section k waits for the first sample after t_k (the
-    simulator takes an answer only after its Pi2 sample); the estimate is the same."""
+def test_after_section_makes_a_section_due_with_its_sample_at_t_k():
+    """Realtime: section k is due with its last sample, the one at t_k (which the
+    lockstep rule does not wait for); lost, with the first sample after t_k."""
     p = OscillatorParams(delta_d=0.1)
     t = np.arange(0, 22) * p.period / 10
     x, _v = _xv(p, t, (1e-3, -2e-3))
@@ -188,8 +188,45 @@ def test_after_section_makes_a_section_due_with_the_first_sample_after_it():
     b = [(j, d[0], d[2].z) for j, (ti, xi) in enumerate(zip(t, x)) for d in before.add_sample(ti, xi)]
     a = [(j, d[0], d[2].z) for j, (ti, xi) in enumerate(zip(t, x)) for d in after.add_sample(ti, xi)]
     assert [r[:2] for r in b] == [(0, 0), (9, 1), (19, 2)]
-    assert [r[:2] for r in a] == [(1, 0), (11, 1), (21, 2)]
+    assert [r[:2] for r in a] == [(0, 0), (10, 1), (20, 2)]
     assert np.allclose([r[2] for r in a[1:]], [r[2] for r in b[1:]], rtol=0, atol=1e-12)
+    lost = StreamEstimator(p, "arc", 1e-6, "stream", p.period / 10, after_section=True)
+    keep = [j for j in range(22) if j != 10]
+    d = [(j, r[0]) for j in keep for r in lost.add_sample(t[j], x[j])]
+    assert d == [(0, 0), (11, 1), (20, 2)]
+
+
+def test_after_section_with_the_sample_at_t_k_estimates_as_with_the_sample_after_it():
+    """Issue 30: answering with the sample at t_k instead of the first sample after it
+    (which the estimate does not use; a simulator's wake-up later at T/200 x1000) gives
+    the same estimates, covariances and filter resets bit for bit: the model filter over
+    noisy samples at T/200 (stamps as the controller computes them), with corrections and
+    a lost sample. The reference is the rule before (only a sample after t_k makes a
+    section due: a negative sample period, which the constructor refuses, set here)."""
+    p = OscillatorParams(delta_d=0.1)
+    rng = np.random.default_rng(7)
+    h = p.period / 200
+    t = np.array([(lambda s: s[0] + s[1] * 1e-9)(divmod(round(j * h * 1e9), 10**9))
+                  for j in range(200 * 12 + 1)])
+    x, _v = _xv(p, t, (1e-3, -2e-3))
+    x = x + rng.normal(0.0, 1e-4, x.size)
+    new = StreamEstimator(p, "model", 1e-4, "stream", h, after_section=True,
+                          pulse_width=0.1, kernel=False)
+    old = StreamEstimator(p, "model", 1e-4, "stream", h, after_section=True,
+                          pulse_width=0.1, kernel=False)
+    old.sample_period = -1.0
+    due = {"new": [], "old": []}
+    for j in range(t.size):
+        if j == 200 * 7:                     # lost: section 7 due with the next sample
+            continue
+        for name, est in (("new", new), ("old", old)):
+            for k, tk, e in est.add_sample(t[j], x[j]):
+                due[name].append((j, k, tk, tuple(e.z), e.cov.tobytes(), e.source))
+                est.set_correction(k, 1e-5 * (k % 3), 3.0)
+    assert [r[:2] for r in due["new"]] == [(200 * k + (k == 7), k) for k in range(13)]
+    assert [r[0] for r in due["old"]] == [200 * k + 1 for k in range(12)]
+    assert [r[1:] for r in due["new"][:12]] == [r[1:] for r in due["old"]]
+    assert new.resets == old.resets and {r[-1] for r in due["new"][2:]} == {"model"}
 
 
 def test_a_lead_makes_a_section_due_earlier_without_its_last_samples():
@@ -212,6 +249,11 @@ def test_a_lead_makes_a_section_due_earlier_without_its_last_samples():
     for lead in (-1e-9, p.period, math.nan):
         with pytest.raises(ParameterError, match="answer_lead"):
             StreamEstimator(p, "arc", 1e-6, "stream", h, lead=lead)
+    # realtime (answer_after_section): lead 2.5 h before the sample at t_k, the sample
+    # at t_k - 2 h (the lead was ignored there before issue 30)
+    after = StreamEstimator(p, "arc", 1e-6, "stream", h, after_section=True, lead=2.5 * h)
+    a = [(j, d[0]) for j, (ti, xi) in enumerate(zip(t, x)) for d in after.add_sample(ti, xi)]
+    assert a == [(0, 0), (8, 1), (18, 2)]
 
 
 def test_what_the_plant_reports_as_acted_replaces_the_answer():

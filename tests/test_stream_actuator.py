@@ -82,7 +82,7 @@ def test_an_actuator_without_a_pulse_width_is_refused_naming_it():
 def test_n1_model_filter_through_the_actuator_gives_the_1dof_corrections():
     """The n = 1 model file (config/models/study_1dof.yaml) as the model filter's model
     through the actuator (section_state.model_update over the n-DOF trajectory through the
-    lag, ndof_motion.ndof_actuated_trajectory) on the same samples as the 1-DOF filter: the plant of
+    lag, motion.modal_actuated_trajectory) on the same samples as the 1-DOF filter: the plant of
     the 1-DOF core through the actuator (3x bandwidth, pulse 0.1 at delay 3) in 12 periods
     of the loop on the 1-DOF filter's estimate, x only at sigma 1e-4, T/200, seeded, each
     filter from the same prior; every estimate, covariance and correction k^T z^ of the
@@ -90,8 +90,9 @@ def test_n1_model_filter_through_the_actuator_gives_the_1dof_corrections():
     import dataclasses
     import math
 
+    from grazing_control.dynamics.estimation import motion as mo
     from grazing_control.dynamics.estimation import section_state as ss
-    from test_ndof_design import _study
+    from test_family import _study
 
     m, p = _study()
     m, p = dataclasses.replace(m, delta_d=-5e-6), p.with_(delta_d=-5e-6)
@@ -106,7 +107,7 @@ def test_n1_model_filter_through_the_actuator_gives_the_1dof_corrections():
     force, forces, worst, hits = 0.0, [0.0, 0.0], 0.0, 0
     dv = gains.c1 * z[0] + gains.c2 * z[1]
     for k in range(12):
-        dev, _j, z, _m, imps = ss.trajectory(p, z, s, dv, gains.delay, width=WIDTH,
+        dev, _j, z, _m, imps = mo.trajectory(p, z, s, dv, gains.delay, width=WIDTH,
                                              actuator=act, force0=force)
         hits += len(imps)
         y = dev[:, 0] + SIGMA * rng.standard_normal(s.size)
@@ -115,8 +116,8 @@ def test_n1_model_filter_through_the_actuator_gives_the_1dof_corrections():
                for model, prior, f0 in zip((p, m), priors, forces)]
         worst = max(worst, np.max(np.abs(np.subtract(out[0].z, out[1].z))),
                     np.max(np.abs(out[0].cov - out[1].cov)) / np.max(np.abs(out[0].cov)))
-        force = ss.section_force(p, force, dv, gains.delay, WIDTH, math.inf, act)
-        forces = [ss.section_force(model, f0, dv, gains.delay, WIDTH, math.inf, act)
+        force = mo.section_force(p, force, dv, gains.delay, WIDTH, math.inf, act)
+        forces = [mo.section_force(model, f0, dv, gains.delay, WIDTH, math.inf, act)
                   for model, f0 in zip((p, m), forces)]
         assert abs(forces[0] - forces[1]) <= 1e-12 * abs(forces[0]) and forces[0] == force
         dvs = [gains.c1 * e.z[0] + gains.c2 * e.z[1] for e in out]

@@ -24,8 +24,8 @@ __all__ = ["cmd_design"]
 def cmd_design(args):
     if args.model is not None:
         return _family_design(args)
-    from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, evaluate_design,
-                                                 write_controller_yaml)
+    from grazing_control.dynamics.design.gains import C2_LIMIT, write_controller_yaml
+    from grazing_control.dynamics.design.model_design import admissible_set, evaluate_design
 
     p = params_of(args)
     t0 = time.perf_counter()
@@ -38,7 +38,7 @@ def cmd_design(args):
     elif args.c2 is None:
         raise ParameterError("c2 is missing: give --c2 (the chosen gain) or --optimize noise")
     point = evaluate_design(p, args.c2, args.delay)
-    sets = {c: admissible_c2(p, delay=args.delay, conditions=c)
+    sets = {c: admissible_set(p, c, args.delay)
             for c in ("combined", "impacting", "non-impacting")}
     cost = time.perf_counter() - t0
     other = None
@@ -305,7 +305,9 @@ def _family_design(args):
     """design --model FILE [--mu MU | --free-gain NAME=V] [--delay D] [--pulse-width W
     [--actuator-bandwidth B] [--actuator-latency L]] [--out FILE] (docs/ndof_commands.md;
     the delayed design is docs/theory_ndof.md §14, the pulse's §15)."""
-    from grazing_control.dynamics.design import ndof_design as nd
+    from grazing_control.dynamics.design import family as nd
+    from grazing_control.dynamics.design.model_design import (admissible_set, evaluate_design,
+                                                              free_multipliers)
 
     rig = getattr(args, "rig_model", None)          # --rig FILE of n masses (cli/rig.py)
     model = load(args.model) if rig is None else rig.model()
@@ -317,7 +319,7 @@ def _family_design(args):
     k0 = np.asarray(nd.gain_family(model, 0.0, delay), dtype=float)
     k1 = np.asarray(nd.gain_family(model, 1.0, delay), dtype=float) - k0
     zeros = np.asarray(nd.transmission_zeros(model, delay), dtype=complex)
-    sets = {c: _intervals(nd.admissible_mu(model, c, delay))
+    sets = {c: _intervals(admissible_set(model, c, delay))
             for c in ("impacting", "non-impacting")}
     intervals = _intersection(sets["impacting"], sets["non-impacting"])   # "combined"
     given = [f for f, v in (("--mu", args.mu), ("--free-gain", args.free_gain)) if v is not None]
@@ -331,11 +333,11 @@ def _family_design(args):
     else:
         mu, chosen = nd.default_mu(intervals)
     mu += 0.0   # no "-0" in the report
-    design = nd.evaluate_design(model, mu, delay)
+    design = evaluate_design(model, mu, delay)
     k = np.asarray(design.gains, dtype=float)
     lam0 = np.asarray(design.limit_multipliers, dtype=complex)
     gamma = float(design.gamma1)
-    rho_free = float(np.max(np.abs(nd.free_multipliers(model, mu, delay))))
+    rho_free = float(np.max(np.abs(free_multipliers(model, mu, delay))))
     conditions = {"limit_stable": bool(design.stable), "exists_impacting": bool(design.exists),
                   "free_stable": bool(design.free_stable)}
     admissible = bool(design.admissible)
@@ -434,13 +436,12 @@ def _family_spread(args, model, design, delay):
     lag) and of the corrections, every coordinate measured with sigma (R = I), the
     position of the wall coordinate only (the model filter's covariance at --sensor-rate
     over the samples a lockstep controller fits), and the velocity noise at Pi2
-    (dynamics/design/ndof_spread.py, docs/theory_ndof.md section 17). Null entries
+    (dynamics/design/noise.py, docs/theory_ndof.md section 17). Null entries
     where the loop has no stable 1/1 orbit there."""
     import dataclasses
 
-    from grazing_control.dynamics.design.ndof_design import Actuation
-    from grazing_control.dynamics.design.ndof_spread import predicted_spread
-    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.design.family import Actuation
+    from grazing_control.dynamics.design.noise import filter_covariance, predicted_spread
     from grazing_control.dynamics.simulation.actuator import Actuator
 
     given = getattr(args, "delta_d", None)      # (grazing rig's design has none)
@@ -464,7 +465,7 @@ def _family_spread(args, model, design, delay):
         act = None if not isinstance(delay, Actuation) else \
             Actuator(delay.time_constant, delay.latency)
         kick_delay = delay.delay if isinstance(delay, Actuation) else delay
-        r = ndof_filter_covariance(q, design.gains, orbit[:d], rate, model.i_w, kick_delay,
+        r = filter_covariance(q, design.gains, orbit[:d], rate, model.i_w, kick_delay,
                                    width=delay.width if act else 0.0, section_sample=False,
                                    actuator=act, force0=float(orbit[d]) if lag else 0.0)
         cases = {"measured": {}, "position_only": {"measurement": r},

@@ -170,7 +170,7 @@ def coordinates(model) -> tuple:
 def family_member(model, name: str, value: float, delay: float = 0.0) -> float:
     """mu of the family member whose gain on ``name`` is ``value`` (the family is affine
     in mu, docs/theory_ndof.md, "Kick design"; for a kick ``delay`` after Pi2, §14)."""
-    from grazing_control.dynamics.design.ndof_design import gain_family
+    from grazing_control.dynamics.design.family import gain_family
 
     names = coordinates(model)
     if name not in names:
@@ -184,7 +184,7 @@ def family_member(model, name: str, value: float, delay: float = 0.0) -> float:
                              f"the same ({k0[j]:.12g}) for every member of the family; choose "
                              "another coordinate, or --mu")
     mu = float((value - k0[j]) / k1[j])
-    from grazing_control.dynamics.design.ndof_design import MU_LIMIT
+    from grazing_control.dynamics.design.family import MU_LIMIT
 
     if not abs(mu) <= MU_LIMIT:
         raise ParameterError(f"--free-gain {name}={value!r} is invalid: it is the member "
@@ -206,7 +206,7 @@ def gains_of(args, model):
         if given != ["--mu"]:
             raise ParameterError("--cancel-first-markov OFFSET needs --mu MU (the family member "
                                  "it moves off by OFFSET), and neither --gains nor --free-gain")
-        from grazing_control.dynamics.design.ndof_design import cancel_first_markov
+        from grazing_control.dynamics.design.family import cancel_first_markov
 
         only = bool(getattr(args, "markov_only", False))
         k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only),
@@ -226,7 +226,7 @@ def gains_of(args, model):
             raise ParameterError(f"--gains has {k.size} values: the model has n = {model.n}, "
                                  f"give 2n = {2 * model.n} ({', '.join(coordinates(model))})")
         return k, None, "given"
-    from grazing_control.dynamics.design.ndof_design import gain_family
+    from grazing_control.dynamics.design.family import gain_family
 
     mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain)
     return np.asarray(gain_family(model, mu), dtype=float), mu, "design family"

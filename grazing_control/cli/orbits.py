@@ -5,7 +5,7 @@ Pi2 samples of a scene, on the 1-DOF study's model or a model file's (``--model`
 Each command reads its model (the 1-DOF parameters of :mod:`.common` or the file), asks
 the model's own route for the numbers (the 1-DOF closed form: ``dynamics.orbits.orbits``,
 ``continuation.continue_11``, ``simulation.simulate``; a model file: the branch in the
-impact phase or shooting over ``NdofMap``, ``studies.near_grazing``), and prints them through
+impact phase or shooting over ``ModalMap``, ``studies.near_grazing``), and prints them through
 one report: :func:`orbit_lines`, :func:`branch_lines`, :func:`impact_lines`.
 """
 
@@ -245,8 +245,8 @@ def _file_branch(args):
     """A model file's branch (docs/ndof_commands.md): in the impact phase when the start is
     on the branch born at grazing, else by shooting; as :func:`_study_branch`."""
     from grazing_control.dynamics.orbits.continuation import continue_orbit
-    from grazing_control.dynamics.orbits.ndof_branch import continue_branch
-    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.orbits.modal_branch import continue_branch
+    from grazing_control.dynamics.maps.modal_map import ModalMap
     from grazing_control.studies.near_grazing.branch import EXPLICIT, fold_beyond, orbit_11, with_delta_d
 
     values = continuation_values(args.start, args.stop, args.points)
@@ -258,7 +258,7 @@ def _file_branch(args):
     # rounding (issue 32: shooting returned points 1e-2 off near |Delta d| = 3e-8)
     explicit = first.guess == EXPLICIT
     branch = continue_branch(model, k, values) if explicit else \
-        continue_orbit(NdofMap(model, k), "delta_d", values, first.state)
+        continue_orbit(ModalMap(model, k), "delta_d", values, first.state)
     fold = fold_beyond(model, k, branch, float(values[-1]))
     seconds = time.perf_counter() - t0
     # by shooting, an impact with v-^2 near the gap's rounding is resolved to a few
@@ -272,7 +272,7 @@ def _file_branch(args):
         f"{weak[-1]:.6g})")
     limit = None
     if mu is not None:
-        from grazing_control.dynamics.design.ndof_design import limit_multipliers
+        from grazing_control.dynamics.design.family import limit_multipliers
 
         limit = np.asarray(limit_multipliers(model, mu), dtype=complex)
     out.update({

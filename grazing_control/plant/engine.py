@@ -32,7 +32,7 @@ the state z in R^{2n} (the deviation from the periodic response at Pi2), the flo
 piece, the kick on the actuated velocity or the force pulse carrying it (``pulse_width``:
 F = m_a Delta v / w on the actuated coordinate, centred ``actuation_delay`` after the
 sample as in 1-DOF; docs/theory_ndof.md section 15; through the first-order actuator
-the legs of :func:`~grazing_control.dynamics.maps.ndof_map.actuated_step`, the force
+the legs of :func:`~grazing_control.dynamics.maps.modal_map.actuated_step`, the force
 carried in :attr:`Engine.force`), the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
 (:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`):
@@ -41,9 +41,9 @@ draw per sample on the actuated velocity, its measurement noise a draw per coord
 (:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
 Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
-A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s
-iterates bit for bit (with a pulse, ``NdofMap(width=)``'s: the calls of
-:func:`~grazing_control.dynamics.maps.ndof_map.pulse_step`); a sticking motion of the
+A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.modal_map.ModalMap`'s
+iterates bit for bit (with a pulse, ``ModalMap(width=)``'s: the calls of
+:func:`~grazing_control.dynamics.maps.modal_map.pulse_step`); a sticking motion of the
 wall coordinate is the core's (``advance`` returns its sticking impacts; the states
 between samples while stuck are ``advance`` from the piece's start); the 1-DOF path is the kernel's closed form, unchanged
 (benchmarks/fold_hashes.py).
@@ -601,7 +601,7 @@ class Engine:
         """The n-DOF period through the first-order actuator (module docstring): the
         command m_a Delta v / w (clipped) on [start + L, start + L + w], the force from
         :attr:`force` at the sample, the legs of
-        :func:`grazing_control.dynamics.maps.ndof_map.actuated_step` (its calls, so a
+        :func:`grazing_control.dynamics.maps.modal_map.actuated_step` (its calls, so a
         lockstep run is its iterates bit for bit); tau_a = 0 (latency only) is the pulse
         at start + L. The force at the next sample is kept for :meth:`end_period`."""
         sec, s = self.section, self.settings
@@ -639,7 +639,7 @@ class Engine:
     def _model_actuate(self, z_head, dv_correction: float, start: float) -> list:
         """The kick ``start`` after the sample and the flow on to t_k+1 (n-DOF); with a
         pulse width w > 0 the pulse on [start, start + w] and the flow on (the legs of
-        :func:`grazing_control.dynamics.maps.ndof_map.pulse_step`)."""
+        :func:`grazing_control.dynamics.maps.modal_map.pulse_step`)."""
         sec, w = self.section, self.settings.pulse_width
         tau = (sec.tau2 + sec.omega * start) % TWO_PI
         if w > 0.0:

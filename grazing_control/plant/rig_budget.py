@@ -87,7 +87,7 @@ def time_estimate(p: OscillatorParams, gains, rate: int, sigma: float, *,
     a controller makes when the first sample after t_k arrives, is timed with
     ``time.perf_counter``.
     """
-    from grazing_control.dynamics.estimation.section_state import trajectory
+    from grazing_control.dynamics.estimation.motion import trajectory
 
     if target is None:
         target = (0.0, 0.0)

@@ -541,7 +541,7 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
         raise ParameterError("pulse_width=0.0 is invalid with model_file and the first-order "
                              "actuator (actuator_bandwidth, actuator_latency): valid range is "
                              "pulse_width > 0 (the n-DOF actuator's command is a pulse: "
-                             "ndof_map.actuated_step)")
+                             "modal_map.actuated_step)")
     if base.pulse_width > 0.0:     # a force pulse needs the static deflection K^-1 e_a
         from grazing_control.oscillator.ndof.flow import NdofFlow
         from grazing_control.oscillator.ndof.forced import static_deflection

@@ -33,7 +33,7 @@ Per scene (:func:`summarize` over the whole state, then):
   (:func:`~grazing_control.recordings.numbers.measured_contraction`) against the largest
   Floquet multiplier |lambda|max of the controlled 1/1 orbit, found by Newton shooting
   (:func:`grazing_control.dynamics.orbits.shooting.find_periodic`) on
-  :class:`grazing_control.dynamics.maps.ndof_map.NdofMap` with the recorded gains and delay from the
+  :class:`grazing_control.dynamics.maps.modal_map.ModalMap` with the recorded gains and delay from the
   last sample; the final sample's distance to that orbit, per coordinate;
 * the model check: every recorded period re-integrated by the core from the recorded
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
@@ -354,12 +354,12 @@ def ndof_period(setup: NdofSetup):
     ``step(z, force, correction) -> (z', force', impacts)`` on Pi2 deviations, the
     correction the kick ``actuation_delay`` after the sample, or with ``pulse_width`` > 0
     the force pulse centred there
-    (:func:`~grazing_control.dynamics.maps.ndof_map.pulse_step`), through the simulator's
+    (:func:`~grazing_control.dynamics.maps.modal_map.pulse_step`), through the simulator's
     first-order actuator when it had one
-    (:func:`~grazing_control.dynamics.maps.ndof_map.actuated_step`, the force on the
+    (:func:`~grazing_control.dynamics.maps.modal_map.actuated_step`, the force on the
     actuated coordinate at the section carried from period to period; docs/theory_ndof.md
     section 15). ``force`` is 0 except through an actuator with a lag."""
-    from grazing_control.dynamics.maps.ndof_map import actuated_step, pulse_step
+    from grazing_control.dynamics.maps.modal_map import actuated_step, pulse_step
     from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.oscillator.ndof.flow import NdofFlow
     from grazing_control.oscillator.ndof.impact import advance
@@ -493,18 +493,18 @@ def ndof_controlled_orbit(setup: NdofSetup, final, force: float | None = None) -
     """The exact controlled 1/1 orbit near the final sample, its multipliers and impacts:
     the fixed point of the plant's period (:func:`ndof_period`) with the recorded gains,
     the kick or the pulse by Newton shooting on
-    :class:`~grazing_control.dynamics.maps.ndof_map.NdofMap` (``width``), through an
+    :class:`~grazing_control.dynamics.maps.modal_map.ModalMap` (``width``), through an
     actuator with a lag on (z, F) (:func:`_actuated_orbit`, ``force`` the guess of F)."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap
+    from grazing_control.dynamics.maps.modal_map import ModalMap
     from grazing_control.dynamics.orbits.shooting import ShootingFailed, find_periodic
 
     if setup.model is None or setup.gains is None:
         return {"note": "no model or gains: no predicted orbit"}
     a = setup.actuator
     lag = a is not None and a.time_constant > 0.0
-    # NdofMap has neither a force limit nor a latency: those loops through ndof_period
+    # ModalMap has neither a force limit nor a latency: those loops through ndof_period
     newton = lag or (setup.pulse_width > 0.0 and (setup.force_limit or a is not None))
-    P = NdofMap(setup.model, setup.gains, setup.actuation_delay)   # its section
+    P = ModalMap(setup.model, setup.gains, setup.actuation_delay)   # its section
     xref = P.flow.particular(P.flow.tau2)
     z0 = np.asarray(final, float) - xref
     try:
@@ -512,7 +512,7 @@ def ndof_controlled_orbit(setup: NdofSetup, final, force: float | None = None) -
             y, J, imps = _actuated_orbit(setup, z0, (force or 0.0) if lag else None)
             state, mult = y[:len(z0)], np.linalg.eigvals(J)
         else:
-            P = NdofMap(setup.model, setup.gains, setup.actuation_delay, setup.pulse_width)
+            P = ModalMap(setup.model, setup.gains, setup.actuation_delay, setup.pulse_width)
             orbit = find_periodic(P, z0)
             state, imps, mult = orbit.state, orbit.impacts, np.linalg.eigvals(orbit.monodromy)
     except (ShootingFailed, ValueError, ArithmeticError, RuntimeError,

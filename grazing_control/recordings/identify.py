@@ -241,10 +241,20 @@ def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
             "(no corrections)"),
         "notes": notes, "_ident": ident, "_model": model,
     }
-    record = {k: sim[k] for k in ("r", "delta_d") if k in sim}
+    record = model_file_record(sim, model)
     if record:
         report["parameter_record"] = record
     return report
+
+
+def model_file_record(sim: dict, model) -> dict:
+    """What an n-DOF bag's scene ran with, to set beside the fit: r of its model file (the
+    simulator's own ``r`` parameter is the 1-DOF one, left at its default and unused in a
+    model file's scene: plant/settings.NOT_WITH_MODEL_FILE) and the recorded delta_d."""
+    record = {"r": float(model.r)} if model is not None else {}
+    if "delta_d" in sim:
+        record["delta_d"] = sim["delta_d"]
+    return record
 
 
 def identify_bag(bag, *, topics=None, position_only=False, impacts=True,

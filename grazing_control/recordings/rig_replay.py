@@ -42,9 +42,11 @@ PARAMETERS = "/grazing/parameters"
 def recorded_controller(bag) -> dict:
     """The controller_node's parameters at its start, from the bag's parameter record,
     less those its rig file sets (:func:`grazing_control.ros.rig_boundary.controller_values`
-    derives them again from ``rig_file`` and ``rig_c2``; ``answer_lead``, which may be
-    given, is kept). ValueError (one line) when the bag has none or no rig_file."""
-    from grazing_control.ros.rig_boundary import CONTROLLER_KEYS
+    derives them again from ``rig_file`` and ``rig_c2``, or for a rig of n masses
+    ``rig_mu``: the n-DOF model's and its gains, MASSES_CONTROLLER_KEYS; ``answer_lead``,
+    which may be given, is kept). ValueError (one line) when the bag has none or no
+    rig_file."""
+    from grazing_control.ros.rig_boundary import CONTROLLER_KEYS, MASSES_CONTROLLER_KEYS
 
     raw = reader.read_raw(bag, [PARAMETERS])
     nodes = run_parameters(reader.decode_strings(raw, PARAMETERS))["nodes"]
@@ -54,7 +56,7 @@ def recorded_controller(bag) -> dict:
     if not rec.get("rig_file"):
         raise ValueError(f"bag={bag}: the recorded controller_node has no rig_file (not a "
                          "rig scene: replay it with grazing replay)")
-    derived = set(CONTROLLER_KEYS) - {"answer_lead"}
+    derived = (set(CONTROLLER_KEYS) | set(MASSES_CONTROLLER_KEYS)) - {"answer_lead"}
     return {k: v for k, v in rec.items() if k not in NOT_SETTINGS and k not in derived}
 
 
@@ -135,7 +137,7 @@ def main(args) -> int:
     identical, 1 naming the first difference, 2 for bad input."""
     import math
 
-    import yaml
+    from grazing_control.support.files import parse_yaml_bytes
 
     if not (math.isfinite(args.time_scale) and 1e-3 <= args.time_scale <= 1e6):
         raise ValueError(f"--time-scale={args.time_scale!r} is invalid: valid range is "
@@ -145,7 +147,7 @@ def main(args) -> int:
         name, sep, value = item.partition(":=")
         if not sep or not name:
             raise ValueError(f"--controller-param {item!r} is invalid: valid is NAME:=VALUE")
-        overrides[name] = yaml.safe_load(value)
+        overrides[name] = parse_yaml_bytes(value.encode(), f"--controller-param {name}")
     recorded_controller(args.bag)          # refuse a bag that is no rig scene first
     res = replay_rig(args.bag, time_scale=args.time_scale, controller_overrides=overrides,
                      log_dir=args.log_dir, timeout=args.timeout)

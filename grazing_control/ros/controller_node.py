@@ -114,7 +114,7 @@ from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
-from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, StartupError, Throttled,
+from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, SafePoints, StartupError, Throttled,
                      check_ranges, deserialize, executor_kind, log_parameter_changes,
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key)
@@ -170,7 +170,7 @@ class ControllerNode(Node):
         self.rig_model = (self.rig.model() if self.rig is not None and self.rig.n > 1
                           else None)
         # how a correction acts in the plant: a rig's force pulse (its estimator and
-        # prediction integrate it, dynamics.estimation.section_state.trajectory), else the kick
+        # prediction integrate it, dynamics.estimation.motion.trajectory), else the kick
         self.pulse = (0.0, math.inf, None)
         # (a rig file's are the defaults: rig_boundary.controller_values; its actuator's
         # latency is in the budget)
@@ -196,7 +196,10 @@ class ControllerNode(Node):
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
             if self.stream is not None and self.stream.kernel:
-                warm_stream_kernel()     # compiled model filter loaded now, not at section 0
+                warm_stream_kernel(self.model)   # compiled model filter loaded now, not at section 0
+            # stream mode: the cyclic collector runs after a section's answer, not inside
+            # its estimate (issue 30; common.SafePoints)
+            self.collect = SafePoints() if self.stream is not None else None
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -553,6 +556,8 @@ class ControllerNode(Node):
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if self.reid is not None:
                 self.reid.answered(k, 0.0 if dv is None else dv)
+        if due:
+            self.collect()          # the answers are out: a safe point for the collector
 
     def _answer_ndof_estimate(self, k: int, tk: float, key: tuple, est) -> None:
         """Section k (model time ``tk``) of an n-DOF stream: the answer k^T (X^ - X**)
@@ -729,6 +734,12 @@ class ControllerNode(Node):
     def _diagnose(self, stat):
         """The controller's /diagnostics task (:func:`controller_status.diagnose`)."""
         return diagnose(self, stat)
+
+    def destroy_node(self) -> None:
+        """The collector's thresholds back (common.SafePoints), then rclpy's teardown."""
+        if getattr(self, "collect", None) is not None:
+            self.collect.close()
+        super().destroy_node()
 
     def on_exit(self) -> None:
         """Say what was published (grazing/published) and log what was answered and

@@ -158,9 +158,9 @@ def declare_parameters(node) -> None:
         "wall seconds between /diagnostics messages (grazing_control.ros.diagnostics); "
         "0 = none", 0.0, 3600.0, read_only=True))
     d("answer_after_section", False, bool_descriptor(
-        "stream mode: answer section k with the first sample after t_k (realtime: the "
-        "simulator takes an answer only after its Pi2 sample), not with the last "
-        "before it (lockstep)", read_only=True))
+        "stream mode: answer section k with its sample at t_k (realtime: the simulator "
+        "publishes it before its Pi2 sample), not with the last before it (lockstep)",
+        read_only=True))
     d("answer_lead", 0.0, float_descriptor(
         "stream mode: answer a section this much simulation time before its last "
         "sample (those samples are not used); 0: with its last sample", 0.0, FINITE,

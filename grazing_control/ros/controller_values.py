@@ -10,14 +10,14 @@ An n-DOF scene (``model_file``, docs/ndof_model.md; issues 17, 32) answers each 
 sample X = (x_0 .. x_{n-1}, v_0 .. v_{n-1}) with the kick on the actuated coordinate's
 velocity, X** the grazing orbit's state on Pi2, ``NdofFlow.particular(tau2)``
 (docs/theory_ndof.md, "Kick design"; the kick of
-:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`). The switch-on, the saturation
+:class:`grazing_control.dynamics.maps.modal_map.ModalMap`). The switch-on, the saturation
 and the stale-sample rules are the same :class:`ControlLaw`'s; the 1-DOF law's
 parameters (c1, c2, x_ref, v_ref, zeta, r) must be left at their defaults (else refused
 with the reason). With ``pi2_source`` stream the Pi2 state is estimated from the sensor
 stream by the model filter over the exact n-DOF map (:func:`model_stream_from_values`:
 the position, and velocity where carried, of coordinate ``sensor_coordinate``). The
 section data the design's parameter file carries with the gains (``n``, ``i_a``,
-``omega``, ``pi2_offset``: :func:`grazing_control.dynamics.design.ndof_design.write_gain_yaml`)
+``omega``, ``pi2_offset``: :func:`grazing_control.dynamics.design.family.write_gain_yaml`)
 must be the model file's: gains designed for another model are refused, naming both
 values."""
 
@@ -31,7 +31,8 @@ import numpy as np
 
 from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation.section_state import ESTIMATORS, actuator_legs
+from grazing_control.dynamics.estimation.section_state import ESTIMATORS
+from grazing_control.dynamics.estimation.motion import actuator_legs
 from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator,
                                                         pulse_shape)
 from grazing_control.dynamics.simulation.actuator import Actuator
@@ -253,7 +254,7 @@ def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
     :data:`PULSE_KEYS` (model units, as sim_node's): the pulse (``pulse_width`` 0: a
     kick) and the first-order actuator between its command and the force
     (``actuator_bandwidth`` 1 / tau_a, 0: ideal; ``actuator_latency``), which the stream
-    estimator and the prediction integrate (dynamics.estimation.section_state.trajectory).
+    estimator and the prediction integrate (dynamics.estimation.motion.trajectory).
     ParameterError, one line naming the parameter and its valid range."""
     period = 2.0 * math.pi / omega
     width, limit = pulse_shape(OscillatorParams(omega=omega), values["pulse_width"],
@@ -364,10 +365,10 @@ class ModelController:
         """The Pi2 sample after (x, v) with ``dv`` acting ``delay`` after it: one exact
         period of the model (the plant engine's calls, plant.engine); ``pulse`` (width,
         force limit[, actuator]): the correction as the force pulse of that width centred
-        ``delay`` after the sample (:func:`grazing_control.dynamics.maps.ndof_map.pulse_step`,
+        ``delay`` after the sample (:func:`grazing_control.dynamics.maps.modal_map.pulse_step`,
         docs/theory_ndof.md section 15), through the first-order actuator from the force
         ``force0`` at the section where one is given (``actuated_step``). Returns (x', v')."""
-        from grazing_control.dynamics.maps.ndof_map import actuated_step, pulse_step
+        from grazing_control.dynamics.maps.modal_map import actuated_step, pulse_step
         from grazing_control.dynamics.simulation.actuation import pulse_start
 
         sec, f = self.section, self.section.flow
@@ -489,7 +490,7 @@ def model_stream_from_values(values: dict, ndof: ModelController,
                            float(values.get("state_period", 0.0)), floor,
                            bool(values.get("answer_after_section", False)),
                            float(values.get("answer_lead", 0.0)),
-                           kernel=False,     # the n-DOF motion is the core's (E11)
+                           kernel=None,      # compiled where numba is: bit for bit (E11)
                            coordinate=int(values.get("sensor_coordinate", 0)),
                            pulse_width=pulse[0], force_limit=pulse[1],
                            actuator=pulse[2] if len(pulse) > 2 else None)

@@ -173,9 +173,9 @@ def masses_controller_values(rig: Rig, mu: float) -> dict:
     estimator reading the first measured mass (``sensor.masses[0]``: the impacting mass
     where the sensor sees it; the others are published on rig/sensor and not read), and
     the gains of the n-DOF pulse design for the budget's delay and the pulse's width
-    (grazing design --rig FILE, dynamics.design.ndof_design.pulse_design) at ``mu``, or
-    with ``mu`` NaN at its default (ndof_design.default_mu of the admissible set)."""
-    from grazing_control.dynamics.design import ndof_design as nd
+    (grazing design --rig FILE, dynamics.design.family.pulse_design) at ``mu``, or
+    with ``mu`` NaN at its default (family.default_mu of the admissible set)."""
+    from grazing_control.dynamics.design import family as nd
 
     model, d = rig.model(), rig.dimensionless()
     delay = nd.design_actuation(d["actuation_delay"], d["pulse_width"],

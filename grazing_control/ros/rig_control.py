@@ -44,7 +44,7 @@ from .common import (PUBLISHER_QOS, deserialize, seconds_from_stamp, stamp_from_
                      stamp_key)
 from .diagnostics import WARN
 from .rig_boundary import (APPLIED_IN_TIME, APPLIED_PREDICTED, Sections, correction_of,
-                           force_of, model_positions)
+                           force_of, joint_names, model_positions)
 
 __all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES", "RIG_INPUT_QOS"]
 
@@ -81,6 +81,8 @@ class RigSide:
         self.held = deque()              # (t, x~, v~) held for a section's rig/applied
         self.acts = deque(maxlen=REPORTED)   # (k, dv): what acted, not told the estimator yet
         self.applied_waited_out = 0      # sections estimated without it (silent driver)
+        self.names = tuple(joint_names(rig))   # rig/sensor's names (n masses)
+        self.joint = None                # the read mass's entry in them (set at first use)
 
     # ---------------------------------------------------------------- driver -> us
     def on_phase(self, msg) -> None:
@@ -131,9 +133,12 @@ class RigSide:
     def _masses_sample(self, data: bytes):
         """(sec, nanosec, x, v, ()) of a rig/sensor message of a rig of n masses: the
         position (m) and velocity (m/s, NaN: none) of the mass the stream estimator reads
-        (its ``sensor_coordinate``, a measured mass); None (counted as malformed) for a
-        message whose names are not the rig's measured masses (rig_boundary.model_positions).
-        Read directly (:func:`cdr.read_joints`), else through rclpy."""
+        (its ``sensor_coordinate``, a measured mass); None (counted as malformed, with
+        rig_boundary.model_positions' line) for a message whose names are not the rig's
+        measured masses or whose position count differs. Read directly
+        (:func:`cdr.read_joints`), else through rclpy. At 2 kHz: the names compared
+        once as a tuple, the read mass's entry found once (the other positions are not
+        converted: the estimator does not read them)."""
         fields = cdr.read_joints(data)
         if fields is None:
             msg = deserialize(data, JointState, self.node.malformed)
@@ -141,12 +146,15 @@ class RigSide:
                 return None
             fields = stamp_key(msg.header.stamp) + (msg.name, msg.position, msg.velocity)
         sec, ns, names, positions, velocities = fields
-        try:
-            model_positions(self.rig, names, positions)
-        except ValueError as exc:
-            self.node.malformed(f"rig/sensor at {(sec, ns)}: {exc}")
+        if tuple(names) != self.names or len(positions) != len(self.names):
+            try:
+                model_positions(self.rig, names, positions)   # raises its one line
+            except ValueError as exc:
+                self.node.malformed(f"rig/sensor at {(sec, ns)}: {exc}")
             return None
-        j = self.rig.measured.index(self.node.stream.coordinate)
+        j = self.joint
+        if j is None:
+            j = self.joint = self.rig.measured.index(self.node.stream.coordinate)
         v = velocities[j] if len(velocities) == len(names) else math.nan
         return sec, ns, positions[j], v, ()
 

@@ -33,7 +33,7 @@ def design_delay(controller_params):
 
 def design_model(controller_params):
     """``model_file`` of the controller's parameters (an n-DOF design's gain file,
-    :func:`grazing_control.dynamics.design.ndof_design.write_gain_yaml`), else None: the model the
+    :func:`grazing_control.dynamics.design.family.write_gain_yaml`), else None: the model the
     gains were designed for, the scene's model when none is given (issue 17)."""
     path = _controller_values(controller_params).get("model_file")
     return path if isinstance(path, str) and path else None

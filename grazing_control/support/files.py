@@ -15,10 +15,14 @@ the limit (the callers prefix the option and exit with status 2).
   every alias expanded (a "billion laughs" of 400 bytes expands to 10^9) and refuses
   more than MAX_NODES, nests at most MAX_DEPTH deep (aliases included; PyYAML's own
   recursion would end in "maximum recursion depth exceeded"), and refuses an alias to a
-  node that contains it (a cycle: ``&a [*a]``).
+  node that contains it (a cycle: ``&a [*a]``);
+- numbers as rcl's parameter-file parser reads them: ``1e-4``, ``5E3`` and ``+.5`` are
+  floats (YAML 1.2's core schema; PyYAML's YAML 1.1 resolver gave the strings), so a
+  file means the same to ``grazing`` and to a node's ``--params-file``
+  (:data:`YAML12_FLOAT`; tests/test_parameter_files_hostile.py compares both readings).
 
 The controller's gain files (``dynamics.design.gains.write_controller_yaml``,
-``dynamics.design.ndof_design.write_gain_yaml``) and the model files of ``grazing identify``
+``dynamics.design.family.write_gain_yaml``) and the model files of ``grazing identify``
 (``cli.parameter_file.write_parameter_file``) are written to a temporary file in the
 target's folder and renamed onto it: a failure (a full disk, a read-only folder, a
 signal) leaves the old file or none, never a half-written one.
@@ -27,6 +31,7 @@ signal) leaves the old file or none, never a half-written one.
 from __future__ import annotations
 
 import os
+import re
 import stat
 import tempfile
 
@@ -47,6 +52,12 @@ MAX_DEPTH = 50
 class YamlFileError(ValueError):
     """A parameter file that cannot be used; the message names the file and the limit."""
 
+
+#: A float of YAML 1.2's core schema (``1e-4``, ``5E3``, ``1.0e4``, ``+.5``): the forms that the
+#: YAML 1.1 resolver reads as strings (it wants a dot, a signed exponent, no sign before
+#: a leading dot) and rcl's parameter-file parser reads as doubles. An integer (``12``)
+#: is resolved as one before this is tried.
+YAML12_FLOAT = r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?$"
 
 def read_yaml_file(path):
     """The YAML document of ``path`` (None for an empty file), within the limits of the
@@ -175,6 +186,12 @@ def _bounded_loader():
             self._size[key], self._height[key] = size, height
             return node
 
+    # 1e-4, 5E3, 1.0e4, +.5: floats, as rcl's parameter-file parser (strtod) and YAML 1.2 read
+    # them; PyYAML's YAML 1.1 resolver wants a dot and a signed exponent and gives the
+    # string '1e-4', which a model file's ``delta_d: -1e-4`` then failed as "expected a
+    # real number" while `ros2 run --params-file` read the same file as a double.
+    BoundedLoader.add_implicit_resolver(
+        "tag:yaml.org,2002:float", re.compile(YAML12_FLOAT), list("-+0123456789."))
     return BoundedLoader
 
 

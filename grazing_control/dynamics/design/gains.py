@@ -1,5 +1,8 @@
 """Control design: the degenerate-grazing gains and the admissible set of c2.
 
+The 1-DOF closed form, the certified fast path behind the one design entry
+(:mod:`.model_design`, issue 32; a model file's family is :mod:`.family`).
+
 Spec section 6 (study Eqs. 33-38), derived for this model in docs/theory.md,
 "Degenerate grazing and the design", and for an actuation delay in
 docs/theory_delay.md, section 2:

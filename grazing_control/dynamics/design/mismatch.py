@@ -28,7 +28,7 @@ the plant has a whole matrix (``M``, ``C``, ``K``), one symmetric pair of entrie
 (``M[i,j]``, ``C[i,j]``, ``K[i,j]``, 0-based), ``r`` or ``omega`` off by (1 + e)
 (:func:`mismatched_model`), the gains are the nominal design's k (the kick k^T z on
 Pi2), and the multipliers are those of the controlled 1/1 orbit of the plant
-(dynamics/orbits/ndof_branch.py: the exact branch, its structured multipliers, and the
+(dynamics/orbits/modal_branch.py: the exact branch, its structured multipliers, and the
 certified check that the period has no other contact). There is no series for n > 1:
 ``predicted`` is nan.
 """
@@ -104,23 +104,23 @@ def mismatched_model(model, name: str, error: float):
 
 def model_largest_multiplier(model, gains, delay: float = 0.0) -> float:
     """max |lambda| of the controlled 1/1 orbit of the n-DOF ``model`` at its delta_d
-    (dynamics/orbits/ndof_branch.py: ``orbit_at``); +inf where there is none, or where the
+    (dynamics/orbits/modal_branch.py: ``orbit_at``); +inf where there is none, or where the
     period has another contact. Without a delay the branch's structured multipliers
     (``branch_multipliers``) and the certified ``other_contacts``; with one (the kick
     ``delay`` after Pi2, docs/theory_ndof.md section 14) one step of the exact delayed
-    map from the orbit's Pi2 state (dynamics/maps/ndof_map.py): exactly one impact, back
+    map from the orbit's Pi2 state (dynamics/maps/modal_map.py): exactly one impact, back
     to the start within 1e-9 of the state's scale, and the eigenvalues of its Jacobian
     (D3)."""
-    from grazing_control.dynamics.maps.ndof_map import NdofMap
-    from grazing_control.dynamics.orbits import ndof_branch
+    from grazing_control.dynamics.maps.modal_map import ModalMap
+    from grazing_control.dynamics.orbits import modal_branch
 
     try:
-        point = ndof_branch.orbit_at(model, gains, model.delta_d, delay=delay)
+        point = modal_branch.orbit_at(model, gains, model.delta_d, delay=delay)
         if delay == 0.0:
-            if ndof_branch.other_contacts(model, gains, point) != 0:
+            if modal_branch.other_contacts(model, gains, point) != 0:
                 return math.inf
-            return float(np.max(np.abs(ndof_branch.branch_multipliers(model, gains, point))))
-        step = NdofMap(model, gains, delay).step(point.pi2_state, jacobian=True)
+            return float(np.max(np.abs(modal_branch.branch_multipliers(model, gains, point))))
+        step = ModalMap(model, gains, delay).step(point.pi2_state, jacobian=True)
         scale = 1.0 + float(np.max(np.abs(point.pi2_state)))
         if len(step.impacts) != 1 or not np.max(np.abs(step.state - point.pi2_state)) <= 1e-9 * scale:
             return math.inf
@@ -192,10 +192,10 @@ def instability_band(nominal, gains, name: str, error: float, *,
     else:
         import dataclasses
 
-        from grazing_control.dynamics.maps.ndof_map import NdofMap
+        from grazing_control.dynamics.maps.modal_map import ModalMap
 
         plant = mismatched_model(nominal, name, error)
-        NdofMap(plant, gains, delay)   # refuses bad gains or delay by name, before the scan
+        ModalMap(plant, gains, delay)   # refuses bad gains or delay by name, before the scan
 
         def rho(dd):
             return model_largest_multiplier(dataclasses.replace(plant, delta_d=dd), gains, delay)

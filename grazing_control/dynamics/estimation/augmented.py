@@ -17,7 +17,7 @@ through the wall at Delta d_{k-1}, plus b:
 
 with the Jacobians d z(s_j) / d z_{k-1} (Phi and the saltation matrices, (E3)),
 d y_j / d b = 1 and d z(s_j) / d Delta d (the wall's sensitivity through the impacts,
-(E8): :func:`grazing_control.dynamics.estimation.section_state.trajectory` with ``wall=True``).
+(E8): :func:`grazing_control.dynamics.estimation.motion.trajectory` with ``wall=True``).
 One period is the iterated EKF of (E4, E5) over the augmented state
 (:func:`augmented_update`), and its minimised cost is the period's normalised
 innovation squared, chi^2 with one degree of freedom per measurement under the right
@@ -39,7 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.estimation.section_state import CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples, trajectory
+from grazing_control.dynamics.estimation.section_state import (
+    CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples)
+from grazing_control.dynamics.estimation.motion import trajectory
 from grazing_control.dynamics.estimation.stream import _TOL, StreamEstimator
 
 __all__ = ["AugmentedState", "augmented_update", "AugmentedStreamEstimator", "augmented_covariance",

@@ -1,4 +1,4 @@
-"""The per-sample evaluation of :func:`grazing_control.dynamics.estimation.section_state.trajectory`,
+"""The per-sample evaluation of :func:`grazing_control.dynamics.estimation.motion.trajectory`,
 compiled by numba (issue 30: the controller's estimate at each section).
 
 ``trajectory`` finds the events of a period (start, kick, pulse edges, impacts) with the
@@ -10,7 +10,7 @@ compiled kernel's. Here the same floating point operations, in the same order, a
 NumPy code they replace (``searchsorted``, ``clip``, ``einsum``, ``outer``: each output a
 sum of two products, 0.0 + first + second, as ``einsum`` sums them: its zero start makes
 a sum of two -0.0 products +0.0), so the results are the same bit for bit (tests/test_estimation_compiled.py). The transcendental functions of
-Phi stay NumPy's (:func:`~grazing_control.dynamics.estimation.section_state.phi_rows`):
+Phi stay NumPy's (:func:`~grazing_control.dynamics.estimation.motion.phi_rows`):
 NumPy's vectorised ``exp`` differs from libm's, which numba would call, in the last bit
 of ~5 % of arguments.
 

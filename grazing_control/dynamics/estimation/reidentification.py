@@ -41,7 +41,8 @@ import numpy as np
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.estimation.section_state import FilterState, trajectory
+from grazing_control.dynamics.estimation.section_state import FilterState
+from grazing_control.dynamics.estimation.motion import trajectory
 
 # The solvers (scipy.optimize, through the identification's fit and the design's orbits)
 # are imported where they are used, in the worker: a node that never refits does not load
@@ -205,7 +206,7 @@ class StreamWindow:
 
     def predicted_impacts(self, p: OscillatorParams, delay: float) -> np.ndarray:
         """The impact times of the running model from each section's estimate with its
-        kick (one exact period each, :func:`grazing_control.dynamics.estimation.section_state.trajectory`):
+        kick (one exact period each, :func:`grazing_control.dynamics.estimation.motion.trajectory`):
         the starts of the fit's impact times where no impact sensor gave them (the fit
         moves each between the samples around it, and to the next interval when it stops
         at a bound)."""

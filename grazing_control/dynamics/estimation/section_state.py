@@ -25,10 +25,10 @@ correction of period k. docs/theory_estimation.md derives the three estimators:
     map; a residual test (chi^2) falls back to the arc fit when the prior and the data
     disagree (an unexpected or missed impact).
 
-The model filter is one algorithm over any model (docs/theory_estimation.md, (E11)): for
-the n-DOF oscillator (an :class:`~grazing_control.oscillator.ndof.model.NdofModel` in
-place of the parameters) :func:`trajectory` is the exact n-DOF motion
-(oscillator/ndof/: the modal flow, the impact law, the saltation matrices), the state
+The model filter is one algorithm over any model (docs/theory_estimation.md, (E11)), on
+the exact motion of :mod:`.motion` (:func:`.motion.trajectory`: the 1-DOF closed form, or
+for a model file of any n, an :class:`~grazing_control.oscillator.ndof.model.NdofModel`
+in place of the parameters, the modal flow, the impact law, the saltation matrices); the state
 has 2n coordinates and the sensor reads the position (and maybe the velocity) of any
 one coordinate (``coordinate``); the 1-DOF closed form is the special case n = 1,
 coordinate 0, bit for bit.
@@ -40,26 +40,19 @@ rig has no impact sensor by a split test on the arc fit (:func:`detect_impact`).
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.oscillator import kernel as _kernel
-from grazing_control.oscillator.flow import transition_matrix
-from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
-from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
+from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 
-__all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "phi_rows", "unkick",
-           "nearest_estimate", "arc_fit", "detect_impact", "correction_legs", "trajectory",
-           "trajectory_end",
-           "model_update", "estimate_covariance", "CHI2_SIGMAS", "actuator_legs", "section_force"]
-
-TWO_PI = 2.0 * math.pi
+__all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "unkick",
+           "nearest_estimate", "arc_fit", "detect_impact", "model_update",
+           "estimate_covariance", "CHI2_SIGMAS"]
 #: The estimators by name (``estimator`` parameter of the controller).
 ESTIMATORS = ("nearest", "arc", "model")
 #: The residual test of the model fit: reset when the sum of squared normalised
@@ -109,22 +102,6 @@ def deviation_samples(p: OscillatorParams, s, x, v=None, tau_start: float | None
     else:
         w = np.asarray(v, dtype=float) + p.amplitude * p.omega * np.sin(psi)
     return y, w
-
-
-def phi_rows(zeta: float, h):
-    """Phi(h) = exp(A h) for an array of h: (n, 2, 2) (the closed form of
-    :func:`grazing_control.oscillator.flow.transition_matrix`, vectorised)."""
-    h = np.asarray(h, dtype=float)
-    wd = math.sqrt(1.0 - zeta * zeta)
-    e = np.exp(-zeta * h)
-    c = np.cos(wd * h)
-    s = np.sin(wd * h) / wd
-    out = np.empty(h.shape + (2, 2))
-    out[..., 0, 0] = e * (c + zeta * s)
-    out[..., 0, 1] = e * s
-    out[..., 1, 0] = -e * s
-    out[..., 1, 1] = e * (c - zeta * s)
-    return out
 
 
 def nearest_estimate(s, y, w, sigma: float) -> Estimate:
@@ -243,335 +220,6 @@ def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
     g = ph - p.delta_d - 2.0 * p.amplitude * np.sin(0.5 * (p.tau2 + p.omega * tt - p.lag)) ** 2
     above = np.nonzero(g >= 0.0)[0]
     return float(tt[above[0]]) if above.size else 0.5 * (lo + hi)
-
-
-def correction_legs(correction: float, delay: float, duration: float, width: float = 0.0,
-                    force_limit: float = math.inf) -> list:
-    """The period (0, ``duration``] as legs (start, end, kick, force): the correction as a
-    velocity kick at ``delay`` (``width`` 0, Eq. 28), or as the rig's force pulse of
-    ``width`` centred at ``delay``, force correction / width clipped to
-    +-``force_limit`` (:mod:`grazing_control.dynamics.simulation.actuation`, docs/theory_pulse.md;
-    it starts where the simulator's starts it:
-    :func:`grazing_control.dynamics.simulation.actuation.pulse_start`)."""
-    if width > 0.0 and correction != 0.0:
-        if not width < duration:
-            raise ParameterError(f"pulse_width={width!r} is invalid: valid range is "
-                                 f"0 <= pulse_width < T = {duration!r}")
-        start = pulse_start(duration, delay, width)
-        force = pulse_force(correction, width, force_limit)
-        legs = [(0.0, start, 0.0, 0.0), (start, start + width, 0.0, force),
-                (start + width, duration, 0.0, 0.0)]
-        return [leg for leg in legs if leg[1] > leg[0]]
-    if delay > 0.0:
-        return [(0.0, delay, 0.0, 0.0), (delay, duration, correction, 0.0)]
-    return [(0.0, duration, correction, 0.0)]
-
-
-def _through_impact(p: OscillatorParams, q: OscillatorParams, m, g, h: float, imp,
-                    wall: bool):
-    """The Jacobian ``m`` and the wall's sensitivity ``g`` carried by the free flow over
-    ``h`` and through the impact ``imp`` of the oscillator ``q`` (the wall where a force
-    shifts it): M <- S Phi(h) M, g <- S Phi(h) g + (I - S) e1 ((E3), (E8))."""
-    phi = np.array(transition_matrix(p.zeta, h)).reshape(2, 2)
-    sal = np.array(saltation_matrix(q, imp.phase, imp.v_minus)).reshape(2, 2)
-    m = sal @ phi @ m
-    if wall:
-        g = sal @ (phi @ g) + np.array([1.0 - sal[0, 0], -sal[1, 0]])
-    return m, g
-
-
-@functools.lru_cache(maxsize=16)
-def _shifted_wall(p: OscillatorParams, force: float) -> OscillatorParams:
-    """The oscillator against the wall moved to Delta d - ``force`` (a pulse's, below),
-    kept for the calls of one model fit (the same pulse in each of its iterations)."""
-    return p.with_(delta_d=p.delta_d - force)
-
-
-def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float = 0.0,
-               duration: float | None = None, *, wall: bool = False, width: float = 0.0,
-               force_limit: float = math.inf, actuator=None, force0: float = 0.0,
-               kernel: bool = False):
-    """The exact motion from the section state ``z0`` (before the correction): the
-    deviation and its Jacobian d z(s_j) / d z0 at the sorted times ``s`` in
-    (0, duration], with the correction (a known velocity kick) at ``delay`` (E3).
-
-    Between events z(s) = Phi(s - s_e) z_e; the Jacobian is Phi(s - s_e) M_e with M_e
-    the product of Phi and the saltation matrices S of the impacts before s (spec
-    section 5); the known kick shifts the state and leaves the Jacobian unchanged.
-
-    With ``width`` > 0 the correction is the rig's force pulse instead (a constant force
-    F = correction / width, clipped to ``force_limit``, centred at ``delay``:
-    :func:`correction_legs`): during it the deviation shifted by (F, 0) obeys the free
-    flow against the wall moved to Delta d - F (docs/theory_pulse.md, as
-    :func:`grazing_control.dynamics.simulation.actuation.pulse_step`), so z(s) = Phi(s - s_e)
-    (z_e - F e1) + F e1 and the saltation matrices are those of the shifted wall; the
-    Jacobian and the wall's sensitivity keep their form (F does not depend on z0).
-    Width 0 is the kick, bit for bit.
-
-    ``kernel``: compiled (numba; issue 30, the controller's estimate at each section):
-    the exact flow with impacts of :func:`grazing_control.oscillator.kernel.advance`
-    instead of the core's :func:`grazing_control.oscillator.impact.advance` (the same
-    segments bit for bit, tests/test_kernel.py), and the evaluation at the samples of
-    :mod:`.compiled_flow` (the same floating point operations as the NumPy code here);
-    every output the same bit for bit (tests/test_estimation_compiled.py), several times faster
-    (benchmarks/bench_stream_estimator.py). The actuator's flow and the n-DOF motion are
-    the core's in both.
-
-    With an ``actuator`` (:class:`grazing_control.dynamics.simulation.actuator.Actuator`, not
-    ideal; ``width`` > 0) the pulse is the command, and the force on the mass follows it
-    through the first-order lag after the latency, from ``force0`` (the force at the
-    section, left by the earlier corrections: :func:`section_force`): the exact flow of
-    :func:`_actuated_trajectory`. None or the ideal actuator (with ``force0`` 0): the
-    constant pulse above, bit for bit.
-
-    Returns
-    -------
-    z : (n, 2) deviations, jac : (n, 2, 2), end : (dx, dv) at ``duration`` (default T),
-    monodromy : (2, 2) d end / d z0, impacts : list of (time, phase, v-, v+).
-
-    With ``wall`` also the sensitivities to the wall, d z(s_j) / d Delta d (n, 2) and
-    d end / d Delta d (2,): zero before the first impact; an impact adds
-    (I - S) e1 to the perturbation carried up to it, d z+ = S d z- + (I - S) e1 d(Delta d)
-    (docs/theory_estimation.md, (E8)); the flow carries it on by Phi and S. The other
-    outputs are the same as without it, bit for bit.
-
-    With an n-DOF model for ``p`` (:class:`~grazing_control.oscillator.ndof.model.NdofModel`)
-    it is the exact n-DOF motion (:mod:`.ndof_motion`, :func:`ndof_trajectory`): z (m, 2n),
-    jac (m, 2n, 2n),
-    end (2n,), monodromy (2n, 2n), the same impacts; the kick or the force pulse of
-    ``width``, through the first-order ``actuator`` from ``force0``
-    (:func:`ndof_actuated_trajectory`); no wall sensitivity.
-    """
-    duration = p.period if duration is None else float(duration)
-    s = np.asarray(s, dtype=float)
-    if isinstance(p, NdofModel):
-        from .ndof_motion import ndof_actuated_trajectory, ndof_trajectory
-
-        if wall:
-            raise ParameterError("wall=True is invalid for an n-DOF model: valid is False "
-                                 "(no wall sensitivity for n > 1)")
-        if actuator is not None and not (actuator.ideal and force0 == 0.0):
-            return ndof_actuated_trajectory(p, z0, s, correction, delay, duration, width,
-                                            force_limit, actuator, force0)
-        return ndof_trajectory(p, z0, s, correction, delay, duration, width, force_limit)
-    if actuator is not None and not (actuator.ideal and force0 == 0.0):
-        return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
-                                    force_limit, actuator, force0)
-    flow = _kernel.advance if kernel else advance
-    # events: (time, state after, jacobian after); start, kick, impacts
-    events = []
-    tau = p.tau2
-    z = (float(z0[0]), float(z0[1]))
-    m = np.eye(2)
-    g = np.zeros(2)                     # d z / d Delta d (``wall``)
-    t0 = 0.0
-    impacts = []
-    legs = correction_legs(correction, delay, duration, width, force_limit)
-    for start, end, kick, force in legs:
-        z = (z[0], z[1] + kick)
-        events.append((start, z, m, g, force))
-        q = p if force == 0.0 else _shifted_wall(p, force)
-        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1], end - start)
-        for imp in seg.impacts:
-            if imp.sticking:
-                raise ValueError("the model's motion sticks to the wall: no fit")
-            ti = start + imp.dt
-            m, g = _through_impact(p, q, m, g, ti - t0, imp, wall)
-            psi = imp.phase - p.lag
-            z = (p.d - p.amplitude * math.cos(psi),
-                 imp.v_plus + p.amplitude * p.omega * math.sin(psi))
-            t0 = ti
-            events.append((ti, z, m, g, force))
-            impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
-        f = np.array(transition_matrix(p.zeta, end - t0)).reshape(2, 2)
-        m = f @ m
-        if wall:
-            g = f @ g
-        z = (seg.dx + force if force else seg.dx, seg.dv)
-        t0 = end
-    times = np.array([e[0] for e in events])
-    if kernel:
-        return _compiled_samples(p, events, times, s, z, m, g, impacts, wall)
-    idx = np.searchsorted(times, s, side="left") - 1   # the last event strictly before s
-    idx = np.clip(idx, 0, len(events) - 1)
-    zs = np.array([e[1] for e in events])[idx]
-    ms = np.array([e[2] for e in events])[idx]
-    phi = phi_rows(p.zeta, s - times[idx])
-    forces = np.array([e[4] for e in events])
-    if forces.any():                    # in a pulse: Phi (z_e - F e1) + F e1
-        fs = forces[idx]
-        zs = zs - np.outer(fs, (1.0, 0.0))
-        out = np.einsum("nij,nj->ni", phi, zs) + np.outer(fs, (1.0, 0.0))
-    else:
-        out = np.einsum("nij,nj->ni", phi, zs)
-    jac = np.einsum("nij,njk->nik", phi, ms)
-    if wall:
-        gs = np.array([e[3] for e in events])[idx]
-        return out, jac, z, m, impacts, np.einsum("nij,nj->ni", phi, gs), g
-    return out, jac, z, m, impacts
-
-
-def trajectory_end(p: OscillatorParams, z0, correction: float = 0.0, delay: float = 0.0,
-                   duration: float | None = None, *, width: float = 0.0,
-                   force_limit: float = math.inf, kernel: bool = False) -> tuple:
-    """``end`` of :func:`trajectory` alone, bit for bit (the same legs and the same
-    exact flow, the same ValueError where the motion sticks), without the Jacobian and
-    the samples: the controller's prediction of the next section on the realtime
-    answer's path (issue 30: a third of the compiled :func:`trajectory`'s time went to
-    evaluating its zero samples and carrying a Jacobian nobody reads). The kick or the
-    constant pulse only (no actuator, a 1-DOF model)."""
-    duration = p.period if duration is None else float(duration)
-    flow = _kernel.advance if kernel else advance
-    tau = p.tau2
-    z = (float(z0[0]), float(z0[1]))
-    for start, end, kick, force in correction_legs(correction, delay, duration, width,
-                                                   force_limit):
-        q = p if force == 0.0 else _shifted_wall(p, force)
-        seg = flow(q, (tau + p.omega * start) % TWO_PI, z[0] - force, z[1] + kick,
-                   end - start)
-        if any(imp.sticking for imp in seg.impacts):
-            raise ValueError("the model's motion sticks to the wall: no fit")
-        z = (seg.dx + force if force else seg.dx, seg.dv)
-    return z
-
-
-_NO_ROWS = np.zeros((0, 2))
-
-
-def _compiled_samples(p, events, times, s, end, m, g, impacts, wall):
-    """The end of :func:`trajectory` (the deviation, Jacobian and wall sensitivity at the
-    samples from their events) by :mod:`.compiled_flow`, bit for bit."""
-    from grazing_control.dynamics.estimation.compiled_flow import (event_offsets,
-                                                                   flow_at_samples)
-
-    idx, hh = event_offsets(times, s)
-    zeta = p.zeta
-    wd = math.sqrt(1.0 - zeta * zeta)           # as phi_rows, whose NumPy functions these are
-    forces = np.array([e[4] for e in events])
-    out, jac, gs = flow_at_samples(np.exp(-zeta * hh), np.cos(wd * hh), np.sin(wd * hh), zeta,
-                                   wd, idx, np.array([e[1] for e in events]),
-                                   np.array([e[2] for e in events]), forces,
-                                   np.array([e[3] for e in events]) if wall else _NO_ROWS,
-                                   bool(forces.any()), wall)
-    if wall:
-        return out, jac, end, m, impacts, gs, g
-    return out, jac, end, m, impacts
-
-
-def actuator_legs(p: OscillatorParams, correction: float, delay: float, duration: float,
-                  width: float, force_limit: float, actuator) -> list:
-    """The period (0, ``duration``] through ``actuator`` as legs (start, end, command):
-    the command F (:func:`grazing_control.dynamics.simulation.actuation.pulse_force`) on the pulse
-    centred at ``delay`` (:func:`grazing_control.dynamics.simulation.actuation.pulse_start`)
-    reaches the lag ``actuator.latency`` later, and must end within the period, as in
-    the plant's :func:`grazing_control.dynamics.simulation.actuator.actuated_step` (its legs,
-    empty ones included). ParameterError naming pulse_width or actuator_latency."""
-    if not (math.isfinite(width) and 0.0 < width < duration):
-        raise ParameterError(f"pulse_width={width!r} is invalid with an actuator: valid range "
-                             f"is 0 < pulse_width < T = {duration!r}")
-    on = pulse_start(duration, delay, width) + actuator.latency
-    off = on + width
-    if not off < duration:
-        raise ParameterError(f"actuator_latency={actuator.latency!r} is invalid: valid range "
-                             f"is pulse start + actuator_latency + pulse_width < T = "
-                             f"{duration!r} (the force within the period)")
-    return [(0.0, on, 0.0), (on, off, pulse_force(correction, width, force_limit)),
-            (off, duration, 0.0)]
-
-
-def section_force(p: OscillatorParams, force0: float, correction: float, delay: float,
-                  width: float, force_limit: float, actuator,
-                  duration: float | None = None) -> float:
-    """The actuator's force at the end of the period (the next section's ``force0`` of
-    :func:`trajectory`): the lag's closed form over :func:`actuator_legs`,
-    f = u + (f - u) e^{-h / tau_a} per leg (u = f at once without lag)."""
-    duration = p.period if duration is None else float(duration)
-    f = float(force0)
-    tau_a = actuator.time_constant
-    if isinstance(p, NdofModel):        # the command is the force m_a Delta v / w
-        from .ndof_motion import ndof_flow
-        from grazing_control.oscillator.ndof.forced import actuated_mass
-
-        correction = actuated_mass(ndof_flow(p)) * correction
-    for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
-                                       actuator):
-        if end > start:
-            f = u + (f - u) * math.exp(-(end - start) / tau_a) if tau_a > 0.0 else u
-    return f
-
-
-def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, force_limit,
-                         actuator, force0):
-    """:func:`trajectory` through a first-order actuator (docs/theory_pulse.md sections
-    5-8, :mod:`grazing_control.dynamics.simulation.actuator`): per leg of constant command u the
-    exact flow of
-    :func:`grazing_control.dynamics.simulation.actuator.lag_flow` (force u + (f - u) e^{-h/tau_a},
-    impacts certified), in its pieces z(h) = Phi(h) z'_e + (x_f, v_f)(h). The force is
-    a function of time alone (the command is known), so d z / d z0 is carried by Phi
-    between impacts and at each impact by the saltation matrix with the acceleration
-    under the force there (the wall shifted by it, as the constant pulse's); the wall's
-    sensitivity as (E8)."""
-    from grazing_control.dynamics.simulation.actuator import lag_flow
-
-    tau_a = actuator.time_constant
-    if tau_a == 0.0 and force0 != 0.0:
-        raise ParameterError(f"force0={force0!r} is invalid: an actuator without lag leaves "
-                             "no force at the section, valid value is 0")
-    z = np.array((float(z0[0]), float(z0[1])))
-    m = np.eye(2)
-    g = np.zeros(2)
-    f = float(force0)
-    t0 = 0.0                            # the last event of the Jacobian (start or impact)
-    events = []                         # (time, z', k, F_inf, M, g) of each piece
-    impacts = []
-    for start, end, u in actuator_legs(p, correction, delay, duration, width, force_limit,
-                                       actuator):
-        length = end - start
-        if length <= 0.0:
-            continue
-        c = f - u if tau_a > 0.0 else 0.0
-        flow = lag_flow(p, (p.tau2 + p.omega * start) % TWO_PI, float(z[0]), float(z[1]),
-                        length, u, c, tau_a)
-        pieces = list(flow.pieces)
-        for i, piece in enumerate(pieces):
-            if i > 0:                   # the impact that started this piece
-                imp = flow.impacts[i - 1]
-                ti = start + imp.dt
-                force = u + (c * math.exp(-imp.dt / tau_a) if tau_a > 0.0 else 0.0)
-                m, g = _through_impact(p, p.with_(delta_d=p.delta_d - force), m, g, ti - t0,
-                                       imp, wall)
-                t0 = ti
-                impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
-            else:
-                phi = np.array(transition_matrix(p.zeta, start - t0)).reshape(2, 2)
-                m = phi @ m
-                if wall:
-                    g = phi @ g
-                t0 = start
-            events.append((start + piece.h0, piece.zp, piece.k, u, m, g))
-        z = np.array((flow.dx, flow.dv))
-        f = flow.force if tau_a > 0.0 else u
-    phi = np.array(transition_matrix(p.zeta, duration - t0)).reshape(2, 2)
-    m_end = phi @ m
-    g_end = phi @ g
-    times = np.array([e[0] for e in events])
-    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
-    hh = s - times[idx]
-    phis = phi_rows(p.zeta, hh)
-    zp = np.array([e[1] for e in events])[idx]
-    kk = np.array([e[2] for e in events])[idx]
-    f_inf = np.array([e[3] for e in events])[idx]
-    decay = np.exp(-hh / tau_a) if tau_a > 0.0 else np.zeros_like(hh)
-    out = np.einsum("nij,nj->ni", phis, zp)
-    out[:, 0] += f_inf + kk * decay
-    if tau_a > 0.0:
-        out[:, 1] -= kk * decay / tau_a
-    jac = np.einsum("nij,njk->nik", phis, np.array([e[4] for e in events])[idx])
-    end = (float(z[0]), float(z[1]))
-    if wall:
-        gs = np.einsum("nij,nj->ni", phis, np.array([e[5] for e in events])[idx])
-        return out, jac, end, m_end, impacts, gs, g_end
-    return out, jac, end, m_end, impacts
 
 
 def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,

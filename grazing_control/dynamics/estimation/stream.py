@@ -6,7 +6,8 @@ are t_k = k T, the simulator's origin: docs/nodes.md, "The sensor stream"). The
 estimate of section k uses the samples with t_{k-1} < t <= t_k (a sample at t_k is
 before that section's correction) and is due as soon as no further sample before t_k can
 come: when t + h >= t_k for the newest sample (h the sample period; a sample at t_k
-itself is not waited for), or when a sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
+itself is not waited for; realtime, ``after_section``: with the sample at t_k), or when a
+sample after t_k arrives (one was lost). :class:`StreamEstimator` is that bookkeeping
 over the estimators of :mod:`grazing_control.dynamics.estimation.section_state`; the controller node
 feeds it from ``oscillator/state``, and :func:`simulate_stream` from the exact flow
 through a sensor's ``measure`` (a :class:`grazing_control.plant.sensor.SensorModel`:
@@ -36,9 +37,10 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
-from grazing_control.dynamics.estimation.section_state import (CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit,
-                         deviation_samples, detect_impact, model_update, nearest_estimate,
-                         section_force, trajectory, trajectory_end, unkick)
+from grazing_control.dynamics.estimation.section_state import (
+    CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit, deviation_samples,
+    detect_impact, model_update, nearest_estimate, unkick)
+from grazing_control.dynamics.estimation.motion import section_force, trajectory, trajectory_end
 
 __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
            "pulse_shape", "warm_up"]
@@ -74,12 +76,16 @@ class StreamEstimator:
     floor : float
         The model filter's floor (:func:`grazing_control.dynamics.estimation.section_state.model_update`).
     after_section : bool
-        Make a section due only with the first sample after t_k (a realtime simulator
-        takes an answer only once it has published its Pi2 sample), not with the last
-        sample before it (lockstep: the simulator waits for the answer before it goes on).
+        Make a section due with its last sample, the one at t_k included (realtime: the
+        simulator publishes it before its Pi2 sample; with the newest sample t at
+        t + h / 2 + lead > t_k, or a sample after t_k when that one is lost; the
+        estimate is the one the first sample after t_k made due before, bit for bit), not
+        with the last sample before t_k (lockstep: the simulator waits for the answer; a
+        sample at t_k itself is not waited for).
     lead : float
         Make a section due ``lead`` (time, >= 0) before its last sample: with the newest
-        sample t at t + h + lead >= t_k (a realtime rig, issue 28: the answer is computed
+        sample t at t + h + lead >= t_k, or with ``after_section`` t + h / 2 + lead >
+        t_k (a realtime rig, issue 28: the answer is computed
         while the last samples before t_k are on their way; this section's estimate has
         not got them, and the model filter, which fits each period's own samples, never
         uses them). 0: with the last sample (the default).
@@ -88,7 +94,7 @@ class StreamEstimator:
         (``pulse_width`` 0, the default), or the rig's force pulse of that width centred
         there, its force clipped to ``force_limit`` (> 0; inf: none). The model filter
         and :func:`predict_section` integrate it exactly
-        (:func:`grazing_control.dynamics.estimation.section_state.trajectory`); a kick in the model of
+        (:func:`grazing_control.dynamics.estimation.motion.trajectory`); a kick in the model of
         a pulse in the plant put the rig scene's mean 5e-5 off its orbit.
     actuator : Actuator or None
         The plant's first-order actuator between the commanded pulse and the force
@@ -98,7 +104,7 @@ class StreamEstimator:
         (:meth:`section_force`). None: the force is the command.
     kernel : bool or None
         Run the model filter compiled
-        (:func:`grazing_control.dynamics.estimation.section_state.trajectory`'s ``kernel``:
+        (:func:`grazing_control.dynamics.estimation.motion.trajectory`'s ``kernel``:
         the same estimates bit for bit, tests/test_estimation_compiled.py); None: where the
         compiled kernel is in use (:func:`grazing_control.oscillator.kernel.use_kernel`,
         ``GRAZING_KERNEL``). Kept as the ``kernel`` attribute, for
@@ -233,11 +239,17 @@ class StreamEstimator:
         while self.samples and self.samples[0][0] < t - 2.0 * T - tol:
             self.samples.popleft()
         self.last_t = t if self.last_t is None else max(self.last_t, t)
+        if self.after_section:
+            # realtime: due with the section's last sample, the one at t_k included (the
+            # next would be after t_k; half a sample period of margin for the stamps'
+            # rounding). Waiting for the first sample after t_k, which the estimate does
+            # not use, cost a simulator's wake-up, 0.5 ms at T/200 x1000 (issue 30)
+            if h > 0.0 and t + 0.5 * h + self.lead > self.next_k * T + tol:
+                due.append(self._due(self.next_k))
         # due when the next sample would be at t_k or after it: a sample at t_k itself
         # (up to rounding, 1e-3 h) is not waited for (a simulator publishes the samples
         # before t_k, then waits for the answer)
-        if not self.after_section and (h <= 0.0 or
-                                       t + h + self.lead >= self.next_k * T - 1e-3 * h):
+        elif h <= 0.0 or t + h + self.lead >= self.next_k * T - 1e-3 * h:
             due.append(self._due(self.next_k))
         return due
 
@@ -292,7 +304,7 @@ class StreamEstimator:
 
     def section_force(self, k: int) -> float:
         """The actuator's force at section k, left by the known corrections of the
-        periods before: :func:`grazing_control.dynamics.estimation.section_state.section_force` period
+        periods before: :func:`grazing_control.dynamics.estimation.motion.section_force` period
         by period from the force carried at the oldest section kept (``force_at``, moved
         on as old corrections are dropped; 0 at the first correction since
         :meth:`reset`), a period without a known correction with none; 0 without an
@@ -311,7 +323,7 @@ class StreamEstimator:
 
     def correction_shape(self, k: int) -> dict:
         """How the correction of period k acts, as keywords of
-        :func:`grazing_control.dynamics.estimation.section_state.trajectory`: the pulse, the actuator
+        :func:`grazing_control.dynamics.estimation.motion.trajectory`: the pulse, the actuator
         and its force at section k."""
         shape = dict(width=self.pulse[0], force_limit=self.pulse[1])
         if self.actuator is not None:
@@ -398,6 +410,7 @@ class StreamEstimator:
                     new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
                                                 at - (k - 1) * T, floor=self.floor,
                                                 coordinate=self.coordinate,
+                                                kernel=self.kernel,
                                                 **self.correction_shape(k - 1))
                 except (ValueError, np.linalg.LinAlgError, ArithmeticError):
                     continue
@@ -538,15 +551,25 @@ def predict_section(p: OscillatorParams, z, correction: float, delay: float = 0.
     return end
 
 
-def warm_up() -> None:
+def warm_up(p: OscillatorParams | None = None) -> None:
     """Load the compiled model filter where the kernel is in use (the kernel and
     :mod:`grazing_control.dynamics.estimation.compiled_flow`: compiled on a machine's first
     call, then loaded from numba's cache, ~1 s) so that the first section does not wait
-    for it: controller_node calls it at start in stream mode."""
+    for it: controller_node calls it at start in stream mode. With an n-DOF model ``p``
+    also :mod:`grazing_control.dynamics.estimation.compiled_modal_flow` (its model filter's
+    evaluation at the samples; a 1-DOF controller never loads it)."""
     if _kernel.use_kernel():
         _kernel.warm_up()
         trajectory(OscillatorParams(delta_d=-1e-3), (0.0, 0.0), np.array([1.0]), 0.1, 1.0,
                    width=0.1, kernel=True)
+        if isinstance(p, NdofModel):
+            from .compiled_modal_flow import modal_flow_at_samples
+
+            flow = NdofFlow.of(p)
+            e = np.exp(np.multiply.outer(np.zeros(1), flow.eigenvalues))
+            rows = np.zeros((1, 2 * p.n))
+            modal_flow_at_samples(flow.modes, e, flow.inverse, np.zeros(1, np.int64), rows,
+                                  np.zeros((1, 2 * p.n, 2 * p.n)), rows, True)
 
 
 def pulse_shape(p: OscillatorParams, pulse_width: float, force_limit: float) -> tuple:

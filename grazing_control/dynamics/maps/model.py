@@ -33,11 +33,25 @@ from typing import NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from grazing_control.oscillator.control import Gains, gain_determinant
+from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams
 
 from grazing_control.dynamics.maps.maps import pi2_map
 
-__all__ = ["Step", "PeriodMap", "SectionMap", "OneDOF"]
+__all__ = ["Step", "PeriodMap", "SectionMap", "OneDOF", "is_model_file"]
+
+
+def is_model_file(model) -> bool:
+    """Which implementation an entry of one concept for every model runs (issue 32): True
+    for a model file of any n (:class:`NdofModel`, n = 1 included: its modal flow), False
+    for the 1-DOF oscillator's parameters (:class:`OscillatorParams`: the closed form, the
+    certified fast path); anything else is refused with a TypeError naming it."""
+    if isinstance(model, NdofModel):
+        return True
+    if isinstance(model, OscillatorParams):
+        return False
+    raise TypeError(f"model={model!r} is invalid: expected OscillatorParams (the 1-DOF "
+                    "oscillator) or NdofModel (a model file)")
 
 
 class Step(NamedTuple):

@@ -46,7 +46,7 @@ from grazing_control.oscillator.impact import Impact
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulation.actuation import (OrbitMultipliers, newton_fixed_point, pulse_force, pulse_start,
                         pulse_step)
-from grazing_control.dynamics.estimation.section_state import phi_rows
+from grazing_control.dynamics.estimation.motion import phi_rows
 
 __all__ = ["Actuator", "IDEAL_ACTUATOR", "actuated_step", "equivalent_delay", "actuated_c1",
            "ActuatedOrbit", "actuated_orbit", "bandwidth_actuator", "LagFlow",

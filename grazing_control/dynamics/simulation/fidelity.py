@@ -102,7 +102,7 @@ def _zdm_period(p: OscillatorParams, dx: float, dv: float, order: int) -> Segmen
     _zdm_check(p, amplitude_bound(p.zeta, dx, dv), "on Pi2", order)
     s = p.pi2_offset / p.omega
     f11, f12, f21, f22 = transition_matrix(p.zeta, p.period - s)
-    zx, zv, t1, v_minus = zdm_event(p, f11 * dx + f12 * dv, f21 * dx + f22 * dv, order)
+    zx, zv, t1, v_minus = zdm_event(p, (f11 * dx + f12 * dv, f21 * dx + f22 * dv), order)
     if t1 is not None:
         _zdm_check(p, amplitude_bound(p.zeta, zx, zv), "after the impact", order)
     impacts = []

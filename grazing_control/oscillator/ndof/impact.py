@@ -263,7 +263,7 @@ def saltation_parts(flow: NdofFlow, phase: float, z_minus, v_minus: float | None
     s = (1 + r) a_w- / v_w- the entry that grows like 1/v- near grazing
     (:func:`saltation_matrix`). Kept apart, the rank-one singular term lets the
     multipliers of a near-grazing orbit be computed without the loss of digits of
-    an eigen-solver on a matrix with an entry ~1/v- (dynamics/orbits/ndof_branch.py,
+    an eigen-solver on a matrix with an entry ~1/v- (dynamics/orbits/modal_branch.py,
     ``structured_multipliers``). ``v_minus``: v_w- where it is known better than from
     the phase (near grazing v_w- = -d* omega sin(phase - tau*) + z_{n+w} loses the
     relative digits that the rounding of phase ~ tau* takes from a small phase - tau*;

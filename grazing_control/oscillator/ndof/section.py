@@ -31,7 +31,7 @@ through :class:`NdofSection` (issue 32):
   1-DOF, and for n = 1 the 1-DOF sensor's draws bit for bit.
 
 A lockstep run with the law Delta v = k^T z therefore repeats
-:class:`grazing_control.dynamics.maps.ndof_map.NdofMap`'s iterates bit for bit (the same
+:class:`grazing_control.dynamics.maps.modal_map.ModalMap`'s iterates bit for bit (the same
 calls). No ROS, no plant: this is the model layer.
 """
 
@@ -146,7 +146,7 @@ class NdofSection:
 
     def pulse_force(self, dv: float, width: float, limit: float = math.inf) -> float:
         """F = m_a Delta v / w clipped to +-``limit``: the pulse carrying Delta v
-        (as :func:`grazing_control.dynamics.maps.ndof_map.pulse_step`)."""
+        (as :func:`grazing_control.dynamics.maps.modal_map.pulse_step`)."""
         return max(-limit, min(limit, actuated_mass(self.flow) * dv / width))
 
     def pushed(self, tau: float, z, duration: float, force: float):

@@ -9,7 +9,7 @@
   |Delta d| on log-log axes, on the side of grazing where it exists
   (:func:`grazing_control.studies.near_grazing.branch.grazing_side`) (:func:`grazing_control.studies.near_grazing.branch.multiplier_scaling`):
   uncontrolled, with a gain of the design family (bounded, the predicted limit
-  :func:`grazing_control.dynamics.design.ndof_design.limit_multipliers` dashed) and with the gain
+  :func:`grazing_control.dynamics.design.family.limit_multipliers` dashed) and with the gain
   that cancels only w^T N u and one that cancels w^T N u and G(1)
   (``cancel_first_markov``), each with its fitted
   exponent over |Delta d| <= ``fit_below``;
@@ -75,7 +75,7 @@ def choose_mu(model) -> tuple[float, str]:
     (docs/ndof_commands.md); without one, of the widest interval where only the
     impacting-side conditions hold, else where the controlled 1/1 orbit exists
     (gamma1 > 0, on a grid of [-1, 1]); else 0."""
-    from grazing_control.dynamics.design.ndof_design import admissible_mu, existence_coefficient
+    from grazing_control.dynamics.design.family import admissible_mu, existence_coefficient
 
     for conditions, why in (("combined", "the middle of the widest admissible interval"),
                             ("impacting", "no admissible mu: the middle of the widest "
@@ -104,10 +104,10 @@ def choose_mu(model) -> tuple[float, str]:
 
 def markov_gain(model, mu: float, settings, smooth_branch: bool = True) -> np.ndarray:
     """k(mu) + offset d: a gain that cancels w^T N u, and G(1) too with ``smooth_branch``
-    (``ndof_design.cancel_first_markov``), |offset| = ``markov_offset`` |k(mu)|, of the
+    (``family.cancel_first_markov``), |offset| = ``markov_offset`` |k(mu)|, of the
     sign for which the local map has a 1/1 orbit born at grazing (whether it exists for
-    d < d* depends on that sign; ndof_design's docstring)."""
-    from grazing_control.dynamics.design.ndof_design import cancel_first_markov, gain_family
+    d < d* depends on that sign; family's docstring)."""
+    from grazing_control.dynamics.design.family import cancel_first_markov, gain_family
     from grazing_control.studies.near_grazing.branch import predicted_orbit
 
     size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu))), 1.0)
@@ -123,7 +123,7 @@ def markov_gain(model, mu: float, settings, smooth_branch: bool = True) -> np.nd
 
 def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     """The three curves of (b) with their fitted exponents and the predicted limit."""
-    from grazing_control.dynamics.design.ndof_design import gain_family, limit_multipliers
+    from grazing_control.dynamics.design.family import gain_family, limit_multipliers
     from grazing_control.studies.near_grazing.branch import (fit_exponent, grazing_side,
                                                      multiplier_scaling)
 
@@ -176,7 +176,7 @@ def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
                       model_file: str = "", workers: int | None = None, log=None) -> dict:
     """Compute and draw (a), (b), (c) of the module docstring into ``out``; returns the
     numbers (also written to ``out/ndof_figures.json``)."""
-    from grazing_control.dynamics.design.ndof_design import gain_family
+    from grazing_control.dynamics.design.family import gain_family
     from grazing_control.studies.sweeps.model_file import diagram
     from grazing_control.studies.sweeps.plot import diagram_png
     from grazing_control.studies.near_grazing.scene import control_scene

@@ -2,7 +2,7 @@
 1-DOF model answers in closed form (dynamics/orbits) and a model file by shooting from the
 local map's prediction (docs/ndof_commands.md):
 
-* :mod:`.branch`: the 1/1 orbit of an :class:`~grazing_control.dynamics.maps.ndof_map.NdofMap`
+* :mod:`.branch`: the 1/1 orbit of an :class:`~grazing_control.dynamics.maps.modal_map.ModalMap`
   by shooting from the leading-order discontinuity-map prediction, its multipliers on a
   log grid of Delta d and the fitted growth exponent;
 * :mod:`.scene`: uncontrolled iterations, then the controller on, and the distance to

@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import (ShootingFailed, find_periodic,
                                                floquet_multipliers, iterate)
 from grazing_control.oscillator.ndof.flow import NdofFlow
@@ -250,9 +250,9 @@ def _offset(state, pred) -> float:
 
 def _on_branch(model, gains, pred):
     """(the 1/1 orbit at the model's Delta d on the branch explicit in the impact phase,
-    None), or (None, why not) (dynamics/orbits/ndof_branch.py: ``orbit_at``, the global check
+    None), or (None, why not) (dynamics/orbits/modal_branch.py: ``orbit_at``, the global check
     ``other_contacts``, the multipliers from ``pi2_factors``)."""
-    from grazing_control.dynamics.orbits.ndof_branch import (branch_multipliers, orbit_at,
+    from grazing_control.dynamics.orbits.modal_branch import (branch_multipliers, orbit_at,
                                                       other_contacts, pi2_factors)
 
     k = np.zeros(2 * model.n) if gains is None else _gains(model, gains)
@@ -300,7 +300,7 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
     """
     if delta_d is not None:
         model = with_delta_d(model, delta_d)
-    pmap = NdofMap(model, _gains(model, gains))
+    pmap = ModalMap(model, _gains(model, gains))
     pred, _s = predicted_orbit(model, gains)
     explicit, reason = _on_branch(model, gains, pred)
     if explicit is not None:
@@ -398,14 +398,14 @@ def fold_beyond(model, gains, branch, stop: float):
     """The fold where a continuation in Delta d stopped short of ``stop``, or None.
 
     A continuation in Delta d cannot pass a turning point of the branch; the branch
-    explicit in the impact phase can (``dynamics.orbits.ndof_branch.branch_fold``). The fold is
+    explicit in the impact phase can (``dynamics.orbits.modal_branch.branch_fold``). The fold is
     reported only if it lies beyond the last point reached, towards ``stop``, and its
-    orbit is an orbit of the exact map (one period of ``NdofMap`` from its Pi2 state
+    orbit is an orbit of the exact map (one period of ``ModalMap`` from its Pi2 state
     returns there to 1e-8 with one impact: the explicit branch assumes that impact is the
     period's only contact). Returns a dict: delta_d, psi, v_minus, the multiplier nearest
     1 and the exact map's residual.
     """
-    from grazing_control.dynamics.orbits.ndof_branch import branch_fold
+    from grazing_control.dynamics.orbits.modal_branch import branch_fold
 
     if not branch.points or branch.stopped == "end":
         return None
@@ -416,7 +416,7 @@ def fold_beyond(model, gains, branch, stop: float):
         return None
     if fold is None or fold.monodromy is None or (fold.delta_d - last) * (stop - last) < 0.0:
         return None
-    step = NdofMap(with_delta_d(model, fold.delta_d), gains).step(fold.pi2_state)
+    step = ModalMap(with_delta_d(model, fold.delta_d), gains).step(fold.pi2_state)
     size = max(1.0, float(np.max(np.abs(fold.pi2_state))))
     residual = float(np.max(np.abs(step.state - fold.pi2_state))) / size
     if residual > 1e-8 or len(step.impacts) != 1:

@@ -1,6 +1,6 @@
 """A control scene of an n-DOF model on Pi2 (issue 17, figure (c); the study's Figs. 2(f, g)).
 
-The period map (:class:`~grazing_control.dynamics.maps.ndof_map.NdofMap`) is iterated without
+The period map (:class:`~grazing_control.dynamics.maps.modal_map.ModalMap`) is iterated without
 control for ``control_after`` periods, then with the kick v[i_a] += k^T z at every Pi2
 sample. The distance of each sample to the controlled 1/1 orbit
 (:func:`.branch.orbit_11`, shooting) says whether, and how fast, the controller captures
@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.params import ParameterError
 
 from .branch import OrbitNotFound, orbit_11, with_delta_d
@@ -46,8 +46,8 @@ def simulate_pi2(model, periods: int, start=None, gains=None, control_after: int
     if z.shape != (n2,) or not np.all(np.isfinite(z)):
         raise ParameterError(f"start is invalid: expected {n2} finite values (deviation from "
                              "the grazing orbit on Pi2)")
-    free = NdofMap(model)
-    ctl = None if gains is None else NdofMap(model, np.asarray(gains, dtype=float))
+    free = ModalMap(model)
+    ctl = None if gains is None else ModalMap(model, np.asarray(gains, dtype=float))
     after = periods if ctl is None else (0 if control_after is None else int(control_after))
     samples = np.empty((int(periods) + 1, n2))
     counts = np.zeros(int(periods), dtype=np.int32)

@@ -60,7 +60,7 @@ def ndof_model_error_bands(model, mus, delay: float = 0.0, errors=None, **band_k
     import math
 
     from grazing_control.dynamics.design.mismatch import tolerated_error
-    from grazing_control.dynamics.design.ndof_design import gain_family
+    from grazing_control.dynamics.design.family import gain_family
 
     if errors is None:
         errors = dict(NDOF_ERRORS)

@@ -2,7 +2,7 @@
 diagram of one parameter on Pi2 for any n (issue 17, figure (a)).
 
 For each value of one model parameter (``delta_d`` by default) the period map of
-:class:`~grazing_control.dynamics.maps.ndof_map.NdofMap` is iterated ``periods`` times from a
+:class:`~grazing_control.dynamics.maps.modal_map.ModalMap` is iterated ``periods`` times from a
 start on Pi2 and the last ``periods - transient`` samples are kept (deviations from the
 grazing orbit, before the kick), with the impacts of each period and the detected
 period on Pi2 (:func:`grazing_control.studies.sweeps.period.detect_period`, any
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 from .period import detect_period
@@ -80,8 +80,8 @@ def run_points(model, name, values, start, gains, periods, transient, control_af
     for j, value in enumerate(values):
         try:
             mj = dataclasses.replace(model, **{name: float(value)})
-            free = NdofMap(mj)
-            ctl = NdofMap(mj, gains) if gains is not None and control_after >= 0 else None
+            free = ModalMap(mj)
+            ctl = ModalMap(mj, gains) if gains is not None and control_after >= 0 else None
             z = np.array(start, dtype=float)
             for k in range(periods):
                 pmap = ctl if ctl is not None and k >= control_after else free

@@ -1,4 +1,8 @@
-"""The controlled 1/1 branch of the n-DOF oscillator, explicit in the impact phase.
+"""The controlled 1/1 branch of a model file (any n), explicit in the impact phase.
+
+The model file's implementation of the 1/1 branch beside the 1-DOF closed form's
+(:mod:`.orbits`: ``orbit_11``, ``branch_point``); for n = 1 the two agree to rounding
+(tests/test_n1_model_file.py).
 
 docs/theory_ndof.md §5 (the n-DOF form of docs/theory.md §5). Take the wall as the
 section: an impact at forcing phase tau* + psi, just before it the deviation
@@ -15,7 +19,7 @@ components fix v- and Delta d:
 so the branch is an explicit curve psi -> (Delta d, v-, z-), exact up to rounding. Its
 monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impact.py).
 This is the exact reference for the limit multipliers and the existence coefficient of
-ndof_design (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
+family (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
 statement: the orbit near grazing; shooting on the exact period map is the global check).
 """
 
@@ -34,7 +38,7 @@ from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.orbits.continuation import OrbitBifurcation, OrbitBranch, OrbitPoint
-from grazing_control.dynamics.design.ndof_design import (Actuation, _flow, _gains, _transition,
+from grazing_control.dynamics.design.family import (Actuation, _flow, _gains, _transition,
                                                      _vectors, smooth_map)
 from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
 
@@ -62,7 +66,7 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     M = Phi(T - sigma)(I + b k^T) Phi(sigma), sigma = s - psi/omega (module docstring);
     with an actuation delay b = Phi(-delay) e_{n + i_a}, valid while the kick acts before
     the next impact, sigma + delay < T (docs/theory_ndof.md §14); for a pulse
-    (:class:`~grazing_control.dynamics.design.ndof_design.Actuation`) b = b_w, valid
+    (:class:`~grazing_control.dynamics.design.family.Actuation`) b = b_w, valid
     while the pulse ends before it, sigma + end < T (§15)."""
     om = model.omega
     s = model.pi2_offset / om
@@ -118,7 +122,7 @@ def branch_coefficients(model: NdofModel, gains):
     v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (proportional to G(1) of §2: zero iff
     the branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
     b1 = -w^T R M' R e_v, v2 = -(1 + r) v1 a1' / q0, a1' = -e_v^T R M' R e_v.
-    On the family (w^T N = mu w^T) gamma1 is ndof_design.existence_coefficient.
+    On the family (w^T N = mu w^T) gamma1 is family.existence_coefficient.
     """
     k = _gains(model, gains)
     n_mat = smooth_map(model, k)

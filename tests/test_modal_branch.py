@@ -1,5 +1,5 @@
 """The explicit n-DOF 1/1 branch (docs/theory_ndof.md §5, §7) against the exact period
-map NdofMap, the 1-DOF branch for n = 1, and its own Taylor coefficients."""
+map ModalMap, the 1-DOF branch for n = 1, and its own Taylor coefficients."""
 
 import dataclasses
 import math
@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.orbits import ndof_branch as nb
+from grazing_control.dynamics.orbits import modal_branch as nb
 
-from grazing_control.dynamics.design import ndof_design as nd
+from grazing_control.dynamics.design import family as nd
 
 from grazing_control.dynamics.orbits import orbits
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -24,7 +24,7 @@ CHAIN = MODELS / "two_mass_chain.yaml"
 
 @pytest.mark.parametrize("gains", ["design", "none", "bad"])
 def test_branch_orbit_is_a_fixed_point_of_the_exact_period_map(gains):
-    """The Pi2 state of a branch point, stepped once by NdofMap at its Delta d, returns to
+    """The Pi2 state of a branch point, stepped once by ModalMap at its Delta d, returns to
     itself with one impact of the same v-, and the exact Jacobian has the branch's
     multipliers."""
     base = load_model(CHAIN)
@@ -34,7 +34,7 @@ def test_branch_orbit_is_a_fixed_point_of_the_exact_period_map(gains):
     for psi in (1e-2, 1e-4):
         bp = nb.branch_point(base, k, math.copysign(psi, v1))
         assert bp.v_minus > 0
-        step = NdofMap(dataclasses.replace(base, delta_d=bp.delta_d), k).step(bp.pi2_state, True)
+        step = ModalMap(dataclasses.replace(base, delta_d=bp.delta_d), k).step(bp.pi2_state, True)
         # the core works with physical states of size ~ d* = 3.2: absolute rounding ~1e-15
         assert np.abs(step.state - bp.pi2_state).max() < 1e-14 + 1e-12 * np.abs(bp.pi2_state).max()
         assert len(step.impacts) == 1
@@ -83,7 +83,7 @@ def test_bad_psi_and_no_orbit_are_refused():
 def test_the_fold_of_the_chain_branch_has_the_multiplier_one_and_is_an_exact_orbit():
     """The chain at omega 0.8 (tests/models): its branch born at grazing (on Delta d > 0)
     turns back at a fold. There Delta d(psi) is extremal, the monodromy has the
-    multiplier 1, and one period of the exact map (NdofMap) returns to the orbit."""
+    multiplier 1, and one period of the exact map (ModalMap) returns to the orbit."""
     m = load_model(Path(__file__).parent / "models" / "two_mass_chain_w08.yaml")
     fold = nb.branch_fold(m, None)
     assert fold is not None and fold.v_minus > 0.0
@@ -91,7 +91,7 @@ def test_the_fold_of_the_chain_branch_has_the_multiplier_one_and_is_an_exact_orb
     assert np.min(np.abs(lam - 1.0)) < 1e-6, lam
     for h in (1e-3, -1e-3):                       # a maximum of Delta d(psi)
         assert nb.branch_point(m, np.zeros(4), fold.psi + h).delta_d < fold.delta_d
-    step = NdofMap(dataclasses.replace(m, delta_d=fold.delta_d)).step(fold.pi2_state)
+    step = ModalMap(dataclasses.replace(m, delta_d=fold.delta_d)).step(fold.pi2_state)
     assert len(step.impacts) == 1
     assert np.max(np.abs(step.state - fold.pi2_state)) < 1e-12 * max(1.0, np.abs(fold.pi2_state).max())
 

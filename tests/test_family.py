@@ -1,6 +1,6 @@
 """The n-DOF design (docs/theory_ndof.md §3-§9): gain family, transmission zeros, limit
 multipliers, existence, admissible mu, the bad gains, and the acceptance of issue 17 on
-the shipped two-mass chain against exact shooting on NdofMap."""
+the shipped two-mass chain against exact shooting on ModalMap."""
 
 import dataclasses
 import math
@@ -13,10 +13,10 @@ from scipy.optimize import brentq, linear_sum_assignment
 
 from grazing_control.dynamics.design import gains as design
 
-from grazing_control.dynamics.orbits import ndof_branch
+from grazing_control.dynamics.orbits import modal_branch
 
-from grazing_control.dynamics.design import ndof_design as nd
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.design import family as nd
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import find_periodic, floquet_multipliers
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.ndof import NdofModel, load_model
@@ -162,7 +162,7 @@ def test_n1_limit_multipliers_existence_and_admissible_sets_are_the_1dof_design(
 
 @pytest.mark.parametrize("seed", [0, 3, 5])
 def test_limit_multipliers_are_the_exact_branch_limit(seed):
-    """The exact 1/1 branch (ndof_branch, no expansion) at impact phase psi has
+    """The exact 1/1 branch (modal_branch, no expansion) at impact phase psi has
     multipliers within O(psi) of the limit spectrum, det J = r^2 det N exactly."""
     m = _random_model(seed, 3)
     mu = 0.25
@@ -172,7 +172,7 @@ def test_limit_multipliers_are_the_exact_branch_limit(seed):
                                               rel=1e-9)
     errs = []
     for psi in (1e-3, 1e-4, 1e-5):
-        bp = ndof_branch.branch_point(m, k, math.copysign(psi, ndof_branch.branch_coefficients(m, k)[2]))
+        bp = modal_branch.branch_point(m, k, math.copysign(psi, modal_branch.branch_coefficients(m, k)[2]))
         errs.append(_match(np.linalg.eigvals(bp.monodromy), lim))
     assert 7 < errs[0] / errs[1] < 14 and 7 < errs[1] / errs[2] < 14
 
@@ -185,11 +185,11 @@ def test_existence_coefficient_is_the_branch_curvature(seed):
     for mu in (-0.3, 0.5):
         k = nd.gain_family(m, mu)
         g1 = nd.existence_coefficient(m, mu)
-        d1, g1_general, _v1 = ndof_branch.branch_coefficients(m, k)
+        d1, g1_general, _v1 = modal_branch.branch_coefficients(m, k)
         assert abs(d1) < 1e-10 * abs(g1) and g1_general == pytest.approx(g1, rel=1e-10)
         errs = []
         for psi in (1e-3, 1e-4):   # symmetric quotient: error O(psi^2)
-            dd = [ndof_branch.branch_point(m, k, x).delta_d for x in (psi, -psi)]
+            dd = [modal_branch.branch_point(m, k, x).delta_d for x in (psi, -psi)]
             errs.append(abs(-0.5 * (dd[0] + dd[1]) / psi ** 2 - g1))
         assert errs[1] < 1e-5 * abs(g1) and 70 < errs[0] / errs[1] < 130
 
@@ -231,9 +231,9 @@ def test_two_mass_chain_has_a_design():
     assert best.admissible and best.limit_radius < 0.8
     assert best.lambda0 is best.limit_multipliers and best.zeros_radius < 0.65
     free = np.zeros(2 * m.n)
-    d1, _g1, v1 = ndof_branch.branch_coefficients(m, free)
+    d1, _g1, v1 = modal_branch.branch_coefficients(m, free)
     assert d1 / v1 < 0          # Delta d < 0 where v- > 0
-    lam = [np.abs(np.linalg.eigvals(ndof_branch.orbit_at(m, free, -dd).monodromy)).max()
+    lam = [np.abs(np.linalg.eigvals(modal_branch.orbit_at(m, free, -dd).monodromy)).max()
            for dd in (1e-4, 1e-6)]
     assert lam[0] > 10 and lam[1] / lam[0] == pytest.approx(100, rel=0.01)
 
@@ -241,14 +241,14 @@ def test_two_mass_chain_has_a_design():
 # ------------------------------------------------------------- acceptance (issue 17)
 def _exact_multipliers(model, gains, delta_d):
     m = dataclasses.replace(model, delta_d=delta_d)
-    guess = ndof_branch.orbit_at(m, gains, delta_d).pi2_state
-    orbit = find_periodic(NdofMap(m, gains), guess)
+    guess = modal_branch.orbit_at(m, gains, delta_d).pi2_state
+    orbit = find_periodic(ModalMap(m, gains), guess)
     assert len(orbit.impacts) == 1 and orbit.impacts[0].v_minus > 0
     return floquet_multipliers(orbit.monodromy)
 
 
 def test_controlled_multipliers_stay_bounded_and_converge_to_the_limit():
-    """mu = 0.2 on the chain: exact multipliers (Newton shooting on NdofMap) bounded down
+    """mu = 0.2 on the chain: exact multipliers (Newton shooting on ModalMap) bounded down
     to Delta d = -1e-10 and within ~1.1 |Delta d|^(1/2) of the predicted limit spectrum
     (measured 1.04e-2, 1.06e-4, 1.07e-5 at -1e-4, -1e-8, -1e-10: order 0.50)."""
     m = load_model(CHAIN)
@@ -273,7 +273,7 @@ def test_cancelling_only_the_first_markov_parameter_is_not_enough(smooth, expone
     k = nd.cancel_first_markov(m, 0.2, 0.5, smooth_branch=smooth)
     markov = nd.markov_parameters(m, k)
     assert abs(markov[0]) < 1e-14 and abs(markov[1]) > 1e-2
-    d1, g1, _v1 = ndof_branch.branch_coefficients(m, k)
+    d1, g1, _v1 = modal_branch.branch_coefficients(m, k)
     assert (abs(d1) < 1e-12) == smooth
     dds = np.array([1e-5, 1e-7, 1e-9])
     big = [np.abs(_exact_multipliers(m, k, -dd)).max() for dd in dds]
@@ -332,7 +332,7 @@ def test_sections_with_stable_zeros_are_where_every_zero_is_inside(seed):
         nd.sections_with_stable_zeros(chain, points=1)
 
 
-# ------------------------------------------------- the predicted spread (§17, ndof_spread)
+# ------------------------------------------------- the predicted spread (§17, noise)
 def _differences(f, y, h):
     """Fourth-order central differences of f at y, step h per column."""
     cols = []
@@ -352,7 +352,7 @@ def test_actuated_step_jacobian_is_the_exact_maps_derivative(start, tau_a, force
     at 11.93), the impact under the decaying force (start 8, tau_a 0.5: the force there
     ~ e^-5 of its peak) and a slow actuator without impact, each from a force carried
     from the previous period."""
-    from grazing_control.dynamics.maps.ndof_map import actuated_step
+    from grazing_control.dynamics.maps.modal_map import actuated_step
     from grazing_control.oscillator.ndof.flow import NdofFlow
 
     flow = NdofFlow.of(dataclasses.replace(load_model(CHAIN), delta_d=-1e-3))
@@ -374,10 +374,10 @@ def test_actuated_step_jacobian_is_the_exact_maps_derivative(start, tau_a, force
 @pytest.mark.parametrize("delay", [0.0, 0.3, 3.0])
 def test_n1_predicted_spread_is_the_1dof_noise_covariance(delay):
     """n = 1 (the study's model file) with the kick: the loop's orbit and Sigma of
-    ndof_spread are the 1-DOF closed form's (noise.noise_covariance, exact saltation)
+    noise are the 1-DOF closed form's (noise.noise_covariance, exact saltation)
     to 1e-12 (measured 7e-15, 1e-13, 2.9e-13)."""
     from grazing_control.dynamics.design import noise
-    from grazing_control.dynamics.design.ndof_spread import predicted_spread
+    from grazing_control.dynamics.design.noise import predicted_spread
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     m, p = _study()
@@ -400,7 +400,7 @@ def test_n1_through_the_lag_is_the_1dof_actuated_loop(tau_a, latency):
     (dynamics.simulation.actuator.actuated_step, its own flow) to 1e-8; the 1-DOF
     prediction, whose monodromy is central differences (error ~1e-6 of it, measured
     1.1e-6), agrees to 5e-6 (measured 7e-7)."""
-    from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
+    from grazing_control.dynamics.design.noise import predicted_spread, spread_linearisation
     from grazing_control.dynamics.simulation import actuator as one
 
     m, p = _study()
@@ -418,7 +418,7 @@ def test_n1_through_the_lag_is_the_1dof_actuated_loop(tau_a, latency):
                                            actuator=one.Actuator(tau_a, latency))
         return np.array([x, v, force])
 
-    jac = loop_linearisation(m, [g.c1, g.c2], got.orbit, act)[0]
+    jac = spread_linearisation(m, [g.c1, g.c2], got.orbit, act)[0]
     ref = _differences(f, np.asarray(got.orbit), 1e-6)
     assert np.max(np.abs(jac - ref)) < 1e-8 * np.abs(jac).max()
     want = orb.noise_covariance(g)
@@ -450,7 +450,7 @@ def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
     impact per period, and the std of every coordinate and of the force within 4 sampling standard errors of the prediction (the errors from the linear
     loop's correlations, 2.2-4.5 % here; measured ratios 0.980-1.015), the corrections'
     within 15 % (N12; measured with 2000 periods for each noise alone 0.975-0.999)."""
-    from grazing_control.dynamics.design.ndof_spread import loop_linearisation, predicted_spread
+    from grazing_control.dynamics.design.noise import predicted_spread, spread_linearisation
     from grazing_control.plant.engine import Engine
     from grazing_control.plant.settings import load_model_file, settings_from_values
 
@@ -478,7 +478,7 @@ def test_predicted_spread_is_the_plants_seeded_closed_loop(pulse):
         dvs.append(dv)
         ev, _ = eng.end_period()
     ratio = np.array(rows).std(axis=0) / (1e-5 * pred.std)
-    J, _g, _ev = loop_linearisation(model, k, pred.orbit, pulse)
+    J, _g, _ev = spread_linearisation(model, k, pred.orbit, pulse)
     for i, r in enumerate(ratio):
         if pred.std[i] > 1e-30:     # (the force at the section: e^-40 of the pulse's)
             assert abs(r - 1.0) < 4.0 * _std_error(J, pred.covariance, i, periods), (i, ratio)
@@ -496,8 +496,8 @@ def test_design_prints_the_predicted_spread_through_the_lag(capsys):
     import json
 
     from grazing_control import cli
-    from grazing_control.dynamics.design.ndof_spread import predicted_spread
-    from grazing_control.dynamics.design.noise import ndof_filter_covariance
+    from grazing_control.dynamics.design.noise import predicted_spread
+    from grazing_control.dynamics.design.noise import filter_covariance
     from grazing_control.dynamics.simulation.actuator import Actuator
 
     argv = ["design", "--model", str(CHAIN), "--mu", "-0.22", "--delay", "1.0",
@@ -512,7 +512,7 @@ def test_design_prints_the_predicted_spread_through_the_lag(capsys):
     assert got["spectral_radius"] == pytest.approx(0.8964, abs=5e-5)
     np.testing.assert_allclose(got["orbit"], want.orbit, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(got["measured"]["std"], want.std, rtol=1e-12)
-    r = ndof_filter_covariance(model, k, want.orbit[:4], 50, 0, 1.0, width=1.0,
+    r = filter_covariance(model, k, want.orbit[:4], 50, 0, 1.0, width=1.0,
                                section_sample=False, actuator=Actuator(0.1, 0.05),
                                force0=float(want.orbit[4]))
     pos = predicted_spread(model, k, act, measurement=r, orbit=want.orbit)

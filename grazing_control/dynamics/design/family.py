@@ -1,4 +1,9 @@
-"""Grazing control of the n-DOF impact oscillator: the design (issue 17).
+"""The degenerate grazing gain family k(mu) of a model file, any n: the design (issues 17, 32).
+
+The family w^T N(k) = mu w^T is the design of every model file, n = 1 included, where it
+is the 1-DOF (c1, c2) family of :mod:`.gains` (the closed form, parametrised by c2;
+tests/test_n1_model_file.py: the same multipliers to 1e-12); :mod:`.model_design` is the
+one entry over both that callers use.
 
 Derived in docs/theory_ndof.md (sections cited as §N). State z in R^{2n}: the deviation
 (positions, velocities) from the non-impacting periodic response; on
@@ -61,7 +66,7 @@ __all__ = [
     "limit_multipliers",
     "existence_coefficient",
     "free_multipliers",
-    "NdofDesign",
+    "FamilyDesign",
     "evaluate_design",
     "admissible_mu",
     "cancel_first_markov",
@@ -441,7 +446,7 @@ def free_multipliers(model: NdofModel, mu: float, delay: float = 0.0) -> np.ndar
 
 
 @dataclass(frozen=True)
-class NdofDesign:
+class FamilyDesign:
     """The design quantities for one mu (gains from the family, §3).
 
     mu : the eigenvalue of N(k) along w (w^T N = mu w^T).
@@ -498,11 +503,11 @@ class NdofDesign:
         return self.admissible_impacting and self.free_stable
 
 
-def evaluate_design(model: NdofModel, mu: float, delay: float = 0.0) -> NdofDesign:
+def evaluate_design(model: NdofModel, mu: float, delay: float = 0.0) -> FamilyDesign:
     """gains, zeros, limit multipliers and gamma1 at mu (for a kick acting ``delay`` after
     the sample, §14)."""
     k = gain_family(model, mu, delay)
-    return NdofDesign(float(mu), k, transmission_zeros(model, delay),
+    return FamilyDesign(float(mu), k, transmission_zeros(model, delay),
                       limit_multipliers(model, mu, delay),
                       existence_coefficient(model, mu, delay),
                       delay if isinstance(delay, Actuation) else float(delay))
@@ -611,7 +616,7 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
     direction of its gradient within w^T N e_v = 0, orthogonal to the family): the branch
     is linear in psi and the largest multiplier grows like |Delta d|^-1/2. offset = 0
     is the design k(mu). Whether the 1/1 orbit exists for d < d* depends on the sign of
-    offset (ndof_branch.branch_coefficients).
+    offset (modal_branch.branch_coefficients).
     """
     k0 = gain_family(model, mu, delay)
     offset = float(offset)
@@ -646,7 +651,7 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
 
 # -- the controller's parameter file ------------------------------------------------------
 
-def controller_parameters(model: NdofModel, design: NdofDesign, model_file) -> dict:
+def controller_parameters(model: NdofModel, design: FamilyDesign, model_file) -> dict:
     """The n-DOF controller's parameters: the gain vector, the model file it is for, and
     the section data the node checks it against (n, i_a, omega, pi2_offset)."""
     k = _gains(model, design.gains)
@@ -700,7 +705,7 @@ def design_actuation(delay: float = 0.0, pulse_width: float = 0.0,
 
 
 def pulse_design(model: NdofModel, mu: float, delay: float = 0.0, width: float = 0.0,
-                 time_constant: float = 0.0, latency: float = 0.0) -> NdofDesign:
+                 time_constant: float = 0.0, latency: float = 0.0) -> FamilyDesign:
     """The design for a correction acting as a force pulse of ``width`` centred ``delay``
     after the sample, through a first-order actuator (``time_constant``, ``latency``)
     (§15; the `grazing design --model M --pulse-width W` route). Width 0 without an
@@ -710,7 +715,7 @@ def pulse_design(model: NdofModel, mu: float, delay: float = 0.0, width: float =
     return evaluate_design(model, mu, Actuation(delay, width, time_constant, latency))
 
 
-def write_gain_yaml(path, model: NdofModel, design: NdofDesign, model_file,
+def write_gain_yaml(path, model: NdofModel, design: FamilyDesign, model_file,
                     node_name: str = "**") -> None:
     """Write the n-DOF controller's ROS 2 parameter file.
 

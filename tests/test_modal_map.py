@@ -1,4 +1,4 @@
-"""Tests of grazing_control.dynamics.maps.ndof_map: the n-DOF Pi2 map as a PeriodMap.
+"""Tests of grazing_control.dynamics.maps.modal_map: the n-DOF Pi2 map as a PeriodMap.
 
 Yardsticks: the 1-DOF core (the n = 1 model file against OneDOF and orbit_11), the
 50-digit reference of tests/reference_ndof.py (states, impacts, central-difference
@@ -17,7 +17,7 @@ from scipy.optimize import brentq
 
 from grazing_control.dynamics.orbits.continuation import continue_orbit
 from grazing_control.dynamics.maps.model import OneDOF, PeriodMap
-from grazing_control.dynamics.maps.ndof_map import NdofMap
+from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.orbits.shooting import (bifurcation_tests, find_periodic,
                                                floquet_multipliers, iterate)
@@ -36,7 +36,7 @@ SHIPPED = MODELS / "two_mass_chain.yaml"    # the shipped example (omega 0.5)
 
 
 def _chain(gains=None, path=CHAIN, **changes):
-    return NdofMap(dataclasses.replace(load_model(path), **changes), gains)
+    return ModalMap(dataclasses.replace(load_model(path), **changes), gains)
 
 
 # ----------------------------------------------------------------- the protocol
@@ -60,10 +60,10 @@ def test_is_a_period_map_with_named_coordinates_and_parameters():
     (lambda m: m.parameter("k4"), "k4"),
     (lambda m: m.with_parameter("r", 1.5), "r=1.5 is invalid"),
     (lambda m: m.with_parameter("omega", -1.0), "omega=-1.0 is invalid"),
-    (lambda m: NdofMap(m.model, [1.0, 2.0]), "gains=.* expected 4 finite"),
-    (lambda m: NdofMap(m.model, [1.0, 2.0, np.inf, 0.0]), "gains"),
+    (lambda m: ModalMap(m.model, [1.0, 2.0]), "gains=.* expected 4 finite"),
+    (lambda m: ModalMap(m.model, [1.0, 2.0, np.inf, 0.0]), "gains"),
     (lambda m: m.step([0.0, 0.0]), "2n = 4"),
-    (lambda m: NdofMap(m.model).parameter("k0"), "without gains"),
+    (lambda m: ModalMap(m.model).parameter("k0"), "without gains"),
 ])
 def test_bad_parameters_raise_parameter_error(call, match):
     with pytest.raises(ParameterError, match=match):
@@ -93,7 +93,7 @@ def _one_dof(gains):
     m = load_model(STUDY)
     p = OscillatorParams(zeta=0.5 * m.C[0, 0], r=m.r, omega=m.omega, delta_d=m.delta_d,
                          pi2_offset=m.pi2_offset)
-    return NdofMap(m, gains), OneDOF(p, None if gains is None else Gains(*gains))
+    return ModalMap(m, gains), OneDOF(p, None if gains is None else Gains(*gains))
 
 
 @pytest.mark.parametrize("gains", [None, (-0.15, 0.25)])
@@ -142,7 +142,7 @@ def test_n1_model_file_reproduces_the_1dof_pi2_map(gains):
 
 
 def test_n1_1_1_orbit_and_multipliers_are_the_1dof_ones():
-    """find_periodic + floquet_multipliers on the n = 1 NdofMap give orbit_11's state and
+    """find_periodic + floquet_multipliers on the n = 1 ModalMap give orbit_11's state and
     multipliers to 1e-10, uncontrolled and controlled, from Delta d = -1e-3 to -1e-6."""
     for gains in (None, (-0.1, 0.1)):
         for dd in (-1e-3, -1e-5, -1e-6):
@@ -177,7 +177,7 @@ def test_step_and_jacobian_match_mpmath(delta_d, gains):
     assert np.abs(s.jacobian - J).max() < 1e-10 * np.abs(J).max()
 
 
-def _branch(m: NdofMap):
+def _branch(m: ModalMap):
     """The uncontrolled 1/1 orbit explicit in its impact phase tau* + psi (no shooting):
     just before the impact z- = Phi(T) (R z- + c), c the affine part of the reset
     v_w -> -r v_w in deviation coordinates, a linear solve; Delta d is then the wall
@@ -219,7 +219,7 @@ def _orbit_guess(m, delta_d):
 
 
 def test_1_1_orbit_near_grazing_and_its_multiplier_growth():
-    """The uncontrolled 1/1 orbit born at grazing, found by find_periodic on NdofMap at
+    """The uncontrolled 1/1 orbit born at grazing, found by find_periodic on ModalMap at
     |Delta d| = 1e-4 .. 1e-8 on the side where it exists (for the shipped 2-mass chain,
     omega = 0.8: Delta d > 0, coexisting with the non-impacting orbit; computed here from
     the file), agrees with the explicit impact-phase construction (state to 1e-9, v- to
@@ -279,7 +279,7 @@ def test_1_1_orbit_and_multipliers_match_mpmath(exponent, path):
 
 # ---------------------------------------------------------------- continuation
 def test_continue_orbit_follows_the_1_1_branch_to_its_grazing_end():
-    """continue_orbit in Delta d on NdofMap, from 1e-3 towards and past grazing on the
+    """continue_orbit in Delta d on ModalMap, from 1e-3 towards and past grazing on the
     branch's side: the branch is followed (the step halving of continue_orbit keeps the
     predictor off the coexisting non-impacting orbit) down to |Delta d| < 1e-9 and ends in
     a 'grazing' event within 1e-9 of Delta d = 0 (measured: points down to 6e-13, the
@@ -302,7 +302,7 @@ def test_continue_orbit_follows_the_1_1_branch_to_its_grazing_end():
             < (1e-12 + 1e-14 / pt.v_min) * np.abs(lam).max()
 
 
-def test_continue_orbit_detects_period_doubling_and_neimark_sacker_on_ndof_map():
+def test_continue_orbit_detects_period_doubling_and_neimark_sacker_on_modal_map():
     """The 2-impact attractor of the 2-mass chain at Delta d = -0.01, continued in the
     gain k2 (a kick on v1 from x0 - x0**): a period doubling and a Neimark-Sacker
     bifurcation (prod (lambda_i lambda_j - 1) of shooting.bifurcation_tests) are located;

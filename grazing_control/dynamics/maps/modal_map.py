@@ -1,7 +1,12 @@
-"""The n-DOF impact oscillator on Pi2: a :class:`~grazing_control.dynamics.maps.model.PeriodMap`.
+"""The period map of a model file over its modal flow, for any n: a
+:class:`~grazing_control.dynamics.maps.model.PeriodMap`.
 
-:class:`NdofMap` is the n-DOF counterpart of :class:`~grazing_control.dynamics.maps.model.OneDOF`
-(issue 17; docs/theory_ndof_flow.md, section 7): the state is the deviation
+:class:`ModalMap` is the model protocol's second implementation beside the 1-DOF closed
+form :class:`~grazing_control.dynamics.maps.model.OneDOF` (issues 17, 32;
+docs/theory_ndof_flow.md, section 7). Its name says what it steps: the motion of a model
+file (an :class:`NdofModel` of any n, n = 1 included) as a sum of damped modes
+(:class:`NdofFlow`), with certified impacts, the kick or pulse or actuator of the
+correction; the 1-DOF oscillator's parameters have their own closed form. The state is the deviation
 z = X - X** sampled on Pi2 = {tau = tau* + pi2_offset} *before* the controller acts, X**
 the grazing orbit's point there (so the grazing orbit is z = 0). One step
 
@@ -14,7 +19,7 @@ With an actuation ``delay`` (0 < delay < T) the kick k^T z computed from the sam
 ``delay`` later: flow ``delay`` with impacts, kick, flow T - delay; the Jacobian is then
 M2 (M1 + b k^T) (M1, M2 the monodromies of the two pieces; docs/theory_delay.md (D3),
 the same for every n), and det DP has no product formula (an impact inside the delay
-window breaks it): :meth:`NdofMap.jacobian_det` returns None.
+window breaks it): :meth:`ModalMap.jacobian_det` returns None.
 
 With a pulse ``width`` w > 0 the correction k^T z is a force pulse on the actuated
 coordinate instead of the kick: F = m_a k^T z / w on [start, start + w], centred
@@ -30,7 +35,7 @@ DP = Phi(T - t_m) S_m ... S_1 Phi(t_1) G, with
     det DP = e^{tr(A) T} r^(2 m) (1 + k_{n + i_a})
 
 (det Phi(t) = e^{tr(A) t}, det S = r^2, det G = 1 + k^T b), which
-:meth:`NdofMap.jacobian_det` returns for P^n with m impacts.
+:meth:`ModalMap.jacobian_det` returns for P^n with m impacts.
 """
 
 from __future__ import annotations
@@ -52,11 +57,11 @@ from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.maps.model import SectionMap, Step
 
-__all__ = ["NdofMap", "MODEL_PARAMETERS", "pulse_step", "actuated_step", "check_pulse"]
+__all__ = ["ModalMap", "MODEL_PARAMETERS", "pulse_step", "actuated_step", "check_pulse"]
 
 TWO_PI = 2.0 * math.pi
 
-#: Model fields :meth:`NdofMap.with_parameter` may change (besides the gains k0 .. k{2n-1}
+#: Model fields :meth:`ModalMap.with_parameter` may change (besides the gains k0 .. k{2n-1}
 #: and the actuation ``delay``).
 MODEL_PARAMETERS = ("delta_d", "omega", "r", "phase", "pi2_offset")
 
@@ -76,7 +81,7 @@ def _gain_vector(gains, n: int):
 
 
 @dataclass(frozen=True, eq=False)
-class NdofMap(SectionMap):
+class ModalMap(SectionMap):
     """The n-DOF oscillator on Pi2, optionally with the kick controller (module docstring).
 
     Parameters
@@ -213,7 +218,7 @@ class NdofMap(SectionMap):
         raise ParameterError(f"parameter {name!r} is invalid: valid names are "
                              f"{', '.join(self._names())}")
 
-    def with_parameter(self, name: str, value: float) -> "NdofMap":
+    def with_parameter(self, name: str, value: float) -> "ModalMap":
         """The same map with one parameter changed (validated again: a bad value raises
         ParameterError naming it)."""
         self.parameter(name)
