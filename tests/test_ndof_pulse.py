@@ -339,7 +339,6 @@ def test_pulsed_motion_against_the_core_and_finite_differences(pulsed_chain):
     relative (measured 4e-12; |d z / d z0| reaches 30 after the impact, v- ~ 0.03); n = 1
     equals the 1-DOF pulsed trajectory (1e-13)."""
     from grazing_control.dynamics.estimation import motion as mo
-    from grazing_control.dynamics.estimation import section_state as ss
 
     m, s, states, corrections, samples = pulsed_chain
     out, jac, end, _mono, imps = mo.trajectory(m, states[0], s, corrections[0],
@@ -424,7 +423,6 @@ def test_actuated_motion_against_the_plant_and_finite_differences():
     differences (h 1e-5) to 1e-9 relative (measured 3.4e-11); n = 1 equals the 1-DOF
     actuated trajectory (states 2.5e-16, Jacobians 8e-15)."""
     from grazing_control.dynamics.estimation import motion as mo
-    from grazing_control.dynamics.estimation import section_state as ss
     from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.oscillator.ndof.forced import lag_advance
 
