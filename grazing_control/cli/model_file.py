@@ -14,6 +14,11 @@ kick v[i_a] += k^T (X - X**) at Pi2, coordinates x0..x{n-1}, v0..v{n-1}), given 
 * ``--free-gain NAME=VALUE``: the member of the family whose gain on coordinate NAME
   is VALUE (for n = 1, ``--free-gain v0=C2`` is the 1-DOF ``--c2 C2``).
 
+With ``--delay D`` (design, orbit, continue, simulate) the kick k^T z of the sample acts D
+later, 0 <= D < T - pi2_offset/omega (:func:`delay_of`): the family members of ``--mu``
+and ``--free-gain`` are the delayed kick's (docs/theory_ndof.md §14), as ``design --delay``
+gives them.
+
 A leaf of the command line like :mod:`.common`. Errors are one line and status 2, as for
 every command (cli/commands.py).
 """
@@ -28,7 +33,7 @@ from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
            "add_sweep_options", "add_figures_options", "check_options", "load", "coordinates",
-           "family_member", "gains_of", "control_of", "dispatch", "fmt_vec", "header"]
+           "family_member", "gains_of", "delay_of", "control_of", "dispatch", "fmt_vec", "header"]
 
 #: Options of the 1-DOF commands that a model file replaces (refused with --model).
 ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--rig", "--c1", "--c2",
@@ -125,6 +130,8 @@ def _given(argv, flag):
 
 #: The commands of this module (``run --model`` is the launcher's: ros/launcher.py).
 COMMANDS = ("design", "orbit", "continue", "simulate", "sweep", "figures")
+#: The commands that take ``--delay`` with ``--model`` (the delayed kick, §14).
+DELAY_COMMANDS = ("design", "orbit", "continue", "simulate")
 
 
 def check_options(args, argv) -> None:
@@ -135,8 +142,9 @@ def check_options(args, argv) -> None:
     model = getattr(args, "model", None)
     if model is not None:
         bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
-               and not (f in ("--delay", "--sensor-rate") and args.command == "design")]
-        # (the delayed design; the predicted spread's position-only sensor)
+               and not (f == "--delay" and args.command in DELAY_COMMANDS)
+               and not (f == "--sensor-rate" and args.command == "design")]
+        # (the delayed kick; the predicted spread's position-only sensor)
         if bad:
             raise ParameterError(f"{', '.join(bad)} {'is a 1-DOF option' if len(bad) == 1 else 'are 1-DOF options'}"
                                  f": with --model the model file gives the model "
@@ -195,9 +203,26 @@ def family_member(model, name: str, value: float, delay: float = 0.0) -> float:
     return mu
 
 
+def delay_of(args, model) -> float:
+    """The actuation delay of ``--delay`` (default 0), checked against the model: the kick
+    must act before the grazing phase, 0 <= delay < T - s, s = pi2_offset / omega
+    (docs/theory_ndof.md §14; the bound of ``design --delay``). One-line ParameterError
+    naming --delay and the range."""
+    delay = float(getattr(args, "delay", 0.0) or 0.0)
+    reach = model.period - model.pi2_offset / model.omega
+    if not (math.isfinite(delay) and 0.0 <= delay < reach):
+        raise ParameterError(f"--delay {delay!r} is invalid: valid range is 0 <= delay < "
+                             f"T - pi2_offset/omega = {reach:.10g} for this model (the kick "
+                             "must act before the grazing phase, docs/theory_ndof.md §14)")
+    return delay
+
+
 def gains_of(args, model):
     """(gains or None, mu or None, how): the gains of --gains / --mu / --free-gain (at most
-    one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled."""
+    one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled. With
+    ``--delay`` (:func:`delay_of`) the family is the delayed kick's; a delay without
+    gains is refused."""
+    delay = delay_of(args, model)
     offset = getattr(args, "cancel_first_markov", None)
     given = [f for f, v in (("--gains", getattr(args, "gains", None)),
                             ("--mu", getattr(args, "mu", None)),
@@ -209,8 +234,8 @@ def gains_of(args, model):
         from grazing_control.dynamics.design.family import cancel_first_markov
 
         only = bool(getattr(args, "markov_only", False))
-        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only),
-                       dtype=float)
+        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only,
+                                           delay=delay), dtype=float)
         what = "only w^T N u" if only else "w^T N u and G(1)"
         return k, None, f"cancels {what}: k(mu = {args.mu:g}) + {offset:g} d"
     if getattr(args, "markov_only", False):
@@ -219,6 +244,8 @@ def gains_of(args, model):
         raise ParameterError(f"{' and '.join(given)} are given: give one of --gains, --mu, "
                              "--free-gain")
     if not given:
+        if delay:
+            raise ParameterError("--delay needs the gains: give --gains, --mu or --free-gain")
         return None, None, "uncontrolled"
     if given[0] == "--gains":
         k = np.asarray(args.gains, dtype=float)
@@ -228,8 +255,8 @@ def gains_of(args, model):
         return k, None, "given"
     from grazing_control.dynamics.design.family import gain_family
 
-    mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain)
-    return np.asarray(gain_family(model, mu), dtype=float), mu, "design family"
+    mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain, delay)
+    return np.asarray(gain_family(model, mu, delay), dtype=float), mu, "design family"
 
 
 
