@@ -205,7 +205,7 @@ def test_sections_with_stable_zeros_for_a_delayed_kick():
 
 # ------------------------------------------- the delayed kick's 1/1 orbit and branch
 def test_the_delayed_kick_is_the_kick_on_the_section_delay_later_with_gain_phi_minus_delay_t_k():
-    """docs/theory_ndof.md §14, (N11): with no impact inside the delay, the kick k^T z of
+    """docs/theory_ndof.md §14, (N8b): with no impact inside the delay, the kick k^T z of
     the Pi2 sample acting D later is the undelayed kick on Pi2' = Pi2 + D (pi2_offset +
     omega D) with the gain k' = Phi(-D)^T k, whose state there is Phi(D) z. Two routes
     through different code: the family (k(mu; D) mapped is k'(mu) of the moved section,

@@ -83,7 +83,9 @@ def add_gain_options(parser, *, markov: bool = False) -> None:
     """--gains / --mu / --free-gain (module docstring), and --cancel-first-markov."""
     g = parser.add_argument_group("n-DOF gains (with --model; at most one)")
     g.add_argument("--gains", type=_vector, metavar="K0,K1,...",
-                   help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**)")
+                   help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**); "
+                        "a gain file of design --model M --delay D --out F holds k: give its "
+                        "k here with --delay D")
     g.add_argument("--mu", type=_finite, help="the design family's member with w^T N = mu w^T")
     g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
                    help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
