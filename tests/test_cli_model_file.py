@@ -400,6 +400,32 @@ def test_simulate_with_delay_steps_the_delayed_map_to_the_delayed_orbit(capsys):
     assert got["distance_to_orbit"] < 1e-12 and got["actuation_delay"] == 0.5
 
 
+def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_path, three):
+    """``--gains FILE`` (issue 32: refused as "expected comma-separated finite numbers"):
+    the file of ``design --model M --delay 0.5 --mu 0.2 --out FILE`` gives orbit the
+    same numbers as ``--mu 0.2 --delay 0.5`` (bit for bit); a file of another model, a
+    different --delay, a delayed file in sweep are one line naming the entry."""
+    out = tmp_path / "k.yaml"
+    run_json(capsys, "design", "--model", TWO, "--delay", "0.5", "--mu", "0.2", "--out",
+             str(out))
+    ref = run_json(capsys, "orbit", "--model", TWO, "--delta-d", "-1e-8", "--mu", "0.2",
+                   "--delay", "0.5")
+    got = run_json(capsys, "orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", str(out))
+    for key in ("gains", "actuation_delay", "section_pi2_deviation", "multipliers", "v_minus"):
+        assert got[key] == ref[key], key
+    for argv, needle in (
+            (("orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", str(out), "--delay",
+              "0.3"), "--delay 0.3 is invalid with --gains"),
+            (("orbit", "--model", three, "--delta-d", "-1e-8", "--gains", str(out)),
+             "n=2 is invalid for this model: the model file gives n = 3"),
+            (("orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", TWO),
+             "not a gain file of design --model --out"),
+            (("sweep", "--model", TWO, "--grid", "delta_d=-1e-4:0:3", "--periods", "3",
+              "--gains", str(out)), "actuation_delay=0.5 is invalid for sweep")):
+        code, text, err = run(capsys, *argv)
+        assert code == 2 and text == "" and err.count("\n") == 1 and needle in err, err
+
+
 # ------------------------------------------------------------------ errors
 @pytest.mark.parametrize("argv, needle", [
     (["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"], "--c2 is a 1-DOF option"),
