@@ -284,3 +284,26 @@ def test_the_delayed_branch_is_exact_point_by_point_and_tends_to_the_delayed_lim
             assert np.max(np.abs(st.state - p.state)) <= 1e-13
         err = _match(p.multipliers, limit)
         assert 0.05 < err / math.sqrt(-dd) < 20.0, (dd, err)
+
+
+def test_the_shooting_route_of_continue_on_the_delayed_map_agrees_with_the_delayed_branch():
+    """The route `continue --delay` falls back to where the start is off the branch
+    (continuation.continue_orbit on the exact delayed ModalMap) against the branch in the
+    impact phase, from -1e-3 to -1e-5 (v- >= 3e-3, where shooting resolves the impact):
+    the same Pi2 states (1e-12) and v- (1e-9 relative), multipliers (1e-9)."""
+    from grazing_control.dynamics.orbits.continuation import continue_orbit
+
+    m0 = load_model(CHAIN)
+    delay = 0.5
+    k = nd.gain_family(m0, 0.2, delay)
+    values = -np.geomspace(1e-3, 1e-5, 3)
+    m = dataclasses.replace(m0, delta_d=values[0])
+    explicit = modal_branch.continue_branch(m, k, values, delay=delay)
+    start = modal_branch.orbit_at(m, k, values[0], delay=delay).pi2_state
+    shot = continue_orbit(ModalMap(m, k, delay), "delta_d", values, start)
+    assert len(shot.points) == len(explicit.points) == 3
+    for a, b in zip(explicit.points, shot.points):
+        assert b.value == pytest.approx(a.value, rel=1e-14)
+        assert np.max(np.abs(a.state - b.state)) <= 1e-12
+        assert abs(a.v_min - b.v_min) <= 1e-9 * a.v_min
+        assert _match(a.multipliers, b.multipliers) <= 1e-9
