@@ -329,12 +329,113 @@ def test_design_with_a_pulse_is_the_pulse_family_and_the_1dof_p1_c1(capsys, tmp_
     assert code == 2 and "pulse_width=0.0 is invalid with an actuator" in err
 
 
+# ------------------------------------------------------------------ the delayed kick
+def _delayed(which, three):
+    """(model file, delay, mu) of an admissible delayed design: the chain at delay 0.5
+    (admissible mu (-0.408, 0.420)), the 3-mass chain at delay 2 ((-0.746, 0.497); none
+    at 0.2 .. 1)."""
+    return (TWO, "0.5", "0.2") if which == "two" else (three, "2", "-0.12")
+
+
+@pytest.mark.parametrize("which", ["two", "three"])
+def test_orbit_with_delay_down_to_1e_10_is_the_delayed_map_s_orbit(capsys, three, which):
+    """``orbit --model M --delay D --mu MU`` (refused before, issue 32) on a 2- and a 3-mass
+    chain down to Delta d = -1e-10: the delayed family's gains (design --delay's), the
+    branch in the impact phase, the Pi2 state a fixed point of the exact delayed map
+    (ModalMap(model, k, D): flow D, kick, flow T - D) with its one impact at the same v-;
+    the multipliers tend to design --delay's limit (within 20 sqrt|Delta d|)."""
+    path, delay, mu = _delayed(which, three)
+    model0 = load_model(path)
+    k = gain_family(model0, float(mu), float(delay))
+    limit = lam(run_json(capsys, "design", "--model", path, "--delay", delay, "--mu",
+                         mu)["multipliers_limit"])
+    for dd in ("-1e-6", "-1e-8", "-1e-10"):
+        got = run_json(capsys, "orbit", "--model", path, "--delta-d", dd, "--mu", mu,
+                       "--delay", delay)
+        assert got["actuation_delay"] == float(delay) and got["gains"] == k.tolist()
+        assert got["guess"].startswith("impact phase") and got["branch"] == "grazing"
+        z = np.array(got["section_pi2_deviation"])
+        step = ModalMap(with_delta_d(model0, float(dd)), k, float(delay)).step(z)
+        assert len(step.impacts) == 1 and step.impacts[0].dt > float(delay)
+        assert abs(step.impacts[0].v_minus - got["v_minus"]) <= 1e-6 * got["v_minus"]
+        np.testing.assert_allclose(step.state, z, rtol=0, atol=1e-13)
+        mult = lam(got["multipliers"])
+        cost = np.abs(np.subtract.outer(mult, limit))
+        assert max(cost[i].min() for i in range(len(mult))) <= 20 * abs(float(dd)) ** 0.5
+
+
+def test_continue_with_delay_and_few_points_gives_the_points_of_many(capsys):
+    """``continue --delay 0.5 --points 8`` from -1e-3 to -1e-10 on the chain: 8 converged
+    points (one impact each, stopped at the end), the same v- (1e-12) and multipliers
+    (1e-12) as ``--points 190`` at the common values (every 27th: 7 decades); the
+    issue's defect was shooting with few points 1e-2 off near grazing."""
+    span = ("continue", "--model", TWO, "--from", "-1e-3", "--to", "-1e-10", "--mu", "0.2",
+            "--delay", "0.5")
+    few = run_json(capsys, *span, "--points", "8")
+    many = run_json(capsys, *span, "--points", "190")
+    assert few["route"] == "impact phase" and few["stopped"] == "end"
+    assert len(few["branch"]) == 8 and len(many["branch"]) == 190
+    assert all(p["impacts"] == 1 for p in few["branch"])
+    for j, p in enumerate(few["branch"]):
+        q = many["branch"][27 * j]
+        assert q["delta_d"] == pytest.approx(p["delta_d"], rel=1e-14)
+        assert q["v_minus"] == pytest.approx(p["v_minus"], rel=1e-12)
+        np.testing.assert_allclose(lam(q["multipliers"]), lam(p["multipliers"]), rtol=0,
+                                   atol=1e-12)
+    assert few["actuation_delay"] == 0.5 and few["multipliers_limit"] is not None
+
+
+def test_simulate_with_delay_steps_the_delayed_map_to_the_delayed_orbit(capsys):
+    """``simulate --delay 0.5 --mu 0.2`` on the chain: each sample is the exact delayed
+    map of the one before (1e-13), one impact per period, and the end is on the delayed
+    orbit (1e-12)."""
+    got = run_json(capsys, "simulate", "--model", TWO, "--delta-d", "-1e-5", "--periods",
+                   "200", "--mu", "0.2", "--delay", "0.5")
+    model = with_delta_d(load_model(TWO), -1e-5)
+    pmap = ModalMap(model, np.array(got["gains"]), 0.5)
+    z = np.array(got["pi2_deviation"])
+    for j in (0, 1, 100):
+        np.testing.assert_allclose(pmap.step(z[j]).state, z[j + 1], rtol=0, atol=1e-13)
+    assert got["impacts_per_period"][-20:] == [1] * 20
+    assert got["distance_to_orbit"] < 1e-12 and got["actuation_delay"] == 0.5
+
+
+def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_path, three):
+    """``--gains FILE`` (issue 32: refused as "expected comma-separated finite numbers"):
+    the file of ``design --model M --delay 0.5 --mu 0.2 --out FILE`` gives orbit the
+    same numbers as ``--mu 0.2 --delay 0.5`` (bit for bit); a file of another model, a
+    different --delay, a delayed file in sweep are one line naming the entry."""
+    out = tmp_path / "k.yaml"
+    run_json(capsys, "design", "--model", TWO, "--delay", "0.5", "--mu", "0.2", "--out",
+             str(out))
+    ref = run_json(capsys, "orbit", "--model", TWO, "--delta-d", "-1e-8", "--mu", "0.2",
+                   "--delay", "0.5")
+    got = run_json(capsys, "orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", str(out))
+    for key in ("gains", "actuation_delay", "section_pi2_deviation", "multipliers", "v_minus"):
+        assert got[key] == ref[key], key
+    for argv, needle in (
+            (("orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", str(out), "--delay",
+              "0.3"), "--delay 0.3 is invalid with --gains"),
+            (("orbit", "--model", three, "--delta-d", "-1e-8", "--gains", str(out)),
+             "n=2 is invalid for this model: the model file gives n = 3"),
+            (("orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", TWO),
+             "not a gain file of design --model --out"),
+            (("sweep", "--model", TWO, "--grid", "delta_d=-1e-4:0:3", "--periods", "3",
+              "--gains", str(out)), "actuation_delay=0.5 is invalid for sweep")):
+        code, text, err = run(capsys, *argv)
+        assert code == 2 and text == "" and err.count("\n") == 1 and needle in err, err
+
+
 # ------------------------------------------------------------------ errors
 @pytest.mark.parametrize("argv, needle", [
     (["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"], "--c2 is a 1-DOF option"),
     (["design", "--model", ONE, "--zeta", "0.02"], "--zeta is a 1-DOF option"),
-    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--mu", "0", "--delay", "1"],
-     "--delay is a 1-DOF option"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--mu", "0", "--delay", "12"],
+     "--delay 12.0 is invalid: valid range is 0 <= delay < T - pi2_offset/omega = 11.96637061"),
+    (["continue", "--model", TWO, "--from", "-1e-3", "--to", "-1e-6", "--mu", "0",
+      "--delay", "-0.5"], "--delay -0.5 is invalid: valid range is 0 <= delay"),
+    (["simulate", "--model", TWO, "--delta-d", "-1e-6", "--periods", "3", "--delay", "1"],
+     "--delay needs the gains: give --gains, --mu or --free-gain"),
     (["design", "--model", TWO, "--delay", "12"], "delay=12.0 is invalid: valid range is 0 <= delay"),
     (["orbit", "--delta-d", "-1e-6", "--mu", "0"], "--mu needs --model"),
     (["orbit", "--model", "/nonexistent/m.yaml", "--delta-d", "-1e-6"], "no such file"),

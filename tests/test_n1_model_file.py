@@ -252,6 +252,46 @@ def test_simulate(c1, controlled):
     check(differences(ref, got), f"simulate {'controlled' if controlled else 'free'}")
 
 
+#: The actuation delay of the delayed cases: c2 = -1 is admissible there (at delay 2 and
+#: 1 the 1-DOF and the n-DOF routes both find no 1/1 orbit near grazing: two impacts).
+DELAY = "0.5"
+
+
+@pytest.fixture(scope="module")
+def delayed():
+    """(1-DOF options, n = 1 options) of the delayed design's gains at c2 = -1 (c1 of
+    ``design --c2 -1 --delay 0.5``), the kick acting 0.5 after the sample."""
+    c1 = run_json("design", "--c2", "-1", "--delay", DELAY)["c1"]
+    return (("--c1", repr(c1), "--c2", "-1", "--delay", DELAY),
+            (f"--gains={c1!r},-1", "--delay", DELAY))
+
+
+@pytest.mark.parametrize("delta_d", ORBITS)
+def test_orbit_with_delay(delayed, delta_d):
+    """``orbit --delay`` (issue 32: refused with --model before): the n = 1 file's delayed
+    branch (docs/theory_ndof.md §14) against the 1-DOF delayed orbit."""
+    one, model = delayed
+    ref = run_json("orbit", "--delta-d", delta_d, *one)
+    got = run_json("orbit", "--model", ONE, "--delta-d", delta_d, *model)
+    assert got["actuation_delay"] == ref["actuation_delay"] == 0.5
+    check_orbits(differences(ref, got), {"": float(delta_d)}, one, f"orbit {delta_d} delayed")
+
+
+def test_continue_and_simulate_with_delay(delayed):
+    """``continue --delay`` point by point and ``simulate --delay`` sample by sample
+    against the 1-DOF commands with the same delay."""
+    one, model = delayed
+    span = ("--from", "-1e-3", "--to", "-1e-7", "--points", "12")
+    ref = run_json("continue", *span, *one)
+    got = run_json("continue", "--model", ONE, *span, *model)
+    points = {f".branch[{i}]": p["delta_d"] for i, p in enumerate(ref["branch"])}
+    check_orbits(differences(ref, got), points, one, "continue delayed")
+    ref = run_json("simulate", "--delta-d", "-5e-6", "--periods", "30", *one)
+    got = run_json("simulate", "--model", ONE, "--delta-d", "-5e-6", "--periods", "30", *model)
+    assert got["impacts_per_period"][-5:] == [1] * 5
+    check(differences(ref, got), "simulate delayed")
+
+
 def test_sweep(tmp_path):
     """The sweep's npz: the same grid, the Pi2 samples after the transient, X** and the
     detected period at each point (the n = 1 file names them values, samples)."""

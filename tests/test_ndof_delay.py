@@ -201,3 +201,109 @@ def test_sections_with_stable_zeros_for_a_delayed_kick():
         assert (radius < 1.0) == inside, (mid, radius)
         if inside:
             assert 4.0 < m.period - mid / m.omega
+
+
+# ------------------------------------------- the delayed kick's 1/1 orbit and branch
+def test_the_delayed_kick_is_the_kick_on_the_section_delay_later_with_gain_phi_minus_delay_t_k():
+    """docs/theory_ndof.md §14, (N8b): with no impact inside the delay, the kick k^T z of
+    the Pi2 sample acting D later is the undelayed kick on Pi2' = Pi2 + D (pi2_offset +
+    omega D) with the gain k' = Phi(-D)^T k, whose state there is Phi(D) z. Two routes
+    through different code: the family (k(mu; D) mapped is k'(mu) of the moved section,
+    1e-14) and the branch (psi, v-, multipliers, Pi2 states at Delta d = -1e-4, -1e-6, 1e-12)."""
+    m0 = load_model(CHAIN)
+    delay, mu = 0.5, 0.2
+    moved = dataclasses.replace(m0, pi2_offset=m0.pi2_offset + m0.omega * delay)
+    phi = NdofFlow.of(m0).transition(-delay)
+    k = nd.gain_family(m0, mu, delay)
+    k_moved = phi.T @ k
+    assert np.max(np.abs(k_moved - nd.gain_family(moved, mu))) <= 1e-14 * np.max(np.abs(k))
+    for dd in (-1e-4, -1e-6):
+        m, mm = (dataclasses.replace(x, delta_d=dd) for x in (m0, moved))
+        a = modal_branch.orbit_at(m, k, dd, delay=delay)
+        b = modal_branch.orbit_at(mm, k_moved, dd)
+        assert abs(a.psi - b.psi) <= 1e-12 * abs(a.psi)
+        assert abs(a.v_minus - b.v_minus) <= 1e-12 * a.v_minus
+        la = modal_branch.branch_multipliers(m, k, a, delay)
+        lb = modal_branch.branch_multipliers(mm, k_moved, b)
+        assert _match(la, lb) <= 1e-12
+        z_moved = NdofFlow.of(m).transition(delay) @ a.pi2_state
+        assert np.max(np.abs(z_moved - b.pi2_state)) <= 1e-14
+
+
+@pytest.mark.parametrize("dd", [-1e-4, -1e-6])
+def test_the_delayed_orbit_against_shooting_and_finite_differences_of_the_delayed_map(dd):
+    """orbit_11 with a delay (the explicit branch, §14) against Newton shooting on the exact
+    delayed ModalMap from the local map's prediction: the same Pi2 state (1e-13), the
+    multipliers of the map's (D3) Jacobian (1e-9 relative) and of its fourth-order
+    finite-difference Jacobian (step 1e-2 v-^2; 1e-6), on the design family (bounded)
+    and off it (k_x0 + 0.05: the singular multiplier ~ 1/v- that the delay-aware gains
+    remove)."""
+    from grazing_control.studies.near_grazing.branch import EXPLICIT, orbit_11, predicted_orbit
+
+    m0 = load_model(CHAIN)
+    delay = 0.5
+    m = dataclasses.replace(m0, delta_d=dd)
+    family = nd.gain_family(m0, 0.2, delay)
+    for k in (family, family + np.array([0.05, 0.0, 0.0, 0.0])):
+        o = orbit_11(m, k, delay=delay)
+        assert o.guess == EXPLICIT
+        P = ModalMap(m, k, delay)
+        shot = find_periodic(P, predicted_orbit(m, k, delay=delay)[0])
+        assert len(shot.impacts) == 1 and shot.impacts[0].dt > delay
+        assert np.max(np.abs(shot.state - o.state)) <= 1e-13
+        lam = np.linalg.eigvals(shot.monodromy)
+        big = max(1.0, float(np.max(np.abs(lam))))
+        assert _match(o.multipliers, lam) <= 1e-9 * big
+        fd = np.linalg.eigvals(_fd_jacobian(P, o.state, 1e-2 * o.v_minus ** 2))
+        assert _match(o.multipliers, fd) <= 1e-6 * big
+    assert np.max(np.abs(o.multipliers)) > 1.0      # off the family: 6.29 at -1e-4
+
+
+def test_the_delayed_branch_is_exact_point_by_point_and_tends_to_the_delayed_limit():
+    """continue_branch with a delay on 8 points from -1e-3 to -1e-10: each point is the
+    delayed orbit solved on its own from psi = 0 (orbit_at, 1e-12 in v-), the points
+    down to -1e-5 are fixed points of the exact delayed map (1e-13), and the multipliers
+    tend to design --delay's limit spectrum like |Delta d|^(1/2) (error / sqrt|Delta d|
+    in (0.05, 20)): the issue's 'continue with few points' on the delayed kick."""
+    m0 = load_model(CHAIN)
+    delay, mu = 0.5, 0.2
+    k = nd.gain_family(m0, mu, delay)
+    limit = nd.limit_multipliers(m0, mu, delay)
+    values = -np.geomspace(1e-3, 1e-10, 8)
+    branch = modal_branch.continue_branch(dataclasses.replace(m0, delta_d=values[0]), k,
+                                          values, delay=delay)
+    assert branch.stopped == "end" and len(branch.points) == 8
+    for p, dd in zip(branch.points, values):
+        m = dataclasses.replace(m0, delta_d=dd)
+        alone = modal_branch.orbit_at(m, k, dd, delay=delay)
+        assert p.value == pytest.approx(dd, rel=1e-13)
+        assert abs(p.v_min - alone.v_minus) <= 1e-12 * alone.v_minus
+        if dd <= -1e-5:
+            st = ModalMap(m, k, delay).step(p.state)
+            assert len(st.impacts) == 1
+            assert np.max(np.abs(st.state - p.state)) <= 1e-13
+        err = _match(p.multipliers, limit)
+        assert 0.05 < err / math.sqrt(-dd) < 20.0, (dd, err)
+
+
+def test_the_shooting_route_of_continue_on_the_delayed_map_agrees_with_the_delayed_branch():
+    """The route `continue --delay` falls back to where the start is off the branch
+    (continuation.continue_orbit on the exact delayed ModalMap) against the branch in the
+    impact phase, from -1e-3 to -1e-5 (v- >= 3e-3, where shooting resolves the impact):
+    the same Pi2 states (1e-12) and v- (1e-9 relative), multipliers (1e-9)."""
+    from grazing_control.dynamics.orbits.continuation import continue_orbit
+
+    m0 = load_model(CHAIN)
+    delay = 0.5
+    k = nd.gain_family(m0, 0.2, delay)
+    values = -np.geomspace(1e-3, 1e-5, 3)
+    m = dataclasses.replace(m0, delta_d=values[0])
+    explicit = modal_branch.continue_branch(m, k, values, delay=delay)
+    start = modal_branch.orbit_at(m, k, values[0], delay=delay).pi2_state
+    shot = continue_orbit(ModalMap(m, k, delay), "delta_d", values, start)
+    assert len(shot.points) == len(explicit.points) == 3
+    for a, b in zip(explicit.points, shot.points):
+        assert b.value == pytest.approx(a.value, rel=1e-14)
+        assert np.max(np.abs(a.state - b.state)) <= 1e-12
+        assert abs(a.v_min - b.v_min) <= 1e-9 * a.v_min
+        assert _match(a.multipliers, b.multipliers) <= 1e-9

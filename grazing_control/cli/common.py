@@ -93,7 +93,10 @@ def add_delay(parser):
     parser.add_argument("--delay", type=finite, default=0.0,
                         help="actuation delay: the correction acts this long (simulation time) "
                              "after the Pi2 sample, 0 <= delay < T - pi2_offset/omega "
-                             "(docs/theory_delay.md); default 0")
+                             "(docs/theory_delay.md); default 0. With --model (design, orbit, "
+                             "continue, simulate) the kick k^T z acts this long after the "
+                             "sample and --mu/--free-gain are the delayed family's "
+                             "(docs/ndof_commands.md)")
 
 
 #: Largest zeta T (forcing periods' decay exponent) the commands accept: e^{-2 zeta T}

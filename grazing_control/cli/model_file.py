@@ -14,6 +14,11 @@ kick v[i_a] += k^T (X - X**) at Pi2, coordinates x0..x{n-1}, v0..v{n-1}), given 
 * ``--free-gain NAME=VALUE``: the member of the family whose gain on coordinate NAME
   is VALUE (for n = 1, ``--free-gain v0=C2`` is the 1-DOF ``--c2 C2``).
 
+With ``--delay D`` (design, orbit, continue, simulate) the kick k^T z of the sample acts D
+later, 0 <= D < T - pi2_offset/omega (:func:`delay_of`): the family members of ``--mu``
+and ``--free-gain`` are the delayed kick's (docs/theory_ndof.md §14), as ``design --delay``
+gives them.
+
 A leaf of the command line like :mod:`.common`. Errors are one line and status 2, as for
 every command (cli/commands.py).
 """
@@ -28,7 +33,7 @@ from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
            "add_sweep_options", "add_figures_options", "check_options", "load", "coordinates",
-           "family_member", "gains_of", "control_of", "dispatch", "fmt_vec", "header"]
+           "family_member", "gains_of", "delay_of", "control_of", "dispatch", "fmt_vec", "header"]
 
 #: Options of the 1-DOF commands that a model file replaces (refused with --model).
 ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--rig", "--c1", "--c2",
@@ -61,6 +66,71 @@ def _vector(text):
     return values
 
 
+class GainFile(str):
+    """``--gains FILE``: the path of a gain file of ``design --model M --out FILE``
+    (read against the model by :func:`gain_file`)."""
+
+
+def _gains_value(text):
+    """``--gains``: comma-separated numbers, or the path of a YAML gain file."""
+    import argparse
+
+    if text.lower().endswith((".yaml", ".yml")):
+        return GainFile(text)
+    try:
+        return _vector(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected comma-separated "
+                                         "finite numbers, e.g. 0.1,-0.2,0,0.5, or a gain file "
+                                         "of design --out (FILE.yaml)") from None
+
+
+#: Entries of a gain file that must equal the model's (``family.controller_parameters``).
+GAIN_FILE_MODEL = ("n", "i_a", "omega", "pi2_offset")
+
+
+def gain_file(path, model):
+    """(k, actuation_delay) of a gain file of ``design --model M --out FILE``
+    (``family.write_gain_yaml``), checked against ``model``: its n, i_a, omega and
+    pi2_offset must be the model's (a file designed for another model is refused, one
+    line naming the entry); a pulse's file (pulse_width) is refused (these commands run
+    the kick)."""
+    from grazing_control.support.files import YamlFileError, read_yaml_file
+
+    try:
+        doc = read_yaml_file(path)
+    except YamlFileError as exc:
+        raise ParameterError(f"--gains {exc}") from None
+    nodes = list(doc.values()) if isinstance(doc, dict) else []
+    values = nodes[0].get("ros__parameters") if len(nodes) == 1 and \
+        isinstance(nodes[0], dict) else None
+    if not isinstance(values, dict) or "gains" not in values:
+        raise ParameterError(f"--gains {path}: not a gain file of design --model --out "
+                             "(expected /**: ros__parameters: {gains: [...], n, i_a, omega, "
+                             "pi2_offset})")
+    for name in GAIN_FILE_MODEL:
+        want = getattr(model, name)
+        got = values.get(name)
+        if isinstance(got, bool) or not isinstance(got, (int, float)) or \
+                not abs(float(got) - want) <= 1e-12 * max(1.0, abs(want)):
+            raise ParameterError(f"--gains {path}: {name}={got!r} is invalid for this model: "
+                                 f"the model file gives {name} = {want!r} (a gain file of "
+                                 "another model)")
+    if values.get("pulse_width"):
+        raise ParameterError(f"--gains {path}: pulse_width={values['pulse_width']!r} is "
+                             "invalid here: orbit, continue and simulate run the kick "
+                             "(valid: a kick's gain file, pulse_width absent or 0)")
+    try:
+        k = np.array([float(x) for x in values["gains"]], dtype=float)
+        delay = float(values.get("actuation_delay", 0.0))
+    except (TypeError, ValueError):
+        k, delay = np.array([math.nan]), math.nan
+    if k.size != 2 * model.n or not np.all(np.isfinite(k)) or not math.isfinite(delay):
+        raise ParameterError(f"--gains {path}: gains and actuation_delay are invalid: "
+                             f"expected 2n = {2 * model.n} finite gains and a finite delay")
+    return k, delay
+
+
 def _named(text):
     import argparse
 
@@ -77,8 +147,11 @@ def _named(text):
 def add_gain_options(parser, *, markov: bool = False) -> None:
     """--gains / --mu / --free-gain (module docstring), and --cancel-first-markov."""
     g = parser.add_argument_group("n-DOF gains (with --model; at most one)")
-    g.add_argument("--gains", type=_vector, metavar="K0,K1,...",
-                   help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**)")
+    g.add_argument("--gains", type=_gains_value, metavar="K0,K1,...|FILE.yaml",
+                   help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**), "
+                        "or a gain file of design --model M [--delay D] --out FILE.yaml: its "
+                        "gains and its actuation_delay (its n, i_a, omega, pi2_offset must "
+                        "be the model's; a --delay given must equal the file's)")
     g.add_argument("--mu", type=_finite, help="the design family's member with w^T N = mu w^T")
     g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
                    help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
@@ -125,6 +198,8 @@ def _given(argv, flag):
 
 #: The commands of this module (``run --model`` is the launcher's: ros/launcher.py).
 COMMANDS = ("design", "orbit", "continue", "simulate", "sweep", "figures")
+#: The commands that take ``--delay`` with ``--model`` (the delayed kick, §14).
+DELAY_COMMANDS = ("design", "orbit", "continue", "simulate")
 
 
 def check_options(args, argv) -> None:
@@ -135,8 +210,9 @@ def check_options(args, argv) -> None:
     model = getattr(args, "model", None)
     if model is not None:
         bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
-               and not (f in ("--delay", "--sensor-rate") and args.command == "design")]
-        # (the delayed design; the predicted spread's position-only sensor)
+               and not (f == "--delay" and args.command in DELAY_COMMANDS)
+               and not (f == "--sensor-rate" and args.command == "design")]
+        # (the delayed kick; the predicted spread's position-only sensor)
         if bad:
             raise ParameterError(f"{', '.join(bad)} {'is a 1-DOF option' if len(bad) == 1 else 'are 1-DOF options'}"
                                  f": with --model the model file gives the model "
@@ -195,9 +271,46 @@ def family_member(model, name: str, value: float, delay: float = 0.0) -> float:
     return mu
 
 
+def delay_of(args, model) -> float:
+    """The actuation delay of ``--delay`` (default 0), checked against the model: the kick
+    must act before the grazing phase, 0 <= delay < T - s, s = pi2_offset / omega
+    (docs/theory_ndof.md §14; the bound of ``design --delay``). One-line ParameterError
+    naming --delay and the range."""
+    delay = float(getattr(args, "delay", 0.0) or 0.0)
+    reach = model.period - model.pi2_offset / model.omega
+    if not (math.isfinite(delay) and 0.0 <= delay < reach):
+        raise ParameterError(f"--delay {delay!r} is invalid: valid range is 0 <= delay < "
+                             f"T - pi2_offset/omega = {reach:.10g} for this model (the kick "
+                             "must act before the grazing phase, docs/theory_ndof.md §14)")
+    return delay
+
+
 def gains_of(args, model):
     """(gains or None, mu or None, how): the gains of --gains / --mu / --free-gain (at most
-    one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled."""
+    one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled. With
+    ``--delay`` (:func:`delay_of`) the family is the delayed kick's; a delay without
+    gains is refused. ``--gains FILE`` (:func:`gain_file`) sets ``args.delay`` to the
+    file's actuation_delay (a different --delay is refused)."""
+    if isinstance(getattr(args, "gains", None), GainFile):
+        k, file_delay = gain_file(args.gains, model)
+        given = float(getattr(args, "delay", 0.0) or 0.0)
+        if given and given != file_delay:
+            raise ParameterError(f"--delay {given!r} is invalid with --gains {args.gains}: "
+                                 f"the file's actuation_delay is {file_delay!r} (give the "
+                                 "same, or none)")
+        if file_delay and getattr(args, "command", None) not in DELAY_COMMANDS:
+            raise ParameterError(f"--gains {args.gains}: actuation_delay={file_delay!r} is "
+                                 f"invalid for {args.command}, which runs the kick on Pi2 "
+                                 "(valid: 0; the delayed kick runs in orbit, continue, "
+                                 "simulate)")
+        args.delay = file_delay
+        delay_of(args, model)
+        if getattr(args, "cancel_first_markov", None) is not None or \
+                getattr(args, "mu", None) is not None or getattr(args, "free_gain", None):
+            raise ParameterError("--gains FILE and --mu/--free-gain/--cancel-first-markov are "
+                                 "given: give one of --gains, --mu, --free-gain")
+        return k, None, f"gain file {args.gains}"
+    delay = delay_of(args, model)
     offset = getattr(args, "cancel_first_markov", None)
     given = [f for f, v in (("--gains", getattr(args, "gains", None)),
                             ("--mu", getattr(args, "mu", None)),
@@ -209,8 +322,8 @@ def gains_of(args, model):
         from grazing_control.dynamics.design.family import cancel_first_markov
 
         only = bool(getattr(args, "markov_only", False))
-        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only),
-                       dtype=float)
+        k = np.asarray(cancel_first_markov(model, args.mu, offset, smooth_branch=not only,
+                                           delay=delay), dtype=float)
         what = "only w^T N u" if only else "w^T N u and G(1)"
         return k, None, f"cancels {what}: k(mu = {args.mu:g}) + {offset:g} d"
     if getattr(args, "markov_only", False):
@@ -219,6 +332,8 @@ def gains_of(args, model):
         raise ParameterError(f"{' and '.join(given)} are given: give one of --gains, --mu, "
                              "--free-gain")
     if not given:
+        if delay:
+            raise ParameterError("--delay needs the gains: give --gains, --mu or --free-gain")
         return None, None, "uncontrolled"
     if given[0] == "--gains":
         k = np.asarray(args.gains, dtype=float)
@@ -228,8 +343,8 @@ def gains_of(args, model):
         return k, None, "given"
     from grazing_control.dynamics.design.family import gain_family
 
-    mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain)
-    return np.asarray(gain_family(model, mu), dtype=float), mu, "design family"
+    mu = args.mu if given[0] == "--mu" else family_member(model, *args.free_gain, delay)
+    return np.asarray(gain_family(model, mu, delay), dtype=float), mu, "design family"
 
 
 

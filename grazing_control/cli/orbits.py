@@ -20,7 +20,7 @@ import numpy as np
 from grazing_control.oscillator.params import ParameterError
 
 from .common import complex_list, gains_of, nulls, params_of, require_finite
-from .model_file import control_of, fmt_vec, header, load
+from .model_file import control_of, delay_of, fmt_vec, header, load
 from .model_file import gains_of as vector_gains_of
 
 __all__ = ["cmd_orbit", "cmd_continue", "cmd_simulate", "orbit_lines", "branch_lines",
@@ -147,10 +147,11 @@ def _file_orbit(args):
 
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = vector_gains_of(args, model)
+    delay = delay_of(args, model)
     t0 = time.perf_counter()
-    side = grazing_side(model, k)
+    side = grazing_side(model, k, delay=delay)
     try:
-        o = orbit_11(model, k)
+        o = orbit_11(model, k, delay=delay)
     except RuntimeError as exc:
         if side * args.delta_d < 0.0:
             raise RuntimeError(f"{exc}; note: the local map puts the 1/1 orbit born at "
@@ -162,8 +163,10 @@ def _file_orbit(args):
     out.update(_orbit_json(o))
     out["grazing_side"] = side
     out.update(gains=None if k is None else k.tolist(), mu=mu, control=how, seconds=seconds)
+    if delay:
+        out["actuation_delay"] = delay
     ctl = " (uncontrolled)" if k is None else f" with k = {fmt_vec(k, 8)} ({how}" + \
-        (f", mu = {mu:.8g})" if mu is not None else ")")
+        (f", mu = {mu:.8g})" if mu is not None else ")") + _delay_text(delay)
     explicit = o.guess == EXPLICIT
     route = "the factored monodromy" if explicit else "shooting"
     born = "born at grazing (" + ("on the branch from psi = 0" if explicit else
@@ -178,6 +181,11 @@ def _file_orbit(args):
                      stable=o.stable,
                      branch=born if o.near_grazing else "another 1/1 orbit, not the one born "
                      "at grazing (docs/ndof_commands.md)", found=o.guess)
+
+
+def _delay_text(delay: float) -> str:
+    """The report's words for an actuation delay (none without one)."""
+    return f", actuation delay {delay:.6g}" if delay else ""
 
 
 # ---------------------------------------------------------------------------- continue
@@ -252,14 +260,16 @@ def _file_branch(args):
     values = continuation_values(args.start, args.stop, args.points)
     model = with_delta_d(load(args.model), float(values[0]))
     k, mu, how = vector_gains_of(args, model)
+    delay = delay_of(args, model)
     t0 = time.perf_counter()
-    first = orbit_11(model, k)
+    first = orbit_11(model, k, delay=delay)
     # the branch born at grazing: explicit in the impact phase, every point exact to
-    # rounding (issue 32: shooting returned points 1e-2 off near |Delta d| = 3e-8)
+    # rounding (issue 32: shooting returned points 1e-2 off near |Delta d| = 3e-8); with
+    # a delay the delayed kick's, its impacts outside the delay (docs/theory_ndof.md §14)
     explicit = first.guess == EXPLICIT
-    branch = continue_branch(model, k, values) if explicit else \
-        continue_orbit(ModalMap(model, k), "delta_d", values, first.state)
-    fold = fold_beyond(model, k, branch, float(values[-1]))
+    branch = continue_branch(model, k, values, delay=delay) if explicit else \
+        continue_orbit(ModalMap(model, k, delay), "delta_d", values, first.state)
+    fold = fold_beyond(model, k, branch, float(values[-1]), delay)
     seconds = time.perf_counter() - t0
     # by shooting, an impact with v-^2 near the gap's rounding is resolved to a few
     # digits only (docs/ndof_commands.md, "Near grazing"): say which points that is
@@ -274,7 +284,7 @@ def _file_branch(args):
     if mu is not None:
         from grazing_control.dynamics.design.family import limit_multipliers
 
-        limit = np.asarray(limit_multipliers(model, mu), dtype=complex)
+        limit = np.asarray(limit_multipliers(model, mu, delay), dtype=complex)
     out.update({
         "gains": None if k is None else k.tolist(), "mu": mu, "control": how,
         "branch": [{"delta_d": p.value, "v_minus": p.v_min, "impacts": p.impacts,
@@ -290,10 +300,13 @@ def _file_branch(args):
         "multipliers_limit": None if limit is None else complex_list(limit),
         "seconds": seconds,
     })
+    if delay:
+        out["actuation_delay"] = delay
     route = "in the impact phase (exact to rounding)" if explicit else "by shooting"
     title = (f"1/1 branch {route}, {len(branch.points)} points from Delta d = "
              f"{args.start:g} towards {args.stop:g}"
-             + ("" if k is None else f" ({how}{'' if mu is None else f', mu = {mu:.8g}'})"))
+             + ("" if k is None else f" ({how}{'' if mu is None else f', mu = {mu:.8g}'}"
+                f"{_delay_text(delay)})"))
     lines = [f"  stopped: {branch.stopped}"]
     if warning:
         lines.append(f"  warning: {warning}")
@@ -464,17 +477,20 @@ def _file_simulation(args):
                              "model file's stop is rigid (docs/ndof_model.md)")
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = control_of(args, model)
+    delay = delay_of(args, model)
     after = None if k is None else (0 if args.control_after is None else args.control_after)
-    samples, counts = simulate_pi2(model, args.periods, args.z0, k, after)
+    samples, counts = simulate_pi2(model, args.periods, args.z0, k, after, delay)
     flow = NdofFlow.of(model)
     ref = flow.to_physical(flow.tau2, np.zeros(2 * model.n))
     out = {"pi2": (samples[:-1] + ref).tolist(), "pi2_deviation": samples[:-1].tolist(),
            "impacts_per_period": counts.tolist(), "final_deviation": samples[-1].tolist(),
            "gains": None if k is None else k.tolist(), "mu": mu, "control_after": after}
+    if delay:
+        out["actuation_delay"] = delay
     orbit_note = ""
     if k is not None:
         try:
-            o = orbit_11(model, k)
+            o = orbit_11(model, k, delay=delay)
             dist = float(np.linalg.norm(samples[-1] - o.state))
             out.update(distance_to_orbit=dist, orbit_deviation=o.state.tolist(),
                        orbit_multipliers=complex_list(o.multipliers))
@@ -486,7 +502,8 @@ def _file_simulation(args):
     n = args.periods
     lines = [
         f"simulated {n} periods of {args.model} at Delta d = {model.delta_d:.6g}"
-        + (f", control on from sample {after} ({how})" if k is not None else ", uncontrolled"),
+        + (f", control on from sample {after} ({how}{_delay_text(delay)})" if k is not None
+           else ", uncontrolled"),
         *impact_lines(counts, n),
         f"  last state (dev.)  = {fmt_vec(samples[-1], 10)}",
     ]

@@ -114,7 +114,7 @@ def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> Bra
     return BranchPoint(psi, dd, v, z, jac, z2)
 
 
-def branch_coefficients(model: NdofModel, gains):
+def branch_coefficients(model: NdofModel, gains, delay: float = 0.0):
     """(d1, gamma1, v1): Delta d = d1 psi - gamma1 psi^2 + O(psi^3), v- = v1 psi + O(psi^2)
     on the 1/1 branch born at grazing, for any gains (§7, Eq. (N7')).
 
@@ -122,10 +122,11 @@ def branch_coefficients(model: NdofModel, gains):
     v1 = d* omega / q0, d1 = (1 + r) v1 w^T R e_v (proportional to G(1) of §2: zero iff
     the branch is smooth), gamma1 = d*/2 - (1 + r)(v1 b1 + v2 b0) with b0 = w^T R e_v,
     b1 = -w^T R M' R e_v, v2 = -(1 + r) v1 a1' / q0, a1' = -e_v^T R M' R e_v.
-    On the family (w^T N = mu w^T) gamma1 is family.existence_coefficient.
+    On the family (w^T N = mu w^T) gamma1 is family.existence_coefficient. With an
+    actuation ``delay``, N = N(k; delay) (§14).
     """
     k = _gains(model, gains)
-    n_mat = smooth_map(model, k)
+    n_mat = smooth_map(model, k, delay)
     w, ev, _b = _vectors(model)
     a = _flow(model).A
     dstar, om, r = _flow(model).d_star, model.omega, model.r
@@ -171,7 +172,7 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     return branch_point(model, k, psi, delay)
 
 
-def branch_fold(model: NdofModel, gains, steps: int = 2000):
+def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
     """The first fold of the branch born at grazing (``gains`` None: uncontrolled),
     walking away from grazing in the impact phase, or None if there is none before v-
     or the window of psi ends.
@@ -182,30 +183,31 @@ def branch_fold(model: NdofModel, gains, steps: int = 2000):
     The side of grazing is that of v- ~ v1 psi > 0 (``branch_coefficients``); the fold
     is bracketed on a grid of ``steps`` phases up to the end of the window
     -omega (T - s) < psi < omega s and located by Brent's method on a central-difference
-    slope.
+    slope. With an actuation ``delay`` the delayed kick's branch (§14), whose window
+    ends where the impact enters the delay.
     """
     k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
-    sgn = math.copysign(1.0, branch_coefficients(model, k)[2])
+    sgn = math.copysign(1.0, branch_coefficients(model, k, delay)[2])
     s = model.pi2_offset / model.omega
-    bound = model.omega * s if sgn > 0 else model.omega * (model.period - s)
+    bound = model.omega * s if sgn > 0 else model.omega * (model.period - s - delay)
     grid = sgn * np.linspace(1e-6 * bound, 0.999 * bound, steps)
 
     def slope(psi):
         h = 1e-7 * max(1e-3, abs(psi))
-        return (branch_point(model, k, psi + h).delta_d
-                - branch_point(model, k, psi - h).delta_d) / (2.0 * h)
+        return (branch_point(model, k, psi + h, delay).delta_d
+                - branch_point(model, k, psi - h, delay).delta_d) / (2.0 * h)
 
     first = slope(grid[0]) > 0.0
     prev = grid[0]
     for psi in grid[1:]:
         try:
-            if branch_point(model, k, psi).v_minus <= 0.0:
+            if branch_point(model, k, psi, delay).v_minus <= 0.0:
                 return None
             turned = (slope(psi) > 0.0) != first
         except ParameterError:
             return None
         if turned:
-            return branch_point(model, k, brentq(slope, prev, psi, xtol=1e-13))
+            return branch_point(model, k, brentq(slope, prev, psi, xtol=1e-13), delay)
         prev = psi
     return None
 
@@ -222,7 +224,7 @@ def _sigma(model: NdofModel, psi: float) -> float:
     return (model.pi2_offset - psi) / model.omega
 
 
-def pi2_factors(model: NdofModel, gains, point: BranchPoint):
+def pi2_factors(model: NdofModel, gains, point: BranchPoint, delay: float = 0.0):
     """(B, p, q, s): the Pi2 monodromy of the branch orbit as DP = B + s p q^T.
 
     From Pi2 (before the kick) one period is: the kick G = I + b k^T, the flow
@@ -230,12 +232,16 @@ def pi2_factors(model: NdofModel, gains, point: BranchPoint):
     (``oscillator.ndof.impact.saltation_parts``: s = (1 + r) a_w- / v- grows like 1/v-),
     the flow Phi(sigma) back to Pi2. So DP = Phi(sigma) S Phi(T - sigma) G with
     B = Phi(sigma) S0 Phi(T - sigma) G, p = Phi(sigma) e_v, q^T = e_w^T Phi(T - sigma) G:
-    bounded factors and one scalar that carries the singularity of grazing.
+    bounded factors and one scalar that carries the singularity of grazing. With an
+    actuation ``delay`` (no impact inside it: the branch's window) G = I + b_delay k^T,
+    b_delay = Phi(-delay) e_{n + i_a} (docs/theory_ndof.md §14, (N8)): the delayed map's
+    Jacobian M2 (M1 + e k^T), M1 = Phi(delay), M2 = Phi(sigma) S Phi(T - sigma - delay),
+    is Phi(sigma) S Phi(T - sigma) (I + b_delay k^T).
     """
     k = _gains(model, gains)
     flow = _flow(model)
     sigma = _sigma(model, point.psi)
-    _w, _ev, b = _vectors(model)
+    _w, _ev, b = _vectors(model, delay)
     n, w = model.n, model.i_w
     after = _transition(model, sigma)
     before = _transition(model, model.period - sigma) @ (np.eye(2 * n) + np.outer(b, k))
@@ -306,24 +312,29 @@ def _conjugate_pairs(lam: np.ndarray) -> np.ndarray:
     return np.concatenate([real, pairs, np.conj(pairs)]).astype(complex)
 
 
-def branch_multipliers(model: NdofModel, gains, point: BranchPoint) -> np.ndarray:
+def branch_multipliers(model: NdofModel, gains, point: BranchPoint,
+                       delay: float = 0.0) -> np.ndarray:
     """The Floquet multipliers of the branch orbit (:func:`structured_multipliers` on
-    :func:`pi2_factors`, det J = e^{tr(A) T} r^2 (1 + k_{n+i_a}), the exact determinant
-    of one period with one impact)."""
+    :func:`pi2_factors`, det J = e^{tr(A) T} r^2 (1 + k^T b), the exact determinant
+    of one period with one impact; b = e_{n+i_a}, or b_delay = Phi(-delay) e_{n+i_a}
+    with an actuation ``delay``, §14)."""
     k = _gains(model, gains)
     flow = _flow(model)
+    _w, _ev, b = _vectors(model, delay)
     det = (math.exp(float(np.trace(flow.A)) * model.period) * model.r ** 2
-           * (1.0 + float(k[model.n + model.i_a])))
-    return structured_multipliers(*pi2_factors(model, k, point), det)
+           * (1.0 + float(k @ b)))
+    return structured_multipliers(*pi2_factors(model, k, point, delay), det)
 
 
-def other_contacts(model: NdofModel, gains, point: BranchPoint) -> int:
+def other_contacts(model: NdofModel, gains, point: BranchPoint, delay: float = 0.0) -> int:
     """How many contacts the branch orbit makes besides its one impact (0 for a true
     1/1 orbit), by the certified search of the exact flow (``oscillator.ndof.impact``).
 
     The explicit branch assumes that the impact at tau* + psi is the period's only
     contact; this is the global check. From the state just after the impact the flow
-    runs sigma to Pi2, takes the kick, and runs on until :data:`RETURN_MARGIN` T before
+    runs sigma to Pi2, takes the kick (with an actuation ``delay``: runs on ``delay``
+    and takes the kick k^T z of the Pi2 sample there, §14), and runs on until
+    :data:`RETURN_MARGIN` T before
     the orbit's next impact; every impact found on the way counts, and a chattering or
     sticking contact counts as one. On the last stretch x_w rises monotonically to the
     impact where the wall coordinate decelerates there (regular grazing); where it
@@ -346,22 +357,28 @@ def other_contacts(model: NdofModel, gains, point: BranchPoint) -> int:
     try:
         first = advance(flow, tau, z, sigma)
         z2 = np.array(first.z)
-        z2[n + model.i_a] += float(k @ z2)
-        rest = model.period - sigma - RETURN_MARGIN * model.period
-        second = advance(flow, flow.tau2, z2, rest) if rest > 0.0 else None
+        kick = float(k @ z2)
+        window = advance(flow, flow.tau2, z2, delay) if delay > 0.0 else None
+        if window is not None:
+            z2 = np.array(window.z)
+        z2[n + model.i_a] += kick
+        rest = model.period - sigma - delay - RETURN_MARGIN * model.period
+        tau_kick = (flow.tau2 + model.omega * delay) % (2.0 * math.pi)
+        second = advance(flow, tau_kick, z2, rest) if rest > 0.0 else None
     except (ChatteringError, ImpactCapError):
         return 1
-    return len(first.impacts) + (0 if second is None else len(second.impacts))
+    return (len(first.impacts) + (0 if window is None else len(window.impacts))
+            + (0 if second is None else len(second.impacts)))
 
 
 # ------------------------------------------------- continuation along the branch
-def _orbit_point(model: NdofModel, k, point: BranchPoint) -> OrbitPoint:
+def _orbit_point(model: NdofModel, k, point: BranchPoint, delay: float = 0.0) -> OrbitPoint:
     return OrbitPoint(point.delta_d, np.array(point.pi2_state),
-                      branch_multipliers(model, k, point), 1, point.v_minus)
+                      branch_multipliers(model, k, point, delay), 1, point.v_minus)
 
 
 def continue_branch(model: NdofModel, gains, values, *, growth: float = 10 ** (1 / 16),
-                    psi_max: float = 0.3) -> OrbitBranch:
+                    psi_max: float = 0.3, delay: float = 0.0) -> OrbitBranch:
     """The 1/1 branch born at grazing at each Delta d of ``values`` (in order), each
     point exact to rounding, with its multipliers and the bifurcations between them.
 
@@ -377,43 +394,46 @@ def continue_branch(model: NdofModel, gains, values, *, growth: float = 10 ** (1
     contact, v- falls to 0 (grazing: the next value lies beyond psi = 0) or the window
     of psi ends. Bifurcations: sign changes of the test functions
     (``shooting.bifurcation_tests``) of consecutive points, refined by Brent in psi.
+    With an actuation ``delay`` the branch is the delayed kick's (§14): the window of
+    psi keeps the impact out of the delay (:func:`branch_point`).
     """
     k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
     values = [float(v) for v in values]
     if len(values) < 2 or not all(math.isfinite(v) for v in values):
         raise ValueError("values are invalid: expected at least two finite Delta d values")
-    start = orbit_at(model, k, values[0], psi_max)
+    start = orbit_at(model, k, values[0], psi_max, delay)
     points, psis, stopped = [], [], "end"
-    if other_contacts(model, k, start):
+    if other_contacts(model, k, start, delay):
         return OrbitBranch("delta_d", 1, [], [], f"the orbit at delta_d={values[0]!r} touches "
                            "the wall again within the period: not a 1/1 orbit")
-    points.append(_orbit_point(model, k, start))
+    points.append(_orbit_point(model, k, start, delay))
     psis.append(start.psi)
     for value in values[1:]:
         psi, dd = psis[-1], points[-1].value
-        found, why = _walk(model, k, psi, dd, value, growth, psi_max)
+        found, why = _walk(model, k, psi, dd, value, growth, psi_max, delay)
         if found is None:
             stopped = why
             break
-        if other_contacts(model, k, found):
+        if other_contacts(model, k, found, delay):
             stopped = (f"at delta_d={value!r} the orbit of the branch touches the wall again "
                        "within the period: not a 1/1 orbit beyond "
                        f"delta_d={points[-1].value!r}")
             break
-        points.append(_orbit_point(model, k, found))
+        points.append(_orbit_point(model, k, found, delay))
         psis.append(found.psi)
-    return OrbitBranch("delta_d", 1, points, _bifurcations(model, k, points, psis), stopped)
+    return OrbitBranch("delta_d", 1, points, _bifurcations(model, k, points, psis, delay),
+                       stopped)
 
 
-def _walk(model, k, psi, dd, target, growth, psi_max):
+def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
     """(the branch point at Delta d = target beyond psi, None) or (None, why): walk |psi|
     by the factor ``growth`` from psi in the direction in which Delta d moves towards
     the target, bracket the crossing and solve it by Brent."""
     def delta(x):
-        return branch_point(model, k, x).delta_d
+        return branch_point(model, k, x, delay).delta_d
 
     if target == dd:
-        return branch_point(model, k, psi), None
+        return branch_point(model, k, psi, delay), None
     h = 1e-6 * abs(psi)
     slope = (delta(psi + h) - delta(psi - h)) / (2.0 * h)
     outward = (slope * psi > 0.0) == (target > dd)      # |psi| grows towards the target
@@ -426,7 +446,7 @@ def _walk(model, k, psi, dd, target, growth, psi_max):
         if abs(nxt) < 1e-300:
             return None, f"grazing (v- -> 0) before delta_d={target!r}"
         try:
-            bp = branch_point(model, k, nxt)
+            bp = branch_point(model, k, nxt, delay)
         except ParameterError as exc:
             return None, str(exc)
         if not bp.v_minus > 0.0:
@@ -435,14 +455,14 @@ def _walk(model, k, psi, dd, target, growth, psi_max):
         if (f_nxt > 0.0) != (f_prev > 0.0) or f_nxt == 0.0:
             x = brentq(lambda t: delta(t) - target, prev, nxt, xtol=1e-300,
                        rtol=4.0 * 2.0 ** -52, maxiter=400)
-            return branch_point(model, k, x), None
+            return branch_point(model, k, x, delay), None
         if abs(f_nxt) > abs(f_prev):
             return None, (f"a fold: Delta d turns back at {bp.delta_d!r} (psi={nxt!r}) before "
                           f"delta_d={target!r}")
         prev, f_prev = nxt, f_nxt
 
 
-def _bifurcations(model, k, points, psis):
+def _bifurcations(model, k, points, psis, delay=0.0):
     """Sign changes of the test functions between consecutive points, refined in psi."""
     out = []
     for (a, pa), (b, pb) in zip(zip(points[:-1], psis[:-1]), zip(points[1:], psis[1:])):
@@ -453,12 +473,14 @@ def _bifurcations(model, k, points, psis):
                 continue
 
             def f(x, kind=kind):
-                return bifurcation_tests(branch_multipliers(model, k, branch_point(model, k, x)))[kind]
+                bp = branch_point(model, k, x, delay)
+                return bifurcation_tests(branch_multipliers(model, k, bp, delay))[kind]
 
             try:
                 at = brentq(f, pa, pb, xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=200)
             except ValueError:
                 continue
-            bp = branch_point(model, k, at)
-            out.append(OrbitBifurcation(kind, float(bp.delta_d), branch_multipliers(model, k, bp)))
+            bp = branch_point(model, k, at, delay)
+            out.append(OrbitBifurcation(kind, float(bp.delta_d),
+                                        branch_multipliers(model, k, bp, delay)))
     return out

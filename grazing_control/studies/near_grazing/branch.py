@@ -39,6 +39,7 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["fold_beyond", "OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
+           "kick_vector",
            "smooth_map", "local_map", "predicted_orbit", "grazing_side", "monodromy_det", "orbit_11",
            "multiplier_scaling", "fit_exponent"]
 
@@ -99,25 +100,35 @@ def _gains(model, gains):
     return k
 
 
-def kick_matrix(model, gains) -> np.ndarray:
+def kick_matrix(model, gains, delay: float = 0.0) -> np.ndarray:
     """K = I + b k^T, b the velocity unit vector of the actuated coordinate (the kick
-    v[i_a] += k^T z at Pi2; issue 17, "The design"); I without gains."""
+    v[i_a] += k^T z at Pi2; issue 17, "The design"); I without gains. With an actuation
+    ``delay`` (no impact inside it) b = Phi(-delay) e_{n + i_a} (docs/theory_ndof.md §14,
+    (N8))."""
     n2 = 2 * model.n
     K = np.eye(n2)
     k = _gains(model, gains)
     if k is not None:
-        K[model.n + model.i_a] += k
+        K += np.outer(kick_vector(model, delay), k)
     return K
 
 
-def smooth_map(model, gains=None):
+def kick_vector(model, delay: float = 0.0) -> np.ndarray:
+    """b: e_{n + i_a}, or b_delay = Phi(-delay) e_{n + i_a} with an actuation ``delay``
+    (docs/theory_ndof.md §14, (N8); ``family``'s, which checks 0 <= delay < T - s)."""
+    from grazing_control.dynamics.design.family import _vectors
+
+    return _vectors(model, delay)[2]
+
+
+def smooth_map(model, gains=None, delay: float = 0.0):
     """(N, Phi_a, Phi_b, K): the smooth return map on Pi1 N = Phi_a K Phi_b and its
-    factors (module docstring)."""
+    factors (module docstring; K of :func:`kick_matrix`)."""
     flow = NdofFlow.of(model)
     off = model.pi2_offset / model.omega
     phi_a = flow.transition(model.period - off)
     phi_b = flow.transition(off)
-    K = kick_matrix(model, gains)
+    K = kick_matrix(model, gains, delay)
     return phi_a @ K @ phi_b, phi_a, phi_b, K
 
 
@@ -147,16 +158,17 @@ def local_map(model, y, delta_d: float, jacobian: bool = False):
     return (out, jac) if jacobian else out
 
 
-def predicted_orbit(model, gains=None, delta_d: float | None = None):
+def predicted_orbit(model, gains=None, delta_d: float | None = None, delay: float = 0.0):
     """The 1/1 orbit of the local map on Pi2 and its s = sqrt(H) (module docstring), or
     (None, nan) when the local map has no impacting fixed point there.
 
     First the leading order (closed form in s), then Newton's method on
-    y = N D(y) with :func:`local_map` and its Jacobian."""
+    y = N D(y) with :func:`local_map` and its Jacobian. With an actuation ``delay`` the
+    kick is the delayed one seen on Pi2 (:func:`kick_matrix`)."""
     dd = model.delta_d if delta_d is None else float(delta_d)
     flow = NdofFlow.of(model)
     n, n2 = model.n, 2 * model.n
-    N, _phi_a, phi_b, _K = smooth_map(model, gains)
+    N, _phi_a, phi_b, _K = smooth_map(model, gains, delay)
     acc = model.omega ** 2 * flow.d_star
     u = np.zeros(n2)
     u[n + model.i_w] = -(1.0 + model.r) * math.sqrt(2.0 * acc)
@@ -201,26 +213,27 @@ def predicted_orbit(model, gains=None, delta_d: float | None = None):
     return phi_b @ local_map(model, y, dd), math.sqrt(h)
 
 
-def grazing_side(model, gains=None, size: float = 1e-6) -> float:
+def grazing_side(model, gains=None, size: float = 1e-6, delay: float = 0.0) -> float:
     """-1 or +1: the sign of Delta d on which the local map has a 1/1 orbit born at
     grazing, i.e. the side whose predicted s at |Delta d| = ``size`` is the smaller
     (s ~ |Delta d| or sqrt|Delta d| there, O(1) on the other side); -1 when neither has
     one."""
     found = []
     for sign in (-1.0, 1.0):
-        _z, s = predicted_orbit(model, gains, sign * size)
+        _z, s = predicted_orbit(model, gains, sign * size, delay)
         if s > 0.0:
             found.append((s, sign))
     return min(found)[1] if found else -1.0
 
 
-def monodromy_det(model, gains, impacts: int) -> float:
+def monodromy_det(model, gains, impacts: int, delay: float = 0.0) -> float:
     """det of DP over one period with ``impacts`` impacts: det Phi(T) = e^{T tr A} =
     e^{-T tr(M^-1 C)}, det S = r^2 per impact (the saltation matrix, docs/theory_ndof_flow.md)
-    and det K = 1 + k_{v_i_a} (matrix determinant lemma); the n-DOF counterpart of
+    and det K = 1 + k^T b (matrix determinant lemma; b of :func:`kick_matrix`, with an
+    actuation ``delay`` valid when no impact lies inside it); the n-DOF counterpart of
     OneDOF.jacobian_det (dynamics/maps/model.py)."""
     k = _gains(model, gains)
-    det_k = 1.0 if k is None else 1.0 + float(k[model.n + model.i_a])
+    det_k = 1.0 if k is None else 1.0 + float(k @ kick_vector(model, delay))
     trace = float(np.trace(np.linalg.solve(model.M, model.C)))
     return math.exp(-trace * model.period) * model.r ** (2 * impacts) * det_k
 
@@ -228,13 +241,16 @@ def monodromy_det(model, gains, impacts: int) -> float:
 def _multipliers(pmap, model, gains, monodromy, impacts):
     """Floquet multipliers; the exact determinant (the map's, else :func:`monodromy_det`)
     keeps the small multiplier of a 2x2 monodromy accurate when the large one grows like
-    1/v- (dynamics/shooting.floquet_multipliers)."""
+    1/v- (dynamics/shooting.floquet_multipliers). None (no product formula) with a
+    sticking impact or an impact inside the actuation delay (docs/theory_delay.md (D3))."""
     det = None
-    if not any(getattr(i, "sticking", False) for i in impacts):
+    delay = float(getattr(pmap, "delay", 0.0)) if gains is not None else 0.0
+    inside = any(i.dt <= delay for i in impacts)
+    if not any(getattr(i, "sticking", False) for i in impacts) and not inside:
         jd = getattr(pmap, "jacobian_det", None)
         det = jd(1, len(impacts)) if jd is not None else None
         if det is None:
-            det = monodromy_det(model, gains, len(impacts))
+            det = monodromy_det(model, gains, len(impacts), delay)
     return floquet_multipliers(monodromy, det)
 
 
@@ -248,35 +264,36 @@ def _offset(state, pred) -> float:
         np.linalg.norm(state - pred) / max(np.linalg.norm(pred), 1e-300))
 
 
-def _on_branch(model, gains, pred):
+def _on_branch(model, gains, pred, delay: float = 0.0):
     """(the 1/1 orbit at the model's Delta d on the branch explicit in the impact phase,
     None), or (None, why not) (dynamics/orbits/modal_branch.py: ``orbit_at``, the global check
-    ``other_contacts``, the multipliers from ``pi2_factors``)."""
+    ``other_contacts``, the multipliers from ``pi2_factors``; with an actuation ``delay``
+    the delayed kick's branch, its impact outside the delay, docs/theory_ndof.md §14)."""
     from grazing_control.dynamics.orbits.modal_branch import (branch_multipliers, orbit_at,
                                                       other_contacts, pi2_factors)
 
     k = np.zeros(2 * model.n) if gains is None else _gains(model, gains)
     try:
-        bp = orbit_at(model, k, model.delta_d)
+        bp = orbit_at(model, k, model.delta_d, delay=delay)
     except (ValueError, ParameterError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return None, " ".join(str(exc).split())[:120]
-    contacts = other_contacts(model, k, bp)
+    contacts = other_contacts(model, k, bp, delay)
     if contacts:
         return None, (f"the orbit at psi={bp.psi:.6g} touches the wall {contacts} more "
                       "time(s) per period")
-    B, p, q, s = pi2_factors(model, k, bp)
+    B, p, q, s = pi2_factors(model, k, bp, delay)
     flow = NdofFlow.of(model)
     sigma = (model.pi2_offset - bp.psi) / model.omega
     state = np.array(bp.pi2_state)
     orbit = NdofOrbit(model.delta_d, state, flow.to_physical(flow.tau2, state),
-                      branch_multipliers(model, k, bp), B + s * np.outer(p, q),
+                      branch_multipliers(model, k, bp, delay), B + s * np.outer(p, q),
                       float(model.period - sigma), float((flow.tau_star + bp.psi) % TWO_PI),
                       float(bp.v_minus), EXPLICIT, _offset(state, pred))
     return orbit, None
 
 
 def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e-14,
-             extra_guesses=()) -> NdofOrbit:
+             extra_guesses=(), delay: float = 0.0) -> NdofOrbit:
     """The 1/1 orbit at ``delta_d`` (default the model's): on the branch explicit in the
     impact phase where it has one, else by Newton shooting.
 
@@ -291,7 +308,10 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
     order: the leading-order prediction (:func:`predicted_orbit`), ``extra_guesses``
     (name, state pairs), the grazing point z = 0, and the end of a 200-period
     simulation from the prediction. The first that converges to an orbit with exactly
-    one impact per period wins.
+    one impact per period wins. With an actuation ``delay`` (the kick k^T z of the sample
+    acts ``delay`` later) both routes are the delayed kick's: the explicit branch where
+    the impact lies outside the delay (docs/theory_ndof.md §14), shooting on the exact
+    delayed map ``ModalMap(model, k, delay)`` otherwise.
 
     Raises
     ------
@@ -300,9 +320,13 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
     """
     if delta_d is not None:
         model = with_delta_d(model, delta_d)
-    pmap = ModalMap(model, _gains(model, gains))
-    pred, _s = predicted_orbit(model, gains)
-    explicit, reason = _on_branch(model, gains, pred)
+    delay = float(delay) if gains is not None else 0.0
+    pmap = ModalMap(model, _gains(model, gains), delay)
+    try:
+        pred, _s = predicted_orbit(model, gains, delay=delay)
+    except ParameterError:     # a delay past the grazing phase: no local map (§14)
+        pred = None
+    explicit, reason = _on_branch(model, gains, pred, delay)
     if explicit is not None:
         return explicit
     guesses = [] if pred is None else [("discontinuity map", pred)]
@@ -394,7 +418,7 @@ def fit_exponent(delta_d, values) -> float:
     return float(np.polyfit(x[ok], y[ok], 1)[0])
 
 
-def fold_beyond(model, gains, branch, stop: float):
+def fold_beyond(model, gains, branch, stop: float, delay: float = 0.0):
     """The fold where a continuation in Delta d stopped short of ``stop``, or None.
 
     A continuation in Delta d cannot pass a turning point of the branch; the branch
@@ -411,12 +435,13 @@ def fold_beyond(model, gains, branch, stop: float):
         return None
     last = branch.points[-1].value
     try:
-        fold = branch_fold(model, gains)
+        fold = branch_fold(model, gains, delay=delay)
     except (ValueError, ParameterError, np.linalg.LinAlgError):
         return None
     if fold is None or fold.monodromy is None or (fold.delta_d - last) * (stop - last) < 0.0:
         return None
-    step = ModalMap(with_delta_d(model, fold.delta_d), gains).step(fold.pi2_state)
+    step = ModalMap(with_delta_d(model, fold.delta_d), gains,
+                    delay if gains is not None else 0.0).step(fold.pi2_state)
     size = max(1.0, float(np.max(np.abs(fold.pi2_state))))
     residual = float(np.max(np.abs(step.state - fold.pi2_state))) / size
     if residual > 1e-8 or len(step.impacts) != 1:
