@@ -24,7 +24,7 @@ import rclpy
 from geometry_msgs.msg import TwistStamped, Vector3Stamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, String
@@ -62,6 +62,14 @@ TOPICS = {
 #: The collector's subscriptions: reliable keep-all, as the recorder's, so that nothing
 #: is dropped on the reader's side while the test's executor lags behind a burst.
 KEEP_ALL = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+#: The same, transient local, for the controller's topics (its writers are transient local,
+#: ``REPLAY_QOS``): its readiness says this reader has matched the controller's writer, not
+#: that the writer has matched this reader, and under load the writer's side came later:
+#: a volatile reader lost the first answers (237 of 300 on a fresh clone, a rerun); a
+#: transient-local one gets them from the writer's history when the match completes.
+KEEP_ALL_REPLAYED = QoSProfile(history=HistoryPolicy.KEEP_ALL,
+                               reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 _CLAIMED = []
@@ -92,9 +100,10 @@ class Collector:
         self.node = rclpy.create_node("collector", context=self.context)
         self.msgs = defaultdict(list)
         self.lock = threading.Lock()
-        self.subs = {topic: self.node.create_subscription(kind, topic, self._keeper(topic),
-                                                          KEEP_ALL)
-                     for topic, kind in topics.items()}
+        self.subs = {topic: self.node.create_subscription(
+            kind, topic, self._keeper(topic),
+            KEEP_ALL_REPLAYED if topic.startswith("controller/") else KEEP_ALL)
+            for topic, kind in topics.items()}
         self.node.create_subscription(Bool, "oscillator/done", self._keeper("done"),
                                       LATCHED_QOS)
         self.node.create_subscription(String, PUBLISHED_TOPIC, self._keeper("published"),
@@ -203,7 +212,9 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
                        controller_overrides={"enable_after": ON}, log_dir=tmp_path)
     assert res.ok, (res, Path(res.logs["sim_node"]).read_text())
     assert collector.wait_for(lambda: len(collector.get("done")) == 1, 5.0)
-    assert collector.wait_for(collector.has_all_of, 20.0)
+    # every message each node counts as published, the controller's answers included
+    assert collector.wait_for(lambda: collector.has_all_of() and
+                              collector.has_all_of("controller_node"), 20.0)
     pi2 = collector.get("oscillator/pi2")
     assert len(pi2) == N
     T = p.period
