@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mpmath import mp, mpf
+from mpmath import mpf
 from scipy.optimize import brentq
 
 from grazing_control.dynamics.orbits.continuation import continue_orbit
@@ -210,7 +210,7 @@ def _branch_side(m):
 
 def _branch_phase(m, delta_d):
     """The impact phase psi of the branch's orbit at delta_d."""
-    at, (sgn, _side) = _branch(m), _branch_side(m)
+    at, sgn = _branch(m), _branch_side(m)[0]
     return brentq(lambda p: at(p)[0] - delta_d, sgn * 1e-16, sgn * 0.1, xtol=1e-300, rtol=1e-15)
 
 
