@@ -307,3 +307,22 @@ def test_the_shooting_route_of_continue_on_the_delayed_map_agrees_with_the_delay
         assert np.max(np.abs(a.state - b.state)) <= 1e-12
         assert abs(a.v_min - b.v_min) <= 1e-9 * a.v_min
         assert _match(a.multipliers, b.multipliers) <= 1e-9
+
+
+@pytest.mark.timeout(60)   # a hang guard: before, this orbit ran for minutes
+def test_an_unstable_delayed_loop_fails_naming_its_divergence():
+    """The 2-mass chain at mu = 0 with a delay of 2 (gains ~170): no 1/1 orbit on the
+    branch, shooting fails, and the last guess's simulation diverges 6x a period. It used
+    to run on until |z| ~ 1e25, where each period's certified impact search took 11-39 s
+    (`grazing orbit` ran for over 100 s); now the simulation stops once the state leaves
+    max |z| <= DIVERGED d* and the failure names it."""
+    from grazing_control.studies.near_grazing.branch import (DIVERGED, OrbitNotFound,
+                                                              orbit_11, with_delta_d)
+
+    model = with_delta_d(load_model(CHAIN), -1e-4)
+    k = np.asarray(nd.gain_family(model, 0.0, 2.0), dtype=float)
+    with pytest.raises(OrbitNotFound) as err:
+        orbit_11(model, k, delay=2.0)
+    bound = DIVERGED * NdofFlow.of(model).d_star
+    assert f"simulation: the motion left |z| <= {bound:.3g} at period " in str(err.value)
+    assert "diverging" in str(err.value)

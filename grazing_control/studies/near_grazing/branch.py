@@ -34,7 +34,7 @@ import numpy as np
 
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.dynamics.orbits.shooting import (ShootingFailed, find_periodic,
-                                               floquet_multipliers, iterate)
+                                               floquet_multipliers)
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
@@ -354,13 +354,34 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
         if i == len(guesses) and not tried_simulation:
             tried_simulation = True
             try:
-                z, _jac, _imp = iterate(pmap, pred if pred is not None else guesses[-1][1], 200)
-                if np.all(np.isfinite(z)):
-                    guesses.append(("simulation", z))
+                z = _simulated_guess(pmap, pred if pred is not None else guesses[-1][1],
+                                     SIMULATED_PERIODS, DIVERGED * NdofFlow.of(model).d_star)
+                guesses.append(("simulation", z))
             except (ValueError, ArithmeticError, RuntimeError) as exc:
                 why.append(f"simulation: {' '.join(str(exc).split())[:120]}")
     raise OrbitNotFound(f"no 1/1 orbit found at delta_d={model.delta_d!r} "
                         f"({'; '.join(why)})")
+
+
+#: The simulation that gives orbit_11 its last starting guess: periods, and the size of a
+#: state (times d*, the wall coordinate's amplitude) beyond which the motion is taken as
+#: diverging. A 1/1 orbit near grazing lies within a few d* of the grazing point; an
+#: unstable loop (the 2-mass chain at mu = 0 with a delay of 2: gains ~170) grew 6x a
+#: period, and at |z| ~ 1e25 each period's certified impact search took 11-39 s (the
+#: rounding of the gap grows with the state), so `grazing orbit` ran for minutes.
+SIMULATED_PERIODS, DIVERGED = 200, 1e3
+
+
+def _simulated_guess(pmap, start, periods: int, bound: float) -> np.ndarray:
+    """The state ``periods`` periods after ``start`` (no Jacobian: a guess only);
+    ArithmeticError once a state is not finite or leaves ``max |z| <= bound``."""
+    z = np.asarray(start, dtype=float)
+    for k in range(periods):
+        z = pmap.step(z).state
+        if not (np.all(np.isfinite(z)) and np.max(np.abs(z)) <= bound):
+            raise ArithmeticError(f"the motion left |z| <= {bound:.3g} at period {k + 1} "
+                                  "(diverging: no attractor to start shooting from)")
+    return z
 
 
 class Scaling(NamedTuple):
