@@ -95,16 +95,13 @@ def gain_file(path, model):
     pi2_offset must be the model's (a file designed for another model is refused, one
     line naming the entry); a pulse's file (pulse_width) is refused (these commands run
     the kick)."""
-    from grazing_control.support.files import YamlFileError, read_yaml_file
+    from grazing_control.support.files import YamlFileError, read_yaml_file, ros_parameters
 
     try:
-        doc = read_yaml_file(path)
+        values = ros_parameters(read_yaml_file(path))
     except YamlFileError as exc:
         raise ParameterError(f"--gains {exc}") from None
-    nodes = list(doc.values()) if isinstance(doc, dict) else []
-    values = nodes[0].get("ros__parameters") if len(nodes) == 1 and \
-        isinstance(nodes[0], dict) else None
-    if not isinstance(values, dict) or "gains" not in values:
+    if "gains" not in values:
         raise ParameterError(f"--gains {path}: not a gain file of design --model --out "
                              "(expected /**: ros__parameters: {gains: [...], n, i_a, omega, "
                              "pi2_offset})")

@@ -53,17 +53,12 @@ def _positive(value) -> bool:
 def _controller_values(controller_params) -> dict:
     """The controller's parameters: a file's ``ros__parameters`` (any node key) or a
     dict; {} if the file cannot be read."""
-    from grazing_control.support.files import YamlFileError, read_yaml_file
-
+    from grazing_control.support.files import YamlFileError, read_yaml_file, ros_parameters
     if isinstance(controller_params, (str, os.PathLike)):
         try:
-            doc = read_yaml_file(controller_params) or {}
+            values = ros_parameters(read_yaml_file(controller_params))
         except YamlFileError:
             return {}
-        values = {}
-        for section in doc.values() if isinstance(doc, dict) else ():
-            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-                values.update(section["ros__parameters"])
     else:
         values = dict(controller_params or {})
     return values
@@ -75,14 +70,10 @@ def sim_values_for_model(sim_params) -> dict:
     pi2_offset): what an n-DOF scene's simulator takes from the study's file, whose model
     the model file replaces (docs/nodes.md, "n-DOF scenes")."""
     from grazing_control.plant.settings import MODEL_KEYS
-    from grazing_control.support.files import read_yaml_file
+    from grazing_control.support.files import read_yaml_file, ros_parameters
 
     if isinstance(sim_params, (str, os.PathLike)):
-        doc = read_yaml_file(sim_params) or {}
-        values = {}
-        for section in doc.values() if isinstance(doc, dict) else ():
-            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-                values.update(section["ros__parameters"])
+        values = ros_parameters(read_yaml_file(sim_params))
     else:
         values = dict(sim_params or {})
     return {k: v for k, v in values.items() if k not in MODEL_KEYS}

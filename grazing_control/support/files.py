@@ -35,7 +35,8 @@ import re
 import stat
 import tempfile
 
-__all__ = ["write_yaml_atomic", "read_yaml_file", "parse_yaml_bytes", "YamlFileError", "MAX_FILE_BYTES",
+__all__ = ["write_yaml_atomic", "read_yaml_file", "parse_yaml_bytes", "ros_parameters",
+           "YamlFileError", "MAX_FILE_BYTES",
            "MAX_NODES", "MAX_DEPTH"]
 
 #: The largest parameter file read (a parameter file is a few kB; an n-DOF model of 100
@@ -208,6 +209,16 @@ def _get_loader():
 
 
 _LOADER = None
+
+
+def ros_parameters(doc) -> dict:
+    """The ``ros__parameters`` of a ROS parameter file's document, merged over its node
+    keys (``/**``, ``/sim_node``, ...) in file order; {} for a document of another shape."""
+    values = {}
+    for section in doc.values() if isinstance(doc, dict) else ():
+        if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+            values.update(section["ros__parameters"])
+    return values
 
 
 def write_yaml_atomic(path, doc: dict, comments=()) -> None:
