@@ -247,7 +247,7 @@ def test_continue_json_keys_and_values(runs, name, args, gains):
     assert set(d) == {"branch", "bifurcations"}
     start, stop, n = args
     # the command's points: log-spaced in Delta d, as for a model file (issue 32)
-    from grazing_control.cli.orbits import continuation_values
+    from grazing_control.dynamics.orbits.one_one import continuation_values
 
     b = continue_11(P, start, stop, gains, points=n, check=True,
                     values=continuation_values(start, stop, n))

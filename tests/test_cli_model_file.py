@@ -33,7 +33,7 @@ from grazing_control.cli.commands import main
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.dynamics.design.family import gain_family
-from grazing_control.studies.near_grazing.branch import grazing_side, smooth_map, with_delta_d
+from grazing_control.dynamics.orbits.near_grazing import grazing_side, smooth_map, with_delta_d
 
 ROOT = Path(__file__).resolve().parents[1]
 ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
@@ -403,8 +403,9 @@ def test_simulate_with_delay_steps_the_delayed_map_to_the_delayed_orbit(capsys):
 def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_path, three):
     """``--gains FILE`` (issue 32: refused as "expected comma-separated finite numbers"):
     the file of ``design --model M --delay 0.5 --mu 0.2 --out FILE`` gives orbit the
-    same numbers as ``--mu 0.2 --delay 0.5`` (bit for bit); a file of another model, a
-    different --delay, a delayed file in sweep are one line naming the entry."""
+    same numbers as ``--mu 0.2 --delay 0.5`` (bit for bit), and sweep its delayed kick
+    (refused there before; issue 32); a file of another model, a different --delay are
+    one line naming the entry."""
     out = tmp_path / "k.yaml"
     run_json(capsys, "design", "--model", TWO, "--delay", "0.5", "--mu", "0.2", "--out",
              str(out))
@@ -419,11 +420,14 @@ def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_pat
             (("orbit", "--model", three, "--delta-d", "-1e-8", "--gains", str(out)),
              "n=2 is invalid for this model: the model file gives n = 3"),
             (("orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", TWO),
-             "not a gain file of design --model --out"),
-            (("sweep", "--model", TWO, "--grid", "delta_d=-1e-4:0:3", "--periods", "3",
-              "--gains", str(out)), "actuation_delay=0.5 is invalid for sweep")):
+             "not a gain file of design --model --out")):
         code, text, err = run(capsys, *argv)
         assert code == 2 and text == "" and err.count("\n") == 1 and needle in err, err
+    swept = run_json(capsys, "sweep", "--model", TWO, "--grid", "delta_d=-1e-4:-1e-5:2",
+                     "--periods", "3", "--workers", "1", "--no-png", "--gains", str(out),
+                     "--out", str(tmp_path / "sweep"))
+    assert swept["actuation_delay"] == 0.5 and swept["gains"] == ref["gains"]
+    assert float(np.load(swept["npz"])["delay"]) == 0.5
 
 
 # ------------------------------------------------------------------ errors
@@ -437,6 +441,14 @@ def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_pat
     (["simulate", "--model", TWO, "--delta-d", "-1e-6", "--periods", "3", "--delay", "1"],
      "--delay needs the gains: give --gains, --mu or --free-gain"),
     (["design", "--model", TWO, "--delay", "12"], "delay=12.0 is invalid: valid range is 0 <= delay"),
+    (["sweep", "--model", TWO, "--grid", "delta_d=-1e-4:0:3", "--periods", "3", "--mu", "0",
+      "--delay", "12"], "--delay 12.0 is invalid: valid range is 0 <= delay"),
+    (["sweep", "--model", TWO, "--grid", "delta_d=-1e-4:0:3", "--periods", "3", "--delay",
+      "1"], "--delay needs the gains: give --gains, --mu or --free-gain"),
+    (["sweep", "--grid", "delta_d=-1e-4:0:3", "--periods", "3", "--delay", "1"],
+     "--delay needs the gains: give --c2"),
+    (["figures", "--model", TWO, "--delay", "12", "--quick"], "--delay 12.0 is invalid"),
+    (["figures", "--delay", "0.5", "--quick"], "--delay needs --model"),
     (["orbit", "--delta-d", "-1e-6", "--mu", "0"], "--mu needs --model"),
     (["orbit", "--model", "/nonexistent/m.yaml", "--delta-d", "-1e-6"], "no such file"),
     (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--gains", "1,2,3"], "give 2n = 4"),

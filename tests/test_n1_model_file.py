@@ -292,12 +292,19 @@ def test_continue_and_simulate_with_delay(delayed):
     check(differences(ref, got), "simulate delayed")
 
 
-def test_sweep(tmp_path):
+@pytest.mark.parametrize("delay", [False, True])
+def test_sweep(tmp_path, delayed, delay):
     """The sweep's npz: the same grid, the Pi2 samples after the transient, X** and the
-    detected period at each point (the n = 1 file names them values, samples)."""
+    detected period at each point (the n = 1 file names them values, samples); with
+    ``--delay`` (issue 32: refused with --model before) the delayed gains of both, the
+    kick 0.5 after each sample."""
     grid = ("--grid", "delta_d=-1e-4:-1e-5:3", "--periods", "10", "--workers", "1", "--no-png")
-    ref = run_json("sweep", *grid, "--out", str(tmp_path / "one"))
-    got = run_json("sweep", "--model", ONE, *grid, "--out", str(tmp_path / "model"))
+    one, model = delayed if delay else ((), ())
+    ref = run_json("sweep", *grid, *one, "--out", str(tmp_path / "one"))
+    got = run_json("sweep", "--model", ONE, *grid, *model, "--out", str(tmp_path / "model"))
+    if delay:
+        assert got["actuation_delay"] == 0.5 and float(np.load(got["npz"])["delay"]) == 0.5
+        assert float(np.load(ref["npz"])["delay"]) == 0.5
     check(differences(ref, got), "sweep summary")
     a, b = np.load(ref["npz"]), np.load(got["npz"])
     rows = differences({"delta_d": a["axis_delta_d"], "pi2": a["pi2_deviation"],

@@ -232,21 +232,22 @@ def test_the_delayed_kick_is_the_kick_on_the_section_delay_later_with_gain_phi_m
 
 @pytest.mark.parametrize("dd", [-1e-4, -1e-6])
 def test_the_delayed_orbit_against_shooting_and_finite_differences_of_the_delayed_map(dd):
-    """orbit_11 with a delay (the explicit branch, §14) against Newton shooting on the exact
+    """one_one.orbit with a delay (the explicit branch, §14) against Newton shooting on the exact
     delayed ModalMap from the local map's prediction: the same Pi2 state (1e-13), the
     multipliers of the map's (D3) Jacobian (1e-9 relative) and of its fourth-order
     finite-difference Jacobian (step 1e-2 v-^2; 1e-6), on the design family (bounded)
     and off it (k_x0 + 0.05: the singular multiplier ~ 1/v- that the delay-aware gains
     remove)."""
-    from grazing_control.studies.near_grazing.branch import EXPLICIT, orbit_11, predicted_orbit
+    from grazing_control.dynamics.orbits.near_grazing import predicted_orbit
+    from grazing_control.dynamics.orbits.one_one import EXPLICIT, orbit
 
     m0 = load_model(CHAIN)
     delay = 0.5
     m = dataclasses.replace(m0, delta_d=dd)
     family = nd.gain_family(m0, 0.2, delay)
     for k in (family, family + np.array([0.05, 0.0, 0.0, 0.0])):
-        o = orbit_11(m, k, delay=delay)
-        assert o.guess == EXPLICIT
+        o = orbit(m, k, delay=delay)
+        assert o.route == EXPLICIT
         P = ModalMap(m, k, delay)
         shot = find_periodic(P, predicted_orbit(m, k, delay=delay)[0])
         assert len(shot.impacts) == 1 and shot.impacts[0].dt > delay
@@ -316,13 +317,14 @@ def test_an_unstable_delayed_loop_fails_naming_its_divergence():
     to run on until |z| ~ 1e25, where each period's certified impact search took 11-39 s
     (`grazing orbit` ran for over 100 s); now the simulation stops once the state leaves
     max |z| <= DIVERGED d* and the failure names it."""
-    from grazing_control.studies.near_grazing.branch import (DIVERGED, OrbitNotFound,
-                                                              orbit_11, with_delta_d)
+    from grazing_control.dynamics.orbits.near_grazing import DIVERGED, with_delta_d
+    from grazing_control.dynamics.orbits.one_one import orbit
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 
     model = with_delta_d(load_model(CHAIN), -1e-4)
     k = np.asarray(nd.gain_family(model, 0.0, 2.0), dtype=float)
     with pytest.raises(OrbitNotFound) as err:
-        orbit_11(model, k, delay=2.0)
+        orbit(model, k, delay=2.0)
     bound = DIVERGED * NdofFlow.of(model).d_star
     assert f"simulation: the motion left |z| <= {bound:.3g} at period " in str(err.value)
     assert "diverging" in str(err.value)

@@ -172,7 +172,7 @@ def test_continue_by_shooting_names_its_unresolved_points(files, monkeypatch):
     """Where the branch in the impact phase is not taken (here: switched off), shooting
     continues as before, and the points whose v- its event search cannot resolve are
     named in a warning instead of passing silently."""
-    import grazing_control.studies.near_grazing.branch as branch
+    import grazing_control.dynamics.orbits.near_grazing as branch
 
     monkeypatch.setattr(branch, "_on_branch", lambda *args: (None, "switched off"))
     code, got, err = grazing("continue", "--model", files["two"], "--from", "-1e-3",

@@ -94,7 +94,7 @@ def add_delay(parser):
                         help="actuation delay: the correction acts this long (simulation time) "
                              "after the Pi2 sample, 0 <= delay < T - pi2_offset/omega "
                              "(docs/theory_delay.md); default 0. With --model (design, orbit, "
-                             "continue, simulate) the kick k^T z acts this long after the "
+                             "continue, simulate, sweep) the kick k^T z acts this long after the "
                              "sample and --mu/--free-gain are the delayed family's "
                              "(docs/ndof_commands.md)")
 

@@ -14,13 +14,14 @@ import numpy as np
 from grazing_control.oscillator.params import ParameterError
 
 from .common import nulls
-from .model_file import control_of, coordinates, load
+from .model_file import control_of, coordinates, delay_of, load
 
 __all__ = ["cmd_sweep", "cmd_figures"]
 
 
 def cmd_sweep(args):
-    """sweep --model FILE --grid NAME=A:B:N --periods P (docs/ndof_commands.md)."""
+    """sweep --model FILE --grid NAME=A:B:N --periods P [gains [--delay D]]
+    (docs/ndof_commands.md): the kick ``--delay`` after each sample, as simulate."""
     import os
     import sys
 
@@ -33,6 +34,7 @@ def cmd_sweep(args):
                              "one axis (delta_d, omega, r, phase or pi2_offset)")
     name, values = args.grid[0]
     k, mu, how = control_of(args, model)
+    delay = delay_of(args, model)
     coordinate = args.coordinate or f"x{model.i_w}"
     coordinate_index(coordinates(model), coordinate)     # valid before the run
     transient = args.periods // 2 if args.transient is None else args.transient
@@ -46,7 +48,8 @@ def cmd_sweep(args):
     res = diagram(model, values, name=name, periods=args.periods, transient=transient,
                   start=args.z0, gains=k, control_after=args.control_after,
                   workers=args.workers, scheduler=args.scheduler, period_tol=args.period_tol,
-                  max_period=args.max_period, progress=not args.json and sys.stderr.isatty())
+                  max_period=args.max_period, progress=not args.json and sys.stderr.isatty(),
+                  delay=delay)
     seconds = time.perf_counter() - t0
     res.to_npz(out)
     png = None if args.no_png else diagram_png(res, out[:-4] + ".png", coordinate=coordinate)
@@ -58,6 +61,8 @@ def cmd_sweep(args):
                "seconds": seconds,
                "detected_periods": {str(int(p)): int(c) for p, c in zip(periods, n_of)},
                "failed": int(np.sum(res.period == -1))}
+    if delay:
+        summary["actuation_delay"] = delay
     if args.json:
         return summary
     hist = ", ".join(f"{'failed' if p == '-1' else 'none' if p == '0' else 'period ' + p}: {c}"
@@ -65,7 +70,8 @@ def cmd_sweep(args):
     lines = [
         f"sweep of {res.values.size} points of {name} for {args.model}, {res.periods} periods "
         f"each, last {res.periods - res.transient} kept"
-        + ("" if k is None else f", control on from sample {res.control_after} ({how})"),
+        + ("" if k is None else f", control on from sample {res.control_after} ({how}"
+           + (f", actuation delay {delay:.6g})" if delay else ")")),
         f"  time              : {seconds:.3g} s",
         f"  detected on Pi2   : {hist}",
         f"  written           : {out}" + (f"\n                      {png}" if png else ""),
@@ -78,24 +84,27 @@ def cmd_sweep(args):
 
 
 def cmd_figures(args):
-    """figures --model FILE [--out DIR] [--mu MU] [--quick] (docs/ndof_commands.md)."""
+    """figures --model FILE [--out DIR] [--mu MU] [--delay D] [--quick]
+    (docs/ndof_commands.md)."""
     import sys
     from dataclasses import replace
 
     from grazing_control.studies.figures.near_grazing import DEFAULT, QUICK, make_ndof_figures
 
     model = load(args.model)
+    delay = delay_of(args, model)
     settings = replace(QUICK if args.quick else DEFAULT, mu=args.mu)
     out = args.out if args.out != "out/figures" else "out/figures_ndof"
     log = None if args.json else (lambda line: print(line, file=sys.stderr))
     numbers = make_ndof_figures(model, out, settings, model_file=args.model,
-                                workers=args.workers, log=log)
+                                workers=args.workers, log=log, delay=delay)
     if args.json:
         return nulls(numbers)
     m = numbers["multipliers"]
     lines = [f"n-DOF figures of {args.model} in {out}: ndof_diagram.png, ndof_multipliers.png, "
              "ndof_scene.png, ndof_figures.json",
-             f"  mu = {numbers['mu']:.6g} ({numbers['mu_chosen']})"]
+             f"  mu = {numbers['mu']:.6g} ({numbers['mu_chosen']})"
+             + (f", actuation delay {delay:.6g}" if delay else "")]
     lines += [f"  {label:16s}: {_scaling_text(entry)}" for label, entry in m.items()
               if isinstance(entry, dict)]
     sc = numbers["scene"]

@@ -14,8 +14,8 @@ kick v[i_a] += k^T (X - X**) at Pi2, coordinates x0..x{n-1}, v0..v{n-1}), given 
 * ``--free-gain NAME=VALUE``: the member of the family whose gain on coordinate NAME
   is VALUE (for n = 1, ``--free-gain v0=C2`` is the 1-DOF ``--c2 C2``).
 
-With ``--delay D`` (design, orbit, continue, simulate) the kick k^T z of the sample acts D
-later, 0 <= D < T - pi2_offset/omega (:func:`delay_of`): the family members of ``--mu``
+With ``--delay D`` (every command here: design, orbit, continue, simulate, sweep,
+figures) the kick k^T z of the sample acts D later, 0 <= D < T - pi2_offset/omega (:func:`delay_of`): the family members of ``--mu``
 and ``--free-gain`` are the delayed kick's (docs/theory_ndof.md §14), as ``design --delay``
 gives them.
 
@@ -195,8 +195,6 @@ def _given(argv, flag):
 
 #: The commands of this module (``run --model`` is the launcher's: ros/launcher.py).
 COMMANDS = ("design", "orbit", "continue", "simulate", "sweep", "figures")
-#: The commands that take ``--delay`` with ``--model`` (the delayed kick, §14).
-DELAY_COMMANDS = ("design", "orbit", "continue", "simulate")
 
 
 def check_options(args, argv) -> None:
@@ -207,7 +205,7 @@ def check_options(args, argv) -> None:
     model = getattr(args, "model", None)
     if model is not None:
         bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
-               and not (f == "--delay" and args.command in DELAY_COMMANDS)
+               and f != "--delay"          # every model command takes the delayed kick
                and not (f == "--sensor-rate" and args.command == "design")]
         # (the delayed kick; the predicted spread's position-only sensor)
         if bad:
@@ -217,6 +215,8 @@ def check_options(args, argv) -> None:
                                  "--free-gain")
     elif getattr(args, "rig", None) is None:   # a rig of n masses takes them (cli/rig.py)
         bad = [f for f in MODEL_OPTIONS if _given(argv, f)]
+        if args.command == "figures" and _given(argv, "--delay"):
+            bad.append("--delay")        # the study's figures run no controller to delay
         if bad:
             raise ParameterError(f"{', '.join(bad)} {'needs' if len(bad) == 1 else 'need'} "
                                  "--model FILE (an n-DOF model file, docs/ndof_model.md)")
@@ -295,11 +295,6 @@ def gains_of(args, model):
             raise ParameterError(f"--delay {given!r} is invalid with --gains {args.gains}: "
                                  f"the file's actuation_delay is {file_delay!r} (give the "
                                  "same, or none)")
-        if file_delay and getattr(args, "command", None) not in DELAY_COMMANDS:
-            raise ParameterError(f"--gains {args.gains}: actuation_delay={file_delay!r} is "
-                                 f"invalid for {args.command}, which runs the kick on Pi2 "
-                                 "(valid: 0; the delayed kick runs in orbit, continue, "
-                                 "simulate)")
         args.delay = file_delay
         delay_of(args, model)
         if getattr(args, "cancel_first_markov", None) is not None or \
@@ -386,9 +381,13 @@ def dispatch(one_dof, model_file):
 
 
 def add_sweep_options(parser) -> None:
-    """--model, the gains, --z0 and --coordinate of ``sweep --model``."""
+    """--model, the gains, --delay, --z0 and --coordinate of ``sweep --model`` (--delay:
+    also the 1-DOF sweep's, the actuation delay of its gains)."""
+    from .common import add_delay
+
     add_model_option(parser)
     add_gain_options(parser)
+    add_delay(parser)
     add_start_option(parser)
     parser.add_argument("--coordinate", metavar="NAME",
                         help="with --model: the Pi2 coordinate drawn in the PNG, x0.. or v0.. "
@@ -398,10 +397,15 @@ def add_sweep_options(parser) -> None:
 
 
 def add_figures_options(parser) -> None:
-    """--model and --mu of ``figures --model``."""
+    """--model, --mu and --delay of ``figures --model``."""
     add_model_option(parser)
     parser.add_argument("--mu", type=_finite,
                         help="with --model: the design family's member drawn (default: the "
                              "middle of the widest admissible interval)")
+    parser.add_argument("--delay", type=_finite, default=0.0,
+                        help="with --model: the kick k^T z acts this long after the Pi2 "
+                             "sample, 0 <= delay < T - pi2_offset/omega: the delayed "
+                             "family's member, its multipliers near grazing, diagram and "
+                             "scene (docs/theory_ndof.md section 14); default 0")
 
 

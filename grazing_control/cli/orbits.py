@@ -3,10 +3,11 @@ Pi2 samples of a scene, on the 1-DOF study's model or a model file's (``--model`
 :mod:`.model_file`; docs/commands.md, docs/ndof_commands.md).
 
 Each command reads its model (the 1-DOF parameters of :mod:`.common` or the file), asks
-the model's own route for the numbers (the 1-DOF closed form: ``dynamics.orbits.orbits``,
-``continuation.continue_11``, ``simulation.simulate``; a model file: the branch in the
-impact phase or shooting over ``ModalMap``, ``studies.near_grazing``), and prints them through
-one report: :func:`orbit_lines`, :func:`branch_lines`, :func:`impact_lines`.
+the one entry of its concept for the numbers (the 1/1 orbit and its branch:
+``dynamics.orbits.one_one.orbit`` and ``branch``, which run the 1-DOF closed form or the
+model file's branch in the impact phase, or shooting; the simulation:
+``simulation.simulate`` or ``studies.near_grazing.scene``), and prints them through one
+report: :func:`orbit_lines`, :func:`branch_lines`, :func:`impact_lines`.
 """
 
 from __future__ import annotations
@@ -19,12 +20,14 @@ import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
+from grazing_control.dynamics.orbits import one_one
+
 from .common import complex_list, gains_of, nulls, params_of, require_finite
 from .model_file import control_of, delay_of, fmt_vec, header, load
 from .model_file import gains_of as vector_gains_of
 
 __all__ = ["cmd_orbit", "cmd_continue", "cmd_simulate", "orbit_lines", "branch_lines",
-           "impact_lines", "continuation_values"]
+           "impact_lines"]
 
 
 def orbit_lines(delta_d, control, impact_phase, v_minus, pi2, multipliers, stable, branch,
@@ -69,20 +72,19 @@ def impact_lines(counts, periods: int, word: str = "impacts") -> list:
 # ---------------------------------------------------------------------------- orbit
 def cmd_orbit(args):
     """orbit --delta-d DD [--c2 ..] or --model FILE [gains]: the 1/1 orbit and its
-    multipliers, found by the model's route (:func:`_study_orbit`, :func:`_file_orbit`)."""
+    multipliers by the one entry (``one_one.orbit``), the model and the report's words
+    read per model (:func:`_study_orbit`, :func:`_file_orbit`)."""
     out, report = (_file_orbit if args.model is not None else _study_orbit)(args)
     return out if args.json else orbit_lines(**report)
 
 
 def _study_orbit(args):
-    """The 1-DOF study's orbit (impact-phase shooting, ``dynamics.orbits.orbits``; or the
-    perturbation series' multipliers): its JSON and its report's fields."""
-    from grazing_control.dynamics.orbits.orbits import orbit_11
-
+    """The 1-DOF study's orbit (the one entry, its closed form; or the perturbation
+    series' multipliers): its JSON and its report's fields."""
     p = params_of(args, args.delta_d)
     gains = gains_of(args, p)
     t0 = time.perf_counter()
-    o = orbit_11(p, gains)
+    o = one_one.orbit(p, gains)
     lam = o.multipliers
     cost = time.perf_counter() - t0
     if args.method == "perturbation":
@@ -98,10 +100,10 @@ def _study_orbit(args):
         lam = perturbation_multipliers(p, gains)
         cost = time.perf_counter() - t0
     out = {
-        "delta_d": o.params.delta_d,
+        "delta_d": o.delta_d,
         "impact_phase": o.impact_phase,
         "v_minus": o.v_minus,
-        "section_pi2": list(o.pi2),
+        "section_pi2": o.physical.tolist(),
         "multipliers": complex_list(lam),
         "stable": bool(np.max(np.abs(lam)) < 1.0),
         "branch": o.branch,
@@ -110,13 +112,13 @@ def _study_orbit(args):
     }
     if gains is not None and gains.delay:
         out.update(c1=gains.c1, c2=gains.c2, actuation_delay=gains.delay,
-                   section_pi2_deviation=list(o.pi2_deviation))
+                   section_pi2_deviation=o.state.tolist())
     require_finite(out, "orbit")
     ctl = f" with c1={gains.c1:.6g}, c2={gains.c2:.6g}" if gains else " (uncontrolled)"
     if gains is not None and gains.delay:
         ctl += f", actuation delay {gains.delay:.6g}"
-    return out, dict(delta_d=o.params.delta_d, control=ctl, impact_phase=o.impact_phase,
-                     v_minus=o.v_minus, pi2=f"({o.pi2[0]:.15g}, {o.pi2[1]:.15g})",
+    return out, dict(delta_d=o.delta_d, control=ctl, impact_phase=o.impact_phase,
+                     v_minus=o.v_minus, pi2=f"({o.physical[0]:.15g}, {o.physical[1]:.15g})",
                      multipliers=f"{', '.join(f'{z:.6g}' for z in lam)}  "
                                  f"({args.method}, {cost:.3g} s)",
                      stable=out["stable"], branch=_BRANCH_TEXT.get(o.branch, o.branch))
@@ -135,15 +137,16 @@ def _orbit_json(o):
             "v_minus": o.v_minus, "section_pi2": o.physical.tolist(),
             "section_pi2_deviation": o.state.tolist(),
             "multipliers": complex_list(o.multipliers), "stable": o.stable,
-            "guess": o.guess, "branch": "grazing" if o.near_grazing else "other",
+            "guess": o.route, "branch": o.branch,
             "prediction_offset": o.prediction_offset if math.isfinite(o.prediction_offset)
             else None}
 
 
 def _file_orbit(args):
-    """A model file's orbit (docs/ndof_commands.md): on the branch in the impact phase, or
-    by shooting from the local map's prediction; its JSON and its report's fields."""
-    from grazing_control.studies.near_grazing.branch import EXPLICIT, grazing_side, orbit_11, with_delta_d
+    """A model file's orbit (docs/ndof_commands.md; the one entry: on the branch in the
+    impact phase, or by shooting from the local map's prediction): its JSON and its
+    report's fields."""
+    from grazing_control.dynamics.orbits.near_grazing import grazing_side, with_delta_d
 
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = vector_gains_of(args, model)
@@ -151,7 +154,7 @@ def _file_orbit(args):
     t0 = time.perf_counter()
     side = grazing_side(model, k, delay=delay)
     try:
-        o = orbit_11(model, k, delay=delay)
+        o = one_one.orbit(model, k, delay=delay)
     except RuntimeError as exc:
         if side * args.delta_d < 0.0:
             raise RuntimeError(f"{exc}; note: the local map puts the 1/1 orbit born at "
@@ -167,7 +170,7 @@ def _file_orbit(args):
         out["actuation_delay"] = delay
     ctl = " (uncontrolled)" if k is None else f" with k = {fmt_vec(k, 8)} ({how}" + \
         (f", mu = {mu:.8g})" if mu is not None else ")") + _delay_text(delay)
-    explicit = o.guess == EXPLICIT
+    explicit = o.route == one_one.EXPLICIT
     route = "the factored monodromy" if explicit else "shooting"
     born = "born at grazing (" + ("on the branch from psi = 0" if explicit else
                                   "the local map's prediction")
@@ -180,7 +183,7 @@ def _file_orbit(args):
                                  f"{seconds:.3g} s)",
                      stable=o.stable,
                      branch=born if o.near_grazing else "another 1/1 orbit, not the one born "
-                     "at grazing (docs/ndof_commands.md)", found=o.guess)
+                     "at grazing (docs/ndof_commands.md)", found=o.route)
 
 
 def _delay_text(delay: float) -> str:
@@ -190,8 +193,9 @@ def _delay_text(delay: float) -> str:
 
 # ---------------------------------------------------------------------------- continue
 def cmd_continue(args):
-    """continue --from A --to B [--c2 ..] or --model FILE [gains]: the 1/1 branch, found
-    by the model's route (:func:`_study_branch`, :func:`_file_branch`)."""
+    """continue --from A --to B [--c2 ..] or --model FILE [gains]: the 1/1 branch by the
+    one entry (``one_one.branch``), the model and the report's words read per model
+    (:func:`_study_branch`, :func:`_file_branch`)."""
     out, title, points, bifurcations, notes = \
         (_file_branch if args.model is not None else _study_branch)(args)
     if args.json:
@@ -200,33 +204,29 @@ def cmd_continue(args):
 
 
 def _study_branch(args):
-    """The 1-DOF study's branch (``continuation.continue_11``, in the impact phase) at the
-    points of :func:`continuation_values`, as a model file's (issue 32): its JSON, the
+    """The 1-DOF study's branch (the one entry, its closed form in the impact phase) at the
+    points of ``one_one.continuation_values``, as a model file's (issue 32): its JSON, the
     report's title, points (Delta d, v-, multipliers, stable), bifurcations (type,
     Delta d) and notes."""
-    from grazing_control.dynamics.orbits.continuation import continue_11
-
     p = params_of(args)
     gains = gains_of(args, p)
-    values = continuation_values(args.start, args.stop, args.points)
-    branch = continue_11(p, args.start, args.stop, gains, points=args.points, check=True,
-                         values=values)
+    branch = one_one.branch(p, gains, args.start, args.stop, args.points)
     out = {
         "branch": [
-            {"delta_d": b.delta_d, "v_minus": b.v_minus,
+            {"delta_d": b.value, "v_minus": b.v_min,
              "multipliers": complex_list(b.multipliers), "stable": b.stable}
             for b in branch.points
         ],
         "bifurcations": [
-            {"type": b.type, "delta_d": b.delta_d, "multipliers": complex_list(b.multipliers)}
+            {"type": b.type, "delta_d": b.value, "multipliers": complex_list(b.multipliers)}
             for b in branch.bifurcations
         ],
     }
     return (out,
             f"1/1 branch, {len(branch.points)} points from Delta d = {args.start:g} to "
             f"{args.stop:g}",
-            [(b.delta_d, b.v_minus, b.multipliers, b.stable) for b in branch.points],
-            [(b.type, b.delta_d) for b in branch.bifurcations], [])
+            [(b.value, b.v_min, b.multipliers, b.stable) for b in branch.points],
+            [(b.type, b.value) for b in branch.bifurcations], [])
 
 
 #: Impact velocity, in units of d* omega, below which a point found by shooting is
@@ -235,41 +235,20 @@ def _study_branch(args):
 UNRESOLVED_V = 1e-5
 
 
-def continuation_values(start: float, stop: float, points: int) -> np.ndarray:
-    """Delta d from ``start`` to ``stop``: log-spaced in |Delta d| when both have one sign
-    (points crowd towards grazing; ``stop`` = 0: down to 1e-12 |start|), else linear."""
-    if points < 2:
-        raise ParameterError(f"points={points!r} is invalid: valid range is points >= 2")
-    if start == stop:
-        raise ParameterError("--from and --to must differ")
-    if start != 0.0 and stop == 0.0:
-        stop = start * 1e-12
-    if start * stop > 0.0:
-        return math.copysign(1.0, start) * np.geomspace(abs(start), abs(stop), points)
-    return np.linspace(start, stop, points)
-
-
 def _file_branch(args):
-    """A model file's branch (docs/ndof_commands.md): in the impact phase when the start is
-    on the branch born at grazing, else by shooting; as :func:`_study_branch`."""
-    from grazing_control.dynamics.orbits.continuation import continue_orbit
-    from grazing_control.dynamics.orbits.modal_branch import continue_branch
-    from grazing_control.dynamics.maps.modal_map import ModalMap
-    from grazing_control.studies.near_grazing.branch import EXPLICIT, fold_beyond, orbit_11, with_delta_d
+    """A model file's branch (docs/ndof_commands.md; the one entry: in the impact phase
+    when the start is on the branch born at grazing, else by shooting); as
+    :func:`_study_branch`."""
+    from grazing_control.dynamics.orbits.near_grazing import with_delta_d
 
-    values = continuation_values(args.start, args.stop, args.points)
+    values = one_one.continuation_values(args.start, args.stop, args.points)
     model = with_delta_d(load(args.model), float(values[0]))
     k, mu, how = vector_gains_of(args, model)
     delay = delay_of(args, model)
     t0 = time.perf_counter()
-    first = orbit_11(model, k, delay=delay)
-    # the branch born at grazing: explicit in the impact phase, every point exact to
-    # rounding (issue 32: shooting returned points 1e-2 off near |Delta d| = 3e-8); with
-    # a delay the delayed kick's, its impacts outside the delay (docs/theory_ndof.md §14)
-    explicit = first.guess == EXPLICIT
-    branch = continue_branch(model, k, values, delay=delay) if explicit else \
-        continue_orbit(ModalMap(model, k, delay), "delta_d", values, first.state)
-    fold = fold_beyond(model, k, branch, float(values[-1]), delay)
+    branch = one_one.branch(model, k, args.start, args.stop, args.points, delay=delay)
+    first, fold = branch.first, branch.fold
+    explicit = branch.route == "impact phase"
     seconds = time.perf_counter() - t0
     # by shooting, an impact with v-^2 near the gap's rounding is resolved to a few
     # digits only (docs/ndof_commands.md, "Near grazing"): say which points that is
@@ -469,7 +448,8 @@ def _file_simulation(args):
     """A model file's simulation on Pi2 (docs/ndof_commands.md; its stop is rigid): its
     JSON and its report's lines."""
     from grazing_control.oscillator.ndof.flow import NdofFlow
-    from grazing_control.studies.near_grazing.branch import OrbitNotFound, orbit_11, with_delta_d
+    from grazing_control.dynamics.orbits.near_grazing import with_delta_d
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
     from grazing_control.studies.near_grazing.scene import simulate_pi2
 
     if args.contact != "rigid" or _stop_options(args):
@@ -490,7 +470,7 @@ def _file_simulation(args):
     orbit_note = ""
     if k is not None:
         try:
-            o = orbit_11(model, k, delay=delay)
+            o = one_one.orbit(model, k, delay=delay)
             dist = float(np.linalg.norm(samples[-1] - o.state))
             out.update(distance_to_orbit=dist, orbit_deviation=o.state.tolist(),
                        orbit_multipliers=complex_list(o.multipliers))

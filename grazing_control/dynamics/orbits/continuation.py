@@ -114,7 +114,7 @@ def continue_11(p: OscillatorParams, start: float, stop: float, gains: Gains | N
         The points' Delta d instead of the grid in psi (each one's phase by
         :func:`~grazing_control.dynamics.orbits.orbits.find_branch_phase`; a Delta d of 0 is
         the grazing orbit's phase 0 and is left out): ``grazing continue``'s grid, the same
-        for every model (cli/orbits.py ``continuation_values``, issue 32: the n = 1 model
+        for every model (``one_one.continuation_values``, issue 32: the n = 1 model
         file gives the 1-DOF points).
 
     Returns

@@ -1,8 +1,9 @@
 """The controlled 1/1 branch of a model file (any n), explicit in the impact phase.
 
-The model file's implementation of the 1/1 branch beside the 1-DOF closed form's
-(:mod:`.orbits`: ``orbit_11``, ``branch_point``); for n = 1 the two agree to rounding
-(tests/test_n1_model_file.py).
+The model file's implementation of the 1/1 branch behind the one entry
+(:mod:`.one_one`: ``orbit``, ``branch``), beside the 1-DOF closed form's (:mod:`.orbits`:
+``orbit_11``, ``branch_point``); for n = 1 the two agree to rounding
+(tests/test_one_one.py, tests/test_n1_model_file.py).
 
 docs/theory_ndof.md §5 (the n-DOF form of docs/theory.md §5). Take the wall as the
 section: an impact at forcing phase tau* + psi, just before it the deviation
@@ -42,12 +43,12 @@ from grazing_control.dynamics.design.family import (Actuation, _flow, _gains, _t
                                                      _vectors, smooth_map)
 from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
 
-__all__ = ["BranchPoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold",
+__all__ = ["PhasePoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold",
            "pi2_factors", "structured_multipliers", "branch_multipliers", "other_contacts",
            "continue_branch", "RETURN_MARGIN"]
 
 
-class BranchPoint(NamedTuple):
+class PhasePoint(NamedTuple):
     """One 1/1 orbit on the branch: impact phase psi (after tau*), wall offset Delta d,
     impact velocity v-, the deviation z- just before the impact, its monodromy J there
     (None where v- <= 0: not a physical orbit), and the Pi2 state (before the kick) of
@@ -82,7 +83,7 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
 
 
-def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> BranchPoint:
+def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> PhasePoint:
     """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)).
 
     Periodicity (M - I) z- = (1 + r) v- M e_v gives z- = (1 + r) v- (e_v + R e_v),
@@ -111,7 +112,7 @@ def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> Bra
     flow = _flow(model)
     jac = m @ saltation_matrix(flow, flow.tau_star + psi, z) if v > 0.0 else None
     z2 = pm @ (z - (1.0 + r) * v * ev)
-    return BranchPoint(psi, dd, v, z, jac, z2)
+    return PhasePoint(psi, dd, v, z, jac, z2)
 
 
 def branch_coefficients(model: NdofModel, gains, delay: float = 0.0):
@@ -142,7 +143,7 @@ def branch_coefficients(model: NdofModel, gains, delay: float = 0.0):
 
 
 def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
-             delay: float = 0.0) -> BranchPoint:
+             delay: float = 0.0) -> PhasePoint:
     """The 1/1 orbit born at grazing at the wall offset ``delta_d`` (< 0), v- > 0.
 
     Walks |psi| outwards on both sides of grazing (1e-12 .. psi_max, logarithmic) and
@@ -224,7 +225,7 @@ def _sigma(model: NdofModel, psi: float) -> float:
     return (model.pi2_offset - psi) / model.omega
 
 
-def pi2_factors(model: NdofModel, gains, point: BranchPoint, delay: float = 0.0):
+def pi2_factors(model: NdofModel, gains, point: PhasePoint, delay: float = 0.0):
     """(B, p, q, s): the Pi2 monodromy of the branch orbit as DP = B + s p q^T.
 
     From Pi2 (before the kick) one period is: the kick G = I + b k^T, the flow
@@ -312,7 +313,7 @@ def _conjugate_pairs(lam: np.ndarray) -> np.ndarray:
     return np.concatenate([real, pairs, np.conj(pairs)]).astype(complex)
 
 
-def branch_multipliers(model: NdofModel, gains, point: BranchPoint,
+def branch_multipliers(model: NdofModel, gains, point: PhasePoint,
                        delay: float = 0.0) -> np.ndarray:
     """The Floquet multipliers of the branch orbit (:func:`structured_multipliers` on
     :func:`pi2_factors`, det J = e^{tr(A) T} r^2 (1 + k^T b), the exact determinant
@@ -326,7 +327,7 @@ def branch_multipliers(model: NdofModel, gains, point: BranchPoint,
     return structured_multipliers(*pi2_factors(model, k, point, delay), det)
 
 
-def other_contacts(model: NdofModel, gains, point: BranchPoint, delay: float = 0.0) -> int:
+def other_contacts(model: NdofModel, gains, point: PhasePoint, delay: float = 0.0) -> int:
     """How many contacts the branch orbit makes besides its one impact (0 for a true
     1/1 orbit), by the certified search of the exact flow (``oscillator.ndof.impact``).
 
@@ -372,7 +373,7 @@ def other_contacts(model: NdofModel, gains, point: BranchPoint, delay: float = 0
 
 
 # ------------------------------------------------- continuation along the branch
-def _orbit_point(model: NdofModel, k, point: BranchPoint, delay: float = 0.0) -> OrbitPoint:
+def _orbit_point(model: NdofModel, k, point: PhasePoint, delay: float = 0.0) -> OrbitPoint:
     return OrbitPoint(point.delta_d, np.array(point.pi2_state),
                       branch_multipliers(model, k, point, delay), 1, point.v_minus)
 

@@ -7,7 +7,7 @@
   near grazing, uncontrolled (:func:`grazing_control.studies.sweeps.model_file.diagram`);
 * (b) ``ndof_multipliers.png``: max |lambda| of the 1/1 orbit born at grazing against
   |Delta d| on log-log axes, on the side of grazing where it exists
-  (:func:`grazing_control.studies.near_grazing.branch.grazing_side`) (:func:`grazing_control.studies.near_grazing.branch.multiplier_scaling`):
+  (:func:`grazing_control.dynamics.orbits.near_grazing.grazing_side`) (:func:`grazing_control.studies.near_grazing.scaling.multiplier_scaling`):
   uncontrolled, with a gain of the design family (bounded, the predicted limit
   :func:`grazing_control.dynamics.design.family.limit_multipliers` dashed) and with the gain
   that cancels only w^T N u and one that cancels w^T N u and G(1)
@@ -17,8 +17,11 @@
   distance to the controlled 1/1 orbit (:func:`grazing_control.studies.near_grazing.scene.control_scene`),
   like the study's Figs. 2(f, g).
 
-The numbers read off the panels go to ``ndof_figures.json``. The default settings keep
-the whole set under a minute on two cores.
+With an actuation ``delay`` (``grazing figures --model FILE --delay D``) the kick k^T z of
+the sample acts D later: the family member, its limit, the multipliers of (b) and the
+scene of (c) are the delayed kick's (docs/theory_ndof.md §14); the uncontrolled (a) is
+the same. The numbers read off the panels go to ``ndof_figures.json``. The default
+settings keep the whole set under a minute on two cores.
 """
 
 from __future__ import annotations
@@ -70,24 +73,25 @@ def _finite_or_none(x):
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def choose_mu(model) -> tuple[float, str]:
+def choose_mu(model, delay: float = 0.0) -> tuple[float, str]:
     """The family member drawn: the middle of the widest admissible interval of mu
     (docs/ndof_commands.md); without one, of the widest interval where only the
     impacting-side conditions hold, else where the controlled 1/1 orbit exists
-    (gamma1 > 0, on a grid of [-1, 1]); else 0."""
+    (gamma1 > 0, on a grid of [-1, 1]); else 0. The delayed kick's family with a
+    ``delay``."""
     from grazing_control.dynamics.design.family import admissible_mu, existence_coefficient
 
     for conditions, why in (("combined", "the middle of the widest admissible interval"),
                             ("impacting", "no admissible mu: the middle of the widest "
                                           "interval where |lambda0| < 1 and gamma1 > 0")):
-        intervals = [(float(a), float(b)) for a, b in admissible_mu(model, conditions)]
+        intervals = [(float(a), float(b)) for a, b in admissible_mu(model, conditions, delay)]
         if intervals:
             lo, hi = max(intervals, key=lambda iv: iv[1] - iv[0])
             if math.isfinite(lo) and math.isfinite(hi):
                 return 0.5 * (lo + hi) + 0.0, why
             return (hi - 1.0 if math.isfinite(hi) else lo + 1.0), why
     grid = np.linspace(-1.0, 1.0, 41)
-    ok = np.array([existence_coefficient(model, mu) > 0.0 for mu in grid])
+    ok = np.array([existence_coefficient(model, mu, delay) > 0.0 for mu in grid])
     if ok.any():
         runs, start = [], None
         for i, flag in enumerate(list(ok) + [False]):
@@ -102,34 +106,38 @@ def choose_mu(model) -> tuple[float, str]:
     return 0.0, "mu = 0: the controlled 1/1 orbit exists for no mu in [-1, 1]"
 
 
-def markov_gain(model, mu: float, settings, smooth_branch: bool = True) -> np.ndarray:
+def markov_gain(model, mu: float, settings, smooth_branch: bool = True,
+                delay: float = 0.0) -> np.ndarray:
     """k(mu) + offset d: a gain that cancels w^T N u, and G(1) too with ``smooth_branch``
     (``family.cancel_first_markov``), |offset| = ``markov_offset`` |k(mu)|, of the
     sign for which the local map has a 1/1 orbit born at grazing (whether it exists for
-    d < d* depends on that sign; family's docstring)."""
+    d < d* depends on that sign; family's docstring); the delayed kick's with a ``delay``."""
     from grazing_control.dynamics.design.family import cancel_first_markov, gain_family
-    from grazing_control.studies.near_grazing.branch import predicted_orbit
+    from grazing_control.dynamics.orbits.near_grazing import predicted_orbit
 
-    size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu))), 1.0)
+    size = settings.markov_offset * max(float(np.linalg.norm(gain_family(model, mu, delay))),
+                                        1.0)
     candidates = [np.asarray(cancel_first_markov(model, mu, sign * size,
-                                                 smooth_branch=smooth_branch),
+                                                 smooth_branch=smooth_branch, delay=delay),
                              dtype=float) for sign in (1.0, -1.0)]
     for k in candidates:
-        if any(predicted_orbit(model, k, side * settings.fit_below)[0] is not None
+        if any(predicted_orbit(model, k, side * settings.fit_below, delay)[0] is not None
                for side in (-1.0, 1.0)):
             return k
     return candidates[0]
 
 
-def scaling_curves(model, settings: NdofFigureSettings, mu: float):
-    """The three curves of (b) with their fitted exponents and the predicted limit."""
+def scaling_curves(model, settings: NdofFigureSettings, mu: float, delay: float = 0.0):
+    """The three curves of (b) with their fitted exponents and the predicted limit (the
+    delayed kick's with a ``delay``)."""
     from grazing_control.dynamics.design.family import gain_family, limit_multipliers
-    from grazing_control.studies.near_grazing.branch import (fit_exponent, grazing_side,
-                                                     multiplier_scaling)
+    from grazing_control.dynamics.orbits.near_grazing import grazing_side
+    from grazing_control.studies.near_grazing.scaling import fit_exponent, multiplier_scaling
 
     sizes = np.geomspace(settings.scaling_from, settings.scaling_to, settings.scaling_points)
     cases = [("uncontrolled", None, "tab:red"),
-             (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu)), "tab:green")]
+             (f"design family, mu = {mu:.4g}", np.asarray(gain_family(model, mu, delay)),
+              "tab:green")]
     numbers = {}
     # w^T N u = 0 alone leaves the branch linear in psi (v- ~ |Delta d|): |Delta d|^-1/2;
     # with G(1) = 0 too the branch is smooth (v- ~ |Delta d|^1/2): |Delta d|^-1/4
@@ -137,14 +145,14 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
     for label, smooth, color in (("cancels only w^T N u", False, "tab:purple"),
                                  ("cancels w^T N u and G(1)", True, "tab:orange")):
         try:
-            cases.append((label, markov_gain(model, mu, settings, smooth), color))
+            cases.append((label, markov_gain(model, mu, settings, smooth, delay), color))
         except ParameterError as exc:   # n = 1: w^T N u = 0 is the whole family (Eq. 33)
             numbers[label] = {"error": " ".join(str(exc).split())}
-    limit = float(np.max(np.abs(limit_multipliers(model, mu))))
+    limit = float(np.max(np.abs(limit_multipliers(model, mu, delay))))
     curves = []
     for label, k, color in cases:
-        side = grazing_side(model, k, settings.fit_below)
-        sc = multiplier_scaling(model, k, side * sizes)
+        side = grazing_side(model, k, settings.fit_below, 0.0 if k is None else delay)
+        sc = multiplier_scaling(model, k, side * sizes, 0.0 if k is None else delay)
         big = sc.largest
         near = np.abs(sc.delta_d) <= settings.fit_below
         slope = fit_exponent(sc.delta_d[near], big[near])
@@ -162,7 +170,7 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
         if k is not None and label.startswith("design"):
             curve["limit"] = limit
             entry["predicted_limit"] = limit
-            entry["limit_multipliers"] = _complex_list(limit_multipliers(model, mu))
+            entry["limit_multipliers"] = _complex_list(limit_multipliers(model, mu, delay))
             if ok.any():
                 last = big[ok][np.argmin(np.abs(sc.delta_d[ok]))]
                 entry["difference_to_limit_at_smallest"] = float(abs(last - limit))
@@ -173,9 +181,11 @@ def scaling_curves(model, settings: NdofFigureSettings, mu: float):
 
 
 def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
-                      model_file: str = "", workers: int | None = None, log=None) -> dict:
-    """Compute and draw (a), (b), (c) of the module docstring into ``out``; returns the
-    numbers (also written to ``out/ndof_figures.json``)."""
+                      model_file: str = "", workers: int | None = None, log=None,
+                      delay: float = 0.0) -> dict:
+    """Compute and draw (a), (b), (c) of the module docstring into ``out``, the kick
+    ``delay`` after the sample; returns the numbers (also written to
+    ``out/ndof_figures.json``)."""
     from grazing_control.dynamics.design.family import gain_family
     from grazing_control.studies.sweeps.model_file import diagram
     from grazing_control.studies.sweeps.plot import diagram_png
@@ -187,13 +197,15 @@ def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
     out.mkdir(parents=True, exist_ok=True)
     say = log or (lambda line: None)
     if settings.mu is None:
-        mu, why = choose_mu(model)
+        mu, why = choose_mu(model, delay)
     else:
         mu, why = float(settings.mu), "given"
-    k = np.asarray(gain_family(model, mu), dtype=float)
+    k = np.asarray(gain_family(model, mu, delay), dtype=float)
     coord = f"x{model.i_w}"
     numbers = {"model": model_file, "n": model.n, "mu": mu, "mu_chosen": why,
                "gains": k.tolist(), "settings": asdict(settings)}
+    if delay:
+        numbers["actuation_delay"] = float(delay)
 
     say("(a) brute-force diagram on Pi2 against Delta d ...")
     values = np.linspace(settings.diagram_from, settings.diagram_to, settings.diagram_points)
@@ -208,7 +220,7 @@ def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
                           "failed": int(np.sum(dia.period == -1))}
 
     say("(b) multipliers of the 1/1 orbit against |Delta d| ...")
-    curves, scal = scaling_curves(model, settings, mu)
+    curves, scal = scaling_curves(model, settings, mu, delay)
     scaling_png(curves, out / "ndof_multipliers.png",
                 title=f"1/1 orbit by shooting; exponents fitted over |Delta d| <= "
                       f"{settings.fit_below:g}")
@@ -217,7 +229,7 @@ def make_ndof_figures(model, out, settings: NdofFigureSettings = DEFAULT, *,
     say("(c) control scene ...")
     sc = control_scene(model, k, delta_d=settings.scene_delta_d,
                        control_after=settings.scene_before,
-                       periods=settings.scene_before + settings.scene_after)
+                       periods=settings.scene_before + settings.scene_after, delay=delay)
     scene_png(sc, out / "ndof_scene.png", coordinate_index_=model.i_w, coordinate=coord)
     before = sc.impacts_per_period[:settings.scene_before]
     numbers["scene"] = {

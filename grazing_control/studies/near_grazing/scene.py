@@ -3,7 +3,7 @@
 The period map (:class:`~grazing_control.dynamics.maps.modal_map.ModalMap`) is iterated without
 control for ``control_after`` periods, then with the kick v[i_a] += k^T z at every Pi2
 sample. The distance of each sample to the controlled 1/1 orbit
-(:func:`.branch.orbit_11`, shooting) says whether, and how fast, the controller captures
+(the one entry :func:`grazing_control.dynamics.orbits.one_one.orbit`) says whether, and how fast, the controller captures
 the motion: near the orbit it shrinks like |lambda_max|^k.
 """
 
@@ -16,7 +16,9 @@ import numpy as np
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.params import ParameterError
 
-from .branch import OrbitNotFound, orbit_11, with_delta_d
+from grazing_control.dynamics.orbits import one_one
+from grazing_control.dynamics.orbits.near_grazing import with_delta_d
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 
 __all__ = ["Scene", "StreamLoop", "simulate_pi2", "control_scene", "stream_loop"]
 
@@ -66,16 +68,17 @@ def simulate_pi2(model, periods: int, start=None, gains=None, control_after: int
 
 
 def control_scene(model, gains, *, delta_d: float | None = None, control_after: int,
-                  periods: int, start=None) -> Scene:
-    """Run a scene (module docstring) and measure the distance to the controlled orbit."""
+                  periods: int, start=None, delay: float = 0.0) -> Scene:
+    """Run a scene (module docstring) and measure the distance to the controlled orbit;
+    the kick acts ``delay`` after each sample (the orbit is the delayed kick's)."""
     if delta_d is not None:
         model = with_delta_d(model, delta_d)
-    samples, counts = simulate_pi2(model, periods, start, gains, control_after)
+    samples, counts = simulate_pi2(model, periods, start, gains, control_after, delay)
     orbit = distance = None
     error = ""
     if gains is not None:
         try:
-            orbit = orbit_11(model, gains).state
+            orbit = one_one.orbit(model, gains, delay=delay).state
             distance = np.linalg.norm(samples - orbit, axis=1)
         except OrbitNotFound as exc:
             error = str(exc)

@@ -144,10 +144,14 @@ def cmd_sweep(args):
         grid[name] = values
     p = OscillatorParams(zeta=args.zeta, r=args.r, omega=args.omega, pi2_offset=args.pi2_offset)
     gains = None
+    delay = float(getattr(args, "delay", 0.0) or 0.0)
     if args.c2 is not None:
-        gains = Gains(degenerate_c1(p, args.c2) if args.c1 is None else args.c1, args.c2)
+        c1 = degenerate_c1(p, args.c2, delay) if args.c1 is None else args.c1
+        gains = Gains(c1, args.c2, delay)
     elif args.c1 is not None and "c2" not in grid:
         raise ParameterError("c1 given without c2: give both, or c2 alone (c1 from Eq. 38)")
+    if delay and gains is None:
+        raise ParameterError("--delay needs the gains: give --c2 (and optionally --c1)")
     if args.control_after is not None and gains is None and not ({"c1", "c2"} & set(grid)):
         raise ParameterError("--control-after needs the gains: give --c2 (or a c2 grid)")
     if gains is None and args.c1 is not None:  # c2 gridded, c1 fixed

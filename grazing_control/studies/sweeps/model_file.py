@@ -37,7 +37,8 @@ class NdofDiagram:
     """The kept Pi2 samples of every point (``samples``: (points, kept, 2n) deviations;
     ``reference``: (points, 2n) the grazing orbit's physical state on Pi2, so that the
     physical samples are ``samples + reference[:, None]``), impacts per kept period,
-    detected period (0: none up to max_period, -1: failed) and the failure messages."""
+    detected period (0: none up to max_period, -1: failed) and the failure messages;
+    ``delay``: the actuation delay of the kick (0: on Pi2)."""
 
     name: str
     values: np.ndarray
@@ -51,6 +52,7 @@ class NdofDiagram:
     transient: int
     control_after: int
     gains: np.ndarray | None
+    delay: float = 0.0
 
     def to_npz(self, path) -> None:
         """Write the arrays (and the settings as 0-d arrays) to an npz file."""
@@ -61,7 +63,8 @@ class NdofDiagram:
             period=self.period, errors=np.array(self.errors, dtype=str),
             periods=np.array(self.periods), transient=np.array(self.transient),
             control_after=np.array(self.control_after),
-            gains=np.array([]) if self.gains is None else self.gains)
+            gains=np.array([]) if self.gains is None else self.gains,
+            delay=np.array(self.delay))
 
 
 def _coordinates(n):
@@ -69,8 +72,10 @@ def _coordinates(n):
 
 
 def run_points(model, name, values, start, gains, periods, transient, control_after,
-               period_tol, max_period):
-    """Run the points ``values`` (one chunk); returns (samples, counts, period, errors)."""
+               period_tol, max_period, delay=0.0):
+    """Run the points ``values`` (one chunk); returns (samples, counts, period, errors).
+    The kick acts ``delay`` after each sample while the controller is on (``ModalMap``'s
+    exact delayed map, docs/theory_ndof.md §14), as ``grazing simulate --model --delay``."""
     m = periods - transient
     n2 = 2 * model.n
     samples = np.full((len(values), m, n2), np.nan)
@@ -81,7 +86,8 @@ def run_points(model, name, values, start, gains, periods, transient, control_af
         try:
             mj = dataclasses.replace(model, **{name: float(value)})
             free = ModalMap(mj)
-            ctl = ModalMap(mj, gains) if gains is not None and control_after >= 0 else None
+            ctl = ModalMap(mj, gains, delay) if gains is not None and control_after >= 0 \
+                else None
             z = np.array(start, dtype=float)
             for k in range(periods):
                 pmap = ctl if ctl is not None and k >= control_after else free
@@ -103,7 +109,8 @@ def run_points(model, name, values, start, gains, periods, transient, control_af
 def diagram(model, values, *, name: str = "delta_d", periods: int, transient: int,
             start=None, gains=None, control_after: int | None = None,
             workers: int | None = None, scheduler=None, period_tol: float = 1e-10,
-            max_period: int | None = None, progress: bool = False) -> NdofDiagram:
+            max_period: int | None = None, progress: bool = False,
+            delay: float = 0.0) -> NdofDiagram:
     """Simulate every value of ``name`` and keep its Pi2 samples after the transient.
 
     Parameters
@@ -119,6 +126,9 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
     gains : array_like, optional
         2n gains k of the kick v[i_a] += k^T z; on from sample ``control_after``
         (default 0 when gains are given).
+    delay : float
+        The kick acts this long after each sample (0 <= delay < T at every point;
+        docs/theory_ndof.md §14); ignored without gains.
     workers : int, optional
         Local processes (default: all cores); ignored with ``scheduler``.
     scheduler : str or distributed.Client, optional
@@ -147,10 +157,13 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
         if k.shape != (n2,) or not np.all(np.isfinite(k)):
             raise ParameterError(f"gains are invalid: expected {n2} finite values")
     after = -1 if k is None else (0 if control_after is None else int(control_after))
-    for v in vals:   # every point's model is valid before anything runs
-        dataclasses.replace(model, **{name: float(v)})
+    for v in vals:   # every point's model (and its delayed kick) is valid before anything runs
+        mv = dataclasses.replace(model, **{name: float(v)})
+        if k is not None:
+            ModalMap(mv, k, delay)
     args = (model, name)
-    rest = (z0, k, int(periods), int(transient), after, float(period_tol), max_period)
+    delay = 0.0 if k is None else float(delay)
+    rest = (z0, k, int(periods), int(transient), after, float(period_tol), max_period, delay)
     m = periods - transient
     samples = np.full((vals.size, m, n2), np.nan)
     counts = np.zeros((vals.size, m), dtype=np.int32)
@@ -195,7 +208,7 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
         flow = NdofFlow.of(dataclasses.replace(model, **{name: float(v)}))
         reference[j] = flow.to_physical(flow.tau2, np.zeros(n2))
     return NdofDiagram(name, vals, _coordinates(model.n), samples, reference, counts, period,
-                       tuple(errors), int(periods), int(transient), after, k)
+                       tuple(errors), int(periods), int(transient), after, k, delay)
 
 
 def _run_dask(scheduler, index, vals, args, rest, store):

@@ -1,4 +1,7 @@
-"""The 1/1 orbit of an n-DOF model near grazing: prediction, shooting, multipliers vs Delta d.
+"""A model file's 1/1 orbit near grazing (any n): the local map's prediction, and shooting
+from it where the branch explicit in the impact phase has no orbit; the model file's
+implementation behind the one entry :func:`.one_one.orbit` (issue 32; moved from
+studies/near_grazing/branch.py).
 
 The prediction is the local map near grazing of docs/theory_ndof.md ("Local map near
 grazing"), written on Pi2 and carried to order H (docs/ndof_commands.md, "The starting
@@ -28,60 +31,25 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import NamedTuple
 
 import numpy as np
 
 from grazing_control.dynamics.maps.modal_map import ModalMap
+from grazing_control.dynamics.orbits.one_one import EXPLICIT, Orbit11
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 from grazing_control.dynamics.orbits.shooting import (ShootingFailed, find_periodic,
-                                               floquet_multipliers)
+                                                      floquet_multipliers)
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["fold_beyond", "OrbitNotFound", "NdofOrbit", "Scaling", "with_delta_d", "kick_matrix",
-           "kick_vector",
-           "smooth_map", "local_map", "predicted_orbit", "grazing_side", "monodromy_det", "orbit_11",
-           "multiplier_scaling", "fit_exponent"]
+__all__ = ["fold_beyond", "with_delta_d", "kick_matrix", "kick_vector", "smooth_map",
+           "local_map", "predicted_orbit", "grazing_side", "model_file_orbit", "NEAR"]
 
 TWO_PI = 2.0 * math.pi
 #: An orbit within this relative distance of the local map's prediction is the one born
 #: at grazing (measured offsets: O(sqrt|Delta d|), below 1e-2 at |Delta d| = 1e-4 on the
 #: shipped models and a 3-mass chain; another 1/1 orbit is O(1) or more away).
 NEAR = 0.25
-
-
-class OrbitNotFound(RuntimeError):
-    """No 1/1 orbit near grazing was found from any of the starting guesses."""
-
-
-class NdofOrbit(NamedTuple):
-    """A 1/1 orbit: Pi2 state (deviation, before the kick), its physical value, the
-    Floquet multipliers (decreasing modulus), impact time since the sample, phase and
-    velocity v-, which starting guess converged, and the relative distance of the orbit
-    to the local map's prediction (inf without one): the orbit is the one born at
-    grazing when it is small (:attr:`near_grazing`, below :data:`NEAR`), or when it was
-    found on the branch explicit in the impact phase, connected to psi = 0 (``guess``
-    :data:`EXPLICIT`: born at grazing by construction)."""
-
-    delta_d: float
-    state: np.ndarray
-    physical: np.ndarray
-    multipliers: np.ndarray
-    monodromy: np.ndarray
-    impact_dt: float
-    impact_phase: float
-    v_minus: float
-    guess: str
-    prediction_offset: float = math.inf
-
-    @property
-    def stable(self) -> bool:
-        return bool(np.max(np.abs(self.multipliers)) < 1.0)
-
-    @property
-    def near_grazing(self) -> bool:
-        """The orbit is the one born at grazing, not another 1/1 orbit."""
-        return self.guess == EXPLICIT or bool(self.prediction_offset < NEAR)
 
 
 def with_delta_d(model, delta_d: float):
@@ -226,7 +194,7 @@ def grazing_side(model, gains=None, size: float = 1e-6, delay: float = 0.0) -> f
     return min(found)[1] if found else -1.0
 
 
-def monodromy_det(model, gains, impacts: int, delay: float = 0.0) -> float:
+def _monodromy_det(model, gains, impacts: int, delay: float = 0.0) -> float:
     """det of DP over one period with ``impacts`` impacts: det Phi(T) = e^{T tr A} =
     e^{-T tr(M^-1 C)}, det S = r^2 per impact (the saltation matrix, docs/theory_ndof_flow.md)
     and det K = 1 + k^T b (matrix determinant lemma; b of :func:`kick_matrix`, with an
@@ -239,7 +207,7 @@ def monodromy_det(model, gains, impacts: int, delay: float = 0.0) -> float:
 
 
 def _multipliers(pmap, model, gains, monodromy, impacts):
-    """Floquet multipliers; the exact determinant (the map's, else :func:`monodromy_det`)
+    """Floquet multipliers; the exact determinant (the map's, else :func:`_monodromy_det`)
     keeps the small multiplier of a 2x2 monodromy accurate when the large one grows like
     1/v- (dynamics/shooting.floquet_multipliers). None (no product formula) with a
     sticking impact or an impact inside the actuation delay (docs/theory_delay.md (D3))."""
@@ -250,18 +218,26 @@ def _multipliers(pmap, model, gains, monodromy, impacts):
         jd = getattr(pmap, "jacobian_det", None)
         det = jd(1, len(impacts)) if jd is not None else None
         if det is None:
-            det = monodromy_det(model, gains, len(impacts), delay)
+            det = _monodromy_det(model, gains, len(impacts), delay)
     return floquet_multipliers(monodromy, det)
-
-
-#: The name of the route in :attr:`NdofOrbit.guess` for an orbit of the explicit branch.
-EXPLICIT = "impact phase (the branch explicit in psi)"
 
 
 def _offset(state, pred) -> float:
     """Relative distance of an orbit's Pi2 state to the local map's prediction."""
     return math.inf if pred is None else float(
         np.linalg.norm(state - pred) / max(np.linalg.norm(pred), 1e-300))
+
+
+def _orbit(model, state, multipliers, monodromy, dt, phase, v_minus, route,
+           offset) -> Orbit11:
+    """The one result type of the 1/1 orbit (:class:`.one_one.Orbit11`): born at grazing
+    when found on the explicit branch (connected to psi = 0 by construction) or within
+    :data:`NEAR` of the local map's prediction, else 'other'."""
+    flow = NdofFlow.of(model)
+    born = route == EXPLICIT or offset < NEAR
+    return Orbit11(model.delta_d, state, flow.to_physical(flow.tau2, state), multipliers,
+                   monodromy, float(dt), float(phase), float(v_minus),
+                   "grazing" if born else "other", route, offset)
 
 
 def _on_branch(model, gains, pred, delay: float = 0.0):
@@ -285,17 +261,17 @@ def _on_branch(model, gains, pred, delay: float = 0.0):
     flow = NdofFlow.of(model)
     sigma = (model.pi2_offset - bp.psi) / model.omega
     state = np.array(bp.pi2_state)
-    orbit = NdofOrbit(model.delta_d, state, flow.to_physical(flow.tau2, state),
-                      branch_multipliers(model, k, bp, delay), B + s * np.outer(p, q),
-                      float(model.period - sigma), float((flow.tau_star + bp.psi) % TWO_PI),
-                      float(bp.v_minus), EXPLICIT, _offset(state, pred))
-    return orbit, None
+    return _orbit(model, state, branch_multipliers(model, k, bp, delay),
+                  B + s * np.outer(p, q), model.period - sigma,
+                  (flow.tau_star + bp.psi) % TWO_PI, bp.v_minus, EXPLICIT,
+                  _offset(state, pred)), None
 
 
-def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e-14,
-             extra_guesses=(), delay: float = 0.0) -> NdofOrbit:
-    """The 1/1 orbit at ``delta_d`` (default the model's): on the branch explicit in the
-    impact phase where it has one, else by Newton shooting.
+def model_file_orbit(model, gains=None, delta_d: float | None = None, *,
+                     tol: float = 1e-14, extra_guesses=(), delay: float = 0.0) -> Orbit11:
+    """A model file's 1/1 orbit at ``delta_d`` (default the model's), the implementation
+    behind :func:`.one_one.orbit`: on the branch explicit in the impact phase where it has
+    one, else by Newton shooting.
 
     First the branch explicit in the impact phase psi (:func:`_on_branch`): the orbit
     with Delta d(psi) = delta_d nearest grazing, exact to rounding whatever v-, checked
@@ -346,10 +322,8 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
             if len(o.impacts) == 1 and o.impacts[0].v_minus > 0.0:
                 imp = o.impacts[0]
                 lam = _multipliers(pmap, model, gains, o.monodromy, o.impacts)
-                flow = NdofFlow.of(model)
-                return NdofOrbit(model.delta_d, o.state, flow.to_physical(flow.tau2, o.state),
-                                 lam, o.monodromy, float(imp.dt), float(imp.phase),
-                                 float(imp.v_minus), name, _offset(o.state, pred))
+                return _orbit(model, o.state, lam, o.monodromy, imp.dt, imp.phase,
+                              imp.v_minus, name, _offset(o.state, pred))
             why.append(f"{name}: converged to an orbit with {len(o.impacts)} impacts per period")
         if i == len(guesses) and not tried_simulation:
             tried_simulation = True
@@ -363,7 +337,7 @@ def orbit_11(model, gains=None, delta_d: float | None = None, *, tol: float = 1e
                         f"({'; '.join(why)})")
 
 
-#: The simulation that gives orbit_11 its last starting guess: periods, and the size of a
+#: The simulation that gives model_file_orbit its last starting guess: periods, and the size of a
 #: state (times d*, the wall coordinate's amplitude) beyond which the motion is taken as
 #: diverging. A 1/1 orbit near grazing lies within a few d* of the grazing point; an
 #: unstable loop (the 2-mass chain at mu = 0 with a delay of 2: gains ~170) grew 6x a
@@ -382,61 +356,6 @@ def _simulated_guess(pmap, start, periods: int, bound: float) -> np.ndarray:
             raise ArithmeticError(f"the motion left |z| <= {bound:.3g} at period {k + 1} "
                                   "(diverging: no attractor to start shooting from)")
     return z
-
-
-class Scaling(NamedTuple):
-    """Multipliers of the 1/1 orbit on a grid of Delta d (rows in grid order; nan where
-    no orbit was found, with the reason in ``errors``)."""
-
-    delta_d: np.ndarray
-    multipliers: np.ndarray
-    v_minus: np.ndarray
-    errors: tuple
-
-    @property
-    def largest(self) -> np.ndarray:
-        return np.max(np.abs(self.multipliers), axis=1)
-
-
-def multiplier_scaling(model, gains, deltas) -> Scaling:
-    """The multipliers of the 1/1 orbit born at grazing at each Delta d of ``deltas`` (each
-    by :func:`orbit_11`, the previous point's orbit tried after the prediction); another
-    1/1 orbit (not :attr:`NdofOrbit.near_grazing`) counts as not found."""
-    deltas = np.asarray(deltas, dtype=float).reshape(-1)
-    n2 = 2 * model.n
-    lam = np.full((deltas.size, n2), np.nan, dtype=complex)
-    vm = np.full(deltas.size, np.nan)
-    errors = []
-    prev = None
-    for j, dd in enumerate(deltas):
-        extra = () if prev is None else (("previous point", prev),)
-        try:
-            o = orbit_11(model, gains, dd, extra_guesses=extra)
-        except (OrbitNotFound, ValueError) as exc:
-            errors.append(str(exc))
-            prev = None
-            continue
-        if not o.near_grazing:
-            errors.append(f"the 1/1 orbit found at delta_d={dd!r} is not the one born at "
-                          f"grazing (v- = {o.v_minus:.3g}, {o.prediction_offset:.3g} away "
-                          "from the local map's prediction)")
-            prev = None
-            continue
-        lam[j], vm[j] = o.multipliers, o.v_minus
-        prev = o.state
-        errors.append("")
-    return Scaling(deltas, lam, vm, tuple(errors))
-
-
-def fit_exponent(delta_d, values) -> float:
-    """Least-squares slope of log|values| against log|Delta d| (the growth exponent:
-    -1/2 for |lambda| ~ |Delta d|^(-1/2)); nan with fewer than two finite points."""
-    x = np.log(np.abs(np.asarray(delta_d, dtype=float)))
-    y = np.log(np.abs(np.asarray(values, dtype=float)))
-    ok = np.isfinite(x) & np.isfinite(y)
-    if ok.sum() < 2:
-        return math.nan
-    return float(np.polyfit(x[ok], y[ok], 1)[0])
 
 
 def fold_beyond(model, gains, branch, stop: float, delay: float = 0.0):
