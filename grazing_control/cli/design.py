@@ -1,5 +1,16 @@
-"""`grazing design`: the kick gains of the 1-DOF study, their admissible set and limit
-multipliers, the noise-optimal gain and the controller's parameter file (docs/commands.md).
+"""`grazing design`: the degenerate grazing design of either model, its admissible set and
+limit multipliers, and the controller's parameter file (docs/commands.md,
+docs/ndof_commands.md).
+
+One command, one report: each model's design goes through the one entry
+``dynamics/design/model_design.py`` (the 1-DOF closed form in c2, or a model file's
+family in mu), and :func:`design_lines` prints both from a :class:`DesignReport`: the
+model's own head (the 1-DOF c1 and X**; a model file's d*, delay or pulse, family and
+transmission zeros), the member's limit multipliers, gamma1 and the non-impacting
+spectral radius, the admissible set of the family's parameter, and the model's own tail
+(the 1-DOF method, noise gains, optimum, actuator; a model file's predicted spread, the
+sections to move to, a rig's gains in SI). The JSON is each model's (the 1-DOF keys of
+docs/commands.md, the model file's of docs/ndof_commands.md).
 
 Moved out of cli/commands.py so that ``grazing rig`` (cli/rig.py), which runs this design
 for a rig, and the parser (cli/commands.py) both sit above it without an import circle.
@@ -9,6 +20,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -18,12 +30,63 @@ from grazing_control.oscillator.params import ParameterError
 from .common import complex_list, params_of, require_finite
 from .model_file import coordinates, family_member, fmt_vec, header, load
 
-__all__ = ["cmd_design"]
+__all__ = ["cmd_design", "DesignReport", "design_lines"]
+
+
+class DesignReport(NamedTuple):
+    """What :func:`design_lines` prints for either model: the title, the model's own
+    ``head`` lines, the family's parameter (``name``: c2 or mu) and its smooth map
+    (``free_map``: N_g or N), whether its admissible set is unbounded (``unbounded``: mu)
+    and printed before the member (``admissible_first``), the ``member`` lines (the
+    chosen member's gains), its limit multipliers, gamma1, non-impacting spectral radius
+    and ``conditions``, the admissible sets (``intervals``: all three conditions,
+    ``sets``: each side), whether the member is admissible, and the ``tail`` lines."""
+
+    title: str
+    head: list
+    name: str
+    free_map: str
+    unbounded: bool
+    admissible_first: bool
+    member: list
+    multipliers_limit: np.ndarray
+    gamma1: float
+    rho_free: float
+    conditions: dict
+    intervals: list
+    sets: dict
+    admissible: bool
+    tail: list
+
+
+def design_lines(r: DesignReport) -> list:
+    """The report of ``grazing design`` for either model (module docstring)."""
+    ok = {True: "yes", False: "NO"}
+    admissible = _admissible_lines(r.name, r.intervals, r.sets, r.free_map, r.unbounded)
+    limits = [
+        f"  |lambda0|          = {', '.join(f'{abs(z):.6g}' for z in r.multipliers_limit)}"
+        f"  (limit Delta d -> 0-: {ok[r.conditions['limit_stable']]} < 1)",
+        f"  gamma1             = {r.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*: "
+        f"{ok[r.conditions['exists_impacting']]})",
+        f"  {'rho(' + r.free_map + ')':19s}= {r.rho_free:.6g}  (non-impacting motion, d > d*: "
+        f"{ok[r.conditions['free_stable']]} < 1)",
+    ]
+    return [r.title, *r.head, *(admissible if r.admissible_first else []), *r.member,
+            *limits, *([] if r.admissible_first else admissible),
+            f"  this {r.name:14s}: {'admissible' if r.admissible else 'NOT admissible'}",
+            *r.tail]
 
 
 def cmd_design(args):
-    if args.model is not None:
-        return _family_design(args)
+    """design [--c2 C2 | --optimize noise] ... or --model FILE [--mu MU | --free-gain ..]:
+    the model's design (:func:`_study_design`, :func:`_family_design`), printed by
+    :func:`design_lines`, or its JSON."""
+    out, report = (_family_design if args.model is not None else _study_design)(args)
+    return out if args.json else "\n".join(design_lines(report))
+
+
+def _study_design(args):
+    """The 1-DOF study's design at --c2 (or --optimize noise): its JSON and its report."""
     from grazing_control.dynamics.design.gains import C2_LIMIT, write_controller_yaml
     from grazing_control.dynamics.design.model_design import admissible_set, evaluate_design
 
@@ -106,24 +169,8 @@ def cmd_design(args):
                 f"c2={args.c2!r} is not admissible: valid range is {_fmt_intervals(intervals)}; "
                 f"nothing written to {args.out}")
         write_controller_yaml(args.out, p, gains)
-    if args.json:
-        return out
-    lam = ", ".join(f"{abs(z):.6g}" for z in point.multipliers_limit)
-    ok = {True: "yes", False: "NO"}
     delay = f", actuation delay {point.delay:.12g}" if point.delay else ""
-    lines = [
-        f"degenerate grazing design (N_g,12 = 0, Eq. 38) for c2 = {point.c2:.12g}{delay}",
-        f"  c1                 = {point.c1:.15g}",
-        f"  X** on Pi2         = ({p.x_ref:.15g}, {p.v_ref:.15g})",
-        f"  |lambda0|          = {lam}  (limit Delta d -> 0-: {ok[point.stable]} < 1)",
-        f"  gamma1             = {point.gamma1:.6g}  (> 0: 1/1 motion exists for d < d*: "
-        f"{ok[point.gamma1 > 0.0]})",
-        f"  rho(N_g)           = {rho_free:.6g}  (non-impacting motion, d > d*: "
-        f"{ok[point.free_stable]} < 1)",
-        *_admissible_lines("c2", intervals, sets, "N_g"),
-        f"  this c2            : {'admissible' if point.admissible else 'NOT admissible'}",
-        f"  method             : {args.method} ({cost:.3g} s)",
-    ]
+    lines = [f"  method             : {args.method} ({cost:.3g} s)"]
     if noise is not None:
         gain = noise["noise_gain"]
         lines.append(f"  noise gain         = {'none (no stable controlled orbit)' if gain is None else f'{gain:.4g}'}"
@@ -161,7 +208,12 @@ def cmd_design(args):
                          f"per sigma) {both} (x, v measured), {pos} (position only)")
     if args.out:
         lines.append(f"  controller parameters written to {args.out}")
-    return "\n".join(lines)
+    return out, DesignReport(
+        f"degenerate grazing design (N_g,12 = 0, Eq. 38) for c2 = {point.c2:.12g}{delay}",
+        [f"  c1                 = {point.c1:.15g}",
+         f"  X** on Pi2         = ({p.x_ref:.15g}, {p.v_ref:.15g})"],
+        "c2", "N_g", False, False, [], point.multipliers_limit, point.gamma1, rho_free,
+        out["conditions"], intervals, sets, point.admissible, lines)
 
 
 def _actuator_report(args, p, point):
@@ -372,13 +424,9 @@ def _family_design(args):
                                  f"{_fmt_intervals(intervals, True)}; nothing written to {args.out}")
         nd.write_gain_yaml(args.out, model, design, args.model)
         out["written"] = args.out
-    if args.json:
-        return out
     ok = {True: "yes", False: "NO"}
     names = coordinates(model)
-    lines = [
-        f"n-DOF degenerate grazing design (w^T N = mu w^T) for {args.model} (n = {model.n}, "
-        f"wall on x{model.i_w}, kick on v{model.i_a})",
+    head = [
         f"  d*, tau*           = {out['d_star']:.15g}, {out['tau_star']:.15g}",
         *([f"  actuation delay    = {delay:.15g}  (the kick acts this long after the Pi2 "
            f"sample; the family, zeros and limits are those of the delayed kick)"]
@@ -392,17 +440,10 @@ def _family_design(args):
         f"  transmission zeros = {', '.join(f'{z:.6g}' for z in zeros)}",
         f"    max |zero|       = {out['transmission_zeros_max_modulus']:.6g}  (< 1 needed: "
         f"{ok[out['transmission_zeros_max_modulus'] < 1.0]})",
-        *_admissible_lines("mu", intervals, sets, "N", unbounded=True),
-        f"  mu                 = {mu:.15g}  ({chosen})",
-        f"  gains k            = {fmt_vec(k, 15)}",
-        f"  |lambda0|          = {', '.join(f'{abs(z):.6g}' for z in lam0)}  (limit Delta d -> "
-        f"0-: {ok[conditions['limit_stable']]} < 1)",
-        f"  gamma1             = {gamma:.6g}  (> 0: 1/1 motion exists for d < d*: "
-        f"{ok[conditions['exists_impacting']]})",
-        f"  rho(N)             = {rho_free:.6g}  (non-impacting motion, d > d*: "
-        f"{ok[conditions['free_stable']]} < 1)",
-        f"  this mu            : {'admissible' if admissible else 'NOT admissible'}",
     ]
+    member = [f"  mu                 = {mu:.15g}  ({chosen})",
+              f"  gains k            = {fmt_vec(k, 15)}"]
+    lines = []
     lines += _spread_lines(out["spread"], names)
     if sections is not None:
         where = " U ".join(f"({a:.4f}, {b:.4f})" for a, b in sections) or "none"
@@ -412,7 +453,10 @@ def _family_design(args):
         lines += _si_lines(out["si"], names)
     if args.out:
         lines.append(f"  gains written to {args.out}")
-    return "\n".join(lines)
+    return out, DesignReport(
+        f"n-DOF degenerate grazing design (w^T N = mu w^T) for {args.model} (n = {model.n}, "
+        f"wall on x{model.i_w}, kick on v{model.i_a})", head, "mu", "N", True, True, member,
+        lam0, gamma, rho_free, conditions, intervals, sets, admissible, lines)
 
 
 def _si_lines(si: dict, names) -> list:
