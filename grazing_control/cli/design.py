@@ -225,7 +225,8 @@ def _actuator_report(args, p, point):
     from grazing_control.dynamics.simulation.actuator import Actuator, actuated_design
     from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.dynamics.estimation.section_state import estimate_covariance
-    from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
+    from grazing_control.dynamics.orbits import one_one
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 
     bw, lat, w = args.actuator_bandwidth, args.actuator_latency, args.pulse_width
     for name, value in (("actuator_bandwidth", bw), ("actuator_latency", lat),
@@ -247,7 +248,7 @@ def _actuator_report(args, p, point):
                       spread=None if spread is None else [float(x) for x in spread])
         try:
             kick = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
-            x_star = orbit_11(q, kick).pi2_deviation
+            x_star = one_one.orbit(q, kick).state
             report["orbit_offset"] = [orbit.state[0] - x_star[0], orbit.state[1] - x_star[1]]
             r = estimate_covariance(q, kick, args.sensor_rate, estimator=args.estimator)
             report["spread_position_only"] = [float(x) for x in np.sqrt(np.diag(

@@ -25,7 +25,7 @@ from grazing_control.recordings.analysis import (plot_scene, scene_from_bag,
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import (degenerate_c1, evaluate_design,
                                              write_controller_yaml)
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.simulation.simulate import simulate
 
@@ -106,13 +106,13 @@ def main(args) -> int:
             source = f"recording {bag}"
         wall = time.perf_counter() - t0
         numbers = summarize(scene)
-        exact = orbit_11(p, gains)
+        exact = one_one.orbit(p, gains)
         core = simulate(p, len(scene.t), gains=gains, control_after=CONTROL_AFTER)
         n = min(len(core.pi2), len(scene.pi2))
         cross = {
-            "exact_controlled_orbit_pi2": list(exact.pi2),
+            "exact_controlled_orbit_pi2": exact.physical.tolist(),
             "exact_v_minus": exact.v_minus,
-            "final_pi2_error_vs_exact": float(np.max(np.abs(scene.pi2[-1] - np.array(exact.pi2)))),
+            "final_pi2_error_vs_exact": float(np.max(np.abs(scene.pi2[-1] - exact.physical))),
             "max_sample_difference_vs_core_simulation": float(np.max(np.abs(scene.pi2[:n] - core.pi2[:n]))),
         }
         report["scenes"][name] = {"delta_d": dd, "source": source, "wall_seconds": wall,
@@ -132,8 +132,8 @@ def main(args) -> int:
             f"* final Π2 point: ({numbers['final_pi2'][0]:.12g}, {numbers['final_pi2'][1]:.12g}); "
             f"impacts per period at the end: {numbers['final_impacts_per_period']}; "
             f"final v⁻ = {numbers['final_v_minus']:.6g}",
-            f"* core cross-check: exact controlled 1/1 orbit on Π2 = ({exact.pi2[0]:.12g}, "
-            f"{exact.pi2[1]:.12g}), v⁻ = {exact.v_minus:.6g}; |final − exact| = "
+            f"* core cross-check: exact controlled 1/1 orbit on Π2 = ({exact.physical[0]:.12g}, "
+            f"{exact.physical[1]:.12g}), v⁻ = {exact.v_minus:.6g}; |final − exact| = "
             f"{cross['final_pi2_error_vs_exact']:.2e}; max |recorded − core simulation| over "
             f"all samples = {cross['max_sample_difference_vs_core_simulation']:.2e}",
             "",

@@ -43,22 +43,23 @@ MATCH_SCALE = 1e-3
 
 def orbit_scale(params: OscillatorParams) -> float:
     """max(|x - x**|, |v - v**|) of the uncontrolled 1/1 orbit born at grazing
-    (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) at -|Delta d|: the scale of the
+    (:func:`grazing_control.dynamics.orbits.one_one.orbit`) at -|Delta d|: the scale of the
     near-grazing motions on Pi2, which grows like |Delta d| (spec section 2); on the
     non-impacting side the orbit at the mirrored Delta d gives it. ParameterError where
     there is none (Delta d = 0: the orbit is X** itself)."""
-    from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
+    from grazing_control.dynamics.orbits import one_one
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 
     if params.delta_d == 0.0:
         raise ParameterError("delta_d=0.0 has no default box of starts (the 1/1 orbit is X** "
                              "itself): give dx_range and dv_range (--dx, --dv)")
     try:
-        orbit = orbit_11(params.with_(delta_d=-abs(params.delta_d)), branch="grazing")
+        orbit = one_one.orbit(params, None, -abs(params.delta_d), branch="grazing")
     except OrbitNotFound:
         raise ParameterError(f"delta_d={params.delta_d!r} has no 1/1 orbit at -|delta_d| to "
                              "scale the default box of starts: give dx_range and dv_range "
                              "(--dx, --dv)") from None
-    return float(np.max(np.abs(orbit.pi2_deviation)))
+    return float(np.max(np.abs(orbit.state)))
 
 
 def default_box(params: OscillatorParams):

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.studies.sweeps import sweep
 from grazing_control.support.plotting import (COLORS, PANEL_SIZE, pyplot, save,
@@ -104,8 +104,8 @@ def _branch_agreement(p, data: DiagramData, limit: int = 25) -> float | None:
     k = k[np.linspace(0, k.size - 1, min(limit, k.size)).astype(int)]
     errs = []
     for i in k:
-        o = orbit_11(p.with_(delta_d=float(data.delta_d[i])), check=False)
-        errs.append(abs(data.x[i, 0, -1] - o.pi2[0]))
+        o = one_one.orbit(p, None, float(data.delta_d[i]), check=False)
+        errs.append(abs(data.x[i, 0, -1] - o.physical[0]))
     return float(max(errs))
 
 
@@ -164,7 +164,7 @@ def panel_1a(p: OscillatorParams, data: DiagramData, branch: BranchData, out) ->
                fmt=".3f", note="the chaotic attractor coexists with the 0/1 motion"),
         Number("branch_agreement", "max |x − x(1/1 orbit)| at period-1 points",
                _branch_agreement(p, data), fmt=".2e",
-               note="brute force vs exact shooting (orbit_11), up to 25 points"),
+               note="brute force vs exact shooting (one_one.orbit), up to 25 points"),
     ) + _lyapunov_numbers(p, data)
     return Panel("fig1a", "bifurcation diagram on Π2 across grazing",
                  "Brute force: for each Δd the uncontrolled oscillator runs from X** (black) "

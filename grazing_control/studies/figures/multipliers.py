@@ -4,7 +4,7 @@ Lines: the exact multipliers along the continued branch (impact-phase shooting,
 :mod:`grazing_control.studies.figures.branches`). Circles: the perturbation estimates of
 :mod:`grazing_control.dynamics.maps.perturbation` (series in the impact velocity delta2, spec
 section 7), at a few Delta d where the exact multipliers are also computed directly
-(:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) for the numbers. |Delta d| is on a
+(:func:`grazing_control.dynamics.orbits.one_one.orbit`) for the numbers. |Delta d| is on a
 logarithmic axis: the uncontrolled large multiplier grows like 1/|Delta d| (the
 square-root singularity of the discontinuity map, docs/theory.md §5); the controlled
 ones tend to lambda0 (Eq. 23) with an error O(delta2) = O(|Delta d|^(1/2)).
@@ -18,7 +18,7 @@ import numpy as np
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import limit_multipliers
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.maps.perturbation import (limit_multipliers_perturbation,
                                                    perturbation_multipliers,
@@ -32,7 +32,7 @@ __all__ = ["Samples", "samples", "panel_1d", "panel_2d", "panel_2e"]
 
 @dataclass(frozen=True)
 class Samples:
-    """Multipliers at chosen Delta d: exact (orbit_11) and perturbation ((n, 2) complex)."""
+    """Multipliers at chosen Delta d: exact (one_one.orbit) and perturbation ((n, 2) complex)."""
 
     delta_d: np.ndarray
     exact: np.ndarray
@@ -43,7 +43,7 @@ class Samples:
 def samples(p: OscillatorParams, gains: Gains | None, delta_d, truncation: str) -> Samples:
     """Exact and perturbation multipliers at each Delta d (< 0) of ``delta_d``."""
     dd = np.asarray(delta_d, dtype=float)
-    exact = [orbit_11(p.with_(delta_d=float(d)), gains, check=False).multipliers for d in dd]
+    exact = [one_one.orbit(p, gains, float(d), check=False).multipliers for d in dd]
     pert = [perturbation_multipliers(p.with_(delta_d=float(d)), gains, truncation) for d in dd]
     return Samples(dd, np.array(exact).reshape(-1, 2), np.array(pert).reshape(-1, 2), truncation)
 

@@ -5,7 +5,7 @@ Pi2 samples, then switches the controller of Eq. 28 on (c2 = -1, c1 from Eq. 38)
 The scene is read with :mod:`grazing_control.recordings.analysis` (the demo's reader and
 numbers): from a core simulation by default, or from a recording made by
 ``grazing demo`` when its bag folder is given. The exact controlled 1/1 orbit
-(:func:`grazing_control.dynamics.orbits.orbits.orbit_11`) is drawn as the target.
+(:func:`grazing_control.dynamics.orbits.one_one.orbit`) is drawn as the target.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from grazing_control.recordings.analysis import (scene_from_bag, scene_from_simu
                                                  summarize)
 from grazing_control.oscillator.control import Gains
 from grazing_control.studies.demo import CONTROL_AFTER, PERIODS, SCENES
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.simulation.simulate import simulate
 from grazing_control.support.plotting import COLORS, PANEL_SIZE, pyplot, save
@@ -45,7 +45,7 @@ def panel_scene(p: OscillatorParams, gains: Gains, which: str, out, bags=None) -
     q = p.with_(delta_d=dd)
     scene, source = load_scene(q, gains, name, bags)
     numbers = summarize(scene)
-    exact = orbit_11(q, gains)
+    exact = one_one.orbit(q, gains)
     on = numbers["control_on"] if numbers["control_on"] is not None else len(scene.t)
     k = np.arange(len(scene.t))
     plt = pyplot()
@@ -54,15 +54,15 @@ def panel_scene(p: OscillatorParams, gains: Gains, which: str, out, bags=None) -
     ax.plot(k[on:], scene.pi2[on:, 0], ".", ms=2.5, color=COLORS["controlled"],
             label="controlled")
     ax.axvline(on, color="0.3", lw=0.8, ls="--", label=f"control on (sample {on})")
-    ax.axhline(exact.pi2[0], color=COLORS["stable"], lw=0.9, ls=":",
-               label=f"controlled 1/1 orbit, x = {exact.pi2[0]:.6g}")
+    ax.axhline(exact.physical[0], color=COLORS["stable"], lw=0.9, ls=":",
+               label=f"controlled 1/1 orbit, x = {exact.physical[0]:.6g}")
     ax.set(xlabel="Π2 sample k (forcing periods)", ylabel="x on Π2",
            title=f"Fig. 2({which}): Δd = {dd:g}, control switched on after {CONTROL_AFTER} samples")
     fig.legend(fontsize=8, loc="outside lower center", ncol=2)
     files = save(fig, out, f"fig2{which}")
     per = numbers["uncontrolled_period"]
     hist = numbers["uncontrolled_impacts_per_period"]
-    err = float(np.max(np.abs(scene.pi2[-1] - np.array(exact.pi2))))
+    err = float(np.max(np.abs(scene.pi2[-1] - exact.physical)))
     nums = (
         Number("source", "source", source),
         Number("delta_d", "Δd", dd, f"{dd:g}", fmt="g"),

@@ -4,7 +4,7 @@ Gains designed for a delay delta_a (c1 = c1(c2; delta_a), Eq. (D5)) act, in the 
 loop, at some other delay delta. Then N_g,12(delta) != 0 and the singular multiplier of
 the 1/1 orbit is back: it grows like 1/|Delta d| as Delta d -> 0-, so the interval of
 delays where the orbit is stable shrinks onto delta_a as the wall approaches grazing.
-This module measures that on the exact 1/1 orbit (:func:`grazing_control.dynamics.orbits.orbits.orbit_11`
+This module measures that on the exact 1/1 orbit (:func:`grazing_control.dynamics.orbits.one_one.orbit`
 with the delayed kick, saltation at the impact) and, for comparison, with the
 perturbation series (:func:`grazing_control.dynamics.maps.perturbation.perturbation_multipliers`).
 """
@@ -19,7 +19,8 @@ from scipy.optimize import brentq
 
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import degenerate_c1, max_design_delay
-from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
+from grazing_control.dynamics.orbits import one_one
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
 __all__ = ["largest_multiplier", "multiplier_curve", "stability_interval", "StabilityMap",
@@ -40,7 +41,7 @@ def largest_multiplier(p: OscillatorParams, gains: Gains, delay: float) -> float
     """
     g = Gains(gains.c1, gains.c2, delay)
     try:
-        orbit = orbit_11(p, g, branch="grazing")
+        orbit = one_one.orbit(p, g, branch="grazing")
     except (OrbitNotFound, ValueError):
         return math.nan
     return float(np.max(np.abs(orbit.multipliers)))

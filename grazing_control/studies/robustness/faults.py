@@ -12,7 +12,7 @@ sample for sample):
   :func:`grazing_control.dynamics.simulation.simulate.period_step` with that delay.
 
 **Capture** (:func:`capture_statistics`): the loop has captured the controlled 1/1 orbit
-z* (the exact orbit of :func:`grazing_control.dynamics.orbits.orbits.orbit_11` for the designed gains and
+z* (the exact orbit of :func:`grazing_control.dynamics.orbits.one_one.orbit` for the designed gains and
 delay) at sample n if the distance |z_k - z*| (Euclidean, on the Pi2 deviation) is
 <= ``threshold`` for the ``hold`` consecutive samples k = n, ..., n + hold - 1, all inside
 the first N = ``horizon`` controlled samples. The **stationary spread** is the RMS of that
@@ -94,10 +94,10 @@ def predicted_spread(p: OscillatorParams, gains: Gains, kind: str, level: float,
     """
     from scipy.linalg import solve_discrete_lyapunov
 
-    from grazing_control.dynamics.orbits.orbits import orbit_11
+    from grazing_control.dynamics.orbits import one_one
 
     if target is None:
-        target = orbit_11(p, gains).pi2_deviation
+        target = one_one.orbit(p, gains).state
     j, m2, dvc = loop_linearisation(p, gains, target)
     mean = np.zeros(2)
     if kind == "noise":
@@ -219,12 +219,12 @@ def fault_sweep(p: OscillatorParams, gains: Gains, delta_d: float, kind: str, le
     samples ``transient`` + j (control switched on at sample ``transient``, as in the
     study's scenes). Returns a JSON-ready dict with per-level statistics.
     """
-    from grazing_control.dynamics.orbits.orbits import orbit_11
+    from grazing_control.dynamics.orbits import one_one
 
     if kind not in LEVELS:
         raise ValueError(f"kind={kind!r} is invalid: valid values are {', '.join(LEVELS)}")
     q = p.with_(delta_d=delta_d)
-    target = orbit_11(q, gains).pi2_deviation
+    target = one_one.orbit(q, gains).state
     starts = attractor_states(q, seeds, transient=transient)
     rows = []
     for level in levels:
