@@ -33,7 +33,7 @@ from grazing_control.cli.commands import main
 from grazing_control.dynamics.maps.modal_map import ModalMap
 from grazing_control.oscillator.ndof import load_model
 from grazing_control.dynamics.design.family import gain_family
-from grazing_control.dynamics.orbits.near_grazing import grazing_side, smooth_map, with_delta_d
+from grazing_control.dynamics.orbits.near_grazing import grazing_side, pi1_factors, with_delta_d
 
 ROOT = Path(__file__).resolve().parents[1]
 ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
@@ -165,7 +165,7 @@ def test_simulate_of_the_n1_file_is_the_1dof_simulation(capsys, controlled):
 def test_design_gains_are_on_the_family(capsys):
     got = run_json(capsys, "design", "--model", TWO, "--mu", "0.2")
     model = load_model(TWO)
-    N = smooth_map(model, got["gains"])[0]          # independent: Phi_a (I + b k^T) Phi_b
+    N = pi1_factors(model, got["gains"])[0]          # independent: Phi_a (I + b k^T) Phi_b
     w = np.eye(4)[model.i_w]
     np.testing.assert_allclose(w @ N, 0.2 * w, atol=1e-10)
     k0, dk = np.array(got["family"]["k_at_mu_0"]), np.array(got["family"]["dk_dmu"])

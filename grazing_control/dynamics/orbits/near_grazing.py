@@ -42,7 +42,7 @@ from grazing_control.dynamics.orbits.shooting import (ShootingFailed, find_perio
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["fold_beyond", "with_delta_d", "kick_matrix", "kick_vector", "smooth_map",
+__all__ = ["fold_beyond", "with_delta_d", "kick_matrix", "kick_vector", "pi1_factors",
            "local_map", "predicted_orbit", "grazing_side", "model_file_orbit", "NEAR"]
 
 TWO_PI = 2.0 * math.pi
@@ -89,9 +89,10 @@ def kick_vector(model, delay: float = 0.0) -> np.ndarray:
     return _vectors(model, delay)[2]
 
 
-def smooth_map(model, gains=None, delay: float = 0.0):
+def pi1_factors(model, gains=None, delay: float = 0.0):
     """(N, Phi_a, Phi_b, K): the smooth return map on Pi1 N = Phi_a K Phi_b and its
-    factors (module docstring; K of :func:`kick_matrix`)."""
+    factors (module docstring; K of :func:`kick_matrix`). N alone, for every model, is
+    :func:`grazing_control.dynamics.maps.zdm.smooth_map`."""
     flow = NdofFlow.of(model)
     off = model.pi2_offset / model.omega
     phi_a = flow.transition(model.period - off)
@@ -136,7 +137,7 @@ def predicted_orbit(model, gains=None, delta_d: float | None = None, delay: floa
     dd = model.delta_d if delta_d is None else float(delta_d)
     flow = NdofFlow.of(model)
     n, n2 = model.n, 2 * model.n
-    N, _phi_a, phi_b, _K = smooth_map(model, gains, delay)
+    N, _phi_a, phi_b, _K = pi1_factors(model, gains, delay)
     acc = model.omega ** 2 * flow.d_star
     u = np.zeros(n2)
     u[n + model.i_w] = -(1.0 + model.r) * math.sqrt(2.0 * acc)
