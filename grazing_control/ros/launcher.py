@@ -63,6 +63,7 @@ from pathlib import Path
 
 import yaml
 
+from . import node_zygote
 from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
                           scene_overrides, sim_values_for_model, sim_values_for_rig)
@@ -315,16 +316,21 @@ def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, 
     while a node's Python is still starting would print a traceback, a SIGTERM ends it
     quietly. The node is sent SIGTERM if the launcher dies (killed with SIGKILL).
     ``command``: this command line instead of the node's (the composed scene).
+    With ``GRAZING_NODE_ZYGOTE=1`` in the environment the node is forked from a process
+    that has already imported it (:mod:`.node_zygote`; the test suite), else spawned.
     """
     out = open(log, "wb") if log is not None else None
+    command = command or node_command(module, params_files, overrides, python)
+    env = dict(node_env(domain_id), GRAZING_LAUNCHER_PID=str(os.getpid()))
+    streams = dict(stdin=subprocess.DEVNULL, stdout=out,
+                   stderr=subprocess.STDOUT if out else None)
     try:
-        return subprocess.Popen(command or node_command(module, params_files, overrides,
-                                                        python),
-                                env=dict(node_env(domain_id),
-                                         GRAZING_LAUNCHER_PID=str(os.getpid())),
-                                stdin=subprocess.DEVNULL,
-                                stdout=out, stderr=subprocess.STDOUT if out else None,
-                                process_group=0)
+        if command[1:3] == ["-c", BOOTSTRAP]:
+            zygote = node_zygote.owner_zygote(node_env(), MODULES.values())
+            forked = zygote.spawn(command, env, **streams) if zygote else None
+            if forked is not None:
+                return forked
+        return subprocess.Popen(command, env=env, process_group=0, **streams)
     finally:
         if out is not None:
             out.close()

@@ -1,0 +1,168 @@
+"""The node zygote (grazing_control/ros/node_zygote.py): a node forked from it is, to
+its owner and to itself, the process that ``launcher.start_node`` spawns; what it cannot
+make so it refuses, and the node is spawned."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from grazing_control.ros import launcher, node_zygote
+
+TESTS = Path(__file__).resolve().parent
+PROBE = "node_zygote_probe"
+
+
+def _env(**extra):
+    env = launcher.node_env()
+    env["PYTHONPATH"] = os.pathsep.join([str(TESTS), env["PYTHONPATH"]])
+    return {**env, **extra}
+
+
+@pytest.fixture(scope="module")
+def zygote():
+    z = node_zygote.NodeZygote(_env(), [PROBE, launcher.CONTROLLER_MODULE])
+    yield z
+    z.close()
+
+
+def _read_json(path: Path, timeout: float = 30.0) -> dict:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        lines = path.read_text().splitlines() if path.exists() else []
+        if lines:
+            return json.loads(lines[0])
+        time.sleep(0.02)
+    raise AssertionError(f"{path}: nothing in {timeout} s")
+
+
+def _probe(zygote, tmp_path, name="probe", **env):
+    out = tmp_path / f"{name}.out"
+    with open(out, "wb") as f:
+        node = zygote.spawn(launcher.node_command(PROBE, (), {"x": 1.5}),
+                            _env(GRAZING_LAUNCHER_PID=str(os.getpid()), **env),
+                            stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT,
+                            cwd=str(tmp_path))
+    return node, out
+
+
+def test_a_forked_node_is_its_owners_child_as_a_spawned_one(zygote, tmp_path):
+    node, out = _probe(zygote, tmp_path, ROS_DOMAIN_ID="17")
+    assert isinstance(node, node_zygote.ForkedNode)
+    seen = _read_json(out)
+    assert seen["pid"] == node.pid
+    assert seen["ppid"] == os.getpid()                 # reparented to its owner
+    assert seen["pgid"] == node.pid                    # a process group of its own
+    assert seen["name"] == "__main__"                  # run as python -m runs it
+    assert seen["argv"] == ["--ros-args", "-p", "x:=1.5"]
+    assert seen["path0"] == ""                         # as python -c BOOTSTRAP has it
+    assert seen["cwd"] == str(tmp_path)
+    assert seen["cmdline"][3:] == [PROBE, "--ros-args", "-p", "x:=1.5"]   # what ps shows
+    assert seen["domain"] == "17"                      # the request's environment
+    assert seen["launcher_pid"] is None                # popped, as BOOTSTRAP does
+    assert seen["pdeathsig"] == signal.SIGTERM
+    assert not seen["sigint_default"]                  # BOOTSTRAP's quiet Ctrl-C
+    assert seen["stdin"] == os.devnull
+    assert seen["threads"] == 1
+    assert not seen["rclpy_before"]                    # the node imports rclpy itself
+    assert node.poll() is None
+    node.terminate()
+    assert node.wait(10) == 0
+    assert "to stderr" in out.read_text()              # stderr into the same file
+
+
+def test_two_forked_nodes_draw_different_random_numbers(zygote, tmp_path):
+    """numpy's legacy global generator is reseeded in each node (a fork copies the
+    zygote's state; a spawned node seeds its own)."""
+    a, out_a = _probe(zygote, tmp_path, "a")
+    b, out_b = _probe(zygote, tmp_path, "b")
+    try:
+        assert _read_json(out_a)["draw"] != _read_json(out_b)["draw"]
+    finally:
+        launcher.stop_nodes([a, b])
+
+
+def test_signals_and_statuses_read_as_popen_reads_them(zygote, tmp_path):
+    node, out = _probe(zygote, tmp_path)
+    _read_json(out)
+    with pytest.raises(subprocess.TimeoutExpired):
+        node.wait(0.2)
+    node.kill()
+    assert node.wait(10) == -signal.SIGKILL
+    node.terminate()                                   # after the end: nothing happens
+    assert node.returncode == -signal.SIGKILL
+
+
+@pytest.mark.parametrize("name, value", [("OPENBLAS_NUM_THREADS", "4"),
+                                         ("NUMBA_DISABLE_JIT", "1"),
+                                         ("PYTHONPATH", "/elsewhere")])
+def test_an_environment_read_at_import_is_refused(zygote, tmp_path, name, value):
+    node, _ = _probe(zygote, tmp_path, **{name: value})
+    assert node is None
+
+
+def test_another_interpreter_and_pipes_are_refused(zygote):
+    command = launcher.node_command(PROBE)
+    assert zygote.spawn(["/usr/bin/python3", *command[1:]], _env()) is None
+    assert zygote.spawn(command, _env(), stdout=subprocess.PIPE) is None
+
+
+def test_start_node_spawns_when_the_zygote_is_gone(monkeypatch, tmp_path):
+    """The owner's zygote killed: the next node is spawned (subprocess.Popen) and runs."""
+    z = node_zygote.NodeZygote(launcher.node_env(), [launcher.CONTROLLER_MODULE])
+    monkeypatch.setitem(node_zygote._owned, os.getpid(), z)
+    z.proc.kill()
+    z.proc.wait()
+    log = tmp_path / "controller.log"
+    proc = launcher.start_node(launcher.CONTROLLER_MODULE,
+                               [launcher.CONFIG_DIR / "controller.yaml"], {},
+                               domain_id=launcher.MAX_DOMAIN_ID, log=log)
+    try:
+        assert isinstance(proc, subprocess.Popen)
+        assert z.broken
+        end = time.monotonic() + 60
+        while "c1=" not in log.read_text() and time.monotonic() < end:
+            time.sleep(0.05)
+        assert "c1=" in log.read_text()
+    finally:
+        launcher.stop_nodes([proc])
+    assert proc.returncode == 0
+
+
+OWNER = """
+import os, sys, time
+from grazing_control.ros import launcher, node_zygote
+node_zygote.enable()
+proc = launcher.start_node(launcher.CONTROLLER_MODULE, [launcher.CONFIG_DIR / "controller.yaml"],
+                           {}, domain_id=launcher.MAX_DOMAIN_ID, log=sys.argv[1])
+print(type(proc).__name__, proc.pid, node_zygote._owned[os.getpid()].proc.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def test_a_killed_owner_takes_its_nodes_and_zygote_with_it(tmp_path):
+    """SIGKILL to the owner: its forked node gets SIGTERM (PR_SET_PDEATHSIG, set once the
+    node is the owner's child) and ends with its summary; the zygote ends too."""
+    log = tmp_path / "controller.log"
+    owner = subprocess.Popen([sys.executable, "-c", OWNER, str(log)], env=launcher.node_env(),
+                             stdout=subprocess.PIPE, text=True)
+    kind, node, zygote = owner.stdout.readline().split()
+    assert kind == "ForkedNode"
+    end = time.monotonic() + 60
+    while "c1=" not in log.read_text() and time.monotonic() < end:
+        time.sleep(0.05)
+    owner.kill()
+    owner.wait()
+    end = time.monotonic() + 30
+    alive = [int(node), int(zygote)]
+    while alive and time.monotonic() < end:
+        alive = [p for p in alive if Path(f"/proc/{p}").exists()
+                 and "Z" not in Path(f"/proc/{p}/stat").read_text().split(")")[1][:3]]
+        time.sleep(0.05)
+    assert not alive
+    assert "summary:" in log.read_text()
