@@ -41,6 +41,16 @@ CASES = {
               "--out", "{tmp}/s1"],
     "sweep_json": ["sweep", "--grid", "delta_d=-1e-4:-1e-5:3", "--periods", "20", "--workers", "1",
                    "--out", "{tmp}/s1", "--no-png", "--json"],
+    # the design's other reports (issue 32: one report for both models)
+    "design_pulse_json": ["design", "--c2", "-0.5", "--delay", "1", "--pulse-width", "0.5", "--json"],
+    "design_actuator": ["design", "--c2", "-0.5", "--delay", "1", "--pulse-width", "0.5",
+                        "--actuator-bandwidth", "5", "--actuator-latency", "0.1", "--delta-d", "-1e-5"],
+    "design_optimize_json": ["design", "--optimize", "noise", "--json"],
+    "design_perturbation": ["design", "--c2", "-0.5", "--method", "perturbation"],
+    "design_out": ["design", "--c2", "-0.5", "--out", "{tmp}/d1.yaml"],
+    "orbit_perturbation": ["orbit", "--delta-d", "-1e-4", "--c2", "-0.5", "--method", "perturbation"],
+    "continue_delay": ["continue", "--from", "-1e-2", "--to", "-1e-8", "--points", "9", "--c2", "-0.5",
+                       "--delay", "0.5"],
     # n-DOF commands, the n = 1 and the 2-mass model files
     "m1_design": ["design", "--model", ONE, "--free-gain", "v0=-1"],
     "m1_design_json": ["design", "--model", ONE, "--free-gain", "v0=-1", "--json"],
@@ -66,6 +76,11 @@ CASES = {
                       "--workers", "1", "--out", "{tmp}/s2", "--no-png", "--json"],
     "m2_figures_json": ["figures", "--model", TWO, "--quick", "--workers", "1", "--out",
                         "{tmp}/f2", "--json"],
+    "m2_design_pulse": ["design", "--model", TWO, "--mu", "0.2", "--delay", "1", "--pulse-width", "0.5"],
+    "m2_orbit_delay": ["orbit", "--model", TWO, "--delta-d", "-1e-4", "--mu", "0.2", "--delay", "0.5"],
+    "m2_sweep_delay_json": ["sweep", "--model", TWO, "--grid", "delta_d=-1e-4:-1e-5:3", "--periods", "10",
+                            "--mu", "0.2", "--delay", "0.5", "--workers", "1", "--out", "{tmp}/s3",
+                            "--no-png", "--json"],
     # refusals
     "err_c2_with_model": ["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"],
     "err_mu_without_model": ["orbit", "--delta-d", "-1e-6", "--mu", "0"],
