@@ -116,13 +116,21 @@ def check_state(flow: NdofFlow, z, where: str = "the state") -> np.ndarray:
     return a
 
 
-def _mode_sizes(flow: NdofFlow, z: np.ndarray) -> np.ndarray:
-    """sum_k |w_k V_wk| |lambda_k|^j sum_l |U_kl z_l| for j = 0, 1, 2: bounds of the terms
-    of z_w, v_w, a_w (section 5, "Rounding")."""
-    i_w = flow.model.i_w
-    per = np.abs(flow.modes[i_w]) * (np.abs(flow.inverse) @ np.abs(z))
-    lam = np.abs(flow.eigenvalues)
-    return np.array([per.sum(), (per * lam).sum(), (per * lam * lam).sum()])
+def _velocity_sizes(k: "SearchConstants", z) -> tuple:
+    """(sum_k |w_k V_wk| |lambda_k| sum_l |U_kl z_l|, |z|): the bound of the terms of v_w
+    and the deviation's size (section 5, "Rounding"), from the flow's
+    :func:`search_constants`, in Python floats (the terms of z_w are the evaluator's
+    ``zmag``)."""
+    size = norm2 = 0.0
+    zs = [float(x) for x in z]
+    for va, lam, row_abs in zip(k.vw_abs, k.lam, k.inverse_abs):
+        s = 0.0
+        for ua, zl in zip(row_abs, zs):
+            s += ua * abs(zl)
+        size += va * abs(lam) * s
+    for zl in zs:
+        norm2 += zl * zl
+    return size, math.sqrt(norm2)
 
 
 class SearchConstants(NamedTuple):
@@ -468,7 +476,8 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
     m = flow.model
     n, w, r, omega = m.n, m.i_w, m.r, m.omega
     chatter = chatter_time if chatter_time is not None else 1e-6 * m.period
-    rho = float(np.abs(flow.eigenvalues).max())
+    consts = search_constants(flow)
+    rho = consts.rho
     impacts = []
     mono = np.eye(2 * n) if monodromy else None
     t = 0.0
@@ -492,9 +501,9 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
                 f"at phase {tau % TWO_PI:.6f}: the motion is not resolvable at this cap")
         contacts += 1
         # velocity rounding after the flow (docs/theory_ndof_flow.md, section 5)
-        sizes = _mode_sizes(flow, z)
-        flow_err = (8.0 * _EPS * sizes[1] * (2.0 * n + 2.0 + rho * h)
-                    + 2.0 * h * rho * flow.defect * flow.condition ** 2 * float(np.linalg.norm(z)))
+        size, norm = _velocity_sizes(consts, z)
+        flow_err = (8.0 * _EPS * size * (2.0 * n + 2.0 + rho * h)
+                    + 2.0 * h * rho * consts.drift_scale * norm)
         phi = flow.transition(h)
         z = phi @ z
         if monodromy:
