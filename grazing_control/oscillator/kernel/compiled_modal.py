@@ -76,9 +76,6 @@ def make_eval(table, S, tau0, z0, horizon):
     """ndof.impact._Eval.__init__ (without the lag's transient): (ev, terms), the comment
     above. ``table``, ``S``: the flow's ``SearchConstants.table`` and ``.scalars``."""
     m, n2 = table.shape[0], z0.shape[0]
-    lam_re, lam_im, vw_re, vw_im, vw_abs, lam3 = (table[:, 0], table[:, 1], table[:, 2],
-                                                  table[:, 3], table[:, 4], table[:, 5])
-    u_re, u_im, u_abs = table[:, 6:6 + n2], table[:, 6 + n2:6 + 2 * n2], table[:, 6 + 2 * n2:]
     terms = np.empty((m, 10))
     zmag = 0.0
     for k in range(m):
@@ -87,21 +84,22 @@ def make_eval(table, S, tau0, z0, horizon):
         s = 0.0
         for j in range(n2):                   # beta_k = (V^-1 z0)_k
             zl = z0[j]
-            br += u_re[k, j] * zl
-            bi += u_im[k, j] * zl
-            s += u_abs[k, j] * abs(zl)
-        cr = vw_re[k] * br - vw_im[k] * bi
-        ci = vw_re[k] * bi + vw_im[k] * br
-        lr, li = lam_re[k], lam_im[k]
+            br += table[k, 6 + j] * zl
+            bi += table[k, 6 + n2 + j] * zl
+            s += table[k, 6 + 2 * n2 + j] * abs(zl)
+        vr, vi = table[k, 2], table[k, 3]
+        cr = vr * br - vi * bi
+        ci = vr * bi + vi * br
+        lr, li = table[k, 0], table[k, 1]
         c1r = cr * lr - ci * li               # c lambda
         c1i = cr * li + ci * lr
         terms[k, 0], terms[k, 1], terms[k, 2], terms[k, 3] = lr, li, cr, ci
         terms[k, 4], terms[k, 5] = c1r, c1i
         terms[k, 6] = c1r * lr - c1i * li     # (c lambda) lambda
         terms[k, 7] = c1r * li + c1i * lr
-        terms[k, 8] = math.hypot(cr, ci) * lam3[k]
+        terms[k, 8] = math.hypot(cr, ci) * table[k, 5]
         terms[k, 9] = math.exp(max(lr, 0.0) * horizon)
-        zmag += vw_abs[k] * s
+        zmag += table[k, 4] * s
     cabs = 0.0
     grow = 0.0
     for k in range(m):
