@@ -19,6 +19,11 @@ Which path runs
 Compilation happens on the first call in a process and is cached on disk by numba
 (``cache=True``: ``__pycache__`` next to the source, or ``NUMBA_CACHE_DIR``), so later
 processes only load the machine code (:func:`warm_up` does either explicitly).
+
+The n-DOF model's certified event search has its compiled mirror too
+(:mod:`.compiled_modal`, the same floats as oscillator/ndof/impact.py's): the n-DOF core
+takes it (:func:`modal_search`) once :func:`warm_up_modal` has loaded it, and searches in
+Python before; a controller of an n-DOF model loads it at its start.
 """
 
 from __future__ import annotations
@@ -225,7 +230,7 @@ _modal = None
 
 def warm_up_modal() -> float:
     """Load the compiled n-DOF event search (:mod:`.compiled_modal`: compiled on a
-    machine's first call, ~10 s, then loaded from numba's cache, ~0.1 s) where the kernel
+    machine's first call, ~10 s, then loaded from numba's cache, ~0.03 s) where the kernel
     is in use; seconds taken (0.0 when loaded before or not in use). Until then
     :func:`modal_search` is None and the n-DOF core searches in Python, with the same
     floats: a caller that needs the speed (controller_node's start, through

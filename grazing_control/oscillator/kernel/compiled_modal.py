@@ -33,8 +33,9 @@ Only this module's functions are compiled here and none calls another file's, so
 on-disk cache (``cache=True``, keyed on this file) never loads stale code
 (oscillator/kernel/compiled.py, module docstring); :func:`ulp` and the stack's layout
 are therefore this module's own. A start beyond the wall comes back as
-``STATUS_BEYOND_WALL`` with the gap, and the wrapper
-(:func:`grazing_control.oscillator.kernel.modal_search`) raises the pure path's error.
+``STATUS_BEYOND_WALL`` with the gap, through
+:func:`grazing_control.oscillator.kernel.modal_search`'s function, and ndof.impact raises
+the pure path's error with it.
 """
 
 from __future__ import annotations

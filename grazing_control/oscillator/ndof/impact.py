@@ -47,11 +47,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from grazing_control.oscillator import kernel
 from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impact,
                                                ImpactCapError, InitialStateError,
                                                NonFiniteStateError, _scan_window, check_times,
                                                wall_rounding)
-from grazing_control.oscillator import kernel
 from grazing_control.oscillator.params import ParameterError
 
 from .flow import NdofFlow
