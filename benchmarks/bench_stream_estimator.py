@@ -23,7 +23,9 @@ delay 3); ``masses``, the two-mass rig of issue 32 (config/rigs/two_mass_beam.ya
 n-DOF model filter on mass 1 at 500 samples a period with the 4 ms answer lead, its
 gains, ``ModelController.predict`` with the 2 ms pulse; ``--noise-um`` another sensor
 noise; the compiled path there is the evaluation at the samples of
-dynamics/estimation/compiled_modal_flow.py, the events stay the core's). ``--paths core``
+dynamics/estimation/compiled_modal_flow.py and the n-DOF event search of
+oscillator/kernel/compiled_modal.py; the core path runs the pure search with
+GRAZING_KERNEL=python). ``--paths core``
 runs one path alone (with ``PYTHONPATH=/work/main``: main's). Printed per path: the time of a section's answer (the add_sample that makes it
 due through the prediction), the time of a sample that makes none due (p50/p99/max, µs),
 their ratio core/kernel, and whether the two paths gave the same estimates, covariances,
@@ -39,6 +41,7 @@ Results in docs/benchmarks.md ("The controller's compute per section").
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
@@ -174,6 +177,23 @@ def replay_masses(ndof, pulse, v, kw, samples, enable_after, compiled):
     return np.array(section_t), np.array(section_cpu), np.array(sample_t), answers
 
 
+@contextlib.contextmanager
+def search_path(compiled):
+    """The n-DOF event search of the path: the compiled one (oscillator/kernel/
+    compiled_modal.py, loaded by kernel.warm_up_modal) for ``compiled``, else the pure
+    one (GRAZING_KERNEL=python for the replay; the same floats)."""
+    before = os.environ.get(kernel.ENV)
+    if not compiled:
+        os.environ[kernel.ENV] = "python"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(kernel.ENV, None)
+        else:
+            os.environ[kernel.ENV] = before
+
+
 def record(p, gains, rate, kw, periods, enable_after, seed=7):
     """The stream's samples [(t, x~, v~)] of the closed loop in the core."""
     samples = []
@@ -241,9 +261,11 @@ def main(argv=None) -> int:
         noise = None if args.noise_um is None else args.noise_um * 1e-6
         rig, ndof, pulse, rate, v, kw = masses_scene(noise)
         samples = record_masses(rig, ndof, v, kw, args.periods, args.enable_after)
+        kernel.warm_up_modal()
 
         def run(compiled):
-            return replay_masses(ndof, pulse, v, kw, samples, args.enable_after, compiled)
+            with search_path(compiled):
+                return replay_masses(ndof, pulse, v, kw, samples, args.enable_after, compiled)
     else:
         p, gains, rate, kw = (rig_scene if args.scene == "rig" else t200_scene)()
         samples = record(p, gains, rate, kw, args.periods, args.enable_after)

@@ -62,9 +62,10 @@ def compiled_kernel():
             from grazing_control.oscillator.ndof.model import model_from_mapping
 
             # the compiled model filters, 1-2 s each the first time: compiled_flow, and
-            # with a model file compiled_modal_flow (an n-DOF controller loads it at start;
-            # a model of two masses written here: tests/test_test_cleanup.py runs this
-            # conftest in a folder of its own)
+            # with a model file compiled_modal_flow and the n-DOF event search
+            # (kernel/compiled_modal.py, ~10 s the first time; an n-DOF controller loads
+            # them at start; a model of two masses written here: tests/test_test_cleanup.py
+            # runs this conftest in a folder of its own)
             warm_up(model_from_mapping({
                 "M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.04, -0.02], [-0.02, 0.04]],
                 "K": [[1.0, -1.0], [-1.0, 2.0]], "f": [0.0, 1.0], "omega": 0.5, "i_w": 0}))

@@ -17,7 +17,11 @@ answered 5.2 ms (p50) after a section at physical speed, against a pulse that st
 5 s now. What the tests read (the SI boundary, the pulse map, capture) does not depend on
 the rate. With the compiled n-DOF filter (compiled_modal_flow.py) the scene at physical
 speed still missed about a third of its deadlines through the nodes (docs/benchmarks.md,
-"The n-DOF filter compiled, and the two-mass rig at physical speed"): half speed stays."""
+"The n-DOF filter compiled, and the two-mass rig at physical speed"); with the compiled
+n-DOF event search as well (oscillator/kernel/compiled_modal.py) 16-22 of 59 at load
+14-26 (main 42-54 in the same half hour; docs/benchmarks.md "The n-DOF event search
+compiled"): the controller's reaction 5.1-5.3 ms (p50) against ~3 ms available. Half
+speed stays."""
 
 import math
 from pathlib import Path

@@ -557,13 +557,17 @@ def warm_up(p: OscillatorParams | None = None) -> None:
     call, then loaded from numba's cache, ~1 s) so that the first section does not wait
     for it: controller_node calls it at start in stream mode. With an n-DOF model ``p``
     also :mod:`grazing_control.dynamics.estimation.compiled_modal_flow` (its model filter's
-    evaluation at the samples; a 1-DOF controller never loads it)."""
+    evaluation at the samples) and the compiled n-DOF event search
+    (:func:`grazing_control.oscillator.kernel.warm_up_modal`); a 1-DOF controller never
+    loads them."""
     if _kernel.use_kernel():
         _kernel.warm_up()
         trajectory(OscillatorParams(delta_d=-1e-3), (0.0, 0.0), np.array([1.0]), 0.1, 1.0,
                    width=0.1, kernel=True)
         if isinstance(p, NdofModel):
             from .compiled_modal_flow import modal_flow_at_samples
+
+            _kernel.warm_up_modal()       # the n-DOF event search (issue 32)
 
             flow = NdofFlow.of(p)
             e = np.exp(np.multiply.outer(np.zeros(1), flow.eigenvalues))

@@ -19,6 +19,11 @@ Which path runs
 Compilation happens on the first call in a process and is cached on disk by numba
 (``cache=True``: ``__pycache__`` next to the source, or ``NUMBA_CACHE_DIR``), so later
 processes only load the machine code (:func:`warm_up` does either explicitly).
+
+The n-DOF model's certified event search has its compiled mirror too
+(:mod:`.compiled_modal`, the same floats as oscillator/ndof/impact.py's): the n-DOF core
+takes it (:func:`modal_search`) once :func:`warm_up_modal` has loaded it, and searches in
+Python before; a controller of an n-DOF model loads it at its start.
 """
 
 from __future__ import annotations
@@ -38,7 +43,8 @@ from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialSt
                                                NonFiniteStateError, Segment, check_state)
 
 __all__ = ["ENV", "available", "use_kernel", "loaded", "warm_up", "next_impact", "advance",
-           "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple"]
+           "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple",
+           "warm_up_modal", "modal_search"]
 
 #: Environment variable that chooses the path: auto (default), python, numba.
 ENV = "GRAZING_KERNEL"
@@ -217,6 +223,56 @@ def _first_calls():
     simulate_exact(p, 2, 0.0, 0.0)
     run_point(p, 2, 1, 0.0, 0.0)
     lyapunov_sums(p, 2, 1, 0.0, 0.0)
+
+
+_modal = None
+
+
+def warm_up_modal() -> float:
+    """Load the compiled n-DOF event search (:mod:`.compiled_modal`: compiled on a
+    machine's first call, ~10 s, then loaded from numba's cache, ~0.03 s) where the kernel
+    is in use; seconds taken (0.0 when loaded before or not in use). Until then
+    :func:`modal_search` is None and the n-DOF core searches in Python, with the same
+    floats: a caller that needs the speed (controller_node's start, through
+    ``dynamics.estimation.stream.warm_up``) loads it first, and nothing else waits for it."""
+    global _modal
+    if _modal is not None or not use_kernel():
+        return 0.0
+    t0 = time.perf_counter()
+    with _sigint_held():
+        from . import compiled_modal as km
+
+        # one mode (lambda = -0.1 + i) of a model with n = 1 (SearchConstants' layout)
+        table = np.array([[-0.1, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0]])
+        scalars = np.array([1.0, 0.0, 1.0, -1e-3, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 2.0])
+        km.next_impact(table, scalars, 0.0, np.zeros(2), 1.0, 0.0, km.search_stack())
+        _modal = km
+    return time.perf_counter() - t0
+
+
+def modal_search():
+    """The compiled n-DOF event search once :func:`warm_up_modal` has loaded it and while
+    the kernel is in use (``GRAZING_KERNEL``), else None: a function (table, scalars,
+    tau0, z0, horizon, max_step) -> (time of the first impact or None, the gap at a start
+    beyond the wall or None) over a flow's
+    :func:`~grazing_control.oscillator.ndof.impact.search_constants`, with ``max_step``
+    0.0 for the default window."""
+    if _modal is None or os.environ.get(ENV, "auto").strip().lower() == "python":
+        return None      # (numba is there: loaded; use_kernel() asks importlib, ~2 us)
+    return _modal_next_impact
+
+
+def _modal_next_impact(table, scalars, tau0, z0, horizon, max_step):
+    """:func:`modal_search`'s function (per-thread work array, the kernel's statuses)."""
+    stack = getattr(_local, "modal_stack", None)
+    if stack is None:
+        stack = _local.modal_stack = _modal.search_stack()
+    h, status, info = _modal.next_impact(table, scalars, tau0,
+                                         np.ascontiguousarray(z0, dtype=float), horizon,
+                                         max_step, stack)
+    if status == _modal.STATUS_BEYOND_WALL:
+        return None, info
+    return (None if h == _modal.NONE else h), None
 
 
 def exact_advance():

@@ -41,11 +41,13 @@ wall and the search never hangs.
 from __future__ import annotations
 
 import cmath
+import functools
 import math
 from typing import NamedTuple
 
 import numpy as np
 
+from grazing_control.oscillator import kernel
 from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impact,
                                                ImpactCapError, InitialStateError,
                                                NonFiniteStateError, _scan_window, check_times,
@@ -103,9 +105,10 @@ def check_state(flow: NdofFlow, z, where: str = "the state") -> np.ndarray:
         raise ParameterError(f"{where}={z!r} is invalid: expected {2 * flow.n} real numbers") from None
     if a.shape != (2 * flow.n,):
         raise ParameterError(f"{where} has {a.size} entries: valid is 2n = {2 * flow.n}")
-    if not np.all(np.isfinite(a)):
+    largest = float(np.abs(a).max())     # nan or inf where an entry is
+    if not math.isfinite(largest):
         raise NonFiniteStateError(f"{where} is not finite: deviation z = {a.tolist()!r}")
-    size = flow.condition * float(np.max(np.abs(a)))
+    size = flow.condition * largest
     if not size <= MAX_AMPLITUDE:
         raise NonFiniteStateError(
             f"{where} is absurdly large: cond(V) max|z| = {size:.3e} > {MAX_AMPLITUDE:.0e}; "
@@ -113,55 +116,140 @@ def check_state(flow: NdofFlow, z, where: str = "the state") -> np.ndarray:
     return a
 
 
-def _mode_sizes(flow: NdofFlow, z: np.ndarray) -> np.ndarray:
-    """sum_k |w_k V_wk| |lambda_k|^j sum_l |U_kl z_l| for j = 0, 1, 2: bounds of the terms
-    of z_w, v_w, a_w (section 5, "Rounding")."""
-    i_w = flow.model.i_w
-    per = np.abs(flow.modes[i_w]) * (np.abs(flow.inverse) @ np.abs(z))
-    lam = np.abs(flow.eigenvalues)
-    return np.array([per.sum(), (per * lam).sum(), (per * lam * lam).sum()])
+def _velocity_sizes(k: "SearchConstants", z) -> tuple:
+    """(sum_k |w_k V_wk| |lambda_k| sum_l |U_kl z_l|, |z|): the bound of the terms of v_w
+    and the deviation's size (section 5, "Rounding"), from the flow's
+    :func:`search_constants`, in Python floats (the terms of z_w are the evaluator's
+    ``zmag``)."""
+    size = norm2 = 0.0
+    zs = [float(x) for x in z]
+    for va, lam, row_abs in zip(k.vw_abs, k.lam, k.inverse_abs):
+        s = 0.0
+        for ua, zl in zip(row_abs, zs):
+            s += ua * abs(zl)
+        size += va * abs(lam) * s
+    for zl in zs:
+        norm2 += zl * zl
+    return size, math.sqrt(norm2)
+
+
+class SearchConstants(NamedTuple):
+    """What the certified search needs of a flow that does not depend on the start
+    (:func:`search_constants`, computed once per flow): the eigenvalues ``lam`` (one per
+    real eigenvalue or conjugate pair), the wall coordinate's row of the weighted modes
+    ``vw`` and the left eigenvectors ``inverse`` (rows), as Python complex numbers (lists);
+    |vw_k|, |inverse_kl|, |lambda_k|^3 and rho = max |lambda_k|; d* omega^3; the drift
+    scale defect cond(V)^2 (docs/theory_ndof_flow.md, section 5); the default initial
+    window min(T / 8, pi / (4 rho)); and, for the compiled search
+    (oscillator/kernel/compiled_modal.py), the same in two float arrays: ``table``, a row
+    a mode (Re lam, Im lam, Re vw, Im vw, |vw|, |lam|^3, then Re, Im and |.| of the row of
+    the inverse, 2n columns each), and ``scalars`` (omega, tau*, d*, Delta d, n,
+    d* omega^3, defect cond(V)^2, omega^2, rho, rho^2, the default window, 2.0) (powers
+    computed here, as the evaluator computes them, so that both use the same floats)."""
+
+    lam: list
+    vw: list
+    inverse: list
+    vw_abs: list
+    inverse_abs: list
+    lam3: list
+    rho: float
+    aw3: float
+    drift_scale: float
+    step: float
+    table: np.ndarray
+    scalars: np.ndarray
+
+
+@functools.lru_cache(maxsize=64)
+def search_constants(flow: NdofFlow) -> SearchConstants:
+    """The :class:`SearchConstants` of ``flow`` (kept for the 64 flows used last; a flow
+    is hashed by identity)."""
+    m = flow.model
+    lam = [complex(x) for x in flow.eigenvalues]
+    vw = [complex(x) for x in flow.modes[m.i_w]]
+    inverse = [[complex(x) for x in row] for row in flow.inverse]
+    vw_abs = [abs(x) for x in vw]
+    inverse_abs = [[abs(x) for x in row] for row in inverse]
+    lam3 = [abs(x) ** 3 for x in lam]
+    rho = max(abs(x) for x in lam)
+    table = np.array([[l.real, l.imag, v.real, v.imag, va, l3] + [x.real for x in row]
+                      + [x.imag for x in row] + row_abs
+                      for l, v, va, l3, row, row_abs in zip(lam, vw, vw_abs, lam3, inverse,
+                                                            inverse_abs)], dtype=float)
+    aw3 = flow.d_star * m.omega ** 3
+    drift_scale = flow.defect * flow.condition ** 2
+    step = min(m.period / 8.0, 0.25 * math.pi / rho)
+    scalars = np.array([m.omega, flow.tau_star, flow.d_star, m.delta_d, m.n, aw3,
+                        drift_scale, m.omega ** 2, rho, rho ** 2, step, 2.0])
+    return SearchConstants(lam, vw, inverse, vw_abs, inverse_abs, lam3, rho, aw3, drift_scale,
+                           step, table, scalars)
 
 
 class _Eval(GapEvaluator):
     """Gap, velocity and acceleration of the wall coordinate along the free flow from one
     start (docs/theory_ndof_flow.md, section 4); the interface of the 1-DOF evaluator that
-    oscillator.impact._search and _bracket use."""
+    oscillator.impact._search and _bracket use.
+
+    Its set-up is written out term by term in Python floats (no NumPy reduction, whose
+    order of summation is NumPy's and its BLAS's): the compiled search
+    (oscillator/kernel/compiled_modal.py) mirrors it operation for operation, and so gives
+    the same floats (tests/test_ndof_compiled.py)."""
 
     __slots__ = ("terms", "cabs", "jerk_terms", "aw3", "acc_err", "m0", "m1", "zmag", "rho",
                  "drift", "n", "horizon")
 
-    def __init__(self, flow: NdofFlow, tau0: float, z0: np.ndarray, horizon: float,
+    def __init__(self, flow: NdofFlow, tau0: float, z0, horizon: float,
                  transient: tuple | None = None):
         m = flow.model
-        beta = flow.inverse @ z0
-        c = flow.modes[m.i_w] * beta
-        lam = flow.eigenvalues
+        k = search_constants(flow)
+        zs = [float(x) for x in z0]
+        lam, vw_abs, lam3 = list(k.lam), list(k.vw_abs), list(k.lam3)
+        c, sizes = [], []
+        for vwk, row, row_abs in zip(k.vw, k.inverse, k.inverse_abs):
+            br = bi = s = 0.0
+            for u, ua, zl in zip(row, row_abs, zs):      # beta_k = (V^-1 z0)_k
+                br += u.real * zl
+                bi += u.imag * zl
+                s += ua * abs(zl)
+            c.append(complex(vwk.real * br - vwk.imag * bi, vwk.real * bi + vwk.imag * br))
+            sizes.append(s)
+        rho = k.rho
         if transient is not None:     # one more decaying real mode of the gap, coef e^{-rate h}
             rate, coef = transient    # (an actuator's lag, oscillator/ndof/forced.py)
-            lam, c = np.append(lam, -rate), np.append(c, coef)
-        self.terms = [(complex(l), complex(ck), complex(ck * l), complex(ck * l * l))
-                      for l, ck in zip(lam, c)]
+            lam.append(complex(-rate))
+            c.append(complex(coef))
+            lam3.append(rate ** 3)
+            rho = max(rho, rate)
+        self.terms = [(l, ck, ck * l, ck * l * l) for l, ck in zip(lam, c)]
         super().__init__(m.omega, flow.tau_star, flow.d_star, m.delta_d, tau0)
         self.horizon = horizon
         self.n = m.n
-        grow = np.exp(np.maximum(lam.real, 0.0) * horizon)  # 1 unless rounding made Re > 0
-        cab = np.abs(c)
-        self.cabs = float((cab * grow).sum())
-        self.jerk_terms = [(float(l.real), float(a * abs(l) ** 3), float(g))
-                           for l, a, g in zip(lam, cab, grow)]
-        self.aw3 = self.amp * self.omega ** 3
+        # 1 unless rounding made Re lambda > 0
+        grow = [math.exp(max(l.real, 0.0) * horizon) for l in lam]
+        cabs = 0.0
+        for ck, g in zip(c, grow):
+            cabs += abs(ck) * g
+        self.cabs = cabs
+        self.jerk_terms = [(l.real, abs(ck) * l3, g) for l, ck, l3, g in zip(lam, c, lam3, grow)]
+        self.aw3 = k.aw3
         # rounding (docs/theory_ndof_flow.md, section 5): terms of size zmag, and the
         # decomposition's defect, which moves z by <= t defect cond(V)^2 |z0| after time t
-        self.zmag = float(_mode_sizes(flow, z0)[0] * grow.max()) + (
-            abs(transient[1]) if transient is not None else 0.0)
-        self.rho = float(np.abs(lam).max())
-        self.drift = flow.defect * flow.condition ** 2 * float(np.linalg.norm(z0))
-        k = 2.0 * self.n + 2.0
+        zmag = 0.0
+        for va, s in zip(vw_abs, sizes):
+            zmag += va * s
+        self.zmag = zmag * max(grow) + (abs(transient[1]) if transient is not None else 0.0)
+        self.rho = rho
+        norm2 = 0.0
+        for zl in zs:
+            norm2 += zl * zl
+        self.drift = k.drift_scale * math.sqrt(norm2)
+        n2 = 2.0 * self.n + 2.0
         phase0 = abs(tau0) + abs(self.lag) + 1.0
         self.acc_err = (8.0 * _EPS * (self.amp * self.omega ** 2 * (4.0 + phase0 + self.omega * horizon)
-                                      + self.zmag * self.rho ** 2 * (k + self.rho * horizon))
+                                      + self.zmag * self.rho ** 2 * (n2 + self.rho * horizon))
                         + 2.0 * horizon * self.drift * self.rho ** 2)
-        self.m0 = 8.0 * _EPS * (self.zmag * k + abs(self.dd) + 2.0 * self.amp * (1.0 + phase0))
+        self.m0 = 8.0 * _EPS * (self.zmag * n2 + abs(self.dd) + 2.0 * self.amp * (1.0 + phase0))
         self.m1 = 8.0 * _EPS * (self.zmag * self.rho + 2.0 * self.amp * self.omega) + 2.0 * self.drift
 
     def __call__(self, h: float):
@@ -227,16 +315,33 @@ def next_impact(flow: NdofFlow, tau0: float, z0, horizon: float,
 
 
 def _next_impact(flow, tau0, z0, horizon, max_step=None):
-    """:func:`next_impact` without the checks of its inputs."""
+    """:func:`next_impact` without the checks of its inputs: compiled
+    (oscillator/kernel/compiled_modal.py, the same floats) once
+    :func:`grazing_control.oscillator.kernel.warm_up_modal` has loaded it and while the
+    kernel is in use, else this module's search."""
     if horizon <= 0.0:
         return None
+    compiled = kernel.modal_search()
+    if compiled is not None:
+        k = search_constants(flow)
+        h, beyond = compiled(k.table, k.scalars, float(tau0), z0, float(horizon),
+                             float(max_step or 0.0))
+        if beyond is not None:
+            _beyond_wall(beyond)
+        return h
     f = _Eval(flow, tau0, z0, horizon)
     # whole-window exclusion: g <= sup |z_w| - Delta d <= sum |c_k| - Delta d
     if f.cabs * (1.0 + 4.0 * _EPS) + f.m0 + f.m1 * horizon < f.dd:
         return None
-    step = max_step or min(flow.model.period / 8.0, 0.25 * math.pi / f.rho)
+    step = max_step or search_constants(flow).step
     count = max(1, int(math.ceil(horizon / step)))
     return _scan_window(f, horizon, count, lambda fa: f.gap_rounding(0.0, fa), "x_w")
+
+
+def _beyond_wall(gap: float):
+    """Raise the :class:`InitialStateError` of oscillator.impact._scan_window for the
+    computed gap ``gap`` > 0 at the start."""
+    raise InitialStateError(f"state beyond the wall: x_w - d = {gap:.3e} > 0 (valid: x_w <= d)")
 
 
 def saltation_matrix(flow: NdofFlow, phase: float, z_minus) -> np.ndarray:
@@ -371,7 +476,8 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
     m = flow.model
     n, w, r, omega = m.n, m.i_w, m.r, m.omega
     chatter = chatter_time if chatter_time is not None else 1e-6 * m.period
-    rho = float(np.abs(flow.eigenvalues).max())
+    consts = search_constants(flow)
+    rho = consts.rho
     impacts = []
     mono = np.eye(2 * n) if monodromy else None
     t = 0.0
@@ -395,9 +501,9 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
                 f"at phase {tau % TWO_PI:.6f}: the motion is not resolvable at this cap")
         contacts += 1
         # velocity rounding after the flow (docs/theory_ndof_flow.md, section 5)
-        sizes = _mode_sizes(flow, z)
-        flow_err = (8.0 * _EPS * sizes[1] * (2.0 * n + 2.0 + rho * h)
-                    + 2.0 * h * rho * flow.defect * flow.condition ** 2 * float(np.linalg.norm(z)))
+        size, norm = _velocity_sizes(consts, z)
+        flow_err = (8.0 * _EPS * size * (2.0 * n + 2.0 + rho * h)
+                    + 2.0 * h * rho * consts.drift_scale * norm)
         phi = flow.transition(h)
         z = phi @ z
         if monodromy:
