@@ -34,6 +34,7 @@ commands: 40-87 s) set up on each. tests/test_suite_layout.py
 checks that a grouped test's node id carries its group.
 """
 
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -45,30 +46,33 @@ from grazing_control.oscillator import kernel
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernel():
-    """Compile the numba kernel and the stream estimator's compiled model filters (or load
+    """Compile the numba kernels and the stream estimator's compiled model filters (or load
     their on-disk cache) once, before any test: in a fresh checkout the first compilation
-    takes 5-20 s, which a node test's startup timeouts must not absorb. One worker at a
-    time (a file lock): the first compiles and writes numba's cache, the others then load
-    it (on a fresh clone the three workers compiled at once, 12.7-13.4 s each on the two
-    cores, 2026-11-28)."""
+    takes 5-20 s, which a node test's startup timeouts must not absorb. Each of the three
+    pieces under a file lock of its own (:func:`_compiled_once`): the first worker to take
+    it compiles and writes numba's cache, the others then load it (on a fresh clone the
+    three workers compiled at once, 12.7-13.4 s each on the two cores, 2026-11-28). The
+    1-DOF kernel and the n-DOF search are independent, and the workers take them in
+    opposite orders, so that both compile at once on the two cores (one lock for all:
+    about 13 + 10 s of the suite's start with the other workers waiting)."""
     if kernel.use_kernel():
-        import fcntl
+        from grazing_control.dynamics.estimation.stream import warm_up
 
-        with open(Path(tempfile.gettempdir()) / "grazing-kernel-compile.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            kernel.warm_up()
-            from grazing_control.dynamics.estimation.stream import warm_up
+        from grazing_control.oscillator.ndof.model import model_from_mapping
 
-            from grazing_control.oscillator.ndof.model import model_from_mapping
-
-            # the compiled model filters, 1-2 s each the first time: compiled_flow, and
-            # with a model file compiled_modal_flow and the n-DOF event search
-            # (kernel/compiled_modal.py, ~10 s the first time; an n-DOF controller loads
-            # them at start; a model of two masses written here: tests/test_test_cleanup.py
-            # runs this conftest in a folder of its own)
-            warm_up(model_from_mapping({
-                "M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.04, -0.02], [-0.02, 0.04]],
-                "K": [[1.0, -1.0], [-1.0, 2.0]], "f": [0.0, 1.0], "omega": 0.5, "i_w": 0}))
+        pieces = [("kernel", kernel.warm_up), ("modal", kernel.warm_up_modal)]
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+        if worker[2:].isdigit() and int(worker[2:]) % 2 == 1:
+            pieces.reverse()
+        for name, compile_it in pieces:
+            _compiled_once(name, compile_it)
+        # the compiled model filters, 1-2 s each the first time: compiled_flow, and
+        # with a model file compiled_modal_flow (an n-DOF controller loads them at start;
+        # a model of two masses written here: tests/test_test_cleanup.py runs this
+        # conftest in a folder of its own)
+        _compiled_once("filters", lambda: warm_up(model_from_mapping({
+            "M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.04, -0.02], [-0.02, 0.04]],
+            "K": [[1.0, -1.0], [-1.0, 2.0]], "f": [0.0, 1.0], "omega": 0.5, "i_w": 0})))
     # the node zygote of this worker (ros/node_zygote.py): the nodes that the tests
     # start in this process are forked from it, not spawned, and share its imports
     # (0.4-0.55 s of CPU a node, several hundred nodes in the suite); started here, once
@@ -77,6 +81,16 @@ def compiled_kernel():
 
     node_zygote.enable()
     node_zygote.owner_zygote(launcher.node_env(), launcher.MODULES.values())
+
+
+def _compiled_once(name: str, compile_it) -> None:
+    """``compile_it()`` under the file lock ``grazing-compile-<name>.lock``: one worker
+    compiles, the others wait and then load numba's cache."""
+    import fcntl
+
+    with open(Path(tempfile.gettempdir()) / f"grazing-compile-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        compile_it()
 
 
 @pytest.fixture(autouse=True)
