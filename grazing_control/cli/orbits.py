@@ -20,7 +20,6 @@ import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
-from grazing_control.dynamics.orbits import one_one
 
 from .common import complex_list, gains_of, nulls, params_of, require_finite
 from .model_file import control_of, delay_of, fmt_vec, header, load
@@ -81,6 +80,8 @@ def cmd_orbit(args):
 def _study_orbit(args):
     """The 1-DOF study's orbit (the one entry, its closed form; or the perturbation
     series' multipliers): its JSON and its report's fields."""
+    from grazing_control.dynamics.orbits import one_one   # scipy: not at --version
+
     p = params_of(args, args.delta_d)
     gains = gains_of(args, p)
     t0 = time.perf_counter()
@@ -146,6 +147,8 @@ def _file_orbit(args):
     """A model file's orbit (docs/ndof_commands.md; the one entry: on the branch in the
     impact phase, or by shooting from the local map's prediction): its JSON and its
     report's fields."""
+    from grazing_control.dynamics.orbits import one_one   # scipy: not at --version
+
     from grazing_control.dynamics.orbits.near_grazing import grazing_side, with_delta_d
 
     model = with_delta_d(load(args.model), args.delta_d)
@@ -208,6 +211,8 @@ def _study_branch(args):
     points of ``one_one.continuation_values``, as a model file's (issue 32): its JSON, the
     report's title, points (Delta d, v-, multipliers, stable), bifurcations (type,
     Delta d) and notes."""
+    from grazing_control.dynamics.orbits import one_one   # scipy: not at --version
+
     p = params_of(args)
     gains = gains_of(args, p)
     branch = one_one.branch(p, gains, args.start, args.stop, args.points)
@@ -239,6 +244,8 @@ def _file_branch(args):
     """A model file's branch (docs/ndof_commands.md; the one entry: in the impact phase
     when the start is on the branch born at grazing, else by shooting); as
     :func:`_study_branch`."""
+    from grazing_control.dynamics.orbits import one_one   # scipy: not at --version
+
     from grazing_control.dynamics.orbits.near_grazing import with_delta_d
 
     values = one_one.continuation_values(args.start, args.stop, args.points)
@@ -447,6 +454,8 @@ def _pi2_lines(title, res, periods: int, word: str = "impacts", first=()) -> lis
 def _file_simulation(args):
     """A model file's simulation on Pi2 (docs/ndof_commands.md; its stop is rigid): its
     JSON and its report's lines."""
+    from grazing_control.dynamics.orbits import one_one   # scipy: not at --version
+
     from grazing_control.oscillator.ndof.flow import NdofFlow
     from grazing_control.dynamics.orbits.near_grazing import with_delta_d
     from grazing_control.dynamics.orbits.orbits import OrbitNotFound
