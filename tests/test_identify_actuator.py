@@ -178,8 +178,12 @@ def test_the_parameter_record_gives_the_actuation():
     act = actuation({"pulse_width": 1.0, "actuation_delay": 1.0, "actuator_bandwidth": 10.0,
                      "actuator_latency": 0.05, "force_limit": 0.015}, 12.0, notes)
     assert act == {"width": 1.0, "time_constant": 0.1, "latency": 0.05, "pulse_offset": -0.5,
-                   "force_limit": 0.015} and not notes
-    assert actuation({"pulse_width": 1.0, "actuation_delay": 0.2}, 12.0, notes)[
+                   "force_limit": 0.015}
+    assert notes == ["the corrections' force modelled as the parameter record gives it: "
+                     "pulse width 1, actuator time constant 0.1, latency 0.05 "
+                     "(docs/theory_identification.md section 12)"]
+    notes.clear()
+    assert actuation({"pulse_width": 1.0, "actuation_delay": 0.2}, 12.0, [])[
         "pulse_offset"] == pytest.approx(-0.2)
     assert list(clipped([0.01, -0.03], act)) == pytest.approx([0.01, -0.015])
     bare = actuation({}, 12.0, notes)

@@ -149,8 +149,8 @@ def test_a_noise_free_controlled_chain_gives_its_modal_parameters_to_1e_8():
 def test_a_pulsed_chain_gives_its_modal_parameters_to_1e_8():
     """Issue 32's rig scene: the corrections act as force pulses of width 1 centred 1.0
     after each sample (the plant's pulse_width, docs/theory_ndof.md section 15): with
-    the pulse (the samples inside it left out, the motion after it the kick's averaged
-    over it: modal.pulse_coefficients) the noise-free fit gives every parameter to 1e-8
+    the pulse (its force the fit's known input: force_input.py, every sample kept) the
+    noise-free fit gives every parameter to 1e-8
     relative; read as kicks at the pulses' centres it does not (the reproduction)."""
     from grazing_control.dynamics.design.family import pulse_design
 

@@ -274,6 +274,12 @@ def actuation(sim: dict, period: float, notes: list) -> dict:
     limit = _num(sim.get("force_limit"), 0.0) or 0.0
     delay = _num(sim.get("actuation_delay"), 0.0) or 0.0
     act = _actuator(sim, notes)
+    if width > 0.0 or act is not None and act.time_constant > 0.0:
+        notes.append(f"the corrections' force modelled as the parameter record gives it: "
+                     f"pulse width {width:g}, actuator time constant "
+                     f"{act.time_constant if act else 0.0:g}, latency "
+                     f"{act.latency if act else 0.0:g} (docs/theory_identification.md "
+                     "section 12)")
     return {"width": width, "time_constant": act.time_constant if act else 0.0,
             "latency": act.latency if act else 0.0,
             "pulse_offset": pulse_start(period, delay, width) - delay,
