@@ -13,12 +13,6 @@ spring, a bias) shows in what is left over:
   (:func:`grazing_control.oscillator.impact.advance`), simulated for one forcing period
   from the fitted state at each arc's first sample, against the recorded positions: its
   RMS error over the fit's noise estimate is about 1 with the right model;
-* near the corrections: a correction that did not act as the fit models it (a force
-  pulse or a lagging actuator the recording does not declare, or declares wrongly) leaves
-  its misfit in the quarter period around it. The mean square of the position residuals
-  there over the rest's is 1 +- sqrt(2 / N) (N samples there) with the right model:
-  beyond :data:`WHITENESS_LIMIT` of those standard deviations the report says the
-  corrections are not modelled (:func:`near_corrections`);
 * the fitted values: a restitution outside (0, 1) or a damping ratio outside (0, 1) is
   no oscillator of this kind;
 * the solver converged.
@@ -38,7 +32,7 @@ from grazing_control.oscillator.params import ParameterError
 from grazing_control.dynamics.identification.model import free_flight
 
 __all__ = ["WHITENESS_LIMIT", "RESIMULATION_LIMIT", "whiteness", "resimulate", "verdict",
-           "near_corrections"]
+           "suspects"]
 
 #: Largest |rho| sqrt(N) of the residuals' lag-1 autocorrelation of a good fit (5 sigma).
 WHITENESS_LIMIT = 5.0
@@ -61,35 +55,17 @@ def whiteness(ident) -> dict:
     return {"lag1_autocorrelation": rho, "pairs": n, "z": rho * math.sqrt(max(n, 1))}
 
 
-def near_corrections(ident) -> dict:
-    """The position residuals within a quarter period of a correction against the rest's
-    (module docstring): ``ratio`` of their mean squares, ``samples`` near, ``z`` =
-    (ratio - 1) sqrt(samples / 2), ``reason`` (one line, or None when |z| is within
-    :data:`WHITENESS_LIMIT`, or there are too few samples either side to tell)."""
-    prob = ident.problem
-    rec = prob.rec
-    r = np.real(prob.residual(ident.solution)[:rec.t.size])
-    near = rec.near(rec.corrections, 0.25 * 2.0 * math.pi / ident.phase.omega)
-    n_in, n_out = int(np.count_nonzero(near)), int(np.count_nonzero(~near))
-    out = {"samples": n_in, "ratio": math.nan, "z": 0.0, "reason": None}
-    if n_in < 20 or n_out < 20:
-        return out
-    rest = float(np.mean(r[~near] ** 2))
-    ratio = float(np.mean(r[near] ** 2)) / rest if rest > 0.0 else 1.0
-    z = (ratio - 1.0) * math.sqrt(n_in / 2.0)
-    out.update(ratio=ratio, z=z)
-    if z > WHITENESS_LIMIT and rest > (ROUNDING * max(abs(float(np.max(np.abs(rec.x)))),
-                                                      1e-300)) ** 2:
-        act = getattr(prob, "actuator", None)
-        modelled = ("as the force of the pulse and actuator the parameter record gives "
-                    f"(pulse_width {act.width:g}, tau_a {act.time_constant:g}, latency "
-                    f"{act.latency:g})" if act is not None else "as kicks")
-        out["reason"] = (f"the corrections did not act as modelled ({modelled}): the "
-                         f"residuals within T/4 of them are {math.sqrt(ratio):.3g} x the "
-                         f"rest's ({z:.1f} sigma > {WHITENESS_LIMIT:g}); is the bag's actuator "
-                         "(pulse_width, actuator_bandwidth, actuator_latency in its "
-                         "parameter record) the one that acted?")
-    return out
+def suspects(ident, usual: str) -> str:
+    """The whiteness reason's list of suspects: ``usual``, and with corrections in the
+    recording a force pulse or actuator other than the one modelled (the parameter
+    record's; docs/theory_identification.md section 12)."""
+    if ident.problem.rec.corrections.size == 0:
+        return usual
+    act = getattr(ident.problem, "actuator", None)
+    modelled = (f"pulse_width {act.width:g}, tau_a {act.time_constant:g}, latency "
+                f"{act.latency:g}" if act is not None else "kicks")
+    return (f"{usual} corrections that acted otherwise than modelled ({modelled}): "
+            "pulse_width, actuator_bandwidth, actuator_latency in the parameter record?")
 
 
 def _arc_state(ident, k, tt):
@@ -179,13 +155,11 @@ def verdict(ident) -> dict:
         reasons.append(f"the residuals are not white: lag-1 autocorrelation "
                        f"{white['lag1_autocorrelation']:.3f} over {white['pairs']} pairs "
                        f"({abs(white['z']):.1f} sigma > {WHITENESS_LIMIT:g}): the motion is not "
-                       "this model's (soft wall? nonlinear spring? sensor bias?)")
-    near = near_corrections(ident)
-    if near["reason"]:
-        reasons.append(near["reason"])
+                       "this model's ("
+                       + suspects(ident, "soft wall? nonlinear spring? sensor bias?") + ")")
     if not (ratio <= RESIMULATION_LIMIT):
         reasons.append(f"the re-simulated model misses the recording: one-period RMS error "
                        f"{resim['rms']:.3g} = {ratio:.3g} x the noise estimate "
                        f"(limit {RESIMULATION_LIMIT:g})")
     return {"fit": "poor" if reasons else "good", "reasons": reasons, "whiteness": white,
-            "resimulation": dict(resim, ratio_to_noise=ratio), "near_corrections": near}
+            "resimulation": dict(resim, ratio_to_noise=ratio)}

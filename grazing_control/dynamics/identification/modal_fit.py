@@ -554,7 +554,7 @@ def modal_verdict(ident: ModalIdentification) -> dict:
     convergence, r and every zeta_k in (0, 1), white position residuals (unless at
     rounding: an exact fit). (The 1-DOF re-simulation is not run for n > 1.)"""
     from grazing_control.dynamics.identification.checks import (ROUNDING, WHITENESS_LIMIT,
-                                                                 near_corrections, whiteness)
+                                                                 suspects, whiteness)
 
     m = ident.model
     white = whiteness(ident)
@@ -571,9 +571,6 @@ def modal_verdict(ident: ModalIdentification) -> dict:
         reasons.append(f"the residuals are not white: lag-1 autocorrelation "
                        f"{white['lag1_autocorrelation']:.3f} over {white['pairs']} pairs "
                        f"({abs(white['z']):.1f} sigma > {WHITENESS_LIMIT:g}): the motion is not "
-                       "this model's (another n? soft wall? sensor bias?)")
-    near = near_corrections(ident)
-    if near["reason"]:
-        reasons.append(near["reason"])
-    return {"fit": "poor" if reasons else "good", "reasons": reasons, "whiteness": white,
-            "near_corrections": near}
+                       "this model's (" + suspects(ident, "another n? soft wall? sensor bias?")
+                       + ")")
+    return {"fit": "poor" if reasons else "good", "reasons": reasons, "whiteness": white}
