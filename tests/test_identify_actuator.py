@@ -99,9 +99,9 @@ def test_the_input_response_is_the_actuator_and_modes_odes():
 def test_noise_free_actuated_bags_give_the_model_to_1e_8():
     """Noise-free, through the actuator: the 2-mass chain's every modal parameter and
     delta_d (modal fit) and the 1-DOF scene's zeta, r, omega, delta_d (1-DOF fit) to
-    1e-8 relative with the actuator modelled (measured 2e-11 and 3e-14); as main read
-    them (the pulse alone, centred at the correction: no lag, no latency) they miss by
-    more than 1e-5 (measured 1e-3)."""
+    1e-8 relative with the actuator modelled (measured 1.1e-10 and 2.6e-14); as main
+    read them (the pulse alone, centred at the correction: no lag, no latency) they miss
+    by more than 1e-5 (measured: a parameter 60x off)."""
     model, rec, dv = chain_bag(0, 0.0)
     ident = identify_modal(rec, 2, correction_dv=dv, **ACTUATOR)
     true = modal_of(model).vector(ident.problem.layout)
@@ -137,7 +137,7 @@ def test_seeded_actuated_bags_are_identified_within_three_standard_errors(chain_
     """sigma 1e-4, position only: the 2-mass chain (seeds 0, 1; T/200, 8 periods) and the
     1-DOF scene (seeds 0-2; T/100, 10 periods) through the actuator: the noise estimate
     within 12 % of 1e-4 and every parameter within 3 standard errors (measured: 2-mass
-    max |z| 1.36, 1.83; 1-DOF max |z| see the print), a good verdict."""
+    max |z| 1.36, 1.83; 1-DOF 1.46), a good verdict."""
     for model, ident, _plain in chain_fits:
         assert ident.converged and ident.sigma == pytest.approx(1e-4, rel=0.12)
         zs = z_scores(ident, model)
