@@ -31,6 +31,7 @@ from grazing_control.dynamics.identification.modal_fit import identify_modal, mo
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.identify import actuation, clipped
 
+from test_identify import run, write_bag
 from test_modal_identification import random_chain, simulate, z_scores
 
 #: The acceptance scene's actuator: bandwidth 10 (tau_a 0.1), latency 0.05, pulse width 1
@@ -202,3 +203,29 @@ def test_the_parameter_record_gives_the_actuation():
     assert bare["width"] == bare["time_constant"] == bare["latency"] == 0.0
     assert notes == ["no parameter record: the corrections are fitted as kicks at their "
                      "stamps (a force pulse or actuator the scene had is not modelled)"]
+
+
+def test_grazing_identify_reads_the_actuator_from_the_bags_record(tmp_path, capsys):
+    """`grazing identify BAG --json` of a 1-DOF bag (the engine's motion through the
+    actuator, sigma 1e-4, written as sim_node and the recorder write it: the corrections
+    stamped at their samples, the parameter record with pulse_width, actuation_delay,
+    actuator_bandwidth and actuator_latency): the record's actuator is modelled (a note
+    says so), a good fit, zeta, r, omega, delta_d within 3 standard errors."""
+    import json
+
+    rec, dv = one_dof_bag(0, 1e-4)
+    imp = np.column_stack([rec.impact_t, rec.impact_v_minus, rec.impact_v_plus,
+                           np.zeros(rec.impact_t.size)])
+    bag = write_bag(tmp_path / "bag", rec.t, rec.x, rec.v, np.arctan2(rec.sin_tau, rec.cos_tau),
+                    imp, np.column_stack([rec.corrections - DELAY, dv]), sin=True,
+                    velocity=False, p=ONE_DOF,
+                    extra={"pulse_width": WIDTH, "actuation_delay": DELAY,
+                           "actuator_bandwidth": BANDWIDTH, "actuator_latency": LATENCY})
+    code, out, _err = run(capsys, bag, "--json")
+    report = json.loads(out)
+    assert code == 0 and report["fit"] == "good", report["reasons"]
+    assert any(n.startswith("the corrections' force modelled") for n in report["notes"])
+    par = report["parameters"]
+    for k in ("zeta", "r", "omega", "delta_d"):
+        assert abs(par[k]["value"] - getattr(ONE_DOF, k)) < 3.0 * par[k]["stderr"], k
+
