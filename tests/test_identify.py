@@ -65,16 +65,17 @@ def _string(text):
 
 
 def write_bag(path, t, x, v, tau, impacts=None, corrections=None, *, sin=False,
-              velocity=True, record=True, p=SCENE):
+              velocity=True, record=True, p=SCENE, extra=None):
     """A bag as sim_node and the recorder write it: state (x, v or empty, effort [cos tau]
-    or [cos tau, sin tau]), impacts, corrections, the parameter record."""
+    or [cos tau, sin tau]), impacts, corrections, the parameter record (with ``extra``
+    of sim_node's parameters)."""
     with BagWriter(path) as bag:
         bag.add_topic("/oscillator/state", "sensor_msgs/msg/JointState")
         if record:
             bag.add_topic("/grazing/parameters", "std_msgs/msg/String")
             bag.write("/grazing/parameters", _string(encode("/sim_node", {
                 "zeta": p.zeta, "r": p.r, "omega": p.omega, "delta_d": p.delta_d,
-                "actuation_delay": 0.0})), 0)
+                "actuation_delay": 0.0, **(extra or {})})), 0)
         stamps = np.round(np.asarray(t) * 1e9).astype(np.int64)
         for j, s in enumerate(stamps):
             eff = [np.cos(tau[j]), np.sin(tau[j])] if sin else [np.cos(tau[j])]

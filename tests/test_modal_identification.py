@@ -33,15 +33,23 @@ CHAIN = ROOT / "config" / "models" / "two_mass_chain.yaml"
 
 
 def simulate(model, periods, rate, sigma=0.0, seed=1, gains=None, delay=0.0, on=0,
-             kicks=None, width=0.0):
+             kicks=None, width=0.0, actuator=None):
     """(Recording of x_w, position only, the recorded kicks): the engine with a model (the
-    core's exact n-DOF flow and impacts, the seeded sensor of sim_node) for ``periods`` with
-    the kick k^T z (or ``kicks[k]``) acting ``delay`` after each Pi2 sample from sample
-    ``on`` (with ``width`` > 0 the force pulse carrying it, centred there)."""
+    core's exact n-DOF flow and impacts, the seeded sensor of sim_node; an
+    OscillatorParams: the 1-DOF scene's engine) for ``periods`` with the kick k^T z (or
+    ``kicks[k]``) acting ``delay`` after each Pi2 sample from sample ``on`` (with
+    ``width`` > 0 the force pulse carrying it, centred there; ``actuator``
+    (bandwidth, latency): through the first-order actuator, sim_node's parameters)."""
+    bandwidth, latency = actuator or (0.0, 0.0)
     vals = {"delta_d": model.delta_d, "state_period": model.period / rate,
             "sensor_noise": sigma, "sensor_velocity": False, "sensor_seed": seed,
-            "pulse_width": width, "actuation_delay": delay}
-    eng = Engine(settings_from_values(vals, "model.yaml", model))
+            "pulse_width": width, "actuation_delay": delay,
+            "actuator_bandwidth": bandwidth, "actuator_latency": latency}
+    if isinstance(model, NdofModel):
+        eng = Engine(settings_from_values(vals, "model.yaml", model))
+    else:
+        vals.update(zeta=model.zeta, r=model.r, omega=model.omega)
+        eng = Engine(settings_from_values(vals))
     states = list(eng.initial_states())
     imp, corr, dvs = [], [], []
     for k in range(periods):
@@ -62,7 +70,7 @@ def simulate(model, periods, rate, sigma=0.0, seed=1, gains=None, delay=0.0, on=
                 imp.append((e.t, e.x, e.v))
         eng.end_period()
     t = np.array([s.t for s in states])
-    x = np.array([s.x[model.i_w] for s in states])
+    x = np.array([s.x[model.i_w] if isinstance(model, NdofModel) else s.x for s in states])
     ph = np.array([s.phase for s in states])
     imp = np.array(imp).reshape(-1, 3)
     rec = Recording(t, x, np.full(t.size, np.nan), np.cos(ph), np.sin(ph), imp[:, 0],
@@ -141,8 +149,8 @@ def test_a_noise_free_controlled_chain_gives_its_modal_parameters_to_1e_8():
 def test_a_pulsed_chain_gives_its_modal_parameters_to_1e_8():
     """Issue 32's rig scene: the corrections act as force pulses of width 1 centred 1.0
     after each sample (the plant's pulse_width, docs/theory_ndof.md section 15): with
-    the pulse (the samples inside it left out, the motion after it the kick's averaged
-    over it: modal.pulse_coefficients) the noise-free fit gives every parameter to 1e-8
+    the pulse (its force the fit's known input: force_input.py, every sample kept) the
+    noise-free fit gives every parameter to 1e-8
     relative; read as kicks at the pulses' centres it does not (the reproduction)."""
     from grazing_control.dynamics.design.family import pulse_design
 

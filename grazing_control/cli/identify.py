@@ -14,6 +14,13 @@ n > 1, or ``--model FILE``) gets the n-DOF fit: the wall coordinate's modal para
 (docs/theory_identification.md section 11), and ``--out-model FILE`` writes them as a
 model file (docs/ndof_model.md) that ``grazing design --model`` reads.
 
+A bag whose corrections were force pulses through the first-order actuator
+(``pulse_width``, ``actuator_bandwidth``, ``actuator_latency``, ``force_limit`` in its
+parameter record) is fitted with the commands' force as a known input: the pulse, its
+latency and the lag's tail (docs/theory_identification.md section 12); a poor fit of a
+bag with corrections names, among its suspects, corrections that acted otherwise than
+modelled (an actuator the record does not give).
+
 ``--stop``: which stop the bags' Pi2 samples support (rigid, Kelvin-Voigt, with
 friction; :mod:`grazing_control.recordings.stop`, docs/theory_contact.md section 17),
 each candidate with its parameters, standard errors and BIC, the oscillator's

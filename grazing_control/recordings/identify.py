@@ -218,10 +218,18 @@ def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
             f"impacts: {bag} has no recorded impacts on oscillator/impact"
             + ("" if impacts else " (--no-impacts)") + ": the n-DOF fit starts from them "
             "(finding them in the motion is built for n = 1 only)")
-    width = float(sim.get("pulse_width", 0.0) or 0.0)     # the plant's force pulse (§15)
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+    from grazing_control.oscillator.ndof.forced import actuated_mass
+
+    act = actuation(sim, model.period, notes)
+    if act["width"] > 0.0 and act["force_limit"] > 0.0:     # the plant clips m_a dv / w
+        ma = actuated_mass(NdofFlow.of(model))
+        kicks = clipped(kicks, act, ma)
     ident = identify_modal(rec, model.n, correction_dv=kicks,
                            kick_on_wall=model.i_a == model.i_w, max_arcs=max_arcs,
-                           shrink=shrink, width=width)
+                           shrink=shrink, width=act["width"],
+                           time_constant=act["time_constant"], latency=act["latency"],
+                           pulse_offset=act["pulse_offset"])
     check = modal_verdict(ident)
     names = ident.names + ("delta_d", "d_star")
     params = {k: {"value": ident.value(k), "stderr": ident.stderr[k]} for k in names}
@@ -245,6 +253,53 @@ def identify_ndof(bag, rec, notes, sim, kicks, model, path, *, impacts=True,
     if record:
         report["parameter_record"] = record
     return report
+
+
+def actuation(sim: dict, period: float, notes: list) -> dict:
+    """How the bag's corrections reached the mass, from its parameter record (docs/nodes.md):
+    the force pulse's ``width`` (pulse_width), its start ``pulse_offset`` relative to the
+    correction's time (stamp + actuation_delay; the engine's pulse_start: centred there,
+    kept within [0, T - w)), the first-order actuator's ``time_constant`` (1 /
+    actuator_bandwidth) and ``latency``, the ``force_limit``; a note when the record
+    lacks them (the corrections are then fitted as kicks)."""
+    from grazing_control.dynamics.simulation.actuation import pulse_start
+
+    from .numbers import _actuator, _num
+
+    if not sim:
+        notes.append("no parameter record: the corrections are fitted as kicks at their "
+                     "stamps (a force pulse or actuator the scene had is not modelled)")
+    width = _num(sim.get("pulse_width"), 0.0) or 0.0
+    width = width if math.isfinite(width) and width > 0.0 else 0.0
+    limit = _num(sim.get("force_limit"), 0.0) or 0.0
+    delay = _num(sim.get("actuation_delay"), 0.0) or 0.0
+    act = _actuator(sim, notes)
+    if width > 0.0 or act is not None and act.time_constant > 0.0:
+        notes.append(f"the corrections' force modelled as the parameter record gives it: "
+                     f"pulse width {width:g}, actuator time constant "
+                     f"{act.time_constant if act else 0.0:g}, latency "
+                     f"{act.latency if act else 0.0:g} (docs/theory_identification.md "
+                     "section 12)")
+    return {"width": width, "time_constant": act.time_constant if act else 0.0,
+            "latency": act.latency if act else 0.0,
+            "pulse_offset": pulse_start(period, delay, width) - delay,
+            "force_limit": limit if math.isfinite(limit) and limit > 0.0 else 0.0}
+
+
+def _num_or(value, default: float) -> float:
+    """A positive finite number of the record, else ``default``."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return default
+    return value if math.isfinite(value) and value > 0.0 else default
+
+
+def clipped(kicks, act: dict, mass: float = 1.0):
+    """The impulses the plant delivered for the commanded ``kicks``: the pulse's force
+    mass dv / w clipped to +-force_limit (dynamics/simulation/actuation.pulse_force)."""
+    w, limit = act["width"], act["force_limit"]
+    return np.clip(mass * np.asarray(kicks, float) / w, -limit, limit) * w / mass
 
 
 def model_file_record(sim: dict, model) -> dict:
@@ -278,8 +333,16 @@ def identify_bag(bag, *, topics=None, position_only=False, impacts=True,
     if nominal is not None and nominal.n > 1:
         return identify_ndof(bag, rec, notes, sim, kicks, nominal, path, impacts=impacts,
                              max_arcs=max_arcs, shrink=shrink)
+    from grazing_control.oscillator.params import OscillatorParams
+
+    omega = _num_or(sim.get("omega"), OscillatorParams().omega)
+    act = actuation(sim, 2.0 * math.pi / omega, notes)
+    if act["width"] > 0.0 and act["force_limit"] > 0.0:
+        kicks = clipped(kicks, act)
     ident = identify(rec, impacts="recorded" if impacts and rec.impact_t.size else "motion",
-                     max_arcs=max_arcs, shrink=shrink)
+                     max_arcs=max_arcs, shrink=shrink, correction_dv=kicks,
+                     width=act["width"], time_constant=act["time_constant"],
+                     latency=act["latency"], pulse_offset=act["pulse_offset"])
     check = verdict(ident)
     report = {
         "bag": str(bag),

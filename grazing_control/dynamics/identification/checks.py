@@ -31,7 +31,8 @@ from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.identification.model import free_flight
 
-__all__ = ["WHITENESS_LIMIT", "RESIMULATION_LIMIT", "whiteness", "resimulate", "verdict"]
+__all__ = ["WHITENESS_LIMIT", "RESIMULATION_LIMIT", "whiteness", "resimulate", "verdict",
+           "suspects"]
 
 #: Largest |rho| sqrt(N) of the residuals' lag-1 autocorrelation of a good fit (5 sigma).
 WHITENESS_LIMIT = 5.0
@@ -52,6 +53,19 @@ def whiteness(ident) -> dict:
     denom = float(np.sqrt((a @ a) * (b @ b)))
     rho = float(a @ b) / denom if denom > 0 else 0.0
     return {"lag1_autocorrelation": rho, "pairs": n, "z": rho * math.sqrt(max(n, 1))}
+
+
+def suspects(ident, usual: str) -> str:
+    """The whiteness reason's list of suspects: ``usual``, and with corrections in the
+    recording a force pulse or actuator other than the one modelled (the parameter
+    record's; docs/theory_identification.md section 12)."""
+    if ident.problem.rec.corrections.size == 0:
+        return usual
+    act = getattr(ident.problem, "actuator", None)
+    modelled = (f"pulse_width {act.width:g}, tau_a {act.time_constant:g}, latency "
+                f"{act.latency:g}" if act is not None else "kicks")
+    return (f"{usual} corrections that acted otherwise than modelled ({modelled}): "
+            "pulse_width, actuator_bandwidth, actuator_latency in the parameter record?")
 
 
 def _arc_state(ident, k, tt):
@@ -80,6 +94,9 @@ def resimulate(ident, *, windows: int = 100) -> dict:
     starts = prob.unpack(ident.solution)[1]
     ends = np.concatenate([starts[1:], [np.inf]])
     corrections = starts[prob.arcs.kind == 2]
+    act = getattr(prob, "actuator", None)
+    if act is not None:        # the model re-simulated free: from the input's onsets on
+        corrections = act.onsets
     arcs = np.unique(prob.arcs.sample_arc)
     if arcs.size > windows:
         arcs = arcs[np.linspace(0, arcs.size - 1, windows).astype(int)]
@@ -92,6 +109,8 @@ def resimulate(ident, *, windows: int = 100) -> dict:
         if first >= rec.t.size:
             continue
         t0 = rec.t[first]
+        if act is not None and np.any((act.onsets < t0) & (act.onsets + act.reach > t0)):
+            continue           # a command's force still acts there
         later = corrections[corrections > t0]
         t1 = min(t0 + T, later[0] if later.size else np.inf, rec.t[-1])
         sel = np.flatnonzero((rec.t > t0) & (rec.t <= t1))
@@ -136,7 +155,8 @@ def verdict(ident) -> dict:
         reasons.append(f"the residuals are not white: lag-1 autocorrelation "
                        f"{white['lag1_autocorrelation']:.3f} over {white['pairs']} pairs "
                        f"({abs(white['z']):.1f} sigma > {WHITENESS_LIMIT:g}): the motion is not "
-                       "this model's (soft wall? nonlinear spring? sensor bias?)")
+                       "this model's ("
+                       + suspects(ident, "soft wall? nonlinear spring? sensor bias?") + ")")
     if not (ratio <= RESIMULATION_LIMIT):
         reasons.append(f"the re-simulated model misses the recording: one-period RMS error "
                        f"{resim['rms']:.3g} = {ratio:.3g} x the noise estimate "

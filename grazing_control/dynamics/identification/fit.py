@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from grazing_control.dynamics.identification.data import Arcs, Recording, RecordingError, cut_arcs
+from grazing_control.dynamics.identification.force_input import ActuatorInput, forced_increment
 from grazing_control.dynamics.identification.initial import InitialGuessError, find_impacts, initial_guess
 from grazing_control.dynamics.identification.model import (GLOBAL_NAMES, NONDIMENSIONAL_NAMES, RigModel, free_flight,
                     nondimensional_vector)
@@ -91,8 +92,9 @@ class Problem:
     """The residual vector and its Jacobian for one recording cut into arcs."""
 
     def __init__(self, rec: Recording, arcs: Arcs, phase: PhaseReference, *,
-                 impact_velocities: bool = True):
+                 impact_velocities: bool = True, actuator: ActuatorInput | None = None):
         self.rec, self.arcs, self.phase = rec, arcs, phase
+        self.actuator = actuator
         self.weight = CONSTRAINT_WEIGHT
         self.omega, self.tau0 = phase.omega, phase.tau0
         K = arcs.count
@@ -120,8 +122,11 @@ class Problem:
         use = bool(impact_velocities)
         self.b_vm = self.b_imp[np.isfinite(arcs.v_minus[self.b_imp])] if use else b[:0]
         self.b_vp = self.b_imp[np.isfinite(arcs.v_plus[self.b_imp])] if use else b[:0]
+        # with the input, the velocity is continuous at a correction too (the force is
+        # the input's, not a jump)
+        self.b_cor_v = self.b_cor if actuator is not None else b[:0]
         sizes = [rec.t.size, self.vrows.size, self.b_vm.size, self.b_vp.size,
-                 self.b_imp.size, self.b_imp.size, self.b_cor.size]
+                 self.b_imp.size, self.b_imp.size, self.b_cor.size, self.b_cor_v.size]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)])
         self.m = int(self.offsets[-1])
         self.m_data = int(self.offsets[4])
@@ -134,11 +139,28 @@ class Problem:
         for i, j in enumerate(self.vrows):
             owner[sa[j]].append(o[1] + i)
         for block, bs in ((2, self.b_vm), (3, self.b_vp), (4, self.b_imp), (5, self.b_imp),
-                          (6, self.b_cor)):
+                          (6, self.b_cor), (7, self.b_cor_v)):
             for i, bb in enumerate(bs):
                 owner[bb].append(o[block] + i)
                 owner[bb - 1].append(o[block] + i)
         self.rows_of_arc = [np.array(r, int) for r in owner]
+        if actuator is not None:     # the commands acting on each stretch (.force_input)
+            s_lo = np.where(arcs.time_free, arcs.lower, arcs.start)
+            s_hi = np.where(arcs.time_free, arcs.upper, arcs.start)
+            self.acting = (actuator.relevant(rec.t, s_lo[sa]),
+                           actuator.relevant(s_hi[self.b_imp], s_lo[self.b_imp - 1]),
+                           actuator.relevant(s_hi[self.b_cor], s_lo[self.b_cor - 1]))
+
+    def forced(self, g, which: int, t, s):
+        """(x, v) the input adds over the stretches (s, t] (:mod:`.force_input`; the
+        kick's response of the one mode is -i / w: x = Im F / w, v = Re F - sigma Im F /
+        w); 0 without an input."""
+        if self.actuator is None:
+            return 0.0, 0.0
+        zeta, Om = g[0], g[1]
+        sig, w = zeta * Om, Om * np.sqrt(1.0 - zeta * zeta)
+        fr, fi = forced_increment(sig, w, t, s, self.actuator, self.acting[which])
+        return fi[:, 0] / w, fr[:, 0] - sig * fi[:, 0] / w
 
     # ------------------------------------------------------------------ vector
     def pack(self, g, start, X, V) -> np.ndarray:
@@ -191,11 +213,17 @@ class Problem:
         rec = self.rec
         a = self.arcs.sample_arc
         x, v = free_flight(zeta, Om, A, om, psi0[a], rec.t - S[a], X[a], V[a])
+        fx, fv = self.forced(g, 0, rec.t, S[a])
+        x, v = x + fx, v + fv
         bi, bc = self.b_imp, self.b_cor
         xi, vi = free_flight(zeta, Om, A, om, psi0[bi - 1], S[bi] - S[bi - 1], X[bi - 1],
                              V[bi - 1])
-        xc, _vc = free_flight(zeta, Om, A, om, psi0[bc - 1], S[bc] - S[bc - 1], X[bc - 1],
-                              V[bc - 1])
+        fx, fv = self.forced(g, 1, S[bi], S[bi - 1])
+        xi, vi = xi + fx, vi + fv
+        xc, vc = free_flight(zeta, Om, A, om, psi0[bc - 1], S[bc] - S[bc - 1], X[bc - 1],
+                             V[bc - 1])
+        fx, fv = self.forced(g, 2, S[bc], S[bc - 1])
+        xc, vc = xc + fx, vc + fv
         W = self.weight
         ar = self.arcs
         pos = {int(b): i for i, b in enumerate(bi)}
@@ -210,6 +238,7 @@ class Problem:
             W * (xi - d),
             W * (V[bi] + r * vi),
             W * (xc - X[bc]),
+            W * (vc[:self.b_cor_v.size] - V[self.b_cor_v]),
         ])
 
     def jacobian(self, p) -> np.ndarray:
@@ -341,7 +370,7 @@ def _covariance(J, sigma2, k=6):
 
 
 def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correction_times,
-           max_nfev, prior=None, fixed=None, deadline=None):
+           max_nfev, prior=None, fixed=None, deadline=None, actuator=None):
     """Arcs, initial guess and the penalty continuation: (Problem, last solution);
     ``fixed`` {index in GLOBAL_NAMES: value} held out of the solve (sol.x is the whole
     vector)."""
@@ -351,7 +380,7 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
         raise IdentificationError(
             "the recording has no impact: r and d (so delta_d) are not identifiable "
             "from free flight alone (record a scene with impacts)")
-    prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities)
+    prob = Problem(rec, arcs, phase, impact_velocities=impact_velocities, actuator=actuator)
     check_size(prob)
     g0, start0, X0, V0 = initial_guess(rec, arcs, phase, prior)
     lo, hi = prob.bounds()
@@ -392,6 +421,30 @@ def _solve(rec, phase, impact_t, vm, vp, corr_t, free, impact_velocities, correc
     return prob, sol
 
 
+def actuator_input(rec: Recording, correction_dv, width: float, time_constant: float,
+                   latency: float, pulse_offset: float | None):
+    """(ActuatorInput or None, rec): the corrections of ``rec`` as the force's known input
+    (:func:`identify`'s arguments; the commands of size 0 left out); without one (a kick)
+    ``rec`` with its corrections L later. IdentificationError when the sizes are missing
+    or do not match the corrections."""
+    if width > 0.0 or time_constant > 0.0:
+        dv = None if correction_dv is None else np.asarray(correction_dv, float).ravel()
+        if dv is None or dv.size != rec.corrections.size:
+            raise IdentificationError(
+                f"correction_dv has {0 if dv is None else dv.size} values for "
+                f"{rec.corrections.size} corrections: a force pulse or actuator needs the "
+                "size of every correction")
+        offset = (-0.5 * width if pulse_offset is None else float(pulse_offset)) + latency
+        acting = dv != 0.0
+        return ActuatorInput(rec.corrections[acting] + offset, dv[acting], width,
+                             time_constant, latency), rec
+    if latency:
+        import dataclasses
+
+        return None, dataclasses.replace(rec, corrections=rec.corrections + latency)
+    return None, rec
+
+
 def _shift_from_bounds(prob, p):
     """Fitted event times with those stopped at a bound moved to the middle of the next
     sample interval beyond it (the event was between other samples); None if none is."""
@@ -417,7 +470,9 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
              max_arcs: int | None = 100, max_nfev: int = 400,
              coincidence: float = 1.5e-9, correction_times: bool = True,
              shrink: bool = False, prior=None, fixed: dict | None = None,
-             deadline: float | None = None) -> Identification:
+             deadline: float | None = None, correction_dv=None, width: float = 0.0,
+             time_constant: float = 0.0, latency: float = 0.0,
+             pulse_offset: float | None = None) -> Identification:
     """Fit the model to a recording (module docstring).
 
     ``shrink``: where ``max_arcs`` arcs would exceed the Jacobian's memory bound (a dense
@@ -448,6 +503,14 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     deadline : a ``time.monotonic()`` instant by which the fit must end (None: none):
         beyond it the solver stops and FitTimedOut is raised (a controller's worker must
         not fit for minutes on data that hardly determine the model).
+    correction_dv, width, time_constant, latency, pulse_offset : how the corrections
+        reached the mass (the bag's parameter record): with ``width`` > 0 or
+        ``time_constant`` > 0 each correction of size ``correction_dv`` (one per
+        ``rec.corrections``) is commanded as a force pulse of that width starting
+        ``pulse_offset`` after its time (default -width / 2: centred) through the
+        first-order actuator (tau_a, latency L): the force is a known input
+        (:mod:`.force_input`), the state continuous at the corrections, their times
+        held. Both 0: a kick L after its time, its size fitted (V free after it).
 
     Raises
     ------
@@ -459,7 +522,8 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
     while True:
         try:
             return _identify(rec, impacts, impact_velocities, max_arcs, max_nfev,
-                             coincidence, correction_times, prior, fixed, deadline)
+                             coincidence, correction_times, prior, fixed, deadline,
+                             (correction_dv, width, time_constant, latency, pulse_offset))
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -467,10 +531,14 @@ def identify(rec: Recording, *, impacts: str = "recorded", impact_velocities: bo
 
 
 def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
-              correction_times, prior, fixed, deadline=None) -> Identification:
+              correction_times, prior, fixed, deadline=None,
+              actuation=(None, 0.0, 0.0, 0.0, None)) -> Identification:
     if impacts not in ("recorded", "motion"):
         raise IdentificationError(f"impacts={impacts!r} is invalid: valid values are "
                                   "recorded, motion")
+    actuator, rec = actuator_input(rec, *actuation)
+    if actuator is not None:
+        correction_times = False     # known instants: the state is continuous there
     try:
         # a sample stamped at an event's instant is ambiguous (before or after the jump)
         events = np.concatenate([rec.corrections, rec.impact_t if impacts == "recorded"
@@ -504,7 +572,7 @@ def _identify(rec, impacts, impact_velocities, max_arcs, max_nfev, coincidence,
         for _round in range(MAX_SHIFTS + 1):
             prob, sol = _solve(rec, phase, rec_events, vm, vp, corr_t, free,
                                impact_velocities, correction_times, max_nfev, prior, fixed,
-                               deadline)
+                               deadline, actuator)
             if best is None or sol.cost < best[2].cost:   # an event on a sample may cycle
                 best = (shifts, prob, sol)
             moved = _shift_from_bounds(prob, sol.x)

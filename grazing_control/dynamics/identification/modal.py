@@ -37,7 +37,7 @@ import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["ModalLayout", "ModalModel", "modal_of", "kick_coefficients", "pulse_coefficients",
+__all__ = ["ModalLayout", "ModalModel", "modal_of", "kick_coefficients",
            "modal_flow",
            "propagate", "particular"]
 
@@ -101,21 +101,6 @@ def kick_coefficients(Om, zeta, free, slope):
     c_last = -np.sum(cf)
     s_last = (slope - np.sum(w[:-1] * sf - sig[:-1] * cf) + sig[-1] * c_last) / w[-1]
     return np.concatenate([cf, [c_last]]), np.concatenate([sf, [s_last]])
-
-
-def pulse_coefficients(sig, w, c, s, width: float):
-    """(c, s) of a correction acting as a constant force pulse of ``width`` centred at the
-    correction's instant instead of the kick there, for the motion after the pulse
-    (docs/theory_identification.md section 11, "A force pulse"): the response to the
-    pulse is the kick's averaged over the window, so each mode's complex coefficient
-    C = c - i s is multiplied by sinh(lambda a) / (lambda a), lambda = -sigma + i w,
-    a = width / 2. Real arithmetic only (the fit's Jacobian is a complex step)."""
-    a = 0.5 * width
-    x, y = -sig * a, w * a
-    P, Q = np.sinh(x) * np.cos(y), np.cosh(x) * np.sin(y)    # sinh(lambda a) = P + i Q
-    den = x * x + y * y
-    fr, fi = (P * x + Q * y) / den, (Q * x - P * y) / den
-    return c * fr + s * fi, s * fr - c * fi
 
 
 def modal_flow(sig, w, alpha, beta, h):

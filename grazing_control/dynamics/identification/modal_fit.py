@@ -29,6 +29,7 @@ kicks' coefficients from the arcs' jumps at the events.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -38,12 +39,13 @@ from scipy.optimize import least_squares
 from grazing_control.dynamics.identification.data import Recording, RecordingError, cut_arcs
 from grazing_control.dynamics.identification.fit import (CONTINUATION, FitTooLarge,
                                                          IdentificationError, check_size,
-                                                         ShootingFit,
+                                                         ShootingFit, actuator_input,
                                                          _covariance,
                                                          coloured_jacobian, interior)
+from grazing_control.dynamics.identification.force_input import (ActuatorInput, equivalent_kick,
+                                                                 forced_increment, kicked)
 from grazing_control.dynamics.identification.modal import (ModalLayout, ModalModel,
                                                            kick_coefficients, modal_flow,
-                                                           pulse_coefficients,
                                                            particular, propagate, rates)
 from grazing_control.dynamics.identification.phase import PhaseError, PhaseReference, fit_phase
 
@@ -55,14 +57,15 @@ class ModalProblem:
     """The residual vector and its Jacobian (module docstring) of one recording of the
     wall coordinate cut into arcs. ``correction_dv``: the recorded kicks (one per
     correction time of ``rec``); ``kick_on_wall``: they act on the wall coordinate;
-    ``width`` > 0: each acts as a force pulse of that width centred at its time
-    (:func:`.modal.pulse_coefficients`; the samples inside the pulses are not in ``rec``)."""
+    ``actuator``: the commands as the force's known input (:mod:`.force_input`: a pulse,
+    through the first-order actuator): the state is continuous at a correction and the
+    input's response is added to every stretch; None: each correction is a kick."""
 
     def __init__(self, rec: Recording, arcs, phase: PhaseReference, n: int,
                  correction_dv, kick_on_wall: bool, impact_velocities: bool = True,
-                 width: float = 0.0):
+                 actuator: ActuatorInput | None = None):
         self.rec, self.arcs, self.phase, self.n_modes = rec, arcs, phase, n
-        self.width = float(width)
+        self.actuator = actuator
         K = arcs.count
         self.kick_on_wall = bool(kick_on_wall)
         self.b_imp = np.flatnonzero(arcs.kind == 1)
@@ -107,6 +110,29 @@ class ModalProblem:
                 owner[b] += rows
                 owner[b - 1] += rows
         self.rows_of_arc = [np.array(r, int) for r in owner]
+        if actuator is not None:
+            # the commands acting on each stretch (its start within its time's bounds)
+            s_lo = np.where(arcs.time_free, arcs.lower, arcs.start)
+            s_hi = np.where(arcs.time_free, arcs.upper, arcs.start)
+            self._last = {}
+            self.relevant = {
+                "samples": actuator.relevant(rec.t, s_lo[sa]),
+                "impacts": actuator.relevant(s_hi[bi], s_lo[bi - 1]),
+                "corrections": actuator.relevant(s_hi[self.b_cor], s_lo[self.b_cor - 1])}
+
+    def _forced(self, which, sig, w, t, s, kc, ks):
+        """The input's (alpha, beta) over the stretches (s, t] (:mod:`.force_input`), or
+        0 without an input."""
+        if self.actuator is None:
+            return 0.0, 0.0
+        # the complex step of an arc's state leaves the input's response as it was: the
+        # last one of each kind is kept for the same (sigma, w, t, s)
+        key = b"".join(np.asarray(a, complex).tobytes() for a in (sig, w, t, s))
+        hit = self._last.get(which)
+        if hit is None or hit[0] != key:
+            hit = (key, forced_increment(sig, w, t, s, self.actuator, self.relevant[which]))
+            self._last[which] = hit
+        return kicked(kc, ks, *hit[1])
 
     def pack(self, g, start, a) -> np.ndarray:
         p = np.zeros(self.n)
@@ -143,12 +169,17 @@ class ModalProblem:
         Om, ze, ci, Pc, Ps, d, r, ka = self.layout.split(g)
         sig, w = rates(Om, ze)
         c, s = kick_coefficients(Om, ze, ci, 1.0)
+        kc, ks = (c, s) if ka is None else kick_coefficients(Om, ze, ka, 0.0)
         om, tau0 = self.phase.omega, self.phase.tau0
         rec, arcs = self.rec, self.arcs
         al, be = a[:, :n], a[:, n:]
         sa = arcs.sample_arc
         h = (rec.t - S[sa])[:, None]
         y, dy = modal_flow(sig, w, al[sa], be[sa], h)
+        if self.actuator is not None:
+            fa, fb = self._forced("samples", sig, w, rec.t, S[sa], kc, ks)
+            y = y + np.sum(fa, axis=-1)
+            dy = dy + np.sum(w * fb - sig * fa, axis=-1)
         xp, vp = particular(Pc, Ps, om, om * rec.t + tau0)
         W = self.weight
         out = [y + xp - rec.x, (dy + vp)[self.vrows] - rec.v[self.vrows]]
@@ -156,6 +187,10 @@ class ModalProblem:
         # the arcs before each impact, at the impact
         hb = (S[bi] - S[bi - 1])[:, None]
         ym, dym = modal_flow(sig, w, al[bi - 1], be[bi - 1], hb)
+        ia, ib = self._forced("impacts", sig, w, S[bi], S[bi - 1], kc, ks)
+        if self.actuator is not None:
+            ym = ym + np.sum(ia, axis=-1)
+            dym = dym + np.sum(w * ib - sig * ia, axis=-1)
         xpi, vpi = particular(Pc, Ps, om, om * S[bi] + tau0)
         vminus = dym + vpi
         pos = {int(b): i for i, b in enumerate(bi)}
@@ -166,18 +201,15 @@ class ModalProblem:
         out.append(W * (ym + xpi - d))
         pa, pb = propagate(sig, w, al[bi - 1], be[bi - 1], hb)
         jump = (-(1.0 + r) * vminus)[:, None]
-        out.append(W * np.concatenate([al[bi] - pa - jump * c, be[bi] - pb - jump * s],
-                                      axis=1).ravel())
+        out.append(W * np.concatenate([al[bi] - pa - ia - jump * c,
+                                       be[bi] - pb - ib - jump * s], axis=1).ravel())
         if bc.size:
-            if ka is None:
-                kc, ks = c, s
-            else:
-                kc, ks = kick_coefficients(Om, ze, ka, 0.0)
-            if self.width:
-                kc, ks = pulse_coefficients(sig, w, kc, ks, self.width)
             pa, pb = propagate(sig, w, al[bc - 1], be[bc - 1], (S[bc] - S[bc - 1])[:, None])
-            dv = self.dv[:, None]
-            out.append(W * np.concatenate([al[bc] - pa - dv * kc, be[bc] - pb - dv * ks],
+            if self.actuator is not None:      # the input carries the command: no jump
+                ja, jb = self._forced("corrections", sig, w, S[bc], S[bc - 1], kc, ks)
+            else:
+                ja, jb = self.dv[:, None] * kc, self.dv[:, None] * ks
+            out.append(W * np.concatenate([al[bc] - pa - ja, be[bc] - pb - jb],
                                           axis=1).ravel())
         return np.concatenate([np.asarray(o).ravel() for o in out])
 
@@ -194,7 +226,8 @@ def _arx_eigenvalues(rec, arcs, phase, n):
     fewer than n oscillating modes."""
     t, x = rec.t, rec.x
     dt = float(np.median(np.diff(t)))
-    lengths = np.bincount(arcs.sample_arc, minlength=arcs.count)
+    # (a sample of arc -1 is left out: under an input's force, :func:`initial_modal`)
+    lengths = np.bincount(arcs.sample_arc[arcs.sample_arc >= 0], minlength=arcs.count)
     # q h at most T/16: modes up to 8 omega stay below the Nyquist limit pi / (q h)
     q = max(1, min(int(np.median(lengths[lengths > 0]) // (4 * n)),
                    int(2.0 * math.pi / phase.omega / (16.0 * dt))))
@@ -204,7 +237,7 @@ def _arx_eigenvalues(rec, arcs, phase, n):
     sa = arcs.sample_arc
     for j in range(t.size - order * q):
         idx = j + q * np.arange(order + 1)
-        if sa[idx[0]] != sa[idx[-1]] or abs(t[idx[-1]] - t[j] - order * q * dt) > 1e-6 * dt * q:
+        if sa[idx[0]] < 0 or np.any(sa[idx] != sa[idx[0]]) or abs(t[idx[-1]] - t[j] - order * q * dt) > 1e-6 * dt * q:
             continue
         rows.append(np.concatenate([x[idx[-2::-1]], [np.cos(tau[j]), np.sin(tau[j])]]))
         rhs.append(x[idx[-1]])
@@ -228,9 +261,19 @@ def _arx_eigenvalues(rec, arcs, phase, n):
     return Om, zeta
 
 
-def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, width: float = 0.0):
+def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0.0):
     """(g, start times, modal states (K, 2n)) to start the fit from (module docstring);
-    ``width``: the corrections are pulses (:class:`ModalProblem`)."""
+    ``actuator``: the corrections are the input's commands (:class:`ModalProblem`), each
+    ``offset`` after its correction's time: the samples under their force are left out
+    of the arcs' linear fits, the jumps read as the commands' equivalent kicks
+    (:func:`.force_input.equivalent_kick`)."""
+    if actuator is not None:
+        # under the force: from the onset to 8 tau_a after the pulse (e^-8: 3e-4 of it)
+        acting = actuator.relevant(rec.t, rec.t)
+        end = actuator.onsets[acting.commands] + actuator.width + 8.0 * actuator.time_constant
+        under = np.zeros(rec.t.size, bool)
+        under[acting.rows[rec.t[acting.rows] < end]] = True
+        arcs = dataclasses.replace(arcs, sample_arc=np.where(under, -1, arcs.sample_arc))
     Om, zeta = _arx_eigenvalues(rec, arcs, phase, n)
     sig, w = rates(Om, zeta)
     om, tau0 = phase.omega, phase.tau0
@@ -306,9 +349,9 @@ def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, width: float = 0.0):
                 cd.append(dv[i])
         cd = np.array(cd)
         ka_cs = (cd @ np.array(cj)) / (cd @ cd) if cd.size else np.zeros(2 * n)
-        if width:       # the pulse's coefficients back to the kick's (C / F, F complex)
-            one_c, one_s = pulse_coefficients(sig, w, np.ones(n), np.zeros(n), width)
-            f = one_c - 1j * one_s
+        if actuator is not None:   # the command's jump back to the kick's (C / F)
+            fr, fi = equivalent_kick(sig, w, actuator, offset)
+            f = fr[0] + 1j * fi[0]
             kick = (ka_cs[:n] - 1j * ka_cs[n:]) / f
             ka_cs = np.concatenate([kick.real, -kick.imag])
         g_free.append(np.column_stack([ka_cs[:n], ka_cs[n:]])[:n - 1].ravel())
@@ -318,8 +361,9 @@ def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, width: float = 0.0):
     _Om, _ze, ci, *_rest, ka = layout.split(g)
     c, s = kick_coefficients(Om, zeta, ci, 1.0)
     kc, ks = (c, s) if ka is None else kick_coefficients(Om, zeta, ka, 0.0)
-    if width:
-        kc, ks = pulse_coefficients(sig, w, kc, ks, width)
+    if actuator is not None:
+        fr, fi = equivalent_kick(sig, w, actuator, offset)
+        kc, ks = kicked(kc, ks, fr[0], fi[0])
     bc_list = np.flatnonzero(arcs.kind == 2).tolist()
     for k in range(1, K):
         if good[k]:
@@ -386,16 +430,20 @@ class ModalIdentification(ShootingFit):
 def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=False,
                    impact_velocities: bool = True, max_arcs: int | None = 100,
                    max_nfev: int = 200, coincidence: float = 1.5e-9,
-                   shrink: bool = False, width: float = 0.0) -> ModalIdentification:
+                   shrink: bool = False, width: float = 0.0, time_constant: float = 0.0,
+                   latency: float = 0.0, pulse_offset: float | None = None
+                   ) -> ModalIdentification:
     """Fit the modal parameters of an n-DOF model to a recording of its wall coordinate
     (module docstring). ``rec``'s impacts must be recorded (their times start the fit);
     ``correction_dv``: the kick of each of ``rec.corrections`` (on the wall coordinate if
     ``kick_on_wall``, else on another: its response is fitted too). ``shrink``: where
     ``max_arcs`` arcs would exceed JACOBIAN_BYTES, fit as many as it allows (as
-    :func:`.fit.identify`). ``width`` > 0: the corrections are force pulses of that width
-    centred at their times (the plant's ``pulse_width``): the samples inside them are
-    left out and the motion after each is the kick's averaged over the pulse
-    (:func:`.modal.pulse_coefficients`).
+    :func:`.fit.identify`). ``width`` > 0 or ``time_constant`` > 0: each correction is
+    commanded as a force pulse of that width starting ``pulse_offset`` after its time
+    (default -width / 2: centred there; the plant's ``pulse_width``) through the
+    first-order actuator (tau_a ``time_constant``, ``latency`` L; the bag's parameter
+    record): the force is the fit's known input (:mod:`.force_input`), every sample kept.
+    A kick (both 0) acts L after its time.
 
     Raises IdentificationError on bad input (no phase reference, no or too few impacts,
     too few samples, no initial guess, a Jacobian beyond JACOBIAN_BYTES).
@@ -403,7 +451,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
     while True:
         try:
             return _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities,
-                                   max_arcs, max_nfev, coincidence, width)
+                                   max_arcs, max_nfev, coincidence,
+                                   (width, time_constant, latency, pulse_offset))
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -411,7 +460,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
 
 
 def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_arcs,
-                    max_nfev, coincidence, width=0.0) -> ModalIdentification:
+                    max_nfev, coincidence, actuation=(0.0, 0.0, 0.0, None)
+                    ) -> ModalIdentification:
     if not (isinstance(n, (int, np.integer)) and n >= 1):
         raise IdentificationError(f"n={n!r} is invalid: valid is an integer >= 1")
     dv = np.zeros(rec.corrections.size) if correction_dv is None else \
@@ -419,11 +469,12 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
     if dv.size != rec.corrections.size:
         raise IdentificationError(f"correction_dv has {dv.size} values for "
                                   f"{rec.corrections.size} corrections")
+    width, tau_a, latency, offset = actuation
+    actuator, rec = actuator_input(rec, dv, width, tau_a, latency, offset)
+    offset = (-0.5 * width if offset is None else float(offset)) + latency
     try:
         events = np.concatenate([rec.corrections, rec.impact_t])
         rec = rec.without_samples(rec.near(events, coincidence))
-        if width:           # inside a pulse the force acts: not the free flight's data
-            rec = rec.without_samples(rec.near(rec.corrections[dv != 0.0], 0.5 * width))
         phase = fit_phase(rec.t, rec.cos_tau, rec.sin_tau)
         if max_arcs is not None:
             ev = np.sort(events[events > rec.t[0]])
@@ -446,13 +497,14 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
             f"impacts: the recording has {impacts} impact(s) inside its state stream: the "
             f"n-DOF fit needs at least {need_impacts} recorded impacts (oscillator/impact) "
             "to identify d, r and the impact's modal response")
-    prob = ModalProblem(rec, arcs, phase, n, rec_dv, kick_on_wall, impact_velocities, width)
+    prob = ModalProblem(rec, arcs, phase, n, rec_dv, kick_on_wall, impact_velocities,
+                        actuator)
     check_size(prob)
     dof = prob.m_data - (prob.n - prob.n_constraints)
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
-    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, width)
+    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, actuator, offset)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = interior(lo, hi)
     p = np.clip(prob.pack(g0, S0, a0), inner_lo, inner_hi)
@@ -502,7 +554,7 @@ def modal_verdict(ident: ModalIdentification) -> dict:
     convergence, r and every zeta_k in (0, 1), white position residuals (unless at
     rounding: an exact fit). (The 1-DOF re-simulation is not run for n > 1.)"""
     from grazing_control.dynamics.identification.checks import (ROUNDING, WHITENESS_LIMIT,
-                                                                 whiteness)
+                                                                 suspects, whiteness)
 
     m = ident.model
     white = whiteness(ident)
@@ -519,5 +571,6 @@ def modal_verdict(ident: ModalIdentification) -> dict:
         reasons.append(f"the residuals are not white: lag-1 autocorrelation "
                        f"{white['lag1_autocorrelation']:.3f} over {white['pairs']} pairs "
                        f"({abs(white['z']):.1f} sigma > {WHITENESS_LIMIT:g}): the motion is not "
-                       "this model's (another n? soft wall? sensor bias?)")
+                       "this model's (" + suspects(ident, "another n? soft wall? sensor bias?")
+                       + ")")
     return {"fit": "poor" if reasons else "good", "reasons": reasons, "whiteness": white}
