@@ -15,12 +15,11 @@ groups with most tests first, and the realtime group then came first): the group
 then the single tests, which fill the workers up to about the same end, the realtime
 group last (:func:`_rank`; a 60-100 s group handed out late can keep one worker busy
 while the other waits with the realtime group). The tests marked ``realtime`` (their
-assertions hold only if the scene's answers meet wall-clock deadlines) form two more
-groups, last in the queue (:data:`REALTIME_BESIDE_FIFO`), and each test waits until every
-worker outside them has been idle for IDLE_SECONDS (at most REALTIME_WAIT): such a
-deadline is measured on a machine that runs realtime scenes and nothing else of the
-suite (a CPU-bound test beside a realtime scene made its answers miss: 12 of 40 where 4
-is the bound); the two groups run at once, one scene each. A realtime scene whose assertions do
+assertions hold only if the scene's answers meet wall-clock deadlines) form one more
+group, last in the queue, and each waits until every other worker has been idle for
+IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a machine that runs
+one scene and nothing else of the suite (a CPU-bound test beside a realtime scene made
+its answers miss: 12 of 40 where 4 is the bound). A realtime scene whose assertions do
 not depend on meeting deadlines (one that misses by design, a refused start, a signal)
 is not marked. A module whose module-scoped scene is realtime marks the whole module
 (``pytestmark``), so that the scene is set up once.
