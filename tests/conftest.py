@@ -188,14 +188,6 @@ FIFO_SCENE_MODULES = frozenset({"test_rig_masses_scene", "test_rig_scene", "test
                                 "test_scheduling", "test_signals", "test_sim_node"})
 
 
-#: The realtime tests of these modules are the group ``realtime:fifo``, the others
-#: ``realtime``; the two groups run at once (:func:`pytest_runtest_protocol`). The FIFO
-#: scene modules are all in one (no two SCHED_FIFO scenes at once), and test_ndof_nodes
-#: beside them, so that the two take about as long: 27.8 and 29.6 s at idle (the FIFO
-#: ones alone 21.4 s against 36 s, 2026-11-28).
-REALTIME_BESIDE_FIFO = FIFO_SCENE_MODULES | {"test_ndof_nodes"}
-
-
 def pytest_configure(config):
     config.pluginmanager.register(GroupMender(), "grazing-group-mender")
     config.addinivalue_line(
@@ -224,12 +216,10 @@ def _shares_a_module_fixture(item) -> bool:
 
 
 def xdist_group(item) -> str | None:
-    """The xdist group of a test: ``realtime`` or ``realtime:fifo`` (those of
-    :data:`REALTIME_BESIDE_FIFO`; the two run at once, :func:`pytest_runtest_protocol`),
-    ``scene:fifo`` (:data:`FIFO_SCENE_MODULES`),
+    """The xdist group of a test: ``realtime``, ``scene:fifo`` (:data:`FIFO_SCENE_MODULES`),
     ``scene:<module>``, ``shared:<module>`` (:func:`_shares_a_module_fixture`) or none."""
     if is_realtime(item):
-        return "realtime:fifo" if item.path.stem in REALTIME_BESIDE_FIFO else "realtime"
+        return "realtime"
     if item.path.stem in FIFO_SCENE_MODULES:
         return "scene:fifo"
     if item.path.stem in SCENE_MODULES:
@@ -296,25 +286,13 @@ def _busy_file(config) -> Path | None:
     return folder / info["workerid"]
 
 
-#: A worker's flag (:func:`_busy_file`): running a test, idle, or in the realtime groups.
-BUSY, IDLE, REALTIME = "busy", "idle", "realtime"
-
-
 def _others_idle(flag: Path) -> bool:
-    """Every other worker idle for IDLE_SECONDS, or in a realtime group."""
     now = time.time()
-    try:
-        others = list(flag.parent.iterdir())
-    except FileNotFoundError:             # a worker without tests ended, and took it
-        return True
-    for other in others:
+    for other in flag.parent.iterdir():
         if other.name == flag.name:
             continue
         try:
-            state = other.read_text()
-            if state == REALTIME:
-                continue
-            if state == BUSY or now - other.stat().st_mtime < IDLE_SECONDS:
+            if other.read_text() == "busy" or now - other.stat().st_mtime < IDLE_SECONDS:
                 return False
         except OSError:
             continue
@@ -324,33 +302,19 @@ def _others_idle(flag: Path) -> bool:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     """Flag this worker busy while a test runs; a realtime test first waits for the
-    other workers to be idle. The two realtime groups (``realtime``, ``realtime:fifo``)
-    run at once, each on a worker of its own: a realtime scene is mostly waiting for its
-    deadlines (its nodes and listener take a fraction of a core), so two of them leave
-    each other the two cores, where a CPU-bound test beside one made it miss (12 of 40
-    where 4 is the bound); the FIFO scenes (rig, two-mass rig) stay one group, so that
-    no two SCHED_FIFO scenes run at once (:data:`FIFO_SCENE_MODULES`). The serial tail
-    of the suite was the sum of both groups, 64.5 s on the last fresh clone."""
+    other worker to be idle."""
     flag = _busy_file(item.config)
     if flag is None:
         return (yield)
-    realtime = is_realtime(item)
-    if realtime:
-        # flagged first: the folder is not empty, and a worker that ends removes only
-        # an empty one (pytest_sessionfinish; a worker without tests ended at once and
-        # removed it under the waiting one: an internal error of xdist, 2026-11-28)
-        flag.parent.mkdir(exist_ok=True)
-        flag.write_text(REALTIME)
+    if is_realtime(item):
         end = time.monotonic() + REALTIME_WAIT
         while time.monotonic() < end and not _others_idle(flag):
             time.sleep(0.2)
-    flag.write_text(REALTIME if realtime else BUSY)
+    flag.write_text("busy")
     try:
         return (yield)
     finally:
-        # its mtime: when this worker became idle; a realtime worker stays "realtime"
-        # (its next test is realtime too: the groups are last)
-        flag.write_text(REALTIME if realtime else IDLE)
+        flag.write_text("idle")              # its mtime: when this worker became idle
 
 
 def pytest_sessionfinish(session):
