@@ -92,7 +92,6 @@ def resimulate(ident, *, windows: int = 100) -> dict:
     L = A / Om ** 2
     T = 2.0 * math.pi / m.omega
     starts = prob.unpack(ident.solution)[1]
-    ends = np.concatenate([starts[1:], [np.inf]])
     corrections = starts[prob.arcs.kind == 2]
     act = getattr(prob, "actuator", None)
     if act is not None:        # the model re-simulated free: from the input's onsets on
