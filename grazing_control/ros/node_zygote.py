@@ -150,6 +150,14 @@ class ForkedNode:
         return self.returncode
 
     def wait(self, timeout=None):
+        if timeout is None and self.returncode is None:
+            try:
+                _, status = os.waitpid(self.pid, 0)
+            except ChildProcessError:
+                self.returncode = 0
+            else:
+                self.returncode = os.waitstatus_to_exitcode(status)
+            return self.returncode
         end = None if timeout is None else time.monotonic() + timeout
         delay = 0.0005
         while self.poll() is None:
@@ -332,9 +340,10 @@ def _serve(sock: socket.socket, owner: int):
             return None
         middle = os.fork()
         if middle == 0:
+            middle = os.getpid()              # read here: in the node it may be gone
             node = os.fork()
             if node == 0:
-                return message, fds, sock, owner
+                return {**message, "middle": middle}, fds, sock, owner
             os._exit(0)
         for fd in fds:
             os.close(fd)
@@ -346,8 +355,9 @@ def _serve(sock: socket.socket, owner: int):
 def _become_node(message, fds, sock, owner) -> None:
     """In the forked node: take its parent, fds, group, environment and signals as
     :data:`launcher.BOOTSTRAP` and ``start_node`` give them, then report the pid."""
+    middle = message["middle"]
     end = time.monotonic() + SPAWN_TIMEOUT
-    while os.getppid() != owner and time.monotonic() < end:
+    while os.getppid() == middle and time.monotonic() < end:   # until it has exited
         time.sleep(0.0002)
     if os.getppid() != owner:                 # the owner is not our subreaper
         _send(sock, {"refused": "not reparented to the owner"})
