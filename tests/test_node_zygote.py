@@ -166,3 +166,24 @@ def test_a_killed_owner_takes_its_nodes_and_zygote_with_it(tmp_path):
         time.sleep(0.05)
     assert not alive
     assert "summary:" in log.read_text()
+
+
+def test_an_owner_that_is_no_subreaper_is_refused_at_once_and_the_zygote_goes_on(zygote,
+                                                                                  tmp_path):
+    """The node reparented elsewhere (its owner no longer a child subreaper): it says so as
+    soon as its middle process has gone, the zygote's answer is a refusal (the owner then
+    spawns), and the next request, with the owner a subreaper again, is forked."""
+    node_zygote._prctl(36, 0)                          # PR_SET_CHILD_SUBREAPER off
+    try:
+        t0 = time.monotonic()
+        refused, _ = _probe(zygote, tmp_path, "refused")
+        took = time.monotonic() - t0
+    finally:
+        node_zygote._prctl(36, 1)
+    assert refused is None and took < 5.0, took       # not SPAWN_TIMEOUT (30 s)
+    assert not zygote.broken
+    node, out = _probe(zygote, tmp_path, "after")
+    try:
+        assert _read_json(out)["ppid"] == os.getpid()
+    finally:
+        launcher.stop_nodes([node])
