@@ -56,9 +56,7 @@ def compiled_kernel():
     opposite orders, so that both compile at once on the two cores (one lock for all:
     about 13 + 10 s of the suite's start with the other workers waiting)."""
     if kernel.use_kernel():
-        from grazing_control.dynamics.estimation.stream import warm_up
-
-        from grazing_control.oscillator.ndof.model import model_from_mapping
+        from grazing_control.dynamics.estimation.stream import warm_up_all
 
         pieces = [("kernel", kernel.warm_up), ("modal", kernel.warm_up_modal)]
         worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
@@ -67,12 +65,8 @@ def compiled_kernel():
         for name, compile_it in pieces:
             _compiled_once(name, compile_it)
         # the compiled model filters, 1-2 s each the first time: compiled_flow, and
-        # with a model file compiled_modal_flow (an n-DOF controller loads them at start;
-        # a model of two masses written here: tests/test_test_cleanup.py runs this
-        # conftest in a folder of its own)
-        _compiled_once("filters", lambda: warm_up(model_from_mapping({
-            "M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.04, -0.02], [-0.02, 0.04]],
-            "K": [[1.0, -1.0], [-1.0, 2.0]], "f": [0.0, 1.0], "omega": 0.5, "i_w": 0})))
+        # with a model file compiled_modal_flow (an n-DOF controller loads them at start)
+        _compiled_once("filters", warm_up_all)
     # the node zygote of this worker (ros/node_zygote.py): the nodes that the tests
     # start in this process are forked from it, not spawned, and share its imports
     # (0.4-0.55 s of CPU a node, several hundred nodes in the suite); started here, once

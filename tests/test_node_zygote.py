@@ -187,3 +187,19 @@ def test_an_owner_that_is_no_subreaper_is_refused_at_once_and_the_zygote_goes_on
         assert _read_json(out)["ppid"] == os.getpid()
     finally:
         launcher.stop_nodes([node])
+
+
+def test_a_ctrl_c_is_the_owners_the_zygote_neither_gets_it_nor_dies_of_it(zygote, tmp_path):
+    """The zygote has a process group of its own (a terminal's Ctrl-C reached it in the
+    launcher's group and printed a KeyboardInterrupt traceback, found by hand) and
+    ignores SIGINT; a node forked after one is a node as before."""
+    assert os.getpgid(zygote.proc.pid) == zygote.proc.pid
+    zygote.proc.send_signal(signal.SIGINT)
+    time.sleep(0.5)
+    assert zygote.proc.poll() is None
+    node, out = _probe(zygote, tmp_path, "after_sigint")
+    try:
+        seen = _read_json(out)
+        assert seen["ppid"] == os.getpid() and not seen["sigint_default"]
+    finally:
+        launcher.stop_nodes([node])

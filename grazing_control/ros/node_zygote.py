@@ -175,10 +175,6 @@ class ForkedNode:
         except ProcessLookupError:
             pass
 
-    def communicate(self, input=None, timeout=None):
-        self.wait(timeout)
-        return None, None
-
     def terminate(self):
         self.send_signal(signal.SIGTERM)
 
@@ -206,7 +202,8 @@ class NodeZygote:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", __name__, str(theirs.fileno()), str(os.getpid()),
                  *modules, _PADDING],
-                env=self.env, stdin=subprocess.DEVNULL, pass_fds=(theirs.fileno(),))
+                env=self.env, stdin=subprocess.DEVNULL, pass_fds=(theirs.fileno(),),
+                process_group=0)    # a terminal's Ctrl-C is the owner's, not the zygote's
         finally:
             theirs.close()
         ours.settimeout(START_TIMEOUT)
@@ -495,17 +492,13 @@ def _prepare(modules) -> None:
                 pass                           # needs rclpy: the node imports it
     finally:
         sys.meta_path.remove(guard)
-    from grazing_control.dynamics.estimation.stream import warm_up
-    from grazing_control.oscillator.ndof.model import model_from_mapping
+    from grazing_control.dynamics.estimation.stream import warm_up_all
 
-    # the kernel and both model filters, as a node loads them at its start (a stream
-    # controller; an n-DOF one with its model: any two masses load the same code)
-    warm_up(model_from_mapping({
-        "M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.04, -0.02], [-0.02, 0.04]],
-        "K": [[1.0, -1.0], [-1.0, 2.0]], "f": [0.0, 1.0], "omega": 0.5, "i_w": 0}))
+    warm_up_all()          # the kernel and the model filters, as nodes load them at start
 
 
 def main(argv) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # the owner ends it (EOF, PDEATHSIG)
     fd, owner = int(argv[0]), int(argv[1])
     modules = [m for m in argv[2:] if m != _PADDING]
     sock = socket.socket(fileno=fd)

@@ -576,6 +576,17 @@ def warm_up(p: OscillatorParams | None = None) -> None:
                                   np.zeros((1, 2 * p.n, 2 * p.n)), rows, True)
 
 
+
+def warm_up_all() -> None:
+    """:func:`warm_up` of every compiled filter, the n-DOF ones through a model of two
+    masses (any two masses load the same code): what a process that will run nodes of
+    either kind loads once (the test suite's conftest, ros/node_zygote.py)."""
+    from grazing_control.oscillator.ndof.model import model_from_mapping
+
+    warm_up(model_from_mapping({
+        "M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.04, -0.02], [-0.02, 0.04]],
+        "K": [[1.0, -1.0], [-1.0, 2.0]], "f": [0.0, 1.0], "omega": 0.5, "i_w": 0}))
+
 def pulse_shape(p: OscillatorParams, pulse_width: float, force_limit: float) -> tuple:
     """(width, force limit) of the plant's corrections, validated: ParameterError naming
     ``pulse_width`` (0 <= w < T) or ``force_limit`` (> 0, inf: none; 0 is read as none,
