@@ -184,6 +184,15 @@ class _Region:
         self._an = (None, amp * w ** 1, amp * w ** 2, amp * w ** 3)
         self._kn = (None, kk * rate ** 1, kk * rate ** 2, kk * rate ** 3)
 
+    def constants(self) -> tuple:
+        """The constants of :meth:`__call__`, :meth:`bound` and :meth:`force_bound`, in the
+        order of kernel.compiled_contact's ``R`` (:func:`_region_crossing`)."""
+        bn, an, kn = self._bn, self._an, self._kn
+        return (self.tau0, self.omega, self.lag, self.amp, self.offset, self.beta,
+                self.big_om, self.c1, self.c2, self._av, self._wa, self._wb, self.kk,
+                self.rate, self._aa, self._b2, self._w2, self._r2, bn[2], bn[3], an[2], an[3],
+                kn[2], kn[3])
+
     def _particular(self, h: float):
         psi = self.tau0 + self.omega * h - self.lag
         d, v = self.amp * math.cos(psi) + self.offset, -self.amp * self.omega * math.sin(psi)
@@ -351,8 +360,13 @@ def load_compiled() -> bool:
     global _compiled
     if _compiled is None and kernel.use_kernel():
         from .kernel import compiled_contact as cc
+        kernel.warm_up()            # the wall's search (_wall_entry)
+        # compile now: both kinds of the search and the bracketing (one region)
+        reg = _Region(2.0, 0.1, OscillatorParams(), 0.0, -0.1, 1.0)
+        for kind in (_GAP, _FORCE):
+            cc.first_crossing_region(reg.constants(), kind, 1.0, 0.1, 1.0, 1.0, 1.0)
         cc.bracket_region(0.0, 1.0, 1.0, -1.0, 1.0, _GAP, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0,
-                          0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)  # compile now
+                          0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
         _compiled = cc
     return _compiled is not None
 
@@ -572,21 +586,19 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                 dx, dv = (delta + p.d) - xp, vel - vp
                 if delta == 0.0:  # on the stop: its deviation without cancellation (impact.py)
                     dx = _on_wall_at_rest(p, tau)[0]
-                h = _next_impact(p, tau, dx, dv, horizon)
+                h = _wall_entry(p, tau, dx, dv, horizon)
             else:
-                h = _first_crossing(lambda h: reg(h)[:2], lambda h: reg.bound(2, h), horizon,
-                                    1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk),
-                                    _RegionValue(reg, _GAP))
+                h = _region_crossing(reg, _GAP, 0.0, 0.0, horizon, 1.0,
+                                     reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
             kind = "entry" if h is not None else None
         elif region == "contact":
             sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
-            h = _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon,
-                                -1.0, sc, _force_value(reg, k, c))
+            h = _region_crossing(reg, _FORCE, k, c, horizon, -1.0, sc)
             kind = "exit" if h is not None else None
         else:
             sc = k * (reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk)) + c * scale_x
-            kind, h = _above_switch(reg, _force_event(reg, k, c), _force_bound(reg, k, c),
-                                    horizon, sc, _force_value(reg, k, c))
+            kind, h = _above_switch(reg, _region_crossing(reg, _FORCE, k, c, horizon, 1.0, sc),
+                                    horizon)
         if kind is None:
             if h_stop is None:
                 dense.piece(t, duration, reg)
@@ -640,22 +652,46 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
                             dense.end(delta, vel) if times is not None else None)
 
 
-def _above_switch(reg: _Region, force_event, force_bound, horizon: float, scale: float,
-                  force_value=None):
+def _above_switch(reg: _Region, h_force: float | None, horizon: float):
     """Above the stop after an exit (free, delta > 0, the force <= 0): the first of the
-    force's return to 0 (``force_event``: a new contact, 'entry') and of the gap's
-    (delta = 0: 'below') within ``horizon``, certified (:func:`_first_crossing`);
-    (None, None) if neither."""
-    h_force = _first_crossing(force_event, force_bound, horizon, 1.0, scale, force_value)
-    h_gap = _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u),
-                            h_force if h_force is not None else horizon, -1.0,
-                            reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk),
-                            _RegionValue(reg, _GAP))
+    force's return to 0 at ``h_force`` (a new contact, 'entry'; None if not within
+    ``horizon``, the caller's certified search) and of the gap's (delta = 0: 'below'),
+    certified (:func:`_region_crossing`); (None, None) if neither."""
+    h_gap = _region_crossing(reg, _GAP, 0.0, 0.0, h_force if h_force is not None else horizon,
+                             -1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
     if h_gap is not None and (h_force is None or h_gap < h_force):
         return "below", h_gap
     if h_force is not None:
         return "entry", h_force
     return None, None
+
+
+def _region_crossing(reg: _Region, kind: int, k: float, c: float, horizon: float,
+                     sign: float, scale: float):
+    """:func:`_first_crossing` of a region's gap delta (``kind`` _GAP: the event
+    (delta, delta'), the bound :meth:`_Region.bound` (2)) or contact force k delta +
+    c delta' (_FORCE: :func:`_force_event`, :func:`_force_bound`), each bracketed on its
+    value alone (:class:`_RegionValue`); the whole search by the compiled mirror once
+    :func:`load_compiled` has loaded it (kernel.compiled_contact.first_crossing_region:
+    the same floats)."""
+    if _compiled is not None:
+        h = _compiled.first_crossing_region(reg.constants(), kind, k, c, horizon, sign, scale)
+        return None if h == _compiled.NONE else h
+    if kind == _GAP:
+        return _first_crossing(lambda u: reg(u)[:2], lambda u: reg.bound(2, u), horizon, sign,
+                               scale, _RegionValue(reg, _GAP))
+    return _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon, sign,
+                           scale, _force_value(reg, k, c))
+
+
+def _wall_entry(p: OscillatorParams, tau: float, dx: float, dv: float, horizon: float):
+    """The entry from below the stop, the rigid wall's certified search
+    (:func:`~grazing_control.oscillator.impact._next_impact` from the deviation (dx, dv) at
+    phase tau), compiled (:func:`kernel.next_impact_unchecked`, the same floats) once
+    :func:`load_compiled` has loaded the compiled searches."""
+    if _compiled is not None:
+        return kernel.next_impact_unchecked(p, tau, dx, dv, horizon)
+    return _next_impact(p, tau, dx, dv, horizon)
 
 
 def _force_event(reg: _Region, k: float, c: float):

@@ -238,10 +238,11 @@ def advance_hertz(p: OscillatorParams, law: HuntCrossley, tau0: float, x: float,
                                     1.0, reg.cabs + reg.amp + abs(reg.offset) + abs(reg.kk))
             kind = "entry" if h is not None else None
         else:   # above: delta > 0 and 1 + 1.5 alpha delta' <= 0
-            kind, h = _above_switch(
-                reg, lambda u: (1.0 + 1.5 * a * reg(u)[1], 1.5 * a * reg(u)[2]),
-                lambda u: 1.5 * a * reg.bound(3, u), horizon,
+            h_force = _first_crossing(
+                lambda u: (1.0 + 1.5 * a * reg(u)[1], 1.5 * a * reg(u)[2]),
+                lambda u: 1.5 * a * reg.bound(3, u), horizon, 1.0,
                 1.0 + 1.5 * a * (reg.cabs + reg.amp * p.omega))
+            kind, h = _above_switch(reg, h_force, horizon)
         if kind is None:
             if h_stop is None:
                 dense.piece(t, duration, reg)

@@ -42,7 +42,8 @@ import numpy as np
 from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialStateError,
                                                NonFiniteStateError, Segment, check_state)
 
-__all__ = ["ENV", "available", "use_kernel", "loaded", "warm_up", "next_impact", "advance",
+__all__ = ["ENV", "available", "use_kernel", "loaded", "warm_up", "next_impact",
+           "next_impact_unchecked", "advance",
            "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple",
            "warm_up_modal", "modal_search"]
 
@@ -297,6 +298,19 @@ def next_impact(p, tau0, dx0, dv0, horizon, max_step=None):
         if status == ki.STATUS_NONFINITE and math.isfinite(dx0) and math.isfinite(dv0) and \
                 not (math.isfinite(tau0) and math.isfinite(horizon)):
             raise NonFiniteStateError(f"tau0={tau0!r} and horizon={horizon!r} must be finite")
+        _raise(status, info, max_impacts=0, duration=horizon, p=p, state=(dx0, dv0),
+               times=(tau0, horizon))
+    return None if h == ki.NONE else h
+
+
+def next_impact_unchecked(p, tau0, dx0, dv0, horizon):
+    """:func:`grazing_control.oscillator.impact._next_impact` (inputs checked by the
+    caller, the default window), compiled: the contact entry of the compliant stop's flow
+    (oscillator/contact.py, once its compiled searches are loaded)."""
+    ki = _compiled()[0]
+    h, status, info = ki.next_impact_unchecked(_params(p), tau0, dx0, dv0, horizon, 0.0,
+                                               _scratch()[1], _NO_GRID)
+    if status != ki.STATUS_OK:
         _raise(status, info, max_impacts=0, duration=horizon, p=p, state=(dx0, dv0),
                times=(tau0, horizon))
     return None if h == ki.NONE else h

@@ -74,3 +74,142 @@ def bracket_region(lo, hi, sign, flo, fhi, kind, k, c, tau0, omega, lag, amp, of
         else:
             lo, flo = x, fx
     return hi
+
+
+# ------------------------------------------------------------ the certified search
+#: :func:`first_crossing_region`'s answer where there is no crossing (times are >= 0)
+NONE = -1.0
+#: contact._MAX_DEPTH: the bisection's deepest level
+_MAX_DEPTH = 60
+_EPS = 2.0 ** -52
+#: the region's constants in the tuple ``R`` of :func:`first_crossing_region`, in this
+#: order (contact._Region's attributes; bn2 .. kn3 its _bn[2], _bn[3], _an[2], ...)
+(_TAU0, _OMEGA, _LAG, _AMP, _OFFSET, _BETA, _BIG_OM, _C1, _C2, _AV, _WA, _WB, _KK, _RATE,
+ _AA, _B2, _W2, _R2, _BN2, _BN3, _AN2, _AN3, _KN2, _KN3) = range(24)
+
+
+@jit
+def _state(R, h):
+    """_Region.__call__: (delta, delta', delta'') at h."""
+    psi = R[_TAU0] + R[_OMEGA] * h - R[_LAG]
+    cp = math.cos(psi)
+    e = math.exp(-R[_BETA] * h)
+    oh = R[_BIG_OM] * h
+    c = math.cos(oh)
+    s = math.sin(oh)
+    w = e * (R[_C1] * c + R[_C2] * s)
+    wv = e * (R[_WA] * c - R[_WB] * s)
+    d = R[_AMP] * cp + R[_OFFSET] + w
+    v = R[_AV] * math.sin(psi) + wv
+    acc = R[_AA] * cp - R[_B2] * wv - R[_W2] * w
+    kk = R[_KK]
+    if kk != 0.0:
+        ek = kk * math.exp(-R[_RATE] * h)
+        return d + ek, v - R[_RATE] * ek, acc + R[_R2] * ek
+    return d, v, acc
+
+
+@jit
+def _event(R, kind, k, c, h):
+    """The searched function and its derivative at h: the gap (delta, delta') (contact's
+    ``reg(h)[:2]``) or the force (k delta + c delta', k delta' + c delta'')
+    (contact._force_event)."""
+    d, v, a = _state(R, h)
+    if kind == GAP:
+        return d, v
+    return k * d + c * v, k * v + c * a
+
+
+@jit
+def _bound2(R, kind, k, c, h):
+    """A bound on the searched function's second derivative on [h, inf): _Region.bound(2,
+    h) for the gap, _Region.force_bound(k, c, h) for the force."""
+    e = math.exp(-R[_BETA] * h)
+    kk = R[_KK]
+    if kind == GAP:
+        out = R[_BN2] * e + R[_AN2]
+        if kk != 0.0:
+            out += R[_KN2] * math.exp(-R[_RATE] * h)
+        return out
+    b2 = R[_BN2] * e + R[_AN2]
+    b3 = R[_BN3] * e + R[_AN3]
+    if kk != 0.0:
+        ek = math.exp(-R[_RATE] * h)
+        b2 += R[_KN2] * ek
+        b3 += R[_KN3] * ek
+    return k * b2 + c * b3
+
+
+@jit
+def _bracket_r(R, kind, k, c, lo, hi, sign, flo, fhi):
+    return bracket_region(lo, hi, sign, flo, fhi, kind, k, c, R[_TAU0], R[_OMEGA], R[_LAG],
+                          R[_AMP], R[_OFFSET], R[_BETA], R[_BIG_OM], R[_C1], R[_C2], R[_AV],
+                          R[_WA], R[_WB], R[_KK], R[_RATE])
+
+
+@jit
+def _crossing_in(R, kind, k, c, a, b, fa0, fa1, fb0, fb1, sign, margin, start, stack):
+    """contact._crossing_in, its recursion as a stack of pending intervals (the left half
+    first, as the recursion takes it): the crossing's time or NONE."""
+    # a row: a, b, f(a), f'(a), f(b), f'(b), depth, start
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = a, b, fa0, fa1
+    stack[0, 4], stack[0, 5], stack[0, 6], stack[0, 7] = fb0, fb1, 0.0, 1.0 if start else 0.0
+    top = 1
+    while top > 0:
+        top -= 1
+        a, b, fa0, fa1 = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
+        fb0, fb1, depth, start = stack[top, 4], stack[top, 5], stack[top, 6], stack[top, 7] != 0.0
+        sa, sb = sign * fa0, sign * fb0
+        da, db = sign * fa1, sign * fb1
+        if start and sa >= -margin and da < 0.0:
+            sa = -0.0  # on the surface and leaving it: not a crossing
+        m = _bound2(R, kind, k, c, a) * (b - a) * (1.0 + 1e-12)
+        if sa >= 0.0 and not start:
+            return a
+        if (da > 0.0 and db > 0.0 or da < 0.0 and db < 0.0) and abs(da) + abs(db) > m:
+            # monotone: a crossing iff the ends straddle 0
+            if sb >= 0.0 and sa < 0.0:
+                return _bracket_r(R, kind, k, c, a, b, sign, fa0, fb0)
+            continue
+        upper = (sb if sb > sa else sa) + 0.125 * (b - a) * m      # Python's max(sa, sb)
+        if upper < -margin:
+            continue
+        if depth >= _MAX_DEPTH or b - a <= 4.0 * _ulp(b):
+            if sa < 0.0 <= sb:
+                return _bracket_r(R, kind, k, c, a, b, sign, fa0, fb0)
+            continue
+        mid = 0.5 * (a + b)
+        fm0, fm1 = _event(R, kind, k, c, mid)
+        # the right half below the left one: the left is searched first
+        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = mid, b, fm0, fm1
+        stack[top, 4], stack[top, 5], stack[top, 6], stack[top, 7] = fb0, fb1, depth + 1.0, 0.0
+        top += 1
+        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = a, mid, fa0, fa1
+        stack[top, 4], stack[top, 5], stack[top, 6] = fm0, fm1, depth + 1.0
+        stack[top, 7] = 1.0 if start else 0.0
+        top += 1
+    return NONE
+
+
+@jit
+def first_crossing_region(R, kind, k, c, horizon, sign, scale):
+    """contact._first_crossing on a region's gap (``kind`` GAP: the event reg(h)[:2], the
+    bound reg.bound(2, h)) or contact force (FORCE: contact._force_event and
+    _force_bound), the bracketing by :func:`bracket_region`: the first h in (0, horizon]
+    at which sign * f(h) >= 0 after being < 0, or NONE. ``R``: the region's constants
+    (:data:`_TAU0` ...)."""
+    margin = 64.0 * _EPS * scale
+    n = max(1, int(math.ceil(horizon / (0.25 * math.pi))))
+    stack = np.empty((_MAX_DEPTH + 2, 8))
+    a = 0.0
+    fa0, fa1 = _event(R, kind, k, c, 0.0)
+    start = True
+    for j in range(1, n + 1):
+        b = horizon if j == n else j * horizon / n
+        fb0, fb1 = _event(R, kind, k, c, b)
+        root = _crossing_in(R, kind, k, c, a, b, fa0, fa1, fb0, fb1, sign, margin, start,
+                            stack)
+        if root != NONE:
+            return root
+        a, fa0, fa1, start = b, fb0, fb1, False
+    return NONE
