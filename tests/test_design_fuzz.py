@@ -35,6 +35,8 @@ from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, admi
 from grazing_control.dynamics.orbits.orbits import branch_point
 from grazing_control.dynamics.maps.perturbation import admissible_c2_perturbation
 
+from test_compliant_flow_bits import _digest
+
 SETS = ("combined", "impacting", "non-impacting")
 
 #: The issue's failing inputs: (zeta, r, omega), c2, delay.
@@ -69,17 +71,33 @@ def random_cases(n, seed):
         yield p, rng.uniform(-5.0, 3.0), delay
 
 
-def _design_failure(p, c2, delay, n=0):
-    """None, or the exception the design raised that is not a ParameterError."""
+#: sha256 (tests/test_compliant_flow_bits.py's canonical digest: every float's hex) of what
+#: the design gives on the 2000 cases of test_no_numerical_failure_over_2000_seeded_cases
+#: (each case's c1, gamma1, condition values and admissible sets, or its ParameterError),
+#: made on 5b46339, before the design's c2-free matrices were formed once a model
+#: (gains._Degenerate, issue 30's suite CPU): the same floats, bit for bit
+DESIGN_DIGEST = "0ec92d26f8094026b77f2750cc7e705ac5541e9a2efb51f569b5826d477ca248"
+
+
+def _design_failure(p, c2, delay, n=0, record=None):
+    """None, or the exception the design raised that is not a ParameterError; ``record``
+    (a list): what the design gave is appended (c1, gamma1, the condition values at c2,
+    the admissible sets), or "ParameterError"."""
     try:
-        evaluate_design(p, c2, delay)
+        point = evaluate_design(p, c2, delay)
+        cv = condition_values(p, c2, delay)
+        out = [point.c1, point.gamma1, (cv.limit, cv.existence, cv.free)]
         for c in SETS:
-            for lo, hi in admissible_c2(p, n=n, delay=delay, conditions=c):
+            sets = admissible_c2(p, n=n, delay=delay, conditions=c)
+            for lo, hi in sets:
                 assert lo < hi and not math.isnan(lo) and not math.isnan(hi)
+            out.append(sets)
     except ParameterError:
-        return None
+        out = "ParameterError"
     except Exception as exc:  # noqa: BLE001 - counting every other failure is the test
         return exc
+    if record is not None:
+        record.append(out)
     return None
 
 
@@ -94,9 +112,13 @@ def test_issue_inputs_give_a_design(model, c2, delay):
 
 
 def test_no_numerical_failure_over_2000_seeded_cases():
+    """No failure, and the same floats as before the design was made cheaper
+    (:data:`DESIGN_DIGEST`)."""
+    record = []
     failures = [(p, c2, d, exc) for p, c2, d in random_cases(2000, seed=20)
-                if (exc := _design_failure(p, c2, d)) is not None]
+                if (exc := _design_failure(p, c2, d, record=record)) is not None]
     assert failures == []
+    assert _digest(record) == DESIGN_DIGEST
 
 
 def test_no_numerical_failure_with_the_scan_and_the_perturbation_route():
