@@ -202,8 +202,12 @@ def test_admissible_mu_agrees_with_a_dense_grid_and_its_ends_are_switches(seed):
     sets = {c: nd.admissible_mu(m, c) for c in nd.CONDITIONS}
     assert sets["impacting"]
 
+    designs = {}    # mu -> its design, evaluated once for the three conditions
+
     def ok(mu, cond):
-        d = nd.evaluate_design(m, mu)
+        d = designs.get(mu)
+        if d is None:
+            d = designs[mu] = nd.evaluate_design(m, mu)
         return {"impacting": d.admissible_impacting, "non-impacting": d.free_stable,
                 "combined": d.admissible}[cond]
 
