@@ -139,10 +139,16 @@ class Actuation:
         return self.start(model) + self.latency + self.width
 
 
+@functools.lru_cache(maxsize=64, typed=True)
 def _vectors(model: NdofModel, delay: float = 0.0):
     """(w, e_v, b): the wall coordinate's position and velocity rows, the kick direction
     seen on Pi2, b = Phi(-delay) e_{n + i_a} (§14; e_{n + i_a} itself without delay); for
-    an :class:`Actuation` the pulse's effective input vector b_w (§15, (N10))."""
+    an :class:`Actuation` the pulse's effective input vector b_w (§15, (N10)).
+
+    Formed once a model and delay (the model's identity: NdofModel compares by identity;
+    ``typed``: a delay True is not the delay 1 and is refused) and read-only: the design's
+    searches over mu ask for them hundreds of thousands of times (issue 30, the suite's
+    CPU)."""
     n = model.n
     eye = np.eye(2 * n)
     b = eye[n + model.i_a]
@@ -150,7 +156,14 @@ def _vectors(model: NdofModel, delay: float = 0.0):
         b = _pulse_vector(model, delay)
     elif delay != 0.0:
         b = _transition(model, -_delay(model, delay)) @ b
-    return eye[model.i_w], eye[n + model.i_w], b
+    return _read_only(eye[model.i_w], eye[n + model.i_w], b)
+
+
+def _read_only(*arrays):
+    """The arrays, made read-only (a cached value no caller may change)."""
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
 
 
 def _pulse_vector(model: NdofModel, act: Actuation) -> np.ndarray:
@@ -181,10 +194,13 @@ def _delay(model: NdofModel, delay) -> float:
     return float(delay)
 
 
+@functools.lru_cache(maxsize=32)
 def _sections(model: NdofModel):
-    """(P, Q, Phi(-s)) with P = Phi(s), Q = Phi(T - s), s = pi2_offset / omega."""
+    """(P, Q, Phi(-s)) with P = Phi(s), Q = Phi(T - s), s = pi2_offset / omega; formed once
+    a model and read-only (as :func:`_vectors`)."""
     s = model.pi2_offset / model.omega
-    return _transition(model, s), _transition(model, model.period - s), _transition(model, -s)
+    return _read_only(_transition(model, s), _transition(model, model.period - s),
+                      _transition(model, -s))
 
 
 def smooth_map(model: NdofModel, gains=None, delay: float = 0.0) -> np.ndarray:
