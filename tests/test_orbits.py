@@ -351,3 +351,28 @@ def test_delta_d_rounding_bounds_the_wobble_and_is_not_vacuous(c2, delay):
             err = abs(branch_point(p, psi, g)[0] + gamma1 * psi * psi)
             ratios.append(err / _delta_d_rounding(p, psi, g))
     assert 0.1 < max(ratios) <= 1.0
+
+
+def test_the_branch_scan_is_the_same_at_every_delta_d():
+    """orbits._branch_values scans the branch once per oscillator, gains and side, at Delta
+    d = 0 (issue 30, the suite's CPU): the scan at each p's own Delta d, computed here
+    point by point, gives the same floats (branch_point and the rounding bound do not
+    read p.delta_d), without and with a delayed controller, on both sides."""
+    from grazing_control.dynamics.orbits.orbits import (_branch_values, _delta_d_rounding,
+                                                        _psi_grid)
+    from test_compliant_flow_bits import _canonical
+
+    P = OscillatorParams()
+    for delta_d, gains in ((-1e-3, None), (2e-5, Gains(degenerate_c1(P, -1.0), -1.0)),
+                           (-0.3, Gains(degenerate_c1(P, -0.5, 0.5), -0.5, 0.5))):
+        p = P.with_(delta_d=delta_d)
+        for sign in (-1.0, 1.0):
+            direct = []
+            for m in _psi_grid():
+                point = branch_point(p, sign * m, gains)
+                direct.append((sign * m, point[0], point[1],
+                               _delta_d_rounding(p, sign * m, gains, point)))
+            assert _canonical(_branch_values(p, gains, sign, rounding=True)) == \
+                _canonical(direct)
+            assert _canonical(_branch_values(p, gains, sign)) == \
+                _canonical([row[:3] for row in direct])

@@ -27,6 +27,7 @@ Two routes, each exact (no truncation) and cross-checked against each other:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -233,17 +234,32 @@ def _psi_grid(lo_exp=-15.0, n=241):
     return mags
 
 
-def _branch_values(p, gains, sign, mags, rounding=False):
-    """(psi, Delta d, v-) along the grid, with Delta d's rounding bound if ``rounding``."""
+def _branch_values(p, gains, sign, rounding=False):
+    """(psi, Delta d, v-) along the grid of :func:`_psi_grid` on the side ``sign``, with
+    Delta d's rounding bound if ``rounding``. The same for every Delta d:
+    :func:`branch_point` and :func:`_delta_d_rounding` do not read p.delta_d (it is the
+    unknown), so the scan is made once per oscillator (p's other fields), gains and side
+    (:func:`_branch_scan`); a sweep over Delta d (the noise covariance's, the mismatch
+    bands') solved each orbit's scan anew, 1526 scans in five test modules (issue 30, the
+    suite's CPU)."""
+    return _branch_scan((p.zeta, p.r, p.omega, p.tau0, p.pi2_offset), gains, sign, rounding)
+
+
+@functools.lru_cache(maxsize=256)
+def _branch_scan(oscillator: tuple, gains, sign: float, rounding: bool) -> tuple:
+    """:func:`_branch_values` of the oscillator (zeta, r, omega, tau0, pi2_offset) at
+    Delta d = 0 (any other gives the same floats: tests/test_orbits.py)."""
+    zeta, r, omega, tau0, pi2_offset = oscillator
+    p = OscillatorParams(zeta=zeta, r=r, omega=omega, tau0=tau0, pi2_offset=pi2_offset)
     out = []
-    for m in mags:
+    for m in _psi_grid():
         point = branch_point(p, sign * m, gains)
         dd, v, _ = point
         if rounding:
             out.append((sign * m, dd, v, _delta_d_rounding(p, sign * m, gains, point)))
         else:
             out.append((sign * m, dd, v))
-    return out
+    return tuple(out)
 
 
 def find_branch_phase(p: OscillatorParams, delta_d: float, gains: Gains | None = None) -> float:
@@ -259,10 +275,9 @@ def find_branch_phase(p: OscillatorParams, delta_d: float, gains: Gains | None =
         If no physical (v- > 0) 1/1 orbit on the branch has this Delta d.
     """
     best = None
-    mags = _psi_grid()
     for sign in (-1.0, 1.0):
         prev = (0.0, 0.0, 0.0)
-        for cur in _branch_values(p, gains, sign, mags):
+        for cur in _branch_values(p, gains, sign):
             f0, f1 = prev[1] - delta_d, cur[1] - delta_d
             if cur[2] > 0.0 and f0 * f1 <= 0.0 and f0 != f1:
                 lo, hi = sorted((prev[0], cur[0]))
@@ -298,11 +313,10 @@ def branch_brackets(p: OscillatorParams, delta_d: float, gains: Gains | None = N
     Delta d wobbles by tens of percent, which is no fold.
     """
     found = []
-    mags = _psi_grid()
     for sign in (-1.0, 1.0):
         prev = (0.0, 0.0, 0.0, 0.0)
         on_grazing_arc, fold, direction, steps = True, None, 0.0, 0
-        for cur in _branch_values(p, gains, sign, mags, rounding=True):
+        for cur in _branch_values(p, gains, sign, rounding=True):
             steps += 1
             if cur[2] <= 0.0:
                 if abs(cur[0]) > 1e-3:  # rounding may flip tiny v- near psi = 0
