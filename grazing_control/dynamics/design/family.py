@@ -291,13 +291,15 @@ def _mu(mu) -> float:
     return float(mu)
 
 
+@functools.lru_cache(maxsize=64, typed=True)
 def transmission_zeros(model: NdofModel, delay: float = 0.0) -> np.ndarray:
     """The 2n - 1 transmission zeros of (Phi(T), Phi(T - s) b, w^T) (§4; with a delay
     b = Phi(-delay) e_{n + i_a}, so they move with the delay, §14).
 
     Finite generalized eigenvalues of the Rosenbrock pencil
     [[Phi(T), g], [w^T, 0]] - lambda [[I, 0], [0, 0]] (the pencil has two infinite ones,
-    relative degree 1 since c = w^T g != 0), sorted by decreasing modulus.
+    relative degree 1 since c = w^T g != 0), sorted by decreasing modulus. The same for
+    every mu: formed once a model and delay, read-only (as :func:`_vectors`).
     """
     _reach(model, delay)
     p, q, _ = _sections(model)
@@ -313,7 +315,7 @@ def transmission_zeros(model: NdofModel, delay: float = 0.0) -> np.ndarray:
     ratio = np.where(beta != 0, np.abs(alpha) / np.maximum(np.abs(beta), 1e-300), np.inf)
     keep = np.argsort(ratio, kind="stable")[: d - 1]
     z = (alpha[keep] / beta[keep]).astype(complex)
-    return z[np.argsort(-np.abs(z), kind="stable")]
+    return _read_only(z[np.argsort(-np.abs(z), kind="stable")])[0]
 
 
 def _zeros_radius_at(model: NdofModel, offset: float, delay: float = 0.0) -> float:
@@ -369,10 +371,12 @@ def sections_with_stable_zeros(model: NdofModel, points: int = 720,
 
 # -- the limit of the controlled 1/1 orbit (§5-§7) ----------------------------------------
 
+@functools.lru_cache(maxsize=64, typed=True)
 def _reduced(model: NdofModel, delay: float = 0.0):
     """(N~, iv, a1, q): N restricted to W = ker w^T (rows and columns other than i_w,
     the same for every mu), the index of e_v in it, a1 = e_v^T (N~ - I)^-1 e_v and
-    q = r + (1 + r) a1 = e_v^T (N~ - I)^-1 (r N~ + I) e_v (§5)."""
+    q = r + (1 + r) a1 = e_v^T (N~ - I)^-1 (r N~ + I) e_v (§5); formed once a model
+    and delay, N~ read-only (as :func:`_vectors`)."""
     n_mat = smooth_map(model, gain_family(model, 0.0, delay), delay)
     keep = [j for j in range(2 * model.n) if j != model.i_w]
     nt = n_mat[np.ix_(keep, keep)]
@@ -386,7 +390,7 @@ def _reduced(model: NdofModel, delay: float = 0.0):
         raise ParameterError("model is invalid for the design: 1 is a transmission zero "
                              "(N - I singular on ker w^T), the 1/1 branch born at grazing is "
                              "not a graph over psi")
-    return nt, iv, a1, model.r + (1.0 + model.r) * a1
+    return _read_only(nt)[0], iv, a1, model.r + (1.0 + model.r) * a1
 
 
 def limit_monodromy(model: NdofModel, mu: float, delay: float = 0.0) -> np.ndarray:
