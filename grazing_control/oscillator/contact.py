@@ -350,13 +350,16 @@ _GAP, _FORCE = 0, 1     # kernel.compiled_contact.GAP, FORCE
 
 
 def load_compiled() -> bool:
-    """Bracket the regions' switching times with the compiled mirror from now on in this
-    process (:mod:`grazing_control.oscillator.kernel.compiled_contact`: the same floats,
-    about half of the flow's time saved; docs/benchmarks.md "The compliant stop's hot
-    path"), where numba runs (``GRAZING_KERNEL``, :func:`kernel.use_kernel`). Compiles
-    or loads from numba's cache on the first call (seconds on a fresh clone), so it is
-    asked for by the offline callers that evaluate the flow many times (the stop's fit),
-    never on a node's first period. Returns whether the compiled path is on."""
+    """Search the regions' switching times with the compiled mirror from now on in this
+    process (:mod:`grazing_control.oscillator.kernel.compiled_contact`: the certified
+    search of a region's gap or force and its bracketing, :func:`_region_crossing`; the
+    entry from below the stop by the kernel's wall search, :func:`_wall_entry`; the
+    same floats, the stop's fit at 0.30 of the Python path's CPU; docs/benchmarks.md
+    "The compliant stop's hot path"), where numba runs (``GRAZING_KERNEL``,
+    :func:`kernel.use_kernel`). Compiles or loads from numba's cache on the first call
+    (seconds on a fresh clone; it loads the 1-DOF kernel too), so it is asked for by
+    the offline callers that evaluate the flow many times (the stop's fit), never on a
+    node's first period. Returns whether the compiled path is on."""
     global _compiled
     if _compiled is None and kernel.use_kernel():
         from .kernel import compiled_contact as cc

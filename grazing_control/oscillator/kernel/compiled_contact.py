@@ -1,14 +1,17 @@
-"""Compiled mirror of the Kelvin-Voigt stop's bracketing (:func:`grazing_control.oscillator.
-contact._bracket` on a region's gap or contact force), in the same floating point
-operations and the same order, so that it gives the same floats (tests/
-test_compliant_flow_bits.py runs the flow's digest on both paths).
+"""Compiled mirror of the Kelvin-Voigt stop's certified switching search
+(:func:`grazing_control.oscillator.contact._first_crossing` on a region's gap or contact
+force, :func:`first_crossing_region`) and its bracketing (``contact._bracket``,
+:func:`bracket_region`), in the same floating point operations and the same order, so
+that it gives the same floats (tests/test_compliant_flow_bits.py runs the flow's digests
+on both paths).
 
-The bracketing is about half of the compliant flow's time (issue 30, the suite's CPU:
-cProfile of test_stop_selection's fits, docs/benchmarks.md "The compliant stop's hot
-path"): its safeguarded secant mostly bisects, some 50 evaluations of the region's
-closed form per switching time. Self-contained in its own file: numba's on-disk cache
-keys a function on its own source file (:mod:`.compiled`'s docstring), and nothing here
-calls into another file.
+The search is most of the compliant flow's time (issue 30, the suite's CPU: cProfile of
+test_stop_selection's fits, docs/benchmarks.md "The compliant stop's hot path"): an
+interval is excluded or bisected on a bound of the second derivative, and a root's
+safeguarded secant mostly bisects, some 50 evaluations of the region's closed form per
+switching time. Self-contained in its own file: numba's on-disk cache keys a function on
+its own source file (:mod:`.compiled`'s docstring), and nothing here calls into another
+file.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["GAP", "FORCE", "bracket_region"]
+__all__ = ["GAP", "FORCE", "NONE", "bracket_region", "first_crossing_region"]
 
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
