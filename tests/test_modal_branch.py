@@ -159,3 +159,28 @@ def test_structured_multipliers_are_the_eigenvalues_of_b_plus_s_p_q(s, grazing):
     assert all(np.any(got == np.conj(z)) for z in got)      # exact conjugate pairs
     if grazing:
         assert abs(got[-1]) < 1e-3 * abs(got[-2])          # the determinant's multiplier
+
+
+def test_the_walk_to_the_orbit_is_the_same_at_every_delta_d():
+    """orbit_at's walk in psi is made once per model content but Delta d (modal_branch._psi_walk,
+    issue 30's suite CPU): the orbit found at one Delta d after a walk made at another is,
+    bit for bit, the one found after a walk of its own (branch_point does not read
+    model.delta_d), with the kick on Pi2 and 4.0 after it."""
+    from test_compliant_flow_bits import _canonical
+
+    base = load_model(CHAIN)
+    k = nd.gain_family(base, 0.0)
+    for delay in (0.0, 4.0):
+        dds = [-1e-4, -3e-7]
+        alone = []
+        for dd in dds:
+            nb._WALKS.clear()
+            alone.append(nb.orbit_at(dataclasses.replace(base, delta_d=dd), k, dd, delay=delay))
+        nb._WALKS.clear()
+        nb.orbit_at(dataclasses.replace(base, delta_d=0.5 * dds[0]), k, 0.5 * dds[0], delay=delay)
+        walked = [nb.orbit_at(dataclasses.replace(base, delta_d=dd), k, dd, delay=delay)
+                  for dd in dds]
+        assert len(nb._WALKS) == 2         # one walk a side, both sides asked for
+        for a, b in zip(alone, walked):    # every float of the point, arrays too
+            assert _canonical([np.asarray(x).tolist() for x in a]) == \
+                _canonical([np.asarray(x).tolist() for x in b])

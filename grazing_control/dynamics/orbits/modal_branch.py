@@ -148,18 +148,19 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
 
     Walks |psi| outwards on both sides of grazing (1e-12 .. psi_max, logarithmic) and
     solves Delta d(psi) = delta_d by Brent's method on the first bracket with v- > 0 on
-    the side nearer grazing. Raises ValueError when no such orbit is found.
+    the side nearer grazing. Raises ValueError when no such orbit is found. The walk's
+    values are the same at every Delta d (:func:`_psi_walk`).
     """
     k = _gains(model, gains)
-    mags = np.geomspace(1e-12, psi_max, 400)
     best = None
     for sign in (1.0, -1.0):
         prev = None
-        for a in mags:
-            bp = branch_point(model, k, sign * a, delay)
-            if bp.v_minus <= 0.0:
+        for a, dd, v, error in _psi_walk(model, k, sign, psi_max, delay):
+            if error is not None:
+                raise error[0](*error[1])
+            if v <= 0.0:
                 break
-            val = bp.delta_d - delta_d
+            val = dd - delta_d
             if prev is not None and (val > 0.0) != (prev[1] > 0.0):
                 if best is None or a < best[2]:
                     best = (prev[0], sign * a, a)
@@ -171,6 +172,44 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     psi = brentq(lambda x: branch_point(model, k, x, delay).delta_d - delta_d, best[0], best[1],
                  xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
     return branch_point(model, k, psi, delay)
+
+
+def _psi_walk(model: NdofModel, k: np.ndarray, sign: float, psi_max: float, delay) -> tuple:
+    """:func:`orbit_at`'s walk on one side: (|psi|, Delta d, v-, None) of
+    :func:`branch_point` at sign |psi|, |psi| on 400 logarithmic steps from 1e-12 to
+    ``psi_max``, up to the first v- <= 0, or up to a point where branch_point raised
+    (its error as (type, args) in the last row). branch_point does not read
+    model.delta_d (it is the unknown), so the walk is made once per model content but
+    Delta d, gains, side and window (:func:`_psi_walk_of`): a sweep over Delta d (the
+    mismatch bands' ~60 orbits a plant) walked each orbit's 800 phases anew
+    (tests/test_modal_branch.py checks the same floats at another Delta d)."""
+    key = (model.M.tobytes(), model.C.tobytes(), model.K.tobytes(), model.f.tobytes(),
+           model.M.shape, model.omega, model.i_w, model.r, model.i_a, model.phase,
+           model.pi2_offset, k.tobytes(), sign, psi_max, delay)
+    return _psi_walk_of(key, model, k, sign, psi_max, delay)
+
+
+_WALKS: dict = {}
+
+
+def _psi_walk_of(key, model, k, sign, psi_max, delay) -> tuple:
+    """:func:`_psi_walk` by its key, from the walks made (the last 64)."""
+    rows = _WALKS.get(key)
+    if rows is None:
+        rows = []
+        for a in np.geomspace(1e-12, psi_max, 400):
+            try:
+                bp = branch_point(model, k, sign * a, delay)
+            except Exception as exc:     # noqa: BLE001 - raised again where it was met
+                rows.append((a, math.nan, math.nan, (type(exc), exc.args)))
+                break
+            rows.append((a, bp.delta_d, bp.v_minus, None))
+            if bp.v_minus <= 0.0:
+                break
+        if len(_WALKS) >= 64:
+            _WALKS.pop(next(iter(_WALKS)))
+        rows = _WALKS[key] = tuple(rows)
+    return rows
 
 
 def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
