@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -185,16 +186,20 @@ def _psi_walk(model: NdofModel, k: np.ndarray, sign: float, psi_max: float, dela
     (tests/test_modal_branch.py checks the same floats at another Delta d)."""
     key = (model.M.tobytes(), model.C.tobytes(), model.K.tobytes(), model.f.tobytes(),
            model.M.shape, model.omega, model.i_w, model.r, model.i_a, model.phase,
-           model.pi2_offset, k.tobytes(), sign, psi_max, delay)
+           model.pi2_offset, k.tobytes(), sign, psi_max, type(delay), delay)
     return _psi_walk_of(key, model, k, sign, psi_max, delay)
 
 
+#: the walks made, by key (the last 64), and the lock of its changes (threads may ask)
 _WALKS: dict = {}
+_WALKS_LOCK = threading.Lock()
 
 
 def _psi_walk_of(key, model, k, sign, psi_max, delay) -> tuple:
-    """:func:`_psi_walk` by its key, from the walks made (the last 64)."""
-    rows = _WALKS.get(key)
+    """:func:`_psi_walk` by its key, from the walks made. ``type(delay)`` is in the key:
+    a delay True is refused by branch_point, not taken for the delay 1."""
+    with _WALKS_LOCK:
+        rows = _WALKS.get(key)
     if rows is None:
         rows = []
         for a in np.geomspace(1e-12, psi_max, 400):
@@ -206,9 +211,11 @@ def _psi_walk_of(key, model, k, sign, psi_max, delay) -> tuple:
             rows.append((a, bp.delta_d, bp.v_minus, None))
             if bp.v_minus <= 0.0:
                 break
-        if len(_WALKS) >= 64:
-            _WALKS.pop(next(iter(_WALKS)))
-        rows = _WALKS[key] = tuple(rows)
+        rows = tuple(rows)
+        with _WALKS_LOCK:
+            if len(_WALKS) >= 64:
+                _WALKS.pop(next(iter(_WALKS)))
+            _WALKS[key] = rows
     return rows
 
 
