@@ -172,7 +172,7 @@ def test_limit_multipliers_are_the_exact_branch_limit(seed):
                                               rel=1e-9)
     errs = []
     for psi in (1e-3, 1e-4, 1e-5):
-        bp = modal_branch.branch_point(m, k, math.copysign(psi, modal_branch.branch_coefficients(m, k)[2]))
+        bp = modal_branch.orbit_at_phase(m, k, math.copysign(psi, modal_branch.branch_coefficients(m, k)[2]))
         errs.append(_match(np.linalg.eigvals(bp.monodromy), lim))
     assert 7 < errs[0] / errs[1] < 14 and 7 < errs[1] / errs[2] < 14
 
@@ -189,7 +189,7 @@ def test_existence_coefficient_is_the_branch_curvature(seed):
         assert abs(d1) < 1e-10 * abs(g1) and g1_general == pytest.approx(g1, rel=1e-10)
         errs = []
         for psi in (1e-3, 1e-4):   # symmetric quotient: error O(psi^2)
-            dd = [modal_branch.branch_point(m, k, x).delta_d for x in (psi, -psi)]
+            dd = [modal_branch.orbit_at_phase(m, k, x).delta_d for x in (psi, -psi)]
             errs.append(abs(-0.5 * (dd[0] + dd[1]) / psi ** 2 - g1))
         assert errs[1] < 1e-5 * abs(g1) and 70 < errs[0] / errs[1] < 130
 

@@ -2,7 +2,7 @@
 
 The model file's implementation of the 1/1 branch behind the one entry
 (:mod:`.one_one`: ``orbit``, ``branch``), beside the 1-DOF closed form's (:mod:`.orbits`:
-``orbit_11``, ``branch_point``); for n = 1 the two agree to rounding
+``orbit_11``, ``wall_offset_at_phase``); for n = 1 the two agree to rounding
 (tests/test_one_one.py, tests/test_n1_model_file.py).
 
 docs/theory_ndof.md §5 (the n-DOF form of docs/theory.md §5). Take the wall as the
@@ -43,7 +43,7 @@ from grazing_control.dynamics.design.family import (Actuation, _flow, _gains, _t
                                                      _vectors, smooth_map)
 from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
 
-__all__ = ["PhasePoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold",
+__all__ = ["PhasePoint", "orbit_at_phase", "branch_coefficients", "orbit_at", "branch_fold",
            "pi2_factors", "structured_multipliers", "branch_multipliers", "other_contacts",
            "continue_branch", "RETURN_MARGIN"]
 
@@ -83,8 +83,10 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
 
 
-def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> PhasePoint:
-    """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)).
+def orbit_at_phase(model: NdofModel, gains, psi: float, delay: float = 0.0) -> PhasePoint:
+    """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)), as a
+    :class:`PhasePoint` (the 1-DOF closed form's Delta d, v- and period matrix at the
+    phase: :func:`.orbits.wall_offset_at_phase`; at a given Delta d: :func:`orbit_at`).
 
     Periodicity (M - I) z- = (1 + r) v- M e_v gives z- = (1 + r) v- (e_v + R e_v),
     R = (M - I)^-1, whose wall velocity and position components are
@@ -156,7 +158,7 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     for sign in (1.0, -1.0):
         prev = None
         for a in mags:
-            bp = branch_point(model, k, sign * a, delay)
+            bp = orbit_at_phase(model, k, sign * a, delay)
             if bp.v_minus <= 0.0:
                 break
             val = bp.delta_d - delta_d
@@ -168,9 +170,9 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     if best is None:
         raise ValueError(f"delta_d={delta_d!r}: no 1/1 orbit born at grazing with v- > 0 "
                          f"for |psi| <= {psi_max!r}")
-    psi = brentq(lambda x: branch_point(model, k, x, delay).delta_d - delta_d, best[0], best[1],
+    psi = brentq(lambda x: orbit_at_phase(model, k, x, delay).delta_d - delta_d, best[0], best[1],
                  xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
-    return branch_point(model, k, psi, delay)
+    return orbit_at_phase(model, k, psi, delay)
 
 
 def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
@@ -195,20 +197,20 @@ def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
 
     def slope(psi):
         h = 1e-7 * max(1e-3, abs(psi))
-        return (branch_point(model, k, psi + h, delay).delta_d
-                - branch_point(model, k, psi - h, delay).delta_d) / (2.0 * h)
+        return (orbit_at_phase(model, k, psi + h, delay).delta_d
+                - orbit_at_phase(model, k, psi - h, delay).delta_d) / (2.0 * h)
 
     first = slope(grid[0]) > 0.0
     prev = grid[0]
     for psi in grid[1:]:
         try:
-            if branch_point(model, k, psi, delay).v_minus <= 0.0:
+            if orbit_at_phase(model, k, psi, delay).v_minus <= 0.0:
                 return None
             turned = (slope(psi) > 0.0) != first
         except ParameterError:
             return None
         if turned:
-            return branch_point(model, k, brentq(slope, prev, psi, xtol=1e-13), delay)
+            return orbit_at_phase(model, k, brentq(slope, prev, psi, xtol=1e-13), delay)
         prev = psi
     return None
 
@@ -396,7 +398,7 @@ def continue_branch(model: NdofModel, gains, values, *, growth: float = 10 ** (1
     of psi ends. Bifurcations: sign changes of the test functions
     (``shooting.bifurcation_tests``) of consecutive points, refined by Brent in psi.
     With an actuation ``delay`` the branch is the delayed kick's (§14): the window of
-    psi keeps the impact out of the delay (:func:`branch_point`).
+    psi keeps the impact out of the delay (:func:`orbit_at_phase`).
     """
     k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
     values = [float(v) for v in values]
@@ -431,10 +433,10 @@ def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
     by the factor ``growth`` from psi in the direction in which Delta d moves towards
     the target, bracket the crossing and solve it by Brent."""
     def delta(x):
-        return branch_point(model, k, x, delay).delta_d
+        return orbit_at_phase(model, k, x, delay).delta_d
 
     if target == dd:
-        return branch_point(model, k, psi, delay), None
+        return orbit_at_phase(model, k, psi, delay), None
     h = 1e-6 * abs(psi)
     slope = (delta(psi + h) - delta(psi - h)) / (2.0 * h)
     outward = (slope * psi > 0.0) == (target > dd)      # |psi| grows towards the target
@@ -447,7 +449,7 @@ def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
         if abs(nxt) < 1e-300:
             return None, f"grazing (v- -> 0) before delta_d={target!r}"
         try:
-            bp = branch_point(model, k, nxt, delay)
+            bp = orbit_at_phase(model, k, nxt, delay)
         except ParameterError as exc:
             return None, str(exc)
         if not bp.v_minus > 0.0:
@@ -456,7 +458,7 @@ def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
         if (f_nxt > 0.0) != (f_prev > 0.0) or f_nxt == 0.0:
             x = brentq(lambda t: delta(t) - target, prev, nxt, xtol=1e-300,
                        rtol=4.0 * 2.0 ** -52, maxiter=400)
-            return branch_point(model, k, x, delay), None
+            return orbit_at_phase(model, k, x, delay), None
         if abs(f_nxt) > abs(f_prev):
             return None, (f"a fold: Delta d turns back at {bp.delta_d!r} (psi={nxt!r}) before "
                           f"delta_d={target!r}")
@@ -474,14 +476,14 @@ def _bifurcations(model, k, points, psis, delay=0.0):
                 continue
 
             def f(x, kind=kind):
-                bp = branch_point(model, k, x, delay)
+                bp = orbit_at_phase(model, k, x, delay)
                 return bifurcation_tests(branch_multipliers(model, k, bp, delay))[kind]
 
             try:
                 at = brentq(f, pa, pb, xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=200)
             except ValueError:
                 continue
-            bp = branch_point(model, k, at, delay)
+            bp = orbit_at_phase(model, k, at, delay)
             out.append(OrbitBifurcation(kind, float(bp.delta_d),
                                         branch_multipliers(model, k, bp, delay)))
     return out
