@@ -111,6 +111,24 @@ def test_bad_gains_and_conditions_are_refused():
     m = load_model(CHAIN)
     with pytest.raises(ParameterError, match="gains"):
         nd.smooth_map(m, [1.0, 2.0])
+    # one check, one line for every use of a model file's gains (issue 32: the design
+    # family and the shooting near grazing refused them in other words)
+    from grazing_control.dynamics.orbits import near_grazing
+    from grazing_control.studies.sweeps.model_file import diagram
+
+    uses = {"family": lambda k: nd.smooth_map(m, k),
+            "explicit branch": lambda k: modal_branch.orbit_at_phase(m, k, 0.01),
+            "near grazing": lambda k: near_grazing.kick_matrix(m, k),
+            "modal map": lambda k: ModalMap(m, k),
+            "sweep": lambda k: diagram(m, [-1e-6], periods=2, transient=1, gains=k)}
+    for bad, shown in (([1.0, 2.0], "[1.0, 2.0]"), (np.array([0.0, 0.0, math.nan, 1.0]),
+                                                     "[0.0, 0.0, nan, 1.0]"), ("x", "'x'")):
+        for use, call in uses.items():
+            with pytest.raises(ParameterError) as err:
+                call(bad)
+            assert str(err.value) == (f"gains={shown} is invalid: valid range is 2n = 4 finite "
+                                      "real numbers (the kick's gain on each of x0..x1, "
+                                      "v0..v1)"), use
     with pytest.raises(ValueError, match="conditions"):
         nd.admissible_mu(m, "both")
 

@@ -33,14 +33,15 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
+from grazing_control.oscillator.control import gain_vector
 from grazing_control.oscillator.ndof.impact import (ChatteringError, ImpactCapError, advance,
                                                     saltation_matrix, saltation_parts)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.orbits.continuation import OrbitBifurcation, OrbitBranch, OrbitPoint
-from grazing_control.dynamics.design.family import (Actuation, _flow, _gains, _transition,
-                                                     _vectors, smooth_map)
+from grazing_control.dynamics.design.family import (Actuation, _flow, _transition, _vectors,
+                                                     smooth_map)
 from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
 
 __all__ = ["PhasePoint", "orbit_at_phase", "branch_coefficients", "orbit_at", "branch_fold",
@@ -98,7 +99,7 @@ def orbit_at_phase(model: NdofModel, gains, psi: float, delay: float = 0.0) -> P
     actuation ``delay`` the kick acts delay after Pi2 (before the next impact:
     -omega (T - s - delay) < psi, §14); the Pi2 state is the sample, before the kick.
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     psi = float(psi)
     m, pm = _impact_map(model, k, psi, delay)
     w, ev, _b = _vectors(model)
@@ -128,7 +129,7 @@ def branch_coefficients(model: NdofModel, gains, delay: float = 0.0):
     On the family (w^T N = mu w^T) gamma1 is family.existence_coefficient. With an
     actuation ``delay``, N = N(k; delay) (§14).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     n_mat = smooth_map(model, k, delay)
     w, ev, _b = _vectors(model)
     a = _flow(model).A
@@ -152,7 +153,7 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     solves Delta d(psi) = delta_d by Brent's method on the first bracket with v- > 0 on
     the side nearer grazing. Raises ValueError when no such orbit is found.
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     mags = np.geomspace(1e-12, psi_max, 400)
     best = None
     for sign in (1.0, -1.0):
@@ -189,7 +190,7 @@ def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
     slope. With an actuation ``delay`` the delayed kick's branch (§14), whose window
     ends where the impact enters the delay.
     """
-    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    k = gain_vector(np.zeros(2 * model.n) if gains is None else gains, model.n)
     sgn = math.copysign(1.0, branch_coefficients(model, k, delay)[2])
     s = model.pi2_offset / model.omega
     bound = model.omega * s if sgn > 0 else model.omega * (model.period - s - delay)
@@ -241,7 +242,7 @@ def pi2_factors(model: NdofModel, gains, point: PhasePoint, delay: float = 0.0):
     Jacobian M2 (M1 + e k^T), M1 = Phi(delay), M2 = Phi(sigma) S Phi(T - sigma - delay),
     is Phi(sigma) S Phi(T - sigma) (I + b_delay k^T).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     flow = _flow(model)
     sigma = _sigma(model, point.psi)
     _w, _ev, b = _vectors(model, delay)
@@ -321,7 +322,7 @@ def branch_multipliers(model: NdofModel, gains, point: PhasePoint,
     :func:`pi2_factors`, det J = e^{tr(A) T} r^2 (1 + k^T b), the exact determinant
     of one period with one impact; b = e_{n+i_a}, or b_delay = Phi(-delay) e_{n+i_a}
     with an actuation ``delay``, §14)."""
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     flow = _flow(model)
     _w, _ev, b = _vectors(model, delay)
     det = (math.exp(float(np.trace(flow.A)) * model.period) * model.r ** 2
@@ -346,7 +347,7 @@ def other_contacts(model: NdofModel, gains, point: PhasePoint, delay: float = 0.
     point is exact to rounding whatever v-, where the event search on the period map
     cannot resolve an impact of v-^2 below the gap's rounding (v- ~ 1e-8).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     model = dataclasses.replace(model, delta_d=float(point.delta_d))
     flow = _flow(model)
     n, w = model.n, model.i_w
@@ -400,7 +401,7 @@ def continue_branch(model: NdofModel, gains, values, *, growth: float = 10 ** (1
     With an actuation ``delay`` the branch is the delayed kick's (§14): the window of
     psi keeps the impact out of the delay (:func:`orbit_at_phase`).
     """
-    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    k = gain_vector(np.zeros(2 * model.n) if gains is None else gains, model.n)
     values = [float(v) for v in values]
     if len(values) < 2 or not all(math.isfinite(v) for v in values):
         raise ValueError("values are invalid: expected at least two finite Delta d values")
