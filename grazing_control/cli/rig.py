@@ -539,8 +539,8 @@ def masses_report(rig, path, args) -> dict:
     n-DOF model, the gap at grazing, the n-DOF design for the budget's pulse with its
     gains in SI (grazing design --rig FILE), a 1 um error of the impacting mass and the
     correction at the controlled 1/1 orbit (:func:`_at_controlled_orbit`, the 1-DOF
-    rig's) as the pulse's force, and the timing budget with --compute-tail (the n-DOF estimate is not
-    timed here)."""
+    rig's) as the pulse's force, and the timing budget with --compute-tail (the n-DOF
+    estimate is not timed here)."""
     from grazing_control.oscillator.ndof.flow import NdofFlow
     from grazing_control.plant.rig_budget import check_budget, timing_budget
     from grazing_control.plant.rig_structure import modes
