@@ -9,7 +9,7 @@ import os
 import time
 
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.dynamics.estimation.stream import simulate_stream
 from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.params import OscillatorParams
@@ -21,7 +21,7 @@ SIGMA, RATE, PERIODS, REPS = 1e-4, 200, 300, 3
 
 def main():
     g = optimize_noise(P, 3.0).gains()
-    z = orbit_11(P, g).pi2_deviation
+    z = one_one.orbit(P, g).state
     sensor = SensorModel(noise=SIGMA, velocity=False, seed=1)
     h = P.period / RATE
     cases = (("plain model filter", lambda: None),

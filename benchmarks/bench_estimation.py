@@ -21,7 +21,7 @@ import numpy as np
 
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.motion import trajectory
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.dynamics.estimation.stream import StreamEstimator, predict_section
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
@@ -31,7 +31,7 @@ from grazing_control.plant.sensor import SensorModel
 def stream(p, g, periods, rate, sigma=1e-4):
     """(t, x~) of a recorded position-only stream on the controlled orbit, and the
     corrections of each section."""
-    z = orbit_11(p, g).pi2_deviation
+    z = one_one.orbit(p, g).state
     h = p.period / rate
     dv = g.c1 * z[0] + g.c2 * z[1]
     s = np.arange(1, rate + 1) * h
@@ -74,7 +74,7 @@ def main(argv=None):
             per = best[0] / best[1]
             base = per if base is None else base
             print(f"| {rate} | {e} | {1e3 * per:.3f} | {per / base:.1f} |")
-    z = orbit_11(p, g).pi2_deviation
+    z = one_one.orbit(p, g).state
     n = 2000
     t0 = time.process_time()
     for _ in range(n):

@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from grazing_control.oscillator.control import Gains  # noqa: E402
 from grazing_control.dynamics.design.gains import degenerate_c1  # noqa: E402
 from grazing_control.dynamics.simulation.fidelity import period_step  # noqa: E402
-from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
+from grazing_control.dynamics.orbits import one_one  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
 from grazing_control.dynamics.simulation.simulate import simulate  # noqa: E402
 from reference import RefModel  # noqa: E402
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
     rows = []
     for dd in SCENES:
         p = base.with_(delta_d=dd)
-        orb = orbit_11(p, gains).pi2_deviation
+        orb = one_one.orbit(p, gains).state
         z0 = (1.01 * orb[0], orb[1])
         ref = RefModel.from_params(p).simulate(
             args.periods + 1, x0=p.x_ref + z0[0], v0=p.v_ref + z0[1],

@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml  # noqa: E402
-from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
+from grazing_control.dynamics.orbits import one_one  # noqa: E402
 from grazing_control.dynamics.design.tuning import optimize_noise  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
@@ -94,7 +94,7 @@ def main():
     c2 = optimize_noise(p, args.delay).c2     # the study's c2 = -1 has no orbit at delay 3
     gains = Gains(degenerate_c1(p, c2, args.delay), c2, args.delay)
     controller = write_controller_yaml(OUT / "controller.yaml", p, gains) or OUT / "controller.yaml"
-    orbit = np.array(orbit_11(p, gains, branch="grazing").pi2)
+    orbit = one_one.orbit(p, gains, branch="grazing").physical
     configs = [("idle", False, False), ("idle+rt", False, True), ("yes", True, False),
                ("yes+rt", True, True)]
     results = []

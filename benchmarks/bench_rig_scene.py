@@ -462,9 +462,9 @@ def main(argv=None):
     n = len(x) - captured
     rms = float(np.sqrt(np.mean((x[held] - x_orbit) ** 2)))
     std = float(np.std(x[held]))
-    from grazing_control.dynamics.orbits.orbits import orbit_11
+    from grazing_control.dynamics.orbits import one_one
 
-    kick = p.x_ref + orbit_11(p, g).pi2_deviation[0]
+    kick = p.x_ref + one_one.orbit(p, g).state[0]
     print(f"  mean Pi2 x over the held periods: {np.mean(x[held]) - x_orbit:+.3g} from the "
           f"pulse loop's orbit, {np.mean(x[held]) - kick:+.3g} from the kick's (the "
           "controller's estimator and prediction integrate the pulse since 2026-11-28)")

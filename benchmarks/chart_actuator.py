@@ -16,7 +16,7 @@ Plotted: the spectral radius of the controlled limit map (3x3 Jacobian; the marg
 minus it), the noise gain sqrt(Sigma_xx) per unit sigma with the model filter's
 position-only covariance at 200 samples per period (the design's predicted spread
 through the actuator), and the orbit's offset from X** (the kick design's controlled
-orbit, orbits.orbit_11); 10x and 3x marked. With ``--measured`` (the JSON of
+orbit, one_one.orbit); 10x and 3x marked. With ``--measured`` (the JSON of
 ``bench_watchful_nodes.py --part actuator --measured``) the spreads measured through
 the real nodes (std of the Pi2 x about its mean per sigma) are marked on the noise gain.
 Writes out/actuator/margin.png and prints the table (docs/theory_pulse.md section 7).
@@ -41,7 +41,8 @@ from grazing_control.dynamics.simulation.actuator import (actuated_c1, actuated_
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.section_state import estimate_covariance
 from grazing_control.dynamics.design.noise import noise_gain
-from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
+from grazing_control.dynamics.orbits import one_one
+from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
@@ -65,7 +66,7 @@ def main(argv=None):
     g = optimize_noise(p, args.delay).gains()
     r = estimate_covariance(p, g, 200)
     ideal = pulse_orbit(p, g, args.width)
-    target = orbit_11(p, g).pi2_deviation
+    target = one_one.orbit(p, g).state
     start = pulse_start(p.period, g.delay, args.width)
     print(f"gains {g}; ideal pulse: spectral radius {np.max(np.abs(ideal.multipliers)):.6f}, "
           f"kick noise gain {noise_gain(p, g, r):.4f}")

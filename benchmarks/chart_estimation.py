@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from grazing_control.dynamics.design.gains import degenerate_c1
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.dynamics.estimation.stream import simulate_stream
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
@@ -41,7 +41,7 @@ def one(args):
     delta_d, c2, sigma, rate, estimator, seed, periods = args
     p = OscillatorParams(delta_d=delta_d)
     g = Gains(degenerate_c1(p, c2), c2)
-    z = orbit_11(p, g).pi2_deviation
+    z = one_one.orbit(p, g).state
     try:
         run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=seed).measure,
                               periods, rate, estimator=estimator, sigma=sigma, deviation=z)

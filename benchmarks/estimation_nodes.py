@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 
 from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml  # noqa: E402
 from grazing_control.dynamics.estimation.motion import trajectory  # noqa: E402
-from grazing_control.dynamics.orbits.orbits import orbit_11  # noqa: E402
+from grazing_control.dynamics.orbits import one_one  # noqa: E402
 from grazing_control.dynamics.estimation.stream import simulate_stream  # noqa: E402
 from grazing_control.oscillator.control import Gains  # noqa: E402
 from grazing_control.oscillator.params import OscillatorParams  # noqa: E402
@@ -51,7 +51,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     p = OscillatorParams(delta_d=a.delta_d)
     g = Gains(degenerate_c1(p, a.c2), a.c2)
-    z0 = orbit_11(p, g).pi2_deviation
+    z0 = one_one.orbit(p, g).state
     sensor = SensorModel(noise=a.sigma, velocity=False, seed=a.seed)
     tmp = Path(tempfile.mkdtemp())
     yaml = tmp / "controller.yaml"

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.recordings.analyze import analyze
@@ -61,7 +61,7 @@ def scene(dd, estimator, periods, sigma, rate, delay, width, out, control_after=
     last = slice(-n, None)
     edges = np.append(t, t[-1] + p.period)
     counts = np.histogram(sd.scene.impacts[:, 0], edges)[0]
-    z = orbit_11(p, g).pi2_deviation
+    z = one_one.orbit(p, g).state
     rms = float(np.sqrt(np.mean((x[last] - p.x_ref - z[0]) ** 2)))
     rep = analyze([out / "bag"], out / "report", figures=False)
     lines = [ln for ln in rep["markdown"].splitlines() if "estimate vs" in ln]

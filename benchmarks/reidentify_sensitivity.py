@@ -27,7 +27,7 @@ import numpy as np
 
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.design.gains import degenerate_c1
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.dynamics.estimation.stream import StreamEstimator, simulate_stream
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
@@ -41,7 +41,7 @@ def offset(dz: float, track: bool, seed: int) -> tuple:
     m = p.with_(zeta=p.zeta + dz, delta_d=0.0)
     model = m.with_(delta_d=p.d - m.d_star)
     g = Gains(degenerate_c1(model, C2, DELAY), C2, DELAY)
-    orbit = orbit_11(p, g).pi2_deviation
+    orbit = one_one.orbit(p, g).state
     h = p.period / RATE
     est = (AugmentedStreamEstimator(model, 1e-4, "stream", h, bias=False, wall=True,
                                     wall_std=5e-6) if track

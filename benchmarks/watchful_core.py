@@ -38,7 +38,7 @@ from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.section_state import estimate_covariance
 from grazing_control.dynamics.design.noise import noise_covariance
-from grazing_control.dynamics.orbits.orbits import orbit_11
+from grazing_control.dynamics.orbits import one_one
 from grazing_control.dynamics.estimation.stream import simulate_stream
 from grazing_control.dynamics.design.tuning import optimize_noise
 from grazing_control.oscillator.control import Gains
@@ -52,7 +52,7 @@ OUT = Path(__file__).parent / "out" / "watchful"
 
 def _design():
     g = optimize_noise(P, 3.0).gains()
-    return g, np.array(orbit_11(P, g).pi2_deviation)
+    return g, one_one.orbit(P, g).state
 
 
 def _estimator(model=P, **kwargs):
@@ -77,7 +77,7 @@ def drift_one(args):
     def wall(k):
         return P.delta_d * (1.0 + frac * min(k, n) / n)
     ks = np.linspace(0, n, 21)
-    targets = np.array([orbit_11(P.with_(delta_d=wall(k)), g).pi2_deviation for k in ks])
+    targets = np.array([one_one.orbit(P, g, wall(k)).state for k in ks])
     tx = np.interp(np.arange(n), ks, targets[:, 0])
     seen = []
     est = _estimator(bias=False) if augmented else None
@@ -144,7 +144,7 @@ def capture_one(args):
         g = Gains(degenerate_c1(P, -1.0, 0.0), -1.0, 0.0)
     else:
         g = _design()[0]
-    z = np.array(orbit_11(P, g).pi2_deviation)
+    z = one_one.orbit(P, g).state
     cov = noise_covariance(P, g, estimate_covariance(P, g, RATE)) * SIGMA ** 2
     band = 5.0 * math.sqrt(np.trace(cov))
     switch = {"now": None, "rule": CaptureRule.for_wall(z, P.delta_d),

@@ -405,7 +405,8 @@ def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_pat
     the file of ``design --model M --delay 0.5 --mu 0.2 --out FILE`` gives orbit the
     same numbers as ``--mu 0.2 --delay 0.5`` (bit for bit), and sweep its delayed kick
     (refused there before; issue 32); a file of another model, a different --delay are
-    one line naming the entry."""
+    one line naming the entry. A gain file written under another name (``--out k.json``)
+    is read too (it was refused as "expected comma-separated finite numbers")."""
     out = tmp_path / "k.yaml"
     run_json(capsys, "design", "--model", TWO, "--delay", "0.5", "--mu", "0.2", "--out",
              str(out))
@@ -423,6 +424,11 @@ def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_pat
              "not a gain file of design --model --out")):
         code, text, err = run(capsys, *argv)
         assert code == 2 and text == "" and err.count("\n") == 1 and needle in err, err
+    named = tmp_path / "k.json"       # design --out writes YAML under any name it is given
+    run_json(capsys, "design", "--model", TWO, "--delay", "0.5", "--mu", "0.2", "--out",
+             str(named))
+    assert run_json(capsys, "orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains",
+                    str(named))["gains"] == ref["gains"]
     swept = run_json(capsys, "sweep", "--model", TWO, "--grid", "delta_d=-1e-4:-1e-5:2",
                      "--periods", "3", "--workers", "1", "--no-png", "--gains", str(out),
                      "--out", str(tmp_path / "sweep"))

@@ -32,7 +32,7 @@ from grazing_control.dynamics.design.gains import (admissible_c2, controller_par
                                              existence_coefficient, limit_multipliers,
                                              write_controller_yaml)
 from grazing_control.dynamics.maps.maps import pi2_map, smooth_return_matrix
-from grazing_control.dynamics.orbits.orbits import _orbit_from_phase, branch_point, orbit_11, shoot
+from grazing_control.dynamics.orbits.orbits import _orbit_from_phase, wall_offset_at_phase, orbit_11, shoot
 from grazing_control.oscillator.params import OscillatorParams
 
 P = OscillatorParams()
@@ -210,7 +210,7 @@ def test_upper_end_is_where_the_branch_leaves_the_impacting_side(interval):
     # Outside: they lie on Delta d > 0, and their exact multiplier is > 1.
     for g, sign in ((inside, -1.0), (outside, 1.0)):
         for psi in (-1e-4, -1e-3):
-            dd, v, _ = branch_point(P, psi, g)
+            dd, v, _ = wall_offset_at_phase(P, psi, g)
             assert v > 0.0
             assert math.copysign(1.0, dd) == sign
             o = _orbit_from_phase(P, psi, g, check=True)

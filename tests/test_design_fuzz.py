@@ -11,7 +11,7 @@ The independent route (no code shared with design.condition_values):
 
 * rho(N_g) from the eigenvalues of N_g = expm(A (T - s)) G_delta expm(A s), scipy's
   matrix exponential and b_delta = expm(-A delta) e2;
-* lambda0 from the exact 1/1 branch near grazing (orbits.branch_point at psi = +-1e-7:
+* lambda0 from the exact 1/1 branch near grazing (orbits.wall_offset_at_phase at psi = +-1e-7:
   J = M S with the saltation matrix of the impact, the trace averaged over the two
   signs, det from det N_g);
 * gamma1 as the symmetric quotient -(Delta d(psi) + Delta d(-psi)) / (2 psi^2) of the
@@ -32,7 +32,7 @@ from grazing_control.dynamics.design.gains import (C2_LIMIT, admissible_c2, admi
                                              condition_values,
                                              degenerate_c1, degenerate_n22, evaluate_design,
                                              max_design_delay)
-from grazing_control.dynamics.orbits.orbits import branch_point
+from grazing_control.dynamics.orbits.orbits import wall_offset_at_phase
 from grazing_control.dynamics.maps.perturbation import admissible_c2_perturbation
 
 from test_compliant_flow_bits import _digest
@@ -142,7 +142,7 @@ def independent_conditions(p, c2, delay, psi=1e-7):
     rho = float(np.max(np.abs(np.linalg.eigvals(n))))
     traces, dds = [], []
     for sign in (1.0, -1.0):
-        dd, v, m = branch_point(p, sign * psi, Gains(c1, c2, delay))
+        dd, v, m = wall_offset_at_phase(p, sign * psi, Gains(c1, c2, delay))
         s21 = (1.0 + p.r) * (math.cos(p.tau_star + sign * psi) - p.amplitude - dd) / v
         j = np.array(m).reshape(2, 2) @ np.array([[-p.r, 0.0], [s21, -p.r]])
         traces.append(np.trace(j))

@@ -111,6 +111,24 @@ def test_bad_gains_and_conditions_are_refused():
     m = load_model(CHAIN)
     with pytest.raises(ParameterError, match="gains"):
         nd.smooth_map(m, [1.0, 2.0])
+    # one check, one line for every use of a model file's gains (issue 32: the design
+    # family and the shooting near grazing refused them in other words)
+    from grazing_control.dynamics.orbits import near_grazing
+    from grazing_control.studies.sweeps.model_file import diagram
+
+    uses = {"family": lambda k: nd.smooth_map(m, k),
+            "explicit branch": lambda k: modal_branch.orbit_at_phase(m, k, 0.01),
+            "near grazing": lambda k: near_grazing.kick_matrix(m, k),
+            "modal map": lambda k: ModalMap(m, k),
+            "sweep": lambda k: diagram(m, [-1e-6], periods=2, transient=1, gains=k)}
+    for bad, shown in (([1.0, 2.0], "[1.0, 2.0]"), (np.array([0.0, 0.0, math.nan, 1.0]),
+                                                     "[0.0, 0.0, nan, 1.0]"), ("x", "'x'")):
+        for use, call in uses.items():
+            with pytest.raises(ParameterError) as err:
+                call(bad)
+            assert str(err.value) == (f"gains={shown} is invalid: valid range is 2n = 4 finite "
+                                      "real numbers (the kick's gain on each of x0..x1, "
+                                      "v0..v1)"), use
     with pytest.raises(ValueError, match="conditions"):
         nd.admissible_mu(m, "both")
 
@@ -172,7 +190,7 @@ def test_limit_multipliers_are_the_exact_branch_limit(seed):
                                               rel=1e-9)
     errs = []
     for psi in (1e-3, 1e-4, 1e-5):
-        bp = modal_branch.branch_point(m, k, math.copysign(psi, modal_branch.branch_coefficients(m, k)[2]))
+        bp = modal_branch.orbit_at_phase(m, k, math.copysign(psi, modal_branch.branch_coefficients(m, k)[2]))
         errs.append(_match(np.linalg.eigvals(bp.monodromy), lim))
     assert 7 < errs[0] / errs[1] < 14 and 7 < errs[1] / errs[2] < 14
 
@@ -189,7 +207,7 @@ def test_existence_coefficient_is_the_branch_curvature(seed):
         assert abs(d1) < 1e-10 * abs(g1) and g1_general == pytest.approx(g1, rel=1e-10)
         errs = []
         for psi in (1e-3, 1e-4):   # symmetric quotient: error O(psi^2)
-            dd = [modal_branch.branch_point(m, k, x).delta_d for x in (psi, -psi)]
+            dd = [modal_branch.orbit_at_phase(m, k, x).delta_d for x in (psi, -psi)]
             errs.append(abs(-0.5 * (dd[0] + dd[1]) / psi ** 2 - g1))
         assert errs[1] < 1e-5 * abs(g1) and 70 < errs[0] / errs[1] < 130
 

@@ -32,7 +32,7 @@ def test_branch_orbit_is_a_fixed_point_of_the_exact_period_map(gains):
          "bad": nd.cancel_first_markov(base, 0.2, 0.5, smooth_branch=False)}[gains]
     v1 = nb.branch_coefficients(base, k)[2]
     for psi in (1e-2, 1e-4):
-        bp = nb.branch_point(base, k, math.copysign(psi, v1))
+        bp = nb.orbit_at_phase(base, k, math.copysign(psi, v1))
         assert bp.v_minus > 0
         step = ModalMap(dataclasses.replace(base, delta_d=bp.delta_d), k).step(bp.pi2_state, True)
         # the core works with physical states of size ~ d* = 3.2: absolute rounding ~1e-15
@@ -50,8 +50,8 @@ def test_n1_branch_is_the_1dof_branch():
     for gains in (None, Gains(-0.3, -1.0)):
         k = np.zeros(2) if gains is None else np.array([gains.c1, gains.c2])
         for psi in (0.05, -1e-3, 1e-6):
-            dd, v, _m = orbits.branch_point(p, psi, gains)
-            bp = nb.branch_point(m, k, psi)
+            dd, v, _m = orbits.wall_offset_at_phase(p, psi, gains)
+            bp = nb.orbit_at_phase(m, k, psi)
             assert bp.delta_d == pytest.approx(dd, rel=1e-9, abs=1e-15 * abs(v))
             assert bp.v_minus == pytest.approx(v, rel=1e-10)
 
@@ -64,7 +64,7 @@ def test_branch_coefficients_are_the_taylor_coefficients():
               nd.cancel_first_markov(base, 0.2, 0.5, smooth_branch=True)):
         d1, g1, v1 = nb.branch_coefficients(base, k)
         h = 1e-4
-        a, b = nb.branch_point(base, k, h), nb.branch_point(base, k, -h)
+        a, b = nb.orbit_at_phase(base, k, h), nb.orbit_at_phase(base, k, -h)
         assert (a.delta_d - b.delta_d) / (2 * h) == pytest.approx(d1, rel=1e-6, abs=1e-6)  # + O(h^2)
         assert -(a.delta_d + b.delta_d) / (2 * h * h) == pytest.approx(g1, rel=1e-5)
         assert (a.v_minus - b.v_minus) / (2 * h) == pytest.approx(v1, rel=1e-7)
@@ -74,7 +74,7 @@ def test_bad_psi_and_no_orbit_are_refused():
     base = load_model(CHAIN)
     k = nd.gain_family(base, 0.2)
     with pytest.raises(ParameterError, match="psi"):
-        nb.branch_point(base, k, base.pi2_offset + 0.01)
+        nb.orbit_at_phase(base, k, base.pi2_offset + 0.01)
     with pytest.raises(ValueError, match="no 1/1 orbit"):
         nb.orbit_at(base, k, 1e-6)       # gamma1 > 0: none on the non-impacting side
 
@@ -90,7 +90,7 @@ def test_the_fold_of_the_chain_branch_has_the_multiplier_one_and_is_an_exact_orb
     lam = np.linalg.eigvals(fold.monodromy)
     assert np.min(np.abs(lam - 1.0)) < 1e-6, lam
     for h in (1e-3, -1e-3):                       # a maximum of Delta d(psi)
-        assert nb.branch_point(m, np.zeros(4), fold.psi + h).delta_d < fold.delta_d
+        assert nb.orbit_at_phase(m, np.zeros(4), fold.psi + h).delta_d < fold.delta_d
     step = ModalMap(dataclasses.replace(m, delta_d=fold.delta_d)).step(fold.pi2_state)
     assert len(step.impacts) == 1
     assert np.max(np.abs(step.state - fold.pi2_state)) < 1e-12 * max(1.0, np.abs(fold.pi2_state).max())
@@ -98,7 +98,7 @@ def test_the_fold_of_the_chain_branch_has_the_multiplier_one_and_is_an_exact_orb
 
 def test_for_n_1_the_fold_is_the_turning_point_of_the_1dof_closed_form_branch():
     """n = 1: the turning point of Delta d(psi) found by branch_fold equals the extremum
-    of the 1-DOF core's explicit branch (orbits.branch_point, an independent closed form)
+    of the 1-DOF core's explicit branch (orbits.wall_offset_at_phase, an independent closed form)
     located on a dense grid and refined by a parabola, to 1e-9 relative."""
     from grazing_control.dynamics.orbits import orbits
 
@@ -106,7 +106,7 @@ def test_for_n_1_the_fold_is_the_turning_point_of_the_1dof_closed_form_branch():
     fold = nb.branch_fold(m, None)
     p = OscillatorParams(zeta=0.01, r=m.r, omega=m.omega, delta_d=0.0)
     psi = fold.psi + np.linspace(-1e-3, 1e-3, 41)
-    dd = np.array([orbits.branch_point(p, float(x))[0] for x in psi])
+    dd = np.array([orbits.wall_offset_at_phase(p, float(x))[0] for x in psi])
     i = int(np.argmax(dd) if dd[20] > dd[0] else np.argmin(dd))
     c = np.polyfit(psi[i - 2:i + 3] - psi[i], dd[i - 2:i + 3], 2)
     extremum = c[2] - c[1] ** 2 / (4.0 * c[0])
@@ -164,7 +164,7 @@ def test_structured_multipliers_are_the_eigenvalues_of_b_plus_s_p_q(s, grazing):
 def test_the_walk_to_the_orbit_is_the_same_at_every_delta_d():
     """orbit_at's walk in psi is made once per model content but Delta d (modal_branch._psi_walk,
     issue 30's suite CPU): the orbit found at one Delta d after a walk made at another is,
-    bit for bit, the one found after a walk of its own (branch_point does not read
+    bit for bit, the one found after a walk of its own (orbit_at_phase does not read
     model.delta_d), with the kick on Pi2 and 4.0 after it."""
     from test_compliant_flow_bits import _canonical
 

@@ -60,7 +60,7 @@ def test_is_a_period_map_with_named_coordinates_and_parameters():
     (lambda m: m.parameter("k4"), "k4"),
     (lambda m: m.with_parameter("r", 1.5), "r=1.5 is invalid"),
     (lambda m: m.with_parameter("omega", -1.0), "omega=-1.0 is invalid"),
-    (lambda m: ModalMap(m.model, [1.0, 2.0]), "gains=.* expected 4 finite"),
+    (lambda m: ModalMap(m.model, [1.0, 2.0]), r"gains=\[1.0, 2.0\] is invalid: valid range is 2n = 4 finite"),
     (lambda m: ModalMap(m.model, [1.0, 2.0, np.inf, 0.0]), "gains"),
     (lambda m: m.step([0.0, 0.0]), "2n = 4"),
     (lambda m: ModalMap(m.model).parameter("k0"), "without gains"),

@@ -164,13 +164,20 @@ def test_a_fit_whose_plain_gauss_newton_overshoots_is_finished_by_step_halving(
     """Found by the Monte Carlo above with a wider prior (1e-3) and no floor: in period 3
     of a run the full Gauss-Newton steps circle at ~3e-7 without converging (a large
     residual on a trajectory curved by an impact with v- = 0.036). model_update then
-    takes halved steps (section_state._halving_fit) down the cost: the fit converges,
-    its residual is the noise's (chi^2 / n ~ 1) and its error is within 4 reported
-    standard deviations of the true state."""
+    takes halved steps (section_state._line_search takes a fraction t < 1 of a
+    Gauss-Newton step) down the cost: the fit converges, its residual is the noise's
+    (chi^2 / n ~ 1) and its error is within 4 reported standard deviations of the true
+    state."""
     m, s, states, corrections, samples = controlled_chain
     calls = []
-    original = ss._halving_fit
-    monkeypatch.setattr(ss, "_halving_fit", lambda *a: calls.append(1) or original(*a))
+    original = ss._line_search
+
+    def line_search(*a):
+        out = original(*a)
+        calls.extend([out[0]] if out[0] < 1.0 else [])
+        return out
+
+    monkeypatch.setattr(ss, "_line_search", line_search)
     rng = np.random.default_rng(32)
     nan = np.full(len(s), math.nan)
     p0 = (1e-3) ** 2 * np.eye(4)

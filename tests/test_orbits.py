@@ -24,7 +24,7 @@ from mpmath import mp, mpf
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.maps.maps import pi2_map
-from grazing_control.dynamics.orbits.orbits import (OrbitNotFound, branch_brackets, branch_point,
+from grazing_control.dynamics.orbits.orbits import (OrbitNotFound, branch_brackets, wall_offset_at_phase,
                                              find_branch_phase, monodromy_det, multipliers,
                                              orbit_11, shoot)
 from grazing_control.oscillator.params import OscillatorParams
@@ -181,11 +181,11 @@ def test_multipliers_function_is_cancellation_free():
     assert np.allclose(sorted(rot, key=lambda z: z.imag), [-1j, 1j])
 
 
-def test_branch_point_solves_the_periodicity_system():
-    """(Delta d, v-) from branch_point at impact phase tau* + psi reproduces a 1/1 orbit
+def test_wall_offset_at_phase_solves_the_periodicity_system():
+    """(Delta d, v-) from wall_offset_at_phase at impact phase tau* + psi reproduces a 1/1 orbit
     whose impact happens at that phase with that velocity."""
     for psi in (0.01, 0.05, 0.2):
-        dd, v, _ = branch_point(STUDY, psi)
+        dd, v, _ = wall_offset_at_phase(STUDY, psi)
         if v <= 0:
             continue
         orb = orbit_11(STUDY.with_(delta_d=dd))
@@ -285,8 +285,8 @@ def test_far_orbit_past_a_fold_is_labelled_issue_7():
     # the fold, independently: Delta d(psi) on a fine grid from grazing to the orbit
     psi_orbit = (o.impact_phase - p.tau_star + math.pi) % (2 * math.pi) - math.pi
     psis = np.linspace(0.0, psi_orbit, 4001)[1:]
-    dds = np.array([branch_point(p, s)[0] for s in psis])
-    vs = np.array([branch_point(p, s)[1] for s in psis])
+    dds = np.array([wall_offset_at_phase(p, s)[0] for s in psis])
+    vs = np.array([wall_offset_at_phase(p, s)[1] for s in psis])
     assert np.all(vs > 0)  # one arc with v- > 0 from grazing to the orbit
     assert 0.1 < dds.max() < 0.13 and dds[0] > 0  # born towards Delta d > 0, turns
     (lo, hi, kind, fold), = branch_brackets(p, p.delta_d)
@@ -337,7 +337,7 @@ def test_near_grazing_controlled_orbit_is_not_past_a_fold(c2, delay):
 @pytest.mark.parametrize("c2, delay", [(-0.5, 0.0), (0.1, 0.0), (-1.0, 0.5), (-1.0, 0.0)])
 def test_delta_d_rounding_bounds_the_wobble_and_is_not_vacuous(c2, delay):
     """Against Delta d = -gamma1 psi^2 (D9; the psi^3 term is below 1e-33 here): the error
-    of branch_point's Delta d stays inside the bound for |psi| <= 6e-12 on both sides,
+    of wall_offset_at_phase's Delta d stays inside the bound for |psi| <= 6e-12 on both sides,
     and reaches at least a tenth of it (measured 0.55 ... 0.72 of the bound at most)."""
     from grazing_control.dynamics.design.gains import existence_coefficient
     from grazing_control.dynamics.orbits.orbits import _delta_d_rounding, _psi_grid
@@ -348,7 +348,7 @@ def test_delta_d_rounding_bounds_the_wobble_and_is_not_vacuous(c2, delay):
     ratios = []
     for m in _psi_grid()[:60]:
         for psi in (-m, m):
-            err = abs(branch_point(p, psi, g)[0] + gamma1 * psi * psi)
+            err = abs(wall_offset_at_phase(p, psi, g)[0] + gamma1 * psi * psi)
             ratios.append(err / _delta_d_rounding(p, psi, g))
     assert 0.1 < max(ratios) <= 1.0
 
@@ -356,8 +356,8 @@ def test_delta_d_rounding_bounds_the_wobble_and_is_not_vacuous(c2, delay):
 def test_the_branch_scan_is_the_same_at_every_delta_d():
     """orbits._branch_values scans the branch once per oscillator, gains and side, at Delta
     d = 0 (issue 30, the suite's CPU): the scan at each p's own Delta d, computed here
-    point by point, gives the same floats (branch_point and the rounding bound do not
-    read p.delta_d), without and with a delayed controller, on both sides."""
+    point by point, gives the same floats (wall_offset_at_phase and the rounding bound do
+    not read p.delta_d), without and with a delayed controller, on both sides."""
     from grazing_control.dynamics.orbits.orbits import (_branch_values, _delta_d_rounding,
                                                         _psi_grid)
     from test_compliant_flow_bits import _canonical
@@ -369,7 +369,7 @@ def test_the_branch_scan_is_the_same_at_every_delta_d():
         for sign in (-1.0, 1.0):
             direct = []
             for m in _psi_grid():
-                point = branch_point(p, sign * m, gains)
+                point = wall_offset_at_phase(p, sign * m, gains)
                 direct.append((sign * m, point[0], point[1],
                                _delta_d_rounding(p, sign * m, gains, point)))
             assert _canonical(_branch_values(p, gains, sign, rounding=True)) == \

@@ -17,7 +17,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import (admissible_c2, degenerate_c1,
                                              existence_coefficient, limit_multipliers)
 from grazing_control.oscillator.flow import transition_matrix
-from grazing_control.dynamics.orbits.orbits import branch_point, multipliers, orbit_11
+from grazing_control.dynamics.orbits.orbits import wall_offset_at_phase, multipliers, orbit_11
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.maps.perturbation import (admissible_c2_perturbation,
                                                    characteristic_roots, delta2_from_delta_d,
@@ -53,7 +53,7 @@ def rel_errors(gains, truncation, which=0):
 
 def exact_fixed_point(p, psi, gains):
     """(delta2 = v-, Delta d, z on Pi1, t1) of the exact branch at impact phase tau* + psi."""
-    dd, v, _m = branch_point(p, psi, gains)
+    dd, v, _m = wall_offset_at_phase(p, psi, gains)
     t1 = psi / p.omega
     a, w = p.amplitude, p.omega
     zc = (dd + 2.0 * a * math.sin(0.5 * psi) ** 2, v + a * w * math.sin(psi))

@@ -259,6 +259,21 @@ def test_design_with_a_rig_of_two_masses_is_the_model_files_design_with_its_puls
         np.dot(si["force_gains_velocity_N_s_per_m"], v)
     assert force == pytest.approx(m_a * dv_si / w, rel=1e-12)
     assert report["design"]["admissible"] and report["model"]["delta_d"] == written.delta_d
+    # the correction at the controlled orbit (issue 32: the 1-DOF rig's, through the one
+    # entry of every model): z is the fixed point of the exact n-DOF period map with the
+    # report's gains kicking at its delay, and the pulse is k^T z in SI
+    from grazing_control.dynamics.maps.modal_map import ModalMap
+
+    k, delay = np.array(report["design"]["gains"]), report["design"]["delay"]
+    at = report["corrections"]["at_controlled_orbit"]
+    z = np.array(at["pi2_deviation"])
+    step = ModalMap(written, k, delay).step(z)
+    assert len(step.impacts) == 1
+    assert np.max(np.abs(step.state - z)) < 1e-12 * np.max(np.abs(z)), step.state - z
+    assert at["pi2_deviation_m_and_m_per_s"] == pytest.approx(
+        np.r_[z[:2] * rig.scales.length, z[2:] * rig.scales.velocity], rel=1e-15)
+    assert at == {**at, **rig.correction_si(float(k @ z)), "within_force_limit": True}
+    assert at["velocity_m_per_s"] == pytest.approx(float(k @ z) * rig.scales.velocity, rel=1e-12)
 
 
 @pytest.mark.parametrize("argv, first", [

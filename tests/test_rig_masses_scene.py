@@ -10,18 +10,13 @@ The rig is config/rigs/two_mass_beam.yaml with the sensor's noise at 0.2 um (10x
 the orbit the design holds meets the stop at v- 0.005-0.009 (model units; 0.8-1.4 mm/s),
 and at the file's 2 um (sigma / |Delta d| = 8) 4 of 16 held periods had no impact
 (measured through the nodes, 2026-11-28); at 0.2 um every held period has one. The
-sensor at 500 Hz (125 samples a period, not the file's 500) and the scene at half of
-physical speed (SLOW): the n-DOF model filter is plain Python, and at the file's 2 kHz it
-answered 5.2 ms (p50) after a section at physical speed, against a pulse that starts
-4 ms after it; at 1/8 speed with 2 kHz the scene took 20 s of the suite's realtime group,
-5 s now. What the tests read (the SI boundary, the pulse map, capture) does not depend on
-the rate. With the compiled n-DOF filter (compiled_modal_flow.py) the scene at physical
-speed still missed about a third of its deadlines through the nodes (docs/benchmarks.md,
-"The n-DOF filter compiled, and the two-mass rig at physical speed"); with the compiled
-n-DOF event search as well (oscillator/kernel/compiled_modal.py) 16-22 of 59 at load
-14-26 (main 42-54 in the same half hour; docs/benchmarks.md "The n-DOF event search
-compiled"): the controller's reaction 5.1-5.3 ms (p50) against ~3 ms available. Half
-speed stays."""
+sensor at the file's 2 kHz (500 samples a period) and the scene at physical speed: the
+controller's n-DOF model filter answers in time there since its fit stops within 1e-3 of
+the posterior std (docs/theory_estimation.md, "Where the fit stops": 3.7 evaluations of
+the motion per section, not 7.5, and no 35-80 ms fits at a kink); before, the scene ran
+at half speed with a 500 Hz sensor, and at physical speed 16-22 of 59 sections were late
+at load 14-26 (docs/benchmarks.md "The n-DOF event search compiled"), now 0 of 59 in two
+runs at load 5 (docs/benchmarks.md "Where the model fit stops")."""
 
 import math
 from pathlib import Path
@@ -35,7 +30,7 @@ from test_rig_scene import _seconds, run_rig_scene
 pytestmark = pytest.mark.timeout(240)
 
 RIG = Path(__file__).resolve().parents[1] / "config" / "rigs" / "two_mass_beam.yaml"
-PERIODS, ON, SLOW, RATE = 10, 1, 2.0, "500 Hz"
+PERIODS, ON, SLOW, RATE = 10, 1, 1.0, "2 kHz"
 #: The held periods, one impact each (the control acts from section 1; over 16 periods
 #: at 1/8 of physical speed and 2 kHz, one impact in each from the fifth on).
 HELD = 5

@@ -22,7 +22,7 @@ from grazing_control.cli.commands import main
 from grazing_control.dynamics.orbits.continuation import continue_11
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.maps.maps import pi2_map
-from grazing_control.dynamics.orbits.orbits import branch_point, shoot, _orbit_from_phase
+from grazing_control.dynamics.orbits.orbits import wall_offset_at_phase, shoot, _orbit_from_phase
 from grazing_control.dynamics.orbits.two_parameter import (KINDS, Family, asymptotic_coefficient,
                                                     codim2_points, continue_curve, curve_point,
                                                     fitted_exponent, local_shape,
@@ -126,8 +126,8 @@ def test_fold_curve_is_the_turning_point_of_delta_d(omega_diagram):
     for q in fold.points[5::20]:
         p = P.with_(omega=q.value)
         h = 1e-6 * abs(q.psi)
-        slope = (branch_point(p, q.psi + h)[0] - branch_point(p, q.psi - h)[0]) / (2.0 * h)
-        scale = abs(branch_point(p, 1.01 * q.psi)[0] - q.delta_d) / (0.01 * abs(q.psi))
+        slope = (wall_offset_at_phase(p, q.psi + h)[0] - wall_offset_at_phase(p, q.psi - h)[0]) / (2.0 * h)
+        scale = abs(wall_offset_at_phase(p, 1.01 * q.psi)[0] - q.delta_d) / (0.01 * abs(q.psi))
         assert abs(slope) < 1e-5 * max(scale, 1e-300) + 1e-12
 
 
@@ -135,7 +135,7 @@ def test_study_pd_point_lies_on_the_pd_curve(omega_diagram):
     fam = Family(P, None, "omega")
     curve = next(c for c in omega_diagram.curves if c.kind == PD and len(c.codim2) == 2)
     psi = _point_at(curve, fam, P.omega)
-    dd = branch_point(P, psi)[0]
+    dd = wall_offset_at_phase(P, psi)[0]
     one = next(b for b in continue_11(P, -1e-3, 0.0).bifurcations if b.type == "period-doubling")
     assert abs(dd - one.delta_d) < 1e-12 * abs(one.delta_d)
     assert abs(dd - PD_STUDY) < 1e-12 * abs(PD_STUDY)
@@ -144,7 +144,7 @@ def test_study_pd_point_lies_on_the_pd_curve(omega_diagram):
         f = Family(P, None, name)
         d = two_parameter_diagram(f, lo, hi, (PD,), max_points=200)
         c = next(c for c in d.curves)
-        assert abs(branch_point(P, _point_at(c, f, f.base))[0] - PD_STUDY) < 1e-12 * abs(PD_STUDY)
+        assert abs(wall_offset_at_phase(P, _point_at(c, f, f.base))[0] - PD_STUDY) < 1e-12 * abs(PD_STUDY)
 
 
 def test_regularised_tests_equal_v_times_det_of_j_plus_minus_i():
@@ -290,7 +290,7 @@ def test_uncontrolled_branch_closed_form_of_the_derivation():
         for psi in (-1e-3, -0.1, 0.5, 2.0):
             dd = (1 + p.r) * a * w * m12 * math.sin(psi) / d - 2 * a * math.sin(psi / 2) ** 2
             v = -a * w * math.sin(psi) * ((1 - m11) * (1 - m22) - m12 * m21) / d
-            got = branch_point(p, psi)
+            got = wall_offset_at_phase(p, psi)
             assert dd == pytest.approx(got[0], rel=1e-12) and v == pytest.approx(got[1], rel=1e-12)
 
 
@@ -400,7 +400,7 @@ def test_pd_curve_agrees_with_one_parameter_continuation_along_it(omega_diagram)
     curve = next(c for c in omega_diagram.curves if c.kind == PD and len(c.codim2) == 2)
     fam = Family(P, None, "omega")
     for w in (0.67, 0.72, 0.8, 0.9):
-        dd = branch_point(P.with_(omega=w), _point_at(curve, fam, w))[0]
+        dd = wall_offset_at_phase(P.with_(omega=w), _point_at(curve, fam, w))[0]
         one = continue_11(P.with_(omega=w), 2.0 * dd, 0.5 * dd, points=40)
         (b,) = [b for b in one.bifurcations if b.type == "period-doubling"]
         assert abs(b.delta_d - dd) < 1e-11 * abs(dd)

@@ -72,14 +72,19 @@ class GainFile(str):
 
 
 def _gains_value(text):
-    """``--gains``: comma-separated numbers, or the path of a YAML gain file."""
+    """``--gains``: comma-separated numbers, or the path of a YAML gain file (a name
+    ending in .yaml or .yml, or any existing file: ``design --out`` writes YAML under
+    the name it is given)."""
     import argparse
+    import os
 
     if text.lower().endswith((".yaml", ".yml")):
         return GainFile(text)
     try:
         return _vector(text)
     except argparse.ArgumentTypeError:
+        if os.path.isfile(text):
+            return GainFile(text)
         raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected comma-separated "
                                          "finite numbers, e.g. 0.1,-0.2,0,0.5, or a gain file "
                                          "of design --out (FILE.yaml)") from None

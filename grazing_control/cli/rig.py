@@ -211,6 +211,33 @@ def _pulse(rig, dv_model: float) -> dict:
     return out
 
 
+def _at_controlled_orbit(rig, model, gains, k, delay: float = 0.0) -> tuple:
+    """(the controlled 1/1 orbit's Pi2 deviation or None, its correction as a force pulse
+    or None): the orbit of the rig's model at its Delta d under the design's gains, from
+    the one entry of every model (:func:`grazing_control.dynamics.orbits.one_one.orbit`:
+    the 1-DOF closed form for ``model`` an OscillatorParams with ``gains`` its Gains, a
+    model file's for an NdofModel with ``gains`` = k and the actuation ``delay``); the
+    correction is k^T z (``k``: the gains over the 2n deviation coordinates) as SI
+    (:func:`_pulse`), with the deviation in model units and in m and m/s. None and None
+    at or beyond grazing (Delta d >= 0: no impacting orbit to hold); a note where the
+    orbit is not found."""
+    if not model.delta_d < 0.0:
+        return None, None
+    from grazing_control.dynamics.orbits.one_one import orbit
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
+
+    try:
+        z = orbit(model, gains, delay=delay).state
+    except (OrbitNotFound, ValueError, ArithmeticError) as exc:
+        return None, {"note": f"no controlled orbit: {exc}"}
+    n, s = len(z) // 2, rig.scales
+    dv = sum(float(ki) * float(zi) for ki, zi in zip(k, z))
+    return z, {"pi2_deviation": [float(v) for v in z],
+               "pi2_deviation_m_and_m_per_s": [float(v) * s.length for v in z[:n]]
+               + [float(v) * s.velocity for v in z[n:]],
+               **_pulse(rig, dv)}
+
+
 def _timing(rig, p, gains, args, target) -> dict:
     from grazing_control.plant.rig_budget import (check_budget, samples_per_period,
                                                   time_estimate, timing_budget)
@@ -221,7 +248,8 @@ def _timing(rig, p, gains, args, target) -> dict:
         tail, how = args.compute_tail, "given by --compute-tail"
     else:
         measured = time_estimate(p, gains, n, rig.dimensionless()["sensor_noise"],
-                                 runs=args.runs, target=target or (0.0, 0.0))
+                                 runs=args.runs,
+                                 target=(0.0, 0.0) if target is None else target)
         if args.tail == "cpu":
             tail = measured.cpu_p99
             how = (f"CPU-time p99 of {measured.runs} measured here; wall p99 "
@@ -242,7 +270,7 @@ def _timing(rig, p, gains, args, target) -> dict:
                            "runs": measured.runs, "p50_s": measured.p50, "p99_s": measured.p99,
                            "max_s": measured.max, "cpu_p99_s": measured.cpu_p99,
                            "resets": measured.resets, "load_average": measured.load,
-                           "on": ("the controlled 1/1 orbit" if target else
+                           "on": ("the controlled 1/1 orbit" if target is not None else
                                   "the motion from the grazing orbit's section (no "
                                   "controlled 1/1 orbit)")}
     return out
@@ -305,19 +333,9 @@ def rig_report(rig, path, args) -> dict:
     }
     if "optimize" in design:
         report["design"]["optimize"] = design["optimize"]
-    target = None
-    if p.delta_d < 0.0:
-        from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
-
-        try:
-            z = target = orbit_11(p, gains).pi2_deviation
-            dv = c1 * z[0] + c2 * z[1]
-            report["corrections"]["at_controlled_orbit"] = {
-                "pi2_deviation": [z[0], z[1]],
-                "pi2_deviation_m_and_m_per_s": [z[0] * s.length, z[1] * s.velocity],
-                **_pulse(rig, dv)}
-        except (OrbitNotFound, ValueError, ArithmeticError) as exc:
-            report["corrections"]["at_controlled_orbit"] = {"note": f"no controlled orbit: {exc}"}
+    target, at_orbit = _at_controlled_orbit(rig, p, gains, (c1, c2))
+    if at_orbit is not None:
+        report["corrections"]["at_controlled_orbit"] = at_orbit
     report["predicted_spread"] = _spread(rig, design, ns, n)
     report["timing"] = _timing(rig, p, gains, args, target)
     return report
@@ -519,9 +537,10 @@ def masses_report(rig, path, args) -> dict:
     """The JSON of ``grazing rig`` for a rig of n >= 2 masses (docs/rig.md, "A rig with n
     masses"): the rig in SI (M, K, the modal damping C, the modes), the scales, the
     n-DOF model, the gap at grazing, the n-DOF design for the budget's pulse with its
-    gains in SI (grazing design --rig FILE), a 1 um error of the impacting mass as the
-    pulse's force, and the timing budget with --compute-tail (the n-DOF estimate is not
-    timed here)."""
+    gains in SI (grazing design --rig FILE), a 1 um error of the impacting mass and the
+    correction at the controlled 1/1 orbit (:func:`_at_controlled_orbit`, the 1-DOF
+    rig's) as the pulse's force, and the timing budget with --compute-tail (the n-DOF
+    estimate is not timed here)."""
     from grazing_control.oscillator.ndof.flow import NdofFlow
     from grazing_control.plant.rig_budget import check_budget, timing_budget
     from grazing_control.plant.rig_structure import modes
@@ -574,6 +593,9 @@ def masses_report(rig, path, args) -> dict:
                         "for_position_error_of_the_impacting_mass": _pulse(rig, pos)},
     }
     report["design"]["si"] = design["si"]
+    _z, at_orbit = _at_controlled_orbit(rig, model, k, k, design["delay"])
+    if at_orbit is not None:
+        report["corrections"]["at_controlled_orbit"] = at_orbit
     if args.compute_tail is not None:
         b = timing_budget(rig, args.compute_tail)
         check_budget(b, rig.sensor.rate, "given by --compute-tail")
@@ -590,6 +612,22 @@ def masses_report(rig, path, args) -> dict:
                            "docs/rig.md, docs/ndof_model.md)"])
         report["model_written"] = args.model_out
     return report
+
+
+def _pulse_text(c: dict) -> str:
+    """A correction of :func:`_pulse` as text: Delta v, impulse and force."""
+    return (f"Delta v = {c['velocity_m_per_s']:.6g} m/s, impulse {c['impulse_N_s']:.6g} N s"
+            + (f", force {c['force_N']:.6g} N" if "force_N" in c else ""))
+
+
+def _orbit_correction_lines(c) -> list:
+    """The n-DOF report's line of the correction at the controlled 1/1 orbit (none at or
+    beyond grazing)."""
+    if c is None:
+        return []
+    if "note" in c:
+        return [f"  at the controlled orbit: {c['note']}"]
+    return ["  at the controlled orbit: " + _pulse_text(c)]
 
 
 def format_masses_report(r: dict) -> str:
@@ -628,8 +666,8 @@ def format_masses_report(r: dict) -> str:
         f"  gains k            = {fmt_vec(de['gains'], 12)} over ({', '.join(names)})",
         *_si_lines(de["si"], names),
         f"  {r['corrections']['position_error_m'] * 1e6:g} um error of mass {si['impacting']}: "
-        f"Delta v = {c['velocity_m_per_s']:.6g} m/s, impulse {c['impulse_N_s']:.6g} N s"
-        + (f", force {c['force_N']:.6g} N" if "force_N" in c else ""),
+        + _pulse_text(c),
+        *_orbit_correction_lines(r["corrections"].get("at_controlled_orbit")),
         "timing: " + (r["timing"]["note"] if "note" in r["timing"] else
                       f"needed {r['timing']['needed_s'] * 1e3:.4g} ms <= available "
                       f"{r['timing']['available_s'] * 1e3:.4g} ms: feasible"),
@@ -678,7 +716,8 @@ DESCRIPTION = (
     "<= budget - pulse_width / 2. An infeasible budget or too slow a sensor: status 2, one "
     "line naming controller.budget or sensor.rate with the numbers. A rig of n masses "
     "(masses: [...], docs/rig.md 'A rig with n masses'): its n-DOF model, the n-DOF pulse "
-    "design at the budget with the gains in SI, the budget with --compute-tail; "
+    "design at the budget with the gains in SI, the correction at the controlled orbit, "
+    "the budget with --compute-tail; "
     "--model-out PATH writes the model file (any n).")
 
 

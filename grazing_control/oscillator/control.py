@@ -17,6 +17,10 @@ equals a kick on Pi2 along b_delta = Phi(-delta) e2::
 
 so every linear map of the controlled motion (N_g, the monodromy of the 1/1 orbit)
 keeps its form with G replaced by G_delta. delta = 0 gives b = e2 and Eq. 29 exactly.
+
+**A model of n degrees of freedom** (docs/theory_ndof.md) takes the same kick with the
+gains as one vector k over its 2n deviation coordinates (x0..x{n-1}, v0..v{n-1}):
+:func:`gain_vector` is its one check.
 """
 
 from __future__ import annotations
@@ -24,10 +28,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .flow import transition_matrix
 from .params import ParameterError
 
-__all__ = ["Gains", "correction", "gain_matrix", "gain_determinant", "kick_direction"]
+__all__ = ["Gains", "correction", "gain_matrix", "gain_determinant", "kick_direction",
+           "gain_vector"]
 
 
 @dataclass(frozen=True)
@@ -107,3 +114,31 @@ def gain_determinant(gains: Gains | None, zeta: float | None = None) -> float:
         return 1.0 + gains.c2
     b1, b2 = kick_direction(_zeta_for(gains, zeta), gains.delay)
     return 1.0 + gains.c1 * b1 + gains.c2 * b2
+
+
+def gain_vector(gains, n: int) -> np.ndarray:
+    """The gains k of the kick v[i_a] += k^T z over the 2n deviation coordinates of a model
+    of n degrees of freedom, as a new float array of 2n finite values (for n = 1,
+    (c1, c2) of Eq. 28).
+
+    Anything else is a :class:`ParameterError` naming ``gains`` and its valid range: the
+    one check of a model file's gains (the design family, the explicit branch, the
+    shooting near grazing, the modal map and the sweep over a model file).
+    """
+    try:
+        k = np.array(gains, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        k = None
+    if k is None or k.shape != (2 * n,) or not np.all(np.isfinite(k)):
+        names = "x0, v0" if n == 1 else f"x0..x{n - 1}, v0..v{n - 1}"
+        raise ParameterError(f"gains={_shown(gains)} is invalid: valid range is 2n = {2 * n} "
+                             f"finite real numbers (the kick's gain on each of {names})")
+    return k
+
+
+def _shown(value) -> str:
+    """``value`` as the refusal shows it (an array as its list)."""
+    try:
+        return repr(np.asarray(value).tolist())
+    except (TypeError, ValueError):
+        return repr(value)

@@ -92,9 +92,9 @@ def time_estimate(p: OscillatorParams, gains, rate: int, sigma: float, *,
     if target is None:
         target = (0.0, 0.0)
         if p.delta_d < 0.0:
-            from grazing_control.dynamics.orbits.orbits import orbit_11
+            from grazing_control.dynamics.orbits.one_one import orbit
 
-            target = orbit_11(p, gains).pi2_deviation
+            target = orbit(p, gains).state
     sigma = float(sigma) if sigma > 0.0 else _EXACT_SIGMA
     T = p.period
     h = T / rate

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from grazing_control.oscillator.control import gain_vector
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
@@ -209,20 +210,9 @@ def smooth_map(model: NdofModel, gains=None, delay: float = 0.0) -> np.ndarray:
     p, q, _ = _sections(model)
     if gains is None:
         return q @ p
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     _w, _ev, b = _vectors(model, delay)
     return q @ (np.eye(2 * model.n) + np.outer(b, k)) @ p
-
-
-def _gains(model: NdofModel, gains) -> np.ndarray:
-    try:
-        k = np.array(gains, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        k = None
-    if k is None or k.shape != (2 * model.n,) or not np.all(np.isfinite(k)):
-        raise ParameterError(f"gains={gains!r} is invalid: expected {2 * model.n} finite real "
-                             f"numbers (the kick k^T z on Pi2)")
-    return k
 
 
 def markov_parameters(model: NdofModel, gains=None, delay: float = 0.0) -> np.ndarray:
@@ -674,7 +664,7 @@ def cancel_first_markov(model: NdofModel, mu: float, offset: float, *,
 def controller_parameters(model: NdofModel, design: FamilyDesign, model_file) -> dict:
     """The n-DOF controller's parameters: the gain vector, the model file it is for, and
     the section data the node checks it against (n, i_a, omega, pi2_offset)."""
-    k = _gains(model, design.gains)
+    k = gain_vector(design.gains, model.n)
     return {
         "model_file": os.fspath(model_file),
         "gains": [float(x) for x in k],
@@ -746,7 +736,7 @@ def write_gain_yaml(path, model: NdofModel, design: FamilyDesign, model_file,
     """
     from grazing_control.support.files import write_yaml_atomic
 
-    k = _gains(model, design.gains)
+    k = gain_vector(design.gains, model.n)
     w, _ev, _b = _vectors(model)
     row = w @ smooth_map(model, k, design.delay)
     if not np.allclose(row, design.mu * w, atol=1e-9 * (1.0 + np.abs(row).max())):

@@ -40,7 +40,7 @@ import numpy as np
 
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (
-    CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples)
+    CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples, gauss_newton_fit)
 from grazing_control.dynamics.estimation.motion import trajectory
 from grazing_control.dynamics.estimation.stream import _TOL, StreamEstimator
 
@@ -115,32 +115,27 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
     theta = theta_prior.copy()
     inv_var = 1.0 / (sigma * sigma)
 
-    def linearise(theta):
-        pm = p.with_(delta_d=float(theta[3]))
-        pred, jac, end, mono, imps, gw, gend = trajectory(pm, theta[:2], s, correction, delay,
+    def linearise(z):
+        """(H, r, end, d end / dz, M, d end / d Delta d) at the active states z."""
+        t = theta_prior.copy()
+        t[act] = z
+        pm = p.with_(delta_d=float(t[3]))
+        pred, jac, end, mono, imps, gw, gend = trajectory(pm, t[:2], s, correction, delay,
                                                           wall=True, width=width,
                                                           force_limit=force_limit,
                                                           actuator=actuator, force0=force0)
         hx = np.column_stack([jac[:, 0, :], np.ones(s.size), gw[:, 0]])
         hv = np.column_stack([jac[has_v, 1, :], np.zeros(has_v.sum()), gw[has_v, 1]])
         h = np.vstack([hx, hv])[:, act]
-        r = np.concatenate([y - pred[:, 0] - theta[2], w[has_v] - pred[has_v, 1]])
-        return h, r, end, mono, gend
+        r = np.concatenate([y - pred[:, 0] - t[2], w[has_v] - pred[has_v, 1]])
+        d_end = np.column_stack([mono, np.zeros(2), gend])[:, act]
+        return h, r, end, d_end, mono, gend
 
-    whitened = None
-    for _ in range(iterations):
-        h, r, *_ = linearise(theta)
-        if whitened is None:
-            whitened = _whiten(r, h, prior.cov[np.ix_(act, act)], sigma)
-        info = info_prior + inv_var * (h.T @ h)
-        grad = info_prior @ (theta_prior - theta)[act] + inv_var * (h.T @ r)
-        step = np.linalg.solve(info, grad)
-        theta[act] += step
-        if np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(theta[act])):
-            break
-    else:
-        raise ValueError("the augmented model fit did not converge")
-    h, r, end, mono, gend = linearise(theta)
+    first = linearise(theta[act])
+    whitened = _whiten(first[1], first[0], prior.cov[np.ix_(act, act)], sigma)
+    theta[act], (h, r, end, _d_end, mono, gend) = gauss_newton_fit(
+        linearise, theta_prior[act], info_prior, inv_var, theta[act], iterations,
+        at_start=first)
     info = info_prior + inv_var * (h.T @ h)
     post = prior.cov.copy()
     post[np.ix_(act, act)] = np.linalg.inv(info)

@@ -52,7 +52,7 @@ from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "unkick",
            "nearest_estimate", "arc_fit", "detect_impact", "model_update",
-           "estimate_covariance", "CHI2_SIGMAS"]
+           "gauss_newton_fit", "estimate_covariance", "CHI2_SIGMAS"]
 #: The estimators by name (``estimator`` parameter of the controller).
 ESTIMATORS = ("nearest", "arc", "model")
 #: The residual test of the model fit: reset when the sum of squared normalised
@@ -273,15 +273,8 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
         r = np.concatenate([y - pred[:, ix], w[has_v] - pred[has_v, iv]])
         return h, r, end, mono
 
-    for _ in range(iterations):
-        h, r, _end, _mono = linearised(z)
-        step = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
-        z = z + step
-        if np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(z)):
-            break
-    else:
-        z = _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations)
-    h, r, end, mono = linearised(z)
+    z, (h, r, end, mono) = gauss_newton_fit(linearised, z_prior, info_prior, inv_var, z,
+                                            iterations)
     info = info_prior + inv_var * (h.T @ h)
     post = np.linalg.inv(info)
     cov = mono @ post @ mono.T + (floor * sigma) ** 2 * np.eye(len(z))
@@ -290,46 +283,87 @@ def model_update(p: OscillatorParams, prior: FilterState, s, y, w, sigma: float,
                        prior.periods + 1), chi2, r.size
 
 
+#: (E4)'s Gauss-Newton stops once a step is below this fraction of the posterior
+#: standard deviation along it (its norm under P^-1 + H^T H / sigma^2): the estimate is
+#: then that close to the minimiser, far inside its own uncertainty
+#: (docs/theory_estimation.md, "When the fit stops").
+STEP_TOLERANCE = 1e-3
+
+
 def _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r):
-    """The Gauss-Newton step of (E4) at z: (P^-1 + H^T H / sigma^2)^-1 (P^-1 (z^ - z) +
-    H^T r / sigma^2)."""
+    """(step, its squared norm under the posterior information): the Gauss-Newton step of
+    (E4) at z, (P^-1 + H^T H / sigma^2)^-1 (P^-1 (z^ - z) + H^T r / sigma^2)."""
     info = info_prior + inv_var * (h.T @ h)
     grad = info_prior @ (z_prior - z) + inv_var * (h.T @ r)
-    return np.linalg.solve(info, grad)
+    step = np.linalg.solve(info, grad)
+    return step, float(step @ info @ step)
 
 
-def _halving_fit(linearised, z_prior, info_prior, inv_var, z, iterations: int):
-    """Gauss-Newton with step halving (``linearised(z)`` gives H and r first), where :func:`model_update`'s plain iteration has
-    not converged (docs/theory_estimation.md, (E11)): with noise on a trajectory strongly
-    curved by a low-velocity impact the full Gauss-Newton step can overshoot for ever (a
-    large-residual problem: linear rate >= 1), but its direction descends the cost
-    (z - z^)^T P^-1 (z - z^) + |r|^2 / sigma^2. The first of step, step / 2, ... that
-    lowers the cost is taken; converged when the step taken meets the plain criterion,
-    lowers the cost by less than 1e-12 of it, or none lowers it (the minimum, to
-    rounding). A fit that converged without it is untouched (bit for bit)."""
+def _small(step, norm2, z) -> bool:
+    """Whether a step ends the fit: below STEP_TOLERANCE of the posterior standard
+    deviation, or at the rounding of z."""
+    return norm2 <= STEP_TOLERANCE * STEP_TOLERANCE \
+        or bool(np.all(np.abs(step) <= 1e-12 + 1e-9 * np.abs(z)))
 
-    def cost(z, r):
-        d = z - z_prior
-        return float(d @ info_prior @ d) + inv_var * float(r @ r)
 
-    h, r = linearised(z)[:2]
-    c = cost(z, r)
-    for _ in range(4 * iterations):
-        step = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
-        t = 1.0
-        while True:
-            zt = z + t * step
-            ht, rt = linearised(zt)[:2]
-            ct = cost(zt, rt)
-            if ct < c or t < 1e-6:
-                break
-            t *= 0.5
-        if not ct < c:
-            return z
-        decrease, z, h, r, c = c - ct, zt, ht, rt, ct
-        if np.all(np.abs(t * step) <= 1e-12 + 1e-9 * np.abs(z)) or decrease <= 1e-12 * c:
-            return z
+def gauss_newton_fit(linearised, z_prior, info_prior, inv_var, z, iterations: int = 8, *,
+                     at_start=None):
+    """The minimiser of (E4) from ``z`` and the linearisation at it: (z, (H, r, end,
+    d end / dz, ...)), ``linearised(z)`` giving that tuple at z (H and r of the samples,
+    the state at the section and its Jacobian, anything else the caller needs there).
+
+    Gauss-Newton; a full step that raises the cost (z - z^)^T P^-1 (z - z^) + |r|^2 /
+    sigma^2 is halved until it lowers it (:func:`_line_search`: the direction descends
+    the cost. A large-residual fit on a trajectory strongly curved by a low-velocity
+    impact, or a minimum at the kink where an impact appears, has full steps that circle
+    for ever), and the next step starts from twice the last fraction taken
+    (docs/theory_estimation.md, (E11) and "Where the fit stops"). It stops at a step
+    below STEP_TOLERANCE of the posterior standard deviation (:func:`_small`), at a
+    decrease of the cost below STEP_TOLERANCE^2 (or 1e-12 of it), or where no fraction
+    down to 1e-6 lowers it (the minimum, to rounding or at a kink). A full step that ends
+    the fit is not evaluated again: r and the end at z + step are those at z carried to
+    first order (r - H step, end + (d end / dz) step; the step is below the tolerance,
+    the error of the order of its square; the rest of the tuple is the one at z). At
+    most 5 ``iterations`` steps; beyond, ValueError. model_update and the augmented
+    filter (:mod:`.augmented`) fit with it; ``at_start``: ``linearised(z)`` where the
+    caller has it already."""
+    lin = linearised(z) if at_start is None else at_start
+    cost = _cost(z, lin[1], z_prior, info_prior, inv_var)
+    t = 1.0
+    for _ in range(5 * iterations):
+        h, r, end, d_end = lin[:4]
+        step, norm2 = _gauss_newton_step(info_prior, inv_var, z_prior, z, h, r)
+        if _small(step, norm2, z):
+            return z + step, (h, r - h @ step, np.asarray(end) + d_end @ step) + lin[3:]
+        t, zt, lin_t, cost_t = _line_search(linearised, z, step, t, cost, z_prior,
+                                            info_prior, inv_var)
+        if not cost_t < cost:
+            return z, lin
+        decrease = cost - cost_t
+        z, lin, cost = zt, lin_t, cost_t
+        if _small(t * step, t * t * norm2, z) \
+                or decrease <= max(STEP_TOLERANCE * STEP_TOLERANCE, 1e-12 * cost):
+            return z, lin
+        t = min(1.0, 2.0 * t)
     raise ValueError("the model fit did not converge")
+
+
+def _cost(z, r, z_prior, info_prior, inv_var) -> float:
+    """(E4)'s cost (z - z^)^T P^-1 (z - z^) + |r|^2 / sigma^2."""
+    d = z - z_prior
+    return float(d @ info_prior @ d) + inv_var * float(r @ r)
+
+
+def _line_search(linearised, z, step, t, cost, z_prior, info_prior, inv_var):
+    """(t, z + t step, linearised(z + t step), its cost): the first of t, t/2, t/4, ...
+    whose point lowers ``cost``, or the last tried once t < 1e-6."""
+    while True:
+        zt = z + t * step
+        lin = linearised(zt)
+        cost_t = _cost(zt, lin[1], z_prior, info_prior, inv_var)
+        if cost_t < cost or t < 1e-6:
+            return t, zt, lin, cost_t
+        t *= 0.5
 
 
 def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str = "model",

@@ -47,6 +47,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from grazing_control.oscillator.control import gain_vector
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.forced import (actuated_mass, advance_with_force,
                                                     forced_flow, lag_advance, lag_particular,
@@ -67,15 +68,11 @@ MODEL_PARAMETERS = ("delta_d", "omega", "r", "phase", "pi2_offset")
 
 
 def _gain_vector(gains, n: int):
+    """The map's read-only k (:func:`~grazing_control.oscillator.control.gain_vector`),
+    None uncontrolled."""
     if gains is None:
         return None
-    try:
-        k = np.array(gains, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ParameterError(f"gains={gains!r} is invalid: expected {2 * n} finite real numbers") from None
-    if k.shape != (2 * n,) or not np.all(np.isfinite(k)):
-        raise ParameterError(f"gains={gains!r} is invalid: expected {2 * n} finite real numbers "
-                             f"(a gain on each deviation coordinate)")
+    k = gain_vector(gains, n)
     k.setflags(write=False)
     return k
 

@@ -1,8 +1,8 @@
 """Continuation of the 1/1 branch in Delta d and location of its bifurcations.
 
 The branch is explicit in the impact phase offset psi = theta - tau*
-(:func:`grazing_control.dynamics.orbits.orbits.branch_point`): psi -> (Delta d, v-, J). Continuation
-therefore steps in psi, which passes folds of Delta d(psi) without special care, on
+(:func:`grazing_control.dynamics.orbits.orbits.wall_offset_at_phase`): psi -> (Delta d, v-, J).
+Continuation therefore steps in psi, which passes folds of Delta d(psi) without special care, on
 a logarithmic grid in |psi| so that points crowd towards grazing (|Delta d| down to
 1e-12 and below).
 
@@ -29,8 +29,9 @@ from scipy.optimize import brentq
 from grazing_control.oscillator.control import Gains, gain_determinant
 from grazing_control.oscillator.flow import matmul2
 from grazing_control.oscillator.impact import saltation_matrix
-from grazing_control.dynamics.orbits.orbits import (OrbitNotFound, _orbit_from_phase, branch_point, find_branch_phase,
-                     multipliers)
+from grazing_control.dynamics.orbits.orbits import (OrbitNotFound, _orbit_from_phase,
+                                                    find_branch_phase, multipliers,
+                                                    wall_offset_at_phase)
 from grazing_control.oscillator.params import OscillatorParams
 
 __all__ = ["BranchPoint", "Bifurcation", "Branch", "continue_11", "branch_monodromy",
@@ -73,7 +74,7 @@ class Branch:
 
 def branch_monodromy(p: OscillatorParams, psi: float, gains: Gains | None = None):
     """(Delta d, v-, trace J, det J) on the 1/1 branch at impact phase tau* + psi."""
-    dd, v, m = branch_point(p, psi, gains)
+    dd, v, m = wall_offset_at_phase(p, psi, gains)
     q = p.with_(delta_d=dd)
     theta = (p.tau_star + psi) % TWO_PI
     j = matmul2(m, saltation_matrix(q, theta, v))

@@ -2,7 +2,7 @@
 
 The model file's implementation of the 1/1 branch behind the one entry
 (:mod:`.one_one`: ``orbit``, ``branch``), beside the 1-DOF closed form's (:mod:`.orbits`:
-``orbit_11``, ``branch_point``); for n = 1 the two agree to rounding
+``orbit_11``, ``wall_offset_at_phase``); for n = 1 the two agree to rounding
 (tests/test_one_one.py, tests/test_n1_model_file.py).
 
 docs/theory_ndof.md §5 (the n-DOF form of docs/theory.md §5). Take the wall as the
@@ -34,17 +34,18 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
+from grazing_control.oscillator.control import gain_vector
 from grazing_control.oscillator.ndof.impact import (ChatteringError, ImpactCapError, advance,
                                                     saltation_matrix, saltation_parts)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 from grazing_control.dynamics.orbits.continuation import OrbitBifurcation, OrbitBranch, OrbitPoint
-from grazing_control.dynamics.design.family import (Actuation, _flow, _gains, _transition,
-                                                     _vectors, smooth_map)
+from grazing_control.dynamics.design.family import (Actuation, _flow, _transition, _vectors,
+                                                     smooth_map)
 from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation_tests
 
-__all__ = ["PhasePoint", "branch_point", "branch_coefficients", "orbit_at", "branch_fold",
+__all__ = ["PhasePoint", "orbit_at_phase", "branch_coefficients", "orbit_at", "branch_fold",
            "pi2_factors", "structured_multipliers", "branch_multipliers", "other_contacts",
            "continue_branch", "RETURN_MARGIN"]
 
@@ -84,8 +85,10 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
 
 
-def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> PhasePoint:
-    """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)).
+def orbit_at_phase(model: NdofModel, gains, psi: float, delay: float = 0.0) -> PhasePoint:
+    """The 1/1 orbit with its impact at phase tau* + psi (§5, Eq. (N5)), as a
+    :class:`PhasePoint` (the 1-DOF closed form's Delta d, v- and period matrix at the
+    phase: :func:`.orbits.wall_offset_at_phase`; at a given Delta d: :func:`orbit_at`).
 
     Periodicity (M - I) z- = (1 + r) v- M e_v gives z- = (1 + r) v- (e_v + R e_v),
     R = (M - I)^-1, whose wall velocity and position components are
@@ -97,7 +100,7 @@ def branch_point(model: NdofModel, gains, psi: float, delay: float = 0.0) -> Pha
     actuation ``delay`` the kick acts delay after Pi2 (before the next impact:
     -omega (T - s - delay) < psi, §14); the Pi2 state is the sample, before the kick.
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     psi = float(psi)
     m, pm = _impact_map(model, k, psi, delay)
     w, ev, _b = _vectors(model)
@@ -127,7 +130,7 @@ def branch_coefficients(model: NdofModel, gains, delay: float = 0.0):
     On the family (w^T N = mu w^T) gamma1 is family.existence_coefficient. With an
     actuation ``delay``, N = N(k; delay) (§14).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     n_mat = smooth_map(model, k, delay)
     w, ev, _b = _vectors(model)
     a = _flow(model).A
@@ -152,7 +155,7 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     the side nearer grazing. Raises ValueError when no such orbit is found. The walk's
     values are the same at every Delta d (:func:`_psi_walk`).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     best = None
     for sign in (1.0, -1.0):
         prev = None
@@ -170,16 +173,16 @@ def orbit_at(model: NdofModel, gains, delta_d: float, psi_max: float = 0.3,
     if best is None:
         raise ValueError(f"delta_d={delta_d!r}: no 1/1 orbit born at grazing with v- > 0 "
                          f"for |psi| <= {psi_max!r}")
-    psi = brentq(lambda x: branch_point(model, k, x, delay).delta_d - delta_d, best[0], best[1],
+    psi = brentq(lambda x: orbit_at_phase(model, k, x, delay).delta_d - delta_d, best[0], best[1],
                  xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=400)
-    return branch_point(model, k, psi, delay)
+    return orbit_at_phase(model, k, psi, delay)
 
 
 def _psi_walk(model: NdofModel, k: np.ndarray, sign: float, psi_max: float, delay) -> tuple:
     """:func:`orbit_at`'s walk on one side: (|psi|, Delta d, v-, None) of
-    :func:`branch_point` at sign |psi|, |psi| on 400 logarithmic steps from 1e-12 to
-    ``psi_max``, up to the first v- <= 0, or up to a point where branch_point raised
-    (its error as (type, args) in the last row). branch_point does not read
+    :func:`orbit_at_phase` at sign |psi|, |psi| on 400 logarithmic steps from 1e-12 to
+    ``psi_max``, up to the first v- <= 0, or up to a point where orbit_at_phase raised
+    (its error as (type, args) in the last row). orbit_at_phase does not read
     model.delta_d (it is the unknown), so the walk is made once per model content but
     Delta d, gains, side and window (:func:`_psi_walk_of`): a sweep over Delta d (the
     mismatch bands' ~60 orbits a plant) walked each orbit's 800 phases anew
@@ -197,14 +200,14 @@ _WALKS_LOCK = threading.Lock()
 
 def _psi_walk_of(key, model, k, sign, psi_max, delay) -> tuple:
     """:func:`_psi_walk` by its key, from the walks made. ``type(delay)`` is in the key:
-    a delay True is refused by branch_point, not taken for the delay 1."""
+    a delay True is refused by orbit_at_phase, not taken for the delay 1."""
     with _WALKS_LOCK:
         rows = _WALKS.get(key)
     if rows is None:
         rows = []
         for a in np.geomspace(1e-12, psi_max, 400):
             try:
-                bp = branch_point(model, k, sign * a, delay)
+                bp = orbit_at_phase(model, k, sign * a, delay)
             except Exception as exc:     # noqa: BLE001 - raised again where it was met
                 rows.append((a, math.nan, math.nan, (type(exc), exc.args)))
                 break
@@ -233,7 +236,7 @@ def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
     slope. With an actuation ``delay`` the delayed kick's branch (§14), whose window
     ends where the impact enters the delay.
     """
-    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    k = gain_vector(np.zeros(2 * model.n) if gains is None else gains, model.n)
     sgn = math.copysign(1.0, branch_coefficients(model, k, delay)[2])
     s = model.pi2_offset / model.omega
     bound = model.omega * s if sgn > 0 else model.omega * (model.period - s - delay)
@@ -241,20 +244,20 @@ def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
 
     def slope(psi):
         h = 1e-7 * max(1e-3, abs(psi))
-        return (branch_point(model, k, psi + h, delay).delta_d
-                - branch_point(model, k, psi - h, delay).delta_d) / (2.0 * h)
+        return (orbit_at_phase(model, k, psi + h, delay).delta_d
+                - orbit_at_phase(model, k, psi - h, delay).delta_d) / (2.0 * h)
 
     first = slope(grid[0]) > 0.0
     prev = grid[0]
     for psi in grid[1:]:
         try:
-            if branch_point(model, k, psi, delay).v_minus <= 0.0:
+            if orbit_at_phase(model, k, psi, delay).v_minus <= 0.0:
                 return None
             turned = (slope(psi) > 0.0) != first
         except ParameterError:
             return None
         if turned:
-            return branch_point(model, k, brentq(slope, prev, psi, xtol=1e-13), delay)
+            return orbit_at_phase(model, k, brentq(slope, prev, psi, xtol=1e-13), delay)
         prev = psi
     return None
 
@@ -285,7 +288,7 @@ def pi2_factors(model: NdofModel, gains, point: PhasePoint, delay: float = 0.0):
     Jacobian M2 (M1 + e k^T), M1 = Phi(delay), M2 = Phi(sigma) S Phi(T - sigma - delay),
     is Phi(sigma) S Phi(T - sigma) (I + b_delay k^T).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     flow = _flow(model)
     sigma = _sigma(model, point.psi)
     _w, _ev, b = _vectors(model, delay)
@@ -365,7 +368,7 @@ def branch_multipliers(model: NdofModel, gains, point: PhasePoint,
     :func:`pi2_factors`, det J = e^{tr(A) T} r^2 (1 + k^T b), the exact determinant
     of one period with one impact; b = e_{n+i_a}, or b_delay = Phi(-delay) e_{n+i_a}
     with an actuation ``delay``, §14)."""
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     flow = _flow(model)
     _w, _ev, b = _vectors(model, delay)
     det = (math.exp(float(np.trace(flow.A)) * model.period) * model.r ** 2
@@ -390,7 +393,7 @@ def other_contacts(model: NdofModel, gains, point: PhasePoint, delay: float = 0.
     point is exact to rounding whatever v-, where the event search on the period map
     cannot resolve an impact of v-^2 below the gap's rounding (v- ~ 1e-8).
     """
-    k = _gains(model, gains)
+    k = gain_vector(gains, model.n)
     model = dataclasses.replace(model, delta_d=float(point.delta_d))
     flow = _flow(model)
     n, w = model.n, model.i_w
@@ -442,9 +445,9 @@ def continue_branch(model: NdofModel, gains, values, *, growth: float = 10 ** (1
     of psi ends. Bifurcations: sign changes of the test functions
     (``shooting.bifurcation_tests``) of consecutive points, refined by Brent in psi.
     With an actuation ``delay`` the branch is the delayed kick's (§14): the window of
-    psi keeps the impact out of the delay (:func:`branch_point`).
+    psi keeps the impact out of the delay (:func:`orbit_at_phase`).
     """
-    k = _gains(model, np.zeros(2 * model.n) if gains is None else gains)
+    k = gain_vector(np.zeros(2 * model.n) if gains is None else gains, model.n)
     values = [float(v) for v in values]
     if len(values) < 2 or not all(math.isfinite(v) for v in values):
         raise ValueError("values are invalid: expected at least two finite Delta d values")
@@ -477,10 +480,10 @@ def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
     by the factor ``growth`` from psi in the direction in which Delta d moves towards
     the target, bracket the crossing and solve it by Brent."""
     def delta(x):
-        return branch_point(model, k, x, delay).delta_d
+        return orbit_at_phase(model, k, x, delay).delta_d
 
     if target == dd:
-        return branch_point(model, k, psi, delay), None
+        return orbit_at_phase(model, k, psi, delay), None
     h = 1e-6 * abs(psi)
     slope = (delta(psi + h) - delta(psi - h)) / (2.0 * h)
     outward = (slope * psi > 0.0) == (target > dd)      # |psi| grows towards the target
@@ -493,7 +496,7 @@ def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
         if abs(nxt) < 1e-300:
             return None, f"grazing (v- -> 0) before delta_d={target!r}"
         try:
-            bp = branch_point(model, k, nxt, delay)
+            bp = orbit_at_phase(model, k, nxt, delay)
         except ParameterError as exc:
             return None, str(exc)
         if not bp.v_minus > 0.0:
@@ -502,7 +505,7 @@ def _walk(model, k, psi, dd, target, growth, psi_max, delay=0.0):
         if (f_nxt > 0.0) != (f_prev > 0.0) or f_nxt == 0.0:
             x = brentq(lambda t: delta(t) - target, prev, nxt, xtol=1e-300,
                        rtol=4.0 * 2.0 ** -52, maxiter=400)
-            return branch_point(model, k, x, delay), None
+            return orbit_at_phase(model, k, x, delay), None
         if abs(f_nxt) > abs(f_prev):
             return None, (f"a fold: Delta d turns back at {bp.delta_d!r} (psi={nxt!r}) before "
                           f"delta_d={target!r}")
@@ -520,14 +523,14 @@ def _bifurcations(model, k, points, psis, delay=0.0):
                 continue
 
             def f(x, kind=kind):
-                bp = branch_point(model, k, x, delay)
+                bp = orbit_at_phase(model, k, x, delay)
                 return bifurcation_tests(branch_multipliers(model, k, bp, delay))[kind]
 
             try:
                 at = brentq(f, pa, pb, xtol=1e-300, rtol=4.0 * 2.0 ** -52, maxiter=200)
             except ValueError:
                 continue
-            bp = branch_point(model, k, at, delay)
+            bp = orbit_at_phase(model, k, at, delay)
             out.append(OrbitBifurcation(kind, float(bp.delta_d),
                                         branch_multipliers(model, k, bp, delay)))
     return out

@@ -39,6 +39,7 @@ from grazing_control.dynamics.orbits.one_one import EXPLICIT, Orbit11
 from grazing_control.dynamics.orbits.orbits import OrbitNotFound
 from grazing_control.dynamics.orbits.shooting import (ShootingFailed, find_periodic,
                                                       floquet_multipliers)
+from grazing_control.oscillator.control import gain_vector
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
@@ -57,17 +58,6 @@ def with_delta_d(model, delta_d: float):
     return dataclasses.replace(model, delta_d=float(delta_d))
 
 
-def _gains(model, gains):
-    if gains is None:
-        return None
-    k = np.asarray(gains, dtype=float).reshape(-1)
-    if k.shape != (2 * model.n,) or not np.all(np.isfinite(k)):
-        raise ParameterError(f"gains={np.asarray(gains).tolist()!r} is invalid: expected "
-                             f"2n = {2 * model.n} finite values (x0..x{model.n - 1}, "
-                             f"v0..v{model.n - 1})")
-    return k
-
-
 def kick_matrix(model, gains, delay: float = 0.0) -> np.ndarray:
     """K = I + b k^T, b the velocity unit vector of the actuated coordinate (the kick
     v[i_a] += k^T z at Pi2; issue 17, "The design"); I without gains. With an actuation
@@ -75,9 +65,8 @@ def kick_matrix(model, gains, delay: float = 0.0) -> np.ndarray:
     (N8))."""
     n2 = 2 * model.n
     K = np.eye(n2)
-    k = _gains(model, gains)
-    if k is not None:
-        K += np.outer(kick_vector(model, delay), k)
+    if gains is not None:
+        K += np.outer(kick_vector(model, delay), gain_vector(gains, model.n))
     return K
 
 
@@ -201,8 +190,8 @@ def _monodromy_det(model, gains, impacts: int, delay: float = 0.0) -> float:
     and det K = 1 + k^T b (matrix determinant lemma; b of :func:`kick_matrix`, with an
     actuation ``delay`` valid when no impact lies inside it); the n-DOF counterpart of
     OneDOF.jacobian_det (dynamics/maps/model.py)."""
-    k = _gains(model, gains)
-    det_k = 1.0 if k is None else 1.0 + float(k @ kick_vector(model, delay))
+    det_k = 1.0 if gains is None else \
+        1.0 + float(gain_vector(gains, model.n) @ kick_vector(model, delay))
     trace = float(np.trace(np.linalg.solve(model.M, model.C)))
     return math.exp(-trace * model.period) * model.r ** (2 * impacts) * det_k
 
@@ -249,7 +238,7 @@ def _on_branch(model, gains, pred, delay: float = 0.0):
     from grazing_control.dynamics.orbits.modal_branch import (branch_multipliers, orbit_at,
                                                       other_contacts, pi2_factors)
 
-    k = np.zeros(2 * model.n) if gains is None else _gains(model, gains)
+    k = np.zeros(2 * model.n) if gains is None else gain_vector(gains, model.n)
     try:
         bp = orbit_at(model, k, model.delta_d, delay=delay)
     except (ValueError, ParameterError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -298,7 +287,7 @@ def model_file_orbit(model, gains=None, delta_d: float | None = None, *,
     if delta_d is not None:
         model = with_delta_d(model, delta_d)
     delay = float(delay) if gains is not None else 0.0
-    pmap = ModalMap(model, _gains(model, gains), delay)
+    pmap = ModalMap(model, gains, delay)
     try:
         pred, _s = predicted_orbit(model, gains, delay=delay)
     except ParameterError:     # a delay past the grazing phase: no local map (§14)

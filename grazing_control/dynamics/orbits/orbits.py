@@ -47,7 +47,7 @@ __all__ = [
     "PeriodicOrbit",
     "OrbitNotFound",
     "impact_period_matrix",
-    "branch_point",
+    "wall_offset_at_phase",
     "orbit_11",
     "shoot",
     "multipliers",
@@ -155,8 +155,11 @@ def impact_period_matrix(p: OscillatorParams, theta: float, gains: Gains | None 
     return period_matrix(p, gains, ((p.tau2 - theta) % TWO_PI) / p.omega)
 
 
-def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
-    """The 1/1 branch at impact phase tau* + psi: (Delta d, v-, M).
+def wall_offset_at_phase(p: OscillatorParams, psi: float, gains: Gains | None = None):
+    """The wall offset Delta d whose 1/1 orbit impacts at phase tau* + psi, with that
+    impact's velocity v- and the period matrix M from it: (Delta d, v-, M), M a 4-tuple
+    (the 1-DOF closed form; a model file's whole orbit at the phase is
+    :func:`.modal_branch.orbit_at_phase`).
 
     Solves the linear periodicity system of the module docstring; ``p.delta_d`` is
     ignored (it is the unknown). v- <= 0 means the point is not a physical impact.
@@ -185,7 +188,7 @@ def branch_point(p: OscillatorParams, psi: float, gains: Gains | None = None):
 
 def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = None,
                       point=None) -> float:
-    """A bound on the rounding error of Delta d(psi) from :func:`branch_point`.
+    """A bound on the rounding error of Delta d(psi) from :func:`wall_offset_at_phase`.
 
     Delta d = N / det with N = -rhs1 w2 + w1 rhs2, det = -b11 w2 + w1 b21 (the
     periodicity system of docs/theory.md section 5). Each entry of M = Q G P carries an
@@ -196,13 +199,13 @@ def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = Non
     level and Delta d(psi) ~ psi^2 wobbles by tens of percent: a change of direction
     smaller than this bound is not a fold (issue 20, item 4).
 
-    ``point``: :func:`branch_point`'s result at psi when the caller has it (the scan of
+    ``point``: :func:`wall_offset_at_phase`'s result at psi when the caller has it (the scan of
     :func:`branch_brackets`), so that it is not solved twice. The 2x2 products of
     absolute values are written out (a scan makes ~500 of these bounds per orbit).
     """
     theta = (p.tau_star + psi) % TWO_PI
     s = ((p.tau2 - theta) % TWO_PI) / p.omega
-    dd, _v, (m11, m12, m21, m22) = branch_point(p, psi, gains) if point is None else point
+    dd, _v, (m11, m12, m21, m22) = wall_offset_at_phase(p, psi, gains) if point is None else point
     if not math.isfinite(dd):
         return math.inf
     q11, q12, q21, q22 = (abs(e) for e in transition_matrix(p.zeta, p.period - s))
@@ -237,8 +240,8 @@ def _psi_grid(lo_exp=-15.0, n=241):
 def _branch_values(p, gains, sign, rounding=False):
     """(psi, Delta d, v-) along the grid of :func:`_psi_grid` on the side ``sign``, with
     Delta d's rounding bound if ``rounding``. The same for every Delta d:
-    :func:`branch_point` and :func:`_delta_d_rounding` do not read p.delta_d (it is the
-    unknown), so the scan is made once per oscillator (p's other fields), gains and side
+    :func:`wall_offset_at_phase` and :func:`_delta_d_rounding` do not read p.delta_d (it
+    is the unknown), so the scan is made once per oscillator (p's other fields), gains and side
     (:func:`_branch_scan`); a sweep over Delta d (the noise covariance's, the mismatch
     bands') solved each orbit's scan anew, 1526 scans in five test modules (issue 30, the
     suite's CPU)."""
@@ -253,7 +256,7 @@ def _branch_scan(oscillator: tuple, gains, sign: float, rounding: bool) -> tuple
     p = OscillatorParams(zeta=zeta, r=r, omega=omega, tau0=tau0, pi2_offset=pi2_offset)
     out = []
     for m in _psi_grid():
-        point = branch_point(p, sign * m, gains)
+        point = wall_offset_at_phase(p, sign * m, gains)
         dd, v, _ = point
         if rounding:
             out.append((sign * m, dd, v, _delta_d_rounding(p, sign * m, gains, point)))
@@ -289,7 +292,7 @@ def find_branch_phase(p: OscillatorParams, delta_d: float, gains: Gains | None =
             prev = cur
     if best is None:
         raise OrbitNotFound(f"no 1/1 orbit born at grazing with delta_d={delta_d!r}")
-    g = lambda psi: branch_point(p, psi, gains)[0] - delta_d  # noqa: E731
+    g = lambda psi: wall_offset_at_phase(p, psi, gains)[0] - delta_d  # noqa: E731
     if g(best[0]) == 0.0:
         return best[0]
     if g(best[1]) == 0.0:
@@ -341,7 +344,7 @@ def branch_brackets(p: OscillatorParams, delta_d: float, gains: Gains | None = N
 
 
 def _solve_bracket(p, delta_d, gains, lo, hi):
-    g = lambda psi: branch_point(p, psi, gains)[0] - delta_d  # noqa: E731
+    g = lambda psi: wall_offset_at_phase(p, psi, gains)[0] - delta_d  # noqa: E731
     if g(lo) == 0.0:
         return lo
     if g(hi) == 0.0:
@@ -390,7 +393,7 @@ def orbit_11(p: OscillatorParams, gains: Gains | None = None, *, check: bool = T
 def _orbit_from_phase(p, psi, gains, *, check=True, keep_delta_d=False):
     """The 1/1 orbit at impact phase offset psi; Delta d is the branch's unless kept
     (when psi was solved for p.delta_d, the two agree to a few ulps)."""
-    dd, v, m = branch_point(p, psi, gains)
+    dd, v, m = wall_offset_at_phase(p, psi, gains)
     if not v > 0.0 or not math.isfinite(dd):
         raise OrbitNotFound(
             f"the 1/1 solution at delta_d={dd!r} has v- = {v!r}: not an impacting orbit (at "

@@ -6,7 +6,7 @@ clearance, so the **grazing curve** is Delta d = 0, i.e. d = d*(mu) = a(omega) i
 absolute clearance (spec section 2, Eq. 2). Derivation: docs/theory_two_parameter.md.
 
 The 1/1 branch is explicit in the impact phase psi (docs/theory.md section 5,
-:func:`grazing_control.dynamics.orbits.orbits.branch_point`): psi -> (Delta d, v-, M). Its
+:func:`grazing_control.dynamics.orbits.orbits.wall_offset_at_phase`): psi -> (Delta d, v-, M). Its
 monodromy J = M S has tr J = -r tr M + M12 K / v-, K = (1 + r)(cos theta - d), and the
 exact det J (spec section 5). The period-doubling and fold conditions det(J + I) = 0,
 det(J - I) = 0 are multiplied by v- (docs/theory_two_parameter.md, (T1)):
@@ -47,7 +47,9 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.orbits.continuation import branch_monodromy
 from grazing_control.dynamics.maps.maps import period_matrix
-from grazing_control.dynamics.orbits.orbits import OrbitNotFound, _orbit_from_phase, branch_point, monodromy_det, multipliers
+from grazing_control.dynamics.orbits.orbits import (OrbitNotFound, _orbit_from_phase,
+                                                    monodromy_det, multipliers,
+                                                    wall_offset_at_phase)
 
 __all__ = ["PARAMETERS", "KINDS", "Family", "regular_tests", "codim2_points",
            "branch_seeds", "curve_point", "CurvePoint", "Curve", "continue_curve",
@@ -114,7 +116,7 @@ def regular_tests(p: OscillatorParams, gains: Gains | None, psi: float):
 
     g = v- det(J +- I): smooth at psi = 0 (v- = 0), where both equal +-N_g,12 K.
     """
-    dd, v, m = branch_point(p, psi, gains)
+    dd, v, m = wall_offset_at_phase(p, psi, gains)
     theta = (p.tau_star + psi) % TWO_PI
     k = (1.0 + p.r) * (math.cos(theta) - (p.d_star + dd))
     det = monodromy_det(p, gains, 1, 1)
@@ -358,7 +360,7 @@ def _meets_grazing(fam, kind, a, b):
 
 def _v_minus(fam, psi, value):
     p, gains = fam.at(value)
-    return branch_point(p, psi, gains)[1]
+    return wall_offset_at_phase(p, psi, gains)[1]
 
 
 def _walk(fam, kind, y0, t0, lo, hi, step, max_step, max_points):
@@ -525,13 +527,13 @@ def _design_fold(fam, value, at, up, down, h):
     fold is the turning point of Delta d = kappa2 v^2 + kappa3 v^3 with kappa2 =
     kappa2' (c2 - c2*): v = -2 kappa2' delta / (3 kappa3),
     Delta d = 4 kappa2'^3 delta^3 / (27 kappa3^2). kappa3 = lim Delta d / v^3 on the
-    exact branch at c2* (branch_point at |psi| = 1e-3, 1e-4 where v > 0, Richardson)."""
+    exact branch at c2* (wall_offset_at_phase at |psi| = 1e-3, 1e-4 where v > 0, Richardson)."""
     p, gains = fam.at(value)
     k2 = (up.kappa2 - down.kappa2) / (2.0 * h)
-    sign = 1.0 if branch_point(p, 1e-3, gains)[1] > 0.0 else -1.0
+    sign = 1.0 if wall_offset_at_phase(p, 1e-3, gains)[1] > 0.0 else -1.0
     ratio = []
     for psi in (1e-3, 1e-4):
-        dd, v, _m = branch_point(p, sign * psi, gains)
+        dd, v, _m = wall_offset_at_phase(p, sign * psi, gains)
         ratio.append(dd / v ** 3)
     k3 = (10.0 * ratio[1] - ratio[0]) / 9.0      # the error is O(v), v ~ psi
     c = -2.0 * k2 / (3.0 * k3)
@@ -556,7 +558,7 @@ def local_shape(fam: Family, kind: str, value: float, offsets) -> np.ndarray:
         psi0 = slope * (mu - value) if guess is None else guess * delta / rows[-1][0]
         psi = curve_point(fam, kind, mu, psi0)
         p, gains = fam.at(mu)
-        rows.append((delta, branch_point(p, psi, gains)[0], psi))
+        rows.append((delta, wall_offset_at_phase(p, psi, gains)[0], psi))
         guess = psi
     return np.array(rows)
 

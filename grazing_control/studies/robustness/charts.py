@@ -151,7 +151,7 @@ def plot_model_bands(record, path, dpi=80):
     """|band end| (log) against the relative error (log), one panel per parameter with a
     band, one line per design (positive errors; for n-DOF records negative ones too,
     hollow), the series' prediction dashed where there is one. ``record``:
-    :func:`.model.model_error_bands` or :func:`.model.ndof_model_error_bands`."""
+    :func:`.model.model_error_bands` (either model)."""
     plt = _plt()
     names = list(dict.fromkeys(r["parameter"] for d in record["designs"] for r in d["bands"]))
     params = [n for n in names

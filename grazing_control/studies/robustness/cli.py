@@ -223,7 +223,7 @@ def _cmd_model_ndof(args):
     from grazing_control.oscillator.ndof import load_model
     from grazing_control.oscillator.params import ParameterError
     from .charts import plot_model_bands
-    from .model import NDOF_ERRORS, ndof_model_error_bands
+    from .model import NDOF_ERRORS, model_error_bands
 
     if args.c2:
         raise ParameterError("--c2 is a 1-DOF design: with --model give --mu MU (the family "
@@ -242,7 +242,8 @@ def _cmd_model_ndof(args):
             errors[name] = NDOF_ERRORS.get(name[:1] if name[1:2] == "[" else name, NDOF_ERRORS["M"])
     out = _out_dir(args.out)
     t0 = time.perf_counter()
-    record = ndof_model_error_bands(model, args.mu, args.delay, errors)
+    record = model_error_bands(model, [(f"mu = {mu:g}", mu) for mu in args.mu], errors,
+                               delay=args.delay)
     png = os.path.join(out, "model_error_bands.png")
     plot_model_bands(record, png)
     record.update(model=str(args.model), delta_d=model.delta_d, delay=args.delay,

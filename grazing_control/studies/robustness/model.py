@@ -1,6 +1,9 @@
 """Model-error margins: the band of Delta d next to grazing where control fails, against
 the error size, per parameter and design (issue 16 section 2; docs/robustness.md s4), for
-the 1-DOF study and (issue 32) for an n-DOF model file (:func:`ndof_model_error_bands`).
+every model (issue 32): the 1-DOF study and an n-DOF model file, one loop over the
+designs and errors (:func:`model_error_bands`); the model supplies its design family
+(c2 or mu, :mod:`grazing_control.dynamics.design.model_design`), its parameters
+(:data:`ERRORS`, :data:`NDOF_ERRORS`) and its extras (the series, or the error tolerated).
 
 Plain data from :func:`grazing_control.dynamics.design.mismatch.instability_band` (exact route)
 and :func:`grazing_control.dynamics.design.mismatch.predicted_band` (series), for
@@ -9,12 +12,14 @@ and :func:`grazing_control.dynamics.design.mismatch.predicted_band` (series), fo
 
 from __future__ import annotations
 
+import math
+
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.design.mismatch import instability_band
+from grazing_control.dynamics.maps.model import is_model_file
 from grazing_control.oscillator.control import Gains
-from grazing_control.oscillator.params import OscillatorParams
 
-__all__ = ["ERRORS", "NDOF_ERRORS", "model_error_bands", "ndof_model_error_bands"]
+__all__ = ["ERRORS", "NDOF_ERRORS", "model_error_bands"]
 
 #: Relative error sizes per parameter (both signs are run): omega near the degenerate
 #: frequency is ~1e5 times more sensitive than zeta; r does not enter N_g at all.
@@ -24,60 +29,74 @@ ERRORS = {
     "r": (1e-2, 1e-1),
 }
 
-
-def model_error_bands(base: OscillatorParams, designs, errors=None, **band_kwargs):
-    """{"designs": [{"label", "c2", "c1", "bands": [{"parameter", "error", "end",
-    "predicted", "k"}]}]} with k = end / error^2 (the coefficient of the e^2 law)."""
-    errors = ERRORS if errors is None else errors
-    out = []
-    for label, c2 in designs:
-        g = Gains(degenerate_c1(base, c2), c2)
-        rows = []
-        for name, sizes in errors.items():
-            for size in sizes:
-                for e in (size, -size):
-                    b = instability_band(base, g, name, e, **band_kwargs)
-                    rows.append({"parameter": name, "error": e, "end": b.end,
-                                 "predicted": b.predicted, "k": b.end / (e * e)})
-        out.append({"label": label, "c2": c2, "c1": g.c1, "bands": rows})
-    return {"designs": out}
-
-
 #: Relative error sizes of the n-DOF parameters (both signs are run); the masses M[i,i]
-#: are added per coordinate by :func:`ndof_model_error_bands`.
+#: are added per coordinate by :func:`model_error_bands`.
 NDOF_ERRORS = {"M": (1e-3, 1e-2), "C": (1e-2, 1e-1), "K": (1e-3, 1e-2), "r": (1e-2, 1e-1),
                "omega": (1e-4, 1e-3)}
 
 
-def ndof_model_error_bands(model, mus, delay: float = 0.0, errors=None, **band_kwargs):
-    """{"designs": [{"label", "mu", "gains", "bands": [{"parameter", "error", "end",
-    "predicted" (None: no series for n > 1), "k", "tolerated"}]}]} for the n-DOF
-    ``model``: per design k(mu; delay) of the family (docs/theory_ndof.md (N2), (N9)),
-    the band of each parameter error (:func:`instability_band` over the exact n-DOF
-    branch), k = end / error^2 and ``tolerated`` the error the design tolerates at the
-    model's delta_d by the e^2 law (None where delta_d >= 0). ``errors``: {name: sizes}
-    (default :data:`NDOF_ERRORS` plus each mass M[i,i] with the sizes of M)."""
-    import math
+def model_error_bands(model, designs, errors=None, *, delay: float = 0.0, **band_kwargs):
+    """{"designs": [{"label", the design, "bands": [{"parameter", "error", "end",
+    "predicted", "k", ...}]}]}: per design (label, value) of the model's family the band
+    of each parameter error (:func:`instability_band`) and k = end / error^2 (the
+    coefficient of the e^2 law). ``errors``: {name: sizes}, both signs run.
 
-    from grazing_control.dynamics.design.mismatch import tolerated_error
-    from grazing_control.dynamics.design.family import gain_family
-
+    * 1-DOF (OscillatorParams): value = c2, the design c2 and c1 (degenerate, no delay),
+      "predicted" the series' band end; default errors :data:`ERRORS`.
+    * A model file: value = mu, the design mu and gains k(mu; ``delay``) of the family
+      (docs/theory_ndof.md (N2), (N9)), "predicted" None (no series for n > 1) and
+      "tolerated" the error the design tolerates at the model's delta_d by the e^2 law
+      (None where delta_d >= 0 or no band); default errors :data:`NDOF_ERRORS` plus each
+      mass M[i,i] with the sizes of M.
+    """
+    file = is_model_file(model)
     if errors is None:
-        errors = dict(NDOF_ERRORS)
-        if model.n > 1:
-            errors.update({f"M[{i},{i}]": NDOF_ERRORS["M"] for i in range(model.n)})
+        errors = _file_errors(model) if file else ERRORS
     out = []
-    for mu in mus:
-        k = gain_family(model, mu, delay)
+    for label, value in designs:
+        gains, design = _file_design(model, value, delay) if file else _closed_form(model, value)
         rows = []
         for name, sizes in errors.items():
             for size in sizes:
                 for e in (size, -size):
-                    b = instability_band(model, k, name, e, delay=delay, **band_kwargs)
-                    tol = tolerated_error(b.end, e, model.delta_d) if model.delta_d < 0.0 else None
-                    rows.append({"parameter": name, "error": e, "end": b.end, "predicted": None,
-                                 "k": b.end / (e * e),
-                                 "tolerated": None if tol is None or math.isinf(tol) else tol})
-        out.append({"label": f"mu = {mu:g}", "mu": mu, "gains": [float(x) for x in k],
-                    "bands": rows})
+                    b = instability_band(model, gains, name, e, delay=delay, **band_kwargs)
+                    row = {"parameter": name, "error": e, "end": b.end,
+                           "predicted": None if file else b.predicted, "k": b.end / (e * e)}
+                    if file:
+                        row["tolerated"] = _tolerated(model, b.end, e)
+                    rows.append(row)
+        out.append({"label": label, **design, "bands": rows})
     return {"designs": out}
+
+
+def _closed_form(p, c2: float) -> tuple:
+    """The 1-DOF design of c2 (c1 degenerate): (Gains, its JSON fields)."""
+    g = Gains(degenerate_c1(p, c2), c2)
+    return g, {"c2": c2, "c1": g.c1}
+
+
+def _file_design(model, mu: float, delay: float) -> tuple:
+    """A model file's family member k(mu; delay): (k, its JSON fields)."""
+    from grazing_control.dynamics.design.family import gain_family
+
+    k = gain_family(model, mu, delay)
+    return k, {"mu": mu, "gains": [float(x) for x in k]}
+
+
+def _file_errors(model) -> dict:
+    """:data:`NDOF_ERRORS` and each mass M[i,i] with the sizes of M (n > 1)."""
+    errors = dict(NDOF_ERRORS)
+    if model.n > 1:
+        errors.update({f"M[{i},{i}]": NDOF_ERRORS["M"] for i in range(model.n)})
+    return errors
+
+
+def _tolerated(model, end: float, error: float):
+    """The error the design tolerates at the model's delta_d by the e^2 law (None where
+    delta_d >= 0 or there is no band)."""
+    from grazing_control.dynamics.design.mismatch import tolerated_error
+
+    if not model.delta_d < 0.0:
+        return None
+    tol = tolerated_error(end, error, model.delta_d)
+    return None if math.isinf(tol) else tol

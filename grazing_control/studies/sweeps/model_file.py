@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grazing_control.dynamics.maps.modal_map import ModalMap
+from grazing_control.oscillator.control import gain_vector
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 from .period import detect_period
@@ -151,11 +152,7 @@ def diagram(model, values, *, name: str = "delta_d", periods: int, transient: in
     if z0.shape != (n2,) or not np.all(np.isfinite(z0)):
         raise ParameterError(f"start is invalid: expected {n2} finite values (deviation from "
                              "the grazing orbit on Pi2)")
-    k = None
-    if gains is not None:
-        k = np.asarray(gains, dtype=float).reshape(-1)
-        if k.shape != (n2,) or not np.all(np.isfinite(k)):
-            raise ParameterError(f"gains are invalid: expected {n2} finite values")
+    k = None if gains is None else gain_vector(gains, model.n)
     after = -1 if k is None else (0 if control_after is None else int(control_after))
     for v in vals:   # every point's model (and its delayed kick) is valid before anything runs
         mv = dataclasses.replace(model, **{name: float(v)})
