@@ -13,12 +13,15 @@ here                   the pure path
 :func:`evaluate`       ``_Eval.__call__`` (``cmath.exp(lam * h)`` as CPython computes it)
 :func:`jerk_bound`     ``_Eval.jerk_bound``
 :func:`gap_rounding`   ``_Eval.gap_rounding``
-:func:`next_impact`    ``ndof.impact._next_impact`` with ``oscillator.impact._scan_window``
+:func:`bracket`        ``oscillator.impact._bracket``
+:func:`search`         ``oscillator.impact._search`` (its recursion on an explicit stack)
+:func:`next_impact`    ``ndof.impact._next_impact`` with ``oscillator.impact._scan_window``,
+                       ``_danger_halfwidth``, ``_far_from_wall``
 =====================  ==========================================================
 
-The interval search itself (``oscillator.impact._search``, ``_bracket``,
-``_danger_halfwidth``, ``_far_from_wall``) is the 1-DOF kernel's, written once in
-:mod:`.interval_search` for both models, which reaches this model's :func:`evaluate`,
+The interval search (:func:`bracket`, :func:`search`, the window's ``danger_halfwidth``
+and ``far_from_wall``) is the 1-DOF kernel's, written once for both models in
+:mod:`.interval_search` and imported here: it reaches this model's :func:`evaluate`,
 :func:`jerk_bound` and :func:`gap_rounding` (``terms`` the array of modes), as the pure
 path's ``_search`` runs over either evaluator.
 
@@ -45,11 +48,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from .caching import jit
-from .interval_search import NONE, danger_halfwidth, far_from_wall, search, search_stack, ulp
 
-__all__ = ["make_eval", "evaluate", "jerk_bound", "gap_rounding", "search_stack",
-           "next_impact", "NONE", "STATUS_OK", "STATUS_BEYOND_WALL"]
+from .caching import jit
+from .interval_search import (NONE, bracket, danger_halfwidth, far_from_wall, search,
+                              search_stack, ulp)
+
+__all__ = ["make_eval", "evaluate", "jerk_bound", "gap_rounding", "bracket", "search",
+           "search_stack", "next_impact", "NONE", "STATUS_OK", "STATUS_BEYOND_WALL"]
 
 TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
