@@ -302,7 +302,6 @@ def test_a_callees_edit_invalidates_its_callers_cache(tmp_path, monkeypatch):
 
     monkeypatch.setattr(numba_caching.CacheImpl, "_locator_classes",
                         list(numba_caching.CacheImpl._locator_classes))
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     package = tmp_path / "kernel_copy"
     package.mkdir()
     (package / "__init__.py").write_text("")
