@@ -8,10 +8,12 @@ tests/test_impact.py are run again through the kernel; and a differential fuzz t
 compares single periods over thousands of random seeded cases.
 """
 
+import ast
 import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -288,6 +290,15 @@ def test_every_kernel_function_is_cached_under_the_folders_stamp():
     for f in functions:
         assert isinstance(f._cache._impl.locator, caching.LOCATORS), f.__name__
         assert f._cache._impl.locator.get_source_stamp() == caching.folder_stamp()
+    # and in every process, whichever module it imports first: a module with a jit of its
+    # own would be stamped by its file where caching.py was not imported before it, and
+    # two such processes would overwrite each other's cache index in turn
+    for path in Path(caching.FOLDER).glob("*.py"):
+        if path.name != "caching.py":
+            calls = [n.func for n in ast.walk(ast.parse(path.read_text()))
+                     if isinstance(n, ast.Call)]
+            assert not [f for f in calls if getattr(f, "attr", getattr(f, "id", None))
+                        in ("njit", "jit", "generated_jit")], f"{path.name}: use caching.jit"
 
 
 def test_a_callees_edit_invalidates_its_callers_cache(tmp_path, monkeypatch):
