@@ -8,10 +8,12 @@ tests/test_impact.py are run again through the kernel; and a differential fuzz t
 compares single periods over thousands of random seeded cases.
 """
 
+import ast
 import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -264,6 +266,83 @@ def test_ctrl_c_while_the_kernel_compiles_is_delivered_once_it_is_loaded(tmp_pat
     assert err.rstrip().endswith("KeyboardInterrupt") and "Exception ignored" not in err, err
     assert "_sigint_held" in err  # delivered when the load ended, not inside numba
     assert any(tmp_path.rglob("*.nbi"))  # the compilation finished and was cached
+
+
+# ------------------------------------------------ numba's cache over the kernel's files
+def _kernel_dispatchers():
+    """Every compiled function defined in a file of oscillator/kernel/."""
+    from numba.core.registry import CPUDispatcher
+
+    from grazing_control.oscillator.kernel import (compiled, compiled_contact, compiled_modal,
+                                                   interval_search)
+
+    return [f for m in (compiled, compiled_modal, compiled_contact, interval_search)
+            for f in vars(m).values()
+            if isinstance(f, CPUDispatcher) and f.py_func.__module__ == m.__name__]
+
+
+def test_every_kernel_function_is_cached_under_the_folders_stamp():
+    """The search of interval_search.py runs the models' evaluators of compiled.py and
+    compiled_modal.py: each function's cache is stamped by the whole folder
+    (kernel/caching.py), not by its own file as numba's locators do."""
+    from grazing_control.oscillator.kernel import caching
+
+    functions = _kernel_dispatchers()
+    assert {f.py_func.__module__.rsplit(".", 1)[1] for f in functions} == {
+        "compiled", "compiled_modal", "compiled_contact", "interval_search"}
+    for f in functions:
+        assert isinstance(f._cache._impl.locator, caching.LOCATORS), f.__name__
+        assert f._cache._impl.locator.get_source_stamp() == caching.folder_stamp()
+    # and in every process, whichever module it imports first: a module with a jit of its
+    # own would be stamped by its file where caching.py was not imported before it, and
+    # two such processes would overwrite each other's cache index in turn
+    for path in Path(caching.FOLDER).glob("*.py"):
+        if path.name != "caching.py":
+            calls = [n.func for n in ast.walk(ast.parse(path.read_text()))
+                     if isinstance(n, ast.Call)]
+            assert not [f for f in calls if getattr(f, "attr", getattr(f, "id", None))
+                        in ("njit", "jit", "generated_jit")], f"{path.name}: use caching.jit"
+
+
+def test_a_callees_edit_invalidates_its_callers_cache(tmp_path, monkeypatch):
+    """numba keys a cached function on its own file: with its own locators, a caller whose
+    callee lives in another file keeps loading the callee's old machine code after that
+    file changed (here g(1.0) = 2.0 after f became x + 2). A copy of kernel/caching.py in
+    a package of two such files, each import a fresh one (as a new process would): the
+    cache is written, loaded, and after the callee's edit rejected and written anew."""
+    from numba.core import caching as numba_caching
+
+    from grazing_control.oscillator.kernel import caching
+
+    monkeypatch.setattr(numba_caching.CacheImpl, "_locator_classes",
+                        list(numba_caching.CacheImpl._locator_classes))
+    package = tmp_path / "kernel_copy"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "caching.py").write_text(open(caching.__file__).read())
+    callee = "from .caching import jit\n\n\n@jit\ndef f(x):\n    return x + {}\n"
+    (package / "callee.py").write_text(callee.format("1.0"))
+    (package / "caller.py").write_text("from .caching import jit\nfrom .callee import f\n\n\n"
+                                       "@jit\ndef g(x):\n    return f(x)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    def fresh_g():
+        for name in [m for m in sys.modules if m.split(".")[0] == "kernel_copy"]:
+            del sys.modules[name]
+        from kernel_copy.caller import g
+
+        value = g(1.0)
+        return value, sum(g.stats.cache_hits.values()), sum(g.stats.cache_misses.values())
+
+    try:
+        assert fresh_g() == (2.0, 0, 1)      # compiled, written
+        assert fresh_g() == (2.0, 1, 0)      # loaded from the cache
+        (package / "callee.py").write_text(callee.format("2.0"))
+        assert fresh_g() == (3.0, 0, 1)      # the index is stale: compiled anew
+        assert fresh_g() == (3.0, 1, 0)
+    finally:
+        for name in [m for m in sys.modules if m.split(".")[0] == "kernel_copy"]:
+            del sys.modules[name]
 
 
 # ------------------------------------------------ the mpmath tests, through the kernel

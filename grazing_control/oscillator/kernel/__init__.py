@@ -17,8 +17,9 @@ Which path runs
 * ``numba``: always the kernel (an error if numba is missing).
 
 Compilation happens on the first call in a process and is cached on disk by numba
-(``cache=True``: ``__pycache__`` next to the source, or ``NUMBA_CACHE_DIR``), so later
-processes only load the machine code (:func:`warm_up` does either explicitly).
+(``cache=True``: ``__pycache__`` next to the source, or ``NUMBA_CACHE_DIR``; stamped by
+every file of this folder, :mod:`.caching`), so later processes only load the machine
+code (:func:`warm_up` does either explicitly).
 
 The n-DOF model's certified event search has its compiled mirror too
 (:mod:`.compiled_modal`, the same floats as oscillator/ndof/impact.py's): the n-DOF core

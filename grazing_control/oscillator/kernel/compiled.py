@@ -6,10 +6,12 @@ table of which function mirrors which is in docs/sweeps.md ("The compiled exact
 kernel"), as are the two values computed once instead of again (the window grid of a
 period from Pi2, e^{-zeta a} of the jerk bound), bit-identically.
 
-All compiled functions live in this one module on purpose: numba's on-disk cache
-(``cache=True``) keys each function on its own source file only, so a function that
-calls into another file would keep loading stale machine code after that file changed.
-In one file, any edit recompiles everything.
+The certified interval search (``impact._search``, ``_bracket``) is not here: it is
+written once for this closed form and the n-DOF modal sum, in :mod:`.interval_search`,
+which reaches this model's :func:`evaluate`, :func:`jerk_bound` and :func:`gap_rounding`
+(``terms`` None). numba's on-disk cache keys a function on its own file; the kernel's
+``jit`` (:mod:`.caching`) stamps every function of the folder by all its files, so an
+edit of any of them recompiles everything.
 
 Model parameters travel as the tuple ``P`` of ``kernel.params_tuple`` (derived quantities
 computed once, by :class:`~grazing_control.oscillator.params.OscillatorParams` itself, so that
@@ -22,12 +24,14 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from .caching import jit
+from .interval_search import NONE, danger_halfwidth, far_from_wall, search, search_stack, ulp
+
 __all__ = ["check_state", "wall_rounding", "make_eval", "evaluate",
-           "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "bracket", "search",
-           "search_stack", "danger_halfwidth", "far_from_wall", "next_impact", "next_impact_unchecked", "release_time",
+           "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "search_stack",
+           "next_impact", "next_impact_unchecked", "release_time",
            "resting_on_wall", "release_skip", "on_wall_at_rest", "leave_wall", "advance",
            "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
            "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run",
@@ -35,11 +39,9 @@ __all__ = ["check_state", "wall_rounding", "make_eval", "evaluate",
            "lyapunov_run"]
 
 TWO_PI = 2.0 * math.pi
-_MAX_DEPTH = 64
 _EPS = 2.0 ** -52
 #: impact.MAX_AMPLITUDE: the largest deviation amplitude |C| accepted.
 MAX_AMPLITUDE = 1e150
-NONE = -1.0  # "no impact" (times are >= 0)
 
 STATUS_OK = 0
 STATUS_IMPACT_CAP = 1  # ImpactCapError
@@ -52,20 +54,11 @@ IMPACT_FIELDS = ("dt", "phase", "v_minus", "v_plus", "sticking", "release")
 # P: the model parameters, in this order (kernel.params_tuple builds it)
 _ZETA, _R, _OMEGA, _WD, _LAG, _AMP, _DD, _D, _PERIOD, _TAU2, _TWO, _THIRD = range(12)
 
-jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-
 
 @jit
 def power(x, y):
     """x ** y as CPython computes it for floats (libm pow); y must come from P."""
     return math.pow(x, y)
-
-
-@jit
-def ulp(x):
-    """math.ulp(x) for finite x: the gap from |x| to the next float up."""
-    a = abs(x)
-    return np.nextafter(a, np.inf) - a
 
 
 @jit
@@ -217,131 +210,6 @@ def gap_rounding(ev, h, g, dx):
                          + math.sqrt(2.0 * ev[4] * s2) * phase)
 
 
-# ------------------------------------------------------------------ _bracket
-@jit
-def bracket(ev, lo, hi, which, sign, flo, fhi):
-    """impact._bracket: root of g (which = 0) or v (which = 1) in [lo, hi]."""
-    d = flo - fhi
-    x = lo + (hi - lo) * (flo / d) if d != 0.0 else 0.5 * (lo + hi)
-    if not lo < x < hi:
-        x = 0.5 * (lo + hi)
-    probed = False
-    while hi - lo > 4.0 * ulp(hi):
-        g, v, acc, _dx, _dv, _e = evaluate(ev, x)
-        if which == 0:
-            fx, dfx = sign * g, sign * v
-        else:
-            fx, dfx = sign * v, sign * acc
-        if fx >= 0.0:
-            hi = x
-        else:
-            lo = x
-        xn = x - fx / dfx if dfx > 0.0 else lo
-        probe = 2.0 * ulp(x)
-        if abs(xn - x) < probe:  # 2 ulps past the root; bisect if the last probe failed
-            xn = 0.5 * (lo + hi) if probed else (x - probe if fx >= 0.0 else x + probe)
-            probed = not probed
-        else:
-            probed = False
-        if not lo < xn < hi:
-            xn = 0.5 * (lo + hi)
-        if xn == x:
-            xn = 0.5 * (lo + hi)
-            if xn == x:
-                break
-        x = xn
-    return hi
-
-
-# ------------------------------------------------------------------ _search
-@jit
-def _certified(ev, a, b, ea, ga, va, acca, dxa, gb, vb, accb, dxb):
-    """The certified cases of impact._search on [a, b] (fa = (ga, va, acca, dxa) etc.).
-
-    Returns (decided, time): decided = 1 with time >= 0 (impact) or NONE (none), or
-    decided = 0 when the interval must be split.
-    """
-    # J (b - a), rounded up, plus the rounding of the two accelerations (docs/theory.md)
-    jw = jerk_bound(ev, ea) * (b - a) * (1.0 + 1e-12) + 2.0 * ev[13]
-    concave = acca < 0.0 and accb < 0.0 and -(acca + accb) > jw
-    convex = acca > 0.0 and accb > 0.0 and (acca + accb) > jw
-    if concave:  # v decreasing: at most one maximum
-        if va <= 0.0:
-            return 1, NONE
-        if vb >= 0.0:
-            return 1, (bracket(ev, a, b, 0, 1.0, ga, gb) if gb >= 0.0 else NONE)
-        tm = bracket(ev, a, b, 1, -1.0, va, vb)
-        gm = evaluate(ev, tm)[0]
-        return 1, (bracket(ev, a, tm, 0, 1.0, ga, gm) if gm >= 0.0 else NONE)
-    if convex:  # v increasing: g below the chord unless it ends above 0
-        if gb < 0.0:
-            return 1, NONE
-        if ga < 0.0:
-            return 1, bracket(ev, a, b, 0, 1.0, ga, gb)
-        if va >= 0.0:  # at rest on the wall and pushed into it
-            return 1, a
-        tmin = bracket(ev, a, b, 1, 1.0, va, vb) if vb > 0.0 else b
-        gmin = evaluate(ev, tmin)[0]
-        if gmin >= 0.0:  # the dip below the wall is below rounding: at rest, pushed in
-            return 1, tmin
-        return 1, (bracket(ev, tmin, b, 0, 1.0, gmin, gb) if gmin < 0.0 <= gb else NONE)
-    # below the chord plus the curvature allowance, with the rounding margin of the ends
-    # (a uniform bound m0 + m1 b first, the precise one only when needed)
-    curvature = max(0.0, 0.5 * (jw - acca - accb))
-    upper = max(ga, gb) + 0.125 * power(b - a, ev[12]) * curvature
-    if upper < 0.0 and (upper + ev[14] + ev[15] * b < 0.0 or
-                        upper + max(gap_rounding(ev, a, ga, dxa), gap_rounding(ev, b, gb, dxb))
-                        < 0.0):
-        return 1, NONE
-    return 0, NONE
-
-
-@jit
-def search(ev, a, b, fa, fb, stack):
-    """impact._search(f, a, b, fa, fb, 0): first impact time in (a, b], or NONE.
-
-    The recursion (left half first, then the right half) runs on an explicit stack of
-    pending right halves (``stack``, from :func:`search_stack`), which visits the
-    intervals in the same order.
-    """
-    top = 0
-    ga, va, acca, dxa, ea = fa[0], fa[1], fa[2], fa[3], fa[5]
-    gb, vb, accb, dxb = fb[0], fb[1], fb[2], fb[3]
-    depth = 0
-    while True:
-        decided, t = _certified(ev, a, b, ea, ga, va, acca, dxa, gb, vb, accb, dxb)
-        if not decided:
-            if depth >= _MAX_DEPTH or b - a <= 4.0 * ulp(b):
-                decided = 1
-                t = bracket(ev, a, b, 0, 1.0, ga, gb) if ga < 0.0 <= gb else NONE
-        if decided:
-            if t != NONE:
-                return t
-            if top == 0:
-                return NONE
-            top -= 1  # the pending right half of the nearest ancestor
-            a, b, ea = stack[top, 0], stack[top, 1], stack[top, 2]
-            ga, va, acca, dxa = stack[top, 3], stack[top, 4], stack[top, 5], stack[top, 6]
-            gb, vb, accb, dxb = stack[top, 7], stack[top, 8], stack[top, 9], stack[top, 10]
-            depth = int(stack[top, 11])
-            continue
-        mid = 0.5 * (a + b)
-        gm, vm, accm, dxm, _dv, em = evaluate(ev, mid)
-        stack[top, 0], stack[top, 1], stack[top, 2] = mid, b, em
-        stack[top, 3], stack[top, 4], stack[top, 5], stack[top, 6] = gm, vm, accm, dxm
-        stack[top, 7], stack[top, 8], stack[top, 9], stack[top, 10] = gb, vb, accb, dxb
-        stack[top, 11] = depth + 1
-        top += 1
-        b, gb, vb, accb, dxb = mid, gm, vm, accm, dxm
-        depth += 1
-
-
-def search_stack():
-    """The work array of :func:`search`: one row per pending interval."""
-    return np.empty((_MAX_DEPTH + 2, 12))
-
-
-# ------------------------------------------------------------------ next_impact
 @jit
 def next_impact(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
     """impact.next_impact: (time of the first impact in (0, horizon] or NONE, status, info).
@@ -382,7 +250,7 @@ def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
     if ga == 0.0 and fa[1] > 0.0:
         return 0.0, STATUS_OK, 0.0  # on the wall, moving into it
     fa = (ga, fa[1], fa[2], fa[3], fa[4], fa[5])
-    w = danger_halfwidth(ev, horizon)
+    w = danger_halfwidth(ev[11], ev[5], ev[4], ev[14], ev[15], horizon)
     valid = True  # fa holds the values at a
     for k in range(1, n + 1):
         b = horizon if k == n else k * (horizon / n)
@@ -394,27 +262,11 @@ def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
             fa = evaluate_row(ev, grid, k - 1) if cached else evaluate(ev, a)
             valid = True
         fb = evaluate_row(ev, grid, k) if cached else evaluate(ev, b)
-        r = search(ev, a, b, fa, fb, stack)
+        r = search(ev, None, a, b, fa, fb, stack)
         if r != NONE:
             return r, STATUS_OK, 0.0
         a, fa = b, fb
     return NONE, STATUS_OK, 0.0
-
-
-@jit
-def danger_halfwidth(ev, horizon):
-    """impact._danger_halfwidth; -1.0 for None."""
-    s = (ev[11] * (1.0 + 4.0 * _EPS) - ev[5] + ev[14] + ev[15] * horizon) / (2.0 * ev[4])
-    if s >= 1.0:
-        return -1.0
-    return 2.0 * math.asin(math.sqrt(max(s, 0.0))) + 1e-9
-
-
-@jit
-def far_from_wall(psi_a, psi_b, w):
-    """impact._far_from_wall."""
-    k = math.ceil((psi_a - w) / TWO_PI)
-    return TWO_PI * k - w > psi_b
 
 
 # ------------------------------------------------------------------ sticking

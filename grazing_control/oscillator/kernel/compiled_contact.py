@@ -9,21 +9,19 @@ The search is most of the compliant flow's time (issue 30, the suite's CPU: cPro
 test_stop_selection's fits, docs/benchmarks.md "The compliant stop's hot path"): an
 interval is excluded or bisected on a bound of the second derivative, and a root's
 safeguarded secant mostly bisects, some 50 evaluations of the region's closed form per
-switching time. Self-contained in its own file: numba's on-disk cache keys a function on
-its own source file (:mod:`.compiled`'s docstring), and nothing here calls into another
-file.
+switching time. Compiled by the kernel's ``jit``, whose on-disk cache is stamped by every
+file of the folder (:mod:`.caching`).
 """
 
 from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-__all__ = ["GAP", "FORCE", "NONE", "bracket_region", "first_crossing_region"]
+from .caching import jit
 
-jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+__all__ = ["GAP", "FORCE", "NONE", "bracket_region", "first_crossing_region"]
 
 #: what is bracketed: the gap delta (_Region.gap) or the force k delta + c delta'
 #: (_Region.force_value)

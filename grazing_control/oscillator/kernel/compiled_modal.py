@@ -19,6 +19,12 @@ here                   the pure path
                        ``_danger_halfwidth``, ``_far_from_wall``
 =====================  ==========================================================
 
+The interval search (:func:`bracket`, :func:`search`, the window's ``danger_halfwidth``
+and ``far_from_wall``) is the 1-DOF kernel's, written once for both models in
+:mod:`.interval_search` and imported here: it reaches this model's :func:`evaluate`,
+:func:`jerk_bound` and :func:`gap_rounding` (``terms`` the array of modes), as the pure
+path's ``_search`` runs over either evaluator.
+
 CPython's arithmetic, written out: a complex times a float promotes the float to a
 complex (Python 3.11), ``(a + ib) h = (a h - b 0) + i (a 0 + b h)``; a product of two
 complex numbers is ``(ac - bd) + i (ad + bc)``; ``cmath.exp(x + iy)`` is
@@ -29,10 +35,9 @@ multiplication, oscillator/kernel/compiled.py ``power``). The powers of the mode
 numbers and everything else that depends on the flow only come computed by the pure
 path's :func:`~grazing_control.oscillator.ndof.impact.search_constants`.
 
-Only this module's functions are compiled here and none calls another file's, so numba's
-on-disk cache (``cache=True``, keyed on this file) never loads stale code
-(oscillator/kernel/compiled.py, module docstring); :func:`ulp` and the stack's layout
-are therefore this module's own. A start beyond the wall comes back as
+numba's on-disk cache of these functions is stamped by every file of the kernel folder
+(:mod:`.caching`), so an edit of the search recompiles this module's callers of it. A
+start beyond the wall comes back as
 ``STATUS_BEYOND_WALL`` with the gap, through
 :func:`grazing_control.oscillator.kernel.modal_search`'s function, and ndof.impact raises
 the pure path's error with it.
@@ -42,16 +47,17 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from .caching import jit
+from .interval_search import (NONE, bracket, danger_halfwidth, far_from_wall, search,
+                              search_stack, ulp)
 
 __all__ = ["make_eval", "evaluate", "jerk_bound", "gap_rounding", "bracket", "search",
            "search_stack", "next_impact", "NONE", "STATUS_OK", "STATUS_BEYOND_WALL"]
 
 TWO_PI = 2.0 * math.pi
-_MAX_DEPTH = 64
 _EPS = 2.0 ** -52
-NONE = -1.0  # "no impact" (times are >= 0)
 STATUS_OK = 0
 STATUS_BEYOND_WALL = 2  # InitialStateError (info: the gap at the start)
 
@@ -62,14 +68,6 @@ _OMEGA, _LAG, _AMP, _DD, _N, _AW3, _DRIFT, _OMEGA2, _RHO, _RHO2, _STEP, _TWO = r
 # Im c lam, Re c lam^2, Im c lam^2, |c| |lam|^3, e^{max(Re lam, 0) horizon})
 _CABS, _ACC_ERR, _M0, _M1, _ZMAG = 7, 8, 9, 10, 11
 
-jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-
-
-@jit
-def ulp(x):
-    """math.ulp(x) for finite x: the gap from |x| to the next float up."""
-    a = abs(x)
-    return np.nextafter(a, np.inf) - a
 
 
 @jit
@@ -171,135 +169,6 @@ def gap_rounding(ev, h, g, zx):
 
 
 @jit
-def bracket(ev, terms, lo, hi, which, sign, flo, fhi):
-    """impact._bracket: root of g (which = 0) or v (which = 1) in [lo, hi]."""
-    d = flo - fhi
-    x = lo + (hi - lo) * (flo / d) if d != 0.0 else 0.5 * (lo + hi)
-    if not lo < x < hi:
-        x = 0.5 * (lo + hi)
-    probed = False
-    while hi - lo > 4.0 * ulp(hi):
-        g, v, acc, _zx = evaluate(ev, terms, x)
-        if which == 0:
-            fx, dfx = sign * g, sign * v
-        else:
-            fx, dfx = sign * v, sign * acc
-        if fx >= 0.0:
-            hi = x
-        else:
-            lo = x
-        xn = x - fx / dfx if dfx > 0.0 else lo
-        probe = 2.0 * ulp(x)
-        if abs(xn - x) < probe:  # 2 ulps past the root; bisect if the last probe failed
-            xn = 0.5 * (lo + hi) if probed else (x - probe if fx >= 0.0 else x + probe)
-            probed = not probed
-        else:
-            probed = False
-        if not lo < xn < hi:
-            xn = 0.5 * (lo + hi)
-        if xn == x:
-            xn = 0.5 * (lo + hi)
-            if xn == x:
-                break
-        x = xn
-    return hi
-
-
-@jit
-def _certified(ev, terms, a, b, ga, va, acca, zxa, gb, vb, accb, zxb):
-    """The certified cases of impact._search on [a, b]: (decided, time), decided = 1 with
-    time >= 0 (impact) or NONE (none), decided = 0 when the interval must be split."""
-    jw = jerk_bound(ev, terms, a) * (b - a) * (1.0 + 1e-12) + 2.0 * ev[_ACC_ERR]
-    concave = acca < 0.0 and accb < 0.0 and -(acca + accb) > jw
-    convex = acca > 0.0 and accb > 0.0 and (acca + accb) > jw
-    if concave:  # v decreasing: at most one maximum
-        if va <= 0.0:
-            return 1, NONE
-        if vb >= 0.0:
-            return 1, (bracket(ev, terms, a, b, 0, 1.0, ga, gb) if gb >= 0.0 else NONE)
-        tm = bracket(ev, terms, a, b, 1, -1.0, va, vb)
-        gm = evaluate(ev, terms, tm)[0]
-        return 1, (bracket(ev, terms, a, tm, 0, 1.0, ga, gm) if gm >= 0.0 else NONE)
-    if convex:  # v increasing: g below the chord unless it ends above 0
-        if gb < 0.0:
-            return 1, NONE
-        if ga < 0.0:
-            return 1, bracket(ev, terms, a, b, 0, 1.0, ga, gb)
-        if va >= 0.0:  # at rest on the wall and pushed into it
-            return 1, a
-        tmin = bracket(ev, terms, a, b, 1, 1.0, va, vb) if vb > 0.0 else b
-        gmin = evaluate(ev, terms, tmin)[0]
-        if gmin >= 0.0:  # the dip below the wall is below rounding: at rest, pushed in
-            return 1, tmin
-        return 1, (bracket(ev, terms, tmin, b, 0, 1.0, gmin, gb) if gmin < 0.0 <= gb
-                   else NONE)
-    curvature = max(0.0, 0.5 * (jw - acca - accb))
-    upper = max(ga, gb) + 0.125 * math.pow(b - a, ev[14]) * curvature
-    if upper < 0.0 and (upper + ev[_M0] + ev[_M1] * b < 0.0 or
-                        upper + max(gap_rounding(ev, a, ga, zxa), gap_rounding(ev, b, gb, zxb))
-                        < 0.0):
-        return 1, NONE
-    return 0, NONE
-
-
-@jit
-def search(ev, terms, a, b, fa, fb, stack):
-    """impact._search(f, a, b, fa, fb, 0): first impact time in (a, b], or NONE; the
-    recursion (left half first) on an explicit stack of pending right halves."""
-    top = 0
-    ga, va, acca, zxa = fa[0], fa[1], fa[2], fa[3]
-    gb, vb, accb, zxb = fb[0], fb[1], fb[2], fb[3]
-    depth = 0
-    while True:
-        decided, t = _certified(ev, terms, a, b, ga, va, acca, zxa, gb, vb, accb, zxb)
-        if not decided:
-            if depth >= _MAX_DEPTH or b - a <= 4.0 * ulp(b):
-                decided = 1
-                t = bracket(ev, terms, a, b, 0, 1.0, ga, gb) if ga < 0.0 <= gb else NONE
-        if decided:
-            if t != NONE:
-                return t
-            if top == 0:
-                return NONE
-            top -= 1  # the pending right half of the nearest ancestor
-            a, b = stack[top, 0], stack[top, 1]
-            ga, va, acca, zxa = stack[top, 2], stack[top, 3], stack[top, 4], stack[top, 5]
-            gb, vb, accb, zxb = stack[top, 6], stack[top, 7], stack[top, 8], stack[top, 9]
-            depth = int(stack[top, 10])
-            continue
-        mid = 0.5 * (a + b)
-        gm, vm, accm, zxm = evaluate(ev, terms, mid)
-        stack[top, 0], stack[top, 1] = mid, b
-        stack[top, 2], stack[top, 3], stack[top, 4], stack[top, 5] = gm, vm, accm, zxm
-        stack[top, 6], stack[top, 7], stack[top, 8], stack[top, 9] = gb, vb, accb, zxb
-        stack[top, 10] = depth + 1
-        top += 1
-        b, gb, vb, accb, zxb = mid, gm, vm, accm, zxm
-        depth += 1
-
-
-def search_stack():
-    """The work array of :func:`search`: one row per pending interval."""
-    return np.empty((_MAX_DEPTH + 2, 11))
-
-
-@jit
-def _danger_halfwidth(ev, horizon):
-    """impact._danger_halfwidth; -1.0 for None."""
-    s = (ev[_CABS] * (1.0 + 4.0 * _EPS) - ev[3] + ev[_M0] + ev[_M1] * horizon) / (2.0 * ev[2])
-    if s >= 1.0:
-        return -1.0
-    return 2.0 * math.asin(math.sqrt(max(s, 0.0))) + 1e-9
-
-
-@jit
-def _far_from_wall(psi_a, psi_b, w):
-    """impact._far_from_wall."""
-    k = math.ceil((psi_a - w) / TWO_PI)
-    return TWO_PI * k - w > psi_b
-
-
-@jit
 def next_impact(table, S, tau0, z0, horizon, max_step, stack):
     """ndof.impact._next_impact (inputs checked, horizon > 0): (time of the first impact
     in (0, horizon] or NONE, status, info); ``max_step`` <= 0: the default window;
@@ -321,13 +190,13 @@ def next_impact(table, S, tau0, z0, horizon, max_step, stack):
     if ga == 0.0 and va > 0.0:
         return 0.0, STATUS_OK, 0.0  # on the wall, moving into it
     fa = (ga, va, acca, zxa)
-    w = _danger_halfwidth(ev, horizon)
+    w = danger_halfwidth(ev[_CABS], ev[3], ev[2], ev[_M0], ev[_M1], horizon)
     valid = True  # fa holds the values at a
     omega, lag = ev[0], ev[1]
     for k in range(1, count + 1):
         b = horizon if k == count else k * (horizon / count)
-        if k > 1 and w >= 0.0 and _far_from_wall(tau0 + omega * a - lag,
-                                                 tau0 + omega * b - lag, w):
+        if k > 1 and w >= 0.0 and far_from_wall(tau0 + omega * a - lag,
+                                                tau0 + omega * b - lag, w):
             a, valid = b, False  # g < 0 on all of [a, b]: the search would find nothing
             continue
         if not valid:
