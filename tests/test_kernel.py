@@ -316,6 +316,10 @@ def test_a_callees_edit_invalidates_its_callers_cache(tmp_path, monkeypatch):
 
     monkeypatch.setattr(numba_caching.CacheImpl, "_locator_classes",
                         list(numba_caching.CacheImpl._locator_classes))
+    # no .pyc: the callee's edit keeps its size, and within the same second as its first
+    # import Python would load the old bytecode (its check is the source's mtime in
+    # seconds and its size): g then recompiled over the old f (a fresh clone's rerun)
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
     package = tmp_path / "kernel_copy"
     package.mkdir()
     (package / "__init__.py").write_text("")

@@ -9,14 +9,16 @@ The bag is replayed through rig_mock (grazing replay-rig: the same pulses bit fo
 The rig is config/rigs/two_mass_beam.yaml with the sensor's noise at 0.2 um (10x less):
 the orbit the design holds meets the stop at v- 0.005-0.009 (model units; 0.8-1.4 mm/s),
 and at the file's 2 um (sigma / |Delta d| = 8) 4 of 16 held periods had no impact
-(measured through the nodes, 2026-11-28); at 0.2 um every held period has one. The
-sensor at the file's 2 kHz (500 samples a period) and the scene at physical speed: the
-controller's n-DOF model filter answers in time there since its fit stops within 1e-3 of
-the posterior std (docs/theory_estimation.md, "Where the fit stops": 3.7 evaluations of
-the motion per section, not 7.5, and no 35-80 ms fits at a kink); before, the scene ran
-at half speed with a 500 Hz sensor, and at physical speed 16-22 of 59 sections were late
-at load 14-26 (docs/benchmarks.md "The n-DOF event search compiled"), now 0 of 59 in two
-runs at load 5 (docs/benchmarks.md "Where the model fit stops")."""
+(measured through the nodes, 2026-11-28); at 0.2 um every held period has one. The sensor at 500 Hz (125 samples a period, not the
+file's 500) and the scene at half of physical speed (SLOW). At physical speed with the
+file's 2 kHz the controller answers in time at idle (its fit stops within 1e-3 of the
+posterior std: docs/theory_estimation.md, "Where the fit stops"; docs/rig_scene.md), and
+this scene passed 3 of 3 runs at load 6, but a held period without an impact failed it
+in a fresh clone's suite beside other agents' tests (load 7) and in 2 of 4 runs of
+another agent at load 3-5: at physical speed the answers' margin is a few ms, so the
+test's scene keeps the margin of half speed. What the tests read (the SI boundary, the
+pulse map, capture) does not depend on the rate or the speed; physical speed is
+benchmarks/bench_rig_scene.py's."""
 
 import math
 from pathlib import Path
@@ -30,7 +32,7 @@ from test_rig_scene import _seconds, run_rig_scene
 pytestmark = pytest.mark.timeout(240)
 
 RIG = Path(__file__).resolve().parents[1] / "config" / "rigs" / "two_mass_beam.yaml"
-PERIODS, ON, SLOW, RATE = 10, 1, 1.0, "2 kHz"
+PERIODS, ON, SLOW, RATE = 10, 1, 2.0, "500 Hz"
 #: The held periods, one impact each (the control acts from section 1; over 16 periods
 #: at 1/8 of physical speed and 2 kHz, one impact in each from the fifth on).
 HELD = 5
