@@ -11,6 +11,8 @@ n = 1 this is the 1-DOF a(omega) and tau* = phi (oscillator/params.py).
 
 from __future__ import annotations
 
+import cmath
+import functools
 import math
 
 import numpy as np
@@ -21,7 +23,7 @@ from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["harmonic_amplitudes", "grazing_clearance", "grazing_phase", "periodic_response",
-           "NdofFlow", "MAX_CONDITION"]
+           "NdofFlow", "MAX_CONDITION", "matvec", "matmul"]
 
 TWO_PI = 2.0 * math.pi
 #: Largest condition number of the modal matrix V accepted: the flow's rounding grows like
@@ -152,9 +154,33 @@ class NdofFlow:
         return self.model.period
 
     def transition(self, h: float) -> np.ndarray:
-        """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n)."""
-        e = np.exp(self.eigenvalues * float(h))
-        return ((self.modes * e) @ self.inverse).real
+        """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n).
+
+        In a fixed order of real operations, which the compiled n-DOF flow
+        (oscillator/kernel/compiled_modal.py ``transition``) repeats, so that both give the
+        same floats: e_k = cmath.exp(lambda_k h), p = v_k e_k (complex product written out),
+        Phi_ij = sum over k, from 0.0, of Re(p_i u_kj) (the order of
+        ``einsum("ik,mk,kj->mij")`` in the model filter's samples); before issue 32's
+        compiled advance it was ``((V e) @ U).real`` (BLAS), which differs from this in
+        the last bits (docs/benchmarks.md, "The n-DOF trajectory compiled")."""
+        lam, vr, vi, ur, ui = self.modal_parts
+        h = float(h)
+        e = [cmath.exp(x * h) for x in lam]
+        er = np.array([x.real for x in e])
+        ei = np.array([x.imag for x in e])
+        pr = vr * er - vi * ei
+        pi = vr * ei + vi * er
+        phi = np.zeros((2 * self.n, 2 * self.n))
+        for k in range(len(lam)):
+            phi = (pr[:, k, None] * ur[k] - pi[:, k, None] * ui[k]) + phi
+        return phi
+
+    @functools.cached_property
+    def modal_parts(self) -> tuple:
+        """(eigenvalues as Python complex numbers, Re and Im of the weighted modes (2n, m),
+        Re and Im of the inverse's rows (m, 2n)): :meth:`transition`'s operands."""
+        return ([complex(x) for x in self.eigenvalues], self.modes.real.copy(),
+                self.modes.imag.copy(), self.inverse.real.copy(), self.inverse.imag.copy())
 
     def particular(self, tau: float) -> np.ndarray:
         """X_p(tau) = (Re(X e^{i tau}), Re(i omega X e^{i tau})), the periodic response."""
@@ -188,8 +214,10 @@ class NdofFlow:
         """Free acceleration of x_w: -d* omega^2 cos(tau - tau*) + (A z)_{n + i_w}."""
         m = self.model
         row = self.A[m.n + m.i_w]
-        return (-self.d_star * m.omega ** 2 * math.cos(tau - self.tau_star)
-                + float(row @ np.asarray(z, dtype=float)))
+        s = 0.0          # (A z)_{n + i_w} from 0.0 in the order of z (as the compiled flow)
+        for a, x in zip(row.tolist(), np.asarray(z, dtype=float).tolist()):
+            s += a * x
+        return -self.d_star * m.omega ** 2 * math.cos(tau - self.tau_star) + s
 
     def on_wall(self, tau: float) -> tuple:
         """(z_w, z_{n+w}) of x_w = d, v_w = 0 at phase tau: (Delta d + 2 d* sin^2(psi/2),
@@ -198,3 +226,21 @@ class NdofFlow:
         s = math.sin(0.5 * psi)
         return (self.model.delta_d + 2.0 * self.d_star * s * s,
                 self.d_star * self.model.omega * math.sin(psi))
+
+
+def matvec(a: np.ndarray, x) -> np.ndarray:
+    """a @ x summed over j = 0, 1, ... from 0.0 in elementwise IEEE operations (no BLAS,
+    whose order and fused multiply-adds are its own): the order that the compiled n-DOF
+    flow (oscillator/kernel/compiled_modal.py) repeats, so that both give the same floats."""
+    out = np.zeros(a.shape[0])
+    for j in range(a.shape[1]):
+        out = out + a[:, j] * x[j]
+    return out
+
+
+def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b in the order of :func:`matvec`, column of a by row of b."""
+    out = np.zeros((a.shape[0], b.shape[1]))
+    for j in range(a.shape[1]):
+        out = out + a[:, j, None] * b[j]
+    return out

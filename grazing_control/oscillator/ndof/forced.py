@@ -68,7 +68,14 @@ MIN_IMPACT_VELOCITY = 1e-9
 
 def actuated_mass(flow: NdofFlow) -> float:
     """m_a = 1 / (M^-1)_aa: the impulse m_a Delta v on coordinate i_a changes its velocity
-    by Delta v (module docstring)."""
+    by Delta v (module docstring); kept per flow (the model filter asks for it at every
+    iteration of its fit)."""
+    return _actuated_mass(flow)
+
+
+@functools.lru_cache(maxsize=64)
+def _actuated_mass(flow: NdofFlow) -> float:
+    """:func:`actuated_mass`, kept per flow (flows compare by identity)."""
     a = flow.model.i_a
     return float(1.0 / np.linalg.solve(flow.model.M, np.eye(flow.n)[a])[a])
 
