@@ -12,7 +12,9 @@ d +- 1e-10 .. 1e-1 relative), three horizons each, plus starts on the wall and b
 
 import dataclasses
 import math
+from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
@@ -24,6 +26,8 @@ from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 from test_ndof_impact import _random_cases, _random_model
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.skipif(not kernel.use_kernel(),
                                 reason="the kernel is not in use (numba or GRAZING_KERNEL)")
@@ -248,3 +252,49 @@ def test_compiled_model_filter_period_gives_the_pure_floats(monkeypatch, seed):
         pulses += width > 0.0 and correction != 0.0 and len(pure[4]) > 0
     assert differ == []
     assert ran > 1000 and impacts > 700 and grazing > 15 and pulses > 100
+
+
+class _Recorder:
+    """compiled_modal's entry points, recording the numba types of their arguments."""
+
+    def __init__(self, km):
+        self.km, self.types = km, {}
+        for name in ("STATUS_OK", "NONE", "STATUS_BEYOND_WALL", "search_stack"):
+            setattr(self, name, getattr(km, name))
+
+    def __getattr__(self, name):
+        f = getattr(self.km, name)
+
+        def call(*args):
+            self.types.setdefault(name, set()).add(tuple(numba.typeof(a) for a in args))
+            return f(*args)
+        return call
+
+
+def test_the_warm_up_loads_what_the_model_filter_calls(monkeypatch):
+    """kernel.warm_up_modal (the controller's start, the zygote's) calls each compiled
+    entry point with the argument types of the calls that the plant and the model filter
+    make (a kick and a pulse on the two-mass chain, impacts): a node never compiles at its
+    first section."""
+    from grazing_control.oscillator.kernel import compiled_modal as km
+    from grazing_control.oscillator.ndof.model import load_model
+
+    warm = _Recorder(km)
+    kernel._modal_first_calls(warm)
+    real = _Recorder(km)
+    monkeypatch.setattr(kernel, "_modal", real)
+    model = dataclasses.replace(load_model(ROOT / "config" / "models" / "two_mass_chain.yaml"),
+                                delta_d=-1e-4)
+    flow = NdofFlow.of(model)
+    z = 1e-3 * flow.d_star * np.array([1.0, -0.5, 0.3, 0.2])
+    samples = np.linspace(0.01, 1.0, 50) * model.period
+    impacts = len(ndof_impact.advance(flow, flow.tau2, z, 3.0 * model.period).impacts)
+    ndof_impact.next_impact(flow, flow.tau2, z, model.period)
+    for width in (0.0, 0.01 * model.period):
+        out = motion.modal_trajectory(model, z, samples, 1e-3, 0.3 * model.period,
+                                      model.period, width, kernel=True)
+        impacts += len(out[4])
+    assert impacts > 2
+    assert set(real.types) == {"next_impact", "advance", "modal_events"}
+    for name, types in real.types.items():
+        assert types <= warm.types[name], (name, types - warm.types[name])

@@ -247,19 +247,26 @@ def warm_up_modal() -> float:
     with _sigint_held():
         from . import compiled_modal as km
 
-        # one mode (lambda = -0.1 + i) of a model with n = 1 (SearchConstants' layout)
-        table = np.array([[-0.1, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0]])
-        scalars = np.array([1.0, 0.0, 1.0, -1e-3, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 2.0,
-                            0.8, 0.0, 1.0, 1e150])
-        stack = km.search_stack()
-        km.next_impact(table, scalars, 0.0, np.zeros(2), 1.0, 0.0, stack)
-        parts = (np.ones((2, 1)), np.zeros((2, 1)), np.ones((1, 2)), np.zeros((1, 2)),
-                 np.array([[0.0, 1.0], [-1.0, -0.2]]))
-        km.advance(table, scalars, *parts, 0.0, np.zeros(2), 1.0, 1e-6, 10000, stack)
-        km.modal_events(table, scalars, *parts, 0.0, 0, np.zeros(2),
-                        np.array([[0.0, 1.0, 0.0, -1e-3]]), np.zeros((1, 2)), 1e-6, stack)
+        _modal_first_calls(km)
         _modal = km
     return time.perf_counter() - t0
+
+
+def _modal_first_calls(km):
+    """One call of each entry point of :mod:`.compiled_modal` with the argument types of
+    the n-DOF core's calls (tests/test_ndof_compiled.py checks them): numba compiles, or
+    loads, each specialisation."""
+    # one mode (lambda = -0.1 + i) of a model with n = 1 (SearchConstants' layout)
+    table = np.array([[-0.1, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0]])
+    scalars = np.array([1.0, 0.0, 1.0, -1e-3, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 2.0,
+                        0.8, 0.0, 1.0, 1e150])
+    stack = km.search_stack()
+    km.next_impact(table, scalars, 0.0, np.zeros(2), 1.0, 0.0, stack)
+    parts = (np.ones((2, 1)), np.zeros((2, 1)), np.ones((1, 2)), np.zeros((1, 2)),
+             np.array([[0.0, 1.0], [-1.0, -0.2]]))
+    km.advance(table, scalars, *parts, 0.0, np.zeros(2), 1.0, 1e-6, 10000, stack)
+    km.modal_events(table, scalars, *parts, 0.0, 0, np.zeros(2),
+                    np.array([[0.0, 1.0, 0.0, -1e-3]]), np.zeros((1, 2)), 1e-6, stack)
 
 
 def modal_search():

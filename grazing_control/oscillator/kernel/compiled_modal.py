@@ -1,5 +1,6 @@
 """Compiled mirror of the n-DOF certified event search
-(:func:`grazing_control.oscillator.ndof.impact.next_impact`; issue 32: the rig of n
+(:func:`grazing_control.oscillator.ndof.impact.next_impact`), of the flow with impacts
+(``advance``) and of the model filter's events of a period (issue 32: the rig of n
 masses at physical speed).
 
 The same algorithm as the pure path, function by function and in the same floating
@@ -17,6 +18,17 @@ here                   the pure path
 :func:`search`         ``oscillator.impact._search`` (its recursion on an explicit stack)
 :func:`next_impact`    ``ndof.impact._next_impact`` with ``oscillator.impact._scan_window``,
                        ``_danger_halfwidth``, ``_far_from_wall``
+:func:`transition`     ``ndof.flow.NdofFlow.transition`` (real operations, cmath.exp)
+:func:`matvec`         ``ndof.flow.matvec`` and ``matmul``
+:func:`advance`        ``ndof.impact.advance`` without the monodromy, with
+                       ``_impact_law``, ``_roundings``, ``_velocity_sizes`` and
+                       the flow's ``on_wall``, ``wall_velocity``,
+                       ``wall_acceleration``; what it does not handle (a stick, a
+                       contact at rest, a refused start, the cap) comes back as
+                       ``STATUS_FALLBACK`` and the pure path runs from the start
+:func:`modal_events`   ``dynamics.estimation.motion._modal_events`` (the model
+                       filter's legs, impacts and Jacobians, with
+                       :func:`saltation_matrix`)
 =====================  ==========================================================
 
 The interval search (:func:`bracket`, :func:`search`, the window's ``danger_halfwidth``
@@ -33,7 +45,9 @@ complex numbers is ``(ac - bd) + i (ad + bc)``; ``cmath.exp(x + iy)`` is
 module calls with the exponent passed at run time (``two``: a literal 2 would become a
 multiplication, oscillator/kernel/compiled.py ``power``). The powers of the model's
 numbers and everything else that depends on the flow only come computed by the pure
-path's :func:`~grazing_control.oscillator.ndof.impact.search_constants`.
+path's :func:`~grazing_control.oscillator.ndof.impact.search_constants`. The pure flow's
+products (``NdofFlow.transition``, ``matvec``) are NumPy's elementwise operations, each
+rounded once as here (numba fuses no multiply-add without fastmath), not BLAS.
 
 numba's on-disk cache of these functions is stamped by every file of the kernel folder
 (:mod:`.caching`), so an edit of the search recompiles this module's callers of it. A
@@ -54,7 +68,10 @@ from .interval_search import (NONE, bracket, danger_halfwidth, far_from_wall, se
                               search_stack, ulp)
 
 __all__ = ["make_eval", "evaluate", "jerk_bound", "gap_rounding", "bracket", "search",
-           "search_stack", "next_impact", "NONE", "STATUS_OK", "STATUS_BEYOND_WALL"]
+           "search_stack", "next_impact", "transition", "matvec", "matmul", "on_wall",
+           "wall_velocity", "wall_acceleration", "wall_rounding", "saltation_matrix",
+           "advance", "modal_events", "NONE", "STATUS_OK", "STATUS_BEYOND_WALL",
+           "STATUS_FALLBACK"]
 
 TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
