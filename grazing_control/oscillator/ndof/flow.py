@@ -156,31 +156,22 @@ class NdofFlow:
     def transition(self, h: float) -> np.ndarray:
         """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n).
 
-        In a fixed order of real operations, which the compiled n-DOF flow
+        In an order of operations that the compiled n-DOF flow
         (oscillator/kernel/compiled_modal.py ``transition``) repeats, so that both give the
-        same floats: e_k = cmath.exp(lambda_k h), p = v_k e_k (complex product written out),
-        Phi_ij = sum over k, from 0.0, of Re(p_i u_kj) (the order of
-        ``einsum("ik,mk,kj->mij")`` in the model filter's samples); before issue 32's
-        compiled advance it was ``((V e) @ U).real`` (BLAS), which differs from this in
-        the last bits (docs/benchmarks.md, "The n-DOF trajectory compiled")."""
-        lam, vr, vi, ur, ui = self.modal_parts
+        same floats (tests/test_ndof_compiled.py): e_k = cmath.exp(lambda_k h), and NumPy's
+        ``einsum("ik,k,kj->ij")`` (the model filter's ``modal_transitions`` order): for each
+        entry the complex products (v_ik e_k) u_kj written out, their real parts summed over
+        k from 0.0. Before issue 32's compiled advance it was ``((V e) @ U).real``, whose
+        BLAS sums in its own order (docs/theory_ndof_flow.md section 4, the size of the
+        change)."""
         h = float(h)
-        e = [cmath.exp(x * h) for x in lam]
-        er = np.array([x.real for x in e])
-        ei = np.array([x.imag for x in e])
-        pr = vr * er - vi * ei
-        pi = vr * ei + vi * er
-        phi = np.zeros((2 * self.n, 2 * self.n))
-        for k in range(len(lam)):
-            phi = (pr[:, k, None] * ur[k] - pi[:, k, None] * ui[k]) + phi
-        return phi
+        e = np.array([cmath.exp(x * h) for x in self._eigenvalues])
+        return np.einsum("ik,k,kj->ij", self.modes, e, self.inverse).real.copy()
 
     @functools.cached_property
-    def modal_parts(self) -> tuple:
-        """(eigenvalues as Python complex numbers, Re and Im of the weighted modes (2n, m),
-        Re and Im of the inverse's rows (m, 2n)): :meth:`transition`'s operands."""
-        return ([complex(x) for x in self.eigenvalues], self.modes.real.copy(),
-                self.modes.imag.copy(), self.inverse.real.copy(), self.inverse.imag.copy())
+    def _eigenvalues(self) -> list:
+        """The eigenvalues as Python complex numbers (:meth:`transition`'s cmath.exp)."""
+        return [complex(x) for x in self.eigenvalues]
 
     def particular(self, tau: float) -> np.ndarray:
         """X_p(tau) = (Re(X e^{i tau}), Re(i omega X e^{i tau})), the periodic response."""
@@ -229,18 +220,21 @@ class NdofFlow:
 
 
 def matvec(a: np.ndarray, x) -> np.ndarray:
-    """a @ x summed over j = 0, 1, ... from 0.0 in elementwise IEEE operations (no BLAS,
-    whose order and fused multiply-adds are its own): the order that the compiled n-DOF
-    flow (oscillator/kernel/compiled_modal.py) repeats, so that both give the same floats."""
+    """a @ x: the products a_ij x_j, summed over j = 0, 1, ... from 0.0, each operation
+    rounded once (NumPy's elementwise ones; no BLAS, whose order and fused multiply-adds
+    are its own): the order that the compiled n-DOF flow (oscillator/kernel/compiled_modal.py)
+    repeats, so that both give the same floats."""
+    p = a * np.asarray(x, dtype=float)
     out = np.zeros(a.shape[0])
     for j in range(a.shape[1]):
-        out = out + a[:, j] * x[j]
+        out = out + p[:, j]
     return out
 
 
 def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a @ b in the order of :func:`matvec`, column of a by row of b."""
+    """a @ b in the order of :func:`matvec`: the products a_ij b_jc summed over j from 0.0."""
+    p = a[:, :, None] * b
     out = np.zeros((a.shape[0], b.shape[1]))
     for j in range(a.shape[1]):
-        out = out + a[:, j, None] * b[j]
+        out = out + p[:, j]
     return out

@@ -191,10 +191,10 @@ def search_constants(flow: NdofFlow) -> SearchConstants:
     scalars = np.array([m.omega, flow.tau_star, flow.d_star, m.delta_d, m.n, aw3,
                         drift_scale, m.omega ** 2, rho, rho ** 2, step, 2.0, m.r, m.i_w,
                         flow.condition, MAX_AMPLITUDE])
-    _lam, vr, vi, ur, ui = flow.modal_parts
+    modes, inv = flow.modes, flow.inverse
     return SearchConstants(lam, vw, inverse, vw_abs, inverse_abs, lam3, rho, aw3, drift_scale,
-                           step, table, scalars, vr.copy(), vi.copy(), ur.copy(), ui.copy(),
-                           np.array(flow.A, dtype=float))
+                           step, table, scalars, modes.real.copy(), modes.imag.copy(),
+                           inv.real.copy(), inv.imag.copy(), np.array(flow.A, dtype=float))
 
 
 class _Eval(GapEvaluator):
