@@ -234,11 +234,12 @@ _modal = None
 
 
 def warm_up_modal() -> float:
-    """Load the compiled n-DOF event search (:mod:`.compiled_modal`: compiled on a
-    machine's first call, ~10 s, then loaded from numba's cache, ~0.03 s) where the kernel
-    is in use; seconds taken (0.0 when loaded before or not in use). Until then
-    :func:`modal_search` is None and the n-DOF core searches in Python, with the same
-    floats: a caller that needs the speed (controller_node's start, through
+    """Load the compiled n-DOF event search, flow with impacts and model filter's events
+    (:mod:`.compiled_modal`: compiled on a machine's first call, ~30 s, then loaded from
+    numba's cache, ~0.1 s after :func:`warm_up`) where the kernel is in use; seconds
+    taken (0.0 when loaded before or not in use). Until then :func:`modal_search`,
+    :func:`modal_advance` and :func:`modal_events` are None and the n-DOF core runs in
+    Python, with the same floats: a caller that needs the speed (controller_node's start, through
     ``dynamics.estimation.stream.warm_up``) loads it first, and nothing else waits for it."""
     global _modal
     if _modal is not None or not use_kernel():
