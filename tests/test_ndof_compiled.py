@@ -131,10 +131,10 @@ def _segment_key(seg):
     return seg.z.tobytes(), seg.tau, seg.impacts
 
 
-@pytest.mark.parametrize("seed", [31, 32])
+@pytest.mark.parametrize("seed", [31])
 def test_compiled_advance_gives_the_pure_segment(monkeypatch, seed):
     """advance without the monodromy (what the plant and the model filter run) over one
-    and three periods from 2 x 1500 random cases (large transients, starts near X**,
+    and three periods from 1500 random cases (large transients, starts near X**,
     near-grazing humps): the final state, phase and every impact equal bit for bit with
     the compiled flow (kernel.modal_advance) and the pure one. The compiled path itself
     ran (not the fallback) in most cases, through impacts near grazing too; the cases it
@@ -209,16 +209,16 @@ def _trajectory_cases(seed, count):
     return out
 
 
-@pytest.mark.parametrize("seed", [41, 42])
+@pytest.mark.parametrize("seed", [41])
 def test_compiled_model_filter_period_gives_the_pure_floats(monkeypatch, seed):
-    """motion.modal_trajectory, 2 x 1200 random periods with kicks and pulses (width > 0,
+    """motion.modal_trajectory, 1500 random periods with kicks and pulses (width > 0,
     clipped or not): the compiled path (kernel=True: kernel.modal_events and the compiled
     samples) and the pure one (kernel=False, GRAZING_KERNEL=python) give every output
     (states and Jacobians at the samples, the end, its monodromy, the impacts) bit for
     bit, or the same error. The compiled events ran in most periods, with impacts, near
     grazing and in pulses."""
     differ, ran, fell_back, impacts, grazing, pulses = [], 0, 0, 0, 0, 0
-    for m, z, samples, correction, delay, width, limit in _trajectory_cases(seed, 1200):
+    for m, z, samples, correction, delay, width, limit in _trajectory_cases(seed, 1500):
         def period(kernel_on):
             return motion.modal_trajectory(m, z, samples, correction, delay, m.period, width,
                                            limit, kernel=kernel_on)
@@ -251,7 +251,7 @@ def test_compiled_model_filter_period_gives_the_pure_floats(monkeypatch, seed):
         grazing += sum(v < 1e-4 * flow.d_star * m.omega for _t, _p, v, _v in pure[4])
         pulses += width > 0.0 and correction != 0.0 and len(pure[4]) > 0
     assert differ == []
-    assert ran > 1000 and impacts > 700 and grazing > 15 and pulses > 100
+    assert ran > 1300 and impacts > 900 and grazing > 15 and pulses > 200
 
 
 class _Recorder:
