@@ -24,8 +24,9 @@ from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.ndof import impact as ndof_impact
 from grazing_control.oscillator.ndof.flow import NdofFlow, matmul, matvec
-from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_flow, lag_advance,
-                                                    lag_particular, static_deflection)
+from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_clearance,
+                                                    forced_flow, lag_advance, lag_particular,
+                                                    static_deflection)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -502,7 +503,7 @@ def _compiled_modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
     rows, shifts = [], []
     for start, end, kick, force in legs:
         force *= ma
-        rows.append((start, end, kick, forced_flow(flow, force).model.delta_d))
+        rows.append((start, end, kick, forced_clearance(flow, force)))
         shifts.append(static_deflection(flow) * force if force else np.zeros(2 * model.n))
     out = compiled(ndof_impact.search_constants(flow), float(flow.tau2), int(model.i_a), z,
                    np.array(rows, dtype=float), np.array(shifts), 1e-6 * model.period)
