@@ -23,9 +23,9 @@ delay 3); ``masses``, the two-mass rig of issue 32 (config/rigs/two_mass_beam.ya
 n-DOF model filter on mass 1 at 500 samples a period with the 4 ms answer lead, its
 gains, ``ModelController.predict`` with the 2 ms pulse; ``--noise-um`` another sensor
 noise; the compiled path there is the evaluation at the samples of
-dynamics/estimation/compiled_modal_flow.py and the n-DOF event search of
-oscillator/kernel/compiled_modal.py; the core path runs the pure search with
-GRAZING_KERNEL=python). ``--paths core``
+dynamics/estimation/compiled_modal_flow.py and the n-DOF event search, flow with impacts
+and period's events of oscillator/kernel/compiled_modal.py; the core path runs the pure
+ones with GRAZING_KERNEL=python). ``--paths core``
 runs one path alone (with ``PYTHONPATH=/work/main``: main's). Printed per path: the time of a section's answer (the add_sample that makes it
 due through the prediction), the time of a sample that makes none due (p50/p99/max, µs),
 their ratio core/kernel, and whether the two paths gave the same estimates, covariances,

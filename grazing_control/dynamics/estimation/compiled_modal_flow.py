@@ -52,16 +52,20 @@ def modal_flow_at_samples(modes, e, inverse, idx, zs, ms, shifts, shifted):
     out = np.empty((m, n2))
     jac = np.empty((m, n2, n2))
     phi = np.empty((n2, n2))
+    re1 = np.empty(nk)
+    im1 = np.empty(nk)
     for a in range(m):
         i_e = idx[a]
         for i in range(n2):
+            for k in range(nk):     # V_ik e_k, the same for every j
+                x, y = modes[i, k], e[a, k]
+                re1[k] = x.real * y.real - x.imag * y.imag
+                im1[k] = x.real * y.imag + x.imag * y.real
             for j in range(n2):
                 acc = 0.0
                 for k in range(nk):
-                    x, y, w = modes[i, k], e[a, k], inverse[k, j]
-                    re1 = x.real * y.real - x.imag * y.imag
-                    im1 = x.real * y.imag + x.imag * y.real
-                    acc = (re1 * w.real - im1 * w.imag) + acc
+                    w = inverse[k, j]
+                    acc = (re1[k] * w.real - im1[k] * w.imag) + acc
                 phi[i, j] = acc
         for i in range(n2):
             acc = 0.0

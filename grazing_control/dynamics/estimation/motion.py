@@ -23,9 +23,10 @@ from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.flow import transition_matrix
 from grazing_control.oscillator.impact import advance, saltation_matrix
 from grazing_control.oscillator.ndof import impact as ndof_impact
-from grazing_control.oscillator.ndof.flow import NdofFlow
-from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_flow, lag_advance,
-                                                    lag_particular, static_deflection)
+from grazing_control.oscillator.ndof.flow import NdofFlow, matmul, matvec
+from grazing_control.oscillator.ndof.forced import (actuated_mass, forced_clearance,
+                                                    forced_flow, lag_advance, lag_particular,
+                                                    static_deflection)
 from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -422,17 +423,42 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     + sigma F and the saltation matrices are the shifted flow's; F does not depend on z0
     (the correction is known), so the Jacobian keeps its form.
     A motion that sticks (a sticking impact of the n-DOF core, issue 32) raises ValueError.
-    ``kernel``: the evaluation at the samples compiled (:mod:`.compiled_modal_flow`, the
-    same numbers bit for bit; the events are the core's in both)."""
+    ``kernel``: compiled (:func:`grazing_control.oscillator.kernel.modal_events`, the
+    events of the period, once kernel.warm_up_modal has loaded it; the evaluation at the
+    samples by :mod:`.compiled_modal_flow`), the same numbers bit for bit
+    (tests/test_ndof_compiled.py, tests/test_estimation_compiled.py); a period the
+    compiled events leave to the pure path (a stick, a contact at rest) runs this
+    function's own loop."""
     flow = modal_flow(model)
-    n, w = model.n, model.i_w
+    n = model.n
     z = np.array(z0, dtype=float).reshape(-1)
     if z.shape != (2 * n,):
         raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
-    m = np.eye(2 * n)
-    events, impacts = [], []
     ma = actuated_mass(flow) if width > 0.0 else 1.0
     legs = correction_legs(correction, delay, duration, width, force_limit / ma)
+    events = _compiled_modal_events(flow, z, legs, ma) if kernel else None
+    times, zs, ms, shifts, z, m, impacts = events or _modal_events(flow, z, legs, ma)
+    if kernel:
+        return _compiled_modal_samples(flow, times, zs, ms, shifts, s, width > 0.0) + (
+            z, m, impacts)
+    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(times) - 1)
+    phi = modal_transitions(flow, s - times[idx])
+    out = np.einsum("mij,mj->mi", phi, zs[idx])
+    if width > 0.0:
+        out = out + shifts[idx]
+    jac = np.einsum("mij,mjk->mik", phi, ms[idx])
+    return out, jac, z, m, impacts
+
+
+def _modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
+    """The events of :func:`modal_trajectory`'s period (each leg's start and each impact):
+    (times, z_e, M_e, shifts sigma F, z at the end, M at the end, impacts), the products
+    in the order of :func:`grazing_control.oscillator.ndof.flow.matvec` (which the
+    compiled events repeat)."""
+    model = flow.model
+    n, w = model.n, model.i_w
+    m = np.eye(2 * n)
+    events, impacts = [], []
     for start, end, kick, force in legs:
         force *= ma
         z = z.copy()
@@ -452,40 +478,49 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
             ti = start + imp.dt
             phi = flow.transition(ti - t_e)
             wall_x, rest_v = fl.on_wall(imp.phase)
-            z_minus = phi @ z_e
+            z_minus = matvec(phi, z_e)
             z_minus[w], z_minus[n + w] = wall_x, imp.v_minus + rest_v
-            m = ndof_impact.saltation_matrix(fl, imp.phase, z_minus) @ phi @ m
+            m = matmul(matmul(ndof_impact.saltation_matrix(fl, imp.phase, z_minus), phi), m)
             z_e = z_minus.copy()
             z_e[n + w] = imp.v_plus + rest_v
             t_e = ti
             events.append((ti, z_e, m, shift))
             impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
-        m = flow.transition(end - t_e) @ m
+        m = matmul(flow.transition(end - t_e), m)
         z = np.array(seg.z, dtype=float) + shift
-    times = np.array([e[0] for e in events])
-    if kernel:
-        return _compiled_modal_samples(flow, events, times, s, width > 0.0) + (z, m, impacts)
-    idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
-    phi = modal_transitions(flow, s - times[idx])
-    out = np.einsum("mij,mj->mi", phi, np.array([e[1] for e in events])[idx])
-    if width > 0.0:
-        out = out + np.array([e[3] for e in events])[idx]
-    jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
-    return out, jac, z, m, impacts
+    return (np.array([e[0] for e in events]), np.array([e[1] for e in events]),
+            np.array([e[2] for e in events]), np.array([e[3] for e in events]), z, m, impacts)
 
 
-def _compiled_modal_samples(flow: NdofFlow, events, times, s, shifted: bool):
-    """(z, jac) at the samples of :func:`modal_trajectory` from its ``events`` by
+def _compiled_modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
+    """:func:`_modal_events` compiled (oscillator/kernel/compiled_modal.py
+    ``modal_events``), or None where it is not loaded or leaves the period to the pure
+    path. The legs' forced flows differ from the free one only in Delta d (their wall)."""
+    compiled = _kernel.modal_events()
+    if compiled is None:
+        return None
+    model = flow.model
+    rows, shifts = [], []
+    for start, end, kick, force in legs:
+        force *= ma
+        rows.append((start, end, kick, forced_clearance(flow, force)))
+        shifts.append(static_deflection(flow) * force if force else np.zeros(2 * model.n))
+    out = compiled(ndof_impact.search_constants(flow), float(flow.tau2), int(model.i_a), z,
+                   np.array(rows, dtype=float), np.array(shifts), 1e-6 * model.period)
+    if out is None:
+        return None
+    return out[:6] + ([tuple(row) for row in out[6].tolist()],)
+
+
+def _compiled_modal_samples(flow: NdofFlow, times, zs, ms, shifts, s, shifted: bool):
+    """(z, jac) at the samples of :func:`modal_trajectory` from its events by
     :mod:`.compiled_modal_flow`, bit for bit."""
     from .compiled_flow import event_offsets
     from .compiled_modal_flow import modal_flow_at_samples
 
     idx, h = event_offsets(times, s)
     e = np.exp(np.multiply.outer(h, flow.eigenvalues))     # as modal_transitions
-    return modal_flow_at_samples(flow.modes, e, flow.inverse, idx,
-                                 np.array([ev[1] for ev in events]),
-                                 np.array([ev[2] for ev in events]),
-                                 np.array([ev[3] for ev in events]), shifted)
+    return modal_flow_at_samples(flow.modes, e, flow.inverse, idx, zs, ms, shifts, shifted)
 
 
 def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay: float,

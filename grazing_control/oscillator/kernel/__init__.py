@@ -24,7 +24,10 @@ code (:func:`warm_up` does either explicitly).
 The n-DOF model's certified event search has its compiled mirror too
 (:mod:`.compiled_modal`, the same floats as oscillator/ndof/impact.py's): the n-DOF core
 takes it (:func:`modal_search`) once :func:`warm_up_modal` has loaded it, and searches in
-Python before; a controller of an n-DOF model loads it at its start.
+Python before; a controller of an n-DOF model loads it at its start. With it come the
+compiled flow with impacts (:func:`modal_advance`: ndof.impact.advance without sticking)
+and the model filter's events of a period (:func:`modal_events`:
+dynamics.estimation.motion.modal_trajectory's loop), the same floats as well.
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialSt
 __all__ = ["ENV", "available", "use_kernel", "loaded", "warm_up", "next_impact",
            "next_impact_unchecked", "advance",
            "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple",
-           "warm_up_modal", "modal_search"]
+           "warm_up_modal", "modal_search", "modal_advance", "modal_events"]
 
 #: Environment variable that chooses the path: auto (default), python, numba.
 ENV = "GRAZING_KERNEL"
@@ -231,11 +234,12 @@ _modal = None
 
 
 def warm_up_modal() -> float:
-    """Load the compiled n-DOF event search (:mod:`.compiled_modal`: compiled on a
-    machine's first call, ~10 s, then loaded from numba's cache, ~0.03 s) where the kernel
-    is in use; seconds taken (0.0 when loaded before or not in use). Until then
-    :func:`modal_search` is None and the n-DOF core searches in Python, with the same
-    floats: a caller that needs the speed (controller_node's start, through
+    """Load the compiled n-DOF event search, flow with impacts and model filter's events
+    (:mod:`.compiled_modal`: compiled on a machine's first call, ~30 s, then loaded from
+    numba's cache, ~0.1 s after :func:`warm_up`) where the kernel is in use; seconds
+    taken (0.0 when loaded before or not in use). Until then :func:`modal_search`,
+    :func:`modal_advance` and :func:`modal_events` are None and the n-DOF core runs in
+    Python, with the same floats: a caller that needs the speed (controller_node's start, through
     ``dynamics.estimation.stream.warm_up``) loads it first, and nothing else waits for it."""
     global _modal
     if _modal is not None or not use_kernel():
@@ -244,12 +248,26 @@ def warm_up_modal() -> float:
     with _sigint_held():
         from . import compiled_modal as km
 
-        # one mode (lambda = -0.1 + i) of a model with n = 1 (SearchConstants' layout)
-        table = np.array([[-0.1, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0]])
-        scalars = np.array([1.0, 0.0, 1.0, -1e-3, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 2.0])
-        km.next_impact(table, scalars, 0.0, np.zeros(2), 1.0, 0.0, km.search_stack())
+        _modal_first_calls(km)
         _modal = km
     return time.perf_counter() - t0
+
+
+def _modal_first_calls(km):
+    """One call of each entry point of :mod:`.compiled_modal` with the argument types of
+    the n-DOF core's calls (tests/test_ndof_compiled.py checks them): numba compiles, or
+    loads, each specialisation."""
+    # one mode (lambda = -0.1 + i) of a model with n = 1 (SearchConstants' layout)
+    table = np.array([[-0.1, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0]])
+    scalars = np.array([1.0, 0.0, 1.0, -1e-3, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 2.0,
+                        0.8, 0.0, 1.0, 1e150])
+    stack = km.search_stack()
+    km.next_impact(table, scalars, 0.0, np.zeros(2), 1.0, 0.0, stack)
+    parts = (np.ones((2, 1)), np.zeros((2, 1)), np.ones((1, 2)), np.zeros((1, 2)),
+             np.array([[0.0, 1.0], [-1.0, -0.2]]))
+    km.advance(table, scalars, *parts, 0.0, np.zeros(2), 1.0, 1e-6, 10000, stack)
+    km.modal_events(table, scalars, *parts, 0.0, 0, np.zeros(2),
+                    np.array([[0.0, 1.0, 0.0, -1e-3]]), np.zeros((1, 2)), 1e-6, stack)
 
 
 def modal_search():
@@ -264,14 +282,53 @@ def modal_search():
     return _modal_next_impact
 
 
-def _modal_next_impact(table, scalars, tau0, z0, horizon, max_step):
-    """:func:`modal_search`'s function (per-thread work array, the kernel's statuses)."""
+def modal_advance():
+    """The compiled n-DOF flow with impacts (:func:`.compiled_modal.advance`) where
+    :func:`modal_search` is in use, else None: a function (search constants, tau0, z0,
+    duration, chatter_time, max_impacts) -> (z, tau, impacts as rows (time, phase, v-,
+    v+)), or None where the pure path must run (a stick, a contact at rest, a refused
+    start, the cap)."""
+    return None if modal_search() is None else _modal_advance
+
+
+def _modal_advance(k, tau0, z0, duration, chatter, max_impacts):
+    """:func:`modal_advance`'s function."""
+    status, z, tau, imps = _modal.advance(k.table, k.scalars, k.modes_re, k.modes_im,
+                                          k.inverse_re, k.inverse_im, k.A, tau0, z0, duration,
+                                          chatter, max_impacts, _modal_stack())
+    return None if status != _modal.STATUS_OK else (z, tau, imps.tolist())
+
+
+def modal_events():
+    """The compiled events of the n-DOF model filter's period
+    (:func:`.compiled_modal.modal_events`, dynamics.estimation.motion.modal_trajectory's)
+    where :func:`modal_search` is in use, else None: a function (search constants of the
+    free flow, tau2, i_a, z0, legs, shifts, chatter_time) -> (times, z_e, M_e, shifts, z,
+    M, impacts) or None where the pure path must run."""
+    return None if modal_search() is None else _modal_events
+
+
+def _modal_events(k, tau2, i_a, z0, legs, shifts, chatter):
+    """:func:`modal_events`' function."""
+    out = _modal.modal_events(k.table, k.scalars, k.modes_re, k.modes_im, k.inverse_re,
+                              k.inverse_im, k.A, tau2, i_a, z0, legs, shifts, chatter,
+                              _modal_stack())
+    return None if out[0] != _modal.STATUS_OK else out[1:]
+
+
+def _modal_stack():
+    """The compiled n-DOF search's work array of this thread."""
     stack = getattr(_local, "modal_stack", None)
     if stack is None:
         stack = _local.modal_stack = _modal.search_stack()
+    return stack
+
+
+def _modal_next_impact(table, scalars, tau0, z0, horizon, max_step):
+    """:func:`modal_search`'s function (per-thread work array, the kernel's statuses)."""
     h, status, info = _modal.next_impact(table, scalars, tau0,
                                          np.ascontiguousarray(z0, dtype=float), horizon,
-                                         max_step, stack)
+                                         max_step, _modal_stack())
     if status == _modal.STATUS_BEYOND_WALL:
         return None, info
     return (None if h == _modal.NONE else h), None

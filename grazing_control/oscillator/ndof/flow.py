@@ -11,6 +11,8 @@ n = 1 this is the 1-DOF a(omega) and tau* = phi (oscillator/params.py).
 
 from __future__ import annotations
 
+import cmath
+import functools
 import math
 
 import numpy as np
@@ -21,7 +23,7 @@ from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["harmonic_amplitudes", "grazing_clearance", "grazing_phase", "periodic_response",
-           "NdofFlow", "MAX_CONDITION"]
+           "NdofFlow", "MAX_CONDITION", "matvec", "matmul"]
 
 TWO_PI = 2.0 * math.pi
 #: Largest condition number of the modal matrix V accepted: the flow's rounding grows like
@@ -152,9 +154,24 @@ class NdofFlow:
         return self.model.period
 
     def transition(self, h: float) -> np.ndarray:
-        """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n)."""
-        e = np.exp(self.eigenvalues * float(h))
-        return ((self.modes * e) @ self.inverse).real
+        """Phi(h) = e^{A h} = Re(sum_k w_k v_k e^{lambda_k h} u_k^T) (section 2), (2n, 2n).
+
+        In an order of operations that the compiled n-DOF flow
+        (oscillator/kernel/compiled_modal.py ``transition``) repeats, so that both give the
+        same floats (tests/test_ndof_compiled.py): e_k = cmath.exp(lambda_k h), and NumPy's
+        ``einsum("ik,k,kj->ij")`` (the model filter's ``modal_transitions`` order): for each
+        entry the complex products (v_ik e_k) u_kj written out, their real parts summed over
+        k from 0.0. Before issue 32's compiled advance it was ``((V e) @ U).real``, whose
+        BLAS sums in its own order (docs/theory_ndof_flow.md section 4, the size of the
+        change)."""
+        h = float(h)
+        e = np.array([cmath.exp(x * h) for x in self._eigenvalues])
+        return np.einsum("ik,k,kj->ij", self.modes, e, self.inverse).real.copy()
+
+    @functools.cached_property
+    def _eigenvalues(self) -> list:
+        """The eigenvalues as Python complex numbers (:meth:`transition`'s cmath.exp)."""
+        return [complex(x) for x in self.eigenvalues]
 
     def particular(self, tau: float) -> np.ndarray:
         """X_p(tau) = (Re(X e^{i tau}), Re(i omega X e^{i tau})), the periodic response."""
@@ -188,8 +205,10 @@ class NdofFlow:
         """Free acceleration of x_w: -d* omega^2 cos(tau - tau*) + (A z)_{n + i_w}."""
         m = self.model
         row = self.A[m.n + m.i_w]
-        return (-self.d_star * m.omega ** 2 * math.cos(tau - self.tau_star)
-                + float(row @ np.asarray(z, dtype=float)))
+        s = 0.0          # (A z)_{n + i_w} from 0.0 in the order of z (as the compiled flow)
+        for a, x in zip(row.tolist(), np.asarray(z, dtype=float).tolist()):
+            s += a * x
+        return -self.d_star * m.omega ** 2 * math.cos(tau - self.tau_star) + s
 
     def on_wall(self, tau: float) -> tuple:
         """(z_w, z_{n+w}) of x_w = d, v_w = 0 at phase tau: (Delta d + 2 d* sin^2(psi/2),
@@ -198,3 +217,24 @@ class NdofFlow:
         s = math.sin(0.5 * psi)
         return (self.model.delta_d + 2.0 * self.d_star * s * s,
                 self.d_star * self.model.omega * math.sin(psi))
+
+
+def matvec(a: np.ndarray, x) -> np.ndarray:
+    """a @ x: the products a_ij x_j, summed over j = 0, 1, ... from 0.0, each operation
+    rounded once (NumPy's elementwise ones; no BLAS, whose order and fused multiply-adds
+    are its own): the order that the compiled n-DOF flow (oscillator/kernel/compiled_modal.py)
+    repeats, so that both give the same floats."""
+    p = a * np.asarray(x, dtype=float)
+    out = np.zeros(a.shape[0])
+    for j in range(a.shape[1]):
+        out = out + p[:, j]
+    return out
+
+
+def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b in the order of :func:`matvec`: the products a_ij b_jc summed over j from 0.0."""
+    p = a[:, :, None] * b
+    out = np.zeros((a.shape[0], b.shape[1]))
+    for j in range(a.shape[1]):
+        out = out + p[:, j]
+    return out

@@ -54,7 +54,7 @@ from grazing_control.oscillator.impact import (MAX_AMPLITUDE, GapEvaluator, Impa
                                                wall_rounding)
 from grazing_control.oscillator.params import ParameterError
 
-from .flow import NdofFlow
+from .flow import NdofFlow, matvec
 from .sticking import stuck_flow
 
 __all__ = ["NdofImpact", "NdofSegment", "ChatteringError", "ImpactCapError",
@@ -144,8 +144,11 @@ class SearchConstants(NamedTuple):
     (oscillator/kernel/compiled_modal.py), the same in two float arrays: ``table``, a row
     a mode (Re lam, Im lam, Re vw, Im vw, |vw|, |lam|^3, then Re, Im and |.| of the row of
     the inverse, 2n columns each), and ``scalars`` (omega, tau*, d*, Delta d, n,
-    d* omega^3, defect cond(V)^2, omega^2, rho, rho^2, the default window, 2.0) (powers
-    computed here, as the evaluator computes them, so that both use the same floats)."""
+    d* omega^3, defect cond(V)^2, omega^2, rho, rho^2, the default window, 2.0, then for
+    the compiled :func:`advance`: r, i_w, cond(V), MAX_AMPLITUDE) (powers computed here,
+    as the evaluator computes them, so that both use the same floats); and for the
+    compiled :func:`advance`, :meth:`NdofFlow.transition`'s operands (Re and Im of the
+    weighted modes and of the inverse's rows) and A, as fresh float arrays."""
 
     lam: list
     vw: list
@@ -159,6 +162,11 @@ class SearchConstants(NamedTuple):
     step: float
     table: np.ndarray
     scalars: np.ndarray
+    modes_re: np.ndarray
+    modes_im: np.ndarray
+    inverse_re: np.ndarray
+    inverse_im: np.ndarray
+    A: np.ndarray
 
 
 @functools.lru_cache(maxsize=64)
@@ -181,9 +189,12 @@ def search_constants(flow: NdofFlow) -> SearchConstants:
     drift_scale = flow.defect * flow.condition ** 2
     step = min(m.period / 8.0, 0.25 * math.pi / rho)
     scalars = np.array([m.omega, flow.tau_star, flow.d_star, m.delta_d, m.n, aw3,
-                        drift_scale, m.omega ** 2, rho, rho ** 2, step, 2.0])
+                        drift_scale, m.omega ** 2, rho, rho ** 2, step, 2.0, m.r, m.i_w,
+                        flow.condition, MAX_AMPLITUDE])
+    modes, inv = flow.modes, flow.inverse
     return SearchConstants(lam, vw, inverse, vw_abs, inverse_abs, lam3, rho, aw3, drift_scale,
-                           step, table, scalars)
+                           step, table, scalars, modes.real.copy(), modes.imag.copy(),
+                           inv.real.copy(), inv.imag.copy(), np.array(flow.A, dtype=float))
 
 
 class _Eval(GapEvaluator):
@@ -452,6 +463,12 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
 
     Notes
     -----
+    Without the monodromy it runs compiled once
+    :func:`grazing_control.oscillator.kernel.warm_up_modal` has loaded the kernel and while
+    it is in use (:func:`grazing_control.oscillator.kernel.modal_advance`, the same floats:
+    tests/test_ndof_compiled.py); a stick, a contact at rest or a refused start is left
+    to this function's own loop, from the start.
+
     A contact whose approach velocity is within the velocity's rounding of 0 is a
     contact at rest (docs/theory.md, "Tangency below rounding"): with F <= 0 a tangency,
     not an impact (nothing reported, the flow goes on); with F > 0 it sticks. A stick is
@@ -477,6 +494,12 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
     n, w, r, omega = m.n, m.i_w, m.r, m.omega
     chatter = chatter_time if chatter_time is not None else 1e-6 * m.period
     consts = search_constants(flow)
+    compiled = None if monodromy else kernel.modal_advance()
+    if compiled is not None:     # the same floats (oscillator/kernel/compiled_modal.py)
+        out = compiled(consts, float(tau0), z, float(duration), float(chatter),
+                       int(max_impacts))
+        if out is not None:
+            return NdofSegment(out[0], out[1], [NdofImpact(*row) for row in out[2]], None)
     rho = consts.rho
     impacts = []
     mono = np.eye(2 * n) if monodromy else None
@@ -490,7 +513,7 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
         if h is None or remaining <= 0.0:
             if remaining > 0.0:
                 phi = flow.transition(remaining)
-                z = phi @ z
+                z = matvec(phi, z)
                 if monodromy:
                     mono = phi @ mono
                 tau = (tau + omega * remaining) % TWO_PI
@@ -505,7 +528,7 @@ def advance(flow: NdofFlow, tau0: float, z0, duration: float, *, monodromy: bool
         flow_err = (8.0 * _EPS * size * (2.0 * n + 2.0 + rho * h)
                     + 2.0 * h * rho * consts.drift_scale * norm)
         phi = flow.transition(h)
-        z = phi @ z
+        z = matvec(phi, z)
         if monodromy:
             mono = phi @ mono
         t += h
@@ -572,7 +595,7 @@ def _impact_law(flow: NdofFlow, tau: float, z: np.ndarray, wall_x: float, v: flo
     if not abs(delta * acc) <= 1e-6 * v:
         overshoot = delta = 0.0
     # before the impact, at phase tau - omega delta (deviation coordinates: z' = A z)
-    z_minus = z - delta * (flow.A @ z)
+    z_minus = z - delta * matvec(flow.A, z)
     z_minus[w] = flow.on_wall(tau - m.omega * delta)[0]
     v_minus = v - delta * acc
     z_plus = z.copy()
@@ -633,7 +656,7 @@ def _leave_wall(flow: NdofFlow, tau0: float, t: float, duration: float, z: np.nd
     tau = (tau0 + flow.model.omega * t) % TWO_PI
     skip = min(duration - t, _release_skip(flow, tau, z))
     phi = flow.transition(skip)
-    z = phi @ z
+    z = matvec(phi, z)
     if mono is not None:
         mono = phi @ mono
     t += skip
