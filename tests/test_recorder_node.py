@@ -655,6 +655,14 @@ def _end_of_scene(bag, isolation, ros, close_timeout, extra, announce):
     node = f"{namespace}/controller_node"
     params.publish(String(data=record.encode(node, {"c2": -1.0})))
     wait_ready(ros, recorder)
+    # the recorder's readiness is its reader having matched this writer; the writer may
+    # not have matched the reader yet (discovery runs on each side), and what it
+    # published before went to nobody and was acked by nobody (a fresh clone's rerun:
+    # the recorder took the 20 late corrections and not the first 30)
+    end = time.monotonic() + 10.0
+    while corrections.get_subscription_count() == 0 and time.monotonic() < end:
+        time.sleep(0.01)
+    assert corrections.get_subscription_count() == 1
     for i in range(30):
         corrections.publish(make_message("geometry_msgs/msg/TwistStamped", i))
     assert corrections.wait_for_all_acked(Duration(seconds=10))
