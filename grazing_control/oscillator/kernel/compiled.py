@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from .caching import jit
-from .interval_search import NONE, danger_halfwidth, far_from_wall, search, search_stack, ulp
+from .interval_search import NONE, danger_halfwidth, scan_windows, search_stack, ulp
 
 __all__ = ["check_state", "wall_rounding", "make_eval", "evaluate",
            "evaluate_row", "window_grid", "jerk_bound", "gap_rounding", "search_stack",
@@ -237,7 +237,6 @@ def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
     ev = make_eval(P, tau0, dx0, dv0)
     step = max_step if max_step > 0.0 else P[_PERIOD] / 8.0
     n = max(1, int(math.ceil(horizon / step)))
-    a = 0.0
     cached = (max_step <= 0.0 and grid.shape[0] > 0 and grid[0, 7] == tau0
               and grid[0, 8] == horizon)
     fa = evaluate_row(ev, grid, 0) if cached else evaluate(ev, 0.0)
@@ -251,22 +250,8 @@ def next_impact_unchecked(P, tau0, dx0, dv0, horizon, max_step, stack, grid):
         return 0.0, STATUS_OK, 0.0  # on the wall, moving into it
     fa = (ga, fa[1], fa[2], fa[3], fa[4], fa[5])
     w = danger_halfwidth(ev[11], ev[5], ev[4], ev[14], ev[15], horizon)
-    valid = True  # fa holds the values at a
-    for k in range(1, n + 1):
-        b = horizon if k == n else k * (horizon / n)
-        if k > 1 and w >= 0.0 and far_from_wall(ev[6] + ev[2] * a - ev[3],
-                                                ev[6] + ev[2] * b - ev[3], w):
-            a, valid = b, False  # g < 0 on all of [a, b]: the search would find nothing
-            continue
-        if not valid:
-            fa = evaluate_row(ev, grid, k - 1) if cached else evaluate(ev, a)
-            valid = True
-        fb = evaluate_row(ev, grid, k) if cached else evaluate(ev, b)
-        r = search(ev, None, a, b, fa, fb, stack)
-        if r != NONE:
-            return r, STATUS_OK, 0.0
-        a, fa = b, fb
-    return NONE, STATUS_OK, 0.0
+    return (scan_windows(ev, None, horizon, n, w, ev[6], ev[2], ev[3], fa, stack, grid,
+                         cached), STATUS_OK, 0.0)
 
 
 # ------------------------------------------------------------------ sticking

@@ -64,7 +64,7 @@ import math
 import numpy as np
 
 from .caching import jit
-from .interval_search import (NONE, bracket, danger_halfwidth, far_from_wall, search,
+from .interval_search import (NONE, bracket, danger_halfwidth, scan_windows, search,
                               search_stack, ulp)
 
 __all__ = ["make_eval", "evaluate", "jerk_bound", "gap_rounding", "bracket", "search",
@@ -198,8 +198,7 @@ def next_impact(table, S, tau0, z0, horizon, max_step, stack):
         return NONE, STATUS_OK, 0.0
     step = max_step if max_step > 0.0 else S[_STEP]
     count = max(1, int(math.ceil(horizon / step)))
-    # impact._scan_window
-    a = 0.0
+    # impact._scan_window (its loop: interval_search.scan_windows)
     ga, va, acca, zxa = evaluate(ev, terms, 0.0)
     # on the wall up to rounding: above it, or below it while leaving (v < 0)
     if (ga > 0.0 or ga < 0.0 and va < 0.0) and abs(ga) <= gap_rounding(ev, 0.0, ga, zxa):
@@ -210,23 +209,9 @@ def next_impact(table, S, tau0, z0, horizon, max_step, stack):
         return 0.0, STATUS_OK, 0.0  # on the wall, moving into it
     fa = (ga, va, acca, zxa)
     w = danger_halfwidth(ev[_CABS], ev[3], ev[2], ev[_M0], ev[_M1], horizon)
-    valid = True  # fa holds the values at a
-    omega, lag = ev[0], ev[1]
-    for k in range(1, count + 1):
-        b = horizon if k == count else k * (horizon / count)
-        if k > 1 and w >= 0.0 and far_from_wall(tau0 + omega * a - lag,
-                                                tau0 + omega * b - lag, w):
-            a, valid = b, False  # g < 0 on all of [a, b]: the search would find nothing
-            continue
-        if not valid:
-            fa = evaluate(ev, terms, a)
-            valid = True
-        fb = evaluate(ev, terms, b)
-        r = search(ev, terms, a, b, fa, fb, stack)
-        if r != NONE:
-            return r, STATUS_OK, 0.0
-        a, fa = b, fb
-    return NONE, STATUS_OK, 0.0
+    # no grid of window ends for the modal sum: an empty view of the stack stands for it
+    return (scan_windows(ev, terms, horizon, count, w, tau0, ev[0], ev[1], fa, stack,
+                         stack[:0], False), STATUS_OK, 0.0)
 
 
 # -- the flow with impacts: ndof.impact.advance (issue 32: the rig of n masses) ---------

@@ -33,8 +33,8 @@ from numba.extending import overload
 from .caching import jit
 
 __all__ = ["NONE", "ulp", "values", "jerk_argument", "jerk_bound", "gap_rounding",
-           "margins", "bracket", "search", "search_stack", "danger_halfwidth",
-           "far_from_wall"]
+           "margins", "window_values", "bracket", "search", "search_stack",
+           "danger_halfwidth", "far_from_wall", "scan_windows"]
 
 TWO_PI = 2.0 * math.pi
 _MAX_DEPTH = 64
@@ -129,6 +129,22 @@ def _margins(ev, terms):
 
 
 # ------------------------------------------------------------------ the search
+def window_values(ev, terms, grid, cached, k, h):
+    """The values at the end h of window k of :func:`scan_windows` (:func:`values`; the
+    1-DOF closed form reads them from its grid of the window ends where ``cached``)."""
+    raise NotImplementedError("compiled only (numba's overload below)")
+
+
+@overload(window_values, jit_options=_OPTIONS)
+def _window_values(ev, terms, grid, cached, k, h):
+    if _closed_form(terms):
+        from .compiled import evaluate, evaluate_row
+        return lambda ev, terms, grid, cached, k, h: (evaluate_row(ev, grid, k) if cached
+                                                      else evaluate(ev, h))
+    from .compiled_modal import evaluate as modal
+    return lambda ev, terms, grid, cached, k, h: modal(ev, terms, h)
+
+
 @jit
 def ulp(x):
     """math.ulp(x) for finite x: the gap from |x| to the next float up."""
@@ -279,3 +295,29 @@ def far_from_wall(psi_a, psi_b, w):
     """impact._far_from_wall."""
     k = math.ceil((psi_a - w) / TWO_PI)
     return TWO_PI * k - w > psi_b
+
+
+@jit
+def scan_windows(ev, terms, horizon, count, w, phase0, omega, lag, fa, stack, grid, cached):
+    """impact._scan_window's loop over ``count`` equal windows of (0, horizon]: the first
+    impact time or NONE. A window whose phases phase0 + omega t - lag lie where the gap
+    cannot reach the wall (:func:`far_from_wall`, half-width ``w``; w < 0: none such) is
+    skipped unevaluated; the others are searched (:func:`search`) from ``fa``, the
+    values at their start (at 0 for the first)."""
+    a = 0.0
+    valid = True  # fa holds the values at a
+    for k in range(1, count + 1):
+        b = horizon if k == count else k * (horizon / count)
+        if k > 1 and w >= 0.0 and far_from_wall(phase0 + omega * a - lag,
+                                                phase0 + omega * b - lag, w):
+            a, valid = b, False  # g < 0 on all of [a, b]: the search would find nothing
+            continue
+        if not valid:
+            fa = window_values(ev, terms, grid, cached, k - 1, a)
+            valid = True
+        fb = window_values(ev, terms, grid, cached, k, b)
+        r = search(ev, terms, a, b, fa, fb, stack)
+        if r != NONE:
+            return r
+        a, fa = b, fb
+    return NONE
