@@ -60,6 +60,7 @@ from grazing_control.ros.common import (DATA_QOS, EVENT_QOS, LATCHED_QOS, PUBLIS
                                         freeze_heap, publish_parameter_record, run_node,
                                         spin, stamp_key)
 from grazing_control.ros.diagnostics import SceneWindow, Updater
+from grazing_control.ros.matching import MATCHED_TOPIC, parse_report
 from grazing_control.ros.published import (ACK_TIMEOUT, Counted, PublishedRecord,
                                           close_publishers)
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
@@ -138,6 +139,10 @@ class SimNode(Node):
                                                            raw=True, event_callbacks=events)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(lambda params: on_set_parameters(self, params))
+        self.controller_matched = None  # the controller's (inputs, answers) matched, or None
+        if self.get_parameter("wait_for_controller").value:
+            self.create_subscription(String, MATCHED_TOPIC, self._on_controller_matched,
+                                     LATCHED_QOS)
         self.recorder_ready = False
         if self.get_parameter("wait_for_recorder").value:
             self.create_subscription(Bool, READY_TOPIC, self._on_recorder_ready, LATCHED_QOS)
@@ -181,6 +186,11 @@ class SimNode(Node):
         return self.loop is not None and not self.loop.finished and not self.refused
 
     # ------------------------------------------------------------------ start
+    def _on_controller_matched(self, msg: String) -> None:
+        report = parse_report(msg.data)
+        if report is not None:
+            self.controller_matched = report
+
     def _on_recorder_ready(self, msg: Bool) -> None:
         self.recorder_ready = bool(msg.data)
 

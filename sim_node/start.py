@@ -7,6 +7,7 @@ import time
 
 from grazing_control.plant.feasibility import ROUND_TRIPS, check, sustained_rate
 from grazing_control.ros.common import READY_TOPIC
+from grazing_control.ros.matching import MATCHED_TOPIC
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
 
 from sim_node.probe import RoundTrips, controller_name
@@ -122,6 +123,9 @@ def missing(node) -> list:
         why = node.scene.missing_controller()
         if why is not None:
             missing.append(why)
+        why = missing_matches(node, n)
+        if why is not None:
+            missing.append(why)
     if n > 0:
         pubs = [node.pub_impact, node.pub_pi1, node.pub_pi2, node.pub_clock]
         if node.settings.state_period > 0.0:
@@ -140,6 +144,24 @@ def missing(node) -> list:
             missing.append(f"a recorder subscribed to {topic} ({have} subscriber(s) of "
                            f"{n + 1}, this node's own included)")
     return missing
+
+
+def missing_matches(node, n: int) -> str | None:
+    """What the controller's own ends still lack (ros/matching.py), or None: its report
+    on controller/matched must show every input subscription matched to a publisher and
+    its answers to this node and ``n`` recorders. Asked of a controller of this package
+    (one that publishes the report); another controller's ends are not seen."""
+    report = node.controller_matched
+    topic = node.resolve_topic_name(MATCHED_TOPIC)
+    if report is None:
+        if node.count_publishers(topic) == 0:
+            return None
+        return f"the controller's report of its matches on {topic}"
+    inputs, answers = report
+    if inputs >= 1 and answers >= n + 1:
+        return None
+    return (f"the controller matched to this node's samples and its answers to {n + 1} "
+            f"reader(s) ({topic}: inputs={inputs} answers={answers})")
 
 
 def feasible(node) -> bool:

@@ -34,6 +34,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.ros.common import (LATCHED_QOS, READY_TOPIC, RECORDS_QOS,
                                         seconds_from_stamp)
+from grazing_control.ros.matching import MATCHED_TOPIC, parse_report
 from grazing_control.ros.recording.record import PUBLISHED_TOPIC, decode_published
 from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.dynamics.simulation.simulate import simulate
@@ -108,6 +109,8 @@ class Collector:
                                       LATCHED_QOS)
         self.node.create_subscription(String, PUBLISHED_TOPIC, self._keeper("published"),
                                       RECORDS_QOS)
+        self.node.create_subscription(String, MATCHED_TOPIC, self._keeper("matched"),
+                                      LATCHED_QOS)
         if ready:
             self._ready = self.node.create_publisher(Bool, READY_TOPIC, LATCHED_QOS)
             self._ready_timer = self.node.create_timer(0.02, self._say_ready)
@@ -162,6 +165,18 @@ class Collector:
                 return True
             time.sleep(0.02)
         return predicate()
+
+    def controller_matched(self, inputs: int = 1, answers: int = 1,
+                           timeout: float = 20.0) -> bool:
+        """Whether the controller has said (controller/matched, ros/matching.py) that its
+        input subscriptions have matched ``inputs`` publishers and its answer publisher
+        ``answers`` subscriptions, within ``timeout`` s: with this node's own ends
+        matched too, nothing published from here on is lost to a half-made match."""
+        def said():
+            reports = [parse_report(m.data) for m in self.get("matched")]
+            return any(r is not None and r[0] >= inputs and r[1] >= answers
+                       for r in reports[-1:])
+        return self.wait_for(said, timeout)
 
     def close(self):
         self.executor.shutdown(timeout_sec=1.0)

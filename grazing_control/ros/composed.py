@@ -117,6 +117,7 @@ def _spin_scene(executor, nodes: dict) -> None:
     while not _Stop.asked and not sim.exit_now and not ctl.exit_now:
         executor.spin_once(timeout_sec=SIGNAL_POLL)
         now = time.monotonic()
+        ctl.matched.poll(now)
         if now >= next_check:
             next_check = now + ISOLATION_CHECK
             ctl._check_isolation()

@@ -126,6 +126,7 @@ from .controller_values import (ControlLaw, actuation_delay_from_values,
                                 stream_from_values)
 from .controller_status import diagnose
 from .diagnostics import Updater
+from .matching import MatchReport
 from .model_watch import (WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC, describe_verdict,
                           watch_from_values, watch_row)
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
@@ -203,6 +204,9 @@ class ControllerNode(Node):
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
+        # what its ends have matched, for the start handshake (ros/matching.py): made
+        # before the data endpoints, so whoever discovers those has discovered it
+        self.matched = MatchReport(self)
         # no default QoS-event handlers: each is one more entity in every executor wait
         self.pub = Counted(self.create_publisher(
             TwistStamped, "controller/velocity_correction", REPLAY_QOS,
@@ -233,6 +237,7 @@ class ControllerNode(Node):
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.rig_side = None     # the driver contract's side (rig_file), or None
+        self.sub_impacts = None  # stream mode's impact topic (impact_source topic), or None
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
             self.pub_force = Counted(self.create_publisher(
@@ -241,8 +246,9 @@ class ControllerNode(Node):
             self.sub_samples = self.create_subscription(
                 JointState, "rig/sensor", self.rig_side.on_sensor, RIG_INPUT_QOS, raw=True,
                 event_callbacks=quiet)
-            self.create_subscription(Vector3Stamped, "rig/phase", self.rig_side.on_phase,
-                                     DATA_QOS, event_callbacks=quiet)
+            sub_phase = self.create_subscription(
+                Vector3Stamped, "rig/phase", self.rig_side.on_phase, DATA_QOS,
+                event_callbacks=quiet)
             self.create_subscription(TimeReference, "rig/clock", self.rig_side.on_clock,
                                      DATA_QOS, event_callbacks=quiet)
             self.create_subscription(WrenchStamped, "rig/applied", self.rig_side.on_applied,
@@ -271,6 +277,12 @@ class ControllerNode(Node):
             self.create_subscription(TwistStamped, "oscillator/substituted",
                                      self._on_substituted, DATA_QOS, raw=True,
                                      event_callbacks=quiet)
+        inputs = [self.sub_samples]
+        if self.rig_side is not None:
+            inputs.append(sub_phase)
+        elif self.sub_impacts is not None:
+            inputs.append(self.sub_impacts)
+        self.matched.watch(inputs, self.pub_force if self.rig_side else self.pub)
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0
@@ -676,6 +688,7 @@ class ControllerNode(Node):
         """
         def stopped() -> bool:
             now = time.monotonic()
+            self.matched.poll(now)
             if now >= self._next_check:
                 self._next_check = now + ISOLATION_CHECK
                 self._check_isolation()
