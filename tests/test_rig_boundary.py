@@ -8,7 +8,7 @@ import pytest
 
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.rig import load_rig, rig_from_dict, rig_to_dict
-from grazing_control.ros.rig_boundary import (SIM_KEYS, DelayLine, Sections,
+from grazing_control.ros.rig_boundary import (SIM_KEYS, DelayLine, Pacer, Sections,
                                               SimulatedClock, check_rig_values,
                                               controller_values, correction_of,
                                               first_section, force_of, sim_values)
@@ -113,3 +113,30 @@ def test_the_controller_designs_for_the_budget_and_refuses_other_values(rig):
     with pytest.raises(ParameterError, match=r"^delta_d=0\.0 is invalid with rig_file=r\.yaml"):
         check_rig_values("r.yaml", values, dict(values, delta_d=0.0))
     check_rig_values("r.yaml", {"time_scale": 1.0}, {"time_scale": 2.0}, free=("time_scale",))
+
+
+def test_the_pacer_keeps_the_rate_from_many_callers_without_bursts():
+    """rig/clock pairs asked from a 20 Hz timer and a loop waking every 0.7-3 ms with
+    stalls of up to 0.4 s (seeded): on average one pair per period over 60 s, never two
+    within half a period, the first at once, and a pair not taken stays due."""
+    import random
+
+    rng = random.Random(27)
+    pace = Pacer(0.05)
+    assert pace.due(0.0)
+    times, wall, stalled = [], 0.0, 0.0
+    while wall < 60.0:
+        step = rng.choice([rng.uniform(7e-4, 3e-3)] * 400 + [rng.uniform(0.05, 0.4)])
+        stalled += step if step >= 0.05 else 0.0
+        wall += step
+        if pace.due(wall):
+            times.append(wall)
+            pace.done(wall)
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert min(gaps) >= 0.025
+    # the time awake at the full rate (a stall of s costs at most s / period pairs)
+    assert 0.97 * (wall - stalled) / 0.05 <= len(times) <= wall / 0.05 + 1
+    late = Pacer(0.05)
+    late.done(1.0)                       # a pair at 1.0 s
+    assert not late.due(1.02) and late.due(1.025)
+    assert late.due(1.03) and late.due(1.03)     # not taken (no done): still due

@@ -37,7 +37,8 @@ from grazing_control.plant.settings import default_values
 __all__ = ["SIM_KEYS", "CONTROLLER_KEYS", "MASSES_CONTROLLER_KEYS", "sim_values",
            "masses_controller_values", "joint_names", "sensor_positions",
            "model_positions", "controller_values", "answer_lead",
-           "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Sections",
+           "check_rig_values", "first_section", "SimulatedClock", "DelayLine", "Pacer",
+           "Sections",
            "force_of", "correction_of", "APPLIED_IN_TIME", "APPLIED_PREDICTED",
            "APPLIED_NOTHING", "APPLIED_SAFE", "RIG_TOPICS"]
 
@@ -260,6 +261,28 @@ class DelayLine:
     def next_time(self) -> float:
         """When the oldest item is due (inf: none held)."""
         return self.items[0][0] if self.items else math.inf
+
+
+class Pacer:
+    """Due about once per ``period`` of wall time on average, never twice within half a
+    period: the rig/clock pairs, asked from every wake-up of the loop and from a timer
+    (whichever runs first under load) without bursts after a stall.
+
+    Due at ``wall`` once ``wall >= next``; :meth:`done` then moves ``next`` to
+    ``max(next + period, wall + period / 2)``: on the period's grid while the callers
+    keep up, half a period after a late pair otherwise. A pair that could not be taken
+    (:meth:`done` not called) stays due.
+    """
+
+    def __init__(self, period: float):
+        self.period = float(period)
+        self.next = -math.inf
+
+    def due(self, wall: float) -> bool:
+        return wall >= self.next
+
+    def done(self, wall: float) -> None:
+        self.next = max(self.next + self.period, wall + 0.5 * self.period)
 
 
 def force_of(rig: Rig, dv: float) -> float:
