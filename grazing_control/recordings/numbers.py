@@ -710,9 +710,13 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     latency is the simulator's own message (one per applied correction, in order); the lag
     comes from the recorded publish times relative to sample 0, whose own lag (the time
     the simulator took to integrate period 0 before publishing it) is not recorded: it is
-    fitted as one constant offset minimising the median departure. The departure left is
-    what the recorded wall-clock timestamps cannot resolve (microseconds x time_scale).
-    None when the data do not allow it (a sample without answer, latencies missing).
+    fitted as one constant offset minimising the median departure, no smaller than the
+    largest lead of a sample over sample 0 (every lag is >= 0: a sample 0 published late,
+    by a preempted simulator, makes the others' relative lags negative; clipped at 0
+    they lost their spread, and a scene on a loaded host departed by 3.4e-3 against
+    4e-6). The departure left is what the recorded wall-clock timestamps cannot resolve
+    (microseconds x time_scale). None when the data do not allow it (a sample without
+    answer, latencies missing).
     """
     from scipy.optimize import minimize_scalar
 
@@ -725,7 +729,8 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     n = len(sd.scene.t)
     if p is None or not ts or lag is None or lat.size != n or not sd.answered.all() or n < 3:
         return None
-    base = lat + np.maximum(lag, 0.0) / 1e3
+    base = lat + lag / 1e3                 # the delays less sample 0's lag, the offset
+    least = max(0.0, -float(np.min(lag)) / 1e3)
     x, v, dv = sd.scene.pi2[:, 0], sd.scene.pi2[:, 1], sd.scene.correction
 
     def departures(offset, ks):
@@ -746,7 +751,7 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
         return None
     fit = active[:: max(1, active.size // fit_samples)]
     best = minimize_scalar(lambda c: float(np.median(departures(c, fit))),
-                           bounds=(0.0, 5e-3), method="bounded",
+                           bounds=(least, least + 5e-3), method="bounded",
                            options={"xatol": 1e-7})
     offset = float(best.x)
     dep = departures(offset, active)
