@@ -77,6 +77,11 @@ __all__ = ["SimNode", "main"]
 
 #: Wall seconds between two checks for another simulator or controller on the topics.
 ISOLATION_CHECK = 0.25
+#: Wall seconds the start conditions must hold before the start: for the ends that no
+#: condition sees (a controller of another package; the controller's ends are its report's,
+#: start.missing_matches). Without it the start was no sooner in bench_scene_overhead.py
+#: (the handshake 0.34 s both ways, medians of 5: the kernel's load is the longer wait).
+SETTLE = 0.2
 #: The wait at exit for the readers' acknowledgements (published.ACK_TIMEOUT, 10 s, after
 #: the scene) when stopped by a signal before the end (the launcher's grace is 15 s).
 INTERRUPTED_ACK_TIMEOUT = 2.0
@@ -195,6 +200,10 @@ class SimNode(Node):
         self.recorder_ready = bool(msg.data)
 
     def _try_start(self) -> None:
+        if self.loop is not None:
+            # an expiry of the start timer queued before it was destroyed (the events
+            # executor delivers it): the scene started twice, its t = 0 samples twice
+            return
         waited = time.monotonic() - self._created
         loading = self._warming is not None and self._warming.is_alive()   # the kernel
         missing = start.missing(self)
@@ -207,7 +216,7 @@ class SimNode(Node):
         elif self._ready_since is None:
             self._ready_since = time.monotonic()   # let both ends of every match settle
             return
-        elif time.monotonic() - self._ready_since < 0.2:
+        elif time.monotonic() - self._ready_since < SETTLE:
             return
         if loading:
             return

@@ -147,21 +147,38 @@ def missing(node) -> list:
 
 
 def missing_matches(node, n: int) -> str | None:
-    """What the controller's own ends still lack (ros/matching.py), or None: its report
-    on controller/matched must show every input subscription matched to a publisher and
-    its answers to this node and ``n`` recorders. Asked of a controller of this package
-    (one that publishes the report); another controller's ends are not seen."""
+    """What the controller's own ends, and this node's ends towards it, still lack
+    (ros/matching.py), or None. From its report on controller/matched: its answers
+    matched to this node and the ``n`` recorders, its other recorded outputs to the
+    recorders, and on each topic of this node that it reads, a publisher matched at its
+    end and ``n + 1`` readers (it and the recorders) at this node's. Asked of a
+    controller of this package (one that publishes the report; another controller's ends
+    are not seen)."""
     report = node.controller_matched
     topic = node.resolve_topic_name(MATCHED_TOPIC)
     if report is None:
         if node.count_publishers(topic) == 0:
             return None
         return f"the controller's report of its matches on {topic}"
-    inputs, answers = report
-    if inputs >= 1 and answers >= n + 1:
+    lacking = []                          # one phrase each, without ";" (missing's list)
+    if report["answers"] < n + 1:
+        lacking.append(f"its answers matched to {n + 1} reader(s) "
+                       f"(answers={report['answers']})")
+    if report["outputs"] < n:
+        lacking.append(f"its other outputs matched to {n} recorder(s) "
+                       f"(outputs={report['outputs']})")
+    for pub in node.published.publishers:
+        read = report.get(pub.topic_name)
+        if read is None:
+            continue                       # a topic of this node the controller ignores
+        have = pub.get_subscription_count()
+        if read < 1 or have < n + 1:
+            lacking.append(f"{pub.topic_name} matched at both ends (its reader {read} "
+                           f"publisher(s) and this node's writer {have} of {n + 1} "
+                           "reader(s))")
+    if not lacking:
         return None
-    return (f"the controller matched to this node's samples and its answers to {n + 1} "
-            f"reader(s) ({topic}: inputs={inputs} answers={answers})")
+    return f"the controller's ends ({topic}): " + ", ".join(lacking)
 
 
 def feasible(node) -> bool:

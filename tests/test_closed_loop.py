@@ -166,16 +166,19 @@ class Collector:
             time.sleep(0.02)
         return predicate()
 
-    def controller_matched(self, inputs: int = 1, answers: int = 1,
+    def controller_matched(self, *topics: str, answers: int = 1,
                            timeout: float = 20.0) -> bool:
-        """Whether the controller has said (controller/matched, ros/matching.py) that its
-        input subscriptions have matched ``inputs`` publishers and its answer publisher
-        ``answers`` subscriptions, within ``timeout`` s: with this node's own ends
-        matched too, nothing published from here on is lost to a half-made match."""
+        """Whether the controller has said (controller/matched, ros/matching.py), within
+        ``timeout`` s, that its subscriptions of ``topics`` (those this node publishes)
+        have matched a publisher and its answer publisher ``answers`` subscriptions: with
+        this node's own ends matched too, nothing published from here on is lost to a
+        half-made match."""
+        names = [self.node.resolve_topic_name(t) for t in topics]
+
         def said():
-            reports = [parse_report(m.data) for m in self.get("matched")]
-            return any(r is not None and r[0] >= inputs and r[1] >= answers
-                       for r in reports[-1:])
+            reports = [parse_report(m.data) for m in self.get("matched")][-1:]
+            return any(r is not None and r["answers"] >= answers
+                       and all(r.get(name, 0) >= 1 for name in names) for r in reports)
         return self.wait_for(said, timeout)
 
     def close(self):

@@ -111,7 +111,7 @@ def controller(tmp_path):
         answers_sub = col.subs["controller/velocity_correction"]
         assert col.wait_for(lambda: pub.get_subscription_count() > 0
                             and answers_sub.get_publisher_count() > 0, 20.0), log.read_text()
-        assert col.controller_matched(), log.read_text()    # the controller's ends too
+        assert col.controller_matched("oscillator/pi2"), log.read_text()   # its ends too
         return procs[-1], log, pub
 
     yield col, start
@@ -448,7 +448,7 @@ def stream_scene(tmp_path):
                             > 0 and col.subs["controller/estimate"].get_publisher_count()
                             > (0 if topic == "oscillator/state" else -1), 20.0), \
             log.read_text()
-        assert col.controller_matched(), log.read_text()    # the controller's ends too
+        assert col.controller_matched(topic), log.read_text()    # the controller's ends too
         return procs[-1], log, pub
 
     yield col, start

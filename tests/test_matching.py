@@ -12,40 +12,64 @@ from sim_node.start import missing_matches
 
 
 def test_a_report_reads_back_as_its_counts():
-    for inputs, answers in [(0, 0), (1, 1), (3, 12), (10**6, 7)]:
-        assert parse_report(report_text(inputs, answers)) == (inputs, answers)
+    for counts in [{"answers": 0, "outputs": 0},
+                   {"answers": 2, "outputs": 1, "/oscillator/pi2": 1},
+                   {"answers": 10**6, "outputs": 3, "/ns/rig/sensor": 1, "/rig/phase": 0}]:
+        assert parse_report(report_text(counts)) == counts
 
 
 def test_any_other_text_is_no_report():
     """Fuzz: 5000 seeded strings (and near misses of the format) parse to None, never
     raise; only the exact form is a report."""
     rng = random.Random(30)
-    near = ["inputs=1", "answers=1 inputs=1", "inputs=-1 answers=1", "inputs=1 answers=x",
-            "inputs=1  answers=1", "", None, 3, b"inputs=1 answers=1", "inputs=1 answers=1 z"]
+    near = ["answers=1", "outputs=1", "answers=1 outputs=x", "answers=-1 outputs=1",
+            "answers=1  outputs=1", "answers=1 outputs=1 ", "answers=1 outputs=1 answers=2",
+            "answers=1 outputs=1 rig/phase=1", "answers=1 outputs=1 /rig phase=1",
+            "", None, 3, b"answers=1 outputs=1"]
     for text in near:
         assert parse_report(text) is None, text
     alphabet = string.printable + "é\x00"
     for _ in range(5000):
-        text = "".join(rng.choice(alphabet) for _ in range(rng.randint(0, 30)))
+        text = "".join(rng.choice(alphabet) for _ in range(rng.randint(0, 40)))
         got = parse_report(text)
-        assert got is None or report_text(*got) == text.strip()
+        assert got is None or report_text(got) == text
 
 
-def _sim(report, publishers):
+class _Pub:
+    def __init__(self, topic, readers):
+        self.topic_name, self.readers = topic, readers
+
+    def get_subscription_count(self):
+        return self.readers
+
+
+def _sim(report, reporting=1, readers=2):
+    pubs = [_Pub("/oscillator/pi2", readers), _Pub("/oscillator/state", 1)]
     return SimpleNamespace(controller_matched=report,
                            resolve_topic_name=lambda topic: "/" + topic,
-                           count_publishers=lambda topic: publishers)
+                           count_publishers=lambda topic: reporting,
+                           published=SimpleNamespace(publishers=pubs))
 
 
 def test_the_simulator_waits_for_both_ends_of_the_controller():
+    ok = {"answers": 2, "outputs": 1, "/oscillator/pi2": 1}
     # no report and nobody to send one: a controller of another package, not asked
-    assert missing_matches(_sim(None, 0), 0) is None
+    assert missing_matches(_sim(None, reporting=0), 1) is None
     # a controller of this package that has not reported yet: wait for it
-    assert MATCHED_TOPIC in missing_matches(_sim(None, 1), 0)
-    # its inputs not matched yet, or its answers not to this node and the n recorders
-    assert "inputs=0" in missing_matches(_sim((0, 1), 1), 0)
-    assert "answers=1" in missing_matches(_sim((1, 1), 1), 1)
-    assert "2 reader(s)" in missing_matches(_sim((1, 1), 1), 1)
-    # matched both ways: nothing missing
-    assert missing_matches(_sim((1, 2), 1), 1) is None
-    assert missing_matches(_sim((2, 5), 1), 1) is None
+    assert MATCHED_TOPIC in missing_matches(_sim(None), 1)
+    # its answers short of this node and the recorder, its outputs of the recorder
+    assert "answers=1" in missing_matches(_sim({**ok, "answers": 1}), 1)
+    assert "outputs=0" in missing_matches(_sim({**ok, "outputs": 0}), 1)
+    # a topic it reads: matched at its end but not yet by this node's writer to it
+    # and the recorder, or the other way round
+    assert "this node's writer 1 of 2" in missing_matches(_sim(ok, readers=1), 1)
+    assert "its reader 0 publisher(s)" in missing_matches(_sim({**ok, "/oscillator/pi2": 0}), 1)
+    # a topic of this node it does not read is not asked (state has 1 reader of 2)
+    assert missing_matches(_sim(ok), 1) is None
+    # without recorders (n = 0): the controller and this node alone
+    assert missing_matches(_sim({"answers": 1, "outputs": 0, "/oscillator/pi2": 1},
+                                readers=1), 0) is None
+    # every lack named, as one item of the start's list (items are joined by "; ")
+    worst = missing_matches(_sim({"answers": 0, "outputs": 0, "/oscillator/pi2": 0},
+                                 readers=0), 1)
+    assert ";" not in worst and "answers=0" in worst and "outputs=0" in worst

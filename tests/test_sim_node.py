@@ -658,14 +658,18 @@ def test_a_controller_designed_for_another_delay_is_refused_and_a_restart_accept
                 assert again.wait(60) == 0, (tmp_path / "again.log").read_text()
                 text = (tmp_path / "again.log").read_text()
                 assert "summary: periods=30 " in text, text
-                assert re.search(r"starting after start_timeout=\d+\.\d s without: the "
-                                 r"recorder's True on /recorder/ready .*; the controller and "
-                                 r"1 recorder\(s\) subscribed to /oscillator/pi2 or "
-                                 r"/oscillator/state \(1 subscriber\(s\) of 2\); "
-                                 # the controller's own ends (its answers reach this node,
-                                 # not the recorder it lacks), when its report came
-                                 r"(the controller[^;]*/controller/matched[^;]*; )?"
-                                 r"a subscriber of /oscillator/impact \(0 of 1\)", text), text
+                line = re.search(r"starting after start_timeout=\d+\.\d s without: the "
+                                 r"recorder's True on /recorder/ready .*", text)
+                assert line, text
+                # the peers it started without, each named: the recorder's subscribers,
+                # the controller's when it had not discovered this node in the 2 s (1 of
+                # about 15 runs under load: "0 subscriber(s) of 2"), and the controller's
+                # own ends when its report came (its answers reach this node, not the
+                # recorder the test lacks)
+                assert re.search(r"the controller and 1 recorder\(s\) subscribed to "
+                                 r"/oscillator/pi2 or /oscillator/state \([01] subscriber"
+                                 r"\(s\) of 2\)", line.group(0)), line.group(0)
+                assert "a subscriber of /oscillator/impact (0 of 1)" in line.group(0)
                 assert procs[0].poll() is None, (tmp_path / "ctl.log").read_text()
                 assert "not isolated" not in (tmp_path / "ctl.log").read_text()
         finally:

@@ -198,7 +198,7 @@ def test_a_controller_takes_a_block_and_refuses_a_malformed_one(tmp_path):
         pub = col.node.create_publisher(Float64MultiArray, stream_block.TOPIC, DATA_QOS)
         assert col.wait_for(lambda: pub.get_subscription_count() > 0 and col.subs[
             "controller/velocity_correction"].get_publisher_count() > 0, 30.0), log.read_text()
-        assert col.controller_matched(), log.read_text()    # the controller's ends too
+        assert col.controller_matched(stream_block.TOPIC), log.read_text()   # its ends too
         pub.publish(_message([1.0] * 6, ("samples", "t,x,v")))
         pub.publish(stream_block.pack([0.0] * 12)[:-8])
         block = stream_block.Block()

@@ -238,6 +238,7 @@ class ControllerNode(Node):
             raise StartupError(str(exc)) from None
         self.rig_side = None     # the driver contract's side (rig_file), or None
         self.sub_impacts = None  # stream mode's impact topic (impact_source topic), or None
+        reads = []               # the other subscriptions of the simulator's topics
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
             self.pub_force = Counted(self.create_publisher(
@@ -246,13 +247,13 @@ class ControllerNode(Node):
             self.sub_samples = self.create_subscription(
                 JointState, "rig/sensor", self.rig_side.on_sensor, RIG_INPUT_QOS, raw=True,
                 event_callbacks=quiet)
-            sub_phase = self.create_subscription(
+            reads = [self.create_subscription(
                 Vector3Stamped, "rig/phase", self.rig_side.on_phase, DATA_QOS,
-                event_callbacks=quiet)
-            self.create_subscription(TimeReference, "rig/clock", self.rig_side.on_clock,
-                                     DATA_QOS, event_callbacks=quiet)
-            self.create_subscription(WrenchStamped, "rig/applied", self.rig_side.on_applied,
-                                     RIG_INPUT_QOS, event_callbacks=quiet)
+                event_callbacks=quiet), self.create_subscription(
+                TimeReference, "rig/clock", self.rig_side.on_clock, DATA_QOS,
+                event_callbacks=quiet), self.create_subscription(
+                WrenchStamped, "rig/applied", self.rig_side.on_applied, RIG_INPUT_QOS,
+                event_callbacks=quiet)]
         elif self.stream is None:
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
@@ -272,17 +273,18 @@ class ControllerNode(Node):
             # what acted where an answer came too late: nothing (oscillator/deadline_miss)
             # or the prediction substituted for it (oscillator/substituted); the model
             # filter must integrate the kick that acted, not the one it answered
-            self.create_subscription(Vector3Stamped, "oscillator/deadline_miss",
-                                     self._on_miss, DATA_QOS, event_callbacks=quiet)
-            self.create_subscription(TwistStamped, "oscillator/substituted",
-                                     self._on_substituted, DATA_QOS, raw=True,
-                                     event_callbacks=quiet)
-        inputs = [self.sub_samples]
-        if self.rig_side is not None:
-            inputs.append(sub_phase)
-        elif self.sub_impacts is not None:
-            inputs.append(self.sub_impacts)
-        self.matched.watch(inputs, self.pub_force if self.rig_side else self.pub)
+            reads = [self.create_subscription(
+                Vector3Stamped, "oscillator/deadline_miss", self._on_miss, DATA_QOS,
+                event_callbacks=quiet), self.create_subscription(
+                TwistStamped, "oscillator/substituted", self._on_substituted, DATA_QOS,
+                raw=True, event_callbacks=quiet)]
+        # the start handshake's report (ros/matching.py): every topic read, the answers
+        # (a rig's force pulse), the other recorded outputs
+        self.matched.watch(
+            [self.sub_samples] + ([self.sub_impacts] if self.sub_impacts else []) + reads,
+            self.pub_force if self.rig_side else self.pub,
+            [self.pub_estimate, self.pub_watch, self.pub_switch]
+            + ([self.pub] if self.rig_side else []))
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0

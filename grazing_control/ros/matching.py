@@ -5,14 +5,25 @@ Each end of a DDS match sees it on its own: a subscription that counts a publish
 and a message published before *both* ends matched can be lost for good (a volatile
 writer sends nothing to a reader it has not matched yet; Fast DDS's volatile reader
 that matches a writer late skips what that writer sent before). The simulator checks
-its own ends before the start (sim_node.start.missing); what only the controller can
-see, it says on ``controller/matched`` (std_msgs/String, latched): the least number of
-publishers any of its input subscriptions has matched, and the number of subscriptions
-its answer publisher has matched, as ``inputs=<k> answers=<m>`` (:func:`report_text`).
-The simulator waits for ``inputs >= 1`` and ``answers >= n + 1`` (itself and n
-recorders); a test that plays the simulator waits for the same (tests/test_closed_loop
+its own ends before the start (sim_node.start.missing_matches); what only the
+controller can see, it says on ``controller/matched`` (std_msgs/String, latched), as
+``key=count`` words (:func:`report_text`):
+
+* ``answers``: the subscriptions its answer publisher has matched (the simulator and
+  the recorders);
+* ``outputs``: the least number of subscriptions any of its other recorded publishers
+  has matched (``controller/estimate``, ``controller/model_watch``,
+  ``controller/model_switch``: the recorders);
+* one word per topic it reads, by its fully qualified name (``/oscillator/pi2=1``): the
+  publishers that subscription has matched.
+
+The simulator waits for ``answers >= n + 1``, ``outputs >= n`` (n recorders) and, on
+each topic it publishes that the controller reads, a publisher matched at the
+controller's end and ``n + 1`` readers at its own; a test that plays the simulator
+waits for the same on the topics it publishes (tests/test_closed_loop
 ``Collector.controller_matched``). Measured under load before this (issue 30, CI): a
-controller's first answers, or the first stream sample, lost in 3 scenes of a suite run.
+controller's first answers, or the first stream sample, lost in the tests that play
+the simulator.
 
 The counts are polled (:data:`MATCH_CHECK`) between the executor's waits rather than
 taken from matched-event callbacks: each event handler is one more entity in every wait
@@ -35,43 +46,60 @@ MATCHED_TOPIC = "controller/matched"
 #: Wall seconds between two looks at the match counts (a few us each).
 MATCH_CHECK = 0.02
 
-_REPORT = re.compile(r"inputs=(\d+) answers=(\d+)")
+#: The words every report has.
+REQUIRED = ("answers", "outputs")
+
+_WORD = re.compile(r"(answers|outputs|/[A-Za-z0-9_/~]+)=(\d+)")
 
 
-def report_text(inputs: int, answers: int) -> str:
-    """The report's text: ``inputs=<k> answers=<m>``."""
-    return f"inputs={int(inputs)} answers={int(answers)}"
+def report_text(counts: dict) -> str:
+    """The report's text: ``answers=<m> outputs=<o> /topic=<k> ...`` (``counts``: those
+    words to their counts)."""
+    return " ".join(f"{k}={int(v)}" for k, v in counts.items())
 
 
-def parse_report(text: str) -> tuple[int, int] | None:
-    """(inputs, answers) of a report's text, None for any other text."""
-    m = _REPORT.fullmatch(text.strip()) if isinstance(text, str) else None
-    return (int(m.group(1)), int(m.group(2))) if m else None
+def parse_report(text) -> dict | None:
+    """{word: count} of a report's text; None for any other text (a word of another
+    form, a repeated word, or ``answers``/``outputs`` missing)."""
+    if not isinstance(text, str):
+        return None
+    out = {}
+    for word in text.split(" "):
+        m = _WORD.fullmatch(word)
+        if m is None or m.group(1) in out:
+            return None
+        out[m.group(1)] = int(m.group(2))
+    return out if all(k in out for k in REQUIRED) else None
 
 
 class MatchReport:
-    """Publishes the match counts of ``inputs`` (subscriptions) and ``answers`` (the
-    publisher the simulator reads) whenever they change, looking at most every
-    :data:`MATCH_CHECK` s (:meth:`poll`, from the node's spin loop). Made before the
-    node's data endpoints, so that a peer that has discovered the answer publisher has
-    discovered this one too (one ordered discovery stream of publications); the ends
-    are named with :meth:`watch` once they exist."""
+    """Publishes the match counts (module docstring) whenever they change, looking at
+    most every :data:`MATCH_CHECK` s (:meth:`poll`, from the node's spin loop). Made
+    before the node's data endpoints, so that a peer that has discovered the answer
+    publisher has discovered this one too (one ordered discovery stream of
+    publications); the ends are named with :meth:`watch` once they exist."""
 
     def __init__(self, node):
         self.pub = node.create_publisher(String, MATCHED_TOPIC, LATCHED_QOS)
         self.inputs = []
         self.answers = None
+        self.outputs = []
         self.last = None
         self._next = 0.0
 
-    def watch(self, inputs, answers) -> None:
-        """The input subscriptions and the answer publisher whose matches are said."""
-        self.inputs, self.answers = list(inputs), answers
+    def watch(self, inputs, answers, outputs) -> None:
+        """The subscriptions of the topics read (``inputs``), the answer publisher and
+        the other recorded publishers whose matches are said."""
+        self.inputs, self.answers, self.outputs = list(inputs), answers, list(outputs)
 
-    def counts(self) -> tuple[int, int]:
-        """(least publishers matched over the inputs, subscriptions the answers matched)."""
-        inputs = min((sub.get_publisher_count() for sub in self.inputs), default=0)
-        return inputs, self.answers.get_subscription_count()
+    def counts(self) -> dict:
+        """The report's words and their counts (module docstring)."""
+        counts = {"answers": self.answers.get_subscription_count(),
+                  "outputs": min((p.get_subscription_count() for p in self.outputs),
+                                 default=0)}
+        for sub in self.inputs:
+            counts[sub.topic_name] = sub.get_publisher_count()
+        return counts
 
     def poll(self, now: float) -> None:
         """Look at the counts when due (``now``: time.monotonic()); publish a change."""
@@ -81,4 +109,4 @@ class MatchReport:
         counts = self.counts()
         if counts != self.last:
             self.last = counts
-            self.pub.publish(String(data=report_text(*counts)))
+            self.pub.publish(String(data=report_text(counts)))
