@@ -127,14 +127,7 @@ def missing(node) -> list:
         if why is not None:
             missing.append(why)
     if n > 0:
-        pubs = [node.pub_impact, node.pub_pi1, node.pub_pi2, node.pub_clock]
-        if node.settings.state_period > 0.0:
-            pubs.append(node.pub_state if node.out.block is None else node.pub_state_block)
-        if node.settings.mode == "realtime":     # the latency of every sample is recorded
-            pubs.append(node.pub_latency)
-        if node.driver is not None:
-            pubs.extend(node.driver.publishers)
-        for pub in pubs:
+        for pub in recorded_publishers(node):
             have = pub.get_subscription_count()
             if have < n:
                 missing.append(f"a subscriber of {pub.topic_name} ({have} of {n})")
@@ -146,12 +139,26 @@ def missing(node) -> list:
     return missing
 
 
+def recorded_publishers(node) -> list:
+    """This node's data publishers that ``wait_for_subscribers`` n asks n subscribers of
+    (the recorders'): the impacts, Pi1, Pi2, /clock, the stream (per sample or in
+    blocks) when on, the latency in realtime, a simulated rig's topics."""
+    pubs = [node.pub_impact, node.pub_pi1, node.pub_pi2, node.pub_clock]
+    if node.settings.state_period > 0.0:
+        pubs.append(node.pub_state if node.out.block is None else node.pub_state_block)
+    if node.settings.mode == "realtime":     # the latency of every sample is recorded
+        pubs.append(node.pub_latency)
+    if node.driver is not None:
+        pubs.extend(node.driver.publishers)
+    return pubs
+
+
 def missing_matches(node, n: int) -> str | None:
     """What the controller's own ends, and this node's ends towards it, still lack
     (ros/matching.py), or None. From its report on controller/matched: its answers
-    matched to this node and the ``n`` recorders, its other recorded outputs to the
-    recorders, and on each topic of this node that it reads, a publisher matched at its
-    end and ``n + 1`` readers (it and the recorders) at this node's. Asked of a
+    matched to this node and the ``n`` recorders, and on each topic of this node that it
+    reads, a publisher matched at its end and at this node's writer the controller's
+    reader and, on a topic of :func:`recorded_publishers`, the n recorders'. Asked of a
     controller of this package (one that publishes the report; another controller's ends
     are not seen)."""
     report = node.controller_matched
@@ -164,17 +171,16 @@ def missing_matches(node, n: int) -> str | None:
     if report["answers"] < n + 1:
         lacking.append(f"its answers matched to {n + 1} reader(s) "
                        f"(answers={report['answers']})")
-    if report["outputs"] < n:
-        lacking.append(f"its other outputs matched to {n} recorder(s) "
-                       f"(outputs={report['outputs']})")
+    recorded = {pub.topic_name for pub in recorded_publishers(node)}
     for pub in node.published.publishers:
         read = report.get(pub.topic_name)
         if read is None:
             continue                       # a topic of this node the controller ignores
-        have = pub.get_subscription_count()
-        if read < 1 or have < n + 1:
+        have, want = pub.get_subscription_count(), 1 + (n if pub.topic_name in recorded
+                                                        else 0)
+        if read < 1 or have < want:
             lacking.append(f"{pub.topic_name} matched at both ends (its reader {read} "
-                           f"publisher(s) and this node's writer {have} of {n + 1} "
+                           f"publisher(s) and this node's writer {have} of {want} "
                            "reader(s))")
     if not lacking:
         return None

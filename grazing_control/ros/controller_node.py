@@ -279,12 +279,10 @@ class ControllerNode(Node):
                 TwistStamped, "oscillator/substituted", self._on_substituted, DATA_QOS,
                 raw=True, event_callbacks=quiet)]
         # the start handshake's report (ros/matching.py): every topic read, the answers
-        # (a rig's force pulse), the other recorded outputs
+        # (a rig's force pulse)
         self.matched.watch(
             [self.sub_samples] + ([self.sub_impacts] if self.sub_impacts else []) + reads,
-            self.pub_force if self.rig_side else self.pub,
-            [self.pub_estimate, self.pub_watch, self.pub_switch]
-            + ([self.pub] if self.rig_side else []))
+            self.pub_force if self.rig_side else self.pub)
         self.exit_code = 0
         self.exit_now = False
         self._next_check = 0.0

@@ -10,16 +10,14 @@ controller can see, it says on ``controller/matched`` (std_msgs/String, latched)
 ``key=count`` words (:func:`report_text`):
 
 * ``answers``: the subscriptions its answer publisher has matched (the simulator and
-  the recorders);
-* ``outputs``: the least number of subscriptions any of its other recorded publishers
-  has matched (``controller/estimate``, ``controller/model_watch``,
-  ``controller/model_switch``: the recorders);
+  the n subscribers of every data topic that ``wait_for_subscribers`` asks for: the
+  recorders);
 * one word per topic it reads, by its fully qualified name (``/oscillator/pi2=1``): the
   publishers that subscription has matched.
 
-The simulator waits for ``answers >= n + 1``, ``outputs >= n`` (n recorders) and, on
-each topic it publishes that the controller reads, a publisher matched at the
-controller's end and ``n + 1`` readers at its own; a test that plays the simulator
+The simulator waits for ``answers >= n + 1`` and, on each topic it publishes that the
+controller reads, a publisher matched at the controller's end and ``n + 1`` readers at
+its own; a test that plays the simulator
 waits for the same on the topics it publishes (tests/test_closed_loop
 ``Collector.controller_matched``). Measured under load before this (issue 30, CI): a
 controller's first answers, or the first stream sample, lost in the tests that play
@@ -47,20 +45,20 @@ MATCHED_TOPIC = "controller/matched"
 MATCH_CHECK = 0.02
 
 #: The words every report has.
-REQUIRED = ("answers", "outputs")
+REQUIRED = ("answers",)
 
-_WORD = re.compile(r"(answers|outputs|/[A-Za-z0-9_/~]+)=(\d+)")
+_WORD = re.compile(r"(answers|/[A-Za-z0-9_/~]+)=(\d+)")
 
 
 def report_text(counts: dict) -> str:
-    """The report's text: ``answers=<m> outputs=<o> /topic=<k> ...`` (``counts``: those
-    words to their counts)."""
+    """The report's text: ``answers=<m> /topic=<k> ...`` (``counts``: those words to their
+    counts)."""
     return " ".join(f"{k}={int(v)}" for k, v in counts.items())
 
 
 def parse_report(text) -> dict | None:
     """{word: count} of a report's text; None for any other text (a word of another
-    form, a repeated word, or ``answers``/``outputs`` missing)."""
+    form, a repeated word, or ``answers`` missing)."""
     if not isinstance(text, str):
         return None
     out = {}
@@ -83,20 +81,17 @@ class MatchReport:
         self.pub = node.create_publisher(String, MATCHED_TOPIC, LATCHED_QOS)
         self.inputs = []
         self.answers = None
-        self.outputs = []
         self.last = None
         self._next = 0.0
 
-    def watch(self, inputs, answers, outputs) -> None:
-        """The subscriptions of the topics read (``inputs``), the answer publisher and
-        the other recorded publishers whose matches are said."""
-        self.inputs, self.answers, self.outputs = list(inputs), answers, list(outputs)
+    def watch(self, inputs, answers) -> None:
+        """The subscriptions of the topics read (``inputs``) and the answer publisher
+        whose matches are said."""
+        self.inputs, self.answers = list(inputs), answers
 
     def counts(self) -> dict:
         """The report's words and their counts (module docstring)."""
-        counts = {"answers": self.answers.get_subscription_count(),
-                  "outputs": min((p.get_subscription_count() for p in self.outputs),
-                                 default=0)}
+        counts = {"answers": self.answers.get_subscription_count()}
         for sub in self.inputs:
             counts[sub.topic_name] = sub.get_publisher_count()
         return counts
