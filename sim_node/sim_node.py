@@ -144,7 +144,7 @@ class SimNode(Node):
                                                            raw=True, event_callbacks=events)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(lambda params: on_set_parameters(self, params))
-        self.controller_matched = None  # the controller's (inputs, answers) matched, or None
+        self.controller_matched = None  # the controller's report (ros/matching.py), or None
         if self.get_parameter("wait_for_controller").value:
             self.create_subscription(String, MATCHED_TOPIC, self._on_controller_matched,
                                      LATCHED_QOS)

@@ -35,7 +35,6 @@ import os
 import signal
 import sys
 import threading
-import time
 
 from .entry import MODULES
 
@@ -47,8 +46,6 @@ __all__ = ["NODES", "main", "write_statuses"]
 #: while the others are built, was slower: overhead 1.67 s against 1.31 s, medians of 4
 #: side by side at load 3 (benchmarks/bench_scene_overhead.py --only-composed).
 NODES = ("recorder_node", "controller_node", "sim_node")
-#: Wall seconds between two of the controller's isolation checks (ControllerNode's).
-ISOLATION_CHECK = 0.25
 
 
 class _Stop:
@@ -108,19 +105,14 @@ def _build(spec: dict, statuses: dict, log):
 
 def _spin_scene(executor, nodes: dict) -> None:
     """Spin the simulator and the controller until the scene ends (or the controller's
-    isolation check stops it, or a signal), the check between the waits as in the
-    controller's own process (ControllerNode.spin_until)."""
+    isolation check stops it, or a signal), the controller's work between the waits as
+    in its own process (ControllerNode.between_waits)."""
     from .common import SIGNAL_POLL
 
     sim, ctl = nodes["sim_node"], nodes["controller_node"]
-    next_check = 0.0
     while not _Stop.asked and not sim.exit_now and not ctl.exit_now:
         executor.spin_once(timeout_sec=SIGNAL_POLL)
-        now = time.monotonic()
-        ctl.matched.poll(now)
-        if now >= next_check:
-            next_check = now + ISOLATION_CHECK
-            ctl._check_isolation()
+        ctl.between_waits()
 
 
 def _start_recorder(rec):

@@ -686,15 +686,19 @@ class ControllerNode(Node):
         SIGTERM is delivered in whatever Python callback runs next, and in a timer's
         the EventsExecutor logs it as a fatal exception.
         """
-        def stopped() -> bool:
-            now = time.monotonic()
-            self.matched.poll(now)
-            if now >= self._next_check:
-                self._next_check = now + ISOLATION_CHECK
-                self._check_isolation()
-            return self.exit_now
+        spin(executor, self.between_waits)
 
-        spin(executor, stopped)
+    def between_waits(self) -> bool:
+        """What runs between two of the executor's waits (here and in a composed
+        scene's loop, ros/composed.py): the report of the matches when due
+        (ros/matching.py), the isolation check every ISOLATION_CHECK s; True once the
+        node must stop."""
+        now = time.monotonic()
+        self.matched.poll(now)
+        if now >= self._next_check:
+            self._next_check = now + ISOLATION_CHECK
+            self._check_isolation()
+        return self.exit_now
 
     def _use_sim_time(self) -> bool:
         return self.get_clock().ros_time_is_active
