@@ -77,11 +77,6 @@ __all__ = ["SimNode", "main"]
 
 #: Wall seconds between two checks for another simulator or controller on the topics.
 ISOLATION_CHECK = 0.25
-#: Wall seconds the start conditions must hold before the start: for the ends that no
-#: condition sees (a controller of another package; the controller's ends are its report's,
-#: start.missing_matches). Without it the start was no sooner in bench_scene_overhead.py
-#: (the handshake 0.34 s both ways, medians of 5: the kernel's load is the longer wait).
-SETTLE = 0.2
 #: The wait at exit for the readers' acknowledgements (published.ACK_TIMEOUT, 10 s, after
 #: the scene) when stopped by a signal before the end (the launcher's grace is 15 s).
 INTERRUPTED_ACK_TIMEOUT = 2.0
@@ -161,11 +156,11 @@ class SimNode(Node):
         self.probe_start = 0.0
         # compile, or load numba's cache (0.5-0.8 s), while the peers are discovered and
         # the start conditions settle, not in the first period (issue 30)
-        self._warming = None
+        self.warming = None
         if kernel.use_kernel():
-            self._warming = threading.Thread(target=kernel.warm_up, name="kernel_warm_up",
+            self.warming = threading.Thread(target=kernel.warm_up, name="kernel_warm_up",
                                              daemon=True)
-            self._warming.start()
+            self.warming.start()
         self.summary_line = None          # the summary line logged when the scene ended
         self.scene = SceneGuard(self, self.get_parameter("scene").value)
         self.start_timer = self.create_timer(0.02, self._try_start)
@@ -179,9 +174,9 @@ class SimNode(Node):
         self.executor_kind = executor_kind(self)
         self.loop = None              # the Lockstep or Realtime loop, once started
         self.refused = False        # refused to start, or failed
-        self._created = time.monotonic()
+        self.created = time.monotonic()       # the start's wait counts from here
         self.wall_start = None
-        self._ready_since = None
+        self.ready_since = None               # since when the start conditions hold
         self._clock_wall = -math.inf   # wall time of the last /clock (realtime)
         self.get_logger().info(f"{self.settings.describe()} executor={self.executor_kind}")
 
@@ -204,29 +199,8 @@ class SimNode(Node):
             # an expiry of the start timer queued before it was destroyed (the events
             # executor delivers it): the scene started twice, its t = 0 samples twice
             return
-        waited = time.monotonic() - self._created
-        loading = self._warming is not None and self._warming.is_alive()   # the kernel
-        missing = start.missing(self)
-        if missing:
-            self._ready_since = None
-            if waited < self.get_parameter("start_timeout").value or loading:
-                return
-            self.get_logger().warning(
-                f"starting after start_timeout={waited:.1f} s without: {'; '.join(missing)}")
-        elif self._ready_since is None:
-            self._ready_since = time.monotonic()   # let both ends of every match settle
+        if not start.due(self):
             return
-        elif time.monotonic() - self._ready_since < SETTLE:
-            return
-        if loading:
-            return
-        if self._warming is not None:
-            self._warming = None
-            kernel.warm_up()            # at once when loaded; raises what the load raised
-        if not start.feasible(self):
-            return
-        if not missing:
-            self.get_logger().info(f"start conditions met after {waited:.1f} s: starting")
         self.destroy_timer(self.start_timer)
         freeze_heap()       # what start-up made (the warmed kernel, the scene): out of reach
         self.wall_start = time.monotonic()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+from grazing_control.oscillator import kernel
 from grazing_control.plant.feasibility import ROUND_TRIPS, check, sustained_rate
 from grazing_control.ros.common import READY_TOPIC
 from grazing_control.ros.matching import MATCHED_TOPIC
@@ -14,6 +15,46 @@ from sim_node.probe import RoundTrips, controller_name
 
 #: Wall seconds the round trips to the controller before a realtime start may take.
 PROBE_TIMEOUT = 5.0
+#: Wall seconds the start conditions must hold before the start: for the ends that no
+#: condition sees (a controller of another package; the controller's ends are its report's,
+#: missing_matches). Without it the start was no sooner in bench_scene_overhead.py
+#: (the handshake 0.34 s both ways, medians of 5: the kernel's load is the longer wait).
+SETTLE = 0.2
+
+
+def due(node) -> bool:
+    """Whether the scene starts now (the start timer's call, every 20 ms until it does).
+
+    The conditions of :func:`missing` have held for SETTLE seconds, or ``start_timeout``
+    has passed without them (a warning names what is missing); the kernel's warm-up
+    thread (compiling, or loading numba's cache) has finished, and its error, if any,
+    is raised here; a realtime start is :func:`feasible`. The node's ``created``,
+    ``ready_since`` and ``warming`` hold the wait between calls.
+    """
+    waited = time.monotonic() - node.created
+    loading = node.warming is not None and node.warming.is_alive()
+    absent = missing(node)
+    if absent:
+        node.ready_since = None
+        if waited < node.get_parameter("start_timeout").value or loading:
+            return False
+        node.get_logger().warning(
+            f"starting after start_timeout={waited:.1f} s without: {'; '.join(absent)}")
+    elif node.ready_since is None:
+        node.ready_since = time.monotonic()     # let both ends of every match settle
+        return False
+    elif time.monotonic() - node.ready_since < SETTLE:
+        return False
+    if loading:
+        return False
+    if node.warming is not None:
+        node.warming = None
+        kernel.warm_up()            # at once when loaded; raises what the load raised
+    if not feasible(node):
+        return False
+    if not absent:
+        node.get_logger().info(f"start conditions met after {waited:.1f} s: starting")
+    return True
 
 
 def intruders(node) -> list:
