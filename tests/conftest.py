@@ -35,6 +35,7 @@ checks that a grouped test's node id carries its group.
 """
 
 import os
+import signal
 import tempfile
 import time
 from pathlib import Path
@@ -42,6 +43,15 @@ from pathlib import Path
 import pytest
 
 from grazing_control.oscillator import kernel
+
+# A suite started with SIGINT ignored (a background job of a non-interactive shell, nohup)
+# passes the ignore on to every process it starts, and Python installs no Ctrl-C handler
+# of its own in a process that starts with SIGINT ignored: the tests that send one (the
+# launcher's, the console script's, the kernel's) saw the scene run to its end, exit 0
+# where 130 is the contract (2026-11-29, six tests of a suite run as `( make test & )`).
+# The processes the tests start get Python's default handling back.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session", autouse=True)
