@@ -210,17 +210,6 @@ def _pulse_case(which):
     return m, act, nd.gain_family(m, mu, act)
 
 
-def _fd(P, z, h):
-    """Fourth-order central differences of P.step at z, step h."""
-    jac = np.zeros((z.size, z.size))
-    for j in range(z.size):
-        e = np.zeros(z.size)
-        e[j] = h
-        f = [P.step(z + t * e).state for t in (-2, -1, 1, 2)]
-        jac[:, j] = (8.0 * (f[2] - f[1]) - (f[3] - f[0])) / (12.0 * h)
-    return jac
-
-
 @pytest.mark.parametrize("which", ["chain", "three"])
 def test_pulse_branch_is_the_orbit_of_the_exact_pulsed_map(which):
     """The branch with the pulse's b_w (§18, (N14)) against the exact pulsed map
@@ -239,6 +228,7 @@ def test_pulse_branch_is_the_orbit_of_the_exact_pulsed_map(which):
       1.1e-9 chain, 2.9e-6 three: an error ||dJ|| ~ 1/v- moves them by kappa ||dJ||)."""
     from grazing_control.dynamics.orbits.shooting import find_periodic
     from test_family import _match
+    from test_ndof_delay import _fd_jacobian
 
     m0, act, k = _pulse_case(which)
     for dd in (-1e-3, -1e-4, -1e-6, -1e-8, -1e-10):
@@ -262,7 +252,7 @@ def test_pulse_branch_is_the_orbit_of_the_exact_pulsed_map(which):
             err = _match(np.linalg.eigvals(o.monodromy), lam) / max(1.0, np.abs(lam).max())
             assert err <= (1e-10 if dd <= -1e-4 else 1e-8), (dd, err)
         if dd in (-1e-4, -1e-6):
-            fd = _fd(P, bp.pi2_state, 1e-3 * bp.v_minus ** 2)
+            fd = _fd_jacobian(P, bp.pi2_state, 1e-3 * bp.v_minus ** 2)
             assert np.max(np.abs(fd - mono)) <= 1e-7 * np.abs(mono).max()
             if dd == -1e-4:
                 assert _match(np.linalg.eigvals(fd), lam) <= 1e-5

@@ -22,6 +22,12 @@ monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impa
 This is the exact reference for the limit multipliers and the existence coefficient of
 family (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
 statement: the orbit near grazing; shooting on the exact period map is the global check).
+
+Every function takes ``delay``: the kick's actuation delay (b -> b_delta = Phi(-delay) b,
+§14), or a pulse as a :class:`~grazing_control.dynamics.design.family.Actuation`
+(b -> b_w, the pulse as a jump on the section its end later, §18, (N13)-(N15)); the
+branch holds while no impact lies in the window where the correction acts
+(:func:`acted_by`), and :func:`other_contacts` flows that window exactly.
 """
 
 from __future__ import annotations
