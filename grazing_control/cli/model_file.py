@@ -166,9 +166,10 @@ def add_gain_options(parser, *, markov: bool = False) -> None:
     g = parser.add_argument_group("n-DOF gains (with --model; at most one)")
     g.add_argument("--gains", type=_gains_value, metavar="K0,K1,...|FILE.yaml",
                    help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**), "
-                        "or a gain file of design --model M [--delay D] --out FILE.yaml: its "
-                        "gains and its actuation_delay (its n, i_a, omega, pi2_offset must "
-                        "be the model's; a --delay given must equal the file's)")
+                        "or a gain file of design --model M [--delay D] [--pulse-width W] "
+                        "--out FILE.yaml: its gains, its actuation_delay and its pulse_width "
+                        "(its n, i_a, omega, pi2_offset must be the model's; a --delay or "
+                        "--pulse-width given must equal the file's; sweep takes a kick's file)")
     g.add_argument("--mu", type=_finite, help="the design family's member with w^T N = mu w^T")
     g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
                    help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
