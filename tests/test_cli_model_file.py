@@ -436,6 +436,125 @@ def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_pat
     assert float(np.load(swept["npz"])["delay"]) == 0.5
 
 
+# ------------------------------------------------------------------ the pulse
+#: The issue's 3-mass chain (docs/theory_ndof.md §18): its design with the pulse of width
+#: 0.5 centred 0.5 after the sample is admissible (mu in (0.647, 0.810)).
+PULSE_THREE = """\
+M: [[1.0, 0.0, 0.0], [0.0, 1.2, 0.0], [0.0, 0.0, 0.9]]
+C: [[0.05, -0.02, 0.0], [-0.02, 0.05, -0.02], [0.0, -0.02, 0.05]]
+K: [[1.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 2.2]]
+f: [0.0, 0.0, 1.0]
+omega: 0.45
+i_w: 0
+r: 0.7
+i_a: 2
+phase: 0.0
+pi2_offset: 1.5
+delta_d: 0.0
+"""
+
+
+@pytest.fixture(scope="module")
+def pulse_files(tmp_path_factory):
+    """{name: (model file, gain file of design --delay D --pulse-width W --mu MU --out,
+    (D, W, MU))}: the chain (pulse 1 at 1, mu -0.17) and the issue's 3-mass chain (0.5 at
+    0.5, mu 0.73)."""
+    base = tmp_path_factory.mktemp("pulse")
+    three = base / "three_pulse.yaml"
+    three.write_text(PULSE_THREE, encoding="utf-8")
+    out = {}
+    for name, path, case in (("two", TWO, ("1", "1", "-0.17")),
+                             ("three", str(three), ("0.5", "0.5", "0.73"))):
+        gains = base / f"gains_{name}.yaml"
+        got = run_json(None, "design", "--model", path, "--delay", case[0], "--pulse-width",
+                       case[1], "--mu", case[2], "--out", str(gains))
+        assert got["admissible"] and got["pulse"]["pulse_width"] == float(case[1])
+        out[name] = (path, str(gains), case)
+    return out
+
+
+@pytest.mark.parametrize("which", ["two", "three"])
+def test_orbit_of_a_pulse_design_s_gain_file_down_to_1e_10(capsys, pulse_files, which):
+    """``orbit --gains FILE`` of ``design --delay D --pulse-width W --out FILE`` (issue 32:
+    refused as "pulse_width=1.0 is invalid here"): the same numbers as ``--mu MU --delay
+    D --pulse-width W``, bit for bit, on the branch in the impact phase down to -1e-10;
+    the Pi2 state a fixed point of the exact pulsed map ModalMap(model, k, D, W) with one
+    impact after the pulse at the same v- (1e-13 absolute; 1e-6 in v-, the map's event
+    search at v- ~ 1e-5)."""
+    path, gains, (delay, width, mu) = pulse_files[which]
+    model0 = load_model(path)
+    for dd in ("-1e-3", "-1e-10"):
+        got = run_json(capsys, "orbit", "--model", path, "--delta-d", dd, "--gains", gains)
+        ref = run_json(capsys, "orbit", "--model", path, "--delta-d", dd, "--mu", mu,
+                       "--delay", delay, "--pulse-width", width)
+        for key in ("gains", "actuation_delay", "pulse_width", "section_pi2_deviation",
+                    "multipliers", "v_minus", "guess"):
+            assert got[key] == ref[key], key
+        assert got["pulse_width"] == float(width) and got["guess"].startswith("impact phase")
+        z = np.array(got["section_pi2_deviation"])
+        step = ModalMap(with_delta_d(model0, float(dd)), np.array(got["gains"]),
+                        float(delay), float(width)).step(z)
+        assert len(step.impacts) == 1 and step.impacts[0].dt > float(delay) + float(width) / 2
+        assert abs(step.impacts[0].v_minus - got["v_minus"]) <= 1e-6 * got["v_minus"]
+        np.testing.assert_allclose(step.state, z, rtol=0, atol=1e-13)
+
+
+def test_continue_and_simulate_of_a_pulse_design(capsys, pulse_files):
+    """``continue --gains FILE --points 8`` from -1e-3 to -1e-9 on the chain's pulse
+    design: 8 points in the impact phase, each the ``orbit`` at its Delta d (state and v-
+    1e-12 relative, multipliers 1e-12); ``simulate --gains FILE``: every sample is the
+    exact pulsed map ModalMap(model, k, 1, 1) of the one before, bit for bit (the same
+    map), one impact per period, and it ends on the pulse's orbit (1e-12)."""
+    path, gains, _case = pulse_files["two"]
+    branch = run_json(capsys, "continue", "--model", path, "--from", "-1e-3", "--to", "-1e-9",
+                      "--points", "8", "--gains", gains)
+    assert branch["route"] == "impact phase" and branch["stopped"] == "end"
+    assert len(branch["branch"]) == 8 and branch["pulse_width"] == 1.0
+    for p in branch["branch"]:
+        o = run_json(capsys, "orbit", "--model", path, "--delta-d", repr(p["delta_d"]),
+                     "--gains", gains)
+        z, zo = np.array(p["section_pi2_deviation"]), np.array(o["section_pi2_deviation"])
+        assert np.max(np.abs(z - zo)) <= 1e-12 * np.max(np.abs(zo))
+        assert p["v_minus"] == pytest.approx(o["v_minus"], rel=1e-12)
+        np.testing.assert_allclose(lam(p["multipliers"]), lam(o["multipliers"]), rtol=0,
+                                   atol=1e-12)
+    got = run_json(capsys, "simulate", "--model", path, "--delta-d", "-1e-5", "--periods",
+                   "150", "--gains", gains)
+    pmap = ModalMap(with_delta_d(load_model(path), -1e-5), np.array(got["gains"]), 1.0, 1.0)
+    z = np.array(got["pi2_deviation"] + [got["final_deviation"]])
+    for j in range(150):
+        assert np.array_equal(pmap.step(z[j]).state, z[j + 1]), j
+    assert got["impacts_per_period"][-20:] == [1] * 20 and got["pulse_width"] == 1.0
+    assert got["distance_to_orbit"] < 1e-12
+
+
+def test_a_pulse_s_gain_file_is_refused_where_it_does_not_fit(capsys, pulse_files, three,
+                                                             tmp_path):
+    """One line naming the option or the entry: a different --pulse-width (0 too), a
+    file of another model (n; omega with the same n), sweep (which runs the kick), a
+    file of a pulse through an actuator (actuator_bandwidth)."""
+    path, gains, _case = pulse_files["two"]
+    three_path, three_gains, _ = pulse_files["three"]
+    actuated = tmp_path / "actuated.yaml"
+    run_json(capsys, "design", "--model", TWO, "--delay", "4", "--pulse-width", "1",
+             "--actuator-bandwidth", "5", "--mu", "0", "--out", str(actuated))
+    for argv, needle in (
+            (("orbit", "--model", path, "--delta-d", "-1e-8", "--gains", gains,
+              "--pulse-width", "0.5"), "--pulse-width 0.5 is invalid with --gains"),
+            (("continue", "--model", path, "--from", "-1e-3", "--to", "-1e-6", "--gains",
+              gains, "--pulse-width", "0"), "the file's pulse_width is 1.0 (give the same"),
+            (("orbit", "--model", three_path, "--delta-d", "-1e-8", "--gains", gains),
+             "n=2 is invalid for this model: the model file gives n = 3"),
+            (("simulate", "--model", three, "--delta-d", "-1e-8", "--periods", "2",
+              "--gains", three_gains), "omega=0.45 is invalid for this model"),
+            (("sweep", "--model", path, "--grid", "delta_d=-1e-4:-1e-5:2", "--periods", "3",
+              "--gains", gains), "pulse_width=1.0 is invalid here: sweep runs the kick"),
+            (("orbit", "--model", TWO, "--delta-d", "-1e-8", "--gains", str(actuated)),
+             "actuator_bandwidth=5.0 is invalid here")):
+        code, text, err = run(capsys, *argv)
+        assert code == 2 and text == "" and err.count("\n") == 1 and needle in err, err
+
+
 # ------------------------------------------------------------------ errors
 @pytest.mark.parametrize("argv, needle", [
     (["orbit", "--model", ONE, "--delta-d", "-1e-6", "--c2", "-1"], "--c2 is a 1-DOF option"),
@@ -467,6 +586,23 @@ def test_a_gain_file_of_design_out_gives_its_gains_and_its_delay(capsys, tmp_pat
      "give 2n = 4"),
     (["sweep", "--model", TWO, "--grid", "zeta=0.1:0.2:2", "--periods", "3"],
      "valid names are delta_d"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--mu", "0", "--pulse-width", "30"],
+     "--pulse-width 30.0 is invalid: valid range is 0 <= pulse_width < 11.96637061 with "
+     "--delay 0"),
+    (["continue", "--model", TWO, "--from", "-1e-3", "--to", "-1e-6", "--mu", "0",
+      "--delay", "11", "--pulse-width", "2"],
+     "--pulse-width 2.0 is invalid: valid range is 0 <= pulse_width < 1.932741229 with "
+     "--delay 11"),
+    (["orbit", "--model", TWO, "--delta-d", "-1e-6", "--mu", "0", "--pulse-width", "-1"],
+     "--pulse-width -1.0 is invalid: valid range is 0 <= pulse_width"),
+    (["simulate", "--model", TWO, "--delta-d", "-1e-6", "--periods", "3", "--pulse-width",
+      "1"], "--pulse-width needs the gains: give --gains, --mu or --free-gain"),
+    (["orbit", "--delta-d", "-1e-6", "--c2", "-1", "--pulse-width", "1"],
+     "--pulse-width needs --model FILE: the 1-DOF orbit, continue and simulate run the kick"),
+    (["continue", "--from", "-1e-3", "--to", "-1e-6", "--c2", "-1", "--pulse-width", "1"],
+     "--pulse-width needs --model FILE"),
+    (["simulate", "--delta-d", "-1e-6", "--periods", "3", "--c2", "-1", "--pulse-width=1"],
+     "--pulse-width needs --model FILE"),
 ])
 def test_errors_are_one_line_status_2(capsys, argv, needle):
     code, out, err = run(capsys, *argv)

@@ -1,5 +1,6 @@
-"""The explicit n-DOF 1/1 branch (docs/theory_ndof.md §5, §7) against the exact period
-map ModalMap, the 1-DOF branch for n = 1, and its own Taylor coefficients."""
+"""The explicit n-DOF 1/1 branch (docs/theory_ndof.md §5, §7; the pulse's, §18) against the
+exact period map ModalMap (with the pulse: ModalMap(width), the integrated flow, shooting
+on random models), the 1-DOF branch for n = 1, and its own Taylor coefficients."""
 
 import dataclasses
 import math
@@ -184,3 +185,191 @@ def test_the_walk_to_the_orbit_is_the_same_at_every_delta_d():
         for a, b in zip(alone, walked):    # every float of the point, arrays too
             assert _canonical([np.asarray(x).tolist() for x in a]) == \
                 _canonical([np.asarray(x).tolist() for x in b])
+
+
+# ------------------------------------------------------------------ the pulse (§18)
+#: The 3-mass chain of the issue: M diag(1, 1.2, 0.9), the wall on x0, forced and
+#: actuated on x2 (its design with the pulse of width 0.5 centred 0.5 is admissible).
+THREE = dict(M=np.diag([1.0, 1.2, 0.9]),
+             C=np.array([[0.05, -0.02, 0.0], [-0.02, 0.05, -0.02], [0.0, -0.02, 0.05]]),
+             K=np.array([[1.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 2.2]]),
+             f=np.array([0.0, 0.0, 1.0]), omega=0.45, i_w=0, r=0.7, i_a=2, phase=0.0,
+             pi2_offset=1.5, delta_d=0.0)
+
+
+def _pulse_case(which):
+    """(model, Actuation, k) of the pulse designs checked: the chain with the pulse of
+    width 1 centred 1 after the sample (mu -0.17, the middle of its admissible set) and
+    the 3-mass chain with width 0.5 centred 0.5 (mu 0.73, the middle of (0.647, 0.810))."""
+    from grazing_control.oscillator.ndof.model import NdofModel
+
+    if which == "chain":
+        m, act, mu = load_model(CHAIN), nd.Actuation(1.0, 1.0), -0.1698021039256156
+    else:
+        m, act, mu = NdofModel(**THREE), nd.Actuation(0.5, 0.5), 0.7285532188753283
+    return m, act, nd.gain_family(m, mu, act)
+
+
+@pytest.mark.parametrize("which", ["chain", "three"])
+def test_pulse_branch_is_the_orbit_of_the_exact_pulsed_map(which):
+    """The branch with the pulse's b_w (§18, (N14)) against the exact pulsed map
+    ModalMap(model, k, delay, width) (the pulse flowed with impacts), -1e-3 .. -1e-10:
+
+    * the fixed-point residual |P(z) - z| is rounding (1e-13 absolute on states ~ d*;
+      measured <= 8e-14), one impact after the pulse with the same v-, and the map's
+      Jacobian is the branch's B + s p q^T (1e-8 of its norm ~ 1/v-; measured 3e-14 ..
+      3.4e-9, as the map's own v- from its event search: 3.3e-9 off at v- = 5e-6);
+    * where shooting converges (-1e-3 .. -1e-6) Newton from the branch state stays there
+      (1e-11 relative; measured <= 6e-13) and LAPACK's multipliers of its monodromy are
+      the branch's to 1e-10 of max(1, |lambda|) at -1e-3, -1e-4 and 1e-8 at -1e-6, where
+      they lose ~eps ||J|| ~ eps / v- (measured <= 3e-9);
+    * fourth-order differences of the exact map (step 1e-3 v-^2): the Jacobian to 1e-7
+      of its norm (measured <= 1.7e-8), and at -1e-4 the multipliers to 1e-5 (measured
+      1.1e-9 chain, 2.9e-6 three: an error ||dJ|| ~ 1/v- moves them by kappa ||dJ||)."""
+    from grazing_control.dynamics.orbits.shooting import find_periodic
+    from test_family import _match
+    from test_ndof_delay import _fd_jacobian
+
+    m0, act, k = _pulse_case(which)
+    for dd in (-1e-3, -1e-4, -1e-6, -1e-8, -1e-10):
+        m = dataclasses.replace(m0, delta_d=dd)
+        bp = nb.orbit_at(m, k, dd, delay=act)
+        assert nb.other_contacts(m, k, bp, act) == 0
+        lam = nb.branch_multipliers(m, k, bp, act)
+        B, p, q, s = nb.pi2_factors(m, k, bp, act)
+        mono = B + s * np.outer(p, q)
+        P = ModalMap(m, k, act.delay, act.width)
+        step = P.step(bp.pi2_state, jacobian=True)
+        assert len(step.impacts) == 1 and step.impacts[0].dt > act.end(m)
+        assert step.impacts[0].v_minus == pytest.approx(bp.v_minus, rel=1e-6)
+        assert np.max(np.abs(step.state - bp.pi2_state)) <= 1e-13
+        assert np.max(np.abs(step.jacobian - mono)) <= 1e-8 * np.abs(mono).max()
+        if dd <= -1e-6:
+            o = find_periodic(P, bp.pi2_state)
+            assert len(o.impacts) == 1
+            scale = np.max(np.abs(bp.pi2_state))
+            assert np.max(np.abs(o.state - bp.pi2_state)) <= 1e-11 * scale
+            err = _match(np.linalg.eigvals(o.monodromy), lam) / max(1.0, np.abs(lam).max())
+            assert err <= (1e-10 if dd <= -1e-4 else 1e-8), (dd, err)
+        if dd in (-1e-4, -1e-6):
+            fd = _fd_jacobian(P, bp.pi2_state, 1e-3 * bp.v_minus ** 2)
+            assert np.max(np.abs(fd - mono)) <= 1e-7 * np.abs(mono).max()
+            if dd == -1e-4:
+                assert _match(np.linalg.eigvals(fd), lam) <= 1e-5
+
+
+def _deviation_flow(model, z0, pieces):
+    """The deviation z' = A z + B F by DOP853 (rtol 1e-13) over ``pieces`` (duration,
+    force) in turn, away from the wall: the forced linear flow of §15 integrated, not
+    Phi's closed form."""
+    from scipy.integrate import solve_ivp
+
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+    from grazing_control.oscillator.ndof.forced import force_input
+
+    flow = NdofFlow.of(model)
+    a, b = flow.A, force_input(flow)
+    z = np.array(z0, dtype=float)
+    for duration, force in pieces:
+        if duration > 0.0:
+            sol = solve_ivp(lambda t, y, f=force: a @ y + b * f, (0.0, duration), z,
+                            method="DOP853", rtol=1e-13, atol=1e-16)
+            z = sol.y[:, -1]
+    return z
+
+
+@pytest.mark.parametrize("which", ["chain", "three"])
+def test_the_pulse_is_a_jump_on_a_later_section_and_the_branch_is_periodic_under_it(which):
+    """(N13) and (N14) against the integrated flow (DOP853, not Phi's closed form): the
+    pulse F = m_a Delta v / w from rest moves the deviation to beta Delta v at its end,
+    beta = (I - Phi(w)) sigma m_a / w (1e-10 relative; measured 2e-15); and from the
+    branch orbit's state just after its impact, sigma to Pi2, the pulse of the sample's
+    k^T z on [s0, s0 + w] after it and the rest of the period bring the deviation back
+    to the state just before the impact, z- = M(psi) z+ (1e-9 relative; measured
+    <= 1.4e-13)."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+    from grazing_control.oscillator.ndof.forced import actuated_mass, static_deflection
+
+    m0, act, k = _pulse_case(which)
+    flow = NdofFlow.of(m0)
+    ma, w, s0 = actuated_mass(flow), act.width, act.start(m0)
+    beta = (np.eye(2 * m0.n) - flow.transition(w)) @ static_deflection(flow) * ma / w
+    got = _deviation_flow(m0, np.zeros(2 * m0.n), [(w, ma / w)])
+    assert np.max(np.abs(got - beta)) <= 1e-10 * np.abs(beta).max()
+    for dd in (-1e-3, -1e-6):
+        m = dataclasses.replace(m0, delta_d=dd)
+        bp = nb.orbit_at(m, k, dd, delay=act)
+        sigma = (m.pi2_offset - bp.psi) / m.omega
+        z_plus = np.array(bp.state)
+        z_plus[m.n + m.i_w] -= (1.0 + m.r) * bp.v_minus
+        z2 = _deviation_flow(m, z_plus, [(sigma, 0.0)])
+        assert np.max(np.abs(z2 - bp.pi2_state)) <= 1e-10 * np.abs(z2).max()
+        force = ma * float(k @ z2) / w
+        back = _deviation_flow(m, z2, [(s0, 0.0), (w, force), (m.period - sigma - s0 - w, 0.0)])
+        assert np.max(np.abs(back - bp.state)) <= 1e-9 * np.abs(bp.state).max()
+
+
+def test_a_contact_inside_the_pulse_takes_the_orbit_off_the_branch():
+    """The global check flows the pulse (§18): a random 3-mass model (seed 2107) with the
+    pulse of width 0.3 R centred 0.5 R (R = T - s), mu 0.5, at Delta d = -0.03: the
+    branch point of that Delta d meets the wall once more, inside the pulse (the exact
+    pulsed map from its Pi2 state has its impact in [start, end]); other_contacts counts
+    it, and the one entry does not return that point as an orbit (it finds another
+    1/1 orbit, v- = 0.30, by shooting from a simulation)."""
+    from grazing_control.dynamics.orbits import one_one
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
+    from test_family import _random_model
+
+    m0 = _random_model(2107, n=3)
+    reach = m0.period - m0.pi2_offset / m0.omega
+    act = nd.Actuation(0.35 * reach, 0.3 * reach)
+    k = nd.gain_family(m0, 0.5, act)
+    m = dataclasses.replace(m0, delta_d=-0.03)
+    bp = nb.orbit_at(m, k, -0.03, psi_max=1.0, delay=act)
+    assert bp.v_minus > 0.0 and nb.other_contacts(m, k, bp, act) == 1
+    step = ModalMap(m, k, act.delay, act.width).step(bp.pi2_state)
+    assert any(act.start(m) <= i.dt <= act.end(m) for i in step.impacts)
+    try:
+        got = one_one.orbit(m, k, delay=act.delay, width=act.width)
+    except OrbitNotFound:
+        return
+    assert got.route != one_one.EXPLICIT
+    assert np.max(np.abs(got.state - bp.pi2_state)) > 1e-6
+
+
+def test_random_pulse_branches_against_shooting():
+    """A differential test over 60 seeded random models (2 and 3 masses, full M and K),
+    pulses (delay in [0, 0.7 R), width up to 0.9 of what fits before the grazing phase),
+    family members mu in (-0.6, 0.6), at Delta d = +-1e-3, +-1e-5: every branch orbit
+    found (116 of the 240 cases: the other side has none) is checked globally and,
+    from its state, Newton shooting on the exact pulsed map converges to it (1e-11 of
+    the state; measured 6.7e-14) with one impact and the same multipliers (1e-9 of
+    max(1, |lambda|); measured 5.6e-10 where |lambda| ~ 30, LAPACK's eps ||J||)."""
+    from grazing_control.dynamics.orbits.shooting import find_periodic
+    from test_family import _match, _random_model
+
+    compared = 0
+    for seed in range(60):
+        rng = np.random.default_rng(1000 + seed)
+        m0 = _random_model(1000 + seed, n=2 + seed % 2)
+        reach = m0.period - m0.pi2_offset / m0.omega
+        delay = float(rng.uniform(0.0, 0.7 * reach))
+        width = float(rng.uniform(0.05, 1.0) * min(reach, 2 * (reach - delay)) * 0.9)
+        act = nd.Actuation(delay, width)
+        k = nd.gain_family(m0, float(rng.uniform(-0.6, 0.6)), act)
+        for dd in (-1e-3, -1e-5, 1e-3, 1e-5):
+            m = dataclasses.replace(m0, delta_d=dd)
+            try:
+                bp = nb.orbit_at(m, k, dd, delay=act)
+            except (ValueError, ParameterError):
+                continue
+            assert nb.other_contacts(m, k, bp, act) == 0
+            lam = nb.branch_multipliers(m, k, bp, act)
+            o = find_periodic(ModalMap(m, k, delay, width), bp.pi2_state)
+            assert len(o.impacts) == 1
+            scale = max(1.0, np.abs(bp.pi2_state).max())
+            assert np.max(np.abs(o.state - bp.pi2_state)) <= 1e-11 * scale, (seed, dd)
+            err = _match(np.linalg.eigvals(o.monodromy), lam)
+            assert err <= 1e-9 * max(1.0, np.abs(lam).max()), (seed, dd, err)
+            compared += 1
+    assert compared >= 100

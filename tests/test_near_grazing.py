@@ -241,3 +241,38 @@ def test_two_mass_cancel_first_markov_grows_like_delta_d_to_minus_quarter_or_hal
     sc = multiplier_scaling(TWO, k, side * np.geomspace(1e-6, 1e-8, 3))
     assert all(e == "" for e in sc.errors), sc.errors
     assert fit_exponent(sc.delta_d, sc.largest) == pytest.approx(exponent, abs=0.02)
+
+
+def test_a_pulse_orbit_off_the_branch_is_shot_on_the_exact_pulsed_map():
+    """Where the pulsed branch does not hold (its point meets the wall inside the pulse:
+    tests/test_modal_branch.py), the entry shoots on ModalMap(model, k, delay, width)
+    (near_grazing.closed_loop_map): the orbit it returns (another 1/1 orbit, |lambda|max
+    1.01, its impact 0.61 after the sample, before the pulse) is a fixed point of that
+    map with one impact (1e-12; measured 2e-16), and its multipliers are those of
+    fourth-order differences of the map (1e-6; measured 1e-12: an impact inside the
+    correction's window, so LAPACK's, no determinant formula); a pulse through an
+    actuator is refused naming its time constant."""
+    import dataclasses
+
+    from grazing_control.dynamics.design.family import Actuation
+    from grazing_control.dynamics.maps.modal_map import ModalMap
+    from grazing_control.dynamics.orbits.near_grazing import closed_loop_map
+    from grazing_control.oscillator.params import ParameterError
+    from test_family import _match, _random_model
+    from test_ndof_delay import _fd_jacobian
+
+    m0 = _random_model(2107, n=3)
+    reach = m0.period - m0.pi2_offset / m0.omega
+    act = Actuation(0.35 * reach, 0.3 * reach)
+    k = gain_family(m0, 0.5, act)
+    m = dataclasses.replace(m0, delta_d=-0.03)
+    o = orbit_11(m, k, delay=act.delay, width=act.width)
+    P = closed_loop_map(m, k, act)
+    assert isinstance(P, ModalMap) and (P.delay, P.width) == (act.delay, act.width)
+    step = P.step(o.state)
+    assert o.route == "simulation" and len(step.impacts) == 1
+    assert np.max(np.abs(step.state - o.state)) <= 1e-12 * np.abs(o.state).max()
+    fd = _fd_jacobian(P, o.state, 1e-3 * o.v_minus ** 2)
+    assert _match(np.linalg.eigvals(fd), o.multipliers) <= 1e-6
+    with pytest.raises(ParameterError, match="time_constant=0.2 is invalid here"):
+        closed_loop_map(m, k, Actuation(1.0, 1.0, 0.2))

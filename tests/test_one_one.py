@@ -153,3 +153,65 @@ def test_an_unknown_model_is_refused_and_no_orbit_raises():
         one_one.orbit({"zeta": 0.1})
     with pytest.raises(OrbitNotFound):
         one_one.orbit(P.with_(delta_d=1e-3))
+
+
+# ------------------------------------------------------------------ the pulse (§18)
+def test_model_file_pulse_orbit_and_branch_are_the_pulsed_explicit_branch():
+    """``width`` > 0 (docs/theory_ndof.md §18): the entry's orbit is modal_branch's with the
+    pulse's Actuation (the same floats), down to Delta d = -1e-10; its branch is
+    continue_branch's, and each point is the entry's orbit at that Delta d (state 1e-12
+    relative, multipliers 1e-12: two Brent solves of the same curve)."""
+    from grazing_control.dynamics.design.family import Actuation
+
+    act = Actuation(1.0, 1.0)
+    k = np.asarray(gain_family(CHAIN, -0.17, act), dtype=float)
+    for dd in (-1e-3, -1e-10):
+        m = dataclasses.replace(CHAIN, delta_d=dd)
+        got = one_one.orbit(m, k, delay=1.0, width=1.0)
+        bp = modal_branch.orbit_at(m, k, dd, delay=act)
+        assert got.route == one_one.EXPLICIT and got.branch == "grazing"
+        assert _same(got.state, bp.pi2_state) and got.v_minus == bp.v_minus
+        assert _same(got.multipliers, modal_branch.branch_multipliers(m, k, bp, act))
+    got = one_one.branch(CHAIN, k, -1e-3, -1e-9, 8, delay=1.0, width=1.0)
+    assert got.route == "impact phase" and got.stopped == "end" and len(got.points) == 8
+    for p in got.points:
+        o = one_one.orbit(CHAIN, k, p.value, delay=1.0, width=1.0)
+        assert np.max(np.abs(o.state - p.state)) <= 1e-12 * np.max(np.abs(o.state))
+        assert np.max(np.abs(o.multipliers - p.multipliers)) <= 1e-12
+
+
+@pytest.mark.parametrize("delay, width, c2", [(0.5, 1.0, -1.0), (2.0, 1.0, 0.5)])
+def test_n1_model_file_pulse_orbit_is_the_1dof_pulse_orbit(delay, width, c2):
+    """The 1-DOF oscillator has the pulse's orbit only as Newton on its exact pulse map
+    with a central-difference Jacobian (``simulation.actuation.pulse_orbit``, no
+    command): the n = 1 file's pulsed branch equals it, the state and v- to 1e-12
+    (measured 3.7e-15, 4.4e-13), the multipliers to 1e-6 (the 1-DOF differences'
+    accuracy: measured 3.3e-7), for the family member with k_v0 = c2 (its k_x0 the 1-DOF
+    pulse design's c1, (P1))."""
+    from grazing_control.dynamics.design.family import Actuation
+    from grazing_control.dynamics.simulation.actuation import pulse_orbit
+
+    act = Actuation(delay, width)
+    k0, k1 = gain_family(ONE, 0.0, act), gain_family(ONE, 1.0, act)
+    k = gain_family(ONE, (c2 - k0[1]) / (k1[1] - k0[1]), act)
+    for dd in (-1e-3, -1e-5):
+        ref = pulse_orbit(P.with_(delta_d=dd), Gains(float(k[0]), float(k[1]), delay), width)
+        got = one_one.orbit(ONE, k, dd, delay=delay, width=width)
+        assert got.route == one_one.EXPLICIT
+        assert np.max(np.abs(got.state - ref.pi2_deviation)) <= 1e-12 * np.max(np.abs(got.state))
+        assert got.v_minus == pytest.approx(ref.v_minus, rel=1e-12)
+        assert np.max(np.abs(np.sort_complex(got.multipliers) - np.sort_complex(ref.multipliers))) <= 1e-6
+
+
+def test_the_1dof_closed_form_refuses_a_pulse_in_one_line():
+    """The 1-DOF closed form runs the kick: a pulse width is refused naming it (the n = 1
+    model file is the same oscillator with the pulse)."""
+    from grazing_control.oscillator.params import ParameterError
+
+    for call in (lambda: one_one.orbit(P.with_(delta_d=-1e-4), Gains(-0.5, -0.5), width=1.0),
+                 lambda: one_one.branch(P, Gains(-0.5, -0.5), -1e-3, -1e-6, 3, width=1.0)):
+        with pytest.raises(ParameterError, match="width=1.0 is invalid for the 1-DOF "
+                                                 "oscillator's 1/1 orbit: .*valid: 0"):
+            call()
+    with pytest.raises(ParameterError, match="pulse_width=-1.0 is invalid"):
+        one_one.orbit(CHAIN, gain_family(CHAIN, 0.0), -1e-4, width=-1.0)

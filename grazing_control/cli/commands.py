@@ -264,6 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_method(s)
     model_file.add_model_option(s)
     model_file.add_gain_options(s, markov=True)
+    model_file.add_pulse_option(s)
     s.set_defaults(func=cmd_orbit)
 
     s = sub.add_parser("continue", help="continue the 1/1 branch in Delta d, find bifurcations")
@@ -277,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_gains(s)
     model_file.add_model_option(s)
     model_file.add_gain_options(s, markov=True)
+    model_file.add_pulse_option(s)
     s.set_defaults(func=cmd_continue)
 
     from .continue2 import add_parser as add_continue2_parser
@@ -305,6 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_gains(s)
     model_file.add_model_option(s)
     model_file.add_gain_options(s)
+    model_file.add_pulse_option(s)
     model_file.add_start_option(s)
     s.set_defaults(func=cmd_simulate)
 

@@ -17,7 +17,11 @@ kick v[i_a] += k^T (X - X**) at Pi2, coordinates x0..x{n-1}, v0..v{n-1}), given 
 With ``--delay D`` (every command here: design, orbit, continue, simulate, sweep,
 figures) the kick k^T z of the sample acts D later, 0 <= D < T - pi2_offset/omega (:func:`delay_of`): the family members of ``--mu``
 and ``--free-gain`` are the delayed kick's (docs/theory_ndof.md §14), as ``design --delay``
-gives them.
+gives them. With ``--pulse-width W`` as well (orbit, continue, simulate; design has its
+own) the correction is the force pulse of width W centred D after the sample
+(:func:`pulse_width_of`, :func:`actuation_of`): the family members are the pulse's
+(docs/theory_ndof.md §15), as ``design --delay D --pulse-width W`` gives them, and a gain
+file of that design carries both.
 
 A leaf of the command line like :mod:`.common`. Errors are one line and status 2, as for
 every command (cli/commands.py).
@@ -33,7 +37,8 @@ from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["add_model_option", "add_gain_options", "add_design_options", "add_start_option",
            "add_sweep_options", "add_figures_options", "check_options", "load", "coordinates",
-           "family_member", "gains_of", "delay_of", "control_of", "dispatch", "fmt_vec", "header"]
+           "family_member", "gains_of", "delay_of", "pulse_width_of", "actuation_of",
+           "add_pulse_option", "control_of", "dispatch", "fmt_vec", "header"]
 
 #: Options of the 1-DOF commands that a model file replaces (refused with --model).
 ONE_DOF_OPTIONS = ("--zeta", "--r", "--omega", "--pi2-offset", "--params", "--rig", "--c1", "--c2",
@@ -94,12 +99,18 @@ def _gains_value(text):
 GAIN_FILE_MODEL = ("n", "i_a", "omega", "pi2_offset")
 
 
+#: A gain file's actuator entries: orbit, continue and simulate run the kick or the ideal
+#: pulse, not the pulse through a first-order actuator (its force is a state of its own).
+GAIN_FILE_ACTUATOR = ("actuator_bandwidth", "actuator_latency")
+
+
 def gain_file(path, model):
-    """(k, actuation_delay) of a gain file of ``design --model M --out FILE``
+    """(k, actuation_delay, pulse_width) of a gain file of ``design --model M --out FILE``
     (``family.write_gain_yaml``), checked against ``model``: its n, i_a, omega and
     pi2_offset must be the model's (a file designed for another model is refused, one
-    line naming the entry); a pulse's file (pulse_width) is refused (these commands run
-    the kick)."""
+    line naming the entry); a file of a pulse through an actuator (actuator_bandwidth or
+    actuator_latency not 0) is refused (these commands run the kick or the ideal
+    pulse)."""
     from grazing_control.support.files import YamlFileError, read_yaml_file, ros_parameters
 
     try:
@@ -118,19 +129,23 @@ def gain_file(path, model):
             raise ParameterError(f"--gains {path}: {name}={got!r} is invalid for this model: "
                                  f"the model file gives {name} = {want!r} (a gain file of "
                                  "another model)")
-    if values.get("pulse_width"):
-        raise ParameterError(f"--gains {path}: pulse_width={values['pulse_width']!r} is "
-                             "invalid here: orbit, continue and simulate run the kick "
-                             "(valid: a kick's gain file, pulse_width absent or 0)")
+    for name in GAIN_FILE_ACTUATOR:
+        if values.get(name):
+            raise ParameterError(f"--gains {path}: {name}={values[name]!r} is invalid here: "
+                                 "orbit, continue and simulate run the kick or the ideal "
+                                 f"pulse (valid: {name} absent or 0)")
     try:
         k = np.array([float(x) for x in values["gains"]], dtype=float)
         delay = float(values.get("actuation_delay", 0.0))
+        width = float(values.get("pulse_width", 0.0))
     except (TypeError, ValueError):
-        k, delay = np.array([math.nan]), math.nan
-    if k.size != 2 * model.n or not np.all(np.isfinite(k)) or not math.isfinite(delay):
-        raise ParameterError(f"--gains {path}: gains and actuation_delay are invalid: "
-                             f"expected 2n = {2 * model.n} finite gains and a finite delay")
-    return k, delay
+        k, delay, width = np.array([math.nan]), math.nan, math.nan
+    if k.size != 2 * model.n or not np.all(np.isfinite(k)) or not math.isfinite(delay) \
+            or not math.isfinite(width):
+        raise ParameterError(f"--gains {path}: gains, actuation_delay and pulse_width are "
+                             f"invalid: expected 2n = {2 * model.n} finite gains, a finite "
+                             "delay and a finite width")
+    return k, delay, width
 
 
 def _named(text):
@@ -151,9 +166,10 @@ def add_gain_options(parser, *, markov: bool = False) -> None:
     g = parser.add_argument_group("n-DOF gains (with --model; at most one)")
     g.add_argument("--gains", type=_gains_value, metavar="K0,K1,...|FILE.yaml",
                    help="the 2n gains k (x0..x{n-1}, v0..v{n-1}) of v[i_a] += k^T (X - X**), "
-                        "or a gain file of design --model M [--delay D] --out FILE.yaml: its "
-                        "gains and its actuation_delay (its n, i_a, omega, pi2_offset must "
-                        "be the model's; a --delay given must equal the file's)")
+                        "or a gain file of design --model M [--delay D] [--pulse-width W] "
+                        "--out FILE.yaml: its gains, its actuation_delay and its pulse_width "
+                        "(its n, i_a, omega, pi2_offset must be the model's; a --delay or "
+                        "--pulse-width given must equal the file's; sweep takes a kick's file)")
     g.add_argument("--mu", type=_finite, help="the design family's member with w^T N = mu w^T")
     g.add_argument("--free-gain", type=_named, metavar="NAME=VALUE",
                    help="the design family's member whose gain on NAME (x0.., v0..) is VALUE")
@@ -167,6 +183,16 @@ def add_gain_options(parser, *, markov: bool = False) -> None:
                             help="with --cancel-first-markov: cancel w^T N u only, G(1) left "
                                  "free (the branch is linear in the impact phase and the "
                                  "singular eigenvalue grows like |Delta d|^(-1/2))")
+
+
+def add_pulse_option(parser) -> None:
+    """``--pulse-width W`` of orbit, continue and simulate (:func:`pulse_width_of`)."""
+    parser.add_argument("--pulse-width", type=_finite, default=None, metavar="W",
+                        help="with --model: the correction k^T z acts as a force pulse of "
+                             "this width centred --delay after the Pi2 sample (the ideal "
+                             "pulse of design --model M --delay D --pulse-width W; "
+                             "docs/theory_ndof.md sections 15, 18), ending before the grazing "
+                             "phase; default 0, the kick. A gain file of that design gives it")
 
 
 def add_design_options(parser) -> None:
@@ -200,6 +226,8 @@ def _given(argv, flag):
 
 #: The commands of this module (``run --model`` is the launcher's: ros/launcher.py).
 COMMANDS = ("design", "orbit", "continue", "simulate", "sweep", "figures")
+#: The commands whose ``--pulse-width`` needs ``--model`` (design has a 1-DOF pulse design).
+PULSE_COMMANDS = ("orbit", "continue", "simulate")
 
 
 def check_options(args, argv) -> None:
@@ -208,6 +236,10 @@ def check_options(args, argv) -> None:
     if getattr(args, "command", None) not in COMMANDS:
         return
     model = getattr(args, "model", None)
+    if model is None and args.command in PULSE_COMMANDS and _given(argv, "--pulse-width"):
+        raise ParameterError("--pulse-width needs --model FILE: the 1-DOF orbit, continue "
+                             "and simulate run the kick (the pulse's 1/1 orbit of the same "
+                             "oscillator: --model config/models/study_1dof.yaml)")
     if model is not None:
         bad = [f for f in ONE_DOF_OPTIONS if _given(argv, f)
                and f != "--delay"          # every model command takes the delayed kick
@@ -287,14 +319,47 @@ def delay_of(args, model) -> float:
     return delay
 
 
+def pulse_width_of(args, model) -> float:
+    """The pulse width of ``--pulse-width`` (default 0: the kick), checked against the
+    model and ``--delay`` D: the pulse centred D after the sample (it starts at
+    max(D - W/2, 0)) must end before the grazing phase, end = max(D + W/2, W) < R =
+    T - pi2_offset/omega, i.e. 0 <= W < min(R, 2 (R - D)) (docs/theory_ndof.md §15; the
+    bound of ``design --pulse-width``). One-line ParameterError naming --pulse-width and
+    the range."""
+    width = getattr(args, "pulse_width", None)
+    width = 0.0 if width is None else float(width)
+    delay = delay_of(args, model)
+    reach = model.period - model.pi2_offset / model.omega
+    most = min(reach, 2.0 * (reach - delay))
+    if not (math.isfinite(width) and 0.0 <= width < most):
+        raise ParameterError(f"--pulse-width {width!r} is invalid: valid range is 0 <= "
+                             f"pulse_width < {most:.10g} with --delay {delay:g} for this model "
+                             "(the pulse centred at the delay must end before the grazing "
+                             f"phase T - pi2_offset/omega = {reach:.10g}, docs/theory_ndof.md "
+                             "§15)")
+    return width
+
+
+def actuation_of(args, model):
+    """The correction's actuation of ``--delay`` and ``--pulse-width``: the kick's delay
+    (a float), or ``family.Actuation(delay, width)`` for the pulse (the ``delay``
+    argument of the family and the orbits, ``family.design_actuation``)."""
+    from grazing_control.dynamics.design.family import design_actuation
+
+    return design_actuation(delay_of(args, model), pulse_width_of(args, model))
+
+
 def gains_of(args, model):
     """(gains or None, mu or None, how): the gains of --gains / --mu / --free-gain (at most
     one), or of --cancel-first-markov OFFSET with --mu; None: uncontrolled. With
-    ``--delay`` (:func:`delay_of`) the family is the delayed kick's; a delay without
-    gains is refused. ``--gains FILE`` (:func:`gain_file`) sets ``args.delay`` to the
-    file's actuation_delay (a different --delay is refused)."""
+    ``--delay`` (:func:`delay_of`) and ``--pulse-width`` (:func:`pulse_width_of`) the
+    family is the delayed kick's or the pulse's; a delay or a pulse without gains is
+    refused. ``--gains FILE`` (:func:`gain_file`) sets ``args.delay`` and
+    ``args.pulse_width`` to the file's actuation_delay and pulse_width (a different
+    --delay or --pulse-width is refused, and a pulse's file in a command without
+    --pulse-width: sweep)."""
     if isinstance(getattr(args, "gains", None), GainFile):
-        k, file_delay = gain_file(args.gains, model)
+        k, file_delay, file_width = gain_file(args.gains, model)
         given = float(getattr(args, "delay", 0.0) or 0.0)
         if given and given != file_delay:
             raise ParameterError(f"--delay {given!r} is invalid with --gains {args.gains}: "
@@ -302,12 +367,14 @@ def gains_of(args, model):
                                  "same, or none)")
         args.delay = file_delay
         delay_of(args, model)
+        _file_pulse(args, file_width)
+        pulse_width_of(args, model)
         if getattr(args, "cancel_first_markov", None) is not None or \
                 getattr(args, "mu", None) is not None or getattr(args, "free_gain", None):
             raise ParameterError("--gains FILE and --mu/--free-gain/--cancel-first-markov are "
                                  "given: give one of --gains, --mu, --free-gain")
         return k, None, f"gain file {args.gains}"
-    delay = delay_of(args, model)
+    delay = actuation_of(args, model)
     offset = getattr(args, "cancel_first_markov", None)
     given = [f for f, v in (("--gains", getattr(args, "gains", None)),
                             ("--mu", getattr(args, "mu", None)),
@@ -329,6 +396,9 @@ def gains_of(args, model):
         raise ParameterError(f"{' and '.join(given)} are given: give one of --gains, --mu, "
                              "--free-gain")
     if not given:
+        if getattr(args, "pulse_width", None):
+            raise ParameterError("--pulse-width needs the gains: give --gains, --mu or "
+                                 "--free-gain")
         if delay:
             raise ParameterError("--delay needs the gains: give --gains, --mu or --free-gain")
         return None, None, "uncontrolled"
@@ -344,6 +414,25 @@ def gains_of(args, model):
     return np.asarray(gain_family(model, mu, delay), dtype=float), mu, "design family"
 
 
+
+
+def _file_pulse(args, width: float) -> None:
+    """Set ``args.pulse_width`` to a gain file's pulse_width: a different ``--pulse-width``
+    given is refused, and a pulse's file in a command that runs the kick only (no
+    ``--pulse-width`` option: sweep), each in one line naming the option or the entry."""
+    if not hasattr(args, "pulse_width"):
+        if width:
+            raise ParameterError(f"--gains {args.gains}: pulse_width={width!r} is invalid "
+                                 f"here: {args.command} runs the kick (valid: a kick's gain "
+                                 "file, pulse_width absent or 0; orbit, continue and "
+                                 "simulate run the pulse)")
+        return
+    given = args.pulse_width
+    if given is not None and float(given) != width:
+        raise ParameterError(f"--pulse-width {float(given)!r} is invalid with --gains "
+                             f"{args.gains}: the file's pulse_width is {width!r} (give the "
+                             "same, or none)")
+    args.pulse_width = width
 
 
 def control_of(args, model):

@@ -22,7 +22,7 @@ from grazing_control.oscillator.params import ParameterError
 
 
 from .common import complex_list, gains_of, nulls, params_of, require_finite
-from .model_file import control_of, delay_of, fmt_vec, header, load
+from .model_file import actuation_of, control_of, delay_of, fmt_vec, header, load, pulse_width_of
 from .model_file import gains_of as vector_gains_of
 
 __all__ = ["cmd_orbit", "cmd_continue", "cmd_simulate", "orbit_lines", "branch_lines",
@@ -153,11 +153,11 @@ def _file_orbit(args):
 
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = vector_gains_of(args, model)
-    delay = delay_of(args, model)
+    delay, width = delay_of(args, model), pulse_width_of(args, model)
     t0 = time.perf_counter()
-    side = grazing_side(model, k, delay=delay)
+    side = grazing_side(model, k, delay=actuation_of(args, model))
     try:
-        o = one_one.orbit(model, k, delay=delay)
+        o = one_one.orbit(model, k, delay=delay, width=width)
     except RuntimeError as exc:
         if side * args.delta_d < 0.0:
             raise RuntimeError(f"{exc}; note: the local map puts the 1/1 orbit born at "
@@ -169,10 +169,9 @@ def _file_orbit(args):
     out.update(_orbit_json(o))
     out["grazing_side"] = side
     out.update(gains=None if k is None else k.tolist(), mu=mu, control=how, seconds=seconds)
-    if delay:
-        out["actuation_delay"] = delay
+    out.update(_actuation_json(delay, width))
     ctl = " (uncontrolled)" if k is None else f" with k = {fmt_vec(k, 8)} ({how}" + \
-        (f", mu = {mu:.8g})" if mu is not None else ")") + _delay_text(delay)
+        (f", mu = {mu:.8g})" if mu is not None else ")") + _delay_text(delay, width)
     explicit = o.route == one_one.EXPLICIT
     route = "the factored monodromy" if explicit else "shooting"
     born = "born at grazing (" + ("on the branch from psi = 0" if explicit else
@@ -189,9 +188,19 @@ def _file_orbit(args):
                      "at grazing (docs/ndof_commands.md)", found=o.route)
 
 
-def _delay_text(delay: float) -> str:
-    """The report's words for an actuation delay (none without one)."""
+def _delay_text(delay: float, width: float = 0.0) -> str:
+    """The report's words for an actuation delay or a pulse (none for the kick at the
+    sample)."""
+    if width:
+        return f", a pulse of width {width:.6g} centred {delay:.6g} after the sample"
     return f", actuation delay {delay:.6g}" if delay else ""
+
+
+def _actuation_json(delay: float, width: float) -> dict:
+    """A model file's report's actuation entries: actuation_delay (when not 0) and
+    pulse_width (a pulse's), the names of the gain file."""
+    return {**({"actuation_delay": delay} if delay else {}),
+            **({"pulse_width": width} if width else {})}
 
 
 # ---------------------------------------------------------------------------- continue
@@ -251,9 +260,10 @@ def _file_branch(args):
     values = one_one.continuation_values(args.start, args.stop, args.points)
     model = with_delta_d(load(args.model), float(values[0]))
     k, mu, how = vector_gains_of(args, model)
-    delay = delay_of(args, model)
+    delay, width = delay_of(args, model), pulse_width_of(args, model)
     t0 = time.perf_counter()
-    branch = one_one.branch(model, k, args.start, args.stop, args.points, delay=delay)
+    branch = one_one.branch(model, k, args.start, args.stop, args.points, delay=delay,
+                            width=width)
     first, fold = branch.first, branch.fold
     explicit = branch.route == "impact phase"
     seconds = time.perf_counter() - t0
@@ -270,7 +280,8 @@ def _file_branch(args):
     if mu is not None:
         from grazing_control.dynamics.design.family import limit_multipliers
 
-        limit = np.asarray(limit_multipliers(model, mu, delay), dtype=complex)
+        limit = np.asarray(limit_multipliers(model, mu, actuation_of(args, model)),
+                           dtype=complex)
     out.update({
         "gains": None if k is None else k.tolist(), "mu": mu, "control": how,
         "branch": [{"delta_d": p.value, "v_minus": p.v_min, "impacts": p.impacts,
@@ -286,13 +297,12 @@ def _file_branch(args):
         "multipliers_limit": None if limit is None else complex_list(limit),
         "seconds": seconds,
     })
-    if delay:
-        out["actuation_delay"] = delay
+    out.update(_actuation_json(delay, width))
     route = "in the impact phase (exact to rounding)" if explicit else "by shooting"
     title = (f"1/1 branch {route}, {len(branch.points)} points from Delta d = "
              f"{args.start:g} towards {args.stop:g}"
              + ("" if k is None else f" ({how}{'' if mu is None else f', mu = {mu:.8g}'}"
-                f"{_delay_text(delay)})"))
+                f"{_delay_text(delay, width)})"))
     lines = [f"  stopped: {branch.stopped}"]
     if warning:
         lines.append(f"  warning: {warning}")
@@ -466,20 +476,19 @@ def _file_simulation(args):
                              "model file's stop is rigid (docs/ndof_model.md)")
     model = with_delta_d(load(args.model), args.delta_d)
     k, mu, how = control_of(args, model)
-    delay = delay_of(args, model)
+    delay, width = delay_of(args, model), pulse_width_of(args, model)
     after = None if k is None else (0 if args.control_after is None else args.control_after)
-    samples, counts = simulate_pi2(model, args.periods, args.z0, k, after, delay)
+    samples, counts = simulate_pi2(model, args.periods, args.z0, k, after, delay, width)
     flow = NdofFlow.of(model)
     ref = flow.to_physical(flow.tau2, np.zeros(2 * model.n))
     out = {"pi2": (samples[:-1] + ref).tolist(), "pi2_deviation": samples[:-1].tolist(),
            "impacts_per_period": counts.tolist(), "final_deviation": samples[-1].tolist(),
            "gains": None if k is None else k.tolist(), "mu": mu, "control_after": after}
-    if delay:
-        out["actuation_delay"] = delay
+    out.update(_actuation_json(delay, width))
     orbit_note = ""
     if k is not None:
         try:
-            o = one_one.orbit(model, k, delay=delay)
+            o = one_one.orbit(model, k, delay=delay, width=width)
             dist = float(np.linalg.norm(samples[-1] - o.state))
             out.update(distance_to_orbit=dist, orbit_deviation=o.state.tolist(),
                        orbit_multipliers=complex_list(o.multipliers))
@@ -491,7 +500,8 @@ def _file_simulation(args):
     n = args.periods
     lines = [
         f"simulated {n} periods of {args.model} at Delta d = {model.delta_d:.6g}"
-        + (f", control on from sample {after} ({how}{_delay_text(delay)})" if k is not None
+        + (f", control on from sample {after} ({how}{_delay_text(delay, width)})"
+           if k is not None
            else ", uncontrolled"),
         *impact_lines(counts, n),
         f"  last state (dev.)  = {fmt_vec(samples[-1], 10)}",

@@ -22,6 +22,12 @@ monodromy at the impact is J = M S, S the saltation matrix (oscillator/ndof/impa
 This is the exact reference for the limit multipliers and the existence coefficient of
 family (no shooting, no expansion); it assumes the one impact of the period is the only contact (a local
 statement: the orbit near grazing; shooting on the exact period map is the global check).
+
+Every function takes ``delay``: the kick's actuation delay (b -> b_delta = Phi(-delay) b,
+§14), or a pulse as a :class:`~grazing_control.dynamics.design.family.Actuation`
+(b -> b_w, the pulse as a jump on the section its end later, §18, (N13)-(N15)); the
+branch holds while no impact lies in the window where the correction acts
+(:func:`acted_by`), and :func:`other_contacts` flows that window exactly.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from grazing_control.oscillator.control import gain_vector
+from grazing_control.oscillator.ndof.forced import actuated_mass, advance_with_force
 from grazing_control.oscillator.ndof.impact import (ChatteringError, ImpactCapError, advance,
                                                     saltation_matrix, saltation_parts)
 from grazing_control.oscillator.ndof.model import NdofModel
@@ -47,7 +54,7 @@ from grazing_control.dynamics.orbits.shooting import TEST_FUNCTIONS, bifurcation
 
 __all__ = ["PhasePoint", "orbit_at_phase", "branch_coefficients", "orbit_at", "branch_fold",
            "pi2_factors", "structured_multipliers", "branch_multipliers", "other_contacts",
-           "continue_branch", "RETURN_MARGIN"]
+           "continue_branch", "acted_by", "RETURN_MARGIN"]
 
 
 class PhasePoint(NamedTuple):
@@ -74,7 +81,7 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     om = model.omega
     s = model.pi2_offset / om
     sigma = s - psi / om
-    reach = delay.end(model) if isinstance(delay, Actuation) else delay
+    reach = acted_by(model, delay)
     if not (0.0 < sigma < model.period - reach) or not math.isfinite(psi):
         raise ParameterError(f"psi={psi!r} is invalid: valid range is "
                              f"{-om * (model.period - s - reach)!r} < psi < {om * s!r} "
@@ -83,6 +90,13 @@ def _impact_map(model: NdofModel, k: np.ndarray, psi: float, delay: float = 0.0)
     pm = _transition(model, sigma)
     eye = np.eye(2 * model.n)
     return _transition(model, model.period - sigma) @ (eye + np.outer(b, k)) @ pm, pm
+
+
+def acted_by(model: NdofModel, delay=0.0) -> float:
+    """How long after the sample the correction has acted: a kick's ``delay`` (§14), or
+    the end start + L + w of a pulse (an :class:`Actuation`, §15). The branch explicit in
+    the impact phase holds while no impact lies in that window (docs/theory_ndof.md §18)."""
+    return delay.end(model) if isinstance(delay, Actuation) else float(delay)
 
 
 def orbit_at_phase(model: NdofModel, gains, psi: float, delay: float = 0.0) -> PhasePoint:
@@ -239,7 +253,8 @@ def branch_fold(model: NdofModel, gains, steps: int = 2000, delay: float = 0.0):
     k = gain_vector(np.zeros(2 * model.n) if gains is None else gains, model.n)
     sgn = math.copysign(1.0, branch_coefficients(model, k, delay)[2])
     s = model.pi2_offset / model.omega
-    bound = model.omega * s if sgn > 0 else model.omega * (model.period - s - delay)
+    bound = model.omega * s if sgn > 0 else \
+        model.omega * (model.period - s - acted_by(model, delay))
     grid = sgn * np.linspace(1e-6 * bound, 0.999 * bound, steps)
 
     def slope(psi):
@@ -383,8 +398,9 @@ def other_contacts(model: NdofModel, gains, point: PhasePoint, delay: float = 0.
     The explicit branch assumes that the impact at tau* + psi is the period's only
     contact; this is the global check. From the state just after the impact the flow
     runs sigma to Pi2, takes the kick (with an actuation ``delay``: runs on ``delay``
-    and takes the kick k^T z of the Pi2 sample there, §14), and runs on until
-    :data:`RETURN_MARGIN` T before
+    and takes the kick k^T z of the Pi2 sample there, §14; with a pulse, an
+    :class:`Actuation`, runs on to its start and through it under its force, §18), and
+    runs on until :data:`RETURN_MARGIN` T before
     the orbit's next impact; every impact found on the way counts, and a chattering or
     sticking contact counts as one. On the last stretch x_w rises monotonically to the
     impact where the wall coordinate decelerates there (regular grazing); where it
@@ -404,21 +420,44 @@ def other_contacts(model: NdofModel, gains, point: PhasePoint, delay: float = 0.
     if push > 0.0 and point.v_minus < push * RETURN_MARGIN * model.period:
         return 1     # accelerating into the wall: the last stretch is not a plain approach
     z[n + w] -= (1.0 + model.r) * point.v_minus
+    reach = acted_by(model, delay)
     try:
         first = advance(flow, tau, z, sigma)
-        z2 = np.array(first.z)
-        kick = float(k @ z2)
-        window = advance(flow, flow.tau2, z2, delay) if delay > 0.0 else None
-        if window is not None:
-            z2 = np.array(window.z)
-        z2[n + model.i_a] += kick
-        rest = model.period - sigma - delay - RETURN_MARGIN * model.period
-        tau_kick = (flow.tau2 + model.omega * delay) % (2.0 * math.pi)
-        second = advance(flow, tau_kick, z2, rest) if rest > 0.0 else None
+        z2, inside = _act(flow, k, np.array(first.z), delay)
+        rest = model.period - sigma - reach - RETURN_MARGIN * model.period
+        tau_acted = (flow.tau2 + model.omega * reach) % (2.0 * math.pi)
+        second = advance(flow, tau_acted, z2, rest) if rest > 0.0 else None
     except (ChatteringError, ImpactCapError):
         return 1
-    return (len(first.impacts) + (0 if window is None else len(window.impacts))
-            + (0 if second is None else len(second.impacts)))
+    return len(first.impacts) + inside + (0 if second is None else len(second.impacts))
+
+
+def _act(flow, k: np.ndarray, z: np.ndarray, delay):
+    """(the state when the correction k^T z of the sample z has acted, the impacts in
+    that window) by the exact flow: the kick ``delay`` later (flow ``delay``, kick; §14),
+    or the ideal pulse of an :class:`Actuation`: flow to start + L, then the constant
+    force F = m_a k^T z / w over the width (``forced.advance_with_force``, §15). A pulse
+    through a lag (time_constant > 0) is refused: its force outlives the window."""
+    m = flow.model
+    correction = float(k @ z)
+    if not isinstance(delay, Actuation):
+        window = advance(flow, flow.tau2, z, delay) if delay > 0.0 else None
+        if window is not None:
+            z = np.array(window.z)
+        z[m.n + m.i_a] += correction
+        return z, 0 if window is None else len(window.impacts)
+    if delay.time_constant != 0.0:
+        raise ParameterError(f"time_constant={delay.time_constant!r} is invalid here: the "
+                             "branch's global check flows the ideal pulse (valid: 0)")
+    start = delay.start(m) + delay.latency
+    force = actuated_mass(flow) * correction / delay.width
+    inside = 0
+    for t0, duration, f in ((0.0, start, 0.0), (start, delay.width, force)):
+        if duration > 0.0:
+            seg = advance_with_force(flow, (flow.tau2 + m.omega * t0) % (2.0 * math.pi), z,
+                                     duration, f)
+            z, inside = np.array(seg.z), inside + len(seg.impacts)
+    return z, inside
 
 
 # ------------------------------------------------- continuation along the branch

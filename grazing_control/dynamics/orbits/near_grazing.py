@@ -44,7 +44,8 @@ from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.params import ParameterError
 
 __all__ = ["fold_beyond", "with_delta_d", "kick_matrix", "kick_vector", "pi1_factors",
-           "local_map", "predicted_orbit", "grazing_side", "model_file_orbit", "NEAR"]
+           "local_map", "predicted_orbit", "grazing_side", "model_file_orbit",
+           "closed_loop_map", "NEAR"]
 
 TWO_PI = 2.0 * math.pi
 #: An orbit within this relative distance of the local map's prediction is the one born
@@ -56,6 +57,27 @@ NEAR = 0.25
 def with_delta_d(model, delta_d: float):
     """The same model with the wall at Delta d (validated by the model)."""
     return dataclasses.replace(model, delta_d=float(delta_d))
+
+
+def closed_loop_map(model, gains=None, delay=0.0) -> ModalMap:
+    """The exact period map of the loop: ``ModalMap(model, k, delay)`` for the kick
+    ``delay`` after the sample, ``ModalMap(model, k, delay, width)`` for the ideal pulse
+    of an :class:`~grazing_control.dynamics.design.family.Actuation` (§15); the map
+    without gains uncontrolled. A pulse through an actuator (time constant or latency)
+    is refused naming it: its period map has the force as a state
+    (``modal_map.actuated_step``), not this one."""
+    from grazing_control.dynamics.design.family import Actuation
+
+    if gains is None:
+        return ModalMap(model)
+    if not isinstance(delay, Actuation):
+        return ModalMap(model, gains, delay)
+    for name in ("time_constant", "latency"):
+        if getattr(delay, name) != 0.0:
+            raise ParameterError(f"{name}={getattr(delay, name)!r} is invalid here: the 1/1 "
+                                 "orbit is that of the kick or the ideal pulse (valid: 0, no "
+                                 "actuator)")
+    return ModalMap(model, gains, delay.delay, delay.width)
 
 
 def kick_matrix(model, gains, delay: float = 0.0) -> np.ndarray:
@@ -196,14 +218,18 @@ def _monodromy_det(model, gains, impacts: int, delay: float = 0.0) -> float:
     return math.exp(-trace * model.period) * model.r ** (2 * impacts) * det_k
 
 
-def _multipliers(pmap, model, gains, monodromy, impacts):
+def _multipliers(pmap, model, gains, monodromy, impacts, delay=0.0):
     """Floquet multipliers; the exact determinant (the map's, else :func:`_monodromy_det`)
     keeps the small multiplier of a 2x2 monodromy accurate when the large one grows like
     1/v- (dynamics/shooting.floquet_multipliers). None (no product formula) with a
-    sticking impact or an impact inside the actuation delay (docs/theory_delay.md (D3))."""
+    sticking impact or an impact inside the window where the correction acts (the
+    delay, or the pulse up to its end: docs/theory_delay.md (D3), docs/theory_ndof.md
+    §18)."""
+    from grazing_control.dynamics.orbits.modal_branch import acted_by
+
     det = None
-    delay = float(getattr(pmap, "delay", 0.0)) if gains is not None else 0.0
-    inside = any(i.dt <= delay for i in impacts)
+    reach = acted_by(model, delay) if gains is not None else 0.0
+    inside = any(i.dt <= reach for i in impacts)
     if not any(getattr(i, "sticking", False) for i in impacts) and not inside:
         jd = getattr(pmap, "jacobian_det", None)
         det = jd(1, len(impacts)) if jd is not None else None
@@ -277,7 +303,11 @@ def model_file_orbit(model, gains=None, delta_d: float | None = None, *,
     one impact per period wins. With an actuation ``delay`` (the kick k^T z of the sample
     acts ``delay`` later) both routes are the delayed kick's: the explicit branch where
     the impact lies outside the delay (docs/theory_ndof.md §14), shooting on the exact
-    delayed map ``ModalMap(model, k, delay)`` otherwise.
+    delayed map ``ModalMap(model, k, delay)`` otherwise. With an
+    :class:`~grazing_control.dynamics.design.family.Actuation` as ``delay`` (the ideal
+    pulse of width w centred delay after the sample) both routes are the pulse's: the
+    branch with b_w where the impact lies after the pulse's end (§18), shooting on
+    ``ModalMap(model, k, delay, w)`` otherwise (:func:`closed_loop_map`).
 
     Raises
     ------
@@ -286,11 +316,16 @@ def model_file_orbit(model, gains=None, delta_d: float | None = None, *,
     """
     if delta_d is not None:
         model = with_delta_d(model, delta_d)
-    delay = float(delay) if gains is not None else 0.0
-    pmap = ModalMap(model, gains, delay)
+    from grazing_control.dynamics.design.family import Actuation
+
+    if gains is None:
+        delay = 0.0
+    elif not isinstance(delay, Actuation):
+        delay = float(delay)
+    pmap = closed_loop_map(model, gains, delay)
     try:
         pred, _s = predicted_orbit(model, gains, delay=delay)
-    except ParameterError:     # a delay past the grazing phase: no local map (§14)
+    except ParameterError:     # a correction past the grazing phase: no local map (§14)
         pred = None
     explicit, reason = _on_branch(model, gains, pred, delay)
     if explicit is not None:
@@ -311,7 +346,7 @@ def model_file_orbit(model, gains=None, delta_d: float | None = None, *,
         else:
             if len(o.impacts) == 1 and o.impacts[0].v_minus > 0.0:
                 imp = o.impacts[0]
-                lam = _multipliers(pmap, model, gains, o.monodromy, o.impacts)
+                lam = _multipliers(pmap, model, gains, o.monodromy, o.impacts, delay)
                 return _orbit(model, o.state, lam, o.monodromy, imp.dt, imp.phase,
                               imp.v_minus, name, _offset(o.state, pred))
             why.append(f"{name}: converged to an orbit with {len(o.impacts)} impacts per period")
@@ -370,8 +405,8 @@ def fold_beyond(model, gains, branch, stop: float, delay: float = 0.0):
         return None
     if fold is None or fold.monodromy is None or (fold.delta_d - last) * (stop - last) < 0.0:
         return None
-    step = ModalMap(with_delta_d(model, fold.delta_d), gains,
-                    delay if gains is not None else 0.0).step(fold.pi2_state)
+    step = closed_loop_map(with_delta_d(model, fold.delta_d), gains,
+                           delay).step(fold.pi2_state)
     size = max(1.0, float(np.max(np.abs(fold.pi2_state))))
     residual = float(np.max(np.abs(step.state - fold.pi2_state))) / size
     if residual > 1e-8 or len(step.impacts) != 1:

@@ -10,9 +10,14 @@ The model supplies the route (:func:`grazing_control.dynamics.maps.model.is_mode
   (:func:`.orbits.orbit_11`, :func:`.continuation.continue_11`; docs/theory.md §5),
   every number the same bit for bit (tests/test_one_one.py);
 * a model file of any n (:class:`NdofModel`, gains the vector k, ``delay`` the
-  actuation delay): the branch explicit in the impact phase with its factored
-  monodromy and global check (:mod:`.modal_branch`), else Newton shooting from the local
-  map's prediction (:mod:`.near_grazing`; docs/theory_ndof.md §5, §14).
+  actuation delay, ``width`` the width of the force pulse that carries the correction):
+  the branch explicit in the impact phase with its factored monodromy and global check
+  (:mod:`.modal_branch`), else Newton shooting from the local map's prediction on the
+  exact map ``ModalMap(model, k, delay, width)`` (:mod:`.near_grazing`;
+  docs/theory_ndof.md §5, §14, §18).
+
+The 1-DOF closed form runs the kick only: a pulse there is refused (one line naming
+``width``; the n = 1 model file config/models/study_1dof.yaml is the same oscillator).
 
 For n = 1 the two routes give the same orbit to 1e-12 (tests/test_one_one.py,
 tests/test_n1_model_file.py): the model is the difference, not the caller.
@@ -85,23 +90,28 @@ class Orbit11:
 
 
 def orbit(model, gains=None, delta_d: float | None = None, *, delay: float = 0.0,
-          check: bool = True, branch: str = "any", extra_guesses=()) -> Orbit11:
+          width: float = 0.0, check: bool = True, branch: str = "any",
+          extra_guesses=()) -> Orbit11:
     """The 1/1 orbit at ``delta_d`` (default the model's).
 
     ``gains``: a 1-DOF :class:`Gains` (its ``delay`` the actuation delay; a nonzero
     ``delay`` here replaces it), or a model file's gain vector k (``delay`` the actuation
-    delay, docs/theory_ndof.md §14); None: uncontrolled. ``check`` and ``branch``: the
-    1-DOF closed form's (:func:`.orbits.orbit_11`: the flow's check of the orbit, and
-    'grazing' for the branch born at grazing only); ``extra_guesses``: a model file's
-    further starting guesses for shooting (:func:`.near_grazing.model_file_orbit`).
+    delay, docs/theory_ndof.md §14; ``width`` > 0: the correction is the force pulse of
+    that width centred ``delay`` after the sample, §15, §18); None: uncontrolled.
+    ``check`` and ``branch``: the 1-DOF closed form's (:func:`.orbits.orbit_11`: the
+    flow's check of the orbit, and 'grazing' for the branch born at grazing only);
+    ``extra_guesses``: a model file's further starting guesses for shooting
+    (:func:`.near_grazing.model_file_orbit`).
 
-    Raises :class:`.orbits.OrbitNotFound` where there is none.
+    Raises :class:`.orbits.OrbitNotFound` where there is none; ParameterError for a pulse
+    of the 1-DOF closed form or a width that is not finite and >= 0.
     """
     if is_model_file(model):
         from grazing_control.dynamics.orbits.near_grazing import model_file_orbit
 
         return model_file_orbit(model, gains, delta_d, extra_guesses=extra_guesses,
-                                delay=delay)
+                                delay=_actuation(delay, width, gains))
+    _closed_form_kick(width)
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     p = model if delta_d is None else model.with_(delta_d=float(delta_d))
@@ -110,6 +120,27 @@ def orbit(model, gains=None, delta_d: float | None = None, *, delay: float = 0.0
     return Orbit11(o.params.delta_d, np.array(o.pi2_deviation), np.array(o.pi2),
                    o.multipliers, o.monodromy, imp.dt, o.impact_phase, o.v_minus, o.branch,
                    CLOSED_FORM)
+
+
+def _actuation(delay: float, width: float, gains):
+    """A model file's ``delay`` argument of :mod:`.near_grazing` and :mod:`.modal_branch`:
+    the kick's delay, or the ideal pulse as an ``Actuation(delay, width)``
+    (``family.design_actuation``: width checked finite and >= 0); 0 uncontrolled."""
+    from grazing_control.dynamics.design.family import design_actuation
+
+    actuation = design_actuation(float(delay), pulse_width=float(width))
+    return 0.0 if gains is None else actuation
+
+
+def _closed_form_kick(width: float) -> None:
+    """The 1-DOF closed form runs the kick: a pulse width other than 0 is refused in one
+    line (module docstring)."""
+    if width != 0.0:
+        from grazing_control.oscillator.params import ParameterError
+
+        raise ParameterError(f"width={width!r} is invalid for the 1-DOF oscillator's 1/1 "
+                             "orbit: its closed form runs the kick (valid: 0); the pulse's "
+                             "orbit is the n = 1 model file's (config/models/study_1dof.yaml)")
 
 
 def _delayed(gains, delay: float):
@@ -155,7 +186,7 @@ class Branch11:
 
 
 def branch(model, gains, start: float, stop: float, points: int, *,
-           delay: float = 0.0) -> Branch11:
+           delay: float = 0.0, width: float = 0.0) -> Branch11:
     """The 1/1 branch born at grazing at the Delta d of :func:`continuation_values`
     (``start`` to ``stop``, ``points``), with its multipliers and bifurcations.
 
@@ -165,11 +196,12 @@ def branch(model, gains, start: float, stop: float, points: int, *,
     (:func:`.modal_branch.continue_branch`, exact to rounding whatever v-), else
     continuation by shooting over the exact map (:func:`.continuation.continue_orbit`),
     and the fold where it stopped short of ``stop`` (:func:`.near_grazing.fold_beyond`).
-    ``gains`` and ``delay`` as in :func:`orbit`.
+    ``gains``, ``delay`` and ``width`` as in :func:`orbit`.
     """
     values = continuation_values(start, stop, points)
     if is_model_file(model):
-        return _model_file_branch(model, gains, values, delay)
+        return _model_file_branch(model, gains, values, _actuation(delay, width, gains))
+    _closed_form_kick(width)
     from grazing_control.dynamics.orbits.continuation import continue_11
     from grazing_control.dynamics.orbits.orbits import _orbit_from_phase
 
@@ -182,23 +214,25 @@ def branch(model, gains, start: float, stop: float, points: int, *,
     return Branch11(pts, bifs, "end", "impact phase")
 
 
-def _model_file_branch(model, gains, values, delay: float) -> Branch11:
-    """A model file's branch (:func:`branch`)."""
+def _model_file_branch(model, gains, values, delay) -> Branch11:
+    """A model file's branch (:func:`branch`); ``delay`` the kick's delay or the pulse's
+    ``Actuation`` (:func:`_actuation`)."""
     import dataclasses
 
-    from grazing_control.dynamics.maps.modal_map import ModalMap
     from grazing_control.dynamics.orbits.continuation import continue_orbit
     from grazing_control.dynamics.orbits.modal_branch import continue_branch
-    from grazing_control.dynamics.orbits.near_grazing import fold_beyond
+    from grazing_control.dynamics.orbits.near_grazing import (closed_loop_map, fold_beyond,
+                                                              model_file_orbit)
 
     model = dataclasses.replace(model, delta_d=float(values[0]))
-    first = orbit(model, gains, delay=delay)
+    first = model_file_orbit(model, gains, delay=delay)
     # the branch born at grazing: explicit in the impact phase, every point exact to
     # rounding (issue 32: shooting returned points 1e-2 off near |Delta d| = 3e-8); with
-    # a delay the delayed kick's, its impacts outside the delay (docs/theory_ndof.md §14)
+    # a delay or a pulse the delayed kick's or the pulse's, its impacts after the
+    # correction has acted (docs/theory_ndof.md §14, §18)
     explicit = first.route == EXPLICIT
     found = continue_branch(model, gains, values, delay=delay) if explicit else \
-        continue_orbit(ModalMap(model, gains, delay), "delta_d", values, first.state)
+        continue_orbit(closed_loop_map(model, gains, delay), "delta_d", values, first.state)
     fold = fold_beyond(model, gains, found, float(values[-1]), delay)
     return Branch11(found.points, found.bifurcations, found.stopped,
                     "impact phase" if explicit else "shooting", first, fold)

@@ -39,10 +39,12 @@ class Scene(NamedTuple):
 
 
 def simulate_pi2(model, periods: int, start=None, gains=None, control_after: int | None = None,
-                 delay: float = 0.0):
+                 delay: float = 0.0, width: float = 0.0):
     """(samples, impacts per period): ``periods`` applications of the period map from
     ``start`` (default the grazing point), the kick on from sample ``control_after``,
-    acting ``delay`` after each sample (``ModalMap``'s exact delayed map)."""
+    acting ``delay`` after each sample (``ModalMap``'s exact delayed map); with ``width``
+    > 0 the correction is the force pulse of that width centred ``delay`` after the
+    sample (``ModalMap(model, k, delay, width)``, docs/theory_ndof.md §15)."""
     if isinstance(periods, bool) or int(periods) != periods or periods < 0:
         raise ParameterError(f"periods={periods!r} is invalid: valid range is an integer >= 0")
     n2 = 2 * model.n
@@ -51,7 +53,8 @@ def simulate_pi2(model, periods: int, start=None, gains=None, control_after: int
         raise ParameterError(f"start is invalid: expected {n2} finite values (deviation from "
                              "the grazing orbit on Pi2)")
     free = ModalMap(model)
-    ctl = None if gains is None else ModalMap(model, np.asarray(gains, dtype=float), delay)
+    ctl = None if gains is None else ModalMap(model, np.asarray(gains, dtype=float), delay,
+                                              width)
     after = periods if ctl is None else (0 if control_after is None else int(control_after))
     samples = np.empty((int(periods) + 1, n2))
     counts = np.zeros(int(periods), dtype=np.int32)
