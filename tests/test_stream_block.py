@@ -361,6 +361,155 @@ def test_grazing_analyze_and_identify_read_a_bag_in_blocks(scenes, tmp_path):
     np.testing.assert_array_equal(rec_b.x, rec_s.x)
 
 
+#: The two-mass chain's stream scene in blocks (issue 32): periods, control from.
+NDOF_PERIODS, NDOF_ON = 12, 4
+
+
+@pytest.fixture(scope="module")
+def ndof_scenes(tmp_path_factory):
+    """The two-mass chain's lockstep stream scene of docs/ndof_scene.md, short
+    (test_ndof_nodes.stream_scene: config/models/two_mass_chain.yaml at Delta d = -1e-3,
+    the delay-aware design mu = -0.22 with the kick 1.0 after each sample, a
+    position-only sensor of both masses at T/200, sigma 1e-4, seed 7, the controller's
+    model filter on x0, control from period NDOF_ON, recorder on) with a message per
+    sample and in blocks: {mode: (RunResult, bag)}."""
+    from test_ndof_nodes import stream_scene
+
+    tmp = tmp_path_factory.mktemp("ndof_stream_block")
+    out = {}
+    for mode in stream_block.MESSAGES:
+        (tmp / mode).mkdir()
+        res, bag, _model, _design = stream_scene(tmp / mode, NDOF_PERIODS, NDOF_ON,
+                                                 stream_message=mode)
+        out[mode] = (res, bag)
+    return out
+
+
+def test_an_n_dof_stream_in_blocks_is_the_stream_of_samples_bit_for_bit(ndof_scenes):
+    """Issue 32: the two-mass chain's stream in blocks of rows of two masses on
+    oscillator/state_block (nothing on oscillator/state): the controller's model filter
+    estimates (controller/estimate), its corrections and predictions and the simulator's
+    Pi2 samples are the per-sample scene's bit for bit, nothing malformed; every block
+    recorded; the bag's blocks expanded (recordings.reader) are the per-sample bag's
+    stream at each coordinate, stamp for stamp and bit for bit."""
+    from grazing_control.recordings import reader
+
+    per_sample, blocks = _messages_both_ways(ndof_scenes, NDOF_PERIODS)
+    n = len(per_sample["/oscillator/state"])
+    assert n >= NDOF_PERIODS * RATE
+    assert all(len(m.position) == 2 and len(m.velocity) == 0
+               for m in per_sample["/oscillator/state"])
+    corr = np.array([m.twist.linear.x for m in blocks["/controller/velocity_correction"]])
+    assert np.count_nonzero(corr) >= NDOF_PERIODS - NDOF_ON - 1
+    raw_s = reader.read_raw(ndof_scenes["sample"][1])
+    raw_b = reader.read_raw(ndof_scenes["block"][1])
+    for c in (0, 1):
+        s = reader.decode_joint_stream(raw_s, "/oscillator/state", c)
+        b = reader.decode_state_blocks(raw_b, "/oscillator/state_block", c)
+        assert b["ok"].all() and b["stamp"].size == n and np.all(b["masses"] == 2)
+        for col in ("stamp", "x", "v", "e0", "e1"):
+            np.testing.assert_array_equal(b[col], s[col], err_msg=f"{col} of x{c}")
+        assert np.all(np.isnan(b["v"]))       # a position-only sensor
+    assert not reader.decode_state_blocks(raw_b, "/oscillator/state_block", 2)["ok"].any()
+
+
+def test_grazing_analyze_and_identify_of_an_n_dof_bag_in_blocks_are_the_samples(
+        ndof_scenes, tmp_path):
+    """Issue 32: grazing analyze reports the same scene (model check, controlled orbit,
+    distances) from the bag in blocks as from the bag of samples, and grazing identify
+    reads the same stream at the wall coordinate and fits the same parameters bit for
+    bit."""
+    from grazing_control.recordings.analyze import analyze
+    from grazing_control.recordings.identify import identify_bag
+
+    scenes = {}
+    for mode, (_res, bag) in ndof_scenes.items():
+        rep = analyze([bag], tmp_path / mode, figures=False)
+        scenes[mode] = rep["bags"][0]["scenes"]
+    assert rep["bags"][0]["topics_used"]["state_block"] == "/oscillator/state_block"
+    assert scenes["block"] == scenes["sample"]
+    assert scenes["block"][0]["model_check"]["max_departure"] <= 1e-10
+    fits = {mode: identify_bag(bag) for mode, (_res, bag) in ndof_scenes.items()}
+    for key in ("n", "parameters", "samples", "samples_in_bag", "arcs", "impacts"):
+        assert fits["block"][key] == fits["sample"][key], key
+    assert fits["block"]["n"] == 2 and fits["block"]["samples"] > NDOF_PERIODS * RATE / 2
+
+
+def test_an_n_dof_controller_takes_the_same_samples_from_blocks_at_any_coordinate():
+    """Issue 32, in-process: two 2-DOF controller_nodes with the stream's model filter on
+    x1 (sensor_coordinate 1) and a sensor with velocity, one fed the engine's stream as
+    per-sample JointStates (messages.ndof_joint_state, serialized), the other the same
+    samples in blocks of a period (the engine's loop closed on the first one's answers):
+    their answers (correction, prediction) and estimates are the same bit for bit; a
+    block of one or of three masses is malformed for them (counted, nothing answered)."""
+    import dataclasses
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+
+    from grazing_control.dynamics.design.family import pulse_design
+    from grazing_control.oscillator.ndof.model import load_model
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros import cdr
+    from grazing_control.ros.controller_node import ControllerNode
+    from sim_node.messages import joint_names, ndof_joint_state
+
+    chain, delay, rate, periods, on = (launcher.CONFIG_DIR / "models" / "two_mass_chain.yaml",
+                                       1.0, 50, 8, 3)
+    model = dataclasses.replace(load_model(chain), delta_d=-1e-3)
+    gains = pulse_design(model, -0.22, delay, 0.0).gains
+    sim = {"delta_d": -1e-3, "actuation_delay": delay, "sensor_noise": 1e-4,
+           "sensor_velocity": True, "sensor_seed": 7, "state_period": model.period / rate}
+    eng = Engine(settings_from_values(sim, str(chain)))
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    got = {}
+    try:
+        nodes = {}
+        for mode in stream_block.MESSAGES:
+            node = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in (
+                    ("model_file", str(chain)), ("gains", gains.tolist()),
+                    ("delta_d", -1e-3), ("enable_after", on), ("actuation_delay", delay),
+                    ("pi2_source", "stream"), ("estimator", "model"),
+                    ("sensor_coordinate", 1), ("sensor_noise", 1e-4),
+                    ("state_period", model.period / rate), ("stream_message", mode))])
+            out = got[mode] = []
+            node.pub.publish = lambda data, out=out: out.append(cdr.read_twist_stamped(data))
+            node.pub_estimate.publish = lambda m, out=out: out.append(
+                (m.header.stamp.sec, m.header.stamp.nanosec, *m.position, *m.velocity,
+                 *m.effort))
+            nodes[mode] = node
+        for bad in (1, 3):
+            nodes["block"]._on_state_block(stream_block.pack([0.0, 0.0] + [0.1] * (2 * bad)
+                                                             + [1.0, 0.0], bad))
+        assert nodes["block"].malformed.count == 2 and got["block"] == []
+        names, states = joint_names(2), eng.initial_states()
+        for k in range(periods):
+            block = stream_block.Block()
+            for ev in states:
+                nodes["sample"]._on_state(bytes(serialize_message(ndof_joint_state(ev, names))))
+                block.add(*cdr.stamp_parts(ev.t), ev.x, ev.v, math.cos(ev.phase),
+                          math.sin(ev.phase))
+            nodes["block"]._on_state_block(block.take())
+            key = cdr.stamp_parts(eng.sample().t)
+            dv = next((a[2] for a in got["sample"] if len(a) == 4 and a[:2] == key), 0.0)
+            states = [ev for ev in eng.begin_period(dv, delay) if ev.kind == "state"]
+            eng.end_period()
+        for node in nodes.values():
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    assert len(got["sample"]) >= 2 * (periods - 1)
+    assert np.count_nonzero([a[2] for a in got["sample"] if len(a) == 4]) >= periods - on - 1
+    np.testing.assert_array_equal(np.array(got["block"], dtype=object),
+                                  np.array(got["sample"], dtype=object))
+    assert not any(math.isnan(v) for row in got["sample"] for v in row[2:])
+
+
 def test_a_controller_takes_a_block_and_refuses_a_malformed_one(tmp_path):
     """controller_node with stream_message block: a Float64MultiArray of another layout
     and a truncated block are counted malformed (one line each, no crash); a block of a
@@ -408,12 +557,10 @@ def test_a_controller_takes_a_block_and_refuses_a_malformed_one(tmp_path):
 
 @pytest.mark.parametrize("over, message", [
     ({"stream_message": "blocks"}, "stream_message='blocks' is invalid: valid values are "
-                                   "sample, block"),
-    ({"stream_message": "block", "model_file": str(launcher.CONFIG_DIR / "models" /
-                                                   "two_mass_chain.yaml")},
-     "stream_message='block' is invalid with model_file=")])
+                                   "sample, block")])
 def test_sim_node_refuses_a_stream_message_it_cannot_send(tmp_path, over, message):
-    """One line naming the parameter, exit status 2 (the n-DOF stream is not in blocks)."""
+    """One line naming the parameter and its valid values, exit status 2 (with a model
+    file too, block is valid since issue 32: the scenes below)."""
     log = tmp_path / "sim.log"
     proc = launcher.start_node(launcher.SIM_MODULE, [launcher.CONFIG_DIR / "study.yaml"], over,
                                domain_id=new_domain(), log=log)
