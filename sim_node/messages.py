@@ -86,7 +86,8 @@ class Outputs:
         if ev.kind == "state":                 # the rig's sensor stream
             v = ev.v if n.settings.sensor.velocity else None
             if self.block is not None:         # out at the wake-up's end
-                self.block.add(sec, ns, ev.x, v, math.cos(ev.phase), math.sin(ev.phase))
+                self.block.add(sec, ns, (ev.x,), None if v is None else (v,),
+                               math.cos(ev.phase), math.sin(ev.phase))
                 return stamp
             n.pub_state.publish(cdr.stream_sample(sec, ns, ev.x, v, math.cos(ev.phase),
                                                   math.sin(ev.phase)))
@@ -105,10 +106,15 @@ class Outputs:
         return stamp
 
     def _publish_ndof(self, ev: NdofEvent, stamp: tuple) -> tuple:
-        """An n-DOF state (state stream, Pi1, Pi2) as a JointState with n joints."""
+        """An n-DOF state (state stream, Pi1, Pi2) as a JointState with n joints; with
+        stream_message block a stream sample as a row of n positions and n velocities
+        (NaN: the JointState's empty velocity) of the wake-up's block."""
         n = self.node
         if n.driver is not None:              # a simulated rig of n masses: rig/sensor ..
             n.driver.event(ev)
+        if ev.kind == "state" and self.block is not None:     # out at the wake-up's end
+            self.block.add(*stamp, ev.x, ev.v, math.cos(ev.phase), math.sin(ev.phase))
+            return stamp
         if self._names is None or len(self._names) != len(ev.x):
             self._names = joint_names(len(ev.x))
         msg = ndof_joint_state(ev, self._names)
@@ -119,6 +125,7 @@ class Outputs:
         elif ev.kind == "pi2":
             if n.settings.mode == "lockstep":
                 n.pub_clock.publish(cdr.clock(*stamp))
+            self.end_of_wake_up()              # the section's last samples first
             n.pub_pi2.publish(msg)
         return stamp
 

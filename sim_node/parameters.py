@@ -64,7 +64,8 @@ NODE_PARAMETERS = (
     Parameter("stream_message", "string", "sample", "the state stream's messages: sample (one "
               "JointState per sample on oscillator/state) or block (the samples of a wake-up "
               "in one Float64MultiArray on oscillator/state_block, as a DAQ driver "
-              "publishes; ros/stream_block.py; 1-DOF only)", choices=stream_block.MESSAGES,
+              "publishes, a row of n positions and n velocities per sample with n masses; "
+              "ros/stream_block.py)", choices=stream_block.MESSAGES,
               read_only=True),
     Parameter("exit_when_done", "bool", False, "exit (status 0) once max_periods have run",
               read_only=True),
@@ -228,10 +229,6 @@ def declare(node) -> None:
     why = stream_block.check_message(node.get_parameter("stream_message").value)
     if why is not None:
         raise StartupError(why)
-    if node.model is not None and node.get_parameter("stream_message").value == "block":
-        raise StartupError(f"stream_message='block' is invalid with model_file="
-                           f"{node.model_file!r}: valid value there is 'sample' (the "
-                           "stream's blocks carry a 1-DOF state)")
     try:
         check_rig_scene(node.rig_file, rig_values, values_of(node))
         node.settings = validate(node, values_of(node))

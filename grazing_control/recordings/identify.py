@@ -2,7 +2,9 @@
 
 bag -> data -> fit -> report. :func:`load_recording` reads a bag's state stream
 (``oscillator/state``: position [x], velocity [v] or empty, effort [cos tau] or
-[cos tau, sin tau]; stamp = time), its impacts (``oscillator/impact``: x = v-, y = v+,
+[cos tau, sin tau]; stamp = time; or the same samples in blocks on
+``oscillator/state_block``, of one mass or n, expanded by
+:func:`reader.decode_state_blocks`), its impacts (``oscillator/impact``: x = v-, y = v+,
 z = phase) where recorded, its corrections (``controller/velocity_correction``, acting
 at the sample's stamp + the simulator's ``actuation_delay`` from the parameter record)
 into a :class:`grazing_control.dynamics.identification.Recording`;
@@ -105,8 +107,8 @@ def _load(bag, topics, position_only, impacts, coordinate=None):
     c = 0 if coordinate is None else coordinate(sim)
     if raw.count(stream) == 0 and raw.count(topics["state_block"]):
         stream = topics["state_block"]           # sim_node's stream_message block
-        _streamed(bag, stream, 1, c)
-        s = reader.decode_state_blocks(raw, stream)
+        s = reader.decode_state_blocks(raw, stream, c)
+        _streamed(bag, stream, int(s["masses"].max(initial=0)), c)
     elif raw.count(stream) == 0:
         raise RecordingError(f"{bag}: no messages on {topics['state']} nor "
                              f"{topics['state_block']} (the state stream; sim_node "

@@ -571,33 +571,40 @@ def decode_joint_stream(bag: RawBag, topic: str, coordinate: int = 0) -> dict:
     return _columns(b, stamp=stamp, x=x, v=np.where(nv > coordinate, v, np.nan), e0=e0, e1=e1)
 
 
-def decode_state_blocks(bag: RawBag, topic: str) -> dict:
+def decode_state_blocks(bag: RawBag, topic: str, coordinate: int = 0) -> dict:
     """The state stream in blocks (``oscillator/state_block``, sim_node's
     ``stream_message:=block``; grazing_control.ros.stream_block), expanded into one row
-    per sample with :func:`decode_joint_stream`'s columns: stamp_ns, x, v (NaN: a
-    position-only sensor), e0, e1 (cos tau, sin tau), times (its block's), ok. A message
-    that is not a block is one row, not ok."""
+    per sample with :func:`decode_joint_stream`'s columns: stamp_ns, x = position of
+    ``coordinate``, v its velocity (NaN: a position-only sensor), e0, e1 (cos tau,
+    sin tau), times (its block's), ok; and ``masses``, the n of each sample's block (an
+    n-DOF scene's rows carry n positions and n velocities, issue 32). A message that is
+    not a block is one row, not ok, masses 0; a block without that coordinate (masses
+    <= coordinate) gives rows that are not ok."""
     from grazing_control.ros.stream_block import read as read_block
 
     b = _Body(bag.pool, bag.offsets(topic))
-    rows, owner, good = [], [], []
+    cols, owner, masses = [], [], []
     for i in range(b.body.size):
-        flat = None
+        rows = None
         if b.ok[i]:
-            flat = read_block(bag.pool[int(b.body[i]) - 4:int(b.end[i])].tobytes())
-        if flat is None:
-            rows.append((0.0,) * 6)
-            owner.append(i)
-            good.append(False)
+            rows = read_block(bag.pool[int(b.body[i]) - 4:int(b.end[i])].tobytes())
+        if rows is None:
+            cols.append(np.zeros((1, 6)))
+            owner.append(np.full(1, i))
+            masses.append(np.zeros(1, np.int64))
             continue
-        n = len(flat) // 6
-        rows.extend(flat[j:j + 6] for j in range(0, 6 * n, 6))
-        owner.extend([i] * n)
-        good.extend([True] * n)
-    a = np.array(rows, dtype=float).reshape(-1, 6)
-    owner = np.array(owner, dtype=np.int64)
+        n, w = rows.masses, 4 + 2 * rows.masses
+        a = np.array(rows.flat, dtype=float).reshape(-1, w)
+        c = min(coordinate, n - 1)       # a block without the coordinate: rows not ok
+        cols.append(a[:, [0, 1, 2 + c, 2 + n + c, w - 2, w - 1]])
+        owner.append(np.full(len(a), i))
+        masses.append(np.full(len(a), n, np.int64))
+    a = np.concatenate(cols) if cols else np.zeros((0, 6))
+    owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
+    masses = np.concatenate(masses) if masses else np.zeros(0, np.int64)
+    ok = masses > coordinate
     return {"log_time": b.log_time[owner], "publish_time": b.publish_time[owner],
-            "sequence": b.sequence[owner], "ok": np.array(good, dtype=bool),
+            "sequence": b.sequence[owner], "ok": ok, "masses": masses,
             "stamp": a[:, 0].astype(np.int64) * 1_000_000_000 + a[:, 1].astype(np.int64),
             "x": a[:, 2], "v": a[:, 3], "e0": a[:, 4], "e1": a[:, 5]}
 

@@ -32,7 +32,8 @@ times are t_k = k T, the simulator's origin) with ``estimator`` nearest, arc or 
 (:mod:`grazing_control.dynamics.estimation.section_state`, docs/theory_estimation.md), the impacts
 taken from ``oscillator/impact`` (``impact_source`` topic) or detected in the stream.
 With ``stream_message`` block the same samples come in blocks on
-``oscillator/state_block`` (:mod:`grazing_control.ros.stream_block`), taken row by row.
+``oscillator/state_block`` (:mod:`grazing_control.ros.stream_block`; an n-DOF scene's
+rows carry its n positions and velocities), taken row by row.
 Section k is estimated and answered (stamped t_k) as soon as its last sample arrived:
 the newest sample's t + ``state_period`` > t_k (0: the gap between the last two stamps),
 or late, with the first sample after t_k when that one was lost. Each estimate is
@@ -512,13 +513,17 @@ class ControllerNode(Node):
 
     def _on_state_block(self, data: bytes) -> None:
         """A block of stream samples (``stream_message`` block, ros/stream_block.py): each
-        row taken as :meth:`_on_state` takes one sample, in order."""
-        flat = stream_block.read(data)
-        if flat is None:
+        row taken as :meth:`_on_state` takes one sample, in order (an n-DOF scene's rows:
+        coordinate ``sensor_coordinate``'s position and velocity, as from its JointState).
+        A block of another number of masses than the model's is malformed."""
+        rows = stream_block.read(data)
+        n = 1 if self.ndof is None else self.ndof.model.n
+        if rows is None or rows.masses != n:
             self.malformed(f"a message on {self.sub_samples.topic_name} that is not a "
-                           "stream block (ros/stream_block.py)")
+                           f"stream block of rows of n={n} (ros/stream_block.py)")
             return
-        for sample in stream_block.rows_of(flat):
+        c = 0 if self.ndof is None else self.stream.coordinate
+        for sample in stream_block.samples(rows, c):
             self._take_sample(sample)
 
     def _take_sample(self, sample: tuple) -> None:

@@ -6,7 +6,8 @@ What it records by default (names relative to the node's namespace):
     position x, velocity v, effort cos(tau); stamp = simulation time.
 ``oscillator/state_block`` (std_msgs/msg/Float64MultiArray)
     the same stream in blocks (sim_node's ``stream_message:=block``): a row per sample,
-    (stamp sec, nanosec, x, v, cos tau, sin tau) (grazing_control.ros.stream_block).
+    (stamp sec, nanosec, x, v, cos tau, sin tau), with n masses x0 .. x{n-1},
+    v0 .. v{n-1} (grazing_control.ros.stream_block).
 ``oscillator/impact`` (geometry_msgs/msg/Vector3Stamped)
     vector = (v-, v+, phase tau) at each impact; stamp = impact time.
 ``oscillator/pi1``, ``oscillator/pi2`` (sensor_msgs/msg/JointState)
