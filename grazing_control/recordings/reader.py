@@ -46,7 +46,7 @@ from grazing_control.ros.recording.bounded import (  # noqa: F401  (re-exported)
 __all__ = ["BagReadError", "Channel", "RawBag", "read_raw", "bag_path", "decode_stamped",
            "decode_joint_state", "decode_joint_states", "joint_count", "decode_estimate", "decode_joint_stream", "decode_state_blocks", "decode_twist_stamped",
            "decode_vector3_stamped", "decode_time_reference",
-           "decode_float64", "decode_strings"]
+           "decode_float64", "decode_strings", "serialized"]
 
 MAGIC = b"\x89MCAP0\r\n"
 _ZSTD_FRAME = b"\x28\xb5\x2f\xfd"
@@ -607,6 +607,17 @@ def decode_state_blocks(bag: RawBag, topic: str, coordinate: int = 0) -> dict:
             "sequence": b.sequence[owner], "ok": ok, "masses": masses,
             "stamp": a[:, 0].astype(np.int64) * 1_000_000_000 + a[:, 1].astype(np.int64),
             "x": a[:, 2], "v": a[:, 3], "e0": a[:, 4], "e1": a[:, 5]}
+
+
+def serialized(bag: RawBag, topic: str) -> dict:
+    """The messages of ``topic`` as recorded: columns log_time, publish_time, sequence,
+    ok (the record whole, little-endian CDR) and ``data``, a list of each message's
+    serialized bytes (encapsulation header and body, what rclpy publishes and a raw
+    subscription receives; b"" where not ok), in file order."""
+    b = _Body(bag.pool, bag.offsets(topic))
+    data = [bag.pool[int(s) - 4:int(e)].tobytes() if ok else b""
+            for s, e, ok in zip(b.body, b.end, b.ok)]
+    return _columns(b, data=data)
 
 
 def decode_twist_stamped(bag: RawBag, topic: str) -> dict:

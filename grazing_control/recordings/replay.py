@@ -39,7 +39,6 @@ random) so that no other scene can cross-talk.
 from __future__ import annotations
 
 import math
-import struct
 import tempfile
 import time
 from pathlib import Path
@@ -53,7 +52,8 @@ from .numbers import resolve_setup
 from grazing_control.support.files import YamlFileError, read_yaml_file
 
 from .reader import read_raw
-from grazing_control.ros.recording.record import encode
+from .replay_nodes import (ControllerRun, Session, bag_writer, claim, close, params_file, qos,
+                           stamp_of, start_process)
 from .scenes import load, parse_topic_option
 
 __all__ = ["replay_controller", "replay_simulator", "add_arguments", "main"]
@@ -138,65 +138,6 @@ def _bag_enable_after(data) -> int:
     return int(on[0]) if on.size else -1
 
 
-def _params_file(values, node, tmp: Path) -> Path:
-    if isinstance(values, Path):
-        return values
-    path = tmp / f"{node}.yaml"
-    clean = {k: (float(v) if isinstance(v, float) else v) for k, v in values.items()
-             if isinstance(v, (bool, int, float, str, list))}
-    # keyed /** like every parameter file of the package (applies under any node name)
-    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": clean}}, sort_keys=False))
-    return path
-
-
-# -------------------------------------------------------------------------- rclpy side
-class _Session:
-    """rclpy context, one node, one executor in this process, on ``domain_id``."""
-
-    def __init__(self, domain_id: int, name: str):
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-
-        self.rclpy = rclpy
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node(name, context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin(self, seconds: float) -> None:
-        self.executor.spin_once(timeout_sec=seconds)
-
-    def wait_for(self, ready, timeout: float, proc=None) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if ready():
-                return True
-            if proc is not None and proc.poll() is not None:
-                return False
-            self.spin(0.02)
-        return ready()
-
-    def close(self) -> None:
-        self.node.destroy_node()
-        self.executor.shutdown()
-        self.rclpy.try_shutdown(context=self.context)
-
-
-def _qos(depth=100_000, latched=False):
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST if not latched else HistoryPolicy.KEEP_ALL,
-                      depth=depth if not latched else 0, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                      else DurabilityPolicy.VOLATILE)
-
-
-def _stamp_of(raw: bytes) -> int:
-    sec, nsec = struct.unpack_from("<iI", raw, 4)
-    return sec * _NS + nsec
-
-
 def _pi2_samples(data):
     """Every usable Pi2 sample of the bag in order: (stamp_ns, x, v)."""
     out = []
@@ -204,47 +145,6 @@ def _pi2_samples(data):
         out += list(zip(sd.stamp_ns.tolist(), sd.scene.pi2[:, 0].tolist(),
                         sd.scene.pi2[:, 1].tolist()))
     return out
-
-
-def _start(module, params_file, overrides, domain_id, log):
-    from grazing_control.ros.launcher import start_node
-
-    return start_node(module, [params_file] if params_file else [], overrides,
-                      domain_id=domain_id, log=log)
-
-
-def _claim(domain_id):
-    """The replay's ROS domain and the lock that keeps it: ``domain_id`` if given, else a
-    free one claimed as ``grazing run`` does (:func:`grazing_control.ros.launcher.claim_domain`)."""
-    if domain_id is not None:
-        return int(domain_id), None
-    from grazing_control.ros.launcher import claim_domain
-
-    return claim_domain()
-
-
-def _close(proc, session, writer, lock) -> None:
-    """Stop the replayed node, close the in-process session, the bag and the domain lock."""
-    from grazing_control.ros.launcher import stop_nodes
-
-    try:
-        if proc is not None:
-            stop_nodes([proc], grace=5.0)
-        if session is not None:
-            session.close()
-        writer.close()
-    finally:
-        if lock is not None:
-            lock.close()
-
-
-def _bag_writer(out: Path):
-    from grazing_control.ros.recording import BagWriter
-
-    if out.exists() and any(out.iterdir()):
-        raise ValueError(f"--bag {out}: the directory exists and is not empty")
-    return BagWriter(out, custom_data={"log_time": "received_timestamp",
-                                       "written_by": "grazing replay"}).open()
 
 
 def _is_ndof(data) -> bool:
@@ -306,13 +206,9 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
     controller's parameters. Raises ValueError for bad input, RuntimeError if the
     controller does not start.
     """
-    from geometry_msgs.msg import TwistStamped
     from sensor_msgs.msg import JointState
-    from std_msgs.msg import String
 
     from builtin_interfaces.msg import Time
-
-    from grazing_control.ros.launcher import CONTROLLER_MODULE
 
     data = load(bag, topics)
     ndof = _is_ndof(data)         # its model and gains: the record's (or the file's)
@@ -321,116 +217,48 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
     values, source = _controller_values(data, setup, controller_params, notes)
     samples = _pi2_samples(data)
     raw = read_raw(data.path, [data.present["pi2"]])
-    out = Path(out)
-    writer = _bag_writer(out)
-    domain_id, lock = _claim(domain_id)
-    log_dir = Path(log_dir) if log_dir else out
-    proc = None
-    session = None
-    answers = {}
-    with tempfile.TemporaryDirectory(prefix="grazing_replay_") as tmp:
-        try:
-            session = _Session(domain_id, "grazing_replay")
-            node = session.node
-            recs = []
-            pub = node.create_publisher(JointState, "oscillator/pi2", _qos())
-
-            def offered(topic):
-                """The QoS its publishers offer, as the recorder stores it (rosbag2's
-                offered_qos_profiles): the replay's own pi2 publisher, the controller's."""
-                from grazing_control.ros.recording.topics import qos_to_dict
-
-                return [qos_to_dict(i.qos_profile)
-                        for i in node.get_publishers_info_by_topic(topic)]
-
-            def on_answer(msg_raw, info=None):
-                recv = time.time_ns()
-                key = _stamp_of(msg_raw)
-                answers.setdefault(key, (msg_raw, recv))
-                if not writer.has_topic("/controller/velocity_correction"):
-                    writer.add_topic("/controller/velocity_correction",
-                                     "geometry_msgs/msg/TwistStamped",
-                                     offered("/controller/velocity_correction"))
-                writer.write("/controller/velocity_correction", msg_raw, recv)
-
-            def on_record(msg_raw, info=None):
-                recs.append((msg_raw, time.time_ns()))
-
-            sub = node.create_subscription(TwistStamped, "controller/velocity_correction",
-                                           on_answer, _qos(), raw=True)
-            node.create_subscription(String, "grazing/parameters", on_record,
-                                     _qos(latched=True), raw=True)
-            proc = _start(CONTROLLER_MODULE, _params_file(values, "controller_node", Path(tmp)),
-                          {}, domain_id, log_dir.parent / f"{out.name}_controller.log")
-            if not session.wait_for(lambda: pub.get_subscription_count() >= 1
-                                    and sub.get_publisher_count() >= 1, 30.0, proc):
-                raise RuntimeError(f"controller_node did not start (exit status {proc.poll()}); "
-                                   f"see {log_dir.parent / (out.name + '_controller.log')}")
-            session.wait_for(lambda: False, 0.3)
-            writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState",
-                             offered("/oscillator/pi2"))
-            order = _pi2_raw_order(raw, data.present["pi2"])
-            msg = JointState(name=["mass"])
-            t0 = time.monotonic()
-            log0 = None
-            logs = [sd.pi2_log_ns for sd in data.scenes]
-            log_all = np.concatenate(logs) if logs else np.zeros(0)
-            missing = 0
-            for i, (stamp, x, v) in enumerate(samples):
-                if rate is not None:
-                    log0 = log_all[0] if log0 is None else log0
-                    due = t0 + (log_all[i] - log0) / 1e9 / rate
-                    while time.monotonic() < due:
-                        session.spin(max(0.0, min(due - time.monotonic(), 0.01)))
-                sec, nsec = divmod(int(stamp), _NS)
-                if ndof:          # every coordinate, as recorded
-                    pub.publish(order[i])
-                else:
-                    msg.header.stamp = Time(sec=sec, nanosec=nsec)
-                    msg.position, msg.velocity = [x], [v]
-                    pub.publish(msg)
-                writer.write("/oscillator/pi2", order[i], time.time_ns())
-                if rate is None:
-                    end = time.monotonic() + answer_timeout
-                    while stamp not in answers and time.monotonic() < end:
-                        if proc.poll() is not None:
-                            raise RuntimeError(f"controller_node exited with status {proc.poll()}")
-                        session.spin(0.05)
-                    missing += stamp not in answers
-            if rate is not None:      # collect the stragglers
-                last = samples[-1][0] if samples else None
-                session.wait_for(lambda: last in answers, answer_timeout)
-            session.wait_for(lambda: False, 0.2)
-            writer.add_topic("/grazing/parameters", "std_msgs/msg/String",
-                             offered("/grazing/parameters"))
-            for data_, t in recs:
-                writer.write("/grazing/parameters", data_, t)
-            # the replay's own record: what was replayed, how
-            own = String(data=encode("/grazing_replay", {
-                "source_bag": str(bag), "rate": "as fast as possible" if rate is None else rate,
-                "gains_source": source, "domain_id": domain_id}))
-            from rclpy.serialization import serialize_message
-            writer.write("/grazing/parameters", bytes(serialize_message(own)), time.time_ns())
-        finally:
-            _close(proc, session, writer, lock)
-    return {"gains_source": source, "notes": notes, "domain_id": domain_id,
-            "samples_published": len(samples), "answers": len(answers),
+    with ControllerRun(out, domain_id=domain_id, log_dir=log_dir) as run:
+        pub = run.publisher(JointState, "oscillator/pi2")
+        run.start(values, [pub])
+        run.writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState",
+                             run.offered("/oscillator/pi2"))
+        order = _pi2_raw_order(raw, data.present["pi2"])
+        msg = JointState(name=["mass"])
+        t0 = time.monotonic()
+        logs = [sd.pi2_log_ns for sd in data.scenes]
+        log_all = np.concatenate(logs) if logs else np.zeros(0)
+        for i, (stamp, x, v) in enumerate(samples):
+            if rate is not None:
+                run.session.until(t0 + (log_all[i] - log_all[0]) / 1e9 / rate)
+            sec, nsec = divmod(int(stamp), _NS)
+            if ndof:          # every coordinate, as recorded
+                pub.publish(order[i])
+            else:
+                msg.header.stamp = Time(sec=sec, nanosec=nsec)
+                msg.position, msg.velocity = [x], [v]
+                pub.publish(msg)
+            run.writer.write("/oscillator/pi2", order[i], time.time_ns())
+            if rate is None:
+                run.wait_answer(stamp, answer_timeout)
+        if rate is not None:      # collect the stragglers
+            last = samples[-1][0] if samples else None
+            run.session.wait_for(lambda: last in run.answers, answer_timeout)
+        run.finish({"source_bag": str(bag),
+                    "rate": "as fast as possible" if rate is None else rate,
+                    "gains_source": source})
+    return {"gains_source": source, "notes": notes, "domain_id": run.domain_id,
+            "samples_published": len(samples), "answers": len(run.answers),
             "comparison": compare_corrections(data, load(out), setup)}
 
 
 def _pi2_raw_order(raw, topic):
     """The recorded CDR bytes of the usable Pi2 samples, in the order of :func:`load`."""
-    from .reader import decode_joint_state
+    from .reader import decode_joint_state, serialized
 
     cols = decode_joint_state(raw, topic)
     order = np.argsort(cols["log_time"], kind="stable")
-    order = order[cols["ok"][order]]
-    rec = raw.offsets(topic)[order]
-    out = []
-    for r in rec.tolist():
-        (ln,) = struct.unpack_from("<Q", raw.pool, r + 1)
-        out.append(raw.pool[r + 31:r + 9 + ln].tobytes())
-    return out
+    data = serialized(raw, topic)["data"]
+    return [data[i] for i in order[cols["ok"][order]].tolist()]
 
 
 def compare_corrections(orig, new, setup) -> dict:
@@ -550,16 +378,16 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                      f"not act; replayed are the {len(sd.substituted)} predictions the "
                      "simulator substituted (oscillator/substituted) and 0 for the rest")
     out = Path(out)
-    writer = _bag_writer(out)
-    domain_id, lock = _claim(domain_id)
+    writer = bag_writer(out)
+    domain_id, lock = claim(domain_id)
     log_dir = Path(log_dir) if log_dir else out
     proc = session = None
     unknown = [0]
     with tempfile.TemporaryDirectory(prefix="grazing_replay_sim_") as tmp:
         try:
-            session = _Session(domain_id, "grazing_replay_sim")
+            session = Session(domain_id, "grazing_replay_sim")
             node = session.node
-            pub = node.create_publisher(TwistStamped, "controller/velocity_correction", _qos())
+            pub = node.create_publisher(TwistStamped, "controller/velocity_correction", qos())
             answer = TwistStamped()
             from grazing_control.ros.common import PUBLISHER_QOS
             from grazing_control.ros.recording.topics import qos_to_dict
@@ -569,11 +397,11 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
             writer.add_topic("/oscillator/pi2", "sensor_msgs/msg/JointState",
                              [qos_to_dict(PUBLISHER_QOS)])
             writer.add_topic("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped",
-                             [qos_to_dict(_qos())])
+                             [qos_to_dict(qos())])
             from rclpy.serialization import serialize_message
 
             def on_sample(msg_raw, info=None):
-                key = _stamp_of(msg_raw)
+                key = stamp_of(msg_raw)
                 writer.write("/oscillator/pi2", msg_raw, time.time_ns())
                 dv = dv_of.get(key)
                 if dv is None:
@@ -585,8 +413,8 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                 writer.write("/controller/velocity_correction", _cdr(serialize_message(answer)),
                              time.time_ns())
 
-            node.create_subscription(JointState, "oscillator/pi2", on_sample, _qos(), raw=True)
-            proc = _start(SIM_MODULE, _params_file(values, "sim_node", Path(tmp)), {},
+            node.create_subscription(JointState, "oscillator/pi2", on_sample, qos(), raw=True)
+            proc = start_process(SIM_MODULE, params_file(values, "sim_node", Path(tmp)), {},
                           domain_id, log_dir.parent / f"{out.name}_sim.log")
             timeout = 60.0 + n * answer_timeout
             end = time.monotonic() + timeout
@@ -599,7 +427,7 @@ def replay_simulator(bag, out, *, domain_id=None, answer_timeout=2.0, topics=Non
                 raise RuntimeError(f"sim_node exited with status {proc.returncode}; see "
                                    f"{log_dir.parent / (out.name + '_sim.log')}")
         finally:
-            _close(proc, session, writer, lock)
+            close(proc, session, writer, lock)
     new = load(out).scenes[0]
     m = min(len(new.stamp_ns), n)
     dep = np.max(np.abs(new.scene.pi2[:m] - sd.scene.pi2[:m]), axis=1) if m else np.zeros(0)
