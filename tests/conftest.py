@@ -176,6 +176,7 @@ SCENE_MODULES = frozenset({
     "test_scheduling",
     "test_signals",
     "test_sim_node", "test_stop_fidelity", "test_stop_selection", "test_stream_block",
+    "test_stream_replay",
     "test_test_cleanup",
 })
 

@@ -12,11 +12,13 @@ Layer 5 of 7 (docs/architecture.md).
 * :mod:`.identify`: the ``identify`` command (the model's parameters from bags; the
   fit is :mod:`grazing_control.dynamics.identification`);
 * :mod:`.replay`: the ``replay`` command (recorded samples through a real controller_node,
-  recorded corrections through sim_node); :mod:`.replay_nodes` its rclpy side (the
-  session in this process, the node replayed).
+  recorded corrections through sim_node); :mod:`.stream_replay` the controller replay
+  of a stream scene (its recorded sensor stream); :mod:`.replay_nodes` their rclpy side
+  (the session in this process, the node replayed).
 
 May import: :mod:`grazing_control.ros` and below. Nothing here imports rclpy except
-:mod:`.replay` and :mod:`.replay_nodes`, and only when they run.
+:mod:`.replay`, :mod:`.stream_replay` and :mod:`.replay_nodes`, and only when they
+run.
 """
 
 

@@ -14,7 +14,10 @@ Controller replay (the regression test of a controller change)
     An n-DOF scene's bag (issues 17, 32) is replayed the same way: its recorded Pi2
     messages (every coordinate) are published as recorded to a controller_node with the
     record's ``model_file`` and ``gains`` (or ``--controller-params``), the one law
-    k^T (X - X**) of every n.
+    k^T (X - X**) of every n. A stream scene's controller (``pi2_source`` stream) reads
+    no Pi2 samples: its recorded sensor stream is replayed instead
+    (:mod:`.stream_replay`; ``--controller-params`` then goes over the recorded
+    parameters, which keep its estimator and sensor).
 
 Simulator replay (open loop)
     ``sim_node`` runs in lockstep with the bag's model parameters and initial state; this
@@ -87,6 +90,10 @@ def _controller_values(data, setup, controller_params, notes):
         except (AttributeError, KeyError, StopIteration, TypeError):
             raise ValueError(f"--controller-params {path}: not a ROS parameter file "
                              "('/controller_node: ros__parameters: ...')") from None
+        rec = (data.parameters.get("nodes", {}).get("controller_node") or [{}])[0]
+        if rec.get("pi2_source") == "stream":   # its estimator, sensor and stream kept
+            values = {**{k: v for k, v in rec.items() if k not in _NOT_SETTINGS}, **values}
+            notes.append(f"{path}'s values over the recorded stream controller's parameters")
         if "enable_after" not in values:
             values["enable_after"] = _bag_enable_after(data)
             notes.append(f"{path} has no enable_after: the bag's, {values['enable_after']}")
@@ -202,6 +209,8 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
                       answer_timeout=2.0, topics=None, options=None, log_dir=None) -> dict:
     """Replay a bag's Pi2 samples through a real controller_node; compare (module doc).
 
+    A bag whose controller estimated the sections from the sensor stream (``pi2_source``
+    stream) replays its stream instead (:func:`.stream_replay.replay_stream`).
     Returns a dict: where the gains came from, counts, the comparison and the new
     controller's parameters. Raises ValueError for bad input, RuntimeError if the
     controller does not start.
@@ -215,6 +224,12 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
     setup = None if ndof else resolve_setup(data, options or {})
     notes = []
     values, source = _controller_values(data, setup, controller_params, notes)
+    if values.get("pi2_source") == "stream":
+        from .stream_replay import replay_stream
+
+        return replay_stream(data, values, source, notes, out, setup=setup, rate=rate,
+                             domain_id=domain_id, answer_timeout=answer_timeout,
+                             log_dir=log_dir)
     samples = _pi2_samples(data)
     raw = read_raw(data.path, [data.present["pi2"]])
     with ControllerRun(out, domain_id=domain_id, log_dir=log_dir) as run:
@@ -543,9 +558,21 @@ def format_result(result) -> str:
     c = result.get("controller")
     if c:
         cmp_ = c["comparison"]
+        what = "stream messages" if "stream" in c else "samples"
         lines.append(f"controller replay: gains from {c['gains_source']}; "
-                     f"{c['samples_published']} samples published, {c['answers']} answers")
+                     f"{c['samples_published']} {what} published, {c['answers']} answers")
         lines += [f"  note: {n}" for n in c["notes"]]
+        if "stream" in c:           # a stream scene's replay (stream_replay.py)
+            st, ans, est = c["stream"], c["answers_bytes"], c["estimates"]
+            sent = ", ".join(f"{n} on /oscillator/{r}" for r, n in st["published"].items())
+            lines.append(f"  the sensor stream replayed ({sent}): {st['answers_awaited']} "
+                         "answers awaited, "
+                         f"{st['answers_not_in_time']} not in time; answers by stamp "
+                         f"{ans['bit_identical']} of {ans['recorded']} bit-identical, estimates "
+                         f"{est['bit_identical']} of {est['recorded']} ({est['differing']} "
+                         f"differ, {est['missing_in_replay']} missing)")
+            if "why" in c:
+                lines.append(f"  why: {c['why']}")
         if "error" in cmp_:
             lines.append(f"  {cmp_['error']}")
         else:

@@ -1,12 +1,12 @@
 """The rclpy side of ``grazing replay``: this process's session and the node replayed.
 
-What the controller replay and the simulator replay (:mod:`.replay`) share: a ROS
-domain of their own (claimed as ``grazing run`` claims one), a context, node and
-executor in this process, the replayed node started as a process by
-:mod:`grazing_control.ros.launcher` with a parameter file written for it, the output bag
-(:class:`grazing_control.ros.recording.BagWriter`), and :class:`ControllerRun`, a real
-controller_node with its answers recorded as they come. rclpy is imported only when
-these run.
+What the controller replays (:mod:`.replay`'s of Pi2 samples, :mod:`.stream_replay`'s of
+a sensor stream) and the simulator replay share: a ROS domain of their own (claimed as
+``grazing run`` claims one), a context, node and executor in this process, the replayed
+node started as a process by :mod:`grazing_control.ros.launcher` with a parameter file
+written for it, the output bag (:class:`grazing_control.ros.recording.BagWriter`), and
+:class:`ControllerRun`, a real controller_node with its answers recorded as they come.
+rclpy is imported only when these run.
 """
 
 from __future__ import annotations
@@ -136,7 +136,8 @@ def bag_writer(out: Path):
 
 
 class ControllerRun:
-    """A real controller_node replayed against (:func:`.replay.replay_controller`).
+    """A real controller_node replayed against (:func:`.replay.replay_controller`,
+    :func:`.stream_replay.replay_stream`).
 
     On entry: the output bag OUT, a claimed ROS domain, this process's session with its
     subscriptions to the controller's answers (``controller/velocity_correction``, each

@@ -1,0 +1,325 @@
+"""``grazing replay`` of a stream scene: the recorded sensor stream through a real controller.
+
+A controller with ``pi2_source`` stream (docs/nodes.md, "Stream mode") does not read
+``oscillator/pi2``: it estimates each section's state from the sensor stream and answers
+it. Its replay publishes what such a controller reads (ros/controller_node.py), the
+recorded messages with their recorded bytes, to a controller_node started with the
+recorded parameters (or ``--controller-params``):
+
+* the stream: ``oscillator/state`` (sensor_msgs/JointState, a sample each) or, with
+  ``stream_message`` block, ``oscillator/state_block`` (std_msgs/Float64MultiArray,
+  :mod:`grazing_control.ros.stream_block`);
+* with a sample per message, ``oscillator/impact`` (geometry_msgs/Vector3Stamped) where
+  ``impact_source`` is topic, and ``oscillator/deadline_miss`` (Vector3Stamped) and
+  ``oscillator/substituted`` (TwistStamped): what acted where an answer came too late,
+  which the model filter integrates. (A controller reading blocks subscribes none of
+  these three: its replay publishes the blocks only.)
+
+Order and waiting (:func:`schedule`). The messages go out in the order the recorder
+logged them. The recorded corrections say where each answer was due: the answer of
+section k (stamped t_k) is awaited, as the lockstep Pi2 replay awaits each sample's,
+after the messages logged before the recorded correction and after every stream message
+whose first sample is at or before t_k (the section's samples, should the recorder have
+logged one after the answer; the stream is one topic, taken in order, so moving its
+messages before a wait changes no answer). Where the next message is on another topic
+than the one before, the replay first waits for the controller's acknowledgement of the
+one before (reliable QoS); the controller's events executor takes its messages in the
+order they arrived, so it reads them in the recorded interleaving. With ``--rate R``
+the messages go out at their recorded log times scaled by R instead, without waiting.
+
+OUT gets the messages published, the answers and estimates as they came, the parameter
+records (the controller's, this replay's own), and the recording's Pi2 samples, copied
+at their logged place (never published: the controller does not read them) so that the
+answers are matched to their samples by stamp as in any bag. The answers are compared
+with the recorded corrections (:func:`grazing_control.recordings.replay.
+compare_corrections`: bit for bit, else the difference report) and the estimates with
+the recorded ``controller/estimate`` messages, bytes for bytes.
+
+A bag without what the controller needs (the stream topic of its ``stream_message``, or
+``oscillator/impact`` with ``impact_source`` topic) is refused in one line before
+anything starts (:func:`check`).
+
+A realtime scene's bag replays the same way, as fast as the controller answers: a
+stream controller's answers depend on the samples' stamps, not on their arrival times,
+so only where a deadline miss or a substitution reached the controller relative to the
+stream can differ (the recorder's order is its own arrival order, not the controller's).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import numpy as np
+
+from . import reader
+from .scenes import DEFAULT_TOPICS, load
+
+__all__ = ["INPUTS", "check", "inputs_of", "schedule", "recorded_lag", "compare_messages",
+           "replay_stream"]
+
+#: Role (recordings.scenes.DEFAULT_TOPICS) -> the message class a stream controller reads
+#: it as (module, name).
+INPUTS = {"state": ("sensor_msgs.msg", "JointState"),
+          "state_block": ("std_msgs.msg", "Float64MultiArray"),
+          "impact": ("geometry_msgs.msg", "Vector3Stamped"),
+          "deadline_miss": ("geometry_msgs.msg", "Vector3Stamped"),
+          "substituted": ("geometry_msgs.msg", "TwistStamped")}
+
+
+def inputs_of(values: dict) -> tuple:
+    """(the stream's role, every role a stream controller with ``values`` reads, the
+    stream's first): ros/controller_node.py's subscriptions in stream mode (with
+    ``stream_message`` block it reads the blocks only)."""
+    if values.get("stream_message") == "block":
+        return "state_block", ("state_block",)
+    roles = ["state"] + (["impact"] if values.get("impact_source") == "topic" else [])
+    return "state", tuple(roles + ["deadline_miss", "substituted"])
+
+
+def check(data, values: dict, notes: list) -> None:
+    """Refuse (ValueError, one line) a bag whose stream controller cannot be replayed:
+    without its stream topic's messages, or without the impacts it reads; note what is
+    replayed as absent (the deadline misses and substitutions where not recorded)."""
+    stream, roles = inputs_of(values)
+    if "pi2" not in data.present or "correction" not in data.present:
+        raise ValueError(f"{data.path}: no Pi2 samples or no corrections recorded "
+                         f"({data.topics['pi2']}, {data.topics['correction']}): nothing to "
+                         "match the controller's answers to")
+    want = {"stream_message": values.get("stream_message", "sample"),
+            "impact_source": values.get("impact_source", "stream")}
+    for role in roles:
+        topic = data.topics[role]
+        recorded = role in data.present
+        if role == stream and (not recorded or not _count(data, topic)):
+            raise ValueError(
+                f"{data.path}: its controller reads the sensor stream (pi2_source stream, "
+                f"stream_message {want['stream_message']}) on {topic}, which the bag "
+                f"{'has no message of' if recorded else 'did not record'}: the controller "
+                "cannot be replayed (--no-controller replays the simulator)")
+        if role == "impact" and not recorded:
+            raise ValueError(
+                f"{data.path}: its controller reads the impacts (impact_source topic) on "
+                f"{topic}, which the bag did not record: the controller cannot be replayed "
+                "(--no-controller replays the simulator)")
+        if not recorded:
+            notes.append(f"{topic} not recorded: replayed as if none came")
+    if values.get("reidentify"):
+        notes.append("the controller re-identifies its model in a worker thread "
+                     "(reidentify): where a refit finished is timing: bit-identical answers "
+                     "are not guaranteed")
+
+
+def _count(data, topic: str) -> int:
+    return reader.read_raw(data.path, [topic]).count(topic)
+
+
+def _first_stamp(role: str, data: bytes) -> int:
+    """The stamp (ns) of a stream message's first sample (a block's first row)."""
+    if role == "state_block":
+        from grazing_control.ros.stream_block import read
+
+        rows = read(data)
+        if rows is None or not rows.flat:
+            return -1
+        return int(rows.flat[0]) * 1_000_000_000 + int(rows.flat[1])
+    from .replay_nodes import stamp_of
+
+    return stamp_of(data)
+
+
+def schedule(items: list, answers: list, stream_role: str) -> list:
+    """The replay's steps (module docstring, "Order and waiting").
+
+    ``items``: (log_ns, role, data) of the recorded messages to publish or copy (in
+    their log order, their order in ``items`` on equal log times); ``answers``:
+    (log_ns, stamp_ns) of the recorded corrections. Returns the steps in order:
+    ("message", role, data, log_ns) or ("answer", stamp_ns), the answer of each stamp
+    once, after the messages logged before it and after every ``stream_role`` message
+    whose first sample is stamped at or before it."""
+    order = sorted(range(len(items)), key=lambda i: items[i][0])
+    stream = deque((items[i][0], i) + items[i][1:] for i in order
+                   if items[i][1] == stream_role)
+    other = deque((items[i][0], i) + items[i][1:] for i in order
+                  if items[i][1] != stream_role)
+    steps, seen = [], set()
+
+    def take(queue):
+        log, _i, role, data = queue.popleft()
+        steps.append(("message", role, data, log))
+
+    def first(before=None):
+        """The queue whose head was logged first (before ``before``), or None."""
+        heads = [q for q in (stream, other) if q and (before is None or q[0][0] < before)]
+        return min(heads, key=lambda q: q[0][:2]) if heads else None
+
+    for log, stamp in sorted(answers):
+        if stamp in seen:
+            continue
+        seen.add(stamp)
+        while (queue := first(log)) is not None:    # logged before the answer
+            take(queue)
+        while stream and _first_stamp(stream_role, stream[0][3]) <= stamp:
+            take(stream)
+        steps.append(("answer", stamp))
+    while (queue := first()) is not None:
+        take(queue)
+    return steps
+
+
+def recorded_lag(items: list, answers: list, stream_role: str) -> tuple:
+    """(messages, stamp ns): how far behind the stream the recorded controller answered
+    at most: the ``stream_role`` messages (of :func:`schedule`'s ``items``) logged
+    before an answer (``answers``) whose first sample is after its section, and that
+    section's stamp (0, None: never behind)."""
+    stream = sorted((it[0], _first_stamp(it[1], it[2])) for it in items
+                    if it[1] == stream_role)
+    logs = np.array([m[0] for m in stream], dtype=np.int64)
+    firsts = np.sort(np.array([m[1] for m in stream], dtype=np.int64))
+    worst = (0, None)
+    for log, stamp in answers:
+        behind = int(np.searchsorted(logs, log) - np.searchsorted(firsts, stamp, "right"))
+        worst = max(worst, (behind, stamp), key=lambda w: w[0])
+    return worst
+
+
+def compare_messages(recorded: dict, replayed: dict) -> dict:
+    """Two sets of messages (stamp ns -> serialized message) compared bytes for bytes:
+    counts and the first differing stamp."""
+    both = sorted(set(recorded) & set(replayed))
+    differ = [k for k in both if recorded[k] != replayed[k]]
+    return {"recorded": len(recorded), "replayed": len(replayed),
+            "bit_identical": len(both) - len(differ), "differing": len(differ),
+            "missing_in_replay": len(set(recorded) - set(replayed)),
+            "first_differing_stamp_ns": differ[0] if differ else None}
+
+
+def _recorded(data, topic: str) -> dict:
+    """stamp ns -> the first recorded message of ``topic`` with that stamp."""
+    cols = reader.serialized(reader.read_raw(data.path, [topic]), topic)
+    return _by_stamp(cols["data"], cols["ok"])
+
+
+def _by_stamp(messages, ok=None) -> dict:
+    from .replay_nodes import stamp_of
+
+    out = {}
+    for i, m in enumerate(messages):
+        if ok is None or ok[i]:
+            out.setdefault(stamp_of(m), m)
+    return out
+
+
+def _recorded_items(data, roles) -> tuple:
+    """(items, answers) of :func:`schedule` from the bag: the input roles' and
+    the Pi2 samples' messages, the corrections' log times and stamps."""
+    topics = [data.topics[r] for r in roles + ("pi2", "correction")]
+    raw = reader.read_raw(data.path, topics)
+    items = []
+    for role in [r for r in roles if r in data.present] + ["pi2"]:
+        cols = reader.serialized(raw, data.topics[role])
+        keep = np.flatnonzero(cols["ok"]).tolist()
+        items += [(int(cols["log_time"][i]), role, cols["data"][i]) for i in keep]
+    corr = reader.decode_twist_stamped(raw, data.topics["correction"])
+    ok = corr["ok"]
+    answers = list(zip(corr["log_time"][ok].tolist(), corr["stamp"][ok].tolist()))
+    return items, answers
+
+
+def _message_class(role: str):
+    import importlib
+
+    module, name = INPUTS[role]
+    return getattr(importlib.import_module(module), name)
+
+
+def replay_stream(data, values: dict, source: str, notes: list, out, *, setup=None,
+                  rate=None, domain_id=None, answer_timeout: float = 2.0,
+                  log_dir=None) -> dict:
+    """Replay a stream scene's bag (``data``, :func:`load`) through a controller_node with
+    ``values`` (``source``: where they came from; ``notes`` extended); compare (module
+    docstring). Returns what :func:`grazing_control.recordings.replay.replay_controller`
+    returns, with ``stream`` (what was published) and ``estimates`` (their comparison).
+    ValueError for a bag that cannot be replayed (:func:`check`), RuntimeError if the
+    controller does not start or exits."""
+    from rclpy.duration import Duration
+
+    from .replay import compare_corrections
+    from .replay_nodes import ControllerRun
+
+    check(data, values, notes)
+    stream_role, roles = inputs_of(values)
+    sim = (data.parameters.get("nodes", {}).get("sim_node") or [{}])[0]
+    if sim.get("mode") == "realtime":
+        notes.append("a realtime scene, replayed as fast as the controller answers: its "
+                     "answers depend on the samples' stamps; where a deadline miss or a "
+                     "substitution came relative to the stream is the recorder's order")
+    items, answers = _recorded_items(data, roles)
+    corrections = data.topics["correction"]
+    estimates = corrections.rsplit("/", 1)[0] + "/estimate"
+    steps = schedule(items, answers, stream_role)
+    published = {r: 0 for r in roles}
+    waited = missing = 0
+    with ControllerRun(out, domain_id=domain_id, log_dir=log_dir, estimates=True) as run:
+        pubs = {r: run.publisher(_message_class(r), DEFAULT_TOPICS[r][1:]) for r in roles}
+        run.start(values, list(pubs.values()))
+        for r in roles:
+            run.writer.add_topic(DEFAULT_TOPICS[r], _type_name(r),
+                                 run.offered(DEFAULT_TOPICS[r]))
+        pi2_meta = reader.read_raw(data.path, [data.present["pi2"]]).channels[
+            data.present["pi2"]].metadata.get("offered_qos_profiles", "")
+        run.writer.add_topic(DEFAULT_TOPICS["pi2"], "sensor_msgs/msg/JointState", pi2_meta)
+        t0, log0, last = time.monotonic(), min((it[0] for it in items), default=0), None
+        for step in steps:
+            if step[0] == "answer":
+                if rate is None:
+                    waited += 1
+                    missing += not run.wait_answer(step[1], answer_timeout)
+                continue
+            role, msg, log = step[1:]
+            if role == "pi2":           # copied, not published: the controller reads none
+                run.writer.write(DEFAULT_TOPICS["pi2"], msg, time.time_ns())
+                continue
+            if rate is not None:
+                run.session.until(t0 + (log - log0) / 1e9 / rate)
+            elif last is not None and last != role:    # the interleaving as recorded
+                pubs[last].wait_for_all_acked(Duration(seconds=answer_timeout))
+            pubs[role].publish(msg)
+            run.writer.write(DEFAULT_TOPICS[role], msg, time.time_ns())
+            published[role] += 1
+            last = role
+        stamps, got = {a[1] for a in answers}, -1
+        while got < len(run.answers):   # the late ones, while they still come
+            got = len(run.answers)
+            if run.session.wait_for(lambda: stamps <= run.answers.keys(), answer_timeout):
+                break
+        run.finish({"source_bag": str(data.path), "gains_source": source,
+                    "rate": "as fast as possible" if rate is None else rate,
+                    "replayed": "the sensor stream (pi2_source stream)"})
+    lag = recorded_lag(items, answers, stream_role)
+    res = {"gains_source": source, "notes": notes, "domain_id": run.domain_id,
+           "samples_published": published[stream_role], "answers": len(run.answers),
+           "stream": {"topic": DEFAULT_TOPICS[stream_role], "published": published,
+                      "answers_awaited": waited, "answers_not_in_time": missing,
+                      "recorded_lag_messages": lag[0], "recorded_lag_stamp_ns": lag[1]},
+           "comparison": compare_corrections(data, load(out), setup),
+           # every answer (correction and predicted next correction) and estimate by
+           # stamp, the section after the last Pi2 sample's too
+           "answers_bytes": compare_messages(_recorded(data, corrections),
+                                             {k: m for k, (m, _t) in run.answers.items()}),
+           "estimates": compare_messages(_recorded(data, estimates),
+                                         {k: m for k, (m, _t) in run.estimates.items()})}
+    from grazing_control.ros.common import DATA_QOS
+
+    if lag[0] > DATA_QOS.depth and not res["comparison"].get("all_bit_identical"):
+        res["why"] = (f"the recorded controller answered section t = {lag[1] / 1e9:.9g} "
+                      f"{lag[0]} stream messages behind the stream, more than its "
+                      f"subscription keeps ({DATA_QOS.depth}): it lost samples the recorder "
+                      "kept, and its answers are not those of the recorded stream from "
+                      "there (a realtime scene faster than the controller)")
+    return res
+
+
+def _type_name(role: str) -> str:
+    module, name = INPUTS[role]
+    return f"{module.split('.')[0]}/msg/{name}"

@@ -1,0 +1,208 @@
+"""`grazing replay` of a stream scene (recordings/stream_replay.py): the recorded sensor
+stream through a real controller_node.
+
+Lockstep stream scenes recorded here through the nodes (Fast DDS, a domain each): a
+1-DOF scene (the model estimator, T/200) and the two-mass chain's scene of
+docs/ndof_scene.md (gains from ``grazing design --model ... --mu -0.22``, a
+position-only sensor of x0, the model filter), each with a message per sample and in
+blocks. Their replay with the recorded parameters gives every answer and every estimate
+again, bytes for bytes; another gain gives the difference report; a bag without its
+stream is refused in one line before anything starts. :func:`schedule` (where the
+replay waits for each answer) is checked on its own.
+"""
+
+import time
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+from grazing_control import cli                                        # noqa: E402
+from grazing_control.oscillator.params import OscillatorParams         # noqa: E402
+from grazing_control.recordings import reader                         # noqa: E402
+from grazing_control.recordings.replay import format_result, replay_controller  # noqa: E402
+from grazing_control.recordings.scenes import load                     # noqa: E402
+from grazing_control.recordings.stream_replay import schedule         # noqa: E402
+from grazing_control.ros import launcher                              # noqa: E402
+from grazing_control.ros.stream_block import MESSAGES                 # noqa: E402
+from test_closed_loop import new_domain                                # noqa: E402
+from test_ndof_nodes import CHAIN                                      # noqa: E402
+
+P = OscillatorParams(delta_d=-5e-6)
+PERIODS, ON = 16, 5                     # 1-DOF: control from sample 5
+NDOF_PERIODS, NDOF_ON = 12, 4
+NDOF_DD = -1e-3
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory):
+    """{(scene, stream_message): bag} for scene "1dof" and "ndof" (module docstring)."""
+    tmp = tmp_path_factory.mktemp("stream_replay")
+    gains = tmp / "g.yaml"
+    assert cli.main(["design", "--model", str(CHAIN), "--mu", "-0.22", "--delta-d",
+                     str(NDOF_DD), "--out", str(gains)]) == 0
+    out = {}
+    for mode in MESSAGES:
+        sensor = {"state_period": P.period / 200, "sensor_noise": 1e-4,
+                  "sensor_velocity": False, "sensor_seed": 7, "stream_message": mode}
+        bag = tmp / f"1dof_{mode}"
+        res = launcher.run(None, None, bag, PERIODS, delta_d=P.delta_d, enable_after=ON,
+                           mode="lockstep", domain_id=new_domain(), timeout=120,
+                           sim_overrides=sensor, log_dir=tmp / f"1dof_{mode}_logs",
+                           controller_overrides={"pi2_source": "stream",
+                                                 "estimator": "model"})
+        assert res.ok, res
+        out["1dof", mode] = bag
+        bag = tmp / f"ndof_{mode}"
+        res = launcher.run(None, gains, bag, NDOF_PERIODS, delta_d=NDOF_DD,
+                           enable_after=NDOF_ON, mode="lockstep", domain_id=new_domain(),
+                           timeout=120, log_dir=tmp / f"ndof_{mode}_logs",
+                           sim_overrides={**sensor, "state_period": 4 * 3.141592653589793
+                                          / 200},
+                           controller_overrides={"pi2_source": "stream",
+                                                 "estimator": "model",
+                                                 "sensor_coordinate": 0})
+        assert res.ok, res
+        out["ndof", mode] = bag
+    return out
+
+
+def _stream_topic(mode: str) -> str:
+    return "/oscillator/state" if mode == "sample" else "/oscillator/state_block"
+
+
+@pytest.mark.parametrize("mode", MESSAGES)
+@pytest.mark.parametrize("scene", ["1dof", "ndof"])
+def test_a_stream_scene_is_replayed_bit_for_bit(bags, tmp_path, scene, mode):
+    """Every recorded answer (correction and predicted next one) and estimate again,
+    bytes for bytes, the section after the last Pi2 sample's too; the stream published
+    as recorded (every message, nothing malformed)."""
+    bag = bags[scene, mode]
+    res = replay_controller(bag, tmp_path / "out", domain_id=new_domain())
+    cmp_ = res["comparison"]
+    n = PERIODS if scene == "1dof" else NDOF_PERIODS
+    assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == n, cmp_
+    assert res["answers_bytes"]["bit_identical"] == res["answers_bytes"]["recorded"] == n + 1
+    assert res["estimates"]["bit_identical"] == res["estimates"]["recorded"] == n + 1
+    assert res["stream"]["answers_not_in_time"] == 0
+    raw = reader.read_raw(bag)
+    topic = _stream_topic(mode)
+    assert res["samples_published"] == raw.count(topic) > 0
+    # the replay's bag holds what was published, byte for byte, in the recorded order
+    new = reader.read_raw(tmp_path / "out")
+    assert reader.serialized(new, topic)["data"] == reader.serialized(raw, topic)["data"]
+    log = (tmp_path / "out_controller.log").read_text()
+    assert f"answered={n + 1} " in log and "malformed=0" in log
+    assert "BIT-IDENTICAL" in format_result({"controller": res})
+
+
+def test_another_gain_gives_the_difference_report(bags, tmp_path, capsys):
+    """The 1-DOF scene with c2 = -0.5 (a parameter file of gains only: the recorded
+    stream controller's estimator and sensor are kept): the answers before the
+    switch-on are the recorded ones, those after it differ, in the Pi2 replay's table."""
+    gains = tmp_path / "c05.yaml"
+    assert cli.main(["design", "--delta-d", str(P.delta_d), "--c2", "-0.5",
+                     "--out", str(gains)]) == 0
+    capsys.readouterr()
+    code = cli.main(["replay", str(bags["1dof", "sample"]), "--bag", str(tmp_path / "out"),
+                     "--controller-params", str(gains), "--no-sim",
+                     "--domain-id", str(new_domain())])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert f"{PERIODS - ON} of {PERIODS} answers differ" in text, text
+    assert f"| before the original switch-on | {ON} |" in text
+    assert "values over the recorded stream controller's parameters" in text
+    assert "-0.5" in text                          # the new gains named
+
+
+def test_another_n_dof_gain_vector_differs(bags, tmp_path):
+    """The two-mass scene with its gain vector scaled by 1.1: the answers from the
+    switch-on differ, those before it are the recorded ones."""
+    import yaml
+
+    rec = load(bags["ndof", "sample"]).parameters["nodes"]["controller_node"][0]
+    gains = tmp_path / "g11.yaml"
+    gains.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
+        "model_file": rec["model_file"], "gains": [1.1 * g for g in rec["gains"]]}}}))
+    res = replay_controller(bags["ndof", "sample"], tmp_path / "out", domain_id=new_domain(),
+                            controller_params=gains)
+    cmp_ = res["comparison"]
+    assert cmp_["differing"] == NDOF_PERIODS - NDOF_ON, cmp_
+    assert cmp_["first_differing_sample"] == NDOF_ON
+    assert cmp_["new_gains"]["gains"] == [1.1 * g for g in rec["gains"]]
+
+
+def _without(bag, out, drop: str):
+    """A copy of ``bag`` without the topic ``drop`` (every other message as recorded)."""
+    from grazing_control.ros.recording import BagWriter
+
+    raw = reader.read_raw(bag)
+    with BagWriter(out) as writer:
+        for topic, ch in raw.channels.items():
+            if topic == drop:
+                continue
+            writer.add_topic(topic, ch.type, ch.metadata.get("offered_qos_profiles", ""))
+            cols = reader.serialized(raw, topic)
+            for t, data in zip(cols["log_time"].tolist(), cols["data"]):
+                writer.write(topic, data, t)
+    return out
+
+
+@pytest.mark.parametrize("mode", MESSAGES)
+def test_a_bag_without_its_stream_is_refused_in_one_line_at_once(bags, tmp_path, capsys,
+                                                                  mode):
+    topic = _stream_topic(mode)
+    bag = _without(bags["1dof", mode], tmp_path / "bag", topic)
+    start = time.monotonic()
+    code = cli.main(["replay", str(bag), "--bag", str(tmp_path / "out")])
+    took = time.monotonic() - start
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("grazing: error:") and err.count("\n") == 1, err
+    assert topic in err and "did not record" in err and "--no-controller" in err
+    assert took < 10.0 and not (tmp_path / "out").exists()
+
+
+def test_schedule_waits_for_each_answer_after_its_section():
+    """Answer at stamp 10 logged at 5: the messages logged before it go first (in log
+    order, file order on ties), then the stream messages stamped up to 10 that the
+    recorder logged after the answer, then the wait; another topic's message logged
+    after the answer stays after it; an answer recorded twice is awaited once."""
+    import struct
+
+    def state(stamp):       # a JointState's bytes as far as its stamp
+        return b"\0\1\0\0" + struct.pack("<iI", 0, stamp)
+
+    items = [(1, "state", state(4)), (3, "impact", state(6)), (3, "state", state(8)),
+             (6, "state", state(10)), (6, "impact", state(12)), (7, "state", state(14)),
+             (2, "pi2", state(0))]
+    steps = schedule(items, [(5, 10), (9, 20), (9, 20)], "state")
+    got = [("answer", s[1]) if s[0] == "answer" else (s[1], struct.unpack_from("<I", s[2], 8)[0])
+           for s in steps]
+    assert got == [("state", 4), ("pi2", 0), ("impact", 6), ("state", 8), ("state", 10),
+                   ("answer", 10), ("impact", 12), ("state", 14), ("answer", 20)]
+
+
+@pytest.mark.realtime
+def test_a_realtime_stream_scene_is_replayed_as_fast_as_the_controller_answers(tmp_path):
+    """Realtime at time_scale 100 (a 1-DOF scene at T/200): the controller's answers
+    depend on the samples' stamps, not on when they came, so the replay, as fast as the
+    controller answers, gives them again bit for bit, while the recorded controller read
+    every recorded sample (it answered at most its subscription's 1000 messages behind
+    the stream); where it fell further behind it lost samples the recorder kept, and
+    the report says so."""
+    bag = tmp_path / "rt"
+    res = launcher.run(None, None, bag, PERIODS, delta_d=P.delta_d, enable_after=ON,
+                       mode="realtime", domain_id=new_domain(), timeout=120,
+                       sim_overrides={"state_period": P.period / 200, "time_scale": 100.0,
+                                      "watchdog_misses": 0, "watchdog_pace": 0.0,
+                                      "watchdog_lag": 0.0, "watchdog_excursion": 0.0},
+                       controller_overrides={"pi2_source": "stream"},
+                       log_dir=tmp_path / "logs")
+    assert res.ok, res
+    out = replay_controller(bag, tmp_path / "out", domain_id=new_domain())
+    assert any("a realtime scene" in n for n in out["notes"])
+    if out["stream"]["recorded_lag_messages"] <= 1000:
+        assert out["comparison"]["all_bit_identical"], out["comparison"]
+        assert out["answers_bytes"]["differing"] == out["estimates"]["differing"] == 0
+    else:
+        assert "lost samples the recorder kept" in out.get("why", ""), out
