@@ -132,6 +132,36 @@ def test_another_n_dof_gain_vector_differs(bags, tmp_path):
     assert cmp_["new_gains"]["gains"] == [1.1 * g for g in rec["gains"]]
 
 
+def test_impacts_and_substituted_corrections_are_replayed_where_they_came(tmp_path):
+    """A lockstep 1-DOF scene whose controller takes the impacts from oscillator/impact
+    (impact_source topic) and whose simulator loses a fifth of the answers (loss 0.2:
+    the prediction acts instead, on oscillator/substituted, which the model filter
+    integrates): interleaved with the stream as recorded, every answer again; without
+    the substitutions (a copy of the bag lacking them) the answers differ after the
+    first loss."""
+    bag = tmp_path / "bag"
+    res = launcher.run(None, None, bag, PERIODS, delta_d=P.delta_d, enable_after=ON,
+                       mode="lockstep", domain_id=new_domain(), timeout=120,
+                       sim_overrides={"state_period": P.period / 200, "loss": 0.2,
+                                      "seed": 3},
+                       controller_overrides={"pi2_source": "stream",
+                                             "impact_source": "topic"},
+                       log_dir=tmp_path / "logs")
+    assert res.ok, res
+    raw = reader.read_raw(bag)
+    assert raw.count("/oscillator/substituted") > 0 and raw.count("/oscillator/impact") > 0
+    out = replay_controller(bag, tmp_path / "out", domain_id=new_domain())
+    sent = out["stream"]["published"]
+    assert sent["substituted"] == raw.count("/oscillator/substituted")
+    assert sent["impact"] == raw.count("/oscillator/impact")
+    assert out["comparison"]["all_bit_identical"], out["comparison"]
+    assert out["answers_bytes"]["differing"] == out["estimates"]["differing"] == 0
+    lacking = _without(bag, tmp_path / "lacking", "/oscillator/substituted")
+    out = replay_controller(lacking, tmp_path / "out2", domain_id=new_domain())
+    assert "/oscillator/substituted not recorded: replayed as if none came" in out["notes"]
+    assert out["comparison"]["differing"] > 0
+
+
 def _without(bag, out, drop: str):
     """A copy of ``bag`` without the topic ``drop`` (every other message as recorded)."""
     from grazing_control.ros.recording import BagWriter

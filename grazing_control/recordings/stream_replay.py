@@ -21,11 +21,17 @@ section k (stamped t_k) is awaited, as the lockstep Pi2 replay awaits each sampl
 after the messages logged before the recorded correction and after every stream message
 whose first sample is at or before t_k (the section's samples, should the recorder have
 logged one after the answer; the stream is one topic, taken in order, so moving its
-messages before a wait changes no answer). Where the next message is on another topic
-than the one before, the replay first waits for the controller's acknowledgement of the
-one before (reliable QoS); the controller's events executor takes its messages in the
-order they arrived, so it reads them in the recorded interleaving. With ``--rate R``
-the messages go out at their recorded log times scaled by R instead, without waiting.
+messages before a wait changes no answer). The other topics' messages go out between
+the stream's where they were logged, and the controller's events executor takes its
+messages in the order they arrive, so it reads them in the recorded interleaving as far
+as the middleware delivers one process's messages on several topics in the order they
+were published (DDS promises it per topic only; an impact or a substitution is read
+at the next section's answer, the messages up to that section's last sample later;
+measured: every replay of tests/test_stream_replay.py's scene with both, and of 60
+periods with 59 impacts or 11 substitutions, gave every answer again). (Waiting for the
+controller's acknowledgement at each change of topic made that certain but cost about
+1.5 s each: 3 minutes for 60 periods with an impact each.) With ``--rate R`` the
+messages go out at their recorded log times scaled by R instead, without waiting.
 
 OUT gets the messages published, the answers and estimates as they came, the parameter
 records (the controller's, this replay's own), and the recording's Pi2 samples, copied
@@ -242,8 +248,6 @@ def replay_stream(data, values: dict, source: str, notes: list, out, *, setup=No
     returns, with ``stream`` (what was published) and ``estimates`` (their comparison).
     ValueError for a bag that cannot be replayed (:func:`check`), RuntimeError if the
     controller does not start or exits."""
-    from rclpy.duration import Duration
-
     from .replay import compare_corrections
     from .replay_nodes import ControllerRun
 
@@ -269,7 +273,7 @@ def replay_stream(data, values: dict, source: str, notes: list, out, *, setup=No
         pi2_meta = reader.read_raw(data.path, [data.present["pi2"]]).channels[
             data.present["pi2"]].metadata.get("offered_qos_profiles", "")
         run.writer.add_topic(DEFAULT_TOPICS["pi2"], "sensor_msgs/msg/JointState", pi2_meta)
-        t0, log0, last = time.monotonic(), min((it[0] for it in items), default=0), None
+        t0, log0 = time.monotonic(), min((it[0] for it in items), default=0)
         for step in steps:
             if step[0] == "answer":
                 if rate is None:
@@ -282,12 +286,9 @@ def replay_stream(data, values: dict, source: str, notes: list, out, *, setup=No
                 continue
             if rate is not None:
                 run.session.until(t0 + (log - log0) / 1e9 / rate)
-            elif last is not None and last != role:    # the interleaving as recorded
-                pubs[last].wait_for_all_acked(Duration(seconds=answer_timeout))
             pubs[role].publish(msg)
             run.writer.write(DEFAULT_TOPICS[role], msg, time.time_ns())
             published[role] += 1
-            last = role
         stamps, got = {a[1] for a in answers}, -1
         while got < len(run.answers):   # the late ones, while they still come
             got = len(run.answers)
