@@ -34,7 +34,8 @@ def add_commands(sub) -> None:
         from . import replay
     except ImportError:          # pragma: no cover
         return
-    s = sub.add_parser("replay", help="replay a bag's samples through a real controller_node "
+    s = sub.add_parser("replay", help="replay a bag's samples (a stream scene's sensor "
+                                      "stream) through a real controller_node "
                                       "(and its corrections through sim_node); compare")
     replay.add_arguments(s)
     s.set_defaults(func=replay.main)

@@ -500,7 +500,8 @@ def add_arguments(parser) -> None:
                              "replay goes to OUT_sim)")
     parser.add_argument("--controller-params", default=None, metavar="FILE",
                         help="controller parameter file (`grazing design --out`); default: "
-                             "the gains recorded in the bag")
+                             "the gains recorded in the bag (a stream scene's: FILE over its "
+                             "recorded parameters)")
     pace = parser.add_mutually_exclusive_group()
     pace.add_argument("--rate", type=float, default=None, metavar="R",
                       help="publish at the recorded timing scaled by R (2: twice as fast)")

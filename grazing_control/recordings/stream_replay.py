@@ -255,9 +255,11 @@ def replay_stream(data, values: dict, source: str, notes: list, out, *, setup=No
     stream_role, roles = inputs_of(values)
     sim = (data.parameters.get("nodes", {}).get("sim_node") or [{}])[0]
     if sim.get("mode") == "realtime":
-        notes.append("a realtime scene, replayed as fast as the controller answers: its "
-                     "answers depend on the samples' stamps; where a deadline miss or a "
-                     "substitution came relative to the stream is the recorder's order")
+        pace = ("as fast as the controller answers" if rate is None else
+                f"at the recorded timing x{rate:g}")
+        notes.append(f"a realtime scene, replayed {pace}: its answers depend on the "
+                     "samples' stamps; where a deadline miss or a substitution came "
+                     "relative to the stream is the recorder's order")
     items, answers = _recorded_items(data, roles)
     corrections = data.topics["correction"]
     estimates = corrections.rsplit("/", 1)[0] + "/estimate"
