@@ -22,7 +22,7 @@ from grazing_control.oscillator.params import OscillatorParams         # noqa: E
 from grazing_control.recordings import reader                         # noqa: E402
 from grazing_control.recordings.replay import format_result, replay_controller  # noqa: E402
 from grazing_control.recordings.scenes import load                     # noqa: E402
-from grazing_control.recordings.stream_replay import schedule         # noqa: E402
+from grazing_control.recordings.stream_replay import recorded_lag, schedule  # noqa: E402
 from grazing_control.ros import launcher                              # noqa: E402
 from grazing_control.ros.stream_block import MESSAGES                 # noqa: E402
 from test_closed_loop import new_domain                                # noqa: E402
@@ -236,3 +236,18 @@ def test_a_realtime_stream_scene_is_replayed_as_fast_as_the_controller_answers(t
         assert out["answers_bytes"]["differing"] == out["estimates"]["differing"] == 0
     else:
         assert "lost samples the recorder kept" in out.get("why", ""), out
+
+
+def test_the_recorded_lag_counts_the_stream_messages_before_a_late_answer():
+    """Answer 10 logged after the stream messages stamped 12 and 14 (two behind), answer
+    20 logged right after its section's last message (none behind)."""
+    import struct
+
+    def state(stamp):
+        return b"\0\1\0\0" + struct.pack("<iI", 0, stamp)
+
+    items = [(1, "state", state(8)), (2, "state", state(10)), (3, "state", state(12)),
+             (4, "state", state(14)), (5, "impact", state(13)), (7, "state", state(20)),
+             (9, "state", state(22))]
+    assert recorded_lag(items, [(6, 10), (8, 20)], "state") == (2, 10)
+    assert recorded_lag(items, [(8, 20)], "state") == (0, None)       # never behind

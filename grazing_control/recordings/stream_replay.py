@@ -84,9 +84,13 @@ def inputs_of(values: dict) -> tuple:
 
 
 def check(data, values: dict, notes: list) -> None:
-    """Refuse (ValueError, one line) a bag whose stream controller cannot be replayed:
-    without its stream topic's messages, or without the impacts it reads; note what is
+    """Refuse (ValueError, one line) a bag whose stream controller cannot be replayed: a
+    rig scene's (grazing replay-rig), one without its Pi2 samples or corrections, without
+    its stream topic's messages, or without the impacts it reads; note what is
     replayed as absent (the deadline misses and substitutions where not recorded)."""
+    if values.get("rig_file"):
+        raise ValueError(f"{data.path}: a rig scene's bag (its controller reads rig/sensor "
+                         "through rig_file): replay it with grazing replay-rig")
     stream, roles = inputs_of(values)
     if "pi2" not in data.present or "correction" not in data.present:
         raise ValueError(f"{data.path}: no Pi2 samples or no corrections recorded "
