@@ -251,3 +251,13 @@ def test_the_recorded_lag_counts_the_stream_messages_before_a_late_answer():
              (9, "state", state(22))]
     assert recorded_lag(items, [(6, 10), (8, 20)], "state") == (2, 10)
     assert recorded_lag(items, [(8, 20)], "state") == (0, None)       # never behind
+
+
+def test_a_rig_scenes_bag_is_sent_to_replay_rig():
+    from types import SimpleNamespace
+
+    from grazing_control.recordings.stream_replay import check
+
+    data = SimpleNamespace(path="bag", present={}, topics={})
+    with pytest.raises(ValueError, match="replay it with grazing replay-rig"):
+        check(data, {"pi2_source": "stream", "rig_file": "rig.yaml"}, [])
