@@ -510,6 +510,46 @@ def test_an_n_dof_controller_takes_the_same_samples_from_blocks_at_any_coordinat
     assert not any(math.isnan(v) for row in got["sample"] for v in row[2:])
 
 
+def test_a_controller_in_blocks_reads_every_topic_a_controller_of_samples_reads():
+    """controller_node in stream mode reads the same topics with stream_message block as
+    with sample, but for the stream's own: the impact sensor (impact_source topic), what
+    acted at a missed deadline (oscillator/deadline_miss) and the prediction substituted
+    for a late answer (oscillator/substituted), and its start report names them. Before,
+    in blocks it subscribed to the blocks alone: the impacts of the topic were never
+    read and, at a miss, its model filter integrated the correction it had answered, not
+    the one that acted."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from grazing_control.ros.controller_node import ControllerNode
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    read, reported = {}, {}
+    try:
+        for mode in stream_block.MESSAGES:
+            node = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in (
+                    ("pi2_source", "stream"), ("estimator", "model"),
+                    ("impact_source", "topic"), ("delta_d", P.delta_d),
+                    ("state_period", P.period / 50), ("stream_message", mode))])
+            try:
+                read[mode] = {sub.topic_name for sub in node.subscriptions}
+                reported[mode] = {sub.topic_name for sub in node.matched.inputs}
+            finally:
+                node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    stream = {"sample": "/oscillator/state", "block": "/" + stream_block.TOPIC}
+    for mode, own in stream.items():
+        assert own in read[mode] and own in reported[mode]
+        assert {"/oscillator/impact", "/oscillator/deadline_miss",
+                "/oscillator/substituted"} <= reported[mode], reported[mode]
+    assert read["block"] - {stream["block"]} == read["sample"] - {stream["sample"]}
+    assert reported["block"] - {stream["block"]} == reported["sample"] - {stream["sample"]}
+
+
 def test_a_controller_takes_a_block_and_refuses_a_malformed_one(tmp_path):
     """controller_node with stream_message block: a Float64MultiArray of another layout
     and a truncated block are counted malformed (one line each, no crash); a block of a

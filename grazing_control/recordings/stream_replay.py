@@ -9,11 +9,10 @@ recorded parameters (or ``--controller-params``):
 * the stream: ``oscillator/state`` (sensor_msgs/JointState, a sample each) or, with
   ``stream_message`` block, ``oscillator/state_block`` (std_msgs/Float64MultiArray,
   :mod:`grazing_control.ros.stream_block`);
-* with a sample per message, ``oscillator/impact`` (geometry_msgs/Vector3Stamped) where
-  ``impact_source`` is topic, and ``oscillator/deadline_miss`` (Vector3Stamped) and
-  ``oscillator/substituted`` (TwistStamped): what acted where an answer came too late,
-  which the model filter integrates. (A controller reading blocks subscribes none of
-  these three: its replay publishes the blocks only.)
+* ``oscillator/impact`` (geometry_msgs/Vector3Stamped) where ``impact_source`` is topic,
+  and ``oscillator/deadline_miss`` (Vector3Stamped) and ``oscillator/substituted``
+  (TwistStamped): what acted where an answer came too late, which the model filter
+  integrates (with a sample per message or in blocks alike).
 
 Order and waiting (:func:`schedule`). The messages go out in the order the recorder
 logged them. The recorded corrections say where each answer was due: the answer of
@@ -75,12 +74,11 @@ INPUTS = {"state": ("sensor_msgs.msg", "JointState"),
 
 def inputs_of(values: dict) -> tuple:
     """(the stream's role, every role a stream controller with ``values`` reads, the
-    stream's first): ros/controller_node.py's subscriptions in stream mode (with
-    ``stream_message`` block it reads the blocks only)."""
-    if values.get("stream_message") == "block":
-        return "state_block", ("state_block",)
-    roles = ["state"] + (["impact"] if values.get("impact_source") == "topic" else [])
-    return "state", tuple(roles + ["deadline_miss", "substituted"])
+    stream's first): ros/controller_node.py's subscriptions in stream mode (the stream
+    per sample, or in blocks with ``stream_message`` block)."""
+    stream = "state_block" if values.get("stream_message") == "block" else "state"
+    roles = [stream] + (["impact"] if values.get("impact_source") == "topic" else [])
+    return stream, tuple(roles + ["deadline_miss", "substituted"])
 
 
 def check(data, values: dict, notes: list) -> None:

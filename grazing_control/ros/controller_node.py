@@ -259,14 +259,13 @@ class ControllerNode(Node):
             self.sub_samples = self.create_subscription(
                 JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
                 event_callbacks=quiet)
-        elif self.get_parameter("stream_message").value == "block":     # issue 30
-            self.sub_samples = self.create_subscription(
+        else:       # stream mode never listens to the simulator's exact samples
+            self.sub_samples = (self.create_subscription(    # in blocks (issue 30)
                 Float64MultiArray, stream_block.TOPIC, self._on_state_block, DATA_QOS,
                 raw=True, event_callbacks=quiet)
-        else:       # stream mode never listens to the simulator's exact samples
-            self.sub_samples = self.create_subscription(
-                JointState, "oscillator/state", self._on_state, DATA_QOS, raw=True,
-                event_callbacks=quiet)
+                if self.get_parameter("stream_message").value == "block" else
+                self.create_subscription(JointState, "oscillator/state", self._on_state,
+                                         DATA_QOS, raw=True, event_callbacks=quiet))
             if self.stream.impact_source == "topic":
                 self.sub_impacts = self.create_subscription(
                     Vector3Stamped, "oscillator/impact", self._on_impact, DATA_QOS,
