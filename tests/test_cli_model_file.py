@@ -187,6 +187,22 @@ def test_design_chooses_an_admissible_mu_on_three_masses(design3):
                                "free_stable": True}
 
 
+def test_design_out_names_its_model_file_from_anywhere(capsys, tmp_path, monkeypatch):
+    """A relative --model is written as the absolute path of the file it names: the gain
+    file is read by `grazing run --controller-params` from any folder (written as given,
+    a scene run elsewhere failed with "model_file='<there>/two_mass_chain.yaml' is
+    invalid: ... no such file")."""
+    import yaml
+
+    monkeypatch.chdir(Path(TWO).parent)
+    out = tmp_path / "gains.yaml"
+    code, _text, err = run(capsys, "design", "--model", Path(TWO).name, "--mu", "-0.22",
+                           "--out", str(out))
+    assert code == 0, err
+    params = next(iter(yaml.safe_load(out.read_text()).values()))["ros__parameters"]
+    assert params["model_file"] == TWO
+
+
 def test_design_report_and_out_file(capsys, tmp_path):
     """The human report names every design quantity; --out writes the family's gains
     (and only for an admissible mu: nothing is written for mu = 5)."""

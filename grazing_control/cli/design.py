@@ -18,6 +18,8 @@ for a rig, and the parser (cli/commands.py) both sit above it without an import 
 
 from __future__ import annotations
 
+import os
+
 import math
 import time
 from typing import NamedTuple
@@ -423,7 +425,9 @@ def _family_design(args):
         if not admissible:
             raise ParameterError(f"mu={mu!r} is not admissible: valid range is "
                                  f"{_fmt_intervals(intervals, True)}; nothing written to {args.out}")
-        nd.write_gain_yaml(args.out, model, design, args.model)
+        # the model file as an absolute path: the gain file is read from wherever the
+        # scene runs (a relative one resolved against that folder: 'no such file')
+        nd.write_gain_yaml(args.out, model, design, os.path.abspath(args.model))
         out["written"] = args.out
     ok = {True: "yes", False: "NO"}
     names = coordinates(model)
