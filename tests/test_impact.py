@@ -30,37 +30,57 @@ def _mat(m):
     return np.array(m, dtype=float).reshape(2, 2)
 
 
-def _run_core(p, periods, dx=0.0, dv=0.0):
-    """Period-by-period advance from a Pi2 deviation: Pi2 deviations and impacts."""
+def _run_core(p, periods, dx=0.0, dv=0.0, step=None):
+    """Period-by-period advance (``step``, default the core's) from a Pi2 deviation: Pi2
+    deviations and impacts."""
+    step = advance if step is None else step
     pi2, impacts, counts = [], [], []
     for k in range(periods):
         pi2.append((dx, dv))
-        seg = advance(p, p.tau2, dx, dv, p.period)
+        seg = step(p, p.tau2, dx, dv, p.period)
         counts.append(len(seg.impacts))
         impacts += [(k, i) for i in seg.impacts]
         dx, dv = seg.dx, seg.dv
     return pi2, impacts, counts
 
 
+def _paths(core):
+    """{name: function}: ``core`` (the core's advance or next_impact) and, wherever numba
+    is installed (whatever GRAZING_KERNEL says), the compiled kernel's of the same name:
+    both compared with one computation of the reference (tests/test_kernel.py re-ran these
+    tests for the kernel before, and the reference with them)."""
+    from grazing_control.oscillator import kernel
+
+    paths = {"core": core}
+    if kernel.available():
+        paths["kernel"] = getattr(kernel, core.__name__)
+    return paths
+
+
 def _compare_with_reference(p, periods):
-    """Largest errors (Pi2 state, impact time in period, phase, v-, v+) against mpmath."""
+    """{path: largest errors (Pi2 state, impact time in period, phase, v-, v+) against
+    mpmath, and the number of impacts} for the core's advance and the kernel's
+    (:func:`_paths`), against one 50-digit run."""
     ref = RefModel.from_params(p)
     run = ref.simulate(periods)
-    pi2, impacts, counts = _run_core(p, periods)
-    assert counts == run.counts
-    err_state = 0.0
-    for (dx, dv), (x, v) in zip(pi2, run.pi2):
-        # physical reference sample -> deviation from X** at 50 digits
-        err_state = max(err_state, abs(float(x - ref.x_ref - mpf(dx))),
-                        abs(float(v - ref.v_ref - mpf(dv))))
-    errs = np.zeros(4)
-    for (k, imp), (t, phase, vm, vp) in zip(impacts, run.impacts):
-        dt_ref = t - k * ref.period  # time since the Pi2 sample, as the core reports it
-        dphase = (mpf(imp.phase) - phase + mp.pi) % (2 * mp.pi) - mp.pi
-        errs = np.maximum(errs, [abs(float(dt_ref - mpf(imp.dt))), abs(float(dphase)),
-                                 abs(float(vm - mpf(imp.v_minus))),
-                                 abs(float(vp - mpf(imp.v_plus)))])
-    return err_state, errs, sum(counts)
+    out = {}
+    for name, step in _paths(advance).items():
+        pi2, impacts, counts = _run_core(p, periods, step=step)
+        assert counts == run.counts, name
+        err_state = 0.0
+        for (dx, dv), (x, v) in zip(pi2, run.pi2):
+            # physical reference sample -> deviation from X** at 50 digits
+            err_state = max(err_state, abs(float(x - ref.x_ref - mpf(dx))),
+                            abs(float(v - ref.v_ref - mpf(dv))))
+        errs = np.zeros(4)
+        for (k, imp), (t, phase, vm, vp) in zip(impacts, run.impacts):
+            dt_ref = t - k * ref.period  # time since the Pi2 sample, as the core reports it
+            dphase = (mpf(imp.phase) - phase + mp.pi) % (2 * mp.pi) - mp.pi
+            errs = np.maximum(errs, [abs(float(dt_ref - mpf(imp.dt))), abs(float(dphase)),
+                                     abs(float(vm - mpf(imp.v_minus))),
+                                     abs(float(vp - mpf(imp.v_plus)))])
+        out[name] = (err_state, errs, sum(counts))
+    return out
 
 
 # ----------------------------------------------------------- exact vs mpmath
@@ -69,10 +89,10 @@ def test_hundred_periods_with_impacts_match_mpmath(delta_d):
     """From X**, 100 periods with one impact each: every Pi2 state, impact time,
     phase and velocity agrees with the 50-digit reference to 1e-12."""
     p = STUDY.with_(delta_d=delta_d)
-    err_state, errs, n = _compare_with_reference(p, 100)
-    assert n == 100
-    assert err_state < 1e-12
-    assert np.all(errs < 1e-12), errs
+    for name, (err_state, errs, n) in _compare_with_reference(p, 100).items():
+        assert n == 100, name
+        assert err_state < 1e-12, name
+        assert np.all(errs < 1e-12), (name, errs)
 
 
 def test_chaotic_near_grazing_scene_matches_mpmath_while_trajectories_are_close():
@@ -82,10 +102,10 @@ def test_chaotic_near_grazing_scene_matches_mpmath_while_trajectories_are_close(
     (measured: 3e-13 at period 15, 2e-11 at 25, 1e-6 at 55). We therefore compare
     the first 15 periods, which include near-grazing impacts and missed periods."""
     p = STUDY.with_(delta_d=-5e-6)
-    err_state, errs, n = _compare_with_reference(p, 15)
-    assert n >= 10
-    assert err_state < 1e-12
-    assert np.all(errs < 1e-12), errs
+    for name, (err_state, errs, n) in _compare_with_reference(p, 15).items():
+        assert n >= 10, name
+        assert err_state < 1e-12, name
+        assert np.all(errs < 1e-12), (name, errs)
 
 
 # ------------------------------------------------ near-grazing construction
@@ -716,23 +736,25 @@ def test_certified_search_agrees_with_dense_grid_brute_force(seed):
     impact in one period from next_impact equals the brute-force one of
     tests/brute_impacts.py (T/4096 cells, maxima inside cells tested, 80 bisections):
     0 missed and 0 spurious impacts, times equal to 1e-7. The pre-fix search missed
-    50 of 3000 here (checked when this test was written)."""
+    50 of 3000 here (checked when this test was written). The core's next_impact and
+    the kernel's (:func:`_paths`) against one brute-force truth (1.4 CPU-s)."""
     cases = _random_cases(seed, 3000)
     brute = Cases(*zip(*[(p.zeta, p.omega, p.delta_d, tau0, dx, dv, p.period)
                          for p, tau0, dx, dv in cases]))
     truth = np.concatenate([first_impacts(brute.take(np.arange(k, min(k + 500, len(cases)))))[0]
                             for k in range(0, len(cases), 500)])
-    missed, spurious = [], []
-    for (p, tau0, dx, dv), t_true in zip(cases, truth):
-        t = next_impact(p, tau0, dx, dv, p.period)
-        if t is None and math.isnan(t_true):
-            continue
-        if t is None or (not math.isnan(t_true) and t > t_true + 1e-7 * max(1.0, t_true)):
-            missed.append((p, tau0, dx, dv, t, t_true))
-        elif math.isnan(t_true) or t < t_true - 1e-7 * max(1.0, t_true):
-            spurious.append((p, tau0, dx, dv, t, t_true))
     assert np.isfinite(truth).sum() > 1000  # most cases do hit the wall
-    assert missed == [] and spurious == []
+    for name, search in _paths(next_impact).items():
+        missed, spurious = [], []
+        for (p, tau0, dx, dv), t_true in zip(cases, truth):
+            t = search(p, tau0, dx, dv, p.period)
+            if t is None and math.isnan(t_true):
+                continue
+            if t is None or (not math.isnan(t_true) and t > t_true + 1e-7 * max(1.0, t_true)):
+                missed.append((p, tau0, dx, dv, t, t_true))
+            elif math.isnan(t_true) or t < t_true - 1e-7 * max(1.0, t_true):
+                spurious.append((p, tau0, dx, dv, t, t_true))
+        assert missed == [] and spurious == [], name
 
 
 def test_no_trajectory_passes_through_the_wall():

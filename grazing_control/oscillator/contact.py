@@ -346,7 +346,7 @@ def _bracket(value, lo, hi, sign, flo, fhi, event=None):
 
 #: kernel.compiled_contact once :func:`load_compiled` has loaded it
 _compiled = None
-_GAP, _FORCE = 0, 1     # kernel.compiled_contact.GAP, FORCE
+_GAP, _FORCE, _SLIP = 0, 1, 2     # kernel.compiled_contact.GAP, FORCE, SLIP
 
 
 def load_compiled() -> bool:
@@ -366,7 +366,7 @@ def load_compiled() -> bool:
         kernel.warm_up()            # the wall's search (_wall_entry)
         # compile now: both kinds of the search and the bracketing (one region)
         reg = _Region(2.0, 0.1, OscillatorParams(), 0.0, -0.1, 1.0)
-        for kind in (_GAP, _FORCE):
+        for kind in (_GAP, _FORCE, _SLIP):
             cc.first_crossing_region(reg.constants(), kind, 1.0, 0.1, 1.0, 1.0, 1.0)
         cc.bracket_region(0.0, 1.0, 1.0, -1.0, 1.0, _GAP, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0,
                           0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
@@ -578,9 +578,8 @@ def advance_compliant(p: OscillatorParams, law: KelvinVoigt, tau0: float, x: flo
         reg = _Region(*geometry, p, tau, delta, vel, push, force, t)
         h_stop = None
         if friction is not None and s != 0.0:
-            h_stop = _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
-                                     lambda h: reg.bound(3, h), remaining, 1.0,
-                                     reg.cabs + reg.amp + abs(reg.kk) + abs(vel) + 1.0)
+            h_stop = _slip_end(reg, s, remaining,
+                               reg.cabs + reg.amp + abs(reg.kk) + abs(vel) + 1.0)
         horizon = h_stop if h_stop is not None else remaining
         kind, h = None, None
         if region == "below":
@@ -685,6 +684,19 @@ def _region_crossing(reg: _Region, kind: int, k: float, c: float, horizon: float
                                scale, _RegionValue(reg, _GAP))
     return _first_crossing(_force_event(reg, k, c), _force_bound(reg, k, c), horizon, sign,
                            scale, _force_value(reg, k, c))
+
+
+def _slip_end(reg: _Region, s: float, horizon: float, scale: float):
+    """The end of a friction's slip in direction ``s`` (+-1): :func:`_first_crossing` of
+    -s delta' (the event -s (delta', delta''), the bound :meth:`_Region.bound` (3)),
+    compiled once :func:`load_compiled` has loaded the searches (kind SLIP of
+    kernel.compiled_contact.first_crossing_region, the same floats)."""
+    if _compiled is not None:
+        h = _compiled.first_crossing_region(reg.constants(), _SLIP, s, 0.0, horizon, 1.0,
+                                            scale)
+        return None if h == _compiled.NONE else h
+    return _first_crossing(lambda h: tuple(-s * u for u in reg(h)[1:]),
+                           lambda h: reg.bound(3, h), horizon, 1.0, scale)
 
 
 def _wall_entry(p: OscillatorParams, tau: float, dx: float, dv: float, horizon: float):

@@ -1,9 +1,9 @@
 """Compiled mirror of the Kelvin-Voigt stop's certified switching search
 (:func:`grazing_control.oscillator.contact._first_crossing` on a region's gap or contact
-force, :func:`first_crossing_region`) and its bracketing (``contact._bracket``,
-:func:`bracket_region`), in the same floating point operations and the same order, so
-that it gives the same floats (tests/test_compliant_flow_bits.py runs the flow's digests
-on both paths).
+force, or a friction's slip end: :func:`first_crossing_region`) and its bracketing
+(``contact._bracket``, :func:`bracket_region`), in the same floating point operations and
+the same order, so that it gives the same floats (tests/test_compliant_flow_bits.py runs
+the flow's digests on both paths).
 
 The search is most of the compliant flow's time (issue 30, the suite's CPU: cProfile of
 test_stop_selection's fits, docs/benchmarks.md "The compliant stop's hot path"): an
@@ -21,11 +21,13 @@ import numpy as np
 
 from .caching import jit
 
-__all__ = ["GAP", "FORCE", "NONE", "bracket_region", "first_crossing_region"]
+__all__ = ["GAP", "FORCE", "SLIP", "NONE", "bracket_region", "first_crossing_region"]
 
 #: what is bracketed: the gap delta (_Region.gap) or the force k delta + c delta'
-#: (_Region.force_value)
-GAP, FORCE = 0, 1
+#: (_Region.force_value); SLIP: the end of a friction's slip, -s delta' with the slip's
+#: direction s in ``k`` (contact.advance_compliant's h_stop: the event -s (delta',
+#: delta''), the bound _Region.bound(3, h), bracketed on the event's first value)
+GAP, FORCE, SLIP = 0, 1, 2
 
 
 @jit
@@ -38,7 +40,8 @@ def _ulp(x):
 @jit
 def _value(h, kind, k, c, tau0, omega, lag, amp, offset, beta, big_om, c1, c2, av, wa, wb,
            kk, rate):
-    """_Region.gap (kind GAP) or _Region.force_value (kind FORCE) at h."""
+    """_Region.gap (kind GAP), _Region.force_value (kind FORCE) or -k delta' (SLIP: the
+    first value of contact's slip event, ``-s * reg(h)[1]``) at h."""
     psi = tau0 + omega * h - lag
     e = math.exp(-beta * h)
     oh = big_om * h
@@ -53,6 +56,8 @@ def _value(h, kind, k, c, tau0, omega, lag, amp, offset, beta, big_om, c1, c2, a
     if kk != 0.0:
         ek = kk * math.exp(-rate * h)
         d, v = d + ek, v - rate * ek
+    if kind == SLIP:
+        return -k * v
     return k * d + c * v
 
 
@@ -113,24 +118,33 @@ def _state(R, h):
 @jit
 def _event(R, kind, k, c, h):
     """The searched function and its derivative at h: the gap (delta, delta') (contact's
-    ``reg(h)[:2]``) or the force (k delta + c delta', k delta' + c delta'')
-    (contact._force_event)."""
+    ``reg(h)[:2]``), the force (k delta + c delta', k delta' + c delta'')
+    (contact._force_event) or the slip's velocity (-k delta', -k delta'') (SLIP, ``k``
+    the slip's direction s: contact's ``-s * u for u in reg(h)[1:]``)."""
     d, v, a = _state(R, h)
     if kind == GAP:
         return d, v
+    if kind == SLIP:
+        return -k * v, -k * a
     return k * d + c * v, k * v + c * a
 
 
 @jit
 def _bound2(R, kind, k, c, h):
     """A bound on the searched function's second derivative on [h, inf): _Region.bound(2,
-    h) for the gap, _Region.force_bound(k, c, h) for the force."""
+    h) for the gap, _Region.force_bound(k, c, h) for the force, _Region.bound(3, h) for
+    the slip's velocity."""
     e = math.exp(-R[_BETA] * h)
     kk = R[_KK]
     if kind == GAP:
         out = R[_BN2] * e + R[_AN2]
         if kk != 0.0:
             out += R[_KN2] * math.exp(-R[_RATE] * h)
+        return out
+    if kind == SLIP:
+        out = R[_BN3] * e + R[_AN3]
+        if kk != 0.0:
+            out += R[_KN3] * math.exp(-R[_RATE] * h)
         return out
     b2 = R[_BN2] * e + R[_AN2]
     b3 = R[_BN3] * e + R[_AN3]
@@ -195,8 +209,9 @@ def _crossing_in(R, kind, k, c, a, b, fa0, fa1, fb0, fb1, sign, margin, start, s
 @jit
 def first_crossing_region(R, kind, k, c, horizon, sign, scale):
     """contact._first_crossing on a region's gap (``kind`` GAP: the event reg(h)[:2], the
-    bound reg.bound(2, h)) or contact force (FORCE: contact._force_event and
-    _force_bound), the bracketing by :func:`bracket_region`: the first h in (0, horizon]
+    bound reg.bound(2, h)), contact force (FORCE: contact._force_event and
+    _force_bound), the bracketing by :func:`bracket_region`, or a friction's slip (SLIP:
+    the slip's direction s in ``k``, bracketed on the event): the first h in (0, horizon]
     at which sign * f(h) >= 0 after being < 0, or NONE. ``R``: the region's constants
     (:data:`_TAU0` ...)."""
     margin = 64.0 * _EPS * scale
