@@ -702,6 +702,11 @@ def realtime_numbers(sd, setup: Setup) -> dict:
     return out
 
 
+#: Periods of the delay check's grid over sample 0's lag (recordings/lag_fit.py; the
+#: refinement uses up to ``fit_samples``).
+COARSE_SAMPLES = 40
+
+
 def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     """Model check with each correction applied at its measured arrival, not on Pi2.
 
@@ -710,7 +715,8 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     latency is the simulator's own message (one per applied correction, in order); the lag
     comes from the recorded publish times relative to sample 0, whose own lag (the time
     the simulator took to integrate period 0 before publishing it) is not recorded: it is
-    fitted as one constant offset minimising the median departure, no smaller than the
+    fitted as one constant offset minimising the median departure (a grid, then Brent:
+    :func:`~grazing_control.recordings.lag_fit.window_minimum`), no smaller than the
     largest lead of a sample over sample 0 (every lag is >= 0: a sample 0 published late,
     by a preempted simulator, makes the others' relative lags negative; clipped at 0
     they lost their spread, and a scene on a loaded host departed by 3.4e-3 against
@@ -718,9 +724,9 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     (microseconds x time_scale). None when the data do not allow it (a sample without
     answer, latencies missing).
     """
-    from scipy.optimize import minimize_scalar
-
     from grazing_control.dynamics.simulation.simulate import period_step
+
+    from .lag_fit import window_minimum
 
     if (setup.actuation_delay or 0.0) > 0.0:
         return None       # scheduled actuation: a correction acts at t_k + delay, not on arrival
@@ -750,10 +756,10 @@ def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
     if active.size == 0:
         return None
     fit = active[:: max(1, active.size // fit_samples)]
-    best = minimize_scalar(lambda c: float(np.median(departures(c, fit))),
-                           bounds=(least, least + 5e-3), method="bounded",
-                           options={"xatol": 1e-7})
-    offset = float(best.x)
+    probe = fit[:: max(1, fit.size // COARSE_SAMPLES)]    # the grid's cheaper misfit
+    offset = window_minimum(lambda c: float(np.median(departures(c, fit))), least,
+                            least + 5e-3,
+                            coarse=lambda c: float(np.median(departures(c, probe))))
     dep = departures(offset, active)
     return {"fitted_first_sample_lag_ms": offset * 1e3,
             "max_departure": float(dep.max()), "median_departure": float(np.median(dep)),
