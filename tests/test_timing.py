@@ -50,12 +50,18 @@ def _joint_state(stamp_ns, x, v):
 
 
 def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, on: int,
-                   *, sim: dict, ctl: dict, seed: int = 3):
+                   *, sim: dict, ctl: dict, seed: int = 3, scheduled: float = 0.0,
+                   misses: dict | None = None):
     """A realtime scene with actuation on arrival, written as recorded (module docstring):
     ``answer(x, v)`` the controller's correction from sample k's positions and
     velocities (from ``on`` on; 0 before). Returns the delays (simulation time) at which
-    the corrections acted."""
-    eng = Engine(settings_from_values({"delta_d": delta_d}, model_file))
+    the corrections acted. ``scheduled`` > 0: actuation scheduled that long after each
+    sample instead, and at the samples k of ``misses`` a deadline miss, the prediction
+    ``misses[k]`` acting in place of the answer (oscillator/substituted)."""
+    misses = misses or {}
+    eng = Engine(settings_from_values({"delta_d": delta_d, "actuation_delay": scheduled},
+                                      model_file))
+    vec = TYPESTORE.types["geometry_msgs/msg/Vector3Stamped"]
     rng = np.random.default_rng(seed)
     msgs, delays = [], []
     for k in range(periods):
@@ -68,9 +74,21 @@ def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, 
         lag = (pub - WALL0) / 1e9 - ev.t / TIME_SCALE
         delay = (lag + latency) * TIME_SCALE            # plant/realtime.py, on arrival
         dv = float(answer(x, v)) if k >= on else 0.0
-        eng.begin_period(0.0)
-        eng.split(ev.t + delay, dv)
+        if scheduled:
+            eng.begin_period(misses.get(k, dv), scheduled)
+            delay = scheduled
+        else:
+            eng.begin_period(0.0)
+            eng.split(ev.t + delay, dv)
         eng.end_period()
+        if k in misses:
+            t = TYPESTORE.types
+            stamped = twist_stamped(stamp, 0.0).header
+            msgs += [("/oscillator/deadline_miss", "geometry_msgs/msg/Vector3Stamped",
+                      pub + 300_000, vec(header=stamped, vector=t["geometry_msgs/msg/Vector3"](
+                          x=float(k), y=scheduled, z=0.0))),
+                     ("/oscillator/substituted", "geometry_msgs/msg/TwistStamped",
+                      pub + 300_001, twist_stamped(stamp, misses[k]))]
         delays.append(delay)
         msgs += [("/oscillator/pi2", "sensor_msgs/msg/JointState", pub,
                   _joint_state(stamp, x, v)),
@@ -79,12 +97,12 @@ def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, 
                  ("/oscillator/latency", "std_msgs/msg/Float64", pub + round(latency * 1e9),
                   TYPESTORE.types["std_msgs/msg/Float64"](data=latency))]
     record = {"mode": "realtime", "time_scale": TIME_SCALE, "actuation": "auto",
-              "actuation_delay": 0.0, "jitter": 0.0, "delta_d": delta_d,
+              "actuation_delay": scheduled, "jitter": 0.0, "delta_d": delta_d,
               "model_file": model_file, **sim}
     head = [("/grazing/parameters", "std_msgs/msg/String", WALL0 - 2,
              string(encode("/sim_node", record))),
             ("/grazing/parameters", "std_msgs/msg/String", WALL0 - 1,
-             string(encode("/controller_node", {"enable_after": on, "actuation_delay": 0.0,
+             string(encode("/controller_node", {"enable_after": on, "actuation_delay": scheduled,
                                                 "model_file": model_file, **ctl})))]
     write_rosbags(path, head + sorted(msgs, key=lambda m: m[2]))
     return np.array(delays)
@@ -166,3 +184,31 @@ def test_an_n1_model_file_bag_and_the_1dof_bag_of_the_scene_agree(tmp_path):
     assert da["explains_model_check"] and db["explains_model_check"]
     assert da["median_departure_kicks_on_pi2"] == pytest.approx(
         db["median_departure_kicks_on_pi2"], rel=1e-6)
+
+
+def test_a_scheduled_n_dof_bag_gets_its_misses_and_substitutions_but_no_delay_check(
+        tmp_path):
+    """Actuation scheduled 3.0 after each sample (grazing design --delay): the realtime
+    numbers (latency, the deadline misses, the predictions substituted) without a delay
+    check (a correction acts at t_k + delay, not on arrival: as 1-DOF); the model check
+    re-integrates a miss with the prediction that acted (it took the late answer, and
+    departed)."""
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    design = evaluate_design(model, -0.22, delay=3.0)
+    gains = np.asarray(design.gains, float)
+    flow = NdofFlow.of(model)
+
+    def answer(x, v):
+        return float(gains @ flow.to_deviation(flow.tau2, np.concatenate([x, v])))
+
+    on_arrival_bag(tmp_path / "bag", CHAIN, -1e-3, answer, 30, 10, sim={},
+                   ctl={"gains": gains.tolist()}, scheduled=3.0, misses={15: 0.05, 21: 0.0})
+    report = analyze([tmp_path / "bag"], tmp_path / "report", figures=False)
+    s = report["bags"][0]["scenes"][0]
+    rt, mc = s["realtime"], s["model_check"]
+    assert rt["latency_ms"]["n"] == 30 and rt["delay_check"] is None
+    assert rt["deadline_misses"] == 2 and rt["substituted"] == 2
+    assert mc["max_departure"] < 1e-12, mc
+    text = report["markdown"]
+    assert "deadline misses: 2 (2 predictions substituted)" in text
+    assert "acted on arrival" not in text and "why a realtime run departs" not in text

@@ -400,14 +400,18 @@ def ndof_period(setup: NdofSetup):
     return flow, step
 
 
-def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None:
+def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
+                     corrections=None) -> dict | None:
     """Each recorded period re-integrated from its recorded sample and correction by the
     plant's period (:func:`ndof_period`): the largest departure from the next recorded
     sample (module docstring). Through an actuator with a lag the force at the section is
     not recorded: it is carried from 0 at the first sample (exact for a scene recorded
     from its start: the force follows the commands alone), and after a gap in the
-    recording the later periods are not checked (``unchecked``)."""
+    recording the later periods are not checked (``unchecked``). ``corrections``: what
+    acted (default the recorded answers; :func:`~grazing_control.recordings.numbers.
+    applied_corrections`: at a deadline miss the prediction substituted, or 0)."""
     m = setup.model
+    dvs = scene.correction if corrections is None else corrections
     if m is None or len(scene.t) < 2:
         return None
     flow, step = ndof_period(setup)
@@ -425,7 +429,7 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None
             continue
         z = flow.to_deviation(flow.tau2, scene.pi2[k])
         try:
-            z, force, _ = step(z, force, float(scene.correction[k]))
+            z, force, _ = step(z, force, float(dvs[k]))
         except (ValueError, ArithmeticError, RuntimeError):
             failed += 1
             dep[k] = np.inf
@@ -541,7 +545,7 @@ def ndof_controlled_orbit(setup: NdofSetup, final, force: float | None = None) -
 def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
     """The numbers of one n-DOF scene (the section "A model file's scene" of the module
     docstring); JSON-serialisable."""
-    from .numbers import measured_contraction
+    from .numbers import applied_corrections, measured_contraction
 
     scene = sd.scene
     base = summarize(scene, tol)
@@ -570,7 +574,7 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
                            "saturation_hits": int(np.count_nonzero(
                                np.abs(scene.correction) >= setup.saturation))}}
     out["measured_contraction"] = measured_contraction(scene.pi2, on)
-    check = ndof_model_check(setup, scene)
+    check = ndof_model_check(setup, scene, corrections=applied_corrections(sd))
     pred = ndof_controlled_orbit(setup, scene.pi2[-1], (check or {}).get("final_force")) \
         if on is not None and len(scene.t) else {}
     out["predicted"] = pred
@@ -581,6 +585,9 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
         rho = (out["measured_contraction"] or {}).get("rho")
         if rho:
             out["contraction_relative_error"] = abs(rho - pred["rho"]) / pred["rho"]
+    if check:
+        check.update(dropped_at_deadline_misses=int(sd.missed_stamp_ns.size),
+                     predictions_substituted=len(sd.substituted))
     out["model_check"] = check
     if setup.mode == "realtime":
         out["realtime"] = ndof_realtime(sd, setup, check)
@@ -656,6 +663,10 @@ def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> l
                      + (f", {mc['failed']} could not be re-integrated" if mc["failed"] else "")
                      + (f", {mc['unchecked']} not checked after a gap (the actuator's force "
                         "unknown)" if mc.get("unchecked") else "")
+                     + (f"; the {mc['dropped_at_deadline_misses']} answers missed at deadline "
+                        "misses re-integrated as what acted instead ("
+                        f"{mc['predictions_substituted']} predictions, 0 otherwise)"
+                        if mc.get("dropped_at_deadline_misses") else "")
                      + ")")
     from .numbers import MODEL_CHECK_BOUND
     from .timing import realtime_lines
