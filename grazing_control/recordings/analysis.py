@@ -38,7 +38,11 @@ Per scene (:func:`summarize` over the whole state, then):
 * the model check: every recorded period re-integrated by the core from the recorded
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
   :mod:`grazing_control.plant.engine`), the largest departure from the next
-  recorded sample (rounding level for a lockstep run).
+  recorded sample (rounding level for a lockstep run; a deadline miss re-integrated
+  with what acted, the prediction substituted or 0);
+* realtime (:func:`ndof_realtime`): the numbers of :mod:`.timing` (latency, answers,
+  misses, substitutions, sample lag) and, with actuation on arrival, its delay check by
+  this model's period with each kick at its measured arrival.
 
 The correction acts as the plant acted it (:func:`ndof_period`, from the simulator's
 record: ``pulse_width``, ``force_limit``, ``actuator_bandwidth``, ``actuator_latency``;
@@ -58,7 +62,8 @@ import numpy as np
 
 __all__ = ["Scene", "scene_from_bag", "scene_from_simulation", "summarize", "plot_scene",
            "fmt", "complex_text", "control_lines", "NdofSetup", "is_ndof", "ndof_setup",
-           "ndof_scene_numbers", "ndof_lines", "plot_ndof_scene", "coordinate_names"]
+           "ndof_scene_numbers", "ndof_realtime", "ndof_lines", "plot_ndof_scene",
+           "coordinate_names"]
 
 TOPIC_PI2 = "/oscillator/pi2"
 TOPIC_CORRECTION = "/controller/velocity_correction"
@@ -604,7 +609,8 @@ def ndof_realtime(sd, setup: NdofSetup, check: dict | None) -> dict:
     rt = realtime_numbers(sd, setup.time_scale)
     rt["delay_check"] = None
     m = setup.model
-    if m is None or not setup.on_arrival or setup.pulse_width > 0.0 or setup.actuator:
+    if m is None or not setup.on_arrival or setup.pulse_width > 0.0 \
+            or setup.actuator is not None:
         return rt
     flow, step = ndof_period(setup)
     pi2, dv = sd.scene.pi2, sd.scene.correction

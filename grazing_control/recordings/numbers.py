@@ -29,7 +29,8 @@ gives (uncontrolled attractor, switch-on, convergence, final point) and:
   the largest departure from the next recorded sample (rounding level for a lockstep run;
   for a realtime run the corrections act at their arrival, not on Pi2, and it departs);
 * corrections: largest |Delta v|, saturation hits;
-* realtime: latency distribution, late and missing answers, deadline misses, sample lag.
+* realtime: latency distribution, late and missing answers, deadline misses, sample lag,
+  and the delay check with this period (:mod:`.timing`, the same for every model).
 """
 
 from __future__ import annotations
