@@ -38,7 +38,11 @@ Per scene (:func:`summarize` over the whole state, then):
 * the model check: every recorded period re-integrated by the core from the recorded
   sample with the recorded correction (at ``actuation_delay``; the simulator's calls,
   :mod:`grazing_control.plant.engine`), the largest departure from the next
-  recorded sample (rounding level for a lockstep run).
+  recorded sample (rounding level for a lockstep run; a deadline miss re-integrated
+  with what acted, the prediction substituted or 0);
+* realtime (:func:`ndof_realtime`): the numbers of :mod:`.timing` (latency, answers,
+  misses, substitutions, sample lag) and, with actuation on arrival, its delay check by
+  this model's period with each kick at its measured arrival.
 
 The correction acts as the plant acted it (:func:`ndof_period`, from the simulator's
 record: ``pulse_width``, ``force_limit``, ``actuator_bandwidth``, ``actuator_latency``;
@@ -58,7 +62,8 @@ import numpy as np
 
 __all__ = ["Scene", "scene_from_bag", "scene_from_simulation", "summarize", "plot_scene",
            "fmt", "complex_text", "control_lines", "NdofSetup", "is_ndof", "ndof_setup",
-           "ndof_scene_numbers", "ndof_lines", "plot_ndof_scene", "coordinate_names"]
+           "ndof_scene_numbers", "ndof_realtime", "ndof_lines", "plot_ndof_scene",
+           "coordinate_names"]
 
 TOPIC_PI2 = "/oscillator/pi2"
 TOPIC_CORRECTION = "/controller/velocity_correction"
@@ -285,6 +290,8 @@ class NdofSetup:
     pulse_width: float = 0.0      # the simulator's force pulse (0: the kick)
     force_limit: float = 0.0      # 0: none
     actuator: object | None = None  # the simulator's first-order actuator (None: ideal)
+    time_scale: float | None = None  # realtime: the simulator's (None: estimated)
+    on_arrival: bool = False      # realtime: each correction acted on its arrival
 
 
 def is_ndof(data) -> bool:
@@ -337,6 +344,7 @@ def ndof_setup(data) -> NdofSetup:
             notes.append(f"{name} parameters changed during the run; the analysis uses the "
                          "values at start")
     from .numbers import _actuator
+    from .timing import acts_on_arrival
 
     width = _number(sim.get("pulse_width"), 0.0)
     limit = _number(sim.get("force_limit"), 0.0)
@@ -346,7 +354,9 @@ def ndof_setup(data) -> NdofSetup:
                      str(sim.get("mode") or "lockstep"), notes,
                      width if math.isfinite(width) and width > 0.0 else 0.0,
                      limit if math.isfinite(limit) and limit > 0.0 else 0.0,
-                     _actuator(sim, notes) if width > 0.0 else None)
+                     _actuator(sim, notes) if width > 0.0 else None,
+                     _number(sim.get("time_scale"), None),
+                     sim.get("mode") == "realtime" and acts_on_arrival(sim))
 
 
 def ndof_period(setup: NdofSetup):
@@ -358,7 +368,9 @@ def ndof_period(setup: NdofSetup):
     first-order actuator when it had one
     (:func:`~grazing_control.dynamics.maps.modal_map.actuated_step`, the force on the
     actuated coordinate at the section carried from period to period; docs/theory_ndof.md
-    section 15). ``force`` is 0 except through an actuator with a lag."""
+    section 15). ``force`` is 0 except through an actuator with a lag; the kick's step
+    takes another delay as a fourth argument (the realtime delay check, the correction
+    at its arrival)."""
     from grazing_control.dynamics.maps.modal_map import actuated_step, pulse_step
     from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.oscillator.ndof.flow import NdofFlow
@@ -380,7 +392,7 @@ def ndof_period(setup: NdofSetup):
             out = pulse_step(flow, z, dv, start=start, width=w, force_limit=limit)
             return out.state, 0.0, list(out.impacts)
     else:
-        def step(z, force, dv):
+        def step(z, force, dv, delay=delay):
             tau, impacts = flow.tau2, []
             if delay > 0.0:
                 head = advance(flow, tau, z, delay)
@@ -393,20 +405,25 @@ def ndof_period(setup: NdofSetup):
     return flow, step
 
 
-def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None:
+def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
+                     corrections=None) -> dict | None:
     """Each recorded period re-integrated from its recorded sample and correction by the
     plant's period (:func:`ndof_period`): the largest departure from the next recorded
     sample (module docstring). Through an actuator with a lag the force at the section is
     not recorded: it is carried from 0 at the first sample (exact for a scene recorded
     from its start: the force follows the commands alone), and after a gap in the
-    recording the later periods are not checked (``unchecked``)."""
+    recording the later periods are not checked (``unchecked``). ``corrections``: what
+    acted (default the recorded answers; :func:`~grazing_control.recordings.numbers.
+    applied_corrections`: at a deadline miss the prediction substituted, or 0)."""
     m = setup.model
+    dvs = scene.correction if corrections is None else corrections
     if m is None or len(scene.t) < 2:
         return None
     flow, step = ndof_period(setup)
     T = m.period
     periods = min(len(scene.t) - 1, limit)
     worst, above, failed, unchecked, force = 0.0, 0, 0, 0, 0.0
+    dep = np.full(periods, np.nan)         # per period (NaN: not checked, inf: failed)
     for k in range(periods):
         if force is None:
             unchecked += 1
@@ -417,17 +434,18 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000) -> dict | None
             continue
         z = flow.to_deviation(flow.tau2, scene.pi2[k])
         try:
-            z, force, _ = step(z, force, float(scene.correction[k]))
+            z, force, _ = step(z, force, float(dvs[k]))
         except (ValueError, ArithmeticError, RuntimeError):
             failed += 1
+            dep[k] = np.inf
             force = 0.0 if setup.actuator is None else None
             continue
-        d = float(np.max(np.abs(flow.to_physical(flow.tau2, z) - scene.pi2[k + 1])))
+        d = dep[k] = float(np.max(np.abs(flow.to_physical(flow.tau2, z) - scene.pi2[k + 1])))
         worst = max(worst, d)
         above += d > 1e-12
     out = {"max_departure": worst, "periods": periods, "periods_above_1e-12": int(above),
            "periods_in_scene": len(scene.t) - 1, "failed": failed,
-           "correction": _actuation_text(setup)}
+           "correction": _actuation_text(setup), "_departures": dep}
     if setup.actuator is not None:
         out["unchecked"] = unchecked
         out["final_force"] = force
@@ -532,7 +550,7 @@ def ndof_controlled_orbit(setup: NdofSetup, final, force: float | None = None) -
 def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
     """The numbers of one n-DOF scene (the section "A model file's scene" of the module
     docstring); JSON-serialisable."""
-    from .numbers import measured_contraction
+    from .numbers import applied_corrections, measured_contraction
 
     scene = sd.scene
     base = summarize(scene, tol)
@@ -561,7 +579,7 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
                            "saturation_hits": int(np.count_nonzero(
                                np.abs(scene.correction) >= setup.saturation))}}
     out["measured_contraction"] = measured_contraction(scene.pi2, on)
-    check = ndof_model_check(setup, scene)
+    check = ndof_model_check(setup, scene, corrections=applied_corrections(sd))
     pred = ndof_controlled_orbit(setup, scene.pi2[-1], (check or {}).get("final_force")) \
         if on is not None and len(scene.t) else {}
     out["predicted"] = pred
@@ -572,8 +590,39 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
         rho = (out["measured_contraction"] or {}).get("rho")
         if rho:
             out["contraction_relative_error"] = abs(rho - pred["rho"]) / pred["rho"]
+    if check:
+        check.update(dropped_at_deadline_misses=int(sd.missed_stamp_ns.size),
+                     predictions_substituted=len(sd.substituted))
     out["model_check"] = check
+    if setup.mode == "realtime":
+        out["realtime"] = ndof_realtime(sd, setup, check)
     return out
+
+
+def ndof_realtime(sd, setup: NdofSetup, check: dict | None) -> dict:
+    """The realtime numbers of an n-DOF scene (:func:`.timing.realtime_numbers`) and, when
+    each correction acted on its arrival (the kick: the simulator refuses a pulse or an
+    actuator on arrival), the delay check (:func:`.timing.delay_check`) by the plant's
+    period (:func:`ndof_period`) with the kick at the measured arrival."""
+    from .timing import delay_check, kicks_on_the_sample, realtime_numbers
+
+    rt = realtime_numbers(sd, setup.time_scale)
+    rt["delay_check"] = None
+    m = setup.model
+    if m is None or not setup.on_arrival or setup.pulse_width > 0.0 \
+            or setup.actuator is not None:
+        return rt
+    flow, step = ndof_period(setup)
+    pi2, dv = sd.scene.pi2, sd.scene.correction
+
+    def predict(k, delay):
+        z, _, _ = step(flow.to_deviation(flow.tau2, pi2[k]), 0.0, float(dv[k]), delay)
+        return flow.to_physical(flow.tau2, z)
+
+    rt["delay_check"] = delay_check(sd, rt, predict, m.period)
+    if check:
+        kicks_on_the_sample(rt["delay_check"], check["_departures"], dv)
+    return rt
 
 
 def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> list:
@@ -620,7 +669,15 @@ def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> l
                      + (f", {mc['failed']} could not be re-integrated" if mc["failed"] else "")
                      + (f", {mc['unchecked']} not checked after a gap (the actuator's force "
                         "unknown)" if mc.get("unchecked") else "")
+                     + (f"; the {mc['dropped_at_deadline_misses']} answers missed at deadline "
+                        "misses re-integrated as what acted instead ("
+                        f"{mc['predictions_substituted']} predictions, 0 otherwise)"
+                        if mc.get("dropped_at_deadline_misses") else "")
                      + ")")
+    from .numbers import MODEL_CHECK_BOUND
+    from .timing import realtime_lines
+
+    lines += realtime_lines(n, MODEL_CHECK_BOUND)
     lines.append("")
     return lines
 

@@ -19,10 +19,11 @@ from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
 from .analysis import (control_lines, fmt, is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup,
                        plot_ndof_scene)
-from .numbers import (controlled_orbit, resolve_setup, scene_numbers, scene_problems,
-                      section_phase_problems)
+from .numbers import (MODEL_CHECK_BOUND, controlled_orbit, resolve_setup, scene_numbers,
+                      scene_problems, section_phase_problems)
 from .rig_record import check_against_model, read_rig, si_numbers
 from .scenes import load, parse_topic_options
+from .timing import realtime_lines
 
 #: The controller's Pi2 estimate in stream mode (ros/controller_node.py).
 ESTIMATE_TOPIC = "/controller/estimate"
@@ -423,32 +424,7 @@ def _scene_lines(label, numbers, fig_name):
                      + (f"; checked only the first {mc['periods']} of "
                         f"{mc['periods_in_scene']} periods" if mc.get("periods_in_scene", 0)
                         > mc["periods"] else "") + ")")
-    rt = n.get("realtime")
-    if rt:
-        def d(x):
-            return ("—" if not x else f"p50 {x['p50']:.3g}, p90 {x['p90']:.3g}, p99 {x['p99']:.3g},"
-                    f" max {x['max']:.3g} ms (n = {x['n']})")
-        lines += [f"* realtime latency (sim, sample published → answer received): {d(rt.get('latency_ms'))}",
-                  f"* answer time (controller, source timestamps): {d(rt.get('answer_time_ms'))}",
-                  f"* late answers (sent after the next sample): {rt['late_answers']}; samples "
-                  f"without an answer: {rt['missing_answers']}; deadline misses: "
-                  f"{fmt(rt['deadline_misses']) if rt['deadline_misses'] is not None else 'topic not recorded'}",
-                  f"* sample lag (published vs due, time scale {fmt(rt.get('time_scale'))}"
-                  f"{', ' + rt['time_scale_source'] if 'time_scale_source' in rt else ''}): "
-                  f"{d(rt.get('sample_lag_ms'))}"]
-        dc = rt.get("delay_check")
-        if dc:
-            lines.append(
-                f"* why a realtime run departs from the model with kicks on Π2: applying each "
-                f"non-zero correction at its measured arrival ((sample lag + latency) × time "
-                f"scale after Π2, median {dc['median_delay']:.3g}; the first sample's own lag, "
-                f"not recorded, fitted: {dc['fitted_first_sample_lag_ms']:.3g} ms) leaves a "
-                f"departure of median {dc['median_departure']:.2e}, max "
-                f"{dc['max_departure']:.2e} over {dc['periods']} periods, against median "
-                f"{fmt(dc.get('median_departure_kicks_on_pi2'), '.2e')}, max "
-                f"{fmt((n.get('model_check') or {}).get('max_departure'), '.2e')} with the "
-                "kicks on Π2; the rest is the microsecond resolution of the recorded wall-clock "
-                "timestamps, times the time scale")
+    lines += realtime_lines(n, MODEL_CHECK_BOUND)
     lines.append("")
     return lines
 

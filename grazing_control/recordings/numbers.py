@@ -29,7 +29,8 @@ gives (uncontrolled attractor, switch-on, convergence, final point) and:
   the largest departure from the next recorded sample (rounding level for a lockstep run;
   for a realtime run the corrections act at their arrival, not on Pi2, and it departs);
 * corrections: largest |Delta v|, saturation hits;
-* realtime: latency distribution, late and missing answers, deadline misses, sample lag.
+* realtime: latency distribution, late and missing answers, deadline misses, sample lag,
+  and the delay check with this period (:mod:`.timing`, the same for every model).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .analysis import summarize
+from .timing import delay_check, kicks_on_the_sample, realtime_numbers as realtime_measured
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.flow import propagate
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
@@ -506,18 +508,6 @@ def scene_problems(sd, setup: Setup, numbers: dict) -> list:
     return out
 
 
-def _pct(a, q):
-    return float(np.percentile(a, q)) if len(a) else None
-
-
-def _dist(a_ms):
-    a = np.asarray(a_ms, float)
-    if a.size == 0:
-        return None
-    return {"n": int(a.size), "p50": _pct(a, 50), "p90": _pct(a, 90), "p99": _pct(a, 99),
-            "max": float(a.max()), "mean": float(a.mean())}
-
-
 class _Step(NamedTuple):
     """A period's end (dx, dv) and impacts, as the core's segments give them."""
 
@@ -660,108 +650,35 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
                               "predictions_substituted": len(sd.substituted)}
         out["_departures"] = dep
     out["realtime"] = realtime_numbers(sd, setup) if setup.mode == "realtime" else None
-    dc = (out["realtime"] or {}).get("delay_check")
-    if dc and "_departures" in out:
-        dep = out["_departures"]          # the model check's periods (at most its limit)
-        active = np.flatnonzero(scene.correction[:dep.size] != 0.0)
-        dc["median_departure_kicks_on_pi2"] = (float(np.median(dep[active])) if active.size
-                                               else None)
+    if "_departures" in out:       # the model check's periods (at most its limit)
+        kicks_on_the_sample((out["realtime"] or {}).get("delay_check"), out["_departures"],
+                            scene.correction)
     return out
 
 
 def realtime_numbers(sd, setup: Setup) -> dict:
-    """Latency, late and missing answers, deadline misses, sample lag (wall clock)."""
-    out = {}
-    if sd.latency_s.size:
-        out["latency_ms"] = _dist(sd.latency_s * 1e3)
-        out["latency_source"] = "the simulator's latency messages (sample published -> answer received)"
-    ans = sd.answered & (sd.corr_pub_ns >= 0) & (sd.pi2_pub_ns > 0)
-    rt = (sd.corr_pub_ns[ans] - sd.pi2_pub_ns[ans]) / 1e6
-    out["answer_time_ms"] = _dist(rt)
-    out["answer_time_source"] = ("correction publish time - sample publish time (source "
-                                 "timestamps, wall clock)")
-    nxt = np.append(sd.pi2_pub_ns[1:], np.iinfo(np.int64).max)
-    late = ans & (sd.corr_pub_ns > nxt)
-    out["late_answers"] = int(np.count_nonzero(late))
-    out["missing_answers"] = int(np.count_nonzero(~sd.answered))
-    out["deadline_misses"] = sd.deadline_misses
-    ts = setup.time_scale
-    t = sd.scene.t
-    wall = (sd.pi2_pub_ns - sd.pi2_pub_ns[0]) / 1e9
-    if ts is None and len(t) > 2 and np.all(sd.pi2_pub_ns > 0):
-        slope = np.polyfit(t - t[0], wall, 1)[0]
-        ts = 1.0 / slope if slope > 0 else None
-        out["time_scale_source"] = "estimated from the publish times"
-    out["time_scale"] = ts
-    if ts:
-        lag = (wall - (t - t[0]) / ts) * 1e3
-        out["sample_lag_ms"] = _dist(lag)
-        out["_lag_ms"] = lag
-    out["_answer_ms"] = rt
+    """Latency, late and missing answers, deadline misses, sample lag (wall clock), and
+    the delay check (:mod:`.timing`) with the core's period."""
+    out = realtime_measured(sd, setup.time_scale)
     out["delay_check"] = _delay_check(sd, setup, out)
     return out
 
 
-#: Periods of the delay check's grid over sample 0's lag (recordings/lag_fit.py; the
-#: refinement uses up to ``fit_samples``).
-COARSE_SAMPLES = 40
-
-
-def _delay_check(sd, setup: Setup, rt: dict, fit_samples: int = 300):
-    """Model check with each correction applied at its measured arrival, not on Pi2.
-
-    In realtime the simulator applies a correction when it arrives, (lag_k + latency_k)
-    x time_scale of simulation time after sample k (docs/nodes.md, realtime mode). The
-    latency is the simulator's own message (one per applied correction, in order); the lag
-    comes from the recorded publish times relative to sample 0, whose own lag (the time
-    the simulator took to integrate period 0 before publishing it) is not recorded: it is
-    fitted as one constant offset minimising the median departure (a grid, then Brent:
-    :func:`~grazing_control.recordings.lag_fit.window_minimum`), no smaller than the
-    largest lead of a sample over sample 0 (every lag is >= 0: a sample 0 published late,
-    by a preempted simulator, makes the others' relative lags negative; clipped at 0
-    they lost their spread, and a scene on a loaded host departed by 3.4e-3 against
-    4e-6). The departure left is what the recorded wall-clock timestamps cannot resolve
-    (microseconds x time_scale). None when the data do not allow it (a sample without
-    answer, latencies missing).
-    """
+def _delay_check(sd, setup: Setup, rt: dict):
+    """:func:`.timing.delay_check` with the 1-DOF period
+    (:func:`grazing_control.dynamics.simulation.simulate.period_step`, the kick ``delay``
+    after the sample); None with scheduled actuation (a correction acts at t_k + delay, not
+    on arrival) or without the model."""
     from grazing_control.dynamics.simulation.simulate import period_step
 
-    from .lag_fit import window_minimum
-
-    if (setup.actuation_delay or 0.0) > 0.0:
-        return None       # scheduled actuation: a correction acts at t_k + delay, not on arrival
-    p, ts = setup.params, rt.get("time_scale")
-    lat, lag = sd.latency_s, rt.get("_lag_ms")
-    n = len(sd.scene.t)
-    if p is None or not ts or lag is None or lat.size != n or not sd.answered.all() or n < 3:
+    p = setup.params
+    if (setup.actuation_delay or 0.0) > 0.0 or p is None:
         return None
-    base = lat + lag / 1e3                 # the delays less sample 0's lag, the offset
-    least = max(0.0, -float(np.min(lag)) / 1e3)
-    x, v, dv = sd.scene.pi2[:, 0], sd.scene.pi2[:, 1], sd.scene.correction
+    pi2, dv = sd.scene.pi2, sd.scene.correction
 
-    def departures(offset, ks):
-        out = np.empty(len(ks))
-        for j, k in enumerate(ks):
-            d = float((base[k] + offset) * ts)
-            try:
-                seg = period_step(p, x[k] - p.x_ref, v[k] - p.v_ref, float(dv[k]),
-                                  **({"delay": d} if 0.0 < d < p.period else {}))
-            except Exception:
-                out[j] = np.inf
-                continue
-            out[j] = max(abs(p.x_ref + seg.dx - x[k + 1]), abs(p.v_ref + seg.dv - v[k + 1]))
-        return out
+    def predict(k, delay):
+        seg = period_step(p, pi2[k, 0] - p.x_ref, pi2[k, 1] - p.v_ref, float(dv[k]),
+                          delay=delay)
+        return (p.x_ref + seg.dx, p.v_ref + seg.dv)
 
-    active = np.flatnonzero(dv[:-1] != 0.0)
-    if active.size == 0:
-        return None
-    fit = active[:: max(1, active.size // fit_samples)]
-    probe = fit[:: max(1, fit.size // COARSE_SAMPLES)]    # the grid's cheaper misfit
-    offset = window_minimum(lambda c: float(np.median(departures(c, fit))), least,
-                            least + 5e-3,
-                            coarse=lambda c: float(np.median(departures(c, probe))))
-    dep = departures(offset, active)
-    return {"fitted_first_sample_lag_ms": offset * 1e3,
-            "max_departure": float(dep.max()), "median_departure": float(np.median(dep)),
-            "median_delay": float(np.median((base[active] + offset) * ts)),
-            "periods": int(active.size)}
+    return delay_check(sd, rt, predict, p.period)
