@@ -22,6 +22,9 @@ from test_closed_loop import Collector, new_domain
 pytestmark = pytest.mark.timeout(240)
 
 P = OscillatorParams(delta_d=-5e-6)
+#: The lockstep scenes' wait for an answer (wall s; the default 1 s): the runs compared bit
+#: for bit must apply every answer, however long a loaded machine stalls a controller.
+ANSWER_TIMEOUT = 30.0
 RATE, PERIODS, ON = 200, 80, 30      # the rig stream at T/200, as issue 30's scene
 
 
@@ -280,6 +283,9 @@ def _messages_both_ways(scenes, periods: int) -> tuple:
         logs = {k: Path(v).read_text() for k, v in res.logs.items()}
         assert res.ok, (res, logs)
         assert "malformed=0" in logs["controller_node"], logs["controller_node"]
+        # every answer applied (a lockstep scene applies none after answer_timeout: the
+        # two runs would part there; one did, once, in a loaded suite, 2026-11-29)
+        assert " timeouts=0 " in logs["sim_node"], logs["sim_node"]
         assert launcher.recorded_losses(bag) == ""
         msgs = {}
         for m in read_messages(bag):
@@ -314,7 +320,7 @@ def scenes(tmp_path_factory):
             mode="lockstep", domain_id=new_domain(), timeout=200,
             sim_overrides={"state_period": P.period / RATE, "sensor_noise": 1e-4,
                            "sensor_velocity": False, "sensor_seed": 7,
-                           "stream_message": mode},
+                           "stream_message": mode, "answer_timeout": ANSWER_TIMEOUT},
             controller_overrides={"pi2_source": "stream", "estimator": "model"},
             log_dir=tmp / mode / "logs")
         out[mode] = (res, tmp / mode / "bag")
@@ -380,7 +386,8 @@ def ndof_scenes(tmp_path_factory):
     for mode in stream_block.MESSAGES:
         (tmp / mode).mkdir()
         res, bag, _model, _design = stream_scene(tmp / mode, NDOF_PERIODS, NDOF_ON,
-                                                 stream_message=mode)
+                                                 stream_message=mode,
+                                                 answer_timeout=ANSWER_TIMEOUT)
         out[mode] = (res, bag)
     return out
 
