@@ -195,11 +195,14 @@ def test_lockstep_reset_starts_again_from_sample_zero():
 
 
 # ==================================================================== realtime
-def run_realtime(s, n, answer, clock, sink, step=None):
+def run_realtime(s, n, answer, clock, sink, step=None, acts=None):
     """Drive a realtime loop for n samples: at each wake-up the clock jumps to the next
     due instant (wake_in), and ``answer(loop, sample)`` is called right after each sample
-    goes out (it may move the clock and answer or not)."""
+    goes out (it may move the clock and answer or not). ``acts``: a list that receives
+    what acted at each section (:func:`record_acts`)."""
     loop = Realtime(Engine(s), sink, clock)
+    if acts is not None:
+        record_acts(loop, acts)
     loop.start()
     seen = 0
     while not loop.finished:
@@ -769,10 +772,10 @@ def stamp(t):
     return divmod(int(round(t * 1e9)), 1_000_000_000)
 
 
-def record_acts(loop):
-    """Wrap the loop's ActuationSchedule.act (as sim_node's rig does): [(k, start, value,
-    outcome)] of every section that acted."""
-    acts, act = [], loop.schedule.act
+def record_acts(loop, acts):
+    """Wrap the loop's ActuationSchedule.act (as sim_node's rig does): ``acts`` receives
+    (k, start, value, outcome) of every section that acted."""
+    act = loop.schedule.act
 
     def recorded(sec, lost=False, on_miss="predict"):
         done = act(sec, lost=lost, on_miss=on_miss)
@@ -780,7 +783,6 @@ def record_acts(loop):
         return done
 
     loop.schedule.act = recorded
-    return acts
 
 
 def test_timed_answers_act_at_their_own_start_as_the_cores_pulse_step():
@@ -803,17 +805,8 @@ def test_timed_answers_act_at_their_own_start_as_the_cores_pulse_step():
         clock.now += 1e-4                             # 0.1 after the sample < its start
         loop.answer(key(ev), dvs[k], start=ev.t + rels[k])
 
-    loop = Realtime(Engine(s), sink, clock)
-    acts = record_acts(loop)
-    loop.start()
-    seen = 0
-    while not loop.finished:
-        samples = sink.samples()
-        while seen < len(samples):
-            answer(loop, samples[seen])
-            seen += 1
-        clock.now += loop.wake_in(loop.now())
-        loop.tick()
+    acts = []
+    loop = run_realtime(s, n, answer, clock, sink, acts=acts)
     p, dx, dv, ref = s.params, 0.0, 0.0, []
     for k in range(n):
         ref.append((p.x_ref + dx, p.v_ref + dv))
@@ -850,17 +843,8 @@ def test_a_missing_timed_answer_is_predicted_at_the_last_start_and_a_passed_one_
         clock.now += 1e-4
         loop.answer(key(ev), 1e-3, 5e-4, start=None if k >= 30 else ev.t + rel)
 
-    loop = Realtime(Engine(s), sink, clock)
-    acts = record_acts(loop)
-    loop.start()
-    seen = 0
-    while not loop.finished:
-        samples = sink.samples()
-        while seen < len(samples):
-            answer(loop, samples[seen])
-            seen += 1
-        clock.now += loop.wake_in(loop.now())
-        loop.tick()
+    acts = []
+    loop = run_realtime(s, n, answer, clock, sink, acts=acts)
     T, own = P.period, delay - w / 2
     by_k = {a[0]: a for a in acts}
     assert [m[0] for m in sink.misses] == [10, 11, 20]
@@ -941,17 +925,8 @@ def test_fuzzed_command_times_around_the_slot_edges_act_once_or_are_refused_once
             if loop.finished:
                 return
 
-    loop = Realtime(Engine(s), sink, clock)
-    acts = record_acts(loop)
-    loop.start()
-    seen = 0
-    while not loop.finished:
-        samples = sink.samples()
-        while seen < len(samples):
-            answer(loop, samples[seen])
-            seen += 1
-        clock.now += loop.wake_in(loop.now())
-        loop.tick()
+    acts = []
+    loop = run_realtime(s, n, answer, clock, sink, acts=acts)
     assert [a[0] for a in acts] == list(range(n))                   # each section once
     applied = [a for a in acts if a[3] == "applied"]
     values = [a[2] for a in applied]
