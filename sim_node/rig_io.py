@@ -21,7 +21,11 @@ publishes what a rig's driver publishes, in SI and in the rig's own clock
 It takes ``rig/force_pulse`` (geometry_msgs/WrenchStamped) as the answer of its section:
 the force F over the width w is the correction Delta v~ = F w / (m omega_n l) of the
 section t_k (torque.y, rig clock), with force.y the prediction, handed to the loop's
-``answer`` like a ``controller/velocity_correction``.
+``answer`` like a ``controller/velocity_correction``. A command whose section and apply
+time are the rig's own (within 1e-6 of a period) acts at the rig's actuation instant, as
+the loop's own sections do; any other is timed output (docs/driver_contract.md, "Off the
+rig's section"): it is the command of the section whose slot [t_k, t_k + T - w - L] (model
+time; L the actuator's latency) holds its apply time, and its pulse starts there.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import String
 
 from grazing_control.plant.rig import rig_to_dict
+from grazing_control.plant.schedule import slot
 from grazing_control.ros import cdr
 from grazing_control.ros.common import LATCHED_QOS, stamp_from_seconds
 from grazing_control.ros.rig_driver import applied_message, read_pulse
@@ -69,6 +74,7 @@ class SimulatedRig:
         self.pub_rig = node.create_publisher(String, "grazing/rig", LATCHED_QOS)
         self.pub_rig.publish(String(data=yaml.safe_dump(rig_to_dict(rig), sort_keys=False)))
         self.applied = [0, 0, 0, 0]  # counts per rig/applied status
+        self.timed = {}              # key -> (model start, rig start) of timed commands
         self.name = node.get_fully_qualified_name()
         self._pairs = Pacer(1.0 / clock_rate)      # rig/clock, asked by timer and loop
         self._clock_timer = node.create_timer(self._pairs.period, self.publish_clock)
@@ -191,28 +197,55 @@ class SimulatedRig:
 
     # ------------------------------------------------------------------ answers
     def answer(self, data: bytes):
-        """(stamp key, Delta v~, predicted Delta v~) of a serialized rig/force_pulse
-        (:func:`grazing_control.ros.rig_driver.read_pulse`), or None (counted as
-        malformed) when it is malformed or names no section of this rig."""
+        """(stamp key, Delta v~, predicted Delta v~, start) of a serialized
+        rig/force_pulse (:func:`grazing_control.ros.rig_driver.read_pulse`), or None
+        (counted as malformed) when it is malformed or its apply time lies in no slot of
+        this rig (:meth:`slot`). ``start``: None for a command of the rig's own section
+        and instant, else the model time its pulse starts (the loop's timed answer)."""
         fields = read_pulse(data, self.node.out.malformed)
         if fields is None:
             return None
-        t_k, _start, f, fy, w = fields
-        period = self.node.engine.p.period
-        t = self.clock.model_time(t_k)
+        t_k, apply, f, fy, w = fields
+        engine = self.node.engine
+        period = engine.p.period
+        t, s = self.clock.model_time(t_k), self.clock.model_time(apply)
         k = round(t / period)
-        if k < 0 or abs(t - k * period) > 1e-6 * period:
-            self.node.out.malformed(f"rig/force_pulse section={t_k!r} s is no section of "
-                                    f"this rig (model time {t!r})")
-            return None
+        own = engine.actuation_start(self.node.settings.actuation_delay)
+        tol = 1e-6 * period
+        start = None
+        if k < 0 or abs(t - k * period) > tol or abs(s - k * period - own) > tol:
+            k = self.slot(s)
+            if k is None:
+                self.node.out.malformed(
+                    f"rig/force_pulse apply time={apply!r} s (model time {s!r}) of section "
+                    f"{t_k!r} s lies in no slot of this rig (a pulse starts in "
+                    f"[t_k, t_k + {self.room():.6g}) of a section t_k = k {period!r}, k >= 0)")
+                return None
+            start = s
+            self.timed.setdefault(cdr.stamp_parts(k * period), (s, apply))
+            if len(self.timed) > 8:
+                del self.timed[next(iter(self.timed))]
         return (cdr.stamp_parts(k * period), correction_of(self.rig, f, w),
-                correction_of(self.rig, fy, w))
+                correction_of(self.rig, fy, w), start)
+
+    def room(self) -> float:
+        """The latest start of a pulse after its section (model time): T - w - L, so
+        that the pulse (through the actuator's latency L) ends within the period."""
+        s = self.node.settings
+        return self.node.engine.p.period - s.pulse_width - s.actuator.latency
+
+    def slot(self, s: float) -> int | None:
+        """The section whose slot holds model time ``s`` (a command's apply time;
+        :func:`grazing_control.plant.schedule.slot`), or None."""
+        return slot(s, self.node.engine.p.period, self.room())
 
     def act(self, act) -> None:
         """What acted at a section (the actuation engine's
         :class:`~grazing_control.plant.schedule.Act`): rig/applied."""
         sec = act.section
-        self.publish_applied(float(act.code), act.value, sec.start, sec.t)
+        timed = self.timed.pop(sec.key, None)
+        rig_start = timed[1] if timed is not None and timed[0] == sec.start else None
+        self.publish_applied(float(act.code), act.value, sec.start, sec.t, rig_start)
 
     def tripped(self, k: int) -> None:
         """The watchdog tripped at section k: nothing acts there (the safe state)."""
@@ -221,17 +254,20 @@ class SimulatedRig:
         self.publish_applied(APPLIED_SAFE, 0.0,
                              t + self.node.engine.actuation_start(self.node.loop.delay), t)
 
-    def publish_applied(self, status: float, dv: float, start: float, t_k: float) -> None:
+    def publish_applied(self, status: float, dv: float, start: float, t_k: float,
+                        rig_start: float | None = None) -> None:
         """rig/applied (:func:`grazing_control.ros.rig_driver.applied_message`): the
         force that acted (N, clipped to the force limit) from the pulse's start
-        ``start`` of the section at ``t_k`` (model times)."""
+        ``start`` of the section at ``t_k`` (model times); ``rig_start``: the start in
+        the rig clock, given (a timed command's own apply time, exactly as sent)."""
         self.applied[int(status)] += 1
         force = force_of(self.rig, dv)
         limit = self.rig.actuator.force_limit
         if limit > 0.0:
             force = max(-limit, min(limit, force))
         self.pub_applied.publish(applied_message(
-            self.clock.rig_time(start), self.clock.rig_time(t_k),
+            self.clock.rig_time(start) if rig_start is None else rig_start,
+            self.clock.rig_time(t_k),
             self.rig.actuator.pulse_width, force, math.nan, int(status)))
 
     def summary(self) -> str:

@@ -266,7 +266,8 @@ class SimNode(Node):
         if not self.running:
             self.out.ignored(f"stamp {answer[0]}: the scene is not running")
             return
-        rearm = self._guard(self.loop.answer, *answer, arrived)
+        key, dv, predicted, start = answer
+        rearm = self._guard(self.loop.answer, key, dv, predicted, arrived, start)
         if rearm and self._tick_timer is not None:
             self._arm(self.loop.now())
 

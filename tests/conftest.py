@@ -172,7 +172,7 @@ SCENE_MODULES = frozenset({
     "test_node_zygote", "test_packaging",
     "test_parameter_files_hostile",
     "test_recorder_node", "test_recording", "test_rig_drivers", "test_rig_masses_scene",
-    "test_rig_scene", "test_rig_stop",
+    "test_rig_scene", "test_rig_stop", "test_rig_wrong_model",
     "test_scheduling",
     "test_signals",
     "test_sim_node", "test_stop_fidelity", "test_stop_selection", "test_stream_block",

@@ -159,6 +159,54 @@ def test_pulse_periods_are_the_cores_pulse_step_bit_for_bit_on_both_paths():
             b.end_period()
 
 
+def test_a_pulse_at_a_start_given_is_the_cores_pulse_step_and_the_reference_flow():
+    """A start given (a rig's command timed off its section, plant.realtime): begin_head
+    and actuate with ``start`` are pulse_step(start=) bit for bit, and the motion is an
+    independent reference's (tests/reference_actuator.py: DOP853 at rtol 1e-13 of
+    x'' + 2 zeta x' + x = cos(tau2 + omega t) + F on the pulse, the impact law at the
+    wall) to 1e-10, at starts off t_k + delay - w/2 up to the slot's end T - w."""
+    from grazing_control.dynamics.simulation.actuation import pulse_step
+    from reference_actuator import lag_reference, pulse_pieces
+
+    w, delay = 0.3, 2.0
+    s = settings(delta_d=-1e-2, pulse_width=w, actuation_delay=delay, state_period=0.0)
+    p = s.params
+    room = p.period - w
+    worst, impacts = 0.0, 0
+    for start, dvc in ((0.0, 0.04), (0.37, -0.03), (3.1, 0.05), (5.0, 0.2),
+                       (math.nextafter(room, 0.0), 0.02)):
+        eng = Engine(s)
+        eng.dx, eng.dv = 1e-3, -2e-3
+        head = eng.begin_head(delay, start)
+        assert all(e.t <= start for e in head)
+        tail = eng.actuate(dvc, delay, start)
+        assert all(e.t >= start for e in tail)
+        ref = pulse_step(p, 1e-3, -2e-3, dvc, start=start, width=w)
+        assert (eng.seg.dx_end, eng.seg.dv_end) == (ref.dx, ref.dv)
+        y, hits, _ = lag_reference(p, p.x_ref + 1e-3, p.v_ref - 2e-3, 0.0,
+                                   pulse_pieces(start, w, dvc / w, 0.0), p.period,
+                                   max_step=0.01)
+        assert len(hits) == len(ref.impacts) == sum(e.kind == "impact" for e in head + tail)
+        impacts += len(hits)
+        worst = max(worst, abs(y[0] - p.x_ref - ref.dx), abs(y[1] - p.v_ref - ref.dv))
+    assert worst < 1e-10, worst
+    assert impacts >= 1                 # (5.0, 0.2) pushes the mass onto the wall
+
+
+def test_an_ndof_pulse_at_a_start_given_is_the_period_of_that_actuation_instant():
+    """n-DOF: begin_head and actuate with the start given repeat the period whose own
+    actuation instant is that start (begin_period with its delay) bit for bit."""
+    s = model_settings(actuation_delay=3.0, pulse_width=0.2)
+    a, b = Engine(s), Engine(s)
+    for delay, dv in ((3.0, 1e-3), (0.1, -2e-3), (5.5, 0.0)):
+        start = a.actuation_start(delay)
+        a.begin_period(dv, delay)
+        b.begin_head(3.0, start)
+        b.actuate(dv, 3.0, start)
+        a.end_period(), b.end_period()
+        assert np.array_equal(a.z, b.z)
+
+
 def test_pulse_width_zero_is_the_kick_and_the_pulse_converges_to_it():
     """w = 0 takes the kick's path (period_step with the delay, bit for bit); the pulse's
     end state approaches the kick's as O(w^2) when centred at the delay

@@ -195,11 +195,14 @@ def test_lockstep_reset_starts_again_from_sample_zero():
 
 
 # ==================================================================== realtime
-def run_realtime(s, n, answer, clock, sink, step=None):
+def run_realtime(s, n, answer, clock, sink, step=None, acts=None):
     """Drive a realtime loop for n samples: at each wake-up the clock jumps to the next
     due instant (wake_in), and ``answer(loop, sample)`` is called right after each sample
-    goes out (it may move the clock and answer or not)."""
+    goes out (it may move the clock and answer or not). ``acts``: a list that receives
+    what acted at each section (:func:`record_acts`)."""
     loop = Realtime(Engine(s), sink, clock)
+    if acts is not None:
+        record_acts(loop, acts)
     loop.start()
     seen = 0
     while not loop.finished:
@@ -761,3 +764,16 @@ def test_the_stream_gathers_for_the_loops_stream_tick():
         assert sorted(stream)[len(stream) // 2] == pytest.approx(tick)
         pi2 = [e.t for e in sink.events if e.kind == "pi2"]
         assert len(pi2) >= 4 and pi2 == pytest.approx([k * P.period for k in range(len(pi2))])
+
+
+def record_acts(loop, acts):
+    """Wrap the loop's ActuationSchedule.act (as sim_node's rig does): ``acts`` receives
+    (k, start, value, outcome) of every section that acted."""
+    act = loop.schedule.act
+
+    def recorded(sec, lost=False, on_miss="predict"):
+        done = act(sec, lost=lost, on_miss=on_miss)
+        acts.append((sec.k, sec.start, done.value, done.outcome))
+        return done
+
+    loop.schedule.act = recorded

@@ -334,3 +334,33 @@ def test_a_pulse_train_is_each_force_over_its_window_and_zero_between():
     train.add(4.1, 0.002, 1.0)
     assert train.force(4.001) == 1.0 and train.force(4.5) == 0.0
     assert train.unsent == 1
+
+
+# ------------------------------------------------ a command's own start (timed output)
+def test_a_slot_holds_the_starts_that_leave_the_pulse_within_its_period():
+    """slot(start, T, room): the section k with k T <= start < k T + room; None before
+    section 0 and in the last T - room of a period (docs/driver_contract.md, "Off the
+    rig's section")."""
+    from grazing_control.plant.schedule import slot
+
+    T, room = 10.0, 9.5
+    assert slot(0.0, T, room) == 0 and slot(9.499, T, room) == 0
+    assert slot(9.5, T, room) is None and slot(9.999, T, room) is None
+    assert slot(10.0, T, room) == 1 and slot(35.2, T, room) == 3
+    assert slot(-1e-12, T, room) is None
+    assert slot(math.nextafter(T, 0.0), T, room) is None
+
+
+def test_retime_moves_only_an_open_unanswered_section_and_drop_late_counts_it():
+    s = ActuationSchedule()
+    s.section(0, "a", 0.0, 5.0)
+    assert s.retime("b", 6.0) is None                     # not announced
+    sec = s.retime("a", 7.5)
+    assert sec.start == 7.5 and s.next_start() == 7.5 and s.waiting("a")
+    assert s.command("a", 0.1).outcome == "kept"
+    assert s.retime("a", 8.0) is None                     # answered: unchanged
+    assert s.open["a"].start == 7.5
+    s.section(1, "b", 10.0, 15.0)
+    assert s.drop_late("b").k == 1 and s.counts["late"] == 1
+    assert s.drop_late("b") is None and s.counts["late"] == 1
+    assert s.command("b", 0.2).outcome == "ignored"       # its answer was dropped

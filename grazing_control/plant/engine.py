@@ -288,18 +288,21 @@ class Engine:
         self.seg = Segment(t0, p.tau2, self.dx, self.dv + dv_correction, t1, seg.dx, seg.dv)
         return self._events(self.seg, seg.impacts, states)
 
-    def begin_head(self, delay: float) -> list:
+    def begin_head(self, delay: float, start: float | None = None) -> list:
         """Sample k's period up to the start of its correction ``delay`` after it
         (scheduled realtime: the correction is not known yet, and what follows its start
         is integrated by :meth:`actuate` once it is). The head is kept for
         :meth:`actuate` (the flow is never integrated twice: with a Hertz stop a period
         costs ms, docs/rig_scene.md); returns the events of (t_k, t_k + start]. Through
         the first-order actuator the whole uncorrected period (:meth:`actuate`
-        re-integrates it with the command)."""
+        re-integrates it with the command). ``start``: the correction's start after the
+        sample, given (a rig's command timed off the rig's own section, plant.realtime;
+        within [0, T - w]) instead of :meth:`actuation_start` of ``delay``."""
         if self.lagged:
             return self.begin_period(0.0)
         p = self.p
-        t0, start = self.t, self.actuation_start(delay)
+        t0 = self.t
+        start = self.actuation_start(delay) if start is None else start
         if self.section is not None:
             head = (self.section.advance(p.tau2, self.z, start) if start > 0.0 else
                     _Rest(self.z, ()))
@@ -321,16 +324,17 @@ class Engine:
         (centred at the actuation time, docs/theory_pulse.md), kept within [0, T - w)."""
         return pulse_start(self.p.period, delay, self.settings.pulse_width)
 
-    def actuate(self, dv_correction: float, delay: float) -> list:
+    def actuate(self, dv_correction: float, delay: float, start: float | None = None) -> list:
         """Apply ``dv_correction`` exactly ``delay`` after the current sample (scheduled).
 
         The period is re-integrated as ``simulate.period_step(p, dx, dv, dv_correction,
         delay=delay)`` does it (the free flow with impacts to t_k + delay, the velocity
         jump, the flow on to t_k+1), or as ``pulse_step`` for a pulse, so a realtime period
         equals the lockstep one bit for bit. Returns the events from the actuation's start
-        to t_k+1.
+        to t_k+1. ``start`` (as :meth:`begin_head`'s): the pulse's start after the sample,
+        given instead of :meth:`actuation_start` of ``delay``; the same flows from there.
         """
-        start = self.actuation_start(delay)
+        start = self.actuation_start(delay) if start is None else start
         if self.section is not None and self.lagged:
             t = self.t + start
             return [ev for ev in self._model_lag_period(dv_correction, start) if ev.t >= t]

@@ -14,6 +14,15 @@ the answer does not include that work). Two ways to act (docs/nodes.md, "Modes")
   the actuation engine's, :class:`grazing_control.plant.schedule.ActuationSchedule`
   (in simulation time, each sample a section keyed by its stamp), the one any rig
   driver uses;
+* timed (a rig's command, docs/driver_contract.md, "Off the rig's section"): an answer
+  may bring its own start (``answer(..., start=)``, simulation time: the command's apply
+  time); its section's deadline moves there, the period is integrated up to it
+  (:meth:`~grazing_control.plant.engine.Engine.begin_head` with the start given) and its
+  pulse acts there (``Engine.actuate`` with the start given), the same flows as at the
+  section's own instant. An answer whose start has passed when it arrives is late
+  (counted, dropped). The next section's deadline, which a missing answer's prediction
+  keeps, is the last applied answer's start one period on; an answer without a start
+  (the rig's own section) acts at t_k + actuation_delay as above, bit for bit;
 * on arrival: the correction acts at the simulation time of its arrival, splitting
   the period there (:meth:`~grazing_control.plant.engine.Engine.split`); it must answer
   one of the last two samples, once; an answer after the next sample went out is still
@@ -61,6 +70,9 @@ class Realtime(Loop):
     delay = 0.0        # scheduled: the current sample's delay (actuation_delay + jitter)
     stream_tick = STREAM_TICK   # wall s the stream's events gather (sim_node's stream_block)
     published = 0.0    # simulation time up to which the last wake-up published (progress)
+    rel = None         # the current section's start after its sample, given by an answer
+    offset = None      # the last applied answer's given start (None: t_k + delay's)
+    late_prediction = None   # (k, prediction) of an answer late for its own start
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -72,6 +84,7 @@ class Realtime(Loop):
         self._deviation = type(self.engine) is Engine and self.engine.section is None
         self._scaled = None     # the model the watchdog's excursion scale is for
         self.watchdog = Watchdog(self.settings.watchdog)
+        self.timed = {}        # key -> start given by an answer kept early (timed)
 
     @property
     def progress(self) -> float:
@@ -98,6 +111,8 @@ class Realtime(Loop):
         self.published = 0.0
         self.finished = False
         self.schedule.clear()
+        self.rel = self.offset = self.late_prediction = None
+        self.timed = {}
         self.watchdog = Watchdog(self.settings.watchdog)   # a new run: a new watchdog
         self._scaled = None
         self.publish_sample(ev)
@@ -129,8 +144,15 @@ class Realtime(Loop):
             # sample k's actuation instant: its period up to there now, the rest with
             # the answer (Engine.begin_head: each piece integrated once)
             self.delay = engine.actuation_delay()
-            start = ev.t + engine.actuation_start(self.delay)
-            self.queue = engine.begin_head(self.delay)
+            given = self.timed.pop(self.sample, None)
+            self.timed = {key: s for key, s in self.timed.items() if key > self.sample}
+            self.rel = self.offset if given is None else given - ev.t
+            if self.rel is None:
+                start = ev.t + engine.actuation_start(self.delay)
+                self.queue = engine.begin_head(self.delay)
+            else:                                        # a start given (timed answers)
+                start = ev.t + self.rel
+                self.queue = engine.begin_head(self.delay, self.rel)
         else:
             self.queue = engine.begin_period(0.0)
             if self.settings.scheduled:
@@ -214,18 +236,19 @@ class Realtime(Loop):
             self.publish_sample(ev)
 
     def answer(self, key: tuple, dv: float, predicted: float = math.nan,
-               arrived: float | None = None) -> bool:
+               arrived: float | None = None, start: float | None = None) -> bool:
         """The correction ``dv`` answering the sample stamped ``key`` (with its
         prediction for the next sample, NaN: none), which arrived at wall time
-        ``arrived`` (None: now); True when the wake-up must be re-armed (an on-arrival
-        split may bring an event forward)."""
+        ``arrived`` (None: now); ``start``: scheduled, the simulation time its pulse
+        starts, given (timed, module docstring; None: the section's own instant); True
+        when the wake-up must be re-armed (a split or a new start may bring an event
+        forward)."""
         if self.settings.scheduled:
-            self._answer_scheduled(key, dv, predicted, arrived)
-            return False
+            return self._answer_scheduled(key, dv, predicted, arrived, start)
         return self._on_arrival(key, dv)
 
     def _answer_scheduled(self, key: tuple, dv: float, predicted: float,
-                          arrived: float | None = None) -> None:
+                          arrived: float | None = None, start: float | None = None) -> bool:
         """Scheduled actuation: keep the answer of the current sample for its deadline.
 
         The answer must arrive before the sample's actuation instant t_k + delay in
@@ -235,29 +258,70 @@ class Realtime(Loop):
         what is due) or, without it, now (this runs); the loop advances to the arrival
         first, so that a deadline due before it is handled first and one due after it
         acts this answer, however late the loop took it. Its latency runs to its arrival.
+        A ``start`` given moves its section's deadline there (:meth:`_retime`); True then
+        (the wake-up is re-armed).
         """
         if self.finished:
             self.sink.ignored(f"stamp {key}: the scene is not running")
-            return
+            return False
         wall = self.clock()
         if arrived is not None:
             wall = min(arrived, wall)
-        self.advance(self.now(wall))     # a deadline due before its arrival is handled first
+        now = self.now(wall)
+        self.advance(now)                # a deadline due before its arrival is handled first
         if self.finished:
-            return
+            return False
+        moved = self._retime(key, start, max(now, self.published), predicted)
+        if moved is None:                # its start had passed: late
+            self.sink.late(f"stamp {key}: its start {start!r} had passed at its arrival "
+                           f"(simulation time {max(now, self.published)!r})")
+            return False
         answer = self.schedule.command(key, dv, predicted, wall, key[0] + key[1] * 1e-9)
+        if answer.outcome == "early" and start is not None:
+            self.timed[key] = start
         if answer.outcome in ("early", "unarmed"):
-            return
+            return moved
         if answer.outcome == "ignored":
             self.sink.ignored(f"stamp {key} answers none of the last two unanswered samples "
                               "(stale, duplicate or foreign)")
-            return
+            return moved
         latency = wall - answer.section.sent
         self.latencies.append(latency)
         self.sink.latency(latency)
         if answer.outcome == "late":      # counted; its prediction kept if the newest
             self.sink.late(f"stamp {key} arrived {latency * 1e3:.3f} ms after its sample, "
                            "after its actuation time")
+        return moved
+
+    def _retime(self, key: tuple, start: float | None, now: float, predicted: float):
+        """The current section ``key``, open and unanswered, starts at ``start`` (None:
+        its own instant t_k + delay): its deadline moved, its period integrated again up
+        to the new start (Engine.begin_head; the events after ``now``, those not yet
+        published, replace the queue). True when it moved, False when nothing changed
+        (another section, the same start), None when ``start`` is not after ``now``
+        (the answer is late: counted, dropped, ActuationSchedule.drop_late)."""
+        schedule, engine = self.schedule, self.engine
+        sec = schedule.open.get(key)
+        if sec is None or not schedule.waiting(key) or sec.k != engine.k:
+            return False
+        if start is None:                # back to its own instant
+            if self.rel is None:
+                return False
+            start, rel = sec.t + engine.actuation_start(self.delay), None
+        elif start == sec.start:
+            return False
+        else:
+            rel = start - sec.t
+        if start <= now:                 # its prediction: for the next section, once k acted
+            schedule.drop_late(key)
+            self.late_prediction = (sec.k, predicted)
+            return None
+        schedule.retime(key, start)
+        self.rel = rel
+        head = (engine.begin_head(self.delay) if rel is None else
+                engine.begin_head(self.delay, rel))
+        self.queue = [ev for ev in head if ev.t > now]
+        return True
 
     def _actuate(self, sec: Section) -> None:
         """Sample k's actuation instant: its answer at t_k + delay; at a deadline miss or
@@ -274,7 +338,16 @@ class Realtime(Loop):
             self.sink.miss(sec.k, sec.key, sec.start, self.clock() - sec.sent)
         if act.substituted:
             self.sink.substituted(sec.k, sec.key, act.value)
-        self.queue = self.engine.actuate(act.value, self.delay)
+        rel = self.rel if sec.k == self.engine.k else None
+        if act.outcome == "applied":     # the next section expected at the same start
+            self.offset = rel
+        if self.late_prediction is not None and self.late_prediction[0] == sec.k:
+            self.prediction.remember_late(*self.late_prediction)
+            self.late_prediction = None
+        if rel is None:
+            self.queue = self.engine.actuate(act.value, self.delay)
+        else:                            # a start given by its answer (timed)
+            self.queue = self.engine.actuate(act.value, self.delay, rel)
 
     def _on_arrival(self, key: tuple, dv: float) -> bool:
         """Apply a correction at the simulation time of its arrival.

@@ -44,7 +44,7 @@ import math
 from typing import Hashable, NamedTuple
 
 __all__ = ["PREDICTION_HOLD", "COUNTS", "Prediction", "Section", "Answer", "Act",
-           "ActuationSchedule", "RigSchedule", "PulseTrain"]
+           "ActuationSchedule", "RigSchedule", "PulseTrain", "slot"]
 
 #: Consecutive missing answers a prediction stands in for.
 PREDICTION_HOLD = 10
@@ -53,6 +53,18 @@ PREDICTION_HOLD = 10
 #: late (after their deadline) and ignored (stale, duplicate, foreign).
 #: Sections without a deadline (``unarmed``: a stream's pre-roll) are counted apart.
 COUNTS = ("applied", "predicted", "missed", "late", "lost", "ignored", "unarmed")
+
+
+def slot(start: float, period: float, room: float) -> int | None:
+    """The section k whose slot [k T, k T + room) holds ``start`` (a command's apply time,
+    section 0 at time 0, ``period`` T), or None: before section 0, or between two slots.
+    ``room`` is the latest start after its section that leaves a pulse its whole width
+    (and the actuator's latency) within the period, T - w - L: a timed command
+    (docs/driver_contract.md, "Off the rig's section") is the one of that section."""
+    k = math.floor(start / period)
+    if k < 0 or not start - k * period < room:
+        return None
+    return int(k)
 
 
 class Prediction:
@@ -171,6 +183,25 @@ class ActuationSchedule:
             sec = sec._replace(value=value, predicted=predicted, received=received)
         if start is not None:
             self.open[key] = sec
+        return sec
+
+    def retime(self, key: Hashable, start: float) -> Section | None:
+        """Section ``key``, open and unanswered, now starting at ``start`` (an answer's
+        own start: a rig's command is timed output, docs/driver_contract.md), or None
+        (not open or already answered: nothing changed)."""
+        if key not in self.open or key not in self.unanswered:
+            return None
+        sec = self.open[key] = self.unanswered[key] = self.open[key]._replace(start=start)
+        return sec
+
+    def drop_late(self, key: Hashable) -> Section | None:
+        """The answer of the unanswered section ``key`` came too late for its own start
+        (a rig's command after its apply time): counted late, dropped; its section stays
+        open for its deadline (a miss there, where the prediction made for it stands in:
+        the caller keeps this answer's prediction for the next section once it acted)."""
+        sec = self.unanswered.pop(key, None)
+        if sec is not None:
+            self.counts["late"] += 1
         return sec
 
     def waiting(self, key: Hashable) -> bool:
