@@ -67,6 +67,19 @@ def _seconds(stamp_ns) -> np.ndarray:
     return (s // _NS).astype(float) + (s % _NS).astype(float) * 1e-9
 
 
+def _carry(k, status, s, on, resolution) -> None:
+    """A prediction acts at the expected start, the last answer's start after its section
+    carried (plant/realtime.py), reported rounded to the stamp's nanosecond: where the
+    reported start is that within ``resolution`` (model time), the carried one, in place."""
+    carried = None
+    for i in np.argsort(k, kind="stable"):
+        if status[i] == 0:
+            carried = None if on[i] else s[i]
+        elif (status[i] == 1 and not on[i] and carried is not None
+              and abs(s[i] - carried) <= resolution):
+            s[i] = carried
+
+
 def read_acts(bag, rig, sim: dict) -> dict | None:
     """What acted and what was commanded, per rig section (module docstring), or None
     (no ``rig/applied`` in the bag, no rig, or a rig of n masses).
@@ -108,6 +121,7 @@ def read_acts(bag, rig, sim: dict) -> dict | None:
     k = np.rint(t / period).astype(np.int64)
     s = (_seconds(a["stamp"]) - start0) * wn - k * period
     on = np.abs(s - own) <= tol
+    _carry(k, np.rint(a["fz"]), s, on, 1e-9 * wn)
     out = {"period": period, "k": k, "status": np.rint(a["fz"]).astype(np.int64),
            "dv": np.array([correction_of(rig, f, w) for f, w in zip(a["fx"], a["tx"])]),
            "start": np.where(on, np.nan, s)}
