@@ -504,7 +504,8 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         label = _label(Path(bag), used)
         entry = {**_bag_entry(bag, data, label, setup.notes + rig_notes),
                  "rig": None if rig is None else _rig_entry(rig),
-                 "rig_commands_off_grid": rig_acts_summary(acts),
+                 **({"rig_commands_off_grid": rig_acts_summary(acts)} if acts and acts["timed"]
+                    else {}),
                  "model_watch": watch,
                  "model_switches": switches,
                  "setup": {"params": ({k: getattr(setup.params, k) for k in
