@@ -39,6 +39,7 @@ __all__ = ["APPLIED_TOPIC", "COMMAND_TOPIC", "read_acts", "apply_acts", "offgrid
 APPLIED_TOPIC = "/rig/applied"
 COMMAND_TOPIC = "/rig/force_pulse"
 _NS = 1_000_000_000
+WRENCH = "geometry_msgs/msg/WrenchStamped"
 #: A command within this fraction of a forcing period of the rig's own section and
 #: instant is the rig's own (sim_node/rig_io.py: the same tolerance).
 ON_GRID = 1e-6
@@ -99,9 +100,15 @@ def read_acts(bag, rig, sim: dict) -> dict | None:
 
     if rig is None or rig.n != 1:
         return None
-    raw = reader.read_raw(Path(bag), topics=None)
+    raw = reader.read_raw(Path(bag), topics=[APPLIED_TOPIC, COMMAND_TOPIC])
     at, ct = _topic(raw, APPLIED_TOPIC), _topic(raw, COMMAND_TOPIC)
     if at is None:
+        return None
+    if at != APPLIED_TOPIC:                 # under a namespace
+        raw = reader.read_raw(Path(bag), topics=[t for t in (at, ct) if t])
+    if ct is not None and raw.channels[ct].type != WRENCH:
+        ct = None
+    if raw.channels[at].type != WRENCH:
         return None
     try:
         clock_start = float(sim.get("clock_start", 1000.0))
