@@ -482,7 +482,11 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         estimates = read_estimates(bag)
         rig, rig_notes = read_rig(bag)
         acts = (read_acts(bag, rig, (data.parameters["nodes"].get("sim_node") or [{}])[0])
-                if rig is not None and len(data.scenes) == 1 else None)
+                if rig is not None else None)
+        if acts and acts["timed"] and len(data.scenes) > 1:
+            data.problems.append("the controller's commands are off the rig's grid, but the "
+                                 "bag holds several scenes: not read by what acted")
+            acts = None
         for sd in data.scenes:      # a rig scene off the rig's grid: what acted (rig_acts)
             apply_acts(sd, acts)
         numbers = []
