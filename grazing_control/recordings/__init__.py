@@ -7,6 +7,7 @@ Layer 5 of 7 (docs/architecture.md).
 * :mod:`.record`: the parameter record the nodes publish on ``grazing/parameters``;
 * :mod:`.scenes`: a bag's Pi2 samples, corrections and impacts as scenes;
 * :mod:`.numbers`: measured vs predicted numbers of a scene;
+* :mod:`.rig_acts`: a rig scene off the rig's section read by what acted (``rig/applied``);
 * :mod:`.analysis`: a scene's summary and figure (the demo's report);
 * :mod:`.analyze`: the report and the ``analyze`` command;
 * :mod:`.identify`: the ``identify`` command (the model's parameters from bags; the

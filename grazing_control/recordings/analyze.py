@@ -21,6 +21,7 @@ from .analysis import (control_lines, fmt, is_ndof, ndof_lines, ndof_scene_numbe
                        plot_ndof_scene)
 from .numbers import (MODEL_CHECK_BOUND, controlled_orbit, resolve_setup, scene_numbers,
                       scene_problems, section_phase_problems)
+from .rig_acts import apply_acts, offgrid_line, read_acts, summary as rig_acts_summary
 from .rig_record import check_against_model, read_rig, si_numbers
 from .scenes import load, parse_topic_options
 from .timing import realtime_lines
@@ -479,6 +480,15 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         setup = resolve_setup(data, options)
         data.problems.extend(section_phase_problems(data, setup))
         estimates = read_estimates(bag)
+        rig, rig_notes = read_rig(bag)
+        acts = (read_acts(bag, rig, (data.parameters["nodes"].get("sim_node") or [{}])[0])
+                if rig is not None else None)
+        if acts and acts["timed"] and len(data.scenes) > 1:
+            data.problems.append("the controller's commands are off the rig's grid, but the "
+                                 "bag holds several scenes: not read by what acted")
+            acts = None
+        for sd in data.scenes:      # a rig scene off the rig's grid: what acted (rig_acts)
+            apply_acts(sd, acts)
         numbers = []
         for sd in data.scenes:
             n = scene_numbers(sd, setup, tol)
@@ -489,7 +499,6 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         period_s = None if setup.params is None else setup.params.period
         watch = watch_numbers(read_watch(bag), period_s)     # stamps: simulation time
         switches = read_switches(bag, period_s=period_s)
-        rig, rig_notes = read_rig(bag)
         rig_notes += model_differences(data.parameters)
         if rig is not None:
             rig_notes += [f"rig mismatch: {m} (the SI numbers use the rig's scales)"
@@ -499,6 +508,8 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         label = _label(Path(bag), used)
         entry = {**_bag_entry(bag, data, label, setup.notes + rig_notes),
                  "rig": None if rig is None else _rig_entry(rig),
+                 **({"rig_commands_off_grid": rig_acts_summary(acts)} if acts and acts["timed"]
+                    else {}),
                  "model_watch": watch,
                  "model_switches": switches,
                  "setup": {"params": ({k: getattr(setup.params, k) for k in
@@ -521,6 +532,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
                   "* topics used: " + ", ".join(f"{r} = {t}" for r, t in data.present.items())]
         if rig is not None:
             lines.append(_rig_line(entry["rig"]))
+            lines += [x for x in [offgrid_line(acts)] if x]
         lines += [f"* note: {s}" for s in entry["notes"]]
         lines += [f"* **cannot use**: {s}" for s in data.problems]
         lines += _watch_lines(watch)

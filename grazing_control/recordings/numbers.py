@@ -399,7 +399,7 @@ def applied_corrections(sd) -> np.ndarray:
 
 def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000,
                 corrections=None, pulse_width: float = 0.0, force_limit: float = 0.0,
-                actuator=None):
+                actuator=None, starts=None):
     """Re-integrate each recorded period with the core; largest departure, per sample.
 
     Returns (max departure, array of departures |P(X_k, dv_k) - X_{k+1}|) over at most
@@ -410,7 +410,9 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
     the simulator's first-order ``actuator`` when it had one
     (:func:`grazing_control.dynamics.simulation.actuator.actuated_step`; the force on the mass is
     not recorded: it is carried from 0 at the first recorded sample, exact for a scene
-    recorded from its start, since the force follows the commands alone).
+    recorded from its start, since the force follows the commands alone). ``starts``: per
+    sample, the pulse's recorded start after the sample (a rig scene off the rig's grid,
+    :func:`.rig_acts.apply_acts`; NaN: the rule above).
     """
     from grazing_control.dynamics.simulation.actuation import pulse_start, pulse_step
     from grazing_control.dynamics.simulation.simulate import period_step
@@ -424,7 +426,7 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
 
         start = pulse_start(p.period, delay, pulse_width)
 
-        def step(dx, dv, dvc):
+        def step(dx, dv, dvc, start=start):
             x, v, f, imps = actuated_step(p, dx, dv, force[0], dvc, start=start,
                                           width=pulse_width, actuator=actuator,
                                           force_limit=force_limit or math.inf)
@@ -433,18 +435,21 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
     elif pulse_width > 0.0:     # the engine's rule: centred at the delay, within [0, T - w)
         start = pulse_start(p.period, delay, pulse_width)
 
-        def step(dx, dv, dvc):
+        def step(dx, dv, dvc, start=start):
             return pulse_step(p, dx, dv, dvc, start=start, width=pulse_width,
                               force_limit=force_limit or math.inf)
     else:
         kw = {"delay": delay} if delay else {}
 
-        def step(dx, dv, dvc):
+        def step(dx, dv, dvc, start=None):
             return period_step(p, dx, dv, dvc, **kw)
     for k in range(n):
         x, v = scene.pi2[k]
         try:
-            seg = step(x - p.x_ref, v - p.v_ref, float(dvs[k]))
+            if starts is not None and math.isfinite(starts[k]):
+                seg = step(x - p.x_ref, v - p.v_ref, float(dvs[k]), float(starts[k]))
+            else:
+                seg = step(x - p.x_ref, v - p.v_ref, float(dvs[k]))
         except Exception:            # the core refuses (impact cap): count as departed
             dep[k] = np.inf
             continue
@@ -641,13 +646,16 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
         worst, dep = model_check(setup.params, scene, setup.actuation_delay,
                                  corrections=applied_corrections(sd),
                                  pulse_width=setup.pulse_width, force_limit=setup.force_limit,
-                                 actuator=setup.actuator)
+                                 actuator=setup.actuator, starts=sd.pulse_starts)
         out["model_check"] = {"max_departure": worst,
                               "periods": int(dep.size),
                               "periods_in_scene": max(len(scene.t) - 1, 0),
                               "periods_above_1e-12": int(np.count_nonzero(dep > 1e-12)),
                               "dropped_at_deadline_misses": int(sd.missed_stamp_ns.size),
                               "predictions_substituted": len(sd.substituted)}
+        if sd.pulse_starts is not None:
+            out["model_check"]["pulses_at_recorded_starts"] = int(
+                np.count_nonzero(np.isfinite(sd.pulse_starts)))
         out["_departures"] = dep
     out["realtime"] = realtime_numbers(sd, setup) if setup.mode == "realtime" else None
     if "_departures" in out:       # the model check's periods (at most its limit)
@@ -660,6 +668,11 @@ def realtime_numbers(sd, setup: Setup) -> dict:
     """Latency, late and missing answers, deadline misses, sample lag (wall clock), and
     the delay check (:mod:`.timing`) with the core's period."""
     out = realtime_measured(sd, setup.time_scale)
+    if sd.rig_late is not None:      # a rig scene off the rig's grid: the rig's own count
+        out["late_answers"] = sd.rig_late
+        out["late_source"] = ("the rig's count (rig/applied): a command recorded for a "
+                              "section where a prediction or nothing acted")
+        out["rig_applied"] = sd.rig_status
     out["delay_check"] = _delay_check(sd, setup, out)
     return out
 

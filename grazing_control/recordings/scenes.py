@@ -132,6 +132,12 @@ class SceneData:
     #: stamp (int64 ns) -> the predicted correction the simulator applied in place of a
     #: missing answer (``oscillator/substituted``, on_miss predict)
     substituted: dict = field(default_factory=dict)
+    #: a rig scene off the rig's grid (:func:`.rig_acts.apply_acts`): each pulse's start,
+    #: model time after its section (NaN: the rig's own instant), the rig's count of late
+    #: answers and of rig/applied per status; None otherwise
+    pulse_starts: np.ndarray | None = None
+    rig_late: int | None = None
+    rig_status: dict | None = None
 
 
 @dataclass

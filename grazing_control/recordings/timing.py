@@ -195,7 +195,8 @@ def realtime_lines(n: dict, bound: float = 1e-9) -> list:
     misses = rt["deadline_misses"]
     lines = [f"* realtime latency (sim, sample published → answer received): {_d(rt.get('latency_ms'))}",
              f"* answer time (controller, source timestamps): {_d(rt.get('answer_time_ms'))}",
-             f"* late answers (sent after the next sample): {rt['late_answers']}; samples "
+             f"* late answers ({rt.get('late_source', 'sent after the next sample')}): "
+             f"{rt['late_answers']}; samples "
              f"without an answer: {rt['missing_answers']}; deadline misses: "
              f"{fmt(misses) if misses is not None else 'topic not recorded'}"
              + (f" ({rt['substituted']} predictions substituted)" if rt.get("substituted")
