@@ -190,7 +190,8 @@ SCENE_MODULES = frozenset({
 #: on two fresh clones a rig scene beside them (test_signals' storm in both) had its
 #: simulator's sample 6-7 go out 3.1-3.5 s late (rerun once each, 2026-11-28).
 FIFO_SCENE_MODULES = frozenset({"test_rig_masses_scene", "test_rig_scene", "test_rig_stop",
-                                "test_scheduling", "test_signals", "test_sim_node"})
+                                "test_rig_wrong_model", "test_scheduling", "test_signals",
+                                "test_sim_node"})
 
 
 def pytest_configure(config):
