@@ -11,8 +11,10 @@ Eq. 28 by it; :func:`grazing_control.dynamics.estimation.stream.simulate_stream`
 
 :class:`CaptureRule`
     No correction until the estimate is within ``radius`` of the controlled orbit's
-    Pi2 state z** (Euclidean in (dx, dv)) with a finite covariance; from then on the
-    full correction (latched: a noisy excursion after capture does not switch it off).
+    Pi2 state z** (Euclidean in (dx, dv); for a model file's 2n coordinates the
+    Euclidean norm of z - z** in (dx_0..dx_{n-1}, dv_0..dv_{n-1})) with a finite
+    covariance; from then on the full correction (latched: a noisy excursion after
+    capture does not switch it off).
     The default radius is CAPTURE_RADIUS sqrt(|Delta d|), inside the watchdog's
     excursion bound 15 sqrt(|Delta d|) (plant/watchdog.py).
 :class:`GainRamp`
@@ -58,9 +60,17 @@ class CaptureRule:
         if self.on_at is None:
             z = np.asarray(estimate.z, dtype=float)
             if np.all(np.isfinite(z)) and np.all(np.isfinite(estimate.cov)) \
-                    and float(np.hypot(*(z - self.target))) <= self.radius:
+                    and _distance(z - self.target) <= self.radius:
                 self.on_at = int(k)
         return 1.0 if self.on_at is not None else 0.0
+
+
+def _distance(dz: np.ndarray) -> float:
+    """|dz|: np.hypot for the 1-DOF (dx, dv) (bit for bit as before), the Euclidean norm
+    of a model file's 2n coordinates (docs/theory_capture.md, n DOF)."""
+    if dz.shape == (2,):
+        return float(np.hypot(*dz))
+    return float(np.linalg.norm(dz))
 
 
 class GainRamp:
