@@ -80,3 +80,90 @@ def test_the_rule_captures_from_afar_with_small_corrections():
                      float(np.max(np.abs(run.corrections))))
     assert out["now"][0] is not None and out["rule"][0] is not None
     assert out["now"][1] > 4e-2 and out["rule"][1] < 1e-3
+
+
+def test_the_rule_of_2n_coordinates_switches_at_its_radius_and_stays_on():
+    """n = 2 (issue 32): the Euclidean norm of the 2n-vector z^ - z** against the radius
+    (just outside, on, inside), latched; a NaN coordinate or an unknown covariance never
+    switches; n = 1 is np.hypot bit for bit."""
+    target = np.array([0.1, -0.2, 0.3, 0.05])
+    step = np.full(4, 0.5e-2)
+    rule = CaptureRule(target, float(np.linalg.norm(target + step - target)))   # ~1e-2
+    cov = np.eye(4)
+    assert rule(0, _est(target + 1.001 * step, cov)) == 0.0
+    assert rule(1, _est(target + np.array([math.nan, 0, 0, 0]), cov)) == 0.0
+    assert rule(2, _est(target, np.full((4, 4), math.nan))) == 0.0
+    assert rule(3, _est(target + step, cov)) == 1.0 and rule.on_at == 3
+    assert rule(4, _est(target + 100.0 * step, cov)) == 1.0        # latched
+    assert rule(5, _est(target + np.array([math.nan] * 4), cov)) == 1.0 and rule.on_at == 3
+    # n = 1: the same hypot as before (its rounding, not the norm's, at the boundary)
+    for dz in [(3e-3, 4e-3), (1e-300, 1e-300), (0.1, 0.7)]:
+        r = float(np.hypot(*dz))
+        assert CaptureRule((0.0, 0.0), r)(0, _est(dz)) == 1.0
+        assert CaptureRule((0.0, 0.0), math.nextafter(r, 0.0))(0, _est(dz)) == 0.0
+
+
+def _chain_pulse():
+    import dataclasses
+
+    from grazing_control.dynamics.design.family import Actuation, evaluate_design
+    from grazing_control.oscillator.ndof.model import load_model
+    from grazing_control.ros import launcher
+
+    path = launcher.CONFIG_DIR / "models" / "two_mass_chain.yaml"
+    model = dataclasses.replace(load_model(path), delta_d=-1e-3)
+    return path, model, evaluate_design(model, -0.22, Actuation(1.0, 1.0)).gains
+
+
+def test_the_rule_captures_the_chain_the_law_at_once_does_not():
+    """Two-mass chain at Delta d = -1e-3, the pulse design (mu -0.22, delay 1, width 1;
+    z** 0.075 from X**, its correction 0.128), the force clipped at 0.6 (m_a = 1, w = 1:
+    Delta v <= 0.6), exact state on the n-DOF map, switched on after 100 uncontrolled
+    periods (0.61 from z**): the law at once saturates and settles 0.35 away on a
+    clipped orbit; the rule (radius 5 sqrt(|Delta d|) = 0.158) waits 1 period and then
+    captures (within 1e-5 of z** by period 60, the multipliers 0.81). docs/theory_capture.md, n DOF."""
+    from grazing_control.dynamics.maps.modal_map import ModalMap, pulse_step
+    from grazing_control.dynamics.orbits.one_one import orbit
+
+    _path, model, k = _chain_pulse()
+    target = orbit(model, k, delay=1.0, width=1.0).state
+    free, cm = ModalMap(model), ModalMap(model, k, 1.0, 1.0)
+    z0 = target.copy()
+    for _ in range(100):
+        z0 = free.step(z0).state
+    ends = {}
+    for name, rule in (("at once", None), ("rule", CaptureRule.for_wall(target, -1e-3))):
+        z = z0.copy()
+        for j in range(60):
+            factor = 1.0 if rule is None else rule(j, _est(z, np.eye(4)))
+            z = pulse_step(cm.flow, z, factor * float(k @ z), start=cm.pulse_start,
+                           width=1.0, force_limit=0.6).state
+        ends[name] = (float(np.linalg.norm(z - target)), None if rule is None else rule.on_at)
+    assert np.linalg.norm(z0 - target) > 0.6
+    assert ends["at once"][0] > 0.3
+    assert ends["rule"][0] < 1e-5 and ends["rule"][1] == 1
+
+
+def test_the_n_dof_controllers_rule_targets_the_designs_orbit():
+    """controller_values.model_capture_from_values: z** of the design's pulse (delay,
+    width) in the law's coordinates X - X**, radius 5 sqrt(|Delta d|) at 0; off without
+    capture; in sample mode, or with a bad radius, one line naming the parameter."""
+    from grazing_control.dynamics.orbits.one_one import orbit
+    from grazing_control.ros.controller_values import (model_capture_from_values,
+                                                       model_controller_from_values)
+
+    path, model, k = _chain_pulse()
+    c = model_controller_from_values({"delta_d": -1e-3}, str(path), k.tolist())
+    on = {"capture": True, "capture_radius": 0.0, "pi2_source": "stream"}
+    rule = model_capture_from_values(on, c, 1.0, (1.0, math.inf, None))
+    o = orbit(model, k, delay=1.0, width=1.0)
+    np.testing.assert_array_equal(rule.target, o.state)
+    np.testing.assert_allclose(o.physical - o.state, np.append(c.x_ref, c.v_ref), atol=1e-12)
+    assert rule.radius == pytest.approx(5.0 * math.sqrt(1e-3))
+    assert model_capture_from_values({**on, "capture_radius": 0.2}, c, 1.0,
+                                     (1.0, math.inf)).radius == 0.2
+    assert model_capture_from_values({**on, "capture": False}, c, 1.0) is None
+    with pytest.raises(ParameterError, match="capture=True is invalid with pi2_source=sample"):
+        model_capture_from_values({**on, "pi2_source": "sample"}, c, 1.0)
+    with pytest.raises(ParameterError, match="capture_radius=-1.0 is invalid: valid range"):
+        model_capture_from_values({**on, "capture_radius": -1.0}, c, 1.0)

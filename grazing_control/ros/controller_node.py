@@ -121,7 +121,7 @@ from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, SafePoints, StartupError
                      run_node, spin, stamp_key)
 from .controller_parameters import declare_parameters, gains_of
 from .controller_values import (ControlLaw, actuation_delay_from_values,
-                                capture_from_values, law_from_values,
+                                capture_from_values, law_from_values, model_capture_from_values,
                                 model_controller_from_values, model_from_values,
                                 model_stream_from_values, pulse_from_values,
                                 stream_from_values)
@@ -186,6 +186,8 @@ class ControllerNode(Node):
                                                self.actuation_delay)
                 self.model = self.capture = None
                 self.stream = model_stream_from_values(self._values(), self.ndof, self.pulse)
+                self.capture = model_capture_from_values(self._values(), self.ndof,
+                                                         self.actuation_delay, self.pulse)
                 if self.stream is not None:     # the section times and the phase check
                     self.model = self.ndof.model
             else:
@@ -583,8 +585,8 @@ class ControllerNode(Node):
         ndof = self.ndof
         X = np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z, dtype=float)
         n = ndof.model.n
-        dv = self._answer(key, X[:n], X[n:],
-                          rig_time=tk if self.rig_side is not None else None)
+        dv = self._answer(key, X[:n], X[n:], self._capture_factor(k, est),
+                          tk if self.rig_side is not None else None)
         msg = JointState(name=[f"mass{i}" for i in range(n)],
                          position=X[:n].tolist(), velocity=X[n:].tolist(),
                          effort=np.diag(est.cov).tolist())
@@ -603,7 +605,7 @@ class ControllerNode(Node):
         if not captured and factor:
             self.get_logger().info(
                 f"capture: the estimate is within {self.capture.radius:.4g} of the "
-                f"controlled orbit at section {k}: Eq. 28 from here on")
+                f"controlled orbit at section {k}: the correction from here on")
         return factor
 
     def _watch(self, k: int, key: tuple) -> None:

@@ -45,7 +45,8 @@ from .model_watch import WATCH_DEFAULTS, watch_from_values
 
 __all__ = ["ControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
            "model_from_values", "stream_from_values", "pulse_from_values",
-           "capture_from_values", "actuation_delay_from_values", "below_period", "model_omega",
+           "capture_from_values", "model_capture_from_values",
+           "actuation_delay_from_values", "below_period", "model_omega",
            "ModelController", "model_controller_from_values", "model_stream_from_values",
            "gain_vector_correction", "ONE_DOF_DEFAULTS"]
 
@@ -304,6 +305,46 @@ def capture_from_values(values: dict, model, delay: float):
     return CaptureRule(target, radius)
 
 
+def model_capture_from_values(values: dict, ndof: ModelController, delay: float,
+                              pulse: tuple = (0.0, math.inf)):
+    """The n-DOF :class:`CaptureRule` of ``capture`` (None when off): no correction until
+    the estimate z^ = X^ - X** is within ``capture_radius`` (Euclidean in the 2n
+    coordinates; 0: CAPTURE_RADIUS sqrt(|Delta d|), docs/theory_capture.md) of the
+    controlled 1/1 orbit's Pi2 deviation z** of the design (gains k, actuation ``delay``,
+    ``pulse`` (width, force limit[, actuator]) as :func:`pulse_from_values`; through an
+    actuator the lag's orbit, :func:`grazing_control.dynamics.design.noise.controlled_orbit`),
+    then k^T z^ (latched). Stream mode only; ParameterError naming the parameter."""
+    radius = float(values.get("capture_radius", 0.0))
+    if not (math.isfinite(radius) and radius >= 0.0):
+        raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a finite "
+                             "capture_radius >= 0 (0: 5 sqrt(|delta_d|))")
+    if not values.get("capture"):
+        return None
+    if values.get("pi2_source", "sample") != "stream" or not ndof.predicts:
+        raise ParameterError(f"capture=True is invalid with pi2_source="
+                             f"{values.get('pi2_source', 'sample')}: valid only with "
+                             "pi2_source=stream and the plant's finite delta_d")
+    width = float(pulse[0])
+    act = pulse[2] if len(pulse) > 2 else None
+    try:
+        if act is None:
+            from grazing_control.dynamics.orbits.one_one import orbit
+
+            target = orbit(ndof.model, ndof.gains, delay=delay, width=width).state
+        else:
+            from grazing_control.dynamics.design.family import Actuation
+            from grazing_control.dynamics.design.noise import controlled_orbit
+
+            target = controlled_orbit(ndof.model, ndof.gains, Actuation(
+                delay, width, act.time_constant, act.latency))[:2 * ndof.model.n]
+    except (ValueError, ArithmeticError, RuntimeError) as exc:
+        raise ParameterError(f"capture=True is invalid here: no controlled 1/1 orbit of the "
+                             f"gains at delta_d={ndof.model.delta_d!r} ({exc})") from None
+    if radius == 0.0:
+        return CaptureRule.for_wall(target, ndof.model.delta_d, CAPTURE_RADIUS)
+    return CaptureRule(target, radius)
+
+
 def actuation_delay_from_values(values: dict) -> float:
     """The design's actuation delay, 0 <= delay < T = 2 pi / omega (ParameterError)."""
     delay = float(values.get("actuation_delay", 0.0))
@@ -474,7 +515,7 @@ def model_stream_from_values(values: dict, ndof: ModelController,
         raise ParameterError(f"impact_source={values['impact_source']!r} is invalid with "
                              "model_file: valid is stream (the n-DOF model filter finds the "
                              "impacts in its exact motion)")
-    for name in ("estimate_bias", "track_delta_d", "capture", "reidentify"):
+    for name in ("estimate_bias", "track_delta_d", "reidentify"):
         if values.get(name):
             raise ParameterError(f"{name}=True is invalid with model_file: valid is false "
                                  "(not built for n-DOF)")
