@@ -167,3 +167,76 @@ def test_the_n_dof_controllers_rule_targets_the_designs_orbit():
         model_capture_from_values({**on, "pi2_source": "sample"}, c, 1.0)
     with pytest.raises(ParameterError, match="capture_radius=-1.0 is invalid: valid range"):
         model_capture_from_values({**on, "capture_radius": -1.0}, c, 1.0)
+
+
+def test_an_n_dof_controller_holds_back_until_its_estimate_is_near_the_orbit():
+    """Issue 32, in-process (the pattern of test_stream_block's n-DOF controller): a
+    2-DOF controller_node with capture (radius 0: 5 sqrt(|Delta d|)) in stream mode, the
+    chain's kick design at delay 1, fed the engine's stream from 10 uncontrolled periods
+    off z** (0.25 away), the loop closed on its answers: from the switch-on it answers 0
+    while its estimate X^ - X** is farther than the radius from z**, latches at the first
+    section within it (capture.on_at) and answers k^T z^ from there on."""
+    import dataclasses
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+
+    from grazing_control.dynamics.design.family import pulse_design
+    from grazing_control.dynamics.maps.modal_map import ModalMap
+    from grazing_control.dynamics.orbits.one_one import orbit
+    from grazing_control.oscillator.ndof.model import load_model
+    from grazing_control.plant.engine import Engine
+    from grazing_control.plant.settings import settings_from_values
+    from grazing_control.ros import cdr, launcher
+    from grazing_control.ros.controller_node import ControllerNode
+    from sim_node.messages import joint_names, ndof_joint_state
+    from test_closed_loop import new_domain
+
+    chain, delay, rate, periods, on = (launcher.CONFIG_DIR / "models" / "two_mass_chain.yaml",
+                                       1.0, 50, 30, 2)
+    model = dataclasses.replace(load_model(chain), delta_d=-1e-3)
+    gains = pulse_design(model, -0.22, delay, 0.0).gains
+    target = orbit(model, gains, delay=delay).state
+    sim = {"delta_d": -1e-3, "actuation_delay": delay, "sensor_noise": 1e-4,
+           "sensor_velocity": True, "sensor_seed": 7, "state_period": model.period / rate}
+    eng = Engine(settings_from_values(sim, str(chain)))
+    z = target.copy()
+    for _ in range(10):
+        z = ModalMap(model).step(z).state
+    eng.z = z
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    answers, estimates = {}, {}
+    try:
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter(k, value=v) for k, v in (
+                ("model_file", str(chain)), ("gains", gains.tolist()), ("delta_d", -1e-3),
+                ("enable_after", on), ("actuation_delay", delay), ("pi2_source", "stream"),
+                ("estimator", "model"), ("sensor_coordinate", 1), ("sensor_noise", 1e-4),
+                ("state_period", model.period / rate), ("capture", True))])
+        node.pub.publish = lambda data: answers.setdefault(
+            *(lambda a: (a[:2], a[2]))(cdr.read_twist_stamped(data)))
+        node.pub_estimate.publish = lambda m: estimates.setdefault(
+            (m.header.stamp.sec, m.header.stamp.nanosec), np.append(m.position, m.velocity))
+        names, states = joint_names(2), eng.initial_states()
+        for k in range(periods):
+            for ev in states:
+                node._on_state(bytes(serialize_message(ndof_joint_state(ev, names))))
+            key = cdr.stamp_parts(eng.sample().t)
+            states = [ev for ev in eng.begin_period(answers.get(key, 0.0), delay)
+                      if ev.kind == "state"]
+            eng.end_period()
+        on_at, radius = node.capture.on_at, node.capture.radius
+        ref = np.append(node.ndof.x_ref, node.ndof.v_ref)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    keys = sorted(answers)
+    assert len(keys) >= periods - 1 and on_at is not None and on_at > on, on_at
+    far = [float(np.linalg.norm(estimates[key] - ref - target)) > radius for key in keys]
+    first = far.index(False, on)                 # the first section within the radius
+    assert first == on_at
+    assert all(answers[key] == 0.0 for key in keys[:on_at])
+    assert all(answers[key] != 0.0 for key in keys[on_at:])
