@@ -117,7 +117,7 @@ def _chain_pulse():
 
 def test_the_rule_captures_the_chain_the_law_at_once_does_not():
     """Two-mass chain at Delta d = -1e-3, the pulse design (mu -0.22, delay 1, width 1;
-    z** 0.075 from X**, its correction 0.128), the force clipped at 0.6 (m_a = 1, w = 1:
+    z** 0.073 from X**, its correction 0.128), the force clipped at 0.6 (m_a = 1, w = 1:
     Delta v <= 0.6), exact state on the n-DOF map, switched on after 100 uncontrolled
     periods (0.61 from z**): the law at once saturates and settles 0.35 away on a
     clipped orbit; the rule (radius 5 sqrt(|Delta d|) = 0.158) waits 1 period and then

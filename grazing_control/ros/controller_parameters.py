@@ -147,9 +147,11 @@ def declare_parameters(node) -> None:
         "stream mode: the capture rule (issue 29, docs/theory_capture.md): once control "
         "is on, no correction until the estimate is within capture_radius of the "
         "controlled orbit's Pi2 state, then Eq. 28 (latched)", True,
-        constraints="true only with pi2_source stream and a model (delta_d)"))
+        constraints="true only with pi2_source stream and a model (delta_d; with "
+                    "model_file its finite delta_d)"))
     d("capture_radius", 0.0, float_descriptor(
-        "capture rule: the distance (Euclidean in (x, v) on Pi2), >= 0; 0: "
+        "capture rule: the distance (Euclidean in (x, v) on Pi2; with model_file in the "
+        "2n coordinates X - X**), >= 0; 0: "
         f"{CAPTURE_RADIUS:g} sqrt(|delta_d|)", 0.0, FINITE, read_only=True))
     declare_reidentify(d)
     d("scene", "", string_descriptor(SCENE_PARAMETER_DOC, True))
