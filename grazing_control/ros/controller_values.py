@@ -283,10 +283,7 @@ def capture_from_values(values: dict, model, delay: float):
     (0: the documented CAPTURE_RADIUS sqrt(|Delta d|), docs/theory_capture.md), then
     Eq. 28 (latched). Stream mode only (the estimate's covariance says it is one);
     ParameterError naming the parameter, or the missing controlled orbit."""
-    radius = float(values["capture_radius"])
-    if not (math.isfinite(radius) and radius >= 0.0):
-        raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a finite "
-                             "capture_radius >= 0 (0: 5 sqrt(|delta_d|))")
+    radius = _capture_radius(values)
     if not values["capture"]:
         return None
     if values["pi2_source"] != "stream" or model is None:
@@ -300,8 +297,22 @@ def capture_from_values(values: dict, model, delay: float):
     except (ValueError, ArithmeticError, RuntimeError) as exc:
         raise ParameterError(f"capture=True is invalid here: no controlled 1/1 orbit of the "
                              f"gains at delta_d={model.delta_d!r} ({exc})") from None
+    return _capture_rule(target, model.delta_d, radius)
+
+
+def _capture_radius(values: dict) -> float:
+    """``capture_radius`` checked: finite and >= 0 (0: the default, 5 sqrt(|Delta d|))."""
+    radius = float(values.get("capture_radius", 0.0))
+    if not (math.isfinite(radius) and radius >= 0.0):
+        raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a finite "
+                             "capture_radius >= 0 (0: 5 sqrt(|delta_d|))")
+    return radius
+
+
+def _capture_rule(target, delta_d: float, radius: float) -> CaptureRule:
+    """The rule about ``target`` with ``radius`` (0: CAPTURE_RADIUS sqrt(|Delta d|))."""
     if radius == 0.0:
-        return CaptureRule.for_wall(target, model.delta_d, CAPTURE_RADIUS)
+        return CaptureRule.for_wall(target, delta_d, CAPTURE_RADIUS)
     return CaptureRule(target, radius)
 
 
@@ -314,10 +325,7 @@ def model_capture_from_values(values: dict, ndof: ModelController, delay: float,
     ``pulse`` (width, force limit[, actuator]) as :func:`pulse_from_values`; through an
     actuator the lag's orbit, :func:`grazing_control.dynamics.design.noise.controlled_orbit`),
     then k^T z^ (latched). Stream mode only; ParameterError naming the parameter."""
-    radius = float(values.get("capture_radius", 0.0))
-    if not (math.isfinite(radius) and radius >= 0.0):
-        raise ParameterError(f"capture_radius={radius!r} is invalid: valid range is a finite "
-                             "capture_radius >= 0 (0: 5 sqrt(|delta_d|))")
+    radius = _capture_radius(values)
     if not values.get("capture"):
         return None
     if values.get("pi2_source", "sample") != "stream" or not ndof.predicts:
@@ -340,9 +348,7 @@ def model_capture_from_values(values: dict, ndof: ModelController, delay: float,
     except (ValueError, ArithmeticError, RuntimeError) as exc:
         raise ParameterError(f"capture=True is invalid here: no controlled 1/1 orbit of the "
                              f"gains at delta_d={ndof.model.delta_d!r} ({exc})") from None
-    if radius == 0.0:
-        return CaptureRule.for_wall(target, ndof.model.delta_d, CAPTURE_RADIUS)
-    return CaptureRule(target, radius)
+    return _capture_rule(target, ndof.model.delta_d, radius)
 
 
 def actuation_delay_from_values(values: dict) -> float:
