@@ -23,7 +23,9 @@ reads them as (N, 2n) arrays X_k = (x_0 .. x_{n-1}, v_0 .. v_{n-1}). The model a
 gains come from the bag's parameter record (the simulator's ``model_file`` and
 ``delta_d``, the controller's ``gains``, ``enable_after``, ``saturation``,
 ``actuation_delay``); the model file must still be readable at its recorded path (else
-only the measured numbers are given, and the report says why).
+only the measured numbers are given, and the report says why). A rig scene names no
+model file; read by what acted (its commands off the rig's grid, :mod:`.rig_acts`) its
+model is the simulated rig's own (:func:`ndof_setup` with the rig).
 
 Per scene (:func:`summarize` over the whole state, then):
 
