@@ -77,7 +77,8 @@ def test_a_biased_n_dof_stream_scene_publishes_the_bias_the_core_estimates(tmp_p
     assert node[-1, col["mismatch"]] == 0.0
     if wall:
         got = node[:, [col["delta_d"], col["delta_d_se"]]]
-        assert np.allclose(got, core[:, 3:], rtol=1e-9, atol=1e-15), np.abs(got - core[:, 3:]).max()
+        assert np.allclose(got, core[:, 3:], rtol=1e-9, atol=1e-15), \
+            np.abs(got - core[:, 3:]).max()
         dd, se = node[-1, col["delta_d"]], node[-1, col["delta_d_se"]]
         assert abs(dd - model.delta_d) <= 3.0 * se and se < 1e-6, (dd, se)
     else:
