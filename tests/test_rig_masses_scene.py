@@ -177,5 +177,7 @@ def test_the_right_models_bag_analyses_as_before_rig_applied_was_read(scene, tmp
         before = module.analyze([res.bag_dir], tmp_path / "before", figures=False)
     assert "off the rig's" not in report["markdown"]
     assert report["markdown"] == before["markdown"]
+    check = report["bags"][0]["scenes"][0]["model_check"]
+    assert check["periods"] > 0 and check["max_departure"] < 1e-12, check
     for name in ("report.md", "report.json"):
         assert (tmp_path / "acts" / name).read_bytes() == (tmp_path / "before" / name).read_bytes()

@@ -674,10 +674,10 @@ def _scene_label(label, data, sd):
 def _ndof_bag(bag, data, label, out, tol, figures, rig=None, acts=None):
     """The report entry and markdown lines of an n-DOF bag (.analysis, a model file's scene): the model
     and gains from its parameter record; options for the 1-DOF model do not apply. A rig
-    scene of ``rig`` off its grid (``acts`` timed, :func:`_acts`): read by what acted,
-    the model the simulated rig's."""
+    scene of ``rig``: the model the simulated rig's (its model file names none); off its
+    grid (``acts`` timed, :func:`_acts`) read by what acted."""
     timed = bool(acts and acts["timed"])
-    setup = ndof_setup(data, rig if timed else None)
+    setup = ndof_setup(data, rig)
     entry = {**_bag_entry(bag, data, label, setup.notes),
              **({"rig_commands_off_grid": rig_acts_summary(acts)} if timed else {}),
              "setup": {"model_file": setup.model_file, "n": setup.n,
