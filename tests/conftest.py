@@ -12,17 +12,19 @@ workers. Every other test (the numerical core, bags written in-process, the comm
 without nodes) is shared out to whichever worker is free. The controller hands out the
 work in the order of the items (``--no-loadscope-reorder``; xdist's default puts the
 groups with most tests first, and the realtime group then came first): the groups first,
-then the single tests, which fill the workers up to about the same end, the realtime
-group last (:func:`_rank`; a 60-100 s group handed out late can keep one worker busy
-while the other waits with the realtime group). The tests marked ``realtime`` (their
-assertions hold only if the scene's answers meet wall-clock deadlines) form one more
-group, last in the queue, and each waits until every other worker has been idle for
-IDLE_SECONDS (at most REALTIME_WAIT): such a deadline is measured on a machine that runs
-one scene and nothing else of the suite (a CPU-bound test beside a realtime scene made
-its answers miss: 12 of 40 where 4 is the bound). A realtime scene whose assertions do
-not depend on meeting deadlines (one that misses by design, a refused start, a signal)
-is not marked. A module whose module-scoped scene is realtime marks the whole module
-(``pytestmark``), so that the scene is set up once.
+then the single tests, which fill the workers up to about the same end (:func:`_rank`).
+The tests marked ``realtime`` (their assertions hold only if the scene's answers meet
+wall-clock deadlines) are in the FIFO group (``scene:fifo``, :data:`FIFO_SCENE_MODULES`),
+which goes out first: a realtime scene runs its simulator and controller under
+SCHED_FIFO (ros/scene_nodes.py, as a rig scene does), so the other workers' CPU-bound
+tests do not delay its answers, and the group runs one such scene at a time (two at once
+delayed each other on the two cores). Before, each realtime test waited at the end of
+the suite until every other worker had been idle for 2 s: 50-65 s with one core mostly
+idle (a CPU-bound test beside a realtime scene under normal scheduling made its answers
+miss: 12 of 40 where 4 is the bound). A realtime scene whose assertions do not depend on
+meeting deadlines (one that misses by design, a refused start, a signal) is not marked,
+and runs with ``thread_priority`` 0 beside the rest. A module whose module-scoped scene
+is realtime marks the whole module (``pytestmark``), so that the scene is set up once.
 
 The groups are made here (:class:`GroupMender`). Found on 2026-11-28: with the pinned
 pytest 9.2 and pytest-xdist 3.8 the ``xdist_group`` marks were inert: xdist's worker
@@ -37,7 +39,6 @@ checks that a grouped test's node id carries its group.
 import os
 import signal
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -199,7 +200,8 @@ def pytest_configure(config):
     config.pluginmanager.register(GroupMender(), "grazing-group-mender")
     config.addinivalue_line(
         "markers", "realtime: a realtime scene whose assertions need its answers to meet "
-                   "wall-clock deadlines: run last, with the other worker idle (conftest.py)")
+                   "wall-clock deadlines: its nodes under SCHED_FIFO, in the FIFO group "
+                   "(conftest.py)")
 
 
 def is_realtime(item) -> bool:
@@ -222,13 +224,17 @@ def _shares_a_module_fixture(item) -> bool:
     return False
 
 
+#: The group of the scenes under SCHED_FIFO (rig scenes, realtime tests, the scheduling
+#: options' tests): one worker, one scene at a time.
+FIFO_GROUP = "scene:fifo"
+
+
 def xdist_group(item) -> str | None:
-    """The xdist group of a test: ``realtime``, ``scene:fifo`` (:data:`FIFO_SCENE_MODULES`),
-    ``scene:<module>``, ``shared:<module>`` (:func:`_shares_a_module_fixture`) or none."""
-    if is_realtime(item):
-        return "realtime"
-    if item.path.stem in FIFO_SCENE_MODULES:
-        return "scene:fifo"
+    """The xdist group of a test: :data:`FIFO_GROUP` (:data:`FIFO_SCENE_MODULES` and the
+    tests marked realtime), ``scene:<module>``, ``shared:<module>``
+    (:func:`_shares_a_module_fixture`) or none."""
+    if is_realtime(item) or item.path.stem in FIFO_SCENE_MODULES:
+        return FIFO_GROUP
     if item.path.stem in SCENE_MODULES:
         return f"scene:{item.path.stem}"
     if _shares_a_module_fixture(item):
@@ -237,20 +243,21 @@ def xdist_group(item) -> str | None:
 
 
 def _rank(item) -> int:
-    """The order in which the controller hands out the work: the groups first (a group
-    is one unit, up to ~100 s: handed out late, as test_stop_selection's was in
-    collection order, it can keep one worker busy while the other, done, holds the
-    realtime group waiting for it), then the single tests (they fill both workers up to
-    about the same end), the realtime group last."""
-    if is_realtime(item):
-        return 2
-    return 0 if xdist_group(item) is not None else 1
+    """The order in which the controller hands out the work: the FIFO group first (the
+    longest one worker runs alone, 100-200 s), then the other groups (a group is one
+    unit, up to ~100 s: handed out late, as test_stop_selection's was in collection
+    order, it kept one worker busy while the others were done), then the single tests
+    (they fill the workers up to about the same end)."""
+    group = xdist_group(item)
+    if group == FIFO_GROUP:
+        return 0
+    return 1 if group is not None else 2
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark each test with its xdist group (:func:`xdist_group`); the grouped tests
-    first, the realtime ones last (:func:`_rank`; collection order kept within each, so
-    that module-scoped scenes are set up once)."""
+    """Mark each test with its xdist group (:func:`xdist_group`); the FIFO group first,
+    then the other groups, then the single tests (:func:`_rank`; collection order kept
+    within each, so that module-scoped scenes are set up once)."""
     for item in items:
         group = xdist_group(item)
         if group is not None:
@@ -275,71 +282,3 @@ class GroupMender:
             group = xdist_group(item)
             if group is not None and not item.nodeid.endswith("@" + group):
                 item._id = coerce_node_id(f"{item.nodeid}@{group}")
-
-
-#: Seconds the other worker must have been idle before a realtime test starts, and the
-#: longest wait for it (then the test runs anyway: the wait orders, it never skips).
-IDLE_SECONDS, REALTIME_WAIT = 2.0, 600.0
-
-
-def _busy_file(config) -> Path | None:
-    """This worker's busy flag, in a folder shared by the workers of this run; None
-    without xdist."""
-    info = getattr(config, "workerinput", None)
-    if info is None:
-        return None
-    folder = Path(tempfile.gettempdir()) / f"grazing-suite-{info['testrunuid']}"
-    folder.mkdir(exist_ok=True)
-    return folder / info["workerid"]
-
-
-def _others_idle(flag: Path) -> bool:
-    now = time.time()
-    try:
-        others = list(flag.parent.iterdir())
-    except FileNotFoundError:             # a worker without tests ended, and took it
-        return True
-    for other in others:
-        if other.name == flag.name:
-            continue
-        try:
-            if other.read_text() == "busy" or now - other.stat().st_mtime < IDLE_SECONDS:
-                return False
-        except OSError:
-            continue
-    return True
-
-
-@pytest.hookimpl(wrapper=True)
-def pytest_runtest_protocol(item, nextitem):
-    """Flag this worker busy while a test runs; a realtime test first waits for the
-    other worker to be idle."""
-    flag = _busy_file(item.config)
-    if flag is None:
-        return (yield)
-    if is_realtime(item):
-        # flagged first: the folder is not empty, and a worker that ends removes only
-        # an empty one (pytest_sessionfinish; a worker without tests ended at once and
-        # removed it under the waiting one: an internal error of xdist with -m realtime,
-        # 2026-11-28); "idle" does not hold the other workers
-        flag.parent.mkdir(exist_ok=True)
-        flag.write_text("idle")
-        end = time.monotonic() + REALTIME_WAIT
-        while time.monotonic() < end and not _others_idle(flag):
-            time.sleep(0.2)
-    flag.write_text("busy")
-    try:
-        return (yield)
-    finally:
-        flag.write_text("idle")              # its mtime: when this worker became idle
-
-
-def pytest_sessionfinish(session):
-    """A worker removes its flag, the last one the run's folder."""
-    flag = _busy_file(session.config)
-    if flag is not None:
-        flag.unlink(missing_ok=True)
-        try:
-            flag.parent.rmdir()
-        except OSError:
-            pass

@@ -23,8 +23,8 @@ def test_the_scene_group_names_existing_modules():
 
 
 def test_the_realtime_tests_are_scene_tests():
-    """A test marked realtime waits for the other worker to be idle: it must be a scene
-    module's, and the marker must be in use."""
+    """A test marked realtime runs its nodes under SCHED_FIFO in the FIFO group: it must
+    be a scene module's, and the marker must be in use."""
     marked = {p.stem for p in HERE.glob("test_*.py")
               if p.stem != "test_suite_layout" and "pytest.mark.realtime" in p.read_text()}
     assert marked, "no test is marked realtime: the marker no longer matches the tests"
@@ -40,14 +40,45 @@ def test_every_module_that_starts_nodes_is_in_the_scene_group():
     assert starts <= conftest.SCENE_MODULES, starts - conftest.SCENE_MODULES
 
 
+#: A thread_priority of 1..99 given to a node, in a test's source.
+FIFO_PRIORITY = re.compile(r"thread_priority[\"']?\s*(:=|:|=)\s*[1-9]")
+#: A scene in realtime mode, in a test's source (launcher, grazing run).
+REALTIME_SCENE = re.compile(r"[\"']mode[\"']: [\"']realtime|mode=[\"']realtime|"
+                            r"[\"']--mode[\"'], [\"']realtime|mode:=realtime")
+
+
 def test_the_rig_scenes_share_one_worker():
     """A rig scene runs its simulator and controller under SCHED_FIFO, and so do the
     scheduling options' tests: every module that launches one (``rig=``) or sets a
-    thread_priority is in conftest.FIFO_SCENE_MODULES, one group, one worker."""
+    thread_priority of 1..99 is in conftest.FIFO_SCENE_MODULES, one group, one worker."""
     rig = {p.stem for p in HERE.glob("test_*.py") if p.stem != "test_suite_layout"
-           and re.search(r"run_rig_scene\(|\brig=str\(|thread_priority", p.read_text())}
+           and (re.search(r"run_rig_scene\(|\brig=str\(", p.read_text())
+                or FIFO_PRIORITY.search(p.read_text()) and STARTS_NODES.search(p.read_text()))}
     assert rig, "the pattern finds no module: it no longer matches the tests"
     assert rig <= conftest.FIFO_SCENE_MODULES <= conftest.SCENE_MODULES, rig
+
+
+#: Scene modules that name the realtime mode but start no realtime scene through
+#: scene_nodes (no default priority), and why.
+NO_REALTIME_SCENE = {
+    "test_contact_plant": "the realtime loop's settings in the core, no node",
+    "test_node_common": "a simulator started alone (launcher.node_command): no scene"}
+
+
+def test_a_realtime_scene_outside_the_fifo_group_is_told_not_to_use_it():
+    """A realtime scene runs its nodes under SCHED_FIFO unless told otherwise
+    (ros/scene_nodes.py): a scene module outside the FIFO group that starts one either
+    marks its tests realtime (they run in the FIFO group) or gives thread_priority 0
+    (misses by design, a refused start: beside the other scenes). Only a module's text
+    is read: a module with both kinds must say 0 where it starts the unmarked ones."""
+    modules = {p.stem: p.read_text() for p in HERE.glob("test_*.py")
+               if p.stem in conftest.SCENE_MODULES - conftest.FIFO_SCENE_MODULES
+               and p.stem not in NO_REALTIME_SCENE}
+    realtime = {m for m, text in modules.items() if REALTIME_SCENE.search(text)}
+    assert realtime, "the pattern finds no module: it no longer matches the tests"
+    told = {m for m in realtime if "pytest.mark.realtime" in modules[m]
+            or re.search(r"thread_priority[\"']?\s*(:=|:|=)\s*0\b", modules[m])}
+    assert realtime <= told, realtime - told
 
 
 def test_a_grouped_test_carries_its_group_in_its_node_id(request):
@@ -76,7 +107,7 @@ def test_the_tests_sharing_a_module_fixture_are_one_group_and_the_groups_come_fi
     """A test that uses a module-scoped fixture of its module is grouped with the
     module's other such tests (``shared:<module>``: the fixture computed on one worker,
     not on both); the items are in the order the controller hands them out: the groups,
-    then the single tests, the realtime ones last (conftest._rank)."""
+    the FIFO group first, then the other groups, then the single tests (conftest._rank)."""
     assert conftest.xdist_group(request.node) == "shared:test_suite_layout"
     ranks = [conftest._rank(i) for i in request.session.items]
     assert ranks == sorted(ranks), ranks

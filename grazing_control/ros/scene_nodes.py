@@ -101,11 +101,14 @@ def new_token() -> str:
 #: (docs/rig_scene.md, "Where the time went").
 RIG_STREAM_BLOCK = 2e-3
 RIG_BATCH_WINDOW = 0.02
-#: ... and the simulator and the controller under SCHED_FIFO (their thread_priority,
-#: ros/scheduling.py; where the process may not, a warning and the scene runs on): at
-#: load 11-15 on this 2-core machine 3 of 700 sections missed with it, 202-578 at load
-#: 7-10 without (docs/rig_scene.md, "Where the time went").
-RIG_THREAD_PRIORITY = 50
+#: A rig's or any realtime scene's simulator and controller run under SCHED_FIFO (their
+#: thread_priority, ros/scheduling.py; where the process may not, a warning and the
+#: scene runs on): a rig scene at load 11-15 on this 2-core machine missed 3 of 700
+#: sections with it, 202-578 at load 7-10 without (docs/rig_scene.md, "Where the time
+#: went"); a realtime scene at x1000 beside other work, answer latency p99 0.72 ms
+#: against 4.8 ms, T/200 2 misses of 1000 against 549 (docs/benchmarks.md, "the realtime
+#: numbers under SCHED_FIFO").
+REALTIME_THREAD_PRIORITY = 50
 
 
 def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_after=None,
@@ -134,7 +137,11 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       the recorder also recording the contract's topics (``rig_topics``); the
       simulator's stream in blocks of RIG_STREAM_BLOCK, the recorder's batch_window
       RIG_BATCH_WINDOW (the CPU they save, docs/rig_scene.md "Where the time went"),
-      both nodes' thread_priority RIG_THREAD_PRIORITY (SCHED_FIFO where allowed).
+      both nodes under SCHED_FIFO (below);
+    - a realtime scene's (a rig's, or ``mode`` realtime): the simulator and the
+      controller under SCHED_FIFO, thread_priority REALTIME_THREAD_PRIORITY unless
+      given (the controller's ``thread_priority`` 0 turns it off for both, the
+      simulator's own overrides its one).
     """
     sim = {"exit_when_done": True, "wait_for_controller": True,
            "wait_for_subscribers": 1 if bag is not None else 0,
@@ -157,7 +164,6 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
         controller.setdefault("rig_file", sim["rig_file"])
         sim["mode"] = "realtime" if mode is None else str(mode)
         sim["stream_block"] = RIG_STREAM_BLOCK
-        sim["thread_priority"] = controller.setdefault("thread_priority", RIG_THREAD_PRIORITY)
     delay = controller.get("actuation_delay", design_delay(controller_params))
     if delay is not None:               # the gains' design delay is the simulator's too
         sim["actuation_delay"] = delay
@@ -170,6 +176,9 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
             if _positive(value):                          # gain file's)
                 sim[key] = float(value)
     sim.update(sim_overrides or {})
+    if rig is not None or sim.get("mode") == "realtime":     # a scene about deadlines
+        sim.setdefault("thread_priority",
+                       controller.setdefault("thread_priority", REALTIME_THREAD_PRIORITY))
     for key in ("delta_d", "sensor_noise", "state_period",   # the controller's model of
                 "stream_message"):                           # the plant and its sensor
         if key in sim:
