@@ -12,7 +12,8 @@ docs/theory_capture.md, "Measured, n DOF".
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_ndof_capture.py
 
 ``--rig FILE`` (a rig of n masses, docs/rig.md): the same on the rig's dimensionless model,
-its design (the controller's: ``rig_boundary.masses_controller_values``, the default mu),
+its design (the controller's: ``rig_boundary.masses_controller_values``, the default mu
+or ``--mu``),
 delay, pulse and force limit, the scene's start X** (docs/theory_capture.md, "The two-mass
 beam after a late switch-on"): (1) the free motion's distance to z** from X** and its
 closest approach once it has left; (2) the clipped law's basin, 20 seeded directions per
@@ -131,7 +132,7 @@ def rig_study(a) -> None:
     from grazing_control.ros.rig_boundary import masses_controller_values
 
     rig = load_rig(a.rig)
-    model, v = rig.model(), masses_controller_values(rig, math.nan)
+    model, v = rig.model(), masses_controller_values(rig, a.mu)
     k, delay, width = np.array(v["gains"]), v["actuation_delay"], v["pulse_width"]
     limit = v["force_limit"] or math.inf
     target = orbit(model, k, delay=delay, width=width).state
@@ -188,6 +189,8 @@ def main(argv=None) -> None:
     ap.add_argument("--rig", default=None, help="a rig file of n masses (module docstring)")
     ap.add_argument("--radii", type=float, nargs="+", default=[0.02, 0.05, 0.1, 0.2, 0.5, 0.85])
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--mu", type=float, default=math.nan,
+                    help="with --rig: the design's mu (default: the controller's)")
     a = ap.parse_args(argv)
     if a.periods is None:
         a.periods = 2000 if a.rig is None else 300
