@@ -11,7 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.capture import CaptureRule, GainRamp, capture_time
+from grazing_control.dynamics.design.capture import (CaptureRule, GainRamp, capture_time,
+                                                      free_approach)
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.section_state import estimate_covariance
 from grazing_control.dynamics.design.noise import noise_covariance
@@ -62,6 +63,23 @@ def test_the_rule_keeps_its_closest_approach_and_says_once_when_it_has_waited_to
     assert rule.news(5, patience=3)[0] == "info" and "section 5" in rule.news(5)[1]
     assert rule(6, _est((1.0, 0.0))) == 1.0 and rule.news(6) is None
     assert rule.summary() == "captured_at=5"
+
+
+def test_the_forecast_warns_only_where_the_free_motion_leaves_and_stays_away():
+    """free_approach: ``left`` the first period beyond the radius, ``closest`` the least
+    distance over periods late..periods; a warning only where it left and stayed beyond
+    (a motion doubling away from z** from 0.01, radius 0.05: left at period 3); none
+    where it comes back (halving from 0.3), nor where it never leaves."""
+    fa = free_approach(lambda z: 2.0 * z, (0.0, 0.0), 0.05, start=(0.01, 0.0), late=5,
+                       periods=8)
+    assert (fa.left, fa.closest) == (3, 0.32)
+    assert "leaves the radius 0.05 of the controlled orbit at period 3 and comes no closer " \
+        "than 0.32 in periods 5-8" in fa.warning()
+    back = free_approach(lambda z: 0.5 * z, (0.0, 0.0), 0.05, start=(0.3, 0.0), late=5,
+                         periods=8)
+    assert back.left == 0 and back.closest < 0.05 and back.warning() is None
+    still = free_approach(lambda z: z, (0.0, 0.01), 0.05, late=5, periods=8)
+    assert still.left is None and still.warning() is None
 
 
 def test_the_ramp_rises_linearly_to_one():
@@ -185,6 +203,7 @@ def test_the_n_dof_controllers_rule_targets_the_designs_orbit():
     np.testing.assert_array_equal(rule.target, o.state)
     np.testing.assert_allclose(o.physical - o.state, np.append(c.x_ref, c.v_ref), atol=1e-12)
     assert rule.radius == pytest.approx(5.0 * math.sqrt(1e-3))
+    assert rule.forecast is None            # the chain's free motion comes back near z**
     assert model_capture_from_values({**on, "capture_radius": 0.2}, c, 1.0,
                                      (1.0, math.inf)).radius == 0.2
     assert model_capture_from_values({**on, "capture": False}, c, 1.0) is None
@@ -274,7 +293,8 @@ def test_the_two_mass_beam_is_captured_only_if_switched_on_before_its_free_motio
     motion leaves the radius at period 2 and, after period 10, stays at least 0.8 (16
     radii) from z** (a period-16 motion with one or two impacts per period). Switched on
     at period 1 the law captures; at period 100 (the scene's late switch-on) the law at once
-    ends far from z**, and the rule never switches on and says so after 100 sections.
+    ends far from z**, and the rule never switches on and says so after 100 sections; the
+    forecast (free_approach, what the controller logs at its start) says it beforehand.
     docs/theory_capture.md, "The two-mass beam after a late switch-on"."""
     from grazing_control.dynamics.maps.modal_map import ModalMap, pulse_step
     from grazing_control.dynamics.orbits.one_one import orbit
@@ -295,6 +315,8 @@ def test_the_two_mass_beam_is_captured_only_if_switched_on_before_its_free_motio
     dist = [float(np.linalg.norm(z - target)) for z in trail]
     assert dist[1] < rule.radius < dist[2]
     assert min(dist[10:]) > 0.8
+    forecast = free_approach(lambda z: free.step(z).state, target, rule.radius)
+    assert forecast.left == 2 and forecast.closest > 0.8 and "at period 2" in forecast.warning()
 
     def closed(z, periods, switch=None):
         for j in range(periods):

@@ -188,6 +188,8 @@ class ControllerNode(Node):
                 self.stream = model_stream_from_values(self._values(), self.ndof, self.pulse)
                 self.capture = model_capture_from_values(self._values(), self.ndof,
                                                          self.actuation_delay, self.pulse)
+                if self.capture is not None and self.capture.forecast:
+                    self.get_logger().warning(self.capture.forecast)
                 if self.stream is not None:     # the section times and the phase check
                     self.model = self.ndof.model
             else:

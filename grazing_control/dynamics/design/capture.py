@@ -25,6 +25,10 @@ Eq. 28 by it; :func:`grazing_control.dynamics.estimation.stream.simulate_stream`
     The factor rises linearly from 1 / N to 1 over the first N sections after
     ``start`` (N = 1: at once).
 
+:func:`free_approach` forecasts it from the model: where the free motion from X** leaves
+the radius and how close it comes again after CAPTURE_PATIENCE periods (a line to log
+where it does not come back, :meth:`FreeApproach.warning`).
+
 :func:`capture_time` measures a run: the first section from which the plant keeps one
 impact per period and stays within ``band`` of z** to the end of the run.
 """
@@ -32,12 +36,14 @@ impact per period and stays within ``band`` of z** to the end of the run.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from grazing_control.oscillator.params import ParameterError
 
-__all__ = ["CAPTURE_RADIUS", "CAPTURE_PATIENCE", "CaptureRule", "GainRamp", "capture_time"]
+__all__ = ["CAPTURE_RADIUS", "CAPTURE_PATIENCE", "CaptureRule", "GainRamp", "capture_time",
+           "FreeApproach", "free_approach"]
 
 #: The capture rule's radius in units of sqrt(|Delta d|) (docs/theory_capture.md).
 CAPTURE_RADIUS = 5.0
@@ -61,6 +67,7 @@ class CaptureRule:
         self.on_at = None
         self.closest = math.inf     # the least |z^ - z**| of an estimate it judged
         self.held = 0               # sections held back (factor 0)
+        self.forecast = None        # a line where the model's free motion stays away
 
     @classmethod
     def for_wall(cls, target, delta_d: float, scale: float = CAPTURE_RADIUS) -> "CaptureRule":
@@ -124,6 +131,47 @@ class GainRamp:
         if k < self.start:
             return 0.0
         return min(1.0, (k - self.start + 1) / self.sections)
+
+
+class FreeApproach(NamedTuple):
+    """The free motion from ``start`` against the radius about z** (:func:`free_approach`):
+    ``left`` the first period it is beyond the radius (None: never in the horizon),
+    ``closest`` its least distance to z** over periods ``late`` .. ``periods``."""
+
+    left: int | None
+    closest: float
+    late: int
+    periods: int
+    radius: float
+
+    def warning(self) -> str | None:
+        """A line for a log where the free motion leaves the radius and does not come
+        back within it over periods ``late`` .. ``periods`` (a late switch-on's rule then
+        waits in vain), else None."""
+        if self.left is None or self.closest <= self.radius:
+            return None
+        return (f"capture: the model's free motion from X** leaves the radius "
+                f"{self.radius:.4g} of the controlled orbit at period {self.left} and comes "
+                f"no closer than {self.closest:.4g} in periods {self.late}-{self.periods}: "
+                "switched on after it has left, the rule is not expected ever to switch on "
+                "(docs/theory_capture.md)")
+
+
+def free_approach(step, target, radius: float, start=None, late: int = CAPTURE_PATIENCE,
+                  periods: int = 3 * CAPTURE_PATIENCE) -> FreeApproach:
+    """Iterate the free map ``step(z) -> z`` (deviations from X**) ``periods`` periods
+    from ``start`` (None: X**, z = 0, the simulator's start) and measure |z - z**|
+    against ``radius`` (:class:`FreeApproach`). The rule's premise is that the free
+    motion returns near z** (docs/theory_capture.md); the two-mass beam's does not."""
+    target = np.asarray(target, dtype=float)
+    z = np.zeros_like(target) if start is None else np.array(start, dtype=float)
+    dist = [_distance(z - target)]
+    for _ in range(periods):
+        z = np.asarray(step(z), dtype=float)
+        dist.append(_distance(z - target))
+    beyond = [j for j, d in enumerate(dist) if not d <= radius]
+    return FreeApproach(beyond[0] if beyond else None, min(dist[late:]), late, periods,
+                        float(radius))
 
 
 def capture_time(truth, impacts_per_period, target, band: float) -> int | None:
