@@ -11,7 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.capture import CaptureRule, GainRamp, capture_time
+from grazing_control.dynamics.design.capture import (CaptureRule, GainRamp, capture_time,
+                                                      free_approach)
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.section_state import estimate_covariance
 from grazing_control.dynamics.design.noise import noise_covariance
@@ -37,6 +38,48 @@ def test_the_rule_switches_on_within_its_radius_and_stays_on():
     assert rule(3, _est((6e-3, 6e-3))) == 1.0 and rule.on_at == 3
     assert rule(4, _est((1.0, 0.0))) == 1.0              # latched
     assert CaptureRule.for_wall((0, 0), -4e-6, 5.0).radius == pytest.approx(1e-2)
+
+
+def test_the_rule_keeps_its_closest_approach_and_says_once_when_it_has_waited_too_long():
+    """While it holds back the rule keeps the least distance of an estimate it judged
+    (not a NaN one, nor one with an unknown covariance) and counts the sections held;
+    ``news`` warns once, at the ``patience``-th section held, naming the closest approach
+    and the radius; on switching on it says so at that section; ``summary`` is the
+    controller's summary field."""
+    rule = CaptureRule((0.0, 0.0), 1e-2)
+    assert rule.summary() == "captured_at=None capture_closest=inf capture_radius=0.01"
+    news = []
+    for k, dz in enumerate([(0.3, 0.0), (0.0, 0.2), (math.nan, 0.0), (0.25, 0.0)]):
+        assert rule(k, _est(dz)) == 0.0
+        news.append(rule.news(k, patience=3))
+    assert rule(4, _est((1e-3, 1e-3), np.full((2, 2), math.inf))) == 0.0
+    assert news[:2] == [None, None] and news[3] is None
+    level, line = news[2]
+    assert level == "warning" and "in 3 sections" in line and "no closer than 0.2 " in line \
+        and "radius 0.01)" in line
+    assert (rule.held, rule.closest) == (5, 0.2)
+    assert rule.summary() == "captured_at=None capture_closest=0.2 capture_radius=0.01"
+    assert rule(5, _est((0.0, 5e-3))) == 1.0 and rule.held == 5
+    assert rule.news(5, patience=3)[0] == "info" and "section 5" in rule.news(5)[1]
+    assert rule(6, _est((1.0, 0.0))) == 1.0 and rule.news(6) is None
+    assert rule.summary() == "captured_at=5"
+
+
+def test_the_forecast_warns_only_where_the_free_motion_leaves_and_stays_away():
+    """free_approach: ``left`` the first period beyond the radius, ``closest`` the least
+    distance over periods late..periods; a warning only where it left and stayed beyond
+    (a motion doubling away from z** from 0.01, radius 0.05: left at period 3); none
+    where it comes back (halving from 0.3), nor where it never leaves."""
+    fa = free_approach(lambda z: 2.0 * z, (0.0, 0.0), 0.05, start=(0.01, 0.0), late=5,
+                       periods=8)
+    assert (fa.left, fa.closest) == (3, 0.32)
+    assert "leaves the radius 0.05 of the controlled orbit at period 3 and comes no closer " \
+        "than 0.32 in periods 5-8" in fa.warning()
+    back = free_approach(lambda z: 0.5 * z, (0.0, 0.0), 0.05, start=(0.3, 0.0), late=5,
+                         periods=8)
+    assert back.left == 0 and back.closest < 0.05 and back.warning() is None
+    still = free_approach(lambda z: z, (0.0, 0.01), 0.05, late=5, periods=8)
+    assert still.left is None and still.warning() is None
 
 
 def test_the_ramp_rises_linearly_to_one():
@@ -160,6 +203,7 @@ def test_the_n_dof_controllers_rule_targets_the_designs_orbit():
     np.testing.assert_array_equal(rule.target, o.state)
     np.testing.assert_allclose(o.physical - o.state, np.append(c.x_ref, c.v_ref), atol=1e-12)
     assert rule.radius == pytest.approx(5.0 * math.sqrt(1e-3))
+    assert rule.forecast is None            # the chain's free motion comes back near z**
     assert model_capture_from_values({**on, "capture_radius": 0.2}, c, 1.0,
                                      (1.0, math.inf)).radius == 0.2
     assert model_capture_from_values({**on, "capture": False}, c, 1.0) is None
@@ -240,3 +284,49 @@ def test_an_n_dof_controller_holds_back_until_its_estimate_is_near_the_orbit():
     assert first == on_at
     assert all(answers[key] == 0.0 for key in keys[:on_at])
     assert all(answers[key] != 0.0 for key in keys[on_at:])
+
+
+def test_the_two_mass_beam_is_captured_only_if_switched_on_before_its_free_motion_leaves():
+    """Issue 32, the rig config/rigs/two_mass_beam.yaml in the core (its dimensionless model,
+    the controller's design and pulse, the 20 N limit: |Delta v| <= 0.316; Delta d = -1e-4,
+    radius 5 sqrt(|Delta d|) = 0.05, |z**| = 0.019): from the scene's start X** the free
+    motion leaves the radius at period 2 and, after period 10, stays at least 0.8 (16
+    radii) from z** (a period-16 motion with one or two impacts per period). Switched on
+    at period 1 the law captures; at period 100 (the scene's late switch-on) the law at once
+    ends far from z**, and the rule never switches on and says so after 100 sections; the
+    forecast (free_approach, what the controller logs at its start) says it beforehand.
+    docs/theory_capture.md, "The two-mass beam after a late switch-on"."""
+    from grazing_control.dynamics.maps.modal_map import ModalMap, pulse_step
+    from grazing_control.dynamics.orbits.one_one import orbit
+    from grazing_control.plant.rig import load_rig
+    from grazing_control.ros import launcher
+    from grazing_control.ros.rig_boundary import masses_controller_values
+
+    rig = load_rig(launcher.CONFIG_DIR / "rigs" / "two_mass_beam.yaml")
+    model, v = rig.model(), masses_controller_values(rig, math.nan)
+    k, delay, width = np.array(v["gains"]), v["actuation_delay"], v["pulse_width"]
+    target = orbit(model, k, delay=delay, width=width).state
+    rule = CaptureRule.for_wall(target, model.delta_d)
+    assert rule.radius == pytest.approx(0.05)
+    free, cm = ModalMap(model), ModalMap(model, k, delay, width)
+    trail = [np.zeros(4)]
+    for _ in range(400):
+        trail.append(free.step(trail[-1]).state)
+    dist = [float(np.linalg.norm(z - target)) for z in trail]
+    assert dist[1] < rule.radius < dist[2]
+    assert min(dist[10:]) > 0.8
+    forecast = free_approach(lambda z: free.step(z).state, target, rule.radius)
+    assert forecast.left == 2 and forecast.closest > 0.8 and "at period 2" in forecast.warning()
+
+    def closed(z, periods, switch=None):
+        for j in range(periods):
+            factor = 1.0 if switch is None else switch(j, _est(z, np.eye(4)))
+            z = pulse_step(cm.flow, z, factor * float(k @ z), start=cm.pulse_start,
+                           width=width, force_limit=v["force_limit"]).state
+        return float(np.linalg.norm(z - target))
+
+    assert closed(trail[1], 60) < 1e-9
+    assert closed(trail[100], 100) > 0.5
+    assert closed(trail[100], 100, rule) > 0.5 and rule.on_at is None
+    assert rule.held == 100 and rule.closest > 0.8
+    assert rule.news(99)[0] == "warning"

@@ -35,6 +35,37 @@ def test_levels_and_the_merged_summary():
     assert [(kv.key, kv.value) for kv in msg.values] == [("x", "0.123457"), ("n", "3")]
 
 
+def test_the_capture_rule_warns_once_it_has_held_back_its_patience():
+    """controller_status.diagnose_capture: where it switched on; while held back the
+    closest approach with the radius and the sections held, OK until CAPTURE_PATIENCE
+    sections, then WARN naming the closest approach (docs/theory_capture.md)."""
+    from types import SimpleNamespace
+
+    from grazing_control.dynamics.design.capture import CAPTURE_PATIENCE, CaptureRule
+    from grazing_control.ros.controller_status import diagnose_capture
+
+    def status(rule):
+        s = DiagnosticStatusWrapper("c", "hw")
+        s.summary(OK, "controlling")
+        diagnose_capture(rule, s)
+        m = s.to_msg()
+        return m.level, m.message, {kv.key: kv.value for kv in m.values}
+
+    rule = CaptureRule((0.0, 0.0), 0.05)
+    assert status(rule) == (OK, "controlling", {"captured at section": "not yet"})
+    far = SimpleNamespace(z=(0.9, 0.0), cov=[[1.0, 0.0], [0.0, 1.0]])
+    for k in range(CAPTURE_PATIENCE - 1):
+        rule(k, far)
+    level, _, values = status(rule)
+    assert level == OK and values["capture closest approach"] == \
+        f"0.9 (radius 0.05, {CAPTURE_PATIENCE - 1} sections held)"
+    rule(CAPTURE_PATIENCE, far)
+    level, message, _ = status(rule)
+    assert level == WARN and "no closer than 0.9 to the orbit in 100 sections" in message
+    rule(CAPTURE_PATIENCE + 1, SimpleNamespace(z=(0.01, 0.0), cov=far.cov))
+    assert status(rule) == (OK, "controlling", {"captured at section": "101"})
+
+
 def test_a_failing_task_is_an_error_status_not_a_crash():
     ctx = Context()
     rclpy.init(context=ctx, domain_id=new_domain())

@@ -188,6 +188,8 @@ class ControllerNode(Node):
                 self.stream = model_stream_from_values(self._values(), self.ndof, self.pulse)
                 self.capture = model_capture_from_values(self._values(), self.ndof,
                                                          self.actuation_delay, self.pulse)
+                if self.capture is not None and self.capture.forecast:
+                    self.get_logger().warning(self.capture.forecast)
                 if self.stream is not None:     # the section times and the phase check
                     self.model = self.ndof.model
             else:
@@ -599,15 +601,13 @@ class ControllerNode(Node):
     def _capture_factor(self, k: int, est) -> float:
         """1, or 0 while the capture rule holds the correction back (only once the
         control is on: the rule latches on the first controlled section within its
-        radius; logged)."""
+        radius; logged, and a warning once it has held back CAPTURE_PATIENCE sections)."""
         if self.capture is None or not self.law.enabled:
             return 1.0
-        captured = self.capture.on_at is not None
         factor = self.capture(k, est)
-        if not captured and factor:
-            self.get_logger().info(
-                f"capture: the estimate is within {self.capture.radius:.4g} of the "
-                f"controlled orbit at section {k}: the correction from here on")
+        news = self.capture.news(k)
+        if news is not None:
+            getattr(self.get_logger(), news[0])(news[1])
         return factor
 
     def _watch(self, k: int, key: tuple) -> None:
@@ -786,7 +786,7 @@ class ControllerNode(Node):
             + ("" if not self.watching else
                f" mismatch_sections={self.mismatches} first_mismatch={self.first_mismatch}"
                f" bias={self.stream.bias!r} delta_d={self.stream.delta_d!r}")
-            + ("" if self.capture is None else f" captured_at={self.capture.on_at}")
+            + ("" if self.capture is None else f" {self.capture.summary()}")
             + ("" if self.reid is None else self.reid.summary())
             + ("" if self.rig_side is None else self.rig_side.summary()))
 

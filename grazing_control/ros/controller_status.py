@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 
+from grazing_control.dynamics.design.capture import CAPTURE_PATIENCE
+
 from .diagnostics import ERROR, OK, WARN
 from .model_watch import WATCH_FIELDS, describe_verdict, watch_row, watch_status
 
@@ -36,8 +38,7 @@ def diagnose(node, stat):
     if node.watching:
         diagnose_watch(node, stat)
     if node.capture is not None:
-        stat.add("captured at section", "not yet" if node.capture.on_at is None
-                 else node.capture.on_at)
+        diagnose_capture(node.capture, stat)
     if node.reid is not None:
         node.reid.diagnose(stat)
     if refused > last_refused:
@@ -48,6 +49,20 @@ def diagnose(node, stat):
     elif last_answered and node.answered == last_answered:
         stat.merge_summary(WARN, "no sample answered in the last period")
     return stat
+
+def diagnose_capture(rule, stat) -> None:
+    """The capture rule: where it switched on, or while it holds back the closest
+    approach of the estimate; WARN once it has held CAPTURE_PATIENCE sections without
+    the estimate coming within its radius (docs/theory_capture.md)."""
+    stat.add("captured at section", "not yet" if rule.on_at is None else rule.on_at)
+    if rule.on_at is None and rule.held:
+        stat.add("capture closest approach", f"{rule.closest:.4g} (radius {rule.radius:.4g},"
+                                             f" {rule.held} sections held)")
+        if rule.held >= CAPTURE_PATIENCE:
+            stat.merge_summary(WARN, f"not captured: the estimate came no closer than "
+                                     f"{rule.closest:.4g} to the orbit in {rule.held} "
+                                     f"sections (radius {rule.radius:.4g})")
+
 
 def diagnose_watch(node, stat) -> None:
     """The augmented filter's estimates and the consistency verdict: ERROR while the

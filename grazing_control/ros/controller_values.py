@@ -324,7 +324,9 @@ def model_capture_from_values(values: dict, ndof: ModelController, delay: float,
     controlled 1/1 orbit's Pi2 deviation z** of the design (gains k, actuation ``delay``,
     ``pulse`` (width, force limit[, actuator]) as :func:`pulse_from_values`; through an
     actuator the lag's orbit, :func:`grazing_control.dynamics.design.noise.controlled_orbit`),
-    then k^T z^ (latched). Stream mode only; ParameterError naming the parameter."""
+    then k^T z^ (latched). Stream mode only; ParameterError naming the parameter. The
+    rule's ``forecast``: a warning where the model's free motion from X** leaves the radius
+    and does not come back (:func:`_free_forecast`), else None."""
     radius = _capture_radius(values)
     if not values.get("capture"):
         return None
@@ -348,7 +350,22 @@ def model_capture_from_values(values: dict, ndof: ModelController, delay: float,
     except (ValueError, ArithmeticError, RuntimeError) as exc:
         raise ParameterError(f"capture=True is invalid here: no controlled 1/1 orbit of the "
                              f"gains at delta_d={ndof.model.delta_d!r} ({exc})") from None
-    return _capture_rule(target, ndof.model.delta_d, radius)
+    rule = _capture_rule(target, ndof.model.delta_d, radius)
+    rule.forecast = _free_forecast(ndof.model, rule)
+    return rule
+
+
+def _free_forecast(model, rule) -> str | None:
+    """The warning of :func:`~grazing_control.dynamics.design.capture.free_approach` for
+    the model's free motion from X** (None where it comes back, or cannot be flowed)."""
+    from grazing_control.dynamics.design.capture import free_approach
+    from grazing_control.dynamics.maps.modal_map import ModalMap
+
+    free = ModalMap(model)
+    try:
+        return free_approach(lambda z: free.step(z).state, rule.target, rule.radius).warning()
+    except (ValueError, ArithmeticError, RuntimeError):
+        return None
 
 
 def actuation_delay_from_values(values: dict) -> float:
