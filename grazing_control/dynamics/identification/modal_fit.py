@@ -261,8 +261,12 @@ def _arx_eigenvalues(rec, arcs, phase, n):
     return Om, zeta
 
 
-def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0.0):
+def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0.0,
+                  modes=None):
     """(g, start times, modal states (K, 2n)) to start the fit from (module docstring);
+    ``modes``: (Omega, zeta) of the n modes to start from instead of the ARX guess (a
+    model's, :func:`.modal.modal_of`: the refit in the loop starts from the running
+    model, docs/theory_reidentification.md);
     ``actuator``: the corrections are the input's commands (:class:`ModalProblem`), each
     ``offset`` after its correction's time: the samples under their force are left out
     of the arcs' linear fits, the jumps read as the commands' equivalent kicks
@@ -274,7 +278,10 @@ def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0
         under = np.zeros(rec.t.size, bool)
         under[acting.rows[rec.t[acting.rows] < end]] = True
         arcs = dataclasses.replace(arcs, sample_arc=np.where(under, -1, arcs.sample_arc))
-    Om, zeta = _arx_eigenvalues(rec, arcs, phase, n)
+    if modes is None:
+        Om, zeta = _arx_eigenvalues(rec, arcs, phase, n)
+    else:
+        Om, zeta = (np.array(a, dtype=float).reshape(n) for a in modes)
     sig, w = rates(Om, zeta)
     om, tau0 = phase.omega, phase.tau0
     K = arcs.count
@@ -431,8 +438,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
                    impact_velocities: bool = True, max_arcs: int | None = 100,
                    max_nfev: int = 200, coincidence: float = 1.5e-9,
                    shrink: bool = False, width: float = 0.0, time_constant: float = 0.0,
-                   latency: float = 0.0, pulse_offset: float | None = None
-                   ) -> ModalIdentification:
+                   latency: float = 0.0, pulse_offset: float | None = None,
+                   modes=None) -> ModalIdentification:
     """Fit the modal parameters of an n-DOF model to a recording of its wall coordinate
     (module docstring). ``rec``'s impacts must be recorded (their times start the fit);
     ``correction_dv``: the kick of each of ``rec.corrections`` (on the wall coordinate if
@@ -443,7 +450,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
     (default -width / 2: centred there; the plant's ``pulse_width``) through the
     first-order actuator (tau_a ``time_constant``, ``latency`` L; the bag's parameter
     record): the force is the fit's known input (:mod:`.force_input`), every sample kept.
-    A kick (both 0) acts L after its time.
+    A kick (both 0) acts L after its time. ``modes``: (Omega, zeta) of the modes to
+    start from (:func:`initial_modal`; None: the ARX guess).
 
     Raises IdentificationError on bad input (no phase reference, no or too few impacts,
     too few samples, no initial guess, a Jacobian beyond JACOBIAN_BYTES).
@@ -452,7 +460,7 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
         try:
             return _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities,
                                    max_arcs, max_nfev, coincidence,
-                                   (width, time_constant, latency, pulse_offset))
+                                   (width, time_constant, latency, pulse_offset), modes)
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -460,7 +468,7 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
 
 
 def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_arcs,
-                    max_nfev, coincidence, actuation=(0.0, 0.0, 0.0, None)
+                    max_nfev, coincidence, actuation=(0.0, 0.0, 0.0, None), modes=None
                     ) -> ModalIdentification:
     if not (isinstance(n, (int, np.integer)) and n >= 1):
         raise IdentificationError(f"n={n!r} is invalid: valid is an integer >= 1")
@@ -504,7 +512,8 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
-    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, actuator, offset)
+    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, actuator, offset,
+                               modes)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = interior(lo, hi)
     p = np.clip(prob.pack(g0, S0, a0), inner_lo, inner_hi)
