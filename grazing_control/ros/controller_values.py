@@ -521,7 +521,7 @@ def model_stream_from_values(values: dict, ndof: ModelController,
         raise ParameterError(f"impact_source={values['impact_source']!r} is invalid with "
                              "model_file: valid is stream (the n-DOF model filter finds the "
                              "impacts in its exact motion)")
-    for name in ("estimate_bias", "track_delta_d", "reidentify"):
+    for name in ("estimate_bias", "track_delta_d"):     # reidentify: ros/reidentify.py
         if values.get(name):
             raise ParameterError(f"{name}=True is invalid with model_file: valid is false "
                                  "(not built for n-DOF)")
