@@ -19,7 +19,8 @@ import math
 import numpy as np
 import pytest
 
-from grazing_control.dynamics.design.family import evaluate_design, family_mu
+from grazing_control.dynamics.design.family import (Actuation, evaluate_design, family_mu,
+                                                    pulse_design)
 from grazing_control.dynamics.estimation.motion import trajectory
 from grazing_control.dynamics.estimation.reidentification import (
     MIN_PERIODS, ReidentificationError, StreamRecord, VectorGains, plan_switch, redesign,
@@ -46,13 +47,17 @@ class Loop:
     """The closed loop on the stream of x_0: the exact plant, the controller's model
     filter and k^T z^ acting DELAY after each section, feeding a StreamRecord as the
     node does (ros/reidentify.py: the samples with the phase reference omega t, each
-    section's 2n-state estimate X** + z^ and its kick)."""
+    section's 2n-state estimate X** + z^ and its kick); ``width`` > 0: each correction
+    the force pulse of that width centred DELAY after its section (plant and filter)."""
 
-    def __init__(self, model, gains, seed: int = 3, record: StreamRecord | None = None):
+    def __init__(self, model, gains, seed: int = 3, record: StreamRecord | None = None,
+                 width: float = 0.0):
         self.rng = np.random.default_rng(seed)
         self.flow = NdofFlow.of(TRUE)
         self.h = TRUE.period / RATE
-        self.est = StreamEstimator(model, "model", SIGMA, "stream", self.h, coordinate=0)
+        self.width = width
+        self.est = StreamEstimator(model, "model", SIGMA, "stream", self.h, coordinate=0,
+                                   pulse_width=width)
         self.gains, self.record = np.asarray(gains, float), record
         self.z = np.zeros(2 * TRUE.n)
         self.k = 0
@@ -85,7 +90,8 @@ class Loop:
                 self.record.add_section(k, X, dv, k * T + DELAY, e.source == "model")
             j = np.arange(math.floor(k * RATE + 1e-9) + 1, math.floor((k + 1) * RATE + 1e-9) + 1)
             s = j * self.h - k * T
-            dev, _jac, self.z, _m, imps = trajectory(TRUE, self.z, s, dv, DELAY)
+            dev, _jac, self.z, _m, imps = trajectory(TRUE, self.z, s, dv, DELAY,
+                                                     width=self.width)
             self.impacts.append(len(imps))
             xp = (self.flow.amplitudes[0] * np.exp(1j * (self.flow.tau2 + TRUE.omega * s))).real
             x = xp + dev[:, 0] + self.rng.normal(0.0, SIGMA, s.size)
@@ -192,6 +198,31 @@ def test_after_the_switch_the_loop_holds_the_true_designs_orbit_closer(scene):
     assert distance[True] < 0.5 * distance[False], distance
     print(f"mean distance from the true orbit: kept {distance[False]:.2e}, "
           f"switched {distance[True]:.2e}")
+
+
+def test_a_pulsed_design_is_refitted_with_its_pulse_and_redesigned_for_it():
+    """The correction as a force pulse of width 1 centred 1.0 after the section (the
+    rig's, docs/theory_ndof.md §15; the design pulse_design's): the fit takes the pulses
+    as the known input (identify_modal's width), the redesign k(mu) is the pulse's
+    (Actuation), admissible on the true model with the pulse; r, Delta d and every
+    zeta_k within 3 standard errors (measured: within 1)."""
+    act = Actuation(DELAY, 1.0)
+    k = pulse_design(WRONG, MU, DELAY, 1.0).gains
+    gains = VectorGains.of(WRONG, k, act)
+    loop = Loop(WRONG, k, record=StreamRecord(TRUE.period, PERIODS), width=1.0)
+    loop.run(40)
+    assert loop.impacts[-20:] == [1] * 20 and loop.est.resets == 0
+    plan = plan_switch(loop.record.snapshot(), WRONG, gains, sigma=SIGMA)
+    assert plan.error is None, plan.error
+    m, se, truth = plan.refit.modal, plan.refit.modal_stderr, modal_of(TRUE)
+    for j in range(TRUE.n):
+        assert abs(m.damping_ratio[j] - truth.damping_ratio[j]) < 3 * se[f"damping_ratio_{j}"]
+    assert abs(m.r - TRUE.r) < 3 * se["r"]
+    assert abs(m.delta_d - TRUE.delta_d) < 3 * se["delta_d"]
+    assert plan.gains.actuation is act
+    np.testing.assert_allclose(plan.gains.k, pulse_design(plan.refit.model, MU, DELAY,
+                                                          1.0).gains, rtol=0, atol=1e-12)
+    assert evaluate_design(TRUE, family_mu(TRUE, plan.gains.k, act), act).admissible
 
 
 def test_the_switch_keeps_the_absolute_state_of_the_n_dof_filter():
