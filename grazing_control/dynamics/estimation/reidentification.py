@@ -70,8 +70,8 @@ from grazing_control.oscillator.ndof.model import NdofModel
 CONDITIONS = ("combined", "impacting", "non-impacting")
 
 __all__ = ["REASONS", "MIN_PERIODS", "REFIT_PERIODS", "ReidentificationError", "StreamRecord",
-           "StreamWindow", "Refit", "SwitchPlan", "VectorGains", "model_from_fit", "refit", "redesign", "plan_switch",
-           "switch_estimator", "Reidentifier"]
+           "StreamWindow", "Refit", "SwitchPlan", "VectorGains", "model_from_fit", "refit",
+           "redesign", "plan_switch", "switch_estimator", "Reidentifier"]
 
 #: The named failures (ReidentificationError.reason); the loop keeps its state on each.
 REASONS = ("too_few_periods", "no_impacts", "fit_failed", "not_identified",
