@@ -24,7 +24,7 @@ from grazing_control.dynamics.design.family import (Actuation, evaluate_design, 
 from grazing_control.dynamics.estimation.motion import trajectory
 from grazing_control.dynamics.estimation.reidentification import (
     MIN_PERIODS, ReidentificationError, StreamRecord, VectorGains, plan_switch, redesign,
-    switch_estimator)
+    refit, switch_estimator)
 from grazing_control.dynamics.estimation.section_state import FilterState
 from grazing_control.dynamics.estimation.stream import StreamEstimator
 from grazing_control.dynamics.identification.modal import modal_of
@@ -223,6 +223,17 @@ def test_a_pulsed_design_is_refitted_with_its_pulse_and_redesigned_for_it():
     np.testing.assert_allclose(plan.gains.k, pulse_design(plan.refit.model, MU, DELAY,
                                                           1.0).gains, rtol=0, atol=1e-12)
     assert evaluate_design(TRUE, family_mu(TRUE, plan.gains.k, act), act).admissible
+
+
+def test_a_refit_beyond_its_time_budget_is_not_identified(scene):
+    """The n-DOF fit honours the refit's wall-clock budget (REFIT_SECONDS; here 0 s): the
+    solver stops, the refit is refused as not_identified naming the budget."""
+    loop, gains, _plan = scene
+    window = loop.record.snapshot()
+    with pytest.raises(ReidentificationError, match=r"did not end within 0 s") as err:
+        refit(window.recording(WRONG, gains.delay), WRONG, kicks=window.kick_sizes(),
+              actuation=gains.actuation, seconds=0.0)
+    assert err.value.reason == "not_identified"
 
 
 def test_the_switch_keeps_the_absolute_state_of_the_n_dof_filter():

@@ -458,13 +458,14 @@ def _realised(ident, running: NdofModel) -> tuple:
 
 
 def _refit_ndof(record, running: NdofModel, kicks, actuation, max_nfev: int,
-                periods, sigma) -> Refit:
+                periods, sigma, seconds) -> Refit:
     """:func:`refit` of an n-DOF model (module docstring): the modal fit of the wall
     coordinate from the running model's modes, the impact times of ``record`` as its
     start, ``kicks`` the corrections' sizes on the actuated coordinate as a kick or
     the ``actuation``'s pulse; the checks and reasons of the 1-DOF refit, over every
     mode's damping ratio and r."""
     from grazing_control.dynamics.identification import IdentificationError
+    from grazing_control.dynamics.identification.fit import FitTimedOut
     from grazing_control.dynamics.identification.modal import modal_of
     from grazing_control.dynamics.identification.modal_fit import identify_modal
 
@@ -486,7 +487,11 @@ def _refit_ndof(record, running: NdofModel, kicks, actuation, max_nfev: int,
         ident = identify_modal(record, running.n, correction_dv=kicks,
                                kick_on_wall=running.i_a == running.i_w, max_arcs=None,
                                max_nfev=max_nfev, modes=(own.natural_frequency,
-                                                         own.damping_ratio), **act)
+                                                         own.damping_ratio),
+                               deadline=time.monotonic() + seconds, **act)
+    except FitTimedOut as exc:
+        raise ReidentificationError("not_identified", f"the refit did not end within "
+                                    f"{seconds:g} s: {exc}") from None
     except IdentificationError as exc:
         reason = "no_impacts" if str(exc).startswith("impacts") else "fit_failed"
         raise ReidentificationError(reason, f"the refit failed: {exc}") from None
@@ -526,12 +531,11 @@ def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
 
     An n-DOF ``running`` model (:func:`_refit_ndof`): ``kicks`` the sizes of
     ``record``'s corrections, ``actuation`` how they act (:class:`VectorGains`); the
-    impact times must be in ``record`` (the fit starts from them; ``no_impacts``), the
-    modal fit has no wall-clock budget (``seconds`` is not used: measured CPU on 20
-    periods in docs/theory_reidentification.md).
+    impact times must be in ``record`` (the fit starts from them; ``no_impacts``).
     """
     if isinstance(running, NdofModel):
-        return _refit_ndof(record, running, kicks, actuation, max_nfev, periods, sigma)
+        return _refit_ndof(record, running, kicks, actuation, max_nfev, periods, sigma,
+                           seconds)
     # the fit's solver (scipy.optimize) is imported here, in the worker: a node that
     # never refits does not load it (tests/test_node_common.py)
     from grazing_control.dynamics.identification import IdentificationError, identify
