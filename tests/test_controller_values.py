@@ -169,6 +169,40 @@ def test_the_n_dof_stream_estimator_refuses_what_it_does_not_do(values, text):
     assert model_stream_from_values({"pi2_source": "sample"}, c) is None
 
 
+@pytest.mark.parametrize("values, text", [
+    ({"consistency_window": -1}, "consistency_window=-1 is invalid: valid range is an "
+                                 "integer >= 0 periods"),
+    ({"consistency_window": 5, "false_alarm": 0.7}, "false_alarm=0.7 is invalid: valid range "
+                                                     "is 0 < false_alarm < 0.5"),
+    ({"track_delta_d": True, "wall_noise": -1.0}, "wall_noise=-1.0 is invalid: valid range "
+                                                   "is a finite wall_noise >= 0"),
+    ({"estimate_bias": True, "bias_std": 0.0}, "bias_std=0.0 is invalid: valid range is a "
+                                               "finite bias_std > 0"),
+    ({"estimate_bias": True, "pi2_source": "sample"},
+     "estimate_bias=True is invalid with pi2_source=sample estimator=model: valid only "
+     "with pi2_source=stream")])
+def test_the_n_dof_model_watch_is_built_and_its_bad_values_name_the_range(values, text):
+    """estimate_bias, track_delta_d and consistency_window with model_file (issue 32; were
+    refused as 'not built for n-DOF'): the augmented filter over the model file, reading
+    sensor_coordinate, with the watch's values; a bad value is refused naming the
+    parameter and its valid range, in sample mode as in 1-DOF."""
+    from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
+    from grazing_control.ros.controller_values import model_stream_from_values
+
+    base = {"pi2_source": "stream", "estimator": "model", "sensor_noise": 1e-4,
+            "delta_d": -1e-3, "state_period": 0.1}
+    c = model_controller_from_values({"delta_d": -1e-3}, SCENE, K.tolist())
+    with pytest.raises(ParameterError, match=text):
+        model_stream_from_values({**base, **values}, c)
+    est = model_stream_from_values({**base, "estimate_bias": True, "wall_noise": 2e-8,
+                                    "sensor_coordinate": 1}, c)
+    assert isinstance(est, AugmentedStreamEstimator) and est.coordinate == 1
+    assert est.use_bias and not est.use_wall and est.wall_noise == 2e-8
+    est = model_stream_from_values({**base, "consistency_window": 10}, c)
+    assert isinstance(est, AugmentedStreamEstimator) and not (est.use_bias or est.use_wall)
+    assert type(model_stream_from_values(base, c)) is not AugmentedStreamEstimator
+
+
 def test_the_designs_parameter_file_is_accepted(tmp_path):
     import yaml
 

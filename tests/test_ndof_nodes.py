@@ -358,7 +358,8 @@ STREAM_DD, STREAM_MU, STREAM_DELAY, SIGMA, RATE = -1e-3, -0.22, 1.0, 1e-4, 200
 
 def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int = 7,
                  coordinate: int = 0, timeout: float = 200, width: float = 0.0,
-                 chain=CHAIN, mu: float = STREAM_MU, actuator: dict | None = None, **sim):
+                 chain=CHAIN, mu: float = STREAM_MU, actuator: dict | None = None,
+                 controller: dict | None = None, **sim):
     """A 2-DOF chain scene through the nodes with the stream estimator (issue 32):
     position-only sensor of every coordinate (sigma 1e-4, T/200, seeded), the controller's
     model filter over the exact n-DOF map reading ``coordinate``, the delay-aware design
@@ -366,8 +367,8 @@ def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int =
     > 0 the correction is the force pulse of that width centred 1.0 after the sample and
     the design the pulse's (pulse_design; pulse_width in the gains file, which the
     launcher gives the simulator); ``chain`` another model file, ``mu`` its design's;
-    ``actuator`` (actuator_bandwidth, actuator_latency) given to both nodes.
-    Returns (RunResult, bag, model, design)."""
+    ``actuator`` (actuator_bandwidth, actuator_latency) given to both nodes, ``controller``
+    more of the controller's parameters. Returns (RunResult, bag, model, design)."""
     model = dataclasses.replace(load_model(chain), delta_d=STREAM_DD)
     design = pulse_design(model, mu, STREAM_DELAY, width)
     assert design.admissible
@@ -382,7 +383,7 @@ def stream_scene(tmp, periods: int, on: int, mode: str = "lockstep", seed: int =
                                       "sensor_seed": seed, **(actuator or {}), **sim},
                        controller_overrides={"pi2_source": "stream", "estimator": "model",
                                              "sensor_coordinate": coordinate,
-                                             **(actuator or {})})
+                                             **(actuator or {}), **(controller or {})})
     return res, bag, model, design
 
 

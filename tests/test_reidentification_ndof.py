@@ -250,6 +250,29 @@ def test_the_switch_keeps_the_absolute_state_of_the_n_dof_filter():
     assert est.filter.cov is cov and est.filter.periods == 5
 
 
+def test_the_augmented_n_dof_filter_moves_its_state_and_takes_the_new_wall():
+    """The model watch's filter over the model file (E12): its 2n-deviation moves as the
+    plain filter's, its Delta d restarts at the new model's with the refit's standard
+    error (the covariance row of Delta d after z and the bias), its bias is kept."""
+    from grazing_control.dynamics.estimation.augmented import (AugmentedState,
+                                                               AugmentedStreamEstimator)
+
+    est = AugmentedStreamEstimator(WRONG, SIGMA, bias=True, wall=True, coordinate=0)
+    z = (1e-4, -2e-4, 3e-4, 5e-5)
+    est.params = (3e-5, WRONG.delta_d)
+    est.state = AugmentedState(z, 3e-5, WRONG.delta_d, np.eye(6) * 1e-8, 4)
+    new = dataclasses.replace(TRUE, delta_d=-1.01e-3)
+    a, b = NdofFlow.of(WRONG), NdofFlow.of(new)
+    switch_estimator(est, new, wall_std=2e-6)
+    assert est.p is new and est.identified is new and est.flow.model is new
+    assert est.delta_d == new.delta_d and est.bias == 3e-5
+    np.testing.assert_allclose(b.particular(b.tau2) + np.array(est.state.z),
+                               a.particular(a.tau2) + np.array(z), rtol=0, atol=1e-15)
+    assert est.state.delta_d == new.delta_d and est.state.cov[5, 5] == pytest.approx(4e-12)
+    assert est.state.cov[4, 4] == 1e-8 and est.state.cov[5, 4] == 0.0
+    assert est.params_cov[1, 1] == pytest.approx(4e-12)
+
+
 def test_a_mu_without_an_admissible_design_is_refused_by_name():
     """mu = 1.5 (|mu| >= 1: the non-impacting motion unstable) on the true model:
     no_admissible_design; the impacting conditions alone may hold there."""

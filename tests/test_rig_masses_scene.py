@@ -161,3 +161,23 @@ def test_the_replay_through_mock_hardware_gives_the_same_pulses_bit_for_bit(scen
     assert (same["identical"], same["differing"], same["missing"], same["extra"]) == (
         recorded, 0, 0, 0), same
     assert same["controller"]["applied_after_use"] == "0", same["controller"]
+
+
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
+def test_the_right_models_bag_analyses_as_before_rig_applied_was_read(scene, tmp_path):
+    """Its commands are on the rig's grid: grazing analyze's report (report.md and
+    report.json) is byte for byte the one without rig/applied read (recordings/
+    rig_acts.py leaves the scene as it is)."""
+    from grazing_control.recordings import analyze as module
+
+    _rig, res, _m = scene
+    report = module.analyze([res.bag_dir], tmp_path / "acts", figures=False)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(module, "_acts", lambda bag, data, rig: None)
+        before = module.analyze([res.bag_dir], tmp_path / "before", figures=False)
+    assert "off the rig's" not in report["markdown"]
+    assert report["markdown"] == before["markdown"]
+    check = report["bags"][0]["scenes"][0]["model_check"]
+    assert check["periods"] > 0 and check["max_departure"] < 1e-12, check
+    for name in ("report.md", "report.json"):
+        assert (tmp_path / "acts" / name).read_bytes() == (tmp_path / "before" / name).read_bytes()

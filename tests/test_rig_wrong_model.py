@@ -4,10 +4,18 @@ simulated, its controller given the same rig with a damping ratio 5 % low (0.009
 high gives its own Delta d > 0, which its design refuses). The controller's Pi2 section,
 from its own model, lies 14 us before the rig's: every command is off the rig's section
 grid, and the simulated rig applies each at its apply time, as a driver executes timed
-output (sim_node/rig_io.py, plant/realtime.py's timed answers)."""
+output (sim_node/rig_io.py, plant/realtime.py's timed answers).
+
+The same for a rig of two masses (config/rigs/two_mass_beam.yaml as
+tests/test_rig_masses_scene.py runs it), its controller given the rig with the first
+mode's damping ratio 5 % low (0.0095): its section lies 42 us before the rig's, and
+``grazing analyze`` reads the bag by what acted (recordings/rig_acts.py) as for one mass."""
+
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from test_rig_scene import RIG, _seconds, _summary, run_rig_scene
 
@@ -83,3 +91,87 @@ def test_the_wrong_model_holds_the_orbit_near_the_exact_one(scene):
     assert set(per) <= {0, 1} and sum(per) >= 5, per      # no chatter, mostly 1/1
     ctl = _summary(res.logs["controller_node"], r"\b(model_resets|answered)=(\d+)")
     assert ctl["model_resets"] >= PERIODS - ON - 2       # the wrong model's fit fails
+
+
+MASSES = Path(__file__).resolve().parents[1] / "config" / "rigs" / "two_mass_beam.yaml"
+#: The two-mass scene: as tests/test_rig_masses_scene.py's (the sensor at 500 Hz with
+#: 0.2 um of noise, half of physical speed: 12 periods of 0.25 s take 6 s of wall time).
+M_PERIODS, M_ON = 12, 3
+
+
+def _analyze(bag, out, by_stamp=False):
+    """(report.json's bag entry, report.md) of ``grazing analyze``; ``by_stamp``: as
+    before rig_acts.py read a rig of n masses (no rig/applied read, the answers matched
+    to the samples by their stamps)."""
+    from grazing_control.recordings import analyze as module
+
+    with pytest.MonkeyPatch.context() as mp:
+        if by_stamp:
+            mp.setattr(module, "_acts", lambda bag, data, rig: None)
+        report = module.analyze([bag], out, figures=False)
+    return report["bags"][0], report["markdown"]
+
+
+@pytest.fixture(scope="module")
+def two_mass(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rig_wrong_model_masses")
+    doc = yaml.safe_load(MASSES.read_text())
+    doc["sensor"].update(noise="0.2 um", rate="500 Hz")
+    path = out / "two_mass_quiet.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    assert doc["damping_ratios"] == [0.01, 0.02]
+    wrong = out / "wrong.yaml"
+    wrong.write_text(yaml.safe_dump({**doc, "damping_ratios": [0.0095, 0.02]}))
+    rig, res, _ = run_rig_scene(out, path, M_PERIODS, M_ON, (), {"rig_file": str(wrong)},
+                                slow=SLOW)
+    return rig, res, out
+
+
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
+def test_a_two_mass_rigs_bag_off_its_grid_is_read_by_what_acted(two_mass):
+    """Measured (2026-11-29, 40 periods, control from 3, the same rigs; grazing analyze):
+    before, the answers matched by their stamps were one section off (answer time p50
+    493 ms, half a second of wall time a period), 1 late answer where the rig counted
+    none, and no model (measured numbers only; with the rig's model the check departed
+    by 0.36, 36 of 39 periods above 1e-12); read by what acted: answer time p50 -6.5 ms
+    (the right model's scene: -8.1 ms), late 0 as the rig's, the model check 1.1e-16."""
+    rig, res, out = two_mass
+    entry, text = _analyze(res.bag_dir, out / "analyze")
+    n = entry["scenes"][0]
+    T = rig.forcing_period
+    off = entry["rig_commands_off_grid"]
+    assert off["commands"] >= M_PERIODS - 1
+    assert 1e-6 * T < -off["median_offset_s"] < 1e-4, off          # 42 us early
+    assert "the controller's sections are" in text and "its model is not the rig's" in text
+    assert "the model: the simulated rig's (grazing/rig, n = 2)" in text
+    mc = n["model_check"]           # re-integrated with what acted, at its starts
+    assert mc["max_departure"] < 1e-12 and mc["failed"] == 0, mc
+    assert mc["periods"] == M_PERIODS - 1
+    assert mc["pulses_at_recorded_starts"] >= M_PERIODS - 2, mc    # not section 0's
+    rt = n["realtime"]
+    sim = _summary(res.logs["sim_node"], r"\b(late|in_time|predicted|nothing)=(\d+)")
+    assert rt["late_answers"] == sim["late"], (rt, sim)            # the simulator's count
+    assert rt["rig_applied"]["predicted"] == sim["predicted"], (rt, sim)
+    assert rt["rig_applied"]["in_time"] == sim["in_time"] >= M_PERIODS - 3, (rt, sim)
+    # answered within the budget in wall time (5 ms x SLOW), as the right model's are
+    assert abs(rt["answer_time_ms"]["p50"]) < 5.0 * SLOW, rt["answer_time_ms"]
+    assert n["corrections"]["max_abs"] > 0.0                        # the corrections act
+    before, before_text = _analyze(res.bag_dir, out / "by_stamp", by_stamp=True)
+    assert "off the rig's" not in before_text
+    b = before["scenes"][0]
+    assert b["model_check"]["max_departure"] > 1e-4, b["model_check"]   # a section off
+    assert "rig_commands_off_grid" not in before
+    assert b["realtime"]["answer_time_ms"]["p50"] > 0.5 * T * SLOW * 1e3   # a section off
+
+
+@pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
+def test_the_two_mass_scene_by_stamp_departs_from_the_rigs_model(two_mass):
+    """The same bag matched by stamps, re-integrated by the rig's own model: each
+    correction a section off, at the rig's own instant, departs far from rounding."""
+    from grazing_control.recordings.analysis import ndof_scene_numbers, ndof_setup
+    from grazing_control.recordings.scenes import load
+
+    rig, res, _ = two_mass
+    data = load(res.bag_dir)
+    n = ndof_scene_numbers(data.scenes[0], ndof_setup(data, rig))
+    assert n["model_check"]["max_departure"] > 1e-4, n["model_check"]

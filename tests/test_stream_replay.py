@@ -138,7 +138,8 @@ def test_impacts_and_substituted_corrections_are_replayed_where_they_came(tmp_pa
     the prediction acts instead, on oscillator/substituted, which the model filter
     integrates): interleaved with the stream as recorded, every answer again; without
     the substitutions (a copy of the bag lacking them) the answers differ after the
-    first loss."""
+    first loss; with the impacts and substitutions logged late (a copy: a recorder behind
+    the stream) every answer again."""
     bag = tmp_path / "bag"
     res = launcher.run(None, None, bag, PERIODS, delta_d=P.delta_d, enable_after=ON,
                        mode="lockstep", domain_id=new_domain(), timeout=120,
@@ -156,6 +157,14 @@ def test_impacts_and_substituted_corrections_are_replayed_where_they_came(tmp_pa
     assert sent["impact"] == raw.count("/oscillator/impact")
     assert out["comparison"]["all_bit_identical"], out["comparison"]
     assert out["answers_bytes"]["differing"] == out["estimates"]["differing"] == 0
+    # logged a quarter of the scene late, after the stream that followed them: the
+    # replay goes by the stamps, not by the recorder's order
+    logs = reader.serialized(reader.read_raw(bag, ["/oscillator/state"]),
+                             "/oscillator/state")["log_time"]
+    late = _logged_late(bag, tmp_path / "late", {"/oscillator/impact", "/oscillator/substituted"},
+                        int(logs.max() - logs.min()) // 4)
+    out = replay_controller(late, tmp_path / "out_late", domain_id=new_domain())
+    assert out["comparison"]["all_bit_identical"], out["comparison"]
     lacking = _without(bag, tmp_path / "lacking", "/oscillator/substituted")
     out = replay_controller(lacking, tmp_path / "out2", domain_id=new_domain())
     assert "/oscillator/substituted not recorded: replayed as if none came" in out["notes"]
@@ -164,16 +173,31 @@ def test_impacts_and_substituted_corrections_are_replayed_where_they_came(tmp_pa
 
 def _without(bag, out, drop: str):
     """A copy of ``bag`` without the topic ``drop`` (every other message as recorded)."""
+    return _copy(bag, out, lambda topic, t: None if topic == drop else t)
+
+
+def _logged_late(bag, out, topics, by: int):
+    """A copy of ``bag`` whose ``topics`` were logged ``by`` ns later (a recorder that
+    took them after the stream that followed them)."""
+    return _copy(bag, out, lambda topic, t: t + by if topic in topics else t)
+
+
+def _copy(bag, out, log_time):
+    """A copy of ``bag``, each message logged at ``log_time(topic, t)`` (None: left out;
+    a topic left out entirely is not written)."""
     from grazing_control.ros.recording import BagWriter
 
     raw = reader.read_raw(bag)
     with BagWriter(out) as writer:
         for topic, ch in raw.channels.items():
-            if topic == drop:
+            cols = reader.serialized(raw, topic)
+            kept = [(log_time(topic, t), data)
+                    for t, data in zip(cols["log_time"].tolist(), cols["data"])]
+            kept = [(t, data) for t, data in kept if t is not None]
+            if not kept and cols["data"]:
                 continue
             writer.add_topic(topic, ch.type, ch.metadata.get("offered_qos_profiles", ""))
-            cols = reader.serialized(raw, topic)
-            for t, data in zip(cols["log_time"].tolist(), cols["data"]):
+            for t, data in kept:
                 writer.write(topic, data, t)
     return out
 
@@ -192,24 +216,27 @@ def test_a_bag_without_its_stream_is_refused_in_one_line_at_once(bags, tmp_path,
     assert took < 10.0 and not (tmp_path / "out").exists()
 
 
-def test_schedule_waits_for_each_answer_after_its_section():
-    """Answer at stamp 10 logged at 5: the messages logged before it go first (in log
-    order, file order on ties), then the stream messages stamped up to 10 that the
-    recorder logged after the answer, then the wait; another topic's message logged
-    after the answer stays after it; an answer recorded twice is awaited once."""
+def test_schedule_is_the_simulators_order_rebuilt_from_the_stamps():
+    """The answer of section 10 is awaited after every message stamped up to 10 (the
+    stream, an impact, a Pi2 sample: whenever the recorder logged them, before or after
+    the answer), and before what acted there instead (a substitution stamped 10); an
+    impact the recorder logged after later stream samples goes at its stamp; an answer
+    recorded twice is awaited once; equal stamps keep their log order."""
     import struct
 
-    def state(stamp):       # a JointState's bytes as far as its stamp
+    def stamped(stamp):       # a stamped message's bytes as far as its stamp
         return b"\0\1\0\0" + struct.pack("<iI", 0, stamp)
 
-    items = [(1, "state", state(4)), (3, "impact", state(6)), (3, "state", state(8)),
-             (6, "state", state(10)), (6, "impact", state(12)), (7, "state", state(14)),
-             (2, "pi2", state(0))]
-    steps = schedule(items, [(5, 10), (9, 20), (9, 20)], "state")
+    items = [(1, "state", stamped(4)), (3, "impact", stamped(6)), (3, "state", stamped(8)),
+             (6, "state", stamped(10)), (6, "impact", stamped(12)), (7, "state", stamped(14)),
+             (2, "pi2", stamped(10)), (8, "substituted", stamped(10)),
+             (9, "impact", stamped(9)), (10, "state", stamped(16)), (11, "impact", stamped(16))]
+    steps = schedule(items, [(5, 10), (12, 20), (12, 20)], "state")
     got = [("answer", s[1]) if s[0] == "answer" else (s[1], struct.unpack_from("<I", s[2], 8)[0])
            for s in steps]
-    assert got == [("state", 4), ("pi2", 0), ("impact", 6), ("state", 8), ("state", 10),
-                   ("answer", 10), ("impact", 12), ("state", 14), ("answer", 20)]
+    assert got == [("state", 4), ("impact", 6), ("state", 8), ("impact", 9), ("pi2", 10),
+                   ("state", 10), ("answer", 10), ("substituted", 10), ("impact", 12),
+                   ("state", 14), ("state", 16), ("impact", 16), ("answer", 20)]
 
 
 @pytest.mark.realtime

@@ -23,7 +23,9 @@ reads them as (N, 2n) arrays X_k = (x_0 .. x_{n-1}, v_0 .. v_{n-1}). The model a
 gains come from the bag's parameter record (the simulator's ``model_file`` and
 ``delta_d``, the controller's ``gains``, ``enable_after``, ``saturation``,
 ``actuation_delay``); the model file must still be readable at its recorded path (else
-only the measured numbers are given, and the report says why).
+only the measured numbers are given, and the report says why). A rig scene names no
+model file; read by what acted (its commands off the rig's grid, :mod:`.rig_acts`) its
+model is the simulated rig's own (:func:`ndof_setup` with the rig).
 
 Per scene (:func:`summarize` over the whole state, then):
 
@@ -311,8 +313,11 @@ def _number(value, default):
         else default
 
 
-def ndof_setup(data) -> NdofSetup:
-    """The run's model and controller from the bag's parameter record (module docstring)."""
+def ndof_setup(data, rig=None) -> NdofSetup:
+    """The run's model and controller from the bag's parameter record (module docstring).
+    ``rig``: the simulated rig whose scene the bag holds (a rig scene read by what acted,
+    :mod:`.rig_acts`): without a model file its model is the rig's own
+    (:meth:`grazing_control.plant.rig.Rig.model`, the simulator's)."""
     from grazing_control.oscillator.ndof.model import load_model
 
     nodes = data.parameters.get("nodes", {})
@@ -321,7 +326,11 @@ def ndof_setup(data) -> NdofSetup:
     notes = []
     path = str(sim.get("model_file") or ctl.get("model_file") or "")
     model = None
-    if not path:
+    if not path and rig is not None:
+        model = rig.model()
+        notes.append(f"the model: the simulated rig's (grazing/rig, n = {model.n}), the "
+                     "plant that acted")
+    elif not path:
         notes.append("no model_file in the parameter record: measured numbers only")
     else:
         try:
@@ -368,9 +377,11 @@ def ndof_period(setup: NdofSetup):
     first-order actuator when it had one
     (:func:`~grazing_control.dynamics.maps.modal_map.actuated_step`, the force on the
     actuated coordinate at the section carried from period to period; docs/theory_ndof.md
-    section 15). ``force`` is 0 except through an actuator with a lag; the kick's step
-    takes another delay as a fourth argument (the realtime delay check, the correction
-    at its arrival)."""
+    section 15). ``force`` is 0 except through an actuator with a lag; the step takes, as
+    a fourth argument, another time after the sample for the correction: the kick's
+    delay (the realtime delay check, the correction at its arrival), or the pulse's start
+    (a rig scene off the rig's grid, each pulse at its recorded start: :mod:`.rig_acts`).
+    """
     from grazing_control.dynamics.maps.modal_map import actuated_step, pulse_step
     from grazing_control.dynamics.simulation.actuation import pulse_start
     from grazing_control.oscillator.ndof.flow import NdofFlow
@@ -383,12 +394,12 @@ def ndof_period(setup: NdofSetup):
     start = pulse_start(T, delay, w)
     act = setup.actuator
     if w > 0.0 and act is not None:
-        def step(z, force, dv):
+        def step(z, force, dv, start=start):
             return actuated_step(flow, z, force, dv, start=start, width=w,
                                  time_constant=act.time_constant, latency=act.latency,
                                  force_limit=limit)
     elif w > 0.0:
-        def step(z, force, dv):
+        def step(z, force, dv, start=start):
             out = pulse_step(flow, z, dv, start=start, width=w, force_limit=limit)
             return out.state, 0.0, list(out.impacts)
     else:
@@ -406,7 +417,7 @@ def ndof_period(setup: NdofSetup):
 
 
 def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
-                     corrections=None) -> dict | None:
+                     corrections=None, starts=None) -> dict | None:
     """Each recorded period re-integrated from its recorded sample and correction by the
     plant's period (:func:`ndof_period`): the largest departure from the next recorded
     sample (module docstring). Through an actuator with a lag the force at the section is
@@ -414,7 +425,10 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
     from its start: the force follows the commands alone), and after a gap in the
     recording the later periods are not checked (``unchecked``). ``corrections``: what
     acted (default the recorded answers; :func:`~grazing_control.recordings.numbers.
-    applied_corrections`: at a deadline miss the prediction substituted, or 0)."""
+    applied_corrections`: at a deadline miss the prediction substituted, or 0).
+    ``starts``: per sample, the pulse's recorded start after it (a rig scene off the
+    rig's grid, :func:`.rig_acts.apply_acts`; NaN: the simulator's rule), as
+    :func:`~grazing_control.recordings.numbers.model_check` takes them."""
     m = setup.model
     dvs = scene.correction if corrections is None else corrections
     if m is None or len(scene.t) < 2:
@@ -434,7 +448,10 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
             continue
         z = flow.to_deviation(flow.tau2, scene.pi2[k])
         try:
-            z, force, _ = step(z, force, float(dvs[k]))
+            if starts is not None and math.isfinite(starts[k]):
+                z, force, _ = step(z, force, float(dvs[k]), float(starts[k]))
+            else:
+                z, force, _ = step(z, force, float(dvs[k]))
         except (ValueError, ArithmeticError, RuntimeError):
             failed += 1
             dep[k] = np.inf
@@ -449,6 +466,8 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
     if setup.actuator is not None:
         out["unchecked"] = unchecked
         out["final_force"] = force
+    if starts is not None:
+        out["pulses_at_recorded_starts"] = int(np.count_nonzero(np.isfinite(starts)))
     return out
 
 
@@ -579,7 +598,8 @@ def ndof_scene_numbers(sd, setup: NdofSetup, tol: float = 1e-8) -> dict:
                            "saturation_hits": int(np.count_nonzero(
                                np.abs(scene.correction) >= setup.saturation))}}
     out["measured_contraction"] = measured_contraction(scene.pi2, on)
-    check = ndof_model_check(setup, scene, corrections=applied_corrections(sd))
+    check = ndof_model_check(setup, scene, corrections=applied_corrections(sd),
+                             starts=sd.pulse_starts)
     pred = ndof_controlled_orbit(setup, scene.pi2[-1], (check or {}).get("final_force")) \
         if on is not None and len(scene.t) else {}
     out["predicted"] = pred

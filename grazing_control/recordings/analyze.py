@@ -472,8 +472,9 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
     for bag, bag_topics in zip(bags, per_bag):
         data = load(bag, bag_topics)
         if is_ndof(data):            # an n-DOF scene (issue 17): per-coordinate numbers
+            rig = read_rig(bag)[0]
             entry, bag_lines = _ndof_bag(bag, data, _label(Path(bag), used), out, tol,
-                                         figures)
+                                         figures, rig, _acts(bag, data, rig))
             lines += bag_lines
             report["bags"].append(_jsonable(entry))
             continue
@@ -481,14 +482,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
         data.problems.extend(section_phase_problems(data, setup))
         estimates = read_estimates(bag)
         rig, rig_notes = read_rig(bag)
-        acts = (read_acts(bag, rig, (data.parameters["nodes"].get("sim_node") or [{}])[0])
-                if rig is not None else None)
-        if acts and acts["timed"] and len(data.scenes) > 1:
-            data.problems.append("the controller's commands are off the rig's grid, but the "
-                                 "bag holds several scenes: not read by what acted")
-            acts = None
-        for sd in data.scenes:      # a rig scene off the rig's grid: what acted (rig_acts)
-            apply_acts(sd, acts)
+        acts = _acts(bag, data, rig)
         numbers = []
         for sd in data.scenes:
             n = scene_numbers(sd, setup, tol)
@@ -638,6 +632,22 @@ def _si_lines(si) -> list:
     return lines
 
 
+def _acts(bag, data, rig) -> dict | None:
+    """What acted in a rig scene of any number of masses (:mod:`.rig_acts`), applied to
+    the bag's scene when the controller's commands are off the rig's grid (then the dict
+    of :func:`.rig_acts.read_acts`, else None or that dict untimed: nothing changed)."""
+    if rig is None:
+        return None
+    acts = read_acts(bag, rig, (data.parameters["nodes"].get("sim_node") or [{}])[0])
+    if acts and acts["timed"] and len(data.scenes) > 1:
+        data.problems.append("the controller's commands are off the rig's grid, but the "
+                             "bag holds several scenes: not read by what acted")
+        return None
+    for sd in data.scenes:      # a rig scene off the rig's grid: what acted (rig_acts)
+        apply_acts(sd, acts)
+    return acts
+
+
 def _bag_entry(bag, data, label, notes) -> dict:
     """The report entry's head of a bag of any model: the file, its messages, the topics,
     the notes (the bag's, then ``notes``), the problems, whether it has a parameter record."""
@@ -661,11 +671,15 @@ def _scene_label(label, data, sd):
     return slabel, f"{slabel.replace(' ', '_')}.png"
 
 
-def _ndof_bag(bag, data, label, out, tol, figures):
+def _ndof_bag(bag, data, label, out, tol, figures, rig=None, acts=None):
     """The report entry and markdown lines of an n-DOF bag (.analysis, a model file's scene): the model
-    and gains from its parameter record; options for the 1-DOF model do not apply."""
-    setup = ndof_setup(data)
+    and gains from its parameter record; options for the 1-DOF model do not apply. A rig
+    scene of ``rig``: the model the simulated rig's (its model file names none); off its
+    grid (``acts`` timed, :func:`_acts`) read by what acted."""
+    timed = bool(acts and acts["timed"])
+    setup = ndof_setup(data, rig)
     entry = {**_bag_entry(bag, data, label, setup.notes),
+             **({"rig_commands_off_grid": rig_acts_summary(acts)} if timed else {}),
              "setup": {"model_file": setup.model_file, "n": setup.n,
                        "delta_d": setup.model.delta_d if setup.model is not None else None,
                        "gains": setup.gains.tolist() if setup.gains is not None else None,
@@ -675,6 +689,7 @@ def _ndof_bag(bag, data, label, out, tol, figures):
              "scenes": []}
     lines = [f"## {label}", "", _file_line(data),
              "* topics used: " + ", ".join(f"{r} = {t}" for r, t in data.present.items())]
+    lines += [x for x in [offgrid_line(acts)] if x]
     lines += [f"* note: {s}" for s in entry["notes"]]
     lines += [f"* **cannot use**: {s}" for s in data.problems]
     lines.append("")

@@ -668,11 +668,6 @@ def realtime_numbers(sd, setup: Setup) -> dict:
     """Latency, late and missing answers, deadline misses, sample lag (wall clock), and
     the delay check (:mod:`.timing`) with the core's period."""
     out = realtime_measured(sd, setup.time_scale)
-    if sd.rig_late is not None:      # a rig scene off the rig's grid: the rig's own count
-        out["late_answers"] = sd.rig_late
-        out["late_source"] = ("the rig's count (rig/applied): a command recorded for a "
-                              "section where a prediction or nothing acted")
-        out["rig_applied"] = sd.rig_status
     out["delay_check"] = _delay_check(sd, setup, out)
     return out
 

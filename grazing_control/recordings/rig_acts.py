@@ -23,6 +23,13 @@ each pulse's start, model time after its section, the one the rig reports (the s
 conversion of the same nanosecond stamp as the simulated rig's, so the model check
 re-integrates each period as the rig did). A scene whose commands are all on the rig's
 grid is left as it is (right-model bags analyse exactly as before).
+
+The same for a rig of any number of masses: the rig's sections, slots and pulse starts
+are its model's (:meth:`grazing_control.plant.rig.Rig.model`, its forcing period; for
+one mass the 1-DOF study's, the same number), the correction of a force its actuated
+mass's (:func:`grazing_control.ros.rig_boundary.correction_of`, the effective mass m_a);
+the 1-DOF analysis and the n-DOF one (:func:`.analysis.ndof_scene_numbers`) read the
+scene it leaves alike (its ``pulse_starts``, ``rig_late``, ``rig_status``).
 """
 
 from __future__ import annotations
@@ -83,7 +90,7 @@ def _carry(k, status, s, on, resolution) -> None:
 
 def read_acts(bag, rig, sim: dict) -> dict | None:
     """What acted and what was commanded, per rig section (module docstring), or None
-    (no ``rig/applied`` in the bag, no rig, or a rig of n masses).
+    (no ``rig/applied`` in the bag, or no rig).
 
     ``sim``: the simulator's parameter record (its ``clock_start``, default 1000 s, and
     ``actuation_delay``, the budget in model time). Returns a dict: ``period``, for
@@ -98,7 +105,7 @@ def read_acts(bag, rig, sim: dict) -> dict | None:
     from grazing_control.plant.schedule import slot
     from grazing_control.ros.rig_boundary import correction_of, first_section
 
-    if rig is None or rig.n != 1:
+    if rig is None:
         return None
     raw = reader.read_raw(Path(bag), topics=[APPLIED_TOPIC, COMMAND_TOPIC])
     at, ct = _topic(raw, APPLIED_TOPIC), _topic(raw, COMMAND_TOPIC)
@@ -115,8 +122,7 @@ def read_acts(bag, rig, sim: dict) -> dict | None:
         delay = float(sim.get("actuation_delay"))
     except (TypeError, ValueError):
         return None
-    p = rig.params()
-    period, wn = p.period, rig.omega_n
+    period, wn = rig.model().period, rig.omega_n
     start0 = first_section(rig, clock_start)
     width = rig.actuator.pulse_width * wn
     own = pulse_start(period, delay, width)

@@ -14,23 +14,27 @@ recorded parameters (or ``--controller-params``):
   (TwistStamped): what acted where an answer came too late, which the model filter
   integrates (with a sample per message or in blocks alike).
 
-Order and waiting (:func:`schedule`). The messages go out in the order the recorder
-logged them. The recorded corrections say where each answer was due: the answer of
-section k (stamped t_k) is awaited, as the lockstep Pi2 replay awaits each sample's,
-after the messages logged before the recorded correction and after every stream message
-whose first sample is at or before t_k (the section's samples, should the recorder have
-logged one after the answer; the stream is one topic, taken in order, so moving its
-messages before a wait changes no answer). The other topics' messages go out between
-the stream's where they were logged, and the controller's events executor takes its
-messages in the order they arrive, so it reads them in the recorded interleaving as far
-as the middleware delivers one process's messages on several topics in the order they
-were published (DDS promises it per topic only; an impact or a substitution is read
-at the next section's answer, the messages up to that section's last sample later;
-measured: every replay of tests/test_stream_replay.py's scene with both, and of 60
-periods with 59 impacts or 11 substitutions, gave every answer again). (Waiting for the
-controller's acknowledgement at each change of topic made that certain but cost about
-1.5 s each: 3 minutes for 60 periods with an impact each.) With ``--rate R`` the
-messages go out at their recorded log times scaled by R instead, without waiting.
+Order and waiting (:func:`schedule`). The messages go out in the order the simulator
+published them, rebuilt from their stamps: the stream (a block at its first sample's
+stamp) and the impacts in time order, each section's answer awaited (as the lockstep
+Pi2 replay awaits each sample's) after every message stamped at or before its section,
+and what acted instead of an answer (``deadline_miss``, ``substituted``, stamped with
+the section) after that answer, where the simulator sent it. Not the recorder's log
+order: that is the order in which the recorder took its topics, one subscription each,
+and a recorder behind the stream logged the impacts late (measured, a lockstep scene
+with the simulator and the controller under SCHED_FIFO on a loaded machine: six
+impacts and a substitution logged 5 to 43 time units after stream samples stamped
+later; replayed in that order, 6 of 16 answers differed). The controller's events
+executor takes its messages in the order they arrive, so it reads them in that
+interleaving as far as the middleware delivers one process's messages on several
+topics in the order they were published (DDS promises it per topic only; an impact or
+a substitution is read at the next section's answer, the stream's messages up to that
+section's last sample later; measured: every replay of tests/test_stream_replay.py's
+scene with both, and of 60 periods with 59 impacts or 11 substitutions, gave every
+answer again). (Waiting for the controller's acknowledgement at each change of topic
+made that certain but cost about 1.5 s each: 3 minutes for 60 periods with an impact
+each.) With ``--rate R`` the messages go out in that order at their recorded log times
+scaled by R instead, without waiting.
 
 OUT gets the messages published, the answers and estimates as they came, the parameter
 records (the controller's, this replay's own), and the recording's Pi2 samples, copied
@@ -53,8 +57,6 @@ stream can differ (the recorder's order is its own arrival order, not the contro
 from __future__ import annotations
 
 import time
-from collections import deque
-
 import numpy as np
 
 from . import reader
@@ -136,43 +138,35 @@ def _first_stamp(role: str, data: bytes) -> int:
     return stamp_of(data)
 
 
+#: Where a message goes among those of its stamp (:func:`schedule`): the stream and the
+#: impacts before the section's answer is awaited, what acted instead of an answer after.
+_BEFORE_ANSWER, _ANSWER, _AFTER_ANSWER = 0, 1, 2
+#: The roles published after their section's answer (its stamp is the section's).
+ACTED_ROLES = ("deadline_miss", "substituted")
+
+
 def schedule(items: list, answers: list, stream_role: str) -> list:
-    """The replay's steps (module docstring, "Order and waiting").
+    """The replay's steps (module docstring, "Order and waiting"): the order in which the
+    simulator published, rebuilt from the stamps.
 
-    ``items``: (log_ns, role, data) of the recorded messages to publish or copy (in
-    their log order, their order in ``items`` on equal log times); ``answers``:
-    (log_ns, stamp_ns) of the recorded corrections. Returns the steps in order:
-    ("message", role, data, log_ns) or ("answer", stamp_ns), the answer of each stamp
-    once, after the messages logged before it and after every ``stream_role`` message
-    whose first sample is stamped at or before it."""
-    order = sorted(range(len(items)), key=lambda i: items[i][0])
-    stream = deque((items[i][0], i) + items[i][1:] for i in order
-                   if items[i][1] == stream_role)
-    other = deque((items[i][0], i) + items[i][1:] for i in order
-                  if items[i][1] != stream_role)
-    steps, seen = [], set()
+    ``items``: (log_ns, role, data) of the recorded messages to publish or copy;
+    ``answers``: (log_ns, stamp_ns) of the recorded corrections. Returns the steps in
+    order: ("message", role, data, log_ns) or ("answer", stamp_ns). Each message goes
+    at its stamp (a ``stream_role`` message's: its first sample's), the answer of each
+    section once, after every stream message, impact and Pi2 sample stamped at or before
+    it and before what acted there instead (:data:`ACTED_ROLES`, stamped with the
+    section); on equal keys in log order, then in the order of ``items``."""
+    from .replay_nodes import stamp_of
 
-    def take(queue):
-        log, _i, role, data = queue.popleft()
-        steps.append(("message", role, data, log))
-
-    def first(before=None):
-        """The queue whose head was logged first (before ``before``), or None."""
-        heads = [q for q in (stream, other) if q and (before is None or q[0][0] < before)]
-        return min(heads, key=lambda q: q[0][:2]) if heads else None
-
-    for log, stamp in sorted(answers):
-        if stamp in seen:
-            continue
-        seen.add(stamp)
-        while (queue := first(log)) is not None:    # logged before the answer
-            take(queue)
-        while stream and _first_stamp(stream_role, stream[0][3]) <= stamp:
-            take(stream)
-        steps.append(("answer", stamp))
-    while (queue := first()) is not None:
-        take(queue)
-    return steps
+    keyed = []
+    for i, (log, role, data) in enumerate(items):
+        stamp = _first_stamp(role, data) if role == stream_role else stamp_of(data)
+        rank = _AFTER_ANSWER if role in ACTED_ROLES else _BEFORE_ANSWER
+        keyed.append(((stamp, rank, log, i), ("message", role, data, log)))
+    for stamp in {stamp for _log, stamp in answers}:
+        keyed.append(((stamp, _ANSWER, 0, 0), ("answer", stamp)))
+    keyed.sort(key=lambda k: k[0])
+    return [step for _key, step in keyed]
 
 
 def recorded_lag(items: list, answers: list, stream_role: str) -> tuple:

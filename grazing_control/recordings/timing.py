@@ -75,7 +75,9 @@ def acts_on_arrival(sim: dict) -> bool:
 def realtime_numbers(sd, time_scale) -> dict:
     """Latency, answer time, late and missing answers, deadline misses, substitutions,
     sample lag (wall clock) of one scene (module docstring); ``time_scale`` None: estimated
-    from the publish times."""
+    from the publish times. A rig scene read by what acted (:func:`.rig_acts.apply_acts`,
+    any number of masses): its answers are the commands of the rig's sections, and the
+    late answers the rig's own count (``rig/applied``), with its count per status."""
     out = {}
     if sd.latency_s.size:
         out["latency_ms"] = distribution(sd.latency_s * 1e3)
@@ -104,6 +106,11 @@ def realtime_numbers(sd, time_scale) -> dict:
         out["sample_lag_ms"] = distribution(lag)
         out["_lag_ms"] = lag
     out["_answer_ms"] = rt
+    if sd.rig_late is not None:      # a rig scene off the rig's grid: the rig's own count
+        out["late_answers"] = sd.rig_late
+        out["late_source"] = ("the rig's count (rig/applied): a command recorded for a "
+                              "section where a prediction or nothing acted")
+        out["rig_applied"] = sd.rig_status
     return out
 
 

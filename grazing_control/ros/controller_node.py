@@ -581,7 +581,9 @@ class ControllerNode(Node):
         """Section k (model time ``tk``) of an n-DOF stream: the answer k^T (X^ - X**)
         (with a rig file of n masses first as the force pulse), then (as in 1-DOF)
         the estimate X^ = X** + z^ on controller/estimate (JointState, n joints:
-        positions, velocities, effort the 2n variances)."""
+        positions, velocities, effort the 2n variances); with the model watch its row first."""
+        if self.watching:
+            self._watch(k, key)
         ndof = self.ndof
         X = np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z, dtype=float)
         n = ndof.model.n

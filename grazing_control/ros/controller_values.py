@@ -505,15 +505,21 @@ def model_stream_from_values(values: dict, ndof: ModelController,
     estimator ``model``, ``sensor_noise`` > 0 and impacts detected in the stream.
     ``pulse``: (width, force limit[, actuator]) of the plant's force pulse
     (:func:`pulse_from_values`; its trajectory, through the first-order actuator where one
-    is given, is the filter's, docs/theory_ndof.md section 15), (0, inf): the kick."""
+    is given, is the filter's, docs/theory_ndof.md section 15), (0, inf): the kick.
+    The model watch (``estimate_bias``, ``track_delta_d``, ``consistency_window``,
+    :mod:`grazing_control.ros.model_watch`) selects the augmented filter over the model
+    file (:class:`AugmentedStreamEstimator`, docs/theory_estimation.md (E12)), its values
+    checked as for 1-DOF; ``reidentify``: :mod:`grazing_control.ros.reidentify`."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
 
     source = values.get("pi2_source", "sample")
-    if source == "sample":
-        return None
-    if source != "stream":
+    if source not in PI2_SOURCES:
         raise ParameterError(f"pi2_source={source!r} is invalid: valid values are sample, "
                              "stream")
+    watch = watch_from_values({**WATCH_DEFAULTS, "pi2_source": source, "estimator": "model",
+                               **values})           # refused in sample mode
+    if source == "sample":
+        return None
     if not ndof.predicts:
         raise ParameterError("delta_d=nan is invalid with pi2_source=stream: valid range is "
                              "the plant's finite Delta d (the estimator's model needs the wall)")
@@ -521,17 +527,18 @@ def model_stream_from_values(values: dict, ndof: ModelController,
         raise ParameterError(f"impact_source={values['impact_source']!r} is invalid with "
                              "model_file: valid is stream (the n-DOF model filter finds the "
                              "impacts in its exact motion)")
-    for name in ("estimate_bias", "track_delta_d"):     # reidentify: ros/reidentify.py
-        if values.get(name):
-            raise ParameterError(f"{name}=True is invalid with model_file: valid is false "
-                                 "(not built for n-DOF)")
-    if int(values.get("consistency_window", 0) or 0) > 0:
-        raise ParameterError(f"consistency_window={values['consistency_window']!r} is invalid "
-                             "with model_file: valid is 0 (not built for n-DOF)")
     floor = float(values.get("model_noise", 1e-2))
     if not (math.isfinite(floor) and floor >= 0.0):
         raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "
                              "model_noise >= 0 (process noise per period, in sensor_noise)")
+    if watch is not None:   # the augmented filter over the model file (E12, issue 32)
+        return AugmentedStreamEstimator(
+            ndof.model, float(values.get("sensor_noise", 0.0)), "stream",
+            float(values.get("state_period", 0.0)), floor,
+            bool(values.get("answer_after_section", False)),
+            float(values.get("answer_lead", 0.0)), **watch[0],
+            coordinate=int(values.get("sensor_coordinate", 0)), pulse_width=pulse[0],
+            force_limit=pulse[1], actuator=pulse[2] if len(pulse) > 2 else None)
     return StreamEstimator(ndof.model, values.get("estimator", "model"),
                            float(values.get("sensor_noise", 0.0)), "stream",
                            float(values.get("state_period", 0.0)), floor,

@@ -29,15 +29,25 @@ less the current bias estimate and with the model's wall at the current Delta d
 estimate, so that its estimates (``Estimate.z``, the Pi2 deviation) are what the
 controller's Eq. 28 needs. With both augmentations off it is the plain model filter
 (the same estimates to rounding: tests/test_augmented.py).
+
+The same filter runs over a model file of any n
+(:class:`~grazing_control.oscillator.ndof.model.NdofModel`, issue 32;
+docs/theory_estimation.md, (E12)): theta = (z (2n), b, Delta d), the samples
+those of the sensed coordinate ``coordinate`` (b on its position), the wall's
+sensitivity through the n-DOF impacts; the estimator then runs through
+:class:`StreamEstimator`'s n-DOF bookkeeping (its ``_ndof_fit``), restarting from the
+wide prior about its state with b and Delta d kept (tests/test_augmented_ndof.py).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from grazing_control.oscillator.ndof.model import NdofModel
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (
     CHI2_SIGMAS, Estimate, FilterState, arc_fit, deviation_samples, gauss_newton_fit)
@@ -63,8 +73,9 @@ WALL_STD = 1e-6
 @dataclass(frozen=True)
 class AugmentedState:
     """The augmented filter's state at a section time: the Pi2 deviation ``z`` (before
-    the correction), the bias ``bias``, the clearance ``delta_d`` and the covariance
-    ``cov`` (4x4 over (dx, dv, b, Delta d)); ``periods`` counts the fitted periods."""
+    the correction; 2n values, (dx, dv) for 1-DOF), the bias ``bias``, the clearance
+    ``delta_d`` and the covariance ``cov`` (2n + 2 square over (z, b, Delta d));
+    ``periods`` counts the fitted periods."""
 
     z: tuple
     bias: float
@@ -74,7 +85,14 @@ class AugmentedState:
 
     @property
     def theta(self) -> np.ndarray:
-        return np.array([self.z[0], self.z[1], self.bias, self.delta_d], dtype=float)
+        return np.array([*self.z, self.bias, self.delta_d], dtype=float)
+
+
+def with_wall(p, delta_d: float):
+    """The model ``p`` (1-DOF parameters or a model file) with its clearance Delta d."""
+    if isinstance(p, NdofModel):
+        return p if delta_d == p.delta_d else dataclasses.replace(p, delta_d=delta_d)
+    return p.with_(delta_d=delta_d)
 
 
 def _whiten(nu, h, cov, sigma: float) -> np.ndarray:
@@ -91,16 +109,20 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
                      wall: bool = True, wall_noise: float = WALL_NOISE,
                      floor: float = 1e-2, iterations: int = 8, innovation: bool = False,
                      width: float = 0.0, force_limit: float = math.inf, actuator=None,
-                     force0: float = 0.0):
+                     force0: float = 0.0, coordinate: int = 0, kernel: bool = False):
     """One period of the augmented filter, from the prior at t_{k-1} and the samples at
     times ``s`` in (0, T] after it to the state at t_k (module docstring; (E8, E9)).
 
     Gauss-Newton on the exact trajectory through the wall at the estimated Delta d
     minimises J(theta) = |theta - theta^|^2_{P^-1} + |y - h(theta)|^2 / sigma^2 over
-    the active states ((dx, dv), and b where ``bias``, Delta d where ``wall``; an
+    the active states (z, and b where ``bias``, Delta d where ``wall``; an
     inactive one keeps its prior value and variance). The posterior is carried by the
     exact map F = [[M, 0, d end / d Delta d], [0, 1, 0], [0, 0, 1]]:
-    P_k = F P+ F^T + diag((floor sigma)^2, (floor sigma)^2, 0, wall_noise^2).
+    P_k = F P+ F^T + diag((floor sigma)^2 I, 0, wall_noise^2).
+
+    ``p`` a model file (n > 1): z has 2n entries, the samples are coordinate
+    ``coordinate``'s (b on its position), the wall's sensitivity (E12); ``kernel``: the
+    compiled motion where the wall is not estimated (:func:`trajectory`).
 
     Returns (AugmentedState at t_k, J at the minimum: the period's normalised
     innovation squared, the number of measurements); raises ValueError when the fit
@@ -109,7 +131,10 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
     """
     s, y, w = (np.asarray(a, dtype=float) for a in (s, y, w))
     has_v = np.isfinite(w)
-    act = [0, 1] + ([2] if bias else []) + ([3] if wall else [])
+    nz = len(prior.z)                   # 2n
+    ib, iw = nz, nz + 1                 # b and Delta d in theta
+    ix, iv = coordinate, nz // 2 + coordinate      # the sensed position and velocity
+    act = list(range(nz)) + ([ib] if bias else []) + ([iw] if wall else [])
     theta_prior = prior.theta
     info_prior = np.linalg.inv(prior.cov[np.ix_(act, act)])
     theta = theta_prior.copy()
@@ -119,16 +144,16 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
         """(H, r, end, d end / dz, M, d end / d Delta d) at the active states z."""
         t = theta_prior.copy()
         t[act] = z
-        pm = p.with_(delta_d=float(t[3]))
-        pred, jac, end, mono, imps, gw, gend = trajectory(pm, t[:2], s, correction, delay,
-                                                          wall=True, width=width,
-                                                          force_limit=force_limit,
-                                                          actuator=actuator, force0=force0)
-        hx = np.column_stack([jac[:, 0, :], np.ones(s.size), gw[:, 0]])
-        hv = np.column_stack([jac[has_v, 1, :], np.zeros(has_v.sum()), gw[has_v, 1]])
+        pm = with_wall(p, float(t[iw]))
+        pred, jac, end, mono, _imps, *g = trajectory(
+            pm, t[:nz], s, correction, delay, wall=wall, width=width,
+            force_limit=force_limit, actuator=actuator, force0=force0, kernel=kernel)
+        gw, gend = g if wall else (np.zeros((s.size, nz)), np.zeros(nz))
+        hx = np.column_stack([jac[:, ix, :], np.ones(s.size), gw[:, ix]])
+        hv = np.column_stack([jac[has_v, iv, :], np.zeros(has_v.sum()), gw[has_v, iv]])
         h = np.vstack([hx, hv])[:, act]
-        r = np.concatenate([y - pred[:, 0] - t[2], w[has_v] - pred[has_v, 1]])
-        d_end = np.column_stack([mono, np.zeros(2), gend])[:, act]
+        r = np.concatenate([y - pred[:, ix] - t[ib], w[has_v] - pred[has_v, iv]])
+        d_end = np.column_stack([mono, np.zeros(nz), gend])[:, act]
         return h, r, end, d_end, mono, gend
 
     first = linearise(theta[act])
@@ -140,19 +165,18 @@ def augmented_update(p: OscillatorParams, prior: AugmentedState, s, y, w, sigma:
     post = prior.cov.copy()
     post[np.ix_(act, act)] = np.linalg.inv(info)
     # an inactive state is not updated: its cross terms with the active ones stay 0
-    for i in (2, 3):
+    for i in (ib, iw):
         if i not in act:
             post[i, :] = post[:, i] = 0.0
             post[i, i] = prior.cov[i, i]
-    f = np.eye(4)
-    f[:2, :2] = mono
-    f[:2, 3] = gend if wall else 0.0
-    q = np.diag([(floor * sigma) ** 2, (floor * sigma) ** 2, 0.0,
-                 wall_noise ** 2 if wall else 0.0])
+    f = np.eye(nz + 2)
+    f[:nz, :nz] = mono
+    f[:nz, iw] = gend if wall else 0.0
+    q = np.diag([(floor * sigma) ** 2] * nz + [0.0, wall_noise ** 2 if wall else 0.0])
     cov = f @ post @ f.T + q
     d = (theta - theta_prior)[act]
     cost = float(d @ info_prior @ d) + float(r @ r) * inv_var
-    state = AugmentedState((float(end[0]), float(end[1])), float(theta[2]), float(theta[3]),
+    state = AugmentedState(tuple(float(x) for x in end), float(theta[ib]), float(theta[iw]),
                            0.5 * (cov + cov.T), prior.periods + 1)
     if innovation:
         return state, cost, r.size, whitened
@@ -173,6 +197,9 @@ class AugmentedStreamEstimator(StreamEstimator):
         The prior std of Delta d about ``p.delta_d`` (default :data:`WALL_STD`).
     wall_noise : float
         The random walk's std per period, sqrt(q_d) (default :data:`WALL_NOISE`).
+    coordinate : int
+        With a model file (n > 1): the sensed coordinate (StreamEstimator's); the
+        estimates and their covariance then have 2n + 2 entries (E12).
 
     After each section: :attr:`state` (the :class:`AugmentedState`), and
     :attr:`innovation` = (k, J, n, eps): the period's normalised innovation squared, its
@@ -198,7 +225,7 @@ class AugmentedStreamEstimator(StreamEstimator):
                  lead: float = 0.0, *, bias: bool = True, wall: bool = True, bias0: float = 0.0,
                  bias_std: float = BIAS_STD, wall_std: float = WALL_STD,
                  wall_noise: float = WALL_NOISE, pulse_width: float = 0.0,
-                 force_limit: float = math.inf, actuator=None):
+                 force_limit: float = math.inf, actuator=None, coordinate: int = 0):
         for name, value, ok, valid in (
                 ("bias0", bias0, True, "finite"),
                 ("bias_std", bias_std, bias_std > 0.0, "finite and > 0"),
@@ -215,7 +242,7 @@ class AugmentedStreamEstimator(StreamEstimator):
                                    wall_std ** 2 if wall else 0.0])
         super().__init__(p, "model", sigma, impact_source, sample_period, floor, after_section,
                          lead, pulse_width=pulse_width, force_limit=force_limit,
-                         actuator=actuator)
+                         actuator=actuator, coordinate=coordinate)
 
     def reset(self) -> None:
         """Forget the stream (the filter restarts from the arc fit); the bias and Delta d
@@ -311,6 +338,41 @@ class AugmentedStreamEstimator(StreamEstimator):
         self.p = self.identified.with_(delta_d=new.delta_d)
         self.filter, self.filter_k = FilterState(new.z, new.cov[:2, :2], new.periods), k
         return Estimate(new.z, new.cov[:2, :2], "model")
+
+    def _ndof_fit(self, k: int, prior: FilterState, s, y, w, dv: float, delay: float):
+        """One period of the augmented filter over a model file (E12), for
+        :meth:`StreamEstimator._ndof_model`: from :attr:`state` where ``prior`` is the
+        filter held from section k - 1, else (a restart) from ``prior`` (the wide prior
+        about the filter's state) with the kept b and Delta d and their covariance. The
+        innovation as :meth:`_model`'s (the first of the section's tries is kept: a held
+        fit that failed is reported though the restart after it passes)."""
+        nz = len(prior.z)
+        state = self.state if prior is self.filter else None
+        if state is None:
+            cov = np.zeros((nz + 2, nz + 2))
+            cov[:nz, :nz] = prior.cov
+            cov[nz:, nz:] = self.params_cov
+            state = AugmentedState(tuple(prior.z), *self.params, cov, 0)
+        self.state = None
+        try:     # the raw positions: the bias is a state of the fit (_window took it off)
+            new, cost, n, white = augmented_update(
+                self.p, state, s, y + self.params[0], w, self.sigma, dv, delay,
+                bias=self.use_bias, wall=self.use_wall, wall_noise=self.wall_noise,
+                floor=self.floor, innovation=True, coordinate=self.coordinate,
+                kernel=self.kernel, **self.correction_shape(k - 1))
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+            if self.innovation is None:
+                self.innovation = (k, None, 0, None)
+            raise
+        failed = cost > n + CHI2_SIGMAS * math.sqrt(2.0 * n)
+        if self.innovation is None and (state.periods >= 1 or failed):
+            self.innovation = (k, cost, n, white) if state.periods >= 1 else (k, None, 0, None)
+        if not failed:
+            self.state = new
+            self.params = (new.bias, new.delta_d)
+            self.params_cov = new.cov[nz:, nz:].copy()
+            self.p = with_wall(self.identified, new.delta_d)
+        return FilterState(new.z, new.cov[:nz, :nz], new.periods), cost, n
 
 
 def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = True,

@@ -150,19 +150,17 @@ def trajectory(p: OscillatorParams, z0, s, correction: float = 0.0, delay: float
     any n) it is the exact motion over its modal flow (:func:`modal_trajectory`): z (m, 2n),
     jac (m, 2n, 2n), end (2n,), monodromy (2n, 2n), the same impacts; the kick or the force
     pulse of ``width``, through the first-order ``actuator`` from ``force0``
-    (:func:`actuated_trajectory`); no wall sensitivity.
+    (:func:`actuated_trajectory`); with ``wall`` the sensitivities (m, 2n) and (2n,), an
+    impact adding (I - S) e_w (docs/theory_estimation.md, (E12)).
     """
     duration = p.period if duration is None else float(duration)
     s = np.asarray(s, dtype=float)
-    if isinstance(p, NdofModel) and wall:
-        raise ParameterError("wall=True is invalid for an n-DOF model: valid is False "
-                             "(no wall sensitivity for n > 1)")
     if actuator is not None and not (actuator.ideal and force0 == 0.0):
         return actuated_trajectory(p, z0, s, correction, delay, duration, width, force_limit,
                                    actuator, force0, wall=wall)
     if isinstance(p, NdofModel):
         return modal_trajectory(p, z0, s, correction, delay, duration, width, force_limit,
-                                kernel)
+                                kernel, wall=wall)
     flow = _kernel.advance if kernel else advance
     # events: (time, state after, jacobian after); start, kick, impacts
     events = []
@@ -311,7 +309,7 @@ def actuated_trajectory(p, z0, s, correction: float, delay: float, duration: flo
     form's (:func:`_actuated_trajectory`), the same outputs as :func:`trajectory`."""
     if isinstance(p, NdofModel):
         return modal_actuated_trajectory(p, z0, s, correction, delay, duration, width,
-                                         force_limit, actuator, force0)
+                                         force_limit, actuator, force0, wall=wall)
     return _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width,
                                 force_limit, actuator, force0)
 
@@ -407,7 +405,7 @@ def modal_transitions(flow: NdofFlow, h) -> np.ndarray:
 
 def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
                      duration: float, width: float = 0.0, force_limit: float = math.inf,
-                     kernel: bool = False):
+                     kernel: bool = False, *, wall: bool = False):
     """:func:`trajectory` of a model file (docs/theory_estimation.md, (E11)): from
     the Pi2 deviation z0 (2n) before the correction, the kick v_{i_a} += correction at
     ``delay``; between events z(s) = Phi(s - s_e) z_e, d z(s) / d z0 = Phi(s - s_e) M_e,
@@ -428,7 +426,13 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     samples by :mod:`.compiled_modal_flow`), the same numbers bit for bit
     (tests/test_ndof_compiled.py, tests/test_estimation_compiled.py); a period the
     compiled events leave to the pure path (a stick, a contact at rest) runs this
-    function's own loop."""
+    function's own loop.
+
+    ``wall``: also d z(s_j) / d Delta d (m, 2n) and d end / d Delta d (2n,) (E12): g = 0
+    before the first impact, g <- S Phi g + (I - S) e_w at each impact (S the saltation
+    matrix there, the shifted wall's in a pulse: the shift does not depend on Delta d),
+    carried by Phi between them; computed on the pure path (``kernel`` ignored), the
+    other outputs the same as without it."""
     flow = modal_flow(model)
     n = model.n
     z = np.array(z0, dtype=float).reshape(-1)
@@ -436,8 +440,10 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
         raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
     ma = actuated_mass(flow) if width > 0.0 else 1.0
     legs = correction_legs(correction, delay, duration, width, force_limit / ma)
+    kernel = kernel and not wall
     events = _compiled_modal_events(flow, z, legs, ma) if kernel else None
-    times, zs, ms, shifts, z, m, impacts = events or _modal_events(flow, z, legs, ma)
+    times, zs, ms, shifts, z, m, impacts, *gs = events or _modal_events(flow, z, legs, ma,
+                                                                         wall)
     if kernel:
         return _compiled_modal_samples(flow, times, zs, ms, shifts, s, width > 0.0) + (
             z, m, impacts)
@@ -447,18 +453,21 @@ def modal_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
     if width > 0.0:
         out = out + shifts[idx]
     jac = np.einsum("mij,mjk->mik", phi, ms[idx])
+    if wall:
+        return out, jac, z, m, impacts, np.einsum("mij,mj->mi", phi, gs[0][idx]), gs[1]
     return out, jac, z, m, impacts
 
 
-def _modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
+def _modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float, wall: bool = False):
     """The events of :func:`modal_trajectory`'s period (each leg's start and each impact):
     (times, z_e, M_e, shifts sigma F, z at the end, M at the end, impacts), the products
     in the order of :func:`grazing_control.oscillator.ndof.flow.matvec` (which the
-    compiled events repeat)."""
+    compiled events repeat); with ``wall`` also (g_e, g at the end) (E12)."""
     model = flow.model
     n, w = model.n, model.i_w
     m = np.eye(2 * n)
-    events, impacts = [], []
+    g = np.zeros(2 * n)
+    events, impacts, gs = [], [], []
     for start, end, kick, force in legs:
         force *= ma
         z = z.copy()
@@ -466,6 +475,7 @@ def _modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
         fl = forced_flow(flow, force)
         shift = static_deflection(flow) * force if force else np.zeros(2 * n)
         events.append((start, z - shift, m, shift))
+        gs.append(g)
         try:
             seg = ndof_impact.advance(fl, (flow.tau2 + model.omega * start) % TWO_PI,
                                       z - shift, end - start)
@@ -480,16 +490,23 @@ def _modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
             wall_x, rest_v = fl.on_wall(imp.phase)
             z_minus = matvec(phi, z_e)
             z_minus[w], z_minus[n + w] = wall_x, imp.v_minus + rest_v
-            m = matmul(matmul(ndof_impact.saltation_matrix(fl, imp.phase, z_minus), phi), m)
+            sal = ndof_impact.saltation_matrix(fl, imp.phase, z_minus)
+            m = matmul(matmul(sal, phi), m)
+            if wall:        # (E12): the wall moved by d acts through the impact
+                g = sal @ (phi @ g) - sal[:, w]
+                g[w] += 1.0
             z_e = z_minus.copy()
             z_e[n + w] = imp.v_plus + rest_v
             t_e = ti
             events.append((ti, z_e, m, shift))
+            gs.append(g)
             impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
         m = matmul(flow.transition(end - t_e), m)
+        g = flow.transition(end - t_e) @ g
         z = np.array(seg.z, dtype=float) + shift
-    return (np.array([e[0] for e in events]), np.array([e[1] for e in events]),
-            np.array([e[2] for e in events]), np.array([e[3] for e in events]), z, m, impacts)
+    out = (np.array([e[0] for e in events]), np.array([e[1] for e in events]),
+           np.array([e[2] for e in events]), np.array([e[3] for e in events]), z, m, impacts)
+    return out + (np.array(gs), g) if wall else out
 
 
 def _compiled_modal_events(flow: NdofFlow, z: np.ndarray, legs, ma: float):
@@ -525,7 +542,7 @@ def _compiled_modal_samples(flow: NdofFlow, times, zs, ms, shifts, s, shifted: b
 
 def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay: float,
                               duration: float, width: float, force_limit: float, actuator,
-                              force0: float):
+                              force0: float, *, wall: bool = False):
     """:func:`trajectory` of a model file through a first-order actuator
     (docs/theory_ndof.md section 15, the plant's
     :func:`grazing_control.dynamics.maps.modal_map.actuated_step`): the command
@@ -536,7 +553,9 @@ def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay:
     transient's particular solution (:func:`lag_particular`); F does not depend on z0, so
     d z / d z0 = Phi(s - s_e) M_e, and an impact puts M <- S Phi M with S the saltation
     matrix under the force there (the flow forced by F(t_i)). tau_a = 0 (a latency only):
-    the constant pulse starting ``actuator.latency`` later (force0 must be 0)."""
+    the constant pulse starting ``actuator.latency`` later (force0 must be 0). ``wall``:
+    the wall's sensitivities as :func:`modal_trajectory`'s (E12; the force does not depend
+    on Delta d)."""
     flow = modal_flow(model)
     n, w = model.n, model.i_w
     tau_a = actuator.time_constant
@@ -547,15 +566,16 @@ def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay:
         actuator_legs(model, correction, delay, duration, width, force_limit, actuator)
         start = pulse_start(duration, delay, width) + actuator.latency
         return modal_trajectory(model, z0, s, correction, start + 0.5 * width, duration,
-                                width, force_limit)
+                                width, force_limit, wall=wall)
     z = np.array(z0, dtype=float).reshape(-1)
     if z.shape != (2 * n,):
         raise ParameterError(f"z0 has {z.size} entries: valid is 2n = {2 * n}")
     ma = actuated_mass(flow)
     sigma = static_deflection(flow)
     m = np.eye(2 * n)
+    g = np.zeros(2 * n)                # d z / d Delta d (``wall``, E12)
     f = float(force0)
-    events, impacts = [], []           # (time, z - sigma u - q, M, sigma u, q)
+    events, impacts = [], []           # (time, z - sigma u - q, M, sigma u, q, g)
     rate = 1.0 / tau_a
     for start, end, u in actuator_legs(model, ma * correction, delay, duration, width,
                                        force_limit, actuator):
@@ -570,7 +590,7 @@ def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay:
         sig_u = sigma * u if u != 0.0 else np.zeros(2 * n)
         c, t_e = f - u, start
         q = lag_particular(flow, c, tau_a)
-        events.append((start, z - sig_u - q, m, sig_u, q))
+        events.append((start, z - sig_u - q, m, sig_u, q, g))
         for imp in seg.impacts:
             ti = start + imp.dt
             h = ti - t_e
@@ -583,16 +603,20 @@ def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay:
             wall_x, rest_v = fl.on_wall(imp.phase)
             zs = z_minus - shift
             zs[w], zs[n + w] = wall_x, imp.v_minus + rest_v
-            m = ndof_impact.saltation_matrix(fl, imp.phase, zs) @ phi @ m
+            sal = ndof_impact.saltation_matrix(fl, imp.phase, zs)
+            m = sal @ phi @ m
+            g = sal @ (phi @ g) - sal[:, w]
+            g[w] += 1.0
             z_plus = z_minus.copy()
             z_plus[w] = zs[w] + shift[w]
             z_plus[n + w] = imp.v_plus + rest_v + shift[n + w]
             c *= decay
             q = lag_particular(flow, c, tau_a)
             t_e = ti
-            events.append((ti, z_plus - sig_u - q, m, sig_u, q))
+            events.append((ti, z_plus - sig_u - q, m, sig_u, q, g))
             impacts.append((ti, imp.phase, imp.v_minus, imp.v_plus))
         m = flow.transition(end - t_e) @ m
+        g = flow.transition(end - t_e) @ g
         z, f = np.array(seg.z, dtype=float), float(seg.force)
     times = np.array([e[0] for e in events])
     idx = np.clip(np.searchsorted(times, s, side="left") - 1, 0, len(events) - 1)
@@ -602,4 +626,7 @@ def modal_actuated_trajectory(model: NdofModel, z0, s, correction: float, delay:
     out += np.array([e[3] for e in events])[idx]
     out += np.array([e[4] for e in events])[idx] * np.exp(-h * rate)[:, None]
     jac = np.einsum("mij,mjk->mik", phi, np.array([e[2] for e in events])[idx])
+    if wall:
+        gs = np.einsum("mij,mj->mi", phi, np.array([e[5] for e in events])[idx])
+        return out, jac, z, m, impacts, gs, g
     return out, jac, z, m, impacts

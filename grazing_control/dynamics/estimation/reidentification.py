@@ -661,22 +661,21 @@ def switch_estimator(stream, new: OscillatorParams, wall_std: float | None = Non
     augmented filter's Delta d restarts at the new model's with its prior variance
     kept, or set to ``wall_std`` (the refit's standard error of the wall, which the
     tracking then refines: docs/theory_reidentification.md); its bias estimate is kept
-    (it belongs to the sensor). An n-DOF stream estimator: z (2n) the same way, with
-    X** = X_p(tau2) of each model, and its flow the new model's."""
+    (it belongs to the sensor). An n-DOF stream estimator (plain or augmented): z (2n)
+    the same way, with X** = X_p(tau2) of each model, and its flow the new model's."""
     old = stream.p
     if isinstance(old, NdofModel):
         a, b = (NdofFlow.of(m) for m in (old, new))
-        shift = a.particular(a.tau2) - b.particular(b.tau2)
-        f = stream.filter
-        if f is not None:
-            stream.filter = FilterState(tuple(float(z + d) for z, d in zip(f.z, shift)),
-                                        f.cov, f.periods)
-        stream.p, stream.flow = new, b
-        return
-    shift = (old.x_ref - new.x_ref, old.v_ref - new.v_ref)
+        shift = tuple(a.particular(a.tau2) - b.particular(b.tau2))
+    else:
+        shift = (old.x_ref - new.x_ref, old.v_ref - new.v_ref)
+
+    def moved(z):
+        return tuple(zi + si for zi, si in zip(z, shift))
+
     if getattr(stream, "filter", None) is not None:
         f = stream.filter
-        stream.filter = FilterState((f.z[0] + shift[0], f.z[1] + shift[1]), f.cov, f.periods)
+        stream.filter = FilterState(moved(f.z), f.cov, f.periods)
     if hasattr(stream, "identified"):           # the augmented filter
         stream.identified = new
         stream.params = (stream.params[0], float(new.delta_d))
@@ -688,11 +687,14 @@ def switch_estimator(stream, new: OscillatorParams, wall_std: float | None = Non
         state = stream.state
         if state is not None:
             cov = state.cov.copy()
+            w = len(shift) + 1                  # Delta d after z and the bias
             if renew:
-                cov[3, :] = cov[:, 3] = 0.0
-                cov[3, 3] = float(wall_std) ** 2
-            stream.state = type(state)((state.z[0] + shift[0], state.z[1] + shift[1]),
-                                       state.bias, float(new.delta_d), cov, state.periods)
+                cov[w, :] = cov[:, w] = 0.0
+                cov[w, w] = float(wall_std) ** 2
+            stream.state = type(state)(moved(state.z), state.bias, float(new.delta_d), cov,
+                                       state.periods)
+    if isinstance(old, NdofModel):
+        stream.flow = NdofFlow.of(new)
     stream.p = new
 
 

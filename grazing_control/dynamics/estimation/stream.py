@@ -407,11 +407,7 @@ class StreamEstimator:
                 if prior is None:
                     continue
                 try:
-                    new, chi2, n = model_update(p, prior, s, y, w, self.sigma, dv,
-                                                at - (k - 1) * T, floor=self.floor,
-                                                coordinate=self.coordinate,
-                                                kernel=self.kernel,
-                                                **self.correction_shape(k - 1))
+                    new, chi2, n = self._ndof_fit(k, prior, s, y, w, dv, at - (k - 1) * T)
                 except (ValueError, np.linalg.LinAlgError, ArithmeticError):
                     continue
                 if chi2 <= n + CHI2_SIGMAS * math.sqrt(2.0 * n):
@@ -429,6 +425,15 @@ class StreamEstimator:
                 pass
         self.filter, self.filter_k = FilterState(z, wide, 0), k
         return Estimate(z, wide, source)
+
+    def _ndof_fit(self, k: int, prior: FilterState, s, y, w, dv: float, delay: float):
+        """One period of the n-DOF model filter from ``prior`` (at section k - 1) to
+        section k on the period's deviations ``y``, ``w`` at ``s``: (FilterState, chi2,
+        measurements); raises where the fit fails. The augmented filter's own
+        (dynamics/estimation/augmented.py) carries a bias and Delta d besides."""
+        return model_update(self.p, prior, s, y, w, self.sigma, dv, delay, floor=self.floor,
+                            coordinate=self.coordinate, kernel=self.kernel,
+                            **self.correction_shape(k - 1))
 
 
 @dataclass
