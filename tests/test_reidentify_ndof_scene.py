@@ -2,7 +2,8 @@
 (issue 32; grazing_control/ros/reidentify.py with a model file): the test plays the true
 two-mass plant, the controller runs on a wrong model file, ~/reidentify is called, the
 decision comes on controller/model_switch, and the loop after the switch holds the true
-design's orbit closer than before it.
+design's orbit closer than before it; and the same requested by the n-DOF model watch's
+mismatch verdicts (``reidentify``, the 1-DOF trigger).
 
 The plant is config/models/two_mass_scene.yaml at Delta d = -1e-3 (the exact n-DOF
 motion, dynamics.estimation.motion.trajectory, each answer acting 1.0 after its
@@ -16,6 +17,7 @@ last 20 after the switch.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
@@ -90,9 +92,10 @@ class Plant:
         self.k += 1
 
 
-@pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("reid_ndof")
+@contextlib.contextmanager
+def controller(tmp: Path, **over):
+    """controller_node on the wrong model file with its design, in a fresh domain, the
+    test's Collector and Plant: (col, proc, log, plant)."""
     wrong = _model_file(tmp / "wrong.yaml", WRONG)
     gains = tmp / "gains.yaml"
     write_gain_yaml(gains, WRONG, evaluate_design(WRONG, MU, DELAY), wrong)
@@ -102,7 +105,8 @@ def scene(tmp_path_factory):
     proc = launcher.start_node(launcher.CONTROLLER_MODULE, [gains], {
         "pi2_source": "stream", "estimator": "model", "delta_d": DELTA_D,
         "sensor_noise": SIGMA, "state_period": TRUE.period / RATE, "enable_after": 0,
-        "sensor_coordinate": 0, "reidentify_periods": 20}, domain_id=domain, log=log)
+        "sensor_coordinate": 0, "reidentify_periods": 20, **over}, domain_id=domain,
+        log=log)
     try:
         pub = col.node.create_publisher(JointState, "oscillator/state", DATA_QOS)
         assert col.wait_for(lambda: pub.get_subscription_count() > 0 and col.subs[
@@ -115,15 +119,25 @@ def scene(tmp_path_factory):
         col.close()
 
 
-def test_a_wrong_model_is_refitted_and_the_loop_holds_the_true_orbit_closer(scene):
+def decisions(col):
+    """The decision rows on controller/model_switch, less the busy refusals."""
+    return [m for m in col.get("controller/model_switch")
+            if m.position[1] != 1 + REASONS.index("busy")]
+
+
+def test_a_wrong_model_is_refitted_and_the_loop_holds_the_true_orbit_closer(tmp_path):
     """~/reidentify after 40 periods on the wrong model: success; the decision row is a
     switch (reason 0) with the refitted r and Delta d within 3 standard errors of the
     truth; the answers from its section on are the new gains' (k^T (X^ - X**) of the new
     model); after 40 more periods the true Pi2 state is nearer the true design's orbit
     than over the 20 periods before the request (measured, printed), one impact a period."""
+    with controller(tmp_path) as scene:
+        _called_refit(*scene)
+
+
+def _called_refit(col, proc, log, plant):
     from std_srvs.srv import Trigger
 
-    col, proc, log, plant = scene
     for k in range(BEFORE):
         plant.period(_answer_of(col, k + 1, 60.0).twist.linear.x)
     client = col.node.create_client(Trigger, "controller_node/reidentify")
@@ -133,16 +147,12 @@ def test_a_wrong_model_is_refitted_and_the_loop_holds_the_true_orbit_closer(scen
     assert call.result().success, call.result().message
     requested = plant.k
 
-    def decisions():
-        return [m for m in col.get("controller/model_switch")
-                if m.position[1] != 1 + REASONS.index("busy")]
-
     end = time.monotonic() + 600.0          # the fit: ~25 s CPU, more on a loaded host
-    while not decisions() and time.monotonic() < end:
+    while not decisions(col) and time.monotonic() < end:
         plant.period(_answer_of(col, plant.k + 1, 60.0).twist.linear.x)
         col.wait_for(lambda: False, 0.05)   # the worker's share of the GIL
-    assert decisions(), f"no decision within 600 s ({plant.k - requested} periods)"
-    msg = decisions()[0]
+    assert decisions(col), f"no decision within 600 s ({plant.k - requested} periods)"
+    msg = decisions(col)[0]
     row = dict(zip(SWITCH_FIELDS, msg.position))
     assert tuple(msg.name) == SWITCH_FIELDS
     assert row["switched"] == 1.0 and row["reason"] == 0.0, (row, log.read_text())
@@ -171,3 +181,35 @@ def test_a_wrong_model_is_refitted_and_the_loop_holds_the_true_orbit_closer(scen
     assert proc.wait(15) == 0
     text = log.read_text()
     assert "Traceback" not in text and "model_switches=1" in text, text
+
+
+def test_a_mismatch_verdict_of_the_n_dof_model_watch_triggers_the_refit(tmp_path):
+    """reidentify with the n-DOF model watch (consistency_window 10, track_delta_d): no
+    service call; the monitor's mismatch verdicts (the damping 1 % high) request the
+    refit themselves (the 1-DOF trigger, ros/reidentify.py AutoTrigger), and within 200
+    periods a decision row is a switch; the loop then holds the true design's orbit
+    closer than over periods 20-40 (measured, printed)."""
+    with controller(tmp_path, reidentify=True, consistency_window=10,
+                    track_delta_d=True) as (col, proc, log, plant):
+        switched = []
+        while plant.k < 200 and not switched:
+            plant.period(_answer_of(col, plant.k + 1, 60.0).twist.linear.x)
+            col.wait_for(lambda: False, 0.02)       # the worker's share of the GIL
+            switched = [m for m in decisions(col) if m.position[0] == 1.0]
+        rows = [dict(zip(SWITCH_FIELDS, m.position)) for m in decisions(col)]
+        assert switched, (rows, log.read_text()[-3000:])
+        at = round((switched[0].header.stamp.sec + switched[0].header.stamp.nanosec * 1e-9)
+                   / TRUE.period)
+        for _ in range(AFTER):
+            plant.period(_answer_of(col, plant.k + 1, 60.0).twist.linear.x)
+        k_true = evaluate_design(TRUE, MU, DELAY).gains
+        orbit = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
+        pi2 = np.array(plant.pi2)
+        before = float(np.mean(np.linalg.norm(pi2[20:40] - orbit, axis=1)))
+        after = float(np.mean(np.linalg.norm(pi2[-20:] - orbit, axis=1)))
+        made = [(r["switched"], r["reason"], r["requested_at"]) for r in rows]
+        print(f"n-DOF automatic refit: decisions {made}, switched at section {at}; "
+              f"distance {before:.2e} before, {after:.2e} after")
+        assert after < 0.5 * before, (before, after)
+        text = log.read_text()
+        assert "re-identification started at section" in text, text
