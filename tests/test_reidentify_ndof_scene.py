@@ -24,7 +24,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 import yaml
 from sensor_msgs.msg import JointState
 
@@ -125,6 +124,20 @@ def decisions(col):
             if m.position[1] != 1 + REASONS.index("busy")]
 
 
+def after_switch(col, plant, msg, first: int) -> tuple:
+    """AFTER more periods after the switch row ``msg``: (its section, the mean distance
+    of the true Pi2 state from the true design's controlled 1/1 orbit over periods
+    first..first + 19, the same over the last 20)."""
+    at = round((msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9) / TRUE.period)
+    for _ in range(AFTER):
+        plant.period(_answer_of(col, plant.k + 1, 60.0).twist.linear.x)
+    k_true = evaluate_design(TRUE, MU, DELAY).gains
+    orbit = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
+    pi2 = np.array(plant.pi2)
+    before = float(np.mean(np.linalg.norm(pi2[first:first + 20] - orbit, axis=1)))
+    return at, before, float(np.mean(np.linalg.norm(pi2[-20:] - orbit, axis=1)))
+
+
 def test_a_wrong_model_is_refitted_and_the_loop_holds_the_true_orbit_closer(tmp_path):
     """~/reidentify after 40 periods on the wrong model: success; the decision row is a
     switch (reason 0) with the refitted r and Delta d within 3 standard errors of the
@@ -159,15 +172,7 @@ def _called_refit(col, proc, log, plant):
     assert abs(row["r"] - TRUE.r) < 3.0 * row["r_se"], row
     assert abs(row["delta_d"] - TRUE.delta_d) < 3.0 * row["delta_d_se"], row
     assert math.isnan(row["c1"]) and math.isnan(row["c2"])
-    switched_at = round((msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
-                        / TRUE.period)
-    for _ in range(AFTER):
-        plant.period(_answer_of(col, plant.k + 1, 60.0).twist.linear.x)
-    k_true = evaluate_design(TRUE, MU, DELAY).gains
-    orbit = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
-    pi2 = np.array(plant.pi2)
-    before = float(np.mean(np.linalg.norm(pi2[BEFORE - 20:BEFORE] - orbit, axis=1)))
-    after = float(np.mean(np.linalg.norm(pi2[-20:] - orbit, axis=1)))
+    switched_at, before, after = after_switch(col, plant, msg, BEFORE - 20)
     print(f"n-DOF reidentify through the node: requested at {requested}, switched at "
           f"section {switched_at}; mean distance from the true orbit {before:.2e} before, "
           f"{after:.2e} after; r {row['r']:.5f} +- {row['r_se']:.1e}, delta_d "
@@ -198,15 +203,7 @@ def test_a_mismatch_verdict_of_the_n_dof_model_watch_triggers_the_refit(tmp_path
             switched = [m for m in decisions(col) if m.position[0] == 1.0]
         rows = [dict(zip(SWITCH_FIELDS, m.position)) for m in decisions(col)]
         assert switched, (rows, log.read_text()[-3000:])
-        at = round((switched[0].header.stamp.sec + switched[0].header.stamp.nanosec * 1e-9)
-                   / TRUE.period)
-        for _ in range(AFTER):
-            plant.period(_answer_of(col, plant.k + 1, 60.0).twist.linear.x)
-        k_true = evaluate_design(TRUE, MU, DELAY).gains
-        orbit = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
-        pi2 = np.array(plant.pi2)
-        before = float(np.mean(np.linalg.norm(pi2[20:40] - orbit, axis=1)))
-        after = float(np.mean(np.linalg.norm(pi2[-20:] - orbit, axis=1)))
+        at, before, after = after_switch(col, plant, switched[0], 20)
         made = [(r["switched"], r["reason"], r["requested_at"]) for r in rows]
         print(f"n-DOF automatic refit: decisions {made}, switched at section {at}; "
               f"distance {before:.2e} before, {after:.2e} after")
