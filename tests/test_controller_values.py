@@ -151,7 +151,6 @@ def test_one_dof_parameters_and_another_models_design_are_refused(values, text):
     ({"impact_source": "topic"}, "impact_source='topic' is invalid with model_file"),
     ({"sensor_coordinate": 2}, "sensor_coordinate=2 is invalid: valid range is 0 <= "
                                "sensor_coordinate < n = 2"),
-    ({"reidentify": True}, "reidentify=True is invalid with model_file"),
     ({"sensor_noise": 0.0}, "sensor_noise=0.0 is invalid")])
 def test_the_n_dof_stream_estimator_refuses_what_it_does_not_do(values, text):
     """pi2_source stream with model_file (issue 32): the model filter over the n-DOF map

@@ -131,3 +131,76 @@ def test_diagnostics_count_switches_and_warn_on_a_new_refusal():
     stat.summaries.clear()
     side.diagnose(stat)                 # nothing new: no WARN
     assert stat.summaries == []
+
+
+# ------------------------------------------------------------- a model-file controller
+def _ndof_node(coordinate: int = 0):
+    """An n-DOF controller's state (issue 32): the two-mass scene's model file with the
+    damping 1 % high as the running model, its design k(mu = -0.22, delay 1.0), the
+    stream estimator of x_`coordinate` with a filter, the law k^T (X - X**)."""
+    import dataclasses
+    from pathlib import Path
+
+    from grazing_control.dynamics.design.family import evaluate_design
+    from grazing_control.oscillator.ndof.model import load_model
+    from grazing_control.ros.controller_values import model_controller_from_values
+
+    path = Path(__file__).resolve().parents[1] / "config" / "models" / "two_mass_scene.yaml"
+    true = dataclasses.replace(load_model(path), delta_d=-1e-3)
+    wrong = dataclasses.replace(true, C=1.01 * true.C)
+    ndof = model_controller_from_values({"delta_d": -1e-3}, str(path),
+                                        evaluate_design(wrong, -0.22, 1.0).gains.tolist(),
+                                        model=wrong)
+    stream = StreamEstimator(ndof.model, "model", 1e-4, coordinate=coordinate)
+    stream.filter = FilterState((1e-4, -1e-4, 2e-4, 0.0), np.eye(4) * 1e-8, 5)
+    stream.next_k = 40
+    law = ControlLaw(ndof.gains, ndof.x_ref, ndof.v_ref, 0, math.inf)
+    sent = []
+    logger = SimpleNamespace(info=lambda m: None, warning=lambda m: None)
+    node = SimpleNamespace(stream=stream, model=ndof.model, ndof=ndof, law=law,
+                           actuation_delay=1.0, pulse=(0.0, math.inf, None), monitor=None,
+                           verdict=None, pub_switch=SimpleNamespace(publish=sent.append),
+                           get_logger=lambda: logger)
+    return node, ReidentifySide.from_node(node, STREAM), sent, true
+
+
+def test_an_n_dof_switch_moves_the_model_the_gains_and_x_star_star():
+    """A plan for a model file: the estimator, the controller's model (its prediction's
+    section) and the law move to the new model's k and X** = X_p(tau2); the row has the
+    lowest mode's zeta, c1 and c2 NaN, the wall coordinate's X**."""
+    from grazing_control.dynamics.estimation.reidentification import VectorGains
+    from grazing_control.dynamics.identification.modal import modal_of
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+
+    node, side, sent, true = _ndof_node()
+    old_X = np.concatenate([node.ndof.x_ref, node.ndof.v_ref]) + np.array(node.stream.filter.z)
+    k = np.array([-1.3, 0.2, -1.6, -1.2])
+    fit = Refit(true, {"zeta": 1e-5, "r": 1e-3, "delta_d": 5e-6}, 1e-4, (math.nan,) * 2,
+                0.0, 20.0, 20, 20, 25.0, modal_of(true), {})
+    side._apply(SwitchPlan(refit=fit, gains=VectorGains(k, 1.0, -0.22), requested_at=39),
+                41, (100, 0))
+    flow = NdofFlow.of(true)
+    X = flow.particular(flow.tau2)
+    assert node.model is true and node.stream.p is true and node.ndof.model is true
+    assert node.ndof.section.model is true and node.ndof.gains is k and node.law.gains is k
+    np.testing.assert_array_equal(node.law.x_ref, X[:2])
+    np.testing.assert_array_equal(node.ndof.v_ref, X[2:])
+    np.testing.assert_allclose(X + np.array(node.stream.filter.z), old_X, rtol=0, atol=1e-15)
+    row = dict(zip(SWITCH_FIELDS, sent[-1].position))
+    assert row["switched"] == 1.0 and row["reason"] == 0.0
+    assert row["zeta"] == modal_of(true).damping_ratio[0] and row["r"] == true.r
+    assert math.isnan(row["c1"]) and math.isnan(row["c2"]) and row["x_ref"] == X[0]
+    assert side.switches == 1
+
+
+def test_an_n_dof_request_names_its_refusals():
+    """The stream of another coordinate than the wall's: not_identified at the request
+    (the modal fit is x_w's); of the wall's, too short: too_few_periods; both a row."""
+    node, side, sent, _true = _ndof_node(coordinate=1)
+    ok, message = side.request()
+    assert not ok and "(not_identified)" in message and "i_w=0" in message
+    assert dict(zip(SWITCH_FIELDS, sent[-1].position))["reason"] == \
+        1 + REASONS.index("not_identified")
+    node, side, sent, _true = _ndof_node(coordinate=0)
+    ok, message = side.request()
+    assert not ok and "too_few_periods" in message

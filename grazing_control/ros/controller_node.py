@@ -589,6 +589,8 @@ class ControllerNode(Node):
         ndof = self.ndof
         X = np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z, dtype=float)
         n = ndof.model.n
+        if self.reid is not None:       # a finished refit is applied here, at Pi2
+            self.reid.at_section(k, key, est)
         dv = self._answer(key, X[:n], X[n:], self._capture_factor(k, est),
                           tk if self.rig_side is not None else None)
         msg = JointState(name=[f"mass{i}" for i in range(n)],
@@ -597,6 +599,8 @@ class ControllerNode(Node):
         msg.header.stamp.sec, msg.header.stamp.nanosec = key
         self.pub_estimate.publish(msg)
         self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
+        if self.reid is not None:
+            self.reid.answered(k, 0.0 if dv is None else dv)
 
     def _capture_factor(self, k: int, est) -> float:
         """1, or 0 while the capture rule holds the correction back (only once the
@@ -727,12 +731,8 @@ class ControllerNode(Node):
         periods (ros/reidentify.py); refused (success false, the reason in the message)
         without the stream's model estimator, while a fit runs, or on too short a
         window. The result is applied at the next Pi2 section."""
-        if self.reid is None:
-            response.success = False
-            response.message = ("re-identification needs pi2_source=stream and "
-                                "estimator=model")
-            return response
-        response.success, response.message = self.reid.request()
+        response.success, response.message = (self.reid.request() if self.reid else (
+            False, "re-identification needs pi2_source=stream and estimator=model"))
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:

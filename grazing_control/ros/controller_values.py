@@ -526,7 +526,7 @@ def model_stream_from_values(values: dict, ndof: ModelController,
     The model watch (``estimate_bias``, ``track_delta_d``, ``consistency_window``,
     :mod:`grazing_control.ros.model_watch`) selects the augmented filter over the model
     file (:class:`AugmentedStreamEstimator`, docs/theory_estimation.md (E12)), its values
-    checked as for 1-DOF; ``reidentify`` is refused (not built for n-DOF)."""
+    checked as for 1-DOF; ``reidentify``: :mod:`grazing_control.ros.reidentify`."""
     from grazing_control.dynamics.estimation.stream import StreamEstimator
 
     source = values.get("pi2_source", "sample")
@@ -544,9 +544,6 @@ def model_stream_from_values(values: dict, ndof: ModelController,
         raise ParameterError(f"impact_source={values['impact_source']!r} is invalid with "
                              "model_file: valid is stream (the n-DOF model filter finds the "
                              "impacts in its exact motion)")
-    if values.get("reidentify"):
-        raise ParameterError("reidentify=True is invalid with model_file: valid is false "
-                             "(not built for n-DOF)")
     floor = float(values.get("model_noise", 1e-2))
     if not (math.isfinite(floor) and floor >= 0.0):
         raise ParameterError(f"model_noise={floor!r} is invalid: valid range is a finite "

@@ -17,6 +17,16 @@ Parameters:
 ``design_conditions``   the design's conditions re-checked for the new model (combined,
                         impacting, non-impacting: ``grazing design``'s sets).
 
+A model-file controller (n masses, issue 32) runs the same path: the record holds its
+sensor coordinate's stream (which must be the wall coordinate i_w for a refit) and each
+section's 2n-state estimate; the refit is the modal fit realised as a model file, the
+redesign the family's k(mu) at the running mu, delay and pulse
+(:class:`~grazing_control.dynamics.estimation.reidentification.VectorGains`); the switch
+moves the estimator, the law's gains and X**, and the controller's model
+(:class:`~grazing_control.ros.controller_values.ModelController`: the prediction of a
+late answer) to the new model. Its row has zeta the lowest mode's damping ratio, c1 and
+c2 NaN (the gains are logged), x_ref and v_ref the wall coordinate's X**.
+
 Each decision (a switch, or a refusal with its reason) is one row on
 ``controller/model_switch`` (sensor_msgs/JointState, stamp t_k of the section it was
 decided at, ``name`` = :data:`SWITCH_FIELDS`, ``position`` = the values, NaN where there is
@@ -27,10 +37,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from grazing_control.dynamics.estimation.reidentification import (CONDITIONS, MIN_PERIODS, REASONS,
                                                        REFIT_PERIODS,
                                                        ReidentificationError, Reidentifier,
-                                                       StreamRecord, switch_estimator)
+                                                       StreamRecord, VectorGains,
+                                                       switch_estimator)
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import ParameterError
 
@@ -108,16 +121,21 @@ def switch_row(plan=None, error: ReidentificationError | None = None, law=None,
     row = [0.0 if err is not None else 1.0,
            0.0 if err is None else 1.0 + REASONS.index(err.reason),
            nan if req is None else float(req)]
+    vector = plan is not None and isinstance(plan.gains, VectorGains)
     if fit is not None:
         m, se = fit.model, fit.stderr
-        row += [m.zeta, se["zeta"], m.r, se["r"], m.delta_d, se["delta_d"]]
+        zeta = fit.modal.damping_ratio[0] if fit.modal is not None else m.zeta
+        row += [zeta, se["zeta"], m.r, se["r"], m.delta_d, se["delta_d"]]
     else:
         row += [nan] * 6
-    if err is None and plan is not None:
+    if err is None and plan is not None and not vector:
         row += [plan.gains.c1, plan.gains.c2]
     else:
         row += [nan, nan]
-    row += [law.x_ref, law.v_ref] if (law is not None and err is None) else [nan, nan]
+    if law is not None and err is None and vector:     # the wall coordinate's X**
+        row += [law.x_ref[fit.model.i_w], law.v_ref[fit.model.i_w]]
+    else:
+        row += [law.x_ref, law.v_ref] if (law is not None and err is None) else [nan, nan]
     if fit is not None:
         row += [fit.periods, fit.impacts, fit.sigma, fit.phase_error, fit.cpu_s]
     else:
@@ -133,6 +151,14 @@ def describe_plan(plan=None, error: ReidentificationError | None = None, k=None)
     if err is not None:
         return f"re-identification refused{at} ({err.reason}): {err}; model and gains kept"
     m, se, g = plan.refit.model, plan.refit.stderr, plan.gains
+    if isinstance(g, VectorGains):
+        f = plan.refit.modal
+        modes = ", ".join(f"Omega={o:.6g} zeta={z:.6g}" for o, z in
+                          zip(f.natural_frequency, f.damping_ratio))
+        return (f"model switched{at}: {modes}, r={m.r:.6g} ({se['r']:.2g}), delta_d="
+                f"{m.delta_d:.6g} ({se['delta_d']:.2g}); k={[round(x, 9) for x in g.k]} "
+                f"(mu={g.mu:.6g}; fit of {plan.refit.periods:.0f} periods, "
+                f"{plan.refit.impacts} impacts, {plan.refit.cpu_s:.1f} s CPU)")
     return (f"model switched{at}: zeta={m.zeta:.6g} ({se['zeta']:.2g}), r={m.r:.6g} "
             f"({se['r']:.2g}), delta_d={m.delta_d:.6g} ({se['delta_d']:.2g}); c1={g.c1:.6g} "
             f"c2={g.c2:.6g} (fit of {plan.refit.periods:.0f} periods, {plan.refit.impacts} "
@@ -191,9 +217,9 @@ class ReidentifySide:
 
     def answered(self, k: int, dv: float) -> None:
         if self._state is not None:
-            self.record.add_section(k, self._state[:2], dv,
+            self.record.add_section(k, self._state[0], dv,
                                     k * self.node.model.period + self.node.actuation_delay,
-                                    self._state[2])
+                                    self._state[1])
 
     def acted(self, k: int, dv: float) -> None:
         self.record.acted(k, dv, k * self.node.model.period + self.node.actuation_delay)
@@ -202,8 +228,10 @@ class ReidentifySide:
     def at_section(self, k: int, key: tuple, est) -> None:
         """Section k's estimate is made, its answer not yet: apply a finished plan here,
         or start a refit on a mismatch verdict (``reidentify``)."""
-        p = self.node.model
-        self._state = (p.x_ref + est.z[0], p.v_ref + est.z[1], est.source == "model")
+        p, ndof = self.node.model, getattr(self.node, "ndof", None)
+        self._state = ((p.x_ref + est.z[0], p.v_ref + est.z[1]) if ndof is None else
+                       tuple(np.concatenate([ndof.x_ref, ndof.v_ref]) + np.asarray(est.z)),
+                       est.source == "model")
         plan = self.worker.take()
         if plan is not None:
             self._apply(plan, k, key)
@@ -222,8 +250,8 @@ class ReidentifySide:
         n = self.node
         if k is None:
             k = n.stream.next_k - 1 if n.stream.next_k is not None else None
-        gains = Gains(n.law.gains.c1, n.law.gains.c2, n.actuation_delay)
         try:
+            gains = self._gains()
             self.worker.request(self.record, n.model, gains, k)
         except ReidentificationError as exc:
             from .cdr import stamp_parts
@@ -234,6 +262,29 @@ class ReidentifySide:
                 f"{self.record.covered:.1f} periods")
         n.get_logger().info(line)
         return True, line
+
+    def _gains(self):
+        """The running gains as the worker takes them: Gains(c1, c2, delay), or an
+        n-DOF law's VectorGains (k, the delay or the design's Actuation of the pulse,
+        mu); ReidentificationError ``not_identified`` where the stream is not the wall
+        coordinate's (the modal fit's data)."""
+        n = self.node
+        if getattr(n, "ndof", None) is None:
+            return Gains(n.law.gains.c1, n.law.gains.c2, n.actuation_delay)
+        model = n.ndof.model
+        if n.stream.coordinate != model.i_w:
+            raise ReidentificationError(
+                "not_identified", f"the stream is coordinate {n.stream.coordinate}'s, not "
+                f"the wall coordinate i_w={model.i_w}'s: the n-DOF refit fits x_w "
+                "(sensor_coordinate must be i_w)")
+        width, _limit, act = (tuple(n.pulse) + (None,))[:3]
+        actuation = n.actuation_delay
+        if width > 0.0:
+            from grazing_control.dynamics.design.family import Actuation
+
+            actuation = Actuation(n.actuation_delay, width, 0.0 if act is None else
+                                  act.time_constant, 0.0 if act is None else act.latency)
+        return VectorGains.of(model, n.ndof.gains, actuation)
 
     def _refused(self, error, k, key, plan=None) -> None:
         self.refused[error.reason] = self.refused.get(error.reason, 0) + 1
@@ -254,8 +305,21 @@ class ReidentifySide:
         switch_estimator(n.stream, new, plan.refit.stderr["delta_d"])
         n.model = new
         law = n.law
-        law.configure(Gains(plan.gains.c1, plan.gains.c2), new.x_ref, new.v_ref,
-                      law.enable_after, law.saturation)
+        if getattr(n, "ndof", None) is None:
+            law.configure(Gains(plan.gains.c1, plan.gains.c2), new.x_ref, new.v_ref,
+                          law.enable_after, law.saturation)
+        else:                           # the n-DOF controller's model, X** and k
+            import dataclasses
+
+            from grazing_control.oscillator.ndof.section import NdofSection
+
+            section = NdofSection(new)
+            X = np.asarray(section.flow.particular(section.tau2), dtype=float)
+            n.ndof = dataclasses.replace(n.ndof, model=new, section=section,
+                                         gains=plan.gains.k, x_ref=X[:new.n].copy(),
+                                         v_ref=X[new.n:].copy())
+            law.configure(plan.gains.k, n.ndof.x_ref, n.ndof.v_ref, law.enable_after,
+                          law.saturation)
         if n.monitor is not None:       # its window held the old model's innovations
             n.monitor.reset()
             n.verdict = None

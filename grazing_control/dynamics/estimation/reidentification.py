@@ -27,6 +27,21 @@ steps, each with its named failure (:class:`ReidentificationError`, ``reason``):
 a stream estimator's filter to the new model at a Pi2 section (the state carried over in
 absolute coordinates, the covariance kept). A request while a fit runs is refused
 (``busy``) by the caller that owns the worker (:class:`Reidentifier`).
+
+One implementation for every model (issue 32), dispatching on the running model: the
+1-DOF oscillator (:class:`OscillatorParams`, all of the above, unchanged bit for bit) or
+a model file of n masses (:class:`~grazing_control.oscillator.ndof.model.NdofModel`,
+docs/theory_reidentification.md "n > 1"): the window's impacts predicted over the exact
+n-DOF motion from each section's 2n-state estimate; step 2 the multiple-shooting fit of
+the wall coordinate's modal parameters
+(:func:`grazing_control.dynamics.identification.modal_fit.identify_modal`, the core of
+``grazing identify`` on an n-DOF bag) started from the running model's modes, realised
+as a model file (:func:`grazing_control.dynamics.identification.modal.realise`, its
+misfit within :data:`REALISATION_LIMIT` standard errors) with the running time base;
+step 3 the family member k(mu) of the new model at the running gains' mu
+(docs/theory_ndof.md §3, (N9) with the delay, §15 with the pulse) with the conditions of
+``grazing design --model`` (:func:`grazing_control.dynamics.design.family.evaluate_design`)
+re-checked: :class:`VectorGains`.
 """
 
 from __future__ import annotations
@@ -35,6 +50,7 @@ import math
 import threading
 import time
 from collections import deque
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +59,8 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import FilterState
 from grazing_control.dynamics.estimation.motion import trajectory
+from grazing_control.oscillator.ndof.flow import NdofFlow
+from grazing_control.oscillator.ndof.model import NdofModel
 
 # The solvers (scipy.optimize, through the identification's fit and the design's orbits)
 # are imported where they are used, in the worker: a node that never refits does not load
@@ -52,8 +70,8 @@ from grazing_control.dynamics.estimation.motion import trajectory
 CONDITIONS = ("combined", "impacting", "non-impacting")
 
 __all__ = ["REASONS", "MIN_PERIODS", "REFIT_PERIODS", "ReidentificationError", "StreamRecord",
-           "StreamWindow", "Refit", "SwitchPlan", "model_from_fit", "refit", "redesign", "plan_switch",
-           "switch_estimator", "Reidentifier"]
+           "StreamWindow", "Refit", "SwitchPlan", "VectorGains", "model_from_fit", "refit",
+           "redesign", "plan_switch", "switch_estimator", "Reidentifier"]
 
 #: The named failures (ReidentificationError.reason); the loop keeps its state on each.
 REASONS = ("too_few_periods", "no_impacts", "fit_failed", "not_identified",
@@ -85,6 +103,10 @@ MAX_NFEV = 400
 #: hardly determines zeta: its refit had not ended 124 s later and the loop waited on it,
 #: ``busy``, for the rest of the scene).
 REFIT_SECONDS = 60.0
+#: The largest misfit, in standard errors, of the realised n-DOF model's modal parameters
+#: (``grazing identify --out-model``'s limit, cli/identify.py REALISATION_LIMIT): beyond it
+#: no symmetric M, C, K near the running model shows the fitted modes (``not_identified``).
+REALISATION_LIMIT = 3.0
 
 
 class ReidentificationError(ValueError):
@@ -101,8 +123,8 @@ class StreamRecord:
 
     ``add_sample(t, x, v, cos_tau, sin_tau)`` (v NaN: position only; a phase reference
     of the forcing frequency: the stream's, or omega t), ``add_section(k, state, dv,
-    at)`` (the controller's estimate of section k as an absolute state (x^, v^), the
-    kick answered and its instant),
+    at)`` (the controller's estimate of section k as an absolute state (x^, v^), for n
+    masses the 2n values X^ = (x^, v^), the kick answered and its instant),
     ``acted(k, dv, at)`` (what the plant says acted there instead), ``add_impact(t)`` (an
     impact sensor's); :meth:`snapshot` the window, taken in the caller's thread.
     """
@@ -139,7 +161,7 @@ class StreamRecord:
     def add_section(self, k: int, z, dv: float, at: float, fitted: bool = True) -> None:
         """Section k's estimate (absolute), its kick and instant; ``fitted``: the model
         filter made the estimate (not an arc fit after a start or a reset)."""
-        self.sections[int(k)] = ((float(z[0]), float(z[1])), float(dv), float(at),
+        self.sections[int(k)] = (tuple(float(a) for a in z), float(dv), float(at),
                                  bool(fitted))
         for old in [j for j in self.sections if j < k - self.periods - 2]:
             del self.sections[old]
@@ -204,12 +226,21 @@ class StreamWindow:
         at = np.array(sorted(sec[2] for sec in self.sections.values() if sec[1] != 0.0))
         return at[(at > t0) & (at < t1)] if at.size else at
 
+    def kick_sizes(self) -> np.ndarray:
+        """The sizes of the kicks of :meth:`kicks`, in the same order (the n-DOF fit's
+        ``correction_dv``: the actuated coordinate's response is fitted from them)."""
+        t0, t1 = self.samples[0, 0], self.samples[-1, 0]
+        rows = sorted((sec[2], sec[1]) for sec in self.sections.values() if sec[1] != 0.0)
+        return np.array([dv for at, dv in rows if t0 < at < t1], dtype=float)
+
     def predicted_impacts(self, p: OscillatorParams, delay: float) -> np.ndarray:
         """The impact times of the running model from each section's estimate with its
         kick (one exact period each, :func:`grazing_control.dynamics.estimation.motion.trajectory`):
         the starts of the fit's impact times where no impact sensor gave them (the fit
         moves each between the samples around it, and to the next interval when it stops
         at a bound)."""
+        if isinstance(p, NdofModel):
+            return self._ndof_impacts(p, delay)
         out = []
         for k in sorted(self.sections):
             state, dv, at, _fitted = self.sections[k]
@@ -218,6 +249,27 @@ class StreamWindow:
                 continue
             try:
                 *_rest, imps = trajectory(p, z, np.empty(0), dv, at - k * self.period)
+            except (ValueError, ArithmeticError, RuntimeError):
+                continue
+            out += [k * self.period + i[0] for i in imps]
+        return np.array(sorted(out))
+
+    def _ndof_impacts(self, p: NdofModel, delay) -> np.ndarray:
+        """:meth:`predicted_impacts` over the exact n-DOF motion (motion.trajectory of a
+        model file): z = X^ - X_p(tau2), the kick or the pulse of ``delay`` (a
+        :class:`VectorGains`' ``actuation``: the delay, or the design's Actuation)."""
+        flow = NdofFlow.of(p)
+        ref = flow.particular(flow.tau2)
+        width, lag = _pulse_of(delay)
+        out = []
+        for k in sorted(self.sections):
+            state, dv, at, _fitted = self.sections[k]
+            z = np.asarray(state, float) - ref
+            if z.size != ref.size or not np.all(np.isfinite(z)):
+                continue
+            try:
+                *_rest, imps = trajectory(p, z, np.empty(0), dv, at - k * self.period,
+                                          width=width, actuator=lag)
             except (ValueError, ArithmeticError, RuntimeError):
                 continue
             out += [k * self.period + i[0] for i in imps]
@@ -246,7 +298,14 @@ class Refit:
     Delta d (``stderr``), the fit's noise ``sigma``, its natural frequency and forcing
     amplitude in the stream's units (``units``: 1 where the running time base is right),
     the forcing phase at t = 0 against the new model's section phase (``phase_error``,
-    rad), the periods, samples and impacts used, the fit's CPU seconds."""
+    rad), the periods, samples and impacts used, the fit's CPU seconds.
+
+    For n masses: ``model`` the realised model file, ``stderr`` zeta and its error the
+    lowest mode's damping ratio (the row's field), r and delta_d, ``modal`` the fit's
+    :class:`~grazing_control.dynamics.identification.modal.ModalModel` with every
+    parameter's standard error (``modal_stderr``), ``units`` (nan, nan) (the modal fit
+    has no unit scales), ``phase_error`` the new model's Pi2 phase tau2 less the
+    running one's."""
 
     model: OscillatorParams
     stderr: dict
@@ -257,6 +316,45 @@ class Refit:
     samples: int
     impacts: int
     cpu_s: float
+    modal: object = None
+    modal_stderr: dict | None = None
+
+
+@dataclass(frozen=True)
+class VectorGains:
+    """An n-DOF law's gains: ``k`` (2n, on x_0..x_n-1, v_0..v_n-1), how the correction
+    acts (``actuation``: the delay, or the design's
+    :class:`~grazing_control.dynamics.design.family.Actuation` for a force pulse) and the
+    family's parameter ``mu`` = N(k)_{i_w, i_w} on the model they run with
+    (docs/theory_ndof.md §3): the redesign keeps mu and the actuation."""
+
+    k: np.ndarray
+    actuation: object = 0.0
+    mu: float = math.nan
+
+    @classmethod
+    def of(cls, model: NdofModel, k, actuation=0.0) -> "VectorGains":
+        """The gains ``k`` running on ``model``, with their mu (family.family_mu)."""
+        from grazing_control.dynamics.design.family import family_mu
+
+        k = np.array(k, dtype=float).reshape(-1)
+        return cls(k, actuation, family_mu(model, k, actuation))
+
+    @property
+    def delay(self):
+        """What predicted_impacts and the fit read as the delay (the actuation)."""
+        return self.actuation
+
+
+def _pulse_of(actuation) -> tuple:
+    """(width, Actuator or None) of an n-DOF actuation: (0, None) for a delay."""
+    if isinstance(actuation, (int, float)):
+        return 0.0, None
+    from grazing_control.dynamics.simulation.actuator import Actuator
+
+    lag = (Actuator(actuation.time_constant, actuation.latency)
+           if actuation.time_constant > 0.0 or actuation.latency > 0.0 else None)
+    return actuation.width, lag
 
 
 @dataclass(frozen=True)
@@ -284,7 +382,11 @@ def model_from_fit(ident, running: OscillatorParams) -> OscillatorParams:
     a(omega / Omega), would carry the errors of Omega and A, each times d* ~ 1.8: at
     Delta d ~ 1e-6 they dominate; docs/theory_reidentification.md.)
     ReidentificationError ``not_identified`` outside the model's ranges.
+
+    An n-DOF ``running`` model: :func:`_realised` (the fit's modes as a model file).
     """
+    if isinstance(running, NdofModel):
+        return _realised(ident, running)[0]
     m = ident.model
     try:
         new = running.with_(zeta=m.zeta, r=m.r, delta_d=0.0)
@@ -294,9 +396,124 @@ def model_from_fit(ident, running: OscillatorParams) -> OscillatorParams:
                                     f"model's ranges: {exc}") from None
 
 
+def _check(ident, se: dict, named: dict, sigma) -> None:
+    """The refit's checks in order (:func:`refit`'s reasons): every standard error of
+    ``se`` finite and > 0 (``not_identified``: a singular fit), each parameter of
+    ``named`` (name: value) within :data:`RELATIVE_SE` (``not_identified``), converged
+    (``fit_failed``), the residual noise within :data:`RESIDUAL_RATIO` ``sigma``
+    (``fit_failed``; None: not checked)."""
+    bad = [n for n, s in se.items() if not (math.isfinite(s) and s > 0.0)]
+    if bad:
+        raise ReidentificationError("not_identified", f"the refit does not identify "
+                                    f"{', '.join(bad)} (no finite standard error: a "
+                                    "singular fit)")
+    vague = [f"{n} = {v:.4g} +- {se[n]:.2g}" for n, v in named.items()
+             if not se[n] <= RELATIVE_SE * abs(v)]
+    if vague:
+        raise ReidentificationError("not_identified", f"the refit does not determine "
+                                    f"{', '.join(vague)} (standard error beyond "
+                                    f"{RELATIVE_SE:.0%})")
+    if not ident.converged:
+        raise ReidentificationError("fit_failed", f"the refit did not converge: "
+                                    f"{ident.message}")
+    if sigma is not None and not ident.sigma <= RESIDUAL_RATIO * sigma:
+        raise ReidentificationError("fit_failed", f"the refit does not explain the window: "
+                                    f"residual noise {ident.sigma:.3g}, "
+                                    f"{ident.sigma / sigma:.3g} x the sensor's {sigma:.3g}")
+
+
+def _realised(ident, running: NdofModel) -> tuple:
+    """(model, misfit) of an n-DOF fit: the model file whose wall coordinate shows the
+    fitted modes (:func:`grazing_control.dynamics.identification.modal.realise`, nearest
+    the running model), with the running time base (omega, phase, pi2_offset) and the
+    wall where the fit put it, Delta d = d_fit - d*(new model).
+
+    The sections of the stream are the plant's (t_k = k T at its Pi2 phase), so the
+    phase of the fitted periodic response against the reference omega t says nothing of
+    the model (arg X_fit = pi2_offset): only its amplitude d* does, and it alone is
+    realised (``amplitude_only``); the phase of X_w is the realised model's, nearest the
+    running one (forcing the running phase on the fitted modes moved f from (0, 1) to
+    (-0.59, 2.14) and held the loop 14 times farther from the true orbit, measured in
+    tests/test_reidentification_ndof.py's scene). ReidentificationError
+    ``not_identified`` beyond :data:`REALISATION_LIMIT` standard errors or outside the
+    model's ranges."""
+    from grazing_control.dynamics.identification.modal import realise
+
+    fitted = ident.model
+    se = [ident.stderr[k] for k in ident.names]
+    try:
+        model, misfit = realise(fitted, running, se, running.phase, amplitude_only=True)
+        new = dataclasses.replace(model, omega=running.omega, phase=running.phase,
+                                  pi2_offset=running.pi2_offset, delta_d=0.0)
+        new = dataclasses.replace(new, delta_d=fitted.d - NdofFlow.of(new).d_star)
+    except (ParameterError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise ReidentificationError("not_identified", f"the fitted modes have no model "
+                                    f"file near the running one: {exc}") from None
+    if not misfit <= REALISATION_LIMIT:
+        raise ReidentificationError(
+            "not_identified", f"no symmetric M, C, K near the running model shows the "
+            f"fitted modes: the nearest misses them by {misfit:.3g} standard errors (limit "
+            f"{REALISATION_LIMIT:g})")
+    return new, misfit
+
+
+def _refit_ndof(record, running: NdofModel, kicks, actuation, max_nfev: int,
+                periods, sigma, seconds) -> Refit:
+    """:func:`refit` of an n-DOF model (module docstring): the modal fit of the wall
+    coordinate from the running model's modes, the impact times of ``record`` as its
+    start, ``kicks`` the corrections' sizes on the actuated coordinate as a kick or
+    the ``actuation``'s pulse; the checks and reasons of the 1-DOF refit, over every
+    mode's damping ratio and r."""
+    from grazing_control.dynamics.identification import IdentificationError
+    from grazing_control.dynamics.identification.fit import FitTimedOut
+    from grazing_control.dynamics.identification.modal import modal_of
+    from grazing_control.dynamics.identification.modal_fit import identify_modal
+
+    c0 = time.process_time()
+    if not record.impact_t.size:
+        raise ReidentificationError("no_impacts", "the refit's window has no impact: the "
+                                    "wall is not identifiable from free flight")
+    own = modal_of(running)
+    width, lag = _pulse_of(actuation)
+    act = {}
+    if width > 0.0:
+        from grazing_control.dynamics.simulation.actuation import pulse_start
+
+        act = dict(width=width, time_constant=0.0 if lag is None else lag.time_constant,
+                   latency=0.0 if lag is None else lag.latency,
+                   pulse_offset=pulse_start(running.period, actuation.delay, width)
+                   - actuation.delay)
+    try:
+        ident = identify_modal(record, running.n, correction_dv=kicks,
+                               kick_on_wall=running.i_a == running.i_w, max_arcs=None,
+                               max_nfev=max_nfev, modes=(own.natural_frequency,
+                                                         own.damping_ratio),
+                               deadline=time.monotonic() + seconds, **act)
+    except FitTimedOut as exc:
+        raise ReidentificationError("not_identified", f"the refit did not end within "
+                                    f"{seconds:g} s: {exc}") from None
+    except IdentificationError as exc:
+        reason = "no_impacts" if str(exc).startswith("impacts") else "fit_failed"
+        raise ReidentificationError(reason, f"the refit failed: {exc}") from None
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise ReidentificationError("fit_failed", f"the refit failed: {exc}") from None
+    m, se = ident.model, ident.stderr
+    named = [f"damping_ratio_{j}" for j in range(m.n)] + ["r"]
+    _check(ident, {k: se[k] for k in named + [f"natural_frequency_{j}" for j in range(m.n)]
+                   + ["delta_d"]}, {k: ident.value(k) for k in named}, sigma)
+    new = model_from_fit(ident, running)
+    phase = math.remainder(NdofFlow.of(new).tau2 - NdofFlow.of(running).tau2, 2.0 * math.pi)
+    span = record.t[-1] - record.t[0]
+    return Refit(new, {"zeta": se["damping_ratio_0"], "r": se["r"], "delta_d": se["delta_d"]},
+                 ident.sigma, (math.nan, math.nan), phase,
+                 periods if periods is not None else span / running.period,
+                 ident.samples_used, ident.impacts_used, time.process_time() - c0,
+                 m, dict(se))
+
+
 def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
           periods: float | None = None, sigma: float | None = None,
-          seconds: float = REFIT_SECONDS) -> Refit:
+          seconds: float = REFIT_SECONDS, kicks=None, actuation=0.0) -> Refit:
     """Fit the model to ``record`` (:func:`grazing_control.dynamics.identification.identify`
     with the recorded impact times where there are some, else found from the motion,
     started from the running model's zeta and Omega = 1) and map it to the controller's
@@ -311,7 +528,14 @@ def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
     sigma), ``not_identified`` (zeta, r or d
     without a finite standard error: a singular fit; zeta or r with a standard error
     beyond :data:`RELATIVE_SE` of its value; or outside the model's ranges).
+
+    An n-DOF ``running`` model (:func:`_refit_ndof`): ``kicks`` the sizes of
+    ``record``'s corrections, ``actuation`` how they act (:class:`VectorGains`); the
+    impact times must be in ``record`` (the fit starts from them; ``no_impacts``).
     """
+    if isinstance(running, NdofModel):
+        return _refit_ndof(record, running, kicks, actuation, max_nfev, periods, sigma,
+                           seconds)
     # the fit's solver (scipy.optimize) is imported here, in the worker: a node that
     # never refits does not load it (tests/test_node_common.py)
     from grazing_control.dynamics.identification import IdentificationError, identify
@@ -335,24 +559,7 @@ def refit(record, running: OscillatorParams, *, max_nfev: int = MAX_NFEV,
         raise ReidentificationError("no_impacts", "the refit's window has no impact: the "
                                     "wall is not identifiable from free flight")
     se = {"zeta": ident.stderr["zeta"], "r": ident.stderr["r"], "d": ident.stderr["d"]}
-    bad = [n for n, s in se.items() if not (math.isfinite(s) and s > 0.0)]
-    if bad:
-        raise ReidentificationError("not_identified", f"the refit does not identify "
-                                    f"{', '.join(bad)} (no finite standard error: a "
-                                    "singular fit)")
-    vague = [f"{n} = {getattr(ident.model, n):.4g} +- {se[n]:.2g}" for n in ("zeta", "r")
-             if not se[n] <= RELATIVE_SE * abs(getattr(ident.model, n))]
-    if vague:
-        raise ReidentificationError("not_identified", f"the refit does not determine "
-                                    f"{', '.join(vague)} (standard error beyond "
-                                    f"{RELATIVE_SE:.0%})")
-    if not ident.converged:
-        raise ReidentificationError("fit_failed", f"the refit did not converge: "
-                                    f"{ident.message}")
-    if sigma is not None and not ident.sigma <= RESIDUAL_RATIO * sigma:
-        raise ReidentificationError("fit_failed", f"the refit does not explain the window: "
-                                    f"residual noise {ident.sigma:.3g}, "
-                                    f"{ident.sigma / sigma:.3g} x the sensor's {sigma:.3g}")
+    _check(ident, se, {n: getattr(ident.model, n) for n in ("zeta", "r")}, sigma)
     new = model_from_fit(ident, running)
     m = ident.model
     phase = math.remainder(m.tau0 + m.forcing_phase - new.tau2, 2.0 * math.pi)
@@ -369,24 +576,57 @@ def redesign(p: OscillatorParams, gains: Gains, conditions: str = "combined") ->
     (:data:`grazing_control.dynamics.design.gains.CONDITIONS`) hold for ``p`` at that c2
     (:func:`grazing_control.dynamics.design.gains.condition_values`: the limit multipliers
     inside the unit circle, the 1/1 motion's existence, the non-impacting motion's
-    stability). ReidentificationError ``no_admissible_design`` otherwise."""
+    stability). ReidentificationError ``no_admissible_design`` otherwise.
+
+    An n-DOF model ``p`` with :class:`VectorGains`: k(mu) of ``p``'s family at the
+    running mu with the running actuation (:func:`_family_member`)."""
     from grazing_control.dynamics.design.gains import condition_values, degenerate_c1
 
     if conditions not in CONDITIONS:
         raise ParameterError(f"design_conditions={conditions!r} is invalid: valid values are "
                              f"{', '.join(CONDITIONS)}")
     try:
-        c1 = degenerate_c1(p, gains.c2, gains.delay)
-        ok = condition_values(p, gains.c2, gains.delay).holds(conditions)
-    except (ParameterError, ValueError, ArithmeticError) as exc:
+        if isinstance(p, NdofModel):
+            new, ok, where = _family_member(p, gains, conditions)
+        else:
+            c1 = degenerate_c1(p, gains.c2, gains.delay)
+            ok = condition_values(p, gains.c2, gains.delay).holds(conditions)
+            new, where = Gains(c1, gains.c2, gains.delay), (
+                f"zeta={p.zeta:.6g}, r={p.r:.6g}, delta_d={p.delta_d:.6g}) has no "
+                f"admissible design at c2={gains.c2:.6g}, delay={gains.delay:g} ("
+                f"{conditions} conditions")
+    except (ParameterError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         raise ReidentificationError("no_admissible_design", f"no design for the refitted "
                                     f"model: {exc}") from None
     if not ok:
-        raise ReidentificationError(
-            "no_admissible_design", f"the refitted model (zeta={p.zeta:.6g}, r={p.r:.6g}, "
-            f"delta_d={p.delta_d:.6g}) has no admissible design at c2={gains.c2:.6g}, "
-            f"delay={gains.delay:g} ({conditions} conditions): old model and gains kept")
-    return Gains(c1, gains.c2, gains.delay)
+        raise ReidentificationError("no_admissible_design", f"the refitted model ({where}): "
+                                    "old model and gains kept")
+    return new
+
+
+#: The FamilyDesign property that says a condition set holds (``grazing design --model``).
+_FAMILY_HOLDS = {"combined": "admissible", "impacting": "admissible_impacting",
+                 "non-impacting": "free_stable"}
+
+
+def _family_member(p: NdofModel, gains: VectorGains, conditions: str) -> tuple:
+    """(VectorGains, whether ``conditions`` hold, what the refusal says) of the n-DOF
+    redesign: k = k(mu) of ``p`` (docs/theory_ndof.md §3, (N9) with the delay, §15 with
+    the pulse: :func:`grazing_control.dynamics.design.family.gain_family`) at the running
+    ``gains.mu`` and actuation, the conditions of
+    :func:`grazing_control.dynamics.design.family.evaluate_design` (the limit spectrum
+    inside the unit circle and gamma1 > 0: impacting; |mu| < 1 and the transmission
+    zeros inside: non-impacting)."""
+    from grazing_control.dynamics.design.family import evaluate_design
+
+    design = evaluate_design(p, gains.mu, gains.actuation)
+    k = np.array(design.gains, dtype=float)
+    k.setflags(write=False)
+    return VectorGains(k, gains.actuation, gains.mu), bool(
+        getattr(design, _FAMILY_HOLDS[conditions])), (
+        f"r={p.r:.6g}, delta_d={p.delta_d:.6g}) has no admissible design at mu="
+        f"{gains.mu:.6g} ({conditions} conditions: limit radius {design.limit_radius:.4g}, "
+        f"gamma1 {design.gamma1:.4g}, zeros radius {design.zeros_radius:.4g}")
 
 
 def plan_switch(window: StreamWindow, running: OscillatorParams, gains: Gains,
@@ -398,7 +638,9 @@ def plan_switch(window: StreamWindow, running: OscillatorParams, gains: Gains,
 
     try:
         record = window.recording(running, gains.delay)
-        fit = refit(record, running, max_nfev=max_nfev, sigma=sigma)
+        more = {} if not isinstance(running, NdofModel) else dict(
+            kicks=window.kick_sizes(), actuation=gains.actuation)
+        fit = refit(record, running, max_nfev=max_nfev, sigma=sigma, **more)
     except ReidentificationError as exc:
         return SwitchPlan(error=exc, requested_at=requested_at)
     except (RecordingError, ValueError) as exc:
@@ -419,12 +661,21 @@ def switch_estimator(stream, new: OscillatorParams, wall_std: float | None = Non
     augmented filter's Delta d restarts at the new model's with its prior variance
     kept, or set to ``wall_std`` (the refit's standard error of the wall, which the
     tracking then refines: docs/theory_reidentification.md); its bias estimate is kept
-    (it belongs to the sensor)."""
+    (it belongs to the sensor). An n-DOF stream estimator (plain or augmented): z (2n)
+    the same way, with X** = X_p(tau2) of each model, and its flow the new model's."""
     old = stream.p
-    shift = (old.x_ref - new.x_ref, old.v_ref - new.v_ref)
+    if isinstance(old, NdofModel):
+        a, b = (NdofFlow.of(m) for m in (old, new))
+        shift = tuple(a.particular(a.tau2) - b.particular(b.tau2))
+    else:
+        shift = (old.x_ref - new.x_ref, old.v_ref - new.v_ref)
+
+    def moved(z):
+        return tuple(zi + si for zi, si in zip(z, shift))
+
     if getattr(stream, "filter", None) is not None:
         f = stream.filter
-        stream.filter = FilterState((f.z[0] + shift[0], f.z[1] + shift[1]), f.cov, f.periods)
+        stream.filter = FilterState(moved(f.z), f.cov, f.periods)
     if hasattr(stream, "identified"):           # the augmented filter
         stream.identified = new
         stream.params = (stream.params[0], float(new.delta_d))
@@ -436,11 +687,14 @@ def switch_estimator(stream, new: OscillatorParams, wall_std: float | None = Non
         state = stream.state
         if state is not None:
             cov = state.cov.copy()
+            w = len(shift) + 1                  # Delta d after z and the bias
             if renew:
-                cov[3, :] = cov[:, 3] = 0.0
-                cov[3, 3] = float(wall_std) ** 2
-            stream.state = type(state)((state.z[0] + shift[0], state.z[1] + shift[1]),
-                                       state.bias, float(new.delta_d), cov, state.periods)
+                cov[w, :] = cov[:, w] = 0.0
+                cov[w, w] = float(wall_std) ** 2
+            stream.state = type(state)(moved(state.z), state.bias, float(new.delta_d), cov,
+                                       state.periods)
+    if isinstance(old, NdofModel):
+        stream.flow = NdofFlow.of(new)
     stream.p = new
 
 

@@ -209,7 +209,8 @@ def modal_of(model) -> ModalModel:
                       flow.d_star + model.delta_d, model.r, model.omega, kc, ks)
 
 
-def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0):
+def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0,
+            amplitude_only: bool = False):
     """A model file's model (symmetric M, C, K, real f) whose wall coordinate shows the
     ``fitted`` modal parameters: least squares over M, C, K (upper triangles; M's wall
     entry held: the common scale) and f from ``nominal`` (the model the recording was
@@ -219,6 +220,12 @@ def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0):
     determined only up to a change of the hidden coordinates and a common scale; this
     picks the realisation nearest the nominal one). r, omega, the phase tau0 and
     delta_d = d - d* (d* of the realised model) are the fitted ones.
+
+    ``amplitude_only``: of the periodic response only d* = |(P_c, P_s)| is fitted (its
+    misfit over P_c's scale), not its phase: a stream whose sections are the plant's own
+    Pi2 (t_k = k T) shows no phase of x_w against the forcing (the re-identification in
+    the loop, docs/theory_reidentification.md section 6); the phase then follows from
+    the realised model nearest ``nominal``.
 
     Returns (model, misfit): the largest |realised - fitted| / scale over the modal
     parameters (module docstring: the data need not lie exactly on a symmetric model;
@@ -239,7 +246,15 @@ def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0):
             f"i_a={nominal.i_a}: the kick's response on the wall coordinate i_w="
             f"{nominal.i_w} is not identified (the recording has no corrections): no model "
             "for a design can be written; record a controlled scene")
-    target = np.delete(fitted.vector(layout), [layout.index_d, layout.index_d + 1])
+    ip = layout.index_d - 2                 # P_c, P_s (before d and r)
+
+    def shaped(v):
+        if amplitude_only:
+            v = v.copy()
+            v[ip], v[ip + 1] = math.hypot(v[ip], v[ip + 1]), 0.0
+        return np.delete(v, [layout.index_d, layout.index_d + 1])
+
+    target = shaped(fitted.vector(layout))
     scale = np.delete(np.asarray(scale, float), [layout.index_d, layout.index_d + 1])
     iu = np.triu_indices(n)
     base = dataclasses.replace(nominal, omega=fitted.omega, r=fitted.r)
@@ -265,8 +280,7 @@ def realise(fitted: ModalModel, nominal, scale, tau0: float = 0.0):
 
     def residual(theta):
         try:
-            got = np.delete(modal_of(build(theta)).vector(layout),
-                            [layout.index_d, layout.index_d + 1])
+            got = shaped(modal_of(build(theta)).vector(layout))
         except (ParameterError, np.linalg.LinAlgError):
             return np.full(target.size + theta.size, 1e6)
         return np.concatenate([(got - target) / scale, 1e-6 * (theta - theta0) / size])

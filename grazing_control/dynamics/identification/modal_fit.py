@@ -31,13 +31,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from grazing_control.dynamics.identification.data import Recording, RecordingError, cut_arcs
-from grazing_control.dynamics.identification.fit import (CONTINUATION, FitTooLarge,
+from grazing_control.dynamics.identification.fit import (CONTINUATION, FitTimedOut,
+                                                         FitTooLarge,
                                                          IdentificationError, check_size,
                                                          ShootingFit, actuator_input,
                                                          _covariance,
@@ -261,8 +263,12 @@ def _arx_eigenvalues(rec, arcs, phase, n):
     return Om, zeta
 
 
-def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0.0):
+def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0.0,
+                  modes=None):
     """(g, start times, modal states (K, 2n)) to start the fit from (module docstring);
+    ``modes``: (Omega, zeta) of the n modes to start from instead of the ARX guess (a
+    model's, :func:`.modal.modal_of`: the refit in the loop starts from the running
+    model, docs/theory_reidentification.md);
     ``actuator``: the corrections are the input's commands (:class:`ModalProblem`), each
     ``offset`` after its correction's time: the samples under their force are left out
     of the arcs' linear fits, the jumps read as the commands' equivalent kicks
@@ -274,7 +280,10 @@ def initial_modal(rec, arcs, phase, n, dv, kick_on_wall, actuator=None, offset=0
         under = np.zeros(rec.t.size, bool)
         under[acting.rows[rec.t[acting.rows] < end]] = True
         arcs = dataclasses.replace(arcs, sample_arc=np.where(under, -1, arcs.sample_arc))
-    Om, zeta = _arx_eigenvalues(rec, arcs, phase, n)
+    if modes is None:
+        Om, zeta = _arx_eigenvalues(rec, arcs, phase, n)
+    else:
+        Om, zeta = (np.array(a, dtype=float).reshape(n) for a in modes)
     sig, w = rates(Om, zeta)
     om, tau0 = phase.omega, phase.tau0
     K = arcs.count
@@ -431,8 +440,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
                    impact_velocities: bool = True, max_arcs: int | None = 100,
                    max_nfev: int = 200, coincidence: float = 1.5e-9,
                    shrink: bool = False, width: float = 0.0, time_constant: float = 0.0,
-                   latency: float = 0.0, pulse_offset: float | None = None
-                   ) -> ModalIdentification:
+                   latency: float = 0.0, pulse_offset: float | None = None,
+                   modes=None, deadline: float | None = None) -> ModalIdentification:
     """Fit the modal parameters of an n-DOF model to a recording of its wall coordinate
     (module docstring). ``rec``'s impacts must be recorded (their times start the fit);
     ``correction_dv``: the kick of each of ``rec.corrections`` (on the wall coordinate if
@@ -443,7 +452,10 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
     (default -width / 2: centred there; the plant's ``pulse_width``) through the
     first-order actuator (tau_a ``time_constant``, ``latency`` L; the bag's parameter
     record): the force is the fit's known input (:mod:`.force_input`), every sample kept.
-    A kick (both 0) acts L after its time.
+    A kick (both 0) acts L after its time. ``modes``: (Omega, zeta) of the modes to
+    start from (:func:`initial_modal`; None: the ARX guess). ``deadline``: a
+    ``time.monotonic()`` instant by which the fit must end (as :func:`.fit.identify`'s:
+    the solver stops there and FitTimedOut is raised; None: none).
 
     Raises IdentificationError on bad input (no phase reference, no or too few impacts,
     too few samples, no initial guess, a Jacobian beyond JACOBIAN_BYTES).
@@ -452,7 +464,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
         try:
             return _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities,
                                    max_arcs, max_nfev, coincidence,
-                                   (width, time_constant, latency, pulse_offset))
+                                   (width, time_constant, latency, pulse_offset), modes,
+                                   deadline)
         except FitTooLarge as exc:
             if not shrink or max_arcs is not None and exc.fits >= max_arcs:
                 raise
@@ -460,8 +473,8 @@ def identify_modal(rec: Recording, n: int, *, correction_dv=None, kick_on_wall=F
 
 
 def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_arcs,
-                    max_nfev, coincidence, actuation=(0.0, 0.0, 0.0, None)
-                    ) -> ModalIdentification:
+                    max_nfev, coincidence, actuation=(0.0, 0.0, 0.0, None), modes=None,
+                    deadline=None) -> ModalIdentification:
     if not (isinstance(n, (int, np.integer)) and n >= 1):
         raise IdentificationError(f"n={n!r} is invalid: valid is an integer >= 1")
     dv = np.zeros(rec.corrections.size) if correction_dv is None else \
@@ -504,15 +517,25 @@ def _identify_modal(rec, n, correction_dv, kick_on_wall, impact_velocities, max_
     if dof <= 0:
         raise IdentificationError(f"too few samples: {prob.m_data} data values for "
                                   f"{prob.n - prob.n_constraints} free parameters")
-    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, actuator, offset)
+    g0, S0, a0 = initial_modal(rec, arcs, phase, n, rec_dv, kick_on_wall, actuator, offset,
+                               modes)
     lo, hi = prob.bounds()
     inner_lo, inner_hi = interior(lo, hi)
     p = np.clip(prob.pack(g0, S0, a0), inner_lo, inner_hi)
+
+    def in_time(intermediate_result=None):
+        if time.monotonic() > deadline:
+            raise StopIteration
+
     for weight in CONTINUATION:
         prob.weight = weight
         sol = least_squares(prob.residual, p, jac=prob.jacobian, bounds=(lo, hi),
                             method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15,
-                            gtol=1e-15, max_nfev=max_nfev)
+                            gtol=1e-15, max_nfev=max_nfev,
+                            callback=None if deadline is None else in_time)
+        if deadline is not None and time.monotonic() > deadline:
+            raise FitTimedOut(f"the fit did not finish in its time budget ({sol.nfev} "
+                              f"evaluations at weight {weight:g})")
         p = sol.x
     p = _sorted_modes(prob, p)
     res = prob.residual(p)
