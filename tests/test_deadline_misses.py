@@ -6,7 +6,6 @@ without the miss messages the same bag departs (issue 19 §4)."""
 import math
 import time
 
-import numpy as np
 import pytest
 
 from grazing_control.dynamics.design.gains import degenerate_c1
