@@ -53,8 +53,18 @@ def due(node) -> bool:
     if not feasible(node):
         return False
     if not absent:
-        node.get_logger().info(f"start conditions met after {waited:.1f} s: starting")
+        node.get_logger().info(f"start conditions met after {waited:.1f} s: starting"
+                               + wall_time(node.settings, node.engine.p.period))
     return True
+
+
+def wall_time(settings, period: float) -> str:
+    """What a realtime scene of max_periods will take on the wall clock (", 50 periods
+    at time_scale 1: about 471 s of wall time"), '' for lockstep or an unbounded scene."""
+    if settings.mode != "realtime" or settings.max_periods <= 0:
+        return ""
+    return (f", {settings.max_periods} periods at time_scale {settings.time_scale:g}: "
+            f"about {settings.max_periods * period / settings.time_scale:.3g} s of wall time")
 
 
 def intruders(node) -> list:

@@ -82,3 +82,4 @@ def test_the_simulator_waits_for_both_ends_of_the_controller():
     # every lack named, as one item of the start's list (items are joined by "; ")
     worst = missing_matches(_sim({"answers": 0, "/oscillator/pi2": 0}, readers=0), 1)
     assert ";" not in worst and "answers=0" in worst and "/oscillator/pi2" in worst
+
