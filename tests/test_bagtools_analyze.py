@@ -272,9 +272,10 @@ def test_a_delayed_design_is_analysed_with_its_delay(tmp_path):
 
 
 def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=(),
-                extra_topic="/controller/model_watch"):
+                extra_topic="/controller/model_watch", model=None):
     """A bag of the core's closed loop on a position-only stream: the ground truth on
-    oscillator/pi2, the corrections, the estimates with their covariance."""
+    oscillator/pi2, the corrections, the estimates with their covariance; ``model``: the
+    estimator's model when it is not the plant's (simulate_stream)."""
     from bagtools_helpers import TYPESTORE, twist_stamped
     from grazing_control.dynamics.estimation.stream import simulate_stream
     from grazing_control.plant.sensor import SensorModel
@@ -284,7 +285,7 @@ def _stream_bag(tmp_path, estimator, periods=1000, sigma=1e-4, seed=2, extra=(),
     z = orbit_11(p, g).pi2_deviation
     run = simulate_stream(p, g, SensorModel(noise=sigma, velocity=False, seed=seed).measure,
                           periods, 200, estimator=estimator, sigma=sigma, deviation=z,
-                          impact_source="topic")
+                          impact_source="topic", model=model)
     JointState = TYPESTORE.types["sensor_msgs/msg/JointState"]
     msgs = []
     for k in range(periods):
@@ -328,6 +329,27 @@ def test_the_estimates_are_reported_against_the_ground_truth(tmp_path, estimator
         assert abs(n["predicted_spread"] / n["measured_spread"] - 1.0) < 0.2
     assert "estimate vs ground truth" in rep["markdown"]
     assert "Π2 spread about the exact controlled orbit" in rep["markdown"]
+    assert "spread_alarm" not in n and "noisier than its model" not in rep["markdown"]
+
+
+def test_a_loop_much_noisier_than_its_model_predicts_is_named(tmp_path):
+    """The controller's model filter with zeta 5 % low (the plant's is the study's): the
+    measured Pi2 spread is far beyond the one its reported covariance predicts, and the
+    report says so in bold with the ratio (SPREAD_ALARM); the right model's is not
+    (the test above)."""
+    import dataclasses
+
+    from grazing_control.recordings.analyze import SPREAD_ALARM, analyze
+
+    p = OscillatorParams(delta_d=-5e-6)
+    wrong = dataclasses.replace(p, zeta=0.95 * p.zeta)
+    bag, p, g, run = _stream_bag(tmp_path, "model", model=wrong)
+    rep = analyze([bag], tmp_path / "out", figures=False,
+                  options={"delta_d": p.delta_d, "c1": g.c1, "c2": g.c2})
+    n = rep["bags"][0]["scenes"][0]["estimate"]
+    ratio = n["measured_spread"] / n["predicted_spread"]
+    assert ratio > SPREAD_ALARM and n["spread_alarm"] == pytest.approx(ratio), n
+    assert "**the loop is noisier than its model predicts**" in rep["markdown"]
 
 
 def test_the_model_watch_is_reported(tmp_path):

@@ -34,6 +34,12 @@ WATCH_TOPIC = "/controller/model_watch"
 SWITCH_TOPIC = "/controller/model_switch"
 #: Samples at the end of a scene over which the spreads are measured.
 SPREAD_WINDOW = 500
+#: A measured Pi2 spread this many times the one predicted from the reported covariance
+#: is named in the report: under the right model they agree to about 20 %
+#: (tests/test_bagtools_analyze.py; 0.95-1.12 on the two-mass rig scenes of issue 32),
+#: with the controller's zeta 5 % low on the acceptance rig the measured one was 62 times
+#: the predicted (issue 30's hand check) and nothing said so.
+SPREAD_ALARM = 3.0
 
 __all__ = ["analyze", "add_arguments", "main"]
 
@@ -246,6 +252,10 @@ def estimate_numbers(est, sd, setup) -> dict | None:
         else:
             pred = noise_covariance(p, gains, cu.mean(axis=0))    # the kick's linearised loop
         out["predicted_spread"] = float(math.sqrt(max(pred[0, 0], 0.0)))
+        ratio = out["measured_spread"] / out["predicted_spread"] \
+            if out["predicted_spread"] > 0.0 else math.inf
+        if ratio > SPREAD_ALARM:
+            out["spread_alarm"] = float(ratio)
     except (ValueError, RuntimeError, ArithmeticError) as exc:
         out["spread_note"] = f"no predicted spread: {exc}"
     return out
@@ -382,6 +392,12 @@ def _estimate_lines(n) -> list:
         lines.append(f"* Π2 spread about the exact controlled orbit: measured "
                      f"{n['measured_spread']:.3g}, predicted from the reported covariance "
                      f"{n['predicted_spread']:.3g}")
+    if "spread_alarm" in n:
+        lines.append(f"* **the loop is noisier than its model predicts**: the measured spread "
+                     f"is {n['spread_alarm']:.3g} times the predicted (more than "
+                     f"{SPREAD_ALARM:g}): a model error, noise the model lacks, or a reported "
+                     "covariance that does not describe the errors (the model watch, "
+                     "consistency_window, tests the model)")
     if "spread_note" in n:
         lines.append(f"* {n['spread_note']}")
     return lines
