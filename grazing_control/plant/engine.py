@@ -37,9 +37,9 @@ carried in :attr:`Engine.force`), the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
 (:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`):
 its start is ``state0`` (X** when empty), its drifting wall (``delta_d_drift``) the
-model's Delta d moved at each sample as the 1-DOF one, its velocity noise at Pi2 the kick of one
-draw per sample on the actuated velocity, its measurement noise a draw per coordinate
-(:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
+model's Delta d moved at each sample as the 1-DOF one, its velocity noise at Pi2 the
+kick of one draw per sample on the actuated velocity, its measurement noise a draw per
+coordinate (:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
 Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
 A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.modal_map.ModalMap`'s

@@ -23,8 +23,8 @@ time reads the n-DOF period T = 2 pi / omega; its start is ``state0``, the 2n co
 not build (yet) is refused with one line naming the parameter and why, never
 half-applied (:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives
 them), the 1-DOF start x0, v0, the compliant stop and friction, and fidelities other
-than exact; the drifting wall (``delta_d_drift``) moves the model's Delta d. The engine runs either over one
-interface (:mod:`grazing_control.plant.engine`).
+than exact; the drifting wall (``delta_d_drift``) moves the model's Delta d. The
+engine runs either over one interface (:mod:`grazing_control.plant.engine`).
 """
 
 from __future__ import annotations

@@ -138,8 +138,9 @@ class NdofSection:
     def with_delta_d(self, delta_d: float) -> "NdofSection":
         """The same oscillator with the wall at ``delta_d``: the flow's periodic response
         and modal decomposition do not depend on Delta d (docs/theory_ndof_flow.md,
-        sections 1-2) and are kept, as :func:`~grazing_control.oscillator.ndof.forced.forced_flow`
-        keeps them; the section is :class:`NdofSection` of the model at ``delta_d``."""
+        sections 1-2) and are kept, as
+        :func:`~grazing_control.oscillator.ndof.forced.forced_flow` keeps them; the
+        section is :class:`NdofSection` of the model at ``delta_d``."""
         model = dataclasses.replace(self.model, delta_d=float(delta_d))
         out = copy.copy(self)
         out.model, out.flow = model, dataclasses.replace(self.flow, model=model)
