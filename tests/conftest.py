@@ -170,6 +170,7 @@ SCENE_MODULES = frozenset({
     "test_controller_node", "test_deadline_misses",
     "test_demo", "test_diagnostics", "test_fidelity", "test_identify", "test_launcher",
     "test_live_node", "test_ndof_identify", "test_ndof_nodes", "test_ndof_watch_scene",
+    "test_ndof_drift_scene",
     "test_node_common",
     "test_node_zygote", "test_packaging",
     "test_parameter_files_hostile",

@@ -10,6 +10,7 @@ import pytest
 
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation.consistency import ConsistencyMonitor
+from grazing_control.recordings.analyze import analyze
 from grazing_control.ros.model_watch import WATCH_FIELDS
 from grazing_control.ros.recording import read_messages
 from test_ndof_nodes import RATE, SIGMA, STREAM_DELAY, stream_scene
@@ -27,7 +28,8 @@ def test_a_biased_n_dof_stream_scene_publishes_the_bias_the_core_estimates(tmp_p
     corrections) to 1e-9 relative, b^ ends within 3 se of the bias (se < 2e-6; measured
     0.23 se), Delta d^ within 3 se of the plant's (NaN when not estimated), the monitor
     finds the model consistent at the end (its verdict the core's monitor's), and the
-    corrections are the core's k^T z^ on the same estimates."""
+    corrections are the core's k^T z^ on the same estimates; ``grazing analyze`` of the bag
+    reports the last row's b^ (and Delta d^) with their standard errors."""
     n, on = 40, 8
     res, bag, model, design = stream_scene(
         tmp_path, n, on, sensor_bias=BIAS,
@@ -85,6 +87,20 @@ def test_a_biased_n_dof_stream_scene_publishes_the_bias_the_core_estimates(tmp_p
         assert np.all(np.isnan(node[:, col["delta_d"]]))
     b, se = node[-1, col["bias"]], node[-1, col["bias_se"]]
     assert abs(b - BIAS) <= 3.0 * se and se < 2e-6, (b, se)
+    # grazing analyze reads the rows as for a 1-DOF bag: the last row's estimates
+    last = np.array(rows[-1].position)
+    report = analyze([bag], None, figures=False)
+    entry = report["bags"][0]
+    assert (f"* sensor bias estimate (last section): {last[col['bias']]:.6g} ± "
+            f"{last[col['bias_se']]:.3g} (standard error)") in report["markdown"]
+    watch = entry["model_watch"]
+    assert watch["sections"] == len(rows)
+    assert watch["bias"] == [last[col["bias"]], last[col["bias_se"]]]
+    assert watch["mismatch_sections"] == int(np.sum([r.position[col["mismatch"]] == 1.0
+                                                     for r in rows]))
+    assert ("delta_d" in watch) == wall
+    if wall:
+        assert watch["delta_d"] == [last[col["delta_d"]], last[col["delta_d_se"]]]
     print(f"n-DOF watch scene: bias {b:.6g} +- {se:.2g}, delta_d "
           f"{node[-1, col['delta_d']]:.8g} +- {node[-1, col['delta_d_se']]:.2g}, nis "
           f"{node[-1, col['nis']]:.4g} of {node[-1, col['nis_dof']]:.0f} dof, resets {est.resets}")

@@ -289,17 +289,18 @@ def test_an_n_dof_simulator_describes_its_model_s_period_and_what_it_does_not_bu
         context):
     """With model_file, sim_node's times are bounded by the model's period (4 pi for
     two_mass_chain): the ends of actuation_delay's and pulse_width's ranges are
-    accepted, the next doubles refused; what it does not build (the drifting wall)
-    states that only its default is valid, and a refusal says why; the sensor of the
-    stream, the velocity and measurement noise at Pi2 and the start state0 are built
-    (issue 32): accepted, state0 declared as a double array (empty: X**)."""
+    accepted, the next doubles refused; what it does not build (the compliant stop's
+    damping) states that only its default is valid, and a refusal says why; the sensor of
+    the stream, the velocity and measurement noise at Pi2, the drifting wall and the
+    start state0 are built (issue 32): accepted, state0 declared as a double array
+    (empty: X**)."""
     chain = str(Path(__file__).resolve().parents[1] / "config" / "models"
                 / "two_mass_chain.yaml")
     kind = NodeKind(SimNode, base={"model_file": chain})
     node = kind.build(context)
     ranges = {n: node.describe_parameter(n).floating_point_range[0]
               for n in ("actuation_delay", "pulse_width")}
-    noise = node.describe_parameter("delta_d_drift").additional_constraints
+    noise = node.describe_parameter("contact_damping").additional_constraints
     start = node.get_parameter("state0").value
     node.destroy_node()
     assert list(start) == []
@@ -309,8 +310,9 @@ def test_an_n_dof_simulator_describes_its_model_s_period_and_what_it_does_not_bu
         assert kind.accepts(context, {name: r.to_value})[0], name
         assert not kind.accepts(context, {name: math.nextafter(r.to_value, math.inf)})[0]
     assert noise.startswith("only its default 0.0 with model_file")
-    ok, why = kind.accepts(context, {"delta_d_drift": 1e-4})
-    assert not ok and "delta_d_drift=0.0001 is invalid with model_file" in why
+    ok, why = kind.accepts(context, {"contact_damping": 1e-4})
+    assert not ok and "contact_damping=0.0001 is invalid with model_file" in why
+    assert kind.accepts(context, {"delta_d_drift": 1e-4})[0]
     assert kind.accepts(context, {"sensor_noise": 1e-4, "sensor_velocity": False})[0]
     assert kind.accepts(context, {"noise": 1e-4, "measurement_noise": 1e-4})[0]
     assert kind.accepts(context, {"state0": [0.0, 0.0, 0.0, 0.0]})[0]

@@ -19,6 +19,7 @@ shooting finds on ModalMap with the same gains.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -362,6 +363,39 @@ def test_controlled_samples_are_ndofmap_with_gains_bit_for_bit():
         eng.end_period()
         z = P.step(z).state
         assert np.array_equal(eng.z, z)
+
+
+def test_an_n_dof_drifting_wall_is_ndofmap_at_the_drifted_delta_d_bit_for_bit():
+    """delta_d_drift in an n-DOF scene (issue 32): period k runs with Delta d + drift k,
+    each period ModalMap of the model at that Delta d (with the gains and a delay of 1)
+    bit for bit, the wall moved far enough to change the impacts; the ramp starts again
+    at a reset; the flow's decomposition is kept (the same eigenvalues object). The
+    realtime path (begin_head, then actuate at the deadline) gives the same states."""
+    drift, delay = -1e-4, 1.0          # from 1e-3 (out of reach) to -2.9e-3 (impacting)
+    s = model_settings(CHAIN, delta_d=1e-3, delta_d_drift=drift, actuation_delay=delay)
+    k = gain_family(s.model, 0.1)
+    eng, rt, z, impacts = Engine(s), Engine(s), np.zeros(4), []
+    flow0 = eng.section.flow
+    for j in range(40):
+        model = dataclasses.replace(s.model, delta_d=s.model.delta_d + drift * j)
+        assert eng.section.model.delta_d == model.delta_d and eng.p is eng.section
+        assert eng.section.flow.model is eng.section.model
+        assert eng.section.flow.eigenvalues is flow0.eigenvalues
+        step = ModalMap(model, k, delay).step(z)
+        eng.begin_period(float(k @ eng.z), delay)
+        eng.end_period()
+        rt.begin_head(delay)
+        rt.actuate(float(k @ rt.z), delay)
+        rt.end_period()
+        z = step.state
+        impacts.append(len(step.impacts))
+        assert np.array_equal(eng.z, z) and np.array_equal(rt.z, z), j
+    assert impacts[0] == 0 and sum(impacts) > 10, impacts     # the wall came into reach
+    eng.reset()
+    assert eng.section.flow is flow0 and eng.k == 0
+    eng.begin_period(0.0)
+    eng.end_period()
+    assert eng.section.model.delta_d == s.model.delta_d + drift
 
 
 def test_a_start_state_starts_ndofmap_iterates_bit_for_bit():

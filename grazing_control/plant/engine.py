@@ -36,9 +36,10 @@ the legs of :func:`~grazing_control.dynamics.maps.modal_map.actuated_step`, the 
 carried in :attr:`Engine.force`), the physical state of the n coordinates, the
 states between samples and the sensor's draws per coordinate -- is the model's
 (:class:`grazing_control.oscillator.ndof.section.NdofSection`, :attr:`Engine.section`):
-its start is ``state0`` (X** when empty), its velocity noise at Pi2 the kick of one
-draw per sample on the actuated velocity, its measurement noise a draw per coordinate
-(:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
+its start is ``state0`` (X** when empty), its drifting wall (``delta_d_drift``) the
+model's Delta d moved at each sample as the 1-DOF one, its velocity noise at Pi2 the
+kick of one draw per sample on the actuated velocity, its measurement noise a draw per
+coordinate (:meth:`grazing_control.plant.faults.FaultModel.coordinate_noise`).
 Its events are :class:`NdofEvent` (tuples of the n coordinates) for the state stream,
 Pi1 and Pi2, and :class:`Event` for an impact (x = v-, v = v+ of the wall coordinate).
 A lockstep n-DOF run repeats :class:`grazing_control.dynamics.maps.modal_map.ModalMap`'s
@@ -173,6 +174,8 @@ class Engine:
         elif self.drift:
             self.p = self._drift_from[0]
         self._drift_from = (self.p, 0)
+        if self.section is not None:
+            self.section = self.p
         s = self.settings
         self.rng = np.random.default_rng(s.seed)
         self.k = 0
@@ -456,6 +459,8 @@ class Engine:
             self.force = self._force_end
             self.k += 1
             self.seg = None
+            if self.drift:
+                self._drift_wall()
             return self._model_sample(), None
         self.dx, self.dv = s.dx_end, s.dv_end
         self.force = self._force_end
@@ -474,8 +479,14 @@ class Engine:
         sample k0 plus delta_d_drift * (k - k0), as ``plant_at(k)`` of
         dynamics.estimation.stream.simulate_stream; X** (which does not depend on Delta d) and the
         deviation stay (a state beyond the moved wall is left to the flow: the drift
-        per period is far below the distance to the wall on Pi2)."""
+        per period is far below the distance to the wall on Pi2). In an n-DOF scene the
+        model's Delta d moves (:meth:`NdofSection.with_delta_d`): z, the deviation from
+        the periodic response, stays."""
         base, k0 = self._drift_from
+        if self.section is not None:
+            self.p = self.section = base.with_delta_d(base.model.delta_d
+                                                      + self.drift * (self.k - k0))
+            return
         self.p = base.with_(delta_d=base.delta_d + self.drift * (self.k - k0))
 
     def _apply_pending(self):

@@ -22,9 +22,9 @@ time reads the n-DOF period T = 2 pi / omega; its start is ``state0``, the 2n co
 (:func:`grazing_control.oscillator.ndof.section.start_state`). What an n-DOF scene does
 not build (yet) is refused with one line naming the parameter and why, never
 half-applied (:data:`NOT_WITH_MODEL_FILE`): the 1-DOF model parameters (the file gives
-them), the 1-DOF start x0, v0, the compliant stop and friction, the drifting wall and
-fidelities other than exact. The engine runs either over one
-interface (:mod:`grazing_control.plant.engine`).
+them), the 1-DOF start x0, v0, the compliant stop and friction, and fidelities other
+than exact; the drifting wall (``delta_d_drift``) moves the model's Delta d. The
+engine runs either over one interface (:mod:`grazing_control.plant.engine`).
 """
 
 from __future__ import annotations
@@ -507,7 +507,6 @@ NOT_WITH_MODEL_FILE = {
     "x0": "an n-DOF scene's start is state0, its 2n coordinates (empty: X**)",
     "v0": "an n-DOF scene's start is state0, its 2n coordinates (empty: X**)",
     "fidelity": "only the exact flow is built for n-DOF",
-    "delta_d_drift": "the drifting wall is not built for n-DOF",
     "contact": "the compliant stop is not built for n-DOF (the rigid wall only)",
     "contact_stiffness": "the compliant stop is not built for n-DOF (the rigid wall only)",
     "contact_damping": "the compliant stop is not built for n-DOF (the rigid wall only)",

@@ -351,6 +351,13 @@ def _switch_lines(rows) -> list:
     return lines
 
 
+def _watch(bag, period_s: float | None) -> dict | None:
+    """The model watch's numbers of ``bag`` (:func:`watch_numbers` of :func:`read_watch`,
+    None without the topic), for a bag of any model; its stamps are simulation time, the
+    period ``period_s`` gives the first mismatch's section."""
+    return watch_numbers(read_watch(bag), period_s)
+
+
 def _watch_lines(n) -> list:
     """The report's lines on the model watch (:func:`watch_numbers`)."""
     if not n:
@@ -507,7 +514,7 @@ def analyze(bags, out=None, *, topics=None, options=None, tol=1e-8, figures=True
             data.problems.extend(scene_problems(sd, setup, n))
             numbers.append(n)
         period_s = None if setup.params is None else setup.params.period
-        watch = watch_numbers(read_watch(bag), period_s)     # stamps: simulation time
+        watch = _watch(bag, period_s)
         switches = read_switches(bag, period_s=period_s)
         rig_notes += model_differences(data.parameters)
         if rig is not None:
@@ -708,6 +715,10 @@ def _ndof_bag(bag, data, label, out, tol, figures, rig=None, acts=None):
     lines += [x for x in [offgrid_line(acts)] if x]
     lines += [f"* note: {s}" for s in entry["notes"]]
     lines += [f"* **cannot use**: {s}" for s in data.problems]
+    watch = _watch(bag, None if setup.model is None else setup.model.period)
+    if watch is not None:       # a controller with a model watch (issue 32)
+        entry["model_watch"] = watch
+        lines += _watch_lines(watch)
     lines.append("")
     for sd in data.scenes:
         n = ndof_scene_numbers(sd, setup, tol)

@@ -37,6 +37,8 @@ calls). No ROS, no plant: this is the model layer.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -132,6 +134,17 @@ class NdofSection:
         self.omega = model.omega
         self.tau2 = self.flow.tau2
         self.tau_star = self.flow.tau_star
+
+    def with_delta_d(self, delta_d: float) -> "NdofSection":
+        """The same oscillator with the wall at ``delta_d``: the flow's periodic response
+        and modal decomposition do not depend on Delta d (docs/theory_ndof_flow.md,
+        sections 1-2) and are kept, as
+        :func:`~grazing_control.oscillator.ndof.forced.forced_flow` keeps them; the
+        section is :class:`NdofSection` of the model at ``delta_d``."""
+        model = dataclasses.replace(self.model, delta_d=float(delta_d))
+        out = copy.copy(self)
+        out.model, out.flow = model, dataclasses.replace(self.flow, model=model)
+        return out
 
     def start(self, state0: tuple = ()) -> np.ndarray:
         """The deviation at sample 0: z = X0 - X_p(tau2) of the physical start ``state0``
