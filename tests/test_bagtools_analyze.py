@@ -339,7 +339,8 @@ def test_a_loop_much_noisier_than_its_model_predicts_is_named(tmp_path):
     (the test above)."""
     import dataclasses
 
-    from grazing_control.recordings.analyze import SPREAD_ALARM, analyze
+    from grazing_control.recordings.analyze import analyze
+    from grazing_control.recordings.estimates import SPREAD_ALARM
 
     p = OscillatorParams(delta_d=-5e-6)
     wrong = dataclasses.replace(p, zeta=0.95 * p.zeta)

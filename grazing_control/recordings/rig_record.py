@@ -116,7 +116,7 @@ def si_numbers(rig: Rig, numbers: dict, scene=None) -> dict:
             d = np.abs(np.subtract(n["final_pi2"], pred["orbit_pi2"]))
             out["final_vs_exact_orbit_m_and_m_per_s"] = _pair(rig, d)
         if scene is not None and n.get("control_on_sample") is not None:
-            from .analyze import SPREAD_WINDOW
+            from .estimates import SPREAD_WINDOW
 
             on = n["control_on_sample"]
             window = max(1, min(SPREAD_WINDOW, (scene.pi2.shape[0] - on) // 2))
