@@ -34,3 +34,14 @@ def test_with_complex_multipliers_the_slope_alone_would_be_biased():
     m = measured_contraction(simulate(p, 1300, gains=g, control_after=1000).pi2, 1000)
     assert abs(m["rho_distance_slope"] / rho - 1) > 0.02
     assert abs(m["rho"] / rho - 1) < 2e-3
+
+
+def test_a_drifting_wall_is_named_beside_the_model_check():
+    """A scene whose wall drifted (the simulator's delta_d_drift) departs from the model
+    check by what the wall moved: the setup's notes say so; none without a drift."""
+    from grazing_control.recordings.numbers import drift_notes
+
+    assert drift_notes({}) == [] and drift_notes({"delta_d_drift": 0.0}) == []
+    assert drift_notes({"delta_d_drift": "not a number"}) == []
+    (note,) = drift_notes({"delta_d_drift": 1e-6})
+    assert "delta_d_drift=1e-06 per period" in note and "not a model error" in note

@@ -320,10 +320,12 @@ def ndof_setup(data, rig=None) -> NdofSetup:
     (:meth:`grazing_control.plant.rig.Rig.model`, the simulator's)."""
     from grazing_control.oscillator.ndof.model import load_model
 
+    from .numbers import drift_notes
+
     nodes = data.parameters.get("nodes", {})
     sim = (nodes.get("sim_node") or [{}])[0]
     ctl = (nodes.get("controller_node") or [{}])[0]
-    notes = []
+    notes = drift_notes(sim)
     path = str(sim.get("model_file") or ctl.get("model_file") or "")
     model = None
     if not path and rig is not None:

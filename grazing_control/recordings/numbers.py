@@ -166,6 +166,21 @@ def _num(value, default=None):
     return value
 
 
+def drift_notes(sim: dict) -> list:
+    """The note of a scene whose wall drifted (the simulator's ``delta_d_drift``, a
+    wearing stop): the model check re-integrates each period at the recorded Delta d,
+    so it departs by what the wall moved, which is no model error."""
+    try:
+        drift = float(sim.get("delta_d_drift") or 0.0)
+    except (TypeError, ValueError):
+        return []
+    if drift == 0.0:
+        return []
+    return [f"the plant's wall drifted (delta_d_drift={drift:g} per period): the model "
+            "check re-integrates each period at the recorded Delta d, so it departs by "
+            "what the wall moved (not a model error)"]
+
+
 def resolve_setup(bag, options: dict) -> Setup:
     """Model, gains and mode of a bag: record, else options, else inferred (module doc).
 
@@ -175,7 +190,7 @@ def resolve_setup(bag, options: dict) -> Setup:
     nodes = bag.parameters.get("nodes", {})
     sim = (nodes.get("sim_node") or [{}])[0]
     ctl = (nodes.get("controller_node") or [{}])[0]
-    sources, notes = {}, []
+    sources, notes = {}, drift_notes(sim)
     for name, seq in nodes.items():
         if len(seq) > 1:
             changed = sorted({k for a in seq[1:] for k in a if a.get(k) != seq[0].get(k)})
