@@ -32,6 +32,11 @@ P = OscillatorParams(delta_d=-5e-6)
 PERIODS, ON = 16, 5                     # 1-DOF: control from sample 5
 NDOF_PERIODS, NDOF_ON = 12, 4
 NDOF_DD = -1e-3
+#: The replay's wait for each answer (wall s; `grazing replay`'s default is 2 s): every
+#: replay here compares answers, and a controller of a loaded suite stalled past 2 s
+#: once (a fresh clone: "17 answers awaited, 1 not in time", then one missing and the
+#: count of differing answers off by one). A controller that answers costs no wait.
+ANSWER_TIMEOUT = 30.0
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +83,8 @@ def test_a_stream_scene_is_replayed_bit_for_bit(bags, tmp_path, scene, mode):
     bytes for bytes, the section after the last Pi2 sample's too; the stream published
     as recorded (every message, nothing malformed)."""
     bag = bags[scene, mode]
-    res = replay_controller(bag, tmp_path / "out", domain_id=new_domain())
+    res = replay_controller(bag, tmp_path / "out", domain_id=new_domain(),
+                            answer_timeout=ANSWER_TIMEOUT)
     cmp_ = res["comparison"]
     n = PERIODS if scene == "1dof" else NDOF_PERIODS
     assert cmp_["all_bit_identical"] and cmp_["bit_identical"] == n, cmp_
@@ -106,7 +112,8 @@ def test_another_gain_gives_the_difference_report(bags, tmp_path, capsys):
     capsys.readouterr()
     code = cli.main(["replay", str(bags["1dof", "sample"]), "--bag", str(tmp_path / "out"),
                      "--controller-params", str(gains), "--no-sim",
-                     "--domain-id", str(new_domain())])
+                     "--domain-id", str(new_domain()),
+                     "--answer-timeout", str(ANSWER_TIMEOUT)])
     text = capsys.readouterr().out
     assert code == 0, text
     assert f"{PERIODS - ON} of {PERIODS} answers differ" in text, text
@@ -125,7 +132,7 @@ def test_another_n_dof_gain_vector_differs(bags, tmp_path):
     gains.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
         "model_file": rec["model_file"], "gains": [1.1 * g for g in rec["gains"]]}}}))
     res = replay_controller(bags["ndof", "sample"], tmp_path / "out", domain_id=new_domain(),
-                            controller_params=gains)
+                            controller_params=gains, answer_timeout=ANSWER_TIMEOUT)
     cmp_ = res["comparison"]
     assert cmp_["differing"] == NDOF_PERIODS - NDOF_ON, cmp_
     assert cmp_["first_differing_sample"] == NDOF_ON
@@ -151,7 +158,8 @@ def test_impacts_and_substituted_corrections_are_replayed_where_they_came(tmp_pa
     assert res.ok, res
     raw = reader.read_raw(bag)
     assert raw.count("/oscillator/substituted") > 0 and raw.count("/oscillator/impact") > 0
-    out = replay_controller(bag, tmp_path / "out", domain_id=new_domain())
+    out = replay_controller(bag, tmp_path / "out", domain_id=new_domain(),
+                            answer_timeout=ANSWER_TIMEOUT)
     sent = out["stream"]["published"]
     assert sent["substituted"] == raw.count("/oscillator/substituted")
     assert sent["impact"] == raw.count("/oscillator/impact")
@@ -163,10 +171,12 @@ def test_impacts_and_substituted_corrections_are_replayed_where_they_came(tmp_pa
                              "/oscillator/state")["log_time"]
     late = _logged_late(bag, tmp_path / "late", {"/oscillator/impact", "/oscillator/substituted"},
                         int(logs.max() - logs.min()) // 4)
-    out = replay_controller(late, tmp_path / "out_late", domain_id=new_domain())
+    out = replay_controller(late, tmp_path / "out_late", domain_id=new_domain(),
+                            answer_timeout=ANSWER_TIMEOUT)
     assert out["comparison"]["all_bit_identical"], out["comparison"]
     lacking = _without(bag, tmp_path / "lacking", "/oscillator/substituted")
-    out = replay_controller(lacking, tmp_path / "out2", domain_id=new_domain())
+    out = replay_controller(lacking, tmp_path / "out2", domain_id=new_domain(),
+                            answer_timeout=ANSWER_TIMEOUT)
     assert "/oscillator/substituted not recorded: replayed as if none came" in out["notes"]
     assert out["comparison"]["differing"] > 0
 
@@ -219,24 +229,29 @@ def test_a_bag_without_its_stream_is_refused_in_one_line_at_once(bags, tmp_path,
 def test_schedule_is_the_simulators_order_rebuilt_from_the_stamps():
     """The answer of section 10 is awaited after every message stamped up to 10 (the
     stream, an impact, a Pi2 sample: whenever the recorder logged them, before or after
-    the answer), and before what acted there instead (a substitution stamped 10); an
-    impact the recorder logged after later stream samples goes at its stamp; an answer
-    recorded twice is awaited once; equal stamps keep their log order."""
+    the answer), and before what acted there instead (a substitution stamped 10); a
+    stream message logged before the answer goes before it whatever its stamp (the
+    first sample after the section, which the controller needed to answer; stamped 11
+    here); an impact the recorder logged after later stream samples goes at its stamp;
+    an answer recorded twice is awaited once; equal stamps keep their log order."""
     import struct
 
     def stamped(stamp):       # a stamped message's bytes as far as its stamp
         return b"\0\1\0\0" + struct.pack("<iI", 0, stamp)
 
-    items = [(1, "state", stamped(4)), (3, "impact", stamped(6)), (3, "state", stamped(8)),
-             (6, "state", stamped(10)), (6, "impact", stamped(12)), (7, "state", stamped(14)),
-             (2, "pi2", stamped(10)), (8, "substituted", stamped(10)),
-             (9, "impact", stamped(9)), (10, "state", stamped(16)), (11, "impact", stamped(16))]
-    steps = schedule(items, [(5, 10), (12, 20), (12, 20)], "state")
+    items = [(10, "state", stamped(4)), (30, "impact", stamped(6)), (30, "state", stamped(8)),
+             (40, "state", stamped(10)), (45, "state", stamped(11)),
+             (60, "impact", stamped(12)), (70, "state", stamped(14)),
+             (20, "pi2", stamped(10)), (80, "substituted", stamped(10)),
+             (90, "impact", stamped(9)), (100, "state", stamped(16)),
+             (110, "impact", stamped(16))]
+    steps = schedule(items, [(50, 10), (120, 20), (120, 20)], "state")
     got = [("answer", s[1]) if s[0] == "answer" else (s[1], struct.unpack_from("<I", s[2], 8)[0])
            for s in steps]
     assert got == [("state", 4), ("impact", 6), ("state", 8), ("impact", 9), ("pi2", 10),
-                   ("state", 10), ("answer", 10), ("substituted", 10), ("impact", 12),
-                   ("state", 14), ("state", 16), ("impact", 16), ("answer", 20)]
+                   ("state", 10), ("state", 11), ("answer", 10), ("substituted", 10),
+                   ("impact", 12), ("state", 14), ("state", 16), ("impact", 16),
+                   ("answer", 20)]
 
 
 @pytest.mark.realtime
@@ -256,7 +271,8 @@ def test_a_realtime_stream_scene_is_replayed_as_fast_as_the_controller_answers(t
                        controller_overrides={"pi2_source": "stream"},
                        log_dir=tmp_path / "logs")
     assert res.ok, res
-    out = replay_controller(bag, tmp_path / "out", domain_id=new_domain())
+    out = replay_controller(bag, tmp_path / "out", domain_id=new_domain(),
+                            answer_timeout=ANSWER_TIMEOUT)
     assert any("a realtime scene" in n for n in out["notes"])
     if out["stream"]["recorded_lag_messages"] <= 1000:
         assert out["comparison"]["all_bit_identical"], out["comparison"]

@@ -155,12 +155,25 @@ def schedule(items: list, answers: list, stream_role: str) -> list:
     at its stamp (a ``stream_role`` message's: its first sample's), the answer of each
     section once, after every stream message, impact and Pi2 sample stamped at or before
     it and before what acted there instead (:data:`ACTED_ROLES`, stamped with the
-    section); on equal keys in log order, then in the order of ``items``."""
+    section). A stream message the recorder logged before an answer goes before that
+    answer too, whatever its stamp: the controller may have needed it to answer (the
+    first sample after the section; the stream is one topic, taken in order, so its log
+    order is the controller's). On equal keys: log order, then the order of ``items``."""
+    import bisect
+
     from .replay_nodes import stamp_of
 
+    by_log = sorted(answers)
+    logs = [log for log, _stamp in by_log]
     keyed = []
     for i, (log, role, data) in enumerate(items):
-        stamp = _first_stamp(role, data) if role == stream_role else stamp_of(data)
+        if role == stream_role:
+            stamp = _first_stamp(role, data)
+            after = bisect.bisect_right(logs, log)     # the first answer logged after it
+            if after < len(by_log):
+                stamp = min(stamp, by_log[after][1])
+        else:
+            stamp = stamp_of(data)
         rank = _AFTER_ANSWER if role in ACTED_ROLES else _BEFORE_ANSWER
         keyed.append(((stamp, rank, log, i), ("message", role, data, log)))
     for stamp in {stamp for _log, stamp in answers}:
