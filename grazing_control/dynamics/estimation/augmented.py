@@ -378,7 +378,9 @@ class AugmentedStreamEstimator(StreamEstimator):
 def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = True,
                          wall: bool = True, wall_noise: float = WALL_NOISE,
                          sigma: float = 1e-4, floor: float = 1e-2, target=None,
-                         periods: int = 5000) -> np.ndarray:
+                         periods: int = 5000, coordinate: int = 0, delay: float = 0.0,
+                         width: float = 0.0, actuator=None, force0: float = 0.0,
+                         section_sample: bool = False) -> np.ndarray:
     """The augmented filter's stationary covariance on the controlled 1/1 orbit (4x4 over
     (dx, dv, b, Delta d), absolute units for the noise ``sigma``), position only at
     ``rate`` samples per period: the fixed point of
@@ -390,7 +392,24 @@ def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = 
     has no process noise, so its variance goes to 0 and leaves R as without it; the
     wall's random walk keeps a share (docs/theory_estimation.md, "Measured (issue 29)"). Unlike the
     plain filter's (E7) this needs sigma: the walk's std is absolute.
+
+    ``p`` a model file (any n; issue 32, docs/theory_estimation.md E13): the same fixed
+    point over theta = (z (2n), b, Delta d), (2n + 2) x (2n + 2), ``gains`` the gain
+    vector k, the samples coordinate ``coordinate``'s position, the correction k^T z*
+    ``delay`` after the section (a pulse of ``width``, through ``actuator`` from the force
+    ``force0``: :func:`trajectory`), ``target`` z* (default: the kick's controlled orbit,
+    :func:`grazing_control.dynamics.design.noise.controlled_orbit`); ``section_sample``
+    fits the sample at t_k too (the 1-DOF form never does: a lockstep stream estimator
+    does not wait for it). With bias and wall off its z block is
+    :func:`grazing_control.dynamics.design.noise.filter_covariance` times sigma^2; for the
+    n = 1 model file it is the 1-DOF result (tests/test_augmented_covariance.py). The
+    other arguments are the 1-DOF ones' (``coordinate`` onwards are the model file's only).
     """
+    if isinstance(p, NdofModel):
+        return _model_file_covariance(
+            p, gains, rate, bias=bias, wall=wall, wall_noise=wall_noise, sigma=sigma,
+            floor=floor, target=target, periods=periods, coordinate=coordinate, delay=delay,
+            width=width, actuator=actuator, force0=force0, section_sample=section_sample)
     from grazing_control.dynamics.orbits.orbits import orbit_11
 
     if target is None:
@@ -417,5 +436,53 @@ def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = 
         if done:
             break
     out = np.zeros((4, 4))
+    out[np.ix_(act, act)] = cov
+    return out
+
+
+def _model_file_covariance(model: NdofModel, gains, rate: int, *, bias, wall, wall_noise, sigma,
+                           floor, target, periods, coordinate, delay, width, actuator, force0,
+                           section_sample) -> np.ndarray:
+    """:func:`augmented_covariance` over a model file (E13): the 1-DOF form's fixed point
+    with z in R^{2n}, H = [e_c^T dz(s_j)/dz0, 1, e_c^T g(s_j)] and
+    F = [[M, 0, g(T)], [0, 1, 0], [0, 0, 1]] at the controlled orbit (E12)."""
+    k = np.asarray(gains, dtype=float)
+    nz = 2 * model.n
+    if k.shape != (nz,) or not np.all(np.isfinite(k)):
+        raise ParameterError(f"gains are invalid: expected {nz} finite gains for a model file "
+                             f"of n = {model.n}")
+    if not (isinstance(coordinate, (int, np.integer)) and 0 <= coordinate < model.n):
+        raise ParameterError(f"coordinate={coordinate!r} is invalid: valid range is "
+                             f"0 .. {model.n - 1}")
+    if target is None:
+        if width != 0.0 or actuator is not None:
+            raise ParameterError("target is missing: with a pulse or an actuator give the "
+                                 "controlled orbit's Pi2 deviation")
+        from grazing_control.dynamics.design.noise import controlled_orbit
+
+        target = controlled_orbit(model, k, delay)
+    z = np.asarray(target, dtype=float)[:nz]
+    last = int(rate) + (1 if section_sample else 0)
+    s = model.period * np.arange(1, last) / rate
+    _pred, jac, _end, mono, _imps, gw, gend = trajectory(
+        model, z, s, float(k @ z), delay, wall=True, width=width, actuator=actuator,
+        force0=force0)
+    ib, iw = nz, nz + 1
+    act = list(range(nz)) + ([ib] if bias else []) + ([iw] if wall else [])
+    hm = np.column_stack([jac[:, coordinate, :], np.ones(s.size), gw[:, coordinate]])[:, act]
+    info_data = hm.T @ hm / sigma ** 2
+    f = np.eye(nz + 2)
+    f[:nz, :nz] = mono
+    f[:nz, iw] = gend
+    f = f[np.ix_(act, act)]
+    q = np.diag([(floor * sigma) ** 2] * nz + [0.0, wall_noise ** 2])[np.ix_(act, act)]
+    cov = np.diag([sigma ** 2] * nz + [BIAS_STD ** 2, WALL_STD ** 2])[np.ix_(act, act)]
+    for _ in range(periods):
+        new = f @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ f.T + q
+        done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
+        cov = 0.5 * (new + new.T)
+        if done:
+            break
+    out = np.zeros((nz + 2, nz + 2))
     out[np.ix_(act, act)] = cov
     return out
