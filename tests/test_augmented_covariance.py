@@ -95,9 +95,9 @@ def test_bad_arguments_are_refused(chain_design):
         augmented_covariance(MODEL, gains, RATE, width=1.0)
 
 
-#: The Monte-Carlo's noise: sigma 1e-5 and a walk of 1e-7 per period (test_augmented_ndof's sigma 1e-4 and walk
-#: 1e-6 scaled by 0.1: the same loop in its linear regime; at 1e-4 the second order shows,
-#: see the test's docstring).
+#: The Monte-Carlo's noise: sigma 1e-5 and a walk of 1e-7 per period (test_augmented_ndof's
+#: sigma 1e-4 and walk 1e-6 scaled by 0.1: the same loop in its linear regime; at 1e-4
+#: the second order shows, see the test's docstring).
 MC_SIGMA, MC_WALK = 1e-5, 1e-7
 MC_SEEDS, MC_PERIODS, MC_SKIP = 4, 400, 30
 
