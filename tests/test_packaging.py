@@ -163,6 +163,20 @@ def python_packages(root):
     return names
 
 
+def numba_cache_to(site):
+    """Copy this checkout's numba cache (the kernels the suite's session compiled) into
+    the installed tree, so that the installed nodes load the kernels instead of
+    compiling them again (8-9 CPU-s of the scene's 11, 2026-11-29). The installed sources
+    are the same files: the kernel's cache is stamped by their contents
+    (oscillator/kernel/caching.py), numba's own by each file's mtime and size, which the
+    copies keep; a stale entry is refused by numba and compiled as before. The cold
+    compilation itself is test_kernel's (a Ctrl-C during it)."""
+    for cached in ROOT.glob('grazing_control/**/__pycache__/*.nb[ic]'):
+        dest = site / cached.relative_to(ROOT)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(cached, dest)
+
+
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize('symlink', [False, True], ids=['install', 'symlink-install'])
 def test_colcon_build(tmp_path, symlink):
@@ -202,6 +216,7 @@ def test_colcon_build(tmp_path, symlink):
     if not symlink:
         for pkg in python_packages(src):
             assert (site / Path(*pkg.split('.')) / '__init__.py').is_file(), pkg
+        numba_cache_to(site)
 
     # In a shell that sourced the install space, as for `ros2 run`, the package imports
     # from the workspace (not from this repository) and the installed executable runs.

@@ -45,17 +45,36 @@ profiles), :mod:`.writer` (:class:`BagWriter`), :mod:`.reading` (two readers),
 so that a recording describes itself).
 """
 
-from .reading import (BagMessage, bag_file, message_to_dict, read_messages,
-                      read_messages_rosbags, read_metadata)
-from .recovery import ReindexResult, reindex
-from .schemas import (COMPRESSIONS, DEFAULT_CHUNK_SIZE, METADATA_VERSION, ROS_DISTRO,
-                      message_definition, qos_profile_dict, qos_profiles_yaml,
-                      type_description_hash)
-from .writer import BagWriter
+import importlib
 
-__all__ = [
-    "BagMessage", "BagWriter", "COMPRESSIONS", "DEFAULT_CHUNK_SIZE", "METADATA_VERSION",
-    "ROS_DISTRO", "ReindexResult", "bag_file", "message_definition", "message_to_dict",
-    "qos_profile_dict", "qos_profiles_yaml", "read_messages", "read_messages_rosbags",
-    "read_metadata", "reindex", "type_description_hash",
-]
+#: Each public name -> the module that defines it. They are loaded on first use
+#: (PEP 562): the nodes import only :mod:`.record` of this package (the parameter
+#: record they publish), and importing the package no longer loads the ``mcap``
+#: library and the readers and writer into every simulator and controller (0.05-0.1
+#: CPU-s of each node's start, docs/benchmarks.md "The nodes' imports").
+_DEFINED_IN = {
+    "BagMessage": "reading", "bag_file": "reading", "message_to_dict": "reading",
+    "read_messages": "reading", "read_messages_rosbags": "reading",
+    "read_metadata": "reading",
+    "ReindexResult": "recovery", "reindex": "recovery",
+    "COMPRESSIONS": "schemas", "DEFAULT_CHUNK_SIZE": "schemas",
+    "METADATA_VERSION": "schemas", "ROS_DISTRO": "schemas",
+    "message_definition": "schemas", "qos_profile_dict": "schemas",
+    "qos_profiles_yaml": "schemas", "type_description_hash": "schemas",
+    "BagWriter": "writer",
+}
+
+__all__ = sorted(_DEFINED_IN)
+
+
+def __getattr__(name: str):
+    module = _DEFINED_IN.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_DEFINED_IN))
