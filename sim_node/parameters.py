@@ -7,6 +7,7 @@ from __future__ import annotations
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.parameter import Parameter as RosParameter
 
+from grazing_control.oscillator.ndof.flow import grazing_clearance
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, STREAM_TICK, Realtime
@@ -169,11 +170,17 @@ def declare_rig(node):
 
 def node_descriptor(node, p: Parameter, declared: dict):
     """:func:`descriptor`; in an n-DOF scene with the model's forcing frequency (its
-    times are bounded by its period), and a parameter it does not build states that
-    only its default is valid (plant.settings.NOT_WITH_MODEL_FILE; the range stays, so
+    times are bounded by its period; delta_d_drift by its d*), and a parameter it does
+    not build states that only its default is valid (plant.settings.NOT_WITH_MODEL_FILE; the range stays, so
     that a refusal says why: "zeta=0.02 is invalid with model_file=...")."""
     if node.model is None:
         return descriptor(p, declared)
+    if p.name == "delta_d_drift":      # |drift| <= d* of the model's wall coordinate
+        try:
+            d_star = grazing_clearance(node.model)
+        except (ValueError, ArithmeticError):     # no d* (resonance): the model is refused
+            return descriptor(p)
+        return float_descriptor(p.doc, -d_star, d_star, p.read_only, p.constraints)
     d = descriptor(p, {**declared, "omega": node.model.omega})
     if p.name in NOT_WITH_MODEL_FILE:
         d.additional_constraints = (f"only its default {p.default!r} with model_file "

@@ -39,6 +39,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 
+from grazing_control.oscillator.ndof.flow import grazing_clearance
+from grazing_control.oscillator.ndof.model import load_model
 from grazing_control.ros.controller_node import ControllerNode
 from grazing_control.recordings.rig_mock import RigMock
 from grazing_control.ros.effort_bridge import EffortBridge
@@ -302,6 +304,7 @@ def test_an_n_dof_simulator_describes_its_model_s_period_and_what_it_does_not_bu
               for n in ("actuation_delay", "pulse_width")}
     noise = node.describe_parameter("contact_damping").additional_constraints
     start = node.get_parameter("state0").value
+    drift = node.describe_parameter("delta_d_drift").floating_point_range[0]
     node.destroy_node()
     assert list(start) == []
     assert ranges["actuation_delay"].to_value == math.nextafter(4 * math.pi, 0.0)
@@ -313,6 +316,15 @@ def test_an_n_dof_simulator_describes_its_model_s_period_and_what_it_does_not_bu
     ok, why = kind.accepts(context, {"contact_damping": 1e-4})
     assert not ok and "contact_damping=0.0001 is invalid with model_file" in why
     assert kind.accepts(context, {"delta_d_drift": 1e-4})[0]
+    # |delta_d_drift| <= the model's d* (3.1885; the 1-DOF d* at its omega is not it),
+    # the ends accepted, the next doubles and 1e308 refused naming it (issue 32)
+    d_star = grazing_clearance(load_model(chain))
+    assert (drift.from_value, drift.to_value) == (-d_star, d_star)
+    for value in (d_star, -d_star):
+        assert kind.accepts(context, {"delta_d_drift": value})[0], value
+    for value in (math.nextafter(d_star, math.inf), 1e308):
+        ok, why = kind.accepts(context, {"delta_d_drift": value})
+        assert not ok and "delta_d_drift" in why and repr(d_star) in why, why
     assert kind.accepts(context, {"sensor_noise": 1e-4, "sensor_velocity": False})[0]
     assert kind.accepts(context, {"noise": 1e-4, "measurement_noise": 1e-4})[0]
     assert kind.accepts(context, {"state0": [0.0, 0.0, 0.0, 0.0]})[0]

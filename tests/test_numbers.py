@@ -37,11 +37,30 @@ def test_with_complex_multipliers_the_slope_alone_would_be_biased():
 
 
 def test_a_drifting_wall_is_named_beside_the_model_check():
-    """A scene whose wall drifted (the simulator's delta_d_drift) departs from the model
-    check by what the wall moved: the setup's notes say so; none without a drift."""
-    from grazing_control.recordings.numbers import drift_notes
+    """A scene whose wall drifted (the simulator's delta_d_drift): the setup's notes name
+    the drift and say that the model check re-integrates each period at the plant's
+    Delta d of that period (issue 32: it no longer departs by what the wall moved); none
+    without a drift, or with a drift that is not a finite number."""
+    from grazing_control.recordings.numbers import drift_notes, recorded_drift
 
     assert drift_notes({}) == [] and drift_notes({"delta_d_drift": 0.0}) == []
     assert drift_notes({"delta_d_drift": "not a number"}) == []
+    assert drift_notes({"delta_d_drift": float("nan")}) == []
+    assert recorded_drift({"delta_d_drift": float("inf")}) == 0.0
     (note,) = drift_notes({"delta_d_drift": 1e-6})
-    assert "delta_d_drift=1e-06 per period" in note and "not a model error" in note
+    assert "delta_d_drift=1e-06 per period" in note
+    assert "the plant's Delta d of that period" in note and "not a model error" not in note
+
+
+def test_the_sample_index_and_the_drifted_model_are_the_simulators():
+    """Sample k is stamped t_k = k T (ns-rounded); the model of its period is the
+    simulator's expression Delta d + drift k (plant.engine.Engine._drift_wall), and
+    the model itself without a drift."""
+    from grazing_control.recordings.numbers import params_at, sample_index
+
+    p = OscillatorParams(delta_d=-1e-3)
+    for k in (0, 1, 7, 12345):
+        t = round(k * p.period * 1e9) / 1e9
+        assert sample_index(t, p.period) == k
+        assert params_at(p, 3e-7, t) == p.with_(delta_d=p.delta_d + 3e-7 * k)
+    assert params_at(p, 0.0, 5.0 * p.period) is p

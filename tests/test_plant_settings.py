@@ -138,6 +138,30 @@ def test_the_model_comes_from_the_file_and_delta_d_replaces_its_wall():
     assert "n=2" in s3.describe() and "delta_d=-1e-05" in s3.describe()
 
 
+@pytest.mark.parametrize("model_file", ["", CHAIN], ids=["1-DOF", "chain"])
+def test_an_absurd_drift_is_refused_at_the_start_naming_its_range(model_file):
+    """delta_d_drift (issue 32): 1e308 ran until Delta d overflowed mid-scene. Valid is
+    |delta_d_drift| <= d*, the amplitude of the wall coordinate's non-impacting motion
+    (1.8015 for the study's oscillator, 3.1885 for two_mass_chain: per period the wall
+    moves by at most the motion it bounds); d* itself and the drifts of the scenes are
+    accepted, the next double, 1e308, inf and nan refused in one line naming the
+    parameter and the range; with a model file the model's d*, not the 1-DOF one."""
+    from grazing_control.oscillator.ndof.flow import grazing_clearance
+
+    d_star = grazing_clearance(load_model(CHAIN)) if model_file else OscillatorParams().d_star
+    assert d_star == pytest.approx(3.188547848893602 if model_file else 1.801498314953796)
+    for ok in (0.0, 5e-10, -1e-4, 1e-6, d_star, -d_star):
+        assert settings_from_values({"delta_d_drift": ok}, model_file).delta_d_drift == ok
+    for bad in (math.nextafter(d_star, math.inf), -math.nextafter(d_star, math.inf), 1e308,
+                -1e308, math.inf, -math.inf, math.nan):
+        with pytest.raises(ParameterError) as exc:
+            settings_from_values({"delta_d_drift": bad}, model_file)
+        text = str(exc.value)
+        assert text.startswith(f"delta_d_drift={bad!r} is invalid: valid range is "
+                               f"|delta_d_drift| <= d* = {d_star!r} per forcing period")
+        assert "\n" not in text
+
+
 def test_times_are_bounded_by_the_n_dof_period():
     T = load_model(SCENE).period                        # 22.8, the study's is 9.4
     assert settings_from_values({"actuation_delay": 20.0}, SCENE).actuation_delay == 20.0

@@ -108,7 +108,11 @@ def test_invalid_parameter_at_start_exits_nonzero_with_one_line():
     cases = {"zeta": ("2.0", "zeta=2.0 is invalid"), "r": ("1.0", "r=1.0 is invalid"),
              "fidelity": ("rk45", "fidelity='rk45' is invalid"),
              "x0": ("5.0", "x0=5.0 is invalid"), "mode": ("fast", "mode='fast' is invalid"),
-             "omega": ("1", "expected type DOUBLE")}
+             "omega": ("1", "expected type DOUBLE"),
+             # issue 32: it ran until Delta d overflowed mid-scene; |drift| <= d* = 1.8015
+             "delta_d_drift": ("1e308", "delta_d_drift=1e+308 is invalid: Parameter "
+                               "delta_d_drift out of range Min: -1.801498314953796, Max: "
+                               "1.801498314953796")}
     procs = {}
     for name, (value, _) in cases.items():
         cmd, env = sim_cmd(domain)

@@ -183,7 +183,8 @@ PARAMETERS = (
     Parameter("delta_d_drift", "double", 0.0, "linear drift of the plant's Delta d per "
               "forcing period (a wearing stop, a warming rig; issue 29): sample k's period "
               "runs with the Delta d in force plus delta_d_drift * (k - k0), k0 the sample "
-              "where it was set or reset; 0 = none", -FINITE, FINITE, read_only=True),
+              "where it was set or reset; 0 = none", -FINITE, FINITE, read_only=True,
+              constraints="|delta_d_drift| <= d*, the non-impacting amplitude at the wall"),
     Parameter("pre_roll", "integer", 0, "realtime, scheduled: the stream's pre-roll, the "
               "first pre_roll sections have no deadline: the stream runs, nothing acts there "
               "and an answer to them is counted as unarmed, not late (a section's answer is "
@@ -271,7 +272,7 @@ def described_range(p: Parameter, declared: dict) -> tuple:
 
     The table's range, narrowed where another parameter bounds it, so that with the
     others at these values :func:`settings_from_values` accepts exactly [lo, hi]:
-    friction and friction_static 0 with contact rigid;
+    friction and friction_static 0 with contact rigid; |delta_d_drift| <= d* (_drift);
     actuation_delay < T = 2 pi / omega, and 0 without the exact flow; jitter and the
     actuator 0 without the exact flow or with actuation on_arrival in realtime;
     pulse_width <= 2 actuation_delay and actuation_delay + pulse_width / 2 < T, 0 where
@@ -281,6 +282,12 @@ def described_range(p: Parameter, declared: dict) -> tuple:
     """
     if p.name in ("friction", "friction_static"):   # Coulomb friction: a compliant stop's
         return (p.lo, p.hi) if declared.get("contact", "rigid") != "rigid" else (p.lo, 0.0)
+    if p.name == "delta_d_drift":        # |drift| <= d* of the model declared (_drift)
+        try:
+            d_star = OscillatorParams(**{k: declared[k] for k in MODEL_KEYS}).d_star
+        except (KeyError, TypeError, ParameterError):
+            return p.lo, p.hi
+        return -d_star, d_star
     if p.name not in ("actuation_delay", "jitter", "pulse_width", "actuator_bandwidth",
                       "actuator_latency"):
         return p.lo, p.hi
@@ -430,6 +437,16 @@ def _finite(name, value, ok, valid):
     return value
 
 
+def _drift(value, d_star) -> float:
+    """delta_d_drift, |value| <= d* = ``d_star()`` (docs/nodes.md; 1e308 overflowed)."""
+    if (value := float(value)) == 0.0:
+        return value
+    d = d_star()
+    return _finite("delta_d_drift", value, lambda v: abs(v) <= d,
+                   f"|delta_d_drift| <= d* = {d!r} per forcing period (d*: the amplitude of "
+                   "the wall coordinate's non-impacting motion)")
+
+
 def settings_from_values(values: dict, model_file: str = "",
                          model: NdofModel | None = None) -> SimSettings:
     """Validate the sim node's parameter values; raise ParameterError naming the bad one.
@@ -492,8 +509,7 @@ def settings_from_values(values: dict, model_file: str = "",
         noise=_finite("noise", values["noise"], lambda v: v >= 0.0, "a finite noise >= 0"),
         seed=seed, sensor=_sensor(values), watchdog=_watchdog(values),
         feasibility=_choice(values, "feasibility", FEASIBILITY),
-        delta_d_drift=_finite("delta_d_drift", values["delta_d_drift"], lambda v: True,
-                              "a finite delta_d_drift (per period)"),
+        delta_d_drift=_drift(values["delta_d_drift"], lambda: p.d_star),
         pre_roll=pre_roll, contact=contact, **actuation)
 
 
@@ -535,7 +551,8 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
     rest = {k: v for k, v in values.items()
             if k not in MODEL_KEYS and k not in NOT_WITH_MODEL_FILE and k != "state0"}
     # the 1-DOF validation with the n-DOF forcing frequency: its bounds on times read T
-    base = settings_from_values({**rest, "omega": model.omega})
+    base = settings_from_values({**rest, "omega": model.omega, "delta_d_drift": 0.0})
+    drift = _drift(values.get("delta_d_drift", 0.0), lambda: grazing_clearance(model))
     if not base.actuator.ideal and base.pulse_width == 0.0:
         raise ParameterError("pulse_width=0.0 is invalid with model_file and the first-order "
                              "actuator (actuator_bandwidth, actuator_latency): valid range is "
@@ -550,7 +567,8 @@ def _model_file_settings(values: dict, model_file: str, model: NdofModel | None)
         except ParameterError as exc:
             raise ParameterError(f"pulse_width={base.pulse_width!r} is invalid with model_file="
                                  f"{model_file!r}: valid is 0 ({exc})") from None
-    return dataclasses.replace(base, model=model, model_file=str(model_file), state0=state0)
+    return dataclasses.replace(base, model=model, model_file=str(model_file), state0=state0,
+                               delta_d_drift=drift)
 
 
 def _same(value, default) -> bool:

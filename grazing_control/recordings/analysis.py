@@ -294,6 +294,7 @@ class NdofSetup:
     actuator: object | None = None  # the simulator's first-order actuator (None: ideal)
     time_scale: float | None = None  # realtime: the simulator's (None: estimated)
     on_arrival: bool = False      # realtime: each correction acted on its arrival
+    drift: float = 0.0            # the simulator's delta_d_drift (per period; 0: none)
 
 
 def is_ndof(data) -> bool:
@@ -320,7 +321,7 @@ def ndof_setup(data, rig=None) -> NdofSetup:
     (:meth:`grazing_control.plant.rig.Rig.model`, the simulator's)."""
     from grazing_control.oscillator.ndof.model import load_model
 
-    from .numbers import drift_notes
+    from .numbers import drift_notes, recorded_drift
 
     nodes = data.parameters.get("nodes", {})
     sim = (nodes.get("sim_node") or [{}])[0]
@@ -367,7 +368,8 @@ def ndof_setup(data, rig=None) -> NdofSetup:
                      limit if math.isfinite(limit) and limit > 0.0 else 0.0,
                      _actuator(sim, notes) if width > 0.0 else None,
                      _number(sim.get("time_scale"), None),
-                     sim.get("mode") == "realtime" and acts_on_arrival(sim))
+                     sim.get("mode") == "realtime" and acts_on_arrival(sim),
+                     recorded_drift(sim))
 
 
 def ndof_period(setup: NdofSetup):
@@ -382,7 +384,9 @@ def ndof_period(setup: NdofSetup):
     section 15). ``force`` is 0 except through an actuator with a lag; the step takes, as
     a fourth argument, another time after the sample for the correction: the kick's
     delay (the realtime delay check, the correction at its arrival), or the pulse's start
-    (a rig scene off the rig's grid, each pulse at its recorded start: :mod:`.rig_acts`).
+    (a rig scene off the rig's grid, each pulse at its recorded start: :mod:`.rig_acts`),
+    and as a keyword ``flow`` the flow of that period (:func:`ndof_flow_at`: a drifting
+    wall's; default the model's).
     """
     from grazing_control.dynamics.maps.modal_map import actuated_step, pulse_step
     from grazing_control.dynamics.simulation.actuation import pulse_start
@@ -396,16 +400,16 @@ def ndof_period(setup: NdofSetup):
     start = pulse_start(T, delay, w)
     act = setup.actuator
     if w > 0.0 and act is not None:
-        def step(z, force, dv, start=start):
+        def step(z, force, dv, start=start, flow=flow):
             return actuated_step(flow, z, force, dv, start=start, width=w,
                                  time_constant=act.time_constant, latency=act.latency,
                                  force_limit=limit)
     elif w > 0.0:
-        def step(z, force, dv, start=start):
+        def step(z, force, dv, start=start, flow=flow):
             out = pulse_step(flow, z, dv, start=start, width=w, force_limit=limit)
             return out.state, 0.0, list(out.impacts)
     else:
-        def step(z, force, dv, delay=delay):
+        def step(z, force, dv, delay=delay, flow=flow):
             tau, impacts = flow.tau2, []
             if delay > 0.0:
                 head = advance(flow, tau, z, delay)
@@ -416,6 +420,22 @@ def ndof_period(setup: NdofSetup):
             tail = advance(flow, tau, z, T - delay)
             return tail.z, 0.0, impacts + list(tail.impacts)
     return flow, step
+
+
+def ndof_flow_at(flow, drift: float, t: float):
+    """The flow of the plant's period of the sample stamped ``t``: the model's wall at
+    Delta d + drift k (k = :func:`~grazing_control.recordings.numbers.sample_index`),
+    as the simulator moves it (plant.engine.Engine._drift_wall, k0 = 0:
+    :meth:`~grazing_control.oscillator.ndof.section.NdofSection.with_delta_d`, the
+    same expression, so bit for bit its wall); ``flow`` itself without a drift."""
+    from .numbers import sample_index
+
+    if not drift:
+        return flow
+    m = flow.model
+    model = dataclasses.replace(m, delta_d=float(m.delta_d + drift * sample_index(
+        t, m.period)))
+    return dataclasses.replace(flow, model=model)
 
 
 def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
@@ -430,7 +450,9 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
     applied_corrections`: at a deadline miss the prediction substituted, or 0).
     ``starts``: per sample, the pulse's recorded start after it (a rig scene off the
     rig's grid, :func:`.rig_acts.apply_acts`; NaN: the simulator's rule), as
-    :func:`~grazing_control.recordings.numbers.model_check` takes them."""
+    :func:`~grazing_control.recordings.numbers.model_check` takes them. A drifting wall
+    (``setup.drift``): each period at the plant's Delta d of that period
+    (:func:`ndof_flow_at`)."""
     m = setup.model
     dvs = scene.correction if corrections is None else corrections
     if m is None or len(scene.t) < 2:
@@ -449,11 +471,12 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
             force = 0.0 if setup.actuator is None else None
             continue
         z = flow.to_deviation(flow.tau2, scene.pi2[k])
+        at = ndof_flow_at(flow, setup.drift, scene.t[k])
         try:
             if starts is not None and math.isfinite(starts[k]):
-                z, force, _ = step(z, force, float(dvs[k]), float(starts[k]))
+                z, force, _ = step(z, force, float(dvs[k]), float(starts[k]), flow=at)
             else:
-                z, force, _ = step(z, force, float(dvs[k]))
+                z, force, _ = step(z, force, float(dvs[k]), flow=at)
         except (ValueError, ArithmeticError, RuntimeError):
             failed += 1
             dep[k] = np.inf
@@ -465,6 +488,8 @@ def ndof_model_check(setup: NdofSetup, scene, limit: int = 20000,
     out = {"max_departure": worst, "periods": periods, "periods_above_1e-12": int(above),
            "periods_in_scene": len(scene.t) - 1, "failed": failed,
            "correction": _actuation_text(setup), "_departures": dep}
+    if setup.drift:
+        out["delta_d_drift"] = setup.drift
     if setup.actuator is not None:
         out["unchecked"] = unchecked
         out["final_force"] = force
@@ -638,7 +663,8 @@ def ndof_realtime(sd, setup: NdofSetup, check: dict | None) -> dict:
     pi2, dv = sd.scene.pi2, sd.scene.correction
 
     def predict(k, delay):
-        z, _, _ = step(flow.to_deviation(flow.tau2, pi2[k]), 0.0, float(dv[k]), delay)
+        z, _, _ = step(flow.to_deviation(flow.tau2, pi2[k]), 0.0, float(dv[k]), delay,
+                       flow=ndof_flow_at(flow, setup.drift, sd.scene.t[k]))
         return flow.to_physical(flow.tau2, z)
 
     rt["delay_check"] = delay_check(sd, rt, predict, m.period)
@@ -688,6 +714,9 @@ def ndof_lines(label: str, setup: NdofSetup, n: dict, fig_name: str | None) -> l
                      f"{mc.get('correction', 'the kick')}) departs from the next "
                      f"recorded sample by at most {mc['max_departure']:.2e} "
                      f"({mc['periods_above_1e-12']} of {mc['periods']} periods above 1e-12"
+                     + (f"; each period at the plant's Δd of that period, the wall "
+                        f"drifting by {mc['delta_d_drift']:g} per period"
+                        if mc.get("delta_d_drift") else "")
                      + (f", {mc['failed']} could not be re-integrated" if mc["failed"] else "")
                      + (f", {mc['unchecked']} not checked after a gap (the actuator's force "
                         "unknown)" if mc.get("unchecked") else "")

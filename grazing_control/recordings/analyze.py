@@ -311,6 +311,9 @@ def _scene_lines(label, numbers, fig_name):
                      f"recorded sample and correction departs from the next recorded sample by "
                      f"at most {fmt(mc['max_departure'], '.2e')} ({mc['periods_above_1e-12']} "
                      f"of {mc['periods']} periods above 1e-12"
+                     + (f"; each period at the plant's Δd of that period, the wall "
+                        f"drifting by {mc['delta_d_drift']:g} per period"
+                        if mc.get("delta_d_drift") else "")
                      + (f"; the {mc['dropped_at_deadline_misses']} answers missed at "
                         "deadline misses re-integrated as what acted instead ("
                         f"{mc.get('predictions_substituted', 0)} predictions, 0 otherwise)"

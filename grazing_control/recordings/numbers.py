@@ -71,6 +71,7 @@ class Setup:
     pulse_width: float = 0.0      # the simulator's force pulse (0: the kick of Eq. 28)
     force_limit: float = 0.0      # 0: none
     actuator: object = None       # the simulator's first-order actuator (None: ideal)
+    drift: float = 0.0            # the simulator's delta_d_drift (per period; 0: none)
 
 
 def infer_delta_d(base: OscillatorParams, scene):
@@ -166,19 +167,31 @@ def _num(value, default=None):
     return value
 
 
+def recorded_drift(sim: dict) -> float:
+    """The simulator's ``delta_d_drift`` (per period) of its parameter record; 0 where
+    absent or not a finite number."""
+    drift = _num(sim.get("delta_d_drift"), 0.0)
+    return drift if drift is not None and math.isfinite(drift) else 0.0
+
+
+def sample_index(t: float, period: float) -> int:
+    """The simulator's index k of the Pi2 sample stamped ``t``: t_k = k T from the
+    scene's start (plant.engine.Engine.t; a reset starts a scene at t = 0)."""
+    return int(round(t / period))
+
+
 def drift_notes(sim: dict) -> list:
     """The note of a scene whose wall drifted (the simulator's ``delta_d_drift``, a
-    wearing stop): the model check re-integrates each period at the recorded Delta d,
-    so it departs by what the wall moved, which is no model error."""
-    try:
-        drift = float(sim.get("delta_d_drift") or 0.0)
-    except (TypeError, ValueError):
-        return []
+    wearing stop): the model check re-integrates period k at the plant's Delta d of that
+    period, the recorded Delta d + delta_d_drift k (k0 = 0: the scene's start), as the
+    simulator ran it (plant.engine.Engine._drift_wall)."""
+    drift = recorded_drift(sim)
     if drift == 0.0:
         return []
     return [f"the plant's wall drifted (delta_d_drift={drift:g} per period): the model "
-            "check re-integrates each period at the recorded Delta d, so it departs by "
-            "what the wall moved (not a model error)"]
+            "check re-integrates period k at the plant's Delta d of that period, the "
+            "recorded Delta d + delta_d_drift k (k counted from the scene's start, t_k = "
+            "k T), so a departure is the model's, not the drift's"]
 
 
 def resolve_setup(bag, options: dict) -> Setup:
@@ -283,7 +296,7 @@ def resolve_setup(bag, options: dict) -> Setup:
     return Setup(params, gains, str(mode), ts, saturation, ea, delay, sources, notes,
                  width if width is not None and math.isfinite(width) and width > 0 else 0.0,
                  limit if limit is not None and math.isfinite(limit) and limit > 0 else 0.0,
-                 _actuator(sim, notes))
+                 _actuator(sim, notes), recorded_drift(sim))
 
 
 def _actuator(sim: dict, notes: list):
@@ -414,7 +427,7 @@ def applied_corrections(sd) -> np.ndarray:
 
 def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 20000,
                 corrections=None, pulse_width: float = 0.0, force_limit: float = 0.0,
-                actuator=None, starts=None):
+                actuator=None, starts=None, drift: float = 0.0):
     """Re-integrate each recorded period with the core; largest departure, per sample.
 
     Returns (max departure, array of departures |P(X_k, dv_k) - X_{k+1}|) over at most
@@ -427,7 +440,9 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
     not recorded: it is carried from 0 at the first recorded sample, exact for a scene
     recorded from its start, since the force follows the commands alone). ``starts``: per
     sample, the pulse's recorded start after the sample (a rig scene off the rig's grid,
-    :func:`.rig_acts.apply_acts`; NaN: the rule above).
+    :func:`.rig_acts.apply_acts`; NaN: the rule above). ``drift``: the simulator's
+    ``delta_d_drift``: the period of sample k (t_k = k T, :func:`sample_index`) at
+    Delta d + drift k, as the simulator ran it (plant.engine.Engine._drift_wall).
     """
     from grazing_control.dynamics.simulation.actuation import pulse_start, pulse_step
     from grazing_control.dynamics.simulation.simulate import period_step
@@ -441,7 +456,7 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
 
         start = pulse_start(p.period, delay, pulse_width)
 
-        def step(dx, dv, dvc, start=start):
+        def step(p, dx, dv, dvc, start=start):
             x, v, f, imps = actuated_step(p, dx, dv, force[0], dvc, start=start,
                                           width=pulse_width, actuator=actuator,
                                           force_limit=force_limit or math.inf)
@@ -450,27 +465,39 @@ def model_check(p: OscillatorParams, scene, delay: float = 0.0, limit: int = 200
     elif pulse_width > 0.0:     # the engine's rule: centred at the delay, within [0, T - w)
         start = pulse_start(p.period, delay, pulse_width)
 
-        def step(dx, dv, dvc, start=start):
+        def step(p, dx, dv, dvc, start=start):
             return pulse_step(p, dx, dv, dvc, start=start, width=pulse_width,
                               force_limit=force_limit or math.inf)
     else:
         kw = {"delay": delay} if delay else {}
 
-        def step(dx, dv, dvc, start=None):
+        def step(p, dx, dv, dvc, start=None):
             return period_step(p, dx, dv, dvc, **kw)
+    base = p
     for k in range(n):
         x, v = scene.pi2[k]
+        p = params_at(base, drift, scene.t[k])
         try:
             if starts is not None and math.isfinite(starts[k]):
-                seg = step(x - p.x_ref, v - p.v_ref, float(dvs[k]), float(starts[k]))
+                seg = step(p, x - p.x_ref, v - p.v_ref, float(dvs[k]), float(starts[k]))
             else:
-                seg = step(x - p.x_ref, v - p.v_ref, float(dvs[k]))
+                seg = step(p, x - p.x_ref, v - p.v_ref, float(dvs[k]))
         except Exception:            # the core refuses (impact cap): count as departed
             dep[k] = np.inf
             continue
         dep[k] = max(abs(p.x_ref + seg.dx - scene.pi2[k + 1, 0]),
                      abs(p.v_ref + seg.dv - scene.pi2[k + 1, 1]))
     return (float(np.max(dep)) if n > 0 else None), dep
+
+
+def params_at(p: OscillatorParams, drift: float, t: float) -> OscillatorParams:
+    """The plant's model in the period of the sample stamped ``t``: ``p`` with Delta d +
+    drift k (k = :func:`sample_index`), the expression the simulator evaluates
+    (plant.engine.Engine._drift_wall, k0 = 0), so bit for bit its wall; ``p`` itself
+    without a drift."""
+    if not drift:
+        return p
+    return p.with_(delta_d=p.delta_d + drift * sample_index(t, p.period))
 
 
 #: Largest model-check departure of a lockstep scene that is not a problem: the simulator
@@ -661,13 +688,16 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
         worst, dep = model_check(setup.params, scene, setup.actuation_delay,
                                  corrections=applied_corrections(sd),
                                  pulse_width=setup.pulse_width, force_limit=setup.force_limit,
-                                 actuator=setup.actuator, starts=sd.pulse_starts)
+                                 actuator=setup.actuator, starts=sd.pulse_starts,
+                                 drift=setup.drift)
         out["model_check"] = {"max_departure": worst,
                               "periods": int(dep.size),
                               "periods_in_scene": max(len(scene.t) - 1, 0),
                               "periods_above_1e-12": int(np.count_nonzero(dep > 1e-12)),
                               "dropped_at_deadline_misses": int(sd.missed_stamp_ns.size),
                               "predictions_substituted": len(sd.substituted)}
+        if setup.drift:
+            out["model_check"]["delta_d_drift"] = setup.drift
         if sd.pulse_starts is not None:
             out["model_check"]["pulses_at_recorded_starts"] = int(
                 np.count_nonzero(np.isfinite(sd.pulse_starts)))
@@ -700,8 +730,9 @@ def _delay_check(sd, setup: Setup, rt: dict):
     pi2, dv = sd.scene.pi2, sd.scene.correction
 
     def predict(k, delay):
-        seg = period_step(p, pi2[k, 0] - p.x_ref, pi2[k, 1] - p.v_ref, float(dv[k]),
+        q = params_at(p, setup.drift, sd.scene.t[k])
+        seg = period_step(q, pi2[k, 0] - q.x_ref, pi2[k, 1] - q.v_ref, float(dv[k]),
                           delay=delay)
-        return (p.x_ref + seg.dx, p.v_ref + seg.dv)
+        return (q.x_ref + seg.dx, q.v_ref + seg.dv)
 
     return delay_check(sd, rt, predict, p.period)
