@@ -298,6 +298,10 @@ class StreamWindow:
             imp = self.impacts
         elif self.sampled:
             imp = impacts_from_samples(a[:, 0], a[:, 1], self.kicks())
+            if not imp.size:
+                raise ReidentificationError(
+                    "no_impacts", "no impact found in the window's samples (free flight, "
+                    "or impacts too slow for the noise: sampled_impacts)")
         else:
             imp = self.predicted_impacts(p, delay)
         imp = imp[(imp > t0) & (imp < t1)]
