@@ -32,7 +32,9 @@ One implementation for every model (issue 32), dispatching on the running model:
 1-DOF oscillator (:class:`OscillatorParams`, all of the above, unchanged bit for bit) or
 a model file of n masses (:class:`~grazing_control.oscillator.ndof.model.NdofModel`,
 docs/theory_reidentification.md "n > 1"): the window's impacts predicted over the exact
-n-DOF motion from each section's 2n-state estimate; step 2 the multiple-shooting fit of
+n-DOF motion from each section's 2n-state estimate, or, where the filter restarted too
+recently for a window, the whole record's found in the samples of x_w
+(:mod:`.sampled_impacts`); step 2 the multiple-shooting fit of
 the wall coordinate's modal parameters
 (:func:`grazing_control.dynamics.identification.modal_fit.identify_modal`, the core of
 ``grazing identify`` on an n-DOF bag) started from the running model's modes, realised
