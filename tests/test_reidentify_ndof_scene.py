@@ -92,12 +92,12 @@ class Plant:
 
 
 @contextlib.contextmanager
-def controller(tmp: Path, **over):
-    """controller_node on the wrong model file with its design, in a fresh domain, the
-    test's Collector and Plant: (col, proc, log, plant)."""
-    wrong = _model_file(tmp / "wrong.yaml", WRONG)
+def controller(tmp: Path, model=WRONG, **over):
+    """controller_node on the wrong ``model`` file with its design, in a fresh domain,
+    the test's Collector and Plant: (col, proc, log, plant)."""
+    wrong = _model_file(tmp / "wrong.yaml", model)
     gains = tmp / "gains.yaml"
-    write_gain_yaml(gains, WRONG, evaluate_design(WRONG, MU, DELAY), wrong)
+    write_gain_yaml(gains, model, evaluate_design(model, MU, DELAY), wrong)
     domain = new_domain()
     col = Collector(domain, STREAM_TOPICS)
     log = tmp / "controller.log"
@@ -145,6 +145,16 @@ def test_a_wrong_model_is_refitted_and_the_loop_holds_the_true_orbit_closer(tmp_
     model); after 40 more periods the true Pi2 state is nearer the true design's orbit
     than over the 20 periods before the request (measured, printed), one impact a period."""
     with controller(tmp_path) as scene:
+        _called_refit(*scene)
+
+
+def test_a_model_the_filter_rejects_is_refitted_through_the_node(tmp_path):
+    """The same with the damping 5 % high: the node's model filter rejects it and
+    restarts every period (its window after the last restart is empty), so the refit
+    takes the record with the impacts found in the samples (docs/theory_reidentification.md
+    §6); the row a switch, r and Delta d within 3 standard errors, the loop back on one
+    impact a period and nearer the true orbit than before the request."""
+    with controller(tmp_path, model=dataclasses.replace(TRUE, C=1.05 * TRUE.C)) as scene:
         _called_refit(*scene)
 
 

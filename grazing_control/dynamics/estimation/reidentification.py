@@ -32,7 +32,9 @@ One implementation for every model (issue 32), dispatching on the running model:
 1-DOF oscillator (:class:`OscillatorParams`, all of the above, unchanged bit for bit) or
 a model file of n masses (:class:`~grazing_control.oscillator.ndof.model.NdofModel`,
 docs/theory_reidentification.md "n > 1"): the window's impacts predicted over the exact
-n-DOF motion from each section's 2n-state estimate; step 2 the multiple-shooting fit of
+n-DOF motion from each section's 2n-state estimate, or, where the filter restarted too
+recently for a window, the whole record's found in the samples of x_w
+(:mod:`.sampled_impacts`); step 2 the multiple-shooting fit of
 the wall coordinate's modal parameters
 (:func:`grazing_control.dynamics.identification.modal_fit.identify_modal`, the core of
 ``grazing identify`` on an n-DOF bag) started from the running model's modes, realised
@@ -59,6 +61,7 @@ from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import FilterState
 from grazing_control.dynamics.estimation.motion import trajectory
+from grazing_control.dynamics.estimation.sampled_impacts import impacts_from_samples
 from grazing_control.oscillator.ndof.flow import NdofFlow
 from grazing_control.oscillator.ndof.model import NdofModel
 
@@ -194,11 +197,18 @@ class StreamRecord:
         return max(first, (max(unfitted) + 1) * self.period - 1e-9 * self.period) \
             if unfitted else first
 
-    def snapshot(self) -> "StreamWindow":
+    def snapshot(self, find_impacts: bool = False) -> "StreamWindow":
         """The window (copies), from :meth:`_usable_start`. ReidentificationError
-        ``too_few_periods`` when it covers less than :data:`MIN_PERIODS` periods."""
+        ``too_few_periods`` when it covers less than :data:`MIN_PERIODS` periods.
+        ``find_impacts`` (an n-DOF model's, :meth:`Reidentifier.request`): where that
+        leaves less, the whole record with the impacts found in its samples instead
+        (:mod:`.sampled_impacts`; docs/theory_reidentification.md §6)."""
         start = self._usable_start()
         covered = (self.samples[-1][0] - start) / self.period if self.samples else 0.0
+        sampled = False
+        if find_impacts and covered < MIN_PERIODS - 0.5 and self.samples:
+            start, sampled = self.samples[0][0], True
+            covered = self.covered
         if covered < MIN_PERIODS - 0.5:
             raise ReidentificationError(
                 "too_few_periods", f"too few periods of stream to refit: {covered:.1f} "
@@ -207,18 +217,20 @@ class StreamRecord:
         rows = np.array([r for r in self.samples if r[0] >= start])
         return StreamWindow(rows, {k: v for k, v in self.sections.items()
                                    if k * self.period >= start - 1e-9 * self.period},
-                            np.array(self.impacts), self.period)
+                            np.array(self.impacts), self.period, sampled)
 
 
 @dataclass(frozen=True)
 class StreamWindow:
     """A snapshot of a :class:`StreamRecord`: samples (n, 5) rows (t, x, v, cos tau,
-    sin tau), sections {k: (z, dv, at)}, impact times, the period."""
+    sin tau), sections {k: (z, dv, at)}, impact times, the period; ``sampled``: without
+    an impact sensor, the impacts are found in the samples, not predicted."""
 
     samples: np.ndarray
     sections: dict
     impacts: np.ndarray
     period: float
+    sampled: bool = False
 
     def kicks(self) -> np.ndarray:
         """The instants of the non-zero kicks inside the samples' span."""
@@ -276,13 +288,24 @@ class StreamWindow:
         return np.array(sorted(out))
 
     def recording(self, p: OscillatorParams, delay: float):
-        """The window as a Recording: the impact sensor's times, else the model's
-        (:meth:`predicted_impacts`); the kicks' instants; no impact velocities."""
+        """The window as a Recording: the impact sensor's times, else those found in
+        the samples (``sampled``: :func:`.sampled_impacts.impacts_from_samples`), else
+        the model's (:meth:`predicted_impacts`); the kicks' instants; no impact
+        velocities."""
         from grazing_control.dynamics.identification.data import Recording
 
         a = self.samples
         t0, t1 = a[0, 0], a[-1, 0]
-        imp = self.impacts if self.impacts.size else self.predicted_impacts(p, delay)
+        if self.impacts.size:
+            imp = self.impacts
+        elif self.sampled:
+            imp = impacts_from_samples(a[:, 0], a[:, 1], self.kicks())
+            if not imp.size:
+                raise ReidentificationError(
+                    "no_impacts", "no impact found in the window's samples (free flight, "
+                    "or impacts too slow for the noise: sampled_impacts)")
+        else:
+            imp = self.predicted_impacts(p, delay)
         imp = imp[(imp > t0) & (imp < t1)]
         keep = np.concatenate([[True], np.diff(imp) > 1e-9 * self.period]) if imp.size \
             else np.zeros(0, bool)
@@ -732,7 +755,7 @@ class Reidentifier:
             if self.running or self._result is not None:
                 raise ReidentificationError("busy", "a refit is already running: request "
                                             "refused")
-        window = record.snapshot()              # too_few_periods raised here
+        window = record.snapshot(isinstance(running, NdofModel))  # too_few_periods here
         self.started_at = k
 
         def work():
