@@ -26,11 +26,12 @@ help:
 # install took 123 s with it and 51 s without (load 10; 39 s against 24 s at load 4); a
 # module is compiled when it is first imported instead (the imports of the CLI, rclpy,
 # matplotlib, scipy.optimize, numba, pytest: 2 s of CPU once, cached in __pycache__).
-$(VENV)/.deps: requirements.txt constraints.txt
+# .ci/install_requirements.py: uv where it can be had (parallel downloads), else pip as
+# before (GRAZING_INSTALLER=pip forces it); uv compiles no bytecode either.
+$(VENV)/.deps: requirements.txt constraints.txt .ci/install_requirements.py
 	rm -rf $(VENV)
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --upgrade pip -c constraints.txt
-	$(PY) -m pip install --no-compile -r requirements.txt -c constraints.txt
+	$(PY) .ci/install_requirements.py
 	touch $@
 
 # $(VENV)/.stamp: the package, installed editable. The editable install maps the

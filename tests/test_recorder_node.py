@@ -280,8 +280,9 @@ LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def wait_ready(node, recorder):
-    """Wait until the recorder says (on recorder/ready) that it matched every topic."""
+def wait_ready(node, recorder, *matched):
+    """Wait until the recorder says (on recorder/ready) that it matched every topic, and
+    until each publisher of ``matched`` has matched a reader (the recorder's)."""
     ready = []
     sub = node.create_subscription(Bool, READY_TOPIC, lambda m: ready.append(m.data),
                                    LATCHED_QOS)
@@ -308,6 +309,14 @@ def wait_ready(node, recorder):
                 for info in node.get_subscriptions_info_by_topic(pub.topic_name))
             for pub in node.publishers):
         time.sleep(0.02)
+    # That count is of the readers this node's graph already knows: where it had not yet
+    # discovered the recorder's reader it asked for none, and a burst published at once
+    # went to nobody (the disk-full test's bag began at message 1631, a fresh clone's
+    # rerun, 2026-11-29). The publishers a test bursts on wait for a reader of their own.
+    end = time.monotonic() + STARTUP_TIMEOUT
+    while not all(pub.get_subscription_count() >= 1 for pub in matched):
+        assert time.monotonic() < end, "the recorder's reader never matched"
+        time.sleep(0.01)
 
 
 def test_adapts_to_best_effort_and_transient_local_publishers(tmp_path, isolation, ros):
@@ -385,7 +394,7 @@ def test_a_best_effort_bystander_does_not_make_the_package_topics_lossy(
             time.sleep(1.0)                     # the recorder sees only the bystanders
             pubs = package()
         time.sleep(0.5)
-        wait_ready(ros, recorder)
+        wait_ready(ros, recorder, pubs["oscillator/state"])
         sent = []
         for i in range(1, 2001):                 # a burst: best effort would drop some
             m = make_message("sensor_msgs/msg/JointState", i)
@@ -442,7 +451,7 @@ def test_reports_what_it_missed(tmp_path, isolation, ros):
     recorder = start_recorder(bag, namespace, env, "topics:=['oscillator/pi2']",
                               "require_complete:=true")
     try:
-        wait_ready(ros, recorder)
+        wait_ready(ros, recorder, pub)
         time.sleep(0.3)
         for i in range(7, 12):
             pub.publish(make_message("sensor_msgs/msg/JointState", i))
@@ -497,7 +506,7 @@ def test_disk_full_is_one_error_line_and_keeps_the_chunks(tmp_path, isolation, r
         pub = ros.create_publisher(JointState, "oscillator/state", QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=5000,
             reliability=ReliabilityPolicy.RELIABLE))
-        wait_ready(ros, recorder)
+        wait_ready(ros, recorder, pub)
         for i in range(3000):                    # about 300 kB of CDR
             pub.publish(make_message("sensor_msgs/msg/JointState", i))
         output, _ = recorder.communicate(timeout=30)   # it stops by itself
