@@ -4,10 +4,10 @@
 had, else with pip; both end with the same packages at the same versions (constraints.txt
 is a full freeze).
 
-Why uv: pip downloads one file at a time. On a fresh machine the requirements' 139
-downloads from the package index took pip 22-36 s, and uv about 4 s, because uv
-downloads in parallel. The timings are in docs/benchmarks.md, "The venv on a fresh
-machine".
+Why uv: pip downloads one file at a time, and a fresh machine fetches 139 of the
+requirements' files from the package index. uv downloads them in parallel. With empty
+caches, venv creation included, pip took 19-42 s and uv 14-20 s (medians 35.4 s and
+17.3 s, benchmarks/bench_venv.py; docs/benchmarks.md, "The venv on a fresh machine").
 
 uv reads no pip configuration. The package sources that pip is configured with (the
 ``pip config list`` of its files and PIP_* variables: find-links, index-url,
