@@ -13,11 +13,16 @@ from __future__ import annotations
 
 import math
 
+from rclpy.duration import Duration
+
 from grazing_control.plant.engine import Event, NdofEvent
 from grazing_control.ros import cdr, stream_block
 from grazing_control.ros.common import Throttled
 
 __all__ = ["Outputs", "read_answer", "joint_names", "ndof_joint_state"]
+
+#: Lockstep: wall seconds to wait for every reader to acknowledge a substitution.
+ACKED_WAIT = 5.0
 
 
 def joint_names(n: int) -> list:
@@ -145,7 +150,16 @@ class Outputs:
         self.node.pub_miss.publish(cdr.vector3_stamped(*key, float(k), t, waited))
 
     def substituted(self, k: int, key: tuple, dv: float) -> None:
-        self.node.pub_substituted.publish(cdr.twist_stamped(*key, dv))
+        pub = self.node.pub_substituted
+        pub.publish(cdr.twist_stamped(*key, dv))
+        if self.node.settings.mode == "lockstep":
+            # The period's stream follows on another topic, and topics keep no order
+            # between them at a reader: a stream controller took the substitution after
+            # the sample that made the next section due (its estimate then used the
+            # answer, not what acted: in 1 of about 10 of test_stream_replay's scenes with
+            # three at once, 2026-11-29). Lockstep waits until every reader has it; realtime
+            # cannot wait, and a late substitution there is what a rig would see too.
+            pub.wait_for_all_acked(Duration(seconds=ACKED_WAIT))
 
     def tripped(self, trip) -> None:
         self.node.on_trip(trip)

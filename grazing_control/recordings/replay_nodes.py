@@ -45,6 +45,9 @@ class Session:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
+        from grazing_control.ros.launcher import use_profile_here
+
+        use_profile_here()
         self.rclpy = rclpy
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id)

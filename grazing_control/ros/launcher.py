@@ -286,6 +286,18 @@ FASTDDS_PROFILE = Path(__file__).with_name("fastdds_profile.xml")
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
+def use_profile_here() -> None:
+    """Give this process's own participants (a replay's session, a test's node) the
+    nodes' Fast DDS profile (:data:`FASTDDS_PROFILE`), unless the environment names
+    one. Fast DDS reads it once, at the process's first participant: call this before.
+    Without it a reliable writer of this process asks for acknowledgements every 3 s,
+    and a replay that waits for one (recordings/stream_replay.py) waited that long."""
+    if not (os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")
+            or os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE")) and FASTDDS_PROFILE.is_file():
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
+        os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
+
+
 def node_env(domain_id: int | None = None) -> dict:
     """Environment of a node: ours, the source root on PYTHONPATH, the domain if given,
     :data:`FASTDDS_PROFILE` as Fast DDS's default profile unless ours names one
