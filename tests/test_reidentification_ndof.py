@@ -182,26 +182,34 @@ def test_after_the_switch_the_loop_holds_the_true_designs_orbit_closer(scene):
     ModalMap(TRUE, k_true, 1.0))."""
     loop, gains, plan = scene
     k_true = evaluate_design(TRUE, gains.mu, DELAY).gains
-    target = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
-    ref = NdofFlow.of(TRUE)
-    ref = ref.particular(ref.tau2)
     distance = {}
     for switched in (False, True):
-        copy = Loop(WRONG, gains.k)
-        copy.run(40)
-        start = copy.k
-
-        def switch(k):
-            if switched and k == start:
-                switch_estimator(copy.est, plan.refit.model)
-                copy.gains = np.asarray(plan.gains.k)
-        copy.run(40, switch)
-        pi2 = np.array(copy.pi2[-20:]) - ref
-        distance[switched] = float(np.mean(np.linalg.norm(pi2 - target, axis=1)))
-        assert copy.impacts[-20:] == [1] * 20
+        distance[switched], impacts = _distance_from_the_true_orbit(
+            WRONG, gains, plan, k_true, switched)
+        assert impacts == [1] * 20
     assert distance[True] < 0.5 * distance[False], distance
     print(f"mean distance from the true orbit: kept {distance[False]:.2e}, "
           f"switched {distance[True]:.2e}")
+
+
+def _distance_from_the_true_orbit(model, gains, plan, k_true, switched: bool) -> tuple:
+    """A loop on ``model`` with ``gains`` for 40 periods, then 40 more (switched to the
+    plan's model and gains at their start if ``switched``): the mean distance of its last
+    20 Pi2 states from the true design's orbit, and their impacts per period."""
+    target = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
+    ref = NdofFlow.of(TRUE)
+    ref = ref.particular(ref.tau2)
+    copy = Loop(model, gains.k)
+    copy.run(40)
+    start = copy.k
+
+    def switch(k):
+        if switched and k == start:
+            switch_estimator(copy.est, plan.refit.model)
+            copy.gains = np.asarray(plan.gains.k)
+    copy.run(40, switch)
+    pi2 = np.array(copy.pi2[-20:]) - ref
+    return float(np.mean(np.linalg.norm(pi2 - target, axis=1))), copy.impacts[-20:]
 
 
 def test_a_pulsed_design_is_refitted_with_its_pulse_and_redesigned_for_it():
@@ -394,23 +402,11 @@ def test_a_model_the_filter_rejects_is_refitted_and_switched(rejected):
     k_true = evaluate_design(TRUE, gains.mu, DELAY).gains
     assert np.linalg.norm(plan.gains.k - k_true) < 0.1 * np.linalg.norm(gains.k - k_true)
     assert evaluate_design(TRUE, family_mu(TRUE, plan.gains.k, DELAY), DELAY).admissible
-    target = find_periodic(ModalMap(TRUE, k_true, DELAY), np.zeros(2 * TRUE.n)).state
-    ref = NdofFlow.of(TRUE)
-    ref = ref.particular(ref.tau2)
     distance = {}
     for switched in (False, True):
-        copy = Loop(REJECTED, gains.k)
-        copy.run(40)
-        start = copy.k
-
-        def switch(k):
-            if switched and k == start:
-                switch_estimator(copy.est, plan.refit.model)
-                copy.gains = np.asarray(plan.gains.k)
-        copy.run(40, switch)
-        pi2 = np.array(copy.pi2[-20:]) - ref
-        distance[switched] = float(np.mean(np.linalg.norm(pi2 - target, axis=1)))
-    assert copy.impacts[-20:] == [1] * 20
+        distance[switched], impacts = _distance_from_the_true_orbit(
+            REJECTED, gains, plan, k_true, switched)
+    assert impacts == [1] * 20
     assert distance[True] < 0.2 * distance[False], distance
     print(f"damping 5 % high: mean distance from the true orbit: kept "
           f"{distance[False]:.2e}, switched {distance[True]:.2e}")

@@ -429,12 +429,7 @@ def augmented_covariance(p: OscillatorParams, gains, rate: int, *, bias: bool = 
     q = np.diag([(floor * sigma) ** 2, (floor * sigma) ** 2, 0.0, wall_noise ** 2])
     q = q[np.ix_(act, act)]
     cov = np.diag([sigma ** 2, sigma ** 2, BIAS_STD ** 2, WALL_STD ** 2])[np.ix_(act, act)]
-    for _ in range(periods):
-        new = f @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ f.T + q
-        done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
-        cov = 0.5 * (new + new.T)
-        if done:
-            break
+    cov = _riccati_fixed_point(f, q, cov, info_data, periods)
     out = np.zeros((4, 4))
     out[np.ix_(act, act)] = cov
     return out
@@ -477,12 +472,20 @@ def _model_file_covariance(model: NdofModel, gains, rate: int, *, bias, wall, wa
     f = f[np.ix_(act, act)]
     q = np.diag([(floor * sigma) ** 2] * nz + [0.0, wall_noise ** 2])[np.ix_(act, act)]
     cov = np.diag([sigma ** 2] * nz + [BIAS_STD ** 2, WALL_STD ** 2])[np.ix_(act, act)]
+    cov = _riccati_fixed_point(f, q, cov, info_data, periods)
+    out = np.zeros((nz + 2, nz + 2))
+    out[np.ix_(act, act)] = cov
+    return out
+
+
+def _riccati_fixed_point(f, q, cov, info_data, periods: int) -> np.ndarray:
+    """P <- F (P^-1 + H^T H / sigma^2)^-1 F^T + Q (E5; ``info_data`` = H^T H / sigma^2
+    summed over the period) from ``cov`` until it moves less than 1e-10 relative, at most
+    ``periods`` times; kept symmetric."""
     for _ in range(periods):
         new = f @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ f.T + q
         done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
         cov = 0.5 * (new + new.T)
         if done:
             break
-    out = np.zeros((nz + 2, nz + 2))
-    out[np.ix_(act, act)] = cov
-    return out
+    return cov
