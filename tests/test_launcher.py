@@ -194,7 +194,8 @@ def test_the_recorders_closed_record_is_read_from_the_bag(tmp_path):
 def test_the_nodes_get_the_packages_fastdds_profile_unless_one_is_given(monkeypatch):
     """Issue 30: a node waits at exit until its messages are acknowledged, and a Fast DDS
     reader acknowledges when a heartbeat asks (default every 3 s): 2.2 s of a scene's
-    end. The launcher gives the nodes the package's profile (a 50 ms heartbeat) under
+    end. The launcher gives the nodes the package's profile (a 5 ms heartbeat: a lockstep
+    simulator waits for a substitution's acknowledgement, sim_node/messages.py) under
     both of Fast DDS's names for it, and leaves a profile the user named alone."""
     import xml.etree.ElementTree as ET
 
@@ -207,7 +208,7 @@ def test_the_nodes_get_the_packages_fastdds_profile_unless_one_is_given(monkeypa
     writer = ET.parse(profile).getroot().find("p:data_writer", ns)
     assert writer.get("is_default_profile") == "true"
     period = writer.find("p:times/p:heartbeatPeriod", ns)
-    assert (period.find("p:sec", ns).text, period.find("p:nanosec", ns).text) == ("0", "50000000")
+    assert (period.find("p:sec", ns).text, period.find("p:nanosec", ns).text) == ("0", "5000000")
     for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
         monkeypatch.setenv(name, "/elsewhere/profile.xml")
         env = launcher.node_env()
@@ -215,6 +216,22 @@ def test_the_nodes_get_the_packages_fastdds_profile_unless_one_is_given(monkeypa
         assert all(env.get(n) in (None, "/elsewhere/profile.xml") for n in (
             "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"))
         monkeypatch.delenv(name)
+
+
+def test_this_process_gets_the_nodes_profile_unless_one_is_given(monkeypatch):
+    """use_profile_here: a replay's session and a test's nodes get the nodes' profile
+    (before their process's first participant); a profile the user named stays."""
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.delenv(name, raising=False)
+    launcher.use_profile_here()
+    assert os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(launcher.FASTDDS_PROFILE)
+    assert os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] == str(launcher.FASTDDS_PROFILE)
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.delenv(name)
+    monkeypatch.setenv("FASTDDS_DEFAULT_PROFILES_FILE", "/elsewhere/profile.xml")
+    launcher.use_profile_here()
+    assert os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] == "/elsewhere/profile.xml"
+    assert "FASTRTPS_DEFAULT_PROFILES_FILE" not in os.environ
 
 
 def _processes_mentioning(text: str) -> list:

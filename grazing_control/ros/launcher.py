@@ -273,7 +273,7 @@ def node_command(module: str, params_files=(), overrides=None, python: str | Non
     return cmd
 
 
-#: The nodes' Fast DDS profile: a reliable writer's heartbeat every 50 ms, so that the
+#: The nodes' Fast DDS profile: a reliable writer's heartbeat every 5 ms, so that the
 #: acknowledgements a node waits for at exit (ros/published.py) come in milliseconds,
 #: not at Fast DDS's 3 s heartbeat (issue 30: 2.2 s of a scene's end on average).
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds_profile.xml")
