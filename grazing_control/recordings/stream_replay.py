@@ -31,9 +31,13 @@ topics in the order they were published (DDS promises it per topic only; an impa
 a substitution is read at the next section's answer, the stream's messages up to that
 section's last sample later; measured: every replay of tests/test_stream_replay.py's
 scene with both, and of 60 periods with 59 impacts or 11 substitutions, gave every
-answer again). (Waiting for the controller's acknowledgement at each change of topic
-made that certain but cost about 1.5 s each: 3 minutes for 60 periods with an impact
-each.) With ``--rate R`` the messages go out in that order at their recorded log times
+answer again). But not always: run three at a time, 5 of 54 replays took a
+substitution after the sample that made the next section due (2026-11-29). So each
+impact and substitution is now published and then waited for until the controller's
+reader has acknowledged it, before the stream goes on. An acknowledgement comes when a
+heartbeat asks, which is every 5 ms in the nodes' profile (this process gets it too:
+``launcher.use_profile_here``); at Fast DDS's 3 s it cost about 1.5 s each. Afterwards:
+1 of 149. With ``--rate R`` the messages go out in that order at their recorded log times
 scaled by R instead, without waiting.
 
 OUT gets the messages published, the answers and estimates as they came, the parameter
