@@ -292,10 +292,18 @@ def use_profile_here() -> None:
     one. Fast DDS reads it once, at the process's first participant: call this before.
     Without it a reliable writer of this process asks for acknowledgements every 3 s,
     and a replay that waits for one (recordings/stream_replay.py) waited that long."""
-    if not (os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")
-            or os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE")) and FASTDDS_PROFILE.is_file():
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
-        os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
+    _with_profile(os.environ)
+
+
+def _with_profile(env) -> None:
+    """:data:`FASTDDS_PROFILE` as Fast DDS's default profile in ``env`` (a mapping),
+    unless it names one already (FASTDDS_DEFAULT_PROFILES_FILE, or the older
+    FASTRTPS_DEFAULT_PROFILES_FILE)."""
+    if not (env.get("FASTDDS_DEFAULT_PROFILES_FILE")
+            or env.get("FASTRTPS_DEFAULT_PROFILES_FILE")) and FASTDDS_PROFILE.is_file():
+        # Fast DDS 2 (ROS 2 Jazzy) reads the FASTRTPS_ name, Fast DDS 3 the FASTDDS_ one
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
+        env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
 
 
 def node_env(domain_id: int | None = None) -> dict:
@@ -306,11 +314,7 @@ def node_env(domain_id: int | None = None) -> dict:
     env = dict(os.environ)
     for name in BLAS_THREADS:
         env.setdefault(name, "1")
-    if not (env.get("FASTDDS_DEFAULT_PROFILES_FILE")
-            or env.get("FASTRTPS_DEFAULT_PROFILES_FILE")) and FASTDDS_PROFILE.is_file():
-        # Fast DDS 2 (ROS 2 Jazzy) reads the FASTRTPS_ name, Fast DDS 3 the FASTDDS_ one
-        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
-        env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
+    _with_profile(env)
     paths = [str(SOURCE_ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
     env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
     env["PYTHONUNBUFFERED"] = "1"
