@@ -255,9 +255,9 @@ def replay_controller(bag, out, *, controller_params=None, rate=None, domain_id=
             run.writer.write("/oscillator/pi2", order[i], time.time_ns())
             if rate is None:
                 run.wait_answer(stamp, answer_timeout)
-        if rate is not None:      # collect the stragglers
-            last = samples[-1][0] if samples else None
-            run.session.wait_for(lambda: last in run.answers, answer_timeout)
+        # the late answers: at a rate, or of a controller stalled past a sample's wait
+        # (a fresh clone's suite: the last answer missing, 2026-11-29)
+        run.collect_late([s[0] for s in samples], answer_timeout)
         run.finish({"source_bag": str(bag),
                     "rate": "as fast as possible" if rate is None else rate,
                     "gains_source": source})

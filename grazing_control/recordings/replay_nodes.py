@@ -241,6 +241,16 @@ class ControllerRun:
             self.session.spin(0.05)
         return stamp in self.answers
 
+    def collect_late(self, stamps, timeout: float) -> None:
+        """Spin until every answer stamped in ``stamps`` came, while they still come: a
+        wait of at most ``timeout`` s after the last one that did (a controller stalled
+        past a sample's wait answers it later; its answers belong in OUT)."""
+        stamps, got = set(stamps), -1
+        while got < len(self.answers):
+            got = len(self.answers)
+            if self.session.wait_for(lambda: stamps <= self.answers.keys(), timeout):
+                return
+
     def finish(self, record: dict) -> None:
         """The parameter records received and the replay's own (``record``: what was
         replayed, how) to OUT."""

@@ -312,11 +312,7 @@ def replay_stream(data, values: dict, source: str, notes: list, out, *, setup=No
                 pubs[role].wait_for_all_acked(Duration(seconds=answer_timeout))
             run.writer.write(DEFAULT_TOPICS[role], msg, time.time_ns())
             published[role] += 1
-        stamps, got = {a[1] for a in answers}, -1
-        while got < len(run.answers):   # the late ones, while they still come
-            got = len(run.answers)
-            if run.session.wait_for(lambda: stamps <= run.answers.keys(), answer_timeout):
-                break
+        run.collect_late([a[1] for a in answers], answer_timeout)   # the late ones
         run.finish({"source_bag": str(data.path), "gains_source": source,
                     "rate": "as fast as possible" if rate is None else rate,
                     "replayed": "the sensor stream (pi2_source stream)"})
