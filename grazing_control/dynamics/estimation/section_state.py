@@ -51,7 +51,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "unkick",
-           "nearest_estimate", "arc_fit", "detect_impact", "model_update",
+           "nearest_estimate", "arc_fit", "detect_impact", "split_rss", "model_update",
            "gauss_newton_fit", "estimate_covariance", "CHI2_SIGMAS"]
 #: The estimators by name (``estimator`` parameter of the controller).
 ESTIMATORS = ("nearest", "arc", "model")
@@ -170,11 +170,45 @@ def arc_fit(p: OscillatorParams, s, y, w, sigma: float, at: float = 0.0,
     return Estimate((float(z[0]), float(z[1])), sigma * sigma * np.linalg.inv(info), "arc")
 
 
-def _rss_line(phi_x, y):
-    """Residual sum of squares of the LS fit y ~ phi_x z (2 unknowns)."""
+def _residuals(phi_x, y):
+    """Residuals of the LS fit y ~ phi_x z (2 unknowns)."""
     z, *_ = np.linalg.lstsq(phi_x, y, rcond=None)
-    r = y - phi_x @ z
-    return float(r @ r)
+    return y - phi_x @ z
+
+
+def _explained(a, b):
+    """b^T a^-1 b of stacked 2 x 2 normal matrices ``a`` (m, 2, 2) and right-hand sides
+    ``b`` (m, 2), in closed form: what a two-unknown least-squares fit removes from the
+    sum of squares. Where ``a`` has rank 1 (one row, or parallel rows) the
+    pseudo-inverse a / tr(a)^2, as a minimum-norm least-squares fit does; 0 for no rows."""
+    p, q, s = a[:, 0, 0], a[:, 0, 1], a[:, 1, 1]
+    u, v = b[:, 0], b[:, 1]
+    det = p * s - q * q
+    trace = p + s
+    with np.errstate(divide="ignore", invalid="ignore"):
+        full = (s * u * u - 2.0 * q * u * v + p * v * v) / det
+        rank1 = (p * u * u + 2.0 * q * u * v + s * v * v) / (trace * trace)
+    return np.where(det > 1e-12 * (p * s), full, np.where(trace > 0.0, rank1, 0.0))
+
+
+def split_rss(phi_x, r, splits):
+    """Residual sums of squares of the two-arc fits r[:m] ~ phi_x[:m] z and r[m:] ~
+    phi_x[m:] z' for each split m of ``splits`` (E6), all at once: each arc's normal
+    equations are prefix (and suffix) sums of the rows' outer products, and a
+    two-unknown fit removes b^T A^-1 b from the sum of squares (:func:`_explained`).
+    ``r`` are the residuals of the one-arc fit over every sample: the same sums as for
+    the samples themselves (the one-arc fit is in each arc's span), without the
+    cancellation of subtracting two large sums."""
+    outer = phi_x[:, :, None] * phi_x[:, None, :]
+    rhs = phi_x * r[:, None]
+    sq = r * r
+    m = np.asarray(splits, dtype=np.int64)
+    # rows [0, m): prefix sums; rows [m, n): suffix sums (no differences of large sums)
+    a0, b0, c0 = (np.cumsum(x, axis=0)[m - 1] for x in (outer, rhs, sq))
+    a1, b1, c1 = (np.cumsum(x[::-1], axis=0)[::-1][m] for x in (outer, rhs, sq))
+    left = np.maximum(c0 - _explained(a0, b0), 0.0)
+    right = np.maximum(c1 - _explained(a1, b1), 0.0)
+    return left + right
 
 
 def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
@@ -198,21 +232,22 @@ def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
     gap = y - p.delta_d - 2.0 * p.amplitude * np.sin(0.5 * psi) ** 2
     hstep = float(np.max(np.diff(s))) if n > 1 else 0.0
     near = gap > -(6.0 * sigma + 2.0 * hstep + hstep * hstep)
-    cands = [m for m in range(min_side, n - min_side + 1)
-             if near[max(m - 2, 0):m + 2].any()]
-    if not cands:
+    # a split m is tried where one of the samples m - 2 .. m + 1 is near the wall
+    padded = np.concatenate([[False, False], near, [False]])
+    window = padded[:-3] | padded[1:-2] | padded[2:-1] | padded[3:]
+    cands = np.arange(min_side, n - min_side + 1)
+    cands = cands[window[cands]]
+    if cands.size == 0:
         return None
     phi_x = phi_rows(p.zeta, s)[:, 0, :]
-    whole = _rss_line(phi_x, y)
-    best, best_m = whole, None
-    for m in cands:
-        rss = _rss_line(phi_x[:m], y[:m]) + _rss_line(phi_x[m:], y[m:])
-        if rss < best:
-            best, best_m = rss, m
-    if best_m is None or whole - best <= threshold * sigma * sigma:
+    r = _residuals(phi_x, y)
+    whole = float(r @ r)
+    rss = split_rss(phi_x, r, cands)
+    i = int(np.argmin(rss))          # the first of equal sums, as a scan in m would keep
+    if not rss[i] < whole or whole - rss[i] <= threshold * sigma * sigma:
         return None
     # refine: the pre-impact arc meets the wall between s[m-1] and s[m + 1)
-    m = best_m
+    m = int(cands[i])
     fit = arc_fit(p, s[:m], y[:m], np.full(m, math.nan), sigma, at=float(s[m - 1]))
     lo, hi = float(s[m - 1]), float(s[m])
     tt = np.linspace(lo, hi, 65)
