@@ -763,3 +763,69 @@ def test_an_absurd_gain_is_refused_even_when_changes_are_allowed(controller):
     # the described range (ros2 param describe) refuses it, naming it and the range
     assert not result.successful and \
         "c2 out of range Min: -1000000.0, Max: 1000000.0" in result.reason
+
+
+def test_before_the_control_is_on_a_stream_section_is_answered_before_its_estimate():
+    """While the control is off for a section and the next one, the answer (0, predicting
+    0) does not depend on the estimate, so a stream controller gives it as the section
+    falls due, before the estimate (issue 30: at T/200 x1000 the first sections missed
+    their deadline behind the arc fit). From the section before the switch-on the answer
+    waits for its estimate again; every answer is the one the estimate-first path gives,
+    bit for bit."""
+    import rclpy
+    from rclpy.context import Context
+
+    from grazing_control.dynamics.estimation.motion import trajectory
+    from grazing_control.ros.controller_node import ControllerNode
+
+    p, on, rate, periods = OscillatorParams(delta_d=-5e-6), 5, 50, 9
+    h = p.period / rate
+    g = Gains(degenerate_c1(p, -0.3), -0.3)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    answers, order = {}, {}
+    try:
+        for early in (True, False):
+            node = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in (
+                    ("c1", g.c1), ("c2", g.c2), ("delta_d", p.delta_d),
+                    ("enable_after", on), ("pi2_source", "stream"), ("estimator", "model"),
+                    ("sensor_noise", 1e-4), ("state_period", h))])
+            try:
+                got = answers[early] = []
+                seen = order[early] = {}
+                node.pub.publish = lambda data, got=got: got.append(
+                    cdr.read_twist_stamped(data))
+                estimate = node.stream.estimate
+
+                def timed(k, got=got, seen=seen, estimate=estimate):
+                    seen[k] = cdr.stamp_parts(k * p.period) in {a[:2] for a in got}
+                    return estimate(k)
+
+                node.stream.estimate = timed
+                if not early:
+                    node.stream.before_estimate = None
+                z, dv = (2e-4, -1e-4), 0.0
+                node.add_stream_sample(0.0, p.x_ref + z[0], p.v_ref + z[1])
+                for k in range(periods):
+                    dv = next((a[2] for a in got if a[:2] == cdr.stamp_parts(k * p.period)),
+                              0.0)
+                    s = np.arange(1, rate + 1) * h
+                    dev, _jac, z, _m, _imps = trajectory(p, z, s, dv, 0.0)
+                    psi = p.tau2 + p.omega * s - p.lag
+                    for j in range(rate):
+                        node.add_stream_sample(
+                            k * p.period + s[j], p.amplitude * math.cos(psi[j]) + dev[j, 0],
+                            -p.amplitude * p.omega * math.sin(psi[j]) + dev[j, 1])
+            finally:
+                node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    assert answers[True] == answers[False] and len(answers[True]) == periods + 1
+    assert not any(order[False].values())
+    # section 0 (the stream's first stamp) and from the section before the switch-on:
+    # after the estimate; the others before it
+    assert order[True] == {k: 0 < k < on - 1 for k in range(periods + 1)}
+    assert [a[2] for a in answers[True][:on]] == [0.0] * on
+    assert [a[3] for a in answers[True][:on - 1]] == [0.0] * (on - 1)
+    assert answers[True][on - 1][3] != 0.0 and answers[True][on][2] != 0.0

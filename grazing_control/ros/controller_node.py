@@ -109,9 +109,7 @@ from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation.stream import predict_section
 from grazing_control.dynamics.estimation.stream import warm_up as warm_stream_kernel
-from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
@@ -123,8 +121,8 @@ from .controller_parameters import declare_parameters, gains_of
 from .controller_values import (ControlLaw, actuation_delay_from_values,
                                 capture_from_values, law_from_values, model_capture_from_values,
                                 model_controller_from_values, model_from_values,
-                                model_stream_from_values, pulse_from_values,
-                                stream_from_values)
+                                model_stream_from_values, predicted_correction,
+                                pulse_from_values, stream_from_values)
 from .controller_status import diagnose
 from .diagnostics import Updater
 from .matching import MatchReport
@@ -206,6 +204,9 @@ class ControllerNode(Node):
             # stream mode: the cyclic collector runs after a section's answer, not inside
             # its estimate (issue 30; common.SafePoints)
             self.collect = SafePoints() if self.stream is not None else None
+            self._early = set()      # stamps answered before their estimate
+            if self.stream is not None:
+                self.stream.before_estimate = self._answer_before_estimate
         except ParameterError as exc:
             raise StartupError(str(exc)) from None
         self.stale_after = float(self.get_parameter("stale_after").value)
@@ -453,35 +454,32 @@ class ControllerNode(Node):
         self.answered += 1
         return dv
 
+    def _answer_before_estimate(self, k: int) -> None:
+        """Section k falls due (before its estimate): while the control is off for it and
+        the next, its answer (0, predicting 0) does not wait for the estimate (issue 30:
+        at T/200 x1000 the first sections missed their deadline behind the arc fit)."""
+        tk = k * self.stream.p.period          # the stamp the estimate will have
+        key = cdr.stamp_parts(tk)
+        if key == (0, 0) or not self.law.off_for_two() \
+                or self.law.answer(key, math.nan, math.nan) is None:
+            return
+        self.prediction = 0.0
+        if self.rig_side is not None:
+            self.rig_side.answered(tk, 0.0, 0.0)
+        self.pub.publish(cdr.twist_stamped(*key, 0.0, 0.0))
+        self.answered += 1
+        self._early.add(key)
+
+    def _answered_early(self, key: tuple) -> bool:
+        if key in self._early:
+            self._early.discard(key)
+            return True
+        return False
+
     def _predict(self, x: float, v: float, dv: float) -> float:
-        """The correction of the next sample predicted by one exact period of the model
-        from (x, v) with ``dv`` applied (NaN without a model or where it fails)."""
-        if self.ndof is not None:
-            if not self.ndof.predicts:
-                return math.nan
-            try:
-                force0 = (self.stream.section_force(self.stream.next_k - 1)
-                          if self.stream is not None and self.stream.next_k else 0.0)
-                xn, vn = self.ndof.predict(x, v, dv, self.actuation_delay, self.pulse, force0)
-            except (ValueError, ArithmeticError, RuntimeError):
-                return math.nan
-            return self.law.preview(xn, vn)
-        if self.model is None:
-            return math.nan
-        p = self.model
-        try:
-            # the force the earlier corrections left at this section (stream mode: the
-            # estimator knows them; else 0, a share e^{-T / tau_a} of one pulse's force)
-            force0 = (self.stream.section_force(self.stream.next_k - 1)
-                      if self.stream is not None and self.stream.next_k else 0.0)
-            zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, self.actuation_delay,
-                                     width=self.pulse[0], force_limit=self.pulse[1],
-                                     actuator=self.pulse[2], force0=force0,
-                                     kernel=(self.stream.kernel if self.stream is not None
-                                             else _kernel.loaded()))
-        except (ValueError, ArithmeticError, RuntimeError):
-            return math.nan
-        return self.law.preview(p.x_ref + zx, p.v_ref + zv)
+        """The correction of the next sample (:func:`predicted_correction`)."""
+        return predicted_correction(self.law, self.model, self.ndof, self.stream, self.pulse,
+                                    self.actuation_delay, x, v, dv)
 
     def _on_state(self, data: bytes) -> None:
         """A stream sample as received: read directly (:func:`cdr.read_state`), else
@@ -570,8 +568,9 @@ class ControllerNode(Node):
                 self.reid.at_section(k, key, est)
             # the answer before the estimate's message (issue 30: in the rig scene publishing
             # the estimate first put the force pulse 0.37 ms later, docs/benchmarks.md)
-            dv = self._answer(key, xh, vh, self._capture_factor(k, est),
-                              tk if self.rig_side is not None else None)
+            dv = 0.0 if self._answered_early(key) else self._answer(
+                key, xh, vh, self._capture_factor(k, est),
+                tk if self.rig_side is not None else None)
             self.pub_estimate.publish(estimate)
             self.stream.set_correction(k, 0.0 if dv is None else dv, self.actuation_delay)
             if self.reid is not None:
@@ -591,8 +590,9 @@ class ControllerNode(Node):
         n = ndof.model.n
         if self.reid is not None:       # a finished refit is applied here, at Pi2
             self.reid.at_section(k, key, est)
-        dv = self._answer(key, X[:n], X[n:], self._capture_factor(k, est),
-                          tk if self.rig_side is not None else None)
+        dv = 0.0 if self._answered_early(key) else self._answer(
+            key, X[:n], X[n:], self._capture_factor(k, est),
+            tk if self.rig_side is not None else None)
         msg = JointState(name=[f"mass{i}" for i in range(n)],
                          position=X[:n].tolist(), velocity=X[n:].tolist(),
                          effort=np.diag(est.cov).tolist())

@@ -34,8 +34,9 @@ from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimat
 from grazing_control.dynamics.estimation.section_state import ESTIMATORS
 from grazing_control.dynamics.estimation.motion import actuator_legs
 from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator,
-                                                        pulse_shape)
+                                                        predict_section, pulse_shape)
 from grazing_control.dynamics.simulation.actuator import Actuator
+from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.control import Gains, correction
 from grazing_control.oscillator.ndof.section import NdofSection
 from grazing_control.oscillator.params import OscillatorParams, ParameterError, study_omega
@@ -48,7 +49,7 @@ __all__ = ["ControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
            "capture_from_values", "model_capture_from_values",
            "actuation_delay_from_values", "below_period", "model_omega",
            "ModelController", "model_controller_from_values", "model_stream_from_values",
-           "gain_vector_correction", "ONE_DOF_DEFAULTS"]
+           "gain_vector_correction", "predicted_correction", "ONE_DOF_DEFAULTS"]
 
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
@@ -136,6 +137,14 @@ class ControlLaw:
         self.count += 1
         return dv
 
+    def off_for_two(self) -> bool:
+        """Whether the next sample's answer and the prediction for the one after it are 0
+        whatever the state: the control is off for both (forced off, or on only through
+        ~/enable, or ``enable_after`` more than one sample away)."""
+        if self.forced is not None:
+            return not self.forced
+        return self.enable_after < 0 or self.enable_after > self.count + 1
+
     def preview(self, x: float, v: float) -> float:
         """The correction the next sample would get if it were (x, v): Eq. 28 with the
         saturation when the next sample is controlled, else 0 (issue 16 section 3)."""
@@ -149,6 +158,34 @@ class ControlLaw:
     def _law(self, x, v) -> float:
         """k^T (X - X**) before the saturation (Eq. 28 for n = 1)."""
         return self._correction(self.gains, x, v, self.x_ref, self.v_ref)
+
+
+def predicted_correction(law: ControlLaw, model, ndof, stream, pulse: tuple, delay: float,
+                         x, v, dv: float) -> float:
+    """The correction of the next sample predicted by one exact period of the model
+    (``model``, or the n-DOF ``ndof``) from the answered state (x, v) with ``dv`` applied
+    ``delay`` after the section as ``pulse`` acts (issue 16 section 3): ``law``'s preview
+    of the predicted state; NaN without a model or where the prediction fails. With a
+    ``stream`` estimator, from the force its known corrections left at this section."""
+    if (model is None and ndof is None) or (ndof is not None and not ndof.predicts):
+        return math.nan
+    try:
+        # the force the earlier corrections left at this section (stream mode: the
+        # estimator knows them; else 0, a share e^{-T / tau_a} of one pulse's force)
+        force0 = (stream.section_force(stream.next_k - 1)
+                  if stream is not None and stream.next_k else 0.0)
+        if ndof is not None:
+            xn, vn = ndof.predict(x, v, dv, delay, pulse, force0)
+        else:
+            p = model
+            zx, zv = predict_section(p, (x - p.x_ref, v - p.v_ref), dv, delay,
+                                     width=pulse[0], force_limit=pulse[1], actuator=pulse[2],
+                                     force0=force0, kernel=(stream.kernel if stream is not None
+                                                            else _kernel.loaded()))
+            xn, vn = p.x_ref + zx, p.v_ref + zv
+    except (ValueError, ArithmeticError, RuntimeError):
+        return math.nan
+    return law.preview(xn, vn)
 
 
 #: Largest |c1|, |c2| (and |k_i| of an n-DOF gain vector) accepted (the design's search

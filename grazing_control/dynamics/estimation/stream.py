@@ -157,6 +157,10 @@ class StreamEstimator:
                                  f"0 < pulse_width < T = {p.period!r} (the command's width)")
         self.actuator = actuator
         self.kernel = _kernel.use_kernel() if kernel is None else bool(kernel)
+        #: Called with k when section k falls due, before its estimate is made (None:
+        #: nothing): a controller whose answer does not depend on the estimate gives it
+        #: at once (controller_node: the sections before the control is on, issue 30).
+        self.before_estimate = None
         self.reset()
 
     def reset(self) -> None:
@@ -265,6 +269,8 @@ class StreamEstimator:
     # ----------------------------------------------------------------- estimates
     def _due(self, k: int):
         self.next_k = k + 1
+        if self.before_estimate is not None:
+            self.before_estimate(k)
         return k, k * self.p.period, self.estimate(k)
 
     def _window(self, k: int, since: float):
