@@ -614,11 +614,15 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
             interrupted = True
         finally:
             try:
-                # in this order: a node that stops says what it published and waits for
-                # the recorder's acknowledgements; the recorder closes after them
+                # the simulator first (it has ended, or is stopped), then the others at
+                # once: a node that stops says what it published and waits for the
+                # recorder's confirmation, and the recorder, stopped, takes messages
+                # until every node that sent a parameter record has said what it
+                # published (recorder_node.settle), then closes; one after the other
+                # they added a node's stop to the scene's end (issue 30)
                 stop_nodes([procs["sim_node"]])
-                stop_nodes([procs["controller_node"]])
-                stop_nodes([procs["recorder_node"], procs["live_node"]])
+                stop_nodes([procs["controller_node"], procs["recorder_node"],
+                            procs["live_node"]])
             except KeyboardInterrupt:
                 interrupted = True
                 stop_nodes(list(procs.values()), grace=2.0)

@@ -35,10 +35,11 @@ COMPLETE_TOPIC = "recorder/complete"
 #: message (a recorder that lags behind gets the rest from the node's history).
 ACK_TIMEOUT = 10.0
 #: Wall seconds a node stays after the recorder's confirmation: its reader acknowledges the
-#: confirmation at the writer's next heartbeat (fastdds_profile.xml: every 50 ms), and the
-#: recorder's close waits for that acknowledgement (recorder_node.CONFIRM_ACK_TIMEOUT, 1 s)
-#: from a reader that stays matched there after its process has exited (issue 30).
-ACK_LINGER = 0.06
+#: confirmation at the writer's next heartbeat (fastdds_profile.xml: every 5 ms; three of
+#: them here), and the recorder's close waits for that acknowledgement
+#: (recorder_node.CONFIRM_ACK_TIMEOUT, 1 s) from a reader that stays matched there after
+#: its process has exited (issue 30).
+ACK_LINGER = 0.015
 
 
 class Counted:
