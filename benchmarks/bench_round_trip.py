@@ -197,9 +197,10 @@ def ping(executor_kind: str, samples: int, interval: float, priority: int = 0) -
     os._exit(0)
 
 
-def floor(executor_kind: str, samples: int, interval: float, priority: int = 0) -> dict:
-    """One bare round trip run (two processes, a domain of their own): p50/p99/max ms and
-    the answers lost."""
+def floor(executor_kind: str, samples: int, interval: float, priority: int = 0,
+          budget: float = math.inf) -> dict:
+    """One bare round trip run (two processes, a domain of their own): p50/p99/max ms, the
+    answers lost, and the round trips longer than ``budget`` wall s (``over``)."""
     from grazing_control.ros import launcher
 
     env = launcher.node_env(random.SystemRandom().randrange(101, 232))
@@ -225,7 +226,8 @@ def floor(executor_kind: str, samples: int, interval: float, priority: int = 0) 
     # answers none of the last two unanswered samples; it is ignored, not in its latency
     counted = [t for t in trips if t <= 2 * interval]
     return {"latency": quantiles_ms(counted), "all": quantiles_ms(trips),
-            "beyond": len(trips) - len(counted), "lost": samples - len(trips)}
+            "beyond": len(trips) - len(counted), "lost": samples - len(trips),
+            "over": sum(t > budget for t in trips)}
 
 
 def scene(executor_kind: str, samples: int, scale: float, compose: bool = False,
@@ -259,6 +261,12 @@ def main(argv=None) -> int:
     ap.add_argument("--priority", type=int, default=0,
                     help="SCHED_FIFO priority 1..99 of the floor's two processes and of both "
                          "nodes (their thread_priority); 0: off (default)")
+    ap.add_argument("--budget", type=float, default=None,
+                    help="also count the floor's round trips longer than this many ms (a "
+                         "section's answer budget: T/200 x1000's is 2.95); with --floor-only "
+                         "the floor alone is run")
+    ap.add_argument("--floor-only", action="store_true",
+                    help="run the floor alone, --reps times (no scene)")
     ap.add_argument("--role", choices=("ping", "pong"), help=argparse.SUPPRESS)
     ap.add_argument("--interval", type=float, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -273,10 +281,24 @@ def main(argv=None) -> int:
           f"ms wall, {args.samples} samples, executor {args.executor}, priority "
           f"{args.priority or 'off'}, {os.cpu_count()} CPUs, "
           f"load {load()}")
+    budget = math.inf if args.budget is None else args.budget * 1e-3
+    if args.floor_only:
+        over = 0
+        for rep in range(args.reps):
+            before = load()
+            f = floor(args.executor, args.samples, interval, args.priority, budget)
+            over += f["over"]
+            fa = f["all"]
+            print(f"rep {rep} (load {before}): floor p50/p99/max {fa[0]:.3f}/{fa[1]:.3f}/"
+                  f"{fa[2]:.3f} ms, lost {f['lost']}, longer than {args.budget} ms: "
+                  f"{f['over']} of {args.samples}", flush=True)
+        print(f"floor alone: {over} of {args.reps * args.samples} round trips longer than "
+              f"{args.budget} ms; load at the end {load()}")
+        return 0
     rows = []
     for rep in range(args.reps):
         before = load()
-        f = floor(args.executor, args.samples, interval, args.priority)
+        f = floor(args.executor, args.samples, interval, args.priority, budget)
         s = scene(args.executor, args.samples, args.scale, priority=args.priority)
         c = scene(args.executor, args.samples, args.scale, True, args.priority) \
             if args.composed else None
@@ -292,7 +314,9 @@ def main(argv=None) -> int:
                   f"{fa[0]:.3f}/{fa[1]:.3f}/{fa[2]:.3f}; lost {f['lost']}); {name} "
                   f"{sl[0]:.3f}/{sl[1]:.3f}/{sl[2]:.3f} ms (late {one['late']}, ignored "
                   f"{one['ignored']}); ratio {sl[0] / fl[0]:.2f}/{sl[1] / fl[1]:.2f}/"
-                  f"{sl[2] / fl[2]:.2f}", flush=True)
+                  f"{sl[2] / fl[2]:.2f}"
+                  + (f"; floor longer than {args.budget} ms: {f['over']}"
+                     if args.budget is not None else ""), flush=True)
     med = lambda i, which: statistics.median(r[which]["latency"][i] for r in rows)  # noqa
     print(f"\nmedians over {args.reps} pairs (ms)       p50     p99     max")
     print(f"bare rclpy round trip (floor)   {med(0, 0):7.3f} {med(1, 0):7.3f} {med(2, 0):7.3f}")
