@@ -211,3 +211,53 @@ def test_the_designs_parameter_file_is_accepted(tmp_path):
     values = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
     c = model_controller_from_values(values, values["model_file"], values["gains"])
     np.testing.assert_array_equal(c.gains, gain_family(MODEL, 0.2))
+
+
+#: A fresh interpreter: the controller's kernel loaded in a thread for the prediction.
+_WARM = r"""
+import json, math, sys
+from grazing_control.oscillator import kernel
+from grazing_control.oscillator.params import OscillatorParams
+from grazing_control.ros.controller_values import (ControlLaw, predicted_correction,
+                                                   warm_up_kernel)
+from grazing_control.oscillator.control import Gains
+p = OscillatorParams(delta_d=-5e-6)
+law = ControlLaw(Gains(-1.0, -1.0), p.x_ref, p.v_ref, 0, math.inf)
+states = [(p.x_ref + 1e-4 * i, p.v_ref - 3e-4 * i, 2e-5 * i) for i in range(-5, 6)]
+args = (law, p, None, None, (0.0, math.inf, None), 0.0)
+before = kernel.loaded()
+python = [predicted_correction(*args, *s) for s in states]
+thread = warm_up_kernel(p, None)
+again = warm_up_kernel(p, None)       # loading already: no second thread
+thread.join()
+compiled = [predicted_correction(*args, *s) for s in states]
+print(json.dumps({"before": before, "thread": thread.name, "again": again is None,
+                  "loaded": kernel.loaded(), "same": python == compiled,
+                  "python": python, "no_model": warm_up_kernel(None, None) is None}))
+"""
+
+
+@pytest.mark.parametrize("choice", ["auto", "python"])
+def test_the_prediction_kernel_loads_in_a_thread_and_changes_no_number(choice):
+    """With a model and exact samples the controller loads the compiled kernel in a thread
+    (the prediction ran ~70 us a section on the Python flow, on the lockstep answer's
+    path); until it is loaded the prediction runs on the Python flow, after it on the
+    kernel, with the same numbers bit for bit. GRAZING_KERNEL=python loads nothing."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, GRAZING_KERNEL=choice)
+    out = subprocess.run([sys.executable, "-c", _WARM.replace(
+        "thread.join()", "thread.join()" if choice == "auto" else "pass").replace(
+        "thread.name", "thread.name" if choice == "auto" else "thread")],
+        env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["before"] is False and res["same"] and res["no_model"]
+    assert all(math.isfinite(x) and x != 0.0 for x in res["python"][:5])
+    if choice == "auto":
+        assert res["thread"] == "kernel_warm_up" and res["again"] and res["loaded"]
+    else:
+        assert res["thread"] is None and not res["loaded"]

@@ -109,7 +109,6 @@ from std_msgs.msg import Bool, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
-from grazing_control.dynamics.estimation.stream import warm_up as warm_stream_kernel
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
@@ -122,7 +121,7 @@ from .controller_values import (ControlLaw, actuation_delay_from_values,
                                 capture_from_values, law_from_values, model_capture_from_values,
                                 model_controller_from_values, model_from_values,
                                 model_stream_from_values, predicted_correction,
-                                pulse_from_values, stream_from_values)
+                                pulse_from_values, stream_from_values, warm_up_kernel)
 from .controller_status import diagnose
 from .diagnostics import Updater
 from .matching import MatchReport
@@ -199,8 +198,7 @@ class ControllerNode(Node):
                 self.stream = stream_from_values(self._values(), self.model, self.pulse)
                 self.capture = capture_from_values(self._values(), self.model,
                                                    self.actuation_delay)
-            if self.stream is not None and self.stream.kernel:
-                warm_stream_kernel(self.model)   # compiled model filter loaded now, not at section 0
+            warm_up_kernel(self.model, self.stream)     # the compiled filter, the prediction
             # stream mode: the cyclic collector runs after a section's answer, not inside
             # its estimate (issue 30; common.SafePoints)
             self.collect = SafePoints() if self.stream is not None else None

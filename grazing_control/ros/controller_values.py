@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from collections import deque
 
 import numpy as np
@@ -35,6 +36,7 @@ from grazing_control.dynamics.estimation.section_state import ESTIMATORS
 from grazing_control.dynamics.estimation.motion import actuator_legs
 from grazing_control.dynamics.estimation.stream import (IMPACT_SOURCES, StreamEstimator,
                                                         predict_section, pulse_shape)
+from grazing_control.dynamics.estimation.stream import warm_up as warm_stream
 from grazing_control.dynamics.simulation.actuator import Actuator
 from grazing_control.oscillator import kernel as _kernel
 from grazing_control.oscillator.control import Gains, correction
@@ -49,7 +51,7 @@ __all__ = ["ControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
            "capture_from_values", "model_capture_from_values",
            "actuation_delay_from_values", "below_period", "model_omega",
            "ModelController", "model_controller_from_values", "model_stream_from_values",
-           "gain_vector_correction", "predicted_correction", "ONE_DOF_DEFAULTS"]
+           "gain_vector_correction", "predicted_correction", "warm_up_kernel", "ONE_DOF_DEFAULTS"]
 
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
@@ -186,6 +188,25 @@ def predicted_correction(law: ControlLaw, model, ndof, stream, pulse: tuple, del
     except (ValueError, ArithmeticError, RuntimeError):
         return math.nan
     return law.preview(xn, vn)
+
+
+def warm_up_kernel(model, stream) -> threading.Thread | None:
+    """Load the compiled kernel where it is in use (``GRAZING_KERNEL``): in stream mode
+    now, the model filter's and the prediction's, so that section 0 does not wait for it
+    (:func:`grazing_control.dynamics.estimation.stream.warm_up`); with a model and exact
+    samples in a thread, returned (issue 30: the prediction on the Python flow, ~70 us a
+    section on the lockstep answer's path, until :func:`predicted_correction` finds it
+    loaded; the same numbers bit for bit, never a wait). None: nothing to load, or done."""
+    if stream is not None:
+        if stream.kernel:
+            warm_stream(model)
+        return None
+    if model is None or not _kernel.use_kernel() or _kernel.loaded() or any(
+            t.name == "kernel_warm_up" and t.is_alive() for t in threading.enumerate()):
+        return None             # (composed: the simulator's thread loads it already)
+    loading = threading.Thread(target=_kernel.warm_up, name="kernel_warm_up", daemon=True)
+    loading.start()
+    return loading
 
 
 #: Largest |c1|, |c2| (and |k_i| of an n-DOF gain vector) accepted (the design's search
