@@ -10,11 +10,15 @@ import pytest
 from grazing_control.oscillator.control import Gains
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.flow import to_deviation, to_physical
-from grazing_control.oscillator.impact import NonFiniteStateError, advance
+from grazing_control.oscillator import kernel
+from grazing_control.oscillator.impact import (ImpactCapError, InitialStateError,
+                                               NonFiniteStateError, advance)
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.oscillator.params import OscillatorParams
-from grazing_control.dynamics.simulation.simulate import (MAX_PERIODS, SimulationResult, period_step,
-                                               simulate, simulate_batch, states_between)
+from grazing_control.dynamics.simulation.simulate import (MAX_PERIODS, SimulationResult,
+                                                          core_states_between, period_step,
+                                                          simulate, simulate_batch,
+                                                          states_between)
 
 STUDY = OscillatorParams()
 SCENE = STUDY.with_(delta_d=-1e-3)
@@ -194,6 +198,94 @@ def test_states_between_holds_the_mass_on_the_wall_while_it_sticks():
         a = advance(p, tau, *z, t)
         xa, va = to_physical(p, tau + p.omega * t, a.dx, a.dv)
         assert abs(x - xa) < 1e-12 and abs(v - va) < 1e-12
+
+
+def _random_model(rng):
+    """A random model in the parameters' valid ranges; half with the wall at d < 1
+    (chattering and sticking), a quarter the study's near grazing."""
+    kind = rng.integers(4)
+    if kind == 0:
+        return STUDY.with_(delta_d=-10.0 ** rng.uniform(-10, -2))
+    if kind == 1:
+        return OscillatorParams(zeta=rng.uniform(0.005, 0.3), r=rng.uniform(0.1, 0.95),
+                                omega=rng.uniform(0.3, 3.0), delta_d=rng.uniform(-1.0, 0.2))
+    return OscillatorParams.from_d(rng.uniform(-0.5, 1.5), zeta=rng.uniform(0.005, 0.3),
+                                   r=rng.uniform(0.05, 0.95), omega=rng.uniform(0.3, 3.0))
+
+
+def _random_segment(rng):
+    """A random model and a real segment of it (the core's advance) from a state near the
+    wall: at it moving in, out or at rest, just below it, or near grazing from Pi2."""
+    p = _random_model(rng)
+    kind = rng.integers(3)
+    if kind == 0:   # on the wall at a random phase
+        tau = rng.uniform(0, 2 * math.pi)
+        v = [0.0, 0.0, 1e-9, -1e-9, 0.1, -0.1, 1.0][rng.integers(7)]
+        dx, dv = to_deviation(p, tau, p.d, v)
+    elif kind == 1:  # just below it
+        tau = rng.uniform(0, 2 * math.pi)
+        dx, dv = to_deviation(p, tau, p.d - 10.0 ** rng.uniform(-12, 0),
+                              rng.normal() * 10.0 ** rng.uniform(-6, 0))
+    else:           # a sample on Pi2 near X**
+        tau = p.tau2
+        dx, dv = rng.normal(size=2) * 10.0 ** rng.uniform(-9, -1)
+    duration = rng.uniform(0.05, 3.0) * p.period
+    try:
+        seg = advance(p, tau, dx, dv, duration)
+    except (ImpactCapError, InitialStateError):
+        return None
+    return p, float(tau), float(dx), float(dv), seg.impacts, duration
+
+
+def _random_times(rng, impacts, duration):
+    """Sorted sample times over the segment: uniform ones, and some at its events
+    exactly (an impact's time, a release), 0 and repeats."""
+    m = int(rng.integers(0, 60))
+    times = list(rng.uniform(0.0, duration, m))
+    events = [i.dt for i in impacts] + [i.release for i in impacts
+                                        if i.sticking and math.isfinite(i.release)]
+    times += [t for t in events if rng.random() < 0.5]
+    if rng.random() < 0.2:
+        times += [0.0, duration]
+    if times and rng.random() < 0.2:
+        times.append(times[int(rng.integers(len(times)))])
+    return np.sort(np.array(times, dtype=float))
+
+
+def test_compiled_states_between_is_the_python_one_bit_for_bit(monkeypatch):
+    """Differential test (issue 30): over 4000 seeded random segments (random models,
+    starts near the wall, 0, 1 or several impacts, sticking ones) and random sorted
+    sample times, the kernel's dense output is the pure-Python one bit for bit, and
+    states_between dispatches by GRAZING_KERNEL."""
+    pytest.importorskip("numba")
+    rng = np.random.default_rng(20261129)
+    seen = {"none": 0, "one": 0, "several": 0, "sticking": 0, "samples": 0}
+    cases = 0
+    while cases < 4000:
+        case = _random_segment(rng)
+        if case is None:
+            continue
+        cases += 1
+        p, tau, dx, dv, impacts, duration = case
+        times = _random_times(rng, impacts, duration)
+        ref = core_states_between(p, tau, dx, dv, impacts, times)
+        got = kernel.states_between(p, tau, dx, dv, impacts, times)
+        assert got.shape == ref.shape == (times.size, 2)
+        assert np.array_equal(got, ref), (p, tau, dx, dv, impacts, times)
+        assert got.tobytes() == ref.tobytes(), (p, tau, dx, dv, impacts, times)  # -0.0 too
+        n = len(impacts)
+        seen["none" if n == 0 else "one" if n == 1 else "several"] += 1
+        seen["sticking"] += any(i.sticking for i in impacts)
+        seen["samples"] += times.size
+    assert min(seen["none"], seen["one"], seen["several"]) > 300 and seen["sticking"] > 300, seen
+    # the dispatch: the kernel where it is in use, the reference with GRAZING_KERNEL=python
+    calls = []
+    monkeypatch.setattr(kernel, "states_between", lambda *a: calls.append(a) or ref)
+    monkeypatch.setenv(kernel.ENV, "numba")
+    assert states_between(p, tau, dx, dv, impacts, list(times)) is ref and len(calls) == 1
+    monkeypatch.setenv(kernel.ENV, "python")
+    assert np.array_equal(states_between(p, tau, dx, dv, impacts, times), ref)
+    assert len(calls) == 1
 
 
 # ------------------------------------------------------------- overflow (issue 7)

@@ -28,8 +28,8 @@ from grazing_control.oscillator.impact import (NonFiniteStateError, Segment, adv
                                                check_state)
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
-__all__ = ["SimulationResult", "period_step", "core_period_step", "states_between", "simulate",
-           "simulate_batch", "MAX_PERIODS"]
+__all__ = ["SimulationResult", "period_step", "core_period_step", "states_between",
+           "core_states_between", "simulate", "simulate_batch", "MAX_PERIODS"]
 
 TWO_PI = 2.0 * math.pi
 #: Largest number of periods of one :func:`simulate` call: it keeps 4 floats and an
@@ -73,8 +73,26 @@ def states_between(p: OscillatorParams, tau0: float, dx: float, dv: float,
 
     ``(dx, dv)`` is the deviation at the start, just after any correction, and
     ``impacts`` the segment's impact list from :func:`advance`; between events the
-    closed-form flow is evaluated, so dense output never changes the trajectory.
+    closed-form flow is evaluated, so dense output never changes the trajectory. Runs
+    on the compiled kernel when it is in use
+    (:func:`grazing_control.oscillator.kernel.use_kernel`) and ``times`` is 1-D, which
+    gives the same numbers bit for bit; :func:`core_states_between` is the reference.
     """
+    times = np.asarray(times, dtype=float)
+    if times.ndim == 1 and _kernel.use_kernel():
+        return _kernel.states_between(p, tau0, dx, dv, impacts, times)
+    return core_states_between(p, tau0, dx, dv, impacts, times)
+
+
+def core_states_between(p: OscillatorParams, tau0: float, dx: float, dv: float,
+                        impacts, times) -> np.ndarray:
+    """:func:`states_between` in pure Python (the reference), whatever ``GRAZING_KERNEL``
+    says: per sample, the deviation flow z(t) = Phi(t - t0) z(t0) from the last event
+    (:func:`~grazing_control.oscillator.flow.propagate`, docs/theory.md "Deviation
+    coordinates") plus the non-impacting motion y_p
+    (:func:`~grazing_control.oscillator.flow.to_physical`); after an impact the flow
+    restarts from (d, v+) at its phase, and after a sticking one the mass rests at
+    (d, 0) until the release, then flows from (d, 0)."""
     times = np.asarray(times, dtype=float)
     out = np.empty((times.size, 2))
     t0, z, stuck_until = 0.0, (dx, dv), -math.inf

@@ -48,7 +48,8 @@ from grazing_control.oscillator.impact import (Impact, ImpactCapError, InitialSt
 
 __all__ = ["ENV", "available", "use_kernel", "loaded", "warm_up", "next_impact",
            "next_impact_unchecked", "advance",
-           "period_step", "simulate_exact", "run_point", "lyapunov_sums", "params_tuple",
+           "period_step", "states_between", "simulate_exact", "run_point", "lyapunov_sums",
+           "params_tuple",
            "warm_up_modal", "modal_search", "modal_advance", "modal_events"]
 
 #: Environment variable that chooses the path: auto (default), python, numba.
@@ -225,6 +226,7 @@ def _first_calls():
     period_step(p, 0.0, 0.0, 0.0, delay=1.0)
     next_impact(p, p.tau2, 0.0, 0.0, p.period)
     advance(p, p.tau2, 0.0, 0.0, p.period)
+    states_between(p, p.tau2, 0.0, 0.0, [], np.zeros(1))
     simulate_exact(p, 2, 0.0, 0.0)
     run_point(p, 2, 1, 0.0, 0.0)
     lyapunov_sums(p, 2, 1, 0.0, 0.0)
@@ -405,6 +407,19 @@ def period_step(p, dx, dv, dv_correction=0.0, *, delay=0.0) -> Segment:
         _raise(status, info, max_impacts=ks.MAX_IMPACTS, duration=p.period, p=p,
                state=(dx, dv), times=(p.tau2, p.period))
     return Segment(dx, dv, _impacts(scratch[:n]), None)
+
+
+def states_between(p, tau0, dx, dv, impacts, times) -> np.ndarray:
+    """:func:`grazing_control.dynamics.simulation.simulate.states_between`, compiled: the
+    physical (x, v) at ``times`` (1-D, since the segment's start, sorted) of the segment
+    from the deviation (dx, dv) at phase ``tau0`` with the impact list ``impacts``; bit
+    for bit the Python function's numbers (:func:`.compiled.states_between`)."""
+    ki = _compiled()[0]
+    times = np.ascontiguousarray(times, dtype=float)
+    rows = np.array([(i.dt, i.phase, i.v_minus, i.v_plus, 1.0 if i.sticking else 0.0,
+                      i.release) for i in impacts], dtype=float).reshape(-1, 6)
+    return ki.states_between(_params(p), float(tau0), float(dx), float(dv), rows, times,
+                             np.empty((times.size, 2)))
 
 
 def _run(p, periods, dx, dv, c1, c2, control_after, delay, record_from, keep_impacts,

@@ -36,7 +36,7 @@ __all__ = ["check_state", "wall_rounding", "make_eval", "evaluate",
            "STATUS_OK", "STATUS_IMPACT_CAP", "STATUS_BEYOND_WALL", "STATUS_NONFINITE",
            "IMPACT_FIELDS", "MAX_AMPLITUDE", "period_step", "run",
            "STATUS_BUFFER_FULL", "STATUS_CORRECTION", "MAX_IMPACTS", "period_jacobian",
-           "lyapunov_run"]
+           "lyapunov_run", "particular", "states_between"]
 
 TWO_PI = 2.0 * math.pi
 _EPS = 2.0 ** -52
@@ -515,6 +515,58 @@ def run(P, k0, periods, dx, dv, controlled, c1, c2, control_after, delay, record
             counts[j] = n
         dx, dv = ndx, ndv
     return periods, dx, dv, n_impacts, STATUS_OK, 0.0
+
+
+# ------------------------------------------------------------------ dense output
+@jit
+def particular(P, tau):
+    """flow.particular: the non-impacting periodic motion (x_p, v_p) at phase tau."""
+    psi = tau - P[_LAG]
+    a = P[_AMP]
+    return a * math.cos(psi), -a * P[_OMEGA] * math.sin(psi)
+
+
+@jit
+def states_between(P, tau0, dx, dv, impacts, times, out):
+    """simulate.states_between: the physical (x, v) at ``times`` into ``out`` (returned).
+
+    Dense output of one segment from phase ``tau0``: ``(dx, dv)`` is the deviation at its
+    start, ``impacts`` its impact rows (columns IMPACT_FIELDS, as :func:`advance` writes
+    them), ``times`` (sorted) count from its start. Between events the closed-form flow
+    z(t) = Phi(t - t0) z(t0) (flow.propagate, docs/theory.md "Deviation coordinates") is
+    evaluated and y = y_p(tau0 + omega t) + z (flow.to_physical); after an impact the
+    flow restarts from (d, v+) at the impact's phase, and after a sticking one the mass
+    rests at (d, 0) until its release, then flows from (d, 0). The same floating-point
+    operations in the same order as the Python function, so bit for bit its numbers
+    (``min(release, 1e300)`` written as CPython's ``min`` evaluates it).
+    """
+    n = impacts.shape[0]
+    zeta, omega, d = P[_ZETA], P[_OMEGA], P[_D]
+    t0, zx, zv, stuck_until = 0.0, dx, dv, -math.inf
+    k = 0
+    for j in range(times.shape[0]):
+        t = times[j]
+        while k < n and impacts[k, 0] <= t:
+            if impacts[k, 4] != 0.0:  # on the wall at rest until the release, then from (d, 0)
+                release = impacts[k, 5]
+                stuck_until = release
+                t0 = 1e300 if 1e300 < release else release
+                xp, vp = particular(P, tau0 + omega * t0)
+                zx, zv = d - xp, 0.0 - vp
+            else:
+                t0 = impacts[k, 0]
+                xp, vp = particular(P, impacts[k, 1])
+                zx, zv = d - xp, impacts[k, 3] - vp
+            k += 1
+        if t < stuck_until:
+            out[j, 0] = d
+            out[j, 1] = 0.0
+            continue
+        zxt, zvt = propagate(zeta, zx, zv, t - t0)
+        xp, vp = particular(P, tau0 + omega * t)
+        out[j, 0] = xp + zxt
+        out[j, 1] = vp + zvt
+    return out
 
 
 # ------------------------------------------------------------------ tangent propagation
