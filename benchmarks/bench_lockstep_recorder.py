@@ -5,7 +5,8 @@ The row "state 1.0 + recorder, events" of ``bench_closed_loop.py --composed``: e
 controlled (enable_after 0, Delta d = -5e-6), a state message every 1.0 of simulation time
 (about 9.4 a period), the recorder on (its default batch_window), both nodes on the
 EventsExecutor; composed (``grazing run --compose``) and, with ``--processes``, also as
-three processes. Each scene runs in a fresh interpreter with the checkout as its working
+three processes; with ``--stream-message block`` the stream in blocks (one a period in
+lockstep). Each scene runs in a fresh interpreter with the checkout as its working
 directory and first on sys.path (the launcher puts that checkout on the nodes'
 PYTHONPATH), this checkout and ``--baseline DIR`` (a git worktree of the old commit)
 alternating, so that both see the same load. The rate is the simulator's own count
@@ -33,13 +34,13 @@ import json, random, re, sys, tempfile
 from pathlib import Path
 sys.path.insert(0, ".")
 from grazing_control.ros import launcher
-periods, compose = int(sys.argv[1]), sys.argv[2] == "1"
+periods, compose, message = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3]
 with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
     res = launcher.run(Path("config/study.yaml"), Path("config/controller.yaml"),
                        Path(tmp) / "bag", periods,
                        domain_id=random.SystemRandom().randrange(101, 232), timeout=600,
                        sim_overrides={"delta_d": -5e-6, "state_period": 1.0,
-                                      "executor": "events"},
+                                      "executor": "events", "stream_message": message},
                        controller_overrides={"enable_after": 0, "executor": "events"},
                        log_dir=tmp, compose=compose)
     line = re.search(r"summary: .*", Path(res.logs["sim_node"]).read_text()).group(0)
@@ -48,9 +49,9 @@ print(json.dumps({"rate": float(re.search(r"rate=([\d.]+)", line).group(1)), "su
 """
 
 
-def scene(root: Path, periods: int, compose: bool) -> float:
-    out = subprocess.run([sys.executable, "-c", SCENE, str(periods), "1" if compose else "0"],
-                         cwd=root, capture_output=True, text=True)
+def scene(root: Path, periods: int, compose: bool, message: str = "sample") -> float:
+    out = subprocess.run([sys.executable, "-c", SCENE, str(periods), "1" if compose else "0",
+                          message], cwd=root, capture_output=True, text=True)
     if out.returncode:
         raise RuntimeError(f"scene in {root} failed:\n{out.stdout[-3000:]}{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])["rate"]
@@ -68,6 +69,9 @@ def main(argv=None):
     ap.add_argument("--periods", type=int, default=3000)
     ap.add_argument("--processes", action="store_true",
                     help="also the three processes (not composed)")
+    ap.add_argument("--stream-message", choices=("sample", "block"), default="sample",
+                    help="the state stream one message a sample (default), or a block a "
+                         "wake-up (sim_node's stream_message; a lockstep wake-up is a period)")
     args = ap.parse_args(argv)
     sides = {"this": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     kinds = (True, False) if args.processes else (True,)
@@ -76,11 +80,12 @@ def main(argv=None):
         for compose in kinds:
             for name, root in sides.items():
                 loads.append(float(load()))
-                r = scene(root, args.periods, compose)
+                r = scene(root, args.periods, compose, args.stream_message)
                 rates.setdefault((name, compose), []).append(r)
                 print(f"rep {rep} {name:8s} {'composed' if compose else 'processes':9s} "
                       f"load {loads[-1]:5.2f}  {r:7.1f} periods/s", flush=True)
-    print(f"\n{args.periods} periods, state every 1.0 + recorder, events; load "
+    print(f"\n{args.periods} periods, state every 1.0 ({args.stream_message}) + recorder, "
+          f"events; load "
           f"{min(loads):.2f}-{max(loads):.2f}")
     for (name, compose), rs in rates.items():
         print(f"{name:8s} {'composed' if compose else 'processes':9s} median "
