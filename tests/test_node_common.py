@@ -7,7 +7,9 @@ name is refused, and a parameter file keyed for another node name is warned abou
 
 from __future__ import annotations
 
+import signal
 import subprocess
+import sys
 import threading
 import time
 
@@ -309,3 +311,36 @@ def test_safe_points_run_the_collections_there_and_not_in_between(monkeypatch):
     finally:
         gc.callbacks.remove(record)
         gc.set_threshold(*thresholds)
+
+
+#: A node whose start fails, with a stop signal landing while the failure is reported.
+_SIGNAL_WHILE_REFUSING = r"""
+import os, signal, sys
+from grazing_control.ros import common
+from grazing_control.oscillator.params import ParameterError
+
+report = common._startup_message
+def signalled(exc):
+    os.kill(os.getpid(), int(sys.argv[1]))     # the launcher stopping the scene, now
+    return report(exc)
+common._startup_message = signalled
+
+def refuse():
+    raise ParameterError("state_period=-1.0 is invalid: valid range is state_period >= 0")
+
+sys.exit(common.run_node(refuse, ["x"], "controller_node"))
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_stop_signal_while_a_refused_start_is_reported_is_quiet(signum):
+    """A node refusing to start (a bad parameter) logs one line and returns status 2, also
+    when a stop signal lands while it reports it: a launcher stops the other nodes as
+    soon as one of them exits (`grazing run --sim-param state_period:=-1.0` printed the
+    controller's KeyboardInterrupt traceback and status -2 in 2 of 6 runs)."""
+    done = subprocess.run([sys.executable, "-c", _SIGNAL_WHILE_REFUSING, str(int(signum))],
+                          env=launcher.node_env(new_domain()), capture_output=True,
+                          text=True, timeout=60)
+    lines = [ln for ln in (done.stdout + done.stderr).splitlines() if ln.strip()]
+    assert done.returncode == 2 and len(lines) == 1, lines
+    assert "[ERROR]" in lines[0] and "state_period=-1.0 is invalid" in lines[0], lines

@@ -530,6 +530,10 @@ def run_node(factory, args=None, name: str = "node", fast_exit: bool = True) -> 
         else:
             spin(executor)
     except (StartupError, ParameterException, ParameterError) as exc:
+        # the node is ending: a stop signal now (a launcher stopping the scene because
+        # another node refused to start) must not end the report in a traceback
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         rclpy.logging.get_logger(name).error(_startup_message(exc))
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
