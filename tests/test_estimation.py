@@ -15,8 +15,8 @@ from scipy.linalg import expm
 
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.section_state import (
-    arc_fit, detect_impact, deviation_samples, split_rss, estimate_covariance, nearest_estimate,
-    unkick)
+    arc_fit, detect_impact, deviation_samples, split_rss, split_rss_by_fits,
+    estimate_covariance, nearest_estimate, unkick)
 from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 from grazing_control.dynamics.orbits.orbits import orbit_11
 from grazing_control.dynamics.simulation.simulate import period_step, states_between
@@ -168,16 +168,6 @@ def test_impacts_are_detected_from_positions_with_a_timing_error_below_one_sampl
     assert false <= 0.01 * n
 
 
-def _split_rss_brute(phi_x, y, splits):
-    """The two-arc sums of squares one split at a time, each arc by np.linalg.lstsq (the
-    split test's definition, E6)."""
-    def rss(a, b):
-        z, *_ = np.linalg.lstsq(a, b, rcond=None)
-        r = b - a @ z
-        return float(r @ r)
-    return np.array([rss(phi_x[:m], y[:m]) + rss(phi_x[m:], y[m:]) for m in splits])
-
-
 def _detect_impact_brute(p, s, y, sigma, min_side=3, threshold=25.0):
     """detect_impact's split by the brute force: every split's two fits by lstsq; the first
     split with the least sum (None when no split beats one arc by the threshold)."""
@@ -190,8 +180,8 @@ def _detect_impact_brute(p, s, y, sigma, min_side=3, threshold=25.0):
     if not cands:
         return None, None
     phi_x = phi_rows(p.zeta, s)[:, 0, :]
-    whole = _split_rss_brute(phi_x, y, [n])[0]
-    rss = _split_rss_brute(phi_x, y, cands)
+    whole = split_rss_by_fits(phi_x, y, [n])[0]
+    rss = split_rss_by_fits(phi_x, y, cands)
     i = int(np.argmin(rss))
     # the margins a rounding could tip: the best split against the next, and the test
     margins = [whole - rss[i] - threshold * sigma * sigma] + list(np.sort(rss)[1:2] - rss[i])
@@ -223,7 +213,7 @@ def test_the_split_sums_are_the_brute_force_least_squares_over_random_periods():
         splits = np.arange(1, s.size)
         r = y - phi_x @ np.linalg.lstsq(phi_x, y, rcond=None)[0]
         fast = split_rss(phi_x, r, splits)
-        brute = _split_rss_brute(phi_x, y, splits)
+        brute = split_rss_by_fits(phi_x, y, splits)
         scale = max(float(r @ r), sigma * sigma)
         worst = max(worst, float(np.max(np.abs(fast - brute))) / scale)
         found = detect_impact(p, s, y, sigma)

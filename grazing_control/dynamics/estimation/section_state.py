@@ -51,7 +51,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "unkick",
-           "nearest_estimate", "arc_fit", "detect_impact", "split_rss", "model_update",
+           "nearest_estimate", "arc_fit", "detect_impact", "split_rss", "split_rss_by_fits", "model_update",
            "gauss_newton_fit", "estimate_covariance", "CHI2_SIGMAS"]
 #: The estimators by name (``estimator`` parameter of the controller).
 ESTIMATORS = ("nearest", "arc", "model")
@@ -209,6 +209,17 @@ def split_rss(phi_x, r, splits):
     left = np.maximum(c0 - _explained(a0, b0), 0.0)
     right = np.maximum(c1 - _explained(a1, b1), 0.0)
     return left + right
+
+
+def split_rss_by_fits(phi_x, y, splits):
+    """:func:`split_rss`'s definition, one pair of least-squares fits (np.linalg.lstsq) per
+    split m of ``splits``: the residual sums of y[:m] ~ phi_x[:m] z and y[m:] ~ phi_x[m:]
+    z'. The reference it is checked and timed against (tests/test_estimation.py,
+    benchmarks/bench_split_test.py); what the split test ran before (issue 30)."""
+    def rss(a, b):
+        r = _residuals(a, b)
+        return float(r @ r)
+    return np.array([rss(phi_x[:m], y[:m]) + rss(phi_x[m:], y[m:]) for m in splits])
 
 
 def detect_impact(p: OscillatorParams, s, y, sigma: float, *, min_side: int = 3,
