@@ -51,8 +51,8 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.motion import phi_rows, trajectory
 
 __all__ = ["ESTIMATORS", "Estimate", "FilterState", "deviation_samples", "unkick",
-           "nearest_estimate", "arc_fit", "detect_impact", "split_rss", "split_rss_by_fits", "model_update",
-           "gauss_newton_fit", "estimate_covariance", "CHI2_SIGMAS"]
+           "nearest_estimate", "arc_fit", "detect_impact", "split_rss", "split_rss_by_fits",
+           "model_update", "gauss_newton_fit", "estimate_covariance", "CHI2_SIGMAS"]
 #: The estimators by name (``estimator`` parameter of the controller).
 ESTIMATORS = ("nearest", "arc", "model")
 #: The residual test of the model fit: reset when the sum of squared normalised
