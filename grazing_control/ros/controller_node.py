@@ -469,10 +469,10 @@ class ControllerNode(Node):
         self._early.add(key)
 
     def _answered_early(self, key: tuple) -> bool:
-        if key in self._early:
-            self._early.discard(key)
-            return True
-        return False
+        early = key in self._early
+        if self._early:     # older ones too (an estimate that failed never came back)
+            self._early = {k for k in self._early if k > key}
+        return early
 
     def _predict(self, x: float, v: float, dv: float) -> float:
         """The correction of the next sample (:func:`predicted_correction`)."""
