@@ -395,12 +395,13 @@ class RecorderNode(Node):
         recorder keep up with a lockstep simulation.
         """
         sub = self._subs[topic]
-        for n in range(limit):
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, True)
-            if taken is None:
-                return n
-            self._record(topic, *taken)
+        handle, kind, record = sub.handle, sub.msg_type, self._record
+        with handle:            # held for the batch, not entered once a message
+            for n in range(limit):
+                taken = handle.take_message(kind, True)
+                if taken is None:
+                    return n
+                record(topic, *taken)
         return limit
 
     def _record(self, topic, data, info):
