@@ -268,8 +268,10 @@ def feasible(node) -> bool:
     elif not probe.asked:
         note = (f"the controller's get_parameters service did not appear in "
                 f"{waited:.3g} s: its round trip is not measured")
+    gains = [(name, c1, c2) for name, (c1, c2) in sorted(node.scene.controller_gains.items())]
     verdict = check(s, period, probe.times if probe else (), sustained,
-                    probe.asked if probe else 0, waited, note)
+                    probe.asked if probe else 0, waited, note, plant=node.engine.p,
+                    gains=gains)
     node.feasibility = verdict
     node.event("feasibility", level=verdict.level, line=verdict.line, **verdict.numbers)
     log = node.get_logger()

@@ -72,3 +72,32 @@ def test_the_measured_rate_runs_the_scenes_engine_and_hands_over_every_event():
     assert sum(e.kind == "state" for e in seen) == pytest.approx(40 * P.period / 0.0471,
                                                                  abs=41)
     assert periods > 0 and RATE_MARGIN >= 1.0
+
+
+#: The default realtime scene's gains (config/controller.yaml: c2 = -1, c1 degenerate).
+DEFAULT_GAINS = [("/controller_node", -1.0206014555435567, -1.0)]
+
+
+@pytest.mark.parametrize("scale, trips_ms, warned", [
+    (1000.0, [0.35] * 7 + [0.85], True),     # the slowest act at 0.85 > 0.441
+    (1000.0, [0.3] * 8, False),              # all within the margin
+    (100.0, [0.35] * 7 + [0.85], False),     # a tenth of the delay
+])
+def test_acting_on_arrival_the_answers_delay_is_checked_against_the_gains(
+        scale, trips_ms, warned):
+    """Acting on arrival, an answer acts its round trip x time_scale after its sample, a
+    delay its gains were not designed for: the check warns when the slowest act beyond
+    the least delay at which the gains lose the orbit at the plant's Delta d (0.441 for
+    the default gains at -5e-6), and names it; a scheduled scene is not concerned (its
+    answers act at the designed delay, or miss)."""
+    s = settings(pulse_width=0.0, actuation_delay=0.0, actuation="on_arrival",
+                 time_scale=scale, state_period=0.0)
+    v = check(s, P.period, [t * 1e-3 for t in trips_ms], 1e5, plant=P, gains=DEFAULT_GAINS)
+    assert (v.level == "warn") is warned, v.line
+    assert v.numbers["arrival_delay_max"] == pytest.approx(max(trips_ms) * 1e-3 * scale)
+    if warned:
+        assert "delays below 0.441" in v.line and "actuation:=scheduled" in v.line, v.line
+        assert v.numbers["delay_margin"] == pytest.approx(0.4413, abs=2e-4)
+    scheduled = check(settings(), P.period, [t * 1e-3 for t in trips_ms], 1e5, plant=P,
+                      gains=DEFAULT_GAINS)
+    assert "arrival_delay_max" not in scheduled.numbers

@@ -136,3 +136,26 @@ def test_a_forcing_amplitude_error_opens_no_band(amplitude):
                 impacts.add(len(s.impacts))
             dx, dv = s.dx, s.dv
         assert max(steps) < 1e-12 and len(impacts) == 1, (dd, max(steps), impacts)
+
+
+def test_the_delay_margin_is_the_first_delay_where_the_orbit_is_lost():
+    """delay_margin (a grid of 16 delays, the first crossing bisected) against a fine scan
+    of the largest multiplier over the same range, for the default gains at two Delta d
+    and a less damped design: the margin lies within one fine step after the fine scan's
+    last stable delay before its first unstable one, the orbit is lost there and stable
+    just before it, and a range that stays stable gives inf."""
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.dynamics.design.mismatch import delay_margin, largest_multiplier
+
+    for delta_d, c2, upper in ((-5e-6, -1.0, 1.0), (-9e-6, -1.0, 1.5), (-5e-6, -0.3, 2.0)):
+        p = OscillatorParams(delta_d=delta_d)
+        c1 = degenerate_c1(p, c2)
+        grid = np.linspace(0.0, upper, 121)
+        rho = np.array([largest_multiplier(p, Gains(c1, c2, d)) for d in grid])
+        first = int(np.argmax(~(rho < 1.0)))
+        assert not rho[first] < 1.0, (delta_d, c2)          # the range does cross
+        margin = delay_margin(p, c1, c2, upper)
+        assert grid[first - 1] <= margin <= grid[first], (delta_d, c2, margin)
+        assert not largest_multiplier(p, Gains(c1, c2, margin)) < 1.0
+        assert largest_multiplier(p, Gains(c1, c2, margin - 1e-3 * upper)) < 1.0
+        assert delay_margin(p, c1, c2, 0.5 * grid[first - 1]) == math.inf

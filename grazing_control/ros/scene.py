@@ -20,6 +20,8 @@ start_timeout (5 of 6 loaded scenes, issue 27; docs/nodes.md, "Start handshake")
 
 from __future__ import annotations
 
+import math
+
 from std_msgs.msg import String
 
 from grazing_control.ros.recording.record import TOPIC, decode
@@ -46,6 +48,9 @@ class SceneGuard:
         #: node name -> the actuation_delay its gains were designed for, from the records
         #: of this scene's controllers (any controller's when there is no token)
         self.controller_delays = {}
+        #: node name -> (c1, c2) of those controllers with a 1-DOF law (the check of a
+        #: realtime scene acting on arrival, plant.feasibility.arrival_delay)
+        self.controller_gains = {}
         self.topic = node.resolve_topic_name(TOPIC)
         # every node's latched record, not only the last to arrive (RECORDS_QOS)
         node.create_subscription(String, TOPIC, self._on_record, RECORDS_QOS)
@@ -66,6 +71,10 @@ class SceneGuard:
         delay = params.get("actuation_delay")
         if isinstance(delay, (int, float)) and not isinstance(delay, bool):
             self.controller_delays[str(name)] = float(delay)
+        c1, c2 = params.get("c1"), params.get("c2")
+        if all(isinstance(c, float) and math.isfinite(c) for c in (c1, c2)) \
+                and not params.get("model_file") and not params.get("rig_file"):
+            self.controller_gains[str(name)] = (c1, c2)
         if self.token and other == self.token:
             self.own_controller = True
 

@@ -48,7 +48,7 @@ from grazing_control.dynamics.maps.perturbation import series_coefficients
 
 __all__ = ["PARAMETERS", "MODEL_PARAMETERS", "mismatched", "mismatched_model",
            "largest_multiplier", "model_largest_multiplier", "Band", "instability_band",
-           "predicted_band", "tolerated_error"]
+           "predicted_band", "tolerated_error", "delay_margin"]
 
 #: The parameters an error is put on.
 PARAMETERS = ("zeta", "omega", "r")
@@ -135,6 +135,37 @@ def largest_multiplier(p: OscillatorParams, gains: Gains) -> float:
         return float(np.max(np.abs(orbit_11(p, gains).multipliers)))
     except (OrbitNotFound, ImpactCapError, InitialStateError, ValueError, ArithmeticError):
         return math.inf
+
+
+def delay_margin(p: OscillatorParams, c1: float, c2: float, upper: float, *,
+                 steps: int = 16, iterations: int = 12) -> float:
+    """The least actuation delay in [0, ``upper``] at which the gains (c1, c2) lose the
+    controlled 1/1 orbit at ``p.delta_d``: its largest Floquet multiplier reaches 1, or
+    there is no such orbit (:func:`largest_multiplier` of ``Gains(c1, c2, delay)``, the
+    exact route; docs/theory_delay.md). A correction that acts some time after its
+    section (on arrival, a realtime answer's latency x time_scale) is one designed for
+    another delay: the degenerate condition (D5) holds at its own delay only, and near
+    grazing the rest of the multipliers' margin goes fast. The grid of ``steps`` delays
+    up to ``upper`` is scanned from 0 and the first crossing bisected ``iterations``
+    times; inf when the orbit is stable at every delay of the grid (a narrower unstable
+    window between two of its points is not seen)."""
+    if not (math.isfinite(upper) and upper >= 0.0):
+        raise ParameterError(f"upper={upper!r} is invalid: valid range is a finite delay >= 0")
+
+    def lost(delay: float) -> bool:
+        return not largest_multiplier(p, Gains(c1, c2, delay)) < 1.0
+
+    grid = np.linspace(0.0, upper, steps + 1)
+    if lost(0.0):
+        return 0.0
+    for lo, hi in zip(grid[:-1], grid[1:]):
+        if lost(float(hi)):
+            lo, hi = float(lo), float(hi)
+            for _ in range(iterations):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if lost(mid) else (mid, hi)
+            return hi
+    return math.inf
 
 
 @dataclass(frozen=True)
