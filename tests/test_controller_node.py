@@ -829,3 +829,91 @@ def test_before_the_control_is_on_a_stream_section_is_answered_before_its_estima
     assert [a[2] for a in answers[True][:on]] == [0.0] * on
     assert [a[3] for a in answers[True][:on - 1]] == [0.0] * (on - 1)
     assert answers[True][on - 1][3] != 0.0 and answers[True][on][2] != 0.0
+
+
+def test_early_answers_are_the_estimate_first_answers_on_hostile_streams():
+    """The early answers (before the control is on) against the estimate-first path on
+    300 seeded hostile streams fed to both controllers alike: samples lost, repeated,
+    swapped, NaN or infinite, a stray far ahead, a reset back to t = 0, the switch-on
+    anywhere from 0 to past the stream's end, and ~/enable forced off or on halfway in
+    some: every answer (stamp, correction, prediction), in order, and every count the
+    same, bit for bit."""
+    import rclpy
+    from rclpy.context import Context
+
+    from grazing_control.dynamics.estimation.motion import trajectory
+    from grazing_control.ros.controller_node import ControllerNode
+
+    p, rate, periods = OscillatorParams(delta_d=-5e-6), 25, 7
+    h = p.period / rate
+    g = Gains(degenerate_c1(p, -0.3), -0.3)
+    rng = np.random.default_rng(30)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    nodes, answers = {}, {}
+    try:
+        for early in (True, False):
+            node = nodes[early] = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in (
+                    ("c1", g.c1), ("c2", g.c2), ("delta_d", p.delta_d),
+                    ("enable_after", 3), ("pi2_source", "stream"), ("estimator", "model"),
+                    ("sensor_noise", 1e-4), ("state_period", h))])
+            got = answers[early] = []
+            node.pub.publish = lambda data, got=got: got.append(cdr.read_twist_stamped(data))
+            if not early:
+                node.stream.before_estimate = None
+        made = []                                       # answers given early, per call
+
+        def counting(k, node=nodes[True], answer=nodes[True]._answer_before_estimate):
+            n = node.answered
+            answer(k)
+            made.append(node.answered - n)
+
+        nodes[True].stream.before_estimate = counting
+        for case in range(300):
+            on = int(rng.integers(0, periods + 2))
+            force = rng.choice([None, None, False, True])
+            z = tuple(rng.uniform(-3e-4, 3e-4, 2))
+            stream = [(0.0, p.x_ref + z[0], p.v_ref + z[1])]
+            for k in range(periods):
+                s = np.arange(1, rate + 1) * h
+                dev, _jac, z, _m, _imps = trajectory(p, z, s, 0.0, 0.0)
+                psi = p.tau2 + p.omega * s - p.lag
+                stream += [(k * p.period + s[j],
+                            p.amplitude * math.cos(psi[j]) + dev[j, 0] + 1e-4 * rng.normal(),
+                            -p.amplitude * p.omega * math.sin(psi[j]) + dev[j, 1])
+                           for j in range(rate)]
+            for _ in range(int(rng.integers(0, 12))):      # the hostile part
+                i = int(rng.integers(1, len(stream) - 1))
+                what = rng.integers(0, 6)
+                if what == 0:
+                    del stream[i]
+                elif what == 1:
+                    stream.insert(i, stream[i])
+                elif what == 2:
+                    stream[i], stream[i + 1] = stream[i + 1], stream[i]
+                elif what == 3:
+                    stream[i] = (stream[i][0], math.nan, stream[i][2])
+                elif what == 4:
+                    stream[i] = (stream[i][0], stream[i][1], math.inf)
+                else:
+                    stream.insert(i, (stream[i][0] + 50.0 * p.period, *stream[i][1:]))
+            for node in nodes.values():
+                node.law.enable_after, node.law.forced = on, None
+            for j, (t, x, v) in enumerate(stream):
+                if force is not None and j == len(stream) // 2:
+                    for node in nodes.values():
+                        node.law.forced = bool(force)
+                for node in nodes.values():
+                    node._take_sample((*cdr.stamp_parts(t), x, v, ()))
+        counts = {early: (node.answered, node.malformed.count, node.stream.ignored,
+                          node.stream.resets) for early, node in nodes.items()}
+        early_count = len(nodes[True]._early)
+    finally:
+        for node in nodes.values():
+            node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    assert len(answers[True]) > 1500 and sum(made) > 300 and 0 in made
+    assert np.array_equal(np.array(answers[True], dtype=float),
+                          np.array(answers[False], dtype=float), equal_nan=True)
+    assert counts[True] == counts[False] and early_count <= 1, (counts, early_count)
