@@ -101,3 +101,17 @@ def test_acting_on_arrival_the_answers_delay_is_checked_against_the_gains(
     scheduled = check(settings(), P.period, [t * 1e-3 for t in trips_ms], 1e5, plant=P,
                       gains=DEFAULT_GAINS)
     assert "arrival_delay_max" not in scheduled.numbers
+
+
+def test_the_arrival_check_caps_its_scan_at_a_period_and_names_gains_that_never_hold():
+    """Round trips of absurd length (a stalled controller: 1e300 time units) scan the
+    delays up to a period only, and gains that lose the orbit even acting at once are
+    named as such, not with a margin of 0."""
+    from grazing_control.plant.feasibility import arrival_delay
+
+    numbers = {}
+    line = arrival_delay(P, DEFAULT_GAINS, [0.3, 1e300], numbers)
+    assert numbers["delay_margin"] == pytest.approx(0.4413, abs=2e-4) and "below 0.441" in line
+    line = arrival_delay(P, [("/c", 1e6, -1e6)], [0.1, 0.2], {})
+    assert "do not hold the orbit at Delta d = -5e-06 even acting at once" in line, line
+    assert arrival_delay(P, [], [0.3, 9.0], {}) is None

@@ -79,12 +79,15 @@ def arrival_delay(plant, gains, delays, numbers: dict) -> str | None:
         if largest_multiplier(plant, Gains(c1, c2, top)) < 1.0 \
                 and largest_multiplier(plant, Gains(c1, c2, med)) < 1.0:
             continue
-        margin = delay_margin(plant, c1, c2, top)
+        # a delay of a period or more acts in the next period: the scan ends at T
+        margin = delay_margin(plant, c1, c2, min(top, plant.period))
         numbers["delay_margin"] = margin
+        held = (f"hold the orbit at Delta d = {plant.delta_d:.3g} for delays below "
+                f"{margin:.3g}" if margin > 0.0 else
+                f"do not hold the orbit at Delta d = {plant.delta_d:.3g} even acting at once")
         return (f"acting on arrival, the answers act {med:.3g} time units after their "
                 f"sample at the median and {top:.3g} at the slowest (round trip x "
-                f"time_scale), and {name}'s gains (c1={c1:.6g}, c2={c2:.6g}) hold the "
-                f"orbit at Delta d = {plant.delta_d:.3g} for delays below {margin:.3g}: "
+                f"time_scale), and {name}'s gains (c1={c1:.6g}, c2={c2:.6g}) {held}: "
                 "lower time_scale, or schedule the corrections at a delay the gains are "
                 "designed for (actuation:=scheduled, grazing design --delay)")
     return None
