@@ -199,23 +199,13 @@ def run(spec: dict, statuses_path: str | None) -> int:
 
 
 def _leave(nodes: dict, executor, timeout: float = 3.0) -> None:
-    """Destroy the nodes and the context (the peers see them leave), ``timeout`` s at
-    most (:func:`grazing_control.ros.common.leave_graph`, for several nodes)."""
-    import rclpy
+    """Destroy the nodes and the context (the peers see them leave, nothing of the
+    participant is left), ``timeout`` s at most
+    (:func:`grazing_control.ros.common.leave_graph`, with every node)."""
+    from .common import leave_graph
 
-    def teardown():
-        try:
-            for node in nodes.values():
-                if executor is not None:
-                    executor.remove_node(node)
-                node.destroy_node()
-            rclpy.try_shutdown()
-        except Exception:  # noqa: BLE001 - leaving anyway
-            pass
-
-    worker = threading.Thread(target=teardown, name="leave_graph", daemon=True)
-    worker.start()
-    worker.join(timeout)
+    if nodes:
+        leave_graph(list(nodes.values()), executor, timeout)
 
 
 def main(argv=None) -> int:
