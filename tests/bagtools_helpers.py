@@ -29,6 +29,16 @@ def joint_state(stamp_ns, x, v, *, frame_id="", names=("mass",), extra=()):
                       name=list(names), position=pos, velocity=vel, effort=np.zeros(0))
 
 
+def masses_joint_state(stamp_ns, x, v):
+    """An n-DOF scene's JointState (sim_node's layout): one joint per coordinate, named
+    mass0 .. mass{n-1}, positions ``x`` and velocities ``v``, no effort."""
+    JointState, Header, Time, *_ = _types()
+    return JointState(header=Header(stamp=Time(sec=int(stamp_ns // _NS), nanosec=int(stamp_ns % _NS)),
+                                    frame_id=""),
+                      name=[f"mass{i}" for i in range(len(x))], position=np.array(x, float),
+                      velocity=np.array(v, float), effort=np.zeros(0))
+
+
 def twist_stamped(stamp_ns, dv, frame_id=""):
     _, Header, Time, TwistStamped, Twist, Vector3, *_ = _types()
     return TwistStamped(header=Header(stamp=Time(sec=int(stamp_ns // _NS), nanosec=int(stamp_ns % _NS)),

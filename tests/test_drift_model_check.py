@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools_helpers import TYPESTORE, string, twist_stamped, write_rosbags
+from bagtools_helpers import masses_joint_state, string, twist_stamped, write_rosbags
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
 from grazing_control.recordings.analyze import analyze
@@ -27,15 +27,6 @@ ROOT = Path(__file__).resolve().parents[1]
 CHAIN = str(ROOT / "config" / "models" / "two_mass_chain.yaml")
 ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
 DELTA_D, DRIFT, DELAY, PERIODS = -1e-3, 2e-5, 1.0, 60
-
-
-def _joint_state(stamp_ns, x, v):
-    t = TYPESTORE.types
-    return t["sensor_msgs/msg/JointState"](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
-            sec=int(stamp_ns // 10**9), nanosec=int(stamp_ns % 10**9)), frame_id=""),
-        name=[f"mass{i}" for i in range(len(x))], position=np.array(x, float),
-        velocity=np.array(v, float), effort=np.zeros(0))
 
 
 def drifting_bags(folder: Path, model_file: str, width: float, drifts) -> list:
@@ -53,7 +44,7 @@ def drifting_bags(folder: Path, model_file: str, width: float, drifts) -> list:
         eng.begin_period(dv, DELAY)
         eng.end_period()
         msgs += [("/oscillator/pi2", "sensor_msgs/msg/JointState", 1_000_000 + 10 * k,
-                  _joint_state(stamp, np.atleast_1d(ev.x), np.atleast_1d(ev.v))),
+                  masses_joint_state(stamp, np.atleast_1d(ev.x), np.atleast_1d(ev.v))),
                  ("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped",
                   1_000_001 + 10 * k, twist_stamped(stamp, dv))]
     bags = []

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools_helpers import TYPESTORE, string, twist_stamped, write_rosbags
+from bagtools_helpers import (TYPESTORE, masses_joint_state, string, twist_stamped,
+                              write_rosbags)
 from grazing_control.dynamics.design.family import evaluate_design
 from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.oscillator.control import Gains, correction
@@ -38,15 +39,6 @@ ONE = str(ROOT / "config" / "models" / "study_1dof.yaml")
 WALL0 = 1_700_000_000_000_000_000      # the simulator's clock start, ns (wall0)
 LAG0_NS = 1_500_000                      # sample 0 published 1.5 ms after it: in no message
 TIME_SCALE = 50.0
-
-
-def _joint_state(stamp_ns, x, v):
-    t = TYPESTORE.types
-    return t["sensor_msgs/msg/JointState"](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
-            sec=int(stamp_ns // 10**9), nanosec=int(stamp_ns % 10**9)), frame_id=""),
-        name=[f"mass{i}" for i in range(len(x))], position=np.array(x, float),
-        velocity=np.array(v, float), effort=np.zeros(0))
 
 
 def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, on: int,
@@ -92,7 +84,7 @@ def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, 
                       pub + 300_001, twist_stamped(stamp, misses[k]))]
         delays.append(delay)
         msgs += [("/oscillator/pi2", "sensor_msgs/msg/JointState", pub,
-                  _joint_state(stamp, x, v)),
+                  masses_joint_state(stamp, x, v)),
                  ("/controller/velocity_correction", "geometry_msgs/msg/TwistStamped",
                   pub + 400_000, twist_stamped(stamp, dv)),
                  ("/oscillator/latency", "std_msgs/msg/Float64", pub + round(latency * 1e9),
