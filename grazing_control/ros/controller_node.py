@@ -458,14 +458,10 @@ class ControllerNode(Node):
         at T/200 x1000 the first sections missed their deadline behind the arc fit)."""
         tk = k * self.stream.p.period          # the stamp the estimate will have
         key = cdr.stamp_parts(tk)
-        if key == (0, 0) or not self.law.off_for_two() \
-                or self.law.answer(key, math.nan, math.nan) is None:
+        if key == (0, 0) or not self.law.off_for_two():
             return
-        self.prediction = 0.0
-        if self.rig_side is not None:
-            self.rig_side.answered(tk, 0.0, 0.0)
-        self.pub.publish(cdr.twist_stamped(*key, 0.0, 0.0))
-        self.answered += 1
+        # factor 0: the answer 0 and the prediction 0, whatever the (unknown) state
+        self._answer(key, math.nan, math.nan, 0.0, tk if self.rig_side is not None else None)
         self._early.add(key)
 
     def _answered_early(self, key: tuple) -> bool:
