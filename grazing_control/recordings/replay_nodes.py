@@ -171,17 +171,22 @@ class ControllerRun:
         try:
             self.session = Session(self.domain_id, "grazing_replay")
             node = self.session.node
+            # transient local, as the recorder's: the controller's writers keep their
+            # history (common.REPLAY_QOS), and an answer published before its writer had
+            # matched this reader still comes; a volatile reader lost it (discovery is
+            # not symmetric: this side saw the writer, the writer not yet this reader; the
+            # first answer of a replay missing in a fresh clone's suite, 2026-11-29)
             self.sub = node.create_subscription(
                 TwistStamped, "controller/velocity_correction",
                 lambda m: self._on_output(m, "/controller/velocity_correction",
                                           "geometry_msgs/msg/TwistStamped", self.answers),
-                qos(), raw=True)
+                qos(latched=True), raw=True)
             if self.estimates_wanted:
                 node.create_subscription(
                     JointState, "controller/estimate",
                     lambda m: self._on_output(m, "/controller/estimate",
                                               "sensor_msgs/msg/JointState", self.estimates),
-                    qos(), raw=True)
+                    qos(latched=True), raw=True)
             node.create_subscription(
                 String, "grazing/parameters",
                 lambda m: self._records.append((m, time.time_ns())), qos(latched=True),
