@@ -271,3 +271,86 @@ def test_what_the_plant_reports_as_acted_replaces_the_answer():
     assert s.kicks[6] == (6 * s.p.period + 2.0, 2e-4)
     s.set_correction(7, 5e-4, 2.0)         # an answer in time stands
     assert s.kicks[7][1] == 5e-4
+
+
+#: The time from the controlled orbit's impact to the next section at Delta d = -5e-6
+#: (the exact flow: the impact falls 2.36 before t_k): an answer lead longer than it
+#: leaves the impact after the last sample a section's estimate sees.
+IMPACT_TO_SECTION = 2.358
+
+
+@pytest.mark.parametrize("lead", [0.5, 2.95, 5.0])
+def test_a_lead_past_the_impact_leaves_the_model_filter_running(lead):
+    """An answer lead of 2.95 (a rig's budget - w/2 at delay 3) or 5 leaves the impact
+    of every period between the last sample of a section's estimate and t_k. The arc
+    fit that starts the model filter used to extrapolate the free flow through the
+    wall there (errors ~2.5e-2, a reset at every section, every estimate an arc fit);
+    carried through the impact by the exact flow it starts the filter, which then
+    predicts through the impact itself: no reset, the errors those of the noise."""
+    p = P
+    g = _gains(p, -0.3, 3.0)
+    z = orbit_11(p, g).pi2_deviation
+    sensor = SensorModel(noise=1e-4, velocity=False, seed=5)
+    est = StreamEstimator(p, "model", 1e-4, "stream", p.period / 200, lead=lead)
+    run = simulate_stream(p, g, sensor.measure, 200, 200, deviation=z, stream_estimator=est)
+    e = (run.estimate - run.truth)[20:]
+    assert run.resets == 0
+    assert np.sqrt(np.mean(e ** 2)) < 3e-5
+    assert np.all(run.impacts_per_period[20:] == 1)
+
+
+def test_an_arc_carried_through_an_impact_no_sample_saw_is_the_exact_state():
+    """Differential, 40 seeded random starts near the orbit: the samples of the exact
+    motion (sigma 1e-9) up to 2.95 before t_1, the impact after the last of them; the
+    arc estimator's state at t_1 is the exact flow's (trajectory's end) to 1e-7, where
+    the arc's own free flow to t_1 is off by more than 1e-4 (through the wall)."""
+    from grazing_control.dynamics.estimation.motion import trajectory
+    from grazing_control.dynamics.estimation.section_state import arc_fit, deviation_samples
+
+    p = P
+    z_orbit = orbit_11(p, _gains(p, -0.3)).pi2_deviation
+    rng = np.random.default_rng(11)
+    h = p.period / 200
+    lead = 2.95
+    checked = 0
+    for _ in range(40):
+        z0 = np.array(z_orbit) + rng.normal(0.0, 2e-5, 2)
+        s = np.arange(1, 201) * h                       # samples after t_0, up to t_1
+        z, _jac, end, _m, imps = trajectory(p, z0, s)
+        if not imps or not p.period - imps[-1][0] < lead:
+            continue                                    # no impact in the lead's gap
+        psi = p.tau2 + p.omega * s - p.lag
+        x = p.amplitude * np.cos(psi) + z[:, 0]
+        est = StreamEstimator(p, "arc", 1e-9, "stream", h, lead=lead)
+        est.add_sample(0.0, p.amplitude * math.cos(p.tau2 - p.lag) + z0[0])
+        due = [d for ti, xi in zip(s, x) for d in est.add_sample(ti, xi)]
+        (k, _tk, e1), = [d for d in due if d[0] == 1]
+        assert e1.source == "arc"
+        assert np.allclose(e1.z, end, rtol=0.0, atol=1e-7)
+        # the arc's free flow to t_1 from the same samples: through the wall
+        seen = s + h + lead < p.period + 1e-9
+        used = s[seen] - p.period
+        y, w = deviation_samples(p, used, x[seen], np.full(used.size, np.nan),
+                                 tau_start=p.tau2)
+        after = used > imps[-2][0] - p.period if len(imps) > 1 else np.ones(used.size, bool)
+        free = arc_fit(p, used[after], y[after], w[after], 1e-9)
+        assert np.max(np.abs(np.array(free.z) - end)) > 1e-4
+        checked += 1
+    assert checked >= 20
+
+
+def test_carry_is_the_trajectory_of_a_period():
+    """:func:`carry` from the section over a period with the correction's kick at the
+    delay is :func:`trajectory`'s end and monodromy (to rounding), over 30 seeded
+    starts, impacting or not."""
+    from grazing_control.dynamics.estimation.motion import carry, trajectory
+
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        z0 = np.array(orbit_11(P, _gains(P, -0.3)).pi2_deviation) + rng.normal(0, 1e-3, 2)
+        dv, delay = rng.normal(0, 1e-3), rng.uniform(0.1, 9.0)
+        _z, _j, end, mono, imps = trajectory(P, z0, [], dv, delay)
+        z, m, impacts = carry(P, z0, 0.0, P.period, [(delay, dv)])
+        assert len(impacts) == len(imps)
+        assert np.allclose(z, end, rtol=0.0, atol=1e-12)
+        assert np.allclose(m, mono, rtol=1e-9, atol=1e-12)

@@ -33,7 +33,7 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.simulation.actuation import pulse_force, pulse_start
 
 __all__ = ["phi_rows", "correction_legs", "actuator_legs", "trajectory", "actuated_trajectory",
-           "trajectory_end", "section_force", "modal_flow", "modal_transitions",
+           "trajectory_end", "carry", "section_force", "modal_flow", "modal_transitions",
            "modal_trajectory", "modal_actuated_trajectory"]
 
 TWO_PI = 2.0 * math.pi
@@ -237,6 +237,40 @@ def trajectory_end(p: OscillatorParams, z0, correction: float = 0.0, delay: floa
             raise ValueError("the model's motion sticks to the wall: no fit")
         z = (seg.dx + force if force else seg.dx, seg.dv)
     return z
+
+
+def carry(p: OscillatorParams, z, start: float, duration: float, kicks=(), *,
+          kernel: bool = False) -> tuple:
+    """The exact motion of the deviation ``z`` at time ``start`` after a section (the
+    forcing phase tau2 + omega start) over ``duration``, with the known velocity
+    ``kicks`` ((time after the section, dv) pairs; those in (start, start + duration]
+    act): (end, monodromy d end / d z, impacts), the flow and the saltation matrices of
+    :func:`trajectory` (E3) between the kicks. An arc fit's state at its last sample
+    carried to the section through an impact that no sample saw
+    (:meth:`grazing_control.dynamics.estimation.stream.StreamEstimator`, an answer
+    lead longer than the time from the impact to the section; docs/theory_estimation.md,
+    (E2''))."""
+    flow = _kernel.advance if kernel else advance
+    stop = start + duration
+    legs = sorted((at, dv) for at, dv in kicks if start < at <= stop and dv != 0.0)
+    z = (float(z[0]), float(z[1]))
+    m = np.eye(2)
+    g = np.zeros(2)
+    impacts = []
+    t = start
+    for at, dv in legs + [(stop, 0.0)]:
+        seg = flow(p, (p.tau2 + p.omega * t) % TWO_PI, z[0], z[1], at - t)
+        t0 = 0.0
+        for imp in seg.impacts:
+            if imp.sticking:
+                raise ValueError("the model's motion sticks to the wall: no carry")
+            m, g = _through_impact(p, p, m, g, imp.dt - t0, imp, False)
+            t0 = imp.dt
+            impacts.append((t + imp.dt, imp.phase, imp.v_minus, imp.v_plus))
+        m = np.array(transition_matrix(p.zeta, at - t - t0)).reshape(2, 2) @ m
+        z = (seg.dx, seg.dv + dv)
+        t = at
+    return z, m, impacts
 
 
 _NO_ROWS = np.zeros((0, 2))

@@ -40,7 +40,8 @@ from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from grazing_control.dynamics.estimation.section_state import (
     CHI2_SIGMAS, ESTIMATORS, Estimate, FilterState, arc_fit, deviation_samples,
     detect_impact, model_update, nearest_estimate, unkick)
-from grazing_control.dynamics.estimation.motion import section_force, trajectory, trajectory_end
+from grazing_control.dynamics.estimation.motion import (carry, section_force, trajectory,
+                                                         trajectory_end)
 
 __all__ = ["IMPACT_SOURCES", "StreamEstimator", "StreamRun", "simulate_stream", "predict_section",
            "pulse_shape", "warm_up"]
@@ -342,7 +343,13 @@ class StreamEstimator:
         return [(at - tk, dv) for j, (at, dv) in self.kicks.items() if j < k]
 
     def _arc(self, k: int):
-        """The arc fit over the samples since the last impact (topic or detected)."""
+        """The arc fit over the samples since the last impact (topic or detected),
+        carried to t_k through an impact after its last sample (:meth:`_carried`).
+
+        The split test looks for that impact over the last period of samples: with an
+        answer lead, the one that ended ``lead`` before t_k, so that an impact that fell
+        after the last sample of section k - 1's arc is found among section k's samples.
+        """
         p, T = self.p, self.p.period
         tk = k * T
         s, x, v = self._window(k, tk - 2.0 * T)
@@ -352,7 +359,7 @@ class StreamEstimator:
         kicks = self._kicks(k)
         if self.impact_source == "stream":
             ya, _wa = unkick(p, s, y, w, kicks)
-            recent = s > -T - _TOL * T
+            recent = s > -T - self.lead - _TOL * T
             hit = detect_impact(p, s[recent] + T, ya[recent], self.sigma)
             if hit is not None:
                 t_hit = hit - T + tk
@@ -363,7 +370,30 @@ class StreamEstimator:
         measured = keep.sum() + np.isfinite(w[keep]).sum()
         if measured < 2:
             return None
-        return arc_fit(p, s[keep], y[keep], w[keep], self.sigma, 0.0, kicks)
+        est = arc_fit(p, s[keep], y[keep], w[keep], self.sigma, 0.0, kicks)
+        return self._carried(s[keep], y[keep], w[keep], kicks) or est
+
+    def _carried(self, s, y, w, kicks):
+        """The arc's state at its last sample s_m carried to t_k by the exact flow
+        (:func:`~grazing_control.dynamics.estimation.motion.carry`), where the mass
+        reaches the wall in between: the arc's free flow to t_k would pass through the
+        wall (docs/theory_estimation.md, (E2'')). The kicks after s_m act in the carry,
+        not in the fit. None where no impact falls between s_m and t_k (the arc fit at
+        t_k itself is the estimate) or the arc cannot be fitted at s_m."""
+        end = float(s[-1])
+        if not end < -_TOL * self.p.period:
+            return None
+        before = [(at, dv) for at, dv in kicks if at <= end]
+        after = [(at, dv) for at, dv in kicks if at > end]
+        try:
+            at_end = arc_fit(self.p, s, y, w, self.sigma, end, before)
+            z, m, impacts = carry(self.p, at_end.z, end, -end, after, kernel=self.kernel)
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError):
+            return None
+        if not impacts:
+            return None
+        cov = m @ at_end.cov @ m.T
+        return Estimate((float(z[0]), float(z[1])), 0.5 * (cov + cov.T), "arc")
 
     def _model(self, k: int):
         """One period of the model filter from section k - 1 (None: start or reset)."""
