@@ -1,0 +1,154 @@
+"""Each deadline miss of the T/200 scene beside the machine's own stops at that instant
+(issue 30).
+
+``bench_machine_stalls.py`` counts how often this machine stops a process with nothing
+of the package running; this script asks whether the misses that are left in the
+realtime T/200 scene are those stops. While ``--reps`` scenes of ``bench_stream_blocks``
+run (``--variant``, default block+fifo; ``--answer-lead``), one monitor per CPU, pinned
+to it and under SCHED_FIFO 99 (above the scene's nodes at 50, so that they cannot delay
+it), sleeps 1 ms at a time and writes down every wake-up more than ``--stop`` ms
+(default 1.5) later than asked: an instant when that CPU ran nothing, not even a thread
+at the highest priority (the hypervisor held the virtual CPU, or the kernel ran with
+interrupts off). Each monitor costs about 1 % of its CPU.
+
+Each missed section (the scene's bag, ``oscillator/deadline_miss``: k, its actuation
+time and how long after its sample went out it was declared, logged at the recorder's
+reception, wall clock) is printed with the stops that began in the ``--window`` ms
+(default 12: longer than the answer's whole budget) before it was logged, on either CPU.
+A miss without one is the scene's own.
+
+Run: ``.venv/bin/python benchmarks/misses_vs_stops.py --reps 3`` (about 45 s a scene).
+Results in docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+
+import bench_stream_blocks as scenes  # noqa: E402
+
+#: One monitor: pinned to CPU argv[1], SCHED_FIFO 99, a line "<wall ns> <late ns>" to
+#: argv[3] for every wake-up more than argv[2] ns late, until its stdin closes.
+MONITOR = r"""
+import os, select, sys, time
+cpu, limit, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+os.sched_setaffinity(0, {cpu})
+os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(99))
+poll = select.poll(); poll.register(sys.stdin.fileno(), select.POLLIN | select.POLLHUP)
+with open(out, "w", buffering=1) as f:
+    while True:
+        t0 = time.monotonic_ns(); w0 = time.time_ns()
+        if poll.poll(1):          # 1 ms, or stdin closed: the end
+            break
+        late = time.monotonic_ns() - t0 - 1_000_000
+        if late > limit:
+            f.write(f"{w0} {late}\n")
+"""
+
+
+def monitors(tmp: Path, stop_ms: float):
+    """One monitor per CPU: (processes, their output files)."""
+    procs, files = [], []
+    for cpu in sorted(os.sched_getaffinity(0)):
+        out = tmp / f"stops{cpu}.txt"
+        procs.append(subprocess.Popen(
+            [sys.executable, "-c", MONITOR, str(cpu), str(int(stop_ms * 1e6)), str(out)],
+            stdin=subprocess.PIPE))
+        files.append((cpu, out))
+    return procs, files
+
+
+def read_stops(files) -> list:
+    """(cpu, start wall ns, length ns) of every stop written."""
+    stops = []
+    for cpu, out in files:
+        if out.is_file():
+            for line in out.read_text().split("\n"):
+                if line:
+                    w, late = map(int, line.split())
+                    stops.append((cpu, w, late + 1_000_000))
+    return sorted(stops, key=lambda s: s[1])
+
+
+def read_misses(bag: Path) -> list:
+    """(k, actuation time, waited s, logged wall ns) of each miss in the scene's bag."""
+    from grazing_control.ros.recording import read_messages
+
+    if not bag.exists():
+        return []
+    return [(int(m.message.vector.x), m.message.vector.y, m.message.vector.z, m.log_time_ns)
+            for m in read_messages(bag, ["/oscillator/deadline_miss"])]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--periods", type=int, default=3000)
+    ap.add_argument("--enable-after", type=int, default=1000)
+    ap.add_argument("--variant", default="block+fifo", choices=scenes.VARIANTS)
+    ap.add_argument("--answer-lead", type=float, default=0.0)
+    ap.add_argument("--stop", type=float, default=1.5,
+                    help="ms a monitor's wake-up must be late to count as a stop")
+    ap.add_argument("--window", type=float, default=12.0,
+                    help="ms before a miss was logged in which its stops are looked for")
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="keep each scene's bag, logs and stops under this directory")
+    args = ap.parse_args(argv)
+    if os.geteuid() != 0:
+        ap.error("the monitors run under SCHED_FIFO 99: run as root")
+    print(f"{args.reps} scenes of {args.periods} periods ({args.variant}, answer_lead "
+          f"{args.answer_lead:g}), monitors on CPUs {sorted(os.sched_getaffinity(0))} "
+          f"(stops > {args.stop:g} ms), load "
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    explained = total = 0
+    with tempfile.TemporaryDirectory(prefix="misses_vs_stops_") as tmp:
+        tmp = Path(tmp) if args.keep is None else args.keep
+        tmp.mkdir(parents=True, exist_ok=True)
+        controller = scenes.design(tmp)
+        for rep in range(args.reps):
+            one = tmp / f"scene{rep}"
+            one.mkdir()
+            procs, files = monitors(one, args.stop)
+            t0 = time.time_ns()
+            try:
+                r = scenes.scene(args.variant, controller, args.periods, args.enable_after,
+                                 1000.0, one, args.answer_lead)
+            finally:
+                for p in procs:
+                    p.stdin.close()
+                for p in procs:
+                    p.wait(timeout=10)
+            seconds = (time.time_ns() - t0) * 1e-9
+            stops = read_stops(files)
+            misses = read_misses(one / "bag")
+            long2 = sum(1 for s in stops if s[2] > 2e6)
+            print(f"\nscene {rep}: {r.get('missed')} missed, {r.get('late')} late; "
+                  f"{len(stops)} stops over {args.stop:g} ms in {seconds:.0f} s "
+                  f"({long2} over 2 ms, longest "
+                  f"{max((s[2] for s in stops), default=0) * 1e-6:.2f} ms)", flush=True)
+            for k, t, waited, logged in misses:
+                near = [s for s in stops
+                        if logged - args.window * 1e6 <= s[1] <= logged + 0.5e6]
+                total += 1
+                explained += bool(near)
+                what = ", ".join(f"CPU {c} {(w - logged) * 1e-6:+.2f} ms for {n * 1e-6:.2f} ms"
+                                 for c, w, n in near) or "none"
+                print(f"  section {k} (logged {logged * 1e-9:.6f}): declared "
+                      f"{waited * 1e3:.2f} ms after its sample went out; stops before it: "
+                      f"{what}", flush=True)
+    print(f"\n{explained} of {total} misses with a stop of the machine in the "
+          f"{args.window:g} ms before them")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
