@@ -831,6 +831,62 @@ def test_before_the_control_is_on_a_stream_section_is_answered_before_its_estima
     assert answers[True][on - 1][3] != 0.0 and answers[True][on][2] != 0.0
 
 
+def test_a_stream_controller_says_once_when_its_lead_reaches_past_an_impact():
+    """With answer_lead 5 the impact of every period falls after the last sample a
+    section's estimate sees: the rebound comes from the model alone
+    (docs/theory_estimation.md (E2'')), and the controller says so once, with the lead;
+    with 0.5 it stops short of the impact and says nothing."""
+    import rclpy
+    from rclpy.context import Context
+
+    from grazing_control.dynamics.estimation.motion import trajectory
+    from grazing_control.ros.controller_node import ControllerNode
+
+    p, rate, periods = OscillatorParams(delta_d=-5e-6), 50, 8
+    h = p.period / rate
+    g = Gains(degenerate_c1(p, -0.3), -0.3)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    said = {}
+    try:
+        for lead in (5.0, 0.5):
+            node = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in (
+                    ("c1", g.c1), ("c2", g.c2), ("delta_d", p.delta_d),
+                    ("pi2_source", "stream"), ("estimator", "model"),
+                    ("sensor_noise", 1e-4), ("state_period", h), ("answer_lead", lead))])
+            try:
+                lines = said[lead] = []
+
+                class Log:
+                    def __getattr__(self, name, lines=lines):
+                        return lambda text, *a, **k: lines.append((name, text))
+
+                node.get_logger = Log
+                got = []
+                node.pub.publish = lambda data, got=got: got.append(
+                    cdr.read_twist_stamped(data))
+                z = (2e-4, -1e-4)
+                node.add_stream_sample(0.0, p.x_ref + z[0], p.v_ref + z[1])
+                for k in range(periods):
+                    dv = next((a[2] for a in got if a[:2] == cdr.stamp_parts(k * p.period)),
+                              0.0)
+                    s = np.arange(1, rate + 1) * h
+                    dev, _jac, z, _m, _imps = trajectory(p, z, s, dv, 0.0)
+                    psi = p.tau2 + p.omega * s - p.lag
+                    for j in range(rate):
+                        node.add_stream_sample(
+                            k * p.period + s[j], p.amplitude * math.cos(psi[j]) + dev[j, 0],
+                            -p.amplitude * p.omega * math.sin(psi[j]) + dev[j, 1])
+                assert len(got) == periods + 1
+            finally:
+                node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    past = [t for n, t in said[5.0] if "reaches past an impact" in t]
+    assert len(past) == 1 and "answer_lead=5.0" in past[0] and said[5.0][0][0] == "warning"
+    assert not any("reaches past an impact" in t for _n, t in said[0.5])
+
 def test_early_answers_are_the_estimate_first_answers_on_hostile_streams():
     """The early answers (before the control is on) against the estimate-first path on
     300 seeded hostile streams fed to both controllers alike: samples lost, repeated,

@@ -297,6 +297,8 @@ def test_a_lead_past_the_impact_leaves_the_model_filter_running(lead):
     assert run.resets == 0
     assert np.sqrt(np.mean(e ** 2)) < 3e-5
     assert np.all(run.impacts_per_period[20:] == 1)
+    # the arc that started the filter was carried through the impact (past it) or not
+    assert (est.unseen_impacts > 0) == (lead > IMPACT_TO_SECTION)
 
 
 def test_an_arc_carried_through_an_impact_no_sample_saw_is_the_exact_state():

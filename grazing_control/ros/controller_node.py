@@ -306,6 +306,7 @@ class ControllerNode(Node):
         self.phase_mismatch = Throttled(log, "stream phase reference off")
         self.mismatch_log = Throttled(log, "consistency test failed")
         self.answered = 0
+        self.warned_unseen = False       # the answer lead's unseen rebound, said once
         self.prediction = math.nan       # the last answer's predicted next correction
         self.diagnostics = Updater(self, self.get_parameter("diagnostics_period").value)
         self.diagnostics.add("controller", self._diagnose)
@@ -542,6 +543,12 @@ class ControllerNode(Node):
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.malformed(f"stamp {cdr.stamp_parts(t)}: the estimator failed: {exc}")
             return
+        if self.stream.unseen_impacts and not self.warned_unseen:
+            self.warned_unseen = True
+            self.get_logger().warning(
+                f"answer_lead={self.stream.lead!r} reaches past an impact: no sample of "
+                "its section saw the rebound, which comes from the model's impact law "
+                "alone (an identified r; docs/theory_estimation.md (E2''))")
         for k, tk, est in due:
             key = cdr.stamp_parts(tk)
             if self.ndof is not None:

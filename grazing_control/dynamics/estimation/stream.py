@@ -176,6 +176,8 @@ class StreamEstimator:
         self.filter = None              # FilterState at section filter_k
         self.filter_k = None
         self.resets = 0                 # model fits that fell back to the arc fit
+        self.unseen_impacts = 0         # arc estimates carried through an impact after
+        #                                 their last sample (an answer lead past it, (E2''))
         self.last_t = None
         self.ignored = 0                # samples not used: duplicates, older, strays
         self._jump = None               # a sample far ahead, kept until confirmed
@@ -392,6 +394,7 @@ class StreamEstimator:
             return None
         if not impacts:
             return None
+        self.unseen_impacts += 1
         cov = m @ at_end.cov @ m.T
         return Estimate((float(z[0]), float(z[1])), 0.5 * (cov + cov.T), "arc")
 
