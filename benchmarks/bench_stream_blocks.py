@@ -29,7 +29,9 @@ putting that checkout on the nodes' PYTHONPATH), the two alternating scene by sc
 (rows ``base:<variant>``).
 
 Run: ``.venv/bin/python benchmarks/bench_stream_blocks.py --reps 2`` (about 40 s a scene).
-Results in docs/benchmarks.md ("The stream in blocks").
+As a rig controller answers (``answer_lead`` = the budget less half the pulse, 3 - 0.1/2,
+under SCHED_FIFO, in blocks): ``--variants block+fifo --answer-lead 2.95``.
+Results in docs/benchmarks.md ("The stream in blocks", "T/200's misses").
 """
 
 from __future__ import annotations
