@@ -765,6 +765,27 @@ def test_an_absurd_gain_is_refused_even_when_changes_are_allowed(controller):
         "c2 out of range Min: -1000000.0, Max: 1000000.0" in result.reason
 
 
+def _feed_exact_stream(node, p, got, periods: int, rate: int) -> None:
+    """The exact motion from the deviation (2e-4, -1e-4) at t = 0 as a stream of ``rate``
+    samples a period (position and velocity) into the stream controller ``node``, for
+    ``periods`` periods, each period's kick the answer in ``got`` to its section (0
+    while none)."""
+    from grazing_control.dynamics.estimation.motion import trajectory
+
+    h = p.period / rate
+    z = (2e-4, -1e-4)
+    node.add_stream_sample(0.0, p.x_ref + z[0], p.v_ref + z[1])
+    for k in range(periods):
+        dv = next((a[2] for a in got if a[:2] == cdr.stamp_parts(k * p.period)), 0.0)
+        s = np.arange(1, rate + 1) * h
+        dev, _jac, z, _m, _imps = trajectory(p, z, s, dv, 0.0)
+        psi = p.tau2 + p.omega * s - p.lag
+        for j in range(rate):
+            node.add_stream_sample(
+                k * p.period + s[j], p.amplitude * math.cos(psi[j]) + dev[j, 0],
+                -p.amplitude * p.omega * math.sin(psi[j]) + dev[j, 1])
+
+
 def test_before_the_control_is_on_a_stream_section_is_answered_before_its_estimate():
     """While the control is off for a section and the next one, the answer (0, predicting
     0) does not depend on the estimate, so a stream controller gives it as the section
@@ -775,7 +796,6 @@ def test_before_the_control_is_on_a_stream_section_is_answered_before_its_estima
     import rclpy
     from rclpy.context import Context
 
-    from grazing_control.dynamics.estimation.motion import trajectory
     from grazing_control.ros.controller_node import ControllerNode
 
     p, on, rate, periods = OscillatorParams(delta_d=-5e-6), 5, 50, 9
@@ -805,18 +825,7 @@ def test_before_the_control_is_on_a_stream_section_is_answered_before_its_estima
                 node.stream.estimate = timed
                 if not early:
                     node.stream.before_estimate = None
-                z, dv = (2e-4, -1e-4), 0.0
-                node.add_stream_sample(0.0, p.x_ref + z[0], p.v_ref + z[1])
-                for k in range(periods):
-                    dv = next((a[2] for a in got if a[:2] == cdr.stamp_parts(k * p.period)),
-                              0.0)
-                    s = np.arange(1, rate + 1) * h
-                    dev, _jac, z, _m, _imps = trajectory(p, z, s, dv, 0.0)
-                    psi = p.tau2 + p.omega * s - p.lag
-                    for j in range(rate):
-                        node.add_stream_sample(
-                            k * p.period + s[j], p.amplitude * math.cos(psi[j]) + dev[j, 0],
-                            -p.amplitude * p.omega * math.sin(psi[j]) + dev[j, 1])
+                _feed_exact_stream(node, p, got, periods, rate)
             finally:
                 node.destroy_node()
     finally:
@@ -839,7 +848,6 @@ def test_a_stream_controller_says_once_when_its_lead_reaches_past_an_impact():
     import rclpy
     from rclpy.context import Context
 
-    from grazing_control.dynamics.estimation.motion import trajectory
     from grazing_control.ros.controller_node import ControllerNode
 
     p, rate, periods = OscillatorParams(delta_d=-5e-6), 50, 8
@@ -866,18 +874,7 @@ def test_a_stream_controller_says_once_when_its_lead_reaches_past_an_impact():
                 got = []
                 node.pub.publish = lambda data, got=got: got.append(
                     cdr.read_twist_stamped(data))
-                z = (2e-4, -1e-4)
-                node.add_stream_sample(0.0, p.x_ref + z[0], p.v_ref + z[1])
-                for k in range(periods):
-                    dv = next((a[2] for a in got if a[:2] == cdr.stamp_parts(k * p.period)),
-                              0.0)
-                    s = np.arange(1, rate + 1) * h
-                    dev, _jac, z, _m, _imps = trajectory(p, z, s, dv, 0.0)
-                    psi = p.tau2 + p.omega * s - p.lag
-                    for j in range(rate):
-                        node.add_stream_sample(
-                            k * p.period + s[j], p.amplitude * math.cos(psi[j]) + dev[j, 0],
-                            -p.amplitude * p.omega * math.sin(psi[j]) + dev[j, 1])
+                _feed_exact_stream(node, p, got, periods, rate)
                 assert len(got) == periods + 1
             finally:
                 node.destroy_node()
