@@ -372,8 +372,8 @@ class StreamEstimator:
         measured = keep.sum() + np.isfinite(w[keep]).sum()
         if measured < 2:
             return None
-        est = arc_fit(p, s[keep], y[keep], w[keep], self.sigma, 0.0, kicks)
-        return self._carried(s[keep], y[keep], w[keep], kicks) or est
+        return (self._carried(s[keep], y[keep], w[keep], kicks)
+                or arc_fit(p, s[keep], y[keep], w[keep], self.sigma, 0.0, kicks))
 
     def _carried(self, s, y, w, kicks):
         """The arc's state at its last sample s_m carried to t_k by the exact flow
