@@ -121,7 +121,8 @@ from .controller_values import (ControlLaw, actuation_delay_from_values,
                                 capture_from_values, law_from_values, model_capture_from_values,
                                 model_controller_from_values, model_from_values,
                                 model_stream_from_values, predicted_correction,
-                                pulse_from_values, stream_from_values, warm_up_kernel)
+                                pulse_from_values, stream_from_values, unseen_rebound,
+                                warm_up_kernel)
 from .controller_status import diagnose
 from .diagnostics import Updater
 from .matching import MatchReport
@@ -545,10 +546,7 @@ class ControllerNode(Node):
             return
         if self.stream.unseen_impacts and not self.warned_unseen:
             self.warned_unseen = True
-            self.get_logger().warning(
-                f"answer_lead={self.stream.lead!r} reaches past an impact: no sample of "
-                "its section saw the rebound, which comes from the model's impact law "
-                "alone (an identified r; docs/theory_estimation.md (E2''))")
+            self.get_logger().warning(unseen_rebound(self.stream.lead))
         for k, tk, est in due:
             key = cdr.stamp_parts(tk)
             if self.ndof is not None:

@@ -51,7 +51,8 @@ __all__ = ["ControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
            "capture_from_values", "model_capture_from_values",
            "actuation_delay_from_values", "below_period", "model_omega",
            "ModelController", "model_controller_from_values", "model_stream_from_values",
-           "gain_vector_correction", "predicted_correction", "warm_up_kernel", "ONE_DOF_DEFAULTS"]
+           "gain_vector_correction", "predicted_correction", "warm_up_kernel", "ONE_DOF_DEFAULTS",
+           "unseen_rebound"]
 
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
@@ -307,6 +308,13 @@ def stream_from_values(values: dict, model, pulse: tuple = (0.0, math.inf)):
                            values.get("answer_lead", 0.0), pulse_width=pulse[0],
                            force_limit=pulse[1], actuator=act)
 
+
+def unseen_rebound(lead: float) -> str:
+    """The warning of a stream controller whose answer ``lead`` reached past an impact
+    (StreamEstimator.unseen_impacts, docs/theory_estimation.md (E2''))."""
+    return (f"answer_lead={lead!r} reaches past an impact: no sample of its section saw "
+            "the rebound, which comes from the model's impact law alone (an identified r; "
+            "docs/theory_estimation.md (E2''))")
 
 def pulse_from_values(values: dict, omega: float, delay: float) -> tuple:
     """(width, force limit, actuator or None) of the plant's corrections from the
