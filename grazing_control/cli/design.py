@@ -183,6 +183,10 @@ def _study_design(args):
         lines.append(f"  position only      = {'none' if pos is None else f'{pos:.4g}'}"
                      f"  (a position sensor at {sensor['samples_per_period']} samples per "
                      f"period, {sensor['estimator']} estimator, per unit sigma)")
+        exact = noise.get("noise_gain_position_only_exact_plant")
+        if exact is not None:
+            lines.append(f"    on an exact plant = {exact:.4g}  (the model right, no process "
+                         "noise: the filter's floor not in the plant, E7')")
     if tuned is not None:
         study = tuned["study_noise_gain"]
         lines.append(f"  optimised          : least noise gain in {_fmt_intervals([tuned['interval']])}"
@@ -302,9 +306,15 @@ def _noise_report(args, p, point):
         r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator,
                                 lead=args.sensor_lead)
         pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
+        exact = math.inf
+        if args.estimator == "model":
+            r = estimate_covariance(q, g, args.sensor_rate, lead=args.sensor_lead,
+                                    exact_plant=True)
+            exact = design_noise_gain(q, point.c2, point.delay, measurement=r)
     except (OrbitNotFound, ValueError, ArithmeticError):
-        pos = math.inf
+        pos = exact = math.inf
     out.update(noise_gain_position_only=pos if math.isfinite(pos) else None,
+               noise_gain_position_only_exact_plant=exact if math.isfinite(exact) else None,
                position_only_sensor={"samples_per_period": args.sensor_rate,
                                      "estimator": args.estimator,
                                      "lead": args.sensor_lead})

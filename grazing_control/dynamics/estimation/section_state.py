@@ -415,7 +415,7 @@ def _line_search(linearised, z, step, t, cost, z_prior, info_prior, inv_var):
 def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str = "model",
                         velocity: bool = False, floor: float = 1e-2, target=None,
                         periods: int = 400, lead: float = 0.0, width: float = 0.0,
-                        force_limit: float = math.inf) -> np.ndarray:
+                        force_limit: float = math.inf, exact_plant: bool = False) -> np.ndarray:
     """The Pi2 estimate's error covariance per unit sigma^2 on the controlled 1/1 orbit
     (2x2), for a sensor at ``rate`` samples per period (position only unless
     ``velocity``): the design's measurement covariance R for
@@ -431,6 +431,13 @@ def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str
     estimator's ``lead``, a rig controller's answer_lead): the samples after the one
     that makes the section due are never used (model, arc). ``width``: the corrections
     act as force pulses of that width (:func:`trajectory`).
+
+    ``exact_plant`` (model): the covariance of the errors the same filter, tuned with
+    the floor, makes on a plant its model describes exactly (no process noise), in place
+    of the one it reports: with the fixed point's gain K = (P^-1 + H^T H)^-1 H^T, the
+    fixed point of S = M ((I - K H) S (I - K H)^T + K K^T) M^T (E7'). Where the floor is
+    carried through an impact no sample sees (an answer lead past it, (E2'')) the
+    reported covariance is several times this one.
     """
     if estimator not in ESTIMATORS:
         raise ParameterError(f"estimator={estimator!r} is invalid: valid values are "
@@ -470,4 +477,15 @@ def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str
         cov = 0.5 * (new + new.T)
         if done:
             break
-    return cov
+    if not exact_plant:
+        return cov
+    gain = np.linalg.inv(np.linalg.inv(cov) + info_data) @ hm.T
+    keep = np.eye(2) - gain @ hm
+    errors = cov
+    for _ in range(periods):
+        new = mono @ (keep @ errors @ keep.T + gain @ gain.T) @ mono.T
+        done = np.allclose(new, errors, rtol=1e-10, atol=0.0)
+        errors = 0.5 * (new + new.T)
+        if done:
+            break
+    return errors
