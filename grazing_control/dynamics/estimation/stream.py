@@ -381,9 +381,12 @@ class StreamEstimator:
         reaches the wall in between: the arc's free flow to t_k would pass through the
         wall (docs/theory_estimation.md, (E2'')). The kicks after s_m act in the carry,
         not in the fit. None where no impact falls between s_m and t_k (the arc fit at
-        t_k itself is the estimate) or the arc cannot be fitted at s_m."""
+        t_k itself is the estimate) or the arc cannot be fitted at s_m, and without an
+        answer lead: its unsampled stretch is under one sample period, and the carry's
+        second fit and flow would cost every arc estimate ~0.1 ms (the section after a
+        start or a reset, on the answer's path)."""
         end = float(s[-1])
-        if not end < -_TOL * self.p.period:
+        if not (self.lead > 0.0 and end < -_TOL * self.p.period):
             return None
         before = [(at, dv) for at, dv in kicks if at <= end]
         after = [(at, dv) for at, dv in kicks if at > end]
