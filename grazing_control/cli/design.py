@@ -290,7 +290,7 @@ def _noise_report(args, p, point):
 
     from grazing_control.dynamics.design.gains import degenerate_c1
     from grazing_control.dynamics.estimation.section_state import estimate_covariance
-    from grazing_control.dynamics.orbits.orbits import OrbitNotFound
+    from grazing_control.dynamics.orbits.orbits import OrbitNotFound, orbit_11
 
     dd = _noise_delta_d(args)
     q = p.with_(delta_d=dd)
@@ -303,13 +303,15 @@ def _noise_report(args, p, point):
     # sigma^2 of the chosen estimator at --sensor-rate samples per period (E7)
     try:
         g = Gains(degenerate_c1(q, point.c2, point.delay), point.c2, point.delay)
+        # the controlled orbit once for the reported and the exact-plant covariance
+        target = None if args.estimator == "nearest" else orbit_11(q, g).pi2_deviation
         r = estimate_covariance(q, g, args.sensor_rate, estimator=args.estimator,
-                                lead=args.sensor_lead)
+                                lead=args.sensor_lead, target=target)
         pos = design_noise_gain(q, point.c2, point.delay, measurement=r)
         exact = math.inf
         if args.estimator == "model":
             r = estimate_covariance(q, g, args.sensor_rate, lead=args.sensor_lead,
-                                    exact_plant=True)
+                                    target=target, exact_plant=True)
             exact = design_noise_gain(q, point.c2, point.delay, measurement=r)
     except (OrbitNotFound, ValueError, ArithmeticError):
         pos = exact = math.inf

@@ -544,7 +544,7 @@ class ControllerNode(Node):
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.malformed(f"stamp {cdr.stamp_parts(t)}: the estimator failed: {exc}")
             return
-        if self.stream.unseen_impacts and not self.warned_unseen:
+        if due and self.stream.unseen_impacts and not self.warned_unseen:
             self.warned_unseen = True
             self.get_logger().warning(unseen_rebound(self.stream.lead))
         for k, tk, est in due:
