@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
-from mcap.writer import CompressionType
 
 
 #: ROS 2 distribution written to ``metadata.yaml`` and the MCAP metadata.
@@ -32,12 +31,6 @@ DEFAULT_CHUNK_SIZE = 256 * 1024
 
 #: Line between the definitions of a ``ros2msg`` schema (rosbag2 convention).
 SCHEMA_SEPARATOR = "=" * 80
-
-_COMPRESSION_TYPES = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
 
 _PRIMITIVE_TYPES = frozenset(
     "bool byte char float32 float64 int8 uint8 int16 uint16 int32 uint32 "
