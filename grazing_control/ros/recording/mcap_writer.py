@@ -28,7 +28,10 @@ from mcap.data_stream import RecordBuilder
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata,
                           MetadataIndex, Schema, Statistics, SummaryOffset)
 from mcap.opcode import Opcode
-from mcap.writer import MCAP0_MAGIC
+
+#: The magic at the start and the end of an MCAP file (not imported from ``mcap.writer``,
+#: whose import takes 26 ms, most of it importlib.metadata's, on a node's start-up)
+MCAP0_MAGIC = b"\x89MCAP0\r\n"
 
 _MESSAGE_OPCODE = int(Opcode.MESSAGE)
 _MESSAGE = struct.Struct("<BQHIQQ")     # opcode, length, channel, sequence, log, publish

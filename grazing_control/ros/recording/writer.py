@@ -343,9 +343,8 @@ class BagWriter:
 
 
 def _library_identifier() -> str:
-    """The Header's ``library``: this writer, and the ``mcap`` release whose records it uses."""
-    from mcap.writer import __version__
-    return f"grazing_control.ros.recording (mcap records {__version__})"
+    """The Header's ``library``: this writer (mcap_writer.McapWriter)."""
+    return "grazing_control.ros.recording"
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
