@@ -387,3 +387,32 @@ def test_the_exact_plant_covariance_is_that_of_the_errors_on_an_exact_plant(lead
         assert np.allclose(reported, exact, rtol=0.1)
     else:
         assert np.all(reported > 4.0 * exact)
+
+
+def test_a_window_holds_exactly_the_kept_samples_in_its_interval():
+    """The estimator's sample store against a plain list filtered by brute force: seeded
+    random streams (irregular steps, drops of old samples, windows anywhere, the edges
+    exact sample times)."""
+    from grazing_control.dynamics.estimation.stream import _Samples
+
+    rng = np.random.default_rng(5)
+    for _ in range(100):
+        store, kept, t = _Samples(), [], 0.0
+        for _ in range(int(rng.integers(0, 1500))):
+            t += float(rng.choice([1e-3, rng.exponential(0.05)]))
+            x, v = float(rng.normal()), float(rng.choice([math.nan, rng.normal()]))
+            store.append(t, x, v)
+            kept.append((t, x, v))
+            if rng.random() < 0.3:
+                start = t - float(rng.exponential(2.0))
+                store.drop_before(start)
+                kept = [r for r in kept if not r[0] < start]
+            if rng.random() < 0.05 and kept:
+                edges = [r[0] for r in kept] + [t + 1.0, -1.0]
+                since, until = sorted(float(rng.choice(edges)) for _ in range(2))
+                want = [r for r in kept if since < r[0] <= until]
+                got = store.between(since, until)
+                np.testing.assert_array_equal(np.column_stack(got).reshape(-1, 3),
+                                              np.array(want).reshape(-1, 3))
+        assert bool(store) == bool(kept)
+        assert store.t[store.first:] == [r[0] for r in kept]
