@@ -374,6 +374,49 @@ def test_writer_refuses_misuse(tmp_path):
         bag.write("/clock", b"", 0)
 
 
+def test_a_write_refused_adds_nothing(tmp_path):
+    """Thousands of seeded writes, a third of them hostile (data that is not bytes, times
+    out of [0, 2**64), NaN, a sequence that is no number): each refused one raises an
+    error naming its parameter and leaves the bag as it was; the bag reads back exactly
+    the accepted messages, in order, and counts them."""
+    import math
+    import random
+
+    rng = random.Random(11)
+    bag = BagWriter(tmp_path / "fuzz", chunk_size=4096).open()
+    bag.add_topic("/clock", "rosgraph_msgs/msg/Clock")
+    bag.add_topic("/oscillator/impact", "geometry_msgs/msg/Vector3Stamped")
+    hostile = {
+        "data": ["text", None, 12, 3.5, ["b"]],
+        "log_time_ns": [-1, 2**64, 2**70, math.nan, math.inf, "soon", None],
+        "publish_time_ns": [-7, 2**64, math.nan, "x"],
+        "sequence": ["x", math.nan, None],
+    }
+    accepted = []
+    for i in range(3000):
+        topic = rng.choice(["/clock", "/oscillator/impact"])
+        args = {"data": rng.randbytes(rng.randrange(0, 64)), "log_time_ns": 10**18 + i,
+                "publish_time_ns": rng.choice([None, 10**18 + i - 5]),
+                "sequence": rng.randrange(0, 2**40)}
+        bad = rng.choice(list(hostile)) if rng.random() < 0.33 else None
+        if bad:
+            args[bad] = rng.choice(hostile[bad])
+            with pytest.raises((TypeError, ValueError), match=bad):
+                bag.write(topic, **args)
+        else:
+            bag.write(topic, **args)
+            accepted.append((topic, args["data"], args["log_time_ns"]))
+    counts = bag.message_counts
+    bag.close()
+    assert counts == {t: sum(1 for a in accepted if a[0] == t)
+                      for t in ("/clock", "/oscillator/impact")}
+    with open(bag_file(tmp_path / "fuzz"), "rb") as fh:
+        reader = SeekingReader(fh)
+        got = [(c.topic, bytes(m.data), m.log_time)
+               for _, c, m in reader.iter_messages(log_time_order=False)]
+    assert got == accepted
+
+
 def test_empty_bag_is_valid(tmp_path):
     with BagWriter(tmp_path / "empty") as bag:
         bag.add_topic("/clock", "rosgraph_msgs/msg/Clock")

@@ -108,12 +108,19 @@ class McapWriter:
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
                     sequence: int = 0) -> None:
-        """A Message record in the open chunk (the hot path: one pack, three appends)."""
+        """A Message record in the open chunk (the hot path: one pack, three appends).
+
+        A field out of its range (struct.error) or data that is not bytes-like
+        (TypeError) adds nothing: the chunk is as it was."""
         chunk = self._chunk
         offset = len(chunk)
         chunk += _MESSAGE.pack(_MESSAGE_OPCODE, _MESSAGE_BODY + len(data), channel_id,
                                sequence, log_time, publish_time)
-        chunk += data
+        try:
+            chunk += data
+        except TypeError:
+            del chunk[offset:]
+            raise
         index = self._index.get(channel_id)
         if index is None:
             index = self._index[channel_id] = []

@@ -8,6 +8,7 @@ its last complete chunk (docs/recording.md).
 
 
 import os
+import struct
 from pathlib import Path
 from typing import Any, Mapping, NamedTuple, Sequence
 
@@ -228,10 +229,14 @@ class BagWriter:
         channel_id = self._channel_ids.get(topic)
         if channel_id is None:
             raise ValueError(f"topic {topic} was not added to the bag")
-        log_time_ns = int(log_time_ns)
-        writer.add_message(channel_id, log_time_ns, data,
-                           log_time_ns if publish_time_ns is None else int(publish_time_ns),
-                           int(sequence) & 0xFFFFFFFF)
+        try:
+            log_ns = int(log_time_ns)
+            writer.add_message(channel_id, log_ns, data,
+                               log_ns if publish_time_ns is None else int(publish_time_ns),
+                               int(sequence) & 0xFFFFFFFF)
+        except (TypeError, ValueError, OverflowError, struct.error):
+            _check_message(data, log_time_ns, publish_time_ns, sequence)
+            raise
 
     @property
     def message_counts(self) -> dict[str, int]:
@@ -340,6 +345,25 @@ class BagWriter:
             state = "closed" if self._closed else "not opened"
             raise RuntimeError(f"bag {self.bag_dir} is {state}")
         return self._writer
+
+
+def _check_message(data, log_time_ns, publish_time_ns, sequence) -> None:
+    """The error that names what :meth:`BagWriter.write` could not write (nothing was)."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise TypeError(f"data must be the serialized message as bytes, not "
+                        f"{type(data).__name__}: nothing was written")
+    for name, value in (("log_time_ns", log_time_ns), ("publish_time_ns", publish_time_ns),
+                        ("sequence", sequence)):
+        if value is None and name == "publish_time_ns":
+            continue
+        try:
+            whole = int(value)
+        except (TypeError, ValueError, OverflowError):
+            whole = None
+        if whole is None or name != "sequence" and not 0 <= whole < 2**64:
+            limits = "an integer" if name == "sequence" else "nanoseconds in [0, 2**64)"
+            raise ValueError(f"{name}={value!r} is invalid: valid range is {limits}; "
+                             "nothing was written")
 
 
 def _library_identifier() -> str:
