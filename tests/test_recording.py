@@ -427,6 +427,70 @@ def test_empty_bag_is_valid(tmp_path):
     assert list(read_messages_rosbags(tmp_path / "empty")) == []
 
 
+@pytest.mark.parametrize("text", ["", "just text\n", "- a\n- list\n",
+                                  "rosbag2_bagfile_information: 3\n",
+                                  "rosbag2_bagfile_information:\n  relative_file_paths: 7\n"])
+def test_a_broken_metadata_yaml_is_named_and_reindex_recovers_the_bag(tmp_path, text):
+    """A metadata.yaml cut short by a full disk (empty) or not rosbag2's: read_metadata
+    names the file (the last one is a mapping, with a file list that is none); the
+    readers and reindex take the directory's own .mcap, and reindex writes a good
+    metadata.yaml."""
+    import shutil
+
+    from grazing_control.ros.recording import reindex
+    from grazing_control.support.files import YamlFileError
+
+    src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
+    bag = tmp_path / "scene_9e-6"
+    shutil.copytree(src, bag)
+    (bag / "metadata.yaml").write_text(text)
+    if "relative_file_paths" in text:
+        assert read_metadata(bag) == {"relative_file_paths": 7}
+    else:
+        with pytest.raises(YamlFileError, match="metadata.yaml"):
+            read_metadata(bag)
+    assert bag_file(bag) == bag / "scene_9e-6_0.mcap"
+    count = read_metadata(src)["message_count"]
+    assert sum(1 for _ in read_messages(bag)) == count
+    res = reindex(bag)
+    assert res.had_summary and res.message_count == count
+    assert read_metadata(bag)["message_count"] == count
+
+
+def test_reindex_without_room_says_what_to_do_and_leaves_the_bag(tmp_path):
+    """A reindex whose copy does not fit (here a file size limit: EFBIG, as ENOSPC on a
+    full disk) names the bag and the remedy, and leaves the bag and its directory as
+    they were."""
+    import shutil
+
+    src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
+    bag = tmp_path / "scene_9e-6"
+    shutil.copytree(src, bag)
+    (bag / "metadata.yaml").unlink()
+    f = bag / "scene_9e-6_0.mcap"
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    before = f.read_bytes()
+    limit = len(before) // 10
+    code = (
+        "import resource, signal, sys\n"
+        "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+        f"resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))\n"
+        "from grazing_control.ros.recording import reindex\n"
+        "try:\n"
+        f"    reindex({str(bag)!r})\n"
+        "except OSError as exc:\n"
+        "    print(exc)\n"
+        "    sys.exit(3)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=Path(__file__).resolve().parents[1], timeout=120)
+    assert out.returncode == 3, out.stderr[-2000:]
+    assert str(bag) in out.stdout and "File too large" in out.stdout
+    assert "the bag is unchanged" in out.stdout and "copy the bag directory" in out.stdout
+    assert f.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene_9e-6"]
+    assert sorted(p.name for p in bag.iterdir()) == ["scene_9e-6_0.mcap"]
+
+
 def test_default_chunk_size_is_moderate():
     assert 16 * 1024 <= DEFAULT_CHUNK_SIZE <= 1024 * 1024
 

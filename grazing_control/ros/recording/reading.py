@@ -29,26 +29,42 @@ class BagMessage(NamedTuple):
 def read_metadata(bag_dir: str | os.PathLike) -> dict[str, Any]:
     """The ``rosbag2_bagfile_information`` mapping of a bag's ``metadata.yaml``, read
     within the limits of a parameter file (:func:`grazing_control.support.files.read_yaml_file`:
-    a YamlFileError, a ValueError naming the file, beyond them or for a missing file)."""
-    from grazing_control.support.files import read_yaml_file
+    a YamlFileError, a ValueError naming the file, beyond them or for a missing file;
+    a YamlFileError also for a file that is no rosbag2 metadata: empty, or without a
+    ``rosbag2_bagfile_information`` mapping)."""
+    from grazing_control.support.files import YamlFileError, read_yaml_file
 
-    return read_yaml_file(Path(bag_dir) / "metadata.yaml")["rosbag2_bagfile_information"]
+    path = Path(bag_dir) / "metadata.yaml"
+    doc = read_yaml_file(path)
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    if not isinstance(info, dict):
+        raise YamlFileError(f"{path}: not a rosbag2 metadata.yaml (no "
+                            "rosbag2_bagfile_information mapping)")
+    return info
 
 
 def bag_file(bag_dir: str | os.PathLike) -> Path:
     """The MCAP file of a bag directory (or the path itself if it is a file).
 
     Taken from ``metadata.yaml`` if present, else the single ``*.mcap`` in the
-    directory (a recorder that died leaves no ``metadata.yaml``).
+    directory (a recorder that died leaves no ``metadata.yaml``; one cut short by a full
+    disk can leave it empty or unreadable, and then the directory's own file is taken
+    too, as by :func:`grazing_control.recordings.reader.bag_path`).
     """
+    from grazing_control.support.files import YamlFileError
+
     bag_dir = Path(bag_dir)
     if bag_dir.is_file():
         return bag_dir
     if (bag_dir / "metadata.yaml").is_file():
-        files = read_metadata(bag_dir)["relative_file_paths"]
-        if len(files) != 1:
+        try:
+            files = read_metadata(bag_dir).get("relative_file_paths")
+        except YamlFileError:
+            files = None
+        if isinstance(files, list) and len(files) > 1:
             raise ValueError(f"{bag_dir}: expected one file, metadata lists {files}")
-        return bag_dir / files[0]
+        if isinstance(files, list) and len(files) == 1 and isinstance(files[0], str):
+            return bag_dir / files[0]
     files = sorted(bag_dir.glob("*.mcap"))
     if len(files) != 1:
         raise FileNotFoundError(f"{bag_dir}: expected one .mcap file, found {len(files)}")

@@ -2,6 +2,7 @@
 """
 
 
+import errno
 import io
 import os
 import struct
@@ -108,6 +109,18 @@ def _records(stream, budget: int):
 # Recovery
 # --------------------------------------------------------------------------
 
+#: A write that failed for want of room (a full file system, a quota, a file size limit).
+_NO_ROOM = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
+def _no_room(exc: OSError, bag_dir: Path, size: int) -> OSError:
+    """The error of a reindex that found no room for its copy: what to do about it."""
+    return OSError(exc.errno, f"{bag_dir}: {exc.strerror}: reindex writes the recovered "
+                              f"bag next to it (up to {size} bytes) before it replaces it, "
+                              "and the bag is unchanged; free space on its file system, or "
+                              "copy the bag directory to one with room and reindex the copy")
+
+
 class ReindexResult(NamedTuple):
     """What :func:`reindex` recovered."""
 
@@ -180,7 +193,11 @@ def reindex(bag_dir: str | os.PathLike, *, compression: str = "zstd",
         custom = dict(read_metadata(bag_dir).get("custom_data") or {})
     except (YamlFileError, KeyError, TypeError):
         pass
-    tmp_root = Path(tempfile.mkdtemp(prefix=f".{bag_dir.name}.reindex-", dir=bag_dir.parent))
+    try:
+        tmp_root = Path(tempfile.mkdtemp(prefix=f".{bag_dir.name}.reindex-",
+                                         dir=bag_dir.parent))
+    except OSError as exc:
+        raise _no_room(exc, bag_dir, size) if exc.errno in _NO_ROOM else exc
     try:
         writer = BagWriter(tmp_root / bag_dir.name, compression=compression,
                            chunk_size=chunk_size, custom_data=custom)
@@ -203,6 +220,10 @@ def reindex(bag_dir: str | os.PathLike, *, compression: str = "zstd",
         writer.close()
         os.replace(writer.path, path)
         os.replace(writer.bag_dir / "metadata.yaml", bag_dir / "metadata.yaml")
+    except OSError as exc:
+        if exc.errno in _NO_ROOM:
+            raise _no_room(exc, bag_dir, size) from exc
+        raise
     finally:
         shutil.rmtree(tmp_root, ignore_errors=True)
     counts = dict(writer.message_counts)
