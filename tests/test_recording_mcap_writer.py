@@ -3,10 +3,11 @@
 Its truth is the ``mcap`` library's own writer: for the same calls, with the options the
 bag writer uses, both must produce the same bytes. The scenes are random (seeded):
 schemas and channels registered between messages, log times out of order, empty and
-large messages, chunks from a few records to many, every compression, metadata
-between chunks.
+large messages (as bytes, bytearray, or memoryviews of bytes and of 8-byte items),
+chunks from a few records to many, every compression, metadata between chunks.
 """
 
+import array
 import io
 import random
 
@@ -41,10 +42,14 @@ def _scene(rng):
             calls.append(("add_metadata", dict(
                 name=rng.choice(["rosbag2", "m"]), data={"a": str(rng.random())})))
         else:
+            data = rng.randbytes(8 * rng.choice([0, 1, 2, rng.randrange(0, 400)]))
+            data = rng.choice([data, bytearray(data), memoryview(data),
+                               memoryview(array.array("d", data)),     # 8-byte items
+                               data[:rng.randrange(0, len(data) + 1)]])
             calls.append(("add_message", dict(
                 channel_id=rng.randrange(1, channels + 1),
                 log_time=rng.choice([rng.randrange(0, 2**63), rng.randrange(10**9, 10**9 + 10**6)]),
-                data=rng.randbytes(rng.choice([0, 1, 8, rng.randrange(0, 3000)])),
+                data=data,
                 publish_time=rng.randrange(0, 2**64),
                 sequence=rng.randrange(0, 2**32))))
     return calls

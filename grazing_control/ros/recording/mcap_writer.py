@@ -110,15 +110,17 @@ class McapWriter:
                     sequence: int = 0) -> None:
         """A Message record in the open chunk (the hot path: one pack, three appends).
 
-        A field out of its range (struct.error) or data that is not bytes-like
-        (TypeError) adds nothing: the chunk is as it was."""
+        A field out of its range (struct.error) or data that is not a contiguous
+        bytes-like object (TypeError) adds nothing: the chunk is as it was."""
         chunk = self._chunk
         offset = len(chunk)
-        chunk += _MESSAGE.pack(_MESSAGE_OPCODE, _MESSAGE_BODY + len(data), channel_id,
+        # len() counts bytes of bytes and bytearray only (a memoryview counts its items)
+        size = len(data) if type(data) is bytes else memoryview(data).nbytes
+        chunk += _MESSAGE.pack(_MESSAGE_OPCODE, _MESSAGE_BODY + size, channel_id,
                                sequence, log_time, publish_time)
         try:
             chunk += data
-        except TypeError:
+        except Exception:           # not a contiguous buffer: the header goes too
             del chunk[offset:]
             raise
         index = self._index.get(channel_id)
