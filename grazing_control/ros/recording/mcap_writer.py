@@ -97,11 +97,11 @@ class McapWriter:
         return schema.id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int,
-                         metadata: Dict[str, str] = {}) -> int:
+                         metadata: Dict[str, str] | None = None) -> int:
         """A Channel record in the open chunk; return its id (1, 2, ...)."""
         channel = Channel(id=len(self._channels) + 1, topic=topic,
                           message_encoding=message_encoding, schema_id=schema_id,
-                          metadata=metadata)
+                          metadata=dict(metadata or {}))
         self._channels[channel.id] = channel
         self._into_chunk(channel)
         return channel.id
