@@ -427,6 +427,21 @@ def test_empty_bag_is_valid(tmp_path):
     assert list(read_messages_rosbags(tmp_path / "empty")) == []
 
 
+def _example_bag(tmp_path, keep=None):
+    """A copy of the example bag (bags/scene_9e-6) in ``tmp_path``: (bag directory, its
+    .mcap). With ``keep``, its metadata.yaml removed and the .mcap cut to that fraction of
+    its size, as a recorder killed part way leaves it."""
+    import shutil
+
+    bag = tmp_path / "scene_9e-6"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6", bag)
+    f = bag / "scene_9e-6_0.mcap"
+    if keep is not None:
+        (bag / "metadata.yaml").unlink()
+        f.write_bytes(f.read_bytes()[: int(f.stat().st_size * keep)])
+    return bag, f
+
+
 @pytest.mark.parametrize("text", ["", "just text\n", "- a\n- list\n",
                                   "rosbag2_bagfile_information: 3\n",
                                   "rosbag2_bagfile_information:\n  relative_file_paths: 7\n"])
@@ -435,14 +450,11 @@ def test_a_broken_metadata_yaml_is_named_and_reindex_recovers_the_bag(tmp_path, 
     names the file (the last one is a mapping, with a file list that is none); the
     readers and reindex take the directory's own .mcap, and reindex writes a good
     metadata.yaml."""
-    import shutil
-
     from grazing_control.ros.recording import reindex
     from grazing_control.support.files import YamlFileError
 
     src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
-    bag = tmp_path / "scene_9e-6"
-    shutil.copytree(src, bag)
+    bag, _ = _example_bag(tmp_path)
     (bag / "metadata.yaml").write_text(text)
     if "relative_file_paths" in text:
         assert read_metadata(bag) == {"relative_file_paths": 7}
@@ -461,14 +473,7 @@ def test_reindex_without_room_says_what_to_do_and_leaves_the_bag(tmp_path):
     """A reindex whose copy does not fit (here a file size limit: EFBIG, as ENOSPC on a
     full disk) names the bag and the remedy, and leaves the bag and its directory as
     they were."""
-    import shutil
-
-    src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
-    bag = tmp_path / "scene_9e-6"
-    shutil.copytree(src, bag)
-    (bag / "metadata.yaml").unlink()
-    f = bag / "scene_9e-6_0.mcap"
-    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    bag, f = _example_bag(tmp_path, keep=0.5)
     before = f.read_bytes()
     limit = len(before) // 10
     code = (
@@ -503,11 +508,7 @@ def test_reindex_recovers_a_truncated_bag_for_every_reader(tmp_path):
     from grazing_control.ros.recording import reindex
 
     src = Path(__file__).resolve().parents[1] / "bags" / "scene_9e-6"
-    bag = tmp_path / "scene_9e-6"
-    shutil.copytree(src, bag)
-    (bag / "metadata.yaml").unlink()
-    f = bag / "scene_9e-6_0.mcap"
-    f.write_bytes(f.read_bytes()[: f.stat().st_size // 3])
+    bag, _ = _example_bag(tmp_path, keep=1 / 3)
     partial = [(m.topic, m.log_time_ns, message_to_dict(m.message)) for m in read_messages(bag)]
     res = reindex(bag)
     assert not res.had_summary and res.dropped_bytes > 0 and res.message_count == len(partial)
