@@ -469,23 +469,25 @@ def estimate_covariance(p: OscillatorParams, gains, rate: int, *, estimator: str
         return np.linalg.inv(h_arc.T @ h_arc)
     hm = jac[:, 0, :] if not velocity else np.vstack([jac[:, 0, :], jac[:, 1, :]])
     info_data = hm.T @ hm
-    cov = np.linalg.inv(info_data)
-    for _ in range(periods):
-        new = mono @ np.linalg.inv(np.linalg.inv(cov) + info_data) @ mono.T \
-            + floor * floor * np.eye(2)
-        done = np.allclose(new, cov, rtol=1e-10, atol=0.0)
-        cov = 0.5 * (new + new.T)
-        if done:
-            break
+    cov = _fixed_point(lambda c: mono @ np.linalg.inv(np.linalg.inv(c) + info_data) @ mono.T
+                       + floor * floor * np.eye(2), np.linalg.inv(info_data), periods)
     if not exact_plant:
         return cov
     gain = np.linalg.inv(np.linalg.inv(cov) + info_data) @ hm.T
     keep = np.eye(2) - gain @ hm
-    errors = cov
+    return _fixed_point(lambda e: mono @ (keep @ e @ keep.T + gain @ gain.T) @ mono.T, cov,
+                        periods)
+
+
+def _fixed_point(step, start, periods: int):
+    """S <- step(S), symmetrised, from ``start`` until a step changes it by no more than
+    1e-10 of itself (at most ``periods`` steps): estimate_covariance's Riccati and
+    error recursions (E7, E7')."""
+    s = start
     for _ in range(periods):
-        new = mono @ (keep @ errors @ keep.T + gain @ gain.T) @ mono.T
-        done = np.allclose(new, errors, rtol=1e-10, atol=0.0)
-        errors = 0.5 * (new + new.T)
+        new = step(s)
+        done = np.allclose(new, s, rtol=1e-10, atol=0.0)
+        s = 0.5 * (new + new.T)
         if done:
             break
-    return errors
+    return s

@@ -216,18 +216,19 @@ class McapWriter:
         chunk_record = records.end()
         chunk_offset = self._stream.tell()
         index_start = chunk_offset + len(chunk_record)
-        index_records, index_offsets = [], {}
+        index_records, index_offsets, position = [], {}, index_start
         for channel_id, index in self._index.items():
-            index_offsets[channel_id] = index_start + sum(map(len, index_records))
+            index_offsets[channel_id] = position
             index_records.append(struct.pack(
                 f"<BQHI{len(index)}Q", Opcode.MESSAGE_INDEX, 2 + 4 + 8 * len(index),
                 channel_id, 8 * len(index), *index))
+            position += len(index_records[-1])
             self._counts[channel_id] += len(index) // 2
         self._stream.write(chunk_record + b"".join(index_records))
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start, message_end_time=end, chunk_start_offset=chunk_offset,
             chunk_length=len(chunk_record), message_index_offsets=index_offsets,
-            message_index_length=sum(map(len, index_records)),
+            message_index_length=position - index_start,
             compression=self._compression, compressed_size=len(compressed),
             uncompressed_size=len(data)))
         self._start_time = start if self._message_count == 0 else min(self._start_time, start)

@@ -107,7 +107,6 @@ class BagWriter:
         self.chunk_size = int(chunk_size)
         self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self._topics: dict[str, _Topic] = {}
-        self._channel_ids: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self._stream: _FlushingStream | None = None
         self._writer: McapWriter | None = None
@@ -192,7 +191,6 @@ class BagWriter:
             metadata={"offered_qos_profiles": qos_text, "topic_type_hash": type_hash},
         )
         self._topics[name] = _Topic(channel_id, msg_type, qos_list, type_hash)
-        self._channel_ids[name] = channel_id
         return channel_id
 
     def has_topic(self, name: str) -> bool:
@@ -226,12 +224,12 @@ class BagWriter:
         writer = self._writer
         if writer is None:
             self._require_open()
-        channel_id = self._channel_ids.get(topic)
-        if channel_id is None:
+        entry = self._topics.get(topic)
+        if entry is None:
             raise ValueError(f"topic {topic} was not added to the bag")
         try:
             log_ns = int(log_time_ns)
-            writer.add_message(channel_id, log_ns, data,
+            writer.add_message(entry.channel_id, log_ns, data,
                                log_ns if publish_time_ns is None else int(publish_time_ns),
                                int(sequence) & 0xFFFFFFFF)
         except (TypeError, ValueError, OverflowError, struct.error):
@@ -242,7 +240,7 @@ class BagWriter:
     def message_counts(self) -> dict[str, int]:
         """Messages written per topic."""
         counts = self._counts if self._writer is None else self._writer.message_counts()
-        return {name: counts.get(channel_id, 0) for name, channel_id in self._channel_ids.items()}
+        return {name: counts.get(topic.channel_id, 0) for name, topic in self._topics.items()}
 
     def close(self) -> dict[str, Any]:
         """Write the last chunk and the summary, close the file, write metadata.
@@ -261,7 +259,7 @@ class BagWriter:
         serialized = yaml.safe_dump(info, sort_keys=False, default_flow_style=False)
         self._writer.add_metadata(
             "rosbag2", {"serialized_metadata": serialized, "ROS_DISTRO": ROS_DISTRO})
-        self._counts, self._times = self._writer.message_counts(), self._writer.message_times()
+        self._keep_tallies()
         self._writer.finish()
         self._stream.close()
         self._writer = None
@@ -280,8 +278,7 @@ class BagWriter:
         :func:`reindex` makes it a complete bag); no ``metadata.yaml`` is written.
         """
         if self._writer is not None:
-            self._counts, self._times = (self._writer.message_counts(),
-                                         self._writer.message_times())
+            self._keep_tallies()
         if self._stream is not None:
             try:
                 self._stream.close()
@@ -339,6 +336,10 @@ class BagWriter:
             "custom_data": dict(self.custom_data) or None,
             "ros_distro": ROS_DISTRO,
         }
+
+    def _keep_tallies(self) -> None:
+        """The counts and times of what was written, kept for after the writer is gone."""
+        self._counts, self._times = self._writer.message_counts(), self._writer.message_times()
 
     def _require_open(self) -> McapWriter:
         if self._writer is None:
