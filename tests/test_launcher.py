@@ -207,8 +207,9 @@ def test_the_nodes_get_the_packages_fastdds_profile_unless_one_is_given(monkeypa
     ns = {"p": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
     writer = ET.parse(profile).getroot().find("p:data_writer", ns)
     assert writer.get("is_default_profile") == "true"
-    period = writer.find("p:times/p:heartbeatPeriod", ns)
-    assert (period.find("p:sec", ns).text, period.find("p:nanosec", ns).text) == ("0", "5000000")
+    for name in ("heartbeatPeriod", "nackSupressionDuration"):
+        duration = writer.find(f"p:times/p:{name}", ns)
+        assert (duration.find("p:sec", ns).text, duration.find("p:nanosec", ns).text) == ("0", "5000000")
     for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
         monkeypatch.setenv(name, "/elsewhere/profile.xml")
         env = launcher.node_env()
@@ -216,6 +217,39 @@ def test_the_nodes_get_the_packages_fastdds_profile_unless_one_is_given(monkeypa
         assert all(env.get(n) in (None, "/elsewhere/profile.xml") for n in (
             "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"))
         monkeypatch.delenv(name)
+
+
+#: A participant and a publisher under the profile in FASTRTPS_DEFAULT_PROFILES_FILE.
+_PARTICIPANT = """
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("profile_check")
+node.create_publisher(String, "profile_check", 10)
+node.destroy_node()
+rclpy.shutdown()
+print("made")
+"""
+
+
+def test_fast_dds_reads_the_nodes_profile_without_an_error(tmp_path):
+    """Fast DDS drops a profile it cannot parse, with an XMLPARSER error on its console
+    (standard output) and nothing else: a misspelt element would silently give the nodes Fast DDS's defaults.
+    The package's profile is read cleanly; the same profile with one element misspelt
+    (nackSuppressionDuration) is not, which is what this check would see."""
+    def console_of(profile):
+        env = launcher.node_env(domain_id=new_domain())
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(profile)
+        done = subprocess.run([sys.executable, "-c", _PARTICIPANT], env=env, capture_output=True,
+                              text=True, timeout=60)
+        assert done.returncode == 0 and "made" in done.stdout, done.stderr
+        return done.stdout + done.stderr
+
+    assert "XMLPARSER" not in console_of(launcher.FASTDDS_PROFILE)
+    misspelt = tmp_path / "misspelt.xml"
+    misspelt.write_text(launcher.FASTDDS_PROFILE.read_text().replace(
+        "nackSupressionDuration>", "nackSuppressionDuration>"))
+    assert "XMLPARSER" in console_of(misspelt)
 
 
 def test_this_process_gets_the_nodes_profile_unless_one_is_given(monkeypatch):
