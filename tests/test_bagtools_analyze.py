@@ -353,6 +353,51 @@ def test_a_loop_much_noisier_than_its_model_predicts_is_named(tmp_path):
     assert "**the loop is noisier than its model predicts**" in rep["markdown"]
 
 
+def test_a_loop_without_a_stationary_spread_reports_the_measured_one_and_why(tmp_path):
+    """Gains under which the controlled orbit exists but is not stable (c2 = -1.5 with the
+    c1 of c2 = -0.3: its largest multiplier ~1e5), as when a realtime controller designed
+    for no delay meets a plant with one (stop 48's hand check, where the report ended in
+    a KeyError): no spread is predicted, and the report gives the measured spread and
+    the reason instead."""
+    from grazing_control.recordings.analyze import analyze
+
+    bag, p, g, run = _stream_bag(tmp_path, "model")
+    rep = analyze([bag], tmp_path / "out", figures=False,
+                  options={"delta_d": p.delta_d, "c1": g.c1, "c2": -1.5})
+    n = rep["bags"][0]["scenes"][0]["estimate"]
+    assert "predicted_spread" not in n and "spread_alarm" not in n
+    assert n["measured_spread"] > 0.0 and "is not stable" in n["spread_note"]
+    line = next(x for x in rep["markdown"].splitlines()
+                if x.startswith("* Π2 spread about the exact controlled orbit"))
+    assert f"measured {n['measured_spread']:.3g}" in line and "predicted" not in line
+    assert f"* {n['spread_note']}" in rep["markdown"]
+
+
+def test_the_rig_units_report_a_measured_spread_without_a_predicted_one():
+    """The SI lines of a rig scene (rig_record.si_numbers, analyze._si_lines) with a
+    measured Pi2 spread and none predicted: the measured one in metres, no predicted."""
+    from pathlib import Path
+
+    from grazing_control.plant.rig import load_rig
+    from grazing_control.recordings.analyze import _si_lines
+    from grazing_control.recordings.rig_record import si_numbers
+
+    rig = load_rig(Path(__file__).resolve().parents[1] / "config" / "rigs" / "acceptance.yaml")
+    estimate = {"error_std": [1e-4, 2e-4], "reported_std": [1e-4, 2e-4],
+                "measured_spread": 0.02, "spread_note": "no predicted spread: not stable"}
+    si = si_numbers(rig, {"samples": 10, "corrections": {"max_abs": 1e-4},
+                          "estimate": estimate})
+    assert si["estimate_measured_spread_m"] == pytest.approx(0.02 * rig.scales.length)
+    assert "estimate_predicted_spread_m" not in si
+    line = next(x for x in _si_lines(si) if "Π2 spread measured" in x)
+    assert f"{0.02 * rig.scales.length:.4g} m" in line and "predicted" not in line
+    with_prediction = si_numbers(rig, {"samples": 10, "corrections": {"max_abs": 1e-4},
+                                       "estimate": {**estimate, "predicted_spread": 0.01}})
+    assert with_prediction["estimate_predicted_spread_m"] == pytest.approx(
+        0.01 * rig.scales.length)
+    assert any("predicted from the reported covariance" in x for x in _si_lines(with_prediction))
+
+
 def test_the_model_watch_is_reported(tmp_path):
     """controller/model_watch rows (issue 29: a bias and Delta d estimate per section, a
     verdict that turns to mismatch at section 37 with the nis test failing): the report

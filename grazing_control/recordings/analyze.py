@@ -522,9 +522,11 @@ def _si_lines(si) -> list:
     lines.append(f"* in SI: largest correction Δv {c['velocity_m_per_s']:.4g} m/s, impulse "
                  f"{c['impulse_N_s']:.4g} N s{force}")
     if "estimate_measured_spread_m" in si:
+        predicted = (f", predicted from the reported covariance "
+                     f"{si['estimate_predicted_spread_m']:.4g} m"
+                     if "estimate_predicted_spread_m" in si else "")
         lines.append(f"* in SI: estimate error std {pair('estimate_error_std_m_and_m_per_s')}; "
-                     f"Π2 spread measured {si['estimate_measured_spread_m']:.4g} m, predicted "
-                     f"from the reported covariance {si['estimate_predicted_spread_m']:.4g} m")
+                     f"Π2 spread measured {si['estimate_measured_spread_m']:.4g} m{predicted}")
     return lines
 
 

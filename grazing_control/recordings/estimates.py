@@ -134,10 +134,11 @@ def estimate_lines(n) -> list:
              f"{n['normalised_std'][0]:.3f}, {n['normalised_std'][1]:.3f} (1 if the covariance "
              f"is right); χ² mean {n['chi2_mean']:.3f} (2), 95 % ellipse covers "
              f"{100 * n['coverage_95']:.1f} %"]
-    if "measured_spread" in n:
+    if "measured_spread" in n:          # predicted: none where the loop has no stationary spread
+        predicted = (f", predicted from the reported covariance {n['predicted_spread']:.3g}"
+                     if "predicted_spread" in n else "")
         lines.append(f"* Π2 spread about the exact controlled orbit: measured "
-                     f"{n['measured_spread']:.3g}, predicted from the reported covariance "
-                     f"{n['predicted_spread']:.3g}")
+                     f"{n['measured_spread']:.3g}{predicted}")
     if "spread_alarm" in n:
         lines.append(f"* **the loop is noisier than its model predicts**: the measured spread "
                      f"is {n['spread_alarm']:.3g} times the predicted (more than "

@@ -131,6 +131,7 @@ def si_numbers(rig: Rig, numbers: dict, scene=None) -> dict:
         out["estimate_reported_std_m_and_m_per_s"] = _pair(rig, est["reported_std"])
     if "measured_spread" in est:
         out["estimate_measured_spread_m"] = est["measured_spread"] * s.length
+    if "predicted_spread" in est:
         out["estimate_predicted_spread_m"] = est["predicted_spread"] * s.length
     return out
 
