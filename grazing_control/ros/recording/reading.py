@@ -61,10 +61,11 @@ def bag_file(bag_dir: str | os.PathLike) -> Path:
             files = read_metadata(bag_dir).get("relative_file_paths")
         except YamlFileError:
             files = None
-        if isinstance(files, list) and len(files) > 1:
-            raise ValueError(f"{bag_dir}: expected one file, metadata lists {files}")
-        if isinstance(files, list) and len(files) == 1 and isinstance(files[0], str):
-            return bag_dir / files[0]
+        if isinstance(files, list) and files:
+            if len(files) > 1:
+                raise ValueError(f"{bag_dir}: expected one file, metadata lists {files}")
+            if isinstance(files[0], str):
+                return bag_dir / files[0]
     files = sorted(bag_dir.glob("*.mcap"))
     if len(files) != 1:
         raise FileNotFoundError(f"{bag_dir}: expected one .mcap file, found {len(files)}")

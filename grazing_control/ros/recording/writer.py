@@ -353,15 +353,15 @@ def _check_message(data, log_time_ns, publish_time_ns, sequence) -> None:
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise TypeError(f"data must be the serialized message as bytes, not "
                         f"{type(data).__name__}: nothing was written")
-    for name, value in (("log_time_ns", log_time_ns), ("publish_time_ns", publish_time_ns),
-                        ("sequence", sequence)):
-        if value is None and name == "publish_time_ns":
-            continue
+    times = [("log_time_ns", log_time_ns)]
+    if publish_time_ns is not None:         # None: the log time
+        times.append(("publish_time_ns", publish_time_ns))
+    for name, value in [*times, ("sequence", sequence)]:
         try:
             whole = int(value)
         except (TypeError, ValueError, OverflowError):
             whole = None
-        if whole is None or name != "sequence" and not 0 <= whole < 2**64:
+        if whole is None or (name != "sequence" and not 0 <= whole < 2**64):
             limits = "an integer" if name == "sequence" else "nanoseconds in [0, 2**64)"
             raise ValueError(f"{name}={value!r} is invalid: valid range is {limits}; "
                              "nothing was written")
