@@ -10,7 +10,7 @@ from rclpy.parameter import Parameter as RosParameter
 from grazing_control.oscillator.ndof.flow import grazing_clearance
 from grazing_control.oscillator.params import ParameterError
 from grazing_control.plant.engine import Engine
-from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, STREAM_TICK, Realtime
+from grazing_control.plant.realtime import CLOCK_TICK, MIN_TICK, STALL_PAUSE, STREAM_TICK, Realtime
 from grazing_control.plant.rig import load_rig
 from grazing_control.plant.settings import (NOT_WITH_MODEL_FILE, PARAMETERS, SETTING_KEYS,
                                             Parameter, check_live_change, described_range,
@@ -62,6 +62,12 @@ NODE_PARAMETERS = (
               "samples (oscillator/state, rig/sensor) gather before one wake-up publishes "
               "them, each with its own stamp: a DAQ's block (5e-5..5e-3)", MIN_TICK,
               CLOCK_TICK, read_only=True),
+    Parameter("stall_pause", "double", STALL_PAUSE, "realtime: a wake-up of the simulator "
+              "this many wall seconds later than it asked for pauses the plant's clock for "
+              "its lateness (the machine held the simulator: its stall is not charged to the "
+              "loop's deadlines; counted, paused= in the summary); 0 = never, the plant's "
+              "clock is the wall clock; 0..1. Not with rig_file: a rig's clock runs on "
+              "against ROS time", 0.0, 1.0, read_only=True),
     Parameter("stream_message", "string", "sample", "the state stream's messages: sample (one "
               "JointState per sample on oscillator/state) or block (the samples of a wake-up "
               "in one Float64MultiArray on oscillator/state_block, as a DAQ driver "

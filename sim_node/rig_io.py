@@ -117,7 +117,8 @@ class SimulatedRig:
         self.node.get_logger().info(
             f"simulated rig clock: ROS time = {self.clock.offset:.9f} s + (1 + "
             f"{self.clock.drift:.6g}) x rig time; the scene starts at rig time "
-            f"{self.clock.start:.9f} s")
+            f"{self.clock.start:.9f} s; the rig's clock runs on through a stall of the "
+            "simulator, as a rig's does (stall_pause does not apply)")
 
     def event(self, ev) -> None:
         """A published event of the loop: a stream sample into the latency's delay line,

@@ -212,6 +212,9 @@ class SimNode(Node):
         else:
             self.loop = Realtime(self.engine, self.out)
             self.loop.stream_tick = self.get_parameter("stream_block").value
+            # a rig's clock runs on against ROS time (rig_io): its stalls are the loop's
+            self.loop.stall_pause = (self.get_parameter("stall_pause").value
+                                     if self.driver is None else 0.0)
             self._tick_timer = self.create_timer(MIN_TICK, self._on_tick)
             self._guard(self.loop.start)
             if self.driver is not None:
@@ -292,6 +295,7 @@ class SimNode(Node):
         wall = None
         if self.port is not None:       # what arrived by now, then what is due by now
             wall = self.loop.clock()
+            self.loop.resume(wall)       # a stall of this process: the plant paused first
             self.take_answers()
             if not self.running:
                 return
@@ -311,6 +315,7 @@ class SimNode(Node):
             wake = min(wake, self.driver.wake_in(now))
         self._tick_timer.timer_period_ns = int(wake * 1e9)
         self._tick_timer.reset()
+        self.loop.expect(wake)
 
     def _guard(self, call, *args):
         """Run a loop call; a refusal of the core (impact cap, state beyond the wall)

@@ -140,6 +140,10 @@ class Loop:
         self.sink.tripped(trip)
         self.finish()
 
+    def pauses(self) -> str:
+        """The summary's words on the plant's pauses (realtime: Realtime.resume)."""
+        return ""
+
     def summary(self, wall: float, counts: dict) -> str:
         """The run in one line: periods, impacts, corrections, then ``counts`` (what the
         node counted: missed, timeouts, ignored, malformed), the rate over ``wall``
@@ -152,7 +156,8 @@ class Loop:
                 + (f"unarmed={stats['unarmed']} " if stats.get("unarmed") else "")
                 + "".join(f"{name}={counts[name]} " for name in
                           ("timeouts", "ignored", "malformed"))
-                + f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s")
+                + f"wall={wall:.3f}s rate={k / wall if wall > 0 else 0.0:.1f} periods/s"
+                + self.pauses())
         for name, values in (("latency_ms", self.latencies), ("sample_lag_ms", self.lags)):
             if values:
                 ms = np.asarray(values) * 1e3

@@ -46,7 +46,7 @@ from grazing_control.plant.loop import Loop
 from grazing_control.plant.schedule import ActuationSchedule, Section
 from grazing_control.plant.watchdog import Watchdog, excursion_scale
 
-__all__ = ["Realtime", "CLOCK_TICK", "MIN_TICK", "STREAM_TICK"]
+__all__ = ["Realtime", "CLOCK_TICK", "MIN_TICK", "STREAM_TICK", "STALL_PAUSE"]
 
 #: Longest wall time between two wake-ups (each publishes /clock), seconds.
 CLOCK_TICK = 5e-3
@@ -59,6 +59,10 @@ MIN_TICK = 5e-5
 #: actuation deadlines are still met on time; a stream sample goes out at most this late
 #: (a rig's data acquisition delivers blocks too).
 STREAM_TICK = 5e-4
+#: Wall seconds a wake-up may come later than the loop asked before the plant's clock
+#: pauses for its lateness (:meth:`Realtime.resume`): above the timer's own jitter here
+#: (p99 0.1-0.3 ms under SCHED_FIFO, docs/benchmarks.md), under the budget of an answer.
+STALL_PAUSE = 1e-3
 
 
 class Realtime(Loop):
@@ -73,6 +77,11 @@ class Realtime(Loop):
     rel = None         # the current section's start after its sample, given by an answer
     offset = None      # the last applied answer's given start (None: t_k + delay's)
     late_prediction = None   # (k, prediction) of an answer late for its own start
+    stall_pause = STALL_PAUSE   # wall s of lateness that pauses the plant (0: never)
+    expected = None    # wall time of the wake-up asked for (expect), None: none pending
+    paused = 0.0       # wall s the plant's clock has paused in all
+    paused_base = 0.0  # paused at the last reset or rebase (the watchdog's lag since)
+    longest_pause = 0.0
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -101,6 +110,40 @@ class Realtime(Loop):
         wall = self.clock() if wall is None else wall
         return self.t0 + (wall - self.wall0) * self.settings.time_scale
 
+    def expect(self, wake: float) -> None:
+        """The node armed its wake-up ``wake`` wall seconds from now (:meth:`wake_in`, or
+        sooner for a driver's sample): :meth:`resume` measures its lateness from it."""
+        self.expected = self.clock() + wake
+
+    def resume(self, wall: float, woke: bool = True) -> float:
+        """The loop runs again at wall time ``wall``: woken (``woke``) or taking an answer
+        between two wake-ups. Coming more than ``stall_pause`` wall seconds after the
+        wake-up it asked for (:meth:`expect`), the simulator was held (the machine ran
+        something else, or nothing: a virtual CPU stopped), so the plant did not run:
+        its clock pauses for the lateness, wall0 moves on by it, and the simulation time
+        at ``wall`` is that of the wake-up asked for. The pause is counted
+        (``stats['paused']``, :attr:`paused` in all, :attr:`longest_pause`) and stays in
+        the watchdog's lag (:meth:`publish_sample`), and the pace the watchdog and the
+        diagnostics read falls by it. Without it the stall would be charged to the loop:
+        the samples due in it go out at once, late, and a deadline in it passes before
+        its sample's answer can come (docs/nodes.md, "A stall of the simulator").
+        ``stall_pause`` 0: never (the plant's clock is the wall clock). Returns the
+        pause, wall seconds (0.0: none)."""
+        due = self.expected
+        if due is None or not self.stall_pause:
+            return 0.0
+        late = wall - due
+        if late <= self.stall_pause:
+            if woke:
+                self.expected = None
+            return 0.0
+        self.expected = None
+        self.wall0 += late
+        self.paused += late
+        self.longest_pause = max(self.longest_pause, late)
+        self.stats["paused"] = self.stats.get("paused", 0) + 1
+        return late
+
     def start(self) -> None:
         """Sample 0 at t = 0, now."""
         self.reset(self.engine.sample())
@@ -109,6 +152,7 @@ class Realtime(Loop):
         """After ``engine.reset()``: t = 0 now, and its sample 0 ``ev`` goes out."""
         self.t0, self.wall0 = 0.0, self.clock()
         self.published = 0.0
+        self.expected, self.paused_base = None, self.paused
         self.finished = False
         self.schedule.clear()
         self.rel = self.offset = self.late_prediction = None
@@ -123,6 +167,7 @@ class Realtime(Loop):
         """Keep the simulation time continuous across a change of time_scale (call it
         before the new settings take effect)."""
         self.t0, self.wall0 = self.now(), self.clock()
+        self.paused_base = self.paused
 
     def publish_sample(self, ev: Event) -> None:
         """Sample k goes out (as measured), then its uncorrected period is integrated (the
@@ -169,7 +214,9 @@ class Realtime(Loop):
         if self._deviation and engine.p is not self._scaled:   # the model (Delta d) changed
             self._scaled = engine.p
             self.watchdog.scale = excursion_scale(engine.p)
-        self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag, self.settings.time_scale,
+        # the watchdog's lag is against the wall clock: the plant's pauses count there
+        self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag + self.paused - self.paused_base,
+                                       self.settings.time_scale,
                                        (engine.dx, engine.dv) if self._deviation else None))
         if self.finished:
             return
@@ -188,6 +235,13 @@ class Realtime(Loop):
                 self.queue = engine.split(ev.t, dv)
                 self.stats["applied"] += 1
 
+    def pauses(self) -> str:
+        """The plant's pauses (:meth:`resume`) for the summary line, when there were any."""
+        if not self.stats.get("paused"):
+            return ""
+        return (f" paused={self.stats['paused']} paused_ms={self.paused * 1e3:.3f} "
+                f"longest_pause_ms={self.longest_pause * 1e3:.3f}")
+
     def tick(self, wall: float | None = None):
         """A wake-up at wall time ``wall`` (default: now; the node reads it before it takes
         the answers that arrived, so that one arriving in between waits for the next
@@ -195,9 +249,11 @@ class Realtime(Loop):
         simulation time then, or None when over."""
         if self.finished:
             return None
+        wall = self.clock() if wall is None else wall
+        self.resume(wall)
         now = self.now(wall)
         self.advance(now)
-        self.published = now
+        self.published = max(self.published, now)
         return None if self.finished else now
 
     def wake_in(self, now: float) -> float:
@@ -265,6 +321,7 @@ class Realtime(Loop):
             self.sink.ignored(f"stamp {key}: the scene is not running")
             return False
         wall = self.clock()
+        self.resume(wall, woke=False)
         if arrived is not None:
             wall = min(arrived, wall)
         now = self.now(wall)
@@ -365,6 +422,7 @@ class Realtime(Loop):
                               "(stale, duplicate or foreign)")
             return False
         wall = self.clock()              # the correction acts at this instant's sim time
+        self.resume(wall, woke=False)
         now = self.now(wall)
         self.advance(now)
         if self.finished:

@@ -161,6 +161,9 @@ class SceneWindow:
         stat.add("late", stats["late"])
         stat.add("lost", stats["lost"])
         stat.add("predicted", stats["predicted"])
+        if realtime:       # the plant's clock paused for the simulator's stalls
+            stat.add("plant paused", stats.get("paused", 0))
+            stat.add("plant paused ms", float(getattr(loop, "paused", 0.0) * 1e3))
         stat.add("deadline misses", counts["missed"])
         stat.add("answer timeouts", counts["timeouts"])
         stat.add("ignored", counts["ignored"])

@@ -1,0 +1,158 @@
+"""A stall of the simulator pauses the plant's clock (grazing_control.plant.realtime,
+``Realtime.resume``; sim_node's ``stall_pause``).
+
+The machine may hold the simulator for milliseconds (this VM: both virtual CPUs stopped
+for 4-16 ms a few times a minute, docs/benchmarks.md). Pinned to the wall clock, the
+plant then jumps on by the stall when the simulator runs again: the samples due in it go
+out at once, late, and a deadline in it passes before its answer can come: a miss that
+is the simulator's, not the loop's. With ``stall_pause`` the plant's clock pauses for a
+wake-up's lateness beyond it; a controller that is late on its own is still late.
+
+The loop is driven as sim_node drives it, over a clock the test moves: each wake-up is
+asked for (``expect``) at most 1 ms ahead (a stream's pace), the controller's answer is
+ready 1 ms after its sample, and a stall moves the clock on at a chosen wake-up: the
+machine's (both processes held: the pending answers wait as well), or the controller's
+alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.plant.engine import Engine
+from grazing_control.plant.realtime import STALL_PAUSE, Realtime
+
+from test_plant_loops import P, Clock, Recorder, key, law, reference, settings
+
+N, ON, DELAY, C2 = 80, 10, 5.0, -1.0
+C1 = degenerate_c1(P, C2, DELAY)
+STALL = 8e-3          # longer than the 5 ms from a sample to its deadline at x1000
+
+
+def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
+    """A scheduled scene of n samples at x1000 (delay 5: 5 ms of wall time), controlled
+    from sample ON. ``stalls``: {sample k: seconds} held at the first wake-up after
+    sample k went out, beginning half way through the wait; ``held``: "machine" (the
+    simulator and the controller: an answer not ready by the stall's start is ready that
+    much later) or "controller" (the simulator wakes on time). ``late``: every wake-up
+    comes this much later than asked (the timer's jitter). Returns (loop, sink)."""
+    s = settings(mode="realtime", time_scale=1000.0, actuation_delay=DELAY, max_periods=n,
+                 state_period=0.0, **kw)
+    clock, sink = Clock(), Recorder()
+    loop = Realtime(Engine(s), sink, clock)
+    loop.stall_pause = pause
+    loop.start()
+    pending, seen, stall = [], 0, None
+    while not loop.finished:
+        for ev in sink.samples()[seen:]:
+            k = round(ev.t / P.period)
+            pending.append([clock.now + 1e-3, key(ev), law(C1, C2, ev) if k >= ON else 0.0])
+            stall = stalls.get(k)
+        seen = len(sink.samples())
+        wait = min(loop.wake_in(loop.now()), 1e-3)
+        loop.expect(wait)
+        begins, clock.now = clock.now + wait / 2.0, clock.now + wait + late
+        if stall:
+            for p in pending:
+                if p[0] > begins:
+                    p[0] += stall                 # the controller held from ``begins``
+            if held == "machine":
+                clock.now += stall
+            stall = None
+        loop.resume(clock.now)                    # sim_node's wake-up: first the pause,
+        for p in [p for p in pending if p[0] <= clock.now]:
+            loop.answer(p[1], p[2], arrived=p[0])     # then the answers arrived by now,
+            pending.remove(p)
+        loop.tick(clock.now)                      # then what is due
+    return loop, sink
+
+
+def samples(sink):
+    return np.array([(e.x, e.v) for e in sink.samples()])
+
+
+def test_without_a_stall_the_scene_is_the_lockstep_loop_bit_for_bit():
+    loop, sink = run({})
+    np.testing.assert_array_equal(samples(sink), reference(N, C1, C2, ON, DELAY))
+    assert not sink.misses and loop.stats.get("paused", 0) == 0 and loop.paused == 0.0
+
+
+def test_a_stall_of_the_machine_on_the_wall_clock_misses_the_deadlines_in_it():
+    """Held 16 ms after sample 47 (a period is 9.4 ms at x1000), the plant publishes
+    sample 48 when it runs again, already past 48's deadline as well."""
+    stalls = {20: STALL, 21: STALL, 47: 2 * STALL}
+    loop, sink = run(stalls, pause=0.0)
+    missed = [20, 21, 47, 48]
+    assert [m[0] for m in sink.misses] == missed
+    np.testing.assert_array_equal(samples(sink), reference(N, C1, C2, ON, DELAY, missed))
+    assert loop.stats.get("paused", 0) == 0
+
+
+def test_a_stall_of_the_machine_pauses_the_plant_and_no_deadline_is_missed():
+    stalls = {20: STALL, 21: STALL, 47: 2 * STALL}
+    loop, sink = run(stalls)
+    assert not sink.misses
+    np.testing.assert_array_equal(samples(sink), reference(N, C1, C2, ON, DELAY))
+    assert loop.stats["paused"] == 3
+    assert loop.paused == pytest.approx(4 * STALL, abs=1e-12)
+    assert loop.longest_pause == pytest.approx(2 * STALL, abs=1e-12)
+    text = loop.summary(1.0, {"missed": 0, "timeouts": 0, "ignored": 0, "malformed": 0})
+    assert "missed=0 " in text and (
+        f"periods/s paused=3 paused_ms={4 * STALL * 1e3:.3f} "
+        f"longest_pause_ms={2 * STALL * 1e3:.3f}") in text
+
+
+def test_a_controller_held_on_its_own_is_late_however_the_plant_pauses():
+    stalls = {20: STALL, 33: STALL}
+    loop, sink = run(stalls, held="controller")
+    assert [m[0] for m in sink.misses] == sorted(stalls)
+    np.testing.assert_array_equal(samples(sink), reference(N, C1, C2, ON, DELAY, stalls))
+    assert loop.stats.get("paused", 0) == 0
+
+
+@pytest.mark.parametrize("late", [0.0, 0.3e-3, 0.9e-3])
+def test_a_lateness_within_stall_pause_is_the_loops_and_pauses_nothing(late):
+    loop, sink = run({}, late=late)
+    assert loop.stats.get("paused", 0) == 0 and loop.paused == 0.0
+    assert not sink.misses            # 0.9 ms a wake-up: still inside the 5 ms budget
+
+
+def test_the_pause_is_exactly_the_lateness_beyond_the_asked_wake_up():
+    """resume on its own: the simulation time at the late wake-up is the asked one's."""
+    clock = Clock()
+    loop = Realtime(Engine(settings(mode="realtime", time_scale=1000.0)), Recorder(), clock)
+    loop.start()
+    clock.now += 2e-3
+    loop.tick()
+    for lateness, paused in ((0.5e-3, 0.0), (0.99 * STALL_PAUSE, 0.0), (7.25e-3, 7.25e-3)):
+        asked = loop.now(clock.now + 1e-3)
+        loop.expect(1e-3)
+        clock.now += 1e-3 + lateness
+        assert loop.resume(clock.now) == pytest.approx(paused, abs=1e-12)
+        assert loop.now() == pytest.approx(asked + (0.0 if paused else lateness * 1e3),
+                                           abs=1e-9)
+        loop.tick()
+    # an answer between wake-ups, early: nothing paused, the wake-up still expected
+    loop.expect(1e-3)
+    assert loop.resume(clock.now + 0.5e-3, woke=False) == 0.0 and loop.expected is not None
+
+
+def test_a_long_stall_still_trips_the_watchdog_on_the_lag():
+    """The pause hides a stall from the deadlines, not from the watchdog: its lag is
+    against the wall clock (1.5 s held: tripped on lag at the next sample)."""
+    loop, sink = run({30: 1.5}, watchdog_misses=0)
+    trip = loop.watchdog.tripped
+    assert trip is not None and trip.kind == "lag" and trip.k == 31, trip
+    assert loop.stats["paused"] == 1 and loop.paused == pytest.approx(1.5, abs=1e-9)
+    assert not sink.misses
+
+
+def test_stalls_again_and_again_trip_the_watchdog_on_the_pace():
+    """A simulator held 10 ms at every sample (a period is 9.4 ms at x1000) runs at half
+    the pace with its plant paused: the watchdog trips on the pace at its first window."""
+    loop, sink = run({k: 10e-3 for k in range(N)}, watchdog_misses=0)
+    trip = loop.watchdog.tripped
+    assert trip is not None and trip.kind == "pace" and trip.k == 50, trip
+    assert not sink.misses
