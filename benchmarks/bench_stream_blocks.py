@@ -17,11 +17,13 @@ Variants, alternating in one run so that each sees the same load (``--variants``
 and either of them composed (``+composed``: ``grazing run --compose``, the three nodes in
 one process), or under SCHED_FIFO (``+fifo``: the simulator's and the controller's
 thread_priority 50, as a rig scene runs them; ``+fifo+pinned``: and the simulator on CPU
-0, the controller on CPU 1, their cpu_affinity). From the simulator's summary: periods
+0, the controller on CPU 1, their cpu_affinity; ``+fifo+wall``: the plant's clock pinned
+to the wall clock, ``stall_pause:=0``, where by default a stall of the simulator pauses
+it, plant.realtime). From the simulator's summary: periods
 per second against the requested (106.2 at x1000), deadline misses and late answers
 (sections whose correction was not there at t_k + 3), the answer latency (a section's
-last sample published -> its answer received) and the sample lag (how late a sample went
-out), p50/p99/max.
+last sample published -> its answer received), the sample lag (how late a sample went
+out), p50/p99/max, and the plant's pauses (count and longest, ms).
 
 With ``--baseline DIR`` (a git worktree of an older commit) each variant also runs on
 that checkout (its own bench_stream_blocks.scene in a fresh interpreter, the launcher
@@ -58,7 +60,7 @@ DD, SIGMA, RATE, DELAY, WIDTH = -5e-6, 1e-4, 200, 3.0, 0.1
 FREE_RUNNING = {"watchdog_misses": 0, "watchdog_pace": 0.0, "watchdog_lag": 0.0,
                 "watchdog_excursion": 0.0, "feasibility": "warn"}
 VARIANTS = ("sample", "block", "sample+composed", "block+composed", "sample+fifo",
-            "block+fifo", "block+fifo+pinned")
+            "block+fifo", "block+fifo+pinned", "block+fifo+wall")
 #: ``+fifo``: the simulator and the controller under SCHED_FIFO at this priority (their
 #: thread_priority, ros/scheduling.py; what a rig scene runs them with, scene_nodes.py)
 FIFO_PRIORITY = 50
@@ -88,7 +90,8 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
         sim_overrides={"time_scale": scale, "state_period": p.period / RATE,
                        "sensor_noise": SIGMA, "sensor_velocity": False,
                        "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING,
-                       "thread_priority": priority, "cpu_affinity": sim_cpus},
+                       "thread_priority": priority, "cpu_affinity": sim_cpus,
+                       **({"stall_pause": 0.0} if "wall" in mods else {})},
         controller_overrides={"pi2_source": "stream", "estimator": "model",
                               "answer_lead": answer_lead, "thread_priority": priority,
                               "cpu_affinity": controller_cpus},
@@ -102,6 +105,8 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
             "missed": int(s["missed"]), "late": int(s["late"]),
             "predicted": int(s.get("predicted", 0)), "latency": s.get("latency", nan3),
             "lag": s.get("sample_lag", nan3), "ok": res.ok,
+            "paused": int(s.get("paused", 0)),
+            "longest_pause": float(s.get("longest_pause_ms", 0.0)),
             "answered": _answered(Path(res.logs["controller_node"]))}
 
 
@@ -197,7 +202,9 @@ def main(argv=None) -> int:
                       f"{r['rate']:.1f} periods/s, answered {r['answered']}, missed {r['missed']} "
                       f"late {r['late']} predicted {r['predicted']}, latency p50/p99/max "
                       f"{lat[0]:.2f}/{lat[1]:.2f}/{lat[2]:.2f} ms, sample lag p50/p99/max "
-                      f"{lag[0]:.2f}/{lag[1]:.2f}/{lag[2]:.2f} ms (load {load})", flush=True)
+                      f"{lag[0]:.2f}/{lag[1]:.2f}/{lag[2]:.2f} ms, plant paused "
+                      f"{r.get('paused', 0)} (longest {r.get('longest_pause', 0.0):.2f} ms) "
+                      f"(load {load})", flush=True)
     print(f"\nmedians over {args.reps} scenes (requested {args.scale / p.period:.1f} periods/s)")
     print(f"{'variant':21s} {'periods/s':>9s} {'missed':>7s} {'late':>5s} {'lat p50':>8s} "
           f"{'lat p99':>8s} {'lag p99':>8s}  {'missed/base':>11s}")

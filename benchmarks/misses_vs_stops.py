@@ -95,7 +95,9 @@ def main(argv=None) -> int:
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--periods", type=int, default=3000)
     ap.add_argument("--enable-after", type=int, default=1000)
-    ap.add_argument("--variant", default="block+fifo", choices=scenes.VARIANTS)
+    ap.add_argument("--variant", default="block+fifo",
+                    help="a variant of bench_stream_blocks, or several separated by commas "
+                         "(alternating scene by scene): " + ", ".join(scenes.VARIANTS))
     ap.add_argument("--answer-lead", type=float, default=0.0)
     ap.add_argument("--stop", type=float, default=1.5,
                     help="ms a monitor's wake-up must be late to count as a stop")
@@ -104,6 +106,10 @@ def main(argv=None) -> int:
     ap.add_argument("--keep", type=Path, default=None,
                     help="keep each scene's bag, logs and stops under this directory")
     args = ap.parse_args(argv)
+    variants = args.variant.split(",")
+    for v in variants:
+        if v not in scenes.VARIANTS:
+            ap.error(f"--variant {v!r} is invalid: valid are {', '.join(scenes.VARIANTS)}")
     if os.geteuid() != 0:
         ap.error("the monitors run under SCHED_FIFO 99: run as root")
     print(f"{args.reps} scenes of {args.periods} periods ({args.variant}, answer_lead "
@@ -115,13 +121,13 @@ def main(argv=None) -> int:
         tmp = Path(tmp) if args.keep is None else args.keep
         tmp.mkdir(parents=True, exist_ok=True)
         controller = scenes.design(tmp)
-        for rep in range(args.reps):
-            one = tmp / f"scene{rep}"
+        for rep, variant in ((r, v) for r in range(args.reps) for v in variants):
+            one = tmp / f"scene{rep}-{variant}"
             one.mkdir()
             procs, files = monitors(one, args.stop)
             t0 = time.time_ns()
             try:
-                r = scenes.scene(args.variant, controller, args.periods, args.enable_after,
+                r = scenes.scene(variant, controller, args.periods, args.enable_after,
                                  1000.0, one, args.answer_lead)
             finally:
                 for p in procs:
@@ -132,7 +138,8 @@ def main(argv=None) -> int:
             stops = read_stops(files)
             misses = read_misses(one / "bag")
             long2 = sum(1 for s in stops if s[2] > 2e6)
-            print(f"\nscene {rep}: {r.get('missed')} missed, {r.get('late')} late; "
+            print(f"\nscene {rep} ({variant}): {r.get('missed')} missed, {r.get('late')} late, plant "
+                  f"paused {r.get('paused')} (longest {r.get('longest_pause', 0):.2f} ms); "
                   f"{len(stops)} stops over {args.stop:g} ms in {seconds:.0f} s "
                   f"({long2} over 2 ms, longest "
                   f"{max((s[2] for s in stops), default=0) * 1e-6:.2f} ms)", flush=True)
