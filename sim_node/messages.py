@@ -161,6 +161,12 @@ class Outputs:
             # cannot wait, and a late substitution there is what a rig would see too.
             pub.wait_for_all_acked(Duration(seconds=ACKED_WAIT))
 
+    def paused(self, t: float, seconds: float) -> None:
+        """A pause of the plant's clock (Realtime.resume): an event record (recorded with
+        the scene: the analysis keeps its sample lag on the paused clock); counted in the
+        summary line and on /diagnostics, not logged one by one."""
+        self.node.event("paused", t=t, seconds=seconds)
+
     def tripped(self, trip) -> None:
         self.node.on_trip(trip)
 

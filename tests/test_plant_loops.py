@@ -38,7 +38,7 @@ class Recorder:
 
     def __init__(self):
         self.events, self.misses, self.latencies = [], [], []
-        self.substitutions = []
+        self.substitutions, self.pauses = [], []
         self.counts = {"ignored": 0, "late": 0, "timeout": 0, "warn": 0}
         self.finished = 0
         self.trips = []
@@ -61,6 +61,9 @@ class Recorder:
 
     def substituted(self, k, key, dv):
         self.substitutions.append((k, key, dv))
+
+    def paused(self, t, seconds):
+        self.pauses.append((t, seconds))
 
     def ignored(self, text):
         self.counts["ignored"] += 1

@@ -98,6 +98,9 @@ def test_a_stall_of_the_machine_pauses_the_plant_and_no_deadline_is_missed():
     assert loop.stats["paused"] == 3
     assert loop.paused == pytest.approx(4 * STALL, abs=1e-12)
     assert loop.longest_pause == pytest.approx(2 * STALL, abs=1e-12)
+    # each pause told to the sink: after sample k went out, before sample k + 1
+    assert [s for _, s in sink.pauses] == pytest.approx([STALL, STALL, 2 * STALL], abs=1e-12)
+    assert [t // P.period for t, _ in sink.pauses] == sorted(stalls)
     text = loop.summary(1.0, {"missed": 0, "timeouts": 0, "ignored": 0, "malformed": 0})
     assert "missed=0 " in text and (
         f"periods/s paused=3 paused_ms={4 * STALL * 1e3:.3f} "

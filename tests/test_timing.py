@@ -31,7 +31,7 @@ from grazing_control.oscillator.params import OscillatorParams
 from grazing_control.plant.engine import Engine
 from grazing_control.plant.settings import settings_from_values
 from grazing_control.recordings.analyze import analyze
-from grazing_control.ros.recording.record import encode
+from grazing_control.ros.recording.record import encode, encode_event
 
 ROOT = Path(__file__).resolve().parents[1]
 CHAIN = str(ROOT / "config" / "models" / "two_mass_chain.yaml")
@@ -43,14 +43,21 @@ TIME_SCALE = 50.0
 
 def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, on: int,
                    *, sim: dict, ctl: dict, seed: int = 3, scheduled: float = 0.0,
-                   misses: dict | None = None):
+                   misses: dict | None = None, pauses: dict | None = None,
+                   record_pauses: bool = True):
     """A realtime scene with actuation on arrival, written as recorded (module docstring):
     ``answer(x, v)`` the controller's correction from sample k's positions and
     velocities (from ``on`` on; 0 before). Returns the delays (simulation time) at which
     the corrections acted. ``scheduled`` > 0: actuation scheduled that long after each
     sample instead, and at the samples k of ``misses`` a deadline miss, the prediction
-    ``misses[k]`` acting in place of the answer (oscillator/substituted)."""
-    misses = misses or {}
+    ``misses[k]`` acting in place of the answer (oscillator/substituted). ``pauses``:
+    {k: (before, between)}, wall seconds the plant's clock paused (plant.realtime.
+    Realtime.resume) just before sample k went out and between sample k and its answer's
+    arrival: every later publish time moves on by them, the simulator's latency of sample
+    k includes ``between``, and each is a ``paused`` event record (unless not
+    ``record_pauses``)."""
+    misses, pauses = misses or {}, pauses or {}
+    held = 0                                          # ns the plant's clock has paused
     eng = Engine(settings_from_values({"delta_d": delta_d, "actuation_delay": scheduled,
                                        "delta_d_drift": sim.get("delta_d_drift", 0.0)},
                                       model_file))
@@ -61,11 +68,22 @@ def on_arrival_bag(path, model_file: str, delta_d: float, answer, periods: int, 
         ev = eng.sample()
         x, v = np.atleast_1d(ev.x), np.atleast_1d(ev.v)
         stamp = round(ev.t * 1e9)
-        pub = WALL0 + (LAG0_NS if k == 0 else round((ev.t / TIME_SCALE) * 1e9
-                                                     + rng.uniform(0.2e6, 3e6)))
+        before, between = pauses.get(k, (0.0, 0.0))
+        held += round(before * 1e9)
+        pub = WALL0 + held + (LAG0_NS if k == 0 else round((ev.t / TIME_SCALE) * 1e9
+                                                            + rng.uniform(0.2e6, 3e6)))
         latency = float(rng.uniform(2e-3, 8e-3))
-        lag = (pub - WALL0) / 1e9 - ev.t / TIME_SCALE
+        lag = (pub - WALL0 - held) / 1e9 - ev.t / TIME_SCALE
         delay = (lag + latency) * TIME_SCALE            # plant/realtime.py, on arrival
+        # (seconds, the simulation time up to which everything had gone out, log time)
+        paused = [(before, ev.t - 1e-6, pub - 1),
+                  (between, ev.t + delay / 2, pub + round(latency * 1e9))]
+        held += round(between * 1e9)
+        latency += between                               # the simulator's wall latency
+        if record_pauses:
+            msgs += [("/grazing/parameters", "std_msgs/msg/String", log,
+                      string(encode_event("/sim_node", "paused", t=t, seconds=s)))
+                     for s, t, log in paused if s]
         dv = float(answer(x, v)) if k >= on else 0.0
         if scheduled:
             eng.begin_period(misses.get(k, dv), scheduled)
@@ -147,6 +165,48 @@ def test_the_arrivals_explain_the_departures_and_the_report_says_so(chain):
     assert "* **the corrections acted on arrival**" in text
     assert "grazing design --delay" in text and "actuation scheduled" in text
     assert "realtime latency (sim, sample published → answer received): p50" in text
+
+
+#: The plant's clock paused (stall_pause): 4 ms before sample 15 went out, 6 ms between
+#: sample 22 and its answer, 10 ms before sample 30 and 3 ms after it.
+PAUSES = {15: (4e-3, 0.0), 22: (0.0, 6e-3), 30: (10e-3, 3e-3)}
+
+
+@pytest.mark.parametrize("recorded", [True, False], ids=["recorded", "not recorded"])
+def test_the_plants_pauses_are_taken_out_of_the_lag_and_the_delays(tmp_path, recorded):
+    """The same chain scene with the plant's clock paused four times (plant.realtime.
+    Realtime.resume): read with its ``paused`` records, the sample lag stays that of the
+    plant's clock (under 3 ms, as drawn), the fitted lag of sample 0 and the delays are
+    the known ones, the arrivals explain the departures, and the report counts the pauses;
+    without the records the pauses read as lag (23 ms) and the arrivals no longer explain
+    the run."""
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    gains = np.asarray(evaluate_design(model, -0.22).gains, float)
+    flow = NdofFlow.of(model)
+
+    def answer(x, v):
+        return float(gains @ flow.to_deviation(flow.tau2, np.concatenate([x, v])))
+
+    delays = on_arrival_bag(tmp_path / "bag", CHAIN, -1e-3, answer, 40, 10, sim={},
+                            ctl={"gains": gains.tolist()}, pauses=PAUSES,
+                            record_pauses=recorded)
+    report = analyze([tmp_path / "bag"], tmp_path / "report", figures=False)
+    rt = report["bags"][0]["scenes"][0]["realtime"]
+    dc = rt["delay_check"]
+    total = sum(sum(p) for p in PAUSES.values())
+    if not recorded:
+        assert "plant_pauses" not in rt
+        assert rt["sample_lag_ms"]["max"] > total * 1e3
+        assert not dc["explains_model_check"] or dc["max_departure"] > 1e-6, dc
+        return
+    assert rt["plant_pauses"] == {"count": 4, "total_ms": pytest.approx(total * 1e3),
+                                  "longest_ms": pytest.approx(10.0)}
+    assert rt["sample_lag_ms"]["max"] < 3.0 - LAG0_NS / 1e6 + 1e-6
+    assert abs(dc["fitted_first_sample_lag_ms"] - LAG0_NS / 1e6) < 1e-6, dc
+    assert dc["median_delay"] == pytest.approx(np.median(delays[10:-1]), abs=1e-8)
+    assert dc["max_delay"] == pytest.approx(delays[10:-1].max(), abs=1e-8)
+    assert dc["max_departure"] < 1e-8 and dc["explains_model_check"], dc
+    assert "the plant's clock paused 4 times for stalls of the simulator" in report["markdown"]
 
 
 def test_an_n1_model_file_bag_and_the_1dof_bag_of_the_scene_agree(tmp_path):

@@ -37,6 +37,11 @@ class Sink(Protocol):
         """Sample k's answer was missing (miss, loss, timeout): ``dv``, a prediction,
         acted in its place (on_miss = predict)."""
 
+    def paused(self, t: float, seconds: float) -> None:
+        """Realtime: the plant's clock paused ``seconds`` of wall time for a stall of the
+        simulator, everything up to simulation time t published before the pause and
+        everything after it after (:meth:`.realtime.Realtime.resume`)."""
+
     def ignored(self, text: str) -> None:
         """An answer that answers no waiting sample."""
 

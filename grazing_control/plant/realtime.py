@@ -142,6 +142,7 @@ class Realtime(Loop):
         self.paused += late
         self.longest_pause = max(self.longest_pause, late)
         self.stats["paused"] = self.stats.get("paused", 0) + 1
+        self.sink.paused(self.published, late)
         return late
 
     def start(self) -> None:
@@ -283,6 +284,7 @@ class Realtime(Loop):
                 self._actuate(self.schedule.pop_due(now))
                 continue
             if now < self.engine.seg.te:
+                self.published = max(self.published, now)
                 return
             for ev in q:
                 self.emit(ev)

@@ -132,6 +132,10 @@ class SceneData:
     #: stamp (int64 ns) -> the predicted correction the simulator applied in place of a
     #: missing answer (``oscillator/substituted``, on_miss predict)
     substituted: dict = field(default_factory=dict)
+    #: realtime: the plant's pauses for the simulator's stalls (its ``paused`` event
+    #: records, plant.realtime.Realtime.resume), rows (the simulation time up to which
+    #: everything had gone out before the pause, wall seconds), in time order
+    pauses: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     #: a rig scene off the rig's grid (:func:`.rig_acts.apply_acts`): each pulse's start,
     #: model time after its section (NaN: the rig's own instant), the rig's count of late
     #: answers and of rig/applied per status; None otherwise
@@ -376,6 +380,11 @@ def load(bag, topics: dict | None = None) -> BagData:
         dl_scene = _scene_index(starts_log, dl["log_time"])
         dl_stamp = np.where(dl["ok"], dl["stamp"], -1)
 
+    paused = [ev for ev in parameters["events"] if ev["event"] == "paused"
+              and isinstance(ev.get("t"), float) and isinstance(ev.get("seconds"), float)]
+    paused_scene = _scene_index(starts_log, np.array([ev["log_time_ns"] for ev in paused],
+                                                     dtype=np.int64))
+
     scenes = []
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
         st = stamp[a:b]
@@ -416,6 +425,9 @@ def load(bag, topics: dict | None = None) -> BagData:
             sd.deadline_misses = int(np.count_nonzero(dl_scene == i))
             missed = dl_stamp[(dl_scene == i) & (dl_stamp >= 0)]
             sd.missed_stamp_ns = np.unique(missed[np.isin(missed, st)])
+        rows = [(ev["t"], ev["seconds"]) for ev, s in zip(paused, paused_scene) if s == i]
+        if rows:
+            sd.pauses = np.array(sorted(rows), dtype=float)
         if sub is not None:
             m = sub["scene"] == i
             sd.substituted = dict(zip(sub["stamp"][m].tolist(), sub["dv"][m].tolist()))

@@ -5,7 +5,10 @@ and the delay check that says whether the corrections' arrival explains the run.
 "Realtime numbers"): the simulator's latency messages (sample published -> answer
 received), the controller's answer time (publish times), late and missing answers, the
 deadline misses and the predictions substituted at them, and each sample's lag against
-the time scale (recorded, or estimated from the publish times).
+the time scale (recorded, or estimated from the publish times) on the plant's clock: less
+the pauses of that clock before the sample (the simulator's ``paused`` event records,
+plant.realtime.Realtime.resume; docs/nodes.md, "A stall of the simulator"), which are
+reported apart (count, total, longest).
 
 :func:`delay_check` is the model check with each correction applied at its measured
 arrival instead of on the sample. In realtime with actuation on arrival (``actuation``
@@ -15,7 +18,7 @@ applies the correction of sample k when it arrives,
     d_k = (lag_k + latency_k) x time_scale
 
 of simulation time after the sample (plant/realtime.py: the arrival's simulation time
-less t_k). The latency is the simulator's own message (one per applied correction, in
+less t_k), less the plant's pauses between the two (:func:`paused_before`). The latency is the simulator's own message (one per applied correction, in
 order); the lag comes from the recorded publish times relative to sample 0, whose own lag
 (the time the simulator took between its clock's start and publishing sample 0) is not
 recorded: it is fitted as one constant offset minimising the median departure (a grid
@@ -72,6 +75,22 @@ def acts_on_arrival(sim: dict) -> bool:
                    for k in ("actuation_delay", "jitter"))
 
 
+#: Simulation seconds a stamp (whole ns) may lie off the time it rounds.
+STAMP_ROUNDING = 1e-9
+
+
+def paused_before(pauses: np.ndarray, t) -> np.ndarray:
+    """Wall seconds the plant's clock had paused before what is due at simulation time(s)
+    ``t`` went out: the sum of the pauses (rows: the simulation time up to which
+    everything had gone out before the pause, seconds) with that time before t (a sample
+    at that very time had gone out before; within STAMP_ROUNDING, as its stamp rounds)."""
+    t = np.asarray(t, dtype=float)
+    if pauses.size == 0:
+        return np.zeros_like(t)
+    total = np.concatenate([[0.0], np.cumsum(pauses[:, 1])])
+    return total[np.searchsorted(pauses[:, 0] + STAMP_ROUNDING, t, side="left")]
+
+
 def realtime_numbers(sd, time_scale) -> dict:
     """Latency, answer time, late and missing answers, deadline misses, substitutions,
     sample lag (wall clock) of one scene (module docstring); ``time_scale`` None: estimated
@@ -95,7 +114,12 @@ def realtime_numbers(sd, time_scale) -> dict:
     out["substituted"] = len(sd.substituted)
     ts = time_scale
     t = sd.scene.t
-    wall = (sd.pi2_pub_ns - sd.pi2_pub_ns[0]) / 1e9
+    # on the plant's clock: the pauses before each sample taken out of its wall time
+    wall = (sd.pi2_pub_ns - sd.pi2_pub_ns[0]) / 1e9 - paused_before(sd.pauses, t)
+    if sd.pauses.size:
+        out["plant_pauses"] = {"count": int(len(sd.pauses)),
+                               "total_ms": float(sd.pauses[:, 1].sum() * 1e3),
+                               "longest_ms": float(sd.pauses[:, 1].max() * 1e3)}
     if ts is None and len(t) > 2 and np.all(sd.pi2_pub_ns > 0):
         slope = np.polyfit(t - t[0], wall, 1)[0]
         ts = 1.0 / slope if slope > 0 else None
@@ -135,6 +159,9 @@ def delay_check(sd, rt: dict, predict, period: float, corrections=None,
     if not ts or lag is None or lat.size != n or not sd.answered.all() or n < 3:
         return None
     base = lat + lag / 1e3                 # the delays less sample 0's lag, the offset
+    if sd.pauses.size:                     # less a pause between a sample and its answer
+        t = sd.scene.t
+        base = base - (paused_before(sd.pauses, t + base * ts) - paused_before(sd.pauses, t))
     least = max(0.0, -float(np.min(lag)) / 1e3)
 
     def departures(offset, ks):
@@ -211,6 +238,12 @@ def realtime_lines(n: dict, bound: float = 1e-9) -> list:
              f"* sample lag (published vs due, time scale {fmt(rt.get('time_scale'))}"
              f"{', ' + rt['time_scale_source'] if 'time_scale_source' in rt else ''}): "
              f"{_d(rt.get('sample_lag_ms'))}"]
+    pp = rt.get("plant_pauses")
+    if pp:
+        lines.append(f"* the plant's clock paused {pp['count']} times for stalls of the "
+                     f"simulator, {pp['total_ms']:.3g} ms in all, the longest "
+                     f"{pp['longest_ms']:.3g} ms (stall_pause: not charged to the deadlines; "
+                     "the sample lag above is on the paused clock)")
     dc = rt.get("delay_check")
     mc = n.get("model_check") or {}
     if not dc:

@@ -121,15 +121,15 @@ def run_parameters(records) -> dict:
     ``records``: (log_time_ns, text) pairs. Returns ``{"nodes": {name: [params, ...]},
     "events": [event, ...], "rejected": n}`` where the first entry of each list is the
     parameters at start and the others are later changes; ``events`` the event records
-    (:func:`decode_event`) in time order.
+    (:func:`decode_event`) in time order, each with its ``log_time_ns``.
     """
     nodes, rejected, events = {}, 0, []
-    for _t, text in sorted(records, key=lambda r: r[0]):
+    for log_ns, text in sorted(records, key=lambda r: r[0]):
         try:
             node, params = decode(text)
         except ValueError:
             try:
-                events.append(decode_event(text))
+                events.append({**decode_event(text), "log_time_ns": log_ns})
             except ValueError:
                 rejected += 1
             continue
