@@ -138,8 +138,9 @@ def main(argv=None) -> int:
             stops = read_stops(files)
             misses = read_misses(one / "bag")
             long2 = sum(1 for s in stops if s[2] > 2e6)
-            print(f"\nscene {rep} ({variant}): {r.get('missed')} missed, {r.get('late')} late, plant "
-                  f"paused {r.get('paused')} (longest {r.get('longest_pause', 0):.2f} ms); "
+            print(f"\nscene {rep} ({variant}): {r.get('missed')} missed, {r.get('late')} "
+                  f"late, plant paused {r.get('paused')} (longest "
+                  f"{r.get('longest_pause', 0):.2f} ms); "
                   f"{len(stops)} stops over {args.stop:g} ms in {seconds:.0f} s "
                   f"({long2} over 2 ms, longest "
                   f"{max((s[2] for s in stops), default=0) * 1e-6:.2f} ms)", flush=True)
