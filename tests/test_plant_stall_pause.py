@@ -36,7 +36,9 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
     from sample ON. ``stalls``: {sample k: seconds} held at the first wake-up after
     sample k went out, beginning half way through the wait; ``held``: "machine" (the
     simulator and the controller: an answer not ready by the stall's start is ready that
-    much later) or "controller" (the simulator wakes on time). ``late``: every wake-up
+    much later), "running" (the same, but the stall begins in the wake-up that published
+    sample k, right after it went out: the simulator held while it runs) or "controller"
+    (the simulator wakes on time). ``late``: every wake-up
     comes this much later than asked (the timer's jitter). Returns (loop, sink)."""
     s = settings(mode="realtime", time_scale=1000.0, actuation_delay=DELAY, max_periods=n,
                  state_period=0.0, **kw)
@@ -51,6 +53,12 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
             pending.append([clock.now + 1e-3, key(ev), law(C1, C2, ev) if k >= ON else 0.0])
             stall = stalls.get(k)
         seen = len(sink.samples())
+        if stall and held == "running":
+            for p in pending:
+                if p[0] > clock.now:
+                    p[0] += stall
+            clock.now += stall
+            stall = None
         wait = min(loop.wake_in(loop.now()), 1e-3)
         loop.expect(wait)
         begins, clock.now = clock.now + wait / 2.0, clock.now + wait + late
@@ -90,9 +98,12 @@ def test_a_stall_of_the_machine_on_the_wall_clock_misses_the_deadlines_in_it():
     assert loop.stats.get("paused", 0) == 0
 
 
-def test_a_stall_of_the_machine_pauses_the_plant_and_no_deadline_is_missed():
+@pytest.mark.parametrize("held", ["machine", "running"])
+def test_a_stall_of_the_machine_pauses_the_plant_and_no_deadline_is_missed(held):
+    """Held while asleep (its wake-up comes late: Realtime.resume) or while it runs (its
+    wake-up ends late: Realtime.expect), the plant pauses as long."""
     stalls = {20: STALL, 21: STALL, 47: 2 * STALL}
-    loop, sink = run(stalls)
+    loop, sink = run(stalls, held=held)
     assert not sink.misses
     np.testing.assert_array_equal(samples(sink), reference(N, C1, C2, ON, DELAY))
     assert loop.stats["paused"] == 3

@@ -79,6 +79,8 @@ class Realtime(Loop):
     late_prediction = None   # (k, prediction) of an answer late for its own start
     stall_pause = STALL_PAUSE   # wall s of lateness that pauses the plant (0: never)
     expected = None    # wall time of the wake-up asked for (expect), None: none pending
+    woke = None        # wall time the current wake-up began (resume), None: asleep
+    settled = -math.inf   # wall time of the last expect (a wake-up's work measured to it)
     paused = 0.0       # wall s the plant's clock has paused in all
     paused_base = 0.0  # paused at the last reset or rebase (the watchdog's lag since)
     longest_pause = 0.0
@@ -112,8 +114,16 @@ class Realtime(Loop):
 
     def expect(self, wake: float) -> None:
         """The node armed its wake-up ``wake`` wall seconds from now (:meth:`wake_in`, or
-        sooner for a driver's sample): :meth:`resume` measures its lateness from it."""
-        self.expected = self.clock() + wake
+        sooner for a driver's sample), at the end of a wake-up: :meth:`resume` measures
+        the next one's lateness from it. A wake-up that took more than ``stall_pause``
+        from its start (the simulator held while it ran, or its work that long) pauses
+        the plant's clock for its length, as a late one does (:meth:`resume`): what it
+        published was due at its start."""
+        wall = self.clock()
+        if self.woke is not None and self.stall_pause and wall - self.woke > self.stall_pause:
+            self._pause(wall - self.woke)
+        self.woke, self.settled = None, wall
+        self.expected = wall + wake
 
     def resume(self, wall: float, woke: bool = True) -> float:
         """The loop runs again at wall time ``wall``: woken (``woke``) or taking an answer
@@ -130,6 +140,8 @@ class Realtime(Loop):
         ``stall_pause`` 0: never (the plant's clock is the wall clock). Returns the
         pause, wall seconds (0.0: none)."""
         due = self.expected
+        if woke:     # (an answer taken in this wake-up may have re-armed: measured to there)
+            self.woke = max(wall, self.settled)
         if due is None or not self.stall_pause:
             return 0.0
         late = wall - due
@@ -138,12 +150,18 @@ class Realtime(Loop):
                 self.expected = None
             return 0.0
         self.expected = None
-        self.wall0 += late
-        self.paused += late
-        self.longest_pause = max(self.longest_pause, late)
-        self.stats["paused"] = self.stats.get("paused", 0) + 1
-        self.sink.paused(self.published, late)
+        self._pause(late)
         return late
+
+    def _pause(self, seconds: float) -> None:
+        """The plant's clock pauses ``seconds`` of wall time (:meth:`resume`,
+        :meth:`expect`): counted, told to the sink with the simulation time up to which
+        everything had gone out."""
+        self.wall0 += seconds
+        self.paused += seconds
+        self.longest_pause = max(self.longest_pause, seconds)
+        self.stats["paused"] = self.stats.get("paused", 0) + 1
+        self.sink.paused(self.published, seconds)
 
     def start(self) -> None:
         """Sample 0 at t = 0, now."""
@@ -153,7 +171,7 @@ class Realtime(Loop):
         """After ``engine.reset()``: t = 0 now, and its sample 0 ``ev`` goes out."""
         self.t0, self.wall0 = 0.0, self.clock()
         self.published = 0.0
-        self.expected, self.paused_base = None, self.paused
+        self.expected, self.woke, self.paused_base = None, None, self.paused
         self.finished = False
         self.schedule.clear()
         self.rel = self.offset = self.late_prediction = None
