@@ -12,7 +12,8 @@ The loop is driven as sim_node drives it, over a clock the test moves: each wake
 asked for (``expect``) at most 1 ms ahead (a stream's pace), the controller's answer is
 ready 1 ms after its sample, and a stall moves the clock on at a chosen wake-up: the
 machine's (both processes held: the pending answers wait as well), or the controller's
-alone.
+alone. The wake-ups' own work takes no wall time and no CPU time here; a wake-up held
+while it runs is one whose wall time grows and its thread's CPU time does not.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
     clock, sink = Clock(), Recorder()
     loop = Realtime(Engine(s), sink, clock)
     loop.stall_pause = pause
+    loop.cpu_clock = lambda: 0.0      # the wake-ups' work takes no time on the test's clock
     loop.start()
     pending, seen, stall = [], 0, None
     while not loop.finished:
@@ -137,6 +139,7 @@ def test_the_pause_is_exactly_the_lateness_beyond_the_asked_wake_up():
     """resume on its own: the simulation time at the late wake-up is the asked one's."""
     clock = Clock()
     loop = Realtime(Engine(settings(mode="realtime", time_scale=1000.0)), Recorder(), clock)
+    loop.cpu_clock = lambda: 0.0
     loop.start()
     clock.now += 2e-3
     loop.tick()
@@ -151,6 +154,26 @@ def test_the_pause_is_exactly_the_lateness_beyond_the_asked_wake_up():
     # an answer between wake-ups, early: nothing paused, the wake-up still expected
     loop.expect(1e-3)
     assert loop.resume(clock.now + 0.5e-3, woke=False) == 0.0 and loop.expected is not None
+
+
+def test_a_wake_ups_own_work_is_the_plants_time_and_pauses_nothing():
+    """Work of 3 ms in one wake-up (the thread's CPU time grows as the wall time): no
+    pause; the same 3 ms held (the CPU time still): a pause of 3 ms; 0.5 ms of the 3
+    held: within stall_pause, no pause."""
+    clock, cpu = Clock(), [0.0]
+    loop = Realtime(Engine(settings(mode="realtime", time_scale=1000.0)), Recorder(), clock)
+    loop.cpu_clock = lambda: cpu[0]
+    loop.start()
+    for worked, paused in ((3e-3, 0.0), (0.0, 3e-3), (2.5e-3, 0.0)):
+        loop.expect(1e-3)
+        clock.now += 1e-3
+        loop.tick()
+        clock.now += 3e-3                      # the wake-up's wall time
+        cpu[0] += worked                       # of which the thread ran this long
+        before = loop.paused
+        loop.expect(1e-3)
+        assert loop.paused - before == pytest.approx(paused, abs=1e-12)
+    assert loop.stats["paused"] == 1
 
 
 def test_a_long_stall_still_trips_the_watchdog_on_the_lag():
