@@ -26,7 +26,7 @@ from test_closed_loop import CONTROLLER, STUDY, new_domain
 
 pytestmark = pytest.mark.realtime
 
-PERIODS, HELD = 90, 0.3
+PERIODS, HELD = 45, 0.3
 
 
 def scene(tmp, name: str, pause: float | None):
