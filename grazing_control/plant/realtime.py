@@ -61,8 +61,9 @@ MIN_TICK = 5e-5
 #: (a rig's data acquisition delivers blocks too).
 STREAM_TICK = 5e-4
 #: Wall seconds a wake-up may come later than the loop asked before the plant's clock
-#: pauses for its lateness (:meth:`Realtime.resume`): above the timer's own jitter here
-#: (p99 0.1-0.3 ms under SCHED_FIFO, docs/benchmarks.md), under the budget of an answer.
+#: pauses for its lateness (:meth:`Realtime.resume`): above how late the loop's samples
+#: go out here (p99 0.35-0.47 ms in the T/200 scene under SCHED_FIFO, docs/benchmarks.md,
+#: "The plant's clock paused"), well under an answer's budget (3 ms there).
 STALL_PAUSE = 1e-3
 
 
@@ -80,7 +81,7 @@ class Realtime(Loop):
     late_prediction = None   # (k, prediction) of an answer late for its own start
     stall_pause = STALL_PAUSE   # wall s of lateness that pauses the plant (0: never)
     expected = None    # wall time of the wake-up asked for (expect), None: none pending
-    woke = None        # (wall, thread CPU time) the current wake-up began, None: asleep
+    began = None       # (wall, thread CPU time) the current wake-up began, None: asleep
     settled = -math.inf   # wall time of the last expect (a wake-up's work measured to it)
     #: the CPU time of the calling thread, seconds (a wake-up's work against its held time)
     cpu_clock = staticmethod(time.thread_time)
@@ -125,11 +126,11 @@ class Realtime(Loop):
         is not charged to the thread's CPU time: a busy loop's 4.1 ms gap of wall time
         used 0.04 ms of it, docs/benchmarks.md)."""
         wall = self.clock()
-        if self.woke is not None and self.stall_pause:
-            held = (wall - self.woke[0]) - (self.cpu_clock() - self.woke[1])
+        if self.began is not None and self.stall_pause:
+            held = (wall - self.began[0]) - (self.cpu_clock() - self.began[1])
             if held > self.stall_pause:
                 self._pause(held)
-        self.woke, self.settled = None, wall
+        self.began, self.settled = None, wall
         self.expected = wall + wake
 
     def resume(self, wall: float, woke: bool = True) -> float:
@@ -148,7 +149,7 @@ class Realtime(Loop):
         pause, wall seconds (0.0: none)."""
         due = self.expected
         if woke:     # (an answer taken in this wake-up may have re-armed: measured to there)
-            self.woke = (max(wall, self.settled), self.cpu_clock())
+            self.began = (max(wall, self.settled), self.cpu_clock())
         if due is None or not self.stall_pause:
             return 0.0
         late = wall - due
@@ -178,7 +179,7 @@ class Realtime(Loop):
         """After ``engine.reset()``: t = 0 now, and its sample 0 ``ev`` goes out."""
         self.t0, self.wall0 = 0.0, self.clock()
         self.published = 0.0
-        self.expected, self.woke, self.paused_base = None, None, self.paused
+        self.expected, self.began, self.paused_base = None, None, self.paused
         self.finished = False
         self.schedule.clear()
         self.rel = self.offset = self.late_prediction = None
