@@ -174,6 +174,16 @@ def test_a_wake_ups_own_work_is_the_plants_time_and_pauses_nothing():
         loop.expect(1e-3)
         assert loop.paused - before == pytest.approx(paused, abs=1e-12)
     assert loop.stats["paused"] == 1
+    # as sim_node wakes with the answer port: resume, the answers (3 ms of work), then
+    # tick, which resumes again: the work is still the wake-up's own
+    loop.expect(1e-3)
+    clock.now += 1e-3
+    loop.resume(clock.now)
+    clock.now += 3e-3
+    cpu[0] += 3e-3
+    loop.tick(clock.now - 3e-3)
+    loop.expect(1e-3)
+    assert loop.stats["paused"] == 1
 
 
 def test_a_long_stall_still_trips_the_watchdog_on_the_lag():

@@ -148,7 +148,8 @@ class Realtime(Loop):
         ``stall_pause`` 0: never (the plant's clock is the wall clock). Returns the
         pause, wall seconds (0.0: none)."""
         due = self.expected
-        if woke:     # (an answer taken in this wake-up may have re-armed: measured to there)
+        if woke and self.began is None:   # (called again by tick: the wake-up's start kept;
+            # an answer taken in this wake-up may have re-armed: measured from there)
             self.began = (max(wall, self.settled), self.cpu_clock())
         if due is None or not self.stall_pause:
             return 0.0
