@@ -185,7 +185,8 @@ SCENE_MODULES = frozenset({
     "test_rig_scene", "test_rig_stop", "test_rig_wrong_model",
     "test_scheduling",
     "test_signals",
-    "test_sim_node", "test_stall_pause_scene", "test_stop_fidelity", "test_stop_selection", "test_stream_block",
+    "test_sim_node", "test_stall_pause_scene", "test_stop_fidelity", "test_stop_selection",
+    "test_stream_block",
     "test_stream_replay",
     "test_test_cleanup",
 })

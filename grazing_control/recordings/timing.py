@@ -18,13 +18,14 @@ applies the correction of sample k when it arrives,
     d_k = (lag_k + latency_k) x time_scale
 
 of simulation time after the sample (plant/realtime.py: the arrival's simulation time
-less t_k), less the plant's pauses between the two (:func:`paused_before`). The latency is the simulator's own message (one per applied correction, in
-order); the lag comes from the recorded publish times relative to sample 0, whose own lag
-(the time the simulator took between its clock's start and publishing sample 0) is not
-recorded: it is fitted as one constant offset minimising the median departure (a grid
-over the window, then Brent: :func:`grazing_control.recordings.lag_fit.window_minimum`), no
-smaller than the largest lead of a sample over sample 0 (every lag is >= 0), to a tenth
-of the stamps' resolution (1 ns). The model is the caller's: ``predict(k, delay)``, the
+less t_k), less the plant's pauses between the two (:func:`paused_before`). The latency
+is the simulator's own message (one per applied correction, in order); the lag comes
+from the recorded publish times relative to sample 0, whose own lag (the time the
+simulator took between its clock's start and publishing sample 0) is not recorded: it is
+fitted as one constant offset minimising the median departure (a grid over the window,
+then Brent: :func:`grazing_control.recordings.lag_fit.window_minimum`), no smaller than
+the largest lead of a sample over sample 0 (every lag is >= 0), to a tenth of the
+stamps' resolution (1 ns). The model is the caller's: ``predict(k, delay)``, the
 next sample from sample k with its correction ``delay`` after it (0: on the sample), by
 the core's own period (the 1-DOF closed form, :func:`grazing_control.recordings.numbers.
 realtime_numbers`; the n-DOF model's, :func:`grazing_control.recordings.analysis.
