@@ -187,9 +187,13 @@ class Realtime(Loop):
         self.timed = {}
         self.watchdog = Watchdog(self.settings.watchdog)   # a new run: a new watchdog
         self._scaled = None
-        self.publish_sample(ev)
+        # the stream's sample at t = 0 before sample 0, as each section's last stream
+        # samples go out before its sample: emitted after it, the t = 0 sample waited in
+        # the wake-up's block for the integration of period 0 (1.6 ms at T/200 x1000, on
+        # the answer's path of section 0: docs/benchmarks.md, "Section 0")
         for e in self.engine.initial_states():
             self.emit(e)
+        self.publish_sample(ev)
 
     def rebase(self) -> None:
         """Keep the simulation time continuous across a change of time_scale (call it
