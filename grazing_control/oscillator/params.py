@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from functools import cached_property
 
 __all__ = [
     "ParameterError",
@@ -126,64 +127,64 @@ class OscillatorParams:
             object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ derived
-    @property
+    @cached_property
     def omega_d(self) -> float:
         """Damped natural frequency omega_d = sqrt(1 - zeta^2)."""
         return math.sqrt(1.0 - self.zeta * self.zeta)
 
-    @property
+    @cached_property
     def period(self) -> float:
         """Forcing period T = 2 pi / omega."""
         return TWO_PI / self.omega
 
-    @property
+    @cached_property
     def amplitude(self) -> float:
         """a(omega) = 1 / sqrt((1 - omega^2)^2 + (2 zeta omega)^2) (spec section 1)."""
         w = self.omega
         return 1.0 / math.hypot(1.0 - w * w, 2.0 * self.zeta * w)
 
-    @property
+    @cached_property
     def lag(self) -> float:
         """Phase lag phi = atan2(2 zeta omega, 1 - omega^2) of x_p (spec section 1)."""
         w = self.omega
         return math.atan2(2.0 * self.zeta * w, 1.0 - w * w)
 
-    @property
+    @cached_property
     def d_star(self) -> float:
         """Critical clearance of grazing d* = a(omega) (Eq. 2)."""
         return self.amplitude
 
-    @property
+    @cached_property
     def d(self) -> float:
         """Wall position d = d* + Delta d."""
         return self.d_star + self.delta_d
 
-    @property
+    @cached_property
     def tau_star(self) -> float:
         """Grazing phase tau* = phi mod 2 pi (Eq. 2): the phase of section Pi1."""
         return self.lag % TWO_PI
 
-    @property
+    @cached_property
     def tau2(self) -> float:
         """Phase of section Pi2, tau* + pi2_offset mod 2 pi (Eq. 27)."""
         return (self.tau_star + self.pi2_offset) % TWO_PI
 
-    @property
+    @cached_property
     def a_star(self) -> float:
         """Acceleration at the grazing point, a* = cos tau* - d* (Eq. 3)."""
         return math.cos(self.tau_star) - self.d_star
 
-    @property
+    @cached_property
     def non_sticking(self) -> bool:
         """Regular grazing condition a* < 0 (Eq. 3)."""
         return self.a_star < 0.0
 
-    @property
+    @cached_property
     def x_ref(self) -> float:
         """x** = d* cos(tau2 - phi), the grazing orbit's position on Pi2 (spec section 3)."""
         return self.d_star * math.cos(self.pi2_offset)
 
-    @property
+    @cached_property
     def v_ref(self) -> float:
         """v** = -d* omega sin(tau2 - phi), the grazing orbit's velocity on Pi2."""
         return -self.d_star * self.omega * math.sin(self.pi2_offset)
