@@ -9,14 +9,17 @@ to it and under SCHED_FIFO 99 (above the scene's nodes at 50, so that they canno
 it), sleeps 1 ms at a time and writes down every wake-up more than ``--stop`` ms
 (default 1.5) later than asked: an instant when that CPU ran nothing, not even a thread
 at the highest priority (the hypervisor held the virtual CPU, or the kernel ran with
-interrupts off). Each monitor costs about 1 % of its CPU.
+interrupts off). After each wake-up it also times a fixed unit of work (~40 us here): one
+that takes more than ``--slow`` (default 3) times its median is a CPU that ran, but
+slowly (the host's contention: the stop's measure does not see it). Each monitor costs
+about 5 % of its CPU.
 
 Each missed section (the scene's bag, ``oscillator/deadline_miss``: k, its actuation
 time and how long after its sample went out it was declared, logged at the recorder's
 reception, wall clock) is printed with the stops that overlap the ``--window`` ms
 (default 12: longer than the answer's whole budget) before it was logged, on either CPU:
-one that began earlier and lasted into the window counts. A miss without one is the
-scene's own.
+one that began earlier and lasted into the window counts, and with the slow units of
+work in the window. A miss with neither is the scene's own.
 
 Run: ``.venv/bin/python benchmarks/misses_vs_stops.py --reps 3`` (about 45 s a scene).
 Results in docs/benchmarks.md.
@@ -38,46 +41,66 @@ sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 import bench_stream_blocks as scenes  # noqa: E402
 
 #: One monitor: pinned to CPU argv[1], SCHED_FIFO 99, a line "<wall ns> <late ns>" to
-#: argv[3] for every wake-up more than argv[2] ns late, until its stdin closes.
+#: argv[3] for every wake-up more than argv[2] ns late, until its stdin closes. After each
+#: wake-up it times a fixed piece of work (``UNIT``, about 40 us, calibrated over its first
+#: 2000 wake-ups); one that takes more than argv[4] times the calibrated median is written
+#: as "S <wall ns> <ratio>": an instant when this CPU ran, but slowly (what the host did to
+#: it: the stop's measure does not see it).
 MONITOR = r"""
 import os, select, sys, time
-cpu, limit, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+cpu, limit, out, slow = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], float(sys.argv[4])
 os.sched_setaffinity(0, {cpu})
 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(99))
 poll = select.poll(); poll.register(sys.stdin.fileno(), select.POLLIN | select.POLLHUP)
+UNIT = range(2000)
+units, median = [], None
 with open(out, "w", buffering=1) as f:
     while True:
         t0 = time.monotonic_ns(); w0 = time.time_ns()
         if poll.poll(1):          # 1 ms, or stdin closed: the end
             break
-        late = time.monotonic_ns() - t0 - 1_000_000
+        t1 = time.monotonic_ns()
+        late = t1 - t0 - 1_000_000
         if late > limit:
             f.write(f"{w0} {late}\n")
+        sum(UNIT)
+        unit = time.monotonic_ns() - t1
+        if median is None:
+            units.append(unit)
+            if len(units) == 2000:
+                median = sorted(units)[1000]
+        elif unit > slow * median:
+            f.write(f"S {time.time_ns()} {unit / median:.2f}\n")
 """
 
 
-def monitors(tmp: Path, stop_ms: float):
+def monitors(tmp: Path, stop_ms: float, slow: float = 3.0):
     """One monitor per CPU: (processes, their output files)."""
     procs, files = [], []
     for cpu in sorted(os.sched_getaffinity(0)):
         out = tmp / f"stops{cpu}.txt"
         procs.append(subprocess.Popen(
-            [sys.executable, "-c", MONITOR, str(cpu), str(int(stop_ms * 1e6)), str(out)],
+            [sys.executable, "-c", MONITOR, str(cpu), str(int(stop_ms * 1e6)), str(out),
+             str(slow)],
             stdin=subprocess.PIPE))
         files.append((cpu, out))
     return procs, files
 
 
-def read_stops(files) -> list:
-    """(cpu, start wall ns, length ns) of every stop written."""
-    stops = []
+def read_stops(files) -> tuple:
+    """(stops, slow units): (cpu, start wall ns, length ns) of every stop written, and
+    (cpu, wall ns, ratio to the median) of every slow unit of work."""
+    stops, slow = [], []
     for cpu, out in files:
         if out.is_file():
             for line in out.read_text().split("\n"):
-                if line:
+                if line.startswith("S "):
+                    _, w, ratio = line.split()
+                    slow.append((cpu, int(w), float(ratio)))
+                elif line:
                     w, late = map(int, line.split())
                     stops.append((cpu, w, late + 1_000_000))
-    return sorted(stops, key=lambda s: s[1])
+    return sorted(stops, key=lambda s: s[1]), sorted(slow, key=lambda s: s[1])
 
 
 def read_misses(bag: Path) -> list:
@@ -101,6 +124,8 @@ def main(argv=None) -> int:
     ap.add_argument("--answer-lead", type=float, default=0.0)
     ap.add_argument("--stop", type=float, default=1.5,
                     help="ms a monitor's wake-up must be late to count as a stop")
+    ap.add_argument("--slow", type=float, default=3.0,
+                    help="a monitor's unit of work this many times its median counts as slow")
     ap.add_argument("--window", type=float, default=12.0,
                     help="ms before a miss was logged in which its stops are looked for")
     ap.add_argument("--keep", type=Path, default=None,
@@ -135,7 +160,7 @@ def main(argv=None) -> int:
                 for p in procs:
                     p.wait(timeout=10)
             seconds = (time.time_ns() - t0) * 1e-9
-            stops = read_stops(files)
+            stops, slow = read_stops(files)
             misses = read_misses(one / "bag")
             long2 = sum(1 for s in stops if s[2] > 2e6)
             print(f"\nscene {rep} ({variant}): {r.get('missed')} missed, {r.get('late')} "
@@ -143,7 +168,8 @@ def main(argv=None) -> int:
                   f"{r.get('longest_pause', 0):.2f} ms); "
                   f"{len(stops)} stops over {args.stop:g} ms in {seconds:.0f} s "
                   f"({long2} over 2 ms, longest "
-                  f"{max((s[2] for s in stops), default=0) * 1e-6:.2f} ms)", flush=True)
+                  f"{max((s[2] for s in stops), default=0) * 1e-6:.2f} ms); {len(slow)} "
+                  f"units of work over {args.slow:g}x their median", flush=True)
             for k, t, waited, logged in misses:
                 # a stop that overlaps the window: one that began before it and
                 # lasted into it counts (at stop 46 only the stops that began in it did)
@@ -153,9 +179,16 @@ def main(argv=None) -> int:
                 explained += bool(near)
                 what = ", ".join(f"CPU {c} {(w - logged) * 1e-6:+.2f} ms for {n * 1e-6:.2f} ms"
                                  for c, w, n in near) or "none"
+                spell = [u for u in slow
+                         if logged - args.window * 1e6 <= u[1] <= logged + 0.5e6]
+                slowest = ", ".join(f"CPU {c} {r:.1f}x"
+                                    for c, r in sorted({c: max(u[2] for u in spell
+                                                               if u[0] == c)
+                                                        for c, _w, _r in spell}.items()))
                 print(f"  section {k} (logged {logged * 1e-9:.6f}): declared "
                       f"{waited * 1e3:.2f} ms after its sample went out; stops before it: "
-                      f"{what}", flush=True)
+                      f"{what}; slow units in the window: {len(spell)}"
+                      f"{f' (the slowest: {slowest})' if spell else ''}", flush=True)
     print(f"\n{explained} of {total} misses with a stop of the machine in the "
           f"{args.window:g} ms before them")
     return 0
