@@ -154,6 +154,37 @@ def test_ctrl_c_early_in_grazing_run_is_quiet(tmp_path, delay):
     assert not any("Traceback" in t or "Fatal Python error" in t for t in texts), texts
 
 
+@pytest.mark.parametrize("node", ["recorder_node", "controller_node", "sim_node"])
+def test_a_ctrl_c_while_a_node_starts_stops_that_node_too(tmp_path, monkeypatch, node):
+    """The Ctrl-C that lands after a node process exists but before its handle is the
+    launcher's (inside ``subprocess.Popen``'s wait for the exec, or the zygote's reply):
+    held until the handle is had, then acted on: that node stopped too, and nothing
+    started after it. Before, it was left running (a Ctrl-C right at the start, about
+    once in a few hundred; the suite's no_process_outlives_its_test caught it)."""
+    made = {}
+    real = launcher._spawn_node
+    names = {launcher.RECORDER_MODULE: "recorder_node", launcher.SIM_MODULE: "sim_node",
+             launcher.CONTROLLER_MODULE: "controller_node"}
+
+    def spawned_then_interrupted(command, env, streams):
+        proc = real(command, env, streams)
+        name = names[command[3]]
+        made[name] = proc
+        if name == node:
+            os.kill(os.getpid(), signal.SIGINT)     # the terminal's Ctrl-C, right now
+            time.sleep(0.05)                         # (delivered before the handle is back)
+        return proc
+
+    monkeypatch.setattr(launcher, "_spawn_node", spawned_then_interrupted)
+    res = launcher.run(STUDY, CONTROLLER, tmp_path / "bag", 50, log_dir=tmp_path / "logs",
+                       timeout=60)
+    assert res.interrupted and node in made
+    assert all(p.poll() is not None for p in made.values()), \
+        {n: p.poll() for n, p in made.items()}
+    order = ["recorder_node", "controller_node", "sim_node"]
+    assert not any(n in made for n in order[order.index(node) + 1:])    # none after it
+
+
 def test_repeated_recorded_scenes_lose_no_correction(tmp_path):
     """The start race: the simulator starts only once the recorder matched every topic
     (recorder/ready), the corrections are transient local, and the recorder checks the

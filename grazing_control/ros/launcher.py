@@ -45,6 +45,7 @@ while it is still importing its modules exits quietly with status 130
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import importlib.util
@@ -334,6 +335,9 @@ def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, 
     ``command``: this command line instead of the node's (the composed scene).
     With ``GRAZING_NODE_ZYGOTE=1`` in the environment the node is forked from a process
     that has already imported it (:mod:`.node_zygote`; the test suite), else spawned.
+    A Ctrl-C (SIGINT, or SIGTERM) while the node starts is acted on once it has: the
+    node is stopped (:func:`stop_nodes`) and KeyboardInterrupt raised, so that it never
+    outlives a caller that did not get its handle (:func:`interrupts_held`).
     """
     out = open(log, "wb") if log is not None else None
     command = command or node_command(module, params_files, overrides, python)
@@ -341,15 +345,47 @@ def start_node(module: str, params_files=(), overrides=None, *, domain_id=None, 
     streams = dict(stdin=subprocess.DEVNULL, stdout=out,
                    stderr=subprocess.STDOUT if out else None)
     try:
-        if command[1:3] == ["-c", BOOTSTRAP]:
-            zygote = node_zygote.owner_zygote(node_env(), MODULES.values())
-            forked = zygote.spawn(command, env, **streams) if zygote else None
-            if forked is not None:
-                return forked
-        return subprocess.Popen(command, env=env, process_group=0, **streams)
+        with interrupts_held() as held:
+            proc = _spawn_node(command, env, streams)
     finally:
         if out is not None:
             out.close()
+    if held:        # a Ctrl-C while it started: the node it made does not outlive it
+        stop_nodes([proc])
+        raise KeyboardInterrupt
+    return proc
+
+
+def _spawn_node(command, env: dict, streams: dict):
+    """The node process of ``command``: forked from the zygote where there is one
+    (:mod:`.node_zygote`), else spawned in a process group of its own."""
+    if command[1:3] == ["-c", BOOTSTRAP]:
+        zygote = node_zygote.owner_zygote(node_env(), MODULES.values())
+        forked = zygote.spawn(command, env, **streams) if zygote else None
+        if forked is not None:
+            return forked
+    return subprocess.Popen(command, env=env, process_group=0, **streams)
+
+
+@contextlib.contextmanager
+def interrupts_held():
+    """SIGINT and SIGTERM held (yields the list of those that came) while a node process
+    starts, for :func:`start_node` to act on once it has the node's handle. Raised
+    inside ``subprocess.Popen`` (its wait for the exec) or the zygote's reply, after the
+    node existed but before its handle came back, the KeyboardInterrupt left a node that
+    nobody stopped or waited for: a Ctrl-C right at the start of ``grazing run``, or of
+    a replay (tests/test_launcher.py). Off the main thread (where signals cannot be
+    handled) it holds nothing."""
+    held, previous = [], {}
+    if threading_is_main():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            if signal.getsignal(sig) is not None:    # None: a handler not set from Python
+                previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
+    try:
+        yield held
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def recorded_status(bag_dir) -> int | None:
