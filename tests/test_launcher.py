@@ -33,6 +33,25 @@ def grazing(*args, **kw):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
 
 
+def test_a_failed_scenes_reason_quotes_the_nodes_last_error(tmp_path):
+    """With --log-dir a node's output is not on the terminal: the reason line quotes its
+    last error (a refused parameter with its valid range), not only its exit status."""
+    log = tmp_path / "sim_node.log"
+    log.write_text("[INFO] [1.0] [sim_node]: starting\n"
+                   "[ERROR] [2.0] [sim_node]: time_scale=-3.0 is invalid: valid range is "
+                   "time_scale > 0\n[INFO] [3.0] [sim_node]: bye\n")
+    quiet = tmp_path / "controller_node.log"
+    quiet.write_text("[INFO] [1.0] [controller_node]: fine\n")
+    res = launcher.RunResult(sim=2, controller=1, recorder=None, bag_dir=None, wall=0.3,
+                             logs={"sim_node": str(log), "controller_node": str(quiet)})
+    assert launcher.failure_reason(res) == (
+        "sim_node exited with status 2 (time_scale=-3.0 is invalid: valid range is "
+        "time_scale > 0); controller_node exited with status 1")
+    res.logs = {}                           # the nodes' output on the terminal
+    assert launcher.failure_reason(res, early=["controller_node"]) == (
+        "controller_node exited early with status 1; sim_node exited with status 2")
+
+
 # ------------------------------------------------------------------------ domains
 def test_claimed_domains_are_distinct_and_not_in_use():
     import rclpy

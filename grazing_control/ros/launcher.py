@@ -65,6 +65,7 @@ from pathlib import Path
 import yaml
 
 from . import node_zygote
+from .scene_verdict import failure_reason, read_verdict  # noqa: F401 (API)
 from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
                           scene_overrides, sim_values_for_model, sim_values_for_rig)
@@ -721,46 +722,6 @@ def _composed_statuses(path: Path, proc, record: bool) -> dict:
     code = None if proc is None else proc.returncode
     names = ("sim_node", "controller_node") + (("recorder_node",) if record else ())
     return {name: code for name in names}
-
-
-def read_verdict(path: Path):
-    """sim_node's ``verdict_file`` (a JSON object), or None when it wrote none (killed,
-    refused at start) or it is unreadable."""
-    import json
-
-    try:
-        obj = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return obj if isinstance(obj, dict) else None
-
-
-def failure_reason(res: RunResult, early=(), timeout=None) -> str:
-    """Why a scene failed, in one line: the simulator's own reason (the watchdog's trip,
-    the feasibility refusal, a stopped simulation: its verdict_file), else what the
-    launcher saw (a timeout, an interruption, a node that left early or failed)."""
-    parts = []
-    verdict = res.sim_verdict or {}
-    if verdict.get("reason") and res.sim != 0:
-        parts.append(f"sim_node: {verdict['reason']}")
-    if res.timed_out:
-        parts.append(f"timed out after {timeout:g} s" if timeout else "timed out")
-    if res.interrupted:
-        parts.append("interrupted")
-    if res.lost:
-        parts.append(f"the recording lost messages: {res.lost}")
-    for name in early:
-        parts.append(f"{name} exited early with status {getattr(res, _FIELD[name])}")
-    for name, attr in _FIELD.items():
-        code = getattr(res, attr)
-        if code not in (None, 0) and name not in early and not (
-                name == "sim_node" and parts and verdict.get("reason")):
-            parts.append(f"{name} exited with status {code}")
-    return "; ".join(parts) or "unknown"
-
-
-_FIELD = {"sim_node": "sim", "controller_node": "controller", "recorder_node": "recorder",
-          "live_node": "live"}
 
 
 def threading_is_main() -> bool:
