@@ -65,10 +65,10 @@ from pathlib import Path
 import yaml
 
 from . import node_zygote
-from .scene_verdict import failure_reason, read_verdict  # noqa: F401 (API)
 from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
                           scene_overrides, sim_values_for_model, sim_values_for_rig)
+from .scene_verdict import failure_reason, read_verdict
 
 __all__ = ["RunResult", "run", "run_scene", "claim_domain", "node_command",
            "recorded_losses",
