@@ -17,8 +17,8 @@ import numpy as np
 
 from grazing_control.support.arguments import finite, non_empty_path, positive
 from . import reader
-from .analysis import (control_lines, fmt, is_ndof, ndof_lines, ndof_scene_numbers, ndof_setup,
-                       plot_ndof_scene)
+from .analysis import (control_lines, convergence, fmt, is_ndof, ndof_lines,
+                       ndof_scene_numbers, ndof_setup, plot_ndof_scene)
 from .estimates import estimate_lines, estimate_numbers, read_estimates
 from .numbers import (MODEL_CHECK_BOUND, resolve_setup, scene_numbers, scene_problems,
                       section_phase_problems)
@@ -672,8 +672,9 @@ def main(args):
                 continue
             spread = (s.get("si") or {}).get("pi2_spread_m_and_m_per_s")
             print(f"{where}: "
-                  f"{b['setup']['mode']}, control on at {s['control_on_sample']}, converged after "
-                  f"{s['samples_to_converge']}, contraction measured {fmt(m.get('rho'), '.5f')} vs "
+                  f"{b['setup']['mode']}, control on at {s['control_on_sample']}, "
+                  f"{convergence(s['samples_to_converge'], s.get('converge_tol'))}, "
+                  f"contraction measured {fmt(m.get('rho'), '.5f')} vs "
                   f"predicted {fmt(s['predicted'].get('rho'), '.5f')}, |final - exact| "
                   f"{fmt(s.get('final_vs_exact_orbit'), '.1e')}"
                   + (f", Π2 spread {spread[0]:.3g} m (rig units)" if spread else ""))

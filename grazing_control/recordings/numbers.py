@@ -651,6 +651,7 @@ def scene_numbers(sd, setup: Setup, tol: float = 1e-8) -> dict:
     out["control_on_sample"] = on
     out["control_on_time_s"] = float(scene.t[on]) if on is not None else None
     out["samples_to_converge"] = base["samples_to_converge"]
+    out["converge_tol"] = base["converge_tol"]
     pred = _predicted(setup)
     if on is None:       # the controller never acted: nothing controlled to compare with
         pred = {"note": "the controller never acted in this scene: no controlled orbit or "
