@@ -261,3 +261,36 @@ def test_the_prediction_kernel_loads_in_a_thread_and_changes_no_number(choice):
         assert res["thread"] == "kernel_warm_up" and res["again"] and res["loaded"]
     else:
         assert res["thread"] is None and not res["loaded"]
+
+
+# ------------------------------------------------------------- the design's delay
+def test_gains_of_another_delay_are_warned_and_designed_ones_are_not():
+    """degeneracy_warning against Eq. 38 itself over seeded random designs: c1 =
+    degenerate_c1(c2, delay) is never warned (at its own delay), the same gains at another
+    delay are when Eq. 38 moves c1 there by more than DEGENERATE_TOL, and a c1 off by 1 %
+    always; both gains 0 and a pulse are not checked here."""
+    from grazing_control.dynamics.design.gains import degenerate_c1
+    from grazing_control.oscillator.params import OscillatorParams
+    from grazing_control.ros.controller_values import DEGENERATE_TOL, degeneracy_warning
+
+    rng = np.random.default_rng(20261129)
+    p = OscillatorParams()
+    base = {"zeta": p.zeta, "r": p.r, "omega": p.omega, "pi2_offset": p.pi2_offset}
+    kick, checked = (0.0, math.inf), 0
+    for _ in range(300):
+        c2, delay, other = rng.uniform(-2.0, 1.0), rng.uniform(0.0, 6.0), rng.uniform(0.0, 6.0)
+        try:
+            c1, c1_other = degenerate_c1(p, c2, delay), degenerate_c1(p, c2, other)
+        except ParameterError:
+            continue
+        checked += 1
+        values = dict(base, c1=c1, c2=c2, actuation_delay=delay)
+        assert degeneracy_warning(values, kick) is None
+        text = degeneracy_warning(dict(values, actuation_delay=other), kick)
+        assert (text is not None) == (abs(c1 - c1_other) > DEGENERATE_TOL * abs(c1_other))
+        if text is not None:
+            assert f"at actuation_delay={other!r}" in text and f"c1={c1_other!r}" in text
+        assert degeneracy_warning(dict(values, c1=c1 * 1.01), kick) is not None
+        assert degeneracy_warning(dict(values, c1=c1 * 1.01), (0.1, math.inf)) is None
+    assert checked > 250
+    assert degeneracy_warning(dict(base, c1=0.0, c2=0.0, actuation_delay=3.0), kick) is None

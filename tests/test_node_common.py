@@ -112,13 +112,15 @@ def test_unknown_parameter_name_is_refused():
 
 def test_parameter_file_for_another_node_name_is_warned(tmp_path):
     """Under a namespace a '/controller_node:' file is ignored by rcl: said, twice (the
-    file, and the gains left at 0); the shipped '/**' file applies."""
+    file, and the gains left at 0); the shipped '/**' file applies, without a warning;
+    with another actuation_delay than its design's, its c1 is said not to be Eq. 38's."""
     old = tmp_path / "old.yaml"
     old.write_text(CONTROLLER.read_text().replace("/**:", "/controller_node:"))
     outputs = {}
-    for name, path in (("old", old), ("shipped", CONTROLLER)):
+    for name, path, delay in (("old", old, {}), ("shipped", CONTROLLER, {}),
+                              ("delayed", CONTROLLER, {"actuation_delay": 1.0})):
         cmd = launcher.node_command(launcher.CONTROLLER_MODULE, [path],
-                                    {"enable_after": -1}) + ["-r", "__ns:=/scene2"]
+                                    {"enable_after": -1, **delay}) + ["-r", "__ns:=/scene2"]
         proc = subprocess.Popen(cmd, env=launcher.node_env(new_domain()), text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         guard = threading.Timer(30.0, proc.kill)      # never hang on a missing line
@@ -127,7 +129,7 @@ def test_parameter_file_for_another_node_name_is_warned(tmp_path):
             out = ""
             for line in proc.stdout:
                 out += line
-                if "summary" in line or ("enable_after=" in line and name == "shipped"):
+                if "summary" in line or ("enable_after=" in line and name != "old"):
                     break
                 if "no key applies" in line:      # checked right after the node is built
                     break
@@ -140,6 +142,8 @@ def test_parameter_file_for_another_node_name_is_warned(tmp_path):
         in outputs["old"], outputs["old"]
     assert "c1 and c2 not given" in outputs["old"] and "c1 = c2 = 0" in outputs["old"]
     assert "WARN" not in outputs["shipped"] and "c1=-1.02060145554" in outputs["shipped"]
+    assert "is not the degenerate gain of c2=-1.0 at actuation_delay=1.0" in \
+        outputs["delayed"], outputs["delayed"]
 
 
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])

@@ -117,8 +117,8 @@ from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, SafePoints, StartupError
                      publish_parameter_record, refuse_out_of_range, refuse_while_running,
                      run_node, spin, stamp_key)
 from .controller_parameters import declare_parameters, gains_of
-from .controller_values import (ControlLaw, actuation_delay_from_values,
-                                capture_from_values, law_from_values, model_capture_from_values,
+from .controller_values import (ControlLaw, actuation_delay_from_values, capture_from_values,
+                                degeneracy_warning, law_from_values, model_capture_from_values,
                                 model_controller_from_values, model_from_values,
                                 model_stream_from_values, predicted_correction,
                                 pulse_from_values, stream_from_values, unseen_rebound,
@@ -338,22 +338,22 @@ class ControllerNode(Node):
     def _warn_gains(self) -> None:
         """Warn when the gains were not given or are both zero (the controller then
         answers every sample with Delta v = 0): typically a parameter file keyed for
-        another node name, which rcl ignores silently."""
-        given = getattr(self, "_parameter_overrides", {})
+        another node name, which rcl ignores silently; or when c1 is not Eq. 38's gain of
+        c2 at the actuation delay (controller_values.degeneracy_warning)."""
+        given, warn = getattr(self, "_parameter_overrides", {}), self.get_logger().warning
         if self.ndof is not None:
             if not np.any(self.ndof.gains):
-                self.get_logger().warning("gains are all 0: every correction is 0, the "
-                                          "controller does not control")
+                warn("gains are all 0: every correction is 0, the controller does not control")
             return
         missing = [k for k in ("c1", "c2") if k not in given]
         if missing and self.rig is None:        # a rig file's design gives them
-            self.get_logger().warning(
-                f"{' and '.join(missing)} not given to {self.get_fully_qualified_name()} "
-                "(no -p and no parameter-file entry that applies to this node name): "
-                "default 0.0 used")
+            warn(f"{' and '.join(missing)} not given to {self.get_fully_qualified_name()} "
+                 "(no -p and no parameter-file entry that applies to this node name): "
+                 "default 0.0 used")
         if self.law.gains.c1 == 0.0 and self.law.gains.c2 == 0.0:
-            self.get_logger().warning("c1 = c2 = 0: every correction is 0, the controller "
-                                      "does not control")
+            warn("c1 = c2 = 0: every correction is 0, the controller does not control")
+        elif self.rig is None and (text := degeneracy_warning(self._values(), self.pulse)):
+            warn(text)
 
     def _values(self) -> dict:
         return {k: self.get_parameter(k).value for k in _KEYS}

@@ -31,6 +31,7 @@ from collections import deque
 import numpy as np
 
 from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
+from grazing_control.dynamics.design.gains import degenerate_c1
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation.section_state import ESTIMATORS
 from grazing_control.dynamics.estimation.motion import actuator_legs
@@ -52,7 +53,7 @@ __all__ = ["ControlLaw", "GAIN_LIMIT", "PI2_SOURCES", "law_from_values",
            "actuation_delay_from_values", "below_period", "model_omega",
            "ModelController", "model_controller_from_values", "model_stream_from_values",
            "gain_vector_correction", "predicted_correction", "warm_up_kernel", "ONE_DOF_DEFAULTS",
-           "unseen_rebound"]
+           "unseen_rebound", "degeneracy_warning", "DEGENERATE_TOL"]
 
 #: Where the Pi2 state comes from: the simulator's exact samples, or the sensor stream.
 PI2_SOURCES = ("sample", "stream")
@@ -442,6 +443,39 @@ def actuation_delay_from_values(values: dict) -> float:
         raise ParameterError(f"actuation_delay={delay!r} is invalid: valid range is "
                              f"0 <= actuation_delay < T = {period!r} (simulation time)")
     return delay
+
+
+#: How far c1 may lie from Eq. 38's degenerate gain of the running c2 and delay, relative
+#: to that gain, before the controller warns: a design's c1 is that gain to rounding, one
+#: typed from a table to its digits.
+DEGENERATE_TOL = 1e-3
+
+
+def degeneracy_warning(values: dict, pulse: tuple) -> str | None:
+    """The start-up warning of a 1-DOF controller whose c1 is not the degenerate gain of
+    its c2 at its ``actuation_delay`` (Eq. 38; docs/theory_delay.md (D5)): gains designed
+    for another delay than the one given (the design's ``actuation_delay`` overridden) do
+    not make the grazing bifurcation degenerate, and the watchdog would end the scene
+    only once the orbit is lost. None where c1 is that gain (within DEGENERATE_TOL),
+    where both gains are 0 (said apart), where the correction is a pulse (``pulse``
+    (width, ...) of :func:`pulse_from_values`; its design is ``grazing design
+    --pulse-width``'s), or where Eq. 38 has no c1."""
+    c1, c2 = float(values["c1"]), float(values["c2"])
+    if (c1 == 0.0 and c2 == 0.0) or pulse[0] > 0.0:
+        return None
+    delay = float(values.get("actuation_delay", 0.0))
+    try:
+        p = OscillatorParams(zeta=values["zeta"], r=values["r"], omega=values["omega"],
+                             pi2_offset=values["pi2_offset"])
+        want = degenerate_c1(p, c2, delay)
+    except (ParameterError, ArithmeticError, ValueError):
+        return None
+    if abs(c1 - want) <= DEGENERATE_TOL * abs(want):
+        return None
+    return (f"c1={c1!r} is not the degenerate gain of c2={c2!r} at actuation_delay="
+            f"{delay!r} (Eq. 38: c1={want!r}): the grazing bifurcation is not made "
+            "degenerate here, and the controlled orbit loses its stability near grazing "
+            f"(gains designed for another delay? grazing design --c2 {c2!r} --delay {delay!r})")
 
 
 def below_period(omega: float) -> float:
