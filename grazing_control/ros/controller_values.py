@@ -31,7 +31,7 @@ from collections import deque
 import numpy as np
 
 from grazing_control.dynamics.design.capture import CAPTURE_RADIUS, CaptureRule
-from grazing_control.dynamics.design.gains import degenerate_c1
+from grazing_control.dynamics.design.degenerate import degenerate_c1
 from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimator
 from grazing_control.dynamics.estimation.section_state import ESTIMATORS
 from grazing_control.dynamics.estimation.motion import actuator_legs
