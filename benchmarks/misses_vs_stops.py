@@ -19,7 +19,11 @@ time and how long after its sample went out it was declared, logged at the recor
 reception, wall clock) is printed with the stops that overlap the ``--window`` ms
 (default 12: longer than the answer's whole budget) before it was logged, on either CPU:
 one that began earlier and lasted into the window counts, and with the slow units of
-work in the window. A miss with neither is the scene's own.
+work in the window. A miss with neither is the scene's own. Under each, from the bag
+(:func:`whose`): how late its Pi2 sample went out against the sections before it (the
+plant's recorded pauses taken out: late, the simulator's), when its answer was published
+from that sample (late with the sample on time: the controller's), and the plant's
+pauses near it.
 
 Run: ``.venv/bin/python benchmarks/misses_vs_stops.py --reps 3`` (about 45 s a scene).
 Results in docs/benchmarks.md.
@@ -113,6 +117,49 @@ def read_misses(bag: Path) -> list:
             for m in read_messages(bag, ["/oscillator/deadline_miss"])]
 
 
+def whose(bag: Path, k: int) -> str:
+    """Whose miss section ``k`` was, from the bag's publish times: its Pi2 sample's lag
+    (its publish time against the median over the 100 sections before it, less the
+    plant's pauses recorded between them: a sample gone out late is the simulator's), its
+    answer's publish time from that sample (late, with the sample on time: the
+    controller's), and the plant's pauses recorded within a period of it."""
+    import numpy as np
+
+    from grazing_control.recordings import reader
+    from grazing_control.recordings.scenes import DEFAULT_TOPICS, load
+
+    data = load(bag)
+    topics = [DEFAULT_TOPICS[r] for r in ("pi2", "correction", "deadline_miss")]
+    raw = reader.read_raw(bag, topics)
+    pi2 = reader.decode_stamped(raw, DEFAULT_TOPICS["pi2"])[1].astype(np.int64)
+    pub = reader.serialized(raw, DEFAULT_TOPICS["pi2"])["publish_time"].astype(np.int64)
+    corr = reader.decode_twist_stamped(raw, DEFAULT_TOPICS["correction"])
+    miss = reader.decode_vector3_stamped(raw, DEFAULT_TOPICS["deadline_miss"])
+    stamps = [int(st) for st, x in zip(miss["stamp"], miss["vx"]) if int(round(x)) == k]
+    pauses = [(ev["t"], ev["seconds"]) for ev in data.parameters["events"]
+              if ev.get("event") == "paused"]
+    at = np.flatnonzero(pi2 == stamps[0]) if stamps else np.array([], int)
+    if not at.size:
+        return "no Pi2 sample of it recorded"
+    i = int(at[0])
+    scale = (pub[1:] - pub[:-1]).astype(float) / np.maximum(pi2[1:] - pi2[:-1], 1)
+    ratio = float(np.median(scale))            # wall ns per simulation ns (1 / time_scale)
+    t_k = pi2[i] * 1e-9
+    before = [j for j in range(max(0, i - 100), i)]
+    if not before:
+        return "the first section"
+    paused_since = [sum(sec for t, sec in pauses if pi2[j] * 1e-9 < t <= t_k) for j in before]
+    lags = [(pub[i] - pub[j]) - (pi2[i] - pi2[j]) * ratio - ps * 1e9
+            for j, ps in zip(before, paused_since)]
+    lag = float(np.median(lags)) * 1e-6
+    answered = [int(p) for p, st in zip(corr["publish_time"], corr["stamp"]) if st == pi2[i]]
+    answer = f"{(answered[0] - pub[i]) * 1e-6:+.2f} ms" if answered else "none"
+    near = [(t, sec) for t, sec in pauses if abs(t - t_k) < 9.5]
+    return (f"its sample out {lag:+.2f} ms against the sections before; answer published "
+            f"{answer} from it; plant pauses within a period: "
+            + (", ".join(f"{sec * 1e3:.2f} ms" for _t, sec in near) or "none"))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=3)
@@ -189,6 +236,10 @@ def main(argv=None) -> int:
                       f"{waited * 1e3:.2f} ms after its sample went out; stops before it: "
                       f"{what}; slow units in the window: {len(spell)}"
                       f"{f' (the slowest: {slowest})' if spell else ''}", flush=True)
+                try:
+                    print(f"    {whose(one / 'bag', k)}", flush=True)
+                except Exception as exc:        # a bag the reader refuses: said, not fatal
+                    print(f"    (not read from the bag: {type(exc).__name__}: {exc})")
     print(f"\n{explained} of {total} misses with a stop of the machine in the "
           f"{args.window:g} ms before them")
     return 0
