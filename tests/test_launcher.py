@@ -33,6 +33,27 @@ def grazing(*args, **kw):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
 
 
+def test_the_controller_takes_how_the_plant_acts_in_a_plain_scene():
+    """A pulse (and its actuator) given to the simulator alone reaches the controller,
+    whose estimator and prediction model it (a stream controller modelled a kick where
+    the plant pushed for 0.1); its own value wins; a model or rig file's come with its
+    gains and are not overridden."""
+    from grazing_control.ros import controller_node, scene_nodes
+
+    assert scene_nodes.ACTUATION_KEYS == controller_node.PULSE_KEYS
+    plant = {"pulse_width": 0.1, "force_limit": 2.0, "actuator_bandwidth": 3.0}
+    over = scene_nodes.scene_overrides(None, sim_overrides=plant)["controller_node"]
+    assert {k: over[k] for k in plant} == plant and "actuator_latency" not in over
+    over = scene_nodes.scene_overrides(None, sim_overrides=plant,
+                                       controller_overrides={"pulse_width": 0.2})
+    assert over["controller_node"]["pulse_width"] == 0.2
+    assert over["sim_node"]["pulse_width"] == 0.1
+    for files in ({"model": "config/models/two_mass_scene.yaml"},
+                  {"rig": "config/rigs/lab_20hz.yaml"}):
+        over = scene_nodes.scene_overrides(None, sim_overrides=plant, **files)
+        assert not set(plant) & set(over["controller_node"]), files
+
+
 def test_a_failed_scenes_reason_quotes_the_nodes_last_error(tmp_path):
     """With --log-dir a node's output is not on the terminal: the reason line quotes its
     last error (a refused parameter with its valid range), not only its exit status."""

@@ -94,6 +94,10 @@ def new_token() -> str:
     return f"{os.getpid():x}-{random.getrandbits(48):012x}"
 
 
+#: How a correction acts in the plant: the simulator's parameters that the controller
+#: takes from it in a plain scene (controller_node.PULSE_KEYS, the same names).
+ACTUATION_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
+
 #: A rig scene at physical speed (issue 28): the simulated DAQ delivers the 2 kHz stream
 #: in blocks of 2 ms (4 samples; sim_node's stream_block) and the recorder takes what
 #: gathered every 20 ms (its batch_window): one wake-up per sample in each cost the
@@ -126,7 +130,9 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
       controller's parameters (a simulator applying another delay refuses to start);
     - controller_node: ``enable_after``; the plant's ``delta_d``, ``sensor_noise``,
       ``state_period`` and ``stream_message`` when the simulator's are set (its
-      estimator's model, the stream's messages); answers
+      estimator's model, the stream's messages), and without a model or rig file its
+      ``pulse_width``, ``force_limit``, ``actuator_bandwidth`` and ``actuator_latency``
+      (how a correction acts: the estimator's and the prediction's); answers
       after the section in realtime;
     - recorder_node: ``output`` = bag, ``require_complete``;
     - live_node (docs/live.md): ``port`` = live (0..65535; 0: any free port, logged);
@@ -183,6 +189,10 @@ def scene_overrides(controller_params, *, periods=None, delta_d=None, enable_aft
                 "stream_message"):                           # the plant and its sensor
         if key in sim:
             controller.setdefault(key, sim[key])
+    if model is None and rig is None:    # and of its actuation (a model file's and a rig's
+        for key in ACTUATION_KEYS:       # come with their gains)
+            if key in sim:
+                controller.setdefault(key, sim[key])
     if sim.get("mode") == "realtime" and rig is None:   # a stream controller answers after t_k
         controller.setdefault("answer_after_section", True)
     if enable_after is not None:
