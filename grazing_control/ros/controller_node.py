@@ -133,6 +133,7 @@ from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
 from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide
 from .rig_boundary import check_rig_values
 from .rig_control import RIG_INPUT_QOS, RigSide
+from .scene_nodes import ACTUATION_KEYS as PULSE_KEYS  # how a correction acts
 from .scheduling import apply_node_scheduling, declare_scheduling
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
@@ -145,8 +146,6 @@ _KEYS = ("c1", "c2", "x_ref", "v_ref", "zeta", "r", "omega", "pi2_offset", "n", 
          "pi2_source", "estimator", "impact_source", "sensor_noise", "state_period",
          "model_noise", "answer_after_section", "answer_lead", "capture",
          "capture_radius", "sensor_coordinate") + WATCH_KEYS + REID_KEYS
-#: How a correction acts in the plant (:func:`pulse_from_values`), model units.
-PULSE_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
 
 
 class ControllerNode(Node):

@@ -95,7 +95,7 @@ def new_token() -> str:
 
 
 #: How a correction acts in the plant: the simulator's parameters that the controller
-#: takes from it in a plain scene (controller_node.PULSE_KEYS, the same names).
+#: takes from it in a plain scene, of the same names (controller_node.PULSE_KEYS).
 ACTUATION_KEYS = ("pulse_width", "force_limit", "actuator_bandwidth", "actuator_latency")
 
 #: A rig scene at physical speed (issue 28): the simulated DAQ delivers the 2 kHz stream
