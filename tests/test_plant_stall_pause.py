@@ -39,16 +39,34 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
     simulator and the controller: an answer not ready by the stall's start is ready that
     much later), "running" (the same, but the stall begins in the wake-up that published
     sample k, right after it went out: the simulator held while it runs) or "controller"
-    (the simulator wakes on time). ``late``: every wake-up
+    (the simulator wakes on time) or "charged" (the wake-up that publishes sample k
+    begins on time and runs that much slowly before the sample goes out, the time
+    charged to its thread's CPU time: a stop of this VM charged as system time, or a
+    slow spell of the machine). ``late``: every wake-up
     comes this much later than asked (the timer's jitter). Returns (loop, sink)."""
     s = settings(mode="realtime", time_scale=1000.0, actuation_delay=DELAY, max_periods=n,
                  state_period=0.0, **kw)
     clock, sink = Clock(), Recorder()
     loop = Realtime(Engine(s), sink, clock)
     loop.stall_pause = pause
-    loop.cpu_clock = lambda: 0.0      # the wake-ups' work takes no time on the test's clock
-    loop.start()
+    cpu = [0.0]                       # the wake-ups' work takes no time on the test's clock
+    loop.cpu_clock = lambda: cpu[0]
     pending, seen, stall = [], 0, None
+    if held == "charged":
+        next_sample, slowed, stalls = loop.next_sample, stalls, {}
+
+        def slow_next_sample():
+            ev = next_sample()
+            slow = ev is not None and slowed.get(round(ev.t / P.period))
+            if slow:
+                for p in pending:
+                    if p[0] > clock.now:
+                        p[0] += slow          # the controller slow as well
+                clock.now += slow
+                cpu[0] += slow
+            return ev
+        loop.next_sample = slow_next_sample
+    loop.start()
     while not loop.finished:
         for ev in sink.samples()[seen:]:
             k = round(ev.t / P.period)
@@ -100,24 +118,31 @@ def test_a_stall_of_the_machine_on_the_wall_clock_misses_the_deadlines_in_it():
     assert loop.stats.get("paused", 0) == 0
 
 
-@pytest.mark.parametrize("held", ["machine", "running"])
+@pytest.mark.parametrize("held", ["machine", "running", "charged"])
 def test_a_stall_of_the_machine_pauses_the_plant_and_no_deadline_is_missed(held):
-    """Held while asleep (its wake-up comes late: Realtime.resume) or while it runs (its
-    wake-up ends late: Realtime.expect), the plant pauses as long."""
+    """Held while asleep (its wake-up comes late: Realtime.resume), while it runs (its
+    wake-up ends late: Realtime.expect) or slow before a sample with the time charged to
+    its CPU time (the sample goes out late: Realtime._catch_up), the plant pauses as
+    long."""
     stalls = {20: STALL, 21: STALL, 47: 2 * STALL}
     loop, sink = run(stalls, held=held)
     assert not sink.misses
     np.testing.assert_array_equal(samples(sink), reference(N, C1, C2, ON, DELAY))
     assert loop.stats["paused"] == 3
-    assert loop.paused == pytest.approx(4 * STALL, abs=1e-12)
-    assert loop.longest_pause == pytest.approx(2 * STALL, abs=1e-12)
-    # each pause told to the sink: after sample k went out, before sample k + 1
-    assert [s for _, s in sink.pauses] == pytest.approx([STALL, STALL, 2 * STALL], abs=1e-12)
-    assert [t // P.period for t, _ in sink.pauses] == sorted(stalls)
+    # charged: the pause is the sample's whole lag, its usual lateness (the test's wake-up
+    # at most 1 ms apart, not at the sample exactly) with the stall
+    usual = run({})[0].lags if held == "charged" else [0.0] * N
+    pauses = [STALL + usual[20], STALL + usual[21], 2 * STALL + usual[47]]
+    assert loop.paused == pytest.approx(sum(pauses), abs=1e-12)
+    assert loop.longest_pause == pytest.approx(pauses[-1], abs=1e-12)
+    # each pause told to the sink: after sample k went out (charged: before sample k)
+    assert [s for _, s in sink.pauses] == pytest.approx(pauses, abs=1e-12)
+    assert [t // P.period for t, _ in sink.pauses] == (
+        sorted(stalls) if held != "charged" else [k - 1 for k in sorted(stalls)])
     text = loop.summary(1.0, {"missed": 0, "timeouts": 0, "ignored": 0, "malformed": 0})
     assert "missed=0 " in text and (
-        f"periods/s paused=3 paused_ms={4 * STALL * 1e3:.3f} "
-        f"longest_pause_ms={2 * STALL * 1e3:.3f}") in text
+        f"periods/s paused=3 paused_ms={sum(pauses) * 1e3:.3f} "
+        f"longest_pause_ms={pauses[-1] * 1e3:.3f}") in text
 
 
 def test_a_controller_held_on_its_own_is_late_however_the_plant_pauses():
@@ -175,7 +200,13 @@ def test_a_wake_ups_own_work_is_the_plants_time_and_pauses_nothing():
         assert loop.paused - before == pytest.approx(paused, abs=1e-12)
     assert loop.stats["paused"] == 1
     # as sim_node wakes with the answer port: resume, the answers (3 ms of work), then
-    # tick, which resumes again: the work is still the wake-up's own
+    # tick, which resumes again: the work is still the wake-up's own (in a wake-up right
+    # after a sample: no sample made late by it, below)
+    due = loop.wall0 + (loop.engine.seg.te - loop.t0) / 1000.0 + 1e-9   # the next sample's
+    loop.expect(due - clock.now)
+    clock.now = due
+    loop.tick()
+    assert loop.lags[-1] == pytest.approx(0.0, abs=1e-8)
     loop.expect(1e-3)
     clock.now += 1e-3
     loop.resume(clock.now)
@@ -184,6 +215,40 @@ def test_a_wake_ups_own_work_is_the_plants_time_and_pauses_nothing():
     loop.tick(clock.now - 3e-3)
     loop.expect(1e-3)
     assert loop.stats["paused"] == 1
+
+
+@pytest.mark.parametrize("worked", [0.5e-3, 0.99e-3, 3e-3, 7e-3])
+def test_a_sample_late_from_its_own_wake_up_pauses_the_plant_by_its_lag(worked):
+    """The wake-up of sample k begins on time and works ``worked`` before it (the time
+    charged to its CPU time, as a stop of this VM can be): beyond stall_pause the plant
+    pauses by the sample's lag, which is 0 after it; within it, nothing. The wake-up's
+    held time is measured from the sample on (nothing paused twice)."""
+    clock, cpu = Clock(), [0.0]
+    loop = Realtime(Engine(settings(mode="realtime", time_scale=1000.0)), Recorder(), clock)
+    loop.cpu_clock = lambda: cpu[0]
+    next_sample = loop.next_sample
+
+    def slow_next_sample():
+        clock.now += worked
+        cpu[0] += worked
+        return next_sample()
+    loop.start()
+    loop.next_sample = slow_next_sample
+    t1 = loop.engine.seg.te
+    due = loop.wall0 + (t1 - loop.t0) / 1000.0 + 1e-9   # sample 1's time
+    loop.expect(due - clock.now)
+    clock.now = woke = due
+    loop.tick()
+    assert clock.now - woke == pytest.approx(worked, abs=1e-12) and len(loop.lags) == 2
+    lag = loop.lags[-1] + loop.paused
+    assert lag == pytest.approx(worked, abs=1e-8)
+    paused = lag if worked > STALL_PAUSE else 0.0
+    assert loop.paused == pytest.approx(paused, abs=1e-12)
+    # the simulation time now: the sample's, paused; else on by the lag
+    assert loop.now() == pytest.approx(t1 + (lag - paused) * 1e3, abs=1e-8)
+    clock.now += 2e-3                      # held 2 ms after the sample
+    loop.expect(1e-3)
+    assert loop.paused == pytest.approx(paused + 2e-3, abs=1e-12)
 
 
 def test_a_long_stall_still_trips_the_watchdog_on_the_lag():
