@@ -19,11 +19,15 @@ one process), or under SCHED_FIFO (``+fifo``: the simulator's and the controller
 thread_priority 50, as a rig scene runs them; ``+fifo+pinned``: and the simulator on CPU
 0, the controller on CPU 1, their cpu_affinity; ``+fifo+wall``: the plant's clock pinned
 to the wall clock, ``stall_pause:=0``, where by default a stall of the simulator pauses
-it, plant.realtime). From the simulator's summary: periods
+it, plant.realtime); ``+tick<ms>`` on any of them sets the simulator's ``stream_block``
+(the wall time a block gathers, default STREAM_TICK 0.5 ms: ``block+fifo+tick1`` gathers
+1 ms). From the simulator's summary: periods
 per second against the requested (106.2 at x1000), deadline misses and late answers
 (sections whose correction was not there at t_k + 3), the answer latency (a section's
 last sample published -> its answer received), the sample lag (how late a sample went
-out), p50/p99/max, and the plant's pauses (count and longest, ms).
+out), p50/p99/max, and the plant's pauses (count and longest, ms); and the CPU time of
+the scene's processes (the three nodes, their start and end included: the children's
+``getrusage``; not measured for a baseline's scenes).
 
 With ``--baseline DIR`` (a git worktree of an older commit) each variant also runs on
 that checkout (its own bench_stream_blocks.scene in a fresh interpreter, the launcher
@@ -41,6 +45,7 @@ from __future__ import annotations
 import argparse
 import os
 import random
+import resource
 import statistics
 import subprocess
 import sys
@@ -75,9 +80,32 @@ def design(out: Path) -> Path:
     return yaml
 
 
+def stream_tick(variant: str) -> float | None:
+    """The ``+tick<ms>`` of a variant in seconds (None: none; ValueError: not a positive
+    number of ms)."""
+    ticks = [m[4:] for m in variant.split("+")[1:] if m.startswith("tick")]
+    if not ticks:
+        return None
+    ms = float(ticks[-1])
+    if not ms > 0.0:
+        raise ValueError(ticks[-1])
+    return ms * 1e-3
+
+
+def valid(variant: str) -> bool:
+    """A variant of VARIANTS, with or without a ``+tick<ms>``."""
+    try:
+        stream_tick(variant)
+    except ValueError:
+        return False
+    return "+".join(m for m in variant.split("+") if not m.startswith("tick")) in VARIANTS
+
+
 def scene(variant: str, controller: Path, periods: int, enable_after: int, scale: float,
           tmp: Path, answer_lead: float = 0.0) -> dict:
     message, *mods = variant.split("+")
+    tick = stream_tick(variant)
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     composed = "composed" in mods
     priority = FIFO_PRIORITY if "fifo" in mods else 0
     # +pinned: the simulator on CPU 0, the controller on CPU 1 (their cpu_affinity)
@@ -91,11 +119,13 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
                        "sensor_noise": SIGMA, "sensor_velocity": False,
                        "pulse_width": WIDTH, "stream_message": message, **FREE_RUNNING,
                        "thread_priority": priority, "cpu_affinity": sim_cpus,
-                       **({"stall_pause": 0.0} if "wall" in mods else {})},
+                       **({"stall_pause": 0.0} if "wall" in mods else {}),
+                       **({"stream_block": tick} if tick is not None else {})},
         controller_overrides={"pi2_source": "stream", "estimator": "model",
                               "answer_lead": answer_lead, "thread_priority": priority,
                               "cpu_affinity": controller_cpus},
         log_dir=tmp / "logs", compose=bool(composed))
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
         s = summary(Path(res.logs["sim_node"]))
     except (RuntimeError, OSError):
@@ -107,7 +137,8 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
             "lag": s.get("sample_lag", nan3), "ok": res.ok,
             "paused": int(s.get("paused", 0)),
             "longest_pause": float(s.get("longest_pause_ms", 0.0)),
-            "answered": _answered(Path(res.logs["controller_node"]))}
+            "answered": _answered(Path(res.logs["controller_node"])),
+            "cpu": (used.ru_utime + used.ru_stime) - (cpu.ru_utime + cpu.ru_stime)}
 
 
 #: One scene of a baseline checkout (run with it as the working directory): prints the
@@ -165,9 +196,10 @@ def main(argv=None) -> int:
                     help="an older checkout (git worktree) run beside this one, alternating")
     args = ap.parse_args(argv)
     variants = args.variants.split(",")
-    bad = [v for v in variants if v not in VARIANTS]
+    bad = [v for v in variants if not valid(v)]
     if bad:
-        ap.error(f"--variants {','.join(bad)}: valid are {', '.join(VARIANTS)}")
+        ap.error(f"--variants {','.join(bad)}: valid are {', '.join(VARIANTS)}, each with "
+                 "an optional +tick<ms> (a positive number)")
     if args.baseline is not None:
         if not (args.baseline / "benchmarks" / "bench_stream_blocks.py").is_file():
             ap.error(f"--baseline {args.baseline}: not a checkout with "
@@ -203,11 +235,12 @@ def main(argv=None) -> int:
                       f"late {r['late']} predicted {r['predicted']}, latency p50/p99/max "
                       f"{lat[0]:.2f}/{lat[1]:.2f}/{lat[2]:.2f} ms, sample lag p50/p99/max "
                       f"{lag[0]:.2f}/{lag[1]:.2f}/{lag[2]:.2f} ms, plant paused "
-                      f"{r.get('paused', 0)} (longest {r.get('longest_pause', 0.0):.2f} ms) "
-                      f"(load {load})", flush=True)
+                      f"{r.get('paused', 0)} (longest {r.get('longest_pause', 0.0):.2f} ms)"
+                      + (f", CPU {r['cpu']:.1f} s" if "cpu" in r else "")
+                      + f" (load {load})", flush=True)
     print(f"\nmedians over {args.reps} scenes (requested {args.scale / p.period:.1f} periods/s)")
     print(f"{'variant':21s} {'periods/s':>9s} {'missed':>7s} {'late':>5s} {'lat p50':>8s} "
-          f"{'lat p99':>8s} {'lag p99':>8s}  {'missed/base':>11s}")
+          f"{'lat p99':>8s} {'lag p99':>8s}  {'missed/base':>11s} {'CPU s':>6s}")
     base = None
     for v, rs in rows.items():
         ok = [r for r in rs if "failed" not in r]
@@ -219,8 +252,10 @@ def main(argv=None) -> int:
         lag = statistics.median(r["lag"][1] for r in ok)
         base = med["missed"] if base is None else base
         ratio = f"{med['missed'] / base:11.2f}" if base else f"{'-':>11s}"
+        cpu = (f"{statistics.median(r['cpu'] for r in ok):6.1f}"
+               if all("cpu" in r for r in ok) else f"{'-':>6s}")
         print(f"{v:21s} {med['rate']:9.1f} {med['missed']:7.0f} {med['late']:5.0f} "
-              f"{lat[0]:8.2f} {lat[1]:8.2f} {lag:8.2f}  {ratio}")
+              f"{lat[0]:8.2f} {lat[1]:8.2f} {lag:8.2f}  {ratio} {cpu}")
     print("load at the end %.2f %.2f %.2f" % os.getloadavg())
     return 0
 

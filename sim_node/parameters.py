@@ -63,8 +63,9 @@ NODE_PARAMETERS = (
               "them, each with its own stamp: a DAQ's block (5e-5..5e-3)", MIN_TICK,
               CLOCK_TICK, read_only=True),
     Parameter("stall_pause", "double", STALL_PAUSE, "realtime: a wake-up of the simulator "
-              "this many wall seconds later than it asked for pauses the plant's clock for "
-              "its lateness (the machine held the simulator: its stall is not charged to the "
+              "this many wall seconds later than it asked for, or a Pi2 sample going out "
+              "this much after its time, pauses the plant's clock for the lateness (the "
+              "machine held or slowed the simulator: its stall is not charged to the "
               "loop's deadlines; counted, paused= in the summary); 0 = never, the plant's "
               "clock is the wall clock; 0..1. Not with rig_file: a rig's clock runs on "
               "against ROS time", 0.0, 1.0, read_only=True),
