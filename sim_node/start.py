@@ -10,6 +10,7 @@ from grazing_control.plant.feasibility import ROUND_TRIPS, check, sustained_rate
 from grazing_control.ros.common import READY_TOPIC
 from grazing_control.ros.matching import MATCHED_TOPIC
 from grazing_control.ros.recording.record import TOPIC as RECORD_TOPIC
+from grazing_control.ros.scheduling import raise_node_priority
 
 from sim_node.probe import RoundTrips, controller_name
 
@@ -28,7 +29,8 @@ def due(node) -> bool:
     The conditions of :func:`missing` have held for SETTLE seconds, or ``start_timeout``
     has passed without them (a warning names what is missing); the kernel's warm-up
     thread (compiling, or loading numba's cache) has finished, and its error, if any,
-    is raised here; a realtime start is :func:`feasible`. The node's ``created``,
+    is raised here; the node's thread_priority applies from here
+    (ros.scheduling.raise_node_priority); a realtime start is :func:`feasible`. The node's ``created``,
     ``ready_since`` and ``warming`` hold the wait between calls.
     """
     waited = time.monotonic() - node.created
@@ -50,6 +52,7 @@ def due(node) -> bool:
     if node.warming is not None:
         node.warming = None
         kernel.warm_up()            # at once when loaded; raises what the load raised
+    raise_node_priority(node)       # the start-up done: SCHED_FIFO from the probe on
     if not feasible(node):
         return False
     if not absent:

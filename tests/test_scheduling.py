@@ -70,8 +70,11 @@ def test_refusals_are_warnings(monkeypatch):
 
 def test_the_controller_node_takes_the_scheduling_parameters():
     """controller_node as sim_node: the three options applied (root here) or each refused
-    with a warning naming it; a malformed one is one line, status 2."""
+    with a warning naming it, the priority once its start-up is done (after the affinity
+    and the memory lock: its start-up's CPU work not under SCHED_FIFO); a malformed one is
+    one line, status 2."""
     import subprocess
+    import threading
 
     from grazing_control.ros import launcher
     from test_closed_loop import CONTROLLER, new_domain
@@ -80,13 +83,23 @@ def test_the_controller_node_takes_the_scheduling_parameters():
         "thread_priority": 20, "lock_memory": True, "cpu_affinity": "0"})
     proc = subprocess.Popen(cmd, env=launcher.node_env(new_domain()), text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    timer = threading.Timer(60.0, proc.kill)      # a node that never says it: the test fails
+    timer.start()
+    lines = []
     try:
-        first = proc.stdout.readline()
+        for line in proc.stdout:                  # up to the end of its start-up
+            lines.append(line)
+            if " c1=" in line:
+                break
     finally:
+        timer.cancel()
         launcher.stop_nodes([proc])
-    out = first + proc.stdout.read()
-    assert ("real-time scheduling: SCHED_FIFO priority 20" in out
-            or "thread_priority=20 not applied" in out), out
+    out = "".join(lines) + proc.stdout.read()
+    said = [i for i, ln in enumerate(lines) if "SCHED_FIFO priority 20" in ln
+            or "thread_priority=20 not applied" in ln]
+    pinned = [i for i, ln in enumerate(lines) if "CPU affinity [0]" in ln
+              or "cpu_affinity=[0] not applied" in ln]
+    assert said and pinned and pinned[0] < said[0], out
     assert "Traceback" not in out
     bad = subprocess.run(launcher.node_command(launcher.CONTROLLER_MODULE, [CONTROLLER],
                                                {"thread_priority": 120}),

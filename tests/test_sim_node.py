@@ -605,10 +605,16 @@ def test_scheduling_options_warn_where_refused_and_bad_ones_stop_the_start(node_
                       thread_priority=10, cpu_affinity="0,1", lock_memory=True)
     assert proc.wait(30) == 0, log.read_text()
     text = log.read_text()
+    at = {}
     for option, applied in (("thread_priority=10", "SCHED_FIFO priority 10"),
                             ("cpu_affinity=[0, 1]", "CPU affinity [0, 1]"),
                             ("lock_memory", "memory locked")):
         assert applied in text or f"{option} not applied" in text, (option, text)
+        at[option] = text.find(applied) if applied in text else text.find(option)
+    # the priority once the start-up is done (its CPU work not under SCHED_FIFO): after
+    # the affinity and the memory lock, with the start (ros.scheduling.raise_node_priority)
+    assert at["cpu_affinity=[0, 1]"] < at["thread_priority=10"], text
+    assert at["lock_memory"] < at["thread_priority=10"], text
     assert "Traceback" not in text
     cmd, env = sim_cmd(domain)
     bad = subprocess.run(cmd + ["-p", "cpu_affinity:=zero"], env=env, capture_output=True,

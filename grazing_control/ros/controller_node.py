@@ -134,7 +134,7 @@ from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide
 from .rig_boundary import check_rig_values
 from .rig_control import RIG_INPUT_QOS, RigSide
 from .scene_nodes import ACTUATION_KEYS as PULSE_KEYS  # how a correction acts
-from .scheduling import apply_node_scheduling, declare_scheduling
+from .scheduling import apply_node_scheduling, declare_scheduling, raise_node_priority
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
 ISOLATION_CHECK = 0.25
@@ -314,6 +314,7 @@ class ControllerNode(Node):
         if math.isfinite(self.stale_after) and not self.get_parameter("use_sim_time").value:
             log.warning("stale_after is ignored without use_sim_time (stamps are simulation "
                         "time)")
+        raise_node_priority(self)   # its start-up done: SCHED_FIFO from here (scheduling.py)
         self._warn_gains()
         if self.ndof is not None:
             log.info(f"model_file={self.model_file or self.rig_file} n={self.ndof.model.n} "

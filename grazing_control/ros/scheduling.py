@@ -10,7 +10,8 @@ warning.
 
 * priority p in 1..99: ``sched_setscheduler(0, SCHED_FIFO, p)`` for the whole process:
   every thread it has (the middleware's receive threads included, /proc/self/task) and
-  every thread it creates afterwards (they inherit it). 0 leaves the scheduler alone.
+  every thread it creates afterwards (they inherit it), once its start-up work is done
+  (:func:`raise_node_priority`). 0 leaves the scheduler alone.
 * cpus: ``sched_setaffinity(0, cpus)``.
 * lock memory: ``mlockall(MCL_CURRENT | MCL_FUTURE)``, so that no page of the process
   is paged out (and faulted back in, a millisecond) during a scene.
@@ -24,7 +25,7 @@ import os
 from typing import NamedTuple
 
 __all__ = ["Scheduling", "parse_cpus", "apply_scheduling", "declare_scheduling",
-           "apply_node_scheduling"]
+           "apply_node_scheduling", "raise_node_priority"]
 
 _MCL_CURRENT, _MCL_FUTURE = 1, 2
 
@@ -71,9 +72,7 @@ def apply_scheduling(priority: int = 0, cpus=(), lock_memory: bool = False) -> S
     ValueError for a priority outside 0..99 (the caller's parameter validation);
     everything the operating system refuses is a warning, never an exception.
     """
-    if isinstance(priority, bool) or int(priority) != priority or not 0 <= priority <= 99:
-        raise ValueError(f"thread_priority={priority!r} is invalid: valid range is 0 (off) "
-                         "or 1..99 (SCHED_FIFO)")
+    _check_priority(priority)
     applied, warnings = [], []
     if priority:
         try:
@@ -156,13 +155,43 @@ def declare_scheduling(node) -> None:
 
 
 def apply_node_scheduling(node) -> Scheduling:
-    """Apply a node's scheduling parameters; log what was applied and what was refused.
+    """Apply a node's CPU affinity and memory lock as it starts, and check its priority;
+    log what was applied and what was refused. The priority itself waits for
+    :func:`raise_node_priority`, once the node's start-up work is done: under SCHED_FIFO
+    that work (imports, compiling or loading numba's cache, the estimator's warm-up, 1.5-2.6
+    s of CPU) ran at 100 % of both CPUs, so that no other process ran for a second (the
+    recorder starting, another scene's loop) and the kernel throttled the real-time
+    threads for the rest of the second (docs/benchmarks.md, "The start under
+    SCHED_FIFO").
 
     ValueError for a malformed value (the caller turns it into its startup error).
     """
-    sched = apply_scheduling(node.get_parameter("thread_priority").value,
-                             parse_cpus(node.get_parameter("cpu_affinity").value),
-                             node.get_parameter("lock_memory").value)
+    priority = node.get_parameter("thread_priority").value
+    _check_priority(priority)
+    return _log(node, apply_scheduling(0, parse_cpus(node.get_parameter("cpu_affinity").value),
+                                       node.get_parameter("lock_memory").value))
+
+
+def raise_node_priority(node) -> Scheduling:
+    """The node's ``thread_priority`` (SCHED_FIFO for every thread of its process) when
+    its loop is about to run: the simulator at its start (sim_node.start.due, before the
+    feasibility probe, so that the probe's round trips are those of the scene), the
+    controller at the end of its start-up. Logged; once per node (later calls return
+    what the first did)."""
+    done = getattr(node, "_priority_raised", None)
+    if done is None:
+        done = node._priority_raised = _log(
+            node, apply_scheduling(node.get_parameter("thread_priority").value))
+    return done
+
+
+def _check_priority(priority) -> None:
+    if isinstance(priority, bool) or int(priority) != priority or not 0 <= priority <= 99:
+        raise ValueError(f"thread_priority={priority!r} is invalid: valid range is 0 (off) "
+                         "or 1..99 (SCHED_FIFO)")
+
+
+def _log(node, sched: Scheduling) -> Scheduling:
     for warning in sched.warnings:
         node.get_logger().warning(warning)
     if sched.applied:
