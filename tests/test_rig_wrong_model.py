@@ -26,6 +26,12 @@ PERIODS, ON = 40, 3
 #: budget of 5 ms rig time; the answers take 2-3 ms), and the 40 periods 6 s (28 s for
 #: the scene at the rig scene's 1/8 speed, alone in the realtime group).
 SLOW = 2.0
+#: The one-mass scene at a quarter of physical speed, 20 ms of wall time a command: on a
+#: machine running at half its speed (2026-11-30, a Python loop 2x slower, the suite 14-16
+#: min) its samples went out up to 9.9 ms late and its answers took up to 13.5 ms at half
+#: speed, 4 deadlines missed, and the orbit left the 0.03 band for that (on the commit
+#: before this stop's changes as well): what it checks is the wrong model, not the budget.
+SLOW_ONE = 4.0
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +43,8 @@ def scene(tmp_path_factory):
     wrong.write_text(text.replace("\ndamping_ratio: 0.01\n", "\ndamping_ratio: 0.0095\n"))
     topics = ("/rig/phase", "/rig/force_pulse", "/rig/applied", "/oscillator/pi2",
               "/oscillator/impact")
-    return run_rig_scene(out, RIG, PERIODS, ON, topics, {"rig_file": str(wrong)}, slow=SLOW)
+    return run_rig_scene(out, RIG, PERIODS, ON, topics, {"rig_file": str(wrong)},
+                         slow=SLOW_ONE)
 
 
 @pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
