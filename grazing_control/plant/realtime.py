@@ -175,11 +175,16 @@ class Realtime(Loop):
         The wake-up's held time is measured from here on (no stall paused twice)."""
         if not self.stall_pause:
             return
-        lag = sent - self.wall0 - (t - self.t0) / self.settings.time_scale
+        lag = self._lag(sent, t)
         if lag > self.stall_pause:
             self._pause(lag)
             if self.began is not None:
                 self.began = (sent, self.cpu_clock())
+
+    def _lag(self, sent: float, t: float) -> float:
+        """Wall seconds the event of simulation time ``t`` went out (at ``sent``) after its
+        time on the plant's clock (its pauses taken out)."""
+        return sent - self.wall0 - (t - self.t0) / self.settings.time_scale
 
     def _pause(self, seconds: float) -> None:
         """The plant's clock pauses ``seconds`` of wall time (:meth:`resume`,
@@ -261,7 +266,7 @@ class Realtime(Loop):
                                early_until=ev.t + 2.0 * engine.p.period + 1e-6,
                                armed=start is None or engine.k >= self.settings.pre_roll)
         # pace: how late the sample went out against its simulation time
-        lag = sent - self.wall0 - (ev.t - self.t0) / self.settings.time_scale
+        lag = self._lag(sent, ev.t)
         self.lags.append(lag)
         if self._deviation and engine.p is not self._scaled:   # the model (Delta d) changed
             self._scaled = engine.p
