@@ -394,7 +394,10 @@ def test_a_best_effort_bystander_does_not_make_the_package_topics_lossy(
             time.sleep(1.0)                     # the recorder sees only the bystanders
             pubs = package()
         time.sleep(0.5)
-        wait_ready(ros, recorder, pubs["oscillator/state"])
+        # the burst goes out on both topics: each writer waits for the recorder's reader
+        # (only the state's did, and /clock's first 25 went to nobody: 1975 of 2000, a
+        # fresh clone's rerun, 2026-11-30)
+        wait_ready(ros, recorder, *pubs.values())
         sent = []
         for i in range(1, 2001):                 # a burst: best effort would drop some
             m = make_message("sensor_msgs/msg/JointState", i)

@@ -256,7 +256,10 @@ def test_effort_bridge_streams_each_pulse_in_its_ros_time_window():
                              and len(peer.get("forward_effort_controller/commands")) > 50)
         time.sleep(0.3)                       # pairs for the fit
         now = rig_of(time.time())
-        t0 = now + 0.4
+        # the pulses' lead over their window: the bridge must take them off the wire and
+        # decide before it opens (0.4 s failed twice running in one fresh clone's suite,
+        # 2026-11-29, with a realtime scene under SCHED_FIFO on the other workers)
+        t0 = now + 1.0
         width = 0.15        # wider than the timer's stalls at load 13 (54 ms measured)
         peer.pulses.publish(pulse(now - 0.2, now - 0.195, 7.0, 7.0, width))   # late
         peer.pulses.publish(pulse(t0, t0 + 0.005, 1.5, 0.7, width))
@@ -282,7 +285,7 @@ def test_effort_bridge_streams_each_pulse_in_its_ros_time_window():
     for force, start_rig in windows.items():
         on = [src for src, f in stream if f == force]
         lo, hi = ros_of(start_rig), ros_of(start_rig + width)
-        assert on, f"the pulse of {force} N never went out"
+        assert on, f"the pulse of {force} N never went out:\n{out}"
         assert min(on) >= lo - tol and min(on) <= lo + tol + slack
         assert max(on) <= hi + tol + slack
         # and while it acts the stream says so: no zero inside the window, ends spared
