@@ -91,6 +91,32 @@ def test_the_record_keeps_the_last_periods_and_restarts_at_a_reset():
     assert len(rec.samples) == 1
 
 
+
+def test_rows_added_in_one_step_are_the_rows_added_one_by_one():
+    """``add_samples`` against ``add_sample`` on each row over 500 seeded runs of rows in
+    increasing time, cut into blocks of 1-20, with impacts among them and now and then a
+    block that starts with a repeat or goes back to the start: the same window kept."""
+    rng = np.random.default_rng(1530)
+    for _ in range(500):
+        one, many = StreamRecord(P.period, 12), StreamRecord(P.period, 12)
+        t = 0.0
+        for _ in range(int(rng.integers(1, 60))):
+            if rng.random() < 0.1:
+                t = float(rng.choice([0.0, t, t - 0.5 * P.period]))
+            rows = []
+            for _ in range(int(rng.integers(1, 21))):
+                t += float(rng.exponential(P.period / 20))
+                rows.append((t, *rng.normal(size=4)))
+            if rng.random() < 0.2:
+                impact = t - float(rng.uniform(0.0, 30.0)) * P.period
+                for rec in (one, many):
+                    rec.add_impact(impact)
+            for row in rows:
+                one.add_sample(*row)
+            many.add_samples(rows)
+            assert list(many.samples) == list(one.samples)
+            assert list(many.impacts) == list(one.impacts)
+
 def test_the_window_starts_after_the_model_filters_last_restart():
     """Without an impact sensor the impacts are the model's predictions from the
     filter's estimates: the window starts after the last section the model filter did

@@ -416,3 +416,78 @@ def test_a_window_holds_exactly_the_kept_samples_in_its_interval():
                                               np.array(want).reshape(-1, 3))
         assert bool(store) == bool(kept)
         assert store.t[store.first:] == [r[0] for r in kept]
+
+
+def _hostile_stream(rng, p, rate, periods):
+    """(t, x, v) of a seeded stream at T/rate with what a sensor and a network do to it:
+    samples lost, repeated, swapped, NaN or infinite stamps, a stray far ahead, a jump
+    ahead that the next sample confirms, a reset back to t = 0; noise on x, v sometimes
+    NaN (position only)."""
+    h = p.period / rate
+    out = []
+    j, n = 0, periods * rate
+    while j <= n:
+        t = j * h + float(rng.choice([0.0, 0.0, 0.0, rng.normal(0.0, 1e-3 * h)]))
+        x, v = float(rng.normal(0.0, 1e-4)), float(rng.choice([math.nan, rng.normal()]))
+        r = rng.random()
+        if r < 0.04:
+            pass                                             # lost
+        elif r < 0.07:
+            out += [(t, x, v), (t, x, v)]                    # repeated
+        elif r < 0.09 and out:
+            out.insert(len(out) - 1, (t, x, v))              # swapped with the one before
+        elif r < 0.10:
+            out.append((float(rng.choice([math.nan, math.inf, -math.inf])), x, v))
+        elif r < 0.11:
+            out.append((t + float(rng.uniform(5.0, 50.0)) * p.period, x, v))   # a stray
+        elif r < 0.115:
+            j += int(rng.integers(5, 12) * rate)              # a jump ahead
+            continue
+        elif r < 0.12 and j > rate:
+            j = 0                                             # a reset back to the start
+            n = int(rng.integers(1, periods + 1)) * rate
+            continue
+        else:
+            out.append((t, x, v))
+        j += 1
+    return out
+
+
+def _state(est):
+    s = est.samples
+    return (s.t[s.first:], s.x[s.first:], s.v[s.first:], est.last_t, est.next_k,
+            est.ignored, est.resets, est._jump)
+
+
+def test_a_block_taken_in_one_step_is_the_block_taken_sample_by_sample():
+    """``add_samples`` (the leading ``plain_run`` kept at once, the rest one by one)
+    against ``add_sample`` on each sample, over 1000 seeded hostile streams cut into
+    blocks of 1 to 20 samples, with and without ``after_section``, a given or a measured
+    sample period and a lead: the same sections due, in order, with the same estimates
+    bit for bit, and the same samples kept, counts and state after every block."""
+    rng = np.random.default_rng(3030)
+    p = P
+    taken_at_once = 0
+    for case in range(1000):
+        rate = int(rng.choice([8, 20, 50]))
+        kw = dict(sample_period=float(rng.choice([0.0, p.period / rate])),
+                  after_section=bool(rng.random() < 0.5),
+                  lead=float(rng.choice([0.0, 0.0, rng.uniform(0.0, 0.3)]) * p.period))
+        estimator = "model" if case % 50 == 0 else "nearest"
+        one, many = (StreamEstimator(p, estimator, 1e-4, **kw) for _ in range(2))
+        stream = _hostile_stream(rng, p, rate, int(rng.integers(1, 4)))
+        i = 0
+        while i < len(stream):
+            block = stream[i:i + int(rng.integers(1, 21))]
+            i += len(block)
+            t, x, v = (list(c) for c in zip(*block))
+            taken_at_once += many.plain_run(t)
+            want = [d for s in block for d in one.add_sample(*s)]
+            got = many.add_samples(t, x, v)
+            assert [(k, tk, e.source) for k, tk, e in got] == \
+                [(k, tk, e.source) for k, tk, e in want], case
+            for (_, _, a), (_, _, b) in zip(got, want):
+                np.testing.assert_array_equal(a.z, b.z)
+                np.testing.assert_array_equal(a.cov, b.cov)
+            assert _state(many) == _state(one) or repr(_state(many)) == repr(_state(one))
+    assert taken_at_once > 10_000           # the one-step path was taken, and often

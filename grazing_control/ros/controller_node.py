@@ -135,6 +135,7 @@ from .rig_boundary import check_rig_values
 from .rig_control import RIG_INPUT_QOS, RigSide
 from .scene_nodes import ACTUATION_KEYS as PULSE_KEYS  # how a correction acts
 from .scheduling import apply_node_scheduling, declare_scheduling, raise_node_priority
+from .stream_intake import PHASE_TOLERANCE, phase_error, plain_rows, take_run
 
 #: Wall seconds between two checks that only one simulator publishes the samples.
 ISOLATION_CHECK = 0.25
@@ -520,7 +521,9 @@ class ControllerNode(Node):
                            f"stream block of rows of n={n} (ros/stream_block.py)")
             return
         c = 0 if self.ndof is None else self.stream.coordinate
-        for sample in stream_block.samples(rows, c):
+        t, x, v = plain_rows(rows, c, self._tau2(), self.model.omega)
+        n = take_run(self.stream, self.reid, t, x, v)     # up to a section, in one step
+        for sample in stream_block.samples(rows, c, n):
             self._take_sample(sample)
 
     def _take_sample(self, sample: tuple) -> None:
@@ -635,16 +638,14 @@ class ControllerNode(Node):
         """The shaker's phase reference (effort [cos tau, sin tau] or [cos tau]) against the
         phase the sections assume, tau2 + omega t: a rig whose reference disagrees by more
         than 1e-6 is counted and logged (``phase_mismatch``); the estimate goes on."""
-        if not effort:
-            return
-        tau2 = self.model.tau2 if self.ndof is None else self.ndof.flow.tau2
-        tau = tau2 + self.model.omega * t
-        want = (math.cos(tau), math.sin(tau))
-        err = max(abs(e - w) for e, w in zip(effort[:2], want))
-        if not err <= 1e-6:
+        err = phase_error(effort, self._tau2() + self.model.omega * t)
+        if not err <= PHASE_TOLERANCE:
             self.phase_mismatch(f"t={t!r}: the stream's phase reference {tuple(effort[:2])} "
                                 f"differs by {err:.3g} from tau2 + omega t (sections at "
                                 "t_k = k T)")
+
+    def _tau2(self) -> float:
+        return self.model.tau2 if self.ndof is None else self.ndof.flow.tau2
 
     def _section(self, sec: int, nanosec: int) -> int | None:
         """The section index k of a sample stamp t_k = k T (None if it is not one)."""

@@ -215,6 +215,14 @@ class ReidentifySide:
             x = x - self.node.stream.bias
         self.record.add_sample(t, x, v, math.cos(self.omega * t), math.sin(self.omega * t))
 
+    def samples(self, t, x, v) -> None:
+        """A run of stream samples in increasing time, as :meth:`sample` on each (no
+        section falls due among them: the bias estimate is the same for all)."""
+        b = self.node.stream.bias if getattr(self.node.stream, "use_bias", False) else None
+        w, cos, sin = self.omega, math.cos, math.sin
+        self.record.add_samples([(ti, xi if b is None else xi - b, vi, cos(w * ti),
+                                  sin(w * ti)) for ti, xi, vi in zip(t, x, v)])
+
     def answered(self, k: int, dv: float) -> None:
         if self._state is not None:
             self.record.add_section(k, self._state[0], dv,

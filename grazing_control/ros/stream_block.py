@@ -191,8 +191,9 @@ def read(data: bytes) -> Rows | None:
     return Rows(masses, flat)
 
 
-def samples(rows: Rows, coordinate: int = 0) -> list:
-    """(sec, nanosec, x, v, (cos tau, sin tau)) of each row of ``rows``: the position
+def samples(rows: Rows, coordinate: int = 0, first: int = 0) -> list:
+    """(sec, nanosec, x, v, (cos tau, sin tau)) of each row of ``rows`` from row
+    ``first`` on: the position
     and velocity of coordinate ``coordinate`` (v NaN: none), the tuple the controller
     takes from one per-sample message (:func:`grazing_control.ros.cdr.read_state`; an
     n-DOF JointState's position[c] and velocity[c], NaN where it has no velocity)."""
@@ -202,7 +203,7 @@ def samples(rows: Rows, coordinate: int = 0) -> list:
                          f" (a block of {n} masses)")
     w, ix, iv = 4 + 2 * n, 2 + coordinate, 2 + n + coordinate
     return [(int(flat[i]), int(flat[i + 1]), flat[i + ix], flat[i + iv],
-             (flat[i + w - 2], flat[i + w - 1])) for i in range(0, len(flat), w)]
+             (flat[i + w - 2], flat[i + w - 1])) for i in range(first * w, len(flat), w)]
 
 
 class Block:

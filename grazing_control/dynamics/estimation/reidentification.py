@@ -161,6 +161,22 @@ class StreamRecord:
         while self.impacts and self.impacts[0] < start:
             self.impacts.popleft()
 
+    def add_samples(self, rows) -> None:
+        """Rows (t, x, v, cos_tau, sin_tau) in increasing t: as :meth:`add_sample` on
+        each, in one step where they all follow the last sample kept."""
+        if not rows:
+            return
+        if self.samples and rows[0][0] <= self.samples[-1][0]:
+            for row in rows:
+                self.add_sample(*row)
+            return
+        self.samples.extend(rows)
+        start = rows[-1][0] - self.periods * self.period
+        while self.samples[0][0] < start:
+            self.samples.popleft()
+        while self.impacts and self.impacts[0] < start:
+            self.impacts.popleft()
+
     def add_section(self, k: int, z, dv: float, at: float, fitted: bool = True) -> None:
         """Section k's estimate (absolute), its kick and instant; ``fitted``: the model
         filter made the estimate (not an arc fit after a start or a reset)."""

@@ -260,6 +260,54 @@ class StreamEstimator:
             due.append(self._due(self.next_k))
         return due
 
+    def plain_run(self, t) -> int:
+        """How many of the samples ``t`` (times, in order) :meth:`add_sample` would only
+        keep, one after the other: each finite, after the one before it (the newest kept
+        first) within MAX_GAP periods, making no section due. 0 before the first sample
+        since :meth:`reset`. The same conditions as :meth:`add_sample`'s, term for term."""
+        if self.last_t is None or self.next_k is None or not self.samples:
+            return 0
+        T = self.p.period
+        tol = _TOL * T
+        edge = self.next_k * T + tol
+        lead, after, h0 = self.lead, self.after_section, self.sample_period
+        before = self.last_t
+        n = 0
+        for ti in t:
+            if not (before < ti <= before + MAX_GAP * T) or ti > edge:
+                break
+            h = h0 if h0 != 0.0 else ti - before
+            if after:
+                if h > 0.0 and ti + 0.5 * h + lead > edge:
+                    break
+            elif h <= 0.0 or ti + h + lead >= self.next_k * T - 1e-3 * h:
+                break
+            before = ti
+            n += 1
+        return n
+
+    def add_plain(self, t, x, v) -> None:
+        """Keep a run of samples that :meth:`plain_run` counted (all of ``t``), as
+        :meth:`add_sample` on each would keep them, in one step: a sensor's block
+        (ros/stream_block.py) holds 10 of them between two sections at T/200 x1000."""
+        if not t:
+            return
+        T = self.p.period
+        self._jump = None
+        self.samples.extend(t, x, v)
+        self.samples.drop_before(t[-1] - 2.0 * T - _TOL * T)
+        self.last_t = t[-1]
+
+    def add_samples(self, t, x, v) -> list:
+        """Samples in order (lists): the sections now due, as :meth:`add_sample` on each
+        (the leading :meth:`plain_run` kept in one step)."""
+        n = self.plain_run(t)
+        self.add_plain(t[:n], x[:n], v[:n])
+        due = []
+        for i in range(n, len(t)):
+            due += self.add_sample(t[i], x[i], v[i])
+        return due
+
     def flush(self, k: int) -> list:
         """The sections up to k not yet estimated (the stream stopped short of t_k)."""
         due = []
@@ -492,6 +540,12 @@ class _Samples:
         self.t.append(t)
         self.x.append(x)
         self.v.append(v)
+
+    def extend(self, t, x, v) -> None:
+        """Samples after the last one, in increasing t (floats)."""
+        self.t.extend(t)
+        self.x.extend(x)
+        self.v.extend(v)
 
     def drop_before(self, start: float) -> None:
         """Forget the samples before ``start`` (the lists are cut once half is dropped)."""
