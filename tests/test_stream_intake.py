@@ -23,11 +23,11 @@ def test_the_phase_error_is_the_larger_difference_and_nan_wherever_one_is_nan():
     assert phase_error((c, s, 9.0), tau) == 0.0                    # beyond two: ignored
 
 
-def _one_by_one(rows, c):
-    """The per-sample path's checks on each row (controller_node._take_sample and
-    _check_phase), by brute force: the rows up to the first one that fails."""
+def _one_by_one(rows, c, first):
+    """The per-sample path's checks on each row from row ``first`` (controller_node.
+    _take_sample and _check_phase), by brute force: the rows up to the first that fails."""
     out = []
-    for sec, ns, x, v, effort in stream_block.samples(rows, c):
+    for sec, ns, x, v, effort in stream_block.samples(rows, c)[first:]:
         t = sec + ns * 1e-9
         tau = TAU2 + OMEGA * t
         want = (math.cos(tau), math.sin(tau))
@@ -39,7 +39,8 @@ def _one_by_one(rows, c):
 
 
 def test_the_plain_rows_are_the_leading_rows_that_pass_every_check():
-    """Against the checks row by row on 4000 seeded blocks of 1-3 masses, each coordinate:
+    """Against the checks row by row on 4000 seeded blocks of 1-3 masses, each coordinate,
+    from any row on:
     a NaN or infinite position, an infinite or NaN velocity (NaN is a position-only
     sensor: it passes), a phase reference off by 0.5-2 tolerances or NaN."""
     rng = np.random.default_rng(2030)
@@ -67,8 +68,12 @@ def test_the_plain_rows_are_the_leading_rows_that_pass_every_check():
             flat += [sec, ns, *x, *v, *cs]
         rows = stream_block.read(stream_block.pack(flat, n))
         c = int(rng.integers(0, n))
-        got = plain_rows(rows, c, TAU2, OMEGA)
-        want = _one_by_one(rows, c)
+        assert rows.count == len(flat) // (4 + 2 * n)
+        first = int(rng.integers(0, 3)) if rng.random() < 0.5 else 0
+        got = plain_rows(rows, c, TAU2, OMEGA, first)
+        want = _one_by_one(rows, c, first)
         assert repr(list(zip(*got))) == repr(want)
-        runs.append(len(want) == len(flat) // (4 + 2 * n))
+        assert stream_block.samples(rows, c, first, first + 1) == \
+            stream_block.samples(rows, c)[first:first + 1]
+        runs.append(len(want) == max(0, rows.count - first))
     assert 0.2 < np.mean(runs) < 0.8            # whole blocks and cut ones, both often

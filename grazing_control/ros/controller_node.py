@@ -510,21 +510,21 @@ class ControllerNode(Node):
         self._take_sample(sample)
 
     def _on_state_block(self, data: bytes) -> None:
-        """A block of stream samples (``stream_message`` block, ros/stream_block.py): each
-        row taken as :meth:`_on_state` takes one sample, in order (an n-DOF scene's rows:
-        coordinate ``sensor_coordinate``'s position and velocity, as from its JointState).
-        A block of another number of masses than the model's is malformed."""
+        """A block of stream samples (ros/stream_block.py), row after row as :meth:`_on_state`
+        takes one (n-DOF: coordinate ``sensor_coordinate``); another n is malformed."""
         rows = stream_block.read(data)
         n = 1 if self.ndof is None else self.ndof.model.n
         if rows is None or rows.masses != n:
             self.malformed(f"a message on {self.sub_samples.topic_name} that is not a "
                            f"stream block of rows of n={n} (ros/stream_block.py)")
             return
-        c = 0 if self.ndof is None else self.stream.coordinate
-        t, x, v = plain_rows(rows, c, self._tau2(), self.model.omega)
-        n = take_run(self.stream, self.reid, t, x, v)     # up to a section, in one step
-        for sample in stream_block.samples(rows, c, n):
-            self._take_sample(sample)
+        c, i = (0 if self.ndof is None else self.stream.coordinate), 0
+        while i < rows.count:   # the runs between sections in one step (ros/stream_intake.py)
+            i += take_run(self.stream, self.reid,
+                          *plain_rows(rows, c, self._tau2(), self.model.omega, i))
+            if i < rows.count:      # a section due, a row that fails a check: by itself
+                self._take_sample(stream_block.samples(rows, c, i, i + 1)[0])
+                i += 1
 
     def _take_sample(self, sample: tuple) -> None:
         """(sec, nanosec, x, v, effort) of one stream sample: checked, then estimated."""

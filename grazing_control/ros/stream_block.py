@@ -149,6 +149,11 @@ class Rows(NamedTuple):
     masses: int
     flat: tuple
 
+    @property
+    def count(self) -> int:
+        """The number of rows."""
+        return len(self.flat) // (4 + 2 * self.masses)
+
 
 def read(data: bytes) -> Rows | None:
     """The rows of a block, or None for any other message: another layout, a dim[1] whose
@@ -191,9 +196,9 @@ def read(data: bytes) -> Rows | None:
     return Rows(masses, flat)
 
 
-def samples(rows: Rows, coordinate: int = 0, first: int = 0) -> list:
+def samples(rows: Rows, coordinate: int = 0, first: int = 0, end: int | None = None) -> list:
     """(sec, nanosec, x, v, (cos tau, sin tau)) of each row of ``rows`` from row
-    ``first`` on: the position
+    ``first`` up to ``end`` (None: the last): the position
     and velocity of coordinate ``coordinate`` (v NaN: none), the tuple the controller
     takes from one per-sample message (:func:`grazing_control.ros.cdr.read_state`; an
     n-DOF JointState's position[c] and velocity[c], NaN where it has no velocity)."""
@@ -203,7 +208,8 @@ def samples(rows: Rows, coordinate: int = 0, first: int = 0) -> list:
                          f" (a block of {n} masses)")
     w, ix, iv = 4 + 2 * n, 2 + coordinate, 2 + n + coordinate
     return [(int(flat[i]), int(flat[i + 1]), flat[i + ix], flat[i + iv],
-             (flat[i + w - 2], flat[i + w - 1])) for i in range(first * w, len(flat), w)]
+             (flat[i + w - 2], flat[i + w - 1]))
+            for i in range(first * w, len(flat) if end is None else min(end * w, len(flat)), w)]
 
 
 class Block:

@@ -39,8 +39,9 @@ def phase_error(effort, tau: float) -> float:
     return max(errs, default=0.0)
 
 
-def plain_rows(rows: Rows, coordinate: int, tau2: float, omega: float):
-    """(t, x, v) of the leading rows of ``rows`` whose sample passes the checks: x
+def plain_rows(rows: Rows, coordinate: int, tau2: float, omega: float, first: int = 0):
+    """(t, x, v) of the rows of ``rows`` from row ``first`` on, up to the first one whose
+    sample does not pass the checks: x
     finite, v not infinite, the phase reference within :data:`PHASE_TOLERANCE` of
     tau2 + omega t; t = sec + nanosec 1e-9 as the per-sample path computes it
     (ros/stream_block.py :func:`~grazing_control.ros.stream_block.samples`)."""
@@ -48,7 +49,7 @@ def plain_rows(rows: Rows, coordinate: int, tau2: float, omega: float):
     w, ix, iv = 4 + 2 * n, 2 + coordinate, 2 + n + coordinate
     cos, sin, isfinite, isinf = math.cos, math.sin, math.isfinite, math.isinf
     ts, xs, vs = [], [], []
-    for i in range(0, len(flat), w):
+    for i in range(first * w, len(flat), w):
         x, v = flat[i + ix], flat[i + iv]
         if not isfinite(x) or isinf(v):
             break
