@@ -30,6 +30,30 @@ def test_measurements_are_a_pure_function_of_seed_and_index_however_the_stream_i
     assert not np.array_equal(whole[0], other[0])
 
 
+def test_the_draws_are_their_blocks_generators_whatever_was_drawn_before():
+    """Sample j's draws are row j % BLOCK of the generator seeded (seed, j // BLOCK),
+    however the blocks kept from earlier calls (for the next segments) were drawn: 300
+    seeded calls over a few seeds, against a fresh generator per block; and a kept
+    block cannot be written through what a call returns."""
+    rng = np.random.default_rng(31)
+    blocks = {}
+
+    def block(seed, b):
+        if (seed, b) not in blocks:
+            blocks[seed, b] = np.random.default_rng([seed, b]).standard_normal((BLOCK, 2))
+        return blocks[seed, b]
+
+    for _ in range(300):
+        seed, j0, n = int(rng.integers(0, 4)), int(rng.integers(0, 5 * BLOCK)), \
+            int(rng.integers(1, 3 * BLOCK))
+        got = SensorModel(noise=1.0, seed=seed).draws(j0, n)
+        want = np.array([block(seed, j // BLOCK)[j % BLOCK] for j in range(j0, j0 + n)])
+        assert np.array_equal(got, want)
+        got[:] = 0.0                                    # the caller's copy
+    assert np.array_equal(SensorModel(noise=1.0, seed=1).draws(0, 2),
+                          np.random.default_rng([1, 0]).standard_normal((BLOCK, 2))[:2])
+
+
 def test_noise_is_unbiased_with_the_given_std_and_independent_on_x_and_v():
     s = SensorModel(noise=2e-4, seed=1)
     n = 200_000

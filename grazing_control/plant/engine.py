@@ -584,10 +584,12 @@ class Engine:
             if states:
                 xm, vm = self.settings.sensor.measure(j0, xv[states, 0], xv[states, 1])
                 xv[states, 0], xv[states, 1] = xm, vm
+            ts, tau, omega, tau_star = s.ts, s.tau, p.omega, p.tau_star
             for h, kind, (x, v) in zip(rel, kinds, xv.tolist()):    # Python floats, exact
-                phase = p.tau_star if kind == "pi1" else (s.tau + p.omega * h) % TWO_PI
-                events.append(Event(s.ts + h, kind, x, v, phase))
-        events.sort(key=lambda e: e.t)
+                phase = tau_star if kind == "pi1" else (tau + omega * h) % TWO_PI
+                events.append(Event(ts + h, kind, x, v, phase))
+        if impacts:             # the rest come in time order (rel is sorted)
+            events.sort(key=lambda e: e.t)
         return events
 
     # ------------------------------------------------- the n-DOF model's pieces

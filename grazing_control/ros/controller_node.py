@@ -518,11 +518,11 @@ class ControllerNode(Node):
             self.malformed(f"a message on {self.sub_samples.topic_name} that is not a "
                            f"stream block of rows of n={n} (ros/stream_block.py)")
             return
-        c, i = (0 if self.ndof is None else self.stream.coordinate), 0
-        while i < rows.count:   # the runs between sections in one step (ros/stream_intake.py)
+        c, i, end = (0 if self.ndof is None else self.stream.coordinate), 0, rows.count
+        while i < end:          # the runs between sections in one step (ros/stream_intake.py)
             i += take_run(self.stream, self.reid,
                           *plain_rows(rows, c, self._tau2(), self.model.omega, i))
-            if i < rows.count:      # a section due, a row that fails a check: by itself
+            if i < end:             # a section due, a row that fails a check: by itself
                 self._take_sample(stream_block.samples(rows, c, i, i + 1)[0])
                 i += 1
 
