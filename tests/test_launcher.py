@@ -73,6 +73,26 @@ def test_a_failed_scenes_reason_quotes_the_nodes_last_error(tmp_path):
         "controller_node exited early with status 1; sim_node exited with status 2")
 
 
+def test_the_last_line_says_the_simulators_numbers_misses_and_pauses_included():
+    """The scene's line carries what the simulator's summary says (its verdict): the
+    periods and their pace, the corrections applied, missed and late, and the plant's
+    pauses where it paused; nothing where there is no summary (a node killed)."""
+    line = ("summary: periods=3000 t=28274.3 impacts=3001 applied=1999 late=2 missed=3 "
+            "lost=0 predicted=3 timeouts=0 ignored=0 malformed=0 wall=28.300s rate=106.1 "
+            "periods/s paused=8 paused_ms=12.345 longest_pause_ms=3.020 latency_ms p50=-1.3")
+    res = launcher.RunResult(sim=0, controller=0, recorder=None, bag_dir=None, wall=30.04,
+                             sim_verdict={"summary": line})
+    assert str(res).startswith(
+        "scene finished in 30.0 s (3000 periods at 106.1 periods/s, 1999 applied, 3 missed,"
+        " 2 late, the plant's clock paused 8 times (12.345 ms in all)): exit status "
+        "sim_node=0 controller_node=0")
+    res.sim_verdict = {"summary": line.split(" paused=")[0]}     # a scene that never paused
+    assert "(3000 periods at 106.1 periods/s, 1999 applied, 3 missed, 2 late): " in str(res)
+    for verdict in (None, {}, {"summary": None}, {"summary": "garbage= x"}):
+        res.sim_verdict = verdict
+        assert str(res).startswith("scene finished in 30.0 s: exit status sim_node=0")
+
+
 # ------------------------------------------------------------------------ domains
 def test_claimed_domains_are_distinct_and_not_in_use():
     import rclpy

@@ -68,7 +68,7 @@ from . import node_zygote
 from .entry import MODULES
 from .scene_nodes import (design_delay, design_model,  # noqa: F401 (design_delay: API)
                           scene_overrides, sim_values_for_model, sim_values_for_rig)
-from .scene_verdict import failure_reason, read_verdict
+from .scene_verdict import failure_reason, read_verdict, scene_numbers
 
 __all__ = ["RunResult", "run", "run_scene", "claim_domain", "node_command",
            "recorded_losses",
@@ -124,8 +124,9 @@ class RunResult:
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
                  else "finished" if self.ok else "failed")
-        text = (f"scene {state} in {self.wall:.1f} s: exit status sim_node={self.sim} "
-                f"controller_node={self.controller}")
+        numbers = scene_numbers(self.sim_verdict)
+        text = (f"scene {state} in {self.wall:.1f} s" + (f" ({numbers})" if numbers else "")
+                + f": exit status sim_node={self.sim} controller_node={self.controller}")
         if self.recorder is not None:
             text += f" recorder_node={self.recorder}; bag {self.bag_dir}"
         if self.lost:

@@ -2,14 +2,15 @@
 
 :func:`grazing_control.ros.launcher.run` reads the simulator's ``verdict_file`` (its own
 reason: the realtime watchdog's trip, a refused feasibility check, a stopped simulation)
-and, for a scene that failed, puts :func:`failure_reason` in ``RunResult.reason``.
+and, for a scene that failed, puts :func:`failure_reason` in ``RunResult.reason``;
+:func:`scene_numbers` gives the simulator's numbers for the last line of every scene.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["read_verdict", "failure_reason"]
+__all__ = ["read_verdict", "failure_reason", "scene_numbers"]
 
 
 def read_verdict(path: Path):
@@ -48,6 +49,27 @@ def failure_reason(res, early=(), timeout=None) -> str:
                 name == "sim_node" and parts and verdict.get("reason")):
             parts.append(f"{name} exited with status {code}" + _said(res.logs.get(name)))
     return "; ".join(parts) or "unknown"
+
+
+def scene_numbers(verdict) -> str:
+    """What the simulator's summary line (in its verdict) says of the run, in words for
+    ``grazing run``'s last line: the periods and their pace, the corrections applied, the
+    deadlines missed and the answers late, and the plant's pauses where there were any
+    (a realtime scene that missed or paused says so where the user looks, not only in
+    the simulator's log); '' without a summary."""
+    line = str((verdict or {}).get("summary") or "")
+    words = dict(w.split("=", 1) for w in line.split() if "=" in w)
+    if "periods" not in words:
+        return ""
+    text = f"{words['periods']} periods"
+    if "rate" in words:
+        text += f" at {words['rate']} periods/s"
+    text += ", " + ", ".join(f"{words[k]} {k}" for k in ("applied", "missed", "late")
+                             if k in words)
+    if "paused" in words:
+        text += (f", the plant's clock paused {words['paused']} times "
+                 f"({words.get('paused_ms', '?')} ms in all)")
+    return text
 
 
 def _said(log) -> str:
