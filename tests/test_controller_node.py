@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import time
 import subprocess
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -884,6 +885,37 @@ def test_a_stream_controller_says_once_when_its_lead_reaches_past_an_impact():
     assert len(past) == 1 and "answer_lead=5.0" in past[0] and said[5.0][0][0] == "warning"
     assert not any("reaches past an impact" in t for _n, t in said[0.5])
 
+
+@contextmanager
+def _stream_controllers(names, g, delta_d, h, **params):
+    """In-process stream controllers alike on a domain of their own, one per name (the
+    model filter on a stream of state_period ``h``, gains ``g``, ``params`` besides):
+    (nodes, answers), each answer a node publishes kept, decoded, in ``answers[name]``;
+    the nodes destroyed and the context shut down at the end."""
+    import rclpy
+    from rclpy.context import Context
+
+    from grazing_control.ros.controller_node import ControllerNode
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=new_domain())
+    nodes, answers = {}, {}
+    try:
+        for name in names:
+            node = nodes[name] = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in (
+                    ("c1", g.c1), ("c2", g.c2), ("delta_d", delta_d),
+                    ("pi2_source", "stream"), ("estimator", "model"),
+                    ("sensor_noise", 1e-4), ("state_period", h), *params.items())])
+            got = answers[name] = []
+            node.pub.publish = lambda data, got=got: got.append(cdr.read_twist_stamped(data))
+        yield nodes, answers
+    finally:
+        for node in nodes.values():
+            node.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
 def test_early_answers_are_the_estimate_first_answers_on_hostile_streams():
     """The early answers (before the control is on) against the estimate-first path on
     300 seeded hostile streams fed to both controllers alike: samples lost, repeated,
@@ -891,30 +923,15 @@ def test_early_answers_are_the_estimate_first_answers_on_hostile_streams():
     anywhere from 0 to past the stream's end, and ~/enable forced off or on halfway in
     some: every answer (stamp, correction, prediction), in order, and every count the
     same, bit for bit."""
-    import rclpy
-    from rclpy.context import Context
-
     from grazing_control.dynamics.estimation.motion import trajectory
-    from grazing_control.ros.controller_node import ControllerNode
 
     p, rate, periods = OscillatorParams(delta_d=-5e-6), 25, 7
     h = p.period / rate
     g = Gains(degenerate_c1(p, -0.3), -0.3)
     rng = np.random.default_rng(30)
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=new_domain())
-    nodes, answers = {}, {}
-    try:
-        for early in (True, False):
-            node = nodes[early] = ControllerNode(context=ctx, parameter_overrides=[
-                Parameter(k, value=v) for k, v in (
-                    ("c1", g.c1), ("c2", g.c2), ("delta_d", p.delta_d),
-                    ("enable_after", 3), ("pi2_source", "stream"), ("estimator", "model"),
-                    ("sensor_noise", 1e-4), ("state_period", h))])
-            got = answers[early] = []
-            node.pub.publish = lambda data, got=got: got.append(cdr.read_twist_stamped(data))
-            if not early:
-                node.stream.before_estimate = None
+    with _stream_controllers((True, False), g, p.delta_d, h, enable_after=3) as (
+            nodes, answers):
+        nodes[False].stream.before_estimate = None
         made = []                                       # answers given early, per call
 
         def counting(k, node=nodes[True], answer=nodes[True]._answer_before_estimate):
@@ -962,10 +979,6 @@ def test_early_answers_are_the_estimate_first_answers_on_hostile_streams():
         counts = {early: (node.answered, node.malformed.count, node.stream.ignored,
                           node.stream.resets) for early, node in nodes.items()}
         early_count = len(nodes[True]._early)
-    finally:
-        for node in nodes.values():
-            node.destroy_node()
-        rclpy.shutdown(context=ctx)
     assert len(answers[True]) > 1500 and sum(made) > 300 and 0 in made
     assert np.array_equal(np.array(answers[True], dtype=float),
                           np.array(answers[False], dtype=float), equal_nan=True)
@@ -981,30 +994,15 @@ def test_a_block_is_answered_as_its_rows_one_by_one_on_hostile_streams():
     ahead, a reset back to t = 0. Every answer (stamp, correction, prediction) in order,
     every count, the estimator's kept samples and the record's window the same, bit for
     bit; and a NaN sin tau is counted as a phase mismatch (max() skipped it before)."""
-    import rclpy
-    from rclpy.context import Context
-
     from grazing_control.dynamics.estimation.motion import trajectory
     from grazing_control.ros import stream_block
-    from grazing_control.ros.controller_node import ControllerNode
 
     p, rate = OscillatorParams(delta_d=-5e-6), 25
     h = p.period / rate
     g = Gains(degenerate_c1(p, -0.3), -0.3)
     rng = np.random.default_rng(3031)
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=new_domain())
-    nodes, answers = {}, {}
-    try:
-        for way in ("block", "rows"):
-            node = nodes[way] = ControllerNode(context=ctx, parameter_overrides=[
-                Parameter(k, value=v) for k, v in (
-                    ("c1", g.c1), ("c2", g.c2), ("delta_d", p.delta_d),
-                    ("enable_after", 2), ("pi2_source", "stream"), ("estimator", "model"),
-                    ("sensor_noise", 1e-4), ("state_period", h),
-                    ("stream_message", "block"))])
-            got = answers[way] = []
-            node.pub.publish = lambda data, got=got: got.append(cdr.read_twist_stamped(data))
+    with _stream_controllers(("block", "rows"), g, p.delta_d, h, enable_after=2,
+                             stream_message="block") as (nodes, answers):
         assert nodes["block"].reid is not None
         for case in range(200):
             z = tuple(rng.uniform(-3e-4, 3e-4, 2))
@@ -1054,10 +1052,6 @@ def test_a_block_is_answered_as_its_rows_one_by_one_on_hostile_streams():
                        repr(node.stream.samples.x[node.stream.samples.first:]),
                        repr(list(node.reid.record.samples)))
                  for way, node in nodes.items()}
-    finally:
-        for node in nodes.values():
-            node.destroy_node()
-        rclpy.shutdown(context=ctx)
     assert len(answers["block"]) > 300
     assert np.array_equal(np.array(answers["block"], dtype=float),
                           np.array(answers["rows"], dtype=float), equal_nan=True)
