@@ -35,7 +35,6 @@ import argparse
 import contextlib
 import os
 import platform
-import random
 import re
 import statistics
 import subprocess
@@ -130,8 +129,7 @@ def scene(periods, sim_overrides, controller_overrides, bag=False, recorder_over
     with tempfile.TemporaryDirectory(prefix="bench_closed_loop_") as tmp, \
             (CpuMeter() if meter else contextlib.nullcontext()) as cpu:
         res = launcher.run(STUDY, CONTROLLER, Path(tmp) / "bag" if bag else None,
-                           periods, domain_id=random.SystemRandom().randrange(101, 232),
-                           timeout=600, sim_overrides=sim_overrides,
+                           periods, timeout=600, sim_overrides=sim_overrides,
                            controller_overrides=controller_overrides,
                            recorder_overrides=recorder_overrides, log_dir=tmp,
                            compose=compose)

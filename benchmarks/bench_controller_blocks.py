@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import statistics
 import subprocess
 import sys
@@ -85,10 +84,15 @@ def record(tmp: Path, periods: int, enable_after: int) -> tuple:
 
 
 def arm(root: Path, bag: Path, values: dict) -> dict:
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", ROS_DOMAIN_ID=str(
-        random.SystemRandom().randrange(101, 232)))
-    out = subprocess.run([sys.executable, "-c", ARM, str(bag), json.dumps(values)], cwd=root,
-                         capture_output=True, text=True, env=env)
+    from grazing_control.ros.launcher import claim_domain
+
+    domain, lock = claim_domain()        # a domain of its own, held while the arm runs
+    try:
+        env = dict(os.environ, OPENBLAS_NUM_THREADS="1", ROS_DOMAIN_ID=str(domain))
+        out = subprocess.run([sys.executable, "-c", ARM, str(bag), json.dumps(values)],
+                             cwd=root, capture_output=True, text=True, env=env)
+    finally:
+        lock.close()
     if out.returncode != 0:
         raise SystemExit(f"{root}: exit {out.returncode}: {out.stderr.strip()[-600:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])

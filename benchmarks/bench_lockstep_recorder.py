@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: One scene, run in the checkout's directory: prints {"rate": periods/s, "summary": line}.
 SCENE = r"""
-import json, random, re, sys, tempfile
+import json, re, sys, tempfile
 from pathlib import Path
 sys.path.insert(0, ".")
 from grazing_control.ros import launcher
@@ -38,7 +38,7 @@ periods, compose, message = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3]
 with tempfile.TemporaryDirectory(prefix="bench_lockstep_") as tmp:
     res = launcher.run(Path("config/study.yaml"), Path("config/controller.yaml"),
                        Path(tmp) / "bag", periods,
-                       domain_id=random.SystemRandom().randrange(101, 232), timeout=600,
+                       timeout=600,
                        sim_overrides={"delta_d": -5e-6, "state_period": 1.0,
                                       "executor": "events", "stream_message": message},
                        controller_overrides={"enable_after": 0, "executor": "events"},

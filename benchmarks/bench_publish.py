@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import random
 import subprocess
 import sys
 import time
@@ -59,7 +58,10 @@ def main(argv=None):
     ap.add_argument("--messages", type=int, default=20000)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
-    os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randrange(101, 232))
+    from grazing_control.ros.launcher import claim_domain
+
+    domain, _lock = claim_domain()       # a domain of its own, held until the process ends
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
 
     import rclpy
     from builtin_interfaces.msg import Time

@@ -40,7 +40,6 @@ import argparse
 import json
 import math
 import os
-import random
 import statistics
 import subprocess
 import sys
@@ -203,7 +202,8 @@ def floor(executor_kind: str, samples: int, interval: float, priority: int = 0,
     answers lost, and the round trips longer than ``budget`` wall s (``over``)."""
     from grazing_control.ros import launcher
 
-    env = launcher.node_env(random.SystemRandom().randrange(101, 232))
+    domain, lock = launcher.claim_domain()     # held until both processes are done
+    env = launcher.node_env(domain)
     me = [sys.executable, str(Path(__file__).resolve()), "--executor", executor_kind,
           "--priority", str(priority)]
     pong_proc = subprocess.Popen(me + ["--role", "pong"], env=env, stdout=subprocess.DEVNULL)
@@ -217,6 +217,7 @@ def floor(executor_kind: str, samples: int, interval: float, priority: int = 0,
         except subprocess.TimeoutExpired:
             pong_proc.kill()
             pong_proc.wait()
+        lock.close()
     line = (out.stdout.strip().splitlines() or ["{}"])[-1]
     res = json.loads(line)
     if "trips" not in res:

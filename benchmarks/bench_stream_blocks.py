@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import random
 import resource
 import statistics
 import subprocess
@@ -113,7 +112,7 @@ def scene(variant: str, controller: Path, periods: int, enable_after: int, scale
     p = OscillatorParams(delta_d=DD)
     res = launcher.run(
         None, str(controller), tmp / "bag", periods, delta_d=DD, enable_after=enable_after,
-        mode="realtime", domain_id=random.SystemRandom().randrange(101, 232),
+        mode="realtime",
         timeout=max(120.0, 4 * periods * p.period / scale),
         sim_overrides={"time_scale": scale, "state_period": p.period / RATE,
                        "sensor_noise": SIGMA, "sensor_velocity": False,
