@@ -211,9 +211,7 @@ class ReidentifySide:
         """A stream sample, less the augmented filter's bias estimate where it estimates
         one (the fit's model has no sensor offset), with the phase reference omega t
         (the fit's forcing phase theta takes the offset)."""
-        if getattr(self.node.stream, "use_bias", False):
-            x = x - self.node.stream.bias
-        self.record.add_sample(t, x, v, math.cos(self.omega * t), math.sin(self.omega * t))
+        self.samples((t,), (x,), (v,))
 
     def samples(self, t, x, v) -> None:
         """A run of stream samples in increasing time, as :meth:`sample` on each (no

@@ -146,9 +146,8 @@ def stream_loop(model_file, gains, *, delta_d: float, delay: float, sigma: float
         est.set_correction(j, dv, delay)
         events = eng.begin_period(dv, delay)
         counts[j] = sum(ev.kind == "impact" for ev in events)
-        due = []
-        for ev in events:
-            if ev.kind == "state":
-                due += est.add_sample(ev.t, ev.x[coordinate], ev.v[coordinate])
+        states = [ev for ev in events if ev.kind == "state"]
+        due = est.add_samples([ev.t for ev in states], [ev.x[coordinate] for ev in states],
+                              [ev.v[coordinate] for ev in states])
         eng.end_period()
     return StreamLoop(truth, estimate, corrections, counts, est.resets)
