@@ -10,6 +10,7 @@ starts only when it listens. The other node test modules import the helpers from
 from __future__ import annotations
 
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -359,3 +360,53 @@ def test_launch_file_is_valid_python():
     # (a quote broke it); the nodes' parameters come from scene_nodes.scene_overrides
     assert "PythonExpression" not in source and 'bag = arg("bag")' in source
     assert "scene_overrides(" in source
+
+
+
+
+def _child_node(parent: int, module: str) -> int | None:
+    """The pid of the child of process ``parent`` that runs ``module``."""
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
+            status = Path(f"/proc/{pid}/status").read_text()
+        except OSError:
+            continue
+        if module.encode() in cmd and f"\nPPid:\t{parent}\n" in status:
+            return int(pid)
+    return None
+
+
+def test_a_scene_whose_controller_is_killed_says_the_summary_it_logged(tmp_path):
+    """SIGKILL to the controller of a realtime stream scene in blocks (`grazing run`): the
+    simulator stops, logs its summary marked '(interrupted)', waits (up to 2 s) for the
+    acknowledgements of a reader that is gone, and grazing run's last line says the pace
+    of the line it logged, not that of the scene plus that wait (75.3 periods/s of a
+    scene whose summary said 104.2, 2026-11-30)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from grazing_control.cli import main; "
+         "sys.exit(main())", "run", "--periods", "3000", "--mode", "realtime",
+         "--delta-d", "-5e-6", "--enable-after", "5000", "--log-dir", str(tmp_path),
+         "--sim-param", "time_scale:=1000.0", "--sim-param", "state_period:=0.05",
+         "--sim-param", "stream_message:=block", "--controller-param", "pi2_source:=stream"],
+        env=launcher.node_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        log, end = tmp_path / "sim_node.log", time.monotonic() + 60
+        while time.monotonic() < end and "starting" not in (
+                log.read_text() if log.exists() else ""):
+            time.sleep(0.05)
+        time.sleep(2.0)
+        pid = _child_node(proc.pid, "grazing_control.ros.controller_node")
+        assert pid is not None
+        os.kill(pid, signal.SIGKILL)
+        out, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    last = out.strip().splitlines()[-1]
+    assert proc.returncode == 1 and "controller_node=-9" in last, out
+    logged = next(line for line in log.read_text().splitlines()
+                  if "summary:" in line and "(interrupted)" in line)
+    rate = logged.split(" rate=")[1].split()[0]
+    assert last.startswith("scene failed in ") and f" periods at {rate} periods/s" in last, (
+        logged, last)
