@@ -104,6 +104,57 @@ def _compiled_once(name: str, compile_it) -> None:
         compile_it()
 
 
+def _thread_scheduling(tid: int) -> tuple:
+    """(policy, real-time priority, nice, CPUs) of one thread of this process."""
+    return (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
+            os.getpriority(os.PRIO_PROCESS, tid), frozenset(os.sched_getaffinity(tid)))
+
+
+def _locked_kib() -> int:
+    """The memory this process has locked (kB; /proc/self/status VmLck)."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmLck:"):
+                return int(line.split()[1])
+    return 0
+
+
+@pytest.fixture(autouse=True)
+def scheduling_is_restored():
+    """A node's scheduling options act on the whole process that builds it (ros/scheduling.py:
+    SCHED_FIFO for every thread, CPU affinity, mlockall; ros/live_node.py: SCHED_IDLE for
+    every thread), and some tests build nodes in the worker itself
+    (tests/test_node_parameters.py's range ends: ``thread_priority`` 99, then the live
+    view's ``idle``). Left so, the worker ran the rest of the suite under SCHED_IDLE, and
+    so did every process it started after: on a fresh clone (2026-11-30) it got 13.7 s of
+    CPU in 214 s of a pure computation while the two other workers had the cores, and a
+    scene it started then waits behind every other test. Each test gets back the worker
+    thread's policy, priority, nice and CPUs on every thread of the process, and unlocked
+    memory if it started so."""
+    if not hasattr(os, "sched_getscheduler") or not os.path.isdir("/proc/self/task"):
+        yield
+        return
+    import threading
+
+    before = _thread_scheduling(threading.get_native_id())
+    locked = _locked_kib()
+    yield
+    policy, priority, nice, cpus = before
+    for tid in (int(t) for t in os.listdir("/proc/self/task")):
+        try:
+            if _thread_scheduling(tid) == before:
+                continue
+            os.sched_setscheduler(tid, policy, os.sched_param(priority))
+            os.setpriority(os.PRIO_PROCESS, tid, nice)
+            os.sched_setaffinity(tid, cpus)
+        except ProcessLookupError:
+            pass                            # a thread that ended meanwhile
+    if _locked_kib() and not locked:
+        import ctypes
+
+        ctypes.CDLL(None).munlockall()
+
+
 @pytest.fixture(autouse=True)
 def mpmath_precision_is_restored():
     """mpmath's working precision is global: the reference modules set 50 digits at

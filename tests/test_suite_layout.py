@@ -111,3 +111,38 @@ def test_the_tests_sharing_a_module_fixture_are_one_group_and_the_groups_come_fi
     assert conftest.xdist_group(request.node) == "shared:test_suite_layout"
     ranks = [conftest._rank(i) for i in request.session.items]
     assert ranks == sorted(ranks), ranks
+
+
+class TestANodeBuiltInTheWorkerLeavesItsSchedulingBehind:
+    """A node's scheduling options change the process that builds it (conftest.py,
+    ``scheduling_is_restored``): the next test runs as the worker ran before. The two
+    tests share a class fixture, so one worker runs both, in this order."""
+
+    @pytest.fixture(scope="class")
+    def worker(self):
+        """The worker's scheduling before the first test, and what the first applied."""
+        import threading
+
+        return {"before": conftest._thread_scheduling(threading.get_native_id()),
+                "locked": conftest._locked_kib(), "applied": ()}
+
+    def test_the_live_views_idle_priority_and_a_rig_nodes_options_are_applied(self, worker):
+        import os
+
+        from grazing_control.ros.live_node import lower_priority
+        from grazing_control.ros.scheduling import apply_scheduling
+
+        cpus = sorted(os.sched_getaffinity(0))
+        worker["applied"] = apply_scheduling(cpus=cpus[:1], lock_memory=True).applied
+        lower_priority("idle")
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+        assert all(os.sched_getscheduler(t) == os.SCHED_IDLE for t in tids)
+
+    def test_the_next_test_runs_as_the_worker_ran_before(self, worker):
+        import os
+
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+        now = {t: conftest._thread_scheduling(t) for t in tids}
+        assert all(s == worker["before"] for s in now.values()), (worker["before"], now)
+        if "memory locked (mlockall)" in worker["applied"] and not worker["locked"]:
+            assert conftest._locked_kib() == 0
