@@ -113,18 +113,19 @@ def test_the_tests_sharing_a_module_fixture_are_one_group_and_the_groups_come_fi
     assert ranks == sorted(ranks), ranks
 
 
+@pytest.fixture(scope="class")
+def worker():
+    """The worker's scheduling before a class's first test, and what that test applied."""
+    import threading
+
+    return {"before": conftest._thread_scheduling(threading.get_native_id()),
+            "locked": conftest._locked_kib(), "applied": ()}
+
+
 class TestANodeBuiltInTheWorkerLeavesItsSchedulingBehind:
     """A node's scheduling options change the process that builds it (conftest.py,
     ``scheduling_is_restored``): the next test runs as the worker ran before. The two
     tests share a class fixture, so one worker runs both, in this order."""
-
-    @pytest.fixture(scope="class")
-    def worker(self):
-        """The worker's scheduling before the first test, and what the first applied."""
-        import threading
-
-        return {"before": conftest._thread_scheduling(threading.get_native_id()),
-                "locked": conftest._locked_kib(), "applied": ()}
 
     def test_the_live_views_idle_priority_and_a_rig_nodes_options_are_applied(self, worker):
         import os
