@@ -110,8 +110,13 @@ def test_without_the_miss_messages_the_replay_departs_at_the_first_miss(tmp_path
 #: A realtime scene whose every answer misses its deadline, whatever the machine: a
 #: budget of 10 us (actuation delay 0.01 at time_scale 1000) against a ROS round trip of
 #: about a millisecond (the 'yes > /dev/null' scene of issue 27 §1, made deterministic).
-#: Misses by design: not under SCHED_FIFO (tests/conftest.py).
+#: Misses by design: not under SCHED_FIFO (tests/conftest.py). The plant's clock is the
+#: wall clock (``stall_pause`` 0): with the default, a simulator held past 1 ms between a
+#: sample and its deadline paused the plant, and an answer that came in the hold was in
+#: time (a fresh clone on a host at a quarter of its speed, 2026-11-30: sample 19's
+#: answer, 0.59 ms, acted; the watchdog tripped at sample 25, not 24).
 TINY_BUDGET = ["--mode", "realtime", "--sim-param", "time_scale:=1000.0",
+               "--sim-param", "stall_pause:=0.0",
                "--sim-param", "actuation_delay:=0.01",
                "--controller-param", "actuation_delay:=0.01", "--enable-after", "0",
                "--controller-param", "thread_priority:=0"]
