@@ -165,6 +165,26 @@ def scheduling_is_restored():
 
 
 @pytest.fixture(autouse=True)
+def environment_is_restored():
+    """The worker's environment as each test found it. dask's LocalCluster (tests/
+    test_atlas.py) sets PYTHONHASHSEED, MALLOC_TRIM_THRESHOLD_ and __DASK_PARENT_PID in
+    the process that makes it, and keeps them: every process the worker started after it
+    had that hash seed, and its node zygote (ros/node_zygote.py) refused every node,
+    whose environment then differed from the zygote's in variables read at import time,
+    so each was spawned again with its imports (0.4-0.55 s of CPU a node at normal
+    speed; found on a fresh clone, 2026-11-30)."""
+    own = "PYTEST_CURRENT_TEST"            # pytest's, set for each phase of the test
+    before = {k: v for k, v in os.environ.items() if k != own}
+    yield
+    if {k: v for k, v in os.environ.items() if k != own} != before:
+        current = os.environ.get(own)
+        os.environ.clear()
+        os.environ.update(before)
+        if current is not None:
+            os.environ[own] = current
+
+
+@pytest.fixture(autouse=True)
 def mpmath_precision_is_restored():
     """mpmath's working precision is global: the reference modules set 50 digits at
     import, and a test that set it to 20 without restoring it (tests/reference_hertz.py

@@ -147,3 +147,25 @@ class TestANodeBuiltInTheWorkerLeavesItsSchedulingBehind:
         assert all(s == worker["before"] for s in now.values()), (worker["before"], now)
         if "memory locked (mlockall)" in worker["applied"] and not worker["locked"]:
             assert conftest._locked_kib() == 0
+
+
+class TestATestLeavesTheEnvironmentAsItFoundIt:
+    """What a library sets in ``os.environ`` during a test (dask's LocalCluster:
+    PYTHONHASHSEED, MALLOC_TRIM_THRESHOLD_, ...) is gone for the next test (conftest.py,
+    ``environment_is_restored``), so the worker's node zygote still takes its nodes. One
+    worker runs both tests, in this order (a class fixture)."""
+
+    def test_a_test_sets_and_removes_variables(self, worker):
+        import os
+
+        worker["environment"] = {k: v for k, v in os.environ.items()
+                                 if k != "PYTEST_CURRENT_TEST"}
+        os.environ["PYTHONHASHSEED"] = "6640"
+        os.environ["__DASK_PARENT_PID"] = str(os.getpid())
+        os.environ.pop("HOME", None)
+
+    def test_the_next_test_has_the_environment_of_the_one_before(self, worker):
+        import os
+
+        assert {k: v for k, v in os.environ.items()
+                if k != "PYTEST_CURRENT_TEST"} == worker["environment"]
