@@ -11,6 +11,15 @@ import time
 import numpy as np
 
 
+def _blocked_signals() -> int:
+    """This thread's blocked signals, the mask of /proc/self/status (SigBlk)."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("SigBlk:"):
+                return int(line.split()[1], 16)
+    return -1
+
+
 def main():
     pdeathsig = ctypes.c_int(0)
     ctypes.CDLL(None).prctl(2, ctypes.byref(pdeathsig), 0, 0, 0)   # PR_GET_PDEATHSIG
@@ -25,6 +34,7 @@ def main():
         "sigint_default": signal.getsignal(signal.SIGINT) is signal.default_int_handler,
         "stdin": os.readlink("/proc/self/fd/0"),
         "threads": len(os.listdir("/proc/self/task")),
+        "blocked": _blocked_signals(),
         "rclpy_before": "rclpy" in sys.modules,
         "draw": float(np.random.random())}), flush=True)
     print("to stderr", file=sys.stderr, flush=True)

@@ -31,6 +31,13 @@ def zygote():
     z.close()
 
 
+def _threads_of_a_process_that_imports_rclpy() -> int:
+    out = subprocess.run([sys.executable, "-c", "import os, rclpy; "
+                          "print(len(os.listdir('/proc/self/task')))"],
+                         env=_env(), capture_output=True, text=True, check=True).stdout
+    return int(out)
+
+
 def _read_json(path: Path, timeout: float = 30.0) -> dict:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -68,8 +75,11 @@ def test_a_forked_node_is_its_owners_child_as_a_spawned_one(zygote, tmp_path):
     assert seen["pdeathsig"] == signal.SIGTERM
     assert not seen["sigint_default"]                  # BOOTSTRAP's quiet Ctrl-C
     assert seen["stdin"] == os.devnull
-    assert seen["threads"] == 1
-    assert not seen["rclpy_before"]                    # the node imports rclpy itself
+    assert seen["rclpy_before"]                        # imported once, in the zygote
+    # the tracer's listener threads, which rclpy's C library starts, started again in the
+    # node (node_zygote.TracerForkHooks), as a spawned process that imports rclpy has them
+    assert seen["threads"] == _threads_of_a_process_that_imports_rclpy()
+    assert seen["blocked"] == 0                        # the fork protocol's mask undone
     assert node.poll() is None
     node.terminate()
     assert node.wait(10) == 0

@@ -5,9 +5,11 @@ compiled kernels' cache, rclpy and the package, 0.4-0.55 s of CPU a node (measur
 this 2-core machine, ``python -c "import grazing_control.ros.controller_node"``: 0.54
 CPU-s; sim_node 0.55, recorder_node 0.38). The test suite starts about six hundred
 nodes, and on two cores its time is CPU time (issue 30). A zygote is a process that
-imports the node modules once, loads the compiled kernels, and then forks one child per
-node: the child runs the node's module as ``python -m`` does, over the imports it
-shares with the zygote copy-on-write.
+imports what the node modules import (rclpy and the message types' C type supports
+included), loads the compiled kernels, and then forks one child per node: the child runs
+the node's module as ``python -m`` does, over the imports it shares with the zygote
+copy-on-write. The threads that rclpy's C library starts (the LTTng tracer's listeners)
+are forked around with the tracer's own fork protocol (:class:`TracerForkHooks`).
 
 What the child is, as seen from its owner (the process that asked: the launcher of
 ``grazing run``, a test): the same as the process :func:`launcher.start_node` spawns.
@@ -328,20 +330,26 @@ def _set_command_line(command) -> None:
     ctypes.memmove(start, text + b"\0" * (end - start - len(text)), end - start)
 
 
-def _serve(sock: socket.socket, owner: int):
+def _serve(sock: socket.socket, owner: int, hooks):
     """Answer requests until the owner closes the socket; return (in the forked node
-    only) the request to run."""
+    only) the request to run. Both forks happen inside the tracer's fork protocol
+    (``hooks``, :class:`TracerForkHooks`): its locks are taken in the zygote before the
+    first, the middle process forks the node still holding them and exits, and the node
+    gives them back and starts its tracer threads as a spawned process has them."""
     while True:
         message, fds = _receive(sock, max_fds=3)
         if message is None:
             return None
+        hooks.before()
         middle = os.fork()
         if middle == 0:
             middle = os.getpid()              # read here: in the node it may be gone
             node = os.fork()
             if node == 0:
+                hooks.after_child()
                 return {**message, "middle": middle}, fds, sock, owner
             os._exit(0)
+        hooks.after_parent()
         for fd in fds:
             os.close(fd)
         os.waitpid(middle, 0)
@@ -394,21 +402,67 @@ def _run(message) -> None:
     runpy.run_module(module, run_name="__main__", alter_sys=True)
 
 
-#: Packages the zygote never imports: loading rclpy's C library starts two threads
-#: (measured: /proc/self/task goes from 1 to 3 at ``rclpy.impl.implementation_singleton``),
-#: and a fork copies only the calling thread. Each node imports rclpy itself (0.2 s CPU).
-NOT_IMPORTED = ("rclpy",)
+class TracerForkHooks:
+    """The LTTng-UST tracer's own fork protocol, for a zygote that has imported rclpy.
 
+    Loading rclpy's C library loads ``liblttng-ust`` (ros2_tracing's tracepoints, linked
+    into rcl and rclcpp), whose constructor starts two listener threads (/proc/self/task
+    goes from 1 to 3 at ``rclpy.impl.implementation_singleton``; gdb shows both in
+    ``ust_listener_thread``). A fork copies only the calling thread, so a lock one of
+    them held at that moment would stay held in the child. The tracer exports what its
+    ``liblttng-ust-fork`` wrapper calls around ``fork()`` for this: ``before`` blocks the
+    signals and takes the tracer's locks, ``after_parent`` gives them back, and
+    ``after_child`` gives them back in the child and starts its listener threads again,
+    so that the child is traced (or not) as a spawned process is (lttng-ust 2.12:
+    ``ust_before_fork``, ``ust_after_fork_parent``, ``ust_after_fork_child``; 2.13 and
+    later: the same with an ``lttng_`` prefix). :meth:`find` returns None where no tracer
+    is mapped (then no thread but the zygote's own may exist)."""
 
-class _NotHere:
-    """A meta path finder that refuses :data:`NOT_IMPORTED` (and with them every module
-    that imports them at its top level)."""
+    _NAMES = (("ust_before_fork", "ust_after_fork_parent", "ust_after_fork_child"),
+              ("lttng_ust_before_fork", "lttng_ust_after_fork_parent",
+               "lttng_ust_after_fork_child"))
 
-    @staticmethod
-    def find_spec(name, path=None, target=None):
-        if name.split(".")[0] in NOT_IMPORTED:
-            raise ImportError(f"{name} is not imported in the node zygote")
+    def __init__(self, before, after_parent, after_child):
+        self._before, self._after_parent, self._after_child = before, after_parent, after_child
+        self._saved = ctypes.create_string_buffer(128)     # a sigset_t (glibc: 128 bytes)
+
+    @classmethod
+    def find(cls):
+        """The hooks of the LTTng-UST library mapped in this process (a system copy, or a
+        wheel's, renamed ``liblttng-ust-<hash>.so``), or None if none is mapped."""
+        try:
+            with open("/proc/self/maps") as maps:
+                paths = sorted({line.split()[-1] for line in maps
+                                if os.path.basename(line.split()[-1]).startswith("liblttng-ust")})
+        except OSError:
+            return None
+        for path in paths:
+            try:
+                lib = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+            except OSError:
+                continue
+            for names in cls._NAMES:
+                if all(hasattr(lib, n) for n in names):
+                    return cls(*(getattr(lib, n) for n in names))
         return None
+
+    def before(self) -> None:
+        self._before(self._saved)
+
+    def after_parent(self) -> None:
+        self._after_parent(self._saved)
+
+    def after_child(self) -> None:
+        self._after_child(self._saved)
+
+
+class _NoHooks:
+    """No tracer: a fork needs nothing around it."""
+
+    def before(self) -> None:
+        pass
+
+    after_parent = after_child = before
 
 
 def dependencies(modules) -> list:
@@ -477,24 +531,53 @@ def _top_level(body):
                                   + [s for h in node.handlers for s in h.body])
 
 
-def _prepare(modules) -> None:
-    """Import what the node modules import, but rclpy and what needs it, and load the
-    compiled kernels; the node modules themselves are left to run as ``__main__``."""
-    guard = _NotHere()
-    sys.meta_path.insert(0, guard)
-    try:
-        for name in dependencies(modules):
-            if name in modules:
-                continue
+def _threads() -> int:
+    return len(os.listdir("/proc/self/task"))
+
+
+def _load_type_supports() -> None:
+    """Load the C type support of every message and service class imported so far (what
+    rclpy does on a type's first publisher, subscription or service: a C extension per
+    package, and the libraries it links), so that each node does not load it again."""
+    for name, module in list(sys.modules.items()):
+        parts = name.split(".")
+        if module is None or len(parts) != 3 or parts[1] not in ("msg", "srv", "action"):
+            continue
+        for value in list(vars(module).values()):
+            meta = type(value)
+            if (isinstance(value, type) and getattr(meta, "_TYPE_SUPPORT", 0) is None
+                    and hasattr(meta, "__import_type_support__")):
+                meta.__import_type_support__()
+
+
+def _prepare(modules):
+    """Import what the node modules import, rclpy included, load their message types'
+    C type supports and the compiled kernels; the node modules themselves are left to run
+    as ``__main__``. Returns the fork hooks (:class:`TracerForkHooks`, or nothing to do);
+    ValueError if a thread exists that a fork would lose and nothing accounts for."""
+    if _threads() != 1:
+        raise ValueError(f"{_threads()} threads before the imports")
+    # rclpy's C library first: the threads it starts are the tracer's, forked around
+    importlib.import_module("rclpy.impl.implementation_singleton")
+
+    traced = _threads()
+    hooks = TracerForkHooks.find()
+    if traced > 1 and (hooks is None or traced > 3):
+        raise ValueError(f"{traced} threads after loading rclpy's C library, "
+                         f"{'no tracer mapped' if hooks is None else 'the tracer starts 2'}")
+    for name in dependencies(modules):
+        if name not in modules:
             try:
                 importlib.import_module(name)
             except ImportError:
-                pass                           # needs rclpy: the node imports it
-    finally:
-        sys.meta_path.remove(guard)
+                pass           # the node imports it and says what is missing, as spawned
+    _load_type_supports()
     from grazing_control.dynamics.estimation.stream import warm_up_all
 
     warm_up_all()          # the kernel and the model filters, as nodes load them at start
+    if _threads() != traced:
+        raise ValueError(f"{_threads()} threads after the imports, {traced} before them")
+    return hooks if hooks is not None else _NoHooks()
 
 
 def main(argv) -> None:
@@ -506,19 +589,15 @@ def main(argv) -> None:
     if os.getppid() != owner:
         os._exit(143)
     try:
-        _prepare(modules)
+        hooks = _prepare(modules)
     except Exception as exc:              # noqa: BLE001 - the owner spawns as before
         _send(sock, {"ready": False, "error": f"{type(exc).__name__}: {exc}"})
-        return
-    threads = len(os.listdir("/proc/self/task"))
-    if threads != 1:
-        _send(sock, {"ready": False, "error": f"{threads} threads after the imports"})
         return
     # the imports' objects to the collector's permanent generation: a node's collections
     # would otherwise walk them all and write every page they are on (copy on write)
     gc.freeze()
     _send(sock, {"ready": True})
-    request = _serve(sock, owner)
+    request = _serve(sock, owner, hooks)
     if request is None:
         return
     _become_node(*request)
