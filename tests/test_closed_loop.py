@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -287,7 +288,12 @@ def test_lockstep_reproduces_simulate(tmp_path, domain, collector, delta_d):
 def test_realtime_keeps_pace_and_measures_latency(tmp_path, domain, collector):
     """time_scale 200: a Pi2 sample every T/200 = 47 ms of wall time; corrections on arrival.
     Its pace is read on the test process's wall clock: marked realtime (a fresh clone's
-    rerun measured 193.6 against 200 +- 3 %, a CPU-bound test on the other worker)."""
+    rerun measured 193.6 against 200 +- 3 %, a CPU-bound test on the other worker). The
+    plant's clock pauses for the simulator's own stalls (``stall_pause``, plant/realtime.py
+    ``Realtime.resume``), and those pauses are the only time it may lose against the wall
+    clock: the pace is within 3 % of the scale once the pauses the simulator reports are
+    taken out, and never above it (2026-11-30, outside the suite's FIFO group on a slow
+    host: 38 pauses, 71 ms in 1.9 s, slope 191.2; 198.8 without them)."""
     scale, n = 200.0, 40
     res = launcher.run(STUDY, CONTROLLER, None, n, domain_id=domain, timeout=60,
                        sim_overrides={"mode": "realtime", "time_scale": scale,
@@ -300,7 +306,10 @@ def test_realtime_keeps_pace_and_measures_latency(tmp_path, domain, collector):
     wall = np.array([w for w, _ in timed])
     sim = stamps([m for _, m in timed])
     slope = np.polyfit(wall, sim, 1)[0]
-    assert slope == pytest.approx(scale, rel=0.03), slope      # keeps pace within 3 %
+    paused = re.search(r"paused_ms=([0-9.]+)", log)
+    paused_s = float(paused.group(1)) * 1e-3 if paused else 0.0
+    unpaused = slope * (wall[-1] - wall[0]) / (wall[-1] - wall[0] - paused_s)
+    assert slope <= scale * 1.03 and unpaused >= scale * 0.97, (slope, unpaused, paused_s)
     # every sample answered and applied on arrival; the latency is published per sample
     assert collector.wait_for(lambda: len(collector.get("oscillator/latency")) == n, 5.0), log
     lat = np.array([m.data for m in collector.get("oscillator/latency")])
