@@ -83,11 +83,41 @@ def read(folder: str) -> dict:
     return runs
 
 
+def by_module(runs: dict) -> tuple:
+    """({module: in-process CPU s}, {module: reaped children's CPU s})."""
+    own, kids = collections.Counter(), collections.Counter()
+    for rows in runs.values():
+        for r in rows:
+            module = r[5].split("::")[0]
+            own[module] += r[2]
+            kids[module] += r[3]
+    return own, kids
+
+
+def compare(runs: dict, baseline: dict) -> None:
+    """Print the host factor (the CPU of the modules that start no process, this run over
+    the baseline) and the children's and the total CPU with it divided out."""
+    own, kids = by_module(runs)
+    own0, kids0 = by_module(baseline)
+    pure = [m for m in own0 if m in own and kids0[m] == 0.0 and kids[m] == 0.0]
+    factor = sum(own[m] for m in pure) / sum(own0[m] for m in pure)
+    print(f"\nagainst the baseline: the {len(pure)} modules that start no process took "
+          f"{sum(own0[m] for m in pure):.0f} -> {sum(own[m] for m in pure):.0f} CPU-s "
+          f"(host factor {factor:.3f})")
+    for name, now, before in (("reaped children", sum(kids.values()), sum(kids0.values())),
+                              ("in-process + children", sum(own.values()) + sum(kids.values()),
+                               sum(own0.values()) + sum(kids0.values()))):
+        print(f"  {name}: {before:.0f} -> {now:.0f} CPU-s; with the host factor divided out "
+              f"{now / factor:.0f} ({now / factor / before - 1:+.1%})")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folder")
     ap.add_argument("--top", type=int, default=30, help="modules to list (default 30)")
     ap.add_argument("--bin", type=float, default=120.0, help="bin width, s (default 120)")
+    ap.add_argument("--against", metavar="FOLDER",
+                    help="a baseline run: the host factor and the CPU with it divided out")
     args = ap.parse_args(argv)
     runs = read(args.folder)
     if not runs:
@@ -114,6 +144,11 @@ def main(argv=None) -> int:
         print(f"  {worker}: " + " ".join(f"{k * args.bin:g}:{bins[k]:.0f}"
                                          for k in range(max(bins) + 1))
               + f"   scheduling after tests: {changed}")
+    if args.against:
+        baseline = read(args.against)
+        if not baseline:
+            ap.error(f"no *.tsv in {args.against}")
+        compare(runs, baseline)
     return 0
 
 
