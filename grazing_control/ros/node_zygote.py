@@ -341,10 +341,17 @@ def _serve(sock: socket.socket, owner: int, hooks):
         if message is None:
             return None
         hooks.before()
-        middle = os.fork()
+        try:
+            middle = os.fork()
+        except BaseException:
+            hooks.after_parent()              # the signals and the tracer's locks back
+            raise
         if middle == 0:
             middle = os.getpid()              # read here: in the node it may be gone
-            node = os.fork()
+            try:
+                node = os.fork()
+            except BaseException:             # noqa: BLE001 - no node: the owner times out
+                os._exit(1)
             if node == 0:
                 hooks.after_child()
                 return {**message, "middle": middle}, fds, sock, owner
