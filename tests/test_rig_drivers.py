@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -154,9 +153,8 @@ def template_scene():
         # the peer's executor takes what the driver sent after the driver has gone: wait
         # for the count the driver's summary gives (a fresh clone on a slow host had
         # taken 390 of 2548 sensor samples when the test read them; its rerun passed)
-        sent = re.search(r"sensor_msgs=(\d+)", out)
-        peer.wait_for(lambda: len(peer.get("rig/sensor")) >= (int(sent.group(1)) if sent
-                                                              else 0), timeout=30.0)
+        sent = int(summary(out).get("sensor_msgs", 0)) if "summary:" in out else 0
+        peer.wait_for(lambda: len(peer.get("rig/sensor")) >= sent, timeout=30.0)
         yield peer, good, out
     finally:
         if proc.poll() is None:
