@@ -198,10 +198,14 @@ def record(p, gains, rate, kw, periods, enable_after, seed=7):
     """The stream's samples [(t, x~, v~)] of the closed loop in the core."""
     samples = []
 
-    class Recording(StreamEstimator):
+    class Recording(StreamEstimator):     # the samples of both paths, in order
         def add_sample(self, t, x, v=math.nan):
             samples.append((t, x, v))
             return super().add_sample(t, x, v)
+
+        def add_plain(self, t, x, v):
+            samples.extend(zip(t, x, v))
+            super().add_plain(t, x, v)
 
     est = Recording(p, **kw)
     simulate_stream(p, gains, SensorModel(noise=kw["sigma"], velocity=False, seed=seed).measure,

@@ -119,10 +119,14 @@ def test_replayed_stream_same_answers(scene):
         kw = dict(sigma=1e-4, sample_period=p.period / rate, pulse_width=0.1)
     samples = []
 
-    class Recording(StreamEstimator):
+    class Recording(StreamEstimator):     # the samples of both paths, in order
         def add_sample(self, t, x, v=math.nan):
             samples.append((t, x, v))
             return super().add_sample(t, x, v)
+
+        def add_plain(self, t, x, v):
+            samples.extend(zip(t, x, v))
+            super().add_plain(t, x, v)
 
     simulate_stream(p, g, SensorModel(noise=kw["sigma"], velocity=False, seed=5).measure,
                     120, rate, sigma=kw["sigma"], control_after=40,

@@ -27,7 +27,7 @@ fails too the estimate is the filter's state carried one period through the mode
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
 
@@ -656,13 +656,17 @@ def simulate_stream(p: OscillatorParams, gains: Gains, measure, periods: int, ra
         v = -p.amplitude * p.omega * np.sin(psi) + dev[:, 1]
         xm, vm = measure(int(j0), x, v)
         pending = []
-        imp_times = [k * T + i[0] for i in imps]
-        for j, t in enumerate(js * h):
-            while imp_times and imp_times[0] <= t:
-                est.add_impact(imp_times.pop(0))
-            pending += est.add_sample(float(t), float(xm[j]), float(vm[j]))
-        for ti in imp_times:
+        # the period's samples in order, each impact before the first sample at or after
+        # it; each run between two impacts as a sensor's block (add_samples: the samples
+        # that only append kept in one step, bit for bit add_sample on each)
+        t, xm, vm = (js * h).tolist(), xm.tolist(), vm.tolist()
+        start = 0
+        for ti in sorted(k * T + i[0] for i in imps):
+            end = bisect_left(t, ti, start)
+            pending += est.add_samples(t[start:end], xm[start:end], vm[start:end])
             est.add_impact(ti)
+            start = end
+        pending += est.add_samples(t[start:], xm[start:], vm[start:])
     return StreamRun(truth, zhat, cov, corr, counts, est.resets)
 
 
