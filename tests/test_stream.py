@@ -491,3 +491,51 @@ def test_a_block_taken_in_one_step_is_the_block_taken_sample_by_sample():
                 np.testing.assert_array_equal(a.cov, b.cov)
             assert _state(many) == _state(one) or repr(_state(many)) == repr(_state(one))
     assert taken_at_once > 10_000           # the one-step path was taken, and often
+
+
+@pytest.mark.parametrize("estimator, impact_source, rate", [("model", "stream", 100),
+                                                            ("arc", "topic", 50)])
+def test_simulate_stream_in_blocks_is_the_run_sample_by_sample(estimator, impact_source,
+                                                                rate):
+    """simulate_stream hands each run of samples between two impacts over as a block
+    (``add_samples``, most of it kept in one step); an estimator that takes every sample
+    one at a time (``add_sample``) runs the same closed loop bit for bit: truth,
+    estimates, covariances, corrections and impacts (160 periods, control from section
+    40, impacts in most periods). Each impact reaches the estimator after the samples
+    before it and before those at or after it."""
+    class Blocks(StreamEstimator):
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.order, self.kept_at_once = [], 0
+
+        def add_impact(self, t):
+            self.order.append((t, 0))
+            super().add_impact(t)
+
+        def add_sample(self, t, x, v=math.nan):
+            self.order.append((t, 1))
+            return super().add_sample(t, x, v)
+
+        def add_plain(self, t, x, v):
+            self.order.extend((ti, 1) for ti in t)
+            self.kept_at_once += len(t)
+            super().add_plain(t, x, v)
+
+    class OneByOne(StreamEstimator):
+        def add_samples(self, t, x, v):
+            return [d for s in zip(t, x, v) for d in self.add_sample(*s)]
+
+    g = _gains(P, -0.3)
+    estimators = [cls(P, estimator, 1e-4, impact_source, P.period / rate)
+                  for cls in (Blocks, OneByOne)]
+    runs = [simulate_stream(P, g, SensorModel(noise=1e-4, velocity=False, seed=4).measure,
+                            160, rate, control_after=40, deviation=(1e-3, -1e-3),
+                            stream_estimator=est) for est in estimators]
+    for field in ("truth", "estimate", "cov", "corrections", "impacts_per_period"):
+        np.testing.assert_array_equal(getattr(runs[0], field), getattr(runs[1], field))
+    assert runs[0].resets == runs[1].resets
+    blocks = estimators[0]
+    assert blocks.order == sorted(blocks.order)
+    impacts = sum(1 for _, kind in blocks.order if kind == 0)
+    assert impacts == runs[0].impacts_per_period.sum() > 100
+    assert blocks.kept_at_once > 0.8 * 160 * rate
