@@ -2,6 +2,7 @@
 process can see of how it was started, then waits for a signal (SIGTERM: exit 0)."""
 
 import ctypes
+import inspect
 import json
 import os
 import signal
@@ -36,6 +37,10 @@ def main():
         "threads": len(os.listdir("/proc/self/task")),
         "blocked": _blocked_signals(),
         "rclpy_before": "rclpy" in sys.modules,
+        "modules": len(sys.modules),
+        "unmapped": sorted(n for n, m in list(sys.modules.items())   # not in inspect's map
+                           if getattr(m, "__file__", None)
+                           and inspect._filesbymodname.get(n) != m.__file__),
         "draw": float(np.random.random())}), flush=True)
     print("to stderr", file=sys.stderr, flush=True)
     signal.signal(signal.SIGTERM, lambda s, f: sys.exit(0))

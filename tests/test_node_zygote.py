@@ -76,6 +76,9 @@ def test_a_forked_node_is_its_owners_child_as_a_spawned_one(zygote, tmp_path):
     assert not seen["sigint_default"]                  # BOOTSTRAP's quiet Ctrl-C
     assert seen["stdin"] == os.devnull
     assert seen["rclpy_before"]                        # imported once, in the zygote
+    # inspect's map of module files, which rclpy's logger reads at each log call, filled in
+    # the zygote: only what the node imported itself is left to its first log line
+    assert seen["modules"] > 500 and seen["unmapped"] == ["__main__"], seen["unmapped"]
     # the tracer's listener threads, which rclpy's C library starts, started again in the
     # node (node_zygote.TracerForkHooks), as a spawned process that imports rclpy has them
     assert seen["threads"] == _threads_of_a_process_that_imports_rclpy()
