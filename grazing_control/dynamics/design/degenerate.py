@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from grazing_control.oscillator.control import Gains, gain_matrix
+from grazing_control.oscillator.control import Gains, gain_matrix, kick_direction
 from grazing_control.oscillator.flow import matmul2, transition_matrix
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
@@ -48,7 +48,7 @@ class _Degenerate:
     form them, so the floats are theirs. The constructor raises degenerate_c1's
     ParameterError where no degenerate design exists."""
 
-    __slots__ = ("p", "delay", "phi_s", "phi_rest", "_n12_free", "_h12")
+    __slots__ = ("p", "delay", "phi_s", "phi_rest", "_n12_free", "_h12", "_kick", "decay")
 
     def __init__(self, p: OscillatorParams, delay: float = 0.0):
         s = p.pi2_offset / p.omega
@@ -58,6 +58,8 @@ class _Degenerate:
             raise ParameterError(f"pi2_offset={p.pi2_offset!r} is invalid: Phi12(s) = 0 there, a kick "
                                  f"on Pi2 cannot reach the grazing phase's position (no c1 exists)")
         self.phi_rest = transition_matrix(p.zeta, p.period - s)
+        self.decay = math.exp(-2.0 * p.zeta * p.period)     # det Phi(T)
+        self._kick = kick_direction(p.zeta, delay)           # b_delta, (D1)
         if delay == 0.0:
             if self.phi_rest[1] == 0.0:
                 raise ParameterError(f"pi2_offset={p.pi2_offset!r} is invalid: Phi12(T - s) = 0 there, "
@@ -82,6 +84,24 @@ class _Degenerate:
             raise ParameterError(f"delay={self.delay!r} is invalid: Phi12(T - s - delay) = {h12!r}, no gain c1 "
                                  f"makes N_g,12 = 0 there (delay = T - s - n pi / omega_d)")
         return c1
+
+    def at(self, c2: float):
+        """(c1, N_g, det G_delta) at c2: :meth:`c1`, :meth:`period_matrix` and
+        ``gain_determinant`` of ``Gains(c1, c2, delay)``, the same floats, without forming
+        the gains each time (the design's conditions are evaluated at hundreds of c2:
+        :func:`~grazing_control.dynamics.design.gains.admissible_c2`). Gains' ParameterError
+        for a c1 or c2 that is not a finite real."""
+        c2 = float(c2)
+        c1 = self.c1(c2)
+        if not (math.isfinite(c1) and math.isfinite(c2)):
+            Gains(c1, c2, self.delay)                        # raises, naming the gain
+        if self.delay == 0.0:        # gain_matrix's and gain_determinant's two forms
+            g, det_g = (1.0, 0.0, c1, 1.0 + c2), 1.0 + c2
+        else:
+            b1, b2 = self._kick
+            g = (1.0 + b1 * c1, b1 * c2, b2 * c1, 1.0 + b2 * c2)
+            det_g = 1.0 + c1 * b1 + c2 * b2
+        return c1, matmul2(self.phi_rest, matmul2(g, self.phi_s)), det_g
 
     def period_matrix(self, gains: Gains):
         """N_g = Phi(T - s) G_delta Phi(s) for gains with this delay: period_matrix(p,

@@ -251,11 +251,10 @@ def condition_values(p: OscillatorParams, c2: float, delay: float = 0.0) -> Cond
 
 def _values(p, c2, delay, family):
     q, beta, design = family
-    g = Gains(design.c1(c2), c2, delay)
-    n11, n12, n21, n22 = design.period_matrix(g)
+    _c1, (n11, n12, n21, n22), det_g = design.at(c2)
     r = p.r
     n22c = q + 1.0
-    det_n = math.exp(-2.0 * p.zeta * p.period) * gain_determinant(g, p.zeta)
+    det_n = design.decay * det_g
     tr_n = n11 + n22
     det0 = r * r * det_n
     big_p = -r * (n11 + n22c) * q + (1.0 + r) * (n11 - n22c) * beta
