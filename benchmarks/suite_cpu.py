@@ -94,16 +94,23 @@ def by_module(runs: dict) -> tuple:
     return own, kids
 
 
-def compare(runs: dict, baseline: dict) -> None:
+def compare(runs: dict, baseline: dict, changed=()) -> None:
     """Print the host factor (the CPU of the modules that start no process, this run over
-    the baseline) and the children's and the total CPU with it divided out."""
+    the baseline; those in ``changed``, whose CPU the change between the two runs moved,
+    left out) and the children's and the total CPU with it divided out. ValueError when
+    no module is left for the factor."""
     own, kids = by_module(runs)
     own0, kids0 = by_module(baseline)
-    pure = [m for m in own0 if m in own and kids0[m] == 0.0 and kids[m] == 0.0]
+    pure = [m for m in own0 if m in own and kids0[m] == 0.0 and kids[m] == 0.0
+            and m not in changed]
+    if not pure or sum(own0[m] for m in pure) == 0.0:
+        raise ValueError("--changed leaves no module that starts no process in both runs "
+                         "for the host factor")
     factor = sum(own[m] for m in pure) / sum(own0[m] for m in pure)
-    print(f"\nagainst the baseline: the {len(pure)} modules that start no process took "
-          f"{sum(own0[m] for m in pure):.0f} -> {sum(own[m] for m in pure):.0f} CPU-s "
-          f"(host factor {factor:.3f})")
+    left_out = f", {len(set(changed))} changed ones left out" if changed else ""
+    print(f"\nagainst the baseline: the {len(pure)} modules that start no process"
+          f"{left_out} took {sum(own0[m] for m in pure):.0f} -> "
+          f"{sum(own[m] for m in pure):.0f} CPU-s (host factor {factor:.3f})")
     for name, now, before in (("reaped children", sum(kids.values()), sum(kids0.values())),
                               ("in-process + children", sum(own.values()) + sum(kids.values()),
                                sum(own0.values()) + sum(kids0.values()))):
@@ -118,6 +125,9 @@ def main(argv=None) -> int:
     ap.add_argument("--bin", type=float, default=120.0, help="bin width, s (default 120)")
     ap.add_argument("--against", metavar="FOLDER",
                     help="a baseline run: the host factor and the CPU with it divided out")
+    ap.add_argument("--changed", nargs="*", default=[], metavar="MODULE",
+                    help="test modules (tests/test_x.py) whose CPU the change between the "
+                         "runs moved: left out of the host factor")
     args = ap.parse_args(argv)
     runs = read(args.folder)
     if not runs:
@@ -148,7 +158,10 @@ def main(argv=None) -> int:
         baseline = read(args.against)
         if not baseline:
             ap.error(f"no *.tsv in {args.against}")
-        compare(runs, baseline)
+        try:
+            compare(runs, baseline, args.changed)
+        except ValueError as exc:
+            ap.error(str(exc))
     return 0
 
 

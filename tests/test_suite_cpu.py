@@ -44,6 +44,29 @@ def test_the_host_factor_comes_from_the_tests_without_processes(suite_cpu, tmp_p
         in out
 
 
+def test_modules_the_change_moved_are_left_out_of_the_host_factor(suite_cpu, tmp_path,
+                                                                  capsys):
+    """A change that halved test_b's CPU on a host 1.5 times slower: left in, test_b makes
+    the factor 0.94 (a faster host, read wrongly); left out, test_a alone gives 1.5."""
+    before = _record(tmp_path / "before", [(10.0, 0.0, "tests/test_a.py::x"),
+                                           (30.0, 0.0, "tests/test_b.py::y"),
+                                           (2.0, 50.0, "tests/test_scene.py::z")])
+    after = _record(tmp_path / "after", [(15.0, 0.0, "tests/test_a.py::x"),
+                                         (22.5, 0.0, "tests/test_b.py::y"),
+                                         (3.0, 60.0, "tests/test_scene.py::z")])
+    assert suite_cpu.main([str(after), "--against", str(before)]) == 0
+    assert "(host factor 0.938)" in capsys.readouterr().out
+    assert suite_cpu.main([str(after), "--against", str(before),
+                           "--changed", "tests/test_b.py"]) == 0
+    out = capsys.readouterr().out
+    assert ("the 1 modules that start no process, 1 changed ones left out took 10 -> 15 "
+            "CPU-s (host factor 1.500)") in out
+    with pytest.raises(SystemExit):
+        suite_cpu.main([str(after), "--against", str(before),
+                        "--changed", "tests/test_a.py", "tests/test_b.py"])
+    assert "--changed leaves no module" in capsys.readouterr().err
+
+
 def test_an_empty_folder_is_refused_by_name(suite_cpu, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     run = _record(tmp_path / "run", [(1.0, 0.0, "tests/test_a.py::x")])
