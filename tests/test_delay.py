@@ -144,6 +144,23 @@ def test_with_an_impact_inside_the_delay_the_kick_on_pi2_no_longer_holds():
     assert abs(other.dx - seg.dx) + abs(other.dv - seg.dv) > 1e-3
 
 
+@pytest.mark.parametrize("delay", [-1.0, -1e308, 1e308, math.nan, math.inf, -math.inf,
+                                   "T - s", 100.0])
+def test_every_design_entry_refuses_a_delay_out_of_range_by_name(delay):
+    """The design's entry points (c1, the condition values, their breakpoints, the
+    admissible sets) refuse a delay outside 0 <= delay < T - s with ParameterError
+    naming it, huge and infinite ones included (they overflowed a transition matrix)."""
+    from grazing_control.dynamics.design.gains import breakpoints, condition_values
+
+    delay = max_design_delay(P) if delay == "T - s" else delay
+    for entry in (lambda: degenerate_c1(P, -1.0, delay),
+                  lambda: condition_values(P, -1.0, delay),
+                  lambda: breakpoints(P, delay),
+                  lambda: admissible_c2(P, n=5, delay=delay)):
+        with pytest.raises(ParameterError, match=r"delay=.* is invalid: valid range is 0 <= delay"):
+            entry()
+
+
 def test_the_delay_must_end_before_the_next_sample_and_be_valid():
     with pytest.raises(ValueError, match="delay"):
         period_step(P, 0.0, 0.0, 0.1, delay=P.period)

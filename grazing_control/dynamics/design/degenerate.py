@@ -59,7 +59,7 @@ class _Degenerate:
                                  f"on Pi2 cannot reach the grazing phase's position (no c1 exists)")
         self.phi_rest = transition_matrix(p.zeta, p.period - s)
         self.decay = math.exp(-2.0 * p.zeta * p.period)     # det Phi(T)
-        self._kick = kick_direction(p.zeta, delay)           # b_delta, (D1)
+        self._kick = (0.0, 1.0)                              # b_delta, (D1)
         if delay == 0.0:
             if self.phi_rest[1] == 0.0:
                 raise ParameterError(f"pi2_offset={p.pi2_offset!r} is invalid: Phi12(T - s) = 0 there, "
@@ -71,6 +71,7 @@ class _Degenerate:
                                  f"(the kick must act before the grazing phase)")
         self._n12_free = transition_matrix(p.zeta, p.period)[1]
         self._h12 = transition_matrix(p.zeta, top - delay)[1]
+        self._kick = kick_direction(p.zeta, delay)
 
     def c1(self, c2: float) -> float:
         """:func:`degenerate_c1` at c2."""

@@ -229,14 +229,14 @@ def _n22_family(p, delay):
     set to exactly 0 when it is 0 within the rounding of N22 (the degenerate family:
     lambda0 unbounded, or gamma1 undefined, for every c2); with the design's c2-free
     matrices (:class:`_Degenerate`): what :func:`_values` takes."""
+    design = _Degenerate(p, delay)    # first: its ParameterError names a delay out of range
     free = transition_matrix(p.zeta, p.period)
     h = transition_matrix(p.zeta, max_design_delay(p) - delay)
     n22 = free[3] - h[3] * free[1] / h[1]
     err = 8.0 * np.finfo(float).eps * (abs(free[3]) + abs(h[3] * free[1] / h[1]) + 1.0)
     q = n22 - 1.0
     beta = 1.0 + p.r * n22
-    return (0.0 if abs(q) <= err else q), (0.0 if abs(beta) <= p.r * err else beta), \
-        _Degenerate(p, delay)
+    return (0.0 if abs(q) <= err else q), (0.0 if abs(beta) <= p.r * err else beta), design
 
 
 def condition_values(p: OscillatorParams, c2: float, delay: float = 0.0) -> ConditionValues:
