@@ -26,6 +26,7 @@ import bisect
 
 import numpy as np
 from scipy.integrate import ode
+from scipy.optimize import brentq
 
 EPS = np.finfo(float).eps
 #: steps one call may take (the references' longest: a period at max_step 0.005)
@@ -100,30 +101,25 @@ def solve(rhs, t0, y0, t1, events, rtol, atol, max_step, first_step):
     r.integrate(t1)
     if not r.successful():
         raise RuntimeError(f"DOP853 failed at t = {r.t}: status {r.get_return_code()}")
-    steps = Solution(rhs, rtol, atol, max_step, ts, ys, [[] for _ in events], 0)
+    sol = Solution(rhs, rtol, atol, max_step, ts, ys, [], 0)
     t_events = [[] for _ in events]
-    end = None
     for i, active in brackets:
-        t_a, t_b = ts[i], ts[i + 1]
-        roots = np.array([_root(events[k], steps, t_a, t_b) for k in active])
-        if terminal[active].any():
+        roots = np.array([_root(events[k], sol, ts[i], ts[i + 1]) for k in active])
+        if terminal[active].any():     # the last bracket: the integration stopped in it
             order = np.argsort(roots)
             active, roots = active[order], roots[order]
             first = np.flatnonzero(terminal[active])[0]
             active, roots = active[:first + 1], roots[:first + 1]
-            end = (i, roots[-1])
+            y_root = sol.sol(roots[-1])
+            sol.t = np.append(sol.t[:i + 1], roots[-1])
+            sol.y = np.column_stack([sol.y[:, :i + 1], y_root])
+            sol.status = 1
         for k, root in zip(active, roots):
             t_events[k].append(root)
-    if end is None:
-        return Solution(rhs, rtol, atol, max_step, ts, ys, t_events, 0)
-    i, root = end
-    y_root = steps.sol(root)
-    return Solution(rhs, rtol, atol, max_step, ts[:i + 1] + [root], ys[:i + 1] + [y_root],
-                    t_events, 1)
+    sol.t_events = [np.array(e) for e in t_events]
+    return sol
 
 
-def _root(event, steps, t_a, t_b):
+def _root(event, sol, t_a, t_b):
     """``solve_ivp``'s ``solve_event_equation``, on :meth:`Solution.sol`."""
-    from scipy.optimize import brentq
-
-    return brentq(lambda s: event(s, steps.sol(s)), t_a, t_b, xtol=4 * EPS, rtol=4 * EPS)
+    return brentq(lambda s: event(s, sol.sol(s)), t_a, t_b, xtol=4 * EPS, rtol=4 * EPS)
