@@ -122,6 +122,7 @@ class Problem:
         use = bool(impact_velocities)
         self.b_vm = self.b_imp[np.isfinite(arcs.v_minus[self.b_imp])] if use else b[:0]
         self.b_vp = self.b_imp[np.isfinite(arcs.v_plus[self.b_imp])] if use else b[:0]
+        self.vm_of_imp = np.searchsorted(self.b_imp, self.b_vm)   # b_vm's places in b_imp
         # with the input, the velocity is continuous at a correction too (the force is
         # the input's, not a jump)
         self.b_cor_v = self.b_cor if actuator is not None else b[:0]
@@ -175,18 +176,19 @@ class Problem:
         return p
 
     def unpack(self, p):
-        """(g, start times, X, V) of a parameter vector (complex allowed)."""
-        g = p[:6]
-        d = g[4]
-        K = self.arcs.count
-        X = np.empty(K, dtype=p.dtype)
+        """(g, start times, X, V) of a parameter vector (complex allowed), or of each row
+        of a batch of them ((B, n): each of the four with the batch's leading axis)."""
+        g = p[..., :6]
+        lead = p.shape[:-1]
+        X = np.empty(lead + (self.arcs.count,), dtype=p.dtype)
         k = self.iX >= 0
-        X[k] = p[self.iX[k]]
-        X[~k] = d
-        V = p[self.iV]
-        S = self.arcs.start.astype(p.dtype)
+        X[..., k] = p[..., self.iX[k]]
+        X[..., ~k] = g[..., 4, None]
+        V = p[..., self.iV]
+        S = np.empty_like(X)
+        S[...] = self.arcs.start
         f = self.iT >= 0
-        S[f] = p[self.iT[f]]
+        S[..., f] = p[..., self.iT[f]]
         return g, S, X, V
 
     def bounds(self):
@@ -205,71 +207,85 @@ class Problem:
 
     # ------------------------------------------------------------------ residuals
     def residual(self, p) -> np.ndarray:
-        """The residual vector (module docstring) at parameters p (real or complex)."""
+        """The residual vector (module docstring) at parameters p (real or complex), or
+        the (B, m) residuals of a batch p (B, n) without an input (:meth:`jacobian`):
+        each row the same arithmetic as the row alone."""
         g, S, X, V = self.unpack(p)
-        zeta, Om, A, th, d, r = g
+        zeta, Om, A, th, d, r = (g[..., None, i] for i in range(6))   # (1,) or (B, 1)
         om = self.omega
         psi0 = om * S + self.tau0 + th
         rec = self.rec
         a = self.arcs.sample_arc
-        x, v = free_flight(zeta, Om, A, om, psi0[a], rec.t - S[a], X[a], V[a])
-        fx, fv = self.forced(g, 0, rec.t, S[a])
-        x, v = x + fx, v + fv
+        x, v = free_flight(zeta, Om, A, om, psi0[..., a], rec.t - S[..., a], X[..., a],
+                           V[..., a])
         bi, bc = self.b_imp, self.b_cor
-        xi, vi = free_flight(zeta, Om, A, om, psi0[bi - 1], S[bi] - S[bi - 1], X[bi - 1],
-                             V[bi - 1])
-        fx, fv = self.forced(g, 1, S[bi], S[bi - 1])
-        xi, vi = xi + fx, vi + fv
-        xc, vc = free_flight(zeta, Om, A, om, psi0[bc - 1], S[bc] - S[bc - 1], X[bc - 1],
-                             V[bc - 1])
-        fx, fv = self.forced(g, 2, S[bc], S[bc - 1])
-        xc, vc = xc + fx, vc + fv
+        xi, vi = free_flight(zeta, Om, A, om, psi0[..., bi - 1], S[..., bi] - S[..., bi - 1],
+                             X[..., bi - 1], V[..., bi - 1])
+        xc, vc = free_flight(zeta, Om, A, om, psi0[..., bc - 1], S[..., bc] - S[..., bc - 1],
+                             X[..., bc - 1], V[..., bc - 1])
+        if self.actuator is not None:    # the input's share: one vector at a time
+            if p.ndim != 1:
+                raise ValueError("residual: a batch of parameter vectors is only for a "
+                                 "fit without an input")
+            fx, fv = self.forced(g, 0, rec.t, S[a])
+            x, v = x + fx, v + fv
+            fx, fv = self.forced(g, 1, S[bi], S[bi - 1])
+            xi, vi = xi + fx, vi + fv
+            fx, fv = self.forced(g, 2, S[bc], S[bc - 1])
+            xc, vc = xc + fx, vc + fv
         W = self.weight
         ar = self.arcs
-        pos = {int(b): i for i, b in enumerate(bi)}
-        vm_rows = vi[[pos[int(b)] for b in self.b_vm]] - ar.v_minus[self.b_vm] \
-            if self.b_vm.size else np.zeros(0, dtype=x.dtype)
-        vp_rows = V[self.b_vp] - ar.v_plus[self.b_vp]
         return np.concatenate([
             x - rec.x,
-            v[self.vrows] - rec.v[self.vrows],
-            vm_rows,
-            vp_rows,
+            v[..., self.vrows] - rec.v[self.vrows],
+            vi[..., self.vm_of_imp] - ar.v_minus[self.b_vm],
+            V[..., self.b_vp] - ar.v_plus[self.b_vp],
             W * (xi - d),
-            W * (V[bi] + r * vi),
-            W * (xc - X[bc]),
-            W * (vc[:self.b_cor_v.size] - V[self.b_cor_v]),
-        ])
+            W * (V[..., bi] + r * vi),
+            W * (xc - X[..., bc]),
+            W * (vc[..., :self.b_cor_v.size] - V[..., self.b_cor_v]),
+        ], axis=-1)
 
     def jacobian(self, p) -> np.ndarray:
-        """Complex-step Jacobian (module docstring), dense (m, n)."""
+        """Complex-step Jacobian (module docstring), dense (m, n): the perturbed vectors
+        as one batch of residuals where there is no input."""
         return coloured_jacobian(self.residual, p, self.m, 6, (self.iX, self.iV, self.iT),
-                                 self.rows_of_arc)
+                                 self.rows_of_arc, batch=self.actuator is None)
 
 
-def coloured_jacobian(residual, p, m: int, globals_: int, indices, rows_of_arc) -> np.ndarray:
+def coloured_jacobian(residual, p, m: int, globals_: int, indices, rows_of_arc, *,
+                      batch: bool = False) -> np.ndarray:
     """The dense (m, len(p)) complex-step Jacobian of a multiple-shooting residual
     (module docstring): the first ``globals_`` parameters one by one, then each arc
     parameter kind (``indices``: per arc its column, -1 where none) in two colours, even
-    and odd arcs together, arc k's column read on its rows ``rows_of_arc[k]`` only."""
+    and odd arcs together, arc k's column read on its rows ``rows_of_arc[k]`` only.
+
+    ``batch``: ``residual`` takes the perturbed vectors as one (B, n) batch and returns
+    their (B, m) residuals (one call instead of B: the same values, row for row)."""
     p = np.asarray(p, float)
-    J = np.zeros((m, p.size))
-    for j in range(globals_):
-        q = p.astype(complex)
-        q[j] += 1j * _H
-        J[:, j] = residual(q).imag / _H
     K = len(rows_of_arc)
+    steps = []           # (the columns perturbed together, per column its rows or None)
+    for j in range(globals_):
+        steps.append(([j], None))
     for index in indices:
         for colour in (0, 1):
             ks = [k for k in range(colour, K, 2) if index[k] >= 0]
-            if not ks:
-                continue
-            q = p.astype(complex)
-            q[index[ks]] += 1j * _H
-            im = residual(q).imag / _H
-            for k in ks:
-                rows = rows_of_arc[k]
-                J[rows, index[k]] = im[rows]
+            if ks:
+                steps.append((index[ks], [rows_of_arc[k] for k in ks]))
+    Q = np.repeat(p.astype(complex)[None, :], len(steps), axis=0)
+    for row, (columns, _rows) in zip(Q, steps):
+        row[columns] += 1j * _H
+    if batch:
+        im = residual(Q).imag / _H
+    else:
+        im = np.array([residual(q).imag for q in Q]) / _H
+    J = np.zeros((m, p.size))
+    for i, (columns, rows) in enumerate(steps):
+        if rows is None:
+            J[:, columns[0]] = im[i]
+        else:
+            for c, r in zip(columns, rows):
+                J[r, c] = im[i, r]
     return J
 
 

@@ -194,36 +194,50 @@ def find_impacts(t, x, tau, arc, *, threshold=10.0, trials=300, seed=0):
 def refine_impact_times(g, omega, tau0, start, X, V, lower, upper, which):
     """For each boundary b in ``which`` (an impact between the samples lower[b], upper[b]),
     the time where the arcs b - 1 and b meet (x continuous at an impact), on a grid
-    refined by bisection; the interval's middle if they do not meet."""
+    refined by bisection; the interval's middle if they do not meet.
+
+    All boundaries at once: the grid of 63 inner points and the 60 bisection steps are
+    each one array evaluation of the gap x_{b-1}(t) - x_b(t) (:func:`.model.free_flight`)
+    over every boundary, elementwise the same arithmetic as one boundary at a time
+    (tests/test_identification.py checks the two agree over random arcs)."""
     zeta, Om, A, th = g[:4]
     out = start.copy()
-    for b in which:
-        if not (np.isfinite(X[b - 1]) and np.isfinite(X[b])):
-            continue
-        grid = np.linspace(lower[b], upper[b], 65)[1:-1]
+    which = np.asarray(which, int)
+    b = which[np.isfinite(X[which - 1]) & np.isfinite(X[which])]
+    if b.size == 0:
+        return out
+    a = b - 1
+    psi_a, psi_b = omega * start[a] + tau0 + th, omega * start[b] + tau0 + th
 
-        def gap(tt):
-            xa, _ = free_flight(zeta, Om, A, omega, omega * start[b - 1] + tau0 + th,
-                                tt - start[b - 1], X[b - 1], V[b - 1])
-            xb, _ = free_flight(zeta, Om, A, omega, omega * start[b] + tau0 + th,
-                                tt - start[b], X[b], V[b])
-            return xa - xb
+    def gap(tt, rows=slice(None), col=False):
+        """x_{b-1}(tt) - x_b(tt) over the boundaries ``rows`` (tt: one time per row, or
+        a row of times per boundary with ``col``)."""
+        def at(v):
+            return v[rows][:, None] if col else v[rows]
 
-        f = gap(grid)
-        s = np.flatnonzero(np.sign(f[:-1]) * np.sign(f[1:]) <= 0)
-        if s.size:
-            lo, hi = grid[s[0]], grid[s[0] + 1]
-            flo = gap(lo)
-            for _ in range(60):
-                mid = 0.5 * (lo + hi)
-                fm = gap(mid)
-                if np.sign(fm) == np.sign(flo):
-                    lo, flo = mid, fm
-                else:
-                    hi = mid
-            out[b] = 0.5 * (lo + hi)
-        else:
-            out[b] = grid[int(np.argmin(np.abs(f)))]
+        xa, _ = free_flight(zeta, Om, A, omega, at(psi_a), tt - at(start[a]), at(X[a]),
+                            at(V[a]))
+        xb, _ = free_flight(zeta, Om, A, omega, at(psi_b), tt - at(start[b]), at(X[b]),
+                            at(V[b]))
+        return xa - xb
+
+    grid = np.linspace(lower[b], upper[b], 65, axis=1)[:, 1:-1]
+    f = gap(grid, col=True)
+    change = np.sign(f[:, :-1]) * np.sign(f[:, 1:]) <= 0
+    met = change.any(axis=1)
+    out[b[~met]] = grid[~met, np.argmin(np.abs(f[~met]), axis=1)]
+    if met.any():
+        rows = np.flatnonzero(met)
+        s = np.argmax(change[rows], axis=1)          # the first sign change
+        lo, hi = grid[rows, s], grid[rows, s + 1]
+        flo = gap(lo, rows)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            fm = gap(mid, rows)
+            same = np.sign(fm) == np.sign(flo)
+            lo, flo = np.where(same, mid, lo), np.where(same, fm, flo)
+            hi = np.where(same, hi, mid)
+        out[b[rows]] = 0.5 * (lo + hi)
     return out
 
 
