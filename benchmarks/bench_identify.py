@@ -5,8 +5,9 @@ The baseline is a checkout (``git worktree add --detach /tmp/base-id <rev>``): i
 fit.py, initial.py and modal_fit.py are loaded beside this tree's (the other modules of
 the package are this tree's: the benchmark is for changes inside those three files).
 Each recording is identified by both, in turn first; printed: the CPU of each (this
-process's), the ratio baseline / this, and whether every fitted vector, covariance and
-Jacobian at the solution is the same, float for float.
+process's), the ratio baseline / this, whether every fitted vector, covariance and
+Jacobian at the solution is the same, float for float, and where not, how far apart
+(the fitted globals in standard errors, the Jacobians relative to each column).
 
     .venv/bin/python benchmarks/bench_identify.py --baseline /tmp/base-id [--seeds 6]
 
@@ -83,15 +84,25 @@ def modal_cases(seeds: int):
         yield rec, dict(n=2, correction_dv=dv)
 
 
-def _same(a, b, prob_a, prob_b) -> bool:
-    return (np.array_equal(a.solution, b.solution)
-            and np.array_equal(np.asarray(a.covariance), np.asarray(b.covariance))
-            and np.array_equal(prob_a.jacobian(a.solution), prob_b.jacobian(b.solution)))
+def _compare(a, b):
+    """(the same float for float, the largest |difference| of the fitted globals in
+    units of the baseline's standard errors, the largest |difference| of the Jacobians
+    at the solution relative to the column's largest entry)."""
+    ja, jb = a.problem.jacobian(a.solution), b.problem.jacobian(b.solution)
+    same = (np.array_equal(a.solution, b.solution) and np.array_equal(ja, jb)
+            and np.array_equal(np.asarray(a.covariance), np.asarray(b.covariance)))
+    ng = np.asarray(a.covariance).shape[0]
+    se = np.sqrt(np.diag(np.asarray(a.covariance)))
+    held = se == 0.0
+    z = np.abs(a.solution[:ng] - b.solution[:ng]) / np.where(held, 1.0, se)
+    scale = np.maximum(np.max(np.abs(ja), axis=0), 1e-300)
+    return same, float(np.max(z[~held], initial=0.0)), float(np.max(np.abs(ja - jb) / scale))
 
 
 def run(label, cases, fit_base, fit_this):
     cpu = {"baseline": 0.0, "this": 0.0}
     same = count = 0
+    z = jac = 0.0
     for i, (rec, kw) in enumerate(cases):
         order = (("baseline", fit_base), ("this", fit_this))
         out = {}
@@ -99,12 +110,14 @@ def run(label, cases, fit_base, fit_this):
             t0 = time.process_time()
             out[name] = fit(rec, **kw)
             cpu[name] += time.process_time() - t0
-        a, b = out["baseline"], out["this"]
-        same += _same(a, b, a.problem, b.problem)
+        one, dz, dj = _compare(out["baseline"], out["this"])
+        same += one
+        z, jac = max(z, dz), max(jac, dj)
         count += 1
     print(f"{label}: {count} fits, CPU baseline {cpu['baseline']:.2f} s, this "
           f"{cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; "
-          f"the same float for float: {same} of {count}")
+          f"the same float for float: {same} of {count}; largest difference of a fitted "
+          f"global {z:.1e} standard errors, of a Jacobian entry {jac:.1e} of its column")
 
 
 def main(argv=None) -> int:

@@ -99,6 +99,28 @@ def test_complex_step_jacobian_matches_finite_differences():
         assert np.max(np.abs(fd - J[:, j])) < 1e-5 * scale, j
 
 
+def test_a_batch_of_residuals_is_each_vectors_residual_float_for_float(monkeypatch):
+    """Problem.residual of a (B, n) batch (the complex-step Jacobian's one call) is each
+    vector's residual, float for float, and the Jacobian from the batch, whole or in
+    chunks, is the Jacobian column by column."""
+    from grazing_control.dynamics.identification import fit
+    from grazing_control.dynamics.identification.fit import coloured_jacobian
+
+    rec = rig_recording(periods=6, noise=1e-3, seed=4)
+    res = identify(rec)
+    prob, p = res.problem, res.solution
+    rng = np.random.default_rng(2)
+    Q = p + 1e-30j * rng.standard_normal((16, prob.n)) * (rng.random((16, prob.n)) < 0.3)
+    batch = prob.residual(Q)
+    assert batch.shape == (16, prob.m)
+    assert all(np.array_equal(row, prob.residual(q)) for row, q in zip(batch, Q))
+    alone = coloured_jacobian(prob.residual, p, prob.m, 6, (prob.iX, prob.iV, prob.iT),
+                              prob.rows_of_arc)
+    assert np.array_equal(prob.jacobian(p), alone)
+    monkeypatch.setattr(fit, "BATCH_VALUES", 3 * prob.m - 1)    # chunks of 2 vectors
+    assert np.array_equal(prob.jacobian(p), alone)
+
+
 # ----------------------------------------------------------------------------- the steps
 @pytest.mark.parametrize("with_sin", [True, False])
 def test_phase_reference_recovers_omega_and_tau0(with_sin):

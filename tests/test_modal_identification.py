@@ -370,3 +370,38 @@ def test_the_complex_step_jacobian_is_the_finite_difference_one():
         q2[j] -= h
         fd = (prob.residual(q1) - prob.residual(q2)) / (2 * h)
         assert np.max(np.abs(J[:, j] - fd)) <= 1e-5 * max(np.max(np.abs(fd)), 1e-12), j
+
+
+def test_a_batch_of_residuals_is_each_vectors_residual():
+    """ModalProblem.residual of a (B, n) batch of complex-step vectors (the Jacobian's one
+    call) gives each vector's residual: the real parts float for float, the complex
+    step's imaginary parts to rounding (numpy's complex products round by the arrays'
+    layout); the Jacobian from the batch is the Jacobian column by column to 1e-12 of
+    its column; a batch with the actuator's input is refused by name."""
+    from grazing_control.dynamics.identification.data import cut_arcs
+    from grazing_control.dynamics.identification.fit import coloured_jacobian
+    from grazing_control.dynamics.identification.modal_fit import ModalProblem
+    from grazing_control.dynamics.identification.phase import fit_phase
+
+    model = dataclasses.replace(load_model(CHAIN), delta_d=-1e-3)
+    rec, dv = simulate(model, 4, 40, 1e-4, 2, kicks=0.02 * np.ones(4), delay=1.0, on=1)
+    arcs = cut_arcs(rec.t, rec.impact_t, rec.corrections, impact_v_minus=rec.impact_v_minus,
+                    impact_v_plus=rec.impact_v_plus, free_times=True)
+    prob = ModalProblem(rec, arcs, fit_phase(rec.t, rec.cos_tau, rec.sin_tau), 2, dv, False)
+    rng = np.random.default_rng(1)
+    g = modal_of(model).vector(prob.layout) * (1 + 1e-3 * rng.standard_normal(prob.ng))
+    p = prob.pack(g, arcs.start, 0.1 * rng.standard_normal((arcs.count, 4)))
+    Q = p + 1e-30j * rng.standard_normal((16, prob.n)) * (rng.random((16, prob.n)) < 0.3)
+    batch = prob.residual(Q)
+    assert batch.shape == (16, prob.m)
+    for row, q in zip(batch, Q):
+        one = prob.residual(q)
+        assert np.array_equal(row.real, one.real)
+        assert np.allclose(row.imag, one.imag, rtol=1e-12, atol=1e-12 * np.abs(one.imag).max())
+    columns = [prob.iA[:, i] for i in range(prob.iA.shape[1])] + [prob.iT]
+    alone = coloured_jacobian(prob.residual, p, prob.m, prob.ng, columns, prob.rows_of_arc)
+    J = prob.jacobian(p)
+    assert np.all(np.abs(J - alone) <= 1e-12 * np.max(np.abs(alone), axis=0))
+    prob.actuator = object()       # with an input the residual takes one vector at a time
+    with pytest.raises(ValueError, match="batch"):
+        prob.residual(Q)

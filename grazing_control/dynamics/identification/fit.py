@@ -69,6 +69,10 @@ MAX_SHIFTS = 4
 #: 4 s idle, 33 s on a loaded 2-core machine; 400 arcs over 300 s there).
 JACOBIAN_BYTES = 32 << 20
 _H = 1e-30
+#: The most residual values of one batched call of the complex-step Jacobian (4 MiB of
+#: complex values; a modal fit's temporaries are n_modes times that): a long fit's
+#: perturbed vectors go in chunks.
+BATCH_VALUES = 1 << 18
 
 
 class IdentificationError(ValueError):
@@ -260,8 +264,9 @@ def coloured_jacobian(residual, p, m: int, globals_: int, indices, rows_of_arc, 
     parameter kind (``indices``: per arc its column, -1 where none) in two colours, even
     and odd arcs together, arc k's column read on its rows ``rows_of_arc[k]`` only.
 
-    ``batch``: ``residual`` takes the perturbed vectors as one (B, n) batch and returns
-    their (B, m) residuals (one call instead of B: the same values, row for row)."""
+    ``batch``: ``residual`` takes the perturbed vectors as a (B, n) batch and returns
+    their (B, m) residuals (a call per :data:`BATCH_VALUES` values instead of one per
+    vector: the same values, row for row)."""
     p = np.asarray(p, float)
     K = len(rows_of_arc)
     steps = []           # (the columns perturbed together, per column its rows or None)
@@ -275,8 +280,10 @@ def coloured_jacobian(residual, p, m: int, globals_: int, indices, rows_of_arc, 
     Q = np.repeat(p.astype(complex)[None, :], len(steps), axis=0)
     for row, (columns, _rows) in zip(Q, steps):
         row[columns] += 1j * _H
-    if batch:
-        im = residual(Q).imag / _H
+    if batch:            # in chunks of at most BATCH_VALUES residual values a call
+        rows = max(1, BATCH_VALUES // max(m, 1))
+        im = np.concatenate([residual(Q[i:i + rows]).imag
+                             for i in range(0, len(steps), rows)]) / _H
     else:
         im = np.array([residual(q).imag for q in Q]) / _H
     J = np.zeros((m, p.size))

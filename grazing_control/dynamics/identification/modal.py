@@ -72,14 +72,17 @@ class ModalLayout:
 
     def split(self, g):
         """(Omega, zeta, free impact coefficients (n-1, 2), P_c, P_s, d, r, free kick
-        coefficients (n-1, 2) or None) of g (real or complex)."""
+        coefficients (n-1, 2) or None) of g (real or complex), or of each row of a
+        batch (B, size): each with the batch's leading axis."""
         n = self.n
-        Om, ze = g[:n], g[n:2 * n]
+        lead = g.shape[:-1]
+        Om, ze = g[..., :n], g[..., n:2 * n]
         o = 2 * n
-        ci = g[o:o + 2 * (n - 1)].reshape(n - 1, 2)
+        ci = g[..., o:o + 2 * (n - 1)].reshape(lead + (n - 1, 2))
         o += 2 * (n - 1)
-        Pc, Ps, d, r = g[o], g[o + 1], g[o + 2], g[o + 3]
-        ka = g[o + 4:o + 4 + 2 * (n - 1)].reshape(n - 1, 2) if self.actuator else None
+        Pc, Ps, d, r = g[..., o], g[..., o + 1], g[..., o + 2], g[..., o + 3]
+        ka = g[..., o + 4:o + 4 + 2 * (n - 1)].reshape(lead + (n - 1, 2)) \
+            if self.actuator else None
         return Om, ze, ci, Pc, Ps, d, r, ka
 
     @property
@@ -95,12 +98,14 @@ def rates(Om, zeta):
 def kick_coefficients(Om, zeta, free, slope):
     """(c, s) of all n modes from the first n - 1 (``free``, (n-1, 2)): the last mode's
     from sum c = 0 and sum (w s - sigma c) = ``slope`` (1 for the wall's own kick, 0 for
-    another coordinate's; module docstring)."""
+    another coordinate's; module docstring). A batch: Om, zeta (B, n), free (B, n-1, 2)."""
     sig, w = rates(Om, zeta)
-    cf, sf = free[:, 0], free[:, 1]
-    c_last = -np.sum(cf)
-    s_last = (slope - np.sum(w[:-1] * sf - sig[:-1] * cf) + sig[-1] * c_last) / w[-1]
-    return np.concatenate([cf, [c_last]]), np.concatenate([sf, [s_last]])
+    cf, sf = free[..., 0], free[..., 1]
+    c_last = -np.sum(cf, axis=-1)
+    s_last = (slope - np.sum(w[..., :-1] * sf - sig[..., :-1] * cf, axis=-1)
+              + sig[..., -1] * c_last) / w[..., -1]
+    return (np.concatenate([cf, c_last[..., None]], axis=-1),
+            np.concatenate([sf, s_last[..., None]], axis=-1))
 
 
 def modal_flow(sig, w, alpha, beta, h):

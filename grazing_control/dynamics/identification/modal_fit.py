@@ -92,6 +92,7 @@ class ModalProblem:
         bi = self.b_imp
         self.b_vm = bi[np.isfinite(arcs.v_minus[bi])] if use else bi[:0]
         self.b_vp = bi[np.isfinite(arcs.v_plus[bi])] if use else bi[:0]
+        self.vm_of_imp = np.searchsorted(bi, self.b_vm)     # b_vm's places in b_imp
         sizes = [rec.t.size, self.vrows.size, self.b_vm.size, self.b_vp.size, bi.size,
                  2 * n * bi.size, 2 * n * self.b_cor.size]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)])
@@ -145,11 +146,13 @@ class ModalProblem:
         return p
 
     def unpack(self, p):
-        """(g, start times, modal states (K, 2n)) of a parameter vector (complex allowed)."""
-        S = self.arcs.start.astype(p.dtype)
+        """(g, start times, modal states (K, 2n)) of a parameter vector (complex allowed),
+        or of each row of a batch (B, n): each with the batch's leading axis."""
+        S = np.empty(p.shape[:-1] + self.arcs.start.shape, p.dtype)
+        S[...] = self.arcs.start
         f = self.iT >= 0
-        S[f] = p[self.iT[f]]
-        return p[:self.ng], S, p[self.iA]
+        S[..., f] = p[..., self.iT[f]]
+        return p[..., :self.ng], S, p[..., self.iA]
 
     def bounds(self):
         lo = np.full(self.n, -np.inf)
@@ -165,60 +168,73 @@ class ModalProblem:
         return lo, hi
 
     def residual(self, p) -> np.ndarray:
-        """The residual vector (module docstring) at p (real or complex)."""
+        """The residual vector (module docstring) at p (real or complex), or the (B, m)
+        residuals of a batch p (B, n) without an input (:meth:`jacobian`): each row the
+        same arithmetic as the row alone."""
+        lead = p.shape[:-1]
         g, S, a = self.unpack(p)
         n = self.n_modes
         Om, ze, ci, Pc, Ps, d, r, ka = self.layout.split(g)
         sig, w = rates(Om, ze)
         c, s = kick_coefficients(Om, ze, ci, 1.0)
         kc, ks = (c, s) if ka is None else kick_coefficients(Om, ze, ka, 0.0)
+        if self.actuator is not None and lead:
+            raise ValueError("residual: a batch of parameter vectors is only for a fit "
+                             "without an input")
+        # per mode (..., 1, n) against the rows (..., m, n); per vector (..., 1)
+        sig_, w_, c_, s_, kc_, ks_ = (u[..., None, :] for u in (sig, w, c, s, kc, ks))
+        Pc, Ps, d, r = (u[..., None] for u in (Pc, Ps, d, r))
         om, tau0 = self.phase.omega, self.phase.tau0
         rec, arcs = self.rec, self.arcs
-        al, be = a[:, :n], a[:, n:]
+        al, be = a[..., :n], a[..., n:]
         sa = arcs.sample_arc
-        h = (rec.t - S[sa])[:, None]
-        y, dy = modal_flow(sig, w, al[sa], be[sa], h)
+        h = (rec.t - S[..., sa])[..., None]
+        y, dy = modal_flow(sig_, w_, al[..., sa, :], be[..., sa, :], h)
         if self.actuator is not None:
             fa, fb = self._forced("samples", sig, w, rec.t, S[sa], kc, ks)
             y = y + np.sum(fa, axis=-1)
             dy = dy + np.sum(w * fb - sig * fa, axis=-1)
         xp, vp = particular(Pc, Ps, om, om * rec.t + tau0)
         W = self.weight
-        out = [y + xp - rec.x, (dy + vp)[self.vrows] - rec.v[self.vrows]]
+        out = [y + xp - rec.x, (dy + vp)[..., self.vrows] - rec.v[self.vrows]]
         bi, bc = self.b_imp, self.b_cor
         # the arcs before each impact, at the impact
-        hb = (S[bi] - S[bi - 1])[:, None]
-        ym, dym = modal_flow(sig, w, al[bi - 1], be[bi - 1], hb)
-        ia, ib = self._forced("impacts", sig, w, S[bi], S[bi - 1], kc, ks)
+        hb = (S[..., bi] - S[..., bi - 1])[..., None]
+        ym, dym = modal_flow(sig_, w_, al[..., bi - 1, :], be[..., bi - 1, :], hb)
+        ia = ib = 0.0
         if self.actuator is not None:
+            ia, ib = self._forced("impacts", sig, w, S[bi], S[bi - 1], kc, ks)
             ym = ym + np.sum(ia, axis=-1)
             dym = dym + np.sum(w * ib - sig * ia, axis=-1)
-        xpi, vpi = particular(Pc, Ps, om, om * S[bi] + tau0)
+        xpi, vpi = particular(Pc, Ps, om, om * S[..., bi] + tau0)
         vminus = dym + vpi
-        pos = {int(b): i for i, b in enumerate(bi)}
-        out.append(vminus[[pos[int(b)] for b in self.b_vm]] - arcs.v_minus[self.b_vm])
-        y0, dy0 = modal_flow(sig, w, al[self.b_vp], be[self.b_vp], np.zeros((self.b_vp.size, 1)))
-        _x, vpp = particular(Pc, Ps, om, om * S[self.b_vp] + tau0)
-        out.append(dy0 + vpp - arcs.v_plus[self.b_vp])
+        out.append(vminus[..., self.vm_of_imp] - arcs.v_minus[self.b_vm])
+        bp = self.b_vp
+        y0, dy0 = modal_flow(sig_, w_, al[..., bp, :], be[..., bp, :], np.zeros((bp.size, 1)))
+        _x, vpp = particular(Pc, Ps, om, om * S[..., bp] + tau0)
+        out.append(dy0 + vpp - arcs.v_plus[bp])
         out.append(W * (ym + xpi - d))
-        pa, pb = propagate(sig, w, al[bi - 1], be[bi - 1], hb)
-        jump = (-(1.0 + r) * vminus)[:, None]
-        out.append(W * np.concatenate([al[bi] - pa - ia - jump * c,
-                                       be[bi] - pb - ib - jump * s], axis=1).ravel())
+        pa, pb = propagate(sig_, w_, al[..., bi - 1, :], be[..., bi - 1, :], hb)
+        jump = (-(1.0 + r) * vminus)[..., None]
+        out.append(W * np.concatenate([al[..., bi, :] - pa - ia - jump * c_,
+                                       be[..., bi, :] - pb - ib - jump * s_], axis=-1))
         if bc.size:
-            pa, pb = propagate(sig, w, al[bc - 1], be[bc - 1], (S[bc] - S[bc - 1])[:, None])
+            pa, pb = propagate(sig_, w_, al[..., bc - 1, :], be[..., bc - 1, :],
+                               (S[..., bc] - S[..., bc - 1])[..., None])
             if self.actuator is not None:      # the input carries the command: no jump
                 ja, jb = self._forced("corrections", sig, w, S[bc], S[bc - 1], kc, ks)
             else:
-                ja, jb = self.dv[:, None] * kc, self.dv[:, None] * ks
-            out.append(W * np.concatenate([al[bc] - pa - ja, be[bc] - pb - jb],
-                                          axis=1).ravel())
-        return np.concatenate([np.asarray(o).ravel() for o in out])
+                ja, jb = self.dv[:, None] * kc_, self.dv[:, None] * ks_
+            out.append(W * np.concatenate([al[..., bc, :] - pa - ja, be[..., bc, :] - pb - jb],
+                                          axis=-1))
+        return np.concatenate([np.asarray(o).reshape(lead + (-1,)) for o in out], axis=-1)
 
     def jacobian(self, p) -> np.ndarray:
-        """Complex-step Jacobian, dense (m, n) (module docstring)."""
+        """Complex-step Jacobian, dense (m, n) (module docstring): the perturbed vectors
+        as one batch of residuals where there is no input."""
         columns = [self.iA[:, i] for i in range(self.iA.shape[1])] + [self.iT]
-        return coloured_jacobian(self.residual, p, self.m, self.ng, columns, self.rows_of_arc)
+        return coloured_jacobian(self.residual, p, self.m, self.ng, columns, self.rows_of_arc,
+                                 batch=self.actuator is None)
 
 
 # ---------------------------------------------------------------------- initial guess
