@@ -559,6 +559,59 @@ _COMMANDS = {
 }
 
 
+def _fuzz_argv(rng):
+    """One seeded argument set of the fuzz: a command of design, orbit, continue and
+    simulate, each numeric option (30 % of the time) from the hostile pool."""
+    command = rng.choice(sorted(_COMMANDS))
+    required, optional, counts = _COMMANDS[command]
+    argv = [command]
+    for opt in required + rng.sample(optional, rng.randint(0, 3)):
+        argv.append(f"{opt}={rng.choice(_POOL if rng.random() < 0.3 else _GOOD[opt])}")
+    for opt in counts:
+        if rng.random() < 0.7 or opt == "--periods":
+            value = rng.choice(_COUNTS[:12] if rng.random() < 0.3 else _GOOD[opt])
+            argv.append(f"{opt}={value}")
+    if command == "simulate" and rng.random() < 0.3:
+        argv.append(f"--fidelity={rng.choice(['exact', 'zdm1', 'zdm2', 'auto'])}")
+    if command in ("orbit", "design") and rng.random() < 0.3:
+        argv.append("--method=perturbation")
+    if rng.random() < 0.5:
+        argv.append("--json")
+    return argv
+
+
+def _parsed(parser, argv):
+    """The options ``parser`` gives ``argv``, or its exit status and message."""
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err):
+            return vars(parser.parse_args(argv))
+    except SystemExit as exc:
+        return exc.code, err.getvalue()
+
+
+def test_the_parser_main_keeps_parses_as_a_fresh_parser_does():
+    """main builds its parser once a process: after thousands of parses of hostile
+    argument sets (the fuzz's, seeded), each set's options (or its error) are those a
+    freshly built parser gives it."""
+    import random
+
+    from grazing_control.cli.commands import _parser, build_parser
+
+    rng = random.Random(8)
+    sets = [_fuzz_argv(rng) for _ in range(2000)]
+    kept = _parser()
+    first = [_parsed(kept, argv) for argv in sets]
+    assert sum(isinstance(f, tuple) for f in first) > 20      # errors among them
+    again = [_parsed(kept, argv) for argv in sets[::-1]][::-1]
+    assert again == first
+    fresh = build_parser()
+    assert [_parsed(fresh, argv) for argv in sets[::7]] == first[::7]
+
+
 def test_cli_fuzz_never_a_traceback(capsys):
     """Fuzz (seeded, 400 argument sets): each numeric option (30 % of the time) of design, orbit, continue
     and simulate set to nan, inf, 1e308, -0, 1e-320, '', garbage or ordinary values,
@@ -569,22 +622,8 @@ def test_cli_fuzz_never_a_traceback(capsys):
     rng = random.Random(7)
     seen = {0: 0, 2: 0}
     for _ in range(400):
-        command = rng.choice(sorted(_COMMANDS))
-        required, optional, counts = _COMMANDS[command]
-        argv = [command]
-        for opt in required + rng.sample(optional, rng.randint(0, 3)):
-            argv.append(f"{opt}={rng.choice(_POOL if rng.random() < 0.3 else _GOOD[opt])}")
-        for opt in counts:
-            if rng.random() < 0.7 or opt == "--periods":
-                value = rng.choice(_COUNTS[:12] if rng.random() < 0.3 else _GOOD[opt])
-                argv.append(f"{opt}={value}")
-        if command == "simulate" and rng.random() < 0.3:
-            argv.append(f"--fidelity={rng.choice(['exact', 'zdm1', 'zdm2', 'auto'])}")
-        if command in ("orbit", "design") and rng.random() < 0.3:
-            argv.append("--method=perturbation")
-        as_json = rng.random() < 0.5
-        if as_json:
-            argv.append("--json")
+        argv = _fuzz_argv(rng)
+        as_json = argv[-1] == "--json"
         status, out, err = _main(argv, capsys)
         assert status in (0, 2), (argv, status, err)
         seen[status] += 1

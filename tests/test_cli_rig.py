@@ -14,7 +14,6 @@
 """
 
 import copy
-import functools
 import json
 import math
 import subprocess
@@ -37,9 +36,8 @@ LAB_FILE = ROOT / "config" / "rigs" / "lab_20hz.yaml"
 
 
 @pytest.fixture
-def cli(monkeypatch, capsys):
-    """main(argv) -> (status, stdout, stderr), the parser built once for the module."""
-    monkeypatch.setattr(commands, "build_parser", _parser)
+def cli(capsys):
+    """main(argv) -> (status, stdout, stderr) (main's parser is built once a process)."""
 
     def run(*argv):
         try:
@@ -51,13 +49,9 @@ def cli(monkeypatch, capsys):
     return run
 
 
-_BUILD = commands.build_parser
-
-
-@functools.lru_cache(maxsize=1)
 def _parser():
-    """The ``grazing`` parser, built once (a parse does not change it)."""
-    return _BUILD()
+    """The ``grazing`` parser of main (built once a process: a parse does not change it)."""
+    return commands._parser()
 
 
 def _write(tmp_path, doc, name="rig.yaml"):
