@@ -18,12 +18,10 @@ four seeded contacts) and tests/reference_ndof.py's two-mass impact search.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
