@@ -115,7 +115,8 @@ def series_coefficients(p: OscillatorParams, gains: Gains | None = None,
     """
     if zdm_order not in (1, 2):
         raise ValueError(f"zdm_order={zdm_order!r} is invalid: valid values are 1, 2")
-    n = smooth_map(p.with_(delta_d=0.0), gains)
+    at_grazing = p.delta_d == 0.0 and math.copysign(1.0, p.delta_d) > 0.0
+    n = smooth_map(p if at_grazing else p.with_(delta_d=0.0), gains)
     nm = np.array(n).reshape(2, 2)
     r, zeta, w = p.r, p.zeta, p.omega
     rr = 1.0 + r
@@ -295,17 +296,16 @@ def admissible_c2_perturbation(p: OscillatorParams, lo: float = -4.0, hi: float 
     """
     from grazing_control.dynamics.design.gains import CONDITIONS, admissible_intervals, breakpoints, degenerate_c1
 
-    def coeffs(c2):
-        return series_coefficients(p, Gains(degenerate_c1(p, c2, delay), c2, delay), zdm_order)
+    p0 = p.with_(delta_d=0.0)      # the expansion's model, formed once
 
-    def stab(c2):
-        return float(np.max(np.abs(characteristic_roots(coeffs(c2), 0.0)))) - 1.0
+    def stab(c):
+        return float(np.max(np.abs(characteristic_roots(c, 0.0)))) - 1.0
 
-    def exist(c2):
-        return coeffs(c2).kappa2
+    def exist(c):
+        return c.kappa2
 
-    def free(c2):
-        return float(np.max(np.abs(multipliers(np.array(coeffs(c2).n).reshape(2, 2))))) - 1.0
+    def free(c):
+        return float(np.max(np.abs(multipliers(np.array(c.n).reshape(2, 2))))) - 1.0
 
     funcs = {"impacting": (stab, exist), "non-impacting": (free,),
              "combined": (stab, exist, free)}.get(conditions)
@@ -315,7 +315,9 @@ def admissible_c2_perturbation(p: OscillatorParams, lo: float = -4.0, hi: float 
     def ok(c2):
         # at a pole of the series (I - N_g singular: N11 = 1) the conditions are undefined
         try:
-            return all(f(c2) < 0.0 for f in funcs)
+            c = series_coefficients(p0, Gains(degenerate_c1(p, c2, delay), c2, delay),
+                                    zdm_order)       # once for the conditions of this c2
+            return all(f(c) < 0.0 for f in funcs)
         except (ArithmeticError, np.linalg.LinAlgError):
             return False
 

@@ -1,0 +1,75 @@
+"""The perturbation route's admissible c2 sets (dynamics/maps/perturbation.py,
+``admissible_c2_perturbation``), this tree against a baseline's, side by side in one
+process on seeded models: CPU, ratio and whether every set is the same, float for float.
+
+The baseline is a checkout (``git worktree add --detach /tmp/base-pert <rev>``): its
+perturbation.py is loaded beside this tree's (the rest of the package is this tree's).
+Each model (zeta, r, omega, Delta d of 0, -0, -1e-5 or 1e-4; a third with a delay),
+condition set and ZDM order is run by both, in turn first, on a scan of 121 points.
+
+    .venv/bin/python benchmarks/bench_perturbation_design.py --baseline /tmp/base-pert \\
+        [--models 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import random
+import sys
+import time
+from pathlib import Path
+
+
+def _baseline(root: Path):
+    spec = importlib.util.spec_from_file_location(
+        "grazing_control.dynamics.maps._baseline_perturbation",
+        root / "grazing_control" / "dynamics" / "maps" / "perturbation.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def main(argv=None) -> int:
+    from grazing_control.dynamics.maps import perturbation
+    from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", type=Path, required=True)
+    ap.add_argument("--models", type=int, default=60)
+    args = ap.parse_args(argv)
+    base = _baseline(args.baseline)
+    rng = random.Random(5)
+    cpu = {"baseline": 0.0, "this": 0.0}
+    same = count = 0
+    for i in range(args.models):
+        try:
+            p = OscillatorParams(zeta=rng.uniform(0.005, 0.2), r=rng.uniform(0.3, 0.95),
+                                 omega=rng.uniform(0.3, 2.5),
+                                 delta_d=rng.choice([0.0, -1e-5, 1e-4, -0.0]))
+        except ParameterError:
+            continue
+        delay = rng.choice([0.0, 0.0, rng.uniform(0, 1.0)])
+        conditions = rng.choice(["combined", "impacting", "non-impacting"])
+        order = rng.choice([1, 2])
+        out = {}
+        pair = (("baseline", base), ("this", perturbation))
+        for name, module in pair if i % 2 == 0 else pair[::-1]:
+            t0 = time.process_time()
+            try:
+                out[name] = module.admissible_c2_perturbation(
+                    p, n=121, zdm_order=order, delay=delay, conditions=conditions)
+            except (ValueError, ArithmeticError) as exc:
+                out[name] = repr(exc)
+            cpu[name] += time.process_time() - t0
+        same += out["baseline"] == out["this"]
+        count += 1
+    print(f"admissible_c2_perturbation: {count} models, CPU baseline {cpu['baseline']:.2f} s, "
+          f"this {cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; the same "
+          f"sets float for float: {same} of {count}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
