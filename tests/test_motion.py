@@ -469,3 +469,21 @@ def test_n_dof_wall_sensitivity_against_mpmath():
         exact = np.array([float(x) for x in (up - down) / (2 * h)])
     assert len(imps) == 1
     assert np.max(np.abs(exact - gend)) <= 1e-12 * np.max(np.abs(exact)), exact - gend
+
+
+def test_a_model_moved_to_another_clearance_shares_its_flow():
+    """modal_flow of a model from NdofModel.with_clearance is its source's flow (built
+    once) carrying the moved model: every array and number that NdofFlow.of gives the
+    moved model itself, float for float (the flow does not depend on Delta d)."""
+    from grazing_control.oscillator.ndof.flow import NdofFlow
+
+    base = load_model(CHAIN)
+    moved = base.with_clearance(base.delta_d + 3e-4)
+    shared, own = mo.modal_flow(moved), NdofFlow.of(moved)
+    assert shared.model is moved
+    assert shared.modes is mo.modal_flow(base).modes          # not built again
+    for field in dataclasses.fields(NdofFlow):
+        if field.name != "model":
+            assert np.array_equal(getattr(shared, field.name), getattr(own, field.name)), \
+                field.name
+    assert np.array_equal(shared.transition(0.7), own.transition(0.7))

@@ -68,3 +68,24 @@ def test_missing_field_and_non_mapping():
 def test_r_one_allowed_and_phase_reduced():
     m = NdofModel(**_base(), r=1.0, phase=2 * math.pi + 0.5)
     assert m.r == 1.0 and abs(m.phase - 0.5) < 1e-12
+
+
+def test_with_clearance_moves_only_the_wall_and_checks_it_by_name():
+    """NdofModel.with_clearance: the model of dataclasses.replace(m, delta_d=...), field for
+    field, with m's validated arrays shared (not copied, not checked again) and
+    ``dynamics`` pointing at the model it came from, through any chain of moves; a
+    clearance that is not a finite real number is refused naming delta_d."""
+    import dataclasses
+
+    m = NdofModel(**_base(), delta_d=-1e-3)
+    moved = m.with_clearance(2e-4).with_clearance(-3e-5)
+    again = dataclasses.replace(m, delta_d=-3e-5)
+    for field in dataclasses.fields(NdofModel):
+        a, b = getattr(moved, field.name), getattr(again, field.name)
+        assert np.array_equal(a, b) and type(a) is type(b), field.name
+    assert moved.M is m.M and moved.K is m.K and moved.f is m.f
+    assert moved.dynamics is m and m.dynamics is m and again.dynamics is again
+    assert m.delta_d == -1e-3                                   # m itself unchanged
+    for bad in (math.nan, math.inf, "0.1", True, None):
+        with pytest.raises(ParameterError, match="delta_d"):
+            m.with_clearance(bad)

@@ -41,7 +41,6 @@ wide prior about its state with b and Delta d kept (tests/test_augmented_ndof.py
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -91,7 +90,7 @@ class AugmentedState:
 def with_wall(p, delta_d: float):
     """The model ``p`` (1-DOF parameters or a model file) with its clearance Delta d."""
     if isinstance(p, NdofModel):
-        return p if delta_d == p.delta_d else dataclasses.replace(p, delta_d=delta_d)
+        return p if delta_d == p.delta_d else p.with_clearance(delta_d)
     return p.with_(delta_d=delta_d)
 
 

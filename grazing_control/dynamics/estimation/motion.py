@@ -14,6 +14,7 @@ and a model file of any n (:class:`NdofModel`: the modal flow, :func:`modal_traj
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -426,8 +427,13 @@ def _actuated_trajectory(p, z0, s, correction, delay, duration, wall, width, for
 
 @functools.lru_cache(maxsize=8)
 def modal_flow(model: NdofModel) -> NdofFlow:
-    """The model's exact flow, built once per model."""
-    return NdofFlow.of(model)
+    """The model's exact flow, built once per model's dynamics: a model that differs
+    from another only in its clearance (:meth:`NdofModel.with_clearance`) gets that
+    one's flow, with its own model (the flow does not depend on Delta d)."""
+    root = model.dynamics
+    if root is model:
+        return NdofFlow.of(model)
+    return dataclasses.replace(modal_flow(root), model=model)
 
 
 def modal_transitions(flow: NdofFlow, h) -> np.ndarray:

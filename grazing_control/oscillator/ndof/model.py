@@ -18,6 +18,7 @@ valid range.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -132,6 +133,26 @@ class NdofModel:
         for name, value in dict(M=M, C=C, K=K, f=f, omega=omega, i_w=i_w, delta_d=delta_d,
                                 r=r, i_a=i_a, phase=phase, pi2_offset=pi2).items():
             object.__setattr__(self, name, value)
+
+    def with_clearance(self, delta_d) -> "NdofModel":
+        """This model with its wall at Delta d = ``delta_d`` (validated as the constructor
+        does: ParameterError naming delta_d), everything else shared, not validated
+        again: a filter that moves the wall at every section (dynamics/estimation/
+        augmented.py) spent half its time checking the same M, C, K. The copy's
+        :attr:`dynamics` is this model's."""
+        value = _real("delta_d", delta_d, lambda v: True, "any finite real number")
+        new = copy.copy(self)
+        object.__setattr__(new, "delta_d", value)
+        object.__setattr__(new, "_dynamics", self.dynamics)
+        return new
+
+    @property
+    def dynamics(self) -> "NdofModel":
+        """The model this one was made from by :meth:`with_clearance` (itself if none):
+        the same M, C, K, f, omega, indices, r, phase and Pi2, so the same free flow
+        (:class:`grazing_control.oscillator.ndof.flow.NdofFlow` does not depend on the
+        clearance)."""
+        return self.__dict__.get("_dynamics", self)
 
     @property
     def n(self) -> int:
