@@ -73,3 +73,38 @@ def test_the_impacts_found_are_the_exact_plants_over_random_models():
     assert worst < 0.1, worst
     assert fast >= 150 and slow >= 30, (fast, slow)
     assert slow_found >= 0.9 * slow and found >= 0.97 * true, (found, true, slow_found, slow)
+
+
+def test_the_kinked_fits_are_a_least_squares_fit_per_tau():
+    """kinked_fits (all the grid's taus at once, by stacked QR) against NumPy's lstsq of
+    each tau's design alone, over 100 seeded random windows (17 samples at a random
+    step, a random kink and noise from 1e-8 to 1e-2, the grid of impacts_from_samples):
+    every residual sum within 1e-9 of the window's sum of squares, every slope and
+    position within 1e-8 of the largest, and the same best tau."""
+    from grazing_control.dynamics.estimation.sampled_impacts import _GRID, kinked_fits
+
+    rng = np.random.default_rng(7)
+    half = 8
+    for _ in range(100):
+        h = 10.0 ** rng.uniform(-4, 0)
+        u = (np.arange(-half, half + 1) + rng.uniform(-0.3, 0.3)) * h
+        kink = rng.uniform(-2, 2) * h
+        y = (np.where(u < kink, rng.normal() * (u - kink), rng.normal() * (u - kink))
+             + 0.1 * rng.normal() * u ** 2 + 10.0 ** rng.uniform(-8, -2) * rng.normal(size=u.size))
+        taus = np.linspace(u[half - 2], u[half + 2], 4 * _GRID + 1)[1:-1]
+        rss, before, after, apex = kinked_fits(u, y, taus)
+        ref = []
+        for tau in taus:
+            s = u - tau
+            left = s < 0.0
+            B = np.column_stack([np.ones_like(s)] + [c for p in (1, 2, 3) for c in
+                                (np.where(left, s ** p, 0.0), np.where(left, 0.0, s ** p))])
+            coef = np.linalg.lstsq(B, y, rcond=None)[0]
+            ref.append((float(np.sum((y - B @ coef) ** 2)), coef[1], coef[2], coef[0]))
+        ref = np.array(ref)
+        scale = float(y @ y)
+        assert np.max(np.abs(rss - ref[:, 0])) <= 1e-9 * scale
+        for got, want in zip((before, after, apex), ref[:, 1:].T):
+            assert np.max(np.abs(got - want)) <= 1e-8 * max(1.0, np.max(np.abs(want)))
+        assert np.argmin(rss) == np.argmin(ref[:, 0]) or \
+            abs(rss[np.argmin(ref[:, 0])] - rss.min()) <= 1e-9 * scale

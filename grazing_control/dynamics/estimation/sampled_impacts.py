@@ -32,7 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["KINK_CHI2", "WALL_SPREAD", "HALF_WINDOW", "noise_of", "impacts_from_samples"]
+__all__ = ["KINK_CHI2", "WALL_SPREAD", "HALF_WINDOW", "noise_of", "kinked_fits",
+           "impacts_from_samples"]
 
 #: The least drop of the residual sum of squares, in sigma^2, that a kink must give over
 #: a smooth cubic (about 10 standard errors of the kink's slope change).
@@ -62,17 +63,24 @@ def _smooth_rss(u, y) -> float:
     return float(np.sum((y - B @ coef) ** 2))
 
 
-def _kinked(u, y, tau):
-    """(rss, slope before, slope after) of two cubics meeting at ``tau``."""
-    s = u - tau
+def kinked_fits(u, y, taus):
+    """For each tau of ``taus``: (rss, slope before, slope after, position at tau) of the
+    two cubics that meet at tau (module docstring), as four arrays. One least-squares
+    problem per tau, all at once: each design (len(u) x 7) by a Householder QR (NumPy's
+    stacked ``qr``) and R c = Q^T y; the residual sums formed from the residuals
+    themselves. tests/test_sampled_impacts.py holds them to a ``lstsq`` per tau."""
+    s = u[None, :] - np.asarray(taus, float)[:, None]
     left = s < 0.0
     cols = [np.ones_like(s)]
     for p in (1, 2, 3):
-        cols.append(np.where(left, s ** p, 0.0))
-        cols.append(np.where(left, 0.0, s ** p))
-    B = np.column_stack(cols)
-    coef, *_ = np.linalg.lstsq(B, y, rcond=None)
-    return float(np.sum((y - B @ coef) ** 2)), float(coef[1]), float(coef[2]), float(coef[0])
+        sp = s ** p
+        cols.append(np.where(left, sp, 0.0))
+        cols.append(np.where(left, 0.0, sp))
+    B = np.stack(cols, axis=-1)
+    q, r = np.linalg.qr(B)
+    coef = np.linalg.solve(r, np.einsum("kmj,m->kj", q, y)[..., None])[..., 0]
+    res = y[None, :] - np.einsum("kmj,kj->km", B, coef)
+    return np.sum(res * res, axis=1), coef[:, 1], coef[:, 2], coef[:, 0]
 
 
 def impacts_from_samples(t, x, corrections=(), *, sigma: float | None = None,
@@ -98,12 +106,11 @@ def impacts_from_samples(t, x, corrections=(), *, sigma: float | None = None,
         u, y = t[w] - t[j], x[w] - x[j]
         smooth = _smooth_rss(u, y)
         lo, hi = u[half - 2], u[half + 2]
-        best = None
-        for tau in np.linspace(lo, hi, 4 * _GRID + 1)[1:-1]:
-            rss, before, after, apex = _kinked(u, y, tau)
-            if best is None or rss < best[0]:
-                best = (rss, tau, before, after, apex)
-        rss, tau, before, after, apex = best
+        taus = np.linspace(lo, hi, 4 * _GRID + 1)[1:-1]
+        fits = kinked_fits(u, y, taus)
+        i = int(np.argmin(fits[0]))       # the first of equal sums, as a scan keeps
+        rss, before, after, apex = (float(f[i]) for f in fits)
+        tau = float(taus[i])
         at = t[j] + tau
         if ((smooth - rss) / sigma ** 2 > KINK_CHI2 and before > after
                 and not (kicks.size and np.min(np.abs(kicks - at)) < 1.5 * h)):
