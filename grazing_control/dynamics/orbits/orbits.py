@@ -170,7 +170,13 @@ def wall_offset_at_phase(p: OscillatorParams, psi: float, gains: Gains | None = 
     if gains is not None and gains.delay != 0.0 and \
             not gains.delay < p.period - ((p.tau2 - theta) % TWO_PI) / p.omega:
         return math.nan, math.nan, (math.nan,) * 4
-    m11, m12, m21, m22 = impact_period_matrix(p, theta, gains)
+    return _offset_of(p, psi, impact_period_matrix(p, theta, gains))
+
+
+def _offset_of(p: OscillatorParams, psi: float, m):
+    """:func:`wall_offset_at_phase`'s (Delta d, v-, M) from the period matrix M at the
+    impact phase tau* + psi: the periodicity system solved."""
+    m11, m12, m21, m22 = m
     a, w, r = p.amplitude, p.omega, p.r
     sh = math.sin(0.5 * psi)
     u1 = 2.0 * a * sh * sh
@@ -187,7 +193,7 @@ def wall_offset_at_phase(p: OscillatorParams, psi: float, gains: Gains | None = 
 
 
 def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = None,
-                      point=None) -> float:
+                      point=None, factors=None) -> float:
     """A bound on the rounding error of Delta d(psi) from :func:`wall_offset_at_phase`.
 
     Delta d = N / det with N = -rhs1 w2 + w1 rhs2, det = -b11 w2 + w1 b21 (the
@@ -200,17 +206,23 @@ def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = Non
     smaller than this bound is not a fold (issue 20, item 4).
 
     ``point``: :func:`wall_offset_at_phase`'s result at psi when the caller has it (the scan of
-    :func:`branch_brackets`), so that it is not solved twice. The 2x2 products of
-    absolute values are written out (a scan makes ~500 of these bounds per orbit).
+    :func:`branch_brackets`), so that it is not solved twice; ``factors``: the point's
+    (Phi(T - s), G, Phi(s)) when the caller has them (the scan: :func:`_scan_point`).
+    The 2x2 products of absolute values are written out (a scan makes ~500 of these
+    bounds per orbit).
     """
-    theta = (p.tau_star + psi) % TWO_PI
-    s = ((p.tau2 - theta) % TWO_PI) / p.omega
     dd, _v, (m11, m12, m21, m22) = wall_offset_at_phase(p, psi, gains) if point is None else point
     if not math.isfinite(dd):
         return math.inf
-    q11, q12, q21, q22 = (abs(e) for e in transition_matrix(p.zeta, p.period - s))
-    g11, g12, g21, g22 = (abs(e) for e in gain_matrix(gains, p.zeta))
-    p11, p12, p21, p22 = (abs(e) for e in transition_matrix(p.zeta, s))
+    if factors is None:
+        theta = (p.tau_star + psi) % TWO_PI
+        s = ((p.tau2 - theta) % TWO_PI) / p.omega
+        factors = (transition_matrix(p.zeta, p.period - s), gain_matrix(gains, p.zeta),
+                   transition_matrix(p.zeta, s))
+    (q11, q12, q21, q22), (g11, g12, g21, g22), (p11, p12, p21, p22) = factors
+    q11, q12, q21, q22 = abs(q11), abs(q12), abs(q21), abs(q22)
+    g11, g12, g21, g22 = abs(g11), abs(g12), abs(g21), abs(g22)
+    p11, p12, p21, p22 = abs(p11), abs(p12), abs(p21), abs(p22)
     h11, h12 = q11 * g11 + q12 * g21, q11 * g12 + q12 * g22          # |Q| |G|
     h21, h22 = q21 * g11 + q22 * g21, q21 * g12 + q22 * g22
     eps = _EPS
@@ -254,15 +266,31 @@ def _branch_scan(oscillator: tuple, gains, sign: float, rounding: bool) -> tuple
     Delta d = 0 (any other gives the same floats: tests/test_orbits.py)."""
     zeta, r, omega, tau0, pi2_offset = oscillator
     p = OscillatorParams(zeta=zeta, r=r, omega=omega, tau0=tau0, pi2_offset=pi2_offset)
+    g = gain_matrix(gains, p.zeta)
     out = []
     for m in _psi_grid():
-        point = wall_offset_at_phase(p, sign * m, gains)
+        psi = sign * m
+        point, factors = _scan_point(p, psi, gains, g)
         dd, v, _ = point
         if rounding:
-            out.append((sign * m, dd, v, _delta_d_rounding(p, sign * m, gains, point)))
+            out.append((psi, dd, v, _delta_d_rounding(p, psi, gains, point, factors)))
         else:
-            out.append((sign * m, dd, v))
+            out.append((psi, dd, v))
     return tuple(out)
+
+
+def _scan_point(p: OscillatorParams, psi: float, gains, g):
+    """(:func:`wall_offset_at_phase`, (Phi(T - s), G, Phi(s))) at psi, the same floats
+    with each transition matrix formed once for both the point and its rounding bound
+    (``g``: gain_matrix(gains, zeta), the same at every point of a scan)."""
+    theta = (p.tau_star + psi) % TWO_PI
+    s = ((p.tau2 - theta) % TWO_PI) / p.omega
+    if gains is not None and gains.delay != 0.0 and not gains.delay < p.period - s:
+        return (math.nan, math.nan, (math.nan,) * 4), None
+    q, ph = transition_matrix(p.zeta, p.period - s), transition_matrix(p.zeta, s)
+    # period_matrix's product, or Phi(T) itself uncontrolled (impact_period_matrix)
+    m = transition_matrix(p.zeta, p.period) if gains is None else matmul2(q, matmul2(g, ph))
+    return _offset_of(p, psi, m), (q, g, ph)
 
 
 def find_branch_phase(p: OscillatorParams, delta_d: float, gains: Gains | None = None) -> float:

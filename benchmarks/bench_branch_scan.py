@@ -1,0 +1,68 @@
+"""The 1/1 branch's scan over the impact phase (dynamics/orbits/orbits.py, ``_branch_scan``:
+Delta d, v- and Delta d's rounding bound on the 241-point psi grid, what every
+``orbit_11`` of a new oscillator or gains starts from), this tree against a baseline's,
+side by side in one process on seeded oscillators and gains (none, without and with a
+delay), both sides, with and without the bound: CPU, ratio, and whether every scan is
+the same, float for float.
+
+The baseline is a checkout (``git worktree add --detach /tmp/base-orb <rev>``): its
+orbits.py is loaded beside this tree's.
+
+    .venv/bin/python benchmarks/bench_branch_scan.py --baseline /tmp/base-orb [--models 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import random
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    from grazing_control.dynamics.orbits import orbits
+    from grazing_control.oscillator.control import Gains
+    from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", type=Path, required=True)
+    ap.add_argument("--models", type=int, default=60)
+    args = ap.parse_args(argv)
+    spec = importlib.util.spec_from_file_location(
+        "grazing_control.dynamics.orbits._baseline_orbits",
+        args.baseline / "grazing_control" / "dynamics" / "orbits" / "orbits.py")
+    base = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = base
+    spec.loader.exec_module(base)
+    rng = random.Random(3)
+    cpu = {"baseline": 0.0, "this": 0.0}
+    same = count = 0
+    for i in range(args.models):
+        try:
+            p = OscillatorParams(zeta=rng.uniform(0.005, 0.2), r=rng.uniform(0.3, 0.95),
+                                 omega=rng.uniform(0.3, 2.5))
+        except ParameterError:
+            continue
+        gains = rng.choice([None, Gains(rng.uniform(-2, 2), rng.uniform(-2, 0.5)),
+                            Gains(rng.uniform(-2, 2), rng.uniform(-2, 0.5), rng.uniform(0, 2))])
+        key = (p.zeta, p.r, p.omega, p.tau0, p.pi2_offset)
+        for sign in (-1.0, 1.0):
+            for rounding in (False, True):
+                out = {}
+                pair = (("baseline", base), ("this", orbits))
+                for name, module in pair if count % 2 == 0 else pair[::-1]:
+                    t0 = time.process_time()
+                    out[name] = module._branch_scan.__wrapped__(key, gains, sign, rounding)
+                    cpu[name] += time.process_time() - t0
+                same += repr(out["baseline"]) == repr(out["this"])
+                count += 1
+    print(f"_branch_scan: {count} scans, CPU baseline {cpu['baseline']:.2f} s, this "
+          f"{cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; the same scans "
+          f"float for float: {same} of {count}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
