@@ -22,7 +22,7 @@ from grazing_control.dynamics.identification.initial import (arx, find_impacts, 
                                                            refine_impact_times)
 from grazing_control.dynamics.identification.model import forced_response, free_flight
 from grazing_control.dynamics.identification.phase import PhaseError, fit_phase
-from grazing_control.oscillator.flow import particular, propagate, to_deviation, to_physical
+from grazing_control.oscillator.flow import particular, propagate, to_physical
 from grazing_control.oscillator.control import Gains
 from grazing_control.oscillator.params import OscillatorParams
 
