@@ -14,11 +14,14 @@ orbits.py is loaded beside this tree's.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import random
 import sys
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import baseline_module  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -30,12 +33,7 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", type=Path, required=True)
     ap.add_argument("--models", type=int, default=60)
     args = ap.parse_args(argv)
-    spec = importlib.util.spec_from_file_location(
-        "grazing_control.dynamics.orbits._baseline_orbits",
-        args.baseline / "grazing_control" / "dynamics" / "orbits" / "orbits.py")
-    base = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = base
-    spec.loader.exec_module(base)
+    base = baseline_module.load(args.baseline, "grazing_control.dynamics.orbits.orbits")
     rng = random.Random(3)
     cpu = {"baseline": 0.0, "this": 0.0}
     same = count = 0
@@ -58,9 +56,7 @@ def main(argv=None) -> int:
                     cpu[name] += time.process_time() - t0
                 same += repr(out["baseline"]) == repr(out["this"])
                 count += 1
-    print(f"_branch_scan: {count} scans, CPU baseline {cpu['baseline']:.2f} s, this "
-          f"{cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; the same scans "
-          f"float for float: {same} of {count}")
+    baseline_module.report("_branch_scan", count, "scans", cpu, same, "scans")
     return 0
 
 

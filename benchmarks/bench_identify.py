@@ -20,7 +20,6 @@ chains (two masses, kicked, T/200).
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 import time
 from pathlib import Path
@@ -29,29 +28,20 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import baseline_module  # noqa: E402
 
 PACKAGE = "grazing_control.dynamics.identification"
 
 
-def _load(root: Path, name: str):
-    """The baseline's ``name``.py of the identification package, as a module of the
-    package (its relative imports are this tree's siblings)."""
-    spec = importlib.util.spec_from_file_location(
-        f"{PACKAGE}._baseline_{name}", root / "grazing_control" / "dynamics" /
-        "identification" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def baseline(root: Path):
     """(fit, modal_fit) of the baseline, wired to its own initial guess and fit."""
-    initial = _load(root, "initial")
-    fit = _load(root, "fit")
+    initial = baseline_module.load(root, f"{PACKAGE}.initial")
+    fit = baseline_module.load(root, f"{PACKAGE}.fit")
     fit.initial_guess = initial.initial_guess
     fit.find_impacts = initial.find_impacts
-    modal_fit = _load(root, "modal_fit")
+    modal_fit = baseline_module.load(root, f"{PACKAGE}.modal_fit")
     for name in ("coloured_jacobian", "interior", "check_size"):
         if hasattr(modal_fit, name):
             setattr(modal_fit, name, getattr(fit, name))

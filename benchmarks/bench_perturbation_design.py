@@ -14,21 +14,14 @@ condition set and ZDM order is run by both, in turn first, on a scan of 121 poin
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import random
 import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-def _baseline(root: Path):
-    spec = importlib.util.spec_from_file_location(
-        "grazing_control.dynamics.maps._baseline_perturbation",
-        root / "grazing_control" / "dynamics" / "maps" / "perturbation.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+import baseline_module  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -39,7 +32,7 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", type=Path, required=True)
     ap.add_argument("--models", type=int, default=60)
     args = ap.parse_args(argv)
-    base = _baseline(args.baseline)
+    base = baseline_module.load(args.baseline, "grazing_control.dynamics.maps.perturbation")
     rng = random.Random(5)
     cpu = {"baseline": 0.0, "this": 0.0}
     same = count = 0
@@ -65,9 +58,7 @@ def main(argv=None) -> int:
             cpu[name] += time.process_time() - t0
         same += out["baseline"] == out["this"]
         count += 1
-    print(f"admissible_c2_perturbation: {count} models, CPU baseline {cpu['baseline']:.2f} s, "
-          f"this {cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; the same "
-          f"sets float for float: {same} of {count}")
+    baseline_module.report("admissible_c2_perturbation", count, "models", cpu, same, "sets")
     return 0
 
 

@@ -14,7 +14,6 @@ sampled_impacts.py is loaded beside this tree's.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 import time
 from pathlib import Path
@@ -22,6 +21,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import baseline_module  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -33,11 +35,8 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", type=Path, required=True)
     ap.add_argument("--scenes", type=int, default=20)
     args = ap.parse_args(argv)
-    spec = importlib.util.spec_from_file_location(
-        "baseline_sampled_impacts", args.baseline / "grazing_control" / "dynamics" /
-        "estimation" / "sampled_impacts.py")
-    base = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(base)
+    base = baseline_module.load(args.baseline,
+                                "grazing_control.dynamics.estimation.sampled_impacts")
     rng = np.random.default_rng(32)
     cpu = {"baseline": 0.0, "this": 0.0}
     same = 0
@@ -51,9 +50,7 @@ def main(argv=None) -> int:
             cpu[name] += time.process_time() - t0
         same += out["baseline"].shape == out["this"].shape and bool(
             np.array_equal(out["baseline"], out["this"]))
-    print(f"impacts_from_samples: {args.scenes} scenes, CPU baseline {cpu['baseline']:.2f} s, "
-          f"this {cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; the same "
-          f"times float for float: {same} of {args.scenes}")
+    baseline_module.report("impacts_from_samples", args.scenes, "scenes", cpu, same, "times")
     return 0
 
 
