@@ -29,3 +29,19 @@ def report(label: str, count: int, unit: str, cpu: dict, same: int, what: str) -
     print(f"{label}: {count} {unit}, CPU baseline {cpu['baseline']:.2f} s, this "
           f"{cpu['this']:.2f} s, ratio {cpu['baseline'] / cpu['this']:.2f}; the same {what} "
           f"float for float: {same} of {count}")
+
+
+def random_oscillator(rng, with_delta_d: bool = False):
+    """A seeded random oscillator of the design and orbit benchmarks (zeta 0.005-0.2,
+    r 0.3-0.95, omega 0.3-2.5; with ``with_delta_d`` Delta d of 0, -1e-5, 1e-4 or -0),
+    or None where the parameters are refused."""
+    from grazing_control.oscillator.params import OscillatorParams, ParameterError
+
+    values = dict(zeta=rng.uniform(0.005, 0.2), r=rng.uniform(0.3, 0.95),
+                  omega=rng.uniform(0.3, 2.5))
+    if with_delta_d:
+        values["delta_d"] = rng.choice([0.0, -1e-5, 1e-4, -0.0])
+    try:
+        return OscillatorParams(**values)
+    except ParameterError:
+        return None

@@ -27,7 +27,6 @@ import baseline_module  # noqa: E402
 def main(argv=None) -> int:
     from grazing_control.dynamics.orbits import orbits
     from grazing_control.oscillator.control import Gains
-    from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", type=Path, required=True)
@@ -38,10 +37,8 @@ def main(argv=None) -> int:
     cpu = {"baseline": 0.0, "this": 0.0}
     same = count = 0
     for i in range(args.models):
-        try:
-            p = OscillatorParams(zeta=rng.uniform(0.005, 0.2), r=rng.uniform(0.3, 0.95),
-                                 omega=rng.uniform(0.3, 2.5))
-        except ParameterError:
+        p = baseline_module.random_oscillator(rng)
+        if p is None:
             continue
         gains = rng.choice([None, Gains(rng.uniform(-2, 2), rng.uniform(-2, 0.5)),
                             Gains(rng.uniform(-2, 2), rng.uniform(-2, 0.5), rng.uniform(0, 2))])

@@ -26,7 +26,6 @@ import baseline_module  # noqa: E402
 
 def main(argv=None) -> int:
     from grazing_control.dynamics.maps import perturbation
-    from grazing_control.oscillator.params import OscillatorParams, ParameterError
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", type=Path, required=True)
@@ -37,11 +36,8 @@ def main(argv=None) -> int:
     cpu = {"baseline": 0.0, "this": 0.0}
     same = count = 0
     for i in range(args.models):
-        try:
-            p = OscillatorParams(zeta=rng.uniform(0.005, 0.2), r=rng.uniform(0.3, 0.95),
-                                 omega=rng.uniform(0.3, 2.5),
-                                 delta_d=rng.choice([0.0, -1e-5, 1e-4, -0.0]))
-        except ParameterError:
+        p = baseline_module.random_oscillator(rng, with_delta_d=True)
+        if p is None:
             continue
         delay = rng.choice([0.0, 0.0, rng.uniform(0, 1.0)])
         conditions = rng.choice(["combined", "impacting", "non-impacting"])
