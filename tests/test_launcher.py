@@ -373,10 +373,30 @@ def _processes_mentioning(text: str) -> list:
     return found
 
 
+def _nodes_of_launcher(pid: int) -> list:
+    """(PID, command line) of the live processes started by the launcher ``pid``: those
+    whose environment at exec holds GRAZING_LAUNCHER_PID=pid (launcher.py sets it for
+    every node it starts; /proc/N/environ keeps it after the bootstrap pops it)."""
+    mark = f"GRAZING_LAUNCHER_PID={pid}".encode()
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/environ", "rb") as f:
+                    if mark in f.read().split(b"\0"):
+                        with open(f"/proc/{entry}/cmdline", "rb") as c:
+                            found.append((int(entry), c.read().replace(b"\0", b" ")[:160]))
+            except OSError:
+                pass
+    return found
+
+
 def test_nodes_stop_and_the_bag_closes_when_the_launcher_is_killed(tmp_path):
     """SIGKILL to `grazing run` (no chance to stop its nodes): every node gets SIGTERM from
     the kernel (PR_SET_PDEATHSIG, set by the bootstrap after exec), ends, and the recorder
-    closes its bag (metadata.yaml written)."""
+    closes its bag (metadata.yaml written). Every node the launcher started is waited for,
+    not only the recorder (a simulator still ending at the test's end was left to the
+    teardown's cleanup once, on a slow host)."""
     bag = tmp_path / "bag"
     proc = grazing("run", "--periods", "1000000", "--bag", str(bag), "--log-dir",
                    str(tmp_path / "logs"), start_new_session=True)
@@ -385,11 +405,13 @@ def test_nodes_stop_and_the_bag_closes_when_the_launcher_is_killed(tmp_path):
         time.sleep(0.05)
     time.sleep(1.0)
     assert _processes_mentioning(str(bag)), "the recorder is not running"
+    assert len(_nodes_of_launcher(proc.pid)) == 3, _nodes_of_launcher(proc.pid)
     proc.kill()
     proc.communicate(timeout=30)
     end = time.monotonic() + 20
-    while _processes_mentioning(str(bag)) and time.monotonic() < end:
+    while _nodes_of_launcher(proc.pid) and time.monotonic() < end:
         time.sleep(0.1)
+    assert not _nodes_of_launcher(proc.pid)
     assert not _processes_mentioning(str(bag))
     assert (bag / "metadata.yaml").is_file()
 
