@@ -215,10 +215,7 @@ def _delta_d_rounding(p: OscillatorParams, psi: float, gains: Gains | None = Non
     if not math.isfinite(dd):
         return math.inf
     if factors is None:
-        theta = (p.tau_star + psi) % TWO_PI
-        s = ((p.tau2 - theta) % TWO_PI) / p.omega
-        factors = (transition_matrix(p.zeta, p.period - s), gain_matrix(gains, p.zeta),
-                   transition_matrix(p.zeta, s))
+        factors = _scan_point(p, psi, gains)[1]
     (q11, q12, q21, q22), (g11, g12, g21, g22), (p11, p12, p21, p22) = factors
     q11, q12, q21, q22 = abs(q11), abs(q12), abs(q21), abs(q22)
     g11, g12, g21, g22 = abs(g11), abs(g12), abs(g21), abs(g22)
@@ -279,14 +276,17 @@ def _branch_scan(oscillator: tuple, gains, sign: float, rounding: bool) -> tuple
     return tuple(out)
 
 
-def _scan_point(p: OscillatorParams, psi: float, gains, g):
+def _scan_point(p: OscillatorParams, psi: float, gains, g=None):
     """(:func:`wall_offset_at_phase`, (Phi(T - s), G, Phi(s))) at psi, the same floats
     with each transition matrix formed once for both the point and its rounding bound
-    (``g``: gain_matrix(gains, zeta), the same at every point of a scan)."""
+    (``g``: gain_matrix(gains, zeta), the same at every point of a scan; None: formed
+    here, after the delay is checked)."""
     theta = (p.tau_star + psi) % TWO_PI
     s = ((p.tau2 - theta) % TWO_PI) / p.omega
     if gains is not None and gains.delay != 0.0 and not gains.delay < p.period - s:
         return (math.nan, math.nan, (math.nan,) * 4), None
+    if g is None:
+        g = gain_matrix(gains, p.zeta)
     q, ph = transition_matrix(p.zeta, p.period - s), transition_matrix(p.zeta, s)
     # period_matrix's product, or Phi(T) itself uncontrolled (impact_period_matrix)
     m = transition_matrix(p.zeta, p.period) if gains is None else matmul2(q, matmul2(g, ph))
