@@ -261,6 +261,43 @@ def test_a_long_stall_still_trips_the_watchdog_on_the_lag():
     assert not sink.misses
 
 
+def test_short_stalls_spread_over_a_run_never_add_up_to_a_lag():
+    """Held 3 ms after every other sample: 0.12 s of pauses in all over 80 samples, at
+    pace 0.86, each deadline kept. The lag counts a sample's pauses since the previous
+    one, not the run's: no trip at watchdog_lag 0.1 s, where all of the pauses summed
+    would have tripped at sample 67 (a time_scale 1 scene: 464 pauses of ~1 ms, 1.117 s,
+    over 50 periods that kept pace). The same 0.12 s in one stall trips at once."""
+    spread = {k: 3e-3 for k in range(0, N, 2)}
+    loop, sink = run(spread, watchdog_misses=0, watchdog_lag=0.1)
+    assert loop.watchdog.tripped is None and not sink.misses
+    assert loop.paused == pytest.approx(sum(spread.values()), abs=1e-9) and loop.paused > 0.1
+    loop, sink = run({40: 0.12}, watchdog_misses=0, watchdog_lag=0.1)
+    trip = loop.watchdog.tripped
+    assert trip is not None and trip.kind == "lag" and trip.k == 41, trip
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_lag_trips_at_the_first_stall_longer_than_the_limit(seed):
+    """Seeded random stalls (2-104 ms, after a random quarter of the samples: 0.8-1.2 s
+    of pauses in all, 5 of the 12 seeds without one over 0.1 s), pace and misses off: the
+    watchdog trips on the lag at the sample after the first stall longer than
+    watchdog_lag 0.1 s (brute force over the pattern), never otherwise; every stall is
+    paused exactly."""
+    rng = np.random.default_rng(seed)
+    ks = sorted(rng.choice(np.arange(1, N - 2), size=N // 4, replace=False))
+    stalls = {int(k): float(s) for k, s in zip(ks, rng.uniform(0.002, 0.104, len(ks)))}
+    loop, sink = run(stalls, watchdog_misses=0, watchdog_pace=0.0, watchdog_lag=0.1)
+    first = next((k for k in ks if stalls[k] > 0.1), None)
+    trip = loop.watchdog.tripped
+    if first is None:
+        assert trip is None
+    else:
+        assert trip is not None and trip.kind == "lag" and trip.k == first + 1, (trip, first)
+        assert f"sample {first + 1} went out {stalls[first]:.3g} s" in trip.reason
+    paused = sum(s for k, s in stalls.items() if first is None or k <= first)
+    assert loop.paused == pytest.approx(paused, abs=1e-9)
+
+
 def test_stalls_again_and_again_trip_the_watchdog_on_the_pace():
     """A simulator held 10 ms at every sample (a period is 9.4 ms at x1000) runs at half
     the pace with its plant paused: the watchdog trips on the pace at its first window."""

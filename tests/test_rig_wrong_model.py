@@ -75,6 +75,24 @@ def test_off_grid_commands_act_at_their_apply_times_exactly(scene):
     assert acting >= 0.75 * (PERIODS - ON - 1)        # the corrections act
 
 
+#: Sections after a deadline missed before the orbit is judged again: a missed command
+#: (the rig then applies the controller's predicted correction, worse under the wrong
+#: model) kicks the motion to 0.045 of X**, and the loop brings it back at a factor 0.87
+#: a period, under 0.03 seven sections on (measured: a suite run on a loaded host missed
+#: sections 7, 22 and 36, answers 18-36 ms after their samples against 9-20 ms budgets:
+#: departures 0.036, 0.045, 0.045, 0.042, 0.038, 0.033, 0.029 after the first).
+SETTLE = 8
+
+
+def _missed_sections(rig, m):
+    """The sections whose command did not act in time (a /rig/applied record flagged
+    predicted or nothing, force.z != 0), by index: the record's section (torque.y, rig
+    time) from the first /rig/phase stamp (the rig time of sample 0), in periods."""
+    T, t0 = rig.forcing_period, _seconds(m["/rig/phase"][0][1].header.stamp)
+    return sorted(round((a.wrench.torque.y - t0) / T) for _, a in m["/rig/applied"]
+                  if a.wrench.force.z != 0.0)
+
+
 @pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
 def test_the_wrong_model_holds_the_orbit_near_the_exact_one(scene):
     """The controlled 1/1 orbit of the rig's own model (X** on Pi2, one impact a
@@ -84,20 +102,40 @@ def test_the_wrong_model_holds_the_orbit_near_the_exact_one(scene):
     impact velocity 0.0049 against the orbit's 0.0144); at 200 periods (grazing analyze) 3.6e-5 m from the
     orbit at the end and a spread of 4.1e-5 m, against 1.4e-7 m and 4.9e-7 m with the
     right model: its estimator's fit fails every period (model_resets), as the χ² test
-    of its own model says."""
+    of its own model says.
+
+    The hold is the model's where its corrections act: the samples judged are those of
+    the last 27 periods whose previous SETTLE sections all acted in time (every one on
+    a machine that keeps the budget; a stall of the machine that misses a deadline
+    takes the SETTLE after it out), at least 10 of them."""
     rig, res, m = scene
     p = rig.params()
     pi2 = [(_seconds(msg.header.stamp), msg.position[0], msg.velocity[0])
            for _, msg in m["/oscillator/pi2"]]
     t, x, v = np.array(pi2).T
     dep = np.hypot(x - p.x_ref, v - p.v_ref)
-    assert dep[ON + 10:].max() < 0.03, dep
+    missed = _missed_sections(rig, m)
+    judged = [k for k in range(ON + 10, len(t)) if not any(k - SETTLE <= j < k for j in missed)]
+    assert len(judged) >= 10, (missed, judged)
+    assert dep[judged].max() < 0.03, (missed, dep)
     hits = np.array([_seconds(msg.header.stamp) for _, msg in m["/oscillator/impact"]])
-    per = [int(((hits > a) & (hits <= b)).sum()) for a, b in zip(t[-11:-1], t[-10:])]
-    print("departure", dep[-10:].max(), "impacts", per)
+    per = [int(((hits > t[k - 1]) & (hits <= t[k])).sum()) for k in judged[-10:]]
+    print("departure", dep[judged].max(), "impacts", per, "missed", missed)
     assert set(per) <= {0, 1} and sum(per) >= 5, per      # no chatter, mostly 1/1
     ctl = _summary(res.logs["controller_node"], r"\b(model_resets|answered)=(\d+)")
     assert ctl["model_resets"] >= PERIODS - ON - 2       # the wrong model's fit fails
+
+
+def test_the_missed_sections_are_read_from_the_rigs_applied_records():
+    """_missed_sections on records built by hand: the flagged ones, by section index."""
+    from types import SimpleNamespace as NS
+
+    rig = NS(forcing_period=0.075)
+    rec = lambda ty, z: (0, NS(wrench=NS(torque=NS(y=ty), force=NS(z=z))))
+    m = {"/rig/applied": [rec(1000.044, 2.0), rec(1000.119, 0.0), rec(1000.569, 1.0),
+                          rec(1001.693, 1.0), rec(1001.768, 0.0)],
+         "/rig/phase": [(0, NS(header=NS(stamp=NS(sec=1000, nanosec=44_000_000))))]}
+    assert _missed_sections(rig, m) == [0, 7, 22]
 
 
 MASSES = Path(__file__).resolve().parents[1] / "config" / "rigs" / "two_mass_beam.yaml"

@@ -87,7 +87,7 @@ class Realtime(Loop):
     #: the CPU time of the calling thread, seconds (a wake-up's work against its held time)
     cpu_clock = staticmethod(time.thread_time)
     paused = 0.0       # wall s the plant's clock has paused in all
-    paused_base = 0.0  # paused at the last reset or rebase (the watchdog's lag since)
+    paused_base = 0.0  # paused when the last Pi2 sample went out (the watchdog's lag since)
     longest_pause = 0.0
 
     def __init__(self, *args, **kwargs):
@@ -142,8 +142,8 @@ class Realtime(Loop):
         its clock pauses for the lateness, wall0 moves on by it, and the simulation time
         at ``wall`` is that of the wake-up asked for. The pause is counted
         (``stats['paused']``, :attr:`paused` in all, :attr:`longest_pause`) and stays in
-        the watchdog's lag (:meth:`publish_sample`), and the pace the watchdog and the
-        diagnostics read falls by it. Without it the stall would be charged to the loop:
+        the watchdog's lag of the next Pi2 sample (:meth:`publish_sample`), and the pace
+        the watchdog and the diagnostics read falls by it. Without it the stall would be charged to the loop:
         the samples due in it go out at once, late, and a deadline in it passes before
         its sample's answer can come (docs/nodes.md, "A stall of the simulator").
         ``stall_pause`` 0: never (the plant's clock is the wall clock). Returns the
@@ -271,8 +271,12 @@ class Realtime(Loop):
         if self._deviation and engine.p is not self._scaled:   # the model (Delta d) changed
             self._scaled = engine.p
             self.watchdog.scale = excursion_scale(engine.p)
-        # the watchdog's lag is against the wall clock: the plant's pauses count there
-        self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag + self.paused - self.paused_base,
+        # the watchdog's lag is against the wall clock: the plant's pauses since the last
+        # sample count there (one stall of the simulator, however many wake-ups it was
+        # cut into); pauses spread over a long run are the pace's to judge, not the lag's
+        # (docs/nodes.md, "A stall of the simulator")
+        held, self.paused_base = self.paused - self.paused_base, self.paused
+        self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag + held,
                                        self.settings.time_scale,
                                        (engine.dx, engine.dv) if self._deviation else None))
         if self.finished:

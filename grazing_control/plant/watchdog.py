@@ -19,7 +19,12 @@ sim_node's parameters ``watchdog_*``, :data:`grazing_control.plant.settings.PARA
   later and catches up in bursts at the rate it sustains: this ratio is that rate over
   the requested one.
 * **lag**: a sample went out more than ``lag`` wall seconds after its simulation time
-  (one stall of the process, or the accumulated lag of a slow pace).
+  (one stall of the process, or the accumulated lag of a slow pace on the wall clock).
+  The realtime loop hands in the sample's lag with the plant's pauses since the previous
+  sample added (:meth:`grazing_control.plant.realtime.Realtime.publish_sample`): one
+  stall, however many pauses it was cut into; pauses spread over a long run lower the
+  pace instead (a ``time_scale`` 1 scene paused 464 times, 1.117 s in all, over its 50
+  periods: tripped on the lag when all its pauses counted).
 * **excursion**: while the plant is being corrected (the last ``window`` samples each
   had a non-zero correction applied in time: control is on and past its capture
   transient), the Pi2 state is farther from the grazing point X** than ``excursion``
