@@ -35,7 +35,8 @@ STALL = 8e-3          # longer than the 5 ms from a sample to its deadline at x1
 def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
     """A scheduled scene of n samples at x1000 (delay 5: 5 ms of wall time), controlled
     from sample ON. ``stalls``: {sample k: seconds} held at the first wake-up after
-    sample k went out, beginning half way through the wait; ``held``: "machine" (the
+    sample k went out, beginning half way through the wait (a list: one at each of the
+    first wake-ups after it, "machine" only); ``held``: "machine" (the
     simulator and the controller: an answer not ready by the stall's start is ready that
     much later), "running" (the same, but the stall begins in the wake-up that published
     sample k, right after it went out: the simulator held while it runs) or "controller"
@@ -51,7 +52,7 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
     loop.stall_pause = pause
     cpu = [0.0]                       # the wake-ups' work takes no time on the test's clock
     loop.cpu_clock = lambda: cpu[0]
-    pending, seen, stall = [], 0, None
+    pending, seen, stall, more = [], 0, None, []
     if held == "charged":
         next_sample, slowed, stalls = loop.next_sample, stalls, {}
 
@@ -72,6 +73,8 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
             k = round(ev.t / P.period)
             pending.append([clock.now + 1e-3, key(ev), law(C1, C2, ev) if k >= ON else 0.0])
             stall = stalls.get(k)
+            if isinstance(stall, list):
+                stall, more = stall[0], stall[1:]
         seen = len(sink.samples())
         if stall and held == "running":
             for p in pending:
@@ -88,7 +91,7 @@ def run(stalls, pause=STALL_PAUSE, held="machine", late=0.0, n=N, **kw):
                     p[0] += stall                 # the controller held from ``begins``
             if held == "machine":
                 clock.now += stall
-            stall = None
+            stall = more.pop(0) if more else None
         loop.resume(clock.now)                    # sim_node's wake-up: first the pause,
         for p in [p for p in pending if p[0] <= clock.now]:
             loop.answer(p[1], p[2], arrived=p[0])     # then the answers arrived by now,
@@ -263,10 +266,11 @@ def test_a_long_stall_still_trips_the_watchdog_on_the_lag():
 
 def test_short_stalls_spread_over_a_run_never_add_up_to_a_lag():
     """Held 3 ms after every other sample: 0.12 s of pauses in all over 80 samples, at
-    pace 0.86, each deadline kept. The lag counts a sample's pauses since the previous
-    one, not the run's: no trip at watchdog_lag 0.1 s, where all of the pauses summed
-    would have tripped at sample 67 (a time_scale 1 scene: 464 pauses of ~1 ms, 1.117 s,
-    over 50 periods that kept pace). The same 0.12 s in one stall trips at once."""
+    pace 0.86, each deadline kept. The lag counts a sample's longest pause since the
+    previous one, not the run's pauses: no trip at watchdog_lag 0.1 s, where all of the
+    pauses summed would have tripped at sample 67 (a time_scale 1 scene: 464 pauses of
+    ~1 ms, 1.117 s, over 50 periods that kept pace). The same 0.12 s in one stall trips
+    at once."""
     spread = {k: 3e-3 for k in range(0, N, 2)}
     loop, sink = run(spread, watchdog_misses=0, watchdog_lag=0.1)
     assert loop.watchdog.tripped is None and not sink.misses
@@ -274,6 +278,17 @@ def test_short_stalls_spread_over_a_run_never_add_up_to_a_lag():
     loop, sink = run({40: 0.12}, watchdog_misses=0, watchdog_lag=0.1)
     trip = loop.watchdog.tripped
     assert trip is not None and trip.kind == "lag" and trip.k == 41, trip
+
+
+def test_many_pauses_in_one_period_are_not_one_stall():
+    """Held 30 ms at each of ten wake-ups after sample 40 (0.3 s of pauses within one
+    period, as a loaded time_scale 1 scene's 9.4 s periods gather up to 1.5 s of pauses
+    of at most 43 ms): no stall beyond watchdog_lag 0.1 s, no trip; each is paused."""
+    loop, sink = run({40: [30e-3] * 10}, watchdog_misses=0, watchdog_pace=0.0,
+                     watchdog_lag=0.1)
+    assert loop.watchdog.tripped is None and not sink.misses
+    assert loop.stats["paused"] == 10 and loop.paused == pytest.approx(0.3, abs=1e-9)
+    assert loop.longest_pause == pytest.approx(30e-3, abs=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(12))

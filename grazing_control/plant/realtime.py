@@ -87,7 +87,7 @@ class Realtime(Loop):
     #: the CPU time of the calling thread, seconds (a wake-up's work against its held time)
     cpu_clock = staticmethod(time.thread_time)
     paused = 0.0       # wall s the plant's clock has paused in all
-    paused_base = 0.0  # paused when the last Pi2 sample went out (the watchdog's lag since)
+    stall = 0.0        # the longest pause since the last Pi2 sample (the watchdog's lag)
     longest_pause = 0.0
 
     def __init__(self, *args, **kwargs):
@@ -142,7 +142,8 @@ class Realtime(Loop):
         its clock pauses for the lateness, wall0 moves on by it, and the simulation time
         at ``wall`` is that of the wake-up asked for. The pause is counted
         (``stats['paused']``, :attr:`paused` in all, :attr:`longest_pause`) and stays in
-        the watchdog's lag of the next Pi2 sample (:meth:`publish_sample`), and the pace
+        the watchdog's lag of the next Pi2 sample when it is the longest since the last
+        one (:meth:`publish_sample`), and the pace
         the watchdog and the diagnostics read falls by it. Without it the stall would be charged to the loop:
         the samples due in it go out at once, late, and a deadline in it passes before
         its sample's answer can come (docs/nodes.md, "A stall of the simulator").
@@ -193,6 +194,7 @@ class Realtime(Loop):
         self.wall0 += seconds
         self.paused += seconds
         self.longest_pause = max(self.longest_pause, seconds)
+        self.stall = max(self.stall, seconds)
         self.stats["paused"] = self.stats.get("paused", 0) + 1
         self.sink.paused(self.published, seconds)
 
@@ -204,7 +206,7 @@ class Realtime(Loop):
         """After ``engine.reset()``: t = 0 now, and its sample 0 ``ev`` goes out."""
         self.t0, self.wall0 = 0.0, self.clock()
         self.published = 0.0
-        self.expected, self.began, self.paused_base = None, None, self.paused
+        self.expected, self.began, self.stall = None, None, 0.0
         self.finished = False
         self.schedule.clear()
         self.rel = self.offset = self.late_prediction = None
@@ -223,7 +225,7 @@ class Realtime(Loop):
         """Keep the simulation time continuous across a change of time_scale (call it
         before the new settings take effect)."""
         self.t0, self.wall0 = self.now(), self.clock()
-        self.paused_base = self.paused
+        self.stall = 0.0
 
     def publish_sample(self, ev: Event) -> None:
         """Sample k goes out (as measured), then its uncorrected period is integrated (the
@@ -271,11 +273,11 @@ class Realtime(Loop):
         if self._deviation and engine.p is not self._scaled:   # the model (Delta d) changed
             self._scaled = engine.p
             self.watchdog.scale = excursion_scale(engine.p)
-        # the watchdog's lag is against the wall clock: the plant's pauses since the last
-        # sample count there (one stall of the simulator, however many wake-ups it was
-        # cut into); pauses spread over a long run are the pace's to judge, not the lag's
-        # (docs/nodes.md, "A stall of the simulator")
-        held, self.paused_base = self.paused - self.paused_base, self.paused
+        # the watchdog's lag is against the wall clock: the longest pause of the plant
+        # since the last sample counts there (one stall of the simulator); pauses spread
+        # over a run, however many, are the pace's to judge, not the lag's (docs/nodes.md,
+        # "A stall of the simulator")
+        held, self.stall = self.stall, 0.0
         self.trip(self.watchdog.sample(engine.k, ev.t, sent, lag + held,
                                        self.settings.time_scale,
                                        (engine.dx, engine.dv) if self._deviation else None))
