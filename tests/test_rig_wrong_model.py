@@ -22,16 +22,15 @@ from test_rig_scene import RIG, _seconds, _summary, run_rig_scene
 pytestmark = pytest.mark.timeout(240)
 
 PERIODS, ON = 40, 3
-#: At half physical speed: each command has 10 ms of wall time to its apply time (the
-#: budget of 5 ms rig time; the answers take 2-3 ms), and the 40 periods 6 s (28 s for
-#: the scene at the rig scene's 1/8 speed, alone in the realtime group).
-SLOW = 2.0
-#: The one-mass scene at a quarter of physical speed, 20 ms of wall time a command: on a
-#: machine running at half its speed (2026-11-30, a Python loop 2x slower, the suite 14-16
-#: min) its samples went out up to 9.9 ms late and its answers took up to 13.5 ms at half
-#: speed, 4 deadlines missed, and the orbit left the 0.03 band for that (on the commit
-#: before this stop's changes as well): what it checks is the wrong model, not the budget.
-SLOW_ONE = 4.0
+#: Both scenes at a quarter of physical speed, 20 ms of wall time a command (the budget of
+#: 5 ms rig time). At half speed, on a machine running at half its speed (2026-11-30, a
+#: Python loop 2x slower, the suite 14-17 min): the one-mass scene's samples went out up
+#: to 9.9 ms late and its answers took up to 13.5 ms, 4 deadlines missed, and the orbit
+#: left the 0.03 band for that; the two-mass scene missed 8 of 11 in a suite (answers
+#: 8-19 ms after their samples, p99 45 ms) and 1 alone at idle (p99 16.8 ms), and 0 in 3
+#: runs at a quarter (alone, and beside three busy processes). What they check is the
+#: wrong model and the analysis of what acted, not the budget.
+SLOW = 4.0
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +43,7 @@ def scene(tmp_path_factory):
     topics = ("/rig/phase", "/rig/force_pulse", "/rig/applied", "/oscillator/pi2",
               "/oscillator/impact")
     return run_rig_scene(out, RIG, PERIODS, ON, topics, {"rig_file": str(wrong)},
-                         slow=SLOW_ONE)
+                         slow=SLOW)
 
 
 @pytest.mark.realtime      # one scene, its answers in time: with the other worker idle
@@ -140,7 +139,7 @@ def test_the_missed_sections_are_read_from_the_rigs_applied_records():
 
 MASSES = Path(__file__).resolve().parents[1] / "config" / "rigs" / "two_mass_beam.yaml"
 #: The two-mass scene: as tests/test_rig_masses_scene.py's (the sensor at 500 Hz with
-#: 0.2 um of noise, half of physical speed: 12 periods of 0.25 s take 6 s of wall time).
+#: 0.2 um of noise), at a quarter of physical speed: 12 periods of 0.25 s take 12 s.
 M_PERIODS, M_ON = 12, 3
 
 
