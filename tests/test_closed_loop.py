@@ -386,12 +386,15 @@ def _child_node(parent: int, module: str) -> int | None:
     return None
 
 
-def test_a_scene_whose_controller_is_killed_says_the_summary_it_logged(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_scene_whose_controller_is_killed_says_the_summary_it_logged(tmp_path, sig):
     """SIGKILL to the controller of a realtime stream scene in blocks (`grazing run`): the
     simulator stops, logs its summary marked '(interrupted)', waits (up to 2 s) for the
     acknowledgements of a reader that is gone, and grazing run's last line says the pace
     of the line it logged, not that of the scene plus that wait (75.3 periods/s of a
-    scene whose summary said 104.2, 2026-11-30).
+    scene whose summary said 104.2, 2026-11-30). SIGTERM: the controller stops cleanly
+    (status 0), and the scene still fails, naming it (it said "scene finished", status 0,
+    for 0 of 3000 periods, 2026-11-30).
 
     The scene starts whatever the host's feasibility check finds (``feasibility:=warn``:
     what is checked here does not depend on keeping pace), and the kill waits for the
@@ -416,13 +419,15 @@ def test_a_scene_whose_controller_is_killed_says_the_summary_it_logged(tmp_path)
         time.sleep(2.0)
         pid = _child_node(proc.pid, "grazing_control.ros.controller_node")
         assert pid is not None, log.read_text() if log.exists() else "no sim_node.log"
-        os.kill(pid, signal.SIGKILL)
+        os.kill(pid, sig)
         out, _ = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
     last = out.strip().splitlines()[-1]
-    assert proc.returncode == 1 and "controller_node=-9" in last, out
+    status = -9 if sig == signal.SIGKILL else 0
+    assert proc.returncode == 1 and f"controller_node={status}" in last, out
+    assert f"reason: controller_node exited early with status {status}" in last, last
     logged = next(line for line in log.read_text().splitlines()
                   if "summary:" in line and "(interrupted)" in line)
     rate = logged.split(" rate=")[1].split()[0]

@@ -73,6 +73,18 @@ def test_a_failed_scenes_reason_quotes_the_nodes_last_error(tmp_path):
         "controller_node exited early with status 1; sim_node exited with status 2")
 
 
+def test_a_node_that_left_before_the_simulator_fails_the_scene_whatever_its_status():
+    """A controller stopped by a SIGTERM of its own exits 0, and the simulator, stopped
+    with it, exits 0 too: the scene is not ok (status 1), and the reason names the node
+    that left early."""
+    res = launcher.RunResult(sim=0, controller=0, recorder=0, bag_dir=None, wall=4.0)
+    assert res.ok and res.exit_code == 0
+    res.early = ("controller_node",)
+    assert not res.ok and res.exit_code == 1 and str(res).startswith("scene failed in 4.0 s")
+    assert launcher.failure_reason(res, res.early) == (
+        "controller_node exited early with status 0")
+
+
 def test_the_last_line_says_the_simulators_numbers_misses_and_pauses_included():
     """The scene's line carries what the simulator's summary says (its verdict): the
     periods and their pace, the corrections applied, missed and late, and the plant's

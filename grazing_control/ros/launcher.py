@@ -120,6 +120,7 @@ class RunResult:
     reason: str | None = None          # why the scene failed, one line (None when ok)
     sim_verdict: dict | None = None    # sim_node's verdict_file: status, reason, summary,
     #                                    watchdog trip, feasibility verdict
+    early: tuple = ()                  # the nodes that left before the simulator was done
 
     def __str__(self) -> str:
         state = ("timed out" if self.timed_out else "interrupted" if self.interrupted
@@ -148,11 +149,14 @@ class RunResult:
 
     @property
     def ok(self) -> bool:
-        """The simulator finished and every node exited with status 0."""
+        """The simulator finished, no node left before it (a controller stopped by a
+        SIGTERM of its own exits 0, and the simulator, stopped with it, exits 0 with its
+        summary marked '(interrupted)': a scene of 0 of 3000 periods, said "finished"
+        with status 0 before), and every node exited with status 0."""
         codes = [self.sim, self.controller] + ([self.recorder] if self.recorder is not None
                                                else [])
         codes += [self.live] if self.live is not None else []
-        return (not (self.timed_out or self.interrupted or self.lost)
+        return (not (self.timed_out or self.interrupted or self.lost or self.early)
                 and all(c == 0 for c in codes))
 
 
@@ -695,7 +699,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                     bag_dir=os.fspath(bag_dir) if record else None,
                     wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
                     logs=logs, domain_id=domain_id, live=code("live_node"),
-                    sim_verdict=verdict, lost=lost)
+                    sim_verdict=verdict, lost=lost, early=tuple(early))
     res.reason = None if res.ok else failure_reason(res, early, timeout)
     return res
 
