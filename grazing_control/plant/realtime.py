@@ -143,9 +143,9 @@ class Realtime(Loop):
         at ``wall`` is that of the wake-up asked for. The pause is counted
         (``stats['paused']``, :attr:`paused` in all, :attr:`longest_pause`) and stays in
         the watchdog's lag of the next Pi2 sample when it is the longest since the last
-        one (:meth:`publish_sample`), and the pace
-        the watchdog and the diagnostics read falls by it. Without it the stall would be charged to the loop:
-        the samples due in it go out at once, late, and a deadline in it passes before
+        one (:meth:`publish_sample`), and the pace the watchdog and the diagnostics read
+        falls by it. Without it the stall would be charged to the loop: the samples due
+        in it go out at once, late, and a deadline in it passes before
         its sample's answer can come (docs/nodes.md, "A stall of the simulator").
         ``stall_pause`` 0: never (the plant's clock is the wall clock). Returns the
         pause, wall seconds (0.0: none)."""

@@ -700,7 +700,7 @@ def run(sim_params=None, controller_params=None, bag_dir=None, periods: int | No
                     wall=time.monotonic() - t0, timed_out=timed_out, interrupted=interrupted,
                     logs=logs, domain_id=domain_id, live=code("live_node"),
                     sim_verdict=verdict, lost=lost, early=tuple(early))
-    res.reason = None if res.ok else failure_reason(res, early, timeout)
+    res.reason = None if res.ok else failure_reason(res, timeout=timeout)
     return res
 
 

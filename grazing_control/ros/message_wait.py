@@ -28,7 +28,6 @@ def wait_for_messages(subscriptions, context, timeout: float) -> bool:
     objects of ``context``) or ``timeout`` seconds have passed (<= 0: look and return at
     once). True where one is ready. A subscription destroyed meanwhile is left out; none
     left (or a context shut down): False at once."""
-    subscriptions = list(subscriptions)
     with ExitStack() as stack:
         handles = []
         for sub in subscriptions:

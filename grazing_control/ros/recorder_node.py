@@ -300,8 +300,9 @@ class RecorderNode(Node):
             self._watch_timer.cancel()
 
     def watch_due(self) -> float:
-        """Seconds until the topic watch (:meth:`_watch`) is due (<= 0: due now)."""
-        due = None if self._watch_timer.is_canceled() else self._watch_timer.time_until_next_call()
+        """Seconds until the topic watch (:meth:`_watch`) is due (<= 0: due now;
+        SIGNAL_POLL once it has stopped: a cancelled timer has no next call)."""
+        due = self._watch_timer.time_until_next_call()
         return SIGNAL_POLL if due is None else due * 1e-9
 
     def _declare_parameters(self):

@@ -25,11 +25,14 @@ def read_verdict(path: Path):
     return obj if isinstance(obj, dict) else None
 
 
-def failure_reason(res, early=(), timeout=None) -> str:
+def failure_reason(res, early=None, timeout=None) -> str:
     """Why the scene ``res`` (a ``launcher.RunResult``) failed, in one line: the
     simulator's own reason (the watchdog's trip, the feasibility refusal, a stopped
     simulation: its verdict_file), else what the launcher saw (a timeout, an
-    interruption, a node that left early or failed, with its last error line)."""
+    interruption, a node that left early or failed, with its last error line).
+    ``early``: the nodes that left early (default: ``res.early``)."""
+    if early is None:
+        early = getattr(res, "early", ())
     parts = []
     verdict = res.sim_verdict or {}
     if verdict.get("reason") and res.sim != 0:
