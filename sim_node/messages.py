@@ -59,6 +59,10 @@ def read_answer(data: bytes):
     return (sec, nanosec), dv, predicted
 
 
+#: The verdict file lists the first this many missed deadlines (sample, actuation time).
+MISSES_KEPT = 100
+
+
 class Outputs:
     """The loops' sink (:class:`grazing_control.plant.loop.Sink`): topics and log lines."""
 
@@ -71,6 +75,10 @@ class Outputs:
         self.misses = Throttled(log, "deadline missed: no correction at the actuation time, "
                                      "none applied")
         self.late = Throttled(log, "answer after its deadline dropped")
+        # for the verdict file: which deadlines were missed (the log is throttled), and
+        # the longest pause of the plant's clock with its simulation time
+        self.missed: list[dict] = []
+        self.longest_pause: dict | None = None
         self.warn = log.warning
         self._names = None         # joint names of n-DOF messages (mass0 ..)
         # stream_message block: the wake-up's stream samples, one message at its end
@@ -147,6 +155,8 @@ class Outputs:
     def miss(self, k: int, key: tuple, t: float, waited: float) -> None:
         self.misses(f"sample {k} (stamp {key}), actuation at t={t:.9g}, "
                     f"{waited * 1e3:.3f} ms after the sample went out")
+        if len(self.missed) < MISSES_KEPT:
+            self.missed.append({"k": k, "t": t, "waited_ms": waited * 1e3})
         self.node.pub_miss.publish(cdr.vector3_stamped(*key, float(k), t, waited))
 
     def substituted(self, k: int, key: tuple, dv: float) -> None:
@@ -164,7 +174,10 @@ class Outputs:
     def paused(self, t: float, seconds: float) -> None:
         """A pause of the plant's clock (Realtime.resume): an event record (recorded with
         the scene: the analysis keeps its sample lag on the paused clock); counted in the
-        summary line and on /diagnostics, not logged one by one."""
+        summary line and on /diagnostics, not logged one by one; the longest is kept for
+        the verdict file."""
+        if self.longest_pause is None or seconds > self.longest_pause["seconds"]:
+            self.longest_pause = {"t": t, "seconds": seconds}
         self.node.event("paused", t=t, seconds=seconds)
 
     def tripped(self, trip) -> None:

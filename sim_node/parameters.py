@@ -104,8 +104,9 @@ NODE_PARAMETERS = (
     Parameter("diag_pace_warn", "double", 0.9, "/diagnostics WARN when realtime runs slower "
               "than this fraction of time_scale (0 = off)", 0.0, 1.0),
     Parameter("verdict_file", "string", "", "write how the scene ended (exit status, "
-              "reason, summary, watchdog trip, feasibility verdict) as one JSON object to "
-              "this file at exit; grazing run reads it ('' = none)", read_only=True),
+              "reason, summary, watchdog trip, feasibility verdict, the missed deadlines, "
+              "the longest pause) as one JSON object to this file at exit; grazing run "
+              "reads it ('' = none)", read_only=True),
     Parameter("start_timeout", "double", 30.0, "wall seconds to wait for the above, then "
               "start anyway (with a warning)", 0.0, read_only=True),
     Parameter("thread_priority", "integer", 0, "real-time scheduling: SCHED_FIFO priority "

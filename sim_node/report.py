@@ -50,6 +50,8 @@ def verdict(node) -> dict:
             "finished": bool(node.loop is not None and node.loop.finished),
             "reason": node.reason, "summary": node.summary_line or summary(node),
             "watchdog": None if trip is None else trip._asdict(),
+            # where the realtime loop missed (the first MISSES_KEPT) and paused longest
+            "misses": node.out.missed, "longest_pause": node.out.longest_pause,
             "feasibility": None if fe is None else {"level": fe.level, "line": fe.line,
                                                     **fe.numbers}}
 

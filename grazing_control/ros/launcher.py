@@ -119,7 +119,8 @@ class RunResult:
     lost: str = ""                     # what the recorder missed (its closed record)
     reason: str | None = None          # why the scene failed, one line (None when ok)
     sim_verdict: dict | None = None    # sim_node's verdict_file: status, reason, summary,
-    #                                    watchdog trip, feasibility verdict
+    #                                    watchdog trip, feasibility verdict,
+    #                                    misses, longest_pause
     early: tuple = ()                  # the nodes that left before the simulator was done
 
     def __str__(self) -> str:
