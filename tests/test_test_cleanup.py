@@ -32,3 +32,44 @@ def test_a_failing_test_leaves_no_process_running(tmp_path):
     assert "left 1 process(es) running" in out.stdout, out.stdout
     pid = int(pidfile.read_text())
     assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+
+
+def test_the_descendants_read_from_the_kernels_lists_are_psutils_over_random_trees():
+    """conftest's ``_descendants`` (the per-thread children lists) against psutil's
+    recursive ``children`` (every process's stat file), over seeded random trees: a
+    Python process starts shells from its main thread and from a thread of its own (a
+    child started by another thread is on that thread's list), each shell a random
+    number of sleeps."""
+    import os
+    import random
+    import time
+
+    from conftest import _descendants
+
+    root = ("import subprocess, sys, threading, time\n"
+            "shells = sys.argv[1:]\n"
+            "def spawn(cmd):\n"
+            "    subprocess.Popen(['sh', '-c', cmd])\n"
+            "for i, cmd in enumerate(shells):\n"
+            "    if i % 2:\n"
+            "        t = threading.Thread(target=spawn, args=(cmd,)); t.start(); t.join()\n"
+            "    else:\n"
+            "        spawn(cmd)\n"
+            "time.sleep(20)\n")
+    rng = random.Random(5)
+    for _ in range(4):
+        shells = ["sleep 20 & " * rng.randint(0, 3) + "wait"
+                  for _ in range(rng.randint(1, 4))]
+        expected = 1 + len(shells) + sum(cmd.count("sleep") for cmd in shells)
+        proc = subprocess.Popen([sys.executable, "-c", root, *shells])
+        try:
+            deadline = time.monotonic() + 30
+            while len(mine := _descendants(os.getpid())) < expected:
+                assert time.monotonic() < deadline, (mine, shells)
+                time.sleep(0.05)
+            assert sorted(mine) == sorted(
+                c.pid for c in psutil.Process().children(recursive=True)), shells
+        finally:
+            for p in psutil.Process().children(recursive=True):
+                p.kill()
+            proc.wait()
