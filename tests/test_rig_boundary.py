@@ -101,6 +101,25 @@ def test_the_sensor_latency_holds_each_sample_until_its_time_plus_the_latency():
     assert line.due(10.0) == [0.4] and line.next_time() == math.inf
 
 
+def test_a_one_mass_rigs_controller_design_imports_no_solver():
+    """The controller's values of the shipped one-mass rig (c1 by Eq. 38 for a given c2)
+    load neither scipy.optimize nor scipy.integrate: a node imports no solver it does not
+    use (tests/test_node_common.py; the rig controller did, through the design's module
+    of orbits)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from grazing_control.plant.rig import load_rig; "
+            "from grazing_control.ros.rig_boundary import controller_values; "
+            f"v = controller_values(load_rig({str(RIG)!r}), 0.03); "
+            "print(sorted(m for m in ('scipy.optimize', 'scipy.integrate') "
+            "if m in sys.modules), v['c1'])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split(" ", 1)[0] == "[]", out.stdout
+
+
 def test_the_controller_designs_for_the_budget_and_refuses_other_values(rig):
     from grazing_control.dynamics.design.gains import degenerate_c1
 

@@ -135,7 +135,9 @@ def controller_values(rig: Rig, c2: float, mu: float = math.nan) -> dict:
     delay: c1 from the degenerate condition (Eq. 38 / (D5)) for ``c2``, or with ``c2``
     NaN for the c2 of least noise gain (dynamics.design.tuning.optimize_noise). A rig of
     n >= 2 masses: :func:`masses_controller_values` at ``mu`` (``c2`` must be NaN)."""
-    from grazing_control.dynamics.design.gains import degenerate_c1
+    # from its own module: dynamics.design.gains imports the orbit solver and with it
+    # scipy.optimize, ~0.25 s of a rig controller's start that the design never used
+    from grazing_control.dynamics.design.degenerate import degenerate_c1
 
     if rig.n > 1:
         if not math.isnan(c2):
