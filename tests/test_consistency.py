@@ -61,6 +61,35 @@ def test_the_window_sums_its_periods_against_the_chi2_bound():
     assert v.status == "mismatch" and v.bound > 400.0
 
 
+def test_the_bound_is_scipys_chi2_isf_bit_for_bit_over_seeded_cases():
+    """The bound (scipy.special's chdtri, imported without scipy.stats) is chi2.isf at
+    alpha / 2 exactly, over 3000 seeded (false alarm, dof): dof 1 to 20000, alpha 1e-9
+    to 0.5 (log-uniform)."""
+    rng = np.random.default_rng(11)
+    for _ in range(3000):
+        alpha = float(10.0 ** rng.uniform(-9.0, math.log10(0.499)))
+        dof = int(rng.integers(1, 20001)) if rng.random() < 0.5 else int(rng.integers(1, 60))
+        m = ConsistencyMonitor(window=3, false_alarm=alpha)
+        assert m.bound(dof) == float(chi2.isf(0.5 * alpha, dof)), (alpha, dof)
+
+
+def test_the_bound_loads_no_solver():
+    """A watchful controller's first bound imports neither scipy.stats nor the solvers
+    it loads (scipy.optimize, scipy.integrate): a node imports no solver it does not use
+    (tests/test_node_common.py)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from grazing_control.dynamics.estimation.consistency import "
+            "ConsistencyMonitor; b = ConsistencyMonitor().bound(40); "
+            "print(sorted(m for m in ('scipy.stats', 'scipy.optimize', 'scipy.integrate') "
+            "if m in sys.modules), b)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split(" ", 1)[0] == "[]", out.stdout
+
+
 def test_a_filter_that_keeps_failing_is_a_mismatch():
     """Half the window (at least 2) of failed fits names ``resets``, with or without fits
     in the window; one failure does not."""
