@@ -231,36 +231,3 @@ def test_the_orbit_for_any_gains_is_found_where_newton_alone_misses_it():
                                       width=W, actuator=act)
         assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
         assert np.allclose(orbit.pi2, (P.x_ref + x, P.v_ref + v), rtol=0, atol=1e-12)
-
-
-def test_the_bisection_of_a_bracketed_impact_agrees_with_brentq_over_seeded_cases():
-    """The last step of the first-impact search (a bracket of at most 1e-12 around the
-    gap's zero) is a bisection to brentq's tolerance, 1e-16 + 4 eps |h|: over 2000 seeded
-    gaps (a cubic with a random root, slope and curvature, the bracket placed at random
-    around the root) it lands within twice that of scipy's brentq, on the root's side
-    the gap says."""
-    import sys
-
-    from scipy.optimize import brentq
-
-    from grazing_control.dynamics.simulation.actuator import _bisect
-
-    eps = sys.float_info.epsilon
-    rng = np.random.default_rng(23)
-    for _ in range(2000):
-        root = float(10.0 ** rng.uniform(-3.0, 1.5))
-        slope, curve = float(10.0 ** rng.uniform(-6.0, 2.0)), float(rng.normal())
-
-        def gap(h, root=root, slope=slope, curve=curve):
-            return slope * (h - root) + curve * (h - root) ** 3
-
-        width = float(10.0 ** rng.uniform(-14.0, -12.0))
-        u = root - width * float(rng.uniform(0.01, 0.99))
-        v = u + width
-        if not gap(u) < 0.0 <= gap(v):
-            continue
-        tol = 1e-16 + 4.0 * eps * root
-        h = _bisect(gap, u, v)
-        assert u <= h <= v
-        assert abs(h - brentq(gap, u, v, xtol=1e-16)) <= 2.0 * tol + 2.0 * eps * root
-        assert abs(h - root) <= 2.0 * tol + 2.0 * eps * root

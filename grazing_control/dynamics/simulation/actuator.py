@@ -36,7 +36,6 @@ benchmarks/chart_actuator.py).
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -173,16 +172,13 @@ def _gap_parts(p, tau0, zp, f_inf, k, tau_a):
     return g, amp
 
 
-_EPS = sys.float_info.epsilon
-
-
 def _first_impact(p, tau0, zp, f_inf, k, tau_a, duration):
     """The first time h in (0, duration] where the gap reaches 0 from below, or None.
 
     Certified: on a cell [u, v] the gap is at most max(g(u), g(v)) + M (v - u)^2 / 8
     with M >= |g''| = R (1 + zeta)^2 + |K| / tau_a^2 e^{-u/tau_a} + a omega^2 (R the
     amplitude of the free part); a cell whose bound is < 0 holds no impact, else it is
-    halved, down to 1e-12 where the root is bracketed, then bisected (:func:`_bisect`)."""
+    halved, down to 1e-12 where the root is bracketed by brentq (xtol 1e-16)."""
     g, amp = _gap_parts(p, tau0, zp, f_inf, k, tau_a)
     m_free = amp * (1.0 + p.zeta) ** 2 + p.amplitude * p.omega ** 2
 
@@ -198,7 +194,9 @@ def _first_impact(p, tau0, zp, f_inf, k, tau_a, duration):
         u, v, gu, gv = stack.pop()
         if v - u <= 1e-12:
             if gu < 0.0 <= gv:
-                return _bisect(g, u, v)
+                from scipy.optimize import brentq   # here: the nodes import no solver
+
+                return brentq(g, u, v, xtol=1e-16)
             continue                   # a tangency below the resolution, or leaving the wall
         if max(gu, gv) + m_bound(u) * (v - u) ** 2 / 8.0 < 0.0:
             continue                   # certainly below the wall throughout
@@ -207,21 +205,6 @@ def _first_impact(p, tau0, zp, f_inf, k, tau_a, duration):
         stack.append((mid, v, gm, gv))
         stack.append((u, mid, gu, gm))
     return None
-
-
-def _bisect(g, u: float, v: float) -> float:
-    """The root of ``g`` in [u, v] (g(u) < 0 <= g(v), v - u <= 1e-12), to brentq's
-    tolerance 1e-16 + 4 eps |h| (scipy's defaults with xtol 1e-16, which this replaced:
-    a simulator with an actuator lag imported scipy.optimize at its first impact, in the
-    middle of a realtime scene). Halving keeps the bracket: at most ~14 evaluations."""
-    while True:
-        mid = 0.5 * (u + v)
-        if v - u <= 2.0 * (1e-16 + 4.0 * _EPS * abs(mid)) or not u < mid < v:
-            return mid
-        if g(mid) < 0.0:
-            u = mid
-        else:
-            v = mid
 
 
 class LagPiece(NamedTuple):
