@@ -231,3 +231,15 @@ def test_the_orbit_for_any_gains_is_found_where_newton_alone_misses_it():
                                       width=W, actuator=act)
         assert np.allclose((x, v, f), orbit.state, rtol=0, atol=1e-12) and len(imps) == 1
         assert np.allclose(orbit.pi2, (P.x_ref + x, P.v_ref + v), rtol=0, atol=1e-12)
+
+
+def test_a_lagging_actuator_loads_its_root_finder_when_it_is_built():
+    """A node builds its actuator at start: a lagging one loads scipy.optimize there (the
+    first impact's brentq), not at the scene's first impact in the middle of a realtime
+    run; the ideal one loads nothing."""
+    from loaded_modules import loaded
+
+    built = "from grazing_control.dynamics.simulation.actuator import Actuator; Actuator({})"
+    assert loaded(built.format("0.0, 0.0"), ("scipy.optimize",)) == []
+    assert loaded(built.format("0.1, 0.0"), ("scipy.optimize",)) == ["scipy.optimize"]
+    assert loaded(built.format("0.0, 0.2"), ("scipy.optimize",)) == ["scipy.optimize"]

@@ -72,6 +72,11 @@ class Actuator:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
                 raise ParameterError(f"actuator_{name}={value!r} is invalid: valid range is a "
                                      f"finite actuator_{name} >= 0")
+        if not self.ideal:
+            # the lag's first impact ends in scipy's brentq (_first_impact): loaded with
+            # the actuator, at a node's start, not at the scene's first impact (a
+            # realtime simulator or controller imported scipy.optimize in mid-scene)
+            import scipy.optimize  # noqa: F401
 
     @property
     def ideal(self) -> bool:
