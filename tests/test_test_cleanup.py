@@ -39,8 +39,10 @@ def test_the_descendants_read_from_the_kernels_lists_are_psutils_over_random_tre
     recursive ``children`` (every process's stat file), over seeded random trees: a
     Python process starts shells from its main thread and from a thread of its own (a
     child started by another thread is on that thread's list), each shell a random
-    number of sleeps."""
-    import os
+    number of sleeps and then one itself (``exec``: no process of the tree exits while
+    it is read). Each tree is read from its root: the worker's other children (the node
+    zygote, the processes of a test that are still exiting) change under the two reads
+    (the suite's first run of this test compared the worker's whole tree and failed)."""
     import random
     import time
 
@@ -58,18 +60,22 @@ def test_the_descendants_read_from_the_kernels_lists_are_psutils_over_random_tre
             "time.sleep(20)\n")
     rng = random.Random(5)
     for _ in range(4):
-        shells = ["sleep 20 & " * rng.randint(0, 3) + "wait"
+        shells = ["sleep 20 & " * rng.randint(0, 3) + "exec sleep 20"
                   for _ in range(rng.randint(1, 4))]
-        expected = 1 + len(shells) + sum(cmd.count("sleep") for cmd in shells)
+        expected = sum(cmd.count("sleep") for cmd in shells)
         proc = subprocess.Popen([sys.executable, "-c", root, *shells])
         try:
             deadline = time.monotonic() + 30
-            while len(mine := _descendants(os.getpid())) < expected:
+            while len(mine := _descendants(proc.pid)) < expected:
                 assert time.monotonic() < deadline, (mine, shells)
                 time.sleep(0.05)
+            time.sleep(0.1)     # each shell's exec done (its pid kept)
+            mine = _descendants(proc.pid)
+            assert len(mine) == expected, (mine, shells)
             assert sorted(mine) == sorted(
-                c.pid for c in psutil.Process().children(recursive=True)), shells
+                c.pid for c in psutil.Process(proc.pid).children(recursive=True)), shells
         finally:
-            for p in psutil.Process().children(recursive=True):
+            for p in psutil.Process(proc.pid).children(recursive=True):
                 p.kill()
+            proc.kill()
             proc.wait()
