@@ -69,8 +69,23 @@ def test_a_failed_scenes_reason_quotes_the_nodes_last_error(tmp_path):
         "sim_node exited with status 2 (time_scale=-3.0 is invalid: valid range is "
         "time_scale > 0); controller_node exited with status 1")
     res.logs = {}                           # the nodes' output on the terminal
-    assert launcher.failure_reason(res, early=["controller_node"]) == (
-        "controller_node exited early with status 1; sim_node exited with status 2")
+    assert launcher.failure_reason(res, early=["controller_node"]) == (   # the refusal first
+        "sim_node exited with status 2; controller_node exited early with status 1")
+
+
+def test_a_node_refused_at_start_leads_the_reason_before_what_followed_from_it():
+    """A simulator that refused a parameter (status 2) never published its tail, so the
+    recording lost it too: the reason names the refusal first (it named the recording's
+    loss first, and the refusal after it, without the refused value when the log was the
+    terminal's). A simulator that wrote its own reason (a feasibility refusal) keeps it."""
+    res = launcher.RunResult(sim=2, controller=0, recorder=1, bag_dir=None, wall=6.9,
+                             lost="/sim_node's tail (no published record)")
+    assert launcher.failure_reason(res) == (
+        "sim_node exited with status 2; the recording lost messages: /sim_node's tail (no "
+        "published record); recorder_node exited with status 1")
+    res.sim_verdict = {"reason": "feasibility: refused"}
+    assert launcher.failure_reason(res).startswith("sim_node: feasibility: refused; the "
+                                                   "recording lost"), res
 
 
 def test_a_node_that_left_before_the_simulator_fails_the_scene_whatever_its_status():

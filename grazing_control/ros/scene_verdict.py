@@ -29,12 +29,19 @@ def failure_reason(res, early=None, timeout=None) -> str:
     """Why the scene ``res`` (a ``launcher.RunResult``) failed, in one line: the
     simulator's own reason (the watchdog's trip, the feasibility refusal, a stopped
     simulation: its verdict_file), else what the launcher saw (a timeout, an
-    interruption, a node that left early or failed, with its last error line).
+    interruption, a node that left early or failed, with its last error line). A node
+    that refused to start (exit status 2: a parameter out of its range) comes first:
+    what follows from it (the recording that lost the simulator's tail) after.
     ``early``: the nodes that left early (default: ``res.early``)."""
     if early is None:
         early = getattr(res, "early", ())
-    parts = []
     verdict = res.sim_verdict or {}
+    # (a simulator that wrote its own reason, a feasibility refusal, is told by it below)
+    refused = [name for name, attr in _FIELD.items()
+               if getattr(res, attr) == REFUSED and name not in early
+               and not (name == "sim_node" and verdict.get("reason"))]
+    parts = [f"{name} exited with status {REFUSED}" + _said(res.logs.get(name))
+             for name in refused]
     if verdict.get("reason") and res.sim != 0:
         parts.append(f"sim_node: {verdict['reason']}")
     if res.timed_out:
@@ -48,7 +55,7 @@ def failure_reason(res, early=None, timeout=None) -> str:
                      + _said(res.logs.get(name)))
     for name, attr in _FIELD.items():
         code = getattr(res, attr)
-        if code not in (None, 0) and name not in early and not (
+        if code not in (None, 0) and name not in early and name not in refused and not (
                 name == "sim_node" and parts and verdict.get("reason")):
             parts.append(f"{name} exited with status {code}" + _said(res.logs.get(name)))
     return "; ".join(parts) or "unknown"
@@ -89,6 +96,9 @@ def _said(log) -> str:
             return f" ({said[:300]}{'...' if len(said) > 300 else ''})"
     return ""
 
+
+#: The exit status of a node that refused to start (common.StartupError).
+REFUSED = 2
 
 _FIELD = {"sim_node": "sim", "controller_node": "controller", "recorder_node": "recorder",
           "live_node": "live"}
