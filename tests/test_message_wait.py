@@ -12,7 +12,7 @@ from rclpy.context import Context
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from grazing_control.ros.message_wait import wait_for_messages
+from grazing_control.ros.message_wait import take_queued, wait_for_messages
 
 from test_closed_loop import new_domain
 
@@ -72,3 +72,37 @@ def test_a_destroyed_subscription_is_left_out(node):
     start = time.monotonic()
     assert wait_for_messages([gone], node.context, 5.0) is False     # none left: at once
     assert time.monotonic() - start < 0.5
+
+
+@pytest.mark.parametrize("executor_kind", ["events", "single_threaded"])
+def test_take_queued_runs_the_callbacks_of_what_has_arrived_and_no_more(node, executor_kind):
+    """A stopping node takes its last inputs (the controller's last stream samples,
+    before its published record): every queued message through its callback, on the
+    nodes' executors both, and then it returns, waiting for nothing more."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental import EventsExecutor
+
+    got = []
+    sub = node.create_subscription(String, "inputs", lambda m: got.append(m.data), QOS)
+    kind = EventsExecutor if executor_kind == "events" else SingleThreadedExecutor
+    executor = kind(context=node.context)
+    executor.add_node(node)
+    try:
+        pub = node.create_publisher(String, "inputs", QOS)
+        _matched(pub)
+        sent = [str(i) for i in range(50)]
+        for data in sent:
+            pub.publish(String(data=data))
+        end = time.monotonic() + 5.0
+        while not wait_for_messages([sub], node.context, 0.0):
+            assert time.monotonic() < end
+        time.sleep(0.2)                      # all 50 delivered to the reader
+        start = time.monotonic()
+        take_queued(executor, [sub], node.context, 5.0)
+        assert got == sent and time.monotonic() - start < 2.0
+        assert wait_for_messages([sub], node.context, 0.0) is False
+        start = time.monotonic()
+        take_queued(executor, [sub], node.context, 5.0)       # nothing queued: at once
+        assert time.monotonic() - start < 0.5
+    finally:
+        executor.shutdown()

@@ -128,6 +128,7 @@ from .diagnostics import Updater
 from .matching import MatchReport
 from .model_watch import (WATCH_FIELDS, WATCH_KEYS, WATCH_TOPIC, describe_verdict,
                           watch_from_values, watch_row)
+from .message_wait import take_queued
 from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide
@@ -243,7 +244,7 @@ class ControllerNode(Node):
             raise StartupError(str(exc)) from None
         self.rig_side = None     # the driver contract's side (rig_file), or None
         self.sub_impacts = None  # stream mode's impact topic (impact_source topic), or None
-        reads = []               # the other subscriptions of the simulator's topics
+        reads = []               # the other subscriptions (all: self.inputs, below)
         if self.rig is not None:
             self.rig_side = RigSide(self, self.rig, self.get_parameter("clock_window").value)
             self.pub_force = Counted(self.create_publisher(
@@ -284,11 +285,9 @@ class ControllerNode(Node):
                 raw=True, event_callbacks=quiet)]
         # the start handshake's report (ros/matching.py): every topic read, the answers
         # (a rig's force pulse)
-        self.matched.watch(
-            [self.sub_samples] + ([self.sub_impacts] if self.sub_impacts else []) + reads,
-            self.pub_force if self.rig_side else self.pub)
-        self.exit_code = 0
-        self.exit_now = False
+        self.inputs = [self.sub_samples] + ([self.sub_impacts] if self.sub_impacts else []) + reads
+        self.matched.watch(self.inputs, self.pub_force if self.rig_side else self.pub)
+        self.exit_code, self.exit_now = 0, False
         self._next_check = 0.0
         self.pub_enabled = Counted(self.create_publisher(Bool, "controller/enabled",
                                                          LATCHED_QOS))
@@ -767,10 +766,11 @@ class ControllerNode(Node):
         super().destroy_node()
 
     def on_exit(self) -> None:
-        """Say what was published (grazing/published) and log what was answered and
-        ignored, once a recorder has confirmed that it holds every message (ACK_TIMEOUT s
-        at most: it may lag behind on a loaded machine, issue 27), or without one once the
-        readers have acknowledged them (1 s at most: the simulator has gone)."""
+        """Take what has arrived (message_wait.take_queued), say what was published
+        (grazing/published) and log what was answered and ignored, once a recorder has
+        confirmed that it holds every message (ACK_TIMEOUT s at most: it may lag on a
+        loaded machine, issue 27), or else once the readers acknowledged them (1 s)."""
+        take_queued(self.executor, self.inputs, self.context, 1.0)
         if self.count_publishers(self.resolve_topic_name(COMPLETE_TOPIC)) > 0:
             close_publishers(self.published, ACK_TIMEOUT, recorder=self.recorder)
         else:       # the only reader is the simulator, which has gone: no warning

@@ -15,12 +15,13 @@ and events on a cadence of its own.
 
 from __future__ import annotations
 
+import time
 from contextlib import ExitStack
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
-__all__ = ["wait_for_messages"]
+__all__ = ["take_queued", "wait_for_messages"]
 
 
 def wait_for_messages(subscriptions, context, timeout: float) -> bool:
@@ -45,3 +46,16 @@ def wait_for_messages(subscriptions, context, timeout: float) -> bool:
             wait_set.add_subscription(handle)
         wait_set.wait(max(0, int(timeout * 1e9)))
         return bool(wait_set.get_ready_entities("subscription"))
+
+
+def take_queued(executor, subscriptions, context, timeout: float) -> None:
+    """Spin ``executor`` until none of ``subscriptions`` has a message queued, ``timeout``
+    wall seconds at most: what has arrived is taken, nothing waited for. A node that
+    stops takes its last inputs this way before its published record counts what it
+    answered (a controller left them queued, took them while it waited for the
+    recorder, after the record, and the bag without its last answer was confirmed
+    complete: docs/benchmarks.md, "The last fresh clone, and a race")."""
+    end = time.monotonic() + timeout
+    while (executor is not None and time.monotonic() < end
+           and wait_for_messages(subscriptions, context, 0.0)):
+        executor.spin_once(timeout_sec=0.0)
