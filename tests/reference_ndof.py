@@ -16,14 +16,16 @@ A = [[0, I], [-M^-1 K, -M^-1 C]]; e^{A h} comes from mpmath's eigendecomposition
 (:meth:`NdofRef.transition_expm`) by the tests.
 
 Impacts: the first h > 0 with x_w(h) = d, v_w >= 0. Each forcing period is cut into
-``SAMPLES`` cells; a cell whose acceleration changes sign is split at its zero (located
-by mp.findroot), so v_w is monotone on each piece; a piece with g < 0 <= g at its ends
-brackets a root, and a piece where v_w goes from + to - holds a maximum of g (located by
-mp.findroot on v_w) that is tested, so a grazing hump negative at every grid point is
-still found (the search is tests/reference.py's ``first_root``). Roots are refined by mp.findroot (Anderson's bracketing method) to
-``ROOT_TOL``. Assumption (true for the example models: cells of T/128 against the
-fastest mode's period): no cell holds two zeros of the acceleration. Sticking is not
-modelled (more than ``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
+``SAMPLES`` cells; a cell whose acceleration changes sign is split at its zero, so v_w
+is monotone on each piece; a piece with g < 0 <= g at its ends brackets a root, and a
+piece where v_w goes from + to - holds a maximum of g (the zero of v_w) that is tested,
+so a grazing hump negative at every grid point is still found (the search is
+tests/reference.py's ``first_root``). Every zero is refined by a bracketed Newton
+iteration (the next component as derivative) to the precision the arc's evaluation
+allows, the bracket closed to a few units of the last place (``_root``). Assumption
+(true for the example models: cells of T/128 against the fastest mode's period): no
+cell holds two zeros of the acceleration. Sticking is not modelled (more than
+``MAX_IMPACTS_PER_PERIOD`` impacts raise RuntimeError).
 
 A force pulse (:meth:`NdofRef.pulse_map`): under a constant force F on x[i_a] the flight
 is X_p + S + e^{A h}(X - X_p - S) with S = (K^-1 e_a F ; 0), and the gap has x_w = the
@@ -102,6 +104,7 @@ class NdofRef:
         self.A = A
         self.lam, self.ER = mp.eig(A)
         self.ERinv = mp.inverse(self.ER)
+        self.pairs = _conjugate_pairs(self.lam)
 
     # ------------------------------------------------------------------ flow
     def transition(self, h):
@@ -174,7 +177,8 @@ class NdofRef:
         horizon = _f(horizon)
         cells = max(4, int(mp.ceil(samples * horizon / self.period)))
         hs = [horizon * k / cells for k in range(cells + 1)]
-        return first_root(arc, hs, ROOT_TOL, lambda arc, a, b, which, _up: _root(arc, which, a, b))
+        return first_root(arc, hs, ROOT_TOL,
+                          lambda arc, a, b, which, up: _root(arc, which, a, b, up))
 
     # -------------------------------------------------------------- the map
     def pi2_map(self, z, gains=None):
@@ -414,45 +418,99 @@ class _Arc:
         self.qw = q[ref.i_w]
         dev = [X[i] - p0[i] - static[i] - q[i] for i in range(m)]
         w = ref.i_w
-        self.c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
-                  for k in range(m)]
+        c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
+             for k in range(m)]
+        # only real parts are used: a conjugate pair's two terms are one,
+        # Re(c_k e^{l h} + c_j e^{conj(l) h}) = Re((c_k + conj(c_j)) e^{l h})
+        self.terms = [(ref.lam[k], c[k] if j is None else c[k] + mp.conj(c[j]))
+                      for k, j in ref.pairs]
         self.Xw = ref.X[w] * mp.expj(tau)
 
-    def __call__(self, h):
+    def __call__(self, h, jerk=False):
+        """(g, v_w, a_w[, jerk]) at time h since the start of the flight."""
         ref = self.ref
         io = mpc(0, 1) * ref.omega
         eh = self.Xw * mp.expj(ref.omega * h)
-        y = v = a = mpc(0)
-        for l, c in zip(ref.lam, self.c):
+        y = v = a = j = mpc(0)
+        for l, c in self.terms:
             e = c * mp.exp(l * h)
             y += e
             v += l * e
             a += l * l * e
+            if jerk:
+                j += l * l * l * e
         if self.tau_a is not None:     # the lag's transient q_w e^{-h / tau_a}
             e = self.qw * mp.exp(-h / self.tau_a)
             y, v, a = y + e, v - e / self.tau_a, a + e / self.tau_a ** 2
+            j -= e / self.tau_a ** 3
         g = mp.re(eh) + mp.re(y) + self.xs - ref.d
-        return g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a)
+        out = (g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a))
+        return out + (mp.re(io ** 3 * eh) + mp.re(j),) if jerk else out
 
 
-def _root(arc, which, lo, hi):
+def _conjugate_pairs(lam):
+    """[(k, j)]: each eigenvalue k with positive imaginary part and j its conjugate
+    (nearest conj(lam[k]), to 1e-30 relative), or (k, None) for one without a partner
+    (real). The eigenvalues of the real A come in such pairs."""
+    left, out = set(range(len(lam))), []
+    for k in sorted(left, key=lambda k: -mp.im(lam[k])):
+        if k not in left:
+            continue
+        left.discard(k)
+        j = min(left, key=lambda j: abs(lam[j] - mp.conj(lam[k])), default=None)
+        if (j is not None and mp.im(lam[k]) > 0
+                and abs(lam[j] - mp.conj(lam[k])) <= abs(lam[k]) * mpf(10) ** -30):
+            left.discard(j)
+            out.append((k, j))
+        else:
+            out.append((k, None))
+    return out
+
+
+def _root(arc, which, lo, hi, increasing):
     """Root of component ``which`` (0 gap, 1 velocity, 2 acceleration) of the arc in the
-    bracket [lo, hi], by mp.findroot (Anderson's bracketing method), kept in the bracket."""
-    def fn(h):
-        return arc(h)[which]
+    bracket [lo, hi], where it goes from < 0 at lo to >= 0 at hi (``increasing``; else the
+    reverse), to the precision the arc's evaluation allows; the bracket's upper end is
+    returned (as a bisection would). Newton with the next component as derivative, kept
+    inside the bracket (bisection where a step leaves it); once its steps are below 16
+    units of the last place, the bracket is closed around its limit at widths growing
+    16-fold, each evaluation moving one end of the bracket. (mp.findroot's Anderson
+    method took 34 evaluations a split and, near grazing, failed on the gap to a 200-step
+    bisection: 235 evaluations a root.)"""
+    sign = 1 if increasing else -1
 
-    try:
-        x = mp.findroot(fn, (lo, hi), solver="anderson", tol=ROOT_TOL ** 2, verify=False)
-    except (ValueError, ZeroDivisionError):
-        x = None
-    if x is None or not lo <= x <= hi or abs(fn(x)) > ROOT_TOL * 1e3:
-        flo = fn(lo)
-        for _ in range(200):  # bisection fallback
-            mid = (lo + hi) / 2
-            fm = fn(mid)
-            if (fm >= 0) == (flo >= 0):
-                lo, flo = mid, fm
-            else:
-                hi = mid
-        x = hi
-    return x
+    def f(h):
+        return sign * arc(h, which == 2)[which] if which == 2 else sign * arc(h)[which]
+
+    ulp = mp.ldexp(max(abs(lo), abs(hi)), 4 - mp.prec)     # 16 units of the last place
+    x = (lo + hi) / 2
+    for _ in range(600):
+        vals = arc(x, which == 2)
+        fx = sign * vals[which]
+        if fx == 0:
+            return x
+        if fx > 0:
+            hi = x
+        else:
+            lo = x
+        if hi - lo <= ulp:
+            return hi
+        dfx = sign * vals[which + 1]
+        xn = x - fx / dfx if dfx != 0 else (lo + hi) / 2
+        if abs(xn - x) <= ulp:      # converged (the step may round to nothing)
+            xn = min(max(xn, lo), hi)
+            break
+        x = xn if lo < xn < hi else (lo + hi) / 2
+    else:
+        return hi
+    # close the bracket around Newton's limit xn
+    width = ulp
+    while hi - lo > 2 * width:
+        for y in (xn - width, xn + width):
+            if lo < y < hi:
+                if f(y) < 0:
+                    lo = y
+                else:
+                    hi = y
+        width *= 16
+    return hi

@@ -192,6 +192,90 @@ def test_low_velocity_impacts_found_with_right_time_and_velocity(vminus, psi):
     assert imp.v_plus == -m.r * imp.v_minus
 
 
+def test_the_references_roots_are_certified_brackets_of_a_few_ulps(monkeypatch):
+    """The yardstick's own root refinement (tests/reference_ndof.py ``_root``): every root
+    it returns, over seeded starts near X** at Delta d = -1e-3 .. -1e-10 and humps of the
+    gap whose maxima are 1e-20 .. 1e-9 either side of the wall (the gap's roots, the
+    acceleration's splits, the maxima located on the velocity), is
+    the upper end of a bracket of at most 32 units of the last place of h, or of the span
+    over which the component's slope moves it by 64 units of the last place of 1 (the
+    component changes sign across it, checked here), inside the bracket it was given,
+    in at most 40 evaluations (mp.findroot's Anderson method it replaced took 34 a split
+    and 235 a grazing gap root, falling back to bisection: measured, docs/benchmarks.md)."""
+    import reference_ndof
+    from mpmath import mp
+
+    refine, calls, roots = reference_ndof._root, [0], []
+
+    def recorded(arc, which, lo, hi, increasing):
+        def counted(h, jerk=False):
+            calls[0] += 1
+            return arc(h, jerk)
+        start = calls[0]
+        h = refine(counted, which, lo, hi, increasing)
+        roots.append((arc, which, lo, hi, increasing, h, calls[0] - start))
+        return h
+
+    monkeypatch.setattr(reference_ndof, "_root", recorded)
+    rng = np.random.default_rng(5)
+    for delta_d in (-1e-3, -1e-6, -1e-8, -1e-10):
+        ref = load_reference(CHAIN, delta_d=delta_d)
+        for _ in range(3):
+            z = rng.normal(size=4) * 0.3 * abs(delta_d)
+            ref.pi2_map(list(z))
+    m, flow = _chain(delta_d=-1e-12)      # humps of the gap: maxima at d -+ 1e-20 .. 1e-9
+    ref = load_reference(CHAIN, delta_d=-1e-12)
+    for gap_at in (-1e-9, -1e-20, 1e-20, 1e-9):
+        _reference_impact(ref, *_construct(flow, ref, 0.0, m.period / 2, gap_at, 0.0),
+                          m.period)
+    assert {r[1] for r in roots} == {0, 1, 2} and len(roots) > 40
+    for arc, which, lo, hi, increasing, h, count in roots:
+        sign = 1 if increasing else -1
+        at = arc(h, True)
+        # 32 ulps of h, or where the component's slope makes it move by 64 ulps of 1 (its
+        # terms are of order 1: it is not resolved below that)
+        width = mp.ldexp(max(abs(lo), abs(hi)), 5 - mp.prec) + \
+            mp.ldexp(1, 6 - mp.prec) / abs(at[which + 1])
+        below = max(h - width, lo)
+        assert lo <= below < h <= hi
+        assert sign * at[which] >= 0 > sign * arc(below, True)[which], (which, h - lo)
+        assert count <= 40, (which, count)
+
+
+@pytest.mark.parametrize("damping", [1.0, 200.0])
+def test_the_references_arc_is_the_sum_over_every_mode(damping):
+    """The yardstick's arc keeps one term a pair of conjugate eigenvalues (only real parts
+    are used): its gap, velocity, acceleration and jerk equal the sum over all 2n modes
+    of A written out (c_k = ER[w, k] (ER^-1 dev)_k, e^{lambda_k h}) to 1e-45, on the
+    2-mass chain and on it damped 200 times (four real eigenvalues, each kept alone)."""
+    from mpmath import mp, mpc
+
+    model = load_model(CHAIN)
+    ref = load_reference(CHAIN, C=(np.asarray(model.C) * damping).tolist())
+    assert any(j is None for _k, j in ref.pairs) == (damping > 1)
+    rng = np.random.default_rng(8)
+    for _ in range(3):
+        tau = mpf(float(rng.uniform(0, 2 * math.pi)))
+        p = ref.particular(tau)
+        X = [x + mpf(float(e)) for x, e in zip(p, rng.normal(size=4) * 0.1)]
+        arc = ref.arc(tau, X)
+        m, w = 2 * ref.n, ref.i_w
+        dev = [X[i] - p[i] for i in range(m)]
+        c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
+             for k in range(m)]
+        for h in rng.uniform(0, float(ref.period), size=3):
+            h = mpf(float(h))
+            eh = ref.X[w] * mp.expj(tau + ref.omega * h)
+            io = mpc(0, 1) * ref.omega
+            direct = [mp.re(eh) + mp.re(mp.fsum(ck * mp.exp(lk * h) for ck, lk in zip(c, ref.lam)))
+                      - ref.d]
+            for power in (1, 2, 3):
+                direct.append(mp.re(io ** power * eh) + mp.re(mp.fsum(
+                    ck * lk ** power * mp.exp(lk * h) for ck, lk in zip(c, ref.lam))))
+            got = arc(h, True)
+            assert max(abs(a - b) for a, b in zip(got, direct)) < mpf(10) ** -45
+
+
 @pytest.mark.parametrize("gap_at,impact", [(-1e-20, False), (-1e-18, False),
                                            (1e-20, True), (1e-18, True)])
 def test_near_miss_is_not_an_impact(gap_at, impact):
