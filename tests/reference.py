@@ -35,6 +35,7 @@ RuntimeError. Chattering sequences are, bounce by bounce, by :meth:`RefModel.bou
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from mpmath import mp, mpf
@@ -246,7 +247,8 @@ class RefRun:
 class Arc:
     """Gap g = x - d, velocity, acceleration and jerk along one free-flight arc."""
 
-    __slots__ = ("m", "tau", "c1", "c2", "k1", "k2", "aw", "aw2", "aw3", "phase0")
+    __slots__ = ("m", "tau", "c1", "c2", "k1", "k2", "aw", "aw2", "aw3", "phase0",
+                 "_floats")
 
     def __init__(self, m: RefModel, tau, x, v):
         self.m = m
@@ -261,6 +263,7 @@ class Arc:
         self.aw2 = self.aw * m.omega
         self.aw3 = self.aw2 * m.omega
         self.phase0 = tau - m.lag
+        self._floats = None
 
     def __call__(self, h, jerk=False):
         """(g, v, acc[, jerk]) at time h since the start of the arc."""
@@ -279,6 +282,26 @@ class Arc:
             return g, vel, acc
         y3 = -2 * m.zeta * y2 - y1
         return g, vel, acc, self.aw3 * sp + y3
+
+    def in_floats(self, h, which):
+        """Components ``which`` and ``which + 1`` of (g, v, acc, jerk) at h, in double
+        precision: only the start of :func:`_refine`'s Newton iteration."""
+        if self._floats is None:
+            m = self.m
+            self._floats = tuple(float(x) for x in (
+                m.zeta, m.omega_d, m.omega, m.amplitude, m.d, self.c1, self.c2, self.k1,
+                self.k2, self.phase0))
+        zeta, omega_d, omega, amplitude, d, c1, c2, k1, k2, phase0 = self._floats
+        e = math.exp(-zeta * h)
+        c, s = math.cos(omega_d * h), math.sin(omega_d * h)
+        cp, sp = math.cos(phase0 + omega * h), math.sin(phase0 + omega * h)
+        y = e * (c1 * c + c2 * s)
+        y1 = e * (k1 * c - k2 * s)
+        y2 = -2 * zeta * y1 - y
+        aw = amplitude * omega
+        out = (amplitude * cp + y - d, y1 - aw * sp, y2 - aw * omega * cp,
+               aw * omega * omega * sp - 2 * zeta * y2 - y1)
+        return out[which], out[which + 1]
 
 
 def first_root(arc, hs, wall_tol, refine):
@@ -333,7 +356,7 @@ def _refine(arc, lo, hi, which, increasing):
     Newton with the next component as derivative, kept inside the bracket.
     """
     sign = 1 if increasing else -1
-    x = (lo + hi) / 2
+    x = _start_in_floats(arc, lo, hi, which, sign)
     for _ in range(400):
         vals = arc(x, which == 2)
         fx = sign * vals[which]
@@ -356,3 +379,35 @@ def _refine(arc, lo, hi, which, increasing):
                 return xh
         x = xn
     return hi
+
+
+def _start_in_floats(arc, lo, hi, which, sign):
+    """Where :func:`_refine` starts: the bracket's midpoint, or the limit of the same
+    bracketed Newton iteration in double precision (on an arc that offers
+    ``in_floats``) when it lies inside the bracket. Only a start: the 50-digit iteration
+    goes on from it, inside the 50-digit bracket, so the root is the same; from ~1e-16
+    it takes ~3 steps to 1e-45 where it took ~10 from the midpoint."""
+    mid = (lo + hi) / 2
+    in_floats = getattr(arc, "in_floats", None)
+    if in_floats is None:
+        return mid
+    a, b = float(lo), float(hi)
+    x = float(mid)
+    for _ in range(60):
+        f, df = in_floats(x, which)
+        f, df = sign * f, sign * df
+        if f == 0:
+            break
+        if f > 0:
+            b = x
+        else:
+            a = x
+        xn = x - f / df if df != 0 else (a + b) / 2
+        if not a < xn < b:
+            xn = (a + b) / 2
+        if abs(xn - x) <= 4 * math.ulp(x) or b - a <= 4 * math.ulp(b):
+            x = xn
+            break
+        x = xn
+    start = mpf(x)
+    return start if lo < start < hi else mid
