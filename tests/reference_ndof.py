@@ -421,31 +421,47 @@ class _Arc:
         c = [ref.ER[w, k] * mp.fsum(ref.ERinv[k, j] * dev[j] for j in range(m))
              for k in range(m)]
         # only real parts are used: a conjugate pair's two terms are one,
-        # Re(c_k e^{l h} + c_j e^{conj(l) h}) = Re((c_k + conj(c_j)) e^{l h})
-        self.terms = [(ref.lam[k], c[k] if j is None else c[k] + mp.conj(c[j]))
-                      for k, j in ref.pairs]
-        self.Xw = ref.X[w] * mp.expj(tau)
+        # Re(c_k e^{l h} + c_j e^{conj(l) h}) = Re((c_k + conj(c_j)) e^{l h}); each term
+        # is kept as real numbers: Re l, Im l, Re and Im of c and of l^2, l^3
+        self.terms = []
+        for k, j in ref.pairs:
+            lk = mpc(ref.lam[k])
+            ck = mpc(c[k] if j is None else c[k] + mp.conj(c[j]))
+            l2, l3 = lk * lk, lk * lk * lk
+            self.terms.append((lk.real, lk.imag, ck.real, ck.imag,
+                               l2.real, l2.imag, l3.real, l3.imag))
+        # the harmonic Re(X_w e^{i (tau + omega h)}) = |X_w| cos(arg X_w + tau + omega h)
+        self.amplitude = abs(ref.X[w])
+        self.phase = mp.arg(ref.X[w]) + tau
 
     def __call__(self, h, jerk=False):
         """(g, v_w, a_w[, jerk]) at time h since the start of the flight."""
         ref = self.ref
-        io = mpc(0, 1) * ref.omega
-        eh = self.Xw * mp.expj(ref.omega * h)
-        y = v = a = j = mpc(0)
-        for l, c in self.terms:
-            e = c * mp.exp(l * h)
-            y += e
-            v += l * e
-            a += l * l * e
+        om = ref.omega
+        cp, sp = mp.cos_sin(self.phase + om * h)
+        ah = self.amplitude * cp
+        g = ah + self.xs - ref.d
+        v = -om * self.amplitude * sp
+        a = -om * om * ah
+        j = -om * v * om if jerk else 0
+        for re, im, cr, ci, re2, im2, re3, im3 in self.terms:
+            # e = c e^{l h} = u + i w
+            ex = mp.exp(re * h)
+            if im:
+                c, s = mp.cos_sin(im * h)
+                u, w = ex * (cr * c - ci * s), ex * (cr * s + ci * c)
+            else:
+                u, w = ex * cr, ex * ci
+            g += u
+            v += re * u - im * w
+            a += re2 * u - im2 * w
             if jerk:
-                j += l * l * l * e
+                j += re3 * u - im3 * w
         if self.tau_a is not None:     # the lag's transient q_w e^{-h / tau_a}
             e = self.qw * mp.exp(-h / self.tau_a)
-            y, v, a = y + e, v - e / self.tau_a, a + e / self.tau_a ** 2
+            g, v, a = g + e, v - e / self.tau_a, a + e / self.tau_a ** 2
             j -= e / self.tau_a ** 3
-        g = mp.re(eh) + mp.re(y) + self.xs - ref.d
-        out = (g, mp.re(io * eh) + mp.re(v), mp.re(io * io * eh) + mp.re(a))
-        return out + (mp.re(io ** 3 * eh) + mp.re(j),) if jerk else out
+        return (g, v, a, j) if jerk else (g, v, a)
 
 
 def _conjugate_pairs(lam):
@@ -473,8 +489,10 @@ def _root(arc, which, lo, hi, increasing):
     reverse), to the precision the arc's evaluation allows; the bracket's upper end is
     returned (as a bisection would). Newton with the next component as derivative, kept
     inside the bracket (bisection where a step leaves it); once its steps are below 16
-    units of the last place, the bracket is closed around its limit at widths growing
-    16-fold, each evaluation moving one end of the bracket. (mp.findroot's Anderson
+    units of the last place, or its value below 32 units of the last place of 1 (the
+    components' terms are of order 1: their rounding), the bracket is closed around its
+    limit at widths growing 16-fold from the step w0 that rounding allows, each
+    evaluation moving one end of the bracket, and bisected to 2 w0. (mp.findroot's Anderson
     method took 34 evaluations a split and, near grazing, failed on the gap to a 200-step
     bisection: 235 evaluations a root.)"""
     sign = 1 if increasing else -1
@@ -483,6 +501,7 @@ def _root(arc, which, lo, hi, increasing):
         return sign * arc(h, which == 2)[which] if which == 2 else sign * arc(h)[which]
 
     ulp = mp.ldexp(max(abs(lo), abs(hi)), 4 - mp.prec)     # 16 units of the last place
+    noise = mp.ldexp(1, 5 - mp.prec)    # the components' terms are of order 1
     x = (lo + hi) / 2
     for _ in range(600):
         vals = arc(x, which == 2)
@@ -497,14 +516,16 @@ def _root(arc, which, lo, hi, increasing):
             return hi
         dfx = sign * vals[which + 1]
         xn = x - fx / dfx if dfx != 0 else (lo + hi) / 2
-        if abs(xn - x) <= ulp:      # converged (the step may round to nothing)
+        # converged: the step rounds to nothing, or the value is at its rounding's level
+        if abs(xn - x) <= ulp or abs(fx) <= noise:
             xn = min(max(xn, lo), hi)
             break
         x = xn if lo < xn < hi else (lo + hi) / 2
     else:
         return hi
-    # close the bracket around Newton's limit xn
-    width = ulp
+    # close the bracket around Newton's limit xn, then bisect it to the width rounding
+    # allows: the root is within 2 w0 above a point where the component is < 0
+    w0 = width = max(ulp, 2 * noise / abs(dfx)) if dfx != 0 else ulp
     while hi - lo > 2 * width:
         for y in (xn - width, xn + width):
             if lo < y < hi:
@@ -513,4 +534,10 @@ def _root(arc, which, lo, hi, increasing):
                 else:
                     hi = y
         width *= 16
+    while hi - lo > 2 * w0:
+        mid = (lo + hi) / 2
+        if f(mid) < 0:
+            lo = mid
+        else:
+            hi = mid
     return hi

@@ -194,14 +194,14 @@ def test_low_velocity_impacts_found_with_right_time_and_velocity(vminus, psi):
 
 def test_the_references_roots_are_certified_brackets_of_a_few_ulps(monkeypatch):
     """The yardstick's own root refinement (tests/reference_ndof.py ``_root``): every root
-    it returns, over seeded starts near X** at Delta d = -1e-3 .. -1e-10 and humps of the
+    h it returns, over seeded starts near X** at Delta d = -1e-3 .. -1e-10 and humps of the
     gap whose maxima are 1e-20 .. 1e-9 either side of the wall (the gap's roots, the
-    acceleration's splits, the maxima located on the velocity), is
-    the upper end of a bracket of at most 32 units of the last place of h, or of the span
-    over which the component's slope moves it by 64 units of the last place of 1 (the
-    component changes sign across it, checked here), inside the bracket it was given,
-    in at most 40 evaluations (mp.findroot's Anderson method it replaced took 34 a split
-    and 235 a grazing gap root, falling back to bisection: measured, docs/benchmarks.md)."""
+    acceleration's splits, the maxima located on the velocity), lies inside the bracket
+    it was given, the component is >= 0 at h and < 0 at h - 4 W, W = 32 units of the last
+    place of h plus the span over which the component's slope moves it by 64 units of the
+    last place of 1 (its rounding: its terms are of order 1), and it took at most 40
+    evaluations (mp.findroot's Anderson method it replaced took 34 a split and 235 a
+    grazing gap root, falling back to bisection: measured, docs/benchmarks.md)."""
     import reference_ndof
     from mpmath import mp
 
@@ -232,11 +232,10 @@ def test_the_references_roots_are_certified_brackets_of_a_few_ulps(monkeypatch):
     for arc, which, lo, hi, increasing, h, count in roots:
         sign = 1 if increasing else -1
         at = arc(h, True)
-        # 32 ulps of h, or where the component's slope makes it move by 64 ulps of 1 (its
-        # terms are of order 1: it is not resolved below that)
+        # W: 32 ulps of h plus where the slope moves the component by 64 ulps of 1
         width = mp.ldexp(max(abs(lo), abs(hi)), 5 - mp.prec) + \
             mp.ldexp(1, 6 - mp.prec) / abs(at[which + 1])
-        below = max(h - width, lo)
+        below = max(h - 4 * width, lo)
         assert lo <= below < h <= hi
         assert sign * at[which] >= 0 > sign * arc(below, True)[which], (which, h - lo)
         assert count <= 40, (which, count)
