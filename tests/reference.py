@@ -349,6 +349,20 @@ def _search_cell(arc, lo, hi, refine):
     return None
 
 
+def newton_bracket(arc, x, lo, hi, which, sign):
+    """One evaluation of a bracketed Newton iteration (this module's and
+    tests/reference_ndof.py's): (f, f', lo, hi) at x, f = ``sign`` times component
+    ``which`` of the arc (so that it rises through the bracket), f' the next component
+    times ``sign``, and the bracket [lo, hi] narrowed to x on the side of f's sign."""
+    vals = arc(x, which == 2)
+    fx = sign * vals[which]
+    if fx > 0:
+        hi = x
+    elif fx < 0:
+        lo = x
+    return fx, sign * vals[which + 1], lo, hi
+
+
 def _refine(arc, lo, hi, which, increasing):
     """Root of component ``which`` (0 gap, 1 velocity, 2 acceleration) in [lo, hi].
 
@@ -358,17 +372,11 @@ def _refine(arc, lo, hi, which, increasing):
     sign = 1 if increasing else -1
     x = _start_in_floats(arc, lo, hi, which, sign)
     for _ in range(400):
-        vals = arc(x, which == 2)
-        fx = sign * vals[which]
+        fx, dfx, lo, hi = newton_bracket(arc, x, lo, hi, which, sign)
         if fx == 0:
             return x
-        if fx > 0:
-            hi = x
-        else:
-            lo = x
         if hi - lo < ROOT_TOL:
             break
-        dfx = sign * vals[which + 1]
         xn = x - fx / dfx if dfx != 0 else (lo + hi) / 2
         if not lo < xn < hi:
             xn = (lo + hi) / 2

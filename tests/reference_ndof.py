@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from mpmath import mp, mpc, mpf
 
-from reference import first_root
+from reference import first_root, newton_bracket
 
 __all__ = ["DPS", "NdofRef", "load_reference"]
 
@@ -504,17 +504,11 @@ def _root(arc, which, lo, hi, increasing):
     noise = mp.ldexp(1, 5 - mp.prec)    # the components' terms are of order 1
     x = (lo + hi) / 2
     for _ in range(600):
-        vals = arc(x, which == 2)
-        fx = sign * vals[which]
+        fx, dfx, lo, hi = newton_bracket(arc, x, lo, hi, which, sign)
         if fx == 0:
             return x
-        if fx > 0:
-            hi = x
-        else:
-            lo = x
         if hi - lo <= ulp:
             return hi
-        dfx = sign * vals[which + 1]
         xn = x - fx / dfx if dfx != 0 else (lo + hi) / 2
         # converged: the step rounds to nothing, or the value is at its rounding's level
         if abs(xn - x) <= ulp or abs(fx) <= noise:
