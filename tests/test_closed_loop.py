@@ -121,6 +121,10 @@ class Collector:
         # message, 2.3 % of the suite's worker CPU in this spin (py-spy, 2026-11-30)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._start_spinning()
+
+    def _start_spinning(self):
+        """The executor spun in a thread of its own until close()."""
         self._stopping = threading.Event()
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()

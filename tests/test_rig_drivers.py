@@ -58,8 +58,7 @@ class Peer(Collector):
         self.pulses = self.node.create_publisher(WrenchStamped, "rig/force_pulse", KEEP_ALL)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        self._start_spinning()
 
     def _keeper(self, topic):
         def keep(msg, info):
