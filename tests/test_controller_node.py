@@ -23,7 +23,7 @@ from grazing_control.ros import launcher
 from grazing_control.oscillator.control import Gains, correction
 from grazing_control.dynamics.design.gains import degenerate_c1, write_controller_yaml
 from grazing_control.ros import cdr
-from grazing_control.ros.common import DATA_QOS, stamp_from_seconds
+from grazing_control.ros.common import DATA_QOS, PUBLISHER_QOS, stamp_from_seconds
 from grazing_control.ros.controller_values import ControlLaw, law_from_values
 from grazing_control.oscillator.params import OscillatorParams, ParameterError
 from test_closed_loop import CONTROLLER, Collector, new_domain
@@ -98,17 +98,18 @@ def test_law_disabled_by_minus_one_until_forced():
 # ========================================================= the node, over DDS
 @pytest.fixture
 def controller(tmp_path):
-    """(collector, start): start(**overrides) runs controller_node in a fresh domain."""
+    """(collector, start): start(**overrides) runs controller_node in a fresh domain and
+    returns (process, log, a publisher of oscillator/pi2 with ``pub_qos``)."""
     domain = new_domain()
     col = Collector(domain)
     col.domain = domain
     procs = []
 
-    def start(**over):
+    def start(pub_qos=DATA_QOS, **over):
         log = tmp_path / f"controller{len(procs)}.log"
         procs.append(launcher.start_node(launcher.CONTROLLER_MODULE, [CONTROLLER], over,
                                          domain_id=domain, log=log))
-        pub = col.node.create_publisher(JointState, "oscillator/pi2", DATA_QOS)
+        pub = col.node.create_publisher(JointState, "oscillator/pi2", pub_qos)
         answers_sub = col.subs["controller/velocity_correction"]
         assert col.wait_for(lambda: pub.get_subscription_count() > 0
                             and answers_sub.get_publisher_count() > 0, 20.0), log.read_text()
@@ -282,6 +283,31 @@ def test_stray_future_sample_and_overflow_over_dds(controller):
     assert proc.wait(10) == 0
     text = log.read_text()
     assert "nonfinite=1" in text and "answered=5" in text and "out_of_order=4" in text, text
+
+
+def test_a_controller_held_while_3000_samples_came_answers_every_one(controller):
+    """A controller stopped (SIGSTOP) while 3000 Pi2 samples are published, then let go,
+    answers all 3000, in order: its subscription keeps what it has not taken
+    (common.INPUT_QOS). With a reader's history of 1000 the oldest 2000 were dropped
+    without a word (a replay at twice the recorded rate on a loaded host: 109 of 1300
+    samples never answered, none counted)."""
+    col, start = controller
+    # the publisher's own history deep enough too: a simulator's (PUBLISHER_QOS)
+    proc, log, pub = start(pub_qos=PUBLISHER_QOS, enable_after=0)
+    x, v = 1e-4, P.v_ref - 2e-4
+    proc.send_signal(19)                                  # SIGSTOP
+    try:
+        for k in range(3000):
+            pub.publish(sample(1.0 + 0.01 * k, x, v))
+        time.sleep(0.5)
+    finally:
+        proc.send_signal(18)                              # SIGCONT
+    got = answers(col, 3000, timeout=120.0)
+    assert [g[:2] for g in got] == [divmod(round((1.0 + 0.01 * k) * 1e9), 10 ** 9)
+                                    for k in range(3000)]
+    proc.send_signal(2)
+    assert proc.wait(10) == 0
+    assert "answered=3000" in log.read_text()
 
 
 def test_a_recorder_started_late_still_gets_every_answer(controller, tmp_path):

@@ -112,10 +112,10 @@ from grazing_control.dynamics.estimation.augmented import AugmentedStreamEstimat
 from grazing_control.oscillator.params import ParameterError
 
 from . import cdr, stream_block
-from .common import (DATA_QOS, LATCHED_QOS, REPLAY_QOS, SafePoints, StartupError, Throttled,
-                     check_ranges, deserialize, executor_kind, log_parameter_changes,
-                     publish_parameter_record, refuse_out_of_range, refuse_while_running,
-                     run_node, spin, stamp_key)
+from .common import (DATA_QOS, INPUT_QOS, LATCHED_QOS, REPLAY_QOS, SafePoints, StartupError,
+                     Throttled, check_ranges, deserialize, executor_kind,
+                     log_parameter_changes, publish_parameter_record, refuse_out_of_range,
+                     refuse_while_running, run_node, spin, stamp_key)
 from .controller_parameters import declare_parameters, gains_of
 from .controller_values import (ControlLaw, actuation_delay_from_values, capture_from_values,
                                 degeneracy_warning, law_from_values, model_capture_from_values,
@@ -262,26 +262,26 @@ class ControllerNode(Node):
                 event_callbacks=quiet)]
         elif self.stream is None:
             self.sub_samples = self.create_subscription(
-                JointState, "oscillator/pi2", self._on_sample, DATA_QOS, raw=True,
+                JointState, "oscillator/pi2", self._on_sample, INPUT_QOS, raw=True,
                 event_callbacks=quiet)
         else:       # stream mode never listens to the simulator's exact samples
             self.sub_samples = (self.create_subscription(    # in blocks (issue 30)
-                Float64MultiArray, stream_block.TOPIC, self._on_state_block, DATA_QOS,
+                Float64MultiArray, stream_block.TOPIC, self._on_state_block, INPUT_QOS,
                 raw=True, event_callbacks=quiet)
                 if self.get_parameter("stream_message").value == "block" else
                 self.create_subscription(JointState, "oscillator/state", self._on_state,
-                                         DATA_QOS, raw=True, event_callbacks=quiet))
+                                         INPUT_QOS, raw=True, event_callbacks=quiet))
             if self.stream.impact_source == "topic":
                 self.sub_impacts = self.create_subscription(
-                    Vector3Stamped, "oscillator/impact", self._on_impact, DATA_QOS,
+                    Vector3Stamped, "oscillator/impact", self._on_impact, INPUT_QOS,
                     event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
             # what acted where an answer came too late: nothing (oscillator/deadline_miss)
             # or the prediction substituted for it (oscillator/substituted); the model
             # filter must integrate the kick that acted, not the one it answered
             reads = [self.create_subscription(
-                Vector3Stamped, "oscillator/deadline_miss", self._on_miss, DATA_QOS,
+                Vector3Stamped, "oscillator/deadline_miss", self._on_miss, INPUT_QOS,
                 event_callbacks=quiet), self.create_subscription(
-                TwistStamped, "oscillator/substituted", self._on_substituted, DATA_QOS,
+                TwistStamped, "oscillator/substituted", self._on_substituted, INPUT_QOS,
                 raw=True, event_callbacks=quiet)]
         # the start handshake's report (ros/matching.py): every topic read, the answers
         # (a rig's force pulse)
