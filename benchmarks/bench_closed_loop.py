@@ -289,7 +289,8 @@ def main(argv=None):
     print(f"closed-loop benchmark: python {platform.python_version()}, "
           f"RMW {os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)')}, "
           f"{os.cpu_count()} CPUs, load average {' '.join(load)} at the start; QoS reliable, "
-          "volatile, publishers keep last 100000, subscriptions keep last 1000")
+          "volatile, publishers keep last 100000, subscriptions keep last 1000 (the "
+          "controller's inputs 100000)")
     if "lockstep" in parts:
         lockstep(args.periods, args.repeat, args.composed)
     if "latency" in parts:
