@@ -133,7 +133,7 @@ from .published import (ACK_TIMEOUT, COMPLETE_TOPIC, Counted, PublishedRecord,
                         RecorderConfirmation, close_publishers)
 from .reidentify import REID_KEYS, SWITCH_TOPIC, ReidentifySide
 from .rig_boundary import check_rig_values
-from .rig_control import RIG_INPUT_QOS, RigSide
+from .rig_control import RigSide
 from .scene_nodes import ACTUATION_KEYS as PULSE_KEYS  # how a correction acts
 from .scheduling import apply_node_scheduling, declare_scheduling, raise_node_priority
 from .stream_intake import PHASE_TOLERANCE, phase_error, plain_rows, take_run
@@ -251,14 +251,14 @@ class ControllerNode(Node):
                 WrenchStamped, "rig/force_pulse", REPLAY_QOS,
                 event_callbacks=PublisherEventCallbacks(use_default_callbacks=False)))
             self.sub_samples = self.create_subscription(
-                JointState, "rig/sensor", self.rig_side.on_sensor, RIG_INPUT_QOS, raw=True,
+                JointState, "rig/sensor", self.rig_side.on_sensor, INPUT_QOS, raw=True,
                 event_callbacks=quiet)
             reads = [self.create_subscription(
                 Vector3Stamped, "rig/phase", self.rig_side.on_phase, DATA_QOS,
                 event_callbacks=quiet), self.create_subscription(
                 TimeReference, "rig/clock", self.rig_side.on_clock, DATA_QOS,
                 event_callbacks=quiet), self.create_subscription(
-                WrenchStamped, "rig/applied", self.rig_side.on_applied, RIG_INPUT_QOS,
+                WrenchStamped, "rig/applied", self.rig_side.on_applied, INPUT_QOS,
                 event_callbacks=quiet)]
         elif self.stream is None:
             self.sub_samples = self.create_subscription(

@@ -17,7 +17,7 @@ are a function of the stamps and values of these inputs, never of their arrival 
 (:mod:`grazing_control.recordings.rig_replay`) gives them again bit for bit:
 
 * no sample is lost to a lagging controller (rig/sensor and rig/applied are read with
-  :data:`RIG_INPUT_QOS`, keep last 100000: 50 s at 2 kHz; with keep last 1000 a
+  :data:`common.INPUT_QOS`, keep last 100000: 50 s at 2 kHz; with keep last 1000 a
   controller half a second behind lost whole periods);
 * the estimate of section k + 1 integrates what acted at section k: once the driver has
   sent a first rig/applied (it reports each section, docs/driver_contract.md), a sample
@@ -40,19 +40,15 @@ from sensor_msgs.msg import JointState
 
 from grazing_control.dynamics.estimation.clock_relation import ClockRelation
 from . import cdr
-from .common import (PUBLISHER_QOS, deserialize, seconds_from_stamp, stamp_from_seconds,
-                     stamp_key)
+from .common import deserialize, seconds_from_stamp, stamp_from_seconds, stamp_key
 from .diagnostics import WARN
 from .rig_boundary import (APPLIED_IN_TIME, APPLIED_PREDICTED, Sections, correction_of,
                            force_of, joint_names, model_positions)
 
-__all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES", "RIG_INPUT_QOS"]
+__all__ = ["RigSide", "PENDING_SAMPLES", "LATENCIES"]
 
 #: Sensor samples kept until the first phase reference fixes the sections.
 PENDING_SAMPLES = 4096
-#: rig/sensor and rig/applied: reliable, keep last 100000 (a lagging controller loses
-#: nothing; module docstring).
-RIG_INPUT_QOS = PUBLISHER_QOS
 #: How long a sample waits for the previous section's rig/applied: until the samples of
 #: this many periods after its section have come (the simulated rig at load 10 sent one
 #: 2.2 periods after the samples it followed; a driver that stays silent costs that).
