@@ -498,7 +498,7 @@ def _root(arc, which, lo, hi, increasing):
     sign = 1 if increasing else -1
 
     def f(h):
-        return sign * arc(h, which == 2)[which] if which == 2 else sign * arc(h)[which]
+        return sign * arc(h)[which]
 
     ulp = mp.ldexp(max(abs(lo), abs(hi)), 4 - mp.prec)     # 16 units of the last place
     noise = mp.ldexp(1, 5 - mp.prec)    # the components' terms are of order 1
