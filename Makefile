@@ -28,10 +28,18 @@ help:
 # matplotlib, scipy.optimize, numba, pytest: 2 s of CPU once, cached in __pycache__).
 # .ci/install_requirements.py: uv where it can be had (parallel downloads), else pip as
 # before (GRAZING_INSTALLER=pip forces it); uv compiles no bytecode either.
+# compileall: the bytecode is then written once, in parallel, leaving out the packages'
+# own tests (7 s wall, 11 CPU-s on the two cores). Compiling on first import is not
+# enough: a shell that sets PYTHONDONTWRITEBYTECODE=1 (this machine's does) never writes
+# the cache, and every process compiled its imports again: a 1300-period `grazing run`
+# from such a shell had an overhead of 3.49 s against 1.32 s with the bytecode
+# (docs/benchmarks.md, "The bytecode written at install").
+SITE_PACKAGES = $(VENV)/lib/python3.11/site-packages
 $(VENV)/.deps: requirements.txt constraints.txt .ci/install_requirements.py
 	rm -rf $(VENV)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) .ci/install_requirements.py
+	$(PY) -m compileall -q -j 0 -x '/tests?/' $(SITE_PACKAGES) > /dev/null
 	touch $@
 
 # $(VENV)/.stamp: the package, installed editable. The editable install maps the
@@ -42,6 +50,7 @@ $(VENV)/.deps: requirements.txt constraints.txt .ci/install_requirements.py
 PKG_INITS = $(wildcard grazing_control/__init__.py sim_node/__init__.py)
 $(VENV)/.stamp: $(VENV)/.deps setup.py setup.cfg package.xml $(PKG_INITS)
 	$(PY) -m pip install --no-compile --no-deps --no-build-isolation -e .
+	$(PY) -m compileall -q grazing_control sim_node drivers > /dev/null
 	touch $@
 
 venv: $(VENV)/.stamp
