@@ -34,11 +34,15 @@ help:
 # the cache, and every process compiled its imports again: a 1300-period `grazing run`
 # from such a shell had an overhead of 3.49 s against 1.32 s with the bytecode
 # (docs/benchmarks.md, "The bytecode written at install").
+# A stamp of its own, so that a venv built before this step gets its bytecode too.
 SITE_PACKAGES = $(VENV)/lib/python3.11/site-packages
 $(VENV)/.deps: requirements.txt constraints.txt .ci/install_requirements.py
 	rm -rf $(VENV)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) .ci/install_requirements.py
+	touch $@
+
+$(VENV)/.bytecode: $(VENV)/.deps
 	$(PY) -m compileall -q -j 0 -x '/tests?/' $(SITE_PACKAGES) > /dev/null
 	touch $@
 
@@ -48,7 +52,7 @@ $(VENV)/.deps: requirements.txt constraints.txt .ci/install_requirements.py
 # appears later gets mapped. --no-build-isolation: the editable wheel is built by the
 # venv's pinned setuptools, not by whatever version the index serves that day.
 PKG_INITS = $(wildcard grazing_control/__init__.py sim_node/__init__.py)
-$(VENV)/.stamp: $(VENV)/.deps setup.py setup.cfg package.xml $(PKG_INITS)
+$(VENV)/.stamp: $(VENV)/.bytecode setup.py setup.cfg package.xml $(PKG_INITS)
 	$(PY) -m pip install --no-compile --no-deps --no-build-isolation -e .
 	$(PY) -m compileall -q grazing_control sim_node drivers > /dev/null
 	touch $@
