@@ -88,6 +88,17 @@ def test_a_node_refused_at_start_leads_the_reason_before_what_followed_from_it()
                                                    "recording lost"), res
 
 
+def test_a_node_killed_in_the_scene_leads_the_reason_before_the_recordings_loss():
+    """A controller killed mid-scene (SIGKILL) never published its tail: the reason names
+    the kill first, then the loss and the recorder's failure that followed from it (it
+    named the loss first, 2026-12-01, by hand)."""
+    res = launcher.RunResult(sim=0, controller=-9, recorder=1, bag_dir=None, wall=6.1,
+                             lost="/controller_node's tail (no published record)")
+    assert launcher.failure_reason(res, early=["controller_node"]) == (
+        "controller_node exited early with status -9; the recording lost messages: "
+        "/controller_node's tail (no published record); recorder_node exited with status 1")
+
+
 def test_a_node_that_left_before_the_simulator_fails_the_scene_whatever_its_status():
     """A controller stopped by a SIGTERM of its own exits 0, and the simulator, stopped
     with it, exits 0 too: the scene is not ok (status 1), and the reason names the node

@@ -30,8 +30,9 @@ def failure_reason(res, early=None, timeout=None) -> str:
     simulator's own reason (the watchdog's trip, the feasibility refusal, a stopped
     simulation: its verdict_file), else what the launcher saw (a timeout, an
     interruption, a node that left early or failed, with its last error line). A node
-    that refused to start (exit status 2: a parameter out of its range) comes first:
-    what follows from it (the recording that lost the simulator's tail) after.
+    that refused to start (exit status 2: a parameter out of its range) comes first, and
+    a node that left early (killed) before what followed from it (the recording that
+    lost that node's tail).
     ``early``: the nodes that left early (default: ``res.early``)."""
     if early is None:
         early = getattr(res, "early", ())
@@ -44,15 +45,15 @@ def failure_reason(res, early=None, timeout=None) -> str:
              for name in refused]
     if verdict.get("reason") and res.sim != 0:
         parts.append(f"sim_node: {verdict['reason']}")
+    for name in early:
+        parts.append(f"{name} exited early with status {getattr(res, _FIELD[name])}"
+                     + _said(res.logs.get(name)))
     if res.timed_out:
         parts.append(f"timed out after {timeout:g} s" if timeout else "timed out")
     if res.interrupted:
         parts.append("interrupted")
     if res.lost:
         parts.append(f"the recording lost messages: {res.lost}")
-    for name in early:
-        parts.append(f"{name} exited early with status {getattr(res, _FIELD[name])}"
-                     + _said(res.logs.get(name)))
     for name, attr in _FIELD.items():
         code = getattr(res, attr)
         if code not in (None, 0) and name not in early and name not in refused and not (
