@@ -216,3 +216,32 @@ def test_a_ctrl_c_is_the_owners_the_zygote_neither_gets_it_nor_dies_of_it(zygote
         assert seen["ppid"] == os.getpid() and not seen["sigint_default"]
     finally:
         launcher.stop_nodes([node])
+
+
+ENDING_OWNER = """
+import os, sys
+from grazing_control.ros import launcher, node_zygote
+node_zygote.enable()
+zygote = node_zygote.owner_zygote(launcher.node_env(), [sys.argv[1]])
+print(zygote.proc.pid, flush=True)
+"""
+
+
+def test_an_owner_that_exits_has_ended_its_zygote_before_it_is_gone(zygote):
+    """An owner that exits normally (a ``grazing run`` after its scene, or its Ctrl-C)
+    ends its zygote and waits for it: once the owner's status is in, no trace of the
+    zygote is left, alive or as a zombie reparented to the subreaper above (this test's
+    process, as the suite's worker is; the worker's check for processes left behind saw
+    a zygote still exiting after test_ctrl_c_early_in_grazing_run_is_quiet, 2026-12-01)."""
+    owner = subprocess.run([sys.executable, "-c", ENDING_OWNER, PROBE], env=_env(),
+                           capture_output=True, text=True, timeout=120)
+    assert owner.returncode == 0, owner.stderr
+    pid = int(owner.stdout.split()[0])
+    left = Path(f"/proc/{pid}").exists()
+    if left:                                      # reap it: a zombie of this process
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (ProcessLookupError, ChildProcessError):
+            pass
+    assert not left, f"the zygote {pid} outlived its owner"
