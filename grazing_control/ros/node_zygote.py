@@ -266,12 +266,14 @@ class NodeZygote:
             for fd in opened:
                 os.close(fd)
 
-    def close(self):
+    def close(self, grace: float = 5.0):
+        """End the zygote: its socket closed (it exits at the end of the stream), and
+        killed if it has not exited ``grace`` s later."""
         try:
             self._sock.close()
         finally:
             try:
-                self.proc.wait(5)
+                self.proc.wait(grace)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
@@ -313,13 +315,8 @@ def _end_with_owner(owner: int) -> None:
     its check for processes left behind caught it, once in a few suites). It holds
     nothing to save: the nodes are the owner's children, and it only forks them."""
     zygote = _owned.get(owner)
-    if zygote is None or os.getpid() != owner:    # (a process forked from the owner)
-        return
-    zygote.proc.kill()
-    try:
-        zygote.proc.wait(5)
-    except subprocess.TimeoutExpired:
-        pass
+    if zygote is not None and os.getpid() == owner:    # (not a process forked from it)
+        zygote.close(grace=0.0)
 
 
 # ------------------------------------------------------------------ the zygote's side
